@@ -1,0 +1,136 @@
+"""Physical units and dimensions: the one place that knows what `km/h` means.
+
+Every quantity in a `ScenarioPlan` is in SI (metres, seconds, radians, kilograms);
+conversion happens once, in the compiler, through `to_si`. A dimension is a vector of
+exponents over (length, time, mass, angle), so arithmetic in formulas
+(`distance(ego, lead) / speed(ego)`) can be dimension-checked.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class Dim:
+    """Exponents of length [m], time [s], mass [kg] and angle [rad]."""
+
+    length: int = 0
+    time: int = 0
+    mass: int = 0
+    angle: int = 0
+
+    def __mul__(self, other: Dim) -> Dim:
+        return Dim(self.length + other.length, self.time + other.time,
+                   self.mass + other.mass, self.angle + other.angle)
+
+    def __truediv__(self, other: Dim) -> Dim:
+        return Dim(self.length - other.length, self.time - other.time,
+                   self.mass - other.mass, self.angle - other.angle)
+
+    def __str__(self) -> str:
+        return dim_name(self)
+
+
+DIMENSIONLESS = Dim()
+LENGTH = Dim(length=1)
+TIME = Dim(time=1)
+MASS = Dim(mass=1)
+ANGLE = Dim(angle=1)
+SPEED = LENGTH / TIME
+ACCELERATION = SPEED / TIME
+JERK = ACCELERATION / TIME
+FREQUENCY = DIMENSIONLESS / TIME
+CURVATURE = DIMENSIONLESS / LENGTH
+ANGULAR_RATE = ANGLE / TIME
+
+# Names used in diagnostics and in registry parameter specs.
+DIMENSION_NAMES: dict[Dim, str] = {
+    DIMENSIONLESS: "number",
+    LENGTH: "length",
+    TIME: "time",
+    MASS: "mass",
+    ANGLE: "angle",
+    SPEED: "speed",
+    ACCELERATION: "acceleration",
+    JERK: "jerk",
+    FREQUENCY: "frequency",
+    CURVATURE: "curvature",
+    ANGULAR_RATE: "angular rate",
+}
+DIMENSIONS_BY_NAME: dict[str, Dim] = {v: k for k, v in DIMENSION_NAMES.items()}
+
+
+def dim_name(dim: Dim) -> str:
+    return DIMENSION_NAMES.get(dim) or (
+        f"m^{dim.length} s^{dim.time} kg^{dim.mass} rad^{dim.angle}")
+
+
+@dataclass(frozen=True, slots=True)
+class Unit:
+    symbol: str
+    factor: float  # multiply a value in this unit by `factor` to get SI
+    dim: Dim
+
+
+_UNITS = (
+    Unit("m", 1.0, LENGTH),
+    Unit("km", 1000.0, LENGTH),
+    Unit("cm", 0.01, LENGTH),
+    Unit("mm", 0.001, LENGTH),
+    Unit("s", 1.0, TIME),
+    Unit("ms", 1e-3, TIME),
+    Unit("min", 60.0, TIME),
+    Unit("kg", 1.0, MASS),
+    Unit("m/s", 1.0, SPEED),
+    Unit("km/h", 1000.0 / 3600.0, SPEED),
+    Unit("mph", 0.44704, SPEED),
+    Unit("m/s^2", 1.0, ACCELERATION),
+    Unit("m/s^3", 1.0, JERK),
+    Unit("g", 9.80665, ACCELERATION),
+    Unit("Hz", 1.0, FREQUENCY),
+    Unit("deg", math.pi / 180.0, ANGLE),
+    Unit("rad", 1.0, ANGLE),
+    Unit("deg/s", math.pi / 180.0, ANGULAR_RATE),
+    Unit("rad/s", 1.0, ANGULAR_RATE),
+    Unit("%", 0.01, DIMENSIONLESS),
+    Unit("1/m", 1.0, CURVATURE),
+    Unit("/m", 1.0, CURVATURE),
+)
+UNITS: dict[str, Unit] = {u.symbol: u for u in _UNITS}
+
+# Canonical unit used when printing a quantity of a dimension back to source.
+CANONICAL_UNIT: dict[Dim, str] = {
+    LENGTH: "m", TIME: "s", MASS: "kg", SPEED: "m/s", ACCELERATION: "m/s^2",
+    JERK: "m/s^3", FREQUENCY: "Hz", ANGLE: "rad", CURVATURE: "1/m",
+    ANGULAR_RATE: "rad/s",
+}
+
+
+class UnknownUnit(KeyError):
+    pass
+
+
+def lookup(symbol: str) -> Unit:
+    try:
+        return UNITS[symbol]
+    except KeyError:
+        raise UnknownUnit(symbol) from None
+
+
+def to_si(value: float, symbol: str | None) -> tuple[float, Dim]:
+    """Convert `value` given in unit `symbol` (None: a plain number) to SI."""
+    if symbol is None:
+        return float(value), DIMENSIONLESS
+    unit = lookup(symbol)
+    return float(value) * unit.factor, unit.dim
+
+
+def format_si(value: float, dim: Dim) -> str:
+    """Render an SI value with its canonical unit, exactly (repr keeps every bit)."""
+    unit = CANONICAL_UNIT.get(dim)
+    text = repr(float(value))
+    if text.endswith(".0"):
+        text = text[:-2]
+    return f"{text} {unit}" if unit else text
