@@ -1,0 +1,227 @@
+"""The .addt abstract syntax tree: frozen dataclasses, every node with its source span.
+
+Built from lark's parse tree by `compiler.parser`; read by `compiler.check` and
+`compiler.lower`. Nothing here knows about units or registries: that is checking.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from addt_dsl.diagnostics import Span
+
+
+@dataclass(frozen=True, slots=True)
+class Node:
+    span: Span
+
+
+# ---------------------------------------------------------------- expressions
+
+@dataclass(frozen=True, slots=True)
+class Number(Node):
+    value: float
+    unit: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Str(Node):
+    value: str
+
+
+@dataclass(frozen=True, slots=True)
+class Bool(Node):
+    value: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Ref(Node):
+    """A dotted name: a parameter (`gap`), an actor field (`ego.speed`) or a word (`weights`)."""
+
+    parts: tuple[str, ...]
+
+    @property
+    def dotted(self) -> str:
+        return ".".join(self.parts)
+
+
+@dataclass(frozen=True, slots=True)
+class CallExpr(Node):
+    fn: str
+    args: tuple[Expression, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class UnaryExpr(Node):
+    op: str  # "neg" | "not"
+    arg: Expression
+
+
+@dataclass(frozen=True, slots=True)
+class BinaryExpr(Node):
+    op: str
+    left: Expression
+    right: Expression
+
+
+@dataclass(frozen=True, slots=True)
+class Window(Node):
+    """A time window of a temporal operator; `hi` None means to the end of the trace."""
+
+    lo: Expression | None
+    hi: Expression | None
+
+
+@dataclass(frozen=True, slots=True)
+class TemporalExpr(Node):
+    op: str  # "always" | "eventually"
+    window: Window | None
+    arg: Expression
+
+
+@dataclass(frozen=True, slots=True)
+class UntilExpr(Node):
+    window: Window | None
+    left: Expression
+    right: Expression
+
+
+@dataclass(frozen=True, slots=True)
+class ListExpr(Node):
+    items: tuple[Expression, ...]
+    unit: str | None = None
+
+
+Expression = (Number | Str | Bool | Ref | CallExpr | UnaryExpr | BinaryExpr | TemporalExpr
+              | UntilExpr | ListExpr)
+
+
+# ---------------------------------------------------------------- statements
+
+@dataclass(frozen=True, slots=True)
+class Setting(Node):
+    key: str
+    key_span: Span
+    value: Expression
+
+
+@dataclass(frozen=True, slots=True)
+class Include(Node):
+    path: str
+
+
+@dataclass(frozen=True, slots=True)
+class RoadItem(Node):
+    kind: str  # geometry primitive (`line`, `arc`, ...) or `lanes`
+    settings: tuple[Setting, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class RoadDecl(Node):
+    name: str
+    items: tuple[RoadItem, ...] = ()
+    import_path: str | None = None
+    import_settings: tuple[Setting, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class ParamDecl(Node):
+    name: str
+    default: Expression
+    domain: Expression | None
+    settings: tuple[Setting, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class AssumeDecl(Node):
+    expr: Expression
+
+
+@dataclass(frozen=True, slots=True)
+class Clause(Node):
+    """`behavior cruise speed 10 m/s`, `sensor lidar rate 10 Hz`, `stack bev`, `goal ...`."""
+
+    keyword: str  # behavior | sensor | stack | goal | node
+    name: str
+    name_span: Span
+    settings: tuple[Setting, ...]
+    block: tuple[Setting, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Trigger(Node):
+    condition: Expression
+    clause: Clause
+
+
+@dataclass(frozen=True, slots=True)
+class ActorDecl(Node):
+    name: str
+    is_ego: bool
+    vehicle: str
+    vehicle_span: Span
+    settings: tuple[Setting, ...]
+    clauses: tuple[Clause, ...] = ()
+    triggers: tuple[Trigger, ...] = ()
+    block_settings: tuple[Setting, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Timing(Node):
+    kind: str  # at | during | from
+    start: Expression
+    end: Expression | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class FaultDecl(Node):
+    kind: str
+    kind_span: Span
+    target: tuple[str, ...]
+    target_span: Span
+    timing: Timing | None
+    settings: tuple[Setting, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class OracleDecl(Node):
+    severity: str  # hard | warn
+    label: str | None
+    formula: Expression | None = None
+    no_what: str | None = None  # `no collision [with lead]`
+    no_with: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class SweepItem(Node):
+    kind: str  # grid | random | halton | lhs | repeat | seed
+    name: str | None
+    value: Expression
+    settings: tuple[Setting, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class Block(Node):
+    """`faults { }`, `expect { }`, `sweep { }` — kept as blocks for span reporting."""
+
+    kind: str
+    items: tuple = ()
+
+
+Definition = RoadDecl | ParamDecl | AssumeDecl | ActorDecl | Block
+
+
+@dataclass(frozen=True, slots=True)
+class Scenario(Node):
+    name: str
+    settings: tuple[Setting, ...]
+    definitions: tuple[Definition, ...]
+    includes: tuple[Include, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class SourceFile(Node):
+    path: str
+    includes: tuple[Include, ...] = ()
+    scenarios: tuple[Scenario, ...] = ()
+    definitions: tuple[Definition, ...] = field(default_factory=tuple)

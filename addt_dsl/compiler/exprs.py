@@ -1,0 +1,262 @@
+"""Typing and lowering of expressions: AST expression → (`Expr`, type), with diagnostics.
+
+A type is ("num", Dim) for arithmetic values or ("bool", None) for formulas. Dimensions
+are checked here: a speed where a length is needed is error E0201.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from addt_dsl import expr as E
+from addt_dsl import units
+from addt_dsl.compiler import ast
+from addt_dsl.diagnostics import DiagnosticSink
+from addt_dsl.registry import SIGNALS
+from addt_dsl.units import Dim
+
+BOOL = ("bool", None)
+
+ARITH_FUNCS = ("abs", "min", "max", "sqrt")
+
+
+@dataclass
+class Scope:
+    """Names an expression may refer to."""
+
+    params: dict[str, Dim]  # parameter name → dimension
+    actors: set[str]
+    nodes: set[str]  # stack nodes with a latency signal, plus "e2e"
+    allow_signals: bool  # formulas and triggers: yes; placement values: no
+    used_params: set[str]
+
+
+def _ty_str(ty) -> str:
+    return "a boolean formula" if ty[0] == "bool" else f"a {units.dim_name(ty[1])}"
+
+
+class ExprLowering:
+    def __init__(self, sink: DiagnosticSink, scope: Scope):
+        self.sink = sink
+        self.scope = scope
+
+    def lower(self, node: ast.Expression):
+        """Return (Expr, type) or (None, None) after reporting a diagnostic."""
+        method = getattr(self, "_" + type(node).__name__, None)
+        if method is None:
+            self.sink.error("E0204", "this kind of value is not allowed here", node.span)
+            return None, None
+        return method(node)
+
+    def lower_value(self, node: ast.Expression, want: Dim, what: str):
+        """Lower an arithmetic value that must have dimension `want`."""
+        expr, ty = self.lower(node)
+        if expr is None:
+            return None
+        if ty[0] != "num":
+            self.sink.error("E0203", f"{what} must be a number, not a formula", node.span)
+            return None
+        if ty[1] != want:
+            self._dim_error(node, want, ty[1], what)
+            return None
+        return expr
+
+    def lower_formula(self, node: ast.Expression, what: str = "an oracle"):
+        expr, ty = self.lower(node)
+        if expr is None:
+            return None
+        if ty != BOOL:
+            self.sink.error("E0203", f"{what} must be a boolean formula, found {_ty_str(ty)}",
+                            node.span, "compare it with something, e.g. `... > 1 s`")
+            return None
+        return expr
+
+    def _dim_error(self, node, want: Dim, got: Dim, what: str) -> None:
+        hint = []
+        if got == units.DIMENSIONLESS and want != units.DIMENSIONLESS:
+            canon = units.CANONICAL_UNIT.get(want)
+            if canon:
+                hint.append(f"add a unit, e.g. `{canon}`")
+        self.sink.error("E0201", f"{what} needs a {units.dim_name(want)}, found a {units.dim_name(got)}",
+                        node.span, *hint, label=f"this is a {units.dim_name(got)}")
+
+    # ---- atoms
+    def _Number(self, node: ast.Number):
+        if node.unit is None:
+            return E.Num(value=node.value), ("num", units.DIMENSIONLESS)
+        try:
+            value, dim = units.to_si(node.value, node.unit)
+        except units.UnknownUnit:
+            self.sink.error("E0202", f"unknown unit '{node.unit}'", node.span)
+            return None, None
+        return E.Num(value=value), ("num", dim)
+
+    def _Bool(self, node: ast.Bool):
+        return E.Num(value=1.0 if node.value else -1.0), BOOL
+
+    def _Ref(self, node: ast.Ref):
+        parts = node.parts
+        if len(parts) == 1 and parts[0] in self.scope.params:
+            self.scope.used_params.add(parts[0])
+            return E.Param(name=parts[0]), ("num", self.scope.params[parts[0]])
+        if len(parts) == 2 and parts[0] in self.scope.actors:
+            return self._signal(node, parts[1], (parts[0],))
+        if len(parts) == 1 and parts[0] in self.scope.actors:
+            self.sink.error("E0204", f"'{parts[0]}' is an actor, not a value", node.span,
+                            f"use one of its signals, e.g. `{parts[0]}.speed`")
+            return None, None
+        known = sorted(self.scope.params)
+        notes = [f"parameters in scope: {', '.join(known)}"] if known else []
+        if len(parts) >= 2:
+            notes = [f"actors: {', '.join(sorted(self.scope.actors))}"]
+        self.sink.error("E0101", f"unknown name '{node.dotted}'", node.span, *notes)
+        return None, None
+
+    def _Str(self, node: ast.Str):
+        self.sink.error("E0204", "a string is not allowed here", node.span)
+        return None, None
+
+    def _ListExpr(self, node: ast.ListExpr):
+        self.sink.error("E0204", "a list is not allowed here", node.span)
+        return None, None
+
+    def _signal(self, node, fn: str, args: tuple[str, ...]):
+        cls = SIGNALS.get(fn)
+        if cls is None:
+            self.sink.error("E0101", f"unknown signal '{fn}'", node.span,
+                            f"signals: {', '.join(SIGNALS.names())}")
+            return None, None
+        if not self.scope.allow_signals:
+            self.sink.error("E0204", f"signal '{fn}' cannot be used here: only parameters and constants",
+                            node.span)
+            return None, None
+        if len(args) != len(cls.args):
+            self.sink.error("E0204", f"'{fn}' takes {len(cls.args)} argument(s), got {len(args)}", node.span)
+            return None, None
+        for kind, arg in zip(cls.args, args):
+            pool = self.scope.actors if kind == "actor" else self.scope.nodes
+            if arg not in pool:
+                self.sink.error("E0101", f"unknown {kind} '{arg}' in {fn}(...)", node.span,
+                                f"{kind}s: {', '.join(sorted(pool))}")
+                return None, None
+        return E.Signal(name=f"{fn}({','.join(args)})"), ("num", cls.dim)
+
+    def _CallExpr(self, node: ast.CallExpr):
+        if node.fn in ARITH_FUNCS:
+            lowered = [self.lower(a) for a in node.args]
+            if any(e is None for e, _ in lowered):
+                return None, None
+            if not lowered or (node.fn in ("abs", "sqrt") and len(lowered) != 1):
+                self.sink.error("E0204", f"wrong number of arguments to {node.fn}()", node.span)
+                return None, None
+            dims = {ty[1] for _, ty in lowered}
+            if any(ty[0] != "num" for _, ty in lowered) or len(dims) != 1:
+                self.sink.error("E0201", f"arguments of {node.fn}() must be numbers of one dimension",
+                                node.span)
+                return None, None
+            dim = dims.pop()
+            if node.fn == "sqrt":
+                dim = Dim(dim.length // 2, dim.time // 2, dim.mass // 2, dim.angle // 2)
+            return E.Call(fn=node.fn, args=tuple(e for e, _ in lowered)), ("num", dim)
+        args = []
+        for a in node.args:
+            if not isinstance(a, ast.Ref) or len(a.parts) != 1:
+                self.sink.error("E0204", f"arguments of {node.fn}() are actor or node names", a.span)
+                return None, None
+            args.append(a.parts[0])
+        return self._signal(node, node.fn, tuple(args))
+
+    # ---- operators
+    def _UnaryExpr(self, node: ast.UnaryExpr):
+        arg, ty = self.lower(node.arg)
+        if arg is None:
+            return None, None
+        if node.op == "not":
+            if ty != BOOL:
+                self.sink.error("E0203", "'not' needs a boolean formula", node.arg.span)
+                return None, None
+            return E.Unary(op="not", arg=arg), BOOL
+        if ty[0] != "num":
+            self.sink.error("E0203", "'-' needs a number", node.arg.span)
+            return None, None
+        return E.Unary(op="neg", arg=arg), ty
+
+    def _BinaryExpr(self, node: ast.BinaryExpr):
+        left, lty = self.lower(node.left)
+        right, rty = self.lower(node.right)
+        if left is None or right is None:
+            return None, None
+        op = node.op
+        if op in E.BOOL_OPS:
+            for side, ty in ((node.left, lty), (node.right, rty)):
+                if ty != BOOL:
+                    self.sink.error("E0203", f"'{op}' needs boolean formulas on both sides", side.span)
+                    return None, None
+            return E.Binary(op=op, left=left, right=right), BOOL
+        if lty[0] != "num" or rty[0] != "num":
+            bad = node.left if lty[0] != "num" else node.right
+            self.sink.error("E0203", f"'{op}' needs numbers, found a boolean formula", bad.span)
+            return None, None
+        if op in ("*", "/"):
+            dim = lty[1] * rty[1] if op == "*" else lty[1] / rty[1]
+            return E.Binary(op=op, left=left, right=right), ("num", dim)
+        if lty[1] != rty[1]:
+            self.sink.error("E0201", f"cannot {'compare' if op in E.COMPARE_OPS else 'combine'} "
+                            f"a {units.dim_name(lty[1])} with a {units.dim_name(rty[1])}", node.span,
+                            label=f"{units.dim_name(lty[1])} {op} {units.dim_name(rty[1])}")
+            return None, None
+        if op in E.COMPARE_OPS:
+            return E.Binary(op=op, left=left, right=right), BOOL
+        return E.Binary(op=op, left=left, right=right), lty
+
+    def window(self, window: ast.Window | None):
+        """Lower a time window to (lo_s, hi_s) constants; parameters are allowed."""
+        if window is None:
+            return E.Num(value=0.0), None
+        lo = self.lower_value(window.lo, units.TIME, "a window bound") if window.lo is not None else E.Num(value=0.0)
+        hi = self.lower_value(window.hi, units.TIME, "a window bound") if window.hi is not None else None
+        for bound in (lo, hi):
+            if bound is not None and E.params_used(bound):
+                self.sink.error("E0204", "window bounds must be constants, not parameters", window.span)
+                return None, None
+        return lo, hi
+
+    def _TemporalExpr(self, node: ast.TemporalExpr):
+        arg = self.lower_formula(node.arg, f"the operand of '{node.op}'")
+        lo, hi = self.window(node.window)
+        if arg is None or lo is None or (node.window is not None and node.window.hi is not None and hi is None):
+            return None, None
+        if hi is not None and _const(hi) < _const(lo):
+            self.sink.error("E0303", "the window ends before it starts", node.window.span)
+            return None, None
+        return _WindowedTemporal(node.op, lo, hi, arg), BOOL
+
+    def _UntilExpr(self, node: ast.UntilExpr):
+        left = self.lower_formula(node.left, "the left side of 'until'")
+        right = self.lower_formula(node.right, "the right side of 'until'")
+        lo, hi = self.window(node.window)
+        if left is None or right is None or lo is None:
+            return None, None
+        return _WindowedUntil(lo, hi, left, right), BOOL
+
+
+# Window bounds may use parameters; they are bound per run. Until then the formula keeps
+# them as `Param`-bearing placeholders stored in the plan through these wrappers.
+def _WindowedTemporal(op, lo, hi, arg):
+    return E.Temporal(op=op, lo_s=_const(lo), hi_s=None if hi is None else _const(hi), arg=arg)
+
+
+def _WindowedUntil(lo, hi, left, right):
+    return E.Until(lo_s=_const(lo), hi_s=None if hi is None else _const(hi), left=left, right=right)
+
+
+def _const(expr) -> float:
+    """Window bounds are constants in plan v1 (parameters there are rejected earlier)."""
+    try:
+        return E.eval_param_expr(expr, {})
+    except E.UnboundParameter:
+        raise WindowParamError() from None
+
+
+class WindowParamError(Exception):
+    pass

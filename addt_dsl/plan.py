@@ -1,0 +1,218 @@
+"""The execution plan: what the compiler produces and the runtime consumes.
+
+`ScenarioPlan` is pydantic, JSON-serialisable, versioned, SI units only. Values that
+depend on parameters stay `Expr` trees; a `RunSpec` pins one parameter assignment, a
+seed and the concrete fault schedule, and fully determines a run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from typing import Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from addt_dsl.expr import Expr, Num, eval_param_expr
+
+SCHEMA_VERSION = "1"
+
+SettingValue = Union[Expr, str, list[Expr]]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class SegmentPlan(_Model):
+    """One planView geometry element of an inline road; SI units."""
+
+    kind: Literal["line", "arc", "spiral", "param_poly3"]
+    length_m: float
+    curvature_per_m: float = 0.0
+    curv_start_per_m: float = 0.0
+    curv_end_per_m: float = 0.0
+    coefficients: list[float] = Field(default_factory=list)  # param_poly3: aU..dU, aV..dV
+
+
+class RoadPlan(_Model):
+    name: str
+    source: Literal["inline", "xodr"]
+    segments: list[SegmentPlan] = Field(default_factory=list)
+    left_lanes: int = 0
+    right_lanes: int = 1
+    lane_width_m: float = 3.5
+    lane_offset_m: float = 0.0
+    xodr_file: str | None = None  # display name of the imported file
+    xodr_text: str | None = None  # embedded, so a RunSpec needs no file system
+    xodr_road_id: str | None = None
+
+
+class ParamPlan(_Model):
+    name: str
+    dimension: str  # units.DIMENSION_NAMES value
+    default: float
+    low: float | None = None
+    high: float | None = None
+    distribution: Literal["uniform", "normal", "choice"] = "uniform"
+    mean: float | None = None
+    sd: float | None = None
+    choices: list[float] = Field(default_factory=list)
+    integer: bool = False
+
+
+class AssumptionPlan(_Model):
+    """A validity condition on parameters: a sample that breaks it is rejected, not failed."""
+
+    text: str
+    expr: Expr
+
+
+class ClausePlan(_Model):
+    """A registered element with its settings: `behavior cruise speed 12 m/s`."""
+
+    keyword: str
+    name: str
+    settings: dict[str, SettingValue] = Field(default_factory=dict)
+
+
+class TriggerPlan(_Model):
+    condition: Expr  # formula over signals; fires the first time it holds
+    clause: ClausePlan
+
+
+class ActorPlan(_Model):
+    name: str
+    vehicle: Literal["car", "truck", "pedestrian", "cyclist"]
+    road: str
+    lane: Expr
+    s: Expr  # station along the road [m]
+    speed: Expr  # initial speed [m/s]
+    length_m: float
+    width_m: float
+    mass_kg: float = 1500.0
+    wheelbase_m: float = 2.7
+    behaviors: list[ClausePlan] = Field(default_factory=list)
+    triggers: list[TriggerPlan] = Field(default_factory=list)
+    sensors: list[ClausePlan] = Field(default_factory=list)
+    stack: ClausePlan | None = None
+    goal_s: Expr | None = None
+
+
+class FaultPlan(_Model):
+    kind: str
+    target: str  # sensor name or dotted stack path (`perception.backbone`)
+    start_s: Expr
+    end_s: Expr | None  # None: to the end of the run
+    settings: dict[str, SettingValue] = Field(default_factory=dict)
+    seed: int | None = None
+    source: str = ""  # file:line, for reports
+
+
+class OraclePlan(_Model):
+    name: str
+    severity: Literal["hard", "warn"] = "hard"
+    formula: Expr
+    text: str = ""
+
+
+class GridAxis(_Model):
+    param: str
+    values: list[float]
+
+
+class SamplerPlan(_Model):
+    kind: Literal["random", "halton", "lhs"]
+    count: int
+    seed: int = 0
+
+
+class SweepPlan(_Model):
+    grid: list[GridAxis] = Field(default_factory=list)
+    sampler: SamplerPlan | None = None
+    repeat: int = 1
+    seed: int = 0
+    max_rejections: int = 1000
+
+
+class ScenarioPlan(_Model):
+    schema_version: Literal["1"] = SCHEMA_VERSION
+    name: str
+    description: str = ""
+    source_file: str = ""
+    duration_s: float
+    step_s: float = 0.01
+    seed: int = 0
+    roads: list[RoadPlan]
+    params: list[ParamPlan] = Field(default_factory=list)
+    assumptions: list[AssumptionPlan] = Field(default_factory=list)
+    ego: ActorPlan
+    agents: list[ActorPlan] = Field(default_factory=list)
+    faults: list[FaultPlan] = Field(default_factory=list)
+    oracles: list[OraclePlan] = Field(default_factory=list)
+    sweep: SweepPlan = Field(default_factory=SweepPlan)
+
+    def road(self, name: str) -> RoadPlan:
+        return next(r for r in self.roads if r.name == name)
+
+    def actors(self) -> list[ActorPlan]:
+        return [self.ego, *self.agents]
+
+    def nominal_params(self) -> dict[str, float]:
+        return {p.name: p.default for p in self.params}
+
+
+class ConcreteFault(_Model):
+    """A fault with every value resolved for one run; `index` is its place in the schedule."""
+
+    index: int
+    kind: str
+    target: str
+    start_s: float
+    end_s: float | None
+    settings: dict[str, float | str | list[float]] = Field(default_factory=dict)
+    seed: int
+
+
+class RunSpec(_Model):
+    """Everything one run needs: same RunSpec, same trace, bit for bit."""
+
+    plan: ScenarioPlan
+    params: dict[str, float]
+    seed: int
+    faults: list[ConcreteFault]
+    run_id: str = ""
+    cell: dict[str, float] = Field(default_factory=dict)  # the sweep cell (grid values)
+    repeat_index: int = 0
+
+    def key(self) -> str:
+        """Content hash: the identity of a run for caches and result stores."""
+        payload = self.model_dump(mode="json", exclude={"run_id"})
+        data = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()
+        return hashlib.sha256(data).hexdigest()[:20]
+
+    def value(self, expr: Expr | None, default: float = 0.0) -> float:
+        return default if expr is None else eval_param_expr(expr, self.params)
+
+
+def resolve_setting(value: SettingValue, params: dict[str, float]) -> float | str | list[float]:
+    if isinstance(value, str):
+        return value
+    if isinstance(value, list):
+        return [eval_param_expr(v, params) for v in value]
+    return eval_param_expr(value, params)
+
+
+def resolve_settings(settings: dict[str, SettingValue], params: dict[str, float]) -> dict:
+    return {k: resolve_setting(v, params) for k, v in settings.items()}
+
+
+def num(value: float) -> Num:
+    return Num(value=float(value))
+
+
+def plan_json_schema() -> dict:
+    schema = ScenarioPlan.model_json_schema()
+    schema["$id"] = f"https://addt-dsl.dev/schema/plan-v{SCHEMA_VERSION}.json"
+    schema["title"] = "addt-dsl ScenarioPlan"
+    return schema

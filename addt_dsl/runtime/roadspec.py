@@ -1,0 +1,87 @@
+"""Inline road statements (`line`, `arc`, `spiral`, `param_poly3`, `lanes`) and the
+builder that turns a `RoadPlan` into a road network.
+"""
+
+from __future__ import annotations
+
+from addt_dsl import units
+from addt_dsl.registry import GEOMETRIES, ParamSpec
+
+
+class RoadItemKind:
+    keyword = ""
+    params: tuple[ParamSpec, ...] = ()
+    doc = ""
+
+
+_LEN = ParamSpec("length", units.LENGTH, required=True, low=1e-3, doc="length along the reference line")
+
+
+@GEOMETRIES.register
+class LineItem(RoadItemKind):
+    keyword = "line"
+    params = (_LEN,)
+    doc = "A straight reference line segment."
+
+
+@GEOMETRIES.register
+class ArcItem(RoadItemKind):
+    keyword = "arc"
+    params = (_LEN, ParamSpec("curvature", units.CURVATURE, required=True, low=-1.0, high=1.0,
+                              doc="1/radius, positive turns left"))
+    doc = "A constant-curvature segment."
+
+
+@GEOMETRIES.register
+class SpiralItem(RoadItemKind):
+    keyword = "spiral"
+    params = (_LEN,
+              ParamSpec("from", units.CURVATURE, default=0.0, low=-1.0, high=1.0, doc="start curvature"),
+              ParamSpec("to", units.CURVATURE, required=True, low=-1.0, high=1.0, doc="end curvature"))
+    doc = "A clothoid: curvature changes linearly along the segment."
+
+
+@GEOMETRIES.register
+class ParamPoly3Item(RoadItemKind):
+    keyword = "param_poly3"
+    params = (_LEN, *(ParamSpec(n, None, default=d, kind="number", doc=f"coefficient {n} [m]")
+                      for n, d in (("au", 0.0), ("bu", 1.0), ("cu", 0.0), ("du", 0.0),
+                                   ("av", 0.0), ("bv", 0.0), ("cv", 0.0), ("dv", 0.0))))
+    doc = "A parametric cubic u(p), v(p) with p in [0, length] (pRange arcLength)."
+
+
+@GEOMETRIES.register
+class LanesItem(RoadItemKind):
+    keyword = "lanes"
+    params = (
+        ParamSpec("right", None, kind="int", default=1, low=0, high=8, doc="lanes right of the reference line"),
+        ParamSpec("left", None, kind="int", default=0, low=0, high=8, doc="lanes left of the reference line"),
+        ParamSpec("width", units.LENGTH, default=3.5, low=1.0, high=10.0, doc="lane width"),
+        ParamSpec("offset", units.LENGTH, default=0.0, low=-20.0, high=20.0, doc="lane offset"),
+    )
+    doc = "Lane layout of an inline road (one lane section, constant widths)."
+
+
+def build_network(road_plans):
+    """Build one `RoadNetwork` per road plan (imported files keep their own ids)."""
+    from addt_dsl.runtime import road as R
+
+    networks = {}
+    for rp in road_plans:
+        if rp.source == "xodr":
+            networks[rp.name] = R.parse_xodr(rp.xodr_text or "", rp.xodr_file or rp.name)
+            continue
+        segments = []
+        for seg in rp.segments:
+            if seg.kind == "line":
+                segments.append(R.line(seg.length_m))
+            elif seg.kind == "arc":
+                segments.append(R.arc(seg.length_m, seg.curvature_per_m))
+            elif seg.kind == "spiral":
+                segments.append(R.spiral(seg.length_m, seg.curv_start_per_m, seg.curv_end_per_m))
+            else:
+                c = seg.coefficients
+                segments.append(R.param_poly3(seg.length_m, *c))
+        networks[rp.name] = R.build_road(rp.name, segments, rp.left_lanes, rp.right_lanes,
+                                         rp.lane_width_m, rp.lane_offset_m)
+    return networks

@@ -1,0 +1,155 @@
+"""Signal functions usable in oracles and triggers, one registered class each.
+
+`ego.speed` and `speed(ego)` are the same signal; its canonical name is `speed(ego)`.
+Each class declares its argument kinds (actor or node) and its dimension so the compiler
+can check formulas; `compute` derives the signal from a `Trace`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from addt_dsl import units
+from addt_dsl.registry import SIGNALS
+
+TTC_CAP_S = 99.0  # a TTC above this means "not closing"; keeps robustness finite
+
+
+def canonical(fn: str, args: tuple[str, ...]) -> str:
+    return f"{fn}({','.join(args)})"
+
+
+class SignalFn:
+    keyword: str = ""
+    args: tuple[str, ...] = ("actor",)  # "actor" | "node"
+    dim = units.DIMENSIONLESS
+    doc = ""
+
+    @staticmethod
+    def compute(trace, args: tuple[str, ...]) -> np.ndarray:
+        raise NotImplementedError
+
+
+def _field_signal(field_name: str, dim, doc: str) -> type[SignalFn]:
+    class _Field(SignalFn):
+        keyword = field_name
+
+        @staticmethod
+        def compute(trace, args):
+            return getattr(trace.actors[args[0]], field_name)
+
+    _Field.dim = dim
+    _Field.doc = doc
+    _Field.__name__ = _Field.__qualname__ = f"Signal_{field_name}"
+    return SIGNALS.register(_Field)
+
+
+for _name, _dim, _doc in (
+    ("x", units.LENGTH, "world x position of the actor's centre [m]"),
+    ("y", units.LENGTH, "world y position of the actor's centre [m]"),
+    ("heading", units.ANGLE, "yaw [rad]"),
+    ("speed", units.SPEED, "speed [m/s]"),
+    ("accel", units.ACCELERATION, "longitudinal acceleration [m/s^2]"),
+    ("yaw_rate", units.ANGULAR_RATE, "yaw rate [rad/s]"),
+    ("s", units.LENGTH, "station along the actor's road [m]"),
+    ("t", units.LENGTH, "lateral offset from the road reference line, left positive [m]"),
+    ("lane_offset", units.LENGTH, "signed offset from the centre of the actor's current lane [m]"),
+    ("steer", units.ANGLE, "front wheel angle [rad]"),
+    ("clearance", units.LENGTH, "gap to the nearest other actor's box, negative when overlapping [m]"),
+):
+    _field_signal(_name, _dim, _doc)
+
+
+@SIGNALS.register
+class Jerk(SignalFn):
+    keyword = "jerk"
+    dim = units.JERK
+    doc = "time derivative of longitudinal acceleration [m/s^3]"
+
+    @staticmethod
+    def compute(trace, args):
+        a = trace.actors[args[0]].accel
+        return np.gradient(a, trace.period_s) if len(a) > 1 else np.zeros_like(a)
+
+
+@SIGNALS.register
+class Distance(SignalFn):
+    keyword = "distance"
+    args = ("actor", "actor")
+    dim = units.LENGTH
+    doc = "centre-to-centre distance between two actors [m]"
+
+    @staticmethod
+    def compute(trace, args):
+        a, b = trace.actors[args[0]], trace.actors[args[1]]
+        return np.hypot(a.x - b.x, a.y - b.y)
+
+
+@SIGNALS.register
+class Gap(SignalFn):
+    keyword = "gap"
+    args = ("actor", "actor")
+    dim = units.LENGTH
+    doc = "bumper-to-bumper gap along the road from the first actor to the second [m]"
+
+    @staticmethod
+    def compute(trace, args):
+        a, b = trace.actors[args[0]], trace.actors[args[1]]
+        return (b.s - a.s) - 0.5 * (a.length_m + b.length_m)
+
+
+@SIGNALS.register
+class Ttc(SignalFn):
+    keyword = "ttc"
+    args = ("actor", "actor")
+    dim = units.TIME
+    doc = (f"time to collision of the first actor into the second along the road, when they "
+           f"overlap laterally and close in; capped at {TTC_CAP_S:g} s [s]")
+
+    @staticmethod
+    def compute(trace, args):
+        a, b = trace.actors[args[0]], trace.actors[args[1]]
+        gap = (b.s - a.s) - 0.5 * (a.length_m + b.length_m)
+        closing = a.speed - b.speed
+        overlap = np.abs(a.t - b.t) < 0.5 * (a.width_m + b.width_m) + 0.2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ttc = np.where((closing > 1e-6) & (gap > -0.5 * a.length_m) & overlap,
+                           np.maximum(gap, 0.0) / closing, TTC_CAP_S)
+        return np.minimum(ttc, TTC_CAP_S)
+
+
+@SIGNALS.register
+class Latency(SignalFn):
+    keyword = "latency"
+    args = ("node",)
+    dim = units.TIME
+    doc = "latency of a stack node, or `e2e` from sensor timestamp to actuation [s]"
+
+    @staticmethod
+    def compute(trace, args):
+        return trace.latency[args[0]]
+
+
+@SIGNALS.register
+class ObjectCount(SignalFn):
+    keyword = "objects"
+    args = ()
+    dim = units.DIMENSIONLESS
+    doc = "number of objects the perception reports"
+
+    @staticmethod
+    def compute(trace, args):
+        return trace.object_count if trace.object_count is not None else np.zeros_like(trace.time)
+
+
+def compute_signals(trace, names: set[str]) -> dict[str, np.ndarray]:
+    """Evaluate canonical signal names (`ttc(ego,lead)`) on a trace."""
+    out: dict[str, np.ndarray] = {}
+    for name in names:
+        fn, _, rest = name.partition("(")
+        args = tuple(a for a in rest.rstrip(")").split(",") if a)
+        cls = SIGNALS.get(fn)
+        if cls is None:
+            raise KeyError(f"unknown signal {name!r}")
+        out[name] = np.asarray(cls.compute(trace, args), dtype=float)
+    return out

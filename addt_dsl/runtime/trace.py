@@ -1,0 +1,82 @@
+"""The trace of one run: signals on a fixed clock, events, per-node latencies.
+
+Arrays are numpy, sampled every `period_s` (the physics step). `digest()` hashes every
+array bit for bit: the determinism tests compare digests.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+ACTOR_FIELDS = ("x", "y", "heading", "speed", "accel", "yaw_rate", "s", "t", "lane_offset",
+                "steer", "clearance")
+
+
+@dataclass
+class ActorTrack:
+    """Per-actor signals, one value per clock sample. Units: m, rad, m/s, m/s^2, rad/s."""
+
+    name: str
+    length_m: float
+    width_m: float
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+    accel: np.ndarray
+    yaw_rate: np.ndarray
+    s: np.ndarray  # station along its road [m]
+    t: np.ndarray  # lateral offset from the road reference line, left positive [m]
+    lane_offset: np.ndarray  # offset from the centre of the lane it started in / targets [m]
+    steer: np.ndarray  # front wheel angle [rad]
+    clearance: np.ndarray  # distance to the nearest other actor's box, negative = overlap [m]
+
+
+@dataclass
+class Event:
+    time_s: float
+    kind: str  # collision | fault | stack_error | trigger | goal | watchdog
+    detail: dict = field(default_factory=dict)
+
+
+@dataclass
+class Trace:
+    period_s: float
+    time: np.ndarray
+    actors: dict[str, ActorTrack]
+    # Latency per node [s], sample-and-hold on the clock; "e2e" is sensor stamp to actuation.
+    latency: dict[str, np.ndarray]
+    events: list[Event] = field(default_factory=list)
+    # Values published by stack nodes (for masked vs silent-corruption classification).
+    outputs: dict[str, np.ndarray] = field(default_factory=dict)
+    object_count: np.ndarray | None = None
+    status: str = "ok"  # ok | detected (exception / NaN / watchdog)
+    error: str = ""
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.time[-1]) if len(self.time) else 0.0
+
+    def events_of(self, kind: str) -> list[Event]:
+        return [e for e in self.events if e.kind == kind]
+
+    def digest(self) -> str:
+        h = hashlib.sha256()
+        h.update(np.ascontiguousarray(self.time).tobytes())
+        for name in sorted(self.actors):
+            track = self.actors[name]
+            for f in ACTOR_FIELDS:
+                h.update(np.ascontiguousarray(getattr(track, f)).tobytes())
+        for name in sorted(self.latency):
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(self.latency[name]).tobytes())
+        for name in sorted(self.outputs):
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(self.outputs[name]).tobytes())
+        for e in self.events:
+            h.update(repr((e.time_s, e.kind, sorted(e.detail.items()))).encode())
+        h.update(self.status.encode())
+        return h.hexdigest()

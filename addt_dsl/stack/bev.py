@@ -1,0 +1,170 @@
+"""The default stack `bev`: perception → tracker → lattice planner → controller on a bus.
+
+Timing follows the paper's BEV stack: sensor frames arrive (possibly late); a frame older
+than `stale` on arrival is discarded (out-of-order avoidance); each node publishes at
+`t + latency`, latency from the per-node model (deterministic) or, with
+`latency measured`, the measured compute time (HIL-like). End-to-end latency is
+actuation time minus the sensor timestamp the command derives from.
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+
+from addt_dsl import units
+from addt_dsl.registry import STACKS, ParamSpec
+from addt_dsl.stack.bus import Bus
+from addt_dsl.stack.latency import load_models
+from addt_dsl.stack.nodes import Controller, GroundTruthPerception, LatticePlanner, Tracker
+
+NODE_NAMES = ("perception", "tracker", "planner", "control")
+
+
+class StackError(RuntimeError):
+    """Raised by the stack's watchdog (e.g. non-finite commands)."""
+
+
+@STACKS.register
+class BevStack:
+    keyword = "bev"
+    params = (
+        ParamSpec("perception", None, kind="word", default="ground_truth",
+                  choices=("ground_truth", "learned"), doc="perception model"),
+        ParamSpec("cruise_speed", units.SPEED, default=25.0, low=0.0, high=70.0, doc="desired speed"),
+        ParamSpec("time_gap", units.TIME, default=1.5, low=0.1, high=10.0, doc="desired headway"),
+        ParamSpec("stale", units.TIME, default=0.15, low=0.0, high=10.0,
+                  doc="frames older than this on arrival are discarded"),
+        ParamSpec("latency", None, kind="word", default="model", choices=("model", "measured"),
+                  doc="node latency from the calibrated model or measured compute time"),
+        ParamSpec("planner_rate", units.FREQUENCY, default=10.0, low=1.0, high=100.0, doc="planning rate"),
+        ParamSpec("control_rate", units.FREQUENCY, default=100.0, low=10.0, high=1000.0, doc="control rate"),
+        ParamSpec("perception_noise", units.LENGTH, default=0.1, low=0.0, high=10.0,
+                  doc="position noise of ground-truth perception (1 sigma)"),
+    )
+    nodes = {
+        "perception": GroundTruthPerception.sites,
+        "tracker": Tracker.sites,
+        "planner": LatticePlanner.sites,
+        "control": Controller.sites,
+    }
+    doc = "BEV-style stack: lidar perception, CV tracker, lattice planner, PID + pure pursuit."
+
+    @classmethod
+    def fault_sites(cls) -> set[str]:
+        return {site for sites in cls.nodes.values() for site in sites}
+
+    def __init__(self, settings: dict, ctx):
+        self.settings = {p.name: settings.get(p.name, p.default) for p in self.params}
+        self.ctx = ctx
+        self.bus = Bus()
+        self.latency_models = load_models()
+        self.measured = self.settings["latency"] == "measured"
+        self.perception = self._make_perception()
+        self.tracker = Tracker()
+        self.planner = LatticePlanner(self.settings)
+        self.controller = Controller(self.settings, ctx.wheelbase_m)
+        self.planner_period = 1.0 / float(self.settings["planner_rate"])
+        self.control_period = 1.0 / float(self.settings["control_rate"])
+        self.next_plan_s = 0.0
+        self.next_control_s = 0.0
+        self.plan = None
+        self.plan_stamp = None  # sensor stamp the current plan derives from
+        self.tracks_stamp = None
+        self.command = (0.0, 0.0)
+        self.latency = {n: 0.0 for n in (*NODE_NAMES, "e2e")}
+        self.objects_seen = 0
+
+    def _make_perception(self):
+        if self.settings["perception"] == "learned":
+            from addt_dsl.stack.learned import LearnedPerception  # torch: only when asked for
+
+            return LearnedPerception(self.settings, self.ctx)
+        return GroundTruthPerception(self.settings, self.ctx.rng("perception"))
+
+    # ---- timing helpers
+    def _latency(self, node: str, objects: int, started: float, time_s: float) -> float:
+        base = (_time.perf_counter() - started) if self.measured else \
+            self.latency_models[node].latency(objects)
+        extra = sum(f.extra_latency(node, time_s, base) for f in self.ctx.faults.for_target(node))
+        lat = base + extra
+        self.latency[node] = lat
+        return lat
+
+    def corrupt(self, site: str, value: float) -> float:
+        for f in self.ctx.faults.for_target(site):
+            value = f.on_value(site, value, self.ctx.now)
+        return value
+
+    # ---- inputs
+    def on_frame(self, frame, arrive_s: float) -> None:
+        """A sensor frame arrives at the stack at `arrive_s`."""
+        if arrive_s - frame.stamp_s > float(self.settings["stale"]):
+            self.ctx.event("stale_frame", sensor=frame.sensor, age_s=arrive_s - frame.stamp_s)
+            return
+        started = _time.perf_counter()
+        sensor = self.ctx.sensor(frame.sensor)
+        objs = self.perception.run(frame, self.ctx.world, sensor, self.ctx.ego_pose(), self.corrupt)
+        self.objects_seen = len(objs)
+        lat = self._latency("perception", len(objs), started, arrive_s)
+        self.bus.publish("objects", objs, frame.stamp_s, arrive_s + lat)
+
+    # ---- the per-step tick
+    def step(self, time_s: float, dt: float):
+        self.ctx.now = time_s
+        for msg in self.bus.deliver_until(time_s):
+            if msg.topic == "objects":
+                started = _time.perf_counter()
+                self.tracker.update(msg.data, msg.stamp_s, self.corrupt)
+                lat = self._latency("tracker", len(msg.data), started, time_s)
+                self.bus.publish("tracks", None, msg.stamp_s, time_s + lat)
+            elif msg.topic == "tracks":
+                self.tracks_stamp = msg.stamp_s
+            elif msg.topic == "plan":
+                self.plan, self.plan_stamp = msg.data, msg.stamp_s
+        if time_s + 1e-9 >= self.next_plan_s:
+            self.next_plan_s += self.planner_period
+            self._run_planner(time_s)
+        if time_s + 1e-9 >= self.next_control_s:
+            self.next_control_s += self.control_period
+            self._run_control(time_s, dt)
+        return self.command
+
+    def _run_planner(self, time_s: float) -> None:
+        started = _time.perf_counter()
+        road, road_id = self.ctx.ego_road()
+        x, y, heading, speed = self.ctx.ego_pose()
+        s0, t0 = road.project(x, y)
+        lane0 = road.lane_at(s0, t0) or self.ctx.ego_lane
+        objs = []
+        for o in self.tracker.objects_at(time_s):
+            so, to = road.project(o.x, o.y)
+            # Velocity along the road tangent.
+            hdg = float(road.reference_pose(so)[2])
+            v_along = o.vx * math.cos(hdg) + o.vy * math.sin(hdg)
+            objs.append((float(so), float(to), v_along, o.length, o.width))
+        plan = self.planner.plan((float(s0), float(t0), lane0), speed, objs, road, road_id, time_s,
+                                 self.corrupt)
+        lat = self._latency("planner", len(objs), started, time_s)
+        stamp = self.tracks_stamp if self.tracks_stamp is not None else time_s
+        self.bus.publish("plan", plan, stamp, time_s + lat)
+
+    def _run_control(self, time_s: float, dt: float) -> None:
+        if self.plan is None:
+            self.command = (0.0, 0.0)
+            return
+        started = _time.perf_counter()
+        road, _ = self.ctx.ego_road()
+        x, y, heading, speed = self.ctx.ego_pose()
+        s_now, t_now = road.project(x, y)
+        steer, accel = self.controller.command(self.plan, (x, y, heading, speed), road,
+                                               float(s_now), float(t_now), self.control_period,
+                                               self.corrupt)
+        lat = self._latency("control", 0, started, time_s)
+        if not (math.isfinite(steer) and math.isfinite(accel)):
+            raise StackError(f"non-finite command steer={steer!r} accel={accel!r}")
+        self.command = (steer, accel)
+        self.latency["e2e"] = time_s + lat - (self.plan_stamp if self.plan_stamp is not None else time_s)
+        self.ctx.apply_command_at(time_s + lat, steer, accel)
+
+
