@@ -148,7 +148,7 @@ class Spiral:
 
     def pose(self, s: ArrayLike):
         scalar = np.ndim(s) == 0
-        ds = np.atleast_1d(np.asarray(s, dtype=float)) - self.s0
+        ds = np.asarray(s, dtype=float).ravel() - self.s0
         u = ds[:, None] * self._nodes[None, :]
         phase = self.curv_start * u + 0.5 * self.curv_rate * u * u
         c = ds * (np.cos(phase) @ self._weights)
@@ -212,7 +212,7 @@ class Poly3:
 
     def pose(self, s: ArrayLike):
         scalar = np.ndim(s) == 0
-        ds = np.atleast_1d(np.asarray(s, dtype=float)) - self.s0
+        ds = np.asarray(s, dtype=float).ravel() - self.s0
         u = self._u_of(ds)
         v = self.a + u * (self.b + u * (self.c + u * self.d))
         ch, sh = math.cos(self.hdg0), math.sin(self.hdg0)
@@ -226,7 +226,7 @@ class Poly3:
 
     def curvature(self, s: ArrayLike):
         scalar = np.ndim(s) == 0
-        ds = np.atleast_1d(np.asarray(s, dtype=float)) - self.s0
+        ds = np.asarray(s, dtype=float).ravel() - self.s0
         u = self._u_of(ds)
         k = (2.0 * self.c + 6.0 * self.d * u) / (1.0 + self._dv(u) ** 2) ** 1.5
         return float(k[0]) if scalar else k.reshape(np.shape(s))
