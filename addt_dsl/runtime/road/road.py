@@ -22,6 +22,7 @@ _SAMPLE_STEP_M = 1.0  # coarse projection grid step, refined where curvature is 
 _MAX_SAMPLE_TURN_RAD = 0.1  # max heading change between coarse samples
 _PROJECT_CHUNK = 2048  # points per block in the (points x samples) distance matrix
 _NEWTON_ITERS = 12
+_SECTION_SNAP_M = 1e-9
 
 
 @dataclass(frozen=True)
@@ -368,7 +369,15 @@ class Road:
         t = -dx * sn + dy * c
         best = np.argmin(dx * dx + dy * dy, axis=1)[:, None]
         pick = lambda a: np.take_along_axis(a, best, axis=1)[:, 0]  # noqa: E731
-        return pick(s), pick(t), pick(f)
+        s, t, f = pick(s), pick(t), pick(f)
+        # Snap onto lane-section starts: lane ids change there, and a 1e-13 m round-off
+        # must not decide which section (hence which lane id) a point belongs to.
+        starts = self._section_starts
+        near = np.clip(np.searchsorted(starts, s), 1, max(1, len(starts) - 1))
+        for cand in (near - 1, np.minimum(near, len(starts) - 1)):
+            snap = np.abs(s - starts[cand]) < _SECTION_SNAP_M
+            s = np.where(snap, starts[cand], s)
+        return s, t, f
 
     def lane_offset(self, lane_id: int, x, y):
         """Signed lateral distance [m] of point(s) from the centre line of ``lane_id``
