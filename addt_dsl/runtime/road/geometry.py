@@ -17,6 +17,7 @@ starts at a given pose (used to chain inline roads tangent-continuously).
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 from dataclasses import dataclass, field
@@ -393,6 +394,8 @@ class CubicProfile:
     before_first: str = "extrapolate"
     _starts: np.ndarray = field(init=False, repr=False, compare=False)
     _coeffs: np.ndarray = field(init=False, repr=False, compare=False)
+    starts_sorted: tuple = field(init=False, repr=False, compare=False)
+    coeffs_sorted: tuple = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if len(self.starts) != len(self.coeffs):
@@ -400,6 +403,8 @@ class CubicProfile:
         order = np.argsort(np.asarray(self.starts, dtype=float), kind="stable")
         object.__setattr__(self, "_starts", np.asarray(self.starts, dtype=float)[order])
         object.__setattr__(self, "_coeffs", np.asarray(self.coeffs, dtype=float).reshape(-1, 4)[order])
+        object.__setattr__(self, "starts_sorted", tuple(float(v) for v in self._starts))
+        object.__setattr__(self, "coeffs_sorted", tuple(tuple(float(v) for v in row) for row in self._coeffs))
 
     @staticmethod
     def constant(value: float) -> "CubicProfile":
@@ -410,6 +415,20 @@ class CubicProfile:
         before = idx < 0
         idx = np.clip(idx, 0, None)
         return idx, s - self._starts[idx], before
+
+    def value_and_rate(self, s: float) -> tuple[float, float]:
+        """Scalar fast path: ``(f(s), df/ds)`` with plain floats (hot in per-step queries)."""
+        starts = self.starts_sorted
+        if not starts:
+            return 0.0, 0.0
+        i = bisect.bisect_right(starts, s) - 1
+        if i < 0:
+            if self.before_first == "zero":
+                return 0.0, 0.0
+            i = 0
+        a, b, c, d = self.coeffs_sorted[i]
+        ds = s - starts[i]
+        return a + ds * (b + ds * (c + ds * d)), b + ds * (2.0 * c + 3.0 * d * ds)
 
     def __call__(self, s: ArrayLike):
         scalar = np.ndim(s) == 0

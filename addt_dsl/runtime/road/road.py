@@ -7,6 +7,7 @@ slack is clamped); anything else raises ``ValueError`` rather than extrapolating
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from typing import Optional
@@ -55,6 +56,8 @@ class Road:
     successor: Optional[RoadLink] = None
     _geom_starts: np.ndarray = field(init=False, repr=False, compare=False)
     _section_starts: np.ndarray = field(init=False, repr=False, compare=False)
+    _section_starts_t: tuple = field(init=False, repr=False, compare=False)
+    _geom_starts_t: tuple = field(init=False, repr=False, compare=False)
     _sample_s: np.ndarray = field(init=False, repr=False, compare=False)
     _sample_xy: np.ndarray = field(init=False, repr=False, compare=False)
 
@@ -67,6 +70,8 @@ class Road:
             raise ValueError(f"road {self.id}: length must be > 0 m, got {self.length!r}")
         object.__setattr__(self, "_geom_starts", np.array([g.s0 for g in self.geometries]))
         object.__setattr__(self, "_section_starts", np.array([sec.s0 for sec in self.sections]))
+        object.__setattr__(self, "_section_starts_t", tuple(sec.s0 for sec in self.sections))
+        object.__setattr__(self, "_geom_starts_t", tuple(g.s0 for g in self.geometries))
         sample_s = self._coarse_samples()
         x, y, _ = self.reference_pose(sample_s)
         object.__setattr__(self, "_sample_s", sample_s)
@@ -91,6 +96,10 @@ class Road:
         return samples
 
     def _s(self, s) -> tuple[np.ndarray, bool]:
+        if isinstance(s, (float, int)):  # fast path for per-step scalar queries
+            if not -S_SLACK_M <= s <= self.length + S_SLACK_M:
+                raise ValueError(f"road {self.id}: s={s!r} m outside [0, {self.length}] m")
+            return np.float64(min(max(float(s), 0.0), self.length)), True
         scalar = np.ndim(s) == 0
         s_arr = np.asarray(s, dtype=float)
         bad = ~((s_arr >= -S_SLACK_M) & (s_arr <= self.length + S_SLACK_M))
@@ -109,6 +118,9 @@ class Road:
 
     def _by_geometry(self, s: np.ndarray, method: str, n_out: int):
         """Evaluate ``geom.<method>(s)`` with each s routed to its primitive."""
+        if np.ndim(s) == 0:
+            i = max(0, bisect.bisect_right(self._geom_starts_t, float(s)) - 1)
+            return getattr(self.geometries[i], method)(float(s))
         idx = self._geom_index(s)
         if idx.ndim == 0 or np.all(idx == idx.flat[0]):
             res = getattr(self.geometries[int(idx.flat[0]) if idx.size else 0], method)(s)
@@ -196,6 +208,8 @@ class Road:
     def _lane_t(self, lane_id: int, s_arr: np.ndarray, rates: bool):
         """(inner t, outer t[, inner rate, outer rate]) of ``lane_id``; NaN where absent."""
         lane_id = int(lane_id)
+        if np.ndim(s_arr) == 0:
+            return self._lane_t_scalar(lane_id, float(s_arr), rates)
         s1 = np.atleast_1d(s_arr)
         outs = [np.full(s1.shape, np.nan) for _ in range(4 if rates else 2)]
         sec_idx = self._section_index(s1)
@@ -219,6 +233,23 @@ class Road:
                 r = sec.side_border_rates(side, ds, offset_rate[m])
                 outs[2][m], outs[3][m] = r[k - 1], r[k]
         return [o.reshape(np.shape(s_arr)) for o in outs]
+
+    def _lane_t_scalar(self, lane_id: int, s: float, rates: bool):
+        sec = self.sections[max(0, bisect.bisect_right(self._section_starts_t, s) - 1)]
+        t, rate = self.offset_profile.value_and_rate(s)
+        nan = (math.nan,) * (4 if rates else 2)
+        if lane_id == 0:
+            return (t, t, rate, rate) if rates else (t, t)
+        if sec.lane(lane_id) is None:
+            return nan
+        side = 1 if lane_id > 0 else -1
+        lanes = sec.left if side > 0 else sec.right
+        ds = s - sec.s0
+        for lane in lanes[: abs(lane_id)]:
+            w, w_rate = lane.width.value_and_rate(ds)
+            inner, inner_rate = t, rate
+            t, rate = t + side * w, rate + side * w_rate
+        return (inner, t, inner_rate, rate) if rates else (inner, t)
 
     def _require_lane(self, lane_id: int, s_arr: np.ndarray, probe: np.ndarray) -> None:
         if np.any(np.isnan(probe)):
@@ -334,15 +365,25 @@ class Road:
     def _project_chunk(self, px: np.ndarray, py: np.ndarray, n_candidates: int):
         ss, xy = self._sample_s, self._sample_xy
         m = len(ss)
-        d2 = (px[:, None] - xy[None, :, 0]) ** 2 + (py[:, None] - xy[None, :, 1]) ** 2
-        # Local minima of the sampled distance (ends included) are the candidate basins.
-        pad = np.pad(d2, ((0, 0), (1, 1)), constant_values=np.inf)
-        is_min = (d2 <= pad[:, :-2]) & (d2 <= pad[:, 2:])
-        d2_min = np.where(is_min, d2, np.inf)
-        n_c = min(n_candidates, m)
-        cand = np.argpartition(d2_min, n_c - 1, axis=1)[:, :n_c] if n_c < m else np.tile(np.arange(m), (len(px), 1))
-        valid = np.isfinite(np.take_along_axis(d2_min, cand, axis=1))
-        cand = np.where(valid, cand, np.argmin(d2, axis=1)[:, None])
+        # |p - q|² via one matrix product (BLAS); round-off ~1e-16 |p|² only affects which
+        # coarse samples become candidates, not the refined result.
+        p = np.stack([px, py], axis=1)
+        d2 = (p * p).sum(1)[:, None] + (xy * xy).sum(1)[None, :] - 2.0 * (p @ xy.T)
+        # Local minima of the sampled distance (ends included) are the candidate basins;
+        # take the n_candidates nearest ones.
+        d2_min = np.full_like(d2, np.inf)
+        if m > 2:
+            mid = d2[:, 1:-1]
+            d2_min[:, 1:-1] = np.where((mid <= d2[:, :-2]) & (mid <= d2[:, 2:]), mid, np.inf)
+        d2_min[:, 0] = np.where(d2[:, 0] <= d2[:, 1], d2[:, 0], np.inf)
+        d2_min[:, -1] = np.where(d2[:, -1] <= d2[:, -2], d2[:, -1], np.inf)
+        rows = np.arange(len(px))
+        picks = []
+        for _ in range(min(n_candidates, m)):
+            j = np.argmin(d2_min, axis=1)
+            picks.append(np.where(np.isfinite(d2_min[rows, j]), j, picks[0] if picks else j))
+            d2_min[rows, j] = np.inf
+        cand = np.stack(picks, axis=1)
         lo = ss[np.clip(cand - 1, 0, m - 1)]
         hi = ss[np.clip(cand + 1, 0, m - 1)]
         s = ss[cand]
