@@ -1,0 +1,334 @@
+"""Safe OpenDRIVE (.xodr) reader.
+
+XML is read with ``defusedxml``'s SAX parser: entity declarations (billion laughs) and
+external entities/DTDs are refused. A tiny element tree records the source line of every
+element so that errors can point at it. Elements that do not change road geometry
+(signals, objects, roadMark, userData, ...) are ignored; anything that does and cannot
+be evaluated raises :class:`XodrError`.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import xml.sax
+from dataclasses import dataclass, field
+from typing import Optional, Union
+
+import defusedxml.sax
+from defusedxml import DefusedXmlException
+
+from .geometry import Arc, CubicProfile, Line, ParamPoly3, Poly3, Spiral
+from .lanes import Lane, LaneSection
+from .network import Connection, Junction, RoadNetwork
+from .road import Road, RoadLink
+
+_GEOMETRY_TAGS = ("line", "arc", "spiral", "poly3", "paramPoly3")
+
+
+class XodrError(ValueError):
+    """Invalid or unsupported OpenDRIVE content.
+
+    ``element`` is the XML tag concerned, ``line`` its 1-based source line (None if
+    unknown) and ``source`` the file name.
+    """
+
+    def __init__(self, message: str, element: Optional[str] = None, line: Optional[int] = None, source: str = "<string>"):
+        self.message = message
+        self.element = element
+        self.line = line
+        self.source = source
+        where = f"{source}:{line}" if line is not None else source
+        what = f" <{element}>" if element else ""
+        super().__init__(f"{where}:{what} {message}")
+
+
+@dataclass
+class _Node:
+    """Minimal element: tag, attributes, children, source line."""
+
+    tag: str
+    attrs: dict
+    line: int
+    children: list = field(default_factory=list)
+
+    def find(self, tag: str) -> Optional["_Node"]:
+        for child in self.children:
+            if child.tag == tag:
+                return child
+        return None
+
+    def findall(self, tag: str) -> list["_Node"]:
+        return [c for c in self.children if c.tag == tag]
+
+
+class _TreeBuilder(xml.sax.handler.ContentHandler):
+    def __init__(self) -> None:
+        super().__init__()
+        self.root: Optional[_Node] = None
+        self._stack: list[_Node] = []
+        self._locator = None
+
+    def setDocumentLocator(self, locator) -> None:
+        self._locator = locator
+
+    @property
+    def line(self) -> Optional[int]:
+        return self._locator.getLineNumber() if self._locator is not None else None
+
+    def startElement(self, name, attrs) -> None:
+        # Drop a namespace prefix ("xodr:road" -> "road"); default xmlns is an attribute only.
+        tag = name.split(":", 1)[-1]
+        node = _Node(tag, dict(attrs.items()), self.line or 0)
+        if self._stack:
+            self._stack[-1].children.append(node)
+        elif self.root is None:
+            self.root = node
+        self._stack.append(node)
+
+    def endElement(self, name) -> None:
+        self._stack.pop()
+
+
+def _parse_tree(data: Union[str, bytes], source: str) -> _Node:
+    handler = _TreeBuilder()
+    parser = defusedxml.sax.make_parser()
+    parser.setContentHandler(handler)
+    parser.forbid_dtd = False  # a plain DOCTYPE is harmless; entities below are what bite
+    parser.forbid_entities = True
+    parser.forbid_external = True
+    inp = xml.sax.InputSource(source)
+    if isinstance(data, bytes):
+        inp.setByteStream(io.BytesIO(data))
+    else:
+        # Text is already decoded: hand expat UTF-8 and drop a conflicting declaration.
+        if data.startswith("<?xml"):
+            end = data.find("?>")
+            data = data[end + 2:] if end >= 0 else data
+        inp.setByteStream(io.BytesIO(data.encode("utf-8")))
+    try:
+        parser.parse(inp)
+    except DefusedXmlException as exc:
+        raise XodrError(
+            f"refused unsafe XML ({type(exc).__name__}: entity/DTD declarations and external "
+            "references are not allowed in OpenDRIVE files)",
+            element="!ENTITY", line=handler.line, source=source,
+        ) from None
+    except xml.sax.SAXParseException as exc:
+        raise XodrError(f"malformed XML: {exc.getMessage()}", line=exc.getLineNumber(), source=source) from None
+    if handler.root is None:
+        raise XodrError("empty document", source=source)
+    return handler.root
+
+
+class _Reader:
+    """Turns the element tree into model objects; holds only the source name."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def err(self, node: _Node, message: str) -> XodrError:
+        return XodrError(message, element=node.tag, line=node.line, source=self.source)
+
+    def num(self, node: _Node, key: str, default: Optional[float] = None) -> float:
+        raw = node.attrs.get(key)
+        if raw is None:
+            if default is not None:
+                return default
+            raise self.err(node, f"missing attribute {key!r}")
+        try:
+            value = float(raw)
+        except ValueError:
+            raise self.err(node, f"attribute {key}={raw!r} is not a number") from None
+        if not math.isfinite(value):
+            raise self.err(node, f"attribute {key}={raw!r} is not finite")
+        return value
+
+    def text(self, node: _Node, key: str, default: Optional[str] = None) -> str:
+        raw = node.attrs.get(key, default)
+        if raw is None:
+            raise self.err(node, f"missing attribute {key!r}")
+        return raw.strip()
+
+    def cubic(self, nodes: list[_Node], s_key: str, before_first: str = "extrapolate") -> CubicProfile:
+        starts, coeffs = [], []
+        for n in nodes:
+            starts.append(self.num(n, s_key))
+            coeffs.append(tuple(self.num(n, k) for k in ("a", "b", "c", "d")))
+        return CubicProfile(tuple(starts), tuple(coeffs), before_first=before_first)
+
+    # ------------------------------------------------------------------ document
+
+    def network(self, root: _Node) -> RoadNetwork:
+        if root.tag != "OpenDRIVE":
+            raise self.err(root, "root element must be <OpenDRIVE>")
+        roads: dict[str, Road] = {}
+        for node in root.findall("road"):
+            road = self.road(node)
+            if road.id in roads:
+                raise self.err(node, f"duplicate road id {road.id!r}")
+            roads[road.id] = road
+        junctions = {}
+        for node in root.findall("junction"):
+            j = self.junction(node)
+            junctions[j.id] = j
+        return RoadNetwork(roads, junctions, source_name=self.source)
+
+    def junction(self, node: _Node) -> Junction:
+        connections = []
+        for c in node.findall("connection"):
+            contact = self.text(c, "contactPoint", "start")
+            if contact not in ("start", "end"):
+                raise self.err(c, f"contactPoint must be 'start' or 'end', got {contact!r}")
+            links = tuple(
+                (int(self.num(ll, "from")), int(self.num(ll, "to"))) for ll in c.findall("laneLink")
+            )
+            connections.append(
+                Connection(
+                    self.text(c, "id", ""),
+                    self.text(c, "incomingRoad", ""),
+                    self.text(c, "connectingRoad", ""),
+                    contact,
+                    links,
+                )
+            )
+        return Junction(self.text(node, "id"), node.attrs.get("name", ""), tuple(connections))
+
+    def link(self, node: Optional[_Node]) -> Optional[RoadLink]:
+        if node is None:
+            return None
+        etype = self.text(node, "elementType", "road")
+        if etype not in ("road", "junction"):
+            raise self.err(node, f"elementType must be 'road' or 'junction', got {etype!r}")
+        contact = node.attrs.get("contactPoint")
+        if contact is not None and contact not in ("start", "end"):
+            raise self.err(node, f"contactPoint must be 'start' or 'end', got {contact!r}")
+        return RoadLink(etype, self.text(node, "elementId"), contact)
+
+    def road(self, node: _Node) -> Road:
+        road_id = self.text(node, "id")
+        length = self.num(node, "length")
+        if length <= 0.0:
+            raise self.err(node, f"road {road_id}: length must be > 0, got {length}")
+        plan = node.find("planView")
+        if plan is None or not plan.findall("geometry"):
+            raise self.err(plan or node, f"road {road_id}: planView needs at least one <geometry>")
+        geometries = tuple(self.geometry(g) for g in plan.findall("geometry"))
+        if any(b.s0 < a.s0 for a, b in zip(geometries, geometries[1:])):
+            raise self.err(plan, f"road {road_id}: geometries must be ordered by s")
+
+        elev = node.find("elevationProfile")
+        elevation = self.cubic(elev.findall("elevation") if elev else [], "s")
+        lat = node.find("lateralProfile")
+        superelevation = self.cubic(lat.findall("superelevation") if lat else [], "s")
+
+        lanes = node.find("lanes")
+        if lanes is None:
+            raise self.err(node, f"road {road_id}: missing <lanes>")
+        offset = self.cubic(lanes.findall("laneOffset"), "s", before_first="zero")
+        sec_nodes = lanes.findall("laneSection")
+        if not sec_nodes:
+            raise self.err(lanes, f"road {road_id}: needs at least one <laneSection>")
+        starts = [self.num(sn, "s") for sn in sec_nodes]
+        if any(b < a for a, b in zip(starts, starts[1:])):
+            raise self.err(lanes, f"road {road_id}: lane sections must be ordered by s")
+        ends = starts[1:] + [length]
+        sections = tuple(self.section(sn, s0, s1) for sn, s0, s1 in zip(sec_nodes, starts, ends))
+
+        link = node.find("link")
+        rule = node.attrs.get("rule", "RHT")
+        if rule not in ("RHT", "LHT"):
+            raise self.err(node, f"rule must be 'RHT' or 'LHT', got {rule!r}")
+        predecessor = self.link(link.find("predecessor")) if link else None
+        successor = self.link(link.find("successor")) if link else None
+        try:
+            return Road(
+                road_id, length, geometries, sections,
+                offset_profile=offset, elevation_profile=elevation,
+                superelevation_profile=superelevation,
+                name=node.attrs.get("name", ""), junction=node.attrs.get("junction", "-1").strip(),
+                rule=rule,
+                predecessor=predecessor,
+                successor=successor,
+            )
+        except ValueError as exc:
+            raise self.err(node, str(exc)) from None
+
+    def geometry(self, node: _Node):
+        s0, x0, y0, hdg = (self.num(node, k) for k in ("s", "x", "y", "hdg"))
+        length = self.num(node, "length")
+        if length < 0.0:
+            raise self.err(node, f"geometry length must be >= 0, got {length}")
+        kinds = [c for c in node.children if c.tag in _GEOMETRY_TAGS]
+        others = [c for c in node.children if c.tag not in _GEOMETRY_TAGS and c.tag != "userData"]
+        if others:
+            raise self.err(others[0], "unsupported planView geometry type")
+        if len(kinds) != 1:
+            raise self.err(node, f"<geometry> needs exactly one of {', '.join(_GEOMETRY_TAGS)}; found {len(kinds)}")
+        g = kinds[0]
+        try:
+            if g.tag == "line":
+                return Line(s0, x0, y0, hdg, length)
+            if g.tag == "arc":
+                return Arc(s0, x0, y0, hdg, length, self.num(g, "curvature"))
+            if g.tag == "spiral":
+                return Spiral(s0, x0, y0, hdg, length, self.num(g, "curvStart"), self.num(g, "curvEnd"))
+            if g.tag == "poly3":
+                return Poly3(s0, x0, y0, hdg, length, *(self.num(g, k) for k in "abcd"))
+            p_range = g.attrs.get("pRange", "normalized").strip()
+            if p_range not in ("arcLength", "normalized"):
+                raise self.err(g, f"pRange must be 'arcLength' or 'normalized', got {p_range!r}")
+            coeffs = [self.num(g, f"{c}{ax}") for ax in "UV" for c in "abcd"]
+            return ParamPoly3(s0, x0, y0, hdg, length, *coeffs, p_range=p_range)
+        except ValueError as exc:
+            if isinstance(exc, XodrError):
+                raise
+            raise self.err(g, str(exc)) from None
+
+    def section(self, node: _Node, s0: float, s1: float) -> LaneSection:
+        sides = {}
+        for side_tag, sign in (("left", 1), ("right", -1)):
+            side = node.find(side_tag)
+            lanes = [self.lane(n) for n in side.findall("lane")] if side else []
+            for lane, n in zip(lanes, side.findall("lane") if side else []):
+                if lane.id * sign <= 0:
+                    raise self.err(n, f"lane id {lane.id} does not belong to <{side_tag}>")
+            sides[side_tag] = tuple(sorted(lanes, key=lambda ln: abs(ln.id)))
+        center = node.find("center")
+        center_lane = center.find("lane") if center else None
+        try:
+            return LaneSection(
+                s0, s1, left=sides["left"], right=sides["right"],
+                center_type=center_lane.attrs.get("type", "none") if center_lane else "none",
+            )
+        except ValueError as exc:
+            raise self.err(node, str(exc)) from None
+
+    def lane(self, node: _Node) -> Lane:
+        lane_id = int(self.num(node, "id"))
+        widths = node.findall("width")
+        if not widths:
+            if node.findall("border"):
+                raise self.err(node, f"lane {lane_id}: <border> lane geometry is not supported (use <width>)")
+            raise self.err(node, f"lane {lane_id}: missing <width>")
+        link = node.find("link")
+        pred = tuple(int(self.num(p, "id")) for p in link.findall("predecessor")) if link else ()
+        succ = tuple(int(self.num(p, "id")) for p in link.findall("successor")) if link else ()
+        level = node.attrs.get("level", "false").strip().lower() in ("true", "1")
+        return Lane(
+            lane_id, node.attrs.get("type", "none").strip(), self.cubic(widths, "sOffset"), level, pred, succ
+        )
+
+
+def parse_xodr(text: Union[str, bytes], source_name: str = "<string>") -> RoadNetwork:
+    """Parse OpenDRIVE XML text (str or bytes) into a :class:`RoadNetwork`."""
+    root = _parse_tree(text, source_name)
+    return _Reader(source_name).network(root)
+
+
+def load_xodr(path: Union[str, os.PathLike]) -> RoadNetwork:
+    """Read and parse an ``.xodr`` file."""
+    with open(path, "rb") as fh:
+        data = fh.read()
+    return parse_xodr(data, source_name=str(path))
