@@ -1,0 +1,461 @@
+"""`execute(RunSpec) -> RunResult`: the only entry point into the runtime.
+
+One discrete loop in simulated time. Each physics step: traffic behaviours and
+triggers; sensors that are due capture (after spatial faults), temporal faults decide
+when (or whether) the frame reaches the stack; the stack ticks (its nodes publish at
+`t + latency`); the latest due command drives the ego dynamics; the state is recorded.
+Everything random draws from generators seeded by the RunSpec, so the same RunSpec
+gives the same trace bit for bit.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import time as _time
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from addt_dsl.expr import substitute_params
+from addt_dsl.plan import ActorPlan, RunSpec, resolve_settings
+from addt_dsl.registry import BEHAVIORS, SENSORS, STACKS
+from addt_dsl.runtime import oracles
+from addt_dsl.runtime.behaviors import AgentState, lateral_profile
+from addt_dsl.runtime.faults import FaultSchedule
+from addt_dsl.runtime.roadspec import build_network
+from addt_dsl.runtime.signals import compute_signals
+from addt_dsl.runtime.trace import ActorTrack, Event, Trace
+from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
+from addt_dsl.runtime.vehicle import step as vehicle_step
+from addt_dsl.runtime.world import PhysicsWorld, box_separation
+
+VEHICLE_SIZES = {"car": (4.6, 1.9), "truck": (12.0, 2.5), "cyclist": (1.8, 0.6), "pedestrian": (0.5, 0.5)}
+VEHICLE_HEIGHT = {"car": 1.5, "truck": 3.5, "cyclist": 1.7, "pedestrian": 1.8}
+
+
+@dataclass
+class OracleVerdict:
+    name: str
+    severity: str
+    robustness: float
+    passed: bool
+    first_violation_s: float | None = None
+
+
+@dataclass
+class RunResult:
+    run_id: str
+    key: str
+    params: dict[str, float]
+    seed: int
+    verdicts: list[OracleVerdict]
+    status: str  # ok | detected
+    error: str
+    sim_time_s: float
+    wall_time_s: float
+    digest: str
+    fault_events: int
+    trace: Trace | None = field(default=None, repr=False)
+
+    @property
+    def passed(self) -> bool:
+        return self.status == "ok" and all(v.passed for v in self.verdicts if v.severity == "hard")
+
+    @property
+    def failed_oracles(self) -> list[str]:
+        failed = [v.name for v in self.verdicts if v.severity == "hard" and not v.passed]
+        if self.status != "ok":
+            failed.append("stack_health")
+        return failed
+
+
+class _Road:
+    """The road an actor drives on: (s, t) ↔ world, with a warm-started projection."""
+
+    def __init__(self, network, road_id: str):
+        self.network = network
+        self.road = network.road(road_id)
+        self.road_id = road_id
+
+    def pose(self, s: float, t: float) -> tuple[float, float, float]:
+        x, y, h = self.road.reference_pose(s)
+        x, y, h = float(x), float(y), float(h)
+        return x - math.sin(h) * t, y + math.cos(h) * t, h
+
+
+def _stable_seed(*parts) -> list[int]:
+    return [int(p) if isinstance(p, int) else zlib.crc32(str(p).encode()) for p in parts]
+
+
+class _Context:
+    """What the stack may see and do: its sensors, the map, the fault schedule, the clock."""
+
+    def __init__(self, run: _Run):
+        self.run = run
+        self.world = run
+        self.faults = run.faults
+        self.now = 0.0
+        self.wheelbase_m = run.vehicle_params.wheelbase_m
+        self.ego_lane = run.ego_lane
+
+    def rng(self, name: str) -> np.random.Generator:
+        return np.random.default_rng(_stable_seed(self.run.spec.seed, "stack", name))
+
+    def ego_pose(self):
+        return self.run.ego_pose()
+
+    def ego_road(self):
+        return self.run.ego_road.road, self.run.ego_road.road_id
+
+    def sensor(self, name: str):
+        return self.run.sensors[name]
+
+    def event(self, kind: str, **detail) -> None:
+        self.run.events.append(Event(self.now, kind, detail))
+
+    def apply_command_at(self, time_s: float, steer: float, accel: float) -> None:
+        self.run.command_queue.append((time_s, steer, accel))
+
+
+class _Run:
+    def __init__(self, spec: RunSpec):
+        self.spec = spec
+        plan = spec.plan
+        self.dt = plan.step_s
+        self.n_steps = int(round(plan.duration_s / self.dt))
+        self.events: list[Event] = []
+        self.networks = build_network(plan.roads)
+        self.physics = PhysicsWorld()
+        self.faults = FaultSchedule(spec.faults, self.dt, plan.duration_s, self.events)
+        self.command_queue: list[tuple[float, float, float]] = []
+        self.command = (0.0, 0.0)
+        self._rngs: dict[str, np.random.Generator] = {}
+
+        ego = plan.ego
+        self.ego_plan = ego
+        self.ego_road = self._road_of(ego)
+        self.ego_lane = int(round(spec.value(ego.lane)))
+        s0 = spec.value(ego.s)
+        t0 = float(self.ego_road.road.lane_center_t(self.ego_lane, s0))
+        x, y, h = self.ego_road.pose(s0, t0)
+        self.vehicle_params = VehicleParams(mass_kg=ego.mass_kg, wheelbase_m=ego.wheelbase_m,
+                                            cg_to_front_m=0.45 * ego.wheelbase_m)
+        self.ego = VehicleState(x, y, h, spec.value(ego.speed))
+        self.ego_s, self.ego_t = s0, t0
+        self.physics.add_box("ego", ego.length_m, ego.width_m, VEHICLE_HEIGHT[ego.vehicle])
+
+        self.agents: list[AgentState] = []
+        self.agent_plans: dict[str, ActorPlan] = {}
+        self.agent_roads: dict[str, _Road] = {}
+        self.longitudinal: dict[str, object] = {}
+        self.pending_triggers: dict[str, list] = {}
+        for a in plan.agents:
+            road = self._road_of(a)
+            lane = int(round(spec.value(a.lane)))
+            s = spec.value(a.s)
+            t = float(road.road.lane_center_t(lane, s))
+            st = AgentState(a.name, road.road_id, s, t, spec.value(a.speed), 0.0, a.length_m, a.width_m,
+                            lane, t)
+            self.agents.append(st)
+            self.agent_plans[a.name] = a
+            self.agent_roads[a.name] = road
+            self.physics.add_box(a.name, a.length_m, a.width_m, VEHICLE_HEIGHT[a.vehicle])
+            self.longitudinal[a.name] = None
+            for clause in a.behaviors:
+                self._start_behavior(st, clause, 0.0)
+            self.pending_triggers[a.name] = [
+                (substitute_params(tr.condition, spec.params), tr.clause) for tr in a.triggers]
+        self.agent_by_name = {a.name: a for a in self.agents}
+        self.body_actor = {}
+
+        self.sensors = {}
+        self.sensor_next: dict[str, float] = {}
+        for clause in ego.sensors:
+            cls = SENSORS.get(clause.name)
+            sensor = cls(clause.name, resolve_settings(clause.settings, spec.params))
+            self.sensors[clause.name] = sensor
+            self.sensor_next[clause.name] = 0.0
+        self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
+        self._frame_seq = 0
+        self.ctx = _Context(self)
+        stack_clause = ego.stack
+        stack_cls = STACKS.get(stack_clause.name)
+        self.stack = stack_cls(resolve_settings(stack_clause.settings, spec.params), self.ctx)
+
+    # ---- queries used by sensors and the stack
+    def _road_of(self, actor: ActorPlan) -> _Road:
+        network = self.networks[actor.road]
+        rp = self.spec.plan.road(actor.road)
+        road_id = rp.xodr_road_id if rp.source == "xodr" and rp.xodr_road_id else next(iter(network.roads))
+        return _Road(network, road_id)
+
+    def rng(self, name: str) -> np.random.Generator:
+        if name not in self._rngs:
+            self._rngs[name] = np.random.default_rng(_stable_seed(self.spec.seed, "world", name))
+        return self._rngs[name]
+
+    def ego_pose(self):
+        e = self.ego
+        return e.x, e.y, e.heading, e.speed
+
+    def ray_cast(self, starts, ends):
+        return self.physics.ray_cast(starts, ends, ignore="ego")
+
+    def actor_by_body(self, body: int):
+        name = self.physics.body_names.get(body)
+        return self.body_actor.get(name)
+
+    def leader_of(self, agent: AgentState):
+        """(gap [m], speed [m/s]) of the nearest actor ahead in the agent's lane, or None."""
+        best = None
+        for other_name, s, t, speed, length in self._road_occupants(agent.road):
+            if other_name == agent.name or abs(t - agent.t) > 1.8:
+                continue
+            gap = s - agent.s - 0.5 * (length + agent.length_m)
+            if s > agent.s and (best is None or gap < best[0]):
+                best = (gap, speed)
+        return best
+
+    def _road_occupants(self, road_id: str):
+        for a in self.agents:
+            if a.road == road_id:
+                yield a.name, a.s, a.t, a.speed, a.length_m
+        if self.ego_road.road_id == road_id:
+            yield "ego", self.ego_s, self.ego_t, self.ego.speed, self.ego_plan.length_m
+
+    def lane_t(self, road_id: str, lane: int, s: float) -> float:
+        road = next(r for r in self.agent_roads.values() if r.road_id == road_id)
+        return float(road.road.lane_center_t(lane, s))
+
+    # ---- behaviours
+    def _start_behavior(self, agent: AgentState, clause, time_s: float) -> None:
+        cls = BEHAVIORS.get(clause.name)
+        beh = cls(resolve_settings(clause.settings, self.spec.params))
+        beh.start(agent, self, time_s)
+        if beh.channel == "longitudinal":
+            self.longitudinal[agent.name] = beh
+        self.events.append(Event(time_s, "behavior", {"actor": agent.name, "behavior": clause.name}))
+
+
+def execute(spec: RunSpec, keep_trace: bool = True) -> RunResult:
+    """Run one RunSpec closed-loop and judge it."""
+    wall0 = _time.perf_counter()
+    run = _Run(spec)
+    try:
+        trace = _loop(run)
+    finally:
+        run.physics.close()
+    verdicts = judge(spec, trace)
+    fault_events = sum(1 for e in trace.events if e.kind == "fault")
+    return RunResult(
+        run_id=spec.run_id, key=spec.key(), params=dict(spec.params), seed=spec.seed,
+        verdicts=verdicts, status=trace.status, error=trace.error,
+        sim_time_s=trace.duration_s, wall_time_s=_time.perf_counter() - wall0,
+        digest=trace.digest(), fault_events=fault_events, trace=trace if keep_trace else None)
+
+
+def _loop(run: _Run) -> Trace:
+    spec, plan, dt = run.spec, run.spec.plan, run.dt
+    n = run.n_steps + 1
+    names = ["ego"] + [a.name for a in run.agents]
+    rec = {name: {f: np.zeros(n) for f in ("x", "y", "heading", "speed", "accel", "yaw_rate", "s", "t",
+                                          "lane_offset", "steer", "clearance")} for name in names}
+    lat_nodes = ("perception", "tracker", "planner", "control", "e2e")
+    latency = {k: np.zeros(n) for k in lat_nodes}
+    outputs = {"control.steer": np.zeros(n), "control.accel": np.zeros(n)}
+    objects = np.zeros(n)
+    status, error = "ok", ""
+    last = n
+    sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
+    sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
+    ego_road = run.ego_road
+
+    for k in range(n):
+        t_now = k * dt
+        run.ctx.now = t_now
+        # Agent poses (kinematic along their road) and snapshot objects for perception.
+        poses = {}
+        for a in run.agents:
+            road = run.agent_roads[a.name]
+            x, y, h = road.pose(a.s, a.t)
+            lat_rate = 0.0
+            if a.lc_duration_s > 0 and t_now < a.lc_start_s + a.lc_duration_s:
+                lat_rate = (lateral_profile(a, t_now + dt) - a.t) / dt
+            heading = h + math.atan2(lat_rate, max(a.speed, 0.1))
+            poses[a.name] = (x, y, heading)
+            run.physics.set_pose(a.name, x, y, VEHICLE_HEIGHT[run.agent_plans[a.name].vehicle] / 2, heading)
+            run.body_actor[a.name] = _GT(x, y, heading, a.speed, a.length_m, a.width_m)
+        e = run.ego
+        run.physics.set_pose("ego", e.x, e.y, VEHICLE_HEIGHT[plan.ego.vehicle] / 2, e.heading)
+        poses["ego"] = (e.x, e.y, e.heading)
+
+        s_e, t_e = ego_road.road.project(e.x, e.y)
+        run.ego_s, run.ego_t = float(s_e), float(t_e)
+
+        # Record the state at t_now.
+        _record(rec["ego"], k, e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
+                _lane_offset(ego_road.road, run.ego_s, run.ego_t), e.steer)
+        for a in run.agents:
+            x, y, h = poses[a.name]
+            _record(rec[a.name], k, x, y, h, a.speed, a.accel, 0.0, a.s, a.t,
+                    _lane_offset(run.agent_roads[a.name].road, a.s, a.t), 0.0)
+        collided = _clearances(rec, k, names, poses, sizes, run, t_now)
+        for node in lat_nodes:
+            latency[node][k] = run.stack.latency[node]
+        outputs["control.steer"][k] = run.command[0]
+        outputs["control.accel"][k] = run.command[1]
+        objects[k] = run.stack.objects_seen
+        if collided or k == n - 1:
+            last = k + 1
+            break
+
+        # Triggers fire on the state just recorded.
+        if any(run.pending_triggers.values()):
+            _fire_triggers(run, rec, k, t_now)
+
+        # Sensors → faults → transit to the stack.
+        try:
+            for name, sensor in run.sensors.items():
+                if t_now + 1e-9 < run.sensor_next[name]:
+                    continue
+                run.sensor_next[name] += sensor.period_s
+                for f in run.faults.for_target(name):
+                    f.before_capture(sensor, t_now)
+                frame = sensor.capture(run, t_now)
+                delay = 0.0
+                for f in run.faults.for_target(name):
+                    frame, extra = f.on_frame(frame, t_now)
+                    delay += extra
+                    if frame is None:
+                        break
+                if frame is not None:
+                    run._frame_seq += 1
+                    heapq.heappush(run.inflight, (t_now + delay, run._frame_seq, frame))
+            while run.inflight and run.inflight[0][0] <= t_now + 1e-12:
+                arrive, _, frame = heapq.heappop(run.inflight)
+                run.stack.on_frame(frame, t_now)
+            run.stack.step(t_now, dt)
+        except Exception as exc:  # noqa: BLE001 - a stack failure is an outcome, not a crash
+            status, error = "detected", f"{type(exc).__name__}: {exc}"
+            run.events.append(Event(t_now, "stack_error", {"error": error}))
+            last = k + 1
+            break
+
+        # Commands become effective at their publish time.
+        queue = run.command_queue
+        while queue and queue[0][0] <= t_now + 1e-12:
+            _, steer, accel = queue.pop(0)
+            run.command = (steer, accel)
+        vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt)
+        if not all(math.isfinite(v) for v in (run.ego.x, run.ego.y, run.ego.vx)):
+            status, error = "detected", "vehicle state became non-finite"
+            last = k + 1
+            break
+        for a in run.agents:
+            beh = run.longitudinal[a.name]
+            acc = beh.accel(a, run, t_now) if beh is not None else 0.0
+            a.accel = acc
+            a.speed = max(0.0, a.speed + acc * dt)
+            a.s += a.speed * dt
+            a.t = lateral_profile(a, t_now + dt)
+
+    time = np.arange(last) * dt
+    actors = {}
+    for name in names:
+        r = rec[name]
+        length, width = sizes[name]
+        actors[name] = ActorTrack(name, length, width, **{f: v[:last] for f, v in r.items()})
+    return Trace(dt, time, actors, {k: v[:last] for k, v in latency.items()}, run.events,
+                 {k: v[:last] for k, v in outputs.items()}, objects[:last], status, error)
+
+
+@dataclass
+class _GT:
+    x: float
+    y: float
+    heading: float
+    speed: float
+    length_m: float
+    width_m: float
+
+
+def _record(r, k, x, y, heading, speed, accel, yaw_rate, s, t, lane_offset, steer) -> None:
+    r["x"][k], r["y"][k], r["heading"][k], r["speed"][k] = x, y, heading, speed
+    r["accel"][k], r["yaw_rate"][k], r["s"][k], r["t"][k] = accel, yaw_rate, s, t
+    r["lane_offset"][k], r["steer"][k] = lane_offset, steer
+
+
+def _lane_offset(road, s: float, t: float) -> float:
+    """Offset from the nearest driving lane's centre; beyond the outer lanes it keeps growing."""
+    best = None
+    for lane in road.driving_lane_ids(s):
+        off = t - float(road.lane_center_t(lane, s))
+        if best is None or abs(off) < abs(best):
+            best = off
+    return best if best is not None else t
+
+
+def _clearances(rec, k, names, poses, sizes, run, t_now) -> bool:
+    collided = False
+    boxes = {n: (*poses[n], *sizes[n]) for n in names}
+    clear = {n: math.inf for n in names}
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            # Cheap reject: boxes farther apart than their diagonals cannot touch.
+            dx, dy = boxes[a][0] - boxes[b][0], boxes[a][1] - boxes[b][1]
+            dist = math.hypot(dx, dy)
+            reach = 0.5 * (math.hypot(*sizes[a]) + math.hypot(*sizes[b]))
+            sep = dist - reach if dist > reach + 5.0 else box_separation(boxes[a], boxes[b])
+            clear[a] = min(clear[a], sep)
+            clear[b] = min(clear[b], sep)
+            if sep <= 0.0 and "ego" in (a, b):
+                run.events.append(Event(t_now, "collision", {"actors": [a, b]}))
+                collided = True
+    for n in names:
+        rec[n]["clearance"][k] = clear[n] if math.isfinite(clear[n]) else 1e3
+    return collided
+
+
+def _fire_triggers(run: _Run, rec, k: int, t_now: float) -> None:
+    snapshot = _snapshot_trace(run, rec, k)
+    for name, pending in run.pending_triggers.items():
+        still = []
+        for condition, clause in pending:
+            sig = compute_signals(snapshot, oracles_signals(condition))
+            if oracles.satisfied(condition, sig, run.dt):
+                run.events.append(Event(t_now, "trigger", {"actor": name, "behavior": clause.name}))
+                run._start_behavior(run.agent_by_name[name], clause, t_now)
+            else:
+                still.append((condition, clause))
+        run.pending_triggers[name] = still
+
+
+def oracles_signals(expr) -> set[str]:
+    from addt_dsl.expr import signals_used
+
+    return signals_used(expr)
+
+
+def _snapshot_trace(run: _Run, rec, k: int) -> Trace:
+    actors = {}
+    sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m)}
+    sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
+    for name, r in rec.items():
+        actors[name] = ActorTrack(name, *sizes[name], **{f: v[k:k + 1] for f, v in r.items()})
+    lat = {n: np.array([v]) for n, v in run.stack.latency.items()}
+    return Trace(run.dt, np.array([k * run.dt]), actors, lat)
+
+
+def judge(spec: RunSpec, trace: Trace) -> list[OracleVerdict]:
+    """Evaluate every oracle of the plan on a trace (robustness at time 0)."""
+    out = []
+    for o in spec.plan.oracles:
+        formula = substitute_params(o.formula, spec.params)
+        signals = compute_signals(trace, oracles_signals(formula))
+        rho = float(oracles.robustness_at_0(formula, signals, trace.period_s))
+        passed = oracles.satisfied(formula, signals, trace.period_s)
+        first = None if passed else oracles.first_violation_time(formula, signals, trace.period_s)
+        out.append(OracleVerdict(o.name, o.severity, rho, passed, first))
+    return out
