@@ -19,7 +19,7 @@ from .lanes import DRIVING_TYPES, LaneSection, lanes_at_t_array
 
 S_SLACK_M = 1e-6  # tolerated overshoot of s beyond [0, length] (float noise in files)
 ON_ROAD_LONG_TOL_M = 1e-6  # projection residual along the road beyond which a point is "off the end"
-_SAMPLE_STEP_M = 1.0  # coarse projection grid step, refined where curvature is high
+_SAMPLE_STEP_M = 4.0  # coarse projection grid step, refined where curvature is high
 _MAX_SAMPLE_TURN_RAD = 0.1  # max heading change between coarse samples
 _PROJECT_CHUNK = 2048  # points per block in the (points x samples) distance matrix
 _NEWTON_ITERS = 12
