@@ -1,0 +1,152 @@
+"""The compiler: `.addt` source → checked AST → `ScenarioPlan`.
+
+Pipeline: `parser.parse_source` (lark → AST with spans), include resolution (paths stay
+inside the scenario's directory tree), `check.RULES` in order, then `lower.build_plan`.
+Never imports pybullet or torch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from addt_dsl.compiler import ast
+from addt_dsl.compiler.check import RULES, Context
+from addt_dsl.compiler.parser import parse_source
+from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
+from addt_dsl.plan import ScenarioPlan
+
+MAX_INCLUDE_DEPTH = 16
+
+
+@dataclass
+class CompileResult:
+    plan: ScenarioPlan | None
+    diagnostics: list[Diagnostic]
+    sources: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.plan is not None and not any(d.is_error for d in self.diagnostics)
+
+
+class _Loader:
+    """Reads files for includes and road imports, confined to the root directory tree."""
+
+    def __init__(self, root: Path, sink: DiagnosticSink, sources: dict[str, str]):
+        self.root = root.resolve()
+        self.sink = sink
+        self.sources = sources
+
+    def display(self, path: Path) -> str:
+        try:
+            return str(path.resolve().relative_to(Path.cwd()))
+        except ValueError:
+            return str(path)
+
+    def resolve(self, relative: str, base: Path, span: Span) -> Path | None:
+        candidate = (base / relative).resolve()
+        if not candidate.is_relative_to(self.root):
+            self.sink.error("E0402", f"'{relative}' is outside the scenario's directory", span,
+                            f"files may only come from {self.root} and below")
+            return None
+        if not candidate.is_file():
+            self.sink.error("E0401", f"cannot find '{relative}'", span, f"looked for {candidate}")
+            return None
+        return candidate
+
+    def read_text(self, relative: str, base: Path, span: Span) -> tuple[str, str] | None:
+        path = self.resolve(relative, base, span)
+        if path is None:
+            return None
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            self.sink.error("E0401", f"cannot read '{relative}': {exc.strerror}", span)
+            return None
+        if len(data) > 50_000_000:
+            self.sink.error("E0401", f"'{relative}' is too large", span)
+            return None
+        return self.display(path), data.decode("utf-8", errors="replace")
+
+
+def compile_file(path: str | Path) -> CompileResult:
+    path = Path(path)
+    sink = DiagnosticSink()
+    sources: dict[str, str] = {}
+    display = str(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        sink.error("E0401", f"cannot read {display}: {exc.strerror or exc}", None)
+        return CompileResult(None, sink.items, sources)
+    return _compile(data, display, path.parent, sink, sources)
+
+
+def compile_source(text: str | bytes, path: str = "<input>", base_dir: str | Path = ".") -> CompileResult:
+    sink = DiagnosticSink()
+    return _compile(text, path, Path(base_dir), sink, {})
+
+
+def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: dict[str, str]) -> CompileResult:
+    sources[display] = data.decode("utf-8", errors="replace") if isinstance(data, bytes) else data
+    tree = parse_source(data, display, sink)
+    if tree is None:
+        return CompileResult(None, sink.items, sources)
+    loader = _Loader(base_dir, sink, sources)
+    if len(tree.scenarios) != 1:
+        if not tree.scenarios:
+            sink.error("E0103", "no scenario in this file", Span.point(display, 1, 1),
+                       "a runnable file declares `scenario NAME { ... }`")
+        else:
+            sink.error("E0102", "more than one scenario in one file", tree.scenarios[1].span)
+        return CompileResult(None, sink.items, sources)
+    scenario = tree.scenarios[0]
+    included = _resolve_includes(tree.includes + scenario.includes, base_dir, loader, [display])
+    scenario = dataclasses.replace(scenario, definitions=included + scenario.definitions)
+
+    def read_file(relative: str, span: Span):
+        got = loader.read_text(relative, base_dir, span)
+        return got
+
+    ctx = Context(scenario, sink, str(base_dir), display, read_file=read_file)
+    ctx.sources = sources
+    for rule in RULES:
+        rule(ctx)
+    if sink.has_errors:
+        return CompileResult(None, sink.items, sources)
+    from addt_dsl.compiler.lower import build_plan
+
+    return CompileResult(build_plan(ctx), sink.items, sources)
+
+
+def _resolve_includes(includes, base: Path, loader: _Loader, stack: list[str]) -> tuple:
+    defs: list = []
+    for inc in includes:
+        if len(stack) > MAX_INCLUDE_DEPTH:
+            loader.sink.error("E0401", "includes nested too deeply", inc.span)
+            continue
+        path = loader.resolve(inc.path, base, inc.span)
+        if path is None:
+            continue
+        display = loader.display(path)
+        if display in stack:
+            loader.sink.error("E0108", f"'{inc.path}' includes itself", inc.span,
+                              "include chain: " + " → ".join([*stack, display]))
+            continue
+        data = path.read_bytes()
+        loader.sources[display] = data.decode("utf-8", errors="replace")
+        tree = parse_source(data, display, loader.sink)
+        if tree is None:
+            continue
+        if tree.scenarios:
+            loader.sink.error("E0204", f"'{inc.path}' declares a scenario; included files hold definitions only",
+                              inc.span)
+            continue
+        defs.extend(_resolve_includes(tree.includes, path.parent, loader, [*stack, display]))
+        defs.extend(tree.definitions)
+    return tuple(defs)
+
+
+__all__ = ["CompileResult", "compile_file", "compile_source", "ast"]

@@ -24,6 +24,7 @@ from addt_dsl.registry import BEHAVIORS, SENSORS, STACKS
 from addt_dsl.runtime import oracles
 from addt_dsl.runtime.behaviors import AgentState, lateral_profile
 from addt_dsl.runtime.faults import FaultSchedule
+from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.runtime.signals import compute_signals
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
@@ -72,17 +73,18 @@ class RunResult:
 
 
 class _Road:
-    """The road an actor drives on: (s, t) ↔ world, with a warm-started projection."""
+    """The road an actor drives on, as a sampled fast view."""
 
-    def __init__(self, network, road_id: str):
+    def __init__(self, network, road_id: str, cache: dict):
         self.network = network
-        self.road = network.road(road_id)
+        key = (id(network), road_id)
+        if key not in cache:
+            cache[key] = FastRoad(network.road(road_id))
+        self.road = cache[key]
         self.road_id = road_id
 
     def pose(self, s: float, t: float) -> tuple[float, float, float]:
-        x, y, h = self.road.reference_pose(s)
-        x, y, h = float(x), float(y), float(h)
-        return x - math.sin(h) * t, y + math.cos(h) * t, h
+        return self.road.point(s, t)
 
 
 def _stable_seed(*parts) -> list[int]:
@@ -127,6 +129,7 @@ class _Run:
         self.n_steps = int(round(plan.duration_s / self.dt))
         self.events: list[Event] = []
         self.networks = build_network(plan.roads)
+        self._road_cache: dict = {}
         self.physics = PhysicsWorld()
         self.faults = FaultSchedule(spec.faults, self.dt, plan.duration_s, self.events)
         self.command_queue: list[tuple[float, float, float]] = []
@@ -189,7 +192,7 @@ class _Run:
         network = self.networks[actor.road]
         rp = self.spec.plan.road(actor.road)
         road_id = rp.xodr_road_id if rp.source == "xodr" and rp.xodr_road_id else next(iter(network.roads))
-        return _Road(network, road_id)
+        return _Road(network, road_id, self._road_cache)
 
     def rng(self, name: str) -> np.random.Generator:
         if name not in self._rngs:
@@ -291,16 +294,15 @@ def _loop(run: _Run) -> Trace:
         run.physics.set_pose("ego", e.x, e.y, VEHICLE_HEIGHT[plan.ego.vehicle] / 2, e.heading)
         poses["ego"] = (e.x, e.y, e.heading)
 
-        s_e, t_e = ego_road.road.project(e.x, e.y)
-        run.ego_s, run.ego_t = float(s_e), float(t_e)
+        run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
 
         # Record the state at t_now.
         _record(rec["ego"], k, e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
-                _lane_offset(ego_road.road, run.ego_s, run.ego_t), e.steer)
+                ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)
         for a in run.agents:
             x, y, h = poses[a.name]
             _record(rec[a.name], k, x, y, h, a.speed, a.accel, 0.0, a.s, a.t,
-                    _lane_offset(run.agent_roads[a.name].road, a.s, a.t), 0.0)
+                    run.agent_roads[a.name].road.lane_offset(a.s, a.t), 0.0)
         collided = _clearances(rec, k, names, poses, sizes, run, t_now)
         for node in lat_nodes:
             latency[node][k] = run.stack.latency[node]
@@ -385,16 +387,6 @@ def _record(r, k, x, y, heading, speed, accel, yaw_rate, s, t, lane_offset, stee
     r["x"][k], r["y"][k], r["heading"][k], r["speed"][k] = x, y, heading, speed
     r["accel"][k], r["yaw_rate"][k], r["s"][k], r["t"][k] = accel, yaw_rate, s, t
     r["lane_offset"][k], r["steer"][k] = lane_offset, steer
-
-
-def _lane_offset(road, s: float, t: float) -> float:
-    """Offset from the nearest driving lane's centre; beyond the outer lanes it keeps growing."""
-    best = None
-    for lane in road.driving_lane_ids(s):
-        off = t - float(road.lane_center_t(lane, s))
-        if best is None or abs(off) < abs(best):
-            best = off
-    return best if best is not None else t
 
 
 def _clearances(rec, k, names, poses, sizes, run, t_now) -> bool:

@@ -18,7 +18,7 @@ from addt_dsl.registry import SENSORS, ParamSpec
 EXTRINSICS = (
     ParamSpec("x", units.LENGTH, default=1.0, doc="mount position forward of the vehicle centre"),
     ParamSpec("y", units.LENGTH, default=0.0, doc="mount position, left positive"),
-    ParamSpec("z", units.LENGTH, default=1.6, doc="mount height"),
+    ParamSpec("z", units.LENGTH, default=1.0, doc="mount height"),
     ParamSpec("roll", units.ANGLE, default=0.0, doc="mount roll"),
     ParamSpec("pitch", units.ANGLE, default=0.0, doc="mount pitch"),
     ParamSpec("yaw", units.ANGLE, default=0.0, doc="mount yaw"),
@@ -31,7 +31,7 @@ class Extrinsics:
 
     x: float = 1.0
     y: float = 0.0
-    z: float = 1.6
+    z: float = 1.0
     roll: float = 0.0
     pitch: float = 0.0
     yaw: float = 0.0

@@ -134,7 +134,7 @@ class BevStack:
         started = _time.perf_counter()
         road, road_id = self.ctx.ego_road()
         x, y, heading, speed = self.ctx.ego_pose()
-        s0, t0 = road.project(x, y)
+        s0, t0 = road.project(x, y, self.ctx.run.ego_s)
         lane0 = road.lane_at(s0, t0) or self.ctx.ego_lane
         objs = []
         for o in self.tracker.objects_at(time_s):
@@ -156,7 +156,7 @@ class BevStack:
         started = _time.perf_counter()
         road, _ = self.ctx.ego_road()
         x, y, heading, speed = self.ctx.ego_pose()
-        s_now, t_now = road.project(x, y)
+        s_now, t_now = road.project(x, y, self.ctx.run.ego_s)
         steer, accel = self.controller.command(self.plan, (x, y, heading, speed), road,
                                                float(s_now), float(t_now), self.control_period,
                                                self.corrupt)

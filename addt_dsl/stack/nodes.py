@@ -165,6 +165,7 @@ class LatticePlanner:
         self.cruise = float(settings.get("cruise_speed", 25.0))
         self.time_gap = float(settings.get("time_gap", 1.5))
         self.current_lane: int | None = None
+        self.maneuver: tuple[int, float, float, float] | None = None
         self.lane_change_cooldown_s = 0.0
         self.last_change_s = -1e9
 
@@ -188,8 +189,12 @@ class LatticePlanner:
             self.current_lane = lane
         speed = corrupt("planner.speed", speed)
         t_lane = corrupt("planner.t_target", t_lane)
-        lateral_len = max(30.0, 3.0 * ego_speed)
-        return Plan(lane, t_lane, speed, s0, t0, lateral_len, stamp_s)
+        # The lateral manoeuvre keeps its start while its target lane stays the same, so
+        # replanning does not restart the profile (which would flatten it every cycle).
+        if self.maneuver is None or self.maneuver[0] != lane:
+            self.maneuver = (lane, s0, t0, max(30.0, 3.0 * ego_speed))
+        _, s_start, t_start, lateral_len = self.maneuver
+        return Plan(lane, t_lane, speed, s_start, t_start, lateral_len, stamp_s)
 
     def _speeds(self, ego_speed: float):
         return (self.cruise, max(0.0, ego_speed - 2.0), max(0.0, ego_speed - 5.0), 0.0)
@@ -221,10 +226,10 @@ class LatticePlanner:
                         cost += 4.0 * (desired - gap) / desired
         cost += 1.0 * abs(self.cruise - speed) / max(self.cruise, 1.0) * 10.0
         if lane != current:
-            cost += 2.0 + (3.0 if now - self.last_change_s < 3.0 else 0.0)
+            cost += 1.5 + (3.0 if now - self.last_change_s < 3.0 else 0.0)
         # Keep-right preference: right lanes have the most negative ids.
         rightmost = min(lanes) if min(lanes) < 0 else max(lanes)
-        cost += 1.0 * abs(lane - rightmost)
+        cost += 2.5 * abs(lane - rightmost)
         return cost
 
 
@@ -246,6 +251,9 @@ class Controller:
         self.kd = float(settings.get("kd", 0.05))
         self.wheelbase = wheelbase_m
         self.integral = 0.0
+        # Understeer gradient [rad/(m/s^2)]: steering feed-forward a tyre-slip vehicle
+        # needs beyond the geometric (pure-pursuit) angle in a curve.
+        self.understeer = float(settings.get("understeer", 0.0028))
         self.prev_err = 0.0
         self.max_steer = 0.5
 
@@ -263,6 +271,11 @@ class Controller:
         local_y = -math.sin(heading) * dx + math.cos(heading) * dy
         ld2 = dx * dx + dy * dy
         steer = math.atan2(2.0 * self.wheelbase * local_y, max(ld2, 1e-6))
+        # Pure pursuit is geometric; the feed-forward removes the steady outward offset
+        # that tyre slip (understeer) leaves in long curves.
+        kappa = float(road.curvature(min(s_la, road.length)))
+        kappa_path = kappa / max(0.2, 1.0 - kappa * t_la)
+        steer += self.understeer * speed * speed * kappa_path
         steer = max(-self.max_steer, min(self.max_steer, steer))
         steer = corrupt("control.steer", steer)
         # PID on speed error.

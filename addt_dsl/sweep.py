@@ -1,0 +1,166 @@
+"""Plan → RunSpecs: grids, samplers (random, Halton, Latin hypercube), repeats, seeds.
+
+Seeds are derived from (plan seed, sweep seed, cell, repeat) with numpy's SeedSequence,
+so a RunSpec's seed does not depend on how many runs come before it or on the worker
+that executes it. Assumptions reject samples (bounded, counted); they never fail a run.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from addt_dsl.expr import eval_param_expr
+from addt_dsl.plan import ConcreteFault, FaultPlan, ParamPlan, RunSpec, ScenarioPlan, resolve_settings
+
+
+class UnsatisfiableAssumptions(ValueError):
+    """No sample satisfied the assumptions within the resample cap."""
+
+
+@dataclass
+class Expansion:
+    specs: list[RunSpec]
+    rejected: Counter = field(default_factory=Counter)  # assumption text → rejected samples
+
+
+def derive_seed(*parts: int) -> int:
+    return int(np.random.SeedSequence([int(p) & 0xFFFFFFFF for p in parts]).generate_state(1)[0])
+
+
+def concrete_faults(plan: ScenarioPlan, params: dict[str, float], run_seed: int) -> list[ConcreteFault]:
+    return [concrete_fault(i, f, params, run_seed) for i, f in enumerate(plan.faults)]
+
+
+def concrete_fault(index: int, f: FaultPlan, params: dict[str, float], run_seed: int) -> ConcreteFault:
+    start = eval_param_expr(f.start_s, params)
+    end = eval_param_expr(f.end_s, params) if f.end_s is not None else None
+    seed = f.seed if f.seed is not None else derive_seed(run_seed, 7919, index)
+    return ConcreteFault(index=index, kind=f.kind, target=f.target, start_s=start, end_s=end,
+                         settings=resolve_settings(f.settings, params), seed=seed)
+
+
+def make_spec(plan: ScenarioPlan, params: dict[str, float], seed: int, run_id: str = "",
+              cell: dict[str, float] | None = None, repeat_index: int = 0) -> RunSpec:
+    return RunSpec(plan=plan, params=params, seed=seed, faults=concrete_faults(plan, params, seed),
+                   run_id=run_id, cell=cell or {}, repeat_index=repeat_index)
+
+
+def violated_assumptions(plan: ScenarioPlan, params: dict[str, float]) -> list[str]:
+    return [a.text for a in plan.assumptions if not eval_param_expr(a.expr, params)]
+
+
+def _halton(index: int, base: int) -> float:
+    f, r = 1.0, 0.0
+    while index > 0:
+        f /= base
+        r += f * (index % base)
+        index //= base
+    return r
+
+
+_PRIMES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53)
+
+
+def _unit_samples(kind: str, count: int, dims: int, rng: np.random.Generator, offset: int) -> np.ndarray:
+    """`count` points in [0, 1)^dims; `offset` continues a low-discrepancy sequence."""
+    if dims == 0:
+        return np.zeros((count, 0))
+    if kind == "random":
+        return rng.random((count, dims))
+    if kind == "halton":
+        return np.array([[_halton(offset + i + 1, _PRIMES[d % len(_PRIMES)]) for d in range(dims)]
+                         for i in range(count)])
+    # Latin hypercube: one point per stratum per dimension, strata shuffled independently.
+    u = (np.arange(count)[:, None] + rng.random((count, dims))) / count
+    for d in range(dims):
+        u[:, d] = u[rng.permutation(count), d]
+    return u
+
+
+def _from_unit(p: ParamPlan, u: float) -> float:
+    if p.distribution == "choice" and p.choices:
+        return p.choices[min(int(u * len(p.choices)), len(p.choices) - 1)]
+    if p.distribution == "normal":
+        mean = p.mean if p.mean is not None else p.default
+        # Inverse normal CDF by bisection on erf: exact enough and dependency-free.
+        value = mean + (p.sd or 0.0) * _probit(min(max(u, 1e-12), 1 - 1e-12))
+        lo = p.low if p.low is not None else -math.inf
+        hi = p.high if p.high is not None else math.inf
+        return min(max(value, lo), hi)
+    lo = p.low if p.low is not None else p.default
+    hi = p.high if p.high is not None else p.default
+    return lo + (hi - lo) * u
+
+
+def _probit(u: float) -> float:
+    lo, hi = -10.0, 10.0
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if 0.5 * (1 + math.erf(mid / math.sqrt(2))) < u:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def expand(plan: ScenarioPlan) -> Expansion:
+    """All RunSpecs of the plan's sweep, in a stable order with stable ids."""
+    sweep = plan.sweep
+    nominal = plan.nominal_params()
+    axes = [(g.param, g.values) for g in sweep.grid]
+    grid_cells = [dict(zip([a for a, _ in axes], combo)) for combo in
+                  itertools.product(*[v for _, v in axes])] or [{}]
+    sampled = [p for p in plan.params if p.name not in {a for a, _ in axes}
+               and (p.low is not None and p.high is not None and p.low < p.high or p.choices)]
+    rejected: Counter = Counter()
+    specs: list[RunSpec] = []
+    for ci, cell in enumerate(grid_cells):
+        base = {**nominal, **cell}
+        if violated_assumptions(plan, base) and not (sweep.sampler and sampled):
+            for text in violated_assumptions(plan, base):
+                rejected[text] += 1
+            continue
+        if sweep.sampler and sampled:
+            assignments = _sample_cell(plan, base, sampled, ci, rejected)
+        else:
+            assignments = [base]
+        for si, params in enumerate(assignments):
+            for r in range(sweep.repeat):
+                seed = derive_seed(plan.seed, sweep.seed, ci, si, r)
+                run_id = f"c{ci:03d}" + (f"-s{si:04d}" if sweep.sampler else "") + f"-r{r:03d}"
+                specs.append(make_spec(plan, params, seed, run_id, cell, r))
+    if not specs and plan.assumptions:
+        raise UnsatisfiableAssumptions(
+            "every candidate run breaks an assumption: "
+            + ", ".join(f"{t} ({n} rejected)" for t, n in rejected.most_common()))
+    return Expansion(specs, rejected)
+
+
+def _sample_cell(plan, base, sampled, cell_index, rejected) -> list[dict[str, float]]:
+    sampler = plan.sweep.sampler
+    rng = np.random.default_rng(derive_seed(plan.seed, sampler.seed, cell_index, 104729))
+    out: list[dict[str, float]] = []
+    drawn = 0
+    cap = plan.sweep.max_rejections
+    while len(out) < sampler.count:
+        need = sampler.count - len(out)
+        units = _unit_samples(sampler.kind, need, len(sampled), rng, drawn)
+        drawn += need
+        for row in units:
+            params = {**base, **{p.name: _from_unit(p, float(u)) for p, u in zip(sampled, row)}}
+            broken = violated_assumptions(plan, params)
+            if broken:
+                for text in broken:
+                    rejected[text] += 1
+                if sum(rejected.values()) > cap:
+                    raise UnsatisfiableAssumptions(
+                        f"more than {cap} samples rejected: "
+                        + ", ".join(f"{t} ({n})" for t, n in rejected.most_common()))
+                continue
+            out.append(params)
+    return out
