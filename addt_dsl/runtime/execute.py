@@ -58,6 +58,7 @@ class RunResult:
     wall_time_s: float
     digest: str
     fault_events: int
+    cell: dict[str, float] = field(default_factory=dict)
     trace: Trace | None = field(default=None, repr=False)
 
     @property
@@ -256,7 +257,8 @@ def execute(spec: RunSpec, keep_trace: bool = True) -> RunResult:
         run_id=spec.run_id, key=spec.key(), params=dict(spec.params), seed=spec.seed,
         verdicts=verdicts, status=trace.status, error=trace.error,
         sim_time_s=trace.duration_s, wall_time_s=_time.perf_counter() - wall0,
-        digest=trace.digest(), fault_events=fault_events, trace=trace if keep_trace else None)
+        digest=trace.digest(), fault_events=fault_events, cell=dict(spec.cell),
+        trace=trace if keep_trace else None)
 
 
 def _loop(run: _Run) -> Trace:

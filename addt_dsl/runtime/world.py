@@ -7,17 +7,43 @@ each step; the ground is an infinite `GEOM_PLANE` (plane.urdf is only 200 m wide
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import math
+import os
+import sys
 
 import numpy as np
 
 
+@contextlib.contextmanager
+def _quiet_stdout():
+    """Silence C-level stdout/stderr: pybullet prints a build banner on every first connect."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = (os.dup(1), os.dup(2))
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 1)
+            os.dup2(devnull.fileno(), 2)
+            try:
+                yield
+            finally:
+                # C stdio buffers output when it goes to a pipe: flush it into /dev/null.
+                ctypes.CDLL(None).fflush(None)
+    finally:
+        for fd, copy in zip((1, 2), saved):
+            os.dup2(copy, fd)
+            os.close(copy)
+
+
 class PhysicsWorld:
     def __init__(self):
-        import pybullet as p  # imported here: the compiler must never load pybullet
+        with _quiet_stdout():
+            import pybullet as p  # imported here: the compiler must never load pybullet
 
+            self.client = p.connect(p.DIRECT)
         self.p = p
-        self.client = p.connect(p.DIRECT)
         p.setGravity(0, 0, -9.81, physicsClientId=self.client)
         plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.client)
         self.ground = p.createMultiBody(0, plane, physicsClientId=self.client)
@@ -52,7 +78,8 @@ class PhysicsWorld:
 
     def close(self) -> None:
         if self.client is not None:
-            self.p.disconnect(physicsClientId=self.client)
+            with _quiet_stdout():
+                self.p.disconnect(physicsClientId=self.client)
             self.client = None
 
 
