@@ -251,6 +251,9 @@ def execute(spec: RunSpec, keep_trace: bool = True) -> RunResult:
         trace = _loop(run)
     finally:
         run.physics.close()
+        close_stack = getattr(run.stack, "close", None)  # e.g. the external bridge's socket
+        if close_stack is not None:
+            close_stack()
     verdicts = judge(spec, trace)
     fault_events = sum(1 for e in trace.events if e.kind == "fault")
     return RunResult(

@@ -51,8 +51,15 @@ class BevStack:
     doc = "BEV-style stack: lidar perception, CV tracker, lattice planner, PID + pure pursuit."
 
     @classmethod
-    def fault_sites(cls) -> set[str]:
-        return {site for sites in cls.nodes.values() for site in sites}
+    def fault_sites(cls, settings: dict | None = None) -> set[str]:
+        """Fault targets of this stack; with `perception learned`, also the detector's
+        tensor sites `perception.<layer>` (all of them when `settings` is not given)."""
+        sites = {site for sites in cls.nodes.values() for site in sites}
+        if settings is None or settings.get("perception") == "learned":
+            from addt_dsl.stack.bev_grid import TENSOR_SITES  # numpy only: safe for the compiler
+
+            sites |= set(TENSOR_SITES)
+        return sites
 
     def __init__(self, settings: dict, ctx):
         self.settings = {p.name: settings.get(p.name, p.default) for p in self.params}

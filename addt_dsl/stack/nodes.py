@@ -87,12 +87,20 @@ class GroundTruthPerception:
 # ---------------------------------------------------------------- tracking
 
 class Tracker:
-    """Nearest-neighbour association with constant-velocity prediction between frames."""
+    """Nearest-neighbour association with constant-velocity prediction between frames.
+
+    A detector that measures no velocity (learned perception: `vx = vy = nan`) gets one
+    from the tracker: a track's second sighting initialises it from the displacement
+    (gated by a maximum speed, since the first prediction has no velocity), later
+    sightings smooth the displacement velocity with `velocity_gain`.
+    """
 
     name = "tracker"
     sites = ("tracker.vx",)
     gate_m = 4.0
     max_age_s = 1.0
+    velocity_gain = 0.35
+    max_speed = 45.0  # [m/s] gate for a track whose velocity is not yet known
 
     def __init__(self):
         self.tracks: list[tuple[Obj, float]] = []  # (object, last update time)
@@ -102,20 +110,27 @@ class Tracker:
         new_tracks = []
         used = set()
         for det in objs:
-            best, best_d = None, self.gate_m
+            best, best_d = None, math.inf
             for i, (p, ts) in enumerate(predicted):
                 if i in used:
                     continue
                 d = math.hypot(p.x - det.x, p.y - det.y)
-                if d < best_d:
+                gate = self.gate_m if not math.isnan(p.vx) else self.gate_m + self.max_speed * (stamp_s - ts)
+                if d < gate and d < best_d:
                     best, best_d = i, d
             if best is not None:
                 used.add(best)
                 prev, ts = self.tracks[best]
                 dt = max(stamp_s - ts, 1e-3)
-                # Blend measured displacement with the detector's velocity estimate.
-                vx = 0.5 * det.vx + 0.5 * (det.x - prev.x) / dt
-                vy = 0.5 * det.vy + 0.5 * (det.y - prev.y) / dt
+                mvx, mvy = (det.x - prev.x) / dt, (det.y - prev.y) / dt
+                if not math.isnan(det.vx):
+                    # Blend measured displacement with the detector's velocity estimate.
+                    vx, vy = 0.5 * det.vx + 0.5 * mvx, 0.5 * det.vy + 0.5 * mvy
+                elif math.isnan(prev.vx):
+                    vx, vy = mvx, mvy
+                else:
+                    vx = prev.vx + self.velocity_gain * (mvx - prev.vx)
+                    vy = prev.vy + self.velocity_gain * (mvy - prev.vy)
                 det = Obj(det.x, det.y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width)
             new_tracks.append((det, stamp_s))
         # Keep unmatched tracks alive (coasting) so a dropped frame does not erase an object.
@@ -126,10 +141,19 @@ class Tracker:
 
     @staticmethod
     def _predict(o: Obj, dt: float) -> Obj:
+        if math.isnan(o.vx):  # velocity not measured yet: stays where it was seen
+            return o
         return Obj(o.x + o.vx * dt, o.y + o.vy * dt, o.heading, o.vx, o.vy, o.length, o.width)
 
     def objects_at(self, time_s: float) -> list[Obj]:
-        return [self._predict(o, time_s - ts) for o, ts in self.tracks if time_s - ts <= self.max_age_s]
+        """Predicted tracks; one whose velocity is not known yet is reported as standing still."""
+        out = []
+        for o, ts in self.tracks:
+            if time_s - ts <= self.max_age_s:
+                p = self._predict(o, time_s - ts)
+                out.append(p if not math.isnan(p.vx) else
+                           Obj(p.x, p.y, p.heading, 0.0, 0.0, p.length, p.width, p.confidence))
+        return out
 
 
 # ---------------------------------------------------------------- planning

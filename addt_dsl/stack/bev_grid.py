@@ -1,0 +1,190 @@
+"""Lidar points → bird's-eye-view feature grid, and the learned detector's fixed layout.
+
+Pure numpy (no torch): the compiler may import this module to list the detector's tensor
+fault sites, and the training data pipeline and the runtime node share `build_grid`, so
+what the network sees in training is exactly what it sees in the loop.
+
+Grid (vehicle frame, x forward, y left, origin at the vehicle centre):
+  x in [-60.8, 60.8) m, y in [-25.6, 25.6) m, 0.8 m cells → 152 × 64 cells.
+  Objects up to about 60 m ahead or behind, and four lanes either side, are in view;
+  the lateral extent is narrower because the detector is trained on road scenes.
+Features per cell (6 channels, zero where no point falls):
+  0 occupancy      min(count, 4) / 4
+  1 mean dx        mean offset of the points from the cell centre, in cells ([-0.5, 0.5))
+  2 mean dy        (sub-cell position: the grid is coarse, the points are not)
+  3 max z          highest point above the ground [m] / 2
+  4 ray cos        mean direction from the sensor to the points (where the sensor is:
+  5 ray sin        a CNN is translation-equivariant and would not know it otherwise)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+CHANNELS = 6
+OUTPUT_STRIDE = 2  # detector head cells are OUTPUT_STRIDE × cell = 1.6 m
+HEAD_CHANNELS = ("heat", "off_x", "off_y", "log_l", "log_w", "sin", "cos")
+
+# Tensor fault sites of the learned detector, `perception.<layer>`: the network in
+# `learned.py` names its layers exactly so (a unit test checks it). Listed here so the
+# compiler can check fault targets without importing torch.
+LAYER_SITES = (
+    "backbone.0", "backbone.1", "backbone.2", "backbone.3",
+    "neck.lateral", "neck.fuse", "neck.lateral_fine", "neck.fine", "head.center", "head.box",
+)
+TENSOR_SITES = tuple(f"perception.{name}" for name in LAYER_SITES)
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """Geometry of the BEV grid [m]."""
+
+    x_min: float = -60.8
+    y_min: float = -25.6
+    cell_m: float = 0.8
+    nx: int = 152
+    ny: int = 64
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return (CHANNELS, self.nx, self.ny)
+
+    @property
+    def head_shape(self) -> tuple[int, int]:
+        return (self.nx // OUTPUT_STRIDE, self.ny // OUTPUT_STRIDE)
+
+    @property
+    def head_cell_m(self) -> float:
+        return self.cell_m * OUTPUT_STRIDE
+
+
+GRID = GridSpec()
+
+
+def build_grid(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec: GridSpec = GRID,
+               out: np.ndarray | None = None) -> np.ndarray:
+    """Scatter vehicle-frame points (N×3, z up from the ground) into a (6, nx, ny) float32 grid.
+
+    `sensor_xy` is where the stack believes the sensor is (nominal extrinsics) [m];
+    `out`, if given, is overwritten in place (saves an allocation per frame).
+    """
+    grid = np.zeros(spec.shape, dtype=np.float32) if out is None else out
+    if out is not None:
+        grid.fill(0.0)
+    if len(points_vehicle) == 0:
+        return grid
+    px = points_vehicle[:, 0]
+    py = points_vehicle[:, 1]
+    fx = (px - spec.x_min) / spec.cell_m
+    fy = (py - spec.y_min) / spec.cell_m
+    ix = np.floor(fx).astype(np.int64)
+    iy = np.floor(fy).astype(np.int64)
+    keep = (ix >= 0) & (ix < spec.nx) & (iy >= 0) & (iy < spec.ny)
+    if not keep.all():
+        ix, iy, fx, fy = ix[keep], iy[keep], fx[keep], fy[keep]
+        px, py, pz = px[keep], py[keep], points_vehicle[keep, 2]
+    else:
+        pz = points_vehicle[:, 2]
+    if len(ix) == 0:
+        return grid
+    flat = ix * spec.ny + iy
+    size = spec.nx * spec.ny
+    count = np.bincount(flat, minlength=size).astype(np.float64)
+    occupied = np.flatnonzero(count)
+    n = count[occupied]
+    rx, ry = px - sensor_xy[0], py - sensor_xy[1]
+    rnorm = np.maximum(np.hypot(rx, ry), 1e-6)
+    views = grid.reshape(CHANNELS, size)
+    views[0, occupied] = np.minimum(n, 4.0) / 4.0
+    views[1, occupied] = np.bincount(flat, fx - ix - 0.5, size)[occupied] / n
+    views[2, occupied] = np.bincount(flat, fy - iy - 0.5, size)[occupied] / n
+    zmax = np.full(size, -np.inf)
+    np.maximum.at(zmax, flat, pz)
+    views[3, occupied] = zmax[occupied] / 2.0
+    views[4, occupied] = np.bincount(flat, rx / rnorm, size)[occupied] / n
+    views[5, occupied] = np.bincount(flat, ry / rnorm, size)[occupied] / n
+    return grid
+
+
+def sensor_points_to_vehicle(points_sensor: np.ndarray, ext) -> np.ndarray:
+    """Map sensor-frame points to the vehicle frame with extrinsics `ext` (roll, pitch, yaw, x, y, z)."""
+    cr, sr = math.cos(ext.roll), math.sin(ext.roll)
+    cp, sp = math.cos(ext.pitch), math.sin(ext.pitch)
+    cy, sy = math.cos(ext.yaw), math.sin(ext.yaw)
+    rot = np.array([
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ])
+    return points_sensor @ rot.T + np.array([ext.x, ext.y, ext.z])
+
+
+# ---------------------------------------------------------------- targets and decoding
+
+def head_cell_centre(i: np.ndarray | int, j: np.ndarray | int, spec: GridSpec = GRID):
+    """Vehicle-frame centre [m] of head cell (i, j)."""
+    c = spec.head_cell_m
+    return spec.x_min + (np.asarray(i) + 0.5) * c, spec.y_min + (np.asarray(j) + 0.5) * c
+
+
+def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float = 0.8):
+    """CenterNet targets for vehicle-frame boxes (N×5: x, y, heading, length, width).
+
+    Returns (heat (hx, hy), regression (6, hx, hy), mask (hx, hy)): a Gaussian peak per
+    object on the head grid; at each object's centre cell the regression targets
+    (offset from the cell centre in head cells, log length, log width, sin, cos heading).
+    """
+    hx, hy = spec.head_shape
+    heat = np.zeros((hx, hy), dtype=np.float32)
+    reg = np.zeros((6, hx, hy), dtype=np.float32)
+    mask = np.zeros((hx, hy), dtype=np.float32)
+    c = spec.head_cell_m
+    gi = np.arange(hx)[:, None]
+    gj = np.arange(hy)[None, :]
+    for x, y, heading, length, width in boxes:
+        fi = (x - spec.x_min) / c - 0.5
+        fj = (y - spec.y_min) / c - 0.5
+        i, j = int(round(fi)), int(round(fj))
+        if not (0 <= i < hx and 0 <= j < hy):
+            continue
+        g = np.exp(-((gi - fi) ** 2 + (gj - fj) ** 2) / (2.0 * sigma_cells ** 2)).astype(np.float32)
+        np.maximum(heat, g, out=heat)
+        heat[i, j] = 1.0
+        reg[:, i, j] = (fi - i, fj - j, math.log(length), math.log(width), math.sin(heading), math.cos(heading))
+        mask[i, j] = 1.0
+    return heat, reg, mask
+
+
+def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec = GRID,
+           max_objects: int = 64) -> np.ndarray:
+    """Peaks of a (hx, hy) probability map (3×3 local maxima above `threshold`) → boxes.
+
+    Returns an (N, 6) array: x, y, heading, length, width, confidence (vehicle frame),
+    sorted by confidence, highest first.
+    """
+    hx, hy = heat.shape
+    padded = np.full((hx + 2, hy + 2), -1.0, dtype=heat.dtype)
+    padded[1:-1, 1:-1] = heat
+    local_max = heat >= threshold
+    for di in (0, 1, 2):
+        for dj in (0, 1, 2):
+            if di == 1 and dj == 1:
+                continue
+            neighbour = padded[di:di + hx, dj:dj + hy]
+            # Ties go to the earlier cell so a plateau yields one peak.
+            local_max &= (heat > neighbour) if (di, dj) < (1, 1) else (heat >= neighbour)
+    i, j = np.nonzero(local_max)
+    if len(i) == 0:
+        return np.zeros((0, 6))
+    conf = heat[i, j]
+    order = np.argsort(-conf, kind="stable")[:max_objects]
+    i, j, conf = i[order], j[order], conf[order]
+    c = spec.head_cell_m
+    r = reg[:, i, j].astype(np.float64)
+    x = spec.x_min + (i + 0.5 + r[0]) * c
+    y = spec.y_min + (j + 0.5 + r[1]) * c
+    heading = np.arctan2(r[4], r[5])
+    return np.stack([x, y, heading, np.exp(r[2]), np.exp(r[3]), conf.astype(np.float64)], axis=1)

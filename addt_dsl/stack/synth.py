@@ -1,0 +1,249 @@
+"""Labelled lidar scans generated from the twin itself, for training and evaluating the detector.
+
+A scene is a stretch of road (straight or curved, 1-4 lanes in the ego's direction, 0-3
+beside them, often oncoming) with box vehicles of car and truck sizes in the lanes
+(queued at random gaps, some mid lane-change) and a few parked at random headings beside
+the road. The ego sits in one of its lanes; the scan comes from the runtime's own `Lidar`
+class casting rays into a pybullet world built like the runtime's (same box bodies,
+same ground plane), so the detector is trained on exactly the points it will see.
+
+Each sample keeps the points in the vehicle frame (mapped with the *nominal* extrinsics,
+as the stack does) and the ground-truth boxes in the vehicle frame with their lidar hit
+counts. `yaw_shift_rad` moves the *actual* mount, as the `shift` fault does.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from addt_dsl.stack.bev_grid import GRID, sensor_points_to_vehicle
+
+LANE_WIDTH_M = 3.5
+EGO_SIZE = (4.6, 1.9, 1.5)
+# Body pool: (kind, length, width, height, count). The runtime's car (4.6 × 1.9) and
+# truck (12 × 2.5) dominate; a few other sizes keep the size head honest.
+POOL = (
+    ("car", 4.6, 1.9, 1.5, 40),
+    ("car", 4.0, 1.75, 1.45, 6),
+    ("car", 5.2, 2.0, 1.8, 6),
+    ("truck", 12.0, 2.5, 3.5, 12),
+    ("truck", 8.0, 2.4, 3.2, 5),
+)
+PARK_X0 = 1.0e4  # unused bodies wait far outside the lidar's range
+
+
+@dataclass
+class Sample:
+    points: np.ndarray  # (N, 3) float32, vehicle frame via nominal extrinsics [m]
+    sensor_xy: tuple[float, float]  # nominal sensor position in the vehicle frame [m]
+    boxes: np.ndarray  # (M, 5) x, y, heading, length, width in the vehicle frame
+    hits: np.ndarray  # (M,) lidar returns on each box
+    rays: int
+
+
+class _ScanWorld:
+    """The runtime's pybullet world with a fixed pool of vehicle bodies, posed per scene."""
+
+    def __init__(self):
+        from addt_dsl.runtime.world import PhysicsWorld
+
+        self.physics = PhysicsWorld()
+        self.physics.add_box("ego", *EGO_SIZE)
+        self.pool: list[tuple[str, str, float, float, float]] = []  # (body name, kind, l, w, h)
+        for kind, length, width, height, count in POOL:
+            for k in range(count):
+                name = f"{kind}_{length}_{k}"
+                self.physics.add_box(name, length, width, height)
+                self.pool.append((name, kind, length, width, height))
+        self.pose = (0.0, 0.0, 0.0, 0.0)
+        self.body_index = {self.physics.bodies[p[0]]: i for i, p in enumerate(self.pool)}
+
+    # The two queries `Lidar.capture` makes of the runtime.
+    def ego_pose(self):
+        return self.pose
+
+    def ray_cast(self, starts, ends):
+        return self.physics.ray_cast(starts, ends, ignore="ego")
+
+    def close(self):
+        self.physics.close()
+
+
+def _road_point(kappa: float, s: float, t: float) -> tuple[float, float, float]:
+    """(x, y, heading) of road coordinates (s, t) on an arc of curvature `kappa` through the origin."""
+    th = kappa * s
+    if abs(kappa) < 1e-9:
+        x, y = s, 0.0
+    else:
+        x, y = math.sin(th) / kappa, (1.0 - math.cos(th)) / kappa
+    return x - t * math.sin(th), y + t * math.cos(th), th
+
+
+def _overlaps(box, placed, margin: float) -> bool:
+    from addt_dsl.runtime.world import box_separation
+
+    x, y, _, length, width = box
+    reach = 0.5 * math.hypot(length, width)
+    for other in placed:
+        d = math.hypot(other[0] - x, other[1] - y)
+        if d > reach + 0.5 * math.hypot(other[3], other[4]) + margin:
+            continue
+        if box_separation(box, other) < margin:
+            return True
+    return False
+
+
+def sample_scene(rng: np.random.Generator, pool) -> list[tuple[int, float, float, float]]:
+    """Poses (pool index, x, y, heading) in the ego's vehicle frame for one random scene."""
+    kappa = float(rng.choice([0.0, rng.uniform(-0.004, 0.004)]))
+    n_right = int(rng.integers(1, 5))
+    n_left = int(rng.integers(0, 4))
+    oncoming = rng.random() < 0.7
+    ego_lane = int(rng.integers(0, n_right))
+    ego_t = -(ego_lane + 0.5) * LANE_WIDTH_M + rng.normal(0.0, 0.3)
+    ego_yaw = rng.normal(0.0, math.radians(2.0))
+    dense = rng.random() < 0.4
+    lanes = [(-(k + 0.5) * LANE_WIDTH_M, False) for k in range(n_right)]
+    lanes += [((k + 0.5) * LANE_WIDTH_M, oncoming) for k in range(n_left)]
+    free = {"car": [i for i, p in enumerate(pool) if p[1] == "car"],
+            "truck": [i for i, p in enumerate(pool) if p[1] == "truck"]}
+    for idxs in free.values():
+        rng.shuffle(idxs)
+
+    def take(kind):
+        return free[kind].pop() if free[kind] else None
+
+    ego_box = (0.0, 0.0, 0.0, EGO_SIZE[0], EGO_SIZE[1])
+    ex, ey, eh = _road_point(kappa, 0.0, ego_t)
+    ego_heading = eh + ego_yaw
+
+    def to_ego(x, y, h):
+        return (*_rot(x - ex, y - ey, -ego_heading), h - ego_heading)
+
+    placed: list[tuple[float, float, float, float, float]] = [ego_box]
+    out = []
+    for t_lane, opposite in lanes:
+        s = -78.0 + rng.uniform(0.0, 15.0)
+        while s < 78.0:
+            kind = "truck" if rng.random() < 0.2 else "car"
+            idx = take(kind)
+            if idx is None:
+                break
+            length, width = pool[idx][2], pool[idx][3]
+            s_c = s + 0.5 * length
+            t = t_lane + rng.normal(0.0, 0.2)
+            yaw = rng.normal(0.0, math.radians(1.5))
+            if rng.random() < 0.08:  # mid lane change
+                side = rng.choice([-1.0, 1.0])
+                t += side * rng.uniform(0.3, 1.75)
+                yaw += side * math.radians(rng.uniform(2.0, 10.0))
+            x, y, h = _road_point(kappa, s_c, t)
+            h += yaw + (math.pi if opposite else 0.0)
+            box = (*to_ego(x, y, h), length, width)
+            if _overlaps(box, placed, 0.3):
+                free[kind].append(idx)
+            else:
+                placed.append(box)
+                out.append((idx, box[0], box[1], box[2]))
+            gap = rng.uniform(1.5, 12.0) if dense else rng.uniform(8.0, 70.0)
+            s = s_c + 0.5 * length + gap
+    # Parked and stray vehicles beside the road at any heading.
+    edge_right = -n_right * LANE_WIDTH_M
+    edge_left = n_left * LANE_WIDTH_M
+    for _ in range(int(rng.poisson(2.0))):
+        kind = "truck" if rng.random() < 0.15 else "car"
+        idx = take(kind)
+        if idx is None:
+            continue
+        side = rng.random() < 0.5
+        t = edge_left + rng.uniform(1.5, 12.0) if side else edge_right - rng.uniform(1.5, 12.0)
+        x, y, h = _road_point(kappa, rng.uniform(-60.0, 60.0), t)
+        box = (*to_ego(x, y, rng.uniform(-math.pi, math.pi)), pool[idx][2], pool[idx][3])
+        if _overlaps(box, placed, 0.3):
+            free[kind].append(idx)
+            continue
+        placed.append(box)
+        out.append((idx, box[0], box[1], box[2]))
+    return out
+
+
+def _rot(x: float, y: float, angle: float) -> tuple[float, float]:
+    c, s = math.cos(angle), math.sin(angle)
+    return c * x - s * y, s * x + c * y
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class ScanGenerator:
+    """Generates `Sample`s; one pybullet world reused across scenes (close it when done)."""
+
+    def __init__(self, seed: int, rays: tuple[int, ...] = (360,), rays_p: tuple[float, ...] | None = None,
+                 yaw_shift_rad: float = 0.0, lidar_settings: dict | None = None):
+        from addt_dsl.runtime.sensors import Lidar
+
+        self.rng = np.random.default_rng(seed)
+        self.world = _ScanWorld()
+        base = {"range": 80.0, **(lidar_settings or {})}
+        self.lidars = {r: Lidar("lidar", {**base, "rays": r}) for r in rays}
+        self.rays = rays
+        self.rays_p = rays_p
+        for lidar in self.lidars.values():
+            if yaw_shift_rad:
+                lidar.actual = lidar.nominal.shifted(yaw=yaw_shift_rad)
+
+    def close(self):
+        self.world.close()
+
+    def sample(self) -> Sample:
+        rng, world = self.rng, self.world
+        pool = world.pool
+        poses = sample_scene(rng, pool)
+        # A random world pose for the ego: the scan must not depend on where the scene is.
+        wx, wy, wh = rng.uniform(-500.0, 500.0), rng.uniform(-500.0, 500.0), rng.uniform(-math.pi, math.pi)
+        world.pose = (wx, wy, wh, 0.0)
+        phys = world.physics
+        phys.set_pose("ego", wx, wy, EGO_SIZE[2] / 2, wh)
+        used = set()
+        boxes = []
+        for idx, x, y, h in poses:
+            name, _, length, width, height = pool[idx]
+            gx, gy = _rot(x, y, wh)
+            phys.set_pose(name, wx + gx, wy + gy, height / 2, wh + h)
+            used.add(idx)
+            boxes.append((x, y, _wrap(h), length, width))
+        for idx, (name, _, _, _, height) in enumerate(pool):
+            if idx not in used:
+                phys.set_pose(name, PARK_X0 + 30.0 * idx, 0.0, height / 2, 0.0)
+        rays = int(rng.choice(self.rays, p=self.rays_p))
+        lidar = self.lidars[rays]
+        frame = lidar.capture(world, 0.0)
+        hits = np.zeros(len(poses), dtype=np.int64)
+        if len(frame.data["hit_body"]):
+            row = {idx: k for k, (idx, *_rest) in enumerate(poses)}
+            ids, counts = np.unique(frame.data["hit_body"], return_counts=True)
+            for body, count in zip(ids.tolist(), counts.tolist()):
+                k = row.get(world.body_index.get(body, -1))
+                if k is not None:
+                    hits[k] = count
+        pts = sensor_points_to_vehicle(frame.data["points"], lidar.nominal).astype(np.float32)
+        box_arr = np.array(boxes, dtype=np.float64).reshape(-1, 5)
+        return Sample(pts, (lidar.nominal.x, lidar.nominal.y), box_arr, hits, rays)
+
+
+def in_grid(boxes: np.ndarray, spec=GRID) -> np.ndarray:
+    """Boxes whose centre lies inside the BEV grid."""
+    return ((boxes[:, 0] >= spec.x_min) & (boxes[:, 0] < spec.x_min + spec.nx * spec.cell_m)
+            & (boxes[:, 1] >= spec.y_min) & (boxes[:, 1] < spec.y_min + spec.ny * spec.cell_m))
+
+
+def generate(n: int, seed: int, **kwargs) -> list[Sample]:
+    gen = ScanGenerator(seed, **kwargs)
+    try:
+        return [gen.sample() for _ in range(n)]
+    finally:
+        gen.close()

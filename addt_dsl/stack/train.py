@@ -1,0 +1,142 @@
+"""Train the BEV detector on scans generated from the twin: `python -m addt_dsl.stack.train`.
+
+    python -m addt_dsl.stack.train --seed 0 --out addt_dsl/stack/perception_weights.pt
+
+Generates `--scenes` labelled scans with `synth.ScanGenerator` (the runtime's `Lidar` in
+a pybullet world of car and truck boxes), then trains `learned.BevDetector` with Adam on
+a CenterNet loss (focal loss on the centre heatmap, L1 on offset, log size and heading
+sin/cos at object centres). Objects with at least one lidar return are positives.
+
+Reproducible from the seed: the scenes, the initial weights and the batch order all
+derive from it, and training runs on `--threads` CPU threads (default 1; the same
+seed and thread count give the same weights, bit for bit, on the same machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from addt_dsl.stack.bev_grid import GRID, build_grid, encode_targets
+from addt_dsl.stack.synth import generate, in_grid
+
+
+def make_targets(samples):
+    """Stacked CenterNet targets for `samples` (objects with ≥ 1 return are positives)."""
+    hx, hy = GRID.head_shape
+    heat = np.zeros((len(samples), hx, hy), dtype=np.float32)
+    reg = np.zeros((len(samples), 6, hx, hy), dtype=np.float32)
+    mask = np.zeros((len(samples), hx, hy), dtype=np.float32)
+    for k, s in enumerate(samples):
+        keep = in_grid(s.boxes) & (s.hits >= 1)
+        heat[k], reg[k], mask[k] = encode_targets(s.boxes[keep])
+    return heat, reg, mask
+
+
+def grids(samples, out: np.ndarray) -> np.ndarray:
+    for k, s in enumerate(samples):
+        build_grid(s.points, s.sensor_xy, out=out[k])
+    return out[: len(samples)]
+
+
+def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
+    import torch
+    import torch.nn.functional as F
+
+    logits = heat_logits[:, 0]
+    p = torch.sigmoid(logits).clamp(1e-4, 1 - 1e-4)
+    pos = heat_t.eq(1.0).float()
+    n_pos = pos.sum().clamp(min=1.0)
+    log_p = F.logsigmoid(logits)
+    log_1mp = F.logsigmoid(-logits)
+    pos_loss = (log_p * (1 - p) ** 2 * pos).sum()
+    neg_loss = (log_1mp * p ** 2 * (1 - heat_t) ** 4 * (1 - pos)).sum()
+    focal = -(pos_loss + neg_loss) / n_pos
+    m = mask_t[:, None]
+    l1 = (box - reg_t).abs() * m
+    offset = l1[:, 0:2].sum() / n_pos
+    size = l1[:, 2:4].sum() / n_pos
+    heading = l1[:, 4:6].sum() / n_pos
+    return focal + offset + size + heading, (focal.item(), offset.item(), size.item(), heading.item())
+
+
+def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: float, log=print):
+    import torch
+
+    from addt_dsl.stack.learned import BevDetector
+
+    torch.set_num_threads(threads)
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    samples = generate(scenes, seed, rays=(360, 720), rays_p=(0.8, 0.2))
+    heat_all, reg_all, mask_all = make_targets(samples)
+    t_gen = time.perf_counter() - t0
+    log(f"generated {scenes} scans in {t_gen:.1f} s "
+        f"({np.mean([len(s.points) for s in samples]):.0f} points, "
+        f"{np.mean([(s.hits >= 1).sum() for s in samples]):.1f} visible objects per scan)")
+
+    model = BevDetector()
+    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
+    steps = epochs * math.ceil(scenes / batch)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=steps, pct_start=0.15)
+    buf = np.zeros((batch, *GRID.shape), dtype=np.float32)
+    t1 = time.perf_counter()
+    for epoch in range(epochs):
+        order = rng.permutation(scenes)
+        totals = np.zeros(5)
+        model.train()
+        for start in range(0, scenes, batch):
+            idx = order[start:start + batch]
+            x = torch.from_numpy(grids([samples[i] for i in idx], buf).copy())
+            heat_logits, box = model(x)
+            loss, parts = centernet_loss(heat_logits, box, torch.from_numpy(heat_all[idx]),
+                                         torch.from_numpy(reg_all[idx]), torch.from_numpy(mask_all[idx]))
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+            totals += (loss.item(), *parts)
+        n = math.ceil(scenes / batch)
+        log(f"epoch {epoch + 1}/{epochs}: loss {totals[0] / n:.3f} (focal {totals[1] / n:.3f}, "
+            f"offset {totals[2] / n:.3f}, size {totals[3] / n:.3f}, heading {totals[4] / n:.3f}) "
+            f"[{time.perf_counter() - t1:.0f} s]")
+    t_train = time.perf_counter() - t1
+    return model.eval(), {"generate_s": round(t_gen, 1), "train_s": round(t_train, 1)}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m addt_dsl.stack.train", description=__doc__.split("\n")[0])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=Path(__file__).with_name("perception_weights.pt"))
+    ap.add_argument("--scenes", type=int, default=12000, help="training scans to generate")
+    ap.add_argument("--epochs", type=int, default=10)
+    ap.add_argument("--batch", type=int, default=32)
+    ap.add_argument("--lr", type=float, default=3e-3)
+    ap.add_argument("--threads", type=int, default=1, help="CPU threads (reproducible per thread count)")
+    ap.add_argument("--threshold", type=float, default=0.35, help="detection threshold stored with the weights")
+    args = ap.parse_args(argv)
+
+    import torch
+
+    model, timing = train(args.seed, args.scenes, args.epochs, args.batch, args.threads, args.lr)
+    meta = {
+        "seed": args.seed, "scenes": args.scenes, "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
+        "threads": args.threads, "threshold": args.threshold, "widths": [16, 24, 32],
+        "grid": {"x_min": GRID.x_min, "y_min": GRID.y_min, "cell_m": GRID.cell_m, "nx": GRID.nx, "ny": GRID.ny},
+        "torch": str(torch.__version__), **timing,
+    }
+    state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({"state_dict": state, "meta": meta}, args.out)
+    print(f"wrote {args.out} ({args.out.stat().st_size / 1024:.0f} KiB; "
+          f"generation {timing['generate_s']} s, training {timing['train_s']} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,105 @@
+"""BEV grid building and CenterNet target encoding / decoding (numpy only)."""
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from addt_dsl.stack.bev_grid import (CHANNELS, GRID, build_grid, decode, encode_targets,
+                                     sensor_points_to_vehicle)
+from addt_dsl.runtime.sensors import Extrinsics, sensor_to_vehicle
+
+
+def test_single_point_lands_in_its_cell_with_subcell_features():
+    # x = 10.1 m: (10.1 + 60.8) / 0.8 = 88.625 -> cell 88, offset 0.125 cells from the centre.
+    # y = -3.0 m: (-3.0 + 25.6) / 0.8 = 28.25 -> cell 28, offset -0.25.
+    grid = build_grid(np.array([[10.1, -3.0, 1.2]]), (1.0, 0.0))
+    assert grid.shape == (CHANNELS, GRID.nx, GRID.ny)
+    occupied = np.argwhere(grid[0] > 0)
+    assert occupied.tolist() == [[88, 28]]
+    cell = grid[:, 88, 28]
+    assert cell[0] == 0.25  # one point of the four that saturate occupancy
+    assert math.isclose(cell[1], 0.125, abs_tol=1e-5)
+    assert math.isclose(cell[2], -0.25, abs_tol=1e-5)
+    assert math.isclose(cell[3], 0.6, abs_tol=1e-6)  # max z / 2
+    d = np.array([10.1 - 1.0, -3.0])
+    d /= np.linalg.norm(d)
+    assert np.allclose(cell[4:], d, atol=1e-6)
+    assert np.count_nonzero(grid) == CHANNELS  # nothing else set
+
+
+def test_points_outside_the_grid_are_dropped_and_empty_input_is_empty():
+    pts = np.array([[100.0, 0.0, 1.0], [0.0, -40.0, 1.0], [-61.0, 0.0, 1.0]])
+    assert not build_grid(pts, (0.0, 0.0)).any()
+    assert not build_grid(np.zeros((0, 3)), (0.0, 0.0)).any()
+
+
+def test_out_buffer_is_cleared_between_frames():
+    buf = np.zeros(GRID.shape, dtype=np.float32)
+    build_grid(np.array([[5.0, 5.0, 1.0]]), (0.0, 0.0), out=buf)
+    build_grid(np.array([[-5.0, -5.0, 1.0]]), (0.0, 0.0), out=buf)
+    assert np.array_equal(buf, build_grid(np.array([[-5.0, -5.0, 1.0]]), (0.0, 0.0)))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(-70, 70), st.floats(-30, 30), st.floats(0, 4)), min_size=1, max_size=60))
+def test_occupancy_matches_the_cells_of_in_range_points(points):
+    pts = np.array(points, dtype=np.float64)
+    grid = build_grid(pts, (1.0, 0.0))
+    ix = np.floor((pts[:, 0] - GRID.x_min) / GRID.cell_m).astype(int)
+    iy = np.floor((pts[:, 1] - GRID.y_min) / GRID.cell_m).astype(int)
+    ok = (ix >= 0) & (ix < GRID.nx) & (iy >= 0) & (iy < GRID.ny)
+    expected = {(int(a), int(b)) for a, b in zip(ix[ok], iy[ok])}
+    assert {tuple(c) for c in np.argwhere(grid[0] > 0).tolist()} == expected
+    # Mean offsets stay inside the cell.
+    assert np.all(np.abs(grid[1:3]) <= 0.5 + 1e-6)
+
+
+def test_sensor_to_vehicle_matches_the_runtime_transform():
+    ext = Extrinsics(1.2, -0.3, 1.1, 0.01, -0.02, 0.3)
+    pts = np.random.default_rng(0).normal(size=(20, 3)) * 10
+    assert np.allclose(sensor_points_to_vehicle(pts, ext), sensor_to_vehicle(pts, ext))
+
+
+boxes_strategy = st.lists(
+    st.tuples(st.floats(-55, 55), st.floats(-22, 22), st.floats(-math.pi + 0.01, math.pi - 0.01),
+              st.floats(3.5, 14.0), st.floats(1.5, 2.7)),
+    min_size=1, max_size=12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(boxes_strategy)
+def test_encode_then_decode_recovers_well_separated_boxes(boxes):
+    boxes = np.array(boxes)
+    # Keep boxes whose centres are at least two head cells apart (the decoder's 3×3 peak window).
+    keep = []
+    for b in boxes:
+        if all(math.hypot(b[0] - k[0], b[1] - k[1]) > 2.5 * GRID.head_cell_m for k in keep):
+            keep.append(b)
+    boxes = np.array(keep)
+    heat, reg, mask = encode_targets(boxes)
+    assert mask.sum() == len(boxes)
+    found = decode(heat, reg, threshold=0.999)
+    assert len(found) == len(boxes)
+    for b in boxes:
+        k = int(np.argmin(np.hypot(found[:, 0] - b[0], found[:, 1] - b[1])))
+        x, y, h, length, width, conf = found[k]
+        assert math.hypot(x - b[0], y - b[1]) < 1e-4
+        assert abs(math.remainder(h - b[2], 2 * math.pi)) < 1e-5
+        assert math.isclose(length, b[3], rel_tol=1e-5) and math.isclose(width, b[4], rel_tol=1e-5)
+        assert conf == 1.0
+
+
+def test_decode_suppresses_non_peaks_and_respects_threshold():
+    heat = np.zeros(GRID.head_shape, dtype=np.float32)
+    reg = np.zeros((6, *GRID.head_shape), dtype=np.float32)
+    reg[5] = 1.0  # cos = 1: heading 0
+    heat[10, 10], heat[10, 11], heat[30, 5] = 0.9, 0.8, 0.4  # (10, 11) is not a peak
+    found = decode(heat, reg, threshold=0.5)
+    assert len(found) == 1 and math.isclose(found[0, 5], 0.9, rel_tol=1e-6)
+    assert len(decode(heat, reg, threshold=0.3)) == 2
+    # A plateau yields one peak.
+    heat[:] = 0
+    heat[20, 8] = heat[20, 9] = 0.7
+    assert len(decode(heat, reg, threshold=0.5)) == 1
