@@ -23,14 +23,12 @@ from addt_dsl.stack.bev_grid import GRID, sensor_points_to_vehicle
 
 LANE_WIDTH_M = 3.5
 EGO_SIZE = (4.6, 1.9, 1.5)
-# Body pool: (kind, length, width, height, count). The runtime's car (4.6 × 1.9) and
-# truck (12 × 2.5) dominate; a few other sizes keep the size head honest.
+# Body pool: (kind, length, width, height, count), the sizes the runtime gives its car and
+# truck actors (execute.VEHICLE_SIZES / VEHICLE_HEIGHT). The detector learns these two
+# shapes, which is what lets it place a box's centre from the one face the lidar sees.
 POOL = (
-    ("car", 4.6, 1.9, 1.5, 40),
-    ("car", 4.0, 1.75, 1.45, 6),
-    ("car", 5.2, 2.0, 1.8, 6),
-    ("truck", 12.0, 2.5, 3.5, 12),
-    ("truck", 8.0, 2.4, 3.2, 5),
+    ("car", 4.6, 1.9, 1.5, 48),
+    ("truck", 12.0, 2.5, 3.5, 14),
 )
 PARK_X0 = 1.0e4  # unused bodies wait far outside the lidar's range
 
@@ -200,11 +198,24 @@ class ScanGenerator:
         self.world.close()
 
     def sample(self) -> Sample:
-        rng, world = self.rng, self.world
+        """One random scene, seen from a random world pose with a lidar drawn from `rays`."""
+        rng = self.rng
+        poses = sample_scene(rng, self.world.pool)
+        world_pose = (rng.uniform(-500.0, 500.0), rng.uniform(-500.0, 500.0), rng.uniform(-math.pi, math.pi))
+        rays = int(rng.choice(self.rays, p=self.rays_p))
+        return self._scan(poses, world_pose, rays)
+
+    def scan(self, objects: list[tuple[str, float, float, float]], rays: int | None = None) -> Sample:
+        """Scan a given scene: `objects` are (kind, x, y, heading) in the ego's vehicle frame."""
+        free = {kind: [i for i, p in enumerate(self.world.pool) if p[1] == kind] for kind in ("car", "truck")}
+        poses = [(free[kind].pop(0), x, y, h) for kind, x, y, h in objects]
+        return self._scan(poses, (0.0, 0.0, 0.0), rays or self.rays[0])
+
+    def _scan(self, poses, world_pose, rays: int) -> Sample:
+        world = self.world
         pool = world.pool
-        poses = sample_scene(rng, pool)
-        # A random world pose for the ego: the scan must not depend on where the scene is.
-        wx, wy, wh = rng.uniform(-500.0, 500.0), rng.uniform(-500.0, 500.0), rng.uniform(-math.pi, math.pi)
+        # The ego's world pose must not matter to the scan (the grid is in the vehicle frame).
+        wx, wy, wh = world_pose
         world.pose = (wx, wy, wh, 0.0)
         phys = world.physics
         phys.set_pose("ego", wx, wy, EGO_SIZE[2] / 2, wh)
@@ -219,7 +230,6 @@ class ScanGenerator:
         for idx, (name, _, _, _, height) in enumerate(pool):
             if idx not in used:
                 phys.set_pose(name, PARK_X0 + 30.0 * idx, 0.0, height / 2, 0.0)
-        rays = int(rng.choice(self.rays, p=self.rays_p))
         lidar = self.lidars[rays]
         frame = lidar.capture(world, 0.0)
         hits = np.zeros(len(poses), dtype=np.int64)
@@ -247,3 +257,25 @@ def generate(n: int, seed: int, **kwargs) -> list[Sample]:
         return [gen.sample() for _ in range(n)]
     finally:
         gen.close()
+
+
+def save_samples(path, samples: list[Sample]) -> None:
+    """Store scans compactly (npz) so experiments can reuse them without pybullet."""
+    npts = np.array([len(s.points) for s in samples])
+    nbox = np.array([len(s.boxes) for s in samples])
+    np.savez_compressed(
+        path, npts=npts, nbox=nbox,
+        points=np.concatenate([s.points for s in samples]) if samples else np.zeros((0, 3), np.float32),
+        boxes=np.concatenate([s.boxes for s in samples]) if samples else np.zeros((0, 5)),
+        hits=np.concatenate([s.hits for s in samples]) if samples else np.zeros(0, np.int64),
+        sensor_xy=np.array([s.sensor_xy for s in samples]), rays=np.array([s.rays for s in samples]))
+
+
+def load_samples(path) -> list[Sample]:
+    z = np.load(path)
+    p_off = np.concatenate([[0], np.cumsum(z["npts"])])
+    b_off = np.concatenate([[0], np.cumsum(z["nbox"])])
+    return [Sample(z["points"][p_off[k]:p_off[k + 1]], tuple(z["sensor_xy"][k].tolist()),
+                   z["boxes"][b_off[k]:b_off[k + 1]], z["hits"][b_off[k]:b_off[k + 1]], int(z["rays"][k]))
+            for k in range(len(z["npts"]))]
+

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from addt_dsl.stack.bev_grid import GRID, build_grid, encode_targets
-from addt_dsl.stack.synth import generate, in_grid
+from addt_dsl.stack.synth import generate, in_grid, load_samples, save_samples
 
 
 def make_targets(samples):
@@ -61,10 +61,11 @@ def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
     offset = l1[:, 0:2].sum() / n_pos
     size = l1[:, 2:4].sum() / n_pos
     heading = l1[:, 4:6].sum() / n_pos
-    return focal + offset + size + heading, (focal.item(), offset.item(), size.item(), heading.item())
+    return focal + 2.0 * offset + size + heading, (focal.item(), offset.item(), size.item(), heading.item())
 
 
-def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: float, log=print):
+def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: float, log=print,
+          cache: Path | None = None, device: str = "cpu"):
     import torch
 
     from addt_dsl.stack.learned import BevDetector
@@ -73,14 +74,20 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
-    samples = generate(scenes, seed, rays=(360, 720), rays_p=(0.8, 0.2))
+    if cache is not None and cache.exists():
+        samples = load_samples(cache)[:scenes]
+        scenes = len(samples)
+    else:
+        samples = generate(scenes, seed, rays=(360, 720), rays_p=(0.8, 0.2))
+        if cache is not None:
+            save_samples(cache, samples)
     heat_all, reg_all, mask_all = make_targets(samples)
     t_gen = time.perf_counter() - t0
     log(f"generated {scenes} scans in {t_gen:.1f} s "
         f"({np.mean([len(s.points) for s in samples]):.0f} points, "
         f"{np.mean([(s.hits >= 1).sum() for s in samples]):.1f} visible objects per scan)")
 
-    model = BevDetector()
+    model = BevDetector().to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     steps = epochs * math.ceil(scenes / batch)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=steps, pct_start=0.15)
@@ -92,10 +99,10 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         model.train()
         for start in range(0, scenes, batch):
             idx = order[start:start + batch]
-            x = torch.from_numpy(grids([samples[i] for i in idx], buf).copy())
+            x = torch.from_numpy(grids([samples[i] for i in idx], buf).copy()).to(device)
             heat_logits, box = model(x)
-            loss, parts = centernet_loss(heat_logits, box, torch.from_numpy(heat_all[idx]),
-                                         torch.from_numpy(reg_all[idx]), torch.from_numpy(mask_all[idx]))
+            targets = (torch.from_numpy(a[idx]).to(device) for a in (heat_all, reg_all, mask_all))
+            loss, parts = centernet_loss(heat_logits, box, *targets)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
@@ -106,7 +113,7 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
             f"offset {totals[2] / n:.3f}, size {totals[3] / n:.3f}, heading {totals[4] / n:.3f}) "
             f"[{time.perf_counter() - t1:.0f} s]")
     t_train = time.perf_counter() - t1
-    return model.eval(), {"generate_s": round(t_gen, 1), "train_s": round(t_train, 1)}
+    return model.cpu().eval(), {"generate_s": round(t_gen, 1), "train_s": round(t_train, 1)}
 
 
 def main(argv=None) -> int:
@@ -119,11 +126,14 @@ def main(argv=None) -> int:
     ap.add_argument("--lr", type=float, default=3e-3)
     ap.add_argument("--threads", type=int, default=1, help="CPU threads (reproducible per thread count)")
     ap.add_argument("--threshold", type=float, default=0.35, help="detection threshold stored with the weights")
+    ap.add_argument("--cache", type=Path, default=None, help="npz of scans: reused if present, else written")
+    ap.add_argument("--device", default="cpu", help="torch device (the shipped weights are trained on cpu)")
     args = ap.parse_args(argv)
 
     import torch
 
-    model, timing = train(args.seed, args.scenes, args.epochs, args.batch, args.threads, args.lr)
+    model, timing = train(args.seed, args.scenes, args.epochs, args.batch, args.threads, args.lr,
+                          cache=args.cache, device=args.device)
     meta = {
         "seed": args.seed, "scenes": args.scenes, "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
         "threads": args.threads, "threshold": args.threshold, "widths": [16, 24, 32],

@@ -1,0 +1,57 @@
+"""The default stack behind the socket bridge, in another process, gives the same run as in process."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from addt_dsl.compiler import compile_source
+from addt_dsl.runtime.execute import execute
+from addt_dsl.sweep import expand
+
+pytestmark = pytest.mark.slow
+
+ROOT = Path(__file__).resolve().parents[2]
+STACK_LINE = "stack bev cruise_speed 25 m/s"
+
+
+@pytest.fixture(scope="module")
+def server_address():
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "addt_dsl.stack.bridge_server", "--address", "127.0.0.1:0"],
+                            stdout=subprocess.PIPE, text=True, env=env, cwd=ROOT)
+    try:
+        line = proc.stdout.readline().strip()
+        assert line.startswith("listening "), line
+        yield line.split()[1]
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def _spec(source: str, stack_line: str):
+    text = source.replace(STACK_LINE, stack_line).replace("duration 30 s", "duration 10 s")
+    result = compile_source(text)
+    assert result.ok, result.diagnostics
+    # 5 % frame drops: dropped frames and stale-input events must cross the bridge identically.
+    return next(s for s in expand(result.plan).specs if s.params["drop_rate"] == 0.05)
+
+
+@pytest.mark.parametrize("perception", ["ground_truth", "learned"])
+def test_bridge_run_matches_the_in_process_stack(overtake_source, server_address, perception):
+    settings = f"perception {perception} cruise_speed 25 m/s"
+    local = execute(_spec(overtake_source, f"stack bev {settings}"))
+    remote = execute(_spec(overtake_source, f'stack external address "{server_address}" {settings}'))
+    assert remote.status == "ok", remote.error
+    assert remote.trace.object_count.max() >= 1
+    assert remote.digest == local.digest
+
+
+def test_unreachable_remote_is_a_stack_error(overtake_source):
+    from addt_dsl.stack.bev import StackError
+
+    spec = _spec(overtake_source, 'stack external address "127.0.0.1:9" timeout 1 s')
+    with pytest.raises(StackError, match="cannot reach"):
+        execute(spec)

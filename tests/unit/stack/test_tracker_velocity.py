@@ -1,0 +1,47 @@
+"""The tracker estimates velocity for detectors that measure none (learned perception)."""
+
+import math
+
+import numpy as np
+
+from addt_dsl.stack.nodes import Obj, Tracker
+
+NO_FAULT = staticmethod(lambda site, value: value)
+
+
+def _det(x, y, vx=math.nan, vy=math.nan):
+    return Obj(x, y, 0.0, vx, vy, 4.6, 1.9)
+
+
+def test_second_sighting_initialises_velocity_then_it_is_smoothed():
+    tr = Tracker()
+    tr.update([_det(10.0, 0.0)], 0.0, lambda s, v: v)
+    (o,) = tr.objects_at(0.05)
+    assert (o.x, o.vx) == (10.0, 0.0)  # not measured yet: reported as standing still
+    tr.update([_det(12.5, 0.0)], 0.1, lambda s, v: v)  # 25 m/s: beyond the normal 4 m gate
+    (o,) = tr.objects_at(0.1)
+    assert math.isclose(o.vx, 25.0) and o.vy == 0.0
+    tr.update([_det(15.2, 0.0)], 0.2, lambda s, v: v)  # measured 27 m/s
+    (o,) = tr.objects_at(0.2)
+    assert math.isclose(o.vx, 25.0 + Tracker.velocity_gain * 2.0)
+
+
+def test_noisy_positions_give_a_steady_velocity():
+    rng = np.random.default_rng(0)
+    tr = Tracker()
+    for k in range(60):
+        t = 0.1 * k
+        tr.update([_det(20.0 * t + rng.normal(0, 0.15), 3.5 + rng.normal(0, 0.15))], t, lambda s, v: v)
+    (o,) = tr.objects_at(6.0)
+    assert abs(o.vx - 20.0) < 1.5 and abs(o.vy) < 1.5
+
+
+def test_measured_velocity_path_is_unchanged():
+    tr = Tracker()
+    tr.update([_det(0.0, 0.0, 10.0, 0.0)], 0.0, lambda s, v: v)
+    tr.update([_det(1.2, 0.0, 10.0, 0.0)], 0.1, lambda s, v: v)
+    (o,) = tr.objects_at(0.1)
+    assert math.isclose(o.vx, 0.5 * 10.0 + 0.5 * 12.0)
+    # An uninitialised-velocity gate does not apply to tracks with a velocity.
+    tr.update([_det(8.0, 0.0, 10.0, 0.0)], 0.2, lambda s, v: v)
+    assert len(tr.objects_at(0.2)) == 2
