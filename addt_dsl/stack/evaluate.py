@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.stack.synth import generate, in_grid
+from addt_dsl.stack.synth import generate, in_grid, load_samples
 
 BANDS = ((0.0, 20.0), (20.0, 40.0), (40.0, 60.0))
 MATCH_M = 2.0
@@ -138,6 +138,7 @@ def main(argv=None) -> int:
     ap.add_argument("--threshold", type=float, default=None)
     ap.add_argument("--yaw-shift", type=float, nargs="*", default=[0.0], metavar="DEG",
                     help="actual-vs-nominal lidar yaw misalignment(s) [deg]")
+    ap.add_argument("--cache", default=None, help="evaluate on stored scans (npz from synth.save_samples) instead")
     args = ap.parse_args(argv)
 
     from addt_dsl.stack.learned import WEIGHTS_PATH, LearnedPerception
@@ -145,7 +146,10 @@ def main(argv=None) -> int:
     settings = {} if args.threshold is None else {"detect_threshold": args.threshold}
     node = LearnedPerception(settings, weights=args.weights or WEIGHTS_PATH)
     for shift in args.yaw_shift:
-        samples = generate(args.scenes, args.seed, rays=(args.rays,), yaw_shift_rad=math.radians(shift))
+        if args.cache:
+            samples = load_samples(args.cache)[: args.scenes]
+        else:
+            samples = generate(args.scenes, args.seed, rays=(args.rays,), yaw_shift_rad=math.radians(shift))
         stats = evaluate(samples, node.detect, args.min_hits)
         print(format_table(stats, f"yaw shift {shift:g} deg, {args.scenes} scans, {args.rays} rays, "
                                   f"threshold {node.threshold:g}, ground truth with >= {args.min_hits} returns"))

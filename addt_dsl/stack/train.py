@@ -65,7 +65,7 @@ def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
 
 
 def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: float, log=print,
-          cache: Path | None = None, device: str = "cpu"):
+          cache: Path | None = None, device: str = "cpu", widths: tuple[int, int, int] = (16, 24, 32)):
     import torch
 
     from addt_dsl.stack.learned import BevDetector
@@ -87,7 +87,7 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         f"({np.mean([len(s.points) for s in samples]):.0f} points, "
         f"{np.mean([(s.hits >= 1).sum() for s in samples]):.1f} visible objects per scan)")
 
-    model = BevDetector().to(device)
+    model = BevDetector(widths).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     steps = epochs * math.ceil(scenes / batch)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=steps, pct_start=0.15)
@@ -127,16 +127,17 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=1, help="CPU threads (reproducible per thread count)")
     ap.add_argument("--threshold", type=float, default=0.35, help="detection threshold stored with the weights")
     ap.add_argument("--cache", type=Path, default=None, help="npz of scans: reused if present, else written")
+    ap.add_argument("--widths", type=int, nargs=3, default=[16, 24, 32], help="channels at 1/2, 1/4, 1/8")
     ap.add_argument("--device", default="cpu", help="torch device (the shipped weights are trained on cpu)")
     args = ap.parse_args(argv)
 
     import torch
 
     model, timing = train(args.seed, args.scenes, args.epochs, args.batch, args.threads, args.lr,
-                          cache=args.cache, device=args.device)
+                          cache=args.cache, device=args.device, widths=tuple(args.widths))
     meta = {
         "seed": args.seed, "scenes": args.scenes, "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
-        "threads": args.threads, "threshold": args.threshold, "widths": [16, 24, 32],
+        "threads": args.threads, "threshold": args.threshold, "widths": list(args.widths),
         "grid": {"x_min": GRID.x_min, "y_min": GRID.y_min, "cell_m": GRID.cell_m, "nx": GRID.nx, "ny": GRID.ny},
         "torch": str(torch.__version__), **timing,
     }
