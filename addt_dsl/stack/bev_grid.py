@@ -159,11 +159,13 @@ def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float 
 
 
 def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec = GRID,
-           max_objects: int = 64) -> np.ndarray:
-    """Peaks of a (hx, hy) probability map (3×3 local maxima above `threshold`) → boxes.
+           max_objects: int = 64, max_overlap_m: float | None = 0.3) -> np.ndarray:
+    """Peaks of a (hx, hy) score map (3×3 local maxima above `threshold`) → boxes.
 
-    Returns an (N, 6) array: x, y, heading, length, width, confidence (vehicle frame),
-    sorted by confidence, highest first.
+    Returns an (N, 6) array: x, y, heading, length, width, score (vehicle frame), sorted
+    by score, highest first. With `max_overlap_m`, a box that overlaps a higher-scoring
+    one by more than that (vehicles cannot overlap) is dropped: the network may propose
+    a car and a truck for the same face, or a phantom behind a long vehicle.
     """
     hx, hy = heat.shape
     padded = np.full((hx + 2, hy + 2), -1.0, dtype=heat.dtype)
@@ -187,4 +189,39 @@ def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec =
     x = spec.x_min + (i + 0.5 + r[0]) * c
     y = spec.y_min + (j + 0.5 + r[1]) * c
     heading = np.arctan2(r[4], r[5])
-    return np.stack([x, y, heading, np.exp(r[2]), np.exp(r[3]), conf.astype(np.float64)], axis=1)
+    boxes = np.stack([x, y, heading, np.exp(r[2]), np.exp(r[3]), conf.astype(np.float64)], axis=1)
+    if max_overlap_m is not None and len(boxes) > 1:
+        boxes = boxes[_keep_non_overlapping(boxes, max_overlap_m)]
+    return boxes
+
+
+def box_penetration(boxes: np.ndarray) -> np.ndarray:
+    """Pairwise separation of oriented boxes (rows x, y, heading, length, width, ...) [m].
+
+    Separating-axis test over the four edge normals of each pair, vectorised: positive
+    is a gap, negative the depth of overlap along the shallowest axis.
+    """
+    x, y, h, length, width = (boxes[:, k] for k in range(5))
+    c, s = np.cos(h), np.sin(h)
+    hl, hw = 0.5 * length, 0.5 * width
+    sx = np.array([1.0, 1.0, -1.0, -1.0])
+    sy = np.array([1.0, -1.0, -1.0, 1.0])
+    cx = x[:, None] + c[:, None] * hl[:, None] * sx - s[:, None] * hw[:, None] * sy  # (N, 4)
+    cy = y[:, None] + s[:, None] * hl[:, None] * sx + c[:, None] * hw[:, None] * sy
+    axes = np.stack([np.stack([c, s], 1), np.stack([-s, c], 1)], 1)  # (N, 2 axes, 2)
+    # proj[k, a, b, :]: box b's corners projected on box k's axis a.
+    proj = axes[:, :, 0, None, None] * cx[None, None] + axes[:, :, 1, None, None] * cy[None, None]
+    lo, hi = proj.min(axis=3), proj.max(axis=3)  # (k, a, b)
+    # gap[k, i, j]: gap between boxes i and j along the better of box k's two axes.
+    gap = np.maximum(lo[:, :, None, :] - hi[:, :, :, None], lo[:, :, :, None] - hi[:, :, None, :]).max(axis=1)
+    i = np.arange(len(boxes))
+    return np.maximum(gap[i[:, None], i[:, None], i[None, :]], gap[i[None, :], i[:, None], i[None, :]])
+
+
+def _keep_non_overlapping(boxes: np.ndarray, max_overlap_m: float) -> np.ndarray:
+    sep = box_penetration(boxes)
+    keep: list[int] = []
+    for i in range(len(boxes)):  # highest score first
+        if all(sep[i, j] >= -max_overlap_m for j in keep):
+            keep.append(i)
+    return np.array(keep, dtype=np.int64)

@@ -133,7 +133,7 @@ def main(argv=None) -> int:
     ap.add_argument("--weights", default=None, help="weights file (default: the shipped one)")
     ap.add_argument("--scenes", type=int, default=1500)
     ap.add_argument("--seed", type=int, default=1_000_003, help="held out: training uses small seeds")
-    ap.add_argument("--rays", type=int, default=360)
+    ap.add_argument("--lidar", default="360x1", help="RAYSxCHANNELS of the runtime's Lidar")
     ap.add_argument("--min-hits", type=int, default=2)
     ap.add_argument("--threshold", type=float, default=None)
     ap.add_argument("--yaw-shift", type=float, nargs="*", default=[0.0], metavar="DEG",
@@ -149,9 +149,11 @@ def main(argv=None) -> int:
         if args.cache:
             samples = load_samples(args.cache)[: args.scenes]
         else:
-            samples = generate(args.scenes, args.seed, rays=(args.rays,), yaw_shift_rad=math.radians(shift))
+            samples = generate(args.scenes, args.seed, lidars=(args.lidar,),
+                               yaw_shift_rad=math.radians(shift))
         stats = evaluate(samples, node.detect, args.min_hits)
-        print(format_table(stats, f"yaw shift {shift:g} deg, {args.scenes} scans, {args.rays} rays, "
+        lidar = ",".join(sorted({s.lidar for s in samples}))
+        print(format_table(stats, f"yaw shift {shift:g} deg, {len(samples)} scans, lidar {lidar}, "
                                   f"threshold {node.threshold:g}, ground truth with >= {args.min_hits} returns"))
         print()
     return 0

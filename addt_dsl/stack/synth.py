@@ -39,7 +39,7 @@ class Sample:
     sensor_xy: tuple[float, float]  # nominal sensor position in the vehicle frame [m]
     boxes: np.ndarray  # (M, 5) x, y, heading, length, width in the vehicle frame
     hits: np.ndarray  # (M,) lidar returns on each box
-    rays: int
+    lidar: str  # "RAYSxCHANNELS", e.g. "360x1"
 
 
 class _ScanWorld:
@@ -180,38 +180,42 @@ def _wrap(a: float) -> float:
 class ScanGenerator:
     """Generates `Sample`s; one pybullet world reused across scenes (close it when done)."""
 
-    def __init__(self, seed: int, rays: tuple[int, ...] = (360,), rays_p: tuple[float, ...] | None = None,
+    def __init__(self, seed: int, lidars: tuple[str, ...] = ("360x1",), lidar_p: tuple[float, ...] | None = None,
                  yaw_shift_rad: float = 0.0, lidar_settings: dict | None = None):
+        """`lidars` are "RAYSxCHANNELS" configurations of the runtime's `Lidar` (other
+        settings at their defaults or `lidar_settings`), drawn per scan with `lidar_p`."""
         from addt_dsl.runtime.sensors import Lidar
 
         self.rng = np.random.default_rng(seed)
         self.world = _ScanWorld()
         base = {"range": 80.0, **(lidar_settings or {})}
-        self.lidars = {r: Lidar("lidar", {**base, "rays": r}) for r in rays}
-        self.rays = rays
-        self.rays_p = rays_p
-        for lidar in self.lidars.values():
+        self.lidars = {}
+        for config in lidars:
+            rays, channels = parse_lidar(config)
+            self.lidars[config] = Lidar("lidar", {**base, "rays": rays, "channels": channels})
             if yaw_shift_rad:
-                lidar.actual = lidar.nominal.shifted(yaw=yaw_shift_rad)
+                self.lidars[config].actual = self.lidars[config].nominal.shifted(yaw=yaw_shift_rad)
+        self.configs = tuple(lidars)
+        self.lidar_p = lidar_p
 
     def close(self):
         self.world.close()
 
     def sample(self) -> Sample:
-        """One random scene, seen from a random world pose with a lidar drawn from `rays`."""
+        """One random scene, seen from a random world pose with a lidar drawn from `lidars`."""
         rng = self.rng
         poses = sample_scene(rng, self.world.pool)
         world_pose = (rng.uniform(-500.0, 500.0), rng.uniform(-500.0, 500.0), rng.uniform(-math.pi, math.pi))
-        rays = int(rng.choice(self.rays, p=self.rays_p))
-        return self._scan(poses, world_pose, rays)
+        config = self.configs[int(rng.choice(len(self.configs), p=self.lidar_p))]
+        return self._scan(poses, world_pose, config)
 
-    def scan(self, objects: list[tuple[str, float, float, float]], rays: int | None = None) -> Sample:
+    def scan(self, objects: list[tuple[str, float, float, float]], lidar: str | None = None) -> Sample:
         """Scan a given scene: `objects` are (kind, x, y, heading) in the ego's vehicle frame."""
         free = {kind: [i for i, p in enumerate(self.world.pool) if p[1] == kind] for kind in ("car", "truck")}
         poses = [(free[kind].pop(0), x, y, h) for kind, x, y, h in objects]
-        return self._scan(poses, (0.0, 0.0, 0.0), rays or self.rays[0])
+        return self._scan(poses, (0.0, 0.0, 0.0), lidar or self.configs[0])
 
-    def _scan(self, poses, world_pose, rays: int) -> Sample:
+    def _scan(self, poses, world_pose, config: str) -> Sample:
         world = self.world
         pool = world.pool
         # The ego's world pose must not matter to the scan (the grid is in the vehicle frame).
@@ -230,7 +234,7 @@ class ScanGenerator:
         for idx, (name, _, _, _, height) in enumerate(pool):
             if idx not in used:
                 phys.set_pose(name, PARK_X0 + 30.0 * idx, 0.0, height / 2, 0.0)
-        lidar = self.lidars[rays]
+        lidar = self.lidars[config]
         frame = lidar.capture(world, 0.0)
         hits = np.zeros(len(poses), dtype=np.int64)
         if len(frame.data["hit_body"]):
@@ -242,7 +246,12 @@ class ScanGenerator:
                     hits[k] = count
         pts = sensor_points_to_vehicle(frame.data["points"], lidar.nominal).astype(np.float32)
         box_arr = np.array(boxes, dtype=np.float64).reshape(-1, 5)
-        return Sample(pts, (lidar.nominal.x, lidar.nominal.y), box_arr, hits, rays)
+        return Sample(pts, (lidar.nominal.x, lidar.nominal.y), box_arr, hits, config)
+
+
+def parse_lidar(config: str) -> tuple[int, int]:
+    rays, _, channels = config.partition("x")
+    return int(rays), int(channels or 1)
 
 
 def in_grid(boxes: np.ndarray, spec=GRID) -> np.ndarray:
@@ -268,14 +277,16 @@ def save_samples(path, samples: list[Sample]) -> None:
         points=np.concatenate([s.points for s in samples]) if samples else np.zeros((0, 3), np.float32),
         boxes=np.concatenate([s.boxes for s in samples]) if samples else np.zeros((0, 5)),
         hits=np.concatenate([s.hits for s in samples]) if samples else np.zeros(0, np.int64),
-        sensor_xy=np.array([s.sensor_xy for s in samples]), rays=np.array([s.rays for s in samples]))
+        sensor_xy=np.array([s.sensor_xy for s in samples]), lidar=np.array([s.lidar for s in samples]))
 
 
 def load_samples(path) -> list[Sample]:
-    z = np.load(path)
+    with np.load(path) as npz:  # each key access decompresses: read every array once
+        z = {k: npz[k] for k in npz.files}
     p_off = np.concatenate([[0], np.cumsum(z["npts"])])
     b_off = np.concatenate([[0], np.cumsum(z["nbox"])])
     return [Sample(z["points"][p_off[k]:p_off[k + 1]], tuple(z["sensor_xy"][k].tolist()),
-                   z["boxes"][b_off[k]:b_off[k + 1]], z["hits"][b_off[k]:b_off[k + 1]], int(z["rays"][k]))
+                   z["boxes"][b_off[k]:b_off[k + 1]], z["hits"][b_off[k]:b_off[k + 1]],
+                   str(z["lidar"][k]) if "lidar" in z else f"{int(z['rays'][k])}x1")
             for k in range(len(z["npts"]))]
 

@@ -25,6 +25,12 @@ from addt_dsl.stack.bev_grid import GRID, build_grid, encode_targets
 from addt_dsl.stack.synth import generate, in_grid, load_samples, save_samples
 
 
+# Lidar configurations ("RAYSxCHANNELS") drawn per training scan: the default `Lidar`
+# (360 rays, one channel, as in examples/overtake.addt) most of the time.
+LIDARS = ("360x1", "720x1")
+LIDAR_P = (0.8, 0.2)
+
+
 def make_targets(samples):
     """Stacked CenterNet targets for `samples` (objects with ≥ 1 return are positives)."""
     hx, hy = GRID.head_shape
@@ -65,7 +71,8 @@ def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
 
 
 def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: float, log=print,
-          cache: Path | None = None, device: str = "cpu", widths: tuple[int, int, int] = (16, 24, 32)):
+          cache: Path | None = None, device: str = "cpu", widths: tuple[int, int, int] = (16, 24, 32),
+          lidars: tuple[str, ...] = LIDARS, lidar_p: tuple[float, ...] = LIDAR_P):
     import torch
 
     from addt_dsl.stack.learned import BevDetector
@@ -78,7 +85,7 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         samples = load_samples(cache)[:scenes]
         scenes = len(samples)
     else:
-        samples = generate(scenes, seed, rays=(360, 720), rays_p=(0.8, 0.2))
+        samples = generate(scenes, seed, lidars=lidars, lidar_p=lidar_p)
         if cache is not None:
             save_samples(cache, samples)
     heat_all, reg_all, mask_all = make_targets(samples)
@@ -128,16 +135,19 @@ def main(argv=None) -> int:
     ap.add_argument("--threshold", type=float, default=0.35, help="detection threshold stored with the weights")
     ap.add_argument("--cache", type=Path, default=None, help="npz of scans: reused if present, else written")
     ap.add_argument("--widths", type=int, nargs=3, default=[16, 24, 32], help="channels at 1/2, 1/4, 1/8")
+    ap.add_argument("--lidars", nargs="*", default=list(LIDARS), help="RAYSxCHANNELS configurations to scan with")
+    ap.add_argument("--lidar-p", type=float, nargs="*", default=list(LIDAR_P), help="their probabilities")
     ap.add_argument("--device", default="cpu", help="torch device (the shipped weights are trained on cpu)")
     args = ap.parse_args(argv)
 
     import torch
 
     model, timing = train(args.seed, args.scenes, args.epochs, args.batch, args.threads, args.lr,
-                          cache=args.cache, device=args.device, widths=tuple(args.widths))
+                          cache=args.cache, device=args.device, widths=tuple(args.widths),
+                          lidars=tuple(args.lidars), lidar_p=tuple(args.lidar_p))
     meta = {
         "seed": args.seed, "scenes": args.scenes, "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
-        "threads": args.threads, "threshold": args.threshold, "widths": list(args.widths),
+        "threads": args.threads, "lidars": args.lidars, "lidar_p": args.lidar_p, "threshold": args.threshold, "widths": list(args.widths),
         "grid": {"x_min": GRID.x_min, "y_min": GRID.y_min, "cell_m": GRID.cell_m, "nx": GRID.nx, "ny": GRID.ny},
         "torch": str(torch.__version__), **timing,
     }

@@ -1,0 +1,115 @@
+"""Per-node compute time of the default stack and the real-time factor of the overtake example.
+
+    PYTHONPATH=. python benchmarks/bench_stack.py [--repeats 3]
+
+Runs examples/overtake.addt (drop rate 0, 30 s simulated, one process, one torch thread)
+with ground-truth and with learned perception. Node methods are wrapped with timers,
+so the table shows where the loop's time goes: mean time per call and total per run for
+each node (and, inside learned perception, grid building and the network), plus the
+lidar's ray casts. The real-time factor is simulated time over the wall time of
+`execute` (world set-up and judging included), median of `--repeats` runs after one
+warm-up run. Issue 10's target: >= 100x with learned perception.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from collections import defaultdict
+from contextlib import contextmanager
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+STACK_LINE = "stack bev cruise_speed 25 m/s"
+
+
+def _spec(perception: str):
+    from addt_dsl.compiler import compile_source
+    from addt_dsl.sweep import expand
+
+    text = (ROOT / "examples" / "overtake.addt").read_text()
+    text = text.replace(STACK_LINE, f"stack bev perception {perception} cruise_speed 25 m/s")
+    result = compile_source(text)
+    assert result.ok, result.diagnostics
+    return next(s for s in expand(result.plan).specs if s.params["drop_rate"] == 0.0)
+
+
+@contextmanager
+def timed(targets):
+    """Wrap (owner, attribute, label) callables with timers; yield {label: [seconds per call]}."""
+    calls: dict[str, list[float]] = defaultdict(list)
+    saved = []
+    for owner, attr, label in targets:
+        original = getattr(owner, attr)
+        saved.append((owner, attr, original))
+
+        def wrapper(*args, _original=original, _label=label, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return _original(*args, **kwargs)
+            finally:
+                calls[_label].append(time.perf_counter() - t0)
+
+        setattr(owner, attr, wrapper)
+    try:
+        yield calls
+    finally:
+        for owner, attr, original in saved:
+            setattr(owner, attr, original)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+
+    import gc
+
+    import torch
+
+    from addt_dsl.runtime import sensors
+    from addt_dsl.runtime.execute import execute
+    from addt_dsl.stack import bev_grid, learned, nodes
+
+    torch.set_num_threads(1)
+    targets = [
+        (sensors.Lidar, "capture", "lidar ray casts"),
+        (nodes.GroundTruthPerception, "run", "perception (ground truth)"),
+        (learned.LearnedPerception, "run", "perception (learned)"),
+        (learned, "build_grid", "  grid from points"),
+        (learned.BevDetector, "forward", "  network forward"),
+        (learned, "decode", "  decode + box NMS"),
+        (nodes.Tracker, "update", "tracker"),
+        (nodes.LatticePlanner, "plan", "planner"),
+        (nodes.Controller, "command", "control"),
+    ]
+    _ = bev_grid
+    print(f"overtake example, 30 s simulated, drop rate 0, torch threads {torch.get_num_threads()}")
+    for perception in ("ground_truth", "learned"):
+        spec = _spec(perception)
+        execute(spec, keep_trace=False)  # warm-up: imports, weights, first-call costs
+        gc.collect()
+        walls, per_run = [], None
+        for _ in range(args.repeats):
+            t0 = time.perf_counter()
+            result = execute(spec, keep_trace=False)
+            walls.append(time.perf_counter() - t0)
+        with timed(targets) as calls:
+            execute(spec, keep_trace=False)
+            per_run = {k: list(v) for k, v in calls.items()}
+        wall = statistics.median(walls)
+        print(f"\n{perception}: wall {wall * 1e3:.0f} ms for {result.sim_time_s:.0f} s, real-time factor "
+              f"{result.sim_time_s / wall:.0f}x (median of {args.repeats}; passed={result.passed})")
+        print(f"  {'node':<28} {'calls':>6} {'us/call':>9} {'ms/run':>8} {'share':>6}")
+        for _, _, label in targets:
+            samples = per_run.get(label)
+            if not samples:
+                continue
+            total = sum(samples)
+            print(f"  {label:<28} {len(samples):>6} {1e6 * total / len(samples):>9.1f} {1e3 * total:>8.1f} "
+                  f"{100 * total / wall:>5.0f}%")
+
+
+if __name__ == "__main__":
+    main()
