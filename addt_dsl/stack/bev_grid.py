@@ -160,7 +160,8 @@ def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float 
 
 def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec = GRID,
            max_objects: int = 64, max_overlap_m: float | None = 0.3) -> np.ndarray:
-    """Peaks of a (hx, hy) score map (3×3 local maxima above `threshold`) → boxes.
+    """Peaks of a (hx, hy) score map (3×3 local maxima at or above `threshold`; scores
+    may be probabilities or logits) → boxes.
 
     Returns an (N, 6) array: x, y, heading, length, width, score (vehicle frame), sorted
     by score, highest first. With `max_overlap_m`, a box that overlaps a higher-scoring
@@ -168,7 +169,7 @@ def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec =
     a car and a truck for the same face, or a phantom behind a long vehicle.
     """
     hx, hy = heat.shape
-    padded = np.full((hx + 2, hy + 2), -1.0, dtype=heat.dtype)
+    padded = np.full((hx + 2, hy + 2), -np.inf, dtype=heat.dtype)
     padded[1:-1, 1:-1] = heat
     local_max = heat >= threshold
     for di in (0, 1, 2):
@@ -184,6 +185,11 @@ def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec =
     conf = heat[i, j]
     order = np.argsort(-conf, kind="stable")[:max_objects]
     i, j, conf = i[order], j[order], conf[order]
+    with np.errstate(all="ignore"):  # a fault can feed inf/nan in: it must flow out, not warn
+        return _boxes(heat, reg, i, j, conf, spec, max_overlap_m)
+
+
+def _boxes(heat, reg, i, j, conf, spec, max_overlap_m):
     c = spec.head_cell_m
     r = reg[:, i, j].astype(np.float64)
     x = spec.x_min + (i + 0.5 + r[0]) * c

@@ -150,7 +150,8 @@ class LearnedPerception:
         # Threshold on logits (monotone): the sigmoid is only needed at the peaks.
         found = decode(heat, box, self._logit_threshold)
         if len(found):
-            found[:, 5] = 1.0 / (1.0 + np.exp(-found[:, 5]))
+            with np.errstate(over="ignore"):
+                found[:, 5] = 1.0 / (1.0 + np.exp(-found[:, 5]))
         return found
 
     # ---- tensor fault sites

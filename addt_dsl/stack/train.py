@@ -127,7 +127,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m addt_dsl.stack.train", description=__doc__.split("\n")[0])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path(__file__).with_name("perception_weights.pt"))
-    ap.add_argument("--scenes", type=int, default=12000, help="training scans to generate")
+    ap.add_argument("--scenes", type=int, default=16000, help="training scans to generate")
     ap.add_argument("--epochs", type=int, default=10)
     ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--lr", type=float, default=3e-3)

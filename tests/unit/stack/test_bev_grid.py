@@ -80,7 +80,7 @@ def test_encode_then_decode_recovers_well_separated_boxes(boxes):
     boxes = np.array(keep)
     heat, reg, mask = encode_targets(boxes)
     assert mask.sum() == len(boxes)
-    found = decode(heat, reg, threshold=0.999)
+    found = decode(heat, reg, threshold=0.999, max_overlap_m=None)  # random boxes may overlap
     assert len(found) == len(boxes)
     for b in boxes:
         k = int(np.argmin(np.hypot(found[:, 0] - b[0], found[:, 1] - b[1])))
@@ -103,3 +103,37 @@ def test_decode_suppresses_non_peaks_and_respects_threshold():
     heat[:] = 0
     heat[20, 8] = heat[20, 9] = 0.7
     assert len(decode(heat, reg, threshold=0.5)) == 1
+
+
+def test_decode_works_on_logits_at_the_border():
+    heat = np.full(GRID.head_shape, -9.0, dtype=np.float32)
+    reg = np.zeros((6, *GRID.head_shape), dtype=np.float32)
+    heat[0, 0] = -1.2  # logit of 0.23, in the corner
+    assert len(decode(heat, reg, threshold=-1.4)) == 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(-20, 20), st.floats(-20, 20), st.floats(-3.2, 3.2),
+                          st.floats(0.5, 14), st.floats(0.5, 3)), min_size=2, max_size=8))
+def test_box_penetration_matches_the_runtime_separating_axis_test(boxes):
+    from addt_dsl.runtime.world import box_separation
+    from addt_dsl.stack.bev_grid import box_penetration
+
+    arr = np.array(boxes)
+    sep = box_penetration(arr)
+    for i in range(len(arr)):
+        for j in range(len(arr)):
+            if i != j:
+                assert math.isclose(sep[i, j], box_separation(tuple(arr[i]), tuple(arr[j])), abs_tol=1e-9)
+
+
+def test_decode_drops_a_box_overlapping_a_stronger_one():
+    heat = np.zeros(GRID.head_shape, dtype=np.float32)
+    reg = np.zeros((6, *GRID.head_shape), dtype=np.float32)
+    reg[5] = 1.0  # heading 0
+    reg[2], reg[3] = math.log(12.0), math.log(2.5)  # truck-sized everywhere
+    heat[40, 16], heat[43, 16] = 0.9, 0.6  # 4.8 m apart along x: two 12 m boxes overlap
+    heat[40, 10] = 0.5  # 9.6 m to the side: a separate object
+    kept = decode(heat, reg, threshold=0.3)
+    assert sorted(kept[:, 5].round(2).tolist()) == [0.5, 0.9]
+    assert len(decode(heat, reg, threshold=0.3, max_overlap_m=None)) == 3
