@@ -1,5 +1,6 @@
 """Closed loop with learned perception: the overtake example passes and runs are repeatable."""
 
+import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
@@ -40,3 +41,20 @@ def test_learned_perception_runs_are_deterministic(overtake_source):
     first, second = execute(spec), execute(spec)
     assert first.status == second.status == "ok"
     assert first.digest == second.digest
+
+
+def test_hil_like_measured_latency_with_learned_perception(overtake_source):
+    spec = next(s for s in _specs(overtake_source, "stack bev perception learned latency measured "
+                                                    "cruise_speed 25 m/s", 4)
+                if s.params["drop_rate"] == 0.0)
+    result = execute(spec)
+    assert result.status == "ok", result.error
+    from addt_dsl.stack.latency import load_models
+
+    perception = result.trace.latency["perception"]
+    seen = np.unique(perception[perception > 0.0])
+    # Each frame's own measured compute time (no wall-clock bound: machines differ), not the model's.
+    assert len(seen) > 10 and np.isfinite(seen).all()
+    model = load_models()["perception"]
+    modelled = {model.latency(n) for n in range(0, 64)}
+    assert not set(seen.tolist()) & modelled
