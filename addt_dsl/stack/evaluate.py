@@ -67,9 +67,17 @@ def _band(d: float) -> int | None:
     return None
 
 
-def evaluate(samples, detector, min_hits: int = 2) -> list[BandStats]:
-    """Band statistics for `detector(points, sensor_xy) -> (N, 6) boxes` over `samples`."""
+def _kind(length: float) -> str:
+    return "truck" if length > 7.0 else "car"
+
+
+def evaluate(samples, detector, min_hits: int = 2, by_kind: dict | None = None) -> list[BandStats]:
+    """Band statistics for `detector(points, sensor_xy) -> (N, 6) boxes` over `samples`.
+
+    `by_kind`, if given, collects recall within 40 m per vehicle kind: {kind: [found, gt]}.
+    """
     stats = [BandStats() for _ in BANDS]
+    by_kind = {} if by_kind is None else by_kind
     for s in samples:
         det = detector(s.points, s.sensor_xy)
         keep = in_grid(s.boxes)
@@ -79,6 +87,8 @@ def evaluate(samples, detector, min_hits: int = 2) -> list[BandStats]:
             b = _band(math.hypot(gt[k, 0], gt[k, 1]))
             if b is not None:
                 stats[b].gt += 1
+                if b < 2:
+                    by_kind.setdefault(_kind(gt[k, 3]), [0, 0])[1] += 1
         taken = np.zeros(len(gt), dtype=bool)
         for row in det:  # sorted by confidence already
             b = _band(math.hypot(row[0], row[1]))
@@ -104,6 +114,8 @@ def evaluate(samples, detector, min_hits: int = 2) -> list[BandStats]:
                 continue
             st = stats[gb]
             st.found += 1
+            if gb < 2:
+                by_kind.setdefault(_kind(gt[match, 3]), [0, 0])[0] += 1
             st.matched += 1
             st.pos_err += math.hypot(gt[match, 0] - row[0], gt[match, 1] - row[1])
             dh = abs((row[2] - gt[match, 2] + math.pi) % (2 * math.pi) - math.pi)
@@ -151,10 +163,13 @@ def main(argv=None) -> int:
         else:
             samples = generate(args.scenes, args.seed, lidars=(args.lidar,),
                                yaw_shift_rad=math.radians(shift))
-        stats = evaluate(samples, node.detect, args.min_hits)
+        kinds: dict = {}
+        stats = evaluate(samples, node.detect, args.min_hits, kinds)
         lidar = ",".join(sorted({s.lidar for s in samples}))
         print(format_table(stats, f"yaw shift {shift:g} deg, {len(samples)} scans, lidar {lidar}, "
                                   f"threshold {node.threshold:g}, ground truth with >= {args.min_hits} returns"))
+        print("recall within 40 m by kind: " + ", ".join(
+            f"{kind} {found / gt:.3f} ({gt})" for kind, (found, gt) in sorted(kinds.items()) if gt))
         print()
     return 0
 

@@ -4,8 +4,9 @@
 
 Generates `--scenes` labelled scans with `synth.ScanGenerator` (the runtime's `Lidar` in
 a pybullet world of car and truck boxes), then trains `learned.BevDetector` with Adam on
-a CenterNet loss (focal loss on the centre heatmap, L1 on offset, log size and heading
-sin/cos at object centres). Objects with at least one lidar return are positives.
+a CenterNet loss (focal loss on the centre heatmap; L1 at object centres on the sub-cell
+offset, weighted 2, on log length/width and on heading sin/cos). Objects with at least
+one lidar return are positives.
 
 Reproducible from the seed: the scenes, the initial weights and the batch order all
 derive from it, and training runs on `--threads` CPU threads (default 1; the same

@@ -137,3 +137,36 @@ def test_decode_drops_a_box_overlapping_a_stronger_one():
     kept = decode(heat, reg, threshold=0.3)
     assert sorted(kept[:, 5].round(2).tolist()) == [0.5, 0.9]
     assert len(decode(heat, reg, threshold=0.3, max_overlap_m=None)) == 3
+
+
+def _reference_grid(points, sensor_xy):
+    """Point-by-point definition of the features (slow, obviously right)."""
+    grid = np.zeros(GRID.shape, dtype=np.float64)
+    cells: dict = {}
+    for x, y, z in points:
+        i = math.floor((x - GRID.x_min) / GRID.cell_m)
+        j = math.floor((y - GRID.y_min) / GRID.cell_m)
+        if 0 <= i < GRID.nx and 0 <= j < GRID.ny:
+            cells.setdefault((i, j), []).append((x, y, z))
+    for (i, j), pts in cells.items():
+        n = len(pts)
+        grid[0, i, j] = min(n, 4) / 4
+        grid[1, i, j] = sum((x - GRID.x_min) / GRID.cell_m - i - 0.5 for x, _, _ in pts) / n
+        grid[2, i, j] = sum((y - GRID.y_min) / GRID.cell_m - j - 0.5 for _, y, _ in pts) / n
+        grid[3, i, j] = max(z for _, _, z in pts) / 2
+        dirs = [((x - sensor_xy[0]), (y - sensor_xy[1])) for x, y, _ in pts]
+        grid[4, i, j] = sum(dx / max(math.hypot(dx, dy), 1e-6) for dx, dy in dirs) / n
+        grid[5, i, j] = sum(dy / max(math.hypot(dx, dy), 1e-6) for dx, dy in dirs) / n
+    return grid
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(-62, 62), st.floats(-27, 27), st.floats(0, 4)), max_size=80),
+       st.integers(0, 3))
+def test_grid_matches_the_point_by_point_definition(points, duplicate_every):
+    # Clustered points (several per cell) are the interesting case: repeat some.
+    pts = list(points)
+    if duplicate_every:
+        pts += [(x + 0.01, y - 0.01, z + 0.5) for x, y, z in points[::duplicate_every]]
+    arr = np.array(pts, dtype=np.float64).reshape(-1, 3)
+    assert np.allclose(build_grid(arr, (1.0, 0.2)), _reference_grid(arr, (1.0, 0.2)), atol=1e-5)
