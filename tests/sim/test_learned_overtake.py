@@ -58,3 +58,13 @@ def test_hil_like_measured_latency_with_learned_perception(overtake_source):
     model = load_models()["perception"]
     modelled = {model.latency(n) for n in range(0, 64)}
     assert not set(seen.tolist()) & modelled
+
+
+def test_learned_perception_digests_do_not_depend_on_worker_count(overtake_source):
+    from addt_dsl.runtime.executor import run_local
+
+    specs = _specs(overtake_source, "stack bev perception learned cruise_speed 25 m/s", 5)
+    serial = run_local(specs, jobs=1)
+    parallel = run_local(specs, jobs=2)
+    assert all(r.status == "ok" for r in serial), [r.error for r in serial]
+    assert [r.digest for r in serial] == [r.digest for r in parallel]
