@@ -108,7 +108,7 @@ def test_nan_is_the_worst_case_even_under_negation():
     assert rho("not x > 0", x=[math.nan])[0] == -INF
     assert rho("x != 0", x=[math.nan])[0] == -INF
     assert rho("not (x > 0 and y > 0)", x=[math.nan], y=[1.0])[0] == -1.0  # as if x > 0 held
-    assert rho("x > 0 implies y > 0", x=[math.nan], y=[-1.0])[0] == -INF
+    assert rho("x > 0 implies y > 0", x=[math.nan], y=[-1.0])[0] == -1.0
     # ...but a NaN doesn't sink a formula that holds whatever the unknown value is
     assert rho("x > 0 implies y > 0", x=[math.nan], y=[2.0])[0] == 2.0
     assert rho("x > 0 or y > 0", x=[math.nan], y=[2.0])[0] == 2.0
