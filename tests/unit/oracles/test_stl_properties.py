@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from stl_testkit import PERIODS, formulas, reference_signal, traces, windows
 
-from addt_dsl.expr import Temporal, Unary, Until
+from addt_dsl.expr import Binary, Num, Temporal, Unary, Until
 from addt_dsl.runtime.oracles import boolean_semantics, evaluate, verdicts
 
 periods = st.sampled_from(PERIODS)
@@ -87,7 +87,6 @@ def test_eventually_is_true_until(data):
 
 
 def _true():
-    from addt_dsl.expr import Binary, Num
     return Binary(op="<", left=Num(value=0.0), right=Num(value=math.inf))
 
 
@@ -104,9 +103,8 @@ def test_wider_window_is_monotone(data):
     def rho(op, a, b):
         return evaluate(Temporal(op=op, lo_s=a * period, hi_s=None if b is None else b * period,
                                  arg=expr), sig, period)
-    wide_hi = grow_hi
-    assert np.all(rho("always", grow_lo, wide_hi) <= rho("always", lo, hi))
-    assert np.all(rho("eventually", grow_lo, wide_hi) >= rho("eventually", lo, hi))
+    assert np.all(rho("always", grow_lo, grow_hi) <= rho("always", lo, hi))
+    assert np.all(rho("eventually", grow_lo, grow_hi) >= rho("eventually", lo, hi))
 
 
 @settings(max_examples=200, deadline=None)
