@@ -292,10 +292,11 @@ def rule_roads(ctx: Context) -> None:
         if d.import_path is not None:
             _import_road(ctx, d)
             continue
-        segments, lanes = [], None
+        segments, lanes, broken = [], None, False
         for item in d.items:
             cls = GEOMETRIES.get(item.kind)
             if cls is None:
+                broken = True
                 ctx.sink.error("E0106", f"unknown road element '{item.kind}'", item.span,
                                *_suggest(item.kind, GEOMETRIES.names()),
                                f"road elements: {', '.join(GEOMETRIES.names())}")
@@ -326,6 +327,8 @@ def rule_roads(ctx: Context) -> None:
                 segments.append(P.SegmentPlan(kind="param_poly3", length_m=spec["length"], coefficients=[
                     spec[k] for k in ("au", "bu", "cu", "du", "av", "bv", "cv", "dv")]))
         if not segments:
+            if broken:
+                continue
             ctx.sink.error("E0103", f"road '{d.name}' has no geometry", d.span, "add e.g. `line length 500 m`")
             continue
         lanes = lanes or {p.name: p.default for p in GEOMETRIES.get("lanes").params}
