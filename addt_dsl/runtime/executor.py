@@ -45,7 +45,7 @@ _GUARD_POLL_S = 0.2  # how often busy workers are checked against timeout and me
 
 # ---------------------------------------------------------------------------- one run
 
-def run_spec(spec: RunSpec, seq: int = -1, worker: str = "", memory_limit_mb: float | None = None) -> RunRecord:
+def run_spec(spec: RunSpec, seq: int = -1, worker: str = "") -> RunRecord:
     """Execute one RunSpec and summarise it; an exception becomes a `crashed` record."""
     t0 = time.perf_counter()
     try:
@@ -55,10 +55,6 @@ def run_spec(spec: RunSpec, seq: int = -1, worker: str = "", memory_limit_mb: fl
         record = RunRecord.unfinished(
             spec, "crashed", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=4)}",
             time.perf_counter() - t0, seq=seq, worker=worker)
-    peak_mb = peak_rss_mb()
-    if memory_limit_mb and peak_mb > memory_limit_mb:
-        record.status = "memory"
-        record.error = f"peak resident memory {peak_mb:.0f} MB over the {memory_limit_mb:.0f} MB limit"
     return record
 
 
@@ -107,7 +103,7 @@ def _die_with_parent() -> None:
         pass
 
 
-def _worker_main(conn, memory_limit_mb: float | None) -> None:
+def _worker_main(conn, memory_limit_mb: float | None, run_fn=None) -> None:
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the coordinator's to handle
     plans = {}
@@ -122,7 +118,15 @@ def _worker_main(conn, memory_limit_mb: float | None) -> None:
             continue
         _, seq, token, fields = msg
         spec = RunSpec.model_construct(plan=plans[token], **fields)
-        record = run_spec(spec, seq, worker=name, memory_limit_mb=memory_limit_mb)
+        try:
+            record = (run_fn or run_spec)(spec, seq, worker=name)
+        except Exception as exc:  # noqa: BLE001 - run_spec catches its own; this guards a custom run_fn
+            record = RunRecord.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", 0.0, seq=seq, worker=name)
+        # A spike between the coordinator's RSS polls still shows in the peak.
+        peak_mb = peak_rss_mb()
+        if memory_limit_mb and peak_mb > memory_limit_mb:
+            record.status = "memory"
+            record.error = f"peak resident memory {peak_mb:.0f} MB over the {memory_limit_mb:.0f} MB limit"
         try:
             conn.send(record)
         except (BrokenPipeError, OSError):
@@ -146,6 +150,8 @@ class LocalExecutor:
     `timeout_s`: wall-clock seconds a run may take before it is killed (None: no limit).
     `memory_limit_mb`: resident memory a worker may use (None: no limit); checked while a
     run is in flight and against the worker's peak when it finishes.
+    `run_fn`: what a worker calls per run (default `run_spec`; a module-level function
+    with the same signature, e.g. to test the guards).
     """
 
     name = "local"
@@ -153,7 +159,7 @@ class LocalExecutor:
     def __init__(self, jobs: int = 1, timeout_s: float | None = None,
                  memory_limit_mb: float | None = DEFAULT_MEMORY_LIMIT_MB,
                  max_tasks_per_child: int | None = DEFAULT_MAX_TASKS_PER_CHILD,
-                 start_method: str | None = None):
+                 start_method: str | None = None, run_fn: Callable | None = None):
         self.workers = max(1, int(jobs))
         self.timeout_s = timeout_s if timeout_s and timeout_s > 0 else None
         self.memory_limit_mb = memory_limit_mb if memory_limit_mb and memory_limit_mb > 0 else None
@@ -163,6 +169,7 @@ class LocalExecutor:
             # starting or replacing one is cheap and never inherits the caller's threads.
             start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
         self.start_method = start_method
+        self.run_fn = run_fn
         self._plans: dict[int, tuple[int, object]] = {}  # id(plan) -> (token, plan)
 
     def _context(self):
@@ -173,7 +180,7 @@ class LocalExecutor:
 
     def _spawn(self, ctx) -> _Worker:
         parent, child = ctx.Pipe(duplex=True)
-        process = ctx.Process(target=_worker_main, args=(child, self.memory_limit_mb), daemon=True,
+        process = ctx.Process(target=_worker_main, args=(child, self.memory_limit_mb, self.run_fn), daemon=True,
                               name="addt-worker")
         process.start()
         child.close()
@@ -257,10 +264,6 @@ class LocalExecutor:
             self._stop(w, kill=True)
             return RunRecord.unfinished(spec, "crashed", f"worker process {why} during the run", elapsed,
                                         seq=seq, worker=f"pid{w.process.pid}"), True
-        if self.timeout_s is not None and elapsed > self.timeout_s:
-            self._stop(w, kill=True)
-            return RunRecord.unfinished(spec, "timeout", f"run exceeded the {self.timeout_s:g} s timeout",
-                                        elapsed, seq=seq, worker=f"pid{w.process.pid}"), True
         if self.memory_limit_mb is not None:
             rss = rss_mb(w.process.pid)
             if rss is not None and rss > self.memory_limit_mb:
@@ -268,6 +271,10 @@ class LocalExecutor:
                 return RunRecord.unfinished(
                     spec, "memory", f"resident memory {rss:.0f} MB over the {self.memory_limit_mb:.0f} MB limit",
                     elapsed, seq=seq, worker=f"pid{w.process.pid}"), True
+        if self.timeout_s is not None and elapsed > self.timeout_s:
+            self._stop(w, kill=True)
+            return RunRecord.unfinished(spec, "timeout", f"run exceeded the {self.timeout_s:g} s timeout",
+                                        elapsed, seq=seq, worker=f"pid{w.process.pid}"), True
         return None, False
 
 
