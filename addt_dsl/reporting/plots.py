@@ -129,8 +129,8 @@ def success_rate_chart(labels: list[str], rates: list[float], intervals: list[tu
     fig, ax = plt.subplots(figsize=(max(3.5, 0.7 * len(labels) + 1.5), 2.6))
     xs = range(len(labels))
     pct = [100 * r for r in rates]
-    err = [[100 * (r - lo) for r, (lo, _) in zip(rates, intervals)],
-           [100 * (hi - r) for r, (_, hi) in zip(rates, intervals)]]
+    err = [[max(0.0, 100 * (r - lo)) for r, (lo, _) in zip(rates, intervals)],
+           [max(0.0, 100 * (hi - r)) for r, (_, hi) in zip(rates, intervals)]]
     ax.bar(xs, pct, color="#4c72b0", yerr=err, capsize=3)
     ax.set_xticks(list(xs), labels, rotation=30 if len(labels) > 6 else 0, fontsize=7)
     ax.set_ylim(0, 105)
