@@ -41,17 +41,20 @@ def _pids_alive(pids) -> list[int]:
     return alive
 
 
-def _children(pid: int) -> set[int]:
-    out = set()
+def _descendants(pid: int) -> set[int]:
+    parents = {}
     for entry in os.listdir("/proc"):
         if entry.isdigit():
             try:
                 with open(f"/proc/{entry}/stat") as fh:
-                    if int(fh.read().rsplit(")", 1)[1].split()[1]) == pid:
-                        out.add(int(entry))
+                    parents[int(entry)] = int(fh.read().rsplit(")", 1)[1].split()[1])
             except (OSError, ValueError, IndexError):
                 pass
-    return out
+    found, frontier = set(), {pid}
+    while frontier:
+        frontier = {p for p, parent in parents.items() if parent in frontier} - found
+        found |= frontier
+    return found
 
 
 def test_sigkill_mid_sweep_then_resume(tmp_path):
@@ -67,7 +70,8 @@ def test_sigkill_mid_sweep_then_resume(tmp_path):
         assert proc.poll() is None, "the sweep ended before it could be killed"
         assert time.monotonic() < deadline
         time.sleep(0.02)
-    helpers = _children(proc.pid)  # forkserver (and workers below it)
+    helpers = _descendants(proc.pid)  # the fork server and the workers forked from it
+    assert len(helpers) >= 3
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     before = _rows(store)
