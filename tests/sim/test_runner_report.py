@@ -37,7 +37,7 @@ window.addEventListener("load", () => {
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("report")
-    scenario = limit_scenario(tmp, repeat=1, duration="3 s")
+    scenario = limit_scenario(tmp, repeat=1, duration="4 s")
     out = tmp / "out"
     proc = addtc(scenario, "--jobs", "2", "--out", out, "--junit", out / "junit.xml", "--animations", "2")
     assert proc.returncode == 1, proc.stderr  # cells with limit 70 m fail
@@ -54,12 +54,13 @@ def test_run_outputs(run_dir):
             "sim_time_s", "wall_time_s"} <= set(runs.columns)
     failing = runs[~runs["passed"]]
     assert (failing["param.limit"] == 70).all() and (failing["rho.before_limit"] < 0).all()
-    assert failing["first_violation_s.before_limit"].between(2.0, 3.0).all()  # 20 m + 20 m/s * t = 70 m
+    # 50 m to go at up to 20 m/s: not before 2.5 s, and within the 4 s run.
+    assert failing["first_violation_s.before_limit"].between(2.5, 4.0).all()
 
     suite = ET.parse(run_dir / "junit.xml").getroot().find("testsuite")
     assert (suite.get("tests"), suite.get("failures"), suite.get("errors")) == ("4", "2", "0")
     messages = [c.find("failure").get("message") for c in suite.findall("testcase") if c.find("failure") is not None]
-    assert all(re.match(r"before_limit: robustness -[\d.]+ first violated at t=2\.\d\d s$", m) for m in messages)
+    assert all(re.match(r"before_limit: robustness -[\d.]+ first violated at t=[23]\.\d\d s$", m) for m in messages)
 
 
 def test_report_has_animations_of_the_failing_runs(run_dir):
@@ -74,7 +75,7 @@ def test_report_has_animations_of_the_failing_runs(run_dir):
         image = Image.open(BytesIO(base64.b64decode(gif)))
         assert image.format == "GIF" and image.n_frames > 10
     assert "not reproducible" not in html  # re-executed traces matched the stored digests
-    assert html.count("first violated at 2.") >= 2
+    assert len(re.findall(r"first violated at [23]\.\d\d s", html)) >= 2
 
 
 def test_report_subcommand_rebuilds_from_the_store(run_dir, tmp_path):
