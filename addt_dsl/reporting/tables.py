@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections import Counter, defaultdict
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -210,9 +210,3 @@ def write_tables(out: Path, store) -> None:
     (out / "summary.json").write_text(json.dumps(store.summary(), indent=2) + "\n")
     store.to_csv(out / "runs.csv")
 
-
-def records_by_cell(records: Iterable) -> dict[str, list]:
-    groups = defaultdict(list)
-    for r in records:
-        groups[json.dumps(sorted(r.cell.items()))].append(r)
-    return groups
