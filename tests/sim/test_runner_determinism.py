@@ -31,7 +31,7 @@ def _sweep(plan, path, executor) -> dict:
 
 @pytest.fixture(scope="module")
 def plan(tmp_path_factory):
-    return compile_file(limit_scenario(tmp_path_factory.mktemp("det"), repeat=2, duration="3 s")).plan
+    return compile_file(limit_scenario(tmp_path_factory.mktemp("det"), repeat=2, duration="4 s")).plan
 
 
 @pytest.fixture(scope="module")
