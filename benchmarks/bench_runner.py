@@ -95,12 +95,12 @@ def part_throughput(runs: int, jobs: int) -> dict:
     plan = _plan(SHORT, runs // 2)
     with tempfile.TemporaryDirectory() as tmp, ResultStore(Path(tmp) / "r.sqlite", plan) as store:
         executor = LocalExecutor(jobs)
-        t0 = time.perf_counter()
+        t0, cpu0 = time.perf_counter(), time.process_time()
         outcome = run_sweep(SweepStream(plan), store, executor)
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
         sim = store.summary()["sim_time_s"]
     return {"jobs": jobs, "runs": outcome.ran, "wall_s": wall, "runs_per_min": 60 * outcome.ran / wall,
-            "sim_s_per_wall_s": sim / wall}
+            "sim_s_per_wall_s": sim / wall, "coordinator_cpu_ms_per_run": 1e3 * cpu / outcome.ran}
 
 
 def part_memory(runs: int, jobs: int) -> dict:
@@ -164,7 +164,7 @@ def main() -> None:
     for jobs in (1, 2):
         r = results[jobs] = _in_subprocess("throughput", args.runs, jobs)
         print(f"  {jobs} worker(s): {r['runs']} runs in {r['wall_s']:.1f} s = {r['runs_per_min']:.0f} runs/min "
-              f"({r['sim_s_per_wall_s']:.0f}x real time)")
+              f"({r['sim_s_per_wall_s']:.0f}x real time; coordinator CPU {r['coordinator_cpu_ms_per_run']:.1f} ms/run)")
     print(f"  scaling 2 vs 1 workers: {results[2]['runs_per_min'] / results[1]['runs_per_min']:.2f}x "
           f"(machine has {os.cpu_count()} CPUs)")
 
