@@ -89,6 +89,7 @@ class VehicleState:
     vx: float  # longitudinal speed in the body frame [m/s]
     vy: float = 0.0  # lateral speed in the body frame [m/s]
     yaw_rate: float = 0.0
+    yaw_acc: float = 0.0  # [rad/s^2]
     steer: float = 0.0  # actual front wheel angle [rad]
     accel_cmd_actual: float = 0.0  # drive/brake actuator output [m/s^2]
     accel: float = 0.0  # realised longitudinal acceleration dvx/dt [m/s^2]
@@ -148,7 +149,9 @@ def _substep(state: VehicleState, p: VehicleParams, steer_cmd: float, accel_cmd:
             ax = 0.0  # brakes hold the car; no reversing
         state.vx = max(0.0, vx + ax * dt)
         state.vy = 0.0
-        state.yaw_rate = state.vx * math.tan(state.steer) / L
+        yaw_rate = state.vx * math.tan(state.steer) / L
+        state.yaw_acc = (yaw_rate - state.yaw_rate) / dt
+        state.yaw_rate = yaw_rate
         state.accel = ax
         state.ax_specific = ax + g_along
         state.ay = state.vx * state.yaw_rate
@@ -179,6 +182,7 @@ def _substep(state: VehicleState, p: VehicleParams, steer_cmd: float, accel_cmd:
         state.vx = max(0.0, vx + ax * dt)
         state.vy += (ay - vx * state.yaw_rate) * dt
         state.yaw_rate += yaw_acc * dt
+        state.yaw_acc = yaw_acc
         state.accel = ax
         state.ax_specific = fx_body / m - drag
         state.ay = ay
