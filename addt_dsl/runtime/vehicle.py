@@ -141,8 +141,10 @@ def _substep(state: VehicleState, p: VehicleParams, steer_cmd: float, accel_cmd:
     drag = p.drag * vx * vx
 
     if vx < KINEMATIC_BELOW_MPS:
-        # Kinematic regime at low speed: only the total friction limit applies.
-        f_max = p.mu * mg
+        # Kinematic regime at low speed: the path follows the wheels; the friction circle
+        # still bounds the longitudinal force by what the cornering leaves.
+        lateral = m * vx * vx * math.tan(state.steer) / L
+        f_max = math.sqrt(max(0.0, (p.mu * mg) ** 2 - lateral * lateral))
         fx = max(-f_max, min(f_max, fx_demand))
         ax = fx / m - drag - g_along
         if vx <= 0.0 and ax < 0.0:
