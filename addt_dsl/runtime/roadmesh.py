@@ -27,6 +27,7 @@ MAX_STEP_M = 4.0  # longest surface sample spacing [m]
 MAX_TURN_RAD = 0.02  # heading change between samples: chord error < R * 5e-5
 MARK_WIDTH_M = 0.15
 MARK_LIFT_M = 0.02  # markings float above the surface (no z-fighting in the renderer)
+GROUND_DROP_M = 0.05  # with a camera, the ground plane drops below flat roads (same reason)
 DASH_M, GAP_M = 3.0, 6.0
 
 SURFACE_CLASSES = {
@@ -283,7 +284,8 @@ def build_scene(physics, networks) -> SceneInfo:
     info.elevated = any(not e.flat for e in elevations.values())
     if not (physics.visual or info.elevated):
         return info
-    z_floor = min(e.z_min for e in elevations.values()) - 0.5 if info.elevated else 0.0
+    # The plane sits under the road surfaces so the renderer never z-fights them.
+    z_floor = min(e.z_min for e in elevations.values()) - 0.5 if info.elevated else -GROUND_DROP_M
     for road in roads:
         collide = not elevations[id(road)].flat
         if not (physics.visual or collide):
@@ -298,7 +300,7 @@ def build_scene(physics, networks) -> SceneInfo:
                 physics.add_mesh(mesh)
                 info.bodies += 1
                 info.visual_triangles += mesh.triangles
-    if info.elevated:
+    if info.elevated or physics.visual:
         physics.set_ground_height(z_floor)
     if physics.visual:
         physics.color_ground(GROUND_RGBA)

@@ -39,6 +39,7 @@ def _quiet_stdout():
             os.close(copy)
 
 
+SUN_DIRECTION = (0.4, 0.3, 1.0)  # high sun: road markings render bright
 # Actor colours for the camera (the ego has no visual shape: cameras sit inside it).
 ACTOR_RGBA = {"car": (0.75, 0.12, 0.10, 1.0), "truck": (0.15, 0.30, 0.70, 1.0),
               "cyclist": (0.95, 0.65, 0.10, 1.0), "pedestrian": (0.90, 0.45, 0.70, 1.0)}
@@ -143,6 +144,7 @@ class PhysicsWorld:
         p = self.p
         flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
         _, _, rgba, depth, seg = p.getCameraImage(width, height, view, projection, shadow=0,
+                                                  lightDirection=SUN_DIRECTION,
                                                   renderer=p.ER_TINY_RENDERER, flags=flags,
                                                   physicsClientId=self.client)
         rgb = np.ascontiguousarray(np.reshape(np.asarray(rgba, dtype=np.uint8), (height, width, 4))[:, :, :3])
