@@ -218,11 +218,15 @@ class Cross(Behavior):
         self.left = left
 
     def accel(self, agent, world, time_s):
-        # Stop on the far side: brake so the remaining distance is just covered.
+        # Walk at `speed`; brake just hard enough to stop at the far-side spot.
         remaining = (self.stop_t - agent.t) if self.left else (agent.t - self.stop_t)
         a_max = self.settings["accel"]
-        target = 0.0 if remaining <= 0.0 else min(self.settings["speed"], math.sqrt(2.0 * a_max * remaining))
-        return _speed_tracking(agent, target, a_max, 2.0 * a_max)
+        v = agent.speed
+        if remaining <= 0.0:
+            return -v / 0.1  # stop within a few steps
+        if v * v >= 2.0 * (2.0 * a_max) * remaining:
+            return -v * v / (2.0 * remaining)
+        return _speed_tracking(agent, self.settings["speed"], a_max, 2.0 * a_max)
 
 
 def _walk_towards(agent: AgentState, heading_rel: float) -> None:
@@ -232,10 +236,9 @@ def _walk_towards(agent: AgentState, heading_rel: float) -> None:
 
 
 def _lane_to_the_left(lane: int) -> int:
-    """The adjacent lane to the left of the travel direction (right-hand traffic):
-    towards +t on the right side (ids < 0), towards -t on the left side."""
-    nxt = lane + 1 if lane < 0 else lane - 1
-    return nxt if nxt != 0 else (1 if lane < 0 else -1)
+    """The adjacent lane on the +t side (agents drive along +s: that is their left),
+    skipping the centre lane 0."""
+    return lane + 1 if lane != -1 else 1
 
 
 def _nearest_ahead(agent: AgentState, world) -> str:
