@@ -218,7 +218,8 @@ class LatticePlanner:
                 if not lat_overlap:
                     continue
                 gap = so - s - 0.5 * (olen + 4.6)
-                if -0.5 * (olen + 4.6) - 2.0 < gap < 0.0 or (0.0 <= gap < 2.0):
+                # Boxes overlap along the road for -(olen + 4.6) < gap < 0; keep 2 m either side.
+                if -(olen + 4.6) - 2.0 < gap < 2.0:
                     return math.inf  # collision with a predicted object
                 if gap >= 0.0:
                     desired = max(5.0, self.time_gap * v)
