@@ -39,6 +39,7 @@ def _quiet_stdout():
             os.close(copy)
 
 
+MAX_RAYS_PER_BATCH = 8192
 SUN_DIRECTION = (0.4, 0.3, 1.0)  # high sun: road markings render bright
 # Actor colours for the camera (the ego has no visual shape: cameras sit inside it).
 ACTOR_RGBA = {"car": (0.75, 0.12, 0.10, 1.0), "truck": (0.15, 0.30, 0.70, 1.0),
@@ -127,7 +128,13 @@ class PhysicsWorld:
 
     def ray_cast(self, starts: np.ndarray, ends: np.ndarray, ignore: str | None = None):
         """Batched rays; returns (body ids, -1 for none, the ground or the ignored body; hit fractions)."""
-        results = self.p.rayTestBatch(starts, ends, physicsClientId=self.client)
+        if len(starts) <= MAX_RAYS_PER_BATCH:
+            results = self.p.rayTestBatch(starts, ends, physicsClientId=self.client)
+        else:  # pybullet refuses batches of 16384 rays or more
+            results = []
+            for i in range(0, len(starts), MAX_RAYS_PER_BATCH):
+                results.extend(self.p.rayTestBatch(starts[i:i + MAX_RAYS_PER_BATCH], ends[i:i + MAX_RAYS_PER_BATCH],
+                                                   physicsClientId=self.client))
         ids_t, _, frac_t, _, _ = zip(*results) if results else ((), (), (), (), ())
         ids = np.array(ids_t, dtype=np.int64)
         frac = np.array(frac_t, dtype=np.float64)
@@ -170,15 +177,21 @@ def box_separation(a: tuple, b: tuple) -> float:
     """Separation of two oriented boxes (x, y, heading, length, width) along the best axis.
 
     Positive: the boxes are apart by at least this much [m]; zero or negative: they
-    overlap (separating axis theorem over the four edge normals).
+    overlap (separating axis theorem over the four edge normals). On each axis u the gap
+    is |d . u| minus both boxes' projected half-extents, which equals projecting all
+    eight corners; written out in plain floats because the loop calls it for every
+    close pair at every step.
     """
-    ca = box_corners(*a)
-    cb = box_corners(*b)
-    best = -math.inf
-    for heading in (a[2], b[2]):
-        for axis in ((math.cos(heading), math.sin(heading)), (-math.sin(heading), math.cos(heading))):
-            pa = ca @ axis
-            pb = cb @ axis
-            gap = max(pb.min() - pa.max(), pa.min() - pb.max())
-            best = max(best, gap)
-    return best
+    xa, ya, ha, la, wa = a
+    xb, yb, hb, lb, wb = b
+    ca, sa, cb, sb = math.cos(ha), math.sin(ha), math.cos(hb), math.sin(hb)
+    dx, dy = xb - xa, yb - ya
+    cos_d = abs(ca * cb + sa * sb)  # |cos(hb - ha)|
+    sin_d = abs(sa * cb - ca * sb)  # |sin(hb - ha)|
+    la, wa, lb, wb = 0.5 * la, 0.5 * wa, 0.5 * lb, 0.5 * wb
+    return max(
+        abs(dx * ca + dy * sa) - (la + lb * cos_d + wb * sin_d),
+        abs(dy * ca - dx * sa) - (wa + lb * sin_d + wb * cos_d),
+        abs(dx * cb + dy * sb) - (lb + la * cos_d + wa * sin_d),
+        abs(dy * cb - dx * sb) - (wb + la * sin_d + wa * cos_d),
+    )
