@@ -323,7 +323,8 @@ def _loop(run: _Run) -> Trace:
         run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
         # The ego follows the road height; its dynamics feel the grade along its heading.
         z, grade = ego_road.elevation.at(run.ego_s)
-        grade *= math.cos(e.heading - ego_road.road.reference_pose(run.ego_s)[2])
+        if grade:
+            grade *= math.cos(e.heading - ego_road.road.reference_pose(run.ego_s)[2])
         run.ego_z, e.pitch = z, math.atan(grade)
         run.physics.set_pose("ego", e.x, e.y, z + VEHICLE_HEIGHT[plan.ego.vehicle] / 2, e.heading, e.pitch)
         poses["ego"] = (e.x, e.y, e.heading)
