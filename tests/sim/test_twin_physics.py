@@ -146,3 +146,34 @@ scenario sensors {
     first, second = X.execute(spec), X.execute(spec)
     assert first.status == "ok", first.error
     assert first.digest == second.digest
+
+
+@pytest.mark.parametrize("lead_s,visible", [(570.0, True), (650.0, False)])
+def test_a_crest_hides_a_truck_from_the_lidar(lead_s, visible):
+    # The road climbs from z = 12.6 m at s = 540 m to a crest of 14.6 m at s = 590 m
+    # and falls to 12.4 m at 650 m: the crest's collision mesh blocks the rays.
+    spec = spec_of(f"""
+scenario crest {{
+  duration 0.5 s
+  road hills import "curves_elevation.xodr"
+  ego car on hills lane -1 at 540 m speed 0 m/s {{
+    stack bev
+    sensor lidar rate 10 Hz rays 2048 channels 8 range 150 m vfov 8 deg
+  }}
+  agent lead truck on hills lane -1 at {lead_s} m speed 0 m/s {{
+    behavior cruise speed 0 m/s
+  }}
+}}""", base_dir=XODR)
+    run = X._Run(spec)
+    try:
+        X._loop(run)
+        frame = run.sensors["lidar"].capture(run, 0.5)
+        hits = int((frame.data["hit_body"] == run.physics.bodies["lead"]).sum())
+        # Without the road surface the truck would be in plain view.
+        for body in run.physics.ground_ids - {run.physics.ground}:
+            run.physics.p.removeBody(body, physicsClientId=run.physics.client)
+        bare = int((run.sensors["lidar"].capture(run, 0.5).data["hit_body"] == run.physics.bodies["lead"]).sum())
+    finally:
+        run.physics.close()
+    assert bare > 20
+    assert (hits > 20) if visible else (hits == 0)
