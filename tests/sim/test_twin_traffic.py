@@ -106,8 +106,13 @@ def test_pedestrian_crosses_and_cyclist_rides():
 }
 agent bike cyclist on r lane -1 at 40 m speed 5 m/s offset -1 m {
   behavior cruise speed 6 m/s
+}
+agent jogger pedestrian on r lane -3 at 100 m offset -3 m {
+  behavior walk speed 2 m/s heading 30 deg
 }""", duration=10.0)
-    ped, bike = tr.actors["ped"], tr.actors["bike"]
+    ped, bike, jog = tr.actors["ped"], tr.actors["bike"], tr.actors["jogger"]
+    assert (jog.t[-1] - jog.t[0]) / (jog.s[-1] - jog.s[0]) == pytest.approx(np.tan(np.radians(30.0)))
+    assert jog.speed[-1] == pytest.approx(2.0, abs=0.01)
     assert ped.t[0] == pytest.approx(lane_t(-1) + 2.5)
     assert ped.s[-1] == pytest.approx(150.0, abs=1e-6)
     # 10 s at up to 1.4 m/s across a 10.5 m road: still crossing, heading across it.
