@@ -260,6 +260,25 @@ def road_meshes(road) -> list[Mesh]:
     return surface_meshes(road) + marking_meshes(road)
 
 
+def ground_mesh(networks, z: float, margin_m: float = 300.0, tile_m: float = 200.0) -> Mesh:
+    """Flat terrain under all roads (their bounding box plus `margin_m`), in square tiles
+    (the renderer clips small triangles more gracefully than one huge quad)."""
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    for net in networks:
+        for road in net.roads.values():
+            x, y, _ = road.reference_pose(np.linspace(0.0, road.length, 64))
+            pts = np.stack([x, y], axis=1)
+            lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
+    lo, hi = lo - margin_m, hi + margin_m
+    nx, ny = (max(1, int(math.ceil(v))) for v in (hi - lo) / tile_m)
+    gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], nx + 1), np.linspace(lo[1], hi[1], ny + 1))
+    verts = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, z)], axis=1)
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+    a = (j * (nx + 1) + i).ravel()
+    tris = np.stack([a, a + 1, a + nx + 2, a, a + nx + 2, a + nx + 1], axis=1).ravel()
+    return Mesh("ground", verts, tris.astype(np.int32), GROUND_RGBA)
+
+
 @dataclass
 class SceneInfo:
     """What `build_scene` put into the physics world."""
@@ -303,5 +322,11 @@ def build_scene(physics, networks) -> SceneInfo:
     if info.elevated or physics.visual:
         physics.set_ground_height(z_floor)
     if physics.visual:
-        physics.color_ground(GROUND_RGBA)
+        # pybullet draws the infinite plane as a ~260 m square around its origin only:
+        # hide it and lay terrain under the whole road network instead.
+        physics.color_ground((0.0, 0.0, 0.0, 0.0))
+        ground = ground_mesh(networks, z_floor)
+        physics.add_mesh(ground)
+        info.bodies += 1
+        info.visual_triangles += ground.triangles
     return info

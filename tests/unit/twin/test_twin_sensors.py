@@ -82,6 +82,21 @@ def test_camera_sees_the_road_its_markings_and_the_car_ahead(camera_run):
     assert asphalt.max() < 90 and abs(asphalt[0] - asphalt[2]) < 15  # dark grey
 
 
+def test_terrain_reaches_the_horizon_far_from_the_origin(camera_run):
+    # pybullet's plane is drawn only ~130 m around its origin; the terrain mesh covers
+    # the whole network, so no sky shows below the horizon anywhere on the road.
+    run = camera_run
+    x0 = run.ego.x
+    run.ego.x = 290.0
+    try:
+        frame = run.sensors["camera"].capture(run, 0.0)
+    finally:
+        run.ego.x = x0
+    seg = frame.data["segmentation"]
+    assert (seg[64:, :] != -1).all()
+    assert run.physics.ground not in np.unique(seg)  # the plane itself is hidden
+
+
 def test_camera_extrinsics_turn_the_view(camera_run):
     run = camera_run
     cam = run.sensors["camera"]
