@@ -152,6 +152,11 @@ def _substep(state: VehicleState, p: VehicleParams, steer_cmd: float, accel_cmd:
         state.vx = max(0.0, vx + ax * dt)
         state.vy = 0.0
         yaw_rate = state.vx * math.tan(state.steer) / L
+        # The tyres cannot turn the car harder than the friction circle leaves after the
+        # longitudinal force: past that they slide and the path widens.
+        ay_max = math.sqrt(max(0.0, (p.mu * G) ** 2 - (fx / m) ** 2))
+        if state.vx * abs(yaw_rate) > ay_max:
+            yaw_rate = math.copysign(ay_max / state.vx, yaw_rate)
         state.yaw_acc = (yaw_rate - state.yaw_rate) / dt
         state.yaw_rate = yaw_rate
         state.accel = ax
