@@ -6,6 +6,7 @@ are checked here: a speed where a length is needed is error E0201.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from addt_dsl import expr as E
@@ -260,3 +261,55 @@ def _const(expr) -> float:
 
 class WindowParamError(Exception):
     pass
+
+
+def value_range(expr, ranges: dict[str, tuple[float, float]]) -> tuple[float, float] | None:
+    """Bounds of an arithmetic expression when each parameter ranges over `ranges`
+    (interval arithmetic: sound, possibly wider than the true range). None if unknown."""
+    try:
+        lo, hi = _interval(expr, ranges)
+    except (KeyError, TypeError, ValueError, ZeroDivisionError, OverflowError):
+        return None
+    if math.isnan(lo) or math.isnan(hi):
+        return None
+    return lo, hi
+
+
+def _interval(expr, ranges):
+    match expr:
+        case E.Num(value=v):
+            return v, v
+        case E.Param(name=n):
+            return ranges[n]
+        case E.Unary(op="neg", arg=a):
+            lo, hi = _interval(a, ranges)
+            return -hi, -lo
+        case E.Call(fn="abs", args=(a,)):
+            lo, hi = _interval(a, ranges)
+            if lo >= 0:
+                return lo, hi
+            if hi <= 0:
+                return -hi, -lo
+            return 0.0, max(-lo, hi)
+        case E.Call(fn="sqrt", args=(a,)):
+            lo, hi = _interval(a, ranges)
+            return math.sqrt(max(lo, 0.0)), math.sqrt(max(hi, 0.0))
+        case E.Call(fn="min", args=args):
+            ivs = [_interval(a, ranges) for a in args]
+            return min(i[0] for i in ivs), min(i[1] for i in ivs)
+        case E.Call(fn="max", args=args):
+            ivs = [_interval(a, ranges) for a in args]
+            return max(i[0] for i in ivs), max(i[1] for i in ivs)
+        case E.Binary(op=op, left=l, right=r) if op in ("+", "-", "*", "/"):
+            a, b = _interval(l, ranges), _interval(r, ranges)
+            if op == "+":
+                return a[0] + b[0], a[1] + b[1]
+            if op == "-":
+                return a[0] - b[1], a[1] - b[0]
+            if op == "/":
+                if b[0] <= 0.0 <= b[1]:
+                    raise ZeroDivisionError
+                b = (1.0 / b[1], 1.0 / b[0])
+            products = [x * y for x in a for y in b]
+            return min(products), max(products)
+    raise TypeError(f"no interval for {expr!r}")

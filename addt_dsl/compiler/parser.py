@@ -1,8 +1,12 @@
 """Source text → AST. Syntax errors become diagnostics, never tracebacks.
 
 lark (LALR, contextual lexer) builds a parse tree with positions; `_ToAst` turns it
-into the frozen dataclasses of `compiler.ast`. After a syntax error the parser skips to
-the next line and goes on, so one run reports every broken statement.
+into the frozen dataclasses of `compiler.ast`.
+
+Error recovery is panic mode, as in yacc's `error` token: after a syntax error the
+parser skips tokens to the end of the statement (a newline or a closing brace outside
+any brace opened on the way), then pops parser states until that token fits, feeds it
+and goes on. One run therefore reports every broken statement, not just the first.
 """
 
 from __future__ import annotations
@@ -11,7 +15,7 @@ import functools
 from pathlib import Path
 
 from lark import Lark, Token, Transformer, Tree, v_args
-from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken
+from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
 from addt_dsl.compiler import ast
 from addt_dsl.diagnostics import DiagnosticSink, Span
@@ -20,50 +24,86 @@ GRAMMAR_PATH = Path(__file__).resolve().parent.parent / "grammar" / "addt.lark"
 MAX_SOURCE_BYTES = 2_000_000
 MAX_NESTING = 64
 MAX_SYNTAX_ERRORS = 25
+MAX_EXPR_DEPTH = 200  # operators chained or nested in one expression
 
 
 @functools.lru_cache(maxsize=1)
 def grammar() -> Lark:
+    """The parser, built once per process (a check of many files reuses it)."""
     return Lark.open(str(GRAMMAR_PATH), parser="lalr", lexer="contextual",
                      propagate_positions=True, maybe_placeholders=False, cache=False)
 
 
-# Friendlier words for lark's terminal names in "expected ..." lists.
-_TERMINAL_WORDS = {
-    "NAME": "a name", "NUMBER": "a number", "STRING": "a string", "UNIT": "a unit",
-    "_NL": "end of line", "LBRACE": "'{'", "RBRACE": "'}'", "LSQB": "'['", "RSQB": "']'",
-    "LPAR": "'('", "RPAR": "')'", "COMMA": "','", "EQUAL": "'='", "COLON": "':'",
-    "DOT": "'.'", "COMP": "a comparison", "ADD_OP": "'+' or '-'", "MUL_OP": "'*' or '/'",
-    "MINUS": "'-'", "$END": "end of file",
+@functools.lru_cache(maxsize=1)
+def _terminal_words() -> dict[str, str]:
+    """Readable names of the grammar's terminals, for "expected ..." notes."""
+    words = {"NAME": "a name", "NUMBER": "a number", "STRING": "a string", "UNIT": "a unit",
+             "_NL": "end of line", "$END": "end of file", "COMP": "a comparison",
+             "ADD_OP": "'+' or '-'", "MUL_OP": "'*' or '/'"}
+    for term in grammar().terminals:
+        if term.name not in words and term.pattern.type == "str":
+            words[term.name] = f"'{term.pattern.value}'"
+    return words
+
+
+def _expected_words(expected) -> list[str]:
+    table = _terminal_words()
+    return sorted({table[name] for name in expected if name in table})
+
+
+# Words that start a definition; seen where they cannot stand, a '}' is usually missing.
+_DEFINITION_WORDS = {"agent", "ego", "param", "road", "faults", "expect", "sweep", "assume", "keep",
+                     "include", "scenario"}
+
+# Characters from other languages, with what to write instead.
+_CHAR_HINTS = {
+    "&": "write `and` for a conjunction",
+    "|": "write `or` for a disjunction",
+    "!": "write `not` for a negation, `!=` for 'not equal'",
+    ";": "statements end at a newline; no ';' is needed",
+    "'": "strings are written in double quotes: \"...\"",
+    "\u2018": "use straight double quotes \"...\"", "\u2019": "use straight double quotes \"...\"",
+    "\u201c": "use straight double quotes \"...\"", "\u201d": "use straight double quotes \"...\"",
+    "$": "parameters are referred to by their bare name: `gap`, not `$gap`",
+    "@": "there are no decorators; write `hard` or `warn` before an oracle",
+    "?": "there is no conditional expression; use `implies` in formulas",
+    "`": "code quotes are not part of the language",
+    "=": "settings are written `key value`, without '='",
 }
 
 
-def _expected_words(expected: set[str]) -> list[str]:
-    words = []
-    for name in sorted(expected):
-        if name in _TERMINAL_WORDS:
-            words.append(_TERMINAL_WORDS[name])
-        elif name.startswith("__ANON") or name.startswith("_"):
-            continue
-        else:
-            words.append(f"'{name.lower()}'")
-    return sorted(set(words))
-
-
-def _curated_hint(token: Token | None, expected: set[str]) -> str | None:
+def _curated_hint(token: Token | None, expected: set[str], prev: Token | None) -> list[str]:
     """Messages for mistakes people actually make."""
     if token is None:
-        return None
-    value = str(token)
+        return []
+    value, kind = str(token), token.type
+    hints = []
     if value == ":" and "NAME" not in expected:
-        return "labels go before the formula: `name: always ...`"
-    if token.type == "NAME" and "UNIT" in expected:
-        return f"'{value}' is not a known unit; units are m, km, m/s, km/h, mph, s, ms, Hz, deg, rad, %, m/s^2, 1/m, kg"
-    if value == "=" :
-        return "settings are written `key value`, without '='; use '==' to compare"
-    if value == "{" and "_NL" in expected:
-        return "a block's '{' must be on the same line as its header"
-    return None
+        hints.append("a label goes first, before the formula: `name: always ...`")
+    if kind == "NAME" and "UNIT" in expected:
+        hints.append(f"'{value}' is not a known unit; units are m, km, cm, mm, m/s, km/h, mph, s, ms, "
+                     "min, Hz, deg, rad, deg/s, rad/s, %, m/s^2, m/s^3, g, 1/m, kg")
+    if value == "=":
+        hints.append("settings are written `key value`, without '='; use '==' to compare")
+    if kind == "_NL" and "LBRACE" in expected:
+        hints.append("a block's '{' must be on the same line as its header")
+    if value in ("&&", "&"):
+        hints.append("write `and`")
+    if value in ("||", "|"):
+        hints.append("write `or`")
+    if kind in ("NUMBER", "NAME") and "COMMA" in expected and prev is not None and prev.type in ("NUMBER", "UNIT", "NAME"):
+        hints.append("is a ',' missing between the list items?")
+    if kind == "NUMBER" and prev is not None and prev.type == "NUMBER":
+        hints.append("two numbers in a row: is an operator or a unit missing?")
+    if value in _DEFINITION_WORDS and kind != "NAME" or (kind == "NAME" and value in _DEFINITION_WORDS
+                                                          and "NAME" not in expected):
+        hints.append(f"'{value}' starts a definition, which cannot stand here; is a '}}' missing above?")
+    if value in ("if", "else", "elif", "while", "for", "def", "import", "lambda", "return"):
+        hints.append(f"'{value}' is not part of the language; behaviours start with "
+                     "`when <condition> then ...`, `at <time>` or `after <time>`")
+    if "THEN" in expected and kind in ("NAME",) and value not in ("then",):
+        hints.append("write `when <condition> then <behaviour>`")
+    return hints
 
 
 def _check_source(data: bytes | str, path: str, sink: DiagnosticSink) -> str | None:
@@ -83,30 +123,135 @@ def _check_source(data: bytes | str, path: str, sink: DiagnosticSink) -> str | N
     else:
         text = data
         if len(text) > MAX_SOURCE_BYTES:
-            sink.error("E0003", "source is too large", Span.point(path, 1, 1))
+            sink.error("E0003", f"source is too large ({len(text)} characters; limit {MAX_SOURCE_BYTES})",
+                       Span.point(path, 1, 1))
             return None
-    bad = next((i for i, ch in enumerate(text) if ch == "\x00" or (ord(ch) < 32 and ch not in "\t\r\n\f")), None)
+        if text.startswith("\ufeff"):
+            text = text[1:]
+    bad = next((i for i, ch in enumerate(text)
+                if (ord(ch) < 32 and ch not in "\t\r\n\f") or ch == "\x7f" or 0xD800 <= ord(ch) <= 0xDFFF),
+               None)
     if bad is not None:
         line = text.count("\n", 0, bad) + 1
         col = bad - (text.rfind("\n", 0, bad) + 1) + 1
         sink.error("E0003", "source contains control characters or binary data",
-                   Span.point(path, line, col))
+                   Span.point(path, line, col), f"character {text[bad]!r} at offset {bad}")
         return None
-    depth = max_depth = 0
+    depth = 0
     for i, ch in enumerate(text):
         if ch in "([{":
             depth += 1
-            if depth > max_depth:
-                max_depth = depth
-                if depth > MAX_NESTING:
-                    line = text.count("\n", 0, i) + 1
-                    col = i - (text.rfind("\n", 0, i) + 1) + 1
-                    sink.error("E0004", f"brackets nested deeper than {MAX_NESTING} levels",
-                               Span.point(path, line, col))
-                    return None
+            if depth > MAX_NESTING:
+                line = text.count("\n", 0, i) + 1
+                col = i - (text.rfind("\n", 0, i) + 1) + 1
+                sink.error("E0004", f"brackets nested deeper than {MAX_NESTING} levels",
+                           Span.point(path, line, col))
+                return None
         elif ch in ")]}":
             depth = max(0, depth - 1)
     return text
+
+
+class _Recovery:
+    """The `on_error` callback of lark: report, skip to a statement end, resynchronise."""
+
+    def __init__(self, text: str, path: str, sink: DiagnosticSink):
+        self.text = text
+        self.path = path
+        self.sink = sink
+        self.lines_reported: set[int] = set()
+
+    @property
+    def failed(self) -> bool:
+        return bool(self.lines_reported)
+
+    def on_error(self, exc: UnexpectedInput) -> bool:
+        self.report(exc)
+        if len(self.lines_reported) >= MAX_SYNTAX_ERRORS:
+            return False
+        ip = getattr(exc, "interactive_parser", None)
+        if ip is None:
+            return False
+        try:
+            sync = self._skip(exc, ip)
+            return self._resync(ip, sync)
+        except (UnexpectedInput, IndexError, KeyError):
+            return False
+
+    def report(self, exc: UnexpectedInput) -> None:
+        line = getattr(exc, "line", None) or 1
+        if line in self.lines_reported or len(self.lines_reported) >= MAX_SYNTAX_ERRORS:
+            return
+        self.lines_reported.add(line)
+        if len(self.lines_reported) == MAX_SYNTAX_ERRORS:
+            self.sink.error("E0001", f"too many syntax errors; stopped after {MAX_SYNTAX_ERRORS}",
+                            Span.point(self.path, line, getattr(exc, "column", 1) or 1))
+            return
+        _report_syntax_error(exc, self.path, self.sink, self.text)
+
+    def _skip(self, exc: UnexpectedInput, ip) -> Token:
+        """Consume tokens up to the end of the broken statement; return the sync token."""
+        depth = 0
+        if isinstance(exc, UnexpectedToken):
+            tok = exc.token
+            if tok.type in ("_NL", "RBRACE", "$END"):
+                return tok
+            depth = 1 if tok.type == "LBRACE" else 0
+        else:
+            self._advance_one_char(ip)
+        while True:
+            try:
+                for tok in ip.lexer_thread.lex(ip.parser_state):
+                    found, depth = self._sync_step(tok, depth)
+                    if found:
+                        return tok
+                return self._end_token(ip)
+            except UnexpectedToken as skipped:  # a token not valid here: skip it too
+                found, depth = self._sync_step(skipped.token, depth)
+                if found:
+                    return skipped.token
+            except UnexpectedCharacters:
+                self._advance_one_char(ip)
+
+    @staticmethod
+    def _sync_step(tok: Token, depth: int) -> tuple[bool, int]:
+        if tok.type == "LBRACE":
+            return False, depth + 1
+        if tok.type == "RBRACE":
+            return depth == 0, max(0, depth - 1)
+        if tok.type in ("_NL", "$END"):
+            return depth == 0 or tok.type == "$END", depth
+        return False, depth
+
+    def _advance_one_char(self, ip) -> None:
+        state = ip.lexer_thread.state
+        pos = state.line_ctr.char_pos
+        if pos < len(self.text):
+            state.line_ctr.feed(self.text[pos:pos + 1])
+
+    def _end_token(self, ip) -> Token:
+        last = ip.lexer_thread.state.last_token
+        return Token.new_borrow_pos("$END", "", last) if last is not None else Token("$END", "", 0, 1, 1)
+
+    @staticmethod
+    def _resync(ip, sync: Token) -> bool:
+        """Pop parser states until `sync` fits; feed it (the end of file is fed by lark)."""
+        state = ip.parser_state
+        is_end = sync.type == "$END"
+        while True:
+            trial = state.copy(deepcopy_values=False)
+            try:
+                trial.feed_token(sync, is_end)
+            except UnexpectedToken:
+                if len(state.state_stack) <= 1:
+                    return False
+                state.state_stack.pop()
+                state.value_stack.pop()
+                continue
+            if not is_end:
+                state.state_stack[:] = trial.state_stack
+                state.value_stack[:] = trial.value_stack
+            return True
 
 
 def parse_source(data: bytes | str, path: str, sink: DiagnosticSink) -> ast.SourceFile | None:
@@ -116,48 +261,50 @@ def parse_source(data: bytes | str, path: str, sink: DiagnosticSink) -> ast.Sour
         return None
     if not text.endswith("\n"):
         text += "\n"
-    errors_seen: set[int] = set()
-
-    def on_error(exc: UnexpectedInput) -> bool:
-        line = getattr(exc, "line", 1) or 1
-        if line not in errors_seen and len(errors_seen) < MAX_SYNTAX_ERRORS:
-            errors_seen.add(line)
-            _report_syntax_error(exc, path, sink)
-        if len(errors_seen) >= MAX_SYNTAX_ERRORS:
-            return False
-        if isinstance(exc, UnexpectedToken):
-            # Skip to the end of the line, then let the parser resync on it.
-            ip = exc.interactive_parser
-            try:
-                if exc.token.type == "_NL":
-                    return False
-                for tok in ip.lexer_thread.lex(ip.parser_state):
-                    if tok.type == "_NL":
-                        ip.feed_token(tok)
-                        break
-                return True
-            except UnexpectedInput:
-                return False
-            except Exception:  # noqa: BLE001 - recovery is best effort
-                return False
-        return isinstance(exc, UnexpectedCharacters)
-
+    recovery = _Recovery(text, path, sink)
     try:
-        tree = grammar().parse(text, on_error=on_error)
+        tree = grammar().parse(text, on_error=recovery.on_error)
     except UnexpectedInput as exc:
-        if not sink.has_errors:
-            _report_syntax_error(exc, path, sink)
+        if not recovery.failed:
+            _report_syntax_error(exc, path, sink, text)
         return None
     except RecursionError:
         sink.error("E0004", "source nested too deeply", Span.point(path, 1, 1))
         return None
-    if errors_seen:
+    if recovery.failed:
         return None
     try:
-        return _ToAst(path).transform(tree)
+        tree_ast = _ToAst(path).transform(tree)
     except RecursionError:
         sink.error("E0004", "source nested too deeply", Span.point(path, 1, 1))
         return None
+    too_deep = _first_too_deep(tree_ast)
+    if too_deep is not None:
+        sink.error("E0004", f"expression is too long or nested too deeply (limit {MAX_EXPR_DEPTH} operators)",
+                   too_deep.span, "split it with parameters or simplify it")
+        return None
+    return tree_ast
+
+
+def _first_too_deep(root) -> ast.Node | None:
+    """The first expression whose operator tree is deeper than MAX_EXPR_DEPTH (iterative:
+    later stages recurse over expressions and must not hit Python's recursion limit)."""
+    stack = [(root, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if depth > MAX_EXPR_DEPTH:
+            return node
+        if isinstance(node, (tuple, list)):
+            stack.extend((child, depth) for child in node)
+            continue
+        if not isinstance(node, ast.Node):
+            continue
+        is_expr = isinstance(node, ast.Expression)
+        for name in node.__slots__:
+            child = getattr(node, name, None)
+            if isinstance(child, (ast.Node, tuple, list)):
+                stack.append((child, depth + 1 if is_expr else depth))
+    return None
 
 
 def parse_file(path: Path, sink: DiagnosticSink, display: str | None = None) -> tuple[ast.SourceFile | None, str]:
@@ -171,34 +318,104 @@ def parse_file(path: Path, sink: DiagnosticSink, display: str | None = None) -> 
     return parse_source(data, name, sink), text
 
 
-def _report_syntax_error(exc: UnexpectedInput, path: str, sink: DiagnosticSink) -> None:
+def _acceptable(parser_state) -> set[str]:
+    """Terminals the parser can take next (lark's `accepts`, without deep copies)."""
+    out = set()
+    for term in parser_state.parse_conf.states[parser_state.position]:
+        if not term.isupper() and term != "$END":
+            continue
+        trial = parser_state.copy(deepcopy_values=False)
+        try:
+            trial.feed_token(Token(term, "", 0, 1, 1, 1, 1, 0), term == "$END")
+        except UnexpectedInput:
+            continue
+        except Exception:  # noqa: BLE001 - a callback on a fake token; just not acceptable
+            continue
+        out.add(term)
+    return out
+
+
+def _unclosed_brace(text: str) -> tuple[int, int] | None:
+    """(line, col) of the '{' most likely left open: the first whose closing '}' is
+    indented differently from its line, else the innermost one never closed."""
+    stack: list[tuple[int, int, int]] = []  # (line, col, indent)
+    suspicious = None
+    line, col, indent, at_line_start = 1, 0, 0, True
+    in_string = in_comment = False
+    prev = ""
+    for ch in text:
+        col += 1
+        if ch == "\n":
+            line, col, indent, at_line_start = line + 1, 0, 0, True
+            in_string = in_comment = False
+            prev = ch
+            continue
+        if at_line_start and ch in " \t":
+            indent += 1
+            prev = ch
+            continue
+        at_line_start = False
+        if in_comment:
+            continue
+        if in_string:
+            if ch == '"' and prev != "\\":
+                in_string = False
+            prev = "" if prev == "\\" and ch == "\\" else ch
+            continue
+        if ch == "#":
+            in_comment = True
+        elif ch == '"':
+            in_string = True
+        elif ch == "{":
+            stack.append((line, col, indent))
+        elif ch == "}" and stack:
+            open_line, open_col, open_indent = stack.pop()
+            if open_indent != indent and open_line != line and suspicious is None:
+                suspicious = (open_line, open_col)
+        prev = ch
+    if not stack:
+        return None
+    return suspicious or stack[-1][:2]
+
+
+def _report_syntax_error(exc: UnexpectedInput, path: str, sink: DiagnosticSink, text: str = "") -> None:
     line = getattr(exc, "line", 1) or 1
     col = getattr(exc, "column", 1) or 1
-    if isinstance(exc, UnexpectedEOF) or (isinstance(exc, UnexpectedToken) and exc.token.type == "$END"):
-        words = _expected_words(set(getattr(exc, "expected", ()) or ()))
-        sink.error("E0002", "unexpected end of file", Span.point(path, line, col),
-                   *([f"expected {', '.join(words)}"] if words else []),
-                   "is a closing '}' missing?")
+    ip = getattr(exc, "interactive_parser", None)
+    try:
+        expected = _acceptable(ip.parser_state) if ip is not None else set(getattr(exc, "expected", ()) or ())
+    except Exception:  # noqa: BLE001 - expected words are a courtesy
+        expected = set(getattr(exc, "expected", ()) or ())
+    words = _expected_words(expected)
+    if isinstance(exc, UnexpectedToken) and exc.token.type == "$END":
+        notes = [f"expected {', '.join(words)}"] if words else []
+        where = _unclosed_brace(text)
+        if where is not None:
+            notes.append(f"the block opened at {path}:{where[0]}:{where[1]} is not closed: is a '}}' missing?")
+        sink.error("E0002", "unexpected end of file", Span.point(path, line, col), *notes)
         return
     if isinstance(exc, UnexpectedCharacters):
         ch = exc.char
+        notes = [_CHAR_HINTS[ch]] if ch in _CHAR_HINTS else []
+        if ch == "/" and text:
+            notes.append("comments start with '#'")
         sink.error("E0001", f"unexpected character {ch!r}", Span.point(path, line, col),
-                   label="not part of the language")
+                   *notes, label="not part of the language")
         return
     assert isinstance(exc, UnexpectedToken)
     token = exc.token
-    expected = set(exc.expected or ())
+    prev = None
+    history = getattr(exc, "token_history", None)
+    if history:
+        prev = history[-1]
+    elif ip is not None:
+        prev = ip.lexer_thread.state.last_token if ip.lexer_thread.state.last_token is not token else None
     shown = "end of line" if token.type == "_NL" else repr(str(token))
-    notes = []
-    hint = _curated_hint(token, expected)
-    if hint:
-        notes.append(hint)
-    words = _expected_words(expected)
+    notes = _curated_hint(token, expected, prev)
     if words:
-        notes.append("expected " + ", ".join(words[:12]) + (" ..." if len(words) > 12 else ""))
+        notes.append("expected " + ", ".join(words[:14]) + (" ..." if len(words) > 14 else ""))
     width = max(1, len(str(token))) if token.type != "_NL" else 1
-    sink.error("E0001", f"unexpected {shown}",
-               Span(path, line, col, line, col + width), *notes)
+    sink.error("E0001", f"unexpected {shown}", Span(path, line, col, line, col + width), *notes)
 
 
 # ---------------------------------------------------------------- tree → AST
@@ -282,7 +499,10 @@ class _ToAst(Transformer):
 
     @v_args(meta=True)
     def assume(self, meta, items):
-        return ast.AssumeDecl(self._span(meta), items[0])
+        label = None
+        if items and isinstance(items[0], tuple) and items[0][0] == "label":
+            label = items[0][1]
+        return ast.AssumeDecl(self._span(meta), items[-1], label)
 
     # ---- actors
     @v_args(meta=True)
@@ -291,17 +511,54 @@ class _ToAst(Transformer):
             is_ego, name, rest = True, "ego", items[1:]
         else:
             is_ego, name, rest = False, str(items[0]), items[1:]
-        vehicle = rest[0]
-        settings = rest[1]
-        block = rest[2] if len(rest) > 2 else []
+        vehicle, rest = rest[0], rest[1:]
+        block = rest[-1] if rest and isinstance(rest[-1], list) else []
+        head = [r for r in rest if not isinstance(r, list)]
+        settings = tuple(h for h in head if isinstance(h, ast.Setting))
+        placements = tuple(h for h in head if isinstance(h, ast.Placement))
         clauses = tuple(b for b in block if isinstance(b, ast.Clause))
-        triggers = tuple(b for b in block if isinstance(b, ast.Trigger))
+        steps = tuple(b for b in block if isinstance(b, (ast.Step, ast.Group)))
         block_settings = tuple(b for b in block if isinstance(b, ast.Setting))
         return ast.ActorDecl(self._span(meta), name, is_ego, str(vehicle), self._tspan(vehicle),
-                             settings, clauses, triggers, block_settings)
+                             settings, clauses, steps, block_settings, placements)
 
     def actor_block(self, items):
         return list(items)
+
+    def actor_ref(self, items):
+        return items[0]
+
+    @v_args(meta=True)
+    def ahead_of(self, meta, items):
+        return ast.Placement(self._span(meta), "ahead", str(items[0]), self._tspan(items[0]), items[1])
+
+    @v_args(meta=True)
+    def behind(self, meta, items):
+        return ast.Placement(self._span(meta), "behind", str(items[0]), self._tspan(items[0]), items[1])
+
+    @v_args(meta=True)
+    def lane_value(self, meta, items):
+        span = self._span(meta)
+        key_span = Span(self.path, span.line, span.col, span.line, span.col + 4)
+        return ast.Setting(span, "lane", key_span, items[0])
+
+    @v_args(meta=True)
+    def at_value(self, meta, items):
+        span = self._span(meta)
+        key_span = Span(self.path, span.line, span.col, span.line, span.col + 2)
+        return ast.Setting(span, "at", key_span, items[0])
+
+    @v_args(meta=True)
+    def lane_of(self, meta, items):
+        return ast.Placement(self._span(meta), "lane_of", str(items[0]), self._tspan(items[0]))
+
+    @v_args(meta=True)
+    def lane_left_of(self, meta, items):
+        return ast.Placement(self._span(meta), "lane_left", str(items[0]), self._tspan(items[0]))
+
+    @v_args(meta=True)
+    def lane_right_of(self, meta, items):
+        return ast.Placement(self._span(meta), "lane_right", str(items[0]), self._tspan(items[0]))
 
     @v_args(meta=True)
     def clause(self, meta, items):
@@ -317,8 +574,25 @@ class _ToAst(Transformer):
         return list(items)
 
     @v_args(meta=True)
-    def trigger(self, meta, items):
-        return ast.Trigger(self._span(meta), items[0], items[1])
+    def step(self, meta, items):
+        starts = tuple(i for i in items if isinstance(i, ast.StepStart))
+        return ast.Step(self._span(meta), starts, items[-1])
+
+    @v_args(meta=True)
+    def start_at(self, meta, items):
+        return ast.StepStart(self._span(meta), "at", items[0])
+
+    @v_args(meta=True)
+    def start_after(self, meta, items):
+        return ast.StepStart(self._span(meta), "after", items[0])
+
+    @v_args(meta=True)
+    def start_when(self, meta, items):
+        return ast.StepStart(self._span(meta), "when", items[0])
+
+    @v_args(meta=True)
+    def group(self, meta, items):
+        return ast.Group(self._span(meta), str(items[0]), tuple(items[1:]))
 
     # ---- faults
     @v_args(meta=True)
@@ -339,7 +613,7 @@ class _ToAst(Transformer):
 
     @v_args(meta=True)
     def at_time(self, meta, items):
-        return ast.Timing(self._span(meta), "at", items[0])
+        return ast.Timing(self._span(meta), "at", items[0], None, items[1] if len(items) > 1 else None)
 
     @v_args(meta=True)
     def during(self, meta, items):
@@ -367,8 +641,8 @@ class _ToAst(Transformer):
         if rest and isinstance(rest[0], tuple) and rest[0][0] == "label":
             label = rest.pop(0)[1]
         body = rest[0]
-        if isinstance(body, tuple) and body[0] == "no":
-            return ast.OracleDecl(self._span(meta), severity, label, None, body[1], body[2])
+        if isinstance(body, ast.Builtin):
+            return ast.OracleDecl(self._span(meta), severity, label, None, body)
         return ast.OracleDecl(self._span(meta), severity, label, body)
 
     def severity(self, items):
@@ -377,8 +651,28 @@ class _ToAst(Transformer):
     def label(self, items):
         return ("label", str(items[0]))
 
-    def no_clause(self, items):
-        return ("no", str(items[0]), str(items[1]) if len(items) > 1 else None)
+    @v_args(meta=True)
+    def no_clause(self, meta, items):
+        actor = items[1] if len(items) > 1 else None
+        return ast.Builtin(self._span(meta), "no", str(items[0]), self._tspan(items[0]),
+                           str(actor) if actor is not None else None,
+                           self._tspan(actor) if actor is not None else None)
+
+    @v_args(meta=True)
+    def stay_in_lane(self, meta, items):
+        return ast.Builtin(self._span(meta), "stay_in_lane", settings=items[0] if items else ())
+
+    @v_args(meta=True)
+    def reach_goal(self, meta, items):
+        return ast.Builtin(self._span(meta), "reach_goal", value=items[0] if items else None)
+
+    @v_args(meta=True)
+    def bound(self, meta, items):
+        kind, signal = items[0], items[1]
+        actor = items[2] if len(items) == 4 else None
+        return ast.Builtin(self._span(meta), str(kind), str(signal), self._tspan(signal),
+                           str(actor) if actor is not None else None,
+                           self._tspan(actor) if actor is not None else None, items[-1])
 
     # ---- sweeps
     @v_args(meta=True)
@@ -403,6 +697,10 @@ class _ToAst(Transformer):
     @v_args(meta=True)
     def sweep_seed(self, meta, items):
         return ast.SweepItem(self._span(meta), "seed", None, items[0])
+
+    @v_args(meta=True)
+    def max_rejections(self, meta, items):
+        return ast.SweepItem(self._span(meta), "max_rejections", None, items[0])
 
     # ---- expressions
     @v_args(meta=True)
@@ -529,8 +827,23 @@ def _wrap_atom_tokens(tree, conv: _ToAst):
     return tree
 
 
+_ESCAPES = {"n": "\n", "t": "\t", '"': '"', "\\": "\\"}
+
+
 def _unquote(tok) -> str:
+    """String literal → text. Escapes: \\n \\t \\" \\\\; any other `\\x` stays as written."""
     if isinstance(tok, ast.Str):
         return tok.value
     text = str(tok)[1:-1]
-    return text.encode("utf-8").decode("unicode_escape") if "\\" in text else text
+    if "\\" not in text:
+        return text
+    out, i = [], 0
+    while i < len(text):
+        ch = text[i]
+        if ch == "\\" and i + 1 < len(text) and text[i + 1] in _ESCAPES:
+            out.append(_ESCAPES[text[i + 1]])
+            i += 2
+        else:
+            out.append(ch)
+            i += 1
+    return "".join(out)
