@@ -123,13 +123,16 @@ def sorted_diagnostics(diags: list[Diagnostic]) -> list[Diagnostic]:
 def render_text(diags: list[Diagnostic], sources: dict[str, str]) -> str:
     """rustc-style text: `error[E0201]: message`, location, source line and caret."""
     out: list[str] = []
+    line_cache: dict[str, list[str]] = {}
     for d in sorted_diagnostics(diags):
         out.append(f"{d.severity.value}[{d.code}]: {d.message}")
         span = d.span
         if span is not None:
             out.append(f"  --> {span}")
-            text = sources.get(span.file)
-            lines = text.splitlines() if text is not None else []
+            if span.file not in line_cache:
+                text = sources.get(span.file)
+                line_cache[span.file] = text.splitlines() if text is not None else []
+            lines = line_cache[span.file]
             if 1 <= span.line <= len(lines):
                 src = lines[span.line - 1].expandtabs(1)
                 gutter = str(span.line)

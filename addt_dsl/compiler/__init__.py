@@ -11,14 +11,14 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from addt_dsl.compiler import ast
+from addt_dsl.compiler import ast, parser
 from addt_dsl.compiler.check import RULES, Context
 from addt_dsl.compiler.parser import parse_source
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
 from addt_dsl.plan import ScenarioPlan
 
 MAX_INCLUDE_DEPTH = 16
-MAX_INCLUDED_BYTES = 2_000_000  # an included .addt file, as for the main file
+MAX_INCLUDED_BYTES = parser.MAX_SOURCE_BYTES  # an .addt file, main or included
 MAX_IMPORT_BYTES = 50_000_000  # an imported .xodr file
 
 

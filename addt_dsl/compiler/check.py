@@ -460,6 +460,8 @@ def rule_roads(ctx: Context) -> None:
                                f"road elements: {', '.join(GEOMETRIES.names())}")
                 continue
             vals = check_settings(ctx, item.settings, cls.params, f"'{item.kind}'", item.span)
+            if any(p.required and p.name not in vals for p in cls.params):
+                continue  # reported by check_settings
             consts = {k: _const_value(v) if not isinstance(v, str) else v for k, v in vals.items()}
             if any(v is None for v in consts.values()):
                 ctx.sink.error("E0204", "road geometry must use constants, not parameters", item.span)

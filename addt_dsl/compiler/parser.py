@@ -12,6 +12,7 @@ and goes on. One run therefore reports every broken statement, not just the firs
 from __future__ import annotations
 
 import functools
+import re
 from pathlib import Path
 
 from lark import Lark, Token, Transformer, Tree, v_args
@@ -21,7 +22,7 @@ from addt_dsl.compiler import ast
 from addt_dsl.diagnostics import DiagnosticSink, Span
 
 GRAMMAR_PATH = Path(__file__).resolve().parent.parent / "grammar" / "addt.lark"
-MAX_SOURCE_BYTES = 2_000_000
+MAX_SOURCE_BYTES = 1_000_000  # real scenarios are a few kB; lark parses ~200 kB/s
 MAX_NESTING = 64
 MAX_SYNTAX_ERRORS = 25
 MAX_EXPR_DEPTH = 200  # operators chained or nested in one expression
@@ -39,7 +40,7 @@ def _terminal_words() -> dict[str, str]:
     """Readable names of the grammar's terminals, for "expected ..." notes."""
     words = {"NAME": "a name", "NUMBER": "a number", "STRING": "a string", "UNIT": "a unit",
              "_NL": "end of line", "$END": "end of file", "COMP": "a comparison",
-             "ADD_OP": "'+' or '-'", "MUL_OP": "'*' or '/'"}
+             "MUL_OP": "'*' or '/'"}
     for term in grammar().terminals:
         if term.name not in words and term.pattern.type == "str":
             words[term.name] = f"'{term.pattern.value}'"
@@ -72,38 +73,77 @@ _CHAR_HINTS = {
 }
 
 
-def _curated_hint(token: Token | None, expected: set[str], prev: Token | None) -> list[str]:
-    """Messages for mistakes people actually make."""
-    if token is None:
-        return []
+_FOREIGN_WORDS = ("if", "else", "elif", "while", "for", "def", "return", "lambda", "function", "var", "let")
+_UNIT_TYPO_RE = re.compile(r"\d\s*(kph|kmh|kmph|mps|secs?|seconds?|msec|meters?|metres?|hz|HZ|degrees?|radians?|"
+                           r"percent|pct|minutes?|mins)\b")
+
+
+def _curated_hint(token: Token, expected: set[str], text: str) -> list[str]:
+    """Messages for mistakes people actually make, from the token, what the parser
+    expected and the line around it."""
     value, kind = str(token), token.type
+    lines = text.splitlines()
+    line_no = getattr(token, "line", None) or 1
+    line = lines[line_no - 1] if 0 < line_no <= len(lines) else ""
+    words = line.split()
+    first = words[0].rstrip(":") if words else ""
+    before = text[:token.start_pos].rstrip(" \t") if token.start_pos is not None else ""
     hints = []
     if value == ":" and "NAME" not in expected:
         hints.append("a label goes first, before the formula: `name: always ...`")
     if kind == "NAME" and "UNIT" in expected:
         hints.append(f"'{value}' is not a known unit; units are m, km, cm, mm, m/s, km/h, mph, s, ms, "
                      "min, Hz, deg, rad, deg/s, rad/s, %, m/s^2, m/s^3, g, 1/m, kg")
+    typo = _UNIT_TYPO_RE.search(line)
+    if typo and not hints:
+        hints.append(f"'{typo.group(1)}' is not a unit; see the list of units in docs/language.md")
     if value == "=":
         hints.append("settings are written `key value`, without '='; use '==' to compare")
     if kind == "_NL" and "LBRACE" in expected:
         hints.append("a block's '{' must be on the same line as its header")
-    if value in ("&&", "&"):
-        hints.append("write `and`")
-    if value in ("||", "|"):
-        hints.append("write `or`")
-    if kind in ("NUMBER", "NAME") and "COMMA" in expected and prev is not None and prev.type in ("NUMBER", "UNIT", "NAME"):
+    if kind in ("NUMBER", "NAME") and "COMMA" in expected and before[-1:].isalnum() | (before[-1:] in "%)"):
         hints.append("is a ',' missing between the list items?")
-    if kind == "NUMBER" and prev is not None and prev.type == "NUMBER":
-        hints.append("two numbers in a row: is an operator or a unit missing?")
-    if value in _DEFINITION_WORDS and kind != "NAME" or (kind == "NAME" and value in _DEFINITION_WORDS
-                                                          and "NAME" not in expected):
-        hints.append(f"'{value}' starts a definition, which cannot stand here; is a '}}' missing above?")
-    if value in ("if", "else", "elif", "while", "for", "def", "import", "lambda", "return"):
-        hints.append(f"'{value}' is not part of the language; behaviours start with "
-                     "`when <condition> then ...`, `at <time>` or `after <time>`")
-    if "THEN" in expected and kind in ("NAME",) and value not in ("then",):
+    if first in _DEFINITION_WORDS and _depth_at(text, line_no) > 1:
+        hints.append(f"`{first} ...` is a definition, which cannot stand inside this block; "
+                     "is a '}' missing above?")
+    if first in _FOREIGN_WORDS or value in _FOREIGN_WORDS:
+        word = first if first in _FOREIGN_WORDS else value
+        hints.append(f"'{word}' is not part of the language; a behaviour starts with "
+                     "`when <condition> then ...`, `at <time> ...` or `after <time> ...`")
+    if "THEN" in expected and first == "when":
         hints.append("write `when <condition> then <behaviour>`")
     return hints
+
+
+def _depth_at(text: str, line_no: int) -> int:
+    """Brace depth at the start of a line (strings and comments skipped)."""
+    depth, line, in_string, in_comment, escaped = 0, 1, False, False, False
+    for ch in text:
+        if ch == "\n":
+            line += 1
+            in_string = in_comment = False
+            if line >= line_no:
+                return depth
+            continue
+        if in_comment:
+            continue
+        if in_string:
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
+            elif ch == '"':
+                in_string = False
+            continue
+        if ch == "#":
+            in_comment = True
+        elif ch == '"':
+            in_string = True
+        elif ch == "{":
+            depth += 1
+        elif ch == "}":
+            depth = max(0, depth - 1)
+    return depth
 
 
 def _check_source(data: bytes | str, path: str, sink: DiagnosticSink) -> str | None:
@@ -172,6 +212,8 @@ class _Recovery:
         ip = getattr(exc, "interactive_parser", None)
         if ip is None:
             return False
+        if self._brace_on_next_line(exc):
+            return True  # reported; read on as if the '{' were on the header's line
         try:
             sync = self._skip(exc, ip)
             return self._resync(ip, sync)
@@ -188,6 +230,12 @@ class _Recovery:
                             Span.point(self.path, line, getattr(exc, "column", 1) or 1))
             return
         _report_syntax_error(exc, self.path, self.sink, self.text)
+
+    def _brace_on_next_line(self, exc: UnexpectedInput) -> bool:
+        if not (isinstance(exc, UnexpectedToken) and exc.token.type == "_NL" and "LBRACE" in (exc.expected or ())):
+            return False
+        end = getattr(exc.token, "end_pos", None)
+        return end is not None and self.text[end:].lstrip(" \t").startswith("{")
 
     def _skip(self, exc: UnexpectedInput, ip) -> Token:
         """Consume tokens up to the end of the broken statement; return the sync token."""
@@ -404,14 +452,8 @@ def _report_syntax_error(exc: UnexpectedInput, path: str, sink: DiagnosticSink, 
         return
     assert isinstance(exc, UnexpectedToken)
     token = exc.token
-    prev = None
-    history = getattr(exc, "token_history", None)
-    if history:
-        prev = history[-1]
-    elif ip is not None:
-        prev = ip.lexer_thread.state.last_token if ip.lexer_thread.state.last_token is not token else None
     shown = "end of line" if token.type == "_NL" else repr(str(token))
-    notes = _curated_hint(token, expected, prev)
+    notes = _curated_hint(token, expected, text)
     if words:
         notes.append("expected " + ", ".join(words[:14]) + (" ..." if len(words) > 14 else ""))
     width = max(1, len(str(token))) if token.type != "_NL" else 1
@@ -566,6 +608,9 @@ class _ToAst(Transformer):
         block = tuple(items[3]) if len(items) > 3 else ()
         keyword = "behavior" if kw == "behaviour" else kw
         return ast.Clause(self._span(meta), keyword, str(name), self._tspan(name), settings, block)
+
+    def add_op(self, items):
+        return str(items[0])
 
     def clause_kw(self, items):
         return str(items[0])
