@@ -170,12 +170,14 @@ def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
     sampled = _sampled_params(plan, {a for a, _ in axes}) if sweep.sampler else []
     rejected: Counter = Counter()
     tried = 0
+    n_cells = math.prod(len(v) for _, v in axes)
+    per_cell = max(1, budget // max(1, min(n_cells, budget)))
     rng = np.random.default_rng(derive_seed(plan.seed, 15485863))
     for combo in itertools.islice(itertools.product(*[v for _, v in axes]), budget):
         base = {**nominal, **dict(zip([a for a, _ in axes], combo))}
         candidates = [base]
         if sampled:
-            n = max(1, min(budget - tried, budget // 10))
+            n = max(1, min(budget - tried, per_cell))
             units = _unit_samples(sweep.sampler.kind if sweep.sampler.kind != "halton" else "random", n,
                                   len(sampled), rng, 0)
             candidates = [{**base, **{p.name: _from_unit(p, float(u)) for p, u in zip(sampled, row)}}

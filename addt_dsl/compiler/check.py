@@ -42,17 +42,6 @@ VEHICLE_KINDS = {"car": (4.6, 1.9), "truck": (12.0, 2.5), "pedestrian": (0.5, 0.
 DEFAULT_SENSOR = P.ClausePlan(keyword="sensor", name="lidar", settings={})
 DEFAULT_STACK = P.ClausePlan(keyword="stack", name="bev", settings={})
 
-# Words people write after a number believing they are units (the parser then reads them
-# as the next setting's key), with the unit they meant.
-UNIT_TYPOS = {
-    "kph": "km/h", "kmh": "km/h", "kmph": "km/h", "kmhr": "km/h", "mps": "m/s", "ms2": "m/s^2",
-    "sec": "s", "secs": "s", "second": "s", "seconds": "s", "msec": "ms", "millis": "ms",
-    "meter": "m", "meters": "m", "metre": "m", "metres": "m", "M": "m", "S": "s", "KM": "km",
-    "Km": "km", "kilometers": "km", "mins": "min", "minute": "min", "minutes": "min",
-    "hz": "Hz", "HZ": "Hz", "hertz": "Hz", "degree": "deg", "degrees": "deg", "radian": "rad",
-    "radians": "rad", "percent": "%", "pct": "%", "kilogram": "kg", "kilograms": "kg",
-}
-
 INT_EPS = 1e-9
 
 
@@ -168,26 +157,6 @@ def check_range(ctx: Context, expr, spec_low, spec_high, dim, what: str, span: S
     return True
 
 
-def _unit_typos(ctx: Context, settings: tuple[ast.Setting, ...]) -> set[int]:
-    """Indices of settings whose key is a misspelt unit right after a unitless number."""
-    found = set()
-    for i in range(1, len(settings)):
-        st, prev = settings[i], settings[i - 1]
-        if st.key in UNIT_TYPOS and isinstance(prev.value, ast.Number) and prev.value.unit is None \
-                and prev.value.span.end_line == st.key_span.line:
-            fixed = UNIT_TYPOS[st.key]
-            ctx.sink.error("E0202", f"'{st.key}' is not a unit", st.key_span,
-                           f"write `{prev.key} {_number_text(prev.value.value)} {fixed}`",
-                           label=f"did you mean `{fixed}`?")
-            found |= {i, i - 1}
-    return found
-
-
-def _number_text(value: float) -> str:
-    text = repr(float(value))
-    return text[:-2] if text.endswith(".0") else text
-
-
 def check_settings(ctx: Context, settings: tuple[ast.Setting, ...], specs, what: str, span: Span,
                    signals: bool = False, skip_required: bool = False) -> dict[str, P.SettingValue]:
     """Check `key value` pairs against ParamSpecs; return lowered values (SI)."""
@@ -195,10 +164,7 @@ def check_settings(ctx: Context, settings: tuple[ast.Setting, ...], specs, what:
     out: dict[str, P.SettingValue] = {}
     seen: dict[str, ast.Setting] = {}
     low = ctx.lowering(signals)
-    typos = _unit_typos(ctx, settings)
-    for i, st in enumerate(settings):
-        if i in typos:
-            continue
+    for st in settings:
         spec = specs.get(st.key)
         if spec is None:
             ctx.sink.error("E0104", f"{what} has no setting '{st.key}'", st.key_span,
@@ -213,7 +179,7 @@ def check_settings(ctx: Context, settings: tuple[ast.Setting, ...], specs, what:
         value = lower_setting(ctx, low, st, spec, what)
         if value is not None:
             out[st.key] = value
-    if not typos and not skip_required:
+    if not skip_required:
         for spec in specs.values():
             if spec.required and spec.name not in seen:
                 ctx.sink.error("E0105", f"{what} needs setting '{spec.name}'", span,
@@ -306,117 +272,125 @@ _PARAM_SETTINGS = ("dist", "mean", "sd", "integer")
 
 def rule_params(ctx: Context) -> None:
     """Parameters: default, domain `in [lo, hi]` or choices, distribution."""
-    const_scope = Scope({}, set(), set(), False, set())
     for d in ctx.params_ast.values():
-        low = ExprLowering(ctx.sink, const_scope)
-        if isinstance(d.default, ast.Str):
-            ctx.sink.error("E0204", f"the default of '{d.name}' must be a number, not a string", d.default.span)
-            continue
-        expr, ty = low.lower(d.default)
-        if expr is None:
-            continue
-        if ty[0] != "num" or _const_value(expr) is None:
-            ctx.sink.error("E0204", f"the default of '{d.name}' must be a constant number", d.default.span,
-                           "parameters cannot depend on other parameters; relate them with `assume`")
-            continue
-        dim = ty[1]
-        default = _const_value(expr)
-        if not math.isfinite(default):
-            ctx.sink.error("E0204", f"the default of '{d.name}' is not a finite number", d.default.span)
-            continue
-        ctx.param_dims[d.name] = dim
-        opts: dict[str, ast.Setting] = {}
-        for st in d.settings:
-            if st.key not in _PARAM_SETTINGS:
-                ctx.sink.error("E0104", f"parameter has no setting '{st.key}'", st.key_span,
-                               *_suggest(st.key, _PARAM_SETTINGS), "settings of a parameter: dist, mean, sd, integer")
-            elif st.key in opts:
-                ctx.sink.error("E0102", f"setting '{st.key}' given twice", st.key_span)
-            else:
-                opts[st.key] = st
-        dist = "uniform"
-        if "dist" in opts:
-            v = opts["dist"].value
-            if isinstance(v, ast.Ref) and v.dotted in ("uniform", "normal", "choice"):
-                dist = v.dotted
-            else:
-                ctx.sink.error("E0204", "`dist` is one of uniform, normal, choice", v.span)
-                continue
-        lo = hi = None
-        choices: list[float] = []
-        if d.domain is not None:
-            if not isinstance(d.domain, ast.ListExpr):
-                ctx.sink.error("E0204", f"the domain of '{d.name}' is a list: `in [low, high]` or `in [a, b, c]`",
-                               d.domain.span)
-                continue
-            vals = _lower_list(ctx, d.domain, dim, f"the domain of '{d.name}'")
-            if vals is None:
-                continue
-            # Two values are a range unless `dist choice`; three or more are choices.
-            if len(vals) != 2 or dist == "choice":
-                choices = vals
-                lo, hi = min(vals), max(vals)
-                if "dist" not in opts:
-                    dist = "choice"
-                elif dist != "choice":
-                    ctx.sink.error("E0204", f"'{d.name}' lists {len(vals)} values, so it is a choice, "
-                                   f"not `dist {dist}`", d.domain.span, "a range is `in [low, high]`")
-                    continue
-            else:
-                lo, hi = vals
-                if lo > hi:
-                    ctx.sink.error("E0303", f"the range of '{d.name}' is inverted: "
-                                   f"{_fmt(lo, dim)} > {_fmt(hi, dim)}", d.domain.span, "write `in [low, high]`")
-                    continue
-            if choices and not any(abs(default - c) <= 1e-12 * max(1.0, abs(c)) for c in choices):
-                ctx.sink.error("E0301", f"the default of '{d.name}' ({_fmt(default, dim)}) is not one of its choices",
-                               d.default.span)
-                continue
-            if not choices and not (lo <= default <= hi):
-                ctx.sink.error("E0301", f"the default of '{d.name}' ({_fmt(default, dim)}) is outside its range "
-                               f"{_range_text(lo, hi, dim)}", d.default.span)
-                continue
-        elif dist == "choice":
-            ctx.sink.error("E0105", f"choice parameter '{d.name}' needs its choices: `in [a, b, c]`", d.span)
-            continue
-        mean = sd = None
-        if "mean" in opts:
-            m_expr = low.lower_value(opts["mean"].value, dim, f"'mean' of '{d.name}'")
-            mean = _const_value(m_expr) if m_expr is not None else None
-        if "sd" in opts:
-            sd_expr = low.lower_value(opts["sd"].value, dim, f"'sd' of '{d.name}'")
-            sd = _const_value(sd_expr) if sd_expr is not None else None
-            if sd is not None and not (sd > 0 and math.isfinite(sd)):
-                ctx.sink.error("E0301", f"'sd' of '{d.name}' must be positive", opts["sd"].value.span)
-                continue
-        if dist == "normal" and "sd" not in opts:
-            ctx.sink.error("E0105", f"normal parameter '{d.name}' needs 'sd'", d.span,
-                           f"e.g. `param {d.name} = ... dist normal sd ...`")
-            continue
-        if dist != "normal":
-            for key in ("mean", "sd"):
-                if key in opts:
-                    ctx.sink.warning("W0002", f"'{key}' has no effect on a {dist} parameter", opts[key].key_span,
-                                     "add `dist normal`")
-        integer = False
-        if "integer" in opts:
-            v = opts["integer"].value
-            if isinstance(v, ast.Bool):
-                integer = v.value
-            else:
-                ctx.sink.error("E0204", "`integer` is true or false", v.span)
-                continue
-        if integer:
-            bad = [x for x in [default, *choices, *(b for b in (lo, hi) if b is not None)]
-                   if abs(x - round(x)) > INT_EPS]
-            if bad:
-                ctx.sink.error("E0204", f"integer parameter '{d.name}' has a fractional value {bad[0]!r}",
-                               d.span)
-                continue
-        ctx.param_ranges[d.name] = (lo, hi) if lo is not None else (default, default)
-        ctx.params.append(P.ParamPlan(name=d.name, dimension=units.dim_name(dim), default=default,
-                                      low=lo, high=hi, distribution=dist, mean=mean, sd=sd,
-                                      choices=choices, integer=integer))
+        plan = _check_param(ctx, d)
+        if plan is not None:
+            ctx.params.append(plan)
+            ctx.param_ranges[d.name] = (plan.low, plan.high) if plan.low is not None else (plan.default,) * 2
+
+
+def _check_param(ctx: Context, d: ast.ParamDecl) -> P.ParamPlan | None:
+    """A parameter's plan, or None after a diagnostic. Its dimension is recorded as soon
+    as the default is known, so uses elsewhere are still checked."""
+    const_scope = Scope({}, set(), set(), False, set())
+    low = ExprLowering(ctx.sink, const_scope)
+    if isinstance(d.default, ast.Str):
+        ctx.sink.error("E0204", f"the default of '{d.name}' must be a number, not a string", d.default.span)
+        return None
+    expr, ty = low.lower(d.default)
+    if expr is None:
+        return None
+    if ty[0] != "num" or _const_value(expr) is None:
+        ctx.sink.error("E0204", f"the default of '{d.name}' must be a constant number", d.default.span,
+                       "parameters cannot depend on other parameters; relate them with `assume`")
+        return None
+    dim = ty[1]
+    default = _const_value(expr)
+    if not math.isfinite(default):
+        ctx.sink.error("E0204", f"the default of '{d.name}' is not a finite number", d.default.span)
+        return None
+    ctx.param_dims[d.name] = dim
+    opts: dict[str, ast.Setting] = {}
+    for st in d.settings:
+        if st.key not in _PARAM_SETTINGS:
+            ctx.sink.error("E0104", f"parameter has no setting '{st.key}'", st.key_span,
+                           *_suggest(st.key, _PARAM_SETTINGS), "settings of a parameter: dist, mean, sd, integer")
+        elif st.key in opts:
+            ctx.sink.error("E0102", f"setting '{st.key}' given twice", st.key_span)
+        else:
+            opts[st.key] = st
+    dist = "uniform"
+    if "dist" in opts:
+        v = opts["dist"].value
+        if isinstance(v, ast.Ref) and v.dotted in ("uniform", "normal", "choice"):
+            dist = v.dotted
+        else:
+            ctx.sink.error("E0204", "`dist` is one of uniform, normal, choice", v.span)
+            return None
+    lo = hi = None
+    choices: list[float] = []
+    if d.domain is not None:
+        if not isinstance(d.domain, ast.ListExpr):
+            ctx.sink.error("E0204", f"the domain of '{d.name}' is a list: `in [low, high]` or `in [a, b, c]`",
+                           d.domain.span)
+            return None
+        vals = _lower_list(ctx, d.domain, dim, f"the domain of '{d.name}'")
+        if vals is None:
+            return None
+        # Two values are a range unless `dist choice`; three or more are choices.
+        if len(vals) != 2 or dist == "choice":
+            choices = vals
+            lo, hi = min(vals), max(vals)
+            if "dist" not in opts:
+                dist = "choice"
+            elif dist != "choice":
+                ctx.sink.error("E0204", f"'{d.name}' lists {len(vals)} values, so it is a choice, "
+                               f"not `dist {dist}`", d.domain.span, "a range is `in [low, high]`")
+                return None
+        else:
+            lo, hi = vals
+            if lo > hi:
+                ctx.sink.error("E0303", f"the range of '{d.name}' is inverted: "
+                               f"{_fmt(lo, dim)} > {_fmt(hi, dim)}", d.domain.span, "write `in [low, high]`")
+                return None
+        if choices and not any(abs(default - c) <= 1e-12 * max(1.0, abs(c)) for c in choices):
+            ctx.sink.error("E0301", f"the default of '{d.name}' ({_fmt(default, dim)}) is not one of its choices",
+                           d.default.span)
+            return None
+        if not choices and not (lo <= default <= hi):
+            ctx.sink.error("E0301", f"the default of '{d.name}' ({_fmt(default, dim)}) is outside its range "
+                           f"{_range_text(lo, hi, dim)}", d.default.span)
+            return None
+    elif dist == "choice":
+        ctx.sink.error("E0105", f"choice parameter '{d.name}' needs its choices: `in [a, b, c]`", d.span)
+        return None
+    mean = sd = None
+    if "mean" in opts:
+        m_expr = low.lower_value(opts["mean"].value, dim, f"'mean' of '{d.name}'")
+        mean = _const_value(m_expr) if m_expr is not None else None
+    if "sd" in opts:
+        sd_expr = low.lower_value(opts["sd"].value, dim, f"'sd' of '{d.name}'")
+        sd = _const_value(sd_expr) if sd_expr is not None else None
+        if sd is not None and not (sd > 0 and math.isfinite(sd)):
+            ctx.sink.error("E0301", f"'sd' of '{d.name}' must be positive", opts["sd"].value.span)
+            return None
+    if dist == "normal" and "sd" not in opts:
+        ctx.sink.error("E0105", f"normal parameter '{d.name}' needs 'sd'", d.span,
+                       f"e.g. `param {d.name} = ... dist normal sd ...`")
+        return None
+    if dist != "normal":
+        for key in ("mean", "sd"):
+            if key in opts:
+                ctx.sink.warning("W0002", f"'{key}' has no effect on a {dist} parameter", opts[key].key_span,
+                                 "add `dist normal`")
+    integer = False
+    if "integer" in opts:
+        v = opts["integer"].value
+        if isinstance(v, ast.Bool):
+            integer = v.value
+        else:
+            ctx.sink.error("E0204", "`integer` is true or false", v.span)
+            return None
+    if integer:
+        bad = [x for x in [default, *choices, *(b for b in (lo, hi) if b is not None)]
+               if abs(x - round(x)) > INT_EPS]
+        if bad:
+            ctx.sink.error("E0204", f"integer parameter '{d.name}' has a fractional value {bad[0]!r}",
+                           d.span)
+            return None
+    return P.ParamPlan(name=d.name, dimension=units.dim_name(dim), default=default,
+                       low=lo, high=hi, distribution=dist, mean=mean, sd=sd,
+                       choices=choices, integer=integer)
 
 
 def _lower_list(ctx: Context, node: ast.ListExpr, dim, what: str) -> list[float] | None:
@@ -691,6 +665,9 @@ def _place(ctx: Context, d: ast.ActorDecl, vals: dict, length: float):
             ctx.sink.error("E0204", f"'{d.name}' is on road '{road}' but placed relative to '{p.actor}' "
                            f"on road '{other_road}'", p.span, "relative placement works along one road")
             return None
+    given = {st.key for st in d.settings + d.block_settings}
+    if any(k in given and k not in vals for k in ("on", "lane", "at")):
+        return None  # given but invalid: reported already
     missing = [k for k, ok in (("on", road is not None), ("lane", "lane" in vals or lane_rel or along),
                                ("at", "at" in vals or along)) if not ok]
     if missing:
@@ -896,9 +873,13 @@ def _simplify(expr):
 
 
 def rule_faults(ctx: Context) -> None:
-    ego = ctx.actors.get("ego")
-    sensors = {s.name for s in ego.sensors} if ego else set()
-    stack_cls = STACKS.get(ego.stack.name) if ego and ego.stack else None
+    # Targets come from the ego's declaration, so a fault is checked even when the ego
+    # itself had an error elsewhere.
+    ego = ctx.actors_ast.get("ego")
+    clauses = ego.clauses if ego else ()
+    sensors = {c.name for c in clauses if c.keyword == "sensor"} or {DEFAULT_SENSOR.name}
+    stack_name = next((c.name for c in clauses if c.keyword == "stack"), DEFAULT_STACK.name)
+    stack_cls = STACKS.get(stack_name)
     sites = stack_cls.fault_sites() if stack_cls else set()
     nodes = set(stack_cls.nodes) if stack_cls else set()
     for block in ctx.blocks("faults"):
@@ -1241,7 +1222,8 @@ def _int_of(ctx: Context, node, what: str, lo: int, hi: int) -> int | None:
 
 def rule_unused(ctx: Context) -> None:
     for name, d in ctx.params_ast.items():
-        if name not in ctx.used_params:
+        checked = any(p.name == name for p in ctx.params)  # a broken one is reported already
+        if checked and name not in ctx.used_params:
             ctx.sink.warning("W0001", f"parameter '{name}' is never used", d.span,
                              "use it in a setting, a constraint or an oracle, or remove it")
 

@@ -74,8 +74,15 @@ _CHAR_HINTS = {
 
 
 _FOREIGN_WORDS = ("if", "else", "elif", "while", "for", "def", "return", "lambda", "function", "var", "let")
-_UNIT_TYPO_RE = re.compile(r"\d\s*(kph|kmh|kmph|mps|secs?|seconds?|msec|meters?|metres?|hz|HZ|degrees?|radians?|"
-                           r"percent|pct|minutes?|mins)\b")
+# Words people write after a number believing they are units, with the unit they meant.
+UNIT_TYPOS = {
+    "kph": "km/h", "kmh": "km/h", "kmph": "km/h", "mps": "m/s", "sec": "s", "secs": "s", "second": "s",
+    "seconds": "s", "msec": "ms", "millis": "ms", "meter": "m", "meters": "m", "metre": "m", "metres": "m",
+    "mins": "min", "minute": "min", "minutes": "min", "hz": "Hz", "HZ": "Hz", "hertz": "Hz", "degree": "deg",
+    "degrees": "deg", "radian": "rad", "radians": "rad", "percent": "%", "pct": "%", "M": "m", "S": "s",
+    "KM": "km", "Km": "km", "kilometers": "km", "kilograms": "kg",
+}
+_UNIT_TYPO_RE = re.compile(r"(\d[\d.eE+-]*)\s*(" + "|".join(sorted(UNIT_TYPOS, key=len, reverse=True)) + r")\b")
 
 
 def _curated_hint(token: Token, expected: set[str], text: str) -> list[str]:
@@ -95,8 +102,9 @@ def _curated_hint(token: Token, expected: set[str], text: str) -> list[str]:
         hints.append(f"'{value}' is not a known unit; units are m, km, cm, mm, m/s, km/h, mph, s, ms, "
                      "min, Hz, deg, rad, deg/s, rad/s, %, m/s^2, m/s^3, g, 1/m, kg")
     typo = _UNIT_TYPO_RE.search(line)
-    if typo and not hints:
-        hints.append(f"'{typo.group(1)}' is not a unit; see the list of units in docs/language.md")
+    if typo:
+        number, word = typo.groups()
+        hints.append(f"'{word}' is not a unit: write `{number} {UNIT_TYPOS[word]}`")
     if value == "=":
         hints.append("settings are written `key value`, without '='; use '==' to compare")
     if kind == "_NL" and "LBRACE" in expected:
