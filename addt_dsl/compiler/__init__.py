@@ -172,7 +172,7 @@ def _resolve_includes(includes, base: Path, loader: _Loader, stack: list[str]) -
             continue
         display = loader.display(path)
         if display in stack:
-            loader.sink.error("E0108", f"'{inc.path}' includes itself", inc.span,
+            loader.sink.error("E0108", f"including '{inc.path}' again makes an include cycle", inc.span,
                               "include chain: " + " → ".join([*stack, display]))
             continue
         data = loader.read_bytes(path, inc.path, inc.span, MAX_INCLUDED_BYTES)

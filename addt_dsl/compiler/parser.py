@@ -105,7 +105,9 @@ def _curated_hint(token: Token, expected: set[str], text: str) -> list[str]:
     if typo:
         number, word = typo.groups()
         hints.append(f"'{word}' is not a unit: write `{number} {UNIT_TYPOS[word]}`")
-    if value == "=":
+    if value == "=" and first == "param":
+        hints.append("a parameter is declared `param NAME = VALUE`")
+    elif value == "=":
         hints.append("settings are written `key value`, without '='; use '==' to compare")
     if kind == "_NL" and "LBRACE" in expected:
         hints.append("a block's '{' must be on the same line as its header")
