@@ -175,13 +175,14 @@ def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
     rng = np.random.default_rng(derive_seed(plan.seed, 15485863))
     for combo in itertools.islice(itertools.product(*[v for _, v in axes]), budget):
         base = {**nominal, **dict(zip([a for a, _ in axes], combo))}
-        candidates = [base]
         if sampled:
             n = max(1, min(budget - tried, per_cell))
-            units = _unit_samples(sweep.sampler.kind if sweep.sampler.kind != "halton" else "random", n,
-                                  len(sampled), rng, 0)
-            candidates = [{**base, **{p.name: _from_unit(p, float(u)) for p, u in zip(sampled, row)}}
-                          for row in units]
+            kind = sweep.sampler.kind if sweep.sampler.kind != "halton" else "random"
+            rows = _unit_samples(kind, n, len(sampled), rng, 0)
+            candidates = ({**base, **{p.name: _from_unit(p, float(u)) for p, u in zip(sampled, row)}}
+                          for row in rows)  # lazy: most scenarios accept the first one
+        else:
+            candidates = iter([base])
         for params in candidates:
             tried += 1
             broken = violated_assumptions(plan, params)

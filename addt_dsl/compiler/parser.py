@@ -1,7 +1,8 @@
 """Source text → AST. Syntax errors become diagnostics, never tracebacks.
 
-lark (LALR, contextual lexer) builds a parse tree with positions; `_ToAst` turns it
-into the frozen dataclasses of `compiler.ast`.
+lark (LALR, contextual lexer) calls the `_Builder` methods as it reduces, so the frozen
+dataclasses of `compiler.ast` are built directly, with spans computed from the tokens
+(no intermediate parse tree, no position propagation: about half the parse time).
 
 Error recovery is panic mode, as in yacc's `error` token: after a syntax error the
 parser skips tokens to the end of the statement (a newline or a closing brace outside
@@ -13,9 +14,10 @@ from __future__ import annotations
 
 import functools
 import re
+import threading
 from pathlib import Path
 
-from lark import Lark, Token, Transformer, Tree, v_args
+from lark import Lark, Token, Tree
 from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
 from addt_dsl.compiler import ast
@@ -29,10 +31,31 @@ MAX_EXPR_DEPTH = 200  # operators chained or nested in one expression
 
 
 @functools.lru_cache(maxsize=1)
+def _parser() -> tuple[Lark, _Builder]:
+    """The parser, built once per process (a check of many files reuses it), with the
+    AST builders called as it reduces: no parse tree is built or walked."""
+    builder = _Builder()
+    lark = Lark.open(str(GRAMMAR_PATH), parser="lalr", lexer="contextual",
+                     transformer=_Callbacks(builder.callbacks()), maybe_placeholders=False)
+    return lark, builder
+
+
 def grammar() -> Lark:
-    """The parser, built once per process (a check of many files reuses it)."""
-    return Lark.open(str(GRAMMAR_PATH), parser="lalr", lexer="contextual",
-                     propagate_positions=True, maybe_placeholders=False, cache=False)
+    return _parser()[0]
+
+
+class _Callbacks:
+    """What lark's `transformer=` option reads: one attribute per rule name."""
+
+    def __init__(self, table: dict):
+        self.__dict__.update(table)
+
+    def __default__(self, data, children, meta):
+        if data.startswith("_"):  # an inlined rule: lark splices its children into the parent
+            return Tree(data, children)
+        raise RuntimeError(f"no AST builder for grammar rule '{data}'")
+
+_PARSE_LOCK = threading.Lock()  # the builder holds the current file name
 
 
 @functools.lru_cache(maxsize=1)
@@ -156,6 +179,19 @@ def _depth_at(text: str, line_no: int) -> int:
     return depth
 
 
+_BAD_CHARS = re.compile("[\x00-\x08\x0b\x0e-\x1f\x7f\ud800-\udfff]")
+_NOT_BRACKETS = re.compile(r"[^()\[\]{}]+")
+
+
+def _nth_bracket(text: str, n: int) -> int:
+    """Offset in `text` of its n-th bracket (0-based)."""
+    for m in re.finditer(r"[()\[\]{}]", text):
+        if n == 0:
+            return m.start()
+        n -= 1
+    return 0
+
+
 def _check_source(data: bytes | str, path: str, sink: DiagnosticSink) -> str | None:
     if isinstance(data, bytes):
         if len(data) > MAX_SOURCE_BYTES:
@@ -178,27 +214,29 @@ def _check_source(data: bytes | str, path: str, sink: DiagnosticSink) -> str | N
             return None
         if text.startswith("\ufeff"):
             text = text[1:]
-    bad = next((i for i, ch in enumerate(text)
-                if (ord(ch) < 32 and ch not in "\t\r\n\f") or ch == "\x7f" or 0xD800 <= ord(ch) <= 0xDFFF),
-               None)
-    if bad is not None:
+    bad_match = _BAD_CHARS.search(text)
+    if bad_match is not None:
+        bad = bad_match.start()
         line = text.count("\n", 0, bad) + 1
         col = bad - (text.rfind("\n", 0, bad) + 1) + 1
         sink.error("E0003", "source contains control characters or binary data",
                    Span.point(path, line, col), f"character {text[bad]!r} at offset {bad}")
         return None
-    depth = 0
-    for i, ch in enumerate(text):
-        if ch in "([{":
-            depth += 1
-            if depth > MAX_NESTING:
-                line = text.count("\n", 0, i) + 1
-                col = i - (text.rfind("\n", 0, i) + 1) + 1
-                sink.error("E0004", f"brackets nested deeper than {MAX_NESTING} levels",
-                           Span.point(path, line, col))
-                return None
-        elif ch in ")]}":
-            depth = max(0, depth - 1)
+    brackets = _NOT_BRACKETS.sub("", text)
+    if len(brackets) > MAX_NESTING:  # else it cannot nest too deeply: skip the scan
+        depth = 0
+        for k, ch in enumerate(brackets):
+            if ch in "([{":
+                depth += 1
+                if depth > MAX_NESTING:
+                    i = _nth_bracket(text, k)
+                    line = text.count("\n", 0, i) + 1
+                    col = i - (text.rfind("\n", 0, i) + 1) + 1
+                    sink.error("E0004", f"brackets nested deeper than {MAX_NESTING} levels",
+                               Span.point(path, line, col))
+                    return None
+            else:
+                depth = max(0, depth - 1)
     return text
 
 
@@ -320,49 +358,28 @@ def parse_source(data: bytes | str, path: str, sink: DiagnosticSink) -> ast.Sour
     if not text.endswith("\n"):
         text += "\n"
     recovery = _Recovery(text, path, sink)
-    try:
-        tree = grammar().parse(text, on_error=recovery.on_error)
-    except UnexpectedInput as exc:
-        if not recovery.failed:
-            _report_syntax_error(exc, path, sink, text)
-        return None
-    except RecursionError:
-        sink.error("E0004", "source nested too deeply", Span.point(path, 1, 1))
-        return None
+    lark, builder = _parser()
+    with _PARSE_LOCK:
+        builder.path = path
+        builder.reset()
+        try:
+            tree_ast = lark.parse(text, on_error=recovery.on_error)
+        except UnexpectedInput as exc:
+            if not recovery.failed:
+                _report_syntax_error(exc, path, sink, text)
+            return None
+        except RecursionError:
+            sink.error("E0004", "source nested too deeply", Span.point(path, 1, 1))
+            return None
+        too_deep = builder.too_deep
+        builder.reset()
     if recovery.failed:
         return None
-    try:
-        tree_ast = _ToAst(path).transform(tree)
-    except RecursionError:
-        sink.error("E0004", "source nested too deeply", Span.point(path, 1, 1))
-        return None
-    too_deep = _first_too_deep(tree_ast)
     if too_deep is not None:
         sink.error("E0004", f"expression is too long or nested too deeply (limit {MAX_EXPR_DEPTH} operators)",
                    too_deep.span, "split it with parameters or simplify it")
         return None
     return tree_ast
-
-
-def _first_too_deep(root) -> ast.Node | None:
-    """The first expression whose operator tree is deeper than MAX_EXPR_DEPTH (iterative:
-    later stages recurse over expressions and must not hit Python's recursion limit)."""
-    stack = [(root, 0)]
-    while stack:
-        node, depth = stack.pop()
-        if depth > MAX_EXPR_DEPTH:
-            return node
-        if isinstance(node, (tuple, list)):
-            stack.extend((child, depth) for child in node)
-            continue
-        if not isinstance(node, ast.Node):
-            continue
-        is_expr = isinstance(node, ast.Expression)
-        for name in node.__slots__:
-            child = getattr(node, name, None)
-            if isinstance(child, (ast.Node, tuple, list)):
-                stack.append((child, depth + 1 if is_expr else depth))
-    return None
 
 
 def parse_file(path: Path, sink: DiagnosticSink, display: str | None = None) -> tuple[ast.SourceFile | None, str]:
@@ -470,95 +487,167 @@ def _report_syntax_error(exc: UnexpectedInput, path: str, sink: DiagnosticSink, 
     sink.error("E0001", f"unexpected {shown}", Span(path, line, col, line, col + width), *notes)
 
 
-# ---------------------------------------------------------------- tree → AST
+# ---------------------------------------------------------------- parse → AST
 
-class _ToAst(Transformer):
-    def __init__(self, path: str):
-        super().__init__(visit_tokens=False)
-        self.path = path
+# Named keyword tokens the grammar keeps only for their position: dropped before a rule's
+# builder sees its children.
+_POSITION_ONLY = frozenset({
+    "INCLUDE", "SCENARIO", "ROAD", "IMPORT", "PARAM", "ASSUME", "KEEP", "AGENT", "AHEAD", "BEHIND",
+    "LANE", "AT", "AFTER", "WHEN", "SET", "FAULTS", "DURING", "FROM", "EXPECT", "NO", "STAY", "REACH",
+    "SWEEP", "GRID", "REPEAT", "SEED", "MAX_REJECTIONS", "WITHIN", "LSQB",
+})
 
-    def _span(self, meta) -> Span:
-        if getattr(meta, "empty", True):
-            return Span.point(self.path, 1, 1)
-        return Span(self.path, meta.line, meta.column, meta.end_line, meta.end_column)
+
+class _Marked:
+    """A helper value with a span (labels, severities, road imports)."""
+
+    __slots__ = ("span", "kind", "value")
+
+    def __init__(self, span: Span, kind: str, value):
+        self.span, self.kind, self.value = span, kind, value
+
+
+def _bounds(child):
+    """((line, col), (end_line, end_col)) of a child, or None."""
+    if isinstance(child, Token):
+        if child.line is None:
+            return None
+        return (child.line, child.column), (child.end_line or child.line,
+                                            child.end_column or child.column + len(child))
+    span = getattr(child, "span", None)
+    if span is not None:
+        return (span.line, span.col), (span.end_line, span.end_col)
+    if isinstance(child, (list, tuple)) and child:
+        first, last = _bounds(child[0]), _bounds(child[-1])
+        if first and last:
+            return first[0], last[1]
+    return None
+
+
+class _Builder:
+    """AST builders, called by lark as it reduces (no intermediate parse tree).
+
+    Each builder gets the rule's span (from the first to the last positioned child, so
+    the grammar keeps the keywords that start a construct as named tokens) and its
+    children without those keywords. `path` is set per parse (see `parse_source`)."""
+
+    def __init__(self):
+        self.path = "<input>"
+        self.reset()
+
+    def reset(self) -> None:
+        # Operator depth of each expression node built (by id), and the first node deeper
+        # than MAX_EXPR_DEPTH: later stages recurse over expressions.
+        self.depth: dict[int, int] = {}
+        self.too_deep: ast.Node | None = None
+
+    def _deep(self, node, *children):
+        depth = self.depth
+        d = 1 + max((depth.get(id(c), 0) for c in children), default=0)
+        depth[id(node)] = d
+        if d > MAX_EXPR_DEPTH and self.too_deep is None:
+            self.too_deep = node
+        return node
+
+    def callbacks(self) -> dict:
+        """name → callback(children) for every rule and alias of the grammar."""
+        out = {}
+        for name in dir(self):
+            if name.startswith("b_"):
+                out[name[2:]] = self._wrap(getattr(self, name))
+        return out
+
+    def _wrap(self, build):
+        position_only = _POSITION_ONLY
+
+        def callback(children):
+            first = last = None
+            for c in children:
+                first = _bounds(c)
+                if first is not None:
+                    break
+            for c in reversed(children):
+                last = _bounds(c)
+                if last is not None:
+                    break
+            if first is None:
+                span = Span.point(self.path, 1, 1)
+            else:
+                span = Span(self.path, first[0][0], first[0][1], last[1][0], last[1][1])
+            items = []
+            for c in children:
+                if isinstance(c, Token):
+                    if c.type in position_only:
+                        continue
+                    if c.type == "STRING":
+                        c = ast.Str(self._tspan(c), _unquote(c))
+                    elif c.type in ("TRUE", "FALSE"):
+                        c = ast.Bool(self._tspan(c), c.type == "TRUE")
+                items.append(c)
+            return build(span, items)
+
+        return callback
 
     def _tspan(self, tok: Token) -> Span:
         return Span(self.path, tok.line, tok.column, tok.end_line or tok.line,
                     tok.end_column or tok.column + len(tok))
 
     # ---- top level
-    @v_args(meta=True)
-    def start(self, meta, items):
+    def b_start(self, span, items):
         includes = tuple(i for i in items if isinstance(i, ast.Include))
         scenarios = tuple(i for i in items if isinstance(i, ast.Scenario))
         defs = tuple(i for i in items if not isinstance(i, (ast.Include, ast.Scenario)))
-        return ast.SourceFile(self._span(meta), self.path, includes, scenarios, defs)
+        return ast.SourceFile(span, self.path, includes, scenarios, defs)
 
-    @v_args(meta=True)
-    def include(self, meta, items):
-        return ast.Include(self._span(meta), _unquote(items[0]))
+    def b_include(self, span, items):
+        return ast.Include(span, _unquote(items[0]))
 
-    @v_args(meta=True)
-    def scenario(self, meta, items):
-        name = str(items[0])
-        rest = items[1:]
+    def b_scenario(self, span, items):
+        name, rest = str(items[0]), items[1:]
         settings = tuple(i for i in rest if isinstance(i, ast.Setting))
         includes = tuple(i for i in rest if isinstance(i, ast.Include))
         defs = tuple(i for i in rest if not isinstance(i, (ast.Setting, ast.Include)))
-        return ast.Scenario(self._span(meta), name, settings, defs, includes)
+        return ast.Scenario(span, name, settings, defs, includes)
 
-    @v_args(meta=True)
-    def setting(self, meta, items):
+    def b_setting(self, span, items):
         key, value = items
-        return ast.Setting(self._span(meta), str(key), self._tspan(key), value)
+        return ast.Setting(span, str(key), self._tspan(key), value)
 
-    def settings(self, items):
+    def b_settings(self, span, items):
         return tuple(items)
 
-    @v_args(meta=True)
-    def setting_line(self, meta, items):
-        key, value = items
-        return ast.Setting(self._span(meta), str(key), self._tspan(key), value)
+    b_setting_line = b_setting
 
     # ---- road
-    @v_args(meta=True)
-    def road(self, meta, items):
+    def b_road(self, span, items):
         name, body = items
-        if isinstance(body, tuple) and body and body[0] == "import":
-            _, path, settings = body
-            return ast.RoadDecl(self._span(meta), str(name), (), path, settings)
-        return ast.RoadDecl(self._span(meta), str(name), tuple(body))
+        if isinstance(body, _Marked):
+            path, settings = body.value
+            return ast.RoadDecl(span, str(name), (), path, settings)
+        return ast.RoadDecl(span, str(name), tuple(body))
 
-    def road_block(self, items):
+    def b_road_block(self, span, items):
         return list(items)
 
-    @v_args(meta=True)
-    def road_item(self, meta, items):
+    def b_road_item(self, span, items):
         kind, settings = items
-        return ast.RoadItem(self._span(meta), str(kind), settings)
+        return ast.RoadItem(span, str(kind), settings)
 
-    def road_import(self, items):
-        return ("import", _unquote(items[0]), items[1])
+    def b_road_import(self, span, items):
+        return _Marked(span, "import", (_unquote(items[0]), items[1]))
 
     # ---- parameters
-    @v_args(meta=True)
-    def param(self, meta, items):
-        name = str(items[0])
-        default = items[1]
+    def b_param(self, span, items):
+        name, default = str(items[0]), items[1]
         domain = items[2] if len(items) == 4 else None
-        settings = items[-1]
-        return ast.ParamDecl(self._span(meta), name, default, domain, settings)
+        return ast.ParamDecl(span, name, default, domain, items[-1])
 
-    @v_args(meta=True)
-    def assume(self, meta, items):
-        label = None
-        if items and isinstance(items[0], tuple) and items[0][0] == "label":
-            label = items[0][1]
-        return ast.AssumeDecl(self._span(meta), items[-1], label)
+    def b_assume(self, span, items):
+        label = items[0].value if isinstance(items[0], _Marked) else None
+        return ast.AssumeDecl(span, items[-1], label)
 
     # ---- actors
-    @v_args(meta=True)
-    def actor(self, meta, items):
+    def b_actor(self, span, items):
         if isinstance(items[0], Token) and items[0].type == "EGO":
             is_ego, name, rest = True, "ego", items[1:]
         else:
@@ -571,315 +660,240 @@ class _ToAst(Transformer):
         clauses = tuple(b for b in block if isinstance(b, ast.Clause))
         steps = tuple(b for b in block if isinstance(b, (ast.Step, ast.Group)))
         block_settings = tuple(b for b in block if isinstance(b, ast.Setting))
-        return ast.ActorDecl(self._span(meta), name, is_ego, str(vehicle), self._tspan(vehicle),
+        return ast.ActorDecl(span, name, is_ego, str(vehicle), self._tspan(vehicle),
                              settings, clauses, steps, block_settings, placements)
 
-    def actor_block(self, items):
+    def b_actor_block(self, span, items):
         return list(items)
 
-    def actor_ref(self, items):
+    def b_actor_ref(self, span, items):
         return items[0]
 
-    @v_args(meta=True)
-    def ahead_of(self, meta, items):
-        return ast.Placement(self._span(meta), "ahead", str(items[0]), self._tspan(items[0]), items[1])
+    def b_ahead_of(self, span, items):
+        return ast.Placement(span, "ahead", str(items[0]), self._tspan(items[0]), items[1])
 
-    @v_args(meta=True)
-    def behind(self, meta, items):
-        return ast.Placement(self._span(meta), "behind", str(items[0]), self._tspan(items[0]), items[1])
+    def b_behind(self, span, items):
+        return ast.Placement(span, "behind", str(items[0]), self._tspan(items[0]), items[1])
 
-    @v_args(meta=True)
-    def lane_value(self, meta, items):
-        span = self._span(meta)
-        key_span = Span(self.path, span.line, span.col, span.line, span.col + 4)
-        return ast.Setting(span, "lane", key_span, items[0])
+    def _keyword_setting(self, span, key, value):
+        key_span = Span(self.path, span.line, span.col, span.line, span.col + len(key))
+        return ast.Setting(span, key, key_span, value)
 
-    @v_args(meta=True)
-    def at_value(self, meta, items):
-        span = self._span(meta)
-        key_span = Span(self.path, span.line, span.col, span.line, span.col + 2)
-        return ast.Setting(span, "at", key_span, items[0])
+    def b_lane_value(self, span, items):
+        return self._keyword_setting(span, "lane", items[0])
 
-    @v_args(meta=True)
-    def lane_of(self, meta, items):
-        return ast.Placement(self._span(meta), "lane_of", str(items[0]), self._tspan(items[0]))
+    def b_at_value(self, span, items):
+        return self._keyword_setting(span, "at", items[0])
 
-    @v_args(meta=True)
-    def lane_left_of(self, meta, items):
-        return ast.Placement(self._span(meta), "lane_left", str(items[0]), self._tspan(items[0]))
+    def b_lane_of(self, span, items):
+        return ast.Placement(span, "lane_of", str(items[0]), self._tspan(items[0]))
 
-    @v_args(meta=True)
-    def lane_right_of(self, meta, items):
-        return ast.Placement(self._span(meta), "lane_right", str(items[0]), self._tspan(items[0]))
+    def b_lane_left_of(self, span, items):
+        return ast.Placement(span, "lane_left", str(items[0]), self._tspan(items[0]))
 
-    @v_args(meta=True)
-    def clause(self, meta, items):
+    def b_lane_right_of(self, span, items):
+        return ast.Placement(span, "lane_right", str(items[0]), self._tspan(items[0]))
+
+    def b_clause(self, span, items):
         kw, name, settings = items[0], items[1], items[2]
         block = tuple(items[3]) if len(items) > 3 else ()
         keyword = "behavior" if kw == "behaviour" else kw
-        return ast.Clause(self._span(meta), keyword, str(name), self._tspan(name), settings, block)
+        return ast.Clause(span, keyword, str(name), self._tspan(name), settings, block)
 
-    def add_op(self, items):
-        return str(items[0])
+    def b_clause_kw(self, span, items):
+        return _keyword(items[0], self.path)
 
-    def clause_kw(self, items):
-        return str(items[0])
-
-    def clause_block(self, items):
+    def b_clause_block(self, span, items):
         return list(items)
 
-    @v_args(meta=True)
-    def step(self, meta, items):
+    def b_step(self, span, items):
         starts = tuple(i for i in items if isinstance(i, ast.StepStart))
-        return ast.Step(self._span(meta), starts, items[-1])
+        return ast.Step(span, starts, items[-1])
 
-    @v_args(meta=True)
-    def start_at(self, meta, items):
-        return ast.StepStart(self._span(meta), "at", items[0])
+    def b_start_at(self, span, items):
+        return ast.StepStart(span, "at", items[0])
 
-    @v_args(meta=True)
-    def start_after(self, meta, items):
-        return ast.StepStart(self._span(meta), "after", items[0])
+    def b_start_after(self, span, items):
+        return ast.StepStart(span, "after", items[0])
 
-    @v_args(meta=True)
-    def start_when(self, meta, items):
-        return ast.StepStart(self._span(meta), "when", items[0])
+    def b_start_when(self, span, items):
+        return ast.StepStart(span, "when", items[0])
 
-    @v_args(meta=True)
-    def group(self, meta, items):
-        return ast.Group(self._span(meta), str(items[0]), tuple(items[1:]))
+    def b_group(self, span, items):
+        return ast.Group(span, str(items[0]), tuple(items[1:]))
 
     # ---- faults
-    @v_args(meta=True)
-    def faults(self, meta, items):
-        return ast.Block(self._span(meta), "faults", tuple(items))
+    def b_faults(self, span, items):
+        return ast.Block(span, "faults", tuple(items))
 
-    @v_args(meta=True)
-    def fault(self, meta, items):
+    def b_fault(self, span, items):
         timing = items[0] if isinstance(items[0], ast.Timing) else None
         rest = items[1:] if timing else items
-        kind, (target, target_span), settings = rest
-        return ast.FaultDecl(self._span(meta), str(kind), self._tspan(kind), target, target_span,
-                             timing, settings)
+        kind, target, settings = rest
+        return ast.FaultDecl(span, str(kind), self._tspan(kind), target.value, target.span, timing, settings)
 
-    @v_args(meta=True)
-    def target(self, meta, items):
-        return tuple(str(t) for t in items), self._span(meta)
+    def b_target(self, span, items):
+        return _Marked(span, "target", tuple(str(t) for t in items))
 
-    @v_args(meta=True)
-    def at_time(self, meta, items):
-        return ast.Timing(self._span(meta), "at", items[0], None, items[1] if len(items) > 1 else None)
+    def b_at_time(self, span, items):
+        return ast.Timing(span, "at", items[0], None, items[1] if len(items) > 1 else None)
 
-    @v_args(meta=True)
-    def during(self, meta, items):
+    def b_during(self, span, items):
         lo, hi = items[0]
-        return ast.Timing(self._span(meta), "during", lo, hi)
+        return ast.Timing(span, "during", lo, hi)
 
-    @v_args(meta=True)
-    def from_time(self, meta, items):
-        return ast.Timing(self._span(meta), "from", items[0])
+    def b_from_time(self, span, items):
+        return ast.Timing(span, "from", items[0])
 
-    def interval(self, items):
+    def b_interval(self, span, items):
         return items[0], items[1]
 
     # ---- oracles
-    @v_args(meta=True)
-    def expect(self, meta, items):
-        return ast.Block(self._span(meta), "expect", tuple(items))
+    def b_expect(self, span, items):
+        return ast.Block(span, "expect", tuple(items))
 
-    @v_args(meta=True)
-    def oracle(self, meta, items):
+    def b_oracle(self, span, items):
         severity, label = "hard", None
         rest = list(items)
-        if rest and isinstance(rest[0], tuple) and rest[0][0] == "severity":
-            severity = rest.pop(0)[1]
-        if rest and isinstance(rest[0], tuple) and rest[0][0] == "label":
-            label = rest.pop(0)[1]
+        if rest and isinstance(rest[0], _Marked) and rest[0].kind == "severity":
+            severity = rest.pop(0).value
+        if rest and isinstance(rest[0], _Marked) and rest[0].kind == "label":
+            label = rest.pop(0).value
         body = rest[0]
         if isinstance(body, ast.Builtin):
-            return ast.OracleDecl(self._span(meta), severity, label, None, body)
-        return ast.OracleDecl(self._span(meta), severity, label, body)
+            return ast.OracleDecl(span, severity, label, None, body)
+        return ast.OracleDecl(span, severity, label, body)
 
-    def severity(self, items):
-        return ("severity", str(items[0]))
+    def b_severity(self, span, items):
+        return _Marked(span, "severity", str(items[0]))
 
-    def label(self, items):
-        return ("label", str(items[0]))
+    def b_label(self, span, items):
+        return _Marked(span, "label", str(items[0]))
 
-    @v_args(meta=True)
-    def no_clause(self, meta, items):
+    def b_no_clause(self, span, items):
         actor = items[1] if len(items) > 1 else None
-        return ast.Builtin(self._span(meta), "no", str(items[0]), self._tspan(items[0]),
+        return ast.Builtin(span, "no", str(items[0]), self._tspan(items[0]),
                            str(actor) if actor is not None else None,
                            self._tspan(actor) if actor is not None else None)
 
-    @v_args(meta=True)
-    def stay_in_lane(self, meta, items):
-        return ast.Builtin(self._span(meta), "stay_in_lane", settings=items[0] if items else ())
+    def b_stay_in_lane(self, span, items):
+        return ast.Builtin(span, "stay_in_lane", settings=items[0] if items else ())
 
-    @v_args(meta=True)
-    def reach_goal(self, meta, items):
-        return ast.Builtin(self._span(meta), "reach_goal", value=items[0] if items else None)
+    def b_reach_goal(self, span, items):
+        return ast.Builtin(span, "reach_goal", value=items[0] if items else None)
 
-    @v_args(meta=True)
-    def bound(self, meta, items):
+    def b_bound(self, span, items):
         kind, signal = items[0], items[1]
         actor = items[2] if len(items) == 4 else None
-        return ast.Builtin(self._span(meta), str(kind), str(signal), self._tspan(signal),
+        return ast.Builtin(span, str(kind), str(signal), self._tspan(signal),
                            str(actor) if actor is not None else None,
                            self._tspan(actor) if actor is not None else None, items[-1])
 
     # ---- sweeps
-    @v_args(meta=True)
-    def sweep(self, meta, items):
-        return ast.Block(self._span(meta), "sweep", tuple(items))
+    def b_sweep(self, span, items):
+        return ast.Block(span, "sweep", tuple(items))
 
-    @v_args(meta=True)
-    def grid(self, meta, items):
-        return ast.SweepItem(self._span(meta), "grid", str(items[0]), items[1])
+    def b_grid(self, span, items):
+        return ast.SweepItem(span, "grid", str(items[0]), items[1])
 
-    @v_args(meta=True)
-    def sample(self, meta, items):
-        return ast.SweepItem(self._span(meta), items[0], None, items[1], items[2])
+    def b_sample(self, span, items):
+        return ast.SweepItem(span, str(items[0]), None, items[1], items[2])
 
-    def sampler(self, items):
-        return str(items[0])
+    def b_sampler(self, span, items):
+        return _keyword(items[0], self.path)
 
-    @v_args(meta=True)
-    def repeat(self, meta, items):
-        return ast.SweepItem(self._span(meta), "repeat", None, items[0])
+    def b_repeat(self, span, items):
+        return ast.SweepItem(span, "repeat", None, items[0])
 
-    @v_args(meta=True)
-    def sweep_seed(self, meta, items):
-        return ast.SweepItem(self._span(meta), "seed", None, items[0])
+    def b_sweep_seed(self, span, items):
+        return ast.SweepItem(span, "seed", None, items[0])
 
-    @v_args(meta=True)
-    def max_rejections(self, meta, items):
-        return ast.SweepItem(self._span(meta), "max_rejections", None, items[0])
+    def b_max_rejections(self, span, items):
+        return ast.SweepItem(span, "max_rejections", None, items[0])
 
     # ---- expressions
-    @v_args(meta=True)
-    def always(self, meta, items):
-        return self._temporal(meta, "always", items)
+    def b_always(self, span, items):
+        return self._temporal(span, "always", items)
 
-    @v_args(meta=True)
-    def eventually(self, meta, items):
-        return self._temporal(meta, "eventually", items)
+    def b_eventually(self, span, items):
+        return self._temporal(span, "eventually", items)
 
-    def _temporal(self, meta, op, items):
+    def _temporal(self, span, op, items):
         items = [i for i in items if not isinstance(i, Token)]
         window = items[0] if len(items) == 2 else None
-        return ast.TemporalExpr(self._span(meta), op, window, items[-1])
+        return self._deep(ast.TemporalExpr(span, op, window, items[-1]), items[-1])
 
-    @v_args(meta=True)
-    def within(self, meta, items):
-        return ast.Window(self._span(meta), None, items[0])
+    def b_within(self, span, items):
+        return ast.Window(span, None, items[0])
 
-    @v_args(meta=True)
-    def during_window(self, meta, items):
+    def b_during_window(self, span, items):
         lo, hi = items[0]
-        return ast.Window(self._span(meta), lo, hi)
+        return ast.Window(span, lo, hi)
 
-    @v_args(meta=True)
-    def after(self, meta, items):
-        return ast.Window(self._span(meta), items[0], None)
+    def b_after(self, span, items):
+        return ast.Window(span, items[0], None)
 
-    @v_args(meta=True)
-    def until(self, meta, items):
+    def b_until(self, span, items):
         items = [i for i in items if not isinstance(i, Token)]
         window = items[1] if len(items) == 3 else None
-        return ast.UntilExpr(self._span(meta), window, items[0], items[-1])
+        return self._deep(ast.UntilExpr(span, window, items[0], items[-1]), items[0], items[-1])
 
-    @v_args(meta=True)
-    def implies(self, meta, items):
-        return ast.BinaryExpr(self._span(meta), "implies", items[0], items[2])
+    def b_implies(self, span, items):
+        return self._deep(ast.BinaryExpr(span, "implies", items[0], items[2]), items[0], items[2])
 
-    @v_args(meta=True)
-    def or_(self, meta, items):
-        return self._chain(meta, items)
-
-    @v_args(meta=True)
-    def and_(self, meta, items):
-        return self._chain(meta, items)
-
-    @v_args(meta=True)
-    def sum(self, meta, items):
-        return self._chain(meta, items)
-
-    @v_args(meta=True)
-    def product(self, meta, items):
-        return self._chain(meta, items)
-
-    def _chain(self, meta, items):
+    def _chain(self, span, items):
         # Left-associative chain `a op b op c`; each node spans its operands.
         node = items[0]
         for op, right in zip(items[1::2], items[2::2]):
-            span = Span(self.path, node.span.line, node.span.col, right.span.end_line, right.span.end_col)
-            node = ast.BinaryExpr(span, str(op), node, right)
+            node = self._deep(ast.BinaryExpr(Span(self.path, node.span.line, node.span.col, right.span.end_line,
+                                                  right.span.end_col), str(op), node, right), node, right)
         return node
 
-    @v_args(meta=True)
-    def comparison(self, meta, items):
-        return ast.BinaryExpr(self._span(meta), str(items[1]), items[0], items[2])
+    b_or_ = b_and_ = b_sum = b_product = _chain
 
-    @v_args(meta=True)
-    def not_(self, meta, items):
-        return ast.UnaryExpr(self._span(meta), "not", items[-1])
+    def b_add_op(self, span, items):
+        return str(items[0])
 
-    @v_args(meta=True)
-    def neg(self, meta, items):
+    def b_comparison(self, span, items):
+        return self._deep(ast.BinaryExpr(span, str(items[1]), items[0], items[2]), items[0], items[2])
+
+    def b_not_(self, span, items):
+        return self._deep(ast.UnaryExpr(span, "not", items[-1]), items[-1])
+
+    def b_neg(self, span, items):
         arg = items[-1]
         if isinstance(arg, ast.Number):
-            return ast.Number(self._span(meta), -arg.value, arg.unit)
-        return ast.UnaryExpr(self._span(meta), "neg", arg)
+            return self._deep(ast.Number(span, -arg.value, arg.unit), arg)
+        return self._deep(ast.UnaryExpr(span, "neg", arg), arg)
 
-    @v_args(meta=True)
-    def quantity(self, meta, items):
-        value = float(items[0])
+    def b_quantity(self, span, items):
         unit = str(items[1]) if len(items) > 1 else None
-        return ast.Number(self._span(meta), value, unit)
+        return ast.Number(span, float(items[0]), unit)
 
-    @v_args(meta=True)
-    def ref(self, meta, items):
-        return ast.Ref(self._span(meta), tuple(str(t) for t in items))
+    def b_ref(self, span, items):
+        return ast.Ref(span, tuple(str(t) for t in items))
 
-    @v_args(meta=True)
-    def call(self, meta, items):
-        return ast.CallExpr(self._span(meta), str(items[0]), tuple(items[1:]))
+    def b_call(self, span, items):
+        return self._deep(ast.CallExpr(span, str(items[0]), tuple(items[1:])), *items[1:])
 
-    @v_args(meta=True)
-    def list_(self, meta, items):
+    def b_list_(self, span, items):
         unit = None
         if items and isinstance(items[-1], Token) and items[-1].type == "UNIT":
             unit = str(items[-1])
             items = items[:-1]
-        return ast.ListExpr(self._span(meta), tuple(items), unit)
-
-    def __default_token__(self, token):
-        return token
-
-    def __default__(self, data, children, meta):
-        # Bare tokens that reach here as atoms (STRING, TRUE, FALSE).
-        return Tree(data, children, meta)
-
-    def _atom_token(self, tok: Token):
-        span = self._tspan(tok)
-        if tok.type == "STRING":
-            return ast.Str(span, _unquote(tok))
-        if tok.type in ("TRUE", "FALSE"):
-            return ast.Bool(span, tok.type == "TRUE")
-        return tok
-
-    def transform(self, tree):
-        return super().transform(_wrap_atom_tokens(tree, self))
+        return self._deep(ast.ListExpr(span, tuple(items), unit), *items)
 
 
-def _wrap_atom_tokens(tree, conv: _ToAst):
-    """Turn STRING/TRUE/FALSE tokens into AST atoms before the bottom-up transform."""
-    if isinstance(tree, Tree):
-        tree.children = [conv._atom_token(c) if isinstance(c, Token) and c.type in ("STRING", "TRUE", "FALSE")
-                         else _wrap_atom_tokens(c, conv) for c in tree.children]
-    return tree
+class _Keyword(str):
+    """A keyword kept as text (a clause keyword, a sampler), with its position."""
+
+    span: Span
+
+
+def _keyword(tok: Token, path: str) -> _Keyword:
+    word = _Keyword(str(tok))
+    word.span = Span(path, tok.line, tok.column, tok.end_line or tok.line, tok.end_column or tok.column + len(tok))
+    return word
 
 
 _ESCAPES = {"n": "\n", "t": "\t", '"': '"', "\\": "\\"}
