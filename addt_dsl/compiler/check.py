@@ -581,11 +581,17 @@ def _check_actor(ctx: Context, d: ast.ActorDecl) -> P.ActorPlan | None:
     what = "the ego" if d.is_ego else f"agent '{d.name}'"
     vals = check_settings(ctx, d.settings + d.block_settings, ACTOR_SETTINGS, what, d.span)
     length, width = VEHICLE_KINDS[d.vehicle]
-    length = _const_value(vals["length"]) if "length" in vals else length
-    width = _const_value(vals["width"]) if "width" in vals else width
-    if length is None or width is None:
-        ctx.sink.error("E0204", "an actor's size must be constant", d.span)
-        return None
+    body = {"length": length, "width": width, "mass": 1500.0, "wheelbase": 2.7}
+    for key in body:
+        if key in vals:
+            value = _const_value(vals[key])
+            if value is None:
+                span = next(st.value.span for st in d.settings + d.block_settings if st.key == key)
+                ctx.sink.error("E0204", f"'{key}' must be a constant, not a parameter", span,
+                               "the body and dynamics of an actor are fixed for a scenario")
+                return None
+            body[key] = value
+    length, width = body["length"], body["width"]
     placement = _place(ctx, d, vals, length)
     if "goal" in vals and not d.is_ego:
         span = next(s.key_span for s in d.settings + d.block_settings if s.key == "goal")
@@ -622,9 +628,7 @@ def _check_actor(ctx: Context, d: ast.ActorDecl) -> P.ActorPlan | None:
     return P.ActorPlan(
         name=d.name, vehicle=d.vehicle, road=road, lane=lane, s=s,
         speed=vals.get("speed", P.num(0.0)),
-        length_m=length, width_m=width,
-        mass_kg=_const_value(vals["mass"]) if "mass" in vals else 1500.0,
-        wheelbase_m=_const_value(vals["wheelbase"]) if "wheelbase" in vals else 2.7,
+        length_m=length, width_m=width, mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
         goal_s=vals.get("goal"))
 
