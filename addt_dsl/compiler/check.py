@@ -77,6 +77,7 @@ class Context:
     used_params: set[str] = field(default_factory=set)
     read_file: object = None  # callable(path str, span) -> (display, text) | None
     sources: dict[str, str] = field(default_factory=dict)
+    lines: dict[str, list[str]] = field(default_factory=dict)  # sources split, on demand
 
     def defs(self, cls):
         return [d for d in self.scenario.definitions if isinstance(d, cls)]
@@ -1118,8 +1119,10 @@ def _auto_name(ctx: Context, o: ast.OracleDecl) -> str:
 
 
 def _text_of(ctx: Context, span: Span) -> str:
-    text = ctx.sources.get(span.file, "")
-    lines = text.splitlines()
+    """The source text of a one-line span (oracle and constraint texts for reports)."""
+    lines = ctx.lines.get(span.file)
+    if lines is None:
+        lines = ctx.lines[span.file] = ctx.sources.get(span.file, "").splitlines()
     if span.line - 1 < len(lines):
         line = lines[span.line - 1]
         end = span.end_col - 1 if span.end_line == span.line else len(line)

@@ -38,8 +38,11 @@ def check_feasible(plan: ScenarioPlan, ctx: Context) -> bool:
     rejected = probe_feasibility(plan, FEASIBILITY_BUDGET)
     if rejected is None:
         return True
+    from addt_dsl.compiler.check import _text_of
+
     worst = rejected.most_common(1)[0][0] if rejected else ""
-    decl = next((d for d in ctx.defs(ast.AssumeDecl) if d.label == worst), None) or next(
+    decl = next((d for d in ctx.defs(ast.AssumeDecl)
+                 if worst in (d.label, _text_of(ctx, d.expr.span))), None) or next(
         (d for d in ctx.defs(ast.AssumeDecl)), None)
     span = decl.span if decl is not None else ctx.scenario.span
     tried = FEASIBILITY_BUDGET

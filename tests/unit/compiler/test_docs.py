@@ -69,3 +69,12 @@ def test_language_doc_covers_every_construct():
                       "halton", "lhs", "repeat", "max_rejections", "include", "#", '"'):
         assert construct in blocks, f"no example of `{construct}` in docs/language.md"
     assert "| unit" in text.lower() or "unit |" in text.lower()
+
+
+def test_language_doc_names_every_registered_element():
+    from addt_dsl.registry import BEHAVIORS, FAULTS, GEOMETRIES, SENSORS, SIGNALS, STACKS
+
+    text = (DOCS / "language.md").read_text()
+    for table in (BEHAVIORS, FAULTS, GEOMETRIES, SENSORS, SIGNALS, STACKS):
+        for name in table.names():
+            assert f"`{name}" in text, f"docs/language.md does not mention {table.what} `{name}`"
