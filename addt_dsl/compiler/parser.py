@@ -557,32 +557,41 @@ class _Builder:
                 out[name[2:]] = self._wrap(getattr(self, name))
         return out
 
+    # Builders that return containers or words: no span needed, skip computing one.
+    _NO_SPAN = frozenset({"settings", "road_block", "actor_block", "clause_block", "interval", "add_op",
+                          "actor_ref"})
+
     def _wrap(self, build):
         position_only = _POSITION_ONLY
+        needs_span = build.__name__[2:] not in self._NO_SPAN
+        no_span = Span.point("<none>", 1, 1)
 
         def callback(children):
-            first = last = None
-            for c in children:
-                first = _bounds(c)
-                if first is not None:
-                    break
-            for c in reversed(children):
-                last = _bounds(c)
-                if last is not None:
-                    break
-            if first is None:
-                span = Span.point(self.path, 1, 1)
-            else:
-                span = Span(self.path, first[0][0], first[0][1], last[1][0], last[1][1])
+            span = no_span
+            if needs_span:
+                first = last = None
+                for c in children:
+                    first = _bounds(c)
+                    if first is not None:
+                        break
+                if first is None:
+                    span = Span.point(self.path, 1, 1)
+                else:
+                    for c in reversed(children):
+                        last = _bounds(c)
+                        if last is not None:
+                            break
+                    span = Span(self.path, first[0][0], first[0][1], last[1][0], last[1][1])
             items = []
             for c in children:
-                if isinstance(c, Token):
-                    if c.type in position_only:
+                if c.__class__ is Token:
+                    kind = c.type
+                    if kind in position_only:
                         continue
-                    if c.type == "STRING":
+                    if kind == "STRING":
                         c = ast.Str(self._tspan(c), _unquote(c))
-                    elif c.type in ("TRUE", "FALSE"):
-                        c = ast.Bool(self._tspan(c), c.type == "TRUE")
+                    elif kind == "TRUE" or kind == "FALSE":
+                        c = ast.Bool(self._tspan(c), kind == "TRUE")
                 items.append(c)
             return build(span, items)
 
