@@ -78,6 +78,7 @@ class Context:
     read_file: object = None  # callable(path str, span) -> (display, text) | None
     sources: dict[str, str] = field(default_factory=dict)
     lines: dict[str, list[str]] = field(default_factory=dict)  # sources split, on demand
+    current_road: str | None = None  # road of the actor being checked
 
     def defs(self, cls):
         return [d for d in self.scenario.definitions if isinstance(d, cls)]
@@ -594,6 +595,12 @@ def _check_actor(ctx: Context, d: ast.ActorDecl) -> P.ActorPlan | None:
             body[key] = value
     length, width = body["length"], body["width"]
     placement = _place(ctx, d, vals, length)
+    ctx.current_road = placement[0] if placement is not None else None
+    if placement is not None and "goal" in vals and d.is_ego:
+        info = ctx.road_info.get(placement[0])
+        span = next(st.value.span for st in d.settings + d.block_settings if st.key == "goal")
+        if info is not None:
+            check_range(ctx, vals["goal"], 0.0, info.length_m, units.LENGTH, "the goal", span)
     if "goal" in vals and not d.is_ego:
         span = next(s.key_span for s in d.settings + d.block_settings if s.key == "goal")
         ctx.sink.warning("W0002", "only the ego has a goal", span)
@@ -771,7 +778,27 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl) -> P.Clause
                        f"{c.keyword}s: {', '.join(table.names())}")
         return None
     vals = check_settings(ctx, c.settings + c.block, cls.params, f"{c.keyword} '{c.name}'", c.span)
+    if c.keyword == "behavior" and getattr(cls, "channel", "") == "lateral" and "to" in vals:
+        _check_target_lane(ctx, c, vals["to"])
     return P.ClausePlan(keyword=c.keyword, name=c.name, settings=vals)
+
+
+def _check_target_lane(ctx: Context, c: ast.Clause, lane) -> None:
+    """A lane change must aim at a lane of the actor's road."""
+    info = ctx.road_info.get(ctx.current_road or "")
+    if info is None or not info.lane_ids:
+        return
+    span = next((st.value.span for st in c.settings + c.block if st.key == "to"), c.span)
+    lane_c = _int_const(lane)
+    if lane_c is not None:
+        if lane_c not in info.lane_ids:
+            ctx.sink.error("E0301", f"road '{ctx.current_road}' has no lane {lane_c}", span,
+                           f"lanes of '{ctx.current_road}': {', '.join(str(i) for i in info.lane_ids)}")
+        return
+    got = value_range(lane, ctx.param_ranges)
+    if got is not None and (got[0] < min(info.lane_ids) or got[1] > max(info.lane_ids)):
+        ctx.sink.error("E0301", f"the target lane can be outside the lanes of '{ctx.current_road}'", span,
+                       f"it spans [{got[0]:g}, {got[1]:g}]; lanes: {', '.join(str(i) for i in info.lane_ids)}")
 
 
 def _lower_step(ctx: Context, node, actor: ast.ActorDecl) -> P.TriggerPlan | None:
