@@ -148,6 +148,57 @@ def _curated_hint(token: Token, expected: set[str], text: str) -> list[str]:
     return hints
 
 
+_DEFINITION_LINE = re.compile(r"\s*(agent\s+\w+\s+\w+|ego\s+(car|truck)\b|param\s+\w+\s*=|road\s+\w+\s+(\{|import)|"
+                              r"(faults|expect|sweep)\s*\{|(assume|keep)\s|include\s+\")")
+_DEFINITION_OPENER = re.compile(r"\s*(road|agent|ego|faults|expect|sweep)\b")
+
+
+def _line_offset(text: str, line_no: int) -> int:
+    pos = 0
+    for _ in range(line_no - 1):
+        pos = text.find("\n", pos) + 1
+        if pos == 0:
+            return len(text)
+    return pos
+
+
+def _open_brace_at(text: str, line_no: int) -> tuple[int, int, str] | None:
+    """(line, col, text of that line) of the innermost '{' still open where line_no starts."""
+    stack: list[tuple[int, int]] = []
+    line, col, in_string, in_comment, escaped = 1, 0, False, False, False
+    for ch in text:
+        col += 1
+        if ch == "\n":
+            line, col = line + 1, 0
+            in_string = in_comment = False
+            if line >= line_no:
+                break
+            continue
+        if in_comment:
+            continue
+        if in_string:
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
+            elif ch == '"':
+                in_string = False
+            continue
+        if ch == "#":
+            in_comment = True
+        elif ch == '"':
+            in_string = True
+        elif ch == "{":
+            stack.append((line, col))
+        elif ch == "}" and stack:
+            stack.pop()
+    if not stack:
+        return None
+    open_line, open_col = stack[-1]
+    lines = text.split("\n", open_line)
+    return open_line, open_col, lines[open_line - 1] if open_line - 1 < len(lines) else ""
+
+
 def _depth_at(text: str, line_no: int) -> int:
     """Brace depth at the start of a line (strings and comments skipped)."""
     depth, line, in_string, in_comment, escaped = 0, 1, False, False, False
@@ -254,10 +305,12 @@ class _Recovery:
         return bool(self.lines_reported)
 
     def on_error(self, exc: UnexpectedInput) -> bool:
+        ip = getattr(exc, "interactive_parser", None)
+        if ip is not None and self._close_unclosed_block(exc, ip):
+            return True  # reported; read the line again after a virtual '}'
         self.report(exc)
         if len(self.lines_reported) >= MAX_SYNTAX_ERRORS:
             return False
-        ip = getattr(exc, "interactive_parser", None)
         if ip is None:
             return False
         if self._brace_on_next_line(exc):
@@ -278,6 +331,47 @@ class _Recovery:
                             Span.point(self.path, line, getattr(exc, "column", 1) or 1))
             return
         _report_syntax_error(exc, self.path, self.sink, self.text)
+
+    def _close_unclosed_block(self, exc: UnexpectedInput, ip) -> bool:
+        """A definition (`param`, `agent`, `expect { ...`) inside another block means that
+        block's '}' is missing. Report that once, close the block with a virtual '}' and
+        read the line again at the scenario level, so the rest of the file is not blamed."""
+        line_no = getattr(exc, "line", None) or 1
+        if line_no in self.lines_reported or len(self.lines_reported) >= MAX_SYNTAX_ERRORS - 1:
+            return False
+        line_start = _line_offset(self.text, line_no)
+        line = self.text[line_start:self.text.find("\n", line_start)]
+        if not _DEFINITION_LINE.match(line):
+            return False
+        opened = _open_brace_at(self.text, line_no)
+        if opened is None or _DEFINITION_OPENER.match(opened[2]) is None:
+            return False
+        state = ip.parser_state
+        rbrace = Token("RBRACE", "}", line_start, line_no, 1, line_no, 1, line_start)
+        newline = Token("_NL", "\n", line_start, line_no, 1, line_no, 1, line_start)
+        trial = state.copy(deepcopy_values=False)
+        while True:  # drop this line's partial statement until a '}' fits
+            probe = trial.copy(deepcopy_values=False)
+            try:
+                probe.feed_token(rbrace)
+                probe.feed_token(newline)
+                break
+            except UnexpectedInput:
+                if len(trial.state_stack) <= 1:
+                    return False
+                trial.state_stack.pop()
+                trial.value_stack.pop()
+        indent = len(line) - len(line.lstrip())
+        self.lines_reported.add(line_no)
+        word = line.split()[0]
+        self.sink.error("E0001", f"`{word}` cannot stand inside the block opened at line {opened[0]}",
+                        Span(self.path, line_no, indent + 1, line_no, indent + 1 + len(word)),
+                        f"is the '}}' of the block at {self.path}:{opened[0]}:{opened[1]} missing?")
+        state.state_stack[:] = probe.state_stack
+        state.value_stack[:] = probe.value_stack
+        counter = ip.lexer_thread.state.line_ctr
+        counter.char_pos, counter.line, counter.column, counter.line_start_pos = line_start, line_no, 1, line_start
+        return True
 
     def _brace_on_next_line(self, exc: UnexpectedInput) -> bool:
         if not (isinstance(exc, UnexpectedToken) and exc.token.type == "_NL" and "LBRACE" in (exc.expected or ())):
