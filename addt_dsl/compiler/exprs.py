@@ -211,15 +211,24 @@ class ExprLowering:
         return E.Binary(op=op, left=left, right=right), lty
 
     def window(self, window: ast.Window | None):
-        """Lower a time window to (lo_s, hi_s) constants; parameters are allowed."""
+        """Lower a time window to (lo_s, hi_s): finite, non-negative constants."""
         if window is None:
             return E.Num(value=0.0), None
         lo = self.lower_value(window.lo, units.TIME, "a window bound") if window.lo is not None else E.Num(value=0.0)
         hi = self.lower_value(window.hi, units.TIME, "a window bound") if window.hi is not None else None
+        if lo is None or (window.hi is not None and hi is None):
+            return None, None
         for bound in (lo, hi):
             if bound is not None and E.params_used(bound):
                 self.sink.error("E0204", "window bounds must be constants, not parameters", window.span)
                 return None, None
+            if bound is not None:
+                value = E.eval_param_expr(bound, {})
+                if not (math.isfinite(value) and value >= 0.0):
+                    self.sink.error("E0301", "a window bound must be a finite time >= 0 s", window.span,
+                                    "windows are relative to the current instant: `within 5 s`, "
+                                    "`during [2 s, 5 s]`")
+                    return None, None
         return lo, hi
 
     def _TemporalExpr(self, node: ast.TemporalExpr):
