@@ -427,19 +427,22 @@ def rule_roads(ctx: Context) -> None:
         if d.import_path is not None:
             _import_road(ctx, d)
             continue
-        segments, lanes, lanes_item = [], None, None
+        segments, lanes, lanes_item, broken = [], None, None, False
         for item in d.items:
             cls = GEOMETRIES.get(item.kind)
             if cls is None:
+                broken = True
                 ctx.sink.error("E0106", f"unknown road element '{item.kind}'", item.span,
                                *_suggest(item.kind, GEOMETRIES.names()),
                                f"road elements: {', '.join(GEOMETRIES.names())}")
                 continue
             vals = check_settings(ctx, item.settings, cls.params, f"'{item.kind}'", item.span)
             if any(p.required and p.name not in vals for p in cls.params):
+                broken = True
                 continue  # reported by check_settings
             consts = {k: _const_value(v) if not isinstance(v, str) else v for k, v in vals.items()}
             if any(v is None for v in consts.values()):
+                broken = True
                 ctx.sink.error("E0204", "road geometry must use constants, not parameters", item.span)
                 continue
             spec = {p.name: p.default for p in cls.params}
@@ -463,6 +466,8 @@ def rule_roads(ctx: Context) -> None:
                 segments.append(P.SegmentPlan(kind="param_poly3", length_m=spec["length"], coefficients=[
                     spec[k] for k in ("au", "bu", "cu", "du", "av", "bv", "cv", "dv")]))
         if not segments:
+            if broken:
+                continue
             ctx.sink.error("E0103", f"road '{d.name}' has no geometry", d.span, "add e.g. `line length 500 m`")
             continue
         lanes = lanes or {p.name: p.default for p in GEOMETRIES.get("lanes").params}
