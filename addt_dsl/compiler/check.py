@@ -119,9 +119,14 @@ def _const_value(expr) -> float | None:
         return None
 
 
-def _fmt(value, dim) -> str:
+def _fmt(value, dim, unit: str | None = None) -> str:
+    """An SI value for a message: in `unit` when the source used one (`20 %`, `72 km/h`),
+    else in the dimension's canonical unit."""
     if value is None:
         return "…"
+    if unit is not None and unit in units.UNITS:
+        shown = value / units.UNITS[unit].factor
+        return f"{shown:.6g} {unit}" if unit != "%" else f"{shown:.6g} %"
     return units.format_si(value, dim or units.DIMENSIONLESS)
 
 
@@ -130,7 +135,7 @@ def _range_text(lo, hi, dim) -> str:
 
 
 def check_range(ctx: Context, expr, spec_low, spec_high, dim, what: str, span: Span,
-                integer: bool = False, code: str = "E0301") -> bool:
+                integer: bool = False, code: str = "E0301", unit: str | None = None) -> bool:
     """Check a value against [spec_low, spec_high]; a parameter-dependent value is checked
     over its parameters' ranges (interval arithmetic). False after reporting."""
     const = _const_value(expr)
@@ -142,8 +147,9 @@ def check_range(ctx: Context, expr, spec_low, spec_high, dim, what: str, span: S
             ctx.sink.error("E0204", f"{what} must be a whole number", span)
             return False
         if (spec_low is not None and const < spec_low) or (spec_high is not None and const > spec_high):
-            ctx.sink.error(code, f"{what} = {_fmt(const, dim)} is outside {_range_text(spec_low, spec_high, dim)}",
-                           span)
+            shown = f"{_fmt(const, dim, unit)} = {_fmt(const, dim)}" if unit in ("%", "km/h", "mph", "ms") \
+                else _fmt(const, dim)
+            ctx.sink.error(code, f"{what} = {shown} is outside {_range_text(spec_low, spec_high, dim)}", span)
             return False
         return True
     got = value_range(expr, ctx.param_ranges)
@@ -218,7 +224,7 @@ def lower_setting(ctx: Context, low: ExprLowering, st: ast.Setting, spec: ParamS
     if expr is None:
         return None
     if not check_range(ctx, expr, spec.low, spec.high, spec.dim, f"'{st.key}'", v.span,
-                       integer=spec.kind == "int"):
+                       integer=spec.kind == "int", unit=_source_unit(v)):
         return None
     return expr
 
@@ -1211,8 +1217,11 @@ def rule_sweep(ctx: Context) -> None:
                     outside = [v for v in vals if v < p.low - 1e-12 or v > p.high + 1e-12]
                     if outside:
                         dim = ctx.param_dims[item.name]
-                        ctx.sink.error("E0301", f"grid value {_fmt(outside[0], dim)} is outside the range of "
-                                       f"'{item.name}' {_range_text(p.low, p.high, dim)}", item.value.span)
+                        unit = item.value.unit or _source_unit(ctx.params_ast[item.name].default)
+                        ctx.sink.error("E0301", f"grid value {_fmt(outside[0], dim, unit)} is outside the range of "
+                                       f"'{item.name}' [{_fmt(p.low, dim, unit)}, {_fmt(p.high, dim, unit)}]",
+                                       item.value.span, "a parameter's range is its domain: widen it to "
+                                       "include the grid")
                         continue
                 if p is not None and p.integer and any(abs(v - round(v)) > INT_EPS for v in vals):
                     ctx.sink.error("E0204", f"'{item.name}' is an integer parameter; the grid has fractions",
@@ -1246,6 +1255,10 @@ def rule_sweep(ctx: Context) -> None:
             ctx.sink.warning("W0002", f"`{sampler.kind}` has nothing to sample", sampler_span,
                              "give a parameter a range (`in [low, high]`) that no grid fixes")
     ctx.sweep = P.SweepPlan(grid=grid, sampler=sampler, repeat=repeat, seed=seed, max_rejections=max_rej)
+
+
+def _source_unit(node) -> str | None:
+    return node.unit if isinstance(node, ast.Number) else None
 
 
 def _int_of(ctx: Context, node, what: str, lo: int, hi: int) -> int | None:
