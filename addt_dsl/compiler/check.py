@@ -923,7 +923,7 @@ def rule_faults(ctx: Context) -> None:
     sensors = {c.name for c in clauses if c.keyword == "sensor"} or {DEFAULT_SENSOR.name}
     stack_name = next((c.name for c in clauses if c.keyword == "stack"), DEFAULT_STACK.name)
     stack_cls = STACKS.get(stack_name)
-    sites = stack_cls.fault_sites() if stack_cls else set()
+    sites = _fault_sites(ctx, stack_cls) if stack_cls else set()
     nodes = set(stack_cls.nodes) if stack_cls else set()
     for block in ctx.blocks("faults"):
         for f in block.items:
@@ -952,6 +952,23 @@ def rule_faults(ctx: Context) -> None:
             ctx.faults.append(P.FaultPlan(kind=f.kind, target=target, start_s=start, end_s=end, settings=vals,
                                           seed=_int_const(seed) if seed is not None else None,
                                           source=f"{f.span.file}:{f.span.line}"))
+
+
+def _fault_sites(ctx: Context, stack_cls) -> set[str]:
+    """The stack's fault sites for the ego's stack settings (a stack whose sites depend on
+    its settings, e.g. tensor sites with `perception learned`, takes them as an argument)."""
+    import inspect
+
+    try:
+        takes_settings = len(inspect.signature(stack_cls.fault_sites).parameters) >= 1
+    except (TypeError, ValueError):
+        takes_settings = False
+    if not takes_settings:
+        return set(stack_cls.fault_sites())
+    ego = ctx.actors.get("ego")
+    lowered = ego.stack.settings if ego is not None and ego.stack is not None else {}
+    settings = {k: v if isinstance(v, str) else _const_value(v) for k, v in lowered.items()}
+    return set(stack_cls.fault_sites({k: v for k, v in settings.items() if v is not None}))
 
 
 def _check_window(ctx: Context, start, end, span: Span) -> bool:
