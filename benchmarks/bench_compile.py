@@ -45,7 +45,7 @@ def scenario(i: int, rng: random.Random) -> str:
              "  param drop_rate = 5 % in [0 %, 20 %]",
              f"  param react = 1 s in [0.5 s, 2 s] dist normal sd {rng.choice([0.2, 0.3])} s",
              "  assume headway: gap > lead_speed * 0.5 s",
-             f"  ego car on main lane -1 at {rng.randint(10, 40)} m speed {rng.randint(15, 25)} m/s goal 900 m {{",
+             f"  ego car on main lane -1 at {rng.randint(10, 40)} m speed {rng.randint(15, 25)} m/s goal 550 m {{",
              f"    stack bev cruise_speed {rng.randint(20, 28)} m/s",
              f"    sensor lidar rate {rng.choice([10, 20])} Hz range {rng.choice([60, 80, 100])} m x 1.5 m z 1.8 m",
              "  }",
