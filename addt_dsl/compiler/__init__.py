@@ -40,6 +40,7 @@ class _Loader:
         self.root = root.resolve()
         self.sink = sink
         self.sources = sources
+        self.included: set[Path] = set()  # each file is read and parsed at most once
 
     def display(self, path: Path) -> str:
         try:
@@ -175,6 +176,9 @@ def _resolve_includes(includes, base: Path, loader: _Loader, stack: list[str]) -
             loader.sink.error("E0108", f"including '{inc.path}' again makes an include cycle", inc.span,
                               "include chain: " + " → ".join([*stack, display]))
             continue
+        if path in loader.included:
+            continue  # included once already (a diamond): its definitions are in
+        loader.included.add(path)
         data = loader.read_bytes(path, inc.path, inc.span, MAX_INCLUDED_BYTES)
         if data is None:
             continue

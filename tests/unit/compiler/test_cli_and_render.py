@@ -102,3 +102,14 @@ def test_nested_include_stays_confined_to_the_main_directory(tmp_path):
 def test_directory_and_missing_file(tmp_path):
     assert compile_file(tmp_path).diagnostics[0].code == "E0401"
     assert compile_file(tmp_path / "nope.addt").diagnostics[0].code == "E0401"
+
+
+def test_diamond_includes_are_read_once_so_work_stays_linear(tmp_path):
+    # Each level includes the next one twice: without include-once this is 2**15 parses.
+    for i in range(15):
+        (tmp_path / f"l{i}.addt").write_text(f'include "l{i + 1}.addt"\ninclude "l{i + 1}.addt"\n')
+    (tmp_path / "l15.addt").write_text("param shared = 1 m\n")
+    (tmp_path / "main.addt").write_text('include "l0.addt"\n' + _scenario(
+        "  road r { line length 100 m }\n  ego car on r lane -1 at shared"))
+    result = compile_file(tmp_path / "main.addt")
+    assert result.ok, result.diagnostics
