@@ -20,6 +20,7 @@ from addt_dsl.plan import ScenarioPlan
 MAX_INCLUDE_DEPTH = 16
 MAX_INCLUDED_BYTES = parser.MAX_SOURCE_BYTES  # an .addt file, main or included
 MAX_IMPORT_BYTES = 50_000_000  # an imported .xodr file
+MAX_TOTAL_BYTES = 200_000_000  # everything one compilation may read
 
 
 @dataclass
@@ -41,6 +42,8 @@ class _Loader:
         self.sink = sink
         self.sources = sources
         self.included: set[Path] = set()  # each file is read and parsed at most once
+        self.texts: dict[Path, tuple[str, str]] = {}  # imports read once per compilation
+        self.bytes_read = 0
 
     def display(self, path: Path) -> str:
         try:
@@ -74,16 +77,23 @@ class _Loader:
         if len(data) > limit:
             self.sink.error("E0401", f"'{relative}' is too large (limit {limit} bytes)", span)
             return None
+        self.bytes_read += len(data)
+        if self.bytes_read > MAX_TOTAL_BYTES:
+            self.sink.error("E0401", f"reading '{relative}' exceeds the {MAX_TOTAL_BYTES} bytes one compilation "
+                            "may read", span)
+            return None
         return data
 
     def read_text(self, relative: str, base: Path, span: Span) -> tuple[str, str] | None:
         path = self.resolve(relative, base, span)
         if path is None:
             return None
-        data = self.read_bytes(path, relative, span, MAX_IMPORT_BYTES)
-        if data is None:
-            return None
-        return self.display(path), data.decode("utf-8", errors="replace")
+        if path not in self.texts:
+            data = self.read_bytes(path, relative, span, MAX_IMPORT_BYTES)
+            if data is None:
+                return None
+            self.texts[path] = (self.display(path), data.decode("utf-8", errors="replace"))
+        return self.texts[path]
 
 
 def compile_file(path: str | Path) -> CompileResult:

@@ -79,6 +79,7 @@ class Context:
     sources: dict[str, str] = field(default_factory=dict)
     lines: dict[str, list[str]] = field(default_factory=dict)  # sources split, on demand
     current_road: str | None = None  # road of the actor being checked
+    xodr_networks: dict = field(default_factory=dict)  # parsed imports by file
 
     def defs(self, cls):
         return [d for d in self.scenario.definitions if isinstance(d, cls)]

@@ -14,8 +14,9 @@ def check_xodr(ctx, text: str, display: str, span: Span, road_value):
     from addt_dsl.expr import eval_param_expr
     from addt_dsl.runtime.road import XodrError, parse_xodr
 
+    cache = ctx.xodr_networks  # one parse per file, however many roads import it
     try:
-        network = parse_xodr(text, display)
+        network = cache.get(display) or cache.setdefault(display, parse_xodr(text, display))
     except XodrError as exc:
         where = f"{display}:{exc.line}" if getattr(exc, "line", None) else display
         ctx.sink.error("E0403", f"cannot use {display}: {exc.message if hasattr(exc, 'message') else exc}",

@@ -113,3 +113,19 @@ def test_diamond_includes_are_read_once_so_work_stays_linear(tmp_path):
         "  road r { line length 100 m }\n  ego car on r lane -1 at shared"))
     result = compile_file(tmp_path / "main.addt")
     assert result.ok, result.diagnostics
+
+
+def test_imports_of_one_file_are_read_and_parsed_once(tmp_path, monkeypatch):
+    import shutil
+
+    from addt_dsl.runtime import road
+
+    shutil.copy(REPO / "examples" / "maps" / "straight_500m.xodr", tmp_path / "map.xodr")
+    roads = "\n".join(f'  road r{i} import "map.xodr"' for i in range(50))
+    (tmp_path / "main.addt").write_text(_scenario(roads + "\n  ego car on r0 lane -1 at 10 m"))
+    calls = []
+    real = road.parse_xodr
+    monkeypatch.setattr(road, "parse_xodr", lambda *a, **k: calls.append(1) or real(*a, **k))
+    result = compile_file(tmp_path / "main.addt")
+    assert result.ok, result.diagnostics
+    assert len(calls) == 1 and len(result.plan.roads) == 50
