@@ -8,6 +8,9 @@ Error recovery is panic mode, as in yacc's `error` token: after a syntax error t
 parser skips tokens to the end of the statement (a newline or a closing brace outside
 any brace opened on the way), then pops parser states until that token fits, feeds it
 and goes on. One run therefore reports every broken statement, not just the first.
+Two repairs avoid cascades: a block's `{` on the line after its header is read as if on
+the header's line, and a definition (`param`, `agent`, `expect {`) inside another block
+closes that block with a virtual `}` (its `}` is missing) and is read again.
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ class _Callbacks:
         if data.startswith("_"):  # an inlined rule: lark splices its children into the parent
             return Tree(data, children)
         raise RuntimeError(f"no AST builder for grammar rule '{data}'")
+
 
 _PARSE_LOCK = threading.Lock()  # the builder holds the current file name
 
