@@ -36,6 +36,10 @@ ACTOR_SETTINGS = (
     ParamSpec("width", units.LENGTH, low=0.1, high=5.0, doc="body width"),
     ParamSpec("mass", units.MASS, default=1500.0, low=50.0, high=60000.0, doc="mass"),
     ParamSpec("wheelbase", units.LENGTH, default=2.7, low=0.5, high=10.0, doc="wheelbase"),
+    ParamSpec("mu", units.DIMENSIONLESS, default=0.8, low=0.05, high=1.5,
+              doc="tyre-road friction coefficient (0.8 dry asphalt, 0.5 wet, 0.1 ice)"),
+    ParamSpec("offset", units.LENGTH, default=0.0, low=-20.0, high=20.0,
+              doc="start offset from the lane centre, left positive (e.g. a pedestrian on the kerb)"),
 )
 
 VEHICLE_KINDS = {"car": (4.6, 1.9), "truck": (12.0, 2.5), "pedestrian": (0.5, 0.5), "cyclist": (1.8, 0.6)}
@@ -650,7 +654,7 @@ def _check_actor(ctx: Context, d: ast.ActorDecl) -> P.ActorPlan | None:
         speed=vals.get("speed", P.num(0.0)),
         length_m=length, width_m=width, mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
-        goal_s=vals.get("goal"))
+        goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"))
 
 
 def _place(ctx: Context, d: ast.ActorDecl, vals: dict, length: float):
