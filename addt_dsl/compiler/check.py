@@ -130,9 +130,9 @@ def _fmt(value, dim, unit: str | None = None) -> str:
     if value is None:
         return "…"
     if unit is not None and unit in units.UNITS:
-        shown = value / units.UNITS[unit].factor
-        return f"{shown:.6g} {unit}" if unit != "%" else f"{shown:.6g} %"
-    return units.format_si(value, dim or units.DIMENSIONLESS)
+        return f"{value / units.UNITS[unit].factor:.6g} {unit}"
+    canonical = units.CANONICAL_UNIT.get(dim or units.DIMENSIONLESS)
+    return f"{value:.6g} {canonical}" if canonical else f"{value:.6g}"
 
 
 def _range_text(lo, hi, dim) -> str:
@@ -796,6 +796,16 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl) -> P.Clause
     vals = check_settings(ctx, c.settings + c.block, cls.params, f"{c.keyword} '{c.name}'", c.span)
     if c.keyword == "behavior" and getattr(cls, "channel", "") == "lateral" and "to" in vals:
         _check_target_lane(ctx, c, vals["to"])
+    for spec in cls.params:  # a `name` setting of a behaviour names another actor
+        if c.keyword == "behavior" and spec.kind == "name" and isinstance(vals.get(spec.name), str):
+            other = vals[spec.name]
+            if other not in ctx.actors_ast or other == actor.name:
+                span = next(st.value.span for st in c.settings + c.block if st.key == spec.name)
+                pool = [a for a in ctx.actors_ast if a != actor.name]
+                ctx.sink.error("E0101", f"unknown actor '{other}'" if other != actor.name
+                               else f"'{other}' cannot {c.name} itself", span, *_suggest(other, pool),
+                               f"actors: {', '.join(sorted(pool))}")
+                return None
     return P.ClausePlan(keyword=c.keyword, name=c.name, settings=vals)
 
 

@@ -656,11 +656,13 @@ class _Builder:
         return out
 
     # Builders that return containers or words: no span needed, skip computing one.
-    _NO_SPAN = frozenset({"settings", "road_block", "actor_block", "clause_block", "interval", "add_op",
-                          "actor_ref"})
+    _NO_SPAN = frozenset({"settings", "clause_settings", "road_block", "actor_block", "clause_block", "interval",
+                          "add_op", "actor_ref", "clause_key"})
+    # Builders that see the keyword tokens other builders drop (a keyword used as a key).
+    _RAW = frozenset({"clause_key"})
 
     def _wrap(self, build):
-        position_only = _POSITION_ONLY
+        position_only = frozenset() if build.__name__[2:] in self._RAW else _POSITION_ONLY
         needs_span = build.__name__[2:] not in self._NO_SPAN
         no_span = Span.point("<none>", 1, 1)
 
@@ -722,6 +724,15 @@ class _Builder:
 
     def b_settings(self, span, items):
         return tuple(items)
+
+    b_clause_settings = b_settings
+
+    def b_clause_setting(self, span, items):
+        key, value = items
+        return ast.Setting(span, str(key), key.span, value)
+
+    def b_clause_key(self, span, items):
+        return _keyword(items[0], self.path)
 
     b_setting_line = b_setting
 
