@@ -216,7 +216,7 @@ def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
     tried = 0
     n_cells = math.prod(len(v) for _, v in axes)
     per_cell = max(1, budget // max(1, min(n_cells, budget)))
-    rng = np.random.default_rng(derive_seed(plan.seed, 15485863))
+    rng = np.random.default_rng(derive_seed(plan.seed, 15485863)) if sampled else None
     for combo in itertools.islice(itertools.product(*[v for _, v in axes]), budget):
         base = {**nominal, **dict(zip([a for a, _ in axes], combo))}
         if sampled:

@@ -8,6 +8,7 @@ statement is reported and skipped, the rest is still checked.
 from __future__ import annotations
 
 import difflib
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -84,6 +85,7 @@ class Context:
     lines: dict[str, list[str]] = field(default_factory=dict)  # sources split, on demand
     current_road: str | None = None  # road of the actor being checked
     xodr_networks: dict = field(default_factory=dict)  # parsed imports by file
+    _scopes: dict = field(default_factory=dict)
 
     def defs(self, cls):
         return [d for d in self.scenario.definitions if isinstance(d, cls)]
@@ -92,12 +94,19 @@ class Context:
         return [d for d in self.scenario.definitions if isinstance(d, ast.Block) and d.kind == kind]
 
     def scope(self, signals: bool) -> Scope:
+        # Built once per kind after the parameters are known (scopes are read-only).
+        key = (signals, len(self.param_dims), len(self.actors_ast))
+        cached = self._scopes.get(key)
+        if cached is not None:
+            return cached
         nodes = set()
         for clause in self._ego_stack_clauses():
             cls = STACKS.get(clause)
             if cls is not None:
                 nodes |= set(cls.nodes)
-        return Scope(dict(self.param_dims), set(self.actors_ast), nodes | {"e2e"}, signals, self.used_params)
+        scope = Scope(dict(self.param_dims), set(self.actors_ast), nodes | {"e2e"}, signals, self.used_params)
+        self._scopes[key] = scope
+        return scope
 
     def _ego_stack_clauses(self):
         ego = self.actors_ast.get("ego")
@@ -972,18 +981,22 @@ def rule_faults(ctx: Context) -> None:
 def _fault_sites(ctx: Context, stack_cls) -> set[str]:
     """The stack's fault sites for the ego's stack settings (a stack whose sites depend on
     its settings, e.g. tensor sites with `perception learned`, takes them as an argument)."""
-    import inspect
-
-    try:
-        takes_settings = len(inspect.signature(stack_cls.fault_sites).parameters) >= 1
-    except (TypeError, ValueError):
-        takes_settings = False
-    if not takes_settings:
+    if not _takes_settings(stack_cls):
         return set(stack_cls.fault_sites())
     ego = ctx.actors.get("ego")
     lowered = ego.stack.settings if ego is not None and ego.stack is not None else {}
     settings = {k: v if isinstance(v, str) else _const_value(v) for k, v in lowered.items()}
     return set(stack_cls.fault_sites({k: v for k, v in settings.items() if v is not None}))
+
+
+@functools.lru_cache(maxsize=None)
+def _takes_settings(stack_cls) -> bool:
+    import inspect
+
+    try:
+        return len(inspect.signature(stack_cls.fault_sites).parameters) >= 1
+    except (TypeError, ValueError):
+        return False
 
 
 def _check_window(ctx: Context, start, end, span: Span) -> bool:
