@@ -37,12 +37,23 @@ def _compile(path: str, fmt: str):
 
 
 def cmd_check(args) -> int:
+    """Compile every file (one process: the grammar is built once). With `--format json`,
+    one JSON array holds the diagnostics of all files (each names its file)."""
+    from addt_dsl.compiler import compile_file
+
     failed = False
+    collected = []
     for path in args.files:
-        result = _compile(path, args.format)
+        if args.format == "json":
+            result = compile_file(path)
+            collected.extend(result.diagnostics)
+        else:
+            result = _compile(path, args.format)
+            if result.ok:
+                print(f"ok: {path}")
         failed |= not result.ok
-        if result.ok and args.format != "json":
-            print(f"ok: {path}")
+    if args.format == "json":
+        print(render_json(collected))
     return EXIT_ERROR if failed else EXIT_OK
 
 

@@ -50,8 +50,21 @@ def make_spec(plan: ScenarioPlan, params: dict[str, float], seed: int, run_id: s
                    run_id=run_id, cell=cell or {}, repeat_index=repeat_index)
 
 
+def assumption_key(a) -> str:
+    """How reports name a constraint: its label, else its source text."""
+    return a.name or a.text
+
+
 def violated_assumptions(plan: ScenarioPlan, params: dict[str, float]) -> list[str]:
-    return [a.text for a in plan.assumptions if not eval_param_expr(a.expr, params)]
+    return [assumption_key(a) for a in plan.assumptions if not _holds(a.expr, params)]
+
+
+def _holds(expr, params: dict[str, float]) -> bool:
+    try:
+        value = eval_param_expr(expr, params)
+    except (ValueError, OverflowError, ZeroDivisionError):  # e.g. sqrt of a negative: not a valid sample
+        return False
+    return bool(value) and not math.isnan(value)
 
 
 def _halton(index: int, base: int) -> float:
@@ -147,8 +160,7 @@ def _cells_and_sampled(plan: ScenarioPlan):
     axes = [(g.param, g.values) for g in plan.sweep.grid]
     grid_cells = [dict(zip([a for a, _ in axes], combo)) for combo in
                   itertools.product(*[v for _, v in axes])] or [{}]
-    sampled = [p for p in plan.params if p.name not in {a for a, _ in axes}
-               and (p.low is not None and p.high is not None and p.low < p.high or p.choices)]
+    sampled = _sampled_params(plan, {a for a, _ in axes})
     return grid_cells, sampled
 
 
@@ -183,6 +195,47 @@ def _iter_specs(plan: ScenarioPlan, rejected: Counter):
                 seed = derive_seed(plan.seed, sweep.seed, ci, si, r)
                 run_id = f"c{ci:03d}" + (f"-s{si:04d}" if sweep.sampler else "") + f"-r{r:03d}"
                 yield make_spec(plan, params, seed, run_id, cell, r)
+
+
+def _sampled_params(plan: ScenarioPlan, gridded: set[str]) -> list[ParamPlan]:
+    return [p for p in plan.params if p.name not in gridded
+            and (p.low is not None and p.high is not None and p.low < p.high or p.choices)]
+
+
+def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
+    """Try up to `budget` candidate assignments the sweep could produce; None as soon as
+    one satisfies every assumption, else the rejection counts (the scenario is
+    unsatisfiable as far as the probe can tell). Cheap enough to run at compile time."""
+    if not plan.assumptions:
+        return None
+    sweep = plan.sweep
+    nominal = plan.nominal_params()
+    axes = [(g.param, g.values) for g in sweep.grid]
+    sampled = _sampled_params(plan, {a for a, _ in axes}) if sweep.sampler else []
+    rejected: Counter = Counter()
+    tried = 0
+    n_cells = math.prod(len(v) for _, v in axes)
+    per_cell = max(1, budget // max(1, min(n_cells, budget)))
+    rng = np.random.default_rng(derive_seed(plan.seed, 15485863)) if sampled else None
+    for combo in itertools.islice(itertools.product(*[v for _, v in axes]), budget):
+        base = {**nominal, **dict(zip([a for a, _ in axes], combo))}
+        if sampled:
+            n = max(1, min(budget - tried, per_cell))
+            kind = sweep.sampler.kind if sweep.sampler.kind != "halton" else "random"
+            rows = _unit_samples(kind, n, len(sampled), rng, 0)
+            candidates = ({**base, **{p.name: _from_unit(p, float(u)) for p, u in zip(sampled, row)}}
+                          for row in rows)  # lazy: most scenarios accept the first one
+        else:
+            candidates = iter([base])
+        for params in candidates:
+            tried += 1
+            broken = violated_assumptions(plan, params)
+            if not broken:
+                return None
+            rejected.update(broken)
+        if tried >= budget:
+            break
+    return rejected
 
 
 def _sample_cell(plan, base, sampled, cell_index, rejected):

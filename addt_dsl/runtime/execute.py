@@ -27,6 +27,7 @@ from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.roadmesh import Elevation, build_scene
 from addt_dsl.runtime.roadspec import build_network
+from addt_dsl.runtime.script import Script
 from addt_dsl.runtime.signals import compute_signals
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
@@ -158,7 +159,7 @@ class _Run:
         self.agent_plans: dict[str, ActorPlan] = {}
         self.agent_roads: dict[str, _Road] = {}
         self.longitudinal: dict[str, object] = {}
-        self.pending_triggers: dict[str, list] = {}
+        self.scripts: dict[str, Script] = {}
         for a in plan.agents:
             road = self._road_of(a)
             lane = int(round(spec.value(a.lane)))
@@ -173,8 +174,8 @@ class _Run:
             self.longitudinal[a.name] = None
             for clause in a.behaviors:
                 self._start_behavior(st, clause, 0.0)
-            self.pending_triggers[a.name] = [
-                (substitute_params(tr.condition, spec.params), tr.clause) for tr in a.triggers]
+            if a.triggers:
+                self.scripts[a.name] = Script(a.triggers, spec)
         self.agent_by_name = {a.name: a for a in self.agents}
         self.body_actor = {}
         self.contacts: set[tuple[str, str]] = set()  # actor pairs overlapping at the last step
@@ -346,9 +347,9 @@ def _loop(run: _Run) -> Trace:
             last = k + 1
             break
 
-        # Triggers fire on the state just recorded.
-        if any(run.pending_triggers.values()):
-            _fire_triggers(run, rec, k, t_now)
+        # Scripted steps fire on the state just recorded.
+        if run.scripts:
+            _advance_scripts(run, rec, k, t_now)
 
         # Sensors → faults → transit to the stack.
         try:
@@ -449,18 +450,26 @@ def _clearances(rec, k, names, poses, sizes, run, t_now) -> bool:
     return collided
 
 
-def _fire_triggers(run: _Run, rec, k: int, t_now: float) -> None:
-    snapshot = _snapshot_trace(run, rec, k)
-    for name, pending in run.pending_triggers.items():
-        still = []
-        for condition, clause in pending:
-            sig = compute_signals(snapshot, oracles_signals(condition))
-            if oracles.satisfied(condition, sig, run.dt):
-                run.events.append(Event(t_now, "trigger", {"actor": name, "behavior": clause.name}))
-                run._start_behavior(run.agent_by_name[name], clause, t_now)
-            else:
-                still.append((condition, clause))
-        run.pending_triggers[name] = still
+def _advance_scripts(run: _Run, rec, k: int, t_now: float) -> None:
+    snapshot = None
+
+    def holds(condition) -> bool:
+        nonlocal snapshot
+        if snapshot is None:
+            snapshot = _snapshot_trace(run, rec, k)
+        sig = compute_signals(snapshot, oracles_signals(condition))
+        return bool(oracles.satisfied(condition, sig, run.dt))
+
+    for name, script in list(run.scripts.items()):
+        agent = run.agent_by_name[name]
+
+        def start(clause, time_s, _agent=agent, _name=name) -> None:
+            run.events.append(Event(time_s, "trigger", {"actor": _name, "behavior": clause.name}))
+            run._start_behavior(_agent, clause, time_s)
+
+        script.advance(t_now, holds, start)
+        if script.done:
+            del run.scripts[name]
 
 
 def oracles_signals(expr) -> set[str]:

@@ -1,6 +1,7 @@
 import json
 
 from addt_dsl.cli import main
+from addt_dsl.plan import SCHEMA_VERSION
 from tests.conftest import EXAMPLES
 
 
@@ -25,7 +26,7 @@ def test_binary_input_exit_2(tmp_path, capsys):
 def test_plan_prints_json(capsys):
     assert main(["plan", str(EXAMPLES / "overtake.addt")]) == 0
     plan = json.loads(capsys.readouterr().out)
-    assert plan["schema_version"] == "1" and plan["name"] == "overtake"
+    assert plan["schema_version"] == SCHEMA_VERSION and plan["name"] == "overtake"
 
 
 def test_schema(capsys):

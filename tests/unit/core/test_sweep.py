@@ -53,5 +53,9 @@ def test_assumptions_reject_and_count():
 
 
 def test_unsatisfiable_assumptions_are_an_error_not_a_loop():
+    # Caught at compile time (E0501: the compiler probes the sweep's candidates) ...
+    result = compile_source(BASE.format(sweep="random 10 seed 1", assume="assume gap > 60 m"), "s.addt")
+    assert [d.code for d in result.diagnostics if d.is_error] == ["E0501"]
+    # ... and at expansion when sampling rejects more than the cap allows.
     with pytest.raises(UnsatisfiableAssumptions):
-        expand(_plan("random 10 seed 1", assume="assume gap > 60 m"))
+        expand(_plan("random 10 seed 1\n    max_rejections 3", assume="assume gap > 49 m"))

@@ -70,7 +70,13 @@ def test_a_sweep_whose_every_cell_breaks_an_assumption_is_unsatisfiable():
 
     from addt_dsl.sweep import UnsatisfiableAssumptions
 
-    plan = plan_of(_text([9.0], None, 0, 2, True))
+    from addt_dsl.compiler import compile_source
+
+    # The compiler rejects such a scenario (E0501); the stream must too, for a plan built
+    # without that check (the unsatisfiable constraints grafted onto a valid plan).
+    assert [d.code for d in compile_source(_text([9.0], None, 0, 2, True)).diagnostics if d.is_error] == ["E0501"]
+    plan = plan_of(_text([9.0], None, 0, 2, False))
+    plan = plan.model_copy(update={"assumptions": plan_of(_text([1.0], None, 0, 2, True)).assumptions})
     assert len(SweepStream(plan)) == 0
     with pytest.raises(UnsatisfiableAssumptions, match="a < 8"):
         list(SweepStream(plan))
