@@ -88,7 +88,8 @@ CODES: dict[str, str] = {
     "E0401": "include or import failed",
     "E0402": "path escapes the scenario directory",
     "E0403": "road file error",
-    "E0501": "unsatisfiable assumptions",
+    "E0501": "unsatisfiable constraints",
+    "E0900": "internal compiler error",
     "W0001": "unused parameter",
     "W0002": "setting has no effect",
 }
@@ -120,16 +121,24 @@ def sorted_diagnostics(diags: list[Diagnostic]) -> list[Diagnostic]:
     return sorted(diags, key=key)
 
 
+# Notes that tell the user what to write are rendered as `= help:` (as rustc does).
+_HELP_PREFIXES = ("did you mean", "write ", "add ", "use ", "give ", "put ", "narrow ", "shorten ",
+                  "widen ", "split ", "configure ", "order ", "save ", "e.g.", "a label goes", "a block's")
+
+
 def render_text(diags: list[Diagnostic], sources: dict[str, str]) -> str:
     """rustc-style text: `error[E0201]: message`, location, source line and caret."""
     out: list[str] = []
+    line_cache: dict[str, list[str]] = {}
     for d in sorted_diagnostics(diags):
         out.append(f"{d.severity.value}[{d.code}]: {d.message}")
         span = d.span
         if span is not None:
             out.append(f"  --> {span}")
-            text = sources.get(span.file)
-            lines = text.splitlines() if text is not None else []
+            if span.file not in line_cache:
+                text = sources.get(span.file)
+                line_cache[span.file] = text.splitlines() if text is not None else []
+            lines = line_cache[span.file]
             if 1 <= span.line <= len(lines):
                 src = lines[span.line - 1].expandtabs(1)
                 gutter = str(span.line)
@@ -141,7 +150,8 @@ def render_text(diags: list[Diagnostic], sources: dict[str, str]) -> str:
                 out.append(f"{gutter} | {src}")
                 out.append(f"{pad} | {caret}" + (f" {d.label}" if d.label else ""))
         for note in d.notes:
-            out.append(f"  = note: {note}")
+            kind = "help" if note.startswith(_HELP_PREFIXES) else "note"
+            out.append(f"  = {kind}: {note}")
         out.append("")
     errors = sum(d.is_error for d in diags)
     warnings = len(diags) - errors

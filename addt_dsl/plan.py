@@ -15,7 +15,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from addt_dsl.expr import Expr, Num, eval_param_expr
 
-SCHEMA_VERSION = "1"
+# Bump when a plan written by this version cannot be read by the previous one.
+SCHEMA_VERSION = "2"
 
 SettingValue = Union[Expr, str, list[Expr]]
 
@@ -62,10 +63,14 @@ class ParamPlan(_Model):
 
 
 class AssumptionPlan(_Model):
-    """A validity condition on parameters: a sample that breaks it is rejected, not failed."""
+    """A validity condition on parameters: a sample that breaks it is rejected, not failed.
+
+    `name` is the label of `assume NAME: expr` ("" when unnamed); reports count
+    rejections per `name or text`."""
 
     text: str
     expr: Expr
+    name: str = ""
 
 
 class ClausePlan(_Model):
@@ -77,8 +82,32 @@ class ClausePlan(_Model):
 
 
 class TriggerPlan(_Model):
-    condition: Expr  # formula over signals; fires the first time it holds
-    clause: ClausePlan
+    """One step of an agent's script.
+
+    A step is *armed* (top-level steps at time 0; steps of a group as the group says),
+    then *fires* at the first physics step where all its start conditions hold:
+    `after_s` has passed since it was armed, the time is at least `at_s`, and
+    `condition` holds on the current state. Firing starts `clause` (a behaviour) and
+    arms `group`. A step is *done* once it fired and its group (if any) is done.
+    Source: `at 5 s behavior brake`, `after 2 s ...`, `when gap(ego, lead) < 20 m then ...`.
+    """
+
+    condition: Expr | None = None  # formula over signals, no temporal operators
+    clause: ClausePlan | None = None
+    at_s: Expr | None = None  # earliest simulated time [s]
+    after_s: Expr | None = None  # delay after arming [s]
+    group: GroupPlan | None = None
+
+
+class GroupPlan(_Model):
+    """Steps armed together (`parallel`: all at once; done when all are done) or one
+    after another (`sequence`: each armed when the previous one is done)."""
+
+    mode: Literal["sequence", "parallel"]
+    steps: list[TriggerPlan]
+
+
+TriggerPlan.model_rebuild()
 
 
 class ActorPlan(_Model):
@@ -97,6 +126,8 @@ class ActorPlan(_Model):
     sensors: list[ClausePlan] = Field(default_factory=list)
     stack: ClausePlan | None = None
     goal_s: Expr | None = None
+    mu: Expr | None = None  # tyre-road friction coefficient of the ego dynamics (None: 0.8)
+    offset: Expr | None = None  # start offset from the lane centre, left positive [m]
 
 
 class FaultPlan(_Model):
@@ -136,7 +167,7 @@ class SweepPlan(_Model):
 
 
 class ScenarioPlan(_Model):
-    schema_version: Literal["1"] = SCHEMA_VERSION
+    schema_version: Literal["2"] = SCHEMA_VERSION
     name: str
     description: str = ""
     source_file: str = ""

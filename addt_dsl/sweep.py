@@ -50,8 +50,21 @@ def make_spec(plan: ScenarioPlan, params: dict[str, float], seed: int, run_id: s
                    run_id=run_id, cell=cell or {}, repeat_index=repeat_index)
 
 
+def assumption_key(a) -> str:
+    """How reports name a constraint: its label, else its source text."""
+    return a.name or a.text
+
+
 def violated_assumptions(plan: ScenarioPlan, params: dict[str, float]) -> list[str]:
-    return [a.text for a in plan.assumptions if not eval_param_expr(a.expr, params)]
+    return [assumption_key(a) for a in plan.assumptions if not _holds(a.expr, params)]
+
+
+def _holds(expr, params: dict[str, float]) -> bool:
+    try:
+        value = eval_param_expr(expr, params)
+    except (ValueError, OverflowError, ZeroDivisionError):  # e.g. sqrt of a negative: not a valid sample
+        return False
+    return bool(value) and not math.isnan(value)
 
 
 def _halton(index: int, base: int) -> float:
@@ -109,16 +122,64 @@ def _probit(u: float) -> float:
 
 
 def expand(plan: ScenarioPlan) -> Expansion:
-    """All RunSpecs of the plan's sweep, in a stable order with stable ids."""
-    sweep = plan.sweep
-    nominal = plan.nominal_params()
-    axes = [(g.param, g.values) for g in sweep.grid]
+    """All RunSpecs of the plan's sweep, in a stable order with stable ids (a list; see
+    `SweepStream` for large sweeps)."""
+    stream = SweepStream(plan)
+    specs = list(stream)
+    return Expansion(specs, stream.rejected)
+
+
+class SweepStream:
+    """The plan's RunSpecs, expanded lazily in the same order and with the same ids and
+    seeds as `expand`. Every RunSpec shares the one plan object, so a coordinator can
+    walk a 10,000-run sweep holding only the specs in flight. Iterating again
+    re-expands from scratch (same specs); `rejected` counts the last iteration's
+    assumption rejections; `len()` is exact and draws no samples.
+    """
+
+    def __init__(self, plan: ScenarioPlan):
+        self.plan = plan
+        self.rejected: Counter = Counter()
+
+    def __len__(self) -> int:
+        return count_runs(self.plan)
+
+    def __iter__(self):
+        self.rejected = Counter()
+        produced = 0
+        for spec in _iter_specs(self.plan, self.rejected):
+            produced += 1
+            yield spec
+        if not produced and self.plan.assumptions:
+            raise UnsatisfiableAssumptions(
+                "every candidate run breaks an assumption: "
+                + ", ".join(f"{t} ({n} rejected)" for t, n in self.rejected.most_common()))
+
+
+def _cells_and_sampled(plan: ScenarioPlan):
+    axes = [(g.param, g.values) for g in plan.sweep.grid]
     grid_cells = [dict(zip([a for a, _ in axes], combo)) for combo in
                   itertools.product(*[v for _, v in axes])] or [{}]
-    sampled = [p for p in plan.params if p.name not in {a for a, _ in axes}
-               and (p.low is not None and p.high is not None and p.low < p.high or p.choices)]
-    rejected: Counter = Counter()
-    specs: list[RunSpec] = []
+    sampled = _sampled_params(plan, {a for a, _ in axes})
+    return grid_cells, sampled
+
+
+def count_runs(plan: ScenarioPlan) -> int:
+    """Number of RunSpecs the sweep expands to. Samplers always deliver `count` accepted
+    samples per cell (or fail), so this needs no sampling."""
+    sweep = plan.sweep
+    grid_cells, sampled = _cells_and_sampled(plan)
+    nominal = plan.nominal_params()
+    if sweep.sampler and sampled:
+        return len(grid_cells) * sweep.sampler.count * sweep.repeat
+    valid = sum(1 for cell in grid_cells if not violated_assumptions(plan, {**nominal, **cell}))
+    return valid * sweep.repeat
+
+
+def _iter_specs(plan: ScenarioPlan, rejected: Counter):
+    sweep = plan.sweep
+    nominal = plan.nominal_params()
+    grid_cells, sampled = _cells_and_sampled(plan)
     for ci, cell in enumerate(grid_cells):
         base = {**nominal, **cell}
         if violated_assumptions(plan, base) and not (sweep.sampler and sampled):
@@ -128,27 +189,64 @@ def expand(plan: ScenarioPlan) -> Expansion:
         if sweep.sampler and sampled:
             assignments = _sample_cell(plan, base, sampled, ci, rejected)
         else:
-            assignments = [base]
+            assignments = iter([base])
         for si, params in enumerate(assignments):
             for r in range(sweep.repeat):
                 seed = derive_seed(plan.seed, sweep.seed, ci, si, r)
                 run_id = f"c{ci:03d}" + (f"-s{si:04d}" if sweep.sampler else "") + f"-r{r:03d}"
-                specs.append(make_spec(plan, params, seed, run_id, cell, r))
-    if not specs and plan.assumptions:
-        raise UnsatisfiableAssumptions(
-            "every candidate run breaks an assumption: "
-            + ", ".join(f"{t} ({n} rejected)" for t, n in rejected.most_common()))
-    return Expansion(specs, rejected)
+                yield make_spec(plan, params, seed, run_id, cell, r)
 
 
-def _sample_cell(plan, base, sampled, cell_index, rejected) -> list[dict[str, float]]:
+def _sampled_params(plan: ScenarioPlan, gridded: set[str]) -> list[ParamPlan]:
+    return [p for p in plan.params if p.name not in gridded
+            and (p.low is not None and p.high is not None and p.low < p.high or p.choices)]
+
+
+def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
+    """Try up to `budget` candidate assignments the sweep could produce; None as soon as
+    one satisfies every assumption, else the rejection counts (the scenario is
+    unsatisfiable as far as the probe can tell). Cheap enough to run at compile time."""
+    if not plan.assumptions:
+        return None
+    sweep = plan.sweep
+    nominal = plan.nominal_params()
+    axes = [(g.param, g.values) for g in sweep.grid]
+    sampled = _sampled_params(plan, {a for a, _ in axes}) if sweep.sampler else []
+    rejected: Counter = Counter()
+    tried = 0
+    n_cells = math.prod(len(v) for _, v in axes)
+    per_cell = max(1, budget // max(1, min(n_cells, budget)))
+    rng = np.random.default_rng(derive_seed(plan.seed, 15485863)) if sampled else None
+    for combo in itertools.islice(itertools.product(*[v for _, v in axes]), budget):
+        base = {**nominal, **dict(zip([a for a, _ in axes], combo))}
+        if sampled:
+            n = max(1, min(budget - tried, per_cell))
+            kind = sweep.sampler.kind if sweep.sampler.kind != "halton" else "random"
+            rows = _unit_samples(kind, n, len(sampled), rng, 0)
+            candidates = ({**base, **{p.name: _from_unit(p, float(u)) for p, u in zip(sampled, row)}}
+                          for row in rows)  # lazy: most scenarios accept the first one
+        else:
+            candidates = iter([base])
+        for params in candidates:
+            tried += 1
+            broken = violated_assumptions(plan, params)
+            if not broken:
+                return None
+            rejected.update(broken)
+        if tried >= budget:
+            break
+    return rejected
+
+
+def _sample_cell(plan, base, sampled, cell_index, rejected):
+    """Accepted parameter assignments of one cell, drawn lazily in batches."""
     sampler = plan.sweep.sampler
     rng = np.random.default_rng(derive_seed(plan.seed, sampler.seed, cell_index, 104729))
-    out: list[dict[str, float]] = []
+    accepted = 0
     drawn = 0
     cap = plan.sweep.max_rejections
-    while len(out) < sampler.count:
-        need = sampler.count - len(out)
+    while accepted < sampler.count:
+        need = sampler.count - accepted
         units = _unit_samples(sampler.kind, need, len(sampled), rng, drawn)
         drawn += need
         for row in units:
@@ -162,5 +260,5 @@ def _sample_cell(plan, base, sampled, cell_index, rejected) -> list[dict[str, fl
                         f"more than {cap} samples rejected: "
                         + ", ".join(f"{t} ({n})" for t, n in rejected.most_common()))
                 continue
-            out.append(params)
-    return out
+            accepted += 1
+            yield params

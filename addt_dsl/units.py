@@ -63,8 +63,19 @@ DIMENSIONS_BY_NAME: dict[str, Dim] = {v: k for k, v in DIMENSION_NAMES.items()}
 
 
 def dim_name(dim: Dim) -> str:
-    return DIMENSION_NAMES.get(dim) or (
-        f"m^{dim.length} s^{dim.time} kg^{dim.mass} rad^{dim.angle}")
+    """`speed`, `length`, ... or the units of an unnamed dimension, e.g. `m^2/s`."""
+    named = DIMENSION_NAMES.get(dim)
+    if named:
+        return named
+    num, den = [], []
+    for symbol, exp in (("m", dim.length), ("kg", dim.mass), ("rad", dim.angle), ("s", dim.time)):
+        if exp:
+            part = symbol if abs(exp) == 1 else f"{symbol}^{abs(exp)}"
+            (num if exp > 0 else den).append(part)
+    text = "*".join(num) or "1"
+    if den:
+        text += "/" + ("*".join(den) if len(den) == 1 else "(" + "*".join(den) + ")")
+    return f"quantity in {text}"
 
 
 @dataclass(frozen=True, slots=True)

@@ -11,13 +11,16 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from addt_dsl.compiler import ast
+from addt_dsl.compiler import ast, parser
 from addt_dsl.compiler.check import RULES, Context
 from addt_dsl.compiler.parser import parse_source
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
 from addt_dsl.plan import ScenarioPlan
 
 MAX_INCLUDE_DEPTH = 16
+MAX_INCLUDED_BYTES = parser.MAX_SOURCE_BYTES  # an .addt file, main or included
+MAX_IMPORT_BYTES = 50_000_000  # an imported .xodr file
+MAX_TOTAL_BYTES = 200_000_000  # everything one compilation may read
 
 
 @dataclass
@@ -38,6 +41,9 @@ class _Loader:
         self.root = root.resolve()
         self.sink = sink
         self.sources = sources
+        self.included: set[Path] = set()  # each file is read and parsed at most once
+        self.texts: dict[Path, tuple[str, str]] = {}  # imports read once per compilation
+        self.bytes_read = 0
 
     def display(self, path: Path) -> str:
         try:
@@ -56,19 +62,38 @@ class _Loader:
             return None
         return candidate
 
+    def read_bytes(self, path: Path, relative: str, span: Span, limit: int) -> bytes | None:
+        """Read a file after checking its size (a huge or endless file must not stall us)."""
+        try:
+            size = path.stat().st_size
+            if size > limit:
+                self.sink.error("E0401", f"'{relative}' is too large ({size} bytes; limit {limit})", span)
+                return None
+            with path.open("rb") as fh:
+                data = fh.read(limit + 1)
+        except OSError as exc:
+            self.sink.error("E0401", f"cannot read '{relative}': {exc.strerror or exc}", span)
+            return None
+        if len(data) > limit:
+            self.sink.error("E0401", f"'{relative}' is too large (limit {limit} bytes)", span)
+            return None
+        self.bytes_read += len(data)
+        if self.bytes_read > MAX_TOTAL_BYTES:
+            self.sink.error("E0401", f"reading '{relative}' exceeds the {MAX_TOTAL_BYTES} bytes one compilation "
+                            "may read", span)
+            return None
+        return data
+
     def read_text(self, relative: str, base: Path, span: Span) -> tuple[str, str] | None:
         path = self.resolve(relative, base, span)
         if path is None:
             return None
-        try:
-            data = path.read_bytes()
-        except OSError as exc:
-            self.sink.error("E0401", f"cannot read '{relative}': {exc.strerror}", span)
-            return None
-        if len(data) > 50_000_000:
-            self.sink.error("E0401", f"'{relative}' is too large", span)
-            return None
-        return self.display(path), data.decode("utf-8", errors="replace")
+        if path not in self.texts:
+            data = self.read_bytes(path, relative, span, MAX_IMPORT_BYTES)
+            if data is None:
+                return None
+            self.texts[path] = (self.display(path), data.decode("utf-8", errors="replace"))
+        return self.texts[path]
 
 
 def compile_file(path: str | Path) -> CompileResult:
@@ -77,16 +102,40 @@ def compile_file(path: str | Path) -> CompileResult:
     sources: dict[str, str] = {}
     display = str(path)
     try:
-        data = path.read_bytes()
+        if not path.is_file():
+            sink.error("E0401", f"cannot read {display}: " + ("it is a directory" if path.is_dir()
+                                                               else "no such file"), None)
+            return CompileResult(None, sink.items, sources)
+        size = path.stat().st_size
+        with path.open("rb") as fh:
+            data = fh.read(MAX_INCLUDED_BYTES + 1)
     except OSError as exc:
         sink.error("E0401", f"cannot read {display}: {exc.strerror or exc}", None)
         return CompileResult(None, sink.items, sources)
-    return _compile(data, display, path.parent, sink, sources)
+    if size > MAX_INCLUDED_BYTES or len(data) > MAX_INCLUDED_BYTES:
+        sink.error("E0003", f"source is too large ({size} bytes; limit {MAX_INCLUDED_BYTES})",
+                   Span.point(display, 1, 1))
+        return CompileResult(None, sink.items, sources)
+    return _compile_guarded(data, display, path.parent, sink, sources)
 
 
 def compile_source(text: str | bytes, path: str = "<input>", base_dir: str | Path = ".") -> CompileResult:
     sink = DiagnosticSink()
-    return _compile(text, path, Path(base_dir), sink, {})
+    return _compile_guarded(text, path, Path(base_dir), sink, {})
+
+
+def _compile_guarded(data, display: str, base_dir: Path, sink: DiagnosticSink,
+                     sources: dict[str, str]) -> CompileResult:
+    """Compile; a bug in the compiler is an "internal compiler error" diagnostic (E0900),
+    never a traceback. The fuzz tests assert that E0900 never appears."""
+    try:
+        return _compile(data, display, base_dir, sink, sources)
+    except RecursionError:
+        sink.error("E0004", "source nested too deeply", Span.point(display, 1, 1))
+    except Exception as exc:  # noqa: BLE001 - the last line of defence, reported as data
+        sink.error("E0900", f"internal compiler error: {type(exc).__name__}: {exc}", Span.point(display, 1, 1),
+                   "this is a bug in addtc; please report it with the input file")
+    return CompileResult(None, sink.items, sources)
 
 
 def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: dict[str, str]) -> CompileResult:
@@ -110,15 +159,17 @@ def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: 
         got = loader.read_text(relative, base_dir, span)
         return got
 
-    ctx = Context(scenario, sink, str(base_dir), display, read_file=read_file)
-    ctx.sources = sources
+    ctx = Context(scenario, sink, str(base_dir), display, read_file=read_file, sources=sources)
     for rule in RULES:
         rule(ctx)
     if sink.has_errors:
         return CompileResult(None, sink.items, sources)
-    from addt_dsl.compiler.lower import build_plan
+    from addt_dsl.compiler.lower import build_plan, check_feasible
 
-    return CompileResult(build_plan(ctx), sink.items, sources)
+    plan = build_plan(ctx)
+    if not check_feasible(plan, ctx):
+        return CompileResult(None, sink.items, sources)
+    return CompileResult(plan, sink.items, sources)
 
 
 def _resolve_includes(includes, base: Path, loader: _Loader, stack: list[str]) -> tuple:
@@ -132,10 +183,15 @@ def _resolve_includes(includes, base: Path, loader: _Loader, stack: list[str]) -
             continue
         display = loader.display(path)
         if display in stack:
-            loader.sink.error("E0108", f"'{inc.path}' includes itself", inc.span,
+            loader.sink.error("E0108", f"including '{inc.path}' again makes an include cycle", inc.span,
                               "include chain: " + " → ".join([*stack, display]))
             continue
-        data = path.read_bytes()
+        if path in loader.included:
+            continue  # included once already (a diamond): its definitions are in
+        loader.included.add(path)
+        data = loader.read_bytes(path, inc.path, inc.span, MAX_INCLUDED_BYTES)
+        if data is None:
+            continue
         loader.sources[display] = data.decode("utf-8", errors="replace")
         tree = parse_source(data, display, loader.sink)
         if tree is None:

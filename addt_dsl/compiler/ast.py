@@ -134,7 +134,10 @@ class ParamDecl(Node):
 
 @dataclass(frozen=True, slots=True)
 class AssumeDecl(Node):
+    """`assume [name:] expr` or `keep [name:] expr`: a constraint on parameter samples."""
+
     expr: Expression
+    label: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,9 +152,33 @@ class Clause(Node):
 
 
 @dataclass(frozen=True, slots=True)
-class Trigger(Node):
-    condition: Expression
-    clause: Clause
+class StepStart(Node):
+    kind: str  # at | after | when
+    value: Expression
+
+
+@dataclass(frozen=True, slots=True)
+class Step(Node):
+    """`at 5 s`, `after 2 s`, `when <cond>` (any combination), then a clause or a group."""
+
+    starts: tuple[StepStart, ...]
+    action: Clause | Group
+
+
+@dataclass(frozen=True, slots=True)
+class Group(Node):
+    mode: str  # sequence | parallel
+    items: tuple[Clause | Step | Group, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Placement(Node):
+    """`ahead of lead 20 m`, `behind ego 10 m`, `lane of ego`, `lane left of ego`."""
+
+    kind: str  # ahead | behind | lane_of | lane_left | lane_right
+    actor: str
+    actor_span: Span
+    distance: Expression | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,8 +189,9 @@ class ActorDecl(Node):
     vehicle_span: Span
     settings: tuple[Setting, ...]
     clauses: tuple[Clause, ...] = ()
-    triggers: tuple[Trigger, ...] = ()
+    steps: tuple[Step | Group, ...] = ()
     block_settings: tuple[Setting, ...] = ()
+    placements: tuple[Placement, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,6 +199,7 @@ class Timing(Node):
     kind: str  # at | during | from
     start: Expression
     end: Expression | None = None
+    length: Expression | None = None  # `at T for D`
 
 
 @dataclass(frozen=True, slots=True)
@@ -184,12 +213,25 @@ class FaultDecl(Node):
 
 
 @dataclass(frozen=True, slots=True)
+class Builtin(Node):
+    """A built-in oracle: `no collision [with X]`, `stay in lane`, `reach goal [within T]`,
+    `min SIGNAL [to|of X] V`, `max SIGNAL [of X] V`."""
+
+    kind: str  # no | stay_in_lane | reach_goal | min | max
+    word: str | None = None  # `collision`, or the signal of a bound
+    word_span: Span | None = None
+    actor: str | None = None
+    actor_span: Span | None = None
+    value: Expression | None = None
+    settings: tuple[Setting, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
 class OracleDecl(Node):
     severity: str  # hard | warn
     label: str | None
     formula: Expression | None = None
-    no_what: str | None = None  # `no collision [with lead]`
-    no_with: str | None = None
+    builtin: Builtin | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -6,6 +6,7 @@ are checked here: a speed where a length is needed is error E0201.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from addt_dsl import expr as E
@@ -210,15 +211,24 @@ class ExprLowering:
         return E.Binary(op=op, left=left, right=right), lty
 
     def window(self, window: ast.Window | None):
-        """Lower a time window to (lo_s, hi_s) constants; parameters are allowed."""
+        """Lower a time window to (lo_s, hi_s): finite, non-negative constants."""
         if window is None:
             return E.Num(value=0.0), None
         lo = self.lower_value(window.lo, units.TIME, "a window bound") if window.lo is not None else E.Num(value=0.0)
         hi = self.lower_value(window.hi, units.TIME, "a window bound") if window.hi is not None else None
+        if lo is None or (window.hi is not None and hi is None):
+            return None, None
         for bound in (lo, hi):
             if bound is not None and E.params_used(bound):
                 self.sink.error("E0204", "window bounds must be constants, not parameters", window.span)
                 return None, None
+            if bound is not None:
+                value = E.eval_param_expr(bound, {})
+                if not (math.isfinite(value) and value >= 0.0):
+                    self.sink.error("E0301", "a window bound must be a finite time >= 0 s", window.span,
+                                    "windows are relative to the current instant: `within 5 s`, "
+                                    "`during [2 s, 5 s]`")
+                    return None, None
         return lo, hi
 
     def _TemporalExpr(self, node: ast.TemporalExpr):
@@ -260,3 +270,55 @@ def _const(expr) -> float:
 
 class WindowParamError(Exception):
     pass
+
+
+def value_range(expr, ranges: dict[str, tuple[float, float]]) -> tuple[float, float] | None:
+    """Bounds of an arithmetic expression when each parameter ranges over `ranges`
+    (interval arithmetic: sound, possibly wider than the true range). None if unknown."""
+    try:
+        lo, hi = _interval(expr, ranges)
+    except (KeyError, TypeError, ValueError, ZeroDivisionError, OverflowError):
+        return None
+    if math.isnan(lo) or math.isnan(hi):
+        return None
+    return lo, hi
+
+
+def _interval(expr, ranges):
+    match expr:
+        case E.Num(value=v):
+            return v, v
+        case E.Param(name=n):
+            return ranges[n]
+        case E.Unary(op="neg", arg=a):
+            lo, hi = _interval(a, ranges)
+            return -hi, -lo
+        case E.Call(fn="abs", args=(a,)):
+            lo, hi = _interval(a, ranges)
+            if lo >= 0:
+                return lo, hi
+            if hi <= 0:
+                return -hi, -lo
+            return 0.0, max(-lo, hi)
+        case E.Call(fn="sqrt", args=(a,)):
+            lo, hi = _interval(a, ranges)
+            return math.sqrt(max(lo, 0.0)), math.sqrt(max(hi, 0.0))
+        case E.Call(fn="min", args=args):
+            ivs = [_interval(a, ranges) for a in args]
+            return min(i[0] for i in ivs), min(i[1] for i in ivs)
+        case E.Call(fn="max", args=args):
+            ivs = [_interval(a, ranges) for a in args]
+            return max(i[0] for i in ivs), max(i[1] for i in ivs)
+        case E.Binary(op=op, left=l, right=r) if op in ("+", "-", "*", "/"):
+            a, b = _interval(l, ranges), _interval(r, ranges)
+            if op == "+":
+                return a[0] + b[0], a[1] + b[1]
+            if op == "-":
+                return a[0] - b[1], a[1] - b[0]
+            if op == "/":
+                if b[0] <= 0.0 <= b[1]:
+                    raise ZeroDivisionError
+                b = (1.0 / b[1], 1.0 / b[0])
+            products = [x * y for x in a for y in b]
+            return min(products), max(products)
+    raise TypeError(f"no interval for {expr!r}")

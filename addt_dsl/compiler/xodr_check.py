@@ -9,25 +9,54 @@ from __future__ import annotations
 from addt_dsl.diagnostics import Span
 
 
-def check_xodr(ctx, text: str, display: str, span: Span, road_value) -> str | None:
+def check_xodr(ctx, text: str, display: str, span: Span, road_value):
+    """(road id, RoadInfo or None) of the imported road, or None after a diagnostic."""
     from addt_dsl.expr import eval_param_expr
     from addt_dsl.runtime.road import XodrError, parse_xodr
 
+    cache = ctx.xodr_networks  # one parse per file, however many roads import it
     try:
-        network = parse_xodr(text, display)
+        network = cache.get(display) or cache.setdefault(display, parse_xodr(text, display))
     except XodrError as exc:
         where = f"{display}:{exc.line}" if getattr(exc, "line", None) else display
         ctx.sink.error("E0403", f"cannot use {display}: {exc.message if hasattr(exc, 'message') else exc}",
                        span, f"at {where}")
         return None
+    except (ValueError, ArithmeticError, RecursionError) as exc:  # geometry the reader accepted but cannot build
+        ctx.sink.error("E0403", f"cannot use {display}: {exc}", span)
+        return None
     if not network.roads:
         ctx.sink.error("E0403", f"{display} has no roads", span)
         return None
     if road_value is None:
-        return next(iter(network.roads))
-    road_id = str(int(eval_param_expr(road_value, {})))
+        road_id = next(iter(network.roads))
+    else:
+        road_id = str(int(eval_param_expr(road_value, {})))
     if road_id not in network.roads:
         ctx.sink.error("E0403", f"{display} has no road '{road_id}'", span,
                        f"roads: {', '.join(sorted(network.roads))}")
         return None
-    return road_id
+    return road_id, _road_info(network.road(road_id))
+
+
+def _road_info(road):
+    """Length, lanes at s = 0 and the narrowest width of each lane along the road."""
+    import numpy as np
+
+    from addt_dsl.compiler.check import RoadInfo
+
+    try:
+        length = float(road.length)
+        lanes = tuple(int(i) for i in road.lane_ids(0.0) if i != 0)
+        widths = {}
+        probe = np.linspace(0.0, length, 64)
+        for lane in lanes:
+            present = []
+            for s in probe:
+                if lane in road.lane_ids(float(s)):
+                    present.append(float(road.lane_width(lane, float(s))))
+            if present:
+                widths[lane] = min(present)
+        return RoadInfo(length, lanes, widths)
+    except (ValueError, ArithmeticError, KeyError, IndexError):
+        return None

@@ -80,6 +80,7 @@ class BevStack:
         self.tracks_stamp = None
         self.command = (0.0, 0.0)
         self.latency = {n: 0.0 for n in (*NODE_NAMES, "e2e")}
+        self.pipeline_s = 0.0
         self.objects_seen = 0
 
     def _make_perception(self):
@@ -106,6 +107,8 @@ class BevStack:
     # ---- inputs
     def on_frame(self, frame, arrive_s: float) -> None:
         """A sensor frame arrives at the stack at `arrive_s`."""
+        if "hit_body" not in frame.data:
+            return  # perception consumes lidar frames; camera, IMU and GNSS frames are not used yet
         if arrive_s - frame.stamp_s > float(self.settings["stale"]):
             self.ctx.event("stale_frame", sensor=frame.sensor, age_s=arrive_s - frame.stamp_s)
             return
@@ -119,6 +122,7 @@ class BevStack:
     # ---- the per-step tick
     def step(self, time_s: float, dt: float):
         self.ctx.now = time_s
+        fresh_tracks = False
         for msg in self.bus.deliver_until(time_s):
             if msg.topic == "objects":
                 started = _time.perf_counter()
@@ -127,10 +131,17 @@ class BevStack:
                 self.bus.publish("tracks", None, msg.stamp_s, time_s + lat)
             elif msg.topic == "tracks":
                 self.tracks_stamp = msg.stamp_s
+                fresh_tracks = True
             elif msg.topic == "plan":
                 self.plan, self.plan_stamp = msg.data, msg.stamp_s
-        if time_s + 1e-9 >= self.next_plan_s:
-            self.next_plan_s += self.planner_period
+                # Pipeline latency of the newest information in use: sensor stamp → plan out.
+                self.pipeline_s = msg.deliver_s - msg.stamp_s
+        # The planner runs on fresh tracks (event-driven, like a ROS callback) and on its
+        # timer when none come (dropped frames), replanning on predicted tracks.
+        if fresh_tracks or time_s + 1e-9 >= self.next_plan_s:
+            # The timer is a fallback for missing frames: half a period of slack lets a
+            # frame that is merely a little late still trigger the replan itself.
+            self.next_plan_s = time_s + 1.5 * self.planner_period
             self._run_planner(time_s)
         if time_s + 1e-9 >= self.next_control_s:
             self.next_control_s += self.control_period
@@ -171,7 +182,8 @@ class BevStack:
         if not (math.isfinite(steer) and math.isfinite(accel)):
             raise StackError(f"non-finite command steer={steer!r} accel={accel!r}")
         self.command = (steer, accel)
-        self.latency["e2e"] = time_s + lat - (self.plan_stamp if self.plan_stamp is not None else time_s)
+        # End-to-end: sensor timestamp → actuation, for the newest frame the command derives from.
+        self.latency["e2e"] = self.pipeline_s + lat
         self.ctx.apply_command_at(time_s + lat, steer, accel)
 
 

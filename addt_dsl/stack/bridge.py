@@ -189,7 +189,12 @@ class ExternalStack:
                 entry["truth"] = {"hit_body": f"{k}.hit_body", "actual": extrinsics_dict(sensor.actual),
                                   "actors": self._actors(hit)}
             else:
-                entry["values"] = _jsonable(data)
+                # Other sensors: arrays (camera images, IMU vectors) as blobs, scalars inline.
+                arrays = {key: v for key, v in data.items() if isinstance(v, np.ndarray)}
+                for key, arr in arrays.items():
+                    blobs[f"{k}.{key}"] = arr
+                entry["arrays"] = {key: f"{k}.{key}" for key in arrays}
+                entry["values"] = _jsonable({key: v for key, v in data.items() if key not in arrays})
             frames.append(entry)
         self._frames = []
         x, y, heading, speed = self.ctx.ego_pose()

@@ -155,6 +155,7 @@ def _step(stack, ctx: _RemoteContext, header: dict, blobs: dict) -> dict:
             ctx.actors = {int(k): _GT(v) for k, v in truth.get("actors", {}).items()}
         else:
             data = dict(f.get("values", {}))
+            data.update({key: blobs[name] for key, name in f.get("arrays", {}).items()})
         stack.on_frame(_Frame(f["sensor"], f["stamp_s"], data), f["arrive_s"])
     command = stack.step(t, float(header["dt"]))
     return {"type": "control", "command": list(command), "commands": ctx.commands,

@@ -55,3 +55,13 @@ def test_unreachable_remote_is_a_stack_error(overtake_source):
     spec = _spec(overtake_source, 'stack external address "127.0.0.1:9" timeout 1 s')
     with pytest.raises(StackError, match="cannot reach"):
         execute(spec)
+
+
+def test_imu_and_gnss_frames_cross_the_bridge(overtake_source, server_address):
+    line = "sensor lidar rate 10 Hz rays 360 range 80 m"
+    assert line in overtake_source
+    text = overtake_source.replace(line, line + "\n    sensor imu rate 50 Hz\n    sensor gnss rate 10 Hz")
+    local = execute(_spec(text, "stack bev cruise_speed 25 m/s"))
+    remote = execute(_spec(text, f'stack external address "{server_address}" cruise_speed 25 m/s'))
+    assert remote.status == "ok", remote.error
+    assert remote.digest == local.digest

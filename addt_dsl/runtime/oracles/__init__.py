@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-
-import numpy as np
-
 from addt_dsl.runtime.oracles.formula_text import FormulaSyntaxError, format_formula, parse_formula
 from addt_dsl.runtime.oracles.stl import (
     FormulaTypeError,
@@ -34,10 +30,5 @@ def robustness(formula: str, signals: dict[str, list[float]], period_s: float) -
     Raises FormulaSyntaxError (a ValueError, with the column) for bad text and
     UnknownSignalError (a KeyError) naming a signal the formula uses but `signals` lacks.
     """
-    expr = parse_formula(formula)
-    arrays: Mapping[str, np.ndarray] = {k: _array(k, v) for k, v in signals.items()}
-    return robustness_at_0(expr, arrays, period_s)
-
-
-def _array(name: str, values: Sequence[float]) -> np.ndarray:
-    return np.asarray(values, dtype=np.float64)
+    # The evaluator converts only the signals the formula uses to arrays.
+    return robustness_at_0(parse_formula(formula), signals, period_s)

@@ -120,9 +120,12 @@ def _expect(expr: Expr, want: Sort, where: str) -> None:
 # --- time ------------------------------------------------------------------------------
 
 def samples(t_s: float, period_s: float) -> int:
-    """Seconds -> whole samples, rounded to the nearest sample, ties up (so 0.3 s at
-    0.1 s is 3 samples despite 0.3/0.1 == 2.9999999999999996)."""
-    return math.floor(t_s / period_s + 0.5)
+    """Seconds -> whole samples, rounded to the nearest sample, ties up.
+
+    The quotient is first snapped to 9 decimals so float noise can't move a bound
+    written in decimal: 0.3 s / 0.1 s is 2.9999999999999996 (-> 3) and 0.95 s / 0.1 s
+    is 9.499999999999998, a tie (-> 10)."""
+    return math.floor(round(t_s / period_s, 9) + 0.5)
 
 
 def _window(lo_s: float, hi_s: float | None, period_s: float) -> tuple[int, int | None]:

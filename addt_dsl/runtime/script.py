@@ -1,0 +1,121 @@
+"""Agent scripts: steps (`at`, `after`, `when`) composed in sequence or in parallel.
+
+The compiler lowers an agent's steps to a tree of `TriggerPlan`/`GroupPlan`; this module
+runs that tree in simulated time. A step is armed, fires when its start conditions hold
+(starting its behaviour and arming its group), and is done once it fired and its group
+is done. A sequence arms each step when the previous one is done; a parallel group arms
+all its steps at once and is done when all are.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from addt_dsl.expr import substitute_params
+from addt_dsl.plan import ClausePlan, GroupPlan, RunSpec, TriggerPlan
+
+TIME_EPS_S = 1e-9
+
+# holds(condition) -> bool on the current state; start(clause, time_s) starts a behaviour.
+Holds = Callable[[object], bool]
+Start = Callable[[ClausePlan, float], None]
+
+
+class StepState:
+    def __init__(self, plan: TriggerPlan, spec: RunSpec):
+        self.clause = plan.clause
+        self.at_s = spec.value(plan.at_s) if plan.at_s is not None else None
+        self.after_s = spec.value(plan.after_s) if plan.after_s is not None else 0.0
+        self.condition = substitute_params(plan.condition, spec.params) if plan.condition is not None else None
+        self.group = GroupState(plan.group, spec) if plan.group is not None else None
+        self.armed_at: float | None = None
+        self.fired = False
+
+    @property
+    def done(self) -> bool:
+        return self.fired and (self.group is None or self.group.done)
+
+    def arm(self, time_s: float) -> None:
+        if self.armed_at is None:
+            self.armed_at = time_s
+
+    def needs_state(self) -> bool:
+        """Whether advancing now may evaluate a condition (so the caller builds a snapshot)."""
+        if self.armed_at is None or self.done:
+            return False
+        if not self.fired:
+            return self.condition is not None
+        return self.group is not None and self.group.needs_state()
+
+    def advance(self, time_s: float, holds: Holds, start: Start) -> None:
+        if self.armed_at is None or self.done:
+            return
+        if not self.fired:
+            if time_s + TIME_EPS_S < self.armed_at + self.after_s:
+                return
+            if self.at_s is not None and time_s + TIME_EPS_S < self.at_s:
+                return
+            if self.condition is not None and not holds(self.condition):
+                return
+            self.fired = True
+            if self.clause is not None:
+                start(self.clause, time_s)
+            if self.group is not None:
+                self.group.arm(time_s)
+        if self.group is not None:
+            self.group.advance(time_s, holds, start)
+
+
+class GroupState:
+    def __init__(self, plan: GroupPlan, spec: RunSpec):
+        self.mode = plan.mode
+        self.steps = [StepState(s, spec) for s in plan.steps]
+        self.current = 0  # sequence: the step armed last
+
+    @property
+    def done(self) -> bool:
+        return all(s.done for s in self.steps)
+
+    def arm(self, time_s: float) -> None:
+        if self.mode == "parallel":
+            for s in self.steps:
+                s.arm(time_s)
+        elif self.steps:
+            self.steps[0].arm(time_s)
+
+    def needs_state(self) -> bool:
+        return any(s.needs_state() for s in self.steps)
+
+    def advance(self, time_s: float, holds: Holds, start: Start) -> None:
+        if self.mode == "parallel":
+            for s in self.steps:
+                s.advance(time_s, holds, start)
+            return
+        # A sequence may complete several zero-delay steps within one physics step.
+        while self.current < len(self.steps):
+            step = self.steps[self.current]
+            step.advance(time_s, holds, start)
+            if not step.done or self.current + 1 == len(self.steps):
+                return
+            self.current += 1
+            self.steps[self.current].arm(time_s)
+
+
+class Script:
+    """The top-level steps of one agent, all armed at time 0."""
+
+    def __init__(self, triggers: list[TriggerPlan], spec: RunSpec):
+        self.steps = [StepState(t, spec) for t in triggers]
+        for s in self.steps:
+            s.arm(0.0)
+
+    @property
+    def done(self) -> bool:
+        return all(s.done for s in self.steps)
+
+    def needs_state(self) -> bool:
+        return any(s.needs_state() for s in self.steps)
+
+    def advance(self, time_s: float, holds: Holds, start: Start) -> None:
+        for s in self.steps:
+            s.advance(time_s, holds, start)

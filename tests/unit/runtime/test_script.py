@@ -1,0 +1,142 @@
+"""Agent scripts: steps fire once, sequences wait for the previous step to be done,
+parallel groups arm together. Checked against a direct computation of firing times."""
+
+from __future__ import annotations
+
+import math
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from addt_dsl.expr import Binary, Num, Param, Signal
+from addt_dsl.plan import ClausePlan, GroupPlan, TriggerPlan
+from addt_dsl.runtime.script import Script
+
+DT = 0.1
+
+
+class _Spec:
+    """The two things a script reads from a RunSpec."""
+
+    def __init__(self, params=None):
+        self.params = params or {}
+
+    def value(self, expr, default=0.0):
+        from addt_dsl.expr import eval_param_expr
+
+        return default if expr is None else eval_param_expr(expr, self.params)
+
+
+def clause(name: str) -> ClausePlan:
+    return ClausePlan(keyword="behavior", name=name, settings={})
+
+
+def run(triggers, duration=20.0, holds=lambda cond: True, params=None):
+    script = Script(triggers, _Spec(params))
+    started: list[tuple[str, float]] = []
+    for k in range(int(round(duration / DT)) + 1):
+        t = k * DT
+        script.advance(t, holds, lambda c, time_s: started.append((c.name, round(time_s, 6))))
+    return started, script
+
+
+def test_at_fires_once_at_the_first_step_after_the_time():
+    started, script = run([TriggerPlan(at_s=Num(value=2.05), clause=clause("brake"))])
+    assert started == [("brake", 2.1)]
+    assert script.done
+
+
+def test_parameters_are_bound_per_run():
+    started, _ = run([TriggerPlan(at_s=Param(name="t0"), clause=clause("brake"))], params={"t0": 3.0})
+    assert started == [("brake", 3.0)]
+
+
+def test_sequence_waits_for_the_previous_step_then_after():
+    seq = GroupPlan(mode="sequence", steps=[
+        TriggerPlan(at_s=Num(value=1.0), clause=clause("a")),
+        TriggerPlan(after_s=Num(value=2.0), clause=clause("b")),
+        TriggerPlan(clause=clause("c")),
+    ])
+    started, _ = run([TriggerPlan(group=seq)])
+    assert started == [("a", 1.0), ("b", 3.0), ("c", 3.0)]
+
+
+def test_parallel_arms_together_and_a_sequence_waits_for_all_of_it():
+    par = GroupPlan(mode="parallel", steps=[
+        TriggerPlan(after_s=Num(value=1.0), clause=clause("a")),
+        TriggerPlan(after_s=Num(value=4.0), clause=clause("b")),
+    ])
+    seq = GroupPlan(mode="sequence", steps=[TriggerPlan(group=par),
+                                            TriggerPlan(after_s=Num(value=0.5), clause=clause("c"))])
+    started, _ = run([TriggerPlan(at_s=Num(value=2.0), group=seq)])
+    assert started == [("a", 3.0), ("b", 6.0), ("c", 6.5)]
+
+
+def test_condition_gates_firing_and_is_checked_only_when_armed():
+    cond = Binary(op="<", left=Signal(name="gap(ego,a)"), right=Num(value=10.0))
+    checked: list[float] = []
+    now = {"t": 0.0}
+
+    def holds(c):
+        checked.append(now["t"])
+        return now["t"] >= 5.0
+
+    script = Script([TriggerPlan(at_s=Num(value=3.0), condition=cond, clause=clause("brake"))], _Spec())
+    started = []
+    for k in range(100):
+        now["t"] = k * DT
+        script.advance(now["t"], holds, lambda c, t: started.append((c.name, round(t, 6))))
+    assert started == [("brake", 5.0)]
+    assert min(checked) >= 3.0 - 1e-9 and max(checked) <= 5.0 + 1e-9
+
+
+# ---------------------------------------------------------------- property
+
+def _steps(depth: int):
+    leaf = st.builds(lambda at, after, name: TriggerPlan(
+        at_s=None if at is None else Num(value=at), after_s=None if after is None else Num(value=after),
+        clause=clause(name)),
+        st.none() | st.sampled_from([0.0, 0.5, 1.0, 2.5, 7.0]),
+        st.none() | st.sampled_from([0.0, 0.3, 1.0, 2.0]),
+        st.sampled_from("abcdefgh"))
+    if depth == 0:
+        return leaf
+    group = st.builds(lambda mode, steps, after: TriggerPlan(
+        after_s=None if after is None else Num(value=after), group=GroupPlan(mode=mode, steps=steps)),
+        st.sampled_from(["sequence", "parallel"]), st.lists(_steps(depth - 1), min_size=1, max_size=3),
+        st.none() | st.sampled_from([0.0, 1.0]))
+    return leaf | group
+
+
+def _tick(t: float) -> float:
+    """The first physics step at or after t."""
+    return math.ceil(t / DT - 1e-6) * DT
+
+
+def _expected(step: TriggerPlan, armed: float, out: list) -> float:
+    """Fire times appended to `out`; returns the time the step is done."""
+    earliest = armed + (step.after_s.value if step.after_s else 0.0)
+    if step.at_s is not None:
+        earliest = max(earliest, step.at_s.value)
+    fired = _tick(earliest)
+    if step.clause is not None:
+        out.append((step.clause.name, round(fired, 6)))
+    if step.group is None:
+        return fired
+    if step.group.mode == "parallel":
+        return max(_expected(s, fired, out) for s in step.group.steps)
+    t = fired
+    for s in step.group.steps:
+        t = _expected(s, t, out)
+    return t
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(_steps(2), min_size=1, max_size=4))
+def test_firing_times_match_the_semantics(triggers):
+    expected: list = []
+    for trig in triggers:
+        _expected(trig, 0.0, expected)
+    horizon = 40.0
+    started, script = run(triggers, duration=horizon)
+    assert sorted(started) == sorted(e for e in expected if e[1] <= horizon + 1e-9)
