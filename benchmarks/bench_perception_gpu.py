@@ -60,7 +60,7 @@ def check_flips(device: str) -> None:
     x[:, :, ::7, ::5] = 1.0
     with torch.inference_mode():
         clean = model(x)[0].clone()
-    layer = model.layers()["backbone.2"]
+    layer = model.layers()["backbone.conv2"]
     with ActivationFlip(layer, [123], [30]) as flip, torch.inference_mode():
         faulty = model(x)[0].clone()
     with torch.inference_mode():

@@ -32,7 +32,7 @@ HEAD_CHANNELS = ("heat", "off_x", "off_y", "log_l", "log_w", "sin", "cos")
 # `learned.py` names its layers exactly so (a unit test checks it). Listed here so the
 # compiler can check fault targets without importing torch.
 LAYER_SITES = (
-    "backbone.0", "backbone.1", "backbone.2", "backbone.3",
+    "backbone.conv0", "backbone.conv1", "backbone.conv2", "backbone.conv3",
     "neck.lateral", "neck.fuse", "neck.lateral_fine", "neck.fine", "head.center", "head.box",
 )
 TENSOR_SITES = tuple(f"perception.{name}" for name in LAYER_SITES)

@@ -8,10 +8,10 @@ face the lidar sees) and back up to a 76×32 head grid of 1.6 m cells (fine enou
 cars in adjacent lanes are separate peaks). Per head cell it predicts an object-centre
 heatmap, a sub-cell offset, log length, log width and heading as (sin, cos):
 
-    backbone.0         conv 3×3 s2   6→16   76×32  ─────────────────────┐
-    backbone.1         conv 3×3 s2  16→24   38×16  ──────────┐          │
-    backbone.2         conv 3×3 s2  24→32   19×8             │          │
-    backbone.3         conv 3×3     32→32   19×8             │          │
+    backbone.conv0     conv 3×3 s2   6→16   76×32  ─────────────────────┐
+    backbone.conv1     conv 3×3 s2  16→24   38×16  ──────────┐          │
+    backbone.conv2     conv 3×3 s2  24→32   19×8             │          │
+    backbone.conv3     conv 3×3     32→32   19×8             │          │
     neck.lateral       conv 1×1     32→24   → ×2 nearest, + ─┘          │
     neck.fuse          conv 3×3     24→24   38×16                       │
     neck.lateral_fine  conv 1×1     24→16   → ×2 nearest, + ────────────┘
@@ -22,7 +22,7 @@ heatmap, a sub-cell offset, log length, log width and heading as (sin, cos):
 One frame per inference: velocity is not estimated here but by the tracker from
 successive detections (objects carry `vx = vy = nan`, "not measured").
 
-Tensor fault sites are the named layers (`perception.backbone.0`, ...): a site's
+Tensor fault sites are the named layers (`perception.backbone.conv0`, ...): a site's
 *weights* are its kernel followed by its bias in one flat index space, its
 *activations* are the layer's output (before the ReLU), batch size 1. See
 `flip_weight_bits` and `flip_activation_bits`, built on `tensorfaults`.
@@ -52,12 +52,13 @@ class BevDetector(nn.Module):
     def __init__(self, widths: tuple[int, int, int] = (16, 24, 32), in_channels: int = 6):
         super().__init__()
         c1, c2, c3 = widths
-        self.backbone = nn.ModuleList([
-            nn.Conv2d(in_channels, c1, 3, 2, 1),
-            nn.Conv2d(c1, c2, 3, 2, 1),
-            nn.Conv2d(c2, c3, 3, 2, 1),
-            nn.Conv2d(c3, c3, 3, 1, 1),
-        ])
+        # Named convN, not 0..3: fault targets are dotted names in the DSL (`perception.backbone.conv0`).
+        self.backbone = nn.ModuleDict({
+            "conv0": nn.Conv2d(in_channels, c1, 3, 2, 1),
+            "conv1": nn.Conv2d(c1, c2, 3, 2, 1),
+            "conv2": nn.Conv2d(c2, c3, 3, 2, 1),
+            "conv3": nn.Conv2d(c3, c3, 3, 1, 1),
+        })
         self.neck = nn.ModuleDict({
             "lateral": nn.Conv2d(c3, c2, 1), "fuse": nn.Conv2d(c2, c2, 3, 1, 1),
             "lateral_fine": nn.Conv2d(c2, c1, 1), "fine": nn.Conv2d(c1, c1, 3, 1, 1),
@@ -67,10 +68,10 @@ class BevDetector(nn.Module):
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         b, neck = self.backbone, self.neck
-        x0 = F.relu(b[0](x), inplace=True)
-        x1 = F.relu(b[1](x0), inplace=True)
-        x = F.relu(b[2](x1), inplace=True)
-        x = F.relu(b[3](x), inplace=True)
+        x0 = F.relu(b["conv0"](x), inplace=True)
+        x1 = F.relu(b["conv1"](x0), inplace=True)
+        x = F.relu(b["conv2"](x1), inplace=True)
+        x = F.relu(b["conv3"](x), inplace=True)
         x = F.interpolate(neck["lateral"](x), scale_factor=2.0, mode="nearest") + x1
         x = F.relu(neck["fuse"](x), inplace=True)
         x = F.interpolate(neck["lateral_fine"](x), scale_factor=2.0, mode="nearest") + x0

@@ -95,6 +95,24 @@ def test_fault_site_errors_are_clear():
     with pytest.raises(KeyError, match="unknown tensor site"):
         node.flip_weight_bits("perception.backbone.9", [0], [0])
     with pytest.raises(IndexError):
-        node.flip_activation_bits("perception.backbone.0", [10**9], [0])
+        node.flip_activation_bits("perception.backbone.conv0", [10**9], [0])
     with pytest.raises(ValueError):
-        node.site_numel("perception.backbone.0", "gradients")
+        node.site_numel("perception.backbone.conv0", "gradients")
+
+
+@pytest.mark.parametrize("site", TENSOR_SITES)
+def test_every_tensor_site_is_a_valid_fault_target_with_learned_perception_only(site):
+    from pathlib import Path
+
+    from addt_dsl.compiler import compile_source
+
+    source = (Path(__file__).resolve().parents[3] / "examples" / "overtake.addt").read_text()
+    stack = "stack bev cruise_speed 25 m/s"
+    fault = "drop lidar rate drop_rate"
+    assert stack in source and fault in source
+    text = source.replace(fault, f"{fault}\n    at 5 s bitflip {site} tensor weights")
+    learned = compile_source(text.replace(stack, "stack bev perception learned cruise_speed 25 m/s"))
+    assert learned.ok, learned.diagnostics
+    ground_truth = compile_source(text)
+    assert not ground_truth.ok
+    assert any("cannot target" in d.message for d in ground_truth.diagnostics)
