@@ -31,19 +31,28 @@ class FastRoad:
         self._k = np.asarray(road.curvature(s), dtype=float).tolist()
         self._xy = np.stack([np.asarray(x, float), np.asarray(y, float)], axis=1)
         self._ds = self._s[1] - self._s[0]
+        self._last_i = len(self._s) - 2
+        self._section_starts = [sec.s0 for sec in road.sections]
         self._lanes_cache: dict[int, tuple[int, ...]] = {}
         self._center_cache: dict[int, list[float]] = {}
 
     # ---- reference line
     def _index(self, s: float) -> tuple[int, float]:
-        i = min(max(int(s / self._ds), 0), len(self._s) - 2)
-        return i, (s - self._s[i]) / self._ds
+        # Comparisons, not min/max: this runs ~50k times per run.
+        ds = self._ds
+        i = int(s / ds)
+        if i < 0:
+            i = 0
+        elif i > self._last_i:
+            i = self._last_i
+        return i, (s - self._s[i]) / ds
 
     def reference_pose(self, s: float) -> tuple[float, float, float]:
         i, u = self._index(s)
-        x = self._x[i] + u * (self._x[i + 1] - self._x[i])
-        y = self._y[i] + u * (self._y[i + 1] - self._y[i])
-        h = self._h[i] + u * (self._h[i + 1] - self._h[i])
+        xs, ys, hs = self._x, self._y, self._h
+        x = xs[i] + u * (xs[i + 1] - xs[i])
+        y = ys[i] + u * (ys[i + 1] - ys[i])
+        h = hs[i] + u * (hs[i + 1] - hs[i])
         if s > self.length:  # extrapolate straight past the end
             extra = s - self.length
             x, y, h = self._x[-1] + extra * math.cos(self._h[-1]), self._y[-1] + extra * math.sin(self._h[-1]), self._h[-1]
@@ -66,11 +75,15 @@ class FastRoad:
             s = self._s[int(np.argmin(np.einsum("ij,ij->i", d, d)))]
         else:
             s = hint
+        length = self.length
         for _ in range(3):
             rx, ry, h = self.reference_pose(s)
-            c, sn = math.cos(h), math.sin(h)
-            ds = (x - rx) * c + (y - ry) * sn
-            s = min(max(s + ds, 0.0), self.length)
+            ds = (x - rx) * math.cos(h) + (y - ry) * math.sin(h)
+            s += ds
+            if s < 0.0:  # min(max(s, 0), length), without the calls
+                s = 0.0
+            elif s > length:
+                s = length
             if abs(ds) < 1e-6:
                 break
         rx, ry, h = self.reference_pose(s)
@@ -79,8 +92,7 @@ class FastRoad:
 
     # ---- lanes
     def _section_key(self, s: float) -> int:
-        starts = [sec.s0 for sec in self.road.sections]
-        return max(0, bisect.bisect_right(starts, s) - 1)
+        return max(0, bisect.bisect_right(self._section_starts, s) - 1)
 
     def driving_lane_ids(self, s: float) -> tuple[int, ...]:
         key = self._section_key(s)

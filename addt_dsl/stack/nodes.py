@@ -228,25 +228,39 @@ class LatticePlanner:
         # speed ramp to `speed` at a comfortable 2 m/s^2 (braking up to 6 m/s^2).
         cost = 0.0
         s, v = s0, v0
-        steps = int(self.horizon_s / self.dt_s)
+        dt = self.dt_s
+        time_gap = self.time_gap
+        steps = int(self.horizon_s / dt)
+        # Per-object constants of the checks below (same expressions, evaluated once).
+        checks = [(os_, ov, ot, 0.5 * (owid + 1.9) + 0.3, 0.5 * (olen + 4.6), -(olen + 4.6) - 2.0)
+                  for (os_, ot, ov, olen, owid) in objs]
         for k in range(1, steps + 1):
-            tk = k * self.dt_s
-            a = max(-6.0, min(2.0, (speed - v) / self.dt_s))
-            v = max(0.0, v + a * self.dt_s)
-            s += v * self.dt_s
-            u = min(1.0, tk / 3.0)
+            tk = k * dt
+            # The min/max below as comparisons with the builtins' results (NaN included).
+            a = (speed - v) / dt
+            if not a < 2.0:  # min(2.0, a)
+                a = 2.0
+            elif not a > -6.0:  # max(-6.0, .)
+                a = -6.0
+            v = v + a * dt
+            if not v > 0.0:  # max(0.0, v)
+                v = 0.0
+            s += v * dt
+            u = tk / 3.0
+            if not u < 1.0:  # min(1.0, u)
+                u = 1.0
             t = t0 + (t_lane - t0) * (u * u * (3 - 2 * u))
-            for (os_, ot, ov, olen, owid) in objs:
-                so = os_ + ov * tk
-                lat_overlap = abs(t - ot) < 0.5 * (owid + 1.9) + 0.3
-                if not lat_overlap:
+            for os_, ov, ot, lat_reach, half_len, gap_low in checks:
+                if not abs(t - ot) < lat_reach:
                     continue
-                gap = so - s - 0.5 * (olen + 4.6)
+                gap = os_ + ov * tk - s - half_len
                 # Boxes overlap along the road for -(olen + 4.6) < gap < 0; keep 2 m either side.
-                if -(olen + 4.6) - 2.0 < gap < 2.0:
+                if gap_low < gap < 2.0:
                     return math.inf  # collision with a predicted object
                 if gap >= 0.0:
-                    desired = max(5.0, self.time_gap * v)
+                    desired = time_gap * v
+                    if not desired > 5.0:  # max(5.0, desired)
+                        desired = 5.0
                     if gap < desired:
                         cost += 4.0 * (desired - gap) / desired
         cost += 1.0 * abs(self.cruise - speed) / max(self.cruise, 1.0) * 10.0
