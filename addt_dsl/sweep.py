@@ -131,7 +131,7 @@ def expand(plan: ScenarioPlan) -> Expansion:
             assignments = [base]
         for si, params in enumerate(assignments):
             for r in range(sweep.repeat):
-                seed = derive_seed(plan.seed, sweep.seed, ci, si, r)
+                seed = plan.run_seed if plan.run_seed is not None else derive_seed(plan.seed, sweep.seed, ci, si, r)
                 run_id = f"c{ci:03d}" + (f"-s{si:04d}" if sweep.sampler else "") + f"-r{r:03d}"
                 specs.append(make_spec(plan, params, seed, run_id, cell, r))
     if not specs and plan.assumptions:
