@@ -90,14 +90,14 @@ def format_const(value: float, dim: Dim) -> str:
     dimensions without a unit of their own are written as `v m * 1 s` (exact: × 1.0)."""
     if dim == units.DIMENSIONLESS or dim in units.CANONICAL_UNIT:
         return format_quantity(value, dim)
-    parts = [_number(value)]
-    for base, exp in ((units.LENGTH, dim.length), (units.TIME, dim.time), (units.MASS, dim.mass),
-                      (units.ANGLE, dim.angle)):
-        symbol = units.CANONICAL_UNIT[base]
-        for _ in range(abs(exp)):
-            parts.append(("* 1 " if exp > 0 else "/ 1 ") + symbol)
-    head, *rest = parts
-    return " ".join([head, *rest])
+    factors = [("*" if exp > 0 else "/", units.CANONICAL_UNIT[base])
+               for base, exp in ((units.LENGTH, dim.length), (units.TIME, dim.time), (units.MASS, dim.mass),
+                                 (units.ANGLE, dim.angle)) for _ in range(abs(exp))]
+    factors.sort(key=lambda f: f[0] != "*")  # a unit with a positive power goes on the number
+    text = _number(value)
+    if factors[0][0] == "*":
+        text += f" {factors.pop(0)[1]}"
+    return " ".join([text, *(f"{op} 1 {symbol}" for op, symbol in factors)])
 
 
 def _dim_of_name(name: str) -> Dim:
@@ -179,11 +179,24 @@ class _ExprPrinter:
             case E.Binary(op="*" | "/", left=l, right=r):
                 dl, dr = self.default_dim(l), self.default_dim(r)
                 return dl * dr if e.op == "*" else dl / dr
-            case E.Binary(left=l):
-                return self.default_dim(l)
+            case E.Binary(left=l, right=r):
+                return self.default_dim(r if _has_ref(r) and not _has_ref(l) else l)
             case E.Unary(arg=a):
                 return self.default_dim(a)
+            case E.Call(fn="sqrt", args=(a,)):
+                d = self.default_dim(a)
+                return Dim(d.length // 2, d.time // 2, d.mass // 2, d.angle // 2)
+            case E.Call(args=args):
+                return self.default_dim(next((a for a in args if _has_ref(a)), args[0]))
         return units.DIMENSIONLESS
+
+    def comparison_dim(self, left, right) -> Dim:
+        for side in (left, right):
+            d = self.dim(side)
+            if d is not None:
+                return d
+        # Both sides are free: the side that names a signal or parameter decides.
+        return self.default_dim(right if _has_ref(right) and not _has_ref(left) else left)
 
     # -- printing: returns (text, level)
     def format(self, e, want, slot: int = TEMPORAL) -> str:
@@ -197,6 +210,10 @@ class _ExprPrinter:
 
     def value(self, e, dim: Dim) -> str:
         return self.format(e, dim)
+
+
+def _has_ref(e) -> bool:
+    return any(isinstance(n, (E.Param, E.Signal)) for n in E.walk(e))
 
 
 def _p_num(p: _ExprPrinter, e: E.Num, want):
@@ -244,9 +261,7 @@ def _p_binary(p: _ExprPrinter, e: E.Binary, want):
     if e.op in E.BOOL_OPS:
         lw = rw = BOOL
     elif e.op in E.COMPARE_OPS:
-        d = p.dim(e.left)
-        d = d if d is not None else p.dim(e.right)
-        lw = rw = d if d is not None else p.default_dim(e.left)
+        lw = rw = p.comparison_dim(e.left, e.right)
     elif e.op in ("+", "-"):
         lw = rw = want
     else:
