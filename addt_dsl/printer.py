@@ -406,8 +406,9 @@ def _roads(pr: _Printer) -> None:
             keyword, fields = SEGMENTS[seg.kind]
             pr.emit(2, _join(keyword, *(_const_setting(pr, keyword, k, get(seg)) for k, get in fields)))
         defaults = {s.name: s.default for s in GEOMETRIES.get("lanes").params}
-        pr.emit(2, _join("lanes", *(_const_setting(pr, "lanes", k, getattr(road, f)) for k, f in LANES
-                                    if getattr(road, f) != defaults[k])))
+        lanes = [_const_setting(pr, "lanes", k, getattr(road, f)) for k, f in LANES if getattr(road, f) != defaults[k]]
+        if lanes:
+            pr.emit(2, _join("lanes", *lanes))
         pr.emit(1, "}")
 
 
