@@ -66,7 +66,7 @@ scenario kitchen_sink {
     warn comfort: always abs(accel(ego)) < 3 m/s^2
     always during [1 s, 5 s] ttc(ego, lead) > 2 s or not (speed(ego) > 1 m/s)
     hard safe: (speed(ego) < 30 m/s until within 3 s s(ego) > 20 m) implies eventually after 1 s gap(ego, lead) >= -(2 * 1 m)
-    always latency(e2e) < 0.2 s and true
+    always latency(e2e) < 0.2 s and objects() >= 0
     always 2 * gap(ego, lead) / speed(lead) > -1 s
   }
 
