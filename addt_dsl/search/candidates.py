@@ -120,6 +120,16 @@ def neutral_value(kind: str, setting: str) -> float:
     return min(max(0.0, lo), hi)
 
 
+def effective_settings(f: ConcreteFault) -> dict:
+    """The settings the fault kind will use: the given ones, defaults for the rest (a
+    setting left out is not smaller: `drop` without `rate` drops every frame)."""
+    cls = FAULTS.get(f.kind)
+    out = {p.name: float(p.default) if isinstance(p.default, (int, float)) else p.default
+           for p in (cls.params if cls else ()) if p.default is not None}
+    out.update(f.settings)
+    return out
+
+
 def window_length(f: ConcreteFault, duration_s: float) -> float:
     end = duration_s if f.end_s is None else min(f.end_s, duration_s)
     return max(0.0, end - f.start_s)
@@ -141,10 +151,10 @@ def sort_key(spec: RunSpec, nominal: dict[str, float], scales: dict[str, float])
     for f in spec.faults:
         n_settings += len(f.settings)
         digits += _digits(f.start_s) + (_digits(f.end_s) if f.end_s is not None else 0)
-        for k, v in f.settings.items():
+        digits += sum(_digits(v) for v in f.settings.values() if isinstance(v, float))
+        for k, v in effective_settings(f).items():
             if not isinstance(v, float):
                 continue
-            digits += _digits(v)
             if k == "bit":
                 bits += 64.0 if v < 0 else v  # a random bit is the most complex choice
             else:
