@@ -15,7 +15,8 @@ calls), and its notion of "the same failure" is an exception's type and location
 passes here are the ones issue 9 names, with per-pass statistics.
 
 Passes, in order (cheap large steps first, like conjecture):
-  cut_after_violation  faults and the run end at the first violation (nothing later matters)
+  cut_after_violation  faults and the run end where the failure is decided (the first
+                       violation plus the formula's look-ahead; nothing later matters)
   delete_faults        adaptive chunk deletion (halves, quarters, ..., single faults)
   delete_agents        same, for agents no kept oracle or trigger refers to
   shorten_windows      instantaneous, then bisect the end down and the start up
@@ -33,6 +34,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from addt_dsl import expr as E
 from addt_dsl.plan import RunSpec, ScenarioPlan
 from addt_dsl.registry import FAULTS
 from addt_dsl.search import candidates as C
@@ -163,6 +165,17 @@ class Shrinker:
         f = self.outcome.failure(self.target)
         return f.time_s if f else None
 
+    def evidence_end(self) -> float | None:
+        """Until when the trace decides the target failure: the first violation plus the
+        look-ahead of the formula there (None: the whole run may matter)."""
+        t_v = self.violation_time()
+        if t_v is None:
+            return None
+        oracle = next((o for o in self.best.plan.oracles if o.name == self.target[0]), None)
+        if oracle is None:  # stack_health: the run stopped at the error
+            return t_v
+        return evidence_end(oracle.formula, t_v)
+
     def bisect(self, current: float, target: float, make: Callable[[float], RunSpec | None],
                integer: bool = False, steps: int = BISECT_STEPS) -> None:
         """Move a value from `current` toward `target`: try `target`, then bisect (the
@@ -193,7 +206,7 @@ class Shrinker:
     def cut_after_violation(self) -> None:
         """Nothing after the first violation matters: drop faults that start after it,
         end the others there, and end the run shortly after (same failing oracles only)."""
-        t_v = self.violation_time()
+        t_v = self.evidence_end()
         if t_v is None:
             return
         spec = self.best
@@ -343,6 +356,34 @@ class Shrinker:
                 return
             if self.consider(make(r)):
                 return
+
+
+# ---------------------------------------------------------------- evidence
+
+def horizon(e) -> float | None:
+    """How far past a sample the formula looks (None: to the end of the trace)."""
+    match e:
+        case E.Temporal(hi_s=hi, arg=a):
+            h = horizon(a)
+            return None if hi is None or h is None else hi + h
+        case E.Until(hi_s=hi, left=l, right=r):
+            hs = [horizon(l), horizon(r)]
+            return None if hi is None or None in hs else hi + max(hs)
+    hs = [horizon(c) for c in E.children(e)]
+    return None if None in hs else max(hs, default=0.0)
+
+
+def evidence_end(formula, t_v: float) -> float | None:
+    """`first_violation_time` is the failing sample of an `always` (or of a violated
+    conjunct); anything else is judged at time 0 and may look as far as its horizon."""
+    match formula:
+        case E.Temporal(op="always", arg=a):
+            h = horizon(a)
+            return None if h is None else t_v + h
+        case E.Binary(op="and", left=l, right=r):
+            ends = [evidence_end(l, t_v), evidence_end(r, t_v)]
+            return None if None in ends else max(ends)
+    return horizon(formula)
 
 
 # ---------------------------------------------------------------- report

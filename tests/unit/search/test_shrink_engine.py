@@ -138,3 +138,46 @@ def test_the_kept_oracle_keeps_its_agents():
 def test_a_passing_run_is_not_shrunk():
     with pytest.raises(NotFailing):
         Shrinker(_spec([]), cache=RunCache(evaluator=Judge()))
+
+
+# ---------------------------------------------------------------- bits
+
+def bit_judge(spec: RunSpec) -> Outcome:
+    """Fails when a bit flip on control.steer flips bit 55 or higher; with `bit -1` the
+    bit comes from the fault's seed (like the real kind draws it from its stream)."""
+    flipped, fails = {}, False
+    for f in spec.faults:
+        if f.kind != "bitflip":
+            continue
+        bit = int(f.settings.get("bit", -1.0))
+        bit = bit if bit >= 0 else 52 + f.seed % 11
+        flipped[f.index] = (bit,)
+        fails |= f.target == "control.steer" and bit >= 55
+    failures = (Failure("lane_keeping", "abs(lane_offset(ego)) < 1.5 m [left]", 2.0, -0.1),) if fails else ()
+    return Outcome(spec.key(), "ok", "", {}, ("lane_keeping",), failures, flipped_bits=flipped)
+
+
+def test_bit_flips_get_the_flipped_bit_then_the_lowest_that_still_fails():
+    flip = ConcreteFault(index=0, kind="bitflip", target="control.steer", start_s=1.0, end_s=3.0,
+                         settings={"count": 4.0, "field": "exponent"}, seed=11019)  # flips bit 60
+    assert 52 + flip.seed % 11 >= 55
+    shrinker = Shrinker(_spec([flip]), nominal_plan=kitchen_sink_plan(), cache=RunCache(evaluator=bit_judge))
+    result = shrinker.run()
+    (f,) = result.best.faults
+    assert f.settings["bit"] == 55.0  # fixed, then lowered to the least significant failing bit
+    assert f.settings.get("count", 1.0) == 1.0
+    assert "field" not in f.settings  # irrelevant once the bit is fixed
+    assert f.start_s == f.end_s  # one instant is enough for this judge
+
+
+def test_evidence_ends_where_the_formula_stops_looking():
+    from addt_dsl import expr as E
+    from addt_dsl.search.shrink import evidence_end, horizon
+
+    atom = E.Binary(op=">", left=E.Signal(name="clearance(ego)"), right=E.Num(value=0.0))
+    assert evidence_end(E.Temporal(op="always", arg=atom), 4.0) == 4.0
+    look_ahead = E.Temporal(op="always", arg=E.Temporal(op="eventually", lo_s=0.0, hi_s=2.0, arg=atom))
+    assert evidence_end(look_ahead, 4.0) == 6.0
+    assert evidence_end(E.Temporal(op="eventually", arg=atom), 0.0) is None  # reach_goal: the whole run
+    assert evidence_end(E.Temporal(op="eventually", hi_s=5.0, arg=atom), 0.0) == 5.0
+    assert horizon(E.Until(hi_s=1.0, left=atom, right=E.Temporal(op="always", hi_s=2.0, arg=atom))) == 3.0
