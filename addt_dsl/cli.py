@@ -1,6 +1,8 @@
 """`addtc`: compile, run and judge `.addt` scenarios.
 
     addtc FILE [--jobs N] [--out DIR]     compile and run the file's sweep, print verdicts
+        [--executor local|ray] [--address ADDR] [--store PATH] [--timeout S] [--junit FILE]
+    addtc report DIR                      HTML report, summary.json, runs.csv of a results dir
     addtc check FILE...                   compile only (diagnostics)
     addtc plan FILE                       print the ScenarioPlan as JSON
     addtc schema [--write PATH]           the plan's JSON schema
@@ -13,15 +15,17 @@ Exit codes: 0 every oracle held in every run, 1 some run failed, 2 compile/usage
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 from addt_dsl.diagnostics import render_json, render_text
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
-SUBCOMMANDS = ("run", "check", "plan", "schema", "shrink", "falsify")
+SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "shrink", "falsify")
 
 
 def _compile(path: str, fmt: str):
@@ -68,40 +72,144 @@ def cmd_run(args) -> int:
     result = _compile(args.file, args.format)
     if not result.ok:
         return EXIT_ERROR
-    from addt_dsl.sweep import UnsatisfiableAssumptions, expand
+    from addt_dsl.runtime.store import ResultStore, StoreMismatch
+    from addt_dsl.sweep import SweepStream, UnsatisfiableAssumptions
 
+    plan = result.plan
+    stream = SweepStream(plan)
     try:
-        expansion = expand(result.plan)
+        if len(stream) == 0:
+            next(iter(stream))  # raises: every candidate breaks an assumption
     except UnsatisfiableAssumptions as exc:
         print(f"error[E0501]: {exc}", file=sys.stderr)
         return EXIT_ERROR
-    specs = expansion.specs
-    if args.limit:
-        specs = specs[: args.limit]
-    from addt_dsl.report import print_verdicts, write_outputs
-    from addt_dsl.runtime.executor import run_local
+    try:
+        executor = _executor(args)
+    except _UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    out = Path(args.out) if args.out else None
+    tmp = None
+    if args.store:
+        store_path = Path(args.store)
+    elif out:
+        store_path = out / "results.sqlite"
+    else:
+        tmp = tempfile.TemporaryDirectory(prefix="addtc-")
+        store_path = Path(tmp.name) / "results.sqlite"
+    try:
+        store = ResultStore(store_path, plan, fresh=args.fresh)
+    except StoreMismatch as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    try:
+        return _run_and_report(args, plan, stream, store, executor, out)
+    except UnsatisfiableAssumptions as exc:
+        print(f"error[E0501]: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    finally:
+        store.close()
+        if tmp is not None:
+            tmp.cleanup()
 
-    results = _run_with_progress(specs, args.jobs, quiet=args.format == "json")
-    if expansion.rejected:
-        for text, n in expansion.rejected.most_common():
-            print(f"note: assumption `{text}` rejected {n} candidate run(s)", file=sys.stderr)
-    if args.out:
-        write_outputs(Path(args.out), result.plan, results, expansion.rejected)
-    print_verdicts(result.plan, results, fmt=args.format)
-    return EXIT_OK if all(r.passed for r in results) else EXIT_FAILED
+
+class _UsageError(ValueError):
+    pass
 
 
-def _run_with_progress(specs, jobs: int, quiet: bool):
-    from addt_dsl.runtime.executor import run_local
+def _executor(args):
+    if args.executor == "inline":
+        from addt_dsl.runtime.executor import InlineExecutor
 
-    if quiet or len(specs) < 4 or not sys.stderr.isatty():
-        return run_local(specs, jobs)
+        return InlineExecutor()
+    if args.executor == "ray":
+        from addt_dsl.runtime.ray_executor import RayExecutor, ray_available
+
+        if not ray_available():
+            raise _UsageError("--executor ray needs the `ray` package (pip install 'addt-dsl[ray]')")
+        return RayExecutor(address=args.address, jobs=args.jobs if args.jobs_given else None,
+                           timeout_s=args.timeout, memory_limit_mb=args.memory_limit)
+    if args.address:
+        raise _UsageError("--address is for --executor ray")
+    from addt_dsl.runtime.executor import LocalExecutor
+
+    return LocalExecutor(args.jobs, timeout_s=args.timeout, memory_limit_mb=args.memory_limit,
+                         max_tasks_per_child=args.max_tasks_per_child)
+
+
+def _run_and_report(args, plan, stream, store, executor, out) -> int:
+    from addt_dsl.reporting.tables import print_verdicts, shown_records
+
+    total = len(stream)
+    limit = args.limit or None
+    specs = itertools.islice(stream, limit) if limit else stream
+    total = min(total, limit) if limit else total
+    store.begin_session(" ".join(sys.argv), executor.name, executor.workers)
+    already = len(store)
+    quiet = args.format == "json"
+    if already and not quiet:
+        print(f"resuming: {already} run(s) already in {store.path}", file=sys.stderr)
+    try:
+        outcome = _sweep_with_progress(specs, store, executor, total, min(already, total), quiet)
+    except KeyboardInterrupt:
+        print(f"interrupted: {len(store)} run(s) are stored in {store.path}; "
+              "run the same command again to resume", file=sys.stderr)
+        return 130
+    store.set_meta("rejected", dict(stream.rejected))
+    for text, n in stream.rejected.most_common():
+        print(f"note: assumption `{text}` rejected {n} candidate run(s)", file=sys.stderr)
+    totals = store.summary()
+    if out:
+        from addt_dsl.reporting import build_report, write_tables
+
+        write_tables(out, store)
+        if not args.no_report:
+            build_report(store, out / "report.html", max_animations=args.animations)
+    if args.junit:
+        from addt_dsl.reporting import write_junit
+
+        write_junit(args.junit, plan, store.records())
+    print_verdicts(plan, shown_records(store), totals, fmt=args.format)
+    if not quiet and outcome.skipped:
+        print(f"({outcome.skipped} run(s) taken from the store, {outcome.ran} executed now)", file=sys.stderr)
+    return EXIT_OK if totals["failed"] == 0 else EXIT_FAILED
+
+
+def _sweep_with_progress(specs, store, executor, total: int, done: int, quiet: bool):
+    from addt_dsl.runtime.executor import run_sweep
+
+    if quiet or total - done < 4 or not sys.stderr.isatty():
+        return run_sweep(specs, store, executor)
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeRemainingColumn(), transient=True) as progress:
-        task = progress.add_task("runs", total=len(specs))
-        return run_local(specs, jobs, on_result=lambda r: progress.advance(task))
+        task = progress.add_task("runs", total=total, completed=done)
+        return run_sweep(specs, store, executor, on_record=lambda r: progress.advance(task))
+
+
+def cmd_report(args) -> int:
+    from addt_dsl.reporting import build_report, write_junit, write_tables
+    from addt_dsl.runtime.store import ResultStore
+
+    target = Path(args.dir)
+    store_path = target if target.is_file() else target / "results.sqlite"
+    if not store_path.exists():
+        print(f"error: no results store at {store_path} (run `addtc FILE --out DIR` first)", file=sys.stderr)
+        return EXIT_ERROR
+    out = Path(args.out) if args.out else (target.parent if target.is_file() else target)
+    with ResultStore(store_path) as store:
+        write_tables(out, store)
+        path = build_report(store, out / "report.html", max_animations=args.animations)
+        if args.junit:
+            write_junit(args.junit, store.plan(), store.records())
+        for export in args.export or ():
+            if export.endswith(".parquet"):
+                store.to_parquet(export)
+            else:
+                store.to_csv(export)
+        print(f"wrote {path}")
+    return EXIT_OK
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -109,11 +217,36 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command")
     run = sub.add_parser("run", help="compile and run a scenario (default)")
     run.add_argument("file")
-    run.add_argument("--jobs", "-j", type=int, default=max(1, os.cpu_count() or 1))
-    run.add_argument("--out", help="write summary.json and runs.csv here")
+    run.add_argument("--jobs", "-j", type=int, default=None,
+                     help="worker processes (default: CPU count; Ray: the cluster's CPUs)")
+    run.add_argument("--executor", choices=("local", "ray", "inline"), default="local",
+                     help="local worker processes (default), a Ray cluster, or this process (debugging)")
+    run.add_argument("--address", help="Ray cluster address (default: start a local Ray instance)")
+    run.add_argument("--out", help="write summary.json, runs.csv, report.html and results.sqlite here")
+    run.add_argument("--store", help="results store (SQLite) to commit runs to and resume from "
+                                     "(default: OUT/results.sqlite, else a temporary file)")
+    run.add_argument("--fresh", action="store_true", help="discard the store's results before running")
+    run.add_argument("--junit", metavar="FILE", help="write JUnit XML (one testcase per run)")
+    run.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
+                     help="wall-clock limit per run; a run past it is recorded as `timeout`")
+    run.add_argument("--memory-limit", type=float, default=4096, metavar="MB",
+                     help="resident memory per worker; a run past it is recorded as `memory` (0: off)")
+    run.add_argument("--max-tasks-per-child", type=int, default=500, metavar="N",
+                     help="replace a worker process after N runs")
+    run.add_argument("--no-report", action="store_true", help="with --out: skip report.html")
+    run.add_argument("--animations", type=int, default=4, metavar="N",
+                     help="failing runs to animate in report.html")
     run.add_argument("--limit", type=int, default=0, help="run only the first N runs of the sweep")
     run.add_argument("--format", choices=("text", "json"), default="text")
     run.set_defaults(func=cmd_run)
+    report = sub.add_parser("report", help="write report.html (and tables) for a results directory")
+    report.add_argument("dir", help="directory written by --out (or a results .sqlite file)")
+    report.add_argument("--out", help="directory for report.html, summary.json, runs.csv (default: DIR)")
+    report.add_argument("--junit", metavar="FILE", help="also write JUnit XML")
+    report.add_argument("--export", action="append", metavar="FILE",
+                        help="also export the runs table (.csv or .parquet); repeatable")
+    report.add_argument("--animations", type=int, default=4, metavar="N")
+    report.set_defaults(func=cmd_report)
     check = sub.add_parser("check", help="compile only")
     check.add_argument("files", nargs="+")
     check.add_argument("--format", choices=("text", "json"), default="text")
@@ -137,6 +270,9 @@ def main(argv: list[str] | None = None) -> int:
         argv.insert(0, "run")
     parser = build_parser()
     args = parser.parse_args(argv)
+    if getattr(args, "command", None) == "run":
+        args.jobs_given = args.jobs is not None
+        args.jobs = args.jobs if args.jobs is not None else max(1, os.cpu_count() or 1)
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_ERROR

@@ -97,6 +97,8 @@ class ActorPlan(_Model):
     sensors: list[ClausePlan] = Field(default_factory=list)
     stack: ClausePlan | None = None
     goal_s: Expr | None = None
+    mu: Expr | None = None  # tyre-road friction coefficient of the ego dynamics (None: 0.8)
+    offset: Expr | None = None  # start offset from the lane centre, left positive [m]
 
 
 class FaultPlan(_Model):

@@ -109,16 +109,65 @@ def _probit(u: float) -> float:
 
 
 def expand(plan: ScenarioPlan) -> Expansion:
-    """All RunSpecs of the plan's sweep, in a stable order with stable ids."""
-    sweep = plan.sweep
-    nominal = plan.nominal_params()
-    axes = [(g.param, g.values) for g in sweep.grid]
+    """All RunSpecs of the plan's sweep, in a stable order with stable ids (a list; see
+    `SweepStream` for large sweeps)."""
+    stream = SweepStream(plan)
+    specs = list(stream)
+    return Expansion(specs, stream.rejected)
+
+
+class SweepStream:
+    """The plan's RunSpecs, expanded lazily in the same order and with the same ids and
+    seeds as `expand`. Every RunSpec shares the one plan object, so a coordinator can
+    walk a 10,000-run sweep holding only the specs in flight. Iterating again
+    re-expands from scratch (same specs); `rejected` counts the last iteration's
+    assumption rejections; `len()` is exact and draws no samples.
+    """
+
+    def __init__(self, plan: ScenarioPlan):
+        self.plan = plan
+        self.rejected: Counter = Counter()
+
+    def __len__(self) -> int:
+        return count_runs(self.plan)
+
+    def __iter__(self):
+        self.rejected = Counter()
+        produced = 0
+        for spec in _iter_specs(self.plan, self.rejected):
+            produced += 1
+            yield spec
+        if not produced and self.plan.assumptions:
+            raise UnsatisfiableAssumptions(
+                "every candidate run breaks an assumption: "
+                + ", ".join(f"{t} ({n} rejected)" for t, n in self.rejected.most_common()))
+
+
+def _cells_and_sampled(plan: ScenarioPlan):
+    axes = [(g.param, g.values) for g in plan.sweep.grid]
     grid_cells = [dict(zip([a for a, _ in axes], combo)) for combo in
                   itertools.product(*[v for _, v in axes])] or [{}]
     sampled = [p for p in plan.params if p.name not in {a for a, _ in axes}
                and (p.low is not None and p.high is not None and p.low < p.high or p.choices)]
-    rejected: Counter = Counter()
-    specs: list[RunSpec] = []
+    return grid_cells, sampled
+
+
+def count_runs(plan: ScenarioPlan) -> int:
+    """Number of RunSpecs the sweep expands to. Samplers always deliver `count` accepted
+    samples per cell (or fail), so this needs no sampling."""
+    sweep = plan.sweep
+    grid_cells, sampled = _cells_and_sampled(plan)
+    nominal = plan.nominal_params()
+    if sweep.sampler and sampled:
+        return len(grid_cells) * sweep.sampler.count * sweep.repeat
+    valid = sum(1 for cell in grid_cells if not violated_assumptions(plan, {**nominal, **cell}))
+    return valid * sweep.repeat
+
+
+def _iter_specs(plan: ScenarioPlan, rejected: Counter):
+    sweep = plan.sweep
+    nominal = plan.nominal_params()
+    grid_cells, sampled = _cells_and_sampled(plan)
     for ci, cell in enumerate(grid_cells):
         base = {**nominal, **cell}
         if violated_assumptions(plan, base) and not (sweep.sampler and sampled):
@@ -128,27 +177,23 @@ def expand(plan: ScenarioPlan) -> Expansion:
         if sweep.sampler and sampled:
             assignments = _sample_cell(plan, base, sampled, ci, rejected)
         else:
-            assignments = [base]
+            assignments = iter([base])
         for si, params in enumerate(assignments):
             for r in range(sweep.repeat):
                 seed = plan.run_seed if plan.run_seed is not None else derive_seed(plan.seed, sweep.seed, ci, si, r)
                 run_id = f"c{ci:03d}" + (f"-s{si:04d}" if sweep.sampler else "") + f"-r{r:03d}"
-                specs.append(make_spec(plan, params, seed, run_id, cell, r))
-    if not specs and plan.assumptions:
-        raise UnsatisfiableAssumptions(
-            "every candidate run breaks an assumption: "
-            + ", ".join(f"{t} ({n} rejected)" for t, n in rejected.most_common()))
-    return Expansion(specs, rejected)
+                yield make_spec(plan, params, seed, run_id, cell, r)
 
 
-def _sample_cell(plan, base, sampled, cell_index, rejected) -> list[dict[str, float]]:
+def _sample_cell(plan, base, sampled, cell_index, rejected):
+    """Accepted parameter assignments of one cell, drawn lazily in batches."""
     sampler = plan.sweep.sampler
     rng = np.random.default_rng(derive_seed(plan.seed, sampler.seed, cell_index, 104729))
-    out: list[dict[str, float]] = []
+    accepted = 0
     drawn = 0
     cap = plan.sweep.max_rejections
-    while len(out) < sampler.count:
-        need = sampler.count - len(out)
+    while accepted < sampler.count:
+        need = sampler.count - accepted
         units = _unit_samples(sampler.kind, need, len(sampled), rng, drawn)
         drawn += need
         for row in units:
@@ -162,5 +207,5 @@ def _sample_cell(plan, base, sampled, cell_index, rejected) -> list[dict[str, fl
                         f"more than {cap} samples rejected: "
                         + ", ".join(f"{t} ({n})" for t, n in rejected.most_common()))
                 continue
-            out.append(params)
-    return out
+            accepted += 1
+            yield params

@@ -38,6 +38,10 @@ ACTOR_SETTINGS = (
     ParamSpec("width", units.LENGTH, low=0.1, high=5.0, doc="body width"),
     ParamSpec("mass", units.MASS, default=1500.0, low=50.0, high=60000.0, doc="mass"),
     ParamSpec("wheelbase", units.LENGTH, default=2.7, low=0.5, high=10.0, doc="wheelbase"),
+    ParamSpec("mu", units.DIMENSIONLESS, default=0.8, low=0.05, high=1.5,
+              doc="tyre-road friction coefficient (0.8 dry asphalt, 0.5 wet, 0.1 ice)"),
+    ParamSpec("offset", units.LENGTH, default=0.0, low=-20.0, high=20.0,
+              doc="start offset from the lane centre, left positive (e.g. a pedestrian on the kerb)"),
 )
 
 VEHICLE_KINDS = {"car": (4.6, 1.9), "truck": (12.0, 2.5), "pedestrian": (0.5, 0.5), "cyclist": (1.8, 0.6)}
@@ -294,10 +298,11 @@ def rule_roads(ctx: Context) -> None:
         if d.import_path is not None:
             _import_road(ctx, d)
             continue
-        segments, lanes = [], None
+        segments, lanes, broken = [], None, False
         for item in d.items:
             cls = GEOMETRIES.get(item.kind)
             if cls is None:
+                broken = True
                 ctx.sink.error("E0106", f"unknown road element '{item.kind}'", item.span,
                                *_suggest(item.kind, GEOMETRIES.names()),
                                f"road elements: {', '.join(GEOMETRIES.names())}")
@@ -328,6 +333,8 @@ def rule_roads(ctx: Context) -> None:
                 segments.append(P.SegmentPlan(kind="param_poly3", length_m=spec["length"], coefficients=[
                     spec[k] for k in ("au", "bu", "cu", "du", "av", "bv", "cv", "dv")]))
         if not segments:
+            if broken:
+                continue
             ctx.sink.error("E0103", f"road '{d.name}' has no geometry", d.span, "add e.g. `line length 500 m`")
             continue
         lanes = lanes or {p.name: p.default for p in GEOMETRIES.get("lanes").params}
@@ -409,7 +416,7 @@ def rule_actors(ctx: Context) -> None:
             mass_kg=_const_value(vals["mass"]) if "mass" in vals else 1500.0,
             wheelbase_m=_const_value(vals["wheelbase"]) if "wheelbase" in vals else 2.7,
             behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
-            goal_s=vals.get("goal"))
+            goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"))
 
 
 _CLAUSE_TABLES = {"behavior": BEHAVIORS, "sensor": SENSORS, "stack": STACKS}

@@ -2,8 +2,11 @@
 
 A behaviour drives one longitudinal or lateral channel of a traffic agent: it returns
 an acceleration command [m/s^2] and/or a lateral target (offset from the road
-reference line [m]) with a smooth profile. Agents move along their road in (s, t), so
-behaviours are pure numpy and need no physics engine.
+reference line [m]) with a smooth profile. Agents move kinematically in road
+coordinates (s, t) — along the road, or at a heading relative to it (pedestrians
+crossing) — so behaviours are pure Python and need no physics engine. A behaviour
+that runs a manoeuvre (overtake, cross) advances its phases inside `accel`, which the
+loop calls once per step.
 """
 
 from __future__ import annotations
@@ -32,6 +35,9 @@ class AgentState:
     t_start: float = 0.0
     lc_start_s: float = 0.0  # time the current lateral manoeuvre began [s]
     lc_duration_s: float = 0.0
+    # Direction of motion relative to the road's +s direction [rad]; non-zero for
+    # walkers: they move at this angle instead of following a lane.
+    heading_rel: float = 0.0
 
 
 class Behavior:
@@ -124,12 +130,7 @@ class LaneChange(Behavior):
     doc = "Move to another lane with a smooth (quintic) lateral profile."
 
     def start(self, agent, world, time_s):
-        lane = int(round(self.settings["to"]))
-        agent.lane = lane
-        agent.t_start = agent.t
-        agent.t_target = world.lane_t(agent.road, lane, agent.s)
-        agent.lc_start_s = time_s
-        agent.lc_duration_s = self.settings["duration"]
+        begin_lane_change(agent, world, int(round(self.settings["to"])), self.settings["duration"], time_s)
 
 
 @BEHAVIORS.register
@@ -140,6 +141,146 @@ class CutIn(LaneChange):
         ParamSpec("duration", units.TIME, default=2.0, low=0.5, doc="time to complete the cut-in"),
     )
     doc = "An abrupt lane change into another lane (typically in front of the ego)."
+
+
+@BEHAVIORS.register
+class Overtake(Behavior):
+    keyword = "overtake"
+    params = (
+        ParamSpec("speed", units.SPEED, required=True, low=0.0, doc="passing speed"),
+        ParamSpec("target", None, kind="name", default="", doc="actor to pass (default: the nearest one ahead in the lane)"),
+        ParamSpec("lane", None, kind="int", default=0, doc="passing lane (default: the next lane to the left)"),
+        ParamSpec("margin", units.LENGTH, default=8.0, low=0.0, doc="gap ahead of the target before cutting back in"),
+        ParamSpec("duration", units.TIME, default=3.0, low=0.5, doc="duration of each lane change"),
+        ParamSpec("accel", units.ACCELERATION, default=2.0, low=0.0, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=3.0, low=0.0, doc="max deceleration"),
+    )
+    doc = ("Pull out into the passing lane, pass the target at `speed` and return to the "
+           "original lane once `margin` ahead of it; then hold `speed`.")
+
+    def start(self, agent, world, time_s):
+        self.home = agent.lane
+        lane = int(round(self.settings["lane"])) or _lane_to_the_left(agent.lane)
+        self.target = self.settings["target"] or _nearest_ahead(agent, world)
+        self.phase = "pass"
+        if math.isnan(world.lane_t(agent.road, lane, agent.s)):
+            self.phase = "done"  # no passing lane here: just hold the speed
+            return
+        begin_lane_change(agent, world, lane, self.settings["duration"], time_s)
+
+    def accel(self, agent, world, time_s):
+        s = self.settings
+        if self.phase == "pass":
+            other = world.actor_station(self.target) if self.target else None
+            clear = other is None or agent.s - other[0] > s["margin"] + 0.5 * (agent.length_m + other[2])
+            changing = time_s < agent.lc_start_s + agent.lc_duration_s
+            if clear and not changing:
+                begin_lane_change(agent, world, self.home, s["duration"], time_s)
+                self.phase = "done"
+        return _speed_tracking(agent, s["speed"], s["accel"], s["decel"])
+
+
+@BEHAVIORS.register
+class Walk(Behavior):
+    keyword = "walk"
+    params = (
+        ParamSpec("speed", units.SPEED, default=1.4, low=0.0, high=15.0, doc="walking (or riding) speed"),
+        ParamSpec("heading", units.ANGLE, default=0.0, low=-math.pi, high=math.pi,
+                  doc="direction relative to the road: 0 along +s, 90 deg to the left"),
+        ParamSpec("accel", units.ACCELERATION, default=1.0, low=0.01, doc="max acceleration"),
+    )
+    doc = "Move at a speed and a heading relative to the road (pedestrians, cyclists off the lane)."
+
+    def start(self, agent, world, time_s):
+        _walk_towards(agent, self.settings["heading"])
+
+    def accel(self, agent, world, time_s):
+        return _speed_tracking(agent, self.settings["speed"], self.settings["accel"], 3.0)
+
+
+@BEHAVIORS.register
+class Cross(Behavior):
+    keyword = "cross"
+    params = (
+        ParamSpec("speed", units.SPEED, default=1.4, low=0.0, high=15.0, doc="crossing speed"),
+        ParamSpec("direction", None, kind="word", default="left", choices=("left", "right"),
+                  doc="side of the road to walk to, seen along +s"),
+        ParamSpec("beyond", units.LENGTH, default=1.0, low=0.0, doc="stop this far past the road edge"),
+        ParamSpec("accel", units.ACCELERATION, default=1.0, low=0.01, doc="max acceleration"),
+    )
+    doc = "Walk straight across the road to the other side and stop there."
+
+    def start(self, agent, world, time_s):
+        left = self.settings["direction"] == "left"
+        _walk_towards(agent, math.pi / 2 if left else -math.pi / 2)
+        t_min, t_max = world.road_band_t(agent.road, agent.s)
+        self.stop_t = t_max + self.settings["beyond"] if left else t_min - self.settings["beyond"]
+        self.left = left
+
+    def accel(self, agent, world, time_s):
+        # Walk at `speed`; brake just hard enough to stop at the far-side spot.
+        remaining = (self.stop_t - agent.t) if self.left else (agent.t - self.stop_t)
+        a_max = self.settings["accel"]
+        v = agent.speed
+        if remaining <= 0.0:
+            return -v / 0.1  # stop within a few steps
+        if v * v >= 2.0 * (2.0 * a_max) * remaining:
+            return -v * v / (2.0 * remaining)
+        return _speed_tracking(agent, self.settings["speed"], a_max, 2.0 * a_max)
+
+
+def _walk_towards(agent: AgentState, heading_rel: float) -> None:
+    agent.heading_rel = heading_rel if heading_rel != 0.0 else 0.0
+    agent.lc_duration_s = 0.0
+    agent.t_target = agent.t
+
+
+def _lane_to_the_left(lane: int) -> int:
+    """The adjacent lane on the +t side (agents drive along +s: that is their left),
+    skipping the centre lane 0."""
+    return lane + 1 if lane != -1 else 1
+
+
+def _nearest_ahead(agent: AgentState, world) -> str:
+    best, best_s = "", math.inf
+    for name, s, t, _, _ in world.occupants(agent.road):
+        if name != agent.name and s > agent.s and abs(t - agent.t) < 1.8 and s < best_s:
+            best, best_s = name, s
+    return best
+
+
+def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, time_s: float) -> None:
+    """Start a quintic lateral move from the agent's current offset to `lane`'s centre."""
+    agent.lane = lane
+    agent.heading_rel = 0.0
+    agent.t_start = agent.t
+    agent.t_target = world.lane_t(agent.road, lane, agent.s)
+    agent.lc_start_s = time_s
+    agent.lc_duration_s = duration_s
+
+
+def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
+    """Integrate an agent's road-frame kinematics from `time_s` over `dt` [s]."""
+    agent.accel = accel
+    agent.speed = max(0.0, agent.speed + accel * dt)
+    if agent.heading_rel:
+        agent.s += agent.speed * math.cos(agent.heading_rel) * dt
+        agent.t += agent.speed * math.sin(agent.heading_rel) * dt
+        agent.t_target = agent.t
+    else:
+        agent.s += agent.speed * dt
+        agent.t = lateral_profile(agent, time_s + dt)
+
+
+def relative_heading(agent: AgentState, time_s: float, dt: float) -> float:
+    """Body heading relative to the road [rad]: walking direction, or the slope of the
+    lateral profile during a lane change."""
+    if agent.heading_rel:
+        return agent.heading_rel
+    if agent.lc_duration_s > 0 and time_s < agent.lc_start_s + agent.lc_duration_s:
+        lat_rate = (lateral_profile(agent, time_s + dt) - agent.t) / dt
+        return math.atan2(lat_rate, max(agent.speed, 0.1))
+    return 0.0
 
 
 def lateral_profile(agent: AgentState, time_s: float) -> float:

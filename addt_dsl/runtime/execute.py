@@ -22,15 +22,16 @@ from addt_dsl.expr import substitute_params
 from addt_dsl.plan import ActorPlan, RunSpec, resolve_settings
 from addt_dsl.registry import BEHAVIORS, SENSORS, STACKS
 from addt_dsl.runtime import oracles
-from addt_dsl.runtime.behaviors import AgentState, lateral_profile
+from addt_dsl.runtime.behaviors import AgentState, advance, relative_heading
 from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.fastroad import FastRoad
+from addt_dsl.runtime.roadmesh import Elevation, build_scene
 from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.runtime.signals import compute_signals
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
 from addt_dsl.runtime.vehicle import step as vehicle_step
-from addt_dsl.runtime.world import PhysicsWorld, box_separation
+from addt_dsl.runtime.world import ACTOR_RGBA, PhysicsWorld, box_separation
 
 VEHICLE_SIZES = {"car": (4.6, 1.9), "truck": (12.0, 2.5), "cyclist": (1.8, 0.6), "pedestrian": (0.5, 0.5)}
 VEHICLE_HEIGHT = {"car": 1.5, "truck": 3.5, "cyclist": 1.7, "pedestrian": 1.8}
@@ -80,8 +81,8 @@ class _Road:
         self.network = network
         key = (id(network), road_id)
         if key not in cache:
-            cache[key] = FastRoad(network.road(road_id))
-        self.road = cache[key]
+            cache[key] = (FastRoad(network.road(road_id)), Elevation(network.road(road_id)))
+        self.road, self.elevation = cache[key]
         self.road_id = road_id
 
     def pose(self, s: float, t: float) -> tuple[float, float, float]:
@@ -131,7 +132,10 @@ class _Run:
         self.events: list[Event] = []
         self.networks = build_network(plan.roads)
         self._road_cache: dict = {}
-        self.physics = PhysicsWorld()
+        # Visual shapes (road meshes, coloured actors) only when a sensor renders.
+        visual = any(getattr(SENSORS.get(c.name), "renders", False) for c in plan.ego.sensors)
+        self.physics = PhysicsWorld(visual=visual)
+        self.scene = build_scene(self.physics, list(self.networks.values()))
         self.faults = FaultSchedule(spec.faults, self.dt, plan.duration_s, self.events)
         self.command_queue: list[tuple[float, float, float]] = []
         self.command = (0.0, 0.0)
@@ -142,11 +146,11 @@ class _Run:
         self.ego_road = self._road_of(ego)
         self.ego_lane = int(round(spec.value(ego.lane)))
         s0 = spec.value(ego.s)
-        t0 = float(self.ego_road.road.lane_center_t(self.ego_lane, s0))
+        t0 = float(self.ego_road.road.lane_center_t(self.ego_lane, s0)) + spec.value(ego.offset)
         x, y, h = self.ego_road.pose(s0, t0)
-        self.vehicle_params = VehicleParams(mass_kg=ego.mass_kg, wheelbase_m=ego.wheelbase_m,
-                                            cg_to_front_m=0.45 * ego.wheelbase_m)
+        self.vehicle_params = VehicleParams.for_vehicle(ego.mass_kg, ego.wheelbase_m, spec.value(ego.mu, 0.8))
         self.ego = VehicleState(x, y, h, spec.value(ego.speed))
+        self.ego_z, self.ego.pitch = 0.0, 0.0
         self.ego_s, self.ego_t = s0, t0
         self.physics.add_box("ego", ego.length_m, ego.width_m, VEHICLE_HEIGHT[ego.vehicle])
 
@@ -159,13 +163,13 @@ class _Run:
             road = self._road_of(a)
             lane = int(round(spec.value(a.lane)))
             s = spec.value(a.s)
-            t = float(road.road.lane_center_t(lane, s))
+            t = float(road.road.lane_center_t(lane, s)) + spec.value(a.offset)
             st = AgentState(a.name, road.road_id, s, t, spec.value(a.speed), 0.0, a.length_m, a.width_m,
                             lane, t)
             self.agents.append(st)
             self.agent_plans[a.name] = a
             self.agent_roads[a.name] = road
-            self.physics.add_box(a.name, a.length_m, a.width_m, VEHICLE_HEIGHT[a.vehicle])
+            self.physics.add_box(a.name, a.length_m, a.width_m, VEHICLE_HEIGHT[a.vehicle], ACTOR_RGBA[a.vehicle])
             self.longitudinal[a.name] = None
             for clause in a.behaviors:
                 self._start_behavior(st, clause, 0.0)
@@ -173,6 +177,7 @@ class _Run:
                 (substitute_params(tr.condition, spec.params), tr.clause) for tr in a.triggers]
         self.agent_by_name = {a.name: a for a in self.agents}
         self.body_actor = {}
+        self.contacts: set[tuple[str, str]] = set()  # actor pairs overlapping at the last step
 
         self.sensors = {}
         self.sensor_next: dict[str, float] = {}
@@ -204,6 +209,28 @@ class _Run:
         e = self.ego
         return e.x, e.y, e.heading, e.speed
 
+    def ego_frame(self):
+        """(x, y, z of the road under the ego, heading, pitch nose-up) for sensor mounts."""
+        e = self.ego
+        return e.x, e.y, self.ego_z, e.heading, e.pitch
+
+    def ego_state(self):
+        return self.ego
+
+    def render(self, width, height, view, projection, segmentation=True):
+        return self.physics.render(width, height, view, projection, segmentation)
+
+    def actor_station(self, name: str):
+        """(s [m], speed [m/s], length [m]) of an actor, or None if there is none."""
+        if name == "ego":
+            return self.ego_s, self.ego.speed, self.ego_plan.length_m
+        a = self.agent_by_name.get(name)
+        return None if a is None else (a.s, a.speed, a.length_m)
+
+    def road_band_t(self, road_id: str, s: float) -> tuple[float, float]:
+        road = next(r for r in self.agent_roads.values() if r.road_id == road_id)
+        return road.road.road.road_band_t(min(max(s, 0.0), road.road.length))
+
     def ray_cast(self, starts, ends):
         return self.physics.ray_cast(starts, ends, ignore="ego")
 
@@ -214,7 +241,7 @@ class _Run:
     def leader_of(self, agent: AgentState):
         """(gap [m], speed [m/s]) of the nearest actor ahead in the agent's lane, or None."""
         best = None
-        for other_name, s, t, speed, length in self._road_occupants(agent.road):
+        for other_name, s, t, speed, length in self.occupants(agent.road):
             if other_name == agent.name or abs(t - agent.t) > 1.8:
                 continue
             gap = s - agent.s - 0.5 * (length + agent.length_m)
@@ -222,7 +249,8 @@ class _Run:
                 best = (gap, speed)
         return best
 
-    def _road_occupants(self, road_id: str):
+    def occupants(self, road_id: str):
+        """(name, s, t, speed, length) of every actor on a road."""
         for a in self.agents:
             if a.road == road_id:
                 yield a.name, a.s, a.t, a.speed, a.length_m
@@ -285,18 +313,21 @@ def _loop(run: _Run) -> Trace:
         for a in run.agents:
             road = run.agent_roads[a.name]
             x, y, h = road.pose(a.s, a.t)
-            lat_rate = 0.0
-            if a.lc_duration_s > 0 and t_now < a.lc_start_s + a.lc_duration_s:
-                lat_rate = (lateral_profile(a, t_now + dt) - a.t) / dt
-            heading = h + math.atan2(lat_rate, max(a.speed, 0.1))
+            heading = h + relative_heading(a, t_now, dt)
             poses[a.name] = (x, y, heading)
-            run.physics.set_pose(a.name, x, y, VEHICLE_HEIGHT[run.agent_plans[a.name].vehicle] / 2, heading)
+            z, grade = road.elevation.at(a.s)
+            run.physics.set_pose(a.name, x, y, z + VEHICLE_HEIGHT[run.agent_plans[a.name].vehicle] / 2, heading,
+                                 math.atan(grade) * math.cos(heading - h))
             run.body_actor[a.name] = _GT(x, y, heading, a.speed, a.length_m, a.width_m)
         e = run.ego
-        run.physics.set_pose("ego", e.x, e.y, VEHICLE_HEIGHT[plan.ego.vehicle] / 2, e.heading)
-        poses["ego"] = (e.x, e.y, e.heading)
-
         run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
+        # The ego follows the road height; its dynamics feel the grade along its heading.
+        z, grade = ego_road.elevation.at(run.ego_s)
+        if grade:
+            grade *= math.cos(e.heading - ego_road.road.reference_pose(run.ego_s)[2])
+        run.ego_z, e.pitch = z, math.atan(grade)
+        run.physics.set_pose("ego", e.x, e.y, z + VEHICLE_HEIGHT[plan.ego.vehicle] / 2, e.heading, e.pitch)
+        poses["ego"] = (e.x, e.y, e.heading)
 
         # Record the state at t_now.
         _record(rec["ego"], k, e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
@@ -352,18 +383,14 @@ def _loop(run: _Run) -> Trace:
         while queue and queue[0][0] <= t_now + 1e-12:
             _, steer, accel = queue.pop(0)
             run.command = (steer, accel)
-        vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt)
+        vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt, grade)
         if not all(math.isfinite(v) for v in (run.ego.x, run.ego.y, run.ego.vx)):
             status, error = "detected", "vehicle state became non-finite"
             last = k + 1
             break
         for a in run.agents:
             beh = run.longitudinal[a.name]
-            acc = beh.accel(a, run, t_now) if beh is not None else 0.0
-            a.accel = acc
-            a.speed = max(0.0, a.speed + acc * dt)
-            a.s += a.speed * dt
-            a.t = lateral_profile(a, t_now + dt)
+            advance(a, beh.accel(a, run, t_now) if beh is not None else 0.0, t_now, dt)
 
     time = np.arange(last) * dt
     actors = {}
@@ -392,21 +419,31 @@ def _record(r, k, x, y, heading, speed, accel, yaw_rate, s, t, lane_offset, stee
 
 
 def _clearances(rec, k, names, poses, sizes, run, t_now) -> bool:
+    """Record each actor's clearance; a collision event when two boxes start to overlap
+    (any pair, agents included). Returns True if the ego is in a collision (the run ends)."""
     collided = False
     boxes = {n: (*poses[n], *sizes[n]) for n in names}
+    reach = {n: 0.5 * math.hypot(*sizes[n]) for n in names}
     clear = {n: math.inf for n in names}
+    touching = set()
     for i, a in enumerate(names):
+        ax, ay = boxes[a][0], boxes[a][1]
         for b in names[i + 1:]:
-            # Cheap reject: boxes farther apart than their diagonals cannot touch.
-            dx, dy = boxes[a][0] - boxes[b][0], boxes[a][1] - boxes[b][1]
-            dist = math.hypot(dx, dy)
-            reach = 0.5 * (math.hypot(*sizes[a]) + math.hypot(*sizes[b]))
-            sep = dist - reach if dist > reach + 5.0 else box_separation(boxes[a], boxes[b])
-            clear[a] = min(clear[a], sep)
-            clear[b] = min(clear[b], sep)
-            if sep <= 0.0 and "ego" in (a, b):
-                run.events.append(Event(t_now, "collision", {"actors": [a, b]}))
-                collided = True
+            # Cheap reject: boxes farther apart than their half-diagonals cannot touch.
+            dist = math.hypot(ax - boxes[b][0], ay - boxes[b][1])
+            r = reach[a] + reach[b]
+            sep = dist - r if dist > r + 5.0 else box_separation(boxes[a], boxes[b])
+            if sep < clear[a]:
+                clear[a] = sep
+            if sep < clear[b]:
+                clear[b] = sep
+            if sep <= 0.0:
+                touching.add((a, b))
+                if (a, b) not in run.contacts:
+                    run.events.append(Event(t_now, "collision", {"actors": [a, b]}))
+                if a == "ego" or b == "ego":
+                    collided = True
+    run.contacts = touching
     for n in names:
         rec[n]["clearance"][k] = clear[n] if math.isfinite(clear[n]) else 1e3
     return collided

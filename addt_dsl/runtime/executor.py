@@ -1,48 +1,334 @@
-"""Run many RunSpecs: in this process, or on local worker processes.
+"""Run many RunSpecs and commit each result to the store as it finishes.
 
-Workers are long-lived (imports and pybullet set-up are paid once per worker). Results
-are returned sorted by run id, so output does not depend on the worker count; each
-result is already fully determined by its RunSpec.
+`run_sweep` is the coordinator: it walks a (lazy) stream of RunSpecs, skips the ones the
+store already holds (resume), hands the rest to an executor and commits every record the
+moment it arrives. It keeps nothing per run beyond the store, so its memory does not grow
+with the sweep.
+
+Executors yield `RunRecord`s in completion order; a record is fully determined by its
+RunSpec, so the store's contents do not depend on the executor, the worker count or the
+order. Three executors:
+
+- `LocalExecutor` (default): long-lived worker processes, each fed one run at a time over
+  its own pipe. The coordinator watches every busy worker: a run past its timeout is
+  killed and recorded as `timeout`; a worker whose resident memory passes the limit is
+  killed and its run recorded as `memory`; a worker that dies (segfault, OOM killer) has
+  its run recorded as `crashed`. The worker is replaced and the sweep goes on. Workers are
+  also recycled after `max_tasks_per_child` runs, like `multiprocessing.Pool`'s
+  `maxtasksperchild`, to bound slow leaks.
+- `InlineExecutor`: in this process, no guards; for debugging.
+- `addt_dsl.runtime.ray_executor.RayExecutor`: the same on a Ray cluster.
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import resource
+import signal
+import sys
+import time
 import traceback
-from collections.abc import Callable, Iterable
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from multiprocessing.connection import wait
 
 from addt_dsl.plan import RunSpec
-from addt_dsl.runtime.execute import RunResult, execute
+from addt_dsl.runtime.execute import execute
+from addt_dsl.runtime.store import ResultStore, RunRecord
+
+DEFAULT_MEMORY_LIMIT_MB = 4096
+DEFAULT_MAX_TASKS_PER_CHILD = 500
+_GUARD_POLL_S = 0.2  # how often busy workers are checked against timeout and memory limit
 
 
-def _run_one(spec: RunSpec) -> RunResult:
+# ---------------------------------------------------------------------------- one run
+
+def run_spec(spec: RunSpec, seq: int = -1, worker: str = "") -> RunRecord:
+    """Execute one RunSpec and summarise it; an exception becomes a `crashed` record."""
+    t0 = time.perf_counter()
     try:
-        return execute(spec, keep_trace=False)
+        result = execute(spec, keep_trace=True)
+        record = RunRecord.from_result(spec, result, result.trace, seq=seq, worker=worker)
     except Exception as exc:  # noqa: BLE001 - a crashing run is recorded, the sweep goes on
-        return RunResult(run_id=spec.run_id, key=spec.key(), params=dict(spec.params), seed=spec.seed,
-                         verdicts=[], status="crashed",
-                         error=f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}",
-                         sim_time_s=0.0, wall_time_s=0.0, digest="", fault_events=0,
-                         cell=dict(spec.cell))
+        record = RunRecord.unfinished(
+            spec, "crashed", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=4)}",
+            time.perf_counter() - t0, seq=seq, worker=worker)
+    return record
+
+
+def peak_rss_mb() -> float:
+    """Peak resident set size of this process [MB]."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 1024.0 if sys.platform != "darwin" else peak / 2**20
+
+
+def rss_mb(pid: int) -> float | None:
+    """Current resident set size of a process [MB] (Linux /proc), None if unknown."""
+    try:
+        with open(f"/proc/{pid}/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _spec_fields(spec: RunSpec) -> dict:
+    return {name: getattr(spec, name) for name in RunSpec.model_fields if name != "plan"}
+
+
+# ---------------------------------------------------------------------------- executors
+
+class InlineExecutor:
+    """Runs in the calling process, one after another (no timeout or memory guard)."""
+
+    name = "inline"
+    workers = 1
+
+    def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunRecord]:
+        for seq, spec in items:
+            yield run_spec(spec, seq, worker="inline")
+
+
+def _die_with_parent() -> None:
+    """Linux: SIGKILL this worker when its parent dies, so a killed coordinator leaves no
+    worker burning CPU on a run nobody will record."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+def _worker_main(conn, memory_limit_mb: float | None, run_fn=None) -> None:
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the coordinator's to handle
+    plans = {}
+    name = f"pid{os.getpid()}"
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError):
+            return
+        if msg[0] == "plan":
+            plans[msg[1]] = msg[2]
+            continue
+        _, seq, token, fields = msg
+        spec = RunSpec.model_construct(plan=plans[token], **fields)
+        try:
+            record = (run_fn or run_spec)(spec, seq, worker=name)
+        except Exception as exc:  # noqa: BLE001 - run_spec catches its own; this guards a custom run_fn
+            record = RunRecord.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", 0.0, seq=seq, worker=name)
+        # A spike between the coordinator's RSS polls still shows in the peak.
+        peak_mb = peak_rss_mb()
+        if memory_limit_mb and peak_mb > memory_limit_mb:
+            record.status = "memory"
+            record.error = f"peak resident memory {peak_mb:.0f} MB over the {memory_limit_mb:.0f} MB limit"
+        try:
+            conn.send(record)
+        except (BrokenPipeError, OSError):
+            return
+        if record.status == "memory":
+            return  # the peak stays high for the rest of this process: retire
+
+
+@dataclass(eq=False)
+class _Worker:
+    process: object
+    conn: object
+    plans: set = field(default_factory=set)
+    tasks: int = 0
+    job: tuple | None = None  # (seq, spec, started_at)
+
+
+class LocalExecutor:
+    """Long-lived worker processes on this machine, with per-run timeout and memory guard.
+
+    `timeout_s`: wall-clock seconds a run may take before it is killed (None: no limit).
+    `memory_limit_mb`: resident memory a worker may use (None: no limit); checked while a
+    run is in flight and against the worker's peak when it finishes.
+    `run_fn`: what a worker calls per run (default `run_spec`; a module-level function
+    with the same signature, e.g. to test the guards).
+    """
+
+    name = "local"
+
+    def __init__(self, jobs: int = 1, timeout_s: float | None = None,
+                 memory_limit_mb: float | None = DEFAULT_MEMORY_LIMIT_MB,
+                 max_tasks_per_child: int | None = DEFAULT_MAX_TASKS_PER_CHILD,
+                 start_method: str | None = None, run_fn: Callable | None = None):
+        self.workers = max(1, int(jobs))
+        self.timeout_s = timeout_s if timeout_s and timeout_s > 0 else None
+        self.memory_limit_mb = memory_limit_mb if memory_limit_mb and memory_limit_mb > 0 else None
+        self.max_tasks_per_child = max_tasks_per_child if max_tasks_per_child and max_tasks_per_child > 0 else None
+        if start_method is None:
+            # forkserver: workers fork from a clean server that imported the runtime once, so
+            # starting or replacing one is cheap and never inherits the caller's threads.
+            start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
+        self.start_method = start_method
+        self.run_fn = run_fn
+        self._plans: dict[int, tuple[int, object]] = {}  # id(plan) -> (token, plan)
+
+    def _context(self):
+        ctx = mp.get_context(self.start_method)
+        if self.start_method == "forkserver":
+            ctx.set_forkserver_preload(["addt_dsl.runtime.executor"])
+        return ctx
+
+    def _spawn(self, ctx) -> _Worker:
+        parent, child = ctx.Pipe(duplex=True)
+        process = ctx.Process(target=_worker_main, args=(child, self.memory_limit_mb, self.run_fn), daemon=True,
+                              name="addt-worker")
+        process.start()
+        child.close()
+        return _Worker(process, parent)
+
+    def _dispatch(self, w: _Worker, seq: int, spec: RunSpec) -> None:
+        token, _ = self._plans.setdefault(id(spec.plan), (len(self._plans), spec.plan))
+        if token not in w.plans:
+            w.conn.send(("plan", token, spec.plan))
+            w.plans.add(token)
+        w.conn.send(("run", seq, token, _spec_fields(spec)))
+        w.job = (seq, spec, time.monotonic())
+
+    @staticmethod
+    def _stop(w: _Worker, kill: bool = False) -> None:
+        if kill and w.process.is_alive():
+            w.process.kill()
+        w.conn.close()
+        w.process.join(timeout=5)
+        if w.process.is_alive():
+            w.process.kill()
+            w.process.join()
+
+    def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunRecord]:
+        ctx = self._context()
+        items = iter(items)
+        pool = [self._spawn(ctx) for _ in range(self.workers)]
+        idle = list(pool)
+        busy: list[_Worker] = []
+        exhausted = False
+        try:
+            while True:
+                while idle and not exhausted:
+                    nxt = next(items, None)
+                    if nxt is None:
+                        exhausted = True
+                        break
+                    w = idle.pop()
+                    self._dispatch(w, *nxt)
+                    busy.append(w)
+                if not busy:
+                    break
+                guarded = self.timeout_s is not None or self.memory_limit_mb is not None
+                ready = set(wait([w.conn for w in busy] + [w.process.sentinel for w in busy],
+                                 timeout=_GUARD_POLL_S if guarded else None))
+                for w in list(busy):
+                    record, replace = self._check(w, ready)
+                    if record is None:
+                        continue
+                    busy.remove(w)
+                    w.job = None
+                    if replace:
+                        pool.remove(w)
+                        w = self._spawn(ctx)
+                        pool.append(w)
+                    idle.append(w)
+                    yield record
+        finally:
+            for w in pool:
+                self._stop(w, kill=w.job is not None)
+
+    def _check(self, w: _Worker, ready: set) -> tuple[RunRecord | None, bool]:
+        """(record, replace worker) if the worker's run is over, (None, False) if it runs on."""
+        seq, spec, started = w.job
+        elapsed = time.monotonic() - started
+        if w.conn in ready or w.process.sentinel in ready:
+            try:
+                record = w.conn.recv() if w.conn.poll() else None
+            except (EOFError, OSError):
+                record = None
+            if record is not None:
+                w.tasks += 1
+                retire = (record.status == "memory"
+                          or (self.max_tasks_per_child and w.tasks >= self.max_tasks_per_child))
+                if retire:
+                    self._stop(w)
+                return record, bool(retire)
+            w.process.join(timeout=5)
+            code = w.process.exitcode
+            why = f"killed by signal {-code}" if code is not None and code < 0 else f"exited with code {code}"
+            self._stop(w, kill=True)
+            return RunRecord.unfinished(spec, "crashed", f"worker process {why} during the run", elapsed,
+                                        seq=seq, worker=f"pid{w.process.pid}"), True
+        if self.memory_limit_mb is not None:
+            rss = rss_mb(w.process.pid)
+            if rss is not None and rss > self.memory_limit_mb:
+                self._stop(w, kill=True)
+                return RunRecord.unfinished(
+                    spec, "memory", f"resident memory {rss:.0f} MB over the {self.memory_limit_mb:.0f} MB limit",
+                    elapsed, seq=seq, worker=f"pid{w.process.pid}"), True
+        if self.timeout_s is not None and elapsed > self.timeout_s:
+            self._stop(w, kill=True)
+            return RunRecord.unfinished(spec, "timeout", f"run exceeded the {self.timeout_s:g} s timeout",
+                                        elapsed, seq=seq, worker=f"pid{w.process.pid}"), True
+        return None, False
+
+
+# ---------------------------------------------------------------------------- coordinator
+
+@dataclass
+class SweepOutcome:
+    """Counts of one `run_sweep` call (the results themselves are in the store)."""
+
+    total: int = 0  # runs in the sweep
+    skipped: int = 0  # already in the store (resumed)
+    ran: int = 0  # executed and committed now
+    passed: int = 0
+    failed: int = 0
+    statuses: Counter = field(default_factory=Counter)
+
+
+def run_sweep(specs: Iterable[RunSpec], store: ResultStore, executor=None,
+              on_record: Callable[[RunRecord], None] | None = None) -> SweepOutcome:
+    """Run every spec the store does not hold yet, committing each as it completes."""
+    executor = executor or LocalExecutor()
+    outcome = SweepOutcome()
+    done = store.done()
+
+    def pending():
+        for seq, spec in enumerate(specs):
+            outcome.total += 1
+            if done and (spec.key(), spec.run_id) in done:
+                outcome.skipped += 1
+                continue
+            yield seq, spec
+
+    for record in executor.imap(pending()):
+        store.add(record)
+        outcome.ran += 1
+        outcome.statuses[record.status] += 1
+        if record.passed:
+            outcome.passed += 1
+        else:
+            outcome.failed += 1
+        if on_record:
+            on_record(record)
+    return outcome
 
 
 def run_local(specs: Iterable[RunSpec], jobs: int = 1,
-              on_result: Callable[[RunResult], None] | None = None) -> list[RunResult]:
-    specs = list(specs)
-    results: list[RunResult] = []
-    if jobs <= 1 or len(specs) <= 1:
-        for spec in specs:
-            r = _run_one(spec)
-            results.append(r)
-            if on_result:
-                on_result(r)
-    else:
-        ctx = mp.get_context("fork" if os.name == "posix" else "spawn")
-        with ctx.Pool(processes=jobs, maxtasksperchild=200) as pool:
-            for r in pool.imap_unordered(_run_one, specs, chunksize=1):
-                results.append(r)
-                if on_result:
-                    on_result(r)
-    results.sort(key=lambda r: r.run_id)
-    return results
+              on_result: Callable[[RunRecord], None] | None = None, **options) -> list[RunRecord]:
+    """Run specs on local workers and return their records sorted by run id (no store;
+    for small sweeps and tests)."""
+    executor = LocalExecutor(jobs, **options)
+    records = []
+    for record in executor.imap(enumerate(specs)):
+        records.append(record)
+        if on_result:
+            on_result(record)
+    records.sort(key=lambda r: r.run_id)
+    return records

@@ -3,6 +3,11 @@
 A sensor has a rate, a field of view and extrinsics (mounting pose on the vehicle); the
 fault engine may shift the *actual* extrinsics while the stack keeps using the nominal
 ones, which is how misalignment errors arise. Frames carry the capture timestamp.
+
+The vehicle frame: x forward, y left, z up, origin on the road surface under the
+vehicle centre; it follows the road's height and grade (pitch). Sensors read the world
+through `ego_pose()` (x, y, heading, speed), `ego_frame()` (x, y, z, heading, pitch),
+`ego_state()` (the dynamics state), `ray_cast` and `render`.
 """
 
 from __future__ import annotations
@@ -15,13 +20,15 @@ import numpy as np
 from addt_dsl import units
 from addt_dsl.registry import SENSORS, ParamSpec
 
+G = 9.81  # [m/s^2]
+
 EXTRINSICS = (
     ParamSpec("x", units.LENGTH, default=1.0, doc="mount position forward of the vehicle centre"),
     ParamSpec("y", units.LENGTH, default=0.0, doc="mount position, left positive"),
-    ParamSpec("z", units.LENGTH, default=1.0, doc="mount height"),
-    ParamSpec("roll", units.ANGLE, default=0.0, doc="mount roll"),
-    ParamSpec("pitch", units.ANGLE, default=0.0, doc="mount pitch"),
-    ParamSpec("yaw", units.ANGLE, default=0.0, doc="mount yaw"),
+    ParamSpec("z", units.LENGTH, default=1.0, doc="mount height above the road"),
+    ParamSpec("roll", units.ANGLE, default=0.0, doc="mount roll about the forward axis"),
+    ParamSpec("pitch", units.ANGLE, default=0.0, doc="mount pitch; positive tilts the sensor down"),
+    ParamSpec("yaw", units.ANGLE, default=0.0, doc="mount yaw; positive turns the sensor left"),
 )
 
 
@@ -94,8 +101,7 @@ class Lidar(Sensor):
         self.range_m = float(self.settings["range"])
 
     def capture(self, world, time_s):
-        pose = world.ego_pose()
-        origin, rot = _sensor_world_pose(pose, self.actual)
+        origin, rot = _sensor_world_pose(_ego_frame(world), self.actual)
         dirs = self._dirs @ rot.T
         starts = np.repeat(origin[None, :], len(dirs), axis=0)
         ends = starts + dirs * self.range_m
@@ -115,14 +121,123 @@ class Gnss(Sensor):
         ParamSpec("noise", units.LENGTH, default=0.02, low=0.0, high=50.0, doc="position noise (1 sigma)"),
         *EXTRINSICS,
     )
-    doc = "Position fix with Gaussian noise."
+    doc = ("Position fix of the antenna (the mount position on the vehicle) with Gaussian noise; "
+           "heading and speed of the vehicle. Omnidirectional: no field of view.")
 
     def capture(self, world, time_s):
-        x, y, heading, speed = world.ego_pose()
-        rng = world.rng("gnss")
+        x, y, z, heading, pitch = _ego_frame(world)
+        _, _, _, speed = world.ego_pose()
+        ant, _ = _sensor_world_pose((x, y, z, heading, pitch), self.actual)
+        rng = world.rng(self.name)
         n = float(self.settings["noise"])
-        return Frame(self.name, time_s, {"x": x + rng.normal(0.0, n), "y": y + rng.normal(0.0, n),
+        return Frame(self.name, time_s, {"x": float(ant[0]) + rng.normal(0.0, n),
+                                         "y": float(ant[1]) + rng.normal(0.0, n),
+                                         "z": float(ant[2]) + rng.normal(0.0, n),
                                          "heading": heading, "speed": speed})
+
+
+@SENSORS.register
+class Imu(Sensor):
+    keyword = "imu"
+    params = (
+        ParamSpec("rate", units.FREQUENCY, default=100.0, low=1.0, high=1000.0, doc="sample rate"),
+        ParamSpec("accel_noise", units.ACCELERATION, default=0.05, low=0.0, high=10.0,
+                  doc="accelerometer white noise (1 sigma)"),
+        ParamSpec("gyro_noise", units.ANGULAR_RATE, default=0.002, low=0.0, high=1.0,
+                  doc="gyroscope white noise (1 sigma)"),
+        ParamSpec("accel_bias", units.ACCELERATION, default=0.0, low=-5.0, high=5.0,
+                  doc="constant accelerometer bias (all axes)"),
+        ParamSpec("gyro_bias", units.ANGULAR_RATE, default=0.0, low=-0.5, high=0.5,
+                  doc="constant gyroscope bias (all axes)"),
+        *(ParamSpec(p.name, p.dim, default={"x": 0.0, "z": 0.5}.get(p.name, p.default), doc=p.doc)
+          for p in EXTRINSICS),
+    )
+    doc = ("Accelerometer (specific force, gravity included) and gyroscope in the sensor frame, "
+           "with white noise and bias. Omnidirectional: no field of view.")
+
+    def capture(self, world, time_s):
+        st = world.ego_state()
+        ext = self.actual
+        # Specific force and rotation rate at the vehicle centre, vehicle frame.
+        pitch = st.pitch
+        f = np.array([st.ax_specific, st.ay, G * math.cos(pitch)])
+        # Rigid-body lever arm of the mount (planar motion: omega = (0, 0, r)).
+        r, r_dot = st.yaw_rate, st.yaw_acc
+        f[0] += -r_dot * ext.y - r * r * ext.x
+        f[1] += r_dot * ext.x - r * r * ext.y
+        omega = np.array([0.0, 0.0, r])
+        rot = _rotation(ext.roll, ext.pitch, ext.yaw)
+        rng = world.rng(self.name)
+        s = self.settings
+        accel = rot.T @ f + float(s["accel_bias"]) + rng.normal(0.0, float(s["accel_noise"]), 3)
+        gyro = rot.T @ omega + float(s["gyro_bias"]) + rng.normal(0.0, float(s["gyro_noise"]), 3)
+        return Frame(self.name, time_s, {"accel": accel, "gyro": gyro})
+
+
+@SENSORS.register
+class Camera(Sensor):
+    keyword = "camera"
+    renders = True  # the run builds visual road meshes and coloured actors
+    params = (
+        ParamSpec("rate", units.FREQUENCY, default=10.0, low=0.1, high=60.0, doc="frame rate"),
+        ParamSpec("width", None, kind="int", default=320, low=16, high=1920, doc="image width [px]"),
+        ParamSpec("height", None, kind="int", default=240, low=16, high=1080, doc="image height [px]"),
+        ParamSpec("fov", units.ANGLE, default=math.radians(90.0), low=math.radians(5.0),
+                  high=math.radians(170.0), doc="horizontal field of view"),
+        ParamSpec("near", units.LENGTH, default=0.1, low=0.01, high=10.0, doc="near clipping distance"),
+        ParamSpec("range", units.LENGTH, default=150.0, low=1.0, high=1000.0, doc="far clipping distance"),
+        ParamSpec("segmentation", None, kind="word", default="on", choices=("on", "off"),
+                  doc="also return the per-pixel body id image"),
+        *(ParamSpec(p.name, p.dim, default={"x": 1.0, "z": 1.4}.get(p.name, p.default), doc=p.doc)
+          for p in EXTRINSICS),
+    )
+    doc = ("Pinhole camera rendered headless by pybullet's TinyRenderer: RGB image (uint8, HxWx3), "
+           "metric depth and per-pixel body ids. Cost grows with pixels; see docs/twin.md.")
+
+    def __init__(self, name, settings):
+        super().__init__(name, settings)
+        self.width, self.height = int(self.settings["width"]), int(self.settings["height"])
+        self.near, self.far = float(self.settings["near"]), float(self.settings["range"])
+        aspect = self.width / self.height
+        fov_h = float(self.settings["fov"])
+        self.fov_v = 2.0 * math.atan(math.tan(fov_h / 2.0) / aspect)
+        self.projection = _perspective(self.fov_v, aspect, self.near, self.far)
+        fx = 0.5 * self.width / math.tan(fov_h / 2.0)
+        fy = 0.5 * self.height / math.tan(self.fov_v / 2.0)
+        self.intrinsics = np.array([[fx, 0.0, 0.5 * self.width], [0.0, fy, 0.5 * self.height], [0.0, 0.0, 1.0]])
+
+    def capture(self, world, time_s):
+        origin, rot = _sensor_world_pose(_ego_frame(world), self.actual)
+        view = _look_at(origin, rot)
+        rgb, zbuf, ids = world.render(self.width, self.height, view, self.projection,
+                                      segmentation=self.settings["segmentation"] == "on")
+        # Non-linear z-buffer → metric depth along the optical axis [m].
+        n, f = self.near, self.far
+        depth = (f * n / (f - (f - n) * zbuf)).astype(np.float32)
+        return Frame(self.name, time_s, {"image": rgb, "depth": depth, "segmentation": ids,
+                                         "intrinsics": self.intrinsics})
+
+
+def _perspective(fov_v: float, aspect: float, near: float, far: float) -> list[float]:
+    """OpenGL projection matrix, column-major (as pybullet's computeProjectionMatrixFOV)."""
+    f = 1.0 / math.tan(fov_v / 2.0)
+    return [f / aspect, 0.0, 0.0, 0.0,
+            0.0, f, 0.0, 0.0,
+            0.0, 0.0, (far + near) / (near - far), -1.0,
+            0.0, 0.0, 2.0 * far * near / (near - far), 0.0]
+
+
+def _look_at(origin: np.ndarray, rot: np.ndarray) -> list[float]:
+    """OpenGL view matrix (column-major) of a camera at `origin` looking along its x axis."""
+    forward, left, up = rot[:, 0], rot[:, 1], rot[:, 2]
+    right = -left
+    # Rows of the view rotation: camera x = right, y = up, z = -forward.
+    m = np.array([right, up, -forward])
+    t = -m @ origin
+    return [m[0, 0], m[1, 0], m[2, 0], 0.0,
+            m[0, 1], m[1, 1], m[2, 1], 0.0,
+            m[0, 2], m[1, 2], m[2, 2], 0.0,
+            t[0], t[1], t[2], 1.0]
 
 
 def _rotation(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -135,10 +250,22 @@ def _rotation(roll: float, pitch: float, yaw: float) -> np.ndarray:
     ])
 
 
-def _sensor_world_pose(vehicle_pose, ext: Extrinsics):
-    x, y, heading, _ = vehicle_pose
-    rot_v = _rotation(0.0, 0.0, heading)
-    origin = np.array([x, y, 0.0]) + rot_v @ np.array([ext.x, ext.y, ext.z])
+def _ego_frame(world) -> tuple[float, float, float, float, float]:
+    """(x, y, z, heading, pitch) of the vehicle frame; flat ground for worlds without height."""
+    frame = getattr(world, "ego_frame", None)
+    if frame is not None:
+        return frame()
+    x, y, heading, _ = world.ego_pose()
+    return x, y, 0.0, heading, 0.0
+
+
+def _sensor_world_pose(vehicle_frame, ext: Extrinsics):
+    """World position and rotation (columns: sensor x, y, z axes) of a sensor mount."""
+    x, y, z, heading, pitch = vehicle_frame
+    # Vehicle pitch is nose-up positive (road grade); a rotation about the left-pointing
+    # y axis is nose-down positive, as for mount pitch (a positive mount pitch looks down).
+    rot_v = _rotation(0.0, -pitch, heading)
+    origin = np.array([x, y, z]) + rot_v @ np.array([ext.x, ext.y, ext.z])
     return origin, rot_v @ _rotation(ext.roll, ext.pitch, ext.yaw)
 
 

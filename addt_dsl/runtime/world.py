@@ -1,8 +1,10 @@
 """The pybullet side of the twin: bodies for actors, ray casts, teardown.
 
 One private pybullet client per run (DIRECT mode, never a GUI), created and torn down by
-`World`, so runs share no global state. Actor bodies are boxes posed from the dynamics
-each step; the ground is an infinite `GEOM_PLANE` (plane.urdf is only 200 m wide).
+`PhysicsWorld`, so runs share no global state. Actor bodies are boxes posed from the
+dynamics each step; the ground is an infinite `GEOM_PLANE` (plane.urdf is only 200 m
+wide). Road meshes (runtime.roadmesh) are added as visual shapes when the run has a
+camera, and as collision trimeshes when a road is elevated, so lidar rays meet crests.
 """
 
 from __future__ import annotations
@@ -37,44 +39,125 @@ def _quiet_stdout():
             os.close(copy)
 
 
+MAX_RAYS_PER_BATCH = 8192
+SUN_DIRECTION = (0.4, 0.3, 1.0)  # high sun: road markings render bright
+# Actor colours for the camera (the ego has no visual shape: cameras sit inside it).
+ACTOR_RGBA = {"car": (0.75, 0.12, 0.10, 1.0), "truck": (0.15, 0.30, 0.70, 1.0),
+              "cyclist": (0.95, 0.65, 0.10, 1.0), "pedestrian": (0.90, 0.45, 0.70, 1.0)}
+
+
 class PhysicsWorld:
-    def __init__(self):
+    """One pybullet client (DIRECT) with the actors' boxes, the ground and road meshes.
+
+    Bodies are posed from the dynamics each step (mass 0, never integrated by
+    pybullet): the engine serves ray casts (lidar), rendering (camera) and contact
+    queries. `visual=False` (no camera in the run) creates no visual shapes at all.
+    """
+
+    def __init__(self, visual: bool = False):
         with _quiet_stdout():
             import pybullet as p  # imported here: the compiler must never load pybullet
 
             self.client = p.connect(p.DIRECT)
         self.p = p
+        self.visual = visual
         p.setGravity(0, 0, -9.81, physicsClientId=self.client)
         plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.client)
         self.ground = p.createMultiBody(0, plane, physicsClientId=self.client)
+        self.ground_ids: set[int] = {self.ground}
+        self._ground_array = np.array([self.ground], dtype=np.int64)
         self.bodies: dict[str, int] = {}
         self.body_names: dict[int, str] = {}
 
-    def add_box(self, name: str, length: float, width: float, height: float) -> int:
+    def add_box(self, name: str, length: float, width: float, height: float,
+                rgba: tuple[float, float, float, float] | None = None) -> int:
+        """A box body for an actor; visible to the camera only if `rgba` is given."""
         p = self.p
-        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[length / 2, width / 2, height / 2],
-                                       physicsClientId=self.client)
-        body = p.createMultiBody(0, shape, basePosition=[0, 0, height / 2], physicsClientId=self.client)
+        half = [length / 2, width / 2, height / 2]
+        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=self.client)
+        visual = -1
+        if self.visual and rgba is not None:
+            visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=list(rgba),
+                                         physicsClientId=self.client)
+        body = p.createMultiBody(0, shape, visual, basePosition=[0, 0, height / 2], physicsClientId=self.client)
         self.bodies[name] = body
         self.body_names[body] = name
         return body
 
-    def set_pose(self, name: str, x: float, y: float, z: float, heading: float) -> None:
-        half = 0.5 * heading
-        self.p.resetBasePositionAndOrientation(self.bodies[name], (x, y, z),
-                                               (0.0, 0.0, math.sin(half), math.cos(half)),
+    def add_mesh(self, mesh, collision: bool = False) -> int | None:
+        """A static road mesh: visible (when the world is visual) and/or part of the ground
+        for ray casts (`collision`, used for elevated roads). Returns the body id."""
+        p = self.p
+        if not (self.visual or collision) or mesh.triangles == 0:
+            return None
+        verts = mesh.vertices.tolist()
+        idx = mesh.indices.tolist()
+        col = -1
+        if collision:
+            col = p.createCollisionShape(p.GEOM_MESH, vertices=verts, indices=idx,
+                                         flags=p.GEOM_FORCE_CONCAVE_TRIMESH, physicsClientId=self.client)
+        vis = -1
+        if self.visual:
+            vis = p.createVisualShape(p.GEOM_MESH, vertices=verts, indices=idx, rgbaColor=list(mesh.rgba),
+                                      physicsClientId=self.client)
+        body = p.createMultiBody(0, col, vis, physicsClientId=self.client)
+        self.ground_ids.add(body)
+        self._ground_array = np.array(sorted(self.ground_ids), dtype=np.int64)
+        return body
+
+    def set_ground_height(self, z: float) -> None:
+        """Move the infinite ground plane (below the lowest road when roads are elevated)."""
+        self.p.resetBasePositionAndOrientation(self.ground, (0.0, 0.0, z), (0.0, 0.0, 0.0, 1.0),
                                                physicsClientId=self.client)
 
+    def color_ground(self, rgba) -> None:
+        """Plain colour for the ground plane (the renderer draws it checkered by default)."""
+        self.p.changeVisualShape(self.ground, -1, rgbaColor=list(rgba), textureUniqueId=-1,
+                                 physicsClientId=self.client)
+
+    def set_pose(self, name: str, x: float, y: float, z: float, heading: float, pitch: float = 0.0) -> None:
+        """Pose a body: yaw `heading`, then `pitch` (nose up positive) [rad]."""
+        hy, hp = 0.5 * heading, -0.5 * pitch  # body y axis points left: nose-up is a negative rotation
+        cy, sy = math.cos(hy), math.sin(hy)
+        if hp == 0.0:
+            quat = (0.0, 0.0, sy, cy)
+        else:
+            cp, sp = math.cos(hp), math.sin(hp)
+            quat = (-sy * sp, cy * sp, sy * cp, cy * cp)
+        self.p.resetBasePositionAndOrientation(self.bodies[name], (x, y, z), quat, physicsClientId=self.client)
+
     def ray_cast(self, starts: np.ndarray, ends: np.ndarray, ignore: str | None = None):
-        """Batched rays; returns (body ids, -1 for none or the ground/ignored body; hit fractions)."""
-        results = self.p.rayTestBatch(starts, ends, physicsClientId=self.client)
-        ids = np.fromiter((r[0] for r in results), dtype=np.int64, count=len(results))
-        frac = np.fromiter((r[2] for r in results), dtype=np.float64, count=len(results))
-        ids[ids == self.ground] = -1
+        """Batched rays; returns (body ids, -1 for none, the ground or the ignored body; hit fractions)."""
+        if len(starts) <= MAX_RAYS_PER_BATCH:
+            results = self.p.rayTestBatch(starts, ends, physicsClientId=self.client)
+        else:  # pybullet refuses batches of 16384 rays or more
+            results = []
+            for i in range(0, len(starts), MAX_RAYS_PER_BATCH):
+                results.extend(self.p.rayTestBatch(starts[i:i + MAX_RAYS_PER_BATCH], ends[i:i + MAX_RAYS_PER_BATCH],
+                                                   physicsClientId=self.client))
+        ids_t, _, frac_t, _, _ = zip(*results) if results else ((), (), (), (), ())
+        ids = np.array(ids_t, dtype=np.int64)
+        frac = np.array(frac_t, dtype=np.float64)
+        ground = np.isin(ids, self._ground_array) if len(self._ground_array) > 1 else ids == self.ground
+        ids[ground] = -1
         if ignore is not None:
             ids[ids == self.bodies[ignore]] = -1
         frac[ids < 0] = 1.0
         return ids, frac
+
+    def render(self, width: int, height: int, view: list[float], projection: list[float],
+               segmentation: bool = True):
+        """Headless render (TinyRenderer): (rgb uint8 HxWx3, z-buffer float32 HxW, body ids int32 HxW | None)."""
+        p = self.p
+        flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
+        _, _, rgba, depth, seg = p.getCameraImage(width, height, view, projection, shadow=0,
+                                                  lightDirection=SUN_DIRECTION,
+                                                  renderer=p.ER_TINY_RENDERER, flags=flags,
+                                                  physicsClientId=self.client)
+        rgb = np.ascontiguousarray(np.reshape(np.asarray(rgba, dtype=np.uint8), (height, width, 4))[:, :, :3])
+        zbuf = np.reshape(np.asarray(depth, dtype=np.float32), (height, width))
+        ids = np.reshape(np.asarray(seg, dtype=np.int32), (height, width)) if segmentation else None
+        return rgb, zbuf, ids
 
     def close(self) -> None:
         if self.client is not None:
@@ -94,15 +177,21 @@ def box_separation(a: tuple, b: tuple) -> float:
     """Separation of two oriented boxes (x, y, heading, length, width) along the best axis.
 
     Positive: the boxes are apart by at least this much [m]; zero or negative: they
-    overlap (separating axis theorem over the four edge normals).
+    overlap (separating axis theorem over the four edge normals). On each axis u the gap
+    is |d . u| minus both boxes' projected half-extents, which equals projecting all
+    eight corners; written out in plain floats because the loop calls it for every
+    close pair at every step.
     """
-    ca = box_corners(*a)
-    cb = box_corners(*b)
-    best = -math.inf
-    for heading in (a[2], b[2]):
-        for axis in ((math.cos(heading), math.sin(heading)), (-math.sin(heading), math.cos(heading))):
-            pa = ca @ axis
-            pb = cb @ axis
-            gap = max(pb.min() - pa.max(), pa.min() - pb.max())
-            best = max(best, gap)
-    return best
+    xa, ya, ha, la, wa = a
+    xb, yb, hb, lb, wb = b
+    ca, sa, cb, sb = math.cos(ha), math.sin(ha), math.cos(hb), math.sin(hb)
+    dx, dy = xb - xa, yb - ya
+    cos_d = abs(ca * cb + sa * sb)  # |cos(hb - ha)|
+    sin_d = abs(sa * cb - ca * sb)  # |sin(hb - ha)|
+    la, wa, lb, wb = 0.5 * la, 0.5 * wa, 0.5 * lb, 0.5 * wb
+    return max(
+        abs(dx * ca + dy * sa) - (la + lb * cos_d + wb * sin_d),
+        abs(dy * ca - dx * sa) - (wa + lb * sin_d + wb * cos_d),
+        abs(dx * cb + dy * sb) - (lb + la * cos_d + wa * sin_d),
+        abs(dy * cb - dx * sb) - (wb + la * sin_d + wa * cos_d),
+    )

@@ -99,6 +99,8 @@ class BevStack:
     # ---- inputs
     def on_frame(self, frame, arrive_s: float) -> None:
         """A sensor frame arrives at the stack at `arrive_s`."""
+        if "hit_body" not in frame.data:
+            return  # perception consumes lidar frames; camera, IMU and GNSS frames are not used yet
         if arrive_s - frame.stamp_s > float(self.settings["stale"]):
             self.ctx.event("stale_frame", sensor=frame.sensor, age_s=arrive_s - frame.stamp_s)
             return

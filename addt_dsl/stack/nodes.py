@@ -218,7 +218,8 @@ class LatticePlanner:
                 if not lat_overlap:
                     continue
                 gap = so - s - 0.5 * (olen + 4.6)
-                if -0.5 * (olen + 4.6) - 2.0 < gap < 0.0 or (0.0 <= gap < 2.0):
+                # Boxes overlap along the road for -(olen + 4.6) < gap < 0; keep 2 m either side.
+                if -(olen + 4.6) - 2.0 < gap < 2.0:
                     return math.inf  # collision with a predicted object
                 if gap >= 0.0:
                     desired = max(5.0, self.time_gap * v)
@@ -240,10 +241,22 @@ def _same_side(a: int, b: int) -> bool:
 # ---------------------------------------------------------------- control
 
 class Controller:
-    """PID longitudinal control and pure-pursuit steering, at the control rate (100 Hz)."""
+    """PID longitudinal control and path-tracking steering, at the control rate (100 Hz).
+
+    Steering = feed-forward of the planned path's curvature (geometric angle plus the
+    understeer a tyre-slip vehicle needs), previewed by `preview_s` to cover the
+    actuator lag, + feedback on the lateral and course errors with gains scheduled on
+    speed, so the error dynamics keep natural frequency `lateral_wn` and damping
+    `lateral_zeta` at every speed. The course (direction of travel) comes from
+    successive poses, so the vehicle's sideslip in a curve is not mistaken for a
+    heading error. (Pure pursuit overshot lane changes at 30 m/s by ~0.8 m.)
+    """
 
     name = "control"
     sites = ("control.steer", "control.accel", "control.integral")
+    lateral_wn = 1.0  # [rad/s]
+    lateral_zeta = 1.0
+    preview_s = 0.2  # [s]
 
     def __init__(self, settings: dict, wheelbase_m: float):
         self.kp = float(settings.get("kp", 1.0))
@@ -252,30 +265,47 @@ class Controller:
         self.wheelbase = wheelbase_m
         self.integral = 0.0
         # Understeer gradient [rad/(m/s^2)]: steering feed-forward a tyre-slip vehicle
-        # needs beyond the geometric (pure-pursuit) angle in a curve.
+        # needs beyond the geometric angle in a curve.
         self.understeer = float(settings.get("understeer", 0.0028))
         self.prev_err = 0.0
         self.max_steer = 0.5
+        self._last_xy: tuple[float, float] | None = None
+
+    @staticmethod
+    def _path(plan: Plan, s: float) -> tuple[float, float, float]:
+        """Planned lateral offset t(s) [m] (smoothstep), its slope dt/ds and d2t/ds2 [1/m]."""
+        length = plan.lateral_length_m
+        u = min(1.0, max(0.0, (s - plan.s_start) / length))
+        d = plan.t_target - plan.t_start
+        if u <= 0.0 or u >= 1.0:
+            return plan.t_start + d * u, 0.0, 0.0
+        return (plan.t_start + d * u * u * (3 - 2 * u), d * 6.0 * u * (1.0 - u) / length,
+                d * (6.0 - 12.0 * u) / (length * length))
+
+    def _course(self, x: float, y: float, heading: float, dt: float, speed: float) -> float:
+        course = heading
+        if self._last_xy is not None:
+            dx, dy = x - self._last_xy[0], y - self._last_xy[1]
+            if dx * dx + dy * dy > (0.3 * max(speed, 1.0) * dt) ** 2 and speed > 1.0:
+                course = heading + math.remainder(math.atan2(dy, dx) - heading, math.tau)
+        self._last_xy = (x, y)
+        return course
 
     def command(self, plan: Plan, ego, road, s_now: float, t_now: float, dt: float, corrupt):
         x, y, heading, speed = ego
-        # Pure pursuit on the planned lateral path (smoothstep from t_start to t_target).
-        lookahead = max(8.0, 0.9 * speed)
-        s_la = s_now + lookahead
-        u = min(1.0, max(0.0, (s_la - plan.s_start) / plan.lateral_length_m))
-        t_la = plan.t_start + (plan.t_target - plan.t_start) * (u * u * (3 - 2 * u))
-        tx, ty, th = road.reference_pose(s_la)
-        nx, ny = -math.sin(th), math.cos(th)
-        gx, gy = tx + nx * t_la, ty + ny * t_la
-        dx, dy = gx - x, gy - y
-        local_y = -math.sin(heading) * dx + math.cos(heading) * dy
-        ld2 = dx * dx + dy * dy
-        steer = math.atan2(2.0 * self.wheelbase * local_y, max(ld2, 1e-6))
-        # Pure pursuit is geometric; the feed-forward removes the steady outward offset
-        # that tyre slip (understeer) leaves in long curves.
-        kappa = float(road.curvature(min(s_la, road.length)))
-        kappa_path = kappa / max(0.2, 1.0 - kappa * t_la)
-        steer += self.understeer * speed * speed * kappa_path
+        course = self._course(x, y, heading, dt, speed)
+        t_path, slope, _ = self._path(plan, s_now)
+        _, _, road_heading = road.reference_pose(s_now)
+        e_lat = t_now - t_path
+        e_course = math.remainder(course - road_heading - math.atan(slope), math.tau)
+        s_pre = min(s_now + speed * self.preview_s, road.length)
+        t_pre, _, bend = self._path(plan, s_pre)
+        kappa_road = float(road.curvature(s_pre))
+        kappa = kappa_road / max(0.2, 1.0 - kappa_road * t_pre) + bend
+        steer = self.wheelbase * kappa + self.understeer * speed * speed * kappa
+        v = max(speed, 5.0)
+        wn, zeta = self.lateral_wn, self.lateral_zeta
+        steer -= self.wheelbase * (wn * wn * e_lat / (v * v) + 2.0 * zeta * wn * e_course / v)
         steer = max(-self.max_steer, min(self.max_steer, steer))
         steer = corrupt("control.steer", steer)
         # PID on speed error.

@@ -45,9 +45,12 @@ def test_lane_center_round_trip(point):
     rc = net.to_road_coords(x, y)
     assert isinstance(rc, RoadCoords)
     assert (rc.road_id, rc.lane_id) == (road_id, lane_id)
-    assert rc.s == pytest.approx(s, abs=1e-6)
-    assert rc.t == pytest.approx(net.road(road_id).lane_center_t(lane_id, s), abs=1e-6)
-    assert net.road(road_id).lane_offset(lane_id, x, y) == pytest.approx(0.0, abs=1e-6)
+    # curves_elevation.xodr's own geometry joints are discontinuous by up to 1.2e-5 m
+    # (see tests/data/xodr/SOURCES.txt): a point on a joint projects within that gap.
+    tol = 2e-5 if name == "curves_elevation.xodr" else 1e-6
+    assert rc.s == pytest.approx(s, abs=tol)
+    assert rc.t == pytest.approx(net.road(road_id).lane_center_t(lane_id, s), abs=tol)
+    assert net.road(road_id).lane_offset(lane_id, x, y) == pytest.approx(0.0, abs=tol)
 
 
 @pytest.mark.parametrize("name", ["curves_elevation.xodr", "jolengatan.xodr", "curve_r100.xodr"])

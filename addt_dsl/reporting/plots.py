@@ -1,0 +1,140 @@
+"""Report figures (matplotlib, Agg backend), returned as base64 PNG for embedding.
+
+Every figure is built from run summaries in the store (robustness per oracle, latency
+histograms, e2e latency by object count), never from traces, so a report over 10,000
+runs costs no simulation.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import math
+from collections import defaultdict
+
+from addt_dsl.runtime.store import LATENCY_BIN_S, LATENCY_BINS
+
+NODE_ORDER = ("perception", "tracker", "planner", "control", "e2e")
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    _pyplot().close(fig)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def robustness_histograms(records_by_oracle: dict[str, list[float]]) -> dict[str, str]:
+    """One histogram per oracle; ±inf (vacuous) values are counted in the title."""
+    plt = _pyplot()
+    out = {}
+    for name, values in records_by_oracle.items():
+        finite = [v for v in values if math.isfinite(v)]
+        infinite = len(values) - len(finite)
+        fig, ax = plt.subplots(figsize=(4.2, 2.6))
+        if finite:
+            ax.hist(finite, bins=min(40, max(5, len(finite) // 3)), color="#4c72b0")
+        ax.axvline(0.0, color="#c44e52", linewidth=1.2, label="0: violated below")
+        ax.set_xlabel("robustness")
+        ax.set_ylabel("runs")
+        ax.set_title(name + (f" ({infinite} run(s) ±inf)" if infinite else ""), fontsize=9)
+        ax.legend(fontsize=7, loc="upper right")
+        out[name] = _png(fig)
+    return out
+
+
+class LatencyStats:
+    """Running sum of per-run latency histograms and e2e-by-object-count summaries
+    (bounded size, whatever the number of runs)."""
+
+    def __init__(self):
+        self.hist: dict[str, list[int]] = {}
+        self.by_objects: dict[int, list[float]] = defaultdict(lambda: [0, 0.0, 0.0])
+        self.worst: dict[str, float] = {}
+
+    def add(self, stats: dict) -> None:
+        for node, bins in stats.get("latency_hist", {}).items():
+            h = self.hist.setdefault(node, [0] * LATENCY_BINS)
+            for i, c in bins.items():
+                h[int(i)] += c
+        for node, m in stats.get("latency_max_s", {}).items():
+            self.worst[node] = max(self.worst.get(node, 0.0), m)
+        for n, (count, total, mx) in stats.get("e2e_by_objects", {}).items():
+            acc = self.by_objects[int(n)]
+            acc[0] += count
+            acc[1] += total
+            acc[2] = max(acc[2], mx)
+
+
+def latency_distributions(hist: dict[str, list[int]], budget_s: float = 0.1) -> str | None:
+    """Per-node latency distributions (share of time at each latency) with the budget line."""
+    nodes = [n for n in NODE_ORDER if n in hist] + sorted(set(hist) - set(NODE_ORDER))
+    if not nodes:
+        return None
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(nodes), 1, figsize=(6.5, 1.35 * len(nodes) + 0.6), sharex=True)
+    axes = [axes] if len(nodes) == 1 else list(axes)
+    edges_ms = [i * LATENCY_BIN_S * 1e3 for i in range(LATENCY_BINS + 1)]
+    top = max((i for n in nodes for i, c in enumerate(hist[n]) if c), default=0)
+    xmax = max(budget_s * 1e3 * 1.3, (top + 2) * LATENCY_BIN_S * 1e3)
+    for ax, node in zip(axes, nodes):
+        counts = hist[node]
+        total = sum(counts) or 1
+        over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s) / total
+        ax.stairs([c / total for c in counts], edges_ms, fill=True, color="#55a868", alpha=0.8)
+        ax.axvline(budget_s * 1e3, color="#c44e52", linewidth=1.2)
+        ax.set_ylabel(node, rotation=0, ha="right", va="center", fontsize=8)
+        ax.set_yticks([])
+        ax.text(0.99, 0.8, f"{100 * over:.1f} % of time ≥ {budget_s * 1e3:.0f} ms", transform=ax.transAxes,
+                ha="right", fontsize=7, color="#c44e52" if over else "#555555")
+    axes[-1].set_xlim(0, xmax)
+    axes[-1].set_xlabel("latency [ms]  (red line: budget)")
+    fig.suptitle("Latency per node (share of simulated time)", fontsize=9)
+    return _png(fig)
+
+
+def latency_vs_objects(by_objects: dict[int, list[float]], budget_s: float = 0.1) -> str | None:
+    """Mean and worst e2e latency against the number of objects perception saw."""
+    if not by_objects:
+        return None
+    plt = _pyplot()
+    ns = sorted(by_objects)
+    mean = [by_objects[n][1] / by_objects[n][0] * 1e3 for n in ns]
+    worst = [by_objects[n][2] * 1e3 for n in ns]
+    fig, ax = plt.subplots(figsize=(5.0, 2.8))
+    ax.plot(ns, mean, "o-", color="#4c72b0", label="mean")
+    ax.plot(ns, worst, "s--", color="#8172b2", label="worst")
+    ax.axhline(budget_s * 1e3, color="#c44e52", linewidth=1.2, label=f"{budget_s * 1e3:.0f} ms budget")
+    ax.set_xlabel("objects seen by perception")
+    ax.set_ylabel("e2e latency [ms]")
+    ax.legend(fontsize=7)
+    ax.set_title("End-to-end latency against object count", fontsize=9)
+    return _png(fig)
+
+
+def success_rate_chart(labels: list[str], rates: list[float], intervals: list[tuple[float, float]],
+                       axis: str) -> str | None:
+    if not labels:
+        return None
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(max(3.5, 0.7 * len(labels) + 1.5), 2.6))
+    xs = range(len(labels))
+    pct = [100 * r for r in rates]
+    err = [[max(0.0, 100 * (r - lo)) for r, (lo, _) in zip(rates, intervals)],
+           [max(0.0, 100 * (hi - r)) for r, (_, hi) in zip(rates, intervals)]]
+    ax.bar(xs, pct, color="#4c72b0", yerr=err, capsize=3)
+    ax.set_xticks(list(xs), labels, rotation=30 if len(labels) > 6 else 0, fontsize=7)
+    ax.set_ylim(0, 105)
+    ax.set_ylabel("success [%]")
+    ax.set_xlabel(axis)
+    ax.set_title("Success rate per cell (95 % Wilson interval)", fontsize=9)
+    return _png(fig)

@@ -1,0 +1,212 @@
+"""Tables over run records: the runs table (pandas), the summary, success rates per
+parameter cell, and the terminal verdict table.
+
+Functions take any iterable of `RunRecord`s (a list, or `ResultStore.records()` to stream
+a large sweep) so they serve both the store and in-memory results.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import Counter
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from addt_dsl import units
+from addt_dsl.plan import ScenarioPlan
+
+
+def runs_table(plan: ScenarioPlan, records: Iterable):
+    """One row per run: id, parameters, seed, verdict, per-oracle robustness and first
+    violation time, simulated and wall seconds."""
+    import pandas as pd
+
+    rows = []
+    for r in records:
+        row = {"run_id": r.run_id, "key": r.key, "seed": r.seed, "repeat": r.repeat_index,
+               "passed": r.passed, "status": r.status}
+        row.update({f"param.{k}": v for k, v in sorted(r.params.items())})
+        for v in r.verdicts:
+            row[f"rho.{v.name}"] = v.robustness
+        for v in r.verdicts:
+            row[f"first_violation_s.{v.name}"] = v.first_violation_s
+        row["failed_oracles"] = ";".join(r.failed_oracles)
+        row["sim_time_s"] = r.sim_time_s
+        row["wall_time_s"] = r.wall_time_s
+        row["fault_events"] = r.fault_events
+        row["digest"] = r.digest
+        row["error"] = r.error.splitlines()[0] if r.error else ""
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = None) -> dict:
+    """Counts over runs: passed, failed, failures per oracle (a crashed, timed-out or
+    out-of-memory run counts under its status)."""
+    failures: Counter = Counter()
+    statuses: Counter = Counter()
+    runs = passed = 0
+    sim = wall = 0.0
+    for r in records:
+        runs += 1
+        passed += r.passed
+        statuses[r.status] += 1
+        sim += r.sim_time_s
+        wall += r.wall_time_s
+        for name in r.failed_oracles:
+            failures[name] += 1
+    return {
+        "scenario": plan.name,
+        "source": plan.source_file,
+        "runs": runs,
+        "passed": passed,
+        "failed": runs - passed,
+        "failures_per_oracle": dict(sorted(failures.items())),
+        "statuses": dict(sorted(statuses.items())),
+        "rejected_by_assumption": dict(rejected or {}),
+        "sim_time_s": sim,
+        "wall_time_s": wall,
+    }
+
+
+def fmt_number(x: float | None) -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, float) and math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    if isinstance(x, float) and math.isnan(x):
+        return "nan"
+    return f"{x:.3g}"
+
+
+def fmt_param(plan: ScenarioPlan, name: str, value: float) -> str:
+    """`12 m/s`: a parameter value in SI with its canonical unit."""
+    p = next((p for p in plan.params if p.name == name), None)
+    unit = units.CANONICAL_UNIT.get(units.DIMENSIONS_BY_NAME.get(p.dimension)) if p else None
+    text = f"{value:.4g}"
+    return f"{text} {unit}" if unit else text
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """95 % Wilson score interval of a success rate (sensible at 0 % and 100 %)."""
+    if n == 0:
+        return 0.0, 1.0
+    p = successes / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+@dataclass
+class CellStats:
+    cell: dict[str, float]
+    runs: int = 0
+    passed: int = 0
+    failures: Counter = field(default_factory=Counter)
+
+    @property
+    def rate(self) -> float:
+        return self.passed / self.runs if self.runs else math.nan
+
+    @property
+    def interval(self) -> tuple[float, float]:
+        return wilson_interval(self.passed, self.runs)
+
+
+def cell_stats(records: Iterable) -> list[CellStats]:
+    """Success rate per sweep cell (one cell per grid point; a sweep without a grid is one
+    cell), in the grid's order."""
+    cells: dict[str, CellStats] = {}
+    order: dict[str, int] = {}
+    for r in records:
+        k = json.dumps(sorted(r.cell.items()))
+        st = cells.get(k)
+        if st is None:
+            st = cells[k] = CellStats(dict(r.cell))
+            order[k] = r.seq if r.seq >= 0 else len(order)
+        st.runs += 1
+        st.passed += r.passed
+        for name in r.failed_oracles:
+            st.failures[name] += 1
+    return [cells[k] for k in sorted(cells, key=lambda k: order[k])]
+
+
+def success_pivot(plan: ScenarioPlan, stats: list[CellStats]) -> dict | None:
+    """Table-1 layout for a 1- or 2-axis grid: rows × columns of success rates, or None
+    for other sweeps (the flat per-cell table is shown instead)."""
+    axes = [g.param for g in plan.sweep.grid]
+    if not stats or not 1 <= len(axes) <= 2:
+        return None
+    col_axis = axes[-1]
+    row_axis = axes[0] if len(axes) == 2 else None
+    cols = next(g.values for g in plan.sweep.grid if g.param == col_axis)
+    rows = next(g.values for g in plan.sweep.grid if g.param == row_axis) if row_axis else [None]
+    by = {(st.cell.get(row_axis) if row_axis else None, st.cell.get(col_axis)): st for st in stats}
+    return {
+        "row_axis": row_axis,
+        "col_axis": col_axis,
+        "columns": [fmt_param(plan, col_axis, c) for c in cols],
+        "rows": [{"label": fmt_param(plan, row_axis, rv) if row_axis else plan.name,
+                  "cells": [by.get((rv, cv)) for cv in cols]} for rv in rows],
+    }
+
+
+# ---------------------------------------------------------------------------- terminal
+
+def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None, fmt: str = "text") -> None:
+    """Verdict table of `records` (at most 40 rows: failing runs first when more) and the
+    totals line; `totals` is a `summary()` (defaults to one over `records`)."""
+    totals = totals or summary(plan, records)
+    if fmt == "json":
+        print(json.dumps(totals, indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(highlight=False)
+    names = [o.name for o in plan.oracles]
+    cell_params = sorted({k for r in records for k in r.cell})
+    table = Table(title=f"{plan.name}: {totals['runs']} run(s)")
+    table.add_column("run")
+    for p in cell_params:
+        table.add_column(p)
+    table.add_column("verdict")
+    for n in names:
+        table.add_column(n, justify="right")
+    for r in records:
+        by_name = {v.name: v for v in r.verdicts}
+        verdict = "[green]pass[/]" if r.passed else f"[red]{'FAIL' if r.status == 'ok' else r.status.upper()}[/]"
+        rho = []
+        for n in names:
+            v = by_name.get(n)
+            rho.append("-" if v is None else
+                       (f"[red]{fmt_number(v.robustness)}[/]" if not v.passed else fmt_number(v.robustness)))
+        table.add_row(r.run_id, *[fmt_number(r.cell[p]) if p in r.cell else "" for p in cell_params],
+                      verdict, *rho)
+    console.print(table)
+    if totals["runs"] > len(records):
+        console.print(f"(showing {len(records)} of {totals['runs']} runs)")
+    console.print(f"{totals['passed']} passed, {totals['failed']} failed"
+                  + (f"; failures per oracle: {totals['failures_per_oracle']}" if totals["failed"] else ""))
+    for r in records:
+        if r.status not in ("ok",):
+            console.print(f"[red]{r.run_id}: {r.status}: {r.error.splitlines()[0] if r.error else ''}[/]")
+
+
+def shown_records(store, limit: int = 40) -> list:
+    """What the terminal table shows: every run of a small sweep, else failing runs first."""
+    if len(store) <= limit:
+        return list(store.records())
+    failing = list(store.failing(limit=limit))
+    return failing or list(store.records(limit=limit))
+
+
+def write_tables(out: Path, store) -> None:
+    """summary.json and runs.csv of a store."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(json.dumps(store.summary(), indent=2) + "\n")
+    store.to_csv(out / "runs.csv")
+

@@ -1,0 +1,123 @@
+"""Run a sweep on a Ray cluster: `addtc FILE --executor ray [--address ADDR]`.
+
+Each run is one Ray task executing the same `run_spec` as a local worker, so a record is
+the same wherever it ran. The plan goes to the object store once (`ray.put`); tasks carry
+only the RunSpec's own fields. At most one task per CPU slot is in flight, so a task
+starts about when it is submitted and the coordinator holds only those few specs.
+
+Guards: a run past `timeout_s` (counted from submission) is cancelled with `force=True`,
+which kills its worker, and recorded as `timeout`; a run whose worker ends above
+`memory_limit_mb`, or that Ray's own memory monitor kills, is recorded as `memory`; a
+lost worker is recorded as `crashed`. Workers are recycled after `max_tasks_per_child`
+tasks (Ray's `max_calls`). Ray is optional: `pip install 'addt-dsl[ray]'`.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import time
+from collections.abc import Iterable, Iterator
+
+from addt_dsl.plan import RunSpec
+from addt_dsl.runtime.executor import (DEFAULT_MAX_TASKS_PER_CHILD, DEFAULT_MEMORY_LIMIT_MB, _spec_fields,
+                                       rss_mb, run_spec)
+from addt_dsl.runtime.store import RunRecord
+
+_POLL_S = 0.2
+
+
+def ray_available() -> bool:
+    return importlib.util.find_spec("ray") is not None
+
+
+def _ray_task(plan, fields: dict, seq: int, memory_limit_mb: float | None) -> RunRecord:
+    spec = RunSpec.model_construct(plan=plan, **fields)
+    record = run_spec(spec, seq, worker=f"ray-pid{os.getpid()}")
+    # Ray reuses workers, so a peak from an earlier task would stay; judge the current size.
+    rss = rss_mb(os.getpid())
+    if memory_limit_mb and rss is not None and rss > memory_limit_mb:
+        record.status = "memory"
+        record.error = f"resident memory {rss:.0f} MB over the {memory_limit_mb:.0f} MB limit"
+    return record
+
+
+class RayExecutor:
+    name = "ray"
+
+    def __init__(self, address: str | None = None, jobs: int | None = None, timeout_s: float | None = None,
+                 memory_limit_mb: float | None = DEFAULT_MEMORY_LIMIT_MB,
+                 max_tasks_per_child: int | None = DEFAULT_MAX_TASKS_PER_CHILD, init_kwargs: dict | None = None):
+        self.address = address
+        self.jobs = jobs
+        self.timeout_s = timeout_s if timeout_s and timeout_s > 0 else None
+        self.memory_limit_mb = memory_limit_mb if memory_limit_mb and memory_limit_mb > 0 else None
+        self.max_tasks_per_child = max_tasks_per_child or 0
+        self.init_kwargs = init_kwargs or {}
+        self.workers = jobs or 0
+
+    def _init(self):
+        import ray
+
+        if ray.is_initialized():
+            return False
+        kwargs = {"include_dashboard": False, "log_to_driver": False, **self.init_kwargs}
+        if self.address:
+            kwargs["address"] = self.address
+        elif self.jobs:
+            kwargs.setdefault("num_cpus", self.jobs)
+        ray.init(**kwargs)
+        return True
+
+    def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunRecord]:
+        import ray
+        from ray import exceptions as rex
+
+        started_here = self._init()
+        try:
+            slots = self.jobs or max(1, int(ray.cluster_resources().get("CPU", 1)))
+            self.workers = slots
+            options = {"num_cpus": 1, "max_retries": 0}
+            if self.max_tasks_per_child:
+                options["max_calls"] = self.max_tasks_per_child
+            task = ray.remote(**options)(_ray_task)
+            plan_refs: dict[int, tuple[object, object]] = {}  # id(plan) -> (plan, ref): keeps ids unique
+            inflight: dict[object, tuple[int, RunSpec, float]] = {}
+            items = iter(items)
+            exhausted = False
+            while True:
+                while not exhausted and len(inflight) < slots:
+                    nxt = next(items, None)
+                    if nxt is None:
+                        exhausted = True
+                        break
+                    seq, spec = nxt
+                    _, plan_ref = plan_refs.setdefault(id(spec.plan), (spec.plan, ray.put(spec.plan)))
+                    ref = task.remote(plan_ref, _spec_fields(spec), seq, self.memory_limit_mb)
+                    inflight[ref] = (seq, spec, time.monotonic())
+                if not inflight:
+                    break
+                ready, _ = ray.wait(list(inflight), num_returns=1,
+                                    timeout=_POLL_S if self.timeout_s else None)
+                for ref in ready:
+                    seq, spec, started = inflight.pop(ref)
+                    elapsed = time.monotonic() - started
+                    try:
+                        yield ray.get(ref)
+                    except rex.OutOfMemoryError as exc:
+                        yield RunRecord.unfinished(spec, "memory", f"Ray killed the task: {exc}", elapsed, seq=seq)
+                    except rex.RayError as exc:
+                        yield RunRecord.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", elapsed,
+                                                   seq=seq)
+                if self.timeout_s:
+                    now = time.monotonic()
+                    for ref, (seq, spec, started) in list(inflight.items()):
+                        if now - started > self.timeout_s:
+                            ray.cancel(ref, force=True)
+                            del inflight[ref]
+                            yield RunRecord.unfinished(spec, "timeout",
+                                                       f"run exceeded the {self.timeout_s:g} s timeout",
+                                                       now - started, seq=seq)
+        finally:
+            if started_here:
+                ray.shutdown()

@@ -1,0 +1,185 @@
+"""Runner benchmark: sweep throughput and coordinator memory.
+
+1. Throughput: runs per minute of a 200-run sweep of a short closed-loop scenario (3 s
+   simulated, one agent, lidar with drops) on 1 and on 2 local workers, and the scaling
+   ratio. Every run is committed to a SQLite store, as in `addtc`.
+2. Coordinator memory: resident memory of the coordinating process while it walks a
+   10,000-run sweep of a trivial scenario (0.1 s, no agents, no sensors), sampled every
+   1,000 runs, and its peak. Flat means the coordinator keeps nothing per run beyond the
+   store: RunSpecs are streamed and share one plan, results go to SQLite.
+
+Each part runs in a fresh interpreter so one part's peak does not hide the other's.
+
+Run: PYTHONPATH=. python benchmarks/bench_runner.py [--runs 200] [--memory-runs 10000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+SHORT = """
+scenario short {
+  duration 3 s
+  road r {
+    line length 300 m
+    lanes right 2 width 3.5 m
+  }
+  param drop = 5 % in [0 %, 50 %]
+  ego car on r lane -1 at 20 m speed 20 m/s {
+    stack bev cruise_speed 20 m/s
+    sensor lidar rate 10 Hz rays 180 range 60 m
+  }
+  agent lead car on r lane -2 at 60 m speed 15 m/s {
+    behavior cruise speed 15 m/s
+  }
+  faults {
+    drop lidar rate drop
+  }
+  expect {
+    no collision
+    always abs(lane_offset(ego)) < 1.8 m
+  }
+  sweep {
+    grid drop in [0, 10] %
+    repeat REPEAT
+  }
+}
+"""
+
+TRIVIAL = """
+scenario trivial {
+  duration 0.1 s
+  road r {
+    line length 200 m
+    lanes right 1 width 3.5 m
+  }
+  ego car on r lane -1 at 10 m speed 10 m/s {
+    stack bev
+  }
+  expect {
+    moving: always ego.speed > 1 m/s
+  }
+  sweep {
+    repeat REPEAT
+  }
+}
+"""
+
+
+def _plan(text: str, repeat: int):
+    from addt_dsl.compiler import compile_source
+
+    result = compile_source(text.replace("REPEAT", str(repeat)))
+    assert result.ok, result.diagnostics
+    return result.plan
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def part_throughput(runs: int, jobs: int) -> dict:
+    from addt_dsl.runtime.executor import LocalExecutor, run_sweep
+    from addt_dsl.runtime.store import ResultStore
+    from addt_dsl.sweep import SweepStream
+
+    plan = _plan(SHORT, runs // 2)
+    with tempfile.TemporaryDirectory() as tmp, ResultStore(Path(tmp) / "r.sqlite", plan) as store:
+        executor = LocalExecutor(jobs)
+        t0, cpu0 = time.perf_counter(), time.process_time()
+        outcome = run_sweep(SweepStream(plan), store, executor)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
+        sim = store.summary()["sim_time_s"]
+    return {"jobs": jobs, "runs": outcome.ran, "wall_s": wall, "runs_per_min": 60 * outcome.ran / wall,
+            "sim_s_per_wall_s": sim / wall, "coordinator_cpu_ms_per_run": 1e3 * cpu / outcome.ran}
+
+
+def part_memory(runs: int, jobs: int) -> dict:
+    from addt_dsl.runtime.executor import LocalExecutor, run_sweep
+    from addt_dsl.runtime.store import ResultStore
+    from addt_dsl.sweep import SweepStream
+
+    plan = _plan(TRIVIAL, runs)
+    samples: list[tuple[int, float]] = [(0, _rss_mb())]
+    count = 0
+
+    def on_record(_record) -> None:
+        nonlocal count
+        count += 1
+        if count % 1000 == 0:
+            samples.append((count, _rss_mb()))
+
+    with tempfile.TemporaryDirectory() as tmp, ResultStore(Path(tmp) / "r.sqlite", plan) as store:
+        t0 = time.perf_counter()
+        run_sweep(SweepStream(plan), store, LocalExecutor(jobs), on_record=on_record)
+        wall = time.perf_counter() - t0
+        stored = len(store)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    # For contrast: the same sweep expanded eagerly into a list.
+    import tracemalloc
+
+    from addt_dsl.sweep import expand
+
+    tracemalloc.start()
+    specs = expand(plan).specs
+    list_mb = tracemalloc.get_traced_memory()[0] / 2**20
+    tracemalloc.stop()
+    del specs
+    return {"runs": stored, "wall_s": wall, "samples": samples, "peak_rss_mb": peak, "eager_list_mb": list_mb}
+
+
+def _in_subprocess(part: str, runs: int, jobs: int) -> dict:
+    out = subprocess.run([sys.executable, __file__, "--part", part, "--runs", str(runs), "--jobs", str(jobs)],
+                         capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--runs", type=int, default=200)
+    parser.add_argument("--memory-runs", type=int, default=10_000)
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--part", choices=("throughput", "memory"))
+    args = parser.parse_args()
+    if args.part == "throughput":
+        print(json.dumps(part_throughput(args.runs, args.jobs)))
+        return
+    if args.part == "memory":
+        print(json.dumps(part_memory(args.runs, args.jobs)))
+        return
+
+    print(f"load average before: {', '.join(f'{x:.1f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs "
+          "(other processes compete for the workers' CPUs)")
+    print(f"Throughput: {args.runs}-run sweep of a 3 s scenario (1 agent, lidar, drop faults), SQLite store")
+    results = {}
+    for jobs in (1, 2):
+        r = results[jobs] = _in_subprocess("throughput", args.runs, jobs)
+        print(f"  {jobs} worker(s): {r['runs']} runs in {r['wall_s']:.1f} s = {r['runs_per_min']:.0f} runs/min "
+              f"({r['sim_s_per_wall_s']:.0f}x real time; coordinator CPU {r['coordinator_cpu_ms_per_run']:.1f} ms/run)")
+    print(f"  scaling 2 vs 1 workers: {results[2]['runs_per_min'] / results[1]['runs_per_min']:.2f}x "
+          f"(machine has {os.cpu_count()} CPUs)")
+
+    print(f"load average: {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
+    print(f"Coordinator memory: {args.memory_runs}-run sweep of a trivial scenario on {args.jobs} workers")
+    m = _in_subprocess("memory", args.memory_runs, args.jobs)
+    print(f"  {m['runs']} runs stored in {m['wall_s']:.1f} s ({60 * m['runs'] / m['wall_s']:.0f} runs/min)")
+    print("  coordinator RSS [MB] by runs done: "
+          + ", ".join(f"{n}: {mb:.1f}" for n, mb in m["samples"]))
+    first = next((mb for n, mb in m["samples"] if n >= 1000), m["samples"][0][1])
+    last = m["samples"][-1][1]
+    print(f"  growth from 1,000 to {m['samples'][-1][0]:,} runs: {last - first:+.1f} MB; "
+          f"peak RSS {m['peak_rss_mb']:.1f} MB")
+    print(f"  (for contrast, the same {m['runs']} RunSpecs held as a list: {m['eager_list_mb']:.1f} MB)")
+
+
+if __name__ == "__main__":
+    main()

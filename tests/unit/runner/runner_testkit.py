@@ -1,0 +1,80 @@
+"""Plans and fake run functions for the runner tests.
+
+`fake_run` replaces the simulation in a worker (LocalExecutor's `run_fn`): the `mode`
+parameter of the RunSpec picks how the run behaves, so the executor's guards can be
+tested in a fraction of a second per run.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+from addt_dsl.compiler import compile_source
+from addt_dsl.runtime.store import RunRecord, VerdictRecord
+
+OK, HANG, SEGFAULT, HOG, RAISE, SPIKE = 0, 1, 2, 3, 4, 5
+HOG_MB = 400
+
+
+def scenario(modes: list[int], repeat: int = 1, duration: str = "0.2 s", extra: str = "") -> str:
+    return f"""
+scenario guards {{
+  description "runner test <script>alert(1)</script>"
+  duration {duration}
+  road r {{
+    line length 200 m
+    lanes right 1 width 3.5 m
+  }}
+  param mode = 0 in [0, 10]
+  ego car on r lane -1 at 10 m speed 10 m/s {{
+    stack bev
+  }}
+  expect {{
+    moving: always ego.speed > 1 m/s
+  }}
+  sweep {{
+    grid mode in [{", ".join(str(m) for m in modes)}]
+    repeat {repeat}
+    {extra}
+  }}
+}}
+"""
+
+
+def plan_of(text: str):
+    result = compile_source(text)
+    assert result.ok, result.diagnostics
+    return result.plan
+
+
+def _touch(n_mb: int) -> bytearray:
+    block = bytearray(n_mb * 2**20)
+    for i in range(0, len(block), 4096):
+        block[i] = 1
+    return block
+
+
+def fake_run(spec, seq: int = -1, worker: str = "") -> RunRecord:
+    mode = int(spec.params["mode"])
+    if mode == HANG:
+        time.sleep(120)
+    elif mode == SEGFAULT:
+        os.kill(os.getpid(), signal.SIGSEGV)
+    elif mode == HOG:
+        hog = _touch(HOG_MB)  # noqa: F841 - held while the coordinator looks
+        time.sleep(120)
+    elif mode == RAISE:
+        raise RuntimeError("boom")
+    elif mode == SPIKE:
+        del _touch(HOG_MB)[:]
+    return fake_record(spec, seq, worker)
+
+
+def fake_record(spec, seq: int = -1, worker: str = "") -> RunRecord:
+    """A passing record for `spec` (no simulation)."""
+    record = RunRecord.unfinished(spec, "ok", "", 0.001, seq=seq, worker=worker)
+    record.verdicts = [VerdictRecord("moving", "hard", 1.0 + spec.repeat_index, True)]
+    record.digest = f"fake-{spec.seed}"
+    return record
