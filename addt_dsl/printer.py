@@ -462,6 +462,8 @@ VEHICLE_DEFAULTS = {  # what the compiler fills in when a setting is left out
     "length": lambda a: _vehicle_size(a.vehicle)[0], "width": lambda a: _vehicle_size(a.vehicle)[1],
     "mass": lambda a: 1500.0, "wheelbase": lambda a: 2.7,
 }
+ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLESS),  # optional, may use parameters
+               ("offset", "offset", units.LENGTH))
 ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units.LENGTH),
                 ("mass", "mass_kg", units.MASS), ("wheelbase", "wheelbase_m", units.LENGTH))
 CLAUSE_TABLES = {"behavior": BEHAVIORS, "sensor": SENSORS, "stack": STACKS}
@@ -484,8 +486,10 @@ def _actor(pr: _Printer, a: ActorPlan, is_ego: bool) -> None:
     head = "ego" if is_ego else f"agent {a.name}"
     parts = [f"{head} {a.vehicle} on {a.road}", f"lane {ex.value(a.lane, units.DIMENSIONLESS)}",
              f"at {ex.value(a.s, units.LENGTH)}", f"speed {ex.value(a.speed, units.SPEED)}"]
-    if a.goal_s is not None:
-        parts.append(f"goal {ex.value(a.goal_s, units.LENGTH)}")
+    for key, field, dim in ACTOR_EXPRS:
+        value = getattr(a, field, None)
+        if value is not None:
+            parts.append(f"{key} {ex.value(value, dim)}")
     for key, field, dim in ACTOR_FLOATS:
         value = getattr(a, field)
         if value != VEHICLE_DEFAULTS[key](a):

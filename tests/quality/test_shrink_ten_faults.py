@@ -67,6 +67,7 @@ def test_ten_faults_shrink_to_the_culprit(case, tmp_path):
     trace = np.load(arts.trace)
     assert trace["time"][-1] <= result.best.plan.duration_s + 1e-9
     assert "ego.speed" in trace.files
+    assert arts.animation is not None and arts.animation.stat().st_size > 0  # GIF from addt_dsl.reporting
 
     again = Shrinker(spec, nominal_plan=plan, cache=RunCache(), max_simulations=MAX_SIMULATIONS).run()
     assert again.best.key() == result.best.key()

@@ -42,7 +42,7 @@ scenario kitchen_sink {
   param k = 2 in [1, 2, 3]
   assume gap > 12 m and v_lead < 24 m/s
 
-  ego car on main lane -1 at 10 m speed 20 km/h goal 200 m mass 1800 kg {
+  ego car on main lane -1 at 10 m speed 20 km/h goal 200 m mass 1800 kg mu 0.6 {
     stack bev cruise_speed 25 m/s time_gap 1.2 s perception ground_truth
     sensor lidar rate 20 Hz rays 180 range 60 m yaw 0.5 deg
   }
@@ -50,7 +50,7 @@ scenario kitchen_sink {
     behavior cruise speed v_lead accel 1 m/s^2
     when distance(ego, lead) < brake_at then behavior brake decel 5 m/s^2 to_speed 2 m/s
   }
-  agent bike cyclist on main lane -2 at 60 m speed 4 m/s
+  agent bike cyclist on main lane -2 at 60 m speed 4 m/s offset -0.5 m
 
   faults {
     drop lidar rate 5 % burst 3

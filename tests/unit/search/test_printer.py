@@ -163,3 +163,53 @@ def test_compound_parameter_reads_back():
               "  ego car on r lane -1 at 0 m\n  expect {\n    always area > 1 m * 1 s and inv > 0 / 1 kg\n  }\n}\n")
     plan = _recompile(source)
     assert semantic_key(_recompile(print_plan(plan, keep_user_text=False))) == semantic_key(plan)
+
+
+def _sample_setting(spec):
+    from addt_dsl.plan import num
+
+    if spec.kind in ("word",):
+        return spec.choices[0] if spec.choices else None
+    if spec.kind in ("name", "string", "list"):
+        return None
+    if spec.low is not None and spec.high is not None:
+        value = (spec.low + spec.high) / 2
+    elif spec.default is not None and not isinstance(spec.default, str):
+        value = float(spec.default)
+    elif spec.low is not None:
+        value = spec.low + 1.0
+    else:
+        value = 1.0
+    return num(float(round(value)) if spec.kind == "int" else value)
+
+
+def _clause(keyword, cls):
+    settings = {}
+    for spec in cls.params:
+        value = _sample_setting(spec)
+        if value is not None:
+            settings[spec.name] = value
+    return ClausePlan(keyword=keyword, name=cls.keyword, settings=settings)
+
+
+def test_every_registered_behaviour_sensor_and_fault_prints():
+    """A new registry entry prints without touching the printer (its settings are data)."""
+    from addt_dsl.registry import BEHAVIORS, FAULTS, SENSORS
+
+    plan = kitchen_sink_plan()
+    lead = plan.agents[0]
+    agents = [lead.model_copy(update={"name": f"a_{cls.keyword}", "behaviors": [_clause("behavior", cls)],
+                                      "triggers": []})
+              for cls in BEHAVIORS.classes()]
+    ego = plan.ego.model_copy(update={"sensors": [_clause("sensor", cls) for cls in SENSORS.classes()]})
+    sensors = [s.name for s in ego.sensors]
+    faults = []
+    for cls in FAULTS.classes():
+        clause = _clause("fault", cls)
+        target = {"sensor": sensors[0], "site": "control.steer", "node": "planner"}[cls.target_kind]
+        faults.append(plan.faults[0].model_copy(update={"kind": cls.keyword, "target": target,
+                                                        "settings": clause.settings}))
+    oracles = [o for o in plan.oracles if not E.signals_used(o.formula) & {"distance(ego,lead)", "ttc(ego,lead)",
+                                                                            "gap(ego,lead)", "speed(lead)"}]
+    plan = plan.model_copy(update={"agents": agents, "ego": ego, "faults": faults, "oracles": oracles})
+    assert semantic_key(_recompile(print_plan(plan, keep_user_text=False))) == semantic_key(plan)
