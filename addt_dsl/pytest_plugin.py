@@ -177,18 +177,22 @@ class AddtItem(pytest.Item):
         return Path(opt) if opt else Path(self.config.rootpath) / self.config.getini("addt_failures")
 
     def source_name(self) -> str:
+        return self.relative(self.path)
+
+    def relative(self, path: Path) -> str:
         try:
-            return str(self.path.relative_to(self.config.rootpath))
+            return str(Path(path).resolve().relative_to(Path(self.config.rootpath).resolve()))
         except ValueError:
-            return str(self.path)
+            return str(path)
 
     # ---- the test
     def runtest(self) -> None:
-        from addt_dsl.compiler import compile_file
+        from addt_dsl.compiler import compile_source
         from addt_dsl.diagnostics import render_text
         from addt_dsl.search import RunCache
 
-        result = compile_file(self.path)
+        # Compiled under its rootdir-relative name, so reports say `scenarios/x.addt:29`.
+        result = compile_source(self.path.read_bytes(), path=self.source_name(), base_dir=self.path.parent)
         if not result.ok:
             raise AddtCompileError(render_text(result.diagnostics, result.sources))
         plan = result.plan
@@ -213,13 +217,14 @@ class AddtItem(pytest.Item):
         for path in corpus_entries(self.corpus_dir(), self.path, plan.name):
             spec = compile_pinned(path.read_text(), path=str(path), base_dir=path.parent)
             outcome = cache.get(spec)
-            notes.append(f"replayed {path}: {'still fails' if outcome.failures else 'passes'}")
+            shown = self.relative(path)
+            notes.append(f"replayed {shown}: {'still fails' if outcome.failures else 'passes'}")
             if outcome.failures:
                 f = outcome.primary()
                 raise AddtFailure(
-                    f"{f.oracle} fails again: known counterexample {path} still fails ({f.describe()})\n"
-                    f"replay: addtc {path}",
-                    [("oracle", f.oracle), ("mode", f.mode), ("counterexample", str(path)), ("regression", "1")])
+                    f"{f.oracle} fails again: known counterexample {shown} still fails ({f.describe()})\n"
+                    f"replay: addtc {shown}",
+                    [("oracle", f.oracle), ("mode", f.mode), ("counterexample", shown), ("regression", "1")])
 
     def _run_sweep(self, plan, cache, opts, notes):
         from addt_dsl.sweep import expand
@@ -260,14 +265,15 @@ class AddtItem(pytest.Item):
         result = Shrinker(spec, nominal_plan=plan, oracle=first.oracle, cache=cache,
                           max_simulations=opts["shrink_budget"]).run()
         arts = write_counterexample(result, self.corpus_dir(), self.source_name(), animate=False)
-        props.append(("counterexample", str(arts.addt)))
-        lines = [f"{first.oracle} fails: minimal counterexample {arts.addt}",
+        path = self.relative(arts.addt)
+        props.append(("counterexample", path))
+        lines = [f"{first.oracle} fails: minimal counterexample {path}",
                  f"failure: {result.target.describe()} in run {spec.run_id or spec.key()} "
                  f"({n_failing} failing run(s))",
                  f"shrunk: {len(result.original.faults)} -> {len(result.best.faults)} fault(s), "
                  f"{len(result.original.plan.agents)} -> {len(result.best.plan.agents)} agent(s) in "
                  f"{result.simulations} simulations",
-                 f"replay: addtc {arts.addt}", *result.changes]
+                 f"replay: addtc {path}", *result.changes]
         raise AddtFailure("\n".join(lines), props)
 
     # ---- reporting

@@ -19,10 +19,11 @@ first failure, and budgets in examples that are cheap. CEM is a standard AV fals
 (rare-event simulation), deterministic for a seed, and keeps going after a failure to
 look for the other oracles' failures.
 
-Distinct failures: a failing run is grouped by (oracle, mode, faults that injected before
-the violation); each new group is shrunk (`shrink`) with a small budget, and its origin
-is what the shrunk run still needs: the fault kinds and targets and the parameters away
-from nominal. Failures with the same oracle, mode and origin are one failure.
+Distinct failures: a failing run is grouped by (oracle, mode, faults that injected); each
+new group is shrunk (`shrink`) with a small budget, and its origin is what the shrunk run
+still needs: the fault kinds and targets, and the parameters away from nominal with the
+direction they moved (`origin_key`). Failures with the same oracle, mode and origin are
+one failure; the report shows the values of the first one.
 """
 
 from __future__ import annotations
@@ -386,8 +387,9 @@ class Falsifier:
                                         max_simulations=shrink_simulations).run()
                 except ValueError:
                     g.shrunk = None
-            g.origin = origin_of(g.shrunk.best if g.shrunk else g.example, self.space.nominal)
-            key = (g.oracle, g.mode, g.origin)
+            best = g.shrunk.best if g.shrunk else g.example
+            g.origin = origin_of(best, self.space.nominal)
+            key = (g.oracle, g.mode, origin_key(best, self.space.nominal))
             if key in out:
                 other = out[key]
                 other.count += g.count
@@ -400,6 +402,15 @@ class Falsifier:
 def _injected_before(spec: RunSpec, outcome: Outcome, t: float | None) -> tuple:
     """Fault kinds/targets that injected anything in the run (cheap grouping before shrinking)."""
     return tuple(sorted({(f.kind, f.target) for f in spec.faults if outcome.fault_events.get(f.index)}))
+
+
+def origin_key(spec: RunSpec, nominal: dict[str, float]) -> tuple:
+    """The region a failure comes from, coarsely: which faults (kind, target) it needs and
+    which parameters it needs away from nominal, in which direction."""
+    faults = tuple(sorted({(f.kind, f.target) for f in spec.faults}))
+    params = tuple(sorted((k, "+" if v > nominal[k] else "-") for k, v in spec.params.items()
+                          if k in nominal and v != nominal[k]))
+    return faults, params
 
 
 def origin_of(spec: RunSpec, nominal: dict[str, float]) -> str:

@@ -58,7 +58,7 @@ def test_the_pinned_example_compiles_to_one_pinned_run():
     spec = compile_pinned(block)
     assert spec.seed == 213907198
     assert [(f.kind, f.target, f.start_s, f.end_s, f.seed) for f in spec.faults] == \
-        [("stuck", "control.accel", 1.0, 4.7, 2666701593)]
+        [("stuck", "control.accel", 1.0, 4.8, 2666701593)]
     assert compile_source(block).ok
 
 
