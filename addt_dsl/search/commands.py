@@ -1,7 +1,8 @@
 """`addtc shrink` and `addtc falsify`.
 
     addtc shrink FILE [--run-id ID] [--oracle NAME] [--max-simulations N] [--out DIR]
-    addtc shrink --run-key SPEC.json [FILE]      a RunSpec as JSON (e.g. from a results store)
+    addtc shrink --run-key SPEC.json [FILE]      a RunSpec as JSON
+    addtc shrink --store DIR [--run-id ID]       a stored run (`addtc FILE --out DIR`)
     addtc falsify FILE [--budget-runs N] [--budget-seconds S] [--seed K] [--jobs J] [--out DIR]
 
 Exit codes follow `addtc`: 0 nothing fails, 1 a failure was found (and written), 2 error.
@@ -23,6 +24,9 @@ def add_commands(sub) -> None:
     shrink.add_argument("--run-id", help="shrink this run of the sweep (e.g. c002-r000)")
     shrink.add_argument("--run-key", metavar="SPEC_JSON",
                         help="shrink the RunSpec in this JSON file (RunSpec.model_dump_json)")
+    shrink.add_argument("--store", metavar="RESULTS",
+                        help="a results store (`addtc FILE --out DIR` writes DIR/results.sqlite): shrink its "
+                             "run --run-id, else its first failing run")
     shrink.add_argument("--oracle", help="the failing oracle to keep (default: the earliest violation)")
     shrink.add_argument("--max-simulations", type=int, default=300)
     shrink.add_argument("--limit", type=int, default=0, help="look for a failure in the first N runs only")
@@ -78,13 +82,36 @@ def _first_failing(plan, run_id: str | None, limit: int, jobs: int, cache):
     return None
 
 
+def _from_store(path: str, run_id: str | None):
+    """(RunSpec, plan) of a stored run: `run_id`, else the first failing one; (None, plan) if none fails."""
+    from addt_dsl.runtime.store import ResultStore
+
+    p = Path(path)
+    if p.is_dir():
+        p = p / "results.sqlite"
+    store = ResultStore(p)
+    try:
+        plan = store.plan()
+        if run_id:
+            record = next(store.records("run_id = ?", (run_id,), limit=1), None)
+            if record is None:
+                raise LookupError(f"no run '{run_id}' in {p}")
+        else:
+            record = next(store.failing(limit=1), None)
+            if record is None:
+                return None, plan
+        return store.spec(record), plan
+    finally:
+        store.close()
+
+
 def cmd_shrink(args) -> int:
     from addt_dsl.plan import RunSpec
     from addt_dsl.search import NotFailing, RunCache, Shrinker
     from addt_dsl.search.artifacts import ReplayMismatch, write_counterexample
 
-    if not args.file and not args.run_key:
-        _err("give a scenario FILE or --run-key SPEC_JSON")
+    if not args.file and not args.run_key and not args.store:
+        _err("give a scenario FILE, --run-key SPEC_JSON or --store RESULTS")
         return EXIT_ERROR
     plan = None
     if args.file:
@@ -94,7 +121,18 @@ def cmd_shrink(args) -> int:
         plan = result.plan
     cache = RunCache(args.cache)
     source = args.file or ""
-    if args.run_key:
+    if args.store:
+        try:
+            spec, store_plan = _from_store(args.store, args.run_id)
+        except (OSError, LookupError) as exc:
+            _err(str(exc))
+            return EXIT_ERROR
+        if spec is None:
+            print(f"no failing run in {args.store}: nothing to shrink")
+            return EXIT_OK
+        plan = plan or store_plan
+        source = source or spec.plan.source_file
+    elif args.run_key:
         try:
             spec = RunSpec.model_validate_json(Path(args.run_key).read_text())
         except (OSError, ValueError) as exc:

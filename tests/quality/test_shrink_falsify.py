@@ -51,3 +51,15 @@ def test_shrink_run_key_matches_the_api(tmp_path):
     expected = Shrinker(spec, nominal_plan=plan, cache=RunCache(), max_simulations=150).run()
     assert report["shrunk_key"] == expected.best.key()
     assert report["faults"] == {"before": 10, "after": 1}
+
+
+def test_shrink_a_run_from_a_results_store(tmp_path):
+    scenario = str(ROOT / "examples" / "ten_faults.addt")
+    assert addtc([scenario, "--out", str(tmp_path / "results"), "--jobs", "1", "--no-report"]) == 1
+    out = tmp_path / "min"
+    assert addtc(["shrink", "--store", str(tmp_path / "results"), "--run-id", "c000-r000", "--out", str(out),
+                  "--no-animation", "--format", "json"]) == 1
+    (report_path,) = out.glob("*.report.json")
+    report = json.loads(report_path.read_text())
+    assert report["faults"] == {"before": 10, "after": 1}
+    assert addtc(["shrink", "--store", str(tmp_path / "results"), "--run-id", "c009-r000"]) == 2
