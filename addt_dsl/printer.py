@@ -190,13 +190,20 @@ class _ExprPrinter:
                 return self.default_dim(next((a for a in args if _has_ref(a)), args[0]))
         return units.DIMENSIONLESS
 
-    def comparison_dim(self, left, right) -> Dim:
+    def comparison_dims(self, left, right) -> list[Dim]:
+        """Dimensions to try for both sides of a comparison, most natural first."""
         for side in (left, right):
             d = self.dim(side)
             if d is not None:
-                return d
-        # Both sides are free: the side that names a signal or parameter decides.
-        return self.default_dim(right if _has_ref(right) and not _has_ref(left) else left)
+                return [d]
+        # Both sides are free: the side that names a signal or parameter decides, else any.
+        first = right if _has_ref(right) and not _has_ref(left) else left
+        out = []
+        for d in (self.default_dim(first), self.default_dim(left), self.default_dim(right),
+                  units.DIMENSIONLESS, *units.CANONICAL_UNIT):
+            if d not in out:
+                out.append(d)
+        return out
 
     # -- printing: returns (text, level)
     def format(self, e, want, slot: int = TEMPORAL) -> str:
@@ -261,33 +268,39 @@ def _p_binary(p: _ExprPrinter, e: E.Binary, want):
     if e.op in E.BOOL_OPS:
         lw = rw = BOOL
     elif e.op in E.COMPARE_OPS:
-        lw = rw = p.comparison_dim(e.left, e.right)
+        for dim in p.comparison_dims(e.left, e.right):
+            try:
+                return f"{p.format(e.left, dim, left_slot)} {e.op} {p.format(e.right, dim, right_slot)}", level
+            except PrinterError:
+                continue
+        raise PrinterError("no dimension makes both sides of this comparison writable")
     elif e.op in ("+", "-"):
         lw = rw = want
     else:
-        lw, rw = _split_product(p, e, want)
+        return _product(p, e, want, left_slot, right_slot), level
     return f"{p.format(e.left, lw, left_slot)} {e.op} {p.format(e.right, rw, right_slot)}", level
 
 
-def _split_product(p: _ExprPrinter, e: E.Binary, want: Dim) -> tuple[Dim, Dim]:
+def _product(p: _ExprPrinter, e: E.Binary, want: Dim, left_slot: int, right_slot: int) -> str:
+    """`a * b` / `a / b` of dimension `want`: a free side takes what the other leaves;
+    two free sides try the splits in turn (the left taking the whole dimension first)."""
     dl, dr = p.dim(e.left), p.dim(e.right)
     mul = e.op == "*"
     if dl is not None and dr is not None:
-        return dl, dr
-    if dl is not None:
-        return dl, (want / dl if mul else dl / want)
-    if dr is not None:
-        return (want / dr if mul else want * dr), dr
-    # Both sides are free: give the left the whole dimension when it has a unit.
-    for left in (want, units.DIMENSIONLESS, *units.CANONICAL_UNIT):
-        right = want / left if mul else left / want
-        if _has_unit(left) and _has_unit(right):
-            return left, right
-    raise PrinterError(f"cannot write a {units.dim_name(want)} product of literals")
-
-
-def _has_unit(d: Dim) -> bool:
-    return d == units.DIMENSIONLESS or d in units.CANONICAL_UNIT
+        splits = [(dl, dr)]
+    elif dl is not None:
+        splits = [(dl, want / dl if mul else dl / want)]
+    elif dr is not None:
+        splits = [(want / dr if mul else want * dr, dr)]
+    else:
+        splits = [(left, want / left if mul else left / want)
+                  for left in (want, units.DIMENSIONLESS, *units.CANONICAL_UNIT)]
+    for lw, rw in splits:
+        try:
+            return f"{p.format(e.left, lw, left_slot)} {e.op} {p.format(e.right, rw, right_slot)}"
+        except PrinterError:
+            continue
+    raise PrinterError(f"cannot write `{e.op}` of dimension {units.dim_name(want)} with these literals")
 
 
 def _window(lo: float, hi: float | None) -> str:

@@ -89,7 +89,7 @@ def _param_dims(plan):
     return {p.name: units.DIMENSIONS_BY_NAME[p.dimension] for p in plan.params}
 
 
-@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=75, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(formulas(_param_dims(kitchen_sink_plan())), min_size=1, max_size=3), st.data())
 def test_formulas_round_trip(generated, data):
     """Random well-typed formulas, as oracles and as a trigger condition, print and read back."""
@@ -117,6 +117,17 @@ def test_formulas_round_trip(generated, data):
 ])
 def test_quantities(value, dim, text):
     assert format_quantity(value, dim) == text
+
+
+def test_a_free_product_puts_the_unit_where_it_can_be_written():
+    # sqrt(0) cannot carry a length (its operand would need m^2): the other factor does.
+    f = E.Binary(op="<", left=E.Signal(name="clearance(ego)"),
+                 right=E.Binary(op="*", left=E.Call(fn="sqrt", args=(E.Num(value=4.0),)), right=E.Num(value=2.0)))
+    assert format_expr(f) == "clearance(ego) < sqrt(4) * 2 m"
+    # Both sides free: `objects() * 0 < accel(ego) * 0` needs a unit on the right's 0, not the left's.
+    g = E.Binary(op="<", left=E.Binary(op="*", left=E.Signal(name="objects()"), right=E.Num(value=0.0)),
+                 right=E.Binary(op="*", left=E.Signal(name="accel(ego)"), right=E.Num(value=0.0)))
+    assert format_expr(g) == "objects() * 0 m/s^2 < accel(ego) * 0"
 
 
 def test_compound_constants_use_unit_products():
