@@ -6,6 +6,8 @@
     addtc check FILE...                   compile only (diagnostics)
     addtc plan FILE                       print the ScenarioPlan as JSON
     addtc schema [--write PATH]           the plan's JSON schema
+    addtc shrink FILE | --run-key JSON    shrink a failing run to a minimal replayable .addt file
+    addtc falsify FILE [--budget-runs N]  search parameters and faults for failures
 
 Exit codes: 0 every oracle held in every run, 1 some run failed, 2 compile/usage error.
 """
@@ -23,7 +25,7 @@ from pathlib import Path
 from addt_dsl.diagnostics import render_json, render_text
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
-SUBCOMMANDS = ("run", "check", "plan", "schema", "report")
+SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "shrink", "falsify")
 
 
 def _compile(path: str, fmt: str):
@@ -267,6 +269,9 @@ def build_parser() -> argparse.ArgumentParser:
     schema = sub.add_parser("schema", help="print or write the plan's JSON schema")
     schema.add_argument("--write", help="file to write")
     schema.set_defaults(func=cmd_schema)
+    from addt_dsl.search.commands import add_commands
+
+    add_commands(sub)
     return parser
 
 

@@ -174,6 +174,9 @@ class ScenarioPlan(_Model):
     duration_s: float
     step_s: float = 0.01
     seed: int = 0
+    # Pins the seed of every run (replay files written by the printer); None: run seeds
+    # derive from (seed, sweep seed, cell, repeat).
+    run_seed: int | None = None
     roads: list[RoadPlan]
     params: list[ParamPlan] = Field(default_factory=list)
     assumptions: list[AssumptionPlan] = Field(default_factory=list)

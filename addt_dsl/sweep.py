@@ -192,7 +192,7 @@ def _iter_specs(plan: ScenarioPlan, rejected: Counter):
             assignments = iter([base])
         for si, params in enumerate(assignments):
             for r in range(sweep.repeat):
-                seed = derive_seed(plan.seed, sweep.seed, ci, si, r)
+                seed = plan.run_seed if plan.run_seed is not None else derive_seed(plan.seed, sweep.seed, ci, si, r)
                 run_id = f"c{ci:03d}" + (f"-s{si:04d}" if sweep.sampler else "") + f"-r{r:03d}"
                 yield make_spec(plan, params, seed, run_id, cell, r)
 

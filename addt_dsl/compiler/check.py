@@ -25,6 +25,8 @@ HEADER = {
     "duration": ParamSpec("duration", units.TIME, required=True, low=0.1, high=3600.0, doc="simulated time"),
     "step": ParamSpec("step", units.TIME, default=0.01, low=0.001, high=0.1, doc="physics step"),
     "seed": ParamSpec("seed", None, kind="int", default=0, low=0, high=2**31 - 1, doc="base seed"),
+    "run_seed": ParamSpec("run_seed", None, kind="int", low=0, high=2**32 - 1,
+                          doc="pins every run's seed (replay files)"),
 }
 
 ACTOR_SETTINGS = (
@@ -965,7 +967,7 @@ def rule_faults(ctx: Context) -> None:
                                *_suggest(target, pool),
                                f"{what}: {', '.join(sorted(pool)) or '(none)'}")
                 continue
-            specs = (*cls.params, ParamSpec("seed", None, kind="int", low=0, high=2**31 - 1, doc="fault seed"))
+            specs = (*cls.params, ParamSpec("seed", None, kind="int", low=0, high=2**32 - 1, doc="fault seed"))
             vals = check_settings(ctx, f.settings, specs, f"fault '{f.kind}'", f.span)
             seed = vals.pop("seed", None)
             start, end = _window_of(ctx, f.timing)

@@ -19,6 +19,7 @@ def build_plan(ctx: Context) -> ScenarioPlan:
         duration_s=float(ctx.header["duration"]),
         step_s=float(ctx.header.get("step") or 0.01),
         seed=int(ctx.header.get("seed") or 0),
+        run_seed=None if ctx.header.get("run_seed") is None else int(ctx.header["run_seed"]),
         roads=ctx.roads,
         params=ctx.params,
         assumptions=ctx.assumptions,

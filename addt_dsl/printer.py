@@ -1,0 +1,813 @@
+"""`ScenarioPlan` / `RunSpec` → `.addt` source: every failure becomes a replayable file.
+
+Two entry points:
+
+- `print_plan(plan)` prints a plan as it is (parameter ranges, distributions, sweep);
+  compiling the text gives the same plan again, up to provenance (file names, source
+  lines, the oracles' source text).
+- `print_spec(spec)` prints one run: `pin_spec` first turns the RunSpec into the plan
+  of exactly that run (parameters fixed at their values, no sweep, the concrete faults
+  with their seeds, `run_seed` pinned), then `print_plan` prints it. Compiling and
+  expanding the text gives back `pin_spec(spec)` (see `semantic_key`), and running it
+  gives the same trace, bit for bit.
+
+The plan stores SI numbers without units, so numbers are printed with the canonical
+unit of the dimension their context requires: a setting's `ParamSpec.dim`, a parameter's
+dimension, or the dimension inferred from the signals and parameters an expression
+combines (`SIGNALS` registry). Every canonical unit has the factor 1, so a printed
+number reads back bit for bit; angles use `deg` where that is exact too.
+
+Table-driven: `SECTIONS` lists the parts of a scenario in print order, `HEADER` the
+header settings, `SEGMENTS` the road geometry keywords and `_NODE_PRINTERS` the
+expression nodes. A new construct is a row (and a function) in one of them.
+`addt_dsl.runtime.oracles.format_formula` is not used for formulas: it prints SI
+numbers without units, writes `-3` as a literal where the DSL folds `-(3)` to the same
+literal, and its precedence differs from the DSL grammar (`not always ...`, chained
+`until`), so its output does not always compile back to the same tree.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import re
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+from addt_dsl import expr as E
+from addt_dsl import units
+from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, FaultPlan, OraclePlan, ParamPlan, RoadPlan,
+                           RunSpec, ScenarioPlan, SweepPlan)
+from addt_dsl.registry import BEHAVIORS, FAULTS, GEOMETRIES, SENSORS, SIGNALS, STACKS, ParamSpec
+from addt_dsl.units import Dim
+
+__all__ = ["PrinterError", "pin_spec", "print_plan", "print_spec", "side_files", "semantic_key",
+           "compile_pinned", "format_quantity", "format_expr"]
+
+INDENT = "  "
+
+
+class PrinterError(ValueError):
+    """The plan holds something the surface syntax cannot express."""
+
+
+# ---------------------------------------------------------------- numbers and quantities
+
+# Units tried before the canonical one, when they read back exactly (nicer to read).
+PREFERRED_UNITS: dict[Dim, tuple[str, ...]] = {units.ANGLE: ("deg",), units.ANGULAR_RATE: ("deg/s",)}
+
+
+def _number(value: float) -> str:
+    if math.isnan(value):
+        raise PrinterError("NaN has no surface syntax")
+    if math.isinf(value):
+        return "1e999" if value > 0 else "-1e999"  # overflows back to inf when read
+    text = repr(float(value))
+    return text[:-2] if text.endswith(".0") else text
+
+
+def format_quantity(value: float, dim: Dim) -> str:
+    """An SI value as a literal of dimension `dim` that reads back bit for bit."""
+    value = float(value)
+    for symbol in PREFERRED_UNITS.get(dim, ()):
+        unit = units.UNITS[symbol]
+        scaled = value / unit.factor
+        text = _number(scaled)
+        if math.isfinite(scaled) and len(text) <= 8 and float(text) * unit.factor == value:
+            return f"{text} {symbol}"
+    if dim == units.DIMENSIONLESS:
+        return _number(value)
+    unit = units.CANONICAL_UNIT.get(dim)
+    if unit is None:
+        raise PrinterError(f"no unit for a {units.dim_name(dim)} literal")
+    return f"{_number(value)} {unit}"
+
+
+def format_const(value: float, dim: Dim) -> str:
+    """A constant that the compiler folds (parameter defaults, list items): compound
+    dimensions without a unit of their own are written as `v m * 1 s` (exact: × 1.0)."""
+    if dim == units.DIMENSIONLESS or dim in units.CANONICAL_UNIT:
+        return format_quantity(value, dim)
+    factors = [("*" if exp > 0 else "/", units.CANONICAL_UNIT[base])
+               for base, exp in ((units.LENGTH, dim.length), (units.TIME, dim.time), (units.MASS, dim.mass),
+                                 (units.ANGLE, dim.angle)) for _ in range(abs(exp))]
+    factors.sort(key=lambda f: f[0] != "*")  # a unit with a positive power goes on the number
+    text = _number(value)
+    if factors[0][0] == "*":
+        text += f" {factors.pop(0)[1]}"
+    return " ".join([text, *(f"{op} 1 {symbol}" for op, symbol in factors)])
+
+
+def _dim_of_name(name: str) -> Dim:
+    if name in units.DIMENSIONS_BY_NAME:
+        return units.DIMENSIONS_BY_NAME[name]
+    m = re.fullmatch(r"m\^(-?\d+) s\^(-?\d+) kg\^(-?\d+) rad\^(-?\d+)", name)
+    if not m:
+        raise PrinterError(f"unknown dimension {name!r}")
+    return Dim(*(int(g) for g in m.groups()))
+
+
+def _string(text: str) -> str:
+    if not re.search(r'["\\\x00-\x1f\x7f]', text):
+        return f'"{text}"'
+    # The parser decodes escapes with `unicode_escape`, so escape non-ASCII too.
+    return '"' + text.encode("unicode_escape").decode("ascii").replace('"', '\\"') + '"'
+
+
+# ---------------------------------------------------------------- expressions
+
+# Binding levels of the DSL grammar (addt.lark), loosest first. A node printed in a slot
+# that needs a tighter level gets parentheses.
+TEMPORAL, IMPLIES, OR, AND, UNTIL, NOT, CMP, SUM, PROD, NEG, ATOM = range(11)
+_BINARY = {  # op: (level, left slot, right slot)
+    "implies": (IMPLIES, OR, TEMPORAL),
+    "or": (OR, OR, AND),
+    "and": (AND, AND, UNTIL),
+    **{op: (CMP, SUM, SUM) for op in E.COMPARE_OPS},
+    "+": (SUM, SUM, PROD), "-": (SUM, SUM, PROD),
+    "*": (PROD, PROD, NEG), "/": (PROD, PROD, NEG),
+}
+BOOL = "bool"  # the expected "dimension" of a formula
+
+
+class _ExprPrinter:
+    """Prints `Expr` trees with units, inferring each number's dimension from context."""
+
+    def __init__(self, param_dims: dict[str, Dim]):
+        self.param_dims = param_dims
+
+    # -- dimension inference: None means "free" (only numbers: any dimension fits)
+    def dim(self, e) -> Dim | None:
+        match e:
+            case E.Num():
+                return None
+            case E.Param(name=n):
+                if n not in self.param_dims:
+                    raise PrinterError(f"unknown parameter {n!r}")
+                return self.param_dims[n]
+            case E.Signal(name=n):
+                cls = SIGNALS.get(n.partition("(")[0])
+                if cls is None:
+                    raise PrinterError(f"unknown signal {n!r}")
+                return cls.dim
+            case E.Call(fn="sqrt", args=(a,)):
+                d = self.dim(a)
+                return None if d is None else Dim(d.length // 2, d.time // 2, d.mass // 2, d.angle // 2)
+            case E.Call(args=args):
+                return next((d for d in map(self.dim, args) if d is not None), None)
+            case E.Unary(op="neg", arg=a):
+                return self.dim(a)
+            case E.Binary(op="+" | "-", left=l, right=r):
+                d = self.dim(l)
+                return d if d is not None else self.dim(r)
+            case E.Binary(op="*" | "/", left=l, right=r):
+                dl, dr = self.dim(l), self.dim(r)
+                if dl is None or dr is None:
+                    return None
+                return dl * dr if e.op == "*" else dl / dr
+        raise PrinterError(f"not a value expression: {e!r}")
+
+    def default_dim(self, e) -> Dim:
+        """The dimension a free expression most naturally has: numbers in products are
+        plain factors (`2 * gap`), elsewhere they take their sibling's dimension."""
+        d = self.dim(e)
+        if d is not None:
+            return d
+        match e:
+            case E.Binary(op="*" | "/", left=l, right=r):
+                dl, dr = self.default_dim(l), self.default_dim(r)
+                return dl * dr if e.op == "*" else dl / dr
+            case E.Binary(left=l, right=r):
+                return self.default_dim(r if _has_ref(r) and not _has_ref(l) else l)
+            case E.Unary(arg=a):
+                return self.default_dim(a)
+            case E.Call(fn="sqrt", args=(a,)):
+                d = self.default_dim(a)
+                return Dim(d.length // 2, d.time // 2, d.mass // 2, d.angle // 2)
+            case E.Call(args=args):
+                return self.default_dim(next((a for a in args if _has_ref(a)), args[0]))
+        return units.DIMENSIONLESS
+
+    def comparison_dims(self, left, right) -> list[Dim]:
+        """Dimensions to try for both sides of a comparison, most natural first."""
+        for side in (left, right):
+            d = self.dim(side)
+            if d is not None:
+                return [d]
+        # Both sides are free: the side that names a signal or parameter decides, else any.
+        first = right if _has_ref(right) and not _has_ref(left) else left
+        out = []
+        for d in (self.default_dim(first), self.default_dim(left), self.default_dim(right),
+                  units.DIMENSIONLESS, *units.CANONICAL_UNIT):
+            if d not in out:
+                out.append(d)
+        return out
+
+    # -- printing: returns (text, level)
+    def format(self, e, want, slot: int = TEMPORAL) -> str:
+        text, level = _NODE_PRINTERS[type(e)](self, e, want)
+        if level < slot:
+            return f"({text})"
+        return text
+
+    def formula(self, e) -> str:
+        return self.format(e, BOOL)
+
+    def value(self, e, dim: Dim) -> str:
+        return self.format(e, dim)
+
+
+def _has_ref(e) -> bool:
+    return any(isinstance(n, (E.Param, E.Signal)) for n in E.walk(e))
+
+
+def _p_num(p: _ExprPrinter, e: E.Num, want):
+    if want == BOOL:
+        if e.value not in (1.0, -1.0):
+            raise PrinterError(f"{e.value!r} is not a truth value")
+        return ("true" if e.value > 0 else "false"), ATOM
+    text = format_quantity(e.value, want)
+    return text, NEG if text.startswith("-") else ATOM
+
+
+def _p_param(p, e: E.Param, want):
+    return e.name, ATOM
+
+
+def _p_signal(p, e: E.Signal, want):
+    fn, _, rest = e.name.partition("(")
+    args = [a for a in rest.rstrip(")").split(",") if a]
+    if not re.fullmatch(r"[A-Za-z_]\w*", fn) or not all(re.fullmatch(r"[A-Za-z_]\w*", a) for a in args):
+        raise PrinterError(f"signal {e.name!r} has no surface syntax")
+    return f"{fn}({', '.join(args)})", ATOM
+
+
+def _p_call(p: _ExprPrinter, e: E.Call, want):
+    if e.fn == "sqrt":
+        d = p.dim(e.args[0])
+        inner = d if d is not None else want * want
+        return f"sqrt({p.format(e.args[0], inner)})", ATOM
+    return f"{e.fn}({', '.join(p.format(a, want) for a in e.args)})", ATOM
+
+
+def _p_unary(p: _ExprPrinter, e: E.Unary, want):
+    if e.op == "not":
+        return "not " + p.format(e.arg, BOOL, NOT), NOT
+    if isinstance(e.arg, E.Num):
+        raise PrinterError("a negated number literal reads back as a negative literal")
+    inner = p.format(e.arg, want, NEG)
+    if inner.startswith("-"):
+        inner = f"({inner})"
+    return "-" + inner, NEG
+
+
+def _p_binary(p: _ExprPrinter, e: E.Binary, want):
+    level, left_slot, right_slot = _BINARY[e.op]
+    if e.op in E.BOOL_OPS:
+        lw = rw = BOOL
+    elif e.op in E.COMPARE_OPS:
+        for dim in p.comparison_dims(e.left, e.right):
+            try:
+                return f"{p.format(e.left, dim, left_slot)} {e.op} {p.format(e.right, dim, right_slot)}", level
+            except PrinterError:
+                continue
+        raise PrinterError("no dimension makes both sides of this comparison writable")
+    elif e.op in ("+", "-"):
+        lw = rw = want
+    else:
+        return _product(p, e, want, left_slot, right_slot), level
+    return f"{p.format(e.left, lw, left_slot)} {e.op} {p.format(e.right, rw, right_slot)}", level
+
+
+def _product(p: _ExprPrinter, e: E.Binary, want: Dim, left_slot: int, right_slot: int) -> str:
+    """`a * b` / `a / b` of dimension `want`: a free side takes what the other leaves;
+    two free sides try the splits in turn (the left taking the whole dimension first)."""
+    dl, dr = p.dim(e.left), p.dim(e.right)
+    mul = e.op == "*"
+    if dl is not None and dr is not None:
+        splits = [(dl, dr)]
+    elif dl is not None:
+        splits = [(dl, want / dl if mul else dl / want)]
+    elif dr is not None:
+        splits = [(want / dr if mul else want * dr, dr)]
+    else:
+        splits = [(left, want / left if mul else left / want)
+                  for left in (want, units.DIMENSIONLESS, *units.CANONICAL_UNIT)]
+    for lw, rw in splits:
+        try:
+            return f"{p.format(e.left, lw, left_slot)} {e.op} {p.format(e.right, rw, right_slot)}"
+        except PrinterError:
+            continue
+    raise PrinterError(f"cannot write `{e.op}` of dimension {units.dim_name(want)} with these literals")
+
+
+def _window(lo: float, hi: float | None) -> str:
+    if hi is None:
+        return "" if lo == 0 else f" after {format_quantity(lo, units.TIME)}"
+    if lo == 0:
+        return f" within {format_quantity(hi, units.TIME)}"
+    return f" during [{format_quantity(lo, units.TIME)}, {format_quantity(hi, units.TIME)}]"
+
+
+def _p_temporal(p: _ExprPrinter, e: E.Temporal, want):
+    return f"{e.op}{_window(e.lo_s, e.hi_s)} {p.format(e.arg, BOOL, TEMPORAL)}", TEMPORAL
+
+
+def _p_until(p: _ExprPrinter, e: E.Until, want):
+    return (f"{p.format(e.left, BOOL, NOT)} until{_window(e.lo_s, e.hi_s)} "
+            f"{p.format(e.right, BOOL, NOT)}"), UNTIL
+
+
+_NODE_PRINTERS: dict[type, Callable] = {
+    E.Num: _p_num, E.Param: _p_param, E.Signal: _p_signal, E.Call: _p_call,
+    E.Unary: _p_unary, E.Binary: _p_binary, E.Temporal: _p_temporal, E.Until: _p_until,
+}
+
+
+def format_expr(expr, want: Dim | str = BOOL, param_dims: dict[str, Dim] | None = None) -> str:
+    """Print a value expression of dimension `want`, or a formula (`want="bool"`)."""
+    return _ExprPrinter(param_dims or {}).format(expr, want)
+
+
+# ---------------------------------------------------------------- the printer
+
+class _Printer:
+    def __init__(self, plan: ScenarioPlan, verbatim: set[tuple[str, int]]):
+        self.plan = plan
+        self.exprs = _ExprPrinter({p.name: _dim_of_name(p.dimension) for p in plan.params})
+        self.verbatim = verbatim  # (section, index) whose user text is printed as written
+        self.lines: list[str] = []
+
+    def emit(self, depth: int, text: str = "") -> None:
+        self.lines.append(INDENT * depth + text if text else "")
+
+    def setting(self, spec: ParamSpec | None, key: str, value) -> str:
+        """`key value`, the value printed as its ParamSpec says."""
+        if spec is None:
+            raise PrinterError(f"no setting {key!r} in the registry")
+        if isinstance(value, str):
+            if spec.kind == "string":
+                return f"{key} {_string(value)}"
+            if not re.fullmatch(r"[A-Za-z_]\w*", value):
+                raise PrinterError(f"{key} {value!r} is not a word")
+            return f"{key} {value}"
+        dim = spec.dim if spec.dim is not None else units.DIMENSIONLESS
+        if isinstance(value, list):
+            return f"{key} [{', '.join(self.exprs.value(v, dim) for v in value)}]"
+        return f"{key} {self.exprs.value(value, dim)}"
+
+    def settings(self, specs, values: dict) -> str:
+        table = {s.name: s for s in specs}
+        return " ".join(self.setting(table.get(k), k, v) for k, v in values.items())
+
+
+def _join(*parts: str) -> str:
+    return " ".join(p for p in parts if p)
+
+
+# -- header
+
+HEADER = (  # keyword, plan field, how to print
+    ("description", "description", lambda v: _string(v) if v else None),
+    ("duration", "duration_s", lambda v: format_quantity(v, units.TIME)),
+    ("step", "step_s", lambda v: format_quantity(v, units.TIME)),
+    ("seed", "seed", lambda v: str(int(v))),
+    ("run_seed", "run_seed", lambda v: None if v is None else str(int(v))),
+)
+
+
+def _header(pr: _Printer) -> None:
+    for keyword, field, fmt in HEADER:
+        text = fmt(getattr(pr.plan, field))
+        if text is not None:
+            pr.emit(1, f"{keyword} {text}")
+
+
+# -- roads
+
+SEGMENTS = {  # plan kind: (keyword, [(setting, getter)])
+    "line": ("line", [("length", lambda s: s.length_m)]),
+    "arc": ("arc", [("length", lambda s: s.length_m), ("curvature", lambda s: s.curvature_per_m)]),
+    "spiral": ("spiral", [("length", lambda s: s.length_m), ("from", lambda s: s.curv_start_per_m),
+                          ("to", lambda s: s.curv_end_per_m)]),
+    "param_poly3": ("param_poly3", [("length", lambda s: s.length_m)] + [
+        (n, (lambda s, i=i: s.coefficients[i])) for i, n in enumerate(("au", "bu", "cu", "du",
+                                                                        "av", "bv", "cv", "dv"))]),
+}
+LANES = (("right", "right_lanes"), ("left", "left_lanes"), ("width", "lane_width_m"), ("offset", "lane_offset_m"))
+
+
+def _const_setting(pr: _Printer, spec_owner: str, key: str, value: float) -> str:
+    spec = {s.name: s for s in GEOMETRIES.get(spec_owner).params}[key]
+    return pr.setting(spec, key, E.Num(value=float(value)))
+
+
+def _roads(pr: _Printer) -> None:
+    for road in pr.plan.roads:
+        pr.emit(0)
+        if road.source == "xodr":
+            rid = road.xodr_road_id
+            if rid is not None and not re.fullmatch(r"\d+", rid):
+                raise PrinterError(f"xodr road id {rid!r} is not a number")
+            pr.emit(1, _join(f"road {road.name} import {_string(_xodr_name(road))}",
+                             f"road {rid}" if rid is not None else ""))
+            continue
+        pr.emit(1, f"road {road.name} {{")
+        for seg in road.segments:
+            keyword, fields = SEGMENTS[seg.kind]
+            pr.emit(2, _join(keyword, *(_const_setting(pr, keyword, k, get(seg)) for k, get in fields)))
+        defaults = {s.name: s.default for s in GEOMETRIES.get("lanes").params}
+        lanes = [_const_setting(pr, "lanes", k, getattr(road, f)) for k, f in LANES if getattr(road, f) != defaults[k]]
+        if lanes:
+            pr.emit(2, _join("lanes", *lanes))
+        pr.emit(1, "}")
+
+
+def _xodr_name(road: RoadPlan) -> str:
+    return Path(road.xodr_file or f"{road.name}.xodr").name
+
+
+def side_files(plan: ScenarioPlan) -> dict[str, str]:
+    """Files a printed plan imports (embedded OpenDRIVE text), by the name it uses."""
+    return {_xodr_name(r): r.xodr_text or "" for r in plan.roads if r.source == "xodr"}
+
+
+# -- parameters and assumptions
+
+def _params(pr: _Printer) -> None:
+    if pr.plan.params:
+        pr.emit(0)
+    for p in pr.plan.params:
+        pr.emit(1, _param_line(p))
+    for i, a in enumerate(pr.plan.assumptions):
+        body = _user_body(a.text) if ("assume", i) in pr.verbatim else None
+        pr.emit(1, f"assume {body or pr.exprs.formula(a.expr)}")
+
+
+def _param_line(p: ParamPlan) -> str:
+    dim = _dim_of_name(p.dimension)
+    if p.integer:
+        raise PrinterError(f"integer parameter {p.name!r} has no surface syntax")
+    parts = [f"param {p.name} = {format_const(p.default, dim)}"]
+    if p.choices:
+        if len(p.choices) == 2:
+            raise PrinterError(f"a choice of two values for {p.name!r} reads back as a range")
+        parts.append(f"in [{', '.join(format_const(c, dim) for c in p.choices)}]")
+    elif p.low is not None or p.high is not None:
+        if p.low is None or p.high is None:
+            raise PrinterError(f"half-open range of {p.name!r} has no surface syntax")
+        parts.append(f"in [{format_const(p.low, dim)}, {format_const(p.high, dim)}]")
+    expected_dist = "choice" if p.choices else "uniform"
+    if p.distribution != expected_dist:
+        parts.append(f"dist {p.distribution}")
+    if p.mean is not None:
+        parts.append(f"mean {format_const(p.mean, dim)}")
+    if p.sd is not None:
+        parts.append(f"sd {format_const(p.sd, dim)}")
+    return " ".join(parts)
+
+
+# -- actors
+
+VEHICLE_DEFAULTS = {  # what the compiler fills in when a setting is left out
+    "length": lambda a: _vehicle_size(a.vehicle)[0], "width": lambda a: _vehicle_size(a.vehicle)[1],
+    "mass": lambda a: 1500.0, "wheelbase": lambda a: 2.7,
+}
+ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLESS),  # optional, may use parameters
+               ("offset", "offset", units.LENGTH))
+ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units.LENGTH),
+                ("mass", "mass_kg", units.MASS), ("wheelbase", "wheelbase_m", units.LENGTH))
+CLAUSE_TABLES = {"behavior": BEHAVIORS, "sensor": SENSORS, "stack": STACKS}
+
+
+def _vehicle_size(kind: str) -> tuple[float, float]:
+    from addt_dsl.compiler.check import VEHICLE_KINDS
+
+    return VEHICLE_KINDS[kind]
+
+
+def _actors(pr: _Printer) -> None:
+    for actor in pr.plan.actors():
+        pr.emit(0)
+        _actor(pr, actor, actor is pr.plan.ego)
+
+
+def _actor(pr: _Printer, a: ActorPlan, is_ego: bool) -> None:
+    ex = pr.exprs
+    head = "ego" if is_ego else f"agent {a.name}"
+    parts = [f"{head} {a.vehicle} on {a.road}", f"lane {ex.value(a.lane, units.DIMENSIONLESS)}",
+             f"at {ex.value(a.s, units.LENGTH)}", f"speed {ex.value(a.speed, units.SPEED)}"]
+    for key, field, dim in ACTOR_EXPRS:
+        value = getattr(a, field, None)
+        if value is not None:
+            parts.append(f"{key} {ex.value(value, dim)}")
+    for key, field, dim in ACTOR_FLOATS:
+        value = getattr(a, field)
+        if value != VEHICLE_DEFAULTS[key](a):
+            parts.append(f"{key} {format_quantity(value, dim)}")
+    clauses = ([a.stack] if a.stack is not None else []) + list(a.sensors) + list(a.behaviors)
+    if not clauses and not a.triggers:
+        pr.emit(1, " ".join(parts))
+        return
+    pr.emit(1, " ".join(parts) + " {")
+    for c in clauses:
+        pr.emit(2, _clause(pr, c))
+    for tr in a.triggers:
+        pr.emit(2, f"when {ex.formula(tr.condition)} then {_clause(pr, tr.clause)}")
+    pr.emit(1, "}")
+
+
+def _clause(pr: _Printer, c: ClausePlan) -> str:
+    cls = CLAUSE_TABLES[c.keyword].get(c.name)
+    if cls is None:
+        raise PrinterError(f"unknown {c.keyword} {c.name!r}")
+    return _join(c.keyword, c.name, pr.settings(cls.params, c.settings))
+
+
+# -- faults
+
+def _faults(pr: _Printer) -> None:
+    if not pr.plan.faults:
+        return
+    pr.emit(0)
+    pr.emit(1, "faults {")
+    for f in pr.plan.faults:
+        pr.emit(2, _fault_line(pr, f))
+    pr.emit(1, "}")
+
+
+def _timing(pr: _Printer, f: FaultPlan) -> str:
+    ex = pr.exprs
+    if f.end_s is None:
+        return "" if f.start_s == E.Num(value=0.0) else f"from {ex.value(f.start_s, units.TIME)}"
+    if f.end_s == f.start_s:
+        return f"at {ex.value(f.start_s, units.TIME)}"
+    return f"during [{ex.value(f.start_s, units.TIME)}, {ex.value(f.end_s, units.TIME)}]"
+
+
+def _fault_line(pr: _Printer, f: FaultPlan) -> str:
+    cls = FAULTS.get(f.kind)
+    if cls is None:
+        raise PrinterError(f"unknown fault kind {f.kind!r}")
+    seed = f"seed {int(f.seed)}" if f.seed is not None else ""
+    return _join(_timing(pr, f), f.kind, f.target, pr.settings(cls.params, f.settings), seed)
+
+
+# -- oracles
+
+def _no_clause(o: OraclePlan) -> str | None:
+    """`no collision [with X]` when the formula is exactly what that built-in lowers to."""
+    from addt_dsl.compiler.check import NO_CLAUSES, _collision_with
+
+    if o.formula == NO_CLAUSES["collision"]("ego", None):
+        return "no collision", "no_collision"
+    for signal in E.signals_used(o.formula):
+        if signal.startswith("distance(ego,"):
+            other = signal[len("distance(ego,"):-1]
+            if o.formula == _collision_with(other):
+                return f"no collision with {other}", f"no_collision_with_{other}"
+    return None
+
+
+def _is_goal_oracle(plan: ScenarioPlan, index: int) -> bool:
+    o, goal = plan.oracles[index], plan.ego.goal_s
+    return (goal is not None and index == len(plan.oracles) - 1 and o.name == "reach_goal"
+            and o.severity == "hard" and o.formula == E.Temporal(
+                op="eventually", arg=E.Binary(op=">=", left=E.Signal(name="s(ego)"), right=goal)))
+
+
+_TEXT_HEAD = re.compile(r"\s*(?:(hard|warn)\s+)?(?:([A-Za-z_]\w*)\s*:(?!=))?\s*(?P<body>.*)$", re.S)
+
+
+def _user_body(text: str) -> str | None:
+    """The formula part of a user's oracle/assumption text, if it is one clean line."""
+    if not text or "\n" in text or "#" in text or "\\" in text:
+        return None
+    body = _TEXT_HEAD.match(text).group("body").strip()
+    return body or None
+
+
+def _oracles(pr: _Printer) -> None:
+    plan = pr.plan
+    if plan.ego.goal_s is not None and not (plan.oracles and _is_goal_oracle(plan, len(plan.oracles) - 1)):
+        raise PrinterError("the ego has a goal but its reach_goal oracle is missing or moved")
+    shown = [(i, o) for i, o in enumerate(plan.oracles) if not _is_goal_oracle(plan, i)]
+    if not shown:
+        return
+    pr.emit(0)
+    pr.emit(1, "expect {")
+    for i, o in shown:
+        pr.emit(2, _oracle_line(pr, i, o))
+    pr.emit(1, "}")
+
+
+def _oracle_line(pr: _Printer, index: int, o: OraclePlan) -> str:
+    severity = "warn" if o.severity == "warn" else ""
+    builtin = _no_clause(o)
+    if builtin is not None:
+        body, default_name = builtin
+        return _join(severity, "" if o.name == default_name else f"{o.name}:", body)
+    body = _user_body(o.text) if ("oracle", index) in pr.verbatim else None
+    if body is not None and body.startswith("no "):
+        body = None
+    return _join(severity, f"{o.name}:", body or pr.exprs.formula(o.formula))
+
+
+# -- sweep
+
+def _sweep(pr: _Printer) -> None:
+    sw = pr.plan.sweep
+    if sw.max_rejections != SweepPlan().max_rejections:
+        raise PrinterError("a custom rejection cap has no surface syntax")
+    items = []
+    dims = {p.name: _dim_of_name(p.dimension) for p in pr.plan.params}
+    for axis in sw.grid:
+        if axis.param not in dims:
+            raise PrinterError(f"grid over unknown parameter {axis.param!r}")
+        items.append(f"grid {axis.param} in [{', '.join(format_const(v, dims[axis.param]) for v in axis.values)}]")
+    if sw.sampler is not None:
+        items.append(_join(f"{sw.sampler.kind} {sw.sampler.count}",
+                           f"seed {sw.sampler.seed}" if sw.sampler.seed else ""))
+    if sw.repeat != 1:
+        items.append(f"repeat {sw.repeat}")
+    if sw.seed:
+        items.append(f"seed {sw.seed}")
+    if not items:
+        return
+    pr.emit(0)
+    pr.emit(1, "sweep {")
+    for item in items:
+        pr.emit(2, item)
+    pr.emit(1, "}")
+
+
+SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _faults, _oracles, _sweep)
+
+
+# ---------------------------------------------------------------- entry points
+
+def _render(plan: ScenarioPlan, verbatim: set, comment: str) -> str:
+    if not re.fullmatch(r"[A-Za-z_]\w*", plan.name):
+        raise PrinterError(f"scenario name {plan.name!r} is not a name")
+    pr = _Printer(plan, verbatim)
+    for line in comment.splitlines():
+        pr.lines.append(f"# {line}".rstrip())
+    pr.lines.append(f"scenario {plan.name} {{")
+    for section in SECTIONS:
+        section(pr)
+    pr.lines.append("}")
+    return "\n".join(pr.lines) + "\n"
+
+
+def print_plan(plan: ScenarioPlan, comment: str = "", keep_user_text: bool = True) -> str:
+    """The plan as `.addt` source.
+
+    With `keep_user_text`, oracles and assumptions are printed as the user wrote them
+    (their `text`) wherever that compiles back to the same formula, checked by compiling
+    the result once; everything else is printed from the plan's trees.
+    """
+    if not keep_user_text:
+        return _render(plan, set(), comment)
+    candidates = {("oracle", i) for i, o in enumerate(plan.oracles) if _user_body(o.text)}
+    candidates |= {("assume", i) for i, a in enumerate(plan.assumptions) if _user_body(a.text)}
+    if not candidates:
+        return _render(plan, set(), comment)
+    text = _render(plan, candidates, comment)
+    got = _compile_plan(text, plan)
+    if got is None:
+        return _render(plan, set(), comment)
+    keep = {("oracle", i) for i, (a, b) in enumerate(zip(plan.oracles, got.oracles))
+            if (a.name, a.severity, a.formula) == (b.name, b.severity, b.formula)}
+    keep |= {("assume", i) for i, (a, b) in enumerate(zip(plan.assumptions, got.assumptions)) if a.expr == b.expr}
+    if len(got.oracles) != len(plan.oracles) or len(got.assumptions) != len(plan.assumptions):
+        keep = set()
+    keep &= candidates
+    return text if keep == candidates else _render(plan, keep, comment)
+
+
+def _compile_plan(text: str, plan: ScenarioPlan) -> ScenarioPlan | None:
+    from addt_dsl.compiler import compile_source
+
+    files = side_files(plan)
+    if not files:
+        return compile_source(text, path="<printed>").plan
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, body in files.items():
+            (Path(tmp) / name).write_text(body)
+        return compile_source(text, path="<printed>", base_dir=tmp).plan
+
+
+def _literal(value):
+    if isinstance(value, str):
+        return value
+    if isinstance(value, list):
+        return [E.Num(value=float(v)) for v in value]
+    return E.Num(value=float(value))
+
+
+def _whole_int_settings(f: ConcreteFault) -> ConcreteFault:
+    """Int settings fed by a continuous parameter (`count k`, k = 1.4) are truncated the
+    way the fault kinds read them (`int(...)`), so the pinned literal compiles."""
+    cls = FAULTS.get(f.kind)
+    ints = {p.name for p in (cls.params if cls else ()) if p.kind == "int"}
+    fixed = {k: float(int(v)) for k, v in f.settings.items()
+             if k in ints and isinstance(v, float) and math.isfinite(v) and v != int(v)}
+    return f.model_copy(update={"settings": {**f.settings, **fixed}}) if fixed else f
+
+
+def pinned_fault_plan(f: ConcreteFault, source: str = "") -> FaultPlan:
+    """A concrete fault as the plan entry that reproduces it exactly (its seed included)."""
+    start = E.Num(value=float(f.start_s))
+    end = None if f.end_s is None else (start if f.end_s == f.start_s else E.Num(value=float(f.end_s)))
+    return FaultPlan(kind=f.kind, target=f.target, start_s=start, end_s=end,
+                     settings={k: _literal(v) for k, v in f.settings.items()}, seed=int(f.seed), source=source)
+
+
+def pin_spec(spec: RunSpec) -> RunSpec:
+    """The RunSpec of the plan that runs exactly `spec` and nothing else: parameters
+    fixed at their values, no sweep, the concrete faults (renumbered) with their seeds,
+    the run seed pinned. Same run: the trace is bit for bit the one of `spec`
+    (fault events carry the renumbered index)."""
+    plan = spec.plan
+    sources = {i: f.source for i, f in enumerate(plan.faults)}
+    concrete = [_whole_int_settings(f).model_copy(update={"index": i}) for i, f in enumerate(spec.faults)]
+    faults = [pinned_fault_plan(f, sources.get(orig.index, "")) for f, orig in zip(concrete, spec.faults)]
+    pinned_plan = plan.model_copy(update={"params": [], "faults": faults, "sweep": SweepPlan(),
+                                          "run_seed": int(spec.seed)})
+    # Parameters that only fed the (now literal) faults or the sweep are dropped.
+    used = params_referenced(pinned_plan)
+    params = [ParamPlan(name=p.name, dimension=p.dimension, default=float(spec.params.get(p.name, p.default)))
+              for p in plan.params if p.name in used]
+    pinned_plan = pinned_plan.model_copy(update={"params": params})
+    return RunSpec(plan=pinned_plan, params={p.name: p.default for p in params}, seed=int(spec.seed),
+                   faults=concrete, run_id=spec.run_id)
+
+
+def params_referenced(plan: ScenarioPlan) -> set[str]:
+    """Names of the parameters any expression of the plan refers to."""
+    found: set[str] = set()
+
+    def visit(node) -> None:
+        if isinstance(node, dict):
+            if node.get("kind") == "param" and isinstance(node.get("name"), str):
+                found.add(node["name"])
+            for v in node.values():
+                visit(v)
+        elif isinstance(node, list):
+            for v in node:
+                visit(v)
+
+    visit(plan.model_dump(mode="json", exclude={"params"}))
+    return found
+
+
+def print_spec(spec: RunSpec, comment: str | None = None) -> str:
+    """One run as a pinned `.addt` file: `addtc` on it replays exactly this run."""
+    if comment is None:
+        origin = spec.plan.source_file or "<unknown>"
+        comment = (f"Pinned run of {origin}" + (f" ({spec.run_id})" if spec.run_id else "")
+                   + f"\nkey {spec.key()}; replay: addtc FILE")
+    return print_plan(pin_spec(spec).plan, comment)
+
+
+# ---------------------------------------------------------------- identity
+
+def _strip_provenance(data: dict) -> dict:
+    plan = data["plan"] if "plan" in data else data
+    plan["source_file"] = ""
+    for f in plan.get("faults", []):
+        f["source"] = ""
+    for o in plan.get("oracles", []):
+        o["text"] = ""
+    for a in plan.get("assumptions", []):
+        a["text"] = ""
+    for r in plan.get("roads", []):
+        if r.get("xodr_file") is not None:
+            r["xodr_file"] = Path(r["xodr_file"]).name
+    data.pop("run_id", None)
+    return data
+
+
+def semantic_key(obj: RunSpec | ScenarioPlan) -> str:
+    """Like `RunSpec.key()`, without provenance: the file name, fault source lines and
+    the oracles' and assumptions' source text. Equal semantic keys, same run."""
+    data = _strip_provenance(obj.model_dump(mode="json"))
+    text = json.dumps(data, sort_keys=True, separators=(",", ":")).encode()
+    return hashlib.sha256(text).hexdigest()[:20]
+
+
+def compile_pinned(text: str, path: str = "<pinned>", base_dir: str | Path = ".") -> RunSpec:
+    """Compile a pinned file and return its one run (raises ValueError otherwise)."""
+    from addt_dsl.compiler import compile_source
+    from addt_dsl.diagnostics import render_text
+    from addt_dsl.sweep import expand
+
+    result = compile_source(text, path=path, base_dir=base_dir)
+    if not result.ok:
+        raise ValueError("pinned source does not compile:\n" + render_text(result.diagnostics, result.sources))
+    specs = expand(result.plan).specs
+    if len(specs) != 1:
+        raise ValueError(f"pinned source expands to {len(specs)} runs, not 1")
+    return specs[0]

@@ -1,0 +1,148 @@
+"""Writing a shrunk failure: the pinned `.addt` file, its trace, a report, an animation.
+
+The `.addt` file is replayed right after it is written (compiled from disk and run):
+its run must fail the same way and give the trace digest the shrinker saw, bit for bit,
+or writing fails. Outputs, for a stem `S`:
+
+    S.addt          the minimal counterexample; `addtc S.addt` replays it (exit 1)
+    S.trace.npz     every signal of the replay (`time`, `<actor>.<field>`, `latency.<node>`, ...)
+    S.events.json   the replay's events (fault injections with their values, collisions)
+    S.report.json   target failure, per-pass statistics, what did not matter
+    S.gif           top-down animation, when the reporting package provides one
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from addt_dsl.plan import RunSpec
+from addt_dsl.printer import compile_pinned, print_spec, semantic_key, side_files
+from addt_dsl.search.outcome import evaluate
+
+
+class ReplayMismatch(RuntimeError):
+    """The written file does not replay the shrunk run."""
+
+
+@dataclass
+class Artifacts:
+    addt: Path
+    trace: Path
+    events: Path
+    report: Path
+    animation: Path | None = None
+    files: list[Path] = field(default_factory=list)
+
+
+def counterexample_stem(source_file: str, spec: RunSpec) -> str:
+    stem = Path(source_file).stem if source_file else spec.plan.name
+    return f"{stem}-{semantic_key(spec)[:8]}"
+
+
+def header_comment(result, source_file: str) -> str:
+    f = result.target
+    lines = [f"Minimal counterexample, written by addtc shrink from {source_file or '<spec>'}"
+             + (f" ({result.original.run_id})" if result.original.run_id else ""),
+             f"source: {source_file}" if source_file else "source: -",
+             f"fails: {f.describe()}",
+             f"shrunk in {result.simulations} simulations ({result.cache_hits} cache hits, {result.rounds} rounds)",
+             "replay: addtc THIS_FILE  (exit 1)"]
+    lines += result.changes
+    return "\n".join(lines)
+
+
+def write_counterexample(result, out_dir: str | Path, source_file: str = "", stem: str | None = None,
+                         animate: bool = True) -> Artifacts:
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = stem or counterexample_stem(source_file, result.best)
+    text = print_spec(result.best, comment=header_comment(result, source_file))
+    path = out / f"{stem}.addt"
+    path.write_text(text)
+    written = [path]
+    for name, body in side_files(result.best.plan).items():
+        (out / name).write_text(body)
+        written.append(out / name)
+    replay = compile_pinned(text, path=str(path), base_dir=out)
+    outcome, trace = evaluate(replay, keep_trace=True)
+    if outcome.failure(result.target.id) is None or outcome.digest != result.outcome.digest:
+        raise ReplayMismatch(f"{path} does not replay the shrunk run "
+                             f"(digest {outcome.digest[:12]} vs {result.outcome.digest[:12]})")
+    arts = Artifacts(path, out / f"{stem}.trace.npz", out / f"{stem}.events.json", out / f"{stem}.report.json")
+    if trace is not None:
+        np.savez_compressed(arts.trace, **trace_arrays(trace))
+        arts.events.write_text(json.dumps([{"time_s": e.time_s, "kind": e.kind, "detail": _jsonable(e.detail)}
+                                           for e in trace.events], indent=1) + "\n")
+        written += [arts.trace, arts.events]
+        if animate:
+            arts.animation = _animation(replay, trace, outcome, out / f"{stem}.gif")
+            if arts.animation:
+                written.append(arts.animation)
+    arts.report.write_text(json.dumps(report(result, source_file, path), indent=2) + "\n")
+    written.append(arts.report)
+    arts.files = written
+    return arts
+
+
+def trace_arrays(trace) -> dict[str, np.ndarray]:
+    from addt_dsl.runtime.trace import ACTOR_FIELDS
+
+    arrays = {"time": trace.time}
+    for name, track in trace.actors.items():
+        for f in ACTOR_FIELDS:
+            arrays[f"{name}.{f}"] = getattr(track, f)
+    for name, values in trace.latency.items():
+        arrays[f"latency.{name}"] = values
+    for name, values in trace.outputs.items():
+        arrays[f"output.{name}"] = values
+    if trace.object_count is not None:
+        arrays["objects"] = trace.object_count
+    return arrays
+
+
+def _animation(spec: RunSpec, trace, outcome, path: Path) -> Path | None:
+    try:  # the reporting package (branch `runner`) draws top-down GIFs; optional here
+        from addt_dsl.reporting.animation import render_gif
+    except ImportError:
+        return None
+    from addt_dsl.runtime.execute import judge
+
+    path.write_bytes(render_gif(spec.plan, trace, judge(spec, trace), label=spec.plan.name))
+    return path
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(x) else repr(float(x))
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+def report(result, source_file: str, path: Path) -> dict:
+    return {
+        "source": source_file,
+        "counterexample": str(path),
+        "target": {"oracle": result.target.oracle, "mode": result.target.mode, "time_s": result.target.time_s,
+                   "robustness": _jsonable(result.target.robustness)},
+        "original_key": result.original.key(),
+        "shrunk_key": result.best.key(),
+        "faults": {"before": len(result.original.faults), "after": len(result.best.faults)},
+        "agents": {"before": len(result.original.plan.agents), "after": len(result.best.plan.agents)},
+        "simulations": result.simulations,
+        "cache_hits": result.cache_hits,
+        "rounds": result.rounds,
+        "budget_exhausted": result.budget_exhausted,
+        "seconds": round(result.seconds, 3),
+        "passes": [asdict(s) for s in result.stats],
+        "changes": result.changes,
+    }

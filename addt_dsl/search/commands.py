@@ -1,0 +1,223 @@
+"""`addtc shrink` and `addtc falsify`.
+
+    addtc shrink FILE [--run-id ID] [--oracle NAME] [--max-simulations N] [--out DIR]
+    addtc shrink --run-key SPEC.json [FILE]      a RunSpec as JSON
+    addtc shrink --store DIR [--run-id ID]       a stored run (`addtc FILE --out DIR`)
+    addtc falsify FILE [--budget-runs N] [--budget-seconds S] [--seed K] [--jobs J] [--out DIR]
+
+Exit codes follow `addtc`: 0 nothing fails, 1 a failure was found (and written), 2 error.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
+DEFAULT_OUT = ".addt-failures"
+
+
+def add_commands(sub) -> None:
+    shrink = sub.add_parser("shrink", help="shrink a failing run to a minimal replayable .addt file")
+    shrink.add_argument("file", nargs="?", help="scenario; its first failing run is shrunk")
+    shrink.add_argument("--run-id", help="shrink this run of the sweep (e.g. c002-r000)")
+    shrink.add_argument("--run-key", metavar="SPEC_JSON",
+                        help="shrink the RunSpec in this JSON file (RunSpec.model_dump_json)")
+    shrink.add_argument("--store", metavar="RESULTS",
+                        help="a results store (`addtc FILE --out DIR` writes DIR/results.sqlite): shrink its "
+                             "run --run-id, else its first failing run")
+    shrink.add_argument("--oracle", help="the failing oracle to keep (default: the earliest violation)")
+    shrink.add_argument("--max-simulations", type=int, default=300)
+    shrink.add_argument("--limit", type=int, default=0, help="look for a failure in the first N runs only")
+    shrink.add_argument("--jobs", "-j", type=int, default=1, help="processes while looking for a failing run")
+    shrink.add_argument("--out", default=DEFAULT_OUT, help=f"output directory (default {DEFAULT_OUT})")
+    shrink.add_argument("--cache", help="JSON-lines run cache to reuse across invocations")
+    shrink.add_argument("--no-animation", action="store_true")
+    shrink.add_argument("--format", choices=("text", "json"), default="text")
+    shrink.set_defaults(func=cmd_shrink)
+
+    fal = sub.add_parser("falsify", help="search parameters and faults for oracle violations")
+    fal.add_argument("file")
+    fal.add_argument("--budget-runs", type=int, default=200)
+    fal.add_argument("--budget-seconds", type=float, default=0.0, help="0: no time limit")
+    fal.add_argument("--seed", type=int, default=0)
+    fal.add_argument("--jobs", "-j", type=int, default=1)
+    fal.add_argument("--batch", type=int, default=16, help="candidates per generation")
+    fal.add_argument("--sampler", choices=("cem", "random"), default="cem")
+    fal.add_argument("--shrink-simulations", type=int, default=60,
+                     help="per distinct failure, to find its origin (0: do not shrink)")
+    fal.add_argument("--out", default=DEFAULT_OUT, help="write each distinct failure's counterexample here")
+    fal.add_argument("--no-write", action="store_true", help="report only")
+    fal.add_argument("--format", choices=("text", "json"), default="text")
+    fal.set_defaults(func=cmd_falsify)
+
+
+def _compile(path: str, fmt: str):
+    from addt_dsl.cli import _compile as compile_and_report
+
+    return compile_and_report(path, fmt)
+
+
+def _err(msg: str) -> None:
+    print(f"error: {msg}", file=sys.stderr)
+
+
+def _first_failing(plan, run_id: str | None, limit: int, jobs: int, cache):
+    from addt_dsl.sweep import expand
+
+    specs = expand(plan).specs
+    if run_id:
+        specs = [s for s in specs if s.run_id == run_id]
+        if not specs:
+            raise LookupError(f"no run '{run_id}' in the sweep")
+    if limit:
+        specs = specs[:limit]
+    step = max(1, jobs)
+    for i in range(0, len(specs), step):
+        batch = specs[i:i + step]
+        for spec, outcome in zip(batch, cache.get_many(batch, jobs)):
+            if not outcome.passed:
+                return spec
+    return None
+
+
+def _from_store(path: str, run_id: str | None):
+    """(RunSpec, plan) of a stored run: `run_id`, else the first failing one; (None, plan) if none fails."""
+    from addt_dsl.runtime.store import ResultStore
+
+    p = Path(path)
+    if p.is_dir():
+        p = p / "results.sqlite"
+    store = ResultStore(p)
+    try:
+        plan = store.plan()
+        if run_id:
+            record = next(store.records("run_id = ?", (run_id,), limit=1), None)
+            if record is None:
+                raise LookupError(f"no run '{run_id}' in {p}")
+        else:
+            record = next(store.failing(limit=1), None)
+            if record is None:
+                return None, plan
+        return store.spec(record), plan
+    finally:
+        store.close()
+
+
+def cmd_shrink(args) -> int:
+    from addt_dsl.plan import RunSpec
+    from addt_dsl.search import NotFailing, RunCache, Shrinker
+    from addt_dsl.search.artifacts import ReplayMismatch, write_counterexample
+
+    if not args.file and not args.run_key and not args.store:
+        _err("give a scenario FILE, --run-key SPEC_JSON or --store RESULTS")
+        return EXIT_ERROR
+    plan = None
+    if args.file:
+        result = _compile(args.file, "text")
+        if not result.ok:
+            return EXIT_ERROR
+        plan = result.plan
+    cache = RunCache(args.cache)
+    source = args.file or ""
+    if args.store:
+        try:
+            spec, store_plan = _from_store(args.store, args.run_id)
+        except (OSError, LookupError) as exc:
+            _err(str(exc))
+            return EXIT_ERROR
+        if spec is None:
+            print(f"no failing run in {args.store}: nothing to shrink")
+            return EXIT_OK
+        plan = plan or store_plan
+        source = source or spec.plan.source_file
+    elif args.run_key:
+        try:
+            spec = RunSpec.model_validate_json(Path(args.run_key).read_text())
+        except (OSError, ValueError) as exc:
+            _err(f"cannot read a RunSpec from {args.run_key}: {exc}")
+            return EXIT_ERROR
+        source = source or spec.plan.source_file
+    else:
+        try:
+            spec = _first_failing(plan, args.run_id, args.limit, args.jobs, cache)
+        except LookupError as exc:
+            _err(str(exc))
+            return EXIT_ERROR
+        if spec is None:
+            print("no failing run: nothing to shrink")
+            return EXIT_OK
+    log = (lambda m: print(m, file=sys.stderr)) if args.format == "text" else None
+    try:
+        shrinker = Shrinker(spec, nominal_plan=plan or spec.plan, oracle=args.oracle, cache=cache,
+                            max_simulations=args.max_simulations, log=log)
+    except NotFailing as exc:
+        print(str(exc))
+        return EXIT_OK
+    result = shrinker.run()
+    try:
+        arts = write_counterexample(result, args.out, source, animate=not args.no_animation)
+    except ReplayMismatch as exc:
+        _err(str(exc))
+        return EXIT_ERROR
+    if args.format == "json":
+        print(json.dumps(json.loads(arts.report.read_text()), indent=2))
+    else:
+        print_shrink_summary(result, arts)
+    return EXIT_FAILED
+
+
+def print_shrink_summary(result, arts) -> None:
+    print(f"failure: {result.target.describe()}")
+    print(f"shrunk: {len(result.original.faults)} -> {len(result.best.faults)} fault(s), "
+          f"{len(result.original.plan.agents)} -> {len(result.best.plan.agents)} agent(s) in "
+          f"{result.simulations} simulations ({result.cache_hits} cache hits, {result.rounds} rounds, "
+          f"{result.seconds:.1f} s)" + (" [budget exhausted]" if result.budget_exhausted else ""))
+    width = max(len(s.name) for s in result.stats)
+    for s in result.stats:
+        print(f"  {s.name:<{width}}  {s.candidates:4d} candidates {s.simulations:4d} simulated "
+              f"{s.accepted:3d} accepted {s.seconds:6.2f} s")
+    for line in result.changes:
+        print(f"  {line}")
+    print(f"wrote {arts.addt}  (replay: addtc {arts.addt})")
+    for p in arts.files[1:]:
+        print(f"      {p}")
+
+
+def cmd_falsify(args) -> int:
+    from addt_dsl.search.falsify import Falsifier
+    from addt_dsl.sweep import UnsatisfiableAssumptions
+
+    result = _compile(args.file, "text")
+    if not result.ok:
+        return EXIT_ERROR
+    log = (lambda m: print(m, file=sys.stderr)) if args.format == "text" else None
+    try:
+        fal = Falsifier(result.plan, seed=args.seed, batch=args.batch, jobs=args.jobs, sampler=args.sampler,
+                        log=log)
+    except UnsatisfiableAssumptions as exc:
+        _err(str(exc))
+        return EXIT_ERROR
+    report = fal.run(budget_runs=args.budget_runs, budget_seconds=args.budget_seconds,
+                     shrink_simulations=args.shrink_simulations)
+    written = []
+    if not args.no_write:
+        from addt_dsl.search.artifacts import ReplayMismatch, write_counterexample
+
+        for found in report.failures:
+            if found.shrunk is None:
+                continue
+            try:
+                written.append(write_counterexample(found.shrunk, args.out, args.file, animate=False).addt)
+            except ReplayMismatch as exc:
+                _err(str(exc))
+    if args.format == "json":
+        data = report.to_json()
+        data["written"] = [str(p) for p in written]
+        print(json.dumps(data, indent=2))
+    else:
+        report.print_text()
+        for p in written:
+            print(f"wrote {p}")
+    return EXIT_FAILED if report.failures else EXIT_OK

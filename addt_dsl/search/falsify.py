@@ -1,0 +1,432 @@
+"""Falsification: search the parameter and fault space for oracle violations.
+
+The space (`SearchSpace`) is a unit hypercube. Its axes: every parameter with a range
+or choices (grid values count as choices); per declared fault, whether it is present,
+its start time and window length, and each constant numeric setting (from its neutral
+value to twice the declared one, inside the registry's range; counts from 1), plus the
+bit for bit flips with a fixed bit. Settings written with a parameter move with that
+parameter. Fault seeds and the run seed are drawn afresh for every candidate.
+
+Guidance is a cross-entropy sampler (CEM) on robustness: each generation samples a batch
+from independent per-axis distributions (truncated normals on [0, 1], a Bernoulli for
+"present"), scores each run by its worst normalised robustness over the oracles not yet
+falsified, and refits the distributions to the best fifth (rank-weighted, smoothed), with
+a tenth of every batch drawn uniformly so the search keeps exploring.
+Why CEM rather than Hypothesis `target()`: runs are expensive (0.1-1 s) and budgets
+small (tens to hundreds of runs), so the search must be batch-parallel and spend its
+budget where it says; `target()` hill-climbs inside one `@given` test, stops at the
+first failure, and budgets in examples that are cheap. CEM is a standard AV falsifier
+(rare-event simulation), deterministic for a seed, and keeps going after a failure to
+look for the other oracles' failures.
+
+Distinct failures: a failing run is grouped by (oracle, mode, faults that injected); each
+new group is shrunk (`shrink`) with a small budget, and its origin is what the shrunk run
+still needs: the fault kinds and targets, and the parameters away from nominal with the
+direction they moved (`origin_key`). Failures with the same oracle, mode and origin are
+one failure; the report shows the values of the first one.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from addt_dsl import expr as E
+from addt_dsl.plan import RunSpec, ScenarioPlan
+from addt_dsl.registry import FAULTS
+from addt_dsl.search import candidates as C
+from addt_dsl.search.cache import RunCache
+from addt_dsl.search.outcome import Outcome
+from addt_dsl.search.shrink import Shrinker, ShrinkResult
+from addt_dsl.sweep import _from_unit, concrete_faults, derive_seed, violated_assumptions
+
+ELITE_FRACTION = 0.2
+EXPLORE_FRACTION = 0.1
+SMOOTHING = 0.7
+MIN_SIGMA = 0.03
+MIN_ELITE = 5
+MIN_POINTS = 16  # uniform samples before the first fit (at least twice the dimensions)
+MAX_SHRINKS = 8
+
+
+# ---------------------------------------------------------------- the space
+
+@dataclass(frozen=True)
+class Axis:
+    name: str  # `param:gap`, `fault3:present`, `fault3:start`, `fault3:length`, `fault3:value`, ...
+    kind: str  # "unit" (continuous) | "bool"
+    decode: object = None  # callable(u) -> value (for reporting)
+
+
+class SearchSpace:
+    def __init__(self, plan: ScenarioPlan):
+        self.plan = plan
+        self.nominal = plan.nominal_params()
+        self.axes: list[Axis] = []
+        grid = {g.param: g.values for g in plan.sweep.grid}
+        self.params = []
+        for p in plan.params:
+            choices = list(p.choices) or (grid.get(p.name) if (p.low is None or p.high is None) else None)
+            if choices and len(set(choices)) > 1:
+                self.params.append((p, choices))
+            elif p.low is not None and p.high is not None and p.low < p.high:
+                self.params.append((p, None))
+            else:
+                continue
+            self.axes.append(Axis(f"param:{p.name}", "unit"))
+        nominal_faults = concrete_faults(plan, self.nominal, plan.seed)
+        self.faults = []  # (index, concrete at nominal, [(setting, lo, hi, integer)], instant, fixed_length)
+        for f, fp in zip(nominal_faults, plan.faults):
+            cls = FAULTS.get(f.kind)
+            specs = {s.name: s for s in cls.params}
+            settings = []
+            for name, value in f.settings.items():
+                spec = specs.get(name)
+                expr = fp.settings.get(name)
+                if spec is None or not isinstance(value, float) or isinstance(expr, (str, list)):
+                    continue
+                if expr is not None and E.params_used(expr):
+                    continue  # moves with its parameter
+                if name == "bit":
+                    if value >= 0:
+                        settings.append((name, 0.0, 63.0, True))
+                    continue
+                neutral = C.neutral_value(f.kind, name)
+                lo, hi = sorted((neutral, neutral + 2.0 * (value - neutral)))
+                lo = max(lo, spec.low) if spec.low is not None else lo
+                hi = min(hi, spec.high) if spec.high is not None else hi
+                if spec.kind == "int":
+                    lo = max(lo, 1.0)
+                if hi > lo:
+                    settings.append((name, lo, hi, spec.kind == "int"))
+            timed = not E.params_used(fp.start_s) and (fp.end_s is None or not E.params_used(fp.end_s))
+            instant = f.end_s is not None and f.end_s == f.start_s
+            self.faults.append((f.index, f, settings, instant, timed))
+            self.axes.append(Axis(f"fault{f.index}:present", "bool"))
+            if timed:
+                self.axes.append(Axis(f"fault{f.index}:start", "unit"))
+                if not instant:
+                    self.axes.append(Axis(f"fault{f.index}:length", "unit"))
+            for name, *_ in settings:
+                self.axes.append(Axis(f"fault{f.index}:{name}", "unit"))
+        self.index = {a.name: i for i, a in enumerate(self.axes)}
+
+    @property
+    def dims(self) -> int:
+        return len(self.axes)
+
+    def params_of(self, u: np.ndarray) -> dict[str, float]:
+        params = dict(self.nominal)
+        for p, choices in self.params:
+            x = float(u[self.index[f"param:{p.name}"]])
+            if choices:
+                params[p.name] = choices[min(int(x * len(choices)), len(choices) - 1)]
+            else:
+                params[p.name] = _from_unit(p, x)
+        return params
+
+    def spec(self, u: np.ndarray, seed: int, run_id: str) -> RunSpec:
+        """The pinned RunSpec of point `u`; `seed` gives the run seed and the fault seeds."""
+        plan = self.plan
+        params = self.params_of(u)
+        run_seed = derive_seed(seed, 1)
+        nominal = {f.index: f for f in concrete_faults(plan, params, run_seed)}
+        entries = []
+        duration = plan.duration_s
+        for index, _, settings, instant, timed in self.faults:
+            if u[self.index[f"fault{index}:present"]] < 0.5:
+                continue
+            f = nominal[index]
+            changes: dict = {"seed": derive_seed(seed, 2, index)}
+            if timed:
+                start = float(u[self.index[f"fault{index}:start"]]) * duration
+                changes["start_s"] = start
+                if instant:
+                    changes["end_s"] = start
+                else:
+                    length = float(u[self.index[f"fault{index}:length"]]) * (duration - start)
+                    changes["end_s"] = start + length
+            new_settings = dict(f.settings)
+            for name, lo, hi, integer in settings:
+                x = lo + float(u[self.index[f"fault{index}:{name}"]]) * (hi - lo)
+                new_settings[name] = float(round(x)) if integer else x
+            changes["settings"] = new_settings
+            entries.append(C.FaultEntry(f.model_copy(update=changes), plan.faults[index].source or f"fault #{index}"))
+        base = RunSpec(plan=plan, params=params, seed=run_seed, faults=[], run_id=run_id)
+        return C.rebuild(C.pinned(base), faults=entries)
+
+
+# ---------------------------------------------------------------- samplers
+
+class UniformSampler:
+    name = "random"
+
+    def __init__(self, dims: int, rng: np.random.Generator):
+        self.dims, self.rng = dims, rng
+
+    def sample(self, n: int) -> np.ndarray:
+        return self.rng.random((n, self.dims))
+
+    def update(self, points: np.ndarray, scores: np.ndarray) -> None:
+        pass
+
+
+class CrossEntropySampler:
+    """Independent per-axis truncated normals (Bernoulli for bool axes), refit to elites."""
+
+    name = "cem"
+
+    def __init__(self, axes: list[Axis], rng: np.random.Generator):
+        self.rng = rng
+        self.bool = np.array([a.kind == "bool" for a in axes], dtype=bool)
+        self.mu = np.full(len(axes), 0.5)
+        self.sigma = np.full(len(axes), 0.5)
+        self.p = np.full(len(axes), 0.5)  # the first batch is uniform, like random sampling
+        self.fitted = False
+
+    def sample(self, n: int) -> np.ndarray:
+        d = len(self.mu)
+        if not self.fitted:
+            u = self.rng.random((n, d))
+            u[:, self.bool] = (self.rng.random((n, int(self.bool.sum()))) < self.p[self.bool]).astype(float)
+            return u
+        n_explore = int(round(EXPLORE_FRACTION * n))
+        u = self.rng.random((n, d))
+        guided = self._truncated(n - n_explore)
+        u[n_explore:] = guided
+        return u
+
+    def _truncated(self, n: int) -> np.ndarray:
+        d = len(self.mu)
+        out = np.empty((n, d))
+        for j in range(d):
+            if self.bool[j]:
+                out[:, j] = (self.rng.random(n) < self.p[j]).astype(float)
+                continue
+            col = self.rng.normal(self.mu[j], self.sigma[j], n)
+            bad = (col < 0) | (col > 1)
+            for _ in range(20):  # resample outside [0, 1]; clip what is left
+                if not bad.any():
+                    break
+                col[bad] = self.rng.normal(self.mu[j], self.sigma[j], int(bad.sum()))
+                bad = (col < 0) | (col > 1)
+            out[:, j] = np.clip(col, 0.0, 1.0)
+        return out
+
+    def update(self, points: np.ndarray, scores: np.ndarray) -> None:
+        """Refit to the best `ELITE_FRACTION` of all points so far (lower score is better),
+        rank-weighted (log weights, as in CMA-ES), once there are enough points."""
+        if len(points) < max(MIN_POINTS, 2 * len(self.mu)):
+            return
+        n = max(MIN_ELITE, int(math.ceil(ELITE_FRACTION * len(points))))
+        elite = points[np.argsort(scores, kind="stable")[:n]]
+        w = np.log(n + 0.5) - np.log(np.arange(1, n + 1))
+        w /= w.sum()
+        mu = w @ elite
+        sigma = np.sqrt(w @ (elite - mu) ** 2)
+        self.mu = SMOOTHING * mu + (1 - SMOOTHING) * self.mu
+        self.sigma = np.maximum(SMOOTHING * sigma + (1 - SMOOTHING) * self.sigma, MIN_SIGMA)
+        self.p = np.clip(SMOOTHING * mu + (1 - SMOOTHING) * self.p, 0.05, 0.95)
+        self.fitted = True
+
+
+# ---------------------------------------------------------------- the search
+
+@dataclass
+class FoundFailure:
+    oracle: str
+    mode: str
+    origin: str  # what the shrunk run still needs
+    first_run: int  # 1-based index of the first search run that showed it
+    count: int  # failing search runs in this group
+    worst_robustness: float
+    example: RunSpec
+    shrunk: ShrinkResult | None = None
+
+    def describe(self) -> str:
+        return f"{self.oracle} [{self.mode}]"
+
+
+@dataclass
+class FalsifyReport:
+    scenario: str
+    sampler: str
+    runs: int
+    seconds: float
+    first_failure_run: int | None
+    shrink_simulations: int
+    failures: list[FoundFailure] = field(default_factory=list)
+    best_robustness: dict[str, float] = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return {
+            "scenario": self.scenario, "sampler": self.sampler, "runs": self.runs,
+            "seconds": round(self.seconds, 3), "first_failure_run": self.first_failure_run,
+            "shrink_simulations": self.shrink_simulations,
+            "best_robustness": {k: (v if math.isfinite(v) else repr(v)) for k, v in self.best_robustness.items()},
+            "failures": [{"oracle": f.oracle, "mode": f.mode, "origin": f.origin, "first_run": f.first_run,
+                          "count": f.count, "worst_robustness": f.worst_robustness if math.isfinite(
+                              f.worst_robustness) else repr(f.worst_robustness),
+                          "example_key": f.example.key(),
+                          "shrunk_key": f.shrunk.best.key() if f.shrunk else None} for f in self.failures],
+        }
+
+    def print_text(self) -> None:
+        first = f", first after {self.first_failure_run} run(s)" if self.first_failure_run else ""
+        print(f"falsify {self.scenario} ({self.sampler}): {self.runs} runs in {self.seconds:.1f} s, "
+              f"{len(self.failures)} distinct failure(s){first}; {self.shrink_simulations} shrink simulations")
+        for i, f in enumerate(self.failures, 1):
+            print(f"  {i}. {f.describe()}: {f.count} failing run(s), first at run {f.first_run}, "
+                  f"worst robustness {f.worst_robustness:.3g}")
+            print(f"     origin: {f.origin}")
+        if not self.failures:
+            worst = ", ".join(f"{k} {v:.3g}" for k, v in sorted(self.best_robustness.items()))
+            print(f"  no failure; lowest robustness per oracle: {worst}")
+
+
+class Falsifier:
+    def __init__(self, plan: ScenarioPlan, *, seed: int = 0, batch: int = 16, jobs: int = 1,
+                 sampler: str = "cem", cache: RunCache | None = None, log=None):
+        self.plan = plan
+        self.space = SearchSpace(plan)
+        self.seed = seed
+        self.batch = max(2, batch)
+        self.jobs = jobs
+        self.cache = cache or RunCache()
+        self.log = log or (lambda msg: None)
+        rng = np.random.default_rng(derive_seed(seed, 31337))
+        self.sampler = (CrossEntropySampler(self.space.axes, rng) if sampler == "cem"
+                        else UniformSampler(self.space.dims, rng))
+        self.hard = [o.name for o in plan.oracles if o.severity == "hard"]
+
+    def _candidates(self, n: int, start: int) -> tuple[np.ndarray, list[RunSpec]]:
+        points, specs = [], []
+        tries = 0
+        while len(specs) < n and tries < 50 * n:
+            for u in self.sampler.sample(n - len(specs)):
+                tries += 1
+                params = self.space.params_of(u)
+                if violated_assumptions(self.plan, params):
+                    continue  # an invalid sample is rejected, never run
+                i = start + len(specs)
+                specs.append(self.space.spec(u, derive_seed(self.seed, 7, i), f"f{i:05d}"))
+                points.append(u)
+        return np.array(points).reshape(len(points), self.space.dims), specs
+
+    def _score(self, outcome: Outcome, targets: list[str], scales: dict[str, float]) -> float:
+        if outcome.status != "ok" and "stack_health" in targets:
+            return -math.inf
+        vals = [outcome.robustness.get(n, math.inf) / scales.get(n, 1.0) for n in targets]
+        vals = [v if not math.isnan(v) else -math.inf for v in vals]
+        return min(vals) if vals else 0.0
+
+    def run(self, budget_runs: int = 200, budget_seconds: float = 0.0, shrink_simulations: int = 60,
+            stop_at_first: bool = False) -> FalsifyReport:
+        t0 = time.perf_counter()
+        all_points, all_outcomes, all_specs = [], [], []
+        groups: dict[tuple, FoundFailure] = {}
+        first_failure = None
+        scales: dict[str, float] = {}
+        falsified: set[str] = set()
+        best = {n: math.inf for n in self.hard}
+        while len(all_outcomes) < budget_runs:
+            if budget_seconds and time.perf_counter() - t0 > budget_seconds:
+                break
+            n = min(self.batch, budget_runs - len(all_outcomes))
+            points, specs = self._candidates(n, len(all_outcomes))
+            if not specs:
+                break
+            outcomes = self.cache.get_many(specs, self.jobs)
+            for k, (spec, outcome) in enumerate(zip(specs, outcomes)):
+                run_no = len(all_outcomes) + k + 1
+                for name in self.hard:
+                    best[name] = min(best[name], outcome.robustness.get(name, math.inf))
+                for fail in outcome.failures:
+                    falsified.add(fail.oracle)
+                    if first_failure is None:
+                        first_failure = run_no
+                    key = (fail.oracle, fail.mode, _injected_before(spec, outcome, fail.time_s))
+                    g = groups.get(key)
+                    if g is None:
+                        groups[key] = FoundFailure(fail.oracle, fail.mode, "", run_no, 1, fail.robustness, spec)
+                    else:
+                        g.count += 1
+                        if fail.robustness < g.worst_robustness:
+                            g.worst_robustness, g.example = fail.robustness, spec
+            all_points.append(points)
+            all_outcomes += outcomes
+            all_specs += specs
+            if not scales:
+                for name in self.hard:
+                    vals = np.abs([o.robustness.get(name, 1.0) for o in all_outcomes])
+                    vals = vals[np.isfinite(vals)]
+                    scales[name] = float(np.median(vals)) if len(vals) and np.median(vals) > 0 else 1.0
+            targets = [n for n in self.hard if n not in falsified] or list(self.hard)
+            scores = np.array([self._score(o, targets, scales) for o in all_outcomes])
+            self.sampler.update(np.concatenate(all_points), scores)
+            self.log(f"{len(all_outcomes)} runs: {len(groups)} failing group(s); best "
+                     + ", ".join(f"{k} {v:.3g}" for k, v in best.items()))
+            if stop_at_first and first_failure is not None:
+                break
+        search_runs = len(all_outcomes)
+        shrink_before = self.cache.simulations
+        failures = self._distinct(groups, shrink_simulations)
+        return FalsifyReport(self.plan.name, self.sampler.name, search_runs, time.perf_counter() - t0,
+                             first_failure, self.cache.simulations - shrink_before, failures, best)
+
+    def _distinct(self, groups: dict, shrink_simulations: int) -> list[FoundFailure]:
+        """Shrink one representative per group; merge groups whose origin is the same."""
+        out: dict[tuple, FoundFailure] = {}
+        for i, g in enumerate(sorted(groups.values(), key=lambda g: g.first_run)):
+            if shrink_simulations > 0 and i < MAX_SHRINKS:
+                try:
+                    g.shrunk = Shrinker(g.example, nominal_plan=self.plan, oracle=g.oracle, cache=self.cache,
+                                        max_simulations=shrink_simulations).run()
+                except ValueError:
+                    g.shrunk = None
+            best = g.shrunk.best if g.shrunk else g.example
+            g.origin = origin_of(best, self.space.nominal)
+            key = (g.oracle, g.mode, origin_key(best, self.space.nominal))
+            if key in out:
+                other = out[key]
+                other.count += g.count
+                other.first_run = min(other.first_run, g.first_run)
+            else:
+                out[key] = g
+        return sorted(out.values(), key=lambda g: g.first_run)
+
+
+def _injected_before(spec: RunSpec, outcome: Outcome, t: float | None) -> tuple:
+    """Fault kinds/targets that injected anything in the run (cheap grouping before shrinking)."""
+    return tuple(sorted({(f.kind, f.target) for f in spec.faults if outcome.fault_events.get(f.index)}))
+
+
+def origin_key(spec: RunSpec, nominal: dict[str, float]) -> tuple:
+    """The region a failure comes from, coarsely: which faults (kind, target) it needs and
+    which parameters it needs away from nominal, in which direction."""
+    faults = tuple(sorted({(f.kind, f.target) for f in spec.faults}))
+    params = tuple(sorted((k, "+" if v > nominal[k] else "-") for k, v in spec.params.items()
+                          if k in nominal and v != nominal[k]))
+    return faults, params
+
+
+def origin_of(spec: RunSpec, nominal: dict[str, float]) -> str:
+    """What a (shrunk) failing run contains beyond the nominal scenario."""
+    parts = []
+    for f in spec.faults:
+        settings = " ".join(f"{k} {_short(v)}" for k, v in sorted(f.settings.items()))
+        window = (f"from {_short(f.start_s)} s" if f.end_s is None else
+                  f"at {_short(f.start_s)} s" if f.end_s == f.start_s else
+                  f"during [{_short(f.start_s)} s, {_short(f.end_s)} s]")
+        parts.append(f"{f.kind} {f.target} {settings} {window}".replace("  ", " "))
+    for k, v in sorted(spec.params.items()):
+        if k in nominal and v != nominal[k]:
+            parts.append(f"{k} = {_short(v)} (nominal {_short(nominal[k])})")
+    return "; ".join(parts) if parts else "nominal scenario (no fault, nominal parameters)"
+
+
+def _short(v) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else str(v)

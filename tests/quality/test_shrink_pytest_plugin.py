@@ -1,0 +1,119 @@
+"""The pytest plugin end to end, in a scratch project run by a child pytest."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from importlib.metadata import entry_points
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+TEN_FAULTS = (ROOT / "examples" / "ten_faults.addt").read_text()
+
+PASSING = """scenario follow {
+  duration 3 s
+  step 20 ms
+  road street {
+    line length 300 m
+  }
+  param lead_gap = 35 m in [30 m, 40 m]
+  ego car on street lane -1 at 10 m speed 14 m/s {
+    stack bev cruise_speed 15 m/s
+  }
+  agent lead car on street lane -1 at 10 m + lead_gap speed 14 m/s {
+    behavior cruise speed 14 m/s
+  }
+  expect {
+    no collision
+  }
+  sweep {
+    grid lead_gap in [32, 38] m
+  }
+}
+"""
+
+pytestmark = pytest.mark.slow
+
+
+CI_VARS = ("CI", "GITHUB_ACTIONS", "GITLAB_CI", "BUILD_ID", "TF_BUILD", "CIRCLECI", "JENKINS_URL")
+
+
+def _pytest(project: Path, *args: str, github: bool = False) -> subprocess.CompletedProcess:
+    installed = any(ep.name == "addt" for ep in entry_points(group="pytest11"))
+    plugin = [] if installed else ["-p", "addt_dsl.pytest_plugin"]
+    # Hypothesis loads its `ci` profile by itself on a CI machine: start from a clean slate.
+    env = {k: v for k, v in os.environ.items() if k not in CI_VARS}
+    env["PYTHONPATH"] = str(ROOT)
+    if github:
+        env["GITHUB_ACTIONS"] = "true"
+    return subprocess.run([sys.executable, "-m", "pytest", *plugin, "-p", "no:cacheprovider", *args],
+                          cwd=project, env=env, capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture
+def project(tmp_path: Path) -> Path:
+    (tmp_path / "pytest.ini").write_text("[pytest]\n")
+    (tmp_path / "scenarios").mkdir()
+    (tmp_path / "scenarios" / "follow.addt").write_text(PASSING)
+    (tmp_path / "scenarios" / "shared.addt").write_text("param unused = 1 m\n")  # definitions only
+    return tmp_path
+
+
+def test_collects_scenarios_one_per_file_or_per_cell(project):
+    out = _pytest(project, "--collect-only", "-q", "scenarios")
+    assert "scenarios/follow.addt::follow" in out.stdout
+    assert "shared.addt" not in out.stdout
+    cells = _pytest(project, "--collect-only", "-q", "--addt-per-cell", "scenarios")
+    assert "follow.addt::follow[lead_gap=32m]" in cells.stdout
+    assert "follow.addt::follow[lead_gap=38m]" in cells.stdout
+
+
+def test_profiles_size_the_search(project):
+    ci = _pytest(project, "-rP", "--hypothesis-profile", "ci", "scenarios")
+    assert ci.returncode == 0, ci.stdout + ci.stderr
+    assert "sweep: 2 run(s), 0 failing" in ci.stdout
+    assert "search (cem): 10 run(s), no failure" in ci.stdout
+    nightly = _pytest(project, "-rP", "--hypothesis-profile", "nightly", "-o", "addt_search_runs=nightly=40",
+                      "scenarios")
+    assert nightly.returncode == 0
+    assert "search (cem): 40 run(s), no failure" in nightly.stdout
+    default = _pytest(project, "-rP", "scenarios")
+    assert default.returncode == 0
+    assert "search" not in default.stdout.split("addt", 1)[-1]
+
+
+def test_failure_is_shrunk_reported_and_replayed_first(project):
+    (project / "scenarios" / "ten_faults.addt").write_text(TEN_FAULTS)
+    junit = project / "report.xml"
+    first = _pytest(project, "--hypothesis-profile", "ci", f"--junitxml={junit}", "scenarios/ten_faults.addt",
+                    github=True)
+    assert first.returncode == 1, first.stdout
+    corpus = sorted((project / ".addt-failures").glob("ten_faults-*.addt"))
+    assert len(corpus) == 1
+    shown = corpus[0].relative_to(project)
+    assert f"no_collision fails: minimal counterexample {shown}" in first.stdout
+    assert "did not matter: fault drop lidar from 0 s (scenarios/ten_faults.addt:29)" in first.stdout
+    assert "did not matter: fault drop lidar" in first.stdout
+    assert "::error file=scenarios/ten_faults.addt,title=addt: no_collision fails::" in first.stdout
+    xml = junit.read_text()
+    assert "<failure message=\"no_collision fails: minimal counterexample" in xml
+    assert 'name="counterexample"' in xml
+    # The counterexample replays with addtc: exit 1.
+    replay = subprocess.run([sys.executable, "-m", "addt_dsl.cli", str(corpus[0]), "--jobs", "1"],
+                            env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True)
+    assert replay.returncode == 1
+    # Next time the known counterexample is replayed first and fails the test by itself.
+    again = _pytest(project, "--hypothesis-profile", "ci", "scenarios/ten_faults.addt")
+    assert again.returncode == 1
+    assert f"known counterexample {shown} still fails" in again.stdout
+
+
+def test_project_suite_does_not_collect_examples():
+    out = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "addt_dsl.pytest_plugin",
+                          "tests/unit/search"], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                         capture_output=True, text=True)
+    assert ".addt" not in out.stdout
+    assert "test_printer.py" in out.stdout

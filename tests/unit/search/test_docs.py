@@ -1,0 +1,102 @@
+"""docs/falsify-and-shrink.md and docs/ci.md: their examples compile, parse and use real options."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+from addt_dsl.cli import build_parser
+from addt_dsl.compiler import compile_source
+from addt_dsl.printer import compile_pinned
+from addt_dsl.pytest_plugin import pytest_addoption
+
+DOCS = Path(__file__).resolve().parents[3] / "docs"
+SHRINK_DOC = (DOCS / "falsify-and-shrink.md").read_text()
+CI_DOC = (DOCS / "ci.md").read_text()
+
+
+def _blocks(text: str, lang: str) -> list[str]:
+    return re.findall(rf"```{lang}\n(.*?)```", text, re.S)
+
+
+def _commands(program: str) -> list[list[str]]:
+    lines = []
+    for text in (SHRINK_DOC, CI_DOC):
+        for block in _blocks(text, "console"):
+            lines += [line[2:] for line in block.splitlines() if line.startswith(f"$ {program} ")]
+        for block in _blocks(text, "yaml"):
+            lines += re.findall(rf"(?:run:|- ) *({program} [^\n]+)", block)
+    return [shlex.split(line)[1:] for line in lines]
+
+
+class _Options:
+    def __init__(self):
+        self.options, self.ini = set(), set()
+
+    def getgroup(self, *args):
+        return self
+
+    def addoption(self, *names, **kwargs):
+        self.options.update(names)
+
+    def addini(self, name, *args, **kwargs):
+        self.ini.add(name)
+
+
+def _plugin_options() -> _Options:
+    opts = _Options()
+    pytest_addoption(opts)
+    return opts
+
+
+def test_the_pinned_example_compiles_to_one_pinned_run():
+    (block,) = _blocks(SHRINK_DOC, "addt")
+    spec = compile_pinned(block)
+    assert spec.seed == 213907198
+    assert [(f.kind, f.target, f.start_s, f.end_s, f.seed) for f in spec.faults] == \
+        [("stuck", "control.accel", 1.0, 4.8, 2666701593)]
+    assert compile_source(block).ok
+
+
+@pytest.mark.parametrize("argv", _commands("addtc"), ids=" ".join)
+def test_addtc_commands_parse(argv):
+    args = build_parser().parse_args(argv)
+    assert args.command in ("shrink", "falsify", "run")
+
+
+def test_there_are_pytest_commands():
+    assert len(_commands("pytest")) >= 3
+
+
+@pytest.mark.parametrize("argv", _commands("pytest"), ids=" ".join)
+def test_pytest_commands_use_real_options(argv):
+    opts = _plugin_options()
+    from hypothesis import settings
+
+    for i, arg in enumerate(argv):
+        name = arg.split("=", 1)[0]
+        if name.startswith("--addt"):
+            assert name in opts.options, name
+        if name == "--hypothesis-profile":
+            settings.get_profile(argv[i + 1])
+
+
+def test_documented_options_exist():
+    opts = _plugin_options()
+    for flag in set(re.findall(r"`(--addt-[a-z-]+)", CI_DOC)):
+        assert flag in opts.options, flag
+    for ini in set(re.findall(r"\((addt_[a-z_]+)", CI_DOC)) | set(re.findall(r"`(addt_[a-z_]+) =", CI_DOC)):
+        assert ini in opts.ini, ini
+
+
+def test_ci_jobs_are_valid_yaml():
+    yaml = pytest.importorskip("yaml")  # pyyaml: in the test extra through ray
+    github, gitlab = (yaml.safe_load(b) for b in _blocks(CI_DOC, "yaml"))
+    steps = github["jobs"]["scenarios"]["steps"]
+    assert any("pytest scenarios/" in s.get("run", "") for s in steps)
+    assert any(s.get("with", {}).get("path") == ".addt-failures/" for s in steps)
+    assert gitlab["scenarios"]["artifacts"]["reports"]["junit"] == "scenario-report.xml"
+    assert ".addt-failures/" in gitlab["scenarios"]["artifacts"]["paths"]

@@ -1,0 +1,118 @@
+"""Falsification against a synthetic judge: the space, the sampler, the report."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from search_testkit import kitchen_sink_plan
+
+from addt_dsl.plan import RunSpec
+from addt_dsl.search.cache import RunCache
+from addt_dsl.search.falsify import CrossEntropySampler, Falsifier, SearchSpace, UniformSampler, origin_of
+from addt_dsl.search.outcome import Failure, Outcome
+from addt_dsl.sweep import violated_assumptions
+
+
+def corner_judge(spec: RunSpec) -> Outcome:
+    """Fails when v_lead is high and gap is low (a corner of the box): robustness is the
+    distance to that corner, so it guides a search there."""
+    v = (spec.params.get("v_lead", 15.0) - 5.0) / 20.0
+    g = (spec.params.get("gap", 30.0) - 10.0) / 50.0
+    rho = math.hypot(1.0 - v, g) - 0.2
+    failures = (Failure("no_collision", "clearance(ego) > 0 m [with lead]", 1.0, rho),) if rho < 0 else ()
+    return Outcome(spec.key(), "ok", "", {"no_collision": rho}, ("no_collision",), failures)
+
+
+def _falsifier(sampler="cem", seed=0, judge=corner_judge):
+    return Falsifier(kitchen_sink_plan(), seed=seed, batch=8, sampler=sampler, cache=RunCache(evaluator=judge))
+
+
+def test_space_axes():
+    space = SearchSpace(kitchen_sink_plan())
+    names = [a.name for a in space.axes]
+    # Parameters with a range or choices; `brake_at` has neither.
+    assert {"param:v_lead", "param:gap", "param:yaw_err", "param:k"} <= set(names)
+    assert "param:brake_at" not in names
+    # Every fault can be present or not and move in time; instants stay instants.
+    for i in range(5):
+        assert f"fault{i}:present" in names and f"fault{i}:start" in names
+    assert "fault1:length" not in names  # `at 2 s shift ...`
+    # Constant magnitudes are axes; settings written with a parameter move with it.
+    assert "fault0:rate" in names and "fault0:burst" in names
+    assert "fault1:yaw" not in names and "fault1:x" in names
+    assert "fault2:count" not in names  # `count k`
+    assert "fault4:value" in names
+
+
+def test_candidates_are_valid_pinned_runs():
+    fal = _falsifier()
+    points, specs = fal._candidates(40, 0)
+    assert len(specs) == 40
+    space = fal.space
+    for u, spec in zip(points, specs):
+        assert not violated_assumptions(kitchen_sink_plan(), {**space.nominal, **spec.params})
+        assert spec.plan.run_seed == spec.seed and not spec.plan.sweep.grid
+        present = sum(u[space.index[f"fault{i}:present"]] >= 0.5 for i in range(5))
+        assert len(spec.faults) == present
+        for f in spec.faults:
+            assert 0.0 <= f.start_s <= spec.plan.duration_s
+            assert f.end_s is None or f.start_s <= f.end_s <= spec.plan.duration_s + 1e-9
+            if f.kind == "stuck":
+                assert -4.0 <= f.settings["value"] <= 0.0  # neutral 0 to twice the declared -2
+            if f.kind == "drop":
+                assert 0.0 <= f.settings["rate"] <= 0.1 and 1.0 <= f.settings["burst"] <= 6.0
+
+
+def test_same_seed_same_search():
+    a = _falsifier(seed=4).run(budget_runs=48, shrink_simulations=0)
+    b = _falsifier(seed=4).run(budget_runs=48, shrink_simulations=0)
+    assert a.to_json()["failures"] == b.to_json()["failures"] and a.first_failure_run == b.first_failure_run
+
+
+def test_guided_search_reaches_a_rare_corner_sooner_than_random():
+    def first(sampler):
+        runs = [_falsifier(sampler, seed).run(budget_runs=200, shrink_simulations=0,
+                                              stop_at_first=True).first_failure_run or 201 for seed in range(6)]
+        return float(np.mean(runs))
+
+    cem, rnd = first("cem"), first("random")
+    assert cem < rnd, (cem, rnd)
+
+
+def test_cem_concentrates_on_the_elite():
+    rng = np.random.default_rng(0)
+    space = SearchSpace(kitchen_sink_plan())
+    cem = CrossEntropySampler(space.axes, rng)
+    points = UniformSampler(space.dims, rng).sample(64)
+    scores = np.abs(points[:, 0] - 0.9)  # the best points have axis 0 near 0.9
+    cem.update(points, scores)
+    assert abs(cem.mu[0] - 0.9) < 0.2 and cem.sigma[0] < 0.3
+    assert cem.fitted
+
+
+def test_failures_are_reported_with_their_shrunk_origin():
+    report = _falsifier().run(budget_runs=96, shrink_simulations=80)
+    assert report.failures, report.to_json()
+    f = report.failures[0]
+    assert f.oracle == "no_collision" and f.shrunk is not None
+    # The judge only cares about v_lead and gap: no fault is needed, gap stays off nominal.
+    assert not f.shrunk.best.faults
+    assert "gap = " in f.origin and "v_lead = " in f.origin
+    assert report.first_failure_run == f.first_run
+
+
+def test_origin_of_a_nominal_run():
+    plan = kitchen_sink_plan()
+    spec = RunSpec(plan=plan, params=plan.nominal_params(), seed=1, faults=[])
+    assert origin_of(spec, plan.nominal_params()) == "nominal scenario (no fault, nominal parameters)"
+
+
+@pytest.mark.parametrize("sampler", ["cem", "random"])
+def test_no_failure_no_report(sampler):
+    def safe(spec):
+        return Outcome(spec.key(), "ok", "", {"no_collision": 1.0}, ("no_collision",), ())
+
+    report = _falsifier(sampler, judge=safe).run(budget_runs=20, shrink_simulations=10)
+    assert report.failures == [] and report.first_failure_run is None and report.runs == 20
