@@ -448,10 +448,9 @@ def _window_of(ctx: Context, timing: ast.Timing | None, span: Span):
 
 def rule_faults(ctx: Context) -> None:
     ego = ctx.actors.get("ego")
-    sensors = {s.name for s in ego.sensors} if ego else set()
+    # A sensor's name is its keyword (`sensor lidar`); each fault kind says which targets it takes.
+    sensors = {s.name: s.name for s in ego.sensors} if ego else {}
     stack_cls = STACKS.get(ego.stack.name) if ego and ego.stack else None
-    sites = stack_cls.fault_sites() if stack_cls else set()
-    nodes = set(stack_cls.nodes) if stack_cls else set()
     for block in ctx.blocks("faults"):
         for f in block.items:
             cls = FAULTS.get(f.kind)
@@ -460,7 +459,7 @@ def rule_faults(ctx: Context) -> None:
                                *_suggest(f.kind, FAULTS.names()), f"fault kinds: {', '.join(FAULTS.names())}")
                 continue
             target = ".".join(f.target)
-            pool = {"sensor": sensors, "site": sites, "node": nodes}[cls.target_kind]
+            pool = cls.valid_targets(sensors, stack_cls)
             if target not in pool:
                 ctx.sink.error("E0107", f"'{f.kind}' cannot target '{target}'", f.target_span,
                                *_suggest(target, pool),
