@@ -97,7 +97,8 @@ class Tracker:
     gate_m = 4.0
     max_age_s = 1.0
 
-    def __init__(self):
+    def __init__(self, max_age_s: float = 1.0):
+        self.max_age_s = max_age_s
         self.tracks: list[tuple[Obj, float]] = []  # (object, last update time)
 
     def update(self, objs: list[Obj], stamp_s: float, corrupt) -> None:
