@@ -41,8 +41,8 @@ class BitFlip(FaultKind):
         end = min(self.end, self.duration_s)
         n = int(self.settings["count"])
         # Flip instants are fixed up front from the fault's seed: same RunSpec, same flips.
-        self.times = (np.sort(self.start + (end - self.start) * self.rng.random(n)) if end > self.start
-                      else np.full(n, float(self.start)))
+        self.times = (np.sort(self.start + (end - self.start) * self.rng.random(n))
+                      if end > self.start and not self.instant else np.full(n, float(self.start)))
         self._queues: dict[str, list[float]] = {self.fault.target: list(self.times)}
         self._next = 0  # tensor sites: flips consumed so far
         self._tensor = None

@@ -24,7 +24,6 @@ torch is imported only when a tensor fault is bound.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping
 
 from addt_dsl.runtime.faults.base import IEEE_FIELDS, IEEE_FIELDS_BF16
@@ -33,11 +32,14 @@ from addt_dsl.runtime.faults.base import IEEE_FIELDS, IEEE_FIELDS_BF16
 def tensor_site_name(prefix: str, module_name: str) -> str:
     """DSL name of a torch module: numeric path parts join their parent with `_`.
 
-    `tensor_site_name("perception", "backbone.0.conv")` → `perception.backbone_0.conv`
-    (a target in `.addt` is a dotted path of names, and names cannot start with a digit).
+    `tensor_site_name("perception", "backbone.0.conv")` → `perception.backbone_0.conv`,
+    `tensor_site_name("perception", "0")` → `perception_0` (a target in `.addt` is a
+    dotted path of names, and a name cannot start with a digit).
     """
-    name = re.sub(r"\.(\d+)", r"_\1", module_name)
-    return f"{prefix}.{name}" if name else prefix
+    out = prefix
+    for part in filter(None, module_name.split(".")):
+        out += f"_{part}" if part.isdigit() else f".{part}"
+    return out
 
 
 def tensor_sites_of(model, prefix: str) -> dict[str, object]:
