@@ -5,13 +5,17 @@ play the stack with a tiny model. CUDA cases run where a GPU is present.
 """
 
 import struct
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from faultkit import bound
 
 torch = pytest.importorskip("torch")
 
+# No pydantic-based imports here (plan, schedule): this module also runs on the GPU machine,
+# whose environment has torch and pytest but not the whole project's dependencies.
+from addt_dsl.runtime.faults.base import Binding  # noqa: E402
+from addt_dsl.runtime.faults.compute import BitFlip  # noqa: E402
 from addt_dsl.runtime.faults.tensor import bit_range, flip_bit_, tensor_site_name, tensor_sites_of  # noqa: E402
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
@@ -38,9 +42,22 @@ class Clock:
         return self.t
 
 
-def _bind(model, target, clock, **settings):
-    return bound("bitflip", target=target, nodes={}, tensor_sites=tensor_sites_of(model, "perception"),
-                 clock=clock, **settings)
+class _Schedule:
+    def __init__(self, kind):
+        self.kind = kind
+
+    def close(self):
+        self.kind.close()
+
+
+def _bind(model, target, clock, start=0.0, end=None, seed=1, **settings):
+    """One `bitflip` fault on a tensor site of `model`, bound as the fault schedule binds it."""
+    fault = SimpleNamespace(index=0, kind="bitflip", target=target, start_s=start, end_s=end,
+                            settings=settings, seed=seed)
+    events = []
+    kind = BitFlip(fault, 0.01, 10.0, lambda t, detail: events.append(SimpleNamespace(time_s=t, detail=detail)))
+    kind.bind(Binding(nodes={}, tensor_sites=tensor_sites_of(model, "perception"), clock=clock))
+    return _Schedule(kind), kind, events
 
 
 def test_site_names_are_dsl_names():
