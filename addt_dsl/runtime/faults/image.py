@@ -91,19 +91,40 @@ class ImageNoise(ImageFault):
     )
     doc = ("Camera sensor noise during the window: additive Gaussian noise per pixel and channel "
            "(`sigma` in 8-bit levels; scaled to 1/255 for float images) and salt-and-pepper "
-           "pixels. Recorded per frame: `value` is sigma, `pixels` the number of salt/pepper pixels.")
+           "pixels. The Gaussian field is drawn once per fault and used at a random offset and "
+           "sign each frame (cheap, and different every frame). Recorded per frame: `value` is "
+           "sigma, `pixels` the number of salt/pepper pixels.")
+
+    # Drawing fresh normals for every pixel of every frame costs more than rendering the
+    # frame; instead a noise field a little larger than the image is drawn once, and each
+    # frame uses it at a random offset and sign (2 x 64 x 64 distinct patterns).
+    MARGIN = 64
+
+    def __init__(self, *a):
+        super().__init__(*a)
+        self._field = None
+
+    def _noise(self, shape) -> np.ndarray:
+        h, w = shape[:2]
+        m = self.MARGIN
+        if self._field is None or self._field.shape[:2] != (h + m, w + m) or self._field.shape[2:] != shape[2:]:
+            self._field = self.rng.standard_normal((h + m, w + m, *shape[2:]), dtype=np.float32)
+        dy, dx = (int(v) for v in self.rng.integers(0, m, 2))
+        sign = 1.0 if self.rng.random() < 0.5 else -1.0
+        return self._field[dy:dy + h, dx:dx + w], sign
 
     def corrupt(self, img):
         top = _full_scale(img)
         sigma = float(self.settings["sigma"]) * top / 255.0
         out = img.astype(np.float32)
         if sigma > 0:
-            out = out + self.rng.normal(0.0, sigma, img.shape).astype(np.float32)
+            noise, sign = self._noise(img.shape)
+            out += noise * np.float32(sign * sigma)
         salted = 0
         frac = float(self.settings["salt"])
         if frac > 0:
             h, w = img.shape[:2]
-            mask = self.rng.random((h, w)) < frac
+            mask = self.rng.random((h, w), dtype=np.float32) < frac
             salted = int(mask.sum())
             white = self.rng.random(salted) < 0.5
             out[mask] = np.where(white, top, 0.0)[:, None]

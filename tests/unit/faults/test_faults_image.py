@@ -101,3 +101,11 @@ def test_frames_without_an_image_pass_unchanged(kind_name):
     frame = lidar_frame(10)
     out, _ = kind.on_frame(frame, 0.0)
     assert out is frame and "image" not in out.data and not events
+
+
+def test_image_noise_differs_from_frame_to_frame():
+    kind, _ = one("image_noise", target="camera", sigma=10.0, seed=5)
+    a = kind.on_frame(camera_frame(), 0.0)[0].data["image"].astype(int)
+    b = kind.on_frame(camera_frame(), 0.1)[0].data["image"].astype(int)
+    clean = camera_frame().data["image"].astype(int)
+    assert np.corrcoef((a - clean).ravel(), (b - clean).ravel())[0, 1] < 0.2
