@@ -226,7 +226,9 @@ class LatticePlanner:
                 if not lat_overlap:
                     continue
                 gap = so - s - 0.5 * (olen + 4.6)
-                if -0.5 * (olen + 4.6) - 2.0 < gap < 0.0 or (0.0 <= gap < 2.0):
+                # Bodies overlap along the road while -(olen + 4.6) < gap < 0 (gap is
+                # front-to-rear); keep 2 m clear at either end.
+                if -(olen + 4.6) - 2.0 < gap < 0.0 or (0.0 <= gap < 2.0):
                     return math.inf  # collision with a predicted object
                 if gap >= 0.0:
                     desired = max(5.0, self.time_gap * v)
