@@ -5,7 +5,7 @@ import struct
 
 import numpy as np
 import pytest
-from faultkit import bound, one, schedule
+from faultkit import bound, schedule
 from hypothesis import given
 from hypothesis import strategies as st
 
