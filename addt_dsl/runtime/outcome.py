@@ -229,11 +229,12 @@ def classify_many(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache | 
 
 
 def outcome_table(pairs: Sequence[tuple[RunResult, str]], by: Sequence[str] = ()):
-    """Counts of each outcome and the mission success rate, grouped by parameters in `by`."""
+    """Counts of each outcome, the mission success rate and the mean number of injections per
+    run (`fault_events`), grouped by the parameters in `by`."""
     import pandas as pd
 
-    rows = [{**{p: r.params.get(p, r.cell.get(p)) for p in by}, "outcome": o, "passed": r.passed}
-            for r, o in pairs]
+    rows = [{**{p: r.params.get(p, r.cell.get(p)) for p in by}, "outcome": o, "passed": r.passed,
+             "fault_events": r.fault_events} for r, o in pairs]
     df = pd.DataFrame(rows)
     if df.empty:
         return df
@@ -246,4 +247,6 @@ def outcome_table(pairs: Sequence[tuple[RunResult, str]], by: Sequence[str] = ()
     grouped = df.groupby(keys)["passed"]
     table["runs"] = grouped.size()
     table["success_rate"] = grouped.mean()
+    # Injections that happened (a flip whose site is never evaluated again is not injected).
+    table["fault_events"] = df.groupby(keys)["fault_events"].mean()
     return table
