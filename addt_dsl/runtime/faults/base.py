@@ -46,8 +46,13 @@ def flip_float64_bit(value: float, bit: int) -> float:
     return out
 
 
+_PLAIN = (float, int, str, bool, type(None))
+
+
 def plain(value):
     """A value as plain Python data, so trace events hash and serialise the same everywhere."""
+    if type(value) in _PLAIN:  # the common case, checked first: this runs per injection
+        return value
     if isinstance(value, (np.floating, np.integer, np.bool_)):
         return value.item()
     if isinstance(value, dict):
@@ -113,8 +118,8 @@ class FaultKind:
 
     def record(self, time_s: float, location, value, **detail) -> None:
         """Record one injection: where (`location`) and what (`value`), plus details."""
-        self._record(time_s, {"location": plain(location), "value": plain(value),
-                              **{k: plain(v) for k, v in detail.items()}})
+        detail["location"], detail["value"] = location, value
+        self._record(time_s, {k: plain(v) for k, v in detail.items()})
 
     # ---- hooks; a kind overrides the ones it needs
     def bind(self, binding: Binding) -> None:

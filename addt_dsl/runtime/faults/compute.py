@@ -113,14 +113,22 @@ class StuckAt(FaultKind):
     keyword = "stuck"
     target_kind = "site"
     params = (ParamSpec("value", None, kind="number", default=0.0, doc="value the site is stuck at (SI)"),)
-    doc = ("A variable or output is stuck at a value during the window. Recorded whenever the "
-           "true value differs from the stuck one: `value` is the stuck value, `before` the true one.")
+    doc = ("A variable or output is stuck at a value during the window. Recorded when the site "
+           "starts to hold the stuck value (and again after the true value has matched it): "
+           "`value` is the stuck value, `before` the true one.")
+
+    def __init__(self, *a):
+        super().__init__(*a)
+        self._holding: set[str] = set()  # sites currently overriding a different true value
 
     def on_value(self, site, value, time_s):
         if not self.active(time_s):
             return value
         stuck = float(self.settings["value"])
-        if value != stuck:
+        if value == stuck:
+            self._holding.discard(site)
+        elif site not in self._holding:
+            self._holding.add(site)
             self.record(time_s, site, stuck, before=value)
         return stuck
 
@@ -133,10 +141,19 @@ class RandomValue(FaultKind):
               ParamSpec("high", None, kind="number", default=1.0, doc="upper bound (SI)"))
     doc = ("A variable or output takes uniform random values in [low, high] during the window. "
            "Recorded per value: `value` is the random value, `before` the true one.")
+    _BATCH = 256
+
+    def __init__(self, *a):
+        super().__init__(*a)
+        self._values: list[float] = []
 
     def on_value(self, site, value, time_s):
         if not self.active(time_s):
             return value
-        out = float(self.rng.uniform(float(self.settings["low"]), float(self.settings["high"])))
+        if not self._values:
+            # Drawn in batches (the same stream as one draw at a time), consumed in order.
+            batch = self.rng.uniform(float(self.settings["low"]), float(self.settings["high"]), self._BATCH)
+            self._values = batch.tolist()[::-1]
+        out = self._values.pop()
         self.record(time_s, site, out, before=value)
         return out
