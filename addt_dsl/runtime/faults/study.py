@@ -151,6 +151,12 @@ def main(argv: list[str] | None = None) -> int:
         print(outcome_table(classify_many(specs, jobs=args.jobs), by=by).to_string())
     else:
         rows = [r for part in _pool_map(_errors_of, specs, args.jobs) for r in part]
+        # Angles read better in degrees (the plan holds SI radians).
+        angles = {p.name for p in plan.params if p.dimension == "angle" and p.name in by}
+        for row in rows:
+            for name in angles:
+                row[f"{name} [deg]"] = round(math.degrees(row[name]), 6)
+        by = [f"{b} [deg]" if b in angles else b for b in by]
         bands = [float(b) for b in args.bands.split(",")]
         print(error_table(rows, by=by, bands=bands).to_string(float_format=lambda x: f"{x:.3f}"))
     return 0
