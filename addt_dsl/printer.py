@@ -101,12 +101,10 @@ def format_const(value: float, dim: Dim) -> str:
 
 
 def _dim_of_name(name: str) -> Dim:
-    if name in units.DIMENSIONS_BY_NAME:
-        return units.DIMENSIONS_BY_NAME[name]
-    m = re.fullmatch(r"m\^(-?\d+) s\^(-?\d+) kg\^(-?\d+) rad\^(-?\d+)", name)
-    if not m:
-        raise PrinterError(f"unknown dimension {name!r}")
-    return Dim(*(int(g) for g in m.groups()))
+    try:
+        return units.dim_from_name(name)
+    except ValueError:
+        raise PrinterError(f"unknown dimension {name!r}") from None
 
 
 def _string(text: str) -> str:
@@ -311,13 +309,23 @@ def _window(lo: float, hi: float | None) -> str:
     return f" during [{format_quantity(lo, units.TIME)}, {format_quantity(hi, units.TIME)}]"
 
 
+def _after_window(window: str, operand: str) -> str:
+    """After `within T` / `after T` an operand starting with '-' or '(' would be read as
+    part of the time bound (`within 5 s - x`): parenthesise it there."""
+    if window and not window.endswith("]") and operand[:1] in "-(":
+        return f"({operand})"
+    return operand
+
+
 def _p_temporal(p: _ExprPrinter, e: E.Temporal, want):
-    return f"{e.op}{_window(e.lo_s, e.hi_s)} {p.format(e.arg, BOOL, TEMPORAL)}", TEMPORAL
+    window = _window(e.lo_s, e.hi_s)
+    return f"{e.op}{window} {_after_window(window, p.format(e.arg, BOOL, TEMPORAL))}", TEMPORAL
 
 
 def _p_until(p: _ExprPrinter, e: E.Until, want):
-    return (f"{p.format(e.left, BOOL, NOT)} until{_window(e.lo_s, e.hi_s)} "
-            f"{p.format(e.right, BOOL, NOT)}"), UNTIL
+    window = _window(e.lo_s, e.hi_s)
+    return (f"{p.format(e.left, BOOL, NOT)} until{window} "
+            f"{_after_window(window, p.format(e.right, BOOL, NOT))}"), UNTIL
 
 
 _NODE_PRINTERS: dict[type, Callable] = {

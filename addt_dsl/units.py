@@ -145,3 +145,23 @@ def format_si(value: float, dim: Dim) -> str:
     if text.endswith(".0"):
         text = text[:-2]
     return f"{text} {unit}" if unit else text
+
+
+def dim_from_name(name: str) -> Dim:
+    """Inverse of `dim_name`: `speed` → SPEED, `quantity in m*s` or `quantity in m^2/(s*kg)` → Dim."""
+    if name in DIMENSIONS_BY_NAME:
+        return DIMENSIONS_BY_NAME[name]
+    if not name.startswith("quantity in "):
+        raise ValueError(f"unknown dimension {name!r}")
+    text = name[len("quantity in "):]
+    num, _, den = text.partition("/")
+    exps = {"m": 0, "kg": 0, "rad": 0, "s": 0}
+    for part, sign in ((num, 1), (den.strip("()"), -1)):
+        for factor in filter(None, part.split("*")):
+            symbol, _, power = factor.partition("^")
+            if symbol == "1":
+                continue
+            if symbol not in exps:
+                raise ValueError(f"unknown dimension {name!r}")
+            exps[symbol] += sign * int(power or 1)
+    return Dim(exps["m"], exps["s"], exps["kg"], exps["rad"])

@@ -950,7 +950,6 @@ def rule_faults(ctx: Context) -> None:
     stack_name = next((c.name for c in clauses if c.keyword == "stack"), DEFAULT_STACK.name)
     stack_cls = STACKS.get(stack_name)
     sites = _fault_sites(ctx, stack_cls) if stack_cls else set()
-    nodes = set(stack_cls.nodes) if stack_cls else set()
     for block in ctx.blocks("faults"):
         for f in block.items:
             cls = FAULTS.get(f.kind)
@@ -959,7 +958,11 @@ def rule_faults(ctx: Context) -> None:
                                *_suggest(f.kind, FAULTS.names()), f"fault kinds: {', '.join(FAULTS.names())}")
                 continue
             target = ".".join(f.target)
-            pool = {"sensor": sensors, "site": sites, "node": nodes}[cls.target_kind]
+            # Each kind says which targets it takes (an image fault only a camera, a bit flip
+            # a site or a whole node); sites come with the ego's stack settings (tensors).
+            pool = cls.valid_targets({name: name for name in sensors}, stack_cls)
+            if cls.target_kind == "site" and stack_cls is not None:
+                pool = (pool - set(stack_cls.fault_sites())) | sites
             if target not in pool:
                 what = {"sensor": "sensors of the ego", "site": "fault sites of the stack",
                         "node": "nodes of the stack"}[cls.target_kind]
@@ -1030,6 +1033,13 @@ def _collision_with(other: str):
 
 BUILTIN_NAMES = ("no collision", "stay in lane", "reach goal", "min SIGNAL", "max SIGNAL")
 
+# `no collision [with X]` → formula; the printer recognises built-ins through this table.
+NO_CLAUSES = {
+    "collision": lambda actor, other: (
+        _always(E.Binary(op=">", left=E.Signal(name=f"clearance({actor})"), right=E.Num(value=0.0)))
+        if other is None else _collision_with(other)),
+}
+
 
 def _builtin(ctx: Context, b: ast.Builtin) -> tuple[E.Expr, str] | None:
     """Lower a built-in oracle to (STL formula, default name)."""
@@ -1039,8 +1049,7 @@ def _builtin(ctx: Context, b: ast.Builtin) -> tuple[E.Expr, str] | None:
                            "built-ins: " + ", ".join(BUILTIN_NAMES))
             return None
         if b.actor is None:
-            return _always(E.Binary(op=">", left=E.Signal(name="clearance(ego)"), right=E.Num(value=0.0))), \
-                "no_collision"
+            return NO_CLAUSES["collision"]("ego", None), "no_collision"
         if b.actor not in ctx.actors_ast or b.actor == "ego":
             ctx.sink.error("E0101", f"unknown agent '{b.actor}'", b.actor_span,
                            *_suggest(b.actor, [a for a in ctx.actors_ast if a != "ego"]))
@@ -1211,6 +1220,11 @@ def _text_of(ctx: Context, span: Span) -> str:
     if span.line - 1 < len(lines):
         line = lines[span.line - 1]
         end = span.end_col - 1 if span.end_line == span.line else len(line)
+        # Parentheses are not tokens of the tree, so a span stops before a statement's
+        # closing brackets: take them back (only brackets and blanks may follow).
+        rest = line[end:].split("#", 1)[0]
+        if rest.strip() and set(rest.strip()) <= set(")]"):
+            end += len(rest.rstrip())
         return line[span.col - 1:end].strip()
     return ""
 

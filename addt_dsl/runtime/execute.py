@@ -193,6 +193,7 @@ class _Run:
         stack_clause = ego.stack
         stack_cls = STACKS.get(stack_clause.name)
         self.stack = stack_cls(resolve_settings(stack_clause.settings, spec.params), self.ctx)
+        self.faults.bind(self.stack, lambda: self.ctx.now)
 
     # ---- queries used by sensors and the stack
     def _road_of(self, actor: ActorPlan) -> _Road:
@@ -279,6 +280,7 @@ def execute(spec: RunSpec, keep_trace: bool = True) -> RunResult:
     try:
         trace = _loop(run)
     finally:
+        run.faults.close()
         run.physics.close()
         close_stack = getattr(run.stack, "close", None)  # e.g. the external bridge's socket
         if close_stack is not None:

@@ -41,6 +41,9 @@ class BevStack:
         ParamSpec("control_rate", units.FREQUENCY, default=100.0, low=10.0, high=1000.0, doc="control rate"),
         ParamSpec("perception_noise", units.LENGTH, default=0.1, low=0.0, high=10.0,
                   doc="position noise of ground-truth perception (1 sigma)"),
+        ParamSpec("track_max_age", units.TIME, default=1.0, low=0.0, high=10.0,
+                  doc="how long the tracker coasts an object it no longer sees (0.15 s: no coasting "
+                      "beyond one lidar period, like a detector without tracking)"),
     )
     nodes = {
         "perception": GroundTruthPerception.sites,
@@ -61,6 +64,11 @@ class BevStack:
             sites |= set(TENSOR_SITES)
         return sites
 
+    def tensor_sites(self) -> dict:
+        """Tensor fault sites (site name → torch module); empty unless perception is learned."""
+        modules = getattr(self.perception, "tensor_modules", None)
+        return modules() if modules else {}
+
     def __init__(self, settings: dict, ctx):
         self.settings = {p.name: settings.get(p.name, p.default) for p in self.params}
         self.ctx = ctx
@@ -68,7 +76,7 @@ class BevStack:
         self.latency_models = load_models()
         self.measured = self.settings["latency"] == "measured"
         self.perception = self._make_perception()
-        self.tracker = Tracker()
+        self.tracker = Tracker(float(self.settings["track_max_age"]))
         self.planner = LatticePlanner(self.settings)
         self.controller = Controller(self.settings, ctx.wheelbase_m)
         self.planner_period = 1.0 / float(self.settings["planner_rate"])
@@ -116,6 +124,10 @@ class BevStack:
         sensor = self.ctx.sensor(frame.sensor)
         objs = self.perception.run(frame, self.ctx.world, sensor, self.ctx.ego_pose(), self.corrupt)
         self.objects_seen = len(objs)
+        # What perception reported, in world coordinates: perception-error studies compare it
+        # with the ground truth in the trace (addt_dsl.runtime.faults.study).
+        self.ctx.event("detections", sensor=frame.sensor, stamp_s=frame.stamp_s,
+                       objects=[[o.x, o.y, o.heading] for o in objs])  # lists: JSON-stable (bridge)
         lat = self._latency("perception", len(objs), started, arrive_s)
         self.bus.publish("objects", objs, frame.stamp_s, arrive_s + lat)
 

@@ -162,6 +162,10 @@ class LearnedPerception:
     def fault_sites(self) -> tuple[str, ...]:
         return self.tensor_sites
 
+    def tensor_modules(self) -> dict[str, nn.Module]:
+        """Site name → torch module, for the fault engine's `bitflip ... tensor` hooks."""
+        return {f"perception.{name}": layer for name, layer in self._layers.items()}
+
     def _layer(self, site: str) -> nn.Conv2d:
         name = site.removeprefix("perception.")
         if name not in self._layers:

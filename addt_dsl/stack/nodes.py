@@ -81,7 +81,10 @@ class GroundTruthPerception:
             wx = x + cos_h * px - sin_h * py
             wy = y + sin_h * px + cos_h * py
             objs.append(Obj(wx, wy, gt.heading - yaw_err, vx_w, vy_w, gt.length_m, gt.width_m))
-        return objs
+        # The detection count bounds the list the downstream nodes read: a corrupted count
+        # hides objects (a NaN or infinite count raises, which the loop records as detected).
+        count = int(corrupt("perception.count", float(len(objs))))
+        return objs[:max(0, count)]
 
 
 # ---------------------------------------------------------------- tracking
@@ -102,7 +105,8 @@ class Tracker:
     velocity_gain = 0.35
     max_speed = 45.0  # [m/s] gate for a track whose velocity is not yet known
 
-    def __init__(self):
+    def __init__(self, max_age_s: float = 1.0):
+        self.max_age_s = max_age_s
         self.tracks: list[tuple[Obj, float]] = []  # (object, last update time)
 
     def update(self, objs: list[Obj], stamp_s: float, corrupt) -> None:
@@ -181,7 +185,7 @@ class LatticePlanner:
     """
 
     name = "planner"
-    sites = ("planner.speed", "planner.t_target")
+    sites = ("planner.speed", "planner.t_target", "planner.t_start", "planner.path_length", "planner.cost")
     horizon_s = 5.0
     dt_s = 0.5
 
@@ -204,7 +208,8 @@ class LatticePlanner:
         for lane in candidates_lanes:
             t_lane = float(road.lane_center_t(lane, s0))
             for speed in self._speeds(ego_speed):
-                cost = self._cost(lane, t_lane, speed, s0, t0, ego_speed, objs_sc, current, lanes, stamp_s)
+                cost = corrupt("planner.cost",
+                               self._cost(lane, t_lane, speed, s0, t0, ego_speed, objs_sc, current, lanes, stamp_s))
                 if best is None or cost < best[0]:
                     best = (cost, lane, t_lane, speed)
         _, lane, t_lane, speed = best
@@ -218,6 +223,9 @@ class LatticePlanner:
         if self.maneuver is None or self.maneuver[0] != lane:
             self.maneuver = (lane, s0, t0, max(30.0, 3.0 * ego_speed))
         _, s_start, t_start, lateral_len = self.maneuver
+        # The published trajectory: lateral path from (s_start, t_start) to t_target over path_length.
+        t_start = corrupt("planner.t_start", t_start)
+        lateral_len = corrupt("planner.path_length", lateral_len)
         return Plan(lane, t_lane, speed, s_start, t_start, lateral_len, stamp_s)
 
     def _speeds(self, ego_speed: float):

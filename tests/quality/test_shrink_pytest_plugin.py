@@ -41,9 +41,12 @@ pytestmark = pytest.mark.slow
 CI_VARS = ("CI", "GITHUB_ACTIONS", "GITLAB_CI", "BUILD_ID", "TF_BUILD", "CIRCLECI", "JENKINS_URL")
 
 
+# With the package installed the entry point loads the plugin; `-p` again would register it twice.
+PLUGIN_ARGS = [] if any(ep.name == "addt" for ep in entry_points(group="pytest11")) else ["-p", "addt_dsl.pytest_plugin"]
+
+
 def _pytest(project: Path, *args: str, github: bool = False) -> subprocess.CompletedProcess:
-    installed = any(ep.name == "addt" for ep in entry_points(group="pytest11"))
-    plugin = [] if installed else ["-p", "addt_dsl.pytest_plugin"]
+    plugin = PLUGIN_ARGS
     # Hypothesis loads its `ci` profile by itself on a CI machine: start from a clean slate.
     env = {k: v for k, v in os.environ.items() if k not in CI_VARS}
     env["PYTHONPATH"] = str(ROOT)
@@ -112,7 +115,7 @@ def test_failure_is_shrunk_reported_and_replayed_first(project):
 
 
 def test_project_suite_does_not_collect_examples():
-    out = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "addt_dsl.pytest_plugin",
+    out = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", *PLUGIN_ARGS,
                           "tests/unit/search"], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
                          capture_output=True, text=True)
     assert ".addt" not in out.stdout

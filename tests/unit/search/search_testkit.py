@@ -157,8 +157,9 @@ DIMS = (units.LENGTH, units.TIME, units.SPEED, units.ACCELERATION, units.ANGLE, 
 
 @st.composite
 def windows(draw):
-    lo = draw(st.one_of(st.just(0.0), nonneg))
-    hi = draw(st.one_of(st.none(), nonneg.map(lambda d: lo + d)))
+    # Windows must end inside the scenario (the compiler checks it): the kitchen sink lasts 12 s.
+    lo = draw(st.one_of(st.just(0.0), st.floats(0.0, 6.0, allow_nan=False)))
+    hi = draw(st.one_of(st.none(), st.floats(0.0, 6.0, allow_nan=False).map(lambda d: lo + d)))
     return lo, hi
 
 
@@ -184,10 +185,14 @@ def formulas(params: dict[str, units.Dim], depth: int = 3):
 # ---------------------------------------------------------------- faults and run specs
 
 def _fault_targets(plan: ScenarioPlan, kind_cls) -> list[str]:
+    """Targets the compiler accepts for this kind (each kind says which it takes)."""
     ego = plan.ego
     stack = STACKS.get(ego.stack.name)
-    return sorted({"sensor": {s.name for s in ego.sensors}, "site": stack.fault_sites(),
-                   "node": set(stack.nodes)}[kind_cls.target_kind])
+    pool = kind_cls.valid_targets({s.name: s.name for s in ego.sensors}, stack)
+    if kind_cls.target_kind == "site":
+        settings = {k: v for k, v in ego.stack.settings.items() if isinstance(v, str)}
+        pool = (pool - set(stack.fault_sites())) | set(stack.fault_sites(settings))
+    return sorted(pool)
 
 
 def _setting_value(spec):
@@ -204,7 +209,7 @@ def _setting_value(spec):
 def concrete_faults(draw, plan: ScenarioPlan, max_faults: int = 4):
     out = []
     for i in range(draw(st.integers(0, max_faults))):
-        cls = draw(st.sampled_from(FAULTS.classes()))
+        cls = draw(st.sampled_from([c for c in FAULTS.classes() if _fault_targets(plan, c)]))
         target = draw(st.sampled_from(_fault_targets(plan, cls)))
         settings = {}
         for spec in cls.params:

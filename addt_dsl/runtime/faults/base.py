@@ -1,0 +1,199 @@
+"""The fault base class, the schedule that applies faults, and bit-level helpers.
+
+A fault kind is one small class registered under its DSL keyword. It declares its
+settings (`ParamSpec`s), which targets it accepts (`valid_targets`, checked by the
+compiler) and overrides the hooks it needs:
+
+- `before_capture(sensor, t)`  the loop, before a sensor captures (extrinsics);
+- `on_frame(frame, t)`         the loop, after capture: drop, delay, skew, corrupt data;
+- `on_value(site, value, t)`   the stack, for every value through a scalar fault site;
+- `extra_latency(node, t, base)` the stack, when a node publishes;
+- `bind(binding)`              once the stack exists: stack sites, tensor sites, clock;
+- `close()`                    at the end of the run: undo persistent side effects.
+
+Every injection is recorded as a trace event `fault` with the same fields for every
+kind: `index`, `kind`, `target`, `location` (where: sensor, site, node, tensor element)
+and `value` (what was injected), plus kind-specific details.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from addt_dsl.registry import FAULTS, ParamSpec
+
+# Bit ranges [lo, hi) of the IEEE-754 fields, by storage width in bits.
+IEEE_FIELDS: dict[int, dict[str, tuple[int, int]]] = {
+    64: {"sign": (63, 64), "exponent": (52, 63), "mantissa": (0, 52), "any": (0, 64)},
+    32: {"sign": (31, 32), "exponent": (23, 31), "mantissa": (0, 23), "any": (0, 32)},
+    16: {"sign": (15, 16), "exponent": (10, 15), "mantissa": (0, 10), "any": (0, 16)},
+}
+# bfloat16 shares float32's exponent width: 8 exponent bits, 7 mantissa bits.
+IEEE_FIELDS_BF16 = {"sign": (15, 16), "exponent": (7, 15), "mantissa": (0, 7), "any": (0, 16)}
+BIT_FIELDS_F64 = IEEE_FIELDS[64]
+FIELD_NAMES = ("any", "sign", "exponent", "mantissa")
+
+
+def flip_float64_bit(value: float, bit: int) -> float:
+    """`value` with bit `bit` (0 = least significant mantissa bit, 63 = sign) inverted."""
+    (bits,) = struct.unpack("<Q", struct.pack("<d", value))
+    (out,) = struct.unpack("<d", struct.pack("<Q", bits ^ (1 << bit)))
+    return out
+
+
+_PLAIN = (float, int, str, bool, type(None))
+
+
+def plain(value):
+    """A value as plain Python data, so trace events hash and serialise the same everywhere."""
+    if type(value) in _PLAIN:  # the common case, checked first: this runs per injection
+        return value
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    return value
+
+
+@dataclass
+class Binding:
+    """What a fault may know about the running stack once it exists.
+
+    `nodes` maps node name → scalar site names; `tensor_sites` maps a tensor site name
+    (`perception.backbone_0`) → the torch module that owns it (empty without a learned
+    model); `clock()` is the current simulated time [s].
+    """
+
+    nodes: Mapping[str, Iterable[str]] = field(default_factory=dict)
+    tensor_sites: Mapping[str, object] = field(default_factory=dict)
+    clock: Callable[[], float] = lambda: 0.0
+
+    def sites(self) -> set[str]:
+        return {s for sites in self.nodes.values() for s in sites}
+
+
+class FaultKind:
+    keyword = ""
+    target_kind = "sensor"  # "sensor" | "site" (a stack variable/output/tensor) | "node"
+    # For sensor faults: the sensor keywords the kind applies to (None: any sensor).
+    sensor_kinds: tuple[str, ...] | None = None
+    params: tuple[ParamSpec, ...] = ()
+    doc = ""
+
+    def __init__(self, fault, step_s: float, duration_s: float, record):
+        self.fault = fault
+        self.settings = {p.name: fault.settings.get(p.name, p.default) for p in self.params}
+        self.start = fault.start_s
+        self.end = fault.end_s if fault.end_s is not None else math.inf
+        self.instant = fault.end_s is not None and fault.end_s == fault.start_s
+        if self.instant:
+            self.end = fault.start_s + step_s * 0.999
+        # Each fault draws from its own generator: adding or removing another fault never
+        # changes when or how this one fires.
+        self.rng = np.random.default_rng(fault.seed)
+        self._record = record  # callable(time_s, detail dict)
+        self.duration_s = duration_s
+
+    # ---- compile-time target check (the compiler calls this; no runtime state)
+    @classmethod
+    def valid_targets(cls, sensors: Mapping[str, str], stack_cls) -> set[str]:
+        """Targets this kind accepts, given the ego's sensors (name → keyword) and stack class."""
+        if cls.target_kind == "sensor":
+            return {n for n, kw in sensors.items() if cls.sensor_kinds is None or kw in cls.sensor_kinds}
+        if stack_cls is None:
+            return set()
+        if cls.target_kind == "node":
+            return set(stack_cls.nodes)
+        return set(stack_cls.fault_sites()) | set(getattr(stack_cls, "static_tensor_sites", lambda: ())())
+
+    def active(self, time_s: float) -> bool:
+        return self.start <= time_s <= self.end
+
+    def record(self, time_s: float, location, value, **detail) -> None:
+        """Record one injection: where (`location`) and what (`value`), plus details."""
+        detail["location"], detail["value"] = location, value
+        self._record(time_s, {k: plain(v) for k, v in detail.items()})
+
+    # ---- hooks; a kind overrides the ones it needs
+    def bind(self, binding: Binding) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+    def before_capture(self, sensor, time_s: float) -> None:
+        pass
+
+    def on_frame(self, frame, time_s: float):
+        """Return (frame or None if dropped, extra delivery delay [s])."""
+        return frame, 0.0
+
+    def on_value(self, site: str, value: float, time_s: float) -> float:
+        return value
+
+    def extra_latency(self, node: str, time_s: float, base_s: float) -> float:
+        return 0.0
+
+
+class FaultSchedule:
+    """The concrete faults of one run, indexed by target for the loop's and stack's hooks.
+
+    A fault on a node name (`bitflip control count 3`) also applies to the node's scalar
+    sites once the schedule is bound to the stack (`bind`).
+    """
+
+    def __init__(self, faults, step_s: float, duration_s: float, events: list):
+        from addt_dsl.runtime.trace import Event
+
+        self.by_target: dict[str, list[FaultKind]] = {}
+        self.events = events
+        self.kinds: list[FaultKind] = []
+        for f in faults:
+            cls = FAULTS.get(f.kind)
+
+            def record(time_s, detail, _f=f):
+                events.append(Event(time_s, "fault", {"index": _f.index, "kind": _f.kind,
+                                                      "target": _f.target, **detail}))
+
+            kind = cls(f, step_s, duration_s, record)
+            self.kinds.append(kind)
+            self.by_target.setdefault(f.target, []).append(kind)
+
+    def bind(self, stack, clock: Callable[[], float]) -> None:
+        """Tell every fault about the stack: its nodes and sites, its tensor sites, the clock.
+
+        Scalar-site faults on a node are added to each of the node's sites. A site fault
+        whose target the stack does not have is an error (the compiler checks targets
+        against the stack class; this catches a plan run against a different stack).
+        """
+        nodes = {n: tuple(s) for n, s in getattr(stack, "nodes", {}).items()}
+        tensor_sites = stack.tensor_sites() if hasattr(stack, "tensor_sites") else {}
+        binding = Binding(nodes, tensor_sites, clock)
+        known = binding.sites() | set(nodes) | set(tensor_sites)
+        for kind in self.kinds:
+            if kind.target_kind == "site" and kind.fault.target not in known:
+                raise ValueError(f"fault '{kind.fault.kind}' targets '{kind.fault.target}', which the stack "
+                                 f"does not have (sites: {', '.join(sorted(known))})")
+            kind.bind(binding)
+        for node, sites in nodes.items():
+            node_faults = [k for k in self.by_target.get(node, []) if k.target_kind == "site"]
+            for site in sites if node_faults else ():
+                self.by_target.setdefault(site, []).extend(node_faults)
+
+    def close(self) -> None:
+        """Undo persistent side effects (e.g. flipped weights of a model cached across runs)."""
+        for kind in reversed(self.kinds):
+            kind.close()
+
+    def for_target(self, target: str) -> list[FaultKind]:
+        return self.by_target.get(target, [])
+
+    def targets(self) -> set[str]:
+        return set(self.by_target)

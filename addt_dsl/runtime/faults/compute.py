@@ -1,0 +1,159 @@
+"""Compute faults: bit flips, stuck-at and random values in the stack's variables and tensors."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from addt_dsl.registry import FAULTS, ParamSpec
+from addt_dsl.runtime.faults.base import BIT_FIELDS_F64, FIELD_NAMES, Binding, FaultKind, flip_float64_bit
+
+
+@FAULTS.register
+class BitFlip(FaultKind):
+    keyword = "bitflip"
+    target_kind = "site"
+    params = (
+        ParamSpec("count", None, kind="int", default=1, low=1, high=10000, doc="number of flips in the window"),
+        ParamSpec("bit", None, kind="int", default=-1, low=-1, high=63,
+                  doc="bit index, 0 = least significant (-1: drawn from `field`)"),
+        ParamSpec("field", None, kind="word", default="any", choices=FIELD_NAMES,
+                  doc="IEEE-754 field the random bit is drawn from"),
+        ParamSpec("tensor", None, kind="word", default="weights", choices=("weights", "activations"),
+                  doc="for tensor sites: weights (persistent) or activations (one inference)"),
+    )
+    doc = ("Flip bits, as a radiation-induced or marginal-hardware fault would. `count` flips "
+           "happen at instants drawn from the fault's seed inside the window (all at the instant "
+           "for `at`). On a scalar site (`control.steer`) each flip inverts one bit of the "
+           "float64 value passing through the site at or after its instant (transient: the "
+           "next value is clean unless the node keeps it as state, like `control.integral`). "
+           "On a node (`control`) each flip goes to one of the node's sites, drawn uniformly. "
+           "On a tensor site of a learned model (`perception.backbone_0`) each flip inverts one "
+           "bit of one element of the layer's weights (`tensor weights`, persistent) or of its "
+           "output in one inference (`tensor activations`). Recorded per flip: `location` (site, "
+           "or `layer:param[index]`), `value` (after), `before`, `bit`.")
+
+    @classmethod
+    def valid_targets(cls, sensors, stack_cls):
+        return super().valid_targets(sensors, stack_cls) | (set(stack_cls.nodes) if stack_cls else set())
+
+    def __init__(self, *a):
+        super().__init__(*a)
+        end = min(self.end, self.duration_s)
+        n = int(self.settings["count"])
+        # Flip instants are fixed up front from the fault's seed: same RunSpec, same flips.
+        self.times = (np.sort(self.start + (end - self.start) * self.rng.random(n))
+                      if end > self.start and not self.instant else np.full(n, float(self.start)))
+        self._queues: dict[str, list[float]] = {self.fault.target: list(self.times)}
+        self._next = 0  # tensor sites: flips consumed so far
+        self._tensor = None
+        self.clock = lambda: 0.0
+
+    def bind(self, binding: Binding) -> None:
+        self.clock = binding.clock
+        target = self.fault.target
+        if target in binding.nodes:
+            # A node target: each flip lands on one of the node's sites, drawn up front.
+            sites = sorted(binding.nodes[target])
+            picks = self.rng.integers(len(sites), size=len(self.times))
+            self._queues = {s: [float(t) for t, p in zip(self.times, picks) if p == i] for i, s in enumerate(sites)}
+        elif target in binding.tensor_sites and target not in binding.sites():
+            from addt_dsl.runtime.faults.tensor import TensorFlipper
+
+            self._queues = {}
+            self._tensor = TensorFlipper(self, target, binding.tensor_sites[target], str(self.settings["tensor"]))
+
+    def close(self) -> None:
+        if self._tensor is not None:
+            self._tensor.close()
+
+    # ---- bit choice
+    def _bit_in(self, lo: int, hi: int, width: int) -> int:
+        bit = int(self.settings["bit"])
+        if bit >= 0:
+            if bit >= width:
+                raise ValueError(f"bit {bit} does not exist in a {width}-bit value")
+            return bit
+        return int(self.rng.integers(lo, hi))
+
+    def bit_for(self, dtype) -> int:
+        """A bit for a tensor element of `dtype` (index, or drawn from the IEEE field)."""
+        import torch
+
+        from addt_dsl.runtime.faults.tensor import bit_range
+
+        width = torch.finfo(dtype).bits
+        return self._bit_in(*bit_range(dtype, str(self.settings["field"])), width)
+
+    def due(self) -> int:
+        """Tensor sites: how many flips are due now (and mark them consumed)."""
+        now = self.clock() + 1e-12
+        n = 0
+        while self._next < len(self.times) and self.times[self._next] <= now:
+            self._next += 1
+            n += 1
+        return n
+
+    # ---- scalar sites
+    def on_value(self, site, value, time_s):
+        queue = self._queues.get(site)
+        if not queue or queue[0] > time_s + 1e-12:
+            return value
+        out = value
+        while queue and queue[0] <= time_s + 1e-12:
+            queue.pop(0)
+            bit = self._bit_in(*BIT_FIELDS_F64[str(self.settings["field"])], 64)
+            before = out
+            out = flip_float64_bit(out, bit)
+            self.record(time_s, site, out, bit=bit, before=before)
+        return out
+
+
+@FAULTS.register
+class StuckAt(FaultKind):
+    keyword = "stuck"
+    target_kind = "site"
+    params = (ParamSpec("value", None, kind="number", default=0.0, doc="value the site is stuck at (SI)"),)
+    doc = ("A variable or output is stuck at a value during the window. Recorded when the site "
+           "starts to hold the stuck value (and again after the true value has matched it): "
+           "`value` is the stuck value, `before` the true one.")
+
+    def __init__(self, *a):
+        super().__init__(*a)
+        self._holding: set[str] = set()  # sites currently overriding a different true value
+
+    def on_value(self, site, value, time_s):
+        if not self.active(time_s):
+            return value
+        stuck = float(self.settings["value"])
+        if value == stuck:
+            self._holding.discard(site)
+        elif site not in self._holding:
+            self._holding.add(site)
+            self.record(time_s, site, stuck, before=value)
+        return stuck
+
+
+@FAULTS.register
+class RandomValue(FaultKind):
+    keyword = "random_value"
+    target_kind = "site"
+    params = (ParamSpec("low", None, kind="number", default=-1.0, doc="lower bound (SI)"),
+              ParamSpec("high", None, kind="number", default=1.0, doc="upper bound (SI)"))
+    doc = ("A variable or output takes uniform random values in [low, high] during the window. "
+           "Recorded per value: `value` is the random value, `before` the true one.")
+    _BATCH = 256
+
+    def __init__(self, *a):
+        super().__init__(*a)
+        self._values: list[float] = []
+
+    def on_value(self, site, value, time_s):
+        if not self.active(time_s):
+            return value
+        if not self._values:
+            # Drawn in batches (the same stream as one draw at a time), consumed in order.
+            batch = self.rng.uniform(float(self.settings["low"]), float(self.settings["high"]), self._BATCH)
+            self._values = batch.tolist()[::-1]
+        out = self._values.pop()
+        self.record(time_s, site, out, before=value)
+        return out

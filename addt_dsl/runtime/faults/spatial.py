@@ -1,0 +1,100 @@
+"""Sensor spatial faults: a moved mount (shift, drift) and additive noise on the data."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from addt_dsl import units
+from addt_dsl.registry import FAULTS, ParamSpec
+from addt_dsl.runtime.faults.base import FaultKind
+
+_AXES = ("x", "y", "z", "roll", "pitch", "yaw")
+
+
+@FAULTS.register
+class Shift(FaultKind):
+    keyword = "shift"
+    params = tuple(ParamSpec(a, units.LENGTH if a in "xyz" else units.ANGLE, default=0.0,
+                             low=-10.0 if a in "xyz" else -math.pi, high=10.0 if a in "xyz" else math.pi,
+                             doc=f"{a} offset of the actual mount from the calibrated one")
+                   for a in _AXES) + (
+        ParamSpec("ramp", units.TIME, default=0.0, low=0.0, doc="drift: reach the full shift over this time"),)
+    doc = ("The sensor's mount moves (a sudden shift, or a linear drift reaching the full shift "
+           "after `ramp`) while the stack keeps the calibrated extrinsics, so detections are "
+           "misplaced more the farther away they are. The shift stays after the window opens "
+           "(a mount does not move back). Recorded when it starts and when a drift completes: "
+           "`value` is the offset per axis [m, rad].")
+
+    def __init__(self, *a):
+        super().__init__(*a)
+        self._offset = {ax: float(self.settings[ax]) for ax in _AXES}
+        self._state = "before"  # before → drifting → full
+
+    def before_capture(self, sensor, time_s):
+        if time_s < self.start:
+            return
+        ramp = float(self.settings["ramp"])
+        k = 1.0 if ramp <= 0 else min(1.0, (time_s - self.start) / ramp)
+        sensor.actual = sensor.nominal.shifted(**{ax: k * v for ax, v in self._offset.items()})
+        state = "full" if k >= 1.0 else "drifting"
+        if state != self._state:
+            self._state = state
+            self.record(time_s, sensor.name, {ax: k * v for ax, v in self._offset.items() if v},
+                        ramp_s=ramp, fraction=k)
+
+
+@FAULTS.register
+class Noise(FaultKind):
+    keyword = "noise"
+    sensor_kinds = ("lidar", "gnss")
+    params = (
+        ParamSpec("range", units.LENGTH, default=0.0, low=0.0, high=50.0,
+                  doc="lidar: Gaussian range noise per return (1 sigma)"),
+        ParamSpec("dropout", units.DIMENSIONLESS, default=0.0, low=0.0, high=1.0,
+                  doc="lidar: fraction of returns lost (independently per point)"),
+        ParamSpec("position", units.LENGTH, default=0.0, low=0.0, high=1000.0,
+                  doc="gnss: Gaussian position noise added to x and y (1 sigma)"),
+    )
+    doc = ("Additive sensor noise during the window. Lidar: each return's range gets Gaussian "
+           "noise (`range`) and returns are lost with probability `dropout` (an object with "
+           "fewer returns than the perception's minimum is missed). GNSS: Gaussian noise on the "
+           "position fix. Recorded per frame: `value` is the RMS range error [m] and the number "
+           "of returns lost (lidar) or the position error [m] (gnss).")
+
+    def on_frame(self, frame, time_s):
+        if not self.active(time_s):
+            return frame, 0.0
+        data = frame.data
+        if "points" in data:
+            frame.data = self._lidar(data, frame.sensor, time_s)
+        elif "x" in data and "y" in data:
+            sigma = float(self.settings["position"])
+            dx, dy = self.rng.normal(0.0, sigma, 2) if sigma > 0 else (0.0, 0.0)
+            frame.data = {**data, "x": data["x"] + dx, "y": data["y"] + dy}
+            self.record(time_s, frame.sensor, math.hypot(dx, dy), dx=dx, dy=dy)
+        return frame, 0.0
+
+    def _lidar(self, data: dict, sensor: str, time_s: float) -> dict:
+        pts = data["points"]
+        n = len(pts)
+        out = dict(data)
+        sigma, dropout = float(self.settings["range"]), float(self.settings["dropout"])
+        rms = 0.0
+        if sigma > 0 and n:
+            r = np.linalg.norm(pts, axis=1)
+            noise = self.rng.normal(0.0, sigma, n)
+            # Move each point along its ray; a return cannot come from behind the sensor.
+            scale = np.maximum(r + noise, 0.0) / np.maximum(r, 1e-9)
+            pts = pts * scale[:, None]
+            rms = float(np.sqrt(np.mean(noise * noise)))
+        lost = 0
+        if dropout > 0 and n:
+            keep = self.rng.random(n) >= dropout
+            lost = int(n - keep.sum())
+            pts = pts[keep]
+            out = {k: (v[keep] if isinstance(v, np.ndarray) and len(v) == n else v) for k, v in out.items()}
+        out["points"] = pts
+        self.record(time_s, sensor, rms, returns_lost=lost, returns=n)
+        return out

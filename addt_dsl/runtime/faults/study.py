@@ -1,0 +1,166 @@
+"""Fault studies over a suite: outcome classes, success tables, perception errors.
+
+    python -m addt_dsl.runtime.faults.study classify FILE [--jobs N] [--by P,Q]
+        every run of FILE's sweep classified (masked / silent / detected / hazard) against
+        its fault-free twin; counts and success rate per value of the grid parameters.
+    python -m addt_dsl.runtime.faults.study table RUNS_CSV --by P,Q
+        success rate per cell from an `addtc FILE --out DIR` run (DIR/runs.csv).
+    python -m addt_dsl.runtime.faults.study perception FILE [--jobs N] [--by P] [--bands 0,20,40,60,80]
+        mean position and heading error of detected objects by distance band, per value of
+        the grid parameters (e.g. a sensor yaw shift).
+
+Perception errors come from the `detections` events the stack records (what perception
+reported, world frame, with the frame's timestamp) compared with the ground truth in the
+trace at that instant; detections are matched to actors by minimum total distance.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+
+DEFAULT_BANDS_M = (0.0, 20.0, 40.0, 60.0, 80.0)
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def perception_errors(trace, gate_m: float = 15.0) -> list[dict]:
+    """One row per matched detection: time, actor, range from the ego [m], errors [m, rad]."""
+    from scipy.optimize import linear_sum_assignment
+
+    others = [n for n in trace.actors if n != "ego"]
+    ego = trace.actors["ego"]
+    rows = []
+    n = len(trace.time)
+    for e in trace.events:
+        if e.kind != "detections" or not e.detail["objects"] or not others:
+            continue
+        k = int(round(e.detail["stamp_s"] / trace.period_s))
+        if not 0 <= k < n:
+            continue
+        gt = np.array([[trace.actors[a].x[k], trace.actors[a].y[k]] for a in others])
+        det = np.array([[o[0], o[1]] for o in e.detail["objects"]])
+        cost = np.hypot(det[:, None, 0] - gt[None, :, 0], det[:, None, 1] - gt[None, :, 1])
+        for i, j in zip(*linear_sum_assignment(cost)):
+            if cost[i, j] > gate_m:
+                continue  # a ghost or a miss, not a misplaced detection
+            actor = trace.actors[others[j]]
+            rows.append({
+                "time_s": float(trace.time[k]), "actor": others[j],
+                "range_m": float(math.hypot(actor.x[k] - ego.x[k], actor.y[k] - ego.y[k])),
+                "position_error_m": float(cost[i, j]),
+                "heading_error_rad": abs(_wrap(float(e.detail["objects"][i][2]) - float(actor.heading[k]))),
+            })
+    return rows
+
+
+def error_table(rows: Sequence[dict], by: Sequence[str] = (), bands: Sequence[float] = DEFAULT_BANDS_M):
+    """Mean position error [m] and heading error [deg] per distance band (and `by` columns)."""
+    import pandas as pd
+
+    df = pd.DataFrame(rows)
+    if df.empty:
+        return df
+    labels = [f"{int(a)}-{int(b)} m" for a, b in zip(bands[:-1], bands[1:])]
+    df["band"] = pd.cut(df["range_m"], list(bands), labels=labels, right=False)
+    df["heading_error_deg"] = np.degrees(df["heading_error_rad"])
+    grouped = df.groupby([*by, "band"], observed=True)
+    return grouped.agg(position_error_m=("position_error_m", "mean"),
+                       heading_error_deg=("heading_error_deg", "mean"),
+                       detections=("position_error_m", "size"))
+
+
+def success_table(runs, by: Sequence[str]):
+    """Success rate per cell of an `addtc --out` runs table (columns `param.NAME`, `passed`)."""
+    cols = [f"param.{b}" for b in by]
+    table = runs.groupby(cols)["passed"].agg(["size", "sum", "mean"])
+    table.columns = ["runs", "passed", "success_rate"]
+    table.index.names = list(by)
+    return table
+
+
+# ---------------------------------------------------------------- running a suite
+
+def _compile(path: str):
+    from addt_dsl.compiler import compile_file
+    from addt_dsl.diagnostics import render_text
+
+    result = compile_file(path)
+    if not result.ok:
+        print(render_text(result.diagnostics, result.sources), file=sys.stderr)
+        raise SystemExit(2)
+    return result.plan
+
+
+def _errors_of(spec):
+    from addt_dsl.runtime.execute import execute
+
+    result = execute(spec, keep_trace=True)
+    return [{**spec.params, **row} for row in perception_errors(result.trace)]
+
+
+def _pool_map(fn, items, jobs):
+    import multiprocessing as mp
+    import os
+
+    if jobs <= 1:
+        return [fn(x) for x in items]
+    with mp.get_context("fork" if os.name == "posix" else "spawn").Pool(jobs, maxtasksperchild=200) as pool:
+        return pool.map(fn, items, chunksize=1)
+
+
+def main(argv: list[str] | None = None) -> int:
+    import pandas as pd
+
+    parser = argparse.ArgumentParser(prog="python -m addt_dsl.runtime.faults.study")
+    sub = parser.add_subparsers(dest="what", required=True)
+    for name in ("classify", "perception"):
+        p = sub.add_parser(name)
+        p.add_argument("file")
+        p.add_argument("--jobs", type=int, default=1)
+        p.add_argument("--by", default="", help="grid parameters to group by (default: all grid axes)")
+        p.add_argument("--limit", type=int, default=0)
+        if name == "perception":
+            p.add_argument("--bands", default=",".join(f"{b:g}" for b in DEFAULT_BANDS_M))
+    t = sub.add_parser("table")
+    t.add_argument("runs_csv")
+    t.add_argument("--by", required=True)
+    args = parser.parse_args(argv)
+    pd.set_option("display.width", 200)
+
+    if args.what == "table":
+        print(success_table(pd.read_csv(args.runs_csv), args.by.split(",")).to_string())
+        return 0
+
+    from addt_dsl.sweep import expand
+
+    plan = _compile(args.file)
+    specs = expand(plan).specs
+    if args.limit:
+        specs = specs[: args.limit]
+    by = args.by.split(",") if args.by else [g.param for g in plan.sweep.grid]
+    if args.what == "classify":
+        from addt_dsl.runtime.outcome import classify_many, outcome_table
+
+        print(outcome_table(classify_many(specs, jobs=args.jobs), by=by).to_string())
+    else:
+        rows = [r for part in _pool_map(_errors_of, specs, args.jobs) for r in part]
+        # Angles read better in degrees (the plan holds SI radians).
+        angles = {p.name for p in plan.params if p.dimension == "angle" and p.name in by}
+        for row in rows:
+            for name in angles:
+                row[f"{name} [deg]"] = round(math.degrees(row[name]), 6)
+        by = [f"{b} [deg]" if b in angles else b for b in by]
+        bands = [float(b) for b in args.bands.split(",")]
+        print(error_table(rows, by=by, bands=bands).to_string(float_format=lambda x: f"{x:.3f}"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

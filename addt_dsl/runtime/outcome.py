@@ -1,0 +1,252 @@
+"""Outcome classes of faulty runs, against the fault-free twin run ("golden run").
+
+For a RunSpec with faults, the golden run is the same RunSpec with `faults=[]` (same
+parameters, same seed, so the same perception noise and traffic). A faulty run is
+
+- `detected`: the stack raised (exception, watchdog on NaN/inf commands) or the vehicle
+  state became non-finite: `RunResult.status == "detected"`;
+- `masked`:   no observable difference from the golden run: the ego trajectory (x, y,
+  heading, speed) and the stack's outputs (steer, accel commands) agree sample by sample
+  within `TOLERANCE` and the runs have the same length;
+- `hazard`:   outputs differed and a hard oracle failed;
+- `silent`:   outputs differed and no oracle failed (silent data corruption);
+- `error`:    the runner itself failed (a bug in the twin, not an outcome of the fault).
+
+A masked run that fails an oracle is still masked: the golden run fails it as well, so
+the failure is the scenario's, not the fault's. Golden runs are cached by their RunSpec
+key (in memory, and on disk when a cache directory is given), so classifying a sweep
+costs one golden run per distinct (parameters, seed), not one per faulty run.
+
+    from addt_dsl.runtime.outcome import classify, classify_many
+    result, outcome = classify(spec)                  # one run
+    pairs = classify_many(specs, jobs=2)              # a sweep: [(RunResult, outcome)]
+    outcome_table(pairs, by=["drop_rate"])            # counts and rates per cell
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import traceback
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from addt_dsl.plan import RunSpec
+from addt_dsl.runtime.execute import RunResult, execute
+
+OUTCOMES = ("masked", "silent", "detected", "hazard")
+# Differences below 1 µm, 1 µrad, 1 µm/s, 1 µm/s^2 are numerical ripples, not observable effects.
+TOLERANCE = 1e-6
+_EGO_FIELDS = ("x", "y", "heading", "speed")
+
+
+@dataclass(frozen=True)
+class Fingerprint:
+    """What an observer sees of a run: ego trajectory and stack outputs, plus its status."""
+
+    signals: dict[str, np.ndarray]
+    status: str
+    passed: bool
+
+    @classmethod
+    def of(cls, result: RunResult) -> Fingerprint:
+        trace = result.trace
+        if trace is None:
+            raise ValueError("classification needs the trace: run with keep_trace=True")
+        ego = trace.actors["ego"]
+        signals = {f"ego.{f}": np.asarray(getattr(ego, f), dtype=float) for f in _EGO_FIELDS}
+        signals.update({k: np.asarray(v, dtype=float) for k, v in sorted(trace.outputs.items())})
+        return cls(signals, result.status, result.passed)
+
+    def differs(self, other: Fingerprint, tol: float = TOLERANCE) -> bool:
+        if self.signals.keys() != other.signals.keys():
+            return True
+        for name, a in self.signals.items():
+            b = other.signals[name]
+            if a.shape != b.shape:
+                return True
+            # NaN on both sides is "the same"; NaN on one side is a difference.
+            if not np.allclose(a, b, rtol=0.0, atol=tol, equal_nan=True):
+                return True
+        return False
+
+    def save(self, path: Path) -> None:
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, __status=np.array(self.status), __passed=np.array(self.passed), **self.signals)
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path: Path) -> Fingerprint:
+        with np.load(path) as data:
+            signals = {k: data[k] for k in data.files if not k.startswith("__")}
+            return cls(signals, str(data["__status"]), bool(data["__passed"]))
+
+
+def golden_spec(spec: RunSpec) -> RunSpec:
+    """The fault-free twin of a run: same plan, parameters and seed, no faults.
+
+    The sweep bookkeeping (run id, cell, repeat index) does not change a run, so it is
+    cleared: two faulty runs that differ only in their faults share one golden run.
+    """
+    return spec.model_copy(update={"faults": [], "run_id": "golden", "cell": {}, "repeat_index": 0})
+
+
+class GoldenCache:
+    """Fingerprints of golden runs by RunSpec key; in memory, and in `directory` if given."""
+
+    def __init__(self, directory: str | Path | None = None):
+        self.memory: dict[str, Fingerprint] = {}
+        self.directory = Path(directory) if directory is not None else None
+        if self.directory is not None:
+            self.directory.mkdir(parents=True, exist_ok=True)
+        self.runs = 0  # golden runs executed (cache misses)
+
+    def get(self, key: str) -> Fingerprint | None:
+        if key in self.memory:
+            return self.memory[key]
+        if self.directory is not None and (self.directory / f"{key}.npz").exists():
+            fp = Fingerprint.load(self.directory / f"{key}.npz")
+            self.memory[key] = fp
+            return fp
+        return None
+
+    def put(self, key: str, fp: Fingerprint) -> None:
+        self.memory[key] = fp
+        if self.directory is not None:
+            fp.save(self.directory / f"{key}.npz")
+
+    def golden(self, spec: RunSpec) -> Fingerprint:
+        g = golden_spec(spec)
+        key = g.key()
+        fp = self.get(key)
+        if fp is None:
+            fp = Fingerprint.of(execute(g, keep_trace=True))
+            self.runs += 1
+            self.put(key, fp)
+        return fp
+
+
+_DEFAULT_CACHE = GoldenCache()
+
+
+def outcome_of(result: RunResult, golden: Fingerprint, tol: float = TOLERANCE) -> str:
+    """The outcome class of a faulty run (with its trace) given its golden fingerprint."""
+    if result.status == "detected":
+        return "detected"
+    if result.status != "ok" or golden.status == "crashed":
+        return "error"
+    if not Fingerprint.of(result).differs(golden, tol):
+        return "masked"
+    return "hazard" if not result.passed else "silent"
+
+
+def _outcome(result: RunResult, golden: Fingerprint | None, tol: float) -> str:
+    if golden is None:  # a run without faults is its own golden run
+        return {"ok": "masked", "detected": "detected"}.get(result.status, "error")
+    return outcome_of(result, golden, tol)
+
+
+def _error_result(spec: RunSpec, exc: BaseException) -> RunResult:
+    return RunResult(run_id=spec.run_id, key=spec.key(), params=dict(spec.params), seed=spec.seed,
+                     verdicts=[], status="crashed",
+                     error=f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}",
+                     sim_time_s=0.0, wall_time_s=0.0, digest="", fault_events=0, cell=dict(spec.cell))
+
+
+def classify(spec: RunSpec, cache: GoldenCache | None = None, tol: float = TOLERANCE,
+             keep_trace: bool = True) -> tuple[RunResult, str]:
+    """Run `spec`, run (or fetch) its golden twin, and return (result, outcome class).
+
+    Never raises for a failing run: a stack exception is `detected`, a runner failure is
+    `error` (the result's `error` says what happened).
+    """
+    cache = _DEFAULT_CACHE if cache is None else cache
+    try:
+        golden = cache.golden(spec) if spec.faults else None
+        result = execute(spec, keep_trace=True)
+    except Exception as exc:  # noqa: BLE001 - recorded, never fatal to a sweep
+        return _error_result(spec, exc), "error"
+    outcome = _outcome(result, golden, tol)
+    if not keep_trace:
+        result.trace = None
+    return result, outcome
+
+
+# ---------------------------------------------------------------- batches
+
+def _golden_worker(spec: RunSpec):
+    g = golden_spec(spec)
+    try:
+        return g.key(), Fingerprint.of(execute(g, keep_trace=True))
+    except Exception:  # noqa: BLE001 - its faulty runs are classified `error`
+        return g.key(), Fingerprint({}, "crashed", False)
+
+
+def _faulty_worker(args):
+    spec, golden, tol = args
+    try:
+        result = execute(spec, keep_trace=True)
+    except Exception as exc:  # noqa: BLE001
+        return _error_result(spec, exc), "error"
+    outcome = _outcome(result, golden, tol)
+    result.trace = None
+    return result, outcome
+
+
+def _map(fn, items: list, jobs: int):
+    if jobs <= 1 or len(items) <= 1:
+        return [fn(x) for x in items]
+    ctx = mp.get_context("fork" if os.name == "posix" else "spawn")
+    with ctx.Pool(processes=jobs, maxtasksperchild=200) as pool:
+        return pool.map(fn, items, chunksize=1)
+
+
+def classify_many(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache | None = None,
+                  tol: float = TOLERANCE) -> list[tuple[RunResult, str]]:
+    """Classify many runs on `jobs` worker processes; results sorted by run id, traces dropped.
+
+    Golden runs are computed once per distinct key (missing ones first, in parallel),
+    then every faulty run is executed and compared with its golden fingerprint.
+    """
+    cache = _DEFAULT_CACHE if cache is None else cache
+    specs = list(specs)
+    missing: dict[str, RunSpec] = {}
+    for s in specs:
+        if s.faults:
+            key = golden_spec(s).key()
+            if cache.get(key) is None and key not in missing:
+                missing[key] = s
+    for key, fp in _map(_golden_worker, list(missing.values()), jobs):
+        cache.put(key, fp)
+        cache.runs += 1
+    tasks = [(s, cache.get(golden_spec(s).key()) if s.faults else None, tol) for s in specs]
+    out = _map(_faulty_worker, tasks, jobs)
+    out.sort(key=lambda pair: pair[0].run_id)
+    return out
+
+
+def outcome_table(pairs: Sequence[tuple[RunResult, str]], by: Sequence[str] = ()):
+    """Counts of each outcome, the mission success rate and the mean number of injections per
+    run (`fault_events`), grouped by the parameters in `by`."""
+    import pandas as pd
+
+    rows = [{**{p: r.params.get(p, r.cell.get(p)) for p in by}, "outcome": o, "passed": r.passed,
+             "fault_events": r.fault_events} for r, o in pairs]
+    df = pd.DataFrame(rows)
+    if df.empty:
+        return df
+    keys = list(by) or (lambda _: 0)
+    counts = df.groupby(keys)["outcome"].value_counts().unstack(fill_value=0)
+    for name in (*OUTCOMES, "error"):
+        if name not in counts:
+            counts[name] = 0
+    table = counts[[*OUTCOMES, "error"]].copy()
+    grouped = df.groupby(keys)["passed"]
+    table["runs"] = grouped.size()
+    table["success_rate"] = grouped.mean()
+    # Injections that happened (a flip whose site is never evaluated again is not injected).
+    table["fault_events"] = df.groupby(keys)["fault_events"].mean()
+    return table

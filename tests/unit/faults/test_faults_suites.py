@@ -1,0 +1,50 @@
+"""The scenario families and the experiment suites compile and expand as documented."""
+
+from collections import Counter
+
+import pytest
+
+from addt_dsl.compiler import compile_file
+from addt_dsl.sweep import expand
+from tests.conftest import EXAMPLES
+
+SUITES = sorted((EXAMPLES / "suites").glob("*.addt"))
+FAMILIES = ["following", "following_brake", "curve"]
+
+
+@pytest.mark.parametrize("path", [EXAMPLES / f"{f}.addt" for f in FAMILIES] + SUITES, ids=lambda p: p.name)
+def test_compiles_without_warnings(path):
+    result = compile_file(path)
+    assert result.ok and not result.diagnostics, [d.message for d in result.diagnostics]
+
+
+def test_the_three_families_and_the_paper_s_suites_exist():
+    names = {p.stem for p in SUITES}
+    assert {f"table1_{f}" for f in ("following", "following_brake", "curve", "overtake")} <= names
+    assert {f"bitflip_{f}_{n}" for f in ("following_brake", "curve", "overtake")
+            for n in ("perception", "planner", "control")} <= names
+    assert "shift_yaw" in names
+
+
+@pytest.mark.parametrize("path", [p for p in SUITES if p.stem.startswith("table1_")], ids=lambda p: p.stem)
+def test_table1_suites_have_40_runs_per_drop_rate_and_stack(path):
+    specs = expand(compile_file(path).plan).specs
+    cells = Counter((s.params["drop_rate"], s.params["track_age"]) for s in specs)
+    assert sorted({r for r, _ in cells}) == [0.01, 0.02, 0.05, 0.1]
+    assert set(cells.values()) == {40}
+    assert all(len(s.faults) == 1 and s.faults[0].kind == "drop" for s in specs)
+    assert len({s.seed for s in specs}) == len(specs)
+
+
+@pytest.mark.parametrize("path", [p for p in SUITES if p.stem.startswith("bitflip_")], ids=lambda p: p.stem)
+def test_bitflip_suites_target_a_node_with_1_to_5_flips(path):
+    specs = expand(compile_file(path).plan).specs
+    node = path.stem.rsplit("_", 1)[1]
+    assert Counter(s.faults[0].settings["count"] for s in specs) == {n: 40 for n in (1, 2, 3, 4, 5)}
+    assert {s.faults[0].target for s in specs} == {node}
+
+
+def test_the_brake_family_triggers_the_emergency_brake():
+    plan = compile_file(EXAMPLES / "following_brake.addt").plan
+    (lead,) = plan.agents
+    assert [t.clause.name for t in lead.triggers] == ["brake"]
