@@ -25,8 +25,19 @@ from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 from addt_dsl.plan import RunSpec, ScenarioPlan
+
+
+class _SummaryRow(NamedTuple):
+    """The fields of a stored run that `reporting.tables.summary` counts."""
+
+    passed: bool
+    status: str
+    sim_time_s: float
+    wall_time_s: float
+    failed_oracles: list[str]
 
 SCHEMA_VERSION = "1"
 
@@ -303,32 +314,12 @@ class ResultStore:
         return spec
 
     def summary(self) -> dict:
-        plan = self.plan()
-        failures: Counter = Counter()
-        statuses: Counter = Counter()
-        runs = passed = 0
-        sim = wall = 0.0
-        for status, ok, failed, s, w in self._db.execute(
-                "SELECT status, passed, failed_oracles, sim_time_s, wall_time_s FROM runs"):
-            runs += 1
-            passed += ok
-            statuses[status] += 1
-            sim += s or 0.0
-            wall += w or 0.0
-            for name in filter(None, failed.split(";")):
-                failures[name] += 1
-        return {
-            "scenario": plan.name,
-            "source": plan.source_file,
-            "runs": runs,
-            "passed": passed,
-            "failed": runs - passed,
-            "failures_per_oracle": dict(sorted(failures.items())),
-            "statuses": dict(sorted(statuses.items())),
-            "rejected_by_assumption": dict(self.rejected()),
-            "sim_time_s": sim,
-            "wall_time_s": wall,
-        }
+        from addt_dsl.reporting.tables import summary
+
+        rows = (_SummaryRow(bool(ok), status, s or 0.0, w or 0.0, [n for n in failed.split(";") if n])
+                for status, ok, failed, s, w in self._db.execute(
+                    "SELECT status, passed, failed_oracles, sim_time_s, wall_time_s FROM runs"))
+        return summary(self.plan(), rows, self.rejected())
 
     def dataframe(self):
         """One row per run: id, parameters, seed, verdict, per-oracle robustness and first
