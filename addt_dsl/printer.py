@@ -60,12 +60,10 @@ PREFERRED_UNITS: dict[Dim, tuple[str, ...]] = {units.ANGLE: ("deg",), units.ANGU
 
 
 def _number(value: float) -> str:
-    if math.isnan(value):
-        raise PrinterError("NaN has no surface syntax")
-    if math.isinf(value):
-        return "1e999" if value > 0 else "-1e999"  # overflows back to inf when read
-    text = repr(float(value))
-    return text[:-2] if text.endswith(".0") else text
+    try:
+        return units.number_literal(value)
+    except ValueError as exc:
+        raise PrinterError(str(exc)) from None
 
 
 def format_quantity(value: float, dim: Dim) -> str:

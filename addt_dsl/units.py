@@ -138,6 +138,16 @@ def to_si(value: float, symbol: str | None) -> tuple[float, Dim]:
     return float(value) * unit.factor, unit.dim
 
 
+def number_literal(value: float) -> str:
+    """A float as source text that reads back bit for bit (repr; `1e999` for infinity)."""
+    if math.isnan(value):
+        raise ValueError("NaN has no surface syntax")
+    if math.isinf(value):
+        return "1e999" if value > 0 else "-1e999"  # overflows back to inf when read
+    text = repr(float(value))
+    return text[:-2] if text.endswith(".0") else text
+
+
 def format_si(value: float, dim: Dim) -> str:
     """Render an SI value with its canonical unit, exactly (repr keeps every bit)."""
     unit = CANONICAL_UNIT.get(dim)

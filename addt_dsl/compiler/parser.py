@@ -166,8 +166,9 @@ def _line_offset(text: str, line_no: int) -> int:
     return pos
 
 
-def _open_brace_at(text: str, line_no: int) -> tuple[int, int, str] | None:
-    """(line, col, text of that line) of the innermost '{' still open where line_no starts."""
+def _open_braces(text: str, line_no: int) -> list[tuple[int, int]]:
+    """(line, col) of every '{' still open where `line_no` starts, outermost first
+    (strings and comments skipped)."""
     stack: list[tuple[int, int]] = []
     line, col, in_string, in_comment, escaped = 1, 0, False, False, False
     for ch in text:
@@ -196,6 +197,12 @@ def _open_brace_at(text: str, line_no: int) -> tuple[int, int, str] | None:
             stack.append((line, col))
         elif ch == "}" and stack:
             stack.pop()
+    return stack
+
+
+def _open_brace_at(text: str, line_no: int) -> tuple[int, int, str] | None:
+    """(line, col, text of that line) of the innermost '{' still open where line_no starts."""
+    stack = _open_braces(text, line_no)
     if not stack:
         return None
     open_line, open_col = stack[-1]
@@ -205,33 +212,7 @@ def _open_brace_at(text: str, line_no: int) -> tuple[int, int, str] | None:
 
 def _depth_at(text: str, line_no: int) -> int:
     """Brace depth at the start of a line (strings and comments skipped)."""
-    depth, line, in_string, in_comment, escaped = 0, 1, False, False, False
-    for ch in text:
-        if ch == "\n":
-            line += 1
-            in_string = in_comment = False
-            if line >= line_no:
-                return depth
-            continue
-        if in_comment:
-            continue
-        if in_string:
-            if escaped:
-                escaped = False
-            elif ch == "\\":
-                escaped = True
-            elif ch == '"':
-                in_string = False
-            continue
-        if ch == "#":
-            in_comment = True
-        elif ch == '"':
-            in_string = True
-        elif ch == "{":
-            depth += 1
-        elif ch == "}":
-            depth = max(0, depth - 1)
-    return depth
+    return len(_open_braces(text, line_no))
 
 
 _BAD_CHARS = re.compile("[\x00-\x08\x0b\x0e-\x1f\x7f\ud800-\udfff]")

@@ -21,7 +21,7 @@ from collections.abc import Collection
 from dataclasses import dataclass
 
 from addt_dsl.expr import Binary, Call, Expr, Num, Param, Signal, Temporal, Unary, Until
-from addt_dsl.units import TIME, UNITS, to_si
+from addt_dsl.units import TIME, UNITS, number_literal, to_si
 
 __all__ = ["FormulaSyntaxError", "format_formula", "parse_formula"]
 
@@ -368,10 +368,4 @@ def _seconds(v: float) -> str:
     return f"{_number(v)} s"
 
 
-def _number(v: float) -> str:
-    if math.isnan(v):
-        raise ValueError("NaN has no surface syntax")
-    if math.isinf(v):
-        return "1e999" if v > 0 else "-1e999"  # overflows back to inf when read
-    text = repr(float(v))
-    return text[:-2] if text.endswith(".0") else text
+_number = number_literal
