@@ -1,6 +1,7 @@
 """`addtc`: compile, run and judge `.addt` scenarios.
 
     addtc FILE [--jobs N] [--out DIR]     compile and run the file's sweep, print verdicts
+    addtc DIR|FILE... [--by PARAM]        a suite: each file's sweep, one combined table
         [--executor local|ray] [--address ADDR] [--store PATH] [--timeout S] [--junit FILE]
     addtc report DIR                      HTML report, summary.json, runs.csv of a results dir
     addtc check FILE...                   compile only (diagnostics)
@@ -80,7 +81,57 @@ def cmd_schema(args) -> int:
 
 
 def cmd_run(args) -> int:
-    result = _compile(args.file, args.format)
+    from addt_dsl.suite import SuiteError, expand_paths
+
+    try:
+        paths = expand_paths(args.files)
+    except SuiteError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    if len(paths) == 1 and not args.by and not Path(args.files[0]).is_dir():
+        return _run_file(args, paths[0], Path(args.out) if args.out else None)
+    return _run_suite(args, paths)
+
+
+def _run_suite(args, paths: list[Path]) -> int:
+    """Each file as its own run (results in OUT/<stem>/), then one combined table."""
+    import time
+
+    from addt_dsl.suite import SuiteRow, collect_row, print_suite, write_summary
+
+    if args.store:
+        print("error: --store names one results file; a suite keeps one per file under --out", file=sys.stderr)
+        return EXIT_ERROR
+    if args.junit:
+        print("error: --junit writes one file per scenario; with a suite use --out (each OUT/<stem>/) "
+              "or the pytest plugin", file=sys.stderr)
+        return EXIT_ERROR
+    out = Path(args.out) if args.out else None
+    args.in_suite = True
+    rows = []
+    for path in paths:
+        row = SuiteRow(path)
+        if args.format != "json":
+            print(f"== {path}", file=sys.stderr)
+        started = time.perf_counter()
+        row.exit_code = _run_file(args, path, out / path.stem if out else None,
+                                  collect=lambda plan, store, row=row: collect_row(row, plan, store, args.by))
+        row.wall_s = time.perf_counter() - started
+        rows.append(row)
+    if out:
+        write_summary(out, rows, args.by)
+    if args.format == "json":
+        from addt_dsl.suite import suite_summary
+
+        print(json.dumps(suite_summary(rows, args.by), indent=2))
+    else:
+        print_suite(rows, args.by)
+    return max(r.exit_code for r in rows)
+
+
+def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
+    """Compile and run one file; `collect(plan, store)` sees the store before it closes."""
+    result = _compile(str(path), args.format)
     if not result.ok:
         return EXIT_ERROR
     from addt_dsl.runtime.store import ResultStore, StoreMismatch
@@ -99,7 +150,6 @@ def cmd_run(args) -> int:
     except _UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR
-    out = Path(args.out) if args.out else None
     tmp = None
     if args.store:
         store_path = Path(args.store)
@@ -114,7 +164,10 @@ def cmd_run(args) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR
     try:
-        return _run_and_report(args, plan, stream, store, executor, out)
+        code = _run_and_report(args, plan, stream, store, executor, out)
+        if collect is not None and code != 130:
+            collect(plan, store)
+        return code
     except UnsatisfiableAssumptions as exc:
         print(f"error[E0501]: {exc}", file=sys.stderr)
         return EXIT_ERROR
@@ -180,7 +233,13 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
         from addt_dsl.reporting import write_junit
 
         write_junit(args.junit, plan, store.records())
-    print_verdicts(plan, shown_records(store), totals, fmt=args.format)
+    if getattr(args, "in_suite", False):
+        if not quiet:  # one line per file; the suite prints the combined table
+            failing = [f"{r.run_id} ({', '.join(r.failed_oracles) or r.status})" for r in store.failing(limit=5)]
+            print(f"{plan.name}: {totals['passed']} passed, {totals['failed']} failed"
+                  + (f"; e.g. {', '.join(failing)}" if failing else ""), file=sys.stderr)
+    else:
+        print_verdicts(plan, shown_records(store), totals, fmt=args.format)
     if not quiet and outcome.skipped:
         print(f"({outcome.skipped} run(s) taken from the store, {outcome.ran} executed now)", file=sys.stderr)
     return EXIT_OK if totals["failed"] == 0 else EXIT_FAILED
@@ -227,7 +286,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="addtc", description="Compile and run .addt driving scenarios.")
     sub = parser.add_subparsers(dest="command")
     run = sub.add_parser("run", help="compile and run a scenario (default)")
-    run.add_argument("file")
+    run.add_argument("files", nargs="+", metavar="file",
+                     help="scenario file(s); a directory stands for the .addt files in it (a suite)")
+    run.add_argument("--by", metavar="PARAM",
+                     help="suite table: success rate per value of this parameter (e.g. drop_rate)")
     run.add_argument("--jobs", "-j", type=int, default=None,
                      help="worker processes (default: CPU count; Ray: the cluster's CPUs)")
     run.add_argument("--executor", choices=("local", "ray", "inline"), default="local",

@@ -1,0 +1,149 @@
+"""Suites: several `.addt` files run by one `addtc` command, with one combined table.
+
+    addtc run examples/suites/table1/ --by drop_rate --out OUT
+
+A directory stands for the `.addt` files directly in it (sorted; files it `include`s
+from elsewhere are not run on their own). Each file is an ordinary run with its own
+results directory `OUT/<file stem>/`; the suite adds `OUT/suite.json` and prints one
+row per file: runs, passes and, with `--by PARAM`, the success rate for each value of
+that parameter — the layout of the paper's Table 1 (rows: scenario families, columns:
+frame-drop rates).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from addt_dsl.reporting.tables import fmt_param, wilson_interval
+
+
+class SuiteError(ValueError):
+    """A path that names no scenario file."""
+
+
+def expand_paths(paths: Sequence[str]) -> list[Path]:
+    """Files as given, directories as their `.addt` files (sorted, not recursive)."""
+    files: list[Path] = []
+    for raw in paths:
+        p = Path(raw)
+        if p.is_dir():
+            found = sorted(q for q in p.glob("*.addt") if q.is_file())
+            if not found:
+                raise SuiteError(f"{raw}: no .addt files in this directory")
+            files += found
+        elif p.is_file():
+            files.append(p)
+        else:
+            raise SuiteError(f"{raw}: no such file or directory")
+    seen: set[Path] = set()
+    unique = []
+    for f in files:  # a file named twice runs once
+        if f.resolve() not in seen:
+            seen.add(f.resolve())
+            unique.append(f)
+    return unique
+
+
+@dataclass
+class Tally:
+    runs: int = 0
+    passed: int = 0
+
+    @property
+    def rate(self) -> float:
+        return self.passed / self.runs if self.runs else math.nan
+
+    def as_dict(self) -> dict:
+        lo, hi = wilson_interval(self.passed, self.runs)
+        return {"runs": self.runs, "passed": self.passed, "rate": self.rate, "interval95": [lo, hi]}
+
+
+@dataclass
+class SuiteRow:
+    """One file of a suite after its run."""
+
+    path: Path
+    name: str = ""
+    exit_code: int = 0
+    totals: dict = field(default_factory=dict)
+    by: dict[float, Tally] = field(default_factory=dict)  # value of the `--by` parameter → tally
+    labels: dict[float, str] = field(default_factory=dict)  # value → label with its unit
+    wall_s: float = 0.0
+
+
+def tally_by(records: Iterable, param: str) -> dict[float, Tally]:
+    """Runs and passes per value of `param` (a sweep axis or any run parameter)."""
+    out: dict[float, Tally] = {}
+    for r in records:
+        value = r.cell.get(param, r.params.get(param))
+        if value is None:
+            continue
+        t = out.setdefault(float(value), Tally())
+        t.runs += 1
+        t.passed += r.passed
+    return dict(sorted(out.items()))
+
+
+def collect_row(row: SuiteRow, plan, store, by: str | None) -> None:
+    """Fill `row` from a finished run's plan and store (called before the store closes)."""
+    row.name = plan.name
+    row.totals = store.summary()
+    if by:
+        row.by = tally_by(store.records(), by)
+        row.labels = {v: fmt_param(plan, by, v) for v in row.by}
+
+
+def suite_summary(rows: Sequence[SuiteRow], by: str | None) -> dict:
+    return {
+        "by": by,
+        "files": [{
+            "path": str(r.path), "scenario": r.name, "exit_code": r.exit_code, "wall_s": r.wall_s,
+            "runs": r.totals.get("runs", 0), "passed": r.totals.get("passed", 0),
+            "failed": r.totals.get("failed", 0),
+            "by": [{"value": v, "label": r.labels.get(v, f"{v:g}"), **t.as_dict()} for v, t in r.by.items()],
+        } for r in rows],
+        "runs": sum(r.totals.get("runs", 0) for r in rows),
+        "passed": sum(r.totals.get("passed", 0) for r in rows),
+        "wall_s": sum(r.wall_s for r in rows),
+    }
+
+
+def write_summary(out: Path, rows: Sequence[SuiteRow], by: str | None) -> Path:
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "suite.json"
+    path.write_text(json.dumps(suite_summary(rows, by), indent=2) + "\n")
+    return path
+
+
+def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
+    """One row per file; with `by`, success rates per value (runs per cell in brackets)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    values = sorted({v for r in rows for v in r.by})
+    labels = {}
+    for r in rows:
+        labels.update(r.labels)
+    title = f"suite: {len(rows)} file(s)" + (f", success rate by {by}" if by else "")
+    table = Table(title=title)
+    for col in ("scenario", "runs", "passed", "wall [s]"):
+        table.add_column(col, justify="left" if col == "scenario" else "right")
+    for v in values:
+        table.add_column(labels.get(v, f"{v:g}"), justify="right")
+    for r in rows:
+        cells = []
+        for v in values:
+            t = r.by.get(v)
+            cells.append("-" if t is None else f"{100 * t.rate:.2f}% ({t.runs})")
+        colour = "green" if r.exit_code == 0 else ("red" if r.exit_code == 1 else "yellow")
+        table.add_row(f"[{colour}]{r.name or r.path.stem}[/]", str(r.totals.get("runs", 0)),
+                      str(r.totals.get("passed", 0)), f"{r.wall_s:.1f}", *cells)
+    console = Console(highlight=False)
+    console.print(table)
+    total = sum(r.totals.get("runs", 0) for r in rows)
+    passed = sum(r.totals.get("passed", 0) for r in rows)
+    console.print(f"{passed} of {total} runs passed in {sum(r.wall_s for r in rows):.1f} s")

@@ -1,0 +1,45 @@
+"""`addtc DIR|FILE... --by PARAM`: several files in one command, one combined table."""
+
+import json
+import os
+import sys
+
+import pytest
+
+sys.path.insert(0, os.path.dirname(__file__))
+from runner_simkit import addtc, limit_scenario  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+
+def test_a_directory_runs_each_file_and_tables_success_by_parameter(tmp_path):
+    suite = tmp_path / "suite"
+    suite.mkdir()
+    limit_scenario(suite, repeat=2, duration="4 s").rename(suite / "a_limit.addt")
+    (suite / "b_far.addt").write_text((suite / "a_limit.addt").read_text()
+                                      .replace("scenario limit", "scenario far")
+                                      .replace("grid limit in [70, 200] m", "grid limit in [190, 200] m"))
+    out = tmp_path / "out"
+    proc = addtc(suite, "--by", "limit", "--jobs", "2", "--out", out, "--no-report")
+    assert proc.returncode == 1, proc.stderr  # the 70 m cell fails
+    assert "success rate by limit" in proc.stdout
+    summary = json.loads((out / "suite.json").read_text())
+    assert [f["scenario"] for f in summary["files"]] == ["limit", "far"]
+    limit, far = summary["files"]
+    assert {c["label"]: (c["runs"], c["passed"]) for c in limit["by"]} == {"70 m": (4, 0), "200 m": (4, 4)}
+    assert {c["label"]: (c["runs"], c["passed"]) for c in far["by"]} == {"190 m": (4, 4), "200 m": (4, 4)}
+    assert (limit["exit_code"], far["exit_code"], summary["runs"], summary["passed"]) == (1, 0, 16, 12)
+    for name in ("a_limit", "b_far"):  # each file keeps its own results directory
+        assert (out / name / "runs.csv").exists() and (out / name / "results.sqlite").exists()
+
+
+def test_suite_errors_are_usage_errors(tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    proc = addtc(empty)
+    assert proc.returncode == 2 and "no .addt files" in proc.stderr
+    one = limit_scenario(tmp_path, repeat=1, duration="1 s")
+    other = tmp_path / "other.addt"
+    other.write_text(one.read_text())
+    proc = addtc(one, other, "--store", tmp_path / "x.sqlite")
+    assert proc.returncode == 2 and "--store" in proc.stderr
