@@ -16,7 +16,7 @@ from addt_dsl import units
 from addt_dsl.registry import STACKS, ParamSpec
 from addt_dsl.stack.bus import Bus
 from addt_dsl.stack.latency import load_models
-from addt_dsl.stack.nodes import Controller, GroundTruthPerception, LatticePlanner, Tracker
+from addt_dsl.stack.nodes import Controller, GroundTruthPerception, LatticePlanner, Obj, Tracker
 
 NODE_NAMES = ("perception", "tracker", "planner", "control")
 
@@ -44,6 +44,10 @@ class BevStack:
         ParamSpec("track_max_age", units.TIME, default=1.0, low=0.0, high=10.0,
                   doc="how long the tracker coasts an object it no longer sees (0.15 s: no coasting "
                       "beyond one lidar period, like a detector without tracking)"),
+        ParamSpec("synthetic_objects", None, kind="int", default=0, low=0, high=500,
+                  doc="extra objects perception reports in every frame (vehicles keeping pace beside "
+                      "the road, 12 m or more to either side): a controllable workload for latency "
+                      "studies, as the paper synthesises objects"),
     )
     nodes = {
         "perception": GroundTruthPerception.sites,
@@ -90,6 +94,7 @@ class BevStack:
         self.latency = {n: 0.0 for n in (*NODE_NAMES, "e2e")}
         self.pipeline_s = 0.0
         self.objects_seen = 0
+        self.synthetic_objects = int(self.settings["synthetic_objects"])
 
     def _make_perception(self):
         if self.settings["perception"] == "learned":
@@ -123,6 +128,8 @@ class BevStack:
         started = _time.perf_counter()
         sensor = self.ctx.sensor(frame.sensor)
         objs = self.perception.run(frame, self.ctx.world, sensor, self.ctx.ego_pose(), self.corrupt)
+        if self.synthetic_objects:
+            objs = objs + synthetic_objects(self.synthetic_objects, self.ctx.ego_pose())
         self.objects_seen = len(objs)
         # What perception reported, in world coordinates: perception-error studies compare it
         # with the ground truth in the trace (addt_dsl.runtime.faults.study).
@@ -199,3 +206,24 @@ class BevStack:
         self.ctx.apply_command_at(time_s + lat, steer, accel)
 
 
+def synthetic_objects(count: int, ego_pose) -> list[Obj]:
+    """`count` vehicles keeping pace with the ego, off the road on both sides.
+
+    Deterministic in `count` (no randomness: same RunSpec, same workload): object k sits
+    on side (-1)^k in one of six rows 12 m, 15.5 m, ... 29.5 m from the ego's centre line,
+    in columns 8 m apart along it (0, +8, -8, +16 m, ...: twelve objects per column, every
+    slot distinct), heading and speed those of the ego. Far enough aside
+    that no lane change of a road up to 6 lanes wide conflicts with them; they load the
+    tracker, the planner's collision checks and the latency model like real objects.
+    """
+    x, y, heading, speed = ego_pose
+    c, s = math.cos(heading), math.sin(heading)
+    out = []
+    for k in range(count):
+        side = 1.0 if k % 2 == 0 else -1.0
+        lateral = side * (12.0 + 3.5 * ((k // 2) % 6))
+        column = k // 12  # 0, +8, -8, +16, -16 m along, then the next 12 objects
+        along = 8.0 * ((column + 1) // 2) * (1.0 if column % 2 else -1.0) + 4.0 * ((k // 2) % 2)
+        out.append(Obj(x + c * along - s * lateral, y + s * along + c * lateral, heading,
+                       speed * c, speed * s, 4.5, 1.8))
+    return out
