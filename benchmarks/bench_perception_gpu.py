@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import time
 
+import _figures as figures_json
 import torch
 
 from addt_dsl.stack.bev_grid import GRID
@@ -74,18 +75,26 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     ap.add_argument("--batches", type=int, nargs="*", default=[1, 16, 256, 1024])
+    ap.add_argument("--json", help="also write the figures here")
     args = ap.parse_args()
     torch.set_num_threads(1)
     model, _ = load_model(device=args.device)
     name = torch.cuda.get_device_name() if args.device.startswith("cuda") else "cpu, 1 thread"
     print(f"device: {name}; torch {torch.__version__}")
+    figures = {"device": name, "inferences_per_s": {}}
     for batch in args.batches:
-        line = f"batch {batch:>5}: fp32 {throughput(model, args.device, batch):>10.0f} inferences/s"
+        fp32 = throughput(model, args.device, batch)
+        figures["inferences_per_s"][f"batch {batch} fp32"] = fp32
+        line = f"batch {batch:>5}: fp32 {fp32:>10.0f} inferences/s"
         if args.device.startswith("cuda"):
-            line += f", bf16 autocast {throughput(model, args.device, batch, torch.bfloat16):>10.0f}/s"
+            bf16 = throughput(model, args.device, batch, torch.bfloat16)
+            figures["inferences_per_s"][f"batch {batch} bf16"] = bf16
+            line += f", bf16 autocast {bf16:>10.0f}/s"
         print(line)
     if args.device.startswith("cuda"):
         check_flips(args.device)
+        figures["cuda_flips_match_cpu"] = True  # check_flips asserts it
+    figures_json.write(args.json, figures)
 
 
 if __name__ == "__main__":

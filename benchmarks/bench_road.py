@@ -3,12 +3,17 @@
 Run: PYTHONPATH=. python benchmarks/bench_road.py
 """
 
+import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from addt_dsl.runtime.road import load_xodr
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _figures as figures_json  # noqa: E402
+
+from addt_dsl.runtime.road import load_xodr  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "xodr"
 
@@ -22,7 +27,11 @@ def per_call(fn, n):
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--json", help="also write the figures here")
+    args = ap.parse_args()
     rng = np.random.default_rng(1)
+    figures = {}
     for name in ("straight_500m.xodr", "curves_elevation.xodr", "jolengatan.xodr"):
         net = load_xodr(DATA / name)
         road = next(iter(net.roads.values()))
@@ -36,12 +45,16 @@ def main() -> None:
         t_center_v = per_call(lambda: road.lane_center(-1, s), 20) / s.size
         t_coords_v = per_call(lambda: net.to_road_coords_array(x, y), 3) / s.size
         t_offset_v = per_call(lambda: road.lane_offset(-1, x, y), 3) / s.size
+        figures[name] = {"lane_center_us": t_center * 1e6, "lane_center_vectorised_us_per_point": t_center_v * 1e6,
+                          "to_road_coords_us": t_coords * 1e6, "to_road_coords_vectorised_us_per_point": t_coords_v * 1e6,
+                          "lane_offset_vectorised_us_per_point": t_offset_v * 1e6}
         print(
             f"{name:24s} ({len(road.geometries):2d} geometries, {len(road._sample_s):4d} samples): "
             f"lane_center {t_center * 1e6:6.1f} us/call, {t_center_v * 1e6:5.2f} us/pt vectorised; "
             f"to_road_coords {t_coords * 1e6:6.1f} us/call, {t_coords_v * 1e6:5.2f} us/pt vectorised; "
             f"lane_offset {t_offset_v * 1e6:5.2f} us/pt vectorised"
         )
+    figures_json.write(args.json, figures)
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import _figures as figures_json  # noqa: E402
 from addt_dsl.compiler import compile_file  # noqa: E402
 from addt_dsl.search.falsify import Falsifier  # noqa: E402
 
@@ -41,6 +42,7 @@ def main() -> None:
     ap.add_argument("--budget", type=int, default=150)
     ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--json", help="also write the figures here")
     args = ap.parse_args()
     plan = compile_file(args.scenario).plan
     results: dict[str, list[tuple[int, bool]]] = {"cem": [], "random": []}
@@ -63,6 +65,12 @@ def main() -> None:
               f"censored {summary[sampler][2]}/{len(rows)}, {seconds[sampler]:.0f} s")
     print(f"ratio random/cem (mean runs to first failure): {summary['random'][0] / summary['cem'][0]:.2f}")
     print(f"ratio random/cem (median): {summary['random'][1] / summary['cem'][1]:.2f}")
+    figures_json.write(args.json, {
+        "scenario": plan.name, "budget_runs": args.budget, "seeds": args.seeds,
+        **{sampler: {"mean_runs_to_failure": m, "median_runs_to_failure": med, "censored": c, "wall_s": seconds[sampler]}
+           for sampler, (m, med, c) in summary.items()},
+        "ratio_random_to_cem_mean": summary["random"][0] / summary["cem"][0],
+        "ratio_random_to_cem_median": summary["random"][1] / summary["cem"][1]})
 
 
 if __name__ == "__main__":

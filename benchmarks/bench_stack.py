@@ -22,6 +22,8 @@ from collections import defaultdict
 from contextlib import contextmanager
 from pathlib import Path
 
+import _figures as figures_json
+
 ROOT = Path(__file__).resolve().parents[1]
 STACK_LINE = "stack bev cruise_speed 25 m/s"
 
@@ -64,6 +66,7 @@ def timed(targets):
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--json", help="also write the figures here")
     args = ap.parse_args()
 
     import gc
@@ -88,6 +91,7 @@ def main() -> None:
     ]
     _ = bev_grid
     print(f"overtake example, 30 s simulated, drop rate 0, torch threads {torch.get_num_threads()}")
+    figures = {"rtf": {}, "rtf_cpu": {}, "nodes_us_per_call": {}, "nodes_ms_per_run": {}}
     for perception in ("ground_truth", "learned"):
         spec = _spec(perception)
         execute(spec, keep_trace=False)  # warm-up: imports, weights, first-call costs
@@ -105,6 +109,10 @@ def main() -> None:
         print(f"\n{perception}: {result.sim_time_s:.0f} s simulated; wall {wall * 1e3:.0f} ms, real-time factor "
               f"{result.sim_time_s / wall:.0f}x; CPU {cpu * 1e3:.0f} ms, {result.sim_time_s / cpu:.0f}x "
               f"(medians of {args.repeats}; passed={result.passed})")
+        figures["rtf"][perception] = result.sim_time_s / wall
+        figures["rtf_cpu"][perception] = result.sim_time_s / cpu
+        figures["nodes_us_per_call"][perception] = {k.strip(): 1e6 * sum(v) / len(v) for k, v in per_run.items() if v}
+        figures["nodes_ms_per_run"][perception] = {k.strip(): 1e3 * sum(v) for k, v in per_run.items() if v}
         print(f"  {'node (CPU time)':<28} {'calls':>6} {'us/call':>9} {'ms/run':>8} {'of CPU':>6}")
         for _, _, label in targets:
             samples = per_run.get(label)
@@ -113,6 +121,7 @@ def main() -> None:
             total = sum(samples)
             print(f"  {label:<28} {len(samples):>6} {1e6 * total / len(samples):>9.1f} {1e3 * total:>8.1f} "
                   f"{100 * total / cpu:>5.0f}%")
+    figures_json.write(args.json, figures)
 
 
 if __name__ == "__main__":

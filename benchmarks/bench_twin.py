@@ -18,8 +18,11 @@ import sys
 import time
 from pathlib import Path
 
+import _figures as figures_json
+
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = "--quick" in sys.argv
+JSON_PATH = sys.argv[sys.argv.index("--json") + 1] if "--json" in sys.argv else None
 
 
 def best_of(fn, repeat: int = 5, number: int = 1) -> float:
@@ -231,27 +234,35 @@ def fidelity() -> list[str]:
 
 def main() -> None:
     print("physics twin benchmark" + (" (quick)" if QUICK else ""))
-    for line in fidelity():
+    figures = {"quick": QUICK, "fidelity": fidelity(), "physics_step_us": {}, "closed_loop_step_us": {},
+               "lidar_ms_per_scan": {}, "camera_ms_per_frame": {}}
+    for line in figures["fidelity"]:
         print("  " + line)
     for n in (5, 20):
         r = physics_step_us(n)
+        figures["physics_step_us"][f"{n} vehicles"] = r
         print(f"  physics step, {n:2d} vehicles: loop physics {r['loop_physics_us']:7.1f} us "
               f"(ego dynamics {r['ego_dynamics_us']:5.1f} us); pybullet stepSimulation "
               f"{r['pybullet_step_us']:7.1f} us (reference, not used by the loop)")
         if not QUICK:
-            print(f"  full closed-loop step, {n:2d} vehicles: {loop_step_us(n):7.1f} us "
+            us = figures["closed_loop_step_us"][f"{n} vehicles"] = loop_step_us(n)
+            print(f"  full closed-loop step, {n:2d} vehicles: {us:7.1f} us "
                   f"(stack, lidar 10 Hz, physics)")
     for rays, channels in ((360, 1), (1024, 16), (2048, 32)):
         ms, _ = sensor_ms(f"sensor lidar rate 10 Hz rays {rays} channels {channels} range 100 m")
+        figures["lidar_ms_per_scan"][f"{rays}x{channels}"] = ms
         print(f"  lidar {rays:4d} x {channels:2d} rays: {ms:6.2f} ms/scan")
     for w, h in ((160, 120), (320, 240), (640, 480)) if not QUICK else ((160, 120),):
         ms, (frame, scene) = sensor_ms(f"sensor camera rate 10 Hz width {w} height {h}", repeat=3)
         ms_noseg, _ = sensor_ms(f"sensor camera rate 10 Hz width {w} height {h} segmentation off", repeat=3)
+        figures["camera_ms_per_frame"][f"{w}x{h}"] = {"with_segmentation": ms, "without_segmentation": ms_noseg}
         print(f"  camera {w:3d} x {h:3d}: {ms:6.1f} ms/frame ({ms_noseg:6.1f} without segmentation); "
               f"scene {scene.visual_triangles} triangles")
     median, best, same = overtake_rtf(3 if QUICK else 5)
     print(f"  examples/overtake.addt (first RunSpec, ground-truth perception): real-time factor "
           f"{median:.0f}x median, {best:.0f}x best; digest stable: {same}")
+    figures["overtake_rtf_gt"] = {"median": median, "best": best, "digest_stable": same}
+    figures_json.write(JSON_PATH, figures)
 
 
 if __name__ == "__main__":
