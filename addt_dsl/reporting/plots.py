@@ -74,6 +74,29 @@ class LatencyStats:
             acc[1] += total
             acc[2] = max(acc[2], mx)
 
+    def summary(self, budget_s: float = 0.1) -> dict:
+        """Per node: percentiles [ms] (to the histogram's 2 ms bins, upper edges), worst
+        and the share of time at or above the budget; e2e mean/worst by object count."""
+        nodes = {}
+        for node in [n for n in NODE_ORDER if n in self.hist] + sorted(set(self.hist) - set(NODE_ORDER)):
+            counts = self.hist[node]
+            total = sum(counts)
+            if not total:
+                continue
+            cumulative, edges = 0, {}
+            for i, c in enumerate(counts):
+                cumulative += c
+                for q in (50, 95, 99):
+                    if q not in edges and cumulative >= q / 100 * total:
+                        edges[q] = (i + 1) * LATENCY_BIN_S * 1e3
+            over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s - 1e-12)
+            nodes[node] = {"p50_ms": edges[50], "p95_ms": edges[95], "p99_ms": edges[99],
+                           "max_ms": self.worst.get(node, float("nan")) * 1e3, "share_at_or_over_budget": over / total,
+                           "ticks": total}
+        by_objects = {str(n): {"mean_ms": acc[1] / acc[0] * 1e3, "max_ms": acc[2] * 1e3, "ticks": acc[0]}
+                      for n, acc in sorted(self.by_objects.items()) if acc[0]}
+        return {"budget_ms": budget_s * 1e3, "bin_ms": LATENCY_BIN_S * 1e3, "nodes": nodes, "e2e_by_objects": by_objects}
+
 
 def latency_distributions(hist: dict[str, list[int]], budget_s: float = 0.1) -> str | None:
     """Per-node latency distributions (share of time at each latency) with the budget line."""

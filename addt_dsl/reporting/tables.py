@@ -204,9 +204,18 @@ def shown_records(store, limit: int = 40) -> list:
     return failing or list(store.records(limit=limit))
 
 
-def write_tables(out: Path, store) -> None:
-    """summary.json and runs.csv of a store."""
+def write_tables(out: Path, store, budget_s: float = 0.1) -> None:
+    """summary.json and runs.csv of a store; latency.json when runs recorded latencies
+    (per-node percentiles and e2e latency by object count, over all runs)."""
+    from addt_dsl.reporting.plots import LatencyStats
+
     out.mkdir(parents=True, exist_ok=True)
     (out / "summary.json").write_text(json.dumps(store.summary(), indent=2) + "\n")
     store.to_csv(out / "runs.csv")
+    latency = LatencyStats()
+    for r in store.records():
+        if r.stats:
+            latency.add(r.stats)
+    if latency.hist:
+        (out / "latency.json").write_text(json.dumps(latency.summary(budget_s), indent=2) + "\n")
 
