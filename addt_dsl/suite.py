@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -142,7 +143,8 @@ def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
         colour = "green" if r.exit_code == 0 else ("red" if r.exit_code == 1 else "yellow")
         table.add_row(f"[{colour}]{r.name or r.path.stem}[/]", str(r.totals.get("runs", 0)),
                       str(r.totals.get("passed", 0)), f"{r.wall_s:.1f}", *cells)
-    console = Console(highlight=False)
+    # Not a terminal (CI logs, files): wide enough that a Table-1 layout does not wrap.
+    console = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
     console.print(table)
     total = sum(r.totals.get("runs", 0) for r in rows)
     passed = sum(r.totals.get("passed", 0) for r in rows)
