@@ -13,3 +13,15 @@ def test_readme_examples_compile():
     for block in blocks:
         result = compile_source(block, "README.md")
         assert result.ok, [str(d) for d in result.diagnostics]
+
+
+def test_readme_suite_commands_name_files_that_compile():
+    text = (ROOT / "README.md").read_text()
+    commands = re.findall(r"^addtc (examples/\S+)", text, re.M)
+    assert len(commands) >= 3
+    for pattern in commands:
+        paths = sorted(ROOT.glob(pattern))
+        assert paths, pattern
+        for path in paths:
+            result = compile_source(path.read_text(), str(path), base_dir=path.parent)
+            assert result.ok, (path, [str(d) for d in result.diagnostics])
