@@ -3,6 +3,7 @@
     addtc FILE [--jobs N] [--out DIR]     compile and run the file's sweep, print verdicts
     addtc DIR|FILE... [--by PARAM]        a suite: each file's sweep, one combined table
         [--executor local|ray] [--address ADDR] [--store PATH] [--timeout S] [--junit FILE]
+        [--classify]                      also classify each run against its fault-free twin
     addtc report DIR                      HTML report, summary.json, runs.csv of a results dir
     addtc check FILE...                   compile only (diagnostics)
     addtc plan FILE                       print the ScenarioPlan as JSON
@@ -164,12 +165,17 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR
     try:
+        if args.classify:
+            executor = _classifying(args, stream, store, executor)
         code = _run_and_report(args, plan, stream, store, executor, out)
         if collect is not None and code != 130:
             collect(plan, store)
         return code
     except UnsatisfiableAssumptions as exc:
         print(f"error[E0501]: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except _UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR
     finally:
         store.close()
@@ -199,6 +205,28 @@ def _executor(args):
 
     return LocalExecutor(args.jobs, timeout_s=args.timeout, memory_limit_mb=args.memory_limit,
                          max_tasks_per_child=args.max_tasks_per_child)
+
+
+def _classifying(args, stream, store, executor):
+    """`--classify`: run the golden (fault-free) twins the sweep still needs, cached next to
+    the store so a resumed sweep reuses them, then wrap the executor so every run it
+    returns carries its outcome class (addt_dsl.runtime.outcome)."""
+    from addt_dsl.runtime.outcome import ClassifyingExecutor, GoldenCache, prepare_goldens
+
+    if not hasattr(executor, "run_fn"):
+        raise _UsageError(f"--classify runs on the local or inline executor, not {executor.name}")
+    golden_dir = store.path.with_name(store.path.stem + "-golden")
+    done = store.done()
+    specs = itertools.islice(stream, args.limit) if args.limit else stream
+    pending = [s for s in specs if s.faults and (s.key(), s.run_id) not in done]
+    if not stream.plan.faults and args.format != "json":
+        print("note: the scenario has no faults: every run is its own golden run (masked, "
+              "or detected if the stack failed)", file=sys.stderr)
+    cache = GoldenCache(golden_dir)
+    ran = prepare_goldens(pending, jobs=args.jobs, cache=cache)
+    if ran and args.format != "json":
+        print(f"classify: ran {ran} golden run(s) (cached in {golden_dir})", file=sys.stderr)
+    return ClassifyingExecutor(executor, golden_dir)
 
 
 def _run_and_report(args, plan, stream, store, executor, out) -> int:
@@ -311,6 +339,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="failing runs to animate in report.html")
     run.add_argument("--limit", type=int, default=0, help="run only the first N runs of the sweep")
     run.add_argument("--format", choices=("text", "json"), default="text")
+    run.add_argument("--classify", action="store_true",
+                     help="classify every run against its fault-free twin: masked, silent, detected, "
+                          "hazard (or error); adds an outcome column and counts")
     run.set_defaults(func=cmd_run)
     report = sub.add_parser("report", help="write report.html (and tables) for a results directory")
     report.add_argument("dir", help="directory written by --out (or a results .sqlite file)")

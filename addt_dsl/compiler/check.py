@@ -657,6 +657,7 @@ def _check_actor(ctx: Context, d: ast.ActorDecl) -> P.ActorPlan | None:
     if d.is_ego:
         sensors = sensors or [DEFAULT_SENSOR]
         stack = stack or DEFAULT_STACK
+        _check_stack_sensors(ctx, stack, sensors, stack_span or d.span)
     if placement is None:
         return None
     road, lane, s = placement
@@ -666,6 +667,18 @@ def _check_actor(ctx: Context, d: ast.ActorDecl) -> P.ActorPlan | None:
         length_m=length, width_m=width, mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
         goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"))
+
+
+def _check_stack_sensors(ctx: Context, stack: P.ClausePlan, sensors: list, span: Span) -> None:
+    """A stack setting that reads a sensor the ego lacks (`perception camera` without a
+    camera): the stack class says which sensors its settings need."""
+    needs = getattr(STACKS.get(stack.name), "required_sensors", None)
+    if needs is None:
+        return
+    words = {k: v for k, v in stack.settings.items() if isinstance(v, str)}
+    for keyword in sorted(set(needs(words)) - {s.name for s in sensors}):
+        ctx.sink.error("E0103", f"the ego's stack settings need a {keyword} sensor", span,
+                       f"add e.g. `sensor {keyword}` to the ego")
 
 
 def _place(ctx: Context, d: ast.ActorDecl, vals: dict, length: float):

@@ -38,26 +38,40 @@ def runs_table(plan: ScenarioPlan, records: Iterable):
         row["fault_events"] = r.fault_events
         row["digest"] = r.digest
         row["error"] = r.error.splitlines()[0] if r.error else ""
+        row["outcome"] = r.outcome
         rows.append(row)
-    return pd.DataFrame(rows)
+    df = pd.DataFrame(rows)
+    if "outcome" in df and not df["outcome"].astype(bool).any():
+        df = df.drop(columns="outcome")  # not classified (`addtc --classify` fills it)
+    return df
 
 
-def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = None) -> dict:
+def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = None,
+            cells: Iterable | None = None) -> dict:
     """Counts over runs: passed, failed, failures per oracle (a crashed, timed-out or
-    out-of-memory run counts under its status)."""
+    out-of-memory run counts under its status). For classified runs (`addtc --classify`)
+    also `outcomes` (runs per outcome class) and, for a sweep with grid axes,
+    `outcomes_per_cell` over `cells` (the classified records; default `records`)."""
     failures: Counter = Counter()
     statuses: Counter = Counter()
+    outcomes: Counter = Counter()
     runs = passed = 0
     sim = wall = 0.0
+    classified = []  # for the per-cell table when `cells` is not given
     for r in records:
         runs += 1
         passed += r.passed
         statuses[r.status] += 1
+        outcome = getattr(r, "outcome", "")
+        if outcome:
+            outcomes[outcome] += 1
+            if cells is None:
+                classified.append(r)
         sim += r.sim_time_s
         wall += r.wall_time_s
         for name in r.failed_oracles:
             failures[name] += 1
-    return {
+    out = {
         "scenario": plan.name,
         "source": plan.source_file,
         "runs": runs,
@@ -69,6 +83,28 @@ def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = No
         "sim_time_s": sim,
         "wall_time_s": wall,
     }
+    if outcomes:
+        out["outcomes"] = {name: outcomes.get(name, 0) for name in OUTCOME_CLASSES}
+        axes = [g.param for g in plan.sweep.grid]
+        if axes:
+            out["outcomes_per_cell"] = outcome_cells(classified if cells is None else cells, axes)
+    return out
+
+
+# Outcome classes of `addt_dsl.runtime.outcome` (OUTCOMES plus the runner's own `error`).
+OUTCOME_CLASSES = ("masked", "silent", "detected", "hazard", "error")
+
+
+def outcome_cells(records: Iterable, axes: list[str]) -> list[dict]:
+    """Per grid cell: the grid values, runs per outcome class, runs, success rate and mean
+    injections per run (`addt_dsl.runtime.outcome.outcome_table` over classified records)."""
+    from addt_dsl.runtime.outcome import outcome_table
+
+    table = outcome_table([(r, r.outcome) for r in records if r.outcome], by=axes)
+    if table.empty:
+        return []
+    return [{k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
+            for row in table.reset_index().to_dict("records")]
 
 
 def fmt_number(x: float | None) -> str:
@@ -169,11 +205,14 @@ def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None
     console = Console(highlight=False)
     names = [o.name for o in plan.oracles]
     cell_params = sorted({k for r in records for k in r.cell})
+    classified = any(getattr(r, "outcome", "") for r in records)
     table = Table(title=f"{plan.name}: {totals['runs']} run(s)")
     table.add_column("run")
     for p in cell_params:
         table.add_column(p)
     table.add_column("verdict")
+    if classified:
+        table.add_column("outcome")
     for n in names:
         table.add_column(n, justify="right")
     for r in records:
@@ -184,16 +223,23 @@ def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None
             v = by_name.get(n)
             rho.append("-" if v is None else
                        (f"[red]{fmt_number(v.robustness)}[/]" if not v.passed else fmt_number(v.robustness)))
+        outcome = [OUTCOME_STYLE.get(r.outcome, "{}").format(r.outcome or "-")] if classified else []
         table.add_row(r.run_id, *[fmt_number(r.cell[p]) if p in r.cell else "" for p in cell_params],
-                      verdict, *rho)
+                      verdict, *outcome, *rho)
     console.print(table)
     if totals["runs"] > len(records):
         console.print(f"(showing {len(records)} of {totals['runs']} runs)")
     console.print(f"{totals['passed']} passed, {totals['failed']} failed"
                   + (f"; failures per oracle: {totals['failures_per_oracle']}" if totals["failed"] else ""))
+    if totals.get("outcomes"):
+        console.print("outcomes: " + ", ".join(f"{n} {name}" for name, n in totals["outcomes"].items()))
     for r in records:
         if r.status not in ("ok",):
             console.print(f"[red]{r.run_id}: {r.status}: {r.error.splitlines()[0] if r.error else ''}[/]")
+
+
+OUTCOME_STYLE = {"masked": "[green]{}[/]", "silent": "[yellow]{}[/]", "detected": "[magenta]{}[/]",
+                 "hazard": "[red]{}[/]", "error": "[red]{}[/]"}
 
 
 def shown_records(store, limit: int = 40) -> list:

@@ -286,7 +286,7 @@ def execute(spec: RunSpec, keep_trace: bool = True) -> RunResult:
         if close_stack is not None:
             close_stack()
     verdicts = judge(spec, trace)
-    fault_events = sum(1 for e in trace.events if e.kind == "fault")
+    fault_events = trace.injection_count()
     return RunResult(
         run_id=spec.run_id, key=spec.key(), params=dict(spec.params), seed=spec.seed,
         verdicts=verdicts, status=trace.status, error=trace.error,

@@ -45,11 +45,15 @@ _GUARD_POLL_S = 0.2  # how often busy workers are checked against timeout and me
 
 # ---------------------------------------------------------------------------- one run
 
-def run_spec(spec: RunSpec, seq: int = -1, worker: str = "") -> RunRecord:
-    """Execute one RunSpec and summarise it; an exception becomes a `crashed` record."""
+def run_spec(spec: RunSpec, seq: int = -1, worker: str = "",
+             on_result: Callable | None = None) -> RunRecord:
+    """Execute one RunSpec and summarise it; an exception becomes a `crashed` record.
+    `on_result(result)` sees the full result (with its trace) before it is summarised."""
     t0 = time.perf_counter()
     try:
         result = execute(spec, keep_trace=True)
+        if on_result is not None:
+            on_result(result)
         record = RunRecord.from_result(spec, result, result.trace, seq=seq, worker=worker)
     except Exception as exc:  # noqa: BLE001 - a crashing run is recorded, the sweep goes on
         record = RunRecord.unfinished(
@@ -85,9 +89,12 @@ class InlineExecutor:
     name = "inline"
     workers = 1
 
+    def __init__(self, run_fn: Callable | None = None):
+        self.run_fn = run_fn  # as LocalExecutor's
+
     def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunRecord]:
         for seq, spec in items:
-            yield run_spec(spec, seq, worker="inline")
+            yield (self.run_fn or run_spec)(spec, seq, worker="inline")
 
 
 def _die_with_parent() -> None:

@@ -204,6 +204,25 @@ def _map(fn, items: list, jobs: int):
         return pool.map(fn, items, chunksize=1)
 
 
+def prepare_goldens(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache | None = None) -> int:
+    """Run (on `jobs` processes) the golden twin of every faulty spec that `cache` lacks,
+    once per distinct golden key; returns how many golden runs were executed.
+
+    A golden run that raises is cached as `crashed`: its faulty runs classify as `error`.
+    """
+    cache = _DEFAULT_CACHE if cache is None else cache
+    missing: dict[str, RunSpec] = {}
+    for s in specs:
+        if s.faults:
+            key = golden_spec(s).key()
+            if key not in missing and cache.get(key) is None:
+                missing[key] = s
+    for key, fp in _map(_golden_worker, list(missing.values()), jobs):
+        cache.put(key, fp)
+        cache.runs += 1
+    return len(missing)
+
+
 def classify_many(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache | None = None,
                   tol: float = TOLERANCE) -> list[tuple[RunResult, str]]:
     """Classify many runs on `jobs` worker processes; results sorted by run id, traces dropped.
@@ -213,15 +232,7 @@ def classify_many(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache | 
     """
     cache = _DEFAULT_CACHE if cache is None else cache
     specs = list(specs)
-    missing: dict[str, RunSpec] = {}
-    for s in specs:
-        if s.faults:
-            key = golden_spec(s).key()
-            if cache.get(key) is None and key not in missing:
-                missing[key] = s
-    for key, fp in _map(_golden_worker, list(missing.values()), jobs):
-        cache.put(key, fp)
-        cache.runs += 1
+    prepare_goldens(specs, jobs, cache)
     tasks = [(s, cache.get(golden_spec(s).key()) if s.faults else None, tol) for s in specs]
     out = _map(_faulty_worker, tasks, jobs)
     out.sort(key=lambda pair: pair[0].run_id)
@@ -250,3 +261,64 @@ def outcome_table(pairs: Sequence[tuple[RunResult, str]], by: Sequence[str] = ()
     # Injections that happened (a flip whose site is never evaluated again is not injected).
     table["fault_events"] = df.groupby(keys)["fault_events"].mean()
     return table
+
+
+# ---------------------------------------------------------------- sweeps with a results store
+
+class ClassifyingRun:
+    """What an executor's worker runs under `addtc --classify`: the run, as `run_spec`
+    records it, plus its outcome class against the golden fingerprint in `golden_dir`.
+
+    Golden runs are expected there already (`prepare_goldens` with a `GoldenCache` on that
+    directory); one that is missing (e.g. a cache directory cleared mid-sweep) is run here.
+    A picklable callable, so that worker processes can be handed it.
+    """
+
+    def __init__(self, golden_dir: str | Path, tol: float = TOLERANCE):
+        self.golden_dir = str(golden_dir)
+        self.tol = tol
+        self._cache: GoldenCache | None = None
+
+    def __getstate__(self):
+        return {"golden_dir": self.golden_dir, "tol": self.tol, "_cache": None}
+
+    def __call__(self, spec: RunSpec, seq: int = -1, worker: str = ""):
+        from addt_dsl.runtime.executor import run_spec
+
+        if self._cache is None:
+            self._cache = GoldenCache(self.golden_dir)
+        try:
+            golden = self._cache.golden(spec) if spec.faults else None
+        except Exception:  # noqa: BLE001 - the golden twin itself failed: `error`
+            golden = Fingerprint({}, "crashed", False)
+            self._cache.put(golden_spec(spec).key(), golden)
+        outcomes: list[str] = []
+
+        def judge(result):
+            outcomes.append(_outcome(result, golden, self.tol))
+
+        record = run_spec(spec, seq, worker=worker, on_result=judge)
+        record.outcome = outcomes[0] if outcomes else "error"  # no result: the run crashed
+        return record
+
+
+class ClassifyingExecutor:
+    """Wraps a local or inline executor so every run it returns carries its outcome class.
+
+    The wrapped executor's workers run `ClassifyingRun(golden_dir)`. A run the executor
+    had to stop (timeout, memory, a dead worker) is an `error`: the runner, not the stack,
+    failed to finish it.
+    """
+
+    def __init__(self, executor, golden_dir: str | Path, tol: float = TOLERANCE):
+        if not hasattr(executor, "run_fn"):
+            raise ValueError(f"the {executor.name} executor cannot classify runs; use the local one")
+        executor.run_fn = ClassifyingRun(golden_dir, tol)
+        self.inner = executor
+        self.name, self.workers = executor.name, executor.workers
+
+    def imap(self, items):
+        for record in self.inner.imap(items):
+            if not record.outcome:
+                record.outcome = "error"
+            yield record

@@ -38,6 +38,7 @@ class _SummaryRow(NamedTuple):
     sim_time_s: float
     wall_time_s: float
     failed_oracles: list[str]
+    outcome: str = ""
 
 SCHEMA_VERSION = "1"
 
@@ -85,6 +86,9 @@ class RunRecord:
     seq: int = -1  # position in the sweep's expansion order
     worker: str = ""
     session: int = 0
+    # Outcome class against the fault-free twin (`addtc --classify`, addt_dsl.runtime.outcome):
+    # masked | silent | detected | hazard | error; "" when the run was not classified.
+    outcome: str = ""
 
     @property
     def passed(self) -> bool:
@@ -159,7 +163,7 @@ def trace_stats(trace) -> dict:
 
 _COLUMNS = ("key", "run_id", "seq", "session", "status", "passed", "seed", "repeat_index", "params",
             "cell", "spec", "verdicts", "failed_oracles", "sim_time_s", "wall_time_s", "digest",
-            "fault_events", "error", "stats", "worker", "finished_at")
+            "fault_events", "error", "stats", "worker", "finished_at", "outcome")
 
 
 def _json_float(x):
@@ -204,7 +208,11 @@ class ResultStore:
                 repeat_index INTEGER NOT NULL, params TEXT NOT NULL, cell TEXT NOT NULL, spec TEXT NOT NULL,
                 verdicts TEXT NOT NULL, failed_oracles TEXT NOT NULL, sim_time_s REAL, wall_time_s REAL,
                 digest TEXT, fault_events INTEGER, error TEXT, stats TEXT, worker TEXT, finished_at REAL,
-                PRIMARY KEY (key, run_id))""")
+                outcome TEXT NOT NULL DEFAULT '', PRIMARY KEY (key, run_id))""")
+            # Stores written before outcomes were recorded lack the column.
+            columns = {row[1] for row in self._db.execute("PRAGMA table_info(runs)")}
+            if "outcome" not in columns:
+                self._db.execute("ALTER TABLE runs ADD COLUMN outcome TEXT NOT NULL DEFAULT ''")
             self._db.execute("""CREATE TABLE IF NOT EXISTS sessions (
                 id INTEGER PRIMARY KEY, started_at REAL, command TEXT, executor TEXT, workers INTEGER)""")
             self._db.execute("INSERT OR IGNORE INTO meta VALUES ('schema', ?)", (SCHEMA_VERSION,))
@@ -286,7 +294,7 @@ class ResultStore:
                 (r.key, r.run_id, r.seq, self.session, r.status, int(r.passed), r.seed, r.repeat_index,
                  json.dumps(r.params), json.dumps(r.cell), r.spec_json, json.dumps(verdicts),
                  ";".join(r.failed_oracles), r.sim_time_s, r.wall_time_s, r.digest, r.fault_events, r.error,
-                 json.dumps(r.stats), r.worker, time.time()))
+                 json.dumps(r.stats), r.worker, time.time(), r.outcome))
         return cur.rowcount == 1
 
     # ---- reading
@@ -316,10 +324,10 @@ class ResultStore:
     def summary(self) -> dict:
         from addt_dsl.reporting.tables import summary
 
-        rows = (_SummaryRow(bool(ok), status, s or 0.0, w or 0.0, [n for n in failed.split(";") if n])
-                for status, ok, failed, s, w in self._db.execute(
-                    "SELECT status, passed, failed_oracles, sim_time_s, wall_time_s FROM runs"))
-        return summary(self.plan(), rows, self.rejected())
+        rows = (_SummaryRow(bool(ok), status, s or 0.0, w or 0.0, [n for n in failed.split(";") if n], outcome)
+                for status, ok, failed, s, w, outcome in self._db.execute(
+                    "SELECT status, passed, failed_oracles, sim_time_s, wall_time_s, outcome FROM runs"))
+        return summary(self.plan(), rows, self.rejected(), cells=self.records("outcome != ''"))
 
     def dataframe(self):
         """One row per run: id, parameters, seed, verdict, per-oracle robustness and first
@@ -346,4 +354,5 @@ def _record(row: dict) -> RunRecord:
                      status=row["status"], verdicts=verdicts, error=row["error"] or "",
                      sim_time_s=row["sim_time_s"] or 0.0, wall_time_s=row["wall_time_s"] or 0.0,
                      digest=row["digest"] or "", fault_events=row["fault_events"] or 0, stats=stats,
-                     seq=row["seq"], worker=row["worker"] or "", session=row["session"])
+                     seq=row["seq"], worker=row["worker"] or "", session=row["session"],
+                     outcome=row["outcome"] or "")

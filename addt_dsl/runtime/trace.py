@@ -42,6 +42,15 @@ class Event:
     detail: dict = field(default_factory=dict)
 
 
+SERIES_COLUMNS = ("times", "value", "before")  # the parallel lists of a series fault event
+
+
+def injection_count(event: Event) -> int:
+    """Injections one `fault` event stands for: 1, or the length of a series event."""
+    times = event.detail.get("times")
+    return 1 if times is None else len(times)
+
+
 @dataclass
 class Trace:
     period_s: float
@@ -63,6 +72,27 @@ class Trace:
     def events_of(self, kind: str) -> list[Event]:
         return [e for e in self.events if e.kind == kind]
 
+    def fault_injections(self) -> list[dict]:
+        """One row per fault injection, in event order: `time_s` plus the event's fields.
+        A series event (one per location of a high-rate fault such as `random_value`, its
+        `times`/`value`/`before` parallel lists) expands into one row per entry."""
+        rows = []
+        for e in self.events:
+            if e.kind != "fault":
+                continue
+            d = e.detail
+            if "times" not in d:
+                rows.append({"time_s": e.time_s, **d})
+                continue
+            fixed = {k: v for k, v in d.items() if k not in SERIES_COLUMNS}
+            rows.extend({"time_s": t, **fixed, "value": v, "before": b}
+                        for t, v, b in zip(d["times"], d["value"], d["before"]))
+        return rows
+
+    def injection_count(self) -> int:
+        """How many injections the `fault` events record (a series event counts each entry)."""
+        return sum(injection_count(e) for e in self.events if e.kind == "fault")
+
     def digest(self) -> str:
         h = hashlib.sha256()
         h.update(np.ascontiguousarray(self.time).tobytes())
@@ -77,6 +107,16 @@ class Trace:
             h.update(name.encode())
             h.update(np.ascontiguousarray(self.outputs[name]).tobytes())
         for e in self.events:
-            h.update(repr((e.time_s, e.kind, sorted(e.detail.items()))).encode())
+            d = e.detail
+            if e.kind == "fault" and "times" in d:
+                # A series event: its columns hashed as float64 bytes (exact, and a repr of
+                # thousands of floats would cost more than the injections themselves).
+                h.update(repr((e.time_s, e.kind, sorted((k, v) for k, v in d.items()
+                                                         if k not in SERIES_COLUMNS))).encode())
+                for column in SERIES_COLUMNS:
+                    h.update(column.encode())
+                    h.update(np.asarray(d[column], dtype=np.float64).tobytes())
+                continue
+            h.update(repr((e.time_s, e.kind, sorted(d.items()))).encode())
         h.update(self.status.encode())
         return h.hexdigest()

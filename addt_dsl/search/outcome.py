@@ -116,11 +116,13 @@ def evaluate(spec: RunSpec, keep_trace: bool = False):
     if result.status != "ok":
         kind = result.error.split(":", 1)[0] or result.status
         failures.append(Failure(STACK_HEALTH, kind, trace.duration_s, -math.inf))
+    from addt_dsl.runtime.trace import injection_count
+
     events = Counter()
     bits: dict[int, list[int]] = {}
     for e in trace.events:
         if e.kind == "fault":
-            events[e.detail["index"]] += 1
+            events[e.detail["index"]] += injection_count(e)
             if "bit" in e.detail:
                 bits.setdefault(e.detail["index"], []).append(int(e.detail["bit"]))
     outcome = Outcome(spec.key(), result.status, result.error, {v.name: v.robustness for v in result.verdicts},

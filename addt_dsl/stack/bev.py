@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 import time as _time
+from collections.abc import Callable
+from dataclasses import dataclass
 
 from addt_dsl import units
 from addt_dsl.registry import STACKS, ParamSpec
@@ -19,6 +21,45 @@ from addt_dsl.stack.latency import load_models
 from addt_dsl.stack.nodes import Controller, GroundTruthPerception, LatticePlanner, Obj, Tracker
 
 NODE_NAMES = ("perception", "tracker", "planner", "control")
+
+
+@dataclass(frozen=True)
+class PerceptionMode:
+    """One value of `stack bev perception NAME`: how to build the node and what it reads.
+
+    `build(settings, ctx)` makes the node (importing torch or opencv only for the mode
+    that needs them); `frame_key` is the frame data entry that marks its input (lidar
+    frames carry `hit_body`, camera frames `image`); `needs_sensor` is the sensor keyword
+    the compiler requires on the ego (None: not enforced, as for the lidar modes, since
+    existing scenarios run the default stack with a camera only, to exercise the renderer).
+    """
+
+    build: Callable
+    frame_key: str
+    needs_sensor: str | None = None
+
+
+def _ground_truth(settings, ctx):
+    return GroundTruthPerception(settings, ctx.rng("perception"))
+
+
+def _learned(settings, ctx):
+    from addt_dsl.stack.learned import LearnedPerception  # torch: only when asked for
+
+    return LearnedPerception(settings, ctx)
+
+
+def _camera(settings, ctx):
+    from addt_dsl.stack.camera_perception import CameraPerception  # opencv: only when asked for
+
+    return CameraPerception(settings, ctx)
+
+
+PERCEPTIONS = {
+    "ground_truth": PerceptionMode(_ground_truth, "hit_body"),
+    "learned": PerceptionMode(_learned, "hit_body"),
+    "camera": PerceptionMode(_camera, "image", "camera"),
+}
 
 
 class StackError(RuntimeError):
@@ -30,7 +71,8 @@ class BevStack:
     keyword = "bev"
     params = (
         ParamSpec("perception", None, kind="word", default="ground_truth",
-                  choices=("ground_truth", "learned"), doc="perception model"),
+                  choices=tuple(PERCEPTIONS), doc="perception model: ground_truth, learned (lidar CNN) or "
+                                                  "camera (colour detector on the camera image)"),
         ParamSpec("cruise_speed", units.SPEED, default=25.0, low=0.0, high=70.0, doc="desired speed"),
         ParamSpec("time_gap", units.TIME, default=1.5, low=0.1, high=10.0, doc="desired headway"),
         ParamSpec("stale", units.TIME, default=0.15, low=0.0, high=10.0,
@@ -55,7 +97,13 @@ class BevStack:
         "planner": LatticePlanner.sites,
         "control": Controller.sites,
     }
-    doc = "BEV-style stack: lidar perception, CV tracker, lattice planner, PID + pure pursuit."
+    doc = "BEV-style stack: lidar or camera perception, CV tracker, lattice planner, PID + pure pursuit."
+
+    @classmethod
+    def required_sensors(cls, settings: dict) -> set[str]:
+        """Sensor keywords the ego must carry for these settings (the compiler checks)."""
+        mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
+        return {mode.needs_sensor} if mode is not None and mode.needs_sensor else set()
 
     @classmethod
     def fault_sites(cls, settings: dict | None = None) -> set[str]:
@@ -97,11 +145,9 @@ class BevStack:
         self.synthetic_objects = int(self.settings["synthetic_objects"])
 
     def _make_perception(self):
-        if self.settings["perception"] == "learned":
-            from addt_dsl.stack.learned import LearnedPerception  # torch: only when asked for
-
-            return LearnedPerception(self.settings, self.ctx)
-        return GroundTruthPerception(self.settings, self.ctx.rng("perception"))
+        mode = PERCEPTIONS[self.settings["perception"]]
+        self.perception_input = mode.frame_key
+        return mode.build(self.settings, self.ctx)
 
     # ---- timing helpers
     def _latency(self, node: str, objects: int, started: float, time_s: float) -> float:
@@ -120,8 +166,8 @@ class BevStack:
     # ---- inputs
     def on_frame(self, frame, arrive_s: float) -> None:
         """A sensor frame arrives at the stack at `arrive_s`."""
-        if "hit_body" not in frame.data:
-            return  # perception consumes lidar frames; camera, IMU and GNSS frames are not used yet
+        if self.perception_input not in frame.data:
+            return  # a frame of a sensor this perception does not read (IMU, GNSS, the other of lidar/camera)
         if arrive_s - frame.stamp_s > float(self.settings["stale"]):
             self.ctx.event("stale_frame", sensor=frame.sensor, age_s=arrive_s - frame.stamp_s)
             return

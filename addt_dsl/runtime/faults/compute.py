@@ -140,7 +140,8 @@ class RandomValue(FaultKind):
     params = (ParamSpec("low", None, kind="number", default=-1.0, doc="lower bound (SI)"),
               ParamSpec("high", None, kind="number", default=1.0, doc="upper bound (SI)"))
     doc = ("A variable or output takes uniform random values in [low, high] during the window. "
-           "Recorded per value: `value` is the random value, `before` the true one.")
+           "Recorded as one series event per site: `times`, `value` (the random values) and "
+           "`before` (the true ones) are parallel lists, one entry per injected value.")
     _BATCH = 256
 
     def __init__(self, *a):
@@ -155,5 +156,5 @@ class RandomValue(FaultKind):
             batch = self.rng.uniform(float(self.settings["low"]), float(self.settings["high"]), self._BATCH)
             self._values = batch.tolist()[::-1]
         out = self._values.pop()
-        self.record(time_s, site, out, before=value)
+        self.record_series(time_s, site, out, value)
         return out

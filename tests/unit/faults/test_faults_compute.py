@@ -117,7 +117,46 @@ def test_stuck_and_random_value_record_location_and_injected_value():
     stuck_ev = [e.detail for e in events if e.detail["kind"] == "stuck"]
     assert stuck_ev == [{"index": 0, "kind": "stuck", "target": "planner.speed", "location": "planner.speed",
                          "value": 0.0, "before": 20.0}]
-    assert [e.detail["value"] for e in events if e.detail["kind"] == "random_value"] == vals[:6]
+    (series,) = [e for e in events if e.detail["kind"] == "random_value"]  # one event per site
+    assert series.time_s == 0.0 and series.detail["location"] == "control.steer"
+    assert series.detail["value"] == vals[:6] and series.detail["before"] == [0.0] * 6
+    assert series.detail["times"] == pytest.approx(list(np.arange(0, 0.6, 0.1)))
+
+
+def test_random_value_on_a_node_keeps_one_series_per_site_and_every_injection_in_the_trace():
+    from addt_dsl.runtime.trace import Trace, injection_count
+
+    sched, kind, events = bound("random_value", nodes=NODES, target="control", low=-1.0, high=1.0,
+                                start=0.0, end=0.05)
+    injected = []
+    for k in range(8):  # control ticks at 100 Hz: steer, then accel, then the integral
+        t = k * 0.01
+        for site, true in (("control.steer", 0.1 * k), ("control.accel", -0.2 * k)):
+            for f in sched.for_target(site):
+                out = f.on_value(site, true, t)
+                if out != true:
+                    injected.append((t, site, out, true))
+    assert len(injected) == 12  # 6 ticks in [0, 0.05] x 2 sites
+    assert [e.detail["location"] for e in events] == ["control.steer", "control.accel"]
+    assert [injection_count(e) for e in events] == [6, 6]
+    trace = Trace(0.01, np.zeros(1), {}, {}, events)
+    rows = trace.fault_injections()
+    assert trace.injection_count() == 12
+    assert sorted((r["time_s"], r["location"], r["value"], r["before"]) for r in rows) == sorted(injected)
+    assert all(r["kind"] == "random_value" and r["target"] == "control" and r["index"] == 0 for r in rows)
+
+
+def test_the_digest_sees_every_value_of_a_series():
+    from addt_dsl.runtime.trace import Trace
+
+    sched, events = schedule({"kind": "random_value", "target": "control.steer", "start": 0.0, "end": 1.0})
+    for k in range(50):
+        sched.kinds[0].on_value("control.steer", 0.0, k * 0.01)
+    trace = Trace(0.01, np.zeros(1), {}, {}, events)
+    before = trace.digest()
+    assert trace.digest() == before
+    events[0].detail["value"][37] = math.nextafter(events[0].detail["value"][37], 2.0)  # one ulp
+    assert trace.digest() != before
 
 
 def test_spike_and_slow_add_latency_in_their_window():

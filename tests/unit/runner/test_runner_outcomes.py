@@ -1,0 +1,91 @@
+"""Outcome classes in the store, the tables and the CLI wiring of `--classify` (no simulation:
+records are made by hand, the executor runs a fake run function)."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+
+import pytest
+from runner_testkit import fake_record, plan_of, scenario
+
+from addt_dsl.reporting.tables import runs_table, summary
+from addt_dsl.runtime.executor import LocalExecutor, run_sweep
+from addt_dsl.runtime.outcome import ClassifyingExecutor, ClassifyingRun
+from addt_dsl.runtime.store import ResultStore
+from addt_dsl.sweep import expand
+
+PLAN = plan_of(scenario([0, 6], repeat=3))
+
+
+def records(outcomes: list[str]):
+    out = []
+    for spec, outcome in zip(expand(PLAN).specs, outcomes):
+        r = fake_record(spec)
+        r.outcome = outcome
+        if outcome == "hazard":
+            r.verdicts[0].passed = False
+        out.append(r)
+    return out
+
+
+def test_summary_counts_outcomes_and_tabulates_them_per_grid_cell():
+    recs = records(["masked", "silent", "hazard", "masked", "detected", "error"])
+    s = summary(PLAN, recs)
+    assert s["outcomes"] == {"masked": 2, "silent": 1, "detected": 1, "hazard": 1, "error": 1}
+    cells = {c["mode"]: c for c in s["outcomes_per_cell"]}
+    assert set(cells) == {0.0, 6.0}
+    assert (cells[0.0]["masked"], cells[0.0]["silent"], cells[0.0]["hazard"], cells[0.0]["runs"]) == (1, 1, 1, 3)
+    assert cells[0.0]["success_rate"] == pytest.approx(2 / 3)
+    assert (cells[6.0]["masked"], cells[6.0]["detected"], cells[6.0]["error"]) == (1, 1, 1)
+    json.dumps(s)  # plain JSON types
+
+
+def test_unclassified_runs_add_no_outcome_fields():
+    recs = records([""] * 6)
+    assert "outcomes" not in summary(PLAN, recs)
+    assert "outcome" not in runs_table(PLAN, recs).columns
+    assert list(runs_table(PLAN, records(["masked"] * 6))["outcome"]) == ["masked"] * 6
+
+
+def test_the_store_keeps_outcomes_and_upgrades_an_old_store(tmp_path):
+    path = tmp_path / "r.sqlite"
+    with ResultStore(path, PLAN) as store:
+        pass
+    # A store written before outcomes existed: the same table without the column.
+    db = sqlite3.connect(path)
+    db.execute("CREATE TABLE old AS SELECT * FROM runs")
+    db.execute("DROP TABLE runs")
+    db.execute("ALTER TABLE old DROP COLUMN outcome")
+    db.execute("ALTER TABLE old RENAME TO runs")
+    db.commit()
+    db.close()
+    with ResultStore(path, PLAN) as store:
+        for r in records(["silent", "hazard", "", "masked", "masked", "masked"]):
+            store.add(r)
+    with ResultStore(path) as store:
+        assert [r.outcome for r in store.records()] == ["silent", "hazard", "", "masked", "masked", "masked"]
+        assert store.summary()["outcomes"] == {"masked": 3, "silent": 1, "detected": 0, "hazard": 1, "error": 0}
+        assert list(store.dataframe()["outcome"]) == ["silent", "hazard", "", "masked", "masked", "masked"]
+
+
+def _crash(spec, seq=-1, worker=""):
+    raise RuntimeError("worker lost")
+
+
+def test_runs_the_executor_could_not_finish_are_errors(tmp_path):
+    executor = ClassifyingExecutor(LocalExecutor(1, start_method="fork"), tmp_path / "golden")
+    assert isinstance(executor.inner.run_fn, ClassifyingRun)
+    executor.inner.run_fn = _crash  # the worker's run fails: the executor records it itself
+    with ResultStore(tmp_path / "r.sqlite", PLAN) as store:
+        run_sweep(expand(PLAN).specs[:1], store, executor)
+        [record] = list(store.records())
+    assert (record.status, record.outcome) == ("crashed", "error")
+
+
+def test_classify_is_refused_on_executors_that_cannot_run_it(tmp_path):
+    class Remote:
+        name, workers = "ray", 4
+
+    with pytest.raises(ValueError, match="cannot classify"):
+        ClassifyingExecutor(Remote(), tmp_path)
