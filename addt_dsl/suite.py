@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,6 +54,7 @@ def expand_paths(paths: Sequence[str]) -> list[Path]:
 class Tally:
     runs: int = 0
     passed: int = 0
+    outcomes: Counter = field(default_factory=Counter)  # with --classify: runs per outcome class
 
     @property
     def rate(self) -> float:
@@ -60,7 +62,10 @@ class Tally:
 
     def as_dict(self) -> dict:
         lo, hi = wilson_interval(self.passed, self.runs)
-        return {"runs": self.runs, "passed": self.passed, "rate": self.rate, "interval95": [lo, hi]}
+        out = {"runs": self.runs, "passed": self.passed, "rate": self.rate, "interval95": [lo, hi]}
+        if self.outcomes:
+            out["outcomes"] = dict(self.outcomes)
+        return out
 
 
 @dataclass
@@ -86,6 +91,8 @@ def tally_by(records: Iterable, param: str) -> dict[float, Tally]:
         t = out.setdefault(float(value), Tally())
         t.runs += 1
         t.passed += r.passed
+        if getattr(r, "outcome", ""):
+            t.outcomes[r.outcome] += 1
     return dict(sorted(out.items()))
 
 
@@ -104,7 +111,7 @@ def suite_summary(rows: Sequence[SuiteRow], by: str | None) -> dict:
         "files": [{
             "path": str(r.path), "scenario": r.name, "exit_code": r.exit_code, "wall_s": r.wall_s,
             "runs": r.totals.get("runs", 0), "passed": r.totals.get("passed", 0),
-            "failed": r.totals.get("failed", 0),
+            "failed": r.totals.get("failed", 0), **({"outcomes": r.totals["outcomes"]} if "outcomes" in r.totals else {}),
             "by": [{"value": v, "label": r.labels.get(v, f"{v:g}"), **t.as_dict()} for v, t in r.by.items()],
         } for r in rows],
         "runs": sum(r.totals.get("runs", 0) for r in rows),
@@ -133,6 +140,9 @@ def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
     table = Table(title=title)
     for col in ("scenario", "runs", "passed", "wall [s]"):
         table.add_column(col, justify="left" if col == "scenario" else "right")
+    classified = any("outcomes" in r.totals for r in rows)
+    if classified:
+        table.add_column("masked/silent/detected/hazard", justify="right")
     for v in values:
         table.add_column(labels.get(v, f"{v:g}"), justify="right")
     for r in rows:
@@ -141,8 +151,11 @@ def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
             t = r.by.get(v)
             cells.append("-" if t is None else f"{100 * t.rate:.2f}% ({t.runs})")
         colour = "green" if r.exit_code == 0 else ("red" if r.exit_code == 1 else "yellow")
+        outcomes = r.totals.get("outcomes", {})
+        counts = ["/".join(str(outcomes.get(k, 0)) for k in ("masked", "silent", "detected", "hazard"))] \
+            if classified else []
         table.add_row(f"[{colour}]{r.name or r.path.stem}[/]", str(r.totals.get("runs", 0)),
-                      str(r.totals.get("passed", 0)), f"{r.wall_s:.1f}", *cells)
+                      str(r.totals.get("passed", 0)), f"{r.wall_s:.1f}", *counts, *cells)
     # Not a terminal (CI logs, files): wide enough that a Table-1 layout does not wrap.
     console = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
     console.print(table)

@@ -43,3 +43,18 @@ def test_suite_errors_are_usage_errors(tmp_path):
     other.write_text(one.read_text())
     proc = addtc(one, other, "--store", tmp_path / "x.sqlite")
     assert proc.returncode == 2 and "--store" in proc.stderr
+
+
+def test_a_classified_suite_counts_outcomes_per_file_and_value(tmp_path):
+    one = limit_scenario(tmp_path, repeat=1, duration="2 s", limits="200")
+    other = tmp_path / "other.addt"
+    other.write_text(one.read_text().replace("scenario limit", "scenario other"))
+    out = tmp_path / "out"
+    proc = addtc(one, other, "--by", "drop", "--classify", "--jobs", "2", "--out", out, "--no-report")
+    assert proc.returncode == 0, proc.stderr
+    assert "masked/silent/detected/hazard" in proc.stdout
+    summary = json.loads((out / "suite.json").read_text())
+    for f in summary["files"]:
+        assert sum(f["outcomes"].values()) == f["runs"] == 2
+        by = {c["value"]: c for c in f["by"]}
+        assert by[0.0]["outcomes"] == {"masked": 1}  # no drops: the run is its own twin
