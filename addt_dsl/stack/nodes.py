@@ -299,8 +299,10 @@ class Controller:
     """
 
     name = "control"
-    sites = ("control.steer", "control.accel", "control.integral")
-    lateral_wn = 1.0  # [rad/s]
+    # Commands (transient), PID state (kept) and the gains (parameters in memory: a
+    # changed gain stays changed for the rest of the run, like a memory upset).
+    sites = ("control.steer", "control.accel", "control.integral",
+             "control.kp", "control.ki", "control.kd", "control.lateral_wn", "control.understeer")
     lateral_zeta = 1.0
     preview_s = 0.2  # [s]
 
@@ -313,6 +315,7 @@ class Controller:
         # Understeer gradient [rad/(m/s^2)]: steering feed-forward a tyre-slip vehicle
         # needs beyond the geometric angle in a curve.
         self.understeer = float(settings.get("understeer", 0.0028))
+        self.lateral_wn = 1.0  # [rad/s] natural frequency of the lateral error dynamics
         self.prev_err = 0.0
         self.max_steer = 0.5
         self._last_xy: tuple[float, float] | None = None
@@ -339,6 +342,12 @@ class Controller:
 
     def command(self, plan: Plan, ego, road, s_now: float, t_now: float, dt: float, corrupt):
         x, y, heading, speed = ego
+        # The gains are read from memory every cycle and written back (persistent faults).
+        self.kp = corrupt("control.kp", self.kp)
+        self.ki = corrupt("control.ki", self.ki)
+        self.kd = corrupt("control.kd", self.kd)
+        self.lateral_wn = corrupt("control.lateral_wn", self.lateral_wn)
+        self.understeer = corrupt("control.understeer", self.understeer)
         course = self._course(x, y, heading, dt, speed)
         t_path, slope, _ = self._path(plan, s_now)
         _, _, road_heading = road.reference_pose(s_now)
