@@ -68,6 +68,15 @@ class PhysicsWorld:
         self._ground_array = np.array([self.ground], dtype=np.int64)
         self.bodies: dict[str, int] = {}
         self.body_names: dict[int, str] = {}
+        # What the analytic ray caster needs (runtime.raycast): the boxes' sizes and poses
+        # (x, y, z, heading, pitch), mirrored from add_box / set_pose, and the plane height.
+        self._box_slot: dict[int, int] = {}
+        self._box_half: list[tuple[float, float, float]] = []
+        self._box_pose: list[tuple[float, float, float, float, float]] = []
+        self._box_ids = np.zeros(0, dtype=np.int64)
+        self._ground_z = 0.0
+        self._collision_meshes = 0
+        self.analytic_rays = True  # False: always ask pybullet (tests compare the two)
 
     def add_box(self, name: str, length: float, width: float, height: float,
                 rgba: tuple[float, float, float, float] | None = None) -> int:
@@ -82,6 +91,10 @@ class PhysicsWorld:
         body = p.createMultiBody(0, shape, visual, basePosition=[0, 0, height / 2], physicsClientId=self.client)
         self.bodies[name] = body
         self.body_names[body] = name
+        self._box_slot[body] = len(self._box_half)
+        self._box_half.append((length / 2, width / 2, height / 2))
+        self._box_pose.append((0.0, 0.0, height / 2, 0.0, 0.0))
+        self._box_ids = np.append(self._box_ids, body)
         return body
 
     def add_mesh(self, mesh, collision: bool = False) -> int | None:
@@ -101,6 +114,7 @@ class PhysicsWorld:
             vis = p.createVisualShape(p.GEOM_MESH, vertices=verts, indices=idx, rgbaColor=list(mesh.rgba),
                                       physicsClientId=self.client)
         body = p.createMultiBody(0, col, vis, physicsClientId=self.client)
+        self._collision_meshes += collision
         self.ground_ids.add(body)
         self._ground_array = np.array(sorted(self.ground_ids), dtype=np.int64)
         return body
@@ -109,6 +123,7 @@ class PhysicsWorld:
         """Move the infinite ground plane (below the lowest road when roads are elevated)."""
         self.p.resetBasePositionAndOrientation(self.ground, (0.0, 0.0, z), (0.0, 0.0, 0.0, 1.0),
                                                physicsClientId=self.client)
+        self._ground_z = z
 
     def color_ground(self, rgba) -> None:
         """Plain colour for the ground plane (the renderer draws it checkered by default)."""
@@ -124,10 +139,42 @@ class PhysicsWorld:
         else:
             cp, sp = math.cos(hp), math.sin(hp)
             quat = (-sy * sp, cy * sp, sy * cp, cy * cp)
-        self.p.resetBasePositionAndOrientation(self.bodies[name], (x, y, z), quat, physicsClientId=self.client)
+        body = self.bodies[name]
+        self.p.resetBasePositionAndOrientation(body, (x, y, z), quat, physicsClientId=self.client)
+        self._box_pose[self._box_slot[body]] = (x, y, z, heading, pitch)
+
+    @property
+    def analytic(self) -> bool:
+        """Whether ray casts are answered by `runtime.raycast`: the collision world is only
+        boxes and the ground plane (no road meshes), which it casts against exactly."""
+        return self.analytic_rays and self._collision_meshes == 0
 
     def ray_cast(self, starts: np.ndarray, ends: np.ndarray, ignore: str | None = None):
         """Batched rays; returns (body ids, -1 for none, the ground or the ignored body; hit fractions)."""
+        if self.analytic:
+            ids, frac = self._ray_cast_analytic(np.asarray(starts, dtype=np.float64),
+                                                np.asarray(ends, dtype=np.float64))
+        else:
+            ids, frac = self._ray_cast_pybullet(starts, ends)
+        ground = np.isin(ids, self._ground_array) if len(self._ground_array) > 1 else ids == self.ground
+        ids[ground] = -1
+        if ignore is not None:
+            ids[ids == self.bodies[ignore]] = -1
+        frac[ids < 0] = 1.0
+        return ids, frac
+
+    def _ray_cast_analytic(self, starts: np.ndarray, ends: np.ndarray):
+        from addt_dsl.runtime import raycast
+
+        pose = np.array(self._box_pose, dtype=np.float64).reshape(-1, 5)
+        half = np.array(self._box_half, dtype=np.float64).reshape(-1, 3)
+        index, frac = raycast.cast(starts, ends, pose[:, :3], raycast.box_rotations(pose[:, 3], pose[:, 4]),
+                                   half, self._ground_z)
+        ids = np.append(self._box_ids, self.ground)[index]
+        ids[index < 0] = -1
+        return ids, frac
+
+    def _ray_cast_pybullet(self, starts, ends):
         if len(starts) <= MAX_RAYS_PER_BATCH:
             results = self.p.rayTestBatch(starts, ends, physicsClientId=self.client)
         else:  # pybullet refuses batches of 16384 rays or more
@@ -136,14 +183,7 @@ class PhysicsWorld:
                 results.extend(self.p.rayTestBatch(starts[i:i + MAX_RAYS_PER_BATCH], ends[i:i + MAX_RAYS_PER_BATCH],
                                                    physicsClientId=self.client))
         ids_t, _, frac_t, _, _ = zip(*results) if results else ((), (), (), (), ())
-        ids = np.array(ids_t, dtype=np.int64)
-        frac = np.array(frac_t, dtype=np.float64)
-        ground = np.isin(ids, self._ground_array) if len(self._ground_array) > 1 else ids == self.ground
-        ids[ground] = -1
-        if ignore is not None:
-            ids[ids == self.bodies[ignore]] = -1
-        frac[ids < 0] = 1.0
-        return ids, frac
+        return np.array(ids_t, dtype=np.int64), np.array(frac_t, dtype=np.float64)
 
     def render(self, width: int, height: int, view: list[float], projection: list[float],
                segmentation: bool = True):
