@@ -9,7 +9,7 @@ meshes) and falls back to pybullet otherwise.
 
 Matched pybullet semantics (checked against `rayTestBatch` in tests/unit/twin/test_raycast.py):
 - a ray that starts inside a box does not hit that box (it may hit others);
-- the ground plane is hit from either side;
+- the ground plane is hit from either side, by segments that strictly cross it;
 - hits are reported as the fraction of the segment start → end, endpoints included.
 Rays that graze an edge or a face exactly (measure zero) may differ.
 """
@@ -58,9 +58,11 @@ def cast(starts: np.ndarray, ends: np.ndarray, centres: np.ndarray, rotations: n
             best[rays[first]] = t[first]
             index[rays[first]] = boxes[first]
     if plane_z is not None and n:
+        above_start, above_end = starts[:, 2] - plane_z, ends[:, 2] - plane_z
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = (plane_z - starts[:, 2]) / seg[:, 2]
-        closer = (t >= 0.0) & (t <= 1.0) & (t < best)
+            t = above_start / (above_start - above_end)
+        # Strictly crossing, as Bullet's triangle ray test: an endpoint on the plane is no hit.
+        closer = (above_start * above_end < 0.0) & (t < best)
         best[closer] = t[closer]
         index[closer] = m
     frac = np.where(index >= 0, best, 1.0)

@@ -40,6 +40,7 @@ def _quiet_stdout():
 
 
 MAX_RAYS_PER_BATCH = 8192
+_BOX_GROUP, _HIDDEN_GROUP = 1, 1 << 10  # collision filter groups: actor boxes; one left out of a ray test
 SUN_DIRECTION = (0.4, 0.3, 1.0)  # high sun: road markings render bright
 # Actor colours for the camera (the ego has no visual shape: cameras sit inside it).
 ACTOR_RGBA = {"car": (0.75, 0.12, 0.10, 1.0), "truck": (0.15, 0.30, 0.70, 1.0),
@@ -89,6 +90,7 @@ class PhysicsWorld:
             visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=list(rgba),
                                          physicsClientId=self.client)
         body = p.createMultiBody(0, shape, visual, basePosition=[0, 0, height / 2], physicsClientId=self.client)
+        p.setCollisionFilterGroupMask(body, -1, _BOX_GROUP, -1, physicsClientId=self.client)
         self.bodies[name] = body
         self.body_names[body] = name
         self._box_slot[body] = len(self._box_half)
@@ -183,7 +185,25 @@ class PhysicsWorld:
                 results.extend(self.p.rayTestBatch(starts[i:i + MAX_RAYS_PER_BATCH], ends[i:i + MAX_RAYS_PER_BATCH],
                                                    physicsClientId=self.client))
         ids_t, _, frac_t, _, _ = zip(*results) if results else ((), (), (), (), ())
-        return np.array(ids_t, dtype=np.int64), np.array(frac_t, dtype=np.float64)
+        ids, frac = np.array(ids_t, dtype=np.int64), np.array(frac_t, dtype=np.float64)
+        # Bullet's convex cast sometimes reports the box a ray starts in, at fraction 0
+        # (depending on where inside and which way: a lidar mounted low in the ego's box
+        # lost ~17 % of its rays). A ray passes through the box it starts in, as it does
+        # in most directions: cast those rays again with that box filtered out.
+        p, hidden = self.p, []
+        stuck = np.flatnonzero((frac == 0.0) & np.isin(ids, self._box_ids))
+        while len(stuck):  # a ray may start inside several (overlapping) boxes
+            for body in np.unique(ids[stuck]).tolist():
+                p.setCollisionFilterGroupMask(body, -1, _HIDDEN_GROUP, -1, physicsClientId=self.client)
+                hidden.append(body)
+            again = p.rayTestBatch(starts[stuck], ends[stuck], collisionFilterMask=-1 ^ _HIDDEN_GROUP,
+                                   physicsClientId=self.client)
+            ids[stuck] = [r[0] for r in again]
+            frac[stuck] = [r[2] for r in again]
+            stuck = stuck[(frac[stuck] == 0.0) & np.isin(ids[stuck], self._box_ids)]
+        for body in hidden:
+            p.setCollisionFilterGroupMask(body, -1, _BOX_GROUP, -1, physicsClientId=self.client)
+        return ids, frac
 
     def render(self, width: int, height: int, view: list[float], projection: list[float],
                segmentation: bool = True):
