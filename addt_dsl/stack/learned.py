@@ -31,6 +31,7 @@ Tensor fault sites are the named layers (`perception.backbone.conv0`, ...): a si
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -300,6 +301,24 @@ class RegionForward:
         return heat, box
 
 
+@contextmanager
+def _one_intra_op_thread():
+    """One torch intra-op thread for an inference: results must not depend on the
+    machine's core count (a conv's partial sums split by thread), and the tiny network
+    gains nothing from threads but jitter and contention with parallel runs. Scoped to
+    the call (toggling costs ~5 us), so a process that embeds the runtime keeps its own
+    setting; worker processes that already run one thread pay nothing."""
+    previous = torch.get_num_threads()
+    if previous == 1:
+        yield
+        return
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
 class LearnedPerception:
     """The `perception learned` node: lidar frame → grid → CNN → objects in world coordinates."""
 
@@ -308,9 +327,6 @@ class LearnedPerception:
     tensor_sites = tuple(f"perception.{n}" for n in LAYER_SITES)
 
     def __init__(self, settings: dict, ctx=None, weights: Path = WEIGHTS_PATH, device: str = "cpu"):
-        # One intra-op thread: inference is tiny, threads only add jitter and contention
-        # with parallel runs (and keep results independent of the machine's core count).
-        torch.set_num_threads(1)
         self.model, self.meta = load_model(weights, device)
         self.device = device
         self.threshold = float(settings.get("detect_threshold", self.meta.get("threshold", DEFAULT_THRESHOLD)))
@@ -347,7 +363,7 @@ class LearnedPerception:
         occupied = self._grid.any(axis=0)
         rows, cols = np.flatnonzero(occupied.any(axis=1)), np.flatnonzero(occupied.any(axis=0))
         region = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1) if len(rows) else EMPTY
-        with torch.inference_mode():
+        with torch.inference_mode(), _one_intra_op_thread():
             x = self._input if self.device == "cpu" else self._input.to(self.device)
             heat, box = self._forward(x, region)
             heat, box = heat[0, 0].cpu().numpy(), box[0].cpu().numpy()

@@ -189,3 +189,19 @@ def test_region_forward_feeds_hooks_whole_outputs_and_follows_their_changes(scan
     node.last_activation_flips, node._armed = [], []
     node.detect(s.points, s.sensor_xy)  # transient: the next frame is clean again
     np.testing.assert_allclose(node._forward.maps["head.center"].buf.numpy(), clean_heat.numpy(), rtol=0, atol=0)
+
+
+def test_inference_runs_on_one_thread_without_changing_the_process_setting(scans):
+    s = scans["two"]
+    node = LearnedPerception({})
+    previous = torch.get_num_threads()
+    try:
+        torch.set_num_threads(2)
+        seen = []
+        handle = node.tensor_modules()["perception.backbone.conv0"].register_forward_pre_hook(
+            lambda module, inputs: seen.append(torch.get_num_threads()))
+        node.detect(s.points, s.sensor_xy)
+        handle.remove()
+        assert seen == [1] and torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(previous)
