@@ -83,14 +83,15 @@ def main() -> None:
         (nodes.GroundTruthPerception, "run", "perception (ground truth)"),
         (learned.LearnedPerception, "run", "perception (learned)"),
         (learned, "build_grid", "  grid from points"),
-        (learned.BevDetector, "forward", "  network forward"),
+        (learned.RegionForward, "__call__", "  network (changed regions)"),
         (learned, "decode", "  decode + box NMS"),
         (nodes.Tracker, "update", "tracker"),
         (nodes.LatticePlanner, "plan", "planner"),
         (nodes.Controller, "command", "control"),
     ]
     _ = bev_grid
-    print(f"overtake example, 30 s simulated, drop rate 0, torch threads {torch.get_num_threads()}")
+    print(f"overtake example, 30 s simulated, drop rate 0, torch threads {torch.get_num_threads()}; "
+          f"lidar ray casts analytic where the world allows (runtime/raycast.py)")
     figures = {"rtf": {}, "rtf_cpu": {}, "nodes_us_per_call": {}, "nodes_ms_per_run": {}}
     for perception in ("ground_truth", "learned"):
         spec = _spec(perception)

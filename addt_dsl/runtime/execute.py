@@ -136,6 +136,15 @@ class _Run:
         # Visual shapes (road meshes, coloured actors) only when a sensor renders.
         visual = any(getattr(SENSORS.get(c.name), "renders", False) for c in plan.ego.sensors)
         self.physics = PhysicsWorld(visual=visual)
+        try:
+            self._populate(spec)
+        except BaseException:
+            # Set-up failed (e.g. an unreachable external stack): release what was opened.
+            self.close()
+            raise
+
+    def _populate(self, spec: RunSpec) -> None:
+        plan = spec.plan
         self.scene = build_scene(self.physics, list(self.networks.values()))
         self.faults = FaultSchedule(spec.faults, self.dt, plan.duration_s, self.events)
         self.command_queue: list[tuple[float, float, float]] = []
@@ -194,6 +203,16 @@ class _Run:
         stack_cls = STACKS.get(stack_clause.name)
         self.stack = stack_cls(resolve_settings(stack_clause.settings, spec.params), self.ctx)
         self.faults.bind(self.stack, lambda: self.ctx.now)
+
+    def close(self) -> None:
+        """Release the fault schedule, the pybullet client and the stack's resources."""
+        faults = getattr(self, "faults", None)
+        if faults is not None:
+            faults.close()
+        self.physics.close()
+        close_stack = getattr(getattr(self, "stack", None), "close", None)  # e.g. the bridge's socket
+        if close_stack is not None:
+            close_stack()
 
     # ---- queries used by sensors and the stack
     def _road_of(self, actor: ActorPlan) -> _Road:
@@ -280,11 +299,7 @@ def execute(spec: RunSpec, keep_trace: bool = True) -> RunResult:
     try:
         trace = _loop(run)
     finally:
-        run.faults.close()
-        run.physics.close()
-        close_stack = getattr(run.stack, "close", None)  # e.g. the external bridge's socket
-        if close_stack is not None:
-            close_stack()
+        run.close()
     verdicts = judge(spec, trace)
     fault_events = trace.injection_count()
     return RunResult(

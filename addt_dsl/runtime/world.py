@@ -40,6 +40,7 @@ def _quiet_stdout():
 
 
 MAX_RAYS_PER_BATCH = 8192
+_BOX_GROUP, _HIDDEN_GROUP = 1, 1 << 10  # collision filter groups: actor boxes; one left out of a ray test
 SUN_DIRECTION = (0.4, 0.3, 1.0)  # high sun: road markings render bright
 # Actor colours for the camera (the ego has no visual shape: cameras sit inside it).
 ACTOR_RGBA = {"car": (0.75, 0.12, 0.10, 1.0), "truck": (0.15, 0.30, 0.70, 1.0),
@@ -68,6 +69,15 @@ class PhysicsWorld:
         self._ground_array = np.array([self.ground], dtype=np.int64)
         self.bodies: dict[str, int] = {}
         self.body_names: dict[int, str] = {}
+        # What the analytic ray caster needs (runtime.raycast): the boxes' sizes and poses
+        # (x, y, z, heading, pitch), mirrored from add_box / set_pose, and the plane height.
+        self._box_slot: dict[int, int] = {}
+        self._box_half: list[tuple[float, float, float]] = []
+        self._box_pose: list[tuple[float, float, float, float, float]] = []
+        self._box_ids = np.zeros(0, dtype=np.int64)
+        self._ground_z = 0.0
+        self._collision_meshes = 0
+        self.analytic_rays = True  # False: always ask pybullet (tests compare the two)
 
     def add_box(self, name: str, length: float, width: float, height: float,
                 rgba: tuple[float, float, float, float] | None = None) -> int:
@@ -80,8 +90,13 @@ class PhysicsWorld:
             visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=list(rgba),
                                          physicsClientId=self.client)
         body = p.createMultiBody(0, shape, visual, basePosition=[0, 0, height / 2], physicsClientId=self.client)
+        p.setCollisionFilterGroupMask(body, -1, _BOX_GROUP, -1, physicsClientId=self.client)
         self.bodies[name] = body
         self.body_names[body] = name
+        self._box_slot[body] = len(self._box_half)
+        self._box_half.append((length / 2, width / 2, height / 2))
+        self._box_pose.append((0.0, 0.0, height / 2, 0.0, 0.0))
+        self._box_ids = np.append(self._box_ids, body)
         return body
 
     def add_mesh(self, mesh, collision: bool = False) -> int | None:
@@ -101,6 +116,7 @@ class PhysicsWorld:
             vis = p.createVisualShape(p.GEOM_MESH, vertices=verts, indices=idx, rgbaColor=list(mesh.rgba),
                                       physicsClientId=self.client)
         body = p.createMultiBody(0, col, vis, physicsClientId=self.client)
+        self._collision_meshes += collision
         self.ground_ids.add(body)
         self._ground_array = np.array(sorted(self.ground_ids), dtype=np.int64)
         return body
@@ -109,6 +125,7 @@ class PhysicsWorld:
         """Move the infinite ground plane (below the lowest road when roads are elevated)."""
         self.p.resetBasePositionAndOrientation(self.ground, (0.0, 0.0, z), (0.0, 0.0, 0.0, 1.0),
                                                physicsClientId=self.client)
+        self._ground_z = z
 
     def color_ground(self, rgba) -> None:
         """Plain colour for the ground plane (the renderer draws it checkered by default)."""
@@ -124,10 +141,42 @@ class PhysicsWorld:
         else:
             cp, sp = math.cos(hp), math.sin(hp)
             quat = (-sy * sp, cy * sp, sy * cp, cy * cp)
-        self.p.resetBasePositionAndOrientation(self.bodies[name], (x, y, z), quat, physicsClientId=self.client)
+        body = self.bodies[name]
+        self.p.resetBasePositionAndOrientation(body, (x, y, z), quat, physicsClientId=self.client)
+        self._box_pose[self._box_slot[body]] = (x, y, z, heading, pitch)
+
+    @property
+    def analytic(self) -> bool:
+        """Whether ray casts are answered by `runtime.raycast`: the collision world is only
+        boxes and the ground plane (no road meshes), which it casts against exactly."""
+        return self.analytic_rays and self._collision_meshes == 0
 
     def ray_cast(self, starts: np.ndarray, ends: np.ndarray, ignore: str | None = None):
         """Batched rays; returns (body ids, -1 for none, the ground or the ignored body; hit fractions)."""
+        if self.analytic:
+            ids, frac = self._ray_cast_analytic(np.asarray(starts, dtype=np.float64),
+                                                np.asarray(ends, dtype=np.float64))
+        else:
+            ids, frac = self._ray_cast_pybullet(starts, ends)
+        ground = np.isin(ids, self._ground_array) if len(self._ground_array) > 1 else ids == self.ground
+        ids[ground] = -1
+        if ignore is not None:
+            ids[ids == self.bodies[ignore]] = -1
+        frac[ids < 0] = 1.0
+        return ids, frac
+
+    def _ray_cast_analytic(self, starts: np.ndarray, ends: np.ndarray):
+        from addt_dsl.runtime import raycast
+
+        pose = np.array(self._box_pose, dtype=np.float64).reshape(-1, 5)
+        half = np.array(self._box_half, dtype=np.float64).reshape(-1, 3)
+        index, frac = raycast.cast(starts, ends, pose[:, :3], raycast.box_rotations(pose[:, 3], pose[:, 4]),
+                                   half, self._ground_z)
+        ids = np.append(self._box_ids, self.ground)[index]
+        ids[index < 0] = -1
+        return ids, frac
+
+    def _ray_cast_pybullet(self, starts, ends):
         if len(starts) <= MAX_RAYS_PER_BATCH:
             results = self.p.rayTestBatch(starts, ends, physicsClientId=self.client)
         else:  # pybullet refuses batches of 16384 rays or more
@@ -136,13 +185,24 @@ class PhysicsWorld:
                 results.extend(self.p.rayTestBatch(starts[i:i + MAX_RAYS_PER_BATCH], ends[i:i + MAX_RAYS_PER_BATCH],
                                                    physicsClientId=self.client))
         ids_t, _, frac_t, _, _ = zip(*results) if results else ((), (), (), (), ())
-        ids = np.array(ids_t, dtype=np.int64)
-        frac = np.array(frac_t, dtype=np.float64)
-        ground = np.isin(ids, self._ground_array) if len(self._ground_array) > 1 else ids == self.ground
-        ids[ground] = -1
-        if ignore is not None:
-            ids[ids == self.bodies[ignore]] = -1
-        frac[ids < 0] = 1.0
+        ids, frac = np.array(ids_t, dtype=np.int64), np.array(frac_t, dtype=np.float64)
+        # Bullet's convex cast sometimes reports the box a ray starts in, at fraction 0
+        # (depending on where inside and which way: a lidar mounted low in the ego's box
+        # lost ~17 % of its rays). A ray passes through the box it starts in, as it does
+        # in most directions: cast those rays again with that box filtered out.
+        p, hidden = self.p, []
+        stuck = np.flatnonzero((frac == 0.0) & np.isin(ids, self._box_ids))
+        while len(stuck):  # a ray may start inside several (overlapping) boxes
+            for body in np.unique(ids[stuck]).tolist():
+                p.setCollisionFilterGroupMask(body, -1, _HIDDEN_GROUP, -1, physicsClientId=self.client)
+                hidden.append(body)
+            again = p.rayTestBatch(starts[stuck], ends[stuck], collisionFilterMask=-1 ^ _HIDDEN_GROUP,
+                                   physicsClientId=self.client)
+            ids[stuck] = [r[0] for r in again]
+            frac[stuck] = [r[2] for r in again]
+            stuck = stuck[(frac[stuck] == 0.0) & np.isin(ids[stuck], self._box_ids)]
+        for body in hidden:
+            p.setCollisionFilterGroupMask(body, -1, _BOX_GROUP, -1, physicsClientId=self.client)
         return ids, frac
 
     def render(self, width: int, height: int, view: list[float], projection: list[float],

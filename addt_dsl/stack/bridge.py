@@ -137,8 +137,12 @@ class ExternalStack:
             self.sock = socket.create_connection((host, port), timeout=timeout)
         except OSError as exc:
             raise StackError(f"cannot reach the external stack at {host}:{port}: {exc}") from None
-        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._request(self._hello(), expect="ready")
+        try:
+            self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._request(self._hello(), expect="ready")
+        except BaseException:
+            self.sock.close()  # the run never gets this stack to close
+            raise
 
     def _hello(self) -> dict:
         run = self.ctx.run

@@ -31,6 +31,7 @@ Tensor fault sites are the named layers (`perception.backbone.conv0`, ...): a si
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -103,6 +104,221 @@ def load_model(path: Path = WEIGHTS_PATH, device: str = "cpu") -> tuple[BevDetec
     return model.to(device).eval(), meta
 
 
+Region = tuple[int, int, int, int]  # rows [r0, r1), columns [c0, c1) of a feature map
+EMPTY: Region = (0, 0, 0, 0)
+
+
+def _union(a: Region, b: Region) -> Region:
+    if a[0] >= a[1] or a[2] >= a[3]:
+        return b
+    if b[0] >= b[1] or b[2] >= b[3]:
+        return a
+    return (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
+
+
+def _changed(new: torch.Tensor, old: torch.Tensor) -> Region:
+    """Bounding box of the elements a hook changed (NaN counts as changed)."""
+    diff = (new != old).flatten(0, 1).any(dim=0)
+    rows = torch.nonzero(diff.any(dim=1)).flatten()
+    if len(rows) == 0:
+        return EMPTY
+    cols = torch.nonzero(diff.any(dim=0)).flatten()
+    return (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
+
+
+class _Map:
+    """One feature map kept across inferences: equal to its background (the map for an
+    empty grid) except inside `dirty`, so the next frame restores only that region."""
+
+    __slots__ = ("background", "buf", "dirty")
+
+    def __init__(self, background: torch.Tensor):
+        self.background = background
+        self.buf = background.clone()
+        self.dirty = EMPTY
+
+    def restore(self, keep: Region = EMPTY) -> None:
+        """Back to the background, except that the caller will overwrite `keep` next."""
+        r0, r1, c0, c1 = self.dirty
+        inside = keep[0] <= r0 and r1 <= keep[1] and keep[2] <= c0 and c1 <= keep[3]
+        if r0 < r1 and c0 < c1 and not inside:
+            self.buf[..., r0:r1, c0:c1] = self.background[..., r0:r1, c0:c1]
+        self.dirty = EMPTY
+
+
+def _empty(region: Region) -> bool:
+    return region[0] >= region[1] or region[2] >= region[3]
+
+
+class RegionForward:
+    """`BevDetector.forward` computed where the input differs from an empty grid.
+
+    A scan fills ~1 % of the grid; away from the points every layer's output is what it
+    is for an empty grid (the *background*, computed once per weights). So each conv is
+    evaluated only on the output cells whose window meets its input's changed region
+    (a bounding box that grows by the kernel's reach per layer), and every map is kept
+    between frames as its background plus the last frame's region, which is restored
+    first: the work per frame follows the occupied area, not the grid.
+    Same arithmetic as the dense forward up to float rounding (a conv on a smaller
+    window may sum in another order); deterministic for a given input.
+
+    Hooks on a layer (tensor faults) see and may change its whole output as in the
+    dense forward: forward pre-hooks run before the layer (a weight flip there makes the
+    backgrounds stale: they are rebuilt), forward hooks get the full pre-activation
+    output, and what they change joins the changed region.
+    """
+
+    def __init__(self, model: BevDetector):
+        self.model = model
+        self.layers = model.layers()
+        self.maps: dict[str, _Map] | None = None
+        self._snapshot: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
+
+    def invalidate(self) -> None:
+        """Weights changed: rebuild the backgrounds at the next inference."""
+        self.maps = None
+
+    def __call__(self, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, torch.Tensor]:
+        """Head outputs (heat, box) for grid `x`, which is zero outside `region`.
+
+        The returned tensors are reused by the next call: copy what must outlive it.
+        """
+        if self.maps is None:
+            self._rebuild()
+        return self._forward(x, region)
+
+    # ---- backgrounds
+    def _rebuild(self) -> None:
+        """Backgrounds of every map (dense, no hooks) from the current weights. Maps whose
+        background did not change keep their state (a rebuild may happen mid-inference)."""
+        self._snapshot = {n: (m.weight.detach().clone(), m.bias.detach().clone()) for n, m in self.layers.items()}
+        weight = self.layers["backbone.conv0"].weight
+        x = torch.zeros((1, *GRID.shape), dtype=weight.dtype, device=weight.device)
+        bg: dict[str, torch.Tensor] = {}
+
+        def conv(name, t):
+            layer = self.layers[name]
+            bg[name] = F.conv2d(t, layer.weight, layer.bias, layer.stride, layer.padding)
+            return bg[name]
+
+        bg["x0"] = F.relu(conv("backbone.conv0", x))
+        bg["x1"] = F.relu(conv("backbone.conv1", bg["x0"]))
+        bg["x2"] = F.relu(conv("backbone.conv2", bg["x1"]))
+        bg["x3"] = F.relu(conv("backbone.conv3", bg["x2"]))
+        bg["u"] = F.interpolate(conv("neck.lateral", bg["x3"]), scale_factor=2.0, mode="nearest") + bg["x1"]
+        bg["f"] = F.relu(conv("neck.fuse", bg["u"]))
+        bg["v"] = F.interpolate(conv("neck.lateral_fine", bg["f"]), scale_factor=2.0, mode="nearest") + bg["x0"]
+        bg["g"] = F.relu(conv("neck.fine", bg["v"]))
+        conv("head.center", bg["g"])
+        conv("head.box", bg["g"])
+        old = self.maps or {}
+        self.maps = {k: old[k] if k in old and torch.equal(old[k].background, t) else _Map(t) for k, t in bg.items()}
+
+    def _weights_changed(self, name: str) -> bool:
+        layer = self.layers[name]
+        w, b = self._snapshot[name]
+        return not (torch.equal(layer.weight, w) and torch.equal(layer.bias, b))
+
+    # ---- the layers on regions
+    def _conv(self, name: str, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, Region]:
+        layer = self.layers[name]
+        if layer._forward_pre_hooks:
+            for hook in list(layer._forward_pre_hooks.values()):
+                hook(layer, (x,))
+            if self._weights_changed(name):  # a persistent weight fault
+                self._rebuild()
+        out = self.maps[name]
+        k, s, p = layer.kernel_size[0], layer.stride[0], layer.padding[0]
+        h_in, w_in = x.shape[-2:]
+        h_out, w_out = out.buf.shape[-2:]
+        if _empty(region):
+            out.restore()
+        else:
+            r0, r1, c0, c1 = region
+            # Output cells whose k×k window (stride s, padding p) meets the changed input cells.
+            o0, o1 = max(0, -(-(r0 + p - k + 1) // s)), min(h_out, (r1 - 1 + p) // s + 1)
+            q0, q1 = max(0, -(-(c0 + p - k + 1) // s)), min(w_out, (c1 - 1 + p) // s + 1)
+            out.restore((o0, o1, q0, q1))
+            i0, i1 = s * o0 - p, s * (o1 - 1) - p + k
+            j0, j1 = s * q0 - p, s * (q1 - 1) - p + k
+            window = x[..., max(i0, 0):min(i1, h_in), max(j0, 0):min(j1, w_in)]
+            pad = (max(0, -j0), max(0, j1 - w_in), max(0, -i0), max(0, i1 - h_in))
+            if any(pad):  # zero padding only where the window crosses the map's border
+                window = F.pad(window, pad)
+            out.buf[..., o0:o1, q0:q1] = F.conv2d(window, layer.weight, layer.bias, s)
+            out.dirty = (o0, o1, q0, q1)
+        if layer._forward_hooks:
+            before = out.buf.clone()
+            for hook in list(layer._forward_hooks.values()):
+                result = hook(layer, (x,), out.buf)
+                if result is not None and result is not out.buf:
+                    out.buf.copy_(result)
+            out.dirty = _union(out.dirty, _changed(out.buf, before))
+        return out.buf, out.dirty
+
+    def _relu(self, name: str, x: torch.Tensor, region: Region) -> torch.Tensor:
+        out = self.maps[name]
+        out.restore(region)
+        if not _empty(region):
+            r0, r1, c0, c1 = region
+            torch.clamp_min(x[..., r0:r1, c0:c1], 0.0, out=out.buf[..., r0:r1, c0:c1])
+            out.dirty = region
+        return out.buf
+
+    def _up_add(self, name: str, low: torch.Tensor, low_region: Region, skip: torch.Tensor,
+                skip_region: Region) -> tuple[torch.Tensor, Region]:
+        """Nearest ×2 upsampling of `low` plus `skip`, on the union of their changed regions."""
+        out = self.maps[name]
+        region = _union(tuple(v * 2 for v in low_region), skip_region)  # type: ignore[arg-type]
+        out.restore(region)
+        if not _empty(region):
+            r0, r1, c0, c1 = region
+            up = F.interpolate(low[..., r0 // 2:(r1 + 1) // 2, c0 // 2:(c1 + 1) // 2], scale_factor=2.0,
+                               mode="nearest")
+            dr, dc = r0 - 2 * (r0 // 2), c0 - 2 * (c0 // 2)
+            torch.add(up[..., dr:dr + r1 - r0, dc:dc + c1 - c0], skip[..., r0:r1, c0:c1],
+                      out=out.buf[..., r0:r1, c0:c1])
+            out.dirty = region
+        return out.buf, region
+
+    def _forward(self, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, torch.Tensor]:
+        """The network of `BevDetector.forward`, layer by layer on changed regions."""
+        a, r0 = self._conv("backbone.conv0", x, region)
+        x0 = self._relu("x0", a, r0)
+        a, r1 = self._conv("backbone.conv1", x0, r0)
+        x1 = self._relu("x1", a, r1)
+        a, r = self._conv("backbone.conv2", x1, r1)
+        a, r = self._conv("backbone.conv3", self._relu("x2", a, r), r)
+        a, r = self._conv("neck.lateral", self._relu("x3", a, r), r)
+        u, r = self._up_add("u", a, r, x1, r1)
+        a, r = self._conv("neck.fuse", u, r)
+        a, r = self._conv("neck.lateral_fine", self._relu("f", a, r), r)
+        v, r = self._up_add("v", a, r, x0, r0)
+        a, r = self._conv("neck.fine", v, r)
+        g = self._relu("g", a, r)
+        heat, _ = self._conv("head.center", g, r)
+        box, _ = self._conv("head.box", g, r)
+        return heat, box
+
+
+@contextmanager
+def _one_intra_op_thread():
+    """One torch intra-op thread for an inference: results must not depend on the
+    machine's core count (a conv's partial sums split by thread), and the tiny network
+    gains nothing from threads but jitter and contention with parallel runs. Scoped to
+    the call (toggling costs ~5 us), so a process that embeds the runtime keeps its own
+    setting; worker processes that already run one thread pay nothing."""
+    previous = torch.get_num_threads()
+    if previous == 1:
+        yield
+        return
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
 class LearnedPerception:
     """The `perception learned` node: lidar frame → grid → CNN → objects in world coordinates."""
 
@@ -111,9 +327,6 @@ class LearnedPerception:
     tensor_sites = tuple(f"perception.{n}" for n in LAYER_SITES)
 
     def __init__(self, settings: dict, ctx=None, weights: Path = WEIGHTS_PATH, device: str = "cpu"):
-        # One intra-op thread: inference is tiny, threads only add jitter and contention
-        # with parallel runs (and keep results independent of the machine's core count).
-        torch.set_num_threads(1)
         self.model, self.meta = load_model(weights, device)
         self.device = device
         self.threshold = float(settings.get("detect_threshold", self.meta.get("threshold", DEFAULT_THRESHOLD)))
@@ -121,6 +334,7 @@ class LearnedPerception:
         self._grid = np.zeros(GRID.shape, dtype=np.float32)
         self._input = torch.from_numpy(self._grid)[None]  # shares memory with the grid buffer
         self._layers = self.model.layers()
+        self._forward = RegionForward(self.model)
         self._armed: list[ActivationFlip] = []
         self.last_activation_flips: list[tuple[str, tuple]] = []
         # Warm-up: the first inference pays one-off kernel set-up, which would otherwise
@@ -146,9 +360,12 @@ class LearnedPerception:
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
         """Vehicle-frame points → (N, 6) boxes: x, y, heading, length, width, confidence."""
         build_grid(points_vehicle, sensor_xy, out=self._grid)
-        with torch.inference_mode():
+        occupied = self._grid.any(axis=0)
+        rows, cols = np.flatnonzero(occupied.any(axis=1)), np.flatnonzero(occupied.any(axis=0))
+        region = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1) if len(rows) else EMPTY
+        with torch.inference_mode(), _one_intra_op_thread():
             x = self._input if self.device == "cpu" else self._input.to(self.device)
-            heat, box = self.model(x)
+            heat, box = self._forward(x, region)
             heat, box = heat[0, 0].cpu().numpy(), box[0].cpu().numpy()
         self._collect_fired()
         # Threshold on logits (monotone): the sigmoid is only needed at the peaks.
@@ -200,6 +417,7 @@ class LearnedPerception:
             bf, af = flip_bits(tensor.data, [k], [b])
             before += bf
             after += af
+        self._forward.invalidate()
         return before, after
 
     def flip_activation_bits(self, site: str, flat_indices, bits) -> ActivationFlip:

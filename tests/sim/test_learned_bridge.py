@@ -49,12 +49,27 @@ def test_bridge_run_matches_the_in_process_stack(overtake_source, server_address
     assert remote.digest == local.digest
 
 
-def test_unreachable_remote_is_a_stack_error(overtake_source):
+def test_unreachable_remote_is_a_stack_error_and_releases_the_world(overtake_source, monkeypatch):
+    import pybullet
+
+    from addt_dsl.runtime import execute as execute_module
     from addt_dsl.stack.bev import StackError
 
+    opened = []
+
+    class Recorded(execute_module.PhysicsWorld):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            opened.append((self, self.client))
+
+    monkeypatch.setattr(execute_module, "PhysicsWorld", Recorded)
     spec = _spec(overtake_source, 'stack external address "127.0.0.1:9" timeout 1 s')
     with pytest.raises(StackError, match="cannot reach"):
         execute(spec)
+    # Set-up failed after the pybullet client was opened: it is closed again, not leaked.
+    (world, client), = opened
+    assert world.client is None
+    assert not pybullet.getConnectionInfo(physicsClientId=client)["isConnected"]
 
 
 def test_imu_and_gnss_frames_cross_the_bridge(overtake_source, server_address):

@@ -116,3 +116,92 @@ def test_every_tensor_site_is_a_valid_fault_target_with_learned_perception_only(
     ground_truth = compile_source(text)
     assert not ground_truth.ok
     assert any("cannot target" in d.message for d in ground_truth.diagnostics)
+
+
+def _region_of(grid):
+    occupied = grid.any(axis=0)
+    rows, cols = np.flatnonzero(occupied.any(axis=1)), np.flatnonzero(occupied.any(axis=0))
+    return (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1) if len(rows) else (0, 0, 0, 0)
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=40, deadline=None)
+@given(clusters=st.lists(st.tuples(st.floats(-62.0, 62.0), st.floats(-27.0, 27.0), st.integers(1, 40)),
+                         max_size=4), seed=st.integers(0, 2**32 - 1))
+def test_region_forward_matches_the_dense_network(clusters, seed):
+    """Point clusters anywhere (borders included), frame after frame on one node (the
+    maps carry the last frame's region): the same head outputs as the dense forward."""
+    from addt_dsl.stack.bev_grid import build_grid
+
+    node = _SHARED.setdefault("node", LearnedPerception({}))
+    rng = np.random.default_rng(seed)
+    pts = [np.column_stack([x + rng.normal(0, 1.5, n), y + rng.normal(0, 1.5, n), rng.uniform(0, 3, n)])
+           for x, y, n in clusters]
+    grid = build_grid(np.concatenate(pts) if pts else np.zeros((0, 3)), (1.0, 0.0))
+    x = torch.from_numpy(grid)[None]
+    with torch.inference_mode():
+        dense = node.model(x)
+        sparse = node._forward(x, _region_of(grid))
+    for d, s in zip(dense, sparse):
+        np.testing.assert_allclose(s.numpy(), d.numpy(), rtol=1e-5, atol=2e-5)
+
+
+_SHARED: dict = {}
+
+
+def test_region_forward_feeds_hooks_whole_outputs_and_follows_their_changes(scans):
+    """A forward hook sees the layer's full output in NCHW order (as with the dense
+    network), and an element it changes far from the points reaches the heads."""
+    node = LearnedPerception({})
+    s = scans["two"]
+    seen = {}
+    layer = node.tensor_modules()["perception.backbone.conv1"]
+
+    def hook(module, inputs, output):
+        seen["dense" if "dense" not in seen else "region"] = output.detach().clone()
+
+    handle = layer.register_forward_hook(hook)
+    try:
+        node.detect(s.points, s.sensor_xy)  # region path (detect): first call seen as "dense" key
+        region_out = seen.pop("dense")
+        with torch.inference_mode():
+            node.model(node._input)  # the same grid through the dense network
+        np.testing.assert_allclose(region_out.numpy(), seen["dense"].numpy(), rtol=1e-5, atol=2e-5)
+    finally:
+        handle.remove()
+    # A flip in a far corner of conv1's output, which no point influences: the region
+    # path takes it up and gives the heads the dense network gives with the same flip.
+    shape = node.activation_shape("perception.backbone.conv1")
+    index = int(np.ravel_multi_index((0, 5, shape[2] - 2, 1), shape))
+    clean_heat = node._forward.maps["head.center"].buf.clone()
+    flip = node.flip_activation_bits("perception.backbone.conv1", [index], [26])  # ×/÷ 2^8
+    node.detect(s.points, s.sensor_xy)
+    assert flip.fired is not None and flip.fired[0] != flip.fired[1]
+    region_heat = node._forward.maps["head.center"].buf.clone()
+    assert not torch.equal(region_heat, clean_heat)
+    node.flip_activation_bits("perception.backbone.conv1", [index], [26])
+    with torch.inference_mode():
+        dense_heat, _ = node.model(node._input)
+    np.testing.assert_allclose(region_heat.numpy(), dense_heat.numpy(), rtol=1e-5, atol=2e-5)
+    node.last_activation_flips, node._armed = [], []
+    node.detect(s.points, s.sensor_xy)  # transient: the next frame is clean again
+    np.testing.assert_allclose(node._forward.maps["head.center"].buf.numpy(), clean_heat.numpy(), rtol=0, atol=0)
+
+
+def test_inference_runs_on_one_thread_without_changing_the_process_setting(scans):
+    s = scans["two"]
+    node = LearnedPerception({})
+    previous = torch.get_num_threads()
+    try:
+        torch.set_num_threads(2)
+        seen = []
+        handle = node.tensor_modules()["perception.backbone.conv0"].register_forward_pre_hook(
+            lambda module, inputs: seen.append(torch.get_num_threads()))
+        node.detect(s.points, s.sensor_xy)
+        handle.remove()
+        assert seen == [1] and torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(previous)
