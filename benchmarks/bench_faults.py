@@ -4,10 +4,9 @@ Closed-loop kinds run in the vehicle-following scenario (20 s simulated, one lid
 each fault active for the whole run with mild settings; runs are interleaved round-robin and
 the least CPU time of `--repeat` is compared, which filters out noise from other processes.
 `none (again)` is the fault-free run measured a second time: its "overhead" is the noise floor.
-Camera kinds have no camera sensor on this branch: their cost per frame is measured and
-compared with the cost of rendering that frame (the camera's own cost per frame).
-Tensor bit flips have no learned perception here: the cost of the armed hooks per
-inference of a small CNN is measured instead.
+Camera kinds (blur, image_noise, occlude) are measured per frame and compared with the
+cost of rendering that frame, the camera's own cost (the scenario perceives from lidar).
+Tensor bit flips: the cost of the armed hooks per inference of the detector network.
 
 Run: PYTHONPATH=. python benchmarks/bench_faults.py [--repeat 7] [--kinds random_value,stuck]
 """

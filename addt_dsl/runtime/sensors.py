@@ -86,7 +86,8 @@ class Lidar(Sensor):
         ParamSpec("vfov", units.ANGLE, default=math.radians(10.0), low=0.0, high=math.pi, doc="vertical field of view"),
         *EXTRINSICS,
     )
-    doc = "Rotating lidar by batched ray casts (pybullet rayTestBatch)."
+    doc = ("Rotating lidar by batched ray casts: exact ray-box intersection in numpy when the world is "
+           "boxes on flat ground (runtime/raycast.py), else pybullet rayTestBatch.")
 
     def __init__(self, name, settings):
         super().__init__(name, settings)
