@@ -83,18 +83,23 @@ class Noise(FaultKind):
         sigma, dropout = float(self.settings["range"]), float(self.settings["dropout"])
         rms = 0.0
         if sigma > 0 and n:
-            r = np.linalg.norm(pts, axis=1)
+            r = np.sqrt(np.einsum("ij,ij->i", pts, pts))
             noise = self.rng.normal(0.0, sigma, n)
             # Move each point along its ray; a return cannot come from behind the sensor.
-            scale = np.maximum(r + noise, 0.0) / np.maximum(r, 1e-9)
+            scale = np.maximum(r + noise, 0.0)
+            scale /= np.maximum(r, 1e-9)
             pts = pts * scale[:, None]
-            rms = float(np.sqrt(np.mean(noise * noise)))
+            rms = math.sqrt(float(noise @ noise) / n)
         lost = 0
         if dropout > 0 and n:
             keep = self.rng.random(n) >= dropout
-            lost = int(n - keep.sum())
-            pts = pts[keep]
-            out = {k: (v[keep] if isinstance(v, np.ndarray) and len(v) == n else v) for k, v in out.items()}
+            kept = np.flatnonzero(keep)
+            lost = n - len(kept)
+            if lost:
+                pts = pts[kept]
+                for k, v in out.items():  # per-return arrays (hit bodies, ...) lose the same rows
+                    if isinstance(v, np.ndarray) and len(v) == n and k != "points":
+                        out[k] = v[kept]
         out["points"] = pts
         self.record(time_s, sensor, rms, returns_lost=lost, returns=n)
         return out
