@@ -153,14 +153,19 @@ class BevStack:
     def _latency(self, node: str, objects: int, started: float, time_s: float) -> float:
         base = (_time.perf_counter() - started) if self.measured else \
             self.latency_models[node].latency(objects)
-        extra = sum(f.extra_latency(node, time_s, base) for f in self.ctx.faults.for_target(node))
-        lat = base + extra
+        timing_faults = self.ctx.faults.by_target.get(node)
+        lat = base + sum(f.extra_latency(node, time_s, base) for f in timing_faults) if timing_faults else base
         self.latency[node] = lat
         return lat
 
     def corrupt(self, site: str, value: float) -> float:
-        for f in self.ctx.faults.for_target(site):
-            value = f.on_value(site, value, self.ctx.now)
+        # Called for every value through every site (~10 per control cycle): the fault-free
+        # path is one dict lookup.
+        kinds = self.ctx.faults.by_target.get(site)
+        if kinds:
+            now = self.ctx.now
+            for f in kinds:
+                value = f.on_value(site, value, now)
         return value
 
     # ---- inputs
