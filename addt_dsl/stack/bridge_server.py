@@ -18,6 +18,8 @@ import socketserver
 import sys
 import threading
 import zlib
+from collections.abc import Mapping
+from types import MappingProxyType
 
 import numpy as np
 
@@ -51,6 +53,10 @@ class _GT:
 
 
 class _NoFaults:
+    """The remote side has no fault schedule (faults act in the simulator's process)."""
+
+    by_target: Mapping[str, list] = MappingProxyType({})
+
     def for_target(self, target: str) -> list:
         return []
 
