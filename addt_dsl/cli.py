@@ -103,24 +103,33 @@ def _run_suite(args, paths: list[Path]) -> int:
     if args.store:
         print("error: --store names one results file; a suite keeps one per file under --out", file=sys.stderr)
         return EXIT_ERROR
-    if args.junit:
-        print("error: --junit writes one file per scenario; with a suite use --out (each OUT/<stem>/) "
-              "or the pytest plugin", file=sys.stderr)
-        return EXIT_ERROR
     out = Path(args.out) if args.out else None
-    args.in_suite = True
-    rows = []
+    # Each file runs as usual, but JUnit goes to one file for the whole suite (below).
+    per_file = argparse.Namespace(**{**vars(args), "junit": None, "in_suite": True})
+    rows, junit_trees = [], []
+
+    def collect(plan, store, row):
+        collect_row(row, plan, store, args.by)
+        if args.junit:
+            from addt_dsl.reporting.junit import junit_tree
+
+            junit_trees.append(junit_tree(plan, store.records()))
+
     for path in paths:
         row = SuiteRow(path)
         if args.format != "json":
             print(f"== {path}", file=sys.stderr)
         started = time.perf_counter()
-        row.exit_code = _run_file(args, path, out / path.stem if out else None,
-                                  collect=lambda plan, store, row=row: collect_row(row, plan, store, args.by))
+        row.exit_code = _run_file(per_file, path, out / path.stem if out else None,
+                                  collect=lambda plan, store, row=row: collect(plan, store, row))
         row.wall_s = time.perf_counter() - started
         rows.append(row)
     if out:
         write_summary(out, rows, args.by)
+    if args.junit:
+        from addt_dsl.reporting.junit import merge_junit, write_tree
+
+        write_tree(args.junit, merge_junit(junit_trees))  # one <testsuite> per file that ran
     if args.format == "json":
         from addt_dsl.suite import suite_summary
 

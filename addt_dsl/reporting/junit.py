@@ -72,10 +72,30 @@ def junit_tree(plan, records) -> ET.ElementTree:
     return ET.ElementTree(root)
 
 
-def write_junit(path: str | Path, plan, records) -> Path:
+def merge_junit(trees: list[ET.ElementTree]) -> ET.ElementTree:
+    """One <testsuites> holding every tree's <testsuite> (a suite of scenario files)."""
+    root = ET.Element("testsuites")
+    totals = {"tests": 0, "failures": 0, "errors": 0}
+    time_s = 0.0
+    for tree in trees:
+        for suite in tree.getroot().findall("testsuite"):
+            root.append(suite)
+            for key in totals:
+                totals[key] += int(suite.get(key, "0"))
+            time_s += float(suite.get("time", "0"))
+    for key, value in totals.items():
+        root.set(key, str(value))
+    root.set("time", f"{time_s:.3f}")
+    return ET.ElementTree(root)
+
+
+def write_tree(path: str | Path, tree: ET.ElementTree) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tree = junit_tree(plan, records)
     ET.indent(tree)
     tree.write(path, encoding="utf-8", xml_declaration=True)
     return path
+
+
+def write_junit(path: str | Path, plan, records) -> Path:
+    return write_tree(path, junit_tree(plan, records))

@@ -3,6 +3,7 @@
 import json
 import os
 import sys
+from xml.etree import ElementTree as ET
 
 import pytest
 
@@ -20,8 +21,12 @@ def test_a_directory_runs_each_file_and_tables_success_by_parameter(tmp_path):
                                       .replace("scenario limit", "scenario far")
                                       .replace("grid limit in [70, 200] m", "grid limit in [190, 200] m"))
     out = tmp_path / "out"
-    proc = addtc(suite, "--by", "limit", "--jobs", "2", "--out", out, "--no-report")
+    junit = tmp_path / "junit.xml"
+    proc = addtc(suite, "--by", "limit", "--jobs", "2", "--out", out, "--no-report", "--junit", junit)
     assert proc.returncode == 1, proc.stderr  # the 70 m cell fails
+    root = ET.parse(junit).getroot()  # one <testsuite> per file, totals over both
+    assert [s.get("name") for s in root.findall("testsuite")] == ["limit", "far"]
+    assert (root.get("tests"), root.get("failures")) == ("16", "4")
     assert "success rate by limit" in proc.stdout
     summary = json.loads((out / "suite.json").read_text())
     assert [f["scenario"] for f in summary["files"]] == ["limit", "far"]
