@@ -10,6 +10,7 @@
     addtc schema [--write PATH]           the plan's JSON schema
     addtc shrink FILE | --run-key JSON    shrink a failing run to a minimal replayable .addt file
     addtc falsify FILE [--budget-runs N]  search parameters and faults for failures
+    addtc study perception|classify|table ...  fault studies (perception errors by band, outcomes)
 
 Exit codes: 0 every oracle held in every run, 1 some run failed, 2 compile/usage error.
 """
@@ -27,7 +28,7 @@ from pathlib import Path
 from addt_dsl.diagnostics import render_json, render_text
 
 EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
-SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "shrink", "falsify")
+SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "shrink", "falsify", "study")
 
 
 def _compile(path: str, fmt: str):
@@ -374,11 +375,25 @@ def build_parser() -> argparse.ArgumentParser:
     from addt_dsl.search.commands import add_commands
 
     add_commands(sub)
+    # Fault studies keep their own argument parser (addt_dsl/runtime/faults/study.py).
+    study = sub.add_parser("study", add_help=False,
+                           help="fault studies: perception errors by distance band, outcome classes, "
+                                "success tables (`addtc study --help`)")
+    study.add_argument("rest", nargs=argparse.REMAINDER)
+    study.set_defaults(func=cmd_study)
     return parser
+
+
+def cmd_study(args) -> int:
+    from addt_dsl.runtime.faults.study import main as study_main
+
+    return study_main(args.rest, prog="addtc study")
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["study"]:  # its own parser sees every argument, --help included
+        return cmd_study(argparse.Namespace(rest=argv[1:]))
     if argv and argv[0] not in SUBCOMMANDS and not argv[0].startswith("-"):
         argv.insert(0, "run")
     parser = build_parser()

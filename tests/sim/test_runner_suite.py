@@ -63,3 +63,16 @@ def test_a_classified_suite_counts_outcomes_per_file_and_value(tmp_path):
         assert sum(f["outcomes"].values()) == f["runs"] == 2
         by = {c["value"]: c for c in f["by"]}
         assert by[0.0]["outcomes"] == {"masked": 1}  # no drops: the run is its own twin
+
+
+def test_addtc_study_runs_the_fault_studies(tmp_path):
+    one = limit_scenario(tmp_path, repeat=1, duration="4 s")  # the 70 m cell fails near 2.5 s
+    out = tmp_path / "out"
+    assert addtc(one, "--jobs", "1", "--out", out, "--no-report").returncode == 1
+    table = addtc("study", "table", out / "runs.csv", "--by", "limit")
+    assert table.returncode == 0, table.stderr
+    assert "success_rate" in table.stdout and "70" in table.stdout
+    perception = addtc("study", "perception", one, "--limit", "1")
+    assert perception.returncode == 0, perception.stderr
+    assert "position_error_m" in perception.stdout
+    assert "usage: addtc study" in addtc("study", "--help").stdout

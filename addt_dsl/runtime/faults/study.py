@@ -115,10 +115,10 @@ def _pool_map(fn, items, jobs):
         return pool.map(fn, items, chunksize=1)
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, prog: str = "python -m addt_dsl.runtime.faults.study") -> int:
     import pandas as pd
 
-    parser = argparse.ArgumentParser(prog="python -m addt_dsl.runtime.faults.study")
+    parser = argparse.ArgumentParser(prog=prog)
     sub = parser.add_subparsers(dest="what", required=True)
     for name in ("classify", "perception"):
         p = sub.add_parser(name)
