@@ -146,6 +146,9 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", type=int, default=1500)
     ap.add_argument("--seed", type=int, default=1_000_003, help="held out: training uses small seeds")
     ap.add_argument("--lidar", default="360x1", help="RAYSxCHANNELS of the runtime's Lidar")
+    ap.add_argument("--lidar-vfov", type=float, default=None, metavar="DEG",
+                    help="vertical field of view of a multi-channel lidar (default: the weights' training "
+                         "value, else the Lidar's 10 deg)")
     ap.add_argument("--min-hits", type=int, default=2)
     ap.add_argument("--threshold", type=float, default=None)
     ap.add_argument("--yaw-shift", type=float, nargs="*", default=[0.0], metavar="DEG",
@@ -157,12 +160,14 @@ def main(argv=None) -> int:
 
     settings = {} if args.threshold is None else {"detect_threshold": args.threshold}
     node = LearnedPerception(settings, weights=args.weights or WEIGHTS_PATH)
+    vfov_deg = args.lidar_vfov if args.lidar_vfov is not None else node.meta.get("lidar_vfov_deg")
+    lidar_settings = None if vfov_deg is None else {"vfov": math.radians(vfov_deg)}
     for shift in args.yaw_shift:
         if args.cache:
             samples = load_samples(args.cache)[: args.scenes]
         else:
             samples = generate(args.scenes, args.seed, lidars=(args.lidar,),
-                               yaw_shift_rad=math.radians(shift))
+                               yaw_shift_rad=math.radians(shift), lidar_settings=lidar_settings)
         kinds: dict = {}
         stats = evaluate(samples, node.detect, args.min_hits, kinds)
         lidar = ",".join(sorted({s.lidar for s in samples}))

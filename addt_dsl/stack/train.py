@@ -73,7 +73,8 @@ def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
 
 def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: float, log=print,
           cache: Path | None = None, device: str = "cpu", widths: tuple[int, int, int] = (16, 24, 32),
-          lidars: tuple[str, ...] = LIDARS, lidar_p: tuple[float, ...] = LIDAR_P):
+          lidars: tuple[str, ...] = LIDARS, lidar_p: tuple[float, ...] = LIDAR_P,
+          lidar_settings: dict | None = None):
     import torch
 
     from addt_dsl.stack.learned import BevDetector
@@ -86,7 +87,7 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         samples = load_samples(cache)[:scenes]
         scenes = len(samples)
     else:
-        samples = generate(scenes, seed, lidars=lidars, lidar_p=lidar_p)
+        samples = generate(scenes, seed, lidars=lidars, lidar_p=lidar_p, lidar_settings=lidar_settings)
         if cache is not None:
             save_samples(cache, samples)
     heat_all, reg_all, mask_all = make_targets(samples)
@@ -138,20 +139,25 @@ def main(argv=None) -> int:
     ap.add_argument("--widths", type=int, nargs=3, default=[16, 24, 32], help="channels at 1/2, 1/4, 1/8")
     ap.add_argument("--lidars", nargs="*", default=list(LIDARS), help="RAYSxCHANNELS configurations to scan with")
     ap.add_argument("--lidar-p", type=float, nargs="*", default=list(LIDAR_P), help="their probabilities")
+    ap.add_argument("--lidar-vfov", type=float, default=None, metavar="DEG",
+                    help="vertical field of view of multi-channel lidars (default: the Lidar's, 10 deg)")
     ap.add_argument("--device", default="cpu", help="torch device (the shipped weights are trained on cpu)")
     args = ap.parse_args(argv)
+    lidar_settings = None if args.lidar_vfov is None else {"vfov": math.radians(args.lidar_vfov)}
 
     import torch
 
     model, timing = train(args.seed, args.scenes, args.epochs, args.batch, args.threads, args.lr,
                           cache=args.cache, device=args.device, widths=tuple(args.widths),
-                          lidars=tuple(args.lidars), lidar_p=tuple(args.lidar_p))
+                          lidars=tuple(args.lidars), lidar_p=tuple(args.lidar_p), lidar_settings=lidar_settings)
     meta = {
         "seed": args.seed, "scenes": args.scenes, "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
         "threads": args.threads, "lidars": args.lidars, "lidar_p": args.lidar_p, "threshold": args.threshold, "widths": list(args.widths),
         "grid": {"x_min": GRID.x_min, "y_min": GRID.y_min, "cell_m": GRID.cell_m, "nx": GRID.nx, "ny": GRID.ny},
         "torch": str(torch.__version__), **timing,
     }
+    if args.lidar_vfov is not None:
+        meta["lidar_vfov_deg"] = args.lidar_vfov
     state = {k: v.detach().clone() for k, v in model.state_dict().items()}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     torch.save({"state_dict": state, "meta": meta}, args.out)
