@@ -3,8 +3,7 @@ every benchmark script it names exists (the figures come from these commands).""
 
 import re
 
-from addt_dsl.compiler import compile_source
-from tests.conftest import ROOT
+from tests.conftest import ROOT, assert_scenarios_compile
 
 DOC = (ROOT / "docs" / "paper-comparison.md").read_text()
 
@@ -12,12 +11,7 @@ DOC = (ROOT / "docs" / "paper-comparison.md").read_text()
 def test_scenario_files_in_commands_exist_and_compile():
     patterns = set(re.findall(r"(examples/\S+?\.addt)", DOC))
     assert len(patterns) >= 6
-    for pattern in sorted(patterns):
-        paths = sorted(ROOT.glob(pattern))
-        assert paths, pattern
-        for path in paths:
-            result = compile_source(path.read_text(), str(path), base_dir=path.parent)
-            assert result.ok, (path, [str(d) for d in result.diagnostics])
+    assert_scenarios_compile(sorted(patterns))
 
 
 def test_benchmark_scripts_named_exist():

@@ -3,7 +3,7 @@
 import re
 
 from addt_dsl.compiler import compile_source
-from tests.conftest import ROOT
+from tests.conftest import ROOT, assert_scenarios_compile
 
 
 def test_readme_examples_compile():
@@ -19,9 +19,4 @@ def test_readme_suite_commands_name_files_that_compile():
     text = (ROOT / "README.md").read_text()
     commands = re.findall(r"^addtc (examples/\S+)", text, re.M)
     assert len(commands) >= 3
-    for pattern in commands:
-        paths = sorted(ROOT.glob(pattern))
-        assert paths, pattern
-        for path in paths:
-            result = compile_source(path.read_text(), str(path), base_dir=path.parent)
-            assert result.ok, (path, [str(d) for d in result.diagnostics])
+    assert_scenarios_compile(commands)
