@@ -375,25 +375,24 @@ def build_parser() -> argparse.ArgumentParser:
     from addt_dsl.search.commands import add_commands
 
     add_commands(sub)
-    # Fault studies keep their own argument parser (addt_dsl/runtime/faults/study.py).
-    study = sub.add_parser("study", add_help=False,
-                           help="fault studies: perception errors by distance band, outcome classes, "
-                                "success tables (`addtc study --help`)")
-    study.add_argument("rest", nargs=argparse.REMAINDER)
-    study.set_defaults(func=cmd_study)
+    # Listed for `addtc --help` only: `main` hands every `addtc study ...` argument to the
+    # studies' own parser (addt_dsl/runtime/faults/study.py), --help included.
+    sub.add_parser("study", add_help=False,
+                   help="fault studies: perception errors by distance band, outcome classes, "
+                        "success tables (`addtc study --help`)")
     return parser
 
 
-def cmd_study(args) -> int:
+def cmd_study(argv: list[str]) -> int:
     from addt_dsl.runtime.faults.study import main as study_main
 
-    return study_main(args.rest, prog="addtc study")
+    return study_main(argv, prog="addtc study")
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["study"]:  # its own parser sees every argument, --help included
-        return cmd_study(argparse.Namespace(rest=argv[1:]))
+        return cmd_study(argv[1:])
     if argv and argv[0] not in SUBCOMMANDS and not argv[0].startswith("-"):
         argv.insert(0, "run")
     parser = build_parser()
