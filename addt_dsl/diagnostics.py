@@ -92,6 +92,7 @@ CODES: dict[str, str] = {
     "E0900": "internal compiler error",
     "W0001": "unused parameter",
     "W0002": "setting has no effect",
+    "W0003": "sensor unlike the one the stack is made for",
 }
 
 

@@ -658,6 +658,7 @@ def _check_actor(ctx: Context, d: ast.ActorDecl) -> P.ActorPlan | None:
         sensors = sensors or [DEFAULT_SENSOR]
         stack = stack or DEFAULT_STACK
         _check_stack_sensors(ctx, stack, sensors, stack_span or d.span)
+        _check_sensor_expectations(ctx, stack, sensors, sensor_spans, stack_span or d.span)
     if placement is None:
         return None
     road, lane, s = placement
@@ -679,6 +680,30 @@ def _check_stack_sensors(ctx: Context, stack: P.ClausePlan, sensors: list, span:
     for keyword in sorted(set(needs(words)) - {s.name for s in sensors}):
         ctx.sink.error("E0103", f"the ego's stack settings need a {keyword} sensor", span,
                        f"add e.g. `sensor {keyword}` to the ego")
+
+
+def _check_sensor_expectations(ctx: Context, stack: P.ClausePlan, sensors: list, spans: dict, span: Span) -> None:
+    """A sensor unlike the one the stack's settings are made for (the learned detector on
+    another lidar than it was trained on) still runs, but works worse: a warning."""
+    mismatches = getattr(STACKS.get(stack.name), "sensor_mismatches", None)
+    if mismatches is None:
+        return
+    words = {k: v for k, v in stack.settings.items() if isinstance(v, str)}
+    for sensor in sensors:
+        cls = SENSORS.get(sensor.name)
+        if cls is None:
+            continue
+        values = {p.name: p.default for p in cls.params if isinstance(p.default, (int, float))}
+        values.update({k: v.value for k, v in sensor.settings.items() if isinstance(v, P.Num)})
+        wanted = []
+        for key, want in mismatches(words, sensor.name, values):
+            dim = next(p.dim for p in cls.params if p.name == key)
+            wanted.append(f"{key} {math.degrees(want):g} deg" if dim == units.ANGLE
+                          else f"{key} {units.format_si(want, dim) if dim is not None else f'{want:g}'}")
+        if wanted:
+            ctx.sink.warning("W0003", f"{words.get('perception', 'this')} perception is made for a "
+                                      f"{sensor.name} with {', '.join(wanted)}", spans.get(sensor.name, span),
+                             "it runs, but expect worse detection")
 
 
 def _place(ctx: Context, d: ast.ActorDecl, vals: dict, length: float):

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from addt_dsl import units
 from addt_dsl.registry import STACKS, ParamSpec
+from addt_dsl.stack.bev_grid import DETECTOR_LIDAR
 from addt_dsl.stack.bus import Bus
 from addt_dsl.stack.latency import load_models
 from addt_dsl.stack.nodes import Controller, GroundTruthPerception, LatticePlanner, Obj, Tracker
@@ -32,11 +33,14 @@ class PerceptionMode:
     frames carry `hit_body`, camera frames `image`); `needs_sensor` is the sensor keyword
     the compiler requires on the ego (None: not enforced, as for the lidar modes, since
     existing scenarios run the default stack with a camera only, to exercise the renderer).
+    `expects` is the sensor the mode is made for, `(keyword, {setting: value in SI})`: the
+    compiler warns when the ego's differs (the learned detector is trained on one lidar).
     """
 
     build: Callable
     frame_key: str
     needs_sensor: str | None = None
+    expects: tuple[str, dict] | None = None
 
 
 def _ground_truth(settings, ctx):
@@ -57,7 +61,9 @@ def _camera(settings, ctx):
 
 PERCEPTIONS = {
     "ground_truth": PerceptionMode(_ground_truth, "hit_body"),
-    "learned": PerceptionMode(_learned, "hit_body"),
+    "learned": PerceptionMode(_learned, "hit_body", expects=("lidar", {
+        "rays": DETECTOR_LIDAR.rays, "channels": DETECTOR_LIDAR.channels,
+        "vfov": math.radians(DETECTOR_LIDAR.vfov_deg)})),
     "camera": PerceptionMode(_camera, "image", "camera"),
 }
 
@@ -104,6 +110,16 @@ class BevStack:
         """Sensor keywords the ego must carry for these settings (the compiler checks)."""
         mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
         return {mode.needs_sensor} if mode is not None and mode.needs_sensor else set()
+
+    @classmethod
+    def sensor_mismatches(cls, settings: dict, sensor: str, values: dict) -> list[tuple[str, float]]:
+        """(setting, expected value) where the ego's `sensor` (its settings, SI, defaults
+        filled in) differs from what these stack settings are made for."""
+        mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
+        if mode is None or mode.expects is None or mode.expects[0] != sensor:
+            return []
+        return [(key, want) for key, want in mode.expects[1].items()
+                if key in values and not math.isclose(values[key], want, rel_tol=1e-9, abs_tol=1e-12)]
 
     @classmethod
     def fault_sites(cls, settings: dict | None = None) -> set[str]:

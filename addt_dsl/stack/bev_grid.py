@@ -26,7 +26,10 @@ import numpy as np
 
 CHANNELS = 6
 OUTPUT_STRIDE = 2  # detector head cells are OUTPUT_STRIDE × cell = 1.6 m
-HEAD_CHANNELS = ("heat", "off_x", "off_y", "log_l", "log_w", "sin", "cos")
+# The box axis, not the heading, is regressed, as (sin 2θ, cos 2θ): a lidar box looks the
+# same from either end, and regressing the heading spent the network on an unlearnable
+# front/back guess (which end is the front comes from the tracker's motion and the lane).
+HEAD_CHANNELS = ("heat", "off_x", "off_y", "log_l", "log_w", "sin2", "cos2")
 
 # Tensor fault sites of the learned detector, `perception.<layer>`: the network in
 # `learned.py` names its layers exactly so (a unit test checks it). Listed here so the
@@ -47,6 +50,9 @@ class GridSpec:
     cell_m: float = 0.8
     nx: int = 152
     ny: int = 64
+    # Points at or below this height are ground returns (a multi-channel lidar's lower
+    # beams reach the road): dropped, as lidar stacks do, so they do not read as objects.
+    ground_m: float = 0.3
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -62,6 +68,37 @@ class GridSpec:
 
 
 GRID = GridSpec()
+
+
+@dataclass(frozen=True)
+class DetectorLidar:
+    """The lidar the shipped detector is trained for (`train.py` scans with it; the
+    weights' metadata records it and a unit test holds the two together).
+
+    360 rays × 5 channels at -6, -3, 0, +3, +6 deg, mounted at the default 1 m. The
+    horizontal beam is the default one-channel lidar's; the upper beams see a truck's
+    height (+3 deg clears a 1.5 m car beyond 9.5 m but meets a 3.5 m truck out to 48 m;
+    +6 deg from 4.8 to 24 m), without which a truck seen from behind is just a wide car;
+    the lower beams reach the road and are dropped as ground (`GridSpec.ground_m`).
+    """
+
+    rays: int = 360
+    channels: int = 5
+    vfov_deg: float = 12.0
+    range_m: float = 80.0
+
+    @property
+    def config(self) -> str:
+        """"RAYSxCHANNELS", as `synth` and `train --lidars` name lidars."""
+        return f"{self.rays}x{self.channels}"
+
+    def clause(self, rate_hz: float = 10.0) -> str:
+        """The `.addt` sensor declaration of this lidar."""
+        return (f"sensor lidar rate {rate_hz:g} Hz rays {self.rays} channels {self.channels} "
+                f"vfov {self.vfov_deg:g} deg range {self.range_m:g} m")
+
+
+DETECTOR_LIDAR = DetectorLidar()
 
 
 def build_grid(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec: GridSpec = GRID,
@@ -82,7 +119,7 @@ def build_grid(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec:
     fy = (py - spec.y_min) / spec.cell_m
     ix = np.floor(fx).astype(np.int64)
     iy = np.floor(fy).astype(np.int64)
-    keep = (ix >= 0) & (ix < spec.nx) & (iy >= 0) & (iy < spec.ny)
+    keep = (ix >= 0) & (ix < spec.nx) & (iy >= 0) & (iy < spec.ny) & (points_vehicle[:, 2] > spec.ground_m)
     if not keep.all():
         ix, iy, fx, fy = ix[keep], iy[keep], fx[keep], fy[keep]
         px, py, pz = px[keep], py[keep], points_vehicle[keep, 2]
@@ -134,7 +171,8 @@ def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float 
 
     Returns (heat (hx, hy), regression (6, hx, hy), mask (hx, hy)): a Gaussian peak per
     object on the head grid; at each object's centre cell the regression targets
-    (offset from the cell centre in head cells, log length, log width, sin, cos heading).
+    (offset from the cell centre in head cells, log length, log width, sin 2θ, cos 2θ of the
+    heading θ).
     """
     hx, hy = spec.head_shape
     heat = np.zeros((hx, hy), dtype=np.float32)
@@ -152,7 +190,8 @@ def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float 
         g = np.exp(-((gi - fi) ** 2 + (gj - fj) ** 2) / (2.0 * sigma_cells ** 2)).astype(np.float32)
         np.maximum(heat, g, out=heat)
         heat[i, j] = 1.0
-        reg[:, i, j] = (fi - i, fj - j, math.log(length), math.log(width), math.sin(heading), math.cos(heading))
+        reg[:, i, j] = (fi - i, fj - j, math.log(length), math.log(width),
+                         math.sin(2.0 * heading), math.cos(2.0 * heading))
         mask[i, j] = 1.0
     return heat, reg, mask
 
@@ -200,7 +239,7 @@ def _boxes(heat, reg, i, j, conf, spec, max_overlap_m):
     r = reg[:, i, j].astype(np.float64)
     x = spec.x_min + (i + 0.5 + r[0]) * c
     y = spec.y_min + (j + 0.5 + r[1]) * c
-    heading = np.arctan2(r[4], r[5])
+    heading = 0.5 * np.arctan2(r[4], r[5])  # the box axis, in [-π/2, π/2]
     boxes = np.stack([x, y, heading, np.exp(r[2]), np.exp(r[3]), conf.astype(np.float64)], axis=1)
     if max_overlap_m is not None and len(boxes) > 1:
         boxes = boxes[_keep_non_overlapping(boxes, max_overlap_m)]

@@ -6,18 +6,18 @@ network is strided from the first layer (PERFORMANCE.md: a stride-1 first layer 
 ~10×), goes down to 1/8 resolution for context (a truck's centre is 6 m from the rear
 face the lidar sees) and back up to a 76×32 head grid of 1.6 m cells (fine enough that
 cars in adjacent lanes are separate peaks). Per head cell it predicts an object-centre
-heatmap, a sub-cell offset, log length, log width and heading as (sin, cos):
+heatmap, a sub-cell offset, log length, log width and the box axis as (sin 2θ, cos 2θ):
 
-    backbone.conv0     conv 3×3 s2   6→16   76×32  ─────────────────────┐
-    backbone.conv1     conv 3×3 s2  16→24   38×16  ──────────┐          │
-    backbone.conv2     conv 3×3 s2  24→32   19×8             │          │
-    backbone.conv3     conv 3×3     32→32   19×8             │          │
-    neck.lateral       conv 1×1     32→24   → ×2 nearest, + ─┘          │
-    neck.fuse          conv 3×3     24→24   38×16                       │
-    neck.lateral_fine  conv 1×1     24→16   → ×2 nearest, + ────────────┘
-    neck.fine          conv 3×3     16→16   76×32
-    head.center        conv 1×1     16→1    heatmap logits
-    head.box           conv 1×1     16→6    offset x/y, log l/w, sin/cos heading
+    backbone.conv0     conv 3×3 s2   6→32   76×32  ─────────────────────┐
+    backbone.conv1     conv 3×3 s2  32→48   38×16  ──────────┐          │
+    backbone.conv2     conv 3×3 s2  48→64   19×8             │          │
+    backbone.conv3     conv 3×3     64→64   19×8             │          │
+    neck.lateral       conv 1×1     64→48   → ×2 nearest, + ─┘          │
+    neck.fuse          conv 3×3     48→48   38×16                       │
+    neck.lateral_fine  conv 1×1     48→32   → ×2 nearest, + ────────────┘
+    neck.fine          conv 3×3     32→32   76×32
+    head.center        conv 1×1     32→1    heatmap logits
+    head.box           conv 1×1     32→6    offset x/y, log l/w, box axis (sin 2θ, cos 2θ)
 
 One frame per inference: velocity is not estimated here but by the tracker from
 successive detections (objects carry `vx = vy = nan`, "not measured").
@@ -50,7 +50,7 @@ DEFAULT_THRESHOLD = 0.35
 class BevDetector(nn.Module):
     """The detector network; layer names are the tensor fault sites (`bev_grid.LAYER_SITES`)."""
 
-    def __init__(self, widths: tuple[int, int, int] = (16, 24, 32), in_channels: int = 6):
+    def __init__(self, widths: tuple[int, int, int] = (32, 48, 64), in_channels: int = 6):
         super().__init__()
         c1, c2, c3 = widths
         # Named convN, not 0..3: fault targets are dotted names in the DSL (`perception.backbone.conv0`).
@@ -99,7 +99,7 @@ def load_weights(path: Path = WEIGHTS_PATH) -> tuple[dict, dict]:
 def load_model(path: Path = WEIGHTS_PATH, device: str = "cpu") -> tuple[BevDetector, dict]:
     """A fresh detector with the shipped weights: weight faults in one run touch only its copy."""
     state, meta = load_weights(path)
-    model = BevDetector(tuple(meta.get("widths", (16, 24, 32))))
+    model = BevDetector(tuple(meta["widths"]))
     model.load_state_dict(state)
     return model.to(device).eval(), meta
 
@@ -440,12 +440,13 @@ class LearnedPerception:
         self._armed = [f for f in self._armed if f.fired is None]
 
 
-_SHAPES: dict[str, dict[str, tuple[int, ...]]] = {}
+_SHAPES: dict[tuple, dict[str, tuple[int, ...]]] = {}
 
 
 def _activation_shapes(model: BevDetector, device: str) -> dict[str, tuple[int, ...]]:
-    """Output shape of every named layer at batch 1 (one dry run, cached)."""
-    if device not in _SHAPES:
+    """Output shape of every named layer at batch 1 (one dry run, cached per device and widths)."""
+    key = (device, tuple(layer.out_channels for layer in model.layers().values()))
+    if key not in _SHAPES:
         shapes = {}
         hooks = [layer.register_forward_hook(
             lambda m, i, o, name=name: shapes.__setitem__(name, tuple(o.shape)))
@@ -454,5 +455,5 @@ def _activation_shapes(model: BevDetector, device: str) -> dict[str, tuple[int, 
             model(torch.zeros((1, *GRID.shape), device=device))
         for h in hooks:
             h.remove()
-        _SHAPES[device] = shapes
-    return _SHAPES[device]
+        _SHAPES[key] = shapes
+    return _SHAPES[key]

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.stack.bev_grid import GRID, sensor_points_to_vehicle
+from addt_dsl.stack.bev_grid import DETECTOR_LIDAR, GRID, sensor_points_to_vehicle
 
 LANE_WIDTH_M = 3.5
 EGO_SIZE = (4.6, 1.9, 1.5)
@@ -185,15 +185,18 @@ def _wrap(a: float) -> float:
 class ScanGenerator:
     """Generates `Sample`s; one pybullet world reused across scenes (close it when done)."""
 
-    def __init__(self, seed: int, lidars: tuple[str, ...] = ("360x1",), lidar_p: tuple[float, ...] | None = None,
-                 yaw_shift_rad: float = 0.0, lidar_settings: dict | None = None):
-        """`lidars` are "RAYSxCHANNELS" configurations of the runtime's `Lidar` (other
-        settings at their defaults or `lidar_settings`), drawn per scan with `lidar_p`."""
+    def __init__(self, seed: int, lidars: tuple[str, ...] = (DETECTOR_LIDAR.config,),
+                 lidar_p: tuple[float, ...] | None = None, yaw_shift_rad: float = 0.0,
+                 lidar_settings: dict | None = None):
+        """`lidars` are "RAYSxCHANNELS" configurations of the runtime's `Lidar` (range and
+        vertical field of view those of `DETECTOR_LIDAR` unless `lidar_settings` says
+        otherwise; other settings at the Lidar's defaults), drawn per scan with `lidar_p`."""
         from addt_dsl.runtime.sensors import Lidar
 
         self.rng = np.random.default_rng(seed)
         self.world = _ScanWorld()
-        base = {"range": 80.0, **(lidar_settings or {})}
+        base = {"range": DETECTOR_LIDAR.range_m, "vfov": math.radians(DETECTOR_LIDAR.vfov_deg),
+                **(lidar_settings or {})}
         self.lidars = {}
         for config in lidars:
             rays, channels = parse_lidar(config)

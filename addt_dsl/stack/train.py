@@ -5,11 +5,11 @@
 Generates `--scenes` labelled scans with `synth.ScanGenerator` (the runtime's `Lidar` in
 a pybullet world of car and truck boxes), then trains `learned.BevDetector` with Adam on
 a CenterNet loss (focal loss on the centre heatmap; L1 at object centres on the sub-cell
-offset, weighted 2, on log length/width and on heading sin/cos). Objects with at least
+offset, weighted 2, on log length/width and on the box axis as sin 2θ, cos 2θ). Objects with at least
 one lidar return are positives.
 
 Reproducible from the seed: the scenes, the initial weights and the batch order all
-derive from it, and training runs on `--threads` CPU threads (default 1; the same
+derive from it, and training runs on `--threads` CPU threads (default 2; the same
 seed and thread count give the same weights, bit for bit, on the same machine).
 """
 
@@ -22,14 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
-from addt_dsl.stack.bev_grid import GRID, build_grid, encode_targets
+from addt_dsl.stack.bev_grid import DETECTOR_LIDAR, GRID, build_grid, encode_targets
 from addt_dsl.stack.synth import generate, in_grid, load_samples, save_samples
 
 
-# Lidar configurations ("RAYSxCHANNELS") drawn per training scan: the default `Lidar`
-# (360 rays, one channel, as in examples/overtake.addt) most of the time.
-LIDARS = ("360x1", "720x1")
-LIDAR_P = (0.8, 0.2)
+# Scans come from the lidar the detector is made for (`bev_grid.DETECTOR_LIDAR`).
+LIDARS = (DETECTOR_LIDAR.config,)
+LIDAR_P = None
+LIDAR_VFOV_DEG = DETECTOR_LIDAR.vfov_deg
 
 
 def make_targets(samples):
@@ -72,13 +72,15 @@ def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
 
 
 def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: float, log=print,
-          cache: Path | None = None, device: str = "cpu", widths: tuple[int, int, int] = (16, 24, 32),
-          lidars: tuple[str, ...] = LIDARS, lidar_p: tuple[float, ...] = LIDAR_P,
+          cache: Path | None = None, device: str = "cpu", widths: tuple[int, int, int] = (32, 48, 64),
+          lidars: tuple[str, ...] = LIDARS, lidar_p: tuple[float, ...] | None = LIDAR_P,
           lidar_settings: dict | None = None):
     import torch
 
     from addt_dsl.stack.learned import BevDetector
 
+    if lidar_settings is None:
+        lidar_settings = {"vfov": math.radians(LIDAR_VFOV_DEG)}
     torch.set_num_threads(threads)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -130,34 +132,34 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path(__file__).with_name("perception_weights.pt"))
     ap.add_argument("--scenes", type=int, default=16000, help="training scans to generate")
-    ap.add_argument("--epochs", type=int, default=10)
+    ap.add_argument("--epochs", type=int, default=16)
     ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--lr", type=float, default=3e-3)
-    ap.add_argument("--threads", type=int, default=1, help="CPU threads (reproducible per thread count)")
+    ap.add_argument("--threads", type=int, default=2, help="CPU threads (reproducible per thread count)")
     ap.add_argument("--threshold", type=float, default=0.35, help="detection threshold stored with the weights")
     ap.add_argument("--cache", type=Path, default=None, help="npz of scans: reused if present, else written")
-    ap.add_argument("--widths", type=int, nargs=3, default=[16, 24, 32], help="channels at 1/2, 1/4, 1/8")
+    ap.add_argument("--widths", type=int, nargs=3, default=[32, 48, 64], help="channels at 1/2, 1/4, 1/8")
     ap.add_argument("--lidars", nargs="*", default=list(LIDARS), help="RAYSxCHANNELS configurations to scan with")
-    ap.add_argument("--lidar-p", type=float, nargs="*", default=list(LIDAR_P), help="their probabilities")
-    ap.add_argument("--lidar-vfov", type=float, default=None, metavar="DEG",
-                    help="vertical field of view of multi-channel lidars (default: the Lidar's, 10 deg)")
+    ap.add_argument("--lidar-p", type=float, nargs="*", default=None, help="their probabilities (default: equal)")
+    ap.add_argument("--lidar-vfov", type=float, default=LIDAR_VFOV_DEG, metavar="DEG",
+                    help="vertical field of view of multi-channel lidars")
     ap.add_argument("--device", default="cpu", help="torch device (the shipped weights are trained on cpu)")
     args = ap.parse_args(argv)
-    lidar_settings = None if args.lidar_vfov is None else {"vfov": math.radians(args.lidar_vfov)}
+    lidar_settings = {"vfov": math.radians(args.lidar_vfov)}
 
     import torch
 
     model, timing = train(args.seed, args.scenes, args.epochs, args.batch, args.threads, args.lr,
                           cache=args.cache, device=args.device, widths=tuple(args.widths),
-                          lidars=tuple(args.lidars), lidar_p=tuple(args.lidar_p), lidar_settings=lidar_settings)
+                          lidars=tuple(args.lidars), lidar_p=None if args.lidar_p is None else tuple(args.lidar_p),
+                          lidar_settings=lidar_settings)
     meta = {
         "seed": args.seed, "scenes": args.scenes, "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
         "threads": args.threads, "lidars": args.lidars, "lidar_p": args.lidar_p, "threshold": args.threshold, "widths": list(args.widths),
         "grid": {"x_min": GRID.x_min, "y_min": GRID.y_min, "cell_m": GRID.cell_m, "nx": GRID.nx, "ny": GRID.ny},
         "torch": str(torch.__version__), **timing,
     }
-    if args.lidar_vfov is not None:
-        meta["lidar_vfov_deg"] = args.lidar_vfov
+    meta["lidar_vfov_deg"] = args.lidar_vfov
     state = {k: v.detach().clone() for k, v in model.state_dict().items()}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     torch.save({"state_dict": state, "meta": meta}, args.out)

@@ -40,8 +40,11 @@ def _spec(source: str, stack_line: str):
 
 
 @pytest.mark.parametrize("perception", ["ground_truth", "learned"])
-def test_bridge_run_matches_the_in_process_stack(overtake_source, server_address, perception):
+def test_bridge_run_matches_the_in_process_stack(overtake_source, learned_overtake_source, server_address,
+                                                perception):
     settings = f"perception {perception} cruise_speed 25 m/s"
+    if perception == "learned":
+        overtake_source = learned_overtake_source
     local = execute(_spec(overtake_source, f"stack bev {settings}"))
     remote = execute(_spec(overtake_source, f'stack external address "{server_address}" {settings}'))
     assert remote.status == "ok", remote.error

@@ -14,8 +14,8 @@ from addt_dsl.sweep import expand
 pytestmark = pytest.mark.slow
 
 
-def test_trace_e2e_matches_the_latency_model(overtake_source):
-    text = overtake_source.replace("stack bev cruise_speed 25 m/s",
+def test_trace_e2e_matches_the_latency_model(learned_overtake_source):
+    text = learned_overtake_source.replace("stack bev cruise_speed 25 m/s",
                                    "stack bev perception learned cruise_speed 25 m/s").replace("duration 30 s",
                                                                                                "duration 8 s")
     result = compile_source(text)

@@ -22,8 +22,8 @@ def _specs(source: str, stack_line: str, duration_s: int | None = None):
     return expand(result.plan).specs
 
 
-def test_overtake_passes_with_learned_perception(overtake_source):
-    spec = next(s for s in _specs(overtake_source, "stack bev perception learned cruise_speed 25 m/s")
+def test_overtake_passes_with_learned_perception(learned_overtake_source):
+    spec = next(s for s in _specs(learned_overtake_source, "stack bev perception learned cruise_speed 25 m/s")
                 if s.params["drop_rate"] == 0.0)
     result = execute(spec)
     assert result.status == "ok", result.error
@@ -34,17 +34,17 @@ def test_overtake_passes_with_learned_perception(overtake_source):
     assert ego.s[-1] > lead.s[-1]  # and overtaken
 
 
-def test_learned_perception_runs_are_deterministic(overtake_source):
+def test_learned_perception_runs_are_deterministic(learned_overtake_source):
     # Frame drops on: the tracker's velocity filter and coasting are exercised too.
-    spec = next(s for s in _specs(overtake_source, "stack bev perception learned cruise_speed 25 m/s", 8)
+    spec = next(s for s in _specs(learned_overtake_source, "stack bev perception learned cruise_speed 25 m/s", 8)
                 if s.params["drop_rate"] > 0.0)
     first, second = execute(spec), execute(spec)
     assert first.status == second.status == "ok"
     assert first.digest == second.digest
 
 
-def test_hil_like_measured_latency_with_learned_perception(overtake_source):
-    spec = next(s for s in _specs(overtake_source, "stack bev perception learned latency measured "
+def test_hil_like_measured_latency_with_learned_perception(learned_overtake_source):
+    spec = next(s for s in _specs(learned_overtake_source, "stack bev perception learned latency measured "
                                                     "cruise_speed 25 m/s", 4)
                 if s.params["drop_rate"] == 0.0)
     result = execute(spec)
@@ -60,10 +60,10 @@ def test_hil_like_measured_latency_with_learned_perception(overtake_source):
     assert not set(seen.tolist()) & modelled
 
 
-def test_learned_perception_digests_do_not_depend_on_worker_count(overtake_source):
+def test_learned_perception_digests_do_not_depend_on_worker_count(learned_overtake_source):
     from addt_dsl.runtime.executor import run_local
 
-    specs = _specs(overtake_source, "stack bev perception learned cruise_speed 25 m/s", 5)
+    specs = _specs(learned_overtake_source, "stack bev perception learned cruise_speed 25 m/s", 5)
     serial = run_local(specs, jobs=1)
     parallel = run_local(specs, jobs=2)
     assert all(r.status == "ok" for r in serial), [r.error for r in serial]

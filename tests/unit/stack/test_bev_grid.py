@@ -35,6 +35,14 @@ def test_points_outside_the_grid_are_dropped_and_empty_input_is_empty():
     assert not build_grid(np.zeros((0, 3)), (0.0, 0.0)).any()
 
 
+def test_ground_returns_are_dropped():
+    # A multi-channel lidar's lower beams reach the road: those points are not objects.
+    road = np.array([[12.0, 1.0, 0.0], [20.0, -2.0, 0.3], [25.0, 0.0, -0.2]])
+    assert not build_grid(road, (1.0, 0.0)).any()
+    grid = build_grid(np.vstack([road, [[12.0, 1.0, 0.31]]]), (1.0, 0.0))
+    assert np.count_nonzero(grid[0]) == 1 and grid[0].max() == 0.25
+
+
 def test_out_buffer_is_cleared_between_frames():
     buf = np.zeros(GRID.shape, dtype=np.float32)
     build_grid(np.array([[5.0, 5.0, 1.0]]), (0.0, 0.0), out=buf)
@@ -49,7 +57,7 @@ def test_occupancy_matches_the_cells_of_in_range_points(points):
     grid = build_grid(pts, (1.0, 0.0))
     ix = np.floor((pts[:, 0] - GRID.x_min) / GRID.cell_m).astype(int)
     iy = np.floor((pts[:, 1] - GRID.y_min) / GRID.cell_m).astype(int)
-    ok = (ix >= 0) & (ix < GRID.nx) & (iy >= 0) & (iy < GRID.ny)
+    ok = (ix >= 0) & (ix < GRID.nx) & (iy >= 0) & (iy < GRID.ny) & (pts[:, 2] > GRID.ground_m)
     expected = {(int(a), int(b)) for a, b in zip(ix[ok], iy[ok])}
     assert {tuple(c) for c in np.argwhere(grid[0] > 0).tolist()} == expected
     # Mean offsets stay inside the cell.
@@ -86,7 +94,8 @@ def test_encode_then_decode_recovers_well_separated_boxes(boxes):
         k = int(np.argmin(np.hypot(found[:, 0] - b[0], found[:, 1] - b[1])))
         x, y, h, length, width, conf = found[k]
         assert math.hypot(x - b[0], y - b[1]) < 1e-4
-        assert abs(math.remainder(h - b[2], 2 * math.pi)) < 1e-5
+        assert abs(math.remainder(h - b[2], math.pi)) < 1e-5  # the box axis: front and back alike
+        assert -math.pi / 2 - 1e-9 <= h <= math.pi / 2 + 1e-9
         assert math.isclose(length, b[3], rel_tol=1e-5) and math.isclose(width, b[4], rel_tol=1e-5)
         assert conf == 1.0
 
@@ -146,7 +155,7 @@ def _reference_grid(points, sensor_xy):
     for x, y, z in points:
         i = math.floor((x - GRID.x_min) / GRID.cell_m)
         j = math.floor((y - GRID.y_min) / GRID.cell_m)
-        if 0 <= i < GRID.nx and 0 <= j < GRID.ny:
+        if 0 <= i < GRID.nx and 0 <= j < GRID.ny and z > GRID.ground_m:
             cells.setdefault((i, j), []).append((x, y, z))
     for (i, j), pts in cells.items():
         n = len(pts)

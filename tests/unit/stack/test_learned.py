@@ -32,6 +32,21 @@ def test_weights_ship_small_and_match_the_architecture():
     assert node.meta["grid"]["cell_m"] == 0.8
 
 
+def test_weights_are_trained_for_the_declared_lidar():
+    # The compiler warns against any other lidar (W0003) on the strength of DETECTOR_LIDAR,
+    # read without torch: the shipped weights must have been trained with exactly it.
+    import math
+
+    from addt_dsl.stack.bev import PERCEPTIONS
+    from addt_dsl.stack.bev_grid import DETECTOR_LIDAR
+
+    meta = LearnedPerception({}).meta
+    assert meta["lidars"] == [DETECTOR_LIDAR.config] and meta["lidar_vfov_deg"] == DETECTOR_LIDAR.vfov_deg
+    keyword, expected = PERCEPTIONS["learned"].expects
+    assert keyword == "lidar" and expected["channels"] == DETECTOR_LIDAR.channels
+    assert math.isclose(expected["vfov"], math.radians(meta["lidar_vfov_deg"]))
+
+
 def test_layer_names_are_the_declared_fault_sites():
     model = BevDetector()
     convs = {n for n, m in model.named_modules() if isinstance(m, torch.nn.Conv2d)}
