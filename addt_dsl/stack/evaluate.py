@@ -144,7 +144,7 @@ def main(argv=None) -> int:
                     help="RAYSxCHANNELS of the runtime's Lidar (default: the one the weights were trained for)")
     ap.add_argument("--lidar-vfov", type=float, default=None, metavar="DEG",
                     help="vertical field of view of a multi-channel lidar (default: the weights' training "
-                         "value, else the Lidar's 10 deg)")
+                         "value, else bev_grid.DETECTOR_LIDAR's)")
     ap.add_argument("--min-hits", type=int, default=2)
     ap.add_argument("--threshold", type=float, default=None)
     ap.add_argument("--yaw-shift", type=float, nargs="*", default=[0.0], metavar="DEG",

@@ -5,8 +5,8 @@
 Generates `--scenes` labelled scans with `synth.ScanGenerator` (the runtime's `Lidar` in
 a pybullet world of car and truck boxes), then trains `learned.BevDetector` with Adam on
 a CenterNet loss (focal loss on the centre heatmap; L1 at object centres on the sub-cell
-offset, weighted 2, on log length/width and on the box axis as sin 2θ, cos 2θ). Objects with at least
-one lidar return are positives.
+offset, weighted 2, on log length/width and on the box axis as sin 2θ, cos 2θ). Objects
+with at least one lidar return are positives.
 
 Reproducible from the seed: the scenes, the initial weights and the batch order all
 derive from it, and training runs on `--threads` CPU threads (default 2; the same
@@ -79,8 +79,6 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
 
     from addt_dsl.stack.learned import BevDetector
 
-    if lidar_settings is None:
-        lidar_settings = {"vfov": math.radians(LIDAR_VFOV_DEG)}
     torch.set_num_threads(threads)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
