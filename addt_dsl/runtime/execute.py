@@ -29,6 +29,7 @@ from addt_dsl.runtime.roadmesh import Elevation, build_scene
 from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.runtime.script import Script
 from addt_dsl.runtime.signals import compute_signals
+from addt_dsl.runtime.store import VerdictRecord
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
 from addt_dsl.runtime.vehicle import step as vehicle_step
@@ -39,21 +40,12 @@ VEHICLE_HEIGHT = {"car": 1.5, "truck": 3.5, "cyclist": 1.7, "pedestrian": 1.8}
 
 
 @dataclass
-class OracleVerdict:
-    name: str
-    severity: str
-    robustness: float
-    passed: bool
-    first_violation_s: float | None = None
-
-
-@dataclass
 class RunResult:
     run_id: str
     key: str
     params: dict[str, float]
     seed: int
-    verdicts: list[OracleVerdict]
+    verdicts: list[VerdictRecord]
     status: str  # ok | detected
     error: str
     sim_time_s: float
@@ -508,7 +500,7 @@ def _snapshot_trace(run: _Run, rec, k: int) -> Trace:
     return Trace(run.dt, np.array([k * run.dt]), actors, lat)
 
 
-def judge(spec: RunSpec, trace: Trace) -> list[OracleVerdict]:
+def judge(spec: RunSpec, trace: Trace) -> list[VerdictRecord]:
     """Evaluate every oracle of the plan on a trace (robustness at time 0)."""
     out = []
     for o in spec.plan.oracles:
@@ -517,5 +509,5 @@ def judge(spec: RunSpec, trace: Trace) -> list[OracleVerdict]:
         rho = float(oracles.robustness_at_0(formula, signals, trace.period_s))
         passed = oracles.satisfied(formula, signals, trace.period_s)
         first = None if passed else oracles.first_violation_time(formula, signals, trace.period_s)
-        out.append(OracleVerdict(o.name, o.severity, rho, passed, first))
+        out.append(VerdictRecord(o.name, o.severity, rho, passed, first))
     return out

@@ -57,6 +57,8 @@ class StoreMismatch(ValueError):
 
 @dataclass
 class VerdictRecord:
+    """One oracle's verdict on a run: what the loop's judge returns and the store keeps."""
+
     name: str
     severity: str
     robustness: float
