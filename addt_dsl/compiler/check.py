@@ -695,11 +695,9 @@ def _check_sensor_expectations(ctx: Context, stack: P.ClausePlan, sensors: list,
             continue
         values = {p.name: p.default for p in cls.params if isinstance(p.default, (int, float))}
         values.update({k: v.value for k, v in sensor.settings.items() if isinstance(v, P.Num)})
-        wanted = []
-        for key, want in mismatches(words, sensor.name, values):
-            dim = next(p.dim for p in cls.params if p.name == key)
-            wanted.append(f"{key} {math.degrees(want):g} deg" if dim == units.ANGLE
-                          else f"{key} {units.format_si(want, dim) if dim is not None else f'{want:g}'}")
+        dims = {p.name: p.dim for p in cls.params}
+        wanted = [f"{key} {_fmt(want, dims[key], 'deg' if dims[key] == units.ANGLE else None)}"
+                  for key, want in mismatches(words, sensor.name, values)]
         if wanted:
             ctx.sink.warning("W0003", f"{words.get('perception', 'this')} perception is made for a "
                                       f"{sensor.name} with {', '.join(wanted)}", spans.get(sensor.name, span),

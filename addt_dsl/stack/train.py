@@ -26,12 +26,6 @@ from addt_dsl.stack.bev_grid import DETECTOR_LIDAR, GRID, build_grid, encode_tar
 from addt_dsl.stack.synth import generate, in_grid, load_samples, save_samples
 
 
-# Scans come from the lidar the detector is made for (`bev_grid.DETECTOR_LIDAR`).
-LIDARS = (DETECTOR_LIDAR.config,)
-LIDAR_P = None
-LIDAR_VFOV_DEG = DETECTOR_LIDAR.vfov_deg
-
-
 def make_targets(samples):
     """Stacked CenterNet targets for `samples` (objects with ≥ 1 return are positives)."""
     hx, hy = GRID.head_shape
@@ -73,7 +67,7 @@ def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
 
 def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: float, log=print,
           cache: Path | None = None, device: str = "cpu", widths: tuple[int, int, int] = (32, 48, 64),
-          lidars: tuple[str, ...] = LIDARS, lidar_p: tuple[float, ...] | None = LIDAR_P,
+          lidars: tuple[str, ...] = (DETECTOR_LIDAR.config,), lidar_p: tuple[float, ...] | None = None,
           lidar_settings: dict | None = None):
     import torch
 
@@ -137,9 +131,10 @@ def main(argv=None) -> int:
     ap.add_argument("--threshold", type=float, default=0.35, help="detection threshold stored with the weights")
     ap.add_argument("--cache", type=Path, default=None, help="npz of scans: reused if present, else written")
     ap.add_argument("--widths", type=int, nargs=3, default=[32, 48, 64], help="channels at 1/2, 1/4, 1/8")
-    ap.add_argument("--lidars", nargs="*", default=list(LIDARS), help="RAYSxCHANNELS configurations to scan with")
+    ap.add_argument("--lidars", nargs="*", default=[DETECTOR_LIDAR.config],
+                    help="RAYSxCHANNELS configurations to scan with (default: bev_grid.DETECTOR_LIDAR)")
     ap.add_argument("--lidar-p", type=float, nargs="*", default=None, help="their probabilities (default: equal)")
-    ap.add_argument("--lidar-vfov", type=float, default=LIDAR_VFOV_DEG, metavar="DEG",
+    ap.add_argument("--lidar-vfov", type=float, default=DETECTOR_LIDAR.vfov_deg, metavar="DEG",
                     help="vertical field of view of multi-channel lidars")
     ap.add_argument("--device", default="cpu", help="torch device (the shipped weights are trained on cpu)")
     args = ap.parse_args(argv)
