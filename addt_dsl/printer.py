@@ -38,9 +38,13 @@ from pathlib import Path
 
 from addt_dsl import expr as E
 from addt_dsl import units
+from addt_dsl.compiler import compile_source
+from addt_dsl.compiler.check import NO_CLAUSES, VEHICLE_KINDS, reach_goal_formula
+from addt_dsl.diagnostics import render_text
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, FaultPlan, OraclePlan, ParamPlan, RoadPlan,
-                           RunSpec, ScenarioPlan, SweepPlan)
+                           RunSpec, ScenarioPlan, SweepPlan, TriggerPlan)
 from addt_dsl.registry import BEHAVIORS, FAULTS, GEOMETRIES, SENSORS, SIGNALS, STACKS, ParamSpec
+from addt_dsl.sweep import expand
 from addt_dsl.units import Dim
 
 __all__ = ["PrinterError", "pin_spec", "print_plan", "print_spec", "side_files", "semantic_key",
@@ -449,29 +453,28 @@ def _params(pr: _Printer) -> None:
         pr.emit(1, _param_line(p))
     for i, a in enumerate(pr.plan.assumptions):
         body = _user_body(a.text) if ("assume", i) in pr.verbatim else None
-        pr.emit(1, f"assume {body or pr.exprs.formula(a.expr)}")
+        pr.emit(1, _join("assume", f"{a.name}:" if a.name else "", body or pr.exprs.formula(a.expr)))
 
 
 def _param_line(p: ParamPlan) -> str:
     dim = _dim_of_name(p.dimension)
-    if p.integer:
-        raise PrinterError(f"integer parameter {p.name!r} has no surface syntax")
     parts = [f"param {p.name} = {format_const(p.default, dim)}"]
     if p.choices:
-        if len(p.choices) == 2:
-            raise PrinterError(f"a choice of two values for {p.name!r} reads back as a range")
         parts.append(f"in [{', '.join(format_const(c, dim) for c in p.choices)}]")
     elif p.low is not None or p.high is not None:
         if p.low is None or p.high is None:
             raise PrinterError(f"half-open range of {p.name!r} has no surface syntax")
         parts.append(f"in [{format_const(p.low, dim)}, {format_const(p.high, dim)}]")
-    expected_dist = "choice" if p.choices else "uniform"
-    if p.distribution != expected_dist:
+    # Three or more values are a choice by themselves; two read back as a range without `dist choice`.
+    implied_dist = "choice" if len(p.choices) > 2 else "uniform"
+    if p.distribution != implied_dist:
         parts.append(f"dist {p.distribution}")
     if p.mean is not None:
         parts.append(f"mean {format_const(p.mean, dim)}")
     if p.sd is not None:
         parts.append(f"sd {format_const(p.sd, dim)}")
+    if p.integer:
+        parts.append("integer true")
     return " ".join(parts)
 
 
@@ -489,8 +492,6 @@ CLAUSE_TABLES = {"behavior": BEHAVIORS, "sensor": SENSORS, "stack": STACKS}
 
 
 def _vehicle_size(kind: str) -> tuple[float, float]:
-    from addt_dsl.compiler.check import VEHICLE_KINDS
-
     return VEHICLE_KINDS[kind]
 
 
@@ -521,8 +522,30 @@ def _actor(pr: _Printer, a: ActorPlan, is_ego: bool) -> None:
     for c in clauses:
         pr.emit(2, _clause(pr, c))
     for tr in a.triggers:
-        pr.emit(2, f"when {ex.formula(tr.condition)} then {_clause(pr, tr.clause)}")
+        _step(pr, tr, 2, in_group=False)
     pr.emit(1, "}")
+
+
+def _step(pr: _Printer, tr: TriggerPlan, depth: int, in_group: bool) -> None:
+    """A step of an agent's script: `[at T] [after T] [when F then] action`, the action a
+    behaviour or a `sequence`/`parallel` block of steps."""
+    ex = pr.exprs
+    starts = _join(f"at {ex.value(tr.at_s, units.TIME)}" if tr.at_s is not None else "",
+                   f"after {ex.value(tr.after_s, units.TIME)}" if tr.after_s is not None else "",
+                   f"when {ex.formula(tr.condition)} then" if tr.condition is not None else "")
+    if (tr.clause is None) == (tr.group is None):
+        raise PrinterError("a step starts one behaviour or one group")
+    if not starts and tr.clause is not None and not in_group:
+        raise PrinterError("a step without a start condition outside a group reads back as a behaviour")
+    if tr.clause is not None:
+        pr.emit(depth, _join(starts, _clause(pr, tr.clause)))
+        return
+    if not tr.group.steps:
+        raise PrinterError(f"an empty `{tr.group.mode}` block has no surface syntax")
+    pr.emit(depth, _join(starts, tr.group.mode, "{"))
+    for sub in tr.group.steps:
+        _step(pr, sub, depth + 1, in_group=True)
+    pr.emit(depth, "}")
 
 
 def _clause(pr: _Printer, c: ClausePlan) -> str:
@@ -563,25 +586,44 @@ def _fault_line(pr: _Printer, f: FaultPlan) -> str:
 
 # -- oracles
 
-def _no_clause(o: OraclePlan) -> str | None:
-    """`no collision [with X]` when the formula is exactly what that built-in lowers to."""
-    from addt_dsl.compiler.check import NO_CLAUSES, _collision_with
-
+def _builtin_clause(plan: ScenarioPlan, o: OraclePlan) -> tuple[str, str] | None:
+    """(built-in oracle text, its default name) when the formula is exactly what that
+    built-in lowers to: `no collision [with X]`, `reach goal [within T]`."""
     if o.formula == NO_CLAUSES["collision"]("ego", None):
         return "no collision", "no_collision"
     for signal in E.signals_used(o.formula):
         if signal.startswith("distance(ego,"):
             other = signal[len("distance(ego,"):-1]
-            if o.formula == _collision_with(other):
+            if o.formula == NO_CLAUSES["collision"]("ego", other):
                 return f"no collision with {other}", f"no_collision_with_{other}"
+    goal, f = plan.ego.goal_s, o.formula
+    if goal is not None and isinstance(f, E.Temporal) and f == reach_goal_formula(goal, f.hi_s):
+        return "reach goal" + ("" if f.hi_s is None else f" within {format_quantity(f.hi_s, units.TIME)}"), \
+            "reach_goal"
     return None
 
 
-def _is_goal_oracle(plan: ScenarioPlan, index: int) -> bool:
-    o, goal = plan.oracles[index], plan.ego.goal_s
-    return (goal is not None and index == len(plan.oracles) - 1 and o.name == "reach_goal"
-            and o.severity == "hard" and o.formula == E.Temporal(
-                op="eventually", arg=E.Binary(op=">=", left=E.Signal(name="s(ego)"), right=goal)))
+def _shown_oracles(plan: ScenarioPlan) -> list[int]:
+    """Indices of the oracles the source states. A goal on the ego adds `reach_goal`
+    (last, hard, no time limit) unless an oracle is named `reach_goal` or states `reach
+    goal`: that added oracle is left out when the rest of the source does not state one."""
+    indices = list(range(len(plan.oracles)))
+    if plan.ego.goal_s is None:
+        return indices
+
+    def states_goal(o: OraclePlan) -> bool:
+        clause = _builtin_clause(plan, o)
+        return o.name == "reach_goal" or (clause is not None and clause[1] == "reach_goal")
+
+    implied = OraclePlan(name="reach_goal", severity="hard", formula=reach_goal_formula(plan.ego.goal_s))
+    last = plan.oracles[-1] if plan.oracles else None
+    if last is not None and (last.name, last.severity, last.formula) == (implied.name, implied.severity,
+                                                                        implied.formula) \
+            and not any(states_goal(o) for o in plan.oracles[:-1]):
+        return indices[:-1]
+    if not any(states_goal(o) for o in plan.oracles):
+        raise PrinterError("the ego has a goal but no oracle named reach_goal: its source would add one")
+    return indices
 
 
 _TEXT_HEAD = re.compile(r"\s*(?:(hard|warn)\s+)?(?:([A-Za-z_]\w*)\s*:(?!=))?\s*(?P<body>.*)$", re.S)
@@ -596,10 +638,7 @@ def _user_body(text: str) -> str | None:
 
 
 def _oracles(pr: _Printer) -> None:
-    plan = pr.plan
-    if plan.ego.goal_s is not None and not (plan.oracles and _is_goal_oracle(plan, len(plan.oracles) - 1)):
-        raise PrinterError("the ego has a goal but its reach_goal oracle is missing or moved")
-    shown = [(i, o) for i, o in enumerate(plan.oracles) if not _is_goal_oracle(plan, i)]
+    shown = [(i, pr.plan.oracles[i]) for i in _shown_oracles(pr.plan)]
     if not shown:
         return
     pr.emit(0)
@@ -611,7 +650,7 @@ def _oracles(pr: _Printer) -> None:
 
 def _oracle_line(pr: _Printer, index: int, o: OraclePlan) -> str:
     severity = "warn" if o.severity == "warn" else ""
-    builtin = _no_clause(o)
+    builtin = _builtin_clause(pr.plan, o)
     if builtin is not None:
         body, default_name = builtin
         return _join(severity, "" if o.name == default_name else f"{o.name}:", body)
@@ -625,8 +664,6 @@ def _oracle_line(pr: _Printer, index: int, o: OraclePlan) -> str:
 
 def _sweep(pr: _Printer) -> None:
     sw = pr.plan.sweep
-    if sw.max_rejections != SweepPlan().max_rejections:
-        raise PrinterError("a custom rejection cap has no surface syntax")
     items = []
     dims = {p.name: _dim_of_name(p.dimension) for p in pr.plan.params}
     for axis in sw.grid:
@@ -640,6 +677,8 @@ def _sweep(pr: _Printer) -> None:
         items.append(f"repeat {sw.repeat}")
     if sw.seed:
         items.append(f"seed {sw.seed}")
+    if sw.max_rejections != SweepPlan().max_rejections:
+        items.append(f"max_rejections {sw.max_rejections}")
     if not items:
         return
     pr.emit(0)
@@ -694,8 +733,6 @@ def print_plan(plan: ScenarioPlan, comment: str = "", keep_user_text: bool = Tru
 
 
 def _compile_plan(text: str, plan: ScenarioPlan) -> ScenarioPlan | None:
-    from addt_dsl.compiler import compile_source
-
     files = side_files(plan)
     if not files:
         return compile_source(text, path="<printed>").plan
@@ -806,10 +843,6 @@ def semantic_key(obj: RunSpec | ScenarioPlan) -> str:
 
 def compile_pinned(text: str, path: str = "<pinned>", base_dir: str | Path = ".") -> RunSpec:
     """Compile a pinned file and return its one run (raises ValueError otherwise)."""
-    from addt_dsl.compiler import compile_source
-    from addt_dsl.diagnostics import render_text
-    from addt_dsl.sweep import expand
-
     result = compile_source(text, path=path, base_dir=base_dir)
     if not result.ok:
         raise ValueError("pinned source does not compile:\n" + render_text(result.diagnostics, result.sources))

@@ -1077,6 +1077,12 @@ NO_CLAUSES = {
 }
 
 
+def reach_goal_formula(goal, within_s: float | None = None):
+    """`reach goal [within T]`, and the oracle a goal on the ego adds by itself."""
+    return E.Temporal(op="eventually", lo_s=0.0, hi_s=within_s,
+                      arg=E.Binary(op=">=", left=E.Signal(name="s(ego)"), right=goal))
+
+
 def _builtin(ctx: Context, b: ast.Builtin) -> tuple[E.Expr, str] | None:
     """Lower a built-in oracle to (STL formula, default name)."""
     if b.kind == "no":
@@ -1112,8 +1118,7 @@ def _builtin(ctx: Context, b: ast.Builtin) -> tuple[E.Expr, str] | None:
                 return None
             if not _check_time(ctx, hi_e, b.value.span, "the time limit"):
                 return None
-        return E.Temporal(op="eventually", lo_s=0.0, hi_s=hi, arg=E.Binary(
-            op=">=", left=E.Signal(name="s(ego)"), right=ego.goal_s)), "reach_goal"
+        return reach_goal_formula(ego.goal_s, hi), "reach_goal"
     return _bound(ctx, b)
 
 
@@ -1277,10 +1282,8 @@ def rule_goal_oracle(ctx: Context) -> None:
                    for b in ctx.blocks("expect") for o in b.items)
     if explicit:
         return
-    ctx.oracles.append(P.OraclePlan(
-        name="reach_goal", severity="hard",
-        formula=E.Temporal(op="eventually", arg=E.Binary(op=">=", left=E.Signal(name="s(ego)"), right=ego.goal_s)),
-        text="ego reaches its goal"))
+    ctx.oracles.append(P.OraclePlan(name="reach_goal", severity="hard", formula=reach_goal_formula(ego.goal_s),
+                                    text="ego reaches its goal"))
 
 
 # ---------------------------------------------------------------- sweeps
