@@ -18,8 +18,9 @@ combines (`SIGNALS` registry). Every canonical unit has the factor 1, so a print
 number reads back bit for bit; angles use `deg` where that is exact too.
 
 Table-driven: `SECTIONS` lists the parts of a scenario in print order, `HEADER` the
-header settings, `SEGMENTS` the road geometry keywords and `_NODE_PRINTERS` the
-expression nodes. A new construct is a row (and a function) in one of them.
+header settings and `_NODE_PRINTERS` the expression nodes; road geometry elements, like
+behaviours, sensors and faults, print from their registered class. A new construct is a
+row (and a function) in one of them.
 `addt_dsl.runtime.oracles.format_formula` is not used for formulas: it prints SI
 numbers without units, writes `-3` as a literal where the DSL folds `-(3)` to the same
 literal, and its precedence differs from the DSL grammar (`not always ...`, chained
@@ -39,7 +40,8 @@ from pathlib import Path
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.compiler import compile_source
-from addt_dsl.compiler.check import NO_CLAUSES, VEHICLE_KINDS, reach_goal_formula
+from addt_dsl.compiler.rules.actors import VEHICLE_KINDS
+from addt_dsl.compiler.rules.oracles import NO_CLAUSES, reach_goal_formula
 from addt_dsl.diagnostics import render_text
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, FaultPlan, OraclePlan, ParamPlan, RoadPlan,
                            RunSpec, ScenarioPlan, SweepPlan, TriggerPlan)
@@ -397,15 +399,6 @@ def _header(pr: _Printer) -> None:
 
 # -- roads
 
-SEGMENTS = {  # plan kind: (keyword, [(setting, getter)])
-    "line": ("line", [("length", lambda s: s.length_m)]),
-    "arc": ("arc", [("length", lambda s: s.length_m), ("curvature", lambda s: s.curvature_per_m)]),
-    "spiral": ("spiral", [("length", lambda s: s.length_m), ("from", lambda s: s.curv_start_per_m),
-                          ("to", lambda s: s.curv_end_per_m)]),
-    "param_poly3": ("param_poly3", [("length", lambda s: s.length_m)] + [
-        (n, (lambda s, i=i: s.coefficients[i])) for i, n in enumerate(("au", "bu", "cu", "du",
-                                                                        "av", "bv", "cv", "dv"))]),
-}
 LANES = (("right", "right_lanes"), ("left", "left_lanes"), ("width", "lane_width_m"), ("offset", "lane_offset_m"))
 
 
@@ -425,9 +418,9 @@ def _roads(pr: _Printer) -> None:
                              f"road {rid}" if rid is not None else ""))
             continue
         pr.emit(1, f"road {road.name} {{")
-        for seg in road.segments:
-            keyword, fields = SEGMENTS[seg.kind]
-            pr.emit(2, _join(keyword, *(_const_setting(pr, keyword, k, get(seg)) for k, get in fields)))
+        for seg in road.segments:  # each geometry element says which settings make its segment
+            settings = GEOMETRIES.get(seg.kind).settings_of(seg)
+            pr.emit(2, _join(seg.kind, *(_const_setting(pr, seg.kind, k, v) for k, v in settings.items())))
         defaults = {s.name: s.default for s in GEOMETRIES.get("lanes").params}
         lanes = [_const_setting(pr, "lanes", k, getattr(road, f)) for k, f in LANES if getattr(road, f) != defaults[k]]
         if lanes:

@@ -1,7 +1,8 @@
 """The compiler: `.addt` source → checked AST → `ScenarioPlan`.
 
 Pipeline: `parser.parse_source` (lark → AST with spans), include resolution (paths stay
-inside the scenario's directory tree), `check.RULES` in order, then `lower.build_plan`.
+inside the scenario's directory tree), `rules.RULES` in order (one module per rule), then
+`lower.build_plan`.
 Never imports pybullet or torch.
 """
 
@@ -12,8 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from addt_dsl.compiler import ast, parser
-from addt_dsl.compiler.check import RULES, Context
+from addt_dsl.compiler.context import Context
+from addt_dsl.compiler.lower import build_plan, check_feasible
 from addt_dsl.compiler.parser import parse_source
+from addt_dsl.compiler.rules import run_rules
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
 from addt_dsl.plan import ScenarioPlan
 
@@ -160,12 +163,9 @@ def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: 
         return got
 
     ctx = Context(scenario, sink, str(base_dir), display, read_file=read_file, sources=sources)
-    for rule in RULES:
-        rule(ctx)
+    run_rules(ctx)
     if sink.has_errors:
         return CompileResult(None, sink.items, sources)
-    from addt_dsl.compiler.lower import build_plan, check_feasible
-
     plan = build_plan(ctx)
     if not check_feasible(plan, ctx):
         return CompileResult(None, sink.items, sources)

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from addt_dsl.compiler import ast
-from addt_dsl.compiler.check import Context
+from addt_dsl.compiler.context import Context, text_of
 from addt_dsl.plan import ScenarioPlan
+from addt_dsl.sweep import probe_feasibility
 
 FEASIBILITY_BUDGET = 2000  # candidate assignments tried at compile time
 
@@ -34,16 +35,12 @@ def build_plan(ctx: Context) -> ScenarioPlan:
 def check_feasible(plan: ScenarioPlan, ctx: Context) -> bool:
     """An unsatisfiable set of constraints is a compile error (E0501), never a silent
     loop: probe the sweep's candidates and report which constraints rejected them."""
-    from addt_dsl.sweep import probe_feasibility
-
     rejected = probe_feasibility(plan, FEASIBILITY_BUDGET)
     if rejected is None:
         return True
-    from addt_dsl.compiler.check import _text_of
-
     worst = rejected.most_common(1)[0][0] if rejected else ""
     decl = next((d for d in ctx.defs(ast.AssumeDecl)
-                 if worst in (d.label, _text_of(ctx, d.expr.span))), None) or next(
+                 if worst in (d.label, text_of(ctx, d.expr.span))), None) or next(
         (d for d in ctx.defs(ast.AssumeDecl)), None)
     span = decl.span if decl is not None else ctx.scenario.span
     tried = FEASIBILITY_BUDGET

@@ -1,19 +1,22 @@
 """Compile-time check of an imported `.xodr` file: it must parse, and the road id exist.
 
-The road package is pure numpy (no pybullet or torch), so the compiler may use it to
-turn OpenDRIVE errors into diagnostics at the `road ... import` line.
+`addt_dsl.runtime.road` is pure numpy and defusedxml (no pybullet or torch; the layer
+test checks it), so the compiler reads OpenDRIVE with the same code the runtime drives
+on and turns its errors into diagnostics at the `road ... import` line.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
+from addt_dsl.compiler.context import Context, RoadInfo
 from addt_dsl.diagnostics import Span
+from addt_dsl.expr import eval_param_expr
+from addt_dsl.runtime.road import XodrError, parse_xodr
 
 
-def check_xodr(ctx, text: str, display: str, span: Span, road_value):
+def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
     """(road id, RoadInfo or None) of the imported road, or None after a diagnostic."""
-    from addt_dsl.expr import eval_param_expr
-    from addt_dsl.runtime.road import XodrError, parse_xodr
-
     cache = ctx.xodr_networks  # one parse per file, however many roads import it
     try:
         network = cache.get(display) or cache.setdefault(display, parse_xodr(text, display))
@@ -41,10 +44,6 @@ def check_xodr(ctx, text: str, display: str, span: Span, road_value):
 
 def _road_info(road):
     """Length, lanes at s = 0 and the narrowest width of each lane along the road."""
-    import numpy as np
-
-    from addt_dsl.compiler.check import RoadInfo
-
     try:
         length = float(road.length)
         lanes = tuple(int(i) for i in road.lane_ids(0.0) if i != 0)

@@ -118,7 +118,7 @@ def test_diamond_includes_are_read_once_so_work_stays_linear(tmp_path):
 def test_imports_of_one_file_are_read_and_parsed_once(tmp_path, monkeypatch):
     import shutil
 
-    from addt_dsl.runtime import road
+    from addt_dsl.compiler import xodr_check as road
 
     shutil.copy(REPO / "examples" / "maps" / "straight_500m.xodr", tmp_path / "map.xodr")
     roads = "\n".join(f'  road r{i} import "map.xodr"' for i in range(50))

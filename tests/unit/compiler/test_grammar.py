@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from addt_dsl.compiler import check
+from addt_dsl.compiler.rules import actors, header, params
 from addt_dsl.compiler.parser import grammar, parse_source
 from addt_dsl.diagnostics import DiagnosticSink
 from addt_dsl.registry import BEHAVIORS, FAULTS, GEOMETRIES, SENSORS, STACKS
@@ -45,10 +45,10 @@ def _contexts():
         names = [p.name for p in cls.params] + ["seed"]
         yield f"fault {cls.keyword}", (f"scenario x {{\n faults {{\n  {cls.keyword} lidar {_pairs(names)}\n"
                                        f"  at 1 s for 1 s {cls.keyword} lidar {_pairs(names)}\n }}\n}}\n")
-    actor = [p.name for p in check.ACTOR_SETTINGS]
+    actor = [p.name for p in actors.ACTOR_SETTINGS]
     yield "actor", f"scenario x {{\n agent a car {_pairs(actor)}\n ego car {_pairs(actor)} {{\n }}\n}}\n"
-    yield "header", "scenario x {\n" + "".join(f" {n} 1 s\n" for n in check.HEADER) + "}\n"
-    yield "param", f"param p = 1 m in [0 m, 2 m] {_pairs(check._PARAM_SETTINGS)}\n"
+    yield "header", "scenario x {\n" + "".join(f" {n} 1 s\n" for n in header.HEADER) + "}\n"
+    yield "param", f"param p = 1 m in [0 m, 2 m] {_pairs(params.PARAM_SETTINGS)}\n"
     yield "sampler", "sweep {\n random 10 seed 1\n lhs 2 seed 3\n}\n"
     yield "stay in lane", "expect {\n stay in lane tolerance 1 m\n}\n"
 

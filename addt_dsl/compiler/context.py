@@ -1,0 +1,283 @@
+"""What the rules share: the `Context` they read and fill, and the checks every rule uses
+(settings against `ParamSpec`s, ranges with interval arithmetic over parameter ranges,
+constants, messages).
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field, fields
+
+from addt_dsl import expr as E
+from addt_dsl import plan as P
+from addt_dsl import units
+from addt_dsl.compiler import ast
+from addt_dsl.compiler.exprs import ExprLowering, Scope, value_range
+from addt_dsl.diagnostics import DiagnosticSink, Span
+from addt_dsl.registry import STACKS, ParamSpec
+
+INT_EPS = 1e-9
+
+
+@dataclass
+class RoadInfo:
+    """What the compiler knows of a road's shape, for placement and lane checks."""
+
+    length_m: float
+    lane_ids: tuple[int, ...]  # lanes at s = 0 (inline roads: everywhere)
+    lane_width_m: dict[int, float]  # narrowest width of each lane along the road
+
+
+@dataclass
+class Context:
+    """The scenario being checked and what the rules have derived from it so far.
+
+    Rules read it and return their product (a dataclass whose fields are fields of the
+    context), which `absorb` stores; diagnostics go to `sink`. `used_params` is filled by
+    every expression lowering (through the scope) and read by the last rule."""
+
+    scenario: ast.Scenario
+    sink: DiagnosticSink
+    base_dir: str
+    source_file: str
+    roads_ast: dict[str, ast.RoadDecl] = field(default_factory=dict)
+    params_ast: dict[str, ast.ParamDecl] = field(default_factory=dict)
+    actors_ast: dict[str, ast.ActorDecl] = field(default_factory=dict)
+    header: dict = field(default_factory=dict)
+    roads: list[P.RoadPlan] = field(default_factory=list)
+    road_info: dict[str, RoadInfo] = field(default_factory=dict)
+    params: list[P.ParamPlan] = field(default_factory=list)
+    param_dims: dict[str, units.Dim] = field(default_factory=dict)
+    param_ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    assumptions: list[P.AssumptionPlan] = field(default_factory=list)
+    actors: dict[str, P.ActorPlan] = field(default_factory=dict)
+    faults: list[P.FaultPlan] = field(default_factory=list)
+    oracles: list[P.OraclePlan] = field(default_factory=list)
+    sweep: P.SweepPlan = field(default_factory=P.SweepPlan)
+    used_params: set[str] = field(default_factory=set)
+    read_file: object = None  # callable(path str, span) -> (display, text) | None
+    sources: dict[str, str] = field(default_factory=dict)
+    lines: dict[str, list[str]] = field(default_factory=dict)  # sources split, on demand
+    xodr_networks: dict = field(default_factory=dict)  # parsed imports by file
+    _scopes: dict = field(default_factory=dict)
+
+    def absorb(self, product) -> None:
+        for f in fields(product):
+            setattr(self, f.name, getattr(product, f.name))
+
+    def defs(self, cls):
+        return [d for d in self.scenario.definitions if isinstance(d, cls)]
+
+    def blocks(self, kind: str):
+        return [d for d in self.scenario.definitions if isinstance(d, ast.Block) and d.kind == kind]
+
+    def scope(self, signals: bool) -> Scope:
+        # Built once per kind after the parameters are known (scopes are read-only).
+        key = (signals, len(self.param_dims), len(self.actors_ast))
+        cached = self._scopes.get(key)
+        if cached is not None:
+            return cached
+        nodes = set()
+        for clause in self._ego_stack_clauses():
+            cls = STACKS.get(clause)
+            if cls is not None:
+                nodes |= set(cls.nodes)
+        scope = Scope(dict(self.param_dims), set(self.actors_ast), nodes | {"e2e"}, signals, self.used_params)
+        self._scopes[key] = scope
+        return scope
+
+    def _ego_stack_clauses(self):
+        ego = self.actors_ast.get("ego")
+        names = [c.name for c in ego.clauses if c.keyword == "stack"] if ego else []
+        return names or ["bev"]
+
+    def lowering(self, signals: bool = False) -> ExprLowering:
+        return ExprLowering(self.sink, self.scope(signals))
+
+    @property
+    def duration(self) -> float | None:
+        return self.header.get("duration")
+
+
+def suggest(name: str, options) -> tuple[str, ...]:
+    close = difflib.get_close_matches(name, list(options), n=1)
+    return (f"did you mean '{close[0]}'?",) if close else ()
+
+
+def const_value(expr) -> float | None:
+    try:
+        return E.eval_param_expr(expr, {})
+    except (E.UnboundParameter, TypeError, ValueError, OverflowError):
+        return None
+
+
+def fmt(value, dim, unit: str | None = None) -> str:
+    """An SI value for a message: in `unit` when the source used one (`20 %`, `72 km/h`),
+    else in the dimension's canonical unit."""
+    if value is None:
+        return "…"
+    if unit is not None and unit in units.UNITS:
+        return f"{value / units.UNITS[unit].factor:.6g} {unit}"
+    canonical = units.CANONICAL_UNIT.get(dim or units.DIMENSIONLESS)
+    return f"{value:.6g} {canonical}" if canonical else f"{value:.6g}"
+
+
+def range_text(lo, hi, dim) -> str:
+    return f"[{fmt(lo, dim)}, {fmt(hi, dim)}]"
+
+
+def check_range(ctx: Context, expr, spec_low, spec_high, dim, what: str, span: Span,
+                integer: bool = False, code: str = "E0301", unit: str | None = None) -> bool:
+    """Check a value against [spec_low, spec_high]; a parameter-dependent value is checked
+    over its parameters' ranges (interval arithmetic). False after reporting."""
+    const = const_value(expr)
+    if const is not None:
+        if not math.isfinite(const):
+            ctx.sink.error("E0204", f"{what} is not a finite number", span)
+            return False
+        if integer and abs(const - round(const)) > INT_EPS:
+            ctx.sink.error("E0204", f"{what} must be a whole number", span)
+            return False
+        if (spec_low is not None and const < spec_low) or (spec_high is not None and const > spec_high):
+            shown = f"{fmt(const, dim, unit)} = {fmt(const, dim)}" if unit in ("%", "km/h", "mph", "ms") \
+                else fmt(const, dim)
+            ctx.sink.error(code, f"{what} = {shown} is outside {range_text(spec_low, spec_high, dim)}", span)
+            return False
+        return True
+    got = value_range(expr, ctx.param_ranges)
+    if got is None:
+        return True
+    lo, hi = got
+    if (spec_low is not None and lo < spec_low - INT_EPS) or (spec_high is not None and hi > spec_high + INT_EPS):
+        used = ", ".join(sorted(E.params_used(expr)))
+        ctx.sink.error(code, f"{what} can be outside {range_text(spec_low, spec_high, dim)}", span,
+                       f"over the ranges of {used} it spans {range_text(lo, hi, dim)}",
+                       "narrow the parameter range, or add an `assume` that excludes those values")
+        return False
+    return True
+
+
+def check_settings(ctx: Context, settings: tuple[ast.Setting, ...], specs, what: str, span: Span,
+                   signals: bool = False, skip_required: bool = False) -> dict[str, P.SettingValue]:
+    """Check `key value` pairs against ParamSpecs; return lowered values (SI)."""
+    specs = {s.name: s for s in specs}
+    out: dict[str, P.SettingValue] = {}
+    seen: dict[str, ast.Setting] = {}
+    low = ctx.lowering(signals)
+    for st in settings:
+        spec = specs.get(st.key)
+        if spec is None:
+            ctx.sink.error("E0104", f"{what} has no setting '{st.key}'", st.key_span,
+                           *suggest(st.key, specs),
+                           f"settings of {what}: {', '.join(sorted(specs)) or '(none)'}")
+            continue
+        if st.key in seen:
+            ctx.sink.error("E0102", f"setting '{st.key}' given twice", st.key_span,
+                           f"first given at {seen[st.key].key_span}")
+            continue
+        seen[st.key] = st
+        value = lower_setting(ctx, low, st, spec, what)
+        if value is not None:
+            out[st.key] = value
+    if not skip_required:
+        for spec in specs.values():
+            if spec.required and spec.name not in seen:
+                ctx.sink.error("E0105", f"{what} needs setting '{spec.name}'", span,
+                               *([f"{spec.name}: {spec.doc}"] if spec.doc else []))
+    return out
+
+
+def lower_setting(ctx: Context, low: ExprLowering, st: ast.Setting, spec: ParamSpec, what: str):
+    v = st.value
+    if spec.kind == "string":
+        if not isinstance(v, ast.Str):
+            ctx.sink.error("E0204", f"'{st.key}' takes a string in quotes", v.span)
+            return None
+        return v.value
+    if spec.kind in ("word", "name"):
+        if not (isinstance(v, ast.Ref) and len(v.parts) == 1):
+            ctx.sink.error("E0204", f"'{st.key}' takes a name", v.span,
+                           *([f"one of: {', '.join(spec.choices)}"] if spec.choices else []))
+            return None
+        word = v.parts[0]
+        if spec.choices and word not in spec.choices:
+            ctx.sink.error("E0204", f"'{word}' is not a valid {st.key}", v.span, *suggest(word, spec.choices),
+                           f"one of: {', '.join(spec.choices)}")
+            return None
+        return word
+    if isinstance(v, ast.ListExpr):
+        ctx.sink.error("E0204", f"'{st.key}' takes one value, not a list", v.span)
+        return None
+    if isinstance(v, ast.Str):
+        ctx.sink.error("E0204", f"'{st.key}' takes a number, not a string", v.span)
+        return None
+    want = spec.dim if spec.dim is not None else units.DIMENSIONLESS
+    expr = low.lower_value(v, want, f"'{st.key}' of {what}")
+    if expr is None:
+        return None
+    if not check_range(ctx, expr, spec.low, spec.high, spec.dim, f"'{st.key}'", v.span,
+                       integer=spec.kind == "int", unit=source_unit(v)):
+        return None
+    return expr
+
+
+def int_const(expr) -> int | None:
+    v = const_value(expr)
+    return int(round(v)) if v is not None and math.isfinite(v) else None
+
+
+def lower_list(ctx: Context, node: ast.ListExpr, dim, what: str) -> list[float] | None:
+    vals = []
+    low = ExprLowering(ctx.sink, Scope({}, set(), set(), False, set()))
+    for item in node.items:
+        if node.unit is not None and isinstance(item, ast.Number) and item.unit is None:
+            item = ast.Number(item.span, item.value, node.unit)
+        elif node.unit is not None and isinstance(item, ast.Number):
+            ctx.sink.error("E0202", f"{what} has units on the list and on an item", item.span,
+                           f"write `[1, 2, 3] {node.unit}` or give each item its unit")
+            return None
+        if isinstance(item, (ast.Str, ast.ListExpr)):
+            ctx.sink.error("E0204", f"{what} must list numbers", item.span)
+            return None
+        e = low.lower_value(item, dim, what)
+        if e is None:
+            return None
+        c = const_value(e)
+        if c is None or not math.isfinite(c):
+            ctx.sink.error("E0204", f"{what} must list finite constants", item.span)
+            return None
+        vals.append(c)
+    if not vals:
+        ctx.sink.error("E0204", f"{what} is empty", node.span)
+        return None
+    return vals
+
+
+def check_time(ctx: Context, value, span: Span, what: str) -> bool:
+    """A time must lie in [0, duration] (E0302 otherwise)."""
+    dur = ctx.duration
+    what = what if what.startswith("the") else f"the time of {what}"
+    return check_range(ctx, value, 0.0, dur if isinstance(dur, float) else None, units.TIME, what, span,
+                       code="E0302")
+
+
+def text_of(ctx: Context, span: Span) -> str:
+    """The source text of a one-line span (oracle and constraint texts for reports)."""
+    lines = ctx.lines.get(span.file)
+    if lines is None:
+        lines = ctx.lines[span.file] = ctx.sources.get(span.file, "").splitlines()
+    if span.line - 1 < len(lines):
+        line = lines[span.line - 1]
+        end = span.end_col - 1 if span.end_line == span.line else len(line)
+        # Parentheses are not tokens of the tree, so a span stops before a statement's
+        # closing brackets: take them back (only brackets and blanks may follow).
+        rest = line[end:].split("#", 1)[0]
+        if rest.strip() and set(rest.strip()) <= set(")]"):
+            end += len(rest.rstrip())
+        return line[span.col - 1:end].strip()
+    return ""
+
+
+def source_unit(node) -> str | None:
+    return node.unit if isinstance(node, ast.Number) else None

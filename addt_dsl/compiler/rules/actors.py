@@ -1,0 +1,432 @@
+"""Actors: vehicle kind, body, placement (absolute or relative, in dependency order), the
+ego's stack and sensors, agents' behaviours and scripts (steps and groups)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from addt_dsl import expr as E
+from addt_dsl import plan as P
+from addt_dsl import units
+from addt_dsl.compiler import ast
+from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, const_value, fmt, int_const,
+                                       suggest)
+from addt_dsl.compiler.exprs import value_range
+from addt_dsl.diagnostics import Span
+from addt_dsl.registry import BEHAVIORS, SENSORS, STACKS, ParamSpec
+
+
+ACTOR_SETTINGS = (
+    ParamSpec("on", None, kind="name", doc="road the actor starts on"),
+    ParamSpec("lane", None, kind="int", low=-20, high=20, doc="lane id (OpenDRIVE: < 0 right of the reference line)"),
+    ParamSpec("at", units.LENGTH, low=0.0, doc="station along the road"),
+    ParamSpec("speed", units.SPEED, default=0.0, low=0.0, high=100.0, doc="initial speed"),
+    ParamSpec("goal", units.LENGTH, low=0.0, doc="station the ego must reach (ego only)"),
+    ParamSpec("length", units.LENGTH, low=0.1, high=30.0, doc="body length"),
+    ParamSpec("width", units.LENGTH, low=0.1, high=5.0, doc="body width"),
+    ParamSpec("mass", units.MASS, default=1500.0, low=50.0, high=60000.0, doc="mass"),
+    ParamSpec("wheelbase", units.LENGTH, default=2.7, low=0.5, high=10.0, doc="wheelbase"),
+    ParamSpec("mu", units.DIMENSIONLESS, default=0.8, low=0.05, high=1.5,
+              doc="tyre-road friction coefficient (0.8 dry asphalt, 0.5 wet, 0.1 ice)"),
+    ParamSpec("offset", units.LENGTH, default=0.0, low=-20.0, high=20.0,
+              doc="start offset from the lane centre, left positive (e.g. a pedestrian on the kerb)"),
+)
+
+VEHICLE_KINDS = {"car": (4.6, 1.9), "truck": (12.0, 2.5), "pedestrian": (0.5, 0.5), "cyclist": (1.8, 0.6)}
+DEFAULT_SENSOR = P.ClausePlan(keyword="sensor", name="lidar", settings={})
+DEFAULT_STACK = P.ClausePlan(keyword="stack", name="bev", settings={})
+
+
+@dataclass(frozen=True)
+class Actors:
+    actors: dict[str, P.ActorPlan]  # by name, in placement order
+
+
+def rule_actors(ctx: Context) -> Actors:
+    out = Actors({})
+    for name in _placement_order(ctx):
+        plan = _check_actor(ctx, ctx.actors_ast[name], out.actors)
+        if plan is not None:
+            out.actors[name] = plan
+    return out
+
+
+def _placement_order(ctx: Context) -> list[str]:
+    """Actors in an order where those placed relative to others come after them."""
+    deps: dict[str, list[ast.Placement]] = {}
+    for name, d in ctx.actors_ast.items():
+        deps[name] = []
+        for p in d.placements:
+            if p.actor == name:
+                ctx.sink.error("E0108", f"'{name}' is placed relative to itself", p.actor_span)
+            elif p.actor not in ctx.actors_ast:
+                ctx.sink.error("E0101", f"unknown actor '{p.actor}'", p.actor_span,
+                               *suggest(p.actor, ctx.actors_ast),
+                               f"actors: {', '.join(sorted(ctx.actors_ast))}")
+            else:
+                deps[name].append(p)
+    order, state = [], {}
+
+    def visit(name: str, chain: list[str]) -> None:
+        if state.get(name) == "done":
+            return
+        if state.get(name) == "visiting":
+            start = chain.index(name)
+            cycle = chain[start:] + [name]
+            d = ctx.actors_ast[name]
+            ctx.sink.error("E0108", "actors are placed relative to each other in a cycle", d.span,
+                           "cycle: " + " → ".join(cycle))
+            return
+        state[name] = "visiting"
+        for p in deps[name]:
+            visit(p.actor, chain + [name])
+        state[name] = "done"
+        order.append(name)
+
+    for name in ctx.actors_ast:
+        visit(name, [])
+    return order
+
+
+def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan]) -> P.ActorPlan | None:
+    """The actor's plan (others it is placed relative to are in `placed`), or None."""
+    if d.vehicle not in VEHICLE_KINDS:
+        ctx.sink.error("E0106", f"unknown vehicle kind '{d.vehicle}'", d.vehicle_span,
+                       *suggest(d.vehicle, VEHICLE_KINDS), f"kinds: {', '.join(VEHICLE_KINDS)}")
+        return None
+    what = "the ego" if d.is_ego else f"agent '{d.name}'"
+    vals = check_settings(ctx, d.settings + d.block_settings, ACTOR_SETTINGS, what, d.span)
+    length, width = VEHICLE_KINDS[d.vehicle]
+    body = {"length": length, "width": width, "mass": 1500.0, "wheelbase": 2.7}
+    for key in body:
+        if key in vals:
+            value = const_value(vals[key])
+            if value is None:
+                span = next(st.value.span for st in d.settings + d.block_settings if st.key == key)
+                ctx.sink.error("E0204", f"'{key}' must be a constant, not a parameter", span,
+                               "the body and dynamics of an actor are fixed for a scenario")
+                return None
+            body[key] = value
+    length, width = body["length"], body["width"]
+    placement = _place(ctx, d, vals, length, placed)
+    road = placement[0] if placement is not None else None
+    if placement is not None and "goal" in vals and d.is_ego:
+        info = ctx.road_info.get(placement[0])
+        span = next(st.value.span for st in d.settings + d.block_settings if st.key == "goal")
+        if info is not None:
+            check_range(ctx, vals["goal"], 0.0, info.length_m, units.LENGTH, "the goal", span)
+    if "goal" in vals and not d.is_ego:
+        span = next(s.key_span for s in d.settings + d.block_settings if s.key == "goal")
+        ctx.sink.warning("W0002", "only the ego has a goal", span)
+    behaviors, sensors, stack = [], [], None
+    stack_span: Span | None = None
+    sensor_spans: dict[str, Span] = {}
+    for c in d.clauses:
+        plan = _check_clause(ctx, c, d, road)
+        if plan is None:
+            continue
+        if c.keyword == "behavior":
+            behaviors.append(plan)
+        elif c.keyword == "sensor":
+            if plan.name in sensor_spans:
+                ctx.sink.error("E0102", f"sensor '{plan.name}' is given twice", c.name_span,
+                               f"first given at {sensor_spans[plan.name]}")
+                continue
+            sensor_spans[plan.name] = c.name_span
+            sensors.append(plan)
+        elif c.keyword == "stack":
+            if stack is not None:
+                ctx.sink.error("E0102", "the ego has one stack", c.span, f"first given at {stack_span}")
+                continue
+            stack, stack_span = plan, c.span
+    _check_lateral_conflicts(ctx, d)
+    triggers = [t for t in (_lower_step(ctx, s, d, road) for s in d.steps) if t is not None]
+    if d.is_ego:
+        sensors = sensors or [DEFAULT_SENSOR]
+        stack = stack or DEFAULT_STACK
+        _check_stack_sensors(ctx, stack, sensors, stack_span or d.span)
+        _check_sensor_expectations(ctx, stack, sensors, sensor_spans, stack_span or d.span)
+    if placement is None:
+        return None
+    _, lane, s = placement
+    return P.ActorPlan(
+        name=d.name, vehicle=d.vehicle, road=road, lane=lane, s=s,
+        speed=vals.get("speed", P.num(0.0)),
+        length_m=length, width_m=width, mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
+        behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
+        goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"))
+
+
+def _check_stack_sensors(ctx: Context, stack: P.ClausePlan, sensors: list, span: Span) -> None:
+    """A stack setting that reads a sensor the ego lacks (`perception camera` without a
+    camera): the stack class says which sensors its settings need."""
+    needs = getattr(STACKS.get(stack.name), "required_sensors", None)
+    if needs is None:
+        return
+    words = {k: v for k, v in stack.settings.items() if isinstance(v, str)}
+    for keyword in sorted(set(needs(words)) - {s.name for s in sensors}):
+        ctx.sink.error("E0103", f"the ego's stack settings need a {keyword} sensor", span,
+                       f"add e.g. `sensor {keyword}` to the ego")
+
+
+def _check_sensor_expectations(ctx: Context, stack: P.ClausePlan, sensors: list, spans: dict, span: Span) -> None:
+    """A sensor unlike the one the stack's settings are made for (the learned detector on
+    another lidar than it was trained on) still runs, but works worse: a warning."""
+    mismatches = getattr(STACKS.get(stack.name), "sensor_mismatches", None)
+    if mismatches is None:
+        return
+    words = {k: v for k, v in stack.settings.items() if isinstance(v, str)}
+    for sensor in sensors:
+        cls = SENSORS.get(sensor.name)
+        if cls is None:
+            continue
+        values = {p.name: p.default for p in cls.params if isinstance(p.default, (int, float))}
+        values.update({k: v.value for k, v in sensor.settings.items() if isinstance(v, P.Num)})
+        dims = {p.name: p.dim for p in cls.params}
+        wanted = [f"{key} {fmt(want, dims[key], 'deg' if dims[key] == units.ANGLE else None)}"
+                  for key, want in mismatches(words, sensor.name, values)]
+        if wanted:
+            ctx.sink.warning("W0003", f"{words.get('perception', 'this')} perception is made for a "
+                                      f"{sensor.name} with {', '.join(wanted)}", spans.get(sensor.name, span),
+                             "it runs, but expect worse detection")
+
+
+def _place(ctx: Context, d: ast.ActorDecl, vals: dict, length: float, placed: dict[str, P.ActorPlan]):
+    """(road, lane, s) of an actor: absolute `on R lane L at S`, or relative to another actor."""
+    along = [p for p in d.placements if p.kind in ("ahead", "behind")]
+    lane_rel = [p for p in d.placements if p.kind.startswith("lane_")]
+    for group, what in ((along, "position along the road"), (lane_rel, "lane")):
+        if len(group) > 1:
+            ctx.sink.error("E0102", f"the {what} of '{d.name}' is given twice", group[1].span)
+            return None
+    if along and "at" in vals:
+        ctx.sink.error("E0102", f"'{d.name}' has both `at` and `{along[0].kind} ...`", along[0].span,
+                       "give the position once")
+        return None
+    if lane_rel and "lane" in vals:
+        ctx.sink.error("E0102", f"'{d.name}' has both `lane N` and `{_placement_text(lane_rel[0])}`",
+                       lane_rel[0].span)
+        return None
+    refs = [p for p in along + lane_rel if p.actor in ctx.actors_ast]
+    if len(refs) < len(along + lane_rel):
+        return None  # unknown actor, already reported
+    for p in refs:
+        if p.actor not in placed:
+            return None  # the reference failed to check (or a cycle): reported there
+    road = vals.get("on")
+    road_span = next((s.value.span for s in d.settings + d.block_settings if s.key == "on"), d.span)
+    if road is not None and road not in ctx.roads_ast:
+        ctx.sink.error("E0101", f"unknown road '{road}'", road_span, *suggest(road, ctx.roads_ast),
+                       f"roads: {', '.join(sorted(ctx.roads_ast))}")
+        return None
+    for p in refs:
+        other_road = placed[p.actor].road
+        if road is None:
+            road = other_road
+        elif road != other_road:
+            ctx.sink.error("E0204", f"'{d.name}' is on road '{road}' but placed relative to '{p.actor}' "
+                           f"on road '{other_road}'", p.span, "relative placement works along one road")
+            return None
+    given = {st.key for st in d.settings + d.block_settings}
+    if any(k in given and k not in vals for k in ("on", "lane", "at")):
+        return None  # given but invalid: reported already
+    missing = [k for k, ok in (("on", road is not None), ("lane", "lane" in vals or lane_rel or along),
+                               ("at", "at" in vals or along)) if not ok]
+    if missing:
+        ctx.sink.error("E0105", f"'{d.name}' needs a position: {', '.join(missing)}", d.span,
+                       "e.g. `on highway lane -1 at 20 m`, or relative: `ahead of lead 20 m`")
+        return None
+    # Lane: given, or that of a reference actor (shifted for left/right of).
+    if "lane" in vals:
+        lane = vals["lane"]
+        lane_span = next(s.value.span for s in d.settings + d.block_settings if s.key == "lane")
+    else:
+        p = lane_rel[0] if lane_rel else along[0]
+        lane = _lane_relative(p.kind, placed[p.actor].lane)
+        lane_span = p.span
+    if along:
+        p = along[0]
+        other = placed[p.actor]
+        dist = ctx.lowering().lower_value(p.distance, units.LENGTH, f"the distance {p.kind} '{p.actor}'")
+        if dist is None:
+            return None
+        check_range(ctx, dist, 0.0, None, units.LENGTH, "the gap", p.distance.span)
+        # The distance is a bumper-to-bumper gap, so half of both lengths is added.
+        half = E.Num(value=0.5 * (other.length_m + length))
+        offset = E.Binary(op="+", left=dist, right=half)
+        s = E.Binary(op="+" if p.kind == "ahead" else "-", left=other.s, right=offset)
+        s_span = p.span
+    else:
+        s = vals["at"]
+        s_span = next(st.value.span for st in d.settings + d.block_settings if st.key == "at")
+    _check_on_road(ctx, d, road, lane, lane_span, s, s_span)
+    return road, lane, s
+
+
+def _placement_text(p: ast.Placement) -> str:
+    return {"lane_of": f"lane of {p.actor}", "lane_left": f"lane left of {p.actor}",
+            "lane_right": f"lane right of {p.actor}"}.get(p.kind, p.kind)
+
+
+def _lane_relative(kind: str, lane):
+    """The lane of another actor, or its left/right neighbour. OpenDRIVE ids grow to the
+    left and skip 0, so left of -1 is 1: `L + 1 + max(0, 1 - |L + 1|)` (and mirrored)."""
+    if kind in ("lane_of", "ahead", "behind"):
+        return lane
+    sign = 1.0 if kind == "lane_left" else -1.0
+    shifted = E.Binary(op="+", left=lane, right=E.Num(value=sign))
+    skip_zero = E.Call(fn="max", args=(E.Num(value=0.0), E.Binary(
+        op="-", left=E.Num(value=1.0), right=E.Call(fn="abs", args=(shifted,)))))
+    result = E.Binary(op="+", left=shifted, right=E.Binary(op="*", left=E.Num(value=sign), right=skip_zero))
+    const = const_value(result)
+    return E.Num(value=float(round(const))) if const is not None else result
+
+
+def _check_on_road(ctx: Context, d: ast.ActorDecl, road: str, lane, lane_span: Span, s, s_span: Span) -> None:
+    info = ctx.road_info.get(road)
+    if info is None:
+        return
+    check_range(ctx, s, 0.0, info.length_m, units.LENGTH, f"the position of '{d.name}' along '{road}'", s_span)
+    lane_c = int_const(lane)
+    if lane_c is not None:
+        if lane_c not in info.lane_ids:
+            ctx.sink.error("E0301", f"road '{road}' has no lane {lane_c}", lane_span,
+                           f"lanes of '{road}': {', '.join(str(i) for i in info.lane_ids)}",
+                           "lane ids are negative right of the reference line (-1, -2, ...), positive left")
+    else:
+        got = value_range(lane, ctx.param_ranges)
+        if got is not None and info.lane_ids:
+            lo, hi = min(info.lane_ids), max(info.lane_ids)
+            if got[0] < lo or got[1] > hi:
+                ctx.sink.error("E0301", f"the lane of '{d.name}' can be outside the lanes of '{road}'", lane_span,
+                               f"it spans [{got[0]:g}, {got[1]:g}]; lanes: {', '.join(str(i) for i in info.lane_ids)}")
+
+
+def _check_lateral_conflicts(ctx: Context, d: ast.ActorDecl) -> None:
+    lateral = [c for c in d.clauses if c.keyword == "behavior" and _channel(c.name) == "lateral"]
+    if len(lateral) > 1:
+        ctx.sink.warning("W0002", "two lane changes start at once; only the last one has an effect",
+                         lateral[1].span, "order them with `sequence { ... }` or `at`/`after`")
+
+
+def _channel(behavior: str) -> str | None:
+    """The channel a behaviour drives (`Behavior.channel`: longitudinal or lateral)."""
+    return getattr(BEHAVIORS.get(behavior), "channel", None)
+
+
+_CLAUSE_TABLES = {"behavior": BEHAVIORS, "sensor": SENSORS, "stack": STACKS}
+
+
+def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str | None) -> P.ClausePlan | None:
+    table = _CLAUSE_TABLES[c.keyword]
+    if c.keyword in ("sensor", "stack") and not actor.is_ego:
+        ctx.sink.error("E0204", f"only the ego has a {c.keyword}", c.span,
+                       "traffic agents follow behaviours")
+        return None
+    if c.keyword == "behavior" and actor.is_ego:
+        ctx.sink.error("E0204", "the ego is driven by its stack, not by behaviours", c.span,
+                       "configure the stack instead, e.g. `stack bev cruise_speed 20 m/s`")
+        return None
+    cls = table.get(c.name)
+    if cls is None:
+        ctx.sink.error("E0106", f"unknown {c.keyword} '{c.name}'", c.name_span, *suggest(c.name, table.names()),
+                       f"{c.keyword}s: {', '.join(table.names())}")
+        return None
+    vals = check_settings(ctx, c.settings + c.block, cls.params, f"{c.keyword} '{c.name}'", c.span)
+    if c.keyword == "behavior" and getattr(cls, "channel", "") == "lateral" and "to" in vals:
+        _check_target_lane(ctx, c, vals["to"], road)
+    for spec in cls.params:  # a `name` setting of a behaviour names another actor
+        if c.keyword == "behavior" and spec.kind == "name" and isinstance(vals.get(spec.name), str):
+            other = vals[spec.name]
+            if other not in ctx.actors_ast or other == actor.name:
+                span = next(st.value.span for st in c.settings + c.block if st.key == spec.name)
+                pool = [a for a in ctx.actors_ast if a != actor.name]
+                ctx.sink.error("E0101", f"unknown actor '{other}'" if other != actor.name
+                               else f"'{other}' cannot {c.name} itself", span, *suggest(other, pool),
+                               f"actors: {', '.join(sorted(pool))}")
+                return None
+    return P.ClausePlan(keyword=c.keyword, name=c.name, settings=vals)
+
+
+def _check_target_lane(ctx: Context, c: ast.Clause, lane, road: str | None) -> None:
+    """A lane change must aim at a lane of the actor's road."""
+    info = ctx.road_info.get(road or "")
+    if info is None or not info.lane_ids:
+        return
+    span = next((st.value.span for st in c.settings + c.block if st.key == "to"), c.span)
+    lane_c = int_const(lane)
+    if lane_c is not None:
+        if lane_c not in info.lane_ids:
+            ctx.sink.error("E0301", f"road '{road}' has no lane {lane_c}", span,
+                           f"lanes of '{road}': {', '.join(str(i) for i in info.lane_ids)}")
+        return
+    got = value_range(lane, ctx.param_ranges)
+    if got is not None and (got[0] < min(info.lane_ids) or got[1] > max(info.lane_ids)):
+        ctx.sink.error("E0301", f"the target lane can be outside the lanes of '{road}'", span,
+                       f"it spans [{got[0]:g}, {got[1]:g}]; lanes: {', '.join(str(i) for i in info.lane_ids)}")
+
+
+def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P.TriggerPlan | None:
+    """A step or group of an actor's block → TriggerPlan (groups become a step without
+    a start condition that arms the group)."""
+    if actor.is_ego:
+        ctx.sink.error("E0204", "the ego is driven by its stack; steps and triggers are for agents", node.span)
+        return None
+    if isinstance(node, ast.Clause):
+        clause = _check_clause(ctx, node, actor, road)
+        return P.TriggerPlan(clause=clause) if clause is not None else None
+    if isinstance(node, ast.Group):
+        group = _lower_group(ctx, node, actor, road)
+        return P.TriggerPlan(group=group) if group is not None else None
+    starts: dict[str, ast.StepStart] = {}
+    ok = True
+    for st in node.starts:
+        if st.kind in starts:
+            ctx.sink.error("E0102", f"`{st.kind}` given twice in one step", st.span)
+            ok = False
+        starts[st.kind] = st
+    at = after = condition = None
+    low = ctx.lowering()
+    for kind in ("at", "after"):
+        if kind in starts:
+            value = low.lower_value(starts[kind].value, units.TIME, f"the time of `{kind}`")
+            if value is None:
+                ok = False
+                continue
+            if not check_time(ctx, value, starts[kind].value.span, f"`{kind}`"):
+                ok = False
+            if kind == "at":
+                at = value
+            else:
+                after = value
+    if "when" in starts:
+        cond_node = starts["when"].value
+        condition = ctx.lowering(signals=True).lower_formula(cond_node, "a trigger condition")
+        if condition is None:
+            ok = False
+        elif any(isinstance(n, (E.Temporal, E.Until)) for n in E.walk(condition)):
+            ctx.sink.error("E0204", "a trigger condition is checked at each instant; it cannot use "
+                           "always/eventually/until", cond_node.span,
+                           "write the condition on the current state, e.g. `when gap(ego, lead) < 20 m`")
+            ok = False
+    if isinstance(node.action, ast.Group):
+        group = _lower_group(ctx, node.action, actor, road)
+        clause = None
+        ok = ok and group is not None
+    else:
+        clause = _check_clause(ctx, node.action, actor, road)
+        group = None
+        ok = ok and clause is not None
+    if not ok:
+        return None
+    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after, group=group)
+
+
+def _lower_group(ctx: Context, node: ast.Group, actor: ast.ActorDecl, road: str | None) -> P.GroupPlan | None:
+    if not node.items:
+        ctx.sink.error("E0103", f"empty `{node.mode}` block", node.span)
+        return None
+    steps = [_lower_step(ctx, item, actor, road) for item in node.items]
+    if any(s is None for s in steps):
+        return None
+    return P.GroupPlan(mode=node.mode, steps=steps)

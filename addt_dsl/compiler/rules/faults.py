@@ -1,0 +1,126 @@
+"""Faults: kind from the `FAULTS` registry, its target (each kind says which it takes),
+settings, seed, and time window inside the scenario."""
+
+from __future__ import annotations
+
+import functools
+import inspect
+from dataclasses import dataclass
+
+from addt_dsl import expr as E
+from addt_dsl import plan as P
+from addt_dsl import units
+from addt_dsl.compiler import ast
+from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, const_value, fmt, int_const,
+                                       suggest)
+from addt_dsl.compiler.rules.actors import DEFAULT_SENSOR, DEFAULT_STACK
+from addt_dsl.diagnostics import Span
+from addt_dsl.registry import FAULTS, STACKS, ParamSpec
+
+
+def _window_of(ctx: Context, timing: ast.Timing | None):
+    low = ctx.lowering(signals=False)
+    if timing is None:
+        return P.num(0.0), None
+    start = low.lower_value(timing.start, units.TIME, "a fault time")
+    if start is None:
+        return None, None
+    if timing.kind == "at":
+        if timing.length is not None:
+            length = low.lower_value(timing.length, units.TIME, "a fault duration")
+            if length is None:
+                return None, None
+            if not check_range(ctx, length, 0.0, None, units.TIME, "the fault's duration", timing.length.span):
+                return None, None
+            return start, _simplify(E.Binary(op="+", left=start, right=length))
+        return start, start
+    if timing.kind == "from":
+        return start, None
+    end = low.lower_value(timing.end, units.TIME, "a fault time")
+    return start, end
+
+
+def _simplify(expr):
+    const = const_value(expr)
+    return E.Num(value=const) if const is not None else expr
+
+
+@dataclass(frozen=True)
+class Faults:
+    faults: list[P.FaultPlan]
+
+
+def rule_faults(ctx: Context) -> Faults:
+    out = Faults([])
+    # Targets come from the ego's declaration, so a fault is checked even when the ego
+    # itself had an error elsewhere.
+    ego = ctx.actors_ast.get("ego")
+    clauses = ego.clauses if ego else ()
+    sensors = {c.name for c in clauses if c.keyword == "sensor"} or {DEFAULT_SENSOR.name}
+    stack_name = next((c.name for c in clauses if c.keyword == "stack"), DEFAULT_STACK.name)
+    stack_cls = STACKS.get(stack_name)
+    sites = _fault_sites(ctx, stack_cls) if stack_cls else set()
+    for block in ctx.blocks("faults"):
+        for f in block.items:
+            cls = FAULTS.get(f.kind)
+            if cls is None:
+                ctx.sink.error("E0106", f"unknown fault kind '{f.kind}'", f.kind_span,
+                               *suggest(f.kind, FAULTS.names()), f"fault kinds: {', '.join(FAULTS.names())}")
+                continue
+            target = ".".join(f.target)
+            # Each kind says which targets it takes (an image fault only a camera, a bit flip
+            # a site or a whole node); sites come with the ego's stack settings (tensors).
+            pool = cls.valid_targets({name: name for name in sensors}, stack_cls)
+            if cls.target_kind == "site" and stack_cls is not None:
+                pool = (pool - set(stack_cls.fault_sites())) | sites
+            if target not in pool:
+                what = {"sensor": "sensors of the ego", "site": "fault sites of the stack",
+                        "node": "nodes of the stack"}[cls.target_kind]
+                ctx.sink.error("E0107", f"'{f.kind}' cannot target '{target}'", f.target_span,
+                               *suggest(target, pool),
+                               f"{what}: {', '.join(sorted(pool)) or '(none)'}")
+                continue
+            specs = (*cls.params, ParamSpec("seed", None, kind="int", low=0, high=2**32 - 1, doc="fault seed"))
+            vals = check_settings(ctx, f.settings, specs, f"fault '{f.kind}'", f.span)
+            seed = vals.pop("seed", None)
+            start, end = _window_of(ctx, f.timing)
+            if start is None or (f.timing is not None and f.timing.kind == "during" and end is None):
+                continue
+            if not _check_window(ctx, start, end, f.timing.span if f.timing else f.span):
+                continue
+            out.faults.append(P.FaultPlan(kind=f.kind, target=target, start_s=start, end_s=end, settings=vals,
+                                          seed=int_const(seed) if seed is not None else None,
+                                          source=f"{f.span.file}:{f.span.line}"))
+    return out
+
+
+def _fault_sites(ctx: Context, stack_cls) -> set[str]:
+    """The stack's fault sites for the ego's stack settings (a stack whose sites depend on
+    its settings, e.g. tensor sites with `perception learned`, takes them as an argument)."""
+    if not _takes_settings(stack_cls):
+        return set(stack_cls.fault_sites())
+    ego = ctx.actors.get("ego")
+    lowered = ego.stack.settings if ego is not None and ego.stack is not None else {}
+    settings = {k: v if isinstance(v, str) else const_value(v) for k, v in lowered.items()}
+    return set(stack_cls.fault_sites({k: v for k, v in settings.items() if v is not None}))
+
+
+@functools.lru_cache(maxsize=None)
+def _takes_settings(stack_cls) -> bool:
+    try:
+        return len(inspect.signature(stack_cls.fault_sites).parameters) >= 1
+    except (TypeError, ValueError):
+        return False
+
+
+def _check_window(ctx: Context, start, end, span: Span) -> bool:
+    if not check_time(ctx, start, span, "the fault's start"):
+        return False
+    if end is not None and end is not start and not check_time(ctx, end, span, "the fault's end"):
+        return False
+    lo, hi = const_value(start), const_value(end) if end is not None else None
+    if lo is not None and hi is not None and hi < lo:
+        ctx.sink.error("E0303", "the window ends before it starts", span,
+                       f"[{fmt(lo, units.TIME)}, {fmt(hi, units.TIME)}]")
+        return False
+    return True

@@ -1,0 +1,219 @@
+"""Oracles in `expect` blocks: built-ins (`no collision`, `stay in lane`, `reach goal`,
+`min`/`max SIGNAL`) lowered to STL formulas, and formulas whose windows end within the scenario."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from addt_dsl import expr as E
+from addt_dsl import plan as P
+from addt_dsl import units
+from addt_dsl.compiler import ast
+from addt_dsl.compiler.context import Context, check_settings, check_time, const_value, fmt, int_const, suggest, text_of
+from addt_dsl.diagnostics import Span
+from addt_dsl.registry import SIGNALS, ParamSpec
+
+
+def _always(formula):
+    return E.Temporal(op="always", arg=formula)
+
+
+def _collision_with(other: str):
+    # Box-to-box clearance between two actors is not a trace signal; use the ego's
+    # clearance while the other actor is its nearest neighbour (distance as a guard).
+    return _always(E.Binary(op="or", left=E.Binary(
+        op=">", left=E.Signal(name="clearance(ego)"), right=E.Num(value=0.0)), right=E.Binary(
+        op=">", left=E.Signal(name=f"distance(ego,{other})"), right=E.Num(value=15.0))))
+
+
+BUILTIN_NAMES = ("no collision", "stay in lane", "reach goal", "min SIGNAL", "max SIGNAL")
+
+# `no collision [with X]` → formula; the printer recognises built-ins through this table.
+NO_CLAUSES = {
+    "collision": lambda actor, other: (
+        _always(E.Binary(op=">", left=E.Signal(name=f"clearance({actor})"), right=E.Num(value=0.0)))
+        if other is None else _collision_with(other)),
+}
+
+
+def reach_goal_formula(goal, within_s: float | None = None):
+    """`reach goal [within T]`, and the oracle a goal on the ego adds by itself."""
+    return E.Temporal(op="eventually", lo_s=0.0, hi_s=within_s,
+                      arg=E.Binary(op=">=", left=E.Signal(name="s(ego)"), right=goal))
+
+
+def _builtin(ctx: Context, b: ast.Builtin) -> tuple[E.Expr, str] | None:
+    """Lower a built-in oracle to (STL formula, default name)."""
+    if b.kind == "no":
+        if b.word != "collision":
+            ctx.sink.error("E0106", f"unknown built-in oracle 'no {b.word}'", b.word_span,
+                           "built-ins: " + ", ".join(BUILTIN_NAMES))
+            return None
+        if b.actor is None:
+            return NO_CLAUSES["collision"]("ego", None), "no_collision"
+        if b.actor not in ctx.actors_ast or b.actor == "ego":
+            ctx.sink.error("E0101", f"unknown agent '{b.actor}'", b.actor_span,
+                           *suggest(b.actor, [a for a in ctx.actors_ast if a != "ego"]))
+            return None
+        return _collision_with(b.actor), f"no_collision_with_{b.actor}"
+    if b.kind == "stay_in_lane":
+        return _stay_in_lane(ctx, b)
+    if b.kind == "reach_goal":
+        ego = ctx.actors.get("ego")
+        if ego is None:
+            return None
+        if ego.goal_s is None:
+            ctx.sink.error("E0105", "`reach goal` needs a goal on the ego", b.span,
+                           "add e.g. `goal 600 m` to the ego")
+            return None
+        hi = None
+        if b.value is not None:
+            hi_e = ctx.lowering().lower_value(b.value, units.TIME, "the time limit")
+            if hi_e is None:
+                return None
+            hi = const_value(hi_e)
+            if hi is None:
+                ctx.sink.error("E0204", "the time limit must be a constant", b.value.span)
+                return None
+            if not check_time(ctx, hi_e, b.value.span, "the time limit"):
+                return None
+        return reach_goal_formula(ego.goal_s, hi), "reach_goal"
+    return _bound(ctx, b)
+
+
+def _stay_in_lane(ctx: Context, b: ast.Builtin):
+    vals = check_settings(ctx, b.settings, (ParamSpec("tolerance", units.LENGTH, default=0.0, low=0.0, high=10.0,
+                                                      doc="how far the body may cross the lane border"),),
+                          "`stay in lane`", b.span)
+    ego = ctx.actors.get("ego")
+    if ego is None:
+        return None
+    tol = const_value(vals["tolerance"]) if "tolerance" in vals else 0.0
+    if tol is None:
+        ctx.sink.error("E0204", "the tolerance must be a constant", b.span)
+        return None
+    info = ctx.road_info.get(ego.road)
+    lane = int_const(ego.lane)
+    if info is not None and lane is not None and lane in info.lane_width_m:
+        lane_width = info.lane_width_m[lane]
+    elif info is not None and info.lane_width_m:
+        lane_width = min(info.lane_width_m.values())
+    else:
+        lane_width = 3.5
+    margin = 0.5 * (lane_width - ego.width_m) + tol
+    if margin <= 0:
+        ctx.sink.error("E0301", f"the ego ({fmt(ego.width_m, units.LENGTH)} wide) does not fit in its lane "
+                       f"({fmt(lane_width, units.LENGTH)})", b.span, "add a `tolerance`")
+        return None
+    # Body inside the lane: |offset of the centre| + half the width <= half the lane.
+    return _always(E.Binary(op="<=", left=E.Call(fn="abs", args=(E.Signal(name="lane_offset(ego)"),)),
+                            right=E.Num(value=margin))), "stay_in_lane"
+
+
+def _bound(ctx: Context, b: ast.Builtin):
+    """`min SIGNAL [to|of X] V` → always SIGNAL >= V; `max ...` → always |SIGNAL| <= V."""
+    cls = SIGNALS.get(b.word)
+    if cls is None:
+        ctx.sink.error("E0101", f"unknown signal '{b.word}'", b.word_span, *suggest(b.word, SIGNALS.names()),
+                       f"signals: {', '.join(SIGNALS.names())}")
+        return None
+    scope = ctx.scope(True)
+    agents = [a for a in ctx.actors_ast if a != "ego"]
+    if cls.args == ("actor",):
+        arg_sets = [(b.actor or "ego",)]
+        pool = scope.actors
+    elif cls.args == ("actor", "actor"):
+        if b.actor is not None:
+            arg_sets = [("ego", b.actor)]
+        elif agents:
+            arg_sets = [("ego", a) for a in agents]
+        else:
+            ctx.sink.error("E0103", f"`{b.kind} {b.word}` compares the ego with other actors, and there are none",
+                           b.span)
+            return None
+        pool = scope.actors
+    elif cls.args == ("node",):
+        arg_sets = [(b.actor or "e2e",)]
+        pool = scope.nodes
+    else:
+        if b.actor is not None:
+            ctx.sink.error("E0204", f"signal '{b.word}' takes no actor", b.actor_span)
+            return None
+        arg_sets = [()]
+        pool = set()
+    if b.actor is not None and b.actor not in pool:
+        kind = "node" if cls.args == ("node",) else "actor"
+        ctx.sink.error("E0101", f"unknown {kind} '{b.actor}'", b.actor_span, *suggest(b.actor, pool),
+                       f"{kind}s: {', '.join(sorted(pool))}")
+        return None
+    if cls.args == ("actor", "actor") and b.actor == "ego":
+        ctx.sink.error("E0204", f"`{b.kind} {b.word}` compares the ego with another actor", b.actor_span)
+        return None
+    limit = ctx.lowering().lower_value(b.value, cls.dim, f"the limit of `{b.kind} {b.word}`")
+    if limit is None:
+        return None
+    parts = []
+    for args in arg_sets:
+        sig = E.Signal(name=f"{b.word}({','.join(args)})")
+        if b.kind == "min":
+            parts.append(E.Binary(op=">=", left=sig, right=limit))
+        else:
+            parts.append(E.Binary(op="<=", left=E.Call(fn="abs", args=(sig,)), right=limit))
+    formula = parts[0]
+    for p in parts[1:]:
+        formula = E.Binary(op="and", left=formula, right=p)
+    name = f"{b.kind}_{b.word}" + (f"_{'to' if len(cls.args) == 2 else 'of'}_{b.actor}" if b.actor else "")
+    return _always(formula), name
+
+
+@dataclass(frozen=True)
+class Oracles:
+    oracles: list[P.OraclePlan]
+
+
+def rule_oracles(ctx: Context) -> Oracles:
+    out = Oracles([])
+    seen: dict[str, Span] = {}
+    for block in ctx.blocks("expect"):
+        for o in block.items:
+            if o.builtin is not None:
+                got = _builtin(ctx, o.builtin)
+                if got is None:
+                    continue
+                formula, default_name = got
+                name = o.label or default_name
+            else:
+                formula = ctx.lowering(signals=True).lower_formula(o.formula)
+                if formula is None:
+                    continue
+                if not _check_formula_windows(ctx, formula, o.formula.span):
+                    continue
+                name = o.label or _auto_name(ctx, o)
+            if name in seen:
+                ctx.sink.error("E0102", f"oracle '{name}' is defined twice", o.span, f"first at {seen[name]}",
+                               "give one of them a name: `my_name: ...`")
+                continue
+            seen[name] = o.span
+            out.oracles.append(P.OraclePlan(name=name, severity=o.severity, formula=formula,
+                                            text=text_of(ctx, o.span)))
+    return out
+
+
+def _check_formula_windows(ctx: Context, formula, span: Span) -> bool:
+    """Time windows of temporal operators must end within the scenario."""
+    dur = ctx.duration
+    if not isinstance(dur, float):
+        return True
+    for node in E.walk(formula):
+        if isinstance(node, (E.Temporal, E.Until)):
+            for bound in (node.lo_s, node.hi_s):
+                if bound is not None and bound > dur + 1e-9:
+                    ctx.sink.error("E0302", f"the time window reaches {fmt(bound, units.TIME)}, beyond the "
+                                   f"scenario's duration ({fmt(dur, units.TIME)})", span,
+                                   "shorten the window or lengthen `duration`")
+                    return False
+    return True
+
+
+def _auto_name(ctx: Context, o: ast.OracleDecl) -> str:
+    return f"oracle_{o.span.line}"

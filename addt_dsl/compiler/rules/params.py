@@ -1,0 +1,145 @@
+"""Parameters: default, domain `in [lo, hi]` or choices, distribution, integer."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from addt_dsl import plan as P
+from addt_dsl import units
+from addt_dsl.compiler import ast
+from addt_dsl.compiler.context import INT_EPS, Context, const_value, fmt, lower_list, range_text, suggest
+from addt_dsl.compiler.exprs import ExprLowering, Scope
+
+PARAM_SETTINGS = ("dist", "mean", "sd", "integer")
+
+
+@dataclass(frozen=True)
+class Params:
+    params: list[P.ParamPlan]
+    param_dims: dict  # name: Dim, also of parameters that failed after their default
+    param_ranges: dict[str, tuple[float, float]]
+
+
+def rule_params(ctx: Context) -> Params:
+    out = Params([], {}, {})
+    for d in ctx.params_ast.values():
+        plan = _check_param(ctx, d, out.param_dims)
+        if plan is not None:
+            out.params.append(plan)
+            out.param_ranges[d.name] = (plan.low, plan.high) if plan.low is not None else (plan.default,) * 2
+    return out
+
+
+def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | None:
+    """A parameter's plan, or None after a diagnostic. Its dimension is recorded as soon
+    as the default is known, so uses elsewhere are still checked."""
+    const_scope = Scope({}, set(), set(), False, set())
+    low = ExprLowering(ctx.sink, const_scope)
+    if isinstance(d.default, ast.Str):
+        ctx.sink.error("E0204", f"the default of '{d.name}' must be a number, not a string", d.default.span)
+        return None
+    expr, ty = low.lower(d.default)
+    if expr is None:
+        return None
+    if ty[0] != "num" or const_value(expr) is None:
+        ctx.sink.error("E0204", f"the default of '{d.name}' must be a constant number", d.default.span,
+                       "parameters cannot depend on other parameters; relate them with `assume`")
+        return None
+    dim = ty[1]
+    default = const_value(expr)
+    if not math.isfinite(default):
+        ctx.sink.error("E0204", f"the default of '{d.name}' is not a finite number", d.default.span)
+        return None
+    dims[d.name] = dim
+    opts: dict[str, ast.Setting] = {}
+    for st in d.settings:
+        if st.key not in PARAM_SETTINGS:
+            ctx.sink.error("E0104", f"parameter has no setting '{st.key}'", st.key_span,
+                           *suggest(st.key, PARAM_SETTINGS), "settings of a parameter: dist, mean, sd, integer")
+        elif st.key in opts:
+            ctx.sink.error("E0102", f"setting '{st.key}' given twice", st.key_span)
+        else:
+            opts[st.key] = st
+    dist = "uniform"
+    if "dist" in opts:
+        v = opts["dist"].value
+        if isinstance(v, ast.Ref) and v.dotted in ("uniform", "normal", "choice"):
+            dist = v.dotted
+        else:
+            ctx.sink.error("E0204", "`dist` is one of uniform, normal, choice", v.span)
+            return None
+    lo = hi = None
+    choices: list[float] = []
+    if d.domain is not None:
+        if not isinstance(d.domain, ast.ListExpr):
+            ctx.sink.error("E0204", f"the domain of '{d.name}' is a list: `in [low, high]` or `in [a, b, c]`",
+                           d.domain.span)
+            return None
+        vals = lower_list(ctx, d.domain, dim, f"the domain of '{d.name}'")
+        if vals is None:
+            return None
+        # Two values are a range unless `dist choice`; three or more are choices.
+        if len(vals) != 2 or dist == "choice":
+            choices = vals
+            lo, hi = min(vals), max(vals)
+            if "dist" not in opts:
+                dist = "choice"
+            elif dist != "choice":
+                ctx.sink.error("E0204", f"'{d.name}' lists {len(vals)} values, so it is a choice, "
+                               f"not `dist {dist}`", d.domain.span, "a range is `in [low, high]`")
+                return None
+        else:
+            lo, hi = vals
+            if lo > hi:
+                ctx.sink.error("E0303", f"the range of '{d.name}' is inverted: "
+                               f"{fmt(lo, dim)} > {fmt(hi, dim)}", d.domain.span, "write `in [low, high]`")
+                return None
+        if choices and not any(abs(default - c) <= 1e-12 * max(1.0, abs(c)) for c in choices):
+            ctx.sink.error("E0301", f"the default of '{d.name}' ({fmt(default, dim)}) is not one of its choices",
+                           d.default.span)
+            return None
+        if not choices and not (lo <= default <= hi):
+            ctx.sink.error("E0301", f"the default of '{d.name}' ({fmt(default, dim)}) is outside its range "
+                           f"{range_text(lo, hi, dim)}", d.default.span)
+            return None
+    elif dist == "choice":
+        ctx.sink.error("E0105", f"choice parameter '{d.name}' needs its choices: `in [a, b, c]`", d.span)
+        return None
+    mean = sd = None
+    if "mean" in opts:
+        m_expr = low.lower_value(opts["mean"].value, dim, f"'mean' of '{d.name}'")
+        mean = const_value(m_expr) if m_expr is not None else None
+    if "sd" in opts:
+        sd_expr = low.lower_value(opts["sd"].value, dim, f"'sd' of '{d.name}'")
+        sd = const_value(sd_expr) if sd_expr is not None else None
+        if sd is not None and not (sd > 0 and math.isfinite(sd)):
+            ctx.sink.error("E0301", f"'sd' of '{d.name}' must be positive", opts["sd"].value.span)
+            return None
+    if dist == "normal" and "sd" not in opts:
+        ctx.sink.error("E0105", f"normal parameter '{d.name}' needs 'sd'", d.span,
+                       f"e.g. `param {d.name} = ... dist normal sd ...`")
+        return None
+    if dist != "normal":
+        for key in ("mean", "sd"):
+            if key in opts:
+                ctx.sink.warning("W0002", f"'{key}' has no effect on a {dist} parameter", opts[key].key_span,
+                                 "add `dist normal`")
+    integer = False
+    if "integer" in opts:
+        v = opts["integer"].value
+        if isinstance(v, ast.Bool):
+            integer = v.value
+        else:
+            ctx.sink.error("E0204", "`integer` is true or false", v.span)
+            return None
+    if integer:
+        bad = [x for x in [default, *choices, *(b for b in (lo, hi) if b is not None)]
+               if abs(x - round(x)) > INT_EPS]
+        if bad:
+            ctx.sink.error("E0204", f"integer parameter '{d.name}' has a fractional value {bad[0]!r}",
+                           d.span)
+            return None
+    return P.ParamPlan(name=d.name, dimension=units.dim_name(dim), default=default,
+                       low=lo, high=hi, distribution=dist, mean=mean, sd=sd,
+                       choices=choices, integer=integer)

@@ -1,0 +1,98 @@
+"""The sweep: grid axes inside their parameters' ranges, one sampler, repeats, seed, rejection cap."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from addt_dsl import plan as P
+from addt_dsl import units
+from addt_dsl.compiler import ast
+from addt_dsl.compiler.context import INT_EPS, Context, const_value, fmt, lower_list, source_unit, suggest
+from addt_dsl.compiler.exprs import ExprLowering, Scope
+from addt_dsl.diagnostics import Span
+
+
+@dataclass(frozen=True)
+class Sweep:
+    sweep: P.SweepPlan
+
+
+def rule_sweep(ctx: Context) -> Sweep:
+    grid, sampler, repeat, seed, max_rej = [], None, 1, 0, P.SweepPlan().max_rejections
+    seen: dict[str, Span] = {}
+    sampler_span: Span | None = None
+    for block in ctx.blocks("sweep"):
+        for item in block.items:
+            key = item.name if item.kind == "grid" else ("sampler" if item.kind in ("random", "halton", "lhs")
+                                                          else item.kind)
+            if key in seen:
+                ctx.sink.error("E0102", f"{'grid of ' + key if item.kind == 'grid' else key} given twice",
+                               item.span, f"first given at {seen[key]}")
+                continue
+            seen[key] = item.span
+            if item.kind == "grid":
+                if item.name not in ctx.param_dims:
+                    ctx.sink.error("E0101", f"unknown parameter '{item.name}'", item.span,
+                                   *suggest(item.name, ctx.param_dims))
+                    continue
+                if not isinstance(item.value, ast.ListExpr):
+                    ctx.sink.error("E0204", "a grid takes a list: `grid x in [1, 2, 3] m`", item.value.span)
+                    continue
+                vals = lower_list(ctx, item.value, ctx.param_dims[item.name], f"the grid of '{item.name}'")
+                if vals is None:
+                    continue
+                p = next((p for p in ctx.params if p.name == item.name), None)
+                if p is not None and p.low is not None:
+                    outside = [v for v in vals if v < p.low - 1e-12 or v > p.high + 1e-12]
+                    if outside:
+                        dim = ctx.param_dims[item.name]
+                        unit = item.value.unit or source_unit(ctx.params_ast[item.name].default)
+                        ctx.sink.error("E0301", f"grid value {fmt(outside[0], dim, unit)} is outside the range of "
+                                       f"'{item.name}' [{fmt(p.low, dim, unit)}, {fmt(p.high, dim, unit)}]",
+                                       item.value.span, "a parameter's range is its domain: widen it to "
+                                       "include the grid")
+                        continue
+                if p is not None and p.integer and any(abs(v - round(v)) > INT_EPS for v in vals):
+                    ctx.sink.error("E0204", f"'{item.name}' is an integer parameter; the grid has fractions",
+                                   item.value.span)
+                    continue
+                grid.append(P.GridAxis(param=item.name, values=vals))
+            elif item.kind in ("random", "halton", "lhs"):
+                count = _int_of(ctx, item.value, "a sample count", 1, 1_000_000)
+                sseed = 0
+                for st in item.settings:
+                    if st.key == "seed":
+                        sseed = _int_of(ctx, st.value, "a seed", 0, 2**31 - 1) or 0
+                    else:
+                        ctx.sink.error("E0104", f"sampler has no setting '{st.key}'", st.key_span,
+                                       "settings of a sampler: seed")
+                if count is not None:
+                    sampler = P.SamplerPlan(kind=item.kind, count=count, seed=sseed)
+                    sampler_span = item.span
+            elif item.kind == "repeat":
+                repeat = _int_of(ctx, item.value, "a repeat count", 1, 1_000_000) or 1
+            elif item.kind == "seed":
+                seed = _int_of(ctx, item.value, "a seed", 0, 2**31 - 1) or 0
+            elif item.kind == "max_rejections":
+                got = _int_of(ctx, item.value, "a rejection cap", 0, 10_000_000)
+                max_rej = got if got is not None else max_rej
+    if sampler is not None:
+        gridded = {g.param for g in grid}
+        sampled = [p for p in ctx.params if p.name not in gridded and
+                   (p.choices or (p.low is not None and p.low < p.high))]
+        if not sampled:
+            ctx.sink.warning("W0002", f"`{sampler.kind}` has nothing to sample", sampler_span,
+                             "give a parameter a range (`in [low, high]`) that no grid fixes")
+    return Sweep(P.SweepPlan(grid=grid, sampler=sampler, repeat=repeat, seed=seed, max_rejections=max_rej))
+
+
+def _int_of(ctx: Context, node, what: str, lo: int, hi: int) -> int | None:
+    e = ExprLowering(ctx.sink, Scope({}, set(), set(), False, set())).lower_value(node, units.DIMENSIONLESS, what)
+    if e is None:
+        return None
+    v = const_value(e)
+    if v is None or not math.isfinite(v) or v != int(v) or not (lo <= v <= hi):
+        ctx.sink.error("E0301", f"{what} must be a whole number in [{lo}, {hi}]", node.span)
+        return None
+    return int(v)

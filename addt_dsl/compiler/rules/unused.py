@@ -1,0 +1,13 @@
+"""Parameters that no setting, constraint or oracle uses (W0001)."""
+
+from __future__ import annotations
+
+from addt_dsl.compiler.context import Context
+
+
+def rule_unused(ctx: Context) -> None:
+    for name, d in ctx.params_ast.items():
+        checked = any(p.name == name for p in ctx.params)  # a broken one is reported already
+        if checked and name not in ctx.used_params:
+            ctx.sink.warning("W0001", f"parameter '{name}' is never used", d.span,
+                             "use it in a setting, a constraint or an oracle, or remove it")
