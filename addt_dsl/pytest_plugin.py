@@ -135,9 +135,9 @@ class AddtFile(pytest.File):
 
 
 def _cell_name(plan, cell: dict) -> str:
-    from addt_dsl.printer import format_const, _dim_of_name
+    from addt_dsl.printer import dim_of_name, format_const
 
-    dims = {p.name: _dim_of_name(p.dimension) for p in plan.params}
+    dims = {p.name: dim_of_name(p.dimension) for p in plan.params}
     inner = ",".join(f"{k}={format_const(v, dims[k]).replace(' ', '')}" for k, v in cell.items())
     return f"{plan.name}[{inner}]"
 
