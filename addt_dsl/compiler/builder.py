@@ -124,6 +124,10 @@ class Builder:
 
         return callback
 
+    def literal(self, tok: Token) -> ast.Bool:
+        """`true` / `false` standing alone (an expression that is one token, no rule)."""
+        return ast.Bool(self._tspan(tok), tok.type == "TRUE")
+
     def _tspan(self, tok: Token) -> Span:
         return Span(self.path, tok.line, tok.column, tok.end_line or tok.line,
                     tok.end_column or tok.column + len(tok))

@@ -7,7 +7,7 @@ are checked here: a speed where a length is needed is error E0201.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from addt_dsl import expr as E
 from addt_dsl import units
@@ -30,6 +30,9 @@ class Scope:
     nodes: set[str]  # stack nodes with a latency signal, plus "e2e"
     allow_signals: bool  # formulas and triggers: yes; placement values: no
     used_params: set[str]
+    # Trace signals named directly (`x`, for formulas over synthetic traces given on their
+    # own, see compiler.formula); a scenario has none.
+    named_signals: dict[str, Dim] = field(default_factory=dict)
 
 
 def _ty_str(ty) -> str:
@@ -97,6 +100,8 @@ class ExprLowering:
 
     def _Ref(self, node: ast.Ref):
         parts = node.parts
+        if len(parts) == 1 and parts[0] in self.scope.named_signals and self.scope.allow_signals:
+            return E.Signal(name=parts[0]), ("num", self.scope.named_signals[parts[0]])
         if len(parts) == 1 and parts[0] in self.scope.params:
             self.scope.used_params.add(parts[0])
             return E.Param(name=parts[0]), ("num", self.scope.params[parts[0]])
@@ -162,7 +167,10 @@ class ExprLowering:
         args = []
         for a in node.args:
             if not isinstance(a, ast.Ref) or len(a.parts) != 1:
-                self.sink.error("E0204", f"arguments of {node.fn}() are actor or node names", a.span)
+                # `not eventually (...)`: a temporal operator is read as a name where it cannot stand.
+                hint = ([f"`{node.fn}` starts a formula only at the top, after `implies` or in parentheses: "
+                         f"`not ({node.fn} ...)`"] if node.fn in ("always", "eventually") else [])
+                self.sink.error("E0204", f"arguments of {node.fn}() are actor or node names", a.span, *hint)
                 return None, None
             args.append(a.parts[0])
         return self._signal(node, node.fn, tuple(args))

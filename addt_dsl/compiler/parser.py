@@ -11,7 +11,7 @@ import functools
 import threading
 from pathlib import Path
 
-from lark import Lark, Tree
+from lark import Lark, Token, Tree
 from lark.exceptions import UnexpectedInput
 
 from addt_dsl.compiler import ast
@@ -58,13 +58,39 @@ def parse_source(data: bytes | str, path: str, sink: DiagnosticSink) -> ast.Sour
         return None
     if not text.endswith("\n"):
         text += "\n"
-    lark, builder = _parser()
+    return _parse(_parser(), text, path, sink, recover=True)
+
+
+def parse_expression(text: str, path: str, sink: DiagnosticSink) -> ast.Expression | None:
+    """Parse one expression or formula (the grammar's `expr` rule, e.g. an oracle given
+    on its own); syntax errors go to `sink`; None if it does not parse."""
+    text = check_source(text, path, sink)
+    if text is None:
+        return None
+    parser = _expression_parser()
+    result = _parse(parser, text, path, sink, recover=False)
+    if isinstance(result, Token):  # `true` / `false`: lark reduced no rule
+        result = parser[1].literal(result)
+    return result
+
+
+@functools.lru_cache(maxsize=1)
+def _expression_parser() -> tuple[Lark, Builder]:
+    """A parser of the same grammar started at its `expr` rule (with its own builder)."""
+    builder = Builder()
+    lark = Lark.open(str(GRAMMAR_PATH), parser="lalr", lexer="contextual", start="expr",
+                     transformer=_Callbacks(builder.callbacks()), maybe_placeholders=False)
+    return lark, builder
+
+
+def _parse(parser: tuple[Lark, Builder], text: str, path: str, sink: DiagnosticSink, recover: bool):
+    lark, builder = parser
     recovery = Recovery(lark, text, path, sink)
     with _PARSE_LOCK:
         builder.path = path
         builder.reset()
         try:
-            tree_ast = lark.parse(text, on_error=recovery.on_error)
+            result = lark.parse(text, on_error=recovery.on_error if recover else None)
         except UnexpectedInput as exc:
             if not recovery.failed:
                 report_syntax_error(lark, exc, path, sink, text)
@@ -80,7 +106,7 @@ def parse_source(data: bytes | str, path: str, sink: DiagnosticSink) -> ast.Sour
         sink.error("E0004", f"expression is too long or nested too deeply (limit {MAX_EXPR_DEPTH} operators)",
                    too_deep.span, "split it with parameters or simplify it")
         return None
-    return tree_ast
+    return result
 
 
 def parse_file(path: Path, sink: DiagnosticSink, display: str | None = None) -> tuple[ast.SourceFile | None, str]:
@@ -94,4 +120,4 @@ def parse_file(path: Path, sink: DiagnosticSink, display: str | None = None) -> 
     return parse_source(data, name, sink), text
 
 
-__all__ = ["GRAMMAR_PATH", "MAX_SOURCE_BYTES", "grammar", "parse_file", "parse_source"]
+__all__ = ["GRAMMAR_PATH", "MAX_SOURCE_BYTES", "grammar", "parse_expression", "parse_file", "parse_source"]

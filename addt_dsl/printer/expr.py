@@ -5,9 +5,9 @@ unit of the dimension their context requires: a setting's `ParamSpec.dim`, a par
 dimension, or the dimension inferred from the signals and parameters an expression
 combines (`SIGNALS` registry). Every canonical unit has the factor 1, so a printed
 number reads back bit for bit; angles use `deg` where that is exact too. Parentheses
-follow the binding levels of the DSL grammar, so `compiler.parse_formula` reads the text
-back to the same tree. This is the one printer of formulas (oracles, constraints,
-trigger conditions, reports).
+follow the binding levels of the DSL grammar, so the compiler reads the text back to the
+same tree (`compiler.formula.parse_formula` for a formula on its own). This is the one
+printer of formulas (oracles, constraints, trigger conditions, reports).
 """
 
 from __future__ import annotations

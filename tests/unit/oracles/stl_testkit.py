@@ -9,12 +9,27 @@ import math
 import numpy as np
 from hypothesis import strategies as st
 
+from addt_dsl import units
+from addt_dsl.compiler.formula import parse_formula
 from addt_dsl.expr import Binary, Call, Num, Signal, Temporal, Unary, Until
+from addt_dsl.runtime.oracles import robustness_at_0
 from addt_dsl.runtime.oracles.stl import samples
 
 SIGNALS = ("x", "y", "z")
 PERIODS = (1.0, 0.1, 0.05, 0.02)
 COMPARE = ("<", "<=", ">", ">=", "==", "!=")
+
+
+
+def parse(text: str, signals=SIGNALS):
+    """A formula over synthetic signals (`x`, `y`, `z`: plain numbers) and registered ones."""
+    return parse_formula(text, signals={name: units.DIMENSIONLESS for name in signals})
+
+
+def robustness(text: str, signals: dict, period_s: float) -> float:
+    """Robustness at time 0 of a formula given as text (parsed by the compiler)."""
+    return robustness_at_0(parse(text, {*SIGNALS, *signals}), signals, period_s)
+
 
 # Few distinct values so that ties (robustness exactly 0) happen often.
 values = st.sampled_from([-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 2.0, 3.0])

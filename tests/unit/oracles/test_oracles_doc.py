@@ -6,8 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from stl_testkit import parse, robustness
 
-from addt_dsl.runtime.oracles import parse_formula, robustness, satisfied
+from addt_dsl.runtime.oracles import satisfied
 
 DOC = Path(__file__).resolve().parents[3] / "docs" / "oracles.md"
 _BLOCK = re.compile(r"```stl-example\n(.*?)```", re.S)
@@ -43,4 +44,4 @@ def test_doc_example(formula, signals, period, value, verdict):
     assert got == value or math.isclose(got, value, abs_tol=1e-9), got
     if verdict is not None:
         arrays = {k: np.array(v) for k, v in signals.items()}
-        assert satisfied(parse_formula(formula), arrays, period) is (verdict == "satisfied")
+        assert satisfied(parse(formula), arrays, period) is (verdict == "satisfied")

@@ -7,15 +7,16 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from addt_dsl.expr import Binary, Num, Param, Signal, Temporal
+from stl_testkit import parse as parse_formula
+from stl_testkit import robustness
+
+from addt_dsl.expr import Binary, Num, Param, Signal, Temporal, Unary
 from addt_dsl.runtime.oracles import (
     FormulaTypeError,
     UnknownSignalError,
     UnsubstitutedParameterError,
     evaluate,
     first_violation_time,
-    parse_formula,
-    robustness,
     robustness_at_0,
     samples,
     satisfied,
@@ -51,8 +52,8 @@ def test_connectives():
 
 def test_arithmetic_and_calls():
     sig = dict(x=[3.0, -4.0], y=[4.0, 3.0])
-    np.testing.assert_array_equal(evaluate(parse_formula("sqrt(x * x + y * y)"),
-                                           {k: np.array(v) for k, v in sig.items()}, 1.0), [5.0, 5.0])
+    value = parse_formula("sqrt(x * x + y * y) > 0").left  # a value expression: the formula's left side
+    np.testing.assert_array_equal(evaluate(value, {k: np.array(v) for k, v in sig.items()}, 1.0), [5.0, 5.0])
     np.testing.assert_array_equal(rho("abs(x) - min(x, y) / 2 + max(x, y, 0) > -x", **sig),
                                   [3 - 1.5 + 4 + 3, 4 + 2 + 3 - 4])
 
@@ -130,9 +131,9 @@ def test_first_violation_time():
     assert first_violation_time(parse_formula("always during [0.4 s, 1 s] x > 0"), sig, 0.1) == pytest.approx(0.5)
     assert first_violation_time(parse_formula("always x > -5"), sig, 0.1) is None
     assert first_violation_time(parse_formula("always x >= 1"), sig, 0.1) == pytest.approx(0.3)
-    both = parse_formula("always x > -1.5 and always within 0.2 s x < 1")
+    both = parse_formula("always x > -1.5 and (always within 0.2 s x < 1)")
     assert first_violation_time(both, sig, 0.1) == pytest.approx(0.0)
-    assert first_violation_time(parse_formula("(always x > -1.5) and always x > 0"), sig, 0.1) == pytest.approx(0.3)
+    assert first_violation_time(parse_formula("(always x > -1.5) and (always x > 0)"), sig, 0.1) == pytest.approx(0.3)
     assert first_violation_time(parse_formula("eventually x > 5"), sig, 0.1) == 0.0
     zero = {"x": np.array([1.0, 0.0, 1.0])}  # a tie counts as a violation of a strict bound
     assert first_violation_time(f, zero, 0.5) == 0.5
@@ -157,12 +158,19 @@ def test_errors():
     assert isinstance(err.value, KeyError)
     with pytest.raises(UnsubstitutedParameterError, match="gap"):
         evaluate(Binary(op=">", left=Signal(name="x"), right=Param(name="gap")), {"x": np.ones(2)}, 1.0)
+    # Trees the compiler would reject (a value where a formula belongs, or the reverse),
+    # built by hand: the evaluator still refuses them.
+    x, one = Signal(name="x"), Num(value=1.0)
+    x_pos = Binary(op=">", left=x, right=Num(value=0.0))
+    sig = {"x": [1.0], "y": [1.0]}
     with pytest.raises(FormulaTypeError, match="operand of 'and' must be a formula"):
-        robustness("x and y > 0", {"x": [1.0], "y": [1.0]}, 1.0)
+        robustness_at_0(Binary(op="and", left=x, right=Binary(op=">", left=Signal(name="y"), right=one)), sig, 1.0)
     with pytest.raises(FormulaTypeError, match="must be a value"):
-        robustness("(x > 0) + 1 > 0", {"x": [1.0]}, 1.0)
+        robustness_at_0(Binary(op=">", left=Binary(op="+", left=x_pos, right=one), right=Num(value=0.0)), sig, 1.0)
     with pytest.raises(FormulaTypeError, match="expected a formula"):
-        robustness("x + 1", {"x": [1.0]}, 1.0)
+        robustness_at_0(Binary(op="+", left=x, right=one), sig, 1.0)
+    with pytest.raises(FormulaTypeError):
+        robustness_at_0(Unary(op="not", arg=x), sig, 1.0)
     with pytest.raises(ValueError, match="differ in length"):
         robustness("x > y", {"x": [1.0], "y": [1.0, 2.0]}, 1.0)
     with pytest.raises(ValueError, match="period"):
