@@ -23,7 +23,8 @@ def rule_names(ctx: Context) -> Declarations:
                         (ast.ActorDecl, out.actors_ast)):
         for d in ctx.defs(kind):
             if d.name in table:
-                ctx.sink.error("E0102", f"'{d.name}' is defined twice", d.span, f"first defined at {table[d.name].span}")
+                ctx.sink.error("E0102", f"'{d.name}' is defined twice", d.span,
+                               f"first defined at {table[d.name].span}")
                 continue
             if kind is ast.ActorDecl and d.name in out.params_ast:
                 ctx.sink.error("E0102", f"'{d.name}' is already a parameter", d.span,
