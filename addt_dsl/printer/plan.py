@@ -30,14 +30,14 @@ from pathlib import Path
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.compiler import compile_source
-from addt_dsl.compiler.rules.actors import VEHICLE_KINDS
+from addt_dsl.compiler.rules.actors import CLAUSE_TABLES, VEHICLE_KINDS
 from addt_dsl.compiler.rules.oracles import NO_CLAUSES, reach_goal_formula
 from addt_dsl.diagnostics import render_text
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, FaultPlan, OraclePlan, ParamPlan, RoadPlan,
                            RunSpec, ScenarioPlan, SweepPlan, TriggerPlan)
 from addt_dsl.printer.expr import (ExprPrinter, PrinterError, dim_of_name, format_const, format_quantity,
                                    string_literal)
-from addt_dsl.registry import BEHAVIORS, FAULTS, GEOMETRIES, SENSORS, STACKS, ParamSpec
+from addt_dsl.registry import FAULTS, GEOMETRIES, ParamSpec
 from addt_dsl.sweep import expand
 
 INDENT = "  "
@@ -179,7 +179,6 @@ ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLES
                ("offset", "offset", units.LENGTH))
 ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units.LENGTH),
                 ("mass", "mass_kg", units.MASS), ("wheelbase", "wheelbase_m", units.LENGTH))
-CLAUSE_TABLES = {"behavior": BEHAVIORS, "sensor": SENSORS, "stack": STACKS}
 
 
 def _vehicle_size(kind: str) -> tuple[float, float]:

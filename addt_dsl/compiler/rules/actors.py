@@ -314,11 +314,11 @@ def _channel(behavior: str) -> str | None:
     return getattr(BEHAVIORS.get(behavior), "channel", None)
 
 
-_CLAUSE_TABLES = {"behavior": BEHAVIORS, "sensor": SENSORS, "stack": STACKS}
+CLAUSE_TABLES = {"behavior": BEHAVIORS, "sensor": SENSORS, "stack": STACKS}  # clause keyword: its registry
 
 
 def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str | None) -> P.ClausePlan | None:
-    table = _CLAUSE_TABLES[c.keyword]
+    table = CLAUSE_TABLES[c.keyword]
     if c.keyword in ("sensor", "stack") and not actor.is_ego:
         ctx.sink.error("E0204", f"only the ego has a {c.keyword}", c.span,
                        "traffic agents follow behaviours")
