@@ -231,7 +231,18 @@ class ExprLowering:
                     return None, None
         return lo, hi
 
+    def _no_time(self, node, op: str) -> bool:
+        """Where only parameters may appear (constraints, values) there is no time to range over."""
+        if self.scope.allow_signals:
+            return False
+        self.sink.error("E0204", f"temporal operator '{op}' cannot be used here: only parameters and constants",
+                        node.span, "only `expect` formulas and `when` triggers range over time; a constraint is "
+                        "checked once per sampled assignment")
+        return True
+
     def _TemporalExpr(self, node: ast.TemporalExpr):
+        if self._no_time(node, node.op):
+            return None, None
         arg = self.lower_formula(node.arg, f"the operand of '{node.op}'")
         lo, hi = self.window(node.window)
         if arg is None or lo is None or (node.window is not None and node.window.hi is not None and hi is None):
@@ -242,6 +253,8 @@ class ExprLowering:
         return _WindowedTemporal(node.op, lo, hi, arg), BOOL
 
     def _UntilExpr(self, node: ast.UntilExpr):
+        if self._no_time(node, "until"):
+            return None, None
         left = self.lower_formula(node.left, "the left side of 'until'")
         right = self.lower_formula(node.right, "the right side of 'until'")
         lo, hi = self.window(node.window)
