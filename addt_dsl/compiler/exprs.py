@@ -84,11 +84,16 @@ class ExprLowering:
     # ---- atoms
     def _Number(self, node: ast.Number):
         if node.unit is None:
-            return E.Num(value=node.value), ("num", units.DIMENSIONLESS)
-        try:
-            value, dim = units.to_si(node.value, node.unit)
-        except units.UnknownUnit:
-            self.sink.error("E0202", f"unknown unit '{node.unit}'", node.span)
+            value, dim = node.value, units.DIMENSIONLESS
+        else:
+            try:
+                value, dim = units.to_si(node.value, node.unit)
+            except units.UnknownUnit:
+                self.sink.error("E0202", f"unknown unit '{node.unit}'", node.span)
+                return None, None
+        if not math.isfinite(value):  # 1e999, or 1e308 km in metres: refused where it is read
+            self.sink.error("E0204", "this number is not finite", node.span,
+                            "numbers must lie within ±1.7e308 (in SI units)")
             return None, None
         return E.Num(value=value), ("num", dim)
 
