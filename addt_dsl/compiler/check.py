@@ -17,6 +17,7 @@ from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.exprs import ExprLowering, Scope, value_range
+from addt_dsl.compiler.xodr_check import check_inline_road
 from addt_dsl.diagnostics import DiagnosticSink, Span
 from addt_dsl.registry import BEHAVIORS, FAULTS, GEOMETRIES, SENSORS, SIGNALS, STACKS, ParamSpec
 
@@ -501,9 +502,11 @@ def rule_roads(ctx: Context) -> None:
             ctx.sink.error("E0204", f"road '{d.name}' has no lanes", lanes_item.span if lanes_item else d.span,
                            "e.g. `lanes right 2 width 3.5 m`")
             continue
-        ctx.roads.append(P.RoadPlan(name=d.name, source="inline", segments=segments,
-                                    left_lanes=left, right_lanes=right,
-                                    lane_width_m=lanes["width"], lane_offset_m=lanes["offset"]))
+        road_plan = P.RoadPlan(name=d.name, source="inline", segments=segments, left_lanes=left, right_lanes=right,
+                               lane_width_m=lanes["width"], lane_offset_m=lanes["offset"])
+        if not check_inline_road(ctx, road_plan, d.span):
+            continue
+        ctx.roads.append(road_plan)
         ids = tuple(range(left, 0, -1)) + tuple(range(-1, -right - 1, -1))
         ctx.road_info[d.name] = RoadInfo(sum(s.length_m for s in segments), ids,
                                          {i: lanes["width"] for i in ids})

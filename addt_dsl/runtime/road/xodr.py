@@ -312,10 +312,12 @@ class _Reader:
         try:
             if g.tag == "line":
                 return Line(s0, x0, y0, hdg, length)
+            # Curvatures are bounded by the turn they give (geometry._check_turn), not by magnitude.
             if g.tag == "arc":
-                return Arc(s0, x0, y0, hdg, length, self.curvature(g, length, "curvature"))
+                return Arc(s0, x0, y0, hdg, length, self.num(g, "curvature", bound=math.inf))
             if g.tag == "spiral":
-                return Spiral(s0, x0, y0, hdg, length, *self.curvature(g, length, "curvStart", "curvEnd"))
+                return Spiral(s0, x0, y0, hdg, length, self.num(g, "curvStart", bound=math.inf),
+                              self.num(g, "curvEnd", bound=math.inf))
             if g.tag == "poly3":
                 return Poly3(s0, x0, y0, hdg, length, *(self.num(g, k) for k in "abcd"))
             p_range = g.attrs.get("pRange", "normalized").strip()
@@ -327,17 +329,6 @@ class _Reader:
             if isinstance(exc, XodrError):
                 raise
             raise self.err(g, str(exc)) from None
-
-    def curvature(self, node: _Node, length: float, *keys: str):
-        """Curvature attributes, refused when the geometry would turn more than
-        MAX_GEOMETRY_TURN_RAD (its sampling and clothoid integration grow with the turn)."""
-        values = [self.num(node, k, bound=math.inf) for k in keys]
-        turn = max(abs(v) for v in values) * length
-        if turn > L.MAX_GEOMETRY_TURN_RAD:
-            raise self.err(node, f"{', '.join(keys)} up to {max(abs(v) for v in values):.6g} /m over {length:.6g} m: "
-                           "its turn of " + L.beyond("MAX_GEOMETRY_TURN_RAD", turn, L.MAX_GEOMETRY_TURN_RAD, "rad",
-                                               "split the curve into several geometries"))
-        return values[0] if len(values) == 1 else values
 
     def section(self, node: _Node, s0: float, s1: float) -> LaneSection:
         sides = {}
