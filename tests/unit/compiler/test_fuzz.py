@@ -188,8 +188,9 @@ def test_planted_semantic_faults(text):
     check(text)
 
 
-MAP_NUMBERS = ("0", "1", "-1", "3.5", "500", "1e12", "-1e12", "1e308", "-1e308", "1e-300", "nan", "inf", "-inf",
-               "1e10", "5e4", "4e4", "12", "0.5", "x")
+SANE_MAP_NUMBERS = ("0", "0", "1", "3.5", "3.5", "100", "500", "0.001", "-0.01", "0.5")
+HOSTILE_MAP_NUMBERS = ("-1", "1e12", "-1e12", "1e308", "-1e308", "1e-300", "nan", "inf", "-inf", "1e10", "5e4", "4e4",
+                       "12", "x", "")
 GEOMETRY_TAGS = (
     '<line/>', '<arc curvature="{a}"/>', '<spiral curvStart="{a}" curvEnd="{b}"/>',
     '<poly3 a="{a}" b="{b}" c="{c}" d="{d}"/>',
@@ -202,21 +203,27 @@ def hostile_map(draw):
     """An OpenDRIVE road whose numbers are drawn from hostile values (non-finite, huge,
     tiny, malformed): road length, geometry kind and coefficients, lane widths, offsets,
     elevation."""
-    num = st.sampled_from(MAP_NUMBERS)
+    hostile = draw(st.floats(0.0, 0.5))  # how often a number is hostile: some maps are sane enough to compile
+
+    def pick(sane):
+        return st.builds(lambda u, a, b: a if u < hostile else b, st.floats(0.0, 1.0),
+                         st.sampled_from(HOSTILE_MAP_NUMBERS), st.sampled_from(sane))
+
+    num, size = pick(SANE_MAP_NUMBERS), pick(("100", "500", "3.5", "2.75"))
     n_geom = draw(st.integers(1, 3))
     geoms = []
     for k in range(n_geom):
         tag = draw(st.sampled_from(GEOMETRY_TAGS)).format(a=draw(num), b=draw(num), c=draw(num), d=draw(num))
-        geoms.append(f'<geometry s="{draw(num) if k else 0}" x="{draw(num)}" y="0" hdg="{draw(num)}" '
-                     f'length="{draw(num)}">{tag}</geometry>')
+        geoms.append(f'<geometry s="{draw(size) if k else 0}" x="{draw(num)}" y="0" hdg="{draw(num)}" '
+                     f'length="{draw(size)}">{tag}</geometry>')
     return f"""<?xml version="1.0"?>
 <OpenDRIVE><header revMajor="1" revMinor="4"/>
-<road name="" length="{draw(num)}" id="1" junction="-1">
+<road name="" length="{draw(size)}" id="1" junction="-1">
 <planView>{''.join(geoms)}</planView>
 <elevationProfile><elevation s="0" a="{draw(num)}" b="{draw(num)}" c="0" d="0"/></elevationProfile>
 <lanes><laneOffset s="0" a="{draw(num)}" b="0" c="0" d="0"/>
 <laneSection s="0"><center><lane id="0" type="none"/></center>
-<right><lane id="-1" type="driving"><width sOffset="0" a="{draw(num)}" b="{draw(num)}" c="0" d="{draw(num)}"/></lane></right>
+<right><lane id="-1" type="driving"><width sOffset="0" a="{draw(size)}" b="{draw(num)}" c="0" d="{draw(num)}"/></lane></right>
 </laneSection></lanes></road></OpenDRIVE>
 """
 
