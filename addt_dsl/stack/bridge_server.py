@@ -6,8 +6,10 @@
 Prints `listening HOST:PORT` once it accepts connections (`--address 127.0.0.1:0` picks a
 free port). It binds loopback unless told otherwise, and warns when told otherwise. Each
 message must arrive whole within the idle timeout and fit the size limit (checked before
-it is read); anything malformed gets an `error` reply and the connection is closed. Each connection is one run: `hello` builds a `BevStack` from the settings
-and the map it carries, every `step` replays the step's frames into it and ticks it,
+it is read); anything malformed gets an `error` reply and the connection is closed.
+
+Each connection is one run: `hello` builds a `BevStack` from the settings and the map it
+carries, every `step` replays the step's frames into it and ticks it,
 `bye` ends the run. Connections are served one thread each, so parallel runs may share a
 server. It is also the worked example of the protocol in docs/bridge.md: a stack in any
 language needs only to answer these three messages.

@@ -285,12 +285,12 @@ class _Reader:
                   (road.superelevation_profile, 0.0, road.length, L.MAX_SUPERELEVATION_RAD,
                    "MAX_SUPERELEVATION_RAD", "superelevation", node.find("lateralProfile") or node, "rad")]
         for sec, sn in zip(road.sections, sec_nodes):
+            # Lane ids were parsed (and checked) by lane(); map them back to their elements.
+            nodes = {int(float(n.attrs["id"])): n for side in (sn.find("left"), sn.find("right")) if side
+                     for n in side.findall("lane")}
             for lane in sec.left + sec.right:
-                lane_node = next((n for side in ("left", "right") if sn.find(side)
-                                  for n in sn.find(side).findall("lane") if n.attrs.get("id", "").strip() == str(lane.id)),
-                                 sn)
                 checks.append((lane.width, 0.0, sec.s1 - sec.s0, L.MAX_LANE_WIDTH_M, "MAX_LANE_WIDTH_M",
-                               f"lane {lane.id} width", lane_node, "m"))
+                               f"lane {lane.id} width", nodes.get(lane.id, sn), "m"))
         for profile, lo, hi, limit, name, what, at, unit in checks:
             worst = _profile_max(profile, lo, hi)
             if worst > limit:

@@ -223,7 +223,8 @@ def hostile_map(draw):
 <elevationProfile><elevation s="0" a="{draw(num)}" b="{draw(num)}" c="0" d="0"/></elevationProfile>
 <lanes><laneOffset s="0" a="{draw(num)}" b="0" c="0" d="0"/>
 <laneSection s="0"><center><lane id="0" type="none"/></center>
-<right><lane id="-1" type="driving"><width sOffset="0" a="{draw(size)}" b="{draw(num)}" c="0" d="{draw(num)}"/></lane></right>
+<right><lane id="-1" type="driving">
+<width sOffset="0" a="{draw(size)}" b="{draw(num)}" c="0" d="{draw(num)}"/></lane></right>
 </laneSection></lanes></road></OpenDRIVE>
 """
 

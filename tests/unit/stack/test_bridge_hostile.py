@@ -1,10 +1,10 @@
 """Hostile peers and clients of the bridge, over loopback: every case ends in bounded time
 with a clean refusal (an `error` reply, a closed connection, a StackError), never a traceback."""
 
-import json
 import select
 import socket
 import struct
+import threading
 import time
 
 import pytest
@@ -20,7 +20,7 @@ from addt_dsl.stack.bridge import (
     recv,
     send,
 )
-from addt_dsl.stack.bridge_server import Limits, serve_connection, start_in_thread
+from addt_dsl.stack.bridge_server import Limits, start_in_thread
 
 
 @pytest.fixture()
@@ -190,3 +190,65 @@ def test_server_warns_when_it_binds_beyond_loopback(capsys):
     finally:
         srv.shutdown()
         srv.server_close()
+
+
+# ---- end to end: a hostile remote stack drives a real run
+
+def _hostile_remote(reply: dict):
+    """A server that says `ready`, then answers the first step with `reply`."""
+    listener = socket.create_server(("127.0.0.1", 0))
+
+    def serve():
+        conn, _ = listener.accept()
+        with conn:
+            recv(conn)
+            send(conn, {"type": "ready"})
+            recv(conn)
+            send(conn, reply)
+            try:
+                recv(conn, deadline=time.monotonic() + 5)
+            except (OSError, ValueError):
+                pass
+        listener.close()
+
+    threading.Thread(target=serve, daemon=True).start()
+    return "127.0.0.1:%d" % listener.getsockname()[1]
+
+
+SCENARIO = """
+scenario hostile_remote {
+  duration 1 s
+  road r {
+    line length 200 m
+    lanes right 1
+  }
+  ego car on r lane -1 at 10 m speed 10 m/s {
+    stack external address "%s" timeout 5 s
+  }
+}
+"""
+
+
+@pytest.mark.parametrize("reply, words", [
+    ({"type": "control", "commands": [[float("nan"), 0.0, 0.0]]}, "non-finite"),
+    ({"type": "error", "message": "boom \x1b[2J\x1b]0;pwned\x07"}, "boom \\x1b[2J"),
+])
+def test_a_hostile_remote_makes_the_run_detected_with_escaped_text(reply, words):
+    from addt_dsl.compiler import compile_source
+    from addt_dsl.runtime.execute import execute
+    from addt_dsl.sweep import expand
+
+    plan = compile_source(SCENARIO % _hostile_remote(reply)).plan
+    result = execute(expand(plan).specs[0])
+    assert result.status == "detected" and words in result.error
+    assert "\x1b" not in result.error and "\x07" not in result.error
+
+
+def test_a_refused_address_is_reported_without_connecting(monkeypatch):
+    from addt_dsl.compiler import compile_source
+    from addt_dsl.runtime.execute import execute
+    from addt_dsl.sweep import expand
+
+    monkeypatch.delenv(ALLOW_HOSTS_ENV, raising=False)
+    result = execute(expand(compile_source(SCENARIO % "192.0.2.1:5555").plan).specs[0])
+    assert result.status == "detected" and "--allow-host 192.0.2.1" in result.error
