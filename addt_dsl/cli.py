@@ -85,6 +85,10 @@ def cmd_schema(args) -> int:
 def cmd_run(args) -> int:
     from addt_dsl.suite import SuiteError, expand_paths
 
+    if getattr(args, "allow_host", None):  # the environment reaches every worker process the runs are made in
+        from addt_dsl.stack.bridge import ALLOW_HOSTS_ENV
+
+        os.environ[ALLOW_HOSTS_ENV] = ",".join(args.allow_host)
     try:
         paths = expand_paths(args.files)
     except SuiteError as exc:
@@ -333,6 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--executor", choices=("local", "ray", "inline"), default="local",
                      help="local worker processes (default), a Ray cluster, or this process (debugging)")
     run.add_argument("--address", help="Ray cluster address (default: start a local Ray instance)")
+    run.add_argument("--allow-host", action="append", default=[], metavar="HOST",
+                     help="let `stack external` scenarios connect to HOST (default: loopback only; repeatable)")
     run.add_argument("--out", help="write summary.json, runs.csv, report.html and results.sqlite here")
     run.add_argument("--store", help="results store (SQLite) to commit runs to and resume from "
                                      "(default: OUT/results.sqlite, else a temporary file)")

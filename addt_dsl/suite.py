@@ -20,6 +20,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from addt_dsl.confine import Refused, confine
 from addt_dsl.reporting.tables import fmt_param, wilson_interval
 
 
@@ -28,12 +29,23 @@ class SuiteError(ValueError):
 
 
 def expand_paths(paths: Sequence[str]) -> list[Path]:
-    """Files as given, directories as their `.addt` files (sorted, not recursive)."""
+    """Files as given, directories as their `.addt` files (sorted, not recursive). A
+    directory's members go through the same confinement as includes: one that is a
+    symbolic link leading out of the directory (or a FIFO, a loop, ...) is refused."""
     files: list[Path] = []
     for raw in paths:
         p = Path(raw)
         if p.is_dir():
-            found = sorted(q for q in p.glob("*.addt") if q.is_file())
+            found = []
+            for q in sorted(p.glob("*.addt")):
+                if q.is_dir() and not q.is_symlink():
+                    continue  # a directory named like a scenario is not one
+                try:
+                    confine(q.name, p, p)
+                except Refused as refused:
+                    raise SuiteError(f"{q}: {refused.message}" + (f" ({refused.note})" if refused.note else "")) \
+                        from None
+                found.append(q)
             if not found:
                 raise SuiteError(f"{raw}: no .addt files in this directory")
             files += found

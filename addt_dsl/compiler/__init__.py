@@ -16,6 +16,7 @@ from addt_dsl.compiler import ast, parser
 from addt_dsl.compiler.context import Context
 from addt_dsl.compiler.lower import build_plan, check_feasible
 from addt_dsl.compiler.parser import parse_source
+from addt_dsl.confine import Refused, confine, shown
 from addt_dsl.compiler.rules import run_rules
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
 from addt_dsl.plan import ScenarioPlan
@@ -42,6 +43,7 @@ class _Loader:
 
     def __init__(self, root: Path, sink: DiagnosticSink, sources: dict[str, str]):
         self.root = root.resolve()
+        self.shown_root = root
         self.sink = sink
         self.sources = sources
         self.included: set[Path] = set()  # each file is read and parsed at most once
@@ -49,40 +51,38 @@ class _Loader:
         self.bytes_read = 0
 
     def display(self, path: Path) -> str:
+        """How diagnostics name a file: relative to the working directory, else to the
+        scenario's directory as the user named it (never an absolute path the user did not type)."""
         try:
-            return str(path.resolve().relative_to(Path.cwd()))
+            return str(path.relative_to(Path.cwd().resolve()))
         except ValueError:
-            return str(path)
+            return str(self.shown_root / path.relative_to(self.root))
 
     def resolve(self, relative: str, base: Path, span: Span) -> Path | None:
-        candidate = (base / relative).resolve()
-        if not candidate.is_relative_to(self.root):
-            self.sink.error("E0402", f"'{relative}' is outside the scenario's directory", span,
-                            f"files may only come from {self.root} and below")
+        try:
+            return confine(relative, base, self.root)
+        except Refused as refused:
+            self.sink.error(refused.code, refused.message, span, *([refused.note] if refused.note else []))
             return None
-        if not candidate.is_file():
-            self.sink.error("E0401", f"cannot find '{relative}'", span, f"looked for {candidate}")
-            return None
-        return candidate
 
     def read_bytes(self, path: Path, relative: str, span: Span, limit: int) -> bytes | None:
         """Read a file after checking its size (a huge or endless file must not stall us)."""
         try:
             size = path.stat().st_size
             if size > limit:
-                self.sink.error("E0401", f"'{relative}' is too large ({size} bytes; limit {limit})", span)
+                self.sink.error("E0401", f"'{shown(relative)}' is too large ({size} bytes; limit {limit})", span)
                 return None
             with path.open("rb") as fh:
                 data = fh.read(limit + 1)
         except OSError as exc:
-            self.sink.error("E0401", f"cannot read '{relative}': {exc.strerror or exc}", span)
+            self.sink.error("E0401", f"cannot read '{shown(relative)}': {exc.strerror or exc}", span)
             return None
         if len(data) > limit:
-            self.sink.error("E0401", f"'{relative}' is too large (limit {limit} bytes)", span)
+            self.sink.error("E0401", f"'{shown(relative)}' is too large (limit {limit} bytes)", span)
             return None
         self.bytes_read += len(data)
         if self.bytes_read > MAX_TOTAL_BYTES:
-            self.sink.error("E0401", f"reading '{relative}' exceeds the {MAX_TOTAL_BYTES} bytes one compilation "
+            self.sink.error("E0401", f"reading '{shown(relative)}' exceeds the {MAX_TOTAL_BYTES} bytes one compilation "
                             "may read", span)
             return None
         return data

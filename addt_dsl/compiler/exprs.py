@@ -87,11 +87,16 @@ class ExprLowering:
     # ---- atoms
     def _Number(self, node: ast.Number):
         if node.unit is None:
-            return E.Num(value=node.value), ("num", units.DIMENSIONLESS)
-        try:
-            value, dim = units.to_si(node.value, node.unit)
-        except units.UnknownUnit:
-            self.sink.error("E0202", f"unknown unit '{node.unit}'", node.span)
+            value, dim = node.value, units.DIMENSIONLESS
+        else:
+            try:
+                value, dim = units.to_si(node.value, node.unit)
+            except units.UnknownUnit:
+                self.sink.error("E0202", f"unknown unit '{node.unit}'", node.span)
+                return None, None
+        if not math.isfinite(value):  # 1e999, or 1e308 km in metres: refused where it is read
+            self.sink.error("E0204", "this number is not finite", node.span,
+                            "numbers must lie within ±1.7e308 (in SI units)")
             return None, None
         return E.Num(value=value), ("num", dim)
 
@@ -239,7 +244,18 @@ class ExprLowering:
                     return None, None
         return lo, hi
 
+    def _no_time(self, node, op: str) -> bool:
+        """Where only parameters may appear (constraints, values) there is no time to range over."""
+        if self.scope.allow_signals:
+            return False
+        self.sink.error("E0204", f"temporal operator '{op}' cannot be used here: only parameters and constants",
+                        node.span, "only `expect` formulas and `when` triggers range over time; a constraint is "
+                        "checked once per sampled assignment")
+        return True
+
     def _TemporalExpr(self, node: ast.TemporalExpr):
+        if self._no_time(node, node.op):
+            return None, None
         arg = self.lower_formula(node.arg, f"the operand of '{node.op}'")
         lo, hi = self.window(node.window)
         if arg is None or lo is None or (node.window is not None and node.window.hi is not None and hi is None):
@@ -250,6 +266,8 @@ class ExprLowering:
         return _WindowedTemporal(node.op, lo, hi, arg), BOOL
 
     def _UntilExpr(self, node: ast.UntilExpr):
+        if self._no_time(node, "until"):
+            return None, None
         left = self.lower_formula(node.left, "the left side of 'until'")
         right = self.lower_formula(node.right, "the right side of 'until'")
         lo, hi = self.window(node.window)

@@ -11,8 +11,10 @@ import numpy as np
 
 from addt_dsl.compiler.context import Context, RoadInfo
 from addt_dsl.diagnostics import Span
-from addt_dsl.expr import eval_param_expr
+from addt_dsl.expr import eval_param_expr, params_used
 from addt_dsl.runtime.road import XodrError, parse_xodr
+from addt_dsl.runtime.road.limits import RoadLimitError
+from addt_dsl.runtime.roadspec import build_network
 
 
 def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
@@ -33,6 +35,9 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
         return None
     if road_value is None:
         road_id = next(iter(network.roads))
+    elif params_used(road_value):
+        ctx.sink.error("E0204", "the imported road's id must be a constant, not a parameter", span)
+        return None
     else:
         road_id = str(int(eval_param_expr(road_value, {})))
     if road_id not in network.roads:
@@ -40,6 +45,21 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
                        f"roads: {', '.join(sorted(network.roads))}")
         return None
     return road_id, _road_info(network.road(road_id))
+
+
+def check_inline_road(ctx: Context, road_plan, span: Span) -> bool:
+    """Build an inline road as every run will (same bounds as imported maps: total length,
+    turn, samples), so a road no run could build is a compile error, not a crashed run."""
+    try:
+        build_network([road_plan])
+    except RoadLimitError as exc:
+        message = str(exc) if str(exc).startswith("road ") else f"road {road_plan.name}: {exc}"
+        ctx.sink.error("E0301", message, span)
+        return False
+    except (ValueError, ArithmeticError) as exc:
+        ctx.sink.error("E0204", f"road '{road_plan.name}' cannot be built: {exc}", span)
+        return False
+    return True
 
 
 def _road_info(road):

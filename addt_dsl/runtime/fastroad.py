@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 STEP_M = 0.25
+_BLOCK = 8192  # samples evaluated at once
 
 
 class FastRoad:
@@ -23,7 +24,9 @@ class FastRoad:
         self.length = float(road.length)
         n = max(2, int(math.ceil(self.length / STEP_M)) + 1)
         s = np.linspace(0.0, self.length, n)
-        x, y, h = road.reference_pose(s)
+        # In blocks: a clothoid's pose costs (points x integration nodes) memory at once.
+        blocks = [road.reference_pose(s[i:i + _BLOCK]) for i in range(0, n, _BLOCK)]
+        x, y, h = (np.concatenate([b[k] for b in blocks]) for k in range(3))
         self._s = s.tolist()
         self._x = np.asarray(x, dtype=float).tolist()
         self._y = np.asarray(y, dtype=float).tolist()

@@ -13,6 +13,7 @@ from addt_dsl import units
 from addt_dsl.plan import RoadPlan, SegmentPlan
 from addt_dsl.registry import GEOMETRIES, ParamSpec
 from addt_dsl.runtime import road as R
+from addt_dsl.runtime.road.limits import MAX_COORDINATE_M, MAX_ROAD_LENGTH_M
 
 
 class RoadItemKind:
@@ -36,7 +37,8 @@ class RoadItemKind:
         raise NotImplementedError
 
 
-_LEN = ParamSpec("length", units.LENGTH, required=True, low=1e-3, doc="length along the reference line")
+_LEN = ParamSpec("length", units.LENGTH, required=True, low=1e-3, high=MAX_ROAD_LENGTH_M,
+                 doc="length along the reference line")
 
 
 @GEOMETRIES.register
@@ -103,7 +105,8 @@ class SpiralItem(RoadItemKind):
 @GEOMETRIES.register
 class ParamPoly3Item(RoadItemKind):
     keyword = "param_poly3"
-    params = (_LEN, *(ParamSpec(n, None, default=d, kind="number", doc=f"coefficient {n} [m]")
+    params = (_LEN, *(ParamSpec(n, None, default=d, kind="number", low=-MAX_COORDINATE_M, high=MAX_COORDINATE_M,
+                                doc=f"coefficient {n} [m]")
                       for n, d in (("au", 0.0), ("bu", 1.0), ("cu", 0.0), ("du", 0.0),
                                    ("av", 0.0), ("bv", 0.0), ("cv", 0.0), ("dv", 0.0))))
     doc = "A parametric cubic u(p), v(p) with p in [0, length] (pRange arcLength)."

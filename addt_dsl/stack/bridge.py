@@ -22,8 +22,11 @@ from __future__ import annotations
 
 import json
 import math
+import ipaddress
+import os
 import socket
 import struct
+import time
 
 import numpy as np
 
@@ -54,27 +57,60 @@ def encode(header: dict, blobs: dict[str, np.ndarray] | None = None) -> bytes:
     return _HEAD.pack(4 + len(head) + len(body), len(head)) + head + body
 
 
+class ProtocolError(ValueError):
+    """A message that breaks the framing or the schema: the connection is closed."""
+
+
+MAX_MESSAGE_BYTES = 64 * 2**20  # default limit on one message, checked before it is read
+_BLOB_KINDS = "biuf"  # numeric dtypes only (never object or void arrays)
+
+
 def decode(payload: bytes) -> tuple[dict, dict[str, np.ndarray]]:
-    """Inverse of `encode` for the bytes after the length prefix."""
-    (head_len,) = struct.unpack(">I", payload[:4])
-    header = json.loads(payload[4:4 + head_len])
-    blobs = {}
-    offset = 4 + head_len
-    for d in header.pop("blobs", []):
-        dtype = np.dtype(d["dtype"])
-        n = int(np.prod(d["shape"], dtype=np.int64)) * dtype.itemsize
-        blobs[d["name"]] = np.frombuffer(payload[offset:offset + n], dtype=dtype).reshape(d["shape"])
-        offset += n
+    """Inverse of `encode` for the bytes after the length prefix; ProtocolError on any
+    malformed input (bad JSON, a header that is not an object, blobs that do not fit)."""
+    try:
+        (head_len,) = struct.unpack(">I", payload[:4])
+        if 4 + head_len > len(payload):
+            raise ProtocolError("header length runs past the message")
+        header = json.loads(payload[4:4 + head_len])
+        if not isinstance(header, dict):
+            raise ProtocolError("the header is not a JSON object")
+        descs = header.pop("blobs", [])
+        if not isinstance(descs, list):
+            raise ProtocolError("'blobs' is not a list")
+        blobs = {}
+        offset = 4 + head_len
+        for d in descs:
+            dtype = np.dtype(d["dtype"])
+            shape = [int(n) for n in d["shape"]]
+            if dtype.kind not in _BLOB_KINDS or any(n < 0 for n in shape) or not isinstance(d["name"], str):
+                raise ProtocolError(f"blob {escape(str(d.get('name')))!r}: unsupported dtype or shape")
+            n = math.prod(shape) * dtype.itemsize
+            if offset + n > len(payload):
+                raise ProtocolError("blobs run past the message")
+            blobs[d["name"]] = np.frombuffer(payload[offset:offset + n], dtype=dtype).reshape(shape)
+            offset += n
+    except ProtocolError:
+        raise
+    except (ValueError, TypeError, KeyError, AttributeError, RecursionError, struct.error) as exc:
+        raise ProtocolError(f"malformed message: {type(exc).__name__}: {escape(str(exc))}") from None
     if offset != len(payload):
-        raise ValueError(f"message has {len(payload) - offset} trailing bytes")
+        raise ProtocolError(f"message has {len(payload) - offset} trailing bytes")
     return header, blobs
 
 
-def _recv_exact(sock: socket.socket, n: int) -> bytes:
+def _recv_exact(sock: socket.socket, n: int, deadline: float | None) -> bytes:
+    """Read n bytes before `deadline` (time.monotonic()): the deadline bounds the whole
+    message, so a peer trickling one byte a second still times out."""
     buf = bytearray(n)
     view = memoryview(buf)
     got = 0
     while got < n:
+        if deadline is not None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError("the peer did not send a whole message in time")
+            sock.settimeout(left)
         k = sock.recv_into(view[got:], n - got)
         if k == 0:
             raise ConnectionError("peer closed the connection")
@@ -82,13 +118,33 @@ def _recv_exact(sock: socket.socket, n: int) -> bytes:
     return bytes(buf)
 
 
-def send(sock: socket.socket, header: dict, blobs: dict[str, np.ndarray] | None = None) -> None:
+def send(sock: socket.socket, header: dict, blobs: dict[str, np.ndarray] | None = None,
+         deadline: float | None = None) -> None:
+    if deadline is not None:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise TimeoutError("no time left to send")
+        sock.settimeout(left)
     sock.sendall(encode(header, blobs))
 
 
-def recv(sock: socket.socket) -> tuple[dict, dict[str, np.ndarray]]:
-    (length,) = struct.unpack(">I", _recv_exact(sock, 4))
-    return decode(_recv_exact(sock, length))
+def recv(sock: socket.socket, max_bytes: int = MAX_MESSAGE_BYTES,
+         deadline: float | None = None) -> tuple[dict, dict[str, np.ndarray]]:
+    """One message, refused (ProtocolError) if its length prefix exceeds `max_bytes`
+    before any of it is read."""
+    (length,) = struct.unpack(">I", _recv_exact(sock, 4, deadline))
+    if length > max_bytes:
+        raise ProtocolError(f"message of {length} bytes exceeds the limit of {max_bytes} bytes")
+    if length < 4:
+        raise ProtocolError(f"message of {length} bytes is shorter than its header length")
+    return decode(_recv_exact(sock, length, deadline))
+
+
+def escape(text: str, limit: int = 2000) -> str:
+    """Peer text made safe to print or store: control characters (terminal escape
+    sequences among them) written as \\xNN, and at most `limit` characters."""
+    out = "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text[:limit])
+    return out + ("..." if len(text) > limit else "")
 
 
 def parse_address(address: str) -> tuple[str, int]:
@@ -96,6 +152,31 @@ def parse_address(address: str) -> tuple[str, int]:
     if not sep or not port.isdigit():
         raise ValueError(f"address must be HOST:PORT, not {address!r}")
     return host or "127.0.0.1", int(port)
+
+
+ALLOW_HOSTS_ENV = "ADDT_BRIDGE_ALLOW_HOSTS"  # comma-separated; `addtc run --allow-host HOST` sets it
+TOKEN_ENV = "ADDT_BRIDGE_TOKEN"  # the shared token both sides send and expect in `hello`
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False  # any other name could resolve anywhere
+
+
+def allowed_hosts() -> set[str]:
+    return {h.strip() for h in os.environ.get(ALLOW_HOSTS_ENV, "").split(",") if h.strip()}
+
+
+def check_address(host: str) -> None:
+    """A scenario file may only point the runner at this machine, unless the person
+    running it allowed the host on the command line."""
+    if not is_loopback(host) and host not in allowed_hosts():
+        raise StackError(f"refused to connect to {escape(host)!r}: a scenario's bridge address must be loopback "
+                         f"unless allowed with `addtc run --allow-host {escape(host)}`")
 
 
 def extrinsics_dict(ext) -> dict[str, float]:
@@ -131,17 +212,22 @@ class ExternalStack:
         self.latency = {n: 0.0 for n in (*NODE_NAMES, "e2e")}
         self.objects_seen = 0
         self._frames: list = []
+        self.sock = None  # connected at the first step, so a failure there is a detected stack failure
+
+    def _connect(self) -> None:
         host, port = parse_address(str(self.settings["address"]))
+        check_address(host)
         timeout = float(self.settings["timeout"])
         try:
             self.sock = socket.create_connection((host, port), timeout=timeout)
         except OSError as exc:
-            raise StackError(f"cannot reach the external stack at {host}:{port}: {exc}") from None
+            raise StackError(f"cannot reach the external stack at {escape(host)}:{port}: {exc}") from None
         try:
             self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self._request(self._hello(), expect="ready")
         except BaseException:
-            self.sock.close()  # the run never gets this stack to close
+            self.sock.close()
+            self.sock = None
             raise
 
     def _hello(self) -> dict:
@@ -152,7 +238,7 @@ class ExternalStack:
         sensors = [{"name": name, "kind": s.keyword, "settings": _jsonable(s.settings),
                     "nominal": extrinsics_dict(s.nominal), "period_s": s.period_s}
                    for name, s in run.sensors.items()]
-        return {
+        hello = {
             "type": "hello", "protocol": PROTOCOL, "seed": spec.seed, "step_s": run.dt,
             "stack": _jsonable(remote),
             "ego": {"lane": self.ctx.ego_lane, "wheelbase_m": self.ctx.wheelbase_m,
@@ -160,17 +246,23 @@ class ExternalStack:
             "sensors": sensors,
             "map": {"format": "addt-road-plan", "road": road.model_dump(mode="json")},
         }
+        token = os.environ.get(TOKEN_ENV)
+        if token:
+            hello["token"] = token
+        return hello
 
     def _request(self, header: dict, blobs=None, expect: str = "control"):
+        """Send one message and read its reply, all within the `timeout` setting."""
+        deadline = time.monotonic() + float(self.settings["timeout"])
         try:
-            send(self.sock, header, blobs)
-            reply, rblobs = recv(self.sock)
-        except (OSError, ConnectionError, ValueError) as exc:
-            raise StackError(f"external stack: {type(exc).__name__}: {exc}") from None
+            send(self.sock, header, blobs, deadline)
+            reply, rblobs = recv(self.sock, deadline=deadline)
+        except (OSError, ConnectionError, ValueError) as exc:  # TimeoutError is an OSError
+            raise StackError(f"external stack: {type(exc).__name__}: {escape(str(exc))}") from None
         if reply.get("type") == "error":
-            raise StackError(f"external stack error: {reply.get('message', '')}")
+            raise StackError(f"external stack error: {escape(str(reply.get('message', '')))}")
         if reply.get("type") != expect:
-            raise StackError(f"external stack sent {reply.get('type')!r}, expected {expect!r}")
+            raise StackError(f"external stack sent {escape(str(reply.get('type')))!r}, expected {expect!r}")
         return reply, rblobs
 
     # ---- the stack interface the loop drives
@@ -203,19 +295,20 @@ class ExternalStack:
         self._frames = []
         x, y, heading, speed = self.ctx.ego_pose()
         ego = {"x": x, "y": y, "heading": heading, "speed": speed, "s_hint": self.ctx.run.ego_s}
+        if self.sock is None:
+            self._connect()
         reply, _ = self._request({"type": "step", "time_s": time_s, "dt": dt, "ego": ego, "frames": frames},
                                  blobs)
-        for apply_s, steer, accel in reply.get("commands", []):
-            if not (math.isfinite(steer) and math.isfinite(accel)):
-                raise StackError(f"non-finite command steer={steer!r} accel={accel!r}")
-            self.ctx.apply_command_at(float(apply_s), float(steer), float(accel))
-        for name, value in reply.get("latency", {}).items():
+        command, commands, latency, objects, events = _control(reply, time_s)
+        for apply_s, steer, accel in commands:
+            self.ctx.apply_command_at(apply_s, steer, accel)
+        for name, value in latency.items():
             if name in self.latency:
-                self.latency[name] = float(value)
-        self.objects_seen = int(reply.get("objects", 0))
-        for t, kind, detail in reply.get("events", []):
+                self.latency[name] = value
+        self.objects_seen = objects
+        for t, kind, detail in events:
             self.ctx.run.events.append(_event(t, kind, detail))
-        return tuple(reply.get("command", (0.0, 0.0)))
+        return command
 
     def _actors(self, hit_ids: np.ndarray) -> dict[str, dict]:
         out = {}
@@ -235,6 +328,50 @@ class ExternalStack:
             pass
         self.sock.close()
         self.sock = None
+
+
+def _control(reply: dict, time_s: float):
+    """The fields of a `control` reply, checked: a number that is not finite (a NaN command
+    time would never be applied and block every later command) or a malformed field is a
+    stack failure (StackError, the run is *detected*); peer text is escaped."""
+    def number(v, what: str) -> float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise StackError(f"external stack sent a non-finite or non-numeric {what}: {escape(repr(v))}")
+        return float(v)
+
+    def triple(v, what: str):
+        if not isinstance(v, (list, tuple)) or len(v) != 3:
+            raise StackError(f"external stack sent a malformed {what}: {escape(repr(v))}")
+        return v
+
+    try:
+        raw = reply.get("command", (0.0, 0.0))
+        if not isinstance(raw, (list, tuple)) or len(raw) != 2:
+            raise StackError(f"external stack sent a malformed command: {escape(repr(raw))}")
+        command = (number(raw[0], "command steer"), number(raw[1], "command accel"))
+        commands = [tuple(number(x, "command") for x in triple(c, "command")) for c in reply.get("commands", [])]
+        latency = {escape(str(k)): number(v, "latency") for k, v in dict(reply.get("latency", {})).items()}
+        objects = int(number(reply.get("objects", 0), "object count"))
+        events = []
+        for e in reply.get("events", []):
+            t, kind, detail = triple(e, "event")
+            events.append((number(t, "event time"), escape(str(kind), 80), _escaped(dict(detail))))
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise StackError(f"external stack sent a malformed control reply: {escape(str(exc))}") from None
+    return command, commands, latency, objects, events
+
+
+def _escaped(value, depth: int = 0):
+    """A peer's JSON value with every string escaped (for events stored in the trace)."""
+    if depth > 8:
+        return escape(repr(value), 200)
+    if isinstance(value, str):
+        return escape(value, 500)
+    if isinstance(value, dict):
+        return {escape(str(k), 80): _escaped(v, depth + 1) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_escaped(v, depth + 1) for v in value]
+    return value
 
 
 def _event(t, kind, detail):

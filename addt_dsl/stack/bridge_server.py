@@ -1,10 +1,15 @@
 """Reference bridge server: hosts the default `bev` stack for `stack external` runs.
 
-    python -m addt_dsl.stack.bridge_server [--address 127.0.0.1:5555]
+    python -m addt_dsl.stack.bridge_server [--address 127.0.0.1:5555] [--token T]
+        [--max-message-bytes N] [--idle-timeout S] [--max-connections N]
 
 Prints `listening HOST:PORT` once it accepts connections (`--address 127.0.0.1:0` picks a
-free port). Each connection is one run: `hello` builds a `BevStack` from the settings
-and the map it carries, every `step` replays the step's frames into it and ticks it,
+free port). It binds loopback unless told otherwise, and warns when told otherwise. Each
+message must arrive whole within the idle timeout and fit the size limit (checked before
+it is read); anything malformed gets an `error` reply and the connection is closed.
+
+Each connection is one run: `hello` builds a `BevStack` from the settings and the map it
+carries, every `step` replays the step's frames into it and ticks it,
 `bye` ends the run. Connections are served one thread each, so parallel runs may share a
 server. It is also the worked example of the protocol in docs/bridge.md: a stack in any
 language needs only to answer these three messages.
@@ -13,17 +18,35 @@ language needs only to answer these three messages.
 from __future__ import annotations
 
 import argparse
+import hmac
+import math
+import os
 import socket
 import socketserver
 import sys
 import threading
+import time
 import zlib
+from dataclasses import dataclass
 from collections.abc import Mapping
 from types import MappingProxyType
 
 import numpy as np
 
-from addt_dsl.stack.bridge import PROTOCOL, parse_address, recv, send
+from addt_dsl.stack.bridge import (
+    MAX_MESSAGE_BYTES,
+    PROTOCOL,
+    TOKEN_ENV,
+    ProtocolError,
+    escape,
+    is_loopback,
+    parse_address,
+    recv,
+    send,
+)
+
+IDLE_TIMEOUT_S = 60.0  # wait for each whole message, from its first byte to its last
+MAX_CONNECTIONS = 32  # runs served at once; more get an `error` reply
 
 
 class _Extrinsics:
@@ -112,36 +135,91 @@ class _RemoteContext:
         self.commands.append([time_s, steer, accel])
 
 
-def serve_connection(sock: socket.socket) -> None:
-    """Run one bridge session on a connected socket until `bye` or the peer closes."""
+@dataclass(frozen=True)
+class Limits:
+    """What one server accepts: the token its clients must send (None: any), the largest
+    message, how long it waits for each message."""
+
+    token: str | None = None
+    max_message_bytes: int = MAX_MESSAGE_BYTES
+    idle_timeout_s: float = IDLE_TIMEOUT_S
+
+
+def serve_connection(sock: socket.socket, limits: Limits = Limits()) -> None:
+    """Run one bridge session on a connected socket until `bye`, the peer closes, a
+    deadline passes or a message is malformed (answered with `error`, then closed)."""
     from addt_dsl.stack.bev import BevStack
 
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     stack = ctx = None
     while True:
+        deadline = time.monotonic() + limits.idle_timeout_s
         try:
-            header, blobs = recv(sock)
-        except ConnectionError:
+            header, blobs = recv(sock, limits.max_message_bytes, deadline)
+        except (ConnectionError, TimeoutError):
+            return  # gone or idle: nothing to answer
+        except (ProtocolError, OSError) as exc:
+            _reply_error(sock, str(exc), deadline)
             return
         kind = header.get("type")
         try:
             if kind == "hello":
-                if header.get("protocol") != PROTOCOL:
-                    raise ValueError(f"protocol {header.get('protocol')} not supported (this is {PROTOCOL})")
+                if stack is not None:
+                    raise ValueError("a second hello on one connection")
+                _check_hello(header, limits)
                 ctx = _RemoteContext(header)
                 stack = BevStack(header["stack"], ctx)
-                send(sock, {"type": "ready", "stack": "bev", "nodes": list(stack.latency)})
+                send(sock, {"type": "ready", "stack": "bev", "nodes": list(stack.latency)}, deadline=deadline)
             elif kind == "step":
                 if stack is None:
                     raise ValueError("step before hello")
-                send(sock, _step(stack, ctx, header, blobs))
+                send(sock, _step(stack, ctx, header, blobs), deadline=deadline)
             elif kind == "bye":
                 return
             else:
-                raise ValueError(f"unknown message type {kind!r}")
+                raise ValueError(f"unknown message type {escape(str(kind), 80)!r}")
         except Exception as exc:  # noqa: BLE001 - reported to the simulator, which marks the run
-            send(sock, {"type": "error", "message": f"{type(exc).__name__}: {exc}"})
+            _reply_error(sock, f"{type(exc).__name__}: {exc}", deadline)
             return
+
+
+def _reply_error(sock: socket.socket, message: str, deadline: float) -> None:
+    try:
+        send(sock, {"type": "error", "message": escape(message)}, deadline=max(deadline, time.monotonic() + 1.0))
+    except OSError:
+        pass  # the peer is gone or not reading: closing is all that is left
+
+
+def _check_hello(header: dict, limits: Limits) -> None:
+    """The hello's token, protocol and settings, before anything is built from them."""
+    if limits.token is not None and not hmac.compare_digest(str(header.get("token", "")).encode(),
+                                                            limits.token.encode()):
+        raise PermissionError("wrong or missing token")
+    if header.get("protocol") != PROTOCOL:
+        raise ValueError(f"protocol {escape(str(header.get('protocol')), 40)} not supported (this is {PROTOCOL})")
+    from addt_dsl.stack.bev import BevStack
+
+    settings = header.get("stack")
+    if not isinstance(settings, dict):
+        raise ValueError("'stack' must be an object of settings")
+    specs = {p.name: p for p in BevStack.params}
+    for key, value in settings.items():
+        spec = specs.get(key)
+        if spec is None:
+            raise ValueError(f"unknown stack setting {escape(str(key), 80)!r}")
+        if spec.choices is not None:
+            if value not in spec.choices:
+                raise ValueError(f"stack setting {key} must be one of {', '.join(spec.choices)}")
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValueError(f"stack setting {key} must be a finite number")
+        if (spec.low is not None and value < spec.low) or (spec.high is not None and value > spec.high):
+            raise ValueError(f"stack setting {key}={value!r} is outside [{spec.low}, {spec.high}]")
+    step = header.get("step_s")
+    if isinstance(step, bool) or not isinstance(step, (int, float)) or not 0.0 < step <= 1.0:
+        raise ValueError("'step_s' must be a number in (0, 1] s")
+    if not isinstance(header.get("seed"), int):
+        raise ValueError("'seed' must be an integer")
 
 
 def _step(stack, ctx: _RemoteContext, header: dict, blobs: dict) -> dict:
@@ -170,15 +248,32 @@ def _step(stack, ctx: _RemoteContext, header: dict, blobs: dict) -> dict:
 
 class _Handler(socketserver.BaseRequestHandler):
     def handle(self):
-        serve_connection(self.request)
+        server: BridgeServer = self.server  # type: ignore[assignment]
+        if not server.slots.acquire(blocking=False):
+            _reply_error(self.request, f"busy: {server.max_connections} runs already connected",
+                         time.monotonic() + 1.0)
+            return
+        try:
+            serve_connection(self.request, server.limits)
+        except Exception as exc:  # noqa: BLE001 - one bad session must not print a traceback
+            print(f"bridge: session ended: {type(exc).__name__}: {escape(str(exc))}", file=sys.stderr)
+        finally:
+            server.slots.release()
 
 
 class BridgeServer(socketserver.ThreadingTCPServer):
     daemon_threads = True
     allow_reuse_address = True
 
-    def __init__(self, address: str):
-        super().__init__(parse_address(address), _Handler)
+    def __init__(self, address: str, limits: Limits = Limits(), max_connections: int = MAX_CONNECTIONS):
+        host, port = parse_address(address)
+        if not is_loopback(host):
+            print(f"warning: the bridge server listens on {escape(host)}, not loopback: any host that can reach "
+                  "it may drive the stack" + ("" if limits.token else "; set --token"), file=sys.stderr)
+        self.limits = limits
+        self.max_connections = max_connections
+        self.slots = threading.BoundedSemaphore(max_connections)
+        super().__init__((host, port), _Handler)
 
     @property
     def address(self) -> str:
@@ -186,9 +281,10 @@ class BridgeServer(socketserver.ThreadingTCPServer):
         return f"{host}:{port}"
 
 
-def start_in_thread(address: str = "127.0.0.1:0") -> BridgeServer:
+def start_in_thread(address: str = "127.0.0.1:0", limits: Limits = Limits(),
+                    max_connections: int = MAX_CONNECTIONS) -> BridgeServer:
     """A server on a background thread (for tests and notebooks); `shutdown()` it when done."""
-    server = BridgeServer(address)
+    server = BridgeServer(address, limits, max_connections)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     return server
 
@@ -196,8 +292,16 @@ def start_in_thread(address: str = "127.0.0.1:0") -> BridgeServer:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m addt_dsl.stack.bridge_server", description=__doc__.split("\n")[0])
     ap.add_argument("--address", default="127.0.0.1:5555", help="HOST:PORT to listen on (port 0: any free one)")
+    ap.add_argument("--token", default=os.environ.get(TOKEN_ENV),
+                    help=f"shared token every hello must carry (default: ${TOKEN_ENV}, else none)")
+    ap.add_argument("--max-message-bytes", type=int, default=MAX_MESSAGE_BYTES,
+                    help="largest message accepted, checked before it is read")
+    ap.add_argument("--idle-timeout", type=float, default=IDLE_TIMEOUT_S,
+                    help="seconds to wait for each whole message before closing the connection")
+    ap.add_argument("--max-connections", type=int, default=MAX_CONNECTIONS, help="runs served at once")
     args = ap.parse_args(argv)
-    with BridgeServer(args.address) as server:
+    limits = Limits(args.token or None, args.max_message_bytes, args.idle_timeout)
+    with BridgeServer(args.address, limits, args.max_connections) as server:
         print(f"listening {server.address}", flush=True)
         try:
             server.serve_forever()

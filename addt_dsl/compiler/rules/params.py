@@ -110,6 +110,9 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
     if "mean" in opts:
         m_expr = low.lower_value(opts["mean"].value, dim, f"'mean' of '{d.name}'")
         mean = const_value(m_expr) if m_expr is not None else None
+        if mean is not None and not math.isfinite(mean):
+            ctx.sink.error("E0204", f"'mean' of '{d.name}' is not a finite number", opts["mean"].value.span)
+            return None
     if "sd" in opts:
         sd_expr = low.lower_value(opts["sd"].value, dim, f"'sd' of '{d.name}'")
         sd = const_value(sd_expr) if sd_expr is not None else None

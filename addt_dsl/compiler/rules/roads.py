@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from addt_dsl import plan as P
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import Context, RoadInfo, check_settings, const_value, suggest
-from addt_dsl.compiler.xodr_check import check_xodr
+from addt_dsl.compiler.xodr_check import check_inline_road, check_xodr
 from addt_dsl.registry import GEOMETRIES, ParamSpec
 
 
@@ -71,6 +71,8 @@ def _inline_road(ctx: Context, d: ast.RoadDecl) -> tuple[P.RoadPlan, RoadInfo] |
         return None
     plan = P.RoadPlan(name=d.name, source="inline", segments=segments, left_lanes=left, right_lanes=right,
                       lane_width_m=lanes["width"], lane_offset_m=lanes["offset"])
+    if not check_inline_road(ctx, plan, d.span):
+        return None
     ids = tuple(range(left, 0, -1)) + tuple(range(-1, -right - 1, -1))
     return plan, RoadInfo(sum(s.length_m for s in segments), ids, {i: lanes["width"] for i in ids})
 

@@ -25,6 +25,8 @@ from typing import Union
 
 import numpy as np
 
+from .limits import MAX_GEOMETRY_TURN_RAD, RoadLimitError, beyond
+
 ArrayLike = Union[float, np.ndarray]
 
 # Gauss-Legendre rule used for the clothoid and poly3 arc-length integrals. 16 nodes
@@ -45,6 +47,18 @@ def _composite_rule(n_sub: int) -> tuple[np.ndarray, np.ndarray]:
     nodes = ((j + (_GL_NODES[None, :] + 1.0) / 2.0) / n_sub).ravel()
     weights = np.tile(_GL_WEIGHTS / (2.0 * n_sub), n_sub)
     return nodes, weights
+
+
+def _check_turn(kind: str, max_abs_curvature: float, length: float) -> float:
+    """The geometry's largest possible heading change, refused beyond MAX_GEOMETRY_TURN_RAD:
+    sampling and the clothoid's integration rule grow with it (a 1e12 /m arc must not
+    ask for petabytes)."""
+    turn = max_abs_curvature * length
+    if not turn <= MAX_GEOMETRY_TURN_RAD:
+        raise RoadLimitError(f"{kind} with |curvature| up to {max_abs_curvature:.6g} /m over {length:.6g} m: its turn "
+                             "of " + beyond("MAX_GEOMETRY_TURN_RAD", turn, MAX_GEOMETRY_TURN_RAD, "rad",
+                                            "split the curve into several geometries"))
+    return turn
 
 
 def _check_finite(name: str, **values: float) -> None:
@@ -91,6 +105,9 @@ class Arc:
 
     kind = "arc"
 
+    def __post_init__(self) -> None:
+        _check_turn(self.kind, abs(self.curvature_per_m), self.length)
+
     def pose(self, s: ArrayLike):
         scalar = np.ndim(s) == 0
         ds = np.asarray(s, dtype=float) - self.s0
@@ -134,7 +151,7 @@ class Spiral:
     def __post_init__(self) -> None:
         if not self.length >= 0.0:
             raise ValueError(f"spiral length must be >= 0 m, got {self.length!r}")
-        max_turn = max(abs(self.curv_start), abs(self.curv_end)) * self.length
+        max_turn = _check_turn(self.kind, max(abs(self.curv_start), abs(self.curv_end)), self.length)
         n_sub = max(1, math.ceil(max_turn / _MAX_PHASE_PER_SUB_RAD))
         nodes, weights = _composite_rule(n_sub)
         object.__setattr__(self, "_nodes", nodes)

@@ -16,6 +16,7 @@ import numpy as np
 
 from .geometry import CubicProfile, Geometry, ParamPoly3, Poly3
 from .lanes import DRIVING_TYPES, LaneSection, lanes_at_t_array
+from .limits import MAX_COORDINATE_M, MAX_ROAD_LENGTH_M, MAX_ROAD_SAMPLES, RoadLimitError, beyond
 
 S_SLACK_M = 1e-6  # tolerated overshoot of s beyond [0, length] (float noise in files)
 ON_ROAD_LONG_TOL_M = 1e-6  # projection residual along the road beyond which a point is "off the end"
@@ -68,32 +69,52 @@ class Road:
             raise ValueError(f"road {self.id}: no lane section")
         if not (self.length > 0.0 and math.isfinite(self.length)):
             raise ValueError(f"road {self.id}: length must be > 0 m, got {self.length!r}")
+        if self.length > MAX_ROAD_LENGTH_M:
+            raise RoadLimitError(f"road {self.id}: length " + beyond(
+                "MAX_ROAD_LENGTH_M", self.length, MAX_ROAD_LENGTH_M, "m", "split it into consecutive roads"))
         object.__setattr__(self, "_geom_starts", np.array([g.s0 for g in self.geometries]))
         object.__setattr__(self, "_section_starts", np.array([sec.s0 for sec in self.sections]))
         object.__setattr__(self, "_section_starts_t", tuple(sec.s0 for sec in self.sections))
         object.__setattr__(self, "_geom_starts_t", tuple(g.s0 for g in self.geometries))
         sample_s = self._coarse_samples()
         x, y, _ = self.reference_pose(sample_s)
+        reach = float(np.max(np.abs(np.concatenate([x, y]))))
+        if not reach <= MAX_COORDINATE_M:  # also catches NaN
+            raise RoadLimitError(f"road {self.id}: reference line distance from the map origin: " + beyond(
+                "MAX_COORDINATE_M", reach, MAX_COORDINATE_M, "m"))
         object.__setattr__(self, "_sample_s", sample_s)
         object.__setattr__(self, "_sample_xy", np.stack([x, y], axis=1))
 
     # ------------------------------------------------------------------ helpers
 
     def _coarse_samples(self) -> np.ndarray:
-        pieces = []
+        """Sample s every 4 m, and every 0.1 rad of heading where the road bends. The count
+        is known before anything is allocated: a road that would need more than
+        MAX_ROAD_SAMPLES is refused (a curvature of 1e12 /m must not ask for petabytes)."""
+        spans = []
         ends = list(self._geom_starts[1:]) + [self.length]
-        for geom, end in zip(self.geometries, ends):
+        for i, (geom, end) in enumerate(zip(self.geometries, ends)):
             start = max(0.0, min(geom.s0, self.length))
             end = max(start, min(end, self.length))
             if end <= start:
                 continue
             probe = np.linspace(start, end, 33)
-            k_max = float(np.max(np.abs(geom.curvature(probe))))
-            step = _SAMPLE_STEP_M if k_max == 0.0 else min(_SAMPLE_STEP_M, _MAX_SAMPLE_TURN_RAD / k_max)
-            n = max(2, int(math.ceil((end - start) / step)) + 1)
-            pieces.append(np.linspace(start, end, n))
-        samples = np.unique(np.concatenate(pieces + [np.array([0.0, self.length])]))
-        return samples
+            with np.errstate(all="ignore"):
+                k_max = float(np.max(np.abs(geom.curvature(probe))))
+            if not math.isfinite(k_max):
+                raise RoadLimitError(f"road {self.id}: the {geom.kind} geometry at s={geom.s0:.6g} m has no finite "
+                                     "curvature (a degenerate tangent)", geometry=i)
+            n = max(2, math.ceil((end - start) / _SAMPLE_STEP_M),
+                    math.ceil((end - start) * k_max / _MAX_SAMPLE_TURN_RAD)) + 1
+            spans.append((i, geom, start, end, n))
+        total = sum(n for *_, n in spans)
+        if total > MAX_ROAD_SAMPLES:
+            i, geom, *_ = max(spans, key=lambda sp: sp[-1])
+            raise RoadLimitError(f"road {self.id}: sampling it needs {total:.6g} points (the {geom.kind} geometry at "
+                                 f"s={geom.s0:.6g} m bends too sharply for its length); " + beyond(
+                                     "MAX_ROAD_SAMPLES", total, MAX_ROAD_SAMPLES, "samples"), geometry=i)
+        pieces = [np.linspace(start, end, n) for _, _, start, end, n in spans]
+        return np.unique(np.concatenate(pieces + [np.array([0.0, self.length])]))
 
     def _s(self, s) -> tuple[np.ndarray, bool]:
         if isinstance(s, (float, int)):  # fast path for per-step scalar queries

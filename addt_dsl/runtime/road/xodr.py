@@ -17,10 +17,12 @@ from dataclasses import dataclass, field
 from typing import Optional, Union
 
 import defusedxml.sax
+import numpy as np
 from defusedxml import DefusedXmlException
 
 from .geometry import Arc, CubicProfile, Line, ParamPoly3, Poly3, Spiral
 from .lanes import Lane, LaneSection
+from . import limits as L
 from .network import Connection, Junction, RoadNetwork
 from .road import Road, RoadLink
 
@@ -131,7 +133,10 @@ class _Reader:
     def err(self, node: _Node, message: str) -> XodrError:
         return XodrError(message, element=node.tag, line=node.line, source=self.source)
 
-    def num(self, node: _Node, key: str, default: Optional[float] = None) -> float:
+    def num(self, node: _Node, key: str, default: Optional[float] = None, bound: float = L.MAX_ABS_ATTRIBUTE,
+            bound_name: str = "MAX_ABS_ATTRIBUTE") -> float:
+        """A finite number no larger in magnitude than `bound` (absurd values are refused here,
+        where they are read, not when something downstream overflows or allocates)."""
         raw = node.attrs.get(key)
         if raw is None:
             if default is not None:
@@ -143,7 +148,12 @@ class _Reader:
             raise self.err(node, f"attribute {key}={raw!r} is not a number") from None
         if not math.isfinite(value):
             raise self.err(node, f"attribute {key}={raw!r} is not finite")
+        if abs(value) > bound:
+            raise self.err(node, f"attribute {key}: " + L.beyond(bound_name, abs(value), bound, "(absolute value)"))
         return value
+
+    def coord(self, node: _Node, key: str, default: Optional[float] = None) -> float:
+        return self.num(node, key, default, L.MAX_COORDINATE_M, "MAX_COORDINATE_M")
 
     def text(self, node: _Node, key: str, default: Optional[str] = None) -> str:
         raw = node.attrs.get(key, default)
@@ -154,8 +164,9 @@ class _Reader:
     def cubic(self, nodes: list[_Node], s_key: str, before_first: str = "extrapolate") -> CubicProfile:
         starts, coeffs = [], []
         for n in nodes:
-            starts.append(self.num(n, s_key))
-            coeffs.append(tuple(self.num(n, k) for k in ("a", "b", "c", "d")))
+            starts.append(self.coord(n, s_key))
+            # coefficients are bounded through the values they give (check_profiles)
+            coeffs.append(tuple(self.num(n, k, bound=math.inf) for k in ("a", "b", "c", "d")))
         return CubicProfile(tuple(starts), tuple(coeffs), before_first=before_first)
 
     # ------------------------------------------------------------------ document
@@ -208,9 +219,12 @@ class _Reader:
 
     def road(self, node: _Node) -> Road:
         road_id = self.text(node, "id")
-        length = self.num(node, "length")
+        length = self.num(node, "length", bound=math.inf)
         if length <= 0.0:
             raise self.err(node, f"road {road_id}: length must be > 0, got {length}")
+        if length > L.MAX_ROAD_LENGTH_M:
+            raise self.err(node, f"road {road_id}: length " + L.beyond(
+                "MAX_ROAD_LENGTH_M", length, L.MAX_ROAD_LENGTH_M, "m", "split it into consecutive roads"))
         plan = node.find("planView")
         if plan is None or not plan.findall("geometry"):
             raise self.err(plan or node, f"road {road_id}: planView needs at least one <geometry>")
@@ -230,7 +244,7 @@ class _Reader:
         sec_nodes = lanes.findall("laneSection")
         if not sec_nodes:
             raise self.err(lanes, f"road {road_id}: needs at least one <laneSection>")
-        starts = [self.num(sn, "s") for sn in sec_nodes]
+        starts = [self.coord(sn, "s") for sn in sec_nodes]
         if any(b < a for a, b in zip(starts, starts[1:])):
             raise self.err(lanes, f"road {road_id}: lane sections must be ordered by s")
         ends = starts[1:] + [length]
@@ -243,7 +257,7 @@ class _Reader:
         predecessor = self.link(link.find("predecessor")) if link else None
         successor = self.link(link.find("successor")) if link else None
         try:
-            return Road(
+            road = Road(
                 road_id, length, geometries, sections,
                 offset_profile=offset, elevation_profile=elevation,
                 superelevation_profile=superelevation,
@@ -252,12 +266,40 @@ class _Reader:
                 predecessor=predecessor,
                 successor=successor,
             )
+        except L.RoadLimitError as exc:
+            at = plan.findall("geometry")[exc.geometry] if exc.geometry is not None else node
+            raise self.err(at, str(exc)) from None
         except ValueError as exc:
             raise self.err(node, str(exc)) from None
+        self.check_profiles(road, node, sec_nodes)
+        return road
+
+    def check_profiles(self, road: Road, node: _Node, sec_nodes: list[_Node]) -> None:
+        """Lane widths, laneOffset, elevation and superelevation stay within their limits
+        along the whole road (each cubic piece is probed at 17 points)."""
+        lanes = node.find("lanes")
+        checks = [(road.offset_profile, 0.0, road.length, L.MAX_LANE_OFFSET_M, "MAX_LANE_OFFSET_M", "laneOffset",
+                   lanes, "m"),
+                  (road.elevation_profile, 0.0, road.length, L.MAX_ELEVATION_M, "MAX_ELEVATION_M", "elevation",
+                   node.find("elevationProfile") or node, "m"),
+                  (road.superelevation_profile, 0.0, road.length, L.MAX_SUPERELEVATION_RAD,
+                   "MAX_SUPERELEVATION_RAD", "superelevation", node.find("lateralProfile") or node, "rad")]
+        for sec, sn in zip(road.sections, sec_nodes):
+            # Lane ids were parsed (and checked) by lane(); map them back to their elements.
+            nodes = {int(float(n.attrs["id"])): n for side in (sn.find("left"), sn.find("right")) if side
+                     for n in side.findall("lane")}
+            for lane in sec.left + sec.right:
+                checks.append((lane.width, 0.0, sec.s1 - sec.s0, L.MAX_LANE_WIDTH_M, "MAX_LANE_WIDTH_M",
+                               f"lane {lane.id} width", nodes.get(lane.id, sn), "m"))
+        for profile, lo, hi, limit, name, what, at, unit in checks:
+            worst = _profile_max(profile, lo, hi)
+            if worst > limit:
+                raise self.err(at, f"road {road.id}: {what} " + L.beyond(name, worst, limit, unit))
 
     def geometry(self, node: _Node):
-        s0, x0, y0, hdg = (self.num(node, k) for k in ("s", "x", "y", "hdg"))
-        length = self.num(node, "length")
+        s0, x0, y0 = (self.coord(node, k) for k in ("s", "x", "y"))
+        hdg = self.num(node, "hdg")
+        length = self.num(node, "length", bound=L.MAX_ROAD_LENGTH_M, bound_name="MAX_ROAD_LENGTH_M")
         if length < 0.0:
             raise self.err(node, f"geometry length must be >= 0, got {length}")
         kinds = [c for c in node.children if c.tag in _GEOMETRY_TAGS]
@@ -270,10 +312,12 @@ class _Reader:
         try:
             if g.tag == "line":
                 return Line(s0, x0, y0, hdg, length)
+            # Curvatures are bounded by the turn they give (geometry._check_turn), not by magnitude.
             if g.tag == "arc":
-                return Arc(s0, x0, y0, hdg, length, self.num(g, "curvature"))
+                return Arc(s0, x0, y0, hdg, length, self.num(g, "curvature", bound=math.inf))
             if g.tag == "spiral":
-                return Spiral(s0, x0, y0, hdg, length, self.num(g, "curvStart"), self.num(g, "curvEnd"))
+                return Spiral(s0, x0, y0, hdg, length, self.num(g, "curvStart", bound=math.inf),
+                              self.num(g, "curvEnd", bound=math.inf))
             if g.tag == "poly3":
                 return Poly3(s0, x0, y0, hdg, length, *(self.num(g, k) for k in "abcd"))
             p_range = g.attrs.get("pRange", "normalized").strip()
@@ -319,6 +363,17 @@ class _Reader:
         return Lane(
             lane_id, node.attrs.get("type", "none").strip(), self.cubic(widths, "sOffset"), level, pred, succ
         )
+
+
+def _profile_max(profile: CubicProfile, lo: float, hi: float) -> float:
+    """Largest |f| of a piecewise cubic over [lo, hi], probed at 17 points per piece."""
+    if not profile.starts_sorted or hi <= lo:
+        return 0.0
+    cuts = sorted({lo, hi, *(min(max(s, lo), hi) for s in profile.starts_sorted)})
+    probe = np.concatenate([np.linspace(a, b, 17) for a, b in zip(cuts, cuts[1:])] or [np.array([lo])])
+    with np.errstate(all="ignore"):
+        values = np.abs(np.asarray(profile(probe), dtype=float))
+    return float(np.max(values)) if np.all(np.isfinite(values)) else math.inf
 
 
 def parse_xodr(text: Union[str, bytes], source_name: str = "<string>") -> RoadNetwork:
