@@ -12,7 +12,9 @@
     addtc falsify FILE [--budget-runs N]  search parameters and faults for failures
     addtc study perception|classify|table ...  fault studies (perception errors by band, outcomes)
 
-Exit codes: 0 every oracle held in every run, 1 some run failed, 2 compile/usage error.
+Exit codes (addt_dsl/errors.py): 0 every run passed, 1 at least one run failed an oracle,
+2 usage or scenario error, 3 the tool could not complete (runs crashed or timed out, the
+store is unusable, internal error). Set ADDT_DEBUG=1 to see the traceback of an internal error.
 """
 
 from __future__ import annotations
@@ -21,13 +23,17 @@ import argparse
 import itertools
 import json
 import os
+import sqlite3
 import sys
 import tempfile
+import traceback
 from pathlib import Path
 
 from addt_dsl.diagnostics import render_json, render_text
+from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, IncompleteError, UsageError, nonneg_float,
+                             nonneg_int, positive_float, positive_int, verdict_exit_code)
 
-EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
+EXIT_ERROR = EXIT_USAGE  # compile and usage errors
 SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "shrink", "falsify", "study")
 
 
@@ -125,6 +131,9 @@ def _run_suite(args, paths: list[Path]) -> int:
                                   collect=lambda plan, store, row=row: collect(plan, store, row))
         row.wall_s = time.perf_counter() - started
         rows.append(row)
+    if args.by and not any(r.by for r in rows) and any(r.totals.get("runs") for r in rows):
+        print(f"error: --by {args.by}: no file of the suite has a parameter of that name", file=sys.stderr)
+        return max([EXIT_USAGE, *(r.exit_code for r in rows)])
     if out:
         write_summary(out, rows, args.by)
     if args.junit:
@@ -158,7 +167,7 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
         return EXIT_ERROR
     try:
         executor = _executor(args)
-    except _UsageError as exc:
+    except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR
     tmp = None
@@ -184,17 +193,13 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
     except UnsatisfiableAssumptions as exc:
         print(f"error[E0501]: {exc}", file=sys.stderr)
         return EXIT_ERROR
-    except _UsageError as exc:
+    except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_ERROR
     finally:
         store.close()
         if tmp is not None:
             tmp.cleanup()
-
-
-class _UsageError(ValueError):
-    pass
 
 
 def _executor(args):
@@ -206,11 +211,11 @@ def _executor(args):
         from addt_dsl.runtime.ray_executor import RayExecutor, ray_available
 
         if not ray_available():
-            raise _UsageError("--executor ray needs the `ray` package (pip install 'addt-dsl[ray]')")
+            raise UsageError("--executor ray needs the `ray` package (pip install 'addt-dsl[ray]')")
         return RayExecutor(address=args.address, jobs=args.jobs if args.jobs_given else None,
                            timeout_s=args.timeout, memory_limit_mb=args.memory_limit)
     if args.address:
-        raise _UsageError("--address is for --executor ray")
+        raise UsageError("--address is for --executor ray")
     from addt_dsl.runtime.executor import LocalExecutor
 
     return LocalExecutor(args.jobs, timeout_s=args.timeout, memory_limit_mb=args.memory_limit,
@@ -224,7 +229,7 @@ def _classifying(args, stream, store, executor):
     from addt_dsl.runtime.outcome import ClassifyingExecutor, GoldenCache, prepare_goldens
 
     if not hasattr(executor, "run_fn"):
-        raise _UsageError(f"--classify runs on the local or inline executor, not {executor.name}")
+        raise UsageError(f"--classify runs on the local or inline executor, not {executor.name}")
     golden_dir = store.path.with_name(store.path.stem + "-golden")
     done = store.done()
     specs = itertools.islice(stream, args.limit) if args.limit else stream
@@ -280,7 +285,7 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
         print_verdicts(plan, shown_records(store), totals, fmt=args.format)
     if not quiet and outcome.skipped:
         print(f"({outcome.skipped} run(s) taken from the store, {outcome.ran} executed now)", file=sys.stderr)
-    return EXIT_OK if totals["failed"] == 0 else EXIT_FAILED
+    return verdict_exit_code(totals["statuses"], totals["failed"])
 
 
 def _sweep_with_progress(specs, store, executor, total: int, done: int, quiet: bool):
@@ -307,6 +312,7 @@ def cmd_report(args) -> int:
         return EXIT_ERROR
     out = Path(args.out) if args.out else (target.parent if target.is_file() else target)
     with ResultStore(store_path) as store:
+        totals = store.summary()
         write_tables(out, store)
         path = build_report(store, out / "report.html", max_animations=args.animations)
         if args.junit:
@@ -317,7 +323,7 @@ def cmd_report(args) -> int:
             else:
                 store.to_csv(export)
         print(f"wrote {path}")
-    return EXIT_OK
+    return verdict_exit_code(totals["statuses"], totals["failed"])
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -328,7 +334,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="scenario file(s); a directory stands for the .addt files in it (a suite)")
     run.add_argument("--by", metavar="PARAM",
                      help="suite table: success rate per value of this parameter (e.g. drop_rate)")
-    run.add_argument("--jobs", "-j", type=int, default=None,
+    run.add_argument("--jobs", "-j", type=positive_int, default=None,
                      help="worker processes (default: CPU count; Ray: the cluster's CPUs)")
     run.add_argument("--executor", choices=("local", "ray", "inline"), default="local",
                      help="local worker processes (default), a Ray cluster, or this process (debugging)")
@@ -338,16 +344,16 @@ def build_parser() -> argparse.ArgumentParser:
                                      "(default: OUT/results.sqlite, else a temporary file)")
     run.add_argument("--fresh", action="store_true", help="discard the store's results before running")
     run.add_argument("--junit", metavar="FILE", help="write JUnit XML (one testcase per run)")
-    run.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
+    run.add_argument("--timeout", type=positive_float, default=None, metavar="SECONDS",
                      help="wall-clock limit per run; a run past it is recorded as `timeout`")
-    run.add_argument("--memory-limit", type=float, default=4096, metavar="MB",
+    run.add_argument("--memory-limit", type=nonneg_float, default=4096, metavar="MB",
                      help="resident memory per worker; a run past it is recorded as `memory` (0: off)")
-    run.add_argument("--max-tasks-per-child", type=int, default=500, metavar="N",
+    run.add_argument("--max-tasks-per-child", type=positive_int, default=500, metavar="N",
                      help="replace a worker process after N runs")
     run.add_argument("--no-report", action="store_true", help="with --out: skip report.html")
-    run.add_argument("--animations", type=int, default=4, metavar="N",
+    run.add_argument("--animations", type=nonneg_int, default=4, metavar="N",
                      help="failing runs to animate in report.html")
-    run.add_argument("--limit", type=int, default=0, help="run only the first N runs of the sweep")
+    run.add_argument("--limit", type=nonneg_int, default=0, help="run only the first N runs of the sweep")
     run.add_argument("--format", choices=("text", "json"), default="text")
     run.add_argument("--classify", action="store_true",
                      help="classify every run against its fault-free twin: masked, silent, detected, "
@@ -359,7 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--junit", metavar="FILE", help="also write JUnit XML")
     report.add_argument("--export", action="append", metavar="FILE",
                         help="also export the runs table (.csv or .parquet); repeatable")
-    report.add_argument("--animations", type=int, default=4, metavar="N")
+    report.add_argument("--animations", type=nonneg_int, default=4, metavar="N")
     report.set_defaults(func=cmd_report)
     check = sub.add_parser("check", help="compile only")
     check.add_argument("files", nargs="+")
@@ -392,7 +398,7 @@ def cmd_study(argv: list[str]) -> int:
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["study"]:  # its own parser sees every argument, --help included
-        return cmd_study(argv[1:])
+        return guarded(cmd_study, argv[1:])
     if argv and argv[0] not in SUBCOMMANDS and not argv[0].startswith("-"):
         argv.insert(0, "run")
     parser = build_parser()
@@ -403,10 +409,41 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_ERROR
+    return guarded(args.func, args)
+
+
+def guarded(command, *args) -> int:
+    """Run a command; map what escapes it onto the exit codes (addt_dsl/errors.py): a usage
+    error is one line and exit 2; an unusable store, a disk error or any other exception
+    is one line and exit 3 (never 1, which means a run failed), with the traceback only
+    when ADDT_DEBUG is set."""
     try:
-        return args.func(args)
+        return command(*args)
     except KeyboardInterrupt:
         return 130
+    except UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError) as exc:  # a path the user gave
+        print(f"error: {exc.strerror or exc}: {exc.filename}" if exc.filename else f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except Exception as exc:  # noqa: BLE001 - the tool failed: say so in one line, exit 3
+        if os.environ.get("ADDT_DEBUG"):
+            traceback.print_exc()
+        print(f"error: {_incomplete_message(exc)}", file=sys.stderr)
+        return EXIT_INCOMPLETE
+
+
+def _incomplete_message(exc: Exception) -> str:
+    first = (str(exc).splitlines() or [""])[0]
+    if isinstance(exc, IncompleteError):
+        return first
+    if isinstance(exc, sqlite3.DatabaseError):
+        return f"the results store is unusable ({first}); run again with a new --out or --store"
+    if isinstance(exc, OSError):
+        return f"{exc.strerror or first}" + (f": {exc.filename}" if exc.filename else "")
+    return (f"internal error: {type(exc).__name__}: {first} "
+            "(a bug in addtc; set ADDT_DEBUG=1 for the traceback)")
 
 
 if __name__ == "__main__":
