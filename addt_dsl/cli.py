@@ -279,7 +279,8 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
     if getattr(args, "in_suite", False):
         if not quiet:  # one line per file; the suite prints the combined table
             failing = [f"{r.run_id} ({', '.join(r.failed_oracles) or r.status})" for r in store.failing(limit=5)]
-            print(f"{plan.name}: {totals['passed']} passed, {totals['failed']} failed"
+            warned = f", {totals['warned']} with warnings" if totals.get("warned") else ""
+            print(f"{plan.name}: {totals['passed']} passed, {totals['failed']} failed{warned}"
                   + (f"; e.g. {', '.join(failing)}" if failing else ""), file=sys.stderr)
     else:
         print_verdicts(plan, shown_records(store), totals, fmt=args.format)

@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 
 from addt_dsl.reporting import plots
-from addt_dsl.reporting.tables import cell_stats, fmt_number, fmt_param, success_pivot
+from addt_dsl.reporting.tables import cell_stats, fmt_number, fmt_param, success_pivot, warned_oracles
 
 MAX_TABLE_ROWS = 500
 DEFAULT_MAX_ANIMATIONS = 4
@@ -27,6 +27,7 @@ def _environment():
     env = Environment(loader=PackageLoader("addt_dsl.reporting", "templates"), autoescape=True,
                       trim_blocks=True, lstrip_blocks=True)
     env.filters["num"] = fmt_number
+    env.globals["warned_oracles"] = warned_oracles
     env.filters["pct"] = lambda x: "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.2f} %"
     return env
 
