@@ -292,8 +292,12 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
 def _sweep_with_progress(specs, store, executor, total: int, done: int, quiet: bool):
     from addt_dsl.runtime.executor import run_sweep
 
-    if quiet or total - done < 4 or not sys.stderr.isatty():
+    if quiet or total - done < 4:
         return run_sweep(specs, store, executor)
+    if not sys.stderr.isatty():  # a log, not a terminal: plain lines a bar cannot give
+        from addt_dsl.reporting.progress import ProgressLines
+
+        return run_sweep(specs, store, executor, on_record=ProgressLines(total, done))
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
