@@ -11,6 +11,7 @@ from addt_dsl.runtime.oracles.stl import (
     evaluate,
     first_violation_time,
     robustness_at_0,
+    robustness_over_time,
     samples,
     satisfied,
     verdicts,
@@ -19,7 +20,7 @@ from addt_dsl.runtime.oracles.stl import (
 __all__ = [
     "FormulaSyntaxError", "FormulaTypeError", "UnknownSignalError", "UnsubstitutedParameterError",
     "boolean_semantics", "evaluate", "first_violation_time", "format_formula", "parse_formula",
-    "robustness", "robustness_at_0", "samples", "satisfied", "verdicts",
+    "robustness", "robustness_at_0", "robustness_over_time", "samples", "satisfied", "verdicts",
 ]
 
 
