@@ -5,6 +5,7 @@
         [--executor local|ray] [--address ADDR] [--store PATH] [--timeout S] [--junit FILE]
         [--classify]                      also classify each run against its fault-free twin
     addtc report DIR                      HTML report, summary.json, runs.csv of a results dir
+    addtc trace DIR RUN_ID [--csv F] [--parquet F] [--plot F.png]   one run's signals and events
     addtc check FILE...                   compile only (diagnostics)
     addtc plan FILE                       print the ScenarioPlan as JSON
     addtc schema [--write PATH]           the plan's JSON schema
@@ -34,7 +35,7 @@ from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, IncompleteErr
                              nonneg_int, positive_float, positive_int, verdict_exit_code)
 
 EXIT_ERROR = EXIT_USAGE  # compile and usage errors
-SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "shrink", "falsify", "study")
+SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study")
 
 
 def _compile(path: str, fmt: str):
@@ -308,15 +309,10 @@ def _sweep_with_progress(specs, store, executor, total: int, done: int, quiet: b
 
 def cmd_report(args) -> int:
     from addt_dsl.reporting import build_report, write_junit, write_tables
-    from addt_dsl.runtime.store import ResultStore
 
     target = Path(args.dir)
-    store_path = target if target.is_file() else target / "results.sqlite"
-    if not store_path.exists():
-        print(f"error: no results store at {store_path} (run `addtc FILE --out DIR` first)", file=sys.stderr)
-        return EXIT_ERROR
     out = Path(args.out) if args.out else (target.parent if target.is_file() else target)
-    with ResultStore(store_path) as store:
+    with _open_store(target) as store:
         totals = store.summary()
         write_tables(out, store)
         path = build_report(store, out / "report.html", max_animations=args.animations)
@@ -329,6 +325,43 @@ def cmd_report(args) -> int:
                 store.to_csv(export)
         print(f"wrote {path}")
     return verdict_exit_code(totals["statuses"], totals["failed"])
+
+
+def _open_store(target: Path):
+    """The results store of a directory written by `--out`, or a store file."""
+    from addt_dsl.runtime.store import ResultStore
+
+    store_path = target if target.is_file() else target / "results.sqlite"
+    if not store_path.exists():
+        raise UsageError(f"no results store at {store_path} (run `addtc FILE --out DIR` first)")
+    return ResultStore(store_path)
+
+
+def cmd_trace(args) -> int:
+    """Execute a stored run again (its RunSpec determines it) and show its signals and events."""
+    from addt_dsl.reporting.trace_view import events_path, events_table, print_trace, rerun, signals_table
+
+    with _open_store(Path(args.dir)) as store:
+        record = next(store.records("run_id = ?", (args.run_id,), limit=1), None)
+        if record is None:
+            ids = [r.run_id for r in store.records(limit=5)]
+            raise UsageError(f"no run {args.run_id!r} in {store.path} (runs are named like {', '.join(ids)})")
+        run = rerun(store, record)
+    table, events = signals_table(run.spec, run.trace), events_table(run.trace)
+    print_trace(run, table, events)
+    for path, write in ((args.csv, "to_csv"), (args.parquet, "to_parquet")):
+        if path:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+            getattr(table, write)(path, index=False)
+            getattr(events, write)(events_path(path), index=False)
+            print(f"wrote {path} and {events_path(path)}")
+    if args.plot:
+        from addt_dsl.reporting.plots import run_signals_png
+
+        Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.plot).write_bytes(run_signals_png(table, run.verdicts, f"{run.spec.plan.name} {record.run_id}"))
+        print(f"wrote {args.plot}")
+    return EXIT_OK
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -372,6 +405,15 @@ def build_parser() -> argparse.ArgumentParser:
                         help="also export the runs table (.csv or .parquet); repeatable")
     report.add_argument("--animations", type=nonneg_int, default=4, metavar="N")
     report.set_defaults(func=cmd_report)
+    trace = sub.add_parser("trace", help="one stored run's signals and events (executes its RunSpec again)")
+    trace.add_argument("dir", help="directory written by --out (or a results .sqlite file)")
+    trace.add_argument("run_id", help="the run, e.g. c002-r000 (the `run` column of the verdict table)")
+    trace.add_argument("--csv", metavar="FILE", help="write the signals (one row per sample) here, the events "
+                                                     "beside it as FILE-events.csv")
+    trace.add_argument("--parquet", metavar="FILE", help="the same as Parquet")
+    trace.add_argument("--plot", metavar="FILE.png", help="plot speeds, gaps, TTC, lane offset and each "
+                                                          "oracle's margin over time")
+    trace.set_defaults(func=cmd_trace)
     check = sub.add_parser("check", help="compile only")
     check.add_argument("files", nargs="+")
     check.add_argument("--format", choices=("text", "json"), default="text")

@@ -12,6 +12,8 @@ import io
 import math
 from collections import defaultdict
 
+import numpy as np
+
 from addt_dsl.runtime.store import LATENCY_BIN_S, LATENCY_BINS
 
 NODE_ORDER = ("perception", "tracker", "planner", "control", "e2e")
@@ -26,11 +28,15 @@ def _pyplot():
     return plt
 
 
-def _png(fig) -> str:
+def _png_bytes(fig) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
     _pyplot().close(fig)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
+    return buf.getvalue()
+
+
+def _png(fig) -> str:
+    return base64.b64encode(_png_bytes(fig)).decode("ascii")
 
 
 def robustness_histograms(records_by_oracle: dict[str, list[float]]) -> dict[str, str]:
@@ -161,3 +167,54 @@ def success_rate_chart(labels: list[str], rates: list[float], intervals: list[tu
     ax.set_xlabel(axis)
     ax.set_title("Success rate per cell (95 % Wilson interval)", fontsize=9)
     return _png(fig)
+
+
+TTC_PLOT_MAX_S = 15.0  # TTC is capped at 99 s ("not closing"); the interesting part is low
+
+
+def run_signals_png(table, verdicts, title: str = "") -> bytes:
+    """PNG of one run over time (a `trace_view.signals_table`): speeds, gaps and TTC from
+    the ego, the ego's lane offset, and one panel per oracle with its margin (negative:
+    violated), the zero line and the time its violation became certain (red; amber for
+    a `warn` oracle)."""
+    plt = _pyplot()
+    t = table["time_s"].to_numpy()
+    groups = [("speed [m/s]", [c for c in table.columns if c.endswith(".speed")]),
+              ("gap from ego [m]", [c for c in table.columns if c.startswith("gap(")]),
+              ("TTC from ego [s]", [c for c in table.columns if c.startswith("ttc(")]),
+              ("ego lane offset [m]", [c for c in ("ego.lane_offset",) if c in table.columns])]
+    groups = [(label, cols) for label, cols in groups if cols]
+    rho = [v for v in verdicts if f"rho.{v.name}" in table.columns]
+    n = len(groups) + len(rho)
+    fig, axes = plt.subplots(n, 1, figsize=(7.0, 1.25 * n + 0.6), sharex=True, squeeze=False)
+    axes = list(axes[:, 0])
+    for ax, (label, cols) in zip(axes, groups):
+        for c in cols:
+            ax.plot(t, table[c].to_numpy(), linewidth=1.0, label=c.replace(".speed", ""))
+        if label.startswith("TTC"):
+            ax.set_ylim(0, TTC_PLOT_MAX_S)
+        ax.set_ylabel(label, fontsize=7)
+        if len(cols) > 1 or label.startswith(("gap", "TTC")):
+            ax.legend(fontsize=6, loc="upper right")
+    for ax, v in zip(axes[len(groups):], rho):
+        y = table[f"rho.{v.name}"].to_numpy(dtype=float)
+        colour = "#55a868" if v.passed else ("#dd8452" if v.severity == "warn" else "#c44e52")
+        finite = np.where(np.isfinite(y), y, np.nan)
+        ax.plot(t, finite, color=colour, linewidth=1.0)
+        ax.axhline(0.0, color="#555555", linewidth=0.7)
+        if not v.passed:
+            ax.fill_between(t, finite, 0.0, where=finite < 0, color=colour, alpha=0.25)
+        if v.first_violation_s is not None:
+            ax.axvline(v.first_violation_s, color=colour, linewidth=1.4, linestyle="--")
+        state = "holds" if v.passed else ("warning" if v.severity == "warn" else "violated") + (
+            f" at {v.first_violation_s:.2f} s" if v.first_violation_s is not None else "")
+        ax.set_ylabel(f"{v.name}\nmargin", fontsize=7)
+        ax.set_title(f"{v.name}: {state}", fontsize=7, loc="left", pad=2)
+    for ax in axes:
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return _png_bytes(fig)
