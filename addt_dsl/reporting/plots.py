@@ -80,9 +80,10 @@ class LatencyStats:
             acc[1] += total
             acc[2] = max(acc[2], mx)
 
-    def summary(self, budget_s: float = 0.1) -> dict:
+    def summary(self, budget_s: float | None = 0.1) -> dict:
         """Per node: percentiles [ms] (to the histogram's 2 ms bins, upper edges), worst
-        and the share of time at or above the budget; e2e mean/worst by object count."""
+        and the share of time at or above the budget (when there is one); e2e mean/worst
+        by object count."""
         nodes = {}
         for node in [n for n in NODE_ORDER if n in self.hist] + sorted(set(self.hist) - set(NODE_ORDER)):
             counts = self.hist[node]
@@ -95,17 +96,19 @@ class LatencyStats:
                 for q in (50, 95, 99):
                     if q not in edges and cumulative >= q / 100 * total:
                         edges[q] = (i + 1) * LATENCY_BIN_S * 1e3
-            over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s - 1e-12)
             nodes[node] = {"p50_ms": edges[50], "p95_ms": edges[95], "p99_ms": edges[99],
-                           "max_ms": self.worst.get(node, float("nan")) * 1e3, "share_at_or_over_budget": over / total,
-                           "ticks": total}
+                           "max_ms": self.worst.get(node, float("nan")) * 1e3, "ticks": total}
+            if budget_s is not None:
+                over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s - 1e-12)
+                nodes[node]["share_at_or_over_budget"] = over / total
         by_objects = {str(n): {"mean_ms": acc[1] / acc[0] * 1e3, "max_ms": acc[2] * 1e3, "ticks": acc[0]}
                       for n, acc in sorted(self.by_objects.items()) if acc[0]}
-        return {"budget_ms": budget_s * 1e3, "bin_ms": LATENCY_BIN_S * 1e3, "nodes": nodes, "e2e_by_objects": by_objects}
+        return {"budget_ms": None if budget_s is None else budget_s * 1e3, "bin_ms": LATENCY_BIN_S * 1e3, "nodes": nodes, "e2e_by_objects": by_objects}
 
 
-def latency_distributions(hist: dict[str, list[int]], budget_s: float = 0.1) -> str | None:
-    """Per-node latency distributions (share of time at each latency) with the budget line."""
+def latency_distributions(hist: dict[str, list[int]], budget_s: float | None = 0.1) -> str | None:
+    """Per-node latency distributions (share of time at each latency) with the budget line
+    (none when the scenario declares no budget)."""
     nodes = [n for n in NODE_ORDER if n in hist] + sorted(set(hist) - set(NODE_ORDER))
     if not nodes:
         return None
@@ -114,24 +117,29 @@ def latency_distributions(hist: dict[str, list[int]], budget_s: float = 0.1) -> 
     axes = [axes] if len(nodes) == 1 else list(axes)
     edges_ms = [i * LATENCY_BIN_S * 1e3 for i in range(LATENCY_BINS + 1)]
     top = max((i for n in nodes for i, c in enumerate(hist[n]) if c), default=0)
-    xmax = max(budget_s * 1e3 * 1.3, (top + 2) * LATENCY_BIN_S * 1e3)
+    xmax = max((budget_s or 0.0) * 1e3 * 1.3, (top + 2) * LATENCY_BIN_S * 1e3)
     for ax, node in zip(axes, nodes):
         counts = hist[node]
         total = sum(counts) or 1
-        over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s) / total
         ax.stairs([c / total for c in counts], edges_ms, fill=True, color="#55a868", alpha=0.8)
-        ax.axvline(budget_s * 1e3, color="#c44e52", linewidth=1.2)
         ax.set_ylabel(node, rotation=0, ha="right", va="center", fontsize=8)
         ax.set_yticks([])
-        ax.text(0.99, 0.8, f"{100 * over:.1f} % of time ≥ {budget_s * 1e3:.0f} ms", transform=ax.transAxes,
-                ha="right", fontsize=7, color="#c44e52" if over else "#555555")
+        if budget_s is not None:
+            over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s) / total
+            ax.axvline(budget_s * 1e3, color="#c44e52", linewidth=1.2)
+            ax.text(0.99, 0.8, f"{100 * over:.1f} % of time ≥ {_ms(budget_s)} ms", transform=ax.transAxes,
+                    ha="right", fontsize=7, color="#c44e52" if over else "#555555")
     axes[-1].set_xlim(0, xmax)
-    axes[-1].set_xlabel("latency [ms]  (red line: budget)")
+    axes[-1].set_xlabel("latency [ms]" + ("  (red line: budget)" if budget_s is not None else ""))
     fig.suptitle("Latency per node (share of simulated time)", fontsize=9)
     return _png(fig)
 
 
-def latency_vs_objects(by_objects: dict[int, list[float]], budget_s: float = 0.1) -> str | None:
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1e3:.4g}"
+
+
+def latency_vs_objects(by_objects: dict[int, list[float]], budget_s: float | None = 0.1) -> str | None:
     """Mean and worst e2e latency against the number of objects perception saw."""
     if not by_objects:
         return None
@@ -142,7 +150,8 @@ def latency_vs_objects(by_objects: dict[int, list[float]], budget_s: float = 0.1
     fig, ax = plt.subplots(figsize=(5.0, 2.8))
     ax.plot(ns, mean, "o-", color="#4c72b0", label="mean")
     ax.plot(ns, worst, "s--", color="#8172b2", label="worst")
-    ax.axhline(budget_s * 1e3, color="#c44e52", linewidth=1.2, label=f"{budget_s * 1e3:.0f} ms budget")
+    if budget_s is not None:
+        ax.axhline(budget_s * 1e3, color="#c44e52", linewidth=1.2, label=f"{_ms(budget_s)} ms budget")
     ax.set_xlabel("objects seen by perception")
     ax.set_ylabel("e2e latency [ms]")
     ax.legend(fontsize=7)

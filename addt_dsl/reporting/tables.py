@@ -291,9 +291,28 @@ def shown_records(store, limit: int = 40) -> list:
     return failing or list(store.records(limit=limit))
 
 
-def write_tables(out: Path, store, budget_s: float = 0.1) -> None:
+def latency_budget_s(plan: ScenarioPlan) -> float | None:
+    """The latency budget the scenario declares: the bound of an oracle atom such as
+    `latency(e2e) < 100 ms` (parameters at their nominal values), the e2e one if there is
+    one, else the tightest on any node; None when no oracle bounds a latency."""
+    from addt_dsl.expr import Binary, Num, Signal, substitute_params, walk
+
+    bounds: dict[str, float] = {}
+    nominal = plan.nominal_params()
+    for o in plan.oracles:
+        for node in walk(substitute_params(o.formula, nominal)):
+            match node:
+                case Binary(op="<" | "<=", left=Signal(name=name), right=Num(value=v)) | \
+                        Binary(op=">" | ">=", left=Num(value=v), right=Signal(name=name)):
+                    if name.startswith("latency("):
+                        bounds[name] = min(v, bounds.get(name, math.inf))
+    return bounds.get("latency(e2e)", min(bounds.values(), default=None))
+
+
+def write_tables(out: Path, store, budget_s: float | None = None) -> None:
     """summary.json and runs.csv of a store; latency.json when runs recorded latencies
-    (per-node percentiles and e2e latency by object count, over all runs)."""
+    (per-node percentiles and e2e latency by object count, over all runs; the share of
+    time over the budget the plan's oracles declare, `budget_s` overriding it)."""
     from addt_dsl.reporting.plots import LatencyStats
 
     out.mkdir(parents=True, exist_ok=True)
@@ -304,5 +323,6 @@ def write_tables(out: Path, store, budget_s: float = 0.1) -> None:
         if r.stats:
             latency.add(r.stats)
     if latency.hist:
-        (out / "latency.json").write_text(json.dumps(latency.summary(budget_s), indent=2) + "\n")
+        budget = budget_s if budget_s is not None else latency_budget_s(store.plan())
+        (out / "latency.json").write_text(json.dumps(latency.summary(budget), indent=2) + "\n")
 
