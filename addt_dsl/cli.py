@@ -31,10 +31,8 @@ import traceback
 from pathlib import Path
 
 from addt_dsl.diagnostics import render_json, render_text
-from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, IncompleteError, UsageError, nonneg_float,
-                             nonneg_int, positive_float, positive_int, verdict_exit_code)
-
-EXIT_ERROR = EXIT_USAGE  # compile and usage errors
+from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, UsageError, nonneg_float, nonneg_int,
+                             positive_float, positive_int, verdict_exit_code)
 SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study")
 
 
@@ -66,13 +64,13 @@ def cmd_check(args) -> int:
         failed |= not result.ok
     if args.format == "json":
         print(render_json(collected))
-    return EXIT_ERROR if failed else EXIT_OK
+    return EXIT_USAGE if failed else EXIT_OK
 
 
 def cmd_plan(args) -> int:
     result = _compile(args.file, args.format)
     if not result.ok:
-        return EXIT_ERROR
+        return EXIT_USAGE
     print(result.plan.model_dump_json(indent=2))
     return EXIT_OK
 
@@ -96,7 +94,7 @@ def cmd_run(args) -> int:
         paths = expand_paths(args.files)
     except SuiteError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     if len(paths) == 1 and not args.by and not Path(args.files[0]).is_dir():
         return _run_file(args, paths[0], Path(args.out) if args.out else None)
     return _run_suite(args, paths)
@@ -110,7 +108,7 @@ def _run_suite(args, paths: list[Path]) -> int:
 
     if args.store:
         print("error: --store names one results file; a suite keeps one per file under --out", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     out = Path(args.out) if args.out else None
     # Each file runs as usual, but JUnit goes to one file for the whole suite (below).
     per_file = argparse.Namespace(**{**vars(args), "junit": None, "in_suite": True})
@@ -154,7 +152,7 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
     """Compile and run one file; `collect(plan, store)` sees the store before it closes."""
     result = _compile(str(path), args.format)
     if not result.ok:
-        return EXIT_ERROR
+        return EXIT_USAGE
     from addt_dsl.runtime.store import ResultStore, StoreMismatch
     from addt_dsl.sweep import SweepStream, UnsatisfiableAssumptions
 
@@ -165,12 +163,12 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
             next(iter(stream))  # raises: every candidate breaks an assumption
     except UnsatisfiableAssumptions as exc:
         print(f"error[E0501]: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     try:
         executor = _executor(args)
     except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     tmp = None
     if args.store:
         store_path = Path(args.store)
@@ -183,7 +181,7 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
         store = ResultStore(store_path, plan, fresh=args.fresh)
     except StoreMismatch as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     try:
         if args.classify:
             executor = _classifying(args, stream, store, executor)
@@ -193,10 +191,10 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
         return code
     except UnsatisfiableAssumptions as exc:
         print(f"error[E0501]: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     finally:
         store.close()
         if tmp is not None:
@@ -455,7 +453,7 @@ def main(argv: list[str] | None = None) -> int:
         args.jobs = args.jobs if args.jobs is not None else max(1, os.cpu_count() or 1)
     if not getattr(args, "func", None):
         parser.print_help()
-        return EXIT_ERROR
+        return EXIT_USAGE
     return guarded(args.func, args)
 
 
@@ -483,8 +481,6 @@ def guarded(command, *args) -> int:
 
 def _incomplete_message(exc: Exception) -> str:
     first = (str(exc).splitlines() or [""])[0]
-    if isinstance(exc, IncompleteError):
-        return first
     if isinstance(exc, sqlite3.DatabaseError):
         return f"the results store is unusable ({first}); run again with a new --out or --store"
     if isinstance(exc, OSError):

@@ -26,10 +26,6 @@ class UsageError(Exception):
     """A bad command line, path or option value: `error: <message>`, exit 2."""
 
 
-class IncompleteError(Exception):
-    """The tool could not complete (an unusable store, a full disk): `error: <message>`, exit 3."""
-
-
 def verdict_exit_code(statuses: dict[str, int], failed: int) -> int:
     """Exit code of a set of runs from their status counts and failed-run count: 3 if any
     run did not finish (crashed, timeout, memory), else 1 if any failed, else 0."""

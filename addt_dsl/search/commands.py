@@ -15,9 +15,8 @@ import json
 import sys
 from pathlib import Path
 
-from addt_dsl.errors import nonneg_float, nonneg_int, positive_int
-
-EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
+from addt_dsl.errors import EXIT_FAILED, EXIT_OK, nonneg_float, nonneg_int, positive_int
+from addt_dsl.errors import EXIT_USAGE as EXIT_ERROR
 DEFAULT_OUT = ".addt-failures"
 
 

@@ -1,6 +1,6 @@
 """`addtc trace`: the docs/running.md example runs as written (a passing run, re-executed
-from the store), its CSV holds the signals it promises, and a failing run's plot and
-margins show the violation."""
+from the store), its CSV holds the signals it promises and its output is what the docs
+quote. (Failing runs' plots: tests/sim/test_runner_report.py.)"""
 
 import re
 from pathlib import Path
