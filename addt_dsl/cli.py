@@ -33,6 +33,7 @@ from pathlib import Path
 from addt_dsl.diagnostics import render_json, render_text
 from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, UsageError, nonneg_float, nonneg_int,
                              positive_float, positive_int, verdict_exit_code)
+
 SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study")
 
 
