@@ -5,6 +5,7 @@
         [--executor local|ray] [--address ADDR] [--store PATH] [--timeout S] [--junit FILE]
         [--classify]                      also classify each run against its fault-free twin
     addtc report DIR                      HTML report, summary.json, runs.csv of a results dir
+    addtc trace DIR RUN_ID [--csv F] [--parquet F] [--plot F.png]   one run's signals and events
     addtc check FILE...                   compile only (diagnostics)
     addtc plan FILE                       print the ScenarioPlan as JSON
     addtc schema [--write PATH]           the plan's JSON schema
@@ -12,7 +13,9 @@
     addtc falsify FILE [--budget-runs N]  search parameters and faults for failures
     addtc study perception|classify|table ...  fault studies (perception errors by band, outcomes)
 
-Exit codes: 0 every oracle held in every run, 1 some run failed, 2 compile/usage error.
+Exit codes (addt_dsl/errors.py): 0 every run passed, 1 at least one run failed an oracle,
+2 usage or scenario error, 3 the tool could not complete (runs crashed or timed out, the
+store is unusable, internal error). Set ADDT_DEBUG=1 to see the traceback of an internal error.
 """
 
 from __future__ import annotations
@@ -21,14 +24,17 @@ import argparse
 import itertools
 import json
 import os
+import sqlite3
 import sys
 import tempfile
+import traceback
 from pathlib import Path
 
 from addt_dsl.diagnostics import render_json, render_text
+from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, UsageError, nonneg_float, nonneg_int,
+                             positive_float, positive_int, verdict_exit_code)
 
-EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
-SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "shrink", "falsify", "study")
+SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study")
 
 
 def _compile(path: str, fmt: str):
@@ -59,13 +65,13 @@ def cmd_check(args) -> int:
         failed |= not result.ok
     if args.format == "json":
         print(render_json(collected))
-    return EXIT_ERROR if failed else EXIT_OK
+    return EXIT_USAGE if failed else EXIT_OK
 
 
 def cmd_plan(args) -> int:
     result = _compile(args.file, args.format)
     if not result.ok:
-        return EXIT_ERROR
+        return EXIT_USAGE
     print(result.plan.model_dump_json(indent=2))
     return EXIT_OK
 
@@ -93,7 +99,7 @@ def cmd_run(args) -> int:
         paths = expand_paths(args.files)
     except SuiteError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     if len(paths) == 1 and not args.by and not Path(args.files[0]).is_dir():
         return _run_file(args, paths[0], Path(args.out) if args.out else None)
     return _run_suite(args, paths)
@@ -107,7 +113,7 @@ def _run_suite(args, paths: list[Path]) -> int:
 
     if args.store:
         print("error: --store names one results file; a suite keeps one per file under --out", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     out = Path(args.out) if args.out else None
     # Each file runs as usual, but JUnit goes to one file for the whole suite (below).
     per_file = argparse.Namespace(**{**vars(args), "junit": None, "in_suite": True})
@@ -129,6 +135,9 @@ def _run_suite(args, paths: list[Path]) -> int:
                                   collect=lambda plan, store, row=row: collect(plan, store, row))
         row.wall_s = time.perf_counter() - started
         rows.append(row)
+    if args.by and not any(r.by for r in rows) and any(r.totals.get("runs") for r in rows):
+        print(f"error: --by {args.by}: no file of the suite has a parameter of that name", file=sys.stderr)
+        return max([EXIT_USAGE, *(r.exit_code for r in rows)])
     if out:
         write_summary(out, rows, args.by)
     if args.junit:
@@ -148,7 +157,7 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
     """Compile and run one file; `collect(plan, store)` sees the store before it closes."""
     result = _compile(str(path), args.format)
     if not result.ok:
-        return EXIT_ERROR
+        return EXIT_USAGE
     from addt_dsl.runtime.store import ResultStore, StoreMismatch
     from addt_dsl.sweep import SweepStream, UnsatisfiableAssumptions
 
@@ -159,12 +168,12 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
             next(iter(stream))  # raises: every candidate breaks an assumption
     except UnsatisfiableAssumptions as exc:
         print(f"error[E0501]: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     try:
         executor = _executor(args)
-    except _UsageError as exc:
+    except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     tmp = None
     if args.store:
         store_path = Path(args.store)
@@ -177,7 +186,7 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
         store = ResultStore(store_path, plan, fresh=args.fresh)
     except StoreMismatch as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     try:
         if args.classify:
             executor = _classifying(args, stream, store, executor)
@@ -187,18 +196,14 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
         return code
     except UnsatisfiableAssumptions as exc:
         print(f"error[E0501]: {exc}", file=sys.stderr)
-        return EXIT_ERROR
-    except _UsageError as exc:
+        return EXIT_USAGE
+    except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
+        return EXIT_USAGE
     finally:
         store.close()
         if tmp is not None:
             tmp.cleanup()
-
-
-class _UsageError(ValueError):
-    pass
 
 
 def _executor(args):
@@ -210,11 +215,11 @@ def _executor(args):
         from addt_dsl.runtime.ray_executor import RayExecutor, ray_available
 
         if not ray_available():
-            raise _UsageError("--executor ray needs the `ray` package (pip install 'addt-dsl[ray]')")
+            raise UsageError("--executor ray needs the `ray` package (pip install 'addt-dsl[ray]')")
         return RayExecutor(address=args.address, jobs=args.jobs if args.jobs_given else None,
                            timeout_s=args.timeout, memory_limit_mb=args.memory_limit)
     if args.address:
-        raise _UsageError("--address is for --executor ray")
+        raise UsageError("--address is for --executor ray")
     from addt_dsl.runtime.executor import LocalExecutor
 
     return LocalExecutor(args.jobs, timeout_s=args.timeout, memory_limit_mb=args.memory_limit,
@@ -228,7 +233,7 @@ def _classifying(args, stream, store, executor):
     from addt_dsl.runtime.outcome import ClassifyingExecutor, GoldenCache, prepare_goldens
 
     if not hasattr(executor, "run_fn"):
-        raise _UsageError(f"--classify runs on the local or inline executor, not {executor.name}")
+        raise UsageError(f"--classify runs on the local or inline executor, not {executor.name}")
     golden_dir = store.path.with_name(store.path.stem + "-golden")
     done = store.done()
     specs = itertools.islice(stream, args.limit) if args.limit else stream
@@ -278,20 +283,25 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
     if getattr(args, "in_suite", False):
         if not quiet:  # one line per file; the suite prints the combined table
             failing = [f"{r.run_id} ({', '.join(r.failed_oracles) or r.status})" for r in store.failing(limit=5)]
-            print(f"{plan.name}: {totals['passed']} passed, {totals['failed']} failed"
+            warned = f", {totals['warned']} with warnings" if totals.get("warned") else ""
+            print(f"{plan.name}: {totals['passed']} passed, {totals['failed']} failed{warned}"
                   + (f"; e.g. {', '.join(failing)}" if failing else ""), file=sys.stderr)
     else:
         print_verdicts(plan, shown_records(store), totals, fmt=args.format)
     if not quiet and outcome.skipped:
         print(f"({outcome.skipped} run(s) taken from the store, {outcome.ran} executed now)", file=sys.stderr)
-    return EXIT_OK if totals["failed"] == 0 else EXIT_FAILED
+    return verdict_exit_code(totals["statuses"], totals["failed"])
 
 
 def _sweep_with_progress(specs, store, executor, total: int, done: int, quiet: bool):
     from addt_dsl.runtime.executor import run_sweep
 
-    if quiet or total - done < 4 or not sys.stderr.isatty():
+    if quiet or total - done < 4:
         return run_sweep(specs, store, executor)
+    if not sys.stderr.isatty():  # a log, not a terminal: plain lines a bar cannot give
+        from addt_dsl.reporting.progress import ProgressLines
+
+        return run_sweep(specs, store, executor, on_record=ProgressLines(total, done))
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
@@ -302,15 +312,11 @@ def _sweep_with_progress(specs, store, executor, total: int, done: int, quiet: b
 
 def cmd_report(args) -> int:
     from addt_dsl.reporting import build_report, write_junit, write_tables
-    from addt_dsl.runtime.store import ResultStore
 
     target = Path(args.dir)
-    store_path = target if target.is_file() else target / "results.sqlite"
-    if not store_path.exists():
-        print(f"error: no results store at {store_path} (run `addtc FILE --out DIR` first)", file=sys.stderr)
-        return EXIT_ERROR
     out = Path(args.out) if args.out else (target.parent if target.is_file() else target)
-    with ResultStore(store_path) as store:
+    with _open_store(target) as store:
+        totals = store.summary()
         write_tables(out, store)
         path = build_report(store, out / "report.html", max_animations=args.animations)
         if args.junit:
@@ -321,6 +327,43 @@ def cmd_report(args) -> int:
             else:
                 store.to_csv(export)
         print(f"wrote {path}")
+    return verdict_exit_code(totals["statuses"], totals["failed"])
+
+
+def _open_store(target: Path):
+    """The results store of a directory written by `--out`, or a store file."""
+    from addt_dsl.runtime.store import ResultStore
+
+    store_path = target if target.is_file() else target / "results.sqlite"
+    if not store_path.exists():
+        raise UsageError(f"no results store at {store_path} (run `addtc FILE --out DIR` first)")
+    return ResultStore(store_path)
+
+
+def cmd_trace(args) -> int:
+    """Execute a stored run again (its RunSpec determines it) and show its signals and events."""
+    from addt_dsl.reporting.trace_view import events_path, events_table, print_trace, rerun, signals_table
+
+    with _open_store(Path(args.dir)) as store:
+        record = next(store.records("run_id = ?", (args.run_id,), limit=1), None)
+        if record is None:
+            ids = [r.run_id for r in store.records(limit=5)]
+            raise UsageError(f"no run {args.run_id!r} in {store.path} (runs are named like {', '.join(ids)})")
+        run = rerun(store, record)
+    table, events = signals_table(run.spec, run.trace), events_table(run.trace)
+    print_trace(run, table, events)
+    for path, write in ((args.csv, "to_csv"), (args.parquet, "to_parquet")):
+        if path:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+            getattr(table, write)(path, index=False)
+            getattr(events, write)(events_path(path), index=False)
+            print(f"wrote {path} and {events_path(path)}")
+    if args.plot:
+        from addt_dsl.reporting.plots import run_signals_png
+
+        Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.plot).write_bytes(run_signals_png(table, run.verdicts, f"{run.spec.plan.name} {record.run_id}"))
+        print(f"wrote {args.plot}")
     return EXIT_OK
 
 
@@ -332,7 +375,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="scenario file(s); a directory stands for the .addt files in it (a suite)")
     run.add_argument("--by", metavar="PARAM",
                      help="suite table: success rate per value of this parameter (e.g. drop_rate)")
-    run.add_argument("--jobs", "-j", type=int, default=None,
+    run.add_argument("--jobs", "-j", type=positive_int, default=None,
                      help="worker processes (default: CPU count; Ray: the cluster's CPUs)")
     run.add_argument("--executor", choices=("local", "ray", "inline"), default="local",
                      help="local worker processes (default), a Ray cluster, or this process (debugging)")
@@ -344,16 +387,16 @@ def build_parser() -> argparse.ArgumentParser:
                                      "(default: OUT/results.sqlite, else a temporary file)")
     run.add_argument("--fresh", action="store_true", help="discard the store's results before running")
     run.add_argument("--junit", metavar="FILE", help="write JUnit XML (one testcase per run)")
-    run.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
+    run.add_argument("--timeout", type=positive_float, default=None, metavar="SECONDS",
                      help="wall-clock limit per run; a run past it is recorded as `timeout`")
-    run.add_argument("--memory-limit", type=float, default=4096, metavar="MB",
+    run.add_argument("--memory-limit", type=nonneg_float, default=4096, metavar="MB",
                      help="resident memory per worker; a run past it is recorded as `memory` (0: off)")
-    run.add_argument("--max-tasks-per-child", type=int, default=500, metavar="N",
+    run.add_argument("--max-tasks-per-child", type=positive_int, default=500, metavar="N",
                      help="replace a worker process after N runs")
     run.add_argument("--no-report", action="store_true", help="with --out: skip report.html")
-    run.add_argument("--animations", type=int, default=4, metavar="N",
+    run.add_argument("--animations", type=nonneg_int, default=4, metavar="N",
                      help="failing runs to animate in report.html")
-    run.add_argument("--limit", type=int, default=0, help="run only the first N runs of the sweep")
+    run.add_argument("--limit", type=nonneg_int, default=0, help="run only the first N runs of the sweep")
     run.add_argument("--format", choices=("text", "json"), default="text")
     run.add_argument("--classify", action="store_true",
                      help="classify every run against its fault-free twin: masked, silent, detected, "
@@ -365,8 +408,17 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--junit", metavar="FILE", help="also write JUnit XML")
     report.add_argument("--export", action="append", metavar="FILE",
                         help="also export the runs table (.csv or .parquet); repeatable")
-    report.add_argument("--animations", type=int, default=4, metavar="N")
+    report.add_argument("--animations", type=nonneg_int, default=4, metavar="N")
     report.set_defaults(func=cmd_report)
+    trace = sub.add_parser("trace", help="one stored run's signals and events (executes its RunSpec again)")
+    trace.add_argument("dir", help="directory written by --out (or a results .sqlite file)")
+    trace.add_argument("run_id", help="the run, e.g. c002-r000 (the `run` column of the verdict table)")
+    trace.add_argument("--csv", metavar="FILE", help="write the signals (one row per sample) here, the events "
+                                                     "beside it as FILE-events.csv")
+    trace.add_argument("--parquet", metavar="FILE", help="the same as Parquet")
+    trace.add_argument("--plot", metavar="FILE.png", help="plot speeds, gaps, TTC, lane offset and each "
+                                                          "oracle's margin over time")
+    trace.set_defaults(func=cmd_trace)
     check = sub.add_parser("check", help="compile only")
     check.add_argument("files", nargs="+")
     check.add_argument("--format", choices=("text", "json"), default="text")
@@ -398,7 +450,7 @@ def cmd_study(argv: list[str]) -> int:
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["study"]:  # its own parser sees every argument, --help included
-        return cmd_study(argv[1:])
+        return guarded(cmd_study, argv[1:])
     if argv and argv[0] not in SUBCOMMANDS and not argv[0].startswith("-"):
         argv.insert(0, "run")
     parser = build_parser()
@@ -408,11 +460,40 @@ def main(argv: list[str] | None = None) -> int:
         args.jobs = args.jobs if args.jobs is not None else max(1, os.cpu_count() or 1)
     if not getattr(args, "func", None):
         parser.print_help()
-        return EXIT_ERROR
+        return EXIT_USAGE
+    return guarded(args.func, args)
+
+
+def guarded(command, *args) -> int:
+    """Run a command; map what escapes it onto the exit codes (addt_dsl/errors.py): a usage
+    error is one line and exit 2; an unusable store, a disk error or any other exception
+    is one line and exit 3 (never 1, which means a run failed), with the traceback only
+    when ADDT_DEBUG is set."""
     try:
-        return args.func(args)
+        return command(*args)
     except KeyboardInterrupt:
         return 130
+    except UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError) as exc:  # a path the user gave
+        print(f"error: {exc.strerror or exc}: {exc.filename}" if exc.filename else f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except Exception as exc:  # noqa: BLE001 - the tool failed: say so in one line, exit 3
+        if os.environ.get("ADDT_DEBUG"):
+            traceback.print_exc()
+        print(f"error: {_incomplete_message(exc)}", file=sys.stderr)
+        return EXIT_INCOMPLETE
+
+
+def _incomplete_message(exc: Exception) -> str:
+    first = (str(exc).splitlines() or [""])[0]
+    if isinstance(exc, sqlite3.DatabaseError):
+        return f"the results store is unusable ({first}); run again with a new --out or --store"
+    if isinstance(exc, OSError):
+        return f"{exc.strerror or first}" + (f": {exc.filename}" if exc.filename else "")
+    return (f"internal error: {type(exc).__name__}: {first} "
+            "(a bug in addtc; set ADDT_DEBUG=1 for the traceback)")
 
 
 if __name__ == "__main__":

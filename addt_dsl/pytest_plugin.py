@@ -104,6 +104,12 @@ class AddtCompileError(Exception):
     pass
 
 
+class AddtWarning(UserWarning):
+    """A `warn` oracle was violated: shown in pytest's warnings summary (and as a
+    `warning.NAME` property in JUnit XML), never a failure; `-W error::addt_dsl.pytest_plugin.AddtWarning`
+    makes it one."""
+
+
 class AddtFile(pytest.File):
     def collect(self):
         from addt_dsl.compiler.parser import parse_source
@@ -235,7 +241,23 @@ class AddtItem(pytest.Item):
         outcomes = cache.get_many(specs, opts["jobs"])
         failing = [(s, o) for s, o in zip(specs, outcomes) if o.failures]
         notes.append(f"sweep: {len(specs)} run(s), {len(failing)} failing")
+        self._warn(plan, specs, outcomes, notes)
         return failing[0] + (len(failing),) if failing else None
+
+    def _warn(self, plan, specs, outcomes, notes) -> None:
+        """Violated `warn` oracles (robustness below 0; the search keeps no verdicts): a
+        note, a property and an AddtWarning each, counted apart from failures."""
+        import warnings
+
+        for o in plan.oracles:
+            if o.severity != "warn":
+                continue
+            runs = [s.run_id for s, out in zip(specs, outcomes) if out.robustness.get(o.name, 0.0) < 0]
+            if runs:
+                text = f"warning: {o.name} violated in {len(runs)} of {len(specs)} run(s), e.g. {runs[0]}"
+                notes.append(text)
+                self.user_properties.append((f"warning.{o.name}", str(len(runs))))
+                warnings.warn(AddtWarning(f"{self.source_name()}: {text}"), stacklevel=1)
 
     def _search(self, plan, cache, opts, notes):
         from addt_dsl.search.falsify import Falsifier

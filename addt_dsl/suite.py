@@ -14,14 +14,13 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from addt_dsl.confine import Refused, confine
-from addt_dsl.reporting.tables import fmt_param, wilson_interval
+from addt_dsl.reporting.tables import fmt_param, terminal, wilson_interval
 
 
 class SuiteError(ValueError):
@@ -123,11 +122,12 @@ def suite_summary(rows: Sequence[SuiteRow], by: str | None) -> dict:
         "files": [{
             "path": str(r.path), "scenario": r.name, "exit_code": r.exit_code, "wall_s": r.wall_s,
             "runs": r.totals.get("runs", 0), "passed": r.totals.get("passed", 0),
-            "failed": r.totals.get("failed", 0), **({"outcomes": r.totals["outcomes"]} if "outcomes" in r.totals else {}),
+            "failed": r.totals.get("failed", 0), "warned": r.totals.get("warned", 0), **({"outcomes": r.totals["outcomes"]} if "outcomes" in r.totals else {}),
             "by": [{"value": v, "label": r.labels.get(v, f"{v:g}"), **t.as_dict()} for v, t in r.by.items()],
         } for r in rows],
         "runs": sum(r.totals.get("runs", 0) for r in rows),
         "passed": sum(r.totals.get("passed", 0) for r in rows),
+        "warned": sum(r.totals.get("warned", 0) for r in rows),
         "wall_s": sum(r.wall_s for r in rows),
     }
 
@@ -141,7 +141,6 @@ def write_summary(out: Path, rows: Sequence[SuiteRow], by: str | None) -> Path:
 
 def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
     """One row per file; with `by`, success rates per value (runs per cell in brackets)."""
-    from rich.console import Console
     from rich.table import Table
 
     values = sorted({v for r in rows for v in r.by})
@@ -168,9 +167,10 @@ def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
             if classified else []
         table.add_row(f"[{colour}]{r.name or r.path.stem}[/]", str(r.totals.get("runs", 0)),
                       str(r.totals.get("passed", 0)), f"{r.wall_s:.1f}", *counts, *cells)
-    # Not a terminal (CI logs, files): wide enough that a Table-1 layout does not wrap.
-    console = Console(highlight=False, width=None if sys.stdout.isatty() else 160)
+    console = terminal()  # off a terminal (CI logs): full width, no column cut
     console.print(table)
     total = sum(r.totals.get("runs", 0) for r in rows)
     passed = sum(r.totals.get("passed", 0) for r in rows)
-    console.print(f"{passed} of {total} runs passed in {sum(r.wall_s for r in rows):.1f} s")
+    warned = sum(r.totals.get("warned", 0) for r in rows)
+    console.print(f"{passed} of {total} runs passed in {sum(r.wall_s for r in rows):.1f} s"
+                  + (f"; {warned} run(s) with warnings" if warned else ""))

@@ -4,7 +4,8 @@ The camera follows the ego, north up. The road is drawn from the plan's road net
 (asphalt band, solid outer borders, dashed lane borders); actors are their boxes from
 the trace (ego blue, others orange, ego's recent path as a trail). Each failing oracle
 is listed with its first violation time; from that time on the frame gets a red border
-and the oracle is flagged, and the timeline at the bottom marks every violation time.
+and the oracle is flagged VIOLATED, and the timeline at the bottom marks every violation
+time. A violated `warn` oracle is flagged WARNING in amber and leaves the border alone.
 
 A GIF (not a video file) because a browser shows it inline from a data URI with no
 codec questions, which keeps the report a single self-contained file.
@@ -26,6 +27,7 @@ _LINE = (235, 235, 235)
 _EGO = (200, 110, 30)
 _AGENT = (40, 150, 240)
 _RED = (40, 40, 220)
+_AMBER = (0, 165, 255)
 _TEXT = (255, 255, 255)
 
 
@@ -76,7 +78,8 @@ class TopDownRenderer:
         v = self.view_h / 2 - (pts[:, 1] - cy) * self.ppm
         return np.round(np.stack([u, v], axis=1) * 16).astype(np.int32)  # 4 fractional bits
 
-    def frame(self, trace, k: int, violations: list[tuple[str, float, float]], label: str) -> np.ndarray:
+    def frame(self, trace, k: int, violations: list[tuple[str, float, float, str]], label: str) -> np.ndarray:
+        """`violations`: (oracle, first violation [s] or None, robustness, severity) of each failing oracle."""
         import cv2
 
         img = np.zeros((self.height, self.width, 3), np.uint8)
@@ -113,13 +116,15 @@ class TopDownRenderer:
         cv2.rectangle(img, (0, 0), (self.width, 16 + 13 * len(violations)), (25, 25, 25), -1)
         cv2.putText(img, f"{label}   t = {t_now:5.2f} s", (6, 12), cv2.FONT_HERSHEY_SIMPLEX, 0.4, _TEXT, 1,
                     cv2.LINE_AA)
-        for i, (name, first, rho) in enumerate(violations):
+        for i, (name, first, rho, severity) in enumerate(violations):
             on = name in {v[0] for v in violated}
+            warn = severity == "warn"
             when = f"{first:.2f} s" if first is not None else "-"
-            text = f"{'VIOLATED' if on else 'fails'}: {name} at {when} (robustness {rho:.3g})"
+            state = ("WARNING" if warn else "VIOLATED") if on else ("warns" if warn else "fails")
+            text = f"{state}: {name} at {when} (robustness {rho:.3g})"
             cv2.putText(img, text, (6, 25 + 13 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.38,
-                        (80, 80, 255) if on else (200, 200, 200), 1, cv2.LINE_AA)
-        if violated:
+                        (_AMBER if warn else (80, 80, 255)) if on else (200, 200, 200), 1, cv2.LINE_AA)
+        if any(v[3] != "warn" for v in violated):
             cv2.rectangle(img, (1, 1), (self.width - 2, self.view_h - 2), _RED, 3)
         # Timeline with the violation times marked.
         t_end = max(float(trace.time[-1]), 1e-9)
@@ -127,10 +132,10 @@ class TopDownRenderer:
         x0, x1 = 8, self.width - 8
         cv2.rectangle(img, (x0, y0), (x1, y0 + 8), (90, 90, 90), -1)
         cv2.rectangle(img, (x0, y0), (x0 + int((x1 - x0) * t_now / t_end), y0 + 8), (200, 200, 200), -1)
-        for _, first, _ in violations:
+        for _, first, _, severity in violations:
             if first is not None:
                 xv = x0 + int((x1 - x0) * min(first / t_end, 1.0))
-                cv2.line(img, (xv, y0 - 4), (xv, y0 + 12), _RED, 2)
+                cv2.line(img, (xv, y0 - 4), (xv, y0 + 12), _AMBER if severity == "warn" else _RED, 2)
         return img
 
 
@@ -153,7 +158,7 @@ def render_gif(plan, trace, verdicts, label: str = "", max_frames: int = 150, fp
     """GIF bytes of one run; `verdicts` are its oracle verdicts (the failing ones are marked)."""
     from PIL import Image
 
-    failing = [(v.name, v.first_violation_s, v.robustness) for v in verdicts if not v.passed]
+    failing = [(v.name, v.first_violation_s, v.robustness, v.severity) for v in verdicts if not v.passed]
     renderer = TopDownRenderer(plan, width, height)
     frames = [renderer.frame(trace, k, failing, label)
               for k in frame_indices(trace, max_frames, tuple(f[1] for f in failing))]

@@ -1,10 +1,11 @@
 """The HTML report of a results store: one self-contained file (inline CSS, figures and
 animations as base64 data URIs), rendered by jinja2 with autoescaping on.
 
-Everything except the animations comes from run summaries in the store. Runs keep no
-trace, so for the failing runs chosen for animation the stored RunSpec is executed again
-with the trace kept; determinism makes that the same run, and the report says whether
-the re-run's trace digest matched the stored one.
+Everything except the animations and signal plots comes from run summaries in the
+store. Runs keep no trace, so for the failing runs chosen for animation the stored
+RunSpec is executed again with the trace kept (`trace_view.rerun`); determinism makes
+that the same run, and the report says whether the re-run's trace digest matched the
+stored one. The latency budget drawn is the one the scenario's oracles declare.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ import math
 from pathlib import Path
 
 from addt_dsl.reporting import plots
-from addt_dsl.reporting.tables import cell_stats, fmt_number, fmt_param, success_pivot
+from addt_dsl.reporting.tables import (OUTCOME_CLASSES, cell_stats, fmt_number, fmt_param, latency_budget_s,
+                                       success_pivot, warned_oracles)
 
 MAX_TABLE_ROWS = 500
 DEFAULT_MAX_ANIMATIONS = 4
@@ -27,6 +29,7 @@ def _environment():
     env = Environment(loader=PackageLoader("addt_dsl.reporting", "templates"), autoescape=True,
                       trim_blocks=True, lstrip_blocks=True)
     env.filters["num"] = fmt_number
+    env.globals["warned_oracles"] = warned_oracles
     env.filters["pct"] = lambda x: "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.2f} %"
     return env
 
@@ -91,24 +94,28 @@ def _worst_rho(record) -> float:
 
 
 def _animate(store, record) -> dict:
+    """A failing run executed again: its GIF and its signals over time."""
     from addt_dsl.reporting.animation import render_gif
-    from addt_dsl.runtime.execute import execute
+    from addt_dsl.reporting.trace_view import rerun, signals_table
 
-    spec = store.spec(record)
-    result = execute(spec, keep_trace=True)
-    gif = render_gif(spec.plan, result.trace, result.verdicts, label=record.run_id)
+    run = rerun(store, record)
+    gif = render_gif(run.spec.plan, run.trace, run.verdicts, label=record.run_id)
+    signals = plots.run_signals_png(signals_table(run.spec, run.trace), run.verdicts)
     return {
         "record": record,
         "gif": base64.b64encode(gif).decode("ascii"),
-        "reproduced": result.digest == record.digest,
-        "failing": [v for v in result.verdicts if not v.passed],
+        "signals": base64.b64encode(signals).decode("ascii"),
+        "reproduced": run.reproduced,
+        "failing": [v for v in run.verdicts if not v.passed],
     }
 
 
 def build_report(store, path: str | Path, max_animations: int = DEFAULT_MAX_ANIMATIONS,
-                 budget_s: float = 0.1, max_rows: int = MAX_TABLE_ROWS) -> Path:
-    """Write the HTML report of `store` to `path`."""
+                 budget_s: float | None = None, max_rows: int = MAX_TABLE_ROWS) -> Path:
+    """Write the HTML report of `store` to `path` (`budget_s` overrides the latency budget
+    the plan's oracles declare)."""
     plan = store.plan()
+    budget_s = budget_s if budget_s is not None else latency_budget_s(plan)
     collector = _Collector(plan, max_rows, max_animations)
     for r in store.records():
         collector.add(r)
@@ -132,7 +139,9 @@ def build_report(store, path: str | Path, max_animations: int = DEFAULT_MAX_ANIM
     html = _environment().get_template("report.html.j2").render(
         plan=plan, totals=totals, store_path=str(store.path), generated=_dt.datetime.now().isoformat(timespec="seconds"),
         cells=cells, pivot=pivot, figures=figures, oracles=[o for o in plan.oracles],
-        rows=table_rows, rows_truncated=collector.total > len(table_rows), budget_ms=budget_s * 1e3,
+        rows=table_rows, rows_truncated=collector.total > len(table_rows),
+        budget_ms=None if budget_s is None else budget_s * 1e3, outcome_classes=OUTCOME_CLASSES,
+        classified=bool(totals.get("outcomes")),
         worst_latency=latency.worst, animations=animations, cell_params=sorted({k for r in table_rows for k in r.cell}),
         fmt_param=fmt_param)
     path = Path(path)

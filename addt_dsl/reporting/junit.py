@@ -2,7 +2,8 @@
 
 A run whose oracles all held passes. A run where an oracle failed carries a `<failure>`
 naming each failing oracle with its robustness and first violation time; a run the
-executor had to stop (crashed, timeout, memory) carries an `<error>`. The class name is
+executor had to stop (crashed, timeout, memory) carries an `<error>`. A violated `warn`
+oracle is not a failure: it is a `warning.NAME` property and a line in `<system-out>`. The class name is
 the scenario plus the sweep cell, so CI dashboards group repeats of one cell together.
 Runs are streamed from the store, so the file can be written for any sweep size.
 """
@@ -13,19 +14,20 @@ import math
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from addt_dsl.reporting.tables import fmt_number, fmt_param
+from addt_dsl.reporting.tables import fmt_number, fmt_param, warned_oracles
 
 
 def _cell_label(plan, cell: dict) -> str:
     return ",".join(f"{k}={fmt_param(plan, k, v).replace(' ', '')}" for k, v in sorted(cell.items()))
 
 
+def _violation(v) -> str:
+    when = f" first violated at t={v.first_violation_s:.2f} s" if v.first_violation_s is not None else ""
+    return f"{v.name}: robustness {fmt_number(v.robustness)}{when}"
+
+
 def failure_message(record) -> str:
-    parts = []
-    for v in record.verdicts:
-        if v.severity == "hard" and not v.passed:
-            when = f" first violated at t={v.first_violation_s:.2f} s" if v.first_violation_s is not None else ""
-            parts.append(f"{v.name}: robustness {fmt_number(v.robustness)}{when}")
+    parts = [_violation(v) for v in record.verdicts if v.severity == "hard" and not v.passed]
     if record.status == "detected":
         parts.append(f"stack_health: {record.error.splitlines()[0] if record.error else 'detected'}")
     return "; ".join(parts)
@@ -52,6 +54,13 @@ def junit_tree(plan, records) -> ET.ElementTree:
             rho = v.robustness
             ET.SubElement(cprops, "property", name=f"robustness.{v.name}",
                           value="inf" if math.isinf(rho) and rho > 0 else ("-inf" if math.isinf(rho) else repr(rho)))
+        warned = set(warned_oracles(r))
+        for v in r.verdicts:
+            if v.name in warned:
+                ET.SubElement(cprops, "property", name=f"warning.{v.name}", value=_violation(v))
+        if warned:
+            ET.SubElement(case, "system-out").text = "\n".join(
+                f"warning: {_violation(v)}" for v in r.verdicts if v.name in warned)
         if r.status in ("crashed", "timeout", "memory"):
             errors += 1
             el = ET.SubElement(case, "error", type=r.status, message=(r.error.splitlines() or [r.status])[0])

@@ -12,6 +12,8 @@ import io
 import math
 from collections import defaultdict
 
+import numpy as np
+
 from addt_dsl.runtime.store import LATENCY_BIN_S, LATENCY_BINS
 
 NODE_ORDER = ("perception", "tracker", "planner", "control", "e2e")
@@ -26,11 +28,15 @@ def _pyplot():
     return plt
 
 
-def _png(fig) -> str:
+def _png_bytes(fig) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
     _pyplot().close(fig)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
+    return buf.getvalue()
+
+
+def _png(fig) -> str:
+    return base64.b64encode(_png_bytes(fig)).decode("ascii")
 
 
 def robustness_histograms(records_by_oracle: dict[str, list[float]]) -> dict[str, str]:
@@ -74,9 +80,10 @@ class LatencyStats:
             acc[1] += total
             acc[2] = max(acc[2], mx)
 
-    def summary(self, budget_s: float = 0.1) -> dict:
+    def summary(self, budget_s: float | None = 0.1) -> dict:
         """Per node: percentiles [ms] (to the histogram's 2 ms bins, upper edges), worst
-        and the share of time at or above the budget; e2e mean/worst by object count."""
+        and the share of time at or above the budget (when there is one); e2e mean/worst
+        by object count."""
         nodes = {}
         for node in [n for n in NODE_ORDER if n in self.hist] + sorted(set(self.hist) - set(NODE_ORDER)):
             counts = self.hist[node]
@@ -89,17 +96,19 @@ class LatencyStats:
                 for q in (50, 95, 99):
                     if q not in edges and cumulative >= q / 100 * total:
                         edges[q] = (i + 1) * LATENCY_BIN_S * 1e3
-            over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s - 1e-12)
             nodes[node] = {"p50_ms": edges[50], "p95_ms": edges[95], "p99_ms": edges[99],
-                           "max_ms": self.worst.get(node, float("nan")) * 1e3, "share_at_or_over_budget": over / total,
-                           "ticks": total}
+                           "max_ms": self.worst.get(node, float("nan")) * 1e3, "ticks": total}
+            if budget_s is not None:
+                over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s - 1e-12)
+                nodes[node]["share_at_or_over_budget"] = over / total
         by_objects = {str(n): {"mean_ms": acc[1] / acc[0] * 1e3, "max_ms": acc[2] * 1e3, "ticks": acc[0]}
                       for n, acc in sorted(self.by_objects.items()) if acc[0]}
-        return {"budget_ms": budget_s * 1e3, "bin_ms": LATENCY_BIN_S * 1e3, "nodes": nodes, "e2e_by_objects": by_objects}
+        return {"budget_ms": None if budget_s is None else budget_s * 1e3, "bin_ms": LATENCY_BIN_S * 1e3, "nodes": nodes, "e2e_by_objects": by_objects}
 
 
-def latency_distributions(hist: dict[str, list[int]], budget_s: float = 0.1) -> str | None:
-    """Per-node latency distributions (share of time at each latency) with the budget line."""
+def latency_distributions(hist: dict[str, list[int]], budget_s: float | None = 0.1) -> str | None:
+    """Per-node latency distributions (share of time at each latency) with the budget line
+    (none when the scenario declares no budget)."""
     nodes = [n for n in NODE_ORDER if n in hist] + sorted(set(hist) - set(NODE_ORDER))
     if not nodes:
         return None
@@ -108,24 +117,29 @@ def latency_distributions(hist: dict[str, list[int]], budget_s: float = 0.1) -> 
     axes = [axes] if len(nodes) == 1 else list(axes)
     edges_ms = [i * LATENCY_BIN_S * 1e3 for i in range(LATENCY_BINS + 1)]
     top = max((i for n in nodes for i, c in enumerate(hist[n]) if c), default=0)
-    xmax = max(budget_s * 1e3 * 1.3, (top + 2) * LATENCY_BIN_S * 1e3)
+    xmax = max((budget_s or 0.0) * 1e3 * 1.3, (top + 2) * LATENCY_BIN_S * 1e3)
     for ax, node in zip(axes, nodes):
         counts = hist[node]
         total = sum(counts) or 1
-        over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s) / total
         ax.stairs([c / total for c in counts], edges_ms, fill=True, color="#55a868", alpha=0.8)
-        ax.axvline(budget_s * 1e3, color="#c44e52", linewidth=1.2)
         ax.set_ylabel(node, rotation=0, ha="right", va="center", fontsize=8)
         ax.set_yticks([])
-        ax.text(0.99, 0.8, f"{100 * over:.1f} % of time ≥ {budget_s * 1e3:.0f} ms", transform=ax.transAxes,
-                ha="right", fontsize=7, color="#c44e52" if over else "#555555")
+        if budget_s is not None:
+            over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s) / total
+            ax.axvline(budget_s * 1e3, color="#c44e52", linewidth=1.2)
+            ax.text(0.99, 0.8, f"{100 * over:.1f} % of time ≥ {_ms(budget_s)} ms", transform=ax.transAxes,
+                    ha="right", fontsize=7, color="#c44e52" if over else "#555555")
     axes[-1].set_xlim(0, xmax)
-    axes[-1].set_xlabel("latency [ms]  (red line: budget)")
+    axes[-1].set_xlabel("latency [ms]" + ("  (red line: budget)" if budget_s is not None else ""))
     fig.suptitle("Latency per node (share of simulated time)", fontsize=9)
     return _png(fig)
 
 
-def latency_vs_objects(by_objects: dict[int, list[float]], budget_s: float = 0.1) -> str | None:
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1e3:.4g}"
+
+
+def latency_vs_objects(by_objects: dict[int, list[float]], budget_s: float | None = 0.1) -> str | None:
     """Mean and worst e2e latency against the number of objects perception saw."""
     if not by_objects:
         return None
@@ -136,7 +150,8 @@ def latency_vs_objects(by_objects: dict[int, list[float]], budget_s: float = 0.1
     fig, ax = plt.subplots(figsize=(5.0, 2.8))
     ax.plot(ns, mean, "o-", color="#4c72b0", label="mean")
     ax.plot(ns, worst, "s--", color="#8172b2", label="worst")
-    ax.axhline(budget_s * 1e3, color="#c44e52", linewidth=1.2, label=f"{budget_s * 1e3:.0f} ms budget")
+    if budget_s is not None:
+        ax.axhline(budget_s * 1e3, color="#c44e52", linewidth=1.2, label=f"{_ms(budget_s)} ms budget")
     ax.set_xlabel("objects seen by perception")
     ax.set_ylabel("e2e latency [ms]")
     ax.legend(fontsize=7)
@@ -161,3 +176,54 @@ def success_rate_chart(labels: list[str], rates: list[float], intervals: list[tu
     ax.set_xlabel(axis)
     ax.set_title("Success rate per cell (95 % Wilson interval)", fontsize=9)
     return _png(fig)
+
+
+TTC_PLOT_MAX_S = 15.0  # TTC is capped at 99 s ("not closing"); the interesting part is low
+
+
+def run_signals_png(table, verdicts, title: str = "") -> bytes:
+    """PNG of one run over time (a `trace_view.signals_table`): speeds, gaps and TTC from
+    the ego, the ego's lane offset, and one panel per oracle with its margin (negative:
+    violated), the zero line and the time its violation became certain (red; amber for
+    a `warn` oracle)."""
+    plt = _pyplot()
+    t = table["time_s"].to_numpy()
+    groups = [("speed [m/s]", [c for c in table.columns if c.endswith(".speed")]),
+              ("gap from ego [m]", [c for c in table.columns if c.startswith("gap(")]),
+              ("TTC from ego [s]", [c for c in table.columns if c.startswith("ttc(")]),
+              ("ego lane offset [m]", [c for c in ("ego.lane_offset",) if c in table.columns])]
+    groups = [(label, cols) for label, cols in groups if cols]
+    rho = [v for v in verdicts if f"rho.{v.name}" in table.columns]
+    n = len(groups) + len(rho)
+    fig, axes = plt.subplots(n, 1, figsize=(7.0, 1.25 * n + 0.6), sharex=True, squeeze=False)
+    axes = list(axes[:, 0])
+    for ax, (label, cols) in zip(axes, groups):
+        for c in cols:
+            ax.plot(t, table[c].to_numpy(), linewidth=1.0, label=c.replace(".speed", ""))
+        if label.startswith("TTC"):
+            ax.set_ylim(0, TTC_PLOT_MAX_S)
+        ax.set_ylabel(label, fontsize=7)
+        if len(cols) > 1 or label.startswith(("gap", "TTC")):
+            ax.legend(fontsize=6, loc="upper right")
+    for ax, v in zip(axes[len(groups):], rho):
+        y = table[f"rho.{v.name}"].to_numpy(dtype=float)
+        colour = "#55a868" if v.passed else ("#dd8452" if v.severity == "warn" else "#c44e52")
+        finite = np.where(np.isfinite(y), y, np.nan)
+        ax.plot(t, finite, color=colour, linewidth=1.0)
+        ax.axhline(0.0, color="#555555", linewidth=0.7)
+        if not v.passed:
+            ax.fill_between(t, finite, 0.0, where=finite < 0, color=colour, alpha=0.25)
+        if v.first_violation_s is not None:
+            ax.axvline(v.first_violation_s, color=colour, linewidth=1.4, linestyle="--")
+        state = "holds" if v.passed else ("warning" if v.severity == "warn" else "violated") + (
+            f" at {v.first_violation_s:.2f} s" if v.first_violation_s is not None else "")
+        ax.set_ylabel(f"{v.name}\nmargin", fontsize=7)
+        ax.set_title(f"{v.name}: {state}", fontsize=7, loc="left", pad=2)
+    for ax in axes:
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return _png_bytes(fig)

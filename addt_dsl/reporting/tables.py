@@ -18,6 +18,12 @@ from addt_dsl import units
 from addt_dsl.plan import ScenarioPlan
 
 
+def warned_oracles(record) -> list[str]:
+    """Names of the `warn` oracles a run violated: counted and shown apart from failures
+    (a warning never fails a run)."""
+    return [v.name for v in record.verdicts if v.severity == "warn" and not v.passed]
+
+
 def runs_table(plan: ScenarioPlan, records: Iterable):
     """One row per run: id, parameters, seed, verdict, per-oracle robustness and first
     violation time, simulated and wall seconds."""
@@ -33,6 +39,7 @@ def runs_table(plan: ScenarioPlan, records: Iterable):
         for v in r.verdicts:
             row[f"first_violation_s.{v.name}"] = v.first_violation_s
         row["failed_oracles"] = ";".join(r.failed_oracles)
+        row["warned_oracles"] = ";".join(warned_oracles(r))
         row["sim_time_s"] = r.sim_time_s
         row["wall_time_s"] = r.wall_time_s
         row["fault_events"] = r.fault_events
@@ -49,10 +56,13 @@ def runs_table(plan: ScenarioPlan, records: Iterable):
 def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = None,
             cells: Iterable | None = None) -> dict:
     """Counts over runs: passed, failed, failures per oracle (a crashed, timed-out or
-    out-of-memory run counts under its status). For classified runs (`addtc --classify`)
+    out-of-memory run counts under its status), runs with a violated `warn` oracle
+    (`warned`, whether they passed or not) and warnings per oracle. For classified runs (`addtc --classify`)
     also `outcomes` (runs per outcome class) and, for a sweep with grid axes,
     `outcomes_per_cell` over `cells` (the classified records; default `records`)."""
     failures: Counter = Counter()
+    warnings: Counter = Counter()
+    warned = 0
     statuses: Counter = Counter()
     outcomes: Counter = Counter()
     runs = passed = 0
@@ -71,6 +81,9 @@ def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = No
         wall += r.wall_time_s
         for name in r.failed_oracles:
             failures[name] += 1
+        names = warned_oracles(r)
+        warned += bool(names)
+        warnings.update(names)
     out = {
         "scenario": plan.name,
         "source": plan.source_file,
@@ -78,6 +91,8 @@ def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = No
         "passed": passed,
         "failed": runs - passed,
         "failures_per_oracle": dict(sorted(failures.items())),
+        "warned": warned,
+        "warnings_per_oracle": dict(sorted(warnings.items())),
         "statuses": dict(sorted(statuses.items())),
         "rejected_by_assumption": dict(rejected or {}),
         "sim_time_s": sim,
@@ -199,10 +214,9 @@ def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None
     if fmt == "json":
         print(json.dumps(totals, indent=2))
         return
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console(highlight=False)
+    console = terminal()
     names = [o.name for o in plan.oracles]
     cell_params = sorted({k for r in records for k in r.cell})
     classified = any(getattr(r, "outcome", "") for r in records)
@@ -218,25 +232,52 @@ def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None
     for r in records:
         by_name = {v.name: v for v in r.verdicts}
         verdict = "[green]pass[/]" if r.passed else f"[red]{'FAIL' if r.status == 'ok' else r.status.upper()}[/]"
+        verdict += " [yellow](warning)[/]" if warned_oracles(r) else ""
         rho = []
         for n in names:
             v = by_name.get(n)
-            rho.append("-" if v is None else
-                       (f"[red]{fmt_number(v.robustness)}[/]" if not v.passed else fmt_number(v.robustness)))
+            rho.append("-" if v is None else fmt_number(v.robustness) if v.passed else
+                       f"[{'yellow' if v.severity == 'warn' else 'red'}]{fmt_number(v.robustness)}[/]")
         outcome = [OUTCOME_STYLE.get(r.outcome, "{}").format(r.outcome or "-")] if classified else []
         table.add_row(r.run_id, *[fmt_number(r.cell[p]) if p in r.cell else "" for p in cell_params],
                       verdict, *outcome, *rho)
     console.print(table)
     if totals["runs"] > len(records):
         console.print(f"(showing {len(records)} of {totals['runs']} runs)")
-    console.print(f"{totals['passed']} passed, {totals['failed']} failed"
-                  + (f"; failures per oracle: {totals['failures_per_oracle']}" if totals["failed"] else ""))
+    console.print(totals_line(totals))
     if totals.get("outcomes"):
         console.print("outcomes: " + ", ".join(f"{n} {name}" for name, n in totals["outcomes"].items()))
     for r in records:
         if r.status not in ("ok",):
             console.print(f"[red]{r.run_id}: {r.status}: {r.error.splitlines()[0] if r.error else ''}[/]")
 
+
+def totals_line(totals: dict) -> str:
+    """`5 passed, 2 failed, 1 with warnings; failures per oracle: {...}; warnings per oracle: {...}`"""
+    line = f"{totals['passed']} passed, {totals['failed']} failed"
+    if totals.get("warned"):
+        line += f", {totals['warned']} with warnings"
+    if totals["failed"]:
+        line += f"; failures per oracle: {totals['failures_per_oracle']}"
+    if totals.get("warned"):
+        line += f"; warnings per oracle: {totals['warnings_per_oracle']}"
+    return line
+
+
+def terminal():
+    """A rich Console for tables: the terminal's width on a terminal; off a terminal (CI
+    logs, files) wide enough that no column is cut ("no_coll..."), unless COLUMNS says
+    otherwise."""
+    import os
+    import sys
+
+    from rich.console import Console
+
+    wide = not sys.stdout.isatty() and "COLUMNS" not in os.environ
+    return Console(highlight=False, width=NON_TTY_WIDTH if wide else None)
+
+
+NON_TTY_WIDTH = 400
 
 OUTCOME_STYLE = {"masked": "[green]{}[/]", "silent": "[yellow]{}[/]", "detected": "[magenta]{}[/]",
                  "hazard": "[red]{}[/]", "error": "[red]{}[/]"}
@@ -250,9 +291,28 @@ def shown_records(store, limit: int = 40) -> list:
     return failing or list(store.records(limit=limit))
 
 
-def write_tables(out: Path, store, budget_s: float = 0.1) -> None:
+def latency_budget_s(plan: ScenarioPlan) -> float | None:
+    """The latency budget the scenario declares: the bound of an oracle atom such as
+    `latency(e2e) < 100 ms` (parameters at their nominal values), the e2e one if there is
+    one, else the tightest on any node; None when no oracle bounds a latency."""
+    from addt_dsl.expr import Binary, Num, Signal, substitute_params, walk
+
+    bounds: dict[str, float] = {}
+    nominal = plan.nominal_params()
+    for o in plan.oracles:
+        for node in walk(substitute_params(o.formula, nominal)):
+            match node:
+                case Binary(op="<" | "<=", left=Signal(name=name), right=Num(value=v)) | \
+                        Binary(op=">" | ">=", left=Num(value=v), right=Signal(name=name)):
+                    if name.startswith("latency("):
+                        bounds[name] = min(v, bounds.get(name, math.inf))
+    return bounds.get("latency(e2e)", min(bounds.values(), default=None))
+
+
+def write_tables(out: Path, store, budget_s: float | None = None) -> None:
     """summary.json and runs.csv of a store; latency.json when runs recorded latencies
-    (per-node percentiles and e2e latency by object count, over all runs)."""
+    (per-node percentiles and e2e latency by object count, over all runs; the share of
+    time over the budget the plan's oracles declare, `budget_s` overriding it)."""
     from addt_dsl.reporting.plots import LatencyStats
 
     out.mkdir(parents=True, exist_ok=True)
@@ -263,5 +323,6 @@ def write_tables(out: Path, store, budget_s: float = 0.1) -> None:
         if r.stats:
             latency.add(r.stats)
     if latency.hist:
-        (out / "latency.json").write_text(json.dumps(latency.summary(budget_s), indent=2) + "\n")
+        budget = budget_s if budget_s is not None else latency_budget_s(store.plan())
+        (out / "latency.json").write_text(json.dumps(latency.summary(budget), indent=2) + "\n")
 

@@ -39,6 +39,7 @@ class _SummaryRow(NamedTuple):
     wall_time_s: float
     failed_oracles: list[str]
     outcome: str = ""
+    verdicts: list = []  # VerdictRecords: `reporting.tables.warned_oracles` reads them
 
 SCHEMA_VERSION = "1"
 
@@ -326,9 +327,10 @@ class ResultStore:
     def summary(self) -> dict:
         from addt_dsl.reporting.tables import summary
 
-        rows = (_SummaryRow(bool(ok), status, s or 0.0, w or 0.0, [n for n in failed.split(";") if n], outcome)
-                for status, ok, failed, s, w, outcome in self._db.execute(
-                    "SELECT status, passed, failed_oracles, sim_time_s, wall_time_s, outcome FROM runs"))
+        rows = (_SummaryRow(bool(ok), status, s or 0.0, w or 0.0, [n for n in failed.split(";") if n], outcome,
+                            _verdicts(verdicts))
+                for status, ok, failed, s, w, outcome, verdicts in self._db.execute(
+                    "SELECT status, passed, failed_oracles, sim_time_s, wall_time_s, outcome, verdicts FROM runs"))
         return summary(self.plan(), rows, self.rejected(), cells=self.records("outcome != ''"))
 
     def dataframe(self):
@@ -347,9 +349,13 @@ class ResultStore:
         return Path(path)
 
 
+def _verdicts(text: str) -> list[VerdictRecord]:
+    return [VerdictRecord(v["name"], v["severity"], _float(v["robustness"]), v["passed"], v["first_violation_s"])
+            for v in json.loads(text)]
+
+
 def _record(row: dict) -> RunRecord:
-    verdicts = [VerdictRecord(v["name"], v["severity"], _float(v["robustness"]), v["passed"],
-                              v["first_violation_s"]) for v in json.loads(row["verdicts"])]
+    verdicts = _verdicts(row["verdicts"])
     stats = json.loads(row["stats"] or "{}")
     return RunRecord(run_id=row["run_id"], key=row["key"], spec_json=row["spec"], params=json.loads(row["params"]),
                      cell=json.loads(row["cell"]), seed=row["seed"], repeat_index=row["repeat_index"],

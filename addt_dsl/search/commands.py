@@ -5,7 +5,8 @@
     addtc shrink --store DIR [--run-id ID]       a stored run (`addtc FILE --out DIR`)
     addtc falsify FILE [--budget-runs N] [--budget-seconds S] [--seed K] [--jobs J] [--out DIR]
 
-Exit codes follow `addtc`: 0 nothing fails, 1 a failure was found (and written), 2 error.
+Exit codes follow `addtc` (addt_dsl/errors.py): 0 nothing fails, 1 a failure was found (and
+written), 2 usage or scenario error, 3 the tool could not complete.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ import json
 import sys
 from pathlib import Path
 
-EXIT_OK, EXIT_FAILED, EXIT_ERROR = 0, 1, 2
+from addt_dsl.errors import EXIT_FAILED, EXIT_OK, nonneg_float, nonneg_int, positive_int
+from addt_dsl.errors import EXIT_USAGE as EXIT_ERROR
 DEFAULT_OUT = ".addt-failures"
 
 
@@ -28,9 +30,9 @@ def add_commands(sub) -> None:
                         help="a results store (`addtc FILE --out DIR` writes DIR/results.sqlite): shrink its "
                              "run --run-id, else its first failing run")
     shrink.add_argument("--oracle", help="the failing oracle to keep (default: the earliest violation)")
-    shrink.add_argument("--max-simulations", type=int, default=300)
-    shrink.add_argument("--limit", type=int, default=0, help="look for a failure in the first N runs only")
-    shrink.add_argument("--jobs", "-j", type=int, default=1, help="processes while looking for a failing run")
+    shrink.add_argument("--max-simulations", type=positive_int, default=300)
+    shrink.add_argument("--limit", type=nonneg_int, default=0, help="look for a failure in the first N runs only")
+    shrink.add_argument("--jobs", "-j", type=positive_int, default=1, help="processes while looking for a failing run")
     shrink.add_argument("--out", default=DEFAULT_OUT, help=f"output directory (default {DEFAULT_OUT})")
     shrink.add_argument("--cache", help="JSON-lines run cache to reuse across invocations")
     shrink.add_argument("--no-animation", action="store_true")
@@ -39,13 +41,13 @@ def add_commands(sub) -> None:
 
     fal = sub.add_parser("falsify", help="search parameters and faults for oracle violations")
     fal.add_argument("file")
-    fal.add_argument("--budget-runs", type=int, default=200)
-    fal.add_argument("--budget-seconds", type=float, default=0.0, help="0: no time limit")
+    fal.add_argument("--budget-runs", type=positive_int, default=200)
+    fal.add_argument("--budget-seconds", type=nonneg_float, default=0.0, help="0: no time limit")
     fal.add_argument("--seed", type=int, default=0)
-    fal.add_argument("--jobs", "-j", type=int, default=1)
-    fal.add_argument("--batch", type=int, default=16, help="candidates per generation")
+    fal.add_argument("--jobs", "-j", type=positive_int, default=1)
+    fal.add_argument("--batch", type=positive_int, default=16, help="candidates per generation")
     fal.add_argument("--sampler", choices=("cem", "random"), default="cem")
-    fal.add_argument("--shrink-simulations", type=int, default=60,
+    fal.add_argument("--shrink-simulations", type=nonneg_int, default=60,
                      help="per distinct failure, to find its origin (0: do not shrink)")
     fal.add_argument("--out", default=DEFAULT_OUT, help="write each distinct failure's counterexample here")
     fal.add_argument("--no-write", action="store_true", help="report only")
@@ -136,7 +138,8 @@ def cmd_shrink(args) -> int:
         try:
             spec = RunSpec.model_validate_json(Path(args.run_key).read_text())
         except (OSError, ValueError) as exc:
-            _err(f"cannot read a RunSpec from {args.run_key}: {exc}")
+            detail = exc.errors()[0]["msg"] if hasattr(exc, "errors") else str(exc)  # pydantic: first error only
+            _err(f"cannot read a RunSpec from {args.run_key}: {detail}")
             return EXIT_ERROR
         source = source or spec.plan.source_file
     else:

@@ -120,3 +120,15 @@ def test_project_suite_does_not_collect_examples():
                          capture_output=True, text=True)
     assert ".addt" not in out.stdout
     assert "test_printer.py" in out.stdout
+
+
+def test_violated_warn_oracle_is_a_warning_not_a_failure(project):
+    (project / "scenarios" / "follow.addt").write_text(
+        PASSING.replace("no collision", "no collision\n    warn crawl: always ego.speed < 5 m/s"))
+    junit = project / "report.xml"
+    out = _pytest(project, f"--junitxml={junit}", "scenarios")
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "AddtWarning: scenarios/follow.addt: warning: crawl violated in 2 of 2 run(s)" in out.stdout
+    assert '<property name="warning.crawl" value="2"' in junit.read_text()
+    strict = _pytest(project, "-W", "error::addt_dsl.pytest_plugin.AddtWarning", "scenarios")
+    assert strict.returncode == 1

@@ -22,16 +22,22 @@ pytestmark = pytest.mark.slow
 CHROMIUM = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)),
                 None)
 
-# Appended to a copy of the report: after load, record which images did not decode.
+# Appended to a copy of the report: after load, record which images did not decode and
+# whether anything makes the page wider than the window (it must scroll inside its boxes).
 IMAGE_CHECK = """<script>
 window.addEventListener("load", () => {
   const bad = [...document.images].filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.alt);
+  const box = document.getElementById("verdict-scroll");
   const out = document.createElement("pre");
   out.id = "image-check";
-  out.textContent = JSON.stringify({images: document.images.length, broken: bad});
+  out.textContent = JSON.stringify({images: document.images.length, broken: bad,
+    signals: [...document.images].filter(i => i.alt.startsWith("signals over time") && i.naturalWidth > 0).length,
+    page_width: document.documentElement.scrollWidth, window_width: window.innerWidth,
+    verdict_box: box ? [box.clientWidth, box.scrollWidth] : null});
   document.body.appendChild(out);
 });
 </script>"""
+NARROW_WINDOW = (500, 900)  # px (chromium's narrowest): narrower than the verdict table and the GIFs
 
 
 @pytest.fixture(scope="module")
@@ -76,6 +82,10 @@ def test_report_has_animations_of_the_failing_runs(run_dir):
         assert image.format == "GIF" and image.n_frames > 10
     assert "not reproducible" not in html  # re-executed traces matched the stored digests
     assert len(re.findall(r"first violated at [23]\.\d\d s", html)) >= 2
+    signals = re.findall(r'alt="signals over time of (c\d+-r\d+)" src="data:image/png;base64,([^"]+)"', html)
+    assert len(signals) == 2  # one signal plot per animated failing run
+    assert all(base64.b64decode(png)[:8] == b"\x89PNG\r\n\x1a\n" for _, png in signals)
+    assert "declares no latency budget" in html  # the scenario bounds no latency
 
 
 def test_report_subcommand_rebuilds_from_the_store(run_dir, tmp_path):
@@ -83,7 +93,7 @@ def test_report_subcommand_rebuilds_from_the_store(run_dir, tmp_path):
     shutil.copytree(run_dir, target)
     (target / "report.html").unlink()
     proc = addtc("report", target, "--animations", "0", "--export", target / "runs.parquet")
-    assert proc.returncode == 0, proc.stderr
+    assert proc.returncode == 1, proc.stderr  # the store's verdict: two runs failed
     assert (target / "report.html").exists()
     assert pd.read_parquet(target / "runs.parquet")["run_id"].tolist() == pd.read_csv(target / "runs.csv")[
         "run_id"].tolist()
@@ -99,6 +109,7 @@ def test_report_renders_in_headless_chromium(run_dir, tmp_path):
         proc = subprocess.run(
             [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
              "--disable-background-networking", f"--user-data-dir={profile}", "--virtual-time-budget=10000",
+             f"--window-size={NARROW_WINDOW[0]},{NARROW_WINDOW[1]}",
              "--dump-dom", page.as_uri()],
             capture_output=True, text=True, timeout=120)
     dom = proc.stdout
@@ -107,4 +118,38 @@ def test_report_renders_in_headless_chromium(run_dir, tmp_path):
     assert table and table.group(1).count("<tr>") == 1 + 4
     check = json.loads(re.search(r'<pre id="image-check">(.*?)</pre>', dom, re.S).group(1))
     assert check["broken"] == []
-    assert check["images"] >= 6  # success chart, 2 robustness histograms, 2 latency figures, GIFs
+    assert check["images"] >= 8  # success chart, 2 robustness histograms, 2 latency figures, GIFs, signal plots
+    assert check["signals"] == 2
+    # The body never scrolls sideways; the verdict table scrolls inside its own box.
+    assert check["page_width"] <= check["window_width"], check
+    assert check["verdict_box"][0] <= check["window_width"], check
+
+
+def test_reach_goal_is_dated_when_it_became_certain(tmp_path):
+    """`reach goal within 2 s` that fails: violated at 2.00 s (the window end), not 0.00 s,
+    and the animation is not red before then."""
+    from io import BytesIO
+
+    import numpy as np
+    from PIL import Image
+
+    scenario = limit_scenario(tmp_path, repeat=1, duration="3 s", limits="200")
+    text = scenario.read_text().replace("ego car on r lane -1 at 20 m speed 20 m/s {",
+                                        "ego car on r lane -1 at 20 m speed 20 m/s goal 250 m {")
+    scenario.write_text(text.replace("no collision", "no collision\n    reach goal within 2 s")
+                        .replace("grid drop in [0, 20] %", "grid drop in [0] %"))
+    out = tmp_path / "out"
+    proc = addtc(scenario, "--jobs", "1", "--out", out, "--animations", "1")
+    assert proc.returncode == 1, proc.stderr
+    runs = pd.read_csv(out / "runs.csv")
+    assert runs["first_violation_s.reach_goal"].tolist() == [2.0]
+    html = (out / "report.html").read_text()
+    assert "first violated at 2.00 s" in html and "first violated at 0.00 s" not in html
+    gif = Image.open(BytesIO(base64.b64decode(re.search(r'src="data:image/gif;base64,([^"]+)"', html).group(1))))
+    border = []
+    for i in (0, gif.n_frames - 1):
+        gif.seek(i)
+        border.append(tuple(np.asarray(gif.convert("RGB"))[150, 2]))
+    first, last = border
+    assert not (first[0] > 180 and first[1] < 80), first  # no red frame at t = 0
+    assert last[0] > 180 and last[1] < 80, last  # red once the violation is certain

@@ -23,6 +23,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from addt_dsl.errors import UsageError, nonneg_int, positive_int
+
 DEFAULT_BANDS_M = (0.0, 20.0, 40.0, 60.0, 80.0)
 
 
@@ -79,6 +81,11 @@ def error_table(rows: Sequence[dict], by: Sequence[str] = (), bands: Sequence[fl
 def success_table(runs, by: Sequence[str]):
     """Success rate per cell of an `addtc --out` runs table (columns `param.NAME`, `passed`)."""
     cols = [f"param.{b}" for b in by]
+    missing = [b for b, c in zip(by, cols) if c not in runs.columns]
+    if missing or "passed" not in runs.columns:
+        known = ", ".join(c.removeprefix("param.") for c in runs.columns if c.startswith("param.")) or "none"
+        raise UsageError(f"--by {','.join(missing)}: not a parameter of these runs (parameters: {known})"
+                         if missing else "not a runs table of `addtc FILE --out DIR` (no `passed` column)")
     table = runs.groupby(cols)["passed"].agg(["size", "sum", "mean"])
     table.columns = ["runs", "passed", "success_rate"]
     table.index.names = list(by)
@@ -115,6 +122,17 @@ def _pool_map(fn, items, jobs):
         return pool.map(fn, items, chunksize=1)
 
 
+def _bands(text: str) -> list[float]:
+    """`--bands 0,20,40`: increasing distance band edges [m]."""
+    try:
+        edges = [float(b) for b in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected increasing distances in m, like 0,20,40; got {text!r}") from None
+    if len(edges) < 2 or any(b <= a for a, b in zip(edges, edges[1:])):
+        raise argparse.ArgumentTypeError(f"expected at least two increasing distances, got {text!r}")
+    return edges
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m addt_dsl.runtime.faults.study") -> int:
     import pandas as pd
 
@@ -123,11 +141,11 @@ def main(argv: list[str] | None = None, prog: str = "python -m addt_dsl.runtime.
     for name in ("classify", "perception"):
         p = sub.add_parser(name)
         p.add_argument("file")
-        p.add_argument("--jobs", type=int, default=1)
+        p.add_argument("--jobs", type=positive_int, default=1)
         p.add_argument("--by", default="", help="grid parameters to group by (default: all grid axes)")
-        p.add_argument("--limit", type=int, default=0)
+        p.add_argument("--limit", type=nonneg_int, default=0)
         if name == "perception":
-            p.add_argument("--bands", default=",".join(f"{b:g}" for b in DEFAULT_BANDS_M))
+            p.add_argument("--bands", type=_bands, default=DEFAULT_BANDS_M)
     t = sub.add_parser("table")
     t.add_argument("runs_csv")
     t.add_argument("--by", required=True)
@@ -135,7 +153,11 @@ def main(argv: list[str] | None = None, prog: str = "python -m addt_dsl.runtime.
     pd.set_option("display.width", 200)
 
     if args.what == "table":
-        print(success_table(pd.read_csv(args.runs_csv), args.by.split(",")).to_string())
+        try:
+            runs = pd.read_csv(args.runs_csv)
+        except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise UsageError(f"{args.runs_csv}: not a runs table ({str(exc).splitlines()[0]})") from None
+        print(success_table(runs, args.by.split(",")).to_string())
         return 0
 
     from addt_dsl.sweep import expand
@@ -145,6 +167,10 @@ def main(argv: list[str] | None = None, prog: str = "python -m addt_dsl.runtime.
     if args.limit:
         specs = specs[: args.limit]
     by = args.by.split(",") if args.by else [g.param for g in plan.sweep.grid]
+    unknown = [b for b in by if b not in {p.name for p in plan.params}]
+    if unknown:
+        raise UsageError(f"--by {','.join(unknown)}: not a parameter of {plan.name} "
+                         f"(parameters: {', '.join(p.name for p in plan.params) or 'none'})")
     if args.what == "classify":
         from addt_dsl.runtime.outcome import classify_many, outcome_table
 
@@ -157,8 +183,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m addt_dsl.runtime.
             for name in angles:
                 row[f"{name} [deg]"] = round(math.degrees(row[name]), 6)
         by = [f"{b} [deg]" if b in angles else b for b in by]
-        bands = [float(b) for b in args.bands.split(",")]
-        print(error_table(rows, by=by, bands=bands).to_string(float_format=lambda x: f"{x:.3f}"))
+        print(error_table(rows, by=by, bands=args.bands).to_string(float_format=lambda x: f"{x:.3f}"))
     return 0
 
 

@@ -14,6 +14,7 @@ from addt_dsl.runtime.oracles.stl import (
     evaluate,
     first_violation_time,
     robustness_at_0,
+    robustness_over_time,
     samples,
     satisfied,
     verdicts,
@@ -21,5 +22,6 @@ from addt_dsl.runtime.oracles.stl import (
 
 __all__ = [
     "FormulaTypeError", "UnknownSignalError", "UnsubstitutedParameterError",
-    "boolean_semantics", "evaluate", "first_violation_time", "robustness_at_0", "samples", "satisfied", "verdicts",
+    "boolean_semantics", "evaluate", "first_violation_time", "robustness_at_0", "robustness_over_time",
+    "samples", "satisfied", "verdicts",
 ]

@@ -32,7 +32,7 @@ from addt_dsl.runtime.oracles.windows import window_reduce
 
 __all__ = [
     "FormulaTypeError", "UnknownSignalError", "UnsubstitutedParameterError", "evaluate",
-    "first_violation_time", "robustness_at_0", "samples", "satisfied", "verdicts",
+    "first_violation_time", "robustness_at_0", "robustness_over_time", "samples", "satisfied", "verdicts",
 ]
 
 
@@ -313,13 +313,22 @@ def satisfied(expr: Expr, signals: Mapping[str, np.ndarray], period_s: float) ->
 
 def first_violation_time(expr: Expr, signals: Mapping[str, np.ndarray],
                          period_s: float) -> float | None:
-    """When a violated formula first went wrong (None if it holds at time 0).
+    """When the violation of a violated formula became certain (None if it holds at time
+    0, or if no single instant can be named).
 
-    `always φ`: the first sample of its window (from time 0) where φ fails; a conjunction:
-    the earliest among its violated conjuncts; anything else: 0.0, the time it is judged at.
+    `always φ`: the first sample of its window (from time 0) where φ fails;
+    `eventually [a, b] φ`: the window end b, or the end of the run when that comes first or
+    there is no b (φ never held, and only then is that known); a conjunction: the earliest
+    among its violated conjuncts; a disjunction: when the later of its two violations
+    became certain; a comparison with no temporal operator: 0.0, the time it is judged at.
     """
     if satisfied(expr, signals, period_s):
         return None
+    return _violation_time(expr, signals, period_s)
+
+
+def _violation_time(expr: Expr, signals: Mapping[str, np.ndarray], period_s: float) -> float | None:
+    """`first_violation_time` of a formula known to be violated at time 0."""
     match expr:
         case Temporal(op="always", lo_s=lo_s, hi_s=hi_s, arg=arg):
             v = verdicts(arg, signals, period_s)
@@ -327,8 +336,31 @@ def first_violation_time(expr: Expr, signals: Mapping[str, np.ndarray],
             end = v.shape[0] if hi is None else min(hi + 1, v.shape[0])
             bad = np.flatnonzero(~v[lo:end])
             return (lo + int(bad[0])) * period_s
+        case Temporal(op="eventually", hi_s=hi_s):
+            last = (_length(signals) - 1) * period_s
+            return last if hi_s is None else min(samples(hi_s, period_s) * period_s, last)
         case Binary(op="and", left=l, right=r):
             times = [t for t in (first_violation_time(e, signals, period_s) for e in (l, r))
                      if t is not None]
             return min(times)
-    return 0.0
+        case Binary(op="or", left=l, right=r):  # both sides are violated
+            times = [_violation_time(e, signals, period_s) for e in (l, r)]
+            return None if None in times else max(times)
+        case Binary(op="<" | "<=" | ">" | ">=" | "==" | "!="):
+            return 0.0
+    return None
+
+
+def _length(signals: Mapping[str, np.ndarray]) -> int:
+    return max((np.asarray(v).shape[0] for v in signals.values()), default=1)
+
+
+def robustness_over_time(expr: Expr, signals: Mapping[str, np.ndarray], period_s: float) -> np.ndarray:
+    """The oracle's margin at every sample, for plots: for `always φ` / `eventually φ` the
+    robustness of φ at each sample (negative where φ fails: the samples that break an
+    `always`, or every sample of an `eventually` that never held), else the formula's own
+    robustness judged at each sample."""
+    match expr:
+        case Temporal(arg=arg):
+            return evaluate(arg, signals, period_s)
+    return evaluate(expr, signals, period_s)

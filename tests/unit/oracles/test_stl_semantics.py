@@ -17,6 +17,7 @@ from addt_dsl.runtime.oracles import (
     UnsubstitutedParameterError,
     evaluate,
     first_violation_time,
+    robustness_over_time,
     robustness_at_0,
     samples,
     satisfied,
@@ -118,7 +119,7 @@ def test_nan_is_the_worst_case_even_under_negation():
 
 def test_infinities_and_arithmetic_nan():
     assert rho("x > 0", x=[INF])[0] == INF
-    assert rho("x < 1e999", x=[INF])[0] == -INF        # inf - inf: unknown
+    assert rho("x < y", x=[INF], y=[INF])[0] == -INF   # inf - inf: unknown (a non-finite literal is E0204)
     assert rho("x / y > 0", x=[1.0], y=[0.0])[0] == INF
     assert rho("x / y > 0", x=[0.0], y=[0.0])[0] == -INF  # 0/0
     assert rho("not sqrt(x) > 0", x=[-1.0])[0] == -INF
@@ -134,9 +135,26 @@ def test_first_violation_time():
     both = parse_formula("always x > -1.5 and (always within 0.2 s x < 1)")
     assert first_violation_time(both, sig, 0.1) == pytest.approx(0.0)
     assert first_violation_time(parse_formula("(always x > -1.5) and (always x > 0)"), sig, 0.1) == pytest.approx(0.3)
-    assert first_violation_time(parse_formula("eventually x > 5"), sig, 0.1) == 0.0
+    # `eventually`: certain only when its window closes (or the run ends), never "at 0 s".
+    assert first_violation_time(parse_formula("eventually x > 5"), sig, 0.1) == pytest.approx(0.5)
+    assert first_violation_time(parse_formula("eventually within 0.2 s x > 5"), sig, 0.1) == pytest.approx(0.2)
+    assert first_violation_time(parse_formula("eventually within 3 s x > 5"), sig, 0.1) == pytest.approx(0.5)
+    assert first_violation_time(parse_formula("eventually within 0.2 s x >= 1"), sig, 0.1) is None
+    either = parse_formula("(always x > 0) or (eventually within 0.4 s x > 5)")
+    assert first_violation_time(either, sig, 0.1) == pytest.approx(0.4)  # the later of the two
+    assert first_violation_time(parse_formula("x > 5"), sig, 0.1) == 0.0
+    assert first_violation_time(parse_formula("not (always x > -5)"), sig, 0.1) is None  # no instant to name
     zero = {"x": np.array([1.0, 0.0, 1.0])}  # a tie counts as a violation of a strict bound
     assert first_violation_time(f, zero, 0.5) == 0.5
+
+
+def test_robustness_over_time_is_the_margin_of_the_body():
+    sig = {"x": np.array([1.0, 1.0, -1.0, 2.0])}
+    np.testing.assert_allclose(robustness_over_time(parse_formula("always x > 0"), sig, 0.1), [1, 1, -1, 2])
+    np.testing.assert_allclose(robustness_over_time(parse_formula("eventually x > 3"), sig, 0.1), [-2, -2, -4, -1])
+    # Not temporal at the top: the formula judged at each sample.
+    np.testing.assert_allclose(robustness_over_time(parse_formula("x > 0 and x < 1.5"), sig, 0.1),
+                               [0.5, 0.5, -1, -0.5])
 
 
 def test_evaluate_value_expression_and_no_aliasing():

@@ -1,0 +1,146 @@
+"""One run's signals and events, for `addtc trace` and the report's per-run plots.
+
+The store keeps no traces: `rerun` executes the stored RunSpec again with the trace kept
+(a RunSpec determines its run; the stored digest says whether it did). `signals_table`
+flattens the trace into one row per clock sample:
+
+    time_s, ego.speed, ego.accel, ego.s, ego.lane_offset, ..., lead.speed, ...,
+    gap(ego,lead), ttc(ego,lead), latency.e2e, ..., objects, rho.<oracle>, ...
+
+where `rho.<oracle>` is the oracle's margin at each sample (`robustness_over_time`:
+negative where it is violated). `events_table` lists the events (collisions, faults,
+behaviours, detections, ...), one row each.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from addt_dsl.expr import signals_used, substitute_params
+from addt_dsl.runtime.oracles import robustness_over_time
+from addt_dsl.runtime.signals import compute_signals
+from addt_dsl.runtime.trace import ACTOR_FIELDS
+
+# Events of these kinds come every sensor frame; the terminal lists them as a count only.
+FREQUENT_EVENTS = ("detections",)
+
+
+@dataclass
+class RunTrace:
+    """A stored run executed again: its spec, trace, verdicts and whether it reproduced."""
+
+    record: object  # the stored RunRecord
+    spec: object
+    trace: object
+    verdicts: list
+    reproduced: bool
+
+
+def rerun(store, record) -> RunTrace:
+    from addt_dsl.runtime.execute import execute
+
+    spec = store.spec(record)
+    result = execute(spec, keep_trace=True)
+    return RunTrace(record, spec, result.trace, result.verdicts,
+                    reproduced=not record.digest or result.digest == record.digest)
+
+
+def oracle_margins(spec, trace) -> dict[str, np.ndarray]:
+    """Oracle name -> its margin at every sample (`robustness_over_time`)."""
+    out = {}
+    for o in spec.plan.oracles:
+        formula = substitute_params(o.formula, spec.params)
+        signals = compute_signals(trace, signals_used(formula))
+        out[o.name] = np.asarray(robustness_over_time(formula, signals, trace.period_s), dtype=float)
+    return out
+
+
+def signals_table(spec, trace):
+    """One row per clock sample: actor fields, gap and TTC from the ego to every other
+    actor, per-node latency, object count and each oracle's margin (pandas)."""
+    import pandas as pd
+
+    columns: dict[str, np.ndarray] = {"time_s": np.asarray(trace.time)}
+    for name, track in trace.actors.items():
+        for f in ACTOR_FIELDS:
+            columns[f"{name}.{f}"] = np.asarray(getattr(track, f))
+    others = [n for n in trace.actors if n != "ego"]
+    if "ego" in trace.actors:
+        wanted = {f"{fn}(ego,{o})" for o in others for fn in ("gap", "ttc")}
+        computed = compute_signals(trace, wanted)
+        for o in others:
+            columns[f"gap(ego,{o})"] = computed[f"gap(ego,{o})"]
+            columns[f"ttc(ego,{o})"] = computed[f"ttc(ego,{o})"]
+    for node, values in trace.latency.items():
+        columns[f"latency.{node}"] = np.asarray(values)
+    if trace.object_count is not None:
+        columns["objects"] = np.asarray(trace.object_count)
+    for name, rho in oracle_margins(spec, trace).items():
+        columns[f"rho.{name}"] = rho
+    return pd.DataFrame(columns)
+
+
+def events_table(trace):
+    """One row per event: time, kind and its details as JSON (pandas)."""
+    import pandas as pd
+
+    rows = [{"time_s": e.time_s, "kind": e.kind, "detail": json.dumps(e.detail, default=_jsonable)}
+            for e in trace.events]
+    return pd.DataFrame(rows, columns=["time_s", "kind", "detail"])
+
+
+def _jsonable(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return str(x)
+
+
+def events_path(path) -> str:
+    """Where `--csv runs/c000.csv` puts the events: `runs/c000-events.csv`."""
+    from pathlib import Path
+
+    p = Path(path)
+    return str(p.with_name(f"{p.stem}-events{p.suffix}"))
+
+
+def print_trace(run: RunTrace, table, events, max_events: int = 40) -> None:
+    """Terminal view: the run and its verdicts, a summary per signal (min, max, mean, at
+    the end) and the events in time order (frequent kinds counted)."""
+    from rich.table import Table
+
+    from addt_dsl.reporting.tables import fmt_number, terminal
+
+    console = terminal()
+    r = run.record
+    params = ", ".join(f"{k} = {fmt_number(v)}" for k, v in sorted(r.params.items()))
+    verdict = "pass" if r.passed else ("FAIL" if r.status == "ok" else r.status.upper())
+    console.print(f"{run.spec.plan.name} {r.run_id}: {verdict} · seed {r.seed} · {params}")
+    for v in run.verdicts:
+        state = "holds" if v.passed else ("warning" if v.severity == "warn" else "VIOLATED")
+        when = f", certain at {v.first_violation_s:.2f} s" if v.first_violation_s is not None else ""
+        console.print(f"  {v.name}: {state}, robustness {fmt_number(v.robustness)}{when}")
+    if not run.reproduced:
+        console.print("[yellow]the re-run's trace digest differs from the stored one: not reproducible[/]")
+    summary = Table(title=f"signals ({len(table)} samples every {run.trace.period_s:g} s)")
+    for col in ("signal", "min", "max", "mean", "at end"):
+        summary.add_column(col, justify="left" if col == "signal" else "right")
+    for col in table.columns[1:]:
+        values = table[col].to_numpy(dtype=float)
+        finite = values[np.isfinite(values)]
+        cells = [fmt_number(float(x)) for x in (finite.min(), finite.max(), finite.mean())] if len(finite) \
+            else ["-"] * 3
+        summary.add_row(col, *cells, fmt_number(float(values[-1])) if len(values) else "-")
+    console.print(summary)
+    frequent = events[events["kind"].isin(FREQUENT_EVENTS)]["kind"].value_counts()
+    listed = events[~events["kind"].isin(FREQUENT_EVENTS)]
+    console.print(f"events: {len(events)}"
+                  + "".join(f"; {n} {kind} (one per sensor frame, in the CSV)" for kind, n in frequent.items()))
+    for row in listed.head(max_events).itertuples():
+        console.print(f"  {row.time_s:7.2f} s  {row.kind:<12} {row.detail}", markup=False)
+    if len(listed) > max_events:
+        console.print(f"  ... {len(listed) - max_events} more (write them with --csv)")
