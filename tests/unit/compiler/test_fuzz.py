@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import re
 import pytest
-from conftest import CASES_DIR, FUZZ, REPO
+from tests.unit.compiler.conftest import CASES_DIR, FUZZ, REPO
 from hypothesis import example, given
 from hypothesis import strategies as st
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from conftest import CASES_DIR, REPO
+from tests.unit.compiler.conftest import CASES_DIR, REPO
 
 from addt_dsl.cli import main
 from addt_dsl.compiler import compile_file
