@@ -13,6 +13,7 @@ from pathlib import Path
 
 from addt_dsl.compiler import ast, parser
 from addt_dsl.compiler.check import RULES, Context
+from addt_dsl.compiler.optional_deps import check_optional_deps
 from addt_dsl.compiler.parser import parse_source
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
 from addt_dsl.plan import ScenarioPlan
@@ -162,6 +163,7 @@ def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: 
     ctx = Context(scenario, sink, str(base_dir), display, read_file=read_file, sources=sources)
     for rule in RULES:
         rule(ctx)
+    check_optional_deps(ctx)
     if sink.has_errors:
         return CompileResult(None, sink.items, sources)
     from addt_dsl.compiler.lower import build_plan, check_feasible
