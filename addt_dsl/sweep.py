@@ -1,4 +1,4 @@
-"""Plan → RunSpecs: grids, samplers (random, Halton, Latin hypercube), repeats, seeds.
+"""Plan → RunSpecs: grids, samplers (random; Halton and Latin hypercube from scipy.stats.qmc), repeats, seeds.
 
 Seeds are derived from (plan seed, sweep seed, cell, repeat) with numpy's SeedSequence,
 so a RunSpec's seed does not depend on how many runs come before it or on the worker
@@ -11,6 +11,7 @@ import itertools
 import math
 from collections import Counter
 from dataclasses import dataclass, field
+from statistics import NormalDist
 
 import numpy as np
 
@@ -67,32 +68,30 @@ def _holds(expr, params: dict[str, float]) -> bool:
     return bool(value) and not math.isnan(value)
 
 
-def _halton(index: int, base: int) -> float:
-    f, r = 1.0, 0.0
-    while index > 0:
-        f /= base
-        r += f * (index % base)
-        index //= base
-    return r
+class _RandomEngine:
+    """Plain uniform draws behind the `random(n)` interface of scipy's QMC engines."""
+
+    def __init__(self, dims: int, rng: np.random.Generator):
+        self.dims, self.rng = dims, rng
+
+    def random(self, n: int) -> np.ndarray:
+        return self.rng.random((n, self.dims))
 
 
-_PRIMES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53)
+def _unit_engine(kind: str, dims: int, seed: int):
+    """An engine whose `random(n)` gives points in [0, 1)^dims, deterministic in `seed`.
 
-
-def _unit_samples(kind: str, count: int, dims: int, rng: np.random.Generator, offset: int) -> np.ndarray:
-    """`count` points in [0, 1)^dims; `offset` continues a low-discrepancy sequence."""
-    if dims == 0:
-        return np.zeros((count, 0))
+    Halton is scrambled (scipy gives each axis its own prime base, so no two axes repeat
+    however many parameters are sampled) and continues its sequence across calls, so a
+    batch drawn after rejections stays low-discrepancy. Each Latin hypercube call is a
+    fresh design: one point per stratum per axis among the `n` drawn."""
+    rng = np.random.default_rng(seed)
     if kind == "random":
-        return rng.random((count, dims))
-    if kind == "halton":
-        return np.array([[_halton(offset + i + 1, _PRIMES[d % len(_PRIMES)]) for d in range(dims)]
-                         for i in range(count)])
-    # Latin hypercube: one point per stratum per dimension, strata shuffled independently.
-    u = (np.arange(count)[:, None] + rng.random((count, dims))) / count
-    for d in range(dims):
-        u[:, d] = u[rng.permutation(count), d]
-    return u
+        return _RandomEngine(dims, rng)
+    # scipy.stats costs ~0.6 s to import; only sweeps that sample pay it (not `addtc check`).
+    from scipy.stats import qmc
+
+    return {"halton": qmc.Halton, "lhs": qmc.LatinHypercube}[kind](dims, rng=rng)
 
 
 def _from_unit(p: ParamPlan, u: float) -> float:
@@ -100,25 +99,13 @@ def _from_unit(p: ParamPlan, u: float) -> float:
         return p.choices[min(int(u * len(p.choices)), len(p.choices) - 1)]
     if p.distribution == "normal":
         mean = p.mean if p.mean is not None else p.default
-        # Inverse normal CDF by bisection on erf: exact enough and dependency-free.
-        value = mean + (p.sd or 0.0) * _probit(min(max(u, 1e-12), 1 - 1e-12))
+        value = mean + (p.sd or 0.0) * NormalDist().inv_cdf(min(max(u, 1e-12), 1 - 1e-12))
         lo = p.low if p.low is not None else -math.inf
         hi = p.high if p.high is not None else math.inf
         return min(max(value, lo), hi)
     lo = p.low if p.low is not None else p.default
     hi = p.high if p.high is not None else p.default
     return lo + (hi - lo) * u
-
-
-def _probit(u: float) -> float:
-    lo, hi = -10.0, 10.0
-    for _ in range(80):
-        mid = 0.5 * (lo + hi)
-        if 0.5 * (1 + math.erf(mid / math.sqrt(2))) < u:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
 
 
 def expand(plan: ScenarioPlan) -> Expansion:
@@ -216,13 +203,12 @@ def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
     tried = 0
     n_cells = math.prod(len(v) for _, v in axes)
     per_cell = max(1, budget // max(1, min(n_cells, budget)))
-    rng = np.random.default_rng(derive_seed(plan.seed, 15485863)) if sampled else None
+    engine = _unit_engine(sweep.sampler.kind, len(sampled), derive_seed(plan.seed, 15485863)) if sampled else None
     for combo in itertools.islice(itertools.product(*[v for _, v in axes]), budget):
         base = {**nominal, **dict(zip([a for a, _ in axes], combo))}
         if sampled:
             n = max(1, min(budget - tried, per_cell))
-            kind = sweep.sampler.kind if sweep.sampler.kind != "halton" else "random"
-            rows = _unit_samples(kind, n, len(sampled), rng, 0)
+            rows = engine.random(n)
             candidates = ({**base, **{p.name: _from_unit(p, float(u)) for p, u in zip(sampled, row)}}
                           for row in rows)  # lazy: most scenarios accept the first one
         else:
@@ -241,15 +227,12 @@ def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
 def _sample_cell(plan, base, sampled, cell_index, rejected):
     """Accepted parameter assignments of one cell, drawn lazily in batches."""
     sampler = plan.sweep.sampler
-    rng = np.random.default_rng(derive_seed(plan.seed, sampler.seed, cell_index, 104729))
+    engine = _unit_engine(sampler.kind, len(sampled), derive_seed(plan.seed, sampler.seed, cell_index, 104729))
     accepted = 0
-    drawn = 0
     cap = plan.sweep.max_rejections
     while accepted < sampler.count:
         need = sampler.count - accepted
-        units = _unit_samples(sampler.kind, need, len(sampled), rng, drawn)
-        drawn += need
-        for row in units:
+        for row in engine.random(need):
             params = {**base, **{p.name: _from_unit(p, float(u)) for p, u in zip(sampled, row)}}
             broken = violated_assumptions(plan, params)
             if broken:

@@ -1,13 +1,46 @@
-"""Shared fixtures: paths and compiled examples."""
+"""Shared fixtures: paths and compiled examples; `--no-skips` for CI."""
 
 from __future__ import annotations
 
+import importlib.util
+import re
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
+
+HAS_TORCH = importlib.util.find_spec("torch") is not None
+# Test inputs (scenario sources, files, doc code blocks) that need the `learned` extra.
+_TORCH_INPUT = re.compile(r"perception\s+learned|^\s*import torch\b|addt_dsl\.stack\.(learned|tensorfaults|train)\b",
+                          re.M)
+
+
+def needs_torch(value) -> bool:
+    """Whether a test input (source text, or an .addt path) needs torch."""
+    if isinstance(value, Path) and value.suffix == ".addt" and value.is_file():
+        value = value.read_text(encoding="utf-8")
+    return isinstance(value, str) and _TORCH_INPUT.search(value) is not None
+
+
+@pytest.hookimpl(tryfirst=True)  # before `-m` deselects by marker
+def pytest_collection_modifyitems(items):
+    """A test case whose parameter needs torch (a learned scenario, a doc block importing
+    torch) gets the `torch` marker, and is skipped, with its reason, where torch is missing.
+    Whole modules that need torch mark themselves (`pytestmark`, `importorskip`)."""
+    for item in items:
+        callspec = getattr(item, "callspec", None)
+        if callspec is not None and any(needs_torch(v) for v in callspec.params.values()):
+            item.add_marker(pytest.mark.torch)
+            if not HAS_TORCH:
+                item.add_marker(pytest.mark.skip(reason="needs torch (the `learned` extra, see README)"))
+
+
+def compiled_as_installed(result) -> bool:
+    """A scenario compiles, or (core install) its only errors are E0601: it needs torch."""
+    errors = {d.code for d in result.diagnostics if d.is_error}
+    return result.ok or (not HAS_TORCH and errors == {"E0601"})
 
 
 @pytest.fixture(scope="session")
@@ -29,4 +62,22 @@ def assert_scenarios_compile(patterns) -> None:
         assert paths, pattern
         for path in paths:
             result = compile_file(path)
-            assert result.ok, (path, [str(d) for d in result.diagnostics])
+            assert compiled_as_installed(result), (path, [str(d) for d in result.diagnostics])
+
+
+def pytest_addoption(parser):
+    parser.addoption("--no-skips", action="store_true",
+                     help="fail the run if any test is skipped (CI installs every optional tool: chromium, "
+                          "the ASAM OpenDRIVE checker, torch, so a skip there means a test silently did not run)")
+
+
+def pytest_sessionfinish(session):
+    if not session.config.getoption("no_skips"):
+        return
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    skipped = reporter.stats.get("skipped", []) if reporter is not None else []
+    if skipped and session.exitstatus == pytest.ExitCode.OK:
+        reporter.write("\n")  # after the progress dots, which end without a newline
+        reporter.write_sep("=", f"--no-skips: {len(skipped)} test(s) skipped (reasons in the short test summary)",
+                           red=True)
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED

@@ -15,6 +15,7 @@ from pathlib import Path
 from addt_dsl.compiler import ast, parser
 from addt_dsl.compiler.context import Context
 from addt_dsl.compiler.lower import build_plan, check_feasible
+from addt_dsl.compiler.optional_deps import check_optional_deps
 from addt_dsl.compiler.parser import parse_source
 from addt_dsl.confine import Refused, confine, shown
 from addt_dsl.compiler.rules import run_rules
@@ -164,6 +165,7 @@ def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: 
 
     ctx = Context(scenario, sink, str(base_dir), display, read_file=read_file, sources=sources)
     run_rules(ctx)
+    check_optional_deps(ctx)
     if sink.has_errors:
         return CompileResult(None, sink.items, sources)
     plan = build_plan(ctx)

@@ -35,12 +35,15 @@ class PerceptionMode:
     existing scenarios run the default stack with a camera only, to exercise the renderer).
     `expects` is the sensor the mode is made for, `(keyword, {setting: value in SI})`: the
     compiler warns when the ego's differs (the learned detector is trained on one lidar).
+    `requires` names a package outside the core install that `build` imports (see
+    `addt_dsl.extras`): the compiler reports its absence instead of the run failing.
     """
 
     build: Callable
     frame_key: str
     needs_sensor: str | None = None
     expects: tuple[str, dict] | None = None
+    requires: str | None = None
 
 
 def _ground_truth(settings, ctx):
@@ -63,7 +66,7 @@ PERCEPTIONS = {
     "ground_truth": PerceptionMode(_ground_truth, "hit_body"),
     "learned": PerceptionMode(_learned, "hit_body", expects=("lidar", {
         "rays": DETECTOR_LIDAR.rays, "channels": DETECTOR_LIDAR.channels,
-        "vfov": math.radians(DETECTOR_LIDAR.vfov_deg)})),
+        "vfov": math.radians(DETECTOR_LIDAR.vfov_deg)}), requires="torch"),
     "camera": PerceptionMode(_camera, "image", "camera"),
 }
 
@@ -110,6 +113,12 @@ class BevStack:
         """Sensor keywords the ego must carry for these settings (the compiler checks)."""
         mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
         return {mode.needs_sensor} if mode is not None and mode.needs_sensor else set()
+
+    @classmethod
+    def required_modules(cls, settings: dict) -> dict[str, str]:
+        """Setting → package outside the core install that these settings need."""
+        mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
+        return {"perception": mode.requires} if mode is not None and mode.requires else {}
 
     @classmethod
     def sensor_mismatches(cls, settings: dict, sensor: str, values: dict) -> list[tuple[str, float]]:

@@ -32,11 +32,13 @@ import argparse
 import json
 import math
 import statistics
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from addt_dsl import extras
 from addt_dsl.stack.latency import MODEL_PATH
 
 COUNTS = (0, 5, 10, 20, 40, 60)
@@ -248,6 +250,9 @@ def main(argv=None) -> int:
     ap.add_argument("--write", action="store_true", help=f"write {MODEL_PATH.name}")
     ap.add_argument("--out", type=Path, default=MODEL_PATH)
     args = ap.parse_args(argv)
+    if (message := extras.missing_message("torch", "calibrating (it times learned perception)")) is not None:
+        print(message, file=sys.stderr)
+        return 2
     model = calibrate(args.repeats)
     cal = model["calibration"]
     print(f"{'node':<11} {'host base ms':>12} {'host per-obj us':>15} {'model base ms':>13} {'model per-obj ms':>16}")

@@ -20,10 +20,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
 
+from addt_dsl import extras
 from addt_dsl.stack.synth import generate, in_grid, load_samples
 
 BANDS = ((0.0, 20.0), (20.0, 40.0), (40.0, 60.0))
@@ -151,6 +153,9 @@ def main(argv=None) -> int:
                     help="actual-vs-nominal lidar yaw misalignment(s) [deg]")
     ap.add_argument("--cache", default=None, help="evaluate on stored scans (npz from synth.save_samples) instead")
     args = ap.parse_args(argv)
+    if (message := extras.missing_message("torch", "evaluating the learned detector")) is not None:
+        print(message, file=sys.stderr)
+        return 2
 
     from addt_dsl.stack.learned import WEIGHTS_PATH, LearnedPerception
 

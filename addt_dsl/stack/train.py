@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from addt_dsl import extras
 from addt_dsl.stack.bev_grid import DETECTOR_LIDAR, GRID, build_grid, encode_targets
 from addt_dsl.stack.synth import generate, in_grid, load_samples, save_samples
 
@@ -138,6 +140,9 @@ def main(argv=None) -> int:
                     help="vertical field of view of multi-channel lidars")
     ap.add_argument("--device", default="cpu", help="torch device (the shipped weights are trained on cpu)")
     args = ap.parse_args(argv)
+    if (message := extras.missing_message("torch", "training the learned detector")) is not None:
+        print(message, file=sys.stderr)
+        return 2
     lidar_settings = {"vfov": math.radians(args.lidar_vfov)}
 
     import torch

@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "unit" / "search"))
-from search_testkit import kitchen_sink_plan  # noqa: E402
+from tests.unit.search.search_testkit import kitchen_sink_plan
 
-from addt_dsl.compiler import compile_file  # noqa: E402
-from addt_dsl.printer import compile_pinned, pin_spec, print_spec  # noqa: E402
-from addt_dsl.runtime.execute import execute  # noqa: E402
-from addt_dsl.sweep import expand  # noqa: E402
+from addt_dsl.compiler import compile_file
+from addt_dsl.printer import compile_pinned, pin_spec, print_spec
+from addt_dsl.runtime.execute import execute
+from addt_dsl.sweep import expand
 
 ROOT = Path(__file__).resolve().parents[2]
 

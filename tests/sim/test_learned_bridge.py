@@ -11,7 +11,7 @@ from addt_dsl.compiler import compile_source
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.torch]
 
 ROOT = Path(__file__).resolve().parents[2]
 STACK_LINE = "stack bev cruise_speed 25 m/s"

@@ -11,7 +11,7 @@ from addt_dsl.stack.calibrate import e2e_ms
 from addt_dsl.stack.latency import MODEL_PATH
 from addt_dsl.sweep import expand
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.torch]
 
 
 def test_trace_e2e_matches_the_latency_model(learned_overtake_source):

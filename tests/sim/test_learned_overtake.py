@@ -7,7 +7,7 @@ from addt_dsl.compiler import compile_source
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.torch]
 
 STACK_LINE = "stack bev cruise_speed 25 m/s"
 

@@ -1,14 +1,11 @@
 """The `addtc FILE` contract: exit codes, stores bound to one plan, per-run timeouts."""
 
 import json
-import os
-import sys
 from xml.etree import ElementTree as ET
 
 import pytest
 
-sys.path.insert(0, os.path.dirname(__file__))
-from runner_simkit import addtc, limit_scenario  # noqa: E402
+from tests.sim.runner_simkit import addtc, limit_scenario
 
 pytestmark = pytest.mark.slow
 

@@ -1,17 +1,14 @@
 """Same results, in any order, for any worker count and executor."""
 
-import os
-import sys
 
 import pytest
 
-sys.path.insert(0, os.path.dirname(__file__))
-from runner_simkit import limit_scenario  # noqa: E402
+from tests.sim.runner_simkit import limit_scenario
 
-from addt_dsl.compiler import compile_file  # noqa: E402
-from addt_dsl.runtime.executor import InlineExecutor, LocalExecutor, run_sweep  # noqa: E402
-from addt_dsl.runtime.store import ResultStore  # noqa: E402
-from addt_dsl.sweep import SweepStream  # noqa: E402
+from addt_dsl.compiler import compile_file
+from addt_dsl.runtime.executor import InlineExecutor, LocalExecutor, run_sweep
+from addt_dsl.runtime.store import ResultStore
+from addt_dsl.sweep import SweepStream
 
 pytestmark = pytest.mark.slow
 

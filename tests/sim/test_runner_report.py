@@ -3,19 +3,16 @@ headless browser."""
 
 import base64
 import json
-import os
 import re
 import shutil
 import subprocess
-import sys
 import tempfile
 from xml.etree import ElementTree as ET
 
 import pandas as pd
 import pytest
 
-sys.path.insert(0, os.path.dirname(__file__))
-from runner_simkit import addtc, limit_scenario  # noqa: E402
+from tests.sim.runner_simkit import addtc, limit_scenario
 
 pytestmark = pytest.mark.slow
 

@@ -5,16 +5,14 @@ import os
 import signal
 import sqlite3
 import subprocess
-import sys
 import time
 
 import pytest
 
-sys.path.insert(0, os.path.dirname(__file__))
-from runner_simkit import REPO, addtc, addtc_command, addtc_env, limit_scenario  # noqa: E402
+from tests.sim.runner_simkit import REPO, addtc, addtc_command, addtc_env, limit_scenario
 
-from addt_dsl.compiler import compile_file  # noqa: E402
-from addt_dsl.sweep import expand  # noqa: E402
+from addt_dsl.compiler import compile_file
+from addt_dsl.sweep import expand
 
 pytestmark = pytest.mark.slow
 

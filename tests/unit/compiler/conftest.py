@@ -15,12 +15,7 @@ import os
 import re
 from pathlib import Path
 
-import sys
-
 from hypothesis import HealthCheck, settings
-
-# Lets test modules import this file as `conftest` whatever pytest's import mode is.
-sys.path.insert(0, os.path.dirname(__file__))
 
 REPO = Path(__file__).resolve().parents[3]
 CASES_DIR = Path(__file__).resolve().parent / "cases"

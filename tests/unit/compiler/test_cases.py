@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from conftest import CASES_DIR, describe, expectations, found
+from tests.unit.compiler.conftest import CASES_DIR, describe, expectations, found
 
 from addt_dsl.compiler import compile_file
 

@@ -6,7 +6,7 @@ import json
 import os
 
 import pytest
-from conftest import CASES_DIR, REPO
+from tests.unit.compiler.conftest import CASES_DIR, REPO
 
 from addt_dsl.cli import main
 from addt_dsl.compiler import compile_file, compile_source

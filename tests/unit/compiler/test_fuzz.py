@@ -15,7 +15,7 @@ import re
 from pathlib import Path
 
 import pytest
-from conftest import CASES_DIR, FUZZ, REPO
+from tests.unit.compiler.conftest import CASES_DIR, FUZZ, REPO
 from hypothesis import example, given
 from hypothesis import strategies as st
 

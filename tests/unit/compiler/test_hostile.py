@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import EXPECT_RE
+from tests.unit.compiler.conftest import EXPECT_RE
 
 from addt_dsl.compiler import compile_file
 from addt_dsl.diagnostics import render_text

@@ -4,7 +4,7 @@ statements around it are not blamed."""
 from __future__ import annotations
 
 import pytest
-from conftest import CASES_DIR, REPO, describe
+from tests.unit.compiler.conftest import CASES_DIR, REPO, describe
 from hypothesis import given, settings
 from hypothesis import strategies as st
 

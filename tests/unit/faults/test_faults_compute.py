@@ -5,7 +5,7 @@ import struct
 
 import numpy as np
 import pytest
-from faultkit import bound, schedule
+from tests.unit.faults.faultkit import bound, schedule
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -174,7 +174,7 @@ def test_every_injection_records_the_same_fields():
     sched, events = schedule({"kind": "drop", "rate": 1.0}, {"kind": "delay", "by": 0.1},
                              {"kind": "stuck", "target": "control.steer", "value": 0.1},
                              {"kind": "spike", "target": "control", "by": 0.1})
-    from faultkit import lidar_frame
+    from tests.unit.faults.faultkit import lidar_frame
 
     sched.kinds[0].on_frame(lidar_frame(3), 0.0)
     sched.kinds[1].on_frame(lidar_frame(3), 0.0)

@@ -2,7 +2,7 @@
 kinds before the camera sensor exists, applies to a synthetic frame)."""
 
 import pytest
-from faultkit import camera_frame, one
+from tests.unit.faults.faultkit import camera_frame, one
 
 from addt_dsl.compiler import compile_source
 from addt_dsl.registry import FAULTS, SENSORS

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from faultkit import camera_frame, lidar_frame, one
+from tests.unit.faults.faultkit import camera_frame, lidar_frame, one
 
 
 def _sharpness(img):

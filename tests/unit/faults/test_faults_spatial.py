@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from faultkit import lidar_frame, one
+from tests.unit.faults.faultkit import lidar_frame, one
 
 from addt_dsl.runtime.sensors import Extrinsics, Frame
 

@@ -1,7 +1,7 @@
 """drop, delay, skew: which frames, how late, determinism."""
 
 import numpy as np
-from faultkit import lidar_frame, one, schedule
+from tests.unit.faults.faultkit import lidar_frame, one, schedule
 from hypothesis import given, settings
 from hypothesis import strategies as st
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
+pytestmark = pytest.mark.torch
 
 # No pydantic-based imports here (plan, schedule): this module also runs on the GPU machine,
 # whose environment has torch and pytest but not the whole project's dependencies.

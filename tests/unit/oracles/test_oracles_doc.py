@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from stl_testkit import parse, robustness
+from tests.unit.oracles.stl_testkit import parse, robustness
 
 from addt_dsl.runtime.oracles import satisfied
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from stl_testkit import PERIODS, formulas, reference_signal, traces, windows
+from tests.unit.oracles.stl_testkit import PERIODS, formulas, reference_signal, traces, windows
 
 from addt_dsl.expr import Binary, Num, Temporal, Unary, Until
 from addt_dsl.runtime.oracles import boolean_semantics, evaluate, verdicts

@@ -15,7 +15,7 @@ import math
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from stl_testkit import formulas, robustness, traces
+from tests.unit.oracles.stl_testkit import formulas, robustness, traces
 
 from addt_dsl.expr import Binary, Call, Num, Signal, Temporal, Unary, Until
 from addt_dsl.runtime.oracles import robustness_at_0

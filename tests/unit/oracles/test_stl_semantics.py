@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from stl_testkit import parse as parse_formula
-from stl_testkit import robustness
+from tests.unit.oracles.stl_testkit import parse as parse_formula
+from tests.unit.oracles.stl_testkit import robustness
 
 from addt_dsl.expr import Binary, Num, Param, Signal, Temporal, Unary
 from addt_dsl.runtime.oracles import (

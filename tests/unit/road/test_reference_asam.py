@@ -16,7 +16,8 @@ from addt_dsl.runtime.road import load_xodr
 
 SAMPLE_MAPS = sorted((Path(__file__).resolve().parents[2] / "data" / "xodr").glob("*.xodr"))
 
-qc = pytest.importorskip("qc_opendrive.base.utils")
+qc = pytest.importorskip("qc_opendrive.base.utils", reason="needs the ASAM OpenDRIVE checker: "
+                         "pip install --no-deps -r tests/requirements-opendrive-checker.txt")
 
 TOL_M = 1e-6
 

@@ -3,7 +3,7 @@ oracle WARNING in amber without one, and nothing before the violation time."""
 
 import numpy as np
 import pytest
-from runner_testkit import plan_of, scenario
+from tests.unit.runner.runner_testkit import plan_of, scenario
 
 from addt_dsl.reporting.animation import _AMBER, _RED, TopDownRenderer
 from addt_dsl.runtime.execute import execute

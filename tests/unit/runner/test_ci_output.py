@@ -5,7 +5,7 @@ non-terminals, as in CI."""
 import sys
 
 import pytest
-from runner_testkit import fake_record, scenario
+from tests.unit.runner.runner_testkit import fake_record, scenario
 
 from addt_dsl import cli
 from addt_dsl.reporting.progress import ProgressLines

@@ -5,7 +5,7 @@ could not complete. Runs are faked (no simulation) through the inline executor."
 import sqlite3
 
 import pytest
-from runner_testkit import fake_record, plan_of, scenario
+from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 
 from addt_dsl import cli
 from addt_dsl.errors import EXIT_FAILED, EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, verdict_exit_code

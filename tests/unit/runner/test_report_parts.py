@@ -4,7 +4,7 @@ classes, and keeps wide tables in scrolling boxes (synthetic stores, no simulati
 import json
 import re
 
-from runner_testkit import fake_record, plan_of, scenario
+from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 
 from addt_dsl.reporting import build_report, write_tables
 from addt_dsl.reporting.tables import latency_budget_s

@@ -2,7 +2,7 @@
 
 from collections import Counter
 
-from runner_testkit import HANG, HOG, OK, RAISE, SEGFAULT, SPIKE, fake_run, plan_of, scenario
+from tests.unit.runner.runner_testkit import HANG, HOG, OK, RAISE, SEGFAULT, SPIKE, fake_run, plan_of, scenario
 
 from addt_dsl.runtime.executor import LocalExecutor, run_local, run_sweep
 from addt_dsl.runtime.store import ResultStore

@@ -7,7 +7,7 @@ import json
 import sqlite3
 
 import pytest
-from runner_testkit import fake_record, plan_of, scenario
+from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 
 from addt_dsl.reporting.tables import runs_table, summary
 from addt_dsl.runtime.executor import LocalExecutor, run_sweep

@@ -7,7 +7,7 @@ from xml.etree import ElementTree as ET
 
 from hypothesis import given
 from hypothesis import strategies as st
-from runner_testkit import fake_record, plan_of, scenario
+from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 
 from addt_dsl.reporting import build_report, write_junit
 from addt_dsl.reporting.tables import cell_stats, success_pivot, wilson_interval

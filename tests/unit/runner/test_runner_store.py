@@ -11,7 +11,8 @@ import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from runner_testkit import OK, fake_record, plan_of, scenario
+from tests.conftest import ROOT
+from tests.unit.runner.runner_testkit import OK, fake_record, plan_of, scenario
 
 from addt_dsl.reporting.tables import summary
 from addt_dsl.runtime.store import ResultStore, RunRecord, StoreMismatch, VerdictRecord
@@ -118,8 +119,8 @@ def test_committed_runs_survive_sigkill(tmp_path):
     path = tmp_path / "r.sqlite"
     code = textwrap.dedent(f"""
         import os, signal, sys
-        sys.path.insert(0, {os.path.dirname(__file__)!r})
-        from runner_testkit import fake_record, plan_of, scenario
+        sys.path.insert(0, {str(ROOT)!r})
+        from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
         from addt_dsl.runtime.store import ResultStore
         from addt_dsl.sweep import expand
         plan = plan_of(scenario([0, 1, 2], repeat=2))

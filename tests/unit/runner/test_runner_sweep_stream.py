@@ -5,7 +5,7 @@ import itertools
 from hypothesis import assume as hyp_assume
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from runner_testkit import plan_of
+from tests.unit.runner.runner_testkit import plan_of
 
 from addt_dsl.sweep import SweepStream, count_runs, expand
 

@@ -5,7 +5,7 @@ import json
 from xml.etree import ElementTree as ET
 
 import pandas as pd
-from runner_testkit import fake_record, plan_of, scenario
+from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 
 from addt_dsl import cli
 from addt_dsl.reporting import build_report, write_junit, write_tables

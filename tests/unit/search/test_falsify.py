@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from search_testkit import kitchen_sink_plan
+from tests.unit.search.search_testkit import kitchen_sink_plan
 
 from addt_dsl.plan import RunSpec
 from addt_dsl.search.cache import RunCache

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from search_testkit import example_plans, formulas, kitchen_sink_plan, run_specs
+from tests.unit.search.search_testkit import example_plans, formulas, kitchen_sink_plan, run_specs
 
 from addt_dsl import expr as E
 from addt_dsl import units

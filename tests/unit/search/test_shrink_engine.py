@@ -13,7 +13,7 @@ from collections import Counter
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from search_testkit import concrete_faults, kitchen_sink_plan
+from tests.unit.search.search_testkit import concrete_faults, kitchen_sink_plan
 
 from addt_dsl.plan import ConcreteFault, RunSpec
 from addt_dsl.search import candidates as C

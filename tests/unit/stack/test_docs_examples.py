@@ -24,9 +24,10 @@ def test_stack_md_python_examples_run(block):
 
 def test_stack_md_scenario_compiles():
     from addt_dsl.compiler import compile_source
+    from tests.conftest import compiled_as_installed
 
     blocks = _blocks("stack.md", "addt")
     assert blocks
     for text in blocks:
         result = compile_source(text)
-        assert result.ok, result.diagnostics
+        assert compiled_as_installed(result), result.diagnostics

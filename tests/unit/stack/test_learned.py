@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
+pytestmark = pytest.mark.torch
 
 from addt_dsl.stack.bev import BevStack  # noqa: E402
 from addt_dsl.stack.bev_grid import LAYER_SITES, TENSOR_SITES  # noqa: E402

@@ -4,11 +4,13 @@ import math
 import struct
 
 import pytest
-import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.stack.tensorfaults import FLOAT32_FIELDS, ActivationFlip, bit_field, flip_bits
+torch = pytest.importorskip("torch")
+pytestmark = pytest.mark.torch
+
+from addt_dsl.stack.tensorfaults import FLOAT32_FIELDS, ActivationFlip, bit_field, flip_bits  # noqa: E402
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 

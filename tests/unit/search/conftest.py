@@ -1,5 +1,0 @@
-import os
-import sys
-
-# Lets the test modules here share `search_testkit` whatever pytest's import mode is.
-sys.path.insert(0, os.path.dirname(__file__))
