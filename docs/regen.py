@@ -12,7 +12,8 @@ A fenced block is regenerated when its info string carries `regen`:
 
 The commands of one doc run in doc order, with bash, in one fresh directory holding a
 copy of `examples/` and the doc's blocks marked `file="NAME"` written as `NAME`; this
-checkout's `addtc` and `pytest` come first. The directory's path is printed as `.`.
+checkout's `addtc` and `pytest` come first. The directory's path is printed as `.`,
+and trailing blanks are dropped.
 `--check` compares up to wall times and versions (`MASKS`), so it passes on any machine.
 
 Only the standard library: the tests import this module for `doc_blocks` and `MASKS`.
@@ -97,6 +98,7 @@ def _run(command: str, cwd: Path, env: dict) -> str:
     if "Traceback (most recent call last)" in proc.stdout or proc.returncode > 2:
         raise RuntimeError(f"`{command}` crashed (exit {proc.returncode}):\n{proc.stdout[-3000:]}")
     out = proc.stdout.replace(str(cwd) + "/", "").replace(str(cwd), ".")
+    out = "".join(line.rstrip() + "\n" for line in out.splitlines())
     return _XML_RULE.sub(lambda m: _rule(m.group(1)), out)
 
 
