@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import pytest
 
 from addt_dsl.cli import SUBCOMMANDS, build_parser
@@ -21,6 +23,7 @@ from tests.docs_harness import (
     scenario_dir,
     section_code,
     source,
+    verdicts,
 )
 
 ADDT = blocks("addt")
@@ -41,6 +44,17 @@ def test_the_docs_have_examples_of_every_kind():
     assert kinds.count("scenario") >= 20 and "file" in kinds and "snippet" in kinds
     assert "fragment" not in kinds, "an .addt example compiles, as a scenario or inside a wrapper"
     assert len(FAULT_LINES) >= 13 and len(PYTHON) >= 7
+
+
+def test_verdicts_read_as_the_docs_state_them():
+    def run(passed, failed=(), warned=()):
+        records = [SimpleNamespace(name=n, severity="warn", passed=False) for n in warned]
+        return SimpleNamespace(passed=passed, failed_oracles=list(failed), verdicts=records)
+
+    runs = [run(True, warned=["max_jerk"]), run(False, ["no_collision", "min_ttc"]), run(False, ["min_ttc"])]
+    assert str(verdicts(runs)) == "1 passed, 2 failed (min_ttc 2, no_collision 1), warned (max_jerk 1)"
+    assert str(verdicts([run(True)])) == "1 passed"
+    assert str(verdicts([run(False, ["stack_health"])])) == "1 failed (stack_health 1)"
 
 
 @pytest.mark.parametrize("block", ADDT, ids=ids(ADDT))
