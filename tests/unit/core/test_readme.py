@@ -1,18 +1,9 @@
-"""The README's scenario example compiles."""
+"""The README's suite commands name files that compile (tests/docs_harness.py compiles and
+runs its scenario example)."""
 
 import re
 
-from addt_dsl.compiler import compile_source
 from tests.conftest import ROOT, assert_scenarios_compile
-
-
-def test_readme_examples_compile():
-    text = (ROOT / "README.md").read_text()
-    blocks = re.findall(r"```addt\n(.*?)```", text, re.S)
-    assert blocks
-    for block in blocks:
-        result = compile_source(block, "README.md")
-        assert result.ok, [str(d) for d in result.diagnostics]
 
 
 def test_readme_suite_commands_name_files_that_compile():

@@ -10,7 +10,6 @@ parameters, labelled constraints, sweeps).
 
 from __future__ import annotations
 
-import re
 import tempfile
 from pathlib import Path
 
@@ -22,11 +21,9 @@ from addt_dsl.compiler import compile_file, compile_source
 from addt_dsl.diagnostics import render_text
 from addt_dsl.printer import compile_pinned, pin_spec, print_plan, print_spec, semantic_key, side_files
 from addt_dsl.sweep import expand
+from tests.docs_harness import blocks, kind, scenario_dir, source
 
 ROOT = Path(__file__).resolve().parents[3]
-BLOCK_RE = re.compile(r"```addt\n(.*?)```", re.S)
-# Where doc snippets find what they include or import (the docs tests use the same).
-BASE_DIRS = (ROOT / "examples", ROOT / "docs", ROOT / "tests" / "data" / "xodr")
 
 
 def _corpus() -> list[tuple[str, object]]:
@@ -35,13 +32,13 @@ def _corpus() -> list[tuple[str, object]]:
         result = compile_file(path)
         if result.ok:
             found.append((str(path.relative_to(ROOT)), result.plan))
-    for doc in (*sorted((ROOT / "docs").glob("*.md")), ROOT / "README.md"):
-        for i, block in enumerate(BLOCK_RE.findall(doc.read_text())):
-            for base in BASE_DIRS:
-                result = compile_source(block, f"{doc.name}#{i}", base_dir=base)
-                if result.ok:
-                    found.append((f"{doc.name}#{i}", result.plan))
-                    break
+    docs_dir = scenario_dir(Path(tempfile.mkdtemp(prefix="addt-corpus-")))
+    for block in blocks("addt"):
+        if kind(block) not in ("scenario", "snippet"):
+            continue
+        result = compile_source(source(block), block.name, base_dir=docs_dir)
+        if result.ok:
+            found.append((f"{Path(block.doc).name}#{block.name.split(':', 1)[1]}", result.plan))
     return found
 
 

@@ -1,0 +1,49 @@
+"""Every scenario in the docs runs, every run of its sweep, with the verdicts its block states
+(```addt expect="..."); every non-camera fault line of docs/faults.md fires in a short run."""
+
+import pytest
+
+from addt_dsl.compiler import compile_source
+from addt_dsl.runtime.execute import execute
+from addt_dsl.sweep import expand
+from tests.docs_harness import (
+    FAULT_LINES,
+    IMAGE_KINDS,
+    blocks,
+    fault_scenario,
+    ids,
+    kind,
+    kind_of,
+    normalise,
+    scenario_dir,
+    verdicts,
+)
+
+pytestmark = pytest.mark.slow
+SCENARIOS = [b for b in blocks("addt") if kind(b) == "scenario"]
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory):
+    return scenario_dir(tmp_path_factory.mktemp("scenarios"))
+
+
+@pytest.mark.parametrize("block", SCENARIOS, ids=ids(SCENARIOS))
+def test_doc_scenario_gives_its_stated_verdicts(block, base):
+    result = compile_source(block.text, block.doc, base_dir=base)
+    assert result.ok, [str(d) for d in result.diagnostics]
+    runs = [execute(spec) for spec in expand(result.plan).specs]
+    ended_early = [r.run_id for r in runs if r.passed and r.sim_time_s < result.plan.duration_s - 1e-9]
+    assert not ended_early, "a run stopped early (the ego collided) and passed: expect `no collision`"
+    assert str(verdicts(runs)) == normalise(block.attrs["expect"])
+
+
+@pytest.mark.parametrize("line", [ln for ln in FAULT_LINES if kind_of(ln) not in IMAGE_KINDS])
+def test_doc_fault_line_injects_and_records(line, base):
+    result = compile_source(fault_scenario(line), "docs/faults.md", base_dir=base)
+    assert result.ok
+    run = execute(expand(result.plan).specs[0])
+    events = [e for e in run.trace.events if e.kind == "fault"]
+    assert events, "the example never fired"
+    assert {e.detail["kind"] for e in events} == {kind_of(line)}
+    assert all({"location", "value"} <= set(e.detail) for e in events)
