@@ -30,21 +30,12 @@ import tempfile
 import traceback
 from pathlib import Path
 
-from addt_dsl.diagnostics import render_json, render_text
+from addt_dsl.console import compile_and_report
+from addt_dsl.diagnostics import render_json
 from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, UsageError, nonneg_float, nonneg_int,
                              positive_float, positive_int, verdict_exit_code)
 
 SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study")
-
-
-def _compile(path: str, fmt: str):
-    from addt_dsl.compiler import compile_file
-
-    result = compile_file(path)
-    if result.diagnostics:
-        text = render_json(result.diagnostics) if fmt == "json" else render_text(result.diagnostics, result.sources)
-        print(text, file=sys.stderr if fmt != "json" else sys.stdout)
-    return result
 
 
 def cmd_check(args) -> int:
@@ -59,7 +50,7 @@ def cmd_check(args) -> int:
             result = compile_file(path)
             collected.extend(result.diagnostics)
         else:
-            result = _compile(path, args.format)
+            result = compile_and_report(path, args.format)
             if result.ok:
                 print(f"ok: {path}")
         failed |= not result.ok
@@ -69,7 +60,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_plan(args) -> int:
-    result = _compile(args.file, args.format)
+    result = compile_and_report(args.file, args.format)
     if not result.ok:
         return EXIT_USAGE
     print(result.plan.model_dump_json(indent=2))
@@ -155,7 +146,7 @@ def _run_suite(args, paths: list[Path]) -> int:
 
 def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
     """Compile and run one file; `collect(plan, store)` sees the store before it closes."""
-    result = _compile(str(path), args.format)
+    result = compile_and_report(str(path), args.format)
     if not result.ok:
         return EXIT_USAGE
     from addt_dsl.runtime.store import ResultStore, StoreMismatch
@@ -227,28 +218,27 @@ def _executor(args):
 
 
 def _classifying(args, stream, store, executor):
-    """`--classify`: run the golden (fault-free) twins the sweep still needs, cached next to
-    the store so a resumed sweep reuses them, then wrap the executor so every run it
-    returns carries its outcome class (addt_dsl.runtime.outcome)."""
+    """`--classify`: run the golden (fault-free) twins the sweep still needs, kept in the
+    store so a resumed sweep reuses them, then wrap the executor so every run it returns
+    carries its outcome class (addt_dsl.runtime.outcome)."""
     from addt_dsl.runtime.outcome import ClassifyingExecutor, GoldenCache, prepare_goldens
 
     if not hasattr(executor, "run_fn"):
         raise UsageError(f"--classify runs on the local or inline executor, not {executor.name}")
-    golden_dir = store.path.with_name(store.path.stem + "-golden")
     done = store.done()
     specs = itertools.islice(stream, args.limit) if args.limit else stream
     pending = [s for s in specs if s.faults and (s.key(), s.run_id) not in done]
     if not stream.plan.faults and args.format != "json":
         print("note: the scenario has no faults: every run is its own golden run (masked, "
               "or detected if the stack failed)", file=sys.stderr)
-    cache = GoldenCache(golden_dir)
-    ran = prepare_goldens(pending, jobs=args.jobs, cache=cache)
+    ran = prepare_goldens(pending, cache=GoldenCache(store.path), executor=executor)
     if ran and args.format != "json":
-        print(f"classify: ran {ran} golden run(s) (cached in {golden_dir})", file=sys.stderr)
-    return ClassifyingExecutor(executor, golden_dir)
+        print(f"classify: ran {ran} golden run(s) (kept in {store.path})", file=sys.stderr)
+    return ClassifyingExecutor(executor, store.path)
 
 
 def _run_and_report(args, plan, stream, store, executor, out) -> int:
+    from addt_dsl.reporting.summary import store_summary
     from addt_dsl.reporting.tables import print_verdicts, shown_records
 
     total = len(stream)
@@ -269,7 +259,7 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
     store.set_meta("rejected", dict(stream.rejected))
     for text, n in stream.rejected.most_common():
         print(f"note: assumption `{text}` rejected {n} candidate run(s)", file=sys.stderr)
-    totals = store.summary()
+    totals = store_summary(store)
     if out:
         from addt_dsl.reporting import build_report, write_tables
 
@@ -312,20 +302,21 @@ def _sweep_with_progress(specs, store, executor, total: int, done: int, quiet: b
 
 def cmd_report(args) -> int:
     from addt_dsl.reporting import build_report, write_junit, write_tables
+    from addt_dsl.reporting.summary import store_summary, write_csv, write_parquet
 
     target = Path(args.dir)
     out = Path(args.out) if args.out else (target.parent if target.is_file() else target)
     with _open_store(target) as store:
-        totals = store.summary()
+        totals = store_summary(store)
         write_tables(out, store)
         path = build_report(store, out / "report.html", max_animations=args.animations)
         if args.junit:
             write_junit(args.junit, store.plan(), store.records())
         for export in args.export or ():
             if export.endswith(".parquet"):
-                store.to_parquet(export)
+                write_parquet(store, export)
             else:
-                store.to_csv(export)
+                write_csv(store, export)
         print(f"wrote {path}")
     return verdict_exit_code(totals["statuses"], totals["failed"])
 
@@ -434,7 +425,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_commands(sub)
     # Listed for `addtc --help` only: `main` hands every `addtc study ...` argument to the
-    # studies' own parser (addt_dsl/runtime/faults/study.py), --help included.
+    # studies' own parser (addt_dsl/studies.py), --help included.
     sub.add_parser("study", add_help=False,
                    help="fault studies: perception errors by distance band, outcome classes, "
                         "success tables (`addtc study --help`)")
@@ -442,7 +433,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_study(argv: list[str]) -> int:
-    from addt_dsl.runtime.faults.study import main as study_main
+    from addt_dsl.studies import main as study_main
 
     return study_main(argv, prog="addtc study")
 

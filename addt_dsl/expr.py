@@ -48,7 +48,6 @@ class Unary(_Node):
     arg: Expr
 
 
-ARITH_OPS = ("+", "-", "*", "/")
 COMPARE_OPS = ("<", "<=", ">", ">=", "==", "!=")
 BOOL_OPS = ("and", "or", "implies")
 

@@ -14,6 +14,8 @@ from typing import Literal, Union
 from pydantic import BaseModel, ConfigDict, Field
 
 from addt_dsl.expr import Expr, Num, eval_param_expr
+from addt_dsl.fingerprint import code_fingerprint
+from addt_dsl.vehicles import VEHICLES
 
 # Bump when a plan written by this version cannot be read by the previous one.
 SCHEMA_VERSION = "2"
@@ -112,7 +114,7 @@ TriggerPlan.model_rebuild()
 
 class ActorPlan(_Model):
     name: str
-    vehicle: Literal["car", "truck", "pedestrian", "cyclist"]
+    vehicle: Literal[tuple(VEHICLES)]  # type: ignore[valid-type]  # the catalogue's kinds
     road: str
     lane: Expr
     s: Expr  # station along the road [m]
@@ -220,13 +222,12 @@ class RunSpec(_Model):
     repeat_index: int = 0
 
     def key(self) -> str:
-        """Content hash: the identity of a run for caches and result stores."""
+        """Content hash: the identity of a run for caches and result stores (with the
+        fingerprint of the code that runs it: a new version or new stack data is a new key)."""
         payload = self.model_dump(mode="json", exclude={"run_id"})
+        payload["code"] = code_fingerprint()
         data = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(data).hexdigest()[:20]
-
-    def value(self, expr: Expr | None, default: float = 0.0) -> float:
-        return default if expr is None else eval_param_expr(expr, self.params)
 
 
 def resolve_setting(value: SettingValue, params: dict[str, float]) -> float | str | list[float]:

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from addt_dsl.confine import Refused, confine
 from addt_dsl.reporting.tables import fmt_param, terminal, wilson_interval
+from addt_dsl.reporting.summary import store_summary
 
 
 class SuiteError(ValueError):
@@ -110,7 +111,7 @@ def tally_by(records: Iterable, param: str) -> dict[float, Tally]:
 def collect_row(row: SuiteRow, plan, store, by: str | None) -> None:
     """Fill `row` from a finished run's plan and store (called before the store closes)."""
     row.name = plan.name
-    row.totals = store.summary()
+    row.totals = store_summary(store)
     if by:
         row.by = tally_by(store.records(), by)
         row.labels = {v: fmt_param(plan, by, v) for v in row.by}

@@ -94,7 +94,7 @@ def _unit_engine(kind: str, dims: int, seed: int):
     return {"halton": qmc.Halton, "lhs": qmc.LatinHypercube}[kind](dims, rng=rng)
 
 
-def _from_unit(p: ParamPlan, u: float) -> float:
+def from_unit(p: ParamPlan, u: float) -> float:
     if p.distribution == "choice" and p.choices:
         return p.choices[min(int(u * len(p.choices)), len(p.choices) - 1)]
     if p.distribution == "normal":
@@ -209,7 +209,7 @@ def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
         if sampled:
             n = max(1, min(budget - tried, per_cell))
             rows = engine.random(n)
-            candidates = ({**base, **{p.name: _from_unit(p, float(u)) for p, u in zip(sampled, row)}}
+            candidates = ({**base, **{p.name: from_unit(p, float(u)) for p, u in zip(sampled, row)}}
                           for row in rows)  # lazy: most scenarios accept the first one
         else:
             candidates = iter([base])
@@ -233,7 +233,7 @@ def _sample_cell(plan, base, sampled, cell_index, rejected):
     while accepted < sampler.count:
         need = sampler.count - accepted
         for row in engine.random(need):
-            params = {**base, **{p.name: _from_unit(p, float(u)) for p, u in zip(sampled, row)}}
+            params = {**base, **{p.name: from_unit(p, float(u)) for p, u in zip(sampled, row)}}
             broken = violated_assumptions(plan, params)
             if broken:
                 for text in broken:

@@ -90,6 +90,7 @@ def _rss_mb() -> float:
 
 
 def part_throughput(runs: int, jobs: int) -> dict:
+    from addt_dsl.reporting.summary import store_summary
     from addt_dsl.runtime.executor import LocalExecutor, run_sweep
     from addt_dsl.runtime.store import ResultStore
     from addt_dsl.sweep import SweepStream
@@ -100,7 +101,7 @@ def part_throughput(runs: int, jobs: int) -> dict:
         t0, cpu0 = time.perf_counter(), time.process_time()
         outcome = run_sweep(SweepStream(plan), store, executor)
         wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
-        sim = store.summary()["sim_time_s"]
+        sim = store_summary(store)["sim_time_s"]
     return {"jobs": jobs, "runs": outcome.ran, "wall_s": wall, "runs_per_min": 60 * outcome.ran / wall,
             "sim_s_per_wall_s": sim / wall, "coordinator_cpu_ms_per_run": 1e3 * cpu / outcome.ran}
 

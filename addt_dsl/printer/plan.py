@@ -30,7 +30,7 @@ from pathlib import Path
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.compiler import compile_source
-from addt_dsl.compiler.rules.actors import CLAUSE_TABLES, VEHICLE_KINDS
+from addt_dsl.compiler.rules.actors import CLAUSE_TABLES
 from addt_dsl.compiler.rules.oracles import NO_CLAUSES, reach_goal_formula
 from addt_dsl.diagnostics import render_text
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, FaultPlan, OraclePlan, ParamPlan, RoadPlan,
@@ -39,6 +39,7 @@ from addt_dsl.printer.expr import (ExprPrinter, PrinterError, dim_of_name, forma
                                    string_literal)
 from addt_dsl.registry import FAULTS, GEOMETRIES, ParamSpec
 from addt_dsl.sweep import expand
+from addt_dsl.vehicles import VEHICLES
 
 INDENT = "  "
 
@@ -182,7 +183,7 @@ ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units
 
 
 def _vehicle_size(kind: str) -> tuple[float, float]:
-    return VEHICLE_KINDS[kind]
+    return VEHICLES[kind].length_m, VEHICLES[kind].width_m
 
 
 def _actors(pr: _Printer) -> None:

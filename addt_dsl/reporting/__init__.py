@@ -3,6 +3,7 @@
 
 from addt_dsl.reporting.html import build_report
 from addt_dsl.reporting.junit import write_junit
-from addt_dsl.reporting.tables import print_verdicts, runs_table, summary, write_tables
+from addt_dsl.reporting.summary import store_summary, write_tables
+from addt_dsl.reporting.tables import print_verdicts, runs_table, summary
 
-__all__ = ["build_report", "print_verdicts", "runs_table", "summary", "write_junit", "write_tables"]
+__all__ = ["build_report", "print_verdicts", "runs_table", "store_summary", "summary", "write_junit", "write_tables"]

@@ -17,7 +17,8 @@ from pathlib import Path
 
 from addt_dsl.reporting import plots
 from addt_dsl.reporting.tables import (OUTCOME_CLASSES, cell_stats, fmt_number, fmt_param, latency_budget_s,
-                                       success_pivot, warned_oracles)
+                                       success_pivot)
+from addt_dsl.reporting.summary import store_summary
 
 MAX_TABLE_ROWS = 500
 DEFAULT_MAX_ANIMATIONS = 4
@@ -29,7 +30,6 @@ def _environment():
     env = Environment(loader=PackageLoader("addt_dsl.reporting", "templates"), autoescape=True,
                       trim_blocks=True, lstrip_blocks=True)
     env.filters["num"] = fmt_number
-    env.globals["warned_oracles"] = warned_oracles
     env.filters["pct"] = lambda x: "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.2f} %"
     return env
 
@@ -119,7 +119,7 @@ def build_report(store, path: str | Path, max_animations: int = DEFAULT_MAX_ANIM
     collector = _Collector(plan, max_rows, max_animations)
     for r in store.records():
         collector.add(r)
-    totals = store.summary()
+    totals = store_summary(store)
     stats = cell_stats(store.records())
     pivot = success_pivot(plan, stats)
     latency = collector.latency

@@ -14,7 +14,7 @@ import math
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from addt_dsl.reporting.tables import fmt_number, fmt_param, warned_oracles
+from addt_dsl.reporting.tables import fmt_number, fmt_param
 
 
 def _cell_label(plan, cell: dict) -> str:
@@ -54,7 +54,7 @@ def junit_tree(plan, records) -> ET.ElementTree:
             rho = v.robustness
             ET.SubElement(cprops, "property", name=f"robustness.{v.name}",
                           value="inf" if math.isinf(rho) and rho > 0 else ("-inf" if math.isinf(rho) else repr(rho)))
-        warned = set(warned_oracles(r))
+        warned = set(r.warned_oracles)
         for v in r.verdicts:
             if v.name in warned:
                 ET.SubElement(cprops, "property", name=f"warning.{v.name}", value=_violation(v))

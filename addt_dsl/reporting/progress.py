@@ -12,7 +12,6 @@ import sys
 import time
 from collections.abc import Callable
 
-from addt_dsl.reporting.tables import warned_oracles
 
 
 def _duration(seconds: float) -> str:
@@ -43,7 +42,7 @@ class ProgressLines:
     def __call__(self, record) -> None:
         self.done += 1
         self.failed += not record.passed
-        self.warned += bool(warned_oracles(record))
+        self.warned += bool(record.warned_oracles)
         now = self.clock()
         if self.done >= self.total or now - self.last_time >= self.every_s or self.done - self.last_done >= self.step:
             self.write(self.line(now))

@@ -12,16 +12,9 @@ import math
 from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from addt_dsl import units
 from addt_dsl.plan import ScenarioPlan
-
-
-def warned_oracles(record) -> list[str]:
-    """Names of the `warn` oracles a run violated: counted and shown apart from failures
-    (a warning never fails a run)."""
-    return [v.name for v in record.verdicts if v.severity == "warn" and not v.passed]
 
 
 def runs_table(plan: ScenarioPlan, records: Iterable):
@@ -39,7 +32,7 @@ def runs_table(plan: ScenarioPlan, records: Iterable):
         for v in r.verdicts:
             row[f"first_violation_s.{v.name}"] = v.first_violation_s
         row["failed_oracles"] = ";".join(r.failed_oracles)
-        row["warned_oracles"] = ";".join(warned_oracles(r))
+        row["warned_oracles"] = ";".join(r.warned_oracles)
         row["sim_time_s"] = r.sim_time_s
         row["wall_time_s"] = r.wall_time_s
         row["fault_events"] = r.fault_events
@@ -81,7 +74,7 @@ def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = No
         wall += r.wall_time_s
         for name in r.failed_oracles:
             failures[name] += 1
-        names = warned_oracles(r)
+        names = r.warned_oracles
         warned += bool(names)
         warnings.update(names)
     out = {
@@ -232,7 +225,7 @@ def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None
     for r in records:
         by_name = {v.name: v for v in r.verdicts}
         verdict = "[green]pass[/]" if r.passed else f"[red]{'FAIL' if r.status == 'ok' else r.status.upper()}[/]"
-        verdict += " [yellow](warning)[/]" if warned_oracles(r) else ""
+        verdict += " [yellow](warning)[/]" if r.warned_oracles else ""
         rho = []
         for n in names:
             v = by_name.get(n)
@@ -307,22 +300,3 @@ def latency_budget_s(plan: ScenarioPlan) -> float | None:
                     if name.startswith("latency("):
                         bounds[name] = min(v, bounds.get(name, math.inf))
     return bounds.get("latency(e2e)", min(bounds.values(), default=None))
-
-
-def write_tables(out: Path, store, budget_s: float | None = None) -> None:
-    """summary.json and runs.csv of a store; latency.json when runs recorded latencies
-    (per-node percentiles and e2e latency by object count, over all runs; the share of
-    time over the budget the plan's oracles declare, `budget_s` overriding it)."""
-    from addt_dsl.reporting.plots import LatencyStats
-
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(store.summary(), indent=2) + "\n")
-    store.to_csv(out / "runs.csv")
-    latency = LatencyStats()
-    for r in store.records():
-        if r.stats:
-            latency.add(r.stats)
-    if latency.hist:
-        budget = budget_s if budget_s is not None else latency_budget_s(store.plan())
-        (out / "latency.json").write_text(json.dumps(latency.summary(budget), indent=2) + "\n")
-

@@ -14,57 +14,29 @@ import heapq
 import math
 import time as _time
 import zlib
-from dataclasses import dataclass, field
+from collections import Counter
+from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.expr import substitute_params
-from addt_dsl.plan import ActorPlan, RunSpec, resolve_settings
-from addt_dsl.registry import BEHAVIORS, SENSORS, STACKS
+from addt_dsl.plan import RunSpec
+from addt_dsl.registry import BEHAVIORS, FAULTS, SENSORS, STACKS
 from addt_dsl.runtime import oracles
 from addt_dsl.runtime.behaviors import AgentState, advance, relative_heading
+from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
 from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.roadmesh import Elevation, build_scene
 from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.runtime.script import Script
 from addt_dsl.runtime.signals import compute_signals
-from addt_dsl.runtime.store import VerdictRecord
-from addt_dsl.runtime.trace import ActorTrack, Event, Trace
+from addt_dsl.runtime.result import RunResult, Verdict, spec_json
+from addt_dsl.runtime.trace import ActorTrack, Event, Trace, injection_count
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
 from addt_dsl.runtime.vehicle import step as vehicle_step
-from addt_dsl.runtime.world import ACTOR_RGBA, PhysicsWorld, box_separation
+from addt_dsl.runtime.world import PhysicsWorld, box_separation
+from addt_dsl.vehicles import VEHICLES
 
-VEHICLE_SIZES = {"car": (4.6, 1.9), "truck": (12.0, 2.5), "cyclist": (1.8, 0.6), "pedestrian": (0.5, 0.5)}
-VEHICLE_HEIGHT = {"car": 1.5, "truck": 3.5, "cyclist": 1.7, "pedestrian": 1.8}
-
-
-@dataclass
-class RunResult:
-    run_id: str
-    key: str
-    params: dict[str, float]
-    seed: int
-    verdicts: list[VerdictRecord]
-    status: str  # ok | detected
-    error: str
-    sim_time_s: float
-    wall_time_s: float
-    digest: str
-    fault_events: int
-    cell: dict[str, float] = field(default_factory=dict)
-    trace: Trace | None = field(default=None, repr=False)
-
-    @property
-    def passed(self) -> bool:
-        return self.status == "ok" and all(v.passed for v in self.verdicts if v.severity == "hard")
-
-    @property
-    def failed_oracles(self) -> list[str]:
-        failed = [v.name for v in self.verdicts if v.severity == "hard" and not v.passed]
-        if self.status != "ok":
-            failed.append("stack_health")
-        return failed
 
 
 class _Road:
@@ -98,7 +70,7 @@ class _Context:
         self.ego_lane = run.ego_lane
 
     def rng(self, name: str) -> np.random.Generator:
-        return np.random.default_rng(_stable_seed(self.run.spec.seed, "stack", name))
+        return np.random.default_rng(_stable_seed(self.run.bound.seed, "stack", name))
 
     def ego_pose(self):
         return self.run.ego_pose()
@@ -119,7 +91,7 @@ class _Context:
 class _Run:
     def __init__(self, spec: RunSpec):
         self.spec = spec
-        plan = spec.plan
+        self.bound = plan = bind(spec)  # every parameter expression evaluated here, once
         self.dt = plan.step_s
         self.n_steps = int(round(plan.duration_s / self.dt))
         self.events: list[Event] = []
@@ -129,16 +101,15 @@ class _Run:
         visual = any(getattr(SENSORS.get(c.name), "renders", False) for c in plan.ego.sensors)
         self.physics = PhysicsWorld(visual=visual)
         try:
-            self._populate(spec)
+            self._populate(plan)
         except BaseException:
             # Set-up failed (e.g. an unreachable external stack): release what was opened.
             self.close()
             raise
 
-    def _populate(self, spec: RunSpec) -> None:
-        plan = spec.plan
+    def _populate(self, plan: BoundScenario) -> None:
         self.scene = build_scene(self.physics, list(self.networks.values()))
-        self.faults = FaultSchedule(spec.faults, self.dt, plan.duration_s, self.events)
+        self.faults = FaultSchedule(list(plan.faults), self.dt, plan.duration_s, self.events)
         self.command_queue: list[tuple[float, float, float]] = []
         self.command = (0.0, 0.0)
         self._rngs: dict[str, np.random.Generator] = {}
@@ -146,37 +117,34 @@ class _Run:
         ego = plan.ego
         self.ego_plan = ego
         self.ego_road = self._road_of(ego)
-        self.ego_lane = int(round(spec.value(ego.lane)))
-        s0 = spec.value(ego.s)
-        t0 = float(self.ego_road.road.lane_center_t(self.ego_lane, s0)) + spec.value(ego.offset)
+        self.ego_lane = ego.lane
+        s0 = ego.s
+        t0 = float(self.ego_road.road.lane_center_t(self.ego_lane, s0)) + ego.offset
         x, y, h = self.ego_road.pose(s0, t0)
-        self.vehicle_params = VehicleParams.for_vehicle(ego.mass_kg, ego.wheelbase_m, spec.value(ego.mu, 0.8))
-        self.ego = VehicleState(x, y, h, spec.value(ego.speed))
+        self.vehicle_params = VehicleParams.for_vehicle(ego.mass_kg, ego.wheelbase_m, ego.mu)
+        self.ego = VehicleState(x, y, h, ego.speed)
         self.ego_z, self.ego.pitch = 0.0, 0.0
         self.ego_s, self.ego_t = s0, t0
-        self.physics.add_box("ego", ego.length_m, ego.width_m, VEHICLE_HEIGHT[ego.vehicle])
+        self.physics.add_box("ego", ego.length_m, ego.width_m, VEHICLES[ego.vehicle].height_m)
 
         self.agents: list[AgentState] = []
-        self.agent_plans: dict[str, ActorPlan] = {}
+        self.agent_plans: dict[str, BoundActor] = {}
         self.agent_roads: dict[str, _Road] = {}
         self.longitudinal: dict[str, object] = {}
         self.scripts: dict[str, Script] = {}
         for a in plan.agents:
             road = self._road_of(a)
-            lane = int(round(spec.value(a.lane)))
-            s = spec.value(a.s)
-            t = float(road.road.lane_center_t(lane, s)) + spec.value(a.offset)
-            st = AgentState(a.name, road.road_id, s, t, spec.value(a.speed), 0.0, a.length_m, a.width_m,
-                            lane, t)
+            t = float(road.road.lane_center_t(a.lane, a.s)) + a.offset
+            st = AgentState(a.name, road.road_id, a.s, t, a.speed, 0.0, a.length_m, a.width_m, a.lane, t)
             self.agents.append(st)
             self.agent_plans[a.name] = a
             self.agent_roads[a.name] = road
-            self.physics.add_box(a.name, a.length_m, a.width_m, VEHICLE_HEIGHT[a.vehicle], ACTOR_RGBA[a.vehicle])
+            self.physics.add_box(a.name, a.length_m, a.width_m, VEHICLES[a.vehicle].height_m, VEHICLES[a.vehicle].rgba)
             self.longitudinal[a.name] = None
             for clause in a.behaviors:
                 self._start_behavior(st, clause, 0.0)
-            if a.triggers:
-                self.scripts[a.name] = Script(a.triggers, spec)
+            if a.steps:
+                self.scripts[a.name] = Script(a.steps)
         self.agent_by_name = {a.name: a for a in self.agents}
         self.body_actor = {}
         self.contacts: set[tuple[str, str]] = set()  # actor pairs overlapping at the last step
@@ -185,7 +153,7 @@ class _Run:
         self.sensor_next: dict[str, float] = {}
         for clause in ego.sensors:
             cls = SENSORS.get(clause.name)
-            sensor = cls(clause.name, resolve_settings(clause.settings, spec.params))
+            sensor = cls(clause.name, clause.settings)
             self.sensors[clause.name] = sensor
             self.sensor_next[clause.name] = 0.0
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
@@ -193,7 +161,7 @@ class _Run:
         self.ctx = _Context(self)
         stack_clause = ego.stack
         stack_cls = STACKS.get(stack_clause.name)
-        self.stack = stack_cls(resolve_settings(stack_clause.settings, spec.params), self.ctx)
+        self.stack = stack_cls(stack_clause.settings, self.ctx)
         self.faults.bind(self.stack, lambda: self.ctx.now)
 
     def close(self) -> None:
@@ -207,15 +175,15 @@ class _Run:
             close_stack()
 
     # ---- queries used by sensors and the stack
-    def _road_of(self, actor: ActorPlan) -> _Road:
+    def _road_of(self, actor: BoundActor) -> _Road:
         network = self.networks[actor.road]
-        rp = self.spec.plan.road(actor.road)
+        rp = self.bound.road(actor.road)
         road_id = rp.xodr_road_id if rp.source == "xodr" and rp.xodr_road_id else next(iter(network.roads))
         return _Road(network, road_id, self._road_cache)
 
     def rng(self, name: str) -> np.random.Generator:
         if name not in self._rngs:
-            self._rngs[name] = np.random.default_rng(_stable_seed(self.spec.seed, "world", name))
+            self._rngs[name] = np.random.default_rng(_stable_seed(self.bound.seed, "world", name))
         return self._rngs[name]
 
     def ego_pose(self):
@@ -275,9 +243,9 @@ class _Run:
         return float(road.road.lane_center_t(lane, s))
 
     # ---- behaviours
-    def _start_behavior(self, agent: AgentState, clause, time_s: float) -> None:
+    def _start_behavior(self, agent: AgentState, clause: BoundClause, time_s: float) -> None:
         cls = BEHAVIORS.get(clause.name)
-        beh = cls(resolve_settings(clause.settings, self.spec.params))
+        beh = cls(clause.settings)
         beh.start(agent, self, time_s)
         if beh.channel == "longitudinal":
             self.longitudinal[agent.name] = beh
@@ -292,18 +260,28 @@ def execute(spec: RunSpec, keep_trace: bool = True) -> RunResult:
         trace = _loop(run)
     finally:
         run.close()
-    verdicts = judge(spec, trace)
-    fault_events = trace.injection_count()
+    verdicts = judge(run.bound, trace)
+    injections: Counter = Counter()
+    drawn_name = {f.index: FAULTS.get(f.kind).drawn_setting for f in spec.faults}
+    drawn: dict[int, list[int]] = {}
+    for e in trace.events:
+        if e.kind == "fault":
+            index = e.detail["index"]
+            injections[index] += injection_count(e)
+            name = drawn_name.get(index)
+            if name is not None and name in e.detail:
+                drawn.setdefault(index, []).append(int(e.detail[name]))
     return RunResult(
-        run_id=spec.run_id, key=spec.key(), params=dict(spec.params), seed=spec.seed,
-        verdicts=verdicts, status=trace.status, error=trace.error,
-        sim_time_s=trace.duration_s, wall_time_s=_time.perf_counter() - wall0,
-        digest=trace.digest(), fault_events=fault_events, cell=dict(spec.cell),
+        run_id=spec.run_id, key=spec.key(), spec_json=spec_json(spec), params=dict(spec.params),
+        cell=dict(spec.cell), seed=spec.seed, repeat_index=spec.repeat_index, status=trace.status,
+        verdicts=verdicts, error=trace.error, sim_time_s=trace.duration_s,
+        wall_time_s=_time.perf_counter() - wall0, digest=trace.digest(), fault_events=sum(injections.values()),
+        injections=dict(injections), drawn_values={k: tuple(v) for k, v in drawn.items()},
         trace=trace if keep_trace else None)
 
 
 def _loop(run: _Run) -> Trace:
-    spec, plan, dt = run.spec, run.spec.plan, run.dt
+    plan, dt = run.bound, run.dt
     n = run.n_steps + 1
     names = ["ego"] + [a.name for a in run.agents]
     rec = {name: {f: np.zeros(n) for f in ("x", "y", "heading", "speed", "accel", "yaw_rate", "s", "t",
@@ -329,7 +307,7 @@ def _loop(run: _Run) -> Trace:
             heading = h + relative_heading(a, t_now, dt)
             poses[a.name] = (x, y, heading)
             z, grade = road.elevation.at(a.s)
-            run.physics.set_pose(a.name, x, y, z + VEHICLE_HEIGHT[run.agent_plans[a.name].vehicle] / 2, heading,
+            run.physics.set_pose(a.name, x, y, z + VEHICLES[run.agent_plans[a.name].vehicle].height_m / 2, heading,
                                  math.atan(grade) * math.cos(heading - h))
             run.body_actor[a.name] = _GT(x, y, heading, a.speed, a.length_m, a.width_m)
         e = run.ego
@@ -339,7 +317,7 @@ def _loop(run: _Run) -> Trace:
         if grade:
             grade *= math.cos(e.heading - ego_road.road.reference_pose(run.ego_s)[2])
         run.ego_z, e.pitch = z, math.atan(grade)
-        run.physics.set_pose("ego", e.x, e.y, z + VEHICLE_HEIGHT[plan.ego.vehicle] / 2, e.heading, e.pitch)
+        run.physics.set_pose("ego", e.x, e.y, z + VEHICLES[plan.ego.vehicle].height_m / 2, e.heading, e.pitch)
         poses["ego"] = (e.x, e.y, e.heading)
 
         # Record the state at t_now.
@@ -500,14 +478,14 @@ def _snapshot_trace(run: _Run, rec, k: int) -> Trace:
     return Trace(run.dt, np.array([k * run.dt]), actors, lat)
 
 
-def judge(spec: RunSpec, trace: Trace) -> list[VerdictRecord]:
-    """Evaluate every oracle of the plan on a trace (robustness at time 0)."""
+def judge(bound: BoundScenario, trace: Trace) -> list[Verdict]:
+    """Evaluate every oracle of the bound scenario on a trace (robustness at time 0)."""
     out = []
-    for o in spec.plan.oracles:
-        formula = substitute_params(o.formula, spec.params)
+    for o in bound.oracles:
+        formula = o.formula
         signals = compute_signals(trace, oracles_signals(formula))
         rho = float(oracles.robustness_at_0(formula, signals, trace.period_s))
         passed = oracles.satisfied(formula, signals, trace.period_s)
         first = None if passed else oracles.first_violation_time(formula, signals, trace.period_s)
-        out.append(VerdictRecord(o.name, o.severity, rho, passed, first))
+        out.append(Verdict(o.name, o.severity, rho, passed, first))
     return out

@@ -5,7 +5,7 @@ store already holds (resume), hands the rest to an executor and commits every re
 moment it arrives. It keeps nothing per run beyond the store, so its memory does not grow
 with the sweep.
 
-Executors yield `RunRecord`s in completion order; a record is fully determined by its
+Executors yield `RunResult`s in completion order; a record is fully determined by its
 RunSpec, so the store's contents do not depend on the executor, the worker count or the
 order. Three executors:
 
@@ -36,7 +36,8 @@ from multiprocessing.connection import wait
 
 from addt_dsl.plan import RunSpec
 from addt_dsl.runtime.execute import execute
-from addt_dsl.runtime.store import ResultStore, RunRecord
+from addt_dsl.runtime.result import RunResult
+from addt_dsl.runtime.store import ResultStore, trace_stats
 
 DEFAULT_MEMORY_LIMIT_MB = 4096
 DEFAULT_MAX_TASKS_PER_CHILD = 500
@@ -46,17 +47,19 @@ _GUARD_POLL_S = 0.2  # how often busy workers are checked against timeout and me
 # ---------------------------------------------------------------------------- one run
 
 def run_spec(spec: RunSpec, seq: int = -1, worker: str = "",
-             on_result: Callable | None = None) -> RunRecord:
-    """Execute one RunSpec and summarise it; an exception becomes a `crashed` record.
-    `on_result(result)` sees the full result (with its trace) before it is summarised."""
+             on_result: Callable | None = None) -> RunResult:
+    """Execute one RunSpec and summarise it (trace dropped, latency statistics kept); an
+    exception becomes a `crashed` record. `on_result(result)` sees the result with its
+    trace first (and may annotate it)."""
     t0 = time.perf_counter()
     try:
-        result = execute(spec, keep_trace=True)
+        record = execute(spec, keep_trace=True)
+        record.stats = trace_stats(record.trace)
         if on_result is not None:
-            on_result(result)
-        record = RunRecord.from_result(spec, result, result.trace, seq=seq, worker=worker)
+            on_result(record)
+        record.seq, record.worker, record.trace = seq, worker, None
     except Exception as exc:  # noqa: BLE001 - a crashing run is recorded, the sweep goes on
-        record = RunRecord.unfinished(
+        record = RunResult.unfinished(
             spec, "crashed", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=4)}",
             time.perf_counter() - t0, seq=seq, worker=worker)
     return record
@@ -77,7 +80,7 @@ def rss_mb(pid: int) -> float | None:
         return None
 
 
-def _spec_fields(spec: RunSpec) -> dict:
+def spec_fields(spec: RunSpec) -> dict:
     return {name: getattr(spec, name) for name in RunSpec.model_fields if name != "plan"}
 
 
@@ -92,7 +95,7 @@ class InlineExecutor:
     def __init__(self, run_fn: Callable | None = None):
         self.run_fn = run_fn  # as LocalExecutor's
 
-    def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunRecord]:
+    def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunResult]:
         for seq, spec in items:
             yield (self.run_fn or run_spec)(spec, seq, worker="inline")
 
@@ -128,7 +131,7 @@ def _worker_main(conn, memory_limit_mb: float | None, run_fn=None) -> None:
         try:
             record = (run_fn or run_spec)(spec, seq, worker=name)
         except Exception as exc:  # noqa: BLE001 - run_spec catches its own; this guards a custom run_fn
-            record = RunRecord.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", 0.0, seq=seq, worker=name)
+            record = RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", 0.0, seq=seq, worker=name)
         # A spike between the coordinator's RSS polls still shows in the peak.
         peak_mb = peak_rss_mb()
         if memory_limit_mb and peak_mb > memory_limit_mb:
@@ -182,7 +185,13 @@ class LocalExecutor:
     def _context(self):
         ctx = mp.get_context(self.start_method)
         if self.start_method == "forkserver":
-            ctx.set_forkserver_preload(["addt_dsl.runtime.executor"])
+            # The server imports the runtime (and the module of a custom run_fn, e.g. the
+            # search's judge) once; every worker forks from it with both loaded.
+            preload = ["addt_dsl.runtime.executor"]
+            if self.run_fn is not None:
+                preload.append(type(self.run_fn).__module__ if not hasattr(self.run_fn, "__code__")
+                               else self.run_fn.__module__)
+            ctx.set_forkserver_preload(preload)
         return ctx
 
     def _spawn(self, ctx) -> _Worker:
@@ -198,7 +207,7 @@ class LocalExecutor:
         if token not in w.plans:
             w.conn.send(("plan", token, spec.plan))
             w.plans.add(token)
-        w.conn.send(("run", seq, token, _spec_fields(spec)))
+        w.conn.send(("run", seq, token, spec_fields(spec)))
         w.job = (seq, spec, time.monotonic())
 
     @staticmethod
@@ -211,7 +220,7 @@ class LocalExecutor:
             w.process.kill()
             w.process.join()
 
-    def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunRecord]:
+    def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunResult]:
         ctx = self._context()
         items = iter(items)
         pool = [self._spawn(ctx) for _ in range(self.workers)]
@@ -249,7 +258,7 @@ class LocalExecutor:
             for w in pool:
                 self._stop(w, kill=w.job is not None)
 
-    def _check(self, w: _Worker, ready: set) -> tuple[RunRecord | None, bool]:
+    def _check(self, w: _Worker, ready: set) -> tuple[RunResult | None, bool]:
         """(record, replace worker) if the worker's run is over, (None, False) if it runs on."""
         seq, spec, started = w.job
         elapsed = time.monotonic() - started
@@ -269,20 +278,26 @@ class LocalExecutor:
             code = w.process.exitcode
             why = f"killed by signal {-code}" if code is not None and code < 0 else f"exited with code {code}"
             self._stop(w, kill=True)
-            return RunRecord.unfinished(spec, "crashed", f"worker process {why} during the run", elapsed,
+            return RunResult.unfinished(spec, "crashed", f"worker process {why} during the run", elapsed,
                                         seq=seq, worker=f"pid{w.process.pid}"), True
         if self.memory_limit_mb is not None:
             rss = rss_mb(w.process.pid)
             if rss is not None and rss > self.memory_limit_mb:
                 self._stop(w, kill=True)
-                return RunRecord.unfinished(
+                return RunResult.unfinished(
                     spec, "memory", f"resident memory {rss:.0f} MB over the {self.memory_limit_mb:.0f} MB limit",
                     elapsed, seq=seq, worker=f"pid{w.process.pid}"), True
         if self.timeout_s is not None and elapsed > self.timeout_s:
             self._stop(w, kill=True)
-            return RunRecord.unfinished(spec, "timeout", f"run exceeded the {self.timeout_s:g} s timeout",
+            return RunResult.unfinished(spec, "timeout", f"run exceeded the {self.timeout_s:g} s timeout",
                                         elapsed, seq=seq, worker=f"pid{w.process.pid}"), True
         return None, False
+
+
+def local_executor(jobs: int = 1, run_fn: Callable | None = None, **options):
+    """In this process for one job (nothing to supervise in parallel), else `jobs` guarded
+    local workers: what the search, `--classify`'s golden runs and the studies run on."""
+    return InlineExecutor(run_fn) if jobs <= 1 else LocalExecutor(jobs, run_fn=run_fn, **options)
 
 
 # ---------------------------------------------------------------------------- coordinator
@@ -300,7 +315,7 @@ class SweepOutcome:
 
 
 def run_sweep(specs: Iterable[RunSpec], store: ResultStore, executor=None,
-              on_record: Callable[[RunRecord], None] | None = None) -> SweepOutcome:
+              on_record: Callable[[RunResult], None] | None = None) -> SweepOutcome:
     """Run every spec the store does not hold yet, committing each as it completes."""
     executor = executor or LocalExecutor()
     outcome = SweepOutcome()
@@ -328,7 +343,7 @@ def run_sweep(specs: Iterable[RunSpec], store: ResultStore, executor=None,
 
 
 def run_local(specs: Iterable[RunSpec], jobs: int = 1,
-              on_result: Callable[[RunRecord], None] | None = None, **options) -> list[RunRecord]:
+              on_result: Callable[[RunResult], None] | None = None, **options) -> list[RunResult]:
     """Run specs on local workers and return their records sorted by run id (no store;
     for small sweeps and tests)."""
     executor = LocalExecutor(jobs, **options)

@@ -13,9 +13,12 @@ parameters, same seed, so the same perception noise and traffic). A faulty run i
 - `error`:    the runner itself failed (a bug in the twin, not an outcome of the fault).
 
 A masked run that fails an oracle is still masked: the golden run fails it as well, so
-the failure is the scenario's, not the fault's. Golden runs are cached by their RunSpec
-key (in memory, and on disk when a cache directory is given), so classifying a sweep
-costs one golden run per distinct (parameters, seed), not one per faulty run.
+the failure is the scenario's, not the fault's. Golden fingerprints are kept by their
+RunSpec key in a results store (`GoldenCache`: the sweep's own store under `--classify`,
+so a resumed or `--fresh` sweep reuses them; a temporary one otherwise), so classifying a
+sweep costs one golden run per distinct (parameters, seed), not one per faulty run. Golden
+and faulty runs execute on the sweep executors (guards included); only the coordinator
+writes the store, workers read golden fingerprints from it.
 
     from addt_dsl.runtime.outcome import classify, classify_many
     result, outcome = classify(spec)                  # one run
@@ -25,8 +28,9 @@ costs one golden run per distinct (parameters, seed), not one per faulty run.
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
+import base64
+import io
+import tempfile
 import traceback
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -35,7 +39,10 @@ from pathlib import Path
 import numpy as np
 
 from addt_dsl.plan import RunSpec
-from addt_dsl.runtime.execute import RunResult, execute
+from addt_dsl.runtime.execute import execute
+from addt_dsl.runtime.executor import local_executor, run_spec
+from addt_dsl.runtime.result import RunResult
+from addt_dsl.runtime.store import ResultStore
 
 OUTCOMES = ("masked", "silent", "detected", "hazard")
 # Differences below 1 µm, 1 µrad, 1 µm/s, 1 µm/s^2 are numerical ripples, not observable effects.
@@ -73,14 +80,14 @@ class Fingerprint:
                 return True
         return False
 
-    def save(self, path: Path) -> None:
-        tmp = path.with_suffix(".tmp.npz")
-        np.savez(tmp, __status=np.array(self.status), __passed=np.array(self.passed), **self.signals)
-        os.replace(tmp, path)
+    def to_bytes(self) -> bytes:
+        buf = io.BytesIO()
+        np.savez(buf, __status=np.array(self.status), __passed=np.array(self.passed), **self.signals)
+        return buf.getvalue()
 
     @classmethod
-    def load(cls, path: Path) -> Fingerprint:
-        with np.load(path) as data:
+    def from_bytes(cls, blob: bytes) -> Fingerprint:
+        with np.load(io.BytesIO(blob)) as data:
             signals = {k: data[k] for k in data.files if not k.startswith("__")}
             return cls(signals, str(data["__status"]), bool(data["__passed"]))
 
@@ -95,43 +102,67 @@ def golden_spec(spec: RunSpec) -> RunSpec:
 
 
 class GoldenCache:
-    """Fingerprints of golden runs by RunSpec key; in memory, and in `directory` if given."""
+    """Fingerprints of golden runs by RunSpec key: in memory, and as blobs in the results
+    store at `store_path` (a temporary store when none is given). Readers (workers) open
+    the store read-only; `put` is the coordinator's."""
 
-    def __init__(self, directory: str | Path | None = None):
+    def __init__(self, store_path: str | Path | None = None, *, readonly: bool = False):
         self.memory: dict[str, Fingerprint] = {}
-        self.directory = Path(directory) if directory is not None else None
-        if self.directory is not None:
-            self.directory.mkdir(parents=True, exist_ok=True)
+        self._tmp = None
+        self._path = Path(store_path) if store_path is not None else None
+        self.readonly = readonly
+        self._store: ResultStore | None = None
         self.runs = 0  # golden runs executed (cache misses)
+
+    @property
+    def store_path(self) -> Path:
+        if self._path is None:  # a temporary store, made on first use
+            self._tmp = tempfile.TemporaryDirectory(prefix="addt-golden-")
+            self._path = Path(self._tmp.name) / "golden.sqlite"
+        return self._path
+
+    def _db(self) -> ResultStore | None:
+        if self._store is None:
+            if self.readonly and not self.store_path.exists():
+                return None
+            self._store = ResultStore(self.store_path, readonly=self.readonly, create=True)
+        return self._store
 
     def get(self, key: str) -> Fingerprint | None:
         if key in self.memory:
             return self.memory[key]
-        if self.directory is not None and (self.directory / f"{key}.npz").exists():
-            fp = Fingerprint.load(self.directory / f"{key}.npz")
-            self.memory[key] = fp
-            return fp
-        return None
+        db = self._db()
+        data = db.blob(f"golden:{key}") if db is not None else None
+        if data is None:
+            return None
+        fp = self.memory[key] = Fingerprint.from_bytes(data)
+        return fp
 
     def put(self, key: str, fp: Fingerprint) -> None:
         self.memory[key] = fp
-        if self.directory is not None:
-            fp.save(self.directory / f"{key}.npz")
+        if not self.readonly:
+            self._db().put_blob(f"golden:{key}", fp.to_bytes())
 
     def golden(self, spec: RunSpec) -> Fingerprint:
         g = golden_spec(spec)
         key = g.key()
         fp = self.get(key)
         if fp is None:
-            fp = Fingerprint.of(execute(g, keep_trace=True))
+            fp = golden_fingerprint(g)
             self.runs += 1
             self.put(key, fp)
         return fp
 
 
+def golden_fingerprint(golden: RunSpec) -> Fingerprint:
+    """Run a golden spec; one that raises is `crashed` (its faulty runs classify as `error`)."""
+    try:
+        return Fingerprint.of(execute(golden, keep_trace=True))
+    except Exception:  # noqa: BLE001 - recorded, never fatal to a sweep
+        return Fingerprint({}, "crashed", False)
+
+
 _DEFAULT_CACHE = GoldenCache()
-
-
 def outcome_of(result: RunResult, golden: Fingerprint, tol: float = TOLERANCE) -> str:
     """The outcome class of a faulty run (with its trace) given its golden fingerprint."""
     if result.status == "detected":
@@ -150,10 +181,7 @@ def _outcome(result: RunResult, golden: Fingerprint | None, tol: float) -> str:
 
 
 def _error_result(spec: RunSpec, exc: BaseException) -> RunResult:
-    return RunResult(run_id=spec.run_id, key=spec.key(), params=dict(spec.params), seed=spec.seed,
-                     verdicts=[], status="crashed",
-                     error=f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}",
-                     sim_time_s=0.0, wall_time_s=0.0, digest="", fault_events=0, cell=dict(spec.cell))
+    return RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}", 0.0)
 
 
 def classify(spec: RunSpec, cache: GoldenCache | None = None, tol: float = TOLERANCE,
@@ -177,36 +205,21 @@ def classify(spec: RunSpec, cache: GoldenCache | None = None, tol: float = TOLER
 
 # ---------------------------------------------------------------- batches
 
-def _golden_worker(spec: RunSpec):
-    g = golden_spec(spec)
-    try:
-        return g.key(), Fingerprint.of(execute(g, keep_trace=True))
-    except Exception:  # noqa: BLE001 - its faulty runs are classified `error`
-        return g.key(), Fingerprint({}, "crashed", False)
+class GoldenRun:
+    """What an executor's worker runs to prepare golden fingerprints: the golden run, its
+    fingerprint sent back in the result (`stats["fingerprint"]`) for the coordinator to store."""
+
+    def __call__(self, spec: RunSpec, seq: int = -1, worker: str = "") -> RunResult:
+        fp = golden_fingerprint(spec)
+        result = RunResult.unfinished(spec, "ok", "", 0.0, seq=seq, worker=worker)
+        result.stats = {"fingerprint": base64.b64encode(fp.to_bytes()).decode()}
+        return result
 
 
-def _faulty_worker(args):
-    spec, golden, tol = args
-    try:
-        result = execute(spec, keep_trace=True)
-    except Exception as exc:  # noqa: BLE001
-        return _error_result(spec, exc), "error"
-    outcome = _outcome(result, golden, tol)
-    result.trace = None
-    return result, outcome
-
-
-def _map(fn, items: list, jobs: int):
-    if jobs <= 1 or len(items) <= 1:
-        return [fn(x) for x in items]
-    ctx = mp.get_context("fork" if os.name == "posix" else "spawn")
-    with ctx.Pool(processes=jobs, maxtasksperchild=200) as pool:
-        return pool.map(fn, items, chunksize=1)
-
-
-def prepare_goldens(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache | None = None) -> int:
-    """Run (on `jobs` processes) the golden twin of every faulty spec that `cache` lacks,
-    once per distinct golden key; returns how many golden runs were executed.
+def prepare_goldens(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache | None = None,
+                    executor=None) -> int:
+    """Run the golden twin of every faulty spec that `cache` lacks, once per distinct golden
+    key, on `executor` (default: `jobs` local workers); returns how many were executed.
 
     A golden run that raises is cached as `crashed`: its faulty runs classify as `error`.
     """
@@ -214,27 +227,35 @@ def prepare_goldens(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache 
     missing: dict[str, RunSpec] = {}
     for s in specs:
         if s.faults:
-            key = golden_spec(s).key()
+            g = golden_spec(s)
+            key = g.key()
             if key not in missing and cache.get(key) is None:
-                missing[key] = s
-    for key, fp in _map(_golden_worker, list(missing.values()), jobs):
-        cache.put(key, fp)
-        cache.runs += 1
+                missing[key] = g
+    executor = executor or local_executor(jobs)
+    if not hasattr(executor, "run_fn"):
+        raise ValueError(f"the {executor.name} executor cannot run golden runs; use the local one")
+    run_fn, executor.run_fn = executor.run_fn, GoldenRun()
+    try:
+        for result in executor.imap(enumerate(missing.values())):
+            data = result.stats.get("fingerprint")
+            fp = Fingerprint.from_bytes(base64.b64decode(data)) if data else Fingerprint({}, "crashed", False)
+            cache.put(result.key, fp)
+            cache.runs += 1
+    finally:
+        executor.run_fn = run_fn
     return len(missing)
 
 
 def classify_many(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache | None = None,
-                  tol: float = TOLERANCE) -> list[tuple[RunResult, str]]:
-    """Classify many runs on `jobs` worker processes; results sorted by run id, traces dropped.
-
-    Golden runs are computed once per distinct key (missing ones first, in parallel),
-    then every faulty run is executed and compared with its golden fingerprint.
-    """
+                  tol: float = TOLERANCE, executor=None) -> list[tuple[RunResult, str]]:
+    """Classify many runs on `executor` (default: `jobs` local workers); results sorted by
+    run id, traces dropped. Golden runs are computed once per distinct key (missing ones
+    first), then every faulty run is executed and compared with its golden fingerprint."""
     cache = _DEFAULT_CACHE if cache is None else cache
     specs = list(specs)
-    prepare_goldens(specs, jobs, cache)
-    tasks = [(s, cache.get(golden_spec(s).key()) if s.faults else None, tol) for s in specs]
-    out = _map(_faulty_worker, tasks, jobs)
+    executor = executor or local_executor(jobs)
+    prepare_goldens(specs, cache=cache, executor=executor)
+    out = [(r, r.outcome) for r in ClassifyingExecutor(executor, cache.store_path, tol).imap(enumerate(specs))]
     out.sort(key=lambda pair: pair[0].run_id)
     return out
 
@@ -269,29 +290,24 @@ class ClassifyingRun:
     """What an executor's worker runs under `addtc --classify`: the run, as `run_spec`
     records it, plus its outcome class against the golden fingerprint in `golden_dir`.
 
-    Golden runs are expected there already (`prepare_goldens` with a `GoldenCache` on that
-    directory); one that is missing (e.g. a cache directory cleared mid-sweep) is run here.
+    Golden fingerprints are expected in the store at `golden_store` already (`prepare_goldens`
+    with a `GoldenCache` on it); one that is missing is run here (and not stored: workers
+    only read the store).
     A picklable callable, so that worker processes can be handed it.
     """
 
-    def __init__(self, golden_dir: str | Path, tol: float = TOLERANCE):
-        self.golden_dir = str(golden_dir)
+    def __init__(self, golden_store: str | Path, tol: float = TOLERANCE):
+        self.golden_store = str(golden_store)
         self.tol = tol
         self._cache: GoldenCache | None = None
 
     def __getstate__(self):
-        return {"golden_dir": self.golden_dir, "tol": self.tol, "_cache": None}
+        return {"golden_store": self.golden_store, "tol": self.tol, "_cache": None}
 
     def __call__(self, spec: RunSpec, seq: int = -1, worker: str = ""):
-        from addt_dsl.runtime.executor import run_spec
-
         if self._cache is None:
-            self._cache = GoldenCache(self.golden_dir)
-        try:
-            golden = self._cache.golden(spec) if spec.faults else None
-        except Exception:  # noqa: BLE001 - the golden twin itself failed: `error`
-            golden = Fingerprint({}, "crashed", False)
-            self._cache.put(golden_spec(spec).key(), golden)
+            self._cache = GoldenCache(self.golden_store, readonly=True)
+        golden = self._cache.golden(spec) if spec.faults else None
         outcomes: list[str] = []
 
         def judge(result):
@@ -305,15 +321,15 @@ class ClassifyingRun:
 class ClassifyingExecutor:
     """Wraps a local or inline executor so every run it returns carries its outcome class.
 
-    The wrapped executor's workers run `ClassifyingRun(golden_dir)`. A run the executor
+    The wrapped executor's workers run `ClassifyingRun(golden_store)`. A run the executor
     had to stop (timeout, memory, a dead worker) is an `error`: the runner, not the stack,
     failed to finish it.
     """
 
-    def __init__(self, executor, golden_dir: str | Path, tol: float = TOLERANCE):
+    def __init__(self, executor, golden_store: str | Path, tol: float = TOLERANCE):
         if not hasattr(executor, "run_fn"):
             raise ValueError(f"the {executor.name} executor cannot classify runs; use the local one")
-        executor.run_fn = ClassifyingRun(golden_dir, tol)
+        executor.run_fn = ClassifyingRun(golden_store, tol)
         self.inner = executor
         self.name, self.workers = executor.name, executor.workers
 

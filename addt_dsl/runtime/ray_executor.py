@@ -20,9 +20,9 @@ import time
 from collections.abc import Iterable, Iterator
 
 from addt_dsl.plan import RunSpec
-from addt_dsl.runtime.executor import (DEFAULT_MAX_TASKS_PER_CHILD, DEFAULT_MEMORY_LIMIT_MB, _spec_fields,
+from addt_dsl.runtime.executor import (DEFAULT_MAX_TASKS_PER_CHILD, DEFAULT_MEMORY_LIMIT_MB, spec_fields,
                                        rss_mb, run_spec)
-from addt_dsl.runtime.store import RunRecord
+from addt_dsl.runtime.result import RunResult
 
 _POLL_S = 0.2
 
@@ -31,7 +31,7 @@ def ray_available() -> bool:
     return importlib.util.find_spec("ray") is not None
 
 
-def _ray_task(plan, fields: dict, seq: int, memory_limit_mb: float | None) -> RunRecord:
+def _ray_task(plan, fields: dict, seq: int, memory_limit_mb: float | None) -> RunResult:
     spec = RunSpec.model_construct(plan=plan, **fields)
     record = run_spec(spec, seq, worker=f"ray-pid{os.getpid()}")
     # Ray reuses workers, so a peak from an earlier task would stay; judge the current size.
@@ -69,7 +69,7 @@ class RayExecutor:
         ray.init(**kwargs)
         return True
 
-    def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunRecord]:
+    def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunResult]:
         import ray
         from ray import exceptions as rex
 
@@ -93,7 +93,7 @@ class RayExecutor:
                         break
                     seq, spec = nxt
                     _, plan_ref = plan_refs.setdefault(id(spec.plan), (spec.plan, ray.put(spec.plan)))
-                    ref = task.remote(plan_ref, _spec_fields(spec), seq, self.memory_limit_mb)
+                    ref = task.remote(plan_ref, spec_fields(spec), seq, self.memory_limit_mb)
                     inflight[ref] = (seq, spec, time.monotonic())
                 if not inflight:
                     break
@@ -105,9 +105,9 @@ class RayExecutor:
                     try:
                         yield ray.get(ref)
                     except rex.OutOfMemoryError as exc:
-                        yield RunRecord.unfinished(spec, "memory", f"Ray killed the task: {exc}", elapsed, seq=seq)
+                        yield RunResult.unfinished(spec, "memory", f"Ray killed the task: {exc}", elapsed, seq=seq)
                     except rex.RayError as exc:
-                        yield RunRecord.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", elapsed,
+                        yield RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", elapsed,
                                                    seq=seq)
                 if self.timeout_s:
                     now = time.monotonic()
@@ -115,7 +115,7 @@ class RayExecutor:
                         if now - started > self.timeout_s:
                             ray.cancel(ref, force=True)
                             del inflight[ref]
-                            yield RunRecord.unfinished(spec, "timeout",
+                            yield RunResult.unfinished(spec, "timeout",
                                                        f"run exceeded the {self.timeout_s:g} s timeout",
                                                        now - started, seq=seq)
         finally:

@@ -88,10 +88,6 @@ class Elevation:
                 self._g[i] + f * (self._g[i + 1] - self._g[i]))
 
 
-def is_flat(road) -> bool:
-    return Elevation(road).flat
-
-
 # ---------------------------------------------------------------- sampling
 
 def surface_stations(road, s0: float, s1: float) -> np.ndarray:
@@ -253,11 +249,6 @@ def _marking_runs(road, sec, a: float, b: float, dashed: bool):
         if hi - lo > 0.05:
             yield np.linspace(lo, hi, 3)
         start += period
-
-
-def road_meshes(road) -> list[Mesh]:
-    """Surface and markings of one road."""
-    return surface_meshes(road) + marking_meshes(road)
 
 
 def ground_mesh(networks, z: float, margin_m: float = 300.0, tile_m: float = 200.0) -> Mesh:

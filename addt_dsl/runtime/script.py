@@ -1,7 +1,8 @@
 """Agent scripts: steps (`at`, `after`, `when`) composed in sequence or in parallel.
 
-The compiler lowers an agent's steps to a tree of `TriggerPlan`/`GroupPlan`; this module
-runs that tree in simulated time. A step is armed, fires when its start conditions hold
+The compiler lowers an agent's steps to a tree of `TriggerPlan`/`GroupPlan`, bound for a
+run into `BoundStep`/`BoundGroup` (runtime/bound.py); this module runs that tree in
+simulated time. A step is armed, fires when its start conditions hold
 (starting its behaviour and arming its group), and is done once it fired and its group
 is done. A sequence arms each step when the previous one is done; a parallel group arms
 all its steps at once and is done when all are.
@@ -11,23 +12,22 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from addt_dsl.expr import substitute_params
-from addt_dsl.plan import ClausePlan, GroupPlan, RunSpec, TriggerPlan
+from addt_dsl.runtime.bound import BoundClause, BoundGroup, BoundStep
 
 TIME_EPS_S = 1e-9
 
 # holds(condition) -> bool on the current state; start(clause, time_s) starts a behaviour.
 Holds = Callable[[object], bool]
-Start = Callable[[ClausePlan, float], None]
+Start = Callable[[BoundClause, float], None]
 
 
 class StepState:
-    def __init__(self, plan: TriggerPlan, spec: RunSpec):
-        self.clause = plan.clause
-        self.at_s = spec.value(plan.at_s) if plan.at_s is not None else None
-        self.after_s = spec.value(plan.after_s) if plan.after_s is not None else 0.0
-        self.condition = substitute_params(plan.condition, spec.params) if plan.condition is not None else None
-        self.group = GroupState(plan.group, spec) if plan.group is not None else None
+    def __init__(self, step: BoundStep):
+        self.clause = step.clause
+        self.at_s = step.at_s
+        self.after_s = step.after_s
+        self.condition = step.condition
+        self.group = GroupState(step.group) if step.group is not None else None
         self.armed_at: float | None = None
         self.fired = False
 
@@ -67,9 +67,9 @@ class StepState:
 
 
 class GroupState:
-    def __init__(self, plan: GroupPlan, spec: RunSpec):
-        self.mode = plan.mode
-        self.steps = [StepState(s, spec) for s in plan.steps]
+    def __init__(self, group: BoundGroup):
+        self.mode = group.mode
+        self.steps = [StepState(s) for s in group.steps]
         self.current = 0  # sequence: the step armed last
 
     @property
@@ -104,8 +104,8 @@ class GroupState:
 class Script:
     """The top-level steps of one agent, all armed at time 0."""
 
-    def __init__(self, triggers: list[TriggerPlan], spec: RunSpec):
-        self.steps = [StepState(t, spec) for t in triggers]
+    def __init__(self, steps: tuple[BoundStep, ...]):
+        self.steps = [StepState(t) for t in steps]
         for s in self.steps:
             s.arm(0.0)
 

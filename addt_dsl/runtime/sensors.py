@@ -167,7 +167,7 @@ class Imu(Sensor):
         f[0] += -r_dot * ext.y - r * r * ext.x
         f[1] += r_dot * ext.x - r * r * ext.y
         omega = np.array([0.0, 0.0, r])
-        rot = _rotation(ext.roll, ext.pitch, ext.yaw)
+        rot = rotation(ext.roll, ext.pitch, ext.yaw)
         rng = world.rng(self.name)
         s = self.settings
         accel = rot.T @ f + float(s["accel_bias"]) + rng.normal(0.0, float(s["accel_noise"]), 3)
@@ -241,7 +241,7 @@ def _look_at(origin: np.ndarray, rot: np.ndarray) -> list[float]:
             t[0], t[1], t[2], 1.0]
 
 
-def _rotation(roll: float, pitch: float, yaw: float) -> np.ndarray:
+def rotation(roll: float, pitch: float, yaw: float) -> np.ndarray:
     cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
                               math.cos(yaw), math.sin(yaw))
     return np.array([
@@ -265,12 +265,12 @@ def _sensor_world_pose(vehicle_frame, ext: Extrinsics):
     x, y, z, heading, pitch = vehicle_frame
     # Vehicle pitch is nose-up positive (road grade); a rotation about the left-pointing
     # y axis is nose-down positive, as for mount pitch (a positive mount pitch looks down).
-    rot_v = _rotation(0.0, -pitch, heading)
+    rot_v = rotation(0.0, -pitch, heading)
     origin = np.array([x, y, z]) + rot_v @ np.array([ext.x, ext.y, ext.z])
-    return origin, rot_v @ _rotation(ext.roll, ext.pitch, ext.yaw)
+    return origin, rot_v @ rotation(ext.roll, ext.pitch, ext.yaw)
 
 
 def sensor_to_vehicle(points: np.ndarray, ext: Extrinsics) -> np.ndarray:
     """Map sensor-frame points into the vehicle frame with extrinsics `ext`."""
-    rot = _rotation(ext.roll, ext.pitch, ext.yaw)
+    rot = rotation(ext.roll, ext.pitch, ext.yaw)
     return points @ rot.T + np.array([ext.x, ext.y, ext.z])

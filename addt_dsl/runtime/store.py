@@ -8,10 +8,14 @@ is lost and nothing is duplicated. `synchronous=NORMAL` keeps commits cheap: a p
 loss may roll back the last few commits, which a restart simply runs again (a RunSpec
 determines its result, so re-running is exact).
 
-Rows are keyed by `(RunSpec.key(), run_id)`. A store holds the runs of one plan: its
-JSON is kept in the `meta` table, so a report or a re-execution needs nothing else.
-Runs keep summaries only (verdicts, robustness, latency histograms); traces are
-re-created on demand by executing the stored RunSpec again.
+Rows are keyed by `(RunSpec.key(), run_id)`. A sweep's store is bound to one plan
+(`ResultStore(path, plan)`, its JSON in `meta`); the search's run cache
+(`ResultStore.cache`) holds runs of the many plans its candidates have, each row naming
+its plan by hash (`plans` table), and is looked up by key alone. Either way a report or a
+re-execution needs nothing else. Runs keep summaries
+only (verdicts, robustness, latency histograms); traces are re-created on demand by
+executing the stored RunSpec again. Golden-run fingerprints of `--classify` (a few
+signals sampled per step) are kept as blobs beside the runs.
 """
 
 from __future__ import annotations
@@ -23,29 +27,13 @@ import sqlite3
 import time
 from collections import Counter
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
 
+from addt_dsl.fingerprint import code_fingerprint, code_identity, describe
 from addt_dsl.plan import RunSpec, ScenarioPlan
-
-
-class _SummaryRow(NamedTuple):
-    """The fields of a stored run that `reporting.tables.summary` counts."""
-
-    passed: bool
-    status: str
-    sim_time_s: float
-    wall_time_s: float
-    failed_oracles: list[str]
-    outcome: str = ""
-    verdicts: list = []  # VerdictRecords: `reporting.tables.warned_oracles` reads them
+from addt_dsl.runtime.result import RunResult, Verdict
 
 SCHEMA_VERSION = "1"
-
-# Outcome of a run as the executor saw it. `ok` and `detected` come from the simulation;
-# the others are recorded by the executor when a run did not finish normally.
-STATUSES = ("ok", "detected", "crashed", "timeout", "memory")
 
 # Latency histograms: fixed bins so that per-run summaries add up across runs.
 LATENCY_BIN_S = 0.002
@@ -56,83 +44,9 @@ class StoreMismatch(ValueError):
     """The store holds results of a different plan."""
 
 
-@dataclass
-class VerdictRecord:
-    """One oracle's verdict on a run: what the loop's judge returns and the store keeps."""
-
-    name: str
-    severity: str
-    robustness: float
-    passed: bool
-    first_violation_s: float | None = None
-
-
-@dataclass
-class RunRecord:
-    """What the store keeps of one run (and what executors return)."""
-
-    run_id: str
-    key: str
-    spec_json: str  # the RunSpec without its plan; `ResultStore.spec()` rebuilds it
-    params: dict[str, float]
-    cell: dict[str, float]
-    seed: int
-    repeat_index: int
-    status: str
-    verdicts: list[VerdictRecord]
-    error: str = ""
-    sim_time_s: float = 0.0
-    wall_time_s: float = 0.0
-    digest: str = ""
-    fault_events: int = 0
-    stats: dict = field(default_factory=dict)
-    seq: int = -1  # position in the sweep's expansion order
-    worker: str = ""
-    session: int = 0
-    # Outcome class against the fault-free twin (`addtc --classify`, addt_dsl.runtime.outcome):
-    # masked | silent | detected | hazard | error; "" when the run was not classified.
-    outcome: str = ""
-
-    @property
-    def passed(self) -> bool:
-        return self.status == "ok" and all(v.passed for v in self.verdicts if v.severity == "hard")
-
-    @property
-    def failed_oracles(self) -> list[str]:
-        failed = [v.name for v in self.verdicts if v.severity == "hard" and not v.passed]
-        if self.status == "detected":
-            failed.append("stack_health")
-        elif self.status != "ok":
-            failed.append(self.status)
-        return failed
-
-    @classmethod
-    def from_result(cls, spec: RunSpec, result, trace=None, seq: int = -1, worker: str = "") -> RunRecord:
-        return cls(
-            run_id=result.run_id, key=result.key, spec_json=spec_json(spec), params=dict(result.params),
-            cell=dict(result.cell), seed=result.seed, repeat_index=spec.repeat_index, status=result.status,
-            verdicts=[VerdictRecord(v.name, v.severity, float(v.robustness), bool(v.passed),
-                                    v.first_violation_s) for v in result.verdicts],
-            error=result.error, sim_time_s=result.sim_time_s, wall_time_s=result.wall_time_s,
-            digest=result.digest, fault_events=result.fault_events,
-            stats=trace_stats(trace) if trace is not None else {}, seq=seq, worker=worker)
-
-    @classmethod
-    def unfinished(cls, spec: RunSpec, status: str, error: str, wall_time_s: float, seq: int = -1,
-                   worker: str = "", key: str | None = None) -> RunRecord:
-        """A run the executor had to stop or lost (timeout, memory, crashed worker)."""
-        return cls(run_id=spec.run_id, key=key or spec.key(), spec_json=spec_json(spec),
-                   params=dict(spec.params), cell=dict(spec.cell), seed=spec.seed,
-                   repeat_index=spec.repeat_index, status=status, verdicts=[], error=error,
-                   wall_time_s=wall_time_s, seq=seq, worker=worker)
-
-
-def spec_json(spec: RunSpec) -> str:
-    return spec.model_dump_json(exclude={"plan"})
-
-
 def plan_hash(plan: ScenarioPlan) -> str:
-    return hashlib.sha256(plan.model_dump_json().encode()).hexdigest()[:20]
+    """The plan's identity with the fingerprint of the code that runs it."""
+    return hashlib.sha256((plan.model_dump_json() + code_fingerprint()).encode()).hexdigest()[:20]
 
 
 def trace_stats(trace) -> dict:
@@ -166,7 +80,7 @@ def trace_stats(trace) -> dict:
 
 _COLUMNS = ("key", "run_id", "seq", "session", "status", "passed", "seed", "repeat_index", "params",
             "cell", "spec", "verdicts", "failed_oracles", "sim_time_s", "wall_time_s", "digest",
-            "fault_events", "error", "stats", "worker", "finished_at", "outcome")
+            "fault_events", "error", "stats", "worker", "finished_at", "outcome", "injections", "plan_hash")
 
 
 def _json_float(x):
@@ -187,19 +101,36 @@ class ResultStore:
     """Open (or create) the store at `path`. With `plan`, the store is bound to it: a
     store of another plan raises `StoreMismatch` unless `fresh` clears it first."""
 
-    def __init__(self, path: str | Path, plan: ScenarioPlan | None = None, *, fresh: bool = False):
-        self.path = Path(path)
-        if not self.path.exists() and plan is None:
-            raise FileNotFoundError(f"no results store at {self.path}")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._db = sqlite3.connect(self.path, isolation_level=None, timeout=30.0)
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=NORMAL")
-        self._create()
+    def __init__(self, path: str | Path | None, plan: ScenarioPlan | None = None, *, fresh: bool = False,
+                 create: bool = False, readonly: bool = False):
+        # path None: in memory (a search cache that is not kept). `readonly`: a reader that
+        # never writes (a worker reading golden fingerprints while the coordinator writes).
+        self.path = Path(path) if path is not None else None
+        if self.path is not None:
+            if not self.path.exists() and (readonly or (plan is None and not create)):
+                raise FileNotFoundError(f"no results store at {self.path}")
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        if readonly:
+            self._db = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True,
+                                       isolation_level=None, timeout=30.0)
+        else:
+            self._db = sqlite3.connect(self.path or ":memory:", isolation_level=None, timeout=30.0)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=NORMAL")
+            self._create()
         self.session = 0
         self._plan: ScenarioPlan | None = None
+        self._plan_hashes: dict[int, tuple[ScenarioPlan, str]] = {}  # id(plan) -> (plan, hash), stored
         if plan is not None:
             self._bind(plan, fresh)
+
+    @classmethod
+    def cache(cls, path: str | Path | None = None) -> ResultStore:
+        """The search's run cache: runs of any plans, found by `RunSpec.key()`. Keys carry
+        the code fingerprint, so runs made by other code are never found: they run again."""
+        store = cls(path, create=True)
+        store.set_meta("code", json.dumps(code_identity()))
+        return store
 
     # ---- set-up
     def _create(self) -> None:
@@ -211,11 +142,16 @@ class ResultStore:
                 repeat_index INTEGER NOT NULL, params TEXT NOT NULL, cell TEXT NOT NULL, spec TEXT NOT NULL,
                 verdicts TEXT NOT NULL, failed_oracles TEXT NOT NULL, sim_time_s REAL, wall_time_s REAL,
                 digest TEXT, fault_events INTEGER, error TEXT, stats TEXT, worker TEXT, finished_at REAL,
-                outcome TEXT NOT NULL DEFAULT '', PRIMARY KEY (key, run_id))""")
-            # Stores written before outcomes were recorded lack the column.
+                outcome TEXT NOT NULL DEFAULT '', injections TEXT NOT NULL DEFAULT '{}',
+                plan_hash TEXT NOT NULL DEFAULT '', PRIMARY KEY (key, run_id))""")
+            # Stores written before outcomes (injections, plan hashes) were recorded lack the column;
+            # a run without a plan hash is of the store's bound plan.
             columns = {row[1] for row in self._db.execute("PRAGMA table_info(runs)")}
-            if "outcome" not in columns:
-                self._db.execute("ALTER TABLE runs ADD COLUMN outcome TEXT NOT NULL DEFAULT ''")
+            for name, default in (("outcome", "''"), ("injections", "'{}'"), ("plan_hash", "''")):
+                if name not in columns:
+                    self._db.execute(f"ALTER TABLE runs ADD COLUMN {name} TEXT NOT NULL DEFAULT {default}")
+            self._db.execute("CREATE TABLE IF NOT EXISTS plans (hash TEXT PRIMARY KEY, plan TEXT NOT NULL)")
+            self._db.execute("CREATE TABLE IF NOT EXISTS blobs (key TEXT PRIMARY KEY, data BLOB NOT NULL)")
             self._db.execute("""CREATE TABLE IF NOT EXISTS sessions (
                 id INTEGER PRIMARY KEY, started_at REAL, command TEXT, executor TEXT, workers INTEGER)""")
             self._db.execute("INSERT OR IGNORE INTO meta VALUES ('schema', ?)", (SCHEMA_VERSION,))
@@ -235,19 +171,28 @@ class ResultStore:
     def _bind(self, plan: ScenarioPlan, fresh: bool) -> None:
         digest = plan_hash(plan)
         stored = self.meta("plan_hash")
+        code = json.dumps(code_identity())
         if stored is not None and stored != digest:
+            stored_code = self.meta("code")
+            if not fresh and stored_code != code:
+                raise StoreMismatch(
+                    f"{self.path} holds results made by other code ({describe(json.loads(stored_code or 'null'))}; "
+                    f"this is {describe(code_identity())}): they would not match new runs; use --fresh to run "
+                    "them again or --store to pick another file")
             if not fresh:
                 raise StoreMismatch(
                     f"{self.path} holds results of another plan ({self.meta('scenario')!r}, plan {stored}); "
                     "use --fresh to discard them or --store to pick another file")
         with self._tx():
             if fresh or (stored is not None and stored != digest):
-                self._db.execute("DELETE FROM runs")
-                self._db.execute("DELETE FROM sessions")
+                # Blobs stay: they are keyed by content (golden fingerprints by RunSpec key).
+                for table in ("runs", "sessions", "plans"):
+                    self._db.execute(f"DELETE FROM {table}")
                 self._db.execute("DELETE FROM meta WHERE name != 'schema'")
             self._db.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)", [
-                ("plan_hash", digest), ("plan", plan.model_dump_json()), ("scenario", plan.name)])
+                ("plan_hash", digest), ("plan", plan.model_dump_json()), ("scenario", plan.name), ("code", code)])
         self._plan = plan
+        self._plan_hashes[id(plan)] = (plan, digest)
 
     def begin_session(self, command: str = "", executor: str = "", workers: int = 0) -> int:
         with self._tx():
@@ -287,17 +232,32 @@ class ResultStore:
         return Counter(json.loads(self.meta("rejected") or "{}"))
 
     # ---- writing
-    def add(self, r: RunRecord) -> bool:
-        """Commit one finished run; False if it was already stored (nothing changes)."""
+    def _plan_hash(self, plan: ScenarioPlan) -> str:
+        known = self._plan_hashes.get(id(plan))
+        if known is not None and known[0] is plan:
+            return known[1]
+        digest = plan_hash(plan)
+        with self._tx():
+            self._db.execute("INSERT OR IGNORE INTO plans VALUES (?, ?)", (digest, plan.model_dump_json()))
+        self._plan_hashes[id(plan)] = (plan, digest)
+        return digest
+
+    def add(self, r: RunResult, plan: ScenarioPlan | None = None) -> bool:
+        """Commit one finished run of `plan` (default: the store's); False if it was already
+        stored (nothing changes)."""
+        digest = self._plan_hash(plan) if plan is not None else ""
         verdicts = [{"name": v.name, "severity": v.severity, "robustness": _json_float(v.robustness),
-                     "passed": v.passed, "first_violation_s": v.first_violation_s} for v in r.verdicts]
+                     "passed": v.passed, "first_violation_s": v.first_violation_s, "mode": v.mode}
+                    for v in r.verdicts]
+        injections = {"events": {str(k): n for k, n in r.injections.items()},
+                      "drawn": {str(k): list(b) for k, b in r.drawn_values.items()}}
         with self._tx():
             cur = self._db.execute(
                 f"INSERT OR IGNORE INTO runs ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})",
                 (r.key, r.run_id, r.seq, self.session, r.status, int(r.passed), r.seed, r.repeat_index,
                  json.dumps(r.params), json.dumps(r.cell), r.spec_json, json.dumps(verdicts),
                  ";".join(r.failed_oracles), r.sim_time_s, r.wall_time_s, r.digest, r.fault_events, r.error,
-                 json.dumps(r.stats), r.worker, time.time(), r.outcome))
+                 json.dumps(r.stats), r.worker, time.time(), r.outcome, json.dumps(injections), digest))
         return cur.rowcount == 1
 
     # ---- reading
@@ -309,58 +269,48 @@ class ResultStore:
         return self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
 
     def records(self, where: str = "", args: tuple = (), order: str = "seq, run_id",
-                limit: int | None = None) -> Iterator[RunRecord]:
+                limit: int | None = None) -> Iterator[RunResult]:
         """Stored runs, streamed (`where` is an SQL condition over the `runs` columns)."""
         sql = f"SELECT {', '.join(_COLUMNS)} FROM runs" + (f" WHERE {where}" if where else "")
         sql += f" ORDER BY {order}" + (f" LIMIT {int(limit)}" if limit else "")
         for row in self._db.execute(sql, args):
             yield _record(dict(zip(_COLUMNS, row)))
 
-    def failing(self, limit: int | None = None) -> Iterator[RunRecord]:
+    def failing(self, limit: int | None = None) -> Iterator[RunResult]:
         return self.records("passed = 0", limit=limit)
 
-    def spec(self, record: RunRecord) -> RunSpec:
+    def find(self, key: str) -> RunResult | None:
+        """A stored run with this RunSpec key (the search's cache lookup)."""
+        return next(self.records("key = ?", (key,), order="run_id", limit=1), None)
+
+    def spec(self, record: RunResult) -> RunSpec:
         """The exact RunSpec of a stored run (same key, so same trace)."""
-        spec = RunSpec(plan=self.plan(), **json.loads(record.spec_json))
-        return spec
+        row = self._db.execute("SELECT plans.plan FROM runs JOIN plans ON plans.hash = runs.plan_hash "
+                               "WHERE runs.key = ? AND runs.run_id = ?", (record.key, record.run_id)).fetchone()
+        plan = ScenarioPlan.model_validate_json(row[0]) if row else self.plan()
+        return RunSpec(plan=plan, **json.loads(record.spec_json))
 
-    def summary(self) -> dict:
-        from addt_dsl.reporting.tables import summary
+    # ---- blobs (golden-run fingerprints)
+    def blob(self, key: str) -> bytes | None:
+        row = self._db.execute("SELECT data FROM blobs WHERE key = ?", (key,)).fetchone()
+        return row[0] if row else None
 
-        rows = (_SummaryRow(bool(ok), status, s or 0.0, w or 0.0, [n for n in failed.split(";") if n], outcome,
-                            _verdicts(verdicts))
-                for status, ok, failed, s, w, outcome, verdicts in self._db.execute(
-                    "SELECT status, passed, failed_oracles, sim_time_s, wall_time_s, outcome, verdicts FROM runs"))
-        return summary(self.plan(), rows, self.rejected(), cells=self.records("outcome != ''"))
-
-    def dataframe(self):
-        """One row per run: id, parameters, seed, verdict, per-oracle robustness and first
-        violation time, simulated and wall seconds (pandas)."""
-        from addt_dsl.reporting.tables import runs_table
-
-        return runs_table(self.plan(), self.records())
-
-    def to_csv(self, path: str | Path) -> Path:
-        self.dataframe().to_csv(path, index=False)
-        return Path(path)
-
-    def to_parquet(self, path: str | Path) -> Path:
-        self.dataframe().to_parquet(path, index=False)
-        return Path(path)
+    def put_blob(self, key: str, data: bytes) -> None:
+        with self._tx():
+            self._db.execute("INSERT OR REPLACE INTO blobs VALUES (?, ?)", (key, data))
 
 
-def _verdicts(text: str) -> list[VerdictRecord]:
-    return [VerdictRecord(v["name"], v["severity"], _float(v["robustness"]), v["passed"], v["first_violation_s"])
-            for v in json.loads(text)]
-
-
-def _record(row: dict) -> RunRecord:
-    verdicts = _verdicts(row["verdicts"])
+def _record(row: dict) -> RunResult:
+    verdicts = [Verdict(v["name"], v["severity"], _float(v["robustness"]), v["passed"],
+                        v["first_violation_s"], v.get("mode", "")) for v in json.loads(row["verdicts"])]
     stats = json.loads(row["stats"] or "{}")
-    return RunRecord(run_id=row["run_id"], key=row["key"], spec_json=row["spec"], params=json.loads(row["params"]),
+    injections = json.loads(row["injections"] or "{}")
+    return RunResult(run_id=row["run_id"], key=row["key"], spec_json=row["spec"], params=json.loads(row["params"]),
                      cell=json.loads(row["cell"]), seed=row["seed"], repeat_index=row["repeat_index"],
                      status=row["status"], verdicts=verdicts, error=row["error"] or "",
                      sim_time_s=row["sim_time_s"] or 0.0, wall_time_s=row["wall_time_s"] or 0.0,
                      digest=row["digest"] or "", fault_events=row["fault_events"] or 0, stats=stats,
                      seq=row["seq"], worker=row["worker"] or "", session=row["session"],
-                     outcome=row["outcome"] or "")
+                     outcome=row["outcome"] or "",
+                     injections={int(k): n for k, n in injections.get("events", {}).items()},
+                     drawn_values={int(k): tuple(b) for k, b in injections.get("drawn", {}).items()})

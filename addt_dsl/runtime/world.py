@@ -42,9 +42,6 @@ def _quiet_stdout():
 MAX_RAYS_PER_BATCH = 8192
 _BOX_GROUP, _HIDDEN_GROUP = 1, 1 << 10  # collision filter groups: actor boxes; one left out of a ray test
 SUN_DIRECTION = (0.4, 0.3, 1.0)  # high sun: road markings render bright
-# Actor colours for the camera (the ego has no visual shape: cameras sit inside it).
-ACTOR_RGBA = {"car": (0.75, 0.12, 0.10, 1.0), "truck": (0.15, 0.30, 0.70, 1.0),
-              "cyclist": (0.95, 0.65, 0.10, 1.0), "pedestrian": (0.90, 0.45, 0.70, 1.0)}
 
 
 class PhysicsWorld:

@@ -69,7 +69,8 @@ def write_counterexample(result, out_dir: str | Path, source_file: str = "", ste
         (out / name).write_text(body)
         written.append(out / name)
     replay = compile_pinned(text, path=str(path), base_dir=out)
-    outcome, trace = evaluate(replay, keep_trace=True)
+    outcome = evaluate(replay, keep_trace=True)
+    trace = outcome.trace
     if outcome.failure(result.target.id) is None or outcome.digest != result.outcome.digest:
         raise ReplayMismatch(f"{path} does not replay the shrunk run "
                              f"(digest {outcome.digest[:12]} vs {result.outcome.digest[:12]})")
@@ -105,14 +106,10 @@ def trace_arrays(trace) -> dict[str, np.ndarray]:
     return arrays
 
 
-def _animation(spec: RunSpec, trace, outcome, path: Path) -> Path | None:
-    try:  # the reporting package (branch `runner`) draws top-down GIFs; optional here
-        from addt_dsl.reporting.animation import render_gif
-    except ImportError:
-        return None
-    from addt_dsl.runtime.execute import judge
+def _animation(spec: RunSpec, trace, outcome, path: Path) -> Path:
+    from addt_dsl.reporting.animation import render_gif  # matplotlib: only when drawing
 
-    path.write_bytes(render_gif(spec.plan, trace, judge(spec, trace), label=spec.plan.name))
+    path.write_bytes(render_gif(spec.plan, trace, outcome.verdicts, label=spec.plan.name))
     return path
 
 

@@ -120,6 +120,12 @@ def neutral_value(kind: str, setting: str) -> float:
     return min(max(0.0, lo), hi)
 
 
+def drawn_setting(kind: str) -> str | None:
+    """The fault kind's setting drawn per injection and recorded (`FaultKind.drawn_setting`)."""
+    cls = FAULTS.get(kind)
+    return cls.drawn_setting if cls else None
+
+
 def effective_settings(f: ConcreteFault) -> dict:
     """The settings the fault kind will use: the given ones, defaults for the rest (a
     setting left out is not smaller: `drop` without `rate` drops every frame)."""
@@ -155,8 +161,8 @@ def sort_key(spec: RunSpec, nominal: dict[str, float], scales: dict[str, float])
         for k, v in effective_settings(f).items():
             if not isinstance(v, float):
                 continue
-            if k == "bit":
-                bits += 64.0 if v < 0 else v  # a random bit is the most complex choice
+            if k == drawn_setting(f.kind):
+                bits += 64.0 if v < 0 else v  # a drawn value is the most complex choice
             else:
                 magnitude += abs(v - neutral_value(f.kind, k))
     params = 0.0

@@ -15,8 +15,9 @@ import json
 import sys
 from pathlib import Path
 
-from addt_dsl.errors import EXIT_FAILED, EXIT_OK, nonneg_float, nonneg_int, positive_int
-from addt_dsl.errors import EXIT_USAGE as EXIT_ERROR
+from addt_dsl.console import compile_and_report
+from addt_dsl.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, nonneg_float, nonneg_int, positive_int
+
 DEFAULT_OUT = ".addt-failures"
 
 
@@ -34,7 +35,7 @@ def add_commands(sub) -> None:
     shrink.add_argument("--limit", type=nonneg_int, default=0, help="look for a failure in the first N runs only")
     shrink.add_argument("--jobs", "-j", type=positive_int, default=1, help="processes while looking for a failing run")
     shrink.add_argument("--out", default=DEFAULT_OUT, help=f"output directory (default {DEFAULT_OUT})")
-    shrink.add_argument("--cache", help="JSON-lines run cache to reuse across invocations")
+    shrink.add_argument("--cache", help="results store (SQLite) to keep runs in and reuse across invocations")
     shrink.add_argument("--no-animation", action="store_true")
     shrink.add_argument("--format", choices=("text", "json"), default="text")
     shrink.set_defaults(func=cmd_shrink)
@@ -53,12 +54,6 @@ def add_commands(sub) -> None:
     fal.add_argument("--no-write", action="store_true", help="report only")
     fal.add_argument("--format", choices=("text", "json"), default="text")
     fal.set_defaults(func=cmd_falsify)
-
-
-def _compile(path: str, fmt: str):
-    from addt_dsl.cli import _compile as compile_and_report
-
-    return compile_and_report(path, fmt)
 
 
 def _err(msg: str) -> None:
@@ -114,21 +109,25 @@ def cmd_shrink(args) -> int:
 
     if not args.file and not args.run_key and not args.store:
         _err("give a scenario FILE, --run-key SPEC_JSON or --store RESULTS")
-        return EXIT_ERROR
+        return EXIT_USAGE
     plan = None
     if args.file:
-        result = _compile(args.file, "text")
+        result = compile_and_report(args.file, "text")
         if not result.ok:
-            return EXIT_ERROR
+            return EXIT_USAGE
         plan = result.plan
-    cache = RunCache(args.cache)
+    try:
+        cache = RunCache(args.cache)
+    except ValueError as exc:
+        _err(str(exc))
+        return EXIT_USAGE
     source = args.file or ""
     if args.store:
         try:
             spec, store_plan = _from_store(args.store, args.run_id)
         except (OSError, LookupError) as exc:
             _err(str(exc))
-            return EXIT_ERROR
+            return EXIT_USAGE
         if spec is None:
             print(f"no failing run in {args.store}: nothing to shrink")
             return EXIT_OK
@@ -140,14 +139,14 @@ def cmd_shrink(args) -> int:
         except (OSError, ValueError) as exc:
             detail = exc.errors()[0]["msg"] if hasattr(exc, "errors") else str(exc)  # pydantic: first error only
             _err(f"cannot read a RunSpec from {args.run_key}: {detail}")
-            return EXIT_ERROR
+            return EXIT_USAGE
         source = source or spec.plan.source_file
     else:
         try:
             spec = _first_failing(plan, args.run_id, args.limit, args.jobs, cache)
         except LookupError as exc:
             _err(str(exc))
-            return EXIT_ERROR
+            return EXIT_USAGE
         if spec is None:
             print("no failing run: nothing to shrink")
             return EXIT_OK
@@ -163,7 +162,7 @@ def cmd_shrink(args) -> int:
         arts = write_counterexample(result, args.out, source, animate=not args.no_animation)
     except ReplayMismatch as exc:
         _err(str(exc))
-        return EXIT_ERROR
+        return EXIT_USAGE
     if args.format == "json":
         print(json.dumps(json.loads(arts.report.read_text()), indent=2))
     else:
@@ -192,16 +191,16 @@ def cmd_falsify(args) -> int:
     from addt_dsl.search.falsify import Falsifier
     from addt_dsl.sweep import UnsatisfiableAssumptions
 
-    result = _compile(args.file, "text")
+    result = compile_and_report(args.file, "text")
     if not result.ok:
-        return EXIT_ERROR
+        return EXIT_USAGE
     log = (lambda m: print(m, file=sys.stderr)) if args.format == "text" else None
     try:
         fal = Falsifier(result.plan, seed=args.seed, batch=args.batch, jobs=args.jobs, sampler=args.sampler,
                         log=log)
     except UnsatisfiableAssumptions as exc:
         _err(str(exc))
-        return EXIT_ERROR
+        return EXIT_USAGE
     report = fal.run(budget_runs=args.budget_runs, budget_seconds=args.budget_seconds,
                      shrink_simulations=args.shrink_simulations)
     written = []

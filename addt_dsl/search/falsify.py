@@ -37,11 +37,11 @@ import numpy as np
 from addt_dsl import expr as E
 from addt_dsl.plan import RunSpec, ScenarioPlan
 from addt_dsl.registry import FAULTS
+from addt_dsl.runtime.result import RunResult
 from addt_dsl.search import candidates as C
 from addt_dsl.search.cache import RunCache
-from addt_dsl.search.outcome import Outcome
 from addt_dsl.search.shrink import Shrinker, ShrinkResult
-from addt_dsl.sweep import _from_unit, concrete_faults, derive_seed, violated_assumptions
+from addt_dsl.sweep import from_unit, concrete_faults, derive_seed, violated_assumptions
 
 ELITE_FRACTION = 0.2
 EXPLORE_FRACTION = 0.1
@@ -90,7 +90,7 @@ class SearchSpace:
                     continue
                 if expr is not None and E.params_used(expr):
                     continue  # moves with its parameter
-                if name == "bit":
+                if name == C.drawn_setting(f.kind):
                     if value >= 0:
                         settings.append((name, 0.0, 63.0, True))
                     continue
@@ -125,7 +125,7 @@ class SearchSpace:
             if choices:
                 params[p.name] = choices[min(int(x * len(choices)), len(choices) - 1)]
             else:
-                params[p.name] = _from_unit(p, x)
+                params[p.name] = from_unit(p, x)
         return params
 
     def spec(self, u: np.ndarray, seed: int, run_id: str) -> RunSpec:
@@ -316,7 +316,7 @@ class Falsifier:
                 points.append(u)
         return np.array(points).reshape(len(points), self.space.dims), specs
 
-    def _score(self, outcome: Outcome, targets: list[str], scales: dict[str, float]) -> float:
+    def _score(self, outcome: RunResult, targets: list[str], scales: dict[str, float]) -> float:
         if outcome.status != "ok" and "stack_health" in targets:
             return -math.inf
         vals = [outcome.robustness.get(n, math.inf) / scales.get(n, 1.0) for n in targets]
@@ -399,9 +399,9 @@ class Falsifier:
         return sorted(out.values(), key=lambda g: g.first_run)
 
 
-def _injected_before(spec: RunSpec, outcome: Outcome, t: float | None) -> tuple:
+def _injected_before(spec: RunSpec, outcome: RunResult, t: float | None) -> tuple:
     """Fault kinds/targets that injected anything in the run (cheap grouping before shrinking)."""
-    return tuple(sorted({(f.kind, f.target) for f in spec.faults if outcome.fault_events.get(f.index)}))
+    return tuple(sorted({(f.kind, f.target) for f in spec.faults if outcome.injections.get(f.index)}))
 
 
 def origin_key(spec: RunSpec, nominal: dict[str, float]) -> tuple:

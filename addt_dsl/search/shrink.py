@@ -37,9 +37,9 @@ from dataclasses import dataclass, field
 from addt_dsl import expr as E
 from addt_dsl.plan import RunSpec, ScenarioPlan
 from addt_dsl.registry import FAULTS
+from addt_dsl.runtime.result import Failure, RunResult
 from addt_dsl.search import candidates as C
 from addt_dsl.search.cache import RunCache
-from addt_dsl.search.outcome import Failure, Outcome
 from addt_dsl.sweep import violated_assumptions
 
 BISECT_STEPS = 5
@@ -58,7 +58,7 @@ class PassStats:
 class ShrinkResult:
     original: RunSpec  # pinned form of the input
     best: RunSpec
-    outcome: Outcome
+    outcome: RunResult
     target: Failure  # the failure as the best run shows it
     stats: list[PassStats]
     simulations: int
@@ -108,10 +108,10 @@ class Shrinker:
     def key(self, spec: RunSpec) -> tuple:
         return C.sort_key(spec, self.nominal, self.scales)
 
-    def interesting(self, outcome: Outcome) -> bool:
+    def interesting(self, outcome: RunResult) -> bool:
         return outcome.failure(self.target) is not None
 
-    def consider(self, candidate: RunSpec, extra: Callable[[Outcome], bool] | None = None) -> bool:
+    def consider(self, candidate: RunSpec, extra: Callable[[RunResult], bool] | None = None) -> bool:
         """Run `candidate` (cached); make it the best if it fails the same way and is simpler."""
         if self.exhausted:
             return False
@@ -278,12 +278,13 @@ class Shrinker:
             f = self.best.faults[i]
             cls = FAULTS.get(f.kind)
             specs = {p.name: p for p in cls.params} if cls else {}
-            if f.kind == "bitflip":
-                self._fix_bits(i)
+            drawn = C.drawn_setting(f.kind)
+            if drawn is not None:
+                self._fix_drawn(i, drawn)
             for name in sorted(self.best.faults[i].settings):
                 value = self.best.faults[i].settings[name]
                 spec = specs.get(name)
-                if not isinstance(value, float) or spec is None or name == "bit":
+                if not isinstance(value, float) or spec is None or name == drawn:
                     continue
                 integer = spec.kind == "int"
                 self.bisect(value, C.neutral_value(f.kind, name),
@@ -294,18 +295,18 @@ class Shrinker:
         f = self.best.faults[i]
         return C.with_fault(self.best, i, settings={**f.settings, name: value})
 
-    def _fix_bits(self, i: int) -> None:
-        f = self.best.faults[i]
-        bit = f.settings.get("bit", -1.0)
-        if bit < 0:
-            flipped = self.outcome.flipped_bits.get(i, ())
-            if not flipped:
+    def _fix_drawn(self, i: int, name: str) -> None:
+        """Pin a drawn setting (a flipped bit) to the value the run drew, then lower it."""
+        value = self.best.faults[i].settings.get(name, -1.0)
+        if value < 0:
+            drawn = self.outcome.drawn_values.get(i, ())
+            if not drawn:
                 return
-            # Flip times are drawn before bits, so fixing the bit that flipped replays the run.
-            if not self.consider(self._with_setting(i, "bit", float(max(flipped)))):
+            # Injection times are drawn before the values, so pinning the drawn value replays the run.
+            if not self.consider(self._with_setting(i, name, float(max(drawn)))):
                 return
-            bit = self.best.faults[i].settings["bit"]
-        self.bisect(bit, 0.0, lambda b: self._with_setting(i, "bit", float(b)), integer=True, steps=7)
+            value = self.best.faults[i].settings[name]
+        self.bisect(value, 0.0, lambda b: self._with_setting(i, name, float(b)), integer=True, steps=7)
 
     def drop_settings(self) -> None:
         for i in range(len(self.best.faults)):
@@ -344,7 +345,7 @@ class Shrinker:
                 self._round(f.end_s, f.start_s, lambda v: C.with_fault(self.best, i, end_s=v))
             for name in sorted(self.best.faults[i].settings):
                 v = self.best.faults[i].settings[name]
-                if isinstance(v, float) and name != "bit":
+                if isinstance(v, float) and name != C.drawn_setting(f.kind):
                     self._round(v, C.neutral_value(f.kind, name), lambda x, n=name: self._with_setting(i, n, x))
 
     def _round(self, value: float, toward: float, make: Callable[[float], RunSpec]) -> None:

@@ -208,7 +208,7 @@ class BevStack:
             objs = objs + synthetic_objects(self.synthetic_objects, self.ctx.ego_pose())
         self.objects_seen = len(objs)
         # What perception reported, in world coordinates: perception-error studies compare it
-        # with the ground truth in the trace (addt_dsl.runtime.faults.study).
+        # with the ground truth in the trace (addt_dsl.studies).
         self.ctx.event("detections", sensor=frame.sensor, stamp_s=frame.stamp_s,
                        objects=[[o.x, o.y, o.heading] for o in objs])  # lists: JSON-stable (bridge)
         lat = self._latency("perception", len(objs), started, arrive_s)

@@ -160,12 +160,6 @@ def sensor_points_to_vehicle(points_sensor: np.ndarray, ext) -> np.ndarray:
 
 # ---------------------------------------------------------------- targets and decoding
 
-def head_cell_centre(i: np.ndarray | int, j: np.ndarray | int, spec: GridSpec = GRID):
-    """Vehicle-frame centre [m] of head cell (i, j)."""
-    c = spec.head_cell_m
-    return spec.x_min + (np.asarray(i) + 0.5) * c, spec.y_min + (np.asarray(j) + 0.5) * c
-
-
 def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float = 0.8):
     """CenterNet targets for vehicle-frame boxes (N×5: x, y, heading, length, width).
 

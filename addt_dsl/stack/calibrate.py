@@ -40,6 +40,7 @@ import numpy as np
 
 from addt_dsl import extras
 from addt_dsl.stack.latency import MODEL_PATH
+from addt_dsl.vehicles import CAR
 
 COUNTS = (0, 5, 10, 20, 40, 60)
 TARGETS = {"pipeline_ms_at_0": 40.0, "e2e_crossing_ms": 100.0, "crossing_objects": 40, "step_s": 0.01}
@@ -72,7 +73,7 @@ def measure_perception(repeats: int, scans: int = 240) -> list[tuple[float, floa
 def _objects(n: int, rng) -> list:
     from addt_dsl.stack.nodes import Obj
 
-    return [Obj(float(rng.uniform(-60, 60)), float(rng.uniform(-8, 8)), 0.0, 20.0, 0.0, 4.6, 1.9)
+    return [Obj(float(rng.uniform(-60, 60)), float(rng.uniform(-8, 8)), 0.0, 20.0, 0.0, CAR.length_m, CAR.width_m)
             for _ in range(n)]
 
 
@@ -113,7 +114,7 @@ def measure_planner(repeats: int) -> list[tuple[float, float]]:
     out = []
     for n in COUNTS:
         objs = [(100.0 + float(rng.uniform(-60, 60)), float(road.lane_center_t(int(rng.choice(lanes)), 100.0)),
-                 float(rng.uniform(10, 30)), 4.6, 1.9) for _ in range(n)]
+                 float(rng.uniform(10, 30)), CAR.length_m, CAR.width_m) for _ in range(n)]
         lane0 = lanes[0]
         t0 = float(road.lane_center_t(lane0, 100.0))
 

@@ -6,7 +6,7 @@ RGB-D camera, the intrinsics and the *nominal* extrinsics. It never reads the re
 body-id image (that is ground truth, and blind to image faults).
 
 1. **Colour segmentation.** The twin paints each road-user class in one colour
-   (`runtime.world.ACTOR_RGBA`: red cars, blue trucks, orange cyclists, pink pedestrians),
+   (`addt_dsl.vehicles.VEHICLES`: red cars, blue trucks, orange cyclists, pink pedestrians),
    distinct from the road (grey), markings (white), verges (green) and the sky (white).
    A pixel belongs to a class when its hue is within `HUE_TOLERANCE` of the class's hue
    and its saturation at least `SATURATION_FRACTION` of the class's (hue and saturation do
@@ -37,6 +37,7 @@ import math
 import numpy as np
 
 from addt_dsl.stack.nodes import GroundTruthPerception, Obj
+from addt_dsl.vehicles import VEHICLES
 
 HUE_TOLERANCE = 8  # [opencv hue units, 2 deg each]
 SATURATION_FRACTION = 0.6  # of the class colour's saturation
@@ -45,7 +46,7 @@ MIN_PIXELS = 6  # after the median filter; a car's rear (1.9 x 1.5 m) passes out
 FACE_PERCENTILE = 20.0
 # Box size priors per class [m] (length, width): what the detector assumes, not what the
 # scenario declared. The twin's default sizes.
-CLASS_SIZE_M = {"car": (4.6, 1.9), "truck": (12.0, 2.5), "cyclist": (1.8, 0.6), "pedestrian": (0.5, 0.5)}
+CLASS_SIZE_M = {name: (v.length_m, v.width_m) for name, v in VEHICLES.items()}
 
 
 def _hsv_of(rgba) -> tuple[int, int]:
@@ -61,9 +62,8 @@ class ColourDetector:
     """Blobs of the class colours in an RGB image, with their range and bearing."""
 
     def __init__(self, classes: dict[str, tuple] | None = None):
-        from addt_dsl.runtime.world import ACTOR_RGBA  # plain data; pybullet loads lazily
-
-        self.classes = {name: _hsv_of(rgba) for name, rgba in (classes or ACTOR_RGBA).items()}
+        classes = classes or {name: v.rgba for name, v in VEHICLES.items()}
+        self.classes = {name: _hsv_of(rgba) for name, rgba in classes.items()}
 
     def masks(self, image: np.ndarray) -> dict[str, np.ndarray]:
         """Per class, the uint8 mask (255 = the class colour) of an HxWx3 RGB image."""

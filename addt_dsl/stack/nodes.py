@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from addt_dsl.vehicles import CAR
+
 
 @dataclass
 class Obj:
@@ -48,7 +50,7 @@ class GroundTruthPerception:
         self.rng = rng
 
     def run(self, frame, world, sensor, ego_pose, corrupt) -> list[Obj]:
-        from addt_dsl.runtime.sensors import _rotation
+        from addt_dsl.runtime.sensors import rotation
 
         hits = frame.data["hit_body"]
         if len(hits) == 0:
@@ -57,8 +59,8 @@ class GroundTruthPerception:
         x, y, heading, _ = ego_pose
         cos_h, sin_h = math.cos(heading), math.sin(heading)
         actual, nominal = sensor.actual, sensor.nominal
-        rot_a = _rotation(actual.roll, actual.pitch, actual.yaw)
-        rot_n = _rotation(nominal.roll, nominal.pitch, nominal.yaw)
+        rot_a = rotation(actual.roll, actual.pitch, actual.yaw)
+        rot_n = rotation(nominal.roll, nominal.pitch, nominal.yaw)
         objs = []
         for body, count in zip(ids.tolist(), counts.tolist()):
             if count < self.min_hits:
@@ -240,7 +242,8 @@ class LatticePlanner:
         time_gap = self.time_gap
         steps = int(self.horizon_s / dt)
         # Per-object constants of the checks below (same expressions, evaluated once).
-        checks = [(os_, ov, ot, 0.5 * (owid + 1.9) + 0.3, 0.5 * (olen + 4.6), -(olen + 4.6) - 2.0)
+        checks = [(os_, ov, ot, 0.5 * (owid + CAR.width_m) + 0.3, 0.5 * (olen + CAR.length_m),
+                   -(olen + CAR.length_m) - 2.0)
                   for (os_, ot, ov, olen, owid) in objs]
         for k in range(1, steps + 1):
             tk = k * dt
@@ -262,7 +265,7 @@ class LatticePlanner:
                 if not abs(t - ot) < lat_reach:
                     continue
                 gap = os_ + ov * tk - s - half_len
-                # Boxes overlap along the road for -(olen + 4.6) < gap < 0; keep 2 m either side.
+                # Boxes overlap along the road for -(olen + ego length) < gap < 0; keep 2 m either side.
                 if gap_low < gap < 2.0:
                     return math.inf  # collision with a predicted object
                 if gap >= 0.0:

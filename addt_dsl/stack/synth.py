@@ -20,16 +20,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from addt_dsl.stack.bev_grid import DETECTOR_LIDAR, GRID, sensor_points_to_vehicle
+from addt_dsl.vehicles import CAR, VEHICLES
 
 LANE_WIDTH_M = 3.5
-EGO_SIZE = (4.6, 1.9, 1.5)
-# Body pool: (kind, length, width, height, count), the sizes the runtime gives its car and
-# truck actors (execute.VEHICLE_SIZES / VEHICLE_HEIGHT). The detector learns these two
-# shapes, which is what lets it place a box's centre from the one face the lidar sees.
-POOL = (
-    ("car", 4.6, 1.9, 1.5, 48),
-    ("truck", 12.0, 2.5, 3.5, 14),
-)
+EGO_SIZE = (CAR.length_m, CAR.width_m, CAR.height_m)
+# Body pool: (kind, length, width, height, count), the bodies the runtime gives its car and
+# truck actors (addt_dsl.vehicles). The detector learns these two shapes, which is what
+# lets it place a box's centre from the one face the lidar sees.
+POOL = tuple((kind, VEHICLES[kind].length_m, VEHICLES[kind].width_m, VEHICLES[kind].height_m, count)
+             for kind, count in (("car", 48), ("truck", 14)))
 PARK_X0 = 1.0e4  # unused bodies wait far outside the lidar's range
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_file, compile_source
-from addt_dsl.runtime.faults.study import perception_errors
+from addt_dsl.studies import perception_errors
 from addt_dsl.runtime.outcome import GoldenCache, classify
 from addt_dsl.sweep import expand
 from tests.conftest import EXAMPLES

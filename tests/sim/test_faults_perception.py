@@ -8,7 +8,7 @@ import pytest
 
 from addt_dsl.compiler import compile_file
 from addt_dsl.runtime.execute import execute
-from addt_dsl.runtime.faults.study import error_table, perception_errors
+from addt_dsl.studies import error_table, perception_errors
 from addt_dsl.sweep import expand
 from tests.conftest import EXAMPLES
 

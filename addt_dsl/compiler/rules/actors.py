@@ -14,6 +14,7 @@ from addt_dsl.compiler.context import (Context, check_range, check_settings, che
 from addt_dsl.compiler.exprs import value_range
 from addt_dsl.diagnostics import Span
 from addt_dsl.registry import BEHAVIORS, SENSORS, STACKS, ParamSpec
+from addt_dsl.vehicles import VEHICLES
 
 
 ACTOR_SETTINGS = (
@@ -32,7 +33,6 @@ ACTOR_SETTINGS = (
               doc="start offset from the lane centre, left positive (e.g. a pedestrian on the kerb)"),
 )
 
-VEHICLE_KINDS = {"car": (4.6, 1.9), "truck": (12.0, 2.5), "pedestrian": (0.5, 0.5), "cyclist": (1.8, 0.6)}
 DEFAULT_SENSOR = P.ClausePlan(keyword="sensor", name="lidar", settings={})
 DEFAULT_STACK = P.ClausePlan(keyword="stack", name="bev", settings={})
 
@@ -90,13 +90,13 @@ def _placement_order(ctx: Context) -> list[str]:
 
 def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan]) -> P.ActorPlan | None:
     """The actor's plan (others it is placed relative to are in `placed`), or None."""
-    if d.vehicle not in VEHICLE_KINDS:
+    if d.vehicle not in VEHICLES:
         ctx.sink.error("E0106", f"unknown vehicle kind '{d.vehicle}'", d.vehicle_span,
-                       *suggest(d.vehicle, VEHICLE_KINDS), f"kinds: {', '.join(VEHICLE_KINDS)}")
+                       *suggest(d.vehicle, VEHICLES), f"kinds: {', '.join(VEHICLES)}")
         return None
     what = "the ego" if d.is_ego else f"agent '{d.name}'"
     vals = check_settings(ctx, d.settings + d.block_settings, ACTOR_SETTINGS, what, d.span)
-    length, width = VEHICLE_KINDS[d.vehicle]
+    length, width = VEHICLES[d.vehicle].length_m, VEHICLES[d.vehicle].width_m
     body = {"length": length, "width": width, "mass": 1500.0, "wheelbase": 2.7}
     for key in body:
         if key in vals:

@@ -89,6 +89,10 @@ class FaultKind:
     sensor_kinds: tuple[str, ...] | None = None
     params: tuple[ParamSpec, ...] = ()
     doc = ""
+    # A setting whose negative default means "drawn from the fault's seed", with every drawn
+    # value recorded in the fault event under the same name (bitflip: `bit`). The search
+    # pins it to the value the run drew, then lowers it; it is never a magnitude.
+    drawn_setting: str | None = None
 
     def __init__(self, fault, step_s: float, duration_s: float, record):
         self.fault = fault

@@ -12,6 +12,7 @@ from addt_dsl.runtime.faults.base import BIT_FIELDS_F64, FIELD_NAMES, Binding, F
 class BitFlip(FaultKind):
     keyword = "bitflip"
     target_kind = "site"
+    drawn_setting = "bit"
     params = (
         ParamSpec("count", None, kind="int", default=1, low=1, high=10000, doc="number of flips in the window"),
         ParamSpec("bit", None, kind="int", default=-1, low=-1, high=63,

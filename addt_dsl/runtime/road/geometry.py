@@ -312,7 +312,6 @@ class ParamPoly3:
 
 
 Geometry = Union[Line, Arc, Spiral, Poly3, ParamPoly3]
-GEOMETRY_TYPES = (Line, Arc, Spiral, Poly3, ParamPoly3)
 
 
 def end_pose(geom: Geometry) -> tuple[float, float, float]:

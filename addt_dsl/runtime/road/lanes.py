@@ -87,19 +87,11 @@ class LaneSection:
         return np.stack(rows)
 
 
-def lane_at_t(section: LaneSection, ds: float, offset: float, t: float) -> Optional[int]:
-    """Id of the lane of ``section`` containing lateral offset ``t`` [m], or None.
-
-    Intervals are half-open towards the outside so that a point on a shared border
-    belongs to the inner lane; t == laneOffset belongs to lane 1 (or -1 without left lanes).
-    Zero-width lanes never contain a point.
-    """
-    lane_id = int(lanes_at_t_array(section, np.asarray(float(ds)), np.asarray(float(offset)), np.asarray(float(t))))
-    return lane_id or None
-
-
 def lanes_at_t_array(section: LaneSection, ds: np.ndarray, offset: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Vectorised :func:`lane_at_t`; 0 marks "outside all lanes" (lane 0 has no width)."""
+    """Id of the lane of `section` containing each lateral offset `t` [m]; 0 marks "outside
+    all lanes" (lane 0 has no width). Intervals are half-open towards the outside so that a
+    point on a shared border belongs to the inner lane; t == laneOffset belongs to lane 1
+    (or -1 without left lanes). Zero-width lanes never contain a point."""
     out = np.zeros(np.shape(t), dtype=int)
     for side in (1, -1):
         lanes = section.left if side > 0 else section.right

@@ -12,7 +12,7 @@ import signal
 import time
 
 from addt_dsl.compiler import compile_source
-from addt_dsl.runtime.store import RunRecord, VerdictRecord
+from addt_dsl.runtime.result import RunResult, Verdict
 
 OK, HANG, SEGFAULT, HOG, RAISE, SPIKE = 0, 1, 2, 3, 4, 5
 HOG_MB = 400
@@ -56,7 +56,7 @@ def _touch(n_mb: int) -> bytearray:
     return block
 
 
-def fake_run(spec, seq: int = -1, worker: str = "") -> RunRecord:
+def fake_run(spec, seq: int = -1, worker: str = "") -> RunResult:
     mode = int(spec.params["mode"])
     if mode == HANG:
         time.sleep(120)
@@ -72,9 +72,9 @@ def fake_run(spec, seq: int = -1, worker: str = "") -> RunRecord:
     return fake_record(spec, seq, worker)
 
 
-def fake_record(spec, seq: int = -1, worker: str = "") -> RunRecord:
+def fake_record(spec, seq: int = -1, worker: str = "") -> RunResult:
     """A passing record for `spec` (no simulation)."""
-    record = RunRecord.unfinished(spec, "ok", "", 0.001, seq=seq, worker=worker)
-    record.verdicts = [VerdictRecord("moving", "hard", 1.0 + spec.repeat_index, True)]
+    record = RunResult.unfinished(spec, "ok", "", 0.001, seq=seq, worker=worker)
+    record.verdicts = [Verdict("moving", "hard", 1.0 + spec.repeat_index, True)]
     record.digest = f"fake-{spec.seed}"
     return record

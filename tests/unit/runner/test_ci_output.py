@@ -24,7 +24,7 @@ class _Clock:
 
 class _Run:
     passed = True
-    verdicts = ()
+    warned_oracles = ()
 
 
 def test_progress_lines_every_5_percent_or_10_seconds():

@@ -10,7 +10,8 @@ from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 from addt_dsl import cli
 from addt_dsl.errors import EXIT_FAILED, EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, verdict_exit_code
 from addt_dsl.runtime import executor as executor_module
-from addt_dsl.runtime.store import ResultStore, RunRecord, VerdictRecord
+from addt_dsl.runtime.result import RunResult, Verdict
+from addt_dsl.runtime.store import ResultStore
 from addt_dsl.sweep import expand
 from tests.conftest import EXAMPLES
 
@@ -21,10 +22,10 @@ FAIL, CRASH = 6, 7  # `mode` values the fake run turns into a failed and a crash
 def _fake_run(spec, seq=-1, worker=""):
     mode = int(spec.params["mode"])
     if mode == CRASH:
-        return RunRecord.unfinished(spec, "crashed", "worker died (SIGKILL)", 0.01, seq=seq, worker=worker)
+        return RunResult.unfinished(spec, "crashed", "worker died (SIGKILL)", 0.01, seq=seq, worker=worker)
     record = fake_record(spec, seq, worker)
     if mode == FAIL:
-        record.verdicts = [VerdictRecord("moving", "hard", -1.0, False, 0.1)]
+        record.verdicts = [Verdict("moving", "hard", -1.0, False, 0.1)]
     return record
 
 
@@ -134,7 +135,7 @@ def test_report_of_a_store_with_failures_is_exit_1(tmp_path):
     for i, spec in enumerate(expand(plan).specs):
         r = fake_record(spec, seq=i)
         if i:
-            r.verdicts = [VerdictRecord("moving", "hard", -1.0, False, 0.1)]
+            r.verdicts = [Verdict("moving", "hard", -1.0, False, 0.1)]
         store.add(r)
     store.close()
     assert cli.main(["report", str(tmp_path / "r.sqlite"), "--animations", "0"]) == EXIT_FAILED

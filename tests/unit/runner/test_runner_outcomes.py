@@ -9,6 +9,7 @@ import sqlite3
 import pytest
 from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 
+from addt_dsl.reporting.summary import store_dataframe, store_summary
 from addt_dsl.reporting.tables import runs_table, summary
 from addt_dsl.runtime.executor import LocalExecutor, run_sweep
 from addt_dsl.runtime.outcome import ClassifyingExecutor, ClassifyingRun
@@ -65,8 +66,8 @@ def test_the_store_keeps_outcomes_and_upgrades_an_old_store(tmp_path):
             store.add(r)
     with ResultStore(path) as store:
         assert [r.outcome for r in store.records()] == ["silent", "hazard", "", "masked", "masked", "masked"]
-        assert store.summary()["outcomes"] == {"masked": 3, "silent": 1, "detected": 0, "hazard": 1, "error": 0}
-        assert list(store.dataframe()["outcome"]) == ["silent", "hazard", "", "masked", "masked", "masked"]
+        assert store_summary(store)["outcomes"] == {"masked": 3, "silent": 1, "detected": 0, "hazard": 1, "error": 0}
+        assert list(store_dataframe(store)["outcome"]) == ["silent", "hazard", "", "masked", "masked", "masked"]
 
 
 def _crash(spec, seq=-1, worker=""):
@@ -74,7 +75,7 @@ def _crash(spec, seq=-1, worker=""):
 
 
 def test_runs_the_executor_could_not_finish_are_errors(tmp_path):
-    executor = ClassifyingExecutor(LocalExecutor(1, start_method="fork"), tmp_path / "golden")
+    executor = ClassifyingExecutor(LocalExecutor(1, start_method="fork"), tmp_path / "r.sqlite")
     assert isinstance(executor.inner.run_fn, ClassifyingRun)
     executor.inner.run_fn = _crash  # the worker's run fails: the executor records it itself
     with ResultStore(tmp_path / "r.sqlite", PLAN) as store:

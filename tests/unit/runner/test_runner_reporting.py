@@ -10,8 +10,10 @@ from hypothesis import strategies as st
 from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 
 from addt_dsl.reporting import build_report, write_junit
+from addt_dsl.reporting.summary import store_summary
 from addt_dsl.reporting.tables import cell_stats, success_pivot, wilson_interval
-from addt_dsl.runtime.store import ResultStore, RunRecord, VerdictRecord
+from addt_dsl.runtime.result import RunResult, Verdict
+from addt_dsl.runtime.store import ResultStore
 from addt_dsl.sweep import expand
 
 PLAN = plan_of(scenario([0, 6, 7], repeat=4))
@@ -23,14 +25,14 @@ def _records():
         r = fake_record(spec, seq=i)
         mode = int(spec.params["mode"])
         failing = mode == 6 and spec.repeat_index < 3  # cell 6: 1 of 4 passes; 0 and 7 all pass
-        r.verdicts = [VerdictRecord("moving", "hard", -0.5 - i if failing else 0.5 + i, not failing,
+        r.verdicts = [Verdict("moving", "hard", -0.5 - i if failing else 0.5 + i, not failing,
                                     1.25 if failing else None)]
         r.stats = {"latency_hist": {"e2e": {"40": 5, "55": 1}, "planner": {"4": 6}},
                    "latency_max_s": {"e2e": 0.111, "planner": 0.009},
                    "e2e_by_objects": {"1": [3, 0.24, 0.09], "3": [3, 0.33, 0.111]}}
         out.append(r)
     spec = expand(PLAN).specs[-1]
-    crashed = RunRecord.unfinished(spec, "timeout", "run exceeded the 5 s timeout", 5.0, seq=99)
+    crashed = RunResult.unfinished(spec, "timeout", "run exceeded the 5 s timeout", 5.0, seq=99)
     crashed.run_id = "c009-r000"
     crashed.key = "k-timeout"
     out.append(crashed)
@@ -95,4 +97,4 @@ def test_html_report_is_escaped_and_self_contained(tmp_path):
     assert 'alt="latency distributions per node"' in html
     assert 'alt="latency against object count"' in html
     assert "25.00 %" in html  # cell mode=6: 1 of 4 passed
-    assert math.isclose(store.summary()["failed"], 4)
+    assert math.isclose(store_summary(store)["failed"], 4)

@@ -14,26 +14,28 @@ from hypothesis import strategies as st
 from tests.conftest import ROOT
 from tests.unit.runner.runner_testkit import OK, fake_record, plan_of, scenario
 
+from addt_dsl.reporting.summary import store_dataframe, store_summary, write_csv, write_parquet
 from addt_dsl.reporting.tables import summary
-from addt_dsl.runtime.store import ResultStore, RunRecord, StoreMismatch, VerdictRecord
+from addt_dsl.runtime.result import RunResult, Verdict
+from addt_dsl.runtime.store import ResultStore, StoreMismatch
 from addt_dsl.sweep import expand
 
 PLAN = plan_of(scenario([0, 1, 2], repeat=2))
 SPECS = expand(PLAN).specs
 
 
-def _record(spec, i: int) -> RunRecord:
+def _record(spec, i: int) -> RunResult:
     r = fake_record(spec, seq=i, worker="w")
-    r.verdicts = [VerdictRecord("moving", "hard", [math.inf, -2.5, 0.75][i % 3], i % 3 != 1,
-                                1.5 if i % 3 == 1 else None),
-                  VerdictRecord("soft", "warn", -math.inf, False, 0.0)]
+    r.verdicts = [Verdict("moving", "hard", [math.inf, -2.5, 0.75][i % 3], i % 3 != 1,
+                          1.5 if i % 3 == 1 else None),
+                  Verdict("soft", "warn", -math.inf, False, 0.0)]
     r.stats = {"latency_hist": {"e2e": {"3": 10, "60": 2}}, "latency_max_s": {"e2e": 0.121},
                "e2e_by_objects": {"2": [12, 0.5, 0.121]}}
     r.sim_time_s, r.wall_time_s = 0.2, 0.01 * i
     return r
 
 
-def _comparable(r: RunRecord) -> dict:
+def _comparable(r: RunResult) -> dict:
     d = dict(vars(r))
     d.pop("session")
     return d
@@ -87,21 +89,21 @@ def test_summary_matches_the_records(tmp_path):
     with ResultStore(tmp_path / "r.sqlite", PLAN) as store:
         for i, s in enumerate(SPECS):
             store.add(_record(s, i))
-        crashed = RunRecord.unfinished(expand(plan_of(scenario([OK]))).specs[0], "crashed", "x", 0.0)
+        crashed = RunResult.unfinished(expand(plan_of(scenario([OK]))).specs[0], "crashed", "x", 0.0)
         crashed.key, crashed.run_id = "other", "c999-r000"
         store.add(crashed)
         records = list(store.records())
-        assert store.summary() == summary(PLAN, records)
-        assert store.summary()["failures_per_oracle"] == {"crashed": 1, "moving": 2}
+        assert store_summary(store) == summary(PLAN, records)
+        assert store_summary(store)["failures_per_oracle"] == {"crashed": 1, "moving": 2}
 
 
 def test_dataframe_csv_and_parquet(tmp_path):
     with ResultStore(tmp_path / "r.sqlite", PLAN) as store:
         for i, s in enumerate(SPECS):
             store.add(_record(s, i))
-        df = store.dataframe()
-        store.to_csv(tmp_path / "runs.csv")
-        store.to_parquet(tmp_path / "runs.parquet")
+        df = store_dataframe(store)
+        write_csv(store, tmp_path / "runs.csv")
+        write_parquet(store, tmp_path / "runs.parquet")
     assert len(df) == len(SPECS)
     for column in ("run_id", "param.mode", "seed", "passed", "rho.moving", "first_violation_s.moving",
                    "sim_time_s", "wall_time_s"):

@@ -9,8 +9,10 @@ from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 
 from addt_dsl import cli
 from addt_dsl.reporting import build_report, write_junit, write_tables
-from addt_dsl.reporting.tables import print_verdicts, warned_oracles
-from addt_dsl.runtime.store import ResultStore, VerdictRecord
+from addt_dsl.reporting.tables import print_verdicts
+from addt_dsl.reporting.summary import store_summary
+from addt_dsl.runtime.result import Verdict
+from addt_dsl.runtime.store import ResultStore
 from addt_dsl.sweep import expand
 
 PLAN = plan_of(scenario([0, 6, 7], extra="").replace(
@@ -22,8 +24,8 @@ def _store(tmp_path):
     store = ResultStore(tmp_path / "results.sqlite", PLAN)
     for i, spec in enumerate(expand(PLAN).specs):
         r = fake_record(spec, seq=i)
-        r.verdicts = [VerdictRecord("moving", "hard", -1.0 if i == 2 else 1.0, i != 2, 0.5 if i == 2 else None),
-                      VerdictRecord("comfy", "warn", -0.3 if i else 0.4, i == 0, 1.25 if i else None)]
+        r.verdicts = [Verdict("moving", "hard", -1.0 if i == 2 else 1.0, i != 2, 0.5 if i == 2 else None),
+                      Verdict("comfy", "warn", -0.3 if i else 0.4, i == 0, 1.25 if i else None)]
         store.add(r)
     return store
 
@@ -35,9 +37,9 @@ def test_plan_has_a_warn_oracle():
 def test_warnings_counted_apart_in_summary_and_tables(tmp_path):
     store = _store(tmp_path)
     records = list(store.records())
-    assert [warned_oracles(r) for r in records] == [[], ["comfy"], ["comfy"]]
+    assert [r.warned_oracles for r in records] == [[], ["comfy"], ["comfy"]]
     assert [r.passed for r in records] == [True, True, False]
-    totals = store.summary()
+    totals = store_summary(store)
     assert (totals["passed"], totals["failed"], totals["warned"]) == (2, 1, 2)
     assert totals["warnings_per_oracle"] == {"comfy": 2} and totals["failures_per_oracle"] == {"moving": 1}
     write_tables(tmp_path, store)
@@ -50,7 +52,7 @@ def test_warnings_counted_apart_in_summary_and_tables(tmp_path):
 def test_terminal_line_and_colours(tmp_path, capsys, monkeypatch):
     store = _store(tmp_path)
     monkeypatch.setenv("FORCE_COLOR", "1")
-    print_verdicts(PLAN, list(store.records()), store.summary())
+    print_verdicts(PLAN, list(store.records()), store_summary(store))
     out = capsys.readouterr().out
     assert "2 passed, 1 failed, 2 with warnings" in out and "warnings per oracle: {'comfy': 2}" in out
     assert "\x1b[33m-0.3" in out  # the violated warning in yellow, not red

@@ -10,21 +10,10 @@ from hypothesis import strategies as st
 
 from addt_dsl.expr import Binary, Num, Param, Signal
 from addt_dsl.plan import ClausePlan, GroupPlan, TriggerPlan
+from addt_dsl.runtime.bound import bind_step
 from addt_dsl.runtime.script import Script
 
 DT = 0.1
-
-
-class _Spec:
-    """The two things a script reads from a RunSpec."""
-
-    def __init__(self, params=None):
-        self.params = params or {}
-
-    def value(self, expr, default=0.0):
-        from addt_dsl.expr import eval_param_expr
-
-        return default if expr is None else eval_param_expr(expr, self.params)
 
 
 def clause(name: str) -> ClausePlan:
@@ -32,7 +21,7 @@ def clause(name: str) -> ClausePlan:
 
 
 def run(triggers, duration=20.0, holds=lambda cond: True, params=None):
-    script = Script(triggers, _Spec(params))
+    script = Script(tuple(bind_step(t, params or {}) for t in triggers))
     started: list[tuple[str, float]] = []
     for k in range(int(round(duration / DT)) + 1):
         t = k * DT
@@ -81,7 +70,7 @@ def test_condition_gates_firing_and_is_checked_only_when_armed():
         checked.append(now["t"])
         return now["t"] >= 5.0
 
-    script = Script([TriggerPlan(at_s=Num(value=3.0), condition=cond, clause=clause("brake"))], _Spec())
+    script = Script((bind_step(TriggerPlan(at_s=Num(value=3.0), condition=cond, clause=clause("brake")), {}),))
     started = []
     for k in range(100):
         now["t"] = k * DT

@@ -13,6 +13,7 @@ from addt_dsl import units
 from addt_dsl.compiler import compile_file, compile_source
 from addt_dsl.plan import ConcreteFault, RunSpec, ScenarioPlan
 from addt_dsl.registry import FAULTS, SIGNALS, STACKS
+from addt_dsl.runtime.result import Failure, RunResult, Verdict
 from addt_dsl.sweep import violated_assumptions
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -252,3 +253,17 @@ def run_specs(draw, plans=None):
 
 def is_finite_tree(expr) -> bool:
     return all(math.isfinite(n.value) for n in E.walk(expr) if isinstance(n, E.Num))
+
+
+def judged(spec: RunSpec, robustness: dict[str, float], failures: tuple[Failure, ...] = (),
+           drawn_values: dict[int, tuple[int, ...]] | None = None) -> RunResult:
+    """What a synthetic judge returns: a finished run whose hard oracles have these
+    robustness values, failing with these identities."""
+    failed = {f.oracle: f for f in failures}
+    result = RunResult.unfinished(spec, "ok", "", 0.0)
+    for name in [*robustness, *(n for n in failed if n not in robustness)]:
+        f = failed.get(name)
+        result.verdicts.append(Verdict(name, "hard", robustness[name] if f is None else f.robustness, f is None,
+                                       None if f is None else f.time_s, "" if f is None else f.mode))
+    result.drawn_values = dict(drawn_values or {})
+    return result

@@ -6,23 +6,23 @@ import math
 
 import numpy as np
 import pytest
-from tests.unit.search.search_testkit import kitchen_sink_plan
+from tests.unit.search.search_testkit import judged, kitchen_sink_plan
 
 from addt_dsl.plan import RunSpec
 from addt_dsl.search.cache import RunCache
 from addt_dsl.search.falsify import CrossEntropySampler, Falsifier, SearchSpace, UniformSampler, origin_of
-from addt_dsl.search.outcome import Failure, Outcome
+from addt_dsl.runtime.result import Failure, RunResult
 from addt_dsl.sweep import violated_assumptions
 
 
-def corner_judge(spec: RunSpec) -> Outcome:
+def corner_judge(spec: RunSpec) -> RunResult:
     """Fails when v_lead is high and gap is low (a corner of the box): robustness is the
     distance to that corner, so it guides a search there."""
     v = (spec.params.get("v_lead", 15.0) - 5.0) / 20.0
     g = (spec.params.get("gap", 30.0) - 10.0) / 50.0
     rho = math.hypot(1.0 - v, g) - 0.2
     failures = (Failure("no_collision", "clearance(ego) > 0 m [with lead]", 1.0, rho),) if rho < 0 else ()
-    return Outcome(spec.key(), "ok", "", {"no_collision": rho}, ("no_collision",), failures)
+    return judged(spec, {"no_collision": rho}, failures)
 
 
 def _falsifier(sampler="cem", seed=0, judge=corner_judge):
@@ -112,7 +112,7 @@ def test_origin_of_a_nominal_run():
 @pytest.mark.parametrize("sampler", ["cem", "random"])
 def test_no_failure_no_report(sampler):
     def safe(spec):
-        return Outcome(spec.key(), "ok", "", {"no_collision": 1.0}, ("no_collision",), ())
+        return judged(spec, {"no_collision": 1.0}, ())
 
     report = _falsifier(sampler, judge=safe).run(budget_runs=20, shrink_simulations=10)
     assert report.failures == [] and report.first_failure_run is None and report.runs == 20

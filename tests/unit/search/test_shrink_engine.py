@@ -13,12 +13,12 @@ from collections import Counter
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from tests.unit.search.search_testkit import concrete_faults, kitchen_sink_plan
+from tests.unit.search.search_testkit import concrete_faults, judged, kitchen_sink_plan
 
 from addt_dsl.plan import ConcreteFault, RunSpec
 from addt_dsl.search import candidates as C
 from addt_dsl.search.cache import RunCache
-from addt_dsl.search.outcome import Failure, Outcome
+from addt_dsl.runtime.result import Failure, RunResult
 from addt_dsl.search.shrink import NotFailing, Shrinker
 
 CULPRIT_MIN = 1.3
@@ -34,11 +34,11 @@ class Judge:
     def __init__(self, mode_of_second_culprit: str | None = None):
         self.calls: Counter = Counter()
 
-    def __call__(self, spec: RunSpec) -> Outcome:
+    def __call__(self, spec: RunSpec) -> RunResult:
         self.calls[spec.key()] += 1
         fails = any(_culprit(f, spec.plan.duration_s) for f in spec.faults) and spec.params.get("gap", 30.0) < 40.0
         failures = (Failure("no_collision", "clearance(ego) > 0 m [with lead]", 3.0, -0.5),) if fails else ()
-        return Outcome(spec.key(), "ok", "", {"no_collision": -0.5 if fails else 1.0}, ("no_collision",), failures)
+        return judged(spec, {"no_collision": -0.5 if fails else 1.0}, failures)
 
 
 def _spec(faults, gap=30.0) -> RunSpec:
@@ -142,7 +142,7 @@ def test_a_passing_run_is_not_shrunk():
 
 # ---------------------------------------------------------------- bits
 
-def bit_judge(spec: RunSpec) -> Outcome:
+def bit_judge(spec: RunSpec) -> RunResult:
     """Fails when a bit flip on control.steer flips bit 55 or higher; with `bit -1` the
     bit comes from the fault's seed (like the real kind draws it from its stream)."""
     flipped, fails = {}, False
@@ -154,7 +154,7 @@ def bit_judge(spec: RunSpec) -> Outcome:
         flipped[f.index] = (bit,)
         fails |= f.target == "control.steer" and bit >= 55
     failures = (Failure("lane_keeping", "abs(lane_offset(ego)) < 1.5 m [left]", 2.0, -0.1),) if fails else ()
-    return Outcome(spec.key(), "ok", "", {}, ("lane_keeping",), failures, flipped_bits=flipped)
+    return judged(spec, {}, failures, drawn_values=flipped)
 
 
 def test_bit_flips_get_the_flipped_bit_then_the_lowest_that_still_fails():
@@ -168,6 +168,21 @@ def test_bit_flips_get_the_flipped_bit_then_the_lowest_that_still_fails():
     assert f.settings.get("count", 1.0) == 1.0
     assert "field" not in f.settings  # irrelevant once the bit is fixed
     assert f.start_s == f.end_s  # one instant is enough for this judge
+
+
+def test_which_setting_is_drawn_comes_from_the_fault_kind(monkeypatch):
+    from addt_dsl.registry import FAULTS
+
+    drawn = {cls.keyword: cls.drawn_setting for cls in FAULTS.classes() if cls.drawn_setting}
+    assert drawn == {"bitflip": "bit"}
+    for kind, name in drawn.items():
+        assert C.drawn_setting(kind) == name and name in {p.name for p in FAULTS.get(kind).params}
+    # Without the property the shrinker has nothing to pin: the drawn bit stays drawn.
+    monkeypatch.setattr(FAULTS.get("bitflip"), "drawn_setting", None)
+    flip = ConcreteFault(index=0, kind="bitflip", target="control.steer", start_s=1.0, end_s=3.0,
+                         settings={"count": 4.0, "field": "exponent"}, seed=11019)
+    result = Shrinker(_spec([flip]), nominal_plan=kitchen_sink_plan(), cache=RunCache(evaluator=bit_judge)).run()
+    assert result.best.faults[0].settings.get("bit", -1.0) < 0
 
 
 def test_evidence_ends_where_the_formula_stops_looking():

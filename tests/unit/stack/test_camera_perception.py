@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from addt_dsl.compiler import compile_source
 from addt_dsl.runtime.sensors import Camera, Frame
-from addt_dsl.runtime.world import ACTOR_RGBA
+from addt_dsl.vehicles import VEHICLES
 from addt_dsl.stack.bev import PERCEPTIONS, BevStack
 from addt_dsl.stack.camera_perception import CLASS_SIZE_M, CameraPerception, ColourDetector
 
@@ -41,7 +41,7 @@ def scene(boxes):
         v0, v1 = cy - (height - z_cam) * fy / fwd, cy + z_cam * fy / fwd
         c0, c1, r0, r1 = (int(round(max(0, u0))), int(round(min(W, u1))),
                           int(round(max(0, v0))), int(round(min(H, v1))))
-        rgb = [round(255 * shade * c) for c in ACTOR_RGBA[name][:3]]
+        rgb = [round(255 * shade * c) for c in VEHICLES[name].rgba[:3]]
         img[r0:r1, c0:c1] = rgb
         depth[r0:r1, c0:c1] = fwd
     return img, depth

@@ -9,7 +9,7 @@ import pytest
 
 from addt_dsl.compiler import compile_source
 from addt_dsl.runtime import execute as X
-from addt_dsl.runtime.sensors import Extrinsics, _look_at, _perspective, _rotation, _sensor_world_pose
+from addt_dsl.runtime.sensors import Extrinsics, _look_at, _perspective, rotation, _sensor_world_pose
 from addt_dsl.sweep import expand
 
 SCENARIO = """
@@ -150,7 +150,7 @@ def test_imu_reads_cornering_lever_arm_and_mount_rotation():
         # Vehicle frame at the mount: f_x = 0.5 - r^2 * 2 m, f_y = 4; rotated by the mount
         # yaw of 90 deg the sensor's x axis points left.
         f_vehicle = np.array([0.5 - 0.2 ** 2 * 2.0, 4.0, 9.81])
-        assert data["accel"] == pytest.approx(_rotation(0.0, 0.0, math.pi / 2).T @ f_vehicle, abs=1e-9)
+        assert data["accel"] == pytest.approx(rotation(0.0, 0.0, math.pi / 2).T @ f_vehicle, abs=1e-9)
         assert data["accel"][0] == pytest.approx(4.0)
         assert data["gyro"] == pytest.approx([0.0, 0.0, 0.2], abs=1e-12)
     finally:

@@ -1,11 +1,11 @@
 """Fault studies over a suite: outcome classes, success tables, perception errors.
 
-    python -m addt_dsl.runtime.faults.study classify FILE [--jobs N] [--by P,Q]
+    addtc study classify FILE [--jobs N] [--by P,Q]
         every run of FILE's sweep classified (masked / silent / detected / hazard) against
         its fault-free twin; counts and success rate per value of the grid parameters.
-    python -m addt_dsl.runtime.faults.study table RUNS_CSV --by P,Q
+    addtc study table RUNS_CSV --by P,Q
         success rate per cell from an `addtc FILE --out DIR` run (DIR/runs.csv).
-    python -m addt_dsl.runtime.faults.study perception FILE [--jobs N] [--by P] [--bands 0,20,40,60,80]
+    addtc study perception FILE [--jobs N] [--by P] [--bands 0,20,40,60,80]
         mean position and heading error of detected objects by distance band, per value of
         the grid parameters (e.g. a sensor yaw shift).
 
@@ -23,7 +23,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from addt_dsl.errors import UsageError, nonneg_int, positive_int
+from addt_dsl.console import compile_and_report
+from addt_dsl.errors import EXIT_USAGE, UsageError, nonneg_int, positive_int
+from addt_dsl.runtime.executor import local_executor, run_spec
+from addt_dsl.runtime.outcome import classify_many, outcome_table
+from addt_dsl.sweep import expand
 
 DEFAULT_BANDS_M = (0.0, 20.0, 40.0, 60.0, 80.0)
 
@@ -94,32 +98,14 @@ def success_table(runs, by: Sequence[str]):
 
 # ---------------------------------------------------------------- running a suite
 
-def _compile(path: str):
-    from addt_dsl.compiler import compile_file
-    from addt_dsl.diagnostics import render_text
-
-    result = compile_file(path)
-    if not result.ok:
-        print(render_text(result.diagnostics, result.sources), file=sys.stderr)
-        raise SystemExit(2)
-    return result.plan
+def _record_errors(result) -> None:
+    result.stats["perception_errors"] = perception_errors(result.trace)
 
 
-def _errors_of(spec):
-    from addt_dsl.runtime.execute import execute
-
-    result = execute(spec, keep_trace=True)
-    return [{**spec.params, **row} for row in perception_errors(result.trace)]
-
-
-def _pool_map(fn, items, jobs):
-    import multiprocessing as mp
-    import os
-
-    if jobs <= 1:
-        return [fn(x) for x in items]
-    with mp.get_context("fork" if os.name == "posix" else "spawn").Pool(jobs, maxtasksperchild=200) as pool:
-        return pool.map(fn, items, chunksize=1)
+def perception_run(spec, seq: int = -1, worker: str = ""):
+    """What an executor's worker runs for `study perception`: the run, with its matched
+    detections in `stats["perception_errors"]`."""
+    return run_spec(spec, seq, worker, on_result=_record_errors)
 
 
 def _bands(text: str) -> list[float]:
@@ -133,7 +119,7 @@ def _bands(text: str) -> list[float]:
     return edges
 
 
-def main(argv: list[str] | None = None, prog: str = "python -m addt_dsl.runtime.faults.study") -> int:
+def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
     import pandas as pd
 
     parser = argparse.ArgumentParser(prog=prog)
@@ -160,9 +146,10 @@ def main(argv: list[str] | None = None, prog: str = "python -m addt_dsl.runtime.
         print(success_table(runs, args.by.split(",")).to_string())
         return 0
 
-    from addt_dsl.sweep import expand
-
-    plan = _compile(args.file)
+    result = compile_and_report(args.file)
+    if not result.ok:
+        return EXIT_USAGE
+    plan = result.plan
     specs = expand(plan).specs
     if args.limit:
         specs = specs[: args.limit]
@@ -172,11 +159,14 @@ def main(argv: list[str] | None = None, prog: str = "python -m addt_dsl.runtime.
         raise UsageError(f"--by {','.join(unknown)}: not a parameter of {plan.name} "
                          f"(parameters: {', '.join(p.name for p in plan.params) or 'none'})")
     if args.what == "classify":
-        from addt_dsl.runtime.outcome import classify_many, outcome_table
-
         print(outcome_table(classify_many(specs, jobs=args.jobs), by=by).to_string())
     else:
-        rows = [r for part in _pool_map(_errors_of, specs, args.jobs) for r in part]
+        rows = []
+        for record in local_executor(args.jobs, perception_run).imap(enumerate(specs)):
+            if record.status in ("crashed", "timeout", "memory"):
+                print(f"error: run {record.run_id} {record.status}: {record.error.splitlines()[0]}", file=sys.stderr)
+                return EXIT_USAGE
+            rows += [{**record.params, **row} for row in record.stats["perception_errors"]]
         # Angles read better in degrees (the plan holds SI radians).
         angles = {p.name for p in plan.params if p.dimension == "angle" and p.name in by}
         for row in rows:

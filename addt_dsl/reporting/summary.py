@@ -1,0 +1,48 @@
+"""Summaries of a results store: the counts of `summary.json` and the runs table
+(pandas, CSV, Parquet). Reporting reads the store; the store knows nothing of reports."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from addt_dsl.reporting.plots import LatencyStats
+from addt_dsl.reporting.tables import latency_budget_s, runs_table, summary
+from addt_dsl.runtime.store import ResultStore
+
+
+def store_summary(store: ResultStore) -> dict:
+    """`reporting.tables.summary` over every stored run (streamed)."""
+    return summary(store.plan(), store.records(), store.rejected(), cells=store.records("outcome != ''"))
+
+
+def store_dataframe(store: ResultStore):
+    """One row per stored run: id, parameters, seed, verdict, per-oracle robustness and
+    first violation time, simulated and wall seconds (pandas)."""
+    return runs_table(store.plan(), store.records())
+
+
+def write_csv(store: ResultStore, path: str | Path) -> Path:
+    store_dataframe(store).to_csv(path, index=False)
+    return Path(path)
+
+
+def write_parquet(store: ResultStore, path: str | Path) -> Path:
+    store_dataframe(store).to_parquet(path, index=False)
+    return Path(path)
+
+
+def write_tables(out: Path, store: ResultStore, budget_s: float | None = None) -> None:
+    """summary.json and runs.csv of a store; latency.json when runs recorded latencies
+    (per-node percentiles and e2e latency by object count, over all runs; the share of
+    time over the budget the plan's oracles declare, `budget_s` overriding it)."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(json.dumps(store_summary(store), indent=2) + "\n")
+    write_csv(store, out / "runs.csv")
+    latency = LatencyStats()
+    for r in store.records():
+        if r.stats:
+            latency.add(r.stats)
+    if latency.hist:
+        budget = budget_s if budget_s is not None else latency_budget_s(store.plan())
+        (out / "latency.json").write_text(json.dumps(latency.summary(budget), indent=2) + "\n")

@@ -1,0 +1,130 @@
+"""A RunSpec bound once: the concrete scenario of plain numbers the twin reads.
+
+The plan keeps parameter-dependent values as expression trees; `bind(spec)` evaluates
+every one of them for the spec's parameters, once, before the loop starts: actor
+placements, behaviour/sensor/stack settings, script timings and conditions, oracle
+formulas. The loop, the scripts and the judge read only the bound scenario, so no
+parameter expression is evaluated twice and nothing downstream needs the parameters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from addt_dsl.expr import Expr, eval_param_expr, substitute_params
+from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, GroupPlan, RoadPlan, RunSpec, TriggerPlan,
+                           resolve_settings)
+
+
+@dataclass(frozen=True)
+class BoundClause:
+    """A registered element (behaviour, sensor, stack) with its settings resolved."""
+
+    keyword: str
+    name: str
+    settings: dict
+
+
+@dataclass(frozen=True)
+class BoundGroup:
+    mode: str  # sequence | parallel
+    steps: tuple[BoundStep, ...]
+
+
+@dataclass(frozen=True)
+class BoundStep:
+    """A script step (`plan.TriggerPlan`) with its times resolved and its condition's
+    parameters substituted."""
+
+    clause: BoundClause | None
+    condition: Expr | None
+    at_s: float | None
+    after_s: float
+    group: BoundGroup | None
+
+
+@dataclass(frozen=True)
+class BoundActor:
+    name: str
+    vehicle: str
+    road: str
+    lane: int
+    s: float  # station along the road [m]
+    speed: float  # initial speed [m/s]
+    offset: float  # from the lane centre, left positive [m]
+    length_m: float
+    width_m: float
+    mass_kg: float
+    wheelbase_m: float
+    mu: float  # tyre-road friction (ego dynamics)
+    behaviors: tuple[BoundClause, ...]
+    steps: tuple[BoundStep, ...]
+    sensors: tuple[BoundClause, ...]
+    stack: BoundClause | None
+
+
+@dataclass(frozen=True)
+class BoundOracle:
+    name: str
+    severity: str
+    formula: Expr  # no parameters left
+
+
+@dataclass(frozen=True)
+class BoundScenario:
+    name: str
+    duration_s: float
+    step_s: float
+    seed: int
+    roads: tuple[RoadPlan, ...]
+    ego: BoundActor
+    agents: tuple[BoundActor, ...]
+    faults: tuple[ConcreteFault, ...]
+    oracles: tuple[BoundOracle, ...]
+
+    def road(self, name: str) -> RoadPlan:
+        return next(r for r in self.roads if r.name == name)
+
+
+DEFAULT_MU = 0.8
+
+
+def bind(spec: RunSpec) -> BoundScenario:
+    plan, params = spec.plan, spec.params
+    return BoundScenario(
+        name=plan.name, duration_s=plan.duration_s, step_s=plan.step_s, seed=spec.seed, roads=tuple(plan.roads),
+        ego=_actor(plan.ego, params), agents=tuple(_actor(a, params) for a in plan.agents),
+        faults=tuple(spec.faults),
+        oracles=tuple(BoundOracle(o.name, o.severity, substitute_params(o.formula, params)) for o in plan.oracles))
+
+
+def _value(expr: Expr | None, params: dict[str, float], default: float = 0.0) -> float:
+    return default if expr is None else float(eval_param_expr(expr, params))
+
+
+def _clause(c: ClausePlan, params: dict[str, float]) -> BoundClause:
+    return BoundClause(c.keyword, c.name, resolve_settings(c.settings, params))
+
+
+def bind_step(t: TriggerPlan, params: dict[str, float]) -> BoundStep:
+    return BoundStep(
+        clause=_clause(t.clause, params) if t.clause is not None else None,
+        condition=substitute_params(t.condition, params) if t.condition is not None else None,
+        at_s=_value(t.at_s, params) if t.at_s is not None else None,
+        after_s=_value(t.after_s, params),
+        group=_group(t.group, params) if t.group is not None else None)
+
+
+def _group(g: GroupPlan, params: dict[str, float]) -> BoundGroup:
+    return BoundGroup(g.mode, tuple(bind_step(s, params) for s in g.steps))
+
+
+def _actor(a: ActorPlan, params: dict[str, float]) -> BoundActor:
+    return BoundActor(
+        name=a.name, vehicle=a.vehicle, road=a.road, lane=int(round(_value(a.lane, params))), s=_value(a.s, params),
+        speed=_value(a.speed, params), offset=_value(a.offset, params), length_m=a.length_m, width_m=a.width_m,
+        mass_kg=a.mass_kg, wheelbase_m=a.wheelbase_m, mu=_value(a.mu, params, DEFAULT_MU),
+        behaviors=tuple(_clause(c, params) for c in a.behaviors),
+        steps=tuple(bind_step(t, params) for t in a.triggers),
+        sensors=tuple(_clause(c, params) for c in a.sensors),
+        stack=_clause(a.stack, params) if a.stack is not None else None)

@@ -1,0 +1,64 @@
+"""The search's run cache is a results store: runs of many plans, by key, reused across
+invocations, misses run on the sweep executors."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from tests.unit.search.search_testkit import judged, kitchen_sink_plan
+
+from addt_dsl.plan import RunSpec
+from addt_dsl.runtime.result import Failure
+from addt_dsl.search.cache import RunCache
+
+
+def flaky_judge(spec: RunSpec):
+    """Fails `no_collision` when the gap is below 30 m, with a flipped bit to keep."""
+    gap = spec.params.get("gap", 30.0)
+    failures = (Failure("no_collision", "clearance(ego) > 0 m [with lead]", 2.5, gap - 30.0),) if gap < 30.0 else ()
+    return judged(spec, {"no_collision": gap - 30.0}, failures, drawn_values={0: (61, 62)})
+
+
+def _spec(gap: float, duration_s: float = 10.0) -> RunSpec:
+    plan = kitchen_sink_plan()
+    plan = plan.model_copy(update={"duration_s": duration_s})
+    return RunSpec(plan=plan, params={**plan.nominal_params(), "gap": gap}, seed=7, faults=[], run_id=f"g{gap}")
+
+
+def test_a_cache_file_is_reused_by_the_next_invocation(tmp_path):
+    path = tmp_path / "cache.sqlite"
+    specs = [_spec(20.0), _spec(40.0), _spec(20.0, duration_s=5.0)]  # two plans
+    first = RunCache(path, evaluator=flaky_judge)
+    results = first.get_many(specs)
+    assert (first.simulations, first.hits) == (3, 0)
+    first.close()
+
+    again = RunCache(path, evaluator=flaky_judge)
+    replayed = again.get_many(specs)
+    assert (again.simulations, again.hits) == (0, 3)
+    for a, b in zip(results, replayed):
+        assert (a.key, a.passed, a.failures, a.drawn_values) == (b.key, b.passed, b.failures, b.drawn_values)
+    assert replayed[0].failures[0].mode == "clearance(ego) > 0 m [with lead]"
+    # Each stored run rebuilds its own RunSpec, plan included.
+    for spec in specs:
+        stored = again.store.find(spec.key())
+        assert again.store.spec(stored).key() == spec.key()
+    again.close()
+
+
+def test_misses_run_on_local_workers_with_the_same_results():
+    specs = [_spec(g) for g in (10.0, 25.0, 35.0, 50.0)]
+    inline = RunCache(evaluator=flaky_judge).get_many(specs, jobs=1)
+    workers = RunCache(evaluator=flaky_judge).get_many(specs, jobs=2)
+    assert [(r.key, r.passed, r.robustness) for r in inline] == [(r.key, r.passed, r.robustness) for r in workers]
+    assert [r.passed for r in workers] == [False, False, True, True]
+    assert math.isclose(workers[0].failures[0].robustness, -20.0)
+
+
+def test_a_file_that_is_no_store_is_refused_with_a_message(tmp_path):
+    old = tmp_path / "cache.jsonl"
+    old.write_text('{"key": "0123", "status": "ok"}\n')  # an earlier version's JSON-lines cache
+    with pytest.raises(ValueError, match="is not a results store.*JSON lines"):
+        RunCache(old, evaluator=flaky_judge)
