@@ -229,8 +229,8 @@ def _classifying(args, stream, store, executor):
     specs = itertools.islice(stream, args.limit) if args.limit else stream
     pending = [s for s in specs if s.faults and (s.key(), s.run_id) not in done]
     if not stream.plan.faults and args.format != "json":
-        print("note: the scenario has no faults: every run is its own golden run (masked, "
-              "or detected if the stack failed)", file=sys.stderr)
+        print("note: the scenario has no faults: every run is its own golden run (masked if it "
+              "passed, else twin_failed)", file=sys.stderr)
     ran = prepare_goldens(pending, cache=GoldenCache(store.path), executor=executor)
     if ran and args.format != "json":
         print(f"classify: ran {ran} golden run(s) (kept in {store.path})", file=sys.stderr)
