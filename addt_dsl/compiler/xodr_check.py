@@ -7,6 +7,8 @@ on and turns its errors into diagnostics at the `road ... import` line.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from addt_dsl.compiler.context import Context, RoadInfo
@@ -63,19 +65,25 @@ def check_inline_road(ctx: Context, road_plan, span: Span) -> bool:
 
 
 def _road_info(road):
-    """Length, lanes at s = 0 and the narrowest width of each lane along the road."""
+    """Length, lanes at s = 0 and the narrowest width of each lane along the road.
+
+    Widths come from each section's own width polynomials (what `Road.lane_ids` and
+    `Road.lane_width` evaluate), one pass per probe: linear in the number of lanes, where
+    asking the road lane by lane re-derived every border per lane (quadratic)."""
     try:
         length = float(road.length)
         lanes = tuple(int(i) for i in road.lane_ids(0.0) if i != 0)
-        widths = {}
-        probe = np.linspace(0.0, length, 64)
-        for lane in lanes:
-            present = []
-            for s in probe:
-                if lane in road.lane_ids(float(s)):
-                    present.append(float(road.lane_width(lane, float(s))))
-            if present:
-                widths[lane] = min(present)
+        wanted = set(lanes)
+        widths: dict[int, float] = {}
+        for s in np.linspace(0.0, length, 64):
+            section = road.section_at(float(s))
+            ds = float(s) - section.s0
+            for lane_id in section.lane_ids:
+                if lane_id not in wanted:
+                    continue
+                width = float(section.lane(lane_id).width(ds))
+                if width > 1e-9:  # the lane exists here (Road.lane_ids' test)
+                    widths[lane_id] = min(width, widths.get(lane_id, math.inf))
         return RoadInfo(length, lanes, widths)
     except (ValueError, ArithmeticError, KeyError, IndexError):
         return None
