@@ -15,6 +15,7 @@ from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.exprs import ExprLowering, Scope, value_range
 from addt_dsl.diagnostics import DiagnosticSink, Span
+from addt_dsl.limits import DEFAULT, Limits
 from addt_dsl.registry import STACKS, ParamSpec
 
 INT_EPS = 1e-9
@@ -60,6 +61,7 @@ class Context:
     sources: dict[str, str] = field(default_factory=dict)
     lines: dict[str, list[str]] = field(default_factory=dict)  # sources split, on demand
     xodr_networks: dict = field(default_factory=dict)  # parsed imports by file
+    limits: Limits = DEFAULT  # input limits and cost thresholds (addt_dsl/limits.py)
     _scopes: dict = field(default_factory=dict)
 
     def absorb(self, product) -> None:
