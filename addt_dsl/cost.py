@@ -108,8 +108,8 @@ def over_thresholds(est: CostEstimate, limits: Limits) -> list[tuple[str, str]]:
         ("runs", "the sweep's run count", est.runs),
         ("sim_seconds", "the sweep's simulated time [s]", est.sim_seconds),
         ("agent_steps", "the sweep's actor-steps", est.agent_steps),
-        ("agent_steps_per_run", "one run's actor-steps (steps x actors)", est.agent_steps_per_run),
-        ("lidar_rays_per_run", "one run's lidar rays (rays x channels x rate x duration)", est.lidar_rays_per_run),
+        ("agent_steps_per_run", "one run's actor-steps", est.agent_steps_per_run),
+        ("lidar_rays_per_run", "one run's lidar rays", est.lidar_rays_per_run),
         ("run_memory_bytes", "one run's modelled memory [bytes]", est.run_memory_bytes),
     )
     return [(name, beyond_message(what, value, name, getattr(limits, name)))

@@ -20,6 +20,9 @@ import math
 from dataclasses import dataclass
 
 GIB = 1024 ** 3
+# Any number of a parameter (default, range, choices, mean, sd) in SI units: finite values
+# beyond it are refused where read (E0301), since samplers overflow on them (1e308 - -1e308).
+MAX_ABS_PARAM_VALUE = 1.0e12
 
 
 @dataclass(frozen=True)
@@ -88,5 +91,5 @@ def _num(value: float) -> str:
     return f"{int(value):,}" if float(value).is_integer() and abs(value) < 1e15 else f"{value:.3g}"
 
 
-__all__ = ["COST_LIMITS", "DEFAULT", "GIB", "INPUT_LIMITS", "Limits", "beyond_message", "how_to_raise",
+__all__ = ["COST_LIMITS", "DEFAULT", "GIB", "INPUT_LIMITS", "MAX_ABS_PARAM_VALUE", "Limits", "beyond_message", "how_to_raise",
            "parse_limit"]

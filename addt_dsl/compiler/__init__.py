@@ -61,7 +61,9 @@ class _Loader:
         try:
             return str(path.relative_to(Path.cwd().resolve()))
         except ValueError:
-            return str(self.shown_root / path.relative_to(self.root))
+            inside = path.relative_to(self.root)
+            # An absolute scenario path shows its files relative to the scenario's directory.
+            return str(inside if self.shown_root.is_absolute() else self.shown_root / inside)
 
     def resolve(self, relative: str, base: Path, span: Span) -> Path | None:
         try:
