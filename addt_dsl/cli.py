@@ -366,7 +366,8 @@ def cmd_trace(args) -> int:
 
 def _limits(args):
     """The input limits and cost thresholds of `--max` and `--allow-large` (docs/limits.md)."""
-    limits = DEFAULT.raised(allow_large=getattr(args, "allow_large", False))
+    limits = DEFAULT.raised(allow_large=getattr(args, "allow_large", False),
+                            run_cap=getattr(args, "limit", 0) or 0)  # `run --limit N`: the first N runs
     for item in getattr(args, "max", None) or ():
         try:
             limits = parse_limit(item, limits)

@@ -104,10 +104,11 @@ def over_thresholds(est: CostEstimate, limits: Limits) -> list[tuple[str, str]]:
     `limits.allow_large`."""
     if limits.allow_large:
         return []
+    runs = min(est.runs, limits.run_cap) if limits.run_cap else est.runs  # `--limit N` runs N of them
     checks = (
-        ("runs", "the sweep's run count", est.runs),
-        ("sim_seconds", "the sweep's simulated time [s]", est.sim_seconds),
-        ("agent_steps", "the sweep's actor-steps", est.agent_steps),
+        ("runs", "the sweep's run count", runs),
+        ("sim_seconds", "the sweep's simulated time [s]", runs * est.duration_s),
+        ("agent_steps", "the sweep's actor-steps", runs * est.agent_steps_per_run),
         ("agent_steps_per_run", "one run's actor-steps", est.agent_steps_per_run),
         ("lidar_rays_per_run", "one run's lidar rays", est.lidar_rays_per_run),
         ("run_memory_bytes", "one run's modelled memory [bytes]", est.run_memory_bytes),

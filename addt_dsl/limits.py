@@ -20,9 +20,10 @@ import math
 from dataclasses import dataclass
 
 GIB = 1024 ** 3
-# Any number of a parameter (default, range, choices, mean, sd) in SI units: finite values
-# beyond it are refused where read (E0301), since samplers overflow on them (1e308 - -1e308).
-MAX_ABS_PARAM_VALUE = 1.0e12
+# Any number of a parameter (default, range, choices, mean, sd) or a setting, in SI units:
+# finite values beyond it are refused where read (E0301). Samplers overflow on them
+# (1e308 - -1e308 is inf) and no quantity of a driving scenario comes near.
+MAX_ABS_NUMBER = 1.0e12
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,7 @@ class Limits:
     lidar_rays_per_run: float = 1.0e9  # rays cast in one run (rays x channels x rate x duration)
     run_memory_bytes: float = 4.0 * GIB  # modelled memory of one run
     allow_large: bool = False  # True: cost thresholds are not enforced (the estimate is still printed)
+    run_cap: int = 0  # `addtc FILE --limit N` runs only the first N runs: the sweep's cost is of those (0: all)
 
     def raised(self, **changes) -> Limits:
         return dataclasses.replace(self, **changes)
@@ -91,5 +93,5 @@ def _num(value: float) -> str:
     return f"{int(value):,}" if float(value).is_integer() and abs(value) < 1e15 else f"{value:.3g}"
 
 
-__all__ = ["COST_LIMITS", "DEFAULT", "GIB", "INPUT_LIMITS", "MAX_ABS_PARAM_VALUE", "Limits", "beyond_message", "how_to_raise",
+__all__ = ["COST_LIMITS", "DEFAULT", "GIB", "INPUT_LIMITS", "MAX_ABS_NUMBER", "Limits", "beyond_message", "how_to_raise",
            "parse_limit"]

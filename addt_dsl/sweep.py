@@ -222,7 +222,7 @@ def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
     for combo in itertools.islice(itertools.product(*[v for _, v in axes]), budget):
         base = {**nominal, **dict(zip([a for a, _ in axes], combo))}
         if sampled:
-            n = max(1, min(budget - tried, per_cell))
+            n = max(1, min(budget - tried, per_cell, SAMPLE_BATCH_VALUES // len(sampled)))
             rows = engine.random(n)
             candidates = ({**base, **{p.name: from_unit(p, float(u)) for p, u in zip(sampled, row)}}
                           for row in rows)  # lazy: most scenarios accept the first one

@@ -10,7 +10,7 @@ from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import INT_EPS, Context, const_value, fmt, lower_list, range_text, suggest
 from addt_dsl.compiler.exprs import ExprLowering, Scope
-from addt_dsl.limits import MAX_ABS_PARAM_VALUE
+from addt_dsl.limits import MAX_ABS_NUMBER
 
 PARAM_SETTINGS = ("dist", "mean", "sd", "integer")
 
@@ -156,11 +156,11 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
 
 
 def _absurd(ctx: Context, values, what: str, span, dim) -> bool:
-    """True (reported, E0301) when a value is beyond MAX_ABS_PARAM_VALUE: finite, but a
+    """True (reported, E0301) when a value is beyond MAX_ABS_NUMBER: finite, but a
     sampler would overflow on it (a range of ±1e308 is an infinite width)."""
-    bad = next((v for v in values if abs(v) > MAX_ABS_PARAM_VALUE), None)
+    bad = next((v for v in values if abs(v) > MAX_ABS_NUMBER), None)
     if bad is None:
         return False
-    ctx.sink.error("E0301", f"{what} ({fmt(bad, dim)}) is beyond ±{MAX_ABS_PARAM_VALUE:g} (SI units)", span,
+    ctx.sink.error("E0301", f"{what} ({fmt(bad, dim)}) is beyond ±{MAX_ABS_NUMBER:g} (SI units)", span,
                    "no quantity of a driving scenario is this large (docs/limits.md)")
     return True

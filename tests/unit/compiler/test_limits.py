@@ -17,7 +17,7 @@ from addt_dsl.cli import build_parser, main
 from addt_dsl.compiler import compile_file, compile_source
 from addt_dsl.limits import COST_LIMITS, DEFAULT, INPUT_LIMITS, parse_limit
 
-TIME_BOUND_S = 20.0  # generous for a loaded CI machine
+TIME_BOUND_S = 60.0  # generous for a loaded CI machine; idle, each case takes a second or two
 
 SCENARIO = """scenario s {{
   duration {duration}
@@ -118,6 +118,7 @@ def test_allow_large_and_max_lift_a_cost_threshold():
     e0701(compile_source(src), "runs")
     assert compile_source(src, limits=DEFAULT.raised(allow_large=True)).ok
     assert compile_source(src, limits=parse_limit("runs=2e5")).ok
+    assert compile_source(src, limits=DEFAULT.raised(run_cap=10)).ok  # `addtc FILE --limit 10`
 
 
 def test_a_huge_grid_is_counted_and_streamed_not_built():
@@ -137,7 +138,7 @@ def test_a_huge_grid_is_counted_and_streamed_not_built():
 
 
 def test_lhs_over_many_params_is_drawn_in_bounded_batches():
-    n = 2000
+    n = 1000  # 1e6 samples of 1,000 parameters: 8 GB if drawn at once
     params = "\n".join(f"  param p{i} = 1 m in [0 m, 2 m]" for i in range(n))
     src = scenario(f"{params}\n  sweep {{\n    lhs 1000000\n  }}")  # unused params: warnings only
     t0 = time.monotonic()
@@ -150,7 +151,7 @@ def test_lhs_over_many_params_is_drawn_in_bounded_batches():
     finally:
         tracemalloc.stop()
     assert len(spec.params) == n
-    assert peak < 200e6  # one batch of SAMPLE_BATCH_VALUES numbers, not 1e6 x 2000 (16 GB)
+    assert peak < 200e6  # one batch of SAMPLE_BATCH_VALUES numbers
     assert time.monotonic() - t0 < TIME_BOUND_S
 
 
