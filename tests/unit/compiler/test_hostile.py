@@ -6,6 +6,7 @@ symlink loops, suite members that lead out) are built in a temporary directory."
 from __future__ import annotations
 
 import os
+import shutil
 import time
 from pathlib import Path
 
@@ -104,3 +105,13 @@ def test_suite_member_symlink_leading_out_is_refused_unread(tmp_path):
         expand_paths([str(suite)])
     os.remove(suite / "loop.addt")
     assert expand_paths([str(suite)]) == [suite / "ok.addt"]
+
+
+def test_no_diagnostic_text_shows_an_absolute_path(tmp_path):
+    """Every hostile case compiled from outside the working directory, named absolutely:
+    messages and notes name its files relative to the scenario's directory."""
+    copy = tmp_path / "hostile"
+    shutil.copytree(HOSTILE, copy)
+    for path in sorted(copy.glob("*.addt")):
+        for d in _compile(path).diagnostics:
+            assert str(tmp_path) not in " ".join((d.message, *d.notes)), (path.name, d)
