@@ -30,7 +30,7 @@ MAX_ABS_NUMBER = 1.0e12
 class Limits:
     # Input limits [count or bytes]: what one compilation may read and check.
     source_bytes: int = 1_000_000  # one .addt file (lark parses ~100-200 kB/s)
-    included_bytes: int = 2_000_000  # all .addt text of one compilation, main file and includes
+    included_bytes: int = 1_000_000  # all .addt text of one compilation, main file and includes (~8 s to parse)
     map_bytes: int = 50_000_000  # one imported .xodr file
     read_bytes: int = 200_000_000  # everything one compilation reads
     roads_per_map: int = 20_000  # <road> elements of one imported map
@@ -40,7 +40,7 @@ class Limits:
     oracles: int = 10_000
     faults: int = 10_000
     # Cost thresholds, from the estimate (addt_dsl/cost.py); --allow-large lifts them.
-    runs: int = 100_000  # runs of one sweep
+    runs: int = 1_000_000  # runs of one sweep
     sim_seconds: float = 1.0e7  # simulated seconds of one sweep (runs x duration)
     agent_steps: float = 1.0e10  # actor-steps of one sweep (runs x steps x actors)
     agent_steps_per_run: float = 5.0e7  # actor-steps of one run (steps x actors, ego included)

@@ -114,10 +114,11 @@ def test_absurd_but_compiling_scenarios_are_refused_by_the_estimate():
 
 
 def test_allow_large_and_max_lift_a_cost_threshold():
-    src = scenario("  param p = 1 m in [0 m, 2 m]\n  assume p > 0.5 m\n  sweep {\n    random 200000\n  }")
+    src = scenario("  param p = 1 m in [0 m, 2 m]\n  assume p > 0.5 m\n  sweep {\n    random 1000000\n    repeat 2\n  }",
+                   duration="1 s")
     e0701(compile_source(src), "runs")
     assert compile_source(src, limits=DEFAULT.raised(allow_large=True)).ok
-    assert compile_source(src, limits=parse_limit("runs=2e5")).ok
+    assert compile_source(src, limits=parse_limit("runs=2e6")).ok
     assert compile_source(src, limits=DEFAULT.raised(run_cap=10)).ok  # `addtc FILE --limit 10`
 
 
@@ -177,13 +178,14 @@ def test_every_limit_has_a_documented_name_and_parses():
 
 def test_check_prints_the_estimate_and_takes_the_options(tmp_path, capsys):
     src = tmp_path / "s.addt"
-    src.write_text(scenario("  sweep {\n    repeat 200000\n  }"))
+    src.write_text(scenario("  param p = 1 m in [0 m, 2 m]\n  agent a car on r lane -2 at 40 m + p\n"
+                            "  sweep {\n    random 1000000\n    repeat 2\n  }", duration="1 s"))
     assert main(["check", str(src)]) == 2
     assert "E0701" in capsys.readouterr().err
     assert main(["check", "--allow-large", str(src)]) == 0
     out = capsys.readouterr().out
-    assert "cost estimate: 200,000 run(s) x 10 s" in out and "actor-steps" in out and "MiB" in out
-    assert main(["plan", "--max", "runs=300000", str(src)]) == 0
+    assert "cost estimate: 2,000,000 run(s) x 1 s" in out and "actor-steps" in out and "MiB" in out
+    assert main(["plan", "--max", "runs=3000000", str(src)]) == 0
     assert "cost estimate" in capsys.readouterr().err
     assert main(["check", "--max", "bogus=1", str(src)]) == 2
     assert build_parser().parse_args(["run", "--allow-large", "--max", "agents=5", "x.addt"]).max == ["agents=5"]
