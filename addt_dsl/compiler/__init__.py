@@ -80,7 +80,7 @@ class _Loader:
                 self._too_large(relative, size, limit, span)
                 return None
             with path.open("rb") as fh:
-                data = fh.read(limit + 1)
+                data = _read_at_most(fh, limit)
         except OSError as exc:
             self.sink.error("E0401", f"cannot read '{shown(relative)}': {exc.strerror or exc}", span)
             return None
@@ -122,6 +122,19 @@ class _Loader:
         return self.texts[path]
 
 
+def _read_at_most(fh, limit: int) -> bytes:
+    """Up to limit + 1 bytes, in chunks: `read(n)` allocates n bytes up front, and a limit
+    raised to 1e12 must not ask for a terabyte; a size from `stat` can lie (/proc)."""
+    chunks, total = [], 0
+    while total <= limit:
+        chunk = fh.read(min(1 << 20, limit + 1 - total))
+        if not chunk:
+            break
+        chunks.append(chunk)
+        total += len(chunk)
+    return b"".join(chunks)
+
+
 def compile_file(path: str | Path, limits: Limits = DEFAULT) -> CompileResult:
     path = Path(path)
     sink = DiagnosticSink()
@@ -134,7 +147,7 @@ def compile_file(path: str | Path, limits: Limits = DEFAULT) -> CompileResult:
             return CompileResult(None, sink.items, sources)
         size = path.stat().st_size
         with path.open("rb") as fh:
-            data = fh.read(limits.source_bytes + 1)
+            data = _read_at_most(fh, limits.source_bytes)
     except OSError as exc:
         sink.error("E0401", f"cannot read {display}: {exc.strerror or exc}", None)
         return CompileResult(None, sink.items, sources)

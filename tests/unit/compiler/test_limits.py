@@ -189,3 +189,10 @@ def test_check_prints_the_estimate_and_takes_the_options(tmp_path, capsys):
     assert "cost estimate" in capsys.readouterr().err
     assert main(["check", "--max", "bogus=1", str(src)]) == 2
     assert build_parser().parse_args(["run", "--allow-large", "--max", "agents=5", "x.addt"]).max == ["agents=5"]
+
+
+def test_a_limit_raised_very_high_reads_only_what_is_there(tmp_path):
+    src = tmp_path / "s.addt"
+    src.write_text(scenario())
+    huge = DEFAULT.raised(source_bytes=10 ** 12, included_bytes=10 ** 12, read_bytes=10 ** 12, map_bytes=10 ** 12)
+    assert compile_file(src, huge).ok  # no terabyte buffer allocated for the read
