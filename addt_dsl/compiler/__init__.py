@@ -153,7 +153,8 @@ def compile_file(path: str | Path, limits: Limits = DEFAULT) -> CompileResult:
         return CompileResult(None, sink.items, sources)
     if size > limits.source_bytes or len(data) > limits.source_bytes:
         sink.error("E0003", beyond_message("the source's size [bytes]", max(size, len(data)), "source_bytes",
-                                           limits.source_bytes), Span.point(display, 1, 1), how_to_raise("source_bytes"))
+                                           limits.source_bytes), Span.point(display, 1, 1),
+                   how_to_raise("source_bytes"))
         return CompileResult(None, sink.items, sources)
     return _compile_guarded(data, display, path.parent, sink, sources, limits)
 
