@@ -94,5 +94,4 @@ def _num(value: float) -> str:
 
 
 __all__ = ["COST_LIMITS", "DEFAULT", "GIB", "INPUT_LIMITS", "MAX_ABS_NUMBER", "Limits", "beyond_message",
-           "how_to_raise",
-           "parse_limit"]
+           "how_to_raise", "parse_limit"]
