@@ -8,8 +8,11 @@ from __future__ import annotations
 
 import time
 import tracemalloc
+from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from addt_dsl import cost
 from addt_dsl import sweep as S
@@ -166,7 +169,7 @@ def test_batching_does_not_change_random_samples(monkeypatch):
 
 
 def test_every_limit_has_a_documented_name_and_parses():
-    text = (__import__("pathlib").Path(__file__).resolve().parents[3] / "docs" / "limits.md").read_text()
+    text = (Path(__file__).resolve().parents[3] / "docs" / "limits.md").read_text()
     for name in (*INPUT_LIMITS, *COST_LIMITS):
         assert f"`{name}`" in text, name
         assert getattr(parse_limit(f"{name}=7"), name) == 7
@@ -196,3 +199,16 @@ def test_a_limit_raised_very_high_reads_only_what_is_there(tmp_path):
     src.write_text(scenario())
     huge = DEFAULT.raised(source_bytes=10 ** 12, included_bytes=10 ** 12, read_bytes=10 ** 12, map_bytes=10 ** 12)
     assert compile_file(src, huge).ok  # no terabyte buffer allocated for the read
+
+
+EXAMPLE_FILES = sorted((Path(__file__).resolve().parents[3] / "examples").rglob("*.addt"))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.sampled_from(EXAMPLE_FILES), st.sampled_from((*INPUT_LIMITS, *COST_LIMITS)), st.integers(0, 50))
+def test_any_lowered_limit_is_a_named_diagnostic_never_an_internal_error(path, name, value):
+    result = compile_file(path, DEFAULT.raised(**{name: value}))
+    assert "E0900" not in {d.code for d in result.diagnostics}
+    for d in result.diagnostics:
+        if d.code == "E0701":
+            assert " is beyond the limit " in d.message and "=N" in d.notes[-1]
