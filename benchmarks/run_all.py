@@ -33,6 +33,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "road": ([], []),
     "stl": ([], []),
     "compile": (["--files", "1000"], ["--files", "100"]),
+    "compile_scaling": ([], ["--quick"]),
     "twin": ([], ["--quick"]),
     "stack": ([], ["--repeats", "1"]),
     "faults": (["--repeat", "9"], ["--repeat", "2"]),
