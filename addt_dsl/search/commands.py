@@ -17,8 +17,13 @@ from pathlib import Path
 
 from addt_dsl.console import compile_and_report
 from addt_dsl.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, nonneg_float, nonneg_int, positive_int
+from addt_dsl.limits import DEFAULT
 
 DEFAULT_OUT = ".addt-failures"
+
+# Falsify and shrink run their own budget of runs, never the file's sweep: only the
+# per-run cost thresholds apply to them, not the sweep-wide ones (docs/limits.md).
+SEARCH_LIMITS = DEFAULT.raised(runs=2 ** 62, sim_seconds=float("inf"), agent_steps=float("inf"))
 
 
 def add_commands(sub) -> None:
@@ -115,7 +120,7 @@ def cmd_shrink(args) -> int:
         return EXIT_USAGE
     plan = None
     if args.file:
-        result = compile_and_report(args.file, "text")
+        result = compile_and_report(args.file, "text", SEARCH_LIMITS)
         if not result.ok:
             return EXIT_USAGE
         plan = result.plan
@@ -194,7 +199,7 @@ def cmd_falsify(args) -> int:
     from addt_dsl.search.falsify import Falsifier
     from addt_dsl.sweep import UnsatisfiableAssumptions
 
-    result = compile_and_report(args.file, "text")
+    result = compile_and_report(args.file, "text", SEARCH_LIMITS)
     if not result.ok:
         return EXIT_USAGE
     log = (lambda m: print(m, file=sys.stderr)) if args.format == "text" else None
