@@ -93,6 +93,17 @@ class FastRoad:
         t = -(x - rx) * math.sin(h) + (y - ry) * math.cos(h)
         return s, t
 
+    def nearest_d2(self, x: float, y: float, s_lo: float, s_hi: float) -> float:
+        """Squared distance [m^2] from a point to the nearest sample with s in [s_lo, s_hi]."""
+        i0 = max(0, int(s_lo / self._ds))
+        i1 = min(len(self._s) - 1, int(math.ceil(s_hi / self._ds)))
+        d = self._xy[i0:i1 + 1] - (x, y)
+        return float(np.min(np.einsum("ij,ij->i", d, d)))
+
+    def road_band_t(self, s: float) -> tuple[float, float]:
+        """(t_min, t_max) [m] of the road's outermost lane borders at `s` (clamped to the road)."""
+        return self.road.road_band_t(min(max(s, 0.0), self.length))
+
     # ---- lanes
     def _section_key(self, s: float) -> int:
         return max(0, bisect.bisect_right(self._section_starts, s) - 1)

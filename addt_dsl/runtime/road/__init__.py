@@ -29,6 +29,7 @@ from .network import (
     build_road,
 )
 from .road import Road, RoadLink
+from .route import TURNS, Leg, RouteError, describe_exits, exits, resolve_route, turn_of
 from .xodr import XodrError, load_xodr, parse_xodr
 
 __all__ = [
@@ -37,5 +38,6 @@ __all__ = [
     "Lane", "LaneSection",
     "Connection", "Junction", "RoadCoords", "RoadCoordsArray", "RoadNetwork", "build_road",
     "Road", "RoadLink",
+    "TURNS", "Leg", "RouteError", "describe_exits", "exits", "resolve_route", "turn_of",
     "XodrError", "load_xodr", "parse_xodr",
 ]

@@ -199,9 +199,10 @@ class _Reader:
                 Connection(
                     self.text(c, "id", ""),
                     self.text(c, "incomingRoad", ""),
-                    self.text(c, "connectingRoad", ""),
+                    self.text(c, "connectingRoad", "") or self.text(c, "linkedRoad", ""),
                     contact,
                     links,
+                    direct="connectingRoad" not in c.attrs and "linkedRoad" in c.attrs,
                 )
             )
         return Junction(self.text(node, "id"), node.attrs.get("name", ""), tuple(connections))
