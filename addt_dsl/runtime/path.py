@@ -25,7 +25,8 @@ import bisect
 import math
 
 class _Seg:
-    __slots__ = ("fast", "elevation", "road_id", "dir", "s_from", "s_to", "u0", "u1", "lane", "h_shift")
+    __slots__ = ("fast", "elevation", "road_id", "dir", "s_from", "s_to", "u0", "u1", "lane", "h_shift",
+                 "blend_t", "blend_m")
 
     def __init__(self, fast, elevation, leg, u0: float, h_shift: float):
         self.fast, self.elevation = fast, elevation
@@ -33,6 +34,9 @@ class _Seg:
         self.s_from, self.s_to = float(leg.s_from), float(leg.s_to)
         self.u0, self.u1 = u0, u0 + abs(self.s_to - self.s_from)
         self.h_shift = h_shift  # added to the road heading: pi against s, plus 2 pi k (unwrap)
+        # Where the route lane continues in a lane beside it (a merge lane ends, a lane with no
+        # link), the reference moves across smoothly: offset [m, road t] at entry, over [m].
+        self.blend_t, self.blend_m = 0.0, 0.0
 
 
 class RoutePath:
@@ -52,6 +56,8 @@ class RoutePath:
             if prev_h is not None:  # keep the heading continuous across legs
                 shift += math.tau * round((prev_h - h) / math.tau)
             seg = _Seg(fast, elev, leg, u, shift)
+            if segs:
+                _blend(segs[-1], seg)
             segs.append(seg)
             u = seg.u1
             prev_h = fast.reference_pose(leg.s_to)[2] + seg.h_shift
@@ -75,8 +81,16 @@ class RoutePath:
     def _s(sg: _Seg, u: float) -> float:
         return sg.s_from + sg.dir * (u - sg.u0)
 
-    def _lc(self, sg: _Seg, s: float) -> float:
-        return sg.fast.lane_center_t(sg.lane, s)
+    @staticmethod
+    def _lc(sg: _Seg, s: float) -> float:
+        """Road t of the path's reference line: the route lane's centre (blended after a shift)."""
+        t = sg.fast.lane_center_t(sg.lane, s)
+        if sg.blend_m:
+            x = sg.dir * (s - sg.s_from) / sg.blend_m
+            if x < 1.0:
+                x = 0.0 if x < 0.0 else x
+                t += sg.blend_t * (1.0 - x * x * (3.0 - 2.0 * x))
+        return t
 
     def road_at(self, u: float) -> tuple[str, float, int]:
         """(road id, road station [m], direction) at path station `u`."""
@@ -182,6 +196,18 @@ class RoutePath:
         lc = self._lc(sg, s)
         a, b = sg.dir * (lo - lc), sg.dir * (hi - lc)
         return (a, b) if a <= b else (b, a)
+
+
+def _blend(prev: _Seg, seg: _Seg) -> None:
+    """Set `seg`'s blend where the route lane's centre does not continue where `prev`'s ended."""
+    x, y, _ = prev.fast.point(prev.s_to, RoutePath._lc(prev, prev.s_to))
+    s_in = seg.s_from
+    rx, ry, h = seg.fast.reference_pose(s_in)
+    t_in = -(x - rx) * math.sin(h) + (y - ry) * math.cos(h)
+    jump = t_in - seg.fast.lane_center_t(seg.lane, s_in)
+    if abs(jump) > 0.05:
+        seg.blend_t = jump
+        seg.blend_m = min(max(10.0, 12.0 * abs(jump)), seg.u1 - seg.u0)
 
 
 class _PathElevation:
