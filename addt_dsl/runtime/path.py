@@ -24,6 +24,10 @@ from __future__ import annotations
 import bisect
 import math
 
+import numpy as np
+
+from addt_dsl.runtime.fastroad import STEP_M, FastRoad
+
 class _Seg:
     __slots__ = ("fast", "elevation", "road_id", "dir", "s_from", "s_to", "u0", "u1", "lane", "h_shift",
                  "blend_t", "blend_m")
@@ -39,10 +43,14 @@ class _Seg:
         self.blend_t, self.blend_m = 0.0, 0.0
 
 
-class RoutePath:
-    """The legs of one route as a single road-like object (see the module doc)."""
+class RoutePath(FastRoad):
+    """The legs of one route as a single road-like object (see the module doc).
 
-    def __init__(self, key: str, legs, roads: dict):
+    It is a `FastRoad` whose sampled line is the route lane's centre over `u` (sampled once,
+    vectorised, every `STEP_M`), so poses, curvature and projections cost what they cost on a
+    road; lane queries go to the leg's road."""
+
+    def __init__(self, key: str, legs, roads: dict):  # noqa: D107 - FastRoad's samples, set here
         """`roads`: road id → (FastRoad, Elevation) of every road the legs use."""
         self.key = key
         self.legs = tuple(legs)
@@ -65,7 +73,39 @@ class RoutePath:
         self._u0 = [sg.u0 for sg in segs]
         self.length = u
         self._last = 0
+        self._lanes_memo: dict = {}
+        self._sample(max(u, 1e-3))
         self.elevation = _PathElevation(self)
+
+    def _sample(self, length: float) -> None:
+        """The lane-centre line over u: FastRoad's sample arrays (x, y, heading, curvature)
+        and the reference offset t_ref(u) [road t] lane queries subtract."""
+        n = max(2, int(math.ceil(length / STEP_M)) + 1)
+        u = np.linspace(0.0, length, n)
+        idx = np.clip(np.searchsorted(self._u0, u, side="right") - 1, 0, len(self._segs) - 1)
+        x, y, h, k, tref = (np.empty(n) for _ in range(5))
+        for i, sg in enumerate(self._segs):
+            m = idx == i
+            if not np.any(m):
+                continue
+            s = np.clip(sg.s_from + sg.dir * (u[m] - sg.u0), 0.0, sg.fast.length)
+            t = sg.fast.lane_center_t_array(sg.lane, s)
+            if sg.blend_m:
+                f = np.clip(sg.dir * (s - sg.s_from) / sg.blend_m, 0.0, 1.0)
+                t = t + sg.blend_t * (1.0 - f * f * (3.0 - 2.0 * f))
+            x[m], y[m], hh, kk = sg.fast.sample_arrays(s, t)
+            h[m] = hh + sg.h_shift
+            kd = sg.dir * kk  # reference curvature as driven; the lane centre's, at its offset
+            k[m] = kd / np.maximum(0.2, 1.0 - kd * sg.dir * t)
+            tref[m] = t
+        self._s = u.tolist()
+        self._x, self._y = x.tolist(), y.tolist()
+        self._h = np.unwrap(h).tolist()
+        self._k = k.tolist()
+        self._tref = tref.tolist()
+        self._xy = np.stack([x, y], axis=1)
+        self._ds = self._s[1] - self._s[0]
+        self._last_i = len(self._s) - 2
 
     # ---- legs
     def _seg(self, u: float) -> _Seg:
@@ -77,130 +117,95 @@ class RoutePath:
             sg = segs[k]
         return sg
 
-    @staticmethod
-    def _s(sg: _Seg, u: float) -> float:
-        return sg.s_from + sg.dir * (u - sg.u0)
-
-    @staticmethod
-    def _lc(sg: _Seg, s: float) -> float:
-        """Road t of the path's reference line: the route lane's centre (blended after a shift)."""
-        t = sg.fast.lane_center_t(sg.lane, s)
-        if sg.blend_m:
-            x = sg.dir * (s - sg.s_from) / sg.blend_m
-            if x < 1.0:
-                x = 0.0 if x < 0.0 else x
-                t += sg.blend_t * (1.0 - x * x * (3.0 - 2.0 * x))
-        return t
-
     def road_at(self, u: float) -> tuple[str, float, int]:
         """(road id, road station [m], direction) at path station `u`."""
         sg = self._seg(u)
-        return sg.road_id, self._s(sg, u), sg.dir
+        return sg.road_id, sg.s_from + sg.dir * (u - sg.u0), sg.dir
 
     def direction(self, u: float) -> int:
         return self._seg(u).dir
 
     def station(self, road_id: str, s: float) -> float:
-        """Path station [m] of road station `s` on the first leg on `road_id` that holds it."""
+        """Path station [m] of road station `s` on the first leg on `road_id` that holds it
+        (else continued from the first leg on that road)."""
+        first = None
         for sg in self._segs:
+            if sg.road_id != road_id:
+                continue
             lo, hi = (sg.s_from, sg.s_to) if sg.dir > 0 else (sg.s_to, sg.s_from)
-            if sg.road_id == road_id and lo - 1e-9 <= s <= hi + 1e-9:
+            if lo - 1e-9 <= s <= hi + 1e-9:
                 return sg.u0 + sg.dir * (s - sg.s_from)
-        raise ValueError(f"road {road_id} at s = {s:g} m is not on route {self.key}")
+            first = first or sg
+        if first is None:
+            raise ValueError(f"road {road_id} is not on route {self.key}")
+        return first.u0 + first.dir * (s - first.s_from)
 
-    # ---- reference line (the route lane's centre)
-    def reference_pose(self, u: float) -> tuple[float, float, float]:
-        sg = self._seg(u)
-        s = self._s(sg, u)
-        x, y, h = sg.fast.point(s, self._lc(sg, s))
-        return x, y, h + sg.h_shift
-
-    def curvature(self, u: float) -> float:
-        sg = self._seg(u)
-        s = self._s(sg, u)
-        k = sg.dir * sg.fast.curvature(s)
-        t = sg.dir * self._lc(sg, s)
-        return k / max(0.2, 1.0 - k * t)
-
-    def point(self, u: float, t: float) -> tuple[float, float, float]:
-        sg = self._seg(u)
-        s = self._s(sg, u)
-        x, y, h = sg.fast.point(s, self._lc(sg, s) + sg.dir * t)
-        return x, y, h + sg.h_shift
-
-    def project(self, x: float, y: float, hint: float | None = None) -> tuple[float, float]:
-        """(u, t) of a point; `hint` (a nearby u) makes it a local search."""
-        segs = self._segs
-        if hint is None:
-            k = self._nearest_seg(x, y)
-            sg = segs[k]
-            s_hint = None
-        else:
-            sg = self._seg(hint)
-            k = self._last
-            s_hint = self._s(sg, hint)
-        for _ in range(len(segs) + 1):
-            s, t_road = sg.fast.project(x, y, s_hint)
-            rx, ry, h = sg.fast.reference_pose(s)
-            along = (x - rx) * math.cos(h) + (y - ry) * math.sin(h)  # beyond the road's end
-            u = sg.u0 + sg.dir * (s + along - sg.s_from)
-            if u < sg.u0 - 1e-6 and k > 0:
-                k -= 1
-            elif u > sg.u1 + 1e-6 and k < len(segs) - 1:
-                k += 1
-            else:
-                break
-            nxt = segs[k]
-            # Moving to a neighbour leg: start from its end that touches this one.
-            s_hint = nxt.s_to if nxt.u1 <= sg.u0 else nxt.s_from
-            sg = nxt
-        s_c = min(max(s, 0.0), sg.fast.length)
-        t = sg.dir * (t_road - self._lc(sg, s_c))
-        return u, t
-
-    def _nearest_seg(self, x: float, y: float) -> int:
-        best, best_d = 0, math.inf
-        for k, sg in enumerate(self._segs):
-            dd = sg.fast.nearest_d2(x, y, min(sg.s_from, sg.s_to), max(sg.s_from, sg.s_to))
-            if dd < best_d:
-                best, best_d = k, dd
-        return best
+    def _tref_at(self, u: float) -> float:
+        i, f = self._index(u)
+        tr = self._tref
+        return tr[i] + f * (tr[i + 1] - tr[i])
 
     # ---- lanes (driving convention: road lane id x direction)
     def driving_lane_ids(self, u: float) -> tuple[int, ...]:
         sg = self._seg(u)
-        ids = sg.fast.driving_lane_ids(self._s(sg, u))
-        return tuple(sg.dir * i for i in ids) if sg.dir > 0 else tuple(sg.dir * i for i in reversed(ids))
+        ids = sg.fast.driving_lane_ids(sg.s_from + sg.dir * (u - sg.u0))
+        key = (id(sg), ids)
+        out = self._lanes_memo.get(key)
+        if out is None:
+            out = tuple(sg.dir * i for i in (ids if sg.dir > 0 else reversed(ids)))
+            self._lanes_memo[key] = out
+        return out
 
     def lane_center_t(self, lane: int, u: float) -> float:
         sg = self._seg(u)
-        s = self._s(sg, u)
-        return sg.dir * (sg.fast.lane_center_t(sg.dir * lane, s) - self._lc(sg, s))
+        s = sg.s_from + sg.dir * (u - sg.u0)
+        return sg.dir * (sg.fast.lane_center_t(sg.dir * lane, s) - self._tref_at(u))
+
+    def _nearest_lane(self, u: float, t: float) -> tuple[int | None, float]:
+        """(lane, its centre's t) nearest to path offset `t` at `u`."""
+        lanes = self.driving_lane_ids(u)
+        sg = self._segs[self._last]
+        s = sg.s_from + sg.dir * (u - sg.u0)
+        ref = self._tref_at(u)
+        fast, d = sg.fast, sg.dir
+        best, best_c, best_d = None, t, math.inf
+        for lane in lanes:
+            c = d * (fast.lane_center_t(d * lane, s) - ref)
+            dist = abs(t - c)
+            if dist < best_d:
+                best, best_c, best_d = lane, c, dist
+        return best, best_c
 
     def lane_at(self, u: float, t: float) -> int | None:
-        best, best_d = None, math.inf
-        for lane in self.driving_lane_ids(u):
-            d = abs(t - self.lane_center_t(lane, u))
-            if d < best_d:
-                best, best_d = lane, d
-        return best
+        return self._nearest_lane(u, t)[0]
 
     def lane_offset(self, u: float, t: float) -> float:
-        lane = self.lane_at(u, t)
-        return t if lane is None else t - self.lane_center_t(lane, u)
+        lane, centre = self._nearest_lane(u, t)
+        return t if lane is None else t - centre
 
     def road_band_t(self, u: float) -> tuple[float, float]:
         sg = self._seg(u)
-        s = min(max(self._s(sg, u), 0.0), sg.fast.length)
+        s = min(max(sg.s_from + sg.dir * (u - sg.u0), 0.0), sg.fast.length)
         lo, hi = sg.fast.road_band_t(s)
-        lc = self._lc(sg, s)
-        a, b = sg.dir * (lo - lc), sg.dir * (hi - lc)
+        ref = self._tref_at(u)
+        a, b = sg.dir * (lo - ref), sg.dir * (hi - ref)
         return (a, b) if a <= b else (b, a)
+
+
+def _reference_t(sg: _Seg, s: float) -> float:
+    """Road t of the path's reference line: the route lane's centre (blended after a shift)."""
+    t = sg.fast.lane_center_t(sg.lane, s)
+    if sg.blend_m:
+        x = sg.dir * (s - sg.s_from) / sg.blend_m
+        if x < 1.0:
+            x = 0.0 if x < 0.0 else x
+            t += sg.blend_t * (1.0 - x * x * (3.0 - 2.0 * x))
+    return t
 
 
 def _blend(prev: _Seg, seg: _Seg) -> None:
     """Set `seg`'s blend where the route lane's centre does not continue where `prev`'s ended."""
-    x, y, _ = prev.fast.point(prev.s_to, RoutePath._lc(prev, prev.s_to))
+    x, y, _ = prev.fast.point(prev.s_to, _reference_t(prev, prev.s_to))
     s_in = seg.s_from
     rx, ry, h = seg.fast.reference_pose(s_in)
     t_in = -(x - rx) * math.sin(h) + (y - ry) * math.cos(h)
@@ -221,5 +226,5 @@ class _PathElevation:
         if self.flat:
             return 0.0, 0.0
         sg = self.path._seg(u)
-        z, grade = sg.elevation.at(RoutePath._s(sg, u))
+        z, grade = sg.elevation.at(sg.s_from + sg.dir * (u - sg.u0))
         return z, sg.dir * grade
