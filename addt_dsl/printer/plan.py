@@ -177,7 +177,7 @@ VEHICLE_DEFAULTS = {  # what the compiler fills in when a setting is left out
     "mass": lambda a: 1500.0, "wheelbase": lambda a: 2.7,
 }
 ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLESS),  # optional, may use parameters
-               ("offset", "offset", units.LENGTH))
+               ("offset", "offset", units.LENGTH), ("yaw", "yaw", units.ANGLE))
 ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units.LENGTH),
                 ("mass", "mass_kg", units.MASS), ("wheelbase", "wheelbase_m", units.LENGTH))
 

@@ -156,6 +156,8 @@ class _Run:
         self.ego_lane = ego.lane * self.ego_road.direction(s0)
         t0 = float(self.ego_road.road.lane_center_t(self.ego_lane, s0)) + ego.offset
         x, y, h = self.ego_road.pose(s0, t0)
+        if ego.yaw:
+            h += ego.yaw
         self.vehicle_params = VehicleParams.for_vehicle(ego.mass_kg, ego.wheelbase_m, ego.mu)
         self.ego = VehicleState(x, y, h, ego.speed)
         self.ego_z, self.ego.pitch = 0.0, 0.0
@@ -391,6 +393,9 @@ def _loop(run: _Run) -> Trace:
             road = run.agent_roads[a.name]
             x, y, h = road.pose(a.s, a.t)
             heading = h + relative_heading(a, t_now, dt)
+            yaw = run.agent_plans[a.name].yaw
+            if yaw:
+                heading += yaw
             poses[a.name] = (x, y, heading)
             z, grade = road.elevation.at(a.s)
             run.physics.set_pose(a.name, x, y, z + VEHICLES[run.agent_plans[a.name].vehicle].height_m / 2, heading,

@@ -15,7 +15,7 @@ from addt_dsl.compiler.exprs import value_range
 from addt_dsl.compiler.xodr_check import check_route
 from addt_dsl.diagnostics import Span
 from addt_dsl.registry import BEHAVIORS, SENSORS, STACKS, ParamSpec
-from addt_dsl.vehicles import VEHICLES
+from addt_dsl.vehicles import STATIC_KINDS, VEHICLES
 
 
 ACTOR_SETTINGS = (
@@ -32,6 +32,8 @@ ACTOR_SETTINGS = (
               doc="tyre-road friction coefficient (0.8 dry asphalt, 0.5 wet, 0.1 ice)"),
     ParamSpec("offset", units.LENGTH, default=0.0, low=-20.0, high=20.0,
               doc="start offset from the lane centre, left positive (e.g. a pedestrian on the kerb)"),
+    ParamSpec("yaw", units.ANGLE, default=0.0, low=-3.1416, high=3.1416,
+              doc="body yaw relative to the lane's driving direction, left positive (an angled or parked car)"),
 )
 
 DEFAULT_SENSOR = P.ClausePlan(keyword="sensor", name="lidar", settings={})
@@ -120,6 +122,8 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
     if "goal" in vals and not d.is_ego:
         span = next(s.key_span for s in d.settings + d.block_settings if s.key == "goal")
         ctx.sink.warning("W0002", "only the ego has a goal", span)
+    if d.vehicle in STATIC_KINDS:
+        _check_static(ctx, d, vals)
     behaviors, sensors, stack = [], [], None
     stack_span: Span | None = None
     sensor_spans: dict[str, Span] = {}
@@ -156,7 +160,22 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
         speed=vals.get("speed", P.num(0.0)),
         length_m=length, width_m=width, mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
-        goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"), route=route)
+        goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"), route=route, yaw=vals.get("yaw"))
+
+
+def _check_static(ctx: Context, d: ast.ActorDecl, vals: dict) -> None:
+    """A static object has no speed, behaviours or steps, and is not the ego."""
+    if d.is_ego:
+        ctx.sink.error("E0204", f"the ego cannot be a static {d.vehicle}", d.vehicle_span, "use `car` or `truck`")
+        return
+    moving = [c.span for c in d.clauses] + [s.span for s in d.steps]
+    if moving:
+        ctx.sink.error("E0204", f"a {d.vehicle} does not move: it takes no behaviours or steps", moving[0],
+                       "use `car` for a vehicle that stops or starts")
+    speed = const_value(vals["speed"]) if "speed" in vals else 0.0
+    if speed != 0.0:
+        span = next(st.value.span for st in d.settings + d.block_settings if st.key == "speed")
+        ctx.sink.error("E0204", f"a {d.vehicle} does not move: its speed is 0", span)
 
 
 def _check_stack_sensors(ctx: Context, stack: P.ClausePlan, sensors: list, span: Span) -> None:

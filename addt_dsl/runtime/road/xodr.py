@@ -282,10 +282,15 @@ class _Reader:
             return ()
         out = []
         for sn in node.findall("signal"):
-            s = self.coord(sn, "s")
+            try:
+                s = self.coord(sn, "s")
+                t = self.coord(sn, "t", 0.0)
+                sid = self.text(sn, "id")
+            except XodrError:
+                continue  # signals are metadata for the geometry: one without a position is skipped
             if not 0.0 <= s <= length + 1e-6:
-                raise self.err(sn, f"signal {sn.attrs.get('id', '?')}: s = {s} m is off the road (length {length} m)")
-            out.append(Signal(self.text(sn, "id"), s, self.coord(sn, "t", 0.0), sn.attrs.get("name", ""),
+                continue
+            out.append(Signal(sid, s, t, sn.attrs.get("name", ""),
                               sn.attrs.get("type", ""), sn.attrs.get("subtype", ""),
                               sn.attrs.get("dynamic", "no").strip().lower() == "yes",
                               sn.attrs.get("orientation", "none").strip() or "none"))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -19,8 +21,13 @@ from addt_dsl.sweep import expand
 FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
+# A printed plan imports its maps by file name (the printer writes them beside it as side
+# files); the examples' maps are all in examples/maps.
+MAPS = Path(__file__).resolve().parents[3] / "examples" / "maps"
+
+
 def _recompile(text: str):
-    result = compile_source(text, path="printed.addt")
+    result = compile_source(text, path="printed.addt", base_dir=MAPS)
     assert result.ok, render_text(result.diagnostics, result.sources) + "\n" + text
     return result.plan
 
@@ -56,7 +63,7 @@ def test_sweep_expands_the_same_runs():
 def test_pinned_run_round_trip(spec):
     """compile(print(spec)) is the one run of the pinned plan: same RunSpec, bit for bit."""
     text = print_spec(spec)
-    again = compile_pinned(text)
+    again = compile_pinned(text, base_dir=MAPS)
     assert semantic_key(again) == semantic_key(pin_spec(spec))
     assert again.seed == spec.seed
     assert again.plan.sweep == type(spec.plan.sweep)()
@@ -69,7 +76,7 @@ def test_pinned_run_round_trip(spec):
 def test_printing_a_pinned_run_is_a_fixed_point(spec):
     pinned = pin_spec(spec)
     assert semantic_key(pin_spec(pinned)) == semantic_key(pinned)
-    again = compile_pinned(print_spec(spec))
+    again = compile_pinned(print_spec(spec), base_dir=MAPS)
     assert _body(print_spec(again)) == _body(print_spec(spec))
 
 
