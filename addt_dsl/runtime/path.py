@@ -78,12 +78,12 @@ class RoutePath(FastRoad):
         self.elevation = _PathElevation(self)
 
     def _sample(self, length: float) -> None:
-        """The lane-centre line over u: FastRoad's sample arrays (x, y, heading, curvature)
-        and the reference offset t_ref(u) [road t] lane queries subtract."""
+        """The lane-centre line over u: FastRoad's sample arrays (x, y, heading, curvature).
+        Lane queries go to the leg's road (`_reference_t`): samples straddle legs."""
         n = max(2, int(math.ceil(length / STEP_M)) + 1)
         u = np.linspace(0.0, length, n)
         idx = np.clip(np.searchsorted(self._u0, u, side="right") - 1, 0, len(self._segs) - 1)
-        x, y, h, k, tref = (np.empty(n) for _ in range(5))
+        x, y, h, k = (np.empty(n) for _ in range(4))
         for i, sg in enumerate(self._segs):
             m = idx == i
             if not np.any(m):
@@ -97,12 +97,10 @@ class RoutePath(FastRoad):
             h[m] = hh + sg.h_shift
             kd = sg.dir * kk  # reference curvature as driven; the lane centre's, at its offset
             k[m] = kd / np.maximum(0.2, 1.0 - kd * sg.dir * t)
-            tref[m] = t
         self._s = u.tolist()
         self._x, self._y = x.tolist(), y.tolist()
         self._h = np.unwrap(h).tolist()
         self._k = k.tolist()
-        self._tref = tref.tolist()
         self._xy = np.stack([x, y], axis=1)
         self._ds = self._s[1] - self._s[0]
         self._last_i = len(self._s) - 2
@@ -140,11 +138,6 @@ class RoutePath(FastRoad):
             raise ValueError(f"road {road_id} is not on route {self.key}")
         return first.u0 + first.dir * (s - first.s_from)
 
-    def _tref_at(self, u: float) -> float:
-        i, f = self._index(u)
-        tr = self._tref
-        return tr[i] + f * (tr[i + 1] - tr[i])
-
     # ---- lanes (driving convention: road lane id x direction)
     def driving_lane_ids(self, u: float) -> tuple[int, ...]:
         sg = self._seg(u)
@@ -159,14 +152,14 @@ class RoutePath(FastRoad):
     def lane_center_t(self, lane: int, u: float) -> float:
         sg = self._seg(u)
         s = sg.s_from + sg.dir * (u - sg.u0)
-        return sg.dir * (sg.fast.lane_center_t(sg.dir * lane, s) - self._tref_at(u))
+        return sg.dir * (sg.fast.lane_center_t(sg.dir * lane, s) - _reference_t(sg, s))
 
     def _nearest_lane(self, u: float, t: float) -> tuple[int | None, float]:
         """(lane, its centre's t) nearest to path offset `t` at `u`."""
         lanes = self.driving_lane_ids(u)
         sg = self._segs[self._last]
         s = sg.s_from + sg.dir * (u - sg.u0)
-        ref = self._tref_at(u)
+        ref = _reference_t(sg, s)
         fast, d = sg.fast, sg.dir
         best, best_c, best_d = None, t, math.inf
         for lane in lanes:
@@ -187,7 +180,7 @@ class RoutePath(FastRoad):
         sg = self._seg(u)
         s = min(max(sg.s_from + sg.dir * (u - sg.u0), 0.0), sg.fast.length)
         lo, hi = sg.fast.road_band_t(s)
-        ref = self._tref_at(u)
+        ref = _reference_t(sg, s)
         a, b = sg.dir * (lo - ref), sg.dir * (hi - ref)
         return (a, b) if a <= b else (b, a)
 
