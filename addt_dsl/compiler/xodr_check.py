@@ -50,6 +50,16 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
     return road_id, info
 
 
+def route_length(network, roads: list[str], lane) -> float:
+    """Length [m] of an expanded route (its legs, from the first road's entry end)."""
+    lane_c = const_value(lane)
+    try:
+        _, legs = resolve_route(network, roads, int(round(lane_c)) if lane_c is not None else -1)
+    except RouteError:
+        return float("inf")
+    return sum(g.length_m for g in legs)
+
+
 def check_route(ctx: Context, route, road_name: str, lane, s, lane_span: Span) -> tuple[list[str], object] | None:
     """Expand an actor's `route` on its imported road network: (road ids with the
     connecting roads, RoadInfo of the first road), or None after a diagnostic (E0404 with

@@ -12,7 +12,7 @@ from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, const_value, fmt, int_const,
                                        suggest)
 from addt_dsl.compiler.exprs import value_range
-from addt_dsl.compiler.xodr_check import check_route
+from addt_dsl.compiler.xodr_check import check_route, route_length
 from addt_dsl.diagnostics import Span
 from addt_dsl.registry import BEHAVIORS, SENSORS, STACKS, ParamSpec
 from addt_dsl.vehicles import STATIC_KINDS, VEHICLES
@@ -117,7 +117,11 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
     if placement is not None and "goal" in vals and d.is_ego:
         info = ctx.road_info.get(placement[0])
         span = next(st.value.span for st in d.settings + d.block_settings if st.key == "goal")
-        if info is not None:
+        if route and info is not None and info.network is not None:
+            # On a route the ego's station runs along the route: the goal is checked against its length.
+            check_range(ctx, vals["goal"], 0.0, route_length(info.network, route, placement[1]), units.LENGTH,
+                        "the goal (a station along the route)", span)
+        elif info is not None:
             check_range(ctx, vals["goal"], 0.0, info.length_m, units.LENGTH, "the goal", span)
     if "goal" in vals and not d.is_ego:
         span = next(s.key_span for s in d.settings + d.block_settings if s.key == "goal")
