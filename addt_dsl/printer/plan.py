@@ -195,7 +195,7 @@ def _actors(pr: _Printer) -> None:
 _PLAIN_STOP = re.compile(r"[0-9]+|[A-Za-z_][A-Za-z0-9_]*")
 
 
-def _route_stop(road_id: str) -> str:
+def format_route_stop(road_id: str) -> str:
     """A road id of a route as the grammar reads it: a whole number or a name as is,
     anything else in quotes."""
     if _PLAIN_STOP.fullmatch(road_id):
@@ -208,7 +208,7 @@ def _actor(pr: _Printer, a: ActorPlan, is_ego: bool) -> None:
     head = "ego" if is_ego else f"agent {a.name}"
     parts = [f"{head} {a.vehicle} on {a.road}"]
     if a.route:
-        parts.append("route " + " -> ".join(_route_stop(r) for r in a.route))
+        parts.append("route " + " -> ".join(format_route_stop(r) for r in a.route))
     parts += [f"lane {ex.value(a.lane, units.DIMENSIONLESS)}",
               f"at {ex.value(a.s, units.LENGTH)}", f"speed {ex.value(a.speed, units.SPEED)}"]
     for key, field, dim in ACTOR_EXPRS:
