@@ -260,7 +260,7 @@ def test_routes_and_yaw_round_trip(route, yaw_rad):
 
 @FAST
 @given(st.text(alphabet="ab_Z09 -.\"\\", min_size=1, max_size=8))
-def test_any_road_id_prints_as_oneformat_route_stop(road_id):
+def test_any_road_id_prints_as_one_route_stop(road_id):
     from addt_dsl.compiler.parser import parse_source
     from addt_dsl.diagnostics import DiagnosticSink
     from addt_dsl.printer.plan import format_route_stop
