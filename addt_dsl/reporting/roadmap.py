@@ -29,10 +29,14 @@ def _link(link) -> str:
     return f"road {link.element_id} ({link.contact_point or 'start'})"
 
 
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}" + ("" if n == 1 else "s")
+
+
 def describe(network: RoadNetwork, name: str = "") -> str:
     roads = sorted(network.roads.values(), key=lambda r: _key(r.id))
-    lines = [f"{name or network.source_name}: {len(roads)} roads, {len(network.junctions)} junctions, "
-             f"{sum(len(r.signals) for r in roads)} signals",
+    lines = [f"{name or network.source_name}: {_count(len(roads), 'road')}, "
+             f"{_count(len(network.junctions), 'junction')}, {_count(sum(len(r.signals) for r in roads), 'signal')}",
              "lanes: id type direction (+s: traffic along the road's s, -s: against it)", ""]
     for road in roads:
         inside = f", in junction {road.junction}" if road.junction not in ("-1", "") else ""

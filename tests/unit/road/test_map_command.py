@@ -12,7 +12,7 @@ MAPS = Path(__file__).resolve().parents[3] / "examples" / "maps"
 def test_map_lists_roads_lanes_junctions(capsys):
     assert main(["map", str(MAPS / "fabriksgatan.xodr")]) == 0
     out = capsys.readouterr().out
-    assert "fabriksgatan.xodr: 16 roads, 1 junctions, 0 signals" in out
+    assert "fabriksgatan.xodr: 16 roads, 1 junction, 0 signals" in out
     # Lanes with their driving direction (right-hand traffic: positive ids against s).
     assert "road 0: 93.7 m, RHT; start: junction 4; end: -" in out
     assert "1 driving -s, -1 driving +s" in out
