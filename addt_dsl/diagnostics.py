@@ -91,6 +91,7 @@ CODES: dict[str, str] = {
     "E0404": "no such route in the road network",
     "E0501": "unsatisfiable constraints",
     "E0601": "feature needs a package that is not installed",
+    "E0701": "beyond a documented limit (input size or sweep cost)",
     "E0900": "internal compiler error",
     "W0001": "unused parameter",
     "W0002": "setting has no effect",

@@ -154,7 +154,7 @@ def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
         table.add_column(col, justify="left" if col == "scenario" else "right")
     classified = any("outcomes" in r.totals for r in rows)
     if classified:
-        table.add_column("masked/silent/detected/hazard", justify="right")
+        table.add_column("masked/silent/detected/hazard/twin_failed", justify="right")
     for v in values:
         table.add_column(labels.get(v, f"{v:g}"), justify="right")
     for r in rows:
@@ -164,7 +164,7 @@ def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
             cells.append("-" if t is None else f"{100 * t.rate:.2f}% ({t.runs})")
         colour = "green" if r.exit_code == 0 else ("red" if r.exit_code == 1 else "yellow")
         outcomes = r.totals.get("outcomes", {})
-        counts = ["/".join(str(outcomes.get(k, 0)) for k in ("masked", "silent", "detected", "hazard"))] \
+        counts = ["/".join(str(outcomes.get(k, 0)) for k in ("masked", "silent", "detected", "hazard", "twin_failed"))] \
             if classified else []
         table.add_row(f"[{colour}]{r.name or r.path.stem}[/]", str(r.totals.get("runs", 0)),
                       str(r.totals.get("passed", 0)), f"{r.wall_s:.1f}", *counts, *cells)

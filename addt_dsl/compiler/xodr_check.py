@@ -7,11 +7,15 @@ on and turns its errors into diagnostics at the `road ... import` line.
 
 from __future__ import annotations
 
+import math
+import re
+
 import numpy as np
 
 from addt_dsl.compiler.context import Context, RoadInfo, const_value
 from addt_dsl.diagnostics import Span
 from addt_dsl.expr import eval_param_expr, params_used
+from addt_dsl.limits import beyond_message, how_to_raise
 from addt_dsl.runtime.road import RouteError, XodrError, parse_xodr, resolve_route
 from addt_dsl.runtime.road.limits import RoadLimitError
 from addt_dsl.runtime.roadspec import build_network
@@ -20,6 +24,8 @@ from addt_dsl.runtime.roadspec import build_network
 def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
     """(road id, RoadInfo or None) of the imported road, or None after a diagnostic."""
     cache = ctx.xodr_networks  # one parse per file, however many roads import it
+    if display not in cache and not _within_map_limits(ctx, text, display, span):
+        return None
     try:
         network = cache.get(display) or cache.setdefault(display, parse_xodr(text, display))
     except XodrError as exc:
@@ -32,6 +38,8 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
         return None
     if not network.roads:
         ctx.sink.error("E0403", f"{display} has no roads", span)
+        return None
+    if not _lanes_within_limit(ctx, network, display, span):
         return None
     if road_value is None:
         road_id = next(iter(network.roads))
@@ -87,6 +95,35 @@ def check_route(ctx: Context, route, road_name: str, lane, s, lane_span: Span) -
     return roads, _road_info(info.network.road(roads[0]))
 
 
+_COMMENT = re.compile(r"<!--.*?-->", re.S)
+_ROAD_TAG = re.compile(r"<road[\s/>]")
+
+
+def _within_map_limits(ctx: Context, text: str, display: str, span: Span) -> bool:
+    """Count the map's <road> elements before building any (a 49 MB map of 129k roads took
+    minutes to build): E0701 beyond `roads_per_map`. Comments are left out of the count."""
+    limit = ctx.limits.roads_per_map
+    roads = sum(1 for _ in _ROAD_TAG.finditer(_COMMENT.sub("", text)))
+    if roads <= limit:
+        return True
+    ctx.sink.error("E0701", beyond_message(f"the number of roads in {display}", roads, "roads_per_map", limit),
+                   span, how_to_raise("roads_per_map"))
+    return False
+
+
+def _lanes_within_limit(ctx: Context, network, display: str, span: Span) -> bool:
+    limit = ctx.limits.lanes_per_section
+    for road_id, road in network.roads.items():
+        for k, section in enumerate(road.sections):
+            lanes = len(section.lane_ids)
+            if lanes > limit:
+                ctx.sink.error("E0701", beyond_message(f"the lanes of road '{road_id}' section {k} in {display}",
+                                                       lanes, "lanes_per_section", limit),
+                               span, how_to_raise("lanes_per_section"))
+                return False
+    return True
+
+
 def check_inline_road(ctx: Context, road_plan, span: Span) -> bool:
     """Build an inline road as every run will (same bounds as imported maps: total length,
     turn, samples), so a road no run could build is a compile error, not a crashed run."""
@@ -103,19 +140,25 @@ def check_inline_road(ctx: Context, road_plan, span: Span) -> bool:
 
 
 def _road_info(road):
-    """Length, lanes at s = 0 and the narrowest width of each lane along the road."""
+    """Length, lanes at s = 0 and the narrowest width of each lane along the road.
+
+    Widths come from each section's own width polynomials (what `Road.lane_ids` and
+    `Road.lane_width` evaluate), one pass per probe: linear in the number of lanes, where
+    asking the road lane by lane re-derived every border per lane (quadratic)."""
     try:
         length = float(road.length)
         lanes = tuple(int(i) for i in road.lane_ids(0.0) if i != 0)
-        widths = {}
-        probe = np.linspace(0.0, length, 64)
-        for lane in lanes:
-            present = []
-            for s in probe:
-                if lane in road.lane_ids(float(s)):
-                    present.append(float(road.lane_width(lane, float(s))))
-            if present:
-                widths[lane] = min(present)
+        wanted = set(lanes)
+        widths: dict[int, float] = {}
+        for s in np.linspace(0.0, length, 64):
+            section = road.section_at(float(s))
+            ds = float(s) - section.s0
+            for lane_id in section.lane_ids:
+                if lane_id not in wanted:
+                    continue
+                width = float(section.lane(lane_id).width(ds))
+                if width > 1e-9:  # the lane exists here (Road.lane_ids' test)
+                    widths[lane_id] = min(width, widths.get(lane_id, math.inf))
         return RoadInfo(length, lanes, widths)
     except (ValueError, ArithmeticError, KeyError, IndexError):
         return None

@@ -100,7 +100,7 @@ def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = No
 
 
 # Outcome classes of `addt_dsl.runtime.outcome` (OUTCOMES plus the runner's own `error`).
-OUTCOME_CLASSES = ("masked", "silent", "detected", "hazard", "error")
+OUTCOME_CLASSES = ("masked", "silent", "detected", "hazard", "twin_failed", "error")
 
 
 def outcome_cells(records: Iterable, axes: list[str]) -> list[dict]:
@@ -111,8 +111,11 @@ def outcome_cells(records: Iterable, axes: list[str]) -> list[dict]:
     table = outcome_table([(r, r.outcome) for r in records if r.outcome], by=axes)
     if table.empty:
         return []
-    return [{k: (v.item() if hasattr(v, "item") else v) for k, v in row.items()}
-            for row in table.reset_index().to_dict("records")]
+    def plain(v):  # numpy scalars to Python; NaN (no runs to rate) to None, valid in JSON
+        v = v.item() if hasattr(v, "item") else v
+        return None if isinstance(v, float) and math.isnan(v) else v
+
+    return [{k: plain(v) for k, v in row.items()} for row in table.reset_index().to_dict("records")]
 
 
 def fmt_number(x: float | None) -> str:
@@ -273,7 +276,7 @@ def terminal():
 NON_TTY_WIDTH = 400
 
 OUTCOME_STYLE = {"masked": "[green]{}[/]", "silent": "[yellow]{}[/]", "detected": "[magenta]{}[/]",
-                 "hazard": "[red]{}[/]", "error": "[red]{}[/]"}
+                 "hazard": "[red]{}[/]", "twin_failed": "[dim]{}[/]", "error": "[red]{}[/]"}
 
 
 def shown_records(store, limit: int = 40) -> list:

@@ -46,8 +46,11 @@ def add_commands(sub) -> None:
     fal.add_argument("--budget-seconds", type=nonneg_float, default=0.0, help="0: no time limit")
     fal.add_argument("--seed", type=int, default=0)
     fal.add_argument("--jobs", "-j", type=positive_int, default=1)
-    fal.add_argument("--batch", type=positive_int, default=16, help="candidates per generation")
-    fal.add_argument("--sampler", choices=("cem", "random"), default="cem")
+    fal.add_argument("--batch", type=positive_int, default=16,
+                     help="candidates per generation (cem, random; bo runs --jobs at a time)")
+    fal.add_argument("--sampler", choices=("bo", "cem", "random"), default="bo",
+                     help="bo: Bayesian optimisation of the failure probability (default); cem: "
+                          "cross-entropy; random: uniform sampling")
     fal.add_argument("--shrink-simulations", type=nonneg_int, default=60,
                      help="per distinct failure, to find its origin (0: do not shrink)")
     fal.add_argument("--out", default=DEFAULT_OUT, help="write each distinct failure's counterexample here")
