@@ -37,7 +37,7 @@ from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, UsageError, n
                              positive_float, positive_int, verdict_exit_code)
 from addt_dsl.limits import DEFAULT, parse_limit
 
-SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study")
+SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map")
 
 
 def cmd_check(args) -> int:
@@ -364,6 +364,23 @@ def cmd_trace(args) -> int:
     return EXIT_OK
 
 
+def cmd_map(args) -> int:
+    """Roads, lanes with direction, junction connections and signals of an OpenDRIVE file."""
+    from addt_dsl.reporting.roadmap import describe, map_png
+    from addt_dsl.runtime.road import XodrError, load_xodr
+
+    try:
+        network = load_xodr(args.file)
+    except XodrError as exc:
+        raise UsageError(f"cannot read {args.file}: {exc}") from None
+    print(describe(network, Path(args.file).name), end="")
+    if args.png:
+        Path(args.png).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.png).write_bytes(map_png(network, Path(args.file).name))
+        print(f"wrote {args.png}")
+    return EXIT_OK
+
+
 def _limits(args):
     """The input limits and cost thresholds of `--max` and `--allow-large` (docs/limits.md)."""
     limits = DEFAULT.raised(allow_large=getattr(args, "allow_large", False),
@@ -449,6 +466,11 @@ def build_parser() -> argparse.ArgumentParser:
     schema = sub.add_parser("schema", help="print or write the plan's JSON schema")
     schema.add_argument("--write", help="file to write")
     schema.set_defaults(func=cmd_schema)
+    road_map = sub.add_parser("map", help="list an OpenDRIVE file's roads, lanes, junctions and signals "
+                                          "(ids for routes); --png draws it")
+    road_map.add_argument("file", help="an .xodr file")
+    road_map.add_argument("--png", help="write a map image with the ids drawn on it")
+    road_map.set_defaults(func=cmd_map)
     from addt_dsl.search.commands import add_commands
 
     add_commands(sub)

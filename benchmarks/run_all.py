@@ -43,6 +43,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "peers": (["--runs", "5"], ["--runs", "1"]),
     "perception_gpu": (["--batches", "1", "16", "256"], ["--batches", "1", "16"]),
     "table1": ([], ["--limit", "8"]),
+    "routes": ([], ["--runs", "1"]),
 }
 
 
@@ -106,6 +107,8 @@ def headline(results: dict) -> dict:
     if fault_overheads:
         worst = max((v, k) for k, v in fault_overheads.items() if " " not in k)
         row("fault_overhead_worst_kind", worst[0], 0.05, better="lower", unit=f"fraction ({worst[1]})")
+    row("route_cost_vs_overtake", _get(b.get("routes", {}), "route_cost_vs_overtake"), 0.10, better="lower",
+        unit="fraction of the overtake run's CPU time per simulated second")
     peers = b.get("peers") or {}
     for key, value in peers.items():
         if key.startswith("ratio"):

@@ -28,6 +28,8 @@ class RoadInfo:
     length_m: float
     lane_ids: tuple[int, ...]  # lanes at s = 0 (inline roads: everywhere)
     lane_width_m: dict[int, float]  # narrowest width of each lane along the road
+    network: object = None  # the imported file's RoadNetwork (routes are checked on it); None inline
+    road_id: str = ""  # the imported road's id in `network`
 
 
 @dataclass

@@ -12,11 +12,11 @@ import re
 
 import numpy as np
 
-from addt_dsl.compiler.context import Context, RoadInfo
+from addt_dsl.compiler.context import Context, RoadInfo, const_value
 from addt_dsl.diagnostics import Span
 from addt_dsl.expr import eval_param_expr, params_used
 from addt_dsl.limits import beyond_message, how_to_raise
-from addt_dsl.runtime.road import XodrError, parse_xodr
+from addt_dsl.runtime.road import RouteError, XodrError, parse_xodr, resolve_route
 from addt_dsl.runtime.road.limits import RoadLimitError
 from addt_dsl.runtime.roadspec import build_network
 
@@ -52,7 +52,47 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
         ctx.sink.error("E0403", f"{display} has no road '{road_id}'", span,
                        f"roads: {', '.join(sorted(network.roads))}")
         return None
-    return road_id, _road_info(network.road(road_id))
+    info = _road_info(network.road(road_id))
+    if info is not None:
+        info.network, info.road_id = network, road_id
+    return road_id, info
+
+
+def route_length(network, roads: list[str], lane) -> float:
+    """Length [m] of an expanded route (its legs, from the first road's entry end)."""
+    lane_c = const_value(lane)
+    try:
+        _, legs = resolve_route(network, roads, int(round(lane_c)) if lane_c is not None else -1)
+    except RouteError:
+        return float("inf")
+    return sum(g.length_m for g in legs)
+
+
+def check_route(ctx: Context, route, road_name: str, lane, s, lane_span: Span) -> tuple[list[str], object] | None:
+    """Expand an actor's `route` on its imported road network: (road ids with the
+    connecting roads, RoadInfo of the first road), or None after a diagnostic (E0404 with
+    what the map offers where the route breaks)."""
+    info = ctx.road_info.get(road_name)
+    decl = ctx.roads_ast.get(road_name)
+    if info is None and decl is not None and decl.import_path is not None:
+        return None  # the import failed: reported there
+    if info is None or info.network is None:
+        ctx.sink.error("E0404", f"a route needs a road network imported from OpenDRIVE; '{road_name}' is inline",
+                       route.span, "import a map: `road town import \"map.xodr\"`, then `route 1 -> left -> 3`")
+        return None
+    lane_c, s_c = const_value(lane), const_value(s)
+    if lane_c is None:
+        ctx.sink.error("E0204", "an actor with a route needs a constant lane", lane_span,
+                       "lane ids differ from road to road; give the lane on the route's first road")
+        return None
+    try:
+        roads, _ = resolve_route(info.network, list(route.stops), int(round(lane_c)), s_c)
+    except RouteError as exc:
+        span = route.stop_spans[min(exc.stop, len(route.stop_spans) - 1)]
+        ctx.sink.error("E0404", exc.message, span, *([exc.hint] if exc.hint else []),
+                       "routes are road ids in driving order, or turns at junctions: docs/roads.md, Routes")
+        return None
+    return roads, _road_info(info.network.road(roads[0]))
 
 
 _COMMENT = re.compile(r"<!--.*?-->", re.S)
