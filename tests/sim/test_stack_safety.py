@@ -102,3 +102,36 @@ def test_a_truck_ego_keeps_its_own_length_from_a_stopped_car():
     assert not trace.events_of("collision") and ego.speed[-1] < 0.5
     # Bumper to bumper, with the truck's 12 m body (the car's 4.6 m would leave it inside the gap).
     assert parked.s[-1] - ego.s[-1] - 0.5 * (12.0 + 4.6) > 0.5
+
+
+def test_study_impact_tables_avoided_runs_and_impact_speeds(tmp_path, capsys):
+    from addt_dsl import studies
+
+    path = tmp_path / "ccrs.addt"
+    path.write_text("""scenario ccrs_short {
+  duration 4 s
+  road r {
+    line length 300 m
+    lanes right 1 width 3.5 m
+  }
+  param gap = 15 m in [5 m, 100 m]
+  ego car on r lane -1 at 20 m speed 20 m/s {
+    stack bev cruise_speed 20 m/s
+    sensor lidar rate 10 Hz rays 360 range 80 m
+  }
+  agent target car on r lane -1 at 24.6 m + gap speed 0 m/s
+  expect {
+    no collision
+  }
+  sweep {
+    grid gap in [15, 60] m
+  }
+}
+""")
+    assert studies.main(["impact", str(path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split() == ["runs", "avoided", "avoided_rate", "impact_kmh", "relative_kmh"]
+    near = lines[2].split()  # gap 15 m: unavoidable, hit braking
+    far = lines[3].split()  # 60 m: stops in time
+    assert near[:4] == ["15.0", "1", "0", "0.00"] and 40.0 < float(near[4]) < 57.6 and near[4] == near[5]
+    assert far[:4] == ["60.0", "1", "1", "1.00"] and far[4] == "NaN"
