@@ -279,7 +279,7 @@ class LatticePlanner:
             self.last_change_s = stamp_s
             self.current_lane = lane
         v_s, v_t = ego_v_st if ego_v_st is not None else (ego_speed, 0.0)
-        stage, ttc, aeb_brake = self.fcw.check(s0, t0, v_s, v_t, objs_sc)
+        stage, ttc, aeb_brake = self.fcw.check(s0, t0, v_s, v_t, objs_sc, stamp_s)
         if aeb_brake > brake:
             brake = aeb_brake
         if brake > 0.0:
@@ -387,13 +387,16 @@ class ForwardCollisionCheck:
        speed within the TTC needs more than partial braking gives: v / (2 TTC) > partial).
 
     A braking stage is held (it can rise, not fall) while the threat stays on the
-    predicted path; it ends when no object is on a collision course within the horizon.
-    `aeb off` disables the braking stages (warnings still count).
+    predicted path, and for `release_s` after no object is on a collision course within
+    the horizon any more (a walker's estimated velocity flickers from frame to frame, and
+    a brake that lets go for one plan loses what it gained). `aeb off` disables the
+    braking stages (warnings still count).
     """
 
     horizon_s = 4.0
     lateral_margin_m = 0.2
     partial_share = 0.4
+    release_s = 0.5
 
     def __init__(self, settings: dict, body: EgoBody = EgoBody()):
         self.enabled = str(settings.get("aeb", "on")) == "on"
@@ -404,6 +407,7 @@ class ForwardCollisionCheck:
         self.full_brake = body.max_brake
         self.partial_brake = self.partial_share * body.max_brake
         self.stage = 0
+        self.threat_s = -math.inf  # last time an object was on a collision course [s]
 
     def time_to_collision(self, s0, t0, v_s, v_t, objs) -> tuple[float, float]:
         """(TTC [s], closing speed along the road [m/s]) of the first predicted collision
@@ -421,12 +425,16 @@ class ForwardCollisionCheck:
                 best, closing = start, v_s - ovs
         return best, closing
 
-    def check(self, s0, t0, v_s, v_t, objs) -> tuple[int, float, float]:
-        """(stage, TTC [s], deceleration to apply [m/s^2])."""
+    def check(self, s0, t0, v_s, v_t, objs, now: float = 0.0) -> tuple[int, float, float]:
+        """(stage, TTC [s], deceleration to apply [m/s^2]) at time `now` [s]."""
         ttc, closing = self.time_to_collision(s0, t0, v_s, v_t, objs)
         if ttc == math.inf:
-            self.stage = 0
-            return 0, ttc, 0.0
+            if self.stage < 2 or not now - self.threat_s < self.release_s:
+                self.stage = 0
+                return 0, ttc, 0.0
+            stage = self.stage  # still braking: the threat left the path only just now
+            return stage, ttc, (self.full_brake if stage == 3 else self.partial_brake) if self.enabled else 0.0
+        self.threat_s = now
         needed = closing / (2.0 * ttc) if ttc > 0.0 else math.inf
         if ttc <= self.full_ttc or (ttc <= self.partial_ttc and needed > self.partial_brake):
             stage = 3

@@ -165,10 +165,13 @@ def test_aeb_escalates_to_full_braking_when_partial_is_not_enough_and_holds_it()
     fcw2 = ForwardCollisionCheck({})
     stage, _, brake = fcw2.check(100.0, 0.0, 5.0, 0.0, [_obj(100.0 + 7.5 + CAR.length_m, 0.0)])
     assert stage == 2 and brake == pytest.approx(0.4 * 0.8 * G)
-    # Slower now, the threat still ahead: full braking holds until it is off the path.
-    stage, _, _ = fcw.check(100.0, 0.0, 5.0, 0.0, [_obj(100.0 + 20.0 + CAR.length_m, 0.0)])
+    # Slower now, the threat still ahead: full braking holds until it is off the path ...
+    stage, _, _ = fcw.check(100.0, 0.0, 5.0, 0.0, [_obj(100.0 + 20.0 + CAR.length_m, 0.0)], now=0.1)
     assert stage == 3
-    assert fcw.check(100.0, 0.0, 0.0, 0.0, [_obj(100.0 + 20.0 + CAR.length_m, 0.0)])[0] == 0
+    # ... and for release_s after that.
+    assert fcw.check(100.0, 0.0, 0.0, 0.0, [_obj(100.0 + 20.0 + CAR.length_m, 0.0)], now=0.2)[::2] == (
+        3, pytest.approx(0.8 * G))
+    assert fcw.check(100.0, 0.0, 0.0, 0.0, [_obj(100.0 + 20.0 + CAR.length_m, 0.0)], now=0.7)[0] == 0
 
 
 def test_aeb_off_warns_without_braking():
