@@ -101,6 +101,9 @@ class _Context:
         self.faults = run.faults
         self.now = 0.0
         self.wheelbase_m = run.vehicle_params.wheelbase_m
+        ego = run.ego_plan  # the declared body reaches the stack's planner and controller
+        self.ego_length_m, self.ego_width_m, self.ego_mass_kg, self.ego_mu = \
+            ego.length_m, ego.width_m, ego.mass_kg, ego.mu
         self.ego_lane = run.ego_lane
 
     def rng(self, name: str) -> np.random.Generator:
