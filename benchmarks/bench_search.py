@@ -3,7 +3,7 @@
     PYTHONPATH=. python benchmarks/bench_search.py [--scenarios FILE ...] [--samplers random bo]
         [--seeds 20] [--budget 150] [--batch 8] [--jobs 2]
 
-The suite (default): the scenarios in `benchmarks/search/`, each written so that a
+The suite (default): the scenarios in `examples/search/`, each written so that a
 failure needs several things at once (a small failure region: uniform sampling fails
 under 3 % of runs; `examples/lead_brake.addt` no longer fails at all since the stack
 brakes for emergencies, so it left the suite). Every sampler searches the same
@@ -35,7 +35,7 @@ from addt_dsl.compiler import compile_file  # noqa: E402
 from addt_dsl.runtime.outcome import wilson_interval  # noqa: E402
 from addt_dsl.search.falsify import SAMPLERS, Falsifier  # noqa: E402
 
-SUITE = sorted((ROOT / "benchmarks" / "search").glob("*.addt"))
+SUITE = sorted((ROOT / "examples" / "search").glob("*.addt"))
 
 
 def first_failure(plan, sampler: str, seed: int, budget: int, batch: int, jobs: int) -> tuple[int, bool, float]:

@@ -38,7 +38,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "stack": ([], ["--repeats", "1"]),
     "faults": (["--repeat", "9"], ["--repeat", "2"]),
     "runner": ([], ["--runs", "40", "--memory-runs", "500"]),
-    "search": ([], ["--seeds", "2", "--budget", "60", "--scenarios", "benchmarks/search/cut_in.addt"]),
+    "search": ([], ["--seeds", "2", "--budget", "60", "--scenarios", "examples/search/cut_in.addt"]),
     "shrink": ([], []),
     "peers": (["--runs", "5"], ["--runs", "1"]),
     "perception_gpu": (["--batches", "1", "16", "256"], ["--batches", "1", "16"]),
