@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from addt_dsl.reporting.atomic import atomic_path, write_text
 from addt_dsl.reporting.plots import LatencyStats
 from addt_dsl.reporting.tables import latency_budget_s, runs_table, summary
 from addt_dsl.runtime.store import ResultStore
@@ -23,12 +24,14 @@ def store_dataframe(store: ResultStore):
 
 
 def write_csv(store: ResultStore, path: str | Path) -> Path:
-    store_dataframe(store).to_csv(path, index=False)
+    with atomic_path(path) as tmp:
+        store_dataframe(store).to_csv(tmp, index=False)
     return Path(path)
 
 
 def write_parquet(store: ResultStore, path: str | Path) -> Path:
-    store_dataframe(store).to_parquet(path, index=False)
+    with atomic_path(path) as tmp:
+        store_dataframe(store).to_parquet(tmp, index=False)
     return Path(path)
 
 
@@ -37,7 +40,7 @@ def write_tables(out: Path, store: ResultStore, budget_s: float | None = None) -
     (per-node percentiles and e2e latency by object count, over all runs; the share of
     time over the budget the plan's oracles declare, `budget_s` overriding it)."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(store_summary(store), indent=2) + "\n")
+    write_text(out / "summary.json", json.dumps(store_summary(store), indent=2) + "\n")
     write_csv(store, out / "runs.csv")
     latency = LatencyStats()
     for r in store.records():
@@ -45,4 +48,4 @@ def write_tables(out: Path, store: ResultStore, budget_s: float | None = None) -
             latency.add(r.stats)
     if latency.hist:
         budget = budget_s if budget_s is not None else latency_budget_s(store.plan())
-        (out / "latency.json").write_text(json.dumps(latency.summary(budget), indent=2) + "\n")
+        write_text(out / "latency.json", json.dumps(latency.summary(budget), indent=2) + "\n")

@@ -9,14 +9,14 @@ local workers (timeout, memory and crash guards of `LocalExecutor`).
 
 from __future__ import annotations
 
-import sqlite3
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from addt_dsl.errors import ToolError
 from addt_dsl.plan import RunSpec
 from addt_dsl.runtime.executor import local_executor
 from addt_dsl.runtime.result import RunResult
-from addt_dsl.runtime.store import ResultStore
+from addt_dsl.runtime.store import ResultStore, StoreBusy, StoreError
 from addt_dsl.search.outcome import evaluate
 
 
@@ -38,8 +38,10 @@ class RunCache:
         self.judge = Judge(evaluator)
         try:
             self.store = ResultStore.cache(path)
-        except sqlite3.DatabaseError as exc:
-            raise ValueError(f"{path} is not a results store ({exc}); earlier versions kept run caches as "
+        except StoreError as exc:
+            if isinstance(exc, StoreBusy) or "not a results store" not in str(exc):
+                raise
+            raise ValueError(f"{path} is not a results store; earlier versions kept run caches as "
                              "JSON lines: remove the file or pick another --cache") from None
         self.path = self.store.path
         self.results: dict[str, RunResult] = {}
@@ -75,6 +77,10 @@ class RunCache:
             executor = local_executor(jobs, self.judge)
             pending = list(todo.values())
             for result in executor.imap(enumerate(pending)):
+                if result.status == "lost":  # never a verdict: the search cannot go on without it
+                    raise ToolError(f"candidate {result.run_id or result.key} could not be run ({result.error}); "
+                                    "run the same command again: every run so far is kept"
+                                    + (f" in {self.path}" if self.path else ""))
                 self.store.add(result, pending[result.seq].plan)
                 self.results[result.key] = result
             self.simulations += len(todo)
