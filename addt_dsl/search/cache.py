@@ -34,19 +34,30 @@ class Judge:
 
 
 class RunCache:
+    _store: ResultStore | None = None
+
     def __init__(self, path: str | Path | None = None, evaluator: Callable[[RunSpec], RunResult] = evaluate):
         self.judge = Judge(evaluator)
-        try:
-            self.store = ResultStore.cache(path)
-        except StoreError as exc:
-            if isinstance(exc, StoreBusy) or "not a results store" not in str(exc):
-                raise
-            raise ValueError(f"{path} is not a results store; earlier versions kept run caches as "
-                             "JSON lines: remove the file or pick another --cache") from None
-        self.path = self.store.path
+        self.path = Path(path) if path is not None else None
+        if self.path is not None and self.path.exists():
+            self.store  # a file that is no store is refused now, not at the first run
         self.results: dict[str, RunResult] = {}
         self.hits = 0
         self.simulations = 0
+
+    @property
+    def store(self) -> ResultStore:
+        """The cache's store, opened (and locked: one writer) when first needed, so a
+        command refused for a bad option leaves no cache file behind."""
+        if self._store is None:
+            try:
+                self._store = ResultStore.cache(self.path)
+            except StoreError as exc:
+                if isinstance(exc, StoreBusy) or "not a results store" not in str(exc):
+                    raise
+                raise ValueError(f"{self.path} is not a results store; earlier versions kept run caches as "
+                                 "JSON lines: remove the file or pick another --cache") from None
+        return self._store
 
     def _lookup(self, key: str) -> RunResult | None:
         if key not in self.results:
@@ -87,4 +98,5 @@ class RunCache:
         return [self.results[k] for k in keys]
 
     def close(self) -> None:
-        self.store.close()
+        if self._store is not None:
+            self._store.close()

@@ -230,7 +230,7 @@ def _falsify(args, result, cache, log) -> int:
     except UnsatisfiableAssumptions as exc:
         _err(str(exc))
         return EXIT_USAGE
-    if log is not None and len(cache.store):
+    if log is not None and cache.path is not None and cache.path.exists() and len(cache.store):
         log(f"run cache {cache.path}: {len(cache.store)} run(s) kept from before are reused")
     report = fal.run(budget_runs=args.budget_runs, budget_seconds=args.budget_seconds,
                      shrink_simulations=args.shrink_simulations)
