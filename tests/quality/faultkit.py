@@ -35,14 +35,17 @@ def rows(path: Path) -> list[tuple]:
     """The stored runs, sorted, read without touching the store (no lock, read-only)."""
     if not Path(path).exists():
         return []
-    try:
-        db = sqlite3.connect(f"{Path(path).resolve().as_uri()}?mode=ro", uri=True, timeout=5)
+    uri = Path(path).resolve().as_uri()
+    for mode in ("ro", "ro&immutable=1"):  # immutable: a WAL store in a read-only directory
         try:
-            return sorted(db.execute(f"SELECT {ROW} FROM runs").fetchall())
-        finally:
-            db.close()
-    except sqlite3.Error:  # not created yet, or mid-creation
-        return []
+            db = sqlite3.connect(f"{uri}?mode={mode}", uri=True, timeout=5)
+            try:
+                return sorted(db.execute(f"SELECT {ROW} FROM runs").fetchall())
+            finally:
+                db.close()
+        except sqlite3.Error:  # not created yet, or mid-creation
+            continue
+    return []
 
 
 def reference(scenario: Path, tmp_path: Path) -> list[tuple]:
