@@ -336,6 +336,10 @@ def cmd_report(args) -> int:
             else:
                 write_csv(store, export)
         print(f"wrote {path}")
+    if totals.get("not_done"):
+        print(f"error: {len(totals['not_done'])} run(s) of the sweep could not be completed and are not in "
+              "the store: run the sweep's command again to run them", file=sys.stderr)
+        return EXIT_INCOMPLETE
     return verdict_exit_code(totals["statuses"], totals["failed"])
 
 

@@ -13,8 +13,13 @@ from addt_dsl.runtime.store import ResultStore
 
 
 def store_summary(store: ResultStore) -> dict:
-    """`reporting.tables.summary` over every stored run (streamed)."""
-    return summary(store.plan(), store.records(), store.rejected(), cells=store.records("outcome != ''"))
+    """`reporting.tables.summary` over every stored run (streamed), with `not_done`: the
+    runs the last sweep could not complete (lost on every attempt; not stored)."""
+    out = summary(store.plan(), store.records(), store.rejected(), cells=store.records("outcome != ''"))
+    not_done = json.loads(store.meta("not_done") or "[]")
+    if not_done:
+        out["not_done"] = not_done
+    return out
 
 
 def store_dataframe(store: ResultStore):

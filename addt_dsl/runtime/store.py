@@ -238,18 +238,25 @@ class ResultStore:
                     self._db.close()
                     self._db = sqlite3.connect(f"{uri}?mode=ro&immutable=1", uri=True, isolation_level=None)
             else:
+                existing = self.path is not None and self.path.exists() and self.path.stat().st_size > 0
                 self._db = sqlite3.connect(self.path or ":memory:", isolation_level=None, timeout=30.0)
-                if self.path is not None and self.path.exists() and self.path.stat().st_size:
-                    self._check_tables()  # before WAL mode writes anything
+                if existing:  # checked before anything is written to it
+                    self._check_tables()
+                    if verify:
+                        self._verify()
                 self._db.execute("PRAGMA journal_mode=WAL")
                 self._db.execute("PRAGMA synchronous=NORMAL")
                 self._create()
+                return
             if self.path is not None:
                 self._check_tables()
                 if verify:
-                    problems = [row[0] for row in self._db.execute("PRAGMA quick_check(3)")]
-                    if problems != ["ok"]:
-                        raise sqlite3.DatabaseError(f"database disk image is malformed ({problems[0]})")
+                    self._verify()
+
+    def _verify(self) -> None:
+        problems = [row[0] for row in self._db.execute("PRAGMA quick_check(3)")]
+        if problems != ["ok"]:
+            raise sqlite3.DatabaseError(f"database disk image is malformed ({problems[0]})")
 
     def _check_tables(self) -> None:
         tables = {row[0] for row in self._db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
