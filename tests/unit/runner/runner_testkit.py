@@ -72,7 +72,9 @@ def fake_run(spec, seq: int = -1, worker: str = "") -> RunResult:
     elif mode == KILLED:  # killed from outside on every attempt (the OOM killer, a lost node)
         os.kill(os.getpid(), signal.SIGKILL)
     elif mode == KILLED_ONCE:  # killed from outside on the first attempt only
-        marker = os.path.join(os.environ["ADDT_TEST_MARKERS"], f"{spec.run_id}.killed")
+        # The marker directory comes in the plan (`markers DIR` as its description): workers
+        # fork from a server that may predate the test, so its environment is not the test's.
+        marker = os.path.join(spec.plan.description.split("markers ", 1)[1], f"{spec.run_id}.killed")
         if not os.path.exists(marker):
             open(marker, "w").close()
             os.kill(os.getpid(), signal.SIGKILL)

@@ -50,9 +50,9 @@ def test_a_crash_the_same_way_twice_is_stored_and_a_different_one_retried():
     assert attempts.judge(4, record) == "done"  # a verdict is never retried
 
 
-def test_lost_runs_are_not_stored_and_run_again_on_resume(tmp_path, monkeypatch):
-    monkeypatch.setenv("ADDT_TEST_MARKERS", str(tmp_path))
-    plan = plan_of(scenario([OK, KILLED, KILLED_ONCE, SEGFAULT, RAISE]))
+def test_lost_runs_are_not_stored_and_run_again_on_resume(tmp_path):
+    text = scenario([OK, KILLED, KILLED_ONCE, SEGFAULT, RAISE])
+    plan = plan_of(text.replace("runner test <script>alert(1)</script>", f"markers {tmp_path}"))
     executor = LocalExecutor(2, run_fn=fake_run, retries=1)
     with ResultStore(tmp_path / "r.sqlite", plan) as store:
         outcome = run_sweep(SweepStream(plan), store, executor)
