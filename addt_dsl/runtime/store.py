@@ -216,6 +216,8 @@ class ResultStore:
         try:
             if self.path is not None and self.path.exists():
                 _check_file(self.path)
+            elif self.path is not None and not readonly:
+                self._create_file()
             self._open(readonly, verify)
             if plan is not None:
                 with self.errors("opening"):
@@ -223,6 +225,27 @@ class ResultStore:
         except BaseException:
             self.close()  # a refused store keeps no lock
             raise
+
+    def _create_file(self) -> None:
+        """Make a new, empty store beside the path and rename it into place, so that no
+        crash ever leaves a 0-byte or half-made file under the store's name (one that a
+        later run would have to refuse)."""
+        tmp = self.path.with_name(f".{self.path.name}.new-{os.getpid()}")
+        with self.errors("creating the store"):
+            try:
+                db = sqlite3.connect(tmp, isolation_level=None)
+                try:
+                    self._db = db
+                    db.execute("PRAGMA journal_mode=WAL")
+                    self._create()
+                finally:
+                    self._db = None
+                    db.close()
+                os.replace(tmp, self.path)
+            finally:
+                for leftover in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+                    if leftover.exists():
+                        leftover.unlink()
 
     def _open(self, readonly: bool, verify: bool) -> None:
         with self.errors("opening"):
