@@ -2,9 +2,11 @@
 
     addtc FILE [--jobs N] [--out DIR]     compile and run the file's sweep, print verdicts
     addtc DIR|FILE... [--by PARAM]        a suite: each file's sweep, one combined table
-        [--executor local|ray] [--address ADDR] [--store PATH] [--timeout S] [--junit FILE]
+        [--executor local|ray] [--address ADDR] [--store PATH] [--timeout auto|S|0] [--retries N]
+        [--junit FILE]
         [--classify]                      also classify each run against its fault-free twin
     addtc report DIR                      HTML report, summary.json, runs.csv of a results dir
+    addtc report DIR --salvage NEW        copy a damaged store's readable runs into a new store
     addtc trace DIR RUN_ID [--csv F] [--parquet F] [--plot F.png]   one run's signals and events
     addtc check FILE...                   compile only (diagnostics)
     addtc plan FILE                       print the ScenarioPlan as JSON
@@ -14,8 +16,8 @@
     addtc study perception|classify|table ...  fault studies (perception errors by band, outcomes)
 
 Exit codes (addt_dsl/errors.py): 0 every run passed, 1 at least one run failed an oracle,
-2 usage or scenario error, 3 the tool could not complete (runs crashed or timed out, the
-store is unusable, internal error). Set ADDT_DEBUG=1 to see the traceback of an internal error.
+2 usage or scenario error, 3 the tool could not complete (runs crashed, timed out or were
+lost after their retries, the store is unusable or in use, the disk is full, internal error). Set ADDT_DEBUG=1 to see the traceback of an internal error.
 """
 
 from __future__ import annotations
