@@ -288,20 +288,9 @@ class ResultStore:
                              f"{', '.join(sorted(tables)) or 'none'}); it is left as it is: pick another "
                              "--out or --store")
 
-    def errors(self, doing: str):
+    def errors(self, doing: str) -> _Errors:
         """Turn SQLite errors into one-line `StoreError`s naming the file and the remedy."""
-        store = self
-
-        class _Errors:
-            def __enter__(self_inner):
-                return self_inner
-
-            def __exit__(self_inner, exc_type, exc, tb):
-                if exc is None or not isinstance(exc, (sqlite3.Error, OSError)) or isinstance(exc, StoreError):
-                    return False
-                raise store.error_of(exc, doing) from exc
-
-        return _Errors()
+        return _Errors(self, doing)
 
     def error_of(self, exc: BaseException, doing: str) -> StoreError:
         where = self.path if self.path is not None else "the in-memory store"
@@ -552,6 +541,23 @@ class ResultStore:
     def put_blob(self, key: str, data: bytes) -> None:
         with self.errors("writing"), self._tx():
             self._db.execute("INSERT OR REPLACE INTO blobs VALUES (?, ?)", (key, data))
+
+
+class _Errors:
+    """`ResultStore.errors`: a context that re-raises SQLite and OS errors as StoreErrors."""
+
+    __slots__ = ("store", "doing")
+
+    def __init__(self, store: ResultStore, doing: str):
+        self.store, self.doing = store, doing
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc is None or not isinstance(exc, (sqlite3.Error, OSError)) or isinstance(exc, StoreError):
+            return False
+        raise self.store.error_of(exc, self.doing) from exc
 
 
 def _record(row: dict) -> RunResult:
