@@ -90,10 +90,14 @@ CODES: dict[str, str] = {
     "E0403": "road file error",
     "E0501": "unsatisfiable constraints",
     "E0601": "feature needs a package that is not installed",
+    "E0701": "unreadable OpenSCENARIO file (malformed XML, a DTD or entity, too large)",
+    "E0702": "invalid OpenSCENARIO content (missing element, attribute or reference)",
     "E0900": "internal compiler error",
     "W0001": "unused parameter",
     "W0002": "setting has no effect",
     "W0003": "sensor unlike the one the stack is made for",
+    "W0701": "OpenSCENARIO element not translated",
+    "W0702": "OpenSCENARIO value approximated or defaulted",
 }
 
 

@@ -260,6 +260,11 @@ def _child(el, *path):
     return el
 
 
+def _first(*elements):
+    """The first element that is not None (elements without children are false)."""
+    return next((e for e in elements if e is not None), None)
+
+
 def _only_child(el):
     kids = list(el) if el is not None else []
     return kids[0] if len(kids) == 1 else None
@@ -337,7 +342,7 @@ class _Translate(_Importer):
     def road_network(self, root) -> None:
         logic = root.find("RoadNetwork/LogicFile")
         if logic is None:
-            self.error(root.find("RoadNetwork") or root, "no <RoadNetwork><LogicFile>: addt-dsl actors need a road")
+            self.error(_first(root.find("RoadNetwork"), root), "no <RoadNetwork><LogicFile>: addt-dsl actors need a road")
             raise _Stop
         got = self.read(self.raw(logic, "filepath"), self.path.parent, logic)
         if got is None:
@@ -570,14 +575,14 @@ class _Translate(_Importer):
             speed = _child(act, "SpeedAction")
             target = _child(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
             if speed is None or target is None:
-                self.skip(_only_child(act) or act, f"<{(_only_child(act) or act).tag}> is not translated",
+                self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
                           "absolute speed targets are translated (relative targets: issue 16)")
                 return None
             return self.speed_action(speed.find("SpeedActionDynamics"), target, info)
         if act.tag == "LateralAction":
             change = _child(act, "LaneChangeAction")
             if change is None:
-                self.skip(_only_child(act) or act, f"<{(_only_child(act) or act).tag}> is not translated",
+                self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
                           "the language has lane changes; lane offsets and lateral distances are issue 16")
                 return None
             return self.lane_change(change, who, info)
