@@ -76,6 +76,8 @@ class _Run:
         self.behaviors: dict[str, dict] = {}  # event name -> exact clause (side file)
         self.conditions: dict[str, dict] = {}  # placeholder parameter -> exact formula (side file)
         self.groups: dict[str, list] = {}
+        self.group_events: set[str] = set()  # events that belong to a group (the side file has its steps)
+        self.event_names: list[str] = []
         self.placeholders: list[str] = []
         self.s0 = {a.name: self.num(a.s) for a in self.plan.actors()}
         self.v0 = {a.name: self.num(a.speed) for a in self.plan.actors()}
@@ -181,7 +183,7 @@ def _compare(run: _Run, node, name: str):
     if fn == "speed" and len(args) == 1:
         return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.SpeedCondition(value, rule), args[0])
     if fn in ("gap", "distance") and len(args) == 2:
-        kind = xosc.RelativeDistanceType.longitudinal if fn == "gap" else xosc.RelativeDistanceType.cartesianDistance
+        kind = xosc.RelativeDistanceType.longitudinal if fn == "gap" else xosc.RelativeDistanceType.euclidianDistance
         cond = xosc.RelativeDistanceCondition(value, rule, kind, args[1], alongroute=False, freespace=fn == "gap",
                                               coordinate_system=xosc.CoordinateSystem.road if fn == "gap"
                                               else xosc.CoordinateSystem.entity)
@@ -212,17 +214,20 @@ def _condition_groups(run: _Run, formula, event: str) -> list[list] | None:
     return groups if len(groups) <= 8 else None
 
 
-def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: str | None) -> xosc.Trigger:
+def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str] | None) -> xosc.Trigger:
+    """`armed_by`: the events whose start arms this step (None: armed at time 0)."""
     common = []
     after = run.num(step.after_s) if step.after_s is not None else 0.0
     if armed_by is None:
-        common.append(xosc.ValueTrigger(run.unique(f"{event}_start"), 0, xosc.ConditionEdge.none,
-                                        xosc.SimulationTimeCondition(after, xosc.Rule.greaterOrEqual)))
+        if after > 0.0 or (step.at_s is None and step.condition is None):
+            common.append(xosc.ValueTrigger(run.unique(f"{event}_start"), 0, xosc.ConditionEdge.none,
+                                            xosc.SimulationTimeCondition(after, xosc.Rule.greaterOrEqual)))
     else:
-        common.append(xosc.ValueTrigger(run.unique(f"{event}_armed"), after, xosc.ConditionEdge.none,
-                                        xosc.StoryboardElementStateCondition(
-                                            xosc.StoryboardElementType.event, armed_by,
-                                            xosc.StoryboardElementState.startTransition)))
+        for ref in armed_by:
+            common.append(xosc.ValueTrigger(run.unique(f"{event}_armed"), after, xosc.ConditionEdge.none,
+                                            xosc.StoryboardElementStateCondition(
+                                                xosc.StoryboardElementType.event, ref,
+                                                xosc.StoryboardElementState.startTransition)))
     if step.at_s is not None:
         common.append(xosc.ValueTrigger(run.unique(f"{event}_at"), 0, xosc.ConditionEdge.none,
                                         xosc.SimulationTimeCondition(run.num(step.at_s), xosc.Rule.greaterOrEqual)))
@@ -253,6 +258,7 @@ def _event(run: _Run, actor: str, clause: ClausePlan, step: TriggerPlan | None, 
     settings = resolve_settings(clause.settings, run.params)
     cls_settings = _with_defaults(clause.name, settings)
     name = run.unique(f"{actor}_{clause.name}")
+    run.event_names.append(name)
     keyword = BEHAVIORS.get(clause.name).keyword  # aliases (`follow`) export as their behaviour
     action, standard = ACTIONS[keyword](run, actor, cls_settings)
     event = xosc.Event(name, xosc.Priority.parallel)
@@ -278,14 +284,43 @@ def _literal(value):
     return E.Num(value=float(value))
 
 
-def _steps(run: _Run, actor: str, steps, maneuver: xosc.Maneuver, armed_by: str | None) -> None:
+def _steps(run: _Run, actor: str, steps, maneuver: xosc.Maneuver) -> None:
     for step in steps:
-        if step.group is not None or step.clause is None:
-            run.groups.setdefault(actor, []).append(step.model_dump(mode="json"))
-            run.carried.append(f"{actor}: a `{step.group.mode if step.group else 'group'}` block: script groups "
-                               "are carried in the side file only")
+        if step.group is None:
+            maneuver.add_event(_event(run, actor, step.clause, step, None))
             continue
-        maneuver.add_event(_event(run, actor, step.clause, step, armed_by))
+        first = len(run.event_names)
+        _flatten(run, actor, step, maneuver, None)
+        # The group's events, in OpenSCENARIO for other tools; exactly, in the side file.
+        run.groups.setdefault(actor, []).append(step.model_dump(mode="json"))
+        run.group_events.update(run.event_names[first:])
+        run.carried.append(f"{actor}: a `{step.group.mode}` block: events linked by storyboard-element "
+                           "conditions (the step semantics exactly in the side file)")
+
+
+def _flatten(run: _Run, actor: str, step: TriggerPlan, maneuver: xosc.Maneuver, armed_by: list[str] | None):
+    """Events for one step; returns the events whose start together mean the step is done."""
+    if step.group is None:
+        event = _event(run, actor, step.clause, step, armed_by)
+        maneuver.add_event(event)
+        return [event.name]
+    if step.at_s is not None or step.after_s is not None or step.condition is not None:
+        # An anchor event marks the moment the group step fires (a no-op action).
+        name = run.unique(f"{actor}_{step.group.mode}")
+        run.event_names.append(name)
+        anchor = xosc.Event(name, xosc.Priority.parallel)
+        anchor.add_action(run.unique(f"{name}_action"), xosc.VisibilityAction(True, True, True))
+        anchor.add_trigger(_start_trigger(run, step, name, armed_by))
+        maneuver.add_event(anchor)
+        armed_by = [name]
+    if step.group.mode == "parallel":
+        done = []
+        for sub in step.group.steps:
+            done += _flatten(run, actor, sub, maneuver, armed_by)
+        return done or (armed_by or [])
+    for sub in step.group.steps:
+        armed_by = _flatten(run, actor, sub, maneuver, armed_by)
+    return armed_by or []
 
 
 # ---------------------------------------------------------------- side file
@@ -330,6 +365,7 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
         "behaviors": run.behaviors,
         "conditions": run.conditions,
         "groups": run.groups,
+        "group_events": sorted(run.group_events),
     }
 
 
@@ -364,7 +400,7 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
         maneuver = xosc.Maneuver(f"{a.name}_maneuver")
         for clause in a.behaviors:
             maneuver.add_event(_event(run, a.name, clause, None, None))
-        _steps(run, a.name, a.triggers, maneuver, None)
+        _steps(run, a.name, a.triggers, maneuver)
         if maneuver.events:
             group = xosc.ManeuverGroup(f"{a.name}_maneuver_group")
             group.add_actor(a.name)
@@ -391,6 +427,6 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
     sidecar_path = out / f"{stem}.addt.json"
     xosc_path.write_text(xml_text(scenario.get_element()))
     xodr_path.write_text(roads.text)
-    sidecar_path.write_text(json.dumps(sidecar, indent=2, sort_keys=True) + "\n")
+    sidecar_path.write_text(json.dumps(sidecar, indent=2) + "\n")
     return Export(xosc_path, xodr_path, sidecar_path, run.carried)
 

@@ -124,6 +124,7 @@ class _Importer:
         self.xodr_text = ""
         self.events: dict[str, tuple] = {}  # event name -> (actor, kind, fields, clause)
         self.pending: list[tuple] = []  # events started by another event: linked at the end
+        self.anchors: dict[str, tuple] = {}  # no-op events that start a group: name -> (actor, start fields)
         self.placed: dict[str, tuple] = {}  # actor -> (road name, lane, s, offset)
         self.doc = None
 
@@ -324,6 +325,12 @@ class _Translate(_Importer):
 
     def load_sidecar(self, decls) -> None:
         name = self.params[SIDECAR_PARAM][1]
+        try:
+            confine(name, self.path.parent, self.root)
+        except Refused as refused:
+            self.approx(decls, f"side file {name}: {refused.message}; the ego's stack and sensors, the faults, "
+                               "oracles and exact behaviours it carries are not imported")
+            return
         got = self.read(name, self.path.parent, decls)
         if got is None:
             return
@@ -594,6 +601,8 @@ class _Translate(_Importer):
                     settings = {}
                     for prop in ctrl.iterfind("Properties/Property"):
                         raw = prop.get("value", "")
+                        if raw == "":
+                            continue  # an empty setting is the default
                         try:
                             settings[prop.get("name")] = _setting(json.loads(raw))
                         except ValueError:
@@ -626,7 +635,7 @@ class _Translate(_Importer):
         if dv < 0:  # constant deceleration to a speed: exactly `brake`
             return ClausePlan(keyword="behavior", name="brake",
                               settings={"decel": E.Num(value=min(rate, 12.0)), "to_speed": v})
-        if shape not in ("step",):
+        if shape != "step" and dv:
             self.approx(dyn, f"a {shape} speed change: `cruise`, which tracks the speed with a 1 s time constant "
                              f"limited to {rate:.3g} m/s^2")
         return ClausePlan(keyword="behavior", name="cruise",
@@ -711,6 +720,8 @@ class _Translate(_Importer):
 
     def event(self, event, who: str, act_at) -> None:
         name = event.get("name", "")
+        if name in (self.sidecar or {}).get("group_events", ()):
+            return  # a step of a group: the side file has the group (appended in `plan`)
         actions = list(event.iterfind("Action"))
         clauses = []
         for action in actions:
@@ -723,6 +734,12 @@ class _Translate(_Importer):
             inner = _only_child(body)
             if inner is None:
                 continue
+            if inner.tag == "VisibilityAction" and len(actions) == 1:
+                # An exported group's anchor (a no-op): the events it starts form one group.
+                step = self.start(event.find("StartTrigger"), who, act_at)
+                if step is not None and step[0] == "now":
+                    self.anchors[name] = (who, step[1])
+                return
             exact = (self.sidecar or {}).get("behaviors", {}).get(name)
             clause = ClausePlan.model_validate(exact["clause"]) if exact else self.private_action(inner, who)
             if clause is not None:
@@ -836,7 +853,7 @@ class _Translate(_Importer):
                 ahead = _ahead(self.placed, a, b, self.param_values())
                 left = sig("gap", a, b) if ahead else sig("gap", b, a)
                 return E.Binary(op=op, left=left, right=_plus(value, E.Num(value=-half)) if half else value)
-            if kind == "cartesianDistance":
+            if kind in ("cartesianDistance", "euclidianDistance"):
                 if free:
                     self.approx(c, "a free-space distance: the centre distance less half of both lengths")
                     half = 0.5 * (self.size(a)[0] + self.size(b)[0])
@@ -868,7 +885,18 @@ class _Translate(_Importer):
     # -- sequences: an event started by another event of the same actor
 
     def link_sequences(self) -> None:
+        grouped: dict[str, list] = {}
         for name, who, (ref, delay, state, cond), clause in self.pending:
+            if ref in self.anchors and self.anchors[ref][0] == who:
+                grouped.setdefault(ref, []).append(TriggerPlan(clause=clause, after_s=E.Num(value=delay)
+                                                               if delay else None))
+                self.events[name] = (who, "now", {}, clause)
+        for ref, steps in grouped.items():
+            who, fields = self.anchors[ref]
+            self.actors[who]["triggers"].append(TriggerPlan(group=GroupPlan(mode="parallel", steps=steps), **fields))
+        for name, who, (ref, delay, state, cond), clause in self.pending:
+            if ref in grouped:
+                continue
             first = self.events.get(ref)
             if first is None or first[0] != who:
                 self.skip(cond, f"event '{name}' starts on '{ref}', "
@@ -935,7 +963,7 @@ class _Translate(_Importer):
         agents = [a for a in actors if a.name != "ego"]
         faults = [pinned_fault_plan(ConcreteFault.model_validate(f)) for f in sc.get("faults", [])]
         oracles = [OraclePlan.model_validate(o) for o in sc.get("oracles", [])]
-        description = sc.get("description") or (header.get("description", "") if header is not None else "")
+        description = sc["description"] if sc else (header.get("description", "") if header is not None else "")
         name = sc.get("scenario") or _safe_name(self.path.stem, set())
         plan = ScenarioPlan(name=name, description=description[:500], duration_s=duration,
                             step_s=sc.get("step_s", 0.01), seed=sc.get("seed", 0), run_seed=sc.get("run_seed"),
