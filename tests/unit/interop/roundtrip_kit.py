@@ -52,3 +52,30 @@ def round_trip(spec, work: Path, sidecar: bool = True) -> RoundTrip:
         y = np.interp(t, tb.time, other.y)
         out.rms_m[name] = float(np.sqrt(np.mean((track.x[:n] - x) ** 2 + (track.y[:n] - y) ** 2)))
     return out
+
+
+def main() -> None:
+    """Print the round-trip figures of every example, with and without the side file
+    (docs/openscenario.md): python -m tests.unit.interop.roundtrip_kit"""
+    import tempfile
+
+    from tests.conftest import EXAMPLES, ROOT, needs_torch
+    from addt_dsl.compiler import compile_file
+
+    paths = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / "every_behavior.addt"]
+    print("| example | side file | same verdicts | RMS per actor [m] |")
+    print("|---|---|---|---|")
+    for path in paths:
+        if needs_torch(path):
+            continue
+        spec = expand(compile_file(path).plan).specs[0]
+        for sidecar in (True, False):
+            with tempfile.TemporaryDirectory() as tmp:
+                got = round_trip(spec, Path(tmp), sidecar=sidecar)
+            rms = ", ".join(f"{k} {v:.3g}" for k, v in got.rms_m.items())
+            same = "yes" if got.same_verdicts else ("n/a (no oracles without it)" if not sidecar else "no")
+            print(f"| {path.stem} | {'with' if sidecar else 'without'} | {same} | {rms} |")
+
+
+if __name__ == "__main__":
+    main()

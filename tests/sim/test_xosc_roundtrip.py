@@ -1,0 +1,50 @@
+"""Round trip: for every example, export -> import -> run gives the verdicts and actor
+trajectories of the original run (RMS < 0.1 m); a shrunk counterexample's .xosc replays
+the failure. docs/openscenario.md reports the figures (and those without the side file)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from addt_dsl.cli import main
+from addt_dsl.compiler import compile_file
+from addt_dsl.interop.xosc_import import import_xosc
+from addt_dsl.sweep import expand
+from tests.conftest import EXAMPLES, ROOT, needs_torch
+from tests.unit.interop.asam_qc import problems
+from tests.unit.interop.roundtrip_kit import round_trip
+
+pytestmark = pytest.mark.slow
+SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / "every_behavior.addt"]
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])
+def test_export_import_run_gives_the_same_run(path, tmp_path):
+    if needs_torch(path):
+        pytest.importorskip("torch")
+    spec = expand(compile_file(path).plan).specs[0]
+    got = round_trip(spec, tmp_path)
+    print(path.stem, got.verdicts_before, {k: round(v, 6) for k, v in got.rms_m.items()})
+    assert got.same_verdicts, (got.verdicts_before, got.verdicts_after)
+    assert max(got.rms_m.values()) < 0.1, got.rms_m
+    assert not [d for d in got.diagnostics if d.startswith("W")], got.diagnostics
+
+
+def test_shrunk_counterexample_has_a_replayable_xosc(tmp_path):
+    out = tmp_path / "min"
+    code = main(["shrink", str(EXAMPLES / "ten_faults.addt"), "--out", str(out), "--no-animation",
+                 "--max-simulations", "150"])
+    assert code == 1
+    (addt,) = out.glob("*.addt")
+    xosc = addt.with_suffix(".xosc")
+    assert xosc.is_file() and (out / f"{addt.stem}.addt.json").is_file()
+    assert problems(xosc, "qc_openscenario") == []
+    got = import_xosc(xosc)
+    back = tmp_path / "back"
+    back.mkdir()
+    (back / "replay.addt").write_text(got.text)
+    for name, body in got.side_files.items():
+        (back / name).write_text(body)
+    assert main([str(back / "replay.addt"), "--jobs", "1"]) == 1  # the failure replays
