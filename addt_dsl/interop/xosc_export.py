@@ -28,7 +28,6 @@ short (docs/openscenario.md has the full table):
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 

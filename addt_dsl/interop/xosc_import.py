@@ -654,6 +654,9 @@ class _Translate(_Importer):
             if ref is None:
                 return None
             base = self.actors[ref]["lane_now"] if ref != who else info["lane_now"]
+            if base is None:
+                self.skip(tgt, f"lane relative to {ref}, whose lane is not known (no translated position)")
+                return None
             if ref != who:
                 self.approx(tgt, f"lane relative to {ref}: its lane at the start ({base}), not at the change",
                             "`lane_change to lane of X` is issue 16")

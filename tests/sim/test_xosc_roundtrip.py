@@ -4,7 +4,6 @@ the failure. docs/openscenario.md reports the figures (and those without the sid
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import pytest
 

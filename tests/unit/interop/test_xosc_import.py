@@ -4,7 +4,9 @@ diagnostic, never a traceback, and nothing is read outside the root directory.""
 from __future__ import annotations
 
 import json
-from pathlib import Path
+import random
+import re
+import shutil
 
 import pytest
 
@@ -143,3 +145,24 @@ def test_cli_import_refuses_files_outside_the_scenario_directory_by_default(caps
     code = main(["import", str(ESMINI / "xosc" / "cut-in_simple.xosc")])
     err = capsys.readouterr().err
     assert code == 2 and "E0402" in err  # the map is ../xodr/: outside unless --root allows it
+
+
+VALUES = ["", "-1", "1e308", "nan", "inf", "$x", "${1/0}", "abc", "0", "-5", "999999", "1.5", "${(}", "$"]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_mutated_esmini_files_never_raise(seed, tmp_path):
+    """Attribute values of real files replaced by hostile ones: diagnostics, never an exception."""
+    rng = random.Random(seed)
+    shutil.copytree(ESMINI, tmp_path / "e")
+    scenarios = [p for p in SCENARIOS if p.name not in NOT_IMPORTED]
+    for _ in range(40):
+        text = rng.choice(scenarios).read_text()
+        for _ in range(rng.randint(1, 4)):
+            spans = [m.span(2) for m in re.finditer(r'(\w+)="([^"]*)"', text)]
+            a, b = rng.choice(spans)
+            text = text[:a] + rng.choice(VALUES) + text[b:]
+        path = tmp_path / "e" / "xosc" / "mutated.xosc"
+        path.write_text(text)
+        got = import_xosc(path, root=tmp_path / "e")
+        assert got.text is not None or any(d.is_error for d in got.diagnostics)
