@@ -536,6 +536,27 @@ class _Translate(_Importer):
         offset = t - odr.lane_center_t(lane, s)
         return road_name, lane, E.Num(value=round(s, 9)), E.Num(value=round(offset, 9))
 
+    def against_s(self, pos_el, placed) -> bool:
+        """Whether the entity faces against the road's +s (OpenSCENARIO: a lane position
+        without an orientation faces the lane's driving direction)."""
+        road_name, lane, s, _ = placed
+        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+        odr = self.network.road(road_id)
+        orient = _only_child(pos_el).find("Orientation") if _only_child(pos_el) is not None else None
+        try:
+            s_now = float(eval_param_expr(s, self.param_values()))
+            if orient is not None and orient.get("h") is not None:
+                h = self.value(orient, "h")
+                if orient.get("type", "relative") == "absolute":
+                    h -= odr.reference_pose(s_now)[2]
+                elif _only_child(pos_el).tag == "LanePosition" and lane:
+                    h += 0.0 if odr.travel_direction(lane) > 0 else math.pi
+                return math.cos(h) < 0
+            return lane != 0 and _only_child(pos_el).tag in ("LanePosition", "RelativeLanePosition") \
+                and odr.travel_direction(lane) < 0
+        except (ValueError, ArithmeticError, _Stop):
+            return False
+
     # -- init
 
     def init(self, init) -> None:
@@ -556,6 +577,7 @@ class _Translate(_Importer):
                     if got is not None:
                         self.placed[who] = got
                         self.actors[who]["lane_now"] = got[1]
+                        self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
                 elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
                                                                 "AbsoluteTargetSpeed") is not None:
                     target = _child(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
@@ -938,9 +960,8 @@ class _Translate(_Importer):
             road, lane, s, offset = self.placed[who]
             kind = VEHICLES[info["vehicle"]]
             extra = sc.get("actors", {}).get(who, {})
-            if info["vehicle"] != "pedestrian" and lane > 0 and self.network.road(
-                    next(i for i, r in self.roads.items() if r.name == road)).rule != "LHT":
-                self.approx(info["el"], f"{who} is on lane {lane}, which OpenDRIVE drives against s; addt-dsl "
+            if info["vehicle"] != "pedestrian" and info.get("against_s"):
+                self.approx(info["el"], f"{who} faces against the road's s direction (lane {lane}); addt-dsl "
                                         "actors drive along +s", "driving directions are issue 15")
             fields = dict(name=who, vehicle=info["vehicle"], road=road, lane=E.Num(value=float(lane)), s=s,
                           speed=info.get("speed", E.Num(value=0.0)),
