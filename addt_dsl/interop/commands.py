@@ -17,10 +17,10 @@ from addt_dsl import units
 from addt_dsl.console import compile_and_report
 from addt_dsl.diagnostics import render_json, render_text
 from addt_dsl.errors import EXIT_OK, EXIT_USAGE, UsageError
-from addt_dsl.interop.xodr_export import ExportError
-from addt_dsl.interop.xosc_export import export_run
-from addt_dsl.interop.xosc_import import import_xosc
 from addt_dsl.sweep import expand, make_spec
+
+# The translators (scenariogeneration, the road reader) load in the commands that use them,
+# as cli.py does for its commands: `addtc check` does not pay for them.
 
 _VALUE = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(\S*)\s*$")
 
@@ -64,6 +64,9 @@ def _param_values(plan, items: list[str]) -> dict[str, float]:
 
 
 def cmd_export(args) -> int:
+    from addt_dsl.interop.xodr_export import ExportError
+    from addt_dsl.interop.xosc_export import export_run
+
     result = compile_and_report(args.file, "text")
     if not result.ok:
         return EXIT_USAGE
@@ -91,6 +94,8 @@ def cmd_export(args) -> int:
 
 
 def cmd_import(args) -> int:
+    from addt_dsl.interop.xosc_import import import_xosc
+
     got = import_xosc(args.file, args.root)
     if args.format == "json":
         print(render_json(got.diagnostics))
