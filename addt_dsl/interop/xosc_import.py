@@ -34,6 +34,7 @@ from pydantic import TypeAdapter
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.compiler import compile_source
+from addt_dsl.compiler.rules.oracles import NO_CLAUSES
 from addt_dsl.confine import Refused, confine
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
 from addt_dsl.expr import eval_param_expr
@@ -979,6 +980,10 @@ class _Translate(_Importer):
                 if extra.get("stack"):
                     fields["stack"] = ClausePlan.model_validate(extra["stack"])
                     fields["sensors"] = [ClausePlan.model_validate(x) for x in extra.get("sensors", [])]
+                elif not sc and eval_param_expr(fields["speed"], self.param_values()) > 0:
+                    # The stack cruises at the ego's initial speed, as OpenSCENARIO's default
+                    # controller keeps the speed the file gives it.
+                    fields["stack"] = ClausePlan(keyword="stack", name="bev", settings={"cruise_speed": fields["speed"]})
                 for key in ("goal_s", "mu"):
                     if extra.get(key) is not None:
                         fields[key] = E.Num(value=float(extra[key]))
@@ -987,6 +992,8 @@ class _Translate(_Importer):
         agents = [a for a in actors if a.name != "ego"]
         faults = [pinned_fault_plan(ConcreteFault.model_validate(f)) for f in sc.get("faults", [])]
         oracles = [OraclePlan.model_validate(o) for o in sc.get("oracles", [])]
+        if not sc:  # OpenSCENARIO states no pass criteria: the one every scenario here has
+            oracles = [OraclePlan(name="no_collision", formula=NO_CLAUSES["collision"]("ego", None))]
         description = sc["description"] if sc else (header.get("description", "") if header is not None else "")
         name = sc.get("scenario") or _safe_name(self.path.stem, set())
         plan = ScenarioPlan(name=name, description=description[:500], duration_s=duration,
@@ -1075,7 +1082,8 @@ def import_xosc(path: str | Path, root: str | Path | None = None) -> Imported:
     comment = (f"Imported from {path.name} by addtc import" + (" (with its addt-dsl side file)"
                                                                if imp.sidecar else "")
                + f"\n{sum(d.code.startswith('W07') for d in imp.sink.items)} element(s) not translated "
-                 "or approximated: see the diagnostics")
+                 "or approximated: see the diagnostics"
+               + ("" if imp.sidecar else "\nOpenSCENARIO states no pass criteria: `no collision` is the default oracle"))
     try:
         text = print_plan(plan, comment=comment)
     except PrinterError as exc:

@@ -8,8 +8,9 @@ from __future__ import annotations
 import pytest
 
 from addt_dsl.cli import main
-from addt_dsl.compiler import compile_file
+from addt_dsl.compiler import compile_file, compile_source
 from addt_dsl.interop.xosc_import import import_xosc
+from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 from tests.conftest import EXAMPLES, ROOT, needs_torch
 from tests.unit.interop.asam_qc import problems
@@ -47,3 +48,22 @@ def test_shrunk_counterexample_has_a_replayable_xosc(tmp_path):
     for name, body in got.side_files.items():
         (back / name).write_text(body)
     assert main([str(back / "replay.addt"), "--jobs", "1"]) == 1  # the failure replays
+
+
+RUN_ESMINI = ["cut-in_simple", "acc-test", "alks_cut-in", "straight_500m_pedestrian", "lane_change_simple",
+              "highway_merge"]
+
+
+@pytest.mark.parametrize("name", RUN_ESMINI)
+def test_imported_esmini_scenario_runs(name, tmp_path):
+    esmini = ROOT / "tests" / "data" / "esmini"
+    got = import_xosc(esmini / "xosc" / f"{name}.xosc", root=esmini)
+    for file, body in got.side_files.items():
+        (tmp_path / file).write_text(body)
+    (spec,) = expand(compile_source(got.text, f"{name}.addt", base_dir=tmp_path).plan).specs
+    result = execute(spec)
+    assert result.status == "ok", result.error
+    assert [v.name for v in result.verdicts] == ["no_collision"]  # the default oracle
+    if name == "cut-in_simple":  # the overtaker passes the ego and cuts into its lane (-1)
+        track = result.trace.actors["OverTaker"]
+        assert track.t[0] > 0 > track.t[-1]
