@@ -343,6 +343,10 @@ class _Translate(_Importer):
         if not isinstance(data, dict) or data.get("format") != SIDECAR_FORMAT:
             self.error(decls, f"side file {name} is not an addt-dsl export side file ({SIDECAR_FORMAT})")
             return
+        problem = _sidecar_problem(data)
+        if problem:
+            self.error(decls, f"side file {name} is not what addtc export writes: {problem}")
+            return
         self.sidecar = data
 
     # -- road network
@@ -1012,6 +1016,49 @@ class _Translate(_Importer):
                 raise _Stop
             params.append(ParamPlan(name=p, dimension=units.dim_name(dim), default=float(values[p])))
         return plan.model_copy(update={"params": params})
+
+
+def _sidecar_problem(data: dict) -> str:
+    """What is wrong with a side file's contents ("" if nothing): each part is validated
+    before the import uses it, so a damaged file is a diagnostic, not an exception."""
+    try:
+        for key, kind in (("actors", dict), ("behaviors", dict), ("conditions", dict), ("groups", dict),
+                          ("faults", list), ("oracles", list), ("params", dict), ("param_dims", dict),
+                          ("group_events", list)):
+            if not isinstance(data.get(key, kind()), kind):
+                return f"'{key}' is not a {kind.__name__}"
+        for info in data.get("actors", {}).values():
+            if info.get("vehicle") not in VEHICLES:
+                return f"unknown vehicle {info.get('vehicle')!r}"
+            for key in ("length_m", "width_m", "mass_kg", "wheelbase_m", "goal_s", "mu"):
+                if info.get(key) is not None:
+                    float(info[key])
+            if info.get("stack"):
+                ClausePlan.model_validate(info["stack"])
+            for x in info.get("sensors", []):
+                ClausePlan.model_validate(x)
+        for b in data.get("behaviors", {}).values():
+            ClausePlan.model_validate(b["clause"])
+        for c in data.get("conditions", {}).values():
+            EXPR.validate_python(c["formula"])
+        for steps in data.get("groups", {}).values():
+            for step in steps:
+                TriggerPlan.model_validate(step)
+        for f in data.get("faults", []):
+            ConcreteFault.model_validate(f)
+        for o in data.get("oracles", []):
+            OraclePlan.model_validate(o)
+        for k, v in data.get("params", {}).items():
+            float(v)
+        for d in data.get("param_dims", {}).values():
+            units.dim_from_name(d)
+        float(data.get("step_s", 0.01))
+        int(data.get("seed", 0))
+        if data.get("run_seed") is not None:
+            int(data["run_seed"])
+    except (ValueError, TypeError, KeyError, AttributeError) as exc:  # pydantic's ValidationError is a ValueError
+        return (str(exc).splitlines() or [type(exc).__name__])[0][:200]
+    return ""
 
 
 def _setting(value):

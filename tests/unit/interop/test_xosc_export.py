@@ -97,3 +97,17 @@ def test_cli_export_by_params_and_run(tmp_path, capsys):
         assert main(["export", example, *bad, "--to", str(tmp_path / "c")]) == 2
         err = capsys.readouterr().err
         assert err.startswith("error:") and "Traceback" not in err
+
+
+def test_roads_from_two_sources_are_refused(tmp_path, capsys):
+    shutil.copy(EXAMPLES / "maps" / "straight_500m.xodr", tmp_path / "town.xodr")
+    (tmp_path / "mixed.addt").write_text("""scenario mixed {
+  duration 5 s
+  road main import "town.xodr" road 1
+  road side { line length 100 m }
+  ego car on main lane -1 at 20 m speed 10 m/s
+  agent a car on side lane -1 at 20 m speed 5 m/s
+}
+""")
+    assert main(["export", str(tmp_path / "mixed.addt"), "--to", str(tmp_path / "out")]) == 2
+    assert "OpenSCENARIO references one OpenDRIVE file" in capsys.readouterr().err

@@ -11,8 +11,10 @@ import shutil
 import pytest
 
 from addt_dsl.cli import main
-from addt_dsl.compiler import compile_source
+from addt_dsl.compiler import compile_file, compile_source
+from addt_dsl.interop.xosc_export import SIDECAR_FORMAT, export_run
 from addt_dsl.interop.xosc_import import import_xosc
+from addt_dsl.sweep import expand
 from tests.conftest import ROOT
 
 ESMINI = ROOT / "tests" / "data" / "esmini"
@@ -166,3 +168,17 @@ def test_mutated_esmini_files_never_raise(seed, tmp_path):
         path.write_text(text)
         got = import_xosc(path, root=tmp_path / "e")
         assert got.text is not None or any(d.is_error for d in got.diagnostics)
+
+
+@pytest.mark.parametrize("damage", ["not json", '{"format": "other"}', "[1, 2]",
+                                    "FORMAT_OK, \"faults\": [{\"kind\": 3}]}",
+                                    "FORMAT_OK, \"actors\": {\"ego\": {\"vehicle\": \"tank\"}}}",
+                                    "FORMAT_OK, \"behaviors\": {\"lead_cruise\": {\"clause\": 5}}}",
+                                    "FORMAT_OK, \"params\": {\"x\": \"y\"}}"])
+def test_damaged_side_file_is_a_diagnostic(damage, tmp_path):
+    spec = expand(compile_file(ROOT / "examples" / "lead_brake.addt").plan).specs[0]
+    done = export_run(spec, tmp_path)
+    done.sidecar_path.write_text(damage.replace("FORMAT_OK", '{"format": "%s"' % SIDECAR_FORMAT))
+    got = import_xosc(done.xosc_path)
+    assert got.text is None
+    assert any(d.code == "E0702" and "side file" in d.message for d in got.diagnostics), got.diagnostics
