@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+import math
 from pathlib import Path
 
 from scenariogeneration import xosc
@@ -36,9 +37,10 @@ from scenariogeneration import xosc
 from addt_dsl import expr as E
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, road_file, xml_text
-from addt_dsl.plan import ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
+from addt_dsl.plan import ActorPlan, ClausePlan, RoadPlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
 from addt_dsl.registry import BEHAVIORS
+from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.vehicles import VEHICLES
 
 OSC_MINOR = 2  # OpenSCENARIO 1.2
@@ -107,7 +109,21 @@ def _entity(a: ActorPlan):
 
 def _position(run: _Run, a: ActorPlan) -> xosc.LanePosition:
     offset = run.num(a.offset) if a.offset is not None else 0.0
-    return xosc.LanePosition(run.num(a.s), offset, str(int(round(run.num(a.lane)))), run.road_ids[a.road])
+    lane = int(round(run.num(a.lane)))
+    if lane > 0 and _drives_against_s(run.plan.road(a.road), a.road, lane):
+        # addt-dsl actors drive along +s; OpenSCENARIO turns an entity on a lane position to
+        # the lane's driving direction, so turn it back (relative to the lane: half a turn).
+        orientation = xosc.Orientation(h=math.pi, reference=xosc.ReferenceContext.relative)
+        return xosc.LanePosition(run.num(a.s), offset, str(lane), run.road_ids[a.road], orientation)
+    return xosc.LanePosition(run.num(a.s), offset, str(lane), run.road_ids[a.road])
+
+
+def _drives_against_s(road: RoadPlan, name: str, lane: int) -> bool:
+    """Right-hand traffic drives positive lanes against s (inline roads are right-hand)."""
+    if road.source != "xodr":
+        return lane > 0
+    rule = build_network([road])[name].road(road.xodr_road_id).rule
+    return (lane > 0) == (rule != "LHT")
 
 
 # ---------------------------------------------------------------- behaviours

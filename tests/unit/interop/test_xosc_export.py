@@ -4,6 +4,7 @@ checkers accept without errors; what OpenSCENARIO cannot hold is listed and carr
 from __future__ import annotations
 
 import json
+import math
 import shutil
 
 import pytest
@@ -111,3 +112,22 @@ def test_roads_from_two_sources_are_refused(tmp_path, capsys):
 """)
     assert main(["export", str(tmp_path / "mixed.addt"), "--to", str(tmp_path / "out")]) == 2
     assert "OpenSCENARIO references one OpenDRIVE file" in capsys.readouterr().err
+
+
+def test_an_actor_on_a_left_lane_faces_along_s(tmp_path):
+    text = """scenario pos {
+  duration 5 s
+  road r {
+    line length 300 m
+    lanes right 1 left 1 width 3.5 m
+  }
+  ego car on r lane -1 at 20 m speed 10 m/s
+  agent a car on r lane 1 at 50 m speed 8 m/s { behavior cruise speed 8 m/s }
+}
+"""
+    done = export_run(expand(compile_source(text, "pos.addt").plan).specs[0], tmp_path)
+    root = DET.parse(done.xosc_path).getroot()
+    assert root.find("Storyboard/Init/Actions/Private[@entityRef='ego']//Orientation") is None
+    turn = root.find("Storyboard/Init/Actions/Private[@entityRef='a']//LanePosition/Orientation")
+    assert (turn.get("type"), float(turn.get("h"))) == ("relative", math.pi)  # lane 1 drives against s
+    assert problems(done.xosc_path, "qc_openscenario") == []
