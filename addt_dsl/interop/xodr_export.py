@@ -81,7 +81,7 @@ def road_file(plan: ScenarioPlan, stem: str) -> RoadFile:
         name = Path(imported[0].xodr_file or f"{stem}.xodr").name
         return RoadFile(name=name, text=imported[0].xodr_text or "", generated=False,
                         road_ids={r.name: str(r.xodr_road_id) for r in imported})
-    odr = xodr.OpenDrive(plan.name, revMajor="1", revMinor="6")
+    odr = xodr.OpenDrive(plan.name, revMajor="1", revMinor="8")
     ids = {}
     for i, road in enumerate(plan.roads, start=1):
         odr.add_road(_road(road, i))
