@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-import math
 from pathlib import Path
 
 from scenariogeneration import xosc
@@ -37,7 +36,7 @@ from scenariogeneration import xosc
 from addt_dsl import expr as E
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, road_file, xml_text
-from addt_dsl.plan import ActorPlan, ClausePlan, RoadPlan, RunSpec, TriggerPlan, resolve_settings
+from addt_dsl.plan import ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.roadspec import build_network
@@ -83,6 +82,7 @@ class _Run:
         self.s0 = {a.name: self.num(a.s) for a in self.plan.actors()}
         self.v0 = {a.name: self.num(a.speed) for a in self.plan.actors()}
         self.names: set[str] = set()
+        self.along = {a.name for a in self.plan.actors() if _along_s(self.plan, a, int(round(self.num(a.lane))))}
 
     def num(self, e) -> float:
         return float(eval_param_expr(e, self.params))
@@ -102,6 +102,8 @@ def _entity(a: ActorPlan):
     box = xosc.BoundingBox(a.width_m, a.length_m, kind.height_m, 0.0, 0.0, kind.height_m / 2)
     if a.vehicle == "pedestrian":
         return xosc.Pedestrian(a.name, 80.0, xosc.PedestrianCategory.pedestrian, box, model=a.vehicle)
+    if a.vehicle == "obstacle":
+        return xosc.MiscObject(a.name, a.mass_kg, xosc.MiscObjectCategory.obstacle, box)
     front = xosc.Axle(0.5, 0.7, a.width_m * 0.85, a.wheelbase_m / 2, 0.35)
     rear = xosc.Axle(0.0, 0.7, a.width_m * 0.85, -a.wheelbase_m / 2, 0.35)
     return xosc.Vehicle(a.name, CATEGORY[a.vehicle], box, front, rear, 70.0, 10.0, 12.0, mass=a.mass_kg)
@@ -110,20 +112,22 @@ def _entity(a: ActorPlan):
 def _position(run: _Run, a: ActorPlan) -> xosc.LanePosition:
     offset = run.num(a.offset) if a.offset is not None else 0.0
     lane = int(round(run.num(a.lane)))
-    if lane > 0 and _drives_against_s(run.plan.road(a.road), a.road, lane):
-        # addt-dsl actors drive along +s; OpenSCENARIO turns an entity on a lane position to
-        # the lane's driving direction, so turn it back (relative to the lane: half a turn).
-        orientation = xosc.Orientation(h=math.pi, reference=xosc.ReferenceContext.relative)
-        return xosc.LanePosition(run.num(a.s), offset, str(lane), run.road_ids[a.road], orientation)
-    return xosc.LanePosition(run.num(a.s), offset, str(lane), run.road_ids[a.road])
+    road_id = a.route[0] if a.route else run.road_ids[a.road]
+    if a.yaw is not None:  # both languages face an entity along its lane's driving direction
+        orientation = xosc.Orientation(h=run.num(a.yaw), reference=xosc.ReferenceContext.relative)
+        return xosc.LanePosition(run.num(a.s), offset, str(lane), road_id, orientation)
+    return xosc.LanePosition(run.num(a.s), offset, str(lane), road_id)
 
 
-def _drives_against_s(road: RoadPlan, name: str, lane: int) -> bool:
-    """Right-hand traffic drives positive lanes against s (inline roads are right-hand)."""
+def _along_s(plan, a: ActorPlan, lane: int) -> bool:
+    """Whether the actor moves towards +s (no route, a lane driven along s)."""
+    if a.route:
+        return False
+    road = plan.road(a.road)
     if road.source != "xodr":
-        return lane > 0
-    rule = build_network([road])[name].road(road.xodr_road_id).rule
-    return (lane > 0) == (rule != "LHT")
+        return lane < 0
+    network = build_network([road])[a.road]
+    return network.road(road.xodr_road_id or next(iter(network.roads))).travel_direction(lane) > 0
 
 
 # ---------------------------------------------------------------- behaviours
@@ -192,7 +196,7 @@ def _compare(run: _Run, node, name: str):
         return None
     fn, args = sig
     rule = RULES[op]
-    if fn == "s" and op in (">", ">=") and len(args) == 1 and args[0] in run.s0:
+    if fn == "s" and op in (">", ">=") and len(args) == 1 and args[0] in run.along:
         cond = xosc.TraveledDistanceCondition(max(0.0, value - run.s0[args[0]]))
         return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, args[0])
     if fn == "speed" and len(args) == 1:
@@ -353,6 +357,8 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
     for o in plan.oracles:
         carried.append(f"oracle {o.name} ({o.severity})")
     for a in plan.actors():
+        if a.route:
+            carried.append(f"{a.name}: route {' -> '.join(a.route)} (no RoutingAction written)")
         for key in ("goal_s", "mu"):
             if getattr(a, key) is not None:
                 carried.append(f"{a.name}: {key.removesuffix('_s')}")
@@ -369,7 +375,8 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
         "params": pinned.params,
         "param_dims": {p.name: p.dimension for p in plan.params},
         "actors": {a.name: {"vehicle": a.vehicle, "road": a.road, "length_m": a.length_m, "width_m": a.width_m,
-                            "mass_kg": a.mass_kg, "wheelbase_m": a.wheelbase_m,
+                            "mass_kg": a.mass_kg, "wheelbase_m": a.wheelbase_m, "route": list(a.route),
+                            "yaw": None if a.yaw is None else run.num(a.yaw),
                             "goal_s": None if a.goal_s is None else run.num(a.goal_s),
                             "mu": None if a.mu is None else run.num(a.mu),
                             "stack": None if a.stack is None else a.stack.model_dump(mode="json"),

@@ -8,10 +8,10 @@ errors. Files (the road network, vehicle catalogs, the side file of an exported 
 are read only inside the root directory (default: the scenario's directory), through
 `addt_dsl/confine.py`.
 
-Codes (docs/diagnostics.md): E0701 unreadable file (malformed XML, DTD or entity, too
-large), E0702 invalid content (a missing element, attribute or reference), E0401/E0402
-a missing file or one outside the root, W0701 an element that is not translated (no
-equivalent in the language today), W0702 a value approximated or defaulted. Each names
+Codes (docs/diagnostics.md): E0801 unreadable file (malformed XML, DTD or entity, too
+large), E0802 invalid content (a missing element, attribute or reference), E0401/E0402
+a missing file or one outside the root, W0801 an element that is not translated (no
+equivalent in the language today), W0802 a value approximated or defaulted. Each names
 the XML line and element. docs/openscenario.md has the mapping table.
 """
 
@@ -135,14 +135,14 @@ class _Importer:
         return Span.point(self.display, self.lines.get(id(el), 1), 1) if el is not None else \
             Span.point(self.display, 1, 1)
 
-    def error(self, el, message: str, *notes: str, code: str = "E0702") -> None:
+    def error(self, el, message: str, *notes: str, code: str = "E0802") -> None:
         self.sink.error(code, message, self.span(el), *notes, label=f"<{el.tag}>" if el is not None else "")
 
     def skip(self, el, message: str, *notes: str) -> None:
-        self.sink.warning("W0701", message, self.span(el), *notes, label=f"<{el.tag}>")
+        self.sink.warning("W0801", message, self.span(el), *notes, label=f"<{el.tag}>")
 
     def approx(self, el, message: str, *notes: str) -> None:
-        self.sink.warning("W0702", message, self.span(el), *notes, label=f"<{el.tag}>" if el is not None else "")
+        self.sink.warning("W0802", message, self.span(el), *notes, label=f"<{el.tag}>" if el is not None else "")
 
     # -- files
 
@@ -168,12 +168,12 @@ class _Importer:
             parser.feed(text)
             root = parser.close()
         except DefusedXmlException as exc:
-            self.sink.error("E0701", f"{display}: refused: {type(exc).__name__} (DTDs and entities are not read)",
+            self.sink.error("E0801", f"{display}: refused: {type(exc).__name__} (DTDs and entities are not read)",
                             Span.point(display, 1, 1))
             return None
         except Exception as exc:  # noqa: BLE001 - expat's ParseError, and any error on hostile input
             line = getattr(exc, "position", (1, 0))[0] if hasattr(exc, "position") else 1
-            self.sink.error("E0701", f"{display}: not well-formed XML: {exc}", Span.point(display, max(1, line), 1))
+            self.sink.error("E0801", f"{display}: not well-formed XML: {exc}", Span.point(display, max(1, line), 1))
             return None
         self.lines.update(parser.lines)
         return root
@@ -439,9 +439,10 @@ class _Translate(_Importer):
             kind = CATEGORY_KIND.get(category, "car")
         elif body.tag == "Pedestrian":
             kind = "pedestrian"
+        elif body.tag == "MiscObject":
+            kind = "obstacle"
         else:
-            self.skip(body, f"<{body.tag}> '{obj.get('name')}' is not translated",
-                      "static objects are part of the road-network work (issue 15)")
+            self.skip(body, f"<{body.tag}> '{obj.get('name')}' is not translated")
             return
         dims = _child(body, "BoundingBox", "Dimensions") if body is not None else None
         if dims is not None:
@@ -542,23 +543,22 @@ class _Translate(_Importer):
         return road_name, lane, E.Num(value=round(s, 9)), E.Num(value=round(offset, 9))
 
     def against_s(self, pos_el, placed) -> bool:
-        """Whether the entity faces against the road's +s (OpenSCENARIO: a lane position
-        without an orientation faces the lane's driving direction)."""
+        """Whether the entity faces against its lane's driving direction (addt-dsl, like
+        OpenSCENARIO's default, drives an actor in its lane's direction)."""
         road_name, lane, s, _ = placed
         road_id = next(i for i, r in self.roads.items() if r.name == road_name)
         odr = self.network.road(road_id)
         orient = _only_child(pos_el).find("Orientation") if _only_child(pos_el) is not None else None
+        if orient is None or orient.get("h") is None or lane == 0:
+            return False
         try:
-            s_now = float(eval_param_expr(s, self.param_values()))
-            if orient is not None and orient.get("h") is not None:
-                h = self.value(orient, "h")
-                if orient.get("type", "relative") == "absolute":
-                    h -= odr.reference_pose(s_now)[2]
-                elif _only_child(pos_el).tag == "LanePosition" and lane:
-                    h += 0.0 if odr.travel_direction(lane) > 0 else math.pi
-                return math.cos(h) < 0
-            return lane != 0 and _only_child(pos_el).tag in ("LanePosition", "RelativeLanePosition") \
-                and odr.travel_direction(lane) < 0
+            h = self.value(orient, "h")
+            if orient.get("type", "relative") == "absolute":
+                s_now = float(eval_param_expr(s, self.param_values()))
+                h -= odr.reference_pose(s_now)[2] + (0.0 if odr.travel_direction(lane) > 0 else math.pi)
+            elif _only_child(pos_el).tag != "LanePosition":  # relative to the road's +s
+                h -= 0.0 if odr.travel_direction(lane) > 0 else math.pi
+            return math.cos(h) < 0
         except (ValueError, ArithmeticError, _Stop):
             return False
 
@@ -855,8 +855,10 @@ class _Translate(_Importer):
         op = RULE_OPS.get(c.get("rule", ""), ">")
         sig = lambda fn, *args: E.Signal(name=f"{fn}({','.join(args)})")  # noqa: E731 - canonical names
         if c.tag == "TraveledDistanceCondition":
-            s0 = self.placed[a][2]
-            return E.Binary(op=">=", left=sig("s", a), right=_plus(s0, self.number(c, "value", units.LENGTH)))
+            s0, travelled = self.placed[a][2], self.number(c, "value", units.LENGTH)
+            if self.along_s(a):
+                return E.Binary(op=">=", left=sig("s", a), right=_plus(s0, travelled))
+            return E.Binary(op="<=", left=sig("s", a), right=E.Binary(op="-", left=s0, right=travelled))
         if c.tag == "SpeedCondition":
             return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
         if c.tag == "AccelerationCondition":
@@ -906,6 +908,12 @@ class _Translate(_Importer):
                   "translated: traveled distance, speed, acceleration, relative distance, time headway, TTC, "
                   "reach position; held conditions and relative speed are issue 16")
         return None
+
+    def along_s(self, who: str) -> bool:
+        """Whether the actor drives towards +s (its lane's OpenDRIVE direction)."""
+        road_name, lane = self.placed[who][0], self.placed[who][1]
+        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+        return lane == 0 or self.network.road(road_id).travel_direction(lane) > 0
 
     def size(self, who: str) -> tuple[float, float]:
         info = self.actors[who]
@@ -965,9 +973,9 @@ class _Translate(_Importer):
             road, lane, s, offset = self.placed[who]
             kind = VEHICLES[info["vehicle"]]
             extra = sc.get("actors", {}).get(who, {})
-            if info["vehicle"] != "pedestrian" and info.get("against_s"):
-                self.approx(info["el"], f"{who} faces against the road's s direction (lane {lane}); addt-dsl "
-                                        "actors drive along +s", "driving directions are issue 15")
+            if info["vehicle"] not in ("pedestrian", "obstacle") and info.get("against_s"):
+                self.approx(info["el"], f"{who} faces against the driving direction of lane {lane}; addt-dsl "
+                                        "drives it in the lane's direction")
             fields = dict(name=who, vehicle=info["vehicle"], road=road, lane=E.Num(value=float(lane)), s=s,
                           speed=info.get("speed", E.Num(value=0.0)),
                           length_m=extra.get("length_m") or info["length_m"] or kind.length_m,
@@ -975,6 +983,10 @@ class _Translate(_Importer):
                           behaviors=info["behaviors"], triggers=info["triggers"])
             if extra.get("mass_kg") is not None:
                 fields.update(mass_kg=extra["mass_kg"], wheelbase_m=extra["wheelbase_m"])
+            if extra.get("route"):
+                fields["route"] = [str(r) for r in extra["route"]]
+            if extra.get("yaw") is not None:
+                fields["yaw"] = E.Num(value=float(extra["yaw"]))
             if eval_param_expr(offset, self.param_values()) != 0.0:
                 fields["offset"] = offset
             fields["triggers"] = fields["triggers"] + [TriggerPlan.model_validate(g)
@@ -1122,19 +1134,19 @@ def import_xosc(path: str | Path, root: str | Path | None = None) -> Imported:
     except _Stop:
         plan = None
     except RecursionError:
-        imp.sink.error("E0701", "the document is nested too deeply", Span.point(imp.display, 1, 1))
+        imp.sink.error("E0801", "the document is nested too deeply", Span.point(imp.display, 1, 1))
         plan = None
     if plan is None:
         return Imported(None, None, imp.sink.items, imp.sources)
     comment = (f"Imported from {path.name} by addtc import" + (" (with its addt-dsl side file)"
                                                                if imp.sidecar else "")
-               + f"\n{sum(d.code.startswith('W07') for d in imp.sink.items)} element(s) not translated "
+               + f"\n{sum(d.code.startswith('W08') for d in imp.sink.items)} element(s) not translated "
                  "or approximated: see the diagnostics"
                + ("" if imp.sidecar else "\nOpenSCENARIO states no pass criteria: `no collision` is the default oracle"))
     try:
         text = print_plan(plan, comment=comment)
     except PrinterError as exc:
-        imp.sink.error("E0702", f"the translated scenario cannot be printed: {exc}", Span.point(imp.display, 1, 1))
+        imp.sink.error("E0802", f"the translated scenario cannot be printed: {exc}", Span.point(imp.display, 1, 1))
         return Imported(None, None, imp.sink.items, imp.sources)
     files = side_files(plan)
     with tempfile.TemporaryDirectory() as tmp:
@@ -1144,7 +1156,7 @@ def import_xosc(path: str | Path, root: str | Path | None = None) -> Imported:
     if not check.ok:
         for d in check.diagnostics:
             if d.is_error:
-                imp.sink.error("E0702", f"the translated scenario does not compile: [{d.code}] {d.message}",
+                imp.sink.error("E0802", f"the translated scenario does not compile: [{d.code}] {d.message}",
                                Span.point(imp.display, 1, 1))
         return Imported(None, None, imp.sink.items, {**imp.sources, **check.sources})
     return Imported(text, check.plan, imp.sink.items, imp.sources, files)

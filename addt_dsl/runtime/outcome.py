@@ -10,10 +10,12 @@ parameters, same seed, so the same perception noise and traffic). A faulty run i
   within `TOLERANCE` and the runs have the same length;
 - `hazard`:   outputs differed and a hard oracle failed;
 - `silent`:   outputs differed and no oracle failed (silent data corruption);
+- `twin_failed`: the golden run itself failed a hard oracle (or the stack stopped it): the
+  scenario fails without the fault, so whatever the faulty run did says nothing about the
+  fault. Such runs are counted apart and left out of every fault statistic (a failing twin
+  made 44 of 75 "hazards" in a random-parameter bit-flip campaign before this class existed);
 - `error`:    the runner itself failed (a bug in the twin, not an outcome of the fault).
-
-A masked run that fails an oracle is still masked: the golden run fails it as well, so
-the failure is the scenario's, not the fault's. Golden fingerprints are kept by their
+ Golden fingerprints are kept by their
 RunSpec key in a results store (`GoldenCache`: the sweep's own store under `--classify`,
 so a resumed or `--fresh` sweep reuses them; a temporary one otherwise), so classifying a
 sweep costs one golden run per distinct (parameters, seed), not one per faulty run. Golden
@@ -30,6 +32,7 @@ from __future__ import annotations
 
 import base64
 import io
+import math
 import tempfile
 import traceback
 from collections.abc import Iterable, Sequence
@@ -37,6 +40,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import binomtest
 
 from addt_dsl.plan import RunSpec
 from addt_dsl.runtime.execute import execute
@@ -44,7 +48,9 @@ from addt_dsl.runtime.executor import local_executor, run_spec
 from addt_dsl.runtime.result import RunResult
 from addt_dsl.runtime.store import ResultStore
 
-OUTCOMES = ("masked", "silent", "detected", "hazard")
+OUTCOMES = ("masked", "silent", "detected", "hazard", "twin_failed")
+# The classes a fault can cause: rates and intervals are over runs whose twin passed.
+FAULT_OUTCOMES = ("masked", "silent", "detected", "hazard")
 # Differences below 1 µm, 1 µrad, 1 µm/s, 1 µm/s^2 are numerical ripples, not observable effects.
 TOLERANCE = 1e-6
 _EGO_FIELDS = ("x", "y", "heading", "speed")
@@ -125,7 +131,8 @@ class GoldenCache:
         if self._store is None:
             if self.readonly and not self.store_path.exists():
                 return None
-            self._store = ResultStore(self.store_path, readonly=self.readonly, create=True)
+            self._store = ResultStore(self.store_path, readonly=self.readonly, create=True,
+                                      verify=not self.readonly)
         return self._store
 
     def get(self, key: str) -> Fingerprint | None:
@@ -165,10 +172,12 @@ def golden_fingerprint(golden: RunSpec) -> Fingerprint:
 _DEFAULT_CACHE = GoldenCache()
 def outcome_of(result: RunResult, golden: Fingerprint, tol: float = TOLERANCE) -> str:
     """The outcome class of a faulty run (with its trace) given its golden fingerprint."""
+    if result.status not in ("ok", "detected") or golden.status == "crashed":
+        return "error"
+    if not golden.passed:
+        return "twin_failed"
     if result.status == "detected":
         return "detected"
-    if result.status != "ok" or golden.status == "crashed":
-        return "error"
     if not Fingerprint.of(result).differs(golden, tol):
         return "masked"
     return "hazard" if not result.passed else "silent"
@@ -176,7 +185,9 @@ def outcome_of(result: RunResult, golden: Fingerprint, tol: float = TOLERANCE) -
 
 def _outcome(result: RunResult, golden: Fingerprint | None, tol: float) -> str:
     if golden is None:  # a run without faults is its own golden run
-        return {"ok": "masked", "detected": "detected"}.get(result.status, "error")
+        if result.status not in ("ok", "detected"):
+            return "error"
+        return "masked" if result.passed else "twin_failed"
     return outcome_of(result, golden, tol)
 
 
@@ -237,6 +248,8 @@ def prepare_goldens(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache 
     run_fn, executor.run_fn = executor.run_fn, GoldenRun()
     try:
         for result in executor.imap(enumerate(missing.values())):
+            if result.status == "lost":
+                continue  # not kept: a worker that classifies its twin runs it (and a resume here)
             data = result.stats.get("fingerprint")
             fp = Fingerprint.from_bytes(base64.b64decode(data)) if data else Fingerprint({}, "crashed", False)
             cache.put(result.key, fp)
@@ -260,9 +273,21 @@ def classify_many(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache | 
     return out
 
 
+def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of a proportion k/n (NaNs for n = 0): sound near 0 and 1, where
+    fault campaigns' rates usually are."""
+    if n == 0:
+        return math.nan, math.nan
+    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
+    return float(ci.low), float(ci.high)
+
+
 def outcome_table(pairs: Sequence[tuple[RunResult, str]], by: Sequence[str] = ()):
     """Counts of each outcome, the mission success rate and the mean number of injections per
-    run (`fault_events`), grouped by the parameters in `by`."""
+    run (`fault_events`), grouped by the parameters in `by`. As fault-injection campaigns
+    report them (NVBitFI): the sample size `fault_samples` (runs whose fault-free twin passed: the only runs that
+    say something about the fault) and, per fault outcome class, its rate over them
+    with a 95 % Wilson interval (`hazard_rate`, `hazard_lo`, `hazard_hi`, ...)."""
     import pandas as pd
 
     rows = [{**{p: r.params.get(p, r.cell.get(p)) for p in by}, "outcome": o, "passed": r.passed,
@@ -281,6 +306,13 @@ def outcome_table(pairs: Sequence[tuple[RunResult, str]], by: Sequence[str] = ()
     table["success_rate"] = grouped.mean()
     # Injections that happened (a flip whose site is never evaluated again is not injected).
     table["fault_events"] = df.groupby(keys)["fault_events"].mean()
+    n = table[list(FAULT_OUTCOMES)].sum(axis=1)
+    table["fault_samples"] = n
+    for name in FAULT_OUTCOMES:
+        bounds = [wilson_interval(k, m) for k, m in zip(table[name], n)]
+        table[f"{name}_rate"] = [k / m if m else math.nan for k, m in zip(table[name], n)]
+        table[f"{name}_lo"] = [lo for lo, _ in bounds]
+        table[f"{name}_hi"] = [hi for _, hi in bounds]
     return table
 
 

@@ -39,6 +39,18 @@ def test_a_blind_ego_collides_and_is_a_hazard():
     assert all(e.detail["value"] == e.time_s for e in fault_events(result))  # every lost frame, stamped
 
 
+def test_a_blind_ego_whose_fault_free_twin_also_fails_is_twin_failed_not_hazard():
+    # The same collision as above, but an oracle the scenario fails without any fault
+    # (the ego never reaches 40 m/s): the run says nothing about the fault.
+    s = spec("    drop lidar rate 100 %", duration_s=6.0,
+             extra="  param dummy = 0 in [0, 1]\n  expect {\n    fast: eventually ego.speed > 40 m/s\n  }")
+    golden = execute(golden_spec(s))
+    assert "fast" in golden.failed_oracles and "no_collision" not in golden.failed_oracles
+    result, outcome = classify(s, cache=GoldenCache())
+    assert "no_collision" in result.failed_oracles
+    assert outcome == "twin_failed"
+
+
 def test_a_flip_in_the_last_mantissa_bit_of_the_path_length_is_masked():
     s = spec("    at 1 s bitflip planner.path_length bit 0")
     result, outcome = classify(s, cache=GoldenCache())

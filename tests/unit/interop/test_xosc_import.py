@@ -32,7 +32,7 @@ def test_esmini_scenario_imports_or_says_why(path, tmp_path):
     got = import_xosc(path, root=ESMINI)
     errors = [d for d in got.diagnostics if d.is_error]
     for d in got.diagnostics:
-        assert d.code in ("E0702", "W0701", "W0702"), d
+        assert d.code in ("E0802", "W0801", "W0802"), d
         assert d.span is not None and d.span.line >= 1, d
     if path.name in NOT_IMPORTED:
         assert got.text is None and any(NOT_IMPORTED[path.name] in d.message for d in errors), errors
@@ -75,7 +75,7 @@ def test_missing_catalog_uses_documented_defaults(tmp_path):
                                                             'entryName="nowhere"/>'))
     got = import_xosc(tmp_path / "s.xosc")
     assert got.text is not None
-    assert any(d.code == "W0702" and "default car" in d.message for d in got.diagnostics)
+    assert any(d.code == "W0802" and "default car" in d.message for d in got.diagnostics)
 
 
 SMALL = """<?xml version="1.0"?>
@@ -93,29 +93,29 @@ SMALL = """<?xml version="1.0"?>
 """
 
 HOSTILE = {
-    "malformed": ("<OpenSCENARIO><FileHeader></OpenSCENARIO>", "E0701"),
-    "empty": ("", "E0701"),
-    "binary": ("\x00\x01\x02", "E0701"),
+    "malformed": ("<OpenSCENARIO><FileHeader></OpenSCENARIO>", "E0801"),
+    "empty": ("", "E0801"),
+    "binary": ("\x00\x01\x02", "E0801"),
     "entity_bomb": ('<?xml version="1.0"?><!DOCTYPE l [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;">'
-                    '<!ENTITY c "&b;&b;&b;&b;&b;">]><OpenSCENARIO>&c;</OpenSCENARIO>', "E0701"),
+                    '<!ENTITY c "&b;&b;&b;&b;&b;">]><OpenSCENARIO>&c;</OpenSCENARIO>', "E0801"),
     "external_entity": ('<?xml version="1.0"?><!DOCTYPE x [<!ENTITY e SYSTEM "file:///etc/passwd">]>'
-                        '<OpenSCENARIO>&e;</OpenSCENARIO>', "E0701"),
+                        '<OpenSCENARIO>&e;</OpenSCENARIO>', "E0801"),
     "external_dtd": ('<?xml version="1.0"?><!DOCTYPE x SYSTEM "http://example.invalid/x.dtd"><OpenSCENARIO/>',
-                     "E0701"),
-    "wrong_root": ("<OpenDRIVE/>", "E0702"),
-    "catalog": ('<OpenSCENARIO><FileHeader revMajor="1" revMinor="2"/><Catalog name="c"/></OpenSCENARIO>', "E0702"),
+                     "E0801"),
+    "wrong_root": ("<OpenDRIVE/>", "E0802"),
+    "catalog": ('<OpenSCENARIO><FileHeader revMajor="1" revMinor="2"/><Catalog name="c"/></OpenSCENARIO>', "E0802"),
     "road_outside_root": (SMALL.replace("r.xodr", "../../etc/passwd.xodr").replace("ENTITY", ""), "E0402"),
     "road_absolute": (SMALL.replace("r.xodr", "/etc/hosts").replace("ENTITY", ""), "E0402"),
     "road_missing": (SMALL.replace("r.xodr", "missing.xodr").replace("ENTITY", ""), "E0401"),
     "road_url": (SMALL.replace("r.xodr", "http://example.invalid/r.xodr").replace("ENTITY", ""), "E0401"),
-    "unknown_parameter": (SMALL.replace('s="20"', 's="$nope"').replace("ENTITY", ""), "E0702"),
-    "bad_number": (SMALL.replace('s="20"', 's="twenty"').replace("ENTITY", ""), "E0702"),
-    "bad_expression": (SMALL.replace('s="20"', 's="${__import__(1)}"').replace("ENTITY", ""), "E0702"),
-    "huge_power": (SMALL.replace('s="20"', 's="${9 ** 99999}"').replace("ENTITY", ""), "E0702"),
-    "no_road_id": (SMALL.replace('roadId="1" ', 'roadId="77" ').replace("ENTITY", ""), "E0702"),
+    "unknown_parameter": (SMALL.replace('s="20"', 's="$nope"').replace("ENTITY", ""), "E0802"),
+    "bad_number": (SMALL.replace('s="20"', 's="twenty"').replace("ENTITY", ""), "E0802"),
+    "bad_expression": (SMALL.replace('s="20"', 's="${__import__(1)}"').replace("ENTITY", ""), "E0802"),
+    "huge_power": (SMALL.replace('s="20"', 's="${9 ** 99999}"').replace("ENTITY", ""), "E0802"),
+    "no_road_id": (SMALL.replace('roadId="1" ', 'roadId="77" ').replace("ENTITY", ""), "E0802"),
     "self_reference": (SMALL.replace("<RoadNetwork>", '<ParameterDeclarations><ParameterDeclaration name="p" '
                                      'parameterType="double" value="$p"/></ParameterDeclarations><RoadNetwork>')
-                       .replace('s="20"', 's="$p"').replace("ENTITY", ""), "E0702"),
+                       .replace('s="20"', 's="$p"').replace("ENTITY", ""), "E0802"),
 }
 
 
@@ -181,4 +181,4 @@ def test_damaged_side_file_is_a_diagnostic(damage, tmp_path):
     done.sidecar_path.write_text(damage.replace("FORMAT_OK", '{"format": "%s"' % SIDECAR_FORMAT))
     got = import_xosc(done.xosc_path)
     assert got.text is None
-    assert any(d.code == "E0702" and "side file" in d.message for d in got.diagnostics), got.diagnostics
+    assert any(d.code == "E0802" and "side file" in d.message for d in got.diagnostics), got.diagnostics

@@ -4,6 +4,7 @@ records are made by hand, the executor runs a fake run function)."""
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 
 import pytest
@@ -31,15 +32,19 @@ def records(outcomes: list[str]):
 
 
 def test_summary_counts_outcomes_and_tabulates_them_per_grid_cell():
-    recs = records(["masked", "silent", "hazard", "masked", "detected", "error"])
+    recs = records(["masked", "silent", "hazard", "twin_failed", "detected", "error"])
     s = summary(PLAN, recs)
-    assert s["outcomes"] == {"masked": 2, "silent": 1, "detected": 1, "hazard": 1, "error": 1}
+    assert s["outcomes"] == {"masked": 1, "silent": 1, "detected": 1, "hazard": 1, "twin_failed": 1, "error": 1}
     cells = {c["mode"]: c for c in s["outcomes_per_cell"]}
     assert set(cells) == {0.0, 6.0}
     assert (cells[0.0]["masked"], cells[0.0]["silent"], cells[0.0]["hazard"], cells[0.0]["runs"]) == (1, 1, 1, 3)
     assert cells[0.0]["success_rate"] == pytest.approx(2 / 3)
-    assert (cells[6.0]["masked"], cells[6.0]["detected"], cells[6.0]["error"]) == (1, 1, 1)
-    json.dumps(s)  # plain JSON types
+    # Rates are over runs whose twin passed: a twin_failed run or a runner error is no sample.
+    assert cells[0.0]["fault_samples"] == 3 and cells[0.0]["hazard_rate"] == pytest.approx(1 / 3)
+    assert 0 < cells[0.0]["hazard_lo"] < 1 / 3 < cells[0.0]["hazard_hi"] < 1
+    assert (cells[6.0]["twin_failed"], cells[6.0]["detected"], cells[6.0]["error"], cells[6.0]["fault_samples"]) == (1, 1, 1, 1)
+    assert cells[6.0]["detected_rate"] == 1.0 and cells[6.0]["hazard_rate"] == 0.0
+    json.dumps(s, allow_nan=False)  # plain JSON types, no NaN
 
 
 def test_unclassified_runs_add_no_outcome_fields():
@@ -66,7 +71,8 @@ def test_the_store_keeps_outcomes_and_upgrades_an_old_store(tmp_path):
             store.add(r)
     with ResultStore(path) as store:
         assert [r.outcome for r in store.records()] == ["silent", "hazard", "", "masked", "masked", "masked"]
-        assert store_summary(store)["outcomes"] == {"masked": 3, "silent": 1, "detected": 0, "hazard": 1, "error": 0}
+        assert store_summary(store)["outcomes"] == {"masked": 3, "silent": 1, "detected": 0, "hazard": 1, "twin_failed": 0,
+                                                   "error": 0}
         assert list(store_dataframe(store)["outcome"]) == ["silent", "hazard", "", "masked", "masked", "masked"]
 
 
@@ -90,3 +96,36 @@ def test_classify_is_refused_on_executors_that_cannot_run_it(tmp_path):
 
     with pytest.raises(ValueError, match="cannot classify"):
         ClassifyingExecutor(Remote(), tmp_path)
+
+
+def _judged(spec, status: str, passed: bool):
+    r = fake_record(spec)
+    r.status = status
+    r.verdicts[0].passed = passed
+    return r
+
+
+def test_a_run_whose_fault_free_twin_fails_is_never_a_hazard():
+    from addt_dsl.runtime.outcome import Fingerprint, outcome_of
+
+    spec = expand(PLAN).specs[0]
+    failing_twin = Fingerprint({}, "ok", passed=False)
+    # However the faulty run ends (failed, passed, stack stopped), the twin's failure decides.
+    assert outcome_of(_judged(spec, "ok", passed=False), failing_twin) == "twin_failed"
+    assert outcome_of(_judged(spec, "ok", passed=True), failing_twin) == "twin_failed"
+    assert outcome_of(_judged(spec, "detected", passed=True), failing_twin) == "twin_failed"
+    # A twin the stack stopped fails too; a crashed twin is the runner's error.
+    assert outcome_of(_judged(spec, "ok", passed=False), Fingerprint({}, "detected", passed=False)) == "twin_failed"
+    assert outcome_of(_judged(spec, "ok", passed=False), Fingerprint({}, "crashed", passed=False)) == "error"
+    # With a passing twin, a stack that stopped is detected.
+    assert outcome_of(_judged(spec, "detected", passed=True), Fingerprint({}, "ok", passed=True)) == "detected"
+
+
+def test_wilson_interval_brackets_the_rate():
+    from addt_dsl.runtime.outcome import wilson_interval
+
+    lo, hi = wilson_interval(0, 40)
+    assert lo == pytest.approx(0.0, abs=1e-12) and 0.05 < hi < 0.1  # 0 of 40: up to ~8.8 %
+    lo, hi = wilson_interval(20, 40)
+    assert lo == pytest.approx(0.352, abs=1e-3) and hi == pytest.approx(0.648, abs=1e-3)
+    assert all(math.isnan(x) for x in wilson_interval(0, 0))
