@@ -15,6 +15,8 @@
     addtc shrink FILE | --run-key JSON    shrink a failing run to a minimal replayable .addt file
     addtc falsify FILE [--budget-runs N]  search parameters and faults for failures
     addtc study perception|classify|table ...  fault studies (perception errors by band, outcomes)
+    addtc export FILE [--run ID | --params K=V ...] --to DIR   one run as OpenSCENARIO + OpenDRIVE
+    addtc import FILE.xosc [-o FILE.addt] [--root DIR]          OpenSCENARIO to .addt (docs/openscenario.md)
 
 Exit codes (addt_dsl/errors.py): 0 every run passed, 1 at least one run failed an oracle,
 2 usage or scenario error, 3 the tool could not complete (runs crashed, timed out or were
@@ -39,7 +41,7 @@ from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, ToolError, Us
                              nonneg_int, positive_int, time_bound, verdict_exit_code)
 from addt_dsl.limits import DEFAULT, parse_limit
 
-SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map")
+SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map", "export", "import")
 
 
 def cmd_check(args) -> int:
@@ -520,6 +522,9 @@ def build_parser() -> argparse.ArgumentParser:
     from addt_dsl.search.commands import add_commands
 
     add_commands(sub)
+    from addt_dsl.interop.commands import add_commands as add_interop_commands  # export, import
+
+    add_interop_commands(sub)
     # Listed for `addtc --help` only: `main` hands every `addtc study ...` argument to the
     # studies' own parser (addt_dsl/studies.py), --help included.
     sub.add_parser("study", add_help=False,

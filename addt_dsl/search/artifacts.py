@@ -9,6 +9,8 @@ or writing fails. Outputs, for a stem `S`:
     S.events.json   the replay's events (fault injections with their values, collisions)
     S.report.json   target failure, per-pass statistics, what did not matter
     S.gif           top-down animation, when the reporting package provides one
+    S.xosc          the same run as OpenSCENARIO XML, with its road (S.xodr or the imported
+                    map) and S.addt.json (what OpenSCENARIO cannot hold), addt_dsl/interop
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from addt_dsl.interop.xodr_export import ExportError
+from addt_dsl.interop.xosc_export import export_run
 from addt_dsl.plan import RunSpec
 from addt_dsl.printer import compile_pinned, print_spec, semantic_key, side_files
 from addt_dsl.reporting.atomic import write_text
@@ -38,6 +42,8 @@ class Artifacts:
     report: Path
     animation: Path | None = None
     files: list[Path] = field(default_factory=list)
+    xosc: Path | None = None  # the OpenSCENARIO replay file (None: the run has no OpenSCENARIO form)
+    xosc_note: str = ""  # why not
 
 
 def counterexample_stem(source_file: str, spec: RunSpec) -> str:
@@ -85,6 +91,12 @@ def write_counterexample(result, out_dir: str | Path, source_file: str = "", ste
             arts.animation = _animation(replay, trace, outcome, out / f"{stem}.gif")
             if arts.animation:
                 written.append(arts.animation)
+    try:  # the same run for esmini or CARLA (docs/openscenario.md)
+        exported = export_run(replay, out, stem)
+        arts.xosc = exported.xosc_path
+        written += [p for p in (exported.xosc_path, exported.xodr_path, exported.sidecar_path) if p not in written]
+    except ExportError as exc:
+        arts.xosc_note = str(exc)
     write_text(arts.report, json.dumps(report(result, source_file, path), indent=2) + "\n")
     written.append(arts.report)
     arts.files = written

@@ -250,7 +250,8 @@ def _falsify(args, result, cache, log) -> int:
             if found.shrunk is None:
                 continue
             try:
-                written.append(write_counterexample(found.shrunk, args.out, args.file, animate=False).addt)
+                arts = write_counterexample(found.shrunk, args.out, args.file, animate=False)
+                written += [arts.addt] + ([arts.xosc] if arts.xosc else [])  # .xosc: docs/openscenario.md
             except ReplayMismatch as exc:
                 _err(str(exc))
     if args.format == "json":
