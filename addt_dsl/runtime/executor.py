@@ -163,6 +163,9 @@ class InlineExecutor:
         for seq, spec in items:
             yield (self.run_fn or run_spec)(spec, seq, worker="inline")
 
+    def close(self) -> None:
+        pass
+
 
 def _die_with_parent() -> None:
     """Linux: SIGKILL this worker when its parent dies, so a killed coordinator leaves no
@@ -228,6 +231,9 @@ class LocalExecutor:
     run is in flight and against the worker's peak when it finishes.
     `run_fn`: what a worker calls per run (default `run_spec`; a module-level function
     with the same signature, e.g. to test the guards).
+    `keep_workers`: keep the idle workers between `imap` calls until `close()` (the search
+    calls `imap` once per small batch; starting two workers per batch cost more than the
+    runs themselves).
     """
 
     name = "local"
@@ -236,8 +242,10 @@ class LocalExecutor:
                  memory_limit_mb: float | None = DEFAULT_MEMORY_LIMIT_MB,
                  max_tasks_per_child: int | None = DEFAULT_MAX_TASKS_PER_CHILD,
                  start_method: str | None = None, run_fn: Callable | None = None,
-                 retries: int = DEFAULT_RETRIES):
+                 retries: int = DEFAULT_RETRIES, keep_workers: bool = False):
         self.workers = max(1, int(jobs))
+        self.keep_workers = keep_workers
+        self._kept: list[_Worker] = []  # idle workers kept from the last `imap` (keep_workers)
         self.timeout_s = timeout_s if timeout_s == AUTO or (timeout_s and timeout_s > 0) else None
         self.retries = retries
         self.retried = 0  # runs run again, after `imap`
@@ -302,7 +310,8 @@ class LocalExecutor:
         items = iter(items)
         attempts = Attempts(self.retries)
         again: deque[tuple[int, RunSpec]] = deque()  # runs to retry, before new ones
-        pool = [self._spawn(ctx) for _ in range(self.workers)]
+        pool, self._kept = self._kept, []
+        pool += [self._spawn(ctx) for _ in range(self.workers - len(pool))]
         idle = list(pool)
         busy: list[_Worker] = []
         exhausted = False
@@ -346,8 +355,17 @@ class LocalExecutor:
                         yield record
         finally:
             for w in pool:
-                self._stop(w, kill=w.job is not None)
+                if self.keep_workers and w.job is None and w.process.is_alive():
+                    self._kept.append(w)  # a dead one is found and replaced at its next run
+                else:
+                    self._stop(w, kill=w.job is not None)
             self.retried = attempts.retried
+
+    def close(self) -> None:
+        """Stop the workers kept between `imap` calls (`keep_workers`)."""
+        kept, self._kept = self._kept, []
+        for w in kept:
+            self._stop(w)
 
     def _check(self, w: _Worker, ready: set) -> tuple[RunResult, bool, bool] | None:
         """(record, replace the worker, killed from outside) once the worker's run is over,
@@ -390,7 +408,9 @@ class LocalExecutor:
 def local_executor(jobs: int = 1, run_fn: Callable | None = None, **options):
     """In this process for one job (nothing to supervise in parallel), else `jobs` guarded
     local workers: what the search, `--classify`'s golden runs and the studies run on."""
-    return InlineExecutor(run_fn) if jobs <= 1 else LocalExecutor(jobs, run_fn=run_fn, **options)
+    if jobs <= 1:
+        return InlineExecutor(run_fn)
+    return LocalExecutor(jobs, run_fn=run_fn, **options)
 
 
 # ---------------------------------------------------------------------------- coordinator

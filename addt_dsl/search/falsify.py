@@ -421,6 +421,13 @@ class Falsifier:
 
     def run(self, budget_runs: int = 200, budget_seconds: float = 0.0, shrink_simulations: int = 60,
             stop_at_first: bool = False) -> FalsifyReport:
+        try:
+            return self._run(budget_runs, budget_seconds, shrink_simulations, stop_at_first)
+        finally:
+            self.cache.release_workers()  # the workers kept between batches
+
+    def _run(self, budget_runs: int, budget_seconds: float, shrink_simulations: int,
+             stop_at_first: bool) -> FalsifyReport:
         t0 = time.perf_counter()
         all_points, all_outcomes, all_specs = [], [], []
         groups: dict[tuple, FoundFailure] = {}

@@ -143,6 +143,12 @@ class Shrinker:
         return True
 
     def run(self) -> ShrinkResult:
+        try:
+            return self._run()
+        finally:
+            self.cache.release_workers()  # the workers kept between batches
+
+    def _run(self) -> ShrinkResult:
         t0 = time.perf_counter()
         passes = [self.cut_after_violation, self.delete_faults, self.delete_agents, self.shorten_windows,
                   self.reduce_settings, self.drop_settings, self.params_to_nominal, self.simplify_numbers]
