@@ -333,6 +333,8 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str |
                        f"{c.keyword}s: {', '.join(table.names())}")
         return None
     vals = check_settings(ctx, c.settings + c.block, cls.params, f"{c.keyword} '{c.name}'", c.span)
+    if not _validate_clause(ctx, c, cls, vals):
+        return None
     if c.keyword == "behavior" and getattr(cls, "channel", "") == "lateral" and "to" in vals:
         _check_target_lane(ctx, c, vals["to"], road)
     for spec in cls.params:  # a `name` setting of a behaviour names another actor
@@ -346,6 +348,26 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str |
                                f"actors: {', '.join(sorted(pool))}")
                 return None
     return P.ClausePlan(keyword=c.keyword, name=c.name, settings=vals)
+
+
+def _validate_clause(ctx: Context, c: ast.Clause, cls, vals: dict) -> bool:
+    """The class's own checks across settings (`validate(values) -> [(setting, message)]`,
+    e.g. a speed profile's times and speeds), on the settings that are constants."""
+    validate = getattr(cls, "validate", None)
+    if validate is None:
+        return True
+    consts = {}
+    for key, value in vals.items():
+        if isinstance(value, list):
+            items = [const_value(v) for v in value]
+            consts[key] = None if any(i is None for i in items) else items
+        else:
+            consts[key] = value if isinstance(value, str) else const_value(value)
+    problems = validate({k: v for k, v in consts.items() if v is not None})
+    for key, message in problems:
+        span = next((st.value.span for st in c.settings + c.block if st.key == key), c.span)
+        ctx.sink.error("E0204", message, span)
+    return not problems
 
 
 def _check_target_lane(ctx: Context, c: ast.Clause, lane, road: str | None) -> None:

@@ -182,8 +182,11 @@ def _sample_setting(spec):
 
     if spec.kind in ("word",):
         return spec.choices[0] if spec.choices else None
-    if spec.kind in ("name", "string", "list"):
+    if spec.kind in ("name", "string"):
         return None
+    if spec.kind == "list":  # two increasing items (a speed profile's times must increase)
+        base = spec.low + 1.0 if spec.low is not None else 1.0
+        return [num(base), num(base + 1.0)]
     if spec.low is not None and spec.high is not None:
         value = (spec.low + spec.high) / 2
     elif spec.default is not None and not isinstance(spec.default, str):

@@ -1,0 +1,122 @@
+"""OpenSCENARIO-like actions as road-frame kinematics: acceleration settings that give
+that acceleration, dynamics shapes, speed profiles (against the fake world)."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from addt_dsl.runtime.behaviors import SHAPES, blend
+from tests.unit.twin.test_twin_behaviors import DT, LANES, FakeWorld, agent, simulate, start
+
+
+@pytest.mark.parametrize("keyword,settings", [
+    ("cruise", {"speed": 20.0, "accel": 2.0}),
+    ("walk", {"speed": 8.0, "accel": 2.0}),
+    ("cross", {"speed": 8.0, "accel": 2.0}),
+    ("overtake", {"speed": 20.0, "accel": 2.0}),
+])
+def test_an_acceleration_setting_gives_that_acceleration(keyword, settings):
+    # The issue: `cross ... accel 2 m/s^2` reached 1.32 m/s after 3 s (a first-order lag).
+    a = agent(speed=0.0)
+    rows = simulate(a, start(keyword, a, FakeWorld(), **settings), FakeWorld(), 1.5)
+    assert a.speed == pytest.approx(3.0, abs=1e-9)
+    assert np.diff(rows[:, 3]) == pytest.approx(2.0 * DT)
+
+
+def test_cruise_lands_on_its_target_without_overshoot():
+    a = agent(speed=10.0)
+    rows = simulate(a, start("cruise", a, FakeWorld(), speed=13.05, accel=2.0, decel=3.0), FakeWorld(), 3.0)
+    assert rows[:, 3].max() <= 13.05 + 1e-9 and a.speed == pytest.approx(13.05, abs=1e-9)
+    assert np.argmax(rows[:, 3] >= 13.05 - 1e-9) == pytest.approx(1.525 / DT, abs=1)
+
+
+def test_brake_stops_at_its_to_speed():
+    a = agent(speed=10.0)
+    simulate(a, start("brake", a, FakeWorld(), decel=6.0, to_speed=4.03), FakeWorld(), 3.0)
+    assert a.speed == pytest.approx(4.03, abs=1e-9)
+
+
+@given(st.sampled_from(sorted(SHAPES)), st.floats(0.0, 1.0))
+def test_shapes_run_from_0_to_1_monotonically(shape, u):
+    assert blend(shape, 0.0) == (1.0 if shape == "step" else 0.0)
+    assert blend(shape, 1.0) == pytest.approx(1.0)
+    assert 0.0 <= blend(shape, u) <= 1.0 + 1e-12
+    assert blend(shape, u) <= blend(shape, min(1.0, u + 0.01)) + 1e-12
+
+
+@pytest.mark.parametrize("shape,mid", [("linear", 15.0), ("cubic", 15.0), ("sinusoidal", 15.0)])
+def test_cruise_with_a_shape_and_duration_follows_the_shape(shape, mid):
+    a = agent(speed=10.0)
+    rows = simulate(a, start("cruise", a, FakeWorld(), speed=20.0, shape=shape, duration=4.0), FakeWorld(), 6.0)
+    at = {round(t, 6): v for t, v in zip(rows[:, 0], rows[:, 3])}
+    assert at[2.0] == pytest.approx(mid, abs=1e-9)
+    assert at[1.0] == pytest.approx(10.0 + 10.0 * blend(shape, 0.25), abs=1e-9)
+    assert at[4.0] == pytest.approx(20.0, abs=1e-9) and a.speed == pytest.approx(20.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("shape,peak", [("linear", 1.0), ("cubic", 1.5), ("sinusoidal", math.pi / 2)])
+def test_a_shape_without_duration_peaks_at_the_rate_limit(shape, peak):
+    a = agent(speed=20.0)
+    rows = simulate(a, start("cruise", a, FakeWorld(), speed=11.0, decel=3.0, shape=shape), FakeWorld(), 8.0)
+    accel = np.diff(rows[:, 3]) / DT
+    assert accel.min() == pytest.approx(-3.0, abs=0.02)
+    # Duration = peak slope * |dv| / rate.
+    reached = rows[np.argmax(rows[:, 3] <= 11.0 + 1e-9), 0]
+    assert reached == pytest.approx(peak * 9.0 / 3.0, abs=2 * DT)
+
+
+def test_a_step_speed_change_takes_one_step():
+    a = agent(speed=10.0)
+    rows = simulate(a, start("cruise", a, FakeWorld(), speed=4.0, shape="step"), FakeWorld(), 1.0)
+    assert rows[1, 3] == pytest.approx(4.0) and a.speed == pytest.approx(4.0)
+
+
+@pytest.mark.parametrize("shape", ["linear", "cubic", "sinusoidal", "quintic"])
+def test_lane_change_shapes(shape):
+    a = agent(lane=-2)
+    start("lane_change", a, FakeWorld(), to=-1, duration=4.0, shape=shape)
+    rows = simulate(a, start("cruise", a, FakeWorld(), speed=10.0), FakeWorld(), 5.0)
+    at = {round(t, 6): lat for t, lat in zip(rows[:, 0], rows[:, 2])}
+    assert at[1.0] == pytest.approx(LANES[-2] + 3.5 * blend(shape, 0.25), abs=1e-9)
+    assert at[2.0] == pytest.approx(LANES[-2] + 1.75, abs=1e-9)
+    assert a.t == pytest.approx(LANES[-1])
+
+
+def test_a_step_lane_change_jumps():
+    a = agent(lane=-2)
+    start("lane_change", a, FakeWorld(), to=-1, duration=4.0, shape="step")
+    rows = simulate(a, start("cruise", a, FakeWorld(), speed=10.0), FakeWorld(), 0.1)
+    assert rows[1, 2] == pytest.approx(LANES[-1])
+
+
+# esmini speed-profile.xosc: entries (0 s, 0), (+4 s, 10), (+4 s, 4), (+2 s, 8) m/s.
+ESMINI_TIMES, ESMINI_SPEEDS = [0.0, 4.0, 8.0, 10.0], [0.0, 10.0, 4.0, 8.0]
+
+
+@pytest.mark.parametrize("shape", ["linear", "cubic", "sinusoidal"])
+def test_speed_profile_meets_its_points(shape):
+    a = agent(speed=0.0)
+    beh = start("speed_profile", a, FakeWorld(), 1.0, times=ESMINI_TIMES, speeds=ESMINI_SPEEDS, shape=shape)
+    rows = simulate(a, beh, FakeWorld(), 12.0, t0=1.0)
+    at = {round(t, 6): v for t, v in zip(rows[:, 0], rows[:, 3])}
+    for t, v in zip(ESMINI_TIMES, ESMINI_SPEEDS):
+        assert at[round(1.0 + t, 6)] == pytest.approx(v, abs=0.1)
+    assert rows[:, 3].max() == pytest.approx(10.0, abs=1e-9)  # the esmini peak (9.09 m/s before)
+    assert a.speed == pytest.approx(8.0)
+
+
+def test_speed_profile_starts_from_the_current_speed_and_steps_at_points():
+    a = agent(speed=6.0)
+    beh = start("speed_profile", a, FakeWorld(), times=[2.0, 3.0], speeds=[10.0, 5.0])
+    rows = simulate(a, beh, FakeWorld(), 4.0)
+    at = {round(t, 6): v for t, v in zip(rows[:, 0], rows[:, 3])}
+    assert at[1.0] == pytest.approx(8.0) and at[2.0] == pytest.approx(10.0) and at[3.0] == pytest.approx(5.0)
+    b = agent(speed=6.0)
+    beh = start("speed_profile", b, FakeWorld(), times=[1.0, 2.0], speeds=[10.0, 5.0], shape="step")
+    rows = simulate(b, beh, FakeWorld(), 3.0)
+    at = {round(t, 6): v for t, v in zip(rows[:, 0], rows[:, 3])}
+    assert at[0.99] == pytest.approx(6.0) and at[1.0] == pytest.approx(10.0)
+    assert at[1.99] == pytest.approx(10.0) and at[2.0] == pytest.approx(5.0)
