@@ -155,6 +155,7 @@ class Clause(Node):
 class StepStart(Node):
     kind: str  # at | after | when
     value: Expression
+    hold: Expression | None = None  # `when C for D`: C must have held for D
 
 
 @dataclass(frozen=True, slots=True)

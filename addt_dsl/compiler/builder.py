@@ -266,7 +266,7 @@ class Builder:
         return ast.StepStart(span, "after", items[0])
 
     def b_start_when(self, span, items):
-        return ast.StepStart(span, "when", items[0])
+        return ast.StepStart(span, "when", items[0], items[1] if len(items) > 1 else None)
 
     def b_group(self, span, items):
         return ast.Group(span, str(items[0]), tuple(items[1:]))

@@ -41,6 +41,7 @@ class BoundStep:
     at_s: float | None
     after_s: float
     group: BoundGroup | None
+    hold_s: float = 0.0  # the condition must have held this long [s]
 
 
 @dataclass(frozen=True)
@@ -112,7 +113,8 @@ def bind_step(t: TriggerPlan, params: dict[str, float]) -> BoundStep:
         condition=substitute_params(t.condition, params) if t.condition is not None else None,
         at_s=_value(t.at_s, params) if t.at_s is not None else None,
         after_s=_value(t.after_s, params),
-        group=_group(t.group, params) if t.group is not None else None)
+        group=_group(t.group, params) if t.group is not None else None,
+        hold_s=_value(t.hold_s, params))
 
 
 def _group(g: GroupPlan, params: dict[str, float]) -> BoundGroup:

@@ -407,7 +407,7 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
             ctx.sink.error("E0102", f"`{st.kind}` given twice in one step", st.span)
             ok = False
         starts[st.kind] = st
-    at = after = condition = None
+    at = after = condition = hold = None
     low = ctx.lowering()
     for kind in ("at", "after"):
         if kind in starts:
@@ -431,6 +431,10 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
                            "always/eventually/until", cond_node.span,
                            "write the condition on the current state, e.g. `when gap(ego, lead) < 20 m`")
             ok = False
+        if starts["when"].hold is not None:
+            hold = low.lower_value(starts["when"].hold, units.TIME, "how long the condition must hold")
+            if hold is None or not check_time(ctx, hold, starts["when"].hold.span, "the hold of `when ... for`"):
+                ok = False
     if isinstance(node.action, ast.Group):
         group = _lower_group(ctx, node.action, actor, road)
         clause = None
@@ -441,7 +445,7 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
         ok = ok and clause is not None
     if not ok:
         return None
-    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after, group=group)
+    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after, group=group, hold_s=hold)
 
 
 def _lower_group(ctx: Context, node: ast.Group, actor: ast.ActorDecl, road: str | None) -> P.GroupPlan | None:
