@@ -37,6 +37,9 @@ class ParamSpec:
     choices: tuple[str, ...] | None = None
     kind: str = "number"
     doc: str = ""
+    # A live setting may use signals (`speed speed(ego) + 5 km/h`): evaluated on the
+    # current state at every step, so the target follows other actors.
+    live: bool = False
 
 
 class Registry(Generic[T]):

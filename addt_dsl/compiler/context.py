@@ -215,6 +215,8 @@ def lower_setting(ctx: Context, low: ExprLowering, st: ast.Setting, spec: ParamS
         ctx.sink.error("E0204", f"'{st.key}' takes a number, not a string", v.span)
         return None
     want = spec.dim if spec.dim is not None else units.DIMENSIONLESS
+    if spec.live and not low.scope.allow_signals:
+        low = ctx.lowering(signals=True)
     expr = low.lower_value(v, want, f"'{st.key}' of {what}")
     if expr is None:
         return None

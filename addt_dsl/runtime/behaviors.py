@@ -53,6 +53,12 @@ class Behavior:
     def start(self, agent: AgentState, world, time_s: float) -> None:
         """Called when the behaviour becomes active."""
 
+    def value(self, name: str, world) -> float:
+        """A setting's value now: a live setting (one that reads signals, e.g. `speed
+        speed(ego) + 5 km/h`) is evaluated on the current state at every call."""
+        v = self.settings[name]
+        return v if isinstance(v, (int, float)) else world.live_value(v)
+
     def accel(self, agent: AgentState, world, time_s: float) -> float:
         return 0.0
 
@@ -125,7 +131,8 @@ DURATION_SETTING = ParamSpec("duration", units.TIME, default=None, low=0.0,
 class Cruise(Behavior):
     keyword = "cruise"
     params = (
-        ParamSpec("speed", units.SPEED, required=True, low=0.0, doc="target speed"),
+        ParamSpec("speed", units.SPEED, required=True, low=0.0, live=True,
+                  doc="target speed; may follow other actors (`1.2 * speed(ego)`)"),
         ParamSpec("accel", units.ACCELERATION, default=2.0, low=0.0, doc="max acceleration"),
         ParamSpec("decel", units.ACCELERATION, default=3.0, low=0.0, doc="max deceleration"),
         SHAPE_SETTING,
@@ -139,8 +146,9 @@ class Cruise(Behavior):
         s = self.settings
         self.transition = None
         if s["shape"] != "linear" or s["duration"] is not None:
-            self.transition = SpeedTransition(agent.speed, s["speed"], time_s, s["shape"], s["accel"],
-                                              s["decel"], s["duration"])
+            # A live target is taken as it is at the start; it is followed once reached.
+            self.transition = SpeedTransition(agent.speed, max(0.0, self.value("speed", world)), time_s,
+                                              s["shape"], s["accel"], s["decel"], s["duration"])
 
     def accel(self, agent, world, time_s):
         s = self.settings
@@ -148,7 +156,7 @@ class Cruise(Behavior):
         if tr is not None and tr.active(time_s, world.dt):
             return tr.accel(agent, time_s, world.dt)
         # Linear at the rate limits: the same as tracking the target.
-        return _speed_tracking(agent, s["speed"], s["accel"], s["decel"], world.dt)
+        return _speed_tracking(agent, max(0.0, self.value("speed", world)), s["accel"], s["decel"], world.dt)
 
 
 @BEHAVIORS.register
@@ -167,7 +175,7 @@ class SpeedProfile(Behavior):
     @staticmethod
     def validate(values: dict) -> list[tuple[str, str]]:
         """Problems of constant settings, as (setting, message)."""
-        times, speeds = values.get("times"), values.get("speeds")
+        times, speeds = values.get("times"), values.get("speeds")  # None: not constants
         out = []
         if isinstance(times, list) and isinstance(speeds, list) and len(times) != len(speeds):
             out.append(("speeds", f"{len(speeds)} speeds for {len(times)} times: give one speed per time"))
@@ -229,6 +237,44 @@ class Idm(Behavior):
 
 
 @BEHAVIORS.register
+class KeepGap(Behavior):
+    keyword = "keep_gap"
+    params = (
+        ParamSpec("target", None, kind="name", required=True, doc="actor to keep the gap to"),
+        ParamSpec("distance", units.LENGTH, low=0.0, doc="bumper-to-bumper gap to keep"),
+        ParamSpec("time_gap", units.TIME, low=0.0, doc="instead of `distance`: gap as time at the own speed"),
+        ParamSpec("side", None, kind="word", default="behind", choices=("behind", "ahead"),
+                  doc="keep the gap behind the target or ahead of it"),
+        ParamSpec("accel", units.ACCELERATION, default=3.0, low=0.01, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=6.0, low=0.01, doc="max deceleration"),
+    )
+    doc = ("Keep a distance or time gap to another actor, continuously (OpenSCENARIO "
+           "LongitudinalDistanceAction, freespace, continuous).")
+    # Critically damped spring on the gap error with a 1.5 s time constant: settles in a
+    # few seconds without overshooting into the target.
+    TAU_S = 1.5
+
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if ("distance" in values) == ("time_gap" in values):
+            return [("distance", "give the gap once: `distance D` or `time_gap T`", "E0105")]
+        return []
+
+    def accel(self, agent, world, time_s):
+        s = self.settings
+        other = world.actor_station(s["target"])
+        if other is None:
+            return 0.0
+        o_s, o_speed, o_length = other
+        sign = 1.0 if s["side"] == "behind" else -1.0
+        gap = sign * (o_s - agent.s) - 0.5 * (agent.length_m + o_length)
+        want = s["distance"] if s["distance"] is not None else s["time_gap"] * agent.speed
+        closing = sign * (o_speed - agent.speed)  # d gap / dt
+        a = (gap - want) / self.TAU_S ** 2 + 2.0 * closing / self.TAU_S
+        return max(-s["decel"], min(s["accel"], sign * a))
+
+
+@BEHAVIORS.register
 class Brake(Behavior):
     keyword = "brake"
     aliases = ("sudden_brake",)
@@ -248,23 +294,36 @@ class LaneChange(Behavior):
     keyword = "lane_change"
     channel = "lateral"
     params = (
-        ParamSpec("to", None, kind="int", required=True, doc="target lane id (OpenDRIVE convention)"),
+        ParamSpec("to", None, kind="int", doc="target lane id (OpenDRIVE convention)"),
+        ParamSpec("to_lane_of", None, kind="name", default="",
+                  doc="instead of `to`: the lane another actor is in when the change starts"),
         ParamSpec("duration", units.TIME, default=4.0, low=0.5, doc="time to complete the change"),
         ParamSpec("shape", None, kind="word", default="quintic", choices=tuple(SHAPES),
                   doc="lateral dynamics shape (quintic: zero lateral speed and acceleration at both ends)"),
     )
     doc = "Move to another lane with a smooth (quintic, or another dynamics shape) lateral profile."
 
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if ("to" in values) == bool(values.get("to_lane_of")):
+            return [("to", "give the target lane once: `to LANE` or `to_lane_of ACTOR`", "E0105")]
+        return []
+
     def start(self, agent, world, time_s):
-        begin_lane_change(agent, world, int(round(self.settings["to"])), self.settings["duration"], time_s,
-                          self.settings["shape"])
+        other = self.settings["to_lane_of"]
+        lane = world.actor_lane(other) if other else int(round(self.settings["to"]))
+        if lane is None:  # the other actor is off the lanes: keep to the current one
+            lane = agent.lane
+        begin_lane_change(agent, world, lane, self.settings["duration"], time_s, self.settings["shape"])
 
 
 @BEHAVIORS.register
 class CutIn(LaneChange):
     keyword = "cut_in"
     params = (
-        ParamSpec("to", None, kind="int", required=True, doc="lane to cut into"),
+        ParamSpec("to", None, kind="int", doc="lane to cut into"),
+        ParamSpec("to_lane_of", None, kind="name", default="",
+                  doc="instead of `to`: the lane another actor is in when the cut-in starts"),
         ParamSpec("duration", units.TIME, default=2.0, low=0.5, doc="time to complete the cut-in"),
         ParamSpec("shape", None, kind="word", default="quintic", choices=tuple(SHAPES),
                   doc="lateral dynamics shape"),

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from addt_dsl.expr import Expr, eval_param_expr, substitute_params
+from addt_dsl.expr import Expr, eval_param_expr, signals_used, substitute_params
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, GroupPlan, RoadPlan, RunSpec, TriggerPlan,
                            resolve_settings)
 
@@ -104,7 +104,12 @@ def _value(expr: Expr | None, params: dict[str, float], default: float = 0.0) ->
 
 
 def _clause(c: ClausePlan, params: dict[str, float]) -> BoundClause:
-    return BoundClause(c.keyword, c.name, resolve_settings(c.settings, params))
+    """Settings as numbers; a live setting that reads signals stays an expression (its
+    parameters substituted), evaluated on the current state at every step."""
+    live = {k: substitute_params(v, params) for k, v in c.settings.items()
+            if not isinstance(v, (str, list)) and signals_used(v)}
+    fixed = resolve_settings({k: v for k, v in c.settings.items() if k not in live}, params)
+    return BoundClause(c.keyword, c.name, {k: live.get(k, fixed.get(k)) for k in c.settings})
 
 
 def bind_step(t: TriggerPlan, params: dict[str, float]) -> BoundStep:

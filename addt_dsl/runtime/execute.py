@@ -54,6 +54,11 @@ class _Road:
         return self.road.point(s, t)
 
 
+def _is_live(clause: BoundClause) -> bool:
+    """Whether a behaviour has a setting that reads signals (kept as an expression)."""
+    return any(not isinstance(v, (int, float, str, list)) for v in clause.settings.values())
+
+
 def _stable_seed(*parts) -> list[int]:
     return [int(p) if isinstance(p, int) else zlib.crc32(str(p).encode()) for p in parts]
 
@@ -113,6 +118,7 @@ class _Run:
         self.command_queue: list[tuple[float, float, float]] = []
         self.command = (0.0, 0.0)
         self._rngs: dict[str, np.random.Generator] = {}
+        self._live_snapshot = None  # (step, state) that live behaviour settings read
 
         ego = plan.ego
         self.ego_plan = ego
@@ -132,6 +138,7 @@ class _Run:
         self.agent_roads: dict[str, _Road] = {}
         self.longitudinal: dict[str, object] = {}
         self.scripts: dict[str, Script] = {}
+        self.deferred: list[tuple[AgentState, BoundClause]] = []  # time-0 behaviours with live settings
         for a in plan.agents:
             road = self._road_of(a)
             t = float(road.road.lane_center_t(a.lane, a.s)) + a.offset
@@ -141,6 +148,9 @@ class _Run:
             self.agent_roads[a.name] = road
             self.physics.add_box(a.name, a.length_m, a.width_m, VEHICLES[a.vehicle].height_m, VEHICLES[a.vehicle].rgba)
             self.longitudinal[a.name] = None
+            if any(_is_live(c) for c in a.behaviors):  # they read the first recorded state
+                self.deferred.extend((st, c) for c in a.behaviors)
+                continue
             for clause in a.behaviors:
                 self._start_behavior(st, clause, 0.0)
             if a.steps:
@@ -208,6 +218,13 @@ class _Run:
         a = self.agent_by_name.get(name)
         return None if a is None else (a.s, a.speed, a.length_m)
 
+    def actor_lane(self, name: str) -> int | None:
+        """The lane an actor is in now (None off the lanes)."""
+        if name == "ego":
+            return self.ego_road.road.lane_at(self.ego_s, self.ego_t)
+        a = self.agent_by_name[name]
+        return self.agent_roads[name].road.lane_at(a.s, a.t)
+
     def road_band_t(self, road_id: str, s: float) -> tuple[float, float]:
         road = next(r for r in self.agent_roads.values() if r.road_id == road_id)
         return road.road.road.road_band_t(min(max(s, 0.0), road.road.length))
@@ -243,6 +260,14 @@ class _Run:
         return float(road.road.lane_center_t(lane, s))
 
     # ---- behaviours
+    def live_value(self, expr) -> float:
+        """A live behaviour setting (`speed(ego) + 5 km/h`) on the state recorded this step."""
+        rec, k = self.recorded
+        if self._live_snapshot is None or self._live_snapshot[0] != k:
+            self._live_snapshot = (k, _snapshot_trace(self, rec, k))
+        trace = self._live_snapshot[1]
+        return float(oracles.evaluate(expr, compute_signals(trace, oracles_signals(expr)), self.dt)[0])
+
     def _start_behavior(self, agent: AgentState, clause: BoundClause, time_s: float) -> None:
         cls = BEHAVIORS.get(clause.name)
         beh = cls(clause.settings)
@@ -337,6 +362,11 @@ def _loop(run: _Run) -> Trace:
             last = k + 1
             break
 
+        run.recorded = (rec, k)  # live behaviour settings read the state just recorded
+        if run.deferred:
+            for agent, clause in run.deferred:
+                run._start_behavior(agent, clause, t_now)
+            run.deferred.clear()
         # Scripted steps fire on the state just recorded.
         if run.scripts:
             _advance_scripts(run, rec, k, t_now)

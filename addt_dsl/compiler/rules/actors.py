@@ -351,7 +351,7 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str |
 
 
 def _validate_clause(ctx: Context, c: ast.Clause, cls, vals: dict) -> bool:
-    """The class's own checks across settings (`validate(values) -> [(setting, message)]`,
+    """The class's own checks across settings (`validate(values) -> [(setting, message[, code])]`,
     e.g. a speed profile's times and speeds), on the settings that are constants."""
     validate = getattr(cls, "validate", None)
     if validate is None:
@@ -363,10 +363,10 @@ def _validate_clause(ctx: Context, c: ast.Clause, cls, vals: dict) -> bool:
             consts[key] = None if any(i is None for i in items) else items
         else:
             consts[key] = value if isinstance(value, str) else const_value(value)
-    problems = validate({k: v for k, v in consts.items() if v is not None})
-    for key, message in problems:
+    problems = validate(consts)  # a setting that is not a constant is there as None
+    for key, message, *code in problems:  # (setting, message[, code]): E0204 unless given
         span = next((st.value.span for st in c.settings + c.block if st.key == key), c.span)
-        ctx.sink.error("E0204", message, span)
+        ctx.sink.error(code[0] if code else "E0204", message, span)
     return not problems
 
 

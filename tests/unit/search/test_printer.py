@@ -201,9 +201,16 @@ def _sample_setting(spec):
 def _clause(keyword, cls):
     settings = {}
     for spec in cls.params:
-        value = _sample_setting(spec)
+        value = "ego" if spec.kind == "name" and spec.required else _sample_setting(spec)
         if value is not None:
             settings[spec.name] = value
+    # Settings that exclude each other (`distance` or `time_gap`): drop the one the class names.
+    validate = getattr(cls, "validate", None)
+    def plain(v):
+        return [plain(i) for i in v] if isinstance(v, list) else getattr(v, "value", v)
+
+    while validate is not None and (problems := validate({k: plain(v) for k, v in settings.items()})):
+        settings.pop(problems[0][0])
     return ClausePlan(keyword=keyword, name=cls.keyword, settings=settings)
 
 

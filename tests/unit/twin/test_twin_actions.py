@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from addt_dsl.runtime.behaviors import SHAPES, blend
+from addt_dsl.runtime.behaviors import SHAPES, advance, blend
 from tests.unit.twin.test_twin_behaviors import DT, LANES, FakeWorld, agent, simulate, start
 
 
@@ -120,3 +120,73 @@ def test_speed_profile_starts_from_the_current_speed_and_steps_at_points():
     at = {round(t, 6): v for t, v in zip(rows[:, 0], rows[:, 3])}
     assert at[0.99] == pytest.approx(6.0) and at[1.0] == pytest.approx(10.0)
     assert at[1.99] == pytest.approx(10.0) and at[2.0] == pytest.approx(5.0)
+
+
+class LiveWorld(FakeWorld):
+    """The fake world with other actors' lanes and live values (a signal: that actor's speed)."""
+
+    def actor_lane(self, name):
+        o = self.others[name]
+        return min(LANES, key=lambda lane: abs(LANES[lane] - o.t))
+
+    def live_value(self, expr):
+        from addt_dsl.expr import eval_param_expr, signals_used
+        speeds = {f"speed({n})": o.speed for n, o in self.others.items()}
+        return eval_param_expr(_signals_as_params(expr), {k: speeds[k] for k in signals_used(expr)})
+
+
+def _signals_as_params(expr):
+    from addt_dsl.expr import Param, Signal
+    if isinstance(expr, Signal):
+        return Param(name=expr.name)
+    updates = {}
+    for field in ("left", "right", "arg"):
+        if hasattr(expr, field):
+            updates[field] = _signals_as_params(getattr(expr, field))
+    return expr.model_copy(update=updates) if updates else expr
+
+
+def test_a_live_speed_follows_another_actor():
+    from addt_dsl.expr import Binary, Num, Signal
+    lead = agent("lead", s=50.0, lane=-1, speed=10.0)
+    world = LiveWorld(lead)
+    a = agent(speed=5.0)
+    target = Binary(op="+", left=Binary(op="*", left=Num(value=1.2), right=Signal(name="speed(lead)")),
+                    right=Num(value=1.0))
+    beh = start("cruise", a, world, speed=target, accel=3.0, decel=3.0)
+    t = 0.0
+    for k in range(800):  # the leader speeds up at 1 m/s^2 for 4 s, then holds
+        lead.speed = 10.0 + min(4.0, t)
+        advance(a, beh.accel(a, world, t), t, DT)
+        t += DT
+        if t > 6.0:
+            assert a.speed == pytest.approx(1.2 * lead.speed + 1.0, abs=0.1)
+
+
+def test_lane_change_to_the_lane_of_another_actor():
+    ego = agent("ego", s=30.0, lane=-1)
+    a = agent(lane=-2)
+    world = LiveWorld(ego)
+    start("lane_change", a, world, to_lane_of="ego", duration=2.0)
+    simulate(a, start("cruise", a, world, speed=10.0), world, 3.0)
+    assert a.lane == -1 and a.t == pytest.approx(LANES[-1])
+
+
+@pytest.mark.parametrize("gap_setting,want", [({"distance": 20.0}, lambda v: 20.0), ({"time_gap": 1.5}, lambda v: 1.5 * v)])
+def test_keep_gap_settles_on_the_gap_behind_a_moving_target(gap_setting, want):
+    lead = agent("lead", s=80.0, speed=12.0)
+    world = LiveWorld(lead)
+    a = agent(s=0.0, speed=15.0)
+    beh = start("keep_gap", a, world, target="lead", **gap_setting)
+    simulate(a, beh, world, 40.0, others=[lead])
+    gap = lead.s - a.s - 4.6
+    assert gap == pytest.approx(want(a.speed), abs=0.2)
+    assert a.speed == pytest.approx(12.0, abs=0.05)
+
+
+def test_keep_gap_ahead_of_a_follower():
+    tail = agent("tail", s=0.0, speed=10.0)
+    world = LiveWorld(tail)
+    a = agent(s=15.0, speed=10.0)
+    simulate(a, start("keep_gap", a, world, target="tail", distance=25.0, side="ahead"), world, 40.0, others=[tail])
+    assert a.s - tail.s - 4.6 == pytest.approx(25.0, abs=0.2)
