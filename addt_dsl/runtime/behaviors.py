@@ -275,6 +275,61 @@ class KeepGap(Behavior):
 
 
 @BEHAVIORS.register
+class Synchronize(Behavior):
+    keyword = "synchronize"
+    params = (
+        ParamSpec("master", None, kind="name", required=True, doc="actor whose arrival sets the time"),
+        ParamSpec("master_at", units.LENGTH, required=True, low=0.0,
+                  doc="station along its road the master arrives at (its centre)"),
+        ParamSpec("target_s", units.LENGTH, low=0.0, doc="station of the own target point"),
+        ParamSpec("target_t", units.LENGTH, doc="lateral offset of the own target point (left positive)"),
+        ParamSpec("heading", units.ANGLE, low=-math.pi, high=math.pi,
+                  doc="direction to move relative to the road, as `walk` (default: as it moves now)"),
+        ParamSpec("max_speed", units.SPEED, default=15.0, low=0.1, doc="speed limit while synchronising"),
+        ParamSpec("accel", units.ACCELERATION, default=5.0, low=0.01, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=5.0, low=0.01, doc="max deceleration"),
+        ParamSpec("final_speed", units.SPEED, low=0.0,
+                  doc="speed to change to once the master has arrived (default: keep the speed)"),
+    )
+    doc = ("Adjust the speed to reach a point when another actor reaches its point (OpenSCENARIO "
+           "SynchronizeAction): at every step, the remaining distance over the master's time to "
+           "arrival at its current speed.")
+
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if "target_s" not in values and "target_t" not in values:
+            return [("master", "give the own target point: `target_s S` and/or `target_t T`", "E0105")]
+        return []
+
+    def start(self, agent, world, time_s):
+        if self.settings["heading"] is not None:
+            _walk_towards(agent, self.settings["heading"])
+        self.final = None
+
+    def remaining_m(self, agent: AgentState) -> float:
+        """Distance to the own target point along the direction of motion [m]."""
+        s = self.settings
+        d = 0.0
+        if s["target_s"] is not None:
+            d += (s["target_s"] - agent.s) * math.cos(agent.heading_rel)
+        if s["target_t"] is not None:
+            d += (s["target_t"] - agent.t) * math.sin(agent.heading_rel)
+        return d
+
+    def accel(self, agent, world, time_s):
+        s = self.settings
+        master = world.actor_station(s["master"])
+        to_go = s["master_at"] - master[0] if master is not None else 0.0
+        if self.final is None and to_go <= 0.0:  # the master has arrived: synchronisation ends
+            self.final = s["final_speed"] if s["final_speed"] is not None else agent.speed
+        if self.final is not None:
+            return _speed_tracking(agent, self.final, s["accel"], s["decel"], world.dt)
+        arrival_s = to_go / master[1] if master[1] > 1e-3 else math.inf
+        wanted = max(0.0, self.remaining_m(agent)) / arrival_s
+        return _speed_tracking(agent, min(wanted, s["max_speed"]), s["accel"], s["decel"], world.dt)
+
+
+@BEHAVIORS.register
 class Brake(Behavior):
     keyword = "brake"
     aliases = ("sudden_brake",)

@@ -101,3 +101,43 @@ agent f car on r lane -1 at 40 m speed 15 m/s {
     gap = lead.s - f.s - 0.5 * (lead.length_m + f.length_m)
     assert gap.min() > 5.0
     assert gap[-1] == pytest.approx(2.0 * f.speed[-1], abs=0.5)
+
+
+CPNA = """
+scenario cpna {{
+  duration 10 s
+  road r {{
+    line length 400 m
+    lanes right 1
+  }}
+  ego car on r lane -1 at 20 m speed 11.1 m/s {{
+    stack bev cruise_speed 11.1 m/s
+  }}
+  agent walker pedestrian on r lane -1 at 100 m offset -4 m {{
+    when distance(ego, walker) < 60 m then behavior synchronize master ego master_at 100 m - 2.3 m target_t {target} m heading 90 deg
+  }}
+  faults {{
+    drop lidar rate 1
+  }}
+}}
+"""
+
+
+@pytest.mark.parametrize("fraction", [0.25, 0.5, 0.75])
+def test_synchronized_pedestrian_meets_the_front_at_the_requested_offset(fraction):
+    # Euro NCAP CPNA: impact at 25/50/75 % of the car's width from its nearside (right)
+    # edge. The ego sees nothing (every lidar frame dropped) and keeps 11.1 m/s.
+    ego_t, width = -1.75, 1.9
+    target = ego_t - width / 2 + fraction * width
+    result = compile_source(CPNA.format(target=target))
+    assert result.plan is not None, [str(d) for d in result.diagnostics]
+    out = execute(expand(result.plan).specs[0])
+    tr = out.trace
+    hit = [e for e in tr.events_of("collision") if "walker" in e.detail["actors"]]
+    assert hit, "the pedestrian never met the car"
+    k = int(round(hit[0].time_s / tr.period_s))
+    ego, walker = tr.actors["ego"], tr.actors["walker"]
+    assert abs(ego.speed[k] - 11.1) < 0.1  # no reaction
+    # At contact the walker is in front of the bumper, at the requested offset.
+    assert walker.s[k] - ego.s[k] == pytest.approx(0.5 * (ego.length_m + walker.length_m), abs=0.2)
+    assert walker.t[k] - (ego.t[k] - width / 2) == pytest.approx(fraction * width, abs=0.2)

@@ -190,3 +190,19 @@ def test_keep_gap_ahead_of_a_follower():
     a = agent(s=15.0, speed=10.0)
     simulate(a, start("keep_gap", a, world, target="tail", distance=25.0, side="ahead"), world, 40.0, others=[tail])
     assert a.s - tail.s - 4.6 == pytest.approx(25.0, abs=0.2)
+
+
+@pytest.mark.parametrize("fraction", [0.25, 0.5, 0.75])
+def test_synchronize_arrives_when_the_master_does(fraction):
+    # A car at 11 m/s from s = 0 reaches s = 77 m at 7 s; the walker at s = 77 m must
+    # be at t = -2.7 + fraction * 1.9 m then, whatever its start.
+    car = agent("car", s=0.0, lane=-1, speed=11.0)
+    world = LiveWorld(car)
+    walker = agent(s=77.0, lane=-2, speed=0.0, length=0.5, width=0.5)
+    target = -2.7 + fraction * 1.9
+    beh = start("synchronize", walker, world, master="car", master_at=77.0, target_t=target,
+                heading=math.pi / 2)
+    rows = simulate(walker, beh, world, 7.0, others=[car])
+    assert car.s == pytest.approx(77.0, abs=0.2)
+    assert walker.t == pytest.approx(target, abs=0.05)
+    assert rows[:, 3].max() < 2.0  # a walking pace, not a sprint at the end
