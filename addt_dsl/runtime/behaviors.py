@@ -330,6 +330,81 @@ class Synchronize(Behavior):
 
 
 @BEHAVIORS.register
+class Trajectory(Behavior):
+    keyword = "trajectory"
+    params = (
+        ParamSpec("s", units.LENGTH, kind="list", doc="stations of the waypoints along the road"),
+        ParamSpec("t", units.LENGTH, kind="list", doc="lateral offsets of the waypoints (left positive)"),
+        ParamSpec("x", units.LENGTH, kind="list", doc="instead of `s`/`t`: world x of the waypoints"),
+        ParamSpec("y", units.LENGTH, kind="list", doc="instead of `s`/`t`: world y of the waypoints"),
+        ParamSpec("times", units.TIME, kind="list", low=0.0,
+                  doc="time to be at each waypoint, from the start of the behaviour (default: at `speed`)"),
+        ParamSpec("speed", units.SPEED, default=10.0, low=0.0, doc="speed without `times`"),
+        ParamSpec("max_speed", units.SPEED, default=40.0, low=0.1, doc="speed limit with `times`"),
+        ParamSpec("accel", units.ACCELERATION, default=5.0, low=0.01, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=8.0, low=0.01, doc="max deceleration"),
+    )
+    doc = ("Follow waypoints in road (`s`, `t`) or world (`x`, `y`) coordinates, at a speed or "
+           "meeting given times (OpenSCENARIO FollowTrajectoryAction, polyline); then drive on "
+           "along the road at the reached offset.")
+
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        road = [k for k in ("s", "t") if k in values]
+        world = [k for k in ("x", "y") if k in values]
+        if not (len(road) == 2 and not world) and not (len(world) == 2 and not road):
+            # Name a setting to drop where there is one too many, else the first missing.
+            key = world[0] if len(road) == 2 else road[0] if len(world) == 2 else (road + world + ["s"])[0]
+            return [(key, "give the waypoints once: `s [...] t [...]` (road) or `x [...] y [...]` (world)",
+                     "E0105")]
+        lists = [values[k] for k in ("s", "t", "x", "y", "times") if isinstance(values.get(k), list)]
+        if len({len(v) for v in lists}) > 1:
+            return [("times" if "times" in values else "t",
+                     "the waypoint lists differ in length: one value per waypoint in each", "E0204")]
+        times = values.get("times")
+        if isinstance(times, list) and any(b <= a for a, b in zip(times, times[1:])):
+            return [("times", "the times of a trajectory must increase")]
+        return []
+
+    def start(self, agent, world, time_s):
+        st = self.settings
+        if st["s"] is not None:
+            self.points = list(zip(st["s"], st["t"]))
+        else:
+            self.points = [world.road_coords(agent, x, y) for x, y in zip(st["x"], st["y"])]
+        self.times = [time_s + t for t in st["times"]] if st["times"] is not None else None
+        self.index = 0
+        self.origin = (agent.s, agent.t)
+
+    def accel(self, agent, world, time_s):
+        st = self.settings
+        while self.index < len(self.points) and self._passed(agent):
+            self.origin = self.points[self.index]
+            self.index += 1
+        if self.index == len(self.points):  # done: on along the road at this offset
+            if agent.heading_rel:
+                _walk_towards(agent, 0.0)
+            target = agent.speed
+        else:
+            ps, pt = self.points[self.index]
+            agent.heading_rel = math.atan2(pt - agent.t, ps - agent.s)
+            agent.t_target, agent.lc_duration_s = agent.t, 0.0
+            if self.times is None:
+                target = st["speed"]
+            else:  # the remaining polyline over the time left to its waypoint
+                left_s = self.times[self.index] - time_s
+                dist = math.hypot(ps - agent.s, pt - agent.t)
+                target = min(st["max_speed"], dist / left_s) if left_s > world.dt else st["max_speed"]
+        return _speed_tracking(agent, target, st["accel"], st["decel"], world.dt)
+
+    def _passed(self, agent: AgentState) -> bool:
+        """Whether the agent is at or beyond the current waypoint along its segment."""
+        (s0, t0), (s1, t1) = self.origin, self.points[self.index]
+        ds, dt_ = s1 - s0, t1 - t0
+        return (agent.s - s0) * ds + (agent.t - t0) * dt_ >= ds * ds + dt_ * dt_ - 1e-9
+
+
+@BEHAVIORS.register
 class Brake(Behavior):
     keyword = "brake"
     aliases = ("sudden_brake",)

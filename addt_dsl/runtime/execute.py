@@ -218,6 +218,10 @@ class _Run:
         a = self.agent_by_name.get(name)
         return None if a is None else (a.s, a.speed, a.length_m)
 
+    def road_coords(self, agent: AgentState, x: float, y: float) -> tuple[float, float]:
+        """(s, t) of a world point on an agent's road [m]."""
+        return self.agent_roads[agent.name].road.project(x, y, agent.s)
+
     def actor_lane(self, name: str) -> int | None:
         """The lane an actor is in now (None off the lanes)."""
         if name == "ego":

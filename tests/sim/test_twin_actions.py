@@ -141,3 +141,11 @@ def test_synchronized_pedestrian_meets_the_front_at_the_requested_offset(fractio
     # At contact the walker is in front of the bumper, at the requested offset.
     assert walker.s[k] - ego.s[k] == pytest.approx(0.5 * (ego.length_m + walker.length_m), abs=0.2)
     assert walker.t[k] - (ego.t[k] - width / 2) == pytest.approx(fraction * width, abs=0.2)
+
+
+def test_trajectory_meets_waypoints_at_their_times():
+    tr = run("""agent a car on r lane -1 at 50 m speed 10 m/s {
+  at 1 s behavior trajectory s [80, 110, 140] m t [-1.75, -5.25, -5.25] m times [2, 5, 8] s
+}""", duration=10.0)
+    for s, t, when in ((80.0, -1.75, 3.0), (110.0, -5.25, 6.0), (140.0, -5.25, 9.0)):
+        assert abs(at(tr, "a", "s", when) - s) < 0.1 and abs(at(tr, "a", "t", when) - t) < 0.1

@@ -206,3 +206,35 @@ def test_synchronize_arrives_when_the_master_does(fraction):
     assert car.s == pytest.approx(77.0, abs=0.2)
     assert walker.t == pytest.approx(target, abs=0.05)
     assert rows[:, 3].max() < 2.0  # a walking pace, not a sprint at the end
+
+
+class ProjectingWorld(LiveWorld):
+    """World coordinates are road coordinates shifted by (100, 0)."""
+
+    def road_coords(self, agent, x, y):
+        return x - 100.0, y
+
+
+def test_trajectory_meets_its_waypoints_at_their_times():
+    a = agent(s=50.0, lane=-1, speed=10.0)
+    points = [(70.0, -1.75), (100.0, -5.25), (130.0, -5.25)]
+    beh = start("trajectory", a, LiveWorld(), 1.0, s=[p[0] for p in points], t=[p[1] for p in points],
+                times=[2.0, 5.0, 8.0])
+    rows = simulate(a, beh, LiveWorld(), 9.0, t0=1.0)
+    for (s, t), when in zip(points, [3.0, 6.0, 9.0]):
+        k = int(round((when - 1.0) / DT))
+        pos = (rows[k, 1], rows[k, 2]) if k < len(rows) else (a.s, a.t)
+        assert math.hypot(pos[0] - s, pos[1] - t) < 0.1
+    # The body turns with the path: heading towards the second waypoint while on it.
+    assert rows[int(round(3.5 / DT)), 4] == pytest.approx(math.atan2(-3.5, 30.0), abs=1e-3)
+
+
+def test_trajectory_in_world_coordinates_at_a_speed_then_on_along_the_road():
+    a = agent(s=95.0, lane=-1, speed=8.0)
+    world = ProjectingWorld()
+    beh = start("trajectory", a, world, x=[210.0, 230.0], y=[-3.0, -1.75], speed=8.0)
+    rows = simulate(a, beh, world, 6.0)
+    on = rows[np.argmin(np.hypot(rows[:, 1] - 110.0, rows[:, 2] + 3.0))]
+    assert math.hypot(on[1] - 110.0, on[2] + 3.0) < 0.1
+    assert a.t == pytest.approx(-1.75, abs=0.05) and a.heading_rel == 0.0
+    assert a.speed == pytest.approx(8.0)
