@@ -189,6 +189,8 @@ class ScenarioPlan(_Model):
     faults: list[FaultPlan] = Field(default_factory=list)
     oracles: list[OraclePlan] = Field(default_factory=list)
     sweep: SweepPlan = Field(default_factory=SweepPlan)
+    # Weather and light models acting on the sensors (`environment { fog visibility 150 m }`).
+    environment: list[ClausePlan] = Field(default_factory=list)
 
     def road(self, name: str) -> RoadPlan:
         return next(r for r in self.roads if r.name == name)

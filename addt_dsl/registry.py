@@ -78,6 +78,7 @@ FAULTS: Registry = Registry("fault")
 STACKS: Registry = Registry("stack")
 SIGNALS: Registry = Registry("signal")
 GEOMETRIES: Registry = Registry("road geometry")
+ENVIRONMENTS: Registry = Registry("environment model")
 
 # Modules whose import registers the built-in elements. None imports pybullet or torch
 # at module level (a unit test checks this).
@@ -87,6 +88,7 @@ _BUILTIN_MODULES = (
     "addt_dsl.runtime.faults",
     "addt_dsl.runtime.signals",
     "addt_dsl.runtime.roadspec",
+    "addt_dsl.runtime.environment",
     "addt_dsl.stack",
 )
 _loaded = False

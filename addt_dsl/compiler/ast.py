@@ -244,8 +244,17 @@ class SweepItem(Node):
 
 
 @dataclass(frozen=True, slots=True)
+class EnvItem(Node):
+    """`fog visibility 150 m` in an `environment { }` block."""
+
+    name: str
+    name_span: Span
+    settings: tuple[Setting, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
 class Block(Node):
-    """`faults { }`, `expect { }`, `sweep { }` — kept as blocks for span reporting."""
+    """`faults { }`, `expect { }`, `sweep { }`, `environment { }` — kept as blocks for span reporting."""
 
     kind: str
     items: tuple = ()

@@ -271,6 +271,14 @@ class Builder:
     def b_group(self, span, items):
         return ast.Group(span, str(items[0]), tuple(items[1:]))
 
+    # ---- environment
+    def b_environment(self, span, items):
+        return ast.Block(span, "environment", tuple(i for i in items if isinstance(i, ast.EnvItem)))
+
+    def b_env_item(self, span, items):
+        name, settings = items
+        return ast.EnvItem(span, str(name), self._tspan(name), settings)
+
     # ---- faults
     def b_faults(self, span, items):
         return ast.Block(span, "faults", tuple(items))

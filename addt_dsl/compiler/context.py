@@ -53,6 +53,7 @@ class Context:
     assumptions: list[P.AssumptionPlan] = field(default_factory=list)
     actors: dict[str, P.ActorPlan] = field(default_factory=dict)
     faults: list[P.FaultPlan] = field(default_factory=list)
+    environment: list[P.ClausePlan] = field(default_factory=list)
     oracles: list[P.OraclePlan] = field(default_factory=list)
     sweep: P.SweepPlan = field(default_factory=P.SweepPlan)
     used_params: set[str] = field(default_factory=set)

@@ -37,7 +37,7 @@ from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, FaultPlan, Orac
                            RunSpec, ScenarioPlan, SweepPlan, TriggerPlan)
 from addt_dsl.printer.expr import (ExprPrinter, PrinterError, dim_of_name, format_const, format_quantity,
                                    string_literal)
-from addt_dsl.registry import FAULTS, GEOMETRIES, ParamSpec
+from addt_dsl.registry import ENVIRONMENTS, FAULTS, GEOMETRIES, ParamSpec
 from addt_dsl.sweep import expand
 from addt_dsl.vehicles import VEHICLES
 
@@ -385,7 +385,21 @@ def _sweep(pr: _Printer) -> None:
     pr.emit(1, "}")
 
 
-SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _faults, _oracles, _sweep)
+def _environment(pr: _Printer) -> None:
+    if not pr.plan.environment:
+        return
+    pr.emit(0)
+    pr.emit(1, "environment {")
+    for c in pr.plan.environment:
+        cls = ENVIRONMENTS.get(c.name)
+        if cls is None:
+            raise PrinterError(f"unknown environment model {c.name!r}")
+        pr.emit(2, _join(c.name, pr.settings(cls.params, c.settings)))
+    pr.emit(1, "}")
+
+
+SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _environment, _faults,
+                                                    _oracles, _sweep)
 
 
 # ---------------------------------------------------------------- entry points

@@ -82,6 +82,7 @@ class BoundScenario:
     agents: tuple[BoundActor, ...]
     faults: tuple[ConcreteFault, ...]
     oracles: tuple[BoundOracle, ...]
+    environment: tuple[BoundClause, ...] = ()
 
     def road(self, name: str) -> RoadPlan:
         return next(r for r in self.roads if r.name == name)
@@ -96,7 +97,8 @@ def bind(spec: RunSpec) -> BoundScenario:
         name=plan.name, duration_s=plan.duration_s, step_s=plan.step_s, seed=spec.seed, roads=tuple(plan.roads),
         ego=_actor(plan.ego, params), agents=tuple(_actor(a, params) for a in plan.agents),
         faults=tuple(spec.faults),
-        oracles=tuple(BoundOracle(o.name, o.severity, substitute_params(o.formula, params)) for o in plan.oracles))
+        oracles=tuple(BoundOracle(o.name, o.severity, substitute_params(o.formula, params)) for o in plan.oracles),
+        environment=tuple(_clause(c, params) for c in plan.environment))
 
 
 def _value(expr: Expr | None, params: dict[str, float], default: float = 0.0) -> float:

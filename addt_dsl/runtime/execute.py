@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from addt_dsl.plan import RunSpec
-from addt_dsl.registry import BEHAVIORS, FAULTS, SENSORS, STACKS
+from addt_dsl.registry import BEHAVIORS, ENVIRONMENTS, FAULTS, SENSORS, STACKS
 from addt_dsl.runtime import oracles
 from addt_dsl.runtime.behaviors import AgentState, advance, relative_heading
 from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
@@ -166,6 +166,7 @@ class _Run:
             sensor = cls(clause.name, clause.settings)
             self.sensors[clause.name] = sensor
             self.sensor_next[clause.name] = 0.0
+        self.environment = [ENVIRONMENTS.get(c.name)(c.settings) for c in plan.environment]
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self.ctx = _Context(self)
@@ -384,6 +385,8 @@ def _loop(run: _Run) -> Trace:
                 for f in run.faults.for_target(name):
                     f.before_capture(sensor, t_now)
                 frame = sensor.capture(run, t_now)
+                for env in run.environment:  # weather and light act on what the sensor captured
+                    frame = env.on_frame(sensor, frame, run.rng(f"environment:{env.keyword}:{name}"))
                 delay = 0.0
                 for f in run.faults.for_target(name):
                     frame, extra = f.on_frame(frame, t_now)
