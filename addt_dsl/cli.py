@@ -6,8 +6,9 @@
         [--classify]                      also classify each run against its fault-free twin
     addtc report DIR                      HTML report, summary.json, runs.csv of a results dir
     addtc trace DIR RUN_ID [--csv F] [--parquet F] [--plot F.png]   one run's signals and events
-    addtc check FILE...                   compile only (diagnostics)
-    addtc plan FILE                       print the ScenarioPlan as JSON
+    addtc check FILE...                   compile only (diagnostics and the sweep's cost estimate)
+    addtc plan FILE                       print the ScenarioPlan as JSON (the cost estimate on stderr)
+        check, plan and run take [--allow-large] [--max NAME=N] (docs/limits.md)
     addtc schema [--write PATH]           the plan's JSON schema
     addtc shrink FILE | --run-key JSON    shrink a failing run to a minimal replayable .addt file
     addtc falsify FILE [--budget-runs N]  search parameters and faults for failures
@@ -34,8 +35,9 @@ from addt_dsl.console import compile_and_report
 from addt_dsl.diagnostics import render_json
 from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, UsageError, nonneg_float, nonneg_int,
                              positive_float, positive_int, verdict_exit_code)
+from addt_dsl.limits import DEFAULT, parse_limit
 
-SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study")
+SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map")
 
 
 def cmd_check(args) -> int:
@@ -45,14 +47,16 @@ def cmd_check(args) -> int:
 
     failed = False
     collected = []
+    limits = _limits(args)
     for path in args.files:
         if args.format == "json":
-            result = compile_file(path)
+            result = compile_file(path, limits)
             collected.extend(result.diagnostics)
         else:
-            result = compile_and_report(path, args.format)
+            result = compile_and_report(path, args.format, limits)
             if result.ok:
                 print(f"ok: {path}")
+                print("\n".join(result.estimate.lines()))
         failed |= not result.ok
     if args.format == "json":
         print(render_json(collected))
@@ -60,9 +64,11 @@ def cmd_check(args) -> int:
 
 
 def cmd_plan(args) -> int:
-    result = compile_and_report(args.file, args.format)
+    result = compile_and_report(args.file, args.format, _limits(args))
     if not result.ok:
         return EXIT_USAGE
+    if args.format == "text":  # stdout stays the plan's JSON
+        print("\n".join(result.estimate.lines()), file=sys.stderr)
     print(result.plan.model_dump_json(indent=2))
     return EXIT_OK
 
@@ -146,7 +152,7 @@ def _run_suite(args, paths: list[Path]) -> int:
 
 def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
     """Compile and run one file; `collect(plan, store)` sees the store before it closes."""
-    result = compile_and_report(str(path), args.format)
+    result = compile_and_report(str(path), args.format, _limits(args))
     if not result.ok:
         return EXIT_USAGE
     from addt_dsl.runtime.store import ResultStore, StoreMismatch
@@ -358,6 +364,42 @@ def cmd_trace(args) -> int:
     return EXIT_OK
 
 
+def cmd_map(args) -> int:
+    """Roads, lanes with direction, junction connections and signals of an OpenDRIVE file."""
+    from addt_dsl.reporting.roadmap import describe, map_png
+    from addt_dsl.runtime.road import XodrError, load_xodr
+
+    try:
+        network = load_xodr(args.file)
+    except XodrError as exc:
+        raise UsageError(f"cannot read {args.file}: {exc}") from None
+    print(describe(network, Path(args.file).name), end="")
+    if args.png:
+        Path(args.png).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.png).write_bytes(map_png(network, Path(args.file).name))
+        print(f"wrote {args.png}")
+    return EXIT_OK
+
+
+def _limits(args):
+    """The input limits and cost thresholds of `--max` and `--allow-large` (docs/limits.md)."""
+    limits = DEFAULT.raised(allow_large=getattr(args, "allow_large", False),
+                            run_cap=getattr(args, "limit", 0) or 0)  # `run --limit N`: the first N runs
+    for item in getattr(args, "max", None) or ():
+        try:
+            limits = parse_limit(item, limits)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    return limits
+
+
+def _limit_options(parser) -> None:
+    parser.add_argument("--allow-large", action="store_true",
+                        help="run a sweep whose cost estimate is beyond the thresholds (docs/limits.md)")
+    parser.add_argument("--max", action="append", default=[], metavar="NAME=N",
+                        help="raise one input limit or cost threshold, e.g. --max agents=5000 (docs/limits.md)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="addtc", description="Compile and run .addt driving scenarios.")
     sub = parser.add_subparsers(dest="command")
@@ -392,6 +434,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--classify", action="store_true",
                      help="classify every run against its fault-free twin: masked, silent, detected, "
                           "hazard (or error); adds an outcome column and counts")
+    _limit_options(run)
     run.set_defaults(func=cmd_run)
     report = sub.add_parser("report", help="write report.html (and tables) for a results directory")
     report.add_argument("dir", help="directory written by --out (or a results .sqlite file)")
@@ -413,14 +456,21 @@ def build_parser() -> argparse.ArgumentParser:
     check = sub.add_parser("check", help="compile only")
     check.add_argument("files", nargs="+")
     check.add_argument("--format", choices=("text", "json"), default="text")
+    _limit_options(check)
     check.set_defaults(func=cmd_check)
     plan = sub.add_parser("plan", help="print the execution plan as JSON")
     plan.add_argument("file")
     plan.add_argument("--format", choices=("text", "json"), default="text")
+    _limit_options(plan)
     plan.set_defaults(func=cmd_plan)
     schema = sub.add_parser("schema", help="print or write the plan's JSON schema")
     schema.add_argument("--write", help="file to write")
     schema.set_defaults(func=cmd_schema)
+    road_map = sub.add_parser("map", help="list an OpenDRIVE file's roads, lanes, junctions and signals "
+                                          "(ids for routes); --png draws it")
+    road_map.add_argument("file", help="an .xodr file")
+    road_map.add_argument("--png", help="write a map image with the ids drawn on it")
+    road_map.set_defaults(func=cmd_map)
     from addt_dsl.search.commands import add_commands
 
     add_commands(sub)

@@ -132,6 +132,10 @@ class ActorPlan(_Model):
     goal_s: Expr | None = None
     mu: Expr | None = None  # tyre-road friction coefficient of the ego dynamics (None: 0.8)
     offset: Expr | None = None  # start offset from the lane centre, left positive [m]
+    # Road ids of the actor's route through an imported network, connecting roads included
+    # (`route 1 -> left -> 3` expanded by the compiler); empty: the road it is placed on.
+    route: list[str] = Field(default_factory=list)
+    yaw: Expr | None = None  # body yaw relative to the lane's driving direction [rad] (None: 0)
 
 
 class FaultPlan(_Model):

@@ -8,6 +8,10 @@
     addtc study perception FILE [--jobs N] [--by P] [--bands 0,20,40,60,80]
         mean position and heading error of detected objects by distance band, per value of
         the grid parameters (e.g. a sensor yaw shift).
+    addtc study impact FILE [--jobs N] [--by P,Q]
+        per cell of the grid: runs, runs without an ego collision (avoided), and the ego's
+        speed and the speed relative to what it hit at the first impact [km/h] (Euro NCAP
+        AEB tables, examples/suites/ncap_aeb_*.addt).
 
 Perception errors come from the `detections` events the stack records (what perception
 reported, world frame, with the frame's timestamp) compared with the ground truth in the
@@ -96,6 +100,41 @@ def success_table(runs, by: Sequence[str]):
     return table
 
 
+def impact(trace) -> dict:
+    """The ego's first collision in a trace: whether there was one, the ego's speed and the
+    closing speed along the ego's heading at that instant [km/h] (NaN without one)."""
+    hits = [e for e in trace.events_of("collision") if "ego" in e.detail.get("actors", ())]
+    if not hits:
+        return {"collided": False, "other": "", "impact_kmh": math.nan, "relative_kmh": math.nan}
+    first = hits[0]
+    other = next(a for a in first.detail["actors"] if a != "ego")
+    k = min(int(round(first.time_s / trace.period_s)), len(trace.actors["ego"].speed) - 1)
+    ego, obj = trace.actors["ego"], trace.actors[other]
+    along = obj.speed[k] * math.cos(obj.heading[k] - ego.heading[k])
+    return {"collided": True, "other": other, "impact_kmh": float(ego.speed[k]) * 3.6,
+            "relative_kmh": float(ego.speed[k] - along) * 3.6}
+
+
+def impact_table(rows: Sequence[dict], by: Sequence[str]):
+    """Per cell: runs, avoided (no ego collision), avoided share, mean impact and relative
+    speed over the runs that collided [km/h]."""
+    import pandas as pd
+
+    frame = pd.DataFrame(rows)
+    keys = list(by) if by else ["all"]
+    if not by:
+        frame["all"] = "all"
+    grouped = frame.groupby(keys)
+    table = pd.DataFrame({
+        "runs": grouped.size(),
+        "avoided": grouped["collided"].apply(lambda c: int((~c.astype(bool)).sum())),
+        "impact_kmh": grouped["impact_kmh"].mean(),
+        "relative_kmh": grouped["relative_kmh"].mean(),
+    })
+    table.insert(2, "avoided_rate", table["avoided"] / table["runs"])
+    return table
+
+
 # ---------------------------------------------------------------- running a suite
 
 def _record_errors(result) -> None:
@@ -106,6 +145,16 @@ def perception_run(spec, seq: int = -1, worker: str = ""):
     """What an executor's worker runs for `study perception`: the run, with its matched
     detections in `stats["perception_errors"]`."""
     return run_spec(spec, seq, worker, on_result=_record_errors)
+
+
+def _record_impact(result) -> None:
+    result.stats["impact"] = impact(result.trace)
+
+
+def impact_run(spec, seq: int = -1, worker: str = ""):
+    """What an executor's worker runs for `study impact`: the run, with its first ego
+    collision in `stats["impact"]`."""
+    return run_spec(spec, seq, worker, on_result=_record_impact)
 
 
 def _bands(text: str) -> list[float]:
@@ -124,7 +173,7 @@ def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
 
     parser = argparse.ArgumentParser(prog=prog)
     sub = parser.add_subparsers(dest="what", required=True)
-    for name in ("classify", "perception"):
+    for name in ("classify", "perception", "impact"):
         p = sub.add_parser(name)
         p.add_argument("file")
         p.add_argument("--jobs", type=positive_int, default=1)
@@ -160,6 +209,20 @@ def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
                          f"(parameters: {', '.join(p.name for p in plan.params) or 'none'})")
     if args.what == "classify":
         print(outcome_table(classify_many(specs, jobs=args.jobs), by=by).to_string())
+    elif args.what == "impact":
+        rows = []
+        for record in local_executor(args.jobs, impact_run).imap(enumerate(specs)):
+            if record.status in ("crashed", "timeout", "memory"):
+                print(f"error: run {record.run_id} {record.status}: {record.error.splitlines()[0]}", file=sys.stderr)
+                return EXIT_USAGE
+            rows.append({**record.params, **record.stats["impact"]})
+        # Speeds read better in km/h (the plan holds SI m/s).
+        speeds = {p.name for p in plan.params if p.dimension == "speed" and p.name in by}
+        for row in rows:
+            for name in speeds:
+                row[f"{name} [km/h]"] = round(row[name] * 3.6, 6)
+        by = [f"{b} [km/h]" if b in speeds else b for b in by]
+        print(impact_table(rows, by).to_string(float_format=lambda x: f"{x:.2f}"))
     else:
         rows = []
         for record in local_executor(args.jobs, perception_run).imap(enumerate(specs)):

@@ -19,6 +19,9 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.plan import ConcreteFault, FaultPlan, ParamPlan, RunSpec, ScenarioPlan, resolve_settings
 
 
+SAMPLE_BATCH_VALUES = 1_000_000  # numbers drawn at once by a sampler (8 MB)
+
+
 class UnsatisfiableAssumptions(ValueError):
     """No sample satisfied the assumptions within the resample cap."""
 
@@ -143,31 +146,43 @@ class SweepStream:
                 + ", ".join(f"{t} ({n} rejected)" for t, n in self.rejected.most_common()))
 
 
-def _cells_and_sampled(plan: ScenarioPlan):
-    axes = [(g.param, g.values) for g in plan.sweep.grid]
-    grid_cells = [dict(zip([a for a, _ in axes], combo)) for combo in
-                  itertools.product(*[v for _, v in axes])] or [{}]
-    sampled = _sampled_params(plan, {a for a, _ in axes})
-    return grid_cells, sampled
+def _grid_cells(plan: ScenarioPlan):
+    """The grid's cells in order, one at a time (a 12-axis grid of 1e12 cells is never built)."""
+    names = [g.param for g in plan.sweep.grid]
+    for combo in itertools.product(*[g.values for g in plan.sweep.grid]):
+        yield dict(zip(names, combo))
+
+
+def grid_cell_count(plan: ScenarioPlan) -> int:
+    """Cells of the grid (1 without a grid), counted without building them."""
+    return math.prod(len(g.values) for g in plan.sweep.grid)
+
+
+def sampled_params(plan: ScenarioPlan) -> list[ParamPlan]:
+    """The parameters the sampler draws (those with a range or choices that no grid fixes)."""
+    return _sampled_params(plan, {g.param for g in plan.sweep.grid})
 
 
 def count_runs(plan: ScenarioPlan) -> int:
     """Number of RunSpecs the sweep expands to. Samplers always deliver `count` accepted
-    samples per cell (or fail), so this needs no sampling."""
+    samples per cell (or fail), so this needs no sampling; without a sampler, cells that
+    break an assumption do not run, so each cell is checked (one at a time: check the
+    estimate of addt_dsl/cost.py first for a huge grid)."""
     sweep = plan.sweep
-    grid_cells, sampled = _cells_and_sampled(plan)
+    if sweep.sampler and sampled_params(plan):
+        return grid_cell_count(plan) * sweep.sampler.count * sweep.repeat
+    if not plan.assumptions:
+        return grid_cell_count(plan) * sweep.repeat
     nominal = plan.nominal_params()
-    if sweep.sampler and sampled:
-        return len(grid_cells) * sweep.sampler.count * sweep.repeat
-    valid = sum(1 for cell in grid_cells if not violated_assumptions(plan, {**nominal, **cell}))
+    valid = sum(1 for cell in _grid_cells(plan) if not violated_assumptions(plan, {**nominal, **cell}))
     return valid * sweep.repeat
 
 
 def _iter_specs(plan: ScenarioPlan, rejected: Counter):
     sweep = plan.sweep
     nominal = plan.nominal_params()
-    grid_cells, sampled = _cells_and_sampled(plan)
-    for ci, cell in enumerate(grid_cells):
+    sampled = sampled_params(plan)
+    for ci, cell in enumerate(_grid_cells(plan)):
         base = {**nominal, **cell}
         if violated_assumptions(plan, base) and not (sweep.sampler and sampled):
             for text in violated_assumptions(plan, base):
@@ -207,7 +222,7 @@ def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
     for combo in itertools.islice(itertools.product(*[v for _, v in axes]), budget):
         base = {**nominal, **dict(zip([a for a, _ in axes], combo))}
         if sampled:
-            n = max(1, min(budget - tried, per_cell))
+            n = max(1, min(budget - tried, per_cell, SAMPLE_BATCH_VALUES // len(sampled)))
             rows = engine.random(n)
             candidates = ({**base, **{p.name: from_unit(p, float(u)) for p, u in zip(sampled, row)}}
                           for row in rows)  # lazy: most scenarios accept the first one
@@ -231,7 +246,10 @@ def _sample_cell(plan, base, sampled, cell_index, rejected):
     accepted = 0
     cap = plan.sweep.max_rejections
     while accepted < sampler.count:
-        need = sampler.count - accepted
+        # In batches of at most SAMPLE_BATCH_VALUES numbers: 1e6 samples of 2,000 parameters
+        # would otherwise be one 16 GB array. (A Latin hypercube larger than a batch is
+        # drawn as consecutive hypercubes of one batch each.)
+        need = min(sampler.count - accepted, max(1, SAMPLE_BATCH_VALUES // max(1, len(sampled))))
         for row in engine.random(need):
             params = {**base, **{p.name: from_unit(p, float(u)) for p, u in zip(sampled, row)}}
             broken = violated_assumptions(plan, params)

@@ -20,5 +20,9 @@ VEHICLES: dict[str, VehicleKind] = {
     "truck": VehicleKind(12.0, 2.5, 3.5, (0.15, 0.30, 0.70, 1.0)),
     "pedestrian": VehicleKind(0.5, 0.5, 1.8, (0.90, 0.45, 0.70, 1.0)),
     "cyclist": VehicleKind(1.8, 0.6, 1.7, (0.95, 0.65, 0.10, 1.0)),
+    # A static object (a box, a barrier, a broken-down car's stand-in): give `length`,
+    # `width`; it does not move (speed 0, no behaviours).
+    "obstacle": VehicleKind(1.0, 1.0, 1.0, (0.10, 0.60, 0.55, 1.0)),
 }
+STATIC_KINDS = frozenset({"obstacle"})  # kinds that never move
 CAR = VEHICLES["car"]

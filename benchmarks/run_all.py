@@ -33,15 +33,17 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "road": ([], []),
     "stl": ([], []),
     "compile": (["--files", "1000"], ["--files", "100"]),
+    "compile_scaling": ([], ["--quick"]),
     "twin": ([], ["--quick"]),
     "stack": ([], ["--repeats", "1"]),
     "faults": (["--repeat", "9"], ["--repeat", "2"]),
     "runner": ([], ["--runs", "40", "--memory-runs", "500"]),
-    "search": ([], ["--seeds", "2", "--budget", "60"]),
+    "search": ([], ["--seeds", "2", "--budget", "60", "--scenarios", "examples/search/cut_in.addt"]),
     "shrink": ([], []),
     "peers": (["--runs", "5"], ["--runs", "1"]),
     "perception_gpu": (["--batches", "1", "16", "256"], ["--batches", "1", "16"]),
     "table1": ([], ["--limit", "8"]),
+    "routes": ([], ["--runs", "1"]),
 }
 
 
@@ -99,10 +101,14 @@ def headline(results: dict) -> dict:
     row("compile_1000_files_wall_s", _get(b["compile"], "wall_s") if _get(b["compile"], "files") == 1000 else None,
         10.0, better="lower", unit="s")
     row("shrink_10_faults_simulations", _get(b["shrink"], "simulations"), 150, better="lower")
+    row("search_runs_to_failure_random_over_bo", _get(b["search"], "suite_ratio_random_to_bo"), 5.0,
+        unit="x fewer runs than uniform (median over scenarios)")
     fault_overheads = _get(b["faults"], "overhead") or {}
     if fault_overheads:
         worst = max((v, k) for k, v in fault_overheads.items() if " " not in k)
         row("fault_overhead_worst_kind", worst[0], 0.05, better="lower", unit=f"fraction ({worst[1]})")
+    row("route_cost_vs_overtake", _get(b.get("routes", {}), "route_cost_vs_overtake"), 0.10, better="lower",
+        unit="fraction of the overtake run's CPU time per simulated second")
     peers = b.get("peers") or {}
     for key, value in peers.items():
         if key.startswith("ratio"):

@@ -183,6 +183,14 @@ class Placement(Node):
 
 
 @dataclass(frozen=True, slots=True)
+class Route(Node):
+    """`route 1 -> left -> 3`: road ids and turns, each with its span."""
+
+    stops: tuple[str, ...]
+    stop_spans: tuple[Span, ...]
+
+
+@dataclass(frozen=True, slots=True)
 class ActorDecl(Node):
     name: str
     is_ego: bool
@@ -193,6 +201,7 @@ class ActorDecl(Node):
     steps: tuple[Step | Group, ...] = ()
     block_settings: tuple[Setting, ...] = ()
     placements: tuple[Placement, ...] = ()
+    route: Route | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -206,11 +206,13 @@ class Builder:
         head = [r for r in rest if not isinstance(r, list)]
         settings = tuple(h for h in head if isinstance(h, ast.Setting))
         placements = tuple(h for h in head if isinstance(h, ast.Placement))
+        routes = [h for h in head if isinstance(h, ast.Route)]
         clauses = tuple(b for b in block if isinstance(b, ast.Clause))
         steps = tuple(b for b in block if isinstance(b, (ast.Step, ast.Group)))
         block_settings = tuple(b for b in block if isinstance(b, ast.Setting))
         return ast.ActorDecl(span, name, is_ego, str(vehicle), self._tspan(vehicle),
-                             settings, clauses, steps, block_settings, placements)
+                             settings, clauses, steps, block_settings, placements,
+                             routes[-1] if routes else None)
 
     def b_actor_block(self, span, items):
         return list(items)
@@ -233,6 +235,14 @@ class Builder:
 
     def b_at_value(self, span, items):
         return self._keyword_setting(span, "at", items[0])
+
+    def b_route(self, span, items):
+        stops = [i for i in items if isinstance(i, _Marked)]
+        return ast.Route(span, tuple(st.value for st in stops), tuple(st.span for st in stops))
+
+    def b_route_stop(self, span, items):
+        tok = items[0]
+        return _Marked(span, "route_stop", _unquote(tok) if isinstance(tok, ast.Str) else str(tok))
 
     def b_lane_of(self, span, items):
         return ast.Placement(span, "lane_of", str(items[0]), self._tspan(items[0]))

@@ -15,6 +15,7 @@ from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.exprs import ExprLowering, Scope, value_range
 from addt_dsl.diagnostics import DiagnosticSink, Span
+from addt_dsl.limits import DEFAULT, MAX_ABS_NUMBER, Limits
 from addt_dsl.registry import STACKS, ParamSpec
 
 INT_EPS = 1e-9
@@ -27,6 +28,8 @@ class RoadInfo:
     length_m: float
     lane_ids: tuple[int, ...]  # lanes at s = 0 (inline roads: everywhere)
     lane_width_m: dict[int, float]  # narrowest width of each lane along the road
+    network: object = None  # the imported file's RoadNetwork (routes are checked on it); None inline
+    road_id: str = ""  # the imported road's id in `network`
 
 
 @dataclass
@@ -61,6 +64,7 @@ class Context:
     sources: dict[str, str] = field(default_factory=dict)
     lines: dict[str, list[str]] = field(default_factory=dict)  # sources split, on demand
     xodr_networks: dict = field(default_factory=dict)  # parsed imports by file
+    limits: Limits = DEFAULT  # input limits and cost thresholds (addt_dsl/limits.py)
     _scopes: dict = field(default_factory=dict)
 
     def absorb(self, product) -> None:
@@ -139,6 +143,10 @@ def check_range(ctx: Context, expr, spec_low, spec_high, dim, what: str, span: S
             return False
         if integer and abs(const - round(const)) > INT_EPS:
             ctx.sink.error("E0204", f"{what} must be a whole number", span)
+            return False
+        if abs(const) > MAX_ABS_NUMBER and (spec_low is None or spec_high is None):  # an open-ended setting
+            ctx.sink.error(code, f"{what} = {fmt(const, dim)} is beyond ±{MAX_ABS_NUMBER:g} (SI units)", span,
+                           "no quantity of a driving scenario is this large (docs/limits.md)")
             return False
         if (spec_low is not None and const < spec_low) or (spec_high is not None and const > spec_high):
             shown = f"{fmt(const, dim, unit)} = {fmt(const, dim)}" if unit in ("%", "km/h", "mph", "ms") \

@@ -51,9 +51,11 @@ class _Callbacks:
 _PARSE_LOCK = threading.Lock()  # the builder holds the current file name
 
 
-def parse_source(data: bytes | str, path: str, sink: DiagnosticSink) -> ast.SourceFile | None:
-    """Parse one file's contents; syntax errors go to `sink`; None if nothing usable."""
-    text = check_source(data, path, sink)
+def parse_source(data: bytes | str, path: str, sink: DiagnosticSink,
+                 max_bytes: int = MAX_SOURCE_BYTES) -> ast.SourceFile | None:
+    """Parse one file's contents; syntax errors go to `sink`; None if nothing usable.
+    `max_bytes` is the `source_bytes` limit (addt_dsl/limits.py)."""
+    text = check_source(data, path, sink, max_bytes)
     if text is None:
         return None
     if not text.endswith("\n"):

@@ -194,11 +194,11 @@ def _nth_bracket(text: str, n: int) -> int:
     return 0
 
 
-def check_source(data: bytes | str, path: str, sink: DiagnosticSink) -> str | None:
+def check_source(data: bytes | str, path: str, sink: DiagnosticSink, max_bytes: int = MAX_SOURCE_BYTES) -> str | None:
     if isinstance(data, bytes):
-        if len(data) > MAX_SOURCE_BYTES:
-            sink.error("E0003", f"source is too large ({len(data)} bytes; limit {MAX_SOURCE_BYTES})",
-                       Span.point(path, 1, 1))
+        if len(data) > max_bytes:
+            sink.error("E0003", f"source is too large ({len(data)} bytes; limit source_bytes = {max_bytes})",
+                       Span.point(path, 1, 1), "raise it with `--max source_bytes=N` (docs/limits.md)")
             return None
         try:
             text = data.decode("utf-8-sig")
@@ -210,9 +210,9 @@ def check_source(data: bytes | str, path: str, sink: DiagnosticSink) -> str | No
             return None
     else:
         text = data
-        if len(text) > MAX_SOURCE_BYTES:
-            sink.error("E0003", f"source is too large ({len(text)} characters; limit {MAX_SOURCE_BYTES})",
-                       Span.point(path, 1, 1))
+        if len(text) > max_bytes:
+            sink.error("E0003", f"source is too large ({len(text)} characters; limit source_bytes = {max_bytes})",
+                       Span.point(path, 1, 1), "raise it with `--max source_bytes=N` (docs/limits.md)")
             return None
         if text.startswith("\ufeff"):
             text = text[1:]

@@ -7,12 +7,16 @@ on and turns its errors into diagnostics at the `road ... import` line.
 
 from __future__ import annotations
 
+import math
+import re
+
 import numpy as np
 
-from addt_dsl.compiler.context import Context, RoadInfo
+from addt_dsl.compiler.context import Context, RoadInfo, const_value
 from addt_dsl.diagnostics import Span
 from addt_dsl.expr import eval_param_expr, params_used
-from addt_dsl.runtime.road import XodrError, parse_xodr
+from addt_dsl.limits import beyond_message, how_to_raise
+from addt_dsl.runtime.road import RouteError, XodrError, parse_xodr, resolve_route
 from addt_dsl.runtime.road.limits import RoadLimitError
 from addt_dsl.runtime.roadspec import build_network
 
@@ -20,6 +24,8 @@ from addt_dsl.runtime.roadspec import build_network
 def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
     """(road id, RoadInfo or None) of the imported road, or None after a diagnostic."""
     cache = ctx.xodr_networks  # one parse per file, however many roads import it
+    if display not in cache and not _within_map_limits(ctx, text, display, span):
+        return None
     try:
         network = cache.get(display) or cache.setdefault(display, parse_xodr(text, display))
     except XodrError as exc:
@@ -33,6 +39,8 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
     if not network.roads:
         ctx.sink.error("E0403", f"{display} has no roads", span)
         return None
+    if not _lanes_within_limit(ctx, network, display, span):
+        return None
     if road_value is None:
         road_id = next(iter(network.roads))
     elif params_used(road_value):
@@ -44,7 +52,76 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
         ctx.sink.error("E0403", f"{display} has no road '{road_id}'", span,
                        f"roads: {', '.join(sorted(network.roads))}")
         return None
-    return road_id, _road_info(network.road(road_id))
+    info = _road_info(network.road(road_id))
+    if info is not None:
+        info.network, info.road_id = network, road_id
+    return road_id, info
+
+
+def route_length(network, roads: list[str], lane) -> float:
+    """Length [m] of an expanded route (its legs, from the first road's entry end)."""
+    lane_c = const_value(lane)
+    try:
+        _, legs = resolve_route(network, roads, int(round(lane_c)) if lane_c is not None else -1)
+    except RouteError:
+        return float("inf")
+    return sum(g.length_m for g in legs)
+
+
+def check_route(ctx: Context, route, road_name: str, lane, s, lane_span: Span) -> tuple[list[str], object] | None:
+    """Expand an actor's `route` on its imported road network: (road ids with the
+    connecting roads, RoadInfo of the first road), or None after a diagnostic (E0404 with
+    what the map offers where the route breaks)."""
+    info = ctx.road_info.get(road_name)
+    decl = ctx.roads_ast.get(road_name)
+    if info is None and decl is not None and decl.import_path is not None:
+        return None  # the import failed: reported there
+    if info is None or info.network is None:
+        ctx.sink.error("E0404", f"a route needs a road network imported from OpenDRIVE; '{road_name}' is inline",
+                       route.span, "import a map: `road town import \"map.xodr\"`, then `route 1 -> left -> 3`")
+        return None
+    lane_c, s_c = const_value(lane), const_value(s)
+    if lane_c is None:
+        ctx.sink.error("E0204", "an actor with a route needs a constant lane", lane_span,
+                       "lane ids differ from road to road; give the lane on the route's first road")
+        return None
+    try:
+        roads, _ = resolve_route(info.network, list(route.stops), int(round(lane_c)), s_c)
+    except RouteError as exc:
+        span = route.stop_spans[min(exc.stop, len(route.stop_spans) - 1)]
+        ctx.sink.error("E0404", exc.message, span, *([exc.hint] if exc.hint else []),
+                       "routes are road ids in driving order, or turns at junctions: docs/roads.md, Routes")
+        return None
+    return roads, _road_info(info.network.road(roads[0]))
+
+
+_COMMENT = re.compile(r"<!--.*?-->", re.S)
+_ROAD_TAG = re.compile(r"<road[\s/>]")
+
+
+def _within_map_limits(ctx: Context, text: str, display: str, span: Span) -> bool:
+    """Count the map's <road> elements before building any (a 49 MB map of 129k roads took
+    minutes to build): E0701 beyond `roads_per_map`. Comments are left out of the count."""
+    limit = ctx.limits.roads_per_map
+    roads = sum(1 for _ in _ROAD_TAG.finditer(_COMMENT.sub("", text)))
+    if roads <= limit:
+        return True
+    ctx.sink.error("E0701", beyond_message(f"the number of roads in {display}", roads, "roads_per_map", limit),
+                   span, how_to_raise("roads_per_map"))
+    return False
+
+
+def _lanes_within_limit(ctx: Context, network, display: str, span: Span) -> bool:
+    limit = ctx.limits.lanes_per_section
+    for road_id, road in network.roads.items():
+        for k, section in enumerate(road.sections):
+            lanes = len(section.lane_ids)
+            if lanes > limit:
+                ctx.sink.error("E0701", beyond_message(f"the lanes of road '{road_id}' section {k} in {display}",
+                                                       lanes, "lanes_per_section", limit),
+                               span, how_to_raise("lanes_per_section"))
+                return False
+    return True
 
 
 def check_inline_road(ctx: Context, road_plan, span: Span) -> bool:
@@ -63,19 +140,25 @@ def check_inline_road(ctx: Context, road_plan, span: Span) -> bool:
 
 
 def _road_info(road):
-    """Length, lanes at s = 0 and the narrowest width of each lane along the road."""
+    """Length, lanes at s = 0 and the narrowest width of each lane along the road.
+
+    Widths come from each section's own width polynomials (what `Road.lane_ids` and
+    `Road.lane_width` evaluate), one pass per probe: linear in the number of lanes, where
+    asking the road lane by lane re-derived every border per lane (quadratic)."""
     try:
         length = float(road.length)
         lanes = tuple(int(i) for i in road.lane_ids(0.0) if i != 0)
-        widths = {}
-        probe = np.linspace(0.0, length, 64)
-        for lane in lanes:
-            present = []
-            for s in probe:
-                if lane in road.lane_ids(float(s)):
-                    present.append(float(road.lane_width(lane, float(s))))
-            if present:
-                widths[lane] = min(present)
+        wanted = set(lanes)
+        widths: dict[int, float] = {}
+        for s in np.linspace(0.0, length, 64):
+            section = road.section_at(float(s))
+            ds = float(s) - section.s0
+            for lane_id in section.lane_ids:
+                if lane_id not in wanted:
+                    continue
+                width = float(section.lane(lane_id).width(ds))
+                if width > 1e-9:  # the lane exists here (Road.lane_ids' test)
+                    widths[lane_id] = min(width, widths.get(lane_id, math.inf))
         return RoadInfo(length, lanes, widths)
     except (ValueError, ArithmeticError, KeyError, IndexError):
         return None

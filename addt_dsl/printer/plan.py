@@ -177,7 +177,7 @@ VEHICLE_DEFAULTS = {  # what the compiler fills in when a setting is left out
     "mass": lambda a: 1500.0, "wheelbase": lambda a: 2.7,
 }
 ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLESS),  # optional, may use parameters
-               ("offset", "offset", units.LENGTH))
+               ("offset", "offset", units.LENGTH), ("yaw", "yaw", units.ANGLE))
 ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units.LENGTH),
                 ("mass", "mass_kg", units.MASS), ("wheelbase", "wheelbase_m", units.LENGTH))
 
@@ -192,11 +192,25 @@ def _actors(pr: _Printer) -> None:
         _actor(pr, actor, actor is pr.plan.ego)
 
 
+_PLAIN_STOP = re.compile(r"[0-9]+|[A-Za-z_][A-Za-z0-9_]*")
+
+
+def format_route_stop(road_id: str) -> str:
+    """A road id of a route as the grammar reads it: a whole number or a name as is,
+    anything else in quotes."""
+    if _PLAIN_STOP.fullmatch(road_id):
+        return road_id
+    return '"' + road_id.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
 def _actor(pr: _Printer, a: ActorPlan, is_ego: bool) -> None:
     ex = pr.exprs
     head = "ego" if is_ego else f"agent {a.name}"
-    parts = [f"{head} {a.vehicle} on {a.road}", f"lane {ex.value(a.lane, units.DIMENSIONLESS)}",
-             f"at {ex.value(a.s, units.LENGTH)}", f"speed {ex.value(a.speed, units.SPEED)}"]
+    parts = [f"{head} {a.vehicle} on {a.road}"]
+    if a.route:
+        parts.append("route " + " -> ".join(format_route_stop(r) for r in a.route))
+    parts += [f"lane {ex.value(a.lane, units.DIMENSIONLESS)}",
+              f"at {ex.value(a.s, units.LENGTH)}", f"speed {ex.value(a.speed, units.SPEED)}"]
     for key, field, dim in ACTOR_EXPRS:
         value = getattr(a, field, None)
         if value is not None:

@@ -62,6 +62,8 @@ class BoundActor:
     steps: tuple[BoundStep, ...]
     sensors: tuple[BoundClause, ...]
     stack: BoundClause | None
+    route: tuple[str, ...] = ()  # road ids in driving order; () = the road it is placed on
+    yaw: float = 0.0  # body yaw relative to the driving direction [rad]
 
 
 @dataclass(frozen=True)
@@ -136,4 +138,5 @@ def _actor(a: ActorPlan, params: dict[str, float]) -> BoundActor:
         behaviors=tuple(_clause(c, params) for c in a.behaviors),
         steps=tuple(bind_step(t, params) for t in a.triggers),
         sensors=tuple(_clause(c, params) for c in a.sensors),
-        stack=_clause(a.stack, params) if a.stack is not None else None)
+        stack=_clause(a.stack, params) if a.stack is not None else None, route=tuple(a.route),
+        yaw=_value(a.yaw, params))

@@ -26,6 +26,8 @@ from addt_dsl.runtime.behaviors import AgentState, advance, relative_heading
 from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
 from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.fastroad import FastRoad
+from addt_dsl.runtime.path import RoutePath
+from addt_dsl.runtime.road import resolve_route
 from addt_dsl.runtime.roadmesh import Elevation, build_scene
 from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.runtime.script import Script
@@ -53,6 +55,38 @@ class _Road:
     def pose(self, s: float, t: float) -> tuple[float, float, float]:
         return self.road.point(s, t)
 
+    def station(self, road_id: str, s: float) -> float:
+        return s
+
+    def direction(self, u: float) -> int:
+        return 1
+
+
+class _PathRoad(_Road):
+    """An actor's route (or a lane driven against s) as one road: `runtime.path.RoutePath`."""
+
+    def __init__(self, network, scenario_road: str, legs, cache: dict):
+        self.network = network
+        roads = {}
+        for leg in legs:
+            key = (id(network), leg.road_id)
+            if key not in cache:
+                cache[key] = (FastRoad(network.road(leg.road_id)), Elevation(network.road(leg.road_id)))
+            roads[leg.road_id] = cache[key]
+        key = scenario_road + ":" + ";".join(f"{g.road_id}{g.direction:+d}{g.lane}@{g.s_from:g}" for g in legs)
+        self.road = RoutePath(key, legs, roads)
+        self.elevation = self.road.elevation
+        self.road_id = key
+
+    def station(self, road_id: str, s: float) -> float:
+        return self.road.station(road_id, s)
+
+    def direction(self, u: float) -> int:
+        return self.road.direction(u)
+
+
+LANE_SETTINGS = ("to", "lane")  # behaviour settings that name a lane id
+
 
 def _is_live(clause: BoundClause) -> bool:
     """Whether a behaviour has a setting that reads signals (kept as an expression)."""
@@ -72,6 +106,9 @@ class _Context:
         self.faults = run.faults
         self.now = 0.0
         self.wheelbase_m = run.vehicle_params.wheelbase_m
+        ego = run.ego_plan  # the declared body reaches the stack's planner and controller
+        self.ego_length_m, self.ego_width_m, self.ego_mass_kg, self.ego_mu = \
+            ego.length_m, ego.width_m, ego.mass_kg, ego.mu
         self.ego_lane = run.ego_lane
 
     def rng(self, name: str) -> np.random.Generator:
@@ -123,10 +160,13 @@ class _Run:
         ego = plan.ego
         self.ego_plan = ego
         self.ego_road = self._road_of(ego)
-        self.ego_lane = ego.lane
-        s0 = ego.s
+        s0 = self.ego_road.station(self._first_road(ego), ego.s)
+        # On a path lane ids are in driving convention (road id x direction).
+        self.ego_lane = ego.lane * self.ego_road.direction(s0)
         t0 = float(self.ego_road.road.lane_center_t(self.ego_lane, s0)) + ego.offset
         x, y, h = self.ego_road.pose(s0, t0)
+        if ego.yaw:
+            h += ego.yaw
         self.vehicle_params = VehicleParams.for_vehicle(ego.mass_kg, ego.wheelbase_m, ego.mu)
         self.ego = VehicleState(x, y, h, ego.speed)
         self.ego_z, self.ego.pitch = 0.0, 0.0
@@ -141,8 +181,10 @@ class _Run:
         self.deferred: list[tuple[AgentState, BoundClause]] = []  # time-0 behaviours with live settings
         for a in plan.agents:
             road = self._road_of(a)
-            t = float(road.road.lane_center_t(a.lane, a.s)) + a.offset
-            st = AgentState(a.name, road.road_id, a.s, t, a.speed, 0.0, a.length_m, a.width_m, a.lane, t)
+            u = road.station(self._first_road(a), a.s)
+            lane = a.lane * road.direction(u)
+            t = float(road.road.lane_center_t(lane, u)) + a.offset
+            st = AgentState(a.name, road.road_id, u, t, a.speed, 0.0, a.length_m, a.width_m, lane, t)
             self.agents.append(st)
             self.agent_plans[a.name] = a
             self.agent_roads[a.name] = road
@@ -156,6 +198,10 @@ class _Run:
             if a.steps:
                 self.scripts[a.name] = Script(a.steps)
         self.agent_by_name = {a.name: a for a in self.agents}
+        # Any actor on a path: agents find their leader by position (across roads), not by road.
+        self.networked = isinstance(self.ego_road, _PathRoad) or any(
+            isinstance(r, _PathRoad) for r in self.agent_roads.values())
+        self.world_pose: dict[str, tuple[float, float, float]] = {}
         self.body_actor = {}
         self.contacts: set[tuple[str, str]] = set()  # actor pairs overlapping at the last step
 
@@ -186,11 +232,20 @@ class _Run:
             close_stack()
 
     # ---- queries used by sensors and the stack
-    def _road_of(self, actor: BoundActor) -> _Road:
-        network = self.networks[actor.road]
+    def _first_road(self, actor: BoundActor) -> str:
+        if actor.route:
+            return actor.route[0]
         rp = self.bound.road(actor.road)
-        road_id = rp.xodr_road_id if rp.source == "xodr" and rp.xodr_road_id else next(iter(network.roads))
-        return _Road(network, road_id, self._road_cache)
+        return rp.xodr_road_id if rp.source == "xodr" and rp.xodr_road_id else next(iter(self.networks[actor.road].roads))
+
+    def _road_of(self, actor: BoundActor) -> _Road:
+        """The plain road (no route, driven along +s), else the actor's path."""
+        network = self.networks[actor.road]
+        road_id = self._first_road(actor)
+        if not actor.route and network.road(road_id).travel_direction(actor.lane) > 0:
+            return _Road(network, road_id, self._road_cache)
+        _, legs = resolve_route(network, list(actor.route or (road_id,)), actor.lane, actor.s)
+        return _PathRoad(network, actor.road, legs, self._road_cache)
 
     def rng(self, name: str) -> np.random.Generator:
         if name not in self._rngs:
@@ -232,7 +287,7 @@ class _Run:
 
     def road_band_t(self, road_id: str, s: float) -> tuple[float, float]:
         road = next(r for r in self.agent_roads.values() if r.road_id == road_id)
-        return road.road.road.road_band_t(min(max(s, 0.0), road.road.length))
+        return road.road.road_band_t(s)
 
     def ray_cast(self, starts, ends):
         return self.physics.ray_cast(starts, ends, ignore="ego")
@@ -243,6 +298,8 @@ class _Run:
 
     def leader_of(self, agent: AgentState):
         """(gap [m], speed [m/s]) of the nearest actor ahead in the agent's lane, or None."""
+        if self.networked:
+            return self._leader_by_position(agent)
         best = None
         for other_name, s, t, speed, length in self.occupants(agent.road):
             if other_name == agent.name or abs(t - agent.t) > 1.8:
@@ -251,6 +308,34 @@ class _Run:
             if s > agent.s and (best is None or gap < best[0]):
                 best = (gap, speed)
         return best
+
+    def _leader_by_position(self, agent: AgentState, reach_m: float = 150.0):
+        """`leader_of` across roads: every actor within `reach_m` projected onto the agent's
+        path; one ahead whose offset is within 1.8 m of the agent's is a leader, its speed
+        taken along the path."""
+        road = self.agent_roads[agent.name].road
+        ax, ay, _ = self.world_pose.get(agent.name, road.point(agent.s, agent.t))
+        best = None
+        for name, (x, y, heading) in self.world_pose.items():
+            if name == agent.name or abs(x - ax) > reach_m or abs(y - ay) > reach_m:
+                continue
+            dist = math.hypot(x - ax, y - ay)
+            if dist > reach_m:
+                continue
+            u, t = road.project(x, y, agent.s + dist)
+            if u <= agent.s or abs(t - agent.t) > 1.8:
+                continue
+            speed, length = (self.ego.speed, self.ego_plan.length_m) if name == "ego" else (
+                self.agent_by_name[name].speed, self.agent_by_name[name].length_m)
+            gap = u - agent.s - 0.5 * (length + agent.length_m)
+            if best is None or gap < best[0]:
+                along = speed * math.cos(heading - road.reference_pose(u)[2])
+                best = (gap, along)
+        return best
+
+    def direction_of(self, agent: AgentState) -> int:
+        """+1 / -1: the agent's road direction at its station (its path's, on a route)."""
+        return self.agent_roads[agent.name].direction(agent.s)
 
     def occupants(self, road_id: str):
         """(name, s, t, speed, length) of every actor on a road."""
@@ -275,7 +360,13 @@ class _Run:
 
     def _start_behavior(self, agent: AgentState, clause: BoundClause, time_s: float) -> None:
         cls = BEHAVIORS.get(clause.name)
-        beh = cls(clause.settings)
+        settings = clause.settings
+        road = self.agent_roads[agent.name]
+        if isinstance(road, _PathRoad):  # lane ids of settings are the map's: to driving convention
+            sign = road.direction(agent.s)
+            settings = {k: (v * sign if k in LANE_SETTINGS and isinstance(v, (int, float)) else v)
+                        for k, v in settings.items()}
+        beh = cls(settings)
         beh.start(agent, self, time_s)
         if beh.channel == "longitudinal":
             self.longitudinal[agent.name] = beh
@@ -335,11 +426,16 @@ def _loop(run: _Run) -> Trace:
             road = run.agent_roads[a.name]
             x, y, h = road.pose(a.s, a.t)
             heading = h + relative_heading(a, t_now, dt)
+            yaw = run.agent_plans[a.name].yaw
+            if yaw:
+                heading += yaw
             poses[a.name] = (x, y, heading)
             z, grade = road.elevation.at(a.s)
             run.physics.set_pose(a.name, x, y, z + VEHICLES[run.agent_plans[a.name].vehicle].height_m / 2, heading,
                                  math.atan(grade) * math.cos(heading - h))
             run.body_actor[a.name] = _GT(x, y, heading, a.speed, a.length_m, a.width_m)
+            if run.networked:
+                run.world_pose[a.name] = (x, y, heading)
         e = run.ego
         run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
         # The ego follows the road height; its dynamics feel the grade along its heading.
@@ -349,6 +445,8 @@ def _loop(run: _Run) -> Trace:
         run.ego_z, e.pitch = z, math.atan(grade)
         run.physics.set_pose("ego", e.x, e.y, z + VEHICLES[plan.ego.vehicle].height_m / 2, e.heading, e.pitch)
         poses["ego"] = (e.x, e.y, e.heading)
+        if run.networked:
+            run.world_pose["ego"] = poses["ego"]
 
         # Record the state at t_now.
         _record(rec["ego"], k, e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
@@ -422,10 +520,12 @@ def _loop(run: _Run) -> Trace:
 
     time = np.arange(last) * dt
     actors = {}
+    frames = {"ego": run.ego_road.road_id}
+    frames.update({a.name: run.agent_roads[a.name].road_id for a in run.agents})
     for name in names:
         r = rec[name]
         length, width = sizes[name]
-        actors[name] = ActorTrack(name, length, width, **{f: v[:last] for f, v in r.items()})
+        actors[name] = ActorTrack(name, length, width, **{f: v[:last] for f, v in r.items()}, frame=frames[name])
     return Trace(dt, time, actors, {k: v[:last] for k, v in latency.items()}, run.events,
                  {k: v[:last] for k, v in outputs.items()}, objects[:last], status, error)
 
@@ -509,8 +609,10 @@ def _snapshot_trace(run: _Run, rec, k: int) -> Trace:
     actors = {}
     sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m)}
     sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
+    frames = {"ego": run.ego_road.road_id}
+    frames.update({a.name: run.agent_roads[a.name].road_id for a in run.agents})
     for name, r in rec.items():
-        actors[name] = ActorTrack(name, *sizes[name], **{f: v[k:k + 1] for f, v in r.items()})
+        actors[name] = ActorTrack(name, *sizes[name], **{f: v[k:k + 1] for f, v in r.items()}, frame=frames[name])
     lat = {n: np.array([v]) for n, v in run.stack.latency.items()}
     return Trace(run.dt, np.array([k * run.dt]), actors, lat)
 

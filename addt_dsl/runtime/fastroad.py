@@ -93,6 +93,51 @@ class FastRoad:
         t = -(x - rx) * math.sin(h) + (y - ry) * math.cos(h)
         return s, t
 
+    def sample_arrays(self, s, t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Vectorised `point` and `curvature` at stations `s` (within the road) and offsets
+        `t`: (x, y, heading, reference-line curvature), interpolated like the scalar calls."""
+        s = np.asarray(s, dtype=float)
+        x = np.interp(s, self._s, self._x)
+        y = np.interp(s, self._s, self._y)
+        h = np.interp(s, self._s, self._h)
+        k = np.interp(s, self._s, self._k)
+        return x - np.sin(h) * t, y + np.cos(h) * t, h, k
+
+    def lane_center_t_array(self, lane: int, s) -> np.ndarray:
+        """Vectorised `lane_center_t` (NaN where the lane is absent)."""
+        self.lane_center_t(lane, 0.0)  # fills the lane's table
+        return np.interp(np.asarray(s, dtype=float), self._s, self._center_cache[lane])
+
+    def nearest_d2(self, x: float, y: float, s_lo: float, s_hi: float) -> float:
+        """Squared distance [m^2] from a point to the nearest sample with s in [s_lo, s_hi]."""
+        i0 = max(0, int(s_lo / self._ds))
+        i1 = min(len(self._s) - 1, int(math.ceil(s_hi / self._ds)))
+        d = self._xy[i0:i1 + 1] - (x, y)
+        return float(np.min(np.einsum("ij,ij->i", d, d)))
+
+    def road_band_t(self, s: float) -> tuple[float, float]:
+        """(t_min, t_max) [m] of the road's outermost lane borders at `s` (clamped to the road)."""
+        return self.road.road_band_t(min(max(s, 0.0), self.length))
+
+    def project_along(self, x: float, y: float, hint: float) -> tuple[float, float, float]:
+        """`project` from a hint, plus the point's distance along the tangent beyond the
+        clamped station [m] (non-zero only past the road's ends): for routes."""
+        s = hint
+        length = self.length
+        for _ in range(3):
+            rx, ry, h = self.reference_pose(s)
+            ds = (x - rx) * math.cos(h) + (y - ry) * math.sin(h)
+            s += ds
+            if s < 0.0:
+                s = 0.0
+            elif s > length:
+                s = length
+            if abs(ds) < 1e-6:
+                break
+        rx, ry, h = self.reference_pose(s)
+        c, sn = math.cos(h), math.sin(h)
+        return s, -(x - rx) * sn + (y - ry) * c, (x - rx) * c + (y - ry) * sn
+
     # ---- lanes
     def _section_key(self, s: float) -> int:
         return max(0, bisect.bisect_right(self._section_starts, s) - 1)

@@ -90,12 +90,21 @@ class Gap(SignalFn):
     keyword = "gap"
     args = ("actor", "actor")
     dim = units.LENGTH
-    doc = "bumper-to-bumper gap along the road from the first actor to the second [m]"
+    doc = ("bumper-to-bumper gap along the road (or the shared route) from the first actor to the "
+           "second; between actors on different roads or routes, the centre distance less half "
+           "of both lengths [m]")
 
     @staticmethod
     def compute(trace, args):
         a, b = trace.actors[args[0]], trace.actors[args[1]]
+        if not same_frame(a, b):
+            return np.hypot(a.x - b.x, a.y - b.y) - 0.5 * (a.length_m + b.length_m)
         return (b.s - a.s) - 0.5 * (a.length_m + b.length_m)
+
+
+def same_frame(a, b) -> bool:
+    """Whether two actor tracks measure `s` along the same road or route (`ActorTrack.frame`)."""
+    return a.frame == b.frame
 
 
 @SIGNALS.register
@@ -130,12 +139,19 @@ class Ttc(SignalFn):
     keyword = "ttc"
     args = ("actor", "actor")
     dim = units.TIME
-    doc = (f"time to collision of the first actor into the second along the road, when they "
-           f"overlap laterally and close in; capped at {TTC_CAP_S:g} s [s]")
+    doc = (f"time to collision of the first actor into the second along the road (or shared route), "
+           f"when they overlap laterally and close in; between actors on different roads or routes, "
+           f"the Euclidean gap over the rate it shrinks at; capped at {TTC_CAP_S:g} s [s]")
 
     @staticmethod
     def compute(trace, args):
         a, b = trace.actors[args[0]], trace.actors[args[1]]
+        if not same_frame(a, b):
+            gap = np.hypot(a.x - b.x, a.y - b.y) - 0.5 * (a.length_m + b.length_m)
+            closing = -np.gradient(gap, trace.period_s) if len(gap) > 1 else np.zeros_like(gap)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ttc = np.where(closing > 1e-6, np.maximum(gap, 0.0) / closing, TTC_CAP_S)
+            return np.minimum(ttc, TTC_CAP_S)
         gap = (b.s - a.s) - 0.5 * (a.length_m + b.length_m)
         closing = a.speed - b.speed
         overlap = np.abs(a.t - b.t) < 0.5 * (a.width_m + b.width_m) + 0.2

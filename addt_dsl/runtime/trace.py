@@ -28,11 +28,14 @@ class ActorTrack:
     speed: np.ndarray
     accel: np.ndarray
     yaw_rate: np.ndarray
-    s: np.ndarray  # station along its road [m]
-    t: np.ndarray  # lateral offset from the road reference line, left positive [m]
+    s: np.ndarray  # station along its road [m] (on a route: along the route, in driving direction)
+    t: np.ndarray  # lateral offset from the road reference line, left positive [m] (route: from the route lane's centre, driver's left positive)
     lane_offset: np.ndarray  # offset from the centre of the lane it started in / targets [m]
     steer: np.ndarray  # front wheel angle [rad]
     clearance: np.ndarray  # distance to the nearest other actor's box, negative = overlap [m]
+    # The station frame `s` and `t` are measured in: the road id, or the route's key for an
+    # actor on a route or driving against s. Actors in one frame compare stations (gap, ttc).
+    frame: str = ""
 
 
 @dataclass

@@ -17,8 +17,13 @@ from pathlib import Path
 
 from addt_dsl.console import compile_and_report
 from addt_dsl.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, nonneg_float, nonneg_int, positive_int
+from addt_dsl.limits import DEFAULT
 
 DEFAULT_OUT = ".addt-failures"
+
+# Falsify and shrink run their own budget of runs, never the file's sweep: only the
+# per-run cost thresholds apply to them, not the sweep-wide ones (docs/limits.md).
+SEARCH_LIMITS = DEFAULT.raised(runs=2 ** 62, sim_seconds=float("inf"), agent_steps=float("inf"))
 
 
 def add_commands(sub) -> None:
@@ -46,8 +51,11 @@ def add_commands(sub) -> None:
     fal.add_argument("--budget-seconds", type=nonneg_float, default=0.0, help="0: no time limit")
     fal.add_argument("--seed", type=int, default=0)
     fal.add_argument("--jobs", "-j", type=positive_int, default=1)
-    fal.add_argument("--batch", type=positive_int, default=16, help="candidates per generation")
-    fal.add_argument("--sampler", choices=("cem", "random"), default="cem")
+    fal.add_argument("--batch", type=positive_int, default=16,
+                     help="candidates per generation (cem, random; bo runs --jobs at a time)")
+    fal.add_argument("--sampler", choices=("bo", "cem", "random"), default="bo",
+                     help="bo: Bayesian optimisation of the failure probability (default); cem: "
+                          "cross-entropy; random: uniform sampling")
     fal.add_argument("--shrink-simulations", type=nonneg_int, default=60,
                      help="per distinct failure, to find its origin (0: do not shrink)")
     fal.add_argument("--out", default=DEFAULT_OUT, help="write each distinct failure's counterexample here")
@@ -112,7 +120,7 @@ def cmd_shrink(args) -> int:
         return EXIT_USAGE
     plan = None
     if args.file:
-        result = compile_and_report(args.file, "text")
+        result = compile_and_report(args.file, "text", SEARCH_LIMITS)
         if not result.ok:
             return EXIT_USAGE
         plan = result.plan
@@ -191,7 +199,7 @@ def cmd_falsify(args) -> int:
     from addt_dsl.search.falsify import Falsifier
     from addt_dsl.sweep import UnsatisfiableAssumptions
 
-    result = compile_and_report(args.file, "text")
+    result = compile_and_report(args.file, "text", SEARCH_LIMITS)
     if not result.ok:
         return EXIT_USAGE
     log = (lambda m: print(m, file=sys.stderr)) if args.format == "text" else None

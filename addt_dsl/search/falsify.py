@@ -30,9 +30,14 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import norm
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.gaussian_process import GaussianProcessRegressor
+from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 
 from addt_dsl import expr as E
 from addt_dsl.plan import RunSpec, ScenarioPlan
@@ -50,6 +55,14 @@ MIN_SIGMA = 0.03
 MIN_ELITE = 5
 MIN_POINTS = 16  # uniform samples before the first fit (at least twice the dimensions)
 MAX_SHRINKS = 8
+# Bayesian optimisation (BayesianSampler)
+BO_MIN_INITIAL = 4  # uniform points before the first model (at least half the axes)
+BO_CANDIDATES = 2000  # uniform candidates per choice, and as many around the best points
+BO_LOCAL_CENTRES = 5
+BO_LOCAL_SIGMA = 0.15
+BO_SPREAD = 0.05  # minimum distance between the points of one batch, per sqrt(axes)
+BO_MAX_POINTS = 200  # points the model is fitted to (the lowest scores)
+SAMPLERS = ("bo", "cem", "random")
 
 
 # ---------------------------------------------------------------- the space
@@ -167,6 +180,9 @@ class UniformSampler:
     def __init__(self, dims: int, rng: np.random.Generator):
         self.dims, self.rng = dims, rng
 
+    def batch_size(self, default: int, done: int) -> int:
+        return default
+
     def sample(self, n: int) -> np.ndarray:
         return self.rng.random((n, self.dims))
 
@@ -186,6 +202,9 @@ class CrossEntropySampler:
         self.sigma = np.full(len(axes), 0.5)
         self.p = np.full(len(axes), 0.5)  # the first batch is uniform, like random sampling
         self.fitted = False
+
+    def batch_size(self, default: int, done: int) -> int:
+        return default
 
     def sample(self, n: int) -> np.ndarray:
         d = len(self.mu)
@@ -231,6 +250,80 @@ class CrossEntropySampler:
         self.sigma = np.maximum(SMOOTHING * sigma + (1 - SMOOTHING) * self.sigma, MIN_SIGMA)
         self.p = np.clip(SMOOTHING * mu + (1 - SMOOTHING) * self.p, 0.05, 0.95)
         self.fitted = True
+
+
+class BayesianSampler:
+    """Bayesian optimisation of the failure probability (`--sampler bo`, the default).
+
+    A Gaussian process (scikit-learn; Matern 5/2 with one length scale per axis, plus a
+    noise term, since run and fault seeds are drawn afresh for every candidate) models the
+    search score (normalised robustness, below 0 = failing) over the unit cube. Each next
+    point maximises the model's probability that the score is below 0, over uniform
+    candidates and perturbations of the best points so far; a batch takes the next best
+    candidates at least `BO_SPREAD` apart, so parallel workers do not run the same point.
+    Before the first fit, `initial` uniform points (a Latin hypercube would not help at
+    these sizes) give the model something to start from.
+
+    Why: runs cost 0.05-1 s and a small failure region (1-3 % of the space) needs 30-70
+    uniform runs on average; robustness is smooth enough in parameters, fault times and
+    magnitudes that a model of it points at the region after a handful of runs. The price
+    is the model itself (tens of ms per fitted point, up to `BO_MAX_POINTS` points).
+    """
+
+    name = "bo"
+
+    def __init__(self, axes: list[Axis], rng: np.random.Generator, jobs: int = 1):
+        self.dims = len(axes)
+        self.rng = rng
+        self.jobs = max(1, jobs)
+        self.initial = max(BO_MIN_INITIAL, self.dims // 2)
+        self.gp = None
+        self.points = np.empty((0, self.dims))
+        self.scores = np.empty(0)
+
+    def batch_size(self, default: int, done: int) -> int:
+        return self.initial if done == 0 else self.jobs
+
+    def sample(self, n: int) -> np.ndarray:
+        if self.gp is None:
+            return self.rng.random((n, self.dims))
+        best = self.points[np.argsort(self.scores, kind="stable")[:BO_LOCAL_CENTRES]]
+        local = best[self.rng.integers(0, len(best), BO_CANDIDATES)]
+        local = np.clip(local + self.rng.normal(0.0, BO_LOCAL_SIGMA, local.shape), 0.0, 1.0)
+        cand = np.vstack([self.rng.random((BO_CANDIDATES, self.dims)), local])
+        mu, sd = self.gp.predict(cand, return_std=True)
+        mu = mu * self.y_scale + self.y_mean
+        sd = np.maximum(sd * self.y_scale, 1e-12)
+        acquisition = norm.cdf(-mu / sd)  # P(score < 0): the run fails
+        chosen: list[np.ndarray] = []
+        spread = BO_SPREAD * math.sqrt(self.dims)
+        for i in np.argsort(-acquisition, kind="stable"):
+            if all(np.linalg.norm(cand[i] - c) >= spread for c in chosen):
+                chosen.append(cand[i])
+                if len(chosen) == n:
+                    break
+        while len(chosen) < n:  # every candidate crowded: fill uniformly
+            chosen.append(self.rng.random(self.dims))
+        return np.array(chosen)
+
+    def update(self, points: np.ndarray, scores: np.ndarray) -> None:
+        finite = scores[np.isfinite(scores)]
+        if not len(finite):
+            return
+        # A crash (-inf) is the lowest score seen and a never-violable oracle (+inf) the highest.
+        y = np.clip(scores, finite.min() - 1.0, finite.max() + 1.0)
+        keep = np.argsort(y, kind="stable")[:BO_MAX_POINTS]  # the model needs the low end most
+        self.points, self.scores = points, y
+        x, y = points[keep], y[keep]
+        self.y_mean, self.y_scale = float(y.mean()), float(y.std()) or 1.0
+        kernel = (ConstantKernel(1.0, (1e-3, 1e3))
+                  * Matern(length_scale=np.full(self.dims, 0.5), length_scale_bounds=(0.02, 50.0), nu=2.5)
+                  + WhiteKernel(1e-3, (1e-6, 1.0)))
+        seed = int(self.rng.integers(2 ** 31))
+        with warnings.catch_warnings():  # length scales at their bounds are expected here
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            self.gp = GaussianProcessRegressor(kernel, n_restarts_optimizer=1, random_state=seed).fit(
+                x, (y - self.y_mean) / self.y_scale)
 
 
 # ---------------------------------------------------------------- the search
@@ -289,7 +382,7 @@ class FalsifyReport:
 
 class Falsifier:
     def __init__(self, plan: ScenarioPlan, *, seed: int = 0, batch: int = 16, jobs: int = 1,
-                 sampler: str = "cem", cache: RunCache | None = None, log=None):
+                 sampler: str = "bo", cache: RunCache | None = None, log=None):
         self.plan = plan
         self.space = SearchSpace(plan)
         self.seed = seed
@@ -298,8 +391,11 @@ class Falsifier:
         self.cache = cache or RunCache()
         self.log = log or (lambda msg: None)
         rng = np.random.default_rng(derive_seed(seed, 31337))
-        self.sampler = (CrossEntropySampler(self.space.axes, rng) if sampler == "cem"
-                        else UniformSampler(self.space.dims, rng))
+        if sampler not in SAMPLERS:
+            raise ValueError(f"unknown sampler {sampler!r}: one of {', '.join(SAMPLERS)}")
+        self.sampler = {"bo": lambda: BayesianSampler(self.space.axes, rng, jobs),
+                        "cem": lambda: CrossEntropySampler(self.space.axes, rng),
+                        "random": lambda: UniformSampler(self.space.dims, rng)}[sampler]()
         self.hard = [o.name for o in plan.oracles if o.severity == "hard"]
 
     def _candidates(self, n: int, start: int) -> tuple[np.ndarray, list[RunSpec]]:
@@ -335,7 +431,7 @@ class Falsifier:
         while len(all_outcomes) < budget_runs:
             if budget_seconds and time.perf_counter() - t0 > budget_seconds:
                 break
-            n = min(self.batch, budget_runs - len(all_outcomes))
+            n = min(self.sampler.batch_size(self.batch, len(all_outcomes)), budget_runs - len(all_outcomes))
             points, specs = self._candidates(n, len(all_outcomes))
             if not specs:
                 break

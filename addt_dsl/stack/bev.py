@@ -19,9 +19,12 @@ from addt_dsl.registry import STACKS, ParamSpec
 from addt_dsl.stack.bev_grid import DETECTOR_LIDAR
 from addt_dsl.stack.bus import Bus
 from addt_dsl.stack.latency import load_models
-from addt_dsl.stack.nodes import Controller, GroundTruthPerception, LatticePlanner, Obj, Tracker
+from addt_dsl.stack.nodes import (LANE_POLICIES, Controller, EgoBody, GroundTruthPerception, LatticePlanner, Obj,
+                                  Tracker)
 
 NODE_NAMES = ("perception", "tracker", "planner", "control")
+CROSSING_SIN = 0.5  # an object whose box is turned more than 30 deg from the road ...
+CROSSING_MIN_SPEED = 0.5  # [m/s] ... and moves across it faster than this is predicted across it
 
 
 @dataclass(frozen=True)
@@ -95,6 +98,19 @@ class BevStack:
         ParamSpec("track_max_age", units.TIME, default=1.0, low=0.0, high=10.0,
                   doc="how long the tracker coasts an object it no longer sees (0.15 s: no coasting "
                       "beyond one lidar period, like a detector without tracking)"),
+        ParamSpec("lane_policy", None, kind="word", default="keep", choices=LANE_POLICIES,
+                  doc="lane preference: keep (the lane the ego starts in: lane changes only when traffic "
+                      "makes them) or keep_right (the rightmost driving lane)"),
+        ParamSpec("lane_change_cooldown", units.TIME, default=3.0, low=0.0, high=60.0,
+                  doc="a lane change within this time of the last one costs extra"),
+        ParamSpec("aeb", None, kind="word", default="on", choices=("on", "off"),
+                  doc="forward-collision check braking stages (warnings are reported either way)"),
+        ParamSpec("aeb_warn_ttc", units.TIME, default=2.6, low=0.0, high=10.0,
+                  doc="forward-collision warning below this time to collision"),
+        ParamSpec("aeb_partial_ttc", units.TIME, default=1.6, low=0.0, high=10.0,
+                  doc="partial braking (40 % of mu g) below this time to collision"),
+        ParamSpec("aeb_full_ttc", units.TIME, default=0.9, low=0.0, high=10.0,
+                  doc="full braking (mu g) below this time to collision"),
         ParamSpec("synthetic_objects", None, kind="int", default=0, low=0, high=500,
                   doc="extra objects perception reports in every frame (vehicles keeping pace beside "
                       "the road, 12 m or more to either side): a controllable workload for latency "
@@ -154,8 +170,13 @@ class BevStack:
         self.measured = self.settings["latency"] == "measured"
         self.perception = self._make_perception()
         self.tracker = Tracker(float(self.settings["track_max_age"]))
-        self.planner = LatticePlanner(self.settings)
-        self.controller = Controller(self.settings, ctx.wheelbase_m)
+        # The ego's declared body and friction: the planner's boxes and braking limits.
+        self.body = EgoBody(float(ctx.ego_length_m), float(ctx.ego_width_m), float(ctx.ego_mass_kg),
+                            float(ctx.ego_mu))
+        self.planner = LatticePlanner(self.settings, self.body)
+        self.controller = Controller(self.settings, ctx.wheelbase_m, self.body)
+        self.aeb_stage = 0
+        self.emergency = False
         self.planner_period = 1.0 / float(self.settings["planner_rate"])
         self.control_period = 1.0 / float(self.settings["control_rate"])
         self.next_plan_s = 0.0
@@ -252,12 +273,28 @@ class BevStack:
         objs = []
         for o in self.tracker.objects_at(time_s):
             so, to = road.project(o.x, o.y)
-            # Velocity along the road tangent.
+            # Velocity along the road, and the box's extent along and across it.
             hdg = float(road.reference_pose(so)[2])
-            v_along = o.vx * math.cos(hdg) + o.vy * math.sin(hdg)
-            objs.append((float(so), float(to), v_along, o.length, o.width))
+            c, s = math.cos(hdg), math.sin(hdg)
+            rc, rs = abs(math.cos(o.heading - hdg)), abs(math.sin(o.heading - hdg))
+            v_t = o.vy * c - o.vx * s
+            # Across the road only for an object turned across it (a crossing pedestrian or
+            # cyclist, a vehicle turning): for one aligned with the road, the lateral velocity
+            # the tracker estimates from 10 Hz positions is mostly noise (about ±1 m/s for
+            # 0.1 m position noise), too much to extrapolate over the horizon.
+            if not (rs > CROSSING_SIN and abs(v_t) > CROSSING_MIN_SPEED):
+                v_t = 0.0
+            objs.append((float(so), float(to), o.vx * c + o.vy * s, v_t,
+                         o.length * rc + o.width * rs, o.length * rs + o.width * rc))
+        hdg0 = heading - float(road.reference_pose(s0)[2])
         plan = self.planner.plan((float(s0), float(t0), lane0), speed, objs, road, road_id, time_s,
-                                 self.corrupt)
+                                 self.corrupt, (speed * math.cos(hdg0), speed * math.sin(hdg0)))
+        if plan.aeb_stage != self.aeb_stage:
+            self.ctx.event("aeb", stage=plan.aeb_stage, ttc_s=plan.ttc_s if math.isfinite(plan.ttc_s) else None)
+            self.aeb_stage = plan.aeb_stage
+        if self.planner.emergency != self.emergency:
+            self.ctx.event("emergency_brake", on=self.planner.emergency, decel=plan.brake)
+            self.emergency = self.planner.emergency
         lat = self._latency("planner", len(objs), started, time_s)
         stamp = self.tracks_stamp if self.tracks_stamp is not None else time_s
         self.bus.publish("plan", plan, stamp, time_s + lat)

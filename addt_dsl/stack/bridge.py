@@ -242,7 +242,8 @@ class ExternalStack:
             "type": "hello", "protocol": PROTOCOL, "seed": spec.seed, "step_s": run.dt,
             "stack": _jsonable(remote),
             "ego": {"lane": self.ctx.ego_lane, "wheelbase_m": self.ctx.wheelbase_m,
-                    "length_m": run.ego_plan.length_m, "width_m": run.ego_plan.width_m},
+                    "length_m": run.ego_plan.length_m, "width_m": run.ego_plan.width_m,
+                    "mass_kg": run.ego_plan.mass_kg, "mu": run.ego_plan.mu},
             "sensors": sensors,
             "map": {"format": "addt-road-plan", "road": road.model_dump(mode="json")},
         }

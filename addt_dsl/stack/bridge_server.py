@@ -100,6 +100,9 @@ class _RemoteContext:
         self.road_id = road_id
         self.seed = int(hello["seed"])
         self.wheelbase_m = float(hello["ego"]["wheelbase_m"])
+        body = hello["ego"]
+        self.ego_length_m, self.ego_width_m = float(body["length_m"]), float(body["width_m"])
+        self.ego_mass_kg, self.ego_mu = float(body["mass_kg"]), float(body["mu"])
         self.ego_lane = int(hello["ego"]["lane"])
         self.sensors = {d["name"]: _Sensor(d) for d in hello["sensors"]}
         self.faults = _NoFaults()

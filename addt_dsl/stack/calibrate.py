@@ -114,7 +114,7 @@ def measure_planner(repeats: int) -> list[tuple[float, float]]:
     out = []
     for n in COUNTS:
         objs = [(100.0 + float(rng.uniform(-60, 60)), float(road.lane_center_t(int(rng.choice(lanes)), 100.0)),
-                 float(rng.uniform(10, 30)), CAR.length_m, CAR.width_m) for _ in range(n)]
+                 float(rng.uniform(10, 30)), 0.0, CAR.length_m, CAR.width_m) for _ in range(n)]
         lane0 = lanes[0]
         t0 = float(road.lane_center_t(lane0, 100.0))
 

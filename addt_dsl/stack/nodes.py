@@ -14,6 +14,25 @@ import numpy as np
 
 from addt_dsl.vehicles import CAR
 
+G = 9.81  # [m/s^2]
+
+
+@dataclass(frozen=True)
+class EgoBody:
+    """The ego's declared body as the stack sees it: box size [m], mass [kg] and the
+    tyre-road friction coefficient its braking can count on (defaults: the catalogue's car
+    on dry asphalt)."""
+
+    length_m: float = CAR.length_m
+    width_m: float = CAR.width_m
+    mass_kg: float = 1500.0
+    mu: float = 0.8
+
+    @property
+    def max_brake(self) -> float:
+        """Largest deceleration the tyres can give [m/s^2]: mu * g (ideal ABS)."""
+        return self.mu * G
+
 
 @dataclass
 class Obj:
@@ -166,7 +185,12 @@ class Tracker:
 
 @dataclass
 class Plan:
-    """Planner output: a target lateral offset path on the ego road and a target speed."""
+    """Planner output: a target lateral offset path on the ego road and a target speed.
+
+    `brake` [m/s^2] is a deceleration the controller applies at least (emergency braking
+    or the forward-collision check's stage); `aeb_stage` and `ttc_s` are that check's
+    state (0 none, 1 warn, 2 partial, 3 full braking) and time to collision [s].
+    """
 
     lane: int
     t_target: float
@@ -175,49 +199,91 @@ class Plan:
     t_start: float
     lateral_length_m: float
     stamp_s: float
+    brake: float = 0.0
+    aeb_stage: int = 0
+    ttc_s: float = math.inf
+
+
+# `stack bev lane_policy`: `keep` prefers the lane the ego started in (it changes lanes
+# only when traffic makes it, and returns there after an overtake); `keep_right` prefers
+# the rightmost driving lane (moves over on an empty multi-lane road).
+LANE_POLICIES = ("keep", "keep_right")
 
 
 class LatticePlanner:
     """Lane-keep / lane-change candidates × speed profiles, costed and collision-checked.
 
     Candidates are evaluated against constant-velocity predictions of the tracked
-    objects in road coordinates over a fixed horizon; the cheapest collision-free one
-    wins. Costs: progress (speed deficit), comfort (lane changes, braking), clearance,
-    and a keep-right preference so the ego returns after an overtake.
+    objects in road coordinates (along the road and across it, so a crossing pedestrian
+    is predicted into the ego's lane) over a fixed horizon; the cheapest collision-free
+    one wins. Costs: progress (speed deficit), comfort (lane changes, braking), clearance,
+    and a lane preference (`lane_policy`). When no candidate is collision-free the plan
+    is an emergency stop in the current lane at the deceleration the tyre-road friction
+    allows (mu * g); never the cheapest of colliding candidates. The forward-collision
+    check (`ForwardCollisionCheck`) runs on every plan and may add braking on top.
+
+    Objects are `(s, t, v_s, v_t, length_along, width_across)` in the ego road's frame.
     """
 
     name = "planner"
     sites = ("planner.speed", "planner.t_target", "planner.t_start", "planner.path_length", "planner.cost")
     horizon_s = 5.0
     dt_s = 0.5
+    comfort_brake = 6.0  # [m/s^2] the speed candidates' braking limit (less where friction is lower)
 
-    def __init__(self, settings: dict):
+    def __init__(self, settings: dict, body: EgoBody = EgoBody()):
         self.cruise = float(settings.get("cruise_speed", 25.0))
         self.time_gap = float(settings.get("time_gap", 1.5))
+        self.lane_policy = str(settings.get("lane_policy", "keep"))
+        if self.lane_policy not in LANE_POLICIES:
+            raise ValueError(f"lane_policy must be one of {', '.join(LANE_POLICIES)}")
+        self.lane_change_cooldown_s = float(settings.get("lane_change_cooldown", 3.0))
+        self.body = body
+        self.max_brake = body.max_brake
+        self.brake_limit = min(self.comfort_brake, self.max_brake)
+        self.fcw = ForwardCollisionCheck(settings, body)
         self.current_lane: int | None = None
+        self.home_lane: int | None = None
         self.maneuver: tuple[int, float, float, float] | None = None
-        self.lane_change_cooldown_s = 0.0
         self.last_change_s = -1e9
+        self.emergency = False  # the last plan was an emergency stop
 
-    def plan(self, ego_sc, ego_speed, objs_sc, road, road_id, stamp_s, corrupt) -> Plan:
+    def plan(self, ego_sc, ego_speed, objs_sc, road, road_id, stamp_s, corrupt,
+             ego_v_st: tuple[float, float] | None = None) -> Plan:
+        """`ego_sc` = (s, t, lane); `ego_v_st` = the ego's velocity along and across the
+        road [m/s] for the forward-collision check (default: `ego_speed` along it)."""
         s0, t0, lane0 = ego_sc
         if self.current_lane is None:
-            self.current_lane = lane0
+            self.current_lane = self.home_lane = lane0
         lanes = road.driving_lane_ids(s0)
         current = self.current_lane
+        home = self._home_lane(lanes)
         candidates_lanes = [l for l in lanes if abs(l - current) <= 1 and _same_side(l, current)]
         best = None
         for lane in candidates_lanes:
             t_lane = float(road.lane_center_t(lane, s0))
             for speed in self._speeds(ego_speed):
                 cost = corrupt("planner.cost",
-                               self._cost(lane, t_lane, speed, s0, t0, ego_speed, objs_sc, current, lanes, stamp_s))
+                               self._cost(lane, t_lane, speed, s0, t0, ego_speed, objs_sc, current, home, stamp_s))
                 if best is None or cost < best[0]:
                     best = (cost, lane, t_lane, speed)
+        brake = 0.0
+        self.emergency = best is None or not best[0] < math.inf  # NaN (a corrupted cost) too
+        if self.emergency:
+            # Nothing comfortable is collision-free: stop straight ahead as hard as the tyres allow.
+            lane = current if current in lanes else lane0
+            best = (math.inf, lane, float(road.lane_center_t(lane, s0)), 0.0)
+            brake = self.max_brake
         _, lane, t_lane, speed = best
         if lane != current:
             self.last_change_s = stamp_s
             self.current_lane = lane
+        v_s, v_t = ego_v_st if ego_v_st is not None else (ego_speed, 0.0)
+        stage, ttc, aeb_brake = self.fcw.check(s0, t0, v_s, v_t, objs_sc, stamp_s)
+        if aeb_brake > brake:
+            brake = aeb_brake
+        if brake > 0.0:
+            speed = min(speed, ego_speed)  # the speed loop must not fight the braking
         speed = corrupt("planner.speed", speed)
         t_lane = corrupt("planner.t_target", t_lane)
         # The lateral manoeuvre keeps its start while its target lane stays the same, so
@@ -228,31 +294,36 @@ class LatticePlanner:
         # The published trajectory: lateral path from (s_start, t_start) to t_target over path_length.
         t_start = corrupt("planner.t_start", t_start)
         lateral_len = corrupt("planner.path_length", lateral_len)
-        return Plan(lane, t_lane, speed, s_start, t_start, lateral_len, stamp_s)
+        return Plan(lane, t_lane, speed, s_start, t_start, lateral_len, stamp_s, brake, stage, ttc)
+
+    def _home_lane(self, lanes: list[int]) -> int:
+        """The lane the `lane_policy` prefers at this station."""
+        if self.lane_policy == "keep_right":
+            # Right lanes have the most negative ids.
+            return min(lanes) if min(lanes) < 0 else max(lanes)
+        return self.home_lane if self.home_lane in lanes else self.current_lane
 
     def _speeds(self, ego_speed: float):
         return (self.cruise, max(0.0, ego_speed - 2.0), max(0.0, ego_speed - 5.0), 0.0)
 
-    def _cost(self, lane, t_lane, speed, s0, t0, v0, objs, current, lanes, now) -> float:
+    def _cost(self, lane, t_lane, speed, s0, t0, v0, objs, current, home, now) -> float:
         # Collision check along the candidate: ego moves from t0 to t_lane over ~3 s with a
-        # speed ramp to `speed` at a comfortable 2 m/s^2 (braking up to 6 m/s^2).
+        # speed ramp to `speed` at a comfortable 2 m/s^2 (braking up to `brake_limit`).
         cost = 0.0
         s, v = s0, v0
         dt = self.dt_s
         time_gap = self.time_gap
         steps = int(self.horizon_s / dt)
-        # Per-object constants of the checks below (same expressions, evaluated once).
-        checks = [(os_, ov, ot, 0.5 * (owid + CAR.width_m) + 0.3, 0.5 * (olen + CAR.length_m),
-                   -(olen + CAR.length_m) - 2.0)
-                  for (os_, ot, ov, olen, owid) in objs]
+        brake = -self.brake_limit
+        path = []  # (time, s, t, speed) of the candidate at each check
         for k in range(1, steps + 1):
             tk = k * dt
             # The min/max below as comparisons with the builtins' results (NaN included).
             a = (speed - v) / dt
             if not a < 2.0:  # min(2.0, a)
                 a = 2.0
-            elif not a > -6.0:  # max(-6.0, .)
-                a = -6.0
+            elif not a > brake:  # max(brake, .)
+                a = brake
             v = v + a * dt
             if not v > 0.0:  # max(0.0, v)
                 v = 0.0
@@ -260,31 +331,125 @@ class LatticePlanner:
             u = tk / 3.0
             if not u < 1.0:  # min(1.0, u)
                 u = 1.0
-            t = t0 + (t_lane - t0) * (u * u * (3 - 2 * u))
-            for os_, ov, ot, lat_reach, half_len, gap_low in checks:
-                if not abs(t - ot) < lat_reach:
-                    continue
+            path.append((tk, s, t0 + (t_lane - t0) * (u * u * (3 - 2 * u)), v))
+        ego_len, ego_wid = self.body.length_m, self.body.width_m
+        for os_, ot, ov, ovt, olen, owid in objs:
+            lat_reach = 0.5 * (owid + ego_wid) + 0.3
+            half_len = 0.5 * (olen + ego_len)
+            gap_low = -(olen + ego_len) - 2.0
+            prev = os_ - s0 - half_len
+            for tk, s, t, v in path:
                 gap = os_ + ov * tk - s - half_len
-                # Boxes overlap along the road for -(olen + ego length) < gap < 0; keep 2 m either side.
-                if gap_low < gap < 2.0:
-                    return math.inf  # collision with a predicted object
-                if gap >= 0.0:
-                    desired = time_gap * v
-                    if not desired > 5.0:  # max(5.0, desired)
-                        desired = 5.0
-                    if gap < desired:
-                        cost += 4.0 * (desired - gap) / desired
+                if abs(t - ot - ovt * tk) < lat_reach:
+                    # Boxes overlap along the road for -(olen + ego length) < gap < 0; keep 2 m
+                    # either side. The gap may jump over that window between two checks (0.5 s
+                    # at a 30 m/s closing speed is 15 m): what lies between counts too.
+                    lo, hi = (prev, gap) if prev < gap else (gap, prev)
+                    if lo < 2.0 and hi > gap_low:
+                        return math.inf  # collision with a predicted object
+                    if gap >= 0.0:
+                        desired = time_gap * v
+                        if not desired > 5.0:  # max(5.0, desired)
+                            desired = 5.0
+                        if gap < desired:
+                            cost += 4.0 * (desired - gap) / desired
+                prev = gap
         cost += 1.0 * abs(self.cruise - speed) / max(self.cruise, 1.0) * 10.0
         if lane != current:
-            cost += 1.5 + (3.0 if now - self.last_change_s < 3.0 else 0.0)
-        # Keep-right preference: right lanes have the most negative ids.
-        rightmost = min(lanes) if min(lanes) < 0 else max(lanes)
-        cost += 2.5 * abs(lane - rightmost)
+            cost += 1.5 + (3.0 if now - self.last_change_s < self.lane_change_cooldown_s else 0.0)
+        cost += 2.5 * abs(lane - home)
         return cost
 
 
 def _same_side(a: int, b: int) -> bool:
     return (a > 0) == (b > 0)
+
+
+def _overlap_times(a: float, b: float, c: float) -> tuple[float, float]:
+    """The times τ with |a + b τ| < c (an empty interval has start > end)."""
+    if b == 0.0:
+        return (-math.inf, math.inf) if abs(a) < c else (math.inf, -math.inf)
+    t1, t2 = (-c - a) / b, (c - a) / b
+    return (t1, t2) if t1 < t2 else (t2, t1)
+
+
+class ForwardCollisionCheck:
+    """AEB-like forward-collision check on the ego's predicted path.
+
+    The ego and each object ahead (centre ahead of the ego's) move at constant velocity
+    in the road frame, along and across the road; the time to collision (TTC) is the
+    first time in the next `horizon_s` their boxes overlap along the road and, with
+    `lateral_margin_m` to spare, across it. Stages by the smallest TTC:
+
+    1. warn (TTC <= `aeb_warn_ttc`, 2.6 s): an event, no braking;
+    2. partial braking (TTC <= `aeb_partial_ttc`, 1.6 s) at `partial_share` (40 %) of mu * g;
+    3. full braking at mu * g (TTC <= `aeb_full_ttc`, 0.9 s, or when stopping the closing
+       speed within the TTC needs more than partial braking gives: v / (2 TTC) > partial).
+
+    A braking stage is held (it can rise, not fall) while the threat stays on the
+    predicted path, and for `release_s` after no object is on a collision course within
+    the horizon any more (a walker's estimated velocity flickers from frame to frame, and
+    a brake that lets go for one plan loses what it gained). `aeb off` disables the
+    braking stages (warnings still count).
+    """
+
+    horizon_s = 4.0
+    lateral_margin_m = 0.2
+    partial_share = 0.4
+    release_s = 0.5
+
+    def __init__(self, settings: dict, body: EgoBody = EgoBody()):
+        self.enabled = str(settings.get("aeb", "on")) == "on"
+        self.warn_ttc = float(settings.get("aeb_warn_ttc", 2.6))
+        self.partial_ttc = float(settings.get("aeb_partial_ttc", 1.6))
+        self.full_ttc = float(settings.get("aeb_full_ttc", 0.9))
+        self.body = body
+        self.full_brake = body.max_brake
+        self.partial_brake = self.partial_share * body.max_brake
+        self.stage = 0
+        self.threat_s = -math.inf  # last time an object was on a collision course [s]
+
+    def time_to_collision(self, s0, t0, v_s, v_t, objs) -> tuple[float, float]:
+        """(TTC [s], closing speed along the road [m/s]) of the first predicted collision
+        with an object ahead within the horizon; (inf, 0) when there is none."""
+        half_len, half_wid = 0.5 * self.body.length_m, 0.5 * self.body.width_m
+        best, closing = math.inf, 0.0
+        for os_, ot, ovs, ovt, olen, owid in objs:
+            d = os_ - s0
+            if not d > 0.0:
+                continue
+            a0, a1 = _overlap_times(d, ovs - v_s, 0.5 * olen + half_len)
+            l0, l1 = _overlap_times(ot - t0, ovt - v_t, 0.5 * owid + half_wid + self.lateral_margin_m)
+            start = max(a0, l0, 0.0)
+            if start <= min(a1, l1, self.horizon_s) and start < best:
+                best, closing = start, v_s - ovs
+        return best, closing
+
+    def check(self, s0, t0, v_s, v_t, objs, now: float = 0.0) -> tuple[int, float, float]:
+        """(stage, TTC [s], deceleration to apply [m/s^2]) at time `now` [s]."""
+        ttc, closing = self.time_to_collision(s0, t0, v_s, v_t, objs)
+        if ttc == math.inf:
+            if self.stage < 2 or not now - self.threat_s < self.release_s:
+                self.stage = 0
+                return 0, ttc, 0.0
+            stage = self.stage  # still braking: the threat left the path only just now
+            return stage, ttc, (self.full_brake if stage == 3 else self.partial_brake) if self.enabled else 0.0
+        self.threat_s = now
+        needed = closing / (2.0 * ttc) if ttc > 0.0 else math.inf
+        if ttc <= self.full_ttc or (ttc <= self.partial_ttc and needed > self.partial_brake):
+            stage = 3
+        elif ttc <= self.partial_ttc:
+            stage = 2
+        elif ttc <= self.warn_ttc:
+            stage = 1
+        else:
+            stage = 0
+        if self.stage >= 2 and stage < self.stage:
+            stage = self.stage  # braking holds while the threat is on the path
+        self.stage = stage
+        if not self.enabled or stage < 2:
+            return stage, ttc, 0.0
+        return stage, ttc, self.full_brake if stage == 3 else self.partial_brake
 
 
 # ---------------------------------------------------------------- control
@@ -309,7 +474,7 @@ class Controller:
     lateral_zeta = 1.0
     preview_s = 0.2  # [s]
 
-    def __init__(self, settings: dict, wheelbase_m: float):
+    def __init__(self, settings: dict, wheelbase_m: float, body: EgoBody = EgoBody()):
         self.kp = float(settings.get("kp", 1.0))
         self.ki = float(settings.get("ki", 0.1))
         self.kd = float(settings.get("kd", 0.05))
@@ -321,6 +486,10 @@ class Controller:
         self.lateral_wn = 1.0  # [rad/s] natural frequency of the lateral error dynamics
         self.prev_err = 0.0
         self.max_steer = 0.5
+        # Braking beyond what the tyres transmit only locks them (the twin's ideal ABS caps
+        # it anyway): the command is bounded by the ego's friction.
+        self.max_brake = body.max_brake
+        self.max_accel = 3.0  # [m/s^2]
         self._last_xy: tuple[float, float] | None = None
 
     @staticmethod
@@ -372,5 +541,7 @@ class Controller:
         deriv = (err - self.prev_err) / dt
         self.prev_err = err
         accel = self.kp * err + self.ki * self.integral + self.kd * deriv
-        accel = corrupt("control.accel", max(-8.0, min(3.0, accel)))
+        if plan.brake > 0.0 and accel > -plan.brake:  # emergency / AEB braking: at least this
+            accel = -plan.brake
+        accel = corrupt("control.accel", max(-self.max_brake, min(self.max_accel, accel)))
         return steer, accel

@@ -29,7 +29,7 @@ scenario lane_change_30 {{
     lanes right 2 width 3.5 m
   }}
   ego car on r lane {lane} at 20 m speed 30 m/s {{
-    stack bev cruise_speed 30 m/s
+    stack bev cruise_speed 30 m/s lane_policy keep_right
     sensor lidar rate 10 Hz rays 720 range 100 m
   }}
 {agents}
@@ -44,7 +44,7 @@ def swings(err: np.ndarray, amplitude: float = 0.05) -> int:
 
 
 def test_stack_lane_change_at_30_mps_settles_without_overshoot():
-    # An empty road: the planner's keep-right rule moves the ego over at full speed.
+    # An empty road: the planner's keep-right policy moves the ego over at full speed.
     out = X.execute(spec_of(LANE_CHANGE.format(lane=-1, agents="")))
     assert out.status == "ok"
     ego = out.trace.actors["ego"]

@@ -12,9 +12,10 @@ from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, const_value, fmt, int_const,
                                        suggest)
 from addt_dsl.compiler.exprs import value_range
+from addt_dsl.compiler.xodr_check import check_route, route_length
 from addt_dsl.diagnostics import Span
 from addt_dsl.registry import BEHAVIORS, SENSORS, STACKS, ParamSpec
-from addt_dsl.vehicles import VEHICLES
+from addt_dsl.vehicles import STATIC_KINDS, VEHICLES
 
 
 ACTOR_SETTINGS = (
@@ -31,6 +32,8 @@ ACTOR_SETTINGS = (
               doc="tyre-road friction coefficient (0.8 dry asphalt, 0.5 wet, 0.1 ice)"),
     ParamSpec("offset", units.LENGTH, default=0.0, low=-20.0, high=20.0,
               doc="start offset from the lane centre, left positive (e.g. a pedestrian on the kerb)"),
+    ParamSpec("yaw", units.ANGLE, default=0.0, low=-3.1416, high=3.1416,
+              doc="body yaw relative to the lane's driving direction, left positive (an angled or parked car)"),
 )
 
 DEFAULT_SENSOR = P.ClausePlan(keyword="sensor", name="lidar", settings={})
@@ -110,14 +113,21 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
     length, width = body["length"], body["width"]
     placement = _place(ctx, d, vals, length, placed)
     road = placement[0] if placement is not None else None
+    route = placement[3] if placement is not None else []
     if placement is not None and "goal" in vals and d.is_ego:
         info = ctx.road_info.get(placement[0])
         span = next(st.value.span for st in d.settings + d.block_settings if st.key == "goal")
-        if info is not None:
+        if route and info is not None and info.network is not None:
+            # On a route the ego's station runs along the route: the goal is checked against its length.
+            check_range(ctx, vals["goal"], 0.0, route_length(info.network, route, placement[1]), units.LENGTH,
+                        "the goal (a station along the route)", span)
+        elif info is not None:
             check_range(ctx, vals["goal"], 0.0, info.length_m, units.LENGTH, "the goal", span)
     if "goal" in vals and not d.is_ego:
         span = next(s.key_span for s in d.settings + d.block_settings if s.key == "goal")
         ctx.sink.warning("W0002", "only the ego has a goal", span)
+    if d.vehicle in STATIC_KINDS:
+        _check_static(ctx, d, vals)
     behaviors, sensors, stack = [], [], None
     stack_span: Span | None = None
     sensor_spans: dict[str, Span] = {}
@@ -148,13 +158,28 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
         _check_sensor_expectations(ctx, stack, sensors, sensor_spans, stack_span or d.span)
     if placement is None:
         return None
-    _, lane, s = placement
+    _, lane, s, _ = placement
     return P.ActorPlan(
         name=d.name, vehicle=d.vehicle, road=road, lane=lane, s=s,
         speed=vals.get("speed", P.num(0.0)),
         length_m=length, width_m=width, mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
-        goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"))
+        goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"), route=route, yaw=vals.get("yaw"))
+
+
+def _check_static(ctx: Context, d: ast.ActorDecl, vals: dict) -> None:
+    """A static object has no speed, behaviours or steps, and is not the ego."""
+    if d.is_ego:
+        ctx.sink.error("E0204", f"the ego cannot be a static {d.vehicle}", d.vehicle_span, "use `car` or `truck`")
+        return
+    moving = [c.span for c in d.clauses] + [s.span for s in d.steps]
+    if moving:
+        ctx.sink.error("E0204", f"a {d.vehicle} does not move: it takes no behaviours or steps", moving[0],
+                       "use `car` for a vehicle that stops or starts")
+    speed = const_value(vals["speed"]) if "speed" in vals else 0.0
+    if speed != 0.0:
+        span = next(st.value.span for st in d.settings + d.block_settings if st.key == "speed")
+        ctx.sink.error("E0204", f"a {d.vehicle} does not move: its speed is 0", span)
 
 
 def _check_stack_sensors(ctx: Context, stack: P.ClausePlan, sensors: list, span: Span) -> None:
@@ -244,6 +269,7 @@ def _place(ctx: Context, d: ast.ActorDecl, vals: dict, length: float, placed: di
         p = lane_rel[0] if lane_rel else along[0]
         lane = _lane_relative(p.kind, placed[p.actor].lane)
         lane_span = p.span
+    route_ref = next((placed[p.actor] for p in refs if placed[p.actor].route), None)
     if along:
         p = along[0]
         other = placed[p.actor]
@@ -251,16 +277,43 @@ def _place(ctx: Context, d: ast.ActorDecl, vals: dict, length: float, placed: di
         if dist is None:
             return None
         check_range(ctx, dist, 0.0, None, units.LENGTH, "the gap", p.distance.span)
-        # The distance is a bumper-to-bumper gap, so half of both lengths is added.
+        # The distance is a bumper-to-bumper gap, so half of both lengths is added; "ahead"
+        # is in the other actor's driving direction (against s on a lane driven that way).
         half = E.Num(value=0.5 * (other.length_m + length))
         offset = E.Binary(op="+", left=dist, right=half)
-        s = E.Binary(op="+" if p.kind == "ahead" else "-", left=other.s, right=offset)
+        ahead = (p.kind == "ahead") == (_direction(ctx, other) > 0)
+        s = E.Binary(op="+" if ahead else "-", left=other.s, right=offset)
         s_span = p.span
     else:
         s = vals["at"]
         s_span = next(st.value.span for st in d.settings + d.block_settings if st.key == "at")
+    route: list[str] = []
+    if d.route is not None or route_ref is not None:
+        # An actor placed relative to one on a route shares that route (re-checked for its lane).
+        spec = d.route if d.route is not None else ast.Route(refs[0].span, tuple(route_ref.route),
+                                                              tuple(refs[0].span for _ in route_ref.route))
+        got = check_route(ctx, spec, road, lane, s if not along else None, lane_span)
+        if got is None:
+            return None
+        route, first_info = got
+        if not along and first_info is not None:
+            _check_on_road(ctx, d, road, lane, lane_span, s, s_span, first_info, route[0])
+        return road, lane, s, route
     _check_on_road(ctx, d, road, lane, lane_span, s, s_span)
-    return road, lane, s
+    return road, lane, s, route
+
+
+def _direction(ctx: Context, actor: P.ActorPlan) -> int:
+    """+1 if the actor's lane is driven along +s (OpenDRIVE: right-hand traffic drives
+    negative lane ids along +s), -1 against; +1 when the lane depends on parameters."""
+    lane = int_const(actor.lane)
+    if lane is None or lane == 0:
+        return 1
+    info = ctx.road_info.get(actor.road)
+    if info is not None and info.network is not None:
+        road = info.network.road(actor.route[0] if actor.route else info.road_id)
+        return road.travel_direction(lane)
+    return 1 if lane < 0 else -1
 
 
 def _placement_text(p: ast.Placement) -> str:
@@ -282,16 +335,25 @@ def _lane_relative(kind: str, lane):
     return E.Num(value=float(round(const))) if const is not None else result
 
 
-def _check_on_road(ctx: Context, d: ast.ActorDecl, road: str, lane, lane_span: Span, s, s_span: Span) -> None:
-    info = ctx.road_info.get(road)
+def _check_on_road(ctx: Context, d: ast.ActorDecl, road: str, lane, lane_span: Span, s, s_span: Span,
+                   info=None, map_road: str = "") -> None:
+    info = info or ctx.road_info.get(road)
     if info is None:
         return
-    check_range(ctx, s, 0.0, info.length_m, units.LENGTH, f"the position of '{d.name}' along '{road}'", s_span)
+    where = f"road {map_road} of '{road}'" if map_road else f"'{road}'"
+    check_range(ctx, s, 0.0, info.length_m, units.LENGTH, f"the position of '{d.name}' along {where}", s_span)
     lane_c = int_const(lane)
+    s_c = const_value(s)
+    lanes = info.lane_ids
+    if info.network is not None and s_c is not None and 0.0 <= s_c <= info.length_m:
+        # Lane sections renumber lanes: check the lanes where the actor starts.
+        lanes = tuple(i for i in info.network.road(map_road or info.road_id).lane_ids(s_c) if i != 0)
     if lane_c is not None:
-        if lane_c not in info.lane_ids:
-            ctx.sink.error("E0301", f"road '{road}' has no lane {lane_c}", lane_span,
-                           f"lanes of '{road}': {', '.join(str(i) for i in info.lane_ids)}",
+        if lane_c not in lanes:
+            at = f" at {s_c:g} m" if s_c is not None and lanes != info.lane_ids else ""
+            ctx.sink.error("E0301", f"{where} has no lane {lane_c}{at}" if map_road
+                           else f"road '{road}' has no lane {lane_c}{at}", lane_span,
+                           f"lanes of {where}{at}: {', '.join(str(i) for i in lanes)}",
                            "lane ids are negative right of the reference line (-1, -2, ...), positive left")
     else:
         got = value_range(lane, ctx.param_ranges)

@@ -10,6 +10,7 @@ from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import INT_EPS, Context, const_value, fmt, lower_list, range_text, suggest
 from addt_dsl.compiler.exprs import ExprLowering, Scope
+from addt_dsl.limits import MAX_ABS_NUMBER
 
 PARAM_SETTINGS = ("dist", "mean", "sd", "integer")
 
@@ -51,6 +52,8 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
     if not math.isfinite(default):
         ctx.sink.error("E0204", f"the default of '{d.name}' is not a finite number", d.default.span)
         return None
+    if _absurd(ctx, [default], f"the default of '{d.name}'", d.default.span, dim):
+        return None
     dims[d.name] = dim
     opts: dict[str, ast.Setting] = {}
     for st in d.settings:
@@ -77,7 +80,7 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
                            d.domain.span)
             return None
         vals = lower_list(ctx, d.domain, dim, f"the domain of '{d.name}'")
-        if vals is None:
+        if vals is None or _absurd(ctx, vals, f"the domain of '{d.name}'", d.domain.span, dim):
             return None
         # Two values are a range unless `dist choice`; three or more are choices.
         if len(vals) != 2 or dist == "choice":
@@ -113,11 +116,15 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
         if mean is not None and not math.isfinite(mean):
             ctx.sink.error("E0204", f"'mean' of '{d.name}' is not a finite number", opts["mean"].value.span)
             return None
+        if mean is not None and _absurd(ctx, [mean], f"'mean' of '{d.name}'", opts["mean"].value.span, dim):
+            return None
     if "sd" in opts:
         sd_expr = low.lower_value(opts["sd"].value, dim, f"'sd' of '{d.name}'")
         sd = const_value(sd_expr) if sd_expr is not None else None
         if sd is not None and not (sd > 0 and math.isfinite(sd)):
             ctx.sink.error("E0301", f"'sd' of '{d.name}' must be positive", opts["sd"].value.span)
+            return None
+        if sd is not None and _absurd(ctx, [sd], f"'sd' of '{d.name}'", opts["sd"].value.span, dim):
             return None
     if dist == "normal" and "sd" not in opts:
         ctx.sink.error("E0105", f"normal parameter '{d.name}' needs 'sd'", d.span,
@@ -146,3 +153,14 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
     return P.ParamPlan(name=d.name, dimension=units.dim_name(dim), default=default,
                        low=lo, high=hi, distribution=dist, mean=mean, sd=sd,
                        choices=choices, integer=integer)
+
+
+def _absurd(ctx: Context, values, what: str, span, dim) -> bool:
+    """True (reported, E0301) when a value is beyond MAX_ABS_NUMBER: finite, but a
+    sampler would overflow on it (a range of ±1e308 is an infinite width)."""
+    bad = next((v for v in values if abs(v) > MAX_ABS_NUMBER), None)
+    if bad is None:
+        return False
+    ctx.sink.error("E0301", f"{what} ({fmt(bad, dim)}) is beyond ±{MAX_ABS_NUMBER:g} (SI units)", span,
+                   "no quantity of a driving scenario is this large (docs/limits.md)")
+    return True

@@ -6,8 +6,8 @@ from addt_dsl.compiler.context import Context
 
 
 def rule_unused(ctx: Context) -> None:
+    checked = {p.name for p in ctx.params}  # a broken one is reported already (a set: linear time)
     for name, d in ctx.params_ast.items():
-        checked = any(p.name == name for p in ctx.params)  # a broken one is reported already
-        if checked and name not in ctx.used_params:
+        if name in checked and name not in ctx.used_params:
             ctx.sink.warning("W0001", f"parameter '{name}' is never used", d.span,
                              "use it in a setting, a constraint or an oracle, or remove it")

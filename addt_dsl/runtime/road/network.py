@@ -40,13 +40,16 @@ class RoadCoordsArray:
 @dataclass(frozen=True)
 class Connection:
     """``<junction><connection>``: from ``incoming_road`` into ``connecting_road``, entering
-    it at ``contact_point`` ("start"/"end"); ``lane_links`` are (from, to) lane ids."""
+    it at ``contact_point`` ("start"/"end"); ``lane_links`` are (from, to) lane ids. In a
+    direct junction (OpenDRIVE 1.7 ``type="direct"``) ``connecting_road`` is the
+    ``linkedRoad``: the incoming road leads straight into it (``direct`` True)."""
 
     id: str
     incoming_road: str
     connecting_road: str
     contact_point: str
     lane_links: tuple[tuple[int, int], ...] = ()
+    direct: bool = False
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,21 @@ def _scalar_or(value: np.ndarray, scalar: bool):
 
 
 @dataclass(frozen=True)
+class Signal:
+    """``<signals><signal>`` of a road: at station ``s`` [m], offset ``t`` [m]; ``orientation``
+    "+" faces traffic driving along +s, "-" against, "none" both; ``dynamic`` for traffic lights."""
+
+    id: str
+    s: float
+    t: float
+    name: str = ""
+    type: str = ""
+    subtype: str = ""
+    dynamic: bool = False
+    orientation: str = "none"
+
+
+@dataclass(frozen=True)
 class Road:
     id: str
     length: float
@@ -55,6 +70,7 @@ class Road:
     rule: str = "RHT"
     predecessor: Optional[RoadLink] = None
     successor: Optional[RoadLink] = None
+    signals: tuple[Signal, ...] = ()
     _geom_starts: np.ndarray = field(init=False, repr=False, compare=False)
     _section_starts: np.ndarray = field(init=False, repr=False, compare=False)
     _section_starts_t: tuple = field(init=False, repr=False, compare=False)

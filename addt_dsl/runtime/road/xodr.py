@@ -24,7 +24,7 @@ from .geometry import Arc, CubicProfile, Line, ParamPoly3, Poly3, Spiral
 from .lanes import Lane, LaneSection
 from . import limits as L
 from .network import Connection, Junction, RoadNetwork
-from .road import Road, RoadLink
+from .road import Road, RoadLink, Signal
 
 _GEOMETRY_TAGS = ("line", "arc", "spiral", "poly3", "paramPoly3")
 
@@ -199,9 +199,10 @@ class _Reader:
                 Connection(
                     self.text(c, "id", ""),
                     self.text(c, "incomingRoad", ""),
-                    self.text(c, "connectingRoad", ""),
+                    self.text(c, "connectingRoad", "") or self.text(c, "linkedRoad", ""),
                     contact,
                     links,
+                    direct="connectingRoad" not in c.attrs and "linkedRoad" in c.attrs,
                 )
             )
         return Junction(self.text(node, "id"), node.attrs.get("name", ""), tuple(connections))
@@ -265,6 +266,7 @@ class _Reader:
                 rule=rule,
                 predecessor=predecessor,
                 successor=successor,
+                signals=self.signals(node.find("signals"), length),
             )
         except L.RoadLimitError as exc:
             at = plan.findall("geometry")[exc.geometry] if exc.geometry is not None else node
@@ -273,6 +275,26 @@ class _Reader:
             raise self.err(node, str(exc)) from None
         self.check_profiles(road, node, sec_nodes)
         return road
+
+    def signals(self, node: Optional[_Node], length: float) -> tuple:
+        """The road's `<signal>`s (positions, type, dynamic); `<signalReference>` is skipped."""
+        if node is None:
+            return ()
+        out = []
+        for sn in node.findall("signal"):
+            try:
+                s = self.coord(sn, "s")
+                t = self.coord(sn, "t", 0.0)
+                sid = self.text(sn, "id")
+            except XodrError:
+                continue  # signals are metadata for the geometry: one without a position is skipped
+            if not 0.0 <= s <= length + 1e-6:
+                continue
+            out.append(Signal(sid, s, t, sn.attrs.get("name", ""),
+                              sn.attrs.get("type", ""), sn.attrs.get("subtype", ""),
+                              sn.attrs.get("dynamic", "no").strip().lower() == "yes",
+                              sn.attrs.get("orientation", "none").strip() or "none"))
+        return tuple(out)
 
     def check_profiles(self, road: Road, node: _Node, sec_nodes: list[_Node]) -> None:
         """Lane widths, laneOffset, elevation and superelevation stay within their limits

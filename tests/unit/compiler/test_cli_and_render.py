@@ -88,7 +88,8 @@ def test_oversized_include_is_refused_before_reading(tmp_path):
     (tmp_path / "big.addt").write_bytes(b"#" * 1_100_000)
     (tmp_path / "main.addt").write_text('include "big.addt"\n' + _scenario(""))
     diags = compile_file(tmp_path / "main.addt").diagnostics
-    assert any(d.code == "E0401" and "too large" in d.message for d in diags)
+    assert any(d.code == "E0701" and "source_bytes" in d.message and "--max source_bytes" in d.notes[-1]
+               for d in diags)
 
 
 def test_nested_include_stays_confined_to_the_main_directory(tmp_path):

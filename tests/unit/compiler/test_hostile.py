@@ -6,6 +6,7 @@ symlink loops, suite members that lead out) are built in a temporary directory."
 from __future__ import annotations
 
 import os
+import shutil
 import time
 from pathlib import Path
 
@@ -104,3 +105,36 @@ def test_suite_member_symlink_leading_out_is_refused_unread(tmp_path):
         expand_paths([str(suite)])
     os.remove(suite / "loop.addt")
     assert expand_paths([str(suite)]) == [suite / "ok.addt"]
+
+
+def test_no_diagnostic_text_shows_an_absolute_path(tmp_path):
+    """Every hostile case compiled from outside the working directory, named absolutely:
+    messages and notes name its files relative to the scenario's directory."""
+    copy = tmp_path / "hostile"
+    shutil.copytree(HOSTILE, copy)
+    for path in sorted(copy.glob("*.addt")):
+        for d in _compile(path).diagnostics:
+            assert str(tmp_path) not in " ".join((d.message, *d.notes)), (path.name, d)
+
+
+def test_twenty_includes_of_a_megabyte_are_refused_unparsed(tmp_path):
+    block = ("param p = 1 m in [0 m, 2 m]\n" * 40_000)[: 1 << 20]
+    for k in range(20):
+        (tmp_path / f"big{k}.addt").write_text(block)
+    src = tmp_path / "s.addt"
+    src.write_text("".join(f'include "big{k}.addt"\n' for k in range(20)) + SCENARIO.format(extra=""))
+    diags = _compile(src).diagnostics
+    assert [(d.code, d.span.line) for d in diags] == [("E0701", k + 1) for k in range(20)]
+    assert all("source_bytes" in d.message and "--max source_bytes=N" in d.notes[-1] for d in diags)
+
+
+def test_a_map_of_too_many_roads_is_refused_before_it_is_built(tmp_path):
+    road = '<road length="10" id="{i}" junction="-1"><planView><geometry s="0" x="0" y="{i}" hdg="0" ' \
+           'length="10"><line/></geometry></planView></road>\n'
+    roads = "".join(road.format(i=i) for i in range(1, 20_002))
+    (tmp_path / "big.xodr").write_text(f'<?xml version="1.0"?><OpenDRIVE><header revMajor="1" revMinor="4"/>\n'
+                                       f'{roads}</OpenDRIVE>\n')
+    src = tmp_path / "s.addt"
+    src.write_text(SCENARIO.format(extra='road q import "big.xodr"'))
+    (d,) = _compile(src).diagnostics
+    assert d.code == "E0701" and "roads_per_map" in d.message and "20,001" in d.message and d.span.line == 7

@@ -116,3 +116,18 @@ def test_no_failure_no_report(sampler):
 
     report = _falsifier(sampler, judge=safe).run(budget_runs=20, shrink_simulations=10)
     assert report.failures == [] and report.first_failure_run is None and report.runs == 20
+
+
+def test_falsify_ignores_the_files_sweep_cost(tmp_path, capsys):
+    # A sweep too large for `addtc FILE` (E0701) can still be searched: falsify runs its
+    # own budget, never the file's sweep.
+    from addt_dsl.cli import main
+
+    path = tmp_path / "big.addt"
+    path.write_text("scenario big {\n  duration 1 s\n  road r {\n    line length 300 m\n"
+                    "    lanes right 1 width 3.5 m\n  }\n  param v = 10 m/s in [5 m/s, 15 m/s]\n"
+                    "  ego car on r lane -1 at 20 m speed v\n  expect {\n    no collision\n  }\n"
+                    "  sweep {\n    random 1000000 seed 1\n    repeat 100\n  }\n}\n")
+    assert main(["check", str(path)]) == 2 and "E0701" in capsys.readouterr().err
+    assert main(["falsify", str(path), "--budget-runs", "2", "--no-write"]) == 0
+    assert "2 runs" in capsys.readouterr().out

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -19,8 +21,13 @@ from addt_dsl.sweep import expand
 FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
+# A printed plan imports its maps by file name (the printer writes them beside it as side
+# files); the examples' maps are all in examples/maps.
+MAPS = Path(__file__).resolve().parents[3] / "examples" / "maps"
+
+
 def _recompile(text: str):
-    result = compile_source(text, path="printed.addt")
+    result = compile_source(text, path="printed.addt", base_dir=MAPS)
     assert result.ok, render_text(result.diagnostics, result.sources) + "\n" + text
     return result.plan
 
@@ -56,7 +63,7 @@ def test_sweep_expands_the_same_runs():
 def test_pinned_run_round_trip(spec):
     """compile(print(spec)) is the one run of the pinned plan: same RunSpec, bit for bit."""
     text = print_spec(spec)
-    again = compile_pinned(text)
+    again = compile_pinned(text, base_dir=MAPS)
     assert semantic_key(again) == semantic_key(pin_spec(spec))
     assert again.seed == spec.seed
     assert again.plan.sweep == type(spec.plan.sweep)()
@@ -69,7 +76,7 @@ def test_pinned_run_round_trip(spec):
 def test_printing_a_pinned_run_is_a_fixed_point(spec):
     pinned = pin_spec(spec)
     assert semantic_key(pin_spec(pinned)) == semantic_key(pinned)
-    again = compile_pinned(print_spec(spec))
+    again = compile_pinned(print_spec(spec), base_dir=MAPS)
     assert _body(print_spec(again)) == _body(print_spec(spec))
 
 
@@ -237,3 +244,38 @@ def test_every_registered_behaviour_sensor_and_fault_prints():
                                                                             "gap(ego,lead)", "speed(lead)"}]
     plan = plan.model_copy(update={"agents": agents, "ego": ego, "faults": faults, "oracles": oracles})
     assert semantic_key(_recompile(print_plan(plan, keep_user_text=False))) == semantic_key(plan)
+
+
+# -- routes and poses on a map: what the printer writes must read back as the same plan
+
+def _route_plan(route: list[str], lane: int, yaw_rad: float):
+    plan = next(p for p in example_plans() if any(a.route for a in p.actors()))
+    ego = plan.ego.model_copy(update={"route": route, "lane": E.Num(value=float(lane)),
+                                      "yaw": E.Num(value=yaw_rad) if yaw_rad else None})
+    return plan.model_copy(update={"ego": ego, "sweep": plan.sweep.model_copy(update={"grid": []})})
+
+
+# Routes of fabriksgatan.xodr's ego road (0, driven in lane 1 into junction 4), fully expanded.
+ROUTES = (["0"], ["0", "8", "1"], ["0", "9", "2"], ["0", "10", "3"])
+
+
+@FAST
+@given(st.sampled_from(ROUTES), st.floats(min_value=-3.0, max_value=3.0, allow_nan=False))
+def test_routes_and_yaw_round_trip(route, yaw_rad):
+    plan = _route_plan(route, 1, yaw_rad)
+    again = _recompile(print_plan(plan, keep_user_text=False))
+    assert again.ego.route == route
+    assert semantic_key(again) == semantic_key(plan)
+
+
+@FAST
+@given(st.text(alphabet="ab_Z09 -.\"\\", min_size=1, max_size=8))
+def test_any_road_id_prints_as_one_route_stop(road_id):
+    from addt_dsl.compiler.parser import parse_source
+    from addt_dsl.diagnostics import DiagnosticSink
+    from addt_dsl.printer.plan import format_route_stop
+
+    text = f"scenario s {{\n  ego car on r route 1 -> {format_route_stop(road_id)} lane -1 at 0 m\n}}\n"
+    source = parse_source(text, "r.addt", DiagnosticSink())
+    actor = next(d for d in source.scenarios[0].definitions if hasattr(d, "route"))
+    assert actor.route.stops == ("1", road_id)

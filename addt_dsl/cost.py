@@ -1,0 +1,124 @@
+"""What a sweep will cost, known from the plan before any run starts (docs/limits.md).
+
+The model, per run (the runtime's fixed clock: one physics step every `step_s`):
+
+    samples           = duration / step + 1
+    actor-steps       = samples x actors (the ego and every agent)
+    lidar rays        = sum over lidars of rays x channels x rate x duration
+    memory [bytes]    = RUN_BASE_BYTES + samples x 8 x (1 + TRACE_FIELDS x actors + LATENCY_SERIES)
+
+and per sweep: runs x each of them (simulated seconds = runs x duration). The memory
+term is the trace the run keeps (runtime/trace.py: TRACE_FIELDS float64 signals per
+actor per sample, a clock, latency series) over a fixed allowance for the interpreter,
+the physics engine and the stack. Runs counts grid cells x samples x repeats without
+building any of them; with assumptions and no sampler, cells an assumption rejects do
+not run, so the count is exact up to EXACT_COUNT_CELLS cells and an upper bound beyond.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from addt_dsl.limits import Limits, beyond_message
+from addt_dsl.plan import ScenarioPlan, resolve_settings
+from addt_dsl.registry import SENSORS
+from addt_dsl.sweep import count_runs, grid_cell_count, sampled_params
+
+# Interpreter, pybullet world, stack and sensors, before the trace: one inline run of
+# examples/following.addt peaks at about 110 MB resident; torch (the learned stack) adds
+# a few hundred MB, so the allowance covers both.
+RUN_BASE_BYTES = 512 * 1024 ** 2
+TRACE_FIELDS = 11  # float64 signals per actor per sample (runtime/trace.py ACTOR_FIELDS)
+LATENCY_SERIES = 8  # per-node latency series of the stack, "e2e" included
+EXACT_COUNT_CELLS = 100_000  # above this many grid cells assumptions are not evaluated to count runs
+
+
+@dataclass(frozen=True)
+class CostEstimate:
+    runs: int
+    runs_exact: bool  # False: an upper bound (assumptions may reject grid cells)
+    duration_s: float
+    samples_per_run: int
+    actors: int
+    agent_steps_per_run: float
+    lidar_rays_per_run: float
+    run_memory_bytes: float
+
+    @property
+    def sim_seconds(self) -> float:
+        return self.runs * self.duration_s
+
+    @property
+    def agent_steps(self) -> float:
+        return self.runs * self.agent_steps_per_run
+
+    @property
+    def lidar_rays(self) -> float:
+        return self.runs * self.lidar_rays_per_run
+
+    def lines(self) -> list[str]:
+        """The estimate as `addtc check` and `addtc plan` print it."""
+        runs = f"{self.runs:,}" if self.runs_exact else f"at most {self.runs:,}"
+        return [f"cost estimate: {runs} run(s) x {self.duration_s:g} s = {self.sim_seconds:.4g} simulated s",
+                f"  per run: {self.samples_per_run:,} steps x {self.actors} actor(s) = "
+                f"{self.agent_steps_per_run:.4g} actor-steps, {self.lidar_rays_per_run:.4g} lidar rays, "
+                f"about {self.run_memory_bytes / 1024 ** 2:,.0f} MiB",
+                f"  sweep: {self.agent_steps:.4g} actor-steps, {self.lidar_rays:.4g} lidar rays"]
+
+
+def estimate(plan: ScenarioPlan) -> CostEstimate:
+    samples = int(math.floor(plan.duration_s / plan.step_s + 1e-9)) + 1
+    actors = 1 + len(plan.agents)
+    nominal = plan.nominal_params()
+    rays = 0.0
+    for actor in plan.actors():
+        for sensor in actor.sensors:
+            if sensor.name != "lidar":
+                continue
+            spec = {p.name: p.default for p in SENSORS.get("lidar").params}
+            try:
+                spec.update(resolve_settings(sensor.settings, nominal))
+            except (ValueError, ArithmeticError, KeyError):
+                pass  # a setting that needs a sampled value: the defaults stand in
+            rays += float(spec["rays"]) * float(spec["channels"]) * float(spec["rate"]) * plan.duration_s
+    memory = RUN_BASE_BYTES + samples * 8.0 * (1 + TRACE_FIELDS * actors + LATENCY_SERIES)
+    runs, exact = run_count(plan)
+    return CostEstimate(runs=runs, runs_exact=exact, duration_s=plan.duration_s, samples_per_run=samples,
+                        actors=actors, agent_steps_per_run=float(samples * actors), lidar_rays_per_run=rays,
+                        run_memory_bytes=memory)
+
+
+def run_count(plan: ScenarioPlan) -> tuple[int, bool]:
+    """(runs, exact): no grid cell or sample is built to count them."""
+    sweep = plan.sweep
+    cells = grid_cell_count(plan)
+    if sweep.sampler and sampled_params(plan):
+        return cells * sweep.sampler.count * sweep.repeat, True
+    if not plan.assumptions:
+        return cells * sweep.repeat, True
+    if cells <= EXACT_COUNT_CELLS:
+        return count_runs(plan), True
+    return cells * sweep.repeat, False
+
+
+def over_thresholds(est: CostEstimate, limits: Limits) -> list[tuple[str, str]]:
+    """(threshold name, message) for each cost threshold the estimate exceeds; none when
+    `limits.allow_large`."""
+    if limits.allow_large:
+        return []
+    runs = min(est.runs, limits.run_cap) if limits.run_cap else est.runs  # `--limit N` runs N of them
+    checks = (
+        ("runs", "the sweep's run count", runs),
+        ("sim_seconds", "the sweep's simulated time [s]", runs * est.duration_s),
+        ("agent_steps", "the sweep's actor-steps", runs * est.agent_steps_per_run),
+        ("agent_steps_per_run", "one run's actor-steps", est.agent_steps_per_run),
+        ("lidar_rays_per_run", "one run's lidar rays", est.lidar_rays_per_run),
+        ("run_memory_bytes", "one run's modelled memory [bytes]", est.run_memory_bytes),
+    )
+    return [(name, beyond_message(what, value, name, getattr(limits, name)))
+            for name, what, value in checks if value > getattr(limits, name)]
+
+
+__all__ = ["CostEstimate", "EXACT_COUNT_CELLS", "LATENCY_SERIES", "RUN_BASE_BYTES", "TRACE_FIELDS", "estimate",
+           "over_thresholds", "run_count"]

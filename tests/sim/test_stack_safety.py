@@ -1,0 +1,137 @@
+"""The bev stack in the loop: emergency braking, the forward-collision check, yielding to
+a crossing pedestrian, lane discipline and the declared ego body."""
+
+import numpy as np
+import pytest
+
+from addt_dsl.compiler import compile_source
+from addt_dsl.runtime.execute import execute
+from addt_dsl.sweep import expand
+
+pytestmark = pytest.mark.slow
+
+
+def run(source: str):
+    result = compile_source(source)
+    assert result.plan is not None, [str(d) for d in result.diagnostics]
+    out = execute(expand(result.plan).specs[0])
+    assert out.status == "ok", out.error
+    return out.trace
+
+
+def straight(ego: str, agents: str, duration_s: float = 12.0, lanes: int = 1, stack: str = "") -> str:
+    return f"""scenario s {{
+  duration {duration_s} s
+  road r {{
+    line length 1000 m
+    lanes right {lanes} width 3.5 m
+  }}
+  {ego} {{
+    stack bev {stack}
+    sensor lidar rate 10 Hz rays 360 range 80 m
+  }}
+{agents}
+}}"""
+
+
+def test_stops_for_a_stopped_car():
+    trace = run(straight("ego car on r lane -1 at 20 m speed 25 m/s",
+                         "  agent parked car on r lane -1 at 200 m speed 0 m/s", stack="cruise_speed 25 m/s"))
+    ego, parked = trace.actors["ego"], trace.actors["parked"]
+    assert not trace.events_of("collision")
+    assert ego.speed[-1] < 0.5
+    assert parked.s[-1] - ego.s[-1] - 4.6 > 0.5  # stopped short of it
+
+
+def test_near_stationary_lead_approached_at_30_mps():
+    # esmini's slow-lead-vehicle: ego at 30 m/s, a lead at 1 m/s 150 m ahead; the lidar
+    # reaches 80 m, so the ego has to brake hard once it sees the lead.
+    trace = run(straight("ego car on r lane -1 at 50 m speed 30 m/s",
+                         "  agent lead car on r lane -1 at 200 m speed 1 m/s {\n"
+                         "    behavior cruise speed 1 m/s\n  }", duration_s=15.0, stack="cruise_speed 30 m/s"))
+    ego = trace.actors["ego"]
+    assert not trace.events_of("collision")
+    speed = ego.speed
+    # Once it slows down it does not speed up again before matching the lead.
+    k = int(np.argmax(speed < 25.0))
+    assert k > 0 and speed[k:].max() < 25.5 and speed[-1] < 2.0
+
+
+def test_an_unavoidable_obstacle_is_hit_braking_never_accelerating():
+    # A stopped car 15 m ahead at 20 m/s: 25 m are needed to stop at mu g.
+    trace = run(straight("ego car on r lane -1 at 20 m speed 20 m/s",
+                         "  agent parked car on r lane -1 at 39.6 m speed 0 m/s", duration_s=4.0,
+                         stack="cruise_speed 25 m/s"))
+    ego = trace.actors["ego"]
+    (hit, *_) = trace.events_of("collision")
+    k = int(round(hit.time_s / trace.period_s))
+    (first, *_) = [e for e in trace.events_of("emergency_brake") if e.detail["on"]]
+    # Until the first frame is through the stack the ego cruises on (a few cm/s more);
+    # from the first plan that sees the car it only slows down.
+    assert first.time_s < 0.2
+    j = int(round(first.time_s / trace.period_s))
+    assert ego.speed[:k + 1].max() < 20.1 and np.all(np.diff(ego.speed[j + 20:k + 1]) < 0.0)
+    # Impact speed: about 0.3 s of perception, planning and brake build-up at 20 m/s leave
+    # 9 m of braking at mu g: sqrt(20^2 - 2 * 7.85 * 9) = 15.9 m/s.
+    assert ego.speed[k] < 16.0
+    assert any(e.detail["stage"] == 3 for e in trace.events_of("aeb"))
+
+
+def test_yields_to_a_crossing_pedestrian():
+    trace = run(straight("ego car on r lane -1 at 20 m speed 11 m/s",
+                         "  agent walker pedestrian on r lane -1 at 100 m offset -3 m {\n"
+                         "    when distance(ego, walker) < 30 m then behavior cross speed 1.4 m/s direction left\n  }",
+                         stack="cruise_speed 11 m/s"))
+    ego = trace.actors["ego"]
+    assert not trace.events_of("collision")
+    assert ego.speed.min() < 5.0  # it slowed for the walker
+    assert ego.speed[-1] > 9.0  # and went on once the lane was clear
+
+
+@pytest.mark.parametrize("policy, lane_t", [("", -1.75), ("lane_policy keep_right", -5.25)])
+def test_lane_policy_on_an_empty_two_lane_road(policy, lane_t):
+    trace = run(straight("ego car on r lane -1 at 20 m speed 25 m/s", "", duration_s=8.0, lanes=2,
+                         stack=f"cruise_speed 25 m/s {policy}"))
+    assert abs(trace.actors["ego"].t[-1] - lane_t) < 0.2
+
+
+def test_a_truck_ego_keeps_its_own_length_from_a_stopped_car():
+    trace = run(straight("ego truck on r lane -1 at 20 m speed 20 m/s",
+                         "  agent parked car on r lane -1 at 150 m speed 0 m/s", stack="cruise_speed 20 m/s"))
+    ego, parked = trace.actors["ego"], trace.actors["parked"]
+    assert not trace.events_of("collision") and ego.speed[-1] < 0.5
+    # Bumper to bumper, with the truck's 12 m body (the car's 4.6 m would leave it inside the gap).
+    assert parked.s[-1] - ego.s[-1] - 0.5 * (12.0 + 4.6) > 0.5
+
+
+def test_study_impact_tables_avoided_runs_and_impact_speeds(tmp_path, capsys):
+    from addt_dsl import studies
+
+    path = tmp_path / "ccrs.addt"
+    path.write_text("""scenario ccrs_short {
+  duration 4 s
+  road r {
+    line length 300 m
+    lanes right 1 width 3.5 m
+  }
+  param gap = 15 m in [5 m, 100 m]
+  ego car on r lane -1 at 20 m speed 20 m/s {
+    stack bev cruise_speed 20 m/s
+    sensor lidar rate 10 Hz rays 360 range 80 m
+  }
+  agent target car on r lane -1 at 24.6 m + gap speed 0 m/s
+  expect {
+    no collision
+  }
+  sweep {
+    grid gap in [15, 60] m
+  }
+}
+""")
+    assert studies.main(["impact", str(path)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split() == ["runs", "avoided", "avoided_rate", "impact_kmh", "relative_kmh"]
+    near = lines[2].split()  # gap 15 m: unavoidable, hit braking
+    far = lines[3].split()  # 60 m: stops in time
+    assert near[:4] == ["15.0", "1", "0", "0.00"] and 40.0 < float(near[4]) < 57.6 and near[4] == near[5]
+    assert far[:4] == ["60.0", "1", "1", "1.00"] and far[4] == "NaN"
