@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Literal, Union
+from typing import ClassVar, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -205,6 +205,17 @@ class ScenarioPlan(_Model):
     def nominal_params(self) -> dict[str, float]:
         return {p.name: p.default for p in self.params}
 
+    # Names a plan keeps for display only: how the scenario's path, or an imported map's,
+    # was spelled. Its identity (store plan hashes, RunSpec keys) is everything else, so the
+    # same file reached by another path is the same plan; imported maps are embedded
+    # (`xodr_text`) and includes are inlined, so their content is part of it.
+    DISPLAY_ONLY: ClassVar[dict] = {"source_file": True, "roads": {"__all__": {"xodr_file"}},
+                                    "faults": {"__all__": {"source"}}}
+
+    def identity(self) -> dict:
+        """The plan's content as JSON-ready data, without display-only names."""
+        return self.model_dump(mode="json", exclude=self.DISPLAY_ONLY)
+
 
 class ConcreteFault(_Model):
     """A fault with every value resolved for one run; `index` is its place in the schedule."""
@@ -232,7 +243,8 @@ class RunSpec(_Model):
     def key(self) -> str:
         """Content hash: the identity of a run for caches and result stores (with the
         fingerprint of the code that runs it: a new version or new stack data is a new key)."""
-        payload = self.model_dump(mode="json", exclude={"run_id"})
+        payload = self.model_dump(mode="json", exclude={"run_id", "plan"})
+        payload["plan"] = self.plan.identity()
         payload["code"] = code_fingerprint()
         data = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(data).hexdigest()[:20]

@@ -468,10 +468,10 @@ class Falsifier:
             if stop_at_first and first_failure is not None:
                 break
         search_runs = len(all_outcomes)
-        shrink_before = self.cache.simulations
         failures = self._distinct(groups, shrink_simulations)
+        shrink_runs = sum(g.shrunk.simulations for g in groups.values() if g.shrunk is not None)
         return FalsifyReport(self.plan.name, self.sampler.name, search_runs, time.perf_counter() - t0,
-                             first_failure, self.cache.simulations - shrink_before, failures, best)
+                             first_failure, shrink_runs, failures, best)
 
     def _distinct(self, groups: dict, shrink_simulations: int) -> list[FoundFailure]:
         """Shrink one representative per group; merge groups whose origin is the same."""
