@@ -89,7 +89,7 @@ class TriggerPlan(_Model):
     A step is *armed* (top-level steps at time 0; steps of a group as the group says),
     then *fires* at the first physics step where all its start conditions hold:
     `after_s` has passed since it was armed, the time is at least `at_s`, and
-    `condition` holds on the current state. Firing starts `clause` (a behaviour) and
+    `condition` holds on the current state (for `hold_s` without a break, when given). Firing starts `clause` (a behaviour) and
     arms `group`. A step is *done* once it fired and its group (if any) is done.
     Source: `at 5 s behavior brake`, `after 2 s ...`, `when gap(ego, lead) < 20 m then ...`.
     """
@@ -99,6 +99,8 @@ class TriggerPlan(_Model):
     at_s: Expr | None = None  # earliest simulated time [s]
     after_s: Expr | None = None  # delay after arming [s]
     group: GroupPlan | None = None
+    # `when C for D`: C must have held at every step for D [s] (past-time `historically`).
+    hold_s: Expr | None = None
 
 
 class GroupPlan(_Model):
@@ -191,6 +193,8 @@ class ScenarioPlan(_Model):
     faults: list[FaultPlan] = Field(default_factory=list)
     oracles: list[OraclePlan] = Field(default_factory=list)
     sweep: SweepPlan = Field(default_factory=SweepPlan)
+    # Weather and light models acting on the sensors (`environment { fog visibility 150 m }`).
+    environment: list[ClausePlan] = Field(default_factory=list)
 
     def road(self, name: str) -> RoadPlan:
         return next(r for r in self.roads if r.name == name)

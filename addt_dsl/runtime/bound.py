@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from addt_dsl.expr import Expr, eval_param_expr, substitute_params
+from addt_dsl.expr import Expr, eval_param_expr, signals_used, substitute_params
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, GroupPlan, RoadPlan, RunSpec, TriggerPlan,
                            resolve_settings)
 
@@ -41,6 +41,7 @@ class BoundStep:
     at_s: float | None
     after_s: float
     group: BoundGroup | None
+    hold_s: float = 0.0  # the condition must have held this long [s]
 
 
 @dataclass(frozen=True)
@@ -83,6 +84,7 @@ class BoundScenario:
     agents: tuple[BoundActor, ...]
     faults: tuple[ConcreteFault, ...]
     oracles: tuple[BoundOracle, ...]
+    environment: tuple[BoundClause, ...] = ()
 
     def road(self, name: str) -> RoadPlan:
         return next(r for r in self.roads if r.name == name)
@@ -97,7 +99,8 @@ def bind(spec: RunSpec) -> BoundScenario:
         name=plan.name, duration_s=plan.duration_s, step_s=plan.step_s, seed=spec.seed, roads=tuple(plan.roads),
         ego=_actor(plan.ego, params), agents=tuple(_actor(a, params) for a in plan.agents),
         faults=tuple(spec.faults),
-        oracles=tuple(BoundOracle(o.name, o.severity, substitute_params(o.formula, params)) for o in plan.oracles))
+        oracles=tuple(BoundOracle(o.name, o.severity, substitute_params(o.formula, params)) for o in plan.oracles),
+        environment=tuple(_clause(c, params) for c in plan.environment))
 
 
 def _value(expr: Expr | None, params: dict[str, float], default: float = 0.0) -> float:
@@ -105,7 +108,12 @@ def _value(expr: Expr | None, params: dict[str, float], default: float = 0.0) ->
 
 
 def _clause(c: ClausePlan, params: dict[str, float]) -> BoundClause:
-    return BoundClause(c.keyword, c.name, resolve_settings(c.settings, params))
+    """Settings as numbers; a live setting that reads signals stays an expression (its
+    parameters substituted), evaluated on the current state at every step."""
+    live = {k: substitute_params(v, params) for k, v in c.settings.items()
+            if not isinstance(v, (str, list)) and signals_used(v)}
+    fixed = resolve_settings({k: v for k, v in c.settings.items() if k not in live}, params)
+    return BoundClause(c.keyword, c.name, {k: live.get(k, fixed.get(k)) for k in c.settings})
 
 
 def bind_step(t: TriggerPlan, params: dict[str, float]) -> BoundStep:
@@ -114,7 +122,8 @@ def bind_step(t: TriggerPlan, params: dict[str, float]) -> BoundStep:
         condition=substitute_params(t.condition, params) if t.condition is not None else None,
         at_s=_value(t.at_s, params) if t.at_s is not None else None,
         after_s=_value(t.after_s, params),
-        group=_group(t.group, params) if t.group is not None else None)
+        group=_group(t.group, params) if t.group is not None else None,
+        hold_s=_value(t.hold_s, params))
 
 
 def _group(g: GroupPlan, params: dict[str, float]) -> BoundGroup:
