@@ -79,6 +79,7 @@ class _Run:
         self.carried: list[str] = []
         self.behaviors: dict[str, dict] = {}  # event name -> exact clause (side file)
         self.conditions: dict[str, dict] = {}  # placeholder parameter -> exact formula (side file)
+        self.holds: dict[str, float] = {}  # event -> `when C for D` hold [s] (written as a condition delay)
         self.groups: dict[str, list] = {}
         self.group_events: set[str] = set()  # events that belong to a group (the side file has its steps)
         self.event_names: list[str] = []
@@ -402,6 +403,7 @@ def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str]
             # `when C for D`: OpenSCENARIO's condition delay fires D after C first holds; it
             # does not ask C to keep holding (exact in the side file).
             hold = run.num(step.hold_s)
+            run.holds[event] = float(hold)
             for conds in got:
                 for c in conds:
                     c.delay = float(hold)
@@ -592,6 +594,7 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
         "oracles": [o.model_dump(mode="json") for o in plan.oracles],
         "behaviors": run.behaviors,
         "conditions": run.conditions,
+        "holds": run.holds,
         "groups": run.groups,
         "group_events": sorted(run.group_events),
     }

@@ -1065,7 +1065,7 @@ class _Translate(_Importer):
         if not clauses:
             return
         trigger = event.find("StartTrigger")
-        step = self.start(trigger, who, act_at)
+        step = self.start(trigger, who, act_at, name)
         if step is None:
             return
         kind, fields = step
@@ -1080,7 +1080,7 @@ class _Translate(_Importer):
             else:
                 self.actors[who]["triggers"].append(TriggerPlan(clause=clause, **fields))
 
-    def start(self, trigger, who: str, act_at):
+    def start(self, trigger, who: str, act_at, event: str = ""):
         """('now', fields of a TriggerPlan) or ('after_event', (event, delay, state)); None: dropped."""
         groups = list(trigger.iterfind("ConditionGroup")) if trigger is not None else []
         alternatives, at_s, holds = [], act_at, []
@@ -1116,7 +1116,8 @@ class _Translate(_Importer):
             # `when C for D` is the nearest form: the same start while C keeps holding, none if it breaks.
             hold = max(d for d, _ in holds)
             fields["hold_s"] = E.Num(value=hold)
-            self.approx(holds[0][1], f"a condition delay of {hold:g} s: `when ... for {hold:g} s` (the condition "
+            if (self.sidecar or {}).get("holds", {}).get(event) != hold:  # exact when the side file says so
+                self.approx(holds[0][1], f"a condition delay of {hold:g} s: `when ... for {hold:g} s` (the condition "
                                      "must keep holding for the delay)")
         return "now", fields
 
@@ -1337,7 +1338,7 @@ def _sidecar_problem(data: dict) -> str:
     try:
         for key, kind in (("actors", dict), ("behaviors", dict), ("conditions", dict), ("groups", dict),
                           ("faults", list), ("oracles", list), ("params", dict), ("param_dims", dict),
-                          ("group_events", list)):
+                          ("group_events", list), ("holds", dict)):
             if not isinstance(data.get(key, kind()), kind):
                 return f"'{key}' is not a {kind.__name__}"
         for info in data.get("actors", {}).values():
