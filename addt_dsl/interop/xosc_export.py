@@ -8,14 +8,20 @@ short (docs/openscenario.md has the full table):
   centre); the initial lane position (`TeleportAction` to a `LanePosition`) and speed
   (`AbsoluteSpeedAction`, step) go into `Init`;
 - behaviours -> one `Event` each in the actor's `Maneuver`: `cruise` and `brake` are
-  `AbsoluteSpeedAction`s with linear dynamics at their acceleration, `lane_change` and
-  `cut_in` `AbsoluteLaneChangeAction`s over their duration; `idm`, `overtake`, `walk`
+  `AbsoluteSpeedAction`s with linear dynamics at their acceleration (or their dynamics
+  shape), a live `cruise` target `RelativeTargetSpeed`, `lane_change` and `cut_in`
+  `AbsoluteLaneChangeAction`s (`RelativeLaneChangeAction` for `to_lane_of`) over their
+  duration, `speed_profile` a `SpeedProfileAction`, `keep_gap` a
+  `LongitudinalDistanceAction`, `synchronize` a `SynchronizeAction`, `trajectory` a
+  `FollowTrajectoryAction` (polyline); routes are `AssignRouteAction`s and the
+  `environment` an `EnvironmentAction` in `Init`; `idm`, `overtake`, `walk`
   and `cross` have no OpenSCENARIO action: they are `AssignControllerAction`s of a
   controller named `addt_<keyword>` whose properties are the settings;
 - step start conditions -> the event's start trigger: `at T` / `after T` a
   `SimulationTimeCondition`, `s(A) > x` a `TraveledDistanceCondition`, `speed(A)`
   a `SpeedCondition`, `gap(A, B)` and `distance(A, B)` `RelativeDistanceCondition`s,
-  `ttc(A, B)` a `TimeToCollisionCondition`; `and` within a condition group, `or`
+  `ttc(A, B)` a `TimeToCollisionCondition`; `when C for D` a condition delay D; `and`
+  within a condition group, `or`
   across groups; a formula with no such form becomes a `ParameterCondition` on a
   declared, never-set parameter `addt_condition_N`;
 - the duration -> the storyboard's stop trigger;
