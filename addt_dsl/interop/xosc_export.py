@@ -207,7 +207,8 @@ def _cruise(run, actor, s):
     if not isinstance(live, float):  # a live target: `1.2 * speed(ego)`
         rel = _relative_speed(live)
         if rel is None:
-            return _controller("cruise")(run, actor, {**s, "speed": format_expr(live)})
+            # No OpenSCENARIO target: a controller whose `speed` property is the expression (JSON).
+            return _controller("cruise")(run, actor, {**s, "speed": live.model_dump(mode="json")})
         other, value, kind = rel
         dyn = _speed_dynamics(s["shape"], s["accel"], s["duration"])
         valuetype = xosc.SpeedTargetValueType.factor if kind == "factor" else xosc.SpeedTargetValueType.delta

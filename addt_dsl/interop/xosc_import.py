@@ -1378,6 +1378,8 @@ def _sidecar_problem(data: dict) -> str:
 def _setting(value):
     if isinstance(value, str):
         return value
+    if isinstance(value, dict):  # a live expression (`speed 2 * speed(ego) - 1 m/s`), as the export writes it
+        return EXPR.validate_python(value)
     if isinstance(value, list):
         return [E.Num(value=float(v)) for v in value]
     return E.Num(value=float(value))

@@ -264,3 +264,14 @@ def test_esmini_trajectories_and_synchronisation(tmp_path):
     assert step.hold_s.value == pytest.approx(0.2)
     # Clothoid and NURBS shapes are said, not dropped.
     assert sum("only polyline trajectories" in d.message for d in got.diagnostics) == 2
+
+
+def test_a_live_target_without_an_openscenario_form_travels_as_a_controller(tmp_path):
+    source = (ROOT / "tests" / "data" / "interop" / "every_action.addt").read_text().replace(
+        "behavior cruise speed 1.2 * speed(ego) accel 3 m/s^2", "behavior cruise speed 2 * speed(ego) - 1 m/s accel 3 m/s^2")
+    plan = compile_source(source, "live.addt").plan
+    spec = expand(plan).specs[0]
+    got = _without_sidecar(spec, tmp_path)
+    assert "behavior cruise speed 2 * speed(ego) - 1 m/s" in got.text
+    faster = next(a for a in got.plan.agents if a.name == "faster")
+    assert faster.behaviors[0].settings["speed"] == next(a for a in plan.agents if a.name == "faster").behaviors[0].settings["speed"]
