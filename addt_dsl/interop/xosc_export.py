@@ -8,14 +8,20 @@ short (docs/openscenario.md has the full table):
   centre); the initial lane position (`TeleportAction` to a `LanePosition`) and speed
   (`AbsoluteSpeedAction`, step) go into `Init`;
 - behaviours -> one `Event` each in the actor's `Maneuver`: `cruise` and `brake` are
-  `AbsoluteSpeedAction`s with linear dynamics at their acceleration, `lane_change` and
-  `cut_in` `AbsoluteLaneChangeAction`s over their duration; `idm`, `overtake`, `walk`
+  `AbsoluteSpeedAction`s with linear dynamics at their acceleration (or their dynamics
+  shape), a live `cruise` target `RelativeTargetSpeed`, `lane_change` and `cut_in`
+  `AbsoluteLaneChangeAction`s (`RelativeLaneChangeAction` for `to_lane_of`) over their
+  duration, `speed_profile` a `SpeedProfileAction`, `keep_gap` a
+  `LongitudinalDistanceAction`, `synchronize` a `SynchronizeAction`, `trajectory` a
+  `FollowTrajectoryAction` (polyline); routes are `AssignRouteAction`s and the
+  `environment` an `EnvironmentAction` in `Init`; `idm`, `overtake`, `walk`
   and `cross` have no OpenSCENARIO action: they are `AssignControllerAction`s of a
   controller named `addt_<keyword>` whose properties are the settings;
 - step start conditions -> the event's start trigger: `at T` / `after T` a
   `SimulationTimeCondition`, `s(A) > x` a `TraveledDistanceCondition`, `speed(A)`
   a `SpeedCondition`, `gap(A, B)` and `distance(A, B)` `RelativeDistanceCondition`s,
-  `ttc(A, B)` a `TimeToCollisionCondition`; `and` within a condition group, `or`
+  `ttc(A, B)` a `TimeToCollisionCondition`; `when C for D` a condition delay D; `and`
+  within a condition group, `or`
   across groups; a formula with no such form becomes a `ParameterCondition` on a
   declared, never-set parameter `addt_condition_N`;
 - the duration -> the storyboard's stop trigger;
@@ -28,17 +34,21 @@ short (docs/openscenario.md has the full table):
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from scenariogeneration import xosc
 
 from addt_dsl import expr as E
+from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, road_file, xml_text
 from addt_dsl.plan import ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
 from addt_dsl.registry import BEHAVIORS
+from addt_dsl.runtime.behaviors import PEAK_SLOPE
+from addt_dsl.runtime.road.route import resolve_route
 from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.vehicles import VEHICLES
 
@@ -75,12 +85,15 @@ class _Run:
         self.carried: list[str] = []
         self.behaviors: dict[str, dict] = {}  # event name -> exact clause (side file)
         self.conditions: dict[str, dict] = {}  # placeholder parameter -> exact formula (side file)
+        self.holds: dict[str, float] = {}  # event -> `when C for D` hold [s] (written as a condition delay)
         self.groups: dict[str, list] = {}
         self.group_events: set[str] = set()  # events that belong to a group (the side file has its steps)
         self.event_names: list[str] = []
         self.placeholders: list[str] = []
         self.s0 = {a.name: self.num(a.s) for a in self.plan.actors()}
         self.v0 = {a.name: self.num(a.speed) for a in self.plan.actors()}
+        self.t0 = {a.name: self.num(a.offset) if a.offset is not None else 0.0 for a in self.plan.actors()}
+        self.by_name = {a.name: a for a in self.plan.actors()}
         self.names: set[str] = set()
         self.along = {a.name for a in self.plan.actors() if _along_s(self.plan, a, int(round(self.num(a.lane))))}
 
@@ -113,10 +126,15 @@ def _position(run: _Run, a: ActorPlan) -> xosc.LanePosition:
     offset = run.num(a.offset) if a.offset is not None else 0.0
     lane = int(round(run.num(a.lane)))
     road_id = a.route[0] if a.route else run.road_ids[a.road]
+    s = run.num(a.s)
+    if a.route:  # `at S` on a route: from the entry end of its first road, in driving direction
+        network = build_network([run.plan.road(a.road)])[a.road]
+        leg = resolve_route(network, a.route[:1], lane, None)[1][0]
+        s = leg.s_from + leg.direction * s
     if a.yaw is not None:  # both languages face an entity along its lane's driving direction
         orientation = xosc.Orientation(h=run.num(a.yaw), reference=xosc.ReferenceContext.relative)
-        return xosc.LanePosition(run.num(a.s), offset, str(lane), road_id, orientation)
-    return xosc.LanePosition(run.num(a.s), offset, str(lane), road_id)
+        return xosc.LanePosition(s, offset, str(lane), road_id, orientation)
+    return xosc.LanePosition(s, offset, str(lane), road_id)
 
 
 def _along_s(plan, a: ActorPlan, lane: int) -> bool:
@@ -132,37 +150,162 @@ def _along_s(plan, a: ActorPlan, lane: int) -> bool:
 
 # ---------------------------------------------------------------- behaviours
 
+# addt-dsl shape -> OpenSCENARIO 1.2 shape (1.2 has no quintic: the nearest is cubic)
+OSC_SHAPE = {"step": xosc.DynamicsShapes.step, "linear": xosc.DynamicsShapes.linear,
+             "cubic": xosc.DynamicsShapes.cubic, "sinusoidal": xosc.DynamicsShapes.sinusoidal,
+             "quintic": xosc.DynamicsShapes.cubic}
+
+
 def _speed_action(target: float, rate: float):
     return xosc.AbsoluteSpeedAction(target, xosc.TransitionDynamics(
         xosc.DynamicsShapes.linear, xosc.DynamicsDimension.rate, max(rate, 1e-3)))
 
 
+def _speed_dynamics(shape: str, rate: float, duration: float | None) -> xosc.TransitionDynamics:
+    """A shaped speed change. Without a duration addt-dsl takes PEAK_SLOPE * |dv| / rate,
+    i.e. an average rate of rate / PEAK_SLOPE: that average is OpenSCENARIO's `rate`."""
+    if shape == "step":
+        return xosc.TransitionDynamics(xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0.0)
+    if duration is not None:
+        return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.time, max(duration, 0.0))
+    return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.rate,
+                                   max(rate / PEAK_SLOPE[shape], 1e-3))
+
+
+def _relative_speed(node) -> tuple[str, float, str] | None:
+    """`k * speed(X)`, `speed(X) * k`, `speed(X) +/- c`, `speed(X)` as (X, value, kind)."""
+    def actor(n):
+        sig = _signal(n)
+        return sig[1][0] if sig is not None and sig[0] == "speed" and len(sig[1]) == 1 else None
+
+    def const(n):
+        return None if E.signals_used(n) else _try_float(n)
+
+    if actor(node) is not None:
+        return actor(node), 0.0, "delta"
+    if isinstance(node, E.Binary) and node.op == "*":
+        for a, b in ((node.left, node.right), (node.right, node.left)):
+            if actor(a) is not None and const(b) is not None:
+                return actor(a), const(b), "factor"
+    if isinstance(node, E.Binary) and node.op in ("+", "-"):
+        if actor(node.left) is not None and const(node.right) is not None:
+            return actor(node.left), const(node.right) * (1.0 if node.op == "+" else -1.0), "delta"
+        if node.op == "+" and actor(node.right) is not None and const(node.left) is not None:
+            return actor(node.right), const(node.left), "delta"
+    return None
+
+
+def _try_float(node) -> float | None:
+    try:
+        return float(eval_param_expr(node, {}))
+    except (KeyError, ValueError, ArithmeticError, TypeError):
+        return None
+
+
 def _cruise(run, actor, s):
+    live = s["speed"]
+    if not isinstance(live, float):  # a live target: `1.2 * speed(ego)`
+        rel = _relative_speed(live)
+        if rel is None:
+            # No OpenSCENARIO target: a controller whose `speed` property is the expression (JSON).
+            return _controller("cruise")(run, actor, {**s, "speed": live.model_dump(mode="json")})
+        other, value, kind = rel
+        dyn = _speed_dynamics(s["shape"], s["accel"], s["duration"])
+        valuetype = xosc.SpeedTargetValueType.factor if kind == "factor" else xosc.SpeedTargetValueType.delta
+        return [xosc.RelativeSpeedAction(value, other, dyn, valuetype, continuous=True)], True
     rate = s["accel"] if s["speed"] >= run.v0[actor] else s["decel"]
-    return _speed_action(s["speed"], rate), True
+    if s["shape"] == "linear" and s["duration"] is None:
+        return [_speed_action(s["speed"], rate)], True
+    return [xosc.AbsoluteSpeedAction(s["speed"], _speed_dynamics(s["shape"], rate, s["duration"]))], True
 
 
 def _brake(run, actor, s):
-    return _speed_action(s["to_speed"], s["decel"]), True
+    return [_speed_action(s["to_speed"], s["decel"])], True
 
 
 def _lane_change(run, actor, s):
-    return xosc.AbsoluteLaneChangeAction(int(round(s["to"])), xosc.TransitionDynamics(
-        xosc.DynamicsShapes.cubic, xosc.DynamicsDimension.time, s["duration"])), True
+    dyn = xosc.TransitionDynamics(OSC_SHAPE[s["shape"]], xosc.DynamicsDimension.time, s["duration"])
+    if s["shape"] == "quintic" or s["shape"] not in OSC_SHAPE:
+        run.carried.append(f"{actor}: lane change shape {s['shape']} written as cubic (OpenSCENARIO 1.2 has no "
+                           "quintic; exact in the side file)")
+    if s.get("to_lane_of"):
+        return [xosc.RelativeLaneChangeAction(0, s["to_lane_of"], dyn)], True
+    return [xosc.AbsoluteLaneChangeAction(int(round(s["to"])), dyn)], True
+
+
+def _speed_profile(run, actor, s):
+    # OpenSCENARIO entry times are durations from the previous entry (the first: from the start).
+    times = list(s["times"])
+    deltas = [times[0]] + [b - a for a, b in zip(times, times[1:])]
+    if s["shape"] != "linear":
+        run.carried.append(f"{actor}: speed profile shape {s['shape']} (SpeedProfileAction interpolates "
+                           "linearly in `position` mode; exact in the side file)")
+    return [xosc.SpeedProfileAction(list(s["speeds"]), xosc.FollowingMode.position, deltas)], True
+
+
+def _road_of(run, actor: str) -> str:
+    a = run.by_name[actor]
+    return a.route[0] if a.route else run.road_ids[a.road]
+
+
+def _synchronize(run, actor, s):
+    master = run.by_name[s["master"]]
+    master_pos = xosc.LanePosition(s["master_at"], 0.0, str(int(round(run.num(master.lane)))),
+                                   _road_of(run, s["master"]))
+    target_s = s["target_s"] if s["target_s"] is not None else run.s0[actor]
+    target_t = s["target_t"] if s["target_t"] is not None else run.t0[actor]
+    final = None if s["final_speed"] is None else xosc.AbsoluteSpeed(s["final_speed"])
+    action = xosc.SynchronizeAction(s["master"], master_pos, xosc.RoadPosition(target_s, target_t,
+                                                                               _road_of(run, actor)),
+                                    final_speed=final)
+    extra = [k for k in ("heading", "max_speed") if s.get(k) is not None and k in s]
+    run.carried.append(f"{actor}: synchronize {', '.join(extra)} and rate limits (side file)")
+    return [action], True
+
+
+def _trajectory(run, actor, s):
+    if s["s"] is not None:
+        road = _road_of(run, actor)
+        positions = [xosc.RoadPosition(ps, pt, road) for ps, pt in zip(s["s"], s["t"])]
+    else:
+        positions = [xosc.WorldPosition(px, py) for px, py in zip(s["x"], s["y"])]
+    times = list(s["times"]) if s["times"] is not None else []
+    traj = xosc.Trajectory(run.unique(f"{actor}_trajectory"), False)
+    traj.add_shape(xosc.Polyline(times, positions))
+    if times:  # vertex times from the start of the action
+        follow = xosc.FollowTrajectoryAction(traj, xosc.FollowingMode.position, xosc.ReferenceContext.relative,
+                                             1.0, 0.0)
+        return [follow], True
+    follow = xosc.FollowTrajectoryAction(traj, xosc.FollowingMode.position)
+    # No times: the trajectory is driven at `speed`, a speed action in the same event.
+    return [follow, _speed_action(s["speed"], s["accel"] if s["speed"] >= run.v0[actor] else s["decel"])], True
+
+
+def _keep_gap(run, actor, s):
+    side = (xosc.LongitudinalDisplacement.trailingReferencedEntity if s["side"] == "behind"
+            else xosc.LongitudinalDisplacement.leadingReferencedEntity)
+    return [xosc.LongitudinalDistanceAction(s["target"], freespace=True, continuous=True,
+                                            max_acceleration=s["accel"], max_deceleration=s["decel"],
+                                            distance=s["distance"], timeGap=s["time_gap"],
+                                            displacement=side)], True
 
 
 def _controller(keyword: str):
     def make(run, actor, s):
         props = xosc.Properties()
         for key, value in s.items():
+            if value is None:
+                continue
             props.add_property(key, json.dumps(value) if not isinstance(value, str) else value)
         ctrl = xosc.Controller(f"{CONTROLLER_PREFIX}{keyword}", props)
-        return xosc.AssignControllerAction(ctrl, activateLateral=True, activateLongitudinal=True), False
+        return [xosc.AssignControllerAction(ctrl, activateLateral=True, activateLongitudinal=True)], False
     return make
 
 
-# keyword -> (run, actor, resolved settings) -> (OpenSCENARIO action, whether it is a standard action)
+# keyword -> (run, actor, resolved settings) -> (OpenSCENARIO actions, whether they are standard actions)
 ACTIONS = {"cruise": _cruise, "brake": _brake, "lane_change": _lane_change, "cut_in": _lane_change,
+           "speed_profile": _speed_profile, "synchronize": _synchronize, "trajectory": _trajectory,
+           "keep_gap": _keep_gap,
            "idm": _controller("idm"), "overtake": _controller("overtake"), "walk": _controller("walk"),
            "cross": _controller("cross")}
 
@@ -263,6 +406,16 @@ def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str]
                                f"{param}, which nothing sets")
             got = [[xosc.ValueTrigger(run.unique(f"{event}_when"), 0, xosc.ConditionEdge.none,
                                       xosc.ParameterCondition(param, "true", xosc.Rule.equalTo))]]
+        if step.hold_s is not None:
+            # `when C for D`: OpenSCENARIO's condition delay fires D after C first holds; it
+            # does not ask C to keep holding (exact in the side file).
+            hold = run.num(step.hold_s)
+            run.holds[event] = float(hold)
+            for conds in got:
+                for c in conds:
+                    c.delay = float(hold)
+            run.carried.append(f"`when ... for {hold:g} s` ({event}): a condition delay of {hold:g} s (it does not "
+                               "require the condition to keep holding)")
         groups = got
     trigger = xosc.Trigger()
     for conds in groups:
@@ -274,14 +427,15 @@ def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str]
 
 
 def _event(run: _Run, actor: str, clause: ClausePlan, step: TriggerPlan | None, armed_by: str | None):
-    settings = resolve_settings(clause.settings, run.params)
+    settings = _resolve(run, clause.settings)
     cls_settings = _with_defaults(clause.name, settings)
     name = run.unique(f"{actor}_{clause.name}")
     run.event_names.append(name)
     keyword = BEHAVIORS.get(clause.name).keyword  # aliases (`follow`) export as their behaviour
-    action, standard = ACTIONS[keyword](run, actor, cls_settings)
+    actions, standard = ACTIONS[keyword](run, actor, cls_settings)
     event = xosc.Event(name, xosc.Priority.parallel)
-    event.add_action(run.unique(f"{name}_action"), action)
+    for action in actions:
+        event.add_action(run.unique(f"{name}_action"), action)
     event.add_trigger(_start_trigger(run, step or TriggerPlan(), name, armed_by))
     run.behaviors[name] = {"actor": actor, "clause": clause.model_copy(
         update={"settings": {k: _literal(v) for k, v in settings.items()}}).model_dump(mode="json")}
@@ -291,11 +445,22 @@ def _event(run: _Run, actor: str, clause: ClausePlan, step: TriggerPlan | None, 
     return event
 
 
+def _resolve(run: _Run, settings: dict) -> dict:
+    """Constant settings as numbers; a live one (`speed 1.2 * speed(ego)`) stays an expression."""
+    out = {}
+    for key, value in settings.items():
+        live = not isinstance(value, (str, list)) and E.signals_used(value)
+        out[key] = value if live else resolve_settings({key: value}, run.params)[key]
+    return out
+
+
 def _with_defaults(keyword: str, settings: dict) -> dict:
     return {**{p.name: p.default for p in BEHAVIORS.get(keyword).params}, **settings}
 
 
 def _literal(value):
+    if not isinstance(value, (str, list, int, float)):  # a live expression, as it is
+        return value
     if isinstance(value, str):
         return value
     if isinstance(value, list):
@@ -342,6 +507,58 @@ def _flatten(run: _Run, actor: str, step: TriggerPlan, maneuver: xosc.Maneuver, 
     return armed_by or []
 
 
+# ---------------------------------------------------------------- routes, environment
+
+def _route_action(run: _Run, a: ActorPlan) -> xosc.AssignRouteAction:
+    """The route as waypoints: one lane position in the middle of each road's stretch of it,
+    the first at the actor's start (a connecting road gets one too, so a tool that plans
+    between waypoints takes the same turn)."""
+    road = run.plan.road(a.road)
+    network = build_network([road])[a.road]
+    lane = int(round(run.num(a.lane)))
+    _, legs = resolve_route(network, list(a.route), lane, None)
+    route = xosc.Route(run.unique(f"{a.name}_route"))
+    route.add_waypoint(_position(run, a), xosc.RouteStrategy.shortest)
+    seen = {legs[0].road_id} if legs else set()
+    for leg in legs[1:]:
+        if leg.road_id in seen:
+            continue
+        seen.add(leg.road_id)
+        route.add_waypoint(xosc.LanePosition(0.5 * (leg.s_from + leg.s_to), 0.0, str(leg.lane), leg.road_id),
+                           xosc.RouteStrategy.shortest)
+    if len(route.waypoints) < 2:  # a one-road route: its end as the second waypoint
+        leg = legs[-1]
+        route.add_waypoint(xosc.LanePosition(leg.s_to, 0.0, str(leg.lane), leg.road_id),
+                           xosc.RouteStrategy.shortest)
+    run.carried.append(f"{a.name}: route {' -> '.join(a.route)} as an AssignRouteAction (waypoints mid-road)")
+    return xosc.AssignRouteAction(route)
+
+
+# lux of the sun overhead on a clear day, for the Sun's required intensity
+SUN_LUX = 100000.0
+
+
+def _environment(run: _Run, models: list[ClausePlan]):
+    """`environment { rain rate R  fog visibility V  light sun E }` as an EnvironmentAction."""
+    if not models:
+        return None
+    got = {m.name: resolve_settings(m.settings, run.params) for m in models}
+    precipitation = sun = fog = None
+    if "rain" in got:  # OpenSCENARIO's intensity is in mm/h
+        rate_mm_h = got["rain"]["rate"] / units.lookup("mm/h").factor
+        precipitation = xosc.Precipitation(xosc.PrecipitationType.rain, rate_mm_h)
+    if "fog" in got:
+        fog = xosc.Fog(got["fog"]["visibility"])
+    if "light" in got:
+        elevation = got["light"]["sun"]
+        sun = xosc.Sun(SUN_LUX * max(0.0, math.sin(elevation)), 0.0, elevation)
+    for name in got.keys() - {"rain", "fog", "light"}:
+        run.carried.append(f"environment model {name} (side file only)")
+    weather = xosc.Weather(sun=sun, fog=fog, precipitation=precipitation)
+    run.carried.append("environment as an EnvironmentAction (the sensor models' settings exactly in the side file)")
+    return xosc.EnvironmentAction(xosc.Environment("addt_environment", weather=weather))
+
+
 # ---------------------------------------------------------------- side file
 
 def _sidecar(run: _Run, pinned: RunSpec) -> dict:
@@ -357,8 +574,6 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
     for o in plan.oracles:
         carried.append(f"oracle {o.name} ({o.severity})")
     for a in plan.actors():
-        if a.route:
-            carried.append(f"{a.name}: route {' -> '.join(a.route)} (no RoutingAction written)")
         for key in ("goal_s", "mu"):
             if getattr(a, key) is not None:
                 carried.append(f"{a.name}: {key.removesuffix('_s')}")
@@ -386,6 +601,7 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
         "oracles": [o.model_dump(mode="json") for o in plan.oracles],
         "behaviors": run.behaviors,
         "conditions": run.conditions,
+        "holds": run.holds,
         "groups": run.groups,
         "group_events": sorted(run.group_events),
     }
@@ -415,6 +631,11 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
         init.add_init_action(a.name, xosc.TeleportAction(_position(run, a)))
         init.add_init_action(a.name, xosc.AbsoluteSpeedAction(run.num(a.speed), xosc.TransitionDynamics(
             xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0)))
+        if a.route:
+            init.add_init_action(a.name, _route_action(run, a))
+    environment = _environment(run, plan.environment)
+    if environment is not None:
+        init.add_global_action(environment)
 
     act = xosc.Act("addt_act", xosc.ValueTrigger("addt_act_start", 0, xosc.ConditionEdge.none,
                                                  xosc.SimulationTimeCondition(0, xosc.Rule.greaterOrEqual)))

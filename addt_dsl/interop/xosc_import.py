@@ -43,6 +43,8 @@ from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, GroupPlan, Orac
                            ScenarioPlan, TriggerPlan)
 from addt_dsl.printer import PrinterError, params_referenced, pinned_fault_plan, print_plan, side_files
 from addt_dsl.registry import BEHAVIORS
+from addt_dsl.runtime.behaviors import PEAK_SLOPE
+from addt_dsl.runtime.road.route import RouteError, resolve_route
 from addt_dsl.runtime.road import XodrError, parse_xodr
 from addt_dsl.vehicles import VEHICLES
 
@@ -127,6 +129,7 @@ class _Importer:
         self.pending: list[tuple] = []  # events started by another event: linked at the end
         self.anchors: dict[str, tuple] = {}  # no-op events that start a group: name -> (actor, start fields)
         self.placed: dict[str, tuple] = {}  # actor -> (road name, lane, s, offset)
+        self.environment: list[ClausePlan] = []  # weather and light from an EnvironmentAction
         self.doc = None
 
     # -- diagnostics
@@ -568,7 +571,13 @@ class _Translate(_Importer):
         if init is None:
             return
         for action in init.iterfind("Actions/GlobalAction"):
-            self.skip(action, "global actions (environment, traffic, parameters) are not translated")
+            env = _child(action, "EnvironmentAction", "Environment")
+            if env is not None:
+                self.environment_action(env)
+            else:
+                self.skip(action, "global actions other than the environment (traffic, parameters, "
+                                  "signals) are not translated")
+        init_trajectories = []
         for private in init.iterfind("Actions/Private"):
             who = self.actor_name(private)
             if who is None or who not in self.actors:
@@ -583,6 +592,11 @@ class _Translate(_Importer):
                         self.placed[who] = got
                         self.actors[who]["lane_now"] = got[1]
                         self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
+                elif act.tag == "RoutingAction" and _child(act, "AssignRouteAction", "Route") is not None:
+                    self.actors[who]["route_el"] = _child(act, "AssignRouteAction", "Route")
+                elif act.tag == "RoutingAction" and _child(act, "FollowTrajectoryAction") is not None \
+                        and who != "ego":
+                    init_trajectories.append((act, who))
                 elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
                                                                 "AbsoluteTargetSpeed") is not None:
                     target = _child(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
@@ -590,12 +604,23 @@ class _Translate(_Importer):
                     self.actors[who]["speed_now"] = self.value(target, "value")
                 else:
                     self.skip(act, f"<{act.tag}> in Init is not translated (positions and speeds are)")
+        for act, who in init_trajectories:  # no TeleportAction: start at the first vertex
+            first_vertex = act.find("FollowTrajectoryAction//Polyline/Vertex/Position")
+            if who not in self.placed and first_vertex is not None:
+                got = self.position(first_vertex, who)
+                if got is not None:
+                    self.placed[who] = got
+                    self.actors[who]["lane_now"] = got[1]
         for who, info in self.actors.items():
             if who not in self.placed:
                 self.approx(info["el"], f"{who} has no translated initial position: lane -1 at s = 0 m of the "
                                         "first road")
                 first = self.road(next(iter(self.network.roads)), info["el"])
                 self.placed[who] = (first, -1, E.Num(value=0.0), E.Num(value=0.0))
+        for act, who in init_trajectories:  # a trajectory from the start: once every actor is placed
+            clause = self.trajectory(_child(act, "FollowTrajectoryAction"), who)
+            if clause is not None:
+                self.actors[who]["behaviors"].append(clause)
 
     # -- actions
 
@@ -607,6 +632,13 @@ class _Translate(_Importer):
         info = self.actors[who]
         if act.tag == "LongitudinalAction":
             speed = _child(act, "SpeedAction")
+            if _child(act, "SpeedProfileAction") is not None:
+                return self.speed_profile(_child(act, "SpeedProfileAction"), info)
+            if _child(act, "LongitudinalDistanceAction") is not None:
+                return self.keep_gap(_child(act, "LongitudinalDistanceAction"))
+            relative = _child(speed, "SpeedActionTarget", "RelativeTargetSpeed")
+            if relative is not None:
+                return self.relative_speed(speed.find("SpeedActionDynamics"), relative, info)
             target = _child(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
             if speed is None or target is None:
                 self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
@@ -637,9 +669,248 @@ class _Translate(_Importer):
                     return ClausePlan(keyword="behavior", name=keyword, settings=settings)
             self.skip(act, "controller actions are not translated (agents follow behaviours)")
             return None
+        if act.tag == "SynchronizeAction":
+            return self.synchronize(act, who)
+        if act.tag == "RoutingAction" and _child(act, "FollowTrajectoryAction") is not None:
+            return self.trajectory(_child(act, "FollowTrajectoryAction"), who)
         self.skip(act, f"<{act.tag}> is not translated",
-                  "routes, trajectories and synchronisation come with issues 15 and 16")
+                  "translated: speed (absolute, relative, profiles), lane changes, longitudinal distance, "
+                  "synchronize, polyline trajectories, routes in Init")
         return None
+
+    def speed_profile(self, el, info) -> ClausePlan | None:
+        entries = list(el.iterfind("SpeedProfileEntry"))
+        if not entries or any(e.get("time") is None for e in entries):
+            self.skip(el, "a speed profile without entry times is not translated",
+                      "`speed_profile` needs the time of each point")
+            return None
+        # Entry times are durations from the previous entry: cumulative times from the start.
+        times, clock = [], 0.0
+        for e in entries:
+            clock += max(self.value(e, "time"), 0.0)
+            times.append(clock)
+        if any(b <= a for a, b in zip(times, times[1:])):
+            self.skip(el, "a speed profile whose entries take no time is not translated")
+            return None
+        if el.get("followingMode") == "follow":
+            self.approx(el, "followingMode follow (smoothed within dynamic constraints): `speed_profile` meets "
+                            "every point, as followingMode position")
+        speeds = [self.value(e, "speed") for e in entries]
+        if times[0] > 0.0:  # the language's first point is at its own time: from the current speed
+            pass
+        info["speed_now"] = speeds[-1]
+        return ClausePlan(keyword="behavior", name="speed_profile",
+                          settings={"times": [E.Num(value=x) for x in times],
+                                    "speeds": [E.Num(value=v) for v in speeds]})
+
+    def relative_speed(self, dyn, rel, info) -> ClausePlan | None:
+        ref = self.actor_name(rel)
+        if ref is None:
+            return None
+        value = self.value(rel, "value")
+        kind = rel.get("speedTargetValueType", "delta")
+        if rel.get("continuous", "false") not in ("true", "1"):
+            self.approx(rel, "a relative speed target that is not continuous: followed continuously")
+        other = E.Signal(name=f"speed({ref})")
+        if kind == "factor":
+            speed = E.Binary(op="*", left=E.Num(value=value), right=other)
+        elif value:
+            speed = E.Binary(op="+", left=other, right=E.Num(value=value))
+        else:
+            speed = other
+        settings = {"speed": speed}
+        if dyn is not None:
+            settings.update(self.speed_dynamics(dyn))
+        return ClausePlan(keyword="behavior", name="cruise", settings=settings)
+
+    def speed_dynamics(self, dyn) -> dict:
+        """Shape and rate/duration of a speed change as `cruise` settings (rate: the average)."""
+        shape = self.raw(dyn, "dynamicsShape")
+        dim = self.raw(dyn, "dynamicsDimension")
+        amount = abs(self.value(dyn, "value"))
+        if shape not in PEAK_SLOPE or shape == "quintic":
+            self.approx(dyn, f"dynamics shape {shape}: linear")
+            shape = "linear"
+        out = {"shape": shape} if shape != "linear" else {}
+        if shape == "step":
+            return out
+        if dim == "time":
+            out["duration"] = E.Num(value=amount)
+        elif dim == "rate":
+            rate = max(amount * PEAK_SLOPE[shape], 0.01)
+            out.update(accel=E.Num(value=rate), decel=E.Num(value=rate))
+        else:
+            self.approx(dyn, f"a speed change over a {dim}: at the default rate limits")
+        return out
+
+    def keep_gap(self, el) -> ClausePlan | None:
+        ref = self.actor_name(el)
+        if ref is None:
+            return None
+        settings = {"target": ref}
+        if el.get("distance") is not None:
+            settings["distance"] = E.Num(value=self.value(el, "distance"))
+        elif el.get("timeGap") is not None:
+            settings["time_gap"] = E.Num(value=self.value(el, "timeGap"))
+        else:
+            self.error(el, "a LongitudinalDistanceAction needs a distance or a timeGap")
+            return None
+        if el.get("displacement") == "leadingReferencedEntity":
+            settings["side"] = "ahead"
+        limits = el.find("DynamicConstraints")
+        for attr, key in (("maxAcceleration", "accel"), ("maxDeceleration", "decel")):
+            src = el if el.get(attr) is not None else limits
+            if src is not None and src.get(attr) is not None:
+                settings[key] = E.Num(value=max(self.value(src, attr), 0.01))
+        if el.get("freespace") in ("false", "0"):
+            self.approx(el, "a reference-point distance: kept as a bumper-to-bumper gap")
+        return ClausePlan(keyword="behavior", name="keep_gap", settings=settings)
+
+    def road_point(self, pos_el, who: str):
+        """(s, t) of a position on the actor's road, or None after a diagnostic."""
+        got = self.position(pos_el, who)
+        if got is None:
+            return None
+        road, lane, s, offset = got
+        params = self.param_values()
+        road_id = next(i for i, r in self.roads.items() if r.name == road)
+        if road != self.placed[who][0]:
+            self.approx(pos_el, f"a point on road {road_id}, not {who}'s road: its s and t are used as they are")
+        s_val = float(eval_param_expr(s, params))
+        odr = self.network.road(road_id)
+        if not 0.0 <= s_val <= odr.length:
+            self.skip(pos_el, f"a point at s = {s_val:g} m, beyond road {road_id} ({odr.length:.6g} m): not translated")
+            return None
+        try:
+            t_val = odr.lane_center_t(lane, s_val) + float(eval_param_expr(offset, params))
+        except ValueError as exc:
+            self.skip(pos_el, f"a point the road does not have: {exc}")
+            return None
+        return s_val, t_val
+
+    def synchronize(self, act, who: str) -> ClausePlan | None:
+        master = self.actor_name(act, "masterEntityRef")
+        if master is None:
+            return None
+        master_pos = self.position(_first(act.find("TargetPositionMaster"), act), master)
+        own = self.road_point(_first(act.find("TargetPosition"), act), who)
+        if master_pos is None or own is None:
+            return None
+        settings = {"master": master, "master_at": master_pos[2],
+                    "target_s": E.Num(value=round(own[0], 9)), "target_t": E.Num(value=round(own[1], 9))}
+        road, lane, s0, off0 = self.placed[who]
+        params = self.param_values()
+        road_id = next(i for i, r in self.roads.items() if r.name == road)
+        s0_val = float(eval_param_expr(s0, params))
+        try:
+            t0 = self.network.road(road_id).lane_center_t(lane, s0_val) + float(eval_param_expr(off0, params))
+        except ValueError:  # placed where the road has no such lane (reported with the position)
+            t0 = own[1]
+        if abs(own[1] - t0) > 0.5 and self.along_s(who):
+            # Across the road: head for the point (the language's synchronize moves along a heading).
+            settings["heading"] = E.Num(value=round(math.atan2(own[1] - t0, own[0] - s0_val), 9))
+            self.approx(act, f"{who} heads straight for its target point from where it starts")
+        final = _child(act, "FinalSpeed", "AbsoluteSpeed")
+        if final is not None:
+            settings["final_speed"] = E.Num(value=self.value(final, "value"))
+        elif act.find("FinalSpeed") is not None:
+            self.approx(act.find("FinalSpeed"), "a final speed relative to the master: the speed reached is kept")
+        if act.find("TargetPositionMaster/LanePosition") is None and act.find("TargetPositionMaster") is not None:
+            self.approx(act.find("TargetPositionMaster"), "the master's target point: its station on its road")
+        return ClausePlan(keyword="behavior", name="synchronize", settings=settings)
+
+    def trajectory(self, follow, who: str) -> ClausePlan | None:
+        traj = _first(follow.find("TrajectoryRef/Trajectory"), follow.find("Trajectory"))
+        if traj is None:
+            self.skip(follow, "a trajectory from a catalog is not translated")
+            return None
+        poly = traj.find("Shape/Polyline")
+        if poly is None:
+            self.skip(_first(traj.find("Shape"), traj), "only polyline trajectories are translated",
+                      "clothoids and NURBS have no `trajectory` form")
+            return None
+        points, times = [], []
+        for vertex in poly.iterfind("Vertex"):
+            got = self.road_point(_first(vertex.find("Position"), vertex), who)
+            if got is None:
+                return None
+            points.append(got)
+            if vertex.get("time") is not None:
+                times.append(self.value(vertex, "time"))
+        if len(points) < 1:
+            self.error(poly, "a polyline needs vertices")
+            return None
+        settings = {"s": [E.Num(value=round(p[0], 9)) for p in points],
+                    "t": [E.Num(value=round(p[1], 9)) for p in points]}
+        timing = follow.find("TimeReference/Timing")
+        if timing is not None and len(times) == len(points):
+            offset = self.value(timing, "offset", default=0.0)
+            scale = self.value(timing, "scale", default=1.0)
+            times = [scale * x + offset for x in times]
+            if timing.get("domainAbsoluteRelative") == "absolute":
+                self.approx(timing, "absolute vertex times: taken from the start of the trajectory")
+            if all(b > a for a, b in zip(times, times[1:])) and times[0] >= 0.0:
+                settings["times"] = [E.Num(value=x) for x in times]
+            else:
+                self.approx(timing, "vertex times that do not increase: driven at the default speed")
+        return ClausePlan(keyword="behavior", name="trajectory", settings=settings)
+
+    def route(self, route_el, who: str, lane: int, s):
+        """An AssignRouteAction's waypoints as the actor's route (road ids, connecting roads
+        included) and its start station along the route; None after a diagnostic."""
+        stops = []
+        for wp in route_el.iterfind("Waypoint"):
+            pos = _only_child(wp.find("Position")) if wp.find("Position") is not None else None
+            road_id = pos.get("roadId") if pos is not None else None
+            if road_id is None:
+                self.skip(wp, "a waypoint that is not a lane or road position: the route is not translated")
+                return None
+            if not stops or stops[-1] != road_id:
+                stops.append(self.resolve(road_id))
+        first = self.placed[who][0]
+        if self.roads.get(stops[0]) is None or self.roads[stops[0]].name != first:
+            self.skip(route_el, f"a route that does not start on {who}'s road: not translated")
+            return None
+        try:
+            roads, _ = resolve_route(self.network, stops, lane, None)
+        except RouteError as exc:
+            self.skip(route_el, f"the route is not translated: {exc}")
+            return None
+        return roads, self.route_station(who, roads, lane, s)
+
+    def route_station(self, who: str, roads: list[str], lane: int, s):
+        """A road station on a route's first road as the distance from the route's entry end."""
+        try:
+            _, legs = resolve_route(self.network, roads[:1], lane, None)
+        except RouteError:
+            return s
+        if legs and legs[0].direction < 0:
+            return E.Binary(op="-", left=E.Num(value=legs[0].s_from), right=s)
+        return s
+
+    def environment_action(self, env) -> None:
+        weather = env.find("Weather")
+        if weather is None:
+            self.approx(env, "an environment without weather: clear daylight")
+            return
+        fog, rain, sun = weather.find("Fog"), weather.find("Precipitation"), weather.find("Sun")
+        if fog is not None:
+            visibility = min(max(self.value(fog, "visualRange"), 10.0), 100000.0)
+            self.environment.append(ClausePlan(keyword="environment", name="fog",
+                                               settings={"visibility": E.Num(value=visibility)}))
+        if rain is not None and rain.get("precipitationType") == "rain":
+            intensity = rain.get("precipitationIntensity") or rain.get("intensity")
+            if intensity is not None:
+                rate = min(float(self.resolve(intensity)), 200.0) * units.lookup("mm/h").factor
+                if rate > 0:
+                    self.environment.append(ClausePlan(keyword="environment", name="rain",
+                                                       settings={"rate": E.Num(value=rate)}))
+        elif rain is not None and rain.get("precipitationType") not in (None, "dry"):
+            self.approx(rain, f"precipitation {rain.get('precipitationType')}: no model (rain, fog, light are)")
+        if sun is not None and sun.get("elevation") is not None:
+            elevation = min(max(self.value(sun, "elevation"), -math.pi / 2), math.pi / 2)
+            self.environment.append(ClausePlan(keyword="environment", name="light",
+                                               settings={"sun": E.Num(value=elevation)}))
 
     def speed_action(self, dyn, target, info) -> ClausePlan | None:
         v = self.number(target, "value", units.SPEED)
@@ -659,6 +930,8 @@ class _Translate(_Importer):
             rate = abs(v_now ** 2 - info["speed_now"] ** 2) / (2 * amount) if dv else 1.0
         rate = max(rate, 0.01)
         info["speed_now"] = v_now
+        if shape in ("cubic", "sinusoidal") and dv and dim in ("time", "rate"):
+            return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, **self.speed_dynamics(dyn)})
         if dv < 0:  # constant deceleration to a speed: exactly `brake`
             return ClausePlan(keyword="behavior", name="brake",
                               settings={"decel": E.Num(value=min(rate, 12.0)), "to_speed": v})
@@ -674,7 +947,18 @@ class _Translate(_Importer):
         if tgt is None or dyn is None:
             self.error(change, "a lane change needs dynamics and a target")
             return None
-        if tgt.tag == "AbsoluteTargetLane":
+        extra = {}
+        shape = self.raw(dyn, "dynamicsShape", required=False)
+        if shape in ("linear", "cubic", "sinusoidal", "step"):
+            extra["shape"] = shape
+        if tgt.tag == "RelativeTargetLane" and tgt.get("entityRef") not in (None, who) \
+                and int(self.value(tgt, "value")) == 0:
+            ref = self.actor_name(tgt)
+            if ref is None:
+                return None
+            lane = self.actors[ref]["lane_now"] if ref in self.actors else None
+            extra["to_lane_of"] = ref
+        elif tgt.tag == "AbsoluteTargetLane":
             lane = int(self.value(tgt, "value"))
         else:
             ref = self.actor_name(tgt)
@@ -686,7 +970,7 @@ class _Translate(_Importer):
                 return None
             if ref != who:
                 self.approx(tgt, f"lane relative to {ref}: its lane at the start ({base}), not at the change",
-                            "`lane_change to lane of X` is issue 16")
+                            "`lane_change to_lane_of X` takes X's lane when the change starts (offset 0)")
             d = int(self.value(tgt, "value"))
             lane = base + d
             if base * lane <= 0 and d:
@@ -702,8 +986,12 @@ class _Translate(_Importer):
             duration = 3.5 / max(amount, 0.1)
             self.approx(dyn, f"a lane change at a lateral rate: {duration:.3g} s for a 3.5 m lane")
         info["lane_now"] = lane
+        if "to_lane_of" in extra:
+            return ClausePlan(keyword="behavior", name="lane_change",
+                              settings={"duration": E.Num(value=max(duration, 0.5)), **extra})
         return ClausePlan(keyword="behavior", name="lane_change",
-                          settings={"to": E.Num(value=float(lane)), "duration": E.Num(value=max(duration, 0.5))})
+                          settings={"to": E.Num(value=float(lane)), "duration": E.Num(value=max(duration, 0.5)),
+                                    **extra})
 
     # -- stop trigger
 
@@ -777,7 +1065,7 @@ class _Translate(_Importer):
         if not clauses:
             return
         trigger = event.find("StartTrigger")
-        step = self.start(trigger, who, act_at)
+        step = self.start(trigger, who, act_at, name)
         if step is None:
             return
         kind, fields = step
@@ -792,10 +1080,10 @@ class _Translate(_Importer):
             else:
                 self.actors[who]["triggers"].append(TriggerPlan(clause=clause, **fields))
 
-    def start(self, trigger, who: str, act_at):
+    def start(self, trigger, who: str, act_at, event: str = ""):
         """('now', fields of a TriggerPlan) or ('after_event', (event, delay, state)); None: dropped."""
         groups = list(trigger.iterfind("ConditionGroup")) if trigger is not None else []
-        alternatives, at_s = [], act_at
+        alternatives, at_s, holds = [], act_at, []
         for group in groups:
             conj = []
             for cond in group.iterfind("Condition"):
@@ -814,6 +1102,9 @@ class _Translate(_Importer):
                 if formula is None:
                     return None
                 conj.append(formula)
+                delay = self.value(cond, "delay", units.TIME, 0.0)
+                if delay > 0:
+                    holds.append((delay, cond))
             if conj:
                 alternatives.append(_all(conj))
         fields = {}
@@ -821,12 +1112,17 @@ class _Translate(_Importer):
             fields["at_s"] = E.Num(value=at_s)
         if alternatives:
             fields["condition"] = _any(alternatives)
+        if holds:
+            # `when C for D` is the nearest form: the same start while C keeps holding, none if it breaks.
+            hold = max(d for d, _ in holds)
+            fields["hold_s"] = E.Num(value=hold)
+            if (self.sidecar or {}).get("holds", {}).get(event) != hold:  # exact when the side file says so
+                self.approx(holds[0][1], f"a condition delay of {hold:g} s: `when ... for {hold:g} s` (the condition "
+                                     "must keep holding for the delay)")
         return "now", fields
 
     def condition(self, cond, who: str):
         """One <Condition> as a formula over signals, or None after a diagnostic."""
-        if (self.value(cond, "delay", units.TIME, 0.0)) > 0:
-            self.approx(cond, "a condition delay is not translated: the step starts when the condition holds")
         value_cond = _only_child(cond.find("ByValueCondition")) if cond.find("ByValueCondition") is not None else None
         if value_cond is not None:
             if value_cond.tag == "ParameterCondition":
@@ -985,6 +1281,11 @@ class _Translate(_Importer):
                 fields.update(mass_kg=extra["mass_kg"], wheelbase_m=extra["wheelbase_m"])
             if extra.get("route"):
                 fields["route"] = [str(r) for r in extra["route"]]
+                fields["s"] = self.route_station(who, fields["route"], lane, s)
+            elif info.get("route_el") is not None:
+                got = self.route(info["route_el"], who, lane, s)
+                if got is not None:
+                    fields["route"], fields["s"] = got
             if extra.get("yaw") is not None:
                 fields["yaw"] = E.Num(value=float(extra["yaw"]))
             if eval_param_expr(offset, self.param_values()) != 0.0:
@@ -1014,7 +1315,8 @@ class _Translate(_Importer):
         name = sc.get("scenario") or _safe_name(self.path.stem, set())
         plan = ScenarioPlan(name=name, description=description[:500], duration_s=duration,
                             step_s=sc.get("step_s", 0.01), seed=sc.get("seed", 0), run_seed=sc.get("run_seed"),
-                            roads=list(self.roads.values()), ego=ego, agents=agents, faults=faults, oracles=oracles)
+                            roads=list(self.roads.values()), ego=ego, agents=agents, faults=faults, oracles=oracles,
+                            environment=self.environment)
         values = {**self.param_values(), **sc.get("params", {})}
         dims = {**{k: v for k, v in self.param_dims.items()},
                 **{k: units.DIMENSIONLESS for k in sc.get("params", {}) if k not in self.param_dims}}
@@ -1036,7 +1338,7 @@ def _sidecar_problem(data: dict) -> str:
     try:
         for key, kind in (("actors", dict), ("behaviors", dict), ("conditions", dict), ("groups", dict),
                           ("faults", list), ("oracles", list), ("params", dict), ("param_dims", dict),
-                          ("group_events", list)):
+                          ("group_events", list), ("holds", dict)):
             if not isinstance(data.get(key, kind()), kind):
                 return f"'{key}' is not a {kind.__name__}"
         for info in data.get("actors", {}).values():
@@ -1076,6 +1378,8 @@ def _sidecar_problem(data: dict) -> str:
 def _setting(value):
     if isinstance(value, str):
         return value
+    if isinstance(value, dict):  # a live expression (`speed 2 * speed(ego) - 1 m/s`), as the export writes it
+        return EXPR.validate_python(value)
     if isinstance(value, list):
         return [E.Num(value=float(v)) for v in value]
     return E.Num(value=float(value))

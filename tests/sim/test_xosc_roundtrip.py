@@ -17,7 +17,8 @@ from tests.unit.interop.asam_qc import problems
 from tests.unit.interop.roundtrip_kit import round_trip
 
 pytestmark = pytest.mark.slow
-SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / "every_behavior.addt"]
+SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / f"{n}.addt"
+                                               for n in ("every_behavior", "every_action")]
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])

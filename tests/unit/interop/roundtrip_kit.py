@@ -62,7 +62,8 @@ def main() -> None:
     from tests.conftest import EXAMPLES, ROOT, needs_torch
     from addt_dsl.compiler import compile_file
 
-    paths = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / "every_behavior.addt"]
+    paths = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / f"{n}.addt"
+                                            for n in ("every_behavior", "every_action")]
     print("| example | side file | same verdicts | RMS per actor [m] |")
     print("|---|---|---|---|")
     for path in paths:

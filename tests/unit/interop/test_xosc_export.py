@@ -24,7 +24,8 @@ def done_ids(done, plan) -> dict[str, str]:
     """Plan road name -> OpenDRIVE road id in the export (inline roads: 1, 2, ...)."""
     return {r.name: str(i) for i, r in enumerate(plan.roads, start=1)}
 
-SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / "every_behavior.addt"]
+SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / f"{n}.addt"
+                                               for n in ("every_behavior", "every_action")]
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])
@@ -150,3 +151,60 @@ def test_an_oncoming_actor_keeps_its_lane_direction(tmp_path):
     assert root.find("Storyboard/Init/Actions/Private[@entityRef='ego']//Orientation") is None
     assert root.find("Storyboard/Init/Actions/Private[@entityRef='a']//Orientation") is None
     assert problems(done.xosc_path, "qc_openscenario") == []
+
+
+def test_actions_are_real_openscenario(tmp_path):
+    """Speed profiles, shaped and relative speed changes, lane changes to another actor's
+    lane, keep_gap, synchronize, trajectories, held conditions and the environment are
+    OpenSCENARIO actions in the .xosc itself, not only in the side file."""
+    spec = expand(compile_file(ROOT / "tests" / "data" / "interop" / "every_action.addt").plan).specs[0]
+    done = export_run(spec, tmp_path)
+    root = DET.parse(done.xosc_path).getroot()
+
+    def event(name):
+        found = root.find(f".//Event[@name='{name}']")
+        assert found is not None, name
+        return found
+
+    # Entry times are durations from the previous entry: points at 0, 4 and 8 s.
+    entries = event("profiler_speed_profile").findall(".//SpeedProfileAction[@followingMode='position']/SpeedProfileEntry")
+    assert [(float(e.get("time")), float(e.get("speed"))) for e in entries] == [(0.0, 10.0), (4.0, 14.0), (4.0, 8.0)]
+    dyn = event("shaper_cruise").find(".//SpeedActionDynamics")
+    assert (dyn.get("dynamicsShape"), dyn.get("dynamicsDimension"), float(dyn.get("value"))) == ("sinusoidal", "time", 3.0)
+    lane = event("shaper_lane_change").find(".//LaneChangeAction")
+    assert lane.find("LaneChangeTarget/RelativeTargetLane").attrib == {"entityRef": "profiler", "value": "0"}
+    assert lane.find("LaneChangeActionDynamics").get("dynamicsShape") == "linear"
+    rel = event("faster_cruise").find(".//RelativeTargetSpeed")
+    assert rel.attrib == {"entityRef": "ego", "value": "1.2", "speedTargetValueType": "factor", "continuous": "true"}
+    gap = event("keeper_keep_gap").find(".//LongitudinalDistanceAction")
+    assert (gap.get("entityRef"), float(gap.get("distance")), gap.get("continuous")) == ("ego", 15.0, "true")
+    sync = event("walker_synchronize")
+    action = sync.find(".//SynchronizeAction")
+    assert action.get("masterEntityRef") == "ego"
+    assert float(action.find("TargetPositionMaster/LanePosition").get("s")) == 150.0
+    assert float(action.find("TargetPosition/RoadPosition").get("t")) == -5.25
+    # `when C for 0.5 s`: the condition's delay.
+    held = sync.findall("StartTrigger/ConditionGroup/Condition")
+    assert [float(c.get("delay")) for c in held] == [0.5] and held[0].find(".//RelativeDistanceCondition") is not None
+    traj = event("drifter_trajectory").find(".//FollowTrajectoryAction")
+    vertices = traj.findall(".//Polyline/Vertex")
+    assert [float(v.get("time")) for v in vertices] == [2.0, 5.0, 8.0]
+    assert [float(v.find("Position/RoadPosition").get("s")) for v in vertices] == [280.0, 250.0, 220.0]
+    assert traj.find("TimeReference/Timing").get("domainAbsoluteRelative") == "relative"
+    weather = root.find("Storyboard/Init/Actions/GlobalAction/EnvironmentAction/Environment/Weather")
+    assert float(weather.find("Fog").get("visualRange")) == 300.0
+    assert float(weather.find("Precipitation").get("precipitationIntensity")) == pytest.approx(5.0)
+    assert float(weather.find("Sun").get("elevation")) == pytest.approx(np.radians(30.0))
+
+
+def test_routes_are_assign_route_actions(tmp_path):
+    spec = expand(compile_file(EXAMPLES / "left_turn.addt").plan).specs[0]
+    done = export_run(spec, tmp_path)
+    root = DET.parse(done.xosc_path).getroot()
+    for actor in spec.plan.actors():
+        if not actor.route:
+            continue
+        private = root.find(f"Storyboard/Init/Actions/Private[@entityRef='{actor.name}']")
+        roads = [p.get("roadId") for p in private.findall(".//AssignRouteAction/Route/Waypoint/Position/LanePosition")]
+        assert roads == list(actor.route), actor.name  # one waypoint per road, connecting road included
+    assert not any("no RoutingAction" in line for line in done.carried)

@@ -12,6 +12,7 @@ import pytest
 
 from addt_dsl.cli import main
 from addt_dsl.compiler import compile_file, compile_source
+from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xosc_export import SIDECAR_FORMAT, export_run
 from addt_dsl.interop.xosc_import import import_xosc
 from addt_dsl.sweep import expand
@@ -182,3 +183,95 @@ def test_damaged_side_file_is_a_diagnostic(damage, tmp_path):
     got = import_xosc(done.xosc_path)
     assert got.text is None
     assert any(d.code == "E0802" and "side file" in d.message for d in got.diagnostics), got.diagnostics
+
+
+def _without_sidecar(spec, tmp_path):
+    """Export a run and drop its side file: only what the .xosc itself says comes back."""
+    done = export_run(spec, tmp_path, "scenario")
+    done.sidecar_path.unlink()
+    got = import_xosc(done.xosc_path)
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    return got
+
+
+def test_actions_come_back_from_the_xosc_alone(tmp_path):
+    spec = expand(compile_file(ROOT / "tests" / "data" / "interop" / "every_action.addt").plan).specs[0]
+    got = _without_sidecar(spec, tmp_path)
+    plan = {a.name: a for a in got.plan.actors()}
+
+    def clause(actor):
+        a = plan[actor]
+        return (a.behaviors + [t.clause for t in a.triggers])[0]
+
+    def nums(values):
+        return [v.value for v in values]
+
+    profile = clause("profiler")
+    assert profile.name == "speed_profile"
+    assert nums(profile.settings["times"]) == [0.0, 4.0, 8.0] and nums(profile.settings["speeds"]) == [10.0, 14.0, 8.0]
+    shaped = clause("shaper")
+    assert (shaped.name, shaped.settings["shape"], shaped.settings["duration"].value) == ("cruise", "sinusoidal", 3.0)
+    change = plan["shaper"].triggers[0].clause
+    assert (change.name, change.settings["to_lane_of"], change.settings["shape"]) == ("lane_change", "profiler", "linear")
+    assert "to" not in change.settings
+    relative = clause("faster")
+    assert relative.name == "cruise" and "1.2 * speed(ego)" in got.text
+    gap = clause("keeper")
+    assert (gap.name, gap.settings["target"], gap.settings["distance"].value) == ("keep_gap", "ego", 15.0)
+    step = plan["walker"].triggers[0]
+    assert step.hold_s.value == 0.5  # the condition delay
+    sync = step.clause
+    assert sync.name == "synchronize" and sync.settings["master"] == "ego"
+    assert (sync.settings["master_at"].value, sync.settings["target_s"].value) == (150.0, 150.0)
+    assert sync.settings["target_t"].value == pytest.approx(-5.25)
+    traj = clause("drifter")
+    assert traj.name == "trajectory"
+    assert nums(traj.settings["s"]) == [280.0, 250.0, 220.0] and nums(traj.settings["times"]) == [2.0, 5.0, 8.0]
+    assert nums(traj.settings["t"]) == pytest.approx([1.75, 3.0, 1.75])
+    env = {c.name: c.settings for c in got.plan.environment}
+    assert env["fog"]["visibility"].value == 300.0
+    assert env["rain"]["rate"].value == pytest.approx(5e-3 / 3600.0)
+    assert env["light"]["sun"].value == pytest.approx(0.5235987755982988)
+    # What is approximated says so; nothing else is dropped.
+    messages = [d.message for d in got.diagnostics if d.code in ("W0801", "W0802")]
+    assert any("condition delay of 0.5 s" in m for m in messages)
+    assert not any(d.code == "W0801" for d in got.diagnostics), messages
+
+
+def test_routes_come_back_from_the_xosc_alone(tmp_path):
+    spec = expand(compile_file(ROOT / "examples" / "left_turn.addt").plan).specs[0]
+    got = _without_sidecar(spec, tmp_path)
+    before = {a.name: a for a in spec.plan.actors()}
+    for actor in got.plan.actors():
+        assert actor.route == before[actor.name].route, actor.name
+        # `at S` counts along the route from its entry end (lane 1 of road 0 runs against s).
+        after_params = {p.name: p.default for p in got.plan.params}
+        assert eval_param_expr(actor.s, after_params) == pytest.approx(
+            eval_param_expr(before[actor.name].s, spec.params), abs=1e-9), actor.name
+
+
+def test_esmini_trajectories_and_synchronisation(tmp_path):
+    # A trajectory in Init places the pedestrian at its first vertex and starts it.
+    ped = import_xosc(ESMINI / "xosc" / "alks_pedestrian.xosc", root=ESMINI)
+    walker = next(a for a in ped.plan.agents if a.vehicle == "pedestrian")
+    traj = walker.behaviors[0]
+    assert traj.name == "trajectory" and [v.value for v in traj.settings["s"]][:2] == [110.0, 110.0]
+    assert walker.s.value == 110.0
+    # A timed polyline started by a held condition (delay 0.2 s).
+    got = import_xosc(ESMINI / "xosc" / "trajectory-test.xosc", root=ESMINI)
+    step = next(t for a in got.plan.agents for t in a.triggers if t.clause and t.clause.name == "trajectory")
+    assert [v.value for v in step.clause.settings["times"]] == [0.0, 2.0, 4.0, 6.0]
+    assert step.hold_s.value == pytest.approx(0.2)
+    # Clothoid and NURBS shapes are said, not dropped.
+    assert sum("only polyline trajectories" in d.message for d in got.diagnostics) == 2
+
+
+def test_a_live_target_without_an_openscenario_form_travels_as_a_controller(tmp_path):
+    source = (ROOT / "tests" / "data" / "interop" / "every_action.addt").read_text().replace(
+        "behavior cruise speed 1.2 * speed(ego) accel 3 m/s^2", "behavior cruise speed 2 * speed(ego) - 1 m/s accel 3 m/s^2")
+    plan = compile_source(source, "live.addt").plan
+    spec = expand(plan).specs[0]
+    got = _without_sidecar(spec, tmp_path)
+    assert "behavior cruise speed 2 * speed(ego) - 1 m/s" in got.text
+    faster = next(a for a in got.plan.agents if a.name == "faster")
+    assert faster.behaviors[0].settings["speed"] == next(a for a in plan.agents if a.name == "faster").behaviors[0].settings["speed"]
