@@ -101,6 +101,9 @@ class TriggerPlan(_Model):
     group: GroupPlan | None = None
     # `when C for D`: C must have held at every step for D [s] (past-time `historically`).
     hold_s: Expr | None = None
+    # `brake_hard: at 3 s ...`: a named step, whose state `started(lead.brake_hard)` and
+    # `ended(lead.brake_hard)` read; unique in the scenario.
+    label: str | None = None
 
 
 class GroupPlan(_Model):

@@ -164,12 +164,16 @@ class Step(Node):
 
     starts: tuple[StepStart, ...]
     action: Clause | Group
+    label: str | None = None  # `brake_hard: at 3 s ...`
+    label_span: Span | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class Group(Node):
     mode: str  # sequence | parallel
     items: tuple[Clause | Step | Group, ...]
+    label: str | None = None  # `swerve: sequence { ... }`
+    label_span: Span | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -6,6 +6,8 @@ time). Syntax errors are not its business (`compiler.recovery`).
 
 from __future__ import annotations
 
+import dataclasses
+
 from lark import Token
 
 from addt_dsl.compiler import ast
@@ -280,6 +282,10 @@ class Builder:
 
     def b_group(self, span, items):
         return ast.Group(span, str(items[0]), tuple(items[1:]))
+
+    def b_labelled(self, span, items):
+        label, item = items
+        return dataclasses.replace(item, span=span, label=label.value, label_span=label.span)
 
     # ---- environment
     def b_environment(self, span, items):

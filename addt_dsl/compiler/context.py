@@ -47,6 +47,8 @@ class Context:
     roads_ast: dict[str, ast.RoadDecl] = field(default_factory=dict)
     params_ast: dict[str, ast.ParamDecl] = field(default_factory=dict)
     actors_ast: dict[str, ast.ActorDecl] = field(default_factory=dict)
+    # Named steps as `actor.label` (rules/names.py), for `started(...)`/`ended(...)`.
+    step_names: dict[str, Span] = field(default_factory=dict)
     header: dict = field(default_factory=dict)
     roads: list[P.RoadPlan] = field(default_factory=list)
     road_info: dict[str, RoadInfo] = field(default_factory=dict)
@@ -88,7 +90,8 @@ class Context:
             cls = STACKS.get(clause)
             if cls is not None:
                 nodes |= set(cls.nodes)
-        scope = Scope(dict(self.param_dims), set(self.actors_ast), nodes | {"e2e"}, signals, self.used_params)
+        scope = Scope(dict(self.param_dims), set(self.actors_ast), nodes | {"e2e"}, signals, self.used_params,
+                      steps=set(self.step_names))
         self._scopes[key] = scope
         return scope
 

@@ -33,6 +33,7 @@ class Scope:
     # Trace signals named directly (`x`, for formulas over synthetic traces given on their
     # own, see compiler.formula); a scenario has none.
     named_signals: dict[str, Dim] = field(default_factory=dict)
+    steps: set[str] = field(default_factory=set)  # named steps, `lead.brake_hard`
 
 
 def _ty_str(ty) -> str:
@@ -144,13 +145,21 @@ class ExprLowering:
         if len(args) != len(cls.args):
             self.sink.error("E0204", f"'{fn}' takes {len(cls.args)} argument(s), got {len(args)}", node.span)
             return None, None
+        pools = {"actor": self.scope.actors, "node": self.scope.nodes, "step": self.scope.steps}
         for kind, arg in zip(cls.args, args):
-            pool = self.scope.actors if kind == "actor" else self.scope.nodes
+            pool = pools[kind]
             if arg not in pool:
-                self.sink.error("E0101", f"unknown {kind} '{arg}' in {fn}(...)", node.span,
-                                f"{kind}s: {', '.join(sorted(pool))}")
+                known = f"{kind}s: {', '.join(sorted(pool))}" if pool else (
+                    "no step is named: name one with a label, `brake_hard: at 3 s behavior brake`"
+                    if kind == "step" else f"no {kind}s")
+                self.sink.error("E0101", f"unknown {kind} '{arg}' in {fn}(...)", node.span, known)
                 return None, None
-        return E.Signal(name=f"{fn}({','.join(args)})"), ("num", cls.dim)
+        signal = E.Signal(name=f"{fn}({','.join(args)})")
+        if cls.boolean:
+            # A state signal (`ended(...)`: +1 holds, -1 not) is a formula: `> 0` makes it one
+            # for the STL evaluator, robustness ±1 like `true`/`false`.
+            return E.Binary(op=">", left=signal, right=E.Num(value=0.0)), BOOL
+        return signal, ("num", cls.dim)
 
     def _CallExpr(self, node: ast.CallExpr):
         if node.fn in ARITH_FUNCS:
@@ -170,12 +179,20 @@ class ExprLowering:
                 dim = Dim(dim.length // 2, dim.time // 2, dim.mass // 2, dim.angle // 2)
             return E.Call(fn=node.fn, args=tuple(e for e, _ in lowered)), ("num", dim)
         args = []
+        cls = SIGNALS.get(node.fn)
+        step_args = cls is not None and "step" in cls.args
         for a in node.args:
+            if step_args and isinstance(a, ast.Ref) and len(a.parts) == 2:
+                args.append(a.dotted)  # a named step: `lead.brake_hard`
+                continue
             if not isinstance(a, ast.Ref) or len(a.parts) != 1:
                 # `not eventually (...)`: a temporal operator is read as a name where it cannot stand.
                 hint = ([f"`{node.fn}` starts a formula only at the top, after `implies` or in parentheses: "
                          f"`not ({node.fn} ...)`"] if node.fn in ("always", "eventually") else [])
-                self.sink.error("E0204", f"arguments of {node.fn}() are actor or node names", a.span, *hint)
+                if step_args:
+                    hint = ["name a step as `actor.label`, e.g. `ended(lead.brake_hard)`"]
+                self.sink.error("E0204", f"arguments of {node.fn}() are "
+                                f"{'step' if step_args else 'actor or node'} names", a.span, *hint)
                 return None, None
             args.append(a.parts[0])
         return self._signal(node, node.fn, tuple(args))

@@ -23,6 +23,7 @@ from addt_dsl.compiler import ast
 from addt_dsl.compiler.exprs import ARITH_FUNCS, ExprLowering, Scope
 from addt_dsl.compiler.parser import parse_expression
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, render_text
+from addt_dsl.registry import SIGNALS
 from addt_dsl.units import Dim
 
 __all__ = ["FormulaError", "parse_formula"]
@@ -52,7 +53,7 @@ def parse_formula(text: str, params: Mapping[str, Dim] | None = None,
     formula = None
     if node is not None:
         names = _actor_and_node_names(node)
-        scope = Scope(dict(params or {}), names, names, True, set(), dict(signals or {}))
+        scope = Scope(dict(params or {}), names, names, True, set(), dict(signals or {}), _step_names(node))
         formula = ExprLowering(sink, scope).lower_formula(node, "a formula")
     if formula is None or sink.has_errors:
         raise FormulaError(text, sink.items)
@@ -70,6 +71,21 @@ def _actor_and_node_names(node: ast.Node) -> set[str]:
             found.add(n.parts[0])
         elif isinstance(n, ast.CallExpr) and n.fn not in ARITH_FUNCS:
             found.update(a.parts[0] for a in n.args if isinstance(a, ast.Ref) and len(a.parts) == 1)
+        for f in dataclasses.fields(n):
+            value = getattr(n, f.name)
+            stack.extend(v for v in (value if isinstance(value, tuple) else (value,)) if isinstance(v, ast.Node))
+    return found
+
+
+def _step_names(node: ast.Node) -> set[str]:
+    """Named steps in step position: `lead.brake_hard` in `ended(lead.brake_hard)`."""
+    found: set[str] = set()
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        cls = SIGNALS.get(n.fn) if isinstance(n, ast.CallExpr) else None
+        if cls is not None and "step" in cls.args:
+            found.update(a.dotted for a in n.args if isinstance(a, ast.Ref) and len(a.parts) == 2)
         for f in dataclasses.fields(n):
             value = getattr(n, f.name)
             stack.extend(v for v in (value if isinstance(value, tuple) else (value,)) if isinstance(v, ast.Node))

@@ -275,6 +275,11 @@ def _only_child(el):
     return kids[0] if len(kids) == 1 else None
 
 
+# StoryboardElementStateCondition states on another actor's event, as step states.
+STATE_SIGNAL = {"startTransition": "started",
+                "endTransition": "ended", "completeState": "ended"}
+
+
 def _safe_name(name: str, taken: set[str]) -> str:
     base = re.sub(r"\W", "_", name) or "actor"
     if not _NAME.fullmatch(base):
@@ -1228,10 +1233,14 @@ class _Translate(_Importer):
         for ref, steps in grouped.items():
             who, fields = self.anchors[ref]
             self.actors[who]["triggers"].append(TriggerPlan(group=GroupPlan(mode="parallel", steps=steps), **fields))
+        other_actor = []  # after the sequences are built: a named step never gets lifted
         for name, who, (ref, delay, state, cond), clause in self.pending:
             if ref in grouped:
                 continue
             first = self.events.get(ref)
+            if first is not None and first[0] != who and state in STATE_SIGNAL:
+                other_actor.append((name, who, (ref, delay, state, cond), clause, first))
+                continue
             if first is None or first[0] != who:
                 self.skip(cond, f"event '{name}' starts on '{ref}', "
                                 + ("not an event of the same actor" if first else "which is not translated"),
@@ -1259,6 +1268,30 @@ class _Translate(_Importer):
                     self.skip(cond, f"event '{name}' follows '{ref}' in a way the language cannot say")
                     continue
             self.events[name] = (who, "now", {}, clause)
+        for name, who, (ref, delay, state, cond), clause, first in other_actor:
+            if not self.after_other_actor(who, ref, delay, state, cond, clause, first):
+                self.skip(cond, f"event '{name}' starts on '{ref}' of '{first[0]}', which is not a step",
+                          "only an event that starts a step can be named for `started`/`ended`")
+                continue
+            self.events[name] = (who, "now", {}, clause)
+
+    def after_other_actor(self, who, ref, delay, state, cond, clause, first) -> bool:
+        """An event on another actor's event: that event's step gets a name and this one
+        starts on its state (`when ended(lead.brake) then ...`)."""
+        other = first[0]
+        triggers = self.actors[other]["triggers"]
+        i = next((i for i, tr in enumerate(triggers) if tr.clause == first[3]), None)
+        if i is None:
+            return False
+        taken = {tr.label for a in self.actors.values() for tr in a["triggers"] if tr.label}
+        label = triggers[i].label or _safe_name(ref, taken)
+        triggers[i] = triggers[i].model_copy(update={"label": label})
+        if delay:
+            self.approx(cond, "a delay after another actor's event is not translated: the step starts on its state")
+        # A step state is a formula: the signal above 0, as the compiler lowers it.
+        state_of = E.Binary(op=">", left=E.Signal(name=f"{STATE_SIGNAL[state]}({other}.{label})"), right=E.Num(value=0.0))
+        self.actors[who]["triggers"].append(TriggerPlan(condition=state_of, clause=clause))
+        return True
 
     # -- the plan
 

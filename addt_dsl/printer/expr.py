@@ -235,6 +235,11 @@ def _p_unary(p: ExprPrinter, e: E.Unary, want):
 
 
 def _p_binary(p: ExprPrinter, e: E.Binary, want):
+    if _is_state(e):  # `ended(lead.brake_hard)`, lowered as `> 0` (compiler/exprs.py)
+        fn, _, rest = e.left.name.partition("(")
+        if not re.fullmatch(r"[A-Za-z_]\w*\.[A-Za-z_]\w*", rest.rstrip(")")):
+            raise PrinterError(f"signal {e.left.name!r} has no surface syntax")
+        return e.left.name, ATOM
     level, left_slot, right_slot = _BINARY[e.op]
     if e.op in E.BOOL_OPS:
         lw = rw = BOOL
@@ -250,6 +255,13 @@ def _p_binary(p: ExprPrinter, e: E.Binary, want):
     else:
         return _product(p, e, want, left_slot, right_slot), level
     return f"{p.format(e.left, lw, left_slot)} {e.op} {p.format(e.right, rw, right_slot)}", level
+
+
+def _is_state(e: E.Binary) -> bool:
+    if e.op != ">" or not isinstance(e.left, E.Signal) or e.right != E.Num(value=0.0):
+        return False
+    cls = SIGNALS.get(e.left.name.partition("(")[0])
+    return cls is not None and cls.boolean
 
 
 def _product(p: ExprPrinter, e: E.Binary, want: Dim, left_slot: int, right_slot: int) -> str:

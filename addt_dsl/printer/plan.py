@@ -242,6 +242,10 @@ def _step(pr: _Printer, tr: TriggerPlan, depth: int, in_group: bool) -> None:
         raise PrinterError("a step starts one behaviour or one group")
     if not starts and tr.clause is not None and not in_group:
         raise PrinterError("a step without a start condition outside a group reads back as a behaviour")
+    if tr.label is not None:  # `brake_hard: at 3 s ...`
+        if not starts and tr.clause is not None:
+            raise PrinterError("a named step needs a start condition (`name: after 0 s behavior ...`)")
+        starts = _join(f"{tr.label}:", starts)
     if tr.clause is not None:
         pr.emit(depth, _join(starts, _clause(pr, tr.clause)))
         return

@@ -78,6 +78,8 @@ def signals_table(spec, trace):
         columns[f"latency.{node}"] = np.asarray(values)
     if trace.object_count is not None:
         columns["objects"] = np.asarray(trace.object_count)
+    for name, state in trace.steps.items():  # named steps: 0 waiting, 1 started, 2 ended
+        columns[f"step.{name}"] = np.asarray(state)
     for name, rho in oracle_margins(spec, trace).items():
         columns[f"rho.{name}"] = rho
     return pd.DataFrame(columns)

@@ -41,6 +41,10 @@ class AgentState:
     lc_shape: str = "quintic"  # blend of the current lateral manoeuvre (see SHAPES)
 
 
+# A speed counts as reached within this [m/s] for `ended(step)` (tracking lands on it).
+ENDED_SPEED_TOL_MS = 1e-3
+
+
 class Behavior:
     keyword = ""
     channel = "longitudinal"  # "longitudinal" | "lateral"
@@ -61,6 +65,12 @@ class Behavior:
 
     def accel(self, agent: AgentState, world, time_s: float) -> float:
         return 0.0
+
+    def ended(self, agent: AgentState, world, time_s: float) -> bool:
+        """Whether the behaviour has completed on the state at `time_s` (what `ended(step)`
+        reads). Behaviours without a natural end (car following, keeping a gap, walking)
+        never end."""
+        return False
 
 
 def _speed_tracking(agent: AgentState, target: float, a_max: float, b_max: float, dt: float) -> float:
@@ -158,6 +168,12 @@ class Cruise(Behavior):
         # Linear at the rate limits: the same as tracking the target.
         return _speed_tracking(agent, max(0.0, self.value("speed", world)), s["accel"], s["decel"], world.dt)
 
+    def ended(self, agent, world, time_s):
+        # At the target speed: the shaped change is over, or the speed is on the target.
+        if self.transition is not None:
+            return not self.transition.active(time_s, world.dt)
+        return abs(agent.speed - max(0.0, self.value("speed", world))) < ENDED_SPEED_TOL_MS
+
 
 @BEHAVIORS.register
 class SpeedProfile(Behavior):
@@ -193,6 +209,10 @@ class SpeedProfile(Behavior):
         self.segments = [SpeedTransition(v0, v1, t1 if shape == "step" else t0, shape, 0.0, 0.0, t1 - t0)
                          for t0, t1, v0, v1 in zip(times, times[1:], speeds, speeds[1:])]
         self.first_speed = speeds[0]
+        self.end_s = times[-1]
+
+    def ended(self, agent, world, time_s):
+        return time_s + 1e-9 >= self.end_s  # at the last point
 
     def speed_at(self, time_s: float) -> float:
         """The profile's speed [m/s] at `time_s`: on the segment begun last."""
@@ -328,6 +348,9 @@ class Synchronize(Behavior):
         wanted = max(0.0, self.remaining_m(agent)) / arrival_s
         return _speed_tracking(agent, min(wanted, s["max_speed"]), s["accel"], s["decel"], world.dt)
 
+    def ended(self, agent, world, time_s):
+        return self.final is not None  # the master has arrived
+
 
 @BEHAVIORS.register
 class Trajectory(Behavior):
@@ -365,6 +388,9 @@ class Trajectory(Behavior):
         if isinstance(times, list) and any(b <= a for a, b in zip(times, times[1:])):
             return [("times", "the times of a trajectory must increase")]
         return []
+
+    def ended(self, agent, world, time_s):
+        return self.index == len(self.points)  # the last waypoint passed
 
     def start(self, agent, world, time_s):
         st = self.settings
@@ -418,6 +444,9 @@ class Brake(Behavior):
         # Brake at `decel`, landing on `to_speed` instead of overshooting below it.
         return min(0.0, max(-self.settings["decel"], (self.settings["to_speed"] - agent.speed) / world.dt))
 
+    def ended(self, agent, world, time_s):
+        return agent.speed <= self.settings["to_speed"] + ENDED_SPEED_TOL_MS
+
 
 @BEHAVIORS.register
 class LaneChange(Behavior):
@@ -445,6 +474,12 @@ class LaneChange(Behavior):
         if lane is None:  # the other actor is off the lanes: keep to the current one
             lane = agent.lane
         begin_lane_change(agent, world, lane, self.settings["duration"], time_s, self.settings["shape"])
+        self.move = (agent.lc_start_s, agent.lc_duration_s)
+
+    def ended(self, agent, world, time_s):
+        # In the target lane; a later lateral move replacing this one means it never ends.
+        start, duration = self.move
+        return (agent.lc_start_s, agent.lc_duration_s) == self.move and time_s + 1e-9 >= start + duration
 
 
 @BEHAVIORS.register
@@ -497,6 +532,10 @@ class Overtake(Behavior):
                 self.phase = "done"
         return _speed_tracking(agent, s["speed"], s["accel"], s["decel"], world.dt)
 
+    def ended(self, agent, world, time_s):
+        # Back in its lane after passing (or holding the speed where it had no passing lane).
+        return self.phase == "done" and time_s + 1e-9 >= agent.lc_start_s + agent.lc_duration_s
+
 
 @BEHAVIORS.register
 class Walk(Behavior):
@@ -545,6 +584,11 @@ class Cross(Behavior):
         if v * v >= 2.0 * (2.0 * a_max) * remaining:
             return -v * v / (2.0 * remaining)
         return _speed_tracking(agent, self.settings["speed"], a_max, 2.0 * a_max, world.dt)
+
+    def ended(self, agent, world, time_s):
+        # Stopped on the far side.
+        past = (agent.t >= self.stop_t) if self.left else (agent.t <= self.stop_t)
+        return past and agent.speed <= ENDED_SPEED_TOL_MS
 
 
 def _walk_towards(agent: AgentState, heading_rel: float) -> None:

@@ -42,6 +42,7 @@ class BoundStep:
     after_s: float
     group: BoundGroup | None
     hold_s: float = 0.0  # the condition must have held this long [s]
+    label: str | None = None  # a named step: its state is recorded as `actor.label`
 
 
 @dataclass(frozen=True)
@@ -123,7 +124,7 @@ def bind_step(t: TriggerPlan, params: dict[str, float]) -> BoundStep:
         at_s=_value(t.at_s, params) if t.at_s is not None else None,
         after_s=_value(t.after_s, params),
         group=_group(t.group, params) if t.group is not None else None,
-        hold_s=_value(t.hold_s, params))
+        hold_s=_value(t.hold_s, params), label=t.label)
 
 
 def _group(g: GroupPlan, params: dict[str, float]) -> BoundGroup:

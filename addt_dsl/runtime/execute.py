@@ -31,7 +31,7 @@ from addt_dsl.runtime.road import resolve_route
 from addt_dsl.runtime.roadmesh import Elevation, build_scene
 from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.runtime.script import Script
-from addt_dsl.runtime.signals import compute_signals
+from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED, STEP_WAITING, compute_signals
 from addt_dsl.runtime.result import RunResult, Verdict, spec_json
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace, injection_count
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
@@ -179,6 +179,8 @@ class _Run:
         self.longitudinal: dict[str, object] = {}
         self.scripts: dict[str, Script] = {}
         self.deferred: list[tuple[AgentState, BoundClause]] = []  # time-0 behaviours with live settings
+        # Named steps (agent, `agent.label`, state), whose states are recorded per sample.
+        self.named_steps: list[tuple[AgentState, str, object]] = []
         for a in plan.agents:
             road = self._road_of(a)
             u = road.station(self._first_road(a), a.s)
@@ -197,6 +199,7 @@ class _Run:
                 self._start_behavior(st, clause, 0.0)
             if a.steps:
                 self.scripts[a.name] = Script(a.steps)
+                self.named_steps.extend((st, f"{a.name}.{n.label}", n) for n in self.scripts[a.name].named)
         self.agent_by_name = {a.name: a for a in self.agents}
         # Any actor on a path: agents find their leader by position (across roads), not by road.
         self.networked = isinstance(self.ego_road, _PathRoad) or any(
@@ -358,7 +361,7 @@ class _Run:
         trace = self._live_snapshot[1]
         return float(oracles.evaluate(expr, compute_signals(trace, oracles_signals(expr)), self.dt)[0])
 
-    def _start_behavior(self, agent: AgentState, clause: BoundClause, time_s: float) -> None:
+    def _start_behavior(self, agent: AgentState, clause: BoundClause, time_s: float):
         cls = BEHAVIORS.get(clause.name)
         settings = clause.settings
         road = self.agent_roads[agent.name]
@@ -371,6 +374,22 @@ class _Run:
         if beh.channel == "longitudinal":
             self.longitudinal[agent.name] = beh
         self.events.append(Event(time_s, "behavior", {"actor": agent.name, "behavior": clause.name}))
+        return beh
+
+    def behavior_ended(self, agent: AgentState, beh, time_s: float) -> bool:
+        """Whether a behaviour a step started has completed; one replaced on the
+        longitudinal channel never does (lateral moves check their own, Behavior.ended)."""
+        if beh.channel == "longitudinal" and self.longitudinal[agent.name] is not beh:
+            return False
+        return beh.ended(agent, self, time_s)
+
+    def step_states(self, time_s: float) -> dict[str, int]:
+        """The state code of each named step now (signals.STEP_*), ends updated first."""
+        out = {}
+        for agent, name, step in self.named_steps:
+            ended = step.update_end(time_s, lambda beh, t, _a=agent: self.behavior_ended(_a, beh, t))
+            out[name] = STEP_ENDED if ended else STEP_STARTED if step.fired else STEP_WAITING
+        return out
 
 
 def execute(spec: RunSpec, keep_trace: bool = True) -> RunResult:
@@ -411,6 +430,7 @@ def _loop(run: _Run) -> Trace:
     latency = {k: np.zeros(n) for k in lat_nodes}
     outputs = {"control.steer": np.zeros(n), "control.accel": np.zeros(n)}
     objects = np.zeros(n)
+    steps = {name: np.zeros(n, dtype=np.int8) for _, name, _ in run.named_steps}
     status, error = "ok", ""
     last = n
     sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
@@ -461,6 +481,9 @@ def _loop(run: _Run) -> Trace:
         outputs["control.steer"][k] = run.command[0]
         outputs["control.accel"][k] = run.command[1]
         objects[k] = run.stack.objects_seen
+        if steps:  # named steps: ended on the state just recorded
+            for name, code in run.step_states(t_now).items():
+                steps[name][k] = code
         if collided or k == n - 1:
             last = k + 1
             break
@@ -473,6 +496,9 @@ def _loop(run: _Run) -> Trace:
         # Scripted steps fire on the state just recorded.
         if run.scripts:
             _advance_scripts(run, rec, k, t_now)
+            if steps:  # steps that fired now are started at this sample
+                for name, code in run.step_states(t_now).items():
+                    steps[name][k] = code
 
         # Sensors → faults → transit to the stack.
         try:
@@ -527,7 +553,8 @@ def _loop(run: _Run) -> Trace:
         length, width = sizes[name]
         actors[name] = ActorTrack(name, length, width, **{f: v[:last] for f, v in r.items()}, frame=frames[name])
     return Trace(dt, time, actors, {k: v[:last] for k, v in latency.items()}, run.events,
-                 {k: v[:last] for k, v in outputs.items()}, objects[:last], status, error)
+                 {k: v[:last] for k, v in outputs.items()}, objects[:last], status, error,
+                 {k: v[:last] for k, v in steps.items()})
 
 
 @dataclass
@@ -592,7 +619,7 @@ def _advance_scripts(run: _Run, rec, k: int, t_now: float) -> None:
 
         def start(clause, time_s, _agent=agent, _name=name) -> None:
             run.events.append(Event(time_s, "trigger", {"actor": _name, "behavior": clause.name}))
-            run._start_behavior(_agent, clause, time_s)
+            return run._start_behavior(_agent, clause, time_s)
 
         script.advance(t_now, holds, start)
         if script.done:
@@ -614,7 +641,10 @@ def _snapshot_trace(run: _Run, rec, k: int) -> Trace:
     for name, r in rec.items():
         actors[name] = ActorTrack(name, *sizes[name], **{f: v[k:k + 1] for f, v in r.items()}, frame=frames[name])
     lat = {n: np.array([v]) for n, v in run.stack.latency.items()}
-    return Trace(run.dt, np.array([k * run.dt]), actors, lat)
+    trace = Trace(run.dt, np.array([k * run.dt]), actors, lat)
+    if run.named_steps:  # `when ended(lead.brake_hard)` reads the states now
+        trace.steps = {name: np.array([code], dtype=np.int8) for name, code in run.step_states(k * run.dt).items()}
+    return trace
 
 
 def judge(bound: BoundScenario, trace: Trace) -> list[Verdict]:

@@ -7,6 +7,12 @@ condition with `for D` must have held at every step for D)
 (starting its behaviour and arming its group), and is done once it fired and its group
 is done. A sequence arms each step when the previous one is done; a parallel group arms
 all its steps at once and is done when all are.
+
+A step has *started* once it fired; it has *ended* once the behaviour it started has
+completed (`Behavior.ended`) and its group, if any, has ended (every step of it). A
+behaviour replaced on its channel before it completes, or one without a natural end
+(`idm`, `keep_gap`, `walk`), never ends. Named steps record these states for
+`started(...)`/`ended(...)`.
 """
 
 from __future__ import annotations
@@ -17,9 +23,11 @@ from addt_dsl.runtime.bound import BoundClause, BoundGroup, BoundStep
 
 TIME_EPS_S = 1e-9
 
-# holds(condition) -> bool on the current state; start(clause, time_s) starts a behaviour.
+# holds(condition) -> bool on the current state; start(clause, time_s) starts a behaviour
+# and returns it; ended(behavior, time_s) -> whether that behaviour has completed.
 Holds = Callable[[object], bool]
-Start = Callable[[BoundClause, float], None]
+Start = Callable[[BoundClause, float], object]
+Ended = Callable[[object, float], bool]
 
 
 class StepState:
@@ -33,6 +41,26 @@ class StepState:
         self.group = GroupState(step.group) if step.group is not None else None
         self.armed_at: float | None = None
         self.fired = False
+        self.label = step.label
+        self.behavior = None  # the behaviour this step started
+        self.ended = False
+
+    def update_end(self, time_s: float, ended: Ended) -> bool:
+        """Whether the step has ended (latched: once ended, it stays ended)."""
+        if self.ended or not self.fired:
+            return self.ended
+        own = self.behavior is None or ended(self.behavior, time_s)
+        group = self.group is None or self.group.update_end(time_s, ended)
+        self.ended = own and group
+        return self.ended
+
+    def named(self):
+        """This step and the steps under it that have a name."""
+        if self.label is not None:
+            yield self
+        if self.group is not None:
+            for s in self.group.steps:
+                yield from s.named()
 
     @property
     def done(self) -> bool:
@@ -70,7 +98,7 @@ class StepState:
                     return
             self.fired = True
             if self.clause is not None:
-                start(self.clause, time_s)
+                self.behavior = start(self.clause, time_s)
             if self.group is not None:
                 self.group.arm(time_s)
         if self.group is not None:
@@ -97,6 +125,9 @@ class GroupState:
     def needs_state(self) -> bool:
         return any(s.needs_state() for s in self.steps)
 
+    def update_end(self, time_s: float, ended: Ended) -> bool:
+        return all([s.update_end(time_s, ended) for s in self.steps])  # every step updated
+
     def advance(self, time_s: float, holds: Holds, start: Start) -> None:
         if self.mode == "parallel":
             for s in self.steps:
@@ -119,6 +150,7 @@ class Script:
         self.steps = [StepState(t) for t in steps]
         for s in self.steps:
             s.arm(0.0)
+        self.named = [n for s in self.steps for n in s.named()]
 
     @property
     def done(self) -> bool:

@@ -21,8 +21,9 @@ def canonical(fn: str, args: tuple[str, ...]) -> str:
 
 class SignalFn:
     keyword: str = ""
-    args: tuple[str, ...] = ("actor",)  # "actor" | "node"
+    args: tuple[str, ...] = ("actor",)  # "actor" | "node" | "step" (a named step, `lead.brake_hard`)
     dim = units.DIMENSIONLESS
+    boolean = False  # a state (+1 holds, -1 not), usable as a formula on its own
     doc = ""
 
     @staticmethod
@@ -183,6 +184,42 @@ class ObjectCount(SignalFn):
     @staticmethod
     def compute(trace, args):
         return trace.object_count if trace.object_count is not None else np.zeros_like(trace.time)
+
+
+# Step states recorded in `Trace.steps` (one code per sample, for each named step).
+STEP_WAITING, STEP_STARTED, STEP_ENDED = 0, 1, 2
+
+
+def _step_state(trace, name: str) -> np.ndarray:
+    state = trace.steps.get(name)
+    return np.zeros_like(trace.time) if state is None else np.asarray(state)
+
+
+@SIGNALS.register
+class Started(SignalFn):
+    keyword = "started"
+    args = ("step",)
+    boolean = True
+    doc = ("whether a named step has fired (started its behaviour or group), also once it ended "
+           "(OpenSCENARIO StoryboardElementStateCondition, startTransition)")
+
+    @staticmethod
+    def compute(trace, args):
+        return np.where(_step_state(trace, args[0]) >= STEP_STARTED, 1.0, -1.0)
+
+
+@SIGNALS.register
+class Ended(SignalFn):
+    keyword = "ended"
+    args = ("step",)
+    boolean = True
+    doc = ("whether a named step's behaviour has completed: a lane change in its lane, a brake at "
+           "its speed, a speed profile past its last point, a group when all its steps ended "
+           "(OpenSCENARIO StoryboardElementStateCondition, endTransition)")
+
+    @staticmethod
+    def compute(trace, args):
+        return np.where(_step_state(trace, args[0]) >= STEP_ENDED, 1.0, -1.0)
 
 
 def compute_signals(trace, names: set[str]) -> dict[str, np.ndarray]:

@@ -67,6 +67,9 @@ class Trace:
     object_count: np.ndarray | None = None
     status: str = "ok"  # ok | detected (exception / NaN / watchdog)
     error: str = ""
+    # State of each named step (`lead.brake_hard`) per sample: 0 waiting, 1 started,
+    # 2 ended (runtime/signals.py STEP_*).
+    steps: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -121,5 +124,8 @@ class Trace:
                     h.update(np.asarray(d[column], dtype=np.float64).tobytes())
                 continue
             h.update(repr((e.time_s, e.kind, sorted(d.items()))).encode())
+        for name in sorted(self.steps):  # none without named steps: earlier digests hold
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(self.steps[name], dtype=np.int8).tobytes())
         h.update(self.status.encode())
         return h.hexdigest()

@@ -116,6 +116,8 @@ def trace_arrays(trace) -> dict[str, np.ndarray]:
         arrays[f"output.{name}"] = values
     if trace.object_count is not None:
         arrays["objects"] = trace.object_count
+    for name, state in trace.steps.items():  # named steps: 0 waiting, 1 started, 2 ended
+        arrays[f"step.{name}"] = state
     return arrays
 
 

@@ -461,7 +461,7 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
         return P.TriggerPlan(clause=clause) if clause is not None else None
     if isinstance(node, ast.Group):
         group = _lower_group(ctx, node, actor, road)
-        return P.TriggerPlan(group=group) if group is not None else None
+        return P.TriggerPlan(group=group, label=node.label) if group is not None else None
     starts: dict[str, ast.StepStart] = {}
     ok = True
     for st in node.starts:
@@ -507,7 +507,8 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
         ok = ok and clause is not None
     if not ok:
         return None
-    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after, group=group, hold_s=hold)
+    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after, group=group, hold_s=hold,
+                         label=node.label)
 
 
 def _lower_group(ctx: Context, node: ast.Group, actor: ast.ActorDecl, road: str | None) -> P.GroupPlan | None:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import Context
+from addt_dsl.diagnostics import Span
 
 
 @dataclass(frozen=True)
@@ -14,11 +15,12 @@ class Declarations:
     roads_ast: dict[str, ast.RoadDecl]
     params_ast: dict[str, ast.ParamDecl]
     actors_ast: dict[str, ast.ActorDecl]
+    step_names: dict[str, Span]  # `actor.label` of each named step
 
 
 def rule_names(ctx: Context) -> Declarations:
     """Collect declarations; duplicates are errors."""
-    out = Declarations({}, {}, {})
+    out = Declarations({}, {}, {}, {})
     for kind, table in ((ast.RoadDecl, out.roads_ast), (ast.ParamDecl, out.params_ast),
                         (ast.ActorDecl, out.actors_ast)):
         for d in ctx.defs(kind):
@@ -31,6 +33,15 @@ def rule_names(ctx: Context) -> Declarations:
                                f"the parameter is defined at {out.params_ast[d.name].span}")
                 continue
             table[d.name] = d
+    labels: dict[str, Span] = {}  # unique in the scenario, so a label names one step
+    for actor in out.actors_ast.values():
+        for node in _named(actor.steps):
+            if node.label in labels:
+                ctx.sink.error("E0102", f"step '{node.label}' is named twice", node.label_span,
+                               f"first named at {labels[node.label]}")
+                continue
+            labels[node.label] = node.label_span
+            out.step_names[f"{actor.name}.{node.label}"] = node.label_span
     egos = [a for a in ctx.defs(ast.ActorDecl) if a.is_ego]
     if not egos:
         ctx.sink.error("E0103", f"scenario '{ctx.scenario.name}' has no ego vehicle", ctx.scenario.span,
@@ -39,3 +50,14 @@ def rule_names(ctx: Context) -> Declarations:
         ctx.sink.error("E0103", f"scenario '{ctx.scenario.name}' has no road", ctx.scenario.span,
                        "add e.g. `road main { line length 500 m }`")
     return out
+
+
+def _named(items):
+    """The named steps and groups of a script, depth first in source order."""
+    for item in items:
+        if isinstance(item, (ast.Step, ast.Group)) and item.label is not None:
+            yield item
+        if isinstance(item, ast.Step):
+            yield from _named((item.action,))
+        elif isinstance(item, ast.Group):
+            yield from _named(item.items)

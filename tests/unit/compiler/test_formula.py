@@ -73,7 +73,7 @@ ACTORS, NODES = ("ego", "lead"), ("planner", "e2e")
 def _signal_texts(dim) -> list[str]:
     out = []
     for cls in SIGNALS.classes():
-        if cls.dim != dim:
+        if cls.dim != dim or cls.boolean:  # step states are formulas (see STATES)
             continue
         pools = [ACTORS if kind == "actor" else NODES for kind in cls.args]
         if not pools:
@@ -115,9 +115,13 @@ windows = st.one_of(st.just(""), seconds.map(lambda t: f" within {t}"), seconds.
                         lambda w: f" during [{w[0]!r} s, {w[0] + w[1]!r} s]"))
 
 
+STATES = st.sampled_from([f"{fn}({a}.{step})" for fn in ("started", "ended") for a in ACTORS
+                          for step in ("brake_hard", "swerve")])
+
+
 def formulas(depth: int = 3):
     """Formula text, every operand in parentheses: the printer decides which ones it needs."""
-    leaf = st.one_of(comparisons, st.sampled_from(["true", "false"]))
+    leaf = st.one_of(comparisons, st.sampled_from(["true", "false"]), STATES)
     if depth == 0:
         return leaf
     sub = formulas(depth - 1)

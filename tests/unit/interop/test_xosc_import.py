@@ -275,3 +275,62 @@ def test_a_live_target_without_an_openscenario_form_travels_as_a_controller(tmp_
     assert "behavior cruise speed 2 * speed(ego) - 1 m/s" in got.text
     faster = next(a for a in got.plan.agents if a.name == "faster")
     assert faster.behaviors[0].settings["speed"] == next(a for a in plan.agents if a.name == "faster").behaviors[0].settings["speed"]
+
+
+FOLLOWER_EVENT = """
+            <ManeuverGroup maximumExecutionCount="1" name="FollowerGroup">
+               <Actors selectTriggeringEntities="false">
+                  <EntityRef entityRef="Follower"/>
+               </Actors>
+               <Maneuver name="FollowerManeuver">
+                  <Event name="FollowerBrake" priority="overwrite">
+                     <Action name="FollowerBrakeAction">
+                        <PrivateAction>
+                           <LongitudinalAction>
+                              <SpeedAction>
+                                 <SpeedActionDynamics dynamicsShape="linear" value="-4" dynamicsDimension="rate"/>
+                                 <SpeedActionTarget>
+                                    <AbsoluteTargetSpeed value="0"/>
+                                 </SpeedActionTarget>
+                              </SpeedAction>
+                           </LongitudinalAction>
+                        </PrivateAction>
+                     </Action>
+                     <StartTrigger>
+                        <ConditionGroup>
+                           <Condition name="AfterBrake" delay="0" conditionEdge="rising">
+                              <ByValueCondition>
+                                 <StoryboardElementStateCondition storyboardElementType="event"
+                                    storyboardElementRef="BrakeEvent" state="%s"/>
+                              </ByValueCondition>
+                           </Condition>
+                        </ConditionGroup>
+                     </StartTrigger>
+                  </Event>
+               </Maneuver>
+            </ManeuverGroup>
+"""
+
+
+@pytest.mark.parametrize("state,fn", [("endTransition", "ended"), ("startTransition", "started")])
+def test_another_actors_event_state_becomes_a_named_step(state, fn, tmp_path):
+    """StoryboardElementStateCondition on another actor's translated event: that event's
+    step is named and this one starts on `ended(...)`/`started(...)` of it."""
+    text = (ESMINI / "xosc" / "cut-in_simple.xosc").read_text()
+    text = text.replace('      <ScenarioObject name="OverTaker">', '      <ScenarioObject name="Follower">\n'
+                        '         <CatalogReference catalogName="VehicleCatalog" entryName="$TargetVehicle"/>\n'
+                        '      </ScenarioObject>\n      <ScenarioObject name="OverTaker">', 1)
+    init = text[text.index('            <Private entityRef="OverTaker">'):text.index("         </Actions>")]
+    text = text.replace("         </Actions>", init.replace('"OverTaker"', '"Follower"')
+                        .replace('ds="-20"', 'ds="-40"') + "         </Actions>", 1)
+    text = text.replace("            </ManeuverGroup>\n", "            </ManeuverGroup>\n" + FOLLOWER_EVENT % state, 1)
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "two.xosc"
+    path.write_text(text)
+    got = import_xosc(path, root=tmp_path / "esmini")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    assert "BrakeEvent: when " in got.text and f"when {fn}(OverTaker.BrakeEvent) then behavior brake" in got.text
+    for name, body in got.side_files.items():
+        (tmp_path / name).write_text(body)
+    result = compile_source(got.text, "imported.addt", base_dir=tmp_path)
+    assert result.ok, [d.message for d in result.diagnostics]

@@ -49,7 +49,7 @@ scenario kitchen_sink {
   }
   agent lead truck on main lane -1 at 10 m + gap speed v_lead length 10 m {
     behavior cruise speed v_lead accel 1 m/s^2
-    when distance(ego, lead) < brake_at then behavior brake decel 5 m/s^2 to_speed 2 m/s
+    brake_hard: when distance(ego, lead) < brake_at then behavior brake decel 5 m/s^2 to_speed 2 m/s
   }
   agent bike cyclist on main lane -2 at 60 m speed 4 m/s offset -0.5 m
 
@@ -69,6 +69,7 @@ scenario kitchen_sink {
     hard safe: (speed(ego) < 30 m/s until within 3 s s(ego) > 20 m) implies eventually after 1 s gap(ego, lead) >= -(2 * 1 m)
     always latency(e2e) < 0.2 s and objects() >= 0
     always 2 * gap(ego, lead) / speed(lead) > -1 s
+    warn slowed: always (ended(lead.brake_hard) implies started(lead.brake_hard) and speed(lead) < 2.5 m/s)
   }
 
   sweep {
@@ -110,7 +111,7 @@ NODES = ("perception", "tracker", "planner", "control", "e2e")
 def _signals_of(dim) -> list[E.Signal]:
     out = []
     for cls in SIGNALS.classes():
-        if cls.dim != dim:
+        if cls.dim != dim or cls.boolean:  # step states are formulas, not values
             continue
         pools = [ACTORS if kind == "actor" else NODES for kind in cls.args]
         if not pools:

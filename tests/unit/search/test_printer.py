@@ -279,3 +279,47 @@ def test_any_road_id_prints_as_one_route_stop(road_id):
     source = parse_source(text, "r.addt", DiagnosticSink())
     actor = next(d for d in source.scenarios[0].definitions if hasattr(d, "route"))
     assert actor.route.stops == ("1", road_id)
+
+
+NAMED_STEPS = """
+scenario named {
+  duration 10 s
+  road r {
+    line length 300 m
+    lanes right 2
+  }
+  ego car on r lane -1 at 10 m speed 10 m/s
+  agent lead car on r lane -1 at 50 m speed 10 m/s {
+    %s: at 2 s behavior brake decel 4 m/s^2 to_speed 5 m/s
+    %s: when ended(lead.%s) then sequence {
+      behavior lane_change to -2 duration 2 s
+      %s: parallel {
+        behavior cruise speed 8 m/s
+      }
+    }
+  }
+  agent other car on r lane -2 at 20 m {
+    when started(lead.%s) and not ended(lead.%s) for 0.5 s then behavior cruise speed 12 m/s
+  }
+  expect {
+    went: eventually ended(lead.%s) or started(lead.%s)
+  }
+}
+"""
+
+labels = st.from_regex(r"[a-z][a-z0-9_]{0,8}", fullmatch=True).filter(
+    lambda w: w not in {"at", "after", "when", "then", "behavior", "behaviour", "sequence", "parallel",
+                        "set", "sensor", "stack", "lane", "and", "or", "not", "ended", "started"})
+
+
+@FAST
+@given(st.lists(labels, min_size=3, max_size=3, unique=True))
+def test_named_steps_and_their_states_round_trip(names):
+    """Labels on steps and groups, and `started(...)`/`ended(...)` in triggers and oracles,
+    print back to the same plan."""
+    a, b, c = names
+    result = compile_source(NAMED_STEPS % (a, b, a, c, c, b, b, a), path="named.addt")
+    assert result.ok, render_text(result.diagnostics, result.sources)
+    text = print_plan(result.plan, keep_user_text=False)
+    assert f"{a}: at 2 s" in text and f"{c}: parallel {{" in text and f"ended(lead.{a})" in text
+    assert semantic_key(_recompile(text)) == semantic_key(result.plan)
