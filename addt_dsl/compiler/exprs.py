@@ -13,6 +13,7 @@ from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.diagnostics import DiagnosticSink
+from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.registry import SIGNALS
 from addt_dsl.units import Dim
 
@@ -33,6 +34,7 @@ class Scope:
     # Trace signals named directly (`x`, for formulas over synthetic traces given on their
     # own, see compiler.formula); a scenario has none.
     named_signals: dict[str, Dim] = field(default_factory=dict)
+    lights: set[str] = field(default_factory=set)  # traffic-light controllers: `light(west)`
 
 
 def _ty_str(ty) -> str:
@@ -112,6 +114,8 @@ class ExprLowering:
             return E.Param(name=parts[0]), ("num", self.scope.params[parts[0]])
         if len(parts) == 2 and parts[0] in self.scope.actors:
             return self._signal(node, parts[1], (parts[0],))
+        if len(parts) == 1 and parts[0] in LIGHT_STATES and self.scope.lights and self.scope.allow_signals:
+            return E.Num(value=LIGHT_STATES[parts[0]]), ("num", units.DIMENSIONLESS)  # `light(west) == red`
         if len(parts) == 1 and parts[0] in self.scope.actors:
             self.sink.error("E0204", f"'{parts[0]}' is an actor, not a value", node.span,
                             f"use one of its signals, e.g. `{parts[0]}.speed`")
@@ -145,10 +149,11 @@ class ExprLowering:
             self.sink.error("E0204", f"'{fn}' takes {len(cls.args)} argument(s), got {len(args)}", node.span)
             return None, None
         for kind, arg in zip(cls.args, args):
-            pool = self.scope.actors if kind == "actor" else self.scope.nodes
+            pool = {"actor": self.scope.actors, "light": self.scope.lights}.get(kind, self.scope.nodes)
             if arg not in pool:
-                self.sink.error("E0101", f"unknown {kind} '{arg}' in {fn}(...)", node.span,
-                                f"{kind}s: {', '.join(sorted(pool))}")
+                what = "traffic-light controller" if kind == "light" else kind
+                self.sink.error("E0405" if kind == "light" else "E0101", f"unknown {what} '{arg}' in {fn}(...)",
+                                node.span, f"{what}s: {', '.join(sorted(pool)) or '(none; declare one in `lights { }`)'}")
                 return None, None
         return E.Signal(name=f"{fn}({','.join(args)})"), ("num", cls.dim)
 

@@ -29,6 +29,9 @@ def build_plan(ctx: Context) -> ScenarioPlan:
         faults=ctx.faults,
         oracles=ctx.oracles,
         sweep=ctx.sweep,
+        signals=ctx.signals,
+        controllers=ctx.controllers,
+        light_steps=ctx.light_steps,
     )
 
 

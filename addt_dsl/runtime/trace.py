@@ -67,6 +67,11 @@ class Trace:
     object_count: np.ndarray | None = None
     status: str = "ok"  # ok | detected (exception / NaN / watchdog)
     error: str = ""
+    # Traffic lights: each controller's state code per sample (plan.LIGHT_STATES), and each
+    # actor's margin to running a red light [m] (signals `light`, `red_light`); empty
+    # without lights.
+    lights: dict[str, np.ndarray] = field(default_factory=dict)
+    red_margin: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -122,4 +127,9 @@ class Trace:
                 continue
             h.update(repr((e.time_s, e.kind, sorted(d.items()))).encode())
         h.update(self.status.encode())
+        # Only scenarios with lights hash them: digests of the others stay what they were.
+        for label, table in (("light:", self.lights), ("red_margin:", self.red_margin)):
+            for name in sorted(table):
+                h.update((label + name).encode())
+                h.update(np.ascontiguousarray(table[name]).tobytes())
         return h.hexdigest()

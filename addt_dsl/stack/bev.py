@@ -288,7 +288,8 @@ class BevStack:
                          o.length * rc + o.width * rs, o.length * rs + o.width * rc))
         hdg0 = heading - float(road.reference_pose(s0)[2])
         plan = self.planner.plan((float(s0), float(t0), lane0), speed, objs, road, road_id, time_s,
-                                 self.corrupt, (speed * math.cos(hdg0), speed * math.sin(hdg0)))
+                                 self.corrupt, (speed * math.cos(hdg0), speed * math.sin(hdg0)),
+                                 self.ctx.stop_line_ahead(float(s0)))
         if plan.aeb_stage != self.aeb_stage:
             self.ctx.event("aeb", stage=plan.aeb_stage, ttc_s=plan.ttc_s if math.isfinite(plan.ttc_s) else None)
             self.aeb_stage = plan.aeb_stage

@@ -128,6 +128,9 @@ class _RemoteContext:
     def sensor(self, name: str):
         return self.sensors[name]
 
+    def stop_line_ahead(self, s: float):
+        return None  # traffic-light states are not sent over the bridge protocol (yet)
+
     def actor_by_body(self, body: int):
         return self.actors.get(body)
 
