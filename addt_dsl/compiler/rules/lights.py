@@ -58,10 +58,15 @@ def rule_lights(ctx: Context) -> Lights | None:
     out = Lights([], [], [])
     inline: dict[str, P.SignalPlan] = {}
     defs = [i for i in items if isinstance(i, ast.LightDef)]
+    # A bare `light NAME state S` line (no start condition) reads as a definition: it is a
+    # state change at time 0.
+    items = [ast.Clause(i.span, "light", i.name, i.name_span, i.settings)
+             if isinstance(i, ast.LightDef) and i.kind == "light" else i for i in items]
+    defs = [i for i in items if isinstance(i, ast.LightDef)]
     for d in defs:
         if d.kind not in ("signal", "controller"):
             ctx.sink.error("E0106", f"unknown lights item '{d.kind}'", d.kind_span,
-                           *suggest(d.kind, ("signal", "controller")), "items: signal, controller, steps")
+                           *suggest(d.kind, ("signal", "controller")), "items: signal, controller, light steps")
     seen: dict[str, ast.LightDef] = {}
     for d in defs:
         if d.kind in ("signal", "controller"):
