@@ -119,6 +119,15 @@ class _Context:
     def sensor(self, name: str):
         return self.run.sensors[name]
 
+    def junction_ahead(self, s: float):
+        """(entry station [m], x, y of its conflict point [m]) of the next junction on the
+        ego's route that its front has not left, or None (no route, or past the last)."""
+        front = s + 0.5 * self.run.ego_plan.length_m
+        for entry, exit_, cx, cy in self.run.ego_junctions:
+            if exit_ > front:
+                return entry, cx, cy
+        return None
+
     def stop_line_ahead(self, s: float):
         """(station [m] on the ego's road or route, state code) of the next traffic light's
         stop line ahead of the ego's front at station `s`, or None: the map and the light's
@@ -219,6 +228,7 @@ class _Run:
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self._setup_lights(plan)
+        self.ego_junctions = self._junctions(self.ego_road)
         self.ctx = _Context(self)
         stack_clause = ego.stack
         stack_cls = STACKS.get(stack_clause.name)
@@ -244,6 +254,20 @@ class _Run:
         self.stop_stations["ego"] = self._stations(self.ego_road, plan.ego, lines.get(plan.ego.road, []))
         for a in plan.agents:
             self.stop_stations[a.name] = self._stations(self.agent_roads[a.name], a, lines.get(a.road, []))
+
+    @staticmethod
+    def _junctions(road: _Road) -> list[tuple[float, float, float, float]]:
+        """(entry, exit station [m], conflict point x, y [m]) of each junction leg of a path."""
+        if not isinstance(road, _PathRoad):
+            return []
+        out = []
+        for leg in road.road.legs:
+            r = road.network.road(leg.road_id)
+            if r.junction in ("", "-1"):
+                continue
+            x, y, _ = r.lane_center(leg.lane, 0.5 * (leg.s_from + leg.s_to))
+            out.append((road.station(leg.road_id, leg.s_from), road.station(leg.road_id, leg.s_to), float(x), float(y)))
+        return out
 
     @staticmethod
     def _stations(road: _Road, actor: BoundActor, lines) -> list[StopStation]:

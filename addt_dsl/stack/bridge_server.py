@@ -131,6 +131,9 @@ class _RemoteContext:
     def stop_line_ahead(self, s: float):
         return None  # traffic-light states are not sent over the bridge protocol (yet)
 
+    def junction_ahead(self, s: float):
+        return None  # nor the junctions of the ego's route
+
     def actor_by_body(self, body: int):
         return self.actors.get(body)
 

@@ -95,3 +95,27 @@ def test_red_light_runner_example():
         tr = out.trace
         stopper = tr.actors["stopper"]
         assert stopper.speed[-1] < 0.1  # waiting at the light on road 3
+
+
+def test_the_ego_gives_way_at_a_junction_with_yield_gap():
+    plan = compile_file(EXAMPLES / "left_turn_yield.addt").plan
+    for spec in expand(plan).specs[1:]:  # the oncoming car at 240 m and 260 m: too close to go first
+        out = execute(spec)
+        assert out.passed, out.verdicts
+        tr = out.trace
+        ego, other = tr.actors["ego"], tr.actors["oncoming"]
+        entry = 93.7  # road 0's length: the ego's route reaches junction 4 there
+        waiting = ego.speed < 0.1
+        assert waiting.any()
+        front = ego.s + 0.5 * ego.length_m
+        assert front[waiting].max() <= entry  # it waits before the junction ...
+        k = np.argmax(front > entry + 1.0)
+        # ... and enters once the oncoming car is past the junction (its station beyond the
+        # junction's middle), not before
+        assert np.hypot(other.x[k] - ego.x[k], other.y[k] - ego.y[k]) > 5.0
+        assert front[-1] > entry + 40.0  # and completes the turn
+    # Off by default: the same run without `yield_gap` does not wait at the entry.
+    base = compile_file(EXAMPLES / "left_turn.addt").plan
+    out = execute(expand(base).specs[2])
+    front = out.trace.actors["ego"].s + 0.5 * out.trace.actors["ego"].length_m
+    assert (out.trace.actors["ego"].speed[front <= 93.7] > 1.0).all()
