@@ -2,9 +2,11 @@
 
     addtc FILE [--jobs N] [--out DIR]     compile and run the file's sweep, print verdicts
     addtc DIR|FILE... [--by PARAM]        a suite: each file's sweep, one combined table
-        [--executor local|ray] [--address ADDR] [--store PATH] [--timeout S] [--junit FILE]
+        [--executor local|ray] [--address ADDR] [--store PATH] [--timeout auto|S|0] [--retries N]
+        [--junit FILE]
         [--classify]                      also classify each run against its fault-free twin
     addtc report DIR                      HTML report, summary.json, runs.csv of a results dir
+    addtc report DIR --salvage NEW        copy a damaged store's readable runs into a new store
     addtc trace DIR RUN_ID [--csv F] [--parquet F] [--plot F.png]   one run's signals and events
     addtc check FILE...                   compile only (diagnostics and the sweep's cost estimate)
     addtc plan FILE                       print the ScenarioPlan as JSON (the cost estimate on stderr)
@@ -13,10 +15,12 @@
     addtc shrink FILE | --run-key JSON    shrink a failing run to a minimal replayable .addt file
     addtc falsify FILE [--budget-runs N]  search parameters and faults for failures
     addtc study perception|classify|table ...  fault studies (perception errors by band, outcomes)
+    addtc export FILE [--run ID | --params K=V ...] --to DIR   one run as OpenSCENARIO + OpenDRIVE
+    addtc import FILE.xosc [-o FILE.addt] [--root DIR]          OpenSCENARIO to .addt (docs/openscenario.md)
 
 Exit codes (addt_dsl/errors.py): 0 every run passed, 1 at least one run failed an oracle,
-2 usage or scenario error, 3 the tool could not complete (runs crashed or timed out, the
-store is unusable, internal error). Set ADDT_DEBUG=1 to see the traceback of an internal error.
+2 usage or scenario error, 3 the tool could not complete (runs crashed, timed out or were
+lost after their retries, the store is unusable or in use, the disk is full, internal error). Set ADDT_DEBUG=1 to see the traceback of an internal error.
 """
 
 from __future__ import annotations
@@ -33,11 +37,11 @@ from pathlib import Path
 
 from addt_dsl.console import compile_and_report
 from addt_dsl.diagnostics import render_json
-from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, UsageError, nonneg_float, nonneg_int,
-                             positive_float, positive_int, verdict_exit_code)
+from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, ToolError, UsageError, nonneg_float,
+                             nonneg_int, positive_int, time_bound, verdict_exit_code)
 from addt_dsl.limits import DEFAULT, parse_limit
 
-SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map")
+SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map", "export", "import")
 
 
 def cmd_check(args) -> int:
@@ -184,6 +188,9 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
     except StoreMismatch as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except ToolError as exc:  # damaged, foreign, read-only or busy: this file fails, a suite goes on
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INCOMPLETE
     try:
         if args.classify:
             executor = _classifying(args, stream, store, executor)
@@ -197,6 +204,9 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
     except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except ToolError as exc:  # e.g. the disk filled up: committed runs stay, a resume goes on
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INCOMPLETE
     finally:
         store.close()
         if tmp is not None:
@@ -214,13 +224,13 @@ def _executor(args):
         if not ray_available():
             raise UsageError("--executor ray needs the `ray` package (pip install 'addt-dsl[ray]')")
         return RayExecutor(address=args.address, jobs=args.jobs if args.jobs_given else None,
-                           timeout_s=args.timeout, memory_limit_mb=args.memory_limit)
+                           timeout_s=args.timeout, memory_limit_mb=args.memory_limit, retries=args.retries)
     if args.address:
         raise UsageError("--address is for --executor ray")
     from addt_dsl.runtime.executor import LocalExecutor
 
     return LocalExecutor(args.jobs, timeout_s=args.timeout, memory_limit_mb=args.memory_limit,
-                         max_tasks_per_child=args.max_tasks_per_child)
+                         max_tasks_per_child=args.max_tasks_per_child, retries=args.retries)
 
 
 def _classifying(args, stream, store, executor):
@@ -263,6 +273,7 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
               "run the same command again to resume", file=sys.stderr)
         return 130
     store.set_meta("rejected", dict(stream.rejected))
+    store.set_meta("not_done", [r.run_id for r in outcome.lost])
     for text, n in stream.rejected.most_common():
         print(f"note: assumption `{text}` rejected {n} candidate run(s)", file=sys.stderr)
     totals = store_summary(store)
@@ -280,12 +291,21 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
         if not quiet:  # one line per file; the suite prints the combined table
             failing = [f"{r.run_id} ({', '.join(r.failed_oracles) or r.status})" for r in store.failing(limit=5)]
             warned = f", {totals['warned']} with warnings" if totals.get("warned") else ""
-            print(f"{plan.name}: {totals['passed']} passed, {totals['failed']} failed{warned}"
+            errors = f", {totals['errors']} error(s)" if totals.get("errors") else ""
+            print(f"{plan.name}: {totals['passed']} passed, {totals['failed']} failed{errors}{warned}"
                   + (f"; e.g. {', '.join(failing)}" if failing else ""), file=sys.stderr)
     else:
         print_verdicts(plan, shown_records(store), totals, fmt=args.format)
     if not quiet and outcome.skipped:
         print(f"({outcome.skipped} run(s) taken from the store, {outcome.ran} executed now)", file=sys.stderr)
+    if getattr(executor, "retried", 0) and not quiet:
+        print(f"note: {executor.retried} run attempt(s) did not finish and were run again", file=sys.stderr)
+    if outcome.lost:
+        ids = ", ".join(r.run_id for r in outcome.lost[:5]) + (", ..." if len(outcome.lost) > 5 else "")
+        print(f"error: {len(outcome.lost)} run(s) could not be completed ({ids}: "
+              f"{outcome.lost[0].error.splitlines()[0]}); they are not stored: run the same command again "
+              "to run them", file=sys.stderr)
+        return EXIT_INCOMPLETE
     return verdict_exit_code(totals["statuses"], totals["failed"])
 
 
@@ -311,6 +331,8 @@ def cmd_report(args) -> int:
     from addt_dsl.reporting.summary import store_summary, write_csv, write_parquet
 
     target = Path(args.dir)
+    if args.salvage:
+        return _salvage(target, Path(args.salvage))
     out = Path(args.out) if args.out else (target.parent if target.is_file() else target)
     with _open_store(target) as store:
         totals = store_summary(store)
@@ -324,17 +346,36 @@ def cmd_report(args) -> int:
             else:
                 write_csv(store, export)
         print(f"wrote {path}")
+    if totals.get("not_done"):
+        print(f"error: {len(totals['not_done'])} run(s) of the sweep could not be completed and are not in "
+              "the store: run the sweep's command again to run them", file=sys.stderr)
+        return EXIT_INCOMPLETE
     return verdict_exit_code(totals["statuses"], totals["failed"])
 
 
-def _open_store(target: Path):
-    """The results store of a directory written by `--out`, or a store file."""
-    from addt_dsl.runtime.store import ResultStore
-
+def _store_path(target: Path) -> Path:
     store_path = target if target.is_file() else target / "results.sqlite"
     if not store_path.exists():
         raise UsageError(f"no results store at {store_path} (run `addtc FILE --out DIR` first)")
-    return ResultStore(store_path)
+    return store_path
+
+
+def _open_store(target: Path):
+    """The results store of a directory written by `--out`, or a store file, read-only
+    (readers never write it: a read-only store or one a sweep is writing both work)."""
+    from addt_dsl.runtime.store import ResultStore
+
+    return ResultStore(_store_path(target), readonly=True)
+
+
+def _salvage(target: Path, into: Path) -> int:
+    """`addtc report DIR --salvage NEW`: copy a damaged store's readable runs into NEW."""
+    from addt_dsl.runtime.store import ResultStore
+
+    copied, lost = ResultStore.salvage(_store_path(target), into)
+    print(f"salvaged {copied} run(s) into {into}" + (f"; {lost} unreadable run(s) left out" if lost else "")
+          + f"; resume the sweep with `addtc FILE --store {into}` (it runs the missing ones)")
+    return EXIT_OK
 
 
 def cmd_trace(args) -> int:
@@ -420,8 +461,12 @@ def build_parser() -> argparse.ArgumentParser:
                                      "(default: OUT/results.sqlite, else a temporary file)")
     run.add_argument("--fresh", action="store_true", help="discard the store's results before running")
     run.add_argument("--junit", metavar="FILE", help="write JUnit XML (one testcase per run)")
-    run.add_argument("--timeout", type=positive_float, default=None, metavar="SECONDS",
-                     help="wall-clock limit per run; a run past it is recorded as `timeout`")
+    run.add_argument("--timeout", type=time_bound, default="auto", metavar="SECONDS",
+                     help="wall-clock limit per run; a run past it is recorded as `timeout` (default auto: "
+                          "60 s + 10 x the simulated duration; 0: no limit)")
+    run.add_argument("--retries", type=nonneg_int, default=2, metavar="N",
+                     help="run again a run that did not finish (its worker killed from outside: up to N "
+                          "times; a crash or timeout: once); default 2")
     run.add_argument("--memory-limit", type=nonneg_float, default=4096, metavar="MB",
                      help="resident memory per worker; a run past it is recorded as `memory` (0: off)")
     run.add_argument("--max-tasks-per-child", type=positive_int, default=500, metavar="N",
@@ -443,6 +488,9 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--export", action="append", metavar="FILE",
                         help="also export the runs table (.csv or .parquet); repeatable")
     report.add_argument("--animations", type=nonneg_int, default=4, metavar="N")
+    report.add_argument("--salvage", metavar="NEW.sqlite",
+                        help="copy the readable runs of a damaged store into a new store (then resume with "
+                             "--store NEW.sqlite)")
     report.set_defaults(func=cmd_report)
     trace = sub.add_parser("trace", help="one stored run's signals and events (executes its RunSpec again)")
     trace.add_argument("dir", help="directory written by --out (or a results .sqlite file)")
@@ -474,6 +522,9 @@ def build_parser() -> argparse.ArgumentParser:
     from addt_dsl.search.commands import add_commands
 
     add_commands(sub)
+    from addt_dsl.interop.commands import add_commands as add_interop_commands  # export, import
+
+    add_interop_commands(sub)
     # Listed for `addtc --help` only: `main` hands every `addtc study ...` argument to the
     # studies' own parser (addt_dsl/studies.py), --help included.
     sub.add_parser("study", add_help=False,
@@ -517,6 +568,9 @@ def guarded(command, *args) -> int:
     except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except ToolError as exc:  # says what is wrong and what to do: no "internal error"
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INCOMPLETE
     except (FileNotFoundError, IsADirectoryError, NotADirectoryError) as exc:  # a path the user gave
         print(f"error: {exc.strerror or exc}: {exc.filename}" if exc.filename else f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE

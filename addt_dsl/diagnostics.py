@@ -93,10 +93,14 @@ CODES: dict[str, str] = {
     "E0501": "unsatisfiable constraints",
     "E0601": "feature needs a package that is not installed",
     "E0701": "beyond a documented limit (input size or sweep cost)",
+    "E0801": "unreadable OpenSCENARIO file (malformed XML, a DTD or entity, too large)",
+    "E0802": "invalid OpenSCENARIO content (missing element, attribute or reference)",
     "E0900": "internal compiler error",
     "W0001": "unused parameter",
     "W0002": "setting has no effect",
     "W0003": "sensor unlike the one the stack is made for",
+    "W0801": "OpenSCENARIO element not translated",
+    "W0802": "OpenSCENARIO value approximated or defaulted",
 }
 
 

@@ -18,12 +18,24 @@ import argparse
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INCOMPLETE = 0, 1, 2, 3
 
-# Run statuses that mean the tool, not the system under test, did not finish the run.
-INCOMPLETE_STATUSES = ("crashed", "timeout", "memory")
+# Run statuses that mean the tool, not the system under test, did not finish the run
+# (`lost`: its worker was killed from outside on every attempt; such a run is never stored,
+# so a resumed sweep runs it again).
+INCOMPLETE_STATUSES = ("crashed", "timeout", "memory", "lost")
 
 
 class UsageError(Exception):
     """A bad command line, path or option value: `error: <message>`, exit 2."""
+
+
+class ToolError(Exception):
+    """The tool could not complete (an unusable results store, a full disk): a one-line
+    message that says what to do, exit 3, no traceback."""
+
+
+def is_error_status(status: str) -> bool:
+    """A run the tool did not finish (an error, not a failure: JUnit `<error>`)."""
+    return status in INCOMPLETE_STATUSES
 
 
 def verdict_exit_code(statuses: dict[str, int], failed: int) -> int:
@@ -47,6 +59,16 @@ def _number(kind, minimum, strict: bool, what: str):
     parse.__name__ = what  # argparse names the type in its message
     return parse
 
+
+def time_bound(text: str):
+    """`--timeout`: "auto" (the bound derived from the scenario), seconds > 0, or 0 (off)."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    value = _number(float, 0.0, False, "auto, 0 (no limit) or a number of seconds > 0")(text)
+    return value if value > 0 else None
+
+
+time_bound.__name__ = "auto, 0 (no limit) or a number of seconds > 0"
 
 # argparse `type=`s: a bad value is a one-line usage error (exit 2), never a traceback later.
 nonneg_int = _number(int, 0, False, "an integer >= 0")

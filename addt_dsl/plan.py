@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Literal, Union
+from typing import ClassVar, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -89,7 +89,7 @@ class TriggerPlan(_Model):
     A step is *armed* (top-level steps at time 0; steps of a group as the group says),
     then *fires* at the first physics step where all its start conditions hold:
     `after_s` has passed since it was armed, the time is at least `at_s`, and
-    `condition` holds on the current state. Firing starts `clause` (a behaviour) and
+    `condition` holds on the current state (for `hold_s` without a break, when given). Firing starts `clause` (a behaviour) and
     arms `group`. A step is *done* once it fired and its group (if any) is done.
     Source: `at 5 s behavior brake`, `after 2 s ...`, `when gap(ego, lead) < 20 m then ...`.
     """
@@ -99,6 +99,8 @@ class TriggerPlan(_Model):
     at_s: Expr | None = None  # earliest simulated time [s]
     after_s: Expr | None = None  # delay after arming [s]
     group: GroupPlan | None = None
+    # `when C for D`: C must have held at every step for D [s] (past-time `historically`).
+    hold_s: Expr | None = None
 
 
 class GroupPlan(_Model):
@@ -227,6 +229,8 @@ class ScenarioPlan(_Model):
     signals: list[SignalPlan] = Field(default_factory=list)
     controllers: list[ControllerPlan] = Field(default_factory=list)
     light_steps: list[TriggerPlan] = Field(default_factory=list)
+    # Weather and light models acting on the sensors (`environment { fog visibility 150 m }`).
+    environment: list[ClausePlan] = Field(default_factory=list)
 
     def road(self, name: str) -> RoadPlan:
         return next(r for r in self.roads if r.name == name)
@@ -236,6 +240,17 @@ class ScenarioPlan(_Model):
 
     def nominal_params(self) -> dict[str, float]:
         return {p.name: p.default for p in self.params}
+
+    # Names a plan keeps for display only: how the scenario's path, or an imported map's,
+    # was spelled. Its identity (store plan hashes, RunSpec keys) is everything else, so the
+    # same file reached by another path is the same plan; imported maps are embedded
+    # (`xodr_text`) and includes are inlined, so their content is part of it.
+    DISPLAY_ONLY: ClassVar[dict] = {"source_file": True, "roads": {"__all__": {"xodr_file"}},
+                                    "faults": {"__all__": {"source"}}}
+
+    def identity(self) -> dict:
+        """The plan's content as JSON-ready data, without display-only names."""
+        return self.model_dump(mode="json", exclude=self.DISPLAY_ONLY)
 
 
 class ConcreteFault(_Model):
@@ -264,7 +279,8 @@ class RunSpec(_Model):
     def key(self) -> str:
         """Content hash: the identity of a run for caches and result stores (with the
         fingerprint of the code that runs it: a new version or new stack data is a new key)."""
-        payload = self.model_dump(mode="json", exclude={"run_id"})
+        payload = self.model_dump(mode="json", exclude={"run_id", "plan"})
+        payload["plan"] = self.plan.identity()
         payload["code"] = code_fingerprint()
         data = json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(data).hexdigest()[:20]

@@ -37,6 +37,9 @@ class ParamSpec:
     choices: tuple[str, ...] | None = None
     kind: str = "number"
     doc: str = ""
+    # A live setting may use signals (`speed speed(ego) + 5 km/h`): evaluated on the
+    # current state at every step, so the target follows other actors.
+    live: bool = False
 
 
 class Registry(Generic[T]):
@@ -75,6 +78,7 @@ FAULTS: Registry = Registry("fault")
 STACKS: Registry = Registry("stack")
 SIGNALS: Registry = Registry("signal")
 GEOMETRIES: Registry = Registry("road geometry")
+ENVIRONMENTS: Registry = Registry("environment model")
 
 # Modules whose import registers the built-in elements. None imports pybullet or torch
 # at module level (a unit test checks this).
@@ -84,6 +88,7 @@ _BUILTIN_MODULES = (
     "addt_dsl.runtime.faults",
     "addt_dsl.runtime.signals",
     "addt_dsl.runtime.roadspec",
+    "addt_dsl.runtime.environment",
     "addt_dsl.stack",
 )
 _loaded = False

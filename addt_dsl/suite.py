@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from addt_dsl.confine import Refused, confine
+from addt_dsl.reporting.atomic import write_text
 from addt_dsl.reporting.tables import fmt_param, terminal, wilson_interval
 from addt_dsl.reporting.summary import store_summary
 
@@ -123,11 +124,13 @@ def suite_summary(rows: Sequence[SuiteRow], by: str | None) -> dict:
         "files": [{
             "path": str(r.path), "scenario": r.name, "exit_code": r.exit_code, "wall_s": r.wall_s,
             "runs": r.totals.get("runs", 0), "passed": r.totals.get("passed", 0),
-            "failed": r.totals.get("failed", 0), "warned": r.totals.get("warned", 0), **({"outcomes": r.totals["outcomes"]} if "outcomes" in r.totals else {}),
+            "failed": r.totals.get("failed", 0), "errors": r.totals.get("errors", 0), "warned": r.totals.get("warned", 0), **({"outcomes": r.totals["outcomes"]} if "outcomes" in r.totals else {}),
             "by": [{"value": v, "label": r.labels.get(v, f"{v:g}"), **t.as_dict()} for v, t in r.by.items()],
         } for r in rows],
         "runs": sum(r.totals.get("runs", 0) for r in rows),
         "passed": sum(r.totals.get("passed", 0) for r in rows),
+        "failed": sum(r.totals.get("failed", 0) for r in rows),
+        "errors": sum(r.totals.get("errors", 0) for r in rows),
         "warned": sum(r.totals.get("warned", 0) for r in rows),
         "wall_s": sum(r.wall_s for r in rows),
     }
@@ -136,7 +139,7 @@ def suite_summary(rows: Sequence[SuiteRow], by: str | None) -> dict:
 def write_summary(out: Path, rows: Sequence[SuiteRow], by: str | None) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     path = out / "suite.json"
-    path.write_text(json.dumps(suite_summary(rows, by), indent=2) + "\n")
+    write_text(path, json.dumps(suite_summary(rows, by), indent=2) + "\n")
     return path
 
 

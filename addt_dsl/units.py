@@ -97,6 +97,7 @@ _UNITS = (
     Unit("m/s", 1.0, SPEED),
     Unit("km/h", 1000.0 / 3600.0, SPEED),
     Unit("mph", 0.44704, SPEED),
+    Unit("mm/h", 1e-3 / 3600.0, SPEED),  # rain rate
     Unit("m/s^2", 1.0, ACCELERATION),
     Unit("m/s^3", 1.0, JERK),
     Unit("g", 9.80665, ACCELERATION),

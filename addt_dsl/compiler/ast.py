@@ -155,6 +155,7 @@ class Clause(Node):
 class StepStart(Node):
     kind: str  # at | after | when
     value: Expression
+    hold: Expression | None = None  # `when C for D`: C must have held for D
 
 
 @dataclass(frozen=True, slots=True)
@@ -263,8 +264,17 @@ class SweepItem(Node):
 
 
 @dataclass(frozen=True, slots=True)
+class EnvItem(Node):
+    """`fog visibility 150 m` in an `environment { }` block."""
+
+    name: str
+    name_span: Span
+    settings: tuple[Setting, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
 class Block(Node):
-    """`faults { }`, `expect { }`, `sweep { }` — kept as blocks for span reporting."""
+    """`faults { }`, `expect { }`, `sweep { }`, `environment { }` — kept as blocks for span reporting."""
 
     kind: str
     items: tuple = ()

@@ -276,7 +276,7 @@ class Builder:
         return ast.StepStart(span, "after", items[0])
 
     def b_start_when(self, span, items):
-        return ast.StepStart(span, "when", items[0])
+        return ast.StepStart(span, "when", items[0], items[1] if len(items) > 1 else None)
 
     def b_group(self, span, items):
         return ast.Group(span, str(items[0]), tuple(items[1:]))
@@ -288,6 +288,14 @@ class Builder:
     def b_light_def(self, span, items):
         kind, name, settings = items
         return ast.LightDef(span, str(kind), self._tspan(kind), str(name), self._tspan(name), settings)
+
+    # ---- environment
+    def b_environment(self, span, items):
+        return ast.Block(span, "environment", tuple(i for i in items if isinstance(i, ast.EnvItem)))
+
+    def b_env_item(self, span, items):
+        name, settings = items
+        return ast.EnvItem(span, str(name), self._tspan(name), settings)
 
     # ---- faults
     def b_faults(self, span, items):

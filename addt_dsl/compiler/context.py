@@ -56,6 +56,7 @@ class Context:
     assumptions: list[P.AssumptionPlan] = field(default_factory=list)
     actors: dict[str, P.ActorPlan] = field(default_factory=dict)
     faults: list[P.FaultPlan] = field(default_factory=list)
+    environment: list[P.ClausePlan] = field(default_factory=list)
     oracles: list[P.OraclePlan] = field(default_factory=list)
     sweep: P.SweepPlan = field(default_factory=P.SweepPlan)
     signals: list[P.SignalPlan] = field(default_factory=list)
@@ -223,6 +224,8 @@ def lower_setting(ctx: Context, low: ExprLowering, st: ast.Setting, spec: ParamS
                            f"one of: {', '.join(spec.choices)}")
             return None
         return word
+    if spec.kind == "list":
+        return _lower_list_setting(ctx, low, st, spec, what)
     if isinstance(v, ast.ListExpr):
         ctx.sink.error("E0204", f"'{st.key}' takes one value, not a list", v.span)
         return None
@@ -230,6 +233,8 @@ def lower_setting(ctx: Context, low: ExprLowering, st: ast.Setting, spec: ParamS
         ctx.sink.error("E0204", f"'{st.key}' takes a number, not a string", v.span)
         return None
     want = spec.dim if spec.dim is not None else units.DIMENSIONLESS
+    if spec.live and not low.scope.allow_signals:
+        low = ctx.lowering(signals=True)
     expr = low.lower_value(v, want, f"'{st.key}' of {what}")
     if expr is None:
         return None
@@ -237,6 +242,38 @@ def lower_setting(ctx: Context, low: ExprLowering, st: ast.Setting, spec: ParamS
                        integer=spec.kind == "int", unit=source_unit(v)):
         return None
     return expr
+
+
+def _lower_list_setting(ctx: Context, low: ExprLowering, st: ast.Setting, spec: ParamSpec, what: str):
+    """A list setting (`times [0, 4, 8] s`): items may use parameters; each is checked
+    against the setting's dimension and range."""
+    v = st.value
+    if not isinstance(v, ast.ListExpr):
+        ctx.sink.error("E0204", f"'{st.key}' takes a list, e.g. `{st.key} [1, 2, 3] ...`", v.span)
+        return None
+    if not v.items:
+        ctx.sink.error("E0204", f"'{st.key}' is empty", v.span)
+        return None
+    out = []
+    for item in v.items:
+        if v.unit is not None and isinstance(item, ast.Number) and item.unit is None:
+            item = ast.Number(item.span, item.value, v.unit)
+        elif v.unit is not None and isinstance(item, ast.Number):
+            ctx.sink.error("E0202", f"'{st.key}' has units on the list and on an item", item.span,
+                           f"write `[1, 2, 3] {v.unit}` or give each item its unit")
+            return None
+        if isinstance(item, (ast.Str, ast.ListExpr)):
+            ctx.sink.error("E0204", f"'{st.key}' must list numbers", item.span)
+            return None
+        expr = low.lower_value(item, spec.dim if spec.dim is not None else units.DIMENSIONLESS,
+                               f"an item of '{st.key}' of {what}")
+        if expr is None:
+            return None
+        if not check_range(ctx, expr, spec.low, spec.high, spec.dim, f"'{st.key}'", item.span,
+                           unit=source_unit(item)):
+            return None
+        out.append(expr)
+    return out
 
 
 def int_const(expr) -> int | None:

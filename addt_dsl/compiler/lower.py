@@ -27,6 +27,7 @@ def build_plan(ctx: Context) -> ScenarioPlan:
         ego=ego,
         agents=agents,
         faults=ctx.faults,
+        environment=ctx.environment,
         oracles=ctx.oracles,
         sweep=ctx.sweep,
         signals=ctx.signals,

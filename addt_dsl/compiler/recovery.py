@@ -47,7 +47,7 @@ def _expected_words(lark: Lark, expected) -> list[str]:
 
 # Words that start a definition; seen where they cannot stand, a '}' is usually missing.
 _DEFINITION_WORDS = {"agent", "ego", "param", "road", "faults", "expect", "sweep", "assume", "keep",
-                     "include", "scenario", "lights"}
+                     "include", "scenario", "lights", "environment"}
 
 # Characters from other languages, with what to write instead.
 _CHAR_HINTS = {
@@ -119,8 +119,8 @@ def _curated_hint(token: Token, expected: set[str], text: str) -> list[str]:
 
 
 _DEFINITION_LINE = re.compile(r"\s*(agent\s+\w+\s+\w+|ego\s+(car|truck)\b|param\s+\w+\s*=|road\s+\w+\s+(\{|import)|"
-                              r"(faults|expect|sweep)\s*\{|(assume|keep)\s|include\s+\")")
-_DEFINITION_OPENER = re.compile(r"\s*(road|agent|ego|faults|expect|sweep)\b")
+                              r"(faults|expect|sweep|environment)\s*\{|(assume|keep)\s|include\s+\")")
+_DEFINITION_OPENER = re.compile(r"\s*(road|agent|ego|faults|expect|sweep|environment)\b")
 
 
 def _line_offset(text: str, line_no: int) -> int:

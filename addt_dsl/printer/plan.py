@@ -38,7 +38,7 @@ from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, FaultPlan, Orac
                            RunSpec, ScenarioPlan, SweepPlan, TriggerPlan)
 from addt_dsl.printer.expr import (ExprPrinter, PrinterError, dim_of_name, format_const, format_quantity,
                                    string_literal)
-from addt_dsl.registry import FAULTS, GEOMETRIES, ParamSpec
+from addt_dsl.registry import ENVIRONMENTS, FAULTS, GEOMETRIES, ParamSpec
 from addt_dsl.sweep import expand
 from addt_dsl.vehicles import VEHICLES
 
@@ -240,7 +240,7 @@ def _step(pr: _Printer, tr: TriggerPlan, depth: int, in_group: bool) -> None:
     ex = pr.exprs
     starts = _join(f"at {ex.value(tr.at_s, units.TIME)}" if tr.at_s is not None else "",
                    f"after {ex.value(tr.after_s, units.TIME)}" if tr.after_s is not None else "",
-                   f"when {ex.formula(tr.condition)} then" if tr.condition is not None else "")
+                   f"when {ex.formula(tr.condition)}{_hold(pr, tr)} then" if tr.condition is not None else "")
     if (tr.clause is None) == (tr.group is None):
         raise PrinterError("a step starts one behaviour or one group")
     if not starts and tr.clause is not None and not in_group:
@@ -254,6 +254,12 @@ def _step(pr: _Printer, tr: TriggerPlan, depth: int, in_group: bool) -> None:
     for sub in tr.group.steps:
         _step(pr, sub, depth + 1, in_group=True)
     pr.emit(depth, "}")
+
+
+def _hold(pr: _Printer, tr: TriggerPlan) -> str:
+    if tr.hold_s is None:
+        return ""
+    return f" for {pr.exprs.value(tr.hold_s, units.TIME)}"
 
 
 def _clause(pr: _Printer, c: ClausePlan) -> str:
@@ -430,8 +436,21 @@ def _sweep(pr: _Printer) -> None:
     pr.emit(1, "}")
 
 
-SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _lights, _faults, _oracles,
-                                                    _sweep)
+def _environment(pr: _Printer) -> None:
+    if not pr.plan.environment:
+        return
+    pr.emit(0)
+    pr.emit(1, "environment {")
+    for c in pr.plan.environment:
+        cls = ENVIRONMENTS.get(c.name)
+        if cls is None:
+            raise PrinterError(f"unknown environment model {c.name!r}")
+        pr.emit(2, _join(c.name, pr.settings(cls.params, c.settings)))
+    pr.emit(1, "}")
+
+
+SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _lights, _environment,
+                                                    _faults, _oracles, _sweep)
 
 
 # ---------------------------------------------------------------- entry points

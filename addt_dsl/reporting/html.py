@@ -16,6 +16,7 @@ import math
 from pathlib import Path
 
 from addt_dsl.reporting import plots
+from addt_dsl.reporting.atomic import write_text
 from addt_dsl.reporting.tables import (OUTCOME_CLASSES, cell_stats, fmt_number, fmt_param, latency_budget_s,
                                        success_pivot)
 from addt_dsl.reporting.summary import store_summary
@@ -146,5 +147,5 @@ def build_report(store, path: str | Path, max_animations: int = DEFAULT_MAX_ANIM
         fmt_param=fmt_param)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(html, encoding="utf-8")
+    write_text(path, html)
     return path

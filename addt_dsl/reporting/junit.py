@@ -14,6 +14,8 @@ import math
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
+from addt_dsl.errors import is_error_status
+from addt_dsl.reporting.atomic import atomic_path
 from addt_dsl.reporting.tables import fmt_number, fmt_param
 
 
@@ -61,7 +63,7 @@ def junit_tree(plan, records) -> ET.ElementTree:
         if warned:
             ET.SubElement(case, "system-out").text = "\n".join(
                 f"warning: {_violation(v)}" for v in r.verdicts if v.name in warned)
-        if r.status in ("crashed", "timeout", "memory"):
+        if is_error_status(r.status):
             errors += 1
             el = ET.SubElement(case, "error", type=r.status, message=(r.error.splitlines() or [r.status])[0])
             el.text = r.error
@@ -102,7 +104,8 @@ def write_tree(path: str | Path, tree: ET.ElementTree) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     ET.indent(tree)
-    tree.write(path, encoding="utf-8", xml_declaration=True)
+    with atomic_path(path) as tmp:
+        tree.write(tmp, encoding="utf-8", xml_declaration=True)
     return path
 
 

@@ -12,6 +12,8 @@ import sys
 import time
 from collections.abc import Callable
 
+from addt_dsl.errors import is_error_status
+
 
 
 def _duration(seconds: float) -> str:
@@ -33,7 +35,7 @@ class ProgressLines:
                  write: Callable[[str], None] | None = None, clock: Callable[[], float] = time.monotonic):
         self.total, self.done, self.start_done = total, done, done
         self.every_s, self.step = every_s, max(1, int(total * every_pct / 100))
-        self.failed = self.warned = 0
+        self.failed = self.warned = self.errors = 0
         self.write = write or (lambda line: print(line, file=sys.stderr, flush=True))
         self.clock = clock
         self.started = self.last_time = clock()
@@ -41,7 +43,9 @@ class ProgressLines:
 
     def __call__(self, record) -> None:
         self.done += 1
-        self.failed += not record.passed
+        error = is_error_status(record.status)
+        self.errors += error
+        self.failed += not record.passed and not error
         self.warned += bool(record.warned_oracles)
         now = self.clock()
         if self.done >= self.total or now - self.last_time >= self.every_s or self.done - self.last_done >= self.step:
@@ -53,6 +57,7 @@ class ProgressLines:
         ran = self.done - self.start_done
         pct = 100 * self.done / self.total if self.total else 100.0
         text = f"progress: {self.done}/{self.total} runs ({pct:.0f} %), {self.failed} failed"
+        text += f", {self.errors} error(s)" if self.errors else ""
         text += f", {self.warned} warned" if self.warned else ""
         text += f", {_duration(elapsed)} elapsed"
         if ran and self.done < self.total:

@@ -6,14 +6,20 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from addt_dsl.reporting.atomic import atomic_path, write_text
 from addt_dsl.reporting.plots import LatencyStats
 from addt_dsl.reporting.tables import latency_budget_s, runs_table, summary
 from addt_dsl.runtime.store import ResultStore
 
 
 def store_summary(store: ResultStore) -> dict:
-    """`reporting.tables.summary` over every stored run (streamed)."""
-    return summary(store.plan(), store.records(), store.rejected(), cells=store.records("outcome != ''"))
+    """`reporting.tables.summary` over every stored run (streamed), with `not_done`: the
+    runs the last sweep could not complete (lost on every attempt; not stored)."""
+    out = summary(store.plan(), store.records(), store.rejected(), cells=store.records("outcome != ''"))
+    not_done = json.loads(store.meta("not_done") or "[]")
+    if not_done:
+        out["not_done"] = not_done
+    return out
 
 
 def store_dataframe(store: ResultStore):
@@ -23,12 +29,14 @@ def store_dataframe(store: ResultStore):
 
 
 def write_csv(store: ResultStore, path: str | Path) -> Path:
-    store_dataframe(store).to_csv(path, index=False)
+    with atomic_path(path) as tmp:
+        store_dataframe(store).to_csv(tmp, index=False)
     return Path(path)
 
 
 def write_parquet(store: ResultStore, path: str | Path) -> Path:
-    store_dataframe(store).to_parquet(path, index=False)
+    with atomic_path(path) as tmp:
+        store_dataframe(store).to_parquet(tmp, index=False)
     return Path(path)
 
 
@@ -37,7 +45,7 @@ def write_tables(out: Path, store: ResultStore, budget_s: float | None = None) -
     (per-node percentiles and e2e latency by object count, over all runs; the share of
     time over the budget the plan's oracles declare, `budget_s` overriding it)."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(store_summary(store), indent=2) + "\n")
+    write_text(out / "summary.json", json.dumps(store_summary(store), indent=2) + "\n")
     write_csv(store, out / "runs.csv")
     latency = LatencyStats()
     for r in store.records():
@@ -45,4 +53,4 @@ def write_tables(out: Path, store: ResultStore, budget_s: float | None = None) -
             latency.add(r.stats)
     if latency.hist:
         budget = budget_s if budget_s is not None else latency_budget_s(store.plan())
-        (out / "latency.json").write_text(json.dumps(latency.summary(budget), indent=2) + "\n")
+        write_text(out / "latency.json", json.dumps(latency.summary(budget), indent=2) + "\n")

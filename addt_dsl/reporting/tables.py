@@ -14,6 +14,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from addt_dsl import units
+from addt_dsl.errors import is_error_status
 from addt_dsl.plan import ScenarioPlan
 
 
@@ -24,8 +25,9 @@ def runs_table(plan: ScenarioPlan, records: Iterable):
 
     rows = []
     for r in records:
+        verdict = "pass" if r.passed else "error" if is_error_status(r.status) else "fail"
         row = {"run_id": r.run_id, "key": r.key, "seed": r.seed, "repeat": r.repeat_index,
-               "passed": r.passed, "status": r.status}
+               "passed": r.passed, "verdict": verdict, "status": r.status}
         row.update({f"param.{k}": v for k, v in sorted(r.params.items())})
         for v in r.verdicts:
             row[f"rho.{v.name}"] = v.robustness
@@ -48,7 +50,7 @@ def runs_table(plan: ScenarioPlan, records: Iterable):
 
 def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = None,
             cells: Iterable | None = None) -> dict:
-    """Counts over runs: passed, failed, failures per oracle (a crashed, timed-out or
+    """Counts over runs: passed, failed, errors (runs the tool did not finish), failures per oracle (a crashed, timed-out or
     out-of-memory run counts under its status), runs with a violated `warn` oracle
     (`warned`, whether they passed or not) and warnings per oracle. For classified runs (`addtc --classify`)
     also `outcomes` (runs per outcome class) and, for a sweep with grid axes,
@@ -58,12 +60,13 @@ def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = No
     warned = 0
     statuses: Counter = Counter()
     outcomes: Counter = Counter()
-    runs = passed = 0
+    runs = passed = errors = 0
     sim = wall = 0.0
     classified = []  # for the per-cell table when `cells` is not given
     for r in records:
         runs += 1
         passed += r.passed
+        errors += is_error_status(r.status)
         statuses[r.status] += 1
         outcome = getattr(r, "outcome", "")
         if outcome:
@@ -82,7 +85,10 @@ def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = No
         "source": plan.source_file,
         "runs": runs,
         "passed": passed,
-        "failed": runs - passed,
+        # Failed: a hard oracle was violated or the stack failed (`detected`). Errors: the
+        # tool did not finish the run (crashed, timeout, memory), counted apart.
+        "failed": runs - passed - errors,
+        "errors": errors,
         "failures_per_oracle": dict(sorted(failures.items())),
         "warned": warned,
         "warnings_per_oracle": dict(sorted(warnings.items())),
@@ -251,9 +257,12 @@ def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None
 def totals_line(totals: dict) -> str:
     """`5 passed, 2 failed, 1 with warnings; failures per oracle: {...}; warnings per oracle: {...}`"""
     line = f"{totals['passed']} passed, {totals['failed']} failed"
+    if totals.get("errors"):
+        kinds = ", ".join(f"{s} {n}" for s, n in totals["statuses"].items() if is_error_status(s))
+        line += f", {totals['errors']} error(s) ({kinds}: the tool did not finish them)"
     if totals.get("warned"):
         line += f", {totals['warned']} with warnings"
-    if totals["failed"]:
+    if totals["failed"] or totals.get("errors"):
         line += f"; failures per oracle: {totals['failures_per_oracle']}"
     if totals.get("warned"):
         line += f"; warnings per oracle: {totals['warnings_per_oracle']}"

@@ -38,6 +38,7 @@ class AgentState:
     # Direction of motion relative to the road's +s direction [rad]; non-zero for
     # walkers: they move at this angle instead of following a lane.
     heading_rel: float = 0.0
+    lc_shape: str = "quintic"  # blend of the current lateral manoeuvre (see SHAPES)
 
 
 class Behavior:
@@ -52,28 +53,160 @@ class Behavior:
     def start(self, agent: AgentState, world, time_s: float) -> None:
         """Called when the behaviour becomes active."""
 
+    def value(self, name: str, world) -> float:
+        """A setting's value now: a live setting (one that reads signals, e.g. `speed
+        speed(ego) + 5 km/h`) is evaluated on the current state at every call."""
+        v = self.settings[name]
+        return v if isinstance(v, (int, float)) else world.live_value(v)
+
     def accel(self, agent: AgentState, world, time_s: float) -> float:
         return 0.0
 
 
-def _speed_tracking(agent: AgentState, target: float, a_max: float, b_max: float) -> float:
-    # First-order tracking with a 1 s time constant, clipped to comfort limits.
-    return max(-b_max, min(a_max, target - agent.speed))
+def _speed_tracking(agent: AgentState, target: float, a_max: float, b_max: float, dt: float) -> float:
+    """Accelerate at `a_max` (brake at `b_max`) until the target speed, landing on it
+    within one step: an acceleration setting is the acceleration the agent has. (A
+    first-order lag here once gave 1.32 m/s after 3 s at `accel 2 m/s^2`.)"""
+    return max(-b_max, min(a_max, (target - agent.speed) / dt))
+
+
+# Dynamics shapes (OpenSCENARIO TransitionDynamics): progress u in [0, 1] -> blend in
+# [0, 1]. `quintic` (zero speed and acceleration at both ends) is the lane changes'
+# default; OpenSCENARIO's cubic is 3u^2 - 2u^3, its sinusoidal (1 - cos(pi u)) / 2.
+SHAPES = {
+    "step": lambda u: 1.0,
+    "linear": lambda u: u,
+    "cubic": lambda u: u * u * (3.0 - 2.0 * u),
+    "sinusoidal": lambda u: 0.5 * (1.0 - math.cos(math.pi * u)),
+    "quintic": lambda u: u * u * u * (10.0 - 15.0 * u + 6.0 * u * u),
+}
+# Peak slope of each blend relative to the linear one (max d blend / du): a rate limit
+# [m/s^2] turns into the duration that keeps the shape's peak within it.
+PEAK_SLOPE = {"step": 0.0, "linear": 1.0, "cubic": 1.5, "sinusoidal": math.pi / 2, "quintic": 1.875}
+SPEED_SHAPES = ("step", "linear", "cubic", "sinusoidal")
+
+
+def blend(shape: str, u: float) -> float:
+    return SHAPES[shape](min(1.0, max(0.0, u)))
+
+
+class SpeedTransition:
+    """A speed change from `v0` to `v1` with a dynamics shape, starting at `start_s`.
+
+    `duration_s` when given; otherwise as long as it takes for the shape's peak
+    acceleration to equal the rate limit (`accel` speeding up, `decel` slowing down)."""
+
+    def __init__(self, v0: float, v1: float, start_s: float, shape: str, accel: float, decel: float,
+                 duration_s: float | None = None):
+        self.v0, self.v1, self.start_s, self.shape = v0, v1, start_s, shape
+        rate = accel if v1 >= v0 else decel
+        if shape == "step":
+            self.duration_s = 0.0
+        elif duration_s is not None:
+            self.duration_s = duration_s
+        else:
+            self.duration_s = PEAK_SLOPE[shape] * abs(v1 - v0) / rate if rate > 0 else math.inf
+
+    def speed_at(self, time_s: float) -> float:
+        if self.duration_s <= 0.0 or not math.isfinite(self.duration_s):
+            return self.v1 if self.duration_s <= 0.0 else self.v0
+        return self.v0 + (self.v1 - self.v0) * blend(self.shape, (time_s - self.start_s) / self.duration_s)
+
+    def active(self, time_s: float, dt: float) -> bool:
+        """Whether the change is still under way at `time_s` (a step change takes one step)."""
+        return time_s < self.start_s + max(self.duration_s, dt) - 1e-9
+
+    def accel(self, agent: AgentState, time_s: float, dt: float) -> float:
+        """The acceleration that puts the agent on the profile at the end of this step."""
+        return (self.speed_at(time_s + dt) - agent.speed) / dt
+
+
+SHAPE_SETTING = ParamSpec("shape", None, kind="word", default="linear", choices=SPEED_SHAPES,
+                          doc="dynamics shape of the speed change")
+DURATION_SETTING = ParamSpec("duration", units.TIME, default=None, low=0.0,
+                             doc="time the speed change takes (default: from the rate limits and shape)")
 
 
 @BEHAVIORS.register
 class Cruise(Behavior):
     keyword = "cruise"
     params = (
-        ParamSpec("speed", units.SPEED, required=True, low=0.0, doc="target speed"),
+        ParamSpec("speed", units.SPEED, required=True, low=0.0, live=True,
+                  doc="target speed; may follow other actors (`1.2 * speed(ego)`)"),
         ParamSpec("accel", units.ACCELERATION, default=2.0, low=0.0, doc="max acceleration"),
         ParamSpec("decel", units.ACCELERATION, default=3.0, low=0.0, doc="max deceleration"),
+        SHAPE_SETTING,
+        DURATION_SETTING,
     )
-    doc = "Hold a target speed."
+    doc = ("Change to a target speed (at the rate limits, or over `duration`, with a dynamics "
+           "shape) and hold it.")
+    transition: SpeedTransition | None = None  # a shaped or timed change, set by start()
+
+    def start(self, agent, world, time_s):
+        s = self.settings
+        self.transition = None
+        if s["shape"] != "linear" or s["duration"] is not None:
+            # A live target is taken as it is at the start; it is followed once reached.
+            self.transition = SpeedTransition(agent.speed, max(0.0, self.value("speed", world)), time_s,
+                                              s["shape"], s["accel"], s["decel"], s["duration"])
 
     def accel(self, agent, world, time_s):
         s = self.settings
-        return _speed_tracking(agent, s["speed"], s["accel"], s["decel"])
+        tr = self.transition
+        if tr is not None and tr.active(time_s, world.dt):
+            return tr.accel(agent, time_s, world.dt)
+        # Linear at the rate limits: the same as tracking the target.
+        return _speed_tracking(agent, max(0.0, self.value("speed", world)), s["accel"], s["decel"], world.dt)
+
+
+@BEHAVIORS.register
+class SpeedProfile(Behavior):
+    keyword = "speed_profile"
+    params = (
+        ParamSpec("times", units.TIME, kind="list", required=True, low=0.0,
+                  doc="times of the points, from the start of the behaviour, increasing"),
+        ParamSpec("speeds", units.SPEED, kind="list", required=True, low=0.0, doc="speed at each time"),
+        ParamSpec("shape", None, kind="word", default="linear", choices=SPEED_SHAPES,
+                  doc="dynamics shape between consecutive points"),
+    )
+    doc = ("Follow time/speed points (OpenSCENARIO SpeedProfileAction, its `position` mode: every "
+           "point is met); then hold the last speed.")
+
+    @staticmethod
+    def validate(values: dict) -> list[tuple[str, str]]:
+        """Problems of constant settings, as (setting, message)."""
+        times, speeds = values.get("times"), values.get("speeds")  # None: not constants
+        out = []
+        if isinstance(times, list) and isinstance(speeds, list) and len(times) != len(speeds):
+            out.append(("speeds", f"{len(speeds)} speeds for {len(times)} times: give one speed per time"))
+        if isinstance(times, list) and any(b <= a for a, b in zip(times, times[1:])):
+            out.append(("times", "the times of a speed profile must increase"))
+        return out
+
+    def start(self, agent, world, time_s):
+        times = [time_s + t for t in self.settings["times"]]
+        speeds = list(self.settings["speeds"])
+        if times[0] > time_s:  # from the current speed to the first point
+            times, speeds = [time_s] + times, [agent.speed] + speeds
+        shape = self.settings["shape"]
+        # A step shape jumps at each point's time; the others blend towards it.
+        self.segments = [SpeedTransition(v0, v1, t1 if shape == "step" else t0, shape, 0.0, 0.0, t1 - t0)
+                         for t0, t1, v0, v1 in zip(times, times[1:], speeds, speeds[1:])]
+        self.first_speed = speeds[0]
+
+    def speed_at(self, time_s: float) -> float:
+        """The profile's speed [m/s] at `time_s`: on the segment begun last."""
+        v = self.first_speed
+        for seg in self.segments:
+            if time_s + 1e-9 < seg.start_s:
+                break
+            v = seg.speed_at(time_s)
+        return v
+
+    def accel(self, agent, world, time_s):
+        # Put the agent on the profile at the end of the step (a first point at the
+        # start sets the speed in one step).
+        return (self.speed_at(time_s + world.dt) - agent.speed) / world.dt
 
 
 @BEHAVIORS.register
@@ -104,6 +237,174 @@ class Idm(Behavior):
 
 
 @BEHAVIORS.register
+class KeepGap(Behavior):
+    keyword = "keep_gap"
+    params = (
+        ParamSpec("target", None, kind="name", required=True, doc="actor to keep the gap to"),
+        ParamSpec("distance", units.LENGTH, low=0.0, doc="bumper-to-bumper gap to keep"),
+        ParamSpec("time_gap", units.TIME, low=0.0, doc="instead of `distance`: gap as time at the own speed"),
+        ParamSpec("side", None, kind="word", default="behind", choices=("behind", "ahead"),
+                  doc="keep the gap behind the target or ahead of it"),
+        ParamSpec("accel", units.ACCELERATION, default=3.0, low=0.01, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=6.0, low=0.01, doc="max deceleration"),
+    )
+    doc = ("Keep a distance or time gap to another actor, continuously (OpenSCENARIO "
+           "LongitudinalDistanceAction, freespace, continuous).")
+    # Critically damped spring on the gap error with a 1.5 s time constant: settles in a
+    # few seconds without overshooting into the target.
+    TAU_S = 1.5
+
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if ("distance" in values) == ("time_gap" in values):
+            return [("distance", "give the gap once: `distance D` or `time_gap T`", "E0105")]
+        return []
+
+    def accel(self, agent, world, time_s):
+        s = self.settings
+        other = world.actor_station(s["target"])
+        if other is None:
+            return 0.0
+        o_s, o_speed, o_length = other
+        sign = 1.0 if s["side"] == "behind" else -1.0
+        gap = sign * (o_s - agent.s) - 0.5 * (agent.length_m + o_length)
+        want = s["distance"] if s["distance"] is not None else s["time_gap"] * agent.speed
+        closing = sign * (o_speed - agent.speed)  # d gap / dt
+        a = (gap - want) / self.TAU_S ** 2 + 2.0 * closing / self.TAU_S
+        return max(-s["decel"], min(s["accel"], sign * a))
+
+
+@BEHAVIORS.register
+class Synchronize(Behavior):
+    keyword = "synchronize"
+    params = (
+        ParamSpec("master", None, kind="name", required=True, doc="actor whose arrival sets the time"),
+        ParamSpec("master_at", units.LENGTH, required=True, low=0.0,
+                  doc="station along its road the master arrives at (its centre)"),
+        ParamSpec("target_s", units.LENGTH, low=0.0, doc="station of the own target point"),
+        ParamSpec("target_t", units.LENGTH, doc="lateral offset of the own target point (left positive)"),
+        ParamSpec("heading", units.ANGLE, low=-math.pi, high=math.pi,
+                  doc="direction to move relative to the road, as `walk` (default: as it moves now)"),
+        ParamSpec("max_speed", units.SPEED, default=15.0, low=0.1, doc="speed limit while synchronising"),
+        ParamSpec("accel", units.ACCELERATION, default=5.0, low=0.01, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=5.0, low=0.01, doc="max deceleration"),
+        ParamSpec("final_speed", units.SPEED, low=0.0,
+                  doc="speed to change to once the master has arrived (default: keep the speed)"),
+    )
+    doc = ("Adjust the speed to reach a point when another actor reaches its point (OpenSCENARIO "
+           "SynchronizeAction): at every step, the remaining distance over the master's time to "
+           "arrival at its current speed.")
+
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if "target_s" not in values and "target_t" not in values:
+            return [("master", "give the own target point: `target_s S` and/or `target_t T`", "E0105")]
+        return []
+
+    def start(self, agent, world, time_s):
+        if self.settings["heading"] is not None:
+            _walk_towards(agent, self.settings["heading"])
+        self.final = None
+
+    def remaining_m(self, agent: AgentState) -> float:
+        """Distance to the own target point along the direction of motion [m]."""
+        s = self.settings
+        d = 0.0
+        if s["target_s"] is not None:
+            d += (s["target_s"] - agent.s) * math.cos(agent.heading_rel)
+        if s["target_t"] is not None:
+            d += (s["target_t"] - agent.t) * math.sin(agent.heading_rel)
+        return d
+
+    def accel(self, agent, world, time_s):
+        s = self.settings
+        master = world.actor_station(s["master"])
+        to_go = s["master_at"] - master[0] if master is not None else 0.0
+        if self.final is None and to_go <= 0.0:  # the master has arrived: synchronisation ends
+            self.final = s["final_speed"] if s["final_speed"] is not None else agent.speed
+        if self.final is not None:
+            return _speed_tracking(agent, self.final, s["accel"], s["decel"], world.dt)
+        arrival_s = to_go / master[1] if master[1] > 1e-3 else math.inf
+        wanted = max(0.0, self.remaining_m(agent)) / arrival_s
+        return _speed_tracking(agent, min(wanted, s["max_speed"]), s["accel"], s["decel"], world.dt)
+
+
+@BEHAVIORS.register
+class Trajectory(Behavior):
+    keyword = "trajectory"
+    params = (
+        ParamSpec("s", units.LENGTH, kind="list", doc="stations of the waypoints along the road"),
+        ParamSpec("t", units.LENGTH, kind="list", doc="lateral offsets of the waypoints (left positive)"),
+        ParamSpec("x", units.LENGTH, kind="list", doc="instead of `s`/`t`: world x of the waypoints"),
+        ParamSpec("y", units.LENGTH, kind="list", doc="instead of `s`/`t`: world y of the waypoints"),
+        ParamSpec("times", units.TIME, kind="list", low=0.0,
+                  doc="time to be at each waypoint, from the start of the behaviour (default: at `speed`)"),
+        ParamSpec("speed", units.SPEED, default=10.0, low=0.0, doc="speed without `times`"),
+        ParamSpec("max_speed", units.SPEED, default=40.0, low=0.1, doc="speed limit with `times`"),
+        ParamSpec("accel", units.ACCELERATION, default=5.0, low=0.01, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=8.0, low=0.01, doc="max deceleration"),
+    )
+    doc = ("Follow waypoints in road (`s`, `t`) or world (`x`, `y`) coordinates, at a speed or "
+           "meeting given times (OpenSCENARIO FollowTrajectoryAction, polyline); then drive on "
+           "along the road at the reached offset.")
+
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        road = [k for k in ("s", "t") if k in values]
+        world = [k for k in ("x", "y") if k in values]
+        if not (len(road) == 2 and not world) and not (len(world) == 2 and not road):
+            # Name a setting to drop where there is one too many, else the first missing.
+            key = world[0] if len(road) == 2 else road[0] if len(world) == 2 else (road + world + ["s"])[0]
+            return [(key, "give the waypoints once: `s [...] t [...]` (road) or `x [...] y [...]` (world)",
+                     "E0105")]
+        lists = [values[k] for k in ("s", "t", "x", "y", "times") if isinstance(values.get(k), list)]
+        if len({len(v) for v in lists}) > 1:
+            return [("times" if "times" in values else "t",
+                     "the waypoint lists differ in length: one value per waypoint in each", "E0204")]
+        times = values.get("times")
+        if isinstance(times, list) and any(b <= a for a, b in zip(times, times[1:])):
+            return [("times", "the times of a trajectory must increase")]
+        return []
+
+    def start(self, agent, world, time_s):
+        st = self.settings
+        if st["s"] is not None:
+            self.points = list(zip(st["s"], st["t"]))
+        else:
+            self.points = [world.road_coords(agent, x, y) for x, y in zip(st["x"], st["y"])]
+        self.times = [time_s + t for t in st["times"]] if st["times"] is not None else None
+        self.index = 0
+        self.origin = (agent.s, agent.t)
+
+    def accel(self, agent, world, time_s):
+        st = self.settings
+        while self.index < len(self.points) and self._passed(agent):
+            self.origin = self.points[self.index]
+            self.index += 1
+        if self.index == len(self.points):  # done: on along the road at this offset
+            if agent.heading_rel:
+                _walk_towards(agent, 0.0)
+            target = agent.speed
+        else:
+            ps, pt = self.points[self.index]
+            agent.heading_rel = math.atan2(pt - agent.t, ps - agent.s)
+            agent.t_target, agent.lc_duration_s = agent.t, 0.0
+            if self.times is None:
+                target = st["speed"]
+            else:  # the remaining polyline over the time left to its waypoint
+                left_s = self.times[self.index] - time_s
+                dist = math.hypot(ps - agent.s, pt - agent.t)
+                target = min(st["max_speed"], dist / left_s) if left_s > world.dt else st["max_speed"]
+        return _speed_tracking(agent, target, st["accel"], st["decel"], world.dt)
+
+    def _passed(self, agent: AgentState) -> bool:
+        """Whether the agent is at or beyond the current waypoint along its segment."""
+        (s0, t0), (s1, t1) = self.origin, self.points[self.index]
+        ds, dt_ = s1 - s0, t1 - t0
+        return (agent.s - s0) * ds + (agent.t - t0) * dt_ >= ds * ds + dt_ * dt_ - 1e-9
+
+
+@BEHAVIORS.register
 class Brake(Behavior):
     keyword = "brake"
     aliases = ("sudden_brake",)
@@ -114,9 +415,8 @@ class Brake(Behavior):
     doc = "Brake at a fixed deceleration down to a speed (default: standstill)."
 
     def accel(self, agent, world, time_s):
-        if agent.speed <= self.settings["to_speed"] + 1e-3:
-            return 0.0
-        return -self.settings["decel"]
+        # Brake at `decel`, landing on `to_speed` instead of overshooting below it.
+        return min(0.0, max(-self.settings["decel"], (self.settings["to_speed"] - agent.speed) / world.dt))
 
 
 @BEHAVIORS.register
@@ -124,21 +424,39 @@ class LaneChange(Behavior):
     keyword = "lane_change"
     channel = "lateral"
     params = (
-        ParamSpec("to", None, kind="int", required=True, doc="target lane id (OpenDRIVE convention)"),
+        ParamSpec("to", None, kind="int", doc="target lane id (OpenDRIVE convention)"),
+        ParamSpec("to_lane_of", None, kind="name", default="",
+                  doc="instead of `to`: the lane another actor is in when the change starts"),
         ParamSpec("duration", units.TIME, default=4.0, low=0.5, doc="time to complete the change"),
+        ParamSpec("shape", None, kind="word", default="quintic", choices=tuple(SHAPES),
+                  doc="lateral dynamics shape (quintic: zero lateral speed and acceleration at both ends)"),
     )
-    doc = "Move to another lane with a smooth (quintic) lateral profile."
+    doc = "Move to another lane with a smooth (quintic, or another dynamics shape) lateral profile."
+
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if ("to" in values) == bool(values.get("to_lane_of")):
+            return [("to", "give the target lane once: `to LANE` or `to_lane_of ACTOR`", "E0105")]
+        return []
 
     def start(self, agent, world, time_s):
-        begin_lane_change(agent, world, int(round(self.settings["to"])), self.settings["duration"], time_s)
+        other = self.settings["to_lane_of"]
+        lane = world.actor_lane(other) if other else int(round(self.settings["to"]))
+        if lane is None:  # the other actor is off the lanes: keep to the current one
+            lane = agent.lane
+        begin_lane_change(agent, world, lane, self.settings["duration"], time_s, self.settings["shape"])
 
 
 @BEHAVIORS.register
 class CutIn(LaneChange):
     keyword = "cut_in"
     params = (
-        ParamSpec("to", None, kind="int", required=True, doc="lane to cut into"),
+        ParamSpec("to", None, kind="int", doc="lane to cut into"),
+        ParamSpec("to_lane_of", None, kind="name", default="",
+                  doc="instead of `to`: the lane another actor is in when the cut-in starts"),
         ParamSpec("duration", units.TIME, default=2.0, low=0.5, doc="time to complete the cut-in"),
+        ParamSpec("shape", None, kind="word", default="quintic", choices=tuple(SHAPES),
+                  doc="lateral dynamics shape"),
     )
     doc = "An abrupt lane change into another lane (typically in front of the ego)."
 
@@ -177,7 +495,7 @@ class Overtake(Behavior):
             if clear and not changing:
                 begin_lane_change(agent, world, self.home, s["duration"], time_s)
                 self.phase = "done"
-        return _speed_tracking(agent, s["speed"], s["accel"], s["decel"])
+        return _speed_tracking(agent, s["speed"], s["accel"], s["decel"], world.dt)
 
 
 @BEHAVIORS.register
@@ -195,7 +513,7 @@ class Walk(Behavior):
         _walk_towards(agent, self.settings["heading"])
 
     def accel(self, agent, world, time_s):
-        return _speed_tracking(agent, self.settings["speed"], self.settings["accel"], 3.0)
+        return _speed_tracking(agent, self.settings["speed"], self.settings["accel"], 3.0, world.dt)
 
 
 @BEHAVIORS.register
@@ -226,7 +544,7 @@ class Cross(Behavior):
             return -v / 0.1  # stop within a few steps
         if v * v >= 2.0 * (2.0 * a_max) * remaining:
             return -v * v / (2.0 * remaining)
-        return _speed_tracking(agent, self.settings["speed"], a_max, 2.0 * a_max)
+        return _speed_tracking(agent, self.settings["speed"], a_max, 2.0 * a_max, world.dt)
 
 
 def _walk_towards(agent: AgentState, heading_rel: float) -> None:
@@ -249,9 +567,14 @@ def _nearest_ahead(agent: AgentState, world) -> str:
     return best
 
 
-def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, time_s: float) -> None:
-    """Start a quintic lateral move from the agent's current offset to `lane`'s centre."""
+def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, time_s: float,
+                      shape: str = "quintic") -> None:
+    """Start a lateral move (a dynamics shape, quintic by default) from the agent's
+    current offset to `lane`'s centre; `step` jumps there at the next step."""
     agent.lane = lane
+    agent.lc_shape = shape
+    if shape == "step":
+        duration_s = 0.0
     agent.heading_rel = 0.0
     agent.t_start = agent.t
     agent.t_target = world.lane_t(agent.road, lane, agent.s)
@@ -284,9 +607,8 @@ def relative_heading(agent: AgentState, time_s: float, dt: float) -> float:
 
 
 def lateral_profile(agent: AgentState, time_s: float) -> float:
-    """Lateral offset [m] of an agent on its quintic lane-change profile at `time_s`."""
+    """Lateral offset [m] of an agent on its lane-change profile at `time_s`."""
     if agent.lc_duration_s <= 0.0:
         return agent.t_target
-    u = min(1.0, max(0.0, (time_s - agent.lc_start_s) / agent.lc_duration_s))
-    blend = u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
-    return agent.t_start + (agent.t_target - agent.t_start) * blend
+    u = (time_s - agent.lc_start_s) / agent.lc_duration_s
+    return agent.t_start + (agent.t_target - agent.t_start) * blend(agent.lc_shape, u)

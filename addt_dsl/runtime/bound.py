@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from addt_dsl.expr import Expr, eval_param_expr, substitute_params
+from addt_dsl.expr import Expr, eval_param_expr, signals_used, substitute_params
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, ControllerPlan, GroupPlan, RoadPlan, RunSpec,
                            SignalPlan, TriggerPlan, resolve_settings)
 
@@ -41,6 +41,7 @@ class BoundStep:
     at_s: float | None
     after_s: float
     group: BoundGroup | None
+    hold_s: float = 0.0  # the condition must have held this long [s]
 
 
 @dataclass(frozen=True)
@@ -100,6 +101,7 @@ class BoundScenario:
     signals: tuple[SignalPlan, ...] = ()
     controllers: tuple[BoundController, ...] = ()
     light_steps: tuple[BoundStep, ...] = ()
+    environment: tuple[BoundClause, ...] = ()
 
     def road(self, name: str) -> RoadPlan:
         return next(r for r in self.roads if r.name == name)
@@ -115,6 +117,7 @@ def bind(spec: RunSpec) -> BoundScenario:
         ego=_actor(plan.ego, params), agents=tuple(_actor(a, params) for a in plan.agents),
         faults=tuple(spec.faults),
         oracles=tuple(BoundOracle(o.name, o.severity, substitute_params(o.formula, params)) for o in plan.oracles),
+        environment=tuple(_clause(c, params) for c in plan.environment),
         signals=tuple(plan.signals), controllers=tuple(_controller(c, params) for c in plan.controllers),
         light_steps=tuple(bind_step(t, params) for t in plan.light_steps))
 
@@ -129,7 +132,12 @@ def _value(expr: Expr | None, params: dict[str, float], default: float = 0.0) ->
 
 
 def _clause(c: ClausePlan, params: dict[str, float]) -> BoundClause:
-    return BoundClause(c.keyword, c.name, resolve_settings(c.settings, params))
+    """Settings as numbers; a live setting that reads signals stays an expression (its
+    parameters substituted), evaluated on the current state at every step."""
+    live = {k: substitute_params(v, params) for k, v in c.settings.items()
+            if not isinstance(v, (str, list)) and signals_used(v)}
+    fixed = resolve_settings({k: v for k, v in c.settings.items() if k not in live}, params)
+    return BoundClause(c.keyword, c.name, {k: live.get(k, fixed.get(k)) for k in c.settings})
 
 
 def bind_step(t: TriggerPlan, params: dict[str, float]) -> BoundStep:
@@ -138,7 +146,8 @@ def bind_step(t: TriggerPlan, params: dict[str, float]) -> BoundStep:
         condition=substitute_params(t.condition, params) if t.condition is not None else None,
         at_s=_value(t.at_s, params) if t.at_s is not None else None,
         after_s=_value(t.after_s, params),
-        group=_group(t.group, params) if t.group is not None else None)
+        group=_group(t.group, params) if t.group is not None else None,
+        hold_s=_value(t.hold_s, params))
 
 
 def _group(g: GroupPlan, params: dict[str, float]) -> BoundGroup:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from addt_dsl.plan import RunSpec
-from addt_dsl.registry import BEHAVIORS, FAULTS, SENSORS, STACKS
+from addt_dsl.registry import BEHAVIORS, ENVIRONMENTS, FAULTS, SENSORS, STACKS
 from addt_dsl.runtime import oracles
 from addt_dsl.runtime.behaviors import AgentState, advance, relative_heading
 from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
@@ -87,6 +87,11 @@ class _PathRoad(_Road):
 
 
 LANE_SETTINGS = ("to", "lane")  # behaviour settings that name a lane id
+
+
+def _is_live(clause: BoundClause) -> bool:
+    """Whether a behaviour has a setting that reads signals (kept as an expression)."""
+    return any(not isinstance(v, (int, float, str, list)) for v in clause.settings.values())
 
 
 def _stable_seed(*parts) -> list[int]:
@@ -173,6 +178,7 @@ class _Run:
         self.command_queue: list[tuple[float, float, float]] = []
         self.command = (0.0, 0.0)
         self._rngs: dict[str, np.random.Generator] = {}
+        self._live_snapshot = None  # (step, state) that live behaviour settings read
 
         ego = plan.ego
         self.ego_plan = ego
@@ -195,6 +201,7 @@ class _Run:
         self.agent_roads: dict[str, _Road] = {}
         self.longitudinal: dict[str, object] = {}
         self.scripts: dict[str, Script] = {}
+        self.deferred: list[tuple[AgentState, BoundClause]] = []  # time-0 behaviours with live settings
         for a in plan.agents:
             road = self._road_of(a)
             u = road.station(self._first_road(a), a.s)
@@ -206,6 +213,9 @@ class _Run:
             self.agent_roads[a.name] = road
             self.physics.add_box(a.name, a.length_m, a.width_m, VEHICLES[a.vehicle].height_m, VEHICLES[a.vehicle].rgba)
             self.longitudinal[a.name] = None
+            if any(_is_live(c) for c in a.behaviors):  # they read the first recorded state
+                self.deferred.extend((st, c) for c in a.behaviors)
+                continue
             for clause in a.behaviors:
                 self._start_behavior(st, clause, 0.0)
             if a.steps:
@@ -225,6 +235,7 @@ class _Run:
             sensor = cls(clause.name, clause.settings)
             self.sensors[clause.name] = sensor
             self.sensor_next[clause.name] = 0.0
+        self.environment = [ENVIRONMENTS.get(c.name)(c.settings) for c in plan.environment]
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self._setup_lights(plan)
@@ -353,6 +364,17 @@ class _Run:
         a = self.agent_by_name.get(name)
         return None if a is None else (a.s, a.speed, a.length_m)
 
+    def road_coords(self, agent: AgentState, x: float, y: float) -> tuple[float, float]:
+        """(s, t) of a world point on an agent's road [m]."""
+        return self.agent_roads[agent.name].road.project(x, y, agent.s)
+
+    def actor_lane(self, name: str) -> int | None:
+        """The lane an actor is in now (None off the lanes)."""
+        if name == "ego":
+            return self.ego_road.road.lane_at(self.ego_s, self.ego_t)
+        a = self.agent_by_name[name]
+        return self.agent_roads[name].road.lane_at(a.s, a.t)
+
     def road_band_t(self, road_id: str, s: float) -> tuple[float, float]:
         road = next(r for r in self.agent_roads.values() if r.road_id == road_id)
         return road.road.road_band_t(s)
@@ -418,6 +440,14 @@ class _Run:
         return float(road.road.lane_center_t(lane, s))
 
     # ---- behaviours
+    def live_value(self, expr) -> float:
+        """A live behaviour setting (`speed(ego) + 5 km/h`) on the state recorded this step."""
+        rec, k = self.recorded
+        if self._live_snapshot is None or self._live_snapshot[0] != k:
+            self._live_snapshot = (k, _snapshot_trace(self, rec, k))
+        trace = self._live_snapshot[1]
+        return float(oracles.evaluate(expr, compute_signals(trace, oracles_signals(expr)), self.dt)[0])
+
     def _start_behavior(self, agent: AgentState, clause: BoundClause, time_s: float) -> None:
         cls = BEHAVIORS.get(clause.name)
         settings = clause.settings
@@ -531,6 +561,11 @@ def _loop(run: _Run) -> Trace:
             last = k + 1
             break
 
+        run.recorded = (rec, k)  # live behaviour settings read the state just recorded
+        if run.deferred:
+            for agent, clause in run.deferred:
+                run._start_behavior(agent, clause, t_now)
+            run.deferred.clear()
         # Scripted steps fire on the state just recorded.
         if run.scripts:
             _advance_scripts(run, rec, k, t_now)
@@ -544,6 +579,8 @@ def _loop(run: _Run) -> Trace:
                 for f in run.faults.for_target(name):
                     f.before_capture(sensor, t_now)
                 frame = sensor.capture(run, t_now)
+                for env in run.environment:  # weather and light act on what the sensor captured
+                    frame = env.on_frame(sensor, frame, run.rng(f"environment:{env.keyword}:{name}"))
                 delay = 0.0
                 for f in run.faults.for_target(name):
                     frame, extra = f.on_frame(frame, t_now)

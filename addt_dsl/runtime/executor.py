@@ -29,7 +29,7 @@ import signal
 import sys
 import time
 import traceback
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from multiprocessing.connection import wait
@@ -41,7 +41,71 @@ from addt_dsl.runtime.store import ResultStore, trace_stats
 
 DEFAULT_MEMORY_LIMIT_MB = 4096
 DEFAULT_MAX_TASKS_PER_CHILD = 500
+DEFAULT_RETRIES = 2
 _GUARD_POLL_S = 0.2  # how often busy workers are checked against timeout and memory limit
+
+# The default time bound of a run (`timeout_s="auto"`): its simulated duration over a
+# conservative real-time factor, plus start-up (forking a worker, building the world, the
+# first lidar casts). The closed-loop twin runs at 1-4x real time on one core with the
+# default sensors; 0.1x leaves room for a loaded machine, a large lidar or a camera, and
+# still ends a hung external stack or a run stuck in a loop.
+AUTO = "auto"
+BOUND_REAL_TIME_FACTOR = 0.1  # simulated seconds per wall second, at the slowest expected
+BOUND_STARTUP_S = 60.0
+
+# Signals that kill a worker from outside (the OOM killer and `kill` send SIGKILL, a
+# scheduler SIGTERM): infrastructure, not the run. A run that loses its worker to one is
+# run again; one that loses it on every attempt is `lost`, never stored as a verdict.
+EXTERNAL_SIGNALS = frozenset({signal.SIGKILL, signal.SIGTERM, signal.SIGHUP, signal.SIGINT})
+
+
+def run_time_bound_s(spec: RunSpec, timeout_s: float | str | None = AUTO) -> float | None:
+    """The wall-clock bound of one run [s]: `timeout_s` when it is a number > 0, the default
+    derived from the scenario for "auto", None (no bound) for None or 0."""
+    if timeout_s == AUTO:
+        return BOUND_STARTUP_S + spec.plan.duration_s / BOUND_REAL_TIME_FACTOR
+    return float(timeout_s) if timeout_s else None
+
+
+class Attempts:
+    """The retry policy every executor applies to a run that did not finish.
+
+    A worker killed from outside (`external`: a signal in EXTERNAL_SIGNALS, a lost Ray
+    worker or node) is infrastructure: the run goes again, up to `retries` times, and one
+    still not done is `lost` (not stored: a resume runs it again). Anything else that did
+    not finish (an exception in the stack or the twin, a segfault, a timeout, the memory
+    limit) is run once more; failing the same way twice it is stored as it is (the record
+    carries the traceback), so a deterministic crash costs one retry, never a loop."""
+
+    def __init__(self, retries: int = DEFAULT_RETRIES):
+        self.retries = max(0, int(retries))
+        self._seen: dict[int, list[str]] = {}
+        self.retried = 0
+
+    @staticmethod
+    def signature(record: RunResult) -> str:
+        if record.status in ("timeout", "memory"):
+            return record.status
+        return f"{record.status}: {(record.error.splitlines() or [''])[0]}"
+
+    def judge(self, seq: int, record: RunResult, external: bool = False) -> str:
+        """"done" (yield the record), "retry" (run it again) or "lost"."""
+        if record.status in ("ok", "detected"):
+            self._seen.pop(seq, None)
+            return "done"
+        seen = self._seen.setdefault(seq, [])
+        sig = "external" if external else self.signature(record)
+        repeated = not external and sig in seen
+        seen.append(sig)
+        if repeated or len(seen) > self.retries:
+            del self._seen[seq]
+            if external:
+                record.status = "lost"
+                record.error = (f"{record.error} (on each of {len(seen)} attempt(s); not stored: "
+                                "run the same command again to retry it)")
+            return "lost" if external else "done"
+        self.retried += 1
+        return "retry"
 
 
 # ---------------------------------------------------------------------------- one run
@@ -98,6 +162,9 @@ class InlineExecutor:
     def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunResult]:
         for seq, spec in items:
             yield (self.run_fn or run_spec)(spec, seq, worker="inline")
+
+    def close(self) -> None:
+        pass
 
 
 def _die_with_parent() -> None:
@@ -157,21 +224,31 @@ class _Worker:
 class LocalExecutor:
     """Long-lived worker processes on this machine, with per-run timeout and memory guard.
 
-    `timeout_s`: wall-clock seconds a run may take before it is killed (None: no limit).
+    `timeout_s`: wall-clock seconds a run may take before it is killed: "auto" (default) a
+    bound derived from the scenario (`run_time_bound_s`), a number, or None / 0 (no limit).
+    `retries`: how often a run that did not finish is run again (`Attempts`).
     `memory_limit_mb`: resident memory a worker may use (None: no limit); checked while a
     run is in flight and against the worker's peak when it finishes.
     `run_fn`: what a worker calls per run (default `run_spec`; a module-level function
     with the same signature, e.g. to test the guards).
+    `keep_workers`: keep the idle workers between `imap` calls until `close()` (the search
+    calls `imap` once per small batch; starting two workers per batch cost more than the
+    runs themselves).
     """
 
     name = "local"
 
-    def __init__(self, jobs: int = 1, timeout_s: float | None = None,
+    def __init__(self, jobs: int = 1, timeout_s: float | str | None = AUTO,
                  memory_limit_mb: float | None = DEFAULT_MEMORY_LIMIT_MB,
                  max_tasks_per_child: int | None = DEFAULT_MAX_TASKS_PER_CHILD,
-                 start_method: str | None = None, run_fn: Callable | None = None):
+                 start_method: str | None = None, run_fn: Callable | None = None,
+                 retries: int = DEFAULT_RETRIES, keep_workers: bool = False):
         self.workers = max(1, int(jobs))
-        self.timeout_s = timeout_s if timeout_s and timeout_s > 0 else None
+        self.keep_workers = keep_workers
+        self._kept: list[_Worker] = []  # idle workers kept from the last `imap` (keep_workers)
+        self.timeout_s = timeout_s if timeout_s == AUTO or (timeout_s and timeout_s > 0) else None
+        self.retries = retries
+        self.retried = 0  # runs run again, after `imap`
         self.memory_limit_mb = memory_limit_mb if memory_limit_mb and memory_limit_mb > 0 else None
         self.max_tasks_per_child = max_tasks_per_child if max_tasks_per_child and max_tasks_per_child > 0 else None
         if start_method is None:
@@ -202,13 +279,21 @@ class LocalExecutor:
         child.close()
         return _Worker(process, parent)
 
-    def _dispatch(self, w: _Worker, seq: int, spec: RunSpec) -> None:
+    def _dispatch(self, w: _Worker, seq: int, spec: RunSpec) -> bool:
+        """Hand a run to an idle worker; False if the worker turned out to be dead (it died
+        while idle: its pipe is broken), so the caller replaces it."""
+        if not w.process.is_alive():
+            return False
         token, _ = self._plans.setdefault(id(spec.plan), (len(self._plans), spec.plan))
-        if token not in w.plans:
-            w.conn.send(("plan", token, spec.plan))
-            w.plans.add(token)
-        w.conn.send(("run", seq, token, spec_fields(spec)))
-        w.job = (seq, spec, time.monotonic())
+        try:
+            if token not in w.plans:
+                w.conn.send(("plan", token, spec.plan))
+                w.plans.add(token)
+            w.conn.send(("run", seq, token, spec_fields(spec)))
+        except (BrokenPipeError, ConnectionResetError, EOFError, OSError):
+            return False
+        w.job = (seq, spec, time.monotonic(), run_time_bound_s(spec, self.timeout_s))
+        return True
 
     @staticmethod
     def _stop(w: _Worker, kill: bool = False) -> None:
@@ -223,19 +308,31 @@ class LocalExecutor:
     def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunResult]:
         ctx = self._context()
         items = iter(items)
-        pool = [self._spawn(ctx) for _ in range(self.workers)]
+        attempts = Attempts(self.retries)
+        again: deque[tuple[int, RunSpec]] = deque()  # runs to retry, before new ones
+        pool, self._kept = self._kept, []
+        pool += [self._spawn(ctx) for _ in range(self.workers - len(pool))]
         idle = list(pool)
         busy: list[_Worker] = []
         exhausted = False
+
+        def replace(w: _Worker) -> _Worker:
+            pool.remove(w)
+            fresh = self._spawn(ctx)
+            pool.append(fresh)
+            return fresh
+
         try:
             while True:
-                while idle and not exhausted:
-                    nxt = next(items, None)
+                while idle and (again or not exhausted):
+                    nxt = again.popleft() if again else next(items, None)
                     if nxt is None:
                         exhausted = True
                         break
                     w = idle.pop()
-                    self._dispatch(w, *nxt)
+                    while not self._dispatch(w, *nxt):  # died while idle: a new one takes the run
+                        self._stop(w, kill=True)
+                        w = replace(w)
                     busy.append(w)
                 if not busy:
                     break
@@ -243,24 +340,37 @@ class LocalExecutor:
                 ready = set(wait([w.conn for w in busy] + [w.process.sentinel for w in busy],
                                  timeout=_GUARD_POLL_S if guarded else None))
                 for w in list(busy):
-                    record, replace = self._check(w, ready)
-                    if record is None:
+                    result = self._check(w, ready)
+                    if result is None:
                         continue
+                    record, retire, external = result
+                    seq, spec = w.job[0], w.job[1]
                     busy.remove(w)
                     w.job = None
-                    if replace:
-                        pool.remove(w)
-                        w = self._spawn(ctx)
-                        pool.append(w)
-                    idle.append(w)
-                    yield record
+                    idle.append(replace(w) if retire else w)
+                    verdict = attempts.judge(seq, record, external)
+                    if verdict == "retry":
+                        again.append((seq, spec))
+                    else:
+                        yield record
         finally:
             for w in pool:
-                self._stop(w, kill=w.job is not None)
+                if self.keep_workers and w.job is None and w.process.is_alive():
+                    self._kept.append(w)  # a dead one is found and replaced at its next run
+                else:
+                    self._stop(w, kill=w.job is not None)
+            self.retried = attempts.retried
 
-    def _check(self, w: _Worker, ready: set) -> tuple[RunResult | None, bool]:
-        """(record, replace worker) if the worker's run is over, (None, False) if it runs on."""
-        seq, spec, started = w.job
+    def close(self) -> None:
+        """Stop the workers kept between `imap` calls (`keep_workers`)."""
+        kept, self._kept = self._kept, []
+        for w in kept:
+            self._stop(w)
+
+    def _check(self, w: _Worker, ready: set) -> tuple[RunResult, bool, bool] | None:
+        """(record, replace the worker, killed from outside) once the worker's run is over,
+        None while it runs on."""
+        seq, spec, started, bound_s = w.job
         elapsed = time.monotonic() - started
         if w.conn in ready or w.process.sentinel in ready:
             try:
@@ -273,31 +383,34 @@ class LocalExecutor:
                           or (self.max_tasks_per_child and w.tasks >= self.max_tasks_per_child))
                 if retire:
                     self._stop(w)
-                return record, bool(retire)
+                return record, bool(retire), False
             w.process.join(timeout=5)
             code = w.process.exitcode
             why = f"killed by signal {-code}" if code is not None and code < 0 else f"exited with code {code}"
+            external = code is not None and code < 0 and -code in EXTERNAL_SIGNALS
             self._stop(w, kill=True)
             return RunResult.unfinished(spec, "crashed", f"worker process {why} during the run", elapsed,
-                                        seq=seq, worker=f"pid{w.process.pid}"), True
+                                        seq=seq, worker=f"pid{w.process.pid}"), True, external
         if self.memory_limit_mb is not None:
             rss = rss_mb(w.process.pid)
             if rss is not None and rss > self.memory_limit_mb:
                 self._stop(w, kill=True)
                 return RunResult.unfinished(
                     spec, "memory", f"resident memory {rss:.0f} MB over the {self.memory_limit_mb:.0f} MB limit",
-                    elapsed, seq=seq, worker=f"pid{w.process.pid}"), True
-        if self.timeout_s is not None and elapsed > self.timeout_s:
+                    elapsed, seq=seq, worker=f"pid{w.process.pid}"), True, False
+        if bound_s is not None and elapsed > bound_s:
             self._stop(w, kill=True)
-            return RunResult.unfinished(spec, "timeout", f"run exceeded the {self.timeout_s:g} s timeout",
-                                        elapsed, seq=seq, worker=f"pid{w.process.pid}"), True
-        return None, False
+            return RunResult.unfinished(spec, "timeout", f"run exceeded the {bound_s:g} s timeout",
+                                        elapsed, seq=seq, worker=f"pid{w.process.pid}"), True, False
+        return None
 
 
 def local_executor(jobs: int = 1, run_fn: Callable | None = None, **options):
     """In this process for one job (nothing to supervise in parallel), else `jobs` guarded
     local workers: what the search, `--classify`'s golden runs and the studies run on."""
-    return InlineExecutor(run_fn) if jobs <= 1 else LocalExecutor(jobs, run_fn=run_fn, **options)
+    if jobs <= 1:
+        return InlineExecutor(run_fn)
+    return LocalExecutor(jobs, run_fn=run_fn, **options)
 
 
 # ---------------------------------------------------------------------------- coordinator
@@ -312,11 +425,15 @@ class SweepOutcome:
     passed: int = 0
     failed: int = 0
     statuses: Counter = field(default_factory=Counter)
+    lost: list[RunResult] = field(default_factory=list)  # not done after their retries; not stored
 
 
 def run_sweep(specs: Iterable[RunSpec], store: ResultStore, executor=None,
               on_record: Callable[[RunResult], None] | None = None) -> SweepOutcome:
-    """Run every spec the store does not hold yet, committing each as it completes."""
+    """Run every spec the store does not hold yet, committing each as it completes. A run
+    the executor lost (status `lost`) is counted, not stored, so a resume runs it again. A
+    store that cannot take a run (a full disk: `StoreFull`) stops the sweep at once, the
+    workers with it; every run committed before stays."""
     executor = executor or LocalExecutor()
     outcome = SweepOutcome()
     done = store.done()
@@ -329,16 +446,23 @@ def run_sweep(specs: Iterable[RunSpec], store: ResultStore, executor=None,
                 continue
             yield seq, spec
 
-    for record in executor.imap(pending()):
-        store.add(record)
-        outcome.ran += 1
-        outcome.statuses[record.status] += 1
-        if record.passed:
-            outcome.passed += 1
-        else:
-            outcome.failed += 1
-        if on_record:
-            on_record(record)
+    runs = executor.imap(pending())
+    try:
+        for record in runs:
+            outcome.statuses[record.status] += 1
+            if record.status == "lost":
+                outcome.lost.append(record)
+                continue
+            store.add(record)
+            outcome.ran += 1
+            outcome.passed += record.passed
+            outcome.failed += not record.passed
+            if on_record:
+                on_record(record)
+    finally:
+        close = getattr(runs, "close", None)
+        if close is not None:
+            close()  # stops the workers now, also when the store failed
     return outcome
 
 

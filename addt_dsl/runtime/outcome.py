@@ -131,7 +131,8 @@ class GoldenCache:
         if self._store is None:
             if self.readonly and not self.store_path.exists():
                 return None
-            self._store = ResultStore(self.store_path, readonly=self.readonly, create=True)
+            self._store = ResultStore(self.store_path, readonly=self.readonly, create=True,
+                                      verify=not self.readonly)
         return self._store
 
     def get(self, key: str) -> Fingerprint | None:
@@ -247,6 +248,8 @@ def prepare_goldens(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache 
     run_fn, executor.run_fn = executor.run_fn, GoldenRun()
     try:
         for result in executor.imap(enumerate(missing.values())):
+            if result.status == "lost":
+                continue  # not kept: a worker that classifies its twin runs it (and a resume here)
             data = result.stats.get("fingerprint")
             fp = Fingerprint.from_bytes(base64.b64decode(data)) if data else Fingerprint({}, "crashed", False)
             cache.put(result.key, fp)

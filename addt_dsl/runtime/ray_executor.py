@@ -5,11 +5,16 @@ the same wherever it ran. The plan goes to the object store once (`ray.put`); ta
 only the RunSpec's own fields. At most one task per CPU slot is in flight, so a task
 starts about when it is submitted and the coordinator holds only those few specs.
 
-Guards: a run past `timeout_s` (counted from submission) is cancelled with `force=True`,
+Guards: a run past its time bound (`timeout_s`, by default derived from the scenario:
+`executor.run_time_bound_s`, counted from submission) is cancelled with `force=True`,
 which kills its worker, and recorded as `timeout`; a run whose worker ends above
-`memory_limit_mb`, or that Ray's own memory monitor kills, is recorded as `memory`; a
-lost worker is recorded as `crashed`. Workers are recycled after `max_tasks_per_child`
-tasks (Ray's `max_calls`). Ray is optional: `pip install 'addt-dsl[ray]'`.
+`memory_limit_mb`, or that Ray's own memory monitor kills, is recorded as `memory`.
+Retries follow the local executor's policy (`executor.Attempts`), applied here rather than
+with Ray's `max_retries` so that every attempt gets its own time bound: a task whose
+worker or node was lost (any other `RayError`) is infrastructure and is submitted again up
+to `retries` times, then reported `lost` (not stored); a run that failed the same way twice
+is recorded. Workers are recycled after `max_tasks_per_child` tasks (Ray's `max_calls`).
+Ray is optional: `pip install 'addt-dsl[ray]'`.
 """
 
 from __future__ import annotations
@@ -17,11 +22,12 @@ from __future__ import annotations
 import importlib.util
 import os
 import time
+from collections import deque
 from collections.abc import Iterable, Iterator
 
 from addt_dsl.plan import RunSpec
-from addt_dsl.runtime.executor import (DEFAULT_MAX_TASKS_PER_CHILD, DEFAULT_MEMORY_LIMIT_MB, spec_fields,
-                                       rss_mb, run_spec)
+from addt_dsl.runtime.executor import (AUTO, DEFAULT_MAX_TASKS_PER_CHILD, DEFAULT_MEMORY_LIMIT_MB,
+                                       DEFAULT_RETRIES, Attempts, rss_mb, run_spec, run_time_bound_s, spec_fields)
 from addt_dsl.runtime.result import RunResult
 
 _POLL_S = 0.2
@@ -45,12 +51,15 @@ def _ray_task(plan, fields: dict, seq: int, memory_limit_mb: float | None) -> Ru
 class RayExecutor:
     name = "ray"
 
-    def __init__(self, address: str | None = None, jobs: int | None = None, timeout_s: float | None = None,
+    def __init__(self, address: str | None = None, jobs: int | None = None, timeout_s: float | str | None = AUTO,
                  memory_limit_mb: float | None = DEFAULT_MEMORY_LIMIT_MB,
-                 max_tasks_per_child: int | None = DEFAULT_MAX_TASKS_PER_CHILD, init_kwargs: dict | None = None):
+                 max_tasks_per_child: int | None = DEFAULT_MAX_TASKS_PER_CHILD, init_kwargs: dict | None = None,
+                 retries: int = DEFAULT_RETRIES):
         self.address = address
         self.jobs = jobs
-        self.timeout_s = timeout_s if timeout_s and timeout_s > 0 else None
+        self.timeout_s = timeout_s if timeout_s == AUTO or (timeout_s and timeout_s > 0) else None
+        self.retries = retries
+        self.retried = 0
         self.memory_limit_mb = memory_limit_mb if memory_limit_mb and memory_limit_mb > 0 else None
         self.max_tasks_per_child = max_tasks_per_child or 0
         self.init_kwargs = init_kwargs or {}
@@ -77,47 +86,60 @@ class RayExecutor:
         try:
             slots = self.jobs or max(1, int(ray.cluster_resources().get("CPU", 1)))
             self.workers = slots
-            options = {"num_cpus": 1, "max_retries": 0}
+            options = {"num_cpus": 1, "max_retries": 0}  # retried here, each attempt bounded (Attempts)
             if self.max_tasks_per_child:
                 options["max_calls"] = self.max_tasks_per_child
             task = ray.remote(**options)(_ray_task)
             plan_refs: dict[int, tuple[object, object]] = {}  # id(plan) -> (plan, ref): keeps ids unique
-            inflight: dict[object, tuple[int, RunSpec, float]] = {}
+            inflight: dict[object, tuple[int, RunSpec, float, float | None]] = {}
+            attempts = Attempts(self.retries)
+            again: deque[tuple[int, RunSpec]] = deque()
             items = iter(items)
             exhausted = False
             while True:
-                while not exhausted and len(inflight) < slots:
-                    nxt = next(items, None)
+                while (again or not exhausted) and len(inflight) < slots:
+                    nxt = again.popleft() if again else next(items, None)
                     if nxt is None:
                         exhausted = True
                         break
                     seq, spec = nxt
                     _, plan_ref = plan_refs.setdefault(id(spec.plan), (spec.plan, ray.put(spec.plan)))
                     ref = task.remote(plan_ref, spec_fields(spec), seq, self.memory_limit_mb)
-                    inflight[ref] = (seq, spec, time.monotonic())
+                    inflight[ref] = (seq, spec, time.monotonic(), run_time_bound_s(spec, self.timeout_s))
                 if not inflight:
                     break
                 ready, _ = ray.wait(list(inflight), num_returns=1,
                                     timeout=_POLL_S if self.timeout_s else None)
+                finished = []
                 for ref in ready:
-                    seq, spec, started = inflight.pop(ref)
+                    seq, spec, started, _ = inflight.pop(ref)
                     elapsed = time.monotonic() - started
+                    external = False
                     try:
-                        yield ray.get(ref)
+                        record = ray.get(ref)
                     except rex.OutOfMemoryError as exc:
-                        yield RunResult.unfinished(spec, "memory", f"Ray killed the task: {exc}", elapsed, seq=seq)
-                    except rex.RayError as exc:
-                        yield RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", elapsed,
-                                                   seq=seq)
-                if self.timeout_s:
-                    now = time.monotonic()
-                    for ref, (seq, spec, started) in list(inflight.items()):
-                        if now - started > self.timeout_s:
-                            ray.cancel(ref, force=True)
-                            del inflight[ref]
-                            yield RunResult.unfinished(spec, "timeout",
-                                                       f"run exceeded the {self.timeout_s:g} s timeout",
-                                                       now - started, seq=seq)
+                        record = RunResult.unfinished(spec, "memory", f"Ray killed the task: {exc}", elapsed, seq=seq)
+                    except rex.RayError as exc:  # the worker or its node was lost: infrastructure
+                        first = (str(exc).splitlines() or [""])[0]
+                        record = RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {first}", elapsed,
+                                                      seq=seq)
+                        external = True
+                    finished.append((seq, spec, record, external))
+                now = time.monotonic()
+                for ref, (seq, spec, started, bound_s) in list(inflight.items()):
+                    if bound_s is not None and now - started > bound_s:
+                        ray.cancel(ref, force=True)
+                        del inflight[ref]
+                        finished.append((seq, spec, RunResult.unfinished(
+                            spec, "timeout", f"run exceeded the {bound_s:g} s timeout", now - started, seq=seq),
+                            False))
+                for seq, spec, record, external in finished:
+                    verdict = attempts.judge(seq, record, external)
+                    if verdict == "retry":
+                        again.append((seq, spec))
+                    else:
+                        yield record
+            self.retried = attempts.retried
         finally:
             if started_here:
                 ray.shutdown()

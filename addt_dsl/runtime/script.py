@@ -2,7 +2,8 @@
 
 The compiler lowers an agent's steps to a tree of `TriggerPlan`/`GroupPlan`, bound for a
 run into `BoundStep`/`BoundGroup` (runtime/bound.py); this module runs that tree in
-simulated time. A step is armed, fires when its start conditions hold
+simulated time. A step is armed, fires when its start conditions hold (a `when`
+condition with `for D` must have held at every step for D)
 (starting its behaviour and arming its group), and is done once it fired and its group
 is done. A sequence arms each step when the previous one is done; a parallel group arms
 all its steps at once and is done when all are.
@@ -27,6 +28,8 @@ class StepState:
         self.at_s = step.at_s
         self.after_s = step.after_s
         self.condition = step.condition
+        self.hold_s = step.hold_s
+        self.held_since: float | None = None  # first instant of the condition's current run
         self.group = GroupState(step.group) if step.group is not None else None
         self.armed_at: float | None = None
         self.fired = False
@@ -55,8 +58,16 @@ class StepState:
                 return
             if self.at_s is not None and time_s + TIME_EPS_S < self.at_s:
                 return
-            if self.condition is not None and not holds(self.condition):
-                return
+            if self.condition is not None:
+                # `when C for D`: the past-time `historically[0, D] C`, kept as the start of
+                # C's current run of true samples rather than re-evaluating a window.
+                if not holds(self.condition):
+                    self.held_since = None
+                    return
+                if self.held_since is None:
+                    self.held_since = time_s
+                if time_s + TIME_EPS_S < self.held_since + self.hold_s:
+                    return
             self.fired = True
             if self.clause is not None:
                 start(self.clause, time_s)

@@ -108,6 +108,33 @@ def same_frame(a, b) -> bool:
 
 
 @SIGNALS.register
+class RelSpeed(SignalFn):
+    keyword = "rel_speed"
+    args = ("actor", "actor")
+    dim = units.SPEED
+    doc = ("speed of the first actor minus that of the second, positive when the first is faster "
+           "(OpenSCENARIO RelativeSpeedCondition) [m/s]")
+
+    @staticmethod
+    def compute(trace, args):
+        return trace.actors[args[0]].speed - trace.actors[args[1]].speed
+
+
+@SIGNALS.register
+class LatGap(SignalFn):
+    keyword = "lat_gap"
+    args = ("actor", "actor")
+    dim = units.LENGTH
+    doc = ("side-to-side gap across the road between two actors' boxes, negative when they overlap "
+           "laterally (OpenSCENARIO RelativeDistanceCondition, lateral, freespace) [m]")
+
+    @staticmethod
+    def compute(trace, args):
+        a, b = trace.actors[args[0]], trace.actors[args[1]]
+        return np.abs(b.t - a.t) - 0.5 * (a.width_m + b.width_m)
+
+
+@SIGNALS.register
 class Ttc(SignalFn):
     keyword = "ttc"
     args = ("actor", "actor")

@@ -20,15 +20,20 @@ signals sampled per step) are kept as blobs beside the runs.
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import hashlib
 import json
 import math
+import os
 import sqlite3
+import sys
 import time
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
 
+from addt_dsl.errors import ToolError
 from addt_dsl.fingerprint import code_fingerprint, code_identity, describe
 from addt_dsl.plan import RunSpec, ScenarioPlan
 from addt_dsl.runtime.result import RunResult, Verdict
@@ -40,13 +45,98 @@ LATENCY_BIN_S = 0.002
 LATENCY_BINS = 250  # 0 .. 500 ms; the last bin also holds everything above
 
 
+SQLITE_HEADER = b"SQLite format 3\x00"
+
+
 class StoreMismatch(ValueError):
     """The store holds results of a different plan."""
 
 
+class StoreError(ToolError):
+    """The store cannot be used: damaged, not a results store, read-only, in use by another
+    sweep, or the disk is full. The message is one line that names the file, what is wrong
+    and what to do (the commands print it and exit 3)."""
+
+
+class StoreBusy(StoreError):
+    """Another process is writing the store."""
+
+
+class StoreFull(StoreError):
+    """The disk (or the store's filesystem) is full: what was committed stays."""
+
+
+def _is_full(exc: BaseException) -> bool:
+    text = str(exc).lower()
+    return "disk is full" in text or "disk i/o error" in text or getattr(exc, "errno", None) == errno.ENOSPC
+
+
+# One writer per store: an exclusive flock on `<store>.lock`, held for the store's life (the
+# kernel drops it when the process dies, SIGKILL included, so a killed sweep never leaves a
+# stale lock). Not SQLite's own locks: those last one transaction, and two sweeps
+# interleaving transactions is what mixed rows. A separate file because closing any
+# descriptor of the database file would drop SQLite's POSIX locks. Held per process and
+# counted, so the coordinator's store and its golden-run cache (one file) share it.
+_LOCKS: dict[str, list] = {}  # realpath -> [fd, count]
+
+
+def _lock(path: Path) -> str:
+    key = os.path.realpath(path)
+    held = _LOCKS.get(key)
+    if held is not None:
+        held[1] += 1
+        return key
+    lock_path = f"{path}.lock"
+    try:
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:
+        raise StoreError(f"{path}: cannot write beside the store ({exc.strerror}: {lock_path}); "
+                         "a sweep needs a writable directory: pick another --out or --store "
+                         "(`addtc report` reads a read-only store)") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.pread(fd, 400, 0).decode(errors="replace").strip() or "another process"
+        os.close(fd)
+        raise StoreBusy(f"{path} is in use by another sweep ({holder}); wait for it to finish, "
+                        "or give this one another --out or --store") from None
+    os.ftruncate(fd, 0)
+    os.pwrite(fd, f"pid {os.getpid()}: {' '.join(sys.argv)[:300]}\n".encode(), 0)
+    _LOCKS[key] = [fd, 1]
+    return key
+
+
+def _unlock(key: str) -> None:
+    held = _LOCKS.get(key)
+    if held is None:
+        return
+    held[1] -= 1
+    if held[1] <= 0:
+        del _LOCKS[key]
+        os.close(held[0])  # releases the flock; the lock file stays (harmless, reused)
+
+
+def _check_file(path: Path) -> None:
+    """Refuse a file that is not a results store before SQLite touches it: a 0-byte file
+    (SQLite would silently make it a new store) or another file (overwriting it)."""
+    try:
+        with open(path, "rb") as fh:
+            header = fh.read(len(SQLITE_HEADER))
+    except OSError as exc:
+        raise StoreError(f"{path}: cannot read the results store ({exc.strerror})") from None
+    if not header:
+        raise StoreError(f"{path} is empty (0 bytes), not a results store; it is left as it is: "
+                         "remove it, or pick another --out or --store")
+    if header != SQLITE_HEADER:
+        raise StoreError(f"{path} is not a results store (not an SQLite file); it is left as it is: "
+                         "pick another --out or --store")
+
+
 def plan_hash(plan: ScenarioPlan) -> str:
-    """The plan's identity with the fingerprint of the code that runs it."""
-    return hashlib.sha256((plan.model_dump_json() + code_fingerprint()).encode()).hexdigest()[:20]
+    """The plan's identity (its content, not how its path was spelled: `ScenarioPlan.identity`)
+    with the fingerprint of the code that runs it."""
+    content = json.dumps(plan.identity(), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256((content + code_fingerprint()).encode()).hexdigest()[:20]
 
 
 def trace_stats(trace) -> dict:
@@ -102,27 +192,122 @@ class ResultStore:
     store of another plan raises `StoreMismatch` unless `fresh` clears it first."""
 
     def __init__(self, path: str | Path | None, plan: ScenarioPlan | None = None, *, fresh: bool = False,
-                 create: bool = False, readonly: bool = False):
+                 create: bool = False, readonly: bool = False, verify: bool = True):
         # path None: in memory (a search cache that is not kept). `readonly`: a reader that
-        # never writes (a worker reading golden fingerprints while the coordinator writes).
+        # never writes and takes no lock (reports, exports, `trace`, a worker reading golden
+        # fingerprints while the coordinator writes). A writer holds the store's lock (one
+        # writer per store) until `close`. `verify`: check every page first (a damaged store
+        # is refused in one line, not met as an SQLite error halfway through a report).
         self.path = Path(path) if path is not None else None
+        self._lock_key: str | None = None
+        self._db = None
         if self.path is not None:
             if not self.path.exists() and (readonly or (plan is None and not create)):
                 raise FileNotFoundError(f"no results store at {self.path}")
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-        if readonly:
-            self._db = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True,
-                                       isolation_level=None, timeout=30.0)
-        else:
-            self._db = sqlite3.connect(self.path or ":memory:", isolation_level=None, timeout=30.0)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=NORMAL")
-            self._create()
+            if not readonly:
+                try:
+                    self.path.parent.mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    raise StoreError(f"{self.path}: cannot create its directory ({exc.strerror})") from None
+                self._lock_key = _lock(self.path)
         self.session = 0
         self._plan: ScenarioPlan | None = None
         self._plan_hashes: dict[int, tuple[ScenarioPlan, str]] = {}  # id(plan) -> (plan, hash), stored
-        if plan is not None:
-            self._bind(plan, fresh)
+        try:
+            if self.path is not None and self.path.exists():
+                _check_file(self.path)
+            elif self.path is not None and not readonly:
+                self._create_file()
+            self._open(readonly, verify)
+            if plan is not None:
+                with self.errors("opening"):
+                    self._bind(plan, fresh)
+        except BaseException:
+            self.close()  # a refused store keeps no lock
+            raise
+
+    def _create_file(self) -> None:
+        """Make a new, empty store beside the path and rename it into place, so that no
+        crash ever leaves a 0-byte or half-made file under the store's name (one that a
+        later run would have to refuse)."""
+        tmp = self.path.with_name(f".{self.path.name}.new-{os.getpid()}")
+        with self.errors("creating the store"):
+            try:
+                db = sqlite3.connect(tmp, isolation_level=None)
+                try:
+                    self._db = db
+                    db.execute("PRAGMA journal_mode=WAL")
+                    self._create()
+                finally:
+                    self._db = None
+                    db.close()
+                os.replace(tmp, self.path)
+            finally:
+                for leftover in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+                    if leftover.exists():
+                        leftover.unlink()
+
+    def _open(self, readonly: bool, verify: bool) -> None:
+        with self.errors("opening"):
+            if readonly:
+                uri = self.path.resolve().as_uri()
+                self._db = sqlite3.connect(f"{uri}?mode=ro", uri=True, isolation_level=None, timeout=30.0)
+                try:
+                    self._db.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()
+                except sqlite3.OperationalError:
+                    # A write-ahead-log store in a read-only directory (or on read-only media):
+                    # SQLite cannot make its shared-memory file there. Nobody can be writing
+                    # it either, so it is read as an immutable file.
+                    self._db.close()
+                    self._db = sqlite3.connect(f"{uri}?mode=ro&immutable=1", uri=True, isolation_level=None)
+            else:
+                existing = self.path is not None and self.path.exists() and self.path.stat().st_size > 0
+                self._db = sqlite3.connect(self.path or ":memory:", isolation_level=None, timeout=30.0)
+                if existing:  # checked before anything is written to it
+                    self._check_tables()
+                    if verify:
+                        self._verify()
+                self._db.execute("PRAGMA journal_mode=WAL")
+                self._db.execute("PRAGMA synchronous=NORMAL")
+                self._create()
+                return
+            if self.path is not None:
+                self._check_tables()
+                if verify:
+                    self._verify()
+
+    def _verify(self) -> None:
+        problems = [row[0] for row in self._db.execute("PRAGMA quick_check(3)")]
+        if problems != ["ok"]:
+            raise sqlite3.DatabaseError(f"database disk image is malformed ({problems[0]})")
+
+    def _check_tables(self) -> None:
+        tables = {row[0] for row in self._db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        if "meta" not in tables or "runs" not in tables:
+            raise StoreError(f"{self.path} is an SQLite database but not a results store (tables: "
+                             f"{', '.join(sorted(tables)) or 'none'}); it is left as it is: pick another "
+                             "--out or --store")
+
+    def errors(self, doing: str) -> _Errors:
+        """Turn SQLite errors into one-line `StoreError`s naming the file and the remedy."""
+        return _Errors(self, doing)
+
+    def error_of(self, exc: BaseException, doing: str) -> StoreError:
+        where = self.path if self.path is not None else "the in-memory store"
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        if _is_full(exc):
+            return StoreFull(f"{where}: the disk is full ({first}) while {doing}; every run committed so far "
+                             "is kept: free some space and run the same command again to resume")
+        if isinstance(exc, sqlite3.OperationalError) and "readonly" in first.replace("-", "").replace(" ", ""):
+            return StoreError(f"{where} is read-only ({first}); a sweep must write its store: pick another "
+                              "--out or --store (`addtc report` reads a read-only store)")
+        if isinstance(exc, sqlite3.OperationalError) and "locked" in first:
+            return StoreBusy(f"{where} is locked by another process ({first}); wait for it to finish")
+        if isinstance(exc, sqlite3.DatabaseError) and not isinstance(exc, sqlite3.OperationalError) \
+                or "malformed" in first or "not a database" in first:
+            return StoreError(f"{where} is damaged ({first}); copy its readable runs into a new store with "
+                              f"`addtc report {where} --salvage NEW.sqlite`, then resume with --store NEW.sqlite")
+        return StoreError(f"{where}: {first} while {doing}")
 
     @classmethod
     def cache(cls, path: str | Path | None = None) -> ResultStore:
@@ -164,7 +349,16 @@ class ResultStore:
                 db.execute("BEGIN IMMEDIATE")
 
             def __exit__(self_inner, exc_type, *_):
-                db.execute("ROLLBACK" if exc_type else "COMMIT")
+                if exc_type is None:
+                    try:
+                        db.execute("COMMIT")
+                        return
+                    except sqlite3.Error:  # e.g. the disk filled up: nothing of it stays
+                        if db.in_transaction:
+                            db.execute("ROLLBACK")
+                        raise
+                if db.in_transaction:
+                    db.execute("ROLLBACK")
 
         return _Tx()
 
@@ -181,8 +375,10 @@ class ResultStore:
                     "them again or --store to pick another file")
             if not fresh:
                 raise StoreMismatch(
-                    f"{self.path} holds results of another plan ({self.meta('scenario')!r}, plan {stored}); "
-                    "use --fresh to discard them or --store to pick another file")
+                    f"{self.path} holds results of another plan ({self.meta('scenario')!r}, plan {stored}): the "
+                    f"scenario changed; to keep those results run into a new store beside it, --store "
+                    f"{self.path.with_name(f'{self.path.stem}-{digest[:8]}{self.path.suffix}')}, or use --fresh "
+                    "to discard them")
         with self._tx():
             if fresh or (stored is not None and stored != digest):
                 # Blobs stay: they are keyed by content (golden fingerprints by RunSpec key).
@@ -195,14 +391,19 @@ class ResultStore:
         self._plan_hashes[id(plan)] = (plan, digest)
 
     def begin_session(self, command: str = "", executor: str = "", workers: int = 0) -> int:
-        with self._tx():
+        with self.errors("starting a session"), self._tx():
             cur = self._db.execute("INSERT INTO sessions (started_at, command, executor, workers) VALUES (?,?,?,?)",
                                    (time.time(), command, executor, workers))
         self.session = int(cur.lastrowid)
         return self.session
 
     def close(self) -> None:
-        self._db.close()
+        if self._db is not None:
+            self._db.close()
+            self._db = None
+        if self._lock_key is not None:
+            _unlock(self._lock_key)
+            self._lock_key = None
 
     def __enter__(self):
         return self
@@ -216,7 +417,7 @@ class ResultStore:
         return row[0] if row else None
 
     def set_meta(self, name: str, value) -> None:
-        with self._tx():
+        with self.errors("writing"), self._tx():
             self._db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)",
                              (name, value if isinstance(value, str) else json.dumps(value)))
 
@@ -245,13 +446,14 @@ class ResultStore:
     def add(self, r: RunResult, plan: ScenarioPlan | None = None) -> bool:
         """Commit one finished run of `plan` (default: the store's); False if it was already
         stored (nothing changes)."""
-        digest = self._plan_hash(plan) if plan is not None else ""
+        with self.errors(f"storing run {r.run_id}"):
+            digest = self._plan_hash(plan) if plan is not None else ""
         verdicts = [{"name": v.name, "severity": v.severity, "robustness": _json_float(v.robustness),
                      "passed": v.passed, "first_violation_s": v.first_violation_s, "mode": v.mode}
                     for v in r.verdicts]
         injections = {"events": {str(k): n for k, n in r.injections.items()},
                       "drawn": {str(k): list(b) for k, b in r.drawn_values.items()}}
-        with self._tx():
+        with self.errors(f"storing run {r.run_id}"), self._tx():
             cur = self._db.execute(
                 f"INSERT OR IGNORE INTO runs ({', '.join(_COLUMNS)}) VALUES ({', '.join('?' * len(_COLUMNS))})",
                 (r.key, r.run_id, r.seq, self.session, r.status, int(r.passed), r.seed, r.repeat_index,
@@ -273,8 +475,9 @@ class ResultStore:
         """Stored runs, streamed (`where` is an SQL condition over the `runs` columns)."""
         sql = f"SELECT {', '.join(_COLUMNS)} FROM runs" + (f" WHERE {where}" if where else "")
         sql += f" ORDER BY {order}" + (f" LIMIT {int(limit)}" if limit else "")
-        for row in self._db.execute(sql, args):
-            yield _record(dict(zip(_COLUMNS, row)))
+        with self.errors("reading runs"):
+            for row in self._db.execute(sql, args):
+                yield _record(dict(zip(_COLUMNS, row)))
 
     def failing(self, limit: int | None = None) -> Iterator[RunResult]:
         return self.records("passed = 0", limit=limit)
@@ -290,14 +493,71 @@ class ResultStore:
         plan = ScenarioPlan.model_validate_json(row[0]) if row else self.plan()
         return RunSpec(plan=plan, **json.loads(record.spec_json))
 
+    # ---- salvage
+    @staticmethod
+    def salvage(damaged: str | Path, into: str | Path) -> tuple[int, int]:
+        """Copy every readable run of a damaged store (row by row: a malformed page costs
+        the rows on it, not the rest) with its plan into a new store at `into`; (copied,
+        unreadable). Resuming the sweep on the new store runs the lost runs again."""
+        damaged, into = Path(damaged), Path(into)
+        if into.exists():
+            raise StoreError(f"{into} exists; --salvage writes a new store: pick a new file name")
+        src = sqlite3.connect(f"{damaged.resolve().as_uri()}?mode=ro", uri=True)
+        try:
+            try:
+                meta = dict(src.execute("SELECT name, value FROM meta").fetchall())
+                plans = src.execute("SELECT hash, plan FROM plans").fetchall()
+                last = src.execute("SELECT MAX(rowid) FROM runs").fetchone()[0] or 0
+            except sqlite3.Error as exc:
+                raise StoreError(f"{damaged}: its plan cannot be read ({exc}); nothing can be salvaged: "
+                                 "run the sweep again into a new store") from None
+            copied = lost = 0
+            with ResultStore(into, create=True, verify=False) as out:
+                with out.errors("salvaging"), out._tx():
+                    out._db.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)", meta.items())
+                    out._db.executemany("INSERT OR IGNORE INTO plans VALUES (?, ?)", plans)
+                    for rowid in range(1, last + 1):
+                        try:
+                            row = src.execute(f"SELECT {', '.join(_COLUMNS)} FROM runs WHERE rowid = ?",
+                                              (rowid,)).fetchone()
+                            if row is None:
+                                continue
+                            _record(dict(zip(_COLUMNS, row)))  # readable as a run, not only as bytes
+                        except (sqlite3.Error, ValueError, TypeError, KeyError):
+                            lost += 1
+                            continue
+                        out._db.execute(f"INSERT OR IGNORE INTO runs ({', '.join(_COLUMNS)}) "
+                                        f"VALUES ({', '.join('?' * len(_COLUMNS))})", row)
+                        copied += 1
+            return copied, lost
+        finally:
+            src.close()
+
     # ---- blobs (golden-run fingerprints)
     def blob(self, key: str) -> bytes | None:
         row = self._db.execute("SELECT data FROM blobs WHERE key = ?", (key,)).fetchone()
         return row[0] if row else None
 
     def put_blob(self, key: str, data: bytes) -> None:
-        with self._tx():
+        with self.errors("writing"), self._tx():
             self._db.execute("INSERT OR REPLACE INTO blobs VALUES (?, ?)", (key, data))
+
+
+class _Errors:
+    """`ResultStore.errors`: a context that re-raises SQLite and OS errors as StoreErrors."""
+
+    __slots__ = ("store", "doing")
+
+    def __init__(self, store: ResultStore, doing: str):
+        self.store, self.doing = store, doing
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc is None or not isinstance(exc, (sqlite3.Error, OSError)) or isinstance(exc, StoreError):
+            return False
+        raise self.store.error_of(exc, self.doing) from exc
 
 
 def _record(row: dict) -> RunResult:

@@ -9,6 +9,8 @@ or writing fails. Outputs, for a stem `S`:
     S.events.json   the replay's events (fault injections with their values, collisions)
     S.report.json   target failure, per-pass statistics, what did not matter
     S.gif           top-down animation, when the reporting package provides one
+    S.xosc          the same run as OpenSCENARIO XML, with its road (S.xodr or the imported
+                    map) and S.addt.json (what OpenSCENARIO cannot hold), addt_dsl/interop
 """
 
 from __future__ import annotations
@@ -20,8 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from addt_dsl.interop.xodr_export import ExportError
+from addt_dsl.interop.xosc_export import export_run
 from addt_dsl.plan import RunSpec
 from addt_dsl.printer import compile_pinned, print_spec, semantic_key, side_files
+from addt_dsl.reporting.atomic import write_text
 from addt_dsl.search.outcome import evaluate
 
 
@@ -37,6 +42,8 @@ class Artifacts:
     report: Path
     animation: Path | None = None
     files: list[Path] = field(default_factory=list)
+    xosc: Path | None = None  # the OpenSCENARIO replay file (None: the run has no OpenSCENARIO form)
+    xosc_note: str = ""  # why not
 
 
 def counterexample_stem(source_file: str, spec: RunSpec) -> str:
@@ -63,10 +70,10 @@ def write_counterexample(result, out_dir: str | Path, source_file: str = "", ste
     stem = stem or counterexample_stem(source_file, result.best)
     text = print_spec(result.best, comment=header_comment(result, source_file))
     path = out / f"{stem}.addt"
-    path.write_text(text)
+    write_text(path, text)
     written = [path]
     for name, body in side_files(result.best.plan).items():
-        (out / name).write_text(body)
+        write_text(out / name, body)
         written.append(out / name)
     replay = compile_pinned(text, path=str(path), base_dir=out)
     outcome = evaluate(replay, keep_trace=True)
@@ -77,14 +84,20 @@ def write_counterexample(result, out_dir: str | Path, source_file: str = "", ste
     arts = Artifacts(path, out / f"{stem}.trace.npz", out / f"{stem}.events.json", out / f"{stem}.report.json")
     if trace is not None:
         np.savez_compressed(arts.trace, **trace_arrays(trace))
-        arts.events.write_text(json.dumps([{"time_s": e.time_s, "kind": e.kind, "detail": _jsonable(e.detail)}
+        write_text(arts.events, json.dumps([{"time_s": e.time_s, "kind": e.kind, "detail": _jsonable(e.detail)}
                                            for e in trace.events], indent=1) + "\n")
         written += [arts.trace, arts.events]
         if animate:
             arts.animation = _animation(replay, trace, outcome, out / f"{stem}.gif")
             if arts.animation:
                 written.append(arts.animation)
-    arts.report.write_text(json.dumps(report(result, source_file, path), indent=2) + "\n")
+    try:  # the same run for esmini or CARLA (docs/openscenario.md)
+        exported = export_run(replay, out, stem)
+        arts.xosc = exported.xosc_path
+        written += [p for p in (exported.xosc_path, exported.xodr_path, exported.sidecar_path) if p not in written]
+    except ExportError as exc:
+        arts.xosc_note = str(exc)
+    write_text(arts.report, json.dumps(report(result, source_file, path), indent=2) + "\n")
     written.append(arts.report)
     arts.files = written
     return arts

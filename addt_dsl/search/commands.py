@@ -20,6 +20,7 @@ from addt_dsl.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, nonneg_float, nonn
 from addt_dsl.limits import DEFAULT
 
 DEFAULT_OUT = ".addt-failures"
+CACHE_NAME = "runs.sqlite"  # the search's run cache, in the output directory by default
 
 # Falsify and shrink run their own budget of runs, never the file's sweep: only the
 # per-run cost thresholds apply to them, not the sweep-wide ones (docs/limits.md).
@@ -40,7 +41,8 @@ def add_commands(sub) -> None:
     shrink.add_argument("--limit", type=nonneg_int, default=0, help="look for a failure in the first N runs only")
     shrink.add_argument("--jobs", "-j", type=positive_int, default=1, help="processes while looking for a failing run")
     shrink.add_argument("--out", default=DEFAULT_OUT, help=f"output directory (default {DEFAULT_OUT})")
-    shrink.add_argument("--cache", help="results store (SQLite) to keep runs in and reuse across invocations")
+    shrink.add_argument("--cache", help=f"results store (SQLite) to keep runs in and reuse across invocations "
+                                        f"(default OUT/{CACHE_NAME}: a killed shrink run again resumes)")
     shrink.add_argument("--no-animation", action="store_true")
     shrink.add_argument("--format", choices=("text", "json"), default="text")
     shrink.set_defaults(func=cmd_shrink)
@@ -59,7 +61,10 @@ def add_commands(sub) -> None:
     fal.add_argument("--shrink-simulations", type=nonneg_int, default=60,
                      help="per distinct failure, to find its origin (0: do not shrink)")
     fal.add_argument("--out", default=DEFAULT_OUT, help="write each distinct failure's counterexample here")
-    fal.add_argument("--no-write", action="store_true", help="report only")
+    fal.add_argument("--no-write", action="store_true", help="report only (no counterexamples, no run cache "
+                                                              "unless --cache is given)")
+    fal.add_argument("--cache", help=f"results store (SQLite) to keep runs in (default OUT/{CACHE_NAME}: a killed "
+                                     "search run again with the same seed resumes and ends with the same report)")
     fal.add_argument("--format", choices=("text", "json"), default="text")
     fal.set_defaults(func=cmd_falsify)
 
@@ -94,7 +99,7 @@ def _from_store(path: str, run_id: str | None):
     p = Path(path)
     if p.is_dir():
         p = p / "results.sqlite"
-    store = ResultStore(p)
+    store = ResultStore(p, readonly=True)
     try:
         plan = store.plan()
         if run_id:
@@ -111,9 +116,7 @@ def _from_store(path: str, run_id: str | None):
 
 
 def cmd_shrink(args) -> int:
-    from addt_dsl.plan import RunSpec
-    from addt_dsl.search import NotFailing, RunCache, Shrinker
-    from addt_dsl.search.artifacts import ReplayMismatch, write_counterexample
+    from addt_dsl.search import RunCache
 
     if not args.file and not args.run_key and not args.store:
         _err("give a scenario FILE, --run-key SPEC_JSON or --store RESULTS")
@@ -125,10 +128,21 @@ def cmd_shrink(args) -> int:
             return EXIT_USAGE
         plan = result.plan
     try:
-        cache = RunCache(args.cache)
+        cache = RunCache(args.cache or Path(args.out) / CACHE_NAME)
     except ValueError as exc:
         _err(str(exc))
         return EXIT_USAGE
+    try:
+        return _shrink(args, plan, cache)
+    finally:
+        cache.close()
+
+
+def _shrink(args, plan, cache) -> int:
+    from addt_dsl.plan import RunSpec
+    from addt_dsl.search import NotFailing, Shrinker
+    from addt_dsl.search.artifacts import ReplayMismatch, write_counterexample
+
     source = args.file or ""
     if args.store:
         try:
@@ -196,19 +210,36 @@ def print_shrink_summary(result, arts) -> None:
 
 
 def cmd_falsify(args) -> int:
-    from addt_dsl.search.falsify import Falsifier
-    from addt_dsl.sweep import UnsatisfiableAssumptions
-
     result = compile_and_report(args.file, "text", SEARCH_LIMITS)
     if not result.ok:
         return EXIT_USAGE
     log = (lambda m: print(m, file=sys.stderr)) if args.format == "text" else None
+    from addt_dsl.search import RunCache
+
+    path = args.cache or (None if args.no_write else Path(args.out) / CACHE_NAME)
+    try:
+        cache = RunCache(path)
+    except ValueError as exc:
+        _err(str(exc))
+        return EXIT_USAGE
+    try:
+        return _falsify(args, result, cache, log)
+    finally:
+        cache.close()
+
+
+def _falsify(args, result, cache, log) -> int:
+    from addt_dsl.search.falsify import Falsifier
+    from addt_dsl.sweep import UnsatisfiableAssumptions
+
     try:
         fal = Falsifier(result.plan, seed=args.seed, batch=args.batch, jobs=args.jobs, sampler=args.sampler,
-                        log=log)
+                        log=log, cache=cache)
     except UnsatisfiableAssumptions as exc:
         _err(str(exc))
         return EXIT_USAGE
+    if log is not None and cache.path is not None and cache.path.exists() and len(cache.store):
+        log(f"run cache {cache.path}: {len(cache.store)} run(s) kept from before are reused")
     report = fal.run(budget_runs=args.budget_runs, budget_seconds=args.budget_seconds,
                      shrink_simulations=args.shrink_simulations)
     written = []
@@ -219,7 +250,8 @@ def cmd_falsify(args) -> int:
             if found.shrunk is None:
                 continue
             try:
-                written.append(write_counterexample(found.shrunk, args.out, args.file, animate=False).addt)
+                arts = write_counterexample(found.shrunk, args.out, args.file, animate=False)
+                written += [arts.addt] + ([arts.xosc] if arts.xosc else [])  # .xosc: docs/openscenario.md
             except ReplayMismatch as exc:
                 _err(str(exc))
     if args.format == "json":

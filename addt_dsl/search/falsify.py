@@ -421,6 +421,13 @@ class Falsifier:
 
     def run(self, budget_runs: int = 200, budget_seconds: float = 0.0, shrink_simulations: int = 60,
             stop_at_first: bool = False) -> FalsifyReport:
+        try:
+            return self._run(budget_runs, budget_seconds, shrink_simulations, stop_at_first)
+        finally:
+            self.cache.release_workers()  # the workers kept between batches
+
+    def _run(self, budget_runs: int, budget_seconds: float, shrink_simulations: int,
+             stop_at_first: bool) -> FalsifyReport:
         t0 = time.perf_counter()
         all_points, all_outcomes, all_specs = [], [], []
         groups: dict[tuple, FoundFailure] = {}
@@ -468,10 +475,10 @@ class Falsifier:
             if stop_at_first and first_failure is not None:
                 break
         search_runs = len(all_outcomes)
-        shrink_before = self.cache.simulations
         failures = self._distinct(groups, shrink_simulations)
+        shrink_runs = sum(g.shrunk.simulations for g in groups.values() if g.shrunk is not None)
         return FalsifyReport(self.plan.name, self.sampler.name, search_runs, time.perf_counter() - t0,
-                             first_failure, self.cache.simulations - shrink_before, failures, best)
+                             first_failure, shrink_runs, failures, best)
 
     def _distinct(self, groups: dict, shrink_simulations: int) -> list[FoundFailure]:
         """Shrink one representative per group; merge groups whose origin is the same."""

@@ -80,8 +80,11 @@ class Shrinker:
         self.cache = cache or RunCache()
         self.max_simulations = max_simulations
         self.log = log or (lambda msg: None)
-        self.start_sims = self.cache.simulations
-        self.start_hits = self.cache.hits
+        self.repeats = 0  # candidates proposed again after this shrink judged them (`cache_hits`)
+        # Distinct runs this shrink judged, cached or not: its budget and its `simulations`
+        # count these, so a shrink ends the same whatever the cache held before (a killed
+        # shrink run again resumes from its cache and ends with the same result).
+        self.judged: set[str] = set()
         plan = nominal_plan or spec.plan
         self.nominal = plan.nominal_params()
         self.scales = {p.name: (p.high - p.low) if p.low is not None and p.high is not None and p.high > p.low
@@ -89,6 +92,7 @@ class Shrinker:
         self.assumptions_plan = plan
         self.best = C.pinned(spec)
         self.original = self.best
+        self.judged.add(self.best.key())
         self.outcome = self.cache.get(self.best)
         failure = (self.outcome.primary() if oracle is None else
                    next((f for f in self.outcome.failures if f.oracle == oracle), None))
@@ -103,7 +107,7 @@ class Shrinker:
     # ---- the engine
     @property
     def simulations(self) -> int:
-        return self.cache.simulations - self.start_sims
+        return len(self.judged)
 
     def key(self, spec: RunSpec) -> tuple:
         return C.sort_key(spec, self.nominal, self.scales)
@@ -119,15 +123,18 @@ class Shrinker:
             return False
         if violated_assumptions(self.assumptions_plan, {**self.nominal, **candidate.params}):
             return False
-        if candidate not in self.cache and self.simulations >= self.max_simulations:
+        key = candidate.key()
+        new = key not in self.judged
+        if new and self.simulations >= self.max_simulations:
             self.exhausted = True
             return False
-        before = self.cache.simulations
+        self.judged.add(key)
+        self.repeats += not new
         outcome = self.cache.get(candidate)
         st = self._current
         if st is not None:
             st.candidates += 1
-            st.simulations += self.cache.simulations - before
+            st.simulations += new
         if not self.interesting(outcome) or (extra is not None and not extra(outcome)):
             return False
         self.best, self.outcome = candidate, outcome
@@ -136,6 +143,12 @@ class Shrinker:
         return True
 
     def run(self) -> ShrinkResult:
+        try:
+            return self._run()
+        finally:
+            self.cache.release_workers()  # the workers kept between batches
+
+    def _run(self) -> ShrinkResult:
         t0 = time.perf_counter()
         passes = [self.cut_after_violation, self.delete_faults, self.delete_agents, self.shorten_windows,
                   self.reduce_settings, self.drop_settings, self.params_to_nominal, self.simplify_numbers]
@@ -157,7 +170,7 @@ class Shrinker:
             if self.key(self.best) == before:
                 break
         return ShrinkResult(self.original, self.best, self.outcome, self.outcome.failure(self.target), self.stats,
-                            self.simulations, self.cache.hits - self.start_hits, rounds, self.exhausted,
+                            self.simulations, self.repeats, rounds, self.exhausted,
                             time.perf_counter() - t0, describe_changes(self.original, self.best, self.nominal))
 
     # ---- helpers

@@ -402,6 +402,8 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str |
                        f"{c.keyword}s: {', '.join(table.names())}")
         return None
     vals = check_settings(ctx, c.settings + c.block, cls.params, f"{c.keyword} '{c.name}'", c.span)
+    if not _validate_clause(ctx, c, cls, vals):
+        return None
     if c.keyword == "behavior" and getattr(cls, "channel", "") == "lateral" and "to" in vals:
         _check_target_lane(ctx, c, vals["to"], road)
     for spec in cls.params:  # a `name` setting of a behaviour names another actor
@@ -415,6 +417,26 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str |
                                f"actors: {', '.join(sorted(pool))}")
                 return None
     return P.ClausePlan(keyword=c.keyword, name=c.name, settings=vals)
+
+
+def _validate_clause(ctx: Context, c: ast.Clause, cls, vals: dict) -> bool:
+    """The class's own checks across settings (`validate(values) -> [(setting, message[, code])]`,
+    e.g. a speed profile's times and speeds), on the settings that are constants."""
+    validate = getattr(cls, "validate", None)
+    if validate is None:
+        return True
+    consts = {}
+    for key, value in vals.items():
+        if isinstance(value, list):
+            items = [const_value(v) for v in value]
+            consts[key] = None if any(i is None for i in items) else items
+        else:
+            consts[key] = value if isinstance(value, str) else const_value(value)
+    problems = validate(consts)  # a setting that is not a constant is there as None
+    for key, message, *code in problems:  # (setting, message[, code]): E0204 unless given
+        span = next((st.value.span for st in c.settings + c.block if st.key == key), c.span)
+        ctx.sink.error(code[0] if code else "E0204", message, span)
+    return not problems
 
 
 def _check_target_lane(ctx: Context, c: ast.Clause, lane, road: str | None) -> None:
@@ -454,7 +476,7 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
             ctx.sink.error("E0102", f"`{st.kind}` given twice in one step", st.span)
             ok = False
         starts[st.kind] = st
-    at = after = condition = None
+    at = after = condition = hold = None
     low = ctx.lowering()
     for kind in ("at", "after"):
         if kind in starts:
@@ -478,6 +500,10 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
                            "always/eventually/until", cond_node.span,
                            "write the condition on the current state, e.g. `when gap(ego, lead) < 20 m`")
             ok = False
+        if starts["when"].hold is not None:
+            hold = low.lower_value(starts["when"].hold, units.TIME, "how long the condition must hold")
+            if hold is None or not check_time(ctx, hold, starts["when"].hold.span, "the hold of `when ... for`"):
+                ok = False
     if isinstance(node.action, ast.Group):
         group = _lower_group(ctx, node.action, actor, road)
         clause = None
@@ -488,7 +514,7 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
         ok = ok and clause is not None
     if not ok:
         return None
-    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after, group=group)
+    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after, group=group, hold_s=hold)
 
 
 def _lower_group(ctx: Context, node: ast.Group, actor: ast.ActorDecl, road: str | None) -> P.GroupPlan | None:

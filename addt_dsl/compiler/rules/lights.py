@@ -258,7 +258,7 @@ def _step(ctx: Context, node, controllers: set[str]) -> P.TriggerPlan | None:
     if len(starts) != len(node.starts):
         ctx.sink.error("E0102", "a start condition given twice in one step", node.span)
         return None
-    at = after = condition = None
+    at = after = condition = hold = None
     ok = True
     low = ctx.lowering()
     for kind in ("at", "after"):
@@ -275,6 +275,10 @@ def _step(ctx: Context, node, controllers: set[str]) -> P.TriggerPlan | None:
             ctx.sink.error("E0204", "a trigger condition is checked at each instant; it cannot use "
                            "always/eventually/until", starts["when"].value.span)
             ok = False
+        if getattr(starts["when"], "hold", None) is not None:  # `when C for D`: C held for D
+            hold = low.lower_value(starts["when"].hold, units.TIME, "how long the condition must hold")
+            if hold is None or not check_time(ctx, hold, starts["when"].hold.span, "the hold of `when ... for`"):
+                ok = False
     if node.action.keyword != "light":
         ctx.sink.error("E0204", f"`{node.action.keyword}` clauses belong in an actor's block", node.action.span,
                        "a lights block's steps change lights: `at 5 s light west state red`")
@@ -282,4 +286,4 @@ def _step(ctx: Context, node, controllers: set[str]) -> P.TriggerPlan | None:
     clause = check_light_clause(ctx, node.action, controllers)
     if not ok or clause is None:
         return None
-    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after)
+    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after, hold_s=hold)

@@ -14,7 +14,7 @@ import time
 from addt_dsl.compiler import compile_source
 from addt_dsl.runtime.result import RunResult, Verdict
 
-OK, HANG, SEGFAULT, HOG, RAISE, SPIKE = 0, 1, 2, 3, 4, 5
+OK, HANG, SEGFAULT, HOG, RAISE, SPIKE, KILLED, KILLED_ONCE = 0, 1, 2, 3, 4, 5, 8, 9
 HOG_MB = 400
 
 
@@ -69,6 +69,15 @@ def fake_run(spec, seq: int = -1, worker: str = "") -> RunResult:
         raise RuntimeError("boom")
     elif mode == SPIKE:
         del _touch(HOG_MB)[:]
+    elif mode == KILLED:  # killed from outside on every attempt (the OOM killer, a lost node)
+        os.kill(os.getpid(), signal.SIGKILL)
+    elif mode == KILLED_ONCE:  # killed from outside on the first attempt only
+        # The marker directory comes in the plan (`markers DIR` as its description): workers
+        # fork from a server that may predate the test, so its environment is not the test's.
+        marker = os.path.join(spec.plan.description.split("markers ", 1)[1], f"{spec.run_id}.killed")
+        if not os.path.exists(marker):
+            open(marker, "w").close()
+            os.kill(os.getpid(), signal.SIGKILL)
     return fake_record(spec, seq, worker)
 
 

@@ -12,7 +12,7 @@ from addt_dsl.sweep import SweepStream
 def test_each_failure_is_recorded_and_the_sweep_goes_on(tmp_path):
     plan = plan_of(scenario([OK, HANG, SEGFAULT, HOG, RAISE, SPIKE], repeat=2))
     store = ResultStore(tmp_path / "r.sqlite", plan)
-    executor = LocalExecutor(2, timeout_s=2.5, memory_limit_mb=250, run_fn=fake_run)
+    executor = LocalExecutor(2, timeout_s=2.5, memory_limit_mb=250, run_fn=fake_run, retries=0)  # retries: test_runner_faults
     outcome = run_sweep(SweepStream(plan), store, executor)
 
     records = list(store.records())
@@ -48,3 +48,20 @@ def test_no_guard_configured_still_runs_everything(tmp_path):
     records = run_local(SweepStream(plan), jobs=2, timeout_s=None, memory_limit_mb=None, run_fn=fake_run)
     assert sorted(r.status for r in records) == ["crashed", "crashed", "ok", "ok"]
     assert [r.run_id for r in records] == sorted(r.run_id for r in records)
+
+
+def test_kept_workers_serve_later_calls_until_closed():
+    plan = plan_of(scenario([OK], repeat=4))
+    specs = list(SweepStream(plan))
+    executor = LocalExecutor(2, run_fn=fake_run, keep_workers=True)
+    first = {r.worker for r in executor.imap(enumerate(specs[:2]))}
+    kept = [w.process for w in executor._kept]
+    assert len(kept) == 2 and all(p.is_alive() for p in kept)
+    second = {r.worker for r in executor.imap(enumerate(specs[2:]))}
+    assert second <= first  # the same processes ran the second call
+    executor.close()
+    assert not executor._kept and not any(p.is_alive() for p in kept)
+    # Without keep_workers nothing outlives a call.
+    plain = LocalExecutor(2, run_fn=fake_run)
+    list(plain.imap(enumerate(specs[:2])))
+    assert plain._kept == []

@@ -129,3 +129,24 @@ def test_firing_times_match_the_semantics(triggers):
     horizon = 40.0
     started, script = run(triggers, duration=horizon)
     assert sorted(started) == sorted(e for e in expected if e[1] <= horizon + 1e-9)
+
+
+@given(st.lists(st.booleans(), min_size=1, max_size=60), st.sampled_from([0.0, 0.1, 0.5, 1.0]))
+def test_a_held_condition_fires_after_an_unbroken_run_of_its_duration(samples, hold):
+    """`when C for D` fires at the first step where C held at every step of the last D
+    seconds: a direct scan of the samples says when."""
+    cond = Binary(op="<", left=Signal(name="speed(ego)"), right=Num(value=0.1))
+    index = {"k": 0}
+    script = Script((bind_step(TriggerPlan(condition=cond, hold_s=Num(value=hold), clause=clause("go")), {}),))
+    started = []
+    for k, _ in enumerate(samples):
+        index["k"] = k
+        script.advance(k * DT, lambda c: samples[index["k"]], lambda c, t: started.append(round(t, 6)))
+    need = int(round(hold / DT)) + 1  # samples in an unbroken run of `hold` seconds
+    run_len, expected = 0, None
+    for k, value in enumerate(samples):
+        run_len = run_len + 1 if value else 0
+        if run_len >= need:
+            expected = round(k * DT, 6)
+            break
+    assert started == ([] if expected is None else [expected])

@@ -189,8 +189,11 @@ def _sample_setting(spec):
 
     if spec.kind in ("word",):
         return spec.choices[0] if spec.choices else None
-    if spec.kind in ("name", "string", "list"):
+    if spec.kind in ("name", "string"):
         return None
+    if spec.kind == "list":  # two increasing items (a speed profile's times must increase)
+        base = spec.low + 1.0 if spec.low is not None else 1.0
+        return [num(base), num(base + 1.0)]
     if spec.low is not None and spec.high is not None:
         value = (spec.low + spec.high) / 2
     elif spec.default is not None and not isinstance(spec.default, str):
@@ -205,9 +208,16 @@ def _sample_setting(spec):
 def _clause(keyword, cls):
     settings = {}
     for spec in cls.params:
-        value = _sample_setting(spec)
+        value = "ego" if spec.kind == "name" and spec.required else _sample_setting(spec)
         if value is not None:
             settings[spec.name] = value
+    # Settings that exclude each other (`distance` or `time_gap`): drop the one the class names.
+    validate = getattr(cls, "validate", None)
+    def plain(v):
+        return [plain(i) for i in v] if isinstance(v, list) else getattr(v, "value", v)
+
+    while validate is not None and (problems := validate({k: plain(v) for k, v in settings.items()})):
+        settings.pop(problems[0][0])
     return ClausePlan(keyword=keyword, name=cls.keyword, settings=settings)
 
 

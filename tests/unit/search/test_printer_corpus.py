@@ -106,7 +106,8 @@ def _step_lines(draw, depth: int = 0) -> list[str]:
     lines = []
     for _ in range(draw(st.integers(0 if depth else 1, 2))):
         starts = draw(st.lists(st.sampled_from(["at 2 s", "after 1 s", "at brake_at",
-                                                "when gap(ego, lead) < 20 m then"]),
+                                                "when gap(ego, lead) < 20 m then",
+                                                "when speed(ego) < 5 m/s for 0.5 s then"]),
                                unique_by=lambda s: s.split()[0], min_size=0 if depth else 1, max_size=3))
         if depth < 2 and draw(st.booleans()):
             inner = _step_lines(draw, depth + 1) or ["behavior cruise speed 10 m/s"]
@@ -114,8 +115,11 @@ def _step_lines(draw, depth: int = 0) -> list[str]:
             lines += ["  " + line for line in inner]
             lines.append("}")
         else:
-            lines.append(" ".join([*starts, draw(st.sampled_from(["behavior brake decel 4 m/s^2",
-                                                                 "behavior cruise speed 12 m/s"]))]))
+            lines.append(" ".join([*starts, draw(st.sampled_from([
+                "behavior brake decel 4 m/s^2", "behavior cruise speed 12 m/s",
+                "behavior cruise speed speed(ego) + 2 m/s shape cubic",
+                "behavior speed_profile times [0, 2] s speeds [10 m/s, brake_at * 2 m/s^2]",
+                "behavior lane_change to_lane_of ego"]))]))
     return lines
 
 

@@ -17,6 +17,8 @@ LANES = {-1: -1.75, -2: -5.25, 1: 1.75}  # centre t of each lane
 class FakeWorld:
     """Straight road, lanes as above, band t in [-7, 3.5]; other actors by name."""
 
+    dt = DT
+
     def __init__(self, *others: AgentState):
         self.others = {o.name: o for o in others}
 

@@ -1,0 +1,116 @@
+"""`addtc export` and `addtc import`: OpenSCENARIO in and out (docs/openscenario.md).
+
+    addtc export FILE.addt [--run ID | --params NAME=VALUE ...] --to DIR
+    addtc import FILE.xosc [-o FILE.addt] [--root DIR] [--format text|json]
+
+Exit codes follow `addtc` (addt_dsl/errors.py): 0 done, 2 usage or scenario error (an
+import with errors writes nothing).
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+from addt_dsl import units
+from addt_dsl.console import compile_and_report
+from addt_dsl.diagnostics import render_json, render_text
+from addt_dsl.errors import EXIT_OK, EXIT_USAGE, UsageError
+from addt_dsl.sweep import expand, make_spec
+
+# The translators (scenariogeneration, the road reader) load in the commands that use them,
+# as cli.py does for its commands: `addtc check` does not pay for them.
+
+_VALUE = re.compile(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(\S*)\s*$")
+
+
+def add_commands(sub) -> None:
+    exp = sub.add_parser("export", help="write one run as OpenSCENARIO XML + OpenDRIVE (+ a side file)")
+    exp.add_argument("file")
+    pick = exp.add_mutually_exclusive_group()
+    pick.add_argument("--run", metavar="ID", help="the sweep's run to export (e.g. c002-r000; default: the first)")
+    pick.add_argument("--params", nargs="+", metavar="NAME=VALUE", default=[],
+                      help="parameter values (with units, e.g. gap=30m); the others keep their defaults")
+    exp.add_argument("--to", required=True, metavar="DIR", help="output directory")
+    exp.set_defaults(func=cmd_export)
+    imp = sub.add_parser("import", help="translate an OpenSCENARIO file into .addt")
+    imp.add_argument("file")
+    imp.add_argument("-o", "--output", metavar="FILE.addt", help="write here (default: print)")
+    imp.add_argument("--root", metavar="DIR", help="files (road, catalogs) may come from here and below "
+                                                   "(default: the scenario's directory)")
+    imp.add_argument("--format", choices=("text", "json"), default="text")
+    imp.set_defaults(func=cmd_import)
+
+
+def _param_values(plan, items: list[str]) -> dict[str, float]:
+    dims = {p.name: units.dim_from_name(p.dimension) for p in plan.params}
+    values = plan.nominal_params()
+    for item in items:
+        name, _, text = item.partition("=")
+        match = _VALUE.match(text)
+        if name not in dims:
+            raise UsageError(f"--params: no parameter '{name}' (parameters: {', '.join(dims) or 'none'})")
+        if not match:
+            raise UsageError(f"--params {item}: give NAME=VALUE, e.g. {name}=3.5m")
+        try:
+            value, dim = units.to_si(float(match.group(1)), match.group(2) or None)
+        except units.UnknownUnit:
+            raise UsageError(f"--params {item}: unknown unit '{match.group(2)}'") from None
+        if match.group(2) and dim != dims[name]:
+            raise UsageError(f"--params {item}: {name} is a {units.dim_name(dims[name])}")
+        values[name] = value
+    return values
+
+
+def cmd_export(args) -> int:
+    from addt_dsl.interop.xodr_export import ExportError
+    from addt_dsl.interop.xosc_export import export_run
+
+    result = compile_and_report(args.file, "text")
+    if not result.ok:
+        return EXIT_USAGE
+    plan = result.plan
+    specs = expand(plan).specs
+    if args.run:
+        spec = next((s for s in specs if s.run_id == args.run), None)
+        if spec is None:
+            raise UsageError(f"no run '{args.run}' in the sweep (runs: {specs[0].run_id} .. {specs[-1].run_id})")
+    elif args.params:
+        spec = make_spec(plan, _param_values(plan, args.params), specs[0].seed, run_id="params")
+    else:
+        spec = specs[0]
+    try:
+        done = export_run(spec, args.to, Path(args.file).stem)
+    except ExportError as exc:
+        raise UsageError(f"cannot export {args.file}: {exc}") from None
+    print(f"exported run {spec.run_id or '-'} of {args.file}:")
+    for path in (done.xosc_path, done.xodr_path, done.sidecar_path):
+        print(f"  {path}")
+    print(f"carried in {done.sidecar_path.name} (no OpenSCENARIO equivalent): {len(done.carried)}")
+    for line in done.carried:
+        print(f"  - {line}")
+    return EXIT_OK
+
+
+def cmd_import(args) -> int:
+    from addt_dsl.interop.xosc_import import import_xosc
+
+    got = import_xosc(args.file, args.root)
+    if args.format == "json":
+        print(render_json(got.diagnostics))
+    elif got.diagnostics:
+        print(render_text(got.diagnostics, got.sources), file=sys.stderr, end="")
+    if got.text is None:
+        return EXIT_USAGE
+    if args.output:
+        out = Path(args.output)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(got.text)
+        for name, body in got.side_files.items():
+            (out.parent / name).write_text(body)
+        if args.format == "text":
+            print(f"wrote {out}" + "".join(f", {out.parent / n}" for n in got.side_files))
+    elif args.format == "text":
+        print(got.text, end="")
+    return EXIT_OK

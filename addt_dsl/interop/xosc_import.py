@@ -1,0 +1,1162 @@
+"""OpenSCENARIO XML -> `.addt`: the common subset, everything else a diagnostic.
+
+`import_xosc(path)` reads the file with defusedxml (no DTDs, no entities, no network),
+resolves `$parameter` references and `${...}` arithmetic, and builds a `ScenarioPlan`
+that the one printer (`addt_dsl/printer`) turns into `.addt` text; the text is compiled
+once more before it is returned, so an import either gives a file that compiles or
+errors. Files (the road network, vehicle catalogs, the side file of an exported run)
+are read only inside the root directory (default: the scenario's directory), through
+`addt_dsl/confine.py`.
+
+Codes (docs/diagnostics.md): E0801 unreadable file (malformed XML, DTD or entity, too
+large), E0802 invalid content (a missing element, attribute or reference), E0401/E0402
+a missing file or one outside the root, W0801 an element that is not translated (no
+equivalent in the language today), W0802 a value approximated or defaulted. Each names
+the XML line and element. docs/openscenario.md has the mapping table.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import math
+import operator
+import os
+import re
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from defusedxml import DefusedXmlException
+from defusedxml.ElementTree import DefusedXMLParser
+from pydantic import TypeAdapter
+
+from addt_dsl import expr as E
+from addt_dsl import units
+from addt_dsl.compiler import compile_source
+from addt_dsl.compiler.rules.oracles import NO_CLAUSES
+from addt_dsl.confine import Refused, confine
+from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
+from addt_dsl.expr import eval_param_expr
+from addt_dsl.interop.xosc_export import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM
+from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, GroupPlan, OraclePlan, ParamPlan, RoadPlan,
+                           ScenarioPlan, TriggerPlan)
+from addt_dsl.printer import PrinterError, params_referenced, pinned_fault_plan, print_plan, side_files
+from addt_dsl.registry import BEHAVIORS
+from addt_dsl.runtime.road import XodrError, parse_xodr
+from addt_dsl.vehicles import VEHICLES
+
+MAX_XML_BYTES = 8 * 1024 * 1024
+DEFAULT_DURATION_S = 60.0
+MAX_DURATION_S = 3600.0
+CATEGORY_KIND = {"car": "car", "van": "car", "motorbike": "cyclist", "bicycle": "cyclist", "bus": "truck",
+                 "truck": "truck", "semitrailer": "truck", "trailer": "truck", "train": "truck", "tram": "truck"}
+RULE_OPS = {"lessThan": "<", "lessOrEqual": "<=", "greaterThan": ">", "greaterOrEqual": ">=", "equalTo": "==",
+            "notEqualTo": "!="}
+_NAME = re.compile(r"[A-Za-z_]\w*")
+EXPR = TypeAdapter(E.Expr)
+
+
+@dataclass
+class Imported:
+    text: str | None  # the .addt source; None after errors
+    plan: ScenarioPlan | None
+    diagnostics: list[Diagnostic]
+    sources: dict[str, str]  # file -> text, for rendering diagnostics
+    side_files: dict[str, str] = field(default_factory=dict)  # files the .addt imports, by name
+
+
+class _Stop(Exception):
+    """An error that ends the import (already reported)."""
+
+
+class _LineParser(DefusedXMLParser):
+    """defusedxml's parser (DTDs forbidden, entities refused) that records each element's line."""
+
+    def __init__(self):
+        super().__init__(forbid_dtd=True, forbid_entities=True, forbid_external=True)
+        self.lines: dict[int, int] = {}
+
+    def _start(self, tag, attr_list):
+        element = super()._start(tag, attr_list)
+        self.lines[id(element)] = self.parser.CurrentLineNumber
+        return element
+
+
+# ---------------------------------------------------------------- values
+
+_BINOPS = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
+           ast.Pow: operator.pow, ast.Mod: operator.mod}
+
+
+def _arith(node) -> float:
+    """A `${...}` expression: numbers, + - * / % **, unary minus, parentheses."""
+    if isinstance(node, ast.Expression):
+        return _arith(node.body)
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+        return float(node.value)
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        v = _arith(node.operand)
+        return -v if isinstance(node.op, ast.USub) else v
+    if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
+        left, right = _arith(node.left), _arith(node.right)
+        if isinstance(node.op, ast.Pow) and abs(right) > 64:
+            raise ValueError("exponent too large")
+        return float(_BINOPS[type(node.op)](left, right))
+    raise ValueError("unsupported expression")
+
+
+class _Importer:
+    def __init__(self, path: Path, root: Path):
+        self.path = path
+        self.root = root.resolve()
+        self.display = str(path)
+        self.sink = DiagnosticSink()
+        self.sources: dict[str, str] = {}
+        self.lines: dict[int, int] = {}
+        self.params: dict[str, tuple[str, str]] = {}  # name -> (type, raw value)
+        self.param_dims: dict[str, units.Dim | None] = {}  # used as a number: its dimension (None: clash)
+        self.sidecar: dict | None = None
+        self.renames: dict[str, str] = {}  # OpenSCENARIO entity name -> addt actor name
+        self.actors: dict[str, dict] = {}  # addt name -> fields
+        self.roads: dict[str, RoadPlan] = {}  # OpenDRIVE road id -> plan road
+        self.network = None
+        self.xodr_name = ""
+        self.xodr_text = ""
+        self.events: dict[str, tuple] = {}  # event name -> (actor, kind, fields, clause)
+        self.pending: list[tuple] = []  # events started by another event: linked at the end
+        self.anchors: dict[str, tuple] = {}  # no-op events that start a group: name -> (actor, start fields)
+        self.placed: dict[str, tuple] = {}  # actor -> (road name, lane, s, offset)
+        self.doc = None
+
+    # -- diagnostics
+
+    def span(self, el) -> Span:
+        return Span.point(self.display, self.lines.get(id(el), 1), 1) if el is not None else \
+            Span.point(self.display, 1, 1)
+
+    def error(self, el, message: str, *notes: str, code: str = "E0802") -> None:
+        self.sink.error(code, message, self.span(el), *notes, label=f"<{el.tag}>" if el is not None else "")
+
+    def skip(self, el, message: str, *notes: str) -> None:
+        self.sink.warning("W0801", message, self.span(el), *notes, label=f"<{el.tag}>")
+
+    def approx(self, el, message: str, *notes: str) -> None:
+        self.sink.warning("W0802", message, self.span(el), *notes, label=f"<{el.tag}>" if el is not None else "")
+
+    # -- files
+
+    def read(self, relative: str, base: Path, el, limit: int = MAX_XML_BYTES) -> tuple[Path, str] | None:
+        try:
+            path = confine(relative, base, self.root)
+        except Refused as refused:
+            self.sink.error(refused.code, refused.message, self.span(el), *([refused.note] if refused.note else []),
+                            label=f"<{el.tag}>" if el is not None else "")
+            return None
+        try:
+            if path.stat().st_size > limit:
+                self.error(el, f"'{relative}' is too large (limit {limit} bytes)", code="E0401")
+                return None
+            return path, path.read_bytes().decode("utf-8", errors="replace")
+        except OSError as exc:
+            self.error(el, f"cannot read '{relative}': {exc.strerror or exc}", code="E0401")
+            return None
+
+    def parse(self, text: str, display: str):
+        parser = _LineParser()
+        try:
+            parser.feed(text)
+            root = parser.close()
+        except DefusedXmlException as exc:
+            self.sink.error("E0801", f"{display}: refused: {type(exc).__name__} (DTDs and entities are not read)",
+                            Span.point(display, 1, 1))
+            return None
+        except Exception as exc:  # noqa: BLE001 - expat's ParseError, and any error on hostile input
+            line = getattr(exc, "position", (1, 0))[0] if hasattr(exc, "position") else 1
+            self.sink.error("E0801", f"{display}: not well-formed XML: {exc}", Span.point(display, max(1, line), 1))
+            return None
+        self.lines.update(parser.lines)
+        return root
+
+    # -- attribute values
+
+    def raw(self, el, attr: str, required: bool = True) -> str | None:
+        value = el.get(attr)
+        if value is None:
+            if required:
+                self.error(el, f"<{el.tag}> has no attribute '{attr}'")
+                raise _Stop
+            return None
+        try:
+            return self.resolve(value)
+        except KeyError as exc:
+            self.error(el, f"unknown parameter '${exc.args[0]}' in {attr}")
+            raise _Stop from None
+        except (SyntaxError, ValueError, ArithmeticError, RecursionError, MemoryError):
+            self.error(el, f"cannot evaluate {attr}=\"{value[:80]}\"")
+            raise _Stop from None
+
+    def resolve(self, value: str, depth: int = 0) -> str:
+        """`$name` and `${expression}` resolved (parameters may refer to parameters)."""
+        if depth > 16:
+            raise ValueError("parameters refer to each other too deeply")
+        if value.startswith("${") and value.endswith("}"):
+            body = re.sub(r"\$([A-Za-z_]\w*)", lambda m: self.resolve("$" + m.group(1), depth + 1), value[2:-1])
+            return repr(_arith(ast.parse(body, mode="eval")))
+        if value.startswith("$"):
+            if value[1:] not in self.params:
+                raise KeyError(value[1:])
+            return self.resolve(self.params[value[1:]][1], depth + 1)
+        return value
+
+    def number(self, el, attr: str, dim=units.DIMENSIONLESS, default: float | None = None,
+               keep: bool = True) -> E.Expr:
+        """The attribute as an expression: a parameter reference (`$name`) stays a parameter."""
+        text = self.raw(el, attr, required=default is None)
+        if text is None:
+            return E.Num(value=float(default))
+        try:
+            value = float(text)
+        except ValueError:
+            self.error(el, f"{attr}=\"{text[:40]}\" is not a number")
+            raise _Stop from None
+        if not math.isfinite(value):
+            self.error(el, f"{attr}=\"{text[:40]}\" is not finite")
+            raise _Stop
+        ref = el.get(attr, "")
+        plain = _is_number(self.params.get(ref[1:], ("", ""))[1])
+        if keep and plain and ref.startswith("$") and not ref.startswith("${") and _NAME.fullmatch(ref[1:]):
+            name = ref[1:]
+            known = self.param_dims.get(name, dim)
+            self.param_dims[name] = dim if known == dim else None
+            return E.Param(name=name)
+        return E.Num(value=value)
+
+    def value(self, el, attr: str, dim=units.DIMENSIONLESS, default: float | None = None) -> float:
+        return float(eval_param_expr(self.number(el, attr, dim, default, keep=False), {}))
+
+    def param_values(self) -> dict[str, float]:
+        out = {}
+        for name, (_, raw) in self.params.items():
+            try:
+                out[name] = float(self.resolve(raw))
+            except (KeyError, SyntaxError, ValueError, ArithmeticError, RecursionError, MemoryError):
+                pass
+        return out
+
+    def actor_name(self, el, attr: str = "entityRef") -> str | None:
+        name = self.raw(el, attr)
+        if name not in self.renames:
+            self.error(el, f"no entity '{name}'", f"entities: {', '.join(self.renames) or 'none'}")
+            return None
+        return self.renames[name]
+
+
+# ---------------------------------------------------------------- the document
+
+def _child(el, *path):
+    for tag in path:
+        if el is None:
+            return None
+        el = el.find(tag)
+    return el
+
+
+def _first(*elements):
+    """The first element that is not None (elements without children are false)."""
+    return next((e for e in elements if e is not None), None)
+
+
+def _only_child(el):
+    kids = list(el) if el is not None else []
+    return kids[0] if len(kids) == 1 else None
+
+
+def _safe_name(name: str, taken: set[str]) -> str:
+    base = re.sub(r"\W", "_", name) or "actor"
+    if not _NAME.fullmatch(base):
+        base = f"a_{base}"
+    out, i = base, 2
+    while out in taken:
+        out, i = f"{base}_{i}", i + 1
+    return out
+
+
+class _Translate(_Importer):
+    def run(self) -> ScenarioPlan | None:
+        got = self.read(self.path.name, self.path.parent, None)
+        if got is None:
+            return None
+        _, text = got
+        self.sources[self.display] = text
+        root = self.parse(text, self.display)
+        if root is None:
+            return None
+        self.doc = root
+        if root.tag != "OpenSCENARIO":
+            self.error(root, f"the root element is <{root.tag}>, not <OpenSCENARIO>")
+            return None
+        header = _child(root, "FileHeader")
+        # Global declarations first; those of stories, acts and maneuvers after them (one
+        # scope: a name declared twice keeps its global value).
+        for decl in [*root.iterfind("ParameterDeclarations/ParameterDeclaration"),
+                     *root.iterfind("Storyboard//ParameterDeclaration")]:
+            name, kind, value = decl.get("name"), decl.get("parameterType", "string"), decl.get("value", "")
+            if name:
+                self.params.setdefault(name, (kind, value))
+        if SIDECAR_PARAM in self.params:
+            self.load_sidecar(root.find("ParameterDeclarations"))
+        if _child(root, "Storyboard") is None or _child(root, "Entities") is None:
+            self.error(root, "no <Storyboard> or <Entities>: not a scenario (a catalog?)")
+            return None
+        try:
+            self.road_network(root)
+            self.entities(root)
+            self.init(root.find("Storyboard/Init"))
+            duration = self.stop_trigger(root.find("Storyboard/StopTrigger"))
+            for story in root.iterfind("Storyboard/Story"):
+                self.story(story)
+        except _Stop:
+            return None
+        if self.sink.has_errors:
+            return None
+        return self.plan(header, duration)
+
+    # -- side file of an exported run
+
+    def load_sidecar(self, decls) -> None:
+        name = self.params[SIDECAR_PARAM][1]
+        try:
+            confine(name, self.path.parent, self.root)
+        except Refused as refused:
+            self.approx(decls, f"side file {name}: {refused.message}; the ego's stack and sensors, the faults, "
+                               "oracles and exact behaviours it carries are not imported")
+            return
+        got = self.read(name, self.path.parent, decls)
+        if got is None:
+            return
+        try:
+            data = json.loads(got[1])
+        except ValueError as exc:
+            self.error(decls, f"side file {name} is not JSON: {exc}")
+            return
+        if not isinstance(data, dict) or data.get("format") != SIDECAR_FORMAT:
+            self.error(decls, f"side file {name} is not an addt-dsl export side file ({SIDECAR_FORMAT})")
+            return
+        problem = _sidecar_problem(data)
+        if problem:
+            self.error(decls, f"side file {name} is not what addtc export writes: {problem}")
+            return
+        self.sidecar = data
+
+    # -- road network
+
+    def road_network(self, root) -> None:
+        logic = root.find("RoadNetwork/LogicFile")
+        if logic is None:
+            self.error(_first(root.find("RoadNetwork"), root), "no <RoadNetwork><LogicFile>: addt-dsl actors need a road")
+            raise _Stop
+        got = self.read(self.raw(logic, "filepath"), self.path.parent, logic)
+        if got is None:
+            raise _Stop
+        path, text = got
+        if not path.name.lower().endswith(".xodr"):
+            self.error(logic, f"'{path.name}' is not an OpenDRIVE file")
+            raise _Stop
+        try:
+            self.network = parse_xodr(text, path.name)
+        except XodrError as exc:
+            self.error(logic, f"cannot use {path.name}: {exc}", code="E0403")
+            raise _Stop from None
+        except (ValueError, ArithmeticError, RecursionError) as exc:
+            self.error(logic, f"cannot use {path.name}: {exc}", code="E0403")
+            raise _Stop from None
+        self.xodr_name, self.xodr_text = path.name, text
+        if root.find("RoadNetwork/TrafficSignals") is not None:
+            self.skip(root.find("RoadNetwork/TrafficSignals"), "traffic signal controllers are not translated",
+                      "signals are part of the road-network work (issue 15)")
+
+    def road(self, road_id: str, el) -> str:
+        if road_id not in self.network.roads:
+            self.error(el, f"{self.xodr_name} has no road '{road_id}'")
+            raise _Stop
+        if road_id not in self.roads:
+            odr = self.network.road(road_id)
+            name = _safe_name(f"r{road_id}" if not odr.name or not _NAME.fullmatch(str(odr.name))
+                              else str(odr.name), {r.name for r in self.roads.values()} | set(self.actors))
+            if not re.fullmatch(r"\d+", road_id):
+                self.error(el, f"road id '{road_id}' is not a number: the language imports roads by number")
+                raise _Stop
+            self.roads[road_id] = RoadPlan(name=name, source="xodr", xodr_file=self.xodr_name,
+                                           xodr_text=self.xodr_text, xodr_road_id=road_id)
+        return self.roads[road_id].name
+
+    # -- entities
+
+    def entities(self, root) -> None:
+        objects = list(root.iterfind("Entities/ScenarioObject"))
+        names = [o.get("name", "") for o in objects]
+        ego = next((n for n in names if n.lower() in ("ego", "hero")), None)
+        if ego is None and names:
+            ego = names[0]
+            self.approx(objects[0], f"no entity named Ego: '{ego}' becomes the ego (driven by the stack)")
+        taken: set[str] = set()
+        for obj, name in zip(objects, names):
+            addt = "ego" if name == ego else _safe_name(name, taken | {"ego"})
+            taken.add(addt)
+            self.renames[name] = addt
+        for obj in objects:
+            self.entity(obj, self.renames[obj.get("name", "")])
+        for sel in root.iterfind("Entities/EntitySelection"):
+            self.skip(sel, "entity selections are not translated")
+        if "ego" not in self.actors:
+            self.error(root.find("Entities"), "no entity to be the ego")
+            raise _Stop
+
+    def entity(self, obj, name: str) -> None:
+        body = _only_child(obj) if obj.find("ObjectController") is None else \
+            next((c for c in obj if c.tag != "ObjectController"), None)
+        saved = dict(self.params)
+        if body is not None and body.tag == "CatalogReference":
+            ref = body
+            body = self.catalog_entry(ref)
+            # The entry's own parameters, as the reference assigns them.
+            for decl in body.iterfind("ParameterDeclarations/ParameterDeclaration") if body is not None else ():
+                self.params[decl.get("name", "")] = (decl.get("parameterType", "string"), decl.get("value", ""))
+            for assign in ref.iterfind("ParameterAssignments/ParameterAssignment"):
+                self.params[assign.get("parameterRef", "")] = ("string", assign.get("value", ""))
+        try:
+            self.entity_body(obj, name, body)
+        finally:
+            self.params = saved
+
+    def entity_body(self, obj, name: str, body) -> None:
+        kind, length, width = "car", None, None
+        if body is None:
+            self.approx(obj, f"entity '{obj.get('name')}': no vehicle definition; a default car")
+        elif body.tag == "Vehicle":
+            category = self.raw(body, "vehicleCategory", required=False) or "car"
+            kind = CATEGORY_KIND.get(category, "car")
+        elif body.tag == "Pedestrian":
+            kind = "pedestrian"
+        elif body.tag == "MiscObject":
+            kind = "obstacle"
+        else:
+            self.skip(body, f"<{body.tag}> '{obj.get('name')}' is not translated")
+            return
+        dims = _child(body, "BoundingBox", "Dimensions") if body is not None else None
+        if dims is not None:
+            length, width = self.value(dims, "length"), self.value(dims, "width")
+        if self.sidecar and name in self.sidecar.get("actors", {}):
+            kind = self.sidecar["actors"][name]["vehicle"]
+        if name == "ego" and kind != "car":
+            self.approx(obj, f"the ego is a {kind} in the scenario; addt-dsl's stack drives a car")
+            kind = "car"
+        self.actors[name] = {"vehicle": kind, "length_m": length if length and length > 0 else None,
+                             "width_m": width if width and width > 0 else None, "el": obj,
+                             "behaviors": [], "triggers": [], "lane_now": None, "speed_now": 0.0}
+
+    def catalog_entry(self, ref):
+        catalog, entry = self.raw(ref, "catalogName"), self.raw(ref, "entryName")
+        locations = {loc.tag.removesuffix("Catalog"): loc.find("Directory")
+                     for loc in self.doc.iterfind("CatalogLocations/*")}
+        for kind in ("Vehicle", "Pedestrian", "MiscObject"):
+            directory = locations.get(kind)
+            if directory is None:
+                continue
+            base = self.raw(directory, "path")
+            folder = self.path.parent / base
+            if not self.inside(folder):
+                continue
+            for candidate in sorted(folder.glob("*.xosc"))[:64]:
+                got = self.read(os.path.relpath(candidate, self.path.parent), self.path.parent, ref)
+                root = self.parse(got[1], candidate.name) if got is not None else None
+                for el in root.iterfind(f"Catalog/{kind}") if root is not None else ():
+                    if el.get("name") == entry:
+                        return el
+        self.approx(ref, f"catalog entry '{entry}' of {catalog} not found: a default car "
+                         f"({VEHICLES['car'].length_m} x {VEHICLES['car'].width_m} m)",
+                    "catalogs are read from <CatalogLocations> inside the root directory")
+        return None
+
+    def inside(self, folder) -> bool:
+        try:
+            return Path(folder).resolve().is_relative_to(self.root) and Path(folder).is_dir()
+        except OSError:
+            return False
+
+    # -- positions
+
+    def position(self, pos_el, who: str):
+        """(road name, lane, s, offset) as expressions, or None after a diagnostic."""
+        pos = _only_child(pos_el)
+        if pos is None:
+            self.error(pos_el, "a <Position> holds one position")
+            return None
+        if pos.tag == "LanePosition":
+            road = self.road(self.raw(pos, "roadId"), pos)
+            lane = int(self.value(pos, "laneId"))
+            return road, lane, self.number(pos, "s", units.LENGTH), self.number(pos, "offset", units.LENGTH, 0.0)
+        if pos.tag in ("RoadPosition", "WorldPosition", "RelativeRoadPosition", "RelativeLanePosition"):
+            return self.position_from_road(pos, who)
+        self.skip(pos, f"<{pos.tag}> is not translated: {who} starts at the start of the first road",
+                  "lane, road, world and relative road/lane positions are translated")
+        return None
+
+    def position_from_road(self, pos, who):
+        if pos.tag == "RoadPosition":
+            road_id, s, t = self.raw(pos, "roadId"), self.value(pos, "s"), self.value(pos, "t")
+        elif pos.tag == "WorldPosition":
+            x, y = self.value(pos, "x"), self.value(pos, "y")
+            best = None
+            for rid in self.network.roads:
+                s_, t_ = self.network.road(rid).project(x, y)
+                if best is None or abs(t_) < abs(best[2]):
+                    best = (rid, s_, t_)
+            road_id, s, t = best
+        else:
+            ref = self.actor_name(pos)
+            if ref is None or ref not in self.placed:
+                self.error(pos, f"{pos.tag} relative to '{pos.get('entityRef')}', which has no position yet")
+                return None
+            road_name, lane, s_ref, off_ref = self.placed[ref]
+            params = self.param_values()
+            road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+            if pos.tag == "RelativeLanePosition":
+                d_lane = int(self.value(pos, "dLane"))
+                new_lane = lane + d_lane
+                if lane * new_lane <= 0 and d_lane:  # lane 0 is the reference line
+                    new_lane += 1 if d_lane > 0 else -1
+                ds = self.number(pos, "ds", units.LENGTH, 0.0)
+                return road_name, new_lane, _plus(s_ref, ds), self.number(pos, "offset", units.LENGTH, 0.0)
+            road = self.network.road(road_id)
+            s = eval_param_expr(s_ref, params) + self.value(pos, "ds")
+            t = road.lane_center_t(lane, eval_param_expr(s_ref, params)) + eval_param_expr(off_ref, params) \
+                + self.value(pos, "dt")
+        road_name = self.road(str(road_id), pos)
+        odr = self.network.road(str(road_id))
+        lane = odr.lane_at(s, t)
+        if lane is None:
+            self.error(pos, f"{who}: no lane at s={s:g} m, t={t:g} m of road {road_id}")
+            return None
+        offset = t - odr.lane_center_t(lane, s)
+        return road_name, lane, E.Num(value=round(s, 9)), E.Num(value=round(offset, 9))
+
+    def against_s(self, pos_el, placed) -> bool:
+        """Whether the entity faces against its lane's driving direction (addt-dsl, like
+        OpenSCENARIO's default, drives an actor in its lane's direction)."""
+        road_name, lane, s, _ = placed
+        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+        odr = self.network.road(road_id)
+        orient = _only_child(pos_el).find("Orientation") if _only_child(pos_el) is not None else None
+        if orient is None or orient.get("h") is None or lane == 0:
+            return False
+        try:
+            h = self.value(orient, "h")
+            if orient.get("type", "relative") == "absolute":
+                s_now = float(eval_param_expr(s, self.param_values()))
+                h -= odr.reference_pose(s_now)[2] + (0.0 if odr.travel_direction(lane) > 0 else math.pi)
+            elif _only_child(pos_el).tag != "LanePosition":  # relative to the road's +s
+                h -= 0.0 if odr.travel_direction(lane) > 0 else math.pi
+            return math.cos(h) < 0
+        except (ValueError, ArithmeticError, _Stop):
+            return False
+
+    # -- init
+
+    def init(self, init) -> None:
+        if init is None:
+            return
+        for action in init.iterfind("Actions/GlobalAction"):
+            self.skip(action, "global actions (environment, traffic, parameters) are not translated")
+        for private in init.iterfind("Actions/Private"):
+            who = self.actor_name(private)
+            if who is None or who not in self.actors:
+                continue
+            for pa in private.iterfind("PrivateAction"):
+                act = _only_child(pa)
+                if act is None:
+                    continue
+                if act.tag == "TeleportAction":
+                    got = self.position(act.find("Position"), who)
+                    if got is not None:
+                        self.placed[who] = got
+                        self.actors[who]["lane_now"] = got[1]
+                        self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
+                elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
+                                                                "AbsoluteTargetSpeed") is not None:
+                    target = _child(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
+                    self.actors[who]["speed"] = self.number(target, "value", units.SPEED)
+                    self.actors[who]["speed_now"] = self.value(target, "value")
+                else:
+                    self.skip(act, f"<{act.tag}> in Init is not translated (positions and speeds are)")
+        for who, info in self.actors.items():
+            if who not in self.placed:
+                self.approx(info["el"], f"{who} has no translated initial position: lane -1 at s = 0 m of the "
+                                        "first road")
+                first = self.road(next(iter(self.network.roads)), info["el"])
+                self.placed[who] = (first, -1, E.Num(value=0.0), E.Num(value=0.0))
+
+    # -- actions
+
+    def private_action(self, act, who: str):
+        """The behaviour clause an action starts, or None after a diagnostic."""
+        if who == "ego":
+            self.skip(act, f"<{act.tag}> on the ego is not translated: the ego is driven by the stack under test")
+            return None
+        info = self.actors[who]
+        if act.tag == "LongitudinalAction":
+            speed = _child(act, "SpeedAction")
+            target = _child(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
+            if speed is None or target is None:
+                self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
+                          "absolute speed targets are translated (relative targets: issue 16)")
+                return None
+            return self.speed_action(speed.find("SpeedActionDynamics"), target, info)
+        if act.tag == "LateralAction":
+            change = _child(act, "LaneChangeAction")
+            if change is None:
+                self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
+                          "the language has lane changes; lane offsets and lateral distances are issue 16")
+                return None
+            return self.lane_change(change, who, info)
+        if act.tag == "ControllerAction":
+            ctrl = act.find(".//Controller")
+            if ctrl is not None and (ctrl.get("name") or "").startswith(CONTROLLER_PREFIX):
+                keyword = ctrl.get("name")[len(CONTROLLER_PREFIX):]
+                if keyword in BEHAVIORS:
+                    settings = {}
+                    for prop in ctrl.iterfind("Properties/Property"):
+                        raw = prop.get("value", "")
+                        if raw == "":
+                            continue  # an empty setting is the default
+                        try:
+                            settings[prop.get("name")] = _setting(json.loads(raw))
+                        except ValueError:
+                            settings[prop.get("name")] = raw
+                    return ClausePlan(keyword="behavior", name=keyword, settings=settings)
+            self.skip(act, "controller actions are not translated (agents follow behaviours)")
+            return None
+        self.skip(act, f"<{act.tag}> is not translated",
+                  "routes, trajectories and synchronisation come with issues 15 and 16")
+        return None
+
+    def speed_action(self, dyn, target, info) -> ClausePlan | None:
+        v = self.number(target, "value", units.SPEED)
+        v_now = float(eval_param_expr(v, self.param_values()))
+        shape = self.raw(dyn, "dynamicsShape") if dyn is not None else "step"
+        dim = self.raw(dyn, "dynamicsDimension") if dyn is not None else "time"
+        amount = abs(self.value(dyn, "value")) if dyn is not None else 0.0
+        dv = v_now - info["speed_now"]
+        if shape == "step" or amount == 0.0:
+            rate = 10.0
+            self.approx(dyn if dyn is not None else target, "a step change of speed: a cruise at up to 10 m/s^2")
+        elif dim == "rate":
+            rate = amount
+        elif dim == "time":
+            rate = abs(dv) / amount if dv else 1.0
+        else:  # distance: v1^2 - v0^2 = 2 a d
+            rate = abs(v_now ** 2 - info["speed_now"] ** 2) / (2 * amount) if dv else 1.0
+        rate = max(rate, 0.01)
+        info["speed_now"] = v_now
+        if dv < 0:  # constant deceleration to a speed: exactly `brake`
+            return ClausePlan(keyword="behavior", name="brake",
+                              settings={"decel": E.Num(value=min(rate, 12.0)), "to_speed": v})
+        if shape != "step" and dv:
+            self.approx(dyn, f"a {shape} speed change: `cruise`, which tracks the speed with a 1 s time constant "
+                             f"limited to {rate:.3g} m/s^2")
+        return ClausePlan(keyword="behavior", name="cruise",
+                          settings={"speed": v, "accel": E.Num(value=rate), "decel": E.Num(value=rate)})
+
+    def lane_change(self, change, who, info) -> ClausePlan | None:
+        dyn, target = change.find("LaneChangeActionDynamics"), change.find("LaneChangeTarget")
+        tgt = _only_child(target)
+        if tgt is None or dyn is None:
+            self.error(change, "a lane change needs dynamics and a target")
+            return None
+        if tgt.tag == "AbsoluteTargetLane":
+            lane = int(self.value(tgt, "value"))
+        else:
+            ref = self.actor_name(tgt)
+            if ref is None:
+                return None
+            base = self.actors[ref]["lane_now"] if ref != who else info["lane_now"]
+            if base is None:
+                self.skip(tgt, f"lane relative to {ref}, whose lane is not known (no translated position)")
+                return None
+            if ref != who:
+                self.approx(tgt, f"lane relative to {ref}: its lane at the start ({base}), not at the change",
+                            "`lane_change to lane of X` is issue 16")
+            d = int(self.value(tgt, "value"))
+            lane = base + d
+            if base * lane <= 0 and d:
+                lane += 1 if d > 0 else -1
+        dim = self.raw(dyn, "dynamicsDimension")
+        amount = abs(self.value(dyn, "value"))
+        if dim == "time":
+            duration = amount
+        elif dim == "distance":
+            duration = amount / max(info["speed_now"], 1.0)
+            self.approx(dyn, f"a lane change over {amount:g} m: {duration:.3g} s at {info['speed_now']:.3g} m/s")
+        else:
+            duration = 3.5 / max(amount, 0.1)
+            self.approx(dyn, f"a lane change at a lateral rate: {duration:.3g} s for a 3.5 m lane")
+        info["lane_now"] = lane
+        return ClausePlan(keyword="behavior", name="lane_change",
+                          settings={"to": E.Num(value=float(lane)), "duration": E.Num(value=max(duration, 0.5))})
+
+    # -- stop trigger
+
+    def stop_trigger(self, trigger) -> float:
+        for cond in trigger.iterfind(".//SimulationTimeCondition") if trigger is not None else ():
+            if (cond.get("rule") or "").startswith("greater"):
+                return min(max(self.value(cond, "value"), 0.1), MAX_DURATION_S)
+        self.approx(trigger, f"no simulation-time stop trigger: duration {DEFAULT_DURATION_S:g} s")
+        return DEFAULT_DURATION_S
+
+    # -- storyboard
+
+    def story(self, story) -> None:
+        for act in story.iterfind("Act"):
+            act_at = None
+            for cond in act.iterfind("StartTrigger/ConditionGroup/Condition"):
+                time = cond.find("ByValueCondition/SimulationTimeCondition")
+                if time is not None:
+                    value = self.value(time, "value")
+                    act_at = value if value > 0 else None
+                else:
+                    self.skip(cond, "act start conditions other than the simulation time are not translated")
+            for stop in act.iterfind("StopTrigger/ConditionGroup"):
+                self.skip(stop, "act stop triggers are not translated")
+            for group in act.iterfind("ManeuverGroup"):
+                self.maneuver_group(group, act_at)
+        self.link_sequences()
+
+    def maneuver_group(self, group, act_at) -> None:
+        refs = [self.actor_name(r) for r in group.iterfind("Actors/EntityRef")]
+        refs = [r for r in refs if r is not None]
+        if len(refs) != 1:
+            if refs or list(group.iterfind("Maneuver")):
+                self.skip(group, f"maneuver group with {len(refs)} actors: translated for one actor only")
+            if not refs:
+                return
+        who = refs[0]
+        maneuvers = list(group.iterfind("Maneuver"))
+        if group.find("CatalogReference") is not None:
+            self.skip(group.find("CatalogReference"), "maneuver catalogs are not translated")
+        for maneuver in maneuvers:
+            for event in maneuver.iterfind("Event"):
+                self.event(event, who, act_at)
+
+    def event(self, event, who: str, act_at) -> None:
+        name = event.get("name", "")
+        if name in (self.sidecar or {}).get("group_events", ()):
+            return  # a step of a group: the side file has the group (appended in `plan`)
+        actions = list(event.iterfind("Action"))
+        clauses = []
+        for action in actions:
+            body = _only_child(action)
+            if body is None:
+                continue
+            if body.tag != "PrivateAction":
+                self.skip(body, f"<{body.tag}> is not translated (private actions are)")
+                continue
+            inner = _only_child(body)
+            if inner is None:
+                continue
+            if inner.tag == "VisibilityAction" and len(actions) == 1:
+                # An exported group's anchor (a no-op): the events it starts form one group.
+                step = self.start(event.find("StartTrigger"), who, act_at)
+                if step is not None and step[0] == "now":
+                    self.anchors[name] = (who, step[1])
+                return
+            exact = (self.sidecar or {}).get("behaviors", {}).get(name)
+            clause = ClausePlan.model_validate(exact["clause"]) if exact else self.private_action(inner, who)
+            if clause is not None:
+                clauses.append(clause)
+        if not clauses:
+            return
+        trigger = event.find("StartTrigger")
+        step = self.start(trigger, who, act_at)
+        if step is None:
+            return
+        kind, fields = step
+        if len(clauses) > 1:
+            self.approx(event, f"event '{name}' starts {len(clauses)} actions: one step each, same start")
+        for clause in clauses:
+            self.events.setdefault(name, (who, kind, fields, clause))
+            if kind == "after_event":
+                self.pending.append((name, who, fields, clause))
+            elif not fields:
+                self.actors[who]["behaviors"].append(clause)
+            else:
+                self.actors[who]["triggers"].append(TriggerPlan(clause=clause, **fields))
+
+    def start(self, trigger, who: str, act_at):
+        """('now', fields of a TriggerPlan) or ('after_event', (event, delay, state)); None: dropped."""
+        groups = list(trigger.iterfind("ConditionGroup")) if trigger is not None else []
+        alternatives, at_s = [], act_at
+        for group in groups:
+            conj = []
+            for cond in group.iterfind("Condition"):
+                sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+                if sesc is not None and len(groups) == 1 and len(list(group)) == 1:
+                    if self.raw(sesc, "storyboardElementType") in ("event", "action"):
+                        return "after_event", (self.raw(sesc, "storyboardElementRef"),
+                                               self.value(cond, "delay", units.TIME, 0.0),
+                                               self.raw(sesc, "state"), cond)
+                time = cond.find("ByValueCondition/SimulationTimeCondition")
+                if time is not None and (time.get("rule") or "").startswith("greater") and len(groups) == 1:
+                    value = self.value(time, "value")
+                    at_s = max(at_s or 0.0, value) if value > 0 else at_s
+                    continue
+                formula = self.condition(cond, who)
+                if formula is None:
+                    return None
+                conj.append(formula)
+            if conj:
+                alternatives.append(_all(conj))
+        fields = {}
+        if at_s is not None:
+            fields["at_s"] = E.Num(value=at_s)
+        if alternatives:
+            fields["condition"] = _any(alternatives)
+        return "now", fields
+
+    def condition(self, cond, who: str):
+        """One <Condition> as a formula over signals, or None after a diagnostic."""
+        if (self.value(cond, "delay", units.TIME, 0.0)) > 0:
+            self.approx(cond, "a condition delay is not translated: the step starts when the condition holds")
+        value_cond = _only_child(cond.find("ByValueCondition")) if cond.find("ByValueCondition") is not None else None
+        if value_cond is not None:
+            if value_cond.tag == "ParameterCondition":
+                ref = self.raw(value_cond, "parameterRef")
+                exact = (self.sidecar or {}).get("conditions", {}).get(ref)
+                if exact:
+                    return EXPR.validate_python(exact["formula"])
+            self.skip(value_cond, f"<{value_cond.tag}> is not translated")
+            return None
+        by_entity = cond.find("ByEntityCondition")
+        entity = _only_child(_child(by_entity, "EntityCondition"))
+        if by_entity is None or entity is None:
+            self.error(cond, "a condition needs a ByValueCondition or a ByEntityCondition")
+            return None
+        triggering = by_entity.find("TriggeringEntities")
+        rule = triggering.get("triggeringEntitiesRule", "any") if triggering is not None else "any"
+        actors = [self.actor_name(r) for r in by_entity.iterfind("TriggeringEntities/EntityRef")]
+        if not actors or any(a is None for a in actors):
+            return None
+        parts = [self.entity_condition(entity, a) for a in actors]
+        if any(p is None for p in parts):
+            return None
+        return _all(parts) if rule == "all" else _any(parts)
+
+    def entity_condition(self, c, a: str):
+        op = RULE_OPS.get(c.get("rule", ""), ">")
+        sig = lambda fn, *args: E.Signal(name=f"{fn}({','.join(args)})")  # noqa: E731 - canonical names
+        if c.tag == "TraveledDistanceCondition":
+            s0, travelled = self.placed[a][2], self.number(c, "value", units.LENGTH)
+            if self.along_s(a):
+                return E.Binary(op=">=", left=sig("s", a), right=_plus(s0, travelled))
+            return E.Binary(op="<=", left=sig("s", a), right=E.Binary(op="-", left=s0, right=travelled))
+        if c.tag == "SpeedCondition":
+            return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
+        if c.tag == "AccelerationCondition":
+            return E.Binary(op=op, left=sig("accel", a), right=self.number(c, "value", units.ACCELERATION))
+        if c.tag in ("RelativeDistanceCondition", "TimeToCollisionCondition", "TimeHeadwayCondition"):
+            target = c.find("TimeToCollisionConditionTarget/EntityRef") if c.tag == "TimeToCollisionCondition" else c
+            if target is None:
+                self.skip(c, "time to collision with a position is not translated (with an entity it is)")
+                return None
+            b = self.actor_name(target)
+            if b is None:
+                return None
+            if c.tag == "TimeToCollisionCondition":
+                return E.Binary(op=op, left=sig("ttc", a, b), right=self.number(c, "value", units.TIME))
+            if c.tag == "TimeHeadwayCondition":
+                return E.Binary(op=op, left=sig("gap", a, b),
+                                right=E.Binary(op="*", left=self.number(c, "value", units.TIME),
+                                               right=sig("speed", a)))
+            kind = c.get("relativeDistanceType", "cartesianDistance")
+            free = (c.get("freespace") or "false").lower() == "true"
+            value = self.number(c, "value", units.LENGTH)
+            if kind == "longitudinal":
+                half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
+                ahead = _ahead(self.placed, a, b, self.param_values())
+                left = sig("gap", a, b) if ahead else sig("gap", b, a)
+                return E.Binary(op=op, left=left, right=_plus(value, E.Num(value=-half)) if half else value)
+            if kind in ("cartesianDistance", "euclidianDistance"):
+                if free:
+                    self.approx(c, "a free-space distance: the centre distance less half of both lengths")
+                    half = 0.5 * (self.size(a)[0] + self.size(b)[0])
+                    return E.Binary(op=op, left=sig("distance", a, b), right=_plus(value, E.Num(value=half)))
+                return E.Binary(op=op, left=sig("distance", a, b), right=value)
+            self.skip(c, f"a {kind} relative distance is not translated (longitudinal and cartesian are)")
+            return None
+        if c.tag == "ReachPositionCondition" or c.tag == "DistanceCondition":
+            pos = c.find("Position")
+            lane_pos = _only_child(pos) if pos is not None else None
+            if lane_pos is not None and lane_pos.tag in ("LanePosition", "RoadPosition") and \
+                    self.placed[a][0] == self.road(self.raw(lane_pos, "roadId"), lane_pos):
+                tol = self.number(c, "tolerance" if c.tag == "ReachPositionCondition" else "value", units.LENGTH)
+                self.approx(c, "reaching a position: the actor's station passes it (less the tolerance)")
+                return E.Binary(op=">=", left=sig("s", a),
+                                right=E.Binary(op="-", left=self.number(lane_pos, "s", units.LENGTH), right=tol))
+            self.skip(c, f"<{c.tag}> is translated only for a lane or road position on the actor's road")
+            return None
+        self.skip(c, f"<{c.tag}> is not translated",
+                  "translated: traveled distance, speed, acceleration, relative distance, time headway, TTC, "
+                  "reach position; held conditions and relative speed are issue 16")
+        return None
+
+    def along_s(self, who: str) -> bool:
+        """Whether the actor drives towards +s (its lane's OpenDRIVE direction)."""
+        road_name, lane = self.placed[who][0], self.placed[who][1]
+        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+        return lane == 0 or self.network.road(road_id).travel_direction(lane) > 0
+
+    def size(self, who: str) -> tuple[float, float]:
+        info = self.actors[who]
+        kind = VEHICLES[info["vehicle"]]
+        return info["length_m"] or kind.length_m, info["width_m"] or kind.width_m
+
+    # -- sequences: an event started by another event of the same actor
+
+    def link_sequences(self) -> None:
+        grouped: dict[str, list] = {}
+        for name, who, (ref, delay, state, cond), clause in self.pending:
+            if ref in self.anchors and self.anchors[ref][0] == who:
+                grouped.setdefault(ref, []).append(TriggerPlan(clause=clause, after_s=E.Num(value=delay)
+                                                               if delay else None))
+                self.events[name] = (who, "now", {}, clause)
+        for ref, steps in grouped.items():
+            who, fields = self.anchors[ref]
+            self.actors[who]["triggers"].append(TriggerPlan(group=GroupPlan(mode="parallel", steps=steps), **fields))
+        for name, who, (ref, delay, state, cond), clause in self.pending:
+            if ref in grouped:
+                continue
+            first = self.events.get(ref)
+            if first is None or first[0] != who:
+                self.skip(cond, f"event '{name}' starts on '{ref}', "
+                                + ("not an event of the same actor" if first else "which is not translated"),
+                          "a step after another actor's event has no form in the language")
+                continue
+            after = delay
+            if state in ("endTransition", "completeState"):
+                after += _duration(first[3])
+            info = self.actors[who]
+            prev_clause = first[3]
+            # Lift the first step into a sequence that also starts this one.
+            for i, tr in enumerate(info["triggers"]):
+                if tr.clause == prev_clause or (tr.group and tr.group.steps and tr.group.steps[0].clause ==
+                                                prev_clause):
+                    steps = list(tr.group.steps) if tr.group else [TriggerPlan(clause=prev_clause)]
+                    steps.append(TriggerPlan(clause=clause, after_s=E.Num(value=after) if after else None))
+                    info["triggers"][i] = TriggerPlan(condition=tr.condition, at_s=tr.at_s, after_s=tr.after_s,
+                                                      group=GroupPlan(mode="sequence", steps=steps))
+                    break
+            else:
+                if prev_clause in info["behaviors"]:
+                    info["triggers"].append(TriggerPlan(after_s=E.Num(value=after), clause=clause)
+                                            if after else TriggerPlan(at_s=E.Num(value=0.0), clause=clause))
+                else:
+                    self.skip(cond, f"event '{name}' follows '{ref}' in a way the language cannot say")
+                    continue
+            self.events[name] = (who, "now", {}, clause)
+
+    # -- the plan
+
+    def plan(self, header, duration: float) -> ScenarioPlan:
+        sc = self.sidecar or {}
+        actors = []
+        for who, info in self.actors.items():
+            road, lane, s, offset = self.placed[who]
+            kind = VEHICLES[info["vehicle"]]
+            extra = sc.get("actors", {}).get(who, {})
+            if info["vehicle"] not in ("pedestrian", "obstacle") and info.get("against_s"):
+                self.approx(info["el"], f"{who} faces against the driving direction of lane {lane}; addt-dsl "
+                                        "drives it in the lane's direction")
+            fields = dict(name=who, vehicle=info["vehicle"], road=road, lane=E.Num(value=float(lane)), s=s,
+                          speed=info.get("speed", E.Num(value=0.0)),
+                          length_m=extra.get("length_m") or info["length_m"] or kind.length_m,
+                          width_m=extra.get("width_m") or info["width_m"] or kind.width_m,
+                          behaviors=info["behaviors"], triggers=info["triggers"])
+            if extra.get("mass_kg") is not None:
+                fields.update(mass_kg=extra["mass_kg"], wheelbase_m=extra["wheelbase_m"])
+            if extra.get("route"):
+                fields["route"] = [str(r) for r in extra["route"]]
+            if extra.get("yaw") is not None:
+                fields["yaw"] = E.Num(value=float(extra["yaw"]))
+            if eval_param_expr(offset, self.param_values()) != 0.0:
+                fields["offset"] = offset
+            fields["triggers"] = fields["triggers"] + [TriggerPlan.model_validate(g)
+                                                       for g in sc.get("groups", {}).get(who, [])]
+            if who == "ego":
+                fields.update(behaviors=[], triggers=[])
+                if extra.get("stack"):
+                    fields["stack"] = ClausePlan.model_validate(extra["stack"])
+                    fields["sensors"] = [ClausePlan.model_validate(x) for x in extra.get("sensors", [])]
+                elif not sc and eval_param_expr(fields["speed"], self.param_values()) > 0:
+                    # The stack cruises at the ego's initial speed, as OpenSCENARIO's default
+                    # controller keeps the speed the file gives it.
+                    fields["stack"] = ClausePlan(keyword="stack", name="bev", settings={"cruise_speed": fields["speed"]})
+                for key in ("goal_s", "mu"):
+                    if extra.get(key) is not None:
+                        fields[key] = E.Num(value=float(extra[key]))
+            actors.append(ActorPlan(**fields))
+        ego = next(a for a in actors if a.name == "ego")
+        agents = [a for a in actors if a.name != "ego"]
+        faults = [pinned_fault_plan(ConcreteFault.model_validate(f)) for f in sc.get("faults", [])]
+        oracles = [OraclePlan.model_validate(o) for o in sc.get("oracles", [])]
+        if not sc:  # OpenSCENARIO states no pass criteria: the one every scenario here has
+            oracles = [OraclePlan(name="no_collision", formula=NO_CLAUSES["collision"]("ego", None))]
+        description = sc["description"] if sc else (header.get("description", "") if header is not None else "")
+        name = sc.get("scenario") or _safe_name(self.path.stem, set())
+        plan = ScenarioPlan(name=name, description=description[:500], duration_s=duration,
+                            step_s=sc.get("step_s", 0.01), seed=sc.get("seed", 0), run_seed=sc.get("run_seed"),
+                            roads=list(self.roads.values()), ego=ego, agents=agents, faults=faults, oracles=oracles)
+        values = {**self.param_values(), **sc.get("params", {})}
+        dims = {**{k: v for k, v in self.param_dims.items()},
+                **{k: units.DIMENSIONLESS for k in sc.get("params", {}) if k not in self.param_dims}}
+        for k, d in sc.get("param_dims", {}).items():
+            dims[k] = units.dim_from_name(d)
+        params = []
+        for p in sorted(params_referenced(plan)):
+            dim = dims.get(p)
+            if dim is None or p not in values:
+                self.error(None, f"parameter '{p}' is used with two dimensions or has no number value")
+                raise _Stop
+            params.append(ParamPlan(name=p, dimension=units.dim_name(dim), default=float(values[p])))
+        return plan.model_copy(update={"params": params})
+
+
+def _sidecar_problem(data: dict) -> str:
+    """What is wrong with a side file's contents ("" if nothing): each part is validated
+    before the import uses it, so a damaged file is a diagnostic, not an exception."""
+    try:
+        for key, kind in (("actors", dict), ("behaviors", dict), ("conditions", dict), ("groups", dict),
+                          ("faults", list), ("oracles", list), ("params", dict), ("param_dims", dict),
+                          ("group_events", list)):
+            if not isinstance(data.get(key, kind()), kind):
+                return f"'{key}' is not a {kind.__name__}"
+        for info in data.get("actors", {}).values():
+            if info.get("vehicle") not in VEHICLES:
+                return f"unknown vehicle {info.get('vehicle')!r}"
+            for key in ("length_m", "width_m", "mass_kg", "wheelbase_m", "goal_s", "mu"):
+                if info.get(key) is not None:
+                    float(info[key])
+            if info.get("stack"):
+                ClausePlan.model_validate(info["stack"])
+            for x in info.get("sensors", []):
+                ClausePlan.model_validate(x)
+        for b in data.get("behaviors", {}).values():
+            ClausePlan.model_validate(b["clause"])
+        for c in data.get("conditions", {}).values():
+            EXPR.validate_python(c["formula"])
+        for steps in data.get("groups", {}).values():
+            for step in steps:
+                TriggerPlan.model_validate(step)
+        for f in data.get("faults", []):
+            ConcreteFault.model_validate(f)
+        for o in data.get("oracles", []):
+            OraclePlan.model_validate(o)
+        for k, v in data.get("params", {}).items():
+            float(v)
+        for d in data.get("param_dims", {}).values():
+            units.dim_from_name(d)
+        float(data.get("step_s", 0.01))
+        int(data.get("seed", 0))
+        if data.get("run_seed") is not None:
+            int(data["run_seed"])
+    except (ValueError, TypeError, KeyError, AttributeError) as exc:  # pydantic's ValidationError is a ValueError
+        return (str(exc).splitlines() or [type(exc).__name__])[0][:200]
+    return ""
+
+
+def _setting(value):
+    if isinstance(value, str):
+        return value
+    if isinstance(value, list):
+        return [E.Num(value=float(v)) for v in value]
+    return E.Num(value=float(value))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        return math.isfinite(float(text))
+    except ValueError:
+        return False
+
+
+def _plus(a, b):
+    if isinstance(a, E.Num) and isinstance(b, E.Num):
+        return E.Num(value=a.value + b.value)
+    if isinstance(b, E.Num) and b.value == 0.0:
+        return a
+    return E.Binary(op="+", left=a, right=b)
+
+
+def _all(parts):
+    out = parts[0]
+    for p in parts[1:]:
+        out = E.Binary(op="and", left=out, right=p)
+    return out
+
+
+def _any(parts):
+    out = parts[0]
+    for p in parts[1:]:
+        out = E.Binary(op="or", left=out, right=p)
+    return out
+
+
+def _ahead(placed, a, b, params) -> bool:
+    """Whether b starts ahead of a (so `gap(a, b)` is the positive one)."""
+    return eval_param_expr(placed[b][2], params) >= eval_param_expr(placed[a][2], params)
+
+
+def _duration(clause: ClausePlan) -> float:
+    d = clause.settings.get("duration")
+    return float(d.value) if isinstance(d, E.Num) else 0.0
+
+
+# ---------------------------------------------------------------- entry point
+
+def import_xosc(path: str | Path, root: str | Path | None = None) -> Imported:
+    """Translate an OpenSCENARIO file; files are read only under `root` (default: its directory)."""
+    path = Path(path)
+    imp = _Translate(path, Path(root) if root is not None else path.parent)
+    if not path.resolve().is_relative_to(imp.root):
+        imp.sink.error("E0402", f"{path} is outside the root directory", None)
+        return Imported(None, None, imp.sink.items, imp.sources)
+    try:
+        plan = imp.run()
+    except _Stop:
+        plan = None
+    except RecursionError:
+        imp.sink.error("E0801", "the document is nested too deeply", Span.point(imp.display, 1, 1))
+        plan = None
+    if plan is None:
+        return Imported(None, None, imp.sink.items, imp.sources)
+    comment = (f"Imported from {path.name} by addtc import" + (" (with its addt-dsl side file)"
+                                                               if imp.sidecar else "")
+               + f"\n{sum(d.code.startswith('W08') for d in imp.sink.items)} element(s) not translated "
+                 "or approximated: see the diagnostics"
+               + ("" if imp.sidecar else "\nOpenSCENARIO states no pass criteria: `no collision` is the default oracle"))
+    try:
+        text = print_plan(plan, comment=comment)
+    except PrinterError as exc:
+        imp.sink.error("E0802", f"the translated scenario cannot be printed: {exc}", Span.point(imp.display, 1, 1))
+        return Imported(None, None, imp.sink.items, imp.sources)
+    files = side_files(plan)
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, body in files.items():
+            (Path(tmp) / name).write_text(body)
+        check = compile_source(text, path=f"{path.stem}.addt", base_dir=tmp)
+    if not check.ok:
+        for d in check.diagnostics:
+            if d.is_error:
+                imp.sink.error("E0802", f"the translated scenario does not compile: [{d.code}] {d.message}",
+                               Span.point(imp.display, 1, 1))
+        return Imported(None, None, imp.sink.items, {**imp.sources, **check.sources})
+    return Imported(text, check.plan, imp.sink.items, imp.sources, files)
