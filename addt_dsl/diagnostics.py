@@ -89,6 +89,7 @@ CODES: dict[str, str] = {
     "E0402": "path escapes the scenario directory",
     "E0403": "road file error",
     "E0404": "no such route in the road network",
+    "E0405": "no such traffic signal or controller",
     "E0501": "unsatisfiable constraints",
     "E0601": "feature needs a package that is not installed",
     "E0701": "beyond a documented limit (input size or sweep cost)",

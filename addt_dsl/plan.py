@@ -139,6 +139,37 @@ class ActorPlan(_Model):
     # (`route 1 -> left -> 3` expanded by the compiler); empty: the road it is placed on.
     route: list[str] = Field(default_factory=list)
     yaw: Expr | None = None  # body yaw relative to the lane's driving direction [rad] (None: 0)
+    ignore_lights: bool = False  # runs red lights (agents otherwise stop at red and yellow)
+
+
+# Traffic-light states as numbers (traces and formulas: `light(west) == red`), and the state
+# change that hands a light back to its phase program.
+LIGHT_STATES = {"green": 0.0, "yellow": 1.0, "red": 2.0}
+LIGHT_PROGRAM = "program"
+
+
+class SignalPlan(_Model):
+    """A traffic signal declared on an inline road: `signal NAME road R at S [lane L]`.
+    Imported maps bring their own (`<signal dynamic="yes">`)."""
+
+    name: str
+    road: str  # the scenario road it stands on
+    s_m: float  # its stop line: station along the road [m]
+    lanes: list[int] = Field(default_factory=list)  # lanes it governs; empty: every lane driven along +s
+
+
+class ControllerPlan(_Model):
+    """Signals that switch together and their phase program (OpenSCENARIO's
+    TrafficSignalController with one green/yellow/red cycle): green from `offset_s`, then
+    yellow, then red, repeating every green + yellow + red seconds."""
+
+    name: str
+    road: str  # the scenario road (its map) the signals are on
+    signals: list[str]  # signal ids on that map (inline roads: `SignalPlan` names)
+    green_s: Expr
+    yellow_s: Expr
+    red_s: Expr
+    offset_s: Expr
 
 
 class FaultPlan(_Model):
@@ -196,6 +227,11 @@ class ScenarioPlan(_Model):
     faults: list[FaultPlan] = Field(default_factory=list)
     oracles: list[OraclePlan] = Field(default_factory=list)
     sweep: SweepPlan = Field(default_factory=SweepPlan)
+    # Traffic lights (`lights { }`): inline signals, controllers with phase programs, and
+    # state changes as steps (clauses `light CONTROLLER state S`), armed at time 0.
+    signals: list[SignalPlan] = Field(default_factory=list)
+    controllers: list[ControllerPlan] = Field(default_factory=list)
+    light_steps: list[TriggerPlan] = Field(default_factory=list)
     # Weather and light models acting on the sensors (`environment { fog visibility 150 m }`).
     environment: list[ClausePlan] = Field(default_factory=list)
 

@@ -209,6 +209,17 @@ class ActorDecl(Node):
 
 
 @dataclass(frozen=True, slots=True)
+class LightDef(Node):
+    """A line of `lights { }`: `signal NAME settings` or `controller NAME settings`."""
+
+    kind: str
+    kind_span: Span
+    name: str
+    name_span: Span
+    settings: tuple[Setting, ...]
+
+
+@dataclass(frozen=True, slots=True)
 class Timing(Node):
     kind: str  # at | during | from
     start: Expression

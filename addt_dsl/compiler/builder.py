@@ -21,7 +21,7 @@ MAX_EXPR_DEPTH = 200  # operators chained or nested in one expression
 _POSITION_ONLY = frozenset({
     "INCLUDE", "SCENARIO", "ROAD", "IMPORT", "PARAM", "ASSUME", "KEEP", "AGENT", "AHEAD", "BEHIND",
     "LANE", "AT", "AFTER", "WHEN", "SET", "FAULTS", "DURING", "FROM", "EXPECT", "NO", "STAY", "REACH",
-    "SWEEP", "GRID", "REPEAT", "SEED", "MAX_REJECTIONS", "WITHIN", "LSQB",
+    "SWEEP", "GRID", "REPEAT", "SEED", "MAX_REJECTIONS", "WITHIN", "LSQB", "LIGHTS",
 })
 
 
@@ -286,6 +286,14 @@ class Builder:
     def b_labelled(self, span, items):
         label, item = items
         return dataclasses.replace(item, span=span, label=label.value, label_span=label.span)
+
+    # ---- traffic lights
+    def b_lights(self, span, items):
+        return ast.Block(span, "lights", tuple(items))
+
+    def b_light_def(self, span, items):
+        kind, name, settings = items
+        return ast.LightDef(span, str(kind), self._tspan(kind), str(name), self._tspan(name), settings)
 
     # ---- environment
     def b_environment(self, span, items):

@@ -61,6 +61,9 @@ class Context:
     environment: list[P.ClausePlan] = field(default_factory=list)
     oracles: list[P.OraclePlan] = field(default_factory=list)
     sweep: P.SweepPlan = field(default_factory=P.SweepPlan)
+    signals: list[P.SignalPlan] = field(default_factory=list)
+    controllers: list[P.ControllerPlan] = field(default_factory=list)
+    light_steps: list[P.TriggerPlan] = field(default_factory=list)
     used_params: set[str] = field(default_factory=set)
     read_file: object = None  # callable(path str, span) -> (display, text) | None
     sources: dict[str, str] = field(default_factory=dict)
@@ -91,9 +94,14 @@ class Context:
             if cls is not None:
                 nodes |= set(cls.nodes)
         scope = Scope(dict(self.param_dims), set(self.actors_ast), nodes | {"e2e"}, signals, self.used_params,
-                      steps=set(self.step_names))
+                      steps=set(self.step_names), lights=self.light_names())
         self._scopes[key] = scope
         return scope
+
+    def light_names(self) -> set[str]:
+        """Controllers declared in `lights { }` (formulas refer to them: `light(west)`)."""
+        return {d.name for b in self.blocks("lights") for d in b.items
+                if isinstance(d, ast.LightDef) and d.kind == "controller"}
 
     def _ego_stack_clauses(self):
         ego = self.actors_ast.get("ego")

@@ -13,6 +13,7 @@ from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.diagnostics import DiagnosticSink
+from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.registry import SIGNALS
 from addt_dsl.units import Dim
 
@@ -34,6 +35,7 @@ class Scope:
     # own, see compiler.formula); a scenario has none.
     named_signals: dict[str, Dim] = field(default_factory=dict)
     steps: set[str] = field(default_factory=set)  # named steps, `lead.brake_hard`
+    lights: set[str] = field(default_factory=set)  # traffic-light controllers: `light(west)`
 
 
 def _ty_str(ty) -> str:
@@ -113,6 +115,8 @@ class ExprLowering:
             return E.Param(name=parts[0]), ("num", self.scope.params[parts[0]])
         if len(parts) == 2 and parts[0] in self.scope.actors:
             return self._signal(node, parts[1], (parts[0],))
+        if len(parts) == 1 and parts[0] in LIGHT_STATES and self.scope.lights and self.scope.allow_signals:
+            return E.Num(value=LIGHT_STATES[parts[0]]), ("num", units.DIMENSIONLESS)  # `light(west) == red`
         if len(parts) == 1 and parts[0] in self.scope.actors:
             self.sink.error("E0204", f"'{parts[0]}' is an actor, not a value", node.span,
                             f"use one of its signals, e.g. `{parts[0]}.speed`")
@@ -145,14 +149,18 @@ class ExprLowering:
         if len(args) != len(cls.args):
             self.sink.error("E0204", f"'{fn}' takes {len(cls.args)} argument(s), got {len(args)}", node.span)
             return None, None
-        pools = {"actor": self.scope.actors, "node": self.scope.nodes, "step": self.scope.steps}
+        pools = {"actor": self.scope.actors, "node": self.scope.nodes, "step": self.scope.steps,
+                 "light": self.scope.lights}
         for kind, arg in zip(cls.args, args):
             pool = pools[kind]
             if arg not in pool:
-                known = f"{kind}s: {', '.join(sorted(pool))}" if pool else (
+                what = "traffic-light controller" if kind == "light" else kind
+                known = f"{what}s: {', '.join(sorted(pool))}" if pool else (
                     "no step is named: name one with a label, `brake_hard: at 3 s behavior brake`"
-                    if kind == "step" else f"no {kind}s")
-                self.sink.error("E0101", f"unknown {kind} '{arg}' in {fn}(...)", node.span, known)
+                    if kind == "step" else "traffic-light controllers: (none; declare one in `lights { }`)"
+                    if kind == "light" else f"no {kind}s")
+                self.sink.error("E0405" if kind == "light" else "E0101", f"unknown {what} '{arg}' in {fn}(...)",
+                                node.span, known)
                 return None, None
         signal = E.Signal(name=f"{fn}({','.join(args)})")
         if cls.boolean:

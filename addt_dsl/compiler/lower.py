@@ -30,6 +30,9 @@ def build_plan(ctx: Context) -> ScenarioPlan:
         environment=ctx.environment,
         oracles=ctx.oracles,
         sweep=ctx.sweep,
+        signals=ctx.signals,
+        controllers=ctx.controllers,
+        light_steps=ctx.light_steps,
     )
 
 

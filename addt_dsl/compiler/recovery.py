@@ -47,7 +47,7 @@ def _expected_words(lark: Lark, expected) -> list[str]:
 
 # Words that start a definition; seen where they cannot stand, a '}' is usually missing.
 _DEFINITION_WORDS = {"agent", "ego", "param", "road", "faults", "expect", "sweep", "assume", "keep",
-                     "include", "scenario", "environment"}
+                     "include", "scenario", "lights", "environment"}
 
 # Characters from other languages, with what to write instead.
 _CHAR_HINTS = {

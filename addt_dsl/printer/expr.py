@@ -18,6 +18,7 @@ from collections.abc import Callable
 
 from addt_dsl import expr as E
 from addt_dsl import units
+from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.registry import SIGNALS
 from addt_dsl.units import Dim
 
@@ -244,6 +245,9 @@ def _p_binary(p: ExprPrinter, e: E.Binary, want):
     if e.op in E.BOOL_OPS:
         lw = rw = BOOL
     elif e.op in E.COMPARE_OPS:
+        state = _light_state(e)
+        if state is not None and state not in p.param_dims:  # `light(west) == red`: the state by its name
+            return f"{p.format(e.left, units.DIMENSIONLESS, left_slot)} {e.op} {state}", level
         for dim in p.comparison_dims(e.left, e.right):
             try:
                 return f"{p.format(e.left, dim, left_slot)} {e.op} {p.format(e.right, dim, right_slot)}", level
@@ -262,6 +266,13 @@ def _is_state(e: E.Binary) -> bool:
         return False
     cls = SIGNALS.get(e.left.name.partition("(")[0])
     return cls is not None and cls.boolean
+
+
+def _light_state(e: E.Binary) -> str | None:
+    """The state name when `e` compares a traffic light's state with a state's code."""
+    if isinstance(e.left, E.Signal) and e.left.name.startswith("light(") and isinstance(e.right, E.Num):
+        return next((name for name, code in LIGHT_STATES.items() if code == e.right.value), None)
+    return None
 
 
 def _product(p: ExprPrinter, e: E.Binary, want: Dim, left_slot: int, right_slot: int) -> str:

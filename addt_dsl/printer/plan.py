@@ -31,6 +31,7 @@ from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.compiler import compile_source
 from addt_dsl.compiler.rules.actors import CLAUSE_TABLES
+from addt_dsl.compiler.rules.lights import CONTROLLER_SPECS, LIGHT_CLAUSE_SPECS
 from addt_dsl.compiler.rules.oracles import NO_CLAUSES, reach_goal_formula
 from addt_dsl.diagnostics import render_text
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, FaultPlan, OraclePlan, ParamPlan, RoadPlan,
@@ -178,6 +179,7 @@ VEHICLE_DEFAULTS = {  # what the compiler fills in when a setting is left out
 }
 ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLESS),  # optional, may use parameters
                ("offset", "offset", units.LENGTH), ("yaw", "yaw", units.ANGLE))
+ACTOR_FLAGS = (("at_red run", "ignore_lights"),)  # printed when the plan's flag is set
 ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units.LENGTH),
                 ("mass", "mass_kg", units.MASS), ("wheelbase", "wheelbase_m", units.LENGTH))
 
@@ -219,6 +221,7 @@ def _actor(pr: _Printer, a: ActorPlan, is_ego: bool) -> None:
         value = getattr(a, field)
         if value != VEHICLE_DEFAULTS[key](a):
             parts.append(f"{key} {format_quantity(value, dim)}")
+    parts += [text for text, field in ACTOR_FLAGS if getattr(a, field)]
     clauses = ([a.stack] if a.stack is not None else []) + list(a.sensors) + list(a.behaviors)
     if not clauses and not a.triggers:
         pr.emit(1, " ".join(parts))
@@ -264,10 +267,42 @@ def _hold(pr: _Printer, tr: TriggerPlan) -> str:
 
 
 def _clause(pr: _Printer, c: ClausePlan) -> str:
+    if c.keyword == "light":  # a traffic light's state change (`lights { }`)
+        return _join("light", c.name, pr.settings(LIGHT_CLAUSE_SPECS, c.settings))
     cls = CLAUSE_TABLES[c.keyword].get(c.name)
     if cls is None:
         raise PrinterError(f"unknown {c.keyword} {c.name!r}")
     return _join(c.keyword, c.name, pr.settings(cls.params, c.settings))
+
+
+# -- traffic lights
+
+def _lights(pr: _Printer) -> None:
+    plan = pr.plan
+    if not (plan.signals or plan.controllers or plan.light_steps):
+        return
+    ex = pr.exprs
+    pr.emit(0)
+    pr.emit(1, "lights {")
+    for sig in plan.signals:
+        pr.emit(2, _join(f"signal {sig.name} road {sig.road} at {format_quantity(sig.s_m, units.LENGTH)}",
+                         f"lane {sig.lanes[0]}" if sig.lanes else ""))
+    defaults = {s.name: s.default for s in CONTROLLER_SPECS}
+    for c in plan.controllers:
+        times = [f"{key} {ex.value(getattr(c, key + '_s'), units.TIME)}" for key in ("green", "yellow", "red", "offset")
+                 if getattr(c, key + "_s") != E.Num(value=float(defaults[key]))]
+        pr.emit(2, _join(f"controller {c.name} road {c.road}",
+                         "signals [" + ", ".join(_signal_id(i) for i in c.signals) + "]", *times))
+    for tr in plan.light_steps:  # a bare `light` line reads back as a step at time 0
+        _step(pr, tr, 2, in_group=True)
+    pr.emit(1, "}")
+
+
+def _signal_id(sid: str) -> str:
+    """A signal id as `signals [...]` reads it: a whole number, a name, or a string."""
+    if re.fullmatch(r"-?[0-9]+", sid) and str(int(sid)) == sid:
+        return sid
+    return sid if re.fullmatch(r"[A-Za-z_]\w*", sid) else string_literal(sid)
 
 
 # -- faults
@@ -306,6 +341,8 @@ def _builtin_clause(plan: ScenarioPlan, o: OraclePlan) -> tuple[str, str] | None
     built-in lowers to: `no collision [with X]`, `reach goal [within T]`."""
     if o.formula == NO_CLAUSES["collision"]("ego", None):
         return "no collision", "no_collision"
+    if o.formula == NO_CLAUSES["red_light"]("ego", None):
+        return "no red_light", "no_red_light"
     for signal in E.signals_used(o.formula):
         if signal.startswith("distance(ego,"):
             other = signal[len("distance(ego,"):-1]
@@ -416,8 +453,8 @@ def _environment(pr: _Printer) -> None:
     pr.emit(1, "}")
 
 
-SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _environment, _faults,
-                                                    _oracles, _sweep)
+SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _lights, _environment,
+                                                    _faults, _oracles, _sweep)
 
 
 # ---------------------------------------------------------------- entry points

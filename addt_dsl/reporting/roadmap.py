@@ -69,7 +69,12 @@ def describe(network: RoadNetwork, name: str = "") -> str:
             kind = "traffic light" if sg.dynamic else "sign"
             lines.append(f"  {sg.id}{f' {sg.name!r}' if sg.name else ''}: road {road.id} s {sg.s:.1f} m "
                          f"t {sg.t:.1f} m, {kind}, type {sg.type or '-'}/{sg.subtype or '-'}, "
-                         f"facing {sg.orientation}")
+                         f"facing {sg.orientation}"
+                         + (f", lanes {sg.validity[0]}..{sg.validity[1]}" if sg.validity else ""))
+    if network.controllers:  # signals that switch together: `controller C id ID` in `lights { }`
+        lines += ["", "controllers:"]
+        for c in network.controllers.values():
+            lines.append(f"  {c.id}{f' {c.name!r}' if c.name else ''}: signals {', '.join(c.signal_ids) or '-'}")
     return "\n".join(lines) + "\n"
 
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from addt_dsl.expr import Expr, eval_param_expr, signals_used, substitute_params
-from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, GroupPlan, RoadPlan, RunSpec, TriggerPlan,
-                           resolve_settings)
+from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, ControllerPlan, GroupPlan, RoadPlan, RunSpec,
+                           SignalPlan, TriggerPlan, resolve_settings)
 
 
 @dataclass(frozen=True)
@@ -65,6 +65,7 @@ class BoundActor:
     stack: BoundClause | None
     route: tuple[str, ...] = ()  # road ids in driving order; () = the road it is placed on
     yaw: float = 0.0  # body yaw relative to the driving direction [rad]
+    ignore_lights: bool = False  # runs red lights
 
 
 @dataclass(frozen=True)
@@ -72,6 +73,19 @@ class BoundOracle:
     name: str
     severity: str
     formula: Expr  # no parameters left
+
+
+@dataclass(frozen=True)
+class BoundController:
+    """A traffic-light controller with its program's times resolved [s]."""
+
+    name: str
+    road: str
+    signals: tuple[str, ...]
+    green_s: float
+    yellow_s: float
+    red_s: float
+    offset_s: float
 
 
 @dataclass(frozen=True)
@@ -85,6 +99,9 @@ class BoundScenario:
     agents: tuple[BoundActor, ...]
     faults: tuple[ConcreteFault, ...]
     oracles: tuple[BoundOracle, ...]
+    signals: tuple[SignalPlan, ...] = ()
+    controllers: tuple[BoundController, ...] = ()
+    light_steps: tuple[BoundStep, ...] = ()
     environment: tuple[BoundClause, ...] = ()
 
     def road(self, name: str) -> RoadPlan:
@@ -101,7 +118,14 @@ def bind(spec: RunSpec) -> BoundScenario:
         ego=_actor(plan.ego, params), agents=tuple(_actor(a, params) for a in plan.agents),
         faults=tuple(spec.faults),
         oracles=tuple(BoundOracle(o.name, o.severity, substitute_params(o.formula, params)) for o in plan.oracles),
-        environment=tuple(_clause(c, params) for c in plan.environment))
+        environment=tuple(_clause(c, params) for c in plan.environment),
+        signals=tuple(plan.signals), controllers=tuple(_controller(c, params) for c in plan.controllers),
+        light_steps=tuple(bind_step(t, params) for t in plan.light_steps))
+
+
+def _controller(c: ControllerPlan, params: dict[str, float]) -> BoundController:
+    return BoundController(c.name, c.road, tuple(c.signals), _value(c.green_s, params), _value(c.yellow_s, params),
+                           _value(c.red_s, params), _value(c.offset_s, params))
 
 
 def _value(expr: Expr | None, params: dict[str, float], default: float = 0.0) -> float:
@@ -140,4 +164,4 @@ def _actor(a: ActorPlan, params: dict[str, float]) -> BoundActor:
         steps=tuple(bind_step(t, params) for t in a.triggers),
         sensors=tuple(_clause(c, params) for c in a.sensors),
         stack=_clause(a.stack, params) if a.stack is not None else None, route=tuple(a.route),
-        yaw=_value(a.yaw, params))
+        yaw=_value(a.yaw, params), ignore_lights=a.ignore_lights)

@@ -25,6 +25,7 @@ from addt_dsl.runtime import oracles
 from addt_dsl.runtime.behaviors import AgentState, advance, relative_heading
 from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
 from addt_dsl.runtime.faults import FaultSchedule
+from addt_dsl.runtime.lights import LightsRuntime, Program, StopStation, stations_on, stop_accel, stop_lines
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.path import RoutePath
 from addt_dsl.runtime.road import resolve_route
@@ -123,6 +124,28 @@ class _Context:
     def sensor(self, name: str):
         return self.run.sensors[name]
 
+    def junction_ahead(self, s: float):
+        """(entry station [m], x, y of its conflict point [m]) of the next junction on the
+        ego's route that its front has not left, or None (no route, or past the last)."""
+        front = s + 0.5 * self.run.ego_plan.length_m
+        for entry, exit_, cx, cy in self.run.ego_junctions:
+            if exit_ > front:
+                return entry, cx, cy
+        return None
+
+    def stop_line_ahead(self, s: float):
+        """(station [m] on the ego's road or route, state code) of the next traffic light's
+        stop line ahead of the ego's front at station `s`, or None: the map and the light's
+        state as a connected vehicle would know them (no camera detection of lights)."""
+        run = self.run
+        if run.lights is None:
+            return None
+        front = s + 0.5 * run.ego_plan.length_m
+        for st in run.stop_stations["ego"]:
+            if st.u >= front - 0.5:
+                return st.u, run.lights.state(st.controller, self.now)
+        return None
+
     def event(self, kind: str, **detail) -> None:
         self.run.events.append(Event(self.now, kind, detail))
 
@@ -218,11 +241,78 @@ class _Run:
         self.environment = [ENVIRONMENTS.get(c.name)(c.settings) for c in plan.environment]
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
+        self._setup_lights(plan)
+        self.ego_junctions = self._junctions(self.ego_road)
         self.ctx = _Context(self)
         stack_clause = ego.stack
         stack_cls = STACKS.get(stack_clause.name)
         self.stack = stack_cls(stack_clause.settings, self.ctx)
         self.faults.bind(self.stack, lambda: self.ctx.now)
+
+    def _setup_lights(self, plan: BoundScenario) -> None:
+        """Traffic lights: each controller's program, the stop lines its signals make, and
+        where each actor meets them along its road or route (none: `self.lights` is None)."""
+        self.lights: LightsRuntime | None = None
+        self.light_script: Script | None = None
+        self.stop_stations: dict[str, list[StopStation]] = {}
+        if not plan.controllers:
+            return
+        inline = {sig.name: (sig.road, sig.s_m, tuple(sig.lanes)) for sig in plan.signals}
+        lines: dict[str, list] = {}
+        for c in plan.controllers:
+            lines.setdefault(c.road, []).extend(stop_lines(self.networks[c.road], c.name, c.signals, inline))
+        self.lights = LightsRuntime({c.name: Program(c.green_s, c.yellow_s, c.red_s, c.offset_s)
+                                     for c in plan.controllers})
+        if plan.light_steps:
+            self.light_script = Script(plan.light_steps)
+        self.stop_stations["ego"] = self._stations(self.ego_road, plan.ego, lines.get(plan.ego.road, []))
+        for a in plan.agents:
+            self.stop_stations[a.name] = self._stations(self.agent_roads[a.name], a, lines.get(a.road, []))
+
+    @staticmethod
+    def _junctions(road: _Road) -> list[tuple[float, float, float, float]]:
+        """(entry, exit station [m], conflict point x, y [m]) of each junction leg of a path."""
+        if not isinstance(road, _PathRoad):
+            return []
+        out = []
+        for leg in road.road.legs:
+            r = road.network.road(leg.road_id)
+            if r.junction in ("", "-1"):
+                continue
+            x, y, _ = r.lane_center(leg.lane, 0.5 * (leg.s_from + leg.s_to))
+            out.append((road.station(leg.road_id, leg.s_from), road.station(leg.road_id, leg.s_to), float(x), float(y)))
+        return out
+
+    @staticmethod
+    def _stations(road: _Road, actor: BoundActor, lines) -> list[StopStation]:
+        if not lines:
+            return []
+        if isinstance(road, _PathRoad):
+            return stations_on(lines, road.road.legs, road.station)
+        plain = _PlainLeg(road.road_id, 1, 0.0, float(road.network.road(road.road_id).length), actor.lane)
+        return stations_on(lines, [plain], road.station)
+
+    def stop_for_lights(self, agent: AgentState, accel: float, time_s: float) -> float:
+        """An agent's acceleration [m/s^2] limited to stop at the next red (or yellow it can
+        stop for) light on its path."""
+        front = agent.s + 0.5 * agent.length_m
+        for st in self.stop_stations.get(agent.name, ()):
+            if st.u < front - 0.5:
+                continue
+            a_stop = stop_accel(agent.speed, st.u - front, self.lights.state(st.controller, time_s))
+            if a_stop is not None:
+                accel = min(accel, a_stop)
+            break  # only the next line ahead holds the agent
+        return accel
+
+    def record_lights(self, lights_rec: dict, margins: dict, k: int, time_s: float) -> None:
+        for name in lights_rec:
+            lights_rec[name][k] = self.lights.state(name, time_s)
+        margins["ego"][k] = self.lights.red_margin("ego", self.ego_s + 0.5 * self.ego_plan.length_m,
+                                                   self.stop_stations["ego"], time_s)
+        for a in self.agents:
+            margins[a.name][k] = self.lights.red_margin(a.name, a.s + 0.5 * a.length_m,
+                                                        self.stop_stations[a.name], time_s)
 
     def close(self) -> None:
         """Release the fault schedule, the pybullet client and the stack's resources."""
@@ -436,6 +526,8 @@ def _loop(run: _Run) -> Trace:
     sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
     sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
     ego_road = run.ego_road
+    lights_rec = {c.name: np.zeros(n) for c in plan.controllers} if run.lights else {}
+    margins = {name: np.zeros(n) for name in names} if run.lights else {}
 
     for k in range(n):
         t_now = k * dt
@@ -475,6 +567,10 @@ def _loop(run: _Run) -> Trace:
             x, y, h = poses[a.name]
             _record(rec[a.name], k, x, y, h, a.speed, a.accel, 0.0, a.s, a.t,
                     run.agent_roads[a.name].road.lane_offset(a.s, a.t), 0.0)
+        if run.lights is not None:
+            if run.light_script is not None:  # light changes fire on the state just recorded
+                _advance_light_script(run, rec, k, t_now)
+            run.record_lights(lights_rec, margins, k, t_now)
         collided = _clearances(rec, k, names, poses, sizes, run, t_now)
         for node in lat_nodes:
             latency[node][k] = run.stack.latency[node]
@@ -542,7 +638,10 @@ def _loop(run: _Run) -> Trace:
             break
         for a in run.agents:
             beh = run.longitudinal[a.name]
-            advance(a, beh.accel(a, run, t_now) if beh is not None else 0.0, t_now, dt)
+            accel = beh.accel(a, run, t_now) if beh is not None else 0.0
+            if run.lights is not None and not a.heading_rel and not run.agent_plans[a.name].ignore_lights:
+                accel = run.stop_for_lights(a, accel, t_now)
+            advance(a, accel, t_now, dt)
 
     time = np.arange(last) * dt
     actors = {}
@@ -554,7 +653,19 @@ def _loop(run: _Run) -> Trace:
         actors[name] = ActorTrack(name, length, width, **{f: v[:last] for f, v in r.items()}, frame=frames[name])
     return Trace(dt, time, actors, {k: v[:last] for k, v in latency.items()}, run.events,
                  {k: v[:last] for k, v in outputs.items()}, objects[:last], status, error,
-                 {k: v[:last] for k, v in steps.items()})
+                 steps={k: v[:last] for k, v in steps.items()},
+                 lights={k: v[:last] for k, v in lights_rec.items()}, red_margin={k: v[:last] for k, v in margins.items()})
+
+
+@dataclass(frozen=True)
+class _PlainLeg:
+    """A road driven along +s from end to end, as a route leg (`stations_on`)."""
+
+    road_id: str
+    direction: int
+    s_from: float
+    s_to: float
+    lane: int
 
 
 @dataclass
@@ -626,6 +737,25 @@ def _advance_scripts(run: _Run, rec, k: int, t_now: float) -> None:
             del run.scripts[name]
 
 
+def _advance_light_script(run: _Run, rec, k: int, t_now: float) -> None:
+    snapshot = None
+
+    def holds(condition) -> bool:
+        nonlocal snapshot
+        if snapshot is None:
+            snapshot = _snapshot_trace(run, rec, k)
+        sig = compute_signals(snapshot, oracles_signals(condition))
+        return bool(oracles.satisfied(condition, sig, run.dt))
+
+    def start(clause, time_s) -> None:
+        run.events.append(Event(time_s, "trigger", {"light": clause.name, "state": clause.settings["state"]}))
+        run.lights.change(clause.name, time_s, clause.settings["state"])
+
+    run.light_script.advance(t_now, holds, start)
+    if run.light_script.done:
+        run.light_script = None
+
+
 def oracles_signals(expr) -> set[str]:
     from addt_dsl.expr import signals_used
 
@@ -641,9 +771,11 @@ def _snapshot_trace(run: _Run, rec, k: int) -> Trace:
     for name, r in rec.items():
         actors[name] = ActorTrack(name, *sizes[name], **{f: v[k:k + 1] for f, v in r.items()}, frame=frames[name])
     lat = {n: np.array([v]) for n, v in run.stack.latency.items()}
-    trace = Trace(run.dt, np.array([k * run.dt]), actors, lat)
+    t = k * run.dt
+    lights = {n: np.array([run.lights.state(n, t)]) for n in run.lights.programs} if run.lights else {}
+    trace = Trace(run.dt, np.array([t]), actors, lat, lights=lights)
     if run.named_steps:  # `when ended(lead.brake_hard)` reads the states now
-        trace.steps = {name: np.array([code], dtype=np.int8) for name, code in run.step_states(k * run.dt).items()}
+        trace.steps = {name: np.array([code], dtype=np.int8) for name, code in run.step_states(t).items()}
     return trace
 
 

@@ -222,6 +222,32 @@ class Ended(SignalFn):
         return np.where(_step_state(trace, args[0]) >= STEP_ENDED, 1.0, -1.0)
 
 
+@SIGNALS.register
+class Light(SignalFn):
+    keyword = "light"
+    args = ("light",)
+    dim = units.DIMENSIONLESS
+    doc = "state of a traffic-light controller: compare with `green`, `yellow`, `red` (0, 1, 2)"
+
+    @staticmethod
+    def compute(trace, args):
+        return trace.lights[args[0]]
+
+
+@SIGNALS.register
+class RedLight(SignalFn):
+    keyword = "red_light"
+    dim = units.LENGTH
+    doc = ("margin to running a red light: while a light that governs the actor's lane is red, "
+           "the distance of its front bumper to the stop line, negative once it crosses it (until "
+           "30 m past it); 100 m when no red light is ahead within 100 m [m]")
+
+    @staticmethod
+    def compute(trace, args):
+        margin = trace.red_margin.get(args[0])
+        return margin if margin is not None else np.full_like(trace.time, 100.0)
+
+
 def compute_signals(trace, names: set[str]) -> dict[str, np.ndarray]:
     """Evaluate canonical signal names (`ttc(ego,lead)`) on a trace."""
     out: dict[str, np.ndarray] = {}

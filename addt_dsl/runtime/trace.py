@@ -70,6 +70,11 @@ class Trace:
     # State of each named step (`lead.brake_hard`) per sample: 0 waiting, 1 started,
     # 2 ended (runtime/signals.py STEP_*).
     steps: dict[str, np.ndarray] = field(default_factory=dict)
+    # Traffic lights: each controller's state code per sample (plan.LIGHT_STATES), and each
+    # actor's margin to running a red light [m] (signals `light`, `red_light`); empty
+    # without lights.
+    lights: dict[str, np.ndarray] = field(default_factory=dict)
+    red_margin: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -128,4 +133,9 @@ class Trace:
             h.update(name.encode())
             h.update(np.ascontiguousarray(self.steps[name], dtype=np.int8).tobytes())
         h.update(self.status.encode())
+        # Only scenarios with lights hash them: digests of the others stay what they were.
+        for label, table in (("light:", self.lights), ("red_margin:", self.red_margin)):
+            for name in sorted(table):
+                h.update((label + name).encode())
+                h.update(np.ascontiguousarray(table[name]).tobytes())
         return h.hexdigest()

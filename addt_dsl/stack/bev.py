@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from addt_dsl import units
+from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.registry import STACKS, ParamSpec
 from addt_dsl.stack.bev_grid import DETECTOR_LIDAR
 from addt_dsl.stack.bus import Bus
@@ -111,6 +112,9 @@ class BevStack:
                   doc="partial braking (40 % of mu g) below this time to collision"),
         ParamSpec("aeb_full_ttc", units.TIME, default=0.9, low=0.0, high=10.0,
                   doc="full braking (mu g) below this time to collision"),
+        ParamSpec("yield_gap", units.TIME, default=0.0, low=0.0, high=20.0,
+                  doc="gap acceptance at junctions on the route: give way to traffic that reaches the "
+                      "junction within this time (0: off)"),
         ParamSpec("synthetic_objects", None, kind="int", default=0, low=0, high=500,
                   doc="extra objects perception reports in every frame (vehicles keeping pace beside "
                       "the road, 12 m or more to either side): a controllable workload for latency "
@@ -287,8 +291,12 @@ class BevStack:
             objs.append((float(so), float(to), o.vx * c + o.vy * s, v_t,
                          o.length * rc + o.width * rs, o.length * rs + o.width * rc))
         hdg0 = heading - float(road.reference_pose(s0)[2])
+        stop = self.ctx.stop_line_ahead(float(s0))
+        give_way = self._give_way(float(s0), float(t0), objs, time_s)
+        if give_way is not None and (stop is None or give_way < stop[0]):
+            stop = (give_way, LIGHT_STATES["red"])  # wait before the junction like at a red light
         plan = self.planner.plan((float(s0), float(t0), lane0), speed, objs, road, road_id, time_s,
-                                 self.corrupt, (speed * math.cos(hdg0), speed * math.sin(hdg0)))
+                                 self.corrupt, (speed * math.cos(hdg0), speed * math.sin(hdg0)), stop)
         if plan.aeb_stage != self.aeb_stage:
             self.ctx.event("aeb", stage=plan.aeb_stage, ttc_s=plan.ttc_s if math.isfinite(plan.ttc_s) else None)
             self.aeb_stage = plan.aeb_stage
@@ -298,6 +306,37 @@ class BevStack:
         lat = self._latency("planner", len(objs), started, time_s)
         stamp = self.tracks_stamp if self.tracks_stamp is not None else time_s
         self.bus.publish("plan", plan, stamp, time_s + lat)
+
+    # Gap acceptance at junctions (`yield_gap` > 0): before entering a junction on its route,
+    # the ego gives way to every tracked object (other than traffic ahead in its own lane,
+    # which the planner follows) that would reach the junction's conflict point (the middle
+    # of the ego's connecting road) within `yield_gap` [s] at its current velocity, or is
+    # within `YIELD_RADIUS_M` of it and moving: it waits at the junction entry until the gap
+    # is long enough. Inside the junction it no longer waits (it clears it).
+    YIELD_RADIUS_M = 6.0
+
+    def _give_way(self, s0: float, t0: float, objs, time_s: float) -> float | None:
+        """The station [m] to wait at before a junction, or None (go)."""
+        gap = float(self.settings["yield_gap"])
+        if gap <= 0.0:
+            return None
+        junction = self.ctx.junction_ahead(s0)
+        if junction is None:
+            return None
+        entry, cx, cy = junction
+        if s0 + 0.5 * self.body.length_m > entry + 0.5:
+            return None  # already in the junction: clear it
+        for o, (so, to, *_rest) in zip(self.tracker.objects_at(time_s), objs):
+            if so > s0 and abs(to - t0) < 1.8:
+                continue  # traffic ahead in the ego's lane: the planner follows it
+            dx, dy = o.x - cx, o.y - cy
+            dist = math.hypot(dx, dy)
+            closing = -(dx * o.vx + dy * o.vy) / max(dist, 1e-6)
+            moving = math.hypot(o.vx, o.vy) > 0.5
+            if (dist < self.YIELD_RADIUS_M and moving) or \
+                    (closing > 0.3 and (dist - self.YIELD_RADIUS_M) / closing < gap):
+                return entry
+        return None
 
     def _run_control(self, time_s: float, dt: float) -> None:
         if self.plan is None:

@@ -128,6 +128,12 @@ class _RemoteContext:
     def sensor(self, name: str):
         return self.sensors[name]
 
+    def stop_line_ahead(self, s: float):
+        return None  # traffic-light states are not sent over the bridge protocol (yet)
+
+    def junction_ahead(self, s: float):
+        return None  # nor the junctions of the ego's route
+
     def actor_by_body(self, body: int):
         return self.actors.get(body)
 

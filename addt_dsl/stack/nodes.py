@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.vehicles import CAR
 
 G = 9.81  # [m/s^2]
@@ -249,9 +250,10 @@ class LatticePlanner:
         self.emergency = False  # the last plan was an emergency stop
 
     def plan(self, ego_sc, ego_speed, objs_sc, road, road_id, stamp_s, corrupt,
-             ego_v_st: tuple[float, float] | None = None) -> Plan:
+             ego_v_st: tuple[float, float] | None = None, stop: tuple[float, float] | None = None) -> Plan:
         """`ego_sc` = (s, t, lane); `ego_v_st` = the ego's velocity along and across the
-        road [m/s] for the forward-collision check (default: `ego_speed` along it)."""
+        road [m/s] for the forward-collision check (default: `ego_speed` along it); `stop` =
+        the next traffic light's stop line on the ego's road (station [m], state code)."""
         s0, t0, lane0 = ego_sc
         if self.current_lane is None:
             self.current_lane = self.home_lane = lane0
@@ -278,6 +280,10 @@ class LatticePlanner:
         if lane != current:
             self.last_change_s = stamp_s
             self.current_lane = lane
+        if stop is not None:  # a stop station: hold the speed so the ego stops at the line
+            stop_brake = self._stop_brake(stop, s0, ego_speed)
+            if stop_brake is not None:
+                speed, brake = 0.0, max(brake, stop_brake)
         v_s, v_t = ego_v_st if ego_v_st is not None else (ego_speed, 0.0)
         stage, ttc, aeb_brake = self.fcw.check(s0, t0, v_s, v_t, objs_sc, stamp_s)
         if aeb_brake > brake:
@@ -295,6 +301,27 @@ class LatticePlanner:
         t_start = corrupt("planner.t_start", t_start)
         lateral_len = corrupt("planner.path_length", lateral_len)
         return Plan(lane, t_lane, speed, s_start, t_start, lateral_len, stamp_s, brake, stage, ttc)
+
+    # Stopping at traffic lights: the ego stops `STOP_GAP_M` before a red light's line,
+    # braking when the constant deceleration that stops it there reaches `STOP_DECEL`; at
+    # yellow only if that takes at most `YELLOW_DECEL` (else it goes on through).
+    STOP_GAP_M = 1.0
+    STOP_DECEL = 2.5
+    YELLOW_DECEL = 3.0
+
+    def _stop_brake(self, stop: tuple[float, float], s0: float, speed: float) -> float | None:
+        """Deceleration [m/s^2] that stops the ego at the light's line, or None (free)."""
+        line_s, state = stop
+        dist = line_s - (s0 + 0.5 * self.body.length_m)
+        if state == LIGHT_STATES["green"] or dist < -0.5:
+            return None
+        if state == LIGHT_STATES["yellow"] and speed * speed > 2.0 * self.YELLOW_DECEL * max(dist, 1e-6):
+            return None
+        room = dist - self.STOP_GAP_M
+        if room <= 0.5:
+            return min(self.max_brake, max(1.0, speed / 0.2))  # at the line: stop and hold
+        needed = speed * speed / (2.0 * room)
+        return min(self.max_brake, needed) if needed >= self.STOP_DECEL else None
 
     def _home_lane(self, lanes: list[int]) -> int:
         """The lane the `lane_policy` prefers at this station."""

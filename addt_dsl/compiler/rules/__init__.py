@@ -17,6 +17,7 @@ from addt_dsl.compiler.rules.environment import rule_environment
 from addt_dsl.compiler.rules.faults import rule_faults
 from addt_dsl.compiler.rules.goal import rule_goal_oracle
 from addt_dsl.compiler.rules.header import rule_header
+from addt_dsl.compiler.rules.lights import rule_lights
 from addt_dsl.compiler.rules.names import rule_names
 from addt_dsl.compiler.rules.oracles import rule_oracles
 from addt_dsl.compiler.rules.params import rule_params
@@ -31,6 +32,7 @@ RULES = (
     rule_roads,
     rule_assumptions,
     rule_actors,
+    rule_lights,
     rule_faults,
     rule_environment,
     rule_oracles,

@@ -34,6 +34,8 @@ ACTOR_SETTINGS = (
               doc="start offset from the lane centre, left positive (e.g. a pedestrian on the kerb)"),
     ParamSpec("yaw", units.ANGLE, default=0.0, low=-3.1416, high=3.1416,
               doc="body yaw relative to the lane's driving direction, left positive (an angled or parked car)"),
+    ParamSpec("at_red", None, kind="word", default="stop", choices=("stop", "run"),
+              doc="agents: `stop` at red (and yellow) traffic lights on their lane, or `run` them"),
 )
 
 DEFAULT_SENSOR = P.ClausePlan(keyword="sensor", name="lidar", settings={})
@@ -164,7 +166,8 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
         speed=vals.get("speed", P.num(0.0)),
         length_m=length, width_m=width, mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
-        goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"), route=route, yaw=vals.get("yaw"))
+        goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"), route=route, yaw=vals.get("yaw"),
+        ignore_lights=vals.get("at_red") == "run")
 
 
 def _check_static(ctx: Context, d: ast.ActorDecl, vals: dict) -> None:
@@ -380,7 +383,11 @@ CLAUSE_TABLES = {"behavior": BEHAVIORS, "sensor": SENSORS, "stack": STACKS}  # c
 
 
 def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str | None) -> P.ClausePlan | None:
-    table = CLAUSE_TABLES[c.keyword]
+    table = CLAUSE_TABLES.get(c.keyword)
+    if table is None:  # `light`: state changes of traffic lights live in `lights { }`
+        ctx.sink.error("E0204", f"`{c.keyword}` steps belong in the `lights {{ }}` block", c.span,
+                       "e.g. `lights { when distance(ego, car) < 30 m then light west state red }`")
+        return None
     if c.keyword in ("sensor", "stack") and not actor.is_ego:
         ctx.sink.error("E0204", f"only the ego has a {c.keyword}", c.span,
                        "traffic agents follow behaviours")

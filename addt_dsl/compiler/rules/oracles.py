@@ -26,13 +26,17 @@ def _collision_with(other: str):
         op=">", left=E.Signal(name=f"distance(ego,{other})"), right=E.Num(value=15.0))))
 
 
-BUILTIN_NAMES = ("no collision", "stay in lane", "reach goal", "min SIGNAL", "max SIGNAL")
+BUILTIN_NAMES = ("no collision", "no red_light", "stay in lane", "reach goal", "min SIGNAL", "max SIGNAL")
 
 # `no collision [with X]` → formula; the printer recognises built-ins through this table.
 NO_CLAUSES = {
     "collision": lambda actor, other: (
         _always(E.Binary(op=">", left=E.Signal(name=f"clearance({actor})"), right=E.Num(value=0.0)))
         if other is None else _collision_with(other)),
+    # The ego never crosses the stop line of a red light that governs its lane (the
+    # margin signal `red_light`, runtime/lights.py).
+    "red_light": lambda actor, other: _always(E.Binary(
+        op=">=", left=E.Signal(name=f"red_light({actor})"), right=E.Num(value=0.0))),
 }
 
 
@@ -45,10 +49,16 @@ def reach_goal_formula(goal, within_s: float | None = None):
 def _builtin(ctx: Context, b: ast.Builtin) -> tuple[E.Expr, str] | None:
     """Lower a built-in oracle to (STL formula, default name)."""
     if b.kind == "no":
-        if b.word != "collision":
+        if b.word not in NO_CLAUSES:
             ctx.sink.error("E0106", f"unknown built-in oracle 'no {b.word}'", b.word_span,
                            "built-ins: " + ", ".join(BUILTIN_NAMES))
             return None
+        if b.word == "red_light":
+            if b.actor is not None:
+                ctx.sink.error("E0204", "`no red_light` judges the ego; it takes no `with`", b.actor_span,
+                               f"for an agent write `always red_light({b.actor}) >= 0 m`")
+                return None
+            return NO_CLAUSES["red_light"]("ego", None), "no_red_light"
         if b.actor is None:
             return NO_CLAUSES["collision"]("ego", None), "no_collision"
         if b.actor not in ctx.actors_ast or b.actor == "ego":

@@ -28,7 +28,7 @@ from .network import (
     RoadNetwork,
     build_road,
 )
-from .road import Road, RoadLink, Signal
+from .road import Controller, Road, RoadLink, Signal
 from .route import TURNS, Leg, RouteError, describe_exits, exits, resolve_route, turn_of
 from .xodr import XodrError, load_xodr, parse_xodr
 
@@ -37,7 +37,7 @@ __all__ = [
     "arc", "line", "param_poly3", "poly3", "spiral",
     "Lane", "LaneSection",
     "Connection", "Junction", "RoadCoords", "RoadCoordsArray", "RoadNetwork", "build_road",
-    "Road", "RoadLink", "Signal",
+    "Controller", "Road", "RoadLink", "Signal",
     "TURNS", "Leg", "RouteError", "describe_exits", "exits", "resolve_route", "turn_of",
     "XodrError", "load_xodr", "parse_xodr",
 ]

@@ -10,7 +10,7 @@ import numpy as np
 
 from .geometry import CubicProfile, Geometry, end_pose, place
 from .lanes import Lane, LaneSection
-from .road import ON_ROAD_LONG_TOL_M, Road, RoadLink
+from .road import ON_ROAD_LONG_TOL_M, Controller, Road, RoadLink
 
 CONTACT_POINTS = ("start", "end")
 
@@ -68,6 +68,19 @@ class RoadNetwork:
     roads: dict[str, Road]
     junctions: dict[str, Junction] = field(default_factory=dict)
     source_name: str = "<string>"
+    controllers: dict[str, Controller] = field(default_factory=dict)  # `<controller>` by id
+
+    def signal(self, signal_id: str):
+        """``(road_id, Signal)`` of the signal with this id, or None."""
+        for road in self.roads.values():
+            for sig in road.signals:
+                if sig.id == signal_id:
+                    return road.id, sig
+        return None
+
+    def signal_ids(self, dynamic_only: bool = False) -> list[str]:
+        return [sig.id for road in self.roads.values() for sig in road.signals
+                if sig.dynamic or not dynamic_only]
 
     def road(self, road_id) -> Road:
         try:

@@ -54,6 +54,18 @@ class Signal:
     subtype: str = ""
     dynamic: bool = False
     orientation: str = "none"
+    # `<validity fromLane toLane>`: the lanes the signal governs (inclusive; None: every lane
+    # of the direction it faces).
+    validity: Optional[tuple[int, int]] = None
+
+
+@dataclass(frozen=True)
+class Controller:
+    """``<controller>``: signals that switch together (``<control signalId>``), by id."""
+
+    id: str
+    name: str = ""
+    signal_ids: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from .geometry import Arc, CubicProfile, Line, ParamPoly3, Poly3, Spiral
 from .lanes import Lane, LaneSection
 from . import limits as L
 from .network import Connection, Junction, RoadNetwork
-from .road import Road, RoadLink, Signal
+from .road import Controller, Road, RoadLink, Signal
 
 _GEOMETRY_TAGS = ("line", "arc", "spiral", "poly3", "paramPoly3")
 
@@ -184,7 +184,13 @@ class _Reader:
         for node in root.findall("junction"):
             j = self.junction(node)
             junctions[j.id] = j
-        return RoadNetwork(roads, junctions, source_name=self.source)
+        controllers = {}
+        for node in root.findall("controller"):
+            cid = node.attrs.get("id", "").strip()
+            if cid:  # OpenDRIVE's grouping of signals that switch together (`<control signalId>`)
+                controllers[cid] = Controller(cid, node.attrs.get("name", ""), tuple(
+                    c.attrs["signalId"].strip() for c in node.findall("control") if c.attrs.get("signalId")))
+        return RoadNetwork(roads, junctions, source_name=self.source, controllers=controllers)
 
     def junction(self, node: _Node) -> Junction:
         connections = []
@@ -290,10 +296,18 @@ class _Reader:
                 continue  # signals are metadata for the geometry: one without a position is skipped
             if not 0.0 <= s <= length + 1e-6:
                 continue
+            validity = None
+            vn = sn.find("validity")
+            if vn is not None:
+                try:
+                    lo, hi = int(self.num(vn, "fromLane")), int(self.num(vn, "toLane"))
+                    validity = (min(lo, hi), max(lo, hi))
+                except XodrError:
+                    validity = None  # a malformed validity: the signal governs its whole side
             out.append(Signal(sid, s, t, sn.attrs.get("name", ""),
                               sn.attrs.get("type", ""), sn.attrs.get("subtype", ""),
                               sn.attrs.get("dynamic", "no").strip().lower() == "yes",
-                              sn.attrs.get("orientation", "none").strip() or "none"))
+                              sn.attrs.get("orientation", "none").strip() or "none", validity))
         return tuple(out)
 
     def check_profiles(self, road: Road, node: _Node, sec_nodes: list[_Node]) -> None:

@@ -45,3 +45,15 @@ def test_map_of_a_bad_file_is_one_line(tmp_path, capsys):
     assert main(["map", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: cannot read") and "Traceback" not in err
+
+
+def test_map_lists_signal_validity_and_controllers():
+    from addt_dsl.reporting.roadmap import describe
+    from addt_dsl.runtime.road import parse_xodr
+
+    path = Path(__file__).resolve().parents[3] / "examples" / "maps" / "fabriksgatan_traffic_lights.xodr"
+    text = path.read_text().replace("</OpenDRIVE>", '<controller id="5" name="west"><control signalId="1"/>'
+                                    '<control signalId="2"/></controller></OpenDRIVE>')
+    out = describe(parse_xodr(text))
+    assert "facing +, lanes -1..1" in out
+    assert "controllers:\n  5 'west': signals 1, 2" in out

@@ -323,3 +323,75 @@ def test_named_steps_and_their_states_round_trip(names):
     text = print_plan(result.plan, keep_user_text=False)
     assert f"{a}: at 2 s" in text and f"{c}: parallel {{" in text and f"ended(lead.{a})" in text
     assert semantic_key(_recompile(text)) == semantic_key(result.plan)
+
+
+# -- traffic lights: signals, controllers with programs, light steps, the oracle and signal
+
+LIGHT_STATES_WORDS = ("green", "yellow", "red", "program")
+
+
+@st.composite
+def _lights_scenario(draw) -> str:
+    n_signals = draw(st.integers(1, 3))
+    signals = [f"    signal s{i} road r at {draw(st.integers(10, 290))} m"
+               + draw(st.sampled_from(["", " lane -1", " lane -2"])) for i in range(n_signals)]
+    members = draw(st.lists(st.sampled_from([f"s{i}" for i in range(n_signals)]), min_size=1, max_size=3,
+                            unique=True))
+    times = [f"{key} {draw(st.integers(0, 40))} s" for key in ("green", "yellow", "red", "offset")
+             if draw(st.booleans())]
+    green = draw(st.sampled_from(["", " green g"]))  # a program time may be a parameter
+    steps = []
+    for _ in range(draw(st.integers(0, 3))):
+        start = draw(st.sampled_from(["at {t} s", "after {t} s", "when distance(ego, lead) < {t} m then",
+                                      "at {t} s when light(main) == red then"])).format(t=draw(st.integers(1, 9)))
+        steps.append(f"    {start} light main state {draw(st.sampled_from(LIGHT_STATES_WORDS))}")
+    bare = ["    light main state red"] if draw(st.booleans()) else []
+    run = " at_red run" if draw(st.booleans()) else ""
+    return f"""scenario lit {{
+  duration 10 s
+  road r {{
+    line length 300 m
+    lanes right 2
+  }}
+  param g = 10 s in [5 s, 20 s]
+  lights {{
+{chr(10).join(signals)}
+    controller main signals [{', '.join(members)}] {' '.join(t for t in times if not (green and t.startswith('green')))}{green}
+{chr(10).join(bare + steps)}
+  }}
+  ego car on r lane -1 at 10 m speed 10 m/s
+  agent lead car on r lane -2 at 40 m speed 8 m/s{run}
+  expect {{
+    no red_light
+    always light(main) == green or speed(ego) >= 0 m/s
+  }}
+}}
+"""
+
+
+@FAST
+@given(_lights_scenario())
+def test_lights_round_trip(source):
+    result = compile_source(source, path="lit.addt")
+    assert result.ok, render_text(result.diagnostics, result.sources) + "\n" + source
+    plan = result.plan
+    for keep_user_text in (True, False):
+        again = _recompile(print_plan(plan, keep_user_text=keep_user_text))
+        assert semantic_key(again) == semantic_key(plan)
+        assert again.controllers == plan.controllers and again.light_steps == plan.light_steps
+
+
+def test_map_controllers_print_their_signal_ids():
+    source = """scenario lit {
+  duration 10 s
+  road town import "fabriksgatan_traffic_lights.xodr" road 3
+  lights {
+    controller west signals [1, 2, 3] red 25 s
+  }
+  ego car on town lane -1 at 20 m speed 5 m/s
+}
+"""
+    plan = compile_source(source, path="lit.addt", base_dir=MAPS).plan
+    text = print_plan(plan)
+    assert "controller west road town signals [1, 2, 3] red 25 s" in text
+    assert semantic_key(_recompile(text)) == semantic_key(plan)

@@ -1,0 +1,121 @@
+"""Traffic lights in closed-loop runs: agents and the ego stop at red, runners cross, steps
+change lights, the red-light oracle judges, runs stay deterministic."""
+
+import numpy as np
+import pytest
+
+from addt_dsl.compiler import compile_file, compile_source
+from addt_dsl.plan import LIGHT_STATES
+from addt_dsl.runtime.execute import execute
+from addt_dsl.runtime.lights import Program, state_at
+from addt_dsl.sweep import expand
+from tests.sim.conftest import EXAMPLES
+
+pytestmark = pytest.mark.slow
+
+INLINE = """
+scenario lights {
+  duration 22 s
+  road r {
+    line length 400 m
+    lanes right 2
+  }
+  lights {
+    signal s1 road r at 150 m
+    controller main signals [s1] green 5 s yellow 3 s red 30 s
+    STEPS
+  }
+  ego car on r lane -1 at 40 m speed 8 m/s {
+    stack bev cruise_speed 8 m/s
+  }
+  agent stopper car on r lane -2 at 60 m speed 10 m/s {
+    behavior cruise speed 10 m/s
+  }
+  agent runner car on r lane -2 at 20 m speed 10 m/s at_red run {
+    behavior cruise speed 10 m/s
+  }
+  expect {
+    no red_light
+    runner_stops: always red_light(runner) >= 0 m
+  }
+}
+"""
+
+
+def run_text(text: str):
+    result = compile_source(text, "lights.addt", base_dir=EXAMPLES)
+    assert result.ok, [str(d) for d in result.diagnostics]
+    return execute(expand(result.plan).specs[0])
+
+
+def test_agents_and_the_ego_stop_at_red_and_a_runner_crosses():
+    out = run_text(INLINE.replace("STEPS", ""))
+    assert out.status == "ok", out.error
+    tr = out.trace
+    # The trace's light is the program, a pure function of time.
+    assert np.array_equal(tr.lights["main"], Program(5.0, 3.0, 30.0).state(tr.time))
+    red = tr.lights["main"] == LIGHT_STATES["red"]
+    stopper, ego = tr.actors["stopper"], tr.actors["ego"]
+    # Both stop with their front bumper within 1.5 m before the line, and stay there at red.
+    for track in (stopper, ego):
+        front = track.s + 0.5 * track.length_m
+        assert front[red].max() <= 150.0
+        assert 148.5 <= front[-1] <= 150.0 and track.speed[-1] < 0.1
+    assert tr.actors["runner"].s[-1] > 200.0  # `at_red run` drives on through the red
+    verdicts = {v.name: v for v in out.verdicts}
+    assert verdicts["no_red_light"].passed and 0.0 <= verdicts["no_red_light"].robustness <= 1.5
+    runner = verdicts["runner_stops"]
+    assert not runner.passed and runner.robustness == pytest.approx(-30.0, abs=0.2)
+    # First violation: when the runner's front bumper passes the line at red.
+    k = np.argmax(tr.actors["runner"].s + 0.5 * tr.actors["runner"].length_m > 150.0)
+    assert runner.first_violation_s == pytest.approx(tr.time[k], abs=0.02)
+
+
+def test_light_steps_change_the_state_and_the_program_resumes():
+    out = run_text(INLINE.replace("STEPS", "at 1 s light main state red\n    at 4 s light main state program"))
+    tr = out.trace
+    want = state_at(Program(5.0, 3.0, 30.0), [(1.0, "red"), (4.0, "program")], tr.time)
+    assert np.array_equal(tr.lights["main"], want)
+    assert any(e.kind == "trigger" and e.detail.get("light") == "main" for e in tr.events)
+
+
+def test_same_run_same_digest():
+    text = INLINE.replace("STEPS", "when distance(ego, stopper) < 15 m then light main state red")
+    assert run_text(text).digest == run_text(text).digest
+
+
+def test_red_light_runner_example():
+    result = compile_file(EXAMPLES / "red_light_runner.addt")
+    assert result.ok
+    outs = [execute(spec) for spec in expand(result.plan).specs]
+    for out in outs:
+        v = {x.name: x for x in out.verdicts}
+        assert v["no_collision"].passed and v["no_red_light"].passed and v["stopper_stops"].passed
+        assert not v["runner_stops"].passed  # the runner runs the red light
+        tr = out.trace
+        stopper = tr.actors["stopper"]
+        assert stopper.speed[-1] < 0.1  # waiting at the light on road 3
+
+
+def test_the_ego_gives_way_at_a_junction_with_yield_gap():
+    plan = compile_file(EXAMPLES / "left_turn_yield.addt").plan
+    for spec in expand(plan).specs[1:]:  # the oncoming car at 240 m and 260 m: too close to go first
+        out = execute(spec)
+        assert out.passed, out.verdicts
+        tr = out.trace
+        ego, other = tr.actors["ego"], tr.actors["oncoming"]
+        entry = 93.7  # road 0's length: the ego's route reaches junction 4 there
+        waiting = ego.speed < 0.1
+        assert waiting.any()
+        front = ego.s + 0.5 * ego.length_m
+        assert front[waiting].max() <= entry  # it waits before the junction ...
+        k = np.argmax(front > entry + 1.0)
+        # ... and enters once the oncoming car is past the junction (its station beyond the
+        # junction's middle), not before
+        assert np.hypot(other.x[k] - ego.x[k], other.y[k] - ego.y[k]) > 5.0
+        assert front[-1] > entry + 40.0  # and completes the turn
+    # Off by default: the same run without `yield_gap` does not wait at the entry.
+    base = compile_file(EXAMPLES / "left_turn.addt").plan
+    out = execute(expand(base).specs[2])
+    front = out.trace.actors["ego"].s + 0.5 * out.trace.actors["ego"].length_m
+    assert (out.trace.actors["ego"].speed[front <= 93.7] > 1.0).all()
