@@ -18,9 +18,10 @@ _TORCH_INPUT = re.compile(r"perception\s+learned|^\s*import torch\b|addt_dsl\.st
 
 
 def needs_torch(value) -> bool:
-    """Whether a test input (source text, or an .addt path) needs torch."""
+    """Whether a test input (source text, an .addt path, or a docs code block) needs torch."""
     if isinstance(value, Path) and value.suffix == ".addt" and value.is_file():
         value = value.read_text(encoding="utf-8")
+    value = getattr(value, "text", value)  # a docs code block (tests/docs_harness.Block)
     return isinstance(value, str) and _TORCH_INPUT.search(value) is not None
 
 
