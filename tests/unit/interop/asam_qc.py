@@ -17,7 +17,9 @@ def _bundle(package: str):
         main = importlib.import_module(f"{package}.main")
         constants = importlib.import_module(f"{package}.constants")
     except ImportError as exc:  # the checkers are test requirements outside the extras
-        pytest.fail(f"the ASAM checker {package} is missing ({exc}): {INSTALL}")
+        # Skipped, with its reason, like the OpenDRIVE reference test; CI's full run uses
+        # `--no-skips`, so a missing checker fails there.
+        pytest.skip(f"the ASAM checker {package} is missing ({exc}): {INSTALL}")
     return baselib, main, constants
 
 
