@@ -19,8 +19,10 @@ def speeds_kmh(params: list[dict], name: str = "ego_speed") -> list[float]:
     return sorted({round(p[name] / KMH, 6) for p in params})
 
 
-@pytest.mark.parametrize("suffix", ["", "_learned"])
+@pytest.mark.parametrize("suffix", ["", pytest.param("_learned", marks=pytest.mark.torch)])
 def test_car_to_car_cells(suffix):
+    if suffix:
+        pytest.importorskip("torch")  # `perception learned` compiles only with the learned extra
     assert speeds_kmh(cells("ccrs" + suffix)) == [10, 20, 30, 40, 50]
     ccrm = cells("ccrm" + suffix)
     assert speeds_kmh(ccrm) == [30, 40, 50, 60, 70, 80] and speeds_kmh(ccrm, "target_speed") == [20]
@@ -28,7 +30,9 @@ def test_car_to_car_cells(suffix):
         (12.0, 2.0), (12.0, 6.0), (40.0, 2.0), (40.0, 6.0)]
 
 
+@pytest.mark.torch
 def test_learned_variants_run_the_detector_on_its_lidar():
+    pytest.importorskip("torch")
     for name in ("ccrs", "ccrm", "ccrb"):
         plan = compile_file(EXAMPLES / "suites" / f"ncap_aeb_{name}_learned.addt").plan
         assert plan.ego.stack.settings["perception"] == "learned"
