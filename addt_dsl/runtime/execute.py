@@ -715,7 +715,9 @@ def _clearances(rec, k, names, poses, sizes, run, t_now) -> bool:
     return collided
 
 
-def _advance_scripts(run: _Run, rec, k: int, t_now: float) -> None:
+def _condition_checker(run: _Run, rec, k: int):
+    """`holds(condition)` on the state recorded at sample k; the trace snapshot is built
+    once, at the first condition asked for."""
     snapshot = None
 
     def holds(condition) -> bool:
@@ -724,6 +726,12 @@ def _advance_scripts(run: _Run, rec, k: int, t_now: float) -> None:
             snapshot = _snapshot_trace(run, rec, k)
         sig = compute_signals(snapshot, oracles_signals(condition))
         return bool(oracles.satisfied(condition, sig, run.dt))
+
+    return holds
+
+
+def _advance_scripts(run: _Run, rec, k: int, t_now: float) -> None:
+    holds = _condition_checker(run, rec, k)
 
     for name, script in list(run.scripts.items()):
         agent = run.agent_by_name[name]
@@ -738,14 +746,7 @@ def _advance_scripts(run: _Run, rec, k: int, t_now: float) -> None:
 
 
 def _advance_light_script(run: _Run, rec, k: int, t_now: float) -> None:
-    snapshot = None
-
-    def holds(condition) -> bool:
-        nonlocal snapshot
-        if snapshot is None:
-            snapshot = _snapshot_trace(run, rec, k)
-        sig = compute_signals(snapshot, oracles_signals(condition))
-        return bool(oracles.satisfied(condition, sig, run.dt))
+    holds = _condition_checker(run, rec, k)
 
     def start(clause, time_s) -> None:
         run.events.append(Event(time_s, "trigger", {"light": clause.name, "state": clause.settings["state"]}))
