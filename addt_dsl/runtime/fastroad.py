@@ -122,21 +122,9 @@ class FastRoad:
     def project_along(self, x: float, y: float, hint: float) -> tuple[float, float, float]:
         """`project` from a hint, plus the point's distance along the tangent beyond the
         clamped station [m] (non-zero only past the road's ends): for routes."""
-        s = hint
-        length = self.length
-        for _ in range(3):
-            rx, ry, h = self.reference_pose(s)
-            ds = (x - rx) * math.cos(h) + (y - ry) * math.sin(h)
-            s += ds
-            if s < 0.0:
-                s = 0.0
-            elif s > length:
-                s = length
-            if abs(ds) < 1e-6:
-                break
+        s, t = self.project(x, y, hint)
         rx, ry, h = self.reference_pose(s)
-        c, sn = math.cos(h), math.sin(h)
-        return s, -(x - rx) * sn + (y - ry) * c, (x - rx) * c + (y - ry) * sn
+        return s, t, (x - rx) * math.cos(h) + (y - ry) * math.sin(h)
 
     # ---- lanes
     def _section_key(self, s: float) -> int:
