@@ -258,14 +258,8 @@ def _lower_list_setting(ctx: Context, low: ExprLowering, st: ast.Setting, spec: 
         return None
     out = []
     for item in v.items:
-        if v.unit is not None and isinstance(item, ast.Number) and item.unit is None:
-            item = ast.Number(item.span, item.value, v.unit)
-        elif v.unit is not None and isinstance(item, ast.Number):
-            ctx.sink.error("E0202", f"'{st.key}' has units on the list and on an item", item.span,
-                           f"write `[1, 2, 3] {v.unit}` or give each item its unit")
-            return None
-        if isinstance(item, (ast.Str, ast.ListExpr)):
-            ctx.sink.error("E0204", f"'{st.key}' must list numbers", item.span)
+        item = list_item(ctx, v, item, f"'{st.key}'")
+        if item is None:
             return None
         expr = low.lower_value(item, spec.dim if spec.dim is not None else units.DIMENSIONLESS,
                                f"an item of '{st.key}' of {what}")
@@ -278,6 +272,21 @@ def _lower_list_setting(ctx: Context, low: ExprLowering, st: ast.Setting, spec: 
     return out
 
 
+def list_item(ctx: Context, lst: ast.ListExpr, item, label: str):
+    """A list item as a number with the list's unit (`[1, 2, 3] m`), or None with E0202 (units
+    on the list and the item) or E0204 (not a number)."""
+    if lst.unit is not None and isinstance(item, ast.Number) and item.unit is None:
+        return ast.Number(item.span, item.value, lst.unit)
+    if lst.unit is not None and isinstance(item, ast.Number):
+        ctx.sink.error("E0202", f"{label} has units on the list and on an item", item.span,
+                       f"write `[1, 2, 3] {lst.unit}` or give each item its unit")
+        return None
+    if isinstance(item, (ast.Str, ast.ListExpr)):
+        ctx.sink.error("E0204", f"{label} must list numbers", item.span)
+        return None
+    return item
+
+
 def int_const(expr) -> int | None:
     v = const_value(expr)
     return int(round(v)) if v is not None and math.isfinite(v) else None
@@ -287,14 +296,8 @@ def lower_list(ctx: Context, node: ast.ListExpr, dim, what: str) -> list[float] 
     vals = []
     low = ExprLowering(ctx.sink, Scope({}, set(), set(), False, set()))
     for item in node.items:
-        if node.unit is not None and isinstance(item, ast.Number) and item.unit is None:
-            item = ast.Number(item.span, item.value, node.unit)
-        elif node.unit is not None and isinstance(item, ast.Number):
-            ctx.sink.error("E0202", f"{what} has units on the list and on an item", item.span,
-                           f"write `[1, 2, 3] {node.unit}` or give each item its unit")
-            return None
-        if isinstance(item, (ast.Str, ast.ListExpr)):
-            ctx.sink.error("E0204", f"{what} must list numbers", item.span)
+        item = list_item(ctx, node, item, what)
+        if item is None:
             return None
         e = low.lower_value(item, dim, what)
         if e is None:
