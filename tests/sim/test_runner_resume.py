@@ -9,6 +9,7 @@ import time
 
 import pytest
 
+from tests.quality.faultkit import descendants
 from tests.sim.runner_simkit import REPO, addtc, addtc_command, addtc_env, limit_scenario
 
 from addt_dsl.compiler import compile_file
@@ -39,22 +40,6 @@ def _pids_alive(pids) -> list[int]:
     return alive
 
 
-def _descendants(pid: int) -> set[int]:
-    parents = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as fh:
-                    parents[int(entry)] = int(fh.read().rsplit(")", 1)[1].split()[1])
-            except (OSError, ValueError, IndexError):
-                pass
-    found, frontier = set(), {pid}
-    while frontier:
-        frontier = {p for p, parent in parents.items() if parent in frontier} - found
-        found |= frontier
-    return found
-
-
 def test_sigkill_mid_sweep_then_resume(tmp_path):
     scenario = limit_scenario(tmp_path, repeat=6, duration="5 s")  # 24 runs
     expected = {(s.run_id, s.key()) for s in expand(compile_file(scenario).plan).specs}
@@ -68,7 +53,7 @@ def test_sigkill_mid_sweep_then_resume(tmp_path):
         assert proc.poll() is None, "the sweep ended before it could be killed"
         assert time.monotonic() < deadline
         time.sleep(0.02)
-    helpers = _descendants(proc.pid)  # the fork server and the workers forked from it
+    helpers = set(descendants(proc.pid))  # the fork server and the workers forked from it
     assert len(helpers) >= 3
     proc.send_signal(signal.SIGKILL)
     proc.wait()
