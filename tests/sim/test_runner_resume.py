@@ -1,7 +1,6 @@
 """A sweep killed with SIGKILL and restarted with the same command resumes: nothing lost,
 nothing duplicated, and the results equal an uninterrupted sweep's."""
 
-import os
 import signal
 import sqlite3
 import subprocess
