@@ -121,7 +121,10 @@ def regenerate(path: Path) -> str:
         return text
     env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
                PYTHONPATH=str(ROOT), COLUMNS="80", PYTHONHASHSEED="0", PYTHONUNBUFFERED="1")
-    env.pop("GITHUB_ACTIONS", None)  # on GitHub the pytest plugin adds `::error` lines to its output
+    # The outputs shown are a developer's terminal: on GitHub the pytest plugin adds `::error`
+    # lines, and pytest stops cutting its short summary to the width when `CI` or `BUILD_NUMBER` is set.
+    for name in ("GITHUB_ACTIONS", "CI", "BUILD_NUMBER"):
+        env.pop(name, None)
     new = {}
     with tempfile.TemporaryDirectory(prefix="addt-docs-") as tmp:
         work = Path(tmp)
