@@ -2,7 +2,9 @@
 
 1. Throughput: runs per minute of a 200-run sweep of a short closed-loop scenario (3 s
    simulated, one agent, lidar with drops) on 1 and on 2 local workers, and the scaling
-   ratio. Every run is committed to a SQLite store, as in `addtc`.
+   ratio. Every run is committed to a SQLite store, as in `addtc`. With Ray installed, the
+   same sweep on a local Ray cluster of 2 CPUs (`--executor ray`): its start-up (`ray.init`)
+   and its throughput against the local executor's at 2 workers (Ray's per-task overhead).
 2. Coordinator memory: resident memory of the coordinating process while it walks a
    10,000-run sweep of a trivial scenario (0.1 s, no agents, no sensors), sampled every
    1,000 runs, and its peak. Flat means the coordinator keeps nothing per run beyond the
@@ -16,6 +18,7 @@ Run: PYTHONPATH=. python benchmarks/bench_runner.py [--runs 200] [--memory-runs 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import resource
@@ -89,21 +92,34 @@ def _rss_mb() -> float:
         return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def part_throughput(runs: int, jobs: int) -> dict:
+def part_throughput(runs: int, jobs: int, executor_name: str = "local") -> dict:
     from addt_dsl.reporting.summary import store_summary
     from addt_dsl.runtime.executor import LocalExecutor, run_sweep
     from addt_dsl.runtime.store import ResultStore
     from addt_dsl.sweep import SweepStream
 
     plan = _plan(SHORT, runs // 2)
-    with tempfile.TemporaryDirectory() as tmp, ResultStore(Path(tmp) / "r.sqlite", plan) as store:
+    init_s = 0.0
+    if executor_name == "ray":
+        import ray
+
+        from addt_dsl.runtime.ray_executor import RayExecutor
+
+        t0 = time.perf_counter()
+        ray.init(num_cpus=jobs, include_dashboard=False, log_to_driver=False)
+        init_s = time.perf_counter() - t0
+        executor = RayExecutor(jobs=jobs)
+    else:
         executor = LocalExecutor(jobs)
+    with tempfile.TemporaryDirectory() as tmp, ResultStore(Path(tmp) / "r.sqlite", plan) as store:
         t0, cpu0 = time.perf_counter(), time.process_time()
         outcome = run_sweep(SweepStream(plan), store, executor)
         wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
         sim = store_summary(store)["sim_time_s"]
-    return {"jobs": jobs, "runs": outcome.ran, "wall_s": wall, "runs_per_min": 60 * outcome.ran / wall,
-            "sim_s_per_wall_s": sim / wall, "coordinator_cpu_ms_per_run": 1e3 * cpu / outcome.ran}
+    return {"executor": executor_name, "jobs": jobs, "runs": outcome.ran, "wall_s": wall,
+            "runs_per_min": 60 * outcome.ran / wall, "sim_s_per_wall_s": sim / wall,
+            "coordinator_cpu_ms_per_run": 1e3 * cpu / outcome.ran, "init_s": init_s,
+            "load": [round(x, 2) for x in os.getloadavg()]}
 
 
 def part_memory(runs: int, jobs: int) -> dict:
@@ -140,9 +156,9 @@ def part_memory(runs: int, jobs: int) -> dict:
     return {"runs": stored, "wall_s": wall, "samples": samples, "peak_rss_mb": peak, "eager_list_mb": list_mb}
 
 
-def _in_subprocess(part: str, runs: int, jobs: int) -> dict:
-    out = subprocess.run([sys.executable, __file__, "--part", part, "--runs", str(runs), "--jobs", str(jobs)],
-                         capture_output=True, text=True, check=True)
+def _in_subprocess(part: str, runs: int, jobs: int, executor: str = "local") -> dict:
+    out = subprocess.run([sys.executable, __file__, "--part", part, "--runs", str(runs), "--jobs", str(jobs),
+                          "--executor", executor], capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -152,10 +168,12 @@ def main() -> None:
     parser.add_argument("--memory-runs", type=int, default=10_000)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--part", choices=("throughput", "memory"))
+    parser.add_argument("--executor", choices=("local", "ray"), default="local")
+    parser.add_argument("--no-ray", action="store_true", help="skip the Ray comparison")
     parser.add_argument("--json", help="also write the figures here")
     args = parser.parse_args()
     if args.part == "throughput":
-        print(json.dumps(part_throughput(args.runs, args.jobs)))
+        print(json.dumps(part_throughput(args.runs, args.jobs, args.executor)))
         return
     if args.part == "memory":
         print(json.dumps(part_memory(args.runs, args.jobs)))
@@ -170,7 +188,22 @@ def main() -> None:
         print(f"  {jobs} worker(s): {r['runs']} runs in {r['wall_s']:.1f} s = {r['runs_per_min']:.0f} runs/min "
               f"({r['sim_s_per_wall_s']:.0f}x real time; coordinator CPU {r['coordinator_cpu_ms_per_run']:.1f} ms/run)")
     print(f"  scaling 2 vs 1 workers: {results[2]['runs_per_min'] / results[1]['runs_per_min']:.2f}x "
-          f"(machine has {os.cpu_count()} CPUs)")
+          f"(machine has {os.cpu_count()} CPUs; load average during each part: "
+          f"{results[1]['load'][0]:.1f}, {results[2]['load'][0]:.1f})")
+    ray_figures = None
+    if args.no_ray:
+        pass
+    elif importlib.util.find_spec("ray") is None:
+        print("  Ray: not installed (pip install 'addt-dsl[ray]'), comparison skipped")
+    else:
+        ray_figures = _in_subprocess("throughput", args.runs, 2, "ray")
+        local2 = results[2]
+        print(f"  Ray, local cluster of 2 CPUs: {ray_figures['runs']} runs in {ray_figures['wall_s']:.1f} s = "
+              f"{ray_figures['runs_per_min']:.0f} runs/min after {ray_figures['init_s']:.1f} s of ray.init; "
+              f"throughput vs the local executor at 2 workers: "
+              f"{ray_figures['runs_per_min'] / local2['runs_per_min']:.2f}x, per-run overhead "
+              f"{1e3 * (ray_figures['wall_s'] - local2['wall_s']) / ray_figures['runs']:+.1f} ms "
+              f"(load average {ray_figures['load'][0]:.1f})")
 
     print(f"load average: {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     print(f"Coordinator memory: {args.memory_runs}-run sweep of a trivial scenario on {args.jobs} workers")
@@ -186,6 +219,7 @@ def main() -> None:
     figures_json.write(args.json, {
         "throughput": {str(j): r for j, r in results.items()},
         "scaling_2_vs_1": results[2]["runs_per_min"] / results[1]["runs_per_min"],
+        "ray": ray_figures,
         "memory": {**m, "growth_mb_from_1000_runs": last - first}})
 
 
