@@ -52,11 +52,12 @@ def _geometry(seg):
 LIGHT_TYPE = "1000001"
 
 
-def _signal(sig: SignalPlan, signal_id: str) -> xodr.Signal:
+def _signal(sig: SignalPlan) -> xodr.Signal:
     """`signal NAME road R at S [lane L]`: facing traffic along +s (no lane, or a right-hand
     lane) or against it (a left-hand lane), governing lane L only when one is given."""
     against = bool(sig.lanes) and sig.lanes[0] > 0
-    out = xodr.Signal(sig.s_m, 0.0, "OpenDRIVE", LIGHT_TYPE, id=signal_id, name=sig.name, dynamic=xodr.Dynamic.yes,
+    # No id here: scenariogeneration numbers signals per process; `road_file` writes ours.
+    out = xodr.Signal(sig.s_m, 0.0, "OpenDRIVE", LIGHT_TYPE, name=sig.name, dynamic=xodr.Dynamic.yes,
                       orientation=xodr.Orientation.negative if against else xodr.Orientation.positive)
     if sig.lanes:
         out.add_validity(sig.lanes[0], sig.lanes[0])
@@ -106,7 +107,7 @@ def road_file(plan: ScenarioPlan, stem: str) -> RoadFile:
         built = _road(road, i)
         for sig in plan.signals:
             if sig.road == road.name:
-                built.add_signal(_signal(sig, signal_ids[sig.name]))
+                built.add_signal(_signal(sig))
         odr.add_road(built)
         ids[road.name] = str(i)
     odr.adjust_startpoints()
@@ -115,6 +116,8 @@ def road_file(plan: ScenarioPlan, stem: str) -> RoadFile:
         # scenariogeneration always writes a country; OpenDRIVE 1.8 takes ISO 3166 codes only
         # and 1000001 is OpenDRIVE's own generic traffic light: the optional attribute goes.
         sig.attrib.pop("country", None)
+        # Its ids are unique per process, not per file (a second export would renumber): ours.
+        sig.set("id", signal_ids[sig.get("name")])
     return RoadFile(name=f"{stem}.xodr", text=xml_text(element), road_ids=ids, signal_ids=signal_ids)
 
 

@@ -38,9 +38,9 @@ from addt_dsl.compiler.rules.oracles import NO_CLAUSES
 from addt_dsl.confine import Refused, confine
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.interop.xosc_export import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM
-from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, GroupPlan, OraclePlan, ParamPlan, RoadPlan,
-                           ScenarioPlan, TriggerPlan)
+from addt_dsl.interop.xosc_export import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM, lamps_of, state_of_lamps
+from addt_dsl.plan import (LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, ConcreteFault, ControllerPlan, GroupPlan,
+                           OraclePlan, ParamPlan, RoadPlan, ScenarioPlan, TriggerPlan)
 from addt_dsl.printer import PrinterError, params_referenced, pinned_fault_plan, print_plan, side_files
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
@@ -130,6 +130,12 @@ class _Importer:
         self.anchors: dict[str, tuple] = {}  # no-op events that start a group: name -> (actor, start fields)
         self.placed: dict[str, tuple] = {}  # actor -> (road name, lane, s, offset)
         self.environment: list[ClausePlan] = []  # weather and light from an EnvironmentAction
+        # Traffic lights: controllers by name (signal ids, phase times, the element), the
+        # controller of each signal, phase name -> state per controller, the light steps.
+        self.light_ctls: dict[str, dict] = {}
+        self.signal_owner: dict[str, str] = {}
+        self.light_steps: list[TriggerPlan] = []
+        self.signals_el = None
         self.doc = None
 
     # -- diagnostics
@@ -380,9 +386,130 @@ class _Translate(_Importer):
             self.error(logic, f"cannot use {path.name}: {exc}", code="E0403")
             raise _Stop from None
         self.xodr_name, self.xodr_text = path.name, text
-        if root.find("RoadNetwork/TrafficSignals") is not None:
-            self.skip(root.find("RoadNetwork/TrafficSignals"), "traffic signal controllers are not translated",
-                      "signals are part of the road-network work (issue 15)")
+        self.signals_el = root.find("RoadNetwork/TrafficSignals")
+        for ctl in root.iterfind("RoadNetwork/TrafficSignals/TrafficSignalController"):
+            self.signal_controller(ctl)
+
+    # -- traffic lights
+
+    def signal_state(self, sid: str, text: str, el) -> str | None:
+        """green, yellow or red shown by signal `sid` in state `text` (its lamps from the map's
+        signal type); None after a diagnostic."""
+        found = self.network.signal(sid)
+        if found is None:
+            self.skip(el, f"{self.xodr_name} has no signal '{sid}'",
+                      f"traffic lights on the map: {', '.join(self.network.signal_ids(dynamic_only=True)) or '(none)'}")
+            return None
+        lamps = lamps_of(found[1].type, found[1].subtype)
+        state = state_of_lamps(lamps, text)
+        if state is None:
+            self.skip(el, f"state '{text}' of signal {sid} shows no one colour of its lamps ({';'.join(lamps)})",
+                      "translated: one lamp on or flashing, or a word green, yellow (amber), red")
+        return state
+
+    def signal_controller(self, ctl) -> None:
+        """A TrafficSignalController: its phases as one green -> yellow -> red cycle (rotated:
+        the time before the first green is the offset). A phase's state is its first signal's."""
+        name = _safe_name(self.raw(ctl, "name"), set(self.light_ctls))
+        phases, signals = [], []
+        for phase in ctl.iterfind("Phase"):
+            states = list(phase.iterfind("TrafficSignalState"))
+            for st in states:
+                sid = self.raw(st, "trafficSignalId")
+                if sid not in signals and self.network.signal(sid) is not None:
+                    signals.append(sid)
+            state = self.signal_state(self.raw(states[0], "trafficSignalId"), self.raw(states[0], "state"),
+                                      states[0]) if states else None
+            if state is None:
+                state = {"amber": "yellow"}.get((phase.get("name") or "").lower(), (phase.get("name") or "").lower())
+                if state not in LIGHT_STATES:
+                    self.approx(phase, f"phase '{phase.get('name')}' shows no traffic-light colour: read as red")
+                    state = "red"
+            phases.append((self.raw(phase, "name"), state, self.value(phase, "duration", units.TIME)))
+        if ctl.get("delay") is not None or ctl.get("reference") is not None:
+            self.skip(ctl, "a controller's delay to a reference controller is not translated: its phases start at 0 s")
+        if not signals:
+            self.skip(ctl, f"controller '{name}' switches no signal of {self.xodr_name}: not translated")
+            return
+        cycle = {"green": 0.0, "yellow": 0.0, "red": 0.0}
+        for _, st, d in phases:
+            cycle[st] += d
+        total = sum(cycle.values())
+        timed = [(st, d) for _, st, d in phases if d > 0]
+        # Runs of one colour, the last joined to the first when they match (the cycle repeats).
+        runs = [st for i, (st, _) in enumerate(timed) if i == 0 or timed[i - 1][0] != st]
+        if len(runs) > 1 and runs[0] == runs[-1]:
+            runs.pop()
+        wanted = [k for k in ("green", "yellow", "red") if cycle[k] > 0]
+        offset = 0.0
+        if runs and any(runs[i:] + runs[:i] == wanted for i in range(len(runs))):
+            # The language's program starts its first colour at the offset: where that run starts.
+            lead = wanted[0]
+            i = next(i for i, (st, _) in enumerate(timed) if st == lead and timed[i - 1][0] != lead) \
+                if len(timed) > 1 else 0
+            offset = sum(d for _, d in timed[:i]) % total if total > 0 else 0.0
+        elif timed:
+            self.approx(ctl, f"controller '{name}': phases {', '.join(st for st, _ in timed)} as one green, "
+                             "yellow, red cycle of their summed times")
+        exact = ((self.sidecar or {}).get("lights") or {}).get("controllers", {}).get(name)
+        if exact:  # the export's program exactly (its offset has no OpenSCENARIO form)
+            cycle = {k: float(exact[f"{k}_s"]) for k in cycle}
+            offset = float(exact["offset_s"])
+        self.light_ctls[name] = {"signals": signals, "el": ctl, "offset": offset,
+                                 "phases": {pname: st for pname, st, _ in phases}, **cycle}
+        for sid in signals:
+            self.signal_owner.setdefault(sid, name)
+
+    def light_controller(self, sid: str, el) -> str | None:
+        """The controller that switches signal `sid`: the file's, or one of its own (a signal
+        set directly, as esmini's files do: `controller signal_N signals [N]`)."""
+        if sid in self.signal_owner:
+            return self.signal_owner[sid]
+        if self.network.signal(sid) is None:
+            self.skip(el, f"{self.xodr_name} has no signal '{sid}'",
+                      f"traffic lights on the map: {', '.join(self.network.signal_ids(dynamic_only=True)) or '(none)'}")
+            return None
+        name = _safe_name(f"signal_{sid}" if re.fullmatch(r"\w+", sid) else "signal", set(self.light_ctls))
+        self.light_ctls[name] = {"signals": [sid], "el": el, "offset": 0.0, "phases": {}, "solo": True,
+                                 "green": 0.0, "yellow": 0.0, "red": 0.0}
+        self.signal_owner[sid] = name
+        return name
+
+    def light_clauses(self, action, el) -> list[ClausePlan]:
+        """A GlobalAction's TrafficSignalAction as `light C state S` clauses ([] after a diagnostic)."""
+        state_action = _child(action, "InfrastructureAction", "TrafficSignalAction", "TrafficSignalStateAction")
+        ctl_action = _child(action, "InfrastructureAction", "TrafficSignalAction", "TrafficSignalControllerAction")
+        if ctl_action is not None:
+            ref = self.raw(ctl_action, "trafficSignalControllerRef")
+            if ref not in self.light_ctls or self.light_ctls[ref].get("solo"):
+                self.error(ctl_action, f"no traffic signal controller '{ref}'",
+                           f"controllers: {', '.join(c for c, v in self.light_ctls.items() if not v.get('solo'))}")
+                return []
+            self.approx(ctl_action, f"phase '{self.raw(ctl_action, 'phase')}': the controller resumes its program "
+                                    "(`state program`), in its own cycle")
+            return [ClausePlan(keyword="light", name=ref, settings={"state": LIGHT_PROGRAM})]
+        if state_action is None:
+            return []
+        sid = self.raw(state_action, "name")
+        ctl = self.light_controller(sid, state_action)
+        state = self.signal_state(sid, self.raw(state_action, "state"), state_action) if ctl else None
+        if state is None:
+            return []
+        return [ClausePlan(keyword="light", name=ctl, settings={"state": state})]
+
+    def light_event(self, event, pairs: list, who) -> list[ClausePlan]:
+        """The light clauses of one event's TrafficSignalActions ((action element, clause)
+        pairs): one per controller; setting some of a controller's signals switches it all."""
+        out, seen = [], {}
+        for el, clause in pairs:
+            seen.setdefault((clause.name, clause.settings["state"]), []).append(el)
+        for (ctl, state), els in seen.items():
+            info = self.light_ctls[ctl]
+            if state != LIGHT_PROGRAM and len(els) < len(info["signals"]):
+                self.approx(els[0], f"sets {len(els)} of the {len(info['signals'])} signals of controller '{ctl}': "
+                                    "the language switches the whole controller")
+            out.append(ClausePlan(keyword="light", name=ctl, settings={"state": state}))
+        return out
 
     def road(self, road_id: str, el) -> str:
         if road_id not in self.network.roads:
@@ -575,13 +702,18 @@ class _Translate(_Importer):
     def init(self, init) -> None:
         if init is None:
             return
+        pairs = []
         for action in init.iterfind("Actions/GlobalAction"):
             env = _child(action, "EnvironmentAction", "Environment")
             if env is not None:
                 self.environment_action(env)
+            elif _child(action, "InfrastructureAction", "TrafficSignalAction") is not None:
+                pairs += [(action, c) for c in self.light_clauses(action, action)]
             else:
                 self.skip(action, "global actions other than the environment (traffic, parameters, "
                                   "signals) are not translated")
+        # a light's state in Init: a step at time 0
+        self.light_steps += [TriggerPlan(clause=c) for c in self.light_event(init, pairs, None)]
         init_trajectories = []
         for private in init.iterfind("Actions/Private"):
             who = self.actor_name(private)
@@ -1028,12 +1160,9 @@ class _Translate(_Importer):
     def maneuver_group(self, group, act_at) -> None:
         refs = [self.actor_name(r) for r in group.iterfind("Actors/EntityRef")]
         refs = [r for r in refs if r is not None]
-        if len(refs) != 1:
-            if refs or list(group.iterfind("Maneuver")):
-                self.skip(group, f"maneuver group with {len(refs)} actors: translated for one actor only")
-            if not refs:
-                return
-        who = refs[0]
+        if len(refs) > 1:
+            self.skip(group, f"maneuver group with {len(refs)} actors: translated for one actor only")
+        who = refs[0] if refs else None  # no actor: its events' global actions (light steps) only
         maneuvers = list(group.iterfind("Maneuver"))
         if group.find("CatalogReference") is not None:
             self.skip(group.find("CatalogReference"), "maneuver catalogs are not translated")
@@ -1046,13 +1175,22 @@ class _Translate(_Importer):
         if name in (self.sidecar or {}).get("group_events", ()):
             return  # a step of a group: the side file has the group (appended in `plan`)
         actions = list(event.iterfind("Action"))
-        clauses = []
+        clauses, lights = [], []
         for action in actions:
             body = _only_child(action)
             if body is None:
                 continue
+            if body.tag == "GlobalAction" and _child(body, "InfrastructureAction", "TrafficSignalAction") is not None:
+                exact = ((self.sidecar or {}).get("lights") or {}).get("steps", {}).get(name)
+                lights += [(body, ClausePlan.model_validate(exact))] if exact else \
+                    [(body, c) for c in self.light_clauses(body, body)]
+                continue
             if body.tag != "PrivateAction":
                 self.skip(body, f"<{body.tag}> is not translated (private actions are)")
+                continue
+            if who is None:
+                self.skip(body, f"<{_first(_only_child(body), body).tag}> in a maneuver group without actors is "
+                                "not translated")
                 continue
             inner = _only_child(body)
             if inner is None:
@@ -1067,6 +1205,8 @@ class _Translate(_Importer):
             clause = ClausePlan.model_validate(exact["clause"]) if exact else self.private_action(inner, who)
             if clause is not None:
                 clauses.append(clause)
+        if lights:
+            self.light_step(event, self.light_event(event, lights, who), who, act_at)
         if not clauses:
             return
         trigger = event.find("StartTrigger")
@@ -1084,6 +1224,19 @@ class _Translate(_Importer):
                 self.actors[who]["behaviors"].append(clause)
             else:
                 self.actors[who]["triggers"].append(TriggerPlan(clause=clause, **fields))
+
+    def light_step(self, event, clauses: list[ClausePlan], who, act_at) -> None:
+        if not clauses:
+            return
+        step = self.start(event.find("StartTrigger"), who, act_at, event.get("name", ""))
+        if step is None:
+            return
+        kind, fields = step
+        if kind == "after_event":
+            self.skip(fields[3], f"light step '{event.get('name')}' starts on another event: not translated",
+                      "a lights block's steps start at a time, after a delay or on a condition")
+            return
+        self.light_steps += [TriggerPlan(clause=c, **fields) for c in clauses]
 
     def start(self, trigger, who: str, act_at, event: str = ""):
         """('now', fields of a TriggerPlan) or ('after_event', (event, delay, state)); None: dropped."""
@@ -1135,6 +1288,8 @@ class _Translate(_Importer):
                 exact = (self.sidecar or {}).get("conditions", {}).get(ref)
                 if exact:
                     return EXPR.validate_python(exact["formula"])
+            if value_cond.tag in ("TrafficSignalCondition", "TrafficSignalControllerCondition"):
+                return self.light_condition(value_cond)
             self.skip(value_cond, f"<{value_cond.tag}> is not translated")
             return None
         by_entity = cond.find("ByEntityCondition")
@@ -1151,6 +1306,25 @@ class _Translate(_Importer):
         if any(p is None for p in parts):
             return None
         return _all(parts) if rule == "all" else _any(parts)
+
+    def light_condition(self, c):
+        """`light(C) == S`: a signal's state (its controller's) or a controller's phase."""
+        if c.tag == "TrafficSignalCondition":
+            sid = self.raw(c, "name")
+            ctl = self.light_controller(sid, c)
+            state = self.signal_state(sid, self.raw(c, "state"), c) if ctl else None
+        else:
+            ctl, phase = self.raw(c, "trafficSignalControllerRef"), self.raw(c, "phase")
+            if ctl not in self.light_ctls or self.light_ctls[ctl].get("solo"):
+                self.error(c, f"no traffic signal controller '{ctl}'")
+                return None
+            state = self.light_ctls[ctl]["phases"].get(phase)
+            if state is None:
+                self.error(c, f"controller '{ctl}' has no phase '{phase}'",
+                           f"phases: {', '.join(self.light_ctls[ctl]['phases'])}")
+        if state is None:
+            return None
+        return E.Binary(op="==", left=E.Signal(name=f"light({ctl})"), right=E.Num(value=LIGHT_STATES[state]))
 
     def entity_condition(self, c, a: str):
         op = RULE_OPS.get(c.get("rule", ""), ">")
@@ -1321,6 +1495,10 @@ class _Translate(_Importer):
                     fields["route"], fields["s"] = got
             if extra.get("yaw") is not None:
                 fields["yaw"] = E.Num(value=float(extra["yaw"]))
+            if sc:
+                fields["ignore_lights"] = bool(extra.get("ignore_lights", False))
+            elif self.light_ctls and who != "ego":
+                fields["ignore_lights"] = True  # OpenSCENARIO's actors follow their actions, not the lights
             if eval_param_expr(offset, self.param_values()) != 0.0:
                 fields["offset"] = offset
             fields["triggers"] = fields["triggers"] + [TriggerPlan.model_validate(g)
@@ -1346,10 +1524,25 @@ class _Translate(_Importer):
             oracles = [OraclePlan(name="no_collision", formula=NO_CLAUSES["collision"]("ego", None))]
         description = sc["description"] if sc else (header.get("description", "") if header is not None else "")
         name = sc.get("scenario") or _safe_name(self.path.stem, set())
+        if self.light_ctls and not sc and agents:
+            self.approx(_first(self.signals_el, self.doc), "OpenSCENARIO's actors follow their actions, not the "
+                                                           "traffic lights: the agents get `at_red run`")
+        controllers = []
+        for cname, info in self.light_ctls.items():
+            if info.get("solo"):  # a signal set by actions only: no program, green until a step sets it
+                info["green"] = duration
+                if not any(tr.clause.name == cname and tr.at_s is None and tr.after_s is None and tr.condition is None
+                           for tr in self.light_steps):
+                    self.approx(info["el"], f"signal {info['signals'][0]} has no controller and no state in Init: "
+                                            "green until an action sets it")
+            controllers.append(ControllerPlan(
+                name=cname, road=next(iter(self.roads.values())).name, signals=info["signals"],
+                green_s=E.Num(value=info["green"]), yellow_s=E.Num(value=info["yellow"]),
+                red_s=E.Num(value=info["red"]), offset_s=E.Num(value=info["offset"])))
         plan = ScenarioPlan(name=name, description=description[:500], duration_s=duration,
                             step_s=sc.get("step_s", 0.01), seed=sc.get("seed", 0), run_seed=sc.get("run_seed"),
                             roads=list(self.roads.values()), ego=ego, agents=agents, faults=faults, oracles=oracles,
-                            environment=self.environment)
+                            environment=self.environment, controllers=controllers, light_steps=self.light_steps)
         values = {**self.param_values(), **sc.get("params", {})}
         dims = {**{k: v for k, v in self.param_dims.items()},
                 **{k: units.DIMENSIONLESS for k in sc.get("params", {}) if k not in self.param_dims}}
@@ -1391,6 +1584,15 @@ def _sidecar_problem(data: dict) -> str:
         for steps in data.get("groups", {}).values():
             for step in steps:
                 TriggerPlan.model_validate(step)
+        lights = data.get("lights", {})
+        if not isinstance(lights, dict):
+            return "'lights' is not a dict"
+        for c in lights.get("controllers", {}).values():
+            for key in ("green_s", "yellow_s", "red_s", "offset_s"):
+                float(c[key])
+        for clause in lights.get("steps", {}).values():
+            if ClausePlan.model_validate(clause).keyword != "light":
+                return "a light step that is not a `light` clause"
         for f in data.get("faults", []):
             ConcreteFault.model_validate(f)
         for o in data.get("oracles", []):

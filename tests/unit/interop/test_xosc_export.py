@@ -25,7 +25,7 @@ def done_ids(done, plan) -> dict[str, str]:
     return {r.name: str(i) for i, r in enumerate(plan.roads, start=1)}
 
 SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / f"{n}.addt"
-                                               for n in ("every_behavior", "every_action")]
+                                               for n in ("every_behavior", "every_action", "every_light")]
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])
