@@ -52,7 +52,7 @@ def test_shrunk_counterexample_has_a_replayable_xosc(tmp_path):
 
 
 RUN_ESMINI = ["cut-in_simple", "acc-test", "alks_cut-in", "straight_500m_pedestrian", "lane_change_simple",
-              "highway_merge"]
+              "highway_merge", "traffic_lights"]
 
 
 @pytest.mark.parametrize("name", RUN_ESMINI)

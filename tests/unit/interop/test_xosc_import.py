@@ -334,3 +334,152 @@ def test_another_actors_event_state_becomes_a_named_step(state, fn, tmp_path):
         (tmp_path / name).write_text(body)
     result = compile_source(got.text, "imported.addt", base_dir=tmp_path)
     assert result.ok, [d.message for d in result.diagnostics]
+
+
+def test_esmini_traffic_lights_translate(tmp_path):
+    """esmini's traffic_lights.xosc sets signals directly (no controllers): each signal gets
+    a controller of its own, Init states are steps at time 0, state actions light steps and
+    TrafficSignalConditions `light(C) == S` (its delays `for D`, said with their lines)."""
+    got = import_xosc(ESMINI / "xosc" / "traffic_lights.xosc", root=ESMINI)
+    assert got.text is not None
+    plan = got.plan
+    assert [(c.name, c.signals) for c in plan.controllers] == [("signal_1", ["1"]), ("signal_2", ["2"]),
+                                                              ("signal_3", ["3"])]
+    steps = [(tr.clause.name, tr.clause.settings["state"]) for tr in plan.light_steps]
+    assert steps[:3] == [("signal_1", "green"), ("signal_2", "red"), ("signal_3", "red")]
+    assert ("signal_1", "yellow") in steps and ("signal_1", "red") in steps
+    assert "when light(signal_1) == yellow for 3 s then light signal_1 state red" in got.text
+    assert "when light(signal_3) == green for 0.5 s then behavior" in got.text
+    assert not any("TrafficSignal" in d.message or "signals" in d.message
+                   for d in got.diagnostics if d.code == "W0801"), [d.message for d in got.diagnostics]
+    delay = next(d for d in got.diagnostics if "condition delay of 3 s" in d.message)
+    assert delay.span.line == 192  # the <Condition> of StopLightEvent2
+    # The esmini file's actors follow their actions, not the lights.
+    assert all(a.ignore_lights for a in plan.agents) and not plan.ego.ignore_lights
+
+
+LIGHTS = """<?xml version="1.0"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="2" date="2024-01-01T00:00:00" description="d" author="a"/>
+  <RoadNetwork><LogicFile filepath="m.xodr"/>
+    <TrafficSignals>
+      <TrafficSignalController name="west">
+        PHASES
+      </TrafficSignalController>
+    </TrafficSignals>
+  </RoadNetwork>
+  <Entities>
+    <ScenarioObject name="Ego"><Vehicle name="c" vehicleCategory="car"><BoundingBox><Center x="0" y="0" z="0.7"/>
+      <Dimensions width="2" length="4.5" height="1.4"/></BoundingBox></Vehicle></ScenarioObject>
+    <ScenarioObject name="car"><Vehicle name="c" vehicleCategory="car"><BoundingBox><Center x="0" y="0" z="0.7"/>
+      <Dimensions width="2" length="4.5" height="1.4"/></BoundingBox></Vehicle></ScenarioObject>
+  </Entities>
+  <Storyboard>
+    <Init><Actions>
+      <Private entityRef="Ego"><PrivateAction><TeleportAction><Position>
+        <LanePosition roadId="3" laneId="-1" s="10" offset="0"/></Position></TeleportAction></PrivateAction></Private>
+      <Private entityRef="car"><PrivateAction><TeleportAction><Position>
+        <LanePosition roadId="3" laneId="-1" s="40" offset="0"/></Position></TeleportAction></PrivateAction></Private>
+    </Actions></Init>
+    <Story name="s"><Act name="a">
+      <ManeuverGroup name="lights" maximumExecutionCount="1"><Actors selectTriggeringEntities="false"/>
+        <Maneuver name="m">
+          <Event name="to_red" priority="parallel">
+            <Action name="a1"><GlobalAction><InfrastructureAction><TrafficSignalAction>
+              <TrafficSignalControllerAction trafficSignalControllerRef="CTL" phase="stop"/>
+            </TrafficSignalAction></InfrastructureAction></GlobalAction></Action>
+            <StartTrigger><ConditionGroup><Condition name="t" delay="0" conditionEdge="none"><ByValueCondition>
+              <SimulationTimeCondition value="4" rule="greaterThan"/></ByValueCondition></Condition></ConditionGroup>
+            </StartTrigger>
+          </Event>
+        </Maneuver>
+      </ManeuverGroup>
+      <ManeuverGroup name="g" maximumExecutionCount="1"><Actors selectTriggeringEntities="false">
+        <EntityRef entityRef="car"/></Actors>
+        <Maneuver name="m2">
+          <Event name="go" priority="parallel">
+            <Action name="a2"><PrivateAction><LongitudinalAction><SpeedAction>
+              <SpeedActionDynamics dynamicsShape="step" value="0" dynamicsDimension="time"/>
+              <SpeedActionTarget><AbsoluteTargetSpeed value="5"/></SpeedActionTarget></SpeedAction>
+            </LongitudinalAction></PrivateAction></Action>
+            <StartTrigger><ConditionGroup><Condition name="c" delay="0" conditionEdge="none"><ByValueCondition>
+              <TrafficSignalControllerCondition trafficSignalControllerRef="west" phase="go"/>
+            </ByValueCondition></Condition></ConditionGroup></StartTrigger>
+          </Event>
+        </Maneuver>
+      </ManeuverGroup>
+      <StartTrigger><ConditionGroup><Condition name="s" delay="0" conditionEdge="none"><ByValueCondition>
+        <SimulationTimeCondition value="0" rule="greaterThan"/></ByValueCondition></Condition></ConditionGroup>
+      </StartTrigger>
+    </Act></Story>
+    <StopTrigger><ConditionGroup><Condition name="e" delay="0" conditionEdge="rising"><ByValueCondition>
+      <SimulationTimeCondition value="20" rule="greaterThan"/></ByValueCondition></Condition></ConditionGroup>
+    </StopTrigger>
+  </Storyboard>
+</OpenSCENARIO>
+"""
+
+
+def _phase(name, duration, state):
+    return (f'<Phase name="{name}" duration="{duration}"><TrafficSignalState trafficSignalId="1" state="{state}"/>'
+            f'<TrafficSignalState trafficSignalId="2" state="{"on;off" if state.startswith("on") else "off;on"}"/>'
+            "</Phase>")
+
+
+def _lights_file(tmp_path, phases, ref="west"):
+    (tmp_path / "m.xodr").write_text((ESMINI / "xodr" / "fabriksgatan_traffic_lights.xodr").read_text())
+    (tmp_path / "s.xosc").write_text(LIGHTS.replace("PHASES", phases).replace("CTL", ref))
+    return import_xosc(tmp_path / "s.xosc")
+
+
+def test_signal_controller_phases_become_a_program(tmp_path):
+    """Phases red 10 s, green 5 s, yellow 2 s: the program green 5 s, yellow 2 s, red 10 s
+    whose green starts at 10 s; a controller action resumes the program (W0802, with its
+    line), a controller condition on a phase is `light(C) == S` of that phase's colour."""
+    phases = _phase("stop", 10, "on;off;off") + _phase("go", 5, "off;off;on") + _phase("wait", 2, "off;on;off")
+    got = _lights_file(tmp_path, phases)
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    (ctl,) = got.plan.controllers
+    assert (ctl.name, ctl.signals) == ("west", ["1", "2"])
+    assert [e.value for e in (ctl.green_s, ctl.yellow_s, ctl.red_s, ctl.offset_s)] == [5.0, 2.0, 10.0, 10.0]
+    assert "at 4 s light west state program" in got.text
+    assert "when light(west) == green then behavior" in got.text
+    resume = next(d for d in got.diagnostics if "resumes its program" in d.message)
+    assert resume.code == "W0802" and resume.span.line == 29 and resume.label == "<TrafficSignalControllerAction>"
+    assert not [d for d in got.diagnostics if d.code == "W0801"], [d.message for d in got.diagnostics]
+    # The program is the file's: red until 10 s, then green for 5 s, yellow for 2 s.
+    from addt_dsl.runtime.lights import Program
+    program = Program(5.0, 2.0, 10.0, 10.0)
+    assert [program.state(t) for t in (0.0, 9.9, 10.1, 15.5, 17.5, 27.1)] == [2.0, 2.0, 0.0, 1.0, 2.0, 0.0]
+
+
+def test_signal_controller_problems_are_diagnostics(tmp_path):
+    # Phases out of the language's order: one cycle of their summed times, said with the line.
+    odd = _phase("go", 5, "off;off;on") + _phase("stop", 10, "on;off;off") + _phase("wait", 2, "off;on;off")
+    got = _lights_file(tmp_path, odd)
+    assert got.text is not None
+    approx = next(d for d in got.diagnostics if "as one green, yellow, red cycle" in d.message)
+    assert approx.code == "W0802" and approx.span.line == 6 and approx.label == "<TrafficSignalController>"
+    # A controller action on a controller the file does not have: an error, nothing written.
+    got = _lights_file(tmp_path, odd, ref="east")
+    assert got.text is None
+    err = next(d for d in got.diagnostics if d.is_error)
+    assert "no traffic signal controller 'east'" in err.message and err.span.line == 29
+    # A lamp state that shows no one colour: not translated, with its element.
+    got = _lights_file(tmp_path, _phase("x", 5, "on;on;off") + _phase("go", 5, "off;off;on"))
+    bad = next(d for d in got.diagnostics if "shows no one colour" in d.message)
+    assert bad.code == "W0801" and bad.label == "<TrafficSignalState>"
+
+
+def test_lights_come_back_from_the_xosc_alone(tmp_path):
+    spec = expand(compile_file(ROOT / "tests" / "data" / "interop" / "every_light.addt").plan).specs[0]
+    got = _without_sidecar(spec, tmp_path)
+    ctls = {c.name: c for c in got.plan.controllers}
+    assert ctls["main"].signals == ["1", "2"] and ctls["other"].signals == ["3"]
+    # OpenSCENARIO's phases start at time 0: the offset is the side file's.
+    assert [e.value for e in (ctls["main"].green_s, ctls["main"].red_s, ctls["main"].offset_s)] == [60.0, 20.0, 0.0]
+    steps = [(tr.clause.name, tr.clause.settings["state"]) for tr in got.plan.light_steps]
+    assert steps == [("main", "red"), ("main", "program"), ("other", "yellow"), ("other", "green")]
+    assert "when light(main) == red then light other state green" in got.text
+    assert "when light(main) == red then behavior cruise" in got.text
+    assert all(a.ignore_lights for a in got.plan.agents)  # OpenSCENARIO's actors follow their actions
