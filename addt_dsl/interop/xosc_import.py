@@ -1185,6 +1185,11 @@ class _Translate(_Importer):
                 lights += [(body, ClausePlan.model_validate(exact))] if exact else \
                     [(body, c) for c in self.light_clauses(body, body)]
                 continue
+            if body.tag == "GlobalAction" and body.find("EnvironmentAction") is not None:
+                self.skip(body.find("EnvironmentAction"), "an environment change in an event is not translated: "
+                          "`environment { }` holds for the whole run (the language has no environment steps)",
+                          "an EnvironmentAction in Init is translated")
+                continue
             if body.tag != "PrivateAction":
                 self.skip(body, f"<{body.tag}> is not translated (private actions are)")
                 continue

@@ -483,3 +483,12 @@ def test_lights_come_back_from_the_xosc_alone(tmp_path):
     assert "when light(main) == red then light other state green" in got.text
     assert "when light(main) == red then behavior cruise" in got.text
     assert all(a.ignore_lights for a in got.plan.agents)  # OpenSCENARIO's actors follow their actions
+
+
+def test_an_environment_change_in_an_event_says_why_it_is_not_translated():
+    got = import_xosc(ESMINI / "xosc" / "cut-in_environment.xosc", root=ESMINI)
+    assert got.text is not None
+    changes = [d for d in got.diagnostics if "environment change in an event" in d.message]
+    assert changes and all(d.code == "W0801" and d.label == "<EnvironmentAction>" for d in changes)
+    assert [d.span.line for d in changes][:2] == [90, 110]
+    assert not any("<GlobalAction> is not translated" in d.message for d in got.diagnostics)
