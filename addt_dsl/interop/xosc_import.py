@@ -961,36 +961,135 @@ class _Translate(_Importer):
         if traj is None:
             self.skip(follow, "a trajectory from a catalog is not translated")
             return None
-        poly = traj.find("Shape/Polyline")
-        if poly is None:
-            self.skip(_first(traj.find("Shape"), traj), "only polyline trajectories are translated",
-                      "clothoids and NURBS have no `trajectory` form")
+        shape = _only_child(traj.find("Shape")) if traj.find("Shape") is not None else None
+        if shape is None:
+            self.error(_first(traj.find("Shape"), traj), "a trajectory needs one shape")
             return None
-        points, times = [], []
-        for vertex in poly.iterfind("Vertex"):
-            got = self.road_point(_first(vertex.find("Position"), vertex), who)
+        if shape.tag in ("Clothoid", "Nurbs"):
+            got = self.clothoid(shape, who) if shape.tag == "Clothoid" else self.nurbs(shape, who)
             if got is None:
                 return None
-            points.append(got)
-            if vertex.get("time") is not None:
-                times.append(self.value(vertex, "time"))
-        if len(points) < 1:
-            self.error(poly, "a polyline needs vertices")
+            points, times = got
+            keys = ("x", "y")
+            self.approx(shape, f"a {shape.tag.lower()} trajectory: sampled as a polyline of {len(points)} world "
+                               "points (the language's trajectories are polylines)")
+        elif shape.tag == "Polyline":
+            points, times, keys = [], [], ("s", "t")
+            for vertex in shape.iterfind("Vertex"):
+                got = self.road_point(_first(vertex.find("Position"), vertex), who)
+                if got is None:
+                    return None
+                points.append(got)
+                if vertex.get("time") is not None:
+                    times.append(self.value(vertex, "time"))
+            if len(points) < 1:
+                self.error(shape, "a polyline needs vertices")
+                return None
+        else:
+            self.skip(shape, f"<{shape.tag}> trajectories are not translated",
+                      "polylines are; clothoids and NURBS are sampled")
             return None
-        settings = {"s": [E.Num(value=round(p[0], 9)) for p in points],
-                    "t": [E.Num(value=round(p[1], 9)) for p in points]}
+        settings = {keys[0]: [E.Num(value=round(p[0], 9)) for p in points],
+                    keys[1]: [E.Num(value=round(p[1], 9)) for p in points]}
         timing = follow.find("TimeReference/Timing")
-        if timing is not None and len(times) == len(points):
+        if timing is not None and times and len(times) == len(points):
             offset = self.value(timing, "offset", default=0.0)
             scale = self.value(timing, "scale", default=1.0)
             times = [scale * x + offset for x in times]
             if timing.get("domainAbsoluteRelative") == "absolute":
                 self.approx(timing, "absolute vertex times: taken from the start of the trajectory")
             if all(b > a for a, b in zip(times, times[1:])) and times[0] >= 0.0:
-                settings["times"] = [E.Num(value=x) for x in times]
+                settings["times"] = [E.Num(value=round(x, 9)) for x in times]
             else:
                 self.approx(timing, "vertex times that do not increase: driven at the default speed")
         return ClausePlan(keyword="behavior", name="trajectory", settings=settings)
+
+    def world_point(self, pos_el, who: str):
+        """(x, y, heading) [m, m, rad] of a position, facing its lane's driving direction (or
+        its `Orientation`); None after a diagnostic."""
+        got = self.position(pos_el, who)
+        if got is None:
+            return None
+        road, lane, s, offset = got
+        params = self.param_values()
+        odr = self.network.road(next(i for i, r in self.roads.items() if r.name == road))
+        s_val = min(max(float(eval_param_expr(s, params)), 0.0), odr.length)
+        t_val = odr.lane_center_t(lane, s_val) + float(eval_param_expr(offset, params))
+        x, y, h = (float(v) for v in odr.reference_pose(s_val))
+        heading = h + (math.pi if lane > 0 and odr.travel_direction(lane) < 0 else 0.0)
+        orient = pos_el.find(".//Orientation")
+        if orient is not None and orient.get("h") is not None:
+            turn = self.value(orient, "h")
+            heading = turn if orient.get("type") == "absolute" else heading + turn
+        return x - t_val * math.sin(h), y + t_val * math.cos(h), heading
+
+    def clothoid(self, el, who: str):
+        """A clothoid (curvature k0 + k' u over its length) from its start pose, sampled
+        about every 2 m; times linear in arc length from startTime to stopTime."""
+        start = self.world_point(_first(el.find("Position"), el), who)
+        if start is None:
+            return None
+        k0 = self.value(el, "curvature")
+        rate = el.get("curvaturePrime") if el.get("curvaturePrime") is not None else el.get("curvatureDot")
+        k1 = self.value(el, "curvaturePrime" if el.get("curvaturePrime") is not None else "curvatureDot") \
+            if rate is not None else 0.0
+        length = self.value(el, "length")
+        if not 0.0 < length <= 10000.0:
+            self.skip(el, f"a clothoid {length:g} m long is not translated (0 to 10 km)")
+            return None
+        count = int(min(max(math.ceil(length / 2.0), 8), 200))
+        fine = 20 * count  # heading integrated on a grid 20 times finer than the samples
+        x, y, h0 = start
+        points = [(x, y)]
+        du = length / fine
+        for i in range(1, fine + 1):
+            u_mid = (i - 0.5) * du
+            heading = h0 + k0 * u_mid + 0.5 * k1 * u_mid * u_mid
+            x, y = x + du * math.cos(heading), y + du * math.sin(heading)
+            if i % 20 == 0:
+                points.append((x, y))
+        times = []
+        if el.get("startTime") is not None and el.get("stopTime") is not None:
+            t0, t1 = self.value(el, "startTime"), self.value(el, "stopTime")
+            times = [t0 + (t1 - t0) * i / count for i in range(count + 1)]
+        return points, times
+
+    def nurbs(self, el, who: str):
+        """A NURBS curve (Cox-de Boor) through its control points' world positions, sampled
+        at evenly spaced parameters; times by the same rational basis when every control
+        point has one."""
+        order = int(self.value(el, "order"))
+        cps = list(el.iterfind("ControlPoint"))
+        knots = [self.value(k, "value") for k in el.iterfind("Knot")]
+        if order < 2 or len(cps) < order or len(knots) != len(cps) + order or \
+                any(b < a for a, b in zip(knots, knots[1:])) or knots[order - 1] >= knots[len(cps)]:
+            self.error(el, f"a NURBS of order {order} with {len(cps)} control points needs {len(cps) + order} "
+                           f"non-decreasing knots (it has {len(knots)})")
+            return None
+        pts, weights, stamps = [], [], []
+        for cp in cps:
+            got = self.world_point(_first(cp.find("Position"), cp), who)
+            if got is None:
+                return None
+            pts.append(got[:2])
+            weights.append(self.value(cp, "weight", default=1.0))
+            stamps.append(self.value(cp, "time") if cp.get("time") is not None else None)
+        lo, hi = knots[order - 1], knots[len(cps)]
+        count = int(min(max(10 * len(cps), 20), 200))
+        points, times = [], []
+        for j in range(count + 1):
+            u = lo + (hi - lo) * j / count
+            basis = _bspline_basis(knots, order, len(cps), min(u, hi - 1e-9 * (hi - lo)))
+            w = [b * wt for b, wt in zip(basis, weights)]
+            total = sum(w)
+            if total <= 0.0:
+                self.error(el, "a NURBS whose weights cancel")
+                return None
+            points.append((sum(wi * p[0] for wi, p in zip(w, pts)) / total,
+                           sum(wi * p[1] for wi, p in zip(w, pts)) / total))
+            if None not in stamps:
+                times.append(sum(wi * t for wi, t in zip(w, stamps)) / total)
+        return points, times
 
     def route(self, route_el, who: str, lane: int, s):
         """An AssignRouteAction's waypoints as the actor's route (road ids, connecting roads
@@ -1613,6 +1712,22 @@ def _sidecar_problem(data: dict) -> str:
     except (ValueError, TypeError, KeyError, AttributeError) as exc:  # pydantic's ValidationError is a ValueError
         return (str(exc).splitlines() or [type(exc).__name__])[0][:200]
     return ""
+
+
+def _bspline_basis(knots: list[float], order: int, n: int, u: float) -> list[float]:
+    """The n B-spline basis functions of `order` (degree order - 1) at `u` (Cox-de Boor)."""
+    basis = [1.0 if knots[i] <= u < knots[i + 1] else 0.0 for i in range(len(knots) - 1)]
+    for k in range(2, order + 1):
+        nxt = []
+        for i in range(len(knots) - k):
+            left = right = 0.0
+            if knots[i + k - 1] > knots[i]:
+                left = (u - knots[i]) / (knots[i + k - 1] - knots[i]) * basis[i]
+            if knots[i + k] > knots[i + 1]:
+                right = (knots[i + k] - u) / (knots[i + k] - knots[i + 1]) * basis[i + 1]
+            nxt.append(left + right)
+        basis = nxt
+    return basis[:n]
 
 
 def _setting(value):

@@ -8,6 +8,7 @@ import random
 import re
 import shutil
 
+import numpy as np
 import pytest
 
 from addt_dsl.cli import main
@@ -492,3 +493,79 @@ def test_an_environment_change_in_an_event_says_why_it_is_not_translated():
     assert changes and all(d.code == "W0801" and d.label == "<EnvironmentAction>" for d in changes)
     assert [d.span.line for d in changes][:2] == [90, 110]
     assert not any("<GlobalAction> is not translated" in d.message for d in got.diagnostics)
+
+
+SHAPED = """<?xml version="1.0"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="2" date="2024-01-01T00:00:00" description="d" author="a"/>
+  <RoadNetwork><LogicFile filepath="r.xodr"/></RoadNetwork>
+  <Entities>
+    <ScenarioObject name="Ego"><Vehicle name="c" vehicleCategory="car"><BoundingBox><Center x="0" y="0" z="0.7"/>
+      <Dimensions width="2" length="4.5" height="1.4"/></BoundingBox></Vehicle></ScenarioObject>
+    <ScenarioObject name="a"><Vehicle name="c" vehicleCategory="car"><BoundingBox><Center x="0" y="0" z="0.7"/>
+      <Dimensions width="2" length="4.5" height="1.4"/></BoundingBox></Vehicle></ScenarioObject>
+  </Entities>
+  <Storyboard>
+    <Init><Actions>
+      <Private entityRef="Ego"><PrivateAction><TeleportAction><Position>
+        <LanePosition roadId="1" laneId="-1" s="20" offset="0"/></Position></TeleportAction></PrivateAction></Private>
+      <Private entityRef="a">
+        <PrivateAction><TeleportAction><Position>
+          <LanePosition roadId="1" laneId="-1" s="100" offset="0"/></Position></TeleportAction></PrivateAction>
+        <PrivateAction><RoutingAction><FollowTrajectoryAction>
+          <Trajectory name="t" closed="false"><Shape>SHAPE</Shape></Trajectory>
+          <TimeReference><Timing domainAbsoluteRelative="relative" offset="0" scale="1"/></TimeReference>
+          <TrajectoryFollowingMode followingMode="position"/>
+        </FollowTrajectoryAction></RoutingAction></PrivateAction>
+      </Private>
+    </Actions></Init>
+    <StopTrigger/>
+  </Storyboard>
+</OpenSCENARIO>
+"""
+START = '<Position><LanePosition roadId="1" laneId="-1" s="100" offset="0"/></Position>'
+
+
+def _shaped(tmp_path, shape):
+    (tmp_path / "r.xodr").write_text((ESMINI / "xodr" / "straight_500m.xodr").read_text())
+    (tmp_path / "s.xosc").write_text(SHAPED.replace("SHAPE", shape))
+    got = import_xosc(tmp_path / "s.xosc")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    (traj,) = next(a for a in got.plan.agents if a.name == "a").behaviors
+    xs, ys = ([v.value for v in traj.settings[k]] for k in ("x", "y"))
+    times = [v.value for v in traj.settings.get("times", [])]
+    return got, xs, ys, times
+
+
+@pytest.mark.parametrize("curvature, end", [(0.0, (40.0, 0.0)), (1 / 20.0, (0.0, 40.0))])
+def test_a_clothoid_is_sampled_as_a_world_polyline(curvature, end, tmp_path):
+    """Straight (k = 0) and a half circle of radius 20 m (k = 1/20, length 20 pi m): the
+    samples lie on the curve from the start pose, timed linearly along it."""
+    length = 40.0 if curvature == 0 else 20 * np.pi
+    got, xs, ys, times = _shaped(tmp_path, f'<Clothoid curvature="{curvature}" curvatureDot="0" length="{length}" '
+                                           f'startTime="1" stopTime="5">{START}</Clothoid>')
+    x0, y0 = xs[0], ys[0]
+    assert (xs[-1] - x0, ys[-1] - y0) == pytest.approx(end, abs=1e-3)
+    if curvature:  # every sample is 20 m from the circle's centre, left of the start
+        assert np.allclose(np.hypot(np.array(xs) - x0, np.array(ys) - (y0 + 20.0)), 20.0, atol=1e-3)
+    assert times[0] == 1.0 and times[-1] == pytest.approx(5.0) and np.all(np.diff(times) > 0)
+    warn = next(d for d in got.diagnostics if d.label == "<Clothoid>")
+    assert warn.code == "W0802" and "sampled as a polyline" in warn.message and warn.span.line == 19
+
+
+def test_a_nurbs_is_sampled_with_its_basis(tmp_path):
+    """A clamped quadratic NURBS of three control points with unit weights passes through
+    its end points and, half way, through P0/4 + P1/2 + P2/4; times by the same basis."""
+    cps = "".join(f'<ControlPoint time="{t}" weight="1"><Position><LanePosition roadId="1" laneId="-1" s="{s}" '
+                  f'offset="{o}"/></Position></ControlPoint>' for t, s, o in ((0, 100, 0), (2, 120, 3), (6, 140, 0)))
+    knots = "".join(f'<Knot value="{k}"/>' for k in (0, 0, 0, 1, 1, 1))
+    got, xs, ys, times = _shaped(tmp_path, f'<Nurbs order="3">{cps}{knots}</Nurbs>')
+    y0 = ys[0]
+    assert xs[0] == pytest.approx(100.0) and xs[-1] == pytest.approx(140.0, abs=1e-6)
+    mid = len(xs) // 2
+    assert (xs[mid], ys[mid] - y0) == pytest.approx((120.0, 1.5))
+    assert (times[0], times[mid], times[-1]) == pytest.approx((0.0, 2.5, 6.0), abs=1e-6)
+    bad = SHAPED.replace("SHAPE", f'<Nurbs order="3">{cps}<Knot value="0"/></Nurbs>')
+    (tmp_path / "s.xosc").write_text(bad)
+    err = next(d for d in import_xosc(tmp_path / "s.xosc").diagnostics if d.is_error)
+    assert "needs 6 non-decreasing knots" in err.message and err.label == "<Nurbs>"
