@@ -591,11 +591,11 @@ class _Translate(_Importer):
                              "width_m": width if width and width > 0 else None, "el": obj,
                              "behaviors": [], "triggers": [], "lane_now": None, "speed_now": 0.0}
 
-    def catalog_entry(self, ref):
+    def catalog_entry(self, ref, kinds=("Vehicle", "Pedestrian", "MiscObject")):
         catalog, entry = self.raw(ref, "catalogName"), self.raw(ref, "entryName")
         locations = {loc.tag.removesuffix("Catalog"): loc.find("Directory")
                      for loc in self.doc.iterfind("CatalogLocations/*")}
-        for kind in ("Vehicle", "Pedestrian", "MiscObject"):
+        for kind in kinds:
             directory = locations.get(kind)
             if directory is None:
                 continue
@@ -609,6 +609,10 @@ class _Translate(_Importer):
                 for el in root.iterfind(f"Catalog/{kind}") if root is not None else ():
                     if el.get("name") == entry:
                         return el
+        if "Route" in kinds:
+            self.skip(ref, f"route '{entry}' of catalog {catalog} not found",
+                      "catalogs are read from <CatalogLocations> inside the root directory")
+            return None
         self.approx(ref, f"catalog entry '{entry}' of {catalog} not found: a default car "
                          f"({VEHICLES['car'].length_m} x {VEHICLES['car'].width_m} m)",
                     "catalogs are read from <CatalogLocations> inside the root directory")
@@ -634,6 +638,8 @@ class _Translate(_Importer):
             return road, lane, self.number(pos, "s", units.LENGTH), self.number(pos, "offset", units.LENGTH, 0.0)
         if pos.tag in ("RoadPosition", "WorldPosition", "RelativeRoadPosition", "RelativeLanePosition"):
             return self.position_from_road(pos, who)
+        if pos.tag == "RoutePosition":
+            return self.route_position(pos, who)
         self.skip(pos, f"<{pos.tag}> is not translated: {who} starts at the start of the first road",
                   "lane, road, world and relative road/lane positions are translated")
         return None
@@ -676,6 +682,71 @@ class _Translate(_Importer):
             return None
         offset = t - odr.lane_center_t(lane, s)
         return road_name, lane, E.Num(value=round(s, 9)), E.Num(value=round(offset, 9))
+
+    def route_element(self, ref_parent):
+        """The <Route> of an AssignRouteAction or a RouteRef: inline, or a route catalog's
+        entry (its parameters as the reference assigns them are not read); None after a
+        diagnostic."""
+        inline = ref_parent.find("Route")
+        if inline is not None:
+            return inline
+        ref = ref_parent.find("CatalogReference")
+        if ref is None:
+            self.error(ref_parent, f"<{ref_parent.tag}> needs a <Route> or a <CatalogReference>")
+            return None
+        return self.catalog_entry(ref, kinds=("Route",))
+
+    def route_position(self, pos, who: str):
+        """A RoutePosition `FromLaneCoordinates`: `pathS` along the route from its first
+        waypoint, in `laneId` there. Placed on the route's first road (the language counts
+        `at S` along the route from its entry end), in the first-road lane whose route leg
+        is `laneId` where the point is; the route becomes the actor's when nothing assigns
+        one. (road, lane, s, offset) or None after a diagnostic."""
+        route_el = self.route_element(_first(pos.find("RouteRef"), pos))
+        lane_coords = pos.find("InRoutePosition/FromLaneCoordinates")
+        if route_el is None or lane_coords is None:
+            if route_el is not None:
+                self.skip(_first(_only_child(pos.find("InRoutePosition")) if pos.find("InRoutePosition") is not None
+                                 else None, pos), "a route position is translated from lane coordinates only")
+            return None
+        path_s, lane_id = self.value(lane_coords, "pathS", units.LENGTH), int(self.value(lane_coords, "laneId"))
+        offset = self.number(lane_coords, "laneOffset", units.LENGTH, 0.0)
+        first_wp = route_el.find("Waypoint/Position/LanePosition")
+        stops = []
+        for wp in route_el.iterfind("Waypoint/Position/*"):
+            if wp.get("roadId") is None:
+                self.skip(wp, "a waypoint that is not a lane or road position: the route position is not translated")
+                return None
+            if not stops or stops[-1] != self.resolve(wp.get("roadId")):
+                stops.append(self.resolve(wp.get("roadId")))
+        if first_wp is None or not stops or path_s < 0:
+            self.skip(pos, "a route position needs a route that starts at a lane position and pathS >= 0")
+            return None
+        road_name = self.road(stops[0], first_wp)
+        odr = self.network.road(stops[0])
+        s_wp = self.value(first_wp, "s", units.LENGTH)
+        candidates = sorted(odr.driving_lane_ids(min(max(s_wp, 0.0), odr.length)), key=lambda i: (i != lane_id, abs(i)))
+        for lane in candidates:
+            try:
+                _, legs = resolve_route(self.network, stops, lane, None)
+            except RouteError:
+                continue
+            u = abs(s_wp - legs[0].s_from) + path_s  # from the first road's entry end
+            at, done = legs[-1], 0.0
+            for leg in legs:
+                if u <= done + abs(leg.s_to - leg.s_from) + 1e-9:
+                    at = leg
+                    break
+                done += abs(leg.s_to - leg.s_from)
+            if at.lane == lane_id:
+                break
+        else:
+            self.skip(pos, f"no lane of road {stops[0]} leads along the route to lane {lane_id} at pathS "
+                           f"{path_s:g} m: not translated")
+            return None
+        s_road = s_wp + legs[0].direction * path_s  # a station on the first road, or its continuation
+        self.actors.get(who, {}).setdefault("route_from_position", route_el)
+        return road_name, lane, E.Num(value=round(s_road, 9)), offset
 
     def against_s(self, pos_el, placed) -> bool:
         """Whether the entity faces against its lane's driving direction (addt-dsl, like
@@ -729,8 +800,10 @@ class _Translate(_Importer):
                         self.placed[who] = got
                         self.actors[who]["lane_now"] = got[1]
                         self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
-                elif act.tag == "RoutingAction" and _child(act, "AssignRouteAction", "Route") is not None:
-                    self.actors[who]["route_el"] = _child(act, "AssignRouteAction", "Route")
+                elif act.tag == "RoutingAction" and _child(act, "AssignRouteAction") is not None:
+                    route_el = self.route_element(_child(act, "AssignRouteAction"))
+                    if route_el is not None:
+                        self.actors[who]["route_el"] = route_el
                 elif act.tag == "RoutingAction" and _child(act, "FollowTrajectoryAction") is not None \
                         and who != "ego":
                     init_trajectories.append((act, who))
@@ -1593,8 +1666,11 @@ class _Translate(_Importer):
             if extra.get("route"):
                 fields["route"] = [str(r) for r in extra["route"]]
                 fields["s"] = self.route_station(who, fields["route"], lane, s)
-            elif info.get("route_el") is not None:
-                got = self.route(info["route_el"], who, lane, s)
+            elif info.get("route_el") is not None or info.get("route_from_position") is not None:
+                if info.get("route_el") is None:
+                    self.approx(info["route_from_position"], f"{who} is placed on a route that nothing assigns: "
+                                                             "it drives that route")
+                got = self.route(_first(info.get("route_el"), info["route_from_position"]), who, lane, s)
                 if got is not None:
                     fields["route"], fields["s"] = got
             if extra.get("yaw") is not None:

@@ -569,3 +569,50 @@ def test_a_nurbs_is_sampled_with_its_basis(tmp_path):
     (tmp_path / "s.xosc").write_text(bad)
     err = next(d for d in import_xosc(tmp_path / "s.xosc").diagnostics if d.is_error)
     assert "needs 6 non-decreasing knots" in err.message and err.label == "<Nurbs>"
+
+
+def test_route_catalogs_and_route_positions(tmp_path):
+    """esmini's ltap-od places both cars with RoutePositions on routes of a route catalog
+    and assigns those routes: each actor drives its route from where pathS puts it."""
+    got = import_xosc(ESMINI / "xosc" / "ltap-od.xosc", root=ESMINI)
+    assert got.text is not None
+    actors = {a.name: a for a in got.plan.actors()}
+    params = {p.name: p.default for p in got.plan.params}
+    # HostStraightRoute: road 0 lane 1 (driven against s) from s = 63 m, pathS 0: 63 m
+    # before the end of the 93.66 m road, i.e. 30.66 m from the route's entry end.
+    assert actors["ego"].route == ["0", "9", "2"] and actors["ego"].lane.value == 1.0
+    assert eval_param_expr(actors["ego"].s, params) == pytest.approx(93.6608312256975 - 63.0)
+    # TargetLeftTurnRoute: road 2 lane -1 from s = 100 m, pathS = NPCStartPointS (150 m).
+    assert actors["NPC"].route == ["2", "15", "1"] and eval_param_expr(actors["NPC"].s, params) == 250.0
+    assert not any("Route" in d.message or "first road" in d.message for d in got.diagnostics), \
+        [d.message for d in got.diagnostics]
+
+
+ROUTED = SHAPED.replace("straight_500m", "x").replace(
+    '<LanePosition roadId="1" laneId="-1" s="20" offset="0"/>',
+    '<RoutePosition><RouteRef><Route name="r" closed="false">'
+    '<Waypoint routeStrategy="shortest"><Position><LanePosition roadId="0" laneId="1" s="63" offset="0"/></Position>'
+    '</Waypoint><Waypoint routeStrategy="shortest"><Position><LanePosition roadId="2" laneId="1" s="5" offset="0"/>'
+    '</Position></Waypoint></Route></RouteRef>'
+    '<InRoutePosition><FromLaneCoordinates pathS="10" laneId="LANE"/></InRoutePosition></RoutePosition>')
+
+
+@pytest.mark.parametrize("lane", ["1", "5"])
+def test_an_inline_route_position(lane, tmp_path):
+    (tmp_path / "r.xodr").write_text((ESMINI / "xodr" / "fabriksgatan.xodr").read_text())
+    text = ROUTED.replace("LANE", lane)
+    text = text.replace('<LanePosition roadId="1" laneId="-1" s="100" offset="0"/>',
+                        '<LanePosition roadId="2" laneId="-1" s="100" offset="0"/>')
+    text = re.sub(r"<PrivateAction><RoutingAction><FollowTrajectoryAction>.*?</PrivateAction>", "", text, flags=re.S)
+    (tmp_path / "s.xosc").write_text(text)
+    got = import_xosc(tmp_path / "s.xosc")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    ego = got.plan.ego
+    if lane == "1":  # 10 m along the route from s = 63 m of road 0, which lane 1 drives against s
+        assert ego.route == ["0", "9", "2"]
+        assert eval_param_expr(ego.s, {}) == pytest.approx(93.6608312256975 - 53.0)
+        placed = next(d for d in got.diagnostics if "nothing assigns" in d.message)
+        assert placed.code == "W0802" and placed.label == "<Route>"
+    else:
+        miss = next(d for d in got.diagnostics if "leads along the route to lane 5" in d.message)
+        assert miss.code == "W0801" and miss.label == "<RoutePosition>" and miss.span.line == 14
