@@ -1608,8 +1608,9 @@ class _Translate(_Importer):
                                                 prev_clause):
                     steps = list(tr.group.steps) if tr.group else [TriggerPlan(clause=prev_clause)]
                     steps.append(TriggerPlan(clause=clause, after_s=E.Num(value=after) if after else None))
-                    info["triggers"][i] = TriggerPlan(condition=tr.condition, at_s=tr.at_s, after_s=tr.after_s,
-                                                      group=GroupPlan(mode="sequence", steps=steps))
+                    # The step's start (its hold and name too) now starts the sequence.
+                    info["triggers"][i] = tr.model_copy(update={"clause": None,
+                                                                "group": GroupPlan(mode="sequence", steps=steps)})
                     break
             else:
                 if prev_clause in info["behaviors"]:
@@ -1670,7 +1671,7 @@ class _Translate(_Importer):
                 if info.get("route_el") is None:
                     self.approx(info["route_from_position"], f"{who} is placed on a route that nothing assigns: "
                                                              "it drives that route")
-                got = self.route(_first(info.get("route_el"), info["route_from_position"]), who, lane, s)
+                got = self.route(_first(info.get("route_el"), info.get("route_from_position")), who, lane, s)
                 if got is not None:
                     fields["route"], fields["s"] = got
             if extra.get("yaw") is not None:
@@ -1851,7 +1852,12 @@ def _ahead(placed, a, b, params) -> bool:
 
 
 def _duration(clause: ClausePlan) -> float:
+    """How long a behaviour runs [s], where its settings say: `duration`, or a timed
+    trajectory's last vertex time; else 0."""
     d = clause.settings.get("duration")
+    times = clause.settings.get("times")
+    if not isinstance(d, E.Num) and isinstance(times, list) and times and isinstance(times[-1], E.Num):
+        d = times[-1]
     return float(d.value) if isinstance(d, E.Num) else 0.0
 
 

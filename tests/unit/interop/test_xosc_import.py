@@ -260,11 +260,13 @@ def test_esmini_trajectories_and_synchronisation(tmp_path):
     assert walker.s.value == 110.0
     # A timed polyline started by a held condition (delay 0.2 s).
     got = import_xosc(ESMINI / "xosc" / "trajectory-test.xosc", root=ESMINI)
-    step = next(t for a in got.plan.agents for t in a.triggers if t.clause and t.clause.name == "trajectory")
-    assert [v.value for v in step.clause.settings["times"]] == [0.0, 2.0, 4.0, 6.0]
+    step = next(t for a in got.plan.agents for t in a.triggers if t.group is not None)
+    first, clothoid = step.group.steps
+    assert [v.value for v in first.clause.settings["times"]] == [0.0, 2.0, 4.0, 6.0]
     assert step.hold_s.value == pytest.approx(0.2)
-    # Clothoid and NURBS shapes are said, not dropped.
-    assert sum("only polyline trajectories" in d.message for d in got.diagnostics) == 2
+    # The clothoid starts when the polyline ends (its last vertex time), sampled and said so.
+    assert step.group.mode == "sequence" and clothoid.after_s.value == 6.0 and "x" in clothoid.clause.settings
+    assert {d.label for d in got.diagnostics if "sampled as a polyline" in d.message} == {"<Clothoid>", "<Nurbs>"}
 
 
 def test_a_live_target_without_an_openscenario_form_travels_as_a_controller(tmp_path):
