@@ -133,6 +133,7 @@ class _Importer:
         # Traffic lights: controllers by name (signal ids, phase times, the element), the
         # controller of each signal, phase name -> state per controller, the light steps.
         self.light_ctls: dict[str, dict] = {}
+        self.ctl_names: dict[str, str] = {}  # a controller's name in the file -> in the language
         self.signal_owner: dict[str, str] = {}
         self.light_steps: list[TriggerPlan] = []
         self.signals_el = None
@@ -408,9 +409,11 @@ class _Translate(_Importer):
         return state
 
     def signal_controller(self, ctl) -> None:
-        """A TrafficSignalController: its phases as one green -> yellow -> red cycle (rotated:
-        the time before the first green is the offset). A phase's state is its first signal's."""
+        """A TrafficSignalController: its phases as one green -> yellow -> red cycle (phases in
+        a rotation of that order: the offset is where the cycle's first colour starts). A
+        phase's colour is its first signal's."""
         name = _safe_name(self.raw(ctl, "name"), set(self.light_ctls))
+        self.ctl_names.setdefault(self.raw(ctl, "name"), name)
         phases, signals = [], []
         for phase in ctl.iterfind("Phase"):
             states = list(phase.iterfind("TrafficSignalState"))
@@ -475,14 +478,15 @@ class _Translate(_Importer):
         self.signal_owner[sid] = name
         return name
 
-    def light_clauses(self, action, el) -> list[ClausePlan]:
+    def light_clauses(self, action) -> list[ClausePlan]:
         """A GlobalAction's TrafficSignalAction as `light C state S` clauses ([] after a diagnostic)."""
         state_action = _child(action, "InfrastructureAction", "TrafficSignalAction", "TrafficSignalStateAction")
         ctl_action = _child(action, "InfrastructureAction", "TrafficSignalAction", "TrafficSignalControllerAction")
         if ctl_action is not None:
-            ref = self.raw(ctl_action, "trafficSignalControllerRef")
+            raw = self.raw(ctl_action, "trafficSignalControllerRef")
+            ref = self.ctl_names.get(raw, raw)
             if ref not in self.light_ctls or self.light_ctls[ref].get("solo"):
-                self.error(ctl_action, f"no traffic signal controller '{ref}'",
+                self.error(ctl_action, f"no traffic signal controller '{raw}'",
                            f"controllers: {', '.join(c for c, v in self.light_ctls.items() if not v.get('solo'))}")
                 return []
             self.approx(ctl_action, f"phase '{self.raw(ctl_action, 'phase')}': the controller resumes its program "
@@ -497,7 +501,7 @@ class _Translate(_Importer):
             return []
         return [ClausePlan(keyword="light", name=ctl, settings={"state": state})]
 
-    def light_event(self, event, pairs: list, who) -> list[ClausePlan]:
+    def light_event(self, pairs: list) -> list[ClausePlan]:
         """The light clauses of one event's TrafficSignalActions ((action element, clause)
         pairs): one per controller; setting some of a controller's signals switches it all."""
         out, seen = [], {}
@@ -779,12 +783,12 @@ class _Translate(_Importer):
             if env is not None:
                 self.environment_action(env)
             elif _child(action, "InfrastructureAction", "TrafficSignalAction") is not None:
-                pairs += [(action, c) for c in self.light_clauses(action, action)]
+                pairs += [(action, c) for c in self.light_clauses(action)]
             else:
                 self.skip(action, "global actions other than the environment (traffic, parameters, "
                                   "signals) are not translated")
         # a light's state in Init: a step at time 0
-        self.light_steps += [TriggerPlan(clause=c) for c in self.light_event(init, pairs, None)]
+        self.light_steps += [TriggerPlan(clause=c) for c in self.light_event(pairs)]
         init_trajectories = []
         for private in init.iterfind("Actions/Private"):
             who = self.actor_name(private)
@@ -1355,7 +1359,7 @@ class _Translate(_Importer):
             if body.tag == "GlobalAction" and _child(body, "InfrastructureAction", "TrafficSignalAction") is not None:
                 exact = ((self.sidecar or {}).get("lights") or {}).get("steps", {}).get(name)
                 lights += [(body, ClausePlan.model_validate(exact))] if exact else \
-                    [(body, c) for c in self.light_clauses(body, body)]
+                    [(body, c) for c in self.light_clauses(body)]
                 continue
             if body.tag == "GlobalAction" and body.find("EnvironmentAction") is not None:
                 self.skip(body.find("EnvironmentAction"), "an environment change in an event is not translated: "
@@ -1383,7 +1387,7 @@ class _Translate(_Importer):
             if clause is not None:
                 clauses.append(clause)
         if lights:
-            self.light_step(event, self.light_event(event, lights, who), who, act_at)
+            self.light_step(event, self.light_event(lights), who, act_at)
         if not clauses:
             return
         trigger = event.find("StartTrigger")
@@ -1491,9 +1495,10 @@ class _Translate(_Importer):
             ctl = self.light_controller(sid, c)
             state = self.signal_state(sid, self.raw(c, "state"), c) if ctl else None
         else:
-            ctl, phase = self.raw(c, "trafficSignalControllerRef"), self.raw(c, "phase")
+            raw, phase = self.raw(c, "trafficSignalControllerRef"), self.raw(c, "phase")
+            ctl = self.ctl_names.get(raw, raw)
             if ctl not in self.light_ctls or self.light_ctls[ctl].get("solo"):
-                self.error(c, f"no traffic signal controller '{ctl}'")
+                self.error(c, f"no traffic signal controller '{raw}'")
                 return None
             state = self.light_ctls[ctl]["phases"].get(phase)
             if state is None:

@@ -618,3 +618,14 @@ def test_an_inline_route_position(lane, tmp_path):
     else:
         miss = next(d for d in got.diagnostics if "leads along the route to lane 5" in d.message)
         assert miss.code == "W0801" and miss.label == "<RoutePosition>" and miss.span.line == 14
+
+
+def test_a_controller_name_the_language_cannot_spell_is_renamed_everywhere(tmp_path):
+    phases = _phase("stop", 10, "on;off;off") + _phase("go", 5, "off;off;on") + _phase("wait", 2, "off;on;off")
+    (tmp_path / "m.xodr").write_text((ESMINI / "xodr" / "fabriksgatan_traffic_lights.xodr").read_text())
+    text = LIGHTS.replace("PHASES", phases).replace('"west"', '"west light"').replace("CTL", "west light")
+    (tmp_path / "s.xosc").write_text(text)
+    got = import_xosc(tmp_path / "s.xosc")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    (ctl,) = got.plan.controllers
+    assert "light(" + ctl.name + ") == green" in got.text and f"light {ctl.name} state program" in got.text
