@@ -33,7 +33,7 @@ short (docs/openscenario.md has the full table):
 - the duration -> the storyboard's stop trigger;
 - what OpenSCENARIO cannot say (the ego's stack and sensors, goal, tyre friction,
   the fault schedule, oracles, step, seeds, script groups, exact behaviour settings
-  and trigger formulas, `at_red run`, a program's offset) -> the side file `<stem>.addt.json` (named by the declared
+  and trigger formulas, `at_red run`) -> the side file `<stem>.addt.json` (named by the declared
   parameter `addt_sidecar`), listed in `Export.carried`. `xosc_import` reads it back.
 """
 
@@ -620,25 +620,41 @@ def _environment(run: _Run, models: list[ClausePlan]):
 
 # ---------------------------------------------------------------- traffic lights
 
+def _program_phases(times: list[tuple[str, float]], offset: float) -> list[tuple[str, str, float]]:
+    """(phase name, colour, duration [s]) from time 0 of a program whose first colour starts
+    at `offset` [s]: the cycle rotated to where it stands at 0 s, the colour it stands in
+    split into a first phase (`<colour>_at_start`, what is left of it) and its last one
+    (the part before 0 s), so the repeating phases are the program exactly."""
+    timed = [(k, d) for k, d in times if d > 0.0]
+    cycle = sum(d for _, d in timed)
+    if not timed:
+        return []
+    at = (-offset) % cycle  # where in the cycle 0 s falls
+    start = 0.0
+    for i, (colour, d) in enumerate(timed):
+        if at < start + d - 1e-9:
+            break
+        start += d
+    rest = timed[i + 1:] + timed[:i]
+    elapsed = at - start
+    if elapsed <= 1e-9:
+        return [(k, k, d) for k, d in [timed[i], *rest]]
+    return [(f"{colour}_at_start", colour, d - elapsed), *((k, k, dd) for k, dd in rest), (colour, colour, elapsed)]
+
+
 def _signal_controllers(run: _Run) -> list[xosc.TrafficSignalController]:
-    """Each controller's program as phases green, yellow, red (a phase of 0 s is left out),
-    each with the lamp states of the controller's signals. OpenSCENARIO's phases start at
-    time 0: a program offset is the side file's (listed)."""
+    """Each controller's program as phases green, yellow, red (a phase of 0 s is left out;
+    an offset rotates them, `_program_phases`), each with the lamp states of the
+    controller's signals."""
     out = []
     for c in run.plan.controllers:
         ctl = xosc.TrafficSignalController(c.name)
-        for state, time_s in (("green", c.green_s), ("yellow", c.yellow_s), ("red", c.red_s)):
-            duration = run.num(time_s)
-            if duration <= 0.0:
-                continue
-            phase = xosc.Phase(state, duration)
+        times = [("green", run.num(c.green_s)), ("yellow", run.num(c.yellow_s)), ("red", run.num(c.red_s))]
+        for name, colour, duration in _program_phases(times, run.num(c.offset_s)):
+            phase = xosc.Phase(name, duration)
             for sid in c.signals:
-                phase.add_signal_state(run.signal_id(sid), run.lamp_state(sid, state))
+                phase.add_signal_state(run.signal_id(sid), run.lamp_state(sid, colour))
             ctl.add_phase(phase)
-        offset = run.num(c.offset_s)
-        if offset:
-            run.carried.append(f"controller {c.name}: program offset {offset:g} s (OpenSCENARIO's phases start at "
-                               "time 0; exact in the side file)")
         if ctl.phases:
             out.append(ctl)
         else:
@@ -736,8 +752,8 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
         "holds": run.holds,
         "groups": run.groups,
         "group_events": sorted(run.group_events),
-        # Traffic lights: the controllers exactly (a program's offset has no OpenSCENARIO
-        # form), inline signals by name, and each light step's clause by event name.
+        # Traffic lights: the controllers' programs, inline signals by name, and each light
+        # step's clause by event name (`state program` has no exact OpenSCENARIO form).
         "lights": {"signals": [sig.model_dump(mode="json") for sig in plan.signals],
                    "signal_ids": run.signal_ids,
                    "controllers": {c.name: {k: run.num(getattr(c, k))

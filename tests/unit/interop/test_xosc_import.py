@@ -479,8 +479,9 @@ def test_lights_come_back_from_the_xosc_alone(tmp_path):
     got = _without_sidecar(spec, tmp_path)
     ctls = {c.name: c for c in got.plan.controllers}
     assert ctls["main"].signals == ["1", "2"] and ctls["other"].signals == ["3"]
-    # OpenSCENARIO's phases start at time 0: the offset is the side file's.
-    assert [e.value for e in (ctls["main"].green_s, ctls["main"].red_s, ctls["main"].offset_s)] == [60.0, 20.0, 0.0]
+    # The program's offset is in the phases' order: the same program comes back.
+    assert [e.value for e in (ctls["main"].green_s, ctls["main"].yellow_s, ctls["main"].red_s,
+                              ctls["main"].offset_s)] == [60.0, 2.0, 20.0, 1.0]
     steps = [(tr.clause.name, tr.clause.settings["state"]) for tr in got.plan.light_steps]
     assert steps == [("main", "red"), ("main", "program"), ("other", "yellow"), ("other", "green")]
     assert "when light(main) == red then light other state green" in got.text
@@ -629,3 +630,32 @@ def test_a_controller_name_the_language_cannot_spell_is_renamed_everywhere(tmp_p
     assert got.text is not None, [d.message for d in got.diagnostics]
     (ctl,) = got.plan.controllers
     assert "light(" + ctl.name + ") == green" in got.text and f"light {ctl.name} state program" in got.text
+
+
+@pytest.mark.parametrize("green, yellow, red, offset", [(5, 2, 10, 0), (5, 2, 10, 3), (5, 2, 10, 6),
+                                                        (5, 2, 10, 16.5), (4, 0, 6, 9), (0, 3, 7, 2), (20, 3, 20, 41)])
+def test_a_programs_phases_carry_its_offset(green, yellow, red, offset, tmp_path):
+    """Export writes a program as phases from time 0 (an offset rotates and splits them);
+    the import reads the same program back from the .xosc alone."""
+    from addt_dsl.runtime.lights import Program
+
+    source = f"""scenario p {{
+  duration 5 s
+  road r {{
+    line length 300 m
+    lanes right 1
+  }}
+  lights {{
+    signal s1 road r at 100 m
+    controller c signals [s1] green {green} s yellow {yellow} s red {red} s offset {offset} s
+  }}
+  ego car on r lane -1 at 10 m speed 5 m/s
+}}
+"""
+    spec = expand(compile_source(source, "p.addt").plan).specs[0]
+    got = _without_sidecar(spec, tmp_path)
+    (ctl,) = got.plan.controllers
+    back = Program(*(e.value for e in (ctl.green_s, ctl.yellow_s, ctl.red_s, ctl.offset_s)))
+    times = np.arange(0.0, 120.0, 0.25) + 0.01
+    assert np.array_equal(back.state(times), Program(green, yellow, red, offset).state(times))
+    assert not any(d.code == "W0802" and "cycle" in d.message for d in got.diagnostics)
