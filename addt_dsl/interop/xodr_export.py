@@ -16,7 +16,7 @@ from xml.etree import ElementTree as ET  # serialises trees we build; untrusted 
 
 from scenariogeneration import xodr
 
-from addt_dsl.plan import RoadPlan, ScenarioPlan
+from addt_dsl.plan import RoadPlan, ScenarioPlan, SignalPlan
 
 
 class ExportError(Exception):
@@ -31,6 +31,9 @@ class RoadFile:
     text: str
     road_ids: dict[str, str] = field(default_factory=dict)  # plan road name -> OpenDRIVE road id
     generated: bool = True  # False: an imported map, copied
+    # Signal declared in the language (`signal s1 road r at 150 m`) -> its `<signal id>` in the
+    # generated file: numbered 1, 2, ... (esmini reads signal ids as integers).
+    signal_ids: dict[str, str] = field(default_factory=dict)
 
 
 def _geometry(seg):
@@ -43,6 +46,22 @@ def _geometry(seg):
     if seg.kind == "param_poly3":
         return xodr.ParamPoly3(*seg.coefficients, prange="arcLength", length=seg.length_m)
     raise ExportError(f"road geometry {seg.kind!r} has no OpenDRIVE writer")
+
+
+# An inline signal as an OpenDRIVE traffic light: type 1000001 (red, yellow, green lamps).
+LIGHT_TYPE = "1000001"
+
+
+def _signal(sig: SignalPlan) -> xodr.Signal:
+    """`signal NAME road R at S [lane L]`: facing traffic along +s (no lane, or a right-hand
+    lane) or against it (a left-hand lane), governing lane L only when one is given."""
+    against = bool(sig.lanes) and sig.lanes[0] > 0
+    # No id here: scenariogeneration numbers signals per process; `road_file` writes ours.
+    out = xodr.Signal(sig.s_m, 0.0, "OpenDRIVE", LIGHT_TYPE, name=sig.name, dynamic=xodr.Dynamic.yes,
+                      orientation=xodr.Orientation.negative if against else xodr.Orientation.positive)
+    if sig.lanes:
+        out.add_validity(sig.lanes[0], sig.lanes[0])
+    return out
 
 
 def _road(road: RoadPlan, road_id: int) -> xodr.Road:
@@ -83,11 +102,23 @@ def road_file(plan: ScenarioPlan, stem: str) -> RoadFile:
                         road_ids={r.name: str(r.xodr_road_id) for r in imported})
     odr = xodr.OpenDrive(plan.name, revMajor="1", revMinor="8")
     ids = {}
+    signal_ids = {sig.name: str(i) for i, sig in enumerate(plan.signals, start=1)}
     for i, road in enumerate(plan.roads, start=1):
-        odr.add_road(_road(road, i))
+        built = _road(road, i)
+        for sig in plan.signals:
+            if sig.road == road.name:
+                built.add_signal(_signal(sig))
+        odr.add_road(built)
         ids[road.name] = str(i)
     odr.adjust_startpoints()
-    return RoadFile(name=f"{stem}.xodr", text=xml_text(odr.get_element()), road_ids=ids)
+    element = odr.get_element()
+    for sig in element.iter("signal"):
+        # scenariogeneration always writes a country; OpenDRIVE 1.8 takes ISO 3166 codes only
+        # and 1000001 is OpenDRIVE's own generic traffic light: the optional attribute goes.
+        sig.attrib.pop("country", None)
+        # Its ids are unique per process, not per file (a second export would renumber): ours.
+        sig.set("id", signal_ids[sig.get("name")])
+    return RoadFile(name=f"{stem}.xodr", text=xml_text(element), road_ids=ids, signal_ids=signal_ids)
 
 
 def xml_text(element) -> str:

@@ -24,10 +24,16 @@ short (docs/openscenario.md has the full table):
   within a condition group, `or`
   across groups; a formula with no such form becomes a `ParameterCondition` on a
   declared, never-set parameter `addt_condition_N`;
+- traffic lights -> `RoadNetwork/TrafficSignals`: one `TrafficSignalController` per
+  controller, phases green, yellow, red with each signal's lamp states (esmini's
+  `on;off;off` strings, `LAMPS`); light steps -> events of an actor-less maneuver group
+  (`TrafficSignalStateAction`s on the controller's signals, `program` a
+  `TrafficSignalControllerAction`); `light(C) == S` -> a `TrafficSignalCondition` on C's
+  first signal; inline `signal`s are written into the generated `.xodr` (ids 1, 2, ...);
 - the duration -> the storyboard's stop trigger;
 - what OpenSCENARIO cannot say (the ego's stack and sensors, goal, tyre friction,
   the fault schedule, oracles, step, seeds, script groups, exact behaviour settings
-  and trigger formulas) -> the side file `<stem>.addt.json` (named by the declared
+  and trigger formulas, `at_red run`) -> the side file `<stem>.addt.json` (named by the declared
   parameter `addt_sidecar`), listed in `Export.carried`. `xosc_import` reads it back.
 """
 
@@ -44,7 +50,7 @@ from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, road_file, xml_text
-from addt_dsl.plan import ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
+from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
@@ -61,7 +67,43 @@ RULES = {"<": xosc.Rule.lessThan, "<=": xosc.Rule.lessOrEqual, ">": xosc.Rule.gr
 FLIP = {"<": ">", "<=": ">=", ">": "<", ">=": "<=", "==": "==", "!=": "!="}
 CATEGORY = {"car": xosc.VehicleCategory.car, "truck": xosc.VehicleCategory.truck,
             "cyclist": xosc.VehicleCategory.bicycle}
-__all__ = ["Export", "ExportError", "export_run", "SIDECAR_FORMAT", "SIDECAR_PARAM", "CONTROLLER_PREFIX"]
+# esmini's lamps of an OpenDRIVE traffic light, top to bottom, by `type` or `type.subtype`
+# (its RoadManager traffic_light_type_map); a TrafficSignalState's `state` gives each lamp's
+# mode in this order ("on;off;off": red). Other types: three lamps, red, yellow, green.
+LAMPS = {"1000001": ("red", "yellow", "green"), "1000011": ("red", "yellow", "green"),
+         "1000013": ("red", "yellow", "green"), "1000002": ("red", "green"),
+         "1000002.30": ("red", "red", "green"), "1000009.10": ("red", "yellow"), "1000009.20": ("yellow", "green")}
+LIGHTS_GROUP = "addt_lights"  # the maneuver group (no actors) of the light steps
+__all__ = ["Export", "ExportError", "export_run", "SIDECAR_FORMAT", "SIDECAR_PARAM", "CONTROLLER_PREFIX", "LAMPS",
+           "LIGHTS_GROUP", "lamps_of", "lamp_state", "state_of_lamps"]
+
+
+def lamps_of(sig_type: str, subtype: str = "") -> tuple[str, ...]:
+    """The lamp colours of an OpenDRIVE signal of this type and subtype, top to bottom."""
+    if subtype not in ("", "-1") and f"{sig_type}.{subtype}" in LAMPS:
+        return LAMPS[f"{sig_type}.{subtype}"]
+    return LAMPS.get(sig_type, LAMPS["1000001"])
+
+
+def lamp_state(lamps: tuple[str, ...], state: str) -> str:
+    """The lamp modes that show `state` (green, yellow, red): its lamp on, the others off; a
+    light without that colour shows the nearest one it has (red for yellow, else all off)."""
+    colour = state if state in lamps else ("red" if state == "yellow" and "red" in lamps else None)
+    first = lamps.index(colour) if colour is not None else -1
+    return ";".join("on" if i == first else "off" for i in range(len(lamps)))
+
+
+def state_of_lamps(lamps: tuple[str, ...], text: str) -> str | None:
+    """green, yellow or red from a state string: lamp modes (`off;off;on`, `flashing`
+    counts as on) or a colour word (`Red`, `amber`); None when it shows none or two."""
+    word = text.strip().lower()
+    if word in ("green", "yellow", "red", "amber"):
+        return "yellow" if word == "amber" else word
+    modes = [m.strip().lower() for m in text.split(";") if m.strip()]
+    if len(modes) != len(lamps):
+        return None
+    on = {lamps[i] for i, m in enumerate(modes) if m in ("on", "flashing")}
+    return on.pop() if len(on) == 1 else None
 
 
 @dataclass
@@ -96,6 +138,16 @@ class _Run:
         self.by_name = {a.name: a for a in self.plan.actors()}
         self.names: set[str] = set()
         self.along = {a.name for a in self.plan.actors() if _along_s(self.plan, a, int(round(self.num(a.lane))))}
+        self.controllers = {c.name: c for c in self.plan.controllers}
+        self.signal_ids: dict[str, str] = {}  # inline signal name -> its id in the generated .xodr
+        self.signal_lamps: dict[str, tuple[str, ...]] = {}  # map signal id -> lamp colours
+        self.light_steps: dict[str, dict] = {}  # event -> exact light clause (side file)
+
+    def signal_id(self, sid: str) -> str:
+        return self.signal_ids.get(sid, sid)
+
+    def lamp_state(self, sid: str, state: str) -> str:
+        return lamp_state(self.signal_lamps.get(self.signal_id(sid), LAMPS["1000001"]), state)
 
     def num(self, e) -> float:
         return float(eval_param_expr(e, self.params))
@@ -350,6 +402,13 @@ def _compare(run: _Run, node, name: str):
                                               coordinate_system=xosc.CoordinateSystem.road if fn == "gap"
                                               else xosc.CoordinateSystem.entity)
         return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, args[0])
+    if fn == "light" and len(args) == 1 and op == "==" and args[0] in run.controllers:
+        state = next((k for k, code in LIGHT_STATES.items() if code == value), None)
+        if state is None or not run.controllers[args[0]].signals:
+            return None
+        sid = run.controllers[args[0]].signals[0]  # the controller's signals all show its state
+        return xosc.ValueTrigger(name, 0, xosc.ConditionEdge.none,
+                                 xosc.TrafficSignalCondition(run.signal_id(sid), run.lamp_state(sid, state)))
     if fn == "ttc" and len(args) == 2:
         cond = xosc.TimeToCollisionCondition(value, rule, alongroute=False, freespace=True, entity=args[1],
                                              coordinate_system=xosc.CoordinateSystem.road)
@@ -559,6 +618,92 @@ def _environment(run: _Run, models: list[ClausePlan]):
     return xosc.EnvironmentAction(xosc.Environment("addt_environment", weather=weather))
 
 
+# ---------------------------------------------------------------- traffic lights
+
+def _program_phases(times: list[tuple[str, float]], offset: float) -> list[tuple[str, str, float]]:
+    """(phase name, colour, duration [s]) from time 0 of a program whose first colour starts
+    at `offset` [s]: the cycle rotated to where it stands at 0 s, the colour it stands in
+    split into a first phase (`<colour>_at_start`, what is left of it) and its last one
+    (the part before 0 s), so the repeating phases are the program exactly."""
+    timed = [(k, d) for k, d in times if d > 0.0]
+    cycle = sum(d for _, d in timed)
+    if not timed:
+        return []
+    at = (-offset) % cycle  # where in the cycle 0 s falls
+    start = 0.0
+    for i, (colour, d) in enumerate(timed):
+        if at < start + d - 1e-9:
+            break
+        start += d
+    rest = timed[i + 1:] + timed[:i]
+    elapsed = at - start
+    if elapsed <= 1e-9:
+        return [(k, k, d) for k, d in [timed[i], *rest]]
+    return [(f"{colour}_at_start", colour, d - elapsed), *((k, k, dd) for k, dd in rest), (colour, colour, elapsed)]
+
+
+def _signal_controllers(run: _Run) -> list[xosc.TrafficSignalController]:
+    """Each controller's program as phases green, yellow, red (a phase of 0 s is left out;
+    an offset rotates them, `_program_phases`), each with the lamp states of the
+    controller's signals."""
+    out = []
+    for c in run.plan.controllers:
+        ctl = xosc.TrafficSignalController(c.name)
+        times = [("green", run.num(c.green_s)), ("yellow", run.num(c.yellow_s)), ("red", run.num(c.red_s))]
+        for name, colour, duration in _program_phases(times, run.num(c.offset_s)):
+            phase = xosc.Phase(name, duration)
+            for sid in c.signals:
+                phase.add_signal_state(run.signal_id(sid), run.lamp_state(sid, colour))
+            ctl.add_phase(phase)
+        if ctl.phases:
+            out.append(ctl)
+        else:
+            run.carried.append(f"controller {c.name}: a program of 0 s (no phases; the side file has it)")
+    return out
+
+
+def _light_event(run: _Run, step: TriggerPlan) -> xosc.Event:
+    """A light step: `light C state S` sets each of C's signals (TrafficSignalStateAction);
+    `state program` hands C back to its phases (a TrafficSignalControllerAction to its
+    first phase; addt-dsl resumes the program's own cycle: exact in the side file)."""
+    c = run.controllers[step.clause.name]
+    state = step.clause.settings["state"]
+    name = run.unique(f"light_{c.name}_{state}")
+    event = xosc.Event(name, xosc.Priority.parallel)
+    if state == LIGHT_PROGRAM:
+        first = next((k for k, t in (("green", c.green_s), ("yellow", c.yellow_s), ("red", c.red_s))
+                      if run.num(t) > 0.0), "green")
+        event.add_action(run.unique(f"{name}_action"), xosc.TrafficSignalControllerAction(first, c.name))
+        run.carried.append(f"light {c.name} state program ({name}): a TrafficSignalControllerAction to phase "
+                           f"{first} (addt-dsl resumes the program's cycle)")
+    else:
+        for sid in c.signals:
+            event.add_action(run.unique(f"{name}_action"),
+                             xosc.TrafficSignalStateAction(run.signal_id(sid), run.lamp_state(sid, state)))
+    event.add_trigger(_start_trigger(run, step, name, None))
+    run.light_steps[name] = step.clause.model_dump(mode="json")
+    return event
+
+
+def _lights_group(run: _Run) -> xosc.ManeuverGroup | None:
+    if not run.plan.light_steps:
+        return None
+    maneuver = xosc.Maneuver(f"{LIGHTS_GROUP}_maneuver")
+    for step in run.plan.light_steps:
+        maneuver.add_event(_light_event(run, step))
+    group = xosc.ManeuverGroup(LIGHTS_GROUP)
+    group.add_maneuver(maneuver)
+    return group
+
+
+def _lamps(plan, roads) -> dict[str, tuple[str, ...]]:
+    """The lamp colours of each signal of the run's map (a generated file: type 1000001)."""
+    if roads.generated:
+        return {}
+    network = build_network([plan.roads[0]])[plan.roads[0].name]
+    return {sig.id: lamps_of(sig.type, sig.subtype) for road in network.roads.values() for sig in road.signals}
+
+
 # ---------------------------------------------------------------- side file
 
 def _sidecar(run: _Run, pinned: RunSpec) -> dict:
@@ -577,6 +722,8 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
         for key in ("goal_s", "mu"):
             if getattr(a, key) is not None:
                 carried.append(f"{a.name}: {key.removesuffix('_s')}")
+        if a.ignore_lights:
+            carried.append(f"{a.name}: at_red run (runs red lights; OpenSCENARIO has no such setting)")
     carried.append(f"run: step {plan.step_s} s, seed {pinned.seed}")
     return {
         "format": SIDECAR_FORMAT,
@@ -595,7 +742,8 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
                             "goal_s": None if a.goal_s is None else run.num(a.goal_s),
                             "mu": None if a.mu is None else run.num(a.mu),
                             "stack": None if a.stack is None else a.stack.model_dump(mode="json"),
-                            "sensors": [s.model_dump(mode="json") for s in a.sensors]}
+                            "sensors": [s.model_dump(mode="json") for s in a.sensors],
+                            "ignore_lights": a.ignore_lights}
                    for a in plan.actors()},
         "faults": [f.model_dump(mode="json") for f in pinned.faults],
         "oracles": [o.model_dump(mode="json") for o in plan.oracles],
@@ -604,6 +752,14 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
         "holds": run.holds,
         "groups": run.groups,
         "group_events": sorted(run.group_events),
+        # Traffic lights: the controllers' programs, inline signals by name, and each light
+        # step's clause by event name (`state program` has no exact OpenSCENARIO form).
+        "lights": {"signals": [sig.model_dump(mode="json") for sig in plan.signals],
+                   "signal_ids": run.signal_ids,
+                   "controllers": {c.name: {k: run.num(getattr(c, k))
+                                            for k in ("green_s", "yellow_s", "red_s", "offset_s")}
+                                   for c in plan.controllers},
+                   "steps": run.light_steps},
     }
 
 
@@ -618,6 +774,8 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
     out.mkdir(parents=True, exist_ok=True)
     roads = road_file(plan, stem)
     run = _Run(pinned, roads.road_ids)
+    run.signal_ids = dict(roads.signal_ids)
+    run.signal_lamps = _lamps(plan, roads)
 
     params = xosc.ParameterDeclarations()
     for p in plan.params:  # the run's values, for reference: the file uses the numbers
@@ -649,6 +807,9 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
             group.add_actor(a.name)
             group.add_maneuver(maneuver)
             act.add_maneuver_group(group)
+    lights = _lights_group(run)
+    if lights is not None:
+        act.add_maneuver_group(lights)
     for param in run.placeholders:
         params.add_parameter(xosc.Parameter(param, xosc.ParameterType.boolean, "false"))
     if not act.maneuvergroup:  # an act needs a maneuver group: an empty one for the ego
@@ -662,9 +823,12 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
     storyboard = xosc.StoryBoard(init, stop)
     storyboard.add_story(story)
 
+    network = xosc.RoadNetwork(roadfile=roads.name)
+    for ctl in _signal_controllers(run):
+        network.add_traffic_signal_controller(ctl)
     sidecar = _sidecar(run, pinned)
     scenario = xosc.Scenario(plan.name, "addt-dsl", params, entities, storyboard,
-                             xosc.RoadNetwork(roadfile=roads.name), xosc.Catalog(), osc_minor_version=OSC_MINOR)
+                             network, xosc.Catalog(), osc_minor_version=OSC_MINOR)
     xosc_path = out / f"{stem}.xosc"
     xodr_path = out / roads.name
     sidecar_path = out / f"{stem}.addt.json"

@@ -38,9 +38,9 @@ from addt_dsl.compiler.rules.oracles import NO_CLAUSES
 from addt_dsl.confine import Refused, confine
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.interop.xosc_export import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM
-from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, GroupPlan, OraclePlan, ParamPlan, RoadPlan,
-                           ScenarioPlan, TriggerPlan)
+from addt_dsl.interop.xosc_export import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM, lamps_of, state_of_lamps
+from addt_dsl.plan import (LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, ConcreteFault, ControllerPlan, GroupPlan,
+                           OraclePlan, ParamPlan, RoadPlan, ScenarioPlan, TriggerPlan)
 from addt_dsl.printer import PrinterError, params_referenced, pinned_fault_plan, print_plan, side_files
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
@@ -130,6 +130,13 @@ class _Importer:
         self.anchors: dict[str, tuple] = {}  # no-op events that start a group: name -> (actor, start fields)
         self.placed: dict[str, tuple] = {}  # actor -> (road name, lane, s, offset)
         self.environment: list[ClausePlan] = []  # weather and light from an EnvironmentAction
+        # Traffic lights: controllers by name (signal ids, phase times, the element), the
+        # controller of each signal, phase name -> state per controller, the light steps.
+        self.light_ctls: dict[str, dict] = {}
+        self.ctl_names: dict[str, str] = {}  # a controller's name in the file -> in the language
+        self.signal_owner: dict[str, str] = {}
+        self.light_steps: list[TriggerPlan] = []
+        self.signals_el = None
         self.doc = None
 
     # -- diagnostics
@@ -380,9 +387,133 @@ class _Translate(_Importer):
             self.error(logic, f"cannot use {path.name}: {exc}", code="E0403")
             raise _Stop from None
         self.xodr_name, self.xodr_text = path.name, text
-        if root.find("RoadNetwork/TrafficSignals") is not None:
-            self.skip(root.find("RoadNetwork/TrafficSignals"), "traffic signal controllers are not translated",
-                      "signals are part of the road-network work (issue 15)")
+        self.signals_el = root.find("RoadNetwork/TrafficSignals")
+        for ctl in root.iterfind("RoadNetwork/TrafficSignals/TrafficSignalController"):
+            self.signal_controller(ctl)
+
+    # -- traffic lights
+
+    def signal_state(self, sid: str, text: str, el) -> str | None:
+        """green, yellow or red shown by signal `sid` in state `text` (its lamps from the map's
+        signal type); None after a diagnostic."""
+        found = self.network.signal(sid)
+        if found is None:
+            self.skip(el, f"{self.xodr_name} has no signal '{sid}'",
+                      f"traffic lights on the map: {', '.join(self.network.signal_ids(dynamic_only=True)) or '(none)'}")
+            return None
+        lamps = lamps_of(found[1].type, found[1].subtype)
+        state = state_of_lamps(lamps, text)
+        if state is None:
+            self.skip(el, f"state '{text}' of signal {sid} shows no one colour of its lamps ({';'.join(lamps)})",
+                      "translated: one lamp on or flashing, or a word green, yellow (amber), red")
+        return state
+
+    def signal_controller(self, ctl) -> None:
+        """A TrafficSignalController: its phases as one green -> yellow -> red cycle (phases in
+        a rotation of that order: the offset is where the cycle's first colour starts). A
+        phase's colour is its first signal's."""
+        name = _safe_name(self.raw(ctl, "name"), set(self.light_ctls))
+        self.ctl_names.setdefault(self.raw(ctl, "name"), name)
+        phases, signals = [], []
+        for phase in ctl.iterfind("Phase"):
+            states = list(phase.iterfind("TrafficSignalState"))
+            for st in states:
+                sid = self.raw(st, "trafficSignalId")
+                if sid not in signals and self.network.signal(sid) is not None:
+                    signals.append(sid)
+            state = self.signal_state(self.raw(states[0], "trafficSignalId"), self.raw(states[0], "state"),
+                                      states[0]) if states else None
+            if state is None:
+                state = {"amber": "yellow"}.get((phase.get("name") or "").lower(), (phase.get("name") or "").lower())
+                if state not in LIGHT_STATES:
+                    self.approx(phase, f"phase '{phase.get('name')}' shows no traffic-light colour: read as red")
+                    state = "red"
+            phases.append((self.raw(phase, "name"), state, self.value(phase, "duration", units.TIME)))
+        if ctl.get("delay") is not None or ctl.get("reference") is not None:
+            self.skip(ctl, "a controller's delay to a reference controller is not translated: its phases start at 0 s")
+        if not signals:
+            self.skip(ctl, f"controller '{name}' switches no signal of {self.xodr_name}: not translated")
+            return
+        cycle = {"green": 0.0, "yellow": 0.0, "red": 0.0}
+        for _, st, d in phases:
+            cycle[st] += d
+        total = sum(cycle.values())
+        timed = [(st, d) for _, st, d in phases if d > 0]
+        # Runs of one colour, the last joined to the first when they match (the cycle repeats).
+        runs = [st for i, (st, _) in enumerate(timed) if i == 0 or timed[i - 1][0] != st]
+        if len(runs) > 1 and runs[0] == runs[-1]:
+            runs.pop()
+        wanted = [k for k in ("green", "yellow", "red") if cycle[k] > 0]
+        offset = 0.0
+        if runs and any(runs[i:] + runs[:i] == wanted for i in range(len(runs))):
+            # The language's program starts its first colour at the offset: where that run starts.
+            lead = wanted[0]
+            i = next(i for i, (st, _) in enumerate(timed) if st == lead and timed[i - 1][0] != lead) \
+                if len(timed) > 1 else 0
+            offset = sum(d for _, d in timed[:i]) % total if total > 0 else 0.0
+        elif timed:
+            self.approx(ctl, f"controller '{name}': phases {', '.join(st for st, _ in timed)} as one green, "
+                             "yellow, red cycle of their summed times")
+        exact = ((self.sidecar or {}).get("lights") or {}).get("controllers", {}).get(name)
+        if exact:  # the export's program exactly (its offset has no OpenSCENARIO form)
+            cycle = {k: float(exact[f"{k}_s"]) for k in cycle}
+            offset = float(exact["offset_s"])
+        self.light_ctls[name] = {"signals": signals, "el": ctl, "offset": offset,
+                                 "phases": {pname: st for pname, st, _ in phases}, **cycle}
+        for sid in signals:
+            self.signal_owner.setdefault(sid, name)
+
+    def light_controller(self, sid: str, el) -> str | None:
+        """The controller that switches signal `sid`: the file's, or one of its own (a signal
+        set directly, as esmini's files do: `controller signal_N signals [N]`)."""
+        if sid in self.signal_owner:
+            return self.signal_owner[sid]
+        if self.network.signal(sid) is None:
+            self.skip(el, f"{self.xodr_name} has no signal '{sid}'",
+                      f"traffic lights on the map: {', '.join(self.network.signal_ids(dynamic_only=True)) or '(none)'}")
+            return None
+        name = _safe_name(f"signal_{sid}" if re.fullmatch(r"\w+", sid) else "signal", set(self.light_ctls))
+        self.light_ctls[name] = {"signals": [sid], "el": el, "offset": 0.0, "phases": {}, "solo": True,
+                                 "green": 0.0, "yellow": 0.0, "red": 0.0}
+        self.signal_owner[sid] = name
+        return name
+
+    def light_clauses(self, action) -> list[ClausePlan]:
+        """A GlobalAction's TrafficSignalAction as `light C state S` clauses ([] after a diagnostic)."""
+        state_action = _child(action, "InfrastructureAction", "TrafficSignalAction", "TrafficSignalStateAction")
+        ctl_action = _child(action, "InfrastructureAction", "TrafficSignalAction", "TrafficSignalControllerAction")
+        if ctl_action is not None:
+            raw = self.raw(ctl_action, "trafficSignalControllerRef")
+            ref = self.ctl_names.get(raw, raw)
+            if ref not in self.light_ctls or self.light_ctls[ref].get("solo"):
+                self.error(ctl_action, f"no traffic signal controller '{raw}'",
+                           f"controllers: {', '.join(c for c, v in self.light_ctls.items() if not v.get('solo'))}")
+                return []
+            self.approx(ctl_action, f"phase '{self.raw(ctl_action, 'phase')}': the controller resumes its program "
+                                    "(`state program`), in its own cycle")
+            return [ClausePlan(keyword="light", name=ref, settings={"state": LIGHT_PROGRAM})]
+        if state_action is None:
+            return []
+        sid = self.raw(state_action, "name")
+        ctl = self.light_controller(sid, state_action)
+        state = self.signal_state(sid, self.raw(state_action, "state"), state_action) if ctl else None
+        if state is None:
+            return []
+        return [ClausePlan(keyword="light", name=ctl, settings={"state": state})]
+
+    def light_event(self, pairs: list) -> list[ClausePlan]:
+        """The light clauses of one event's TrafficSignalActions ((action element, clause)
+        pairs): one per controller; setting some of a controller's signals switches it all."""
+        out, seen = [], {}
+        for el, clause in pairs:
+            seen.setdefault((clause.name, clause.settings["state"]), []).append(el)
+        for (ctl, state), els in seen.items():
+            info = self.light_ctls[ctl]
+            if state != LIGHT_PROGRAM and len(els) < len(info["signals"]):
+                self.approx(els[0], f"sets {len(els)} of the {len(info['signals'])} signals of controller '{ctl}': "
+                                    "the language switches the whole controller")
+            out.append(ClausePlan(keyword="light", name=ctl, settings={"state": state}))
+        return out
 
     def road(self, road_id: str, el) -> str:
         if road_id not in self.network.roads:
@@ -464,11 +595,11 @@ class _Translate(_Importer):
                              "width_m": width if width and width > 0 else None, "el": obj,
                              "behaviors": [], "triggers": [], "lane_now": None, "speed_now": 0.0}
 
-    def catalog_entry(self, ref):
+    def catalog_entry(self, ref, kinds=("Vehicle", "Pedestrian", "MiscObject")):
         catalog, entry = self.raw(ref, "catalogName"), self.raw(ref, "entryName")
         locations = {loc.tag.removesuffix("Catalog"): loc.find("Directory")
                      for loc in self.doc.iterfind("CatalogLocations/*")}
-        for kind in ("Vehicle", "Pedestrian", "MiscObject"):
+        for kind in kinds:
             directory = locations.get(kind)
             if directory is None:
                 continue
@@ -482,6 +613,10 @@ class _Translate(_Importer):
                 for el in root.iterfind(f"Catalog/{kind}") if root is not None else ():
                     if el.get("name") == entry:
                         return el
+        if "Route" in kinds:
+            self.skip(ref, f"route '{entry}' of catalog {catalog} not found",
+                      "catalogs are read from <CatalogLocations> inside the root directory")
+            return None
         self.approx(ref, f"catalog entry '{entry}' of {catalog} not found: a default car "
                          f"({VEHICLES['car'].length_m} x {VEHICLES['car'].width_m} m)",
                     "catalogs are read from <CatalogLocations> inside the root directory")
@@ -507,6 +642,8 @@ class _Translate(_Importer):
             return road, lane, self.number(pos, "s", units.LENGTH), self.number(pos, "offset", units.LENGTH, 0.0)
         if pos.tag in ("RoadPosition", "WorldPosition", "RelativeRoadPosition", "RelativeLanePosition"):
             return self.position_from_road(pos, who)
+        if pos.tag == "RoutePosition":
+            return self.route_position(pos, who)
         self.skip(pos, f"<{pos.tag}> is not translated: {who} starts at the start of the first road",
                   "lane, road, world and relative road/lane positions are translated")
         return None
@@ -550,6 +687,71 @@ class _Translate(_Importer):
         offset = t - odr.lane_center_t(lane, s)
         return road_name, lane, E.Num(value=round(s, 9)), E.Num(value=round(offset, 9))
 
+    def route_element(self, ref_parent):
+        """The <Route> of an AssignRouteAction or a RouteRef: inline, or a route catalog's
+        entry (its parameters as the reference assigns them are not read); None after a
+        diagnostic."""
+        inline = ref_parent.find("Route")
+        if inline is not None:
+            return inline
+        ref = ref_parent.find("CatalogReference")
+        if ref is None:
+            self.error(ref_parent, f"<{ref_parent.tag}> needs a <Route> or a <CatalogReference>")
+            return None
+        return self.catalog_entry(ref, kinds=("Route",))
+
+    def route_position(self, pos, who: str):
+        """A RoutePosition `FromLaneCoordinates`: `pathS` along the route from its first
+        waypoint, in `laneId` there. Placed on the route's first road (the language counts
+        `at S` along the route from its entry end), in the first-road lane whose route leg
+        is `laneId` where the point is; the route becomes the actor's when nothing assigns
+        one. (road, lane, s, offset) or None after a diagnostic."""
+        route_el = self.route_element(_first(pos.find("RouteRef"), pos))
+        lane_coords = pos.find("InRoutePosition/FromLaneCoordinates")
+        if route_el is None or lane_coords is None:
+            if route_el is not None:
+                self.skip(_first(_only_child(pos.find("InRoutePosition")) if pos.find("InRoutePosition") is not None
+                                 else None, pos), "a route position is translated from lane coordinates only")
+            return None
+        path_s, lane_id = self.value(lane_coords, "pathS", units.LENGTH), int(self.value(lane_coords, "laneId"))
+        offset = self.number(lane_coords, "laneOffset", units.LENGTH, 0.0)
+        first_wp = route_el.find("Waypoint/Position/LanePosition")
+        stops = []
+        for wp in route_el.iterfind("Waypoint/Position/*"):
+            if wp.get("roadId") is None:
+                self.skip(wp, "a waypoint that is not a lane or road position: the route position is not translated")
+                return None
+            if not stops or stops[-1] != self.resolve(wp.get("roadId")):
+                stops.append(self.resolve(wp.get("roadId")))
+        if first_wp is None or not stops or path_s < 0:
+            self.skip(pos, "a route position needs a route that starts at a lane position and pathS >= 0")
+            return None
+        road_name = self.road(stops[0], first_wp)
+        odr = self.network.road(stops[0])
+        s_wp = self.value(first_wp, "s", units.LENGTH)
+        candidates = sorted(odr.driving_lane_ids(min(max(s_wp, 0.0), odr.length)), key=lambda i: (i != lane_id, abs(i)))
+        for lane in candidates:
+            try:
+                _, legs = resolve_route(self.network, stops, lane, None)
+            except RouteError:
+                continue
+            u = abs(s_wp - legs[0].s_from) + path_s  # from the first road's entry end
+            at, done = legs[-1], 0.0
+            for leg in legs:
+                if u <= done + abs(leg.s_to - leg.s_from) + 1e-9:
+                    at = leg
+                    break
+                done += abs(leg.s_to - leg.s_from)
+            if at.lane == lane_id:
+                break
+        else:
+            self.skip(pos, f"no lane of road {stops[0]} leads along the route to lane {lane_id} at pathS "
+                           f"{path_s:g} m: not translated")
+            return None
+        s_road = s_wp + legs[0].direction * path_s  # a station on the first road, or its continuation
+        self.actors.get(who, {}).setdefault("route_from_position", route_el)
+        return road_name, lane, E.Num(value=round(s_road, 9)), offset
+
     def against_s(self, pos_el, placed) -> bool:
         """Whether the entity faces against its lane's driving direction (addt-dsl, like
         OpenSCENARIO's default, drives an actor in its lane's direction)."""
@@ -575,13 +777,18 @@ class _Translate(_Importer):
     def init(self, init) -> None:
         if init is None:
             return
+        pairs = []
         for action in init.iterfind("Actions/GlobalAction"):
             env = _child(action, "EnvironmentAction", "Environment")
             if env is not None:
                 self.environment_action(env)
+            elif _child(action, "InfrastructureAction", "TrafficSignalAction") is not None:
+                pairs += [(action, c) for c in self.light_clauses(action)]
             else:
                 self.skip(action, "global actions other than the environment (traffic, parameters, "
                                   "signals) are not translated")
+        # a light's state in Init: a step at time 0
+        self.light_steps += [TriggerPlan(clause=c) for c in self.light_event(pairs)]
         init_trajectories = []
         for private in init.iterfind("Actions/Private"):
             who = self.actor_name(private)
@@ -597,8 +804,10 @@ class _Translate(_Importer):
                         self.placed[who] = got
                         self.actors[who]["lane_now"] = got[1]
                         self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
-                elif act.tag == "RoutingAction" and _child(act, "AssignRouteAction", "Route") is not None:
-                    self.actors[who]["route_el"] = _child(act, "AssignRouteAction", "Route")
+                elif act.tag == "RoutingAction" and _child(act, "AssignRouteAction") is not None:
+                    route_el = self.route_element(_child(act, "AssignRouteAction"))
+                    if route_el is not None:
+                        self.actors[who]["route_el"] = route_el
                 elif act.tag == "RoutingAction" and _child(act, "FollowTrajectoryAction") is not None \
                         and who != "ego":
                     init_trajectories.append((act, who))
@@ -829,36 +1038,135 @@ class _Translate(_Importer):
         if traj is None:
             self.skip(follow, "a trajectory from a catalog is not translated")
             return None
-        poly = traj.find("Shape/Polyline")
-        if poly is None:
-            self.skip(_first(traj.find("Shape"), traj), "only polyline trajectories are translated",
-                      "clothoids and NURBS have no `trajectory` form")
+        shape = _only_child(traj.find("Shape")) if traj.find("Shape") is not None else None
+        if shape is None:
+            self.error(_first(traj.find("Shape"), traj), "a trajectory needs one shape")
             return None
-        points, times = [], []
-        for vertex in poly.iterfind("Vertex"):
-            got = self.road_point(_first(vertex.find("Position"), vertex), who)
+        if shape.tag in ("Clothoid", "Nurbs"):
+            got = self.clothoid(shape, who) if shape.tag == "Clothoid" else self.nurbs(shape, who)
             if got is None:
                 return None
-            points.append(got)
-            if vertex.get("time") is not None:
-                times.append(self.value(vertex, "time"))
-        if len(points) < 1:
-            self.error(poly, "a polyline needs vertices")
+            points, times = got
+            keys = ("x", "y")
+            self.approx(shape, f"a {shape.tag.lower()} trajectory: sampled as a polyline of {len(points)} world "
+                               "points (the language's trajectories are polylines)")
+        elif shape.tag == "Polyline":
+            points, times, keys = [], [], ("s", "t")
+            for vertex in shape.iterfind("Vertex"):
+                got = self.road_point(_first(vertex.find("Position"), vertex), who)
+                if got is None:
+                    return None
+                points.append(got)
+                if vertex.get("time") is not None:
+                    times.append(self.value(vertex, "time"))
+            if len(points) < 1:
+                self.error(shape, "a polyline needs vertices")
+                return None
+        else:
+            self.skip(shape, f"<{shape.tag}> trajectories are not translated",
+                      "polylines are; clothoids and NURBS are sampled")
             return None
-        settings = {"s": [E.Num(value=round(p[0], 9)) for p in points],
-                    "t": [E.Num(value=round(p[1], 9)) for p in points]}
+        settings = {keys[0]: [E.Num(value=round(p[0], 9)) for p in points],
+                    keys[1]: [E.Num(value=round(p[1], 9)) for p in points]}
         timing = follow.find("TimeReference/Timing")
-        if timing is not None and len(times) == len(points):
+        if timing is not None and times and len(times) == len(points):
             offset = self.value(timing, "offset", default=0.0)
             scale = self.value(timing, "scale", default=1.0)
             times = [scale * x + offset for x in times]
             if timing.get("domainAbsoluteRelative") == "absolute":
                 self.approx(timing, "absolute vertex times: taken from the start of the trajectory")
             if all(b > a for a, b in zip(times, times[1:])) and times[0] >= 0.0:
-                settings["times"] = [E.Num(value=x) for x in times]
+                settings["times"] = [E.Num(value=round(x, 9)) for x in times]
             else:
                 self.approx(timing, "vertex times that do not increase: driven at the default speed")
         return ClausePlan(keyword="behavior", name="trajectory", settings=settings)
+
+    def world_point(self, pos_el, who: str):
+        """(x, y, heading) [m, m, rad] of a position, facing its lane's driving direction (or
+        its `Orientation`); None after a diagnostic."""
+        got = self.position(pos_el, who)
+        if got is None:
+            return None
+        road, lane, s, offset = got
+        params = self.param_values()
+        odr = self.network.road(next(i for i, r in self.roads.items() if r.name == road))
+        s_val = min(max(float(eval_param_expr(s, params)), 0.0), odr.length)
+        t_val = odr.lane_center_t(lane, s_val) + float(eval_param_expr(offset, params))
+        x, y, h = (float(v) for v in odr.reference_pose(s_val))
+        heading = h + (math.pi if lane > 0 and odr.travel_direction(lane) < 0 else 0.0)
+        orient = pos_el.find(".//Orientation")
+        if orient is not None and orient.get("h") is not None:
+            turn = self.value(orient, "h")
+            heading = turn if orient.get("type") == "absolute" else heading + turn
+        return x - t_val * math.sin(h), y + t_val * math.cos(h), heading
+
+    def clothoid(self, el, who: str):
+        """A clothoid (curvature k0 + k' u over its length) from its start pose, sampled
+        about every 2 m; times linear in arc length from startTime to stopTime."""
+        start = self.world_point(_first(el.find("Position"), el), who)
+        if start is None:
+            return None
+        k0 = self.value(el, "curvature")
+        rate = el.get("curvaturePrime") if el.get("curvaturePrime") is not None else el.get("curvatureDot")
+        k1 = self.value(el, "curvaturePrime" if el.get("curvaturePrime") is not None else "curvatureDot") \
+            if rate is not None else 0.0
+        length = self.value(el, "length")
+        if not 0.0 < length <= 10000.0:
+            self.skip(el, f"a clothoid {length:g} m long is not translated (0 to 10 km)")
+            return None
+        count = int(min(max(math.ceil(length / 2.0), 8), 200))
+        fine = 20 * count  # heading integrated on a grid 20 times finer than the samples
+        x, y, h0 = start
+        points = [(x, y)]
+        du = length / fine
+        for i in range(1, fine + 1):
+            u_mid = (i - 0.5) * du
+            heading = h0 + k0 * u_mid + 0.5 * k1 * u_mid * u_mid
+            x, y = x + du * math.cos(heading), y + du * math.sin(heading)
+            if i % 20 == 0:
+                points.append((x, y))
+        times = []
+        if el.get("startTime") is not None and el.get("stopTime") is not None:
+            t0, t1 = self.value(el, "startTime"), self.value(el, "stopTime")
+            times = [t0 + (t1 - t0) * i / count for i in range(count + 1)]
+        return points, times
+
+    def nurbs(self, el, who: str):
+        """A NURBS curve (Cox-de Boor) through its control points' world positions, sampled
+        at evenly spaced parameters; times by the same rational basis when every control
+        point has one."""
+        order = int(self.value(el, "order"))
+        cps = list(el.iterfind("ControlPoint"))
+        knots = [self.value(k, "value") for k in el.iterfind("Knot")]
+        if order < 2 or len(cps) < order or len(knots) != len(cps) + order or \
+                any(b < a for a, b in zip(knots, knots[1:])) or knots[order - 1] >= knots[len(cps)]:
+            self.error(el, f"a NURBS of order {order} with {len(cps)} control points needs {len(cps) + order} "
+                           f"non-decreasing knots (it has {len(knots)})")
+            return None
+        pts, weights, stamps = [], [], []
+        for cp in cps:
+            got = self.world_point(_first(cp.find("Position"), cp), who)
+            if got is None:
+                return None
+            pts.append(got[:2])
+            weights.append(self.value(cp, "weight", default=1.0))
+            stamps.append(self.value(cp, "time") if cp.get("time") is not None else None)
+        lo, hi = knots[order - 1], knots[len(cps)]
+        count = int(min(max(10 * len(cps), 20), 200))
+        points, times = [], []
+        for j in range(count + 1):
+            u = lo + (hi - lo) * j / count
+            basis = _bspline_basis(knots, order, len(cps), min(u, hi - 1e-9 * (hi - lo)))
+            w = [b * wt for b, wt in zip(basis, weights)]
+            total = sum(w)
+            if total <= 0.0:
+                self.error(el, "a NURBS whose weights cancel")
+                return None
+            points.append((sum(wi * p[0] for wi, p in zip(w, pts)) / total,
+                           sum(wi * p[1] for wi, p in zip(w, pts)) / total))
+            if None not in stamps:
+                times.append(sum(wi * t for wi, t in zip(w, stamps)) / total)
+        return points, times
 
     def route(self, route_el, who: str, lane: int, s):
         """An AssignRouteAction's waypoints as the actor's route (road ids, connecting roads
@@ -1028,12 +1336,9 @@ class _Translate(_Importer):
     def maneuver_group(self, group, act_at) -> None:
         refs = [self.actor_name(r) for r in group.iterfind("Actors/EntityRef")]
         refs = [r for r in refs if r is not None]
-        if len(refs) != 1:
-            if refs or list(group.iterfind("Maneuver")):
-                self.skip(group, f"maneuver group with {len(refs)} actors: translated for one actor only")
-            if not refs:
-                return
-        who = refs[0]
+        if len(refs) > 1:
+            self.skip(group, f"maneuver group with {len(refs)} actors: translated for one actor only")
+        who = refs[0] if refs else None  # no actor: its events' global actions (light steps) only
         maneuvers = list(group.iterfind("Maneuver"))
         if group.find("CatalogReference") is not None:
             self.skip(group.find("CatalogReference"), "maneuver catalogs are not translated")
@@ -1046,13 +1351,27 @@ class _Translate(_Importer):
         if name in (self.sidecar or {}).get("group_events", ()):
             return  # a step of a group: the side file has the group (appended in `plan`)
         actions = list(event.iterfind("Action"))
-        clauses = []
+        clauses, lights = [], []
         for action in actions:
             body = _only_child(action)
             if body is None:
                 continue
+            if body.tag == "GlobalAction" and _child(body, "InfrastructureAction", "TrafficSignalAction") is not None:
+                exact = ((self.sidecar or {}).get("lights") or {}).get("steps", {}).get(name)
+                lights += [(body, ClausePlan.model_validate(exact))] if exact else \
+                    [(body, c) for c in self.light_clauses(body)]
+                continue
+            if body.tag == "GlobalAction" and body.find("EnvironmentAction") is not None:
+                self.skip(body.find("EnvironmentAction"), "an environment change in an event is not translated: "
+                          "`environment { }` holds for the whole run (the language has no environment steps)",
+                          "an EnvironmentAction in Init is translated")
+                continue
             if body.tag != "PrivateAction":
                 self.skip(body, f"<{body.tag}> is not translated (private actions are)")
+                continue
+            if who is None:
+                self.skip(body, f"<{_first(_only_child(body), body).tag}> in a maneuver group without actors is "
+                                "not translated")
                 continue
             inner = _only_child(body)
             if inner is None:
@@ -1067,6 +1386,8 @@ class _Translate(_Importer):
             clause = ClausePlan.model_validate(exact["clause"]) if exact else self.private_action(inner, who)
             if clause is not None:
                 clauses.append(clause)
+        if lights:
+            self.light_step(event, self.light_event(lights), who, act_at)
         if not clauses:
             return
         trigger = event.find("StartTrigger")
@@ -1084,6 +1405,19 @@ class _Translate(_Importer):
                 self.actors[who]["behaviors"].append(clause)
             else:
                 self.actors[who]["triggers"].append(TriggerPlan(clause=clause, **fields))
+
+    def light_step(self, event, clauses: list[ClausePlan], who, act_at) -> None:
+        if not clauses:
+            return
+        step = self.start(event.find("StartTrigger"), who, act_at, event.get("name", ""))
+        if step is None:
+            return
+        kind, fields = step
+        if kind == "after_event":
+            self.skip(fields[3], f"light step '{event.get('name')}' starts on another event: not translated",
+                      "a lights block's steps start at a time, after a delay or on a condition")
+            return
+        self.light_steps += [TriggerPlan(clause=c, **fields) for c in clauses]
 
     def start(self, trigger, who: str, act_at, event: str = ""):
         """('now', fields of a TriggerPlan) or ('after_event', (event, delay, state)); None: dropped."""
@@ -1135,6 +1469,8 @@ class _Translate(_Importer):
                 exact = (self.sidecar or {}).get("conditions", {}).get(ref)
                 if exact:
                     return EXPR.validate_python(exact["formula"])
+            if value_cond.tag in ("TrafficSignalCondition", "TrafficSignalControllerCondition"):
+                return self.light_condition(value_cond)
             self.skip(value_cond, f"<{value_cond.tag}> is not translated")
             return None
         by_entity = cond.find("ByEntityCondition")
@@ -1151,6 +1487,26 @@ class _Translate(_Importer):
         if any(p is None for p in parts):
             return None
         return _all(parts) if rule == "all" else _any(parts)
+
+    def light_condition(self, c):
+        """`light(C) == S`: a signal's state (its controller's) or a controller's phase."""
+        if c.tag == "TrafficSignalCondition":
+            sid = self.raw(c, "name")
+            ctl = self.light_controller(sid, c)
+            state = self.signal_state(sid, self.raw(c, "state"), c) if ctl else None
+        else:
+            raw, phase = self.raw(c, "trafficSignalControllerRef"), self.raw(c, "phase")
+            ctl = self.ctl_names.get(raw, raw)
+            if ctl not in self.light_ctls or self.light_ctls[ctl].get("solo"):
+                self.error(c, f"no traffic signal controller '{raw}'")
+                return None
+            state = self.light_ctls[ctl]["phases"].get(phase)
+            if state is None:
+                self.error(c, f"controller '{ctl}' has no phase '{phase}'",
+                           f"phases: {', '.join(self.light_ctls[ctl]['phases'])}")
+        if state is None:
+            return None
+        return E.Binary(op="==", left=E.Signal(name=f"light({ctl})"), right=E.Num(value=LIGHT_STATES[state]))
 
     def entity_condition(self, c, a: str):
         op = RULE_OPS.get(c.get("rule", ""), ">")
@@ -1257,8 +1613,9 @@ class _Translate(_Importer):
                                                 prev_clause):
                     steps = list(tr.group.steps) if tr.group else [TriggerPlan(clause=prev_clause)]
                     steps.append(TriggerPlan(clause=clause, after_s=E.Num(value=after) if after else None))
-                    info["triggers"][i] = TriggerPlan(condition=tr.condition, at_s=tr.at_s, after_s=tr.after_s,
-                                                      group=GroupPlan(mode="sequence", steps=steps))
+                    # The step's start (its hold and name too) now starts the sequence.
+                    info["triggers"][i] = tr.model_copy(update={"clause": None,
+                                                                "group": GroupPlan(mode="sequence", steps=steps)})
                     break
             else:
                 if prev_clause in info["behaviors"]:
@@ -1315,12 +1672,19 @@ class _Translate(_Importer):
             if extra.get("route"):
                 fields["route"] = [str(r) for r in extra["route"]]
                 fields["s"] = self.route_station(who, fields["route"], lane, s)
-            elif info.get("route_el") is not None:
-                got = self.route(info["route_el"], who, lane, s)
+            elif info.get("route_el") is not None or info.get("route_from_position") is not None:
+                if info.get("route_el") is None:
+                    self.approx(info["route_from_position"], f"{who} is placed on a route that nothing assigns: "
+                                                             "it drives that route")
+                got = self.route(_first(info.get("route_el"), info.get("route_from_position")), who, lane, s)
                 if got is not None:
                     fields["route"], fields["s"] = got
             if extra.get("yaw") is not None:
                 fields["yaw"] = E.Num(value=float(extra["yaw"]))
+            if sc:
+                fields["ignore_lights"] = bool(extra.get("ignore_lights", False))
+            elif self.light_ctls and who != "ego":
+                fields["ignore_lights"] = True  # OpenSCENARIO's actors follow their actions, not the lights
             if eval_param_expr(offset, self.param_values()) != 0.0:
                 fields["offset"] = offset
             fields["triggers"] = fields["triggers"] + [TriggerPlan.model_validate(g)
@@ -1346,10 +1710,25 @@ class _Translate(_Importer):
             oracles = [OraclePlan(name="no_collision", formula=NO_CLAUSES["collision"]("ego", None))]
         description = sc["description"] if sc else (header.get("description", "") if header is not None else "")
         name = sc.get("scenario") or _safe_name(self.path.stem, set())
+        if self.light_ctls and not sc and agents:
+            self.approx(_first(self.signals_el, self.doc), "OpenSCENARIO's actors follow their actions, not the "
+                                                           "traffic lights: the agents get `at_red run`")
+        controllers = []
+        for cname, info in self.light_ctls.items():
+            if info.get("solo"):  # a signal set by actions only: no program, green until a step sets it
+                info["green"] = duration
+                if not any(tr.clause.name == cname and tr.at_s is None and tr.after_s is None and tr.condition is None
+                           for tr in self.light_steps):
+                    self.approx(info["el"], f"signal {info['signals'][0]} has no controller and no state in Init: "
+                                            "green until an action sets it")
+            controllers.append(ControllerPlan(
+                name=cname, road=next(iter(self.roads.values())).name, signals=info["signals"],
+                green_s=E.Num(value=info["green"]), yellow_s=E.Num(value=info["yellow"]),
+                red_s=E.Num(value=info["red"]), offset_s=E.Num(value=info["offset"])))
         plan = ScenarioPlan(name=name, description=description[:500], duration_s=duration,
                             step_s=sc.get("step_s", 0.01), seed=sc.get("seed", 0), run_seed=sc.get("run_seed"),
                             roads=list(self.roads.values()), ego=ego, agents=agents, faults=faults, oracles=oracles,
-                            environment=self.environment)
+                            environment=self.environment, controllers=controllers, light_steps=self.light_steps)
         values = {**self.param_values(), **sc.get("params", {})}
         dims = {**{k: v for k, v in self.param_dims.items()},
                 **{k: units.DIMENSIONLESS for k in sc.get("params", {}) if k not in self.param_dims}}
@@ -1391,6 +1770,15 @@ def _sidecar_problem(data: dict) -> str:
         for steps in data.get("groups", {}).values():
             for step in steps:
                 TriggerPlan.model_validate(step)
+        lights = data.get("lights", {})
+        if not isinstance(lights, dict):
+            return "'lights' is not a dict"
+        for c in lights.get("controllers", {}).values():
+            for key in ("green_s", "yellow_s", "red_s", "offset_s"):
+                float(c[key])
+        for clause in lights.get("steps", {}).values():
+            if ClausePlan.model_validate(clause).keyword != "light":
+                return "a light step that is not a `light` clause"
         for f in data.get("faults", []):
             ConcreteFault.model_validate(f)
         for o in data.get("oracles", []):
@@ -1406,6 +1794,22 @@ def _sidecar_problem(data: dict) -> str:
     except (ValueError, TypeError, KeyError, AttributeError) as exc:  # pydantic's ValidationError is a ValueError
         return (str(exc).splitlines() or [type(exc).__name__])[0][:200]
     return ""
+
+
+def _bspline_basis(knots: list[float], order: int, n: int, u: float) -> list[float]:
+    """The n B-spline basis functions of `order` (degree order - 1) at `u` (Cox-de Boor)."""
+    basis = [1.0 if knots[i] <= u < knots[i + 1] else 0.0 for i in range(len(knots) - 1)]
+    for k in range(2, order + 1):
+        nxt = []
+        for i in range(len(knots) - k):
+            left = right = 0.0
+            if knots[i + k - 1] > knots[i]:
+                left = (u - knots[i]) / (knots[i + k - 1] - knots[i]) * basis[i]
+            if knots[i + k] > knots[i + 1]:
+                right = (knots[i + k] - u) / (knots[i + k] - knots[i + 1]) * basis[i + 1]
+            nxt.append(left + right)
+        basis = nxt
+    return basis[:n]
 
 
 def _setting(value):
@@ -1453,7 +1857,12 @@ def _ahead(placed, a, b, params) -> bool:
 
 
 def _duration(clause: ClausePlan) -> float:
+    """How long a behaviour runs [s], where its settings say: `duration`, or a timed
+    trajectory's last vertex time; else 0."""
     d = clause.settings.get("duration")
+    times = clause.settings.get("times")
+    if not isinstance(d, E.Num) and isinstance(times, list) and times and isinstance(times[-1], E.Num):
+        d = times[-1]
     return float(d.value) if isinstance(d, E.Num) else 0.0
 
 

@@ -258,9 +258,16 @@ class _Run:
         if not plan.controllers:
             return
         inline = {sig.name: (sig.road, sig.s_m, tuple(sig.lanes)) for sig in plan.signals}
+        # A map's signals stand on the map: roads declared from the same OpenDRIVE file
+        # (`road r2 import "m.xodr" road 2`, `road r3 ... road 3`) share its stop lines.
+        same_map = {r.name: [o.name for o in plan.roads if o.name == r.name or
+                             (r.source == "xodr" and o.source == "xodr" and o.xodr_text == r.xodr_text)]
+                    for r in plan.roads}
         lines: dict[str, list] = {}
         for c in plan.controllers:
-            lines.setdefault(c.road, []).extend(stop_lines(self.networks[c.road], c.name, c.signals, inline))
+            found = stop_lines(self.networks[c.road], c.name, c.signals, inline)
+            for name in same_map[c.road]:
+                lines.setdefault(name, []).extend(found)
         self.lights = LightsRuntime({c.name: Program(c.green_s, c.yellow_s, c.red_s, c.offset_s)
                                      for c in plan.controllers})
         if plan.light_steps:

@@ -97,6 +97,22 @@ def test_red_light_runner_example():
         assert stopper.speed[-1] < 0.1  # waiting at the light on road 3
 
 
+def test_a_maps_lights_hold_on_every_road_declared_from_it():
+    """The controller names road `town` (road 2 of the map); a car placed on `side`, road 3
+    of the same file, still stops at road 3's red light (an import writes one road line
+    per starting road)."""
+    text = (EXAMPLES / "red_light_runner.addt").read_text().replace(
+        'road town import "maps/fabriksgatan_traffic_lights.xodr" road 2',
+        'road town import "maps/fabriksgatan_traffic_lights.xodr" road 2\n'
+        '  road side import "maps/fabriksgatan_traffic_lights.xodr" road 3').replace(
+        "agent stopper car on town route 3", "agent stopper car on side route 3")
+    result = compile_source(text, "side.addt", base_dir=EXAMPLES)
+    assert result.ok, [d.message for d in result.diagnostics]
+    out = execute(expand(result.plan).specs[0])
+    assert out.trace.actors["stopper"].speed[-1] < 0.1
+    assert {v.name: v.passed for v in out.verdicts}["stopper_stops"]
+
+
 def test_the_ego_gives_way_at_a_junction_with_yield_gap():
     plan = compile_file(EXAMPLES / "left_turn_yield.addt").plan
     for spec in expand(plan).specs[1:]:  # the oncoming car at 240 m and 260 m: too close to go first

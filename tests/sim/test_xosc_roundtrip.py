@@ -18,18 +18,10 @@ from tests.unit.interop.roundtrip_kit import round_trip
 
 pytestmark = pytest.mark.slow
 SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / f"{n}.addt"
-                                               for n in ("every_behavior", "every_action")]
+                                               for n in ("every_behavior", "every_action", "every_light")]
 
 
-# Traffic lights came to the language after the export: neither the .xosc nor the side file
-# carries a `lights` block or `at_red run` yet, so this example's runner stops at the red
-# light after the round trip (a known gap, docs/openscenario.md).
-NOT_CARRIED = {"red_light_runner": "traffic lights are not exported yet"}
-
-
-@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.xfail(reason=NOT_CARRIED[p.stem], strict=True))
-                                  if p.stem in NOT_CARRIED else p for p in SCENARIOS],
-                         ids=[p.stem for p in SCENARIOS])
+@pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])
 def test_export_import_run_gives_the_same_run(path, tmp_path):
     if needs_torch(path):
         pytest.importorskip("torch")
@@ -60,7 +52,7 @@ def test_shrunk_counterexample_has_a_replayable_xosc(tmp_path):
 
 
 RUN_ESMINI = ["cut-in_simple", "acc-test", "alks_cut-in", "straight_500m_pedestrian", "lane_change_simple",
-              "highway_merge"]
+              "highway_merge", "traffic_lights"]
 
 
 @pytest.mark.parametrize("name", RUN_ESMINI)

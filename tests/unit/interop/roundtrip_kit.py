@@ -63,7 +63,7 @@ def main() -> None:
     from addt_dsl.compiler import compile_file
 
     paths = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / f"{n}.addt"
-                                            for n in ("every_behavior", "every_action")]
+                                            for n in ("every_behavior", "every_action", "every_light")]
     print("| example | side file | same verdicts | RMS per actor [m] |")
     print("|---|---|---|---|")
     for path in paths:

@@ -25,7 +25,7 @@ def done_ids(done, plan) -> dict[str, str]:
     return {r.name: str(i) for i, r in enumerate(plan.roads, start=1)}
 
 SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / f"{n}.addt"
-                                               for n in ("every_behavior", "every_action")]
+                                               for n in ("every_behavior", "every_action", "every_light")]
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])
@@ -208,3 +208,62 @@ def test_routes_are_assign_route_actions(tmp_path):
         roads = [p.get("roadId") for p in private.findall(".//AssignRouteAction/Route/Waypoint/Position/LanePosition")]
         assert roads == list(actor.route), actor.name  # one waypoint per road, connecting road included
     assert not any("no RoutingAction" in line for line in done.carried)
+
+
+def test_traffic_lights_are_openscenario_signals(tmp_path):
+    """Controllers are TrafficSignalControllers (phases green, yellow, red with each signal's
+    lamp states), light steps TrafficSignal actions of an actor-less group, `light(C) == S`
+    a TrafficSignalCondition; inline signals stand in the generated .xodr; what has no
+    OpenSCENARIO form (`at_red run`, a program offset, `state program`) is listed."""
+    spec = expand(compile_file(ROOT / "tests" / "data" / "interop" / "every_light.addt").plan).specs[0]
+    done = export_run(spec, tmp_path)
+    root = DET.parse(done.xosc_path).getroot()
+    main_ctl = root.find("RoadNetwork/TrafficSignals/TrafficSignalController[@name='main']")
+    phases = [(p.get("name"), float(p.get("duration")), [(s.get("trafficSignalId"), s.get("state"))
+                                                         for s in p.iterfind("TrafficSignalState")])
+              for p in main_ctl.iterfind("Phase")]
+    # green 60 s, yellow 2 s, red 20 s with green from 1 s: at 0 s the cycle is 1 s before
+    # the end of its red, so the phases start with that 1 s and end with the other 19 s.
+    assert phases == [("red_at_start", 1.0, [("1", "on;off;off"), ("2", "on;off;off")]),
+                      ("green", 60.0, [("1", "off;off;on"), ("2", "off;off;on")]),
+                      ("yellow", 2.0, [("1", "off;on;off"), ("2", "off;on;off")]),
+                      ("red", 19.0, [("1", "on;off;off"), ("2", "on;off;off")])]
+    group = root.find(".//ManeuverGroup[@name='addt_lights']")
+    assert group.find("Actors/EntityRef") is None
+    red = group.find(".//Event[@name='light_main_red']")
+    assert [(a.get("name"), a.get("state")) for a in red.iterfind(".//TrafficSignalStateAction")] == \
+        [("1", "on;off;off"), ("2", "on;off;off")]
+    assert red.find(".//RelativeDistanceCondition") is not None
+    program = group.find(".//Event[@name='light_main_program']//TrafficSignalControllerAction")
+    assert program.attrib == {"phase": "green", "trafficSignalControllerRef": "main"}
+    on_red = group.find(".//Event[@name='light_other_green']")
+    assert on_red.find(".//TrafficSignalCondition").attrib == {"name": "1", "state": "on;off;off"}
+    parked = root.find(".//Event[@name='parked_cruise']//TrafficSignalCondition")
+    assert parked is not None and parked.get("state") == "on;off;off"
+    # The generated road has the three signals, numbered, facing their lanes' traffic.
+    odr = DET.parse(done.xodr_path).getroot()
+    signals = {s.get("name"): s for s in odr.iter("signal")}
+    assert {n: (s.get("id"), s.get("orientation"), s.find("validity").get("fromLane"), s.get("type"))
+            for n, s in signals.items()} == {"s1": ("1", "+", "-1", "1000001"), "s2": ("2", "+", "-2", "1000001"),
+                                             "back": ("3", "-", "1", "1000001")}
+    listed = "\n".join(done.carried)
+    assert "runner: at_red run" in listed and "offset" not in listed
+    assert "light main state program" in listed
+    side = json.loads(done.sidecar_path.read_text())
+    assert side["actors"]["runner"]["ignore_lights"] is True and side["actors"]["parked"]["ignore_lights"] is False
+    assert side["lights"]["controllers"]["main"] == {"green_s": 60.0, "yellow_s": 2.0, "red_s": 20.0, "offset_s": 1.0}
+    assert side["lights"]["steps"]["light_main_program"]["settings"]["state"] == "program"
+
+
+def test_lamp_states_follow_the_signal_type():
+    from addt_dsl.interop.xosc_export import lamp_state, lamps_of, state_of_lamps
+
+    car, walk = lamps_of("1000001"), lamps_of("1000002", "-1")
+    assert [lamp_state(car, s) for s in ("red", "yellow", "green")] == ["on;off;off", "off;on;off", "off;off;on"]
+    assert [lamp_state(walk, s) for s in ("red", "yellow", "green")] == ["on;off", "on;off", "off;on"]
+    assert lamps_of("1000009", "20") == ("yellow", "green") and lamps_of("206") == car  # unknown: three lamps
+    for lamps in (car, walk):
+        for state in ("red", "green"):
+            assert state_of_lamps(lamps, lamp_state(lamps, state)) == state
+    assert state_of_lamps(car, "off;flashing;off") == "yellow" and state_of_lamps(car, "Amber") == "yellow"
+    assert state_of_lamps(car, "on;on;off") is None and state_of_lamps(car, "on;off") is None

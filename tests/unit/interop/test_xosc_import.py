@@ -8,6 +8,7 @@ import random
 import re
 import shutil
 
+import numpy as np
 import pytest
 
 from addt_dsl.cli import main
@@ -259,11 +260,13 @@ def test_esmini_trajectories_and_synchronisation(tmp_path):
     assert walker.s.value == 110.0
     # A timed polyline started by a held condition (delay 0.2 s).
     got = import_xosc(ESMINI / "xosc" / "trajectory-test.xosc", root=ESMINI)
-    step = next(t for a in got.plan.agents for t in a.triggers if t.clause and t.clause.name == "trajectory")
-    assert [v.value for v in step.clause.settings["times"]] == [0.0, 2.0, 4.0, 6.0]
+    step = next(t for a in got.plan.agents for t in a.triggers if t.group is not None)
+    first, clothoid = step.group.steps
+    assert [v.value for v in first.clause.settings["times"]] == [0.0, 2.0, 4.0, 6.0]
     assert step.hold_s.value == pytest.approx(0.2)
-    # Clothoid and NURBS shapes are said, not dropped.
-    assert sum("only polyline trajectories" in d.message for d in got.diagnostics) == 2
+    # The clothoid starts when the polyline ends (its last vertex time), sampled and said so.
+    assert step.group.mode == "sequence" and clothoid.after_s.value == 6.0 and "x" in clothoid.clause.settings
+    assert {d.label for d in got.diagnostics if "sampled as a polyline" in d.message} == {"<Clothoid>", "<Nurbs>"}
 
 
 def test_a_live_target_without_an_openscenario_form_travels_as_a_controller(tmp_path):
@@ -334,3 +337,325 @@ def test_another_actors_event_state_becomes_a_named_step(state, fn, tmp_path):
         (tmp_path / name).write_text(body)
     result = compile_source(got.text, "imported.addt", base_dir=tmp_path)
     assert result.ok, [d.message for d in result.diagnostics]
+
+
+def test_esmini_traffic_lights_translate(tmp_path):
+    """esmini's traffic_lights.xosc sets signals directly (no controllers): each signal gets
+    a controller of its own, Init states are steps at time 0, state actions light steps and
+    TrafficSignalConditions `light(C) == S` (its delays `for D`, said with their lines)."""
+    got = import_xosc(ESMINI / "xosc" / "traffic_lights.xosc", root=ESMINI)
+    assert got.text is not None
+    plan = got.plan
+    assert [(c.name, c.signals) for c in plan.controllers] == [("signal_1", ["1"]), ("signal_2", ["2"]),
+                                                              ("signal_3", ["3"])]
+    steps = [(tr.clause.name, tr.clause.settings["state"]) for tr in plan.light_steps]
+    assert steps[:3] == [("signal_1", "green"), ("signal_2", "red"), ("signal_3", "red")]
+    assert ("signal_1", "yellow") in steps and ("signal_1", "red") in steps
+    assert "when light(signal_1) == yellow for 3 s then light signal_1 state red" in got.text
+    assert "when light(signal_3) == green for 0.5 s then behavior" in got.text
+    assert not any("TrafficSignal" in d.message or "signals" in d.message
+                   for d in got.diagnostics if d.code == "W0801"), [d.message for d in got.diagnostics]
+    delay = next(d for d in got.diagnostics if "condition delay of 3 s" in d.message)
+    assert delay.span.line == 192  # the <Condition> of StopLightEvent2
+    # The esmini file's actors follow their actions, not the lights.
+    assert all(a.ignore_lights for a in plan.agents) and not plan.ego.ignore_lights
+
+
+LIGHTS = """<?xml version="1.0"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="2" date="2024-01-01T00:00:00" description="d" author="a"/>
+  <RoadNetwork><LogicFile filepath="m.xodr"/>
+    <TrafficSignals>
+      <TrafficSignalController name="west">
+        PHASES
+      </TrafficSignalController>
+    </TrafficSignals>
+  </RoadNetwork>
+  <Entities>
+    <ScenarioObject name="Ego"><Vehicle name="c" vehicleCategory="car"><BoundingBox><Center x="0" y="0" z="0.7"/>
+      <Dimensions width="2" length="4.5" height="1.4"/></BoundingBox></Vehicle></ScenarioObject>
+    <ScenarioObject name="car"><Vehicle name="c" vehicleCategory="car"><BoundingBox><Center x="0" y="0" z="0.7"/>
+      <Dimensions width="2" length="4.5" height="1.4"/></BoundingBox></Vehicle></ScenarioObject>
+  </Entities>
+  <Storyboard>
+    <Init><Actions>
+      <Private entityRef="Ego"><PrivateAction><TeleportAction><Position>
+        <LanePosition roadId="3" laneId="-1" s="10" offset="0"/></Position></TeleportAction></PrivateAction></Private>
+      <Private entityRef="car"><PrivateAction><TeleportAction><Position>
+        <LanePosition roadId="3" laneId="-1" s="40" offset="0"/></Position></TeleportAction></PrivateAction></Private>
+    </Actions></Init>
+    <Story name="s"><Act name="a">
+      <ManeuverGroup name="lights" maximumExecutionCount="1"><Actors selectTriggeringEntities="false"/>
+        <Maneuver name="m">
+          <Event name="to_red" priority="parallel">
+            <Action name="a1"><GlobalAction><InfrastructureAction><TrafficSignalAction>
+              <TrafficSignalControllerAction trafficSignalControllerRef="CTL" phase="stop"/>
+            </TrafficSignalAction></InfrastructureAction></GlobalAction></Action>
+            <StartTrigger><ConditionGroup><Condition name="t" delay="0" conditionEdge="none"><ByValueCondition>
+              <SimulationTimeCondition value="4" rule="greaterThan"/></ByValueCondition></Condition></ConditionGroup>
+            </StartTrigger>
+          </Event>
+        </Maneuver>
+      </ManeuverGroup>
+      <ManeuverGroup name="g" maximumExecutionCount="1"><Actors selectTriggeringEntities="false">
+        <EntityRef entityRef="car"/></Actors>
+        <Maneuver name="m2">
+          <Event name="go" priority="parallel">
+            <Action name="a2"><PrivateAction><LongitudinalAction><SpeedAction>
+              <SpeedActionDynamics dynamicsShape="step" value="0" dynamicsDimension="time"/>
+              <SpeedActionTarget><AbsoluteTargetSpeed value="5"/></SpeedActionTarget></SpeedAction>
+            </LongitudinalAction></PrivateAction></Action>
+            <StartTrigger><ConditionGroup><Condition name="c" delay="0" conditionEdge="none"><ByValueCondition>
+              <TrafficSignalControllerCondition trafficSignalControllerRef="west" phase="go"/>
+            </ByValueCondition></Condition></ConditionGroup></StartTrigger>
+          </Event>
+        </Maneuver>
+      </ManeuverGroup>
+      <StartTrigger><ConditionGroup><Condition name="s" delay="0" conditionEdge="none"><ByValueCondition>
+        <SimulationTimeCondition value="0" rule="greaterThan"/></ByValueCondition></Condition></ConditionGroup>
+      </StartTrigger>
+    </Act></Story>
+    <StopTrigger><ConditionGroup><Condition name="e" delay="0" conditionEdge="rising"><ByValueCondition>
+      <SimulationTimeCondition value="20" rule="greaterThan"/></ByValueCondition></Condition></ConditionGroup>
+    </StopTrigger>
+  </Storyboard>
+</OpenSCENARIO>
+"""
+
+
+def _phase(name, duration, state):
+    return (f'<Phase name="{name}" duration="{duration}"><TrafficSignalState trafficSignalId="1" state="{state}"/>'
+            f'<TrafficSignalState trafficSignalId="2" state="{"on;off" if state.startswith("on") else "off;on"}"/>'
+            "</Phase>")
+
+
+def _lights_file(tmp_path, phases, ref="west"):
+    (tmp_path / "m.xodr").write_text((ESMINI / "xodr" / "fabriksgatan_traffic_lights.xodr").read_text())
+    (tmp_path / "s.xosc").write_text(LIGHTS.replace("PHASES", phases).replace("CTL", ref))
+    return import_xosc(tmp_path / "s.xosc")
+
+
+def test_signal_controller_phases_become_a_program(tmp_path):
+    """Phases red 10 s, green 5 s, yellow 2 s: the program green 5 s, yellow 2 s, red 10 s
+    whose green starts at 10 s; a controller action resumes the program (W0802, with its
+    line), a controller condition on a phase is `light(C) == S` of that phase's colour."""
+    phases = _phase("stop", 10, "on;off;off") + _phase("go", 5, "off;off;on") + _phase("wait", 2, "off;on;off")
+    got = _lights_file(tmp_path, phases)
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    (ctl,) = got.plan.controllers
+    assert (ctl.name, ctl.signals) == ("west", ["1", "2"])
+    assert [e.value for e in (ctl.green_s, ctl.yellow_s, ctl.red_s, ctl.offset_s)] == [5.0, 2.0, 10.0, 10.0]
+    assert "at 4 s light west state program" in got.text
+    assert "when light(west) == green then behavior" in got.text
+    resume = next(d for d in got.diagnostics if "resumes its program" in d.message)
+    assert resume.code == "W0802" and resume.span.line == 29 and resume.label == "<TrafficSignalControllerAction>"
+    assert not [d for d in got.diagnostics if d.code == "W0801"], [d.message for d in got.diagnostics]
+    # The program is the file's: red until 10 s, then green for 5 s, yellow for 2 s.
+    from addt_dsl.runtime.lights import Program
+    program = Program(5.0, 2.0, 10.0, 10.0)
+    assert [program.state(t) for t in (0.0, 9.9, 10.1, 15.5, 17.5, 27.1)] == [2.0, 2.0, 0.0, 1.0, 2.0, 0.0]
+
+
+def test_signal_controller_problems_are_diagnostics(tmp_path):
+    # Phases out of the language's order: one cycle of their summed times, said with the line.
+    odd = _phase("go", 5, "off;off;on") + _phase("stop", 10, "on;off;off") + _phase("wait", 2, "off;on;off")
+    got = _lights_file(tmp_path, odd)
+    assert got.text is not None
+    approx = next(d for d in got.diagnostics if "as one green, yellow, red cycle" in d.message)
+    assert approx.code == "W0802" and approx.span.line == 6 and approx.label == "<TrafficSignalController>"
+    # A controller action on a controller the file does not have: an error, nothing written.
+    got = _lights_file(tmp_path, odd, ref="east")
+    assert got.text is None
+    err = next(d for d in got.diagnostics if d.is_error)
+    assert "no traffic signal controller 'east'" in err.message and err.span.line == 29
+    # A lamp state that shows no one colour: not translated, with its element.
+    got = _lights_file(tmp_path, _phase("x", 5, "on;on;off") + _phase("go", 5, "off;off;on"))
+    bad = next(d for d in got.diagnostics if "shows no one colour" in d.message)
+    assert bad.code == "W0801" and bad.label == "<TrafficSignalState>"
+
+
+def test_lights_come_back_from_the_xosc_alone(tmp_path):
+    spec = expand(compile_file(ROOT / "tests" / "data" / "interop" / "every_light.addt").plan).specs[0]
+    got = _without_sidecar(spec, tmp_path)
+    ctls = {c.name: c for c in got.plan.controllers}
+    assert ctls["main"].signals == ["1", "2"] and ctls["other"].signals == ["3"]
+    # The program's offset is in the phases' order: the same program comes back.
+    assert [e.value for e in (ctls["main"].green_s, ctls["main"].yellow_s, ctls["main"].red_s,
+                              ctls["main"].offset_s)] == [60.0, 2.0, 20.0, 1.0]
+    steps = [(tr.clause.name, tr.clause.settings["state"]) for tr in got.plan.light_steps]
+    assert steps == [("main", "red"), ("main", "program"), ("other", "yellow"), ("other", "green")]
+    assert "when light(main) == red then light other state green" in got.text
+    assert "when light(main) == red then behavior cruise" in got.text
+    assert all(a.ignore_lights for a in got.plan.agents)  # OpenSCENARIO's actors follow their actions
+
+
+def test_an_environment_change_in_an_event_says_why_it_is_not_translated():
+    got = import_xosc(ESMINI / "xosc" / "cut-in_environment.xosc", root=ESMINI)
+    assert got.text is not None
+    changes = [d for d in got.diagnostics if "environment change in an event" in d.message]
+    assert changes and all(d.code == "W0801" and d.label == "<EnvironmentAction>" for d in changes)
+    assert [d.span.line for d in changes][:2] == [90, 110]
+    assert not any("<GlobalAction> is not translated" in d.message for d in got.diagnostics)
+
+
+SHAPED = """<?xml version="1.0"?>
+<OpenSCENARIO>
+  <FileHeader revMajor="1" revMinor="2" date="2024-01-01T00:00:00" description="d" author="a"/>
+  <RoadNetwork><LogicFile filepath="r.xodr"/></RoadNetwork>
+  <Entities>
+    <ScenarioObject name="Ego"><Vehicle name="c" vehicleCategory="car"><BoundingBox><Center x="0" y="0" z="0.7"/>
+      <Dimensions width="2" length="4.5" height="1.4"/></BoundingBox></Vehicle></ScenarioObject>
+    <ScenarioObject name="a"><Vehicle name="c" vehicleCategory="car"><BoundingBox><Center x="0" y="0" z="0.7"/>
+      <Dimensions width="2" length="4.5" height="1.4"/></BoundingBox></Vehicle></ScenarioObject>
+  </Entities>
+  <Storyboard>
+    <Init><Actions>
+      <Private entityRef="Ego"><PrivateAction><TeleportAction><Position>
+        <LanePosition roadId="1" laneId="-1" s="20" offset="0"/></Position></TeleportAction></PrivateAction></Private>
+      <Private entityRef="a">
+        <PrivateAction><TeleportAction><Position>
+          <LanePosition roadId="1" laneId="-1" s="100" offset="0"/></Position></TeleportAction></PrivateAction>
+        <PrivateAction><RoutingAction><FollowTrajectoryAction>
+          <Trajectory name="t" closed="false"><Shape>SHAPE</Shape></Trajectory>
+          <TimeReference><Timing domainAbsoluteRelative="relative" offset="0" scale="1"/></TimeReference>
+          <TrajectoryFollowingMode followingMode="position"/>
+        </FollowTrajectoryAction></RoutingAction></PrivateAction>
+      </Private>
+    </Actions></Init>
+    <StopTrigger/>
+  </Storyboard>
+</OpenSCENARIO>
+"""
+START = '<Position><LanePosition roadId="1" laneId="-1" s="100" offset="0"/></Position>'
+
+
+def _shaped(tmp_path, shape):
+    (tmp_path / "r.xodr").write_text((ESMINI / "xodr" / "straight_500m.xodr").read_text())
+    (tmp_path / "s.xosc").write_text(SHAPED.replace("SHAPE", shape))
+    got = import_xosc(tmp_path / "s.xosc")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    (traj,) = next(a for a in got.plan.agents if a.name == "a").behaviors
+    xs, ys = ([v.value for v in traj.settings[k]] for k in ("x", "y"))
+    times = [v.value for v in traj.settings.get("times", [])]
+    return got, xs, ys, times
+
+
+@pytest.mark.parametrize("curvature, end", [(0.0, (40.0, 0.0)), (1 / 20.0, (0.0, 40.0))])
+def test_a_clothoid_is_sampled_as_a_world_polyline(curvature, end, tmp_path):
+    """Straight (k = 0) and a half circle of radius 20 m (k = 1/20, length 20 pi m): the
+    samples lie on the curve from the start pose, timed linearly along it."""
+    length = 40.0 if curvature == 0 else 20 * np.pi
+    got, xs, ys, times = _shaped(tmp_path, f'<Clothoid curvature="{curvature}" curvatureDot="0" length="{length}" '
+                                           f'startTime="1" stopTime="5">{START}</Clothoid>')
+    x0, y0 = xs[0], ys[0]
+    assert (xs[-1] - x0, ys[-1] - y0) == pytest.approx(end, abs=1e-3)
+    if curvature:  # every sample is 20 m from the circle's centre, left of the start
+        assert np.allclose(np.hypot(np.array(xs) - x0, np.array(ys) - (y0 + 20.0)), 20.0, atol=1e-3)
+    assert times[0] == 1.0 and times[-1] == pytest.approx(5.0) and np.all(np.diff(times) > 0)
+    warn = next(d for d in got.diagnostics if d.label == "<Clothoid>")
+    assert warn.code == "W0802" and "sampled as a polyline" in warn.message and warn.span.line == 19
+
+
+def test_a_nurbs_is_sampled_with_its_basis(tmp_path):
+    """A clamped quadratic NURBS of three control points with unit weights passes through
+    its end points and, half way, through P0/4 + P1/2 + P2/4; times by the same basis."""
+    cps = "".join(f'<ControlPoint time="{t}" weight="1"><Position><LanePosition roadId="1" laneId="-1" s="{s}" '
+                  f'offset="{o}"/></Position></ControlPoint>' for t, s, o in ((0, 100, 0), (2, 120, 3), (6, 140, 0)))
+    knots = "".join(f'<Knot value="{k}"/>' for k in (0, 0, 0, 1, 1, 1))
+    got, xs, ys, times = _shaped(tmp_path, f'<Nurbs order="3">{cps}{knots}</Nurbs>')
+    y0 = ys[0]
+    assert xs[0] == pytest.approx(100.0) and xs[-1] == pytest.approx(140.0, abs=1e-6)
+    mid = len(xs) // 2
+    assert (xs[mid], ys[mid] - y0) == pytest.approx((120.0, 1.5))
+    assert (times[0], times[mid], times[-1]) == pytest.approx((0.0, 2.5, 6.0), abs=1e-6)
+    bad = SHAPED.replace("SHAPE", f'<Nurbs order="3">{cps}<Knot value="0"/></Nurbs>')
+    (tmp_path / "s.xosc").write_text(bad)
+    err = next(d for d in import_xosc(tmp_path / "s.xosc").diagnostics if d.is_error)
+    assert "needs 6 non-decreasing knots" in err.message and err.label == "<Nurbs>"
+
+
+def test_route_catalogs_and_route_positions(tmp_path):
+    """esmini's ltap-od places both cars with RoutePositions on routes of a route catalog
+    and assigns those routes: each actor drives its route from where pathS puts it."""
+    got = import_xosc(ESMINI / "xosc" / "ltap-od.xosc", root=ESMINI)
+    assert got.text is not None
+    actors = {a.name: a for a in got.plan.actors()}
+    params = {p.name: p.default for p in got.plan.params}
+    # HostStraightRoute: road 0 lane 1 (driven against s) from s = 63 m, pathS 0: 63 m
+    # before the end of the 93.66 m road, i.e. 30.66 m from the route's entry end.
+    assert actors["ego"].route == ["0", "9", "2"] and actors["ego"].lane.value == 1.0
+    assert eval_param_expr(actors["ego"].s, params) == pytest.approx(93.6608312256975 - 63.0)
+    # TargetLeftTurnRoute: road 2 lane -1 from s = 100 m, pathS = NPCStartPointS (150 m).
+    assert actors["NPC"].route == ["2", "15", "1"] and eval_param_expr(actors["NPC"].s, params) == 250.0
+    assert not any("Route" in d.message or "first road" in d.message for d in got.diagnostics), \
+        [d.message for d in got.diagnostics]
+
+
+ROUTED = SHAPED.replace("straight_500m", "x").replace(
+    '<LanePosition roadId="1" laneId="-1" s="20" offset="0"/>',
+    '<RoutePosition><RouteRef><Route name="r" closed="false">'
+    '<Waypoint routeStrategy="shortest"><Position><LanePosition roadId="0" laneId="1" s="63" offset="0"/></Position>'
+    '</Waypoint><Waypoint routeStrategy="shortest"><Position><LanePosition roadId="2" laneId="1" s="5" offset="0"/>'
+    '</Position></Waypoint></Route></RouteRef>'
+    '<InRoutePosition><FromLaneCoordinates pathS="10" laneId="LANE"/></InRoutePosition></RoutePosition>')
+
+
+@pytest.mark.parametrize("lane", ["1", "5"])
+def test_an_inline_route_position(lane, tmp_path):
+    (tmp_path / "r.xodr").write_text((ESMINI / "xodr" / "fabriksgatan.xodr").read_text())
+    text = ROUTED.replace("LANE", lane)
+    text = text.replace('<LanePosition roadId="1" laneId="-1" s="100" offset="0"/>',
+                        '<LanePosition roadId="2" laneId="-1" s="100" offset="0"/>')
+    text = re.sub(r"<PrivateAction><RoutingAction><FollowTrajectoryAction>.*?</PrivateAction>", "", text, flags=re.S)
+    (tmp_path / "s.xosc").write_text(text)
+    got = import_xosc(tmp_path / "s.xosc")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    ego = got.plan.ego
+    if lane == "1":  # 10 m along the route from s = 63 m of road 0, which lane 1 drives against s
+        assert ego.route == ["0", "9", "2"]
+        assert eval_param_expr(ego.s, {}) == pytest.approx(93.6608312256975 - 53.0)
+        placed = next(d for d in got.diagnostics if "nothing assigns" in d.message)
+        assert placed.code == "W0802" and placed.label == "<Route>"
+    else:
+        miss = next(d for d in got.diagnostics if "leads along the route to lane 5" in d.message)
+        assert miss.code == "W0801" and miss.label == "<RoutePosition>" and miss.span.line == 14
+
+
+def test_a_controller_name_the_language_cannot_spell_is_renamed_everywhere(tmp_path):
+    phases = _phase("stop", 10, "on;off;off") + _phase("go", 5, "off;off;on") + _phase("wait", 2, "off;on;off")
+    (tmp_path / "m.xodr").write_text((ESMINI / "xodr" / "fabriksgatan_traffic_lights.xodr").read_text())
+    text = LIGHTS.replace("PHASES", phases).replace('"west"', '"west light"').replace("CTL", "west light")
+    (tmp_path / "s.xosc").write_text(text)
+    got = import_xosc(tmp_path / "s.xosc")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    (ctl,) = got.plan.controllers
+    assert "light(" + ctl.name + ") == green" in got.text and f"light {ctl.name} state program" in got.text
+
+
+@pytest.mark.parametrize("green, yellow, red, offset", [(5, 2, 10, 0), (5, 2, 10, 3), (5, 2, 10, 6),
+                                                        (5, 2, 10, 16.5), (4, 0, 6, 9), (0, 3, 7, 2), (20, 3, 20, 41)])
+def test_a_programs_phases_carry_its_offset(green, yellow, red, offset, tmp_path):
+    """Export writes a program as phases from time 0 (an offset rotates and splits them);
+    the import reads the same program back from the .xosc alone."""
+    from addt_dsl.runtime.lights import Program
+
+    source = f"""scenario p {{
+  duration 5 s
+  road r {{
+    line length 300 m
+    lanes right 1
+  }}
+  lights {{
+    signal s1 road r at 100 m
+    controller c signals [s1] green {green} s yellow {yellow} s red {red} s offset {offset} s
+  }}
+  ego car on r lane -1 at 10 m speed 5 m/s
+}}
+"""
+    spec = expand(compile_source(source, "p.addt").plan).specs[0]
+    got = _without_sidecar(spec, tmp_path)
+    (ctl,) = got.plan.controllers
+    back = Program(*(e.value for e in (ctl.green_s, ctl.yellow_s, ctl.red_s, ctl.offset_s)))
+    times = np.arange(0.0, 120.0, 0.25) + 0.01
+    assert np.array_equal(back.state(times), Program(green, yellow, red, offset).state(times))
+    assert not any(d.code == "W0802" and "cycle" in d.message for d in got.diagnostics)
