@@ -25,6 +25,7 @@ from addt_dsl.runtime import oracles
 from addt_dsl.runtime.behaviors import AgentState, advance, relative_heading
 from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
 from addt_dsl.runtime.faults import FaultSchedule
+from addt_dsl.runtime.neighbours import LeaderIndex
 from addt_dsl.runtime.lights import LightsRuntime, Program, StopStation, stations_on, stop_accel, stop_lines
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.path import RoutePath
@@ -224,6 +225,8 @@ class _Run:
                 self.scripts[a.name] = Script(a.steps)
                 self.named_steps.extend((st, f"{a.name}.{n.label}", n) for n in self.scripts[a.name].named)
         self.agent_by_name = {a.name: a for a in self.agents}
+        # Members in `occupants` order (agents, then the ego): the order breaks leader ties.
+        self.leaders = LeaderIndex([*self.agents, _EgoOccupant(self)])
         # Any actor on a path: agents find their leader by position (across roads), not by road.
         self.networked = isinstance(self.ego_road, _PathRoad) or any(
             isinstance(r, _PathRoad) for r in self.agent_roads.values())
@@ -390,17 +393,11 @@ class _Run:
         return self.body_actor.get(name)
 
     def leader_of(self, agent: AgentState):
-        """(gap [m], speed [m/s]) of the nearest actor ahead in the agent's lane, or None."""
+        """(gap [m], speed [m/s]) of the nearest actor ahead in the agent's lane, or None
+        (`neighbours.leader_scan`'s answer, from the per-road index the loop keeps)."""
         if self.networked:
             return self._leader_by_position(agent)
-        best = None
-        for other_name, s, t, speed, length in self.occupants(agent.road):
-            if other_name == agent.name or abs(t - agent.t) > 1.8:
-                continue
-            gap = s - agent.s - 0.5 * (length + agent.length_m)
-            if s > agent.s and (best is None or gap < best[0]):
-                best = (gap, speed)
-        return best
+        return self.leaders.leader(agent)
 
     def _leader_by_position(self, agent: AgentState, reach_m: float = 150.0):
         """`leader_of` across roads: every actor within `reach_m` projected onto the agent's
@@ -550,6 +547,8 @@ def _loop(run: _Run) -> Trace:
                 run.world_pose[a.name] = (x, y, heading)
         e = run.ego
         run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
+        if not run.networked:  # (networked runs find leaders by position)
+            run.leaders.rebuild()
         # The ego follows the road height; its dynamics feel the grade along its heading.
         z, grade = ego_road.elevation.at(run.ego_s)
         if grade:
@@ -636,12 +635,15 @@ def _loop(run: _Run) -> Trace:
             status, error = "detected", "vehicle state became non-finite"
             last = k + 1
             break
-        for a in run.agents:
+        leaders, networked = run.leaders, run.networked
+        for i, a in enumerate(run.agents):
             beh = run.longitudinal[a.name]
             accel = beh.accel(a, run, t_now) if beh is not None else 0.0
             if run.lights is not None and not a.heading_rel and not run.agent_plans[a.name].ignore_lights:
                 accel = run.stop_for_lights(a, accel, t_now)
             advance(a, accel, t_now, dt)
+            if not networked:  # agents later in the order see this one where it is now
+                leaders.moved(i)
 
     time = np.arange(last) * dt
     actors = {}
@@ -655,6 +657,30 @@ def _loop(run: _Run) -> Trace:
                  {k: v[:last] for k, v in outputs.items()}, objects[:last], status, error,
                  steps={k: v[:last] for k, v in steps.items()},
                  lights={k: v[:last] for k, v in lights_rec.items()}, red_margin={k: v[:last] for k, v in margins.items()})
+
+
+class _EgoOccupant:
+    """The ego as a member of the leader index: its station and offset as projected at
+    the start of the step, its speed live (the dynamics step before the agents move)."""
+
+    name = "ego"
+
+    def __init__(self, run: _Run):
+        self._run = run
+        self.road = run.ego_road.road_id
+        self.length_m = run.ego_plan.length_m
+
+    @property
+    def s(self) -> float:
+        return self._run.ego_s
+
+    @property
+    def t(self) -> float:
+        return self._run.ego_t
+
+    @property
+    def speed(self) -> float:
+        return self._run.ego.speed
 
 
 @dataclass(frozen=True)
@@ -684,35 +710,81 @@ def _record(r, k, x, y, heading, speed, accel, yaw_rate, s, t, lane_offset, stee
     r["lane_offset"][k], r["steer"][k] = lane_offset, steer
 
 
+def _pair_separation(a, b, box_a, box_b, reach_a, reach_b) -> float:
+    """Separation [m] of two actors' boxes: their centre distance less their half-diagonals
+    when that is over 5 m (cheap, a lower bound of the boxes' gap), else exact (SAT)."""
+    dist = math.hypot(box_a[0] - box_b[0], box_a[1] - box_b[1])
+    r = reach_a + reach_b
+    return dist - r if dist > r + 5.0 else box_separation(box_a, box_b)
+
+
 def _clearances(rec, k, names, poses, sizes, run, t_now) -> bool:
     """Record each actor's clearance; a collision event when two boxes start to overlap
-    (any pair, agents included). Returns True if the ego is in a collision (the run ends)."""
-    collided = False
+    (any pair, agents included). Returns True if the ego is in a collision (the run ends).
+
+    Each actor's clearance is its least separation over all pairs (`_pair_separation`).
+    A numpy broad phase over all pairs finds the pairs that can matter (those near enough
+    for the exact test, and those whose approximate separation is within a tolerance of
+    an actor's least); only these are evaluated, in the all-pairs order, with the same
+    scalar arithmetic, so the figures are those of visiting every pair."""
     boxes = {n: (*poses[n], *sizes[n]) for n in names}
-    reach = {n: 0.5 * math.hypot(*sizes[n]) for n in names}
     clear = {n: math.inf for n in names}
+    collided = False
     touching = set()
-    for i, a in enumerate(names):
-        ax, ay = boxes[a][0], boxes[a][1]
-        for b in names[i + 1:]:
-            # Cheap reject: boxes farther apart than their half-diagonals cannot touch.
-            dist = math.hypot(ax - boxes[b][0], ay - boxes[b][1])
-            r = reach[a] + reach[b]
-            sep = dist - r if dist > r + 5.0 else box_separation(boxes[a], boxes[b])
-            if sep < clear[a]:
-                clear[a] = sep
-            if sep < clear[b]:
-                clear[b] = sep
-            if sep <= 0.0:
-                touching.add((a, b))
-                if (a, b) not in run.contacts:
-                    run.events.append(Event(t_now, "collision", {"actors": [a, b]}))
-                if a == "ego" or b == "ego":
-                    collided = True
+    for a, b, sep in _pair_separations(run, names, boxes):
+        if sep < clear[a]:
+            clear[a] = sep
+        if sep < clear[b]:
+            clear[b] = sep
+        if sep <= 0.0:
+            touching.add((a, b))
+            if (a, b) not in run.contacts:
+                run.events.append(Event(t_now, "collision", {"actors": [a, b]}))
+            if a == "ego" or b == "ego":
+                collided = True
     run.contacts = touching
     for n in names:
         rec[n]["clearance"][k] = clear[n] if math.isfinite(clear[n]) else 1e3
     return collided
+
+
+# Broad-phase slack [m]: numpy's distances differ from math.hypot's by ulps, far below this.
+_BROAD_SLACK_M = 1e-6
+
+
+def _pair_separations(run, names, boxes) -> list[tuple[str, str, float]]:
+    """(a, b, separation [m]) of the actor pairs, in all-pairs order (i < j over `names`),
+    that can give an actor's clearance or a contact; every pair when a position is not
+    finite or there are few actors."""
+    if not hasattr(run, "pair_reach"):  # sizes are fixed: once per run
+        run.pair_reach = {n: 0.5 * math.hypot(boxes[n][3], boxes[n][4]) for n in names}
+        run.pair_index = np.triu_indices(len(names), 1)
+    reach = run.pair_reach
+    iu, ju = run.pair_index
+    xy = np.array([(boxes[n][0], boxes[n][1]) for n in names]) if len(names) > 4 else None
+    if xy is None or not np.isfinite(xy).all():
+        return [(a, b, _pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b]))
+                for a, b in ((names[i], names[j]) for i, j in zip(iu.tolist(), ju.tolist()))]
+    r_of = np.array([reach[n] for n in names])
+    d = np.hypot(xy[iu, 0] - xy[ju, 0], xy[iu, 1] - xy[ju, 1])
+    r = r_of[iu] + r_of[ju]
+    slack = _BROAD_SLACK_M * (1.0 + d)
+    near = d <= r + 5.0 + slack  # the exact test may apply
+    sep = d - r
+    exact = {}
+    for p in np.flatnonzero(near).tolist():  # exact values: they bound each actor's least
+        a, b = names[iu[p]], names[ju[p]]
+        sep[p] = exact[p] = _pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b])
+    least = np.full(len(names), np.inf)
+    np.minimum.at(least, iu, sep)
+    np.minimum.at(least, ju, sep)
+    keep = np.flatnonzero(near | (sep <= np.maximum(least[iu], least[ju]) + 2.0 * slack))
+    out = []
+    for p in keep.tolist():
+        a, b = names[iu[p]], names[ju[p]]
+        out.append((a, b, exact[p] if p in exact else
+                    _pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b])))
+    return out
 
 
 def _condition_checker(run: _Run, rec, k: int):
