@@ -539,7 +539,7 @@ def _loop(run: _Run) -> Trace:
         # Agent poses (kinematic along their road) and snapshot objects for perception.
         poses = {}
         for a, road, yaw, half_height in agent_consts:
-            x, y, h = road.pose(a.s, a.t)
+            x, y, h = road.road.point(a.s, a.t)  # road.pose
             heading = h + relative_heading(a, t_now, dt)
             if yaw:
                 heading += yaw
@@ -759,33 +759,35 @@ def _pair_separations(run, names, boxes) -> list[tuple[str, str, float]]:
     """(a, b, separation [m]) of the actor pairs, in all-pairs order (i < j over `names`),
     that can give an actor's clearance or a contact; every pair when a position is not
     finite or there are few actors."""
-    if not hasattr(run, "pair_reach"):  # sizes are fixed: once per run
-        run.pair_reach = {n: 0.5 * math.hypot(boxes[n][3], boxes[n][4]) for n in names}
-        run.pair_index = np.triu_indices(len(names), 1)
-    reach = run.pair_reach
-    iu, ju = run.pair_index
+    pairs = getattr(run, "clearance_pairs", None)
+    if pairs is None:  # sizes are fixed: once per run
+        reach = {n: 0.5 * math.hypot(boxes[n][3], boxes[n][4]) for n in names}
+        iu, ju = np.triu_indices(len(names), 1)
+        pair_names = [(names[i], names[j]) for i, j in zip(iu.tolist(), ju.tolist())]
+        r_of = np.array([reach[n] for n in names])
+        run.clearance_pairs = pairs = (reach, iu, ju, pair_names, r_of[iu] + r_of[ju])
+    reach, iu, ju, pair_names, r = pairs
     xy = np.array([(boxes[n][0], boxes[n][1]) for n in names]) if len(names) > 4 else None
     if xy is None or not np.isfinite(xy).all():
-        return [(a, b, _pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b]))
-                for a, b in ((names[i], names[j]) for i, j in zip(iu.tolist(), ju.tolist()))]
-    r_of = np.array([reach[n] for n in names])
+        return [(a, b, _pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b])) for a, b in pair_names]
     d = np.hypot(xy[iu, 0] - xy[ju, 0], xy[iu, 1] - xy[ju, 1])
-    r = r_of[iu] + r_of[ju]
     slack = _BROAD_SLACK_M * (1.0 + d)
     near = d <= r + 5.0 + slack  # the exact test may apply
     sep = d - r
     exact = {}
     for p in np.flatnonzero(near).tolist():  # exact values: they bound each actor's least
-        a, b = names[iu[p]], names[ju[p]]
+        a, b = pair_names[p]
         sep[p] = exact[p] = _pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b])
-    least = np.full(len(names), np.inf)
-    np.minimum.at(least, iu, sep)
-    np.minimum.at(least, ju, sep)
-    keep = np.flatnonzero(near | (sep <= np.maximum(least[iu], least[ju]) + 2.0 * slack))
+    table = np.full((len(names), len(names)), np.inf)
+    table[iu, ju] = sep
+    table[ju, iu] = sep
+    least = table.min(axis=1)
+    keep = np.flatnonzero(near | (sep <= np.maximum(least[iu], least[ju]) + 2.0 * slack)).tolist()
     out = []
-    for p in keep.tolist():
-        a, b = names[iu[p]], names[ju[p]]
-        out.append((a, b, exact[p] if p in exact else
+    for p in keep:
+        a, b = pair_names[p]
+        value = exact.get(p)
+        out.append((a, b, value if value is not None else
                     _pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b])))
     return out
 
