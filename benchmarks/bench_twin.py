@@ -99,6 +99,7 @@ def physics_step_us(n_vehicles: int) -> dict[str, float]:
                 beh = run.longitudinal[a.name]
                 advance(a, beh.accel(a, run, 0.0), 0.0, dt)
                 a.s -= a.speed * dt  # stay in place: every repetition measures the same scene
+            run.leaders.rebuild()  # stations changed outside the loop
 
         total = best_of(one_step, repeat=5, number=200)
         dyn = best_of(lambda: vehicle_step(run.ego, run.vehicle_params, 0.0, 0.0, dt), repeat=5, number=2000)

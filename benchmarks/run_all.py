@@ -35,6 +35,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "compile": (["--files", "1000"], ["--files", "100"]),
     "compile_scaling": ([], ["--quick"]),
     "twin": ([], ["--quick"]),
+    "dense": ([], ["--quick"]),
     "stack": ([], ["--repeats", "1"]),
     "faults": (["--repeat", "9"], ["--repeat", "2"]),
     "runner": ([], ["--runs", "40", "--memory-runs", "500"]),

@@ -159,6 +159,17 @@ class FastRoad:
         return best
 
     def lane_offset(self, s: float, t: float) -> float:
-        """Offset from the nearest driving lane's centre [m]."""
-        lane = self.lane_at(s, t)
-        return t if lane is None else t - self.lane_center_t(lane, s)
+        """Offset from the nearest driving lane's centre [m]: `lane_at`'s lane, each
+        centre interpolated once (the loop asks for every actor at every step)."""
+        i, u = self._index(s)
+        best_d, best_c = math.inf, None
+        for lane in self.driving_lane_ids(s):
+            table = self._center_cache.get(lane)
+            if table is None:
+                self.lane_center_t(lane, s)  # fills the lane's table
+                table = self._center_cache[lane]
+            c = table[i] + u * (table[i + 1] - table[i])
+            d = abs(t - c)
+            if d < best_d:
+                best_d, best_c = d, c
+        return t if best_c is None else t - best_c

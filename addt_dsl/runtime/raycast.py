@@ -83,6 +83,10 @@ def _candidates(starts, seg, centres, rotations, half_extents):
         # the ego's own body, with the sensor mounted inside it.
         local = np.einsum("kji,kj->ki", rotations, rel)
         keep = ~np.all(np.abs(local) < half_extents, axis=1)
+        # Boxes beyond the longest ray's reach (their bounding spheres included) are never
+        # met: in dense traffic most of them, and the (rays x boxes) products below shrink.
+        reach = np.sqrt(len2.max()) + np.sqrt(radius2)
+        keep &= (rel * rel).sum(axis=1) <= reach * reach * (1.0 + 1e-6) + 1e-6
         rel, radius2 = rel[keep], radius2[keep]
         box_ids = np.flatnonzero(keep)
         proj = seg @ rel.T  # (N, K): seg · (centre - start)

@@ -72,6 +72,7 @@ class PhysicsWorld:
         self._box_half: list[tuple[float, float, float]] = []
         self._box_pose: list[tuple[float, float, float, float, float]] = []
         self._box_ids = np.zeros(0, dtype=np.int64)
+        self._unsynced: set[int] = set()  # slots posed since pybullet last saw them
         self._ground_z = 0.0
         self._collision_meshes = 0
         self.analytic_rays = True  # False: always ask pybullet (tests compare the two)
@@ -130,17 +131,28 @@ class PhysicsWorld:
                                  physicsClientId=self.client)
 
     def set_pose(self, name: str, x: float, y: float, z: float, heading: float, pitch: float = 0.0) -> None:
-        """Pose a body: yaw `heading`, then `pitch` (nose up positive) [rad]."""
-        hy, hp = 0.5 * heading, -0.5 * pitch  # body y axis points left: nose-up is a negative rotation
-        cy, sy = math.cos(hy), math.sin(hy)
-        if hp == 0.0:
-            quat = (0.0, 0.0, sy, cy)
-        else:
-            cp, sp = math.cos(hp), math.sin(hp)
-            quat = (-sy * sp, cy * sp, sy * cp, cy * cp)
-        body = self.bodies[name]
-        self.p.resetBasePositionAndOrientation(body, (x, y, z), quat, physicsClientId=self.client)
-        self._box_pose[self._box_slot[body]] = (x, y, z, heading, pitch)
+        """Pose a body: yaw `heading`, then `pitch` (nose up positive) [rad].
+
+        pybullet gets the pose only when it is next asked something (`_sync_bodies`): the
+        loop poses every body every step, and most steps no sensor looks."""
+        slot = self._box_slot[self.bodies[name]]
+        self._box_pose[slot] = (x, y, z, heading, pitch)
+        self._unsynced.add(slot)
+
+    def _sync_bodies(self) -> None:
+        """Hand pybullet the poses set since it was last asked (ray casts, renders)."""
+        p, client = self.p, self.client
+        for slot in sorted(self._unsynced):
+            x, y, z, heading, pitch = self._box_pose[slot]
+            hy, hp = 0.5 * heading, -0.5 * pitch  # body y axis points left: nose-up is a negative rotation
+            cy, sy = math.cos(hy), math.sin(hy)
+            if hp == 0.0:
+                quat = (0.0, 0.0, sy, cy)
+            else:
+                cp, sp = math.cos(hp), math.sin(hp)
+                quat = (-sy * sp, cy * sp, sy * cp, cy * cp)
+            p.resetBasePositionAndOrientation(int(self._box_ids[slot]), (x, y, z), quat, physicsClientId=client)
+        self._unsynced.clear()
 
     @property
     def analytic(self) -> bool:
@@ -174,6 +186,7 @@ class PhysicsWorld:
         return ids, frac
 
     def _ray_cast_pybullet(self, starts, ends):
+        self._sync_bodies()
         if len(starts) <= MAX_RAYS_PER_BATCH:
             results = self.p.rayTestBatch(starts, ends, physicsClientId=self.client)
         else:  # pybullet refuses batches of 16384 rays or more
@@ -205,6 +218,7 @@ class PhysicsWorld:
     def render(self, width: int, height: int, view: list[float], projection: list[float],
                segmentation: bool = True):
         """Headless render (TinyRenderer): (rgb uint8 HxWx3, z-buffer float32 HxW, body ids int32 HxW | None)."""
+        self._sync_bodies()
         p = self.p
         flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
         _, _, rgba, depth, seg = p.getCameraImage(width, height, view, projection, shadow=0,

@@ -209,3 +209,29 @@ def test_collision_meshes_switch_to_pybullet():
         assert ids.tolist() == [-1] and frac.tolist() == [1.0]  # the mesh is ground
     finally:
         world.close()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 60))
+def test_boxes_beyond_the_scan_change_no_ray(seed, n_boxes):
+    """A scan (one origin) among boxes spread far beyond its range answers bit for bit what
+    the general path (no reach prefilter) answers: the prefilter drops only boxes no ray meets."""
+    rng = np.random.default_rng(seed)
+    # Boxes anywhere on a long road, and boxes straddling the end of the rays.
+    r, a = rng.uniform(76.0, 84.0, n_boxes), rng.uniform(-math.pi, math.pi, n_boxes)
+    edge = rng.random(n_boxes) < 0.5
+    centres = np.column_stack([np.where(edge, r * np.cos(a), rng.uniform(-400.0, 400.0, n_boxes)),
+                               np.where(edge, r * np.sin(a), rng.uniform(-12.0, 12.0, n_boxes)),
+                               np.full(n_boxes, 0.75)])
+    half = np.tile([2.3, 0.95, 0.75], (n_boxes, 1))
+    rot = raycast.box_rotations(rng.uniform(-0.3, 0.3, n_boxes), np.zeros(n_boxes))
+    az = np.linspace(-math.pi, math.pi, 720, endpoint=False)
+    starts = np.tile([0.0, 0.0, 1.0], (len(az), 1))
+    ends = starts + 80.0 * np.column_stack([np.cos(az), np.sin(az), rng.uniform(-0.005, 0.005, len(az))])
+    index, frac = raycast.cast(starts, ends, centres, rot, half, 0.0)
+    # One more ray from elsewhere (straight up, far away) sends the scan down the general path.
+    other = np.array([[1e4, 1e4, 10.0]])
+    ref_index, ref_frac = raycast.cast(np.vstack([starts, other]), np.vstack([ends, other + (0.0, 0.0, 1.0)]),
+                                       centres, rot, half, 0.0)
+    assert np.array_equal(index, ref_index[:-1])
+    assert np.array_equal(frac, ref_frac[:-1])

@@ -1,0 +1,156 @@
+"""The dense-traffic lookups against brute force: `LeaderIndex` (sorted per-road stations)
+against every-actor scans, and the clearance broad phase against visiting every pair,
+on random configurations with ties, lane-window edges and agents moving one by one."""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from addt_dsl.runtime import execute as X
+from addt_dsl.runtime.neighbours import LeaderIndex, leader_scan
+from addt_dsl.runtime.world import box_separation
+
+
+@dataclass
+class Member:
+    name: str
+    road: str
+    s: float
+    t: float
+    speed: float
+    length_m: float
+
+
+def bits(result):
+    """A lookup's answer with its floats as bit patterns (-0.0 differs from 0.0)."""
+    return None if result is None else tuple(struct.pack("<d", v) for v in result)
+
+
+def old_leader_of(members, agent):
+    """`_Run.leader_of` before the index (occupants: agents, then the ego), verbatim."""
+    def occupants(road_id):
+        for m in members:
+            if m.road == road_id:
+                yield m.name, m.s, m.t, m.speed, m.length_m
+
+    best = None
+    for other_name, s, t, speed, length in occupants(agent.road):
+        if other_name == agent.name or abs(t - agent.t) > 1.8:
+            continue
+        gap = s - agent.s - 0.5 * (length + agent.length_m)
+        if s > agent.s and (best is None or gap < best[0]):
+            best = (gap, speed)
+    return best
+
+
+# Stations on a coarse grid (many equal stations: gap ties), or anywhere; offsets near
+# lane centres and just inside/outside the 1.8 m window; a few lengths (ties need equal ones).
+stations = st.one_of(st.integers(0, 12).map(lambda i: 5.0 * i), st.floats(-10.0, 80.0))
+offsets = st.one_of(st.sampled_from([-5.25, -1.75, 1.75, -3.55, 0.05, -1.75 + 1.8, -1.75 - 1.8]),
+                    st.floats(-7.0, 3.5))
+member = st.tuples(st.sampled_from(["r", "r", "r", "q"]), stations, offsets,
+                   st.floats(0.0, 40.0), st.sampled_from([4.6, 4.6, 4.6, 12.0, 0.6]))
+
+
+def make_members(rows):
+    return [Member(f"a{i}" if i < len(rows) - 1 else "ego", *row) for i, row in enumerate(rows)]
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(member, min_size=1, max_size=30))
+def test_index_answers_like_the_scan_and_the_old_lookup(rows):
+    members = make_members(rows)
+    index = LeaderIndex(members)
+    for m in members:
+        expected = bits(old_leader_of(members, m))
+        assert bits(leader_scan(members, m)) == expected
+        assert bits(index.leader(m)) == expected
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(member, min_size=2, max_size=25), st.data())
+def test_index_follows_members_moving_one_by_one(rows, data):
+    """As in the loop: each agent in turn queries its leader, then moves (stations may
+    pass each other or land on another's exactly); later agents see it moved."""
+    members = make_members(rows)
+    index = LeaderIndex(members)
+    for _ in range(3):
+        for i, m in enumerate(members):
+            assert bits(index.leader(m)) == bits(old_leader_of(members, m))
+            m.s = data.draw(st.one_of(st.just(m.s), st.sampled_from([o.s for o in members]),
+                                      st.floats(m.s, m.s + 30.0)))
+            m.t = data.draw(st.one_of(st.just(m.t), offsets))
+            index.moved(i)
+
+
+def test_equal_gaps_go_to_the_first_member_whatever_the_station_order():
+    # Two leaders at the same gap (the nearer one shorter); the later-declared one sorts first.
+    agent = Member("a0", "r", 0.0, -1.75, 10.0, 4.0)
+    far = Member("a1", "r", 14.0, -1.75, 7.0, 12.0)  # gap 14 - 8 = 6
+    near = Member("a2", "r", 10.0, -1.75, 9.0, 4.0)  # gap 10 - 4 = 6
+    members = [agent, far, near]
+    assert old_leader_of(members, agent) == (6.0, far.speed)
+    assert LeaderIndex(members).leader(agent) == (6.0, far.speed)
+    members[1:] = [near, far]  # declared the other way round: the nearer one
+    assert LeaderIndex(members).leader(agent) == (6.0, near.speed) == old_leader_of(members, agent)
+
+
+def test_a_non_finite_station_falls_back_to_the_scan():
+    members = make_members([("r", 0.0, -1.75, 10.0, 4.6), ("r", 20.0, -1.75, 5.0, 4.6),
+                            ("r", 30.0, -1.75, 6.0, 4.6)])
+    index = LeaderIndex(members)
+    members[1].s = math.nan
+    index.moved(1)
+    assert bits(index.leader(members[0])) == bits(old_leader_of(members, members[0]))
+    assert index.leader(members[0])[1] == 6.0
+
+
+# ---------------------------------------------------------------- clearances
+
+def all_pairs(names, boxes):
+    """The clearance loop before the broad phase: every pair, in order (verbatim)."""
+    reach = {n: 0.5 * math.hypot(boxes[n][3], boxes[n][4]) for n in names}
+    clear = {n: math.inf for n in names}
+    touching = []
+    for i, a in enumerate(names):
+        ax, ay = boxes[a][0], boxes[a][1]
+        for b in names[i + 1:]:
+            dist = math.hypot(ax - boxes[b][0], ay - boxes[b][1])
+            r = reach[a] + reach[b]
+            sep = dist - r if dist > r + 5.0 else box_separation(boxes[a], boxes[b])
+            if sep < clear[a]:
+                clear[a] = sep
+            if sep < clear[b]:
+                clear[b] = sep
+            if sep <= 0.0:
+                touching.append((a, b))
+    return {n: clear[n] if math.isfinite(clear[n]) else 1e3 for n in names}, touching
+
+
+box = st.tuples(st.one_of(st.integers(0, 20).map(lambda i: 6.0 * i), st.floats(-50.0, 200.0)),
+                st.sampled_from([-5.25, -1.75, 1.75]) | st.floats(-8.0, 4.0),
+                st.floats(-0.4, 0.4) | st.just(0.0), st.sampled_from([(4.6, 1.9), (12.0, 2.5), (0.6, 0.6)]))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(box, min_size=1, max_size=40))
+def test_broad_phase_clearances_equal_all_pairs(rows):
+    names = ["ego"] + [f"a{i}" for i in range(len(rows) - 1)]
+    poses = {n: (x, y, h) for n, (x, y, h, _) in zip(names, rows)}
+    sizes = {n: size for n, (_, _, _, size) in zip(names, rows)}
+    boxes = {n: (*poses[n], *sizes[n]) for n in names}
+    rec = {n: {"clearance": np.zeros(1)} for n in names}
+    run = SimpleNamespace(contacts=set(), events=[])
+    collided = X._clearances(rec, 0, names, poses, sizes, run, 0.0)
+    clear, touching = all_pairs(names, boxes)
+    for n in names:
+        assert struct.pack("<d", rec[n]["clearance"][0]) == struct.pack("<d", clear[n])
+    assert [tuple(e.detail["actors"]) for e in run.events] == touching
+    assert collided == any("ego" in pair for pair in touching)
