@@ -126,6 +126,16 @@ def _changed(new: torch.Tensor, old: torch.Tensor) -> Region:
     return (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
 
 
+def _cells(shape: tuple[int, ...], flat_indices: list[int]) -> Region:
+    """Bounding box (rows, columns of the last two axes) of elements of a map by flat index."""
+    if not flat_indices:
+        return EMPTY
+    h, w = shape[-2], shape[-1]
+    rows = [(k // w) % h for k in flat_indices]
+    cols = [k % w for k in flat_indices]
+    return (min(rows), max(rows) + 1, min(cols), max(cols) + 1)
+
+
 class _Map:
     """One feature map kept across inferences: equal to its background (the map for an
     empty grid) except inside `dirty`, so the next frame restores only that region."""
@@ -165,7 +175,9 @@ class RegionForward:
     Hooks on a layer (tensor faults) see and may change its whole output as in the
     dense forward: forward pre-hooks run before the layer (a weight flip there makes the
     backgrounds stale: they are rebuilt), forward hooks get the full pre-activation
-    output, and what they change joins the changed region.
+    output, and what they change joins the changed region. Fault hooks that offer
+    `flip_owned` flip the kept map in place and report the flipped elements; any other
+    hook's changes are found by comparing the map with a copy taken before it ran.
     """
 
     def __init__(self, model: BevDetector):
@@ -248,13 +260,32 @@ class RegionForward:
             out.buf[..., o0:o1, q0:q1] = F.conv2d(window, layer.weight, layer.bias, s)
             out.dirty = (o0, o1, q0, q1)
         if layer._forward_hooks:
-            before = out.buf.clone()
-            for hook in list(layer._forward_hooks.values()):
-                result = hook(layer, (x,), out.buf)
-                if result is not None and result is not out.buf:
-                    out.buf.copy_(result)
-            out.dirty = _union(out.dirty, _changed(out.buf, before))
+            out.dirty = _union(out.dirty, self._hooked(layer, x, out.buf))
         return out.buf, out.dirty
+
+    @staticmethod
+    def _hooked(layer: nn.Conv2d, x: torch.Tensor, buf: torch.Tensor) -> Region:
+        """Run `layer`'s forward hooks on its output map `buf`; the region they changed."""
+        hooks = list(layer._forward_hooks.values())
+        owned = [getattr(hook, "flip_owned", None) for hook in hooks]
+        if all(owned):
+            # Fault hooks (runtime.faults.tensor, tensorfaults.ActivationFlip) flip `buf` in
+            # place and say what they flipped: the changed cells are those elements whose
+            # last value differs from their first (a NaN counts as changed), exactly what
+            # comparing the whole map with a clone would find, at the cost of the flips.
+            first: dict[int, float] = {}
+            last: dict[int, float] = {}
+            for flip in owned:
+                for k, before, after in flip(buf):
+                    first.setdefault(k, before)
+                    last[k] = after
+            return _cells(buf.shape, [k for k, after in last.items() if after != first[k]])
+        before = buf.clone()  # any other hook: find what it changed by comparison
+        for hook in hooks:
+            result = hook(layer, (x,), buf)
+            if result is not None and result is not buf:
+                buf.copy_(result)
+        return _changed(buf, before)
 
     def _relu(self, name: str, x: torch.Tensor, region: Region) -> torch.Tensor:
         out = self.maps[name]
