@@ -240,28 +240,54 @@ class RegionForward:
             if self._weights_changed(name):  # a persistent weight fault
                 self._rebuild()
         out = self.maps[name]
-        k, s, p = layer.kernel_size[0], layer.stride[0], layer.padding[0]
-        h_in, w_in = x.shape[-2:]
-        h_out, w_out = out.buf.shape[-2:]
-        if _empty(region):
-            out.restore()
-        else:
-            r0, r1, c0, c1 = region
-            # Output cells whose k×k window (stride s, padding p) meets the changed input cells.
-            o0, o1 = max(0, -(-(r0 + p - k + 1) // s)), min(h_out, (r1 - 1 + p) // s + 1)
-            q0, q1 = max(0, -(-(c0 + p - k + 1) // s)), min(w_out, (c1 - 1 + p) // s + 1)
-            out.restore((o0, o1, q0, q1))
-            i0, i1 = s * o0 - p, s * (o1 - 1) - p + k
-            j0, j1 = s * q0 - p, s * (q1 - 1) - p + k
-            window = x[..., max(i0, 0):min(i1, h_in), max(j0, 0):min(j1, w_in)]
-            pad = (max(0, -j0), max(0, j1 - w_in), max(0, -i0), max(0, i1 - h_in))
-            if any(pad):  # zero padding only where the window crosses the map's border
-                window = F.pad(window, pad)
-            out.buf[..., o0:o1, q0:q1] = F.conv2d(window, layer.weight, layer.bias, s)
-            out.dirty = (o0, o1, q0, q1)
+        cells, result = self._window(layer, x, region, out.buf.shape)
+        out.restore(cells)
+        if result is not None:
+            o0, o1, q0, q1 = cells
+            out.buf[..., o0:o1, q0:q1] = result
+            out.dirty = cells
         if layer._forward_hooks:
             out.dirty = _union(out.dirty, self._hooked(layer, x, out.buf))
         return out.buf, out.dirty
+
+    def _conv_relu(self, name: str, relu: str, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, Region]:
+        """`_relu(relu, *_conv(name, ...))`: with no hook on the layer, the ReLU is taken
+        straight from the conv's window (same values), and the pre-activation map, which
+        only hooks read, is left at its background."""
+        layer = self.layers[name]
+        if layer._forward_pre_hooks or layer._forward_hooks:
+            a, r = self._conv(name, x, region)
+            return self._relu(relu, a, r), r
+        self.maps[name].restore()  # after a hooked frame: back to the background once
+        cells, result = self._window(layer, x, region, self.maps[name].buf.shape)
+        out = self.maps[relu]
+        out.restore(cells)
+        if result is None:
+            return out.buf, EMPTY
+        o0, o1, q0, q1 = cells
+        torch.clamp_min(result, 0.0, out=out.buf[..., o0:o1, q0:q1])
+        out.dirty = cells
+        return out.buf, cells
+
+    @staticmethod
+    def _window(layer: nn.Conv2d, x: torch.Tensor, region: Region, shape) -> tuple[Region, torch.Tensor | None]:
+        """The output cells of `layer` whose k×k window (stride s, padding p) meets the
+        changed input `region`, and the conv on them (EMPTY, None for an empty region)."""
+        if _empty(region):
+            return EMPTY, None
+        k, s, p = layer.kernel_size[0], layer.stride[0], layer.padding[0]
+        h_in, w_in = x.shape[-2:]
+        h_out, w_out = shape[-2:]
+        r0, r1, c0, c1 = region
+        o0, o1 = max(0, -(-(r0 + p - k + 1) // s)), min(h_out, (r1 - 1 + p) // s + 1)
+        q0, q1 = max(0, -(-(c0 + p - k + 1) // s)), min(w_out, (c1 - 1 + p) // s + 1)
+        i0, i1 = s * o0 - p, s * (o1 - 1) - p + k
+        j0, j1 = s * q0 - p, s * (q1 - 1) - p + k
+        window = x[..., max(i0, 0):min(i1, h_in), max(j0, 0):min(j1, w_in)]
+        pad = (max(0, -j0), max(0, j1 - w_in), max(0, -i0), max(0, i1 - h_in))
+        if any(pad):  # zero padding only where the window crosses the map's border
+            window = F.pad(window, pad)
+        return (o0, o1, q0, q1), F.conv2d(window, layer.weight, layer.bias, s)
 
     @staticmethod
     def _hooked(layer: nn.Conv2d, x: torch.Tensor, buf: torch.Tensor) -> Region:
@@ -304,8 +330,10 @@ class RegionForward:
         out.restore(region)
         if not _empty(region):
             r0, r1, c0, c1 = region
-            up = F.interpolate(low[..., r0 // 2:(r1 + 1) // 2, c0 // 2:(c1 + 1) // 2], scale_factor=2.0,
-                               mode="nearest")
+            low = low[..., r0 // 2:(r1 + 1) // 2, c0 // 2:(c1 + 1) // 2]
+            b, c, h, w = low.shape
+            # Nearest ×2 is each value repeated 2×2: a broadcast copy, without interpolate's overhead.
+            up = low[:, :, :, None, :, None].expand(b, c, h, 2, w, 2).reshape(b, c, 2 * h, 2 * w)
             dr, dc = r0 - 2 * (r0 // 2), c0 - 2 * (c0 // 2)
             torch.add(up[..., dr:dr + r1 - r0, dc:dc + c1 - c0], skip[..., r0:r1, c0:c1],
                       out=out.buf[..., r0:r1, c0:c1])
@@ -314,19 +342,16 @@ class RegionForward:
 
     def _forward(self, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, torch.Tensor]:
         """The network of `BevDetector.forward`, layer by layer on changed regions."""
-        a, r0 = self._conv("backbone.conv0", x, region)
-        x0 = self._relu("x0", a, r0)
-        a, r1 = self._conv("backbone.conv1", x0, r0)
-        x1 = self._relu("x1", a, r1)
-        a, r = self._conv("backbone.conv2", x1, r1)
-        a, r = self._conv("backbone.conv3", self._relu("x2", a, r), r)
-        a, r = self._conv("neck.lateral", self._relu("x3", a, r), r)
+        x0, r0 = self._conv_relu("backbone.conv0", "x0", x, region)
+        x1, r1 = self._conv_relu("backbone.conv1", "x1", x0, r0)
+        a, r = self._conv_relu("backbone.conv2", "x2", x1, r1)
+        a, r = self._conv_relu("backbone.conv3", "x3", a, r)
+        a, r = self._conv("neck.lateral", a, r)
         u, r = self._up_add("u", a, r, x1, r1)
-        a, r = self._conv("neck.fuse", u, r)
-        a, r = self._conv("neck.lateral_fine", self._relu("f", a, r), r)
+        a, r = self._conv_relu("neck.fuse", "f", u, r)
+        a, r = self._conv("neck.lateral_fine", a, r)
         v, r = self._up_add("v", a, r, x0, r0)
-        a, r = self._conv("neck.fine", v, r)
-        g = self._relu("g", a, r)
+        g, r = self._conv_relu("neck.fine", "g", v, r)
         heat, _ = self._conv("head.center", g, r)
         box, _ = self._conv("head.box", g, r)
         return heat, box
@@ -391,7 +416,7 @@ class LearnedPerception:
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
         """Vehicle-frame points → (N, 6) boxes: x, y, heading, length, width, confidence."""
         build_grid(points_vehicle, sensor_xy, out=self._grid)
-        occupied = self._grid.any(axis=0)
+        occupied = self._grid[0] > 0.0  # the point-count channel: > 0 exactly on occupied cells
         rows, cols = np.flatnonzero(occupied.any(axis=1)), np.flatnonzero(occupied.any(axis=0))
         region = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1) if len(rows) else EMPTY
         with torch.inference_mode(), _one_intra_op_thread():
