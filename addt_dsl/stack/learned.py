@@ -136,24 +136,52 @@ def _cells(shape: tuple[int, ...], flat_indices: list[int]) -> Region:
     return (min(rows), max(rows) + 1, min(cols), max(cols) + 1)
 
 
+class _Views:
+    """`t[:, :, r0:r1, c0:c1]` of tensors kept across frames, cached: a frame's regions are
+    mostly the last frame's, and making a view costs about as much as a small kernel. An
+    entry holds its tensor, so an id in a key is never another tensor's."""
+
+    def __init__(self):
+        self._cache: dict[tuple, tuple[torch.Tensor, torch.Tensor]] = {}
+
+    def __call__(self, t: torch.Tensor, r0: int, r1: int, c0: int, c1: int) -> torch.Tensor:
+        key = (id(t), r0, r1, c0, c1)
+        hit = self._cache.get(key)
+        if hit is not None and hit[0] is t:
+            return hit[1]
+        if len(self._cache) >= 1024:  # regions wander over a run: start afresh now and then
+            self._cache.clear()
+        view = t[:, :, r0:r1, c0:c1]
+        self._cache[key] = (t, view)
+        return view
+
+    def clear(self) -> None:
+        self._cache.clear()
+
+
 class _Map:
     """One feature map kept across inferences: equal to its background (the map for an
     empty grid) except inside `dirty`, so the next frame restores only that region."""
 
-    __slots__ = ("background", "buf", "dirty")
+    __slots__ = ("background", "buf", "dirty", "views")
 
-    def __init__(self, background: torch.Tensor):
+    def __init__(self, background: torch.Tensor, views: _Views):
         self.background = background
         self.buf = background.clone()
         self.dirty = EMPTY
+        self.views = views
 
     def restore(self, keep: Region = EMPTY) -> None:
         """Back to the background, except that the caller will overwrite `keep` next."""
         r0, r1, c0, c1 = self.dirty
         inside = keep[0] <= r0 and r1 <= keep[1] and keep[2] <= c0 and c1 <= keep[3]
         if r0 < r1 and c0 < c1 and not inside:
-            self.buf[..., r0:r1, c0:c1] = self.background[..., r0:r1, c0:c1]
+            self.views(self.buf, r0, r1, c0, c1).copy_(self.views(self.background, r0, r1, c0, c1))
         self.dirty = EMPTY
+
+    def at(self, region: Region) -> torch.Tensor:
+        """The buffer's view on `region` (to write the frame's values into)."""
+        return self.views(self.buf, *region)
 
 
 def _empty(region: Region) -> bool:
@@ -185,6 +213,7 @@ class RegionForward:
         self.layers = model.layers()
         self.maps: dict[str, _Map] | None = None
         self._snapshot: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
+        self.views = _Views()
 
     def invalidate(self) -> None:
         """Weights changed: rebuild the backgrounds at the next inference."""
@@ -224,7 +253,8 @@ class RegionForward:
         conv("head.center", bg["g"])
         conv("head.box", bg["g"])
         old = self.maps or {}
-        self.maps = {k: old[k] if k in old and torch.equal(old[k].background, t) else _Map(t) for k, t in bg.items()}
+        self.maps = {k: old[k] if k in old and torch.equal(old[k].background, t) else _Map(t, self.views)
+                     for k, t in bg.items()}
 
     def _weights_changed(self, name: str) -> bool:
         layer = self.layers[name]
@@ -243,8 +273,7 @@ class RegionForward:
         cells, result = self._window(layer, x, region, out.buf.shape)
         out.restore(cells)
         if result is not None:
-            o0, o1, q0, q1 = cells
-            out.buf[..., o0:o1, q0:q1] = result
+            out.at(cells).copy_(result)
             out.dirty = cells
         if layer._forward_hooks:
             out.dirty = _union(out.dirty, self._hooked(layer, x, out.buf))
@@ -264,13 +293,11 @@ class RegionForward:
         out.restore(cells)
         if result is None:
             return out.buf, EMPTY
-        o0, o1, q0, q1 = cells
-        torch.clamp_min(result, 0.0, out=out.buf[..., o0:o1, q0:q1])
+        torch.clamp_min(result, 0.0, out=out.at(cells))
         out.dirty = cells
         return out.buf, cells
 
-    @staticmethod
-    def _window(layer: nn.Conv2d, x: torch.Tensor, region: Region, shape) -> tuple[Region, torch.Tensor | None]:
+    def _window(self, layer: nn.Conv2d, x: torch.Tensor, region: Region, shape) -> tuple[Region, torch.Tensor | None]:
         """The output cells of `layer` whose k×k window (stride s, padding p) meets the
         changed input `region`, and the conv on them (EMPTY, None for an empty region)."""
         if _empty(region):
@@ -283,7 +310,7 @@ class RegionForward:
         q0, q1 = max(0, -(-(c0 + p - k + 1) // s)), min(w_out, (c1 - 1 + p) // s + 1)
         i0, i1 = s * o0 - p, s * (o1 - 1) - p + k
         j0, j1 = s * q0 - p, s * (q1 - 1) - p + k
-        window = x[..., max(i0, 0):min(i1, h_in), max(j0, 0):min(j1, w_in)]
+        window = self.views(x, max(i0, 0), min(i1, h_in), max(j0, 0), min(j1, w_in))
         pad = (max(0, -j0), max(0, j1 - w_in), max(0, -i0), max(0, i1 - h_in))
         if any(pad):  # zero padding only where the window crosses the map's border
             window = F.pad(window, pad)
@@ -318,7 +345,7 @@ class RegionForward:
         out.restore(region)
         if not _empty(region):
             r0, r1, c0, c1 = region
-            torch.clamp_min(x[..., r0:r1, c0:c1], 0.0, out=out.buf[..., r0:r1, c0:c1])
+            torch.clamp_min(self.views(x, r0, r1, c0, c1), 0.0, out=out.at(region))
             out.dirty = region
         return out.buf
 
@@ -330,13 +357,13 @@ class RegionForward:
         out.restore(region)
         if not _empty(region):
             r0, r1, c0, c1 = region
-            low = low[..., r0 // 2:(r1 + 1) // 2, c0 // 2:(c1 + 1) // 2]
+            low = self.views(low, r0 // 2, (r1 + 1) // 2, c0 // 2, (c1 + 1) // 2)
             b, c, h, w = low.shape
             # Nearest ×2 is each value repeated 2×2: a broadcast copy, without interpolate's overhead.
             up = low[:, :, :, None, :, None].expand(b, c, h, 2, w, 2).reshape(b, c, 2 * h, 2 * w)
             dr, dc = r0 - 2 * (r0 // 2), c0 - 2 * (c0 // 2)
-            torch.add(up[..., dr:dr + r1 - r0, dc:dc + c1 - c0], skip[..., r0:r1, c0:c1],
-                      out=out.buf[..., r0:r1, c0:c1])
+            torch.add(up[:, :, dr:dr + r1 - r0, dc:dc + c1 - c0], self.views(skip, r0, r1, c0, c1),
+                      out=out.at(region))
             out.dirty = region
         return out.buf, region
 
