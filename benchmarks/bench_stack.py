@@ -93,7 +93,7 @@ def main() -> None:
         (sensors.Lidar, "capture", "lidar ray casts"),
         (nodes.GroundTruthPerception, "run", "perception (ground truth)"),
         (learned.LearnedPerception, "run", "perception (learned)"),
-        (learned, "build_grid", "  grid from points"),
+        (learned, "build_grid_region", "  grid from points"),
         (learned.RegionForward, "__call__", "  network (changed regions)"),
         (learned, "decode", "  decode + box NMS"),
         (nodes.Tracker, "update", "tracker"),

@@ -39,7 +39,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from addt_dsl.stack.bev_grid import GRID, LAYER_SITES, build_grid, decode, sensor_points_to_vehicle
+from addt_dsl.stack.bev_grid import GRID, LAYER_SITES, build_grid_region, decode, sensor_points_to_vehicle
 from addt_dsl.stack.nodes import Obj
 from addt_dsl.stack.tensorfaults import ActivationFlip, flip_bits
 
@@ -442,10 +442,7 @@ class LearnedPerception:
 
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
         """Vehicle-frame points → (N, 6) boxes: x, y, heading, length, width, confidence."""
-        build_grid(points_vehicle, sensor_xy, out=self._grid)
-        occupied = self._grid[0] > 0.0  # the point-count channel: > 0 exactly on occupied cells
-        rows, cols = np.flatnonzero(occupied.any(axis=1)), np.flatnonzero(occupied.any(axis=0))
-        region = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1) if len(rows) else EMPTY
+        _, region = build_grid_region(points_vehicle, sensor_xy, out=self._grid)
         with torch.inference_mode(), _one_intra_op_thread():
             x = self._input if self.device == "cpu" else self._input.to(self.device)
             heat, box = self._forward(x, region)
