@@ -99,8 +99,8 @@ def headline(results: dict) -> dict:
     # Every paper family, not the cheapest (issue 22: learned >= 150x in each).
     for family, rtf in (_get(b["stack"], "rtf_families") or {}).items():
         if isinstance(rtf, dict):
-            row(f"rtf_{family}_learned", rtf.get("learned"), 150.0, unit="x real time (wall)")
-            row(f"rtf_{family}_learned_cpu", rtf.get("learned_cpu"), 150.0, unit="x real time (CPU)")
+            row(f"rtf_family_{family}_learned", rtf.get("learned"), 150.0, unit="x real time (wall)")
+            row(f"rtf_family_{family}_learned_cpu", rtf.get("learned_cpu"), 150.0, unit="x real time (CPU)")
     tensor = _get(b["faults"], "tensor", "ratio") or {}
     if tensor:
         row("tensor_fault_last_second_overhead", tensor["activations, last second"] - 1.0, 0.05, better="lower",
