@@ -149,14 +149,11 @@ class _Views:
         hit = self._cache.get(key)
         if hit is not None and hit[0] is t:
             return hit[1]
-        if len(self._cache) >= 1024:  # regions wander over a run: start afresh now and then
+        if len(self._cache) >= 256:  # regions wander over a run: start afresh now and then
             self._cache.clear()
         view = t[:, :, r0:r1, c0:c1]
         self._cache[key] = (t, view)
         return view
-
-    def clear(self) -> None:
-        self._cache.clear()
 
 
 class _Map:
@@ -416,6 +413,8 @@ class LearnedPerception:
         self._logit_threshold = math.log(self.threshold / (1.0 - self.threshold))
         self._grid = np.zeros(GRID.shape, dtype=np.float32)
         self._input = torch.from_numpy(self._grid)[None]  # shares memory with the grid buffer
+        # On another device, one input tensor kept there (RegionForward's views of it stay valid).
+        self._device_input = self._input if device == "cpu" else torch.empty_like(self._input, device=device)
         self._layers = self.model.layers()
         self._forward = RegionForward(self.model)
         self._armed: list[ActivationFlip] = []
@@ -444,7 +443,7 @@ class LearnedPerception:
         """Vehicle-frame points → (N, 6) boxes: x, y, heading, length, width, confidence."""
         _, region = build_grid_region(points_vehicle, sensor_xy, out=self._grid)
         with torch.inference_mode(), _one_intra_op_thread():
-            x = self._input if self.device == "cpu" else self._input.to(self.device)
+            x = self._input if self.device == "cpu" else self._device_input.copy_(self._input)
             heat, box = self._forward(x, region)
             heat, box = heat[0, 0].cpu().numpy(), box[0].cpu().numpy()
         self._collect_fired()
