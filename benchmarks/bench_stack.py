@@ -11,7 +11,10 @@ lidar's ray casts. The real-time factor is simulated time over the wall time of
 `execute` (world set-up and judging included), median of `--repeats` runs after one
 warm-up run; also over the process's CPU time, which is the steadier figure on a shared
 machine (node timings are CPU time of the calling thread, for the same reason).
-Issue 10's target: >= 100x with learned perception.
+Issue 10's target: >= 100x with learned perception. Then every paper family
+(examples/suites/families: overtake, curve, following_brake, following; 30 s, defaults,
+fault-free) with ground-truth and learned perception, runs interleaved, `uptime` printed
+before and after (issue 22's target: learned >= 150x in every family).
 """
 
 from __future__ import annotations
@@ -74,6 +77,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", help="also write the figures here")
+    ap.add_argument("--families-only", action="store_true", help="only the per-family real-time factors")
     args = ap.parse_args()
 
     import gc
@@ -89,7 +93,7 @@ def main() -> None:
         (sensors.Lidar, "capture", "lidar ray casts"),
         (nodes.GroundTruthPerception, "run", "perception (ground truth)"),
         (learned.LearnedPerception, "run", "perception (learned)"),
-        (learned, "build_grid", "  grid from points"),
+        (learned, "build_grid_region", "  grid from points"),
         (learned.RegionForward, "__call__", "  network (changed regions)"),
         (learned, "decode", "  decode + box NMS"),
         (nodes.Tracker, "update", "tracker"),
@@ -100,7 +104,7 @@ def main() -> None:
     print(f"overtake example, 30 s simulated, drop rate 0, torch threads {torch.get_num_threads()}; "
           f"lidar ray casts analytic where the world allows (runtime/raycast.py)")
     figures = {"rtf": {}, "rtf_cpu": {}, "nodes_us_per_call": {}, "nodes_ms_per_run": {}}
-    for perception in ("ground_truth", "learned"):
+    for perception in () if args.families_only else ("ground_truth", "learned"):
         spec = _spec(perception)
         execute(spec, keep_trace=False)  # warm-up: imports, weights, first-call costs
         gc.collect()
@@ -129,7 +133,47 @@ def main() -> None:
             total = sum(samples)
             print(f"  {label:<28} {len(samples):>6} {1e6 * total / len(samples):>9.1f} {1e3 * total:>8.1f} "
                   f"{100 * total / cpu:>5.0f}%")
+    figures["rtf_families"] = families(args.repeats)
     figures_json.write(args.json, figures)
+
+
+def families(repeats: int) -> dict:
+    """Real-time factor of each paper family (30 s, defaults, fault-free), ground truth and
+    learned, runs interleaved; median wall and least CPU of `repeats` after a warm-up."""
+    import subprocess
+    import sys
+
+    from addt_dsl.runtime.execute import execute
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from _families import PAPER_FAMILIES, family_spec
+
+    specs = {(f, p): family_spec(f, p) for f in PAPER_FAMILIES for p in ("ground_truth", "learned")}
+    for spec in specs.values():
+        execute(spec, keep_trace=False)
+    walls = {k: [] for k in specs}
+    cpus = {k: [] for k in specs}
+    sim_s = {}
+    up = subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
+    for _ in range(max(repeats, 3)):
+        for k, spec in specs.items():
+            t0, c0 = time.perf_counter(), time.process_time()
+            result = execute(spec, keep_trace=False)
+            walls[k].append(time.perf_counter() - t0)
+            cpus[k].append(time.process_time() - c0)
+            sim_s[k] = result.sim_time_s
+    up_after = subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
+    print(f"\npaper families, 30 s simulated each, fault-free (uptime before: {up}; after: {up_after})")
+    print(f"  {'family':<16} {'ground truth':>13} {'learned':>9} {'ground truth CPU':>17} {'learned CPU':>12}"
+          "  (x real time: wall median, CPU least)")
+    out = {"uptime_before": up, "uptime_after": up_after}
+    for f in PAPER_FAMILIES:
+        row = {p: sim_s[(f, p)] / statistics.median(walls[(f, p)]) for p in ("ground_truth", "learned")}
+        row.update({f"{p}_cpu": sim_s[(f, p)] / min(cpus[(f, p)]) for p in ("ground_truth", "learned")})
+        out[f] = row
+        print(f"  {f:<16} {row['ground_truth']:>12.0f}x {row['learned']:>8.0f}x {row['ground_truth_cpu']:>16.0f}x "
+              f"{row['learned_cpu']:>11.0f}x")
+    return out
 
 
 if __name__ == "__main__":

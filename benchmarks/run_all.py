@@ -97,6 +97,17 @@ def headline(results: dict) -> dict:
 
     row("rtf_overtake_gt", _get(b["stack"], "rtf", "ground_truth"), 100.0, unit="x real time")
     row("rtf_overtake_learned", _get(b["stack"], "rtf", "learned"), 100.0, unit="x real time")
+    # Every paper family, not the cheapest (issue 22: learned >= 150x in each).
+    for family, rtf in (_get(b["stack"], "rtf_families") or {}).items():
+        if isinstance(rtf, dict):
+            row(f"rtf_family_{family}_learned", rtf.get("learned"), 150.0, unit="x real time (wall)")
+            row(f"rtf_family_{family}_learned_cpu", rtf.get("learned_cpu"), 150.0, unit="x real time (CPU)")
+    tensor = _get(b["faults"], "tensor", "ratio") or {}
+    if tensor:
+        row("tensor_fault_last_second_overhead", tensor["activations, last second"] - 1.0, 0.05, better="lower",
+            unit=f"fraction of the run (noise floor {tensor['none (again)'] - 1.0:+.3f})")
+        row("tensor_fault_in_window_overhead", tensor["activations, whole run, 1 flip/s"] - 1.0, 0.05,
+            better="lower", unit="fraction, window = whole run, 1 flip/s")
     row("table1_wall_s", _get(b["table1"], "wall_s") if not _get(b["table1"], "limit_per_file") else None,
         600.0, better="lower", unit="s")
     row("compile_1000_files_wall_s", _get(b["compile"], "wall_s") if _get(b["compile"], "files") == 1000 else None,

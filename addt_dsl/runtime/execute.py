@@ -543,6 +543,8 @@ def _loop(run: _Run) -> Trace:
     for k in range(n):
         t_now = k * dt
         run.ctx.now = t_now
+        if t_now + 1e-12 >= run.faults.next_wake_s:  # fault timers (tensor hooks attach at their instants)
+            run.faults.wake(t_now)
         # Agent poses (kinematic along their road) and snapshot objects for perception.
         poses = {}
         for a, road, yaw, half_height in agent_consts:

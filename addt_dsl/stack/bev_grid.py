@@ -108,11 +108,18 @@ def build_grid(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec:
     `sensor_xy` is where the stack believes the sensor is (nominal extrinsics) [m];
     `out`, if given, is overwritten in place (saves an allocation per frame).
     """
+    return build_grid_region(points_vehicle, sensor_xy, spec, out)[0]
+
+
+def build_grid_region(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec: GridSpec = GRID,
+                      out: np.ndarray | None = None) -> tuple[np.ndarray, tuple[int, int, int, int]]:
+    """`build_grid`, and the occupied cells' bounding box: rows [r0, r1) along x, columns
+    [c0, c1) along y ((0, 0, 0, 0) for an empty grid), from the points, not a scan of the grid."""
     grid = np.zeros(spec.shape, dtype=np.float32) if out is None else out
     if out is not None:
         grid.fill(0.0)
     if len(points_vehicle) == 0:
-        return grid
+        return grid, (0, 0, 0, 0)
     px = points_vehicle[:, 0]
     py = points_vehicle[:, 1]
     fx = (px - spec.x_min) / spec.cell_m
@@ -126,7 +133,7 @@ def build_grid(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec:
     else:
         pz = points_vehicle[:, 2]
     if len(ix) == 0:
-        return grid
+        return grid, (0, 0, 0, 0)
     flat = ix * spec.ny + iy
     # Per-cell reductions over the occupied cells only (a scan fills ~1 % of the grid).
     cells, inv, n = np.unique(flat, return_inverse=True, return_counts=True)
@@ -142,7 +149,8 @@ def build_grid(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec:
     views[3, cells] = pz[order][last] / 2.0
     views[4, cells] = np.bincount(inv, rx / rnorm, m) / n
     views[5, cells] = np.bincount(inv, ry / rnorm, m) / n
-    return grid
+    # `cells` is sorted: its first and last give the rows (flat = row * ny + column).
+    return grid, (int(cells[0]) // spec.ny, int(cells[-1]) // spec.ny + 1, int(iy.min()), int(iy.max()) + 1)
 
 
 def sensor_points_to_vehicle(points_sensor: np.ndarray, ext) -> np.ndarray:

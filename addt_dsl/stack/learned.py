@@ -39,7 +39,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from addt_dsl.stack.bev_grid import GRID, LAYER_SITES, build_grid, decode, sensor_points_to_vehicle
+from addt_dsl.stack.bev_grid import GRID, LAYER_SITES, build_grid_region, decode, sensor_points_to_vehicle
 from addt_dsl.stack.nodes import Obj
 from addt_dsl.stack.tensorfaults import ActivationFlip, flip_bits
 
@@ -126,24 +126,59 @@ def _changed(new: torch.Tensor, old: torch.Tensor) -> Region:
     return (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
 
 
+def _cells(shape: tuple[int, ...], flat_indices: list[int]) -> Region:
+    """Bounding box (rows, columns of the last two axes) of elements of a map by flat index."""
+    if not flat_indices:
+        return EMPTY
+    h, w = shape[-2], shape[-1]
+    rows = [(k // w) % h for k in flat_indices]
+    cols = [k % w for k in flat_indices]
+    return (min(rows), max(rows) + 1, min(cols), max(cols) + 1)
+
+
+class _Views:
+    """`t[:, :, r0:r1, c0:c1]` of tensors kept across frames, cached: a frame's regions are
+    mostly the last frame's, and making a view costs about as much as a small kernel. An
+    entry holds its tensor, so an id in a key is never another tensor's."""
+
+    def __init__(self):
+        self._cache: dict[tuple, tuple[torch.Tensor, torch.Tensor]] = {}
+
+    def __call__(self, t: torch.Tensor, r0: int, r1: int, c0: int, c1: int) -> torch.Tensor:
+        key = (id(t), r0, r1, c0, c1)
+        hit = self._cache.get(key)
+        if hit is not None and hit[0] is t:
+            return hit[1]
+        if len(self._cache) >= 256:  # regions wander over a run: start afresh now and then
+            self._cache.clear()
+        view = t[:, :, r0:r1, c0:c1]
+        self._cache[key] = (t, view)
+        return view
+
+
 class _Map:
     """One feature map kept across inferences: equal to its background (the map for an
     empty grid) except inside `dirty`, so the next frame restores only that region."""
 
-    __slots__ = ("background", "buf", "dirty")
+    __slots__ = ("background", "buf", "dirty", "views")
 
-    def __init__(self, background: torch.Tensor):
+    def __init__(self, background: torch.Tensor, views: _Views):
         self.background = background
         self.buf = background.clone()
         self.dirty = EMPTY
+        self.views = views
 
     def restore(self, keep: Region = EMPTY) -> None:
         """Back to the background, except that the caller will overwrite `keep` next."""
         r0, r1, c0, c1 = self.dirty
         inside = keep[0] <= r0 and r1 <= keep[1] and keep[2] <= c0 and c1 <= keep[3]
         if r0 < r1 and c0 < c1 and not inside:
-            self.buf[..., r0:r1, c0:c1] = self.background[..., r0:r1, c0:c1]
+            self.views(self.buf, r0, r1, c0, c1).copy_(self.views(self.background, r0, r1, c0, c1))
         self.dirty = EMPTY
+
+    def at(self, region: Region) -> torch.Tensor:
+        """The buffer's view on `region` (to write the frame's values into)."""
+        return self.views(self.buf, *region)
 
 
 def _empty(region: Region) -> bool:
@@ -165,7 +200,9 @@ class RegionForward:
     Hooks on a layer (tensor faults) see and may change its whole output as in the
     dense forward: forward pre-hooks run before the layer (a weight flip there makes the
     backgrounds stale: they are rebuilt), forward hooks get the full pre-activation
-    output, and what they change joins the changed region.
+    output, and what they change joins the changed region. Fault hooks that offer
+    `flip_owned` flip the kept map in place and report the flipped elements; any other
+    hook's changes are found by comparing the map with a copy taken before it ran.
     """
 
     def __init__(self, model: BevDetector):
@@ -173,6 +210,7 @@ class RegionForward:
         self.layers = model.layers()
         self.maps: dict[str, _Map] | None = None
         self._snapshot: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
+        self.views = _Views()
 
     def invalidate(self) -> None:
         """Weights changed: rebuild the backgrounds at the next inference."""
@@ -212,7 +250,8 @@ class RegionForward:
         conv("head.center", bg["g"])
         conv("head.box", bg["g"])
         old = self.maps or {}
-        self.maps = {k: old[k] if k in old and torch.equal(old[k].background, t) else _Map(t) for k, t in bg.items()}
+        self.maps = {k: old[k] if k in old and torch.equal(old[k].background, t) else _Map(t, self.views)
+                     for k, t in bg.items()}
 
     def _weights_changed(self, name: str) -> bool:
         layer = self.layers[name]
@@ -228,40 +267,82 @@ class RegionForward:
             if self._weights_changed(name):  # a persistent weight fault
                 self._rebuild()
         out = self.maps[name]
+        cells, result = self._window(layer, x, region, out.buf.shape)
+        out.restore(cells)
+        if result is not None:
+            out.at(cells).copy_(result)
+            out.dirty = cells
+        if layer._forward_hooks:
+            out.dirty = _union(out.dirty, self._hooked(layer, x, out.buf))
+        return out.buf, out.dirty
+
+    def _conv_relu(self, name: str, relu: str, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, Region]:
+        """`_relu(relu, *_conv(name, ...))`: with no hook on the layer, the ReLU is taken
+        straight from the conv's window (same values), and the pre-activation map, which
+        only hooks read, is left at its background."""
+        layer = self.layers[name]
+        if layer._forward_pre_hooks or layer._forward_hooks:
+            a, r = self._conv(name, x, region)
+            return self._relu(relu, a, r), r
+        self.maps[name].restore()  # after a hooked frame: back to the background once
+        cells, result = self._window(layer, x, region, self.maps[name].buf.shape)
+        out = self.maps[relu]
+        out.restore(cells)
+        if result is None:
+            return out.buf, EMPTY
+        torch.clamp_min(result, 0.0, out=out.at(cells))
+        out.dirty = cells
+        return out.buf, cells
+
+    def _window(self, layer: nn.Conv2d, x: torch.Tensor, region: Region, shape) -> tuple[Region, torch.Tensor | None]:
+        """The output cells of `layer` whose k×k window (stride s, padding p) meets the
+        changed input `region`, and the conv on them (EMPTY, None for an empty region)."""
+        if _empty(region):
+            return EMPTY, None
         k, s, p = layer.kernel_size[0], layer.stride[0], layer.padding[0]
         h_in, w_in = x.shape[-2:]
-        h_out, w_out = out.buf.shape[-2:]
-        if _empty(region):
-            out.restore()
-        else:
-            r0, r1, c0, c1 = region
-            # Output cells whose k×k window (stride s, padding p) meets the changed input cells.
-            o0, o1 = max(0, -(-(r0 + p - k + 1) // s)), min(h_out, (r1 - 1 + p) // s + 1)
-            q0, q1 = max(0, -(-(c0 + p - k + 1) // s)), min(w_out, (c1 - 1 + p) // s + 1)
-            out.restore((o0, o1, q0, q1))
-            i0, i1 = s * o0 - p, s * (o1 - 1) - p + k
-            j0, j1 = s * q0 - p, s * (q1 - 1) - p + k
-            window = x[..., max(i0, 0):min(i1, h_in), max(j0, 0):min(j1, w_in)]
-            pad = (max(0, -j0), max(0, j1 - w_in), max(0, -i0), max(0, i1 - h_in))
-            if any(pad):  # zero padding only where the window crosses the map's border
-                window = F.pad(window, pad)
-            out.buf[..., o0:o1, q0:q1] = F.conv2d(window, layer.weight, layer.bias, s)
-            out.dirty = (o0, o1, q0, q1)
-        if layer._forward_hooks:
-            before = out.buf.clone()
-            for hook in list(layer._forward_hooks.values()):
-                result = hook(layer, (x,), out.buf)
-                if result is not None and result is not out.buf:
-                    out.buf.copy_(result)
-            out.dirty = _union(out.dirty, _changed(out.buf, before))
-        return out.buf, out.dirty
+        h_out, w_out = shape[-2:]
+        r0, r1, c0, c1 = region
+        o0, o1 = max(0, -(-(r0 + p - k + 1) // s)), min(h_out, (r1 - 1 + p) // s + 1)
+        q0, q1 = max(0, -(-(c0 + p - k + 1) // s)), min(w_out, (c1 - 1 + p) // s + 1)
+        i0, i1 = s * o0 - p, s * (o1 - 1) - p + k
+        j0, j1 = s * q0 - p, s * (q1 - 1) - p + k
+        window = self.views(x, max(i0, 0), min(i1, h_in), max(j0, 0), min(j1, w_in))
+        pad = (max(0, -j0), max(0, j1 - w_in), max(0, -i0), max(0, i1 - h_in))
+        if any(pad):  # zero padding only where the window crosses the map's border
+            window = F.pad(window, pad)
+        return (o0, o1, q0, q1), F.conv2d(window, layer.weight, layer.bias, s)
+
+    @staticmethod
+    def _hooked(layer: nn.Conv2d, x: torch.Tensor, buf: torch.Tensor) -> Region:
+        """Run `layer`'s forward hooks on its output map `buf`; the region they changed."""
+        hooks = list(layer._forward_hooks.values())
+        owned = [getattr(hook, "flip_owned", None) for hook in hooks]
+        if all(owned):
+            # Fault hooks (runtime.faults.tensor, tensorfaults.ActivationFlip) flip `buf` in
+            # place and say what they flipped: the changed cells are those elements whose
+            # last value differs from their first (a NaN counts as changed), exactly what
+            # comparing the whole map with a clone would find, at the cost of the flips.
+            first: dict[int, float] = {}
+            last: dict[int, float] = {}
+            for flip in owned:
+                for k, before, after in flip(buf):
+                    first.setdefault(k, before)
+                    last[k] = after
+            return _cells(buf.shape, [k for k, after in last.items() if after != first[k]])
+        before = buf.clone()  # any other hook: find what it changed by comparison
+        for hook in hooks:
+            result = hook(layer, (x,), buf)
+            if result is not None and result is not buf:
+                buf.copy_(result)
+        return _changed(buf, before)
 
     def _relu(self, name: str, x: torch.Tensor, region: Region) -> torch.Tensor:
         out = self.maps[name]
         out.restore(region)
         if not _empty(region):
             r0, r1, c0, c1 = region
-            torch.clamp_min(x[..., r0:r1, c0:c1], 0.0, out=out.buf[..., r0:r1, c0:c1])
+            torch.clamp_min(self.views(x, r0, r1, c0, c1), 0.0, out=out.at(region))
             out.dirty = region
         return out.buf
 
@@ -273,29 +354,28 @@ class RegionForward:
         out.restore(region)
         if not _empty(region):
             r0, r1, c0, c1 = region
-            up = F.interpolate(low[..., r0 // 2:(r1 + 1) // 2, c0 // 2:(c1 + 1) // 2], scale_factor=2.0,
-                               mode="nearest")
+            low = self.views(low, r0 // 2, (r1 + 1) // 2, c0 // 2, (c1 + 1) // 2)
+            b, c, h, w = low.shape
+            # Nearest ×2 is each value repeated 2×2: a broadcast copy, without interpolate's overhead.
+            up = low[:, :, :, None, :, None].expand(b, c, h, 2, w, 2).reshape(b, c, 2 * h, 2 * w)
             dr, dc = r0 - 2 * (r0 // 2), c0 - 2 * (c0 // 2)
-            torch.add(up[..., dr:dr + r1 - r0, dc:dc + c1 - c0], skip[..., r0:r1, c0:c1],
-                      out=out.buf[..., r0:r1, c0:c1])
+            torch.add(up[:, :, dr:dr + r1 - r0, dc:dc + c1 - c0], self.views(skip, r0, r1, c0, c1),
+                      out=out.at(region))
             out.dirty = region
         return out.buf, region
 
     def _forward(self, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, torch.Tensor]:
         """The network of `BevDetector.forward`, layer by layer on changed regions."""
-        a, r0 = self._conv("backbone.conv0", x, region)
-        x0 = self._relu("x0", a, r0)
-        a, r1 = self._conv("backbone.conv1", x0, r0)
-        x1 = self._relu("x1", a, r1)
-        a, r = self._conv("backbone.conv2", x1, r1)
-        a, r = self._conv("backbone.conv3", self._relu("x2", a, r), r)
-        a, r = self._conv("neck.lateral", self._relu("x3", a, r), r)
+        x0, r0 = self._conv_relu("backbone.conv0", "x0", x, region)
+        x1, r1 = self._conv_relu("backbone.conv1", "x1", x0, r0)
+        a, r = self._conv_relu("backbone.conv2", "x2", x1, r1)
+        a, r = self._conv_relu("backbone.conv3", "x3", a, r)
+        a, r = self._conv("neck.lateral", a, r)
         u, r = self._up_add("u", a, r, x1, r1)
-        a, r = self._conv("neck.fuse", u, r)
-        a, r = self._conv("neck.lateral_fine", self._relu("f", a, r), r)
+        a, r = self._conv_relu("neck.fuse", "f", u, r)
+        a, r = self._conv("neck.lateral_fine", a, r)
         v, r = self._up_add("v", a, r, x0, r0)
-        a, r = self._conv("neck.fine", v, r)
-        g = self._relu("g", a, r)
+        g, r = self._conv_relu("neck.fine", "g", v, r)
         heat, _ = self._conv("head.center", g, r)
         box, _ = self._conv("head.box", g, r)
         return heat, box
@@ -333,6 +413,8 @@ class LearnedPerception:
         self._logit_threshold = math.log(self.threshold / (1.0 - self.threshold))
         self._grid = np.zeros(GRID.shape, dtype=np.float32)
         self._input = torch.from_numpy(self._grid)[None]  # shares memory with the grid buffer
+        # On another device, one input tensor kept there (RegionForward's views of it stay valid).
+        self._device_input = self._input if device == "cpu" else torch.empty_like(self._input, device=device)
         self._layers = self.model.layers()
         self._forward = RegionForward(self.model)
         self._armed: list[ActivationFlip] = []
@@ -359,12 +441,9 @@ class LearnedPerception:
 
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
         """Vehicle-frame points → (N, 6) boxes: x, y, heading, length, width, confidence."""
-        build_grid(points_vehicle, sensor_xy, out=self._grid)
-        occupied = self._grid.any(axis=0)
-        rows, cols = np.flatnonzero(occupied.any(axis=1)), np.flatnonzero(occupied.any(axis=0))
-        region = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1) if len(rows) else EMPTY
+        _, region = build_grid_region(points_vehicle, sensor_xy, out=self._grid)
         with torch.inference_mode(), _one_intra_op_thread():
-            x = self._input if self.device == "cpu" else self._input.to(self.device)
+            x = self._input if self.device == "cpu" else self._device_input.copy_(self._input)
             heat, box = self._forward(x, region)
             heat, box = heat[0, 0].cpu().numpy(), box[0].cpu().numpy()
         self._collect_fired()

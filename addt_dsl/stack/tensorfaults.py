@@ -102,6 +102,13 @@ class ActivationFlip:
         self.disarm()
         return out
 
+    def flip_owned(self, output: torch.Tensor) -> list[tuple[int, float, float]]:
+        """Flip in place an output map the caller owns and restores itself (the
+        detector's `RegionForward`); (flat index, before, after) per flip."""
+        self.fired = flip_bits(output, self.flat_indices, self.bits)
+        self.disarm()
+        return list(zip(self.flat_indices, *self.fired))
+
     def __enter__(self) -> ActivationFlip:
         return self.arm()
 

@@ -8,7 +8,7 @@ compiler) and overrides the hooks it needs:
 - `on_frame(frame, t)`         the loop, after capture: drop, delay, skew, corrupt data;
 - `on_value(site, value, t)`   the stack, for every value through a scalar fault site;
 - `extra_latency(node, t, base)` the stack, when a node publishes;
-- `bind(binding)`              once the stack exists: stack sites, tensor sites, clock;
+- `bind(binding)`              once the stack exists: stack sites, tensor sites, clock, timers;
 - `close()`                    at the end of the run: undo persistent side effects.
 
 Every injection is recorded as a trace event `fault` with the same fields for every
@@ -21,6 +21,7 @@ injection (`Trace.fault_injections()` expands both forms into one row per inject
 
 from __future__ import annotations
 
+import heapq
 import math
 import struct
 from collections.abc import Callable, Iterable, Mapping
@@ -71,12 +72,16 @@ class Binding:
 
     `nodes` maps node name → scalar site names; `tensor_sites` maps a tensor site name
     (`perception.backbone_0`) → the torch module that owns it (empty without a learned
-    model); `clock()` is the current simulated time [s].
+    model); `clock()` is the current simulated time [s]; `at(time_s, callback)` calls
+    `callback()` at the start of the first step at or after `time_s` (the schedule's
+    timers: tensor faults attach their hooks only then). Without a loop to drive timers
+    (a bare `Binding`), `at` calls back at once.
     """
 
     nodes: Mapping[str, Iterable[str]] = field(default_factory=dict)
     tensor_sites: Mapping[str, object] = field(default_factory=dict)
     clock: Callable[[], float] = lambda: 0.0
+    at: Callable[[float, Callable[[], None]], None] = lambda time_s, callback: callback()
 
     def sites(self) -> set[str]:
         return {s for sites in self.nodes.values() for s in sites}
@@ -179,6 +184,11 @@ class FaultSchedule:
         self.by_target: dict[str, list[FaultKind]] = {}
         self.events = events
         self.kinds: list[FaultKind] = []
+        # Timers (`Binding.at`): (time [s], order of arming, callback), a heap. The loop
+        # compares one float per step (`next_wake_s`, inf without timers) and calls `wake`.
+        self._timers: list[tuple[float, int, Callable[[], None]]] = []
+        self._timer_seq = 0
+        self.next_wake_s = math.inf
         for f in faults:
             cls = FAULTS.get(f.kind)
 
@@ -199,7 +209,7 @@ class FaultSchedule:
         """
         nodes = {n: tuple(s) for n, s in getattr(stack, "nodes", {}).items()}
         tensor_sites = stack.tensor_sites() if hasattr(stack, "tensor_sites") else {}
-        binding = Binding(nodes, tensor_sites, clock)
+        binding = Binding(nodes, tensor_sites, clock, self.at)
         known = binding.sites() | set(nodes) | set(tensor_sites)
         for kind in self.kinds:
             if kind.target_kind == "site" and kind.fault.target not in known:
@@ -210,6 +220,20 @@ class FaultSchedule:
             node_faults = [k for k in self.by_target.get(node, []) if k.target_kind == "site"]
             for site in sites if node_faults else ():
                 self.by_target.setdefault(site, []).extend(node_faults)
+
+    def at(self, time_s: float, callback: Callable[[], None]) -> None:
+        """Call `callback()` from `wake` at the first step at or after `time_s` [s]."""
+        heapq.heappush(self._timers, (float(time_s), self._timer_seq, callback))
+        self._timer_seq += 1
+        self.next_wake_s = self._timers[0][0]
+
+    def wake(self, time_s: float) -> None:
+        """Run the timers due at `time_s` (the loop calls this when `time_s >= next_wake_s`),
+        in time order, then in the order they were set; a callback may set new timers."""
+        timers = self._timers
+        while timers and timers[0][0] <= time_s + 1e-12:
+            heapq.heappop(timers)[2]()
+        self.next_wake_s = timers[0][0] if timers else math.inf
 
     def close(self) -> None:
         """Undo persistent side effects (e.g. flipped weights of a model cached across runs)."""

@@ -61,7 +61,8 @@ class BitFlip(FaultKind):
             from addt_dsl.runtime.faults.tensor import TensorFlipper
 
             self._queues = {}
-            self._tensor = TensorFlipper(self, target, binding.tensor_sites[target], str(self.settings["tensor"]))
+            self._tensor = TensorFlipper(self, target, binding.tensor_sites[target], str(self.settings["tensor"]),
+                                         binding.at)
 
     def close(self) -> None:
         if self._tensor is not None:
@@ -84,6 +85,14 @@ class BitFlip(FaultKind):
 
         width = torch.finfo(dtype).bits
         return self._bit_in(*bit_range(dtype, str(self.settings["field"])), width)
+
+    def pending(self) -> bool:
+        """Tensor sites: whether flips remain to be taken."""
+        return self._next < len(self.times)
+
+    def next_time(self) -> float:
+        """Tensor sites: the instant [s] of the next flip to be taken."""
+        return float(self.times[self._next])
 
     def due(self) -> int:
         """Tensor sites: how many flips are due now (and mark them consumed)."""

@@ -5,8 +5,10 @@ The interface a stack offers for tensor faults is one method:
     stack.tensor_sites() -> Mapping[str, torch.nn.Module]
 
 naming each injectable layer in DSL form (`perception.backbone_0.conv`, see
-`tensor_site_name`). Nothing else is needed from the stack: the fault attaches
-forward hooks to the named module when the schedule is bound, so
+`tensor_site_name`). Nothing else is needed from the stack: the fault attaches a
+forward hook to the named module at each flip instant (a schedule timer) and removes
+it once the forward pass has taken the flip, so outside its flips a model runs with no
+hook at all, and
 
 - `tensor weights`: at each flip instant, the next forward pass of the layer first
   flips one bit of one element of its parameters (weights and biases, recursively,
@@ -16,6 +18,11 @@ forward hooks to the named module when the schedule is bound, so
 - `tensor activations`: at each flip instant, the next forward pass of the layer
   has one bit of one element of its output flipped, for that inference only (a
   datapath/register fault).
+
+A stack that keeps a layer's output map itself and restores it between inferences
+may call the activation hook's `flip_owned(map)` instead of running it as a torch hook
+(`addt_dsl.stack.learned.RegionForward` does): the flips land in place and come back as
+(flat index, before, after), so the caller knows what changed without comparing maps.
 
 Works on CPU and CUDA tensors of dtype float16, bfloat16, float32 and float64: the
 tensor is reinterpreted as integers of the same width and the bit XORed in place.
@@ -89,24 +96,56 @@ def flip_bit_(tensor, flat_index: int, bit: int) -> tuple[float, float]:
 
 
 class TensorFlipper:
-    """Applies one `bitflip` fault to one torch module through forward hooks."""
+    """Applies one `bitflip` fault to one torch module through forward hooks.
 
-    def __init__(self, fault, site: str, module, mode: str):
+    A hook is attached only while a flip is pending: from the flip's instant (a timer,
+    `Binding.at`) to the forward pass that takes it, then removed until the next
+    instant, so a model runs hook-free outside the fault's flips.
+
+    Activations: the forward hook flips a clone of the layer's output and returns it
+    (a layer may return a buffer it keeps). A caller that owns the output map and
+    restores it itself (the detector's `RegionForward`) calls `flip_owned` instead, which
+    flips in place and returns what it flipped: no clone, no comparison of maps.
+    """
+
+    def __init__(self, fault, site: str, module, mode: str, at=lambda time_s, callback: callback()):
         self.fault = fault  # the BitFlip fault kind: instants, rng, bit choice, record
         self.site = site
         self.module = module
         self.mode = mode
         self.applied: list[tuple[object, int, int]] = []  # (tensor, flat index, bit) to undo
+        self.handle = None
+        self._at = at
         if mode == "weights":
             self.params = [(n, p) for n, p in module.named_parameters() if p.is_floating_point()]
             if not self.params:
                 raise ValueError(f"tensor site '{site}' has no floating-point weights to flip")
-            self.handle = module.register_forward_pre_hook(self._pre_hook)
-        else:
-            self.handle = module.register_forward_hook(self._hook)
+        self._arm_next()
 
+    # ---- attaching the hook while a flip is pending
+    def _arm_next(self) -> None:
+        if self.fault.pending():
+            self._at(self.fault.next_time(), self.arm)
+
+    def arm(self) -> None:
+        if self.handle is None:
+            self.handle = (self.module.register_forward_pre_hook(self._pre_hook) if self.mode == "weights"
+                           else self.module.register_forward_hook(self))
+
+    def disarm(self) -> None:
+        if self.handle is not None:
+            self.handle.remove()
+            self.handle = None
+
+    def _taken(self) -> None:
+        """The due flips are done: detach until the next instant."""
+        self.disarm()
+        self._arm_next()
+
+    # ---- weights
     def _pre_hook(self, module, inputs):
-        for _ in range(self.fault.due()):
+        n = self.fault.due()
+        for _ in range(n):
             total = sum(p.numel() for _, p in self.params)
             k = int(self.fault.rng.integers(total))
             for name, p in self.params:
@@ -118,8 +157,39 @@ class TensorFlipper:
             self.applied.append((p.data, k, bit))
             self.fault.record(self.fault.clock(), f"{self.site}:{name}[{k}]", after, bit=bit, before=before,
                               tensor="weights", device=str(p.device), dtype=str(p.dtype).replace("torch.", ""))
+        if n:
+            self._taken()
 
-    def _hook(self, module, inputs, output):
+    # ---- activations
+    def _flip(self, tensor, n: int) -> list[tuple[int, float, float]]:
+        flips = []
+        for _ in range(n):
+            k = int(self.fault.rng.integers(tensor.numel()))
+            bit = self.fault.bit_for(tensor.dtype)
+            before, after = flip_bit_(tensor, k, bit)
+            flips.append((k, before, after))
+            self.fault.record(self.fault.clock(), f"{self.site}:output[{k}]", after, bit=bit, before=before,
+                              tensor="activations", device=str(tensor.device),
+                              dtype=str(tensor.dtype).replace("torch.", ""))
+        self._taken()
+        return flips
+
+    def flip_owned(self, tensor) -> list[tuple[int, float, float]]:
+        """Flip the due elements of an output map the caller owns, in place.
+
+        Returns (flat index, value before, value after) per flip, in order (an element
+        flipped twice appears twice); empty when no flip is due. Draws and records
+        exactly as the forward hook does on the same map.
+        """
+        n = self.fault.due()
+        if n == 0:
+            return []
+        if not tensor.is_floating_point():
+            raise TypeError(f"tensor site '{self.site}' has no floating-point output to flip")
+        return self._flip(tensor, n)
+
+    def __call__(self, module, inputs, output):
+        """The forward hook (activations): the output with the due flips, on a clone."""
         n = self.fault.due()
         if n == 0:
             return None
@@ -131,13 +201,7 @@ class TensorFlipper:
         if tensor is None or not tensor.is_floating_point():
             raise TypeError(f"tensor site '{self.site}' has no floating-point output to flip")
         flipped = tensor.clone()  # the flip is transient: never write into a buffer the layer keeps
-        for _ in range(n):
-            k = int(self.fault.rng.integers(flipped.numel()))
-            bit = self.fault.bit_for(flipped.dtype)
-            before, after = flip_bit_(flipped, k, bit)
-            self.fault.record(self.fault.clock(), f"{self.site}:output[{k}]", after, bit=bit, before=before,
-                              tensor="activations", device=str(flipped.device),
-                              dtype=str(flipped.dtype).replace("torch.", ""))
+        self._flip(flipped, n)
         if isinstance(out, torch.Tensor):
             return flipped
         if isinstance(out, Mapping):
@@ -145,7 +209,7 @@ class TensorFlipper:
         return type(out)(flipped if o is tensor else o for o in out)
 
     def close(self) -> None:
-        self.handle.remove()
+        self.disarm()
         # Undo weight flips in reverse order: the model is bit-identical to before the run.
         for tensor, k, bit in reversed(self.applied):
             flip_bit_(tensor, k, bit)

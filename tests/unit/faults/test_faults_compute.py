@@ -183,3 +183,24 @@ def test_every_injection_records_the_same_fields():
     assert len(events) == 4
     for e in events:
         assert {"index", "kind", "target", "location", "value"} <= set(e.detail)
+
+
+def test_schedule_timers_run_in_time_then_setting_order_at_their_step():
+    """`Binding.at` timers: the loop calls `wake` when a step reaches `next_wake_s`; due
+    timers run in time order (ties in the order set), a timer set by a callback for a time
+    already reached runs in the same wake, and `next_wake_s` is inf once none is left."""
+    sched, _ = schedule()
+    calls = []
+    sched.at(0.5, lambda: calls.append("b"))
+    sched.at(0.2, lambda: calls.append("a"))
+    sched.at(0.5, lambda: (calls.append("c"), sched.at(0.3, lambda: calls.append("d"))))
+    sched.at(2.0, lambda: calls.append("e"))
+    assert sched.next_wake_s == 0.2
+    sched.wake(0.1)
+    assert calls == [] and sched.next_wake_s == 0.2
+    sched.wake(0.2)
+    assert calls == ["a"] and sched.next_wake_s == 0.5
+    sched.wake(0.5 - 1e-13)  # within the loop's tolerance of the instant
+    assert calls == ["a", "b", "c", "d"] and sched.next_wake_s == 2.0
+    sched.wake(3.0)
+    assert calls == ["a", "b", "c", "d", "e"] and sched.next_wake_s == math.inf

@@ -181,3 +181,19 @@ def test_grid_matches_the_point_by_point_definition(points, duplicate_every):
         pts += [(x + 0.01, y - 0.01, z + 0.5) for x, y, z in points[::duplicate_every]]
     arr = np.array(pts, dtype=np.float64).reshape(-1, 3)
     assert np.allclose(build_grid(arr, (1.0, 0.2)), _reference_grid(arr, (1.0, 0.2)), atol=1e-5)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(-70.0, 70.0), st.floats(-30.0, 30.0), st.floats(-0.5, 3.0)), max_size=40))
+def test_the_region_is_the_occupied_cells_bounding_box(points):
+    """`build_grid_region`'s box (from the points) is the bounding box of the grid's
+    occupied cells (what the detector used to find by scanning the grid)."""
+    from addt_dsl.stack.bev_grid import build_grid_region
+
+    pts = np.array(points, dtype=np.float64).reshape(-1, 3)
+    grid, region = build_grid_region(pts, (1.0, 0.0))
+    occupied = grid.any(axis=0)
+    rows, cols = np.flatnonzero(occupied.any(axis=1)), np.flatnonzero(occupied.any(axis=0))
+    expected = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1) if len(rows) else (0, 0, 0, 0)
+    assert region == expected
+    assert np.array_equal(grid, build_grid(pts, (1.0, 0.0)))

@@ -1,0 +1,135 @@
+"""Tensor faults on the shipped detector: hooks only while a flip is pending, and the
+in-place flips of `RegionForward` (`flip_owned`) record and compute exactly what the
+clone-and-compare path does."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytestmark = pytest.mark.torch
+
+from addt_dsl.plan import ConcreteFault  # noqa: E402
+from addt_dsl.runtime.faults import FaultSchedule  # noqa: E402
+from addt_dsl.runtime.faults.tensor import TensorFlipper  # noqa: E402
+from addt_dsl.stack.learned import LearnedPerception  # noqa: E402
+from addt_dsl.stack.synth import ScanGenerator  # noqa: E402
+
+STEP_S = 0.01
+LIDAR_EVERY = 10  # a frame every 10 steps (10 Hz)
+
+
+@pytest.fixture(scope="module")
+def frames():
+    """A short drive past two vehicles: scans whose occupied region moves frame to frame."""
+    gen = ScanGenerator(3)
+    try:
+        return [gen.scan([("car", 18.0 - 1.5 * i, -0.3, 0.01 * i), ("truck", -25.0 + i, 3.5, 0.0)])
+                for i in range(12)]
+    finally:
+        gen.close()
+
+
+def _run(frames, faults, duration_s=6.0):
+    """Play the loop: the schedule's timers at each step start, a detection every lidar period.
+
+    Returns (per-step hooked layers, fault events, head outputs of every frame, schedule).
+    """
+    node = LearnedPerception({})
+    clock = SimpleNamespace(t=0.0)
+    events = []
+    sched = FaultSchedule([ConcreteFault(index=i, **f) for i, f in enumerate(faults)], STEP_S, duration_s, events)
+    sched.bind(SimpleNamespace(tensor_sites=node.tensor_modules), lambda: clock.t)
+    layers = node.tensor_modules()
+    hooked, outputs = [], []
+    try:
+        for k in range(round(duration_s / STEP_S) + 1):
+            clock.t = k * STEP_S
+            if clock.t + 1e-12 >= sched.next_wake_s:
+                sched.wake(clock.t)
+            if k % LIDAR_EVERY == 0:
+                s = frames[(k // LIDAR_EVERY) % len(frames)]
+                node.detect(s.points, s.sensor_xy)
+                maps = node._forward.maps
+                outputs.append((maps["head.center"].buf.clone(), maps["head.box"].buf.clone()))
+            hooked.append(sorted(n for n, m in layers.items() if m._forward_hooks or m._forward_pre_hooks))
+    finally:
+        sched.close()
+    return hooked, [(e.time_s, e.detail) for e in events], outputs, sched
+
+
+def _fault(target, start, end, seed=11, **settings):
+    return dict(kind="bitflip", target=target, start_s=start, end_s=end, settings=settings, seed=seed)
+
+
+@pytest.mark.parametrize("tensor", ["activations", "weights"])
+def test_no_hook_is_registered_outside_the_flips(frames, tensor):
+    fault = _fault("perception.backbone.conv1", 2.0, 3.0, tensor=tensor, count=3)
+    hooked, events, _, sched = _run(frames, [fault])
+    times = sched.kinds[0].times
+    assert len(events) == 3
+    # Taken at the first frame (every 0.1 s) at or after each instant.
+    taken = [np.ceil(t / (STEP_S * LIDAR_EVERY) - 1e-9) * STEP_S * LIDAR_EVERY for t in times]
+    assert [round(t, 9) for t, _ in events] == [round(t, 9) for t in taken]
+    for k, names in enumerate(hooked):
+        t = k * STEP_S
+        pending = any(times[i] <= t + 1e-12 < taken[i] for i in range(len(times)))
+        # A hook exactly while a flip is due but not yet taken by a forward pass.
+        assert names == (["perception.backbone.conv1"] if pending else []), t
+    assert not any(hooked[k] for k in range(int(times[0] / STEP_S)))  # nothing before the window
+    assert not any(h for h in hooked[int(3.0 / STEP_S) + LIDAR_EVERY:])  # nothing after it
+    assert sched.next_wake_s == float("inf")
+
+
+@pytest.mark.parametrize("target, settings", [
+    ("perception.backbone.conv0", {"count": 6, "field": "exponent"}),
+    ("perception.neck.fine", {"count": 8}),
+    ("perception.head.box", {"count": 5, "field": "sign"}),
+    ("perception.backbone.conv2", {"count": 30, "bit": 30}),  # several flips per frame
+])
+def test_in_place_flips_match_the_clone_and_compare_method(frames, monkeypatch, target, settings):
+    """Same seed: the same elements flipped, the same events and counts, and bit-identical
+    head outputs frame after frame, whether RegionForward takes the flips in place
+    (`flip_owned`) or, as before, runs the hook on a clone and compares whole maps."""
+    faults = [_fault(target, 1.0, 4.0, tensor="activations", **settings),
+              _fault("perception.neck.lateral", 1.5, 2.5, seed=4, tensor="activations", count=3, bit=31)]
+    _, new_events, new_out, _ = _run(frames, faults)
+    monkeypatch.setattr(TensorFlipper, "flip_owned", None)  # RegionForward falls back to clone + compare
+    _, old_events, old_out, _ = _run(frames, faults)
+    assert len(new_events) == settings["count"] + 3
+    assert new_events == old_events
+    for (h_new, b_new), (h_old, b_old) in zip(new_out, old_out, strict=True):
+        assert torch.equal(h_new.view(torch.int32), h_old.view(torch.int32))
+        assert torch.equal(b_new.view(torch.int32), b_old.view(torch.int32))
+    clean = _run(frames, [])[2]
+    assert any(not torch.equal(a[0], b[0]) or not torch.equal(a[1], b[1]) for a, b in zip(new_out, clean)) or \
+        settings.get("field") == "sign"  # the flips reach the heads (a sign flip may vanish in a ReLU)
+
+
+def test_a_flip_that_changes_nothing_leaves_no_changed_region():
+    """An element flipped twice (the same bit) is back to its value: no changed cells, as a
+    comparison of maps would find; a sign flip of 0.0 compares equal too."""
+    from addt_dsl.stack.learned import EMPTY, RegionForward
+
+    class Hook:
+        def __init__(self, flips):
+            self.flips = flips
+
+        def flip_owned(self, buf):
+            from addt_dsl.runtime.faults.tensor import flip_bit_
+
+            return [(k, *flip_bit_(buf, k, bit)) for k, bit in self.flips]
+
+        def __call__(self, module, inputs, output):  # RegionForward must use flip_owned
+            raise AssertionError
+
+    layer = torch.nn.Conv2d(1, 2, 1)
+    buf = torch.zeros(1, 2, 4, 5)
+    buf[0, 1, 2, 3] = 1.5
+    layer.register_forward_hook(Hook([(2 * 20 - 7, 30), (2 * 20 - 7, 30), (0, 31)]))
+    assert RegionForward._hooked(layer, buf, buf) == EMPTY
+    layer2 = torch.nn.Conv2d(1, 2, 1)
+    layer2.register_forward_hook(Hook([(20 + 2 * 5 + 3, 30), (6, 0)]))
+    # Element 33: channel 1, row 2, column 3; element 6: channel 0, row 1, column 1.
+    assert RegionForward._hooked(layer2, buf, buf) == (1, 3, 1, 4)
