@@ -2,8 +2,9 @@
 
 Timing follows the paper's BEV stack: sensor frames arrive (possibly late); a frame older
 than `stale` on arrival is discarded (out-of-order avoidance); each node publishes at
-`t + latency`, latency from the per-node model (deterministic) or, with
-`latency measured`, the measured compute time (HIL-like). End-to-end latency is
+`t + latency`, latency from the per-node model (measured trend and jitter, drawn from
+generators seeded by the run seed, scaled to `latency_target`) or, with `latency
+measured`, the measured compute time (HIL-like). End-to-end latency is
 actuation time minus the sensor timestamp the command derives from.
 """
 
@@ -19,7 +20,7 @@ from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.registry import STACKS, ParamSpec
 from addt_dsl.stack.bev_grid import DETECTOR_LIDAR
 from addt_dsl.stack.bus import Bus
-from addt_dsl.stack.latency import load_models
+from addt_dsl.stack.latency import DEFAULT_TARGET, load_models, target_names
 from addt_dsl.stack.nodes import (LANE_POLICIES, Controller, EgoBody, GroundTruthPerception, LatticePlanner, Obj,
                                   Tracker)
 
@@ -90,8 +91,12 @@ class BevStack:
         ParamSpec("time_gap", units.TIME, default=1.5, low=0.1, high=10.0, doc="desired headway"),
         ParamSpec("stale", units.TIME, default=0.15, low=0.0, high=10.0,
                   doc="frames older than this on arrival are discarded"),
-        ParamSpec("latency", None, kind="word", default="model", choices=("model", "measured"),
-                  doc="node latency from the calibrated model or measured compute time"),
+        ParamSpec("latency", None, kind="word", default="model", choices=("model", "median", "measured"),
+                  doc="node latency: model (measured trend and jitter, drawn from the run seed), median "
+                      "(the trend alone, no jitter) or measured (this run's compute time, HIL-like)"),
+        ParamSpec("latency_target", None, kind="word", default=DEFAULT_TARGET, choices=target_names(),
+                  doc="the hardware the modelled latency stands for: host (as measured) or a target "
+                      "profile of latency_model.json (xavier: assumed factors, see docs/stack.md#latency)"),
         ParamSpec("planner_rate", units.FREQUENCY, default=10.0, low=1.0, high=100.0, doc="planning rate"),
         ParamSpec("control_rate", units.FREQUENCY, default=100.0, low=10.0, high=1000.0, doc="control rate"),
         ParamSpec("perception_noise", units.LENGTH, default=0.1, low=0.0, high=10.0,
@@ -170,8 +175,11 @@ class BevStack:
         self.settings = {p.name: settings.get(p.name, p.default) for p in self.params}
         self.ctx = ctx
         self.bus = Bus()
-        self.latency_models = load_models()
+        self.latency_models = load_models(self.settings["latency_target"])
         self.measured = self.settings["latency"] == "measured"
+        self.jitter = self.settings["latency"] == "model"
+        # One generator per node, from the run seed: the draws repeat bit for bit.
+        self.latency_rngs = {n: ctx.rng(f"latency.{n}") for n in NODE_NAMES}
         self.perception = self._make_perception()
         self.tracker = Tracker(float(self.settings["track_max_age"]))
         # The ego's declared body and friction: the planner's boxes and braking limits.
@@ -201,8 +209,12 @@ class BevStack:
 
     # ---- timing helpers
     def _latency(self, node: str, objects: int, started: float, time_s: float) -> float:
-        base = (_time.perf_counter() - started) if self.measured else \
-            self.latency_models[node].latency(objects)
+        if self.measured:
+            base = _time.perf_counter() - started
+        elif self.jitter:
+            base = self.latency_models[node].sample(objects, self.latency_rngs[node])
+        else:
+            base = self.latency_models[node].median(objects)
         timing_faults = self.ctx.faults.by_target.get(node)
         lat = base + sum(f.extra_latency(node, time_s, base) for f in timing_faults) if timing_faults else base
         self.latency[node] = lat

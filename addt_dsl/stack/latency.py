@@ -1,29 +1,155 @@
-"""Per-node latency models: deterministic by default, measured in HIL-like mode.
+"""Per-node latency: a measured trend, measured jitter, and an explicit target scaling.
 
-A model is `base_s + per_object_s * objects`, calibrated from measured compute times and
-stored as data in `latency_model.json` (the paper's Jetson-class budget: perception
-dominates and grows with the object count).
+`latency_model.json` holds, per node, what `python -m addt_dsl.stack.calibrate --write`
+measured on the host: the trend `base_s + per_object_s * N + per_object_sq_s * N²` for N
+objects (through the medians per object count) and the jitter, a table of quantiles of `sample / median at that object count`
+over all the timed calls (pooled over counts). Its `targets` are hand-written inputs,
+never fitted: the factors that carry host costs to a target (`host`: 1 and 1; `xavier`:
+a Jetson AGX Xavier-class board, each factor with its source or stated as an
+assumption). A node's latency in a run is
+
+    (base_s * f_base + (per_object_s * N + per_object_sq_s * N²) * cpu_scale) * ratio
+
+with `f_base` the target's `accelerator_scale` for perception (its network runs on the
+board's GPU) and `cpu_scale` otherwise, and `ratio` drawn from the jitter table by
+inverse-CDF sampling with a numpy generator seeded from the run seed and the node name,
+so a run repeats bit for bit. Nothing is timed during a run.
 """
 
 from __future__ import annotations
 
+import bisect
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 MODEL_PATH = Path(__file__).with_name("latency_model.json")
+NODES = ("perception", "tracker", "planner", "control")
+DEFAULT_TARGET = "xavier"
 
 
 @dataclass(frozen=True)
 class LatencyModel:
+    """One node's latency on one target: trend [s] and jitter (quantiles of the ratio to it)."""
+
     base_s: float
     per_object_s: float
+    levels: tuple[float, ...]  # cumulative probabilities, increasing, from 0
+    ratios: tuple[float, ...]  # the ratio sample / median at each level, non-decreasing
+    per_object_sq_s: float = 0.0  # pairwise work (the tracker's association) [s per object²]
 
-    def latency(self, objects: int) -> float:
-        return self.base_s + self.per_object_s * objects
+    def median(self, objects: int) -> float:
+        """The trend [s]: the median latency with `objects` objects."""
+        return self.base_s + (self.per_object_s + self.per_object_sq_s * objects) * objects
+
+    def ratio(self, u: float) -> float:
+        """Inverse CDF of the jitter ratio at `u` in [0, 1): piecewise linear between the
+        stored quantiles; above the last level (p99.9) it stays at the last quantile."""
+        lv, r = self.levels, self.ratios
+        i = bisect.bisect_right(lv, u)
+        if i >= len(lv):
+            return r[-1]
+        lo, hi = lv[i - 1], lv[i]
+        return r[i - 1] + (r[i] - r[i - 1]) * (u - lo) / (hi - lo)
+
+    def quantile(self, objects: int, p: float) -> float:
+        """The latency [s] at probability `p` with `objects` objects."""
+        return self.median(objects) * self.ratio(p)
+
+    def ratios_at(self, u: np.ndarray) -> np.ndarray:
+        """`ratio` over an array of probabilities (np.interp: the same piecewise-linear
+        inverse CDF, constant above the last level)."""
+        return np.interp(u, self.levels, self.ratios)
+
+    def sample(self, objects: int, rng: np.random.Generator) -> float:
+        """One latency [s] with `objects` objects, drawn with `rng` (one uniform per call)."""
+        return self.median(objects) * self.ratio(float(rng.random()))
 
 
-def load_models(path: Path = MODEL_PATH) -> dict[str, LatencyModel]:
-    data = json.loads(path.read_text())
-    return {node: LatencyModel(float(v["base_s"]), float(v["per_object_s"]))
-            for node, v in data["nodes"].items()}
+def read(path: Path = MODEL_PATH) -> dict:
+    return json.loads(path.read_text())
+
+
+def target_names(path: Path = MODEL_PATH) -> tuple[str, ...]:
+    """The targets the model file declares (the `latency_target` setting's choices)."""
+    return tuple(read(path)["targets"])
+
+
+def load_models(target: str = DEFAULT_TARGET, path: Path = MODEL_PATH, data: dict | None = None
+                ) -> dict[str, LatencyModel]:
+    """Per-node models scaled to `target` (a name in the file's `targets`)."""
+    data = data if data is not None else read(path)
+    t = data["targets"][target]
+    levels = tuple(float(v) for v in data["jitter_levels"])
+    models = {}
+    for node, v in data["nodes"].items():
+        f_base = float(t["accelerator_scale"]) if node == "perception" else float(t["cpu_scale"])
+        cpu = float(t["cpu_scale"])
+        models[node] = LatencyModel(float(v["base_s"]) * f_base, float(v["per_object_s"]) * cpu,
+                                    levels, tuple(float(r) for r in v["jitter_ratios"]),
+                                    float(v.get("per_object_sq_s", 0.0)) * cpu)
+    return models
+
+
+def pipeline_ms(lat_s: dict[str, float]) -> float:
+    """Sum of the node latencies [ms]."""
+    return 1e3 * sum(lat_s[n] for n in NODES)
+
+
+def e2e_ms(lat_s: dict[str, float], step_s: float) -> float:
+    """End-to-end latency [ms] the `bev` stack records for a frame arriving on a step, given
+    each node's latency [s].
+
+    The bus delivers a message at the first physics step at or after its publish time:
+    perception's objects reach the tracker, the tracks reach the planner (which runs on
+    fresh tracks), and the plan's publish time minus the sensor stamp plus the control
+    latency is `e2e`.
+    """
+    def next_step(t: float) -> float:
+        return math.ceil(t / step_s - 1e-9) * step_s
+
+    tracks_at = next_step(next_step(lat_s["perception"]) + lat_s["tracker"])
+    return 1e3 * (tracks_at + lat_s["planner"] + lat_s["control"])
+
+
+def at(models: dict[str, LatencyModel], objects: int, p: float | None = None) -> dict[str, float]:
+    """Each node's latency [s] with `objects` objects: the median trend, or the quantile at
+    probability `p` (control's cost does not depend on the object count)."""
+    out = {}
+    for n, m in models.items():
+        k = 0 if n == "control" else objects
+        out[n] = m.median(k) if p is None else m.quantile(k, p)
+    return out
+
+
+def e2e_quantile_ms(models: dict[str, LatencyModel], objects: int, p: float, step_s: float,
+                    draws: int = 20000, seed: int = 0) -> float:
+    """The e2e latency [ms] at probability `p` when every node draws its own jitter, as in
+    a run (nodes independent), estimated from `draws` Monte Carlo samples with a fixed
+    seed: the same uniforms for every object count, so the figure grows with it."""
+    u = np.random.default_rng(seed).random((len(NODES), draws))
+    lat = {n: models[n].median(0 if n == "control" else objects) * models[n].ratios_at(u[i])
+           for i, n in enumerate(NODES)}
+    tracks_at = np.ceil((np.ceil(lat["perception"] / step_s - 1e-9) * step_s + lat["tracker"]) / step_s - 1e-9) * step_s
+    return float(1e3 * np.quantile(tracks_at + lat["planner"] + lat["control"], p))
+
+
+def crossing(models: dict[str, LatencyModel], limit_ms: float, step_s: float, p: float | None = None,
+             max_objects: int = 5000) -> int | None:
+    """The fewest objects whose e2e latency exceeds `limit_ms`: with every node at its
+    median, or at probability `p` of the e2e distribution (`e2e_quantile_ms`); None if
+    not within `max_objects`. Both grow with the object count: bisection."""
+    def over(n: int) -> bool:
+        e2e = e2e_ms(at(models, n), step_s) if p is None else e2e_quantile_ms(models, n, p, step_s)
+        return e2e > limit_ms
+
+    if not over(max_objects):
+        return None
+    lo, hi = -1, max_objects  # over(lo) false (or lo = -1), over(hi) true
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if over(mid) else (mid, hi)
+    return hi

