@@ -38,6 +38,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "stack": ([], ["--repeats", "1"]),
     "faults": (["--repeat", "9"], ["--repeat", "2"]),
     "runner": ([], ["--runs", "40", "--memory-runs", "500"]),
+    "tables_memory": ([], ["--small", "200", "--large", "1000"]),
     "search": ([], ["--seeds", "2", "--budget", "60", "--scenarios", "examples/search/cut_in.addt"]),
     "shrink": ([], []),
     "peers": (["--runs", "5"], ["--runs", "1"]),
@@ -100,6 +101,8 @@ def headline(results: dict) -> dict:
         600.0, better="lower", unit="s")
     row("compile_1000_files_wall_s", _get(b["compile"], "wall_s") if _get(b["compile"], "files") == 1000 else None,
         10.0, better="lower", unit="s")
+    row("end_of_sweep_tables_growth_B_per_run", _get(b.get("tables_memory", {}), "growth_B_per_run"), 10.0,
+        better="lower", unit="B of peak traced memory per stored run (flat: about 0)")
     row("shrink_10_faults_simulations", _get(b["shrink"], "simulations"), 150, better="lower")
     row("search_runs_to_failure_random_over_bo", _get(b["search"], "suite_ratio_random_to_bo"), 5.0,
         unit="x fewer runs than uniform (median over scenarios)")
