@@ -123,6 +123,35 @@ def parse_source(data: bytes | str, path: str, sink: DiagnosticSink,
     return _parse(_parser(), text, path, sink, recover=True)
 
 
+INCLUDE_CACHE_SIZE = 64  # parsed files kept per process
+_INCLUDED: dict[tuple[str, bytes, int], ast.SourceFile] = {}  # insertion order = least recently used first
+_INCLUDED_LOCK = threading.Lock()
+
+
+def parse_included(data: bytes, path: str, sink: DiagnosticSink,
+                   max_bytes: int = MAX_SOURCE_BYTES) -> ast.SourceFile | None:
+    """`parse_source` for an included file, remembering clean parses within the process: a
+    suite's files include the same shared definitions, which are then parsed once per
+    `addtc check`/sweep, not once per file. The key is the file's content (a digest of its
+    bytes: the caller reads the file every time, so an edited file is parsed again), the
+    name its spans carry and the size limit; the AST is frozen, so sharing it is safe. A
+    parse that reported anything is not kept (its diagnostics are reported every time)."""
+    key = (path, hashlib.sha256(data.encode("utf-8") if isinstance(data, str) else data).digest(), max_bytes)
+    with _INCLUDED_LOCK:
+        tree = _INCLUDED.pop(key, None)
+        if tree is not None:
+            _INCLUDED[key] = tree  # most recently used again
+            return tree
+    before = len(sink.items)
+    tree = parse_source(data, path, sink, max_bytes)
+    if tree is not None and len(sink.items) == before:
+        with _INCLUDED_LOCK:
+            _INCLUDED[key] = tree
+            while len(_INCLUDED) > INCLUDE_CACHE_SIZE:
+                del _INCLUDED[next(iter(_INCLUDED))]
+    return tree
+
+
 def parse_expression(text: str, path: str, sink: DiagnosticSink) -> ast.Expression | None:
     """Parse one expression or formula (the grammar's `expr` rule, e.g. an oracle given
     on its own); syntax errors go to `sink`; None if it does not parse."""
@@ -200,4 +229,5 @@ def parse_file(path: Path, sink: DiagnosticSink, display: str | None = None) -> 
     return parse_source(data, name, sink), text
 
 
-__all__ = ["GRAMMAR_PATH", "MAX_SOURCE_BYTES", "grammar", "parse_expression", "parse_file", "parse_source"]
+__all__ = ["GRAMMAR_PATH", "MAX_SOURCE_BYTES", "grammar", "parse_expression", "parse_file", "parse_included",
+           "parse_source"]
