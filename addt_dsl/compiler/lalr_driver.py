@@ -16,7 +16,12 @@ compiler case file and generated programs.
 from __future__ import annotations
 
 from lark import Lark, Token
+from lark.parse_tree_builder import ExpandSingleChild
 from lark.parsers.lalr_analysis import Shift
+
+# Token(type, value, ...) without its two Python-level constructor calls (lark's
+# `Token._future_new` does exactly this: str.__new__, then the eight slots).
+_new_str = str.__new__
 
 
 class NotParsed(Exception):
@@ -31,7 +36,10 @@ class Driver:
         callbacks = parser.callbacks
         self.start_state = table.start_states[start]
         self.end_state = table.end_states[start]
-        # state -> terminal -> (shift?, next state) or (shift?, rule size, rule name, callback)
+        # state -> terminal -> (shift?, next state) or (shift?, rule size, rule name, callback);
+        # a rule of one symbol whose callback is lark's ExpandSingleChild (a `?rule` such as
+        # the steps of the expression precedence chain) reduces to its child: size 0 marks it
+        # (its value stays on the stack, only the state changes).
         actions = {}
         for state, row in table.states.items():
             out = {}
@@ -39,18 +47,25 @@ class Driver:
                 if action is Shift:
                     out[term] = (True, arg, None, None)
                 else:
-                    out[term] = (False, len(arg.expansion), arg.origin.name, callbacks[arg])
+                    callback = callbacks[arg]
+                    size = len(arg.expansion)
+                    if size == 1 and type(callback) is ExpandSingleChild:
+                        out[term] = (False, -1, arg.origin.name, None)
+                    else:
+                        out[term] = (False, size, arg.origin.name, callback)
             actions[state] = out
         self.actions = actions
         self.token_callbacks = {name: cb for name, cb in callbacks.items() if isinstance(name, str)}
-        # state -> (compiled scanners, token callbacks, ignored types, types that may hold newlines)
+        # state -> (match functions of the compiled scanners, token callbacks, ignored types,
+        # types that may hold newlines)
         lexers = {}
         shared = {}
         for state, lexer in frontend.lexer.lexers.items():
             key = id(lexer)
             if key not in shared:
                 scanner = lexer.scanner  # builds lexer.callback too
-                shared[key] = (tuple(scanner._mres), dict(lexer.callback), lexer.ignore_types, lexer.newline_types)
+                shared[key] = (tuple(mre.match for mre in scanner._mres), dict(lexer.callback),
+                               lexer.ignore_types, lexer.newline_types)
             lexers[state] = shared[key]
         self.lexers = lexers
 
@@ -65,35 +80,41 @@ class Driver:
         token = None
         while True:
             # ---- the next token, lexed by the lexer of the current state (BasicLexer.next_token)
-            mres, lex_callbacks, ignore_types, newline_types = lexers[state_stack[-1]]
+            matchers, lex_callbacks, ignore_types, newline_types = lexers[state_stack[-1]]
             token = None
             while pos < end:
-                for mre in mres:
-                    m = mre.match(text, pos)
+                for match in matchers:
+                    m = match(text, pos)
                     if m:
                         break
                 else:
                     raise NotParsed
                 value, kind = m.group(0), m.lastgroup
                 ignored = kind in ignore_types
-                t = None
-                if not ignored or kind in lex_callbacks:
-                    t = Token(kind, value, pos, line, pos - line_start + 1)
+                if ignored and kind not in lex_callbacks:  # skipped: no token made
+                    if kind in newline_types:
+                        newlines = value.count("\n")
+                        if newlines:
+                            line += newlines
+                            line_start = pos + value.rindex("\n") + 1
+                    pos += len(value)
+                    continue
+                t = _new_str(Token, value)
+                t.type, t.start_pos, t.value, t.line, t.column = kind, pos, value, line, pos - line_start + 1
                 if kind in newline_types:
                     newlines = value.count("\n")
                     if newlines:
                         line += newlines
                         line_start = pos + value.rindex("\n") + 1
                 pos += len(value)
-                if t is not None:
-                    t.end_line = line
-                    t.end_column = pos - line_start + 1
-                    t.end_pos = pos
-                    if kind in lex_callbacks:
-                        t = lex_callbacks[kind](t)
-                    if not ignored:
-                        token = t
-                        break
+                t.end_line = line
+                t.end_column = pos - line_start + 1
+                t.end_pos = pos
+                if kind in lex_callbacks:
+                    t = lex_callbacks[kind](t)
+                if not ignored:
+                    token = t
+                    break
             if token is None:
                 break
             # ---- feed it (ParserState.feed_token): reduce as the table says, then shift
@@ -107,6 +128,9 @@ class Driver:
                     push_state(arg)
                     push_value(token if kind not in token_callbacks else token_callbacks[kind](token))
                     break
+                if arg < 0:  # one child, passed up as it is
+                    state_stack[-1] = actions[state_stack[-2]][origin][1]
+                    continue
                 if arg:
                     children = value_stack[-arg:]
                     del state_stack[-arg:]
@@ -122,6 +146,11 @@ class Driver:
             if step is None or step[0]:
                 raise NotParsed
             _, arg, origin, callback = step
+            if arg < 0:
+                state_stack[-1] = actions[state_stack[-2]][origin][1]
+                if state_stack[-1] == end_state:
+                    return value_stack[-1]
+                continue
             if arg:
                 children = value_stack[-arg:]
                 del state_stack[-arg:]
