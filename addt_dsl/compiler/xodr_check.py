@@ -172,17 +172,36 @@ def _lanes_within_limit(ctx: Context, network, display: str, span: Span) -> bool
 
 def check_inline_road(ctx: Context, road_plan, span: Span) -> bool:
     """Build an inline road as every run will (same bounds as imported maps: total length,
-    turn, samples), so a road no run could build is a compile error, not a crashed run."""
+    turn, samples), so a road no run could build is a compile error, not a crashed run.
+    The verdict is a function of the road's plan alone, kept per process (suite files
+    share their roads through included families)."""
+    key = road_plan.model_dump_json()
+    with _MAPS_LOCK:
+        verdict = _INLINE.pop(key, None)
+    if verdict is None:
+        verdict = _build_inline(road_plan)
+    with _MAPS_LOCK:
+        _INLINE[key] = verdict  # most recently used last
+        while len(_INLINE) > INLINE_CACHE_SIZE:
+            del _INLINE[next(iter(_INLINE))]
+    if verdict == ():
+        return True
+    ctx.sink.error(verdict[0], verdict[1], span)
+    return False
+
+
+INLINE_CACHE_SIZE = 256
+_INLINE: dict[str, tuple] = {}  # RoadPlan JSON -> () when it builds, else (code, message)
+
+
+def _build_inline(road_plan) -> tuple:
     try:
         build_network([road_plan])
     except RoadLimitError as exc:
-        message = str(exc) if str(exc).startswith("road ") else f"road {road_plan.name}: {exc}"
-        ctx.sink.error("E0301", message, span)
-        return False
+        return "E0301", str(exc) if str(exc).startswith("road ") else f"road {road_plan.name}: {exc}"
     except (ValueError, ArithmeticError) as exc:
-        ctx.sink.error("E0204", f"road '{road_plan.name}' cannot be built: {exc}", span)
-        return False
-    return True
+        return "E0204", f"road '{road_plan.name}' cannot be built: {exc}"
+    return ()
 
 
 def _road_info(road):

@@ -97,3 +97,37 @@ def test_the_map_cache_is_bounded(tmp_path, counted, monkeypatch):
     assert len(X._MAPS) == 2 and len(X._INFOS) == 2
     X.parsed_map(_map(4), "m.xodr")
     assert len(counted) == 4
+
+
+INLINE = """scenario s {{
+  duration 5 s
+  road r {{
+    line length {length} m
+    lanes right 2 width 3.5 m
+  }}
+  ego car on r lane -1 at 5 m speed 5 m/s
+}}
+"""
+
+
+def test_inline_road_verdicts_are_kept_per_road(tmp_path, monkeypatch):
+    """An inline road is built once per distinct plan; a road that cannot be built is
+    reported on every compilation, at its own file's span."""
+    built = []
+    real = X.build_network
+    monkeypatch.setattr(X, "build_network", lambda plans: built.append(plans) or real(plans))
+    monkeypatch.setattr(X, "_INLINE", {})
+    for i in range(3):
+        (tmp_path / f"a{i}.addt").write_text(INLINE.format(length=300))
+    assert all(compile_file(tmp_path / f"a{i}.addt").ok for i in range(3))
+    assert len(built) == 1
+    (tmp_path / "b.addt").write_text(INLINE.format(length=400))
+    assert compile_file(tmp_path / "b.addt").ok and len(built) == 2
+    (tmp_path / "huge.addt").write_text(INLINE.format(length="1e9"))
+    (tmp_path / "huge2.addt").write_text("\n" + INLINE.format(length="1e9"))
+    first, second = compile_file(tmp_path / "huge.addt"), compile_file(tmp_path / "huge2.addt")
+    assert not first.ok and not second.ok
+    e1 = [d for d in first.diagnostics if d.code == "E0301"]
+    e2 = [d for d in second.diagnostics if d.code == "E0301"]
+    assert e1 and e2 and e1[0].message == e2[0].message
+    assert e2[0].span.line == e1[0].span.line + 1 and e2[0].span.file.endswith("huge2.addt")
