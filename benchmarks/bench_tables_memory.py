@@ -8,7 +8,9 @@ classified, with latency stats) are committed to a SQLite store; the peak of Pyt
 memory (tracemalloc) while the tables are written is measured for each store, and the
 growth per run between the two sizes is printed (target: flat, i.e. about 0 B per run).
 For comparison it also measures building the whole runs DataFrame in memory
-(`runs_table(...).to_csv`, what the CSV writer did before it streamed).
+(`runs_table(...).to_csv`, what the CSV writer did before it streamed). Both sizes must
+exceed the writer's chunk (`reporting.summary.CHUNK_RUNS` rows): below it a store's whole
+table is one chunk, and memory grows up to that size by design.
 """
 
 from __future__ import annotations
@@ -97,6 +99,10 @@ def main() -> int:
     ap.add_argument("--json", help="also write the figures here")
     args = ap.parse_args()
     from addt_dsl.reporting import runs_table, write_tables
+    from addt_dsl.reporting.summary import CHUNK_RUNS
+
+    if args.small < CHUNK_RUNS:
+        print(f"note: --small {args.small} is under the {CHUNK_RUNS}-row chunk: the growth includes filling it")
 
     tmp = Path(tempfile.mkdtemp(prefix="addt-tables-"))
     figures = {}

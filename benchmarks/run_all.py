@@ -38,7 +38,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "stack": ([], ["--repeats", "1"]),
     "faults": (["--repeat", "9"], ["--repeat", "2"]),
     "runner": ([], ["--runs", "40", "--memory-runs", "500"]),
-    "tables_memory": ([], ["--small", "200", "--large", "1000"]),
+    "tables_memory": ([], ["--small", "500", "--large", "2000"]),
     "search": ([], ["--seeds", "2", "--budget", "60", "--scenarios", "examples/search/cut_in.addt"]),
     "shrink": ([], []),
     "peers": (["--runs", "5"], ["--runs", "1"]),
