@@ -17,7 +17,7 @@ from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import Context
 from addt_dsl.compiler.lower import build_plan, check_feasible
 from addt_dsl.compiler.optional_deps import check_optional_deps
-from addt_dsl.compiler.parser import parse_source
+from addt_dsl.compiler.parser import parse_included, parse_source
 from addt_dsl.confine import Refused, confine, shown
 from addt_dsl.compiler.rules import run_rules
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
@@ -264,7 +264,7 @@ def _resolve_includes(includes, base: Path, loader: _Loader, stack: list[str]) -
         if data is None or not loader.count_addt(len(data), inc.path, inc.span):
             continue
         loader.sources[display] = data.decode("utf-8", errors="replace")
-        tree = parse_source(data, display, loader.sink, max_bytes=loader.limits.source_bytes)
+        tree = parse_included(data, display, loader.sink, max_bytes=loader.limits.source_bytes)
         if tree is None:
             continue
         if tree.scenarios:

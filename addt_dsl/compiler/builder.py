@@ -98,19 +98,41 @@ class Builder:
         def callback(children):
             span = no_span
             if needs_span:
-                first = last = None
+                # `_bounds` of the first and last positioned child, with its two common
+                # cases (a token, an AST node) inlined: this runs for every reduction.
+                first = None
                 for c in children:
-                    first = _bounds(c)
-                    if first is not None:
-                        break
+                    if c.__class__ is Token:
+                        if c.line is not None:
+                            first = (c.line, c.column)
+                            break
+                    else:
+                        s = getattr(c, "span", None)
+                        if s is not None:
+                            first = (s.line, s.col)
+                            break
+                        b = _bounds(c)
+                        if b is not None:
+                            first = b[0]
+                            break
                 if first is None:
                     span = Span.point(self.path, 1, 1)
                 else:
                     for c in reversed(children):
-                        last = _bounds(c)
-                        if last is not None:
-                            break
-                    span = Span(self.path, first[0][0], first[0][1], last[1][0], last[1][1])
+                        if c.__class__ is Token:
+                            if c.line is not None:
+                                last = (c.end_line or c.line, c.end_column or c.column + len(c))
+                                break
+                        else:
+                            s = getattr(c, "span", None)
+                            if s is not None:
+                                last = (s.end_line, s.end_col)
+                                break
+                            b = _bounds(c)
+                            if b is not None:
+                                last = b[1]
+                                break
+                    span = Span(self.path, first[0], first[1], last[0], last[1])
             items = []
             for c in children:
                 if c.__class__ is Token:

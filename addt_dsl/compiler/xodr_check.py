@@ -7,8 +7,11 @@ on and turns its errors into diagnostics at the `road ... import` line.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
 import re
+import threading
 
 import numpy as np
 
@@ -27,7 +30,7 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
     if display not in cache and not _within_map_limits(ctx, text, display, span):
         return None
     try:
-        network = cache.get(display) or cache.setdefault(display, parse_xodr(text, display))
+        network = cache.get(display) or cache.setdefault(display, parsed_map(text, display))
     except XodrError as exc:
         where = f"{display}:{exc.line}" if getattr(exc, "line", None) else display
         ctx.sink.error("E0403", f"cannot use {display}: {exc.message if hasattr(exc, 'message') else exc}",
@@ -52,10 +55,53 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
         ctx.sink.error("E0403", f"{display} has no road '{road_id}'", span,
                        f"roads: {', '.join(sorted(network.roads))}")
         return None
-    info = _road_info(network.road(road_id))
+    info = road_info_of(network, road_id)
     if info is not None:
         info.network, info.road_id = network, road_id
     return road_id, info
+
+
+# ---- maps parsed once per process (issue 22: a suite's files import the same few maps)
+
+MAP_CACHE_SIZE = 16
+_MAPS: dict[tuple[str, bytes], object] = {}  # (display name, digest of the text) -> RoadNetwork; LRU order
+_INFOS: dict[int, dict[str, RoadInfo | None]] = {}  # id of a cached network -> RoadInfo per road id
+_MAPS_LOCK = threading.RLock()
+
+
+def parsed_map(text: str, display: str):
+    """`parse_xodr(text, display)`, remembered within the process while the file's content
+    is the same (the caller reads the file every time: an edited map is parsed again; the
+    name is part of the key because error messages carry it). A map that does not parse
+    raises every time. The network is only read afterwards (routes, road shapes), so
+    compilations may share it; the runtime builds its own from the plan's text."""
+    key = (display, hashlib.sha256(text.encode("utf-8", "surrogatepass")).digest())
+    with _MAPS_LOCK:
+        network = _MAPS.pop(key, None)
+        if network is not None:
+            _MAPS[key] = network  # most recently used again
+            return network
+    network = parse_xodr(text, display)
+    with _MAPS_LOCK:
+        _MAPS[key] = network
+        _INFOS[id(network)] = {}
+        while len(_MAPS) > MAP_CACHE_SIZE:
+            evicted = _MAPS.pop(next(iter(_MAPS)))
+            _INFOS.pop(id(evicted), None)
+    return network
+
+
+def road_info_of(network, road_id: str) -> RoadInfo | None:
+    """`_road_info(network.road(road_id))`, computed once per road of a cached map (a
+    fresh copy each time: callers fill in its network and id)."""
+    with _MAPS_LOCK:
+        infos = _INFOS.get(id(network))
+        if infos is None:
+            return _road_info(network.road(road_id))
+        if road_id not in infos:
+            infos[road_id] = _road_info(network.road(road_id))
+        info = infos[road_id]
+    return None if info is None else dataclasses.replace(info, lane_width_m=dict(info.lane_width_m))
 
 
 def route_length(network, roads: list[str], lane) -> float:
@@ -92,7 +138,7 @@ def check_route(ctx: Context, route, road_name: str, lane, s, lane_span: Span) -
         ctx.sink.error("E0404", exc.message, span, *([exc.hint] if exc.hint else []),
                        "routes are road ids in driving order, or turns at junctions: docs/roads.md, Routes")
         return None
-    return roads, _road_info(info.network.road(roads[0]))
+    return roads, road_info_of(info.network, roads[0])
 
 
 _COMMENT = re.compile(r"<!--.*?-->", re.S)
@@ -126,17 +172,36 @@ def _lanes_within_limit(ctx: Context, network, display: str, span: Span) -> bool
 
 def check_inline_road(ctx: Context, road_plan, span: Span) -> bool:
     """Build an inline road as every run will (same bounds as imported maps: total length,
-    turn, samples), so a road no run could build is a compile error, not a crashed run."""
+    turn, samples), so a road no run could build is a compile error, not a crashed run.
+    The verdict is a function of the road's plan alone, kept per process (suite files
+    share their roads through included families)."""
+    key = road_plan.model_dump_json()
+    with _MAPS_LOCK:
+        verdict = _INLINE.pop(key, None)
+    if verdict is None:
+        verdict = _build_inline(road_plan)
+    with _MAPS_LOCK:
+        _INLINE[key] = verdict  # most recently used last
+        while len(_INLINE) > INLINE_CACHE_SIZE:
+            del _INLINE[next(iter(_INLINE))]
+    if verdict == ():
+        return True
+    ctx.sink.error(verdict[0], verdict[1], span)
+    return False
+
+
+INLINE_CACHE_SIZE = 256
+_INLINE: dict[str, tuple] = {}  # RoadPlan JSON -> () when it builds, else (code, message)
+
+
+def _build_inline(road_plan) -> tuple:
     try:
         build_network([road_plan])
     except RoadLimitError as exc:
-        message = str(exc) if str(exc).startswith("road ") else f"road {road_plan.name}: {exc}"
-        ctx.sink.error("E0301", message, span)
-        return False
+        return "E0301", str(exc) if str(exc).startswith("road ") else f"road {road_plan.name}: {exc}"
     except (ValueError, ArithmeticError) as exc:
-        ctx.sink.error("E0204", f"road '{road_plan.name}' cannot be built: {exc}", span)
-        return False
-    return True
+        return "E0204", f"road '{road_plan.name}' cannot be built: {exc}"
+    return ()
 
 
 def _road_info(road):

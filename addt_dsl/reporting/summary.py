@@ -8,7 +8,7 @@ from pathlib import Path
 
 from addt_dsl.reporting.atomic import atomic_path, write_text
 from addt_dsl.reporting.plots import LatencyStats
-from addt_dsl.reporting.tables import latency_budget_s, runs_table, summary
+from addt_dsl.reporting.tables import latency_budget_s, runs_layout, runs_table, runs_table_chunks, summary
 from addt_dsl.runtime.store import ResultStore
 
 
@@ -28,15 +28,44 @@ def store_dataframe(store: ResultStore):
     return runs_table(store.plan(), store.records())
 
 
-def write_csv(store: ResultStore, path: str | Path) -> Path:
+CHUNK_RUNS = 250  # rows held at once while writing a runs table (about 4 kB each as dicts and frame)
+
+
+def write_csv(store: ResultStore, path: str | Path, chunk: int = CHUNK_RUNS) -> Path:
+    """`store_dataframe(store).to_csv(path, index=False)`, written in chunks so that memory
+    stays flat in the number of runs: one pass learns the columns, a second writes the rows."""
+    layout = runs_layout(store.records())
     with atomic_path(path) as tmp:
-        store_dataframe(store).to_csv(tmp, index=False)
+        with open(tmp, "w", newline="") as f:
+            wrote = False
+            for df in runs_table_chunks(store.records(), layout, chunk):
+                df.to_csv(f, index=False, header=not wrote)
+                wrote = True
+            if not wrote:  # no runs: what pandas writes for the empty table
+                f.write(runs_table(store.plan(), []).to_csv(index=False))
     return Path(path)
 
 
-def write_parquet(store: ResultStore, path: str | Path) -> Path:
+def write_parquet(store: ResultStore, path: str | Path, chunk: int = CHUNK_RUNS) -> Path:
+    """`store_dataframe(store).to_parquet(path, index=False)`, one row group per chunk."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    layout = runs_layout(store.records())
     with atomic_path(path) as tmp:
-        store_dataframe(store).to_parquet(tmp, index=False)
+        writer = None
+        try:
+            for df in runs_table_chunks(store.records(), layout, chunk):
+                table = pa.Table.from_pandas(df, preserve_index=False,
+                                             schema=None if writer is None else writer.schema)
+                if writer is None:
+                    writer = pq.ParquetWriter(tmp, table.schema)
+                writer.write_table(table)
+        finally:
+            if writer is not None:
+                writer.close()
+        if writer is None:
+            runs_table(store.plan(), []).to_parquet(tmp, index=False)
     return Path(path)
 
 

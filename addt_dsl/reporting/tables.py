@@ -18,34 +18,106 @@ from addt_dsl.errors import is_error_status
 from addt_dsl.plan import ScenarioPlan
 
 
+def run_row(r) -> dict:
+    """One run's row of the runs table."""
+    verdict = "pass" if r.passed else "error" if is_error_status(r.status) else "fail"
+    row = {"run_id": r.run_id, "key": r.key, "seed": r.seed, "repeat": r.repeat_index,
+           "passed": r.passed, "verdict": verdict, "status": r.status}
+    row.update({f"param.{k}": v for k, v in sorted(r.params.items())})
+    for v in r.verdicts:
+        row[f"rho.{v.name}"] = v.robustness
+    for v in r.verdicts:
+        row[f"first_violation_s.{v.name}"] = v.first_violation_s
+    row["failed_oracles"] = ";".join(r.failed_oracles)
+    row["warned_oracles"] = ";".join(r.warned_oracles)
+    row["sim_time_s"] = r.sim_time_s
+    row["wall_time_s"] = r.wall_time_s
+    row["fault_events"] = r.fault_events
+    row["digest"] = r.digest
+    row["error"] = r.error.splitlines()[0] if r.error else ""
+    row["outcome"] = r.outcome
+    return row
+
+
 def runs_table(plan: ScenarioPlan, records: Iterable):
     """One row per run: id, parameters, seed, verdict, per-oracle robustness and first
-    violation time, simulated and wall seconds."""
+    violation time, simulated and wall seconds (the whole table in memory: a large sweep's
+    files are written by `runs_table_chunks`)."""
     import pandas as pd
 
-    rows = []
-    for r in records:
-        verdict = "pass" if r.passed else "error" if is_error_status(r.status) else "fail"
-        row = {"run_id": r.run_id, "key": r.key, "seed": r.seed, "repeat": r.repeat_index,
-               "passed": r.passed, "verdict": verdict, "status": r.status}
-        row.update({f"param.{k}": v for k, v in sorted(r.params.items())})
-        for v in r.verdicts:
-            row[f"rho.{v.name}"] = v.robustness
-        for v in r.verdicts:
-            row[f"first_violation_s.{v.name}"] = v.first_violation_s
-        row["failed_oracles"] = ";".join(r.failed_oracles)
-        row["warned_oracles"] = ";".join(r.warned_oracles)
-        row["sim_time_s"] = r.sim_time_s
-        row["wall_time_s"] = r.wall_time_s
-        row["fault_events"] = r.fault_events
-        row["digest"] = r.digest
-        row["error"] = r.error.splitlines()[0] if r.error else ""
-        row["outcome"] = r.outcome
-        rows.append(row)
-    df = pd.DataFrame(rows)
+    df = pd.DataFrame([run_row(r) for r in records])
     if "outcome" in df and not df["outcome"].astype(bool).any():
         df = df.drop(columns="outcome")  # not classified (`addtc --classify` fills it)
     return df
+
+
+class _Column:
+    """What one pass over the rows learns of a column: enough to give every chunk the dtype
+    pandas would give the whole column."""
+
+    __slots__ = ("missing", "kinds")
+
+    def __init__(self, missing: bool):
+        self.missing = missing
+        self.kinds: set[type] = set()
+
+
+def runs_layout(records: Iterable) -> tuple[list[str], dict[str, str]]:
+    """The runs table's columns (in pandas' first-seen order, `outcome` dropped when no run was
+    classified) and the dtypes the whole table would have where a chunk could infer another:
+    int64 columns that are float64 over all rows (a float or a missing value elsewhere), and
+    bool columns that are object over all rows (a missing value elsewhere)."""
+    columns: dict[str, _Column] = {}
+    rows = 0
+    classified = False
+    for r in records:
+        row = run_row(r)
+        classified |= bool(row["outcome"])
+        for name, value in row.items():
+            col = columns.get(name)
+            if col is None:
+                col = columns[name] = _Column(missing=rows > 0)
+            col.kinds.add(type(value))
+        if len(row) < len(columns):
+            for name, col in columns.items():
+                if name not in row:
+                    col.missing = True
+        rows += 1
+    if not classified:
+        columns.pop("outcome", None)
+    dtypes = {}
+    for name, col in columns.items():
+        kinds = col.kinds - {type(None)}
+        missing = col.missing or type(None) in col.kinds
+        if kinds and kinds <= {int, float} and (float in kinds or missing):
+            dtypes[name] = "float64"
+        elif kinds == {bool} and missing:
+            dtypes[name] = "object"
+    return list(columns), dtypes
+
+
+def runs_table_chunks(records: Iterable, layout: tuple[list[str], dict[str, str]], chunk: int):
+    """The runs table in pieces of `chunk` rows, each with the whole table's columns and
+    dtypes (`runs_layout` of the same records): concatenated, they are `runs_table`."""
+    import pandas as pd
+
+    columns, dtypes = layout
+    rows = []
+
+    def frame():
+        df = pd.DataFrame(rows, columns=columns)
+        for name, dtype in dtypes.items():
+            if df[name].dtype != dtype:
+                df[name] = df[name].astype(dtype)
+        return df
+
+    for r in records:
+        rows.append(run_row(r))
+        if len(rows) == chunk:
+            yield frame()
+            rows = []
+    if rows:
+        yield frame()
 
 
 def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = None,
@@ -114,7 +186,7 @@ def outcome_cells(records: Iterable, axes: list[str]) -> list[dict]:
     injections per run (`addt_dsl.runtime.outcome.outcome_table` over classified records)."""
     from addt_dsl.runtime.outcome import outcome_table
 
-    table = outcome_table([(r, r.outcome) for r in records if r.outcome], by=axes)
+    table = outcome_table(((r, r.outcome) for r in records if r.outcome), by=axes)
     if table.empty:
         return []
     def plain(v):  # numpy scalars to Python; NaN (no runs to rate) to None, valid in JSON

@@ -282,30 +282,50 @@ def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, fl
     return float(ci.low), float(ci.high)
 
 
-def outcome_table(pairs: Sequence[tuple[RunResult, str]], by: Sequence[str] = ()):
+def outcome_table(pairs: Iterable[tuple[RunResult, str]], by: Sequence[str] = ()):
     """Counts of each outcome, the mission success rate and the mean number of injections per
     run (`fault_events`), grouped by the parameters in `by`. As fault-injection campaigns
     report them (NVBitFI): the sample size `fault_samples` (runs whose fault-free twin passed: the only runs that
     say something about the fault) and, per fault outcome class, its rate over them
-    with a 95 % Wilson interval (`hazard_rate`, `hazard_lo`, `hazard_hi`, ...)."""
+    with a 95 % Wilson interval (`hazard_rate`, `hazard_lo`, `hazard_hi`, ...).
+
+    `pairs` is streamed (e.g. from `ResultStore.records()`): running counters per group keep
+    memory flat in the number of runs. The table is the one a pandas `groupby` over all rows
+    gives (groups sorted, a group value that is missing or NaN drops the run)."""
     import pandas as pd
 
-    rows = [{**{p: r.params.get(p, r.cell.get(p)) for p in by}, "outcome": o, "passed": r.passed,
-             "fault_events": r.fault_events} for r, o in pairs]
-    df = pd.DataFrame(rows)
-    if df.empty:
-        return df
-    keys = list(by) or (lambda _: 0)
-    counts = df.groupby(keys)["outcome"].value_counts().unstack(fill_value=0)
-    for name in (*OUTCOMES, "error"):
-        if name not in counts:
-            counts[name] = 0
-    table = counts[[*OUTCOMES, "error"]].copy()
-    grouped = df.groupby(keys)["passed"]
-    table["runs"] = grouped.size()
-    table["success_rate"] = grouped.mean()
+    by = list(by)
+    classes = (*OUTCOMES, "error")
+    groups: dict[tuple, list] = {}  # group key -> [count per class..., runs, passed, fault_events]
+    seen = False
+    for r, o in pairs:
+        seen = True
+        key = tuple(r.params.get(p, r.cell.get(p)) for p in by) if by else (0,)
+        if any(k is None or (isinstance(k, float) and math.isnan(k)) for k in key):
+            continue
+        acc = groups.get(key)
+        if acc is None:
+            acc = groups[key] = [0] * (len(classes) + 3)
+        if o in classes:
+            acc[classes.index(o)] += 1
+        acc[-3] += 1
+        acc[-2] += bool(r.passed)
+        acc[-1] += r.fault_events
+    if not seen:
+        return pd.DataFrame()
+    keys = sorted(groups)
+    if len(by) > 1:
+        index = pd.MultiIndex.from_tuples(keys, names=by)
+    else:
+        index = pd.Index([k[0] for k in keys], name=by[0] if by else None)
+    rows = [groups[k] for k in keys]
+    table = pd.DataFrame({name: pd.Series([a[i] for a in rows], index=index, dtype="int64")
+                          for i, name in enumerate(classes)}, index=index)
+    table.columns.name = "outcome"
+    table["runs"] = pd.Series([a[-3] for a in rows], index=index, dtype="int64")
+    table["success_rate"] = pd.Series([a[-2] / a[-3] for a in rows], index=index, dtype="float64")
     # Injections that happened (a flip whose site is never evaluated again is not injected).
-    table["fault_events"] = df.groupby(keys)["fault_events"].mean()
+    table["fault_events"] = pd.Series([a[-1] / a[-3] for a in rows], index=index, dtype="float64")
     n = table[list(FAULT_OUTCOMES)].sum(axis=1)
     table["fault_samples"] = n
     for name in FAULT_OUTCOMES:
