@@ -7,17 +7,17 @@ value to twice the declared one, inside the registry's range; counts from 1), pl
 bit for bit flips with a fixed bit. Settings written with a parameter move with that
 parameter. Fault seeds and the run seed are drawn afresh for every candidate.
 
-Guidance is a cross-entropy sampler (CEM) on robustness: each generation samples a batch
-from independent per-axis distributions (truncated normals on [0, 1], a Bernoulli for
-"present"), scores each run by its worst normalised robustness over the oracles not yet
-falsified, and refits the distributions to the best fifth (rank-weighted, smoothed), with
-a tenth of every batch drawn uniformly so the search keeps exploring.
-Why CEM rather than Hypothesis `target()`: runs are expensive (0.1-1 s) and budgets
-small (tens to hundreds of runs), so the search must be batch-parallel and spend its
-budget where it says; `target()` hill-climbs inside one `@given` test, stops at the
-first failure, and budgets in examples that are cheap. CEM is a standard AV falsifier
-(rare-event simulation), deterministic for a seed, and keeps going after a failure to
-look for the other oracles' failures.
+Guidance (`SAMPLERS`): each run is scored by its worst normalised robustness over the hard
+oracles not yet falsified (the oracles' STL robustness: below 0 the run fails), and the
+default sampler, `BayesianSampler`, models that score with a Gaussian process and runs the
+candidate most likely to fail, from a Latin hypercube start and a trust region around the
+lowest score (see its docstring). `CrossEntropySampler` (CEM: per-axis distributions
+refitted to the best fifth of each batch) and `UniformSampler` (the benchmark's baseline)
+are the options. Why not Hypothesis `target()`: runs are expensive (0.1-1 s) and budgets
+small (tens to hundreds of runs), so the search must spend each run where a model says;
+`target()` hill-climbs inside one `@given` test, stops at the first failure, and budgets in
+examples that are cheap. Every sampler is deterministic for a seed and keeps going after a
+failure to look for the other oracles' failures.
 
 Distinct failures: a failing run is grouped by (oracle, mode, faults that injected); each
 new group is shrunk (`shrink`) with a small budget, and its origin is what the shrunk run
