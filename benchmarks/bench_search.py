@@ -1,22 +1,31 @@
-"""Guided search vs uniform random sampling: runs needed to the first failure.
+"""Guided search vs uniform random sampling: runs needed to the first failure, distinct failures.
 
     PYTHONPATH=. python benchmarks/bench_search.py [--scenarios FILE ...] [--samplers random bo]
-        [--seeds 20] [--budget 150] [--batch 8] [--jobs 2]
+        [--seeds 20] [--budget 150] [--batch 8] [--jobs 2] [--cache DIR]
+        [--distinct-seeds 2] [--distinct-budget 100] [--distinct-shrink 20]
 
 The suite (default): the scenarios in `examples/search/`, each written so that a
 failure needs several things at once (a small failure region: uniform sampling fails
 under 3 % of runs; `examples/lead_brake.addt` no longer fails at all since the stack
 brakes for emergencies, so it left the suite). Every sampler searches the same
 space (`addt_dsl.search.falsify.SearchSpace`: parameters, fault presence, times and
-magnitudes) with the same budget and seeds; `random` is uniform sampling. A seed that
-finds no failure within the budget counts as budget + 1 runs (censored; reported).
+magnitudes) with the same budget and seeds; `random` is uniform sampling over that space
+(`UniformSampler`). A seed that finds no failure within the budget counts as budget + 1
+runs (censored; reported: a censored median is a lower bound).
 
 Prints per scenario the median and mean runs to the first failure per sampler, the ratio
 random / sampler of the medians (> 1: the guided search needs fewer runs), the uniform
 failure rate estimated from the random sampler's runs (failures per run over all seeds,
 with a 95 % Wilson interval: each seed's runs up to and including its first failure),
-and the wall time per sampler (the model's fitting included). The suite figure is the
-median over scenarios of the per-scenario median ratios.
+the wall time per sampler (the model's fitting included; the machine's load beside it),
+and, from `--distinct-seeds` whole searches of `--distinct-budget` runs with shrinking,
+distinct failures per 1,000 runs (search and shrink runs both count) and failing search
+runs per 1,000. Then one table of all scenarios; the suite figure is the median over
+scenarios of the per-scenario median ratios.
+
+`--cache DIR` keeps every run in `DIR/<scenario file>.sqlite` (the search's run cache):
+runs are pure functions of their RunSpec, so a killed benchmark run again replays what it
+has and goes on, and the counts do not change.
 """
 
 from __future__ import annotations
@@ -33,53 +42,110 @@ sys.path.insert(0, str(ROOT))
 import _figures as figures_json  # noqa: E402
 from addt_dsl.compiler import compile_file  # noqa: E402
 from addt_dsl.runtime.outcome import wilson_interval  # noqa: E402
+from addt_dsl.search.cache import RunCache  # noqa: E402
 from addt_dsl.search.falsify import SAMPLERS, Falsifier  # noqa: E402
 
 SUITE = sorted((ROOT / "examples" / "search").glob("*.addt"))
 
 
-def first_failure(plan, sampler: str, seed: int, budget: int, batch: int, jobs: int) -> tuple[int, bool, float]:
+def first_failure(plan, sampler: str, seed: int, args, cache: RunCache) -> tuple[int, bool, float]:
     t0 = time.perf_counter()
-    report = Falsifier(plan, seed=seed, batch=batch, jobs=jobs, sampler=sampler).run(
-        budget_runs=budget, shrink_simulations=0, stop_at_first=True)
+    report = Falsifier(plan, seed=seed, batch=args.batch, jobs=args.jobs, sampler=sampler, cache=cache).run(
+        budget_runs=args.budget, shrink_simulations=0, stop_at_first=True)
     found = report.first_failure_run is not None
-    return (report.first_failure_run if found else budget + 1), found, time.perf_counter() - t0
+    return (report.first_failure_run if found else args.budget + 1), found, time.perf_counter() - t0
 
 
-def bench_scenario(path: Path, samplers: list[str], seeds: int, budget: int, batch: int, jobs: int) -> dict:
+def distinct_failures(plan, sampler: str, args, cache: RunCache) -> dict:
+    """Whole searches (no stop at the first failure) with shrinking: distinct failures per 1,000 runs."""
+    distinct = runs = search_runs = failing = 0
+    for seed in range(args.distinct_seeds):
+        report = Falsifier(plan, seed=seed, batch=args.batch, jobs=args.jobs, sampler=sampler, cache=cache).run(
+            budget_runs=args.distinct_budget, shrink_simulations=args.distinct_shrink)
+        distinct += len(report.failures)
+        failing += sum(f.count for f in report.failures)
+        search_runs += report.runs
+        runs += report.runs + report.shrink_simulations
+    return {"searches": args.distinct_seeds, "distinct": distinct, "runs": runs,
+            "per_1000_runs": 1000.0 * distinct / runs if runs else 0.0,
+            "failing_search_runs_per_1000": 1000.0 * failing / search_runs if search_runs else 0.0}
+
+
+def bench_scenario(path: Path, args) -> dict:
     plan = compile_file(path).plan
+    samplers = args.samplers
+    cache = RunCache(args.cache / f"{path.stem}.sqlite" if args.cache else None)
     rows: dict[str, list[tuple[int, bool]]] = {s: [] for s in samplers}
     seconds = {s: 0.0 for s in samplers}
-    print(f"\n{plan.name} ({path.relative_to(ROOT)}): budget {budget} runs, {seeds} seeds")
+    print(f"\n{plan.name} ({path.relative_to(ROOT)}): budget {args.budget} runs, {args.seeds} seeds, "
+          f"load {figures_json.load()}")
     print(f"{'seed':>4}  " + "  ".join(f"{s:>7}" for s in samplers))
-    for seed in range(seeds):
-        cells = []
-        for sampler in samplers:
-            runs, found, secs = first_failure(plan, sampler, seed, budget, batch, jobs)
-            rows[sampler].append((runs, found))
-            seconds[sampler] += secs
-            cells.append(f"{runs:>6}{'' if found else '+'}")
-        print(f"{seed:>4}  " + "  ".join(f"{c:>7}" for c in cells), flush=True)
-    out: dict = {"scenario": plan.name, "file": str(path.relative_to(ROOT))}
-    for sampler, r in rows.items():
-        runs = [n for n, _ in r]
-        out[sampler] = {"median_runs_to_failure": statistics.median(runs), "mean_runs_to_failure": statistics.mean(runs),
-                        "censored": sum(not f for _, f in r), "wall_s": seconds[sampler]}
-        print(f"{sampler:>7}: median {statistics.median(runs):.1f} runs, mean {statistics.mean(runs):.1f}, "
-              f"censored {out[sampler]['censored']}/{len(r)}, {seconds[sampler]:.0f} s")
-    if "random" in rows:
-        failures = sum(f for _, f in rows["random"])
-        runs = sum(n if f else n - 1 for n, f in rows["random"])
-        lo, hi = wilson_interval(failures, runs)
-        out["uniform_failure_rate"] = {"estimate": failures / runs if runs else None, "ci95": [lo, hi]}
-        print(f"uniform failure rate: {100 * failures / runs:.2f} % (95 % CI {100 * lo:.2f}-{100 * hi:.2f} %, "
-              f"{failures} failures in {runs} random runs)")
-        for sampler in samplers:
-            if sampler != "random":
-                ratio = out["random"]["median_runs_to_failure"] / out[sampler]["median_runs_to_failure"]
-                out[sampler]["ratio_random_median"] = ratio
-                print(f"ratio random/{sampler} (medians): {ratio:.2f}")
+    try:
+        for seed in range(args.seeds):
+            cells = []
+            for sampler in samplers:
+                runs, found, secs = first_failure(plan, sampler, seed, args, cache)
+                rows[sampler].append((runs, found))
+                seconds[sampler] += secs
+                cells.append(f"{runs:>6}{'' if found else '+'}")
+            print(f"{seed:>4}  " + "  ".join(f"{c:>7}" for c in cells), flush=True)
+        out: dict = {"scenario": plan.name, "file": str(path.relative_to(ROOT))}
+        for sampler, r in rows.items():
+            runs = [n for n, _ in r]
+            out[sampler] = {"median_runs_to_failure": statistics.median(runs),
+                            "mean_runs_to_failure": statistics.mean(runs),
+                            "censored": sum(not f for _, f in r), "wall_s": seconds[sampler],
+                            "runs_to_failure": runs}
+            print(f"{sampler:>7}: median {statistics.median(runs):.1f} runs, mean {statistics.mean(runs):.1f}, "
+                  f"censored {out[sampler]['censored']}/{len(r)}, {seconds[sampler]:.0f} s "
+                  f"(cache hits included; load {figures_json.load()})")
+        if "random" in rows:
+            failures = sum(f for _, f in rows["random"])
+            runs = sum(n if f else n - 1 for n, f in rows["random"])
+            lo, hi = wilson_interval(failures, runs)
+            out["uniform_failure_rate"] = {"estimate": failures / runs if runs else None, "ci95": [lo, hi],
+                                           "failures": failures, "runs": runs}
+            print(f"uniform failure rate: {100 * failures / runs:.2f} % (95 % CI {100 * lo:.2f}-{100 * hi:.2f} %, "
+                  f"{failures} failures in {runs} random runs)")
+            for sampler in samplers:
+                if sampler != "random":
+                    ratio = out["random"]["median_runs_to_failure"] / out[sampler]["median_runs_to_failure"]
+                    out[sampler]["ratio_random_median"] = ratio
+                    print(f"ratio random/{sampler} (medians): {ratio:.2f}")
+        if args.distinct_seeds:
+            for sampler in samplers:
+                d = distinct_failures(plan, sampler, args, cache)
+                out[sampler]["distinct_failures"] = d
+                print(f"{sampler:>7}: {d['distinct']} distinct failure(s) in {d['searches']} searches of "
+                      f"{args.distinct_budget} runs ({d['runs']} runs with shrinking): {d['per_1000_runs']:.1f} "
+                      f"per 1,000 runs; {d['failing_search_runs_per_1000']:.0f} failing search runs per 1,000",
+                      flush=True)
+    finally:
+        cache.close()
     return out
+
+
+def print_table(results: list[dict], samplers: list[str]) -> None:
+    guided = [s for s in samplers if s != "random"]
+    head = ["scenario", "uniform failure rate (95 % CI)", "random"] + guided + [f"ratio {s}" for s in guided]
+    head += [f"distinct/1,000 {s}" for s in samplers]
+    print("\n| " + " | ".join(head) + " |\n|" + " --- |" * len(head))
+    for r in results:
+        rate = r.get("uniform_failure_rate")
+        cells = [f"`{Path(r['file']).stem}`",
+                 f"{100 * rate['estimate']:.2f} % ({100 * rate['ci95'][0]:.2f}-{100 * rate['ci95'][1]:.2f} %)"
+                 if rate else "-"]
+        for s in ["random"] + guided:
+            if s in r:
+                c = r[s]["censored"]
+                cells.append(f"{r[s]['median_runs_to_failure']:.1f}" + (f" ({c} censored)" if c else ""))
+            else:
+                cells.append("-")
+        cells += [f"{r[s]['ratio_random_median']:.2f}" if "ratio_random_median" in r.get(s, {}) else "-"
+                  for s in guided]
+        cells += [f"{r[s]['distinct_failures']['per_1000_runs']:.1f}" if "distinct_failures" in r.get(s, {}) else "-"
+                  for s in samplers]
+        print("| " + " | ".join(cells) + " |")
 
 
 def main() -> None:
@@ -90,10 +156,15 @@ def main() -> None:
     ap.add_argument("--budget", type=int, default=150)
     ap.add_argument("--batch", type=int, default=8, help="candidates per generation of cem and random")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--cache", type=Path, help="keep runs in DIR/<scenario>.sqlite (resumable)")
+    ap.add_argument("--distinct-seeds", type=int, default=2, help="whole searches per sampler (0: skip)")
+    ap.add_argument("--distinct-budget", type=int, default=100)
+    ap.add_argument("--distinct-shrink", type=int, default=20, help="shrink simulations per failure group")
     ap.add_argument("--json", help="also write the figures here")
     args = ap.parse_args()
-    results = [bench_scenario(p.resolve(), args.samplers, args.seeds, args.budget, args.batch, args.jobs)
-               for p in args.scenarios]
+    if args.cache:
+        args.cache.mkdir(parents=True, exist_ok=True)
+    results = [bench_scenario(p.resolve(), args) for p in args.scenarios]
     figures: dict = {"budget_runs": args.budget, "seeds": args.seeds, "samplers": args.samplers, "scenarios": results}
     print()
     for sampler in args.samplers:
@@ -102,6 +173,7 @@ def main() -> None:
             figures[f"suite_ratio_random_to_{sampler}"] = statistics.median(ratios)
             print(f"suite: random/{sampler} median of per-scenario median ratios {statistics.median(ratios):.2f} "
                   f"(per scenario: {', '.join(f'{x:.2f}' for x in ratios)}; lowest {min(ratios):.2f})")
+    print_table(results, args.samplers)
     figures_json.write(args.json, figures)
 
 
