@@ -545,7 +545,8 @@ def _loop(run: _Run) -> Trace:
             z, grade = road.elevation.at(a.s)
             run.physics.set_pose(a.name, x, y, z + VEHICLES[run.agent_plans[a.name].vehicle].height_m / 2, heading,
                                  math.atan(grade) * math.cos(heading - h))
-            run.body_actor[a.name] = _GT(x, y, heading, a.speed, a.length_m, a.width_m)
+            run.body_actor[a.name] = _GT(x, y, heading, a.speed, a.length_m, a.width_m,
+                                         run.agent_plans[a.name].vehicle)
             if run.networked:
                 run.world_pose[a.name] = (x, y, heading)
         e = run.ego
@@ -676,6 +677,7 @@ class _GT:
     speed: float
     length_m: float
     width_m: float
+    kind: str = ""  # the actor's vehicle kind (addt_dsl.vehicles)
 
 
 def _record(r, k, x, y, heading, speed, accel, yaw_rate, s, t, lane_offset, steer) -> None:

@@ -65,7 +65,7 @@ def test_detects_a_car_and_a_truck_where_they_are(scans):
     assert len(found) == 2
     for gt in s.boxes:
         k = int(np.argmin(np.hypot(found[:, 0] - gt[0], found[:, 1] - gt[1])))
-        x, y, heading, length, width, conf = found[k]
+        x, y, heading, length, width, conf, cls = found[k]
         assert math.hypot(x - gt[0], y - gt[1]) < 0.6
         assert abs(length - gt[3]) < 1.0 and conf > node.threshold
     assert len(node.detect(scans["empty"].points, scans["empty"].sensor_xy)) == 0
