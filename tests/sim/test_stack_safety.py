@@ -137,3 +137,22 @@ def test_study_impact_tables_avoided_runs_and_impact_speeds(tmp_path, capsys):
     far = lines[3].split()  # 60 m: stops in time
     assert near[:4] == ["15.0", "1", "0", "0.00"] and 40.0 < float(near[4]) < 57.6 and near[4] == near[5]
     assert far[:4] == ["60.0", "1", "1", "1.00"] and far[4] == "NaN"
+
+
+@pytest.mark.torch
+def test_learned_perception_yields_to_a_crossing_pedestrian():
+    # The walker of test_yields_to_a_crossing_pedestrian, seen by the lidar detector: it
+    # must be found and classed as a pedestrian (its square box has no axis: the planner
+    # predicts it across the lane from its tracked motion).
+    pytest.importorskip("torch")
+    source = straight("ego car on r lane -1 at 20 m speed 11 m/s",
+                      "  agent walker pedestrian on r lane -1 at 100 m offset -3 m {\n"
+                      "    when distance(ego, walker) < 30 m then behavior cross speed 1.4 m/s direction left\n  }",
+                      duration_s=16.0, stack="perception learned cruise_speed 11 m/s")
+    source = source.replace("sensor lidar rate 10 Hz rays 360 range 80 m",
+                            "sensor lidar rate 10 Hz rays 360 channels 5 vfov 12 deg range 80 m")
+    trace = run(source)
+    ego = trace.actors["ego"]
+    assert not trace.events_of("collision")
+    assert ego.speed.min() < 5.0  # it slowed for the walker
+    assert ego.speed[-1] > 9.0  # and went on once the lane was clear

@@ -9,7 +9,7 @@ torch = pytest.importorskip("torch")
 pytestmark = pytest.mark.torch
 
 from addt_dsl.stack.bev import BevStack  # noqa: E402
-from addt_dsl.stack.bev_grid import LAYER_SITES, TENSOR_SITES  # noqa: E402
+from addt_dsl.stack.bev_grid import CLASSES, LAYER_SITES, TENSOR_SITES  # noqa: E402
 from addt_dsl.stack.learned import WEIGHTS_PATH, BevDetector, LearnedPerception  # noqa: E402
 from addt_dsl.stack.synth import ScanGenerator  # noqa: E402
 
@@ -21,6 +21,7 @@ def scans():
         yield {
             "two": gen.scan([("car", 15.0, -0.2, 0.02), ("truck", -22.0, 3.5, 0.0)]),
             "empty": gen.scan([]),
+            "vru": gen.scan([("pedestrian", 9.0, 3.0, 1.4), ("cyclist", 14.0, -2.5, 0.05)]),
         }
     finally:
         gen.close()
@@ -68,7 +69,20 @@ def test_detects_a_car_and_a_truck_where_they_are(scans):
         x, y, heading, length, width, conf, cls = found[k]
         assert math.hypot(x - gt[0], y - gt[1]) < 0.6
         assert abs(length - gt[3]) < 1.0 and conf > node.threshold
+    assert [CLASSES[int(c)] for c in found[np.argsort(found[:, 0]), 6]] == ["truck", "car"]
     assert len(node.detect(scans["empty"].points, scans["empty"].sensor_xy)) == 0
+
+
+def test_detects_and_classes_a_pedestrian_and_a_cyclist(scans):
+    node = LearnedPerception({})
+    assert node.meta["classes"] == list(CLASSES)
+    s = scans["vru"]
+    found = node.detect(s.points, s.sensor_xy)
+    assert len(found) == 2
+    for gt, cls in zip(s.boxes, s.classes):
+        k = int(np.argmin(np.hypot(found[:, 0] - gt[0], found[:, 1] - gt[1])))
+        assert math.hypot(found[k, 0] - gt[0], found[k, 1] - gt[1]) < 0.6
+        assert found[k, 6] == cls
 
 
 def test_weight_flip_is_persistent_and_flipping_back_restores_bit_for_bit(scans):
