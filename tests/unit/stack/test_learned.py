@@ -21,7 +21,6 @@ def scans():
         yield {
             "two": gen.scan([("car", 15.0, -0.2, 0.02), ("truck", -22.0, 3.5, 0.0)]),
             "empty": gen.scan([]),
-            "vru": gen.scan([("pedestrian", 9.0, 3.0, 1.4), ("cyclist", 14.0, -2.5, 0.05)]),
         }
     finally:
         gen.close()
@@ -73,16 +72,27 @@ def test_detects_a_car_and_a_truck_where_they_are(scans):
     assert len(node.detect(scans["empty"].points, scans["empty"].sensor_xy)) == 0
 
 
-def test_detects_and_classes_a_pedestrian_and_a_cyclist(scans):
+def test_finds_and_classes_road_users_on_held_out_scans():
+    """Recall and class within 40 m on 80 held-out scans (the evaluation's seed). Floors
+    set below what the shipped weights measure there (docs/stack.md, Evaluation), so a
+    retrained detector that loses a class fails here."""
+    from addt_dsl.stack.evaluate import evaluate
+    from addt_dsl.stack.synth import generate
+
     node = LearnedPerception({})
     assert node.meta["classes"] == list(CLASSES)
-    s = scans["vru"]
-    found = node.detect(s.points, s.sensor_xy)
-    assert len(found) == 2
-    for gt, cls in zip(s.boxes, s.classes):
-        k = int(np.argmin(np.hypot(found[:, 0] - gt[0], found[:, 1] - gt[1])))
-        assert math.hypot(found[k, 0] - gt[0], found[k, 1] - gt[1]) < 0.6
-        assert found[k, 6] == cls
+    by_class: dict = {}
+    evaluate(generate(80, 1_000_003), node.detect, by_class=by_class)
+
+    def near(name):  # (recall, class accuracy) within 40 m
+        found = sum(st.found for st in by_class[name][:2])
+        right = sum(st.right_class for st in by_class[name][:2])
+        return found / sum(st.gt for st in by_class[name][:2]), right / found
+
+    car, pedestrian, cyclist = near("car"), near("pedestrian"), near("cyclist")
+    assert car[0] > 0.85 and car[1] > 0.95
+    assert pedestrian[0] > 0.6 and pedestrian[1] > 0.5
+    assert cyclist[0] > 0.4
 
 
 def test_weight_flip_is_persistent_and_flipping_back_restores_bit_for_bit(scans):
