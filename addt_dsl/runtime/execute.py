@@ -397,7 +397,7 @@ class _Run:
 
     def actor_by_body(self, body: int):
         name = self.physics.body_names.get(body)
-        pose = self.body_actor.get(name)  # (x, y, heading, speed, length, width) when posed
+        pose = self.body_actor.get(name)  # (x, y, heading, speed, length, width, kind) when posed
         return None if pose is None else _GT(*pose)
 
     def leader_of(self, agent: AgentState):
@@ -535,9 +535,10 @@ def _loop(run: _Run) -> Trace:
     ego_road = run.ego_road
     lights_rec = {c.name: np.zeros(n) for c in plan.controllers} if run.lights else {}
     margins = {name: np.zeros(n) for name in names} if run.lights else {}
-    # Per agent, fixed for the run: (state, road, extra yaw [rad], half its body height [m]).
+    # Per agent, fixed for the run: (state, road, extra yaw [rad], half its body height [m], vehicle kind).
     agent_consts = [(a, run.agent_roads[a.name], run.agent_plans[a.name].yaw,
-                     VEHICLES[run.agent_plans[a.name].vehicle].height_m / 2) for a in run.agents]
+                     VEHICLES[run.agent_plans[a.name].vehicle].height_m / 2, run.agent_plans[a.name].vehicle)
+                    for a in run.agents]
     set_pose, body_actor = run.physics.set_pose, run.body_actor
 
     for k in range(n):
@@ -547,7 +548,7 @@ def _loop(run: _Run) -> Trace:
             run.faults.wake(t_now)
         # Agent poses (kinematic along their road) and snapshot objects for perception.
         poses = {}
-        for a, road, yaw, half_height in agent_consts:
+        for a, road, yaw, half_height, kind in agent_consts:
             x, y, h = road.road.point(a.s, a.t)  # road.pose
             heading = h + relative_heading(a, t_now, dt)
             if yaw:
@@ -555,7 +556,7 @@ def _loop(run: _Run) -> Trace:
             poses[a.name] = (x, y, heading)
             z, grade = road.elevation.at(a.s)
             set_pose(a.name, x, y, z + half_height, heading, math.atan(grade) * math.cos(heading - h))
-            body_actor[a.name] = (x, y, heading, a.speed, a.length_m, a.width_m)
+            body_actor[a.name] = (x, y, heading, a.speed, a.length_m, a.width_m, kind)
             if run.networked:
                 run.world_pose[a.name] = (x, y, heading)
         e = run.ego
@@ -716,6 +717,7 @@ class _GT:
     speed: float
     length_m: float
     width_m: float
+    kind: str = ""  # the actor's vehicle kind (addt_dsl.vehicles)
 
 
 # The recorded fields of an actor, in the order of a step's row; clearance last.

@@ -297,8 +297,13 @@ class BevStack:
             # Across the road only for an object turned across it (a crossing pedestrian or
             # cyclist, a vehicle turning): for one aligned with the road, the lateral velocity
             # the tracker estimates from 10 Hz positions is mostly noise (about ±1 m/s for
-            # 0.1 m position noise), too much to extrapolate over the horizon.
-            if not (rs > CROSSING_SIN and abs(v_t) > CROSSING_MIN_SPEED):
+            # 0.1 m position noise), too much to extrapolate over the horizon. A pedestrian's
+            # box is square (a detector's box axis says nothing of where it walks): its
+            # direction of motion tells whether it crosses.
+            turned = rs
+            if o.kind == "pedestrian" and math.hypot(o.vx, o.vy) > CROSSING_MIN_SPEED:
+                turned = abs(math.sin(math.atan2(o.vy, o.vx) - hdg))
+            if not (turned > CROSSING_SIN and abs(v_t) > CROSSING_MIN_SPEED):
                 v_t = 0.0
             objs.append((float(so), float(to), o.vx * c + o.vy * s, v_t,
                          o.length * rc + o.width * rs, o.length * rs + o.width * rc))

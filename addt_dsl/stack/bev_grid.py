@@ -30,6 +30,11 @@ OUTPUT_STRIDE = 2  # detector head cells are OUTPUT_STRIDE × cell = 1.6 m
 # same from either end, and regressing the heading spent the network on an unlearnable
 # front/back guess (which end is the front comes from the tracker's motion and the lane).
 HEAD_CHANNELS = ("heat", "off_x", "off_y", "log_l", "log_w", "sin2", "cos2")
+# Object classes of the detector's class output (logits after the six box channels of
+# `head.box`), and of the training data's labels. Actor kinds outside these (obstacles)
+# are not in the training data.
+CLASSES = ("car", "truck", "pedestrian", "cyclist")
+BOX_CHANNELS = 6
 
 # Tensor fault sites of the learned detector, `perception.<layer>`: the network in
 # `learned.py` names its layers exactly so (a unit test checks it). Listed here so the
@@ -168,22 +173,24 @@ def sensor_points_to_vehicle(points_sensor: np.ndarray, ext) -> np.ndarray:
 
 # ---------------------------------------------------------------- targets and decoding
 
-def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float = 0.8):
+def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float = 0.8,
+                   classes: np.ndarray | None = None):
     """CenterNet targets for vehicle-frame boxes (N×5: x, y, heading, length, width).
 
     Returns (heat (hx, hy), regression (6, hx, hy), mask (hx, hy)): a Gaussian peak per
     object on the head grid; at each object's centre cell the regression targets
     (offset from the cell centre in head cells, log length, log width, sin 2θ, cos 2θ of the
-    heading θ).
+    heading θ). With `classes` (N indices into `CLASSES`) the regression has a 7th row,
+    the class index at each centre cell.
     """
     hx, hy = spec.head_shape
     heat = np.zeros((hx, hy), dtype=np.float32)
-    reg = np.zeros((6, hx, hy), dtype=np.float32)
+    reg = np.zeros((BOX_CHANNELS + (classes is not None), hx, hy), dtype=np.float32)
     mask = np.zeros((hx, hy), dtype=np.float32)
     c = spec.head_cell_m
     gi = np.arange(hx)[:, None]
     gj = np.arange(hy)[None, :]
-    for x, y, heading, length, width in boxes:
+    for k, (x, y, heading, length, width) in enumerate(boxes):
         fi = (x - spec.x_min) / c - 0.5
         fj = (y - spec.y_min) / c - 0.5
         i, j = int(round(fi)), int(round(fj))
@@ -192,8 +199,10 @@ def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float 
         g = np.exp(-((gi - fi) ** 2 + (gj - fj) ** 2) / (2.0 * sigma_cells ** 2)).astype(np.float32)
         np.maximum(heat, g, out=heat)
         heat[i, j] = 1.0
-        reg[:, i, j] = (fi - i, fj - j, math.log(length), math.log(width),
-                         math.sin(2.0 * heading), math.cos(2.0 * heading))
+        reg[:BOX_CHANNELS, i, j] = (fi - i, fj - j, math.log(length), math.log(width),
+                                    math.sin(2.0 * heading), math.cos(2.0 * heading))
+        if classes is not None:
+            reg[BOX_CHANNELS, i, j] = classes[k]
         mask[i, j] = 1.0
     return heat, reg, mask
 
@@ -208,8 +217,9 @@ def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec =
     """Peaks of a (hx, hy) score map (3×3 local maxima at or above `threshold`; scores
     may be probabilities or logits) → boxes.
 
-    Returns an (N, 6) array: x, y, heading, length, width, score (vehicle frame), sorted
-    by score, highest first. With `max_overlap_m`, a box that overlaps a higher-scoring
+    Returns an (N, 7) array: x, y, heading, length, width, score (vehicle frame), class
+    (index into `CLASSES`, the largest of the class logits that follow the six box rows of
+    `reg`; -1 when `reg` has none), sorted by score, highest first. With `max_overlap_m`, a box that overlaps a higher-scoring
     one by more than that (vehicles cannot overlap) is dropped: the network may propose
     a car and a truck for the same face, or a phantom behind a long vehicle.
     """
@@ -218,7 +228,7 @@ def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec =
     # those with their 8 neighbours instead of shifting the whole map 8 times.
     i, j = np.nonzero(heat >= threshold)
     if len(i) == 0:
-        return np.zeros((0, 6))
+        return np.zeros((0, 7))
     padded = np.full((hx + 2, hy + 2), -np.inf, dtype=heat.dtype)
     padded[1:-1, 1:-1] = heat
     centre = heat[i, j][:, None]
@@ -228,7 +238,7 @@ def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec =
     is_max = (centre > neighbours[:, :4]).all(axis=1) & (centre >= neighbours[:, 4:]).all(axis=1)
     i, j = i[is_max], j[is_max]
     if len(i) == 0:
-        return np.zeros((0, 6))
+        return np.zeros((0, 7))
     conf = heat[i, j]
     order = np.argsort(-conf, kind="stable")[:max_objects]
     i, j, conf = i[order], j[order], conf[order]
@@ -242,7 +252,8 @@ def _boxes(heat, reg, i, j, conf, spec, max_overlap_m):
     x = spec.x_min + (i + 0.5 + r[0]) * c
     y = spec.y_min + (j + 0.5 + r[1]) * c
     heading = 0.5 * np.arctan2(r[4], r[5])  # the box axis, in [-π/2, π/2]
-    boxes = np.stack([x, y, heading, np.exp(r[2]), np.exp(r[3]), conf.astype(np.float64)], axis=1)
+    cls = r[BOX_CHANNELS:].argmax(axis=0).astype(np.float64) if len(r) > BOX_CHANNELS else np.full(len(i), -1.0)
+    boxes = np.stack([x, y, heading, np.exp(r[2]), np.exp(r[3]), conf.astype(np.float64), cls], axis=1)
     if max_overlap_m is not None and len(boxes) > 1:
         boxes = boxes[_keep_non_overlapping(boxes, max_overlap_m)]
     return boxes

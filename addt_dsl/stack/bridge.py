@@ -317,7 +317,7 @@ class ExternalStack:
             gt = self.ctx.world.actor_by_body(body)
             if gt is not None:
                 out[str(body)] = {"x": gt.x, "y": gt.y, "heading": gt.heading, "speed": gt.speed,
-                                  "length_m": gt.length_m, "width_m": gt.width_m}
+                                  "length_m": gt.length_m, "width_m": gt.width_m, "kind": gt.kind}
         return out
 
     def close(self) -> None:

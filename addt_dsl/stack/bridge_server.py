@@ -73,6 +73,7 @@ class _GT:
     def __init__(self, d: dict):
         self.x, self.y, self.heading, self.speed = d["x"], d["y"], d["heading"], d["speed"]
         self.length_m, self.width_m = d["length_m"], d["width_m"]
+        self.kind = str(d.get("kind", ""))  # the actor's vehicle kind ("" from a client that sends none)
 
 
 class _NoFaults:

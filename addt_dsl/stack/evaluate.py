@@ -3,7 +3,9 @@
     python -m addt_dsl.stack.evaluate [--scenes 1500] [--seed 1000003] [--yaw-shift 0 1 2 5]
 
 Prints, per distance band from the ego (0-20, 20-40, 40-60 m): recall, precision, mean
-position error [m] and mean heading error [deg] of matched detections.
+position error [m] and mean heading error [deg] of matched detections; then per class
+(car, truck, pedestrian, cyclist) and band: recall, mean position error and the share
+of matched detections given the right class.
 
 - Ground truth counted for recall: boxes with at least `--min-hits` (default 2) lidar
   returns (an object nobody's lidar sees cannot be detected; nuScenes filters likewise).
@@ -26,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from addt_dsl import extras
+from addt_dsl.stack.bev_grid import CLASSES
 from addt_dsl.stack.synth import generate, in_grid, load_samples
 
 BANDS = ((0.0, 20.0), (20.0, 40.0), (40.0, 60.0))
@@ -41,6 +44,11 @@ class BandStats:
     pos_err: float = 0.0
     head_err: float = 0.0
     matched: int = 0
+    right_class: int = 0  # matched detections whose class output is the box's class
+
+    @property
+    def class_accuracy(self) -> float:
+        return self.right_class / self.matched if self.matched else math.nan
 
     @property
     def recall(self) -> float:
@@ -67,28 +75,28 @@ def _band(d: float) -> int | None:
     return None
 
 
-def _kind(length: float) -> str:
-    return "truck" if length > 7.0 else "car"
+def evaluate(samples, detector, min_hits: int = 2, by_kind: dict | None = None,
+             by_class: dict | None = None) -> list[BandStats]:
+    """Band statistics for `detector(points, sensor_xy) -> (N, 7) boxes` over `samples`.
 
-
-def evaluate(samples, detector, min_hits: int = 2, by_kind: dict | None = None) -> list[BandStats]:
-    """Band statistics for `detector(points, sensor_xy) -> (N, 6) boxes` over `samples`.
-
-    `by_kind`, if given, collects recall within 40 m per vehicle kind: {kind: [found, gt]}.
+    `by_kind`, if given, collects recall within 40 m per class: {class: [found, gt]};
+    `by_class` band statistics per class: {class: [BandStats per band]}.
     """
     stats = [BandStats() for _ in BANDS]
     by_kind = {} if by_kind is None else by_kind
+    by_class = {} if by_class is None else by_class
     for s in samples:
         det = detector(s.points, s.sensor_xy)
         keep = in_grid(s.boxes)
-        gt, hits = s.boxes[keep], s.hits[keep]
+        gt, hits, cls = s.boxes[keep], s.hits[keep], s.classes[keep]
         counted = hits >= min_hits
         for k in np.flatnonzero(counted):
             b = _band(math.hypot(gt[k, 0], gt[k, 1]))
             if b is not None:
                 stats[b].gt += 1
+                by_class.setdefault(CLASSES[cls[k]], [BandStats() for _ in BANDS])[b].gt += 1
                 if b < 2:
-                    by_kind.setdefault(_kind(gt[k, 3]), [0, 0])[1] += 1
+                    by_kind.setdefault(CLASSES[cls[k]], [0, 0])[1] += 1
         taken = np.zeros(len(gt), dtype=bool)
         for row in det:  # sorted by confidence already
             b = _band(math.hypot(row[0], row[1]))
@@ -112,14 +120,17 @@ def evaluate(samples, detector, min_hits: int = 2, by_kind: dict | None = None) 
             gb = _band(math.hypot(gt[match, 0], gt[match, 1]))
             if gb is None:
                 continue
-            st = stats[gb]
-            st.found += 1
+            name = CLASSES[cls[match]]
             if gb < 2:
-                by_kind.setdefault(_kind(gt[match, 3]), [0, 0])[0] += 1
-            st.matched += 1
-            st.pos_err += math.hypot(gt[match, 0] - row[0], gt[match, 1] - row[1])
+                by_kind.setdefault(name, [0, 0])[0] += 1
+            pos_err = math.hypot(gt[match, 0] - row[0], gt[match, 1] - row[1])
             dh = abs((row[2] - gt[match, 2] + math.pi) % (2 * math.pi) - math.pi)
-            st.head_err += min(dh, math.pi - dh)
+            for st in (stats[gb], by_class[name][gb]):
+                st.found += 1
+                st.matched += 1
+                st.pos_err += pos_err
+                st.head_err += min(dh, math.pi - dh)
+                st.right_class += int(len(row) > 6 and row[6] == cls[match])
     return stats
 
 
@@ -134,6 +145,16 @@ def format_table(stats: list[BandStats], title: str = "") -> str:
                        ("gt", "found", "detections", "false_pos", "pos_err", "head_err", "matched")))
     lines.append(f"{'0-40 m':>9} {near.gt:>6} {near.recall:>7.3f} {near.precision:>9.3f} "
                  f"{near.mean_pos:>9.3f} {near.mean_head_deg:>12.2f}")
+    return "\n".join(lines)
+
+
+def format_class_table(by_class: dict) -> str:
+    """Recall, mean position error and class accuracy per class and band."""
+    lines = [f"{'class':>10} {'band':>9} {'gt':>6} {'recall':>7} {'pos err m':>9} {'class ok':>8}"]
+    for name in CLASSES:
+        for (lo, hi), st in zip(BANDS, by_class.get(name, [BandStats() for _ in BANDS])):
+            lines.append(f"{name:>10} {f'{lo:.0f}-{hi:.0f} m':>9} {st.gt:>6} {st.recall:>7.3f} "
+                         f"{st.mean_pos:>9.3f} {st.class_accuracy:>8.3f}")
     return "\n".join(lines)
 
 
@@ -171,12 +192,14 @@ def main(argv=None) -> int:
             samples = generate(args.scenes, args.seed, lidars=(lidar,),
                                yaw_shift_rad=math.radians(shift), lidar_settings=lidar_settings)
         kinds: dict = {}
-        stats = evaluate(samples, node.detect, args.min_hits, kinds)
+        classes: dict = {}
+        stats = evaluate(samples, node.detect, args.min_hits, kinds, classes)
         seen = ",".join(sorted({s.lidar for s in samples}))
         print(format_table(stats, f"yaw shift {shift:g} deg, {len(samples)} scans, lidar {seen}, "
                                   f"threshold {node.threshold:g}, ground truth with >= {args.min_hits} returns"))
         print("recall within 40 m by kind: " + ", ".join(
             f"{kind} {found / gt:.3f} ({gt})" for kind, (found, gt) in sorted(kinds.items()) if gt))
+        print(format_class_table(classes))
         print()
     return 0
 

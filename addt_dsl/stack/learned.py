@@ -17,7 +17,8 @@ heatmap, a sub-cell offset, log length, log width and the box axis as (sin 2θ, 
     neck.lateral_fine  conv 1×1     48→32   → ×2 nearest, + ────────────┘
     neck.fine          conv 3×3     32→32   76×32
     head.center        conv 1×1     32→1    heatmap logits
-    head.box           conv 1×1     32→6    offset x/y, log l/w, box axis (sin 2θ, cos 2θ)
+    head.box           conv 1×1     32→10   offset x/y, log l/w, box axis (sin 2θ, cos 2θ),
+                                            class logits (car, truck, pedestrian, cyclist)
 
 One frame per inference: velocity is not estimated here but by the tracker from
 successive detections (objects carry `vx = vy = nan`, "not measured").
@@ -39,7 +40,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from addt_dsl.stack.bev_grid import GRID, LAYER_SITES, build_grid_region, decode, sensor_points_to_vehicle
+from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CLASSES, GRID, LAYER_SITES, build_grid_region, decode,
+                                     sensor_points_to_vehicle)
 from addt_dsl.stack.nodes import Obj
 from addt_dsl.stack.tensorfaults import ActivationFlip, flip_bits
 
@@ -50,7 +52,10 @@ DEFAULT_THRESHOLD = 0.35
 class BevDetector(nn.Module):
     """The detector network; layer names are the tensor fault sites (`bev_grid.LAYER_SITES`)."""
 
-    def __init__(self, widths: tuple[int, int, int] = (32, 48, 64), in_channels: int = 6):
+    def __init__(self, widths: tuple[int, int, int] = (32, 48, 64), in_channels: int = 6,
+                 classes: int = len(CLASSES)):
+        """`classes`: class logits after the box channels of `head.box` (0: no class output,
+        as weights trained before it)."""
         super().__init__()
         c1, c2, c3 = widths
         # Named convN, not 0..3: fault targets are dotted names in the DSL (`perception.backbone.conv0`).
@@ -64,7 +69,7 @@ class BevDetector(nn.Module):
             "lateral": nn.Conv2d(c3, c2, 1), "fuse": nn.Conv2d(c2, c2, 3, 1, 1),
             "lateral_fine": nn.Conv2d(c2, c1, 1), "fine": nn.Conv2d(c1, c1, 3, 1, 1),
         })
-        self.head = nn.ModuleDict({"center": nn.Conv2d(c1, 1, 1), "box": nn.Conv2d(c1, 6, 1)})
+        self.head = nn.ModuleDict({"center": nn.Conv2d(c1, 1, 1), "box": nn.Conv2d(c1, BOX_CHANNELS + classes, 1)})
         nn.init.constant_(self.head["center"].bias, -math.log((1 - 0.02) / 0.02))  # prior p = 0.02
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -99,7 +104,7 @@ def load_weights(path: Path = WEIGHTS_PATH) -> tuple[dict, dict]:
 def load_model(path: Path = WEIGHTS_PATH, device: str = "cpu") -> tuple[BevDetector, dict]:
     """A fresh detector with the shipped weights: weight faults in one run touch only its copy."""
     state, meta = load_weights(path)
-    model = BevDetector(tuple(meta["widths"]))
+    model = BevDetector(tuple(meta["widths"]), classes=len(meta.get("classes", ())))
     model.load_state_dict(state)
     return model.to(device).eval(), meta
 
@@ -432,15 +437,17 @@ class LearnedPerception:
         x, y, heading, _ = ego_pose
         cos_h, sin_h = math.cos(heading), math.sin(heading)
         objs = []
-        for bx, by, bh, length, width, conf in boxes.tolist():
+        for bx, by, bh, length, width, conf, cls in boxes.tolist():
             px = corrupt("perception.x", bx)
             py = corrupt("perception.y", by)
             objs.append(Obj(x + cos_h * px - sin_h * py, y + sin_h * px + cos_h * py, heading + bh,
-                            math.nan, math.nan, length, width, conf))
+                            math.nan, math.nan, length, width, conf,
+                            kind=CLASSES[int(cls)] if 0 <= cls < len(CLASSES) else ""))
         return objs
 
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
-        """Vehicle-frame points → (N, 6) boxes: x, y, heading, length, width, confidence."""
+        """Vehicle-frame points → (N, 7) boxes: x, y, heading, length, width, confidence,
+        class (index into `bev_grid.CLASSES`)."""
         _, region = build_grid_region(points_vehicle, sensor_xy, out=self._grid)
         with torch.inference_mode(), _one_intra_op_thread():
             x = self._input if self.device == "cpu" else self._device_input.copy_(self._input)

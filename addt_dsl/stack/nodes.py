@@ -49,6 +49,9 @@ class Obj:
     confidence: float = 1.0
     s: float = 0.0
     t: float = 0.0
+    # Class as perception reports it: a vehicle kind of addt_dsl.vehicles ("car",
+    # "pedestrian", ...), "" where the detector gives none.
+    kind: str = ""
 
 
 # ---------------------------------------------------------------- perception
@@ -102,7 +105,8 @@ class GroundTruthPerception:
             py = corrupt("perception.y", py)
             wx = x + cos_h * px - sin_h * py
             wy = y + sin_h * px + cos_h * py
-            objs.append(Obj(wx, wy, gt.heading - yaw_err, vx_w, vy_w, gt.length_m, gt.width_m))
+            objs.append(Obj(wx, wy, gt.heading - yaw_err, vx_w, vy_w, gt.length_m, gt.width_m,
+                            kind=gt.kind))
         # The detection count bounds the list the downstream nodes read: a corrupted count
         # hides objects (a NaN or infinite count raises, which the loop records as detected).
         count = int(corrupt("perception.count", float(len(objs))))
@@ -126,6 +130,9 @@ class Tracker:
     max_age_s = 1.0
     velocity_gain = 0.35
     max_speed = 45.0  # [m/s] gate for a track whose velocity is not yet known
+    # ... and for a detection of these classes: a walker or a bicycle that jumped further
+    # is another object (a 45 m/s gate lets a pedestrian's track grab a passing car's box).
+    class_max_speed = {"pedestrian": 4.0, "cyclist": 15.0}
 
     def __init__(self, max_age_s: float = 1.0):
         self.max_age_s = max_age_s
@@ -141,7 +148,11 @@ class Tracker:
                 if i in used:
                     continue
                 d = math.hypot(p.x - det.x, p.y - det.y)
-                gate = self.gate_m if not math.isnan(p.vx) else self.gate_m + self.max_speed * (stamp_s - ts)
+                if math.isnan(p.vx):
+                    v_max = self.class_max_speed.get(det.kind, self.max_speed)
+                    gate = self.gate_m + v_max * (stamp_s - ts)
+                else:
+                    gate = self.gate_m
                 if d < gate and d < best_d:
                     best, best_d = i, d
             if best is not None:
@@ -157,7 +168,8 @@ class Tracker:
                 else:
                     vx = prev.vx + self.velocity_gain * (mvx - prev.vx)
                     vy = prev.vy + self.velocity_gain * (mvy - prev.vy)
-                det = Obj(det.x, det.y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width)
+                det = Obj(det.x, det.y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width,
+                          kind=det.kind)
             new_tracks.append((det, stamp_s))
         # Keep unmatched tracks alive (coasting) so a dropped frame does not erase an object.
         for i, (p, ts) in enumerate(self.tracks):
@@ -169,7 +181,7 @@ class Tracker:
     def _predict(o: Obj, dt: float) -> Obj:
         if math.isnan(o.vx):  # velocity not measured yet: stays where it was seen
             return o
-        return Obj(o.x + o.vx * dt, o.y + o.vy * dt, o.heading, o.vx, o.vy, o.length, o.width)
+        return Obj(o.x + o.vx * dt, o.y + o.vy * dt, o.heading, o.vx, o.vy, o.length, o.width, kind=o.kind)
 
     def objects_at(self, time_s: float) -> list[Obj]:
         """Predicted tracks; one whose velocity is not known yet is reported as standing still."""
@@ -178,7 +190,7 @@ class Tracker:
             if time_s - ts <= self.max_age_s:
                 p = self._predict(o, time_s - ts)
                 out.append(p if not math.isnan(p.vx) else
-                           Obj(p.x, p.y, p.heading, 0.0, 0.0, p.length, p.width, p.confidence))
+                           Obj(p.x, p.y, p.heading, 0.0, 0.0, p.length, p.width, p.confidence, kind=p.kind))
         return out
 
 
@@ -351,10 +363,16 @@ class LatticePlanner:
                 a = 2.0
             elif not a > brake:  # max(brake, .)
                 a = brake
-            v = v + a * dt
-            if not v > 0.0:  # max(0.0, v)
-                v = 0.0
-            s += v * dt
+            # Exact for the step's constant acceleration (the end speed times dt fell short
+            # of a braking distance by v0 * dt / 2, 5 m from 20 m/s).
+            v_next = v + a * dt
+            if not v_next > 0.0:  # stops within the step (max(0.0, v) for the speed)
+                if a < 0.0:
+                    s += v * v / (-2.0 * a)
+                v_next = 0.0
+            else:
+                s += 0.5 * (v + v_next) * dt
+            v = v_next
             u = tk / 3.0
             if not u < 1.0:  # min(1.0, u)
                 u = 1.0

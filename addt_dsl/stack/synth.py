@@ -2,8 +2,9 @@
 
 A scene is a stretch of road (straight or curved, 1-4 lanes in the ego's direction, 0-3
 beside them, often oncoming) with box vehicles of car and truck sizes in the lanes
-(queued at random gaps, some mid lane-change) and a few parked at random headings beside
-the road. The ego sits in one of its lanes; the scan comes from the runtime's own `Lidar`
+(queued at random gaps, some mid lane-change), a few parked at random headings beside
+the road, and vulnerable road users: pedestrians on the verges and crossing the lanes,
+cyclists along the road's edge and crossing. Every object carries its class (`CLASSES`). The ego sits in one of its lanes; the scan comes from the runtime's own `Lidar`
 class casting rays into a pybullet world built like the runtime's (same box bodies,
 same ground plane), so the detector is trained on exactly the points it will see.
 
@@ -19,16 +20,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.stack.bev_grid import DETECTOR_LIDAR, GRID, sensor_points_to_vehicle
+from addt_dsl.stack.bev_grid import CLASSES, DETECTOR_LIDAR, GRID, sensor_points_to_vehicle
 from addt_dsl.vehicles import CAR, VEHICLES
 
 LANE_WIDTH_M = 3.5
 EGO_SIZE = (CAR.length_m, CAR.width_m, CAR.height_m)
-# Body pool: (kind, length, width, height, count), the bodies the runtime gives its car and
-# truck actors (addt_dsl.vehicles). The detector learns these two shapes, which is what
-# lets it place a box's centre from the one face the lidar sees.
+# Body pool: (kind, length, width, height, count), the bodies the runtime gives its car,
+# truck, pedestrian and cyclist actors (addt_dsl.vehicles). The detector learns these
+# shapes, which is what lets it place a box's centre from the one face the lidar sees.
 POOL = tuple((kind, VEHICLES[kind].length_m, VEHICLES[kind].width_m, VEHICLES[kind].height_m, count)
-             for kind, count in (("car", 48), ("truck", 14)))
+             for kind, count in (("car", 48), ("truck", 14), ("pedestrian", 12), ("cyclist", 6)))
 PARK_X0 = 1.0e4  # unused bodies wait far outside the lidar's range
 
 
@@ -39,6 +40,7 @@ class Sample:
     boxes: np.ndarray  # (M, 5) x, y, heading, length, width in the vehicle frame
     hits: np.ndarray  # (M,) lidar returns on each box
     lidar: str  # "RAYSxCHANNELS", e.g. "360x1"
+    classes: np.ndarray  # (M,) index into bev_grid.CLASSES
 
 
 class _ScanWorld:
@@ -110,8 +112,7 @@ def sample_scene(rng: np.random.Generator, pool) -> list[tuple[int, float, float
     dense = rng.random() < 0.4
     lanes = [(-(k + 0.5) * LANE_WIDTH_M, False) for k in range(n_right)]
     lanes += [((k + 0.5) * LANE_WIDTH_M, oncoming) for k in range(n_left)]
-    free = {"car": [i for i, p in enumerate(pool) if p[1] == "car"],
-            "truck": [i for i, p in enumerate(pool) if p[1] == "truck"]}
+    free = {kind: [i for i, p in enumerate(pool) if p[1] == kind] for kind in CLASSES}
     for idxs in free.values():
         rng.shuffle(idxs)
 
@@ -169,6 +170,37 @@ def sample_scene(rng: np.random.Generator, pool) -> list[tuple[int, float, float
             continue
         placed.append(box)
         out.append((idx, box[0], box[1], box[2]))
+    # Vulnerable road users, placed last (they fit between the vehicles). Pedestrians
+    # stand or walk on the verges or cross the lanes at any station; cyclists ride along
+    # the edge of the outer lanes (with or against the oncoming side) or cross.
+    road_half = {True: edge_left, False: edge_right}
+    for kind, mean in (("pedestrian", 3.0), ("cyclist", 1.2)):
+        for _ in range(int(rng.poisson(mean))):
+            idx = take(kind)
+            if idx is None:
+                break
+            s_c = rng.uniform(-60.0, 60.0)
+            mode = rng.random()
+            if mode < 0.4:  # crossing the road anywhere between its edges
+                t = rng.uniform(edge_right - 1.0, edge_left + 1.0)
+                h = rng.choice([-0.5, 0.5]) * math.pi + rng.normal(0.0, math.radians(15.0))
+            elif kind == "cyclist" and mode < 0.8:  # riding along an outer lane's edge
+                left = n_left > 0 and rng.random() < 0.3
+                edge = road_half[left]
+                t = edge - (1.0 if left else -1.0) * rng.uniform(0.5, 1.3)
+                h = rng.normal(0.0, math.radians(4.0)) + (math.pi if left and oncoming else 0.0)
+            else:  # on a verge: walking along it or standing at any heading
+                left = rng.random() < 0.5
+                t = road_half[left] + (1.0 if left else -1.0) * rng.uniform(0.5, 6.0)
+                h = (rng.choice([0.0, math.pi]) + rng.normal(0.0, math.radians(10.0))
+                     if rng.random() < 0.6 else rng.uniform(-math.pi, math.pi))
+            x, y, road_h = _road_point(kappa, s_c, t)
+            box = (*to_ego(x, y, road_h + h), pool[idx][2], pool[idx][3])
+            if _overlaps(box, placed, 0.3):
+                free[kind].append(idx)
+                continue
+            placed.append(box)
+            out.append((idx, box[0], box[1], box[2]))
     return out
 
 
@@ -218,7 +250,7 @@ class ScanGenerator:
 
     def scan(self, objects: list[tuple[str, float, float, float]], lidar: str | None = None) -> Sample:
         """Scan a given scene: `objects` are (kind, x, y, heading) in the ego's vehicle frame."""
-        free = {kind: [i for i, p in enumerate(self.world.pool) if p[1] == kind] for kind in ("car", "truck")}
+        free = {kind: [i for i, p in enumerate(self.world.pool) if p[1] == kind] for kind in CLASSES}
         poses = [(free[kind].pop(0), x, y, h) for kind, x, y, h in objects]
         return self._scan(poses, (0.0, 0.0, 0.0), lidar or self.configs[0])
 
@@ -232,8 +264,10 @@ class ScanGenerator:
         phys.set_pose("ego", wx, wy, EGO_SIZE[2] / 2, wh)
         used = set()
         boxes = []
+        classes = []
         for idx, x, y, h in poses:
-            name, _, length, width, height = pool[idx]
+            name, kind, length, width, height = pool[idx]
+            classes.append(CLASSES.index(kind))
             gx, gy = _rot(x, y, wh)
             phys.set_pose(name, wx + gx, wy + gy, height / 2, wh + h)
             used.add(idx)
@@ -253,7 +287,8 @@ class ScanGenerator:
                     hits[k] = count
         pts = sensor_points_to_vehicle(frame.data["points"], lidar.nominal).astype(np.float32)
         box_arr = np.array(boxes, dtype=np.float64).reshape(-1, 5)
-        return Sample(pts, (lidar.nominal.x, lidar.nominal.y), box_arr, hits, config)
+        return Sample(pts, (lidar.nominal.x, lidar.nominal.y), box_arr, hits, config,
+                      np.array(classes, dtype=np.int64))
 
 
 def parse_lidar(config: str) -> tuple[int, int]:
@@ -284,6 +319,7 @@ def save_samples(path, samples: list[Sample]) -> None:
         points=np.concatenate([s.points for s in samples]) if samples else np.zeros((0, 3), np.float32),
         boxes=np.concatenate([s.boxes for s in samples]) if samples else np.zeros((0, 5)),
         hits=np.concatenate([s.hits for s in samples]) if samples else np.zeros(0, np.int64),
+        classes=np.concatenate([s.classes for s in samples]) if samples else np.zeros(0, np.int64),
         sensor_xy=np.array([s.sensor_xy for s in samples]), lidar=np.array([s.lidar for s in samples]))
 
 
@@ -292,8 +328,11 @@ def load_samples(path) -> list[Sample]:
         z = {k: npz[k] for k in npz.files}
     p_off = np.concatenate([[0], np.cumsum(z["npts"])])
     b_off = np.concatenate([[0], np.cumsum(z["nbox"])])
+    # Caches from before the class output hold cars and trucks only: the length tells them apart.
+    classes = z["classes"] if "classes" in z else (z["boxes"][:, 3] > 8.0).astype(np.int64)
     return [Sample(z["points"][p_off[k]:p_off[k + 1]], tuple(z["sensor_xy"][k].tolist()),
                    z["boxes"][b_off[k]:b_off[k + 1]], z["hits"][b_off[k]:b_off[k + 1]],
-                   str(z["lidar"][k]) if "lidar" in z else f"{int(z['rays'][k])}x1")
+                   str(z["lidar"][k]) if "lidar" in z else f"{int(z['rays'][k])}x1",
+                   classes[b_off[k]:b_off[k + 1]])
             for k in range(len(z["npts"]))]
 

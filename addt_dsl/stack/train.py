@@ -5,7 +5,8 @@
 Generates `--scenes` labelled scans with `synth.ScanGenerator` (the runtime's `Lidar` in
 a pybullet world of car and truck boxes), then trains `learned.BevDetector` with Adam on
 a CenterNet loss (focal loss on the centre heatmap; L1 at object centres on the sub-cell
-offset, weighted 2, on log length/width and on the box axis as sin 2θ, cos 2θ). Objects
+offset, weighted 2, on log length/width and on the box axis as sin 2θ, cos 2θ; cross
+entropy at object centres on the class, car / truck / pedestrian / cyclist). Objects
 with at least one lidar return are positives.
 
 Reproducible from the seed: the scenes, the initial weights and the batch order all
@@ -24,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from addt_dsl import extras
-from addt_dsl.stack.bev_grid import DETECTOR_LIDAR, GRID, build_grid, encode_targets
+from addt_dsl.stack.bev_grid import BOX_CHANNELS, CLASSES, DETECTOR_LIDAR, GRID, build_grid, encode_targets
 from addt_dsl.stack.synth import generate, in_grid, load_samples, save_samples
 
 
@@ -32,11 +33,11 @@ def make_targets(samples):
     """Stacked CenterNet targets for `samples` (objects with ≥ 1 return are positives)."""
     hx, hy = GRID.head_shape
     heat = np.zeros((len(samples), hx, hy), dtype=np.float32)
-    reg = np.zeros((len(samples), 6, hx, hy), dtype=np.float32)
+    reg = np.zeros((len(samples), BOX_CHANNELS + 1, hx, hy), dtype=np.float32)
     mask = np.zeros((len(samples), hx, hy), dtype=np.float32)
     for k, s in enumerate(samples):
         keep = in_grid(s.boxes) & (s.hits >= 1)
-        heat[k], reg[k], mask[k] = encode_targets(s.boxes[keep])
+        heat[k], reg[k], mask[k] = encode_targets(s.boxes[keep], classes=s.classes[keep])
     return heat, reg, mask
 
 
@@ -60,11 +61,15 @@ def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
     neg_loss = (log_1mp * p ** 2 * (1 - heat_t) ** 4 * (1 - pos)).sum()
     focal = -(pos_loss + neg_loss) / n_pos
     m = mask_t[:, None]
-    l1 = (box - reg_t).abs() * m
+    l1 = (box[:, :BOX_CHANNELS] - reg_t[:, :BOX_CHANNELS]).abs() * m
     offset = l1[:, 0:2].sum() / n_pos
     size = l1[:, 2:4].sum() / n_pos
     heading = l1[:, 4:6].sum() / n_pos
-    return focal + 2.0 * offset + size + heading, (focal.item(), offset.item(), size.item(), heading.item())
+    # Class: cross entropy over the logits at the object centres.
+    ce = F.cross_entropy(box[:, BOX_CHANNELS:], reg_t[:, BOX_CHANNELS].long(), reduction="none")
+    cls = (ce * mask_t).sum() / n_pos
+    return (focal + 2.0 * offset + size + heading + cls,
+            (focal.item(), offset.item(), size.item(), heading.item(), cls.item()))
 
 
 def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: float, log=print,
@@ -88,9 +93,11 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
             save_samples(cache, samples)
     heat_all, reg_all, mask_all = make_targets(samples)
     t_gen = time.perf_counter() - t0
+    seen = np.bincount(np.concatenate([s.classes[s.hits >= 1] for s in samples]), minlength=len(CLASSES))
     log(f"generated {scenes} scans in {t_gen:.1f} s "
         f"({np.mean([len(s.points) for s in samples]):.0f} points, "
-        f"{np.mean([(s.hits >= 1).sum() for s in samples]):.1f} visible objects per scan)")
+        f"{np.mean([(s.hits >= 1).sum() for s in samples]):.1f} visible objects per scan; "
+        + ", ".join(f"{n} {c}" for c, n in zip(CLASSES, seen.tolist())) + ")")
 
     model = BevDetector(widths).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
@@ -100,7 +107,7 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
     t1 = time.perf_counter()
     for epoch in range(epochs):
         order = rng.permutation(scenes)
-        totals = np.zeros(5)
+        totals = np.zeros(6)
         model.train()
         for start in range(0, scenes, batch):
             idx = order[start:start + batch]
@@ -115,7 +122,8 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
             totals += (loss.item(), *parts)
         n = math.ceil(scenes / batch)
         log(f"epoch {epoch + 1}/{epochs}: loss {totals[0] / n:.3f} (focal {totals[1] / n:.3f}, "
-            f"offset {totals[2] / n:.3f}, size {totals[3] / n:.3f}, heading {totals[4] / n:.3f}) "
+            f"offset {totals[2] / n:.3f}, size {totals[3] / n:.3f}, heading {totals[4] / n:.3f}, "
+            f"class {totals[5] / n:.3f}) "
             f"[{time.perf_counter() - t1:.0f} s]")
     t_train = time.perf_counter() - t1
     return model.cpu().eval(), {"generate_s": round(t_gen, 1), "train_s": round(t_train, 1)}
@@ -154,6 +162,7 @@ def main(argv=None) -> int:
     meta = {
         "seed": args.seed, "scenes": args.scenes, "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
         "threads": args.threads, "lidars": args.lidars, "lidar_p": args.lidar_p, "threshold": args.threshold, "widths": list(args.widths),
+        "classes": list(CLASSES),
         "grid": {"x_min": GRID.x_min, "y_min": GRID.y_min, "cell_m": GRID.cell_m, "nx": GRID.nx, "ny": GRID.ny},
         "torch": str(torch.__version__), **timing,
     }

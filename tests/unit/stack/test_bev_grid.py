@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.stack.bev_grid import (CHANNELS, GRID, build_grid, decode, encode_targets,
+from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CHANNELS, CLASSES, GRID, build_grid, decode, encode_targets,
                                      sensor_points_to_vehicle)
 from addt_dsl.runtime.sensors import Extrinsics, sensor_to_vehicle
 
@@ -94,7 +94,8 @@ def test_encode_then_decode_recovers_well_separated_boxes(boxes):
     assert len(found) == len(boxes)
     for b in boxes:
         k = int(np.argmin(np.hypot(found[:, 0] - b[0], found[:, 1] - b[1])))
-        x, y, h, length, width, conf = found[k]
+        x, y, h, length, width, conf, cls = found[k]
+        assert cls == -1  # a regression without class logits
         assert math.hypot(x - b[0], y - b[1]) < 1e-4
         assert abs(math.remainder(h - b[2], math.pi)) < 1e-5  # the box axis: front and back alike
         assert -math.pi / 2 - 1e-9 <= h <= math.pi / 2 + 1e-9
@@ -114,6 +115,21 @@ def test_decode_suppresses_non_peaks_and_respects_threshold():
     heat[:] = 0
     heat[20, 8] = heat[20, 9] = 0.7
     assert len(decode(heat, reg, threshold=0.5)) == 1
+
+
+def test_class_targets_and_the_class_output():
+    boxes = np.array([[10.0, 2.0, 0.0, 0.5, 0.5], [-20.0, -3.0, 0.3, 1.8, 0.6]])
+    heat, reg, mask = encode_targets(boxes, classes=np.array([CLASSES.index("pedestrian"),
+                                                               CLASSES.index("cyclist")]))
+    assert reg.shape[0] == BOX_CHANNELS + 1
+    centres = np.argwhere(mask > 0)
+    assert sorted(reg[BOX_CHANNELS][tuple(centres.T)].tolist()) == [2.0, 3.0]
+    # The network's class output is one logit per class after the box rows: the largest wins.
+    logits = np.zeros((len(CLASSES), *GRID.head_shape), dtype=np.float32)
+    for (i, j), cls in zip(centres, reg[BOX_CHANNELS][tuple(centres.T)].astype(int)):
+        logits[cls, i, j] = 3.0
+    found = decode(heat, np.concatenate([reg[:BOX_CHANNELS], logits]), threshold=0.999)
+    assert sorted(CLASSES[int(c)] for c in found[:, 6]) == ["cyclist", "pedestrian"]
 
 
 def test_decode_works_on_logits_at_the_border():

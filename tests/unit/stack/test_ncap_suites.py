@@ -33,16 +33,19 @@ def test_car_to_car_cells(suffix):
 @pytest.mark.torch
 def test_learned_variants_run_the_detector_on_its_lidar():
     pytest.importorskip("torch")
-    for name in ("ccrs", "ccrm", "ccrb"):
+    for name in ("ccrs", "ccrm", "ccrb", "cpna", "cpfa", "cbla"):
         plan = compile_file(EXAMPLES / "suites" / f"ncap_aeb_{name}_learned.addt").plan
         assert plan.ego.stack.settings["perception"] == "learned"
 
 
-def test_vulnerable_road_user_cells():
-    cpna = cells("cpna")
+@pytest.mark.parametrize("suffix", ["", pytest.param("_learned", marks=pytest.mark.torch)])
+def test_vulnerable_road_user_cells(suffix):
+    if suffix:
+        pytest.importorskip("torch")
+    cpna = cells("cpna" + suffix)
     assert sorted({p["impact_at"] for p in cpna}) == [0.25, 0.75]
     assert speeds_kmh(cpna) == [10, 20, 30, 40, 50, 60] and speeds_kmh(cpna, "walk_speed") == [5]
-    cpfa = cells("cpfa")
+    cpfa = cells("cpfa" + suffix)
     assert speeds_kmh(cpfa) == [10, 20, 30, 40, 50, 60] and speeds_kmh(cpfa, "walk_speed") == [8]
-    cbla = cells("cbla")
+    cbla = cells("cbla" + suffix)
     assert speeds_kmh(cbla) == [25, 30, 40, 50, 60] and speeds_kmh(cbla, "rider_speed") == [15]

@@ -195,3 +195,23 @@ def test_an_unavoidable_stopped_car_is_never_driven_into_faster(gap, speed, mu):
         assert plan.speed <= speed and plan.brake == pytest.approx(mu * G)
     else:
         assert plan.brake == 0.0 or plan.aeb_stage >= 2
+
+
+@pytest.mark.parametrize("speed", [10.0, 20.0, 30.0])
+def test_candidate_stopping_distance_is_the_braking_distance_not_a_step_short(speed):
+    """A braking candidate covers v^2 / (2 b) until it stops. Integrating the speed per 0.5 s
+    step with the step's end speed fell short by v * 0.25 s (5 m at 20 m/s), so a stop
+    that ends inside a stopped car was costed as collision-free."""
+    planner = LatticePlanner({"cruise_speed": speed})
+    b = planner.brake_limit
+    stop_m = speed * speed / (2.0 * b)
+    half_len = CAR.length_m  # half the ego's plus half the car's length
+    t = float(ROAD1.lane_center_t(-1, 100.0))
+
+    def cost(front_gap_m):  # the stopped car's rear this far beyond where the braking ends
+        obj = _obj(100.0 + stop_m + half_len + front_gap_m, t)
+        return planner._cost(-1, t, 0.0, 100.0, t, speed, [obj], -1, -1, 0.0)
+
+    # The collision check keeps 2 m: a stop that ends 1 m short of the car collides.
+    assert cost(1.0) == math.inf
+    assert cost(2.5) < math.inf

@@ -98,7 +98,7 @@ def test_in_place_flips_match_the_clone_and_compare_method(frames, monkeypatch, 
     monkeypatch.setattr(TensorFlipper, "flip_owned", None)  # RegionForward falls back to clone + compare
     _, old_events, old_out, _ = _run(frames, faults)
     assert len(new_events) == settings["count"] + 3
-    assert new_events == old_events
+    assert repr(new_events) == repr(old_events)  # repr: a flip to NaN gives NaN on both sides, and nan != nan
     for (h_new, b_new), (h_old, b_old) in zip(new_out, old_out, strict=True):
         assert torch.equal(h_new.view(torch.int32), h_old.view(torch.int32))
         assert torch.equal(b_new.view(torch.int32), b_old.view(torch.int32))

@@ -45,3 +45,18 @@ def test_measured_velocity_path_is_unchanged():
     # An uninitialised-velocity gate does not apply to tracks with a velocity.
     tr.update([_det(8.0, 0.0, 10.0, 0.0)], 0.2, lambda s, v: v)
     assert len(tr.objects_at(0.2)) == 2
+
+
+def test_the_class_bounds_the_first_association_and_is_kept():
+    # A new track has no velocity: its next detection may be as far as the class can move.
+    def second_sighting(kind):
+        tr = Tracker()
+        tr.update([Obj(10.0, 0.0, 0.0, math.nan, math.nan, 0.5, 0.5, kind=kind)], 0.0, lambda s, v: v)
+        tr.update([Obj(15.0, 0.0, 0.0, math.nan, math.nan, 0.5, 0.5, kind=kind)], 0.1, lambda s, v: v)
+        return tr.objects_at(0.1)
+
+    car = second_sighting("car")  # 5 m in 0.1 s: within 4 m + 45 m/s * 0.1 s, one track
+    assert len(car) == 1 and math.isclose(car[0].vx, 50.0) and car[0].kind == "car"
+    walkers = second_sighting("pedestrian")  # no walker moves 5 m in 0.1 s: a second object
+    assert len(walkers) == 2 and {o.kind for o in walkers} == {"pedestrian"}
+    assert all(o.vx == 0.0 for o in walkers)
