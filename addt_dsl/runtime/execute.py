@@ -576,7 +576,7 @@ def _loop(run: _Run) -> Trace:
         # Record the state at t_now (clearance, the last field, below).
         row = [(e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
                 ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)]
-        for a, road, _, _ in agent_consts:
+        for a, road, _, _, _ in agent_consts:
             x, y, h = poses[a.name]
             row.append((x, y, h, a.speed, a.accel, 0.0, a.s, a.t, road.road.lane_offset(a.s, a.t), 0.0))
         block[k, :, :-1] = row

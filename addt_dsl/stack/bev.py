@@ -131,6 +131,11 @@ class BevStack:
         "planner": LatticePlanner.sites,
         "control": Controller.sites,
     }
+    # Stored state a bit flip stays in (`bitflip` only; a node target draws these too).
+    state_nodes = {
+        "tracker": Tracker.state_sites,
+        "planner": LatticePlanner.state_sites,
+    }
     doc = "BEV-style stack: lidar or camera perception, CV tracker, lattice planner, PID + pure pursuit."
 
     @classmethod
@@ -230,6 +235,10 @@ class BevStack:
                 value = f.on_value(site, value, now)
         return value
 
+    def upset(self, node) -> None:
+        """Memory faults in `node`'s stored state, before the node reads it (`FaultSchedule.upset`)."""
+        self.ctx.faults.upset(node, self.ctx.now)
+
     # ---- inputs
     def on_frame(self, frame, arrive_s: float) -> None:
         """A sensor frame arrives at the stack at `arrive_s`."""
@@ -258,6 +267,7 @@ class BevStack:
         for msg in self.bus.deliver_until(time_s):
             if msg.topic == "objects":
                 started = _time.perf_counter()
+                self.upset(self.tracker)
                 self.tracker.update(msg.data, msg.stamp_s, self.corrupt)
                 lat = self._latency("tracker", len(msg.data), started, time_s)
                 self.bus.publish("tracks", None, msg.stamp_s, time_s + lat)
@@ -287,6 +297,8 @@ class BevStack:
         s0, t0 = road.project(x, y, self.ctx.run.ego_s)
         lane0 = road.lane_at(s0, t0) or self.ctx.ego_lane
         objs = []
+        self.upset(self.tracker)
+        self.upset(self.planner)
         for o in self.tracker.objects_at(time_s):
             so, to = road.project(o.x, o.y)
             # Velocity along the road, and the box's extent along and across it.

@@ -126,6 +126,9 @@ class Tracker:
 
     name = "tracker"
     sites = ("tracker.vx",)
+    # Stored state (memory a flip stays in): every live track's fields and last update time.
+    state_sites = ("tracker.tracks",)
+    TRACK_FIELDS = ("x", "y", "heading", "vx", "vy", "length", "width", "stamp")
     gate_m = 4.0
     max_age_s = 1.0
     velocity_gain = 0.35
@@ -176,6 +179,16 @@ class Tracker:
             if i not in used and stamp_s - ts <= self.max_age_s:
                 new_tracks.append((p, ts))
         self.tracks = new_tracks
+
+    def read_state(self, site: str) -> list[tuple[str, float | int]]:
+        """`tracker.tracks`: (name, value) of every field of every live track, in memory order."""
+        return [(f"{i}.{name}", v) for i, (o, ts) in enumerate(self.tracks)
+                for name, v in zip(self.TRACK_FIELDS, (o.x, o.y, o.heading, o.vx, o.vy, o.length, o.width, ts))]
+
+    def write_state(self, site: str, values: list[float | int]) -> None:
+        n = len(self.TRACK_FIELDS)
+        self.tracks = [(Obj(*values[k:k + 7], confidence=o.confidence, s=o.s, t=o.t), values[k + 7])
+                       for (o, _), k in zip(self.tracks, range(0, len(values), n))]
 
     @staticmethod
     def _predict(o: Obj, dt: float) -> Obj:
@@ -240,6 +253,10 @@ class LatticePlanner:
 
     name = "planner"
     sites = ("planner.speed", "planner.t_target", "planner.t_start", "planner.path_length", "planner.cost")
+    # Stored state (memory a flip stays in until the planner's own logic overwrites it):
+    # the manoeuvre state (lanes, the last lane change, the forward-collision check's held
+    # stage) and the committed lateral manoeuvre every plan publishes.
+    state_sites = ("planner.state", "planner.trajectory")
     horizon_s = 5.0
     dt_s = 0.5
     comfort_brake = 6.0  # [m/s^2] the speed candidates' braking limit (less where friction is lower)
@@ -260,6 +277,24 @@ class LatticePlanner:
         self.maneuver: tuple[int, float, float, float] | None = None
         self.last_change_s = -1e9
         self.emergency = False  # the last plan was an emergency stop
+
+    def read_state(self, site: str) -> list[tuple[str, float | int]]:
+        """(name, value) of the stored state in `site`; empty before the first plan."""
+        if site == "planner.state":
+            if self.current_lane is None:
+                return []
+            return [("current_lane", self.current_lane), ("home_lane", self.home_lane),
+                    ("last_change_s", self.last_change_s), ("aeb_stage", self.fcw.stage),
+                    ("threat_s", self.fcw.threat_s)]
+        if self.maneuver is None:
+            return []
+        return list(zip(("lane", "s_start", "t_start", "path_length"), self.maneuver))
+
+    def write_state(self, site: str, values: list[float | int]) -> None:
+        if site == "planner.state":
+            self.current_lane, self.home_lane, self.last_change_s, self.fcw.stage, self.fcw.threat_s = values
+        else:
+            self.maneuver = tuple(values)
 
     def plan(self, ego_sc, ego_speed, objs_sc, road, road_id, stamp_s, corrupt,
              ego_v_st: tuple[float, float] | None = None, stop: tuple[float, float] | None = None) -> Plan:

@@ -7,6 +7,7 @@ compiler) and overrides the hooks it needs:
 - `before_capture(sensor, t)`  the loop, before a sensor captures (extrinsics);
 - `on_frame(frame, t)`         the loop, after capture: drop, delay, skew, corrupt data;
 - `on_value(site, value, t)`   the stack, for every value through a scalar fault site;
+- `on_state(site, state, t)`   the stack, when a node reads its stored state (a state site);
 - `extra_latency(node, t, base)` the stack, when a node publishes;
 - `bind(binding)`              once the stack exists: stack sites, tensor sites, clock, timers;
 - `close()`                    at the end of the run: undo persistent side effects.
@@ -48,6 +49,20 @@ def flip_float64_bit(value: float, bit: int) -> float:
     (bits,) = struct.unpack("<Q", struct.pack("<d", value))
     (out,) = struct.unpack("<d", struct.pack("<Q", bits ^ (1 << bit)))
     return out
+
+
+def flip_int64_bit(value: int, bit: int) -> int:
+    """`value` stored as a two's-complement int64 with bit `bit` (63 = sign) inverted."""
+    out = (int(value) & 0xFFFF_FFFF_FFFF_FFFF) ^ (1 << bit)
+    return out - (1 << 64) if out >= 1 << 63 else out
+
+
+def flip_stored_bit(value: float | int, bit: int) -> float | int:
+    """A stored state element with bit `bit` inverted: integers (lane ids, stages) as int64,
+    everything else as float64."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        return flip_int64_bit(value, bit)
+    return flip_float64_bit(float(value), bit)
 
 
 _PLAIN = (float, int, str, bool, type(None))
@@ -167,6 +182,11 @@ class FaultKind:
     def on_value(self, site: str, value: float, time_s: float) -> float:
         return value
 
+    def on_state(self, site: str, state: list, time_s: float) -> bool:
+        """A node is about to read its stored state `site`: `state` is its (name, value)
+        pairs in memory order; edit the values in place. True when something changed."""
+        return False
+
     def extra_latency(self, node: str, time_s: float, base_s: float) -> float:
         return 0.0
 
@@ -203,11 +223,13 @@ class FaultSchedule:
     def bind(self, stack, clock: Callable[[], float]) -> None:
         """Tell every fault about the stack: its nodes and sites, its tensor sites, the clock.
 
-        Scalar-site faults on a node are added to each of the node's sites. A site fault
+        Scalar-site faults on a node are added to each of the node's sites, its state sites
+        (`stack.state_nodes`: node → stored-state sites) included. A site fault
         whose target the stack does not have is an error (the compiler checks targets
         against the stack class; this catches a plan run against a different stack).
         """
-        nodes = {n: tuple(s) for n, s in getattr(stack, "nodes", {}).items()}
+        state = getattr(stack, "state_nodes", {})
+        nodes = {n: (*s, *state.get(n, ())) for n, s in getattr(stack, "nodes", {}).items()}
         tensor_sites = stack.tensor_sites() if hasattr(stack, "tensor_sites") else {}
         binding = Binding(nodes, tensor_sites, clock, self.at)
         known = binding.sites() | set(nodes) | set(tensor_sites)
@@ -234,6 +256,20 @@ class FaultSchedule:
         while timers and timers[0][0] <= time_s + 1e-12:
             heapq.heappop(timers)[2]()
         self.next_wake_s = timers[0][0] if timers else math.inf
+
+    def upset(self, node, time_s: float) -> None:
+        """Memory faults in a node's stored state, applied when the node is about to read it.
+
+        `node` declares `state_sites` and offers `read_state(site)` ((name, value) pairs in
+        memory order) and `write_state(site, values)`. A flip changes the stored value in
+        place: it stays until the node's own logic overwrites it.
+        """
+        for site in node.state_sites:
+            kinds = self.by_target.get(site)
+            if kinds:
+                state = node.read_state(site)
+                if any([f.on_state(site, state, time_s) for f in kinds]):  # a list: every fault sees it
+                    node.write_state(site, [v for _, v in state])
 
     def close(self) -> None:
         """Undo persistent side effects (e.g. flipped weights of a model cached across runs)."""

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from addt_dsl.registry import FAULTS, ParamSpec
-from addt_dsl.runtime.faults.base import BIT_FIELDS_F64, FIELD_NAMES, Binding, FaultKind, flip_float64_bit
+from addt_dsl.runtime.faults.base import (BIT_FIELDS_F64, FIELD_NAMES, Binding, FaultKind, flip_float64_bit,
+                                          flip_stored_bit)
 
 
 @FAULTS.register
@@ -30,12 +31,18 @@ class BitFlip(FaultKind):
            "On a node (`control`) each flip goes to one of the node's sites, drawn uniformly. "
            "On a tensor site of a learned model (`perception.backbone_0`) each flip inverts one "
            "bit of one element of the layer's weights (`tensor weights`, persistent) or of its "
-           "output in one inference (`tensor activations`). Recorded per flip: `location` (site, "
-           "or `layer:param[index]`), `value` (after), `before`, `bit`.")
+           "output in one inference (`tensor activations`). On a state site (`planner.trajectory`, "
+           "`tracker.tracks`) each flip inverts one bit of one element of the node's stored state, "
+           "drawn uniformly, when the node next reads it: it persists until the node overwrites it. "
+           "Recorded per flip: `location` (site, `site:element`, or `layer:param[index]`), `value` "
+           "(after), `before`, `bit`.")
 
     @classmethod
     def valid_targets(cls, sensors, stack_cls):
-        return super().valid_targets(sensors, stack_cls) | (set(stack_cls.nodes) if stack_cls else set())
+        if stack_cls is None:
+            return super().valid_targets(sensors, stack_cls)
+        state = {s for sites in getattr(stack_cls, "state_nodes", {}).values() for s in sites}
+        return super().valid_targets(sensors, stack_cls) | set(stack_cls.nodes) | state
 
     def __init__(self, *a):
         super().__init__(*a)
@@ -102,6 +109,23 @@ class BitFlip(FaultKind):
             self._next += 1
             n += 1
         return n
+
+    # ---- stored state
+    def on_state(self, site, state, time_s):
+        """Flip the due bits of `state` (the node's (name, value) pairs) in place; a flip
+        whose instant came while the state was empty waits for the next read that holds
+        something, as a scalar-site flip waits for the next value through its site."""
+        queue = self._queues.get(site)
+        if not queue or queue[0] > time_s + 1e-12 or not state:
+            return False
+        while queue and queue[0] <= time_s + 1e-12:
+            queue.pop(0)
+            i = int(self.rng.integers(len(state)))  # the element, then the bit: one stream
+            bit = self._bit_in(*BIT_FIELDS_F64[str(self.settings["field"])], 64)
+            name, before = state[i]
+            state[i] = (name, flip_stored_bit(before, bit))
+            self.record(time_s, f"{site}:{name}", state[i][1], bit=bit, before=before)
+        return True
 
     # ---- scalar sites
     def on_value(self, site, value, time_s):

@@ -38,7 +38,8 @@ def test_valid_targets_follow_sensor_kind_and_stack():
         assert FAULTS.get(image_kind).valid_targets(sensors, bev) == {"camera"}
     sites = bev.fault_sites()
     assert {"perception.count", "planner.t_target", "planner.cost", "control.integral"} <= sites
-    assert FAULTS.get("bitflip").valid_targets(sensors, bev) == sites | set(bev.nodes)
+    state = {"planner.state", "planner.trajectory", "tracker.tracks"}  # stored state: bit flips only
+    assert FAULTS.get("bitflip").valid_targets(sensors, bev) == sites | set(bev.nodes) | state
     assert FAULTS.get("stuck").valid_targets(sensors, bev) == sites
     assert FAULTS.get("spike").valid_targets(sensors, bev) == set(bev.nodes)
     assert FAULTS.get("bitflip").valid_targets(sensors, None) == set()

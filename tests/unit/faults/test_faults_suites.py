@@ -22,7 +22,7 @@ def test_the_three_families_and_the_paper_s_suites_exist():
     names = {p.stem for p in SUITES}
     assert {f"table1_{f}" for f in ("following", "following_brake", "curve", "overtake")} <= names
     assert {f"bitflip_{f}_{n}" for f in ("following_brake", "curve", "overtake")
-            for n in ("perception", "planner", "control")} <= names
+            for n in ("perception", "tracker", "planner", "control")} <= names
     assert "shift_yaw" in names
 
 
