@@ -84,6 +84,9 @@ class _NoFaults:
     def for_target(self, target: str) -> list:
         return []
 
+    def upset(self, node, time_s: float) -> None:
+        """No stored-state faults on the remote side either."""
+
 
 class _RemoteContext:
     """What `BevStack` asks of the simulator, answered from the bridge messages."""
