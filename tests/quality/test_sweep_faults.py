@@ -27,7 +27,9 @@ pytestmark = pytest.mark.slow
 
 
 def test_coordinator_killed_at_random_points_then_resumed(tmp_path):
-    scenario = sweep_file(tmp_path, repeat=5, duration="3 s")  # 20 runs
+    # 60 runs: enough that a fast machine cannot finish the sweep between two kills (20
+    # runs did, on CI, inside one kill's random delay).
+    scenario = sweep_file(tmp_path, repeat=15, duration="3 s")
     expected = reference(scenario, tmp_path)
     out = tmp_path / "out"
     store = out / "results.sqlite"
@@ -42,7 +44,7 @@ def test_coordinator_killed_at_random_points_then_resumed(tmp_path):
             time.sleep(rng.uniform(0.2, 1.5))
         else:
             wait_for_rows(store, len(rows(store)) + rng.randint(1, 4), proc)
-            time.sleep(rng.uniform(0.0, 0.3))
+            time.sleep(rng.uniform(0.0, 0.1))
         if proc.poll() is not None:
             break
         before = rows(store)
