@@ -78,6 +78,7 @@ CODES: dict[str, str] = {
     "E0106": "unknown kind (not in the registry)",
     "E0107": "invalid reference target",
     "E0108": "cyclic definition",
+    "E0109": "fault needs sites the remote stack does not declare",
     "E0201": "dimension mismatch",
     "E0202": "unknown unit",
     "E0203": "expected a boolean formula",

@@ -5,7 +5,7 @@ the simulator sends the step's sensor frames and the ego state and waits for the
 reply (the commands it publishes and when they take effect). A deterministic remote
 stack therefore gives a deterministic run, whatever the wall-clock speed of either side.
 
-Wire format (protocol 1), both directions, one message at a time over TCP:
+Wire format (protocols 1 and 2), both directions, one message at a time over TCP:
 
     u32 big-endian: length of the rest | u32 big-endian: header length | header | blobs
 
@@ -16,6 +16,12 @@ arrive bit for bit.
 
 The client side (`ExternalStack`) is the registered stack; the message helpers here are
 shared with the reference server `addt_dsl.stack.bridge_server`.
+
+Protocol 2 adds stack-internal faults: a run with faults on the stack's sites, state sites,
+tensors or nodes (bit flips, stuck values, latency spikes) sends them in `hello` as concrete
+schedule entries; the remote applies them with its own copy of the fault machinery and
+returns each injection as a `fault` event with its replies. A run without such faults
+says hello in protocol 1, so servers that speak only protocol 1 still serve it.
 """
 
 from __future__ import annotations
@@ -32,9 +38,12 @@ import numpy as np
 
 from addt_dsl import units
 from addt_dsl.registry import STACKS, ParamSpec
+from addt_dsl.runtime.trace import SERIES_COLUMNS, Event
 from addt_dsl.stack.bev import NODE_NAMES, BevStack, StackError
 
-PROTOCOL = 1
+PROTOCOL = 2  # the newest protocol; a hello says 1 when the run has no stack-internal faults
+PROTOCOLS = (1, 2)  # what the reference server accepts
+MAX_FAULTS = 1000  # stack-internal faults one hello may carry
 _HEAD = struct.Struct(">II")
 
 
@@ -185,6 +194,11 @@ def extrinsics_dict(ext) -> dict[str, float]:
 
 # ---------------------------------------------------------------- the client stack
 
+# Settings the client keeps: never sent to the remote as stack settings.
+CLIENT_SETTINGS = ("address", "timeout", "sites")
+SITE_STACKS = ("bev", "none")  # registered stacks whose fault sites a remote may declare
+
+
 @STACKS.register
 class ExternalStack:
     """A stack in another process behind the bridge; the remote's own settings pass through."""
@@ -197,18 +211,37 @@ class ExternalStack:
                   doc="HOST:PORT of the remote stack's bridge server"),
         ParamSpec("timeout", units.TIME, default=30.0, low=0.001, high=3600.0,
                   doc="wall-clock wait for each reply before the run is marked detected"),
+        ParamSpec("sites", None, kind="word", default="bev", choices=SITE_STACKS,
+                  doc="whose fault sites the remote stack has: bev (the reference server's: stack-internal "
+                      "faults are checked against `stack bev` and sent to the remote in protocol 2) or "
+                      "none (a stack without them: such faults are compile errors)"),
         *BevStack.params,
     )
     nodes = {name: () for name in NODE_NAMES}
     doc = "A stack in another process or language, lock-step over a socket (docs/bridge.md)."
 
     @classmethod
+    def sites_of(cls, settings: dict | None = None):
+        """The registered stack whose fault sites the remote has (`sites bev`), or None
+        (`sites none`): the compiler checks stack-internal fault targets against it."""
+        name = str((settings or {}).get("sites", "bev"))
+        return None if name == "none" else STACKS.get(name)
+
+    @classmethod
     def fault_sites(cls, settings: dict | None = None) -> set[str]:
-        return set()  # the remote's internals are out of reach; sensor and timing faults still apply
+        """The remote's scalar and tensor fault sites, as `sites` declares them."""
+        stack_cls = cls.sites_of(settings)
+        if stack_cls is None:
+            return set()
+        if settings is None:
+            return stack_cls.fault_sites()
+        return stack_cls.fault_sites({k: v for k, v in settings.items() if k not in CLIENT_SETTINGS})
 
     def __init__(self, settings: dict, ctx):
         self.settings = {p.name: settings.get(p.name, p.default) for p in self.params}
         self.ctx = ctx
+        self.internal_faults: list = []  # ConcreteFaults the remote applies (protocol 2)
+        self._remote_events: list = []  # every event the remote sent, in order: series grow in place
         self.latency = {n: 0.0 for n in (*NODE_NAMES, "e2e")}
         self.objects_seen = 0
         self._frames: list = []
@@ -224,17 +257,49 @@ class ExternalStack:
             raise StackError(f"cannot reach the external stack at {escape(host)}:{port}: {exc}") from None
         try:
             self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._request(self._hello(), expect="ready")
+            try:
+                ready, _ = self._request(self._hello(), expect="ready")
+            except StackError as exc:
+                if not self.internal_faults:
+                    raise
+                raise StackError(f"{exc} (this run's {self._faults_text()} need bridge protocol 2; "
+                                 "a server that speaks only protocol 1 cannot apply them)") from None
+            self._check_ready(ready)
         except BaseException:
             self.sock.close()
             self.sock = None
             raise
 
+    def take_internal_faults(self, faults) -> None:
+        """The run's faults on stack sites, state sites, tensors and nodes (`FaultSchedule.bind`
+        hands them over): sent to the remote in `hello`, applied there."""
+        if faults and self.sites_of(self.settings) is None:
+            raise StackError(f"`stack external sites none` has no fault sites, but the run has {len(faults)} "
+                             "stack-internal faults")
+        self.internal_faults = list(faults)
+
+    def _faults_text(self) -> str:
+        names = [f"{f.kind} {f.target}" for f in self.internal_faults[:3]]
+        more = len(self.internal_faults) - len(names)
+        return "stack-internal faults (" + ", ".join(names) + (f", {more} more" if more else "") + ")"
+
+    def _check_ready(self, ready: dict) -> None:
+        """A hello with faults must be answered by a remote that took every one of them:
+        a stack that ignores them would let the run pass as if it had been faulted."""
+        if not self.internal_faults:
+            return
+        sent = sorted(f.index for f in self.internal_faults)
+        taken = ready.get("faults")
+        if ready.get("protocol") != 2 or not isinstance(taken, list) or sorted(taken) != sent:
+            raise StackError(f"the external stack did not confirm this run's {self._faults_text()}: its `ready` "
+                             f"says protocol {escape(str(ready.get('protocol', 1)), 20)} and faults "
+                             f"{escape(repr(taken), 200)}, expected protocol 2 and {sent} (docs/bridge.md)")
+
     def _hello(self) -> dict:
         run = self.ctx.run
         spec = run.spec
         road = spec.plan.road(run.ego_plan.road)
-        remote = {k: v for k, v in self.settings.items() if k not in ("address", "timeout")}
+        remote = {k: v for k, v in self.settings.items() if k not in CLIENT_SETTINGS}
         sensors = [{"name": name, "kind": s.keyword, "settings": _jsonable(s.settings),
                     "nominal": extrinsics_dict(s.nominal), "period_s": s.period_s}
                    for name, s in run.sensors.items()]
@@ -247,6 +312,10 @@ class ExternalStack:
             "sensors": sensors,
             "map": {"format": "addt-road-plan", "road": road.model_dump(mode="json")},
         }
+        if self.internal_faults:
+            # Protocol 2 only when the run needs it, so protocol-1 servers serve the rest.
+            hello.update(protocol=2, duration_s=run.bound.duration_s,
+                         faults=[f.model_dump(mode="json") for f in self.internal_faults])
         token = os.environ.get(TOKEN_ENV)
         if token:
             hello["token"] = token
@@ -298,8 +367,8 @@ class ExternalStack:
         ego = {"x": x, "y": y, "heading": heading, "speed": speed, "s_hint": self.ctx.run.ego_s}
         if self.sock is None:
             self._connect()
-        reply, _ = self._request({"type": "step", "time_s": time_s, "dt": dt, "ego": ego, "frames": frames},
-                                 blobs)
+        reply, rblobs = self._request({"type": "step", "time_s": time_s, "dt": dt, "ego": ego, "frames": frames},
+                                      blobs)
         command, commands, latency, objects, events = _control(reply, time_s)
         for apply_s, steer, accel in commands:
             self.ctx.apply_command_at(apply_s, steer, accel)
@@ -308,7 +377,11 @@ class ExternalStack:
                 self.latency[name] = value
         self.objects_seen = objects
         for t, kind, detail in events:
-            self.ctx.run.events.append(_event(t, kind, detail))
+            event = _event(t, kind, detail)
+            self._remote_events.append(event)
+            self.ctx.run.events.append(event)
+        if "series" in reply:
+            _grow_series(reply["series"], rblobs, self._remote_events)
         return command
 
     def _actors(self, hit_ids: np.ndarray) -> dict[str, dict]:
@@ -362,6 +435,29 @@ def _control(reply: dict, time_s: float):
     return command, commands, latency, objects, events
 
 
+def _grow_series(series, blobs: dict, events: list) -> None:
+    """New entries of the remote's series fault events (`random_value`: one event per
+    site whose columns grow with every injection). `series` is `[[event, {column: blob}]]`,
+    `event` the position of the series event among all events the remote sent; the
+    columns travel as float64 blobs, so they arrive bit for bit."""
+    try:
+        for seq, columns in series:
+            if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq < len(events):
+                raise StackError(f"external stack sent series entries for event {escape(repr(seq), 40)}, "
+                                 f"which it never sent")
+            detail = events[seq].detail
+            if events[seq].kind != "fault" or not all(isinstance(detail.get(c), list) for c in SERIES_COLUMNS):
+                raise StackError(f"external stack sent series entries for event {seq}, which is not a series")
+            arrays = [blobs.get(columns[c]) for c in SERIES_COLUMNS]
+            if any(a is None or a.ndim != 1 or a.dtype.kind != "f" for a in arrays) or \
+                    len({len(a) for a in arrays}) != 1:
+                raise StackError(f"external stack sent malformed series entries for event {seq}")
+            for c, a in zip(SERIES_COLUMNS, arrays):
+                detail[c].extend(a.astype("<f8").tolist())
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
+        raise StackError(f"external stack sent malformed series entries: {escape(str(exc))}") from None
+
+
 def _escaped(value, depth: int = 0):
     """A peer's JSON value with every string escaped (for events stored in the trace)."""
     if depth > 8:
@@ -376,8 +472,6 @@ def _escaped(value, depth: int = 0):
 
 
 def _event(t, kind, detail):
-    from addt_dsl.runtime.trace import Event
-
     return Event(float(t), str(kind), dict(detail))
 
 

@@ -9,7 +9,9 @@ message must arrive whole within the idle timeout and fit the size limit (checke
 it is read); anything malformed gets an `error` reply and the connection is closed.
 
 Each connection is one run: `hello` builds a `BevStack` from the settings and the map it
-carries, every `step` replays the step's frames into it and ticks it,
+carries (and, in protocol 2, a fault schedule from the stack-internal faults it carries,
+bound to the stack as in process), every `step` replays the step's frames into it and
+ticks it, and replies with its commands and events (the faults' injections among them),
 `bye` ends the run. Connections are served one thread each, so parallel runs may share a
 server. It is also the worked example of the protocol in docs/bridge.md: a stack in any
 language needs only to answer these three messages.
@@ -28,14 +30,17 @@ import threading
 import time
 import zlib
 from dataclasses import dataclass
-from collections.abc import Mapping
-from types import MappingProxyType
 
 import numpy as np
 
+from addt_dsl.plan import ConcreteFault
+from addt_dsl.registry import FAULTS
+from addt_dsl.runtime.faults import FaultSchedule
+from addt_dsl.runtime.trace import SERIES_COLUMNS, Event
 from addt_dsl.stack.bridge import (
+    MAX_FAULTS,
     MAX_MESSAGE_BYTES,
-    PROTOCOL,
+    PROTOCOLS,
     TOKEN_ENV,
     ProtocolError,
     escape,
@@ -76,18 +81,6 @@ class _GT:
         self.kind = str(d.get("kind", ""))  # the actor's vehicle kind ("" from a client that sends none)
 
 
-class _NoFaults:
-    """The remote side has no fault schedule (faults act in the simulator's process)."""
-
-    by_target: Mapping[str, list] = MappingProxyType({})
-
-    def for_target(self, target: str) -> list:
-        return []
-
-    def upset(self, node, time_s: float) -> None:
-        """No stored-state faults on the remote side either."""
-
-
 class _RemoteContext:
     """What `BevStack` asks of the simulator, answered from the bridge messages."""
 
@@ -109,12 +102,20 @@ class _RemoteContext:
         self.ego_mass_kg, self.ego_mu = float(body["mass_kg"]), float(body["mu"])
         self.ego_lane = int(hello["ego"]["lane"])
         self.sensors = {d["name"]: _Sensor(d) for d in hello["sensors"]}
-        self.faults = _NoFaults()
         self.now = 0.0
         self.ego = (0.0, 0.0, 0.0, 0.0)
         self.ego_s = 0.0
         self.actors: dict[int, _GT] = {}
-        self.events: list = []
+        # Every event of the run, the stack's and the faults' in the order they happened
+        # (as in process); each reply carries those since the last one.
+        self.events: list[Event] = []
+        self.sent = 0  # events sent so far
+        self.series_sent: dict[int, int] = {}  # series fault event (position) -> entries sent
+        # The stack-internal faults (protocol 2), applied by the same schedule as in process;
+        # bound to the stack once it exists.
+        faults = [ConcreteFault.model_validate(f) for f in hello.get("faults", [])]
+        self.faults = FaultSchedule(faults, float(hello["step_s"]), float(hello.get("duration_s", math.inf)),
+                                    self.events)
         self.commands: list = []
         self.run = self  # BevStack reads ctx.run.ego_s
         self.world = self  # ... and passes ctx.world to perception (actor_by_body)
@@ -142,7 +143,7 @@ class _RemoteContext:
         return self.actors.get(body)
 
     def event(self, kind: str, **detail) -> None:
-        self.events.append([self.now, kind, detail])
+        self.events.append(Event(self.now, kind, detail))
 
     def apply_command_at(self, time_s: float, steer: float, accel: float) -> None:
         self.commands.append([time_s, steer, accel])
@@ -165,35 +166,45 @@ def serve_connection(sock: socket.socket, limits: Limits = Limits()) -> None:
 
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     stack = ctx = None
-    while True:
-        deadline = time.monotonic() + limits.idle_timeout_s
-        try:
-            header, blobs = recv(sock, limits.max_message_bytes, deadline)
-        except (ConnectionError, TimeoutError):
-            return  # gone or idle: nothing to answer
-        except (ProtocolError, OSError) as exc:
-            _reply_error(sock, str(exc), deadline)
-            return
-        kind = header.get("type")
-        try:
-            if kind == "hello":
-                if stack is not None:
-                    raise ValueError("a second hello on one connection")
-                _check_hello(header, limits)
-                ctx = _RemoteContext(header)
-                stack = BevStack(header["stack"], ctx)
-                send(sock, {"type": "ready", "stack": "bev", "nodes": list(stack.latency)}, deadline=deadline)
-            elif kind == "step":
-                if stack is None:
-                    raise ValueError("step before hello")
-                send(sock, _step(stack, ctx, header, blobs), deadline=deadline)
-            elif kind == "bye":
+    try:
+        while True:
+            deadline = time.monotonic() + limits.idle_timeout_s
+            try:
+                header, blobs = recv(sock, limits.max_message_bytes, deadline)
+            except (ConnectionError, TimeoutError):
+                return  # gone or idle: nothing to answer
+            except (ProtocolError, OSError) as exc:
+                _reply_error(sock, str(exc), deadline)
                 return
-            else:
-                raise ValueError(f"unknown message type {escape(str(kind), 80)!r}")
-        except Exception as exc:  # noqa: BLE001 - reported to the simulator, which marks the run
-            _reply_error(sock, f"{type(exc).__name__}: {exc}", deadline)
-            return
+            kind = header.get("type")
+            try:
+                if kind == "hello":
+                    if ctx is not None:
+                        raise ValueError("a second hello on one connection")
+                    _check_hello(header, limits)
+                    ctx = _RemoteContext(header)
+                    stack = BevStack(header["stack"], ctx)
+                    # As in process: faults learn the stack's sites (an unknown target is refused).
+                    ctx.faults.bind(stack, lambda: ctx.now)
+                    ready = {"type": "ready", "stack": "bev", "nodes": list(stack.latency)}
+                    if header["protocol"] >= 2:
+                        ready.update(protocol=2, faults=[k.fault.index for k in ctx.faults.kinds])
+                    send(sock, ready, deadline=deadline)
+                elif kind == "step":
+                    if stack is None:
+                        raise ValueError("step before hello")
+                    reply, rblobs = _step(stack, ctx, header, blobs)
+                    send(sock, reply, rblobs, deadline=deadline)
+                elif kind == "bye":
+                    return
+                else:
+                    raise ValueError(f"unknown message type {escape(str(kind), 80)!r}")
+            except Exception as exc:  # noqa: BLE001 - reported to the simulator, which marks the run
+                _reply_error(sock, f"{type(exc).__name__}: {exc}", deadline)
+                return
+    finally:
+        if ctx is not None:
+            ctx.faults.close()  # undo persistent side effects (flipped weights), as in process
 
 
 def _reply_error(sock: socket.socket, message: str, deadline: float) -> None:
@@ -208,40 +219,85 @@ def _check_hello(header: dict, limits: Limits) -> None:
     if limits.token is not None and not hmac.compare_digest(str(header.get("token", "")).encode(),
                                                             limits.token.encode()):
         raise PermissionError("wrong or missing token")
-    if header.get("protocol") != PROTOCOL:
-        raise ValueError(f"protocol {escape(str(header.get('protocol')), 40)} not supported (this is {PROTOCOL})")
+    protocol = header.get("protocol")
+    if isinstance(protocol, bool) or protocol not in PROTOCOLS:
+        raise ValueError(f"protocol {escape(str(protocol), 40)} not supported "
+                         f"(this server speaks {', '.join(map(str, PROTOCOLS))})")
     from addt_dsl.stack.bev import BevStack
 
     settings = header.get("stack")
     if not isinstance(settings, dict):
         raise ValueError("'stack' must be an object of settings")
-    specs = {p.name: p for p in BevStack.params}
-    for key, value in settings.items():
-        spec = specs.get(key)
-        if spec is None:
-            raise ValueError(f"unknown stack setting {escape(str(key), 80)!r}")
-        if spec.choices is not None:
-            if value not in spec.choices:
-                raise ValueError(f"stack setting {key} must be one of {', '.join(spec.choices)}")
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ValueError(f"stack setting {key} must be a finite number")
-        if (spec.low is not None and value < spec.low) or (spec.high is not None and value > spec.high):
-            raise ValueError(f"stack setting {key}={value!r} is outside [{spec.low}, {spec.high}]")
+    _check_settings(settings, BevStack.params, "stack")
     step = header.get("step_s")
     if isinstance(step, bool) or not isinstance(step, (int, float)) or not 0.0 < step <= 1.0:
         raise ValueError("'step_s' must be a number in (0, 1] s")
     if not isinstance(header.get("seed"), int):
         raise ValueError("'seed' must be an integer")
+    if protocol >= 2:
+        _check_faults(header)
+    elif "faults" in header:
+        raise ValueError("'faults' needs protocol 2")
 
 
-def _step(stack, ctx: _RemoteContext, header: dict, blobs: dict) -> dict:
+def _check_faults(header: dict) -> None:
+    """Protocol 2: the run's duration and its stack-internal faults, each a concrete
+    schedule entry whose kind, window and settings are checked as the compiler would."""
+    duration = header.get("duration_s")
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not 0.0 < duration <= 1e6:
+        raise ValueError("'duration_s' must be a number in (0, 1e6] s")
+    faults = header.get("faults")
+    if not isinstance(faults, list) or len(faults) > MAX_FAULTS:
+        raise ValueError(f"'faults' must be a list of at most {MAX_FAULTS} faults")
+    indices = set()
+    for raw in faults:
+        f = ConcreteFault.model_validate(raw)  # a pydantic ValidationError is a ValueError
+        what = f"fault {f.index} ({escape(f.kind, 40)} {escape(f.target, 80)})"
+        cls = FAULTS.get(f.kind)
+        if cls is None or cls.target_kind == "sensor":
+            raise ValueError(f"{what}: not a stack-internal fault kind (sensor faults act in the simulator)")
+        if f.index in indices:
+            raise ValueError(f"{what}: index given twice")
+        indices.add(f.index)
+        if not (math.isfinite(f.start_s) and f.start_s >= 0.0) or \
+                (f.end_s is not None and not (math.isfinite(f.end_s) and f.end_s >= f.start_s)):
+            raise ValueError(f"{what}: the window must be finite, from 0 s, and not end before it starts")
+        if not 0 <= f.seed < 2**32:
+            raise ValueError(f"{what}: the seed must be in [0, 2^32)")
+        _check_settings(f.settings, cls.params, what)
+
+
+def _check_settings(settings, params, what: str) -> None:
+    """Settings against their ParamSpecs: known names, a word among its choices, a finite
+    number in range (an integer where the spec says int)."""
+    if not isinstance(settings, dict):
+        raise ValueError(f"{what} settings must be an object")
+    specs = {p.name: p for p in params}
+    for key, value in settings.items():
+        spec = specs.get(key)
+        if spec is None:
+            raise ValueError(f"unknown {what} setting {escape(str(key), 80)!r}")
+        if spec.choices is not None:
+            if value not in spec.choices:
+                raise ValueError(f"{what} setting {key} must be one of {', '.join(spec.choices)}")
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValueError(f"{what} setting {key} must be a finite number")
+        if spec.kind == "int" and value != int(value):
+            raise ValueError(f"{what} setting {key} must be an integer")
+        if (spec.low is not None and value < spec.low) or (spec.high is not None and value > spec.high):
+            raise ValueError(f"{what} setting {key}={value!r} is outside [{spec.low}, {spec.high}]")
+
+
+def _step(stack, ctx: _RemoteContext, header: dict, blobs: dict) -> tuple[dict, dict]:
     t = float(header["time_s"])
     ctx.now = t
+    if t + 1e-12 >= ctx.faults.next_wake_s:  # fault timers, at the start of the step as in process
+        ctx.faults.wake(t)
     e = header["ego"]
     ctx.ego = (e["x"], e["y"], e["heading"], e["speed"])
     ctx.ego_s = e["s_hint"]
-    ctx.events, ctx.commands = [], []
+    ctx.commands = []
     for f in header["frames"]:
         if "points" in f:
             truth = f.get("truth", {})
@@ -255,8 +311,43 @@ def _step(stack, ctx: _RemoteContext, header: dict, blobs: dict) -> dict:
             data.update({key: blobs[name] for key, name in f.get("arrays", {}).items()})
         stack.on_frame(_Frame(f["sensor"], f["stamp_s"], data), f["arrive_s"])
     command = stack.step(t, float(header["dt"]))
-    return {"type": "control", "command": list(command), "commands": ctx.commands,
-            "latency": dict(stack.latency), "objects": stack.objects_seen, "events": ctx.events}
+    reply = {"type": "control", "command": list(command), "commands": ctx.commands,
+             "latency": dict(stack.latency), "objects": stack.objects_seen, "events": _new_events(ctx)}
+    series, blobs = _series(ctx)
+    if series:
+        reply["series"] = series
+    return reply, blobs
+
+
+def _new_events(ctx: _RemoteContext) -> list:
+    """The events since the last reply as `[time_s, kind, detail]`; a series fault event
+    goes with empty columns, its entries follow in `series`."""
+    out = []
+    for seq in range(ctx.sent, len(ctx.events)):
+        e = ctx.events[seq]
+        detail = e.detail
+        if e.kind == "fault" and "times" in detail:
+            ctx.series_sent[seq] = 0
+            detail = {k: ([] if k in SERIES_COLUMNS else v) for k, v in detail.items()}
+        out.append([e.time_s, e.kind, detail])
+    ctx.sent = len(ctx.events)
+    return out
+
+
+def _series(ctx: _RemoteContext) -> tuple[list, dict]:
+    """Entries added to series fault events since the last reply, as float64 blobs."""
+    series, blobs = [], {}
+    for seq, n in ctx.series_sent.items():
+        detail = ctx.events[seq].detail
+        if len(detail["times"]) == n:
+            continue
+        columns = {}
+        for c in SERIES_COLUMNS:
+            blobs[f"s{seq}.{c}"] = np.asarray(detail[c][n:], dtype="<f8")
+            columns[c] = f"s{seq}.{c}"
+        series.append([seq, columns])
+        ctx.series_sent[seq] = len(detail["times"])
+    return series, blobs
 
 
 class _Handler(socketserver.BaseRequestHandler):

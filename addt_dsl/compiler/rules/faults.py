@@ -59,7 +59,11 @@ def rule_faults(ctx: Context) -> Faults:
     sensors = {c.name for c in clauses if c.keyword == "sensor"} or {DEFAULT_SENSOR.name}
     stack_name = next((c.name for c in clauses if c.keyword == "stack"), DEFAULT_STACK.name)
     stack_cls = STACKS.get(stack_name)
-    sites = _fault_sites(ctx, stack_cls) if stack_cls else set()
+    # A remote stack (`stack external`) declares whose fault sites it has (`sites bev`):
+    # its stack-internal faults are checked against that stack, or refused (`sites none`).
+    sites_of = getattr(stack_cls, "sites_of", None)
+    site_cls = sites_of(_stack_settings(ctx)) if sites_of is not None else stack_cls
+    sites = _fault_sites(ctx, site_cls) if site_cls else set()
     for block in ctx.blocks("faults"):
         for f in block.items:
             cls = FAULTS.get(f.kind)
@@ -68,11 +72,18 @@ def rule_faults(ctx: Context) -> Faults:
                                *suggest(f.kind, FAULTS.names()), f"fault kinds: {', '.join(FAULTS.names())}")
                 continue
             target = ".".join(f.target)
+            if cls.target_kind != "sensor" and stack_cls is not None and site_cls is None:
+                ctx.sink.error("E0109", f"'{f.kind}' needs fault sites of the remote stack, and "
+                                        f"`stack {stack_name} sites none` declares none", f.target_span,
+                               "the reference server (python -m addt_dsl.stack.bridge_server) has the sites of "
+                               "`stack bev`: `sites bev` (the default) checks targets against them and sends the "
+                               "faults to the remote (bridge protocol 2, docs/bridge.md)")
+                continue
             # Each kind says which targets it takes (an image fault only a camera, a bit flip
             # a site or a whole node); sites come with the ego's stack settings (tensors).
-            pool = cls.valid_targets({name: name for name in sensors}, stack_cls)
-            if cls.target_kind == "site" and stack_cls is not None:
-                pool = (pool - set(stack_cls.fault_sites())) | sites
+            pool = cls.valid_targets({name: name for name in sensors}, site_cls)
+            if cls.target_kind == "site" and site_cls is not None:
+                pool = (pool - set(site_cls.fault_sites())) | sites
             if target not in pool:
                 what = {"sensor": "sensors of the ego", "site": "fault sites of the stack",
                         "node": "nodes of the stack"}[cls.target_kind]
@@ -99,10 +110,15 @@ def _fault_sites(ctx: Context, stack_cls) -> set[str]:
     its settings, e.g. tensor sites with `perception learned`, takes them as an argument)."""
     if not _takes_settings(stack_cls):
         return set(stack_cls.fault_sites())
+    return set(stack_cls.fault_sites(_stack_settings(ctx)))
+
+
+def _stack_settings(ctx: Context) -> dict:
+    """The ego's stack settings that are constants (words and numbers, SI)."""
     ego = ctx.actors.get("ego")
     lowered = ego.stack.settings if ego is not None and ego.stack is not None else {}
     settings = {k: v if isinstance(v, str) else const_value(v) for k, v in lowered.items()}
-    return set(stack_cls.fault_sites({k: v for k, v in settings.items() if v is not None}))
+    return {k: v for k, v in settings.items() if v is not None}
 
 
 @functools.lru_cache(maxsize=None)

@@ -226,8 +226,18 @@ class FaultSchedule:
         Scalar-site faults on a node are added to each of the node's sites, its state sites
         (`stack.state_nodes`: node → stored-state sites) included. A site fault
         whose target the stack does not have is an error (the compiler checks targets
-        against the stack class; this catches a plan run against a different stack).
+        against the stack class; this catches a plan run against a different stack). A stack
+        with `take_internal_faults(faults)` is handed every fault that is not a sensor's
+        (the bridge's client: the remote stack applies them) and they leave this schedule.
         """
+        hand_over = getattr(stack, "take_internal_faults", None)
+        if hand_over is not None:
+            # A stack that applies its internal faults itself (the bridge sends them to the
+            # remote stack, which runs this same machinery): only sensor faults stay here.
+            hand_over([k.fault for k in self.kinds if k.target_kind != "sensor"])
+            self.kinds = [k for k in self.kinds if k.target_kind == "sensor"]
+            kept = {t: [k for k in ks if k.target_kind == "sensor"] for t, ks in self.by_target.items()}
+            self.by_target = {t: ks for t, ks in kept.items() if ks}
         state = getattr(stack, "state_nodes", {})
         nodes = {n: (*s, *state.get(n, ())) for n, s in getattr(stack, "nodes", {}).items()}
         tensor_sites = stack.tensor_sites() if hasattr(stack, "tensor_sites") else {}
