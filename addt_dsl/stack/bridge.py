@@ -304,7 +304,7 @@ class ExternalStack:
                     "nominal": extrinsics_dict(s.nominal), "period_s": s.period_s}
                    for name, s in run.sensors.items()]
         hello = {
-            "type": "hello", "protocol": PROTOCOL, "seed": spec.seed, "step_s": run.dt,
+            "type": "hello", "protocol": 1, "seed": spec.seed, "step_s": run.dt,
             "stack": _jsonable(remote),
             "ego": {"lane": self.ctx.ego_lane, "wheelbase_m": self.ctx.wheelbase_m,
                     "length_m": run.ego_plan.length_m, "width_m": run.ego_plan.width_m,
@@ -314,7 +314,7 @@ class ExternalStack:
         }
         if self.internal_faults:
             # Protocol 2 only when the run needs it, so protocol-1 servers serve the rest.
-            hello.update(protocol=2, duration_s=run.bound.duration_s,
+            hello.update(protocol=PROTOCOL, duration_s=run.bound.duration_s,
                          faults=[f.model_dump(mode="json") for f in self.internal_faults])
         token = os.environ.get(TOKEN_ENV)
         if token:

@@ -52,6 +52,35 @@ def test_bridge_run_matches_the_in_process_stack(overtake_source, learned_overta
     assert remote.digest == local.digest
 
 
+# Flips that persist in the stack's memory (the planner's committed manoeuvre, the
+# tracker's tracks, the controller's integrator) and, with the learned detector, in its
+# weights and one inference's activations: applied by the remote, the same run.
+STATE_FLIPS = """
+    at 1.5 s bitflip planner.trajectory bit 53 seed 0
+    during [1 s, 3 s] bitflip tracker.tracks count 2 seed 1
+    at 2 s bitflip control.integral field exponent seed 2"""
+TENSOR_FLIPS = """
+    at 1 s bitflip perception.backbone.conv1 tensor weights field exponent count 3 seed 3
+    during [1 s, 4 s] bitflip perception.head.center tensor activations count 4 seed 4"""
+
+
+@pytest.mark.parametrize("perception, flips", [("ground_truth", STATE_FLIPS),
+                                               ("learned", STATE_FLIPS + TENSOR_FLIPS)])
+def test_stack_internal_flips_through_the_bridge_match_the_in_process_run(
+        overtake_source, learned_overtake_source, server_address, perception, flips):
+    source = learned_overtake_source if perception == "learned" else overtake_source
+    drop = "drop lidar rate drop_rate"
+    assert drop in source
+    source = source.replace(drop, drop + flips)
+    settings = f"perception {perception} cruise_speed 25 m/s"
+    local = execute(_spec(source, f"stack bev {settings}"))
+    remote = execute(_spec(source, f'stack external address "{server_address}" {settings}'))
+    assert remote.status == "ok", remote.error
+    flipped = {e.detail["target"] for e in remote.trace.events if e.kind == "fault" and e.detail["kind"] == "bitflip"}
+    assert len(flipped) == flips.count("bitflip")  # every flip target injected, remotely
+    assert remote.digest == local.digest
+
+
 def test_unreachable_remote_is_a_detected_stack_failure_and_releases_the_world(overtake_source, monkeypatch):
     import pybullet
 
