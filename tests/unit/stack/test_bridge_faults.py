@@ -5,17 +5,20 @@ and every way of refusing them (old servers, stacks that ignore them, malformed 
 import socket
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from addt_dsl.compiler import compile_source
 from addt_dsl.plan import ConcreteFault
 from addt_dsl.runtime.execute import execute
-from addt_dsl.runtime.trace import Event
+from addt_dsl.runtime.trace import SERIES_COLUMNS, Event
 from addt_dsl.stack.bev import StackError
-from addt_dsl.stack.bridge import _grow_series, recv, send
-from addt_dsl.stack.bridge_server import Limits, start_in_thread
+from addt_dsl.stack.bridge import _grow_series, decode, encode, recv, send
+from addt_dsl.stack.bridge_server import Limits, _new_events, _series, start_in_thread
 
 SCENARIO = """
 scenario remote_faults {
@@ -227,3 +230,55 @@ def test_series_entries_extend_the_event_they_name_bit_for_bit():
 def test_malformed_series_entries_are_stack_failures(series, blobs):
     with pytest.raises(StackError):
         _grow_series(series, blobs, [Event(0.5, "detections", {}), _series_event()])
+
+
+def test_a_hand_built_run_with_faults_on_a_stack_without_sites_is_detected():
+    # The compiler refuses this (E0109); a RunSpec edited by hand ends detected, not crashed.
+    spec = _spec('stack external address "127.0.0.1:9" timeout 1 s')
+    ego = spec.plan.ego
+    stack = ego.stack.model_copy(update={"settings": {**ego.stack.settings, "sites": "none"}})
+    plan = spec.plan.model_copy(update={"ego": ego.model_copy(update={"stack": stack})})
+    result = execute(spec.model_copy(update={"plan": plan}))
+    assert result.status == "detected" and "declares no fault sites" in result.error
+
+
+# Per reply: new plain events, new series events, and entries added to the series so far.
+steps = st.lists(st.tuples(st.integers(0, 2), st.integers(0, 1),
+                           st.lists(st.lists(st.floats(allow_nan=True, width=64), max_size=4), max_size=3)),
+                 min_size=1, max_size=6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(steps)
+def test_series_events_cross_the_wire_bit_for_bit(script):
+    """Whatever the server's events do between replies (new events, new series, entries
+    appended to earlier series), the client's copies end equal, columns byte for byte."""
+    server = SimpleNamespace(events=[], sent=0, series_sent={})
+    client: list = []
+    for plain, new_series, growth in script:
+        for _ in range(plain):
+            server.events.append(Event(0.1 * len(server.events), "detections", {"objects": []}))
+        for _ in range(new_series):
+            server.events.append(_series_event())
+        open_series = [e for e in server.events if "times" in e.detail]
+        for e, values in zip(open_series, growth):
+            for v in values:
+                for c in SERIES_COLUMNS:
+                    e.detail[c].append(v)
+        reply, blobs = encode_reply(server)
+        header, got = decode(encode(reply, blobs)[4:])
+        client.extend(Event(t, kind, detail) for t, kind, detail in header["events"])
+        if "series" in header:
+            _grow_series(header["series"], got, client)
+    assert [(e.time_s, e.kind) for e in client] == [(e.time_s, e.kind) for e in server.events]
+    for mine, theirs in zip(client, server.events):
+        for c in SERIES_COLUMNS if "times" in theirs.detail else ():
+            assert np.asarray(mine.detail[c], dtype="<f8").tobytes() == np.asarray(theirs.detail[c], "<f8").tobytes()
+
+
+def encode_reply(server):
+    reply = {"type": "control", "events": _new_events(server)}
+    series, blobs = _series(server)
+    if series:
+        reply["series"] = series
+    return reply, blobs
