@@ -291,7 +291,8 @@ class ExternalStack:
             return
         sent = sorted(f.index for f in self.internal_faults)
         taken = ready.get("faults")
-        if ready.get("protocol") != 2 or not isinstance(taken, list) or sorted(taken) != sent:
+        if ready.get("protocol") != 2 or not isinstance(taken, list) or \
+                not all(type(t) is int for t in taken) or sorted(taken) != sent:
             raise StackError(f"the external stack did not confirm this run's {self._faults_text()}: its `ready` "
                              f"says protocol {escape(str(ready.get('protocol', 1)), 20)} and faults "
                              f"{escape(repr(taken), 200)}, expected protocol 2 and {sent} (docs/bridge.md)")

@@ -129,6 +129,7 @@ def test_hello_carries_the_stack_internal_faults_only_when_the_run_has_them():
     # minimal stack) would let the run pass as if faulted: it is detected.
     ({"type": "ready"}, "did not confirm"),
     ({"type": "ready", "protocol": 2, "faults": [0]}, "did not confirm"),
+    ({"type": "ready", "protocol": 2, "faults": [0, "1", None, 2.0, [3]]}, "did not confirm"),
     # What a protocol-1-only server answers a protocol-2 hello.
     ({"type": "error", "message": "ValueError: protocol 2 not supported (this is 1)"}, "need bridge protocol 2"),
 ])
