@@ -216,6 +216,9 @@ class RegionForward:
         self.maps: dict[str, _Map] | None = None
         self._snapshot: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
         self.views = _Views()
+        # Per layer (kernel, stride, padding, weight, bias): read once, not through
+        # nn.Module's attribute lookup at every call (faults flip the tensors in place).
+        self._geometry: dict[str, tuple] = {}
 
     def invalidate(self) -> None:
         """Weights changed: rebuild the backgrounds at the next inference."""
@@ -235,6 +238,8 @@ class RegionForward:
         """Backgrounds of every map (dense, no hooks) from the current weights. Maps whose
         background did not change keep their state (a rebuild may happen mid-inference)."""
         self._snapshot = {n: (m.weight.detach().clone(), m.bias.detach().clone()) for n, m in self.layers.items()}
+        self._geometry = {n: (m.kernel_size[0], m.stride[0], m.padding[0], m.weight, m.bias)
+                          for n, m in self.layers.items()}
         weight = self.layers["backbone.conv0"].weight
         x = torch.zeros((1, *GRID.shape), dtype=weight.dtype, device=weight.device)
         bg: dict[str, torch.Tensor] = {}
@@ -272,7 +277,7 @@ class RegionForward:
             if self._weights_changed(name):  # a persistent weight fault
                 self._rebuild()
         out = self.maps[name]
-        cells, result = self._window(layer, x, region, out.buf.shape)
+        cells, result = self._window(name, x, region, out.buf.shape)
         out.restore(cells)
         if result is not None:
             out.at(cells).copy_(result)
@@ -290,7 +295,7 @@ class RegionForward:
             a, r = self._conv(name, x, region)
             return self._relu(relu, a, r), r
         self.maps[name].restore()  # after a hooked frame: back to the background once
-        cells, result = self._window(layer, x, region, self.maps[name].buf.shape)
+        cells, result = self._window(name, x, region, self.maps[name].buf.shape)
         out = self.maps[relu]
         out.restore(cells)
         if result is None:
@@ -299,24 +304,23 @@ class RegionForward:
         out.dirty = cells
         return out.buf, cells
 
-    def _window(self, layer: nn.Conv2d, x: torch.Tensor, region: Region, shape) -> tuple[Region, torch.Tensor | None]:
-        """The output cells of `layer` whose k×k window (stride s, padding p) meets the
+    def _window(self, name: str, x: torch.Tensor, region: Region, shape) -> tuple[Region, torch.Tensor | None]:
+        """The output cells of layer `name` whose k×k window (stride s, padding p) meets the
         changed input `region`, and the conv on them (EMPTY, None for an empty region)."""
-        if _empty(region):
-            return EMPTY, None
-        k, s, p = layer.kernel_size[0], layer.stride[0], layer.padding[0]
-        h_in, w_in = x.shape[-2:]
-        h_out, w_out = shape[-2:]
         r0, r1, c0, c1 = region
+        if r0 >= r1 or c0 >= c1:
+            return EMPTY, None
+        k, s, p, weight, bias = self._geometry[name]
+        _, _, h_in, w_in = x.shape
+        _, _, h_out, w_out = shape
         o0, o1 = max(0, -(-(r0 + p - k + 1) // s)), min(h_out, (r1 - 1 + p) // s + 1)
         q0, q1 = max(0, -(-(c0 + p - k + 1) // s)), min(w_out, (c1 - 1 + p) // s + 1)
         i0, i1 = s * o0 - p, s * (o1 - 1) - p + k
         j0, j1 = s * q0 - p, s * (q1 - 1) - p + k
         window = self.views(x, max(i0, 0), min(i1, h_in), max(j0, 0), min(j1, w_in))
-        pad = (max(0, -j0), max(0, j1 - w_in), max(0, -i0), max(0, i1 - h_in))
-        if any(pad):  # zero padding only where the window crosses the map's border
-            window = F.pad(window, pad)
-        return (o0, o1, q0, q1), F.conv2d(window, layer.weight, layer.bias, s)
+        if i0 < 0 or j0 < 0 or i1 > h_in or j1 > w_in:  # zero padding only where the window crosses the border
+            window = F.pad(window, (max(0, -j0), max(0, j1 - w_in), max(0, -i0), max(0, i1 - h_in)))
+        return (o0, o1, q0, q1), F.conv2d(window, weight, bias, s)
 
     @staticmethod
     def _hooked(layer: nn.Conv2d, x: torch.Tensor, buf: torch.Tensor) -> Region:
