@@ -359,7 +359,8 @@ class RegionForward:
                 skip_region: Region) -> tuple[torch.Tensor, Region]:
         """Nearest ×2 upsampling of `low` plus `skip`, on the union of their changed regions."""
         out = self.maps[name]
-        region = _union(tuple(v * 2 for v in low_region), skip_region)  # type: ignore[arg-type]
+        lr0, lr1, lc0, lc1 = low_region
+        region = _union((2 * lr0, 2 * lr1, 2 * lc0, 2 * lc1), skip_region)
         out.restore(region)
         if not _empty(region):
             r0, r1, c0, c1 = region
