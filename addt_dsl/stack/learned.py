@@ -190,6 +190,17 @@ def _empty(region: Region) -> bool:
     return region[0] >= region[1] or region[2] >= region[3]
 
 
+_INT_OF = {torch.float32: torch.int32, torch.float64: torch.int64, torch.float16: torch.int16,
+           torch.bfloat16: torch.int16}
+
+
+def _same_bits(a: tuple[torch.Tensor, ...], b: tuple[torch.Tensor, ...]) -> bool:
+    """Tensors pairwise equal bit for bit (unlike torch.equal: -0.0 is not 0.0, a NaN is itself)."""
+    return all(x.shape == y.shape and x.dtype == y.dtype and
+               torch.equal(x.contiguous().view(_INT_OF[x.dtype]), y.contiguous().view(_INT_OF[y.dtype]))
+               for x, y in zip(a, b, strict=True))
+
+
 class RegionForward:
     """`BevDetector.forward` computed where the input differs from an empty grid.
 
@@ -215,6 +226,7 @@ class RegionForward:
         self.layers = model.layers()
         self.maps: dict[str, _Map] | None = None
         self._snapshot: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
+        self._last_backgrounds: dict[str, torch.Tensor] = {}  # the last rebuild's maps, as computed
         self.views = _Views()
         # Per layer (kernel, stride, padding, weight, bias): read once, not through
         # nn.Module's attribute lookup at every call (faults flip the tensors in place).
@@ -234,31 +246,56 @@ class RegionForward:
         return self._forward(x, region)
 
     # ---- backgrounds
+    # The dense network for an empty grid, as (map, layer, inputs): a map is its layer's
+    # conv of its one input ("conv"), the ReLU of a conv's map ("relu") or a nearest x2
+    # upsampling of its first input plus its second ("up_add").
+    _GRAPH = (
+        ("backbone.conv0", "conv", ("grid",)), ("x0", "relu", ("backbone.conv0",)),
+        ("backbone.conv1", "conv", ("x0",)), ("x1", "relu", ("backbone.conv1",)),
+        ("backbone.conv2", "conv", ("x1",)), ("x2", "relu", ("backbone.conv2",)),
+        ("backbone.conv3", "conv", ("x2",)), ("x3", "relu", ("backbone.conv3",)),
+        ("neck.lateral", "conv", ("x3",)), ("u", "up_add", ("neck.lateral", "x1")),
+        ("neck.fuse", "conv", ("u",)), ("f", "relu", ("neck.fuse",)),
+        ("neck.lateral_fine", "conv", ("f",)), ("v", "up_add", ("neck.lateral_fine", "x0")),
+        ("neck.fine", "conv", ("v",)), ("g", "relu", ("neck.fine",)),
+        ("head.center", "conv", ("g",)), ("head.box", "conv", ("g",)),
+    )
+
     def _rebuild(self) -> None:
         """Backgrounds of every map (dense, no hooks) from the current weights. Maps whose
-        background did not change keep their state (a rebuild may happen mid-inference)."""
+        background did not change keep their state (a rebuild may happen mid-inference).
+
+        After a weight fault, a map is computed again only if its layer's weights or one
+        of its inputs differ bit for bit from the last rebuild's; otherwise the dense
+        computation, which is deterministic, would give the last rebuild's tensor again,
+        and that is taken. So only the layers from the flipped one on are recomputed, and
+        less where a map comes out as before (a flipped kernel weight of the first layer
+        meets only zeros)."""
+        rebuilt = self.maps is not None
+        last, old_snapshot = (self._last_backgrounds, self._snapshot) if rebuilt else ({}, {})
         self._snapshot = {n: (m.weight.detach().clone(), m.bias.detach().clone()) for n, m in self.layers.items()}
         self._geometry = {n: (m.kernel_size[0], m.stride[0], m.padding[0], m.weight, m.bias)
                           for n, m in self.layers.items()}
         weight = self.layers["backbone.conv0"].weight
-        x = torch.zeros((1, *GRID.shape), dtype=weight.dtype, device=weight.device)
-        bg: dict[str, torch.Tensor] = {}
-
-        def conv(name, t):
-            layer = self.layers[name]
-            bg[name] = F.conv2d(t, layer.weight, layer.bias, layer.stride, layer.padding)
-            return bg[name]
-
-        bg["x0"] = F.relu(conv("backbone.conv0", x))
-        bg["x1"] = F.relu(conv("backbone.conv1", bg["x0"]))
-        bg["x2"] = F.relu(conv("backbone.conv2", bg["x1"]))
-        bg["x3"] = F.relu(conv("backbone.conv3", bg["x2"]))
-        bg["u"] = F.interpolate(conv("neck.lateral", bg["x3"]), scale_factor=2.0, mode="nearest") + bg["x1"]
-        bg["f"] = F.relu(conv("neck.fuse", bg["u"]))
-        bg["v"] = F.interpolate(conv("neck.lateral_fine", bg["f"]), scale_factor=2.0, mode="nearest") + bg["x0"]
-        bg["g"] = F.relu(conv("neck.fine", bg["v"]))
-        conv("head.center", bg["g"])
-        conv("head.box", bg["g"])
+        bg: dict[str, torch.Tensor] = {"grid": torch.zeros((1, *GRID.shape), dtype=weight.dtype, device=weight.device)}
+        changed: set[str] = set()  # maps that differ bit for bit from the last rebuild's
+        for name, op, inputs in self._GRAPH:
+            if name in last and not changed.intersection(inputs) and \
+                    (op != "conv" or _same_bits(self._snapshot[name], old_snapshot[name])):
+                bg[name] = last[name]
+                continue
+            if op == "conv":
+                layer = self.layers[name]
+                t = F.conv2d(bg[inputs[0]], layer.weight, layer.bias, layer.stride, layer.padding)
+            elif op == "relu":
+                t = F.relu(bg[inputs[0]])
+            else:
+                t = F.interpolate(bg[inputs[0]], scale_factor=2.0, mode="nearest") + bg[inputs[1]]
+            bg[name] = t
+            if name not in last or not _same_bits((t,), (last[name],)):
+                changed.add(name)
+        del bg["grid"]
+        self._last_backgrounds = bg
         old = self.maps or {}
         self.maps = {k: old[k] if k in old and torch.equal(old[k].background, t) else _Map(t, self.views)
                      for k, t in bg.items()}
