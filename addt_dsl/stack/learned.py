@@ -165,13 +165,23 @@ class _Map:
     """One feature map kept across inferences: equal to its background (the map for an
     empty grid) except inside `dirty`, so the next frame restores only that region."""
 
-    __slots__ = ("background", "buf", "dirty", "views")
+    __slots__ = ("background", "buf", "dirty", "views", "_nan_free")
 
     def __init__(self, background: torch.Tensor, views: _Views):
         self.background = background
         self.buf = background.clone()
         self.dirty = EMPTY
         self.views = views
+        self._nan_free: bool | None = None
+
+    def equals(self, background: torch.Tensor) -> bool:
+        """`torch.equal(self.background, background)`; for the same tensor (a rebuild that
+        left this map as it was) that is whether it holds no NaN, found once."""
+        if background is not self.background:
+            return torch.equal(self.background, background)
+        if self._nan_free is None:
+            self._nan_free = torch.equal(background, background)
+        return self._nan_free
 
     def restore(self, keep: Region = EMPTY) -> None:
         """Back to the background, except that the caller will overwrite `keep` next."""
@@ -291,14 +301,15 @@ class RegionForward:
                 t = F.relu(bg[inputs[0]])
             else:
                 t = F.interpolate(bg[inputs[0]], scale_factor=2.0, mode="nearest") + bg[inputs[1]]
-            bg[name] = t
-            if name not in last or not _same_bits((t,), (last[name],)):
+            if name in last and _same_bits((t,), (last[name],)):
+                bg[name] = last[name]  # the same bits: keep the tensor (and the maps that hold it)
+            else:
+                bg[name] = t
                 changed.add(name)
         del bg["grid"]
         self._last_backgrounds = bg
         old = self.maps or {}
-        self.maps = {k: old[k] if k in old and torch.equal(old[k].background, t) else _Map(t, self.views)
-                     for k, t in bg.items()}
+        self.maps = {k: old[k] if k in old and old[k].equals(t) else _Map(t, self.views) for k, t in bg.items()}
 
     def _weights_changed(self, name: str) -> bool:
         layer = self.layers[name]
