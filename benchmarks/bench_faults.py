@@ -318,7 +318,8 @@ def main() -> None:
                 print(f"{k:52s} {t * 1000:8.0f} {t / base:7.3f} {events[k]:6d}")
         costs = tensor["per_flip"] = tensor_flip_costs(args.repeat)
         per_sim_s_us = 1e6 * base / DURATION_S
-        print(f"\nper flip, replayed on the detector alone ({costs['frames']} lidar frames of that run; uptime: {uptime()}):\n"
+        print(f"\nper flip, replayed on the detector alone ({costs['frames']} lidar frames of that run; "
+              f"uptime: {uptime()}):\n"
               f"  detect {costs['detect_us']:.0f} us a frame; with a flip in {TENSOR_SITE}'s output every frame "
               f"{costs['detect_flipped_us']:.0f} us (+{costs['detect_flipped_us'] - costs['detect_us']:.0f} us: the "
               f"widened region), of which the flip itself {costs['flip_us']:.1f} us\n"
