@@ -17,7 +17,8 @@ fault-free) with ground-truth and learned perception, runs interleaved, `uptime`
 before and after (issue 22's target: learned >= 150x in every family); then one timed
 learned run per family split into lidar, grid, network (and the conv calls inside it),
 decoding and the rest of the loop, and Table 1's time with learned perception on 2 cores
-estimated from the CPU factors.
+estimated from the CPU factors; last, per detector layer, how many conv window shapes give
+other bits than a larger window (why the region forward's windows are fixed by the traces).
 """
 
 from __future__ import annotations
@@ -137,7 +138,42 @@ def main() -> None:
             print(f"  {label:<28} {len(samples):>6} {1e6 * total / len(samples):>9.1f} {1e3 * total:>8.1f} "
                   f"{100 * total / cpu:>5.0f}%")
     figures["rtf_families"] = families(args.repeats)
+    figures["conv_window_shapes_with_other_bits"] = window_dependence()
     figures_json.write(args.json, figures)
+
+
+def window_dependence() -> dict[str, int]:
+    """Why the region forward's conv windows are fixed by the traces: per detector layer,
+    how many of 128 window shapes (1-13 output cells a side, two offsets) give other bits
+    than the same cells of a 20x20 window's conv on the same backend, on random input."""
+    import itertools
+
+    import torch
+    import torch.nn.functional as F
+
+    from addt_dsl.stack.learned import load_model
+
+    model, _ = load_model()
+    torch.manual_seed(0)
+    out = {}
+    with torch.inference_mode():
+        for name, layer in model.layers().items():
+            k, s = layer.kernel_size[0], layer.stride[0]
+            big = torch.randn(1, layer.in_channels, 20 * s + k - 1, 20 * s + k - 1)
+            # The reference on the same backend as the small windows' (aten's im2col + MKL
+            # sgemm; F.conv2d would take oneDNN for an input this large).
+            ref = torch.ops.aten._slow_conv2d_forward(big, layer.weight, layer.kernel_size, layer.bias,
+                                                      layer.stride, (0, 0))
+            differ = 0
+            for (h, w), (o, q) in itertools.product(itertools.product((1, 2, 3, 4, 5, 7, 9, 13), repeat=2),
+                                                    ((0, 0), (3, 5))):
+                window = big[:, :, o * s:o * s + (h - 1) * s + k, q * s:q * s + (w - 1) * s + k]
+                differ += not torch.equal(F.conv2d(window, layer.weight, layer.bias, s),
+                                          ref[:, :, o:o + h, q:q + w])
+            out[name] = differ
+    print("conv window shapes (of 128) whose cells get other bits than in a 20x20 window, per layer: "
+          + ", ".join(f"{n} {d}" for n, d in out.items()))
+    return out
 
 
 def families(repeats: int) -> dict:
