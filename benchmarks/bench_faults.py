@@ -13,7 +13,9 @@ frame every 0.1 s): (a) a fault whose window is the last second against the faul
 window, as a window over the whole run with 1 flip a second and with 10 (one per lidar frame
 on average). A flipped activation far from the points widens the changed region that the
 following layers compute (the flip's effect is computed, not skipped): that, not the hook,
-is most of (b).
+is most of (b). (c) The same per flip, replayed on the detector alone over that run's lidar
+frames (steadier than whole-run ratios on a loaded machine): the added inference time, the
+XOR itself, and the empty-grid rebuild after a weight flip.
 
 Run: PYTHONPATH=. python benchmarks/bench_faults.py [--repeat 7] [--kinds random_value,stuck]
 """
@@ -177,6 +179,77 @@ def tensor_faults(repeat: int) -> tuple[dict[str, float], dict[str, int]]:
     return best, events
 
 
+def tensor_flip_costs(repeat: int) -> dict[str, float]:
+    """CPU microseconds a tensor flip adds, replayed on the detector alone: the lidar frames
+    of the learned `TENSOR_FAMILY` run go through `LearnedPerception.detect` (least of
+    `repeat` passes), without flips and with one flip in `TENSOR_SITE`'s output per frame
+    (element and bit uniform); the XOR itself (`flip_bit_`); the rebuild of the empty-grid
+    maps after a weight flip of the site (mantissa bits), and recomputing every map as before."""
+    import torch
+
+    from addt_dsl.runtime.faults.tensor import flip_bit_
+    from addt_dsl.stack import learned
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from _families import family_spec
+
+    torch.set_num_threads(1)
+    frames = []
+    build = learned.build_grid_region
+
+    def capture(points, sensor_xy, out=None):
+        frames.append((points.copy(), sensor_xy))
+        return build(points, sensor_xy, out=out)
+
+    learned.build_grid_region = capture
+    try:
+        execute(family_spec(TENSOR_FAMILY, "learned", DURATION_S, seed=1), keep_trace=False)
+    finally:
+        learned.build_grid_region = build
+    node = learned.LearnedPerception({})
+    rng = np.random.default_rng(0)
+    numel = node.site_numel(TENSOR_SITE, "activations")
+    picks = [(int(rng.integers(numel)), int(rng.integers(32))) for _ in frames]
+
+    def per_frame(flip: bool) -> float:
+        best = float("inf")
+        for _ in range(repeat):
+            t = 0.0
+            for (points, sensor_xy), (k, bit) in zip(frames, picks, strict=True):
+                if flip:
+                    node.flip_activation_bits(TENSOR_SITE, [k], [bit])
+                t0 = time.thread_time()
+                node.detect(points, sensor_xy)
+                t += time.thread_time() - t0
+            best = min(best, t / len(frames))
+        return best
+
+    out = {"frames": len(frames), "detect_us": 1e6 * per_frame(False), "detect_flipped_us": 1e6 * per_frame(True)}
+    buf = torch.zeros(1, 32, 76, 32)
+    t0 = time.thread_time()
+    for k, bit in picks:
+        flip_bit_(buf, k, bit)
+    out["flip_us"] = 1e6 * (time.thread_time() - t0) / len(picks)
+    # Weight flips as the fault's pre-hook leaves them: in place, then the maps rebuilt.
+    forward, layer = node._forward, node._layer(TENSOR_SITE)
+    n_w = layer.weight.numel() + layer.bias.numel()
+    for label, full in (("rebuild_us", False), ("full_rebuild_us", True)):
+        times = []
+        with torch.inference_mode():
+            for _ in range(10 * repeat):
+                k = int(rng.integers(n_w))
+                flip_bit_(layer.weight.data if k < layer.weight.numel() else layer.bias.data,
+                          k % layer.weight.numel() if k < layer.weight.numel() else k - layer.weight.numel(),
+                          int(rng.integers(23)))  # mantissa bits: the network stays finite
+                if full:
+                    forward._last_backgrounds = {}  # every map recomputed, as before
+                t0 = time.thread_time()
+                forward._rebuild()
+                times.append(time.thread_time() - t0)
+        out[label] = 1e6 * float(np.median(times))
+    return out
+
+
 def closed_loop_and_camera(args, kinds, figures: dict) -> None:
     best, events = closed_loop(args.repeat, kinds)
     base = best["none"]
@@ -243,6 +316,17 @@ def main() -> None:
             if k != "none":
                 figures["overhead"][f"bitflip tensor {k}"] = t / base - 1.0
                 print(f"{k:52s} {t * 1000:8.0f} {t / base:7.3f} {events[k]:6d}")
+        costs = tensor["per_flip"] = tensor_flip_costs(args.repeat)
+        per_sim_s_us = 1e6 * base / DURATION_S
+        print(f"\nper flip, replayed on the detector alone ({costs['frames']} lidar frames of that run; "
+              f"uptime: {uptime()}):\n"
+              f"  detect {costs['detect_us']:.0f} us a frame; with a flip in {TENSOR_SITE}'s output every frame "
+              f"{costs['detect_flipped_us']:.0f} us (+{costs['detect_flipped_us'] - costs['detect_us']:.0f} us: the "
+              f"widened region), of which the flip itself {costs['flip_us']:.1f} us\n"
+              f"  = {100 * (costs['detect_flipped_us'] - costs['detect_us']) / per_sim_s_us:.1f} % of the fault-free "
+              f"run per flip a second\n"
+              f"  weight flip: empty-grid maps rebuilt in {costs['rebuild_us']:.0f} us "
+              f"(recomputing every map: {costs['full_rebuild_us']:.0f} us), median")
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=2) + "\n")
 

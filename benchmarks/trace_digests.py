@@ -12,6 +12,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _families import PAPER_FAMILIES, family_spec  # noqa: E402
 from bench_dense import dense_source  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,6 +49,15 @@ def specs():
             yield f"dense{n}-{perception}", expand(compile_source(src).plan).specs[0]
     yield "dense-ties", expand(compile_source(dense_source(12, ties=True, duration=6.0)).plan).specs[0]
     yield "dense-lanechange", expand(compile_source(dense_source(15, lane_changes=True, duration=8.0)).plan).specs[0]
+    # The paper families with the learned detector (bench_stack.py's runs), and tensor faults on it.
+    for family in PAPER_FAMILIES:
+        yield f"family-{family}-learned", family_spec(family, "learned")
+    site = "perception.backbone.conv0"
+    for label, faults in (("activations-10hz", f"bitflip {site} tensor activations count 300"),
+                          ("activations-last-second", f"during [29 s, 30 s] bitflip {site} tensor activations"),
+                          ("weights-1hz", f"bitflip {site} tensor weights count 30"),
+                          ("fine-activations-1hz", "bitflip perception.neck.fine tensor activations count 30")):
+        yield f"family-following-learned-{label}", family_spec("following", "learned", faults=faults)
 
 
 def main() -> None:

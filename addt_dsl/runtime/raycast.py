@@ -32,13 +32,17 @@ def box_rotations(heading: np.ndarray, pitch: np.ndarray) -> np.ndarray:
 
 
 def cast(starts: np.ndarray, ends: np.ndarray, centres: np.ndarray, rotations: np.ndarray,
-         half_extents: np.ndarray, plane_z: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+         half_extents: np.ndarray, plane_z: float | None = None,
+         plane_hits: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """First hit of each segment starts[i] → ends[i] (N×3) among M boxes and a plane.
 
     Boxes: `centres` (M×3), `rotations` (M×3×3, columns are the box axes in the world),
     `half_extents` (M×3). `plane_z`: height of the horizontal ground plane, or None.
     Returns (index, fraction): index k < M for box k, M for the plane, -1 for no hit
-    (fraction 1.0 there).
+    (fraction 1.0 there). With `plane_hits=False` the plane only hides boxes behind it: a
+    ray whose first hit is the plane reports -1 as well (for a caller that drops ground
+    hits), and the plane is tested on the rays that meet a box only, with the same
+    arithmetic (a lidar scan's rays mostly end on the ground or nowhere).
     """
     n, m = len(starts), len(centres)
     best = np.full(n, np.inf)
@@ -58,13 +62,17 @@ def cast(starts: np.ndarray, ends: np.ndarray, centres: np.ndarray, rotations: n
             best[rays[first]] = t[first]
             index[rays[first]] = boxes[first]
     if plane_z is not None and n:
-        above_start, above_end = starts[:, 2] - plane_z, ends[:, 2] - plane_z
+        rays = slice(None) if plane_hits else np.flatnonzero(index >= 0)
+        above_start, above_end = starts[rays, 2] - plane_z, ends[rays, 2] - plane_z
         with np.errstate(divide="ignore", invalid="ignore"):
             t = above_start / (above_start - above_end)
         # Strictly crossing, as Bullet's triangle ray test: an endpoint on the plane is no hit.
-        closer = (above_start * above_end < 0.0) & (t < best)
-        best[closer] = t[closer]
-        index[closer] = m
+        closer = (above_start * above_end < 0.0) & (t < best[rays])
+        if plane_hits:
+            best[closer] = t[closer]
+            index[closer] = m
+        else:
+            index[rays[closer]] = -1
     frac = np.where(index >= 0, best, 1.0)
     return index, frac
 

@@ -162,9 +162,9 @@ class PhysicsWorld:
 
     def ray_cast(self, starts: np.ndarray, ends: np.ndarray, ignore: str | None = None):
         """Batched rays; returns (body ids, -1 for none, the ground or the ignored body; hit fractions)."""
-        if self.analytic:
+        if self.analytic:  # ground hits are dropped below: the plane need only hide boxes
             ids, frac = self._ray_cast_analytic(np.asarray(starts, dtype=np.float64),
-                                                np.asarray(ends, dtype=np.float64))
+                                                np.asarray(ends, dtype=np.float64), ground_hits=False)
         else:
             ids, frac = self._ray_cast_pybullet(starts, ends)
         ground = np.isin(ids, self._ground_array) if len(self._ground_array) > 1 else ids == self.ground
@@ -174,13 +174,15 @@ class PhysicsWorld:
         frac[ids < 0] = 1.0
         return ids, frac
 
-    def _ray_cast_analytic(self, starts: np.ndarray, ends: np.ndarray):
+    def _ray_cast_analytic(self, starts: np.ndarray, ends: np.ndarray, ground_hits: bool = True):
+        """`raycast.cast` on the boxes and the ground plane; with `ground_hits=False` a ray
+        whose first hit is the ground reports -1 (no hit)."""
         from addt_dsl.runtime import raycast
 
         pose = np.array(self._box_pose, dtype=np.float64).reshape(-1, 5)
         half = np.array(self._box_half, dtype=np.float64).reshape(-1, 3)
         index, frac = raycast.cast(starts, ends, pose[:, :3], raycast.box_rotations(pose[:, 3], pose[:, 4]),
-                                   half, self._ground_z)
+                                   half, self._ground_z, plane_hits=ground_hits)
         ids = np.append(self._box_ids, self.ground)[index]
         ids[index < 0] = -1
         return ids, frac

@@ -150,7 +150,8 @@ def build_grid_region(points_vehicle: np.ndarray, sensor_xy: tuple[float, float]
     views[1, cells] = np.bincount(inv, fx - ix - 0.5, m) / n
     views[2, cells] = np.bincount(inv, fy - iy - 0.5, m) / n
     order = np.lexsort((pz, inv))  # by cell, then height: each cell's last point is its highest
-    last = np.flatnonzero(np.r_[inv[order][1:] != inv[order][:-1], True])
+    by_cell = inv[order]
+    last = np.flatnonzero(np.r_[by_cell[1:] != by_cell[:-1], True])
     views[3, cells] = pz[order][last] / 2.0
     views[4, cells] = np.bincount(inv, rx / rnorm, m) / n
     views[5, cells] = np.bincount(inv, ry / rnorm, m) / n

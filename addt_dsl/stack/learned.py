@@ -165,13 +165,23 @@ class _Map:
     """One feature map kept across inferences: equal to its background (the map for an
     empty grid) except inside `dirty`, so the next frame restores only that region."""
 
-    __slots__ = ("background", "buf", "dirty", "views")
+    __slots__ = ("background", "buf", "dirty", "views", "_nan_free")
 
     def __init__(self, background: torch.Tensor, views: _Views):
         self.background = background
         self.buf = background.clone()
         self.dirty = EMPTY
         self.views = views
+        self._nan_free: bool | None = None
+
+    def equals(self, background: torch.Tensor) -> bool:
+        """`torch.equal(self.background, background)`; for the same tensor (a rebuild that
+        left this map as it was) that is whether it holds no NaN, found once."""
+        if background is not self.background:
+            return torch.equal(self.background, background)
+        if self._nan_free is None:
+            self._nan_free = torch.equal(background, background)
+        return self._nan_free
 
     def restore(self, keep: Region = EMPTY) -> None:
         """Back to the background, except that the caller will overwrite `keep` next."""
@@ -188,6 +198,17 @@ class _Map:
 
 def _empty(region: Region) -> bool:
     return region[0] >= region[1] or region[2] >= region[3]
+
+
+_INT_OF = {torch.float32: torch.int32, torch.float64: torch.int64, torch.float16: torch.int16,
+           torch.bfloat16: torch.int16}
+
+
+def _same_bits(a: tuple[torch.Tensor, ...], b: tuple[torch.Tensor, ...]) -> bool:
+    """Tensors pairwise equal bit for bit (unlike torch.equal: -0.0 is not 0.0, a NaN is itself)."""
+    return all(x.shape == y.shape and x.dtype == y.dtype and
+               torch.equal(x.contiguous().view(_INT_OF[x.dtype]), y.contiguous().view(_INT_OF[y.dtype]))
+               for x, y in zip(a, b, strict=True))
 
 
 class RegionForward:
@@ -215,7 +236,11 @@ class RegionForward:
         self.layers = model.layers()
         self.maps: dict[str, _Map] | None = None
         self._snapshot: dict[str, tuple[torch.Tensor, torch.Tensor]] = {}
+        self._last_backgrounds: dict[str, torch.Tensor] = {}  # the last rebuild's maps, as computed
         self.views = _Views()
+        # Per layer (kernel, stride, padding, weight, bias): read once, not through
+        # nn.Module's attribute lookup at every call (faults flip the tensors in place).
+        self._geometry: dict[str, tuple] = {}
 
     def invalidate(self) -> None:
         """Weights changed: rebuild the backgrounds at the next inference."""
@@ -231,32 +256,60 @@ class RegionForward:
         return self._forward(x, region)
 
     # ---- backgrounds
+    # The dense network for an empty grid, as (map, layer, inputs): a map is its layer's
+    # conv of its one input ("conv"), the ReLU of a conv's map ("relu") or a nearest x2
+    # upsampling of its first input plus its second ("up_add").
+    _GRAPH = (
+        ("backbone.conv0", "conv", ("grid",)), ("x0", "relu", ("backbone.conv0",)),
+        ("backbone.conv1", "conv", ("x0",)), ("x1", "relu", ("backbone.conv1",)),
+        ("backbone.conv2", "conv", ("x1",)), ("x2", "relu", ("backbone.conv2",)),
+        ("backbone.conv3", "conv", ("x2",)), ("x3", "relu", ("backbone.conv3",)),
+        ("neck.lateral", "conv", ("x3",)), ("u", "up_add", ("neck.lateral", "x1")),
+        ("neck.fuse", "conv", ("u",)), ("f", "relu", ("neck.fuse",)),
+        ("neck.lateral_fine", "conv", ("f",)), ("v", "up_add", ("neck.lateral_fine", "x0")),
+        ("neck.fine", "conv", ("v",)), ("g", "relu", ("neck.fine",)),
+        ("head.center", "conv", ("g",)), ("head.box", "conv", ("g",)),
+    )
+
     def _rebuild(self) -> None:
         """Backgrounds of every map (dense, no hooks) from the current weights. Maps whose
-        background did not change keep their state (a rebuild may happen mid-inference)."""
+        background did not change keep their state (a rebuild may happen mid-inference).
+
+        After a weight fault, a map is computed again only if its layer's weights or one
+        of its inputs differ bit for bit from the last rebuild's; otherwise the dense
+        computation, which is deterministic, would give the last rebuild's tensor again,
+        and that is taken. So only the layers from the flipped one on are recomputed, and
+        less where a map comes out as before (a flipped kernel weight of the first layer
+        meets only zeros)."""
+        rebuilt = self.maps is not None
+        last, old_snapshot = (self._last_backgrounds, self._snapshot) if rebuilt else ({}, {})
         self._snapshot = {n: (m.weight.detach().clone(), m.bias.detach().clone()) for n, m in self.layers.items()}
+        self._geometry = {n: (m.kernel_size[0], m.stride[0], m.padding[0], m.weight, m.bias)
+                          for n, m in self.layers.items()}
         weight = self.layers["backbone.conv0"].weight
-        x = torch.zeros((1, *GRID.shape), dtype=weight.dtype, device=weight.device)
-        bg: dict[str, torch.Tensor] = {}
-
-        def conv(name, t):
-            layer = self.layers[name]
-            bg[name] = F.conv2d(t, layer.weight, layer.bias, layer.stride, layer.padding)
-            return bg[name]
-
-        bg["x0"] = F.relu(conv("backbone.conv0", x))
-        bg["x1"] = F.relu(conv("backbone.conv1", bg["x0"]))
-        bg["x2"] = F.relu(conv("backbone.conv2", bg["x1"]))
-        bg["x3"] = F.relu(conv("backbone.conv3", bg["x2"]))
-        bg["u"] = F.interpolate(conv("neck.lateral", bg["x3"]), scale_factor=2.0, mode="nearest") + bg["x1"]
-        bg["f"] = F.relu(conv("neck.fuse", bg["u"]))
-        bg["v"] = F.interpolate(conv("neck.lateral_fine", bg["f"]), scale_factor=2.0, mode="nearest") + bg["x0"]
-        bg["g"] = F.relu(conv("neck.fine", bg["v"]))
-        conv("head.center", bg["g"])
-        conv("head.box", bg["g"])
+        bg: dict[str, torch.Tensor] = {"grid": torch.zeros((1, *GRID.shape), dtype=weight.dtype, device=weight.device)}
+        changed: set[str] = set()  # maps that differ bit for bit from the last rebuild's
+        for name, op, inputs in self._GRAPH:
+            if name in last and not changed.intersection(inputs) and \
+                    (op != "conv" or _same_bits(self._snapshot[name], old_snapshot[name])):
+                bg[name] = last[name]
+                continue
+            if op == "conv":
+                layer = self.layers[name]
+                t = F.conv2d(bg[inputs[0]], layer.weight, layer.bias, layer.stride, layer.padding)
+            elif op == "relu":
+                t = F.relu(bg[inputs[0]])
+            else:
+                t = F.interpolate(bg[inputs[0]], scale_factor=2.0, mode="nearest") + bg[inputs[1]]
+            if name in last and _same_bits((t,), (last[name],)):
+                bg[name] = last[name]  # the same bits: keep the tensor (and the maps that hold it)
+            else:
+                bg[name] = t
+                changed.add(name)
+        del bg["grid"]
+        self._last_backgrounds = bg
         old = self.maps or {}
-        self.maps = {k: old[k] if k in old and torch.equal(old[k].background, t) else _Map(t, self.views)
-                     for k, t in bg.items()}
+        self.maps = {k: old[k] if k in old and old[k].equals(t) else _Map(t, self.views) for k, t in bg.items()}
 
     def _weights_changed(self, name: str) -> bool:
         layer = self.layers[name]
@@ -272,7 +325,7 @@ class RegionForward:
             if self._weights_changed(name):  # a persistent weight fault
                 self._rebuild()
         out = self.maps[name]
-        cells, result = self._window(layer, x, region, out.buf.shape)
+        cells, result = self._window(name, x, region, out.buf.shape)
         out.restore(cells)
         if result is not None:
             out.at(cells).copy_(result)
@@ -290,7 +343,7 @@ class RegionForward:
             a, r = self._conv(name, x, region)
             return self._relu(relu, a, r), r
         self.maps[name].restore()  # after a hooked frame: back to the background once
-        cells, result = self._window(layer, x, region, self.maps[name].buf.shape)
+        cells, result = self._window(name, x, region, self.maps[name].buf.shape)
         out = self.maps[relu]
         out.restore(cells)
         if result is None:
@@ -299,24 +352,23 @@ class RegionForward:
         out.dirty = cells
         return out.buf, cells
 
-    def _window(self, layer: nn.Conv2d, x: torch.Tensor, region: Region, shape) -> tuple[Region, torch.Tensor | None]:
-        """The output cells of `layer` whose k×k window (stride s, padding p) meets the
+    def _window(self, name: str, x: torch.Tensor, region: Region, shape) -> tuple[Region, torch.Tensor | None]:
+        """The output cells of layer `name` whose k×k window (stride s, padding p) meets the
         changed input `region`, and the conv on them (EMPTY, None for an empty region)."""
-        if _empty(region):
-            return EMPTY, None
-        k, s, p = layer.kernel_size[0], layer.stride[0], layer.padding[0]
-        h_in, w_in = x.shape[-2:]
-        h_out, w_out = shape[-2:]
         r0, r1, c0, c1 = region
+        if r0 >= r1 or c0 >= c1:
+            return EMPTY, None
+        k, s, p, weight, bias = self._geometry[name]
+        _, _, h_in, w_in = x.shape
+        _, _, h_out, w_out = shape
         o0, o1 = max(0, -(-(r0 + p - k + 1) // s)), min(h_out, (r1 - 1 + p) // s + 1)
         q0, q1 = max(0, -(-(c0 + p - k + 1) // s)), min(w_out, (c1 - 1 + p) // s + 1)
         i0, i1 = s * o0 - p, s * (o1 - 1) - p + k
         j0, j1 = s * q0 - p, s * (q1 - 1) - p + k
         window = self.views(x, max(i0, 0), min(i1, h_in), max(j0, 0), min(j1, w_in))
-        pad = (max(0, -j0), max(0, j1 - w_in), max(0, -i0), max(0, i1 - h_in))
-        if any(pad):  # zero padding only where the window crosses the map's border
-            window = F.pad(window, pad)
-        return (o0, o1, q0, q1), F.conv2d(window, layer.weight, layer.bias, s)
+        if i0 < 0 or j0 < 0 or i1 > h_in or j1 > w_in:  # zero padding only where the window crosses the border
+            window = F.pad(window, (max(0, -j0), max(0, j1 - w_in), max(0, -i0), max(0, i1 - h_in)))
+        return (o0, o1, q0, q1), F.conv2d(window, weight, bias, s)
 
     @staticmethod
     def _hooked(layer: nn.Conv2d, x: torch.Tensor, buf: torch.Tensor) -> Region:
@@ -355,7 +407,8 @@ class RegionForward:
                 skip_region: Region) -> tuple[torch.Tensor, Region]:
         """Nearest ×2 upsampling of `low` plus `skip`, on the union of their changed regions."""
         out = self.maps[name]
-        region = _union(tuple(v * 2 for v in low_region), skip_region)  # type: ignore[arg-type]
+        lr0, lr1, lc0, lc1 = low_region
+        region = _union((2 * lr0, 2 * lr1, 2 * lc0, 2 * lc1), skip_region)
         out.restore(region)
         if not _empty(region):
             r0, r1, c0, c1 = region

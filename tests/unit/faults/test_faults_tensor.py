@@ -94,6 +94,26 @@ def test_flip_bit_on_a_non_contiguous_view_edits_the_right_element():
     assert int((base.view(torch.int32) != 0).sum()) == 1
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float16, torch.float64])
+def test_flip_bit_contiguous_cpu_path_equals_the_strided_one(dtype):
+    # Contiguous CPU tensors flip through a numpy view, others through torch indexing:
+    # the same element, bits and reported values (NaN and inf included) either way.
+    rng = np.random.default_rng(3)
+    width = torch.finfo(dtype).bits
+    data = torch.from_numpy(rng.normal(size=(2, 5, 7)) * 1e3).to(dtype)
+    data.view(-1)[:3] = torch.tensor([float("nan"), float("inf"), 0.0], dtype=dtype)
+    fast = data.clone()
+    slow = data.clone().transpose(0, 2).contiguous().transpose(0, 2)  # same values, not contiguous
+    assert fast.is_contiguous() and not slow.is_contiguous()
+    for k, bit in zip(rng.integers(fast.numel(), size=60).tolist() + [0, 1, 2], rng.integers(width, size=63).tolist()):
+        got, want = flip_bit_(fast, k, bit), flip_bit_(slow, k, bit)
+        assert np.array_equal(np.array(got), np.array(want), equal_nan=True)
+    itype = {16: torch.int16, 32: torch.int32, 64: torch.int64}[width]
+    assert torch.equal(fast.view(itype), slow.contiguous().view(itype))
+    with pytest.raises(ValueError):
+        flip_bit_(fast, fast.numel(), 0)
+
+
 def test_flip_bit_rejects_integer_tensors():
     with pytest.raises(TypeError):
         flip_bit_(torch.zeros(3, dtype=torch.int32), 0, 1)

@@ -133,3 +133,40 @@ def test_a_flip_that_changes_nothing_leaves_no_changed_region():
     layer2.register_forward_hook(Hook([(20 + 2 * 5 + 3, 30), (6, 0)]))
     # Element 33: channel 1, row 2, column 3; element 6: channel 0, row 1, column 1.
     assert RegionForward._hooked(layer2, buf, buf) == (1, 3, 1, 4)
+
+
+@pytest.mark.parametrize("target, settings", [
+    ("perception.backbone.conv0", {"count": 12}),  # mostly kernel weights: the maps come out as before
+    ("perception.backbone.conv0", {"count": 6, "field": "exponent"}),
+    ("perception.neck.fuse", {"count": 8}),
+    ("perception.head.box", {"count": 5, "field": "sign"}),
+])
+def test_weight_flips_recompute_only_what_changes_with_the_same_bits(frames, monkeypatch, target, settings):
+    """A weight fault rebuilds the maps for an empty grid from the flipped layer on, and
+    stops where a map comes out bit for bit as before; the head outputs, frame after
+    frame, are those of recomputing every map at every rebuild."""
+    from addt_dsl.stack import learned
+
+    faults = [_fault(target, 0.5, 4.0, tensor="weights", **settings),
+              _fault("perception.backbone.conv2", 2.0, 3.0, seed=5, tensor="weights", count=2, bit=31)]
+    convs = []
+    conv2d = learned.F.conv2d
+    monkeypatch.setattr(learned.F, "conv2d", lambda *a, **k: convs.append(1) or conv2d(*a, **k))
+    _, new_events, new_out, _ = _run(frames, faults)
+    calls_new = len(convs)  # the same windows both ways (same outputs): the difference is the rebuilds'
+    convs.clear()
+    rebuild = learned.RegionForward._rebuild
+
+    def rebuild_all(self):  # every map recomputed at every rebuild, as before
+        self._last_backgrounds = {}
+        rebuild(self)
+
+    monkeypatch.setattr(learned.RegionForward, "_rebuild", rebuild_all)
+    _, old_events, old_out, _ = _run(frames, faults)
+    calls_old = len(convs)
+    assert len(new_events) == settings["count"] + 2
+    assert repr(new_events) == repr(old_events)
+    for (h_new, b_new), (h_old, b_old) in zip(new_out, old_out, strict=True):
+        assert torch.equal(h_new.view(torch.int32), h_old.view(torch.int32))
+        assert torch.equal(b_new.view(torch.int32), b_old.view(torch.int32))
+    assert calls_new < calls_old

@@ -235,3 +235,25 @@ def test_boxes_beyond_the_scan_change_no_ray(seed, n_boxes):
                                        centres, rot, half, 0.0)
     assert np.array_equal(index, ref_index[:-1])
     assert np.array_equal(frac, ref_frac[:-1])
+
+
+@given(st.integers(0, 2**31 - 1), st.integers(0, 30))
+def test_plane_that_only_hides_boxes_answers_as_ground_hits_dropped(seed, n_boxes):
+    """`plane_hits=False` (the plane tested on box-hitting rays only) gives bit for bit what
+    the full test gives once ground hits are dropped (-1, fraction 1.0), as the lidar drops them."""
+    rng = np.random.default_rng(seed)
+    centres = np.column_stack([rng.uniform(-60.0, 60.0, n_boxes), rng.uniform(-12.0, 12.0, n_boxes),
+                               rng.uniform(0.3, 1.5, n_boxes)])  # some poke below the plane
+    half = np.column_stack([rng.uniform(0.3, 6.0, n_boxes), rng.uniform(0.3, 1.3, n_boxes),
+                            rng.uniform(0.3, 1.8, n_boxes)])
+    rot = raycast.box_rotations(rng.uniform(-math.pi, math.pi, n_boxes), rng.uniform(-0.2, 0.2, n_boxes))
+    az, el = np.meshgrid(np.linspace(-math.pi, math.pi, 360, endpoint=False), np.radians([-6, -3, 0, 3, 6]))
+    dirs = np.column_stack([(np.cos(el) * np.cos(az)).ravel(), (np.cos(el) * np.sin(az)).ravel(), np.sin(el).ravel()])
+    starts = np.tile([rng.uniform(-5.0, 5.0), 0.0, rng.uniform(0.5, 2.0)], (len(dirs), 1))
+    ends = starts + 80.0 * dirs
+    index, frac = raycast.cast(starts, ends, centres, rot, half, 0.0)
+    ground = index == n_boxes
+    index[ground], frac[ground] = -1, 1.0
+    index_hide, frac_hide = raycast.cast(starts, ends, centres, rot, half, 0.0, plane_hits=False)
+    assert np.array_equal(index_hide, index)
+    assert np.array_equal(frac_hide, frac)
