@@ -39,8 +39,10 @@ short (docs/openscenario.md has the full table):
 
 from __future__ import annotations
 
+import datetime
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -765,6 +767,17 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
 
 # ---------------------------------------------------------------- entry point
 
+def creation_date() -> datetime.datetime:
+    """The FileHeader's date: `SOURCE_DATE_EPOCH` (the reproducible-builds convention) when
+    set, else the Unix epoch, so that exporting one RunSpec twice gives the same bytes (an
+    exported counterexample diffs clean in version control)."""
+    try:
+        epoch_s = int(os.environ.get("SOURCE_DATE_EPOCH", "0"))
+    except ValueError:
+        epoch_s = 0
+    return datetime.datetime.fromtimestamp(epoch_s, tz=datetime.timezone.utc).replace(tzinfo=None)
+
+
 def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> Export:
     """Write `<stem>.xosc`, its OpenDRIVE file and `<stem>.addt.json` into `out_dir`."""
     pinned = pin_spec(spec)
@@ -828,7 +841,8 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
         network.add_traffic_signal_controller(ctl)
     sidecar = _sidecar(run, pinned)
     scenario = xosc.Scenario(plan.name, "addt-dsl", params, entities, storyboard,
-                             network, xosc.Catalog(), osc_minor_version=OSC_MINOR)
+                             network, xosc.Catalog(), osc_minor_version=OSC_MINOR,
+                             creation_date=creation_date())
     xosc_path = out / f"{stem}.xosc"
     xodr_path = out / roads.name
     sidecar_path = out / f"{stem}.addt.json"

@@ -267,3 +267,17 @@ def test_lamp_states_follow_the_signal_type():
             assert state_of_lamps(lamps, lamp_state(lamps, state)) == state
     assert state_of_lamps(car, "off;flashing;off") == "yellow" and state_of_lamps(car, "Amber") == "yellow"
     assert state_of_lamps(car, "on;on;off") is None and state_of_lamps(car, "on;off") is None
+
+
+def test_exporting_twice_gives_the_same_bytes(tmp_path, monkeypatch):
+    path = EXAMPLES / "red_light_runner.addt"
+    spec = expand(compile_file(path).plan).specs[0]
+    first = export_run(spec, tmp_path / "a", "s")
+    second = export_run(spec, tmp_path / "b", "s")
+    for name in ("xosc_path", "xodr_path", "sidecar_path"):
+        assert getattr(first, name).read_bytes() == getattr(second, name).read_bytes()
+    header = DET.parse(first.xosc_path).getroot().find("FileHeader")
+    assert header.get("date") == "1970-01-01T00:00:00"
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1764115200")  # 2025-11-26 00:00 UTC
+    third = export_run(spec, tmp_path / "c", "s")
+    assert DET.parse(third.xosc_path).getroot().find("FileHeader").get("date") == "2025-11-26T00:00:00"
