@@ -138,14 +138,15 @@ def bench_scenario(path: Path, args) -> dict:
 
 def print_table(results: list[dict], samplers: list[str]) -> None:
     guided = [s for s in samplers if s != "random"]
-    head = ["scenario", "seeds", "uniform failure rate (95 % CI)", "random"] + guided + [f"ratio {s}" for s in guided]
+    head = ["scenario", "seeds", "uniform failure rate (95 % CI)", "ln 2 / p", "random"] + guided + [f"ratio {s}" for s in guided]
     head += [f"distinct/1,000 {s}" for s in samplers]
     print("\n| " + " | ".join(head) + " |\n|" + " --- |" * len(head))
     for r in results:
         rate = r.get("uniform_failure_rate")
         cells = [f"`{Path(r['file']).stem}`", str(len(r[samplers[0]]["runs_to_failure"])),
                  f"{100 * rate['estimate']:.2f} % ({100 * rate['ci95'][0]:.2f}-{100 * rate['ci95'][1]:.2f} %)"
-                 if rate else "-"]
+                 if rate else "-",
+                 f"{math.log(2) / rate['estimate']:.0f}" if rate and rate["estimate"] else "-"]
         for s in ["random"] + guided:
             if s in r:
                 c = r[s]["censored"]
