@@ -1,7 +1,7 @@
 """Guided search vs uniform random sampling: runs needed to the first failure, distinct failures.
 
     PYTHONPATH=. python benchmarks/bench_search.py [--scenarios FILE ...] [--samplers random bo]
-        [--seeds 20] [--budget 150] [--batch 8] [--jobs 2] [--cache DIR]
+        [--seeds 20] [--budget 150] [--random-budget 300] [--batch 8] [--jobs 2] [--cache DIR]
         [--distinct-seeds 2] [--distinct-budget 100] [--distinct-shrink 20]
 
 The suite (default): the scenarios in `examples/search/`, each written so that a
@@ -11,13 +11,16 @@ brakes for emergencies, so it left the suite). Every sampler searches the same
 space (`addt_dsl.search.falsify.SearchSpace`: parameters, fault presence, times and
 magnitudes) with the same budget and seeds; `random` is uniform sampling over that space
 (`UniformSampler`). A seed that finds no failure within the budget counts as budget + 1
-runs (censored; reported: a censored median is a lower bound).
+runs (censored; reported: a censored median is a lower bound). `--random-budget` gives
+uniform sampling a larger budget than the guided samplers (default: the same), so that
+its median on a small failure region is measured rather than censored.
 
 Prints per scenario the median and mean runs to the first failure per sampler, the ratio
 random / sampler of the medians (> 1: the guided search needs fewer runs), the uniform
 failure rate estimated from the random sampler's runs (failures per run over all seeds,
 with a 95 % Wilson interval: each seed's runs up to and including its first failure),
-the wall time per sampler (the model's fitting included; the machine's load beside it),
+what that rate implies for uniform sampling's median (ln 2 / p: runs to the
+first failure are geometric), the wall time per sampler (the model's fitting included; the machine's load beside it),
 and, from `--distinct-seeds` whole searches of `--distinct-budget` runs with shrinking,
 distinct failures per 1,000 runs (search and shrink runs both count) and failing search
 runs per 1,000. Then one table of all scenarios; the suite figure is the median over
@@ -31,6 +34,7 @@ has and goes on, and the counts do not change.
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import sys
 import time
@@ -48,12 +52,17 @@ from addt_dsl.search.falsify import SAMPLERS, Falsifier  # noqa: E402
 SUITE = sorted((ROOT / "examples" / "search").glob("*.addt"))
 
 
+def budget_of(sampler: str, args) -> int:
+    return args.random_budget if sampler == "random" and args.random_budget else args.budget
+
+
 def first_failure(plan, sampler: str, seed: int, args, cache: RunCache) -> tuple[int, bool, float]:
     t0 = time.perf_counter()
+    budget = budget_of(sampler, args)
     report = Falsifier(plan, seed=seed, batch=args.batch, jobs=args.jobs, sampler=sampler, cache=cache).run(
-        budget_runs=args.budget, shrink_simulations=0, stop_at_first=True)
+        budget_runs=budget, shrink_simulations=0, stop_at_first=True)
     found = report.first_failure_run is not None
-    return (report.first_failure_run if found else args.budget + 1), found, time.perf_counter() - t0
+    return (report.first_failure_run if found else budget + 1), found, time.perf_counter() - t0
 
 
 def distinct_failures(plan, sampler: str, args, cache: RunCache) -> dict:
@@ -77,7 +86,8 @@ def bench_scenario(path: Path, args) -> dict:
     cache = RunCache(args.cache / f"{path.stem}.sqlite" if args.cache else None)
     rows: dict[str, list[tuple[int, bool]]] = {s: [] for s in samplers}
     seconds = {s: 0.0 for s in samplers}
-    print(f"\n{plan.name} ({path.relative_to(ROOT)}): budget {args.budget} runs, {args.seeds} seeds, "
+    print(f"\n{plan.name} ({path.relative_to(ROOT)}): budget {args.budget} runs "
+          f"(random {budget_of('random', args)}), {args.seeds} seeds, "
           f"load {figures_json.load()}")
     print(f"{'seed':>4}  " + "  ".join(f"{s:>7}" for s in samplers))
     try:
@@ -106,7 +116,8 @@ def bench_scenario(path: Path, args) -> dict:
             out["uniform_failure_rate"] = {"estimate": failures / runs if runs else None, "ci95": [lo, hi],
                                            "failures": failures, "runs": runs}
             print(f"uniform failure rate: {100 * failures / runs:.2f} % (95 % CI {100 * lo:.2f}-{100 * hi:.2f} %, "
-                  f"{failures} failures in {runs} random runs)")
+                  f"{failures} failures in {runs} random runs)"
+                  + (f"; geometric median ln 2 / p = {math.log(2) * runs / failures:.0f} runs" if failures else ""))
             for sampler in samplers:
                 if sampler != "random":
                     ratio = out["random"]["median_runs_to_failure"] / out[sampler]["median_runs_to_failure"]
@@ -127,14 +138,15 @@ def bench_scenario(path: Path, args) -> dict:
 
 def print_table(results: list[dict], samplers: list[str]) -> None:
     guided = [s for s in samplers if s != "random"]
-    head = ["scenario", "uniform failure rate (95 % CI)", "random"] + guided + [f"ratio {s}" for s in guided]
+    head = ["scenario", "seeds", "uniform failure rate (95 % CI)", "ln 2 / p", "random"] + guided + [f"ratio {s}" for s in guided]
     head += [f"distinct/1,000 {s}" for s in samplers]
     print("\n| " + " | ".join(head) + " |\n|" + " --- |" * len(head))
     for r in results:
         rate = r.get("uniform_failure_rate")
-        cells = [f"`{Path(r['file']).stem}`",
+        cells = [f"`{Path(r['file']).stem}`", str(len(r[samplers[0]]["runs_to_failure"])),
                  f"{100 * rate['estimate']:.2f} % ({100 * rate['ci95'][0]:.2f}-{100 * rate['ci95'][1]:.2f} %)"
-                 if rate else "-"]
+                 if rate else "-",
+                 f"{math.log(2) / rate['estimate']:.0f}" if rate and rate["estimate"] else "-"]
         for s in ["random"] + guided:
             if s in r:
                 c = r[s]["censored"]
@@ -154,6 +166,7 @@ def main() -> None:
     ap.add_argument("--samplers", nargs="+", choices=SAMPLERS, default=["random", "bo"])
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--budget", type=int, default=150)
+    ap.add_argument("--random-budget", type=int, default=0, help="budget of the random sampler (0: --budget)")
     ap.add_argument("--batch", type=int, default=8, help="candidates per generation of cem and random")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--cache", type=Path, help="keep runs in DIR/<scenario>.sqlite (resumable)")
@@ -165,7 +178,7 @@ def main() -> None:
     if args.cache:
         args.cache.mkdir(parents=True, exist_ok=True)
     results = [bench_scenario(p.resolve(), args) for p in args.scenarios]
-    figures: dict = {"budget_runs": args.budget, "seeds": args.seeds, "samplers": args.samplers, "scenarios": results}
+    figures: dict = {"budget_runs": args.budget, "random_budget_runs": budget_of("random", args), "seeds": args.seeds, "samplers": args.samplers, "scenarios": results}
     print()
     for sampler in args.samplers:
         ratios = [r[sampler]["ratio_random_median"] for r in results if "ratio_random_median" in r.get(sampler, {})]

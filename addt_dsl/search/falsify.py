@@ -64,6 +64,7 @@ TR_LENGTH_INIT, TR_LENGTH_MIN, TR_LENGTH_MAX = 0.4, 0.05, 0.8
 TR_SUCCESSES, TR_FAILURES = 2, 3  # improving batches to double it; batches without to halve it
 BO_SPREAD = 0.05  # minimum distance between the points of one batch, per sqrt(axes)
 BO_MAX_POINTS = 200  # points the model is fitted to (the lowest scores)
+WARP_SCALE = 0.05  # scores (robustness / its median size) are modelled as sign * log(1 + |score| / WARP_SCALE)
 SAMPLERS = ("bo", "cem", "random")
 
 
@@ -269,6 +270,11 @@ class BayesianSampler:
     fit, a Latin hypercube of `initial` points (scipy.stats.qmc; each axis covered in
     `initial` strata, so a fault is present in half of them) starts the model.
 
+    The model sees the score through `warp` (a signed logarithm): robustness spans
+    hundreds of metres far from a failure and centimetres near one, and a model of the raw
+    score spends its resolution on the far end (a cliff: 0.2 m of clearance inside the
+    region, 20-300 m everywhere else); the warp keeps the sign, so 0 stays the threshold.
+
     The model sees the point as the run sees it: a fault's present axis as 0 or 1, and
     the start, length and settings of an absent fault at 0.5 (they change nothing), so
     a step on a boolean axis and axes that do not matter are not read as noise.
@@ -355,7 +361,7 @@ class BayesianSampler:
         if not len(finite):
             return
         # A crash (-inf) is the lowest score seen and a never-violable oracle (+inf) the highest.
-        y = np.clip(scores, finite.min() - 1.0, finite.max() + 1.0)
+        y = warp(np.clip(scores, finite.min() - 1.0, finite.max() + 1.0))
         if self.gp is not None:  # the trust region grows after improvements, shrinks after none
             improved = y.min() < self.best - 1e-3 * max(1.0, abs(self.best))
             self.successes, self.failures = (self.successes + 1, 0) if improved else (0, self.failures + 1)
@@ -380,6 +386,13 @@ class BayesianSampler:
             warnings.simplefilter("ignore", ConvergenceWarning)
             self.gp = GaussianProcessRegressor(kernel, n_restarts_optimizer=1, random_state=seed).fit(
                 x, (y - self.y_mean) / self.y_scale)
+
+
+def warp(score: np.ndarray) -> np.ndarray:
+    """Signed logarithm of scores (`BayesianSampler`): monotone, odd, 0 at 0; resolution
+    near 0 (a failure's boundary), compression far from it."""
+    score = np.asarray(score, dtype=float)
+    return np.sign(score) * np.log1p(np.abs(score) / WARP_SCALE)
 
 
 # ---------------------------------------------------------------- the search

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from addt_dsl.search.falsify import BO_SPREAD, Axis, BayesianSampler, UniformSampler
+from addt_dsl.search.falsify import BO_SPREAD, Axis, BayesianSampler, UniformSampler, warp
 
 DIMS = 3
 
@@ -131,3 +131,39 @@ def test_same_seed_same_points():
             points = np.vstack([points, s.sample(s.batch_size(8, len(points)))])
         runs.append((points, s.length))
     assert np.array_equal(runs[0][0], runs[1][0]) and runs[0][1] == runs[1][1]
+
+
+def cliff_score(u: np.ndarray) -> np.ndarray:
+    """A cliff, as `stuck_accel` has: 2 to 100 units of robustness outside a ball of radius
+    0.3 around (0.85, 0.85, 0.2, 0.2), under 0.1 inside it, negative within 0.2 (0.76 % of
+    the cube). Scores reach the sampler divided by their median size, as the search gives them."""
+    d = np.sqrt(((u[..., :2] - 0.85) ** 2).sum(-1) + ((u[..., 2:] - 0.2) ** 2).sum(-1))
+    return np.where(d < 0.3, d - 0.2, 2.0 + 100.0 * d)
+
+
+def test_bo_climbs_down_a_robustness_cliff():
+    axes = [Axis(f"param:p{i}", "unit") for i in range(4)]
+
+    def to_failure(sampler, budget):
+        points, scores = np.empty((0, 4)), np.empty(0)
+        while len(scores) < budget:
+            for u in sampler.sample(sampler.batch_size(8, len(scores))):
+                points, scores = np.vstack([points, u]), np.append(scores, cliff_score(u))
+                if scores[-1] < 0:
+                    return len(scores)
+            sampler.update(points, scores / np.median(np.abs(scores)))
+        return budget + 1
+
+    bo = [to_failure(BayesianSampler(axes, np.random.default_rng(s)), 60) for s in range(3)]
+    # Measured over 8 seeds: 15-48 evaluations with the warped score (median 22), 11-81+
+    # without it (median 36); uniform sampling needs ~90 (median, 0.76 % of the cube).
+    assert np.median(bo) <= 30, bo
+
+
+def test_the_warp_keeps_order_and_sign_and_spreads_the_boundary():
+    y = np.array([-5.0, -0.01, 0.0, 0.01, 0.1, 1.0, 100.0])
+    w = warp(y)
+    assert np.all(np.diff(w) > 0) and w[2] == 0.0 and np.array_equal(np.sign(w), np.sign(y))
+    assert np.allclose(warp(-y), -w)
+    # Near 0 (a failure's boundary) the warp spreads scores apart, relative to the whole range.
+    assert (w[4] - w[3]) / (w[-1] - w[0]) > 10 * (y[4] - y[3]) / (y[-1] - y[0])
