@@ -4,12 +4,12 @@ The paper's system under test sees through six cameras and a learned network tha
 lifts them to a bird's-eye-view grid (Fast-BEV). This is that pipeline, small enough to
 train on a CPU in minutes (`python -m addt_dsl.stack.camera_train`):
 
-    encoder.conv0   conv 3×3 s2   3→12    per camera, 20×64 of a 40×128 image
+    encoder.conv0   conv 3×3      3→12    per camera, on its 40×128 image
     encoder.conv1   conv 3×3     12→16
     encoder.conv2   conv 1×1     16→8     the per-pixel features that are lifted
-    lift            `rig_lift.lift_table`: each BEV cell at 3 heights takes the feature of
+    lift            `rig_lift.lift_table`: each BEV cell at 5 heights takes the feature of
                     the pixel it projects to (nominal intrinsics and extrinsics), no depth
-                    estimate; + 3 position channels → 27 × 152 × 64
+                    estimate; + 3 position channels → 43 × 152 × 64
     backbone/neck/head   the lidar detector's BEV network (`learned.BevDetector`, widths 16/24/32)
 
 and the lidar detector's CenterNet heads and decoding (`bev_grid.decode`): boxes with a
@@ -32,7 +32,7 @@ from torch import nn
 from addt_dsl.stack.bev_grid import CAMERA_BEV_SITES, CLASSES, GRID, decode
 from addt_dsl.stack.learned import BevDetector, one_intra_op_thread
 from addt_dsl.stack.nodes import Obj
-from addt_dsl.stack.rig_lift import LIFT_HEIGHTS_M, lift_table, position_channels
+from addt_dsl.stack.rig_lift import FEATURE_STRIDE, LIFT_HEIGHTS_M, lift_table, position_channels
 from addt_dsl.stack.tensorfaults import ActivationFlip, flip_bits
 
 WEIGHTS_PATH = Path(__file__).with_name("camera_bev_weights.pt")
@@ -48,7 +48,7 @@ class CameraBevNet(BevDetector):
         super().__init__(widths, in_channels=features * heights + 3, classes=classes)
         self.features = features
         self.encoder = nn.ModuleDict({
-            "conv0": nn.Conv2d(3, 12, 3, 2, 1),
+            "conv0": nn.Conv2d(3, 12, 3, FEATURE_STRIDE, 1),
             "conv1": nn.Conv2d(12, 16, 3, 1, 1),
             "conv2": nn.Conv2d(16, features, 1),
         })
@@ -236,7 +236,7 @@ def _activation_shapes(model: CameraBevNet, meta: dict) -> dict[str, tuple[int, 
         shapes = {}
         hooks = [layer.register_forward_hook(lambda m, i, o, name=name: shapes.__setitem__(name, tuple(o.shape)))
                  for name, layer in model.layers().items()]
-        hf, wf = -(-rig["height"] // 2), -(-rig["width"] // 2)
+        hf, wf = -(-rig["height"] // FEATURE_STRIDE), -(-rig["width"] // FEATURE_STRIDE)
         table = torch.full((len(meta["heights"]), GRID.nx, GRID.ny), rig["cameras"] * hf * wf, dtype=torch.long)
         with torch.inference_mode():
             model.forward_images(torch.zeros((1, rig["cameras"], 3, rig["height"], rig["width"])), table,

@@ -259,8 +259,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m addt_dsl.stack.camera_train", description=__doc__.split("\n")[0])
     ap.add_argument("--seed", type=int, default=None, help="default 0 (training), 1000003 (--evaluate)")
     ap.add_argument("--out", type=Path, default=Path(__file__).with_name("camera_bev_weights.pt"))
-    ap.add_argument("--scenes", type=int, default=None, help="default 3000 (training), 400 (--evaluate)")
-    ap.add_argument("--epochs", type=int, default=6)
+    ap.add_argument("--scenes", type=int, default=None, help="default 4500 (training), 400 (--evaluate)")
+    ap.add_argument("--epochs", type=int, default=7)
     ap.add_argument("--batch", type=int, default=16)
     ap.add_argument("--lr", type=float, default=3e-3)
     ap.add_argument("--threads", type=int, default=1, help="CPU threads (reproducible per thread count)")
@@ -281,14 +281,15 @@ def main(argv=None) -> int:
 
     import torch
 
-    from addt_dsl.stack.rig_lift import LIFT_HEIGHTS_M
+    from addt_dsl.stack.rig_lift import FEATURE_STRIDE, LIFT_HEIGHTS_M
 
     seed = 0 if args.seed is None else args.seed
-    scenes = args.scenes or 3000
+    scenes = args.scenes or 4500
     model, timing = train(seed, scenes, args.epochs, args.batch, args.threads, args.lr)
     meta = {"seed": seed, "scenes": scenes, "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
             "threads": args.threads, "threshold": 0.35 if args.threshold is None else args.threshold,
             "widths": [16, 24, 32], "features": model.features, "heights": list(LIFT_HEIGHTS_M),
+            "feature_stride": FEATURE_STRIDE,
             "classes": list(CLASSES), "rig": DETECTOR_RIG.settings(), "torch": str(torch.__version__), **timing}
     state = {k: v.detach().clone() for k, v in model.state_dict().items()}
     args.out.parent.mkdir(parents=True, exist_ok=True)

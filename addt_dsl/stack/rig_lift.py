@@ -4,7 +4,7 @@ As Fast-BEV's "fast ray" transform: every cell of the BEV grid (`bev_grid.GRID`)
 few heights above the road (`LIFT_HEIGHTS_M`), is projected through the *nominal*
 intrinsics and extrinsics of the rig into the camera that sees it most centrally; the
 cell takes that camera's feature vector at that pixel (of the encoder's output, which
-has `FEATURE_STRIDE` times fewer pixels). Depth is not estimated: a feature lands on
+has `FEATURE_STRIDE` times fewer pixels, 1: as many). Depth is not estimated: a feature lands on
 every cell along its ray, and the BEV network learns where along the ray the object
 is (where the features at road height change from road to object: the object's foot).
 The table is computed once per rig; the gather is one index per cell and height.
@@ -17,8 +17,10 @@ import numpy as np
 from addt_dsl.runtime.sensors import rotation
 from addt_dsl.stack.bev_grid import GRID, GridSpec
 
-LIFT_HEIGHTS_M = (0.25, 0.8, 1.6)  # above the road [m]: a car's foot and body, a truck's body
-FEATURE_STRIDE = 2
+# Above the road [m]: a road user's foot, a pedestrian's or car's body and roof line, a
+# truck's body. Which heights of a cell land on an object is what places it along the ray.
+LIFT_HEIGHTS_M = (0.2, 0.6, 1.0, 1.5, 2.5)
+FEATURE_STRIDE = 1  # full resolution: at 2 the 20-40 m band spans two feature rows
 MIN_FORWARD_M = 0.5  # points closer in front of a camera than this are not projected
 
 

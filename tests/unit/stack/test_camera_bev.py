@@ -149,13 +149,13 @@ def test_an_encoder_flip_reaches_the_bev_cells_that_see_its_pixel(rig, scene):
 
     node = CameraBevPerception({})
     g = node.geometry(rig)
-    assert node.activation_shape("perception.encoder.conv2") == (6, 8, 20, 64)  # the cameras are the batch
+    assert node.activation_shape("perception.encoder.conv2") == (6, 8, 40, 128)  # the cameras are the batch
     x = images_tensor(scene.images)[None]
     with torch.inference_mode():
         clean = node.model.lift(x, g.table, g.position)
     # Feature 0 of the front camera's centre pixel, the exponent's top bit: a huge value
     # (cut by the ReLU if it was negative), lifted onto exactly the cells that see the pixel.
-    index = 10 * 64 + 32
+    index = 20 * 128 + 64
     flip = node.flip_activation_bits("perception.encoder.conv2", [index], [30])
     with torch.inference_mode():
         faulty = node.model.lift(x, g.table, g.position)
