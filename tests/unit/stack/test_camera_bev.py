@@ -192,3 +192,14 @@ def test_compiler_checks_camera_bev_against_the_perception_table():
     assert compile_with("sensor camera_rig", "drop camera_rig rate 5 %").ok
     missing = compile_with("sensor lidar")
     assert [d.code for d in missing.diagnostics] == ["E0103"] and "camera_rig" in missing.diagnostics[0].message
+
+
+def test_training_is_reproducible_from_the_seed():
+    from addt_dsl.stack.camera_train import train
+
+    runs = [train(seed=11, scenes=6, epochs=1, batch=3, threads=1, lr=1e-3, log=lambda *_: None)[0]
+            for _ in range(2)]
+    other = train(seed=12, scenes=6, epochs=1, batch=3, threads=1, lr=1e-3, log=lambda *_: None)[0]
+    a, b, c = (m.state_dict() for m in (*runs, other))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert not all(torch.equal(a[k], c[k]) for k in a)
