@@ -46,6 +46,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "perception_gpu": (["--batches", "1", "16", "256"], ["--batches", "1", "16"]),
     "table1": ([], ["--limit", "8"]),
     "routes": ([], ["--runs", "1"]),
+    "camera_bev": ([], ["--repeats", "1", "--duration", "10"]),
 }
 
 

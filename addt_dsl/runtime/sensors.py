@@ -219,6 +219,51 @@ class Camera(Sensor):
                                          "intrinsics": self.intrinsics})
 
 
+@SENSORS.register
+class CameraRig(Sensor):
+    """`cameras` pinhole cameras at one mount, evenly spread in yaw (camera k looks
+    `yaw + k * 360 deg / cameras`), rendered each frame like `camera`. The rig's
+    extrinsics are the mount's; camera k's are those turned by its yaw offset."""
+
+    keyword = "camera_rig"
+    renders = True
+    params = (
+        ParamSpec("rate", units.FREQUENCY, default=10.0, low=0.1, high=60.0, doc="frame rate (all cameras)"),
+        ParamSpec("cameras", None, kind="int", default=6, low=1, high=12,
+                  doc="cameras, evenly spread in yaw from the mount's yaw"),
+        ParamSpec("width", None, kind="int", default=128, low=16, high=1920, doc="image width per camera [px]"),
+        ParamSpec("height", None, kind="int", default=40, low=16, high=1080, doc="image height per camera [px]"),
+        ParamSpec("fov", units.ANGLE, default=math.radians(64.0), low=math.radians(5.0),
+                  high=math.radians(170.0), doc="horizontal field of view per camera"),
+        ParamSpec("near", units.LENGTH, default=0.1, low=0.01, high=10.0, doc="near clipping distance"),
+        ParamSpec("range", units.LENGTH, default=150.0, low=1.0, high=1000.0, doc="far clipping distance"),
+        *(ParamSpec(p.name, p.dim, default={"x": 0.0, "z": 1.5}.get(p.name, p.default), doc=p.doc)
+          for p in EXTRINSICS),
+    )
+    doc = ("Multi-camera rig (the paper's surround view): `cameras` pinhole cameras around one mount, "
+           "rendered like `camera` (RGB only: images uint8, cameras x H x W x 3). For "
+           "`perception camera_bev`.")
+
+    def __init__(self, name, settings):
+        super().__init__(name, settings)
+        n = int(self.settings["cameras"])
+        self.yaw_offsets = tuple(2.0 * math.pi * k / n for k in range(n))
+        self.cameras = [Camera(f"{name}.{k}", {**self.settings, "segmentation": "off"}) for k in range(n)]
+        self.intrinsics = self.cameras[0].intrinsics
+        self.width, self.height = self.cameras[0].width, self.cameras[0].height
+
+    def camera_extrinsics(self, ext: Extrinsics) -> list[Extrinsics]:
+        """Each camera's extrinsics for rig extrinsics `ext` (nominal or actual)."""
+        return [ext.shifted(yaw=dy) for dy in self.yaw_offsets]
+
+    def capture(self, world, time_s):
+        images = np.empty((len(self.cameras), self.height, self.width, 3), dtype=np.uint8)
+        for k, (cam, ext) in enumerate(zip(self.cameras, self.camera_extrinsics(self.actual))):
+            cam.actual = ext
+            images[k] = cam.capture(world, time_s).data["image"]
+        return Frame(self.name, time_s, {"images": images, "intrinsics": self.intrinsics})
+
+
 def _perspective(fov_v: float, aspect: float, near: float, far: float) -> list[float]:
     """OpenGL projection matrix, column-major (as pybullet's computeProjectionMatrixFOV)."""
     f = 1.0 / math.tan(fov_v / 2.0)

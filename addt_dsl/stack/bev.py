@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from addt_dsl import units
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.registry import STACKS, ParamSpec
-from addt_dsl.stack.bev_grid import DETECTOR_LIDAR
+from addt_dsl.stack.bev_grid import CAMERA_BEV_TENSOR_SITES, DETECTOR_LIDAR, DETECTOR_RIG, TENSOR_SITES
 from addt_dsl.stack.bus import Bus
 from addt_dsl.stack.latency import DEFAULT_TARGET, load_models, target_names
 from addt_dsl.stack.nodes import (LANE_POLICIES, Controller, EgoBody, GroundTruthPerception, LatticePlanner, Obj,
@@ -67,13 +67,25 @@ def _camera(settings, ctx):
     return CameraPerception(settings, ctx)
 
 
+def _camera_bev(settings, ctx):
+    from addt_dsl.stack.camera_bev import CameraBevPerception  # torch: only when asked for
+
+    return CameraBevPerception(settings, ctx)
+
+
 PERCEPTIONS = {
     "ground_truth": PerceptionMode(_ground_truth, "hit_body"),
     "learned": PerceptionMode(_learned, "hit_body", expects=("lidar", {
         "rays": DETECTOR_LIDAR.rays, "channels": DETECTOR_LIDAR.channels,
         "vfov": math.radians(DETECTOR_LIDAR.vfov_deg)}), requires="torch"),
     "camera": PerceptionMode(_camera, "image", "camera"),
+    # A fidelity mode (cost per frame: docs/stack.md), not the default.
+    "camera_bev": PerceptionMode(_camera_bev, "images", "camera_rig", expects=("camera_rig", {
+        k: v for k, v in DETECTOR_RIG.settings().items() if k in ("cameras", "width", "height", "fov")}),
+        requires="torch"),
 }
+# Perception modes with a network whose layers are tensor fault sites (`perception.<layer>`).
+_TENSOR_SITES = {"learned": TENSOR_SITES, "camera_bev": CAMERA_BEV_TENSOR_SITES}
 
 
 class StackError(RuntimeError):
@@ -85,8 +97,9 @@ class BevStack:
     keyword = "bev"
     params = (
         ParamSpec("perception", None, kind="word", default="ground_truth",
-                  choices=tuple(PERCEPTIONS), doc="perception model: ground_truth, learned (lidar CNN) or "
-                                                  "camera (colour detector on the camera image)"),
+                  choices=tuple(PERCEPTIONS), doc="perception model: ground_truth, learned (lidar CNN), "
+                                                  "camera (colour detector on the camera image) or camera_bev "
+                                                  "(surround cameras lifted to a BEV grid by a network)"),
         ParamSpec("cruise_speed", units.SPEED, default=25.0, low=0.0, high=70.0, doc="desired speed"),
         ParamSpec("time_gap", units.TIME, default=1.5, low=0.1, high=10.0, doc="desired headway"),
         ParamSpec("stale", units.TIME, default=0.15, low=0.0, high=10.0,
@@ -136,7 +149,8 @@ class BevStack:
         "tracker": Tracker.state_sites,
         "planner": LatticePlanner.state_sites,
     }
-    doc = "BEV-style stack: lidar or camera perception, CV tracker, lattice planner, PID + pure pursuit."
+    doc = ("BEV-style stack: lidar, camera or surround-camera BEV perception, CV tracker, lattice planner, "
+           "PID + pure pursuit.")
 
     @classmethod
     def required_sensors(cls, settings: dict) -> set[str]:
@@ -162,17 +176,16 @@ class BevStack:
 
     @classmethod
     def fault_sites(cls, settings: dict | None = None) -> set[str]:
-        """Fault targets of this stack; with `perception learned`, also the detector's
-        tensor sites `perception.<layer>` (all of them when `settings` is not given)."""
+        """Fault targets of this stack; with `perception learned` or `camera_bev`, also the
+        network's tensor sites `perception.<layer>` (all modes' when `settings` is not given)."""
         sites = {site for sites in cls.nodes.values() for site in sites}
-        if settings is None or settings.get("perception") == "learned":
-            from addt_dsl.stack.bev_grid import TENSOR_SITES  # numpy only: safe for the compiler
-
-            sites |= set(TENSOR_SITES)
+        for mode, tensor_sites in _TENSOR_SITES.items():
+            if settings is None or settings.get("perception") == mode:
+                sites |= set(tensor_sites)
         return sites
 
     def tensor_sites(self) -> dict:
-        """Tensor fault sites (site name → torch module); empty unless perception is learned."""
+        """Tensor fault sites (site name → torch module); empty unless perception is a network."""
         modules = getattr(self.perception, "tensor_modules", None)
         return modules() if modules else {}
 

@@ -299,3 +299,38 @@ def _keep_non_overlapping(boxes: np.ndarray, max_overlap_m: float) -> np.ndarray
         if all(sep[i, j] >= -max_overlap_m for j in keep):
             keep.append(i)
     return np.array(keep, dtype=np.int64)
+
+
+# ---------------------------------------------------------------- camera BEV (`perception camera_bev`)
+
+@dataclass(frozen=True)
+class DetectorRig:
+    """The camera rig the shipped camera BEV weights are trained for (`camera_train`
+    renders with it; the weights' metadata records it): six cameras around a mount above
+    the vehicle centre, as the paper's surround view, at a low resolution so a frame
+    costs little. 64 deg per camera (a little overlap), 128 x 40 px each."""
+
+    cameras: int = 6
+    width: int = 128
+    height: int = 40
+    fov_deg: float = 64.0
+    x_m: float = 0.0
+    z_m: float = 1.5
+
+    def settings(self) -> dict:
+        """The `camera_rig` sensor's settings (SI) for this rig."""
+        return {"cameras": self.cameras, "width": self.width, "height": self.height,
+                "fov": math.radians(self.fov_deg), "x": self.x_m, "z": self.z_m}
+
+    def clause(self, rate_hz: float = 10.0) -> str:
+        """The `.addt` sensor declaration of this rig."""
+        return (f"sensor camera_rig rate {rate_hz:g} Hz cameras {self.cameras} width {self.width} "
+                f"height {self.height} fov {self.fov_deg:g} deg")
+
+
+DETECTOR_RIG = DetectorRig()
+# The camera network's per-camera image encoder; its BEV part is the lidar detector's
+# layout (`LAYER_SITES`). Sites `perception.<layer>` as for `perception learned`.
+ENCODER_SITES = ("encoder.conv0", "encoder.conv1", "encoder.conv2")
+CAMERA_BEV_SITES = ENCODER_SITES + LAYER_SITES
+CAMERA_BEV_TENSOR_SITES = tuple(f"perception.{name}" for name in CAMERA_BEV_SITES)

@@ -457,6 +457,9 @@ def _one_intra_op_thread():
         torch.set_num_threads(previous)
 
 
+one_intra_op_thread = _one_intra_op_thread  # public: the camera BEV node runs under it too
+
+
 class LearnedPerception:
     """The `perception learned` node: lidar frame → grid → CNN → objects in world coordinates."""
 

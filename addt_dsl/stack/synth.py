@@ -86,6 +86,9 @@ def _road_point(kappa: float, s: float, t: float) -> tuple[float, float, float]:
     return x - t * math.sin(th), y + t * math.cos(th), th
 
 
+road_point = _road_point  # public for the camera data (camera_train builds the same roads)
+
+
 def _overlaps(box, placed, margin: float) -> bool:
     from addt_dsl.runtime.world import box_separation
 
@@ -100,11 +103,19 @@ def _overlaps(box, placed, margin: float) -> bool:
     return False
 
 
-def sample_scene(rng: np.random.Generator, pool) -> list[tuple[int, float, float, float]]:
-    """Poses (pool index, x, y, heading) in the ego's vehicle frame for one random scene."""
-    kappa = float(rng.choice([0.0, rng.uniform(-0.004, 0.004)]))
-    n_right = int(rng.integers(1, 5))
-    n_left = int(rng.integers(0, 4))
+def sample_scene(rng: np.random.Generator, pool, road: tuple[float, int, int] | None = None,
+                 ego: list | None = None) -> list[tuple[int, float, float, float]]:
+    """Poses (pool index, x, y, heading) in the ego's vehicle frame for one random scene.
+
+    `road` = (curvature [1/m], lanes right, lanes left) fixes the road instead of drawing
+    it (the camera data renders a road mesh built beforehand); `ego`, if given, receives
+    the ego's pose (x, y, heading) in the road's frame (the arc through the origin)."""
+    if road is None:
+        kappa = float(rng.choice([0.0, rng.uniform(-0.004, 0.004)]))
+        n_right = int(rng.integers(1, 5))
+        n_left = int(rng.integers(0, 4))
+    else:
+        kappa, n_right, n_left = float(road[0]), int(road[1]), int(road[2])
     oncoming = rng.random() < 0.7
     ego_lane = int(rng.integers(0, n_right))
     ego_t = -(ego_lane + 0.5) * LANE_WIDTH_M + rng.normal(0.0, 0.3)
@@ -122,6 +133,8 @@ def sample_scene(rng: np.random.Generator, pool) -> list[tuple[int, float, float
     ego_box = (0.0, 0.0, 0.0, EGO_SIZE[0], EGO_SIZE[1])
     ex, ey, eh = _road_point(kappa, 0.0, ego_t)
     ego_heading = eh + ego_yaw
+    if ego is not None:
+        ego[:] = [ex, ey, ego_heading]
 
     def to_ego(x, y, h):
         return (*_rot(x - ex, y - ey, -ego_heading), h - ego_heading)
@@ -211,6 +224,9 @@ def _rot(x: float, y: float, angle: float) -> tuple[float, float]:
 
 def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+wrap_angle = _wrap
 
 
 class ScanGenerator:
