@@ -27,7 +27,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from addt_dsl.console import compile_and_report
+from addt_dsl.console import compile_and_report, stack_option
 from addt_dsl.errors import EXIT_USAGE, UsageError, nonneg_int, positive_int
 from addt_dsl.runtime.executor import local_executor, run_spec
 from addt_dsl.runtime.outcome import classify_many, outcome_table
@@ -179,6 +179,7 @@ def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
         p.add_argument("--jobs", type=positive_int, default=1)
         p.add_argument("--by", default="", help="grid parameters to group by (default: all grid axes)")
         p.add_argument("--limit", type=nonneg_int, default=0)
+        stack_option(p)
         if name == "perception":
             p.add_argument("--bands", type=_bands, default=DEFAULT_BANDS_M)
     t = sub.add_parser("table")
@@ -195,7 +196,7 @@ def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
         print(success_table(runs, args.by.split(",")).to_string())
         return 0
 
-    result = compile_and_report(args.file)
+    result = compile_and_report(args.file, stack=args.stack)
     if not result.ok:
         return EXIT_USAGE
     plan = result.plan
