@@ -51,3 +51,17 @@ def test_the_suite_table_rates_classified_runs_over_those_whose_twin_passed():
     assert d["interval95"] == pytest.approx(list(wilson_interval(3, 4)))
     (plain,) = tally_by([rec(True, "")] * 3 + [rec(False, "")], "rate").values()
     assert (plain.rate, "fault_samples" in plain.as_dict()) == (0.75, False)
+
+
+def test_the_outcome_table_rates_success_over_runs_whose_twin_passed():
+    from addt_dsl.runtime.outcome import outcome_table
+
+    def rec(passed):
+        return SimpleNamespace(params={"flips": 1}, cell={}, passed=passed, fault_events=1)
+
+    pairs = [(rec(True), "masked")] * 3 + [(rec(False), "hazard"), (rec(True), "twin_failed"),
+                                           (rec(False), "twin_failed"), (rec(False), "error")]
+    row = outcome_table(pairs, by=["flips"]).loc[1]
+    assert (row["runs"], row["fault_samples"], row["twin_failed"]) == (7, 4, 2)
+    assert row["success_rate"] == pytest.approx(3 / 4)
+    assert (row["success_lo"], row["success_hi"]) == pytest.approx(wilson_interval(3, 4))
