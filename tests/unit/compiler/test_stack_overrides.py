@@ -76,3 +76,12 @@ def test_the_paper_suites_screening_variant_from_the_cli(capsys):
         == "ground_truth"
     assert main(["plan", str(path), "--stack", "perception=ground_truth"]) == 0
     assert '"perception": "ground_truth"' in capsys.readouterr().out
+
+
+def test_the_studies_take_the_option_too(capsys):
+    path = str(EXAMPLES / "suites" / "state_flip_overtake_copy.addt")
+    with pytest.raises(SystemExit):
+        main(["study", "classify", path, "--stack", "perception"])
+    assert "expected KEY=VALUE" in capsys.readouterr().err
+    assert main(["study", "classify", path, "--stack", "perception=grund_truth"]) == 2  # compiled, refused
+    assert "--stack:1:12" in capsys.readouterr().err
