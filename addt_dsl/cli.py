@@ -35,7 +35,7 @@ import tempfile
 import traceback
 from pathlib import Path
 
-from addt_dsl.console import compile_and_report
+from addt_dsl.console import compile_and_report, stack_option
 from addt_dsl.diagnostics import render_json
 from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, ToolError, UsageError, nonneg_float,
                              nonneg_int, positive_int, time_bound, verdict_exit_code)
@@ -54,10 +54,10 @@ def cmd_check(args) -> int:
     limits = _limits(args)
     for path in args.files:
         if args.format == "json":
-            result = compile_file(path, limits)
+            result = compile_file(path, limits, args.stack)
             collected.extend(result.diagnostics)
         else:
-            result = compile_and_report(path, args.format, limits)
+            result = compile_and_report(path, args.format, limits, args.stack)
             if result.ok:
                 print(f"ok: {path}")
                 print("\n".join(result.estimate.lines()))
@@ -68,7 +68,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_plan(args) -> int:
-    result = compile_and_report(args.file, args.format, _limits(args))
+    result = compile_and_report(args.file, args.format, _limits(args), args.stack)
     if not result.ok:
         return EXIT_USAGE
     if args.format == "text":  # stdout stays the plan's JSON
@@ -156,7 +156,7 @@ def _run_suite(args, paths: list[Path]) -> int:
 
 def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
     """Compile and run one file; `collect(plan, store)` sees the store before it closes."""
-    result = compile_and_report(str(path), args.format, _limits(args))
+    result = compile_and_report(str(path), args.format, _limits(args), args.stack)
     if not result.ok:
         return EXIT_USAGE
     from addt_dsl.runtime.store import ResultStore, StoreMismatch
@@ -435,6 +435,7 @@ def _limits(args):
 
 
 def _limit_options(parser) -> None:
+    stack_option(parser)
     parser.add_argument("--allow-large", action="store_true",
                         help="run a sweep whose cost estimate is beyond the thresholds (docs/limits.md)")
     parser.add_argument("--max", action="append", default=[], metavar="NAME=N",

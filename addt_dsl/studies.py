@@ -4,7 +4,9 @@
         every run of FILE's sweep classified (masked / silent / detected / hazard) against
         its fault-free twin; counts and success rate per value of the grid parameters.
     addtc study table RUNS_CSV --by P,Q
-        success rate per cell from an `addtc FILE --out DIR` run (DIR/runs.csv).
+        success rate per cell, with its 95 % Wilson interval, from an `addtc FILE --out DIR`
+        run (DIR/runs.csv); from a classified run (`--classify`) over the runs whose
+        fault-free twin passed, the others counted apart.
     addtc study perception FILE [--jobs N] [--by P] [--bands 0,20,40,60,80]
         mean position and heading error of detected objects by distance band, per value of
         the grid parameters (e.g. a sensor yaw shift).
@@ -27,10 +29,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from addt_dsl.console import compile_and_report
+from addt_dsl.console import compile_and_report, stack_option
 from addt_dsl.errors import EXIT_USAGE, UsageError, nonneg_int, positive_int
 from addt_dsl.runtime.executor import local_executor, run_spec
-from addt_dsl.runtime.outcome import classify_many, outcome_table
+from addt_dsl.runtime.outcome import FAULT_OUTCOMES, classify_many, outcome_table, wilson_interval
 from addt_dsl.sweep import expand
 
 DEFAULT_BANDS_M = (0.0, 20.0, 40.0, 60.0, 80.0)
@@ -87,15 +89,40 @@ def error_table(rows: Sequence[dict], by: Sequence[str] = (), bands: Sequence[fl
 
 
 def success_table(runs, by: Sequence[str]):
-    """Success rate per cell of an `addtc --out` runs table (columns `param.NAME`, `passed`)."""
+    """Success rate per cell of an `addtc --out` runs table (columns `param.NAME`, `passed`),
+    with its 95 % Wilson interval (`lo`, `hi`).
+
+    A classified table (`addtc --classify`: an `outcome` column) is rated as fault campaigns
+    are: only runs whose fault-free twin passed count (`n`; `passed` and the rate are over
+    them), and the runs left out are counted apart (`twin_failed`, and `error` for runs the
+    runner could not classify); `hazard` counts the fault-caused failures among the n."""
     cols = [f"param.{b}" for b in by]
     missing = [b for b, c in zip(by, cols) if c not in runs.columns]
     if missing or "passed" not in runs.columns:
         known = ", ".join(c.removeprefix("param.") for c in runs.columns if c.startswith("param.")) or "none"
         raise UsageError(f"--by {','.join(missing)}: not a parameter of these runs (parameters: {known})"
                          if missing else "not a runs table of `addtc FILE --out DIR` (no `passed` column)")
-    table = runs.groupby(cols)["passed"].agg(["size", "sum", "mean"])
-    table.columns = ["runs", "passed", "success_rate"]
+    runs = runs.copy()
+    runs["passed"] = runs["passed"].astype(bool)
+    classified = "outcome" in runs.columns and runs["outcome"].notna().any()
+    if classified:
+        outcome = runs["outcome"].fillna("")
+        runs["sample"] = outcome.isin(FAULT_OUTCOMES)
+        runs["twin_failed"] = outcome == "twin_failed"
+        runs["error"] = ~runs["sample"] & ~runs["twin_failed"]
+        runs["hazard"] = outcome == "hazard"
+        runs["ok"] = runs["passed"] & runs["sample"]
+        grouped = runs.groupby(cols)
+        table = grouped.agg(runs=("passed", "size"), twin_failed=("twin_failed", "sum"), error=("error", "sum"),
+                            n=("sample", "sum"), passed=("ok", "sum"), hazard=("hazard", "sum"))
+        k, n = table["passed"], table["n"]
+    else:
+        table = runs.groupby(cols).agg(runs=("passed", "size"), passed=("passed", "sum"))
+        k, n = table["passed"], table["runs"]
+    table["success_rate"] = [a / b if b else math.nan for a, b in zip(k, n)]
+    bounds = [wilson_interval(int(a), int(b)) for a, b in zip(k, n)]
+    table["lo"] = [lo for lo, _ in bounds]
+    table["hi"] = [hi for _, hi in bounds]
     table.index.names = list(by)
     return table
 
@@ -179,6 +206,7 @@ def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
         p.add_argument("--jobs", type=positive_int, default=1)
         p.add_argument("--by", default="", help="grid parameters to group by (default: all grid axes)")
         p.add_argument("--limit", type=nonneg_int, default=0)
+        stack_option(p)
         if name == "perception":
             p.add_argument("--bands", type=_bands, default=DEFAULT_BANDS_M)
     t = sub.add_parser("table")
@@ -192,10 +220,10 @@ def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
             runs = pd.read_csv(args.runs_csv)
         except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError) as exc:
             raise UsageError(f"{args.runs_csv}: not a runs table ({str(exc).splitlines()[0]})") from None
-        print(success_table(runs, args.by.split(",")).to_string())
+        print(success_table(runs, args.by.split(",")).to_string(float_format=lambda x: f"{x:.3f}"))
         return 0
 
-    result = compile_and_report(args.file)
+    result = compile_and_report(args.file, stack=args.stack)
     if not result.ok:
         return EXIT_USAGE
     plan = result.plan

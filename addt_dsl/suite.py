@@ -63,21 +63,36 @@ def expand_paths(paths: Sequence[str]) -> list[Path]:
     return unique
 
 
+# Outcome classes a fault can cause (addt_dsl.runtime.outcome.FAULT_OUTCOMES): a classified
+# run in another class (`twin_failed`, `error`) says nothing about the fault.
+FAULT_OUTCOMES = ("masked", "silent", "detected", "hazard")
+
+
 @dataclass
 class Tally:
     runs: int = 0
     passed: int = 0
     outcomes: Counter = field(default_factory=Counter)  # with --classify: runs per outcome class
+    samples: int = 0  # with --classify: runs whose fault-free twin passed
+    samples_passed: int = 0
+
+    @property
+    def rated(self) -> tuple[int, int]:
+        """(passed, runs) the success rate is over: with --classify only the runs whose
+        fault-free twin passed, else every run."""
+        return (self.samples_passed, self.samples) if self.outcomes else (self.passed, self.runs)
 
     @property
     def rate(self) -> float:
-        return self.passed / self.runs if self.runs else math.nan
+        k, n = self.rated
+        return k / n if n else math.nan
 
     def as_dict(self) -> dict:
-        lo, hi = wilson_interval(self.passed, self.runs)
+        lo, hi = wilson_interval(*self.rated)
         out = {"runs": self.runs, "passed": self.passed, "rate": self.rate, "interval95": [lo, hi]}
         if self.outcomes:
             out["outcomes"] = dict(self.outcomes)
+            out["fault_samples"], out["fault_samples_passed"] = self.samples, self.samples_passed
         return out
 
 
@@ -106,6 +121,9 @@ def tally_by(records: Iterable, param: str) -> dict[float, Tally]:
         t.passed += r.passed
         if getattr(r, "outcome", ""):
             t.outcomes[r.outcome] += 1
+            if r.outcome in FAULT_OUTCOMES:
+                t.samples += 1
+                t.samples_passed += r.passed
     return dict(sorted(out.items()))
 
 
@@ -144,7 +162,10 @@ def write_summary(out: Path, rows: Sequence[SuiteRow], by: str | None) -> Path:
 
 
 def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
-    """One row per file; with `by`, success rates per value (runs per cell in brackets)."""
+    """One row per file; with `by`, success rates per value (runs per cell in brackets).
+    Classified (`--classify`): the rate is over the runs whose fault-free twin passed, in
+    brackets their number, the runs left out (`+N twin failed`, runner errors included) and
+    the 95 % Wilson interval."""
     from rich.table import Table
 
     values = sorted({v for r in rows for v in r.by})
@@ -164,7 +185,14 @@ def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
         cells = []
         for v in values:
             t = r.by.get(v)
-            cells.append("-" if t is None else f"{100 * t.rate:.2f}% ({t.runs})")
+            if t is None:
+                cells.append("-")
+                continue
+            # Classified: the rate and n are over runs whose twin passed; the others are counted apart.
+            apart = t.runs - t.rated[1]
+            lo, hi = wilson_interval(*t.rated)
+            cells.append(f"{100 * t.rate:.2f}% ({t.rated[1]}" + (f", +{apart} twin failed" if apart else "")
+                         + (f"; {100 * lo:.1f}-{100 * hi:.1f}" if t.outcomes else "") + ")")
         colour = "green" if r.exit_code == 0 else ("red" if r.exit_code == 1 else "yellow")
         outcomes = r.totals.get("outcomes", {})
         counts = ["/".join(str(outcomes.get(k, 0)) for k in ("masked", "silent", "detected", "hazard", "twin_failed"))] \

@@ -9,6 +9,7 @@ Never imports pybullet or torch.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import Context
 from addt_dsl.compiler.lower import build_plan, check_feasible
 from addt_dsl.compiler.optional_deps import check_optional_deps
+from addt_dsl.compiler.overrides import apply_stack_overrides
 from addt_dsl.compiler.parser import parse_included, parse_source
 from addt_dsl.confine import Refused, confine, shown
 from addt_dsl.compiler.rules import run_rules
@@ -135,7 +137,8 @@ def _read_at_most(fh, limit: int) -> bytes:
     return b"".join(chunks)
 
 
-def compile_file(path: str | Path, limits: Limits = DEFAULT) -> CompileResult:
+def compile_file(path: str | Path, limits: Limits = DEFAULT, stack: Sequence[str] = ()) -> CompileResult:
+    """Compile one file; `stack` holds `KEY=VALUE` settings for the ego's stack (`--stack`)."""
     path = Path(path)
     sink = DiagnosticSink()
     sources: dict[str, str] = {}
@@ -156,21 +159,21 @@ def compile_file(path: str | Path, limits: Limits = DEFAULT) -> CompileResult:
                                            limits.source_bytes), Span.point(display, 1, 1),
                    how_to_raise("source_bytes"))
         return CompileResult(None, sink.items, sources)
-    return _compile_guarded(data, display, path.parent, sink, sources, limits)
+    return _compile_guarded(data, display, path.parent, sink, sources, limits, stack)
 
 
 def compile_source(text: str | bytes, path: str = "<input>", base_dir: str | Path = ".",
-                   limits: Limits = DEFAULT) -> CompileResult:
+                   limits: Limits = DEFAULT, stack: Sequence[str] = ()) -> CompileResult:
     sink = DiagnosticSink()
-    return _compile_guarded(text, path, Path(base_dir), sink, {}, limits)
+    return _compile_guarded(text, path, Path(base_dir), sink, {}, limits, stack)
 
 
 def _compile_guarded(data, display: str, base_dir: Path, sink: DiagnosticSink,
-                     sources: dict[str, str], limits: Limits = DEFAULT) -> CompileResult:
+                     sources: dict[str, str], limits: Limits = DEFAULT, stack: Sequence[str] = ()) -> CompileResult:
     """Compile; a bug in the compiler is an "internal compiler error" diagnostic (E0900),
     never a traceback. The fuzz tests assert that E0900 never appears."""
     try:
-        return _compile(data, display, base_dir, sink, sources, limits)
+        return _compile(data, display, base_dir, sink, sources, limits, stack)
     except RecursionError:
         sink.error("E0004", "source nested too deeply", Span.point(display, 1, 1))
     except Exception as exc:  # noqa: BLE001 - the last line of defence, reported as data
@@ -180,7 +183,7 @@ def _compile_guarded(data, display: str, base_dir: Path, sink: DiagnosticSink,
 
 
 def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: dict[str, str],
-             limits: Limits) -> CompileResult:
+             limits: Limits, stack: Sequence[str] = ()) -> CompileResult:
     sources[display] = data.decode("utf-8", errors="replace") if isinstance(data, bytes) else data
     tree = parse_source(data, display, sink, max_bytes=limits.source_bytes)
     if tree is None:
@@ -197,6 +200,7 @@ def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: 
     scenario = tree.scenarios[0]
     included = _resolve_includes(tree.includes + scenario.includes, base_dir, loader, [display])
     scenario = dataclasses.replace(scenario, definitions=included + scenario.definitions)
+    scenario = apply_stack_overrides(scenario, stack, sink, sources)  # `--stack KEY=VALUE`
     if not _within_count_limits(scenario, sink, limits):
         return CompileResult(None, sink.items, sources)  # checking it all would cost what the limit bounds
 

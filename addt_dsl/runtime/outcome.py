@@ -283,8 +283,9 @@ def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, fl
 
 
 def outcome_table(pairs: Iterable[tuple[RunResult, str]], by: Sequence[str] = ()):
-    """Counts of each outcome, the mission success rate and the mean number of injections per
-    run (`fault_events`), grouped by the parameters in `by`. As fault-injection campaigns
+    """Counts of each outcome, the mission success rate over the runs whose fault-free twin
+    passed (`success_rate`, 95 % Wilson `success_lo`/`success_hi`) and the mean number of
+    injections per run (`fault_events`), grouped by the parameters in `by`. As fault-injection campaigns
     report them (NVBitFI): the sample size `fault_samples` (runs whose fault-free twin passed: the only runs that
     say something about the fault) and, per fault outcome class, its rate over them
     with a 95 % Wilson interval (`hazard_rate`, `hazard_lo`, `hazard_hi`, ...).
@@ -296,7 +297,7 @@ def outcome_table(pairs: Iterable[tuple[RunResult, str]], by: Sequence[str] = ()
 
     by = list(by)
     classes = (*OUTCOMES, "error")
-    groups: dict[tuple, list] = {}  # group key -> [count per class..., runs, passed, fault_events]
+    groups: dict[tuple, list] = {}  # group key -> [count per class..., passed samples, runs, passed, fault_events]
     seen = False
     for r, o in pairs:
         seen = True
@@ -305,9 +306,10 @@ def outcome_table(pairs: Iterable[tuple[RunResult, str]], by: Sequence[str] = ()
             continue
         acc = groups.get(key)
         if acc is None:
-            acc = groups[key] = [0] * (len(classes) + 3)
+            acc = groups[key] = [0] * (len(classes) + 4)
         if o in classes:
             acc[classes.index(o)] += 1
+        acc[-4] += bool(r.passed) and o in FAULT_OUTCOMES
         acc[-3] += 1
         acc[-2] += bool(r.passed)
         acc[-1] += r.fault_events
@@ -323,10 +325,15 @@ def outcome_table(pairs: Iterable[tuple[RunResult, str]], by: Sequence[str] = ()
                           for i, name in enumerate(classes)}, index=index)
     table.columns.name = "outcome"
     table["runs"] = pd.Series([a[-3] for a in rows], index=index, dtype="int64")
-    table["success_rate"] = pd.Series([a[-2] / a[-3] for a in rows], index=index, dtype="float64")
+    n = table[list(FAULT_OUTCOMES)].sum(axis=1)
+    # Mission success over the runs whose twin passed, as the class rates below.
+    table["success_rate"] = pd.Series([a[-4] / m if m else math.nan for a, m in zip(rows, n)], index=index,
+                                      dtype="float64")
+    bounds = [wilson_interval(a[-4], m) for a, m in zip(rows, n)]
+    table["success_lo"] = pd.Series([lo for lo, _ in bounds], index=index, dtype="float64")
+    table["success_hi"] = pd.Series([hi for _, hi in bounds], index=index, dtype="float64")
     # Injections that happened (a flip whose site is never evaluated again is not injected).
     table["fault_events"] = pd.Series([a[-1] / a[-3] for a in rows], index=index, dtype="float64")
-    n = table[list(FAULT_OUTCOMES)].sum(axis=1)
     table["fault_samples"] = n
     for name in FAULT_OUTCOMES:
         bounds = [wilson_interval(k, m) for k, m in zip(table[name], n)]

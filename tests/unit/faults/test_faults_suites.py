@@ -48,3 +48,28 @@ def test_the_brake_family_triggers_the_emergency_brake():
     plan = compile_file(EXAMPLES / "following_brake.addt").plan
     (lead,) = plan.agents
     assert [t.clause.name for t in lead.triggers] == ["brake"]
+
+
+PAPER_SUITES = [p for p in SUITES if p.stem.startswith(("paper_table1_", "bitflip_", "state_flip_", "drop_bursts_"))]
+
+
+@pytest.mark.parametrize("family", ["curve", "following_brake", "overtake"])
+def test_a_learned_family_differs_from_its_family_only_in_perception_and_lidar(family):
+    def body(name):  # the definitions, without the leading comment block
+        lines = (EXAMPLES / "suites" / "families" / f"{name}.addt").read_text().splitlines()
+        return lines[next(i for i, line in enumerate(lines) if not line.startswith("#")):]
+
+    plain, learned = body(family), body(f"{family}_learned")
+    differ = [(a.strip(), b.strip()) for a, b in zip(plain, learned) if a != b]
+    assert len(plain) == len(learned) and [b.split()[:4] for _, b in differ] == [
+        ["stack", "bev", "perception", "learned"], ["sensor", "lidar", "rate", "10"]]
+    assert differ[0][1] == differ[0][0].replace("stack bev ", "stack bev perception learned ")
+    assert "channels 5 vfov 12 deg" in differ[1][1]
+
+
+@pytest.mark.parametrize("path", PAPER_SUITES, ids=lambda p: p.stem)
+def test_paper_suites_run_the_learned_detector_and_screen_with_ground_truth(path):
+    assert compile_file(path).plan.ego.stack.settings["perception"] == "learned"
+    screening = compile_file(path, stack=["perception=ground_truth"])
+    assert screening.ok and not screening.diagnostics
+    assert screening.plan.ego.stack.settings["perception"] == "ground_truth"

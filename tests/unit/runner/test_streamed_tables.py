@@ -32,9 +32,14 @@ def _reference_outcome_table(pairs, by):
     table = counts[[*OUTCOMES, "error"]].copy()
     grouped = df.groupby(keys)["passed"]
     table["runs"] = grouped.size()
-    table["success_rate"] = grouped.mean()
-    table["fault_events"] = df.groupby(keys)["fault_events"].mean()
     n = table[list(FAULT_OUTCOMES)].sum(axis=1)
+    df["ok"] = df["passed"].astype(bool) & df["outcome"].isin(FAULT_OUTCOMES)  # passed, twin passed
+    ok = df.groupby(keys)["ok"].sum()
+    table["success_rate"] = [k / m if m else math.nan for k, m in zip(ok, n)]
+    bounds = [wilson_interval(k, m) for k, m in zip(ok, n)]
+    table["success_lo"] = [lo for lo, _ in bounds]
+    table["success_hi"] = [hi for _, hi in bounds]
+    table["fault_events"] = df.groupby(keys)["fault_events"].mean()
     table["fault_samples"] = n
     for name in FAULT_OUTCOMES:
         bounds = [wilson_interval(k, m) for k, m in zip(table[name], n)]
