@@ -42,6 +42,8 @@ class PerceptionMode:
     compiler warns when the ego's differs (the learned detector is trained on one lidar).
     `requires` names a package outside the core install that `build` imports (see
     `addt_dsl.extras`): the compiler reports its absence instead of the run failing.
+    `sites` are the node's scalar fault sites (a network's detections carry no count to
+    corrupt), what a fault on the node `perception` draws from.
     """
 
     build: Callable
@@ -49,6 +51,7 @@ class PerceptionMode:
     needs_sensor: str | None = None
     expects: tuple[str, dict] | None = None
     requires: str | None = None
+    sites: tuple[str, ...] = GroundTruthPerception.sites
 
 
 def _ground_truth(settings, ctx):
@@ -73,16 +76,19 @@ def _camera_bev(settings, ctx):
     return CameraBevPerception(settings, ctx)
 
 
+# The learned detectors' decoded detections (LearnedPerception.sites, CameraBevPerception.sites).
+NETWORK_OUTPUT_SITES = ("perception.x", "perception.y")
+
 PERCEPTIONS = {
     "ground_truth": PerceptionMode(_ground_truth, "hit_body"),
     "learned": PerceptionMode(_learned, "hit_body", expects=("lidar", {
         "rays": DETECTOR_LIDAR.rays, "channels": DETECTOR_LIDAR.channels,
-        "vfov": math.radians(DETECTOR_LIDAR.vfov_deg)}), requires="torch"),
+        "vfov": math.radians(DETECTOR_LIDAR.vfov_deg)}), requires="torch", sites=NETWORK_OUTPUT_SITES),
     "camera": PerceptionMode(_camera, "image", "camera"),
     # A fidelity mode (cost per frame: docs/stack.md), not the default.
     "camera_bev": PerceptionMode(_camera_bev, "images", "camera_rig", expects=("camera_rig", {
         k: v for k, v in DETECTOR_RIG.settings().items() if k in ("cameras", "width", "height", "fov")}),
-        requires="torch"),
+        requires="torch", sites=NETWORK_OUTPUT_SITES),
 }
 # Perception modes with a network whose layers are tensor fault sites (`perception.<layer>`).
 _TENSOR_SITES = {"learned": TENSOR_SITES, "camera_bev": CAMERA_BEV_TENSOR_SITES}
@@ -178,7 +184,10 @@ class BevStack:
     def fault_sites(cls, settings: dict | None = None) -> set[str]:
         """Fault targets of this stack; with `perception learned` or `camera_bev`, also the
         network's tensor sites `perception.<layer>` (all modes' when `settings` is not given)."""
-        sites = {site for sites in cls.nodes.values() for site in sites}
+        sites = {site for node, sites in cls.nodes.items() if node != "perception" for site in sites}
+        for name, mode in PERCEPTIONS.items():
+            if settings is None or settings.get("perception", "ground_truth") == name:
+                sites |= set(mode.sites)
         for mode, tensor_sites in _TENSOR_SITES.items():
             if settings is None or settings.get("perception") == mode:
                 sites |= set(tensor_sites)
@@ -199,6 +208,8 @@ class BevStack:
         # One generator per node, from the run seed: the draws repeat bit for bit.
         self.latency_rngs = {n: ctx.rng(f"latency.{n}") for n in NODE_NAMES}
         self.perception = self._make_perception()
+        # A fault on the node `perception` draws from the sites this mode's node has.
+        self.nodes = {**type(self).nodes, "perception": tuple(self.perception.sites)}
         self.tracker = Tracker(float(self.settings["track_max_age"]))
         # The ego's declared body and friction: the planner's boxes and braking limits.
         self.body = EgoBody(float(ctx.ego_length_m), float(ctx.ego_width_m), float(ctx.ego_mass_kg),
