@@ -13,8 +13,10 @@ EXAMPLES = ROOT / "examples"
 
 HAS_TORCH = importlib.util.find_spec("torch") is not None
 # Test inputs (scenario sources, files, doc code blocks) that need the `learned` extra.
-_TORCH_INPUT = re.compile(r"perception\s+learned|^\s*import torch\b|addt_dsl\.stack\.(learned|tensorfaults|train)\b",
-                          re.M)
+# A suite that includes a learned family (`families/*_learned.addt`) needs it too.
+_TORCH_INPUT = re.compile(r"perception\s+(learned|camera_bev)\b|perception=(learned|camera_bev)\b"
+                          r"|_(learned|camera_bev)\.addt\b|^\s*import torch\b"
+                          r"|addt_dsl\.stack\.(learned|tensorfaults|train|camera_bev|camera_train)\b", re.M)
 
 
 def needs_torch(value) -> bool:

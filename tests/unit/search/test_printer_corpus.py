@@ -21,6 +21,7 @@ from addt_dsl.compiler import compile_file, compile_source
 from addt_dsl.diagnostics import render_text
 from addt_dsl.printer import compile_pinned, pin_spec, print_plan, print_spec, semantic_key, side_files
 from addt_dsl.sweep import expand
+from tests.conftest import HAS_TORCH
 from tests.docs_harness import blocks, kind, scenario_dir, source
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -48,7 +49,8 @@ CORPUS = _corpus()
 def test_the_corpus_holds_what_the_project_ships():
     names = {name for name, _ in CORPUS}
     assert {f"examples/{p.name}" for p in (ROOT / "examples").glob("*.addt")} <= names
-    assert len([n for n in names if n.startswith("examples/suites/")]) >= 20
+    # The core install cannot compile the suites on learned families (they need torch).
+    assert len([n for n in names if n.startswith("examples/suites/")]) >= (20 if HAS_TORCH else 12)
     assert len([n for n in names if n.startswith("language.md#")]) >= 10
     # docs/language.md's complete example: `reach goal within 20 s` on an ego with a goal.
     assert any(plan.name == "cut_in_and_brake" for _, plan in CORPUS)
