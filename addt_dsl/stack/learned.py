@@ -111,6 +111,10 @@ def load_model(path: Path = WEIGHTS_PATH, device: str = "cpu") -> tuple[BevDetec
 
 Region = tuple[int, int, int, int]  # rows [r0, r1), columns [c0, c1) of a feature map
 EMPTY: Region = (0, 0, 0, 0)
+# A map's changed cells as boxes: the first is the points' region (one bounding box, as
+# without faults; EMPTY for no points), any others are cells a fault hook changed away
+# from it, kept apart while the cells they reach do not overlap (see RegionForward).
+Regions = tuple[Region, ...]
 
 
 def _union(a: Region, b: Region) -> Region:
@@ -119,6 +123,27 @@ def _union(a: Region, b: Region) -> Region:
     if b[0] >= b[1] or b[2] >= b[3]:
         return a
     return (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
+
+
+def _overlap(a: Region, b: Region) -> bool:
+    """Whether two boxes share a cell (an empty box shares none)."""
+    return a[0] < b[1] and b[0] < a[1] and a[2] < b[3] and b[2] < a[3] and a[0] < a[1] and a[2] < a[3] \
+        and b[0] < b[1] and b[2] < b[3]
+
+
+def _merged(boxes: list[Region]) -> Regions:
+    """Union overlapping boxes (into the earlier one) until none overlap; the first box
+    keeps its place (empty or not), other empty boxes are dropped."""
+    boxes = [boxes[0], *(b for b in boxes[1:] if not _empty(b))]
+    i = 0
+    while i < len(boxes):
+        for j in range(i + 1, len(boxes)):
+            if _overlap(boxes[i], boxes[j]):
+                boxes[i] = _union(boxes[i], boxes.pop(j))
+                i = -1  # a grown box may now meet an earlier one: look again from the start
+                break
+        i += 1
+    return tuple(boxes)
 
 
 def _changed(new: torch.Tensor, old: torch.Tensor) -> Region:
@@ -170,7 +195,7 @@ class _Map:
     def __init__(self, background: torch.Tensor, views: _Views):
         self.background = background
         self.buf = background.clone()
-        self.dirty = EMPTY
+        self.dirty: Regions = ()
         self.views = views
         self._nan_free: bool | None = None
 
@@ -183,13 +208,13 @@ class _Map:
             self._nan_free = torch.equal(background, background)
         return self._nan_free
 
-    def restore(self, keep: Region = EMPTY) -> None:
-        """Back to the background, except that the caller will overwrite `keep` next."""
-        r0, r1, c0, c1 = self.dirty
-        inside = keep[0] <= r0 and r1 <= keep[1] and keep[2] <= c0 and c1 <= keep[3]
-        if r0 < r1 and c0 < c1 and not inside:
-            self.views(self.buf, r0, r1, c0, c1).copy_(self.views(self.background, r0, r1, c0, c1))
-        self.dirty = EMPTY
+    def restore(self, keep: Regions = ()) -> None:
+        """Back to the background, except boxes inside `keep`, which the caller overwrites next."""
+        for r0, r1, c0, c1 in self.dirty:
+            if r0 < r1 and c0 < c1 and not any(k[0] <= r0 and r1 <= k[1] and k[2] <= c0 and c1 <= k[3]
+                                               for k in keep):
+                self.views(self.buf, r0, r1, c0, c1).copy_(self.views(self.background, r0, r1, c0, c1))
+        self.dirty = ()
 
     def at(self, region: Region) -> torch.Tensor:
         """The buffer's view on `region` (to write the frame's values into)."""
@@ -317,7 +342,7 @@ class RegionForward:
         return not (torch.equal(layer.weight, w) and torch.equal(layer.bias, b))
 
     # ---- the layers on regions
-    def _conv(self, name: str, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, Region]:
+    def _conv(self, name: str, x: torch.Tensor, regions: Regions) -> tuple[torch.Tensor, Regions]:
         layer = self.layers[name]
         if layer._forward_pre_hooks:
             for hook in list(layer._forward_pre_hooks.values()):
@@ -325,32 +350,83 @@ class RegionForward:
             if self._weights_changed(name):  # a persistent weight fault
                 self._rebuild()
         out = self.maps[name]
-        cells, result = self._window(name, x, region, out.buf.shape)
+        computed = self._windows(name, x, regions, out.buf.shape)
+        cells = tuple(c for c, _ in computed)
         out.restore(cells)
-        if result is not None:
-            out.at(cells).copy_(result)
-            out.dirty = cells
+        for c, result in computed:
+            if result is not None:
+                out.at(c).copy_(result)
+        out.dirty = cells
         if layer._forward_hooks:
-            out.dirty = _union(out.dirty, self._hooked(layer, x, out.buf))
+            flipped = self._hooked(layer, x, out.buf)
+            if not _empty(flipped):
+                out.dirty = _merged([*out.dirty, flipped])
         return out.buf, out.dirty
 
-    def _conv_relu(self, name: str, relu: str, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, Region]:
+    def _conv_relu(self, name: str, relu: str, x: torch.Tensor, regions: Regions) -> tuple[torch.Tensor, Regions]:
         """`_relu(relu, *_conv(name, ...))`: with no hook on the layer, the ReLU is taken
-        straight from the conv's window (same values), and the pre-activation map, which
+        straight from the conv's windows (same values), and the pre-activation map, which
         only hooks read, is left at its background."""
         layer = self.layers[name]
         if layer._forward_pre_hooks or layer._forward_hooks:
-            a, r = self._conv(name, x, region)
-            return self._relu(relu, a, r), r
+            a, r = self._conv(name, x, regions)
+            return self._relu(relu, a, r), self._shrunk(relu, r)
         self.maps[name].restore()  # after a hooked frame: back to the background once
-        cells, result = self._window(name, x, region, self.maps[name].buf.shape)
+        computed = self._windows(name, x, regions, self.maps[name].buf.shape)
+        cells = tuple(c for c, _ in computed)
         out = self.maps[relu]
         out.restore(cells)
-        if result is None:
-            return out.buf, EMPTY
-        torch.clamp_min(result, 0.0, out=out.at(cells))
+        for c, result in computed:
+            if result is not None:
+                torch.clamp_min(result, 0.0, out=out.at(c))
         out.dirty = cells
-        return out.buf, cells
+        return out.buf, self._shrunk(relu, cells) if len(cells) > 1 else cells
+
+    def _shrunk(self, name: str, regions: Regions) -> Regions:
+        """A fault's boxes (all but the first) cut to the cells of map `name` that differ
+        bit for bit from its background: a flip the ReLU undoes (a negative value that
+        stays negative) stops there instead of widening every later layer. The map still
+        restores all the cells it wrote (`dirty`). The points' box is kept as it is, so a
+        run without faults computes the windows it always did."""
+        if len(regions) == 1:
+            return regions
+        m = self.maps[name]
+        bits = _INT_OF[m.buf.dtype]
+        out = [regions[0]]
+        for box in regions[1:]:
+            c = _changed(m.at(box).view(bits), self.views(m.background, *box).view(bits))
+            if not _empty(c):
+                out.append((box[0] + c[0], box[0] + c[1], box[2] + c[2], box[2] + c[3]))
+        return tuple(out)
+
+    def _windows(self, name: str, x: torch.Tensor, regions: Regions, shape) -> list[tuple[Region, torch.Tensor | None]]:
+        """`_window` for each box of `regions`; boxes whose output cells would overlap are
+        joined first (a cell's window must see every change around it), so each output
+        cell is computed once. The first box's windows are those of the points' region
+        alone (what a run without faults computes)."""
+        if len(regions) > 1:
+            boxes = list(regions)
+            i = 0
+            while i < len(boxes):
+                ci = self._cells_of(name, boxes[i], shape)
+                for j in range(i + 1, len(boxes)):
+                    if _overlap(ci, self._cells_of(name, boxes[j], shape)):
+                        boxes[i] = _union(boxes[i], boxes.pop(j))
+                        i = -1  # look again from the start
+                        break
+                i += 1
+            regions = tuple(boxes)
+        return [self._window(name, x, r, shape) for r in regions]
+
+    def _cells_of(self, name: str, region: Region, shape) -> Region:
+        """The output cells of layer `name` whose window meets `region` (as `_window`)."""
+        r0, r1, c0, c1 = region
+        if r0 >= r1 or c0 >= c1:
+            return EMPTY
+        k, s, p = self._geometry[name][:3]
+        _, _, h_out, w_out = shape
+        return (max(0, -(-(r0 + p - k + 1) // s)), min(h_out, (r1 - 1 + p) // s + 1),
+                max(0, -(-(c0 + p - k + 1) // s)), min(w_out, (c1 - 1 + p) // s + 1))
 
     def _window(self, name: str, x: torch.Tensor, region: Region, shape) -> tuple[Region, torch.Tensor | None]:
         """The output cells of layer `name` whose k×k window (stride s, padding p) meets the
@@ -394,37 +470,43 @@ class RegionForward:
                 buf.copy_(result)
         return _changed(buf, before)
 
-    def _relu(self, name: str, x: torch.Tensor, region: Region) -> torch.Tensor:
+    def _relu(self, name: str, x: torch.Tensor, regions: Regions) -> torch.Tensor:
         out = self.maps[name]
-        out.restore(region)
-        if not _empty(region):
-            r0, r1, c0, c1 = region
-            torch.clamp_min(self.views(x, r0, r1, c0, c1), 0.0, out=out.at(region))
-            out.dirty = region
+        out.restore(regions)
+        for r0, r1, c0, c1 in regions:
+            if r0 < r1 and c0 < c1:
+                torch.clamp_min(self.views(x, r0, r1, c0, c1), 0.0, out=out.at((r0, r1, c0, c1)))
+        out.dirty = regions
         return out.buf
 
-    def _up_add(self, name: str, low: torch.Tensor, low_region: Region, skip: torch.Tensor,
-                skip_region: Region) -> tuple[torch.Tensor, Region]:
-        """Nearest ×2 upsampling of `low` plus `skip`, on the union of their changed regions."""
+    def _up_add(self, name: str, low: torch.Tensor, low_regions: Regions, skip: torch.Tensor,
+                skip_regions: Regions) -> tuple[torch.Tensor, Regions]:
+        """Nearest ×2 upsampling of `low` plus `skip`, on their changed regions: the first
+        boxes' union, and the other boxes apart from it (joined where they overlap)."""
         out = self.maps[name]
-        lr0, lr1, lc0, lc1 = low_region
-        region = _union((2 * lr0, 2 * lr1, 2 * lc0, 2 * lc1), skip_region)
-        out.restore(region)
-        if not _empty(region):
+        lr0, lr1, lc0, lc1 = low_regions[0]
+        regions: Regions = (_union((2 * lr0, 2 * lr1, 2 * lc0, 2 * lc1), skip_regions[0]),)
+        if len(low_regions) > 1 or len(skip_regions) > 1:
+            regions = _merged([*regions, *((2 * a, 2 * b, 2 * c, 2 * d) for a, b, c, d in low_regions[1:]),
+                               *skip_regions[1:]])
+        out.restore(regions)
+        for region in regions:
+            if _empty(region):
+                continue
             r0, r1, c0, c1 = region
-            low = self.views(low, r0 // 2, (r1 + 1) // 2, c0 // 2, (c1 + 1) // 2)
-            b, c, h, w = low.shape
+            low_v = self.views(low, r0 // 2, (r1 + 1) // 2, c0 // 2, (c1 + 1) // 2)
+            b, c, h, w = low_v.shape
             # Nearest ×2 is each value repeated 2×2: a broadcast copy, without interpolate's overhead.
-            up = low[:, :, :, None, :, None].expand(b, c, h, 2, w, 2).reshape(b, c, 2 * h, 2 * w)
+            up = low_v[:, :, :, None, :, None].expand(b, c, h, 2, w, 2).reshape(b, c, 2 * h, 2 * w)
             dr, dc = r0 - 2 * (r0 // 2), c0 - 2 * (c0 // 2)
             torch.add(up[:, :, dr:dr + r1 - r0, dc:dc + c1 - c0], self.views(skip, r0, r1, c0, c1),
                       out=out.at(region))
-            out.dirty = region
-        return out.buf, region
+        out.dirty = regions
+        return out.buf, regions
 
     def _forward(self, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, torch.Tensor]:
         """The network of `BevDetector.forward`, layer by layer on changed regions."""
-        x0, r0 = self._conv_relu("backbone.conv0", "x0", x, region)
+        x0, r0 = self._conv_relu("backbone.conv0", "x0", x, (region,))
         x1, r1 = self._conv_relu("backbone.conv1", "x1", x0, r0)
         a, r = self._conv_relu("backbone.conv2", "x2", x1, r1)
         a, r = self._conv_relu("backbone.conv3", "x3", a, r)
