@@ -211,8 +211,12 @@ class _Map:
     def restore(self, keep: Regions = ()) -> None:
         """Back to the background, except boxes inside `keep`, which the caller overwrites next."""
         for r0, r1, c0, c1 in self.dirty:
-            if r0 < r1 and c0 < c1 and not any(k[0] <= r0 and r1 <= k[1] and k[2] <= c0 and c1 <= k[3]
-                                               for k in keep):
+            if r0 >= r1 or c0 >= c1:
+                continue
+            for k in keep:
+                if k[0] <= r0 and r1 <= k[1] and k[2] <= c0 and c1 <= k[3]:
+                    break
+            else:
                 self.views(self.buf, r0, r1, c0, c1).copy_(self.views(self.background, r0, r1, c0, c1))
         self.dirty = ()
 
@@ -415,8 +419,8 @@ class RegionForward:
                         i = -1  # look again from the start
                         break
                 i += 1
-            regions = tuple(boxes)
-        return [self._window(name, x, r, shape) for r in regions]
+            return [self._window(name, x, r, shape) for r in boxes]
+        return [self._window(name, x, regions[0], shape)]
 
     def _cells_of(self, name: str, region: Region, shape) -> Region:
         """The output cells of layer `name` whose window meets `region` (as `_window`)."""
@@ -495,9 +499,9 @@ class RegionForward:
                 continue
             r0, r1, c0, c1 = region
             low_v = self.views(low, r0 // 2, (r1 + 1) // 2, c0 // 2, (c1 + 1) // 2)
-            b, c, h, w = low_v.shape
-            # Nearest ×2 is each value repeated 2×2: a broadcast copy, without interpolate's overhead.
-            up = low_v[:, :, :, None, :, None].expand(b, c, h, 2, w, 2).reshape(b, c, 2 * h, 2 * w)
+            # Nearest ×2 copies values: any way of doing it gives the same bits; interpolate
+            # is the quickest here (an expand + reshape copy costs ~1.3x on these windows).
+            up = F.interpolate(low_v, scale_factor=2.0, mode="nearest")
             dr, dc = r0 - 2 * (r0 // 2), c0 - 2 * (c0 // 2)
             torch.add(up[:, :, dr:dr + r1 - r0, dc:dc + c1 - c0], self.views(skip, r0, r1, c0, c1),
                       out=out.at(region))
@@ -555,6 +559,7 @@ class LearnedPerception:
         self.threshold = float(settings.get("detect_threshold", self.meta.get("threshold", DEFAULT_THRESHOLD)))
         self._logit_threshold = math.log(self.threshold / (1.0 - self.threshold))
         self._grid = np.zeros(GRID.shape, dtype=np.float32)
+        self._grid_region: tuple[int, int, int, int] | None = None  # None: clear the whole grid
         self._input = torch.from_numpy(self._grid)[None]  # shares memory with the grid buffer
         # On another device, one input tensor kept there (RegionForward's views of it stay valid).
         self._device_input = self._input if device == "cpu" else torch.empty_like(self._input, device=device)
@@ -586,7 +591,9 @@ class LearnedPerception:
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
         """Vehicle-frame points → (N, 7) boxes: x, y, heading, length, width, confidence,
         class (index into `bev_grid.CLASSES`)."""
-        _, region = build_grid_region(points_vehicle, sensor_xy, out=self._grid)
+        # The grid is zero outside the last frame's region: clear only that.
+        _, region = build_grid_region(points_vehicle, sensor_xy, out=self._grid, dirty=self._grid_region)
+        self._grid_region = region
         with torch.inference_mode(), _one_intra_op_thread():
             x = self._input if self.device == "cpu" else self._device_input.copy_(self._input)
             heat, box = self._forward(x, region)
