@@ -255,9 +255,14 @@ class RegionForward:
     Hooks on a layer (tensor faults) see and may change its whole output as in the
     dense forward: forward pre-hooks run before the layer (a weight flip there makes the
     backgrounds stale: they are rebuilt), forward hooks get the full pre-activation
-    output, and what they change joins the changed region. Fault hooks that offer
-    `flip_owned` flip the kept map in place and report the flipped elements; any other
-    hook's changes are found by comparing the map with a copy taken before it ran.
+    output, and the bounding box of what they change is followed as a box of its own
+    (`Regions`): each later layer computes it apart from the points' box unless the
+    cells the two reach overlap (then on their union), and after each ReLU it is cut to
+    the cells that still differ bit for bit from the background (a flip the ReLU undoes
+    stops there). So a flip costs about its own reach, not the bounding box of it and the
+    points, and the points' box gets the windows of a run without faults. Fault hooks
+    that offer `flip_owned` flip the kept map in place and report the flipped elements;
+    any other hook's changes are found by comparing the map with a copy taken before it ran.
     """
 
     def __init__(self, model: BevDetector):
