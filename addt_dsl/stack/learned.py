@@ -257,12 +257,12 @@ class RegionForward:
     backgrounds stale: they are rebuilt), forward hooks get the full pre-activation
     output, and the bounding box of what they change is followed as a box of its own
     (`Regions`): each later layer computes it apart from the points' box unless the
-    cells the two reach overlap (then on their union), and after each ReLU it is cut to
-    the cells that still differ bit for bit from the background (a flip the ReLU undoes
-    stops there). So a flip costs about its own reach, not the bounding box of it and the
-    points, and the points' box gets the windows of a run without faults. Fault hooks
-    that offer `flip_owned` flip the kept map in place and report the flipped elements;
-    any other hook's changes are found by comparing the map with a copy taken before it ran.
+    cells the two reach overlap (then on their union), and after each ReLU it is dropped
+    if it is back to the background bit for bit (a flip the ReLU undoes stops there).
+    So a flip costs about its own reach, not the bounding box of it and the points, and
+    the points' box gets the windows of a run without faults. Fault hooks that offer
+    `flip_owned` flip the kept map in place and report the flipped elements; any other
+    hook's changes are found by comparing the map with a copy taken before it ran.
     """
 
     def __init__(self, model: BevDetector):
@@ -392,21 +392,19 @@ class RegionForward:
         return out.buf, self._shrunk(relu, cells) if len(cells) > 1 else cells
 
     def _shrunk(self, name: str, regions: Regions) -> Regions:
-        """A fault's boxes (all but the first) cut to the cells of map `name` that differ
-        bit for bit from its background: a flip the ReLU undoes (a negative value that
-        stays negative) stops there instead of widening every later layer. The map still
-        restores all the cells it wrote (`dirty`). The points' box is kept as it is, so a
-        run without faults computes the windows it always did."""
+        """A fault's boxes (all but the first) without those whose cells in map `name` are
+        all back to its background bit for bit: a flip the ReLU undoes (a negative value
+        that stays negative) stops there instead of widening every later layer. (One
+        comparison per box: cutting a box to its changed cells costs more than it saves,
+        as a live flip changes its whole reach.) The map still restores the cells it
+        wrote (`dirty`). The points' box is kept as it is, so a run without faults
+        computes the windows it always did."""
         if len(regions) == 1:
             return regions
         m = self.maps[name]
         bits = _INT_OF[m.buf.dtype]
-        out = [regions[0]]
-        for box in regions[1:]:
-            c = _changed(m.at(box).view(bits), self.views(m.background, *box).view(bits))
-            if not _empty(c):
-                out.append((box[0] + c[0], box[0] + c[1], box[2] + c[2], box[2] + c[3]))
-        return tuple(out)
+        return (regions[0], *(box for box in regions[1:]
+                              if not torch.equal(m.at(box).view(bits), self.views(m.background, *box).view(bits))))
 
     def _windows(self, name: str, x: torch.Tensor, regions: Regions, shape) -> list[tuple[Region, torch.Tensor | None]]:
         """`_window` for each box of `regions`; boxes whose output cells would overlap are
@@ -569,6 +567,7 @@ class LearnedPerception:
         # On another device, one input tensor kept there (RegionForward's views of it stay valid).
         self._device_input = self._input if device == "cpu" else torch.empty_like(self._input, device=device)
         self._layers = self.model.layers()
+        self._shapes: dict[str, tuple[int, ...]] | None = None
         self._forward = RegionForward(self.model)
         self._armed: list[ActivationFlip] = []
         self.last_activation_flips: list[tuple[str, tuple]] = []
@@ -636,8 +635,9 @@ class LearnedPerception:
 
     def activation_shape(self, site: str) -> tuple[int, ...]:
         self._layer(site)
-        shapes = _activation_shapes(self.model, self.device)
-        return shapes[site.removeprefix("perception.")]
+        if self._shapes is None:  # once per node: the lookup walks the model's modules (~50 us)
+            self._shapes = _activation_shapes(self.model, self.device)
+        return self._shapes[site.removeprefix("perception.")]
 
     def flip_weight_bits(self, site: str, flat_indices, bits) -> tuple[list[float], list[float]]:
         """Flip bits in a layer's parameters (persistent for this node's lifetime)."""
