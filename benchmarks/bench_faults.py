@@ -218,9 +218,9 @@ def tensor_flip_costs(repeat: int) -> dict[str, float]:
     frames = []
     build = learned.build_grid_region
 
-    def capture(points, sensor_xy, out=None):
+    def capture(points, sensor_xy, **kwargs):
         frames.append((points.copy(), sensor_xy))
-        return build(points, sensor_xy, out=out)
+        return build(points, sensor_xy, **kwargs)
 
     learned.build_grid_region = capture
     try:
