@@ -43,7 +43,7 @@ from torch import nn
 from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CLASSES, GRID, LAYER_SITES, build_grid_region, decode,
                                      sensor_points_to_vehicle)
 from addt_dsl.stack.nodes import Obj
-from addt_dsl.stack.tensorfaults import ActivationFlip, flip_bits
+from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
 
 WEIGHTS_PATH = Path(__file__).with_name("perception_weights.pt")
 DEFAULT_THRESHOLD = 0.35
@@ -549,7 +549,7 @@ def _one_intra_op_thread():
 one_intra_op_thread = _one_intra_op_thread  # public: the camera BEV node runs under it too
 
 
-class LearnedPerception:
+class LearnedPerception(ConvTensorSites):
     """The `perception learned` node: lidar frame → grid → CNN → objects in world coordinates."""
 
     name = "perception"
@@ -611,69 +611,14 @@ class LearnedPerception:
         return found
 
     # ---- tensor fault sites
-    def fault_sites(self) -> tuple[str, ...]:
-        return self.tensor_sites
-
-    def tensor_modules(self) -> dict[str, nn.Module]:
-        """Site name → torch module, for the fault engine's `bitflip ... tensor` hooks."""
-        return {f"perception.{name}": layer for name, layer in self._layers.items()}
-
-    def _layer(self, site: str) -> nn.Conv2d:
-        name = site.removeprefix("perception.")
-        if name not in self._layers:
-            raise KeyError(f"unknown tensor site {site!r}; sites: {', '.join(self.tensor_sites)}")
-        return self._layers[name]
-
-    def site_numel(self, site: str, tensor: str = "weights") -> int:
-        """Elements addressable at a site: kernel + bias (weights) or the output at batch 1."""
-        layer = self._layer(site)
-        if tensor == "weights":
-            return layer.weight.numel() + (layer.bias.numel() if layer.bias is not None else 0)
-        if tensor == "activations":
-            return int(np.prod(self.activation_shape(site)))
-        raise ValueError(f"tensor must be 'weights' or 'activations', not {tensor!r}")
-
     def activation_shape(self, site: str) -> tuple[int, ...]:
         self._layer(site)
         if self._shapes is None:  # once per node: the lookup walks the model's modules (~50 us)
             self._shapes = _activation_shapes(self.model, self.device)
         return self._shapes[site.removeprefix("perception.")]
 
-    def flip_weight_bits(self, site: str, flat_indices, bits) -> tuple[list[float], list[float]]:
-        """Flip bits in a layer's parameters (persistent for this node's lifetime)."""
-        layer = self._layer(site)
-        n_w = layer.weight.numel()
-        before, after = [], []
-        # One at a time, in the caller's order (a repeated index composes).
-        for i, b in zip(flat_indices, bits, strict=True):
-            i, b = int(i), int(b)
-            tensor, k = (layer.weight, i) if i < n_w else (layer.bias, i - n_w)
-            if tensor is None:
-                raise IndexError(f"{site} has no bias; index {i} is out of range")
-            bf, af = flip_bits(tensor.data, [k], [b])
-            before += bf
-            after += af
-        self._forward.invalidate()
-        return before, after
-
-    def flip_activation_bits(self, site: str, flat_indices, bits) -> ActivationFlip:
-        """Arm a transient flip in a layer's output for the next inference only.
-
-        Returns the armed `ActivationFlip`; after the inference its `fired` holds the
-        values before and after (also appended to `last_activation_flips`).
-        """
-        numel = self.site_numel(site, "activations")
-        for i in flat_indices:
-            if not 0 <= int(i) < numel:
-                raise IndexError(f"activation index {i} out of range for {site} ({numel} elements)")
-        flip = ActivationFlip(self._layer(site), flat_indices, bits).arm()
-        flip.site = site  # type: ignore[attr-defined]
-        self._armed.append(flip)
-        return flip
-
-    def _collect_fired(self) -> None:
-        self.last_activation_flips = [(f.site, f.fired) for f in self._armed if f.fired is not None]
-        self._armed = [f for f in self._armed if f.fired is None]
+    def _after_weight_flip(self) -> None:
+        self._forward.invalidate()  # the backgrounds came from the old weights
 
 
 _SHAPES: dict[tuple, dict[str, tuple[int, ...]]] = {}
