@@ -196,6 +196,8 @@ class Occlude(ImageFault):
             aspect = float(self.rng.uniform(0.5, 2.0))
             bw = int(round(min(w, max(1.0, np.sqrt(area * aspect)))))
             bh = int(round(min(h, max(1.0, area / max(bw, 1)))))
+            if bh == h:  # cut at the image's height: the width takes the rest of the area
+                bw = int(round(min(w, max(1.0, area / h))))
             x0 = int(self.rng.integers(0, w - bw + 1))
             y0 = int(self.rng.integers(0, h - bh + 1))
             boxes.append((x0, y0, x0 + bw, y0 + bh))

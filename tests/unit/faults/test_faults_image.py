@@ -157,3 +157,17 @@ def test_lens_is_checked_against_the_target_sensor():
     assert "numbered 0 to 5" in occlude.setting_problems({"lens": 6}, "camera_rig", {"cameras": 6})["lens"]
     assert occlude.setting_problems({"lens": 0}, "camera", {"width": 320}) == {}  # its one image
     assert "camera_rig" in occlude.setting_problems({"lens": 1}, "camera", {"width": 320})["lens"]
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("shape", [(48, 64), (120, 160), (40, 128)])
+def test_occlusion_covers_the_fraction_asked_for_whatever_the_drawn_aspect(seed, shape):
+    from addt_dsl.runtime.sensors import Frame
+
+    h, w = shape
+    image = np.full((h, w, 3), 200, np.uint8)
+    for fraction in (1.0, 0.9, 0.5):
+        fault, events = one("occlude", target="camera", seed=seed, fraction=fraction)
+        fault.on_frame(Frame("camera", 0.0, {"image": image}), 0.0)
+        # One patch: its area is the fraction, up to rounding to whole pixels.
+        assert events[0].detail["value"] == pytest.approx(fraction, abs=2.0 / min(h, w))
