@@ -65,6 +65,8 @@ TR_SUCCESSES, TR_FAILURES = 2, 3  # improving batches to double it; batches with
 BO_SPREAD = 0.05  # minimum distance between the points of one batch, per sqrt(axes)
 BO_MAX_POINTS = 200  # points the model is fitted to (the lowest scores)
 WARP_SCALE = 0.05  # scores (robustness / its median size) are modelled as sign * log(1 + |score| / WARP_SCALE)
+# Uniform candidates with present faults moved to their severe ends, per choice (0: none)
+SEVERE_CANDIDATES = 0
 SAMPLERS = ("bo", "cem", "random")
 
 
@@ -75,6 +77,9 @@ class Axis:
     name: str  # `param:gap`, `fault3:present`, `fault3:start`, `fault3:length`, `fault3:value`, ...
     kind: str  # "unit" (continuous) | "bool"
     decode: object = None  # callable(u) -> value (for reporting)
+    # A fault axis's most severe end (present, from the start, for the whole run, the
+    # setting farthest from neutral); None: no severe end (parameters, drawn bits, instants).
+    severe: float | None = None
 
 
 class SearchSpace:
@@ -99,6 +104,7 @@ class SearchSpace:
             cls = FAULTS.get(f.kind)
             specs = {s.name: s for s in cls.params}
             settings = []
+            severe: dict[str, float] = {}  # setting -> its unit value farthest from neutral
             for name, value in f.settings.items():
                 spec = specs.get(name)
                 expr = fp.settings.get(name)
@@ -118,16 +124,18 @@ class SearchSpace:
                     lo = max(lo, 1.0)
                 if hi > lo:
                     settings.append((name, lo, hi, spec.kind == "int"))
+                    severe[name] = 1.0 if abs(hi - neutral) >= abs(lo - neutral) else 0.0
             timed = not E.params_used(fp.start_s) and (fp.end_s is None or not E.params_used(fp.end_s))
             instant = f.end_s is not None and f.end_s == f.start_s
             self.faults.append((f.index, f, settings, instant, timed))
-            self.axes.append(Axis(f"fault{f.index}:present", "bool"))
+            self.axes.append(Axis(f"fault{f.index}:present", "bool", severe=1.0))
             if timed:
-                self.axes.append(Axis(f"fault{f.index}:start", "unit"))
+                # an instant fault has no worst time; a window's worst is the whole run
+                self.axes.append(Axis(f"fault{f.index}:start", "unit", severe=None if instant else 0.0))
                 if not instant:
-                    self.axes.append(Axis(f"fault{f.index}:length", "unit"))
+                    self.axes.append(Axis(f"fault{f.index}:length", "unit", severe=1.0))
             for name, *_ in settings:
-                self.axes.append(Axis(f"fault{f.index}:{name}", "unit"))
+                self.axes.append(Axis(f"fault{f.index}:{name}", "unit", severe=severe.get(name)))
         self.index = {a.name: i for i, a in enumerate(self.axes)}
 
     @property
@@ -298,6 +306,7 @@ class BayesianSampler:
         self.gate = np.array([index.get(a.name.split(":")[0] + ":present", -1)
                               if a.name.startswith("fault") and not a.name.endswith(":present") else -1
                               for a in axes], dtype=int)
+        self.severe = np.array([np.nan if a.severe is None else a.severe for a in axes], dtype=float)
         self.gp = None
         self.points = np.empty((0, self.dims))
         self.scores = np.empty(0)
@@ -320,8 +329,10 @@ class BayesianSampler:
 
     def sample(self, n: int) -> np.ndarray:
         if self.gp is None:
-            return qmc.LatinHypercube(self.dims, rng=self.rng).random(n)
+            return self.severe_where_present(qmc.LatinHypercube(self.dims, rng=self.rng).random(n))
         cand = np.vstack([self.rng.random((BO_CANDIDATES, self.dims)), self._trust_region(BO_CANDIDATES)])
+        if SEVERE_CANDIDATES:
+            cand = np.vstack([cand, self.severe_where_present(self.rng.random((SEVERE_CANDIDATES, self.dims)))])
         with threadpool_limits(1):  # see `update`
             mu, sd = self.gp.predict(self.model_inputs(cand), return_std=True)
         mu = mu * self.y_scale + self.y_mean
@@ -337,6 +348,15 @@ class BayesianSampler:
         while len(chosen) < n:  # every candidate crowded: fill uniformly
             chosen.append(self.rng.random(self.dims))
         return np.array(chosen)
+
+    def severe_where_present(self, u: np.ndarray) -> np.ndarray:
+        """`u` with every present fault at its most severe (the `Axis.severe` ends: from
+        the start, for the whole run, settings farthest from neutral); parameters, absent
+        faults and axes without a severe end are kept."""
+        u = np.array(u, dtype=float, copy=True)
+        for j in np.flatnonzero((self.gate >= 0) & np.isfinite(self.severe)):
+            u[:, j] = np.where(u[:, self.gate[j]] >= 0.5, self.severe[j], u[:, j])
+        return u
 
     def _trust_region(self, n: int) -> np.ndarray:
         """Uniform points in the box around the best point, its sides along the model's
