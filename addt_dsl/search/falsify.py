@@ -10,8 +10,8 @@ parameter. Fault seeds and the run seed are drawn afresh for every candidate.
 Guidance (`SAMPLERS`): each run is scored by its worst normalised robustness over the hard
 oracles not yet falsified (the oracles' STL robustness: below 0 the run fails), and the
 default sampler, `BayesianSampler`, models that score with a Gaussian process and runs the
-candidate most likely to fail, from a Latin hypercube start and a trust region around the
-lowest score (see its docstring). `CrossEntropySampler` (CEM: per-axis distributions
+candidate most likely to fail, from a Latin hypercube start (faults in it at their severe
+ends) and a trust region around the lowest score (see its docstring). `CrossEntropySampler` (CEM: per-axis distributions
 refitted to the best fifth of each batch) and `UniformSampler` (the benchmark's baseline)
 are the options. Why not Hypothesis `target()`: runs are expensive (0.1-1 s) and budgets
 small (tens to hundreds of runs), so the search must spend each run where a model says;
@@ -65,8 +65,6 @@ TR_SUCCESSES, TR_FAILURES = 2, 3  # improving batches to double it; batches with
 BO_SPREAD = 0.05  # minimum distance between the points of one batch, per sqrt(axes)
 BO_MAX_POINTS = 200  # points the model is fitted to (the lowest scores)
 WARP_SCALE = 0.05  # scores (robustness / its median size) are modelled as sign * log(1 + |score| / WARP_SCALE)
-# Uniform candidates with present faults moved to their severe ends, per choice (0: none)
-SEVERE_CANDIDATES = 0
 SAMPLERS = ("bo", "cem", "random")
 
 
@@ -276,7 +274,13 @@ class BayesianSampler:
     halved after a run of none). A batch takes the next best candidates at least
     `BO_SPREAD` apart, so parallel workers do not run the same point. Before the first
     fit, a Latin hypercube of `initial` points (scipy.stats.qmc; each axis covered in
-    `initial` strata, so a fault is present in half of them) starts the model.
+    `initial` strata, so a fault is present in half of them) starts the model; a fault
+    present in it is at its severe ends (`severe_where_present`: from the start, for the
+    whole run, its settings farthest from neutral). Why: a fault's effect grows with its
+    magnitude and window, and where the score is flat until a cliff (`lead_brake_blind`:
+    7-12 m of clearance for every lidar delay under ~140 ms of the 150 searched, then a
+    collision) the model has nothing to climb towards the region; the worst case of each
+    fault, tried first across the parameters, is what a test engineer would try first too.
 
     The model sees the score through `warp` (a signed logarithm): robustness spans
     hundreds of metres far from a failure and centimetres near one, and a model of the raw
@@ -331,8 +335,6 @@ class BayesianSampler:
         if self.gp is None:
             return self.severe_where_present(qmc.LatinHypercube(self.dims, rng=self.rng).random(n))
         cand = np.vstack([self.rng.random((BO_CANDIDATES, self.dims)), self._trust_region(BO_CANDIDATES)])
-        if SEVERE_CANDIDATES:
-            cand = np.vstack([cand, self.severe_where_present(self.rng.random((SEVERE_CANDIDATES, self.dims)))])
         with threadpool_limits(1):  # see `update`
             mu, sd = self.gp.predict(self.model_inputs(cand), return_std=True)
         mu = mu * self.y_scale + self.y_mean
