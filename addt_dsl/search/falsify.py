@@ -273,14 +273,17 @@ class BayesianSampler:
     stretched along the model's length scales, doubled after successive improvements,
     halved after a run of none). A batch takes the next best candidates at least
     `BO_SPREAD` apart, so parallel workers do not run the same point. Before the first
-    fit, a Latin hypercube of `initial` points (scipy.stats.qmc; each axis covered in
-    `initial` strata, so a fault is present in half of them) starts the model; a fault
-    present in it is at its severe ends (`severe_where_present`: from the start, for the
-    whole run, its settings farthest from neutral). Why: a fault's effect grows with its
-    magnitude and window, and where the score is flat until a cliff (`lead_brake_blind`:
-    7-12 m of clearance for every lidar delay under ~140 ms of the 150 searched, then a
-    collision) the model has nothing to climb towards the region; the worst case of each
-    fault, tried first across the parameters, is what a test engineer would try first too.
+    fit, one worst case per fault (`worst_cases`: that fault alone, at its severe ends:
+    from the start, for the whole run, its settings farthest from neutral; the parameters
+    uniform) and a Latin hypercube of `initial` points (scipy.stats.qmc; each axis covered
+    in `initial` strata, so a fault is present in half of them) start the model. Why the
+    worst cases: a fault's effect grows with its magnitude and window, and where the score
+    is flat up to a cliff (`lead_brake_blind`: 7-12 m of clearance for every lidar delay
+    under ~140 ms of the 150 searched, then a collision) the model has nothing to climb
+    towards the region. Only one point per fault: with every present fault of the
+    hypercube at its severe ends (tried first), searches whose failure needs no fault
+    (`latency_spike`, `cut_in`) took more runs, the model's first view of the parameters
+    being mostly through a severe fault.
 
     The model sees the score through `warp` (a signed logarithm): robustness spans
     hundreds of metres far from a failure and centimetres near one, and a model of the raw
@@ -311,6 +314,8 @@ class BayesianSampler:
                               if a.name.startswith("fault") and not a.name.endswith(":present") else -1
                               for a in axes], dtype=int)
         self.severe = np.array([np.nan if a.severe is None else a.severe for a in axes], dtype=float)
+        self.faults = np.flatnonzero(self.bool & np.isfinite(self.severe))  # present axes with a worst case
+        self.started = False
         self.gp = None
         self.points = np.empty((0, self.dims))
         self.scores = np.empty(0)
@@ -319,7 +324,7 @@ class BayesianSampler:
         self.best = math.inf
 
     def batch_size(self, default: int, done: int) -> int:
-        return self.initial if done == 0 else self.jobs
+        return self.initial + len(self.faults) if done == 0 else self.jobs
 
     def model_inputs(self, u: np.ndarray) -> np.ndarray:
         """What the model sees of points `u`: booleans as 0/1, an absent fault's axes at 0.5."""
@@ -333,7 +338,11 @@ class BayesianSampler:
 
     def sample(self, n: int) -> np.ndarray:
         if self.gp is None:
-            return self.severe_where_present(qmc.LatinHypercube(self.dims, rng=self.rng).random(n))
+            worst = self.worst_cases()[:n] if not self.started else np.empty((0, self.dims))
+            self.started = True
+            if n <= len(worst):
+                return worst
+            return np.vstack([worst, qmc.LatinHypercube(self.dims, rng=self.rng).random(n - len(worst))])
         cand = np.vstack([self.rng.random((BO_CANDIDATES, self.dims)), self._trust_region(BO_CANDIDATES)])
         with threadpool_limits(1):  # see `update`
             mu, sd = self.gp.predict(self.model_inputs(cand), return_std=True)
@@ -351,13 +360,16 @@ class BayesianSampler:
             chosen.append(self.rng.random(self.dims))
         return np.array(chosen)
 
-    def severe_where_present(self, u: np.ndarray) -> np.ndarray:
-        """`u` with every present fault at its most severe (the `Axis.severe` ends: from
-        the start, for the whole run, settings farthest from neutral); parameters, absent
-        faults and axes without a severe end are kept."""
-        u = np.array(u, dtype=float, copy=True)
-        for j in np.flatnonzero((self.gate >= 0) & np.isfinite(self.severe)):
-            u[:, j] = np.where(u[:, self.gate[j]] >= 0.5, self.severe[j], u[:, j])
+    def worst_cases(self) -> np.ndarray:
+        """One point per fault: that fault present at its severe ends (`Axis.severe`: from
+        the start, for the whole run, settings farthest from neutral), the other faults
+        absent, parameters and axes without a severe end uniform."""
+        u = self.rng.random((len(self.faults), self.dims))
+        u[:, self.bool] = 0.0
+        for k, present in enumerate(self.faults):
+            u[k, present] = 1.0
+            for j in np.flatnonzero((self.gate == present) & np.isfinite(self.severe)):
+                u[k, j] = self.severe[j]
         return u
 
     def _trust_region(self, n: int) -> np.ndarray:

@@ -98,16 +98,20 @@ SEVERE_AXES = [Axis("param:p0", "unit"), Axis("fault0:present", "bool", severe=1
                Axis("fault0:value", "unit", severe=0.0), Axis("fault0:bit", "unit")]
 
 
-def test_a_fault_present_in_the_initial_design_is_at_its_severe_ends():
+def test_the_initial_design_starts_with_each_faults_worst_case():
     sampler = BayesianSampler(SEVERE_AXES, np.random.default_rng(4))
-    first = sampler.sample(8)
-    present = first[:, 1] >= 0.5
-    assert present.sum() == 4  # the present axis is stratified: half the points have the fault
-    assert np.array_equal(first[present][:, 2:5], np.tile([0.0, 1.0, 0.0], (4, 1)))
-    # Absent faults, parameters and axes without a severe end keep their strata.
-    assert len(set(np.floor(first[~present][:, 2] * 8).astype(int))) == 4
-    assert sorted(np.floor(first[:, 0] * 8).astype(int)) == list(range(8))
-    assert sorted(np.floor(first[:, 5] * 8).astype(int)) == list(range(8))
+    n = sampler.batch_size(8, 0)
+    assert n == sampler.initial + 1  # one worst case per fault, then the hypercube
+    first = sampler.sample(n)
+    assert np.array_equal(first[0, 1:5], [1.0, 0.0, 1.0, 0.0])  # present, from the start, whole run, severe value
+    lhs = first[1:]
+    for j in range(len(SEVERE_AXES)):  # the hypercube keeps its strata on every axis
+        assert sorted(np.floor(lhs[:, j] * len(lhs)).astype(int)) == list(range(len(lhs)))
+    # Two faults: two worst cases, each alone.
+    axes = SEVERE_AXES + [Axis("fault1:present", "bool", severe=1.0), Axis("fault1:rate", "unit", severe=1.0)]
+    two = BayesianSampler(axes, np.random.default_rng(4))
+    worst = two.sample(two.batch_size(8, 0))[:2]
+    assert np.array_equal(worst[:, [1, 6]], [[1.0, 0.0], [0.0, 1.0]]) and worst[1, 7] == 1.0
 
 
 def severe_slab_score(u: np.ndarray) -> np.ndarray:
