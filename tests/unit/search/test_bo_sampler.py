@@ -139,7 +139,8 @@ def test_bo_finds_a_flat_severe_slab_from_its_initial_design():
         return budget + 1
 
     bo = [to_failure(BayesianSampler(SEVERE_AXES, np.random.default_rng(s)), 60) for s in range(3)]
-    assert max(bo) <= BayesianSampler(SEVERE_AXES, np.random.default_rng(0)).initial, bo
+    # The fault's worst case (the first run) is inside; without it: 22, 4 and 12 evaluations.
+    assert bo == [1, 1, 1], bo
 
 
 def test_the_trust_region_follows_the_best_point_and_stays_in_the_cube():
