@@ -5,6 +5,7 @@ The model, per run (the runtime's fixed clock: one physics step every `step_s`):
     samples           = duration / step + 1
     actor-steps       = samples x actors (the ego and every agent)
     lidar rays        = sum over lidars of rays x channels x rate x duration
+    camera pixels     = sum over cameras and rigs of pixels per frame x rate x duration
     memory [bytes]    = RUN_BASE_BYTES + samples x 8 x (1 + TRACE_FIELDS x actors + LATENCY_SERIES)
 
 and per sweep: runs x each of them (simulated seconds = runs x duration). The memory
@@ -44,6 +45,7 @@ class CostEstimate:
     agent_steps_per_run: float
     lidar_rays_per_run: float
     run_memory_bytes: float
+    camera_pixels_per_run: float = 0.0  # rendered (a camera's cost grows with its pixels, docs/twin.md)
 
     @property
     def sim_seconds(self) -> float:
@@ -57,36 +59,47 @@ class CostEstimate:
     def lidar_rays(self) -> float:
         return self.runs * self.lidar_rays_per_run
 
+    @property
+    def camera_pixels(self) -> float:
+        return self.runs * self.camera_pixels_per_run
+
     def lines(self) -> list[str]:
         """The estimate as `addtc check` and `addtc plan` print it."""
         runs = f"{self.runs:,}" if self.runs_exact else f"at most {self.runs:,}"
+        pixels = f", {self.camera_pixels_per_run:.4g} camera pixels" if self.camera_pixels_per_run else ""
+        sweep_pixels = f", {self.camera_pixels:.4g} camera pixels" if self.camera_pixels_per_run else ""
         return [f"cost estimate: {runs} run(s) x {self.duration_s:g} s = {self.sim_seconds:.4g} simulated s",
                 f"  per run: {self.samples_per_run:,} steps x {self.actors} actor(s) = "
-                f"{self.agent_steps_per_run:.4g} actor-steps, {self.lidar_rays_per_run:.4g} lidar rays, "
+                f"{self.agent_steps_per_run:.4g} actor-steps, {self.lidar_rays_per_run:.4g} lidar rays{pixels}, "
                 f"about {self.run_memory_bytes / 1024 ** 2:,.0f} MiB",
-                f"  sweep: {self.agent_steps:.4g} actor-steps, {self.lidar_rays:.4g} lidar rays"]
+                f"  sweep: {self.agent_steps:.4g} actor-steps, {self.lidar_rays:.4g} lidar rays{sweep_pixels}"]
 
 
 def estimate(plan: ScenarioPlan) -> CostEstimate:
     samples = int(math.floor(plan.duration_s / plan.step_s + 1e-9)) + 1
     actors = 1 + len(plan.agents)
     nominal = plan.nominal_params()
-    rays = 0.0
+    rays = pixels = 0.0
     for actor in plan.actors():
         for sensor in actor.sensors:
-            if sensor.name != "lidar":
+            cls = SENSORS.get(sensor.name)
+            pixels_per_frame = getattr(cls, "pixels_per_frame", None)
+            if cls is None or (sensor.name != "lidar" and pixels_per_frame is None):
                 continue
-            spec = {p.name: p.default for p in SENSORS.get("lidar").params}
+            spec = {p.name: p.default for p in cls.params}
             try:
                 spec.update(resolve_settings(sensor.settings, nominal))
             except (ValueError, ArithmeticError, KeyError):
                 pass  # a setting that needs a sampled value: the defaults stand in
-            rays += float(spec["rays"]) * float(spec["channels"]) * float(spec["rate"]) * plan.duration_s
+            if sensor.name == "lidar":
+                rays += float(spec["rays"]) * float(spec["channels"]) * float(spec["rate"]) * plan.duration_s
+            else:
+                pixels += pixels_per_frame(spec) * float(spec["rate"]) * plan.duration_s
     memory = RUN_BASE_BYTES + samples * 8.0 * (1 + TRACE_FIELDS * actors + LATENCY_SERIES)
     runs, exact = run_count(plan)
     return CostEstimate(runs=runs, runs_exact=exact, duration_s=plan.duration_s, samples_per_run=samples,
                         actors=actors, agent_steps_per_run=float(samples * actors), lidar_rays_per_run=rays,
-                        run_memory_bytes=memory)
+                        run_memory_bytes=memory, camera_pixels_per_run=pixels)
 
 
 def run_count(plan: ScenarioPlan) -> tuple[int, bool]:
@@ -114,6 +127,7 @@ def over_thresholds(est: CostEstimate, limits: Limits) -> list[tuple[str, str]]:
         ("agent_steps", "the sweep's actor-steps", runs * est.agent_steps_per_run),
         ("agent_steps_per_run", "one run's actor-steps", est.agent_steps_per_run),
         ("lidar_rays_per_run", "one run's lidar rays", est.lidar_rays_per_run),
+        ("camera_pixels_per_run", "one run's rendered camera pixels", est.camera_pixels_per_run),
         ("run_memory_bytes", "one run's modelled memory [bytes]", est.run_memory_bytes),
     )
     return [(name, beyond_message(what, value, name, getattr(limits, name)))

@@ -195,6 +195,11 @@ class Camera(Sensor):
     doc = ("Pinhole camera rendered headless by pybullet's TinyRenderer: RGB image (uint8, HxWx3), "
            "metric depth and per-pixel body ids. Cost grows with pixels; see docs/twin.md.")
 
+    @staticmethod
+    def pixels_per_frame(settings: dict) -> float:
+        """Pixels rendered per frame (the compile-time cost estimate counts them)."""
+        return float(settings["width"]) * float(settings["height"])
+
     def __init__(self, name, settings):
         super().__init__(name, settings)
         self.width, self.height = int(self.settings["width"]), int(self.settings["height"])
@@ -243,6 +248,11 @@ class CameraRig(Sensor):
     doc = ("Multi-camera rig (the paper's surround view): `cameras` pinhole cameras around one mount, "
            "rendered like `camera` (RGB only: images uint8, cameras x H x W x 3). For "
            "`perception camera_bev`.")
+
+    @staticmethod
+    def pixels_per_frame(settings: dict) -> float:
+        """Pixels rendered per frame, all cameras (the compile-time cost estimate counts them)."""
+        return float(settings["cameras"]) * float(settings["width"]) * float(settings["height"])
 
     def __init__(self, name, settings):
         super().__init__(name, settings)

@@ -212,3 +212,18 @@ def test_any_lowered_limit_is_a_named_diagnostic_never_an_internal_error(path, n
     for d in result.diagnostics:
         if d.code == "E0701":
             assert " is beyond the limit " in d.message and "=N" in d.notes[-1]
+
+
+def test_camera_pixels_are_estimated_and_bounded():
+    cams = ("    sensor lidar\n    sensor camera width 320 height 240 rate 10 Hz\n"
+            "    sensor camera_rig cameras 6 width 128 height 40 rate 10 Hz\n")
+    src = scenario(duration="20 s").replace("speed 10 m/s\n", "speed 10 m/s {\n" + cams + "  }\n", 1)
+    result = compile_source(src)
+    assert result.ok, [str(d) for d in result.diagnostics]
+    est = result.estimate
+    assert est.camera_pixels_per_run == (320 * 240 + 6 * 128 * 40) * 10.0 * 20
+    assert "camera pixels" in est.lines()[1]
+    big = src.replace("width 320 height 240 rate 10 Hz", "width 1920 height 1080 rate 30 Hz").replace("20 s", "600 s")
+    e0701(compile_source(big), "camera_pixels_per_run")
+    assert compile_source(big, limits=parse_limit("camera_pixels_per_run=1e11")).ok
+    assert "camera pixels" not in compile_source(scenario()).estimate.lines()[1]  # none without a camera
