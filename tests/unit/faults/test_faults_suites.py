@@ -73,3 +73,16 @@ def test_paper_suites_run_the_learned_detector_and_screen_with_ground_truth(path
     screening = compile_file(path, stack=["perception=ground_truth"])
     assert screening.ok and not screening.diagnostics
     assert screening.plan.ego.stack.settings["perception"] == "ground_truth"
+
+
+@pytest.mark.parametrize("family", ["curve", "following_brake", "overtake"])
+def test_a_camera_bev_family_differs_from_its_family_only_in_perception_and_sensor(family):
+    def code(name):  # the definitions without comment lines (the copies explain themselves)
+        text = (EXAMPLES / "suites" / "families" / f"{name}.addt").read_text()
+        return [line for line in text.splitlines() if not line.lstrip().startswith("#")]
+
+    plain, camera = code(family), code(f"{family}_camera_bev")
+    differ = [(a.strip(), b.strip()) for a, b in zip(plain, camera) if a != b]
+    assert len(plain) == len(camera) and len(differ) == 2, differ
+    assert differ[0][1] == differ[0][0].replace("stack bev ", "stack bev perception camera_bev ")
+    assert differ[1] == ("sensor lidar rate 10 Hz rays 360 range 80 m", "sensor camera_rig rate 10 Hz")
