@@ -733,6 +733,7 @@ class _Fleet:
         codes: dict[str, int] = {}
         self.road_code = np.array([codes.setdefault(a.road, len(codes)) for a in agents], dtype=np.int64)
         self.ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
+        self.views = fleet.Views(self.length, self.road_code, run.ego_plan.length_m, self.ego_code) if n else None
         self.posed = False
         self._plan_version = -1
         self._plan = None
@@ -753,9 +754,11 @@ class _Fleet:
         self.accel = np.array([a.accel for a in agents], dtype=float)
         s, t = self.s, self.t
         rel = np.zeros(n)
-        for i, a in enumerate(agents):
-            if a.heading_rel or a.lc_duration_s > 0.0:
-                rel[i] = relative_heading(a, t_now, dt)
+        plan = self._array_plan(run)  # with one, only lane changes turn agents off their road's heading
+        lateral = plan[2] if plan is not None else \
+            [i for i, a in enumerate(agents) if a.heading_rel or a.lc_duration_s > 0.0]
+        for i in lateral:
+            rel[i] = relative_heading(agents[i], t_now, dt)
         x, y, ref_h, lane_off = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         z, grade = np.zeros(n), np.zeros(n)
         finite = bool(np.isfinite(s).all() and np.isfinite(t).all())
@@ -835,19 +838,21 @@ class _Fleet:
         params, rows, changing, target = plan
         self.gather()  # behaviours started since the poses may have moved nobody, but read anew
         s, t, v = self.s, self.t, self.v
-        ego = (run.ego_s, run.ego_t, run.ego.speed, run.ego_plan.length_m, self.ego_code)
+        ego = (run.ego_s, run.ego_t, run.ego.speed)
         if not (np.isfinite(s).all() and np.isfinite(t).all() and math.isfinite(ego[0]) and math.isfinite(ego[1])):
             return False
         t_new = target.copy()
         for i in changing:
             t_new[i] = lateral_profile(self.agents[i], t_now + dt)
-        state = (s, t, v, self.length, self.road_code)
-        accel = self._accel(params, rows, v, fleet.leaders(state, fleet.view(state, ego)))
+        views, length = self.views, self.length
+        free = fleet.idm_free(params, v if isinstance(rows, slice) else v[rows])
+        accel = self._accel(params, rows, v, free, views.leaders(views.jacobi(s, t, v, ego), s, t, length))
         for _ in range(fleet.MAX_ROUNDS):
             v_new = v + accel * dt
             v_new = np.where(v_new > 0.0, v_new, 0.0)  # max(0.0, v), as `advance` picks
             s_new = s + v_new * dt
-            again = self._accel(params, rows, v, fleet.leaders(state, fleet.view(state, ego, (s_new, t_new, v_new))))
+            table = views.sequential(s, t, v, (s_new, t_new, v_new), ego)
+            again = self._accel(params, rows, v, free, views.leaders(table, s, t, length))
             if np.array_equal(again.view(np.int64), accel.view(np.int64)):  # the fixed point: write it back
                 for a, ai, vi, si, ti in zip(self.agents, accel.tolist(), v_new.tolist(), s_new.tolist(),
                                              t_new.tolist()):
@@ -857,12 +862,12 @@ class _Fleet:
         return False
 
     @staticmethod
-    def _accel(params, rows, v, answer) -> np.ndarray:
+    def _accel(params, rows, v, free, answer) -> np.ndarray:
         found, gap, speed = answer
         if isinstance(rows, slice):
-            return fleet.idm_accel(params, v, found, gap, speed)
+            return fleet.idm_accel(params, v, free, found, gap, speed)
         accel = np.zeros(len(v))  # no longitudinal behaviour: 0
-        accel[rows] = fleet.idm_accel(params, v[rows], found[rows], gap[rows], speed[rows])
+        accel[rows] = fleet.idm_accel(params, v[rows], free, found[rows], gap[rows], speed[rows])
         return accel
 
 
@@ -931,7 +936,7 @@ def _clearances(out, names, x, y, heading, length, width, run, t_now) -> bool:
     return collided
 
 
-# Broad-phase slack [m]: numpy's distances differ from math.hypot's by ulps, far below this.
+# Broad-phase slack [m]: sqrt(dx^2 + dy^2) differs from math.hypot by ulps, far below this.
 _BROAD_SLACK_M = 1e-6
 
 
@@ -947,13 +952,14 @@ def _pair_separations(run, names, x, y, heading, length, width):
         run.clearance_pairs = pairs = (iu, ju, reach, r, r + 5.0)
     iu, ju, reach, r, r_exact = pairs
     n = len(names)
-    if n <= 4 or not (np.isfinite(x).all() and np.isfinite(y).all() and np.isfinite(heading).all()):
+    # Few actors, or a pose not finite (or so far out that squares overflow): every pair.
+    if n <= 4 or not ((np.abs(x) < 1e100).all() and (np.abs(y) < 1e100).all() and np.isfinite(heading).all()):
         boxes = list(zip(x.tolist(), y.tolist(), heading.tolist(), length.tolist(), width.tolist()))
         rl = reach.tolist()
         return iu, ju, np.array([_pair_separation(None, None, boxes[i], boxes[j], rl[i], rl[j])
                                  for i, j in zip(iu.tolist(), ju.tolist())], dtype=float)
     dx, dy = x[iu] - x[ju], y[iu] - y[ju]
-    d = np.hypot(dx, dy)
+    d = np.sqrt(dx * dx + dy * dy)
     slack = _BROAD_SLACK_M * (1.0 + d)
     near = np.flatnonzero(d <= r_exact + slack)  # the exact test may apply
     sep = d - r

@@ -34,8 +34,9 @@ class FastRoad:
         self._k = np.asarray(road.curvature(s), dtype=float).tolist()
         self._xy = np.stack([np.asarray(x, float), np.asarray(y, float)], axis=1)
         # The same samples as arrays, for `points` and `lane_offsets` (many actors at once).
-        self._s_a, self._x_a, self._y_a, self._h_a = (np.array(v) for v in (self._s, self._x, self._y, self._h))
-        self._center_arrays: dict[int, np.ndarray] = {}
+        self._s_a = np.array(self._s)
+        self._xyh = np.array([self._x, self._y, self._h])
+        self._center_arrays: dict[tuple[int, ...], np.ndarray] = {}  # a section's lanes -> their centres
         self._ds = self._s[1] - self._s[0]
         self._last_i = len(self._s) - 2
         self._section_starts = [sec.s0 for sec in road.sections]
@@ -79,10 +80,9 @@ class FastRoad:
         code's order; sin and cos stay libm's (`math`: numpy's SIMD versions may differ in
         the last bit). Finite stations; those off the road's ends are posed by `point`."""
         i, u = self._indices(s)
-        xs, ys, hs = self._x_a, self._y_a, self._h_a
-        x = xs[i] + u * (xs[i + 1] - xs[i])
-        y = ys[i] + u * (ys[i + 1] - ys[i])
-        h = hs[i] + u * (hs[i + 1] - hs[i])
+        table = self._xyh
+        lo = table[:, i]
+        x, y, h = lo + u * (table[:, i + 1] - lo)
         off = np.flatnonzero((s > self.length) | (s < 0.0))
         for j in off.tolist():  # extrapolated straight: the scalar call
             x[j], y[j], h[j] = self.reference_pose(float(s[j]))
@@ -94,27 +94,31 @@ class FastRoad:
     def lane_offsets(self, s: np.ndarray, t: np.ndarray, i: np.ndarray, u: np.ndarray) -> np.ndarray:
         """`lane_offset(s, t)` of many actors (`i`, `u`: `points`' index and fraction),
         bit for bit: the nearest driving lane's centre, the first on equal distances."""
-        sec = np.maximum(np.searchsorted(self._section_starts, s, side="right") - 1, 0)
+        if len(self._section_starts) == 1:
+            keys, sec = [0], None
+        else:
+            sec = np.maximum(np.searchsorted(self._section_starts, s, side="right") - 1, 0)
+            keys = np.unique(sec).tolist()
         out = t.copy()
-        keys = np.unique(sec).tolist()
         for key in keys:
             rows = slice(None) if len(keys) == 1 else np.flatnonzero(sec == key)
             lanes = self._lanes_of_section(key)
-            ii, uu, tt = i[rows], u[rows], t[rows]
-            best_d = np.full(len(tt), math.inf)
-            best_c = np.full(len(tt), math.nan)
-            for lane in lanes:
-                table = self._center_arrays.get(lane)
-                if table is None:
+            if not lanes:
+                continue
+            table = self._center_arrays.get(lanes)
+            if table is None:
+                for lane in lanes:
                     self.lane_center_t(lane, 0.0)  # fills the lane's table
-                    table = self._center_arrays[lane] = np.array(self._center_cache[lane])
-                c = table[ii] + uu * (table[ii + 1] - table[ii])
-                d = np.abs(tt - c)
-                nearer = d < best_d
-                best_d = np.where(nearer, d, best_d)
-                best_c = np.where(nearer, c, best_c)
-            found = best_d < math.inf
-            out[rows] = np.where(found, tt - best_c, tt)
+                table = self._center_arrays[lanes] = np.array([self._center_cache[lane] for lane in lanes])
+            ii, uu, tt = i[rows], u[rows], t[rows]
+            lo = table[:, ii]
+            c = lo + uu * (table[:, ii + 1] - lo)  # a row per lane
+            d = np.abs(tt - c)
+            d[np.isnan(d)] = np.inf  # an absent lane is never the nearest
+            nearest = d.argmin(axis=0)  # the first of equal distances, as the scalar loop's `<`
+            cols = np.arange(len(tt))
+            found = d[nearest, cols] < np.inf
+            out[rows] = np.where(found, tt - c[nearest, cols], tt)
         return out
 
     def curvature(self, s: float) -> float:

@@ -33,74 +33,81 @@ WINDOW = 12  # view entries examined per agent at first (widened where not enoug
 MAX_ROUNDS = 3  # fixed-point checks before a step is left to the scalar loop
 
 
-def _select(mask, gap, member, speed):
-    """Per row: (found, least gap, its speed) among masked columns; equal gaps go to the
-    least member index."""
-    g = np.where(mask, gap, np.inf)
-    best = g.min(axis=1)
-    tied = mask & (g == best[:, None])
-    col = np.where(tied, member, np.iinfo(np.int64).max).argmin(axis=1)
-    rows = np.arange(len(best))
-    return tied.any(axis=1), best, speed[rows, col]
+class Views:
+    """The members as the agents see them, as one table per view sorted by station: a column
+    per entry with rows (station, offset, speed, length, member index, and the keys lo..hi
+    of the agents that see it, key = road code * (n + 1) + agent index: an entry is seen
+    only on its road), and a last column past every station that nobody sees.
 
+    The Jacobi view has each agent's old state (seen by all: an agent's own entry is never
+    strictly ahead of it) and the ego. The sequential view has the old states seen by the
+    agents before them, the new states seen by the agents after them, and the ego."""
 
-def view(agents, ego, new=None) -> tuple:
-    """Entries of the view: agents' old states (seen by the agents after them, or by every
-    other agent when `new` is None), their new states (seen by the agents after them) and
-    the ego (seen by all). `agents` = (s, t, speed, length, road) arrays, `ego` the same as
-    floats; `new` = (s, t, speed) arrays."""
-    s, t, v, length, road = agents
-    n = len(s)
-    idx = np.arange(n)
-    parts = [(s, t, v, length, road, idx)]
-    if new is not None:
-        parts.append((new[0], new[1], new[2], length, road, idx))
-    parts.append(tuple(np.array([x]) for x in (*ego, n)))
-    return (*(np.concatenate(col) for col in zip(*parts)), new is None)
+    def __init__(self, length: np.ndarray, road: np.ndarray, ego_length: float, ego_road: int):
+        n = self.n = len(length)
+        self.longest = max(float(length.max()), ego_length)
+        m = np.arange(n, dtype=float)
+        base = road * (n + 1.0)
+        self.key = base + m  # each agent's own key
+        ego_base = ego_road * (n + 1.0)
+        ego = (ego_length, n, ego_base, ego_base + n - 1)
+        self._jacobi = np.zeros((7, n + 2))
+        self._jacobi[3:, :n] = (length, m, base, base + n - 1)
+        self._jacobi[3:, n] = ego
+        self._seq = np.zeros((7, 2 * n + 2))
+        self._seq[3:, :n] = (length, m, base, base + m - 1.0)
+        self._seq[3:, n:2 * n] = (length, m, base + m + 1.0, base + n - 1)
+        self._seq[3:, 2 * n] = ego
+        for table in (self._jacobi, self._seq):
+            table[:, -1] = (np.inf, 0.0, 0.0, 0.0, -1.0, 0.0, -1.0)
 
+    def jacobi(self, s, t, v, ego) -> np.ndarray:
+        """Everyone where they were (`ego`: station, offset, speed)."""
+        table = self._jacobi.copy()
+        n = self.n
+        table[:3, :n] = (s, t, v)
+        table[:3, n] = ego
+        return table[:, np.argsort(table[0], kind="stable")]
 
-def leaders(agents, entries, window_m: float = LANE_WINDOW_M):
-    """(found, gap [m], leader speed [m/s]) per agent from a view (`view`)."""
-    s = agents[0]
-    es, el = entries[0], entries[3]
-    order = np.argsort(es, kind="stable")
-    ss = es[order]
-    first = np.searchsorted(ss, s, side="right")  # the first entry strictly ahead
-    longest = float(el.max())
-    rows = np.arange(len(s))
-    found, best, speed = np.zeros(len(s), dtype=bool), np.full(len(s), np.inf), np.zeros(len(s))
-    width = WINDOW
-    while len(rows):
-        f, b, v, done = _window(rows, first[rows], width, agents, entries, order, ss, longest, window_m)
-        found[rows], best[rows], speed[rows] = f, b, v
-        rows, width = rows[~done], 4 * width  # not settled within the window: a wider one
-    return found, best, speed
+    def sequential(self, s, t, v, new, ego) -> np.ndarray:
+        """Earlier agents at their `new` (station, offset, speed), later ones where they were."""
+        table = self._seq.copy()
+        n = self.n
+        table[:3, :n] = (s, t, v)
+        table[:3, n:2 * n] = new
+        table[:3, 2 * n] = ego
+        return table[:, np.argsort(table[0], kind="stable")]
 
+    def leaders(self, table, s, t, length, window_m: float = LANE_WINDOW_M):
+        """(found, gap [m], leader speed [m/s]) per agent from a view's sorted table."""
+        first = np.searchsorted(table[0], s, side="right")  # the first entry strictly ahead
+        found, best, speed, done = self._window(table, first, WINDOW, s, t, length, self.key, window_m)
+        if done.all():
+            return found, best, speed
+        rows, width = np.flatnonzero(~done), 4 * WINDOW
+        while len(rows):  # not settled within the window: a wider one
+            f, b, v, done = self._window(table, first[rows], width, s[rows], t[rows], length[rows],
+                                         self.key[rows], window_m)
+            found[rows], best[rows], speed[rows] = f, b, v
+            rows, width = rows[~done], 4 * width
+        return found, best, speed
 
-def _window(rows, first, width, agents, entries, order, ss, longest, window_m):
-    """`leaders` for agents `rows` from the `width` entries ahead of each; `done` where no
-    entry beyond the window can be nearer (none left, or the index's stopping bound)."""
-    s, t, _, length, road = (a[rows] for a in agents)
-    es, et, ev, el, er, em, jacobi = entries
-    n, e_count = len(agents[0]), len(es)
-    cols = first[:, None] + np.arange(width)
-    inside = cols < e_count
-    e = order[np.minimum(cols, e_count - 1)]
-    me = em[e]
-    agent = rows[:, None]
-    if jacobi:
-        seen = me != agent
-    else:  # old entries (the first n) by agents before them, new ones by agents after them
-        seen = np.where(e < n, agent < me, agent > me) | (me == n)
-    gap = (es[e] - s[:, None]) - 0.5 * (el[e] + length[:, None])
-    mask = inside & seen & (er[e] == road[:, None]) & ~(np.abs(et[e] - t[:, None]) > window_m) \
-        & (es[e] > s[:, None])
-    found, best, speed = _select(mask, gap, me, ev[e])
-    last = first + width
-    beyond = last < e_count
-    bound = ss[np.minimum(last, e_count - 1)] - s - 0.5 * (longest + length)
-    done = ~beyond | (found & (bound > best + STOP_SLACK_M))
-    return found, best, speed, done
+    def _window(self, table, first, width, s, t, length, key, window_m):
+        """`leaders` from the `width` entries ahead of each agent; `done` where no entry
+        beyond can be nearer (none left, or `neighbours.LeaderIndex`'s bound)."""
+        last = table.shape[1] - 1
+        cols = np.minimum(first[:, None] + np.arange(width), last)
+        es, et, ev, el, em, lo, hi = table[:, cols]
+        k = key[:, None]
+        mask = (lo <= k) & (k <= hi) & ~(np.abs(et - t[:, None]) > window_m)
+        g = np.where(mask, (es - s[:, None]) - 0.5 * (el + length[:, None]), np.inf)
+        best = g.min(axis=1)
+        tied = mask & (g == best[:, None])  # equal gaps: the least member index
+        col = np.where(tied, em, np.inf).argmin(axis=1)
+        speed = ev[np.arange(len(s)), col]
+        next_s = table[0, np.minimum(first + width, last)]
+        done = (next_s == np.inf) | (next_s - s - 0.5 * (self.longest + length) > best + STOP_SLACK_M)
+        return best < np.inf, best, speed, done
 
 
 class IdmParams:
@@ -115,15 +122,19 @@ class IdmParams:
         self.two_sqrt_ab = np.array([2.0 * math.sqrt(p["accel"] * p["decel"]) for p in settings])
 
 
-def idm_accel(p: IdmParams, v, found, gap, lead_speed) -> np.ndarray:
-    """`behaviors.Idm.accel` of every agent [m/s^2]."""
+def idm_free(p: IdmParams, v) -> np.ndarray:
+    """The free-road term `1 - (v / v0) ** 4` of `Idm.accel` (libm's pow, as Python's `**`)."""
     n = len(v)
-    free = 1.0 - np.fromiter(map(pow, (v / p.v0).tolist(), repeat(4, n)), float, n)
+    return 1.0 - np.fromiter(map(pow, (v / p.v0).tolist(), repeat(4, n)), float, n)
+
+
+def idm_accel(p: IdmParams, v, free, found, gap, lead_speed) -> np.ndarray:
+    """`behaviors.Idm.accel` of every agent [m/s^2] (`free`: `idm_free`)."""
+    n = len(v)
     dv = v - lead_speed
     inner = v * p.time_gap + v * dv / p.two_sqrt_ab
     s_star = p.min_gap + np.where(inner > 0.0, inner, 0.0)
     g = np.where(found, gap, 1.0)
     g = np.where(0.1 > g, 0.1, g)
-    q = (s_star / g).tolist()
-    ratio2 = np.fromiter(map(pow, q, repeat(2, n)), float, n)
+    ratio2 = np.fromiter(map(pow, (s_star / g).tolist(), repeat(2, n)), float, n)
     return np.where(found, p.accel * (free - ratio2), p.accel * free)
