@@ -695,8 +695,12 @@ class _EgoOccupant:
         return self._run.ego.speed
 
 
-# Agents stepped as arrays from this many on (fewer: the per-agent code is as quick).
+# Agents posed as arrays from this many on, and stepped as arrays from STEP_MIN_AGENTS on:
+# fewer, and the per-agent code is quicker (the array step asks two leader lookups of
+# ~30 numpy calls each per step, a sorted-list bisect per agent costs ~2.5 us; measured
+# break-even at 65-75 agents, docs/twin.md "Dense traffic").
 ARRAY_MIN_AGENTS = 4
+STEP_MIN_AGENTS = 64
 
 
 class _Fleet:
@@ -735,6 +739,7 @@ class _Fleet:
         self.ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
         self.views = fleet.Views(self.length, self.road_code, run.ego_plan.length_m, self.ego_code) if n else None
         self.posed = False
+        self._posed_version = -1
         self._plan_version = -1
         self._plan = None
 
@@ -746,13 +751,48 @@ class _Fleet:
         self.v = np.array([a.speed for a in agents], dtype=float)
 
     def pose(self, run: _Run, t_now: float, dt: float) -> None:
-        """Pose every agent on its road (the per-agent code: `road.point`, the relative
-        heading of a lane change or a walk, the extra yaw, the elevation) and hand the
-        poses to the physics world; keep them, and each agent's lane offset, for the row."""
+        """Pose every agent on its road (`road.point`, the relative heading of a lane change
+        or a walk, the extra yaw, the elevation) and hand the poses to the physics world;
+        keep them, and each agent's lane offset, for the row."""
         agents, n = self.agents, self.n
         self.gather()
         self.accel = np.array([a.accel for a in agents], dtype=float)
         s, t = self.s, self.t
+        if n < ARRAY_MIN_AGENTS or not (np.isfinite(s).all() and np.isfinite(t).all()):
+            self._pose_one_by_one(run, t_now, dt)  # few agents: the per-agent calls are quicker
+        else:
+            self._pose_arrays(run, t_now, dt)
+        self.posed = True
+        self._posed_version = run.behavior_version  # nothing else moves agents before their step
+        if run.networked:
+            for a, xi, yi, hi in zip(agents, self.x.tolist(), self.y.tolist(), self.heading.tolist()):
+                run.world_pose[a.name] = (xi, yi, hi)
+
+    def _pose_one_by_one(self, run: _Run, t_now: float, dt: float) -> None:
+        set_pose = run.physics.set_pose
+        x, y, heading, lane_off = [], [], [], []
+        for i, a in enumerate(self.agents):
+            xi, yi, h, off, z, grade = self._road_pose(i)
+            hi = h + relative_heading(a, t_now, dt)
+            yaw = run.agent_plans[a.name].yaw
+            if yaw:
+                hi += yaw
+            set_pose(a.name, xi, yi, z + self.half_height[i], hi, math.atan(grade) * math.cos(hi - h))
+            x.append(xi), y.append(yi), heading.append(hi), lane_off.append(off)
+        self.x, self.y, self.heading, self.lane_offset = np.array(x), np.array(y), np.array(heading), np.array(lane_off)
+
+    def _road_pose(self, i: int):
+        """(x, y, road heading, lane offset, z, grade) of agent i, one by one."""
+        a, road = self.agents[i], self.roads[i]
+        x, y, h = road.road.point(a.s, a.t)
+        z, grade = road.elevation.at(a.s)
+        return x, y, h, road.road.lane_offset(a.s, a.t), z, grade
+
+    def _pose_arrays(self, run: _Run, t_now: float, dt: float) -> None:
+        """`_pose_one_by_one` as arrays (numpy over agents), bit for bit: the road points
+        and lane offsets of each road's agents at once (`FastRoad.points`), and the scalar
+        calls only where an agent turns off its road's heading or the road is not flat."""
+        agents, n, s, t = self.agents, self.n, self.s, self.t
         rel = np.zeros(n)
         plan = self._array_plan(run)  # with one, only lane changes turn agents off their road's heading
         lateral = plan[2] if plan is not None else \
@@ -761,20 +801,15 @@ class _Fleet:
             rel[i] = relative_heading(agents[i], t_now, dt)
         x, y, ref_h, lane_off = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         z, grade = np.zeros(n), np.zeros(n)
-        finite = bool(np.isfinite(s).all() and np.isfinite(t).all())
-        if finite:
-            for fast, elev, rows in self.groups:
-                sr, tr = s[rows], t[rows]
-                x[rows], y[rows], ref_h[rows], i, u = fast.points(sr, tr)
-                lane_off[rows] = fast.lane_offsets(sr, tr, i, u)
-                zg = elev.at_arrays(sr)
-                if zg is not None:
-                    z[rows], grade[rows] = zg
-        for i in (self.path_rows if finite else range(n)):
-            a, road = agents[i], self.roads[i]
-            x[i], y[i], ref_h[i] = road.road.point(a.s, a.t)
-            lane_off[i] = road.road.lane_offset(a.s, a.t)
-            z[i], grade[i] = road.elevation.at(a.s)
+        for fast, elev, rows in self.groups:
+            sr, tr = s[rows], t[rows]
+            x[rows], y[rows], ref_h[rows], i, u = fast.points(sr, tr)
+            lane_off[rows] = fast.lane_offsets(sr, tr, i, u)
+            zg = elev.at_arrays(sr)
+            if zg is not None:
+                z[rows], grade[rows] = zg
+        for i in self.path_rows:  # routes: one by one
+            x[i], y[i], ref_h[i], lane_off[i], z[i], grade[i] = self._road_pose(i)
         heading = ref_h + rel
         for i, yaw in self.yaw:
             heading[i] += yaw
@@ -783,10 +818,6 @@ class _Fleet:
             pitch[i] = math.atan(grade[i]) * math.cos(heading[i] - ref_h[i])
         run.physics.set_poses(self.slots, x, y, z + self.half_height, heading, pitch)
         self.x, self.y, self.heading, self.lane_offset = x, y, heading, lane_off
-        self.posed = True
-        if run.networked:
-            for a, xi, yi, hi in zip(agents, x.tolist(), y.tolist(), heading.tolist()):
-                run.world_pose[a.name] = (xi, yi, hi)
 
     def record(self, row: np.ndarray) -> None:
         """The agents' fields of a step's row (`_FIELDS` but the clearance; yaw rate and
@@ -809,7 +840,7 @@ class _Fleet:
         if run.behavior_version == self._plan_version:
             return self._plan
         self._plan_version, self._plan = run.behavior_version, None
-        if run.networked or run.lights is not None or self.n < ARRAY_MIN_AGENTS:
+        if run.networked or run.lights is not None or self.n < max(ARRAY_MIN_AGENTS, STEP_MIN_AGENTS):
             return None
         rows, settings = [], []
         for i, a in enumerate(self.agents):
@@ -836,7 +867,8 @@ class _Fleet:
         if plan is None:
             return False
         params, rows, changing, target = plan
-        self.gather()  # behaviours started since the poses may have moved nobody, but read anew
+        if run.behavior_version != self._posed_version:  # a behaviour started since the poses: read anew
+            self.gather()
         s, t, v = self.s, self.t, self.v
         ego = (run.ego_s, run.ego_t, run.ego.speed)
         if not (np.isfinite(s).all() and np.isfinite(t).all() and math.isfinite(ego[0]) and math.isfinite(ego[1])):
@@ -916,15 +948,11 @@ def _clearances(out, names, x, y, heading, length, width, run, t_now) -> bool:
     an actor's least); only these are evaluated, with the arithmetic of the all-pairs
     loop (elementwise in numpy, hypot, sin and cos from `math`), so the figures are those
     of visiting every pair."""
-    i, j, sep = _pair_separations(run, names, x, y, heading, length, width)
-    n = len(names)
-    table = np.full((n, n), np.inf)
-    table[i, j] = sep
-    table[j, i] = sep
-    clear = table.min(axis=1)
+    i, j, sep, clear = _pair_separations(run, names, x, y, heading, length, width)
     collided = False
     touching = set()
-    for p in np.flatnonzero(sep <= 0.0).tolist():  # in all-pairs order
+    for p in [p for p, value in enumerate(sep.tolist() if isinstance(sep, np.ndarray) else sep)
+              if value <= 0.0]:  # in all-pairs order
         a, b = names[i[p]], names[j[p]]
         touching.add((a, b))
         if (a, b) not in run.contacts:
@@ -932,8 +960,28 @@ def _clearances(out, names, x, y, heading, length, width, run, t_now) -> bool:
         if a == "ego" or b == "ego":
             collided = True
     run.contacts = touching
-    out[:] = np.where(np.isfinite(clear), clear, 1e3)
+    out[:] = [c if math.isfinite(c) else 1e3 for c in (clear.tolist() if isinstance(clear, np.ndarray) else clear)]
     return collided
+
+
+def _all_pairs(x, y, heading, length, width):
+    """Every pair one by one: (i, j, separation of each pair, each actor's least)."""
+    boxes = list(zip(x.tolist(), y.tolist(), heading.tolist(), length.tolist(), width.tolist()))
+    reach = [0.5 * math.hypot(b[3], b[4]) for b in boxes]
+    n = len(boxes)
+    clear = [math.inf] * n
+    iu, ju, seps = [], [], []
+    for a in range(n):
+        for b in range(a + 1, n):
+            sep = _pair_separation(None, None, boxes[a], boxes[b], reach[a], reach[b])
+            if sep < clear[a]:
+                clear[a] = sep
+            if sep < clear[b]:
+                clear[b] = sep
+            iu.append(a)
+            ju.append(b)
+            seps.append(sep)
+    return iu, ju, seps, clear
 
 
 # Broad-phase slack [m]: sqrt(dx^2 + dy^2) differs from math.hypot by ulps, far below this.
@@ -941,27 +989,26 @@ _BROAD_SLACK_M = 1e-6
 
 
 def _pair_separations(run, names, x, y, heading, length, width):
-    """(i, j, separation [m]) arrays of the actor pairs, in all-pairs order (i < j over `names`),
-    that can give an actor's clearance or a contact; every pair when a pose is not finite
-    or there are few actors."""
-    pairs = getattr(run, "clearance_pairs", None)
-    if pairs is None or len(pairs[0]) != len(names) * (len(names) - 1) // 2:  # sizes are fixed: once per run
-        reach = np.array([0.5 * math.hypot(a, b) for a, b in zip(length.tolist(), width.tolist())])
-        iu, ju = np.triu_indices(len(names), 1)
-        r = reach[iu] + reach[ju]
-        run.clearance_pairs = pairs = (iu, ju, reach, r, r + 5.0)
-    iu, ju, reach, r, r_exact = pairs
+    """(i, j, separation [m]) of the pairs near enough for the box test (every contact is
+    among them), in all-pairs order (i < j over `names`), and each actor's clearance: its
+    least separation over all pairs (`_all_pairs` when a pose is not finite or there are
+    few actors)."""
     n = len(names)
     # Few actors, or a pose not finite (or so far out that squares overflow): every pair.
     if n <= 4 or not ((np.abs(x) < 1e100).all() and (np.abs(y) < 1e100).all() and np.isfinite(heading).all()):
-        boxes = list(zip(x.tolist(), y.tolist(), heading.tolist(), length.tolist(), width.tolist()))
-        rl = reach.tolist()
-        return iu, ju, np.array([_pair_separation(None, None, boxes[i], boxes[j], rl[i], rl[j])
-                                 for i, j in zip(iu.tolist(), ju.tolist())], dtype=float)
+        return _all_pairs(x, y, heading, length, width)
+    pairs = getattr(run, "clearance_pairs", None)
+    if pairs is None or len(pairs[0]) != n * (n - 1) // 2:  # sizes are fixed: once per run
+        reach = np.array([0.5 * math.hypot(a, b) for a, b in zip(length.tolist(), width.tolist())])
+        iu, ju = np.triu_indices(n, 1)
+        r = reach[iu] + reach[ju]
+        run.clearance_pairs = pairs = (iu, ju, r, r + 5.0)
+    iu, ju, r, r_exact = pairs
     dx, dy = x[iu] - x[ju], y[iu] - y[ju]
     d = np.sqrt(dx * dx + dy * dy)
     slack = _BROAD_SLACK_M * (1.0 + d)
-    near = np.flatnonzero(d <= r_exact + slack)  # the exact test may apply
+    close = d <= r_exact + slack
+    near = np.flatnonzero(close)  # the exact test may apply
     sep = d - r
     trig = []  # per actor (cos, sin) of the heading, from math, when a box test needs them
     sep[near] = _exact_separations(near, dx, dy, iu, ju, r, r_exact, x, y, heading, length, width, trig)
@@ -969,13 +1016,16 @@ def _pair_separations(run, names, x, y, heading, length, width):
     table[iu, ju] = sep
     table[ju, iu] = sep
     least = table.min(axis=1)
-    keep = d <= r_exact + slack
-    keep |= sep <= np.maximum(least[iu], least[ju]) + 2.0 * slack
-    extra = np.flatnonzero(keep & ~(d <= r_exact + slack))
+    # Pairs whose approximate separation is within the slack of an actor's least: exact
+    # too. The others are farther than every actor's least by more than the slack, so the
+    # least over the table then is the least over exact values.
+    extra = np.flatnonzero(~close & (sep <= np.maximum(least[iu], least[ju]) + 2.0 * slack))
     if len(extra):
-        sep[extra] = _exact_separations(extra, dx, dy, iu, ju, r, r_exact, x, y, heading, length, width, trig)
-    kept = np.flatnonzero(keep)
-    return iu[kept], ju[kept], sep[kept]
+        value = _exact_separations(extra, dx, dy, iu, ju, r, r_exact, x, y, heading, length, width, trig)
+        table[iu[extra], ju[extra]] = value
+        table[ju[extra], iu[extra]] = value
+        least = table.min(axis=1)
+    return iu[near], ju[near], sep[near], least
 
 
 def _exact_separations(p, dx, dy, iu, ju, r, r_exact, x, y, heading, length, width, trig) -> np.ndarray:

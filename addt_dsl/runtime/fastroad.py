@@ -71,7 +71,7 @@ class FastRoad:
         """`_index` of many finite stations: int(s / ds) clamped (clamping the quotient
         first gives the same index), and the fraction, with the same arithmetic."""
         ds = self._ds
-        i = np.clip(s / ds, 0, self._last_i).astype(np.intp)
+        i = np.minimum(np.maximum(s / ds, 0.0), self._last_i).astype(np.intp)
         return i, (s - self._s_a[i]) / ds
 
     def points(self, s: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -60,11 +60,7 @@ EXTRAS = """  agent parked car on r lane -3 at 150 m speed 0 m/s
 
 def all_pairs(run, names, x, y, heading, length, width):
     """Every pair, in order: the clearance loop without its broad phase."""
-    boxes = list(zip(x.tolist(), y.tolist(), heading.tolist(), length.tolist(), width.tolist()))
-    reach = [0.5 * math.hypot(b[3], b[4]) for b in boxes]
-    iu, ju = np.triu_indices(len(names), 1)
-    return iu, ju, np.array([X._pair_separation(None, None, boxes[i], boxes[j], reach[i], reach[j])
-                             for i, j in zip(iu.tolist(), ju.tolist())])
+    return X._all_pairs(x, y, heading, length, width)
 
 
 def one_by_one_points(self, s, t):
@@ -115,6 +111,7 @@ def test_array_step_gives_the_brute_force_trace(monkeypatch, reverse):
 
     with monkeypatch.context() as m:
         m.setattr(X._Fleet, "step", counted)
+        m.setattr(X, "STEP_MIN_AGENTS", 1)  # arrays whatever the count (by default from 64 agents)
         fast = X.execute(spec)
     assert fast.status == "ok", fast.error
     assert fast.trace.events_of("collision")  # the pairs start overlapping: contacts are exercised
