@@ -538,8 +538,10 @@ def _loop(run: _Run) -> Trace:
     lights_rec = {c.name: np.zeros(n) for c in plan.controllers} if run.lights else {}
     margins = {name: np.zeros(n) for name in names} if run.lights else {}
     agents, fleet_ = run.agents, run.fleet
-    lengths = np.array([sizes[n][0] for n in names])
-    widths = np.array([sizes[n][1] for n in names])
+    lengths = [sizes[n][0] for n in names]
+    widths = [sizes[n][1] for n in names]
+    if len(names) > _ALL_PAIRS_MAX:  # the broad phase's arrays
+        lengths, widths = np.array(lengths), np.array(widths)
 
     for k in range(n):
         t_now = k * dt
@@ -563,14 +565,14 @@ def _loop(run: _Run) -> Trace:
             run.world_pose["ego"] = (e.x, e.y, e.heading)
 
         # Record the state at t_now (clearance, the last field, below).
-        block[k, 0, :-1] = (e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
-                            ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)
-        if agents:
-            fleet_.record(block[k, 1:])
-            xs, ys, hs = (np.concatenate(([v], getattr(fleet_, f))) for v, f in
-                          ((e.x, "x"), (e.y, "y"), (e.heading, "heading")))
+        ego_row = (e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
+                   ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)
+        if fleet_.rows is not None:  # agents posed one by one (or none): the rows at once
+            block[k, :, :-1] = [ego_row, *fleet_.rows]
         else:
-            xs, ys, hs = np.array([e.x]), np.array([e.y]), np.array([e.heading])
+            block[k, 0, :-1] = ego_row
+            fleet_.record(block[k, 1:])
+        xs, ys, hs = fleet_.columns(e)
         if run.lights is not None:
             if run.light_script is not None:  # light changes fire on the state just recorded
                 _advance_light_script(run, rec, k, t_now)
@@ -696,10 +698,10 @@ class _EgoOccupant:
 
 
 # Agents posed as arrays from this many on, and stepped as arrays from STEP_MIN_AGENTS on:
-# fewer, and the per-agent code is quicker (the array step asks two leader lookups of
-# ~30 numpy calls each per step, a sorted-list bisect per agent costs ~2.5 us; measured
-# break-even at 65-75 agents, docs/twin.md "Dense traffic").
-ARRAY_MIN_AGENTS = 4
+# fewer, and the per-agent code is quicker (posing: ~30 us of numpy calls against ~2 us per
+# agent; the array step asks two leader lookups of ~30 numpy calls each per step, a
+# sorted-list bisect per agent costs ~2.5 us: measured break-even at 65-75 agents).
+ARRAY_MIN_AGENTS = 16
 STEP_MIN_AGENTS = 64
 
 
@@ -727,8 +729,10 @@ class _Fleet:
         self.groups = [(fast, elev, slice(None) if len(rows) == n else np.array(rows))
                        for fast, elev, rows in groups.values()]
         plans = [run.agent_plans[a.name] for a in agents]
+        self.yaws = [p.yaw for p in plans]
         self.yaw = [(i, p.yaw) for i, p in enumerate(plans) if p.yaw]
-        self.half_height = np.array([VEHICLES[p.vehicle].height_m / 2 for p in plans])
+        self.half_height_m = [VEHICLES[p.vehicle].height_m / 2 for p in plans]
+        self.half_height = np.array(self.half_height_m)
         self.kinds = [p.vehicle for p in plans]
         self.length = np.array([a.length_m for a in agents])
         slots = run.physics.box_slots([a.name for a in agents])
@@ -739,6 +743,8 @@ class _Fleet:
         self.ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
         self.views = fleet.Views(self.length, self.road_code, run.ego_plan.length_m, self.ego_code) if n else None
         self.posed = False
+        self.x, self.y, self.heading = [], [], []
+        self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
         self._posed_version = -1
         self._plan_version = -1
         self._plan = None
@@ -755,31 +761,43 @@ class _Fleet:
         or a walk, the extra yaw, the elevation) and hand the poses to the physics world;
         keep them, and each agent's lane offset, for the row."""
         agents, n = self.agents, self.n
-        self.gather()
-        self.accel = np.array([a.accel for a in agents], dtype=float)
-        s, t = self.s, self.t
-        if n < ARRAY_MIN_AGENTS or not (np.isfinite(s).all() and np.isfinite(t).all()):
+        self._posed_version = -1
+        if n < ARRAY_MIN_AGENTS:
             self._pose_one_by_one(run, t_now, dt)  # few agents: the per-agent calls are quicker
         else:
-            self._pose_arrays(run, t_now, dt)
+            self.gather()
+            self.accel = np.array([a.accel for a in agents], dtype=float)
+            if np.isfinite(self.s).all() and np.isfinite(self.t).all():
+                self._pose_arrays(run, t_now, dt)
+                self._posed_version = run.behavior_version  # nothing else moves agents before their step
+            else:
+                self._pose_one_by_one(run, t_now, dt)
         self.posed = True
-        self._posed_version = run.behavior_version  # nothing else moves agents before their step
         if run.networked:
-            for a, xi, yi, hi in zip(agents, self.x.tolist(), self.y.tolist(), self.heading.tolist()):
-                run.world_pose[a.name] = (xi, yi, hi)
+            for a, xi, yi, hi in zip(agents, self.x, self.y, self.heading):
+                run.world_pose[a.name] = (float(xi), float(yi), float(hi))
 
     def _pose_one_by_one(self, run: _Run, t_now: float, dt: float) -> None:
+        """The per-agent code: poses, and the rows as lists of floats."""
         set_pose = run.physics.set_pose
-        x, y, heading, lane_off = [], [], [], []
-        for i, a in enumerate(self.agents):
-            xi, yi, h, off, z, grade = self._road_pose(i)
+        x, y, heading, v, rows = [], [], [], [], []
+        for a, road, yaw, half_height in zip(self.agents, self.roads, self.yaws, self.half_height_m):
+            xi, yi, h = road.road.point(a.s, a.t)
+            z, grade = road.elevation.at(a.s)
+            off = road.road.lane_offset(a.s, a.t)
             hi = h + relative_heading(a, t_now, dt)
-            yaw = run.agent_plans[a.name].yaw
             if yaw:
                 hi += yaw
-            set_pose(a.name, xi, yi, z + self.half_height[i], hi, math.atan(grade) * math.cos(hi - h))
-            x.append(xi), y.append(yi), heading.append(hi), lane_off.append(off)
-        self.x, self.y, self.heading, self.lane_offset = np.array(x), np.array(y), np.array(heading), np.array(lane_off)
+            set_pose(a.name, xi, yi, z + half_height, hi, math.atan(grade) * math.cos(hi - h))
+            x.append(xi), y.append(yi), heading.append(hi), v.append(a.speed)
+            rows.append((xi, yi, hi, a.speed, a.accel, 0.0, a.s, a.t, off, 0.0))
+        self.x, self.y, self.heading, self.v, self.rows = x, y, heading, v, rows
+
+    def columns(self, ego: VehicleState):
+        """(x, y, heading) of every actor, the ego first: lists or arrays as posed."""
+        if self.rows is not None:
+            return [ego.x, *self.x], [ego.y, *self.y], [ego.heading, *self.heading]
+        return tuple(np.concatenate(([v], a)) for v, a in ((ego.x, self.x), (ego.y, self.y), (ego.heading, self.heading)))
 
     def _road_pose(self, i: int):
         """(x, y, road heading, lane offset, z, grade) of agent i, one by one."""
@@ -817,11 +835,14 @@ class _Fleet:
         for i in np.flatnonzero((grade != 0.0) | (heading != ref_h)).tolist():
             pitch[i] = math.atan(grade[i]) * math.cos(heading[i] - ref_h[i])
         run.physics.set_poses(self.slots, x, y, z + self.half_height, heading, pitch)
-        self.x, self.y, self.heading, self.lane_offset = x, y, heading, lane_off
+        self.x, self.y, self.heading, self.lane_offset, self.rows = x, y, heading, lane_off, None
 
     def record(self, row: np.ndarray) -> None:
         """The agents' fields of a step's row (`_FIELDS` but the clearance; yaw rate and
         steer stay 0)."""
+        if self.rows is not None:
+            row[:, :-1] = self.rows
+            return
         zero = np.zeros(self.n)
         row[:, :9].T[:] = (self.x, self.y, self.heading, self.v, self.accel, zero, self.s, self.t, self.lane_offset)
 
@@ -964,16 +985,23 @@ def _clearances(out, names, x, y, heading, length, width, run, t_now) -> bool:
     return collided
 
 
-def _all_pairs(x, y, heading, length, width):
-    """Every pair one by one: (i, j, separation of each pair, each actor's least)."""
-    boxes = list(zip(x.tolist(), y.tolist(), heading.tolist(), length.tolist(), width.tolist()))
-    reach = [0.5 * math.hypot(b[3], b[4]) for b in boxes]
+def _floats(values) -> list:
+    return values.tolist() if isinstance(values, np.ndarray) else list(values)
+
+
+def _all_pairs(x, y, heading, length, width, reach=None):
+    """Every pair one by one: (i, j, separation of each pair, each actor's least);
+    `reach`: each actor's half-diagonal [m] (computed when not given)."""
+    boxes = list(zip(*(_floats(v) for v in (x, y, heading, length, width))))
+    if reach is None:
+        reach = [0.5 * math.hypot(b[3], b[4]) for b in boxes]
     n = len(boxes)
     clear = [math.inf] * n
     iu, ju, seps = [], [], []
     for a in range(n):
+        box_a, reach_a = boxes[a], reach[a]
         for b in range(a + 1, n):
-            sep = _pair_separation(None, None, boxes[a], boxes[b], reach[a], reach[b])
+            sep = _pair_separation(None, None, box_a, boxes[b], reach_a, reach[b])
             if sep < clear[a]:
                 clear[a] = sep
             if sep < clear[b]:
@@ -986,6 +1014,8 @@ def _all_pairs(x, y, heading, length, width):
 
 # Broad-phase slack [m]: sqrt(dx^2 + dy^2) differs from math.hypot by ulps, far below this.
 _BROAD_SLACK_M = 1e-6
+_FEW_BOX_TESTS = 8  # up to this many box tests one by one, more as arrays
+_ALL_PAIRS_MAX = 20  # up to this many actors every pair one by one (measured: quicker than numpy)
 
 
 def _pair_separations(run, names, x, y, heading, length, width):
@@ -994,8 +1024,14 @@ def _pair_separations(run, names, x, y, heading, length, width):
     least separation over all pairs (`_all_pairs` when a pose is not finite or there are
     few actors)."""
     n = len(names)
-    # Few actors, or a pose not finite (or so far out that squares overflow): every pair.
-    if n <= 4 or not ((np.abs(x) < 1e100).all() and (np.abs(y) < 1e100).all() and np.isfinite(heading).all()):
+    if n <= _ALL_PAIRS_MAX:  # few actors: every pair, one by one, is quicker
+        reach = getattr(run, "clearance_reach", None)
+        if reach is None or len(reach) != n:  # sizes are fixed: once per run
+            reach = run.clearance_reach = [0.5 * math.hypot(a, b) for a, b in zip(_floats(length), _floats(width))]
+        return _all_pairs(x, y, heading, length, width, reach)
+    x, y, heading = np.asarray(x, dtype=float), np.asarray(y, dtype=float), np.asarray(heading, dtype=float)
+    # A pose not finite (or so far out that squares overflow): every pair.
+    if not ((np.abs(x) < 1e100).all() and (np.abs(y) < 1e100).all() and np.isfinite(heading).all()):
         return _all_pairs(x, y, heading, length, width)
     pairs = getattr(run, "clearance_pairs", None)
     if pairs is None or len(pairs[0]) != n * (n - 1) // 2:  # sizes are fixed: once per run
@@ -1035,7 +1071,11 @@ def _exact_separations(p, dx, dy, iu, ju, r, r_exact, x, y, heading, length, wid
     dist = np.fromiter(map(math.hypot, dx[p].tolist(), dy[p].tolist()), float, len(p))
     out = dist - r[p]
     boxed = np.flatnonzero(~(dist > r_exact[p]))
-    if len(boxed):
+    if 0 < len(boxed) <= _FEW_BOX_TESTS:  # a few: one by one (numpy's calls cost more)
+        cols = [_floats(v) for v in (x, y, heading, length, width)]
+        for k, a, b in zip(boxed.tolist(), iu[p[boxed]].tolist(), ju[p[boxed]].tolist()):
+            out[k] = box_separation(tuple(c[a] for c in cols), tuple(c[b] for c in cols))
+    elif len(boxed):
         if not trig:
             hl = heading.tolist()
             trig[:] = [np.fromiter(map(math.cos, hl), float, len(hl)), np.fromiter(map(math.sin, hl), float, len(hl))]

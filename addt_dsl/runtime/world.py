@@ -193,7 +193,7 @@ class PhysicsWorld:
         whose first hit is the ground reports -1 (no hit)."""
         from addt_dsl.runtime import raycast
 
-        pose = self._box_pose
+        pose = self._box_pose.copy()  # contiguous columns, as the caster slices them
         half = np.array(self._box_half, dtype=np.float64).reshape(-1, 3)
         index, frac = raycast.cast(starts, ends, pose[:, :3], raycast.box_rotations(pose[:, 3], pose[:, 4]),
                                    half, self._ground_z, plane_hits=ground_hits)
