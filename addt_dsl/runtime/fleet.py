@@ -3,18 +3,19 @@ agent at once (numpy over agents), with the floats of the per-agent code.
 
 The loop steps agents one after another in declaration order, so agent i reads the
 agents before it where they have already moved this step (their new station, offset
-and speed) and those after it where they were. `leaders` answers that lookup for every
-agent at once from a *view*: each agent's old state, optionally the new states, and the
-ego. Its answer for agent i is `neighbours.leader_scan` over the members as agent i sees
+and speed) and those after it where they were. `Views.leaders` answers that lookup for
+every agent at once from a *view*, a table of members sorted by station: the Jacobi view
+(everyone where they were, and the ego) or the sequential one (earlier agents moved).
+Its answer for agent i is `neighbours.leader_scan` over the members as agent i sees
 them: the nearest member ahead on its road within the lane window, the first in member
 order on equal gaps (agents in declaration order, then the ego).
 
-`step_idm` solves the sequential step as a fixed point: it steps every agent against
-the old states (what agent i sees when no earlier agent is its leader), then asks the
-lookup again with the earlier agents moved; when no answer changes, the new states are
-those of the sequential loop (agent i's answer depends only on agents before it, so the
-fixed point is unique). Agents declared behind their leaders settle in one check; a
-chain declared front to back would need a round per car and is left to the scalar loop.
+The loop (`_Fleet.step` in execute.py) solves the sequential step as a fixed point: it
+steps every agent against the Jacobi view, then asks the sequential view with the earlier
+agents moved; when no acceleration changes, the new states are those of the sequential
+loop (agent i's answer depends only on agents before it, so the fixed point is unique).
+Agents declared behind their leaders settle at the first check; a chain declared front
+to back needs a round per car and is left to the per-agent loop after `MAX_ROUNDS`.
 
 Bit for bit: +, -, *, /, sqrt and comparisons in numpy round as Python's floats do, in
 the same order of operations; powers stay Python's (`pow`, libm), as numpy's may not.
