@@ -986,7 +986,7 @@ def _clearances(out, names, x, y, heading, length, width, run, t_now) -> bool:
 
 
 def _floats(values) -> list:
-    return values.tolist() if isinstance(values, np.ndarray) else list(values)
+    return values.tolist() if isinstance(values, np.ndarray) else values
 
 
 def _all_pairs(x, y, heading, length, width, reach=None):
