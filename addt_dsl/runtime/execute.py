@@ -542,6 +542,20 @@ def _loop(run: _Run) -> Trace:
     widths = [sizes[n][1] for n in names]
     if len(names) > _ALL_PAIRS_MAX:  # the broad phase's arrays
         lengths, widths = np.array(lengths), np.array(widths)
+    # Few agents (most runs): posed, recorded and checked one by one in straight-line code
+    # below; the fleet's lists, arrays and calls cost more than they save there.
+    few = len(agents) < ARRAY_MIN_AGENTS and len(names) <= _ALL_PAIRS_MAX
+    if few:
+        # Per agent, fixed for the run: (state, road, extra yaw [rad], half its body height [m],
+        # vehicle kind, length [m], width [m]).
+        agent_consts = [(a, run.agent_roads[a.name], run.agent_plans[a.name].yaw,
+                         VEHICLES[run.agent_plans[a.name].vehicle].height_m / 2,
+                         run.agent_plans[a.name].vehicle, a.length_m, a.width_m) for a in agents]
+        set_pose, body_actor, world_pose = run.physics.set_pose, fleet_.body_actor, run.world_pose
+        networked = run.networked
+        ego_size = sizes["ego"]
+        reach = [0.5 * math.hypot(length, width) for length, width in zip(lengths, widths)]
+        clear_cols = [block[:, i, -1] for i in range(len(names))]
 
     for k in range(n):
         t_now = k * dt
@@ -549,7 +563,21 @@ def _loop(run: _Run) -> Trace:
         if t_now + 1e-12 >= run.faults.next_wake_s:  # fault timers (tensor hooks attach at their instants)
             run.faults.wake(t_now)
         # Agent poses (kinematic along their road), for the physics world and perception.
-        if agents:
+        if few:
+            row, boxes = [None], [None]  # the ego's first, below
+            for a, road, yaw, half_height, kind, length, width in agent_consts:
+                x, y, h = road.road.point(a.s, a.t)
+                heading = h + relative_heading(a, t_now, dt)
+                if yaw:
+                    heading += yaw
+                z, grade = road.elevation.at(a.s)
+                set_pose(a.name, x, y, z + half_height, heading, math.atan(grade) * math.cos(heading - h))
+                body_actor[a.name] = (x, y, heading, a.speed, length, width, kind)
+                row.append((x, y, heading, a.speed, a.accel, 0.0, a.s, a.t, road.road.lane_offset(a.s, a.t), 0.0))
+                boxes.append((x, y, heading, length, width))
+                if networked:
+                    world_pose[a.name] = (x, y, heading)
+        elif agents:
             fleet_.pose(run, t_now, dt)
         e = run.ego
         run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
@@ -567,17 +595,24 @@ def _loop(run: _Run) -> Trace:
         # Record the state at t_now (clearance, the last field, below).
         ego_row = (e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
                    ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)
-        if fleet_.rows is not None:  # agents posed one by one (or none): the rows at once
+        if few:
+            row[0] = ego_row
+            block[k, :, :-1] = row
+            boxes[0] = (e.x, e.y, e.heading, *ego_size)
+        elif fleet_.rows is not None:  # agents posed one by one: the rows at once
             block[k, :, :-1] = [ego_row, *fleet_.rows]
         else:
             block[k, 0, :-1] = ego_row
             fleet_.record(block[k, 1:])
-        xs, ys, hs = fleet_.columns(e)
         if run.lights is not None:
             if run.light_script is not None:  # light changes fire on the state just recorded
                 _advance_light_script(run, rec, k, t_now)
             run.record_lights(lights_rec, margins, k, t_now)
-        collided = _clearances(block[k, :, -1], names, xs, ys, hs, lengths, widths, run, t_now)
+        if few:
+            collided = _clearances_few(clear_cols, k, names, boxes, reach, run, t_now)
+        else:
+            xs, ys, hs = fleet_.columns(e)
+            collided = _clearances(block[k, :, -1], names, xs, ys, hs, lengths, widths, run, t_now)
         for node in lat_nodes:
             latency[node][k] = run.stack.latency[node]
         outputs["control.steer"][k] = run.command[0]
@@ -642,7 +677,7 @@ def _loop(run: _Run) -> Trace:
             status, error = "detected", "vehicle state became non-finite"
             last = k + 1
             break
-        if agents and fleet_.step(run, t_now, dt):  # all at once, as arrays
+        if not few and agents and fleet_.step(run, t_now, dt):  # all at once, as arrays
             leaders_stale = True
             continue
         leaders, networked = run.leaders, run.networked
@@ -745,6 +780,9 @@ class _Fleet:
         self.posed = False
         self.x, self.y, self.heading = [], [], []
         self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
+        # name -> (x, y, heading, speed, length, width, kind) of an agent posed by the loop's
+        # few-agent code (which poses without the fleet)
+        self.body_actor: dict[str, tuple] = {}
         self._posed_version = -1
         self._plan_version = -1
         self._plan = None
@@ -848,6 +886,9 @@ class _Fleet:
 
     def ground_truth(self, name: str | None):
         """An agent as perception's ground truth sees it (pose of the step, speed then)."""
+        pose = self.body_actor.get(name)  # posed by the loop's few-agent code
+        if pose is not None:
+            return _GT(*pose)
         i = self.index.get(name)
         if i is None or not self.posed:
             return None
@@ -982,6 +1023,39 @@ def _clearances(out, names, x, y, heading, length, width, run, t_now) -> bool:
             collided = True
     run.contacts = touching
     out[:] = [c if math.isfinite(c) else 1e3 for c in (clear.tolist() if isinstance(clear, np.ndarray) else clear)]
+    return collided
+
+
+def _clearances_few(columns, k, names, boxes, reach, run, t_now) -> bool:
+    """`_clearances` of few actors, every pair one by one: `boxes` (x, y, heading, length,
+    width) and `reach` (half-diagonals [m]) in names' order; each actor's clearance goes
+    to `columns[i][k]`."""
+    n = len(boxes)
+    clear = [math.inf] * n
+    collided = False
+    touching = set()
+    for a in range(n):
+        box_a, reach_a = boxes[a], reach[a]
+        xa, ya = box_a[0], box_a[1]
+        for b in range(a + 1, n):
+            box_b = boxes[b]
+            dist = math.hypot(xa - box_b[0], ya - box_b[1])  # `_pair_separation`, inline
+            r = reach_a + reach[b]
+            sep = dist - r if dist > r + 5.0 else box_separation(box_a, box_b)
+            if sep < clear[a]:
+                clear[a] = sep
+            if sep < clear[b]:
+                clear[b] = sep
+            if sep <= 0.0:
+                pair = (names[a], names[b])
+                touching.add(pair)
+                if pair not in run.contacts:
+                    run.events.append(Event(t_now, "collision", {"actors": list(pair)}))
+                if a == 0:  # the ego is first
+                    collided = True
+    run.contacts = touching
+    for column, c in zip(columns, clear):
+        column[k] = c if math.isfinite(c) else 1e3
     return collided
 
 

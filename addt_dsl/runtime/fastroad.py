@@ -189,7 +189,9 @@ class FastRoad:
         return max(0, bisect.bisect_right(self._section_starts, s) - 1)
 
     def driving_lane_ids(self, s: float) -> tuple[int, ...]:
-        return self._lanes_of_section(self._section_key(s))
+        key = self._section_key(s)
+        lanes = self._lanes_cache.get(key)  # hot (each actor's lane offset, every step): no call layer
+        return lanes if lanes is not None else self._lanes_of_section(key)
 
     def _lanes_of_section(self, key: int) -> tuple[int, ...]:
         if key not in self._lanes_cache:
