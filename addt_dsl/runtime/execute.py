@@ -544,7 +544,8 @@ def _loop(run: _Run) -> Trace:
         lengths, widths = np.array(lengths), np.array(widths)
     # Few agents (most runs): posed, recorded and checked one by one in straight-line code
     # below; the fleet's lists, arrays and calls cost more than they save there.
-    few = len(agents) < ARRAY_MIN_AGENTS and len(names) <= _ALL_PAIRS_MAX
+    few = len(agents) < ARRAY_MIN_AGENTS
+    few_pairs = few and len(names) <= _ALL_PAIRS_MAX
     if few:
         # Per agent, fixed for the run: (state, road, extra yaw [rad], half its body height [m],
         # vehicle kind, length [m], width [m]).
@@ -608,10 +609,10 @@ def _loop(run: _Run) -> Trace:
             if run.light_script is not None:  # light changes fire on the state just recorded
                 _advance_light_script(run, rec, k, t_now)
             run.record_lights(lights_rec, margins, k, t_now)
-        if few:
+        if few_pairs:
             collided = _clearances_few(clear_cols, k, names, boxes, reach, run, t_now)
         else:
-            xs, ys, hs = fleet_.columns(e)
+            xs, ys, hs = ([box[c] for box in boxes] for c in range(3)) if few else fleet_.columns(e)
             collided = _clearances(block[k, :, -1], names, xs, ys, hs, lengths, widths, run, t_now)
         for node in lat_nodes:
             latency[node][k] = run.stack.latency[node]
@@ -733,10 +734,10 @@ class _EgoOccupant:
 
 
 # Agents posed as arrays from this many on, and stepped as arrays from STEP_MIN_AGENTS on:
-# fewer, and the per-agent code is quicker (posing: ~30 us of numpy calls against ~2 us per
-# agent; the array step asks two leader lookups of ~30 numpy calls each per step, a
+# fewer, and the loop's straight-line per-agent code is quicker (posing: ~30 us of numpy
+# calls against ~2 us per agent, measured break-even at ~24 agents; the array step asks two leader lookups of ~30 numpy calls each per step, a
 # sorted-list bisect per agent costs ~2.5 us: measured break-even at 65-75 agents).
-ARRAY_MIN_AGENTS = 16
+ARRAY_MIN_AGENTS = 24
 STEP_MIN_AGENTS = 64
 
 
@@ -1089,7 +1090,7 @@ def _all_pairs(x, y, heading, length, width, reach=None):
 # Broad-phase slack [m]: sqrt(dx^2 + dy^2) differs from math.hypot by ulps, far below this.
 _BROAD_SLACK_M = 1e-6
 _FEW_BOX_TESTS = 8  # up to this many box tests one by one, more as arrays
-_ALL_PAIRS_MAX = 20  # up to this many actors every pair one by one (measured: quicker than numpy)
+_ALL_PAIRS_MAX = 24  # up to this many actors every pair one by one (measured: quicker than numpy)
 
 
 def _pair_separations(run, names, x, y, heading, length, width):
