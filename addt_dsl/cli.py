@@ -241,7 +241,7 @@ def _classifying(args, stream, store, executor):
 
     if not hasattr(executor, "run_fn"):
         raise UsageError(f"--classify runs on the local or inline executor, not {executor.name}")
-    done = store.done()
+    done = store.done(classified=True)  # stored runs without a class run again to get one
     specs = itertools.islice(stream, args.limit) if args.limit else stream
     pending = [s for s in specs if s.faults and (s.key(), s.run_id) not in done]
     if not stream.plan.faults and args.format != "json":
@@ -267,7 +267,14 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
     if already and not quiet:
         print(f"resuming: {already} run(s) already in {store.path}", file=sys.stderr)
     try:
-        outcome = _sweep_with_progress(specs, store, executor, total, min(already, total), quiet)
+        if args.classify:
+            classified = len(store.done(classified=True))
+            if already > classified and not quiet:
+                print(f"classify: {already - classified} stored run(s) have no outcome class; they run again "
+                      "to get one (same RunSpec, same run)", file=sys.stderr)
+            already = classified
+        outcome = _sweep_with_progress(specs, store, executor, total, min(already, total), quiet,
+                                       classified=args.classify)
     except KeyboardInterrupt:
         print(f"interrupted: {len(store)} run(s) are stored in {store.path}; "
               "run the same command again to resume", file=sys.stderr)
@@ -309,21 +316,21 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
     return verdict_exit_code(totals["statuses"], totals["failed"])
 
 
-def _sweep_with_progress(specs, store, executor, total: int, done: int, quiet: bool):
+def _sweep_with_progress(specs, store, executor, total: int, done: int, quiet: bool, classified: bool = False):
     from addt_dsl.runtime.executor import run_sweep
 
     if quiet or total - done < 4:
-        return run_sweep(specs, store, executor)
+        return run_sweep(specs, store, executor, classified=classified)
     if not sys.stderr.isatty():  # a log, not a terminal: plain lines a bar cannot give
         from addt_dsl.reporting.progress import ProgressLines
 
-        return run_sweep(specs, store, executor, on_record=ProgressLines(total, done))
+        return run_sweep(specs, store, executor, on_record=ProgressLines(total, done), classified=classified)
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeRemainingColumn(), transient=True) as progress:
         task = progress.add_task("runs", total=total, completed=done)
-        return run_sweep(specs, store, executor, on_record=lambda r: progress.advance(task))
+        return run_sweep(specs, store, executor, on_record=lambda r: progress.advance(task), classified=classified)
 
 
 def cmd_report(args) -> int:

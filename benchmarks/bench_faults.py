@@ -5,7 +5,9 @@ each fault active for the whole run with mild settings; runs are interleaved rou
 the least CPU time of `--repeat` is compared, which filters out noise from other processes.
 `none (again)` is the fault-free run measured a second time: its "overhead" is the noise floor.
 Camera kinds (blur, image_noise, occlude) are measured per frame and compared with the
-cost of rendering that frame, the camera's own cost (the scenario perceives from lidar).
+cost of rendering that frame, the camera's own cost, measured in the same run in a posed
+twin world: a `camera` at 320x240 and 640x480, and the six 128x40 images of a
+`camera_rig` (`perception camera_bev`'s rig).
 Tensor bit flips, on the shipped detector in the learned `following` family (20 s, a lidar
 frame every 0.1 s): (a) a fault whose window is the last second against the fault-free run
 (hooks attach only at a flip's instant, so this is ~1.0), with the previous method beside it
@@ -80,13 +82,36 @@ def closed_loop(repeat: int, kinds=None) -> tuple[dict[str, float], dict[str, in
     return best, events
 
 
-# getCameraImage (ER_TINY_RENDERER) per frame, from ../shared/design/PERFORMANCE.md: what a
-# camera already costs per frame, against which a corruption's cost is compared.
-RENDER_S = {(240, 320): 0.012, (480, 640): 0.048}
+CAMERA_SHAPES = ((240, 320), (480, 640))  # (H, W) of a `camera` frame
+RIG = "sensor camera_rig rate 10 Hz cameras 6 width 128 height 40 fov 64 deg"  # perception camera_bev's rig
 
 
-def camera_kinds(repeat: int) -> dict[tuple[str, tuple[int, int]], float]:
-    """Seconds per uint8 frame for each camera corruption, at 320x240 and 640x480."""
+def render_s() -> dict[tuple, float]:
+    """CPU seconds per frame of rendering what the corruptions act on, measured here in a
+    posed twin world (5 agents, TinyRenderer; bench_twin.sensor_ms): a `camera` (its
+    default, segmentation on) at each of CAMERA_SHAPES, and the six-camera rig
+    (key "rig"). A corruption's cost is compared with these."""
+    from bench_twin import sensor_ms
+
+    out = {shape: sensor_ms(f"sensor camera rate 10 Hz width {shape[1]} height {shape[0]}", repeat=3)[0] / 1e3
+           for shape in CAMERA_SHAPES}
+    out["rig"] = sensor_ms(RIG, repeat=3)[0] / 1e3
+    return out
+
+
+def _best(fn, repeat: int) -> float:
+    fn()
+    t = []
+    for _ in range(repeat * 5):
+        t0 = time.perf_counter()
+        fn()
+        t.append(time.perf_counter() - t0)
+    return min(t)
+
+
+def camera_kinds(repeat: int) -> dict[tuple[str, object], float]:
+    """Seconds per uint8 frame for each camera corruption, at 320x240 and 640x480, and on
+    the six images (6 x 40 x 128) of a `camera_rig` frame (key "rig")."""
     from addt_dsl.plan import ConcreteFault
     from addt_dsl.runtime.faults import FaultSchedule
     from addt_dsl.runtime.sensors import Frame
@@ -94,19 +119,15 @@ def camera_kinds(repeat: int) -> dict[tuple[str, tuple[int, int]], float]:
     settings = {"blur": {"sigma": 2.0}, "image_noise": {"sigma": 8.0}, "occlude": {"fraction": 0.2}}
     rng = np.random.default_rng(0)
     out = {}
-    for shape in RENDER_S:
-        img = rng.integers(0, 256, (*shape, 3), dtype=np.uint8)
+    for shape in (*CAMERA_SHAPES, "rig"):
+        target = "camera_rig" if shape == "rig" else "camera"
+        key = "images" if shape == "rig" else "image"
+        img = rng.integers(0, 256, (6, 40, 128, 3) if shape == "rig" else (*shape, 3), dtype=np.uint8)
         for kind, st in settings.items():
-            sched = FaultSchedule([ConcreteFault(index=0, kind=kind, target="camera", start_s=0.0, end_s=None,
+            sched = FaultSchedule([ConcreteFault(index=0, kind=kind, target=target, start_s=0.0, end_s=None,
                                                  settings=st, seed=1)], 0.01, 100.0, [])
             fault = sched.kinds[0]
-            fault.on_frame(Frame("camera", 0.0, {"image": img}), 0.0)
-            t = []
-            for _ in range(repeat * 5):
-                t0 = time.perf_counter()
-                fault.on_frame(Frame("camera", 0.0, {"image": img}), 0.0)
-                t.append(time.perf_counter() - t0)
-            out[(kind, shape)] = min(t)
+            out[(kind, shape)] = _best(lambda: fault.on_frame(Frame(target, 0.0, {key: img}), 0.0), repeat)
     return out
 
 
@@ -197,9 +218,9 @@ def tensor_flip_costs(repeat: int) -> dict[str, float]:
     frames = []
     build = learned.build_grid_region
 
-    def capture(points, sensor_xy, out=None):
+    def capture(points, sensor_xy, **kwargs):
         frames.append((points.copy(), sensor_xy))
-        return build(points, sensor_xy, out=out)
+        return build(points, sensor_xy, **kwargs)
 
     learned.build_grid_region = capture
     try:
@@ -265,10 +286,16 @@ def closed_loop_and_camera(args, kinds, figures: dict) -> None:
         print(f"{k:14s} {t * 1000:8.0f} {over * 100:8.1f}% {events[k]:7d}")
     if kinds is not None:
         return
+    render = render_s()
+    figures["render_ms_per_frame"] = {("rig 6x128x40" if k == "rig" else f"{k[1]}x{k[0]}"): v * 1e3
+                                      for k, v in render.items()}
+    print("rendering, measured here (CPU ms per frame): " +
+          ", ".join(f"{name} {ms:.2f}" for name, ms in figures["render_ms_per_frame"].items()))
     for (k, shape), t in camera_kinds(args.repeat).items():
-        over = t / RENDER_S[shape]
-        figures["overhead"][f"{k} {shape[1]}x{shape[0]}"] = over
-        print(f"{k:14s} {shape[1]}x{shape[0]}: {t * 1e3:6.2f} ms/frame = {over * 100:5.1f}% of rendering the frame")
+        over = t / render[shape]
+        name = "rig 6x128x40" if shape == "rig" else f"{shape[1]}x{shape[0]}"
+        figures["overhead"][f"{k} {name}"] = over
+        print(f"{k:14s} {name}: {t * 1e3:6.2f} ms/frame = {over * 100:5.1f}% of rendering the frame")
 
 
 def uptime() -> str:

@@ -19,6 +19,11 @@ learned run per family split into lidar, grid, network (and the conv calls insid
 decoding and the rest of the loop, and Table 1's time with learned perception on 2 cores
 estimated from the CPU factors; last, per detector layer, how many conv window shapes give
 other bits than a larger window (why the region forward's windows are fixed by the traces).
+
+    PYTHONPATH=. python benchmarks/bench_stack.py --conv-backends [--repeats 3]
+
+times instead the conv windows of a learned curve run on other conv backends (oneDNN with
+prepacked weights and fused ReLU, bfloat16): what a new detector forward could gain.
 """
 
 from __future__ import annotations
@@ -82,7 +87,12 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", help="also write the figures here")
     ap.add_argument("--families-only", action="store_true", help="only the per-family real-time factors")
+    ap.add_argument("--conv-backends", action="store_true",
+                    help="only: the detector's conv windows of a learned curve run on other conv backends")
     args = ap.parse_args()
+    if args.conv_backends:
+        figures_json.write(args.json, {"conv_backends_us_per_frame": conv_backends(args.repeats)})
+        return
 
     import gc
 
@@ -173,6 +183,96 @@ def window_dependence() -> dict[str, int]:
             out[name] = differ
     print("conv window shapes (of 128) whose cells get other bits than in a 20x20 window, per layer: "
           + ", ".join(f"{n} {d}" for n, d in out.items()))
+    return out
+
+
+def conv_backends(repeats: int) -> dict:
+    """What another detector forward could gain (it would change the output bits): every conv
+    window the region forward computes in a learned curve run (30 s), recorded, then timed
+    per layer on torch's default path for these sizes (im2col + MKL sgemm, what the region
+    forward runs), on oneDNN with prepacked weights, channels-last input and the ReLU fused
+    (`mkldnn._convolution_pointwise`, as torch.compile's CPU code uses), and in bfloat16
+    (the CPU's AVX512-BF16); least of `repeats` passes, CPU microseconds per lidar frame.
+    The best backend per layer bounds a mixed forward's conv time."""
+    import sys
+    from collections import defaultdict
+
+    import torch
+    import torch.nn.functional as F
+
+    from addt_dsl.runtime.execute import execute
+    from addt_dsl.stack import learned
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from _families import family_spec
+
+    torch.set_num_threads(1)
+    model, _ = learned.load_model()
+    # The run's node holds its own copy of the weights: its layers are told apart by shape.
+    names = {tuple(layer.weight.shape): name for name, layer in model.layers().items()}
+    assert len(names) == len(model.layers())
+    windows: dict[str, list] = defaultdict(list)
+    frames = [0]
+    conv2d, detect = F.conv2d, learned.LearnedPerception.detect
+
+    def record(x, weight, bias=None, stride=1, *args):
+        name = names.get(tuple(weight.shape))
+        if name is not None:
+            windows[name].append(x.contiguous().clone())
+        return conv2d(x, weight, bias, stride, *args)
+
+    def counting(self, *a, **k):
+        frames[0] += 1
+        return detect(self, *a, **k)
+
+    spec = family_spec("curve", "learned")
+    F.conv2d, learned.LearnedPerception.detect = record, counting
+    try:
+        execute(spec, keep_trace=False)
+    finally:
+        F.conv2d, learned.LearnedPerception.detect = conv2d, detect
+    n_frames = frames[0]
+    out = {}
+    print(f"\nconv backends on the {sum(map(len, windows.values()))} conv windows of a learned curve run "
+          f"({n_frames} frames), CPU us per frame (least of {repeats}):")
+    print(f"  {'layer':<18} {'windows':>7} {'default':>8} {'oneDNN':>8} {'bf16':>8}")
+    with torch.inference_mode():
+        for name, layer in model.layers().items():
+            xs = windows.get(name, [])
+            k, s = layer.kernel_size[0], layer.stride[0]
+            w, b = layer.weight, layer.bias
+            packed: dict[tuple, torch.Tensor] = {}
+
+            def onednn(x):
+                key = tuple(x.shape)
+                if key not in packed:  # weights prepacked once per input shape
+                    packed[key] = torch._C._nn.mkldnn_reorder_conv2d_weight(w.to_mkldnn(), [0, 0], [s, s], [1, 1], 1,
+                                                                            list(x.shape))
+                return torch.ops.mkldnn._convolution_pointwise(x, packed[key], b, [0, 0], [s, s], [1, 1], 1,
+                                                               "relu", [None], None)
+
+            cl = [x.contiguous(memory_format=torch.channels_last) for x in xs]
+            wb, bb = w.to(torch.bfloat16), b.to(torch.bfloat16)
+            xb = [x.to(torch.bfloat16) for x in xs]
+            ways = {"default": lambda: [F.relu(conv2d(x, w, b, s)) for x in xs],
+                    "oneDNN": lambda: [onednn(x) for x in cl],
+                    "bf16": lambda: [F.relu(conv2d(x, wb, bb, s)) for x in xb]}
+            row = {}
+            for way, fn in ways.items():
+                fn()  # first calls: kernel set-up, prepacking
+                best = float("inf")
+                for _ in range(max(repeats, 3)):
+                    t0 = time.thread_time()
+                    fn()
+                    best = min(best, time.thread_time() - t0)
+                row[way] = 1e6 * best / n_frames
+            out[name] = row
+            print(f"  {name:<18} {len(xs):>7} {row['default']:>8.1f} {row['oneDNN']:>8.1f} {row['bf16']:>8.1f}")
+    total = {way: sum(r[way] for r in out.values()) for way in ("default", "oneDNN", "bf16")}
+    best_mix = sum(min(r.values()) for r in out.values())
+    out["total"] = dict(total, best_per_layer=best_mix)
+    print(f"  {'total':<18} {'':>7} {total['default']:>8.1f} {total['oneDNN']:>8.1f} {total['bf16']:>8.1f}"
+          f"   best backend per layer: {best_mix:.1f} ({total['default'] / best_mix:.2f}x less than default)")
     return out
 
 

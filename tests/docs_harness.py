@@ -55,6 +55,7 @@ CAMERA_FAULT_WRAPPER = """scenario doc {
   ego car on r lane -2 at 10 m speed 15 m/s {
     sensor lidar
     sensor camera width 160 height 120
+    sensor camera_rig cameras 3 width 32 height 16
   }
   expect {
     no collision
@@ -75,7 +76,7 @@ WRAPPERS = {
                  "  ego car on r lane -1 at 10 m speed 10 m/s {\n%s  }\n}\n",
 }
 
-IMAGE_KINDS = {c.keyword for c in FAULTS.classes() if c.sensor_kinds == ("camera",)}
+IMAGE_KINDS = {c.keyword for c in FAULTS.classes() if "camera" in (c.sensor_kinds or ())}
 
 
 def blocks(*langs: str, doc: str | None = None) -> list[Block]:

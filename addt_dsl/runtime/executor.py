@@ -429,14 +429,15 @@ class SweepOutcome:
 
 
 def run_sweep(specs: Iterable[RunSpec], store: ResultStore, executor=None,
-              on_record: Callable[[RunResult], None] | None = None) -> SweepOutcome:
+              on_record: Callable[[RunResult], None] | None = None, classified: bool = False) -> SweepOutcome:
     """Run every spec the store does not hold yet, committing each as it completes. A run
     the executor lost (status `lost`) is counted, not stored, so a resume runs it again. A
     store that cannot take a run (a full disk: `StoreFull`) stops the sweep at once, the
-    workers with it; every run committed before stays."""
+    workers with it; every run committed before stays. `classified` (the executor
+    classifies runs): a stored run without an outcome class runs again to get one."""
     executor = executor or LocalExecutor()
     outcome = SweepOutcome()
-    done = store.done()
+    done = store.done(classified=classified)
 
     def pending():
         for seq, spec in enumerate(specs):

@@ -84,7 +84,9 @@ def _candidates(starts, seg, centres, rotations, half_extents):
     exact test runs on a small fraction of the ray × box pairs.
     """
     radius2 = (half_extents ** 2).sum(axis=1)
-    len2 = (seg * seg).sum(axis=1)[:, None]
+    # (seg * seg).sum(axis=1) with the same bits ((x² + y²) + z², in numpy's order) in a
+    # fifth of the time: a reduction over rows of 3 is slow, whole-column operations are not.
+    len2 = (seg[:, 0] * seg[:, 0] + seg[:, 1] * seg[:, 1] + seg[:, 2] * seg[:, 2])[:, None]
     if (starts == starts[0]).all():  # one origin (a lidar scan): (3,) vectors, not (N, 3)
         rel = centres - starts[0]
         # A box around the origin is never hit (pybullet ignores the box a ray starts in):

@@ -110,7 +110,7 @@ class Lidar(Sensor):
         hit = hit_ids >= 0
         dist = fractions * self.range_m
         # Points in the *sensor* frame: the stack maps them with the nominal extrinsics.
-        pts = (self._dirs * dist[:, None])[hit]
+        pts = self._dirs[hit] * dist[hit, None]  # the hits only (a scan's rays mostly miss)
         return Frame(self.name, time_s, {"points": pts, "hit_body": hit_ids[hit]})
 
 

@@ -445,7 +445,8 @@ class ResultStore:
 
     def add(self, r: RunResult, plan: ScenarioPlan | None = None) -> bool:
         """Commit one finished run of `plan` (default: the store's); False if it was already
-        stored (nothing changes)."""
+        stored (nothing changes), except that a classified run gives a stored unclassified
+        one its outcome (a run repeats bit for bit: the rest of the row is the same)."""
         with self.errors(f"storing run {r.run_id}"):
             digest = self._plan_hash(plan) if plan is not None else ""
         verdicts = [{"name": v.name, "severity": v.severity, "robustness": _json_float(v.robustness),
@@ -460,12 +461,17 @@ class ResultStore:
                  json.dumps(r.params), json.dumps(r.cell), r.spec_json, json.dumps(verdicts),
                  ";".join(r.failed_oracles), r.sim_time_s, r.wall_time_s, r.digest, r.fault_events, r.error,
                  json.dumps(r.stats), r.worker, time.time(), r.outcome, json.dumps(injections), digest))
+            if cur.rowcount == 0 and r.outcome:
+                cur = self._db.execute("UPDATE runs SET outcome = ? WHERE key = ? AND run_id = ? AND outcome = ''",
+                                       (r.outcome, r.key, r.run_id))
         return cur.rowcount == 1
 
     # ---- reading
-    def done(self) -> set[tuple[str, str]]:
-        """(key, run_id) of every stored run: what a resumed sweep skips."""
-        return set(self._db.execute("SELECT key, run_id FROM runs"))
+    def done(self, classified: bool = False) -> set[tuple[str, str]]:
+        """(key, run_id) of every stored run: what a resumed sweep skips; `classified`: only
+        the runs that carry an outcome class (a `--classify` sweep runs the others again)."""
+        where = " WHERE outcome != ''" if classified else ""
+        return set(self._db.execute(f"SELECT key, run_id FROM runs{where}"))
 
     def __len__(self) -> int:
         return self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]

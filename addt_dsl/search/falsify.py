@@ -10,8 +10,8 @@ parameter. Fault seeds and the run seed are drawn afresh for every candidate.
 Guidance (`SAMPLERS`): each run is scored by its worst normalised robustness over the hard
 oracles not yet falsified (the oracles' STL robustness: below 0 the run fails), and the
 default sampler, `BayesianSampler`, models that score with a Gaussian process and runs the
-candidate most likely to fail, from a Latin hypercube start and a trust region around the
-lowest score (see its docstring). `CrossEntropySampler` (CEM: per-axis distributions
+candidate most likely to fail, from a Latin hypercube start (faults in it at their severe
+ends) and a trust region around the lowest score (see its docstring). `CrossEntropySampler` (CEM: per-axis distributions
 refitted to the best fifth of each batch) and `UniformSampler` (the benchmark's baseline)
 are the options. Why not Hypothesis `target()`: runs are expensive (0.1-1 s) and budgets
 small (tens to hundreds of runs), so the search must spend each run where a model says;
@@ -75,6 +75,9 @@ class Axis:
     name: str  # `param:gap`, `fault3:present`, `fault3:start`, `fault3:length`, `fault3:value`, ...
     kind: str  # "unit" (continuous) | "bool"
     decode: object = None  # callable(u) -> value (for reporting)
+    # A fault axis's most severe end (present, from the start, for the whole run, the
+    # setting farthest from neutral); None: no severe end (parameters, drawn bits, instants).
+    severe: float | None = None
 
 
 class SearchSpace:
@@ -99,6 +102,7 @@ class SearchSpace:
             cls = FAULTS.get(f.kind)
             specs = {s.name: s for s in cls.params}
             settings = []
+            severe: dict[str, float] = {}  # setting -> its unit value farthest from neutral
             for name, value in f.settings.items():
                 spec = specs.get(name)
                 expr = fp.settings.get(name)
@@ -118,16 +122,18 @@ class SearchSpace:
                     lo = max(lo, 1.0)
                 if hi > lo:
                     settings.append((name, lo, hi, spec.kind == "int"))
+                    severe[name] = 1.0 if abs(hi - neutral) >= abs(lo - neutral) else 0.0
             timed = not E.params_used(fp.start_s) and (fp.end_s is None or not E.params_used(fp.end_s))
             instant = f.end_s is not None and f.end_s == f.start_s
             self.faults.append((f.index, f, settings, instant, timed))
-            self.axes.append(Axis(f"fault{f.index}:present", "bool"))
+            self.axes.append(Axis(f"fault{f.index}:present", "bool", severe=1.0))
             if timed:
-                self.axes.append(Axis(f"fault{f.index}:start", "unit"))
+                # an instant fault has no worst time; a window's worst is the whole run
+                self.axes.append(Axis(f"fault{f.index}:start", "unit", severe=None if instant else 0.0))
                 if not instant:
-                    self.axes.append(Axis(f"fault{f.index}:length", "unit"))
+                    self.axes.append(Axis(f"fault{f.index}:length", "unit", severe=1.0))
             for name, *_ in settings:
-                self.axes.append(Axis(f"fault{f.index}:{name}", "unit"))
+                self.axes.append(Axis(f"fault{f.index}:{name}", "unit", severe=severe.get(name)))
         self.index = {a.name: i for i, a in enumerate(self.axes)}
 
     @property
@@ -267,8 +273,17 @@ class BayesianSampler:
     stretched along the model's length scales, doubled after successive improvements,
     halved after a run of none). A batch takes the next best candidates at least
     `BO_SPREAD` apart, so parallel workers do not run the same point. Before the first
-    fit, a Latin hypercube of `initial` points (scipy.stats.qmc; each axis covered in
-    `initial` strata, so a fault is present in half of them) starts the model.
+    fit, one worst case per fault (`worst_cases`: that fault alone, at its severe ends:
+    from the start, for the whole run, its settings farthest from neutral; the parameters
+    uniform) and a Latin hypercube of `initial` points (scipy.stats.qmc; each axis covered
+    in `initial` strata, so a fault is present in half of them) start the model. Why the
+    worst cases: a fault's effect grows with its magnitude and window, and where the score
+    is flat up to a cliff (`lead_brake_blind`: 7-12 m of clearance for every lidar delay
+    under ~140 ms of the 150 searched, then a collision) the model has nothing to climb
+    towards the region. Only one point per fault: with every present fault of the
+    hypercube at its severe ends (tried first), searches whose failure needs no fault
+    (`latency_spike`, `cut_in`) took more runs, the model's first view of the parameters
+    being mostly through a severe fault.
 
     The model sees the score through `warp` (a signed logarithm): robustness spans
     hundreds of metres far from a failure and centimetres near one, and a model of the raw
@@ -298,6 +313,9 @@ class BayesianSampler:
         self.gate = np.array([index.get(a.name.split(":")[0] + ":present", -1)
                               if a.name.startswith("fault") and not a.name.endswith(":present") else -1
                               for a in axes], dtype=int)
+        self.severe = np.array([np.nan if a.severe is None else a.severe for a in axes], dtype=float)
+        self.faults = np.flatnonzero(self.bool & np.isfinite(self.severe))  # present axes with a worst case
+        self.started = False
         self.gp = None
         self.points = np.empty((0, self.dims))
         self.scores = np.empty(0)
@@ -306,7 +324,7 @@ class BayesianSampler:
         self.best = math.inf
 
     def batch_size(self, default: int, done: int) -> int:
-        return self.initial if done == 0 else self.jobs
+        return self.initial + len(self.faults) if done == 0 else self.jobs
 
     def model_inputs(self, u: np.ndarray) -> np.ndarray:
         """What the model sees of points `u`: booleans as 0/1, an absent fault's axes at 0.5."""
@@ -320,7 +338,11 @@ class BayesianSampler:
 
     def sample(self, n: int) -> np.ndarray:
         if self.gp is None:
-            return qmc.LatinHypercube(self.dims, rng=self.rng).random(n)
+            worst = self.worst_cases()[:n] if not self.started else np.empty((0, self.dims))
+            self.started = True
+            if n <= len(worst):
+                return worst
+            return np.vstack([worst, qmc.LatinHypercube(self.dims, rng=self.rng).random(n - len(worst))])
         cand = np.vstack([self.rng.random((BO_CANDIDATES, self.dims)), self._trust_region(BO_CANDIDATES)])
         with threadpool_limits(1):  # see `update`
             mu, sd = self.gp.predict(self.model_inputs(cand), return_std=True)
@@ -337,6 +359,18 @@ class BayesianSampler:
         while len(chosen) < n:  # every candidate crowded: fill uniformly
             chosen.append(self.rng.random(self.dims))
         return np.array(chosen)
+
+    def worst_cases(self) -> np.ndarray:
+        """One point per fault: that fault present at its severe ends (`Axis.severe`: from
+        the start, for the whole run, settings farthest from neutral), the other faults
+        absent, parameters and axes without a severe end uniform."""
+        u = self.rng.random((len(self.faults), self.dims))
+        u[:, self.bool] = 0.0
+        for k, present in enumerate(self.faults):
+            u[k, present] = 1.0
+            for j in np.flatnonzero((self.gate == present) & np.isfinite(self.severe)):
+                u[k, j] = self.severe[j]
+        return u
 
     def _trust_region(self, n: int) -> np.ndarray:
         """Uniform points in the box around the best point, its sides along the model's

@@ -323,7 +323,13 @@ class BevStack:
         objs = []
         self.upset(self.tracker)
         self.upset(self.planner)
-        for o in self.tracker.objects_at(time_s):
+        # Confirmed tracks only. A detector without velocity output leaves a track seen once
+        # with a guessed velocity of 0: a car first seen 35 m ahead of an ego at 20 m/s,
+        # taken as standing, set off an emergency stop and the full AEB stage in the first
+        # 0.1 s of a learned-perception overtake. The second sighting (0.1 s later at
+        # 10 Hz) gives the velocity.
+        tracked = [o for o in self.tracker.objects_at(time_s) if o.velocity_known]
+        for o in tracked:
             so, to = road.project(o.x, o.y)
             # Velocity along the road, and the box's extent along and across it.
             hdg = float(road.reference_pose(so)[2])
@@ -345,7 +351,7 @@ class BevStack:
                          o.length * rc + o.width * rs, o.length * rs + o.width * rc))
         hdg0 = heading - float(road.reference_pose(s0)[2])
         stop = self.ctx.stop_line_ahead(float(s0))
-        give_way = self._give_way(float(s0), float(t0), objs, time_s)
+        give_way = self._give_way(float(s0), float(t0), tracked, objs)
         if give_way is not None and (stop is None or give_way < stop[0]):
             stop = (give_way, LIGHT_STATES["red"])  # wait before the junction like at a red light
         plan = self.planner.plan((float(s0), float(t0), lane0), speed, objs, road, road_id, time_s,
@@ -368,8 +374,9 @@ class BevStack:
     # is long enough. Inside the junction it no longer waits (it clears it).
     YIELD_RADIUS_M = 6.0
 
-    def _give_way(self, s0: float, t0: float, objs, time_s: float) -> float | None:
-        """The station [m] to wait at before a junction, or None (go)."""
+    def _give_way(self, s0: float, t0: float, tracked: list, objs) -> float | None:
+        """The station [m] to wait at before a junction, or None (go); `tracked` are the
+        planned-for tracks, `objs` the same in road coordinates."""
         gap = float(self.settings["yield_gap"])
         if gap <= 0.0:
             return None
@@ -379,7 +386,7 @@ class BevStack:
         entry, cx, cy = junction
         if s0 + 0.5 * self.body.length_m > entry + 0.5:
             return None  # already in the junction: clear it
-        for o, (so, to, *_rest) in zip(self.tracker.objects_at(time_s), objs):
+        for o, (so, to, *_rest) in zip(tracked, objs):
             if so > s0 and abs(to - t0) < 1.8:
                 continue  # traffic ahead in the ego's lane: the planner follows it
             dx, dy = o.x - cx, o.y - cy

@@ -117,12 +117,19 @@ def build_grid(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec:
 
 
 def build_grid_region(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec: GridSpec = GRID,
-                      out: np.ndarray | None = None) -> tuple[np.ndarray, tuple[int, int, int, int]]:
+                      out: np.ndarray | None = None,
+                      dirty: tuple[int, int, int, int] | None = None) -> tuple[np.ndarray, tuple[int, int, int, int]]:
     """`build_grid`, and the occupied cells' bounding box: rows [r0, r1) along x, columns
-    [c0, c1) along y ((0, 0, 0, 0) for an empty grid), from the points, not a scan of the grid."""
+    [c0, c1) along y ((0, 0, 0, 0) for an empty grid), from the points, not a scan of the grid.
+
+    `dirty`: the region of `out` outside which it is already zero (the last call's
+    region, when `out` is reused): only that is cleared (a whole grid costs ~10 us)."""
     grid = np.zeros(spec.shape, dtype=np.float32) if out is None else out
     if out is not None:
-        grid.fill(0.0)
+        if dirty is None:
+            grid.fill(0.0)
+        else:
+            grid[:, dirty[0]:dirty[1], dirty[2]:dirty[3]] = 0.0
     if len(points_vehicle) == 0:
         return grid, (0, 0, 0, 0)
     px = points_vehicle[:, 0]

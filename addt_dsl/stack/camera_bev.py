@@ -33,7 +33,7 @@ from addt_dsl.stack.bev_grid import CAMERA_BEV_SITES, CLASSES, GRID, decode
 from addt_dsl.stack.learned import BevDetector, one_intra_op_thread
 from addt_dsl.stack.nodes import Obj
 from addt_dsl.stack.rig_lift import FEATURE_STRIDE, LIFT_HEIGHTS_M, lift_table, position_channels
-from addt_dsl.stack.tensorfaults import ActivationFlip, flip_bits
+from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
 
 WEIGHTS_PATH = Path(__file__).with_name("camera_bev_weights.pt")
 DEFAULT_THRESHOLD = 0.35
@@ -115,7 +115,7 @@ def images_tensor(images: np.ndarray) -> torch.Tensor:
     return t.movedim(-1, -3).float().div_(255.0)
 
 
-class CameraBevPerception:
+class CameraBevPerception(ConvTensorSites):
     """The `perception camera_bev` node: a `camera_rig` frame → network → objects in world coordinates."""
 
     name = "perception"
@@ -167,62 +167,12 @@ class CameraBevPerception:
                 found[:, 5] = 1.0 / (1.0 + np.exp(-found[:, 5]))
         return found
 
-    # ---- tensor fault sites (as `learned.LearnedPerception`)
-    def fault_sites(self) -> tuple[str, ...]:
-        return self.tensor_sites
-
-    def tensor_modules(self) -> dict[str, nn.Module]:
-        """Site name → torch module, for the fault engine's `bitflip ... tensor` hooks."""
-        return {f"perception.{name}": layer for name, layer in self._layers.items()}
-
-    def _layer(self, site: str) -> nn.Conv2d:
-        name = site.removeprefix("perception.")
-        if name not in self._layers:
-            raise KeyError(f"unknown tensor site {site!r}; sites: {', '.join(self.tensor_sites)}")
-        return self._layers[name]
-
-    def site_numel(self, site: str, tensor: str = "weights") -> int:
-        """Elements addressable at a site: kernel + bias (weights) or the output of one frame."""
-        layer = self._layer(site)
-        if tensor == "weights":
-            return layer.weight.numel() + layer.bias.numel()
-        if tensor == "activations":
-            return int(np.prod(self.activation_shape(site)))
-        raise ValueError(f"tensor must be 'weights' or 'activations', not {tensor!r}")
-
+    # ---- tensor fault sites (ConvTensorSites): the shape of a site's output
     def activation_shape(self, site: str) -> tuple[int, ...]:
         """A site's output shape for one frame of the trained rig (batch 1; the encoder's
         batch is the cameras)."""
         self._layer(site)
         return _activation_shapes(self.model, self.meta)[site.removeprefix("perception.")]
-
-    def flip_weight_bits(self, site: str, flat_indices, bits) -> tuple[list[float], list[float]]:
-        """Flip bits in a layer's parameters (persistent for this node's lifetime)."""
-        layer = self._layer(site)
-        n_w = layer.weight.numel()
-        before, after = [], []
-        for i, b in zip(flat_indices, bits, strict=True):
-            i, b = int(i), int(b)
-            tensor, k = (layer.weight, i) if i < n_w else (layer.bias, i - n_w)
-            bf, af = flip_bits(tensor.data, [k], [b])
-            before += bf
-            after += af
-        return before, after
-
-    def flip_activation_bits(self, site: str, flat_indices, bits) -> ActivationFlip:
-        """Arm a transient flip in a layer's output for the next inference only."""
-        numel = self.site_numel(site, "activations")
-        for i in flat_indices:
-            if not 0 <= int(i) < numel:
-                raise IndexError(f"activation index {i} out of range for {site} ({numel} elements)")
-        flip = ActivationFlip(self._layer(site), flat_indices, bits).arm()
-        flip.site = site  # type: ignore[attr-defined]
-        self._armed.append(flip)
-        return flip
-
-    def _collect_fired(self) -> None:
-        self.last_activation_flips = [(f.site, f.fired) for f in self._armed if f.fired is not None]
-        self._armed = [f for f in self._armed if f.fired is None]
 
 
 _SHAPES: dict[tuple, dict[str, tuple[int, ...]]] = {}

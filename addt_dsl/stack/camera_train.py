@@ -30,6 +30,7 @@ import numpy as np
 from addt_dsl import extras
 from addt_dsl.stack.bev_grid import BOX_CHANNELS, CLASSES, DETECTOR_RIG, GRID, encode_targets
 from addt_dsl.stack.synth import PARK_X0, POOL, in_grid, road_point, sample_scene, wrap_angle
+from addt_dsl.stack.train import save_weights
 
 MIN_PIXELS_TARGET = 3
 ROAD_KAPPAS = (0.0, 0.0, 0.002, -0.002, 0.004, -0.004)
@@ -291,11 +292,7 @@ def main(argv=None) -> int:
             "widths": [16, 24, 32], "features": model.features, "heights": list(LIFT_HEIGHTS_M),
             "feature_stride": FEATURE_STRIDE,
             "classes": list(CLASSES), "rig": DETECTOR_RIG.settings(), "torch": str(torch.__version__), **timing}
-    state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    torch.save({"state_dict": state, "meta": meta}, args.out)
-    print(f"wrote {args.out} ({args.out.stat().st_size / 1024:.0f} KiB; "
-          f"rendering {timing['generate_s']} s, training {timing['train_s']} s)")
+    save_weights(model, meta, args.out, "rendering")
     return 0
 
 

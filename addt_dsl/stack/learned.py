@@ -43,7 +43,7 @@ from torch import nn
 from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CLASSES, GRID, LAYER_SITES, build_grid_region, decode,
                                      sensor_points_to_vehicle)
 from addt_dsl.stack.nodes import Obj
-from addt_dsl.stack.tensorfaults import ActivationFlip, flip_bits
+from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
 
 WEIGHTS_PATH = Path(__file__).with_name("perception_weights.pt")
 DEFAULT_THRESHOLD = 0.35
@@ -111,6 +111,10 @@ def load_model(path: Path = WEIGHTS_PATH, device: str = "cpu") -> tuple[BevDetec
 
 Region = tuple[int, int, int, int]  # rows [r0, r1), columns [c0, c1) of a feature map
 EMPTY: Region = (0, 0, 0, 0)
+# A map's changed cells as boxes: the first is the points' region (one bounding box, as
+# without faults; EMPTY for no points), any others are cells a fault hook changed away
+# from it, kept apart while the cells they reach do not overlap (see RegionForward).
+Regions = tuple[Region, ...]
 
 
 def _union(a: Region, b: Region) -> Region:
@@ -119,6 +123,27 @@ def _union(a: Region, b: Region) -> Region:
     if b[0] >= b[1] or b[2] >= b[3]:
         return a
     return (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
+
+
+def _overlap(a: Region, b: Region) -> bool:
+    """Whether two boxes share a cell (an empty box shares none)."""
+    return a[0] < b[1] and b[0] < a[1] and a[2] < b[3] and b[2] < a[3] and a[0] < a[1] and a[2] < a[3] \
+        and b[0] < b[1] and b[2] < b[3]
+
+
+def _merged(boxes: list[Region]) -> Regions:
+    """Union overlapping boxes (into the earlier one) until none overlap; the first box
+    keeps its place (empty or not), other empty boxes are dropped."""
+    boxes = [boxes[0], *(b for b in boxes[1:] if not _empty(b))]
+    i = 0
+    while i < len(boxes):
+        for j in range(i + 1, len(boxes)):
+            if _overlap(boxes[i], boxes[j]):
+                boxes[i] = _union(boxes[i], boxes.pop(j))
+                i = -1  # a grown box may now meet an earlier one: look again from the start
+                break
+        i += 1
+    return tuple(boxes)
 
 
 def _changed(new: torch.Tensor, old: torch.Tensor) -> Region:
@@ -170,7 +195,7 @@ class _Map:
     def __init__(self, background: torch.Tensor, views: _Views):
         self.background = background
         self.buf = background.clone()
-        self.dirty = EMPTY
+        self.dirty: Regions = ()
         self.views = views
         self._nan_free: bool | None = None
 
@@ -183,13 +208,17 @@ class _Map:
             self._nan_free = torch.equal(background, background)
         return self._nan_free
 
-    def restore(self, keep: Region = EMPTY) -> None:
-        """Back to the background, except that the caller will overwrite `keep` next."""
-        r0, r1, c0, c1 = self.dirty
-        inside = keep[0] <= r0 and r1 <= keep[1] and keep[2] <= c0 and c1 <= keep[3]
-        if r0 < r1 and c0 < c1 and not inside:
-            self.views(self.buf, r0, r1, c0, c1).copy_(self.views(self.background, r0, r1, c0, c1))
-        self.dirty = EMPTY
+    def restore(self, keep: Regions = ()) -> None:
+        """Back to the background, except boxes inside `keep`, which the caller overwrites next."""
+        for r0, r1, c0, c1 in self.dirty:
+            if r0 >= r1 or c0 >= c1:
+                continue
+            for k in keep:
+                if k[0] <= r0 and r1 <= k[1] and k[2] <= c0 and c1 <= k[3]:
+                    break
+            else:
+                self.views(self.buf, r0, r1, c0, c1).copy_(self.views(self.background, r0, r1, c0, c1))
+        self.dirty = ()
 
     def at(self, region: Region) -> torch.Tensor:
         """The buffer's view on `region` (to write the frame's values into)."""
@@ -226,7 +255,12 @@ class RegionForward:
     Hooks on a layer (tensor faults) see and may change its whole output as in the
     dense forward: forward pre-hooks run before the layer (a weight flip there makes the
     backgrounds stale: they are rebuilt), forward hooks get the full pre-activation
-    output, and what they change joins the changed region. Fault hooks that offer
+    output, and the bounding box of what they change is followed as a box of its own
+    (`Regions`): each later layer computes it apart from the points' box unless the
+    cells the two reach overlap (then on their union), and after each ReLU it is dropped
+    if it is back to the background bit for bit (a flip the ReLU undoes stops there).
+    So a flip costs about its own reach, not the bounding box of it and the points, and
+    the points' box gets the windows of a run without faults. Fault hooks that offer
     `flip_owned` flip the kept map in place and report the flipped elements; any other
     hook's changes are found by comparing the map with a copy taken before it ran.
     """
@@ -317,7 +351,7 @@ class RegionForward:
         return not (torch.equal(layer.weight, w) and torch.equal(layer.bias, b))
 
     # ---- the layers on regions
-    def _conv(self, name: str, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, Region]:
+    def _conv(self, name: str, x: torch.Tensor, regions: Regions) -> tuple[torch.Tensor, Regions]:
         layer = self.layers[name]
         if layer._forward_pre_hooks:
             for hook in list(layer._forward_pre_hooks.values()):
@@ -325,32 +359,81 @@ class RegionForward:
             if self._weights_changed(name):  # a persistent weight fault
                 self._rebuild()
         out = self.maps[name]
-        cells, result = self._window(name, x, region, out.buf.shape)
+        computed = self._windows(name, x, regions, out.buf.shape)
+        cells = tuple(c for c, _ in computed)
         out.restore(cells)
-        if result is not None:
-            out.at(cells).copy_(result)
-            out.dirty = cells
+        for c, result in computed:
+            if result is not None:
+                out.at(c).copy_(result)
+        out.dirty = cells
         if layer._forward_hooks:
-            out.dirty = _union(out.dirty, self._hooked(layer, x, out.buf))
+            flipped = self._hooked(layer, x, out.buf)
+            if not _empty(flipped):
+                out.dirty = _merged([*out.dirty, flipped])
         return out.buf, out.dirty
 
-    def _conv_relu(self, name: str, relu: str, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, Region]:
+    def _conv_relu(self, name: str, relu: str, x: torch.Tensor, regions: Regions) -> tuple[torch.Tensor, Regions]:
         """`_relu(relu, *_conv(name, ...))`: with no hook on the layer, the ReLU is taken
-        straight from the conv's window (same values), and the pre-activation map, which
+        straight from the conv's windows (same values), and the pre-activation map, which
         only hooks read, is left at its background."""
         layer = self.layers[name]
         if layer._forward_pre_hooks or layer._forward_hooks:
-            a, r = self._conv(name, x, region)
-            return self._relu(relu, a, r), r
+            a, r = self._conv(name, x, regions)
+            return self._relu(relu, a, r), self._shrunk(relu, r)
         self.maps[name].restore()  # after a hooked frame: back to the background once
-        cells, result = self._window(name, x, region, self.maps[name].buf.shape)
+        computed = self._windows(name, x, regions, self.maps[name].buf.shape)
+        cells = tuple(c for c, _ in computed)
         out = self.maps[relu]
         out.restore(cells)
-        if result is None:
-            return out.buf, EMPTY
-        torch.clamp_min(result, 0.0, out=out.at(cells))
+        for c, result in computed:
+            if result is not None:
+                torch.clamp_min(result, 0.0, out=out.at(c))
         out.dirty = cells
-        return out.buf, cells
+        return out.buf, self._shrunk(relu, cells) if len(cells) > 1 else cells
+
+    def _shrunk(self, name: str, regions: Regions) -> Regions:
+        """A fault's boxes (all but the first) without those whose cells in map `name` are
+        all back to its background bit for bit: a flip the ReLU undoes (a negative value
+        that stays negative) stops there instead of widening every later layer. (One
+        comparison per box: cutting a box to its changed cells costs more than it saves,
+        as a live flip changes its whole reach.) The map still restores the cells it
+        wrote (`dirty`). The points' box is kept as it is, so a run without faults
+        computes the windows it always did."""
+        if len(regions) == 1:
+            return regions
+        m = self.maps[name]
+        bits = _INT_OF[m.buf.dtype]
+        return (regions[0], *(box for box in regions[1:]
+                              if not torch.equal(m.at(box).view(bits), self.views(m.background, *box).view(bits))))
+
+    def _windows(self, name: str, x: torch.Tensor, regions: Regions, shape) -> list[tuple[Region, torch.Tensor | None]]:
+        """`_window` for each box of `regions`; boxes whose output cells would overlap are
+        joined first (a cell's window must see every change around it), so each output
+        cell is computed once. The first box's windows are those of the points' region
+        alone (what a run without faults computes)."""
+        if len(regions) > 1:
+            boxes = list(regions)
+            i = 0
+            while i < len(boxes):
+                ci = self._cells_of(name, boxes[i], shape)
+                for j in range(i + 1, len(boxes)):
+                    if _overlap(ci, self._cells_of(name, boxes[j], shape)):
+                        boxes[i] = _union(boxes[i], boxes.pop(j))
+                        i = -1  # look again from the start
+                        break
+                i += 1
+            return [self._window(name, x, r, shape) for r in boxes]
+        return [self._window(name, x, regions[0], shape)]
+
+    def _cells_of(self, name: str, region: Region, shape) -> Region:
+        """The output cells of layer `name` whose window meets `region` (as `_window`)."""
+        r0, r1, c0, c1 = region
+        if r0 >= r1 or c0 >= c1:
+            return EMPTY
+        k, s, p = self._geometry[name][:3]
+        _, _, h_out, w_out = shape
+        return (max(0, -(-(r0 + p - k + 1) // s)), min(h_out, (r1 - 1 + p) // s + 1),
+                max(0, -(-(c0 + p - k + 1) // s)), min(w_out, (c1 - 1 + p) // s + 1))
 
     def _window(self, name: str, x: torch.Tensor, region: Region, shape) -> tuple[Region, torch.Tensor | None]:
         """The output cells of layer `name` whose k×k window (stride s, padding p) meets the
@@ -394,37 +477,43 @@ class RegionForward:
                 buf.copy_(result)
         return _changed(buf, before)
 
-    def _relu(self, name: str, x: torch.Tensor, region: Region) -> torch.Tensor:
+    def _relu(self, name: str, x: torch.Tensor, regions: Regions) -> torch.Tensor:
         out = self.maps[name]
-        out.restore(region)
-        if not _empty(region):
-            r0, r1, c0, c1 = region
-            torch.clamp_min(self.views(x, r0, r1, c0, c1), 0.0, out=out.at(region))
-            out.dirty = region
+        out.restore(regions)
+        for r0, r1, c0, c1 in regions:
+            if r0 < r1 and c0 < c1:
+                torch.clamp_min(self.views(x, r0, r1, c0, c1), 0.0, out=out.at((r0, r1, c0, c1)))
+        out.dirty = regions
         return out.buf
 
-    def _up_add(self, name: str, low: torch.Tensor, low_region: Region, skip: torch.Tensor,
-                skip_region: Region) -> tuple[torch.Tensor, Region]:
-        """Nearest ×2 upsampling of `low` plus `skip`, on the union of their changed regions."""
+    def _up_add(self, name: str, low: torch.Tensor, low_regions: Regions, skip: torch.Tensor,
+                skip_regions: Regions) -> tuple[torch.Tensor, Regions]:
+        """Nearest ×2 upsampling of `low` plus `skip`, on their changed regions: the first
+        boxes' union, and the other boxes apart from it (joined where they overlap)."""
         out = self.maps[name]
-        lr0, lr1, lc0, lc1 = low_region
-        region = _union((2 * lr0, 2 * lr1, 2 * lc0, 2 * lc1), skip_region)
-        out.restore(region)
-        if not _empty(region):
+        lr0, lr1, lc0, lc1 = low_regions[0]
+        regions: Regions = (_union((2 * lr0, 2 * lr1, 2 * lc0, 2 * lc1), skip_regions[0]),)
+        if len(low_regions) > 1 or len(skip_regions) > 1:
+            regions = _merged([*regions, *((2 * a, 2 * b, 2 * c, 2 * d) for a, b, c, d in low_regions[1:]),
+                               *skip_regions[1:]])
+        out.restore(regions)
+        for region in regions:
+            if _empty(region):
+                continue
             r0, r1, c0, c1 = region
-            low = self.views(low, r0 // 2, (r1 + 1) // 2, c0 // 2, (c1 + 1) // 2)
-            b, c, h, w = low.shape
-            # Nearest ×2 is each value repeated 2×2: a broadcast copy, without interpolate's overhead.
-            up = low[:, :, :, None, :, None].expand(b, c, h, 2, w, 2).reshape(b, c, 2 * h, 2 * w)
+            low_v = self.views(low, r0 // 2, (r1 + 1) // 2, c0 // 2, (c1 + 1) // 2)
+            # Nearest ×2 copies values: any way of doing it gives the same bits; interpolate
+            # is the quickest here (an expand + reshape copy costs ~1.3x on these windows).
+            up = F.interpolate(low_v, scale_factor=2.0, mode="nearest")
             dr, dc = r0 - 2 * (r0 // 2), c0 - 2 * (c0 // 2)
             torch.add(up[:, :, dr:dr + r1 - r0, dc:dc + c1 - c0], self.views(skip, r0, r1, c0, c1),
                       out=out.at(region))
-            out.dirty = region
-        return out.buf, region
+        out.dirty = regions
+        return out.buf, regions
 
     def _forward(self, x: torch.Tensor, region: Region) -> tuple[torch.Tensor, torch.Tensor]:
         """The network of `BevDetector.forward`, layer by layer on changed regions."""
-        x0, r0 = self._conv_relu("backbone.conv0", "x0", x, region)
+        x0, r0 = self._conv_relu("backbone.conv0", "x0", x, (region,))
         x1, r1 = self._conv_relu("backbone.conv1", "x1", x0, r0)
         a, r = self._conv_relu("backbone.conv2", "x2", x1, r1)
         a, r = self._conv_relu("backbone.conv3", "x3", a, r)
@@ -460,7 +549,7 @@ def _one_intra_op_thread():
 one_intra_op_thread = _one_intra_op_thread  # public: the camera BEV node runs under it too
 
 
-class LearnedPerception:
+class LearnedPerception(ConvTensorSites):
     """The `perception learned` node: lidar frame → grid → CNN → objects in world coordinates."""
 
     name = "perception"
@@ -473,10 +562,12 @@ class LearnedPerception:
         self.threshold = float(settings.get("detect_threshold", self.meta.get("threshold", DEFAULT_THRESHOLD)))
         self._logit_threshold = math.log(self.threshold / (1.0 - self.threshold))
         self._grid = np.zeros(GRID.shape, dtype=np.float32)
+        self._grid_region: tuple[int, int, int, int] | None = None  # None: clear the whole grid
         self._input = torch.from_numpy(self._grid)[None]  # shares memory with the grid buffer
         # On another device, one input tensor kept there (RegionForward's views of it stay valid).
         self._device_input = self._input if device == "cpu" else torch.empty_like(self._input, device=device)
         self._layers = self.model.layers()
+        self._shapes: dict[str, tuple[int, ...]] | None = None
         self._forward = RegionForward(self.model)
         self._armed: list[ActivationFlip] = []
         self.last_activation_flips: list[tuple[str, tuple]] = []
@@ -504,7 +595,9 @@ class LearnedPerception:
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
         """Vehicle-frame points → (N, 7) boxes: x, y, heading, length, width, confidence,
         class (index into `bev_grid.CLASSES`)."""
-        _, region = build_grid_region(points_vehicle, sensor_xy, out=self._grid)
+        # The grid is zero outside the last frame's region: clear only that.
+        _, region = build_grid_region(points_vehicle, sensor_xy, out=self._grid, dirty=self._grid_region)
+        self._grid_region = region
         with torch.inference_mode(), _one_intra_op_thread():
             x = self._input if self.device == "cpu" else self._device_input.copy_(self._input)
             heat, box = self._forward(x, region)
@@ -518,68 +611,14 @@ class LearnedPerception:
         return found
 
     # ---- tensor fault sites
-    def fault_sites(self) -> tuple[str, ...]:
-        return self.tensor_sites
-
-    def tensor_modules(self) -> dict[str, nn.Module]:
-        """Site name → torch module, for the fault engine's `bitflip ... tensor` hooks."""
-        return {f"perception.{name}": layer for name, layer in self._layers.items()}
-
-    def _layer(self, site: str) -> nn.Conv2d:
-        name = site.removeprefix("perception.")
-        if name not in self._layers:
-            raise KeyError(f"unknown tensor site {site!r}; sites: {', '.join(self.tensor_sites)}")
-        return self._layers[name]
-
-    def site_numel(self, site: str, tensor: str = "weights") -> int:
-        """Elements addressable at a site: kernel + bias (weights) or the output at batch 1."""
-        layer = self._layer(site)
-        if tensor == "weights":
-            return layer.weight.numel() + (layer.bias.numel() if layer.bias is not None else 0)
-        if tensor == "activations":
-            return int(np.prod(self.activation_shape(site)))
-        raise ValueError(f"tensor must be 'weights' or 'activations', not {tensor!r}")
-
     def activation_shape(self, site: str) -> tuple[int, ...]:
         self._layer(site)
-        shapes = _activation_shapes(self.model, self.device)
-        return shapes[site.removeprefix("perception.")]
+        if self._shapes is None:  # once per node: the lookup walks the model's modules (~50 us)
+            self._shapes = _activation_shapes(self.model, self.device)
+        return self._shapes[site.removeprefix("perception.")]
 
-    def flip_weight_bits(self, site: str, flat_indices, bits) -> tuple[list[float], list[float]]:
-        """Flip bits in a layer's parameters (persistent for this node's lifetime)."""
-        layer = self._layer(site)
-        n_w = layer.weight.numel()
-        before, after = [], []
-        # One at a time, in the caller's order (a repeated index composes).
-        for i, b in zip(flat_indices, bits, strict=True):
-            i, b = int(i), int(b)
-            tensor, k = (layer.weight, i) if i < n_w else (layer.bias, i - n_w)
-            if tensor is None:
-                raise IndexError(f"{site} has no bias; index {i} is out of range")
-            bf, af = flip_bits(tensor.data, [k], [b])
-            before += bf
-            after += af
-        self._forward.invalidate()
-        return before, after
-
-    def flip_activation_bits(self, site: str, flat_indices, bits) -> ActivationFlip:
-        """Arm a transient flip in a layer's output for the next inference only.
-
-        Returns the armed `ActivationFlip`; after the inference its `fired` holds the
-        values before and after (also appended to `last_activation_flips`).
-        """
-        numel = self.site_numel(site, "activations")
-        for i in flat_indices:
-            if not 0 <= int(i) < numel:
-                raise IndexError(f"activation index {i} out of range for {site} ({numel} elements)")
-        flip = ActivationFlip(self._layer(site), flat_indices, bits).arm()
-        flip.site = site  # type: ignore[attr-defined]
-        self._armed.append(flip)
-        return flip
-
-    def _collect_fired(self) -> None:
-        self.last_activation_flips = [(f.site, f.fired) for f in self._armed if f.fired is not None]
-        self._armed = [f for f in self._armed if f.fired is None]
+    def _after_weight_flip(self) -> None:
+        self._forward.invalidate()  # the backgrounds came from the old weights
 
 
 _SHAPES: dict[tuple, dict[str, tuple[int, ...]]] = {}

@@ -52,6 +52,9 @@ class Obj:
     # Class as perception reports it: a vehicle kind of addt_dsl.vehicles ("car",
     # "pedestrian", ...), "" where the detector gives none.
     kind: str = ""
+    # False for a track seen once by a detector that measures no velocity: its velocity
+    # (reported as 0) is a guess, not an estimate.
+    velocity_known: bool = True
 
 
 # ---------------------------------------------------------------- perception
@@ -187,7 +190,7 @@ class Tracker:
 
     def write_state(self, site: str, values: list[float | int]) -> None:
         n = len(self.TRACK_FIELDS)
-        self.tracks = [(Obj(*values[k:k + 7], confidence=o.confidence, s=o.s, t=o.t), values[k + 7])
+        self.tracks = [(Obj(*values[k:k + 7], confidence=o.confidence, s=o.s, t=o.t, kind=o.kind), values[k + 7])
                        for (o, _), k in zip(self.tracks, range(0, len(values), n))]
 
     @staticmethod
@@ -197,13 +200,15 @@ class Tracker:
         return Obj(o.x + o.vx * dt, o.y + o.vy * dt, o.heading, o.vx, o.vy, o.length, o.width, kind=o.kind)
 
     def objects_at(self, time_s: float) -> list[Obj]:
-        """Predicted tracks; one whose velocity is not known yet is reported as standing still."""
+        """Predicted tracks; one whose velocity is not known yet is reported as standing still
+        (`velocity_known` False: a tentative track, which the stack does not plan for)."""
         out = []
         for o, ts in self.tracks:
             if time_s - ts <= self.max_age_s:
                 p = self._predict(o, time_s - ts)
                 out.append(p if not math.isnan(p.vx) else
-                           Obj(p.x, p.y, p.heading, 0.0, 0.0, p.length, p.width, p.confidence, kind=p.kind))
+                           Obj(p.x, p.y, p.heading, 0.0, 0.0, p.length, p.width, p.confidence, kind=p.kind,
+                               velocity_known=False))
         return out
 
 

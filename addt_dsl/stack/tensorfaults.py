@@ -18,6 +18,7 @@ same bit again restores it exactly.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import torch
@@ -114,3 +115,81 @@ class ActivationFlip:
 
     def __exit__(self, *exc) -> None:
         self.disarm()
+
+
+class ConvTensorSites:
+    """The tensor fault sites of a perception node whose network is named conv layers
+    (`learned`, `camera_bev`): site `perception.NAME` is layer NAME; its *weights* are the
+    kernel followed by the bias in one flat index space, its *activations* the layer's
+    output for one frame.
+
+    The node provides `tensor_sites`, `_layers` (name → conv layer), `_armed` (a list) and
+    `activation_shape(site)`; `_after_weight_flip()` is called once a weight flip is done
+    (a node that keeps results computed from its weights drops them there).
+    """
+
+    tensor_sites: tuple[str, ...] = ()
+
+    def fault_sites(self) -> tuple[str, ...]:
+        return self.tensor_sites
+
+    def tensor_modules(self) -> dict:
+        """Site name → torch module, for the fault engine's `bitflip ... tensor` hooks."""
+        return {f"perception.{name}": layer for name, layer in self._layers.items()}
+
+    def _layer(self, site: str):
+        name = site.removeprefix("perception.")
+        if name not in self._layers:
+            raise KeyError(f"unknown tensor site {site!r}; sites: {', '.join(self.tensor_sites)}")
+        return self._layers[name]
+
+    def activation_shape(self, site: str) -> tuple[int, ...]:
+        raise NotImplementedError
+
+    def site_numel(self, site: str, tensor: str = "weights") -> int:
+        """Elements addressable at a site: kernel + bias (weights) or the output of one frame."""
+        layer = self._layer(site)
+        if tensor == "weights":
+            return layer.weight.numel() + (layer.bias.numel() if layer.bias is not None else 0)
+        if tensor == "activations":
+            return math.prod(self.activation_shape(site))
+        raise ValueError(f"tensor must be 'weights' or 'activations', not {tensor!r}")
+
+    def flip_weight_bits(self, site: str, flat_indices, bits) -> tuple[list[float], list[float]]:
+        """Flip bits in a layer's parameters (persistent for this node's lifetime)."""
+        layer = self._layer(site)
+        n_w = layer.weight.numel()
+        before, after = [], []
+        # One at a time, in the caller's order (a repeated index composes).
+        for i, b in zip(flat_indices, bits, strict=True):
+            i, b = int(i), int(b)
+            tensor, k = (layer.weight, i) if i < n_w else (layer.bias, i - n_w)
+            if tensor is None:
+                raise IndexError(f"{site} has no bias; index {i} is out of range")
+            bf, af = flip_bits(tensor.data, [k], [b])
+            before += bf
+            after += af
+        self._after_weight_flip()
+        return before, after
+
+    def _after_weight_flip(self) -> None:
+        pass
+
+    def flip_activation_bits(self, site: str, flat_indices, bits) -> ActivationFlip:
+        """Arm a transient flip in a layer's output for the next inference only.
+
+        Returns the armed `ActivationFlip`; after the inference its `fired` holds the
+        values before and after (also appended to `last_activation_flips`).
+        """
+        numel = self.site_numel(site, "activations")
+        for i in flat_indices:
+            if not 0 <= int(i) < numel:
+                raise IndexError(f"activation index {i} out of range for {site} ({numel} elements)")
+        flip = ActivationFlip(self._layer(site), flat_indices, bits).arm()
+        flip.site = site  # type: ignore[attr-defined]
+        self._armed.append(flip)
+        return flip
+
+    def _collect_fired(self) -> None:
+        self.last_activation_flips = [(f.site, f.fired) for f in self._armed if f.fired is not None]
+        self._armed = [f for f in self._armed if f.fired is None]

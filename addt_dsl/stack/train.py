@@ -167,12 +167,21 @@ def main(argv=None) -> int:
         "torch": str(torch.__version__), **timing,
     }
     meta["lidar_vfov_deg"] = args.lidar_vfov
-    state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    torch.save({"state_dict": state, "meta": meta}, args.out)
-    print(f"wrote {args.out} ({args.out.stat().st_size / 1024:.0f} KiB; "
-          f"generation {timing['generate_s']} s, training {timing['train_s']} s)")
+    save_weights(model, meta, args.out, "generation")
     return 0
+
+
+def save_weights(model, meta: dict, path: Path, data_step: str) -> None:
+    """Write a trained model's weights with the metadata that says how they were made (a
+    store ties results to them), and say so; `data_step` names how the training data came
+    (its time is `meta["generate_s"]`)."""
+    import torch
+
+    state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({"state_dict": state, "meta": meta}, path)
+    print(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB; "
+          f"{data_step} {meta['generate_s']} s, training {meta['train_s']} s)")
 
 
 if __name__ == "__main__":

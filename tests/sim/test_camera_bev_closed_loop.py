@@ -46,3 +46,20 @@ def test_the_camera_bev_stack_sees_the_lead_and_brakes_behind_it():
 def test_dropped_rig_frames_never_reach_the_network():
     result = execute(spec("from 2 s drop camera_rig rate 100 %"))
     assert len([e for e in result.trace.events if e.kind == "detections"]) == 20  # the first 2 s
+
+
+def test_occluding_the_front_lens_blinds_the_network_and_the_rear_lens_does_not():
+    """Dirt on one lens of the rig: over the front camera (lens 0, along the mount's yaw)
+    the lead ahead is never seen again; over the rear camera (lens 3 of 6) nothing the
+    network finds ahead changes."""
+    def seen_after(result, t_s):
+        return [e for e in result.trace.events if e.kind == "detections" and e.time_s > t_s
+                and e.detail.get("objects")]
+
+    clean = execute(spec())
+    front = execute(spec("from 2 s occlude camera_rig fraction 1 lens 0"))
+    rear = execute(spec("from 2 s occlude camera_rig fraction 1 lens 3"))
+    assert seen_after(clean, 2.0) and not seen_after(front, 2.1)
+    locations = {e.detail["location"] for e in front.trace.events if e.kind == "fault"}
+    assert locations == {"camera_rig.0"}
+    assert [e.detail for e in seen_after(rear, 2.0)][:10] == [e.detail for e in seen_after(clean, 2.0)][:10]

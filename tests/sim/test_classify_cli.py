@@ -63,3 +63,24 @@ def test_classify_stores_classify_many_outcomes_and_reuses_golden_runs(tmp_path,
     assert "golden run(s)" not in capsys.readouterr().err
     with ResultStore(out / "results.sqlite") as store:
         assert {r.run_id: r.outcome for r in store.records()} == stored
+
+
+def test_classify_on_a_store_of_unclassified_runs_classifies_them(tmp_path, capsys):
+    suite = tmp_path / "suite"
+    (suite / "families").mkdir(parents=True)
+    (suite / "families" / "following.addt").write_text((EXAMPLES / "suites/families/following.addt").read_text())
+    path = suite / "flips.addt"
+    path.write_text(SCENARIO.replace("repeat 3", "repeat 1"))
+    out = tmp_path / "out"
+    code = main([str(path), "--jobs", "1", "--out", str(out), "--no-report"])
+    with ResultStore(out / "results.sqlite") as store:
+        before = {r.run_id: (r.digest, r.passed) for r in store.records()}
+        assert {r.outcome for r in store.records()} == {""}
+    capsys.readouterr()
+    assert main([str(path), "--classify", "--jobs", "1", "--out", str(out), "--no-report"]) == code
+    assert "2 stored run(s) have no outcome class" in capsys.readouterr().err
+    expected = classify_many(expand(compile_file(path).plan).specs, jobs=1, cache=GoldenCache())
+    with ResultStore(out / "results.sqlite") as store:
+        assert {r.run_id: r.outcome for r in store.records()} == {r.run_id: o for r, o in expected}
+        assert {r.run_id: (r.digest, r.passed) for r in store.records()} == before
+    assert (out / "runs.csv").read_text().splitlines()[0].split(",")[-1] == "outcome"

@@ -160,3 +160,24 @@ def test_learned_perception_yields_to_a_crossing_pedestrian():
     assert not trace.events_of("collision")
     assert ego.speed.min() < 5.0  # it slowed for the walker
     assert ego.speed[-1] > 9.0  # and went on once the lane was clear
+
+
+@pytest.mark.torch
+def test_learned_perception_never_brakes_for_a_car_it_has_seen_once():
+    # A slower car 40 m ahead (closing at 8 m/s: 4.4 s away). The detector measures no
+    # velocity: taken as standing after its first sighting it was 1.7 s away, and an
+    # emergency stop (and the AEB) fired at 0.02 s. Now the stack waits for the second
+    # sighting, which gives the track's velocity, then slows to follow.
+    pytest.importorskip("torch")
+    source = straight("ego car on r lane -1 at 20 m speed 20 m/s",
+                      "  agent lead car on r lane -1 at 60 m speed 12 m/s {\n    behavior cruise speed 12 m/s\n  }",
+                      duration_s=2.0, stack="perception learned cruise_speed 20 m/s")
+    source = source.replace("sensor lidar rate 10 Hz rays 360 range 80 m",
+                            "sensor lidar rate 10 Hz rays 360 channels 5 vfov 12 deg range 80 m")
+    trace = run(source)
+    detected = [e for e in trace.events if e.kind == "detections" and e.detail["objects"]]
+    assert detected and detected[0].time_s < 0.1  # seen from the first frame
+    assert not [e for e in trace.events if e.kind in ("aeb", "emergency_brake")]
+    ego = trace.actors["ego"]
+    assert ego.speed[np.searchsorted(trace.time, 0.2)] > 19.8  # nothing braked in the first frames
+    assert ego.speed[-1] < 14.0  # then it slowed behind the lead

@@ -15,7 +15,7 @@ from addt_dsl.compiler.context import (Context, check_range, check_settings, che
                                        suggest)
 from addt_dsl.compiler.rules.actors import DEFAULT_SENSOR, DEFAULT_STACK
 from addt_dsl.diagnostics import Span
-from addt_dsl.registry import FAULTS, STACKS, ParamSpec
+from addt_dsl.registry import FAULTS, SENSORS, STACKS, ParamSpec
 
 
 def _window_of(ctx: Context, timing: ast.Timing | None):
@@ -94,6 +94,8 @@ def rule_faults(ctx: Context) -> Faults:
             specs = (*cls.params, ParamSpec("seed", None, kind="int", low=0, high=2**32 - 1, doc="fault seed"))
             vals = check_settings(ctx, f.settings, specs, f"fault '{f.kind}'", f.span)
             seed = vals.pop("seed", None)
+            if cls.target_kind == "sensor" and not _fits_sensor(ctx, cls, f, target, vals):
+                continue
             start, end = _window_of(ctx, f.timing)
             if start is None or (f.timing is not None and f.timing.kind == "during" and end is None):
                 continue
@@ -103,6 +105,28 @@ def rule_faults(ctx: Context) -> Faults:
                                           seed=int_const(seed) if seed is not None else None,
                                           source=f"{f.span.file}:{f.span.line}"))
     return out
+
+
+def _fits_sensor(ctx: Context, cls, f: ast.FaultDecl, target: str, vals: dict) -> bool:
+    """A kind's settings that depend on its target sensor's settings (an image fault's
+    `lens` against the rig's `cameras`); constant settings only, defaults filled in."""
+    problems_of = getattr(cls, "setting_problems", None)
+    ego = ctx.actors.get("ego")
+    sensor = next((s for s in ego.sensors if s.name == target), None) if ego is not None else None
+    spec = SENSORS.get(target)
+    if problems_of is None or sensor is None or spec is None:
+        return True
+    constants = {k: const_value(v) if not isinstance(v, str) else v for k, v in vals.items()}
+    settings = {p.name: p.default for p in cls.params} | {k: v for k, v in constants.items() if v is not None}
+    sensor_settings = {p.name: p.default for p in spec.params}
+    sensor_settings |= {k: v if isinstance(v, str) else const_value(v) for k, v in sensor.settings.items()
+                        if isinstance(v, str) or const_value(v) is not None}
+    problems = problems_of(settings, sensor.name, sensor_settings)
+    for key, why in problems.items():
+        st = next((s for s in f.settings if s.key == key), None)
+        ctx.sink.error("E0204", f"invalid value for setting '{key}' of fault '{f.kind}'",
+                       st.value.span if st is not None else f.span, why)
+    return not problems
 
 
 def _fault_sites(ctx: Context, stack_cls) -> set[str]:

@@ -1,9 +1,12 @@
 """Camera image corruptions (opencv): blur, pixel noise, occlusion.
 
-Contract with the camera sensor: a camera frame carries its image as a numpy array
-`frame.data["image"]` of shape H×W×3 (uint8 in [0, 255], or float in [0, 1]). A
-corruption returns a new array of the same shape and dtype; it never edits the
-sensor's buffer in place. Frames without an image pass through unchanged.
+Contract with the camera sensors: a `camera` frame carries its image as a numpy array
+`frame.data["image"]` of shape H×W×3 (uint8 in [0, 255], or float in [0, 1]); a
+`camera_rig` frame carries its cameras' images as `frame.data["images"]`, K×H×W×3, and
+the corruption acts on each image the `lens` setting picks (every camera by default, or
+camera k: dirt on one lens). A corruption returns a new array of the same shape and
+dtype; it never edits the sensor's buffer in place. Frames without an image pass
+through unchanged.
 opencv is imported when the first image is corrupted, not when the compiler loads
 the registry.
 """
@@ -29,22 +32,52 @@ def _back_to(img_f: np.ndarray, like: np.ndarray) -> np.ndarray:
     return out.astype(like.dtype, copy=False)
 
 
+# Which camera of a rig: every one (-1), or camera k (k counted from the one looking along
+# the mount's yaw, as `camera_rig` spreads them). A plain `camera` has one: lens 0.
+LENS = ParamSpec("lens", None, kind="int", default=-1, low=-1, high=11,
+                 doc="camera_rig only: the camera whose image is corrupted (0 = the one along the "
+                     "mount's yaw, counting round as the rig spreads them; -1: every camera)")
+
+
 class ImageFault(FaultKind):
-    sensor_kinds = ("camera",)
+    sensor_kinds = ("camera", "camera_rig")
+
+    @classmethod
+    def setting_problems(cls, settings: dict, sensor_keyword: str, sensor_settings: dict) -> dict[str, str]:
+        """{setting: why it is wrong} for settings that do not fit the target sensor."""
+        lens = settings.get("lens", -1)
+        if lens in (-1, 0) and sensor_keyword != "camera_rig":
+            return {}
+        if sensor_keyword != "camera_rig":
+            return {"lens": "a `camera` has one image, lens 0; `lens K` picks camera K of a `camera_rig`"}
+        if lens == -1:
+            return {}
+        cameras = int(sensor_settings["cameras"])
+        if lens >= cameras:
+            return {"lens": f"the rig has {cameras} camera(s), numbered 0 to {cameras - 1}"}
+        return {}
 
     def on_frame(self, frame, time_s):
         if not self.active(time_s):
             return frame, 0.0
-        img = frame.data.get("image") if isinstance(frame.data, dict) else None
-        if img is None:
-            return frame, 0.0
-        out, value, detail = self.corrupt(np.asarray(img))
-        frame.data = {**frame.data, "image": out}
-        self.record(time_s, frame.sensor, value, **detail)
+        data = frame.data if isinstance(frame.data, dict) else {}
+        if data.get("image") is not None:
+            out, value, detail = self.corrupt(np.asarray(data["image"]))
+            frame.data = {**data, "image": out}
+            self.record(time_s, frame.sensor, value, **detail)
+        elif data.get("images") is not None:
+            images = np.asarray(data["images"])
+            lens = int(self.settings["lens"])
+            out = images.copy()
+            for k in range(len(images)) if lens < 0 else (lens,):
+                out[k], value, detail = self.corrupt(images[k], lens=k)
+                self.record(time_s, f"{frame.sensor}.{k}", value, **detail)
+            frame.data = {**data, "images": out}
         return frame, 0.0
 
-    def corrupt(self, img: np.ndarray) -> tuple[np.ndarray, object, dict]:
-        """Return (corrupted image, injected value, details for the trace)."""
+    def corrupt(self, img: np.ndarray, lens: int = 0) -> tuple[np.ndarray, object, dict]:
+        """Return (corrupted image, injected value, details for the trace) for the image of
+        camera `lens` (0 for a plain camera)."""
         raise NotImplementedError
 
 
@@ -58,11 +91,12 @@ class Blur(ImageFault):
                   doc="motion blur length [px] along `angle` (0: none)"),
         ParamSpec("angle", None, kind="number", default=0.0, low=-360.0, high=360.0,
                   doc="direction of the motion blur [deg in the image, 0 = horizontal]"),
+        LENS,
     )
     doc = ("Camera image blur during the window: Gaussian defocus (`sigma` px) and/or linear "
            "motion blur (`motion` px at `angle`). Recorded per frame: `value` is sigma [px].")
 
-    def corrupt(self, img):
+    def corrupt(self, img, lens=0):
         import cv2
 
         out = img.astype(np.float32)
@@ -88,6 +122,7 @@ class ImageNoise(ImageFault):
                   doc="additive Gaussian noise [8-bit intensity levels] (1 sigma)"),
         ParamSpec("salt", None, kind="number", default=0.0, low=0.0, high=1.0,
                   doc="fraction of pixels set to black or white (salt and pepper)"),
+        LENS,
     )
     doc = ("Camera sensor noise during the window: additive Gaussian noise per pixel and channel "
            "(`sigma` in 8-bit levels; scaled to 1/255 for float images) and salt-and-pepper "
@@ -113,7 +148,7 @@ class ImageNoise(ImageFault):
         sign = 1.0 if self.rng.random() < 0.5 else -1.0
         return self._field[dy:dy + h, dx:dx + w], sign
 
-    def corrupt(self, img):
+    def corrupt(self, img, lens=0):
         top = _full_scale(img)
         sigma = float(self.settings["sigma"]) * top / 255.0
         out = img.astype(np.float32)
@@ -141,16 +176,17 @@ class Occlude(ImageFault):
                   doc="number of rectangular patches sharing that area"),
         ParamSpec("value", None, kind="number", default=0.0, low=0.0, high=255.0,
                   doc="patch intensity [8-bit levels] (0: black, e.g. dirt or tape on the lens)"),
+        LENS,
     )
     doc = ("Part of the camera image is covered (dirt, a sticker, a wiper) by `patches` "
            "rectangles covering `fraction` of the area. Where the patches sit is drawn once from "
-           "the fault's seed and stays fixed during the window. Recorded per frame: `value` is "
-           "the covered fraction, `location` the sensor, `boxes` the patches (x0, y0, x1, y1 px).")
+           "the fault's seed and stays fixed during the window (on a `camera_rig`, each camera's "
+           "patches are drawn the first time it is corrupted). Recorded per frame: `value` is "
+           "the covered fraction, `location` the sensor (`camera_rig.K` for camera K of a rig), `boxes` the patches (x0, y0, x1, y1 px).")
 
     def __init__(self, *a):
         super().__init__(*a)
-        self._boxes: list[tuple[int, int, int, int]] | None = None
-        self._shape = None
+        self._boxes: dict[tuple[int, int, int], list[tuple[int, int, int, int]]] = {}  # (lens, h, w) -> boxes
 
     def _place(self, h: int, w: int) -> list[tuple[int, int, int, int]]:
         n = int(self.settings["patches"])
@@ -160,20 +196,23 @@ class Occlude(ImageFault):
             aspect = float(self.rng.uniform(0.5, 2.0))
             bw = int(round(min(w, max(1.0, np.sqrt(area * aspect)))))
             bh = int(round(min(h, max(1.0, area / max(bw, 1)))))
+            if bh == h:  # cut at the image's height: the width takes the rest of the area
+                bw = int(round(min(w, max(1.0, area / h))))
             x0 = int(self.rng.integers(0, w - bw + 1))
             y0 = int(self.rng.integers(0, h - bh + 1))
             boxes.append((x0, y0, x0 + bw, y0 + bh))
         return boxes
 
-    def corrupt(self, img):
+    def corrupt(self, img, lens=0):
         h, w = img.shape[:2]
-        if self._boxes is None or self._shape != (h, w):
-            self._boxes, self._shape = self._place(h, w), (h, w)
+        boxes = self._boxes.get((lens, h, w))
+        if boxes is None:
+            boxes = self._boxes[(lens, h, w)] = self._place(h, w)
         out = img.copy()
         fill = float(self.settings["value"]) * _full_scale(img) / 255.0
         covered = np.zeros((h, w), bool)
         if float(self.settings["fraction"]) > 0:
-            for x0, y0, x1, y1 in self._boxes:
+            for x0, y0, x1, y1 in boxes:
                 out[y0:y1, x0:x1] = fill
                 covered[y0:y1, x0:x1] = True
-        return out, float(covered.mean()), {"boxes": self._boxes}
+        return out, float(covered.mean()), {"boxes": boxes}

@@ -1,10 +1,12 @@
 """docs/faults.md: an entry per kind, and every camera ```addt-fault example corrupts a frame
 (tests/docs_harness.py compiles every example and runs the others)."""
 
+import numpy as np
 import pytest
 from tests.unit.faults.faultkit import camera_frame, one
 
 from addt_dsl.registry import FAULTS
+from addt_dsl.runtime.sensors import Frame
 from tests.docs_harness import FAULT_LINES as LINES
 from tests.docs_harness import IMAGE_KINDS, ROOT, kind_of
 
@@ -25,7 +27,10 @@ def test_camera_doc_example_corrupts_a_synthetic_frame(line):
     settings = {k: float(v) for k, v in zip(rest[::2], rest[1::2])}
     fault, events = one(kind, target=target, **settings)
     frame = camera_frame()
-    before = frame.data["image"].copy()
+    if target == "camera_rig":  # its images, K x H x W x 3
+        frame = Frame("camera_rig", 0.0, {"images": np.stack([frame.data["image"]] * 3)})
+    key = "images" if target == "camera_rig" else "image"
+    before = frame.data[key].copy()
     out, _ = fault.on_frame(frame, 1.5)
-    assert out.data["image"].shape == before.shape and (out.data["image"] != before).any()
-    assert events and events[0].detail["location"] == "camera"
+    assert out.data[key].shape == before.shape and (out.data[key] != before).any()
+    assert events and events[0].detail["location"].split(".")[0] == target

@@ -109,3 +109,65 @@ def test_image_noise_differs_from_frame_to_frame():
     b = kind.on_frame(camera_frame(), 0.1)[0].data["image"].astype(int)
     clean = camera_frame().data["image"].astype(int)
     assert np.corrcoef((a - clean).ravel(), (b - clean).ravel())[0, 1] < 0.2
+
+
+def _rig_frame(cameras: int = 4):
+    from addt_dsl.runtime.sensors import Frame
+
+    images = np.stack([camera_frame(24, 32).data["image"] // (k + 1) for k in range(cameras)])
+    return Frame("camera_rig", 0.0, {"images": images, "intrinsics": np.eye(3)})
+
+
+@pytest.mark.parametrize("kind,settings", [("blur", {"sigma": 2.0}), ("image_noise", {"sigma": 20.0}),
+                                           ("occlude", {"fraction": 0.5})])
+def test_a_rig_fault_corrupts_every_camera_by_default_and_one_camera_with_lens(kind, settings):
+    frame = _rig_frame()
+    original = frame.data["images"].copy()
+    fault, events = one(kind, target="camera_rig", seed=5, **settings)
+    every = fault.on_frame(frame, 0.0)[0].data["images"]
+    assert (frame.data["images"] is not original) and (_rig_frame().data["images"] == original).all()
+    assert every.shape == original.shape and every.dtype == original.dtype
+    assert all((every[k] != original[k]).any() for k in range(4))
+    assert [e.detail["location"] for e in events] == [f"camera_rig.{k}" for k in range(4)]
+
+    fault, events = one(kind, target="camera_rig", seed=5, lens=2, **settings)
+    picked = fault.on_frame(_rig_frame(), 0.0)[0].data["images"]
+    assert [k for k in range(4) if (picked[k] != original[k]).any()] == [2]
+    assert [e.detail["location"] for e in events] == ["camera_rig.2"]
+
+
+def test_occlusion_on_a_rig_places_each_lens_patches_once():
+    fault, events = one("occlude", target="camera_rig", seed=2, fraction=0.3, patches=2)
+    for t in (0.0, 0.1, 0.2):
+        fault.on_frame(_rig_frame(3), t)
+    boxes = {}
+    for e in events:
+        boxes.setdefault(e.detail["location"], []).append(e.detail["boxes"])
+    assert sorted(boxes) == ["camera_rig.0", "camera_rig.1", "camera_rig.2"]
+    assert all(len({str(b) for b in seen}) == 1 for seen in boxes.values())  # fixed on each lens
+    assert len({str(seen[0]) for seen in boxes.values()}) > 1  # drawn per lens, not shared
+
+
+def test_lens_is_checked_against_the_target_sensor():
+    from addt_dsl.registry import FAULTS
+
+    occlude = FAULTS.get("occlude")
+    assert occlude.setting_problems({"lens": -1}, "camera", {}) == {}
+    assert occlude.setting_problems({"lens": 3}, "camera_rig", {"cameras": 6}) == {}
+    assert "numbered 0 to 5" in occlude.setting_problems({"lens": 6}, "camera_rig", {"cameras": 6})["lens"]
+    assert occlude.setting_problems({"lens": 0}, "camera", {"width": 320}) == {}  # its one image
+    assert "camera_rig" in occlude.setting_problems({"lens": 1}, "camera", {"width": 320})["lens"]
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("shape", [(48, 64), (120, 160), (40, 128)])
+def test_occlusion_covers_the_fraction_asked_for_whatever_the_drawn_aspect(seed, shape):
+    from addt_dsl.runtime.sensors import Frame
+
+    h, w = shape
+    image = np.full((h, w, 3), 200, np.uint8)
+    for fraction in (1.0, 0.9, 0.5):
+        fault, events = one("occlude", target="camera", seed=seed, fraction=fraction)
+        fault.on_frame(Frame("camera", 0.0, {"image": image}), 0.0)
+        # One patch: its area is the fraction, up to rounding to whole pixels.
+        assert events[0].detail["value"] == pytest.approx(fraction, abs=2.0 / min(h, w))

@@ -129,3 +129,19 @@ def test_wilson_interval_brackets_the_rate():
     lo, hi = wilson_interval(20, 40)
     assert lo == pytest.approx(0.352, abs=1e-3) and hi == pytest.approx(0.648, abs=1e-3)
     assert all(math.isnan(x) for x in wilson_interval(0, 0))
+
+
+def test_a_classified_run_gives_a_stored_unclassified_one_its_outcome_and_nothing_else(tmp_path):
+    with ResultStore(tmp_path / "r.sqlite", PLAN) as store:
+        plain = records([""] * 6)
+        for r in plain:
+            store.add(r)
+        assert store.done(classified=True) == set() and len(store.done()) == 6
+        again = records(["masked", "hazard", "", "", "", ""])
+        assert store.add(again[0]) and store.add(again[1])  # gained a class
+        assert not store.add(again[0])  # already classified: nothing changes
+        assert not store.add(again[2])  # no class to give
+        assert {rid for _, rid in store.done(classified=True)} == {again[0].run_id, again[1].run_id}
+        stored = {r.run_id: r for r in store.records()}
+    assert stored[again[0].run_id].outcome == "masked" and stored[again[1].run_id].outcome == "hazard"
+    assert len(stored) == 6 and stored[again[1].run_id].passed == plain[1].passed  # the row is not replaced

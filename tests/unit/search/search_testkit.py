@@ -12,7 +12,7 @@ from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.compiler import compile_file, compile_source
 from addt_dsl.plan import ConcreteFault, RunSpec, ScenarioPlan
-from addt_dsl.registry import FAULTS, SIGNALS, STACKS
+from addt_dsl.registry import FAULTS, SENSORS, SIGNALS, STACKS
 from addt_dsl.runtime.result import Failure, RunResult, Verdict
 from addt_dsl.sweep import violated_assumptions
 
@@ -217,12 +217,27 @@ def concrete_faults(draw, plan: ScenarioPlan, max_faults: int = 4):
         for spec in cls.params:
             if spec.required or draw(st.booleans()):
                 settings[spec.name] = draw(_setting_value(spec))
+        settings = fitting_settings(cls, plan, target, settings)
         start = draw(st.floats(0.0, plan.duration_s))
         end = draw(st.one_of(st.none(), st.just(start), st.floats(start, plan.duration_s)))
         seed = draw(st.integers(0, 2**32 - 1))
         out.append(ConcreteFault(index=i, kind=cls.keyword, target=target, start_s=start, end_s=end,
                                  settings=settings, seed=seed))
     return out
+
+
+def fitting_settings(cls, plan: ScenarioPlan, target: str, settings: dict) -> dict:
+    """Without the settings the compiler refuses for this target sensor (an image fault's
+    `lens` beyond the rig's cameras): the kind's own check decides."""
+    problems_of = getattr(cls, "setting_problems", None)
+    sensor = next((s for s in plan.ego.sensors if s.name == target), None)
+    if problems_of is None or sensor is None:
+        return settings
+    sensor_settings = {p.name: p.default for p in SENSORS.get(target).params}
+    sensor_settings |= {k: v.value for k, v in sensor.settings.items() if isinstance(v, E.Num)}
+    defaults = {p.name: p.default for p in cls.params}
+    bad = problems_of(defaults | {k: getattr(v, "value", v) for k, v in settings.items()}, target, sensor_settings)
+    return {k: v for k, v in settings.items() if k not in bad}
 
 
 @st.composite

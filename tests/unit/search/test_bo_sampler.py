@@ -93,6 +93,56 @@ def test_the_initial_design_is_a_latin_hypercube():
         assert sorted(np.floor(first[:, j] * n).astype(int)) == list(range(n))
 
 
+SEVERE_AXES = [Axis("param:p0", "unit"), Axis("fault0:present", "bool", severe=1.0),
+               Axis("fault0:start", "unit", severe=0.0), Axis("fault0:length", "unit", severe=1.0),
+               Axis("fault0:value", "unit", severe=0.0), Axis("fault0:bit", "unit")]
+
+
+def test_the_initial_design_starts_with_each_faults_worst_case():
+    sampler = BayesianSampler(SEVERE_AXES, np.random.default_rng(4))
+    n = sampler.batch_size(8, 0)
+    assert n == sampler.initial + 1  # one worst case per fault, then the hypercube
+    first = sampler.sample(n)
+    assert np.array_equal(first[0, 1:5], [1.0, 0.0, 1.0, 0.0])  # present, from the start, whole run, severe value
+    lhs = first[1:]
+    for j in range(len(SEVERE_AXES)):  # the hypercube keeps its strata on every axis
+        assert sorted(np.floor(lhs[:, j] * len(lhs)).astype(int)) == list(range(len(lhs)))
+    # Two faults: two worst cases, each alone.
+    axes = SEVERE_AXES + [Axis("fault1:present", "bool", severe=1.0), Axis("fault1:rate", "unit", severe=1.0)]
+    two = BayesianSampler(axes, np.random.default_rng(4))
+    worst = two.sample(two.batch_size(8, 0))[:2]
+    assert np.array_equal(worst[:, [1, 6]], [[1.0, 0.0], [0.0, 1.0]]) and worst[1, 7] == 1.0
+
+
+def severe_slab_score(u: np.ndarray) -> np.ndarray:
+    """As `lead_brake_blind`: flat robustness (1 to 2, set by the parameter alone) unless the
+    fault is present with its value in the top 7 % and a window from before 0.3 lasting past
+    0.6 of the run: then -0.1. Nothing in the score points at the slab (0.45 % of the cube)."""
+    u = np.atleast_2d(u)
+    start, end = u[:, 2], u[:, 2] + u[:, 3] * (1 - u[:, 2])
+    inside = (u[:, 1] >= 0.5) & (u[:, 4] <= 0.07) & (start < 0.3) & (end > 0.6)
+    return np.where(inside, -0.1, 1.0 + u[:, 0])
+
+
+def test_bo_finds_a_flat_severe_slab_from_its_initial_design():
+    rate = float(np.mean(severe_slab_score(np.random.default_rng(0).random((200_000, len(SEVERE_AXES)))) < 0))
+    assert 0.003 < rate < 0.006  # uniform sampling: ~150 runs (median)
+
+    def to_failure(sampler, budget):
+        points, scores = np.empty((0, len(SEVERE_AXES))), np.empty(0)
+        while len(scores) < budget:
+            for u in sampler.sample(sampler.batch_size(8, len(scores))):
+                points, scores = np.vstack([points, u]), np.append(scores, severe_slab_score(u))
+                if scores[-1] < 0:
+                    return len(scores)
+            sampler.update(points, scores)
+        return budget + 1
+
+    bo = [to_failure(BayesianSampler(SEVERE_AXES, np.random.default_rng(s)), 60) for s in range(3)]
+    # The fault's worst case (the first run) is inside; without it: 22, 4 and 12 evaluations.
+    assert bo == [1, 1, 1], bo
+
+
 def test_the_trust_region_follows_the_best_point_and_stays_in_the_cube():
     sampler = BayesianSampler(FAULT_AXES, np.random.default_rng(2), jobs=2)
     points = np.random.default_rng(9).random((12, len(FAULT_AXES)))

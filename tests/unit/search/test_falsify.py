@@ -46,6 +46,26 @@ def test_space_axes():
     assert "fault4:value" in names
 
 
+def test_severe_ends_of_the_fault_axes():
+    space = SearchSpace(kitchen_sink_plan())
+    severe = {a.name: a.severe for a in space.axes}
+    assert all(v is None for k, v in severe.items() if k.startswith("param:"))
+    # A window's worst is the whole run: from the start, as long as it can be.
+    assert severe["fault4:present"] == 1.0 and severe["fault4:start"] == 0.0 and severe["fault4:length"] == 1.0
+    assert severe["fault1:start"] is None  # an instant has no worst time
+    # The setting's end farthest from neutral: up for a drop rate, down for a negative stuck value.
+    assert severe["fault0:rate"] == 1.0 and severe["fault4:value"] == 0.0 and severe["fault1:x"] == 0.0
+    u = np.full(space.dims, 0.5)
+    for name, v in severe.items():
+        if v is not None:
+            u[space.index[name]] = v
+    faults = {f.kind: f for f in space.spec(u, 1, "severe").faults}
+    assert faults["stuck"].settings["value"] == pytest.approx(-4.0) and faults["stuck"].start_s == 0.0
+    assert faults["stuck"].end_s == pytest.approx(space.plan.duration_s)
+    assert faults["drop"].settings["rate"] == pytest.approx(0.1)
+    assert faults["shift"].settings["x"] == pytest.approx(-0.4)
+
+
 def test_candidates_are_valid_pinned_runs():
     fal = _falsifier()
     points, specs = fal._candidates(40, 0)

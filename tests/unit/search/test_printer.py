@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from tests.unit.search.search_testkit import example_plans, formulas, kitchen_sink_plan, run_specs
+from tests.unit.search.search_testkit import example_plans, fitting_settings, formulas, kitchen_sink_plan, run_specs
 
 from addt_dsl import expr as E
 from addt_dsl import units
@@ -238,8 +238,9 @@ def test_every_registered_behaviour_sensor_and_fault_prints():
         accepts = cls.valid_targets({name: name for name in sensors}, STACKS.get(ego.stack.name))
         target = (next(n for n in sensors if n in accepts) if cls.target_kind == "sensor"
                   else {"site": "control.steer", "node": "planner"}[cls.target_kind])
+        settings = fitting_settings(cls, plan.model_copy(update={"ego": ego}), target, clause.settings)
         faults.append(plan.faults[0].model_copy(update={"kind": cls.keyword, "target": target,
-                                                        "settings": clause.settings}))
+                                                        "settings": settings}))
     oracles = [o for o in plan.oracles if not E.signals_used(o.formula) & {"distance(ego,lead)", "ttc(ego,lead)",
                                                                             "gap(ego,lead)", "speed(lead)"}]
     plan = plan.model_copy(update={"agents": agents, "ego": ego, "faults": faults, "oracles": oracles})

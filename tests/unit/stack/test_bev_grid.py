@@ -213,3 +213,23 @@ def test_the_region_is_the_occupied_cells_bounding_box(points):
     expected = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1) if len(rows) else (0, 0, 0, 0)
     assert region == expected
     assert np.array_equal(grid, build_grid(pts, (1.0, 0.0)))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.lists(st.tuples(st.floats(-70.0, 70.0), st.floats(-30.0, 30.0), st.floats(-0.5, 3.0)),
+                         max_size=12), min_size=1, max_size=6))
+def test_a_reused_grid_cleared_only_in_the_last_region_equals_a_fresh_one(scans):
+    """Frame after frame into one buffer, clearing only the last frame's region (as the
+    learned node does): the same grid and region as building each frame afresh."""
+    from addt_dsl.stack.bev_grid import build_grid_region
+
+    out = np.zeros(GRID.shape, dtype=np.float32)
+    out[:] = 7.0  # a first frame with dirty=None clears everything
+    dirty = None
+    for pts in scans:
+        points = np.array(pts, dtype=np.float64).reshape(-1, 3)
+        fresh, fresh_region = build_grid_region(points, (1.0, 0.0))
+        reused, region = build_grid_region(points, (1.0, 0.0), out=out, dirty=dirty)
+        assert region == fresh_region
+        assert np.array_equal(reused, fresh)
+        dirty = region

@@ -21,7 +21,10 @@ def test_calibrate_writes_a_loadable_model_and_keeps_the_targets(tmp_path, capsy
     assert data["calibration"]["repeats"] == 3 and len(data["calibration"]["loadavg"]) == 3
     for node in NODES:
         v = data["nodes"][node]
-        assert len(v["jitter_ratios"]) == len(calibrate.LEVELS) and v["base_s"] > 0
+        assert len(v["jitter_ratios"]) == len(calibrate.LEVELS)
+        # A node takes time; under load a trend fitted to 2 scans may put all of it on the
+        # objects (the fit clamps a negative intercept to 0).
+        assert v["base_s"] >= 0 and v["per_object_s"] >= 0 and v["base_s"] + v["per_object_s"] > 0
     for target in data["targets"]:
         assert set(load_models(target, data=data)) == set(NODES)
     printed = capsys.readouterr().out

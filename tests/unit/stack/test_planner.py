@@ -174,6 +174,19 @@ def test_aeb_escalates_to_full_braking_when_partial_is_not_enough_and_holds_it()
     assert fcw.check(100.0, 0.0, 0.0, 0.0, [_obj(100.0 + 20.0 + CAR.length_m, 0.0)], now=0.7)[0] == 0
 
 
+def test_the_tracker_marks_a_track_seen_once_as_velocity_unknown():
+    from addt_dsl.stack.nodes import Obj, Tracker
+
+    tracker = Tracker()
+    seen = Obj(50.0, 0.0, 0.0, math.nan, math.nan, 4.6, 1.9, kind="car")
+    tracker.update([seen], 0.0, NO_FAULT)
+    [first] = tracker.objects_at(0.05)
+    assert not first.velocity_known and (first.vx, first.vy) == (0.0, 0.0)
+    tracker.update([Obj(51.0, 0.0, 0.0, math.nan, math.nan, 4.6, 1.9, kind="car")], 0.1, NO_FAULT)
+    [second] = tracker.objects_at(0.1)
+    assert second.velocity_known and second.vx == pytest.approx(10.0)
+
+
 def test_aeb_off_warns_without_braking():
     fcw = ForwardCollisionCheck({"aeb": "off"})
     stage, _, brake = fcw.check(100.0, 0.0, 20.0, 0.0, [_obj(110.0, 0.0)])

@@ -170,3 +170,58 @@ def test_weight_flips_recompute_only_what_changes_with_the_same_bits(frames, mon
         assert torch.equal(h_new.view(torch.int32), h_old.view(torch.int32))
         assert torch.equal(b_new.view(torch.int32), b_old.view(torch.int32))
     assert calls_new < calls_old
+
+
+def test_a_distant_flip_is_computed_apart_from_the_points(frames):
+    """A flip far from the points is computed in its own boxes: the heads away from its
+    reach keep the bits of the same frame without the flip (the points' windows are as
+    without faults), and near it they match the dense network with the same flip."""
+    node = LearnedPerception({})
+    s = frames[0]
+    node.detect(s.points, s.sensor_xy)
+    clean = node._forward.maps["head.center"].buf.clone()
+    site = "perception.backbone.conv1"
+    shape = node.activation_shape(site)
+    background = node._forward.maps["backbone.conv1"].background
+    channel = int(torch.nonzero(background[0, :, 1, 1] > 0)[0])  # positive: the flipped value passes the ReLU
+    index = int(np.ravel_multi_index((0, channel, 1, 1), shape))  # a corner: the scans' vehicles are far from it
+    flip = node.flip_activation_bits(site, [index], [26])  # ×/÷ 2^8
+    node.detect(s.points, s.sensor_xy)
+    assert flip.fired[0] != flip.fired[1]
+    flipped = node._forward.maps["head.center"].buf.clone()
+    # conv1's cell (1, 1) is head cell (2, 2); the layers after it reach ~20 head cells.
+    assert not torch.equal(flipped[..., :24, :24], clean[..., :24, :24])
+    assert torch.equal(flipped[..., 30:, :].view(torch.int32), clean[..., 30:, :].view(torch.int32))
+    node.flip_activation_bits(site, [index], [26])
+    with torch.inference_mode():
+        dense, _ = node.model(node._input)
+    np.testing.assert_allclose(flipped.numpy(), dense.numpy(), rtol=1e-5, atol=2e-5)
+    node.last_activation_flips, node._armed = [], []
+
+
+def test_a_flip_the_relu_undoes_widens_nothing(frames):
+    """A negative element of a pre-activation map flipped to another negative value is
+    zero after the ReLU: the layers after it compute only the points' region, and the
+    heads are bit for bit those of the frame without the flip."""
+    node = LearnedPerception({})
+    s = frames[0]
+    node.detect(s.points, s.sensor_xy)
+    clean = [node._forward.maps[k].buf.clone() for k in ("head.center", "head.box")]
+    site = "perception.backbone.conv0"
+    background = node._forward.maps["backbone.conv0"].background
+    channel = int(torch.nonzero(background[0, :, 0, 0] < 0)[0])  # a channel whose empty-grid value is negative
+    index = int(np.ravel_multi_index((0, channel, 2, 2), node.activation_shape(site)))
+    seen = []
+    widths = node._forward._windows
+
+    def windows(name, x, regions, shape):
+        seen.append(len(regions))
+        return widths(name, x, regions, shape)
+
+    node._forward._windows = windows
+    node.flip_activation_bits(site, [index], [24])  # an exponent bit: still negative
+    node.detect(s.points, s.sensor_xy)
+    assert node.last_activation_flips and node.last_activation_flips[0][1][1][0] < 0
+    assert max(seen[1:]) == 1  # after conv0's ReLU: one box, the points'
+    for k, c in zip(("head.center", "head.box"), clean):
+        assert torch.equal(node._forward.maps[k].buf.view(torch.int32), c.view(torch.int32))
