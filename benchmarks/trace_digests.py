@@ -2,6 +2,9 @@
 checkouts' output to show a change keeps every run bit for bit.
 
 Run: PYTHONPATH=. python benchmarks/trace_digests.py > digests.txt   (on each checkout; diff)
+     [--arrays: agents posed and stepped as arrays whatever their count, as the loop does
+     from `ARRAY_MIN_AGENTS` / `STEP_MIN_AGENTS` agents on: the digests must not change]
+     [NAME ...: only the runs whose name contains one of these]
 """
 
 from __future__ import annotations
@@ -61,9 +64,12 @@ def specs():
 
 
 def main() -> None:
+    from addt_dsl.runtime import execute as loop
     from addt_dsl.runtime.execute import execute
 
-    only = sys.argv[1:]
+    if "--arrays" in sys.argv:
+        loop.ARRAY_MIN_AGENTS = loop.STEP_MIN_AGENTS = 1
+    only = [a for a in sys.argv[1:] if a != "--arrays"]
     for name, spec in specs():
         if only and not any(o in name for o in only):
             continue

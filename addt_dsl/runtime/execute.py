@@ -22,7 +22,8 @@ import numpy as np
 from addt_dsl.plan import RunSpec
 from addt_dsl.registry import BEHAVIORS, ENVIRONMENTS, FAULTS, SENSORS, STACKS
 from addt_dsl.runtime import oracles
-from addt_dsl.runtime.behaviors import AgentState, advance, relative_heading
+from addt_dsl.runtime import fleet
+from addt_dsl.runtime.behaviors import AgentState, Idm, advance, lateral_profile, relative_heading
 from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
 from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.neighbours import LeaderIndex
@@ -180,6 +181,7 @@ class _Run:
         self.command = (0.0, 0.0)
         self._rngs: dict[str, np.random.Generator] = {}
         self._live_snapshot = None  # (step, state) that live behaviour settings read
+        self.behavior_version = 0  # behaviours started so far
 
         ego = plan.ego
         self.ego_plan = ego
@@ -231,7 +233,7 @@ class _Run:
         self.networked = isinstance(self.ego_road, _PathRoad) or any(
             isinstance(r, _PathRoad) for r in self.agent_roads.values())
         self.world_pose: dict[str, tuple[float, float, float]] = {}
-        self.body_actor = {}
+        self.fleet = _Fleet(self)
         self.contacts: set[tuple[str, str]] = set()  # actor pairs overlapping at the last step
 
         self.sensors = {}
@@ -396,9 +398,7 @@ class _Run:
         return self.physics.ray_cast(starts, ends, ignore="ego")
 
     def actor_by_body(self, body: int):
-        name = self.physics.body_names.get(body)
-        pose = self.body_actor.get(name)  # (x, y, heading, speed, length, width, kind) when posed
-        return None if pose is None else _GT(*pose)
+        return self.fleet.ground_truth(self.physics.body_names.get(body))
 
     def leader_of(self, agent: AgentState):
         """(gap [m], speed [m/s]) of the nearest actor ahead in the agent's lane, or None
@@ -465,6 +465,7 @@ class _Run:
             settings = {k: (v * sign if k in LANE_SETTINGS and isinstance(v, (int, float)) else v)
                         for k, v in settings.items()}
         beh = cls(settings)
+        self.behavior_version += 1  # the agents' array step re-reads who may be stepped as arrays
         beh.start(agent, self, time_s)
         if beh.channel == "longitudinal":
             self.longitudinal[agent.name] = beh
@@ -533,35 +534,55 @@ def _loop(run: _Run) -> Trace:
     sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
     sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
     ego_road = run.ego_road
+    leaders_stale = False  # the leader index missed an array step: rebuilt before it is asked
     lights_rec = {c.name: np.zeros(n) for c in plan.controllers} if run.lights else {}
     margins = {name: np.zeros(n) for name in names} if run.lights else {}
-    # Per agent, fixed for the run: (state, road, extra yaw [rad], half its body height [m], vehicle kind).
-    agent_consts = [(a, run.agent_roads[a.name], run.agent_plans[a.name].yaw,
-                     VEHICLES[run.agent_plans[a.name].vehicle].height_m / 2, run.agent_plans[a.name].vehicle)
-                    for a in run.agents]
-    set_pose, body_actor = run.physics.set_pose, run.body_actor
+    agents, fleet_ = run.agents, run.fleet
+    lengths = [sizes[n][0] for n in names]
+    widths = [sizes[n][1] for n in names]
+    if len(names) > _ALL_PAIRS_MAX:  # the broad phase's arrays
+        lengths, widths = np.array(lengths), np.array(widths)
+    # Few agents (most runs): posed, recorded and checked one by one in straight-line code
+    # below; the fleet's lists, arrays and calls cost more than they save there.
+    few = len(agents) < ARRAY_MIN_AGENTS
+    few_pairs = few and len(names) <= _ALL_PAIRS_MAX
+    if few:
+        # Per agent, fixed for the run: (state, road, extra yaw [rad], half its body height [m],
+        # vehicle kind, length [m], width [m]).
+        agent_consts = [(a, run.agent_roads[a.name], run.agent_plans[a.name].yaw,
+                         VEHICLES[run.agent_plans[a.name].vehicle].height_m / 2,
+                         run.agent_plans[a.name].vehicle, a.length_m, a.width_m) for a in agents]
+        set_pose, body_actor, world_pose = run.physics.set_pose, fleet_.body_actor, run.world_pose
+        networked = run.networked
+        ego_size = sizes["ego"]
+        reach = [0.5 * math.hypot(length, width) for length, width in zip(lengths, widths)]
+        clear_cols = [block[:, i, -1] for i in range(len(names))]
 
     for k in range(n):
         t_now = k * dt
         run.ctx.now = t_now
         if t_now + 1e-12 >= run.faults.next_wake_s:  # fault timers (tensor hooks attach at their instants)
             run.faults.wake(t_now)
-        # Agent poses (kinematic along their road) and snapshot objects for perception.
-        poses = {}
-        for a, road, yaw, half_height, kind in agent_consts:
-            x, y, h = road.road.point(a.s, a.t)  # road.pose
-            heading = h + relative_heading(a, t_now, dt)
-            if yaw:
-                heading += yaw
-            poses[a.name] = (x, y, heading)
-            z, grade = road.elevation.at(a.s)
-            set_pose(a.name, x, y, z + half_height, heading, math.atan(grade) * math.cos(heading - h))
-            body_actor[a.name] = (x, y, heading, a.speed, a.length_m, a.width_m, kind)
-            if run.networked:
-                run.world_pose[a.name] = (x, y, heading)
+        # Agent poses (kinematic along their road), for the physics world and perception.
+        if few:
+            row, boxes = [None], [None]  # the ego's first, below
+            for a, road, yaw, half_height, kind, length, width in agent_consts:
+                x, y, h = road.road.point(a.s, a.t)
+                heading = h + relative_heading(a, t_now, dt)
+                if yaw:
+                    heading += yaw
+                z, grade = road.elevation.at(a.s)
+                set_pose(a.name, x, y, z + half_height, heading, math.atan(grade) * math.cos(heading - h))
+                body_actor[a.name] = (x, y, heading, a.speed, length, width, kind)
+                row.append((x, y, heading, a.speed, a.accel, 0.0, a.s, a.t, road.road.lane_offset(a.s, a.t), 0.0))
+                boxes.append((x, y, heading, length, width))
+                if networked:
+                    world_pose[a.name] = (x, y, heading)
+        elif agents:
+            fleet_.pose(run, t_now, dt)
         e = run.ego
         run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
-        if not run.networked:  # (networked runs find leaders by position)
+        if not run.networked and not leaders_stale:  # (networked runs find leaders by position)
             run.leaders.moved(len(run.agents))  # the ego, last member; agents move below
         # The ego follows the road height; its dynamics feel the grade along its heading.
         z, grade = ego_road.elevation.at(run.ego_s)
@@ -569,22 +590,30 @@ def _loop(run: _Run) -> Trace:
             grade *= math.cos(e.heading - ego_road.road.reference_pose(run.ego_s)[2])
         run.ego_z, e.pitch = z, math.atan(grade)
         run.physics.set_pose("ego", e.x, e.y, z + VEHICLES[plan.ego.vehicle].height_m / 2, e.heading, e.pitch)
-        poses["ego"] = (e.x, e.y, e.heading)
         if run.networked:
-            run.world_pose["ego"] = poses["ego"]
+            run.world_pose["ego"] = (e.x, e.y, e.heading)
 
         # Record the state at t_now (clearance, the last field, below).
-        row = [(e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
-                ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)]
-        for a, road, _, _, _ in agent_consts:
-            x, y, h = poses[a.name]
-            row.append((x, y, h, a.speed, a.accel, 0.0, a.s, a.t, road.road.lane_offset(a.s, a.t), 0.0))
-        block[k, :, :-1] = row
+        ego_row = (e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
+                   ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)
+        if few:
+            row[0] = ego_row
+            block[k, :, :-1] = row
+            boxes[0] = (e.x, e.y, e.heading, *ego_size)
+        elif fleet_.rows is not None:  # agents posed one by one: the rows at once
+            block[k, :, :-1] = [ego_row, *fleet_.rows]
+        else:
+            block[k, 0, :-1] = ego_row
+            fleet_.record(block[k, 1:])
         if run.lights is not None:
             if run.light_script is not None:  # light changes fire on the state just recorded
                 _advance_light_script(run, rec, k, t_now)
             run.record_lights(lights_rec, margins, k, t_now)
-        collided = _clearances(rec, k, names, poses, sizes, run, t_now)
+        if few_pairs:
+            collided = _clearances_few(clear_cols, k, names, boxes, reach, run, t_now)
+        else:
+            xs, ys, hs = ([box[c] for box in boxes] for c in range(3)) if few else fleet_.columns(e)
+            collided = _clearances(block[k, :, -1], names, xs, ys, hs, lengths, widths, run, t_now)
         for node in lat_nodes:
             latency[node][k] = run.stack.latency[node]
         outputs["control.steer"][k] = run.command[0]
@@ -649,8 +678,14 @@ def _loop(run: _Run) -> Trace:
             status, error = "detected", "vehicle state became non-finite"
             last = k + 1
             break
+        if not few and agents and fleet_.step(run, t_now, dt):  # all at once, as arrays
+            leaders_stale = True
+            continue
         leaders, networked = run.leaders, run.networked
-        for i, a in enumerate(run.agents):
+        if leaders_stale and not networked:
+            leaders.rebuild()
+            leaders_stale = False
+        for i, a in enumerate(agents):
             beh = run.longitudinal[a.name]
             accel = beh.accel(a, run, t_now) if beh is not None else 0.0
             if run.lights is not None and not a.heading_rel and not run.agent_plans[a.name].ignore_lights:
@@ -698,6 +733,239 @@ class _EgoOccupant:
         return self._run.ego.speed
 
 
+# Agents posed as arrays from this many on, and stepped as arrays from STEP_MIN_AGENTS on:
+# fewer, and the loop's straight-line per-agent code is quicker (posing: ~30 us of numpy
+# calls against ~2 us per agent, measured break-even at ~24 agents; the array step asks two leader lookups of ~30 numpy calls each per step, a
+# sorted-list bisect per agent costs ~2.5 us: measured break-even at 65-75 agents).
+ARRAY_MIN_AGENTS = 24
+STEP_MIN_AGENTS = 64
+
+
+class _Fleet:
+    """The agents as arrays for the loop: each step's poses, road points and recorded
+    rows computed for all agents at once (numpy over agents), and the longitudinal step
+    of car-following agents (`fleet.step` below), with the floats of the per-agent code.
+
+    The `AgentState` objects stay the agents' state (behaviours, scripts and oracles read
+    them): a step gathers their stations, offsets and speeds into arrays and, when it
+    steps them as arrays, writes the new values back."""
+
+    def __init__(self, run: _Run):
+        agents = self.agents = run.agents
+        n = self.n = len(agents)
+        self.index = {a.name: i for i, a in enumerate(agents)}
+        self.roads = [run.agent_roads[a.name] for a in agents]
+        groups: dict[int, tuple] = {}
+        self.path_rows = []  # agents on a route: posed one by one (RoutePath)
+        for i, road in enumerate(self.roads):
+            if isinstance(road, _PathRoad):
+                self.path_rows.append(i)
+            else:
+                groups.setdefault(id(road.road), (road.road, road.elevation, []))[2].append(i)
+        self.groups = [(fast, elev, slice(None) if len(rows) == n else np.array(rows))
+                       for fast, elev, rows in groups.values()]
+        plans = [run.agent_plans[a.name] for a in agents]
+        self.yaws = [p.yaw for p in plans]
+        self.yaw = [(i, p.yaw) for i, p in enumerate(plans) if p.yaw]
+        self.half_height_m = [VEHICLES[p.vehicle].height_m / 2 for p in plans]
+        self.half_height = np.array(self.half_height_m)
+        self.kinds = [p.vehicle for p in plans]
+        self.length = np.array([a.length_m for a in agents])
+        slots = run.physics.box_slots([a.name for a in agents])
+        contiguous = bool(slots) and slots == list(range(slots[0], slots[0] + n))
+        self.slots = slice(slots[0], slots[0] + n) if contiguous else np.array(slots, dtype=np.intp)
+        codes: dict[str, int] = {}
+        self.road_code = np.array([codes.setdefault(a.road, len(codes)) for a in agents], dtype=np.int64)
+        self.ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
+        self.views = fleet.Views(self.length, self.road_code, run.ego_plan.length_m, self.ego_code) if n else None
+        self.posed = False
+        self.x, self.y, self.heading = [], [], []
+        self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
+        # name -> (x, y, heading, speed, length, width, kind) of an agent posed by the loop's
+        # few-agent code (which poses without the fleet)
+        self.body_actor: dict[str, tuple] = {}
+        self._posed_version = -1
+        self._plan_version = -1
+        self._plan = None
+
+    def gather(self) -> None:
+        """Stations, offsets, speeds and accelerations of the agents now."""
+        agents = self.agents
+        self.s = np.array([a.s for a in agents], dtype=float)
+        self.t = np.array([a.t for a in agents], dtype=float)
+        self.v = np.array([a.speed for a in agents], dtype=float)
+
+    def pose(self, run: _Run, t_now: float, dt: float) -> None:
+        """Pose every agent on its road (`road.point`, the relative heading of a lane change
+        or a walk, the extra yaw, the elevation) and hand the poses to the physics world;
+        keep them, and each agent's lane offset, for the row."""
+        agents, n = self.agents, self.n
+        self._posed_version = -1
+        if n < ARRAY_MIN_AGENTS:
+            self._pose_one_by_one(run, t_now, dt)  # few agents: the per-agent calls are quicker
+        else:
+            self.gather()
+            self.accel = np.array([a.accel for a in agents], dtype=float)
+            if np.isfinite(self.s).all() and np.isfinite(self.t).all():
+                self._pose_arrays(run, t_now, dt)
+                self._posed_version = run.behavior_version  # nothing else moves agents before their step
+            else:
+                self._pose_one_by_one(run, t_now, dt)
+        self.posed = True
+        if run.networked:
+            for a, xi, yi, hi in zip(agents, self.x, self.y, self.heading):
+                run.world_pose[a.name] = (float(xi), float(yi), float(hi))
+
+    def _pose_one_by_one(self, run: _Run, t_now: float, dt: float) -> None:
+        """The per-agent code: poses, and the rows as lists of floats."""
+        set_pose = run.physics.set_pose
+        x, y, heading, v, rows = [], [], [], [], []
+        for a, road, yaw, half_height in zip(self.agents, self.roads, self.yaws, self.half_height_m):
+            xi, yi, h = road.road.point(a.s, a.t)
+            z, grade = road.elevation.at(a.s)
+            off = road.road.lane_offset(a.s, a.t)
+            hi = h + relative_heading(a, t_now, dt)
+            if yaw:
+                hi += yaw
+            set_pose(a.name, xi, yi, z + half_height, hi, math.atan(grade) * math.cos(hi - h))
+            x.append(xi), y.append(yi), heading.append(hi), v.append(a.speed)
+            rows.append((xi, yi, hi, a.speed, a.accel, 0.0, a.s, a.t, off, 0.0))
+        self.x, self.y, self.heading, self.v, self.rows = x, y, heading, v, rows
+
+    def columns(self, ego: VehicleState):
+        """(x, y, heading) of every actor, the ego first: lists or arrays as posed."""
+        if self.rows is not None:
+            return [ego.x, *self.x], [ego.y, *self.y], [ego.heading, *self.heading]
+        return tuple(np.concatenate(([v], a)) for v, a in ((ego.x, self.x), (ego.y, self.y), (ego.heading, self.heading)))
+
+    def _road_pose(self, i: int):
+        """(x, y, road heading, lane offset, z, grade) of agent i, one by one."""
+        a, road = self.agents[i], self.roads[i]
+        x, y, h = road.road.point(a.s, a.t)
+        z, grade = road.elevation.at(a.s)
+        return x, y, h, road.road.lane_offset(a.s, a.t), z, grade
+
+    def _pose_arrays(self, run: _Run, t_now: float, dt: float) -> None:
+        """`_pose_one_by_one` as arrays (numpy over agents), bit for bit: the road points
+        and lane offsets of each road's agents at once (`FastRoad.points`), and the scalar
+        calls only where an agent turns off its road's heading or the road is not flat."""
+        agents, n, s, t = self.agents, self.n, self.s, self.t
+        rel = np.zeros(n)
+        plan = self._array_plan(run)  # with one, only lane changes turn agents off their road's heading
+        lateral = plan[2] if plan is not None else \
+            [i for i, a in enumerate(agents) if a.heading_rel or a.lc_duration_s > 0.0]
+        for i in lateral:
+            rel[i] = relative_heading(agents[i], t_now, dt)
+        x, y, ref_h, lane_off = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        z, grade = np.zeros(n), np.zeros(n)
+        for fast, elev, rows in self.groups:
+            sr, tr = s[rows], t[rows]
+            x[rows], y[rows], ref_h[rows], i, u = fast.points(sr, tr)
+            lane_off[rows] = fast.lane_offsets(sr, tr, i, u)
+            zg = elev.at_arrays(sr)
+            if zg is not None:
+                z[rows], grade[rows] = zg
+        for i in self.path_rows:  # routes: one by one
+            x[i], y[i], ref_h[i], lane_off[i], z[i], grade[i] = self._road_pose(i)
+        heading = ref_h + rel
+        for i, yaw in self.yaw:
+            heading[i] += yaw
+        pitch = np.zeros(n)  # atan(0) * cos(0) where flat and along the road
+        for i in np.flatnonzero((grade != 0.0) | (heading != ref_h)).tolist():
+            pitch[i] = math.atan(grade[i]) * math.cos(heading[i] - ref_h[i])
+        run.physics.set_poses(self.slots, x, y, z + self.half_height, heading, pitch)
+        self.x, self.y, self.heading, self.lane_offset, self.rows = x, y, heading, lane_off, None
+
+    def record(self, row: np.ndarray) -> None:
+        """The agents' fields of a step's row (`_FIELDS` but the clearance; yaw rate and
+        steer stay 0)."""
+        if self.rows is not None:
+            row[:, :-1] = self.rows
+            return
+        zero = np.zeros(self.n)
+        row[:, :9].T[:] = (self.x, self.y, self.heading, self.v, self.accel, zero, self.s, self.t, self.lane_offset)
+
+    def ground_truth(self, name: str | None):
+        """An agent as perception's ground truth sees it (pose of the step, speed then)."""
+        pose = self.body_actor.get(name)  # posed by the loop's few-agent code
+        if pose is not None:
+            return _GT(*pose)
+        i = self.index.get(name)
+        if i is None or not self.posed:
+            return None
+        a = self.agents[i]
+        return _GT(float(self.x[i]), float(self.y[i]), float(self.heading[i]), float(self.v[i]),
+                   a.length_m, a.width_m, self.kinds[i])
+
+    def _array_plan(self, run: _Run):
+        """(IDM settings, their rows, rows in a lane change, lateral targets) when every
+        agent can be stepped as arrays now, else None. Re-read when a behaviour starts."""
+        if run.behavior_version == self._plan_version:
+            return self._plan
+        self._plan_version, self._plan = run.behavior_version, None
+        if run.networked or run.lights is not None or self.n < max(ARRAY_MIN_AGENTS, STEP_MIN_AGENTS):
+            return None
+        rows, settings = [], []
+        for i, a in enumerate(self.agents):
+            beh = run.longitudinal[a.name]
+            if a.heading_rel:
+                return None
+            if beh is None:
+                continue
+            if type(beh) is not Idm or not all(isinstance(v, (int, float)) for v in beh.settings.values()):
+                return None
+            rows.append(i)
+            settings.append(beh.settings)
+        changing = [i for i, a in enumerate(self.agents) if a.lc_duration_s > 0.0]
+        target = np.array([a.t_target for a in self.agents], dtype=float)
+        self._plan = (fleet.IdmParams(settings), slice(None) if len(rows) == self.n else np.array(rows, dtype=np.intp),
+                      changing, target)
+        return self._plan
+
+    def step(self, run: _Run, t_now: float, dt: float) -> bool:
+        """Advance every agent as the per-agent loop would (in declaration order, each
+        seeing the earlier ones moved), as arrays; False (nothing changed) where the agents'
+        behaviours or states leave it to that loop."""
+        plan = self._array_plan(run)
+        if plan is None:
+            return False
+        params, rows, changing, target = plan
+        if run.behavior_version != self._posed_version:  # a behaviour started since the poses: read anew
+            self.gather()
+        s, t, v = self.s, self.t, self.v
+        ego = (run.ego_s, run.ego_t, run.ego.speed)
+        if not (np.isfinite(s).all() and np.isfinite(t).all() and math.isfinite(ego[0]) and math.isfinite(ego[1])):
+            return False
+        t_new = target.copy()
+        for i in changing:
+            t_new[i] = lateral_profile(self.agents[i], t_now + dt)
+        views, length = self.views, self.length
+        free = fleet.idm_free(params, v if isinstance(rows, slice) else v[rows])
+        accel = self._accel(params, rows, v, free, views.leaders(views.jacobi(s, t, v, ego), s, t, length))
+        for _ in range(fleet.MAX_ROUNDS):
+            v_new = v + accel * dt
+            v_new = np.where(v_new > 0.0, v_new, 0.0)  # max(0.0, v), as `advance` picks
+            s_new = s + v_new * dt
+            table = views.sequential(s, t, v, (s_new, t_new, v_new), ego)
+            again = self._accel(params, rows, v, free, views.leaders(table, s, t, length))
+            if np.array_equal(again.view(np.int64), accel.view(np.int64)):  # the fixed point: write it back
+                for a, ai, vi, si, ti in zip(self.agents, accel.tolist(), v_new.tolist(), s_new.tolist(),
+                                             t_new.tolist()):
+                    a.accel, a.speed, a.s, a.t = ai, vi, si, ti
+                return True
+            accel = again
+        return False
+
+    @staticmethod
+    def _accel(params, rows, v, free, answer) -> np.ndarray:
+        found, gap, speed = answer
+        if isinstance(rows, slice):
+            return fleet.idm_accel(params, v, free, found, gap, speed)
+        accel = np.zeros(len(v))  # no longitudinal behaviour: 0
+        accel[rows] = fleet.idm_accel(params, v[rows], free, found[rows], gap[rows], speed[rows])
+        return accel
+
+
 @dataclass(frozen=True)
 class _PlainLeg:
     """A road driven along +s from end to end, as a route leg (`stations_on`)."""
@@ -732,74 +1000,172 @@ def _pair_separation(a, b, box_a, box_b, reach_a, reach_b) -> float:
     return dist - r if dist > r + 5.0 else box_separation(box_a, box_b)
 
 
-def _clearances(rec, k, names, poses, sizes, run, t_now) -> bool:
-    """Record each actor's clearance; a collision event when two boxes start to overlap
-    (any pair, agents included). Returns True if the ego is in a collision (the run ends).
+def _clearances(out, names, x, y, heading, length, width, run, t_now) -> bool:
+    """Record each actor's clearance in `out` (names' order; x, y, heading, length and width
+    are arrays in that order); a collision event when two boxes start to overlap (any pair,
+    agents included). Returns True if the ego is in a collision (the run ends).
 
     Each actor's clearance is its least separation over all pairs (`_pair_separation`).
     A numpy broad phase over all pairs finds the pairs that can matter (those near enough
     for the exact test, and those whose approximate separation is within a tolerance of
-    an actor's least); only these are evaluated, in the all-pairs order, with the same
-    scalar arithmetic, so the figures are those of visiting every pair."""
-    boxes = {n: (*poses[n], *sizes[n]) for n in names}
-    clear = {n: math.inf for n in names}
+    an actor's least); only these are evaluated, with the arithmetic of the all-pairs
+    loop (elementwise in numpy, hypot, sin and cos from `math`), so the figures are those
+    of visiting every pair."""
+    i, j, sep, clear = _pair_separations(run, names, x, y, heading, length, width)
     collided = False
     touching = set()
-    for a, b, sep in _pair_separations(run, names, boxes):
-        if sep < clear[a]:
-            clear[a] = sep
-        if sep < clear[b]:
-            clear[b] = sep
-        if sep <= 0.0:
-            touching.add((a, b))
-            if (a, b) not in run.contacts:
-                run.events.append(Event(t_now, "collision", {"actors": [a, b]}))
-            if a == "ego" or b == "ego":
-                collided = True
+    for p in [p for p, value in enumerate(sep.tolist() if isinstance(sep, np.ndarray) else sep)
+              if value <= 0.0]:  # in all-pairs order
+        a, b = names[i[p]], names[j[p]]
+        touching.add((a, b))
+        if (a, b) not in run.contacts:
+            run.events.append(Event(t_now, "collision", {"actors": [a, b]}))
+        if a == "ego" or b == "ego":
+            collided = True
     run.contacts = touching
-    for n in names:
-        rec[n]["clearance"][k] = clear[n] if math.isfinite(clear[n]) else 1e3
+    out[:] = [c if math.isfinite(c) else 1e3 for c in (clear.tolist() if isinstance(clear, np.ndarray) else clear)]
     return collided
 
 
-# Broad-phase slack [m]: numpy's distances differ from math.hypot's by ulps, far below this.
+def _clearances_few(columns, k, names, boxes, reach, run, t_now) -> bool:
+    """`_clearances` of few actors, every pair one by one: `boxes` (x, y, heading, length,
+    width) and `reach` (half-diagonals [m]) in names' order; each actor's clearance goes
+    to `columns[i][k]`."""
+    n = len(boxes)
+    clear = [math.inf] * n
+    collided = False
+    touching = set()
+    for a in range(n):
+        box_a, reach_a = boxes[a], reach[a]
+        xa, ya = box_a[0], box_a[1]
+        for b in range(a + 1, n):
+            box_b = boxes[b]
+            dist = math.hypot(xa - box_b[0], ya - box_b[1])  # `_pair_separation`, inline
+            r = reach_a + reach[b]
+            sep = dist - r if dist > r + 5.0 else box_separation(box_a, box_b)
+            if sep < clear[a]:
+                clear[a] = sep
+            if sep < clear[b]:
+                clear[b] = sep
+            if sep <= 0.0:
+                pair = (names[a], names[b])
+                touching.add(pair)
+                if pair not in run.contacts:
+                    run.events.append(Event(t_now, "collision", {"actors": list(pair)}))
+                if a == 0:  # the ego is first
+                    collided = True
+    run.contacts = touching
+    for column, c in zip(columns, clear):
+        column[k] = c if math.isfinite(c) else 1e3
+    return collided
+
+
+def _floats(values) -> list:
+    return values.tolist() if isinstance(values, np.ndarray) else values
+
+
+def _all_pairs(x, y, heading, length, width, reach=None):
+    """Every pair one by one: (i, j, separation of each pair, each actor's least);
+    `reach`: each actor's half-diagonal [m] (computed when not given)."""
+    boxes = list(zip(*(_floats(v) for v in (x, y, heading, length, width))))
+    if reach is None:
+        reach = [0.5 * math.hypot(b[3], b[4]) for b in boxes]
+    n = len(boxes)
+    clear = [math.inf] * n
+    iu, ju, seps = [], [], []
+    for a in range(n):
+        box_a, reach_a = boxes[a], reach[a]
+        for b in range(a + 1, n):
+            sep = _pair_separation(None, None, box_a, boxes[b], reach_a, reach[b])
+            if sep < clear[a]:
+                clear[a] = sep
+            if sep < clear[b]:
+                clear[b] = sep
+            iu.append(a)
+            ju.append(b)
+            seps.append(sep)
+    return iu, ju, seps, clear
+
+
+# Broad-phase slack [m]: sqrt(dx^2 + dy^2) differs from math.hypot by ulps, far below this.
 _BROAD_SLACK_M = 1e-6
+_FEW_BOX_TESTS = 8  # up to this many box tests one by one, more as arrays
+_ALL_PAIRS_MAX = 24  # up to this many actors every pair one by one (measured: quicker than numpy)
 
 
-def _pair_separations(run, names, boxes) -> list[tuple[str, str, float]]:
-    """(a, b, separation [m]) of the actor pairs, in all-pairs order (i < j over `names`),
-    that can give an actor's clearance or a contact; every pair when a position is not
-    finite or there are few actors."""
+def _pair_separations(run, names, x, y, heading, length, width):
+    """(i, j, separation [m]) of the pairs near enough for the box test (every contact is
+    among them), in all-pairs order (i < j over `names`), and each actor's clearance: its
+    least separation over all pairs (`_all_pairs` when a pose is not finite or there are
+    few actors)."""
+    n = len(names)
+    if n <= _ALL_PAIRS_MAX:  # few actors: every pair, one by one, is quicker
+        reach = getattr(run, "clearance_reach", None)
+        if reach is None or len(reach) != n:  # sizes are fixed: once per run
+            reach = run.clearance_reach = [0.5 * math.hypot(a, b) for a, b in zip(_floats(length), _floats(width))]
+        return _all_pairs(x, y, heading, length, width, reach)
+    x, y, heading = np.asarray(x, dtype=float), np.asarray(y, dtype=float), np.asarray(heading, dtype=float)
+    # A pose not finite (or so far out that squares overflow): every pair.
+    if not ((np.abs(x) < 1e100).all() and (np.abs(y) < 1e100).all() and np.isfinite(heading).all()):
+        return _all_pairs(x, y, heading, length, width)
     pairs = getattr(run, "clearance_pairs", None)
-    if pairs is None:  # sizes are fixed: once per run
-        reach = {n: 0.5 * math.hypot(boxes[n][3], boxes[n][4]) for n in names}
-        iu, ju = np.triu_indices(len(names), 1)
-        pair_names = [(names[i], names[j]) for i, j in zip(iu.tolist(), ju.tolist())]
-        r_of = np.array([reach[n] for n in names])
-        run.clearance_pairs = pairs = (reach, iu, ju, pair_names, r_of[iu] + r_of[ju])
-    reach, iu, ju, pair_names, r = pairs
-    xy = np.array([(boxes[n][0], boxes[n][1]) for n in names]) if len(names) > 4 else None
-    if xy is None or not np.isfinite(xy).all():
-        return [(a, b, _pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b])) for a, b in pair_names]
-    d = np.hypot(xy[iu, 0] - xy[ju, 0], xy[iu, 1] - xy[ju, 1])
+    if pairs is None or len(pairs[0]) != n * (n - 1) // 2:  # sizes are fixed: once per run
+        reach = np.array([0.5 * math.hypot(a, b) for a, b in zip(length.tolist(), width.tolist())])
+        iu, ju = np.triu_indices(n, 1)
+        r = reach[iu] + reach[ju]
+        run.clearance_pairs = pairs = (iu, ju, r, r + 5.0)
+    iu, ju, r, r_exact = pairs
+    dx, dy = x[iu] - x[ju], y[iu] - y[ju]
+    d = np.sqrt(dx * dx + dy * dy)
     slack = _BROAD_SLACK_M * (1.0 + d)
-    near = d <= r + 5.0 + slack  # the exact test may apply
+    close = d <= r_exact + slack
+    near = np.flatnonzero(close)  # the exact test may apply
     sep = d - r
-    exact = {}
-    for p in np.flatnonzero(near).tolist():  # exact values: they bound each actor's least
-        a, b = pair_names[p]
-        sep[p] = exact[p] = _pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b])
-    table = np.full((len(names), len(names)), np.inf)
+    trig = []  # per actor (cos, sin) of the heading, from math, when a box test needs them
+    sep[near] = _exact_separations(near, dx, dy, iu, ju, r, r_exact, x, y, heading, length, width, trig)
+    table = np.full((n, n), np.inf)
     table[iu, ju] = sep
     table[ju, iu] = sep
     least = table.min(axis=1)
-    keep = np.flatnonzero(near | (sep <= np.maximum(least[iu], least[ju]) + 2.0 * slack)).tolist()
-    out = []
-    for p in keep:
-        a, b = pair_names[p]
-        value = exact.get(p)
-        out.append((a, b, value if value is not None else
-                    _pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b])))
+    # Pairs whose approximate separation is within the slack of an actor's least: exact
+    # too. The others are farther than every actor's least by more than the slack, so the
+    # least over the table then is the least over exact values.
+    extra = np.flatnonzero(~close & (sep <= np.maximum(least[iu], least[ju]) + 2.0 * slack))
+    if len(extra):
+        value = _exact_separations(extra, dx, dy, iu, ju, r, r_exact, x, y, heading, length, width, trig)
+        table[iu[extra], ju[extra]] = value
+        table[ju[extra], iu[extra]] = value
+        least = table.min(axis=1)
+    return iu[near], ju[near], sep[near], least
+
+
+def _exact_separations(p, dx, dy, iu, ju, r, r_exact, x, y, heading, length, width, trig) -> np.ndarray:
+    """`_pair_separation` of pairs `p`, bit for bit: math.hypot of the centres, and where
+    they are within reach + 5 m the separating-axis test of `world.box_separation`,
+    written elementwise in its order."""
+    dist = np.fromiter(map(math.hypot, dx[p].tolist(), dy[p].tolist()), float, len(p))
+    out = dist - r[p]
+    boxed = np.flatnonzero(~(dist > r_exact[p]))
+    if 0 < len(boxed) <= _FEW_BOX_TESTS:  # a few: one by one (numpy's calls cost more)
+        cols = [_floats(v) for v in (x, y, heading, length, width)]
+        for k, a, b in zip(boxed.tolist(), iu[p[boxed]].tolist(), ju[p[boxed]].tolist()):
+            out[k] = box_separation(tuple(c[a] for c in cols), tuple(c[b] for c in cols))
+    elif len(boxed):
+        if not trig:
+            hl = heading.tolist()
+            trig[:] = [np.fromiter(map(math.cos, hl), float, len(hl)), np.fromiter(map(math.sin, hl), float, len(hl))]
+        cos_h, sin_h = trig
+        a, b = iu[p[boxed]], ju[p[boxed]]
+        ca, sa, cb, sb = cos_h[a], sin_h[a], cos_h[b], sin_h[b]
+        ddx, ddy = x[b] - x[a], y[b] - y[a]
+        cos_d = np.abs(ca * cb + sa * sb)
+        sin_d = np.abs(sa * cb - ca * sb)
+        la, wa, lb, wb = 0.5 * length[a], 0.5 * width[a], 0.5 * length[b], 0.5 * width[b]
+        out[boxed] = np.maximum(np.maximum(np.maximum(
+            np.abs(ddx * ca + ddy * sa) - (la + lb * cos_d + wb * sin_d),
+            np.abs(ddy * ca - ddx * sa) - (wa + lb * sin_d + wb * cos_d)),
+            np.abs(ddx * cb + ddy * sb) - (lb + la * cos_d + wa * sin_d)),
+            np.abs(ddy * cb - ddx * sb) - (wb + la * sin_d + wa * cos_d))
     return out
 
 

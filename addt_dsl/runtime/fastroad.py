@@ -33,6 +33,10 @@ class FastRoad:
         self._h = np.unwrap(np.asarray(h, dtype=float)).tolist()
         self._k = np.asarray(road.curvature(s), dtype=float).tolist()
         self._xy = np.stack([np.asarray(x, float), np.asarray(y, float)], axis=1)
+        # The same samples as arrays, for `points` and `lane_offsets` (many actors at once).
+        self._s_a = np.array(self._s)
+        self._xyh = np.array([self._x, self._y, self._h])
+        self._center_arrays: dict[tuple[int, ...], np.ndarray] = {}  # a section's lanes -> their centres
         self._ds = self._s[1] - self._s[0]
         self._last_i = len(self._s) - 2
         self._section_starts = [sec.s0 for sec in road.sections]
@@ -62,6 +66,60 @@ class FastRoad:
         elif s < 0.0:
             x, y, h = self._x[0] + s * math.cos(self._h[0]), self._y[0] + s * math.sin(self._h[0]), self._h[0]
         return x, y, h
+
+    def _indices(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`_index` of many finite stations: int(s / ds) clamped (clamping the quotient
+        first gives the same index), and the fraction, with the same arithmetic."""
+        ds = self._ds
+        i = np.minimum(np.maximum(s / ds, 0.0), self._last_i).astype(np.intp)
+        return i, (s - self._s_a[i]) / ds
+
+    def points(self, s: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """`point(s, t)` of many actors, bit for bit, plus the sample index and fraction
+        (`lane_offsets` takes them): the interpolation is elementwise in numpy, in the scalar
+        code's order; sin and cos stay libm's (`math`: numpy's SIMD versions may differ in
+        the last bit). Finite stations; those off the road's ends are posed by `point`."""
+        i, u = self._indices(s)
+        table = self._xyh
+        lo = table[:, i]
+        x, y, h = lo + u * (table[:, i + 1] - lo)
+        off = np.flatnonzero((s > self.length) | (s < 0.0))
+        for j in off.tolist():  # extrapolated straight: the scalar call
+            x[j], y[j], h[j] = self.reference_pose(float(s[j]))
+        hl = h.tolist()
+        px = x - np.fromiter(map(math.sin, hl), float, len(hl)) * t
+        py = y + np.fromiter(map(math.cos, hl), float, len(hl)) * t
+        return px, py, h, i, u
+
+    def lane_offsets(self, s: np.ndarray, t: np.ndarray, i: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """`lane_offset(s, t)` of many actors (`i`, `u`: `points`' index and fraction),
+        bit for bit: the nearest driving lane's centre, the first on equal distances."""
+        if len(self._section_starts) == 1:
+            keys, sec = [0], None
+        else:
+            sec = np.maximum(np.searchsorted(self._section_starts, s, side="right") - 1, 0)
+            keys = np.unique(sec).tolist()
+        out = t.copy()
+        for key in keys:
+            rows = slice(None) if len(keys) == 1 else np.flatnonzero(sec == key)
+            lanes = self._lanes_of_section(key)
+            if not lanes:
+                continue
+            table = self._center_arrays.get(lanes)
+            if table is None:
+                for lane in lanes:
+                    self.lane_center_t(lane, 0.0)  # fills the lane's table
+                table = self._center_arrays[lanes] = np.array([self._center_cache[lane] for lane in lanes])
+            ii, uu, tt = i[rows], u[rows], t[rows]
+            lo = table[:, ii]
+            c = lo + uu * (table[:, ii + 1] - lo)  # a row per lane
+            d = np.abs(tt - c)
+            d[np.isnan(d)] = np.inf  # an absent lane is never the nearest
+            nearest = d.argmin(axis=0)  # the first of equal distances, as the scalar loop's `<`
+            cols = np.arange(len(tt))
+            found = d[nearest, cols] < np.inf
+            out[rows] = np.where(found, tt - c[nearest, cols], tt)
+        return out
 
     def curvature(self, s: float) -> float:
         i, u = self._index(s)
@@ -132,6 +190,10 @@ class FastRoad:
 
     def driving_lane_ids(self, s: float) -> tuple[int, ...]:
         key = self._section_key(s)
+        lanes = self._lanes_cache.get(key)  # hot (each actor's lane offset, every step): no call layer
+        return lanes if lanes is not None else self._lanes_of_section(key)
+
+    def _lanes_of_section(self, key: int) -> tuple[int, ...]:
         if key not in self._lanes_cache:
             sec = self.road.sections[key]
             self._lanes_cache[key] = tuple(self.road.driving_lane_ids(min(max(sec.s0 + 1e-6, 0.0), self.length)))

@@ -22,7 +22,7 @@ from bisect import bisect_left, bisect_right
 LANE_WINDOW_M = 1.8  # |t - t_agent| within this: the same lane [m]
 # Slack of the walk's stopping bound [m]: the bound is a lower limit of later gaps, in
 # floating point within far less than this of the gap itself.
-_STOP_SLACK_M = 1e-6
+STOP_SLACK_M = 1e-6
 
 
 def leader_scan(members, agent, window_m: float = LANE_WINDOW_M):
@@ -111,7 +111,7 @@ class LeaderIndex:
         for j in range(bisect_right(keys, s_a), len(keys)):
             s = keys[j]
             # Every later member is at least this far ahead (bumpers included).
-            if best_gap is not None and s - s_a - half_longest > best_gap + _STOP_SLACK_M:
+            if best_gap is not None and s - s_a - half_longest > best_gap + STOP_SLACK_M:
                 break
             i = ids[j]
             m = members[i]

@@ -87,6 +87,20 @@ class Elevation:
         return (self._z[i] + f * (self._z[i + 1] - self._z[i]),
                 self._g[i] + f * (self._g[i + 1] - self._g[i]))
 
+    def at_arrays(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """`at` of many stations, bit for bit (the same clamps and interpolation,
+        elementwise); None on a flat road (z and grade 0)."""
+        if self.flat:
+            return None
+        if not hasattr(self, "_z_a"):
+            self._z_a, self._g_a = np.array(self._z), np.array(self._g)
+        u = np.where(0.0 > s, 0.0, s)  # min(max(s, 0.0), length), as the scalar call picks
+        u = np.where(self.length < u, self.length, u) / self._ds
+        i = np.minimum(u.astype(np.intp), len(self._z) - 2)
+        f = u - i
+        z, g = self._z_a, self._g_a
+        return z[i] + f * (z[i + 1] - z[i]), g[i] + f * (g[i + 1] - g[i])
+
 
 # ---------------------------------------------------------------- sampling
 

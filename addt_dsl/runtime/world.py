@@ -70,9 +70,10 @@ class PhysicsWorld:
         # (x, y, z, heading, pitch), mirrored from add_box / set_pose, and the plane height.
         self._box_slot: dict[int, int] = {}
         self._box_half: list[tuple[float, float, float]] = []
-        self._box_pose: list[tuple[float, float, float, float, float]] = []
+        self._box_pose = np.zeros((0, 5))  # a row per box: the loop poses many agents at once
         self._box_ids = np.zeros(0, dtype=np.int64)
-        self._unsynced: set[int] = set()  # slots posed since pybullet last saw them
+        self._unsynced = np.zeros(0, dtype=bool)  # slots posed since pybullet last saw them
+        self._pending: dict[int, tuple] = {}  # slot -> pose set by `set_pose`, not yet in the table
         self._ground_z = 0.0
         self._collision_meshes = 0
         self.analytic_rays = True  # False: always ask pybullet (tests compare the two)
@@ -93,8 +94,9 @@ class PhysicsWorld:
         self.body_names[body] = name
         self._box_slot[body] = len(self._box_half)
         self._box_half.append((length / 2, width / 2, height / 2))
-        self._box_pose.append((0.0, 0.0, height / 2, 0.0, 0.0))
+        self._box_pose = np.vstack([self._box_pose, (0.0, 0.0, height / 2, 0.0, 0.0)])
         self._box_ids = np.append(self._box_ids, body)
+        self._unsynced = np.append(self._unsynced, False)
         return body
 
     def add_mesh(self, mesh, collision: bool = False) -> int | None:
@@ -135,15 +137,46 @@ class PhysicsWorld:
 
         pybullet gets the pose only when it is next asked something (`_sync_bodies`): the
         loop poses every body every step, and most steps no sensor looks."""
-        slot = self._box_slot[self.bodies[name]]
-        self._box_pose[slot] = (x, y, z, heading, pitch)
-        self._unsynced.add(slot)
+        # Kept aside until the table is read (`_flush`): a numpy row store costs ~0.5 us,
+        # a dict store ~0.05 us, and the loop poses the ego (and few agents) every step.
+        self._pending[self._box_slot[self.bodies[name]]] = (x, y, z, heading, pitch)
+
+    def box_poses(self) -> np.ndarray:
+        """The box table: a row (x, y, z, heading, pitch) per box, as last posed."""
+        if self._pending:
+            self._flush()
+        return self._box_pose
+
+    def _flush(self) -> None:
+        """Write the poses `set_pose` kept aside into the box table."""
+        pose, unsynced = self._box_pose, self._unsynced
+        for slot, row in self._pending.items():
+            pose[slot] = row
+            unsynced[slot] = True
+        self._pending.clear()
+
+    def set_poses(self, slots, x, y, z, heading, pitch) -> None:
+        """`set_pose` of many boxes at once: `slots` (a slice or indices of the box table,
+        `box_slots`) and arrays of their poses."""
+        if self._pending:
+            self._flush()
+        if isinstance(slots, slice):
+            self._box_pose[slots].T[:] = (x, y, z, heading, pitch)
+        else:
+            self._box_pose[slots] = np.stack([x, y, z, heading, pitch], axis=1)
+        self._unsynced[slots] = True
+
+    def box_slots(self, names) -> list[int]:
+        """The rows of the named bodies in the box table (`set_poses`)."""
+        return [self._box_slot[self.bodies[n]] for n in names]
 
     def _sync_bodies(self) -> None:
         """Hand pybullet the poses set since it was last asked (ray casts, renders)."""
         p, client = self.p, self.client
-        for slot in sorted(self._unsynced):
-            x, y, z, heading, pitch = self._box_pose[slot]
+        if self._pending:
+            self._flush()
+        for slot in np.flatnonzero(self._unsynced).tolist():
+            x, y, z, heading, pitch = self._box_pose[slot].tolist()
             hy, hp = 0.5 * heading, -0.5 * pitch  # body y axis points left: nose-up is a negative rotation
             cy, sy = math.cos(hy), math.sin(hy)
             if hp == 0.0:
@@ -152,7 +185,7 @@ class PhysicsWorld:
                 cp, sp = math.cos(hp), math.sin(hp)
                 quat = (-sy * sp, cy * sp, sy * cp, cy * cp)
             p.resetBasePositionAndOrientation(int(self._box_ids[slot]), (x, y, z), quat, physicsClientId=client)
-        self._unsynced.clear()
+        self._unsynced[:] = False
 
     @property
     def analytic(self) -> bool:
@@ -179,7 +212,7 @@ class PhysicsWorld:
         whose first hit is the ground reports -1 (no hit)."""
         from addt_dsl.runtime import raycast
 
-        pose = np.array(self._box_pose, dtype=np.float64).reshape(-1, 5)
+        pose = self.box_poses().copy()  # contiguous columns, as the caster slices them
         half = np.array(self._box_half, dtype=np.float64).reshape(-1, 3)
         index, frac = raycast.cast(starts, ends, pose[:, :3], raycast.box_rotations(pose[:, 3], pose[:, 4]),
                                    half, self._ground_z, plane_hits=ground_hits)

@@ -1,13 +1,18 @@
-"""Dense traffic: a closed-loop run with the fast lookups (sorted leader index, clearance
-broad phase, pybullet posed only when asked) gives the trace of the brute-force ones
-(every actor scanned, every pair tested, every pose handed to pybullet at once)."""
+"""Dense traffic: a closed-loop run with the agents stepped as arrays (`runtime.fleet`:
+leaders from sorted views, a fixed point for the sequential step), posed as arrays, with
+the clearance broad phase and pybullet posed only when asked, gives the trace of the
+brute-force loop (agents one by one, every actor scanned, every pair tested, every pose
+handed to pybullet at once)."""
 
 import math
+from collections import Counter
 
+import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
 from addt_dsl.runtime import execute as X
+from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.neighbours import LeaderIndex, leader_scan
 from addt_dsl.runtime.world import PhysicsWorld
 from addt_dsl.sweep import expand
@@ -15,9 +20,10 @@ from addt_dsl.sweep import expand
 pytestmark = pytest.mark.slow
 
 
-def dense(n_agents: int) -> str:
+def dense(n_agents: int, reverse: bool = False, extra: str = "") -> str:
     """IDM cars on three lanes, in pairs at equal stations (leader ties, touching boxes),
-    some changing lanes (leaders change), the ego among them."""
+    some changing lanes (leaders change), the ego among them. `reverse`: declared front
+    to back (each leader declared before its follower: the sequential step's chains)."""
     agents = []
     for i in range(n_agents):
         slot = i // 2
@@ -26,7 +32,7 @@ def dense(n_agents: int) -> str:
             if i % 4 == 1 else ""
         agents.append(f"  agent a{i} car on r lane {lane} at {40 + 12 * (slot // 3)} m speed {14 + i % 4} m/s {{\n"
                       f"    behavior idm speed {16 + i % 5} m/s{change}\n  }}")
-    body = "\n".join(agents)
+    body = "\n".join(reversed(agents) if reverse else agents)
     return f"""
 scenario dense {{
   duration 4 s
@@ -40,33 +46,82 @@ scenario dense {{
     sensor lidar rate 10 Hz rays 360 range 80 m
   }}
 {body}
+{extra}
 }}"""
 
 
-def all_pairs(run, names, boxes):
+# A parked car (no behaviour: its rows step at 0 m/s^2) and one that drives off the
+# road's end (posed by extrapolation).
+EXTRAS = """  agent parked car on r lane -3 at 150 m speed 0 m/s
+  agent leaving car on r lane -1 at 585 m speed 20 m/s {
+    behavior idm speed 20 m/s
+  }"""
+
+
+def all_pairs(run, names, x, y, heading, length, width):
     """Every pair, in order: the clearance loop without its broad phase."""
-    reach = {n: 0.5 * math.hypot(boxes[n][3], boxes[n][4]) for n in names}
-    return [(a, b, X._pair_separation(a, b, boxes[a], boxes[b], reach[a], reach[b]))
-            for i, a in enumerate(names) for b in names[i + 1:]]
+    return X._all_pairs(x, y, heading, length, width)
 
 
-def test_fast_lookups_give_the_brute_force_trace(monkeypatch):
-    result = compile_source(dense(24))
-    assert result.plan is not None, [str(d) for d in result.diagnostics]
-    spec = expand(result.plan).specs[0]
-    fast = X.execute(spec)
-    assert fast.status == "ok", fast.error
-    assert fast.trace.events_of("collision")  # the pairs start overlapping: contacts are exercised
+def one_by_one_points(self, s, t):
+    """`FastRoad.points` as a loop of the scalar calls."""
+    rows = [(*self.point(si, ti), *self._index(si)) for si, ti in zip(s.tolist(), t.tolist())]
+    return tuple(np.array(c) for c in zip(*rows))
 
-    eager = PhysicsWorld.set_pose
+
+def one_by_one_offsets(self, s, t, i, u):
+    return np.array([self.lane_offset(si, ti) for si, ti in zip(s.tolist(), t.tolist())])
+
+
+def brute_force(monkeypatch):
+    """The per-agent loop with the reference lookups: agents stepped one by one, leaders
+    found by scanning every actor, every pair tested, road points one at a time, every
+    pose handed to pybullet at once."""
+    eager, eager_many = PhysicsWorld.set_pose, PhysicsWorld.set_poses
 
     def set_pose_now(self, *args, **kwargs):
         eager(self, *args, **kwargs)
         self._sync_bodies()
 
+    def set_poses_now(self, *args):
+        eager_many(self, *args)
+        self._sync_bodies()
+
+    monkeypatch.setattr(X, "ARRAY_MIN_AGENTS", 10 ** 9)
     monkeypatch.setattr(LeaderIndex, "leader", lambda self, agent: leader_scan(self.members, agent))
     monkeypatch.setattr(X, "_pair_separations", all_pairs)
+    monkeypatch.setattr(FastRoad, "points", one_by_one_points)
+    monkeypatch.setattr(FastRoad, "lane_offsets", one_by_one_offsets)
     monkeypatch.setattr(PhysicsWorld, "set_pose", set_pose_now)
+    monkeypatch.setattr(PhysicsWorld, "set_poses", set_poses_now)
+
+
+@pytest.mark.parametrize("reverse", [False, True], ids=["declared-back-to-front", "declared-front-to-back"])
+def test_array_step_gives_the_brute_force_trace(monkeypatch, reverse):
+    result = compile_source(dense(24, reverse, EXTRAS))
+    assert result.plan is not None, [str(d) for d in result.diagnostics]
+    spec = expand(result.plan).specs[0]
+    stepped = Counter()
+    array_step = X._Fleet.step
+
+    def counted(self, *args):
+        done = array_step(self, *args)
+        stepped[done] += 1
+        return done
+
+    with monkeypatch.context() as m:
+        m.setattr(X._Fleet, "step", counted)
+        m.setattr(X, "STEP_MIN_AGENTS", 1)  # arrays whatever the count (by default from 64 agents)
+        fast = X.execute(spec)
+    assert fast.status == "ok", fast.error
+    assert fast.trace.events_of("collision")  # the pairs start overlapping: contacts are exercised
+    assert fast.trace.actors["leaving"].s[-1] > 600.0  # off the road's end
+    # Back to front, every step is taken as arrays; front to back, the chains leave some
+    # steps to the per-agent loop.
+    assert stepped[True] > 0 and (stepped[False] > 0) == reverse, stepped
+
+    brute_force(monkeypatch)
     brute = X.execute(spec)
     assert brute.digest == fast.digest
     assert brute.trace.events == fast.trace.events
+    assert (brute.trace.object_count == fast.trace.object_count).all()

@@ -146,11 +146,13 @@ def test_broad_phase_clearances_equal_all_pairs(rows):
     poses = {n: (x, y, h) for n, (x, y, h, _) in zip(names, rows)}
     sizes = {n: size for n, (_, _, _, size) in zip(names, rows)}
     boxes = {n: (*poses[n], *sizes[n]) for n in names}
-    rec = {n: {"clearance": np.zeros(1)} for n in names}
+    out = np.zeros(len(names))
     run = SimpleNamespace(contacts=set(), events=[])
-    collided = X._clearances(rec, 0, names, poses, sizes, run, 0.0)
+    x, y, h = (np.array([poses[n][c] for n in names]) for c in range(3))
+    length, width = (np.array([sizes[n][c] for n in names]) for c in range(2))
+    collided = X._clearances(out, names, x, y, h, length, width, run, 0.0)
     clear, touching = all_pairs(names, boxes)
-    for n in names:
-        assert struct.pack("<d", rec[n]["clearance"][0]) == struct.pack("<d", clear[n])
+    for i, n in enumerate(names):
+        assert struct.pack("<d", out[i]) == struct.pack("<d", clear[n])
     assert [tuple(e.detail["actors"]) for e in run.events] == touching
     assert collided == any("ego" in pair for pair in touching)

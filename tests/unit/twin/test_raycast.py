@@ -28,7 +28,7 @@ EPS_M = 2e-3  # pybullet's convex-cast shortfall (≤ ~1 mm seen) with a margin
 
 
 def _analytic(world: PhysicsWorld, starts, ends, grow: float = 0.0):
-    pose = np.array(world._box_pose).reshape(-1, 5)
+    pose = world.box_poses().reshape(-1, 5)
     half = np.array(world._box_half).reshape(-1, 3) + grow
     index, frac = raycast.cast(starts, ends, pose[:, :3], raycast.box_rotations(pose[:, 3], pose[:, 4]),
                                half, world._ground_z)
@@ -40,7 +40,7 @@ def _analytic(world: PhysicsWorld, starts, ends, grow: float = 0.0):
 def _on_a_face(world, points) -> np.ndarray:
     """Points within EPS_M of a box's surface, or on the ground plane (a ray starting or
     ending there is a toss-up)."""
-    pose = np.array(world._box_pose).reshape(-1, 5)
+    pose = world.box_poses().reshape(-1, 5)
     half = np.array(world._box_half).reshape(-1, 3)
     rot = raycast.box_rotations(pose[:, 3], pose[:, 4])
     local = np.abs(np.einsum("kji,knj->kni", rot, points[None] - pose[:, None, :3]))  # (boxes, points, 3)
@@ -56,7 +56,7 @@ def _tied(world, starts, ends, ids, dist, ids_pb) -> np.ndarray:
     which one is 'first' is a tie."""
     tied = np.zeros(len(ids), dtype=bool)
     length = np.linalg.norm(ends - starts, axis=1)
-    pose = np.array(world._box_pose).reshape(-1, 5)
+    pose = world.box_poses().reshape(-1, 5)
     half = np.array(world._box_half).reshape(-1, 3)
     rot = raycast.box_rotations(pose[:, 3], pose[:, 4])
     for i in np.flatnonzero((ids != ids_pb) & (ids >= 0) & (ids_pb >= 0)):

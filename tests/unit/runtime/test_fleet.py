@@ -1,0 +1,88 @@
+"""The agents' array step (`runtime.fleet`) against the per-agent definitions: leaders
+from the sorted views against `neighbours.leader_scan` over the members as each agent
+sees them in the sequential step (earlier agents moved, later ones not), and the IDM
+accelerations against `behaviors.Idm.accel`, bit for bit."""
+
+from __future__ import annotations
+
+import copy
+import struct
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from addt_dsl.runtime import fleet
+from addt_dsl.runtime.behaviors import Idm
+from addt_dsl.runtime.neighbours import leader_scan
+
+
+@dataclass
+class Member:
+    name: str
+    road: str
+    s: float
+    t: float
+    speed: float
+    length_m: float
+
+
+def bits(values):
+    return None if values is None else tuple(struct.pack("<d", float(v)) for v in values)
+
+
+# Stations on a coarse grid (equal stations and gaps: ties), offsets at lane centres and
+# at the 1.8 m window's edges, two roads, a few lengths (equal gaps need equal ones).
+stations = st.one_of(st.integers(0, 12).map(lambda i: 5.0 * i), st.floats(-10.0, 80.0))
+offsets = st.one_of(st.sampled_from([-5.25, -1.75, 1.75, 0.05, -1.75 + 1.8, -1.75 - 1.8]), st.floats(-7.0, 3.5))
+member = st.tuples(st.sampled_from(["r", "r", "r", "q"]), stations, offsets, st.floats(0.0, 40.0),
+                   st.sampled_from([4.6, 4.6, 12.0, 0.6]))
+moves = st.tuples(st.sampled_from([0.0, 0.2, 5.0]) | st.floats(0.0, 20.0), offsets, st.floats(0.0, 40.0))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(member, min_size=2, max_size=25), st.data(), st.sampled_from([1, 2, 12]))
+def test_views_answer_like_the_scan_of_what_each_agent_sees(rows, data, window):
+    *agents, ego = [Member(f"a{i}", *row) for i, row in enumerate(rows)]
+    ego.name = "ego"
+    n = len(agents)
+    moved = copy.deepcopy(agents)
+    for m in moved:  # where the agents are after their step (stations only grow)
+        ds, m.t, m.speed = data.draw(moves)
+        m.s += ds
+    roads = {"r": 0, "q": 1}
+    s, t, v, length = (np.array([getattr(a, f) for a in agents]) for f in ("s", "t", "speed", "length_m"))
+    views = fleet.Views(length, np.array([roads[a.road] for a in agents]), ego.length_m, roads[ego.road])
+    ego_state = (ego.s, ego.t, ego.speed)
+    new = tuple(np.array([getattr(a, f) for a in moved]) for f in ("s", "t", "speed"))
+    fleet.WINDOW, window = window, fleet.WINDOW  # small windows: the widening is exercised
+    try:
+        jacobi = views.leaders(views.jacobi(s, t, v, ego_state), s, t, length)
+        sequential = views.leaders(views.sequential(s, t, v, new, ego_state), s, t, length)
+    finally:
+        fleet.WINDOW = window
+    for i, agent in enumerate(agents):
+        for answer, seen in ((jacobi, [*agents, ego]), (sequential, [*moved[:i], *agents[i:], ego])):
+            found, gap, speed = (a[i] for a in answer)
+            assert bits((gap, speed) if found else None) == bits(leader_scan(seen, agent))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.0, 40.0), st.floats(0.0, 45.0), st.booleans(), st.floats(-3.0, 60.0),
+                          st.floats(0.0, 40.0)), min_size=1, max_size=12))
+def test_idm_accelerations_are_the_behaviours(rows):
+    settings_ = [{"speed": desired, "time_gap": 1.5, "min_gap": 2.0, "accel": 1.5, "decel": 2.0} if k % 2 else
+                 {"speed": desired, "time_gap": 0.7, "min_gap": 0.5, "accel": 3.0, "decel": 5.5}
+                 for k, (_, desired, _, _, _) in enumerate(rows)]
+    params = fleet.IdmParams(settings_)
+    v = np.array([r[0] for r in rows])
+    found = np.array([r[2] for r in rows])
+    gap, lead = np.array([r[3] for r in rows]), np.array([r[4] for r in rows])
+    got = fleet.idm_accel(params, v, fleet.idm_free(params, v), found, gap, lead)
+    for k, (speed, _, has, g, ls) in enumerate(rows):
+        behaviour = Idm(settings_[k])
+        world = SimpleNamespace(leader_of=lambda agent, answer=((g, ls) if has else None): answer)
+        expected = behaviour.accel(SimpleNamespace(speed=speed), world, 0.0)
+        assert struct.pack("<d", got[k]) == struct.pack("<d", expected)
