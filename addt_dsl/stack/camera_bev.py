@@ -30,7 +30,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from addt_dsl.stack.bev_grid import CAMERA_BEV_SITES, CLASSES, GRID, decode
-from addt_dsl.stack.learned import BevDetector, one_intra_op_thread
+from addt_dsl.stack.learned import BevDetector, load_weights, one_intra_op_thread
 from addt_dsl.stack.nodes import Obj
 from addt_dsl.stack.rig_lift import FEATURE_STRIDE, LIFT_HEIGHTS_M, lift_table, position_channels
 from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
@@ -42,6 +42,8 @@ FEATURES = 8
 
 class CameraBevNet(BevDetector):
     """Per-camera encoder + fixed lift + the BEV detector; layer names are the fault sites."""
+
+    sites = CAMERA_BEV_SITES
 
     def __init__(self, widths: tuple[int, int, int] = (16, 24, 32), features: int = FEATURES,
                  heights: int = len(LIFT_HEIGHTS_M), classes: int = len(CLASSES)):
@@ -73,21 +75,7 @@ class CameraBevNet(BevDetector):
     def forward_images(self, images, table, position):
         return self.forward(self.lift(images, table, position))
 
-    def layers(self) -> dict[str, nn.Conv2d]:
-        named = dict(self.named_modules())
-        return {name: named[name] for name in CAMERA_BEV_SITES}
 
-
-_CACHE: dict[Path, tuple[dict, dict]] = {}
-
-
-def load_weights(path: Path = WEIGHTS_PATH) -> tuple[dict, dict]:
-    """(state dict, metadata), cached per process (read-only: copy it)."""
-    path = Path(path)
-    if path not in _CACHE:
-        blob = torch.load(path, map_location="cpu", weights_only=True)
-        _CACHE[path] = (blob["state_dict"], blob.get("meta", {}))
-    return _CACHE[path]
 
 
 def load_model(path: Path = WEIGHTS_PATH) -> tuple[CameraBevNet, dict]:

@@ -178,7 +178,7 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
     import torch
 
     from addt_dsl.stack.camera_bev import CameraBevNet, RigGeometry, images_tensor
-    from addt_dsl.stack.train import centernet_loss
+    from addt_dsl.stack.train import fit
 
     torch.set_num_threads(threads)
     torch.manual_seed(seed)
@@ -198,31 +198,15 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         + ", ".join(f"{n} {c}" for c, n in zip(CLASSES, seen.tolist())) + " visible)")
     geometry = RigGeometry(rig.intrinsics, rig.camera_extrinsics(rig.nominal), rig.width, rig.height)
     model = CameraBevNet()
-    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
-    steps = epochs * math.ceil(scenes / batch)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=steps, pct_start=0.15)
     all_images = np.stack([s.images for s in samples])
-    t1 = time.perf_counter()
-    for epoch in range(epochs):
-        order = rng.permutation(scenes)
-        totals = np.zeros(6)
-        model.train()
-        for start in range(0, scenes, batch):
-            idx = np.sort(order[start:start + batch])
-            heat_logits, box = model.forward_images(images_tensor(all_images[idx]), geometry.table,
-                                                    geometry.position)
-            targets = (torch.from_numpy(a[idx]) for a in (heat_all, reg_all, mask_all))
-            loss, parts = centernet_loss(heat_logits, box, *targets)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            sched.step()
-            totals += (loss.item(), *parts)
-        n = math.ceil(scenes / batch)
-        log(f"epoch {epoch + 1}/{epochs}: loss {totals[0] / n:.3f} (focal {totals[1] / n:.3f}, "
-            f"offset {totals[2] / n:.3f}, size {totals[3] / n:.3f}, heading {totals[4] / n:.3f}, "
-            f"class {totals[5] / n:.3f}) [{time.perf_counter() - t1:.0f} s]")
-    return model.eval(), {"generate_s": round(t_gen, 1), "train_s": round(time.perf_counter() - t1, 1)}
+
+    def forward(idx):
+        idx = np.sort(idx)
+        heat_logits, box = model.forward_images(images_tensor(all_images[idx]), geometry.table, geometry.position)
+        return heat_logits, box, (torch.from_numpy(a[idx]) for a in (heat_all, reg_all, mask_all))
+
+    t_train = fit(model, lr, scenes, batch, epochs, rng, forward, log)
+    return model.eval(), {"generate_s": round(t_gen, 1), "train_s": round(t_train, 1)}
 
 
 def evaluate_weights(weights: Path, scenes: int, seed: int, min_pixels: int, threshold: float | None,

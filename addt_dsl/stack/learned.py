@@ -52,6 +52,8 @@ DEFAULT_THRESHOLD = 0.35
 class BevDetector(nn.Module):
     """The detector network; layer names are the tensor fault sites (`bev_grid.LAYER_SITES`)."""
 
+    sites = LAYER_SITES  # the named layers `layers()` returns, in this order
+
     def __init__(self, widths: tuple[int, int, int] = (32, 48, 64), in_channels: int = 6,
                  classes: int = len(CLASSES)):
         """`classes`: class logits after the box channels of `head.box` (0: no class output,
@@ -86,14 +88,15 @@ class BevDetector(nn.Module):
 
     def layers(self) -> dict[str, nn.Conv2d]:
         named = dict(self.named_modules())
-        return {name: named[name] for name in LAYER_SITES}
+        return {name: named[name] for name in self.sites}
 
 
 _CACHE: dict[Path, tuple[dict, dict]] = {}
 
 
 def load_weights(path: Path = WEIGHTS_PATH) -> tuple[dict, dict]:
-    """(state dict, metadata) from a weights file, cached per process (read-only: copy it)."""
+    """(state dict, metadata) from a weights file (this detector's or another's, e.g. the
+    camera BEV network's), cached per process (read-only: copy it)."""
     path = Path(path)
     if path not in _CACHE:
         blob = torch.load(path, map_location="cpu", weights_only=True)

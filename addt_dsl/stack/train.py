@@ -100,20 +100,34 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         + ", ".join(f"{n} {c}" for c, n in zip(CLASSES, seen.tolist())) + ")")
 
     model = BevDetector(widths).to(device)
+    buf = np.zeros((batch, *GRID.shape), dtype=np.float32)
+
+    def forward(idx):
+        x = torch.from_numpy(grids([samples[i] for i in idx], buf).copy()).to(device)
+        heat_logits, box = model(x)
+        return heat_logits, box, (torch.from_numpy(a[idx]).to(device) for a in (heat_all, reg_all, mask_all))
+
+    t_train = fit(model, lr, scenes, batch, epochs, rng, forward, log)
+    return model.cpu().eval(), {"generate_s": round(t_gen, 1), "train_s": round(t_train, 1)}
+
+
+def fit(model, lr: float, scenes: int, batch: int, epochs: int, rng, forward, log=print) -> float:
+    """The training loop of both detectors (this one and `camera_train`'s): AdamW with a
+    one-cycle schedule on the CenterNet loss, scenes in a fresh order from `rng` every
+    epoch; `forward(idx)` gives (heat logits, box, targets) for a batch's scene indices.
+    Returns the training time [s]."""
+    import torch
+
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     steps = epochs * math.ceil(scenes / batch)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=steps, pct_start=0.15)
-    buf = np.zeros((batch, *GRID.shape), dtype=np.float32)
     t1 = time.perf_counter()
     for epoch in range(epochs):
         order = rng.permutation(scenes)
         totals = np.zeros(6)
         model.train()
         for start in range(0, scenes, batch):
-            idx = order[start:start + batch]
-            x = torch.from_numpy(grids([samples[i] for i in idx], buf).copy()).to(device)
-            heat_logits, box = model(x)
-            targets = (torch.from_numpy(a[idx]).to(device) for a in (heat_all, reg_all, mask_all))
+            heat_logits, box, targets = forward(order[start:start + batch])
             loss, parts = centernet_loss(heat_logits, box, *targets)
             opt.zero_grad(set_to_none=True)
             loss.backward()
@@ -123,10 +137,8 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         n = math.ceil(scenes / batch)
         log(f"epoch {epoch + 1}/{epochs}: loss {totals[0] / n:.3f} (focal {totals[1] / n:.3f}, "
             f"offset {totals[2] / n:.3f}, size {totals[3] / n:.3f}, heading {totals[4] / n:.3f}, "
-            f"class {totals[5] / n:.3f}) "
-            f"[{time.perf_counter() - t1:.0f} s]")
-    t_train = time.perf_counter() - t1
-    return model.cpu().eval(), {"generate_s": round(t_gen, 1), "train_s": round(t_train, 1)}
+            f"class {totals[5] / n:.3f}) [{time.perf_counter() - t1:.0f} s]")
+    return time.perf_counter() - t1
 
 
 def main(argv=None) -> int:

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import copy
 import struct
-from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
@@ -17,16 +16,7 @@ from hypothesis import strategies as st
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.behaviors import Idm
 from addt_dsl.runtime.neighbours import leader_scan
-
-
-@dataclass
-class Member:
-    name: str
-    road: str
-    s: float
-    t: float
-    speed: float
-    length_m: float
+from tests.unit.runtime.test_neighbours import Member
 
 
 def bits(values):
@@ -47,7 +37,6 @@ moves = st.tuples(st.sampled_from([0.0, 0.2, 5.0]) | st.floats(0.0, 20.0), offse
 def test_views_answer_like_the_scan_of_what_each_agent_sees(rows, data, window):
     *agents, ego = [Member(f"a{i}", *row) for i, row in enumerate(rows)]
     ego.name = "ego"
-    n = len(agents)
     moved = copy.deepcopy(agents)
     for m in moved:  # where the agents are after their step (stations only grow)
         ds, m.t, m.speed = data.draw(moves)
