@@ -13,7 +13,7 @@ from typing import ClassVar, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from addt_dsl.expr import Expr, Num, eval_param_expr
+from addt_dsl.expr import Expr, Num, Param, eval_param_expr, walk
 from addt_dsl.fingerprint import code_fingerprint
 from addt_dsl.vehicles import VEHICLES
 
@@ -244,6 +244,27 @@ class ScenarioPlan(_Model):
     def nominal_params(self) -> dict[str, float]:
         return {p.name: p.default for p in self.params}
 
+    # What a fault-free run does not read: the fault schedule, the parameter declarations
+    # and the sweep (they make RunSpecs), the assumptions (they reject them).
+    NOT_READ_WITHOUT_FAULTS: ClassVar[frozenset[str]] = frozenset({"faults", "params", "assumptions", "sweep"})
+
+    def fault_only_params(self) -> frozenset[str]:
+        """The parameters only the fault schedule reads (`drop_rate` in `drop lidar rate
+        drop_rate`): runs that differ only in them have the same fault-free twin, and
+        sweeps give them the same seeds (paired runs, `sweep.py`)."""
+        cached = _FAULT_ONLY.get(id(self))
+        if cached is not None and cached[0] is self:
+            return cached[1]
+        read = set()
+        for name in type(self).model_fields:
+            if name not in self.NOT_READ_WITHOUT_FAULTS:
+                read |= _params_in(getattr(self, name))
+        result = frozenset(_params_in(self.faults) - read)
+        if len(_FAULT_ONLY) >= 16:  # a process sees few plans at a time; keep the cache small
+            _FAULT_ONLY.clear()
+        _FAULT_ONLY[id(self)] = (self, result)
+        return result
+
     # Names a plan keeps for display only: how the scenario's path, or an imported map's,
     # was spelled. Its identity (store plan hashes, RunSpec keys) is everything else, so the
     # same file reached by another path is the same plan; imported maps are embedded
@@ -254,6 +275,26 @@ class ScenarioPlan(_Model):
     def identity(self) -> dict:
         """The plan's content as JSON-ready data, without display-only names."""
         return self.model_dump(mode="json", exclude=self.DISPLAY_ONLY)
+
+
+# id(plan) -> (plan, its fault-only parameters): the plan is held, so its id stays its own.
+_FAULT_ONLY: dict[int, tuple[ScenarioPlan, frozenset[str]]] = {}
+
+
+def _params_in(value) -> set[str]:
+    """Names of the parameters an Expr-holding plan value reads (any nesting of models,
+    lists and dicts)."""
+    if isinstance(value, Param):
+        return {value.name}
+    if isinstance(value, BaseModel):
+        if type(value).__module__ == Param.__module__:  # an Expr tree
+            return {n.name for n in walk(value) if isinstance(n, Param)}
+        return set().union(*(_params_in(getattr(value, f)) for f in type(value).model_fields))
+    if isinstance(value, (list, tuple)):
+        return set().union(*(_params_in(v) for v in value))
+    if isinstance(value, dict):
+        return set().union(*(_params_in(v) for v in value.values()))
+    return set()
 
 
 class ConcreteFault(_Model):

@@ -1,8 +1,10 @@
 """Plan → RunSpecs: grids, samplers (random; Halton and Latin hypercube from scipy.stats.qmc), repeats, seeds.
 
-Seeds are derived from (plan seed, sweep seed, cell, repeat) with numpy's SeedSequence,
-so a RunSpec's seed does not depend on how many runs come before it or on the worker
-that executes it. Assumptions reject samples (bounded, counted); they never fail a run.
+Seeds are derived from (plan seed, sweep seed, scenario instance, sample, repeat) with
+numpy's SeedSequence, so a RunSpec's seed does not depend on how many runs come before it
+or on the worker that executes it. The instance is the grid cell without its fault-only
+axes: cells that differ only in what the faults read (`grid drop_rate in [1, 5] %`) run
+the same scenarios, paired, and share one fault-free twin per run (`--classify`). Assumptions reject samples (bounded, counted); they never fail a run.
 """
 
 from __future__ import annotations
@@ -153,6 +155,21 @@ def _grid_cells(plan: ScenarioPlan):
         yield dict(zip(names, combo))
 
 
+def _instances(plan: ScenarioPlan):
+    """For each grid cell in order, the index of its scenario instance: the cell's place
+    in the grid without the axes of fault-only parameters (`ScenarioPlan.fault_only_params`).
+    Seeds and samples derive from it, so cells that differ only in their faults run the
+    same scenarios (paired runs) and share their fault-free twins. Without such axes it
+    is the cell index."""
+    fault_only = plan.fault_only_params()
+    kept = [(k, len(g.values)) for k, g in enumerate(plan.sweep.grid) if g.param not in fault_only]
+    for combo in itertools.product(*[range(len(g.values)) for g in plan.sweep.grid]):
+        index = 0
+        for k, size in kept:
+            index = index * size + combo[k]
+        yield index
+
+
 def grid_cell_count(plan: ScenarioPlan) -> int:
     """Cells of the grid (1 without a grid), counted without building them."""
     return math.prod(len(g.values) for g in plan.sweep.grid)
@@ -182,19 +199,20 @@ def _iter_specs(plan: ScenarioPlan, rejected: Counter):
     sweep = plan.sweep
     nominal = plan.nominal_params()
     sampled = sampled_params(plan)
-    for ci, cell in enumerate(_grid_cells(plan)):
+    for ci, (cell, instance) in enumerate(zip(_grid_cells(plan), _instances(plan))):
         base = {**nominal, **cell}
         if violated_assumptions(plan, base) and not (sweep.sampler and sampled):
             for text in violated_assumptions(plan, base):
                 rejected[text] += 1
             continue
         if sweep.sampler and sampled:
-            assignments = _sample_cell(plan, base, sampled, ci, rejected)
+            assignments = _sample_cell(plan, base, sampled, instance, rejected)
         else:
             assignments = iter([base])
         for si, params in enumerate(assignments):
             for r in range(sweep.repeat):
-                seed = plan.run_seed if plan.run_seed is not None else derive_seed(plan.seed, sweep.seed, ci, si, r)
+                seed = (plan.run_seed if plan.run_seed is not None
+                        else derive_seed(plan.seed, sweep.seed, instance, si, r))
                 run_id = f"c{ci:03d}" + (f"-s{si:04d}" if sweep.sampler else "") + f"-r{r:03d}"
                 yield make_spec(plan, params, seed, run_id, cell, r)
 
@@ -239,10 +257,10 @@ def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
     return rejected
 
 
-def _sample_cell(plan, base, sampled, cell_index, rejected):
+def _sample_cell(plan, base, sampled, instance, rejected):
     """Accepted parameter assignments of one cell, drawn lazily in batches."""
     sampler = plan.sweep.sampler
-    engine = _unit_engine(sampler.kind, len(sampled), derive_seed(plan.seed, sampler.seed, cell_index, 104729))
+    engine = _unit_engine(sampler.kind, len(sampled), derive_seed(plan.seed, sampler.seed, instance, 104729))
     accepted = 0
     cap = plan.sweep.max_rejections
     while accepted < sampler.count:

@@ -18,7 +18,8 @@ parameters, same seed, so the same perception noise and traffic). A faulty run i
  Golden fingerprints are kept by their
 RunSpec key in a results store (`GoldenCache`: the sweep's own store under `--classify`,
 so a resumed or `--fresh` sweep reuses them; a temporary one otherwise), so classifying a
-sweep costs one golden run per distinct (parameters, seed), not one per faulty run. Golden
+sweep costs one golden run per distinct (parameters the fault-free run reads, seed), not
+one per faulty run: Table 1's 2,880 runs at four drop rates need 720. Golden
 and faulty runs execute on the sweep executors (guards included); only the coordinator
 writes the store, workers read golden fingerprints from it.
 
@@ -101,10 +102,16 @@ class Fingerprint:
 def golden_spec(spec: RunSpec) -> RunSpec:
     """The fault-free twin of a run: same plan, parameters and seed, no faults.
 
-    The sweep bookkeeping (run id, cell, repeat index) does not change a run, so it is
-    cleared: two faulty runs that differ only in their faults share one golden run.
+    What does not change a fault-free run is cleared: the sweep bookkeeping (run id, cell,
+    repeat index) and the parameters only the faults read (`drop_rate`). Two faulty runs
+    that differ only in their faults share one golden run; a sweep gives such runs the
+    same seed (paired cells, `sweep.py`), so a grid over drop rates needs one twin per
+    scenario, not one per rate.
     """
-    return spec.model_copy(update={"faults": [], "run_id": "golden", "cell": {}, "repeat_index": 0})
+    fault_only = spec.plan.fault_only_params()
+    params = {k: v for k, v in spec.params.items() if k not in fault_only}
+    return spec.model_copy(update={"faults": [], "params": params, "run_id": "golden", "cell": {},
+                                   "repeat_index": 0})
 
 
 class GoldenCache:

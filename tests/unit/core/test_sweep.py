@@ -59,3 +59,64 @@ def test_unsatisfiable_assumptions_are_an_error_not_a_loop():
     # ... and at expansion when sampling rejects more than the cap allows.
     with pytest.raises(UnsatisfiableAssumptions):
         expand(_plan("random 10 seed 1\n    max_rejections 3", assume="assume gap > 49 m"))
+
+
+PAIRED = """
+scenario p {{
+  duration 5 s
+  road r {{
+    line length 300 m
+  }}
+  param v = 10 m/s in [5 m/s, 20 m/s]
+  param rate = 1 % in [0 %, 50 %]
+  param window = 1 s in [0 s, 4 s]
+  param unused = 1 in [0, 9]
+  ego car on r lane -1 at 10 m speed v {{
+    sensor lidar
+  }}
+  faults {{
+    during [window, 5 s] drop lidar rate rate
+  }}
+  {extra}
+  sweep {{
+    {sweep}
+  }}
+}}
+"""
+
+
+def _paired(sweep: str, extra: str = ""):
+    result = compile_source(PAIRED.format(sweep=sweep, extra=extra), "p.addt")
+    assert result.ok, result.diagnostics
+    return result.plan
+
+
+def test_fault_only_parameters_are_those_only_the_faults_read():
+    assert _paired("repeat 1").fault_only_params() == {"rate", "window"}
+    # Read by an oracle too: not fault-only. A parameter nothing reads is not either.
+    plan = _paired("repeat 1", extra="expect {\n    always ego.speed < 40 m/s + window / 1 s * 1 m/s\n  }")
+    assert plan.fault_only_params() == {"rate"}
+
+
+def test_cells_differing_only_in_fault_parameters_share_seeds_and_golden_twins():
+    from addt_dsl.runtime.outcome import golden_spec
+
+    specs = expand(_paired("grid rate in [1, 5, 10] %\n    grid v in [10, 15] m/s\n    repeat 3")).specs
+    assert len(specs) == 18
+    seeds = {}
+    for s in specs:
+        seeds.setdefault(s.params["rate"], []).append((s.params["v"], s.repeat_index, s.seed))
+    assert seeds[0.01] == seeds[0.05] == seeds[0.1]  # paired across rates
+    assert len({s.seed for s in specs}) == 6  # apart across speeds and repeats
+    assert len({golden_spec(s).key() for s in specs}) == 6
+    assert all("rate" not in golden_spec(s).params for s in specs)
+    # Unchanged where no axis is fault-only: the seed derives from the cell index, as before.
+    specs_v = expand(_paired("grid v in [10, 15] m/s\n    grid unused in [1, 2]\n    repeat 3")).specs
+    assert len({s.seed for s in specs_v}) == 12
+
+
+def test_samples_are_paired_across_fault_only_cells():
+    specs = expand(_paired("grid rate in [1, 10] %\n    random 4 seed 2")).specs
+    by_rate = {r: [(s.params["v"], s.seed) for s in specs if s.params["rate"] == r] for r in (0.01, 0.1)}
+    assert by_rate[0.01] == by_rate[0.1]
+    assert len({v for v, _ in by_rate[0.01]}) == 4

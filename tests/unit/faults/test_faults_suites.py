@@ -33,7 +33,10 @@ def test_table1_suites_have_40_runs_per_drop_rate_and_stack(path):
     assert sorted({r for r, _ in cells}) == [0.01, 0.02, 0.05, 0.1]
     assert set(cells.values()) == {40}
     assert all(len(s.faults) == 1 and s.faults[0].kind == "drop" for s in specs)
-    assert len({s.seed for s in specs}) == len(specs)
+    # Paired: every drop rate runs the same scenarios (seeds), each rate's 40 apart.
+    seeds_by_rate = {r: sorted(s.seed for s in specs if s.params["drop_rate"] == r) for r, _ in cells}
+    assert len({tuple(v) for v in seeds_by_rate.values()}) == 1
+    assert len(set(seeds_by_rate[0.01])) == len(specs) // 4
 
 
 @pytest.mark.parametrize("path", [p for p in SUITES if p.stem.startswith("bitflip_")], ids=lambda p: p.stem)
