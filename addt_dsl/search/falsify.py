@@ -303,10 +303,12 @@ class BayesianSampler:
 
     name = "bo"
 
-    def __init__(self, axes: list[Axis], rng: np.random.Generator, jobs: int = 1):
+    def __init__(self, axes: list[Axis], rng: np.random.Generator, jobs: int = 1,
+                 fixed: dict[int, float] | None = None):
         self.dims = len(axes)
         self.rng = rng
         self.jobs = max(1, jobs)
+        self.fixed = fixed or {}  # axis -> value of every candidate (`BanditSampler`: its fault present)
         self.initial = max(BO_MIN_INITIAL, self.dims // 2)
         self.bool = np.array([a.kind == "bool" for a in axes], dtype=bool)
         index = {a.name: i for i, a in enumerate(axes)}
@@ -345,6 +347,8 @@ class BayesianSampler:
                 return worst
             return np.vstack([worst, qmc.LatinHypercube(self.dims, rng=self.rng).random(n - len(worst))])
         cand = np.vstack([self.rng.random((BO_CANDIDATES, self.dims)), self._trust_region(BO_CANDIDATES)])
+        for j, v in self.fixed.items():
+            cand[:, j] = v
         with threadpool_limits(1):  # see `update`
             mu, sd = self.gp.predict(self.model_inputs(cand), return_std=True)
         mu = mu * self.y_scale + self.y_mean
@@ -466,15 +470,17 @@ class BanditSampler:
         self.arms: list[tuple[str, int, list[int]]] = []
         for p in self.present:
             prefix = names[p].split(":")[0] + ":"
-            self.arms.append((prefix[:-1], int(p), params + [i for i, n in enumerate(names)
-                                                             if n.startswith(prefix) and i != p]))
+            self.arms.append((prefix[:-1], int(p), params + [i for i, n in enumerate(names) if n.startswith(prefix)]))
         self.none = len(self.arms)
         self.arms.append(("none", -1, params))
-        self.models = [BayesianSampler([axes[i] for i in sub], rng, jobs) if sub else None
-                       for _, _, sub in self.arms]
+        # A fault arm's model has the fault's present axis, fixed at 1 in its candidates.
+        self.models = [BayesianSampler([axes[i] for i in sub], rng, jobs,
+                                       fixed={sub.index(present): 1.0} if present >= 0 else None) if sub else None
+                       for _, present, sub in self.arms]
         self.severe = np.array([np.nan if a.severe is None else a.severe for a in axes], dtype=float)
         self.pulls = np.zeros(len(self.arms), dtype=int)  # points drawn per arm (by the arm drawn for)
-        self.fitted = [0] * len(self.arms)  # the arm's run count at its model's last fit
+        self.fitted = [-1] * len(self.arms)  # the runs the arm's model was last fitted to
+        self.points, self.scores = np.empty((0, self.dims)), np.empty(0)
         self.y = np.empty(0)  # warped scores so far
         self.arm_of = np.empty(0, dtype=int)
 
@@ -514,40 +520,50 @@ class BanditSampler:
         return float(norm.logcdf(-mu / math.sqrt(var)))
 
     def sample(self, n: int) -> np.ndarray:
-        out = []
+        arms = []
         for _ in range(n):
             k = self.choose()
             self.pulls[k] += 1
-            out.append(self._point(k, early=self.pulls[k] <= BANDIT_MIN_MODEL))
-        return np.array(out).reshape(n, self.dims)
+            arms.append((k, self.pulls[k] <= BANDIT_MIN_MODEL))
+        out = self.rng.random((n, self.dims))  # axes outside an arm's subspace change nothing
+        out[:, self.present] = 0.0
+        for k in sorted({k for k, _ in arms}):
+            _, present, sub = self.arms[k]
+            rows = [i for i, a in enumerate(arms) if a[0] == k]
+            if present >= 0:
+                out[rows, present] = 1.0
+            if not sub:
+                continue
+            early = [i for i in rows if arms[i][1]]
+            if early:  # before the arm's model: the fault's worst case, parameters uniform
+                severe = self.severe[sub]
+                for i in early:
+                    out[i, sub] = np.where(np.isfinite(severe), severe, out[i, sub])
+            later = [i for i in rows if not arms[i][1]]
+            if later:
+                self._fit(k)
+                out[np.ix_(later, sub)] = self.models[k].sample(len(later))
+        return out
 
-    def _point(self, k: int, early: bool) -> np.ndarray:
-        u = self.rng.random(self.dims)  # axes outside the arm's subspace change nothing
-        _, present, sub = self.arms[k]
-        u[self.present] = 0.0
-        if present >= 0:
-            u[present] = 1.0
-        if not sub:
-            return u
-        if early:  # before the arm's model: the fault's worst case, parameters uniform
-            severe = self.severe[sub]
-            u[sub] = np.where(np.isfinite(severe), severe, u[sub])
-        else:
-            u[sub] = self.models[k].sample(1)[0]
-        return u
+    def _fit(self, k: int) -> None:
+        """Fit arm `k`'s model to the runs so far, if it has not seen them: a fault arm's to
+        every run with no other fault (the rest tell it what the parameters do without its
+        fault), the no-fault arm's to its own."""
+        arm = self.arm_of
+        use = np.flatnonzero(arm == k) if k == self.none else np.flatnonzero(arm >= 0)
+        if self.models[k] is None or len(use) < BANDIT_MIN_MODEL or len(use) == self.fitted[k]:
+            return
+        self.fitted[k] = len(use)
+        self.models[k].update(self.points[use][:, self.arms[k][2]], self.scores[use])
 
     def update(self, points: np.ndarray, scores: np.ndarray) -> None:
         finite = scores[np.isfinite(scores)]
         if not len(finite):
             return
+        self.points, self.scores = points, scores
         self.y = warp(np.clip(scores, finite.min() - 1.0, finite.max() + 1.0))
         self.arm_of = self.classify(points)
-        for k, model in enumerate(self.models):
-            idx = np.flatnonzero(self.arm_of == k)
-            if model is None or len(idx) < BANDIT_MIN_MODEL or len(idx) == self.fitted[k]:
-                continue
-            self.fitted[k] = len(idx)
-            model.update(points[idx][:, self.arms[k][2]], scores[idx])
+        self.fitted = [-1] * len(self.arms)  # scores change when an oracle is falsified: refit when pulled
 
 
 def warp(score: np.ndarray) -> np.ndarray:
