@@ -481,6 +481,7 @@ class BanditSampler:
         self.pulls = np.zeros(len(self.arms), dtype=int)  # points drawn per arm (by the arm drawn for)
         self.fitted = [-1] * len(self.arms)  # the runs the arm's model was last fitted to
         self.points, self.scores = np.empty((0, self.dims)), np.empty(0)
+        self.asked = False  # points handed out since the last update
         self.y = np.empty(0)  # warped scores so far
         self.arm_of = np.empty(0, dtype=int)
 
@@ -520,6 +521,9 @@ class BanditSampler:
         return float(norm.logcdf(-mu / math.sqrt(var)))
 
     def sample(self, n: int) -> np.ndarray:
+        # Asked again before any result: the last points broke an `assume` and were never
+        # run. A model would propose the same corner again, so these are uniform in the arm.
+        retry, self.asked = self.asked, True
         arms = []
         for _ in range(n):
             k = self.choose()
@@ -535,12 +539,19 @@ class BanditSampler:
             if not sub:
                 continue
             early = [i for i in rows if arms[i][1]]
-            if early:  # before the arm's model: the fault's worst case, parameters uniform
-                severe = self.severe[sub]
-                for i in early:
-                    out[i, sub] = np.where(np.isfinite(severe), severe, out[i, sub])
+            if early:  # the fault's worst case; the parameters uniform, or the model's once it has one
+                self._fit(k)
+                model, severe = self.models[k], self.severe[sub]
+                if model.gp is None or retry:
+                    for i in early:
+                        out[i, sub] = np.where(np.isfinite(severe), severe, out[i, sub])
+                else:
+                    free = model.fixed
+                    model.fixed = {**free, **{int(j): float(severe[j]) for j in np.flatnonzero(np.isfinite(severe))}}
+                    out[np.ix_(early, sub)] = model.sample(len(early))
+                    model.fixed = free
             later = [i for i in rows if not arms[i][1]]
-            if later:
+            if later and not retry:
                 self._fit(k)
                 out[np.ix_(later, sub)] = self.models[k].sample(len(later))
         return out
@@ -557,6 +568,7 @@ class BanditSampler:
         self.models[k].update(self.points[use][:, self.arms[k][2]], self.scores[use])
 
     def update(self, points: np.ndarray, scores: np.ndarray) -> None:
+        self.asked = False
         finite = scores[np.isfinite(scores)]
         if not len(finite):
             return
