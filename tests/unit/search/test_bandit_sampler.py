@@ -50,8 +50,8 @@ def test_the_culprits_arm_gets_the_runs():
         arms = sampler.classify(points)
         assert set(arms) <= set(range(FAULTS + 1))  # one fault or none: never several at once
         pulls = np.bincount(arms, minlength=FAULTS + 1)
-        # Measured: 34 and 32 of 60 on the culprit's arm, at most 6 on any other.
-        assert pulls[CULPRIT] >= 20 and pulls[CULPRIT] > 2 * np.delete(pulls, CULPRIT).max(), pulls
+        # Measured (seeds 0-3): 41-50 of 60 on the culprit's arm, at most 6 on any other.
+        assert pulls[CULPRIT] >= 30 and pulls[CULPRIT] > 4 * np.delete(pulls, CULPRIT).max(), pulls
 
 
 def test_bandit_reaches_a_one_fault_failure_sooner_than_bo():
@@ -59,9 +59,9 @@ def test_bandit_reaches_a_one_fault_failure_sooner_than_bo():
               for s in range(4)]
     bo = [evaluations_to_failure(BayesianSampler(AXES, np.random.default_rng(s), jobs=2), one_culprit_score, 100)
           for s in range(4)]
-    # Measured over seeds 0-7: bandit 9-43 (median 17), bo 20-28 (median 24): bo's start alone
+    # Measured over seeds 0-7: bandit 4-23 (median 11), bo 4-25 (median 23): bo's start alone
     # (six worst cases and a hypercube of 13) is 19 evaluations.
-    assert np.median(bandit) < np.median(bo), (bandit, bo)
+    assert np.median(bandit) < 0.75 * np.median(bo), (bandit, bo)
 
 
 def test_first_runs_are_each_faults_worst_case_then_no_fault():
