@@ -109,7 +109,7 @@ def test_bandit_in_the_falsifier_finds_a_parameter_corner():
 
     def search():
         return Falsifier(kitchen_sink_plan(), seed=2, sampler="bandit",
-                         cache=RunCache(evaluator=corner)).run(budget_runs=80, shrink_simulations=0)
+                         cache=RunCache(evaluator=corner)).run(budget_runs=60, shrink_simulations=0)
 
     report = search()
     assert report.sampler == "bandit" and report.first_failure_run is not None, report.to_json()
