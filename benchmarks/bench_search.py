@@ -8,7 +8,9 @@ The suite (default): the scenarios in `examples/search/`, each written so that a
 failure needs several things at once (a small failure region: uniform sampling fails
 under 3 % of runs; `examples/lead_brake.addt` left the suite when the stack began to
 brake for emergencies: its collisions became rare, the Bayesian search's seed 0 needs
-104-134 runs). Every sampler searches the same
+104-134 runs). Schedules of several declared faults, one or two of which matter, are in
+`examples/search/many_faults/` (pass them with `--scenarios`; `--samplers random bo bandit`
+compares the bandit over which fault is present). Every sampler searches the same
 space (`addt_dsl.search.falsify.SearchSpace`: parameters, fault presence, times and
 magnitudes) with the same budget and seeds; `random` is uniform sampling over that space
 (`UniformSampler`). A seed that finds no failure within the budget counts as budget + 1

@@ -55,9 +55,10 @@ def add_commands(sub) -> None:
     fal.add_argument("--jobs", "-j", type=positive_int, default=1)
     fal.add_argument("--batch", type=positive_int, default=16,
                      help="candidates per generation (cem, random; bo runs --jobs at a time)")
-    fal.add_argument("--sampler", choices=("bo", "cem", "random"), default="bo",
+    fal.add_argument("--sampler", choices=("bo", "bandit", "cem", "random"), default="bo",
                      help="bo: Bayesian optimisation of the failure probability (default); cem: "
-                          "cross-entropy; random: uniform sampling")
+                          "cross-entropy; random: uniform sampling; bandit: Thompson sampling over which "
+                          "fault is present, Bayesian optimisation inside (for many faults)")
     fal.add_argument("--shrink-simulations", type=nonneg_int, default=60,
                      help="per distinct failure, to find its origin (0: do not shrink)")
     fal.add_argument("--out", default=DEFAULT_OUT, help="write each distinct failure's counterexample here")
