@@ -104,11 +104,21 @@ def descendants(pid: int) -> dict[int, int]:
 
 
 def alive(pid: int) -> bool:
+    """Whether a thread of `pid` still runs. A killed multi-threaded process (a worker that
+    has loaded numba's kernels, or torch) shows its main thread as a zombie while its other
+    threads, which hold its open files (the worker's pipe), are still exiting."""
     try:
-        with open(f"/proc/{pid}/stat") as fh:
-            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+        tasks = os.listdir(f"/proc/{pid}/task")
     except OSError:
         return False
+    for task in tasks:
+        try:
+            with open(f"/proc/{pid}/task/{task}/stat") as fh:
+                if fh.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X"):
+                    return True
+        except OSError:
+            pass
+    return False
 
 
 def local_workers(pid: int | None = None) -> list[int]:
