@@ -133,7 +133,11 @@ class Trace:
             h.update(name.encode())
             h.update(np.ascontiguousarray(self.steps[name], dtype=np.int8).tobytes())
         h.update(self.status.encode())
-        # Only scenarios with lights hash them: digests of the others stay what they were.
+        if self.object_count is not None:  # what the stack perceived: a replay must see the same
+            h.update(b"objects:")
+            h.update(np.ascontiguousarray(self.object_count, dtype=np.float64).tobytes())
+        # (The step is in `time`; an error's text is in its `stack_error` event or fixed by
+        # `status`.) Only scenarios with lights hash them: digests of the others stay what they were.
         for label, table in (("light:", self.lights), ("red_margin:", self.red_margin)):
             for name in sorted(table):
                 h.update((label + name).encode())

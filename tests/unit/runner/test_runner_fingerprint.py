@@ -28,7 +28,7 @@ def other_code(monkeypatch):
 
 def test_the_fingerprint_names_the_version_and_hashes_the_stack_data():
     identity = fingerprint.code_identity()
-    assert set(identity) == {"addt-dsl", *fingerprint.DATA_FILES}
+    assert set(identity) == {"addt-dsl", *fingerprint.DATA_FILES, "source"}
     for name in fingerprint.DATA_FILES:
         digest = hashlib.sha256((fingerprint.PACKAGE_DIR / name).read_bytes()).hexdigest()
         assert digest.startswith(identity[name])
@@ -70,3 +70,31 @@ def test_the_search_cache_reruns_what_other_code_made(tmp_path, other_code):
     later = RunCache(path, evaluator=_judge)
     later.get(SPECS[0])
     assert (later.simulations, later.hits) == (1, 0)
+
+
+def test_the_fingerprint_changes_with_the_source_that_runs_a_spec(tmp_path, monkeypatch):
+    """An editable install keeps its version across edits: a change to the stack's or the
+    loop's source must still make other code (a stale run cache would be reused otherwise)."""
+    names = {p.relative_to(fingerprint.PACKAGE_DIR).as_posix() for p in fingerprint.source_files()}
+    assert {"runtime/execute.py", "stack/nodes.py", "runtime/faults/base.py", "plan.py"} <= names
+    assert not any(n == "cli.py" or n.startswith(("compiler/", "reporting/")) for n in names)
+    real = fingerprint.code_identity()
+    copy = tmp_path / "addt_dsl"
+    for name in [*names, *fingerprint.DATA_FILES]:
+        (copy / name).parent.mkdir(parents=True, exist_ok=True)
+        (copy / name).write_bytes((fingerprint.PACKAGE_DIR / name).read_bytes())
+    monkeypatch.setattr(fingerprint, "PACKAGE_DIR", copy)
+
+    def identity():
+        fingerprint._identity.cache_clear()
+        return fingerprint.code_identity()
+
+    try:
+        before = identity()
+        assert before == real  # the copy is the same code
+        (copy / "stack/nodes.py").write_text((copy / "stack/nodes.py").read_text() + "\n# an edit\n")
+        after = identity()
+        assert after["source"] != before["source"]
+        assert {k: v for k, v in after.items() if k != "source"} == {k: v for k, v in before.items() if k != "source"}
+    finally:
+        fingerprint._identity.cache_clear()
