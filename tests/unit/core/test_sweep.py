@@ -24,8 +24,8 @@ scenario s {{
 """
 
 
-def _plan(sweep: str, assume: str = ""):
-    result = compile_source(BASE.format(sweep=sweep, assume=assume), "s.addt")
+def _plan(sweep: str, assume: str = "", template: str = BASE):
+    result = compile_source(template.format(sweep=sweep, assume=assume), "s.addt")
     assert result.ok, result.diagnostics
     return result.plan
 
@@ -77,7 +77,7 @@ scenario p {{
   faults {{
     during [window, 5 s] drop lidar rate rate
   }}
-  {extra}
+  {assume}
   sweep {{
     {sweep}
   }}
@@ -86,9 +86,7 @@ scenario p {{
 
 
 def _paired(sweep: str, extra: str = ""):
-    result = compile_source(PAIRED.format(sweep=sweep, extra=extra), "p.addt")
-    assert result.ok, result.diagnostics
-    return result.plan
+    return _plan(sweep, assume=extra, template=PAIRED)
 
 
 def test_fault_only_parameters_are_those_only_the_faults_read():
