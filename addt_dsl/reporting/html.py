@@ -107,6 +107,7 @@ def _animate(store, record) -> dict:
         "gif": base64.b64encode(gif).decode("ascii"),
         "signals": base64.b64encode(signals).decode("ascii"),
         "reproduced": run.reproduced,
+        "mismatch": run.mismatch(),
         "failing": [v for v in run.verdicts if not v.passed],
     }
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from addt_dsl.expr import signals_used, substitute_params
+from addt_dsl.fingerprint import code_identity, describe
 from addt_dsl.runtime.oracles import robustness_over_time
 from addt_dsl.runtime.signals import compute_signals
 from addt_dsl.runtime.trace import ACTOR_FIELDS
@@ -37,6 +38,23 @@ class RunTrace:
     trace: object
     verdicts: list
     reproduced: bool
+    other_code: str = ""  # the store's code, where it is not this code (`describe`)
+
+    def mismatch(self) -> str:
+        """Why the re-run is not the stored run, or "" where it is."""
+        if self.reproduced:
+            return ""
+        if self.other_code:
+            return (f"the re-run's trace digest differs from the stored one: the store was made by other "
+                    f"code ({self.other_code}; this is {describe(code_identity())})")
+        return "the re-run's trace digest differs from the stored one: not reproducible"
+
+
+def stored_by_other_code(store) -> str:
+    """The code that made `store`'s runs, described, where it is not this code; else ""."""
+    stored = store.meta("code")
+    identity = json.loads(stored) if stored else None
+    return describe(identity) if identity != code_identity() else ""
 
 
 def rerun(store, record) -> RunTrace:
@@ -45,7 +63,8 @@ def rerun(store, record) -> RunTrace:
     spec = store.spec(record)
     result = execute(spec, keep_trace=True)
     return RunTrace(record, spec, result.trace, result.verdicts,
-                    reproduced=not record.digest or result.digest == record.digest)
+                    reproduced=not record.digest or result.digest == record.digest,
+                    other_code=stored_by_other_code(store))
 
 
 def oracle_margins(spec, trace) -> dict[str, np.ndarray]:
@@ -127,7 +146,7 @@ def print_trace(run: RunTrace, table, events, max_events: int = 40) -> None:
         when = f", certain at {v.first_violation_s:.2f} s" if v.first_violation_s is not None else ""
         console.print(f"  {v.name}: {state}, robustness {fmt_number(v.robustness)}{when}")
     if not run.reproduced:
-        console.print("[yellow]the re-run's trace digest differs from the stored one: not reproducible[/]")
+        console.print(f"[yellow]{run.mismatch()}[/]")
     summary = Table(title=f"signals ({len(table)} samples every {run.trace.period_s:g} s)")
     for col in ("signal", "min", "max", "mean", "at end"):
         summary.add_column(col, justify="left" if col == "signal" else "right")

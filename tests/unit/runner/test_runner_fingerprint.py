@@ -98,3 +98,21 @@ def test_the_fingerprint_changes_with_the_source_that_runs_a_spec(tmp_path, monk
         assert {k: v for k, v in after.items() if k != "source"} == {k: v for k, v in before.items() if k != "source"}
     finally:
         fingerprint._identity.cache_clear()
+
+
+def test_a_rerun_that_differs_says_when_the_store_was_made_by_other_code(tmp_path, other_code):
+    from addt_dsl.reporting.trace_view import RunTrace, stored_by_other_code
+
+    path = tmp_path / "r.sqlite"
+    with ResultStore(path, PLAN) as store:
+        store.add(fake_record(SPECS[0], seq=0))
+    with ResultStore(path) as store:
+        assert stored_by_other_code(store) == ""
+        differs = RunTrace(None, SPECS[0], None, [], reproduced=False)
+        assert differs.mismatch().endswith("not reproducible")
+        assert RunTrace(None, SPECS[0], None, [], reproduced=True).mismatch() == ""
+        other_code()  # this process is now a later version than the store's
+        made_by = stored_by_other_code(store)
+        assert "addt-dsl" in made_by and "9.9" not in made_by
+        message = RunTrace(None, SPECS[0], None, [], reproduced=False, other_code=made_by).mismatch()
+        assert "made by other code" in message and "this is addt-dsl 9.9" in message
