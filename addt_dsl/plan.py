@@ -13,7 +13,7 @@ from typing import ClassVar, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from addt_dsl.expr import Expr, Num, Param, eval_param_expr, walk
+from addt_dsl.expr import Expr, Num, Param, eval_param_expr
 from addt_dsl.fingerprint import code_fingerprint
 from addt_dsl.vehicles import VEHICLES
 
@@ -251,19 +251,13 @@ class ScenarioPlan(_Model):
     def fault_only_params(self) -> frozenset[str]:
         """The parameters only the fault schedule reads (`drop_rate` in `drop lidar rate
         drop_rate`): runs that differ only in them have the same fault-free twin, and
-        sweeps give them the same seeds (paired runs, `sweep.py`)."""
-        cached = _FAULT_ONLY.get(id(self))
-        if cached is not None and cached[0] is self:
-            return cached[1]
+        sweeps give them the same seeds (paired runs, `sweep.py`). (A walk of the plan,
+        about 0.1 ms: nothing to cache beside a run.)"""
         read = set()
         for name in type(self).model_fields:
             if name not in self.NOT_READ_WITHOUT_FAULTS:
                 read |= _params_in(getattr(self, name))
-        result = frozenset(_params_in(self.faults) - read)
-        if len(_FAULT_ONLY) >= 16:  # a process sees few plans at a time; keep the cache small
-            _FAULT_ONLY.clear()
-        _FAULT_ONLY[id(self)] = (self, result)
-        return result
+        return frozenset(_params_in(self.faults) - read)
 
     # Names a plan keeps for display only: how the scenario's path, or an imported map's,
     # was spelled. Its identity (store plan hashes, RunSpec keys) is everything else, so the
@@ -277,18 +271,12 @@ class ScenarioPlan(_Model):
         return self.model_dump(mode="json", exclude=self.DISPLAY_ONLY)
 
 
-# id(plan) -> (plan, its fault-only parameters): the plan is held, so its id stays its own.
-_FAULT_ONLY: dict[int, tuple[ScenarioPlan, frozenset[str]]] = {}
-
-
 def _params_in(value) -> set[str]:
-    """Names of the parameters an Expr-holding plan value reads (any nesting of models,
-    lists and dicts)."""
+    """Names of the parameters a plan value reads (any nesting of models, Expr trees
+    included, lists and dicts)."""
     if isinstance(value, Param):
         return {value.name}
     if isinstance(value, BaseModel):
-        if type(value).__module__ == Param.__module__:  # an Expr tree
-            return {n.name for n in walk(value) if isinstance(n, Param)}
         return set().union(*(_params_in(getattr(value, f)) for f in type(value).model_fields))
     if isinstance(value, (list, tuple)):
         return set().union(*(_params_in(v) for v in value))
