@@ -58,6 +58,7 @@ MIN_SIGMA = 0.03
 MIN_ELITE = 5
 MIN_POINTS = 16  # uniform samples before the first fit (at least twice the dimensions)
 MAX_SHRINKS = 8
+CANDIDATE_TRIES = 50  # points proposed per point wanted before a search gives up on its `assume`s
 # Bayesian optimisation (BayesianSampler)
 BO_MIN_INITIAL = 4  # uniform points before the first model (at least half the axes)
 BO_CANDIDATES = 2000  # uniform candidates per choice, and as many around the best points
@@ -306,11 +307,15 @@ class BayesianSampler:
     name = "bo"
 
     def __init__(self, axes: list[Axis], rng: np.random.Generator, jobs: int = 1,
-                 fixed: dict[int, float] | None = None):
+                 fixed: dict[int, float] | None = None, feasible=None):
         self.dims = len(axes)
         self.rng = rng
         self.jobs = max(1, jobs)
         self.fixed = fixed or {}  # axis -> value of every candidate (`BanditSampler`: its fault present)
+        # Whether a point satisfies the scenario's `assume`s (None: every point does). The
+        # model does not know them: where a failure region borders one it extrapolates
+        # across it, and its best candidates, rejected unrun, came back at every ask.
+        self.feasible = feasible
         self.initial = max(BO_MIN_INITIAL, self.dims // 2)
         self.bool = np.array([a.kind == "bool" for a in axes], dtype=bool)
         index = {a.name: i for i, a in enumerate(axes)}
@@ -359,7 +364,8 @@ class BayesianSampler:
         chosen: list[np.ndarray] = []
         spread = BO_SPREAD * math.sqrt(self.dims)
         for i in np.argsort(-acquisition, kind="stable"):
-            if all(np.linalg.norm(cand[i] - c) >= spread for c in chosen):
+            if all(np.linalg.norm(cand[i] - c) >= spread for c in chosen) and (
+                    self.feasible is None or self.feasible(cand[i])):
                 chosen.append(cand[i])
                 if len(chosen) == n:
                     break
@@ -470,7 +476,7 @@ class BanditSampler:
 
     name = "bandit"
 
-    def __init__(self, axes: list[Axis], rng: np.random.Generator, jobs: int = 1):
+    def __init__(self, axes: list[Axis], rng: np.random.Generator, jobs: int = 1, feasible=None):
         self.dims = len(axes)
         self.rng = rng
         self.jobs = max(1, jobs)
@@ -486,7 +492,8 @@ class BanditSampler:
         self.arms.append(("none", -1, params))
         # A fault arm's model has the fault's present axis, fixed at 1 in its candidates.
         self.models = [BayesianSampler([axes[i] for i in sub], rng, jobs,
-                                       fixed={sub.index(present): 1.0} if present >= 0 else None) if sub else None
+                                       fixed={sub.index(present): 1.0} if present >= 0 else None,
+                                       feasible=_embedded(feasible, self.dims, sub)) if sub else None
                        for _, present, sub in self.arms]
         self.severe = np.array([np.nan if a.severe is None else a.severe for a in axes], dtype=float)
         self.pulls = np.zeros(len(self.arms), dtype=int)  # points drawn per arm (by the arm drawn for)
@@ -589,6 +596,19 @@ class BanditSampler:
         self.fitted = [-1] * len(self.arms)  # scores change when an oracle is falsified: refit when pulled
 
 
+def _embedded(feasible, dims: int, sub: list[int]):
+    """`feasible` of a full point, as a test of an arm's subspace points: `assume`s read
+    parameters only, and every arm's subspace has every parameter axis."""
+    if feasible is None:
+        return None
+
+    def test(v: np.ndarray) -> bool:
+        u = np.full(dims, 0.5)
+        u[sub] = v
+        return feasible(u)
+    return test
+
+
 def warp(score: np.ndarray) -> np.ndarray:
     """Signed logarithm of scores (`BayesianSampler`): monotone, odd, 0 at 0; resolution
     near 0 (a failure's boundary), compression far from it."""
@@ -623,10 +643,11 @@ class FalsifyReport:
     shrink_simulations: int
     failures: list[FoundFailure] = field(default_factory=list)
     best_robustness: dict[str, float] = field(default_factory=dict)
+    ended_early: str = ""  # why the search stopped before its budget ("": it did not)
 
     def to_json(self) -> dict:
         return {
-            "scenario": self.scenario, "sampler": self.sampler, "runs": self.runs,
+            "scenario": self.scenario, "sampler": self.sampler, "runs": self.runs, "ended_early": self.ended_early,
             "seconds": round(self.seconds, 3), "first_failure_run": self.first_failure_run,
             "shrink_simulations": self.shrink_simulations,
             "best_robustness": {k: (v if math.isfinite(v) else repr(v)) for k, v in self.best_robustness.items()},
@@ -641,6 +662,8 @@ class FalsifyReport:
         first = f", first after {self.first_failure_run} run(s)" if self.first_failure_run else ""
         print(f"falsify {self.scenario} ({self.sampler}): {self.runs} runs in {self.seconds:.1f} s, "
               f"{len(self.failures)} distinct failure(s){first}; {self.shrink_simulations} shrink simulations")
+        if self.ended_early:
+            print(f"  ended early: {self.ended_early}")
         for i, f in enumerate(self.failures, 1):
             print(f"  {i}. {f.describe()}: {f.count} failing run(s), first at run {f.first_run}, "
                   f"worst robustness {f.worst_robustness:.3g}")
@@ -663,16 +686,19 @@ class Falsifier:
         rng = np.random.default_rng(derive_seed(seed, 31337))
         if sampler not in SAMPLERS:
             raise ValueError(f"unknown sampler {sampler!r}: one of {', '.join(SAMPLERS)}")
-        self.sampler = {"bo": lambda: BayesianSampler(self.space.axes, rng, jobs),
-                        "bandit": lambda: BanditSampler(self.space.axes, rng, jobs),
+        feasible = (lambda u: not violated_assumptions(plan, self.space.params_of(u))) if plan.assumptions else None
+        self.sampler = {"bo": lambda: BayesianSampler(self.space.axes, rng, jobs, feasible=feasible),
+                        "bandit": lambda: BanditSampler(self.space.axes, rng, jobs, feasible),
                         "cem": lambda: CrossEntropySampler(self.space.axes, rng),
                         "random": lambda: UniformSampler(self.space.dims, rng)}[sampler]()
         self.hard = [o.name for o in plan.oracles if o.severity == "hard"]
 
     def _candidates(self, n: int, start: int) -> tuple[np.ndarray, list[RunSpec]]:
+        """Up to `n` points that satisfy the assumptions, from at most `CANDIDATE_TRIES * n`
+        the sampler proposes (fewer, or none, where the assumptions reject them all)."""
         points, specs = [], []
         tries = 0
-        while len(specs) < n and tries < 50 * n:
+        while len(specs) < n and tries < CANDIDATE_TRIES * n:
             for u in self.sampler.sample(n - len(specs)):
                 tries += 1
                 params = self.space.params_of(u)
@@ -700,6 +726,7 @@ class Falsifier:
     def _run(self, budget_runs: int, budget_seconds: float, shrink_simulations: int,
              stop_at_first: bool) -> FalsifyReport:
         t0 = time.perf_counter()
+        ended = ""
         all_points, all_outcomes, all_specs = [], [], []
         groups: dict[tuple, FoundFailure] = {}
         first_failure = None
@@ -712,6 +739,8 @@ class Falsifier:
             n = min(self.sampler.batch_size(self.batch, len(all_outcomes)), budget_runs - len(all_outcomes))
             points, specs = self._candidates(n, len(all_outcomes))
             if not specs:
+                ended = (f"the assumptions rejected all {CANDIDATE_TRIES * n} points the {self.sampler.name} "
+                         f"sampler proposed after {len(all_outcomes)} runs")
                 break
             outcomes = self.cache.get_many(specs, self.jobs)
             for k, (spec, outcome) in enumerate(zip(specs, outcomes)):
@@ -749,7 +778,7 @@ class Falsifier:
         failures = self._distinct(groups, shrink_simulations)
         shrink_runs = sum(g.shrunk.simulations for g in groups.values() if g.shrunk is not None)
         return FalsifyReport(self.plan.name, self.sampler.name, search_runs, time.perf_counter() - t0,
-                             first_failure, shrink_runs, failures, best)
+                             first_failure, shrink_runs, failures, best, ended)
 
     def _distinct(self, groups: dict, shrink_simulations: int) -> list[FoundFailure]:
         """Shrink one representative per group; merge groups whose origin is the same."""

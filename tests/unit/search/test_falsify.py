@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 import pytest
-from tests.unit.search.search_testkit import judged, kitchen_sink_plan
+from tests.unit.search.search_testkit import KITCHEN_SINK, judged, kitchen_sink_plan
 
+from addt_dsl.compiler import compile_source
 from addt_dsl.plan import RunSpec
 from addt_dsl.search.cache import RunCache
 from addt_dsl.search.falsify import CrossEntropySampler, Falsifier, SearchSpace, UniformSampler, origin_of
@@ -151,3 +152,31 @@ def test_falsify_ignores_the_files_sweep_cost(tmp_path, capsys):
     assert main(["check", str(path)]) == 2 and "E0701" in capsys.readouterr().err
     assert main(["falsify", str(path), "--budget-runs", "2", "--no-write"]) == 0
     assert "2 runs" in capsys.readouterr().out
+
+
+def edge_judge(spec: RunSpec) -> RunResult:
+    """Fails only for gap in (12 m, 12.5 m): the kitchen sink assumes gap > 12 m, so the
+    failure region borders the assumption and robustness keeps falling across it."""
+    rho = (spec.params.get("gap", 30.0) - 12.5) / 50.0
+    failures = (Failure("no_collision", "clearance(ego) > 0 m [with lead]", 1.0, rho),) if rho < 0 else ()
+    return judged(spec, {"no_collision": rho}, failures)
+
+
+@pytest.mark.parametrize("sampler", ["bo", "bandit"])
+def test_the_model_keeps_searching_where_a_failure_borders_an_assumption(sampler):
+    # The model extrapolated the falling robustness across `gap > 12 m`; its best points
+    # were rejected unrun at every ask. `bo` ended silently after ~17 of its 120 runs
+    # without a failure (5 of these 6 seeds); the bandit fell back to uniform points in the
+    # arm and found nothing in 120 runs for 3 of them.
+    for seed in range(6):
+        report = _falsifier(sampler, seed, edge_judge).run(budget_runs=120, shrink_simulations=0, stop_at_first=True)
+        assert report.first_failure_run is not None and not report.ended_early, (seed, report.to_json())
+
+
+def test_a_search_the_assumptions_starve_says_why_it_ended():
+    plan = compile_source(KITCHEN_SINK.replace("assume gap > 12 m", "assume gap > 59.99999 m"),
+                          path="starved.addt").plan
+    report = Falsifier(plan, seed=0, batch=8, sampler="random",
+                       cache=RunCache(evaluator=corner_judge)).run(budget_runs=50, shrink_simulations=0)
+    assert report.runs == 0 and "assumptions rejected all 400 points" in report.ended_early
+    assert report.to_json()["ended_early"] == report.ended_early
