@@ -15,7 +15,6 @@ its `<validity>` (all lanes of that direction without one).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 

@@ -4,7 +4,6 @@ the clearance broad phase and pybullet posed only when asked, gives the trace of
 brute-force loop (agents one by one, every actor scanned, every pair tested, every pose
 handed to pybullet at once)."""
 
-import math
 from collections import Counter
 
 import numpy as np

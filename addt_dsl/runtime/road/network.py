@@ -10,7 +10,7 @@ import numpy as np
 
 from .geometry import CubicProfile, Geometry, end_pose, place
 from .lanes import Lane, LaneSection
-from .road import ON_ROAD_LONG_TOL_M, Controller, Road, RoadLink
+from .road import ON_ROAD_LONG_TOL_M, Controller, Road
 
 CONTACT_POINTS = ("start", "end")
 

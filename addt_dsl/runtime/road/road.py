@@ -14,7 +14,7 @@ from typing import Optional
 
 import numpy as np
 
-from .geometry import CubicProfile, Geometry, ParamPoly3, Poly3
+from .geometry import CubicProfile, Geometry
 from .lanes import DRIVING_TYPES, LaneSection, lanes_at_t_array
 from .limits import MAX_COORDINATE_M, MAX_ROAD_LENGTH_M, MAX_ROAD_SAMPLES, RoadLimitError, beyond
 

@@ -4,7 +4,6 @@ parsed again, a broken one reports on every compilation, and results equal a col
 
 from __future__ import annotations
 
-import shutil
 
 import pytest
 from tests.unit.compiler.conftest import REPO

@@ -1,7 +1,6 @@
 """Tables, JUnit XML and the HTML report over synthetic stores (no simulation)."""
 
 import base64
-import math
 import re
 from xml.etree import ElementTree as ET
 

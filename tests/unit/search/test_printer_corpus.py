@@ -142,7 +142,7 @@ def scenarios(draw) -> str:
                                            "repeat 2", "seed 7", "max_rejections 50"]),
                           unique_by=lambda s: s.split()[0] if s.split()[0] not in ("random", "halton", "lhs")
                           else "sampler", max_size=4))
-    lines = [f"scenario generated {{", f"  duration {duration} s",
+    lines = ["scenario generated {", f"  duration {duration} s",
              "  road r {", "    line length 900 m", "    lanes right 2 left 1", "  }",
              *("  " + p for p in params), *("  " + a for a in assumes),
              f"  ego car on r lane lane_k at 10 m speed 20 m/s{goal}",
