@@ -239,7 +239,7 @@ def conv_backends(repeats: int) -> dict:
     with torch.inference_mode():
         for name, layer in model.layers().items():
             xs = windows.get(name, [])
-            k, s = layer.kernel_size[0], layer.stride[0]
+            s = layer.stride[0]
             w, b = layer.weight, layer.bias
             packed: dict[tuple, torch.Tensor] = {}
 
