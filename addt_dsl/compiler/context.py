@@ -16,7 +16,7 @@ from addt_dsl.compiler import ast
 from addt_dsl.compiler.exprs import ExprLowering, Scope, value_range
 from addt_dsl.diagnostics import DiagnosticSink, Span
 from addt_dsl.limits import DEFAULT, MAX_ABS_NUMBER, Limits
-from addt_dsl.registry import STACKS, ParamSpec
+from addt_dsl.registry import SIGNALS, STACKS, ParamSpec
 
 INT_EPS = 1e-9
 
@@ -319,6 +319,24 @@ def check_time(ctx: Context, value, span: Span, what: str) -> bool:
     what = what if what.startswith("the") else f"the time of {what}"
     return check_range(ctx, value, 0.0, dur if isinstance(dur, float) else None, units.TIME, what, span,
                        code="E0302")
+
+
+def check_trigger_condition(ctx: Context, condition, span: Span) -> bool:
+    """A `when` condition is checked on the current state (E0204 otherwise): no temporal
+    operators, and no signal whose value at an instant needs the run before it (`jerk`,
+    `travelled`: `SignalFn.history`), which the check at an instant does not have."""
+    ok = True
+    if any(isinstance(n, (E.Temporal, E.Until)) for n in E.walk(condition)):
+        ctx.sink.error("E0204", "a trigger condition is checked at each instant; it cannot use "
+                       "always/eventually/until", span,
+                       "write the condition on the current state, e.g. `when gap(ego, lead) < 20 m`")
+        ok = False
+    for name in sorted({n.name.split("(")[0] for n in E.walk(condition) if isinstance(n, E.Signal)}):
+        if getattr(SIGNALS.get(name), "history", False):
+            ctx.sink.error("E0204", f"`{name}` needs the run's past, which a trigger condition does not see: "
+                           "it is checked on the current state", span, "use it in an oracle (`expect`)")
+            ok = False
+    return ok
 
 
 def text_of(ctx: Context, span: Span) -> str:

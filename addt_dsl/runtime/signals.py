@@ -24,6 +24,9 @@ class SignalFn:
     args: tuple[str, ...] = ("actor",)  # "actor" | "node" | "step" (a named step, `lead.brake_hard`)
     dim = units.DIMENSIONLESS
     boolean = False  # a state (+1 holds, -1 not), usable as a formula on its own
+    # Its value at an instant needs the samples before it: oracles only (a `when` condition
+    # is checked on the current state alone, where it would read 0).
+    history = False
     doc = ""
 
     @staticmethod
@@ -65,12 +68,27 @@ for _name, _dim, _doc in (
 class Jerk(SignalFn):
     keyword = "jerk"
     dim = units.JERK
+    history = True
     doc = "time derivative of longitudinal acceleration [m/s^3]"
 
     @staticmethod
     def compute(trace, args):
         a = trace.actors[args[0]].accel
         return np.gradient(a, trace.period_s) if len(a) > 1 else np.zeros_like(a)
+
+
+@SIGNALS.register
+class Travelled(SignalFn):
+    keyword = "travelled"
+    dim = units.LENGTH
+    history = True
+    doc = ("distance the actor's centre has covered since the start, summed over the steps [m] "
+           "(CARLA's DrivenDistanceTest)")
+
+    @staticmethod
+    def compute(trace, args):
+        a = trace.actors[args[0]]
+        return np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(a.x), np.diff(a.y)))))
 
 
 @SIGNALS.register

@@ -9,8 +9,8 @@ from addt_dsl import expr as E
 from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
-from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, const_value, fmt, int_const,
-                                       suggest)
+from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, check_trigger_condition,
+                                       const_value, fmt, int_const, suggest)
 from addt_dsl.compiler.exprs import value_range
 from addt_dsl.compiler.xodr_check import check_route, route_length
 from addt_dsl.diagnostics import Span
@@ -493,12 +493,7 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
     if "when" in starts:
         cond_node = starts["when"].value
         condition = ctx.lowering(signals=True).lower_formula(cond_node, "a trigger condition")
-        if condition is None:
-            ok = False
-        elif any(isinstance(n, (E.Temporal, E.Until)) for n in E.walk(condition)):
-            ctx.sink.error("E0204", "a trigger condition is checked at each instant; it cannot use "
-                           "always/eventually/until", cond_node.span,
-                           "write the condition on the current state, e.g. `when gap(ego, lead) < 20 m`")
+        if condition is None or not check_trigger_condition(ctx, condition, cond_node.span):
             ok = False
         if starts["when"].hold is not None:
             hold = low.lower_value(starts["when"].hold, units.TIME, "how long the condition must hold")

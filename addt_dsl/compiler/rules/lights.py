@@ -13,7 +13,8 @@ from addt_dsl import expr as E
 from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
-from addt_dsl.compiler.context import Context, check_settings, check_time, const_value, int_const, suggest
+from addt_dsl.compiler.context import (Context, check_settings, check_time, check_trigger_condition, const_value,
+                                       int_const, suggest)
 from addt_dsl.registry import ParamSpec
 
 STATE_CHOICES = (*P.LIGHT_STATES, P.LIGHT_PROGRAM)
@@ -269,11 +270,7 @@ def _step(ctx: Context, node, controllers: set[str]) -> P.TriggerPlan | None:
             at, after = (value, after) if kind == "at" else (at, value)
     if "when" in starts:
         condition = ctx.lowering(signals=True).lower_formula(starts["when"].value, "a trigger condition")
-        if condition is None:
-            ok = False
-        elif any(isinstance(n, (E.Temporal, E.Until)) for n in E.walk(condition)):
-            ctx.sink.error("E0204", "a trigger condition is checked at each instant; it cannot use "
-                           "always/eventually/until", starts["when"].value.span)
+        if condition is None or not check_trigger_condition(ctx, condition, starts["when"].value.span):
             ok = False
         if getattr(starts["when"], "hold", None) is not None:  # `when C for D`: C held for D
             hold = low.lower_value(starts["when"].hold, units.TIME, "how long the condition must hold")
