@@ -102,6 +102,7 @@ CODES: dict[str, str] = {
     "W0003": "sensor unlike the one the stack is made for",
     "W0801": "OpenSCENARIO element not translated",
     "W0802": "OpenSCENARIO value approximated or defaulted",
+    "W0803": "OpenSCENARIO file read with CARLA ScenarioRunner's conventions",
 }
 
 

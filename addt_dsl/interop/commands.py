@@ -1,7 +1,7 @@
 """`addtc export` and `addtc import`: OpenSCENARIO in and out (docs/openscenario.md).
 
     addtc export FILE.addt [--run ID | --params NAME=VALUE ...] --to DIR
-    addtc import FILE.xosc [-o FILE.addt] [--root DIR] [--format text|json]
+    addtc import FILE.xosc [-o FILE.addt] [--root DIR] [--maps DIR] [--format text|json]
 
 Exit codes follow `addtc` (addt_dsl/errors.py): 0 done, 2 usage or scenario error (an
 import with errors writes nothing).
@@ -39,6 +39,9 @@ def add_commands(sub) -> None:
     imp.add_argument("-o", "--output", metavar="FILE.addt", help="write here (default: print)")
     imp.add_argument("--root", metavar="DIR", help="files (road, catalogs) may come from here and below "
                                                    "(default: the scenario's directory)")
+    imp.add_argument("--maps", metavar="DIR", action="append", default=[],
+                     help="a folder of road networks (repeatable): a <LogicFile> named without a folder, or "
+                          "without .xodr as CARLA names its towns (Town01), is also looked for here")
     imp.add_argument("--format", choices=("text", "json"), default="text")
     imp.set_defaults(func=cmd_import)
 
@@ -96,7 +99,7 @@ def cmd_export(args) -> int:
 def cmd_import(args) -> int:
     from addt_dsl.interop.xosc_import import import_xosc
 
-    got = import_xosc(args.file, args.root)
+    got = import_xosc(args.file, args.root, args.maps)
     if args.format == "json":
         print(render_json(got.diagnostics))
     elif got.diagnostics:

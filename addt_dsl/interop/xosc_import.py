@@ -109,9 +109,14 @@ def _arith(node) -> float:
 
 
 class _Importer:
-    def __init__(self, path: Path, root: Path):
+    def __init__(self, path: Path, root: Path, maps: tuple[Path, ...] = ()):
         self.path = path
         self.root = root.resolve()
+        self.maps = tuple(Path(m).resolve() for m in maps)  # where a road network named bare is looked for
+        # CARLA ScenarioRunner's frame (FileHeader description "CARLA:..."): left-handed, so
+        # world y, headings and lateral offsets are mirrored into OpenDRIVE's (`mirror`).
+        self.carla = False
+        self.criteria = False  # pass criteria came from the file (CARLA's `criteria_*` conditions)
         self.display = str(path)
         self.sink = DiagnosticSink()
         self.sources: dict[str, str] = {}
@@ -156,9 +161,10 @@ class _Importer:
 
     # -- files
 
-    def read(self, relative: str, base: Path, el, limit: int = MAX_XML_BYTES) -> tuple[Path, str] | None:
+    def read(self, relative: str, base: Path, el, limit: int = MAX_XML_BYTES,
+             root: Path | None = None) -> tuple[Path, str] | None:
         try:
-            path = confine(relative, base, self.root)
+            path = confine(relative, base, self.root if root is None else root)
         except Refused as refused:
             self.sink.error(refused.code, refused.message, self.span(el), *([refused.note] if refused.note else []),
                             label=f"<{el.tag}>" if el is not None else "")
@@ -245,6 +251,18 @@ class _Importer:
     def value(self, el, attr: str, dim=units.DIMENSIONLESS, default: float | None = None) -> float:
         return float(eval_param_expr(self.number(el, attr, dim, default, keep=False), {}))
 
+    def mirror(self, value):
+        """A lateral coordinate or a heading (y, t, an offset, h; a float or an expression) in
+        OpenDRIVE's right-handed frame: negated in a CARLA-frame file, where y, t, lane offsets
+        and yaw grow to the right (ScenarioRunner's `use_carla_coordinate_system`)."""
+        if not self.carla:
+            return value
+        if isinstance(value, (int, float)):
+            return -value
+        if isinstance(value, E.Num):
+            return E.Num(value=-value.value)
+        return E.Unary(op="neg", arg=value)
+
     def param_values(self) -> dict[str, float]:
         out = {}
         for name, (_, raw) in self.params.items():
@@ -312,6 +330,12 @@ class _Translate(_Importer):
             self.error(root, f"the root element is <{root.tag}>, not <OpenSCENARIO>")
             return None
         header = _child(root, "FileHeader")
+        if header is not None and (header.get("description") or "").startswith("CARLA:"):
+            self.carla = True
+            self.sink.warning("W0803", "read in CARLA's coordinate frame (the description starts with 'CARLA:'): "
+                              "world y, headings and lateral offsets are mirrored into OpenDRIVE's",
+                              self.span(header), "as CARLA ScenarioRunner reads such a file: its frame is "
+                              "left-handed, y and yaw grow to the right", label="<FileHeader>")
         # Global declarations first; those of stories, acts and maneuvers after them (one
         # scope: a name declared twice keeps its global value).
         for decl in [*root.iterfind("ParameterDeclarations/ParameterDeclaration"),
@@ -371,7 +395,7 @@ class _Translate(_Importer):
         if logic is None:
             self.error(_first(root.find("RoadNetwork"), root), "no <RoadNetwork><LogicFile>: addt-dsl actors need a road")
             raise _Stop
-        got = self.read(self.raw(logic, "filepath"), self.path.parent, logic)
+        got = self.read_road_network(self.raw(logic, "filepath"), logic)
         if got is None:
             raise _Stop
         path, text = got
@@ -390,6 +414,34 @@ class _Translate(_Importer):
         self.signals_el = root.find("RoadNetwork/TrafficSignals")
         for ctl in root.iterfind("RoadNetwork/TrafficSignals/TrafficSignalController"):
             self.signal_controller(ctl)
+
+    def read_road_network(self, name: str, logic):
+        """(path, text) of the road network `name` names: the file itself, relative to the
+        scenario; else, for a name without `.xodr` (CARLA names its towns, `Town01`), NAME.xodr
+        there or in a maps directory (`maps`); None after a diagnostic."""
+        bare = not name.lower().endswith(".xodr")
+        tries = [(name, self.path.parent, self.root)]
+        if bare:
+            tries.append((name + ".xodr", self.path.parent, self.root))
+        if bare or Path(name).name == name:
+            file = Path(name).name + (".xodr" if bare else "")
+            tries += [(file, folder, folder) for folder in self.maps]
+        looked = []
+        for relative, base, root in tries:
+            try:
+                confine(relative, base, root)
+            except Refused as refused:
+                if refused.code == "E0401" and refused.message.startswith("cannot find"):
+                    looked.append(str(base / relative))
+                    continue
+            if (relative, base) != (name, self.path.parent):
+                self.sink.warning("W0803", f"road network '{name}' read from {base / relative}", self.span(logic),
+                                  label="<LogicFile>")
+            return self.read(relative, base, logic, root=root)
+        self.error(logic, f"cannot find the road network '{name}'", "looked for " + ", ".join(looked),
+                   "a map named without a folder is also looked for in each `--maps DIR`"
+                   + (" (none given)" if not self.maps else ""), code="E0401")
+        return None
 
     # -- traffic lights
 
@@ -639,7 +691,8 @@ class _Translate(_Importer):
         if pos.tag == "LanePosition":
             road = self.road(self.raw(pos, "roadId"), pos)
             lane = int(self.value(pos, "laneId"))
-            return road, lane, self.number(pos, "s", units.LENGTH), self.number(pos, "offset", units.LENGTH, 0.0)
+            return road, lane, self.number(pos, "s", units.LENGTH), \
+                self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
         if pos.tag in ("RoadPosition", "WorldPosition", "RelativeRoadPosition", "RelativeLanePosition"):
             return self.position_from_road(pos, who)
         if pos.tag == "RoutePosition":
@@ -650,15 +703,11 @@ class _Translate(_Importer):
 
     def position_from_road(self, pos, who):
         if pos.tag == "RoadPosition":
-            road_id, s, t = self.raw(pos, "roadId"), self.value(pos, "s"), self.value(pos, "t")
+            road_id, s, t = self.raw(pos, "roadId"), self.value(pos, "s"), self.mirror(self.value(pos, "t"))
         elif pos.tag == "WorldPosition":
-            x, y = self.value(pos, "x"), self.value(pos, "y")
-            best = None
-            for rid in self.network.roads:
-                s_, t_ = self.network.road(rid).project(x, y)
-                if best is None or abs(t_) < abs(best[2]):
-                    best = (rid, s_, t_)
-            road_id, s, t = best
+            x, y = self.value(pos, "x"), self.mirror(self.value(pos, "y"))
+            h = self.mirror(self.value(pos, "h")) if pos.get("h") is not None else None
+            road_id, s, t = self.world_to_road(x, y, h)
         else:
             ref = self.actor_name(pos)
             if ref is None or ref not in self.placed:
@@ -673,11 +722,11 @@ class _Translate(_Importer):
                 if lane * new_lane <= 0 and d_lane:  # lane 0 is the reference line
                     new_lane += 1 if d_lane > 0 else -1
                 ds = self.number(pos, "ds", units.LENGTH, 0.0)
-                return road_name, new_lane, _plus(s_ref, ds), self.number(pos, "offset", units.LENGTH, 0.0)
+                return road_name, new_lane, _plus(s_ref, ds), self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
             road = self.network.road(road_id)
             s = eval_param_expr(s_ref, params) + self.value(pos, "ds")
             t = road.lane_center_t(lane, eval_param_expr(s_ref, params)) + eval_param_expr(off_ref, params) \
-                + self.value(pos, "dt")
+                + self.mirror(self.value(pos, "dt"))
         road_name = self.road(str(road_id), pos)
         odr = self.network.road(str(road_id))
         lane = odr.lane_at(s, t)
@@ -686,6 +735,31 @@ class _Translate(_Importer):
             return None
         offset = t - odr.lane_center_t(lane, s)
         return road_name, lane, E.Num(value=round(s, 9)), E.Num(value=round(offset, 9))
+
+    def world_to_road(self, x: float, y: float, h: float | None) -> tuple[str, float, float]:
+        """(road id, s, t) of world point (x, y) [m]: among the roads with a lane there (the
+        point alongside the road, not beyond an end), those whose lane is driven the way `h`
+        [rad] faces first, then roads outside junctions (a junction's connecting roads overlap
+        each other and the roads they join), then the least offset from the lane's centre.
+        Without any such road: the road whose reference line is nearest."""
+        best, nearest = None, None
+        for rid in self.network.roads:
+            road = self.network.road(rid)
+            s, t = road.project(x, y)
+            px, py = (float(v) for v in road.point_at(s, t))
+            if nearest is None or abs(t) < abs(nearest[2]):
+                nearest = (rid, s, t)
+            lane = road.lane_at(s, t) if math.hypot(px - x, py - y) < 0.5 else None
+            if lane is None:
+                continue
+            against = False
+            if h is not None:
+                lane_h = float(road.reference_pose(s)[2]) + (0.0 if road.travel_direction(lane) > 0 else math.pi)
+                against = math.cos(h - lane_h) < 0
+            key = (against, road.is_junction_road, abs(t - float(road.lane_center_t(lane, s))))
+            if best is None or key < best[0]:
+                best = (key, (rid, s, t))
+        return best[1] if best is not None else nearest
 
     def route_element(self, ref_parent):
         """The <Route> of an AssignRouteAction or a RouteRef: inline, or a route catalog's
@@ -714,7 +788,7 @@ class _Translate(_Importer):
                                  else None, pos), "a route position is translated from lane coordinates only")
             return None
         path_s, lane_id = self.value(lane_coords, "pathS", units.LENGTH), int(self.value(lane_coords, "laneId"))
-        offset = self.number(lane_coords, "laneOffset", units.LENGTH, 0.0)
+        offset = self.mirror(self.number(lane_coords, "laneOffset", units.LENGTH, 0.0))
         first_wp = route_el.find("Waypoint/Position/LanePosition")
         stops = []
         for wp in route_el.iterfind("Waypoint/Position/*"):
@@ -762,7 +836,7 @@ class _Translate(_Importer):
         if orient is None or orient.get("h") is None or lane == 0:
             return False
         try:
-            h = self.value(orient, "h")
+            h = self.mirror(self.value(orient, "h"))
             if orient.get("type", "relative") == "absolute":
                 s_now = float(eval_param_expr(s, self.param_values()))
                 h -= odr.reference_pose(s_now)[2] + (0.0 if odr.travel_direction(lane) > 0 else math.pi)
@@ -1096,7 +1170,7 @@ class _Translate(_Importer):
         heading = h + (math.pi if lane > 0 and odr.travel_direction(lane) < 0 else 0.0)
         orient = pos_el.find(".//Orientation")
         if orient is not None and orient.get("h") is not None:
-            turn = self.value(orient, "h")
+            turn = self.mirror(self.value(orient, "h"))
             heading = turn if orient.get("type") == "absolute" else heading + turn
         return x - t_val * math.sin(h), y + t_val * math.cos(h), heading
 
@@ -1106,9 +1180,9 @@ class _Translate(_Importer):
         start = self.world_point(_first(el.find("Position"), el), who)
         if start is None:
             return None
-        k0 = self.value(el, "curvature")
+        k0 = self.mirror(self.value(el, "curvature"))  # a left turn is a right one in CARLA's frame
         rate = el.get("curvaturePrime") if el.get("curvaturePrime") is not None else el.get("curvatureDot")
-        k1 = self.value(el, "curvaturePrime" if el.get("curvaturePrime") is not None else "curvatureDot") \
+        k1 = self.mirror(self.value(el, "curvaturePrime" if el.get("curvaturePrime") is not None else "curvatureDot")) \
             if rate is not None else 0.0
         length = self.value(el, "length")
         if not 0.0 < length <= 10000.0:
@@ -1650,6 +1724,66 @@ class _Translate(_Importer):
         self.actors[who]["triggers"].append(TriggerPlan(condition=state_of, clause=clause))
         return True
 
+    # -- pass criteria
+
+    def pass_criteria(self, ego: ActorPlan) -> list[OraclePlan]:
+        """CARLA ScenarioRunner's test criteria as oracles on the ego: the stop triggers'
+        conditions named `criteria_<Test>` (a ParameterCondition whose value, if any, is the
+        test's argument), as ScenarioRunner reads them. Those the language cannot judge are
+        W0801; none at all: [] (the caller's default)."""
+        found: dict[str, OraclePlan] = {}
+        for cond in self.doc.iterfind("Storyboard//StopTrigger//Condition"):
+            name = cond.get("name") or ""
+            if not name.startswith("criteria_"):
+                continue
+            test = name[len("criteria_"):]
+            param = cond.find("ByValueCondition/ParameterCondition")
+            raw = param.get("value", "") if param is not None else ""
+            try:
+                arg = float(self.resolve(raw)) if raw.strip() else None
+            except (KeyError, SyntaxError, ValueError, ArithmeticError):
+                arg = None
+            oracle = self.criterion(test, arg, ego, cond)
+            if oracle is not None:
+                found.setdefault(oracle.name, oracle)
+        self.criteria = bool(found)
+        return list(found.values())
+
+    def criterion(self, test: str, arg: float | None, ego: ActorPlan, cond) -> OraclePlan | None:
+        always, signal = (lambda f: E.Temporal(op="always", lo_s=0.0, hi_s=None, arg=f)), E.Signal
+        if test == "CollisionTest":
+            return OraclePlan(name="no_collision", formula=NO_CLAUSES["collision"]("ego", None), text="no collision")
+        if test == "RunningRedLightTest":
+            return OraclePlan(name="no_red_light", formula=NO_CLAUSES["red_light"]("ego", None), text="no red_light")
+        if test == "KeepLaneTest":
+            road_id = next(i for i, r in self.roads.items() if r.name == ego.road)
+            odr = self.network.road(road_id)
+            s0 = min(max(float(eval_param_expr(ego.s, self.param_values())), 0.0), odr.length)
+            margin = 0.5 * (float(odr.lane_width(int(ego.lane.value), s0)) - ego.width_m)
+            if margin <= 0:
+                self.skip(cond, f"criteria_{test}: the ego is wider than its lane: not translated")
+                return None
+            self.approx(cond, f"criteria_{test} is translated as `stay in lane` (the body inside the lane); "
+                              "ScenarioRunner fails it on any lane marking crossed")
+            return OraclePlan(name="keep_lane", formula=always(E.Binary(
+                op="<=", left=E.Call(fn="abs", args=(signal(name="lane_offset(ego)"),)),
+                right=E.Num(value=round(margin, 6)))), text="stay in lane")
+        if test == "DrivenDistanceTest" and arg is not None and arg > 0:
+            return OraclePlan(name="driven_distance", formula=E.Temporal(
+                op="eventually", lo_s=0.0, hi_s=None,
+                arg=E.Binary(op=">=", left=signal(name="travelled(ego)"), right=E.Num(value=arg))),
+                text=f"eventually travelled(ego) >= {arg:g} m")
+        if test == "MaxVelocityTest" and arg is not None and arg > 0:
+            return OraclePlan(name="max_velocity", formula=always(E.Binary(
+                op="<=", left=signal(name="speed(ego)"), right=E.Num(value=arg))),
+                text=f"always speed(ego) <= {arg:g} m/s")
+        why = {"RunningStopTest": "the twin has no stop signs",
+               "WrongLaneTest": "no signal gives the driving direction of the lane the ego is in",
+               "OnSidewalkTest": "no signal gives the type of the lane the ego is in"}.get(test, "no such oracle")
+        self.skip(cond, f"criteria_{test} is not translated: {why}",
+                  "translated: CollisionTest, RunningRedLightTest, KeepLaneTest, DrivenDistanceTest, MaxVelocityTest")
+        return None
+
     # -- the plan
 
     def plan(self, header, duration: float) -> ScenarioPlan:
@@ -1706,7 +1840,9 @@ class _Translate(_Importer):
         agents = [a for a in actors if a.name != "ego"]
         faults = [pinned_fault_plan(ConcreteFault.model_validate(f)) for f in sc.get("faults", [])]
         oracles = [OraclePlan.model_validate(o) for o in sc.get("oracles", [])]
-        if not sc:  # OpenSCENARIO states no pass criteria: the one every scenario here has
+        if not sc:
+            oracles = self.pass_criteria(ego)
+        if not sc and not oracles:  # OpenSCENARIO states no pass criteria: the one every scenario here has
             oracles = [OraclePlan(name="no_collision", formula=NO_CLAUSES["collision"]("ego", None))]
         description = sc["description"] if sc else (header.get("description", "") if header is not None else "")
         name = sc.get("scenario") or _safe_name(self.path.stem, set())
@@ -1868,10 +2004,11 @@ def _duration(clause: ClausePlan) -> float:
 
 # ---------------------------------------------------------------- entry point
 
-def import_xosc(path: str | Path, root: str | Path | None = None) -> Imported:
-    """Translate an OpenSCENARIO file; files are read only under `root` (default: its directory)."""
+def import_xosc(path: str | Path, root: str | Path | None = None, maps=()) -> Imported:
+    """Translate an OpenSCENARIO file; files are read only under `root` (default: its
+    directory), and a road network named without a folder also from the `maps` directories."""
     path = Path(path)
-    imp = _Translate(path, Path(root) if root is not None else path.parent)
+    imp = _Translate(path, Path(root) if root is not None else path.parent, tuple(Path(m) for m in maps))
     if not path.resolve().is_relative_to(imp.root):
         imp.sink.error("E0402", f"{path} is outside the root directory", None)
         return Imported(None, None, imp.sink.items, imp.sources)
@@ -1888,7 +2025,8 @@ def import_xosc(path: str | Path, root: str | Path | None = None) -> Imported:
                                                                if imp.sidecar else "")
                + f"\n{sum(d.code.startswith('W08') for d in imp.sink.items)} element(s) not translated "
                  "or approximated: see the diagnostics"
-               + ("" if imp.sidecar else "\nOpenSCENARIO states no pass criteria: `no collision` is the default oracle"))
+               + ("" if imp.sidecar else "\nThe oracles are CARLA ScenarioRunner's criteria_* conditions that translate"
+                  if imp.criteria else "\nOpenSCENARIO states no pass criteria: `no collision` is the default oracle"))
     try:
         text = print_plan(plan, comment=comment)
     except PrinterError as exc:

@@ -1,0 +1,98 @@
+"""`addtc import` of CARLA ScenarioRunner's OpenSCENARIO examples: towns named without a
+file extension (found with `--maps`), CARLA's left-handed frame (the "CARLA:" header),
+and ScenarioRunner's `criteria_*` test criteria as oracles."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from addt_dsl.cli import main
+from addt_dsl.compiler import compile_source
+from addt_dsl.expr import eval_param_expr
+from addt_dsl.interop.xosc_import import import_xosc
+from addt_dsl.runtime.road import parse_xodr
+from tests.conftest import ROOT
+
+CARLA = ROOT / "tests" / "data" / "carla"
+MAPS = CARLA / "maps"
+SCENARIOS = sorted((CARLA / "xosc").glob("*.xosc"))
+CRITERIA = {"no_red_light", "keep_lane", "no_collision", "driven_distance"}
+
+
+def _import(name: str):
+    return import_xosc(CARLA / "xosc" / name, maps=[MAPS])
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=[p.name for p in SCENARIOS])
+def test_every_carla_example_imports_and_compiles(path, tmp_path):
+    got = import_xosc(path, maps=[MAPS])
+    assert not [d for d in got.diagnostics if d.is_error], [d.message for d in got.diagnostics if d.is_error]
+    notes = [d.message for d in got.diagnostics if d.code == "W0803"]
+    assert any("CARLA's coordinate frame" in m for m in notes) and any("read from" in m for m in notes), notes
+    for name, body in got.side_files.items():
+        (tmp_path / name).write_text(body)
+    result = compile_source(got.text, "imported.addt", base_dir=tmp_path)
+    assert result.ok, [d.message for d in result.diagnostics]
+    names = {o.name for o in result.plan.oracles}
+    # ChangingWeather has no criteria: the import's default oracle.
+    assert names == ({"no_collision"} if path.name == "ChangingWeather.xosc" else CRITERIA), names
+
+
+def _world(plan, actor):
+    """Where the plan puts an actor: (x, y) [m] in OpenDRIVE's frame."""
+    road = next(r for r in plan.roads if r.name == actor.road)
+    odr = parse_xodr(road.xodr_text, road.xodr_file).road(road.xodr_road_id)
+    s = float(eval_param_expr(actor.s, {}))
+    t = float(odr.lane_center_t(int(actor.lane.value), s)) + float(eval_param_expr(actor.offset, {}))
+    x, y = odr.point_at(s, t)
+    return float(x), float(y)
+
+
+def test_world_positions_are_mirrored_out_of_carlas_frame():
+    # CyclistCrossing's hero: <WorldPosition x="130" y="55" h="pi"/> in CARLA's frame is
+    # (130, -55) in the map's. Read as OpenDRIVE coordinates it lay 22 m off any lane.
+    plan = _import("CyclistCrossing.xosc").plan
+    x, y = _world(plan, plan.ego)
+    assert math.hypot(x - 130.0, y + 55.0) < 0.5, (x, y)
+    # Facing -x (h = pi): placed on the lane driven that way.
+    road = next(r for r in plan.roads if r.name == plan.ego.road)
+    odr = parse_xodr(road.xodr_text, road.xodr_file).road(road.xodr_road_id)
+    s = float(eval_param_expr(plan.ego.s, {}))
+    heading = float(odr.reference_pose(s)[2]) + (0.0 if odr.travel_direction(int(plan.ego.lane.value)) > 0 else math.pi)
+    assert math.cos(heading - math.pi) > 0.9
+
+
+def test_road_offsets_grow_to_the_right_in_carlas_frame():
+    # FollowLeadingVehicle: the hero at <RoadPosition roadId="4" s="48.58" t="2.75"/>, the
+    # file's comment giving the same place as lane -1 with offset 1.0: 1 m right of lane
+    # -1's centre (t = -2 m), so t = -2.75 m in OpenDRIVE's frame. The adversary is
+    # <RelativeRoadPosition ds="50" dt="-1.0"/> from it: 1 m to the left.
+    plan = _import("FollowLeadingVehicle.xosc").plan
+    ego, lead = plan.ego, plan.agents[0]
+    assert (ego.lane.value, ego.s.value, ego.offset.value) == (-1.0, 48.58, -0.75)
+    assert (lead.lane.value, lead.s.value, lead.offset.value) == (-1.0, pytest.approx(98.58), 0.25)
+
+
+def test_criteria_become_oracles_and_the_rest_say_why_not():
+    got = _import("FollowLeadingVehicle.xosc")
+    oracles = {o.name: o for o in got.plan.oracles}
+    assert "eventually travelled(ego) >= 100 m" in got.text
+    assert oracles["driven_distance"].formula.arg.right.value == 100.0
+    skipped = sorted(d.message.split(" ")[0] for d in got.diagnostics if d.code == "W0801"
+                     and d.message.startswith("criteria_"))
+    assert skipped == ["criteria_OnSidewalkTest", "criteria_RunningStopTest", "criteria_WrongLaneTest"]
+    assert "CARLA ScenarioRunner's criteria_*" in got.text
+
+
+def test_a_town_not_found_names_where_it_looked(tmp_path, capsys):
+    got = import_xosc(CARLA / "xosc" / "Slalom.xosc")
+    errors = [d for d in got.diagnostics if d.is_error]
+    assert got.text is None and [d.code for d in errors] == ["E0401"]
+    assert "cannot find the road network 'Town01'" in errors[0].message
+    assert any("Town01.xodr" in n for n in errors[0].notes) and any("--maps DIR" in n for n in errors[0].notes)
+    # The command line: --maps finds it, and the map is written beside the scenario.
+    out = tmp_path / "slalom.addt"
+    assert main(["import", str(CARLA / "xosc" / "Slalom.xosc"), "--maps", str(MAPS), "-o", str(out)]) == 0
+    assert (tmp_path / "Town01.xodr").is_file() and "Town01.xodr" in out.read_text()
