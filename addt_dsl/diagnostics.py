@@ -100,6 +100,7 @@ CODES: dict[str, str] = {
     "W0001": "unused parameter",
     "W0002": "setting has no effect",
     "W0003": "sensor unlike the one the stack is made for",
+    "W0004": "agent under every ray of the ego's lidar",
     "W0801": "OpenSCENARIO element not translated",
     "W0802": "OpenSCENARIO value approximated or defaulted",
     "W0803": "OpenSCENARIO file read with CARLA ScenarioRunner's conventions",

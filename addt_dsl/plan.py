@@ -126,6 +126,7 @@ class ActorPlan(_Model):
     speed: Expr  # initial speed [m/s]
     length_m: float
     width_m: float
+    height_m: float | None = None  # body height [m] (None: the vehicle kind's; the compiler fills it in)
     mass_kg: float = 1500.0
     wheelbase_m: float = 2.7
     behaviors: list[ClausePlan] = Field(default_factory=list)

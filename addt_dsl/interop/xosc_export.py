@@ -165,8 +165,8 @@ class _Run:
 # ---------------------------------------------------------------- entities
 
 def _entity(a: ActorPlan):
-    kind = VEHICLES[a.vehicle]
-    box = xosc.BoundingBox(a.width_m, a.length_m, kind.height_m, 0.0, 0.0, kind.height_m / 2)
+    height = a.height_m if a.height_m is not None else VEHICLES[a.vehicle].height_m
+    box = xosc.BoundingBox(a.width_m, a.length_m, height, 0.0, 0.0, height / 2)
     if a.vehicle == "pedestrian":
         return xosc.Pedestrian(a.name, 80.0, xosc.PedestrianCategory.pedestrian, box, model=a.vehicle)
     if a.vehicle == "obstacle":
@@ -739,6 +739,7 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
         "params": pinned.params,
         "param_dims": {p.name: p.dimension for p in plan.params},
         "actors": {a.name: {"vehicle": a.vehicle, "road": a.road, "length_m": a.length_m, "width_m": a.width_m,
+                            "height_m": a.height_m,
                             "mass_kg": a.mass_kg, "wheelbase_m": a.wheelbase_m, "route": list(a.route),
                             "yaw": None if a.yaw is None else run.num(a.yaw),
                             "goal_s": None if a.goal_s is None else run.num(a.goal_s),

@@ -636,15 +636,18 @@ class _Translate(_Importer):
             self.skip(body, f"<{body.tag}> '{obj.get('name')}' is not translated")
             return
         dims = _child(body, "BoundingBox", "Dimensions") if body is not None else None
+        height = None
         if dims is not None:
             length, width = self.value(dims, "length"), self.value(dims, "width")
+            height = self.value(dims, "height") if dims.get("height") is not None else None
         if self.sidecar and name in self.sidecar.get("actors", {}):
             kind = self.sidecar["actors"][name]["vehicle"]
         if name == "ego" and kind != "car":
             self.approx(obj, f"the ego is a {kind} in the scenario; addt-dsl's stack drives a car")
             kind = "car"
         self.actors[name] = {"vehicle": kind, "length_m": length if length and length > 0 else None,
-                             "width_m": width if width and width > 0 else None, "el": obj,
+                             "width_m": width if width and width > 0 else None,
+                             "height_m": height if height and 0.05 <= height <= 10.0 else None, "el": obj,
                              "behaviors": [], "triggers": [], "lane_now": None, "speed_now": 0.0}
 
     def catalog_entry(self, ref, kinds=("Vehicle", "Pedestrian", "MiscObject")):
@@ -1800,6 +1803,7 @@ class _Translate(_Importer):
                           speed=info.get("speed", E.Num(value=0.0)),
                           length_m=extra.get("length_m") or info["length_m"] or kind.length_m,
                           width_m=extra.get("width_m") or info["width_m"] or kind.width_m,
+                          height_m=extra.get("height_m") or info["height_m"],
                           behaviors=info["behaviors"], triggers=info["triggers"])
             if extra.get("mass_kg") is not None:
                 fields.update(mass_kg=extra["mass_kg"], wheelbase_m=extra["wheelbase_m"])
@@ -1892,7 +1896,7 @@ def _sidecar_problem(data: dict) -> str:
         for info in data.get("actors", {}).values():
             if info.get("vehicle") not in VEHICLES:
                 return f"unknown vehicle {info.get('vehicle')!r}"
-            for key in ("length_m", "width_m", "mass_kg", "wheelbase_m", "goal_s", "mu"):
+            for key in ("length_m", "width_m", "height_m", "mass_kg", "wheelbase_m", "goal_s", "mu"):
                 if info.get(key) is not None:
                     float(info[key])
             if info.get("stack"):

@@ -175,12 +175,14 @@ def _param_line(p: ParamPlan) -> str:
 
 VEHICLE_DEFAULTS = {  # what the compiler fills in when a setting is left out
     "length": lambda a: _vehicle_size(a.vehicle)[0], "width": lambda a: _vehicle_size(a.vehicle)[1],
+    "height": lambda a: VEHICLES[a.vehicle].height_m if a.height_m is not None else None,
     "mass": lambda a: 1500.0, "wheelbase": lambda a: 2.7,
 }
 ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLESS),  # optional, may use parameters
                ("offset", "offset", units.LENGTH), ("yaw", "yaw", units.ANGLE))
 ACTOR_FLAGS = (("at_red run", "ignore_lights"),)  # printed when the plan's flag is set
 ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units.LENGTH),
+                ("height", "height_m", units.LENGTH),
                 ("mass", "mass_kg", units.MASS), ("wheelbase", "wheelbase_m", units.LENGTH))
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from addt_dsl.expr import Expr, eval_param_expr, signals_used, substitute_params
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, ControllerPlan, GroupPlan, RoadPlan, RunSpec,
                            SignalPlan, TriggerPlan, resolve_settings)
+from addt_dsl.vehicles import VEHICLES
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,7 @@ class BoundActor:
     offset: float  # from the lane centre, left positive [m]
     length_m: float
     width_m: float
+    height_m: float  # body height [m]: the box lidar rays and cameras meet
     mass_kg: float
     wheelbase_m: float
     mu: float  # tyre-road friction (ego dynamics)
@@ -159,6 +161,7 @@ def _actor(a: ActorPlan, params: dict[str, float]) -> BoundActor:
     return BoundActor(
         name=a.name, vehicle=a.vehicle, road=a.road, lane=int(round(_value(a.lane, params))), s=_value(a.s, params),
         speed=_value(a.speed, params), offset=_value(a.offset, params), length_m=a.length_m, width_m=a.width_m,
+        height_m=a.height_m if a.height_m is not None else VEHICLES[a.vehicle].height_m,
         mass_kg=a.mass_kg, wheelbase_m=a.wheelbase_m, mu=_value(a.mu, params, DEFAULT_MU),
         behaviors=tuple(_clause(c, params) for c in a.behaviors),
         steps=tuple(bind_step(t, params) for t in a.triggers),

@@ -197,7 +197,7 @@ class _Run:
         self.ego = VehicleState(x, y, h, ego.speed)
         self.ego_z, self.ego.pitch = 0.0, 0.0
         self.ego_s, self.ego_t = s0, t0
-        self.physics.add_box("ego", ego.length_m, ego.width_m, VEHICLES[ego.vehicle].height_m)
+        self.physics.add_box("ego", ego.length_m, ego.width_m, ego.height_m)
 
         self.agents: list[AgentState] = []
         self.agent_plans: dict[str, BoundActor] = {}
@@ -216,7 +216,7 @@ class _Run:
             self.agents.append(st)
             self.agent_plans[a.name] = a
             self.agent_roads[a.name] = road
-            self.physics.add_box(a.name, a.length_m, a.width_m, VEHICLES[a.vehicle].height_m, VEHICLES[a.vehicle].rgba)
+            self.physics.add_box(a.name, a.length_m, a.width_m, a.height_m, VEHICLES[a.vehicle].rgba)
             self.longitudinal[a.name] = None
             if any(_is_live(c) for c in a.behaviors):  # they read the first recorded state
                 self.deferred.extend((st, c) for c in a.behaviors)
@@ -550,7 +550,7 @@ def _loop(run: _Run) -> Trace:
         # Per agent, fixed for the run: (state, road, extra yaw [rad], half its body height [m],
         # vehicle kind, length [m], width [m]).
         agent_consts = [(a, run.agent_roads[a.name], run.agent_plans[a.name].yaw,
-                         VEHICLES[run.agent_plans[a.name].vehicle].height_m / 2,
+                         run.agent_plans[a.name].height_m / 2,
                          run.agent_plans[a.name].vehicle, a.length_m, a.width_m) for a in agents]
         set_pose, body_actor, world_pose = run.physics.set_pose, fleet_.body_actor, run.world_pose
         networked = run.networked
@@ -589,7 +589,7 @@ def _loop(run: _Run) -> Trace:
         if grade:
             grade *= math.cos(e.heading - ego_road.road.reference_pose(run.ego_s)[2])
         run.ego_z, e.pitch = z, math.atan(grade)
-        run.physics.set_pose("ego", e.x, e.y, z + VEHICLES[plan.ego.vehicle].height_m / 2, e.heading, e.pitch)
+        run.physics.set_pose("ego", e.x, e.y, z + plan.ego.height_m / 2, e.heading, e.pitch)
         if run.networked:
             run.world_pose["ego"] = (e.x, e.y, e.heading)
 
@@ -767,7 +767,7 @@ class _Fleet:
         plans = [run.agent_plans[a.name] for a in agents]
         self.yaws = [p.yaw for p in plans]
         self.yaw = [(i, p.yaw) for i, p in enumerate(plans) if p.yaw]
-        self.half_height_m = [VEHICLES[p.vehicle].height_m / 2 for p in plans]
+        self.half_height_m = [p.height_m / 2 for p in plans]
         self.half_height = np.array(self.half_height_m)
         self.kinds = [p.vehicle for p in plans]
         self.length = np.array([a.length_m for a in agents])

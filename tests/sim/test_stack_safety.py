@@ -181,3 +181,14 @@ def test_learned_perception_never_brakes_for_a_car_it_has_seen_once():
     ego = trace.actors["ego"]
     assert ego.speed[np.searchsorted(trace.time, 0.2)] > 19.8  # nothing braked in the first frames
     assert ego.speed[-1] < 14.0  # then it slowed behind the lead
+
+
+@pytest.mark.parametrize("height_m, seen", [(1.0, False), (1.4, True)])
+def test_the_lidar_sees_a_box_only_if_it_reaches_the_rays(height_m, seen):
+    # The default lidar's one channel is level at 1 m: a 1 m box (an obstacle's default
+    # height) stays under it and is driven into; at 1.4 m the ego stops short of it.
+    trace = run(straight("ego car on r lane -1 at 20 m speed 15 m/s",
+                         f"  agent box obstacle on r lane -1 at 150 m height {height_m} m", stack="cruise_speed 15 m/s"))
+    assert bool(trace.events_of("collision")) is not seen
+    far = trace.actors["box"].clearance > 10.0  # detections from more than 10 m off
+    assert bool(trace.object_count[far].max() > 0) is seen

@@ -3,6 +3,7 @@ ego's stack and sensors, agents' behaviours and scripts (steps and groups)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from addt_dsl import expr as E
@@ -26,6 +27,8 @@ ACTOR_SETTINGS = (
     ParamSpec("goal", units.LENGTH, low=0.0, doc="station the ego must reach (ego only)"),
     ParamSpec("length", units.LENGTH, low=0.1, high=30.0, doc="body length"),
     ParamSpec("width", units.LENGTH, low=0.1, high=5.0, doc="body width"),
+    ParamSpec("height", units.LENGTH, low=0.05, high=10.0,
+              doc="body height (what a lidar ray or a camera meets; default: the kind's)"),
     ParamSpec("mass", units.MASS, default=1500.0, low=50.0, high=60000.0, doc="mass"),
     ParamSpec("wheelbase", units.LENGTH, default=2.7, low=0.5, high=10.0, doc="wheelbase"),
     ParamSpec("mu", units.DIMENSIONLESS, default=0.8, low=0.05, high=1.5,
@@ -53,7 +56,65 @@ def rule_actors(ctx: Context) -> Actors:
         plan = _check_actor(ctx, ctx.actors_ast[name], out.actors)
         if plan is not None:
             out.actors[name] = plan
+    _check_lidar_reach(ctx, out.actors)
     return out
+
+
+def lidar_reach(mount_z: float, elevations: list[float], range_m: float, height_m: float) -> float:
+    """The farthest distance [m] at which a ray of a lidar mounted `mount_z` [m] over level
+    ground, at these elevations [rad] (up positive), meets a box `height_m` tall standing on
+    the ground: 0 when every ray passes over it (or reaches the ground before it)."""
+    best = 0.0
+    for el in elevations:
+        slope = math.tan(el)
+        if slope >= 0:  # level or rising: under the box's top from the start, or never
+            if mount_z < height_m:
+                best = max(best, range_m if slope == 0 else min(range_m, (height_m - mount_z) / slope))
+            continue
+        ground = mount_z / -slope  # where the ray meets the ground
+        under_top = max(0.0, (mount_z - height_m) / -slope)  # from here on it is below the box's top
+        if under_top < min(ground, range_m):
+            best = max(best, min(ground, range_m))
+    return best
+
+
+def _check_lidar_reach(ctx: Context, actors: dict[str, P.ActorPlan]) -> None:
+    """An agent no ray of the ego's lidars meets (shorter than the lowest ray's height over
+    its whole range) is never perceived by a stack that sees through them: a warning."""
+    ego = actors.get("ego")
+    if ego is None or ego.stack is None:
+        return
+    if ego.stack.settings.get("perception", "ground_truth") not in ("ground_truth", "learned"):
+        return  # cameras see it whatever the lidar does
+    rays = []  # (mount height [m], elevations [rad], range [m]) per lidar
+    for sensor in ego.sensors:
+        cls = SENSORS.get(sensor.name)
+        if sensor.name != "lidar" or cls is None:
+            continue
+        values = {p.name: p.default for p in cls.params if isinstance(p.default, (int, float))}
+        for key in ("z", "pitch", "channels", "vfov", "range"):
+            if key in sensor.settings:
+                if not isinstance(sensor.settings[key], P.Num):
+                    return  # set by a parameter: the rays move with it
+                values[key] = sensor.settings[key].value
+        ch, vfov = int(values["channels"]), float(values["vfov"])
+        elevations = [(k / (ch - 1) - 0.5) * vfov - values["pitch"] for k in range(ch)] if ch > 1 else [-values["pitch"]]
+        rays.append((float(values["z"]), elevations, float(values["range"])))
+    if not rays:
+        return
+    for name, actor in actors.items():
+        if name == "ego" or actor.height_m is None:
+            continue
+        if max(lidar_reach(z, els, rng, actor.height_m) for z, els, rng in rays) > 0.0:
+            continue
+        d = ctx.actors_ast[name]
+        span = next((st.value.span for st in d.settings + d.block_settings if st.key == "height"), d.vehicle_span)
+        lowest = min(z + rng * math.tan(min(els)) if min(els) < 0 else z for z, els, rng in rays)
+        ctx.sink.warning("W0004", f"'{name}' ({fmt(actor.height_m, units.LENGTH)} tall) is under every ray of the "
+                                  f"ego's lidar (none lower than {fmt(max(lowest, 0.0), units.LENGTH)} within its "
+                                  "range on level ground): the stack never perceives it", span,
+                         "give it its real `height`, or mount the lidar lower (`sensor lidar z ...`) or tilt "
+                         "rays down (`channels`, `vfov`, `pitch`)")
 
 
 def _placement_order(ctx: Context) -> list[str]:
@@ -101,8 +162,9 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
         return None
     what = "the ego" if d.is_ego else f"agent '{d.name}'"
     vals = check_settings(ctx, d.settings + d.block_settings, ACTOR_SETTINGS, what, d.span)
-    length, width = VEHICLES[d.vehicle].length_m, VEHICLES[d.vehicle].width_m
-    body = {"length": length, "width": width, "mass": 1500.0, "wheelbase": 2.7}
+    kind = VEHICLES[d.vehicle]
+    body = {"length": kind.length_m, "width": kind.width_m, "height": kind.height_m, "mass": 1500.0,
+            "wheelbase": 2.7}
     for key in body:
         if key in vals:
             value = const_value(vals[key])
@@ -164,7 +226,7 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
     return P.ActorPlan(
         name=d.name, vehicle=d.vehicle, road=road, lane=lane, s=s,
         speed=vals.get("speed", P.num(0.0)),
-        length_m=length, width_m=width, mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
+        length_m=length, width_m=width, height_m=body["height"], mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
         goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"), route=route, yaw=vals.get("yaw"),
         ignore_lights=vals.get("at_red") == "run")

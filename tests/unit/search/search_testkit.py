@@ -47,7 +47,7 @@ scenario kitchen_sink {
     stack bev cruise_speed 25 m/s time_gap 1.2 s perception ground_truth
     sensor lidar rate 20 Hz rays 180 range 60 m yaw 0.5 deg
   }
-  agent lead truck on main lane -1 at 10 m + gap speed v_lead length 10 m {
+  agent lead truck on main lane -1 at 10 m + gap speed v_lead length 10 m height 3 m {
     behavior cruise speed v_lead accel 1 m/s^2
     brake_hard: when distance(ego, lead) < brake_at then behavior brake decel 5 m/s^2 to_speed 2 m/s
   }

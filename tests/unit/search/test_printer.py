@@ -17,6 +17,7 @@ from addt_dsl.limits import DEFAULT
 from addt_dsl.plan import ClausePlan, OraclePlan, TriggerPlan
 from addt_dsl.printer import (PrinterError, compile_pinned, format_const, format_expr, format_quantity, pin_spec,
                               print_plan, print_spec, semantic_key)
+from addt_dsl.registry import SIGNALS
 from addt_dsl.sweep import expand
 
 FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -108,8 +109,11 @@ def test_formulas_round_trip(generated, data):
                for i, f in enumerate(generated)]
     goal = plan.oracles[-1]
     lead = plan.agents[0]
-    # Trigger conditions are checked at each instant: only non-temporal formulas qualify.
-    instant = [f for f in generated if not any(isinstance(n, (E.Temporal, E.Until)) for n in E.walk(f))]
+    # Trigger conditions are checked at each instant: only formulas without temporal
+    # operators and without signals of the run's past (`jerk`, `travelled`) qualify.
+    instant = [f for f in generated if not any(
+        isinstance(n, (E.Temporal, E.Until))
+        or isinstance(n, E.Signal) and SIGNALS.get(n.name.split("(")[0]).history for n in E.walk(f))]
     if instant:
         trigger = TriggerPlan(condition=instant[0], clause=ClausePlan(keyword="behavior", name="brake", settings={}))
         lead = lead.model_copy(update={"triggers": [*lead.triggers, trigger]})
