@@ -162,6 +162,7 @@ class _Run:
         self.dt = plan.step_s
         self.n_steps = int(round(plan.duration_s / self.dt))
         self.events: list[Event] = []
+        self.left_road = False  # the ego passed the end of its road or route (`left_road` event)
         self.networks = build_network(plan.roads)
         self._road_cache: dict = {}
         # Visual shapes (road meshes, coloured actors) only when a sensor renders.
@@ -582,6 +583,15 @@ def _loop(run: _Run) -> Trace:
             fleet_.pose(run, t_now, dt)
         e = run.ego
         run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
+        if run.ego_s >= ego_road.road.length and not run.left_road:
+            # Past the end of its road or route: `s` stays at the end, the map has nothing
+            # beyond, and the run goes on off the map. Say so once (a route through the
+            # junction keeps the ego on the network).
+            rx, ry, h = ego_road.road.reference_pose(run.ego_s)
+            if (e.x - rx) * math.cos(h) + (e.y - ry) * math.sin(h) > 0.5 * plan.ego.length_m:
+                run.left_road = True
+                run.events.append(Event(t_now, "left_road", {"actor": "ego", "road": plan.ego.road,
+                                                             "s": round(float(run.ego_s), 3)}))
         if not run.networked and not leaders_stale:  # (networked runs find leaders by position)
             run.leaders.moved(len(run.agents))  # the ego, last member; agents move below
         # The ego follows the road height; its dynamics feel the grade along its heading.

@@ -41,7 +41,7 @@ class ActorTrack:
 @dataclass
 class Event:
     time_s: float
-    kind: str  # collision | fault | stack_error | trigger | goal | watchdog
+    kind: str  # collision | fault | stack_error | trigger | goal | watchdog | left_road | behavior
     detail: dict = field(default_factory=dict)
 
 

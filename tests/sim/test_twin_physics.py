@@ -177,3 +177,27 @@ scenario crest {{
         run.physics.close()
     assert bare > 20
     assert (hits > 20) if visible else (hits == 0)
+
+
+@pytest.mark.parametrize("road_m, left", [(120.0, True), (400.0, False)])
+def test_driving_past_the_end_of_the_road_is_an_event(road_m, left):
+    # 20 m/s for 6 s from station 10 m: 130 m, past the end of a 120 m road, not of 400 m.
+    spec = spec_of(f"""scenario end {{
+  duration 6 s
+  road r {{
+    line length {road_m} m
+    lanes right 1
+  }}
+  ego car on r lane -1 at 10 m speed 20 m/s {{
+    stack bev cruise_speed 20 m/s
+  }}
+}}""")
+    trace = X.execute(spec).trace
+    events = trace.events_of("left_road")
+    assert len(events) == int(left)
+    if left:
+        e = events[0]
+        assert e.detail == {"actor": "ego", "road": "r", "s": 120.0}
+        # Half the car's length past the end: (120 + 2.3 - 10) m at 20 m/s, within a step or two.
+        assert e.time_s == pytest.approx((120.0 + 2.3 - 10.0) / 20.0, abs=0.05)
+        assert trace.actors["ego"].s.max() == pytest.approx(120.0)
