@@ -1727,6 +1727,15 @@ class _Translate(_Importer):
         self.actors[who]["triggers"].append(TriggerPlan(condition=state_of, clause=clause))
         return True
 
+    def speed_limit_at(self, road_name: str, s) -> float | None:
+        """The map's speed limit [m/s] where an actor is placed (None: the map gives none)."""
+        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+        odr = self.network.road(road_id)
+        try:
+            return odr.speed_limit(min(max(float(eval_param_expr(s, self.param_values())), 0.0), odr.length))
+        except (KeyError, ValueError, ArithmeticError):
+            return None
+
     # -- pass criteria
 
     def pass_criteria(self, ego: ActorPlan) -> list[OraclePlan]:
@@ -1836,6 +1845,15 @@ class _Translate(_Importer):
                     # The stack cruises at the ego's initial speed, as OpenSCENARIO's default
                     # controller keeps the speed the file gives it.
                     fields["stack"] = ClausePlan(keyword="stack", name="bev", settings={"cruise_speed": fields["speed"]})
+                elif not sc:
+                    limit = self.speed_limit_at(road, s)
+                    if limit is not None:
+                        # A standing ego is someone else's to drive (CARLA's examples leave it to an
+                        # external agent): the stack drives at the map's limit, not its own default.
+                        fields["stack"] = ClausePlan(keyword="stack", name="bev",
+                                                     settings={"cruise_speed": E.Num(value=round(limit, 6))})
+                        self.approx(info["el"], f"the ego starts standing: the stack cruises at its road's speed "
+                                                f"limit, {limit * 3.6:.4g} km/h")
                 for key in ("goal_s", "mu"):
                     if extra.get(key) is not None:
                         fields[key] = E.Num(value=float(extra[key]))

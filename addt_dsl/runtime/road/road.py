@@ -83,6 +83,8 @@ class Road:
     predecessor: Optional[RoadLink] = None
     successor: Optional[RoadLink] = None
     signals: tuple[Signal, ...] = ()
+    # <type><speed max>: (start station [m], speed limit [m/s]) in order of s.
+    speed_limits: tuple[tuple[float, float], ...] = ()
     _geom_starts: np.ndarray = field(init=False, repr=False, compare=False)
     _section_starts: np.ndarray = field(init=False, repr=False, compare=False)
     _section_starts_t: tuple = field(init=False, repr=False, compare=False)
@@ -481,6 +483,14 @@ class Road:
         inner, outer = self._lane_t(lane_id, s, rates=False)
         off = t - 0.5 * (inner + outer)
         return float(off) if scalar else off
+
+    def speed_limit(self, s: float) -> float | None:
+        """The map's speed limit [m/s] at station `s` [m] (None where it gives none)."""
+        limit = None
+        for start, value in self.speed_limits:
+            if start <= s + 1e-9:
+                limit = value
+        return limit
 
     @property
     def is_junction_road(self) -> bool:

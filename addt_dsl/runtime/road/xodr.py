@@ -20,6 +20,8 @@ import defusedxml.sax
 import numpy as np
 from defusedxml import DefusedXmlException
 
+from addt_dsl import units
+
 from .geometry import Arc, CubicProfile, Line, ParamPoly3, Poly3, Spiral
 from .lanes import Lane, LaneSection
 from . import limits as L
@@ -273,6 +275,7 @@ class _Reader:
                 predecessor=predecessor,
                 successor=successor,
                 signals=self.signals(node.find("signals"), length),
+                speed_limits=self.speed_limits(node),
             )
         except L.RoadLimitError as exc:
             at = plan.findall("geometry")[exc.geometry] if exc.geometry is not None else node
@@ -281,6 +284,24 @@ class _Reader:
             raise self.err(node, str(exc)) from None
         self.check_profiles(road, node, sec_nodes)
         return road
+
+    def speed_limits(self, node: _Node) -> tuple[tuple[float, float], ...]:
+        """(s, max [m/s]) of each road `<type>` with a numeric `<speed max>` (units m/s,
+        km/h or mph; "no limit" and unknown units are skipped: the limit is unknown there)."""
+        out = []
+        for tn in node.findall("type"):
+            speed = tn.find("speed")
+            if speed is None:
+                continue
+            try:
+                s, value = self.coord(tn, "s", 0.0), float(speed.attrs.get("max", ""))
+            except (XodrError, ValueError):
+                continue
+            unit = units.UNITS.get(speed.attrs.get("unit", "m/s").strip())
+            if unit is None or unit.dim != units.SPEED or not (math.isfinite(value) and value > 0):
+                continue
+            out.append((s, value * unit.factor))
+        return tuple(sorted(out))
 
     def signals(self, node: Optional[_Node], length: float) -> tuple:
         """The road's `<signal>`s (positions, type, dynamic); `<signalReference>` is skipped."""

@@ -96,3 +96,15 @@ def test_a_town_not_found_names_where_it_looked(tmp_path, capsys):
     out = tmp_path / "slalom.addt"
     assert main(["import", str(CARLA / "xosc" / "Slalom.xosc"), "--maps", str(MAPS), "-o", str(out)]) == 0
     assert (tmp_path / "Town01.xodr").is_file() and "Town01.xodr" in out.read_text()
+
+
+def test_a_standing_ego_cruises_at_its_roads_speed_limit():
+    # Town01's roads give <type><speed max="25" unit="mph"/>: 11.176 m/s, not the stack's
+    # default. Where the map gives none (a junction's connecting road), the default stays.
+    got = _import("FollowLeadingVehicle.xosc")
+    road = next(r for r in got.plan.roads if r.name == got.plan.ego.road)
+    assert parse_xodr(road.xodr_text, road.xodr_file).road(road.xodr_road_id).speed_limit(48.58) == \
+        pytest.approx(25 * 0.44704)
+    assert got.plan.ego.stack.settings["cruise_speed"].value == pytest.approx(11.176)
+    assert any("speed limit, 40.23 km/h" in d.message for d in got.diagnostics)
+    assert "cruise_speed" not in _import("SyncArrivalIntersection.xosc").plan.ego.stack.settings
