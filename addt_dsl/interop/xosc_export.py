@@ -180,11 +180,7 @@ def _position(run: _Run, a: ActorPlan) -> xosc.LanePosition:
     offset = run.num(a.offset) if a.offset is not None else 0.0
     lane = int(round(run.num(a.lane)))
     road_id = a.route[0] if a.route else run.road_ids[a.road]
-    s = run.num(a.s)
-    if a.route:  # `at S` on a route: from the entry end of its first road, in driving direction
-        network = build_network([run.plan.road(a.road)])[a.road]
-        leg = resolve_route(network, a.route[:1], lane, None)[1][0]
-        s = leg.s_from + leg.direction * s
+    s = run.num(a.s)  # `at S` is a station of the first road, on a route too (only `s(A)` runs along it)
     if a.yaw is not None:  # both languages face an entity along its lane's driving direction
         orientation = xosc.Orientation(h=run.num(a.yaw), reference=xosc.ReferenceContext.relative)
         return xosc.LanePosition(s, offset, str(lane), road_id, orientation)

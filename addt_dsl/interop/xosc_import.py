@@ -42,9 +42,9 @@ from addt_dsl.interop.xosc_export import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDE
 from addt_dsl.plan import (LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, ConcreteFault, ControllerPlan, GroupPlan,
                            OraclePlan, ParamPlan, RoadPlan, ScenarioPlan, TriggerPlan)
 from addt_dsl.printer import PrinterError, params_referenced, pinned_fault_plan, print_plan, side_files
-from addt_dsl.registry import BEHAVIORS
+from addt_dsl.registry import BEHAVIORS, STACKS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
-from addt_dsl.runtime.road.route import RouteError, resolve_route
+from addt_dsl.runtime.road.route import RouteError, exits, resolve_route, turn_of
 from addt_dsl.runtime.road import XodrError, parse_xodr
 from addt_dsl.vehicles import VEHICLES
 
@@ -1266,17 +1266,41 @@ class _Translate(_Importer):
         except RouteError as exc:
             self.skip(route_el, f"the route is not translated: {exc}")
             return None
-        return roads, self.route_station(who, roads, lane, s)
+        return roads, s  # `at` stays the first road's station on a route too
 
-    def route_station(self, who: str, roads: list[str], lane: int, s):
-        """A road station on a route's first road as the distance from the route's entry end."""
+    def straight_on(self, road_name: str, lane: int, s, reach_m: float) -> list[str] | None:
+        """A route for an ego the file gives none: from its lane, on along each road's link
+        and through each junction straight on, or else turning to the kerb side, until
+        `reach_m` [m] beyond its start, a road end with neither, or a road met twice. None
+        when it never leaves its road."""
+        first = next(i for i, r in self.roads.items() if r.name == road_name)
         try:
-            _, legs = resolve_route(self.network, roads[:1], lane, None)
-        except RouteError:
-            return s
-        if legs and legs[0].direction < 0:
-            return E.Binary(op="-", left=E.Num(value=legs[0].s_from), right=s)
-        return s
+            s0 = float(eval_param_expr(s, self.param_values()))
+            roads, legs = resolve_route(self.network, [first], lane, s0)
+        except (RouteError, KeyError, ValueError, ArithmeticError):
+            return None
+        stops = [first]
+        for _ in range(64):
+            if sum(abs(g.s_to - g.s_from) for g in legs) >= reach_m:
+                break
+            last = legs[-1]
+            outs = exits(self.network, last.road_id, "end" if last.direction > 0 else "start")
+            direct = [e.road_id for e in outs if e.connection is None or e.connection.direct]
+            turns = {turn_of(self.network, e.road_id, e.contact) for e in outs}
+            # Straight on where a junction allows it, else the turn that crosses no oncoming
+            # traffic (right under right-hand traffic).
+            kerb = "right" if self.network.road(last.road_id).rule == "RHT" else "left"
+            step = direct[0] if direct else next((t for t in ("straight", kerb) if t in turns), None)
+            if step is None:
+                break
+            try:
+                more, more_legs = resolve_route(self.network, stops + [step], lane, s0)
+            except RouteError:
+                break
+            if len(set(more)) < len(more):  # round a block and back: enough
+                break
+            stops, roads, legs = stops + [step], more, more_legs
+        return roads if len(roads) > 1 else None
 
     def environment_action(self, env) -> None:
         weather = env.find("Weather")
@@ -1818,7 +1842,6 @@ class _Translate(_Importer):
                 fields.update(mass_kg=extra["mass_kg"], wheelbase_m=extra["wheelbase_m"])
             if extra.get("route"):
                 fields["route"] = [str(r) for r in extra["route"]]
-                fields["s"] = self.route_station(who, fields["route"], lane, s)
             elif info.get("route_el") is not None or info.get("route_from_position") is not None:
                 if info.get("route_el") is None:
                     self.approx(info["route_from_position"], f"{who} is placed on a route that nothing assigns: "
@@ -1854,6 +1877,19 @@ class _Translate(_Importer):
                                                      settings={"cruise_speed": E.Num(value=round(limit, 6))})
                         self.approx(info["el"], f"the ego starts standing: the stack cruises at its road's speed "
                                                 f"limit, {limit * 3.6:.4g} km/h")
+                if not sc and not fields.get("route"):
+                    # Without a route the ego leaves the map where its road ends (a `left_road`
+                    # event): give it the way straight on, as far as it can drive in the run.
+                    stack = fields.get("stack")
+                    cruise = stack.settings.get("cruise_speed") if stack is not None else None
+                    speed = (float(eval_param_expr(cruise, self.param_values())) if cruise is not None
+                             else next(p.default for p in STACKS.get("bev").params if p.name == "cruise_speed"))
+                    route = self.straight_on(road, lane, s, speed * duration + 50.0)
+                    if route is not None:
+                        fields["route"] = route
+                        self.approx(info["el"], f"the ego has no route in the file: it drives on through junctions, "
+                                                f"straight where it can, else to the kerb side (roads "
+                                                f"{' -> '.join(route)})")
                 for key in ("goal_s", "mu"):
                     if extra.get(key) is not None:
                         fields[key] = E.Num(value=float(extra[key]))

@@ -19,6 +19,8 @@ _BLOCK = 8192  # samples evaluated at once
 
 
 class FastRoad:
+    _k_a: np.ndarray | None = None  # the curvature samples (and `_s_k` their stations) as arrays, made when first asked
+
     def __init__(self, road):
         self.road = road
         self.length = float(road.length)
@@ -124,6 +126,17 @@ class FastRoad:
     def curvature(self, s: float) -> float:
         i, u = self._index(s)
         return self._k[i] + u * (self._k[i + 1] - self._k[i])
+
+    def curvature_ahead(self, s: float, distance: float) -> tuple[np.ndarray, np.ndarray]:
+        """(distance past `s` [m], curvature [1/m]) of the line's samples from `s` to `s +
+        distance` (clipped to the line): what a speed plan for the curves ahead reads."""
+        if self._k_a is None:  # (a RoutePath sets the sample lists itself)
+            self._k_a = np.array(self._k)
+            self._s_k = np.array(self._s)
+        ds = self._ds
+        i0 = min(max(int(s / ds), 0), self._last_i)
+        i1 = min(max(int((s + distance) / ds) + 2, i0 + 1), len(self._s))
+        return np.maximum(self._s_k[i0:i1] - s, 0.0), self._k_a[i0:i1]
 
     def point(self, s: float, t: float) -> tuple[float, float, float]:
         x, y, h = self.reference_pose(s)

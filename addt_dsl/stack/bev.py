@@ -108,6 +108,8 @@ class BevStack:
                                                   "(surround cameras lifted to a BEV grid by a network)"),
         ParamSpec("cruise_speed", units.SPEED, default=25.0, low=0.0, high=70.0, doc="desired speed"),
         ParamSpec("time_gap", units.TIME, default=1.5, low=0.1, high=10.0, doc="desired headway"),
+        ParamSpec("max_lateral_accel", units.ACCELERATION, default=4.0, low=0.5, high=10.0,
+                  doc="the planner slows for curves ahead to keep the lateral acceleration under this"),
         ParamSpec("stale", units.TIME, default=0.15, low=0.0, high=10.0,
                   doc="frames older than this on arrival are discarded"),
         ParamSpec("latency", None, kind="word", default="model", choices=("model", "median", "measured"),

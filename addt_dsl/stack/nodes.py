@@ -265,9 +265,12 @@ class LatticePlanner:
     horizon_s = 5.0
     dt_s = 0.5
     comfort_brake = 6.0  # [m/s^2] the speed candidates' braking limit (less where friction is lower)
+    curve_decel = 2.0  # [m/s^2] slowing down for a curve ahead
+    curve_preview_max_m = 150.0
 
     def __init__(self, settings: dict, body: EgoBody = EgoBody()):
         self.cruise = float(settings.get("cruise_speed", 25.0))
+        self.max_lateral_accel = float(settings.get("max_lateral_accel", 4.0))
         self.time_gap = float(settings.get("time_gap", 1.5))
         self.lane_policy = str(settings.get("lane_policy", "keep"))
         if self.lane_policy not in LANE_POLICIES:
@@ -332,6 +335,10 @@ class LatticePlanner:
         if lane != current:
             self.last_change_s = stamp_s
             self.current_lane = lane
+        if speed > 0.0:
+            cap, curve_brake = self._curve_speed(road, s0, t0, ego_speed, max(speed, ego_speed))
+            speed = min(speed, cap)
+            brake = max(brake, curve_brake)
         if stop is not None:  # a stop station: hold the speed so the ego stops at the line
             stop_brake = self._stop_brake(stop, s0, ego_speed)
             if stop_brake is not None:
@@ -353,6 +360,27 @@ class LatticePlanner:
         t_start = corrupt("planner.t_start", t_start)
         lateral_len = corrupt("planner.path_length", lateral_len)
         return Plan(lane, t_lane, speed, s_start, t_start, lateral_len, stamp_s, brake, stage, ttc)
+
+    def _curve_speed(self, road, s0: float, t0: float, ego_speed: float, speed: float) -> tuple[float, float]:
+        """(speed cap [m/s], braking [m/s^2]) for the curves ahead (a junction's corner, a
+        bend): the fastest speed now from which slowing at `curve_decel` keeps the lateral
+        acceleration on the lane ahead under `max_lateral_accel` (v^2 <= a_lat / kappa +
+        2 * decel * distance, over the stopping preview), and, once the ego is at or past
+        that envelope, the deceleration that reaches each bend's speed at the bend (like a
+        stop line's: the speed loop alone lags by a couple of m/s)."""
+        reach = min(self.curve_preview_max_m, speed * speed / (2.0 * self.curve_decel) + 2.0 * self.body.length_m)
+        dist, kappa = road.curvature_ahead(s0, reach)
+        # The curvature of the line the ego drives, offset t0 from the sampled one.
+        lane_kappa = np.abs(kappa) / np.maximum(1.0 - kappa * t0, 0.1)
+        bends = lane_kappa > 1e-6
+        if not bends.any():
+            return math.inf, 0.0
+        bend_v2, d = self.max_lateral_accel / lane_kappa[bends], dist[bends]
+        cap = float(np.sqrt(np.min(bend_v2 + 2.0 * self.curve_decel * d)))
+        if ego_speed <= cap:
+            return cap, 0.0
+        needed = float(np.max((ego_speed * ego_speed - bend_v2) / (2.0 * np.maximum(d, 1.0))))
+        return cap, min(self.max_brake, needed) if needed > 0.0 else 0.0
 
     # Stopping at traffic lights: the ego stops `STOP_GAP_M` before a red light's line,
     # braking when the constant deceleration that stops it there reaches `STOP_DECEL`; at

@@ -192,3 +192,33 @@ def test_the_lidar_sees_a_box_only_if_it_reaches_the_rays(height_m, seen):
     assert bool(trace.events_of("collision")) is not seen
     far = trace.actors["box"].clearance > 10.0  # detections from more than 10 m off
     assert bool(trace.object_count[far].max() > 0) is seen
+
+
+def _bend(limit: str) -> str:
+    # A 90 degree corner of 10 m radius between two straights, taken at a 15 m/s cruise.
+    return f"""scenario bend {{
+  duration 14 s
+  road r {{
+    line length 80 m
+    arc length 15.708 m curvature 0.1 /m
+    line length 200 m
+    lanes right 1 left 1 width 3.5 m
+  }}
+  ego car on r lane -1 at 10 m speed 15 m/s {{
+    stack bev cruise_speed 15 m/s {limit}
+  }}
+}}"""
+
+
+def test_the_planner_slows_for_a_tight_corner():
+    trace = run(_bend(""))
+    ego = trace.actors["ego"]
+    in_corner = (ego.s > 80.0) & (ego.s < 95.7)
+    # Lane -1 runs 1.75 m outside the reference line of this left bend: 11.75 m of radius,
+    # 6.9 m/s at the default 4 m/s^2 (entered at 7.0 m/s), and the lane kept.
+    assert ego.speed[in_corner].max() < 7.2
+    assert np.abs(ego.lane_offset).max() < 0.5
+    # Allowed 10 m/s^2 (near the tyres' limit), it enters at 10 m/s and leaves its lane.
+    fast = run(_bend("max_lateral_accel 10 m/s^2")).actors["ego"]
+    assert fast.speed[(fast.s > 80.0) & (fast.s < 95.7)].max() > 8.0
+    assert np.abs(fast.lane_offset).max() > np.abs(ego.lane_offset).max()

@@ -45,7 +45,8 @@ def _world(plan, actor):
     road = next(r for r in plan.roads if r.name == actor.road)
     odr = parse_xodr(road.xodr_text, road.xodr_file).road(road.xodr_road_id)
     s = float(eval_param_expr(actor.s, {}))
-    t = float(odr.lane_center_t(int(actor.lane.value), s)) + float(eval_param_expr(actor.offset, {}))
+    lane = int(actor.lane.value)  # `at` is the first road's station, on a route too
+    t = float(odr.lane_center_t(lane, s)) + float(eval_param_expr(actor.offset, {}))
     x, y = odr.point_at(s, t)
     return float(x), float(y)
 
@@ -108,3 +109,14 @@ def test_a_standing_ego_cruises_at_its_roads_speed_limit():
     assert got.plan.ego.stack.settings["cruise_speed"].value == pytest.approx(11.176)
     assert any("speed limit, 40.23 km/h" in d.message for d in got.diagnostics)
     assert "cruise_speed" not in _import("SyncArrivalIntersection.xosc").plan.ego.stack.settings
+
+
+def test_an_ego_without_a_route_drives_on_straight_through_junctions():
+    # CyclistCrossing's hero stands on Town01's road 9, 43.6 m long: without a route it left
+    # the map at 4.8 s (a left_road event). Straight on, at 25 mph for the run's 60 s.
+    got = _import("CyclistCrossing.xosc")
+    route = got.plan.ego.route
+    assert route[0] == "9" and len(route) >= 3, route
+    assert any(d.code == "W0802" and "no route in the file" in d.message for d in got.diagnostics)
+    # A road met twice ends the route: it never loops.
+    assert len(set(route)) == len(route)

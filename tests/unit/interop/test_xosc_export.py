@@ -208,6 +208,10 @@ def test_routes_are_assign_route_actions(tmp_path):
         roads = [p.get("roadId") for p in private.findall(".//AssignRouteAction/Route/Waypoint/Position/LanePosition")]
         assert roads == list(actor.route), actor.name  # one waypoint per road, connecting road included
     assert not any("no RoutingAction" in line for line in done.carried)
+    # The ego starts on road 0's lane 1, driven against s, `at 40 m`: that is the road's
+    # station on a route too, so the teleport says s = 40 (it said the road's length less 40).
+    teleport = root.find("Storyboard/Init/Actions/Private[@entityRef='ego']//TeleportAction/Position/LanePosition")
+    assert (teleport.get("roadId"), teleport.get("laneId"), float(teleport.get("s"))) == ("0", "1", 40.0)
 
 
 def test_traffic_lights_are_openscenario_signals(tmp_path):

@@ -581,10 +581,11 @@ def test_route_catalogs_and_route_positions(tmp_path):
     assert got.text is not None
     actors = {a.name: a for a in got.plan.actors()}
     params = {p.name: p.default for p in got.plan.params}
-    # HostStraightRoute: road 0 lane 1 (driven against s) from s = 63 m, pathS 0: 63 m
-    # before the end of the 93.66 m road, i.e. 30.66 m from the route's entry end.
+    # HostStraightRoute: road 0 lane 1 (driven against s) from s = 63 m, pathS 0: `at 63 m`,
+    # the first road's station (on a route too; it was written as 30.66 m, the distance from
+    # the route's entry end, which placed the ego 32 m from where esmini has it).
     assert actors["ego"].route == ["0", "9", "2"] and actors["ego"].lane.value == 1.0
-    assert eval_param_expr(actors["ego"].s, params) == pytest.approx(93.6608312256975 - 63.0)
+    assert eval_param_expr(actors["ego"].s, params) == pytest.approx(63.0)
     # TargetLeftTurnRoute: road 2 lane -1 from s = 100 m, pathS = NPCStartPointS (150 m).
     assert actors["NPC"].route == ["2", "15", "1"] and eval_param_expr(actors["NPC"].s, params) == 250.0
     assert not any("Route" in d.message or "first road" in d.message for d in got.diagnostics), \
@@ -613,7 +614,7 @@ def test_an_inline_route_position(lane, tmp_path):
     ego = got.plan.ego
     if lane == "1":  # 10 m along the route from s = 63 m of road 0, which lane 1 drives against s
         assert ego.route == ["0", "9", "2"]
-        assert eval_param_expr(ego.s, {}) == pytest.approx(93.6608312256975 - 53.0)
+        assert eval_param_expr(ego.s, {}) == pytest.approx(53.0)  # `at` is road 0's station
         placed = next(d for d in got.diagnostics if "nothing assigns" in d.message)
         assert placed.code == "W0802" and placed.label == "<Route>"
     else:
