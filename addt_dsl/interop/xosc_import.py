@@ -1270,9 +1270,9 @@ class _Translate(_Importer):
 
     def straight_on(self, road_name: str, lane: int, s, reach_m: float) -> list[str] | None:
         """A route for an ego the file gives none: from its lane, on along each road's link
-        and through each junction straight on, or else turning to the kerb side, until
-        `reach_m` [m] beyond its start, a road end with neither, or a road met twice. None
-        when it never leaves its road."""
+        and through each junction straight on, else turning to the kerb side, else the other
+        way, never onto a road it already has, until `reach_m` [m] beyond its start or a
+        road end with no such way on. None when it never leaves its road."""
         first = next(i for i, r in self.roads.items() if r.name == road_name)
         try:
             s0 = float(eval_param_expr(s, self.param_values()))
@@ -1288,18 +1288,20 @@ class _Translate(_Importer):
             direct = [e.road_id for e in outs if e.connection is None or e.connection.direct]
             turns = {turn_of(self.network, e.road_id, e.contact) for e in outs}
             # Straight on where a junction allows it, else the turn that crosses no oncoming
-            # traffic (right under right-hand traffic).
-            kerb = "right" if self.network.road(last.road_id).rule == "RHT" else "left"
-            step = direct[0] if direct else next((t for t in ("straight", kerb) if t in turns), None)
-            if step is None:
+            # traffic (right under right-hand traffic), else the other; never onto a road the
+            # route already has (the language's routes do not repeat a road).
+            kerb, far = ("right", "left") if self.network.road(last.road_id).rule == "RHT" else ("left", "right")
+            options = direct[:1] if direct else [t for t in ("straight", kerb, far) if t in turns]
+            for step in options:
+                try:
+                    more, more_legs = resolve_route(self.network, stops + [step], lane, s0)
+                except RouteError:
+                    continue
+                if len(set(more)) == len(more):
+                    break
+            else:
                 break
-            try:
-                more, more_legs = resolve_route(self.network, stops + [step], lane, s0)
-            except RouteError:
-                break
-            if len(set(more)) < len(more):  # round a block and back: enough
-                break
-            stops, roads, legs = stops + [step], more, more_legs
+            stops, roads, legs = list(more), more, more_legs  # (a turn's road after the junction named)
         return roads if len(roads) > 1 else None
 
     def environment_action(self, env) -> None:
@@ -1888,7 +1890,7 @@ class _Translate(_Importer):
                     if route is not None:
                         fields["route"] = route
                         self.approx(info["el"], f"the ego has no route in the file: it drives on through junctions, "
-                                                f"straight where it can, else to the kerb side (roads "
+                                                f"straight where it can, else to the kerb side, else the other way (roads "
                                                 f"{' -> '.join(route)})")
                 for key in ("goal_s", "mu"):
                     if extra.get(key) is not None:

@@ -586,7 +586,8 @@ def _loop(run: _Run) -> Trace:
         if run.ego_s >= ego_road.road.length and not run.left_road:
             # Past the end of its road or route: `s` stays at the end, the map has nothing
             # beyond, and the run goes on off the map. Say so once (a route through the
-            # junction keeps the ego on the network).
+            # junction keeps the ego on the network); from then on it is in no lane: its
+            # `lane_offset` is unknown (NaN), which fails `stay in lane`.
             rx, ry, h = ego_road.road.reference_pose(run.ego_s)
             if (e.x - rx) * math.cos(h) + (e.y - ry) * math.sin(h) > 0.5 * plan.ego.length_m:
                 run.left_road = True
@@ -605,7 +606,7 @@ def _loop(run: _Run) -> Trace:
 
         # Record the state at t_now (clearance, the last field, below).
         ego_row = (e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
-                   ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)
+                   math.nan if run.left_road else ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)
         if few:
             row[0] = ego_row
             block[k, :, :-1] = row

@@ -191,8 +191,12 @@ def test_driving_past_the_end_of_the_road_is_an_event(road_m, left):
   ego car on r lane -1 at 10 m speed 20 m/s {{
     stack bev cruise_speed 20 m/s
   }}
+  expect {{
+    stay in lane
+  }}
 }}""")
-    trace = X.execute(spec).trace
+    result = X.execute(spec)
+    trace = result.trace
     events = trace.events_of("left_road")
     assert len(events) == int(left)
     if left:
@@ -201,3 +205,8 @@ def test_driving_past_the_end_of_the_road_is_an_event(road_m, left):
         # Half the car's length past the end: (120 + 2.3 - 10) m at 20 m/s, within a step or two.
         assert e.time_s == pytest.approx((120.0 + 2.3 - 10.0) / 20.0, abs=0.05)
         assert trace.actors["ego"].s.max() == pytest.approx(120.0)
+        # In no lane from then on: lane keeping is unknown there, and fails.
+        off = trace.time >= e.time_s
+        assert np.isnan(trace.actors["ego"].lane_offset[off]).all()
+        assert not np.isnan(trace.actors["ego"].lane_offset[~off]).any()
+    assert result.verdicts[0].passed is not left
