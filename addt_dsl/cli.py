@@ -261,7 +261,7 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
     limit = args.limit or None
     specs = itertools.islice(stream, limit) if limit else stream
     total = min(total, limit) if limit else total
-    store.begin_session(" ".join(sys.argv), executor.name, executor.workers)
+    store.begin_session(" ".join(sys.argv), executor.name, min(executor.workers, total))  # no more ever start
     already = len(store)
     quiet = args.format == "json"
     if already and not quiet:

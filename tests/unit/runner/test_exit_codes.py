@@ -141,3 +141,11 @@ def test_report_of_a_store_with_failures_is_exit_1(tmp_path):
     store.close()
     assert cli.main(["report", str(tmp_path / "r.sqlite"), "--animations", "0"]) == EXIT_FAILED
     assert sqlite3.connect(tmp_path / "r.sqlite").execute("SELECT COUNT(*) FROM runs").fetchone() == (2,)
+
+
+@pytest.mark.timeout(120)  # before workers started on demand, this started 10**20 processes
+def test_more_jobs_than_runs_or_than_sqlite_holds(fake_runs, tmp_path, capsys):
+    path = _scenario(tmp_path, [0])
+    for jobs in ("100000", "99999999999999999999"):
+        assert cli.main([path, "--jobs", jobs, "--out", str(tmp_path / jobs), "--no-report"]) == EXIT_OK
+    assert "Traceback" not in capsys.readouterr().err
