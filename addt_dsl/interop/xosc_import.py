@@ -320,7 +320,7 @@ class _Translate(_Importer):
             if name:
                 self.params.setdefault(name, (kind, value))
         if SIDECAR_PARAM in self.params:
-            self.load_sidecar(root.find("ParameterDeclarations"))
+            self.load_sidecar(root.find("ParameterDeclarations"), header)
         if _child(root, "Storyboard") is None or _child(root, "Entities") is None:
             self.error(root, "no <Storyboard> or <Entities>: not a scenario (a catalog?)")
             return None
@@ -339,7 +339,7 @@ class _Translate(_Importer):
 
     # -- side file of an exported run
 
-    def load_sidecar(self, decls) -> None:
+    def load_sidecar(self, decls, header) -> None:
         name = self.params[SIDECAR_PARAM][1]
         try:
             confine(name, self.path.parent, self.root)
@@ -361,6 +361,14 @@ class _Translate(_Importer):
         problem = _sidecar_problem(data)
         if problem:
             self.error(decls, f"side file {name} is not what addtc export writes: {problem}")
+            return
+        # `addtc export` names the scenario in the FileHeader and in the side file: a side
+        # file of another export would bring its stack, faults and oracles into this one.
+        written_for = header.get("description") if header is not None else None
+        if written_for and data.get("scenario") and written_for != data["scenario"]:
+            self.error(decls, f"side file {name} was written for scenario {data['scenario']!r}, but this file is "
+                              f"scenario {written_for!r}: it belongs to another export; export the run again, or "
+                              f"remove the `{SIDECAR_PARAM}` parameter to import the OpenSCENARIO alone")
             return
         self.sidecar = data
 
@@ -1788,9 +1796,10 @@ def _sidecar_problem(data: dict) -> str:
         for d in data.get("param_dims", {}).values():
             units.dim_from_name(d)
         float(data.get("step_s", 0.01))
-        int(data.get("seed", 0))
-        if data.get("run_seed") is not None:
-            int(data["run_seed"])
+        for key in ("seed", "run_seed"):  # int(1.5) is 1: a seed must be a whole number as written
+            value = data.get(key)
+            if value is not None and (type(value) is not int):
+                return f"'{key}' is {value!r}, not an integer"
     except (ValueError, TypeError, KeyError, AttributeError) as exc:  # pydantic's ValidationError is a ValueError
         return (str(exc).splitlines() or [type(exc).__name__])[0][:200]
     return ""

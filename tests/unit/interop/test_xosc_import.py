@@ -176,7 +176,8 @@ def test_mutated_esmini_files_never_raise(seed, tmp_path):
                                     "FORMAT_OK, \"faults\": [{\"kind\": 3}]}",
                                     "FORMAT_OK, \"actors\": {\"ego\": {\"vehicle\": \"tank\"}}}",
                                     "FORMAT_OK, \"behaviors\": {\"lead_cruise\": {\"clause\": 5}}}",
-                                    "FORMAT_OK, \"params\": {\"x\": \"y\"}}"])
+                                    "FORMAT_OK, \"params\": {\"x\": \"y\"}}",
+                                    "FORMAT_OK, \"run_seed\": 1.5}", "FORMAT_OK, \"seed\": true}"])
 def test_damaged_side_file_is_a_diagnostic(damage, tmp_path):
     spec = expand(compile_file(ROOT / "examples" / "lead_brake.addt").plan).specs[0]
     done = export_run(spec, tmp_path)
@@ -184,6 +185,19 @@ def test_damaged_side_file_is_a_diagnostic(damage, tmp_path):
     got = import_xosc(done.xosc_path)
     assert got.text is None
     assert any(d.code == "E0802" and "side file" in d.message for d in got.diagnostics), got.diagnostics
+
+
+def test_a_side_file_of_another_export_is_refused(tmp_path):
+    """Two exports side by side, one side file copied over the other's: importing it
+    brought the other scenario's stack, faults, oracles and name into this one, silently."""
+    runs = {name: expand(compile_file(ROOT / "examples" / f"{name}.addt").plan).specs[0]
+            for name in ("lead_brake", "following")}
+    done = {name: export_run(spec, tmp_path / name) for name, spec in runs.items()}
+    done["lead_brake"].sidecar_path.write_bytes(done["following"].sidecar_path.read_bytes())
+    got = import_xosc(done["lead_brake"].xosc_path)
+    assert got.text is None
+    (d,) = [d for d in got.diagnostics if d.is_error]
+    assert d.code == "E0802" and "written for scenario 'following'" in d.message and "'lead_brake'" in d.message
 
 
 def _without_sidecar(spec, tmp_path):
