@@ -607,7 +607,7 @@ def semantic_key(obj: RunSpec | ScenarioPlan) -> str:
     return hashlib.sha256(text).hexdigest()[:20]
 
 
-def compile_pinned(text: str, path: str = "<pinned>", base_dir: str | Path = ".") -> RunSpec:
+def compile_pinned(text: str | bytes, path: str = "<pinned>", base_dir: str | Path = ".") -> RunSpec:
     """Compile a pinned file and return its one run (raises ValueError otherwise)."""
     result = compile_source(text, path=path, base_dir=base_dir)
     if not result.ok:
