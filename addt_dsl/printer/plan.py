@@ -271,7 +271,7 @@ def _hold(pr: _Printer, tr: TriggerPlan) -> str:
 def _clause(pr: _Printer, c: ClausePlan) -> str:
     if c.keyword == "light":  # a traffic light's state change (`lights { }`)
         return _join("light", c.name, pr.settings(LIGHT_CLAUSE_SPECS, c.settings))
-    cls = CLAUSE_TABLES[c.keyword].get(c.name)
+    cls = CLAUSE_TABLES.get(c.keyword, {}).get(c.name)
     if cls is None:
         raise PrinterError(f"unknown {c.keyword} {c.name!r}")
     return _join(c.keyword, c.name, pr.settings(cls.params, c.settings))
