@@ -659,8 +659,9 @@ def _check_row(row: dict) -> None:
         if type(row[name]) not in types:
             raise TypeError(f"{name} is {row[name]!r}")
     for name in ("params", "cell"):
-        if not isinstance(json.loads(row[name]), dict):
-            raise TypeError(f"{name} is not a JSON object")
+        values = json.loads(row[name])
+        if not isinstance(values, dict) or not all(type(v) in (float, int) for v in values.values()):
+            raise TypeError(f"{name} is not a JSON object of numbers")
     verdicts = json.loads(row["verdicts"])
     if not isinstance(verdicts, list) or not all(isinstance(v, dict) for v in verdicts):
         raise TypeError("verdicts is not a JSON list of objects")

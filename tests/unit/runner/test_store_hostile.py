@@ -60,6 +60,7 @@ ROWS = {
     "verdicts_wrong_shape": f"UPDATE runs SET verdicts = '[{{\"x\": 1}}]' WHERE rowid = {FIRST}",
     "params_not_json": f"UPDATE runs SET params = '[1, 2' WHERE rowid = {FIRST}",
     "params_a_list": f"UPDATE runs SET params = '[1, 2]' WHERE rowid = {FIRST}",
+    "cell_of_a_list": f"UPDATE runs SET cell = '{{\"mode\": []}}' WHERE rowid = {FIRST}",
     "stats_not_json": f"UPDATE runs SET stats = 'nope' WHERE rowid = {FIRST}",
     "injections_bad_key": f"UPDATE runs SET injections = '{{\"events\": {{\"a\": 1}}}}' WHERE rowid = {FIRST}",
     "seq_text": f"UPDATE runs SET seq = 'abc' WHERE rowid = {FIRST}",
