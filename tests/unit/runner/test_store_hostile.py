@@ -13,7 +13,10 @@ from hypothesis import strategies as st
 from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 
 from addt_dsl import cli
+from addt_dsl.compiler import compile_source
 from addt_dsl.errors import EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE
+from addt_dsl.limits import DEFAULT
+from addt_dsl.printer import check_spec
 from addt_dsl.runtime.result import Verdict
 from addt_dsl.runtime.store import ResultStore, StoreError, StoreMismatch
 from addt_dsl.sweep import expand
@@ -182,3 +185,30 @@ def test_any_value_in_any_column_is_a_report_or_one_line(good, tmp_path_factory,
     err = capsys.readouterr().err
     assert "Traceback" not in err and "internal error" not in err, (column, value, err)
     assert code in (0, 1, 3), (column, value, err)
+
+
+def test_trace_of_a_run_edited_beyond_a_scenario_is_one_line(good, tmp_path, capsys):
+    """A stored plan edited to a duration of 1e308 s: `addtc trace` re-ran it and said
+    'internal error: OverflowError'; now it is checked as a scenario first."""
+    with ResultStore(good, readonly=True) as store:
+        plan = store.plan().model_copy(update={"duration_s": 1e308})
+    path = _damaged(good, tmp_path, "DELETE FROM plans")
+    with sqlite3.connect(path) as db:
+        db.execute("UPDATE meta SET value = ? WHERE name = 'plan'", (plan.model_dump_json(),))
+    db.close()
+    assert cli.main(["trace", str(path), "c000-r000"]) == EXIT_INCOMPLETE
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {path}: run c000-r000 is not one a scenario can state") and "E0301" in err
+
+
+def test_trace_checks_a_run_of_raised_limits_as_the_sweep_made_it():
+    """A sweep run with `--max agents=N` makes runs beyond the default limits: `trace`
+    checks values, not sizes."""
+    agents = "\n".join(f"  agent a{i} car on r lane -1 at {30 + 5 * i} m speed 5 m/s" for i in range(12))
+    text = scenario([0]).replace("  expect {", agents + "\n  expect {")
+    few = DEFAULT.raised(agents=10)
+    plan = compile_source(text, limits=few.raised(agents=12)).plan
+    spec = expand(plan).specs[0]
+    with pytest.raises(ValueError, match="agents"):
+        check_spec(spec, few)
+    check_spec(spec, cli._ANY_SIZE)
