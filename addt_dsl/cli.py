@@ -39,7 +39,7 @@ from addt_dsl.console import compile_and_report, stack_option
 from addt_dsl.diagnostics import render_json
 from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, ToolError, UsageError, nonneg_float,
                              nonneg_int, positive_int, time_bound, verdict_exit_code)
-from addt_dsl.limits import DEFAULT, parse_limit
+from addt_dsl.limits import DEFAULT, INPUT_LIMITS, parse_limit
 
 SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map", "export", "import")
 
@@ -261,7 +261,7 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
     limit = args.limit or None
     specs = itertools.islice(stream, limit) if limit else stream
     total = min(total, limit) if limit else total
-    store.begin_session(" ".join(sys.argv), executor.name, executor.workers)
+    store.begin_session(" ".join(sys.argv), executor.name, min(executor.workers, total))  # no more ever start
     already = len(store)
     quiet = args.format == "json"
     if already and not quiet:
@@ -385,8 +385,13 @@ def _salvage(target: Path, into: Path) -> int:
     return EXIT_OK
 
 
+# Input limits and cost thresholds out of the way: a stored run was made under the sweep's `--max`.
+_ANY_SIZE = DEFAULT.raised(allow_large=True, **{name: type(getattr(DEFAULT, name))(2 ** 62) for name in INPUT_LIMITS})
+
+
 def cmd_trace(args) -> int:
     """Execute a stored run again (its RunSpec determines it) and show its signals and events."""
+    from addt_dsl.printer import check_spec
     from addt_dsl.reporting.trace_view import events_path, events_table, print_trace, rerun, signals_table
 
     with _open_store(Path(args.dir)) as store:
@@ -394,6 +399,11 @@ def cmd_trace(args) -> int:
         if record is None:
             ids = [r.run_id for r in store.records(limit=5)]
             raise UsageError(f"no run {args.run_id!r} in {store.path} (runs are named like {', '.join(ids)})")
+        try:  # the stored run met a compiler (with whatever --max the sweep had): its values still must
+            check_spec(store.spec(record), _ANY_SIZE)
+        except ValueError as exc:
+            raise ToolError(f"{store.path}: run {args.run_id} is not one a scenario can state (the store was "
+                            f"edited or damaged): {exc}") from None
         run = rerun(store, record)
     table, events = signals_table(run.spec, run.trace), events_table(run.trace)
     print_trace(run, table, events)

@@ -104,6 +104,10 @@ class AddtCompileError(Exception):
     pass
 
 
+class AddtCorpusError(Exception):
+    """An entry of the failure corpus cannot be replayed (it does not compile)."""
+
+
 class AddtWarning(UserWarning):
     """A `warn` oracle was violated: shown in pytest's warnings summary (and as a
     `warning.NAME` property in JUnit XML), never a failure; `-W error::addt_dsl.pytest_plugin.AddtWarning`
@@ -221,9 +225,13 @@ class AddtItem(pytest.Item):
         from addt_dsl.printer import compile_pinned
 
         for path in corpus_entries(self.corpus_dir(), self.path, plan.name):
-            spec = compile_pinned(path.read_text(), path=str(path), base_dir=path.parent)
-            outcome = cache.get(spec)
             shown = self.relative(path)
+            try:
+                spec = compile_pinned(path.read_bytes(), path=shown, base_dir=path.parent)
+            except ValueError as exc:  # damaged, hand-edited, or older than the language: say which, no traceback
+                raise AddtCorpusError(f"corpus entry {shown} cannot be replayed: {exc}\n"
+                                       f"fix it, or delete it if it is stale") from None
+            outcome = cache.get(spec)
             notes.append(f"replayed {shown}: {'still fails' if outcome.failures else 'passes'}")
             if outcome.failures:
                 f = outcome.primary()
@@ -307,6 +315,8 @@ class AddtItem(pytest.Item):
             return excinfo.value.message
         if isinstance(excinfo.value, AddtCompileError):
             return f"{self.path} does not compile:\n{excinfo.value}"
+        if isinstance(excinfo.value, AddtCorpusError):
+            return str(excinfo.value)
         return super().repr_failure(excinfo)
 
     def reportinfo(self):

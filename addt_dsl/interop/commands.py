@@ -17,6 +17,7 @@ from addt_dsl import units
 from addt_dsl.console import compile_and_report
 from addt_dsl.diagnostics import render_json, render_text
 from addt_dsl.errors import EXIT_OK, EXIT_USAGE, UsageError
+from addt_dsl.printer import check_spec, format_quantity
 from addt_dsl.sweep import expand, make_spec
 
 # The translators (scenariogeneration, the road reader) load in the commands that use them,
@@ -48,6 +49,7 @@ def add_commands(sub) -> None:
 
 def _param_values(plan, items: list[str]) -> dict[str, float]:
     dims = {p.name: units.dim_from_name(p.dimension) for p in plan.params}
+    params = {p.name: p for p in plan.params}
     values = plan.nominal_params()
     for item in items:
         name, _, text = item.partition("=")
@@ -62,6 +64,16 @@ def _param_values(plan, items: list[str]) -> dict[str, float]:
             raise UsageError(f"--params {item}: unknown unit '{match.group(2)}'") from None
         if match.group(2) and dim != dims[name]:
             raise UsageError(f"--params {item}: {name} is a {units.dim_name(dims[name])}")
+        # The compiler checked every value that depends on a parameter over its range (or
+        # choices) only: a value beyond them would export what no run of the scenario can be.
+        p = params[name]
+        shown = [format_quantity(v, dims[name]) for v in (p.choices or (p.low, p.high)) if v is not None]
+        if p.choices and value not in p.choices:
+            raise UsageError(f"--params {item}: {name} is one of {', '.join(shown)}")
+        if p.low is not None and p.high is not None and not p.low <= value <= p.high:
+            raise UsageError(f"--params {item}: outside {name}'s range [{', '.join(shown)}]")
+        if p.integer and value != int(value):
+            raise UsageError(f"--params {item}: {name} is a whole number")
         values[name] = value
     return values
 
@@ -81,6 +93,10 @@ def cmd_export(args) -> int:
             raise UsageError(f"no run '{args.run}' in the sweep (runs: {specs[0].run_id} .. {specs[-1].run_id})")
     elif args.params:
         spec = make_spec(plan, _param_values(plan, args.params), specs[0].seed, run_id="params")
+        try:  # a parameter without a range: its value meets the compiler's checks here
+            check_spec(spec)
+        except ValueError as exc:
+            raise UsageError(f"--params {' '.join(args.params)}: not a run the scenario can state: {exc}") from None
     else:
         spec = specs[0]
     try:

@@ -344,7 +344,7 @@ class _Translate(_Importer):
             if name:
                 self.params.setdefault(name, (kind, value))
         if SIDECAR_PARAM in self.params:
-            self.load_sidecar(root.find("ParameterDeclarations"))
+            self.load_sidecar(root.find("ParameterDeclarations"), header)
         if _child(root, "Storyboard") is None or _child(root, "Entities") is None:
             self.error(root, "no <Storyboard> or <Entities>: not a scenario (a catalog?)")
             return None
@@ -363,7 +363,7 @@ class _Translate(_Importer):
 
     # -- side file of an exported run
 
-    def load_sidecar(self, decls) -> None:
+    def load_sidecar(self, decls, header) -> None:
         name = self.params[SIDECAR_PARAM][1]
         try:
             confine(name, self.path.parent, self.root)
@@ -385,6 +385,14 @@ class _Translate(_Importer):
         problem = _sidecar_problem(data)
         if problem:
             self.error(decls, f"side file {name} is not what addtc export writes: {problem}")
+            return
+        # `addtc export` names the scenario in the FileHeader and in the side file: a side
+        # file of another export would bring its stack, faults and oracles into this one.
+        written_for = header.get("description") if header is not None else None
+        if written_for and data.get("scenario") and written_for != data["scenario"]:
+            self.error(decls, f"side file {name} was written for scenario {data['scenario']!r}, but this file is "
+                              f"scenario {written_for!r}: it belongs to another export; export the run again, or "
+                              f"remove the `{SIDECAR_PARAM}` parameter to import the OpenSCENARIO alone")
             return
         self.sidecar = data
 
@@ -1461,6 +1469,10 @@ class _Translate(_Importer):
                 continue
             if body.tag == "GlobalAction" and _child(body, "InfrastructureAction", "TrafficSignalAction") is not None:
                 exact = ((self.sidecar or {}).get("lights") or {}).get("steps", {}).get(name)
+                if exact and exact.get("name") not in self.light_ctls:
+                    self.error(body, f"the side file's light step {name!r} names controller "
+                                     f"{exact.get('name')!r}, which this file does not have")
+                    raise _Stop
                 lights += [(body, ClausePlan.model_validate(exact))] if exact else \
                     [(body, c) for c in self.light_clauses(body)]
                 continue
@@ -1949,12 +1961,20 @@ def _sidecar_problem(data: dict) -> str:
                           ("group_events", list), ("holds", dict)):
             if not isinstance(data.get(key, kind()), kind):
                 return f"'{key}' is not a {kind.__name__}"
+        for key in ("scenario", "description", "source_file", "run_id"):
+            if not isinstance(data.get(key, ""), str):
+                return f"'{key}' is not a string"
         for info in data.get("actors", {}).values():
             if info.get("vehicle") not in VEHICLES:
                 return f"unknown vehicle {info.get('vehicle')!r}"
-            for key in ("length_m", "width_m", "height_m", "mass_kg", "wheelbase_m", "goal_s", "mu"):
+            for key in ("length_m", "width_m", "height_m", "mass_kg", "wheelbase_m", "goal_s", "mu", "yaw"):
                 if info.get(key) is not None:
                     float(info[key])
+            if (info.get("mass_kg") is None) != (info.get("wheelbase_m") is None):
+                return "an actor's 'mass_kg' and 'wheelbase_m' come together"
+            route = info.get("route", [])
+            if not isinstance(route, list) or not all(type(r) in (str, int) for r in route):
+                return "an actor's 'route' is not a list of road ids"
             if info.get("stack"):
                 ClausePlan.model_validate(info["stack"])
             for x in info.get("sensors", []):
@@ -1973,8 +1993,9 @@ def _sidecar_problem(data: dict) -> str:
             for key in ("green_s", "yellow_s", "red_s", "offset_s"):
                 float(c[key])
         for clause in lights.get("steps", {}).values():
-            if ClausePlan.model_validate(clause).keyword != "light":
-                return "a light step that is not a `light` clause"
+            step = ClausePlan.model_validate(clause)
+            if step.keyword != "light" or step.settings.get("state") not in (*LIGHT_STATES, LIGHT_PROGRAM):
+                return "a light step that is not a `light` clause with a state"
         for f in data.get("faults", []):
             ConcreteFault.model_validate(f)
         for o in data.get("oracles", []):
@@ -1984,9 +2005,10 @@ def _sidecar_problem(data: dict) -> str:
         for d in data.get("param_dims", {}).values():
             units.dim_from_name(d)
         float(data.get("step_s", 0.01))
-        int(data.get("seed", 0))
-        if data.get("run_seed") is not None:
-            int(data["run_seed"])
+        # int(1.5) is 1: a seed must be a whole number as written (run_seed may be absent: null).
+        for key, value in (("seed", data.get("seed", 0)), ("run_seed", data.get("run_seed"))):
+            if type(value) is not int and not (key == "run_seed" and value is None):
+                return f"'{key}' is {value!r}, not an integer"
     except (ValueError, TypeError, KeyError, AttributeError) as exc:  # pydantic's ValidationError is a ValueError
         return (str(exc).splitlines() or [type(exc).__name__])[0][:200]
     return ""

@@ -4,9 +4,9 @@
 from __future__ import annotations
 
 from addt_dsl.printer.expr import PrinterError, dim_of_name, format_const, format_expr, format_quantity
-from addt_dsl.printer.plan import (compile_pinned, params_referenced, pin_spec, pinned_fault_plan, print_plan,
-                                   print_spec, semantic_key, side_files)
+from addt_dsl.printer.plan import (check_spec, compile_pinned, params_referenced, pin_spec, pinned_fault_plan,
+                                   print_plan, print_spec, semantic_key, side_files)
 
-__all__ = ["PrinterError", "compile_pinned", "dim_of_name", "format_const", "format_expr", "format_quantity",
-           "params_referenced", "pin_spec", "pinned_fault_plan", "print_plan", "print_spec", "semantic_key",
-           "side_files"]
+__all__ = ["PrinterError", "check_spec", "compile_pinned", "dim_of_name", "format_const", "format_expr",
+           "format_quantity", "params_referenced", "pin_spec", "pinned_fault_plan", "print_plan", "print_spec",
+           "semantic_key", "side_files"]

@@ -158,7 +158,7 @@ class ExprPrinter:
             case E.Call(fn="sqrt", args=(a,)):
                 d = self.default_dim(a)
                 return Dim(d.length // 2, d.time // 2, d.mass // 2, d.angle // 2)
-            case E.Call(args=args):
+            case E.Call(args=args) if args:  # no arguments: printed as such, and the compiler says so
                 return self.default_dim(next((a for a in args if _has_ref(a)), args[0]))
         return units.DIMENSIONLESS
 

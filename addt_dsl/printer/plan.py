@@ -34,6 +34,8 @@ from addt_dsl.compiler.rules.actors import CLAUSE_TABLES
 from addt_dsl.compiler.rules.lights import CONTROLLER_SPECS, LIGHT_CLAUSE_SPECS
 from addt_dsl.compiler.rules.oracles import NO_CLAUSES, reach_goal_formula
 from addt_dsl.diagnostics import render_text
+from addt_dsl.limits import DEFAULT as DEFAULT_LIMITS
+from addt_dsl.limits import Limits
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, FaultPlan, OraclePlan, ParamPlan, RoadPlan,
                            RunSpec, ScenarioPlan, SweepPlan, TriggerPlan)
 from addt_dsl.printer.expr import (ExprPrinter, PrinterError, dim_of_name, format_const, format_quantity,
@@ -271,7 +273,7 @@ def _hold(pr: _Printer, tr: TriggerPlan) -> str:
 def _clause(pr: _Printer, c: ClausePlan) -> str:
     if c.keyword == "light":  # a traffic light's state change (`lights { }`)
         return _join("light", c.name, pr.settings(LIGHT_CLAUSE_SPECS, c.settings))
-    cls = CLAUSE_TABLES[c.keyword].get(c.name)
+    cls = CLAUSE_TABLES.get(c.keyword, {}).get(c.name)
     if cls is None:
         raise PrinterError(f"unknown {c.keyword} {c.name!r}")
     return _join(c.keyword, c.name, pr.settings(cls.params, c.settings))
@@ -609,9 +611,26 @@ def semantic_key(obj: RunSpec | ScenarioPlan) -> str:
     return hashlib.sha256(text).hexdigest()[:20]
 
 
-def compile_pinned(text: str, path: str = "<pinned>", base_dir: str | Path = ".") -> RunSpec:
+def check_spec(spec: RunSpec, limits: Limits = DEFAULT_LIMITS) -> None:
+    """A RunSpec read from a file (`addtc shrink --run-key`, a results store) has met no
+    compiler: printed pinned and compiled again, it meets the compiler's checks and limits
+    (a duration of 1e308 s, a step of 0, 5000 agents: E0301, E0701) before anything runs it.
+    Raises ValueError with the diagnostics."""
+    try:
+        pinned = pin_spec(spec).plan
+        text = print_plan(pinned, keep_user_text=False)
+    except (PrinterError, ValueError, TypeError) as exc:  # pydantic's ValidationError is a ValueError
+        raise ValueError(f"it cannot be written as a scenario: {(str(exc).splitlines() or [''])[0]}") from None
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, body in side_files(pinned).items():
+            (Path(tmp) / name).write_text(body)
+        compile_pinned(text, path="<the run's scenario>", base_dir=tmp, limits=limits)
+
+
+def compile_pinned(text: str | bytes, path: str = "<pinned>", base_dir: str | Path = ".",
+                   limits: Limits = DEFAULT_LIMITS) -> RunSpec:
     """Compile a pinned file and return its one run (raises ValueError otherwise)."""
-    result = compile_source(text, path=path, base_dir=base_dir)
+    result = compile_source(text, path=path, base_dir=base_dir, limits=limits)
     if not result.ok:
         raise ValueError("pinned source does not compile:\n" + render_text(result.diagnostics, result.sources))
     specs = expand(result.plan).specs

@@ -5,6 +5,7 @@ mid-write leaves the old file and no stray temporary."""
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from collections.abc import Iterator
@@ -17,6 +18,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path to write `path`'s new content to; renamed over `path` on success,
     removed on any error."""
     path = Path(path)
+    if path.is_dir():  # refused by name: the rename would fail naming the temporary file
+        raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)

@@ -16,7 +16,7 @@ def store_summary(store: ResultStore) -> dict:
     """`reporting.tables.summary` over every stored run (streamed), with `not_done`: the
     runs the last sweep could not complete (lost on every attempt; not stored)."""
     out = summary(store.plan(), store.records(), store.rejected(), cells=store.records("outcome != ''"))
-    not_done = json.loads(store.meta("not_done") or "[]")
+    not_done = store.not_done()
     if not_done:
         out["not_done"] = not_done
     return out

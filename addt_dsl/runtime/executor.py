@@ -311,7 +311,8 @@ class LocalExecutor:
         attempts = Attempts(self.retries)
         again: deque[tuple[int, RunSpec]] = deque()  # runs to retry, before new ones
         pool, self._kept = self._kept, []
-        pool += [self._spawn(ctx) for _ in range(self.workers - len(pool))]
+        # Workers start when a run needs one, never more than the runs: `--jobs 100000` on a
+        # sweep of 2 runs starts 2 processes, not 100000.
         idle = list(pool)
         busy: list[_Worker] = []
         exhausted = False
@@ -324,12 +325,16 @@ class LocalExecutor:
 
         try:
             while True:
-                while idle and (again or not exhausted):
+                while (idle or len(pool) < self.workers) and (again or not exhausted):
                     nxt = again.popleft() if again else next(items, None)
                     if nxt is None:
                         exhausted = True
                         break
-                    w = idle.pop()
+                    if idle:
+                        w = idle.pop()
+                    else:
+                        w = self._spawn(ctx)
+                        pool.append(w)
                     while not self._dispatch(w, *nxt):  # died while idle: a new one takes the run
                         self._stop(w, kill=True)
                         w = replace(w)

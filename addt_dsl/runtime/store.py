@@ -35,6 +35,7 @@ from pathlib import Path
 
 from addt_dsl.errors import ToolError
 from addt_dsl.fingerprint import code_fingerprint, code_identity, describe
+from addt_dsl.plan import SCHEMA_VERSION as PLAN_SCHEMA_VERSION
 from addt_dsl.plan import RunSpec, ScenarioPlan
 from addt_dsl.runtime.result import RunResult, Verdict
 
@@ -287,6 +288,11 @@ class ResultStore:
             raise StoreError(f"{self.path} is an SQLite database but not a results store (tables: "
                              f"{', '.join(sorted(tables)) or 'none'}); it is left as it is: pick another "
                              "--out or --store")
+        schema = self.meta("schema")
+        if schema is not None and schema != SCHEMA_VERSION:  # its rows mean something else: never mixed
+            raise StoreError(f"{self.path} is a results store of schema {schema!r}, made by another version of "
+                             f"addtc (this one reads schema {SCHEMA_VERSION}); it is left as it is: read it with "
+                             "the addtc that made it, or pick another --out or --store")
 
     def errors(self, doing: str) -> _Errors:
         """Turn SQLite errors into one-line `StoreError`s naming the file and the remedy."""
@@ -305,15 +311,26 @@ class ResultStore:
             return StoreBusy(f"{where} is locked by another process ({first}); wait for it to finish")
         if isinstance(exc, sqlite3.DatabaseError) and not isinstance(exc, sqlite3.OperationalError) \
                 or "malformed" in first or "not a database" in first:
-            return StoreError(f"{where} is damaged ({first}); copy its readable runs into a new store with "
-                              f"`addtc report {where} --salvage NEW.sqlite`, then resume with --store NEW.sqlite")
+            return self.damaged(first)
         return StoreError(f"{where}: {first} while {doing}")
+
+    def damaged(self, what: str) -> StoreError:
+        """A store SQLite can read but whose contents are not what addtc writes (a malformed
+        page, or a row or plan edited or damaged by something else): one line, salvage remedy."""
+        where = self.path if self.path is not None else "the in-memory store"
+        return StoreError(f"{where} is damaged ({what}); copy its readable runs into a new store with "
+                          f"`addtc report {where} --salvage NEW.sqlite`, then resume with --store NEW.sqlite")
 
     @classmethod
     def cache(cls, path: str | Path | None = None) -> ResultStore:
         """The search's run cache: runs of any plans, found by `RunSpec.key()`. Keys carry
         the code fingerprint, so runs made by other code are never found: they run again."""
         store = cls(path, create=True)
+        scenario = store.meta("scenario")
+        if store.meta("plan") is not None:  # one plan's runs: another plan's would be mixed into its reports
+            store.close()
+            raise StoreMismatch(f"{path} is the results store of a sweep of {scenario!r}, not a run cache: runs "
+                                "of other plans would be mixed into it; pick another --cache")
         store.set_meta("code", json.dumps(code_identity()))
         return store
 
@@ -366,6 +383,11 @@ class ResultStore:
         digest = plan_hash(plan)
         stored = self.meta("plan_hash")
         code = json.dumps(code_identity())
+        if stored is None and not fresh and len(self):
+            raise StoreMismatch(
+                f"{self.path} holds {len(self)} run(s) but no plan: it is a run cache of `addtc falsify` or "
+                "`addtc shrink` (--cache), not a sweep's results store, and its runs would be mixed into this "
+                "sweep's; pick another --out or --store, or use --fresh to discard them")
         if stored is not None and stored != digest:
             stored_code = self.meta("code")
             if not fresh and stored_code != code:
@@ -425,12 +447,50 @@ class ResultStore:
         if self._plan is None:
             text = self.meta("plan")
             if text is None:
-                raise ValueError(f"{self.path} holds no plan")
-            self._plan = ScenarioPlan.model_validate_json(text)
+                raise StoreError(f"{self.path} holds no plan: it is a run cache of `addtc falsify` or `addtc "
+                                 "shrink`, not a sweep's results store (`addtc trace FILE RUN_ID` re-runs one "
+                                 "of its runs)")
+            self._plan = self._stored_plan(text)
         return self._plan
 
+    def _stored_plan(self, text: str, what: str = "") -> ScenarioPlan:
+        """A stored plan (`what`: the run whose plan it is; "" for the store's own plan). A
+        store damaged there, or made by another version of the plan's schema, is a one-line
+        StoreError."""
+        try:
+            return ScenarioPlan.model_validate_json(text)
+        except ValueError as exc:  # pydantic's ValidationError is a ValueError
+            try:
+                version = json.loads(text).get("schema_version")
+            except (ValueError, AttributeError):
+                version = None
+            if isinstance(version, str) and version != PLAN_SCHEMA_VERSION:
+                raise StoreError(f"{self.path} holds a plan of schema {version!r}, made by another version of "
+                                 f"addtc (this one reads plan schema {PLAN_SCHEMA_VERSION}): read it with the "
+                                 "addtc that made it") from None
+            first = (str(exc).splitlines() or [type(exc).__name__])[0]
+            if what:
+                raise self.damaged(f"the plan of {what} cannot be read: {first}") from None
+            # The runs are intact: a sweep's writer stores its plan again.
+            raise StoreError(f"{self.path} is damaged (its plan cannot be read: {first}); run the sweep again "
+                             f"on it (`addtc FILE --store {self.path}`): it writes the plan again and keeps "
+                             "the runs") from None
+
+    def _meta_json(self, name: str, default: str, kind: type):
+        try:
+            value = json.loads(self.meta(name) or default)
+        except ValueError:
+            value = None
+        if not isinstance(value, kind):
+            raise self.damaged(f"its {name!r} entry is not a JSON {kind.__name__}")
+        return value
+
     def rejected(self) -> Counter:
-        return Counter(json.loads(self.meta("rejected") or "{}"))
+        return Counter(self._meta_json("rejected", "{}", dict))
+
+    def not_done(self) -> list:
+        """Run ids a sweep could not complete (`lost`), as its last session left them."""
+        return self._meta_json("not_done", "[]", list)
 
     # ---- writing
     def _plan_hash(self, plan: ScenarioPlan) -> str:
@@ -483,7 +543,14 @@ class ResultStore:
         sql += f" ORDER BY {order}" + (f" LIMIT {int(limit)}" if limit else "")
         with self.errors("reading runs"):
             for row in self._db.execute(sql, args):
-                yield _record(dict(zip(_COLUMNS, row)))
+                yield self._read(dict(zip(_COLUMNS, row)))
+
+    def _read(self, row: dict) -> RunResult:
+        try:
+            return _record(row)
+        except _ROW_ERRORS as exc:
+            first = f"no {exc}" if isinstance(exc, KeyError) else (str(exc).splitlines() or [type(exc).__name__])[0]
+            raise self.damaged(f"run {row['run_id']!r} cannot be read: {first}") from None
 
     def failing(self, limit: int | None = None) -> Iterator[RunResult]:
         return self.records("passed = 0", limit=limit)
@@ -496,8 +563,15 @@ class ResultStore:
         """The exact RunSpec of a stored run (same key, so same trace)."""
         row = self._db.execute("SELECT plans.plan FROM runs JOIN plans ON plans.hash = runs.plan_hash "
                                "WHERE runs.key = ? AND runs.run_id = ?", (record.key, record.run_id)).fetchone()
-        plan = ScenarioPlan.model_validate_json(row[0]) if row else self.plan()
-        return RunSpec(plan=plan, **json.loads(record.spec_json))
+        plan = self._stored_plan(row[0], f"run {record.run_id!r}") if row else self.plan()
+        try:
+            fields = json.loads(record.spec_json)
+            if not isinstance(fields, dict):
+                raise ValueError("not a JSON object")
+            return RunSpec(plan=plan, **fields)
+        except (ValueError, TypeError) as exc:  # pydantic's ValidationError is a ValueError
+            first = (str(exc).splitlines() or [type(exc).__name__])[0]
+            raise self.damaged(f"the RunSpec of run {record.run_id!r} cannot be read: {first}") from None
 
     # ---- salvage
     @staticmethod
@@ -529,7 +603,7 @@ class ResultStore:
                             if row is None:
                                 continue
                             _record(dict(zip(_COLUMNS, row)))  # readable as a run, not only as bytes
-                        except (sqlite3.Error, ValueError, TypeError, KeyError):
+                        except (sqlite3.Error, *_ROW_ERRORS):
                             lost += 1
                             continue
                         out._db.execute(f"INSERT OR IGNORE INTO runs ({', '.join(_COLUMNS)}) "
@@ -566,11 +640,46 @@ class _Errors:
         raise self.store.error_of(exc, self.doing) from exc
 
 
+# What a row edited or damaged by something other than addtc raises when read (JSON that
+# does not parse, or parses to the wrong shape).
+_ROW_ERRORS = (ValueError, TypeError, KeyError, AttributeError)
+
+
+# The type each column holds as addtc writes it (SQLite stores any value in any column).
+_ROW_TYPES = {**dict.fromkeys(("seq", "session", "seed", "repeat_index", "passed"), (int,)),
+              **dict.fromkeys(("key", "run_id", "status", "spec", "failed_oracles"), (str,)),
+              **dict.fromkeys(("digest", "error", "worker", "outcome", "plan_hash", "stats", "injections"),
+                              (str, type(None))),
+              **dict.fromkeys(("sim_time_s", "wall_time_s", "finished_at"), (float, int, type(None))),
+              "fault_events": (int, type(None))}
+
+
+def _check_row(row: dict) -> None:
+    for name, types in _ROW_TYPES.items():
+        if type(row[name]) not in types:
+            raise TypeError(f"{name} is {row[name]!r}")
+    for name in ("params", "cell"):
+        values = json.loads(row[name])
+        if not isinstance(values, dict) or not all(type(v) in (float, int) for v in values.values()):
+            raise TypeError(f"{name} is not a JSON object of numbers")
+    verdicts = json.loads(row["verdicts"])
+    if not isinstance(verdicts, list) or not all(isinstance(v, dict) for v in verdicts):
+        raise TypeError("verdicts is not a JSON list of objects")
+    for v in verdicts:
+        if not (isinstance(v["name"], str) and isinstance(v["severity"], str) and type(v["passed"]) is bool
+                and type(v["robustness"]) in (float, int, str) and isinstance(v.get("mode", ""), str)
+                and type(v["first_violation_s"]) in (float, int, type(None))):
+            raise TypeError(f"a verdict is {v!r}")
+
+
 def _record(row: dict) -> RunResult:
+    _check_row(row)
     verdicts = [Verdict(v["name"], v["severity"], _float(v["robustness"]), v["passed"],
                         v["first_violation_s"], v.get("mode", "")) for v in json.loads(row["verdicts"])]
     stats = json.loads(row["stats"] or "{}")
     injections = json.loads(row["injections"] or "{}")
+    if not isinstance(stats, dict) or not isinstance(injections, dict):
+        raise TypeError("stats or injections is not a JSON object")
     return RunResult(run_id=row["run_id"], key=row["key"], spec_json=row["spec"], params=json.loads(row["params"]),
                      cell=json.loads(row["cell"]), seed=row["seed"], repeat_index=row["repeat_index"],
                      status=row["status"], verdicts=verdicts, error=row["error"] or "",

@@ -141,6 +141,7 @@ def cmd_shrink(args) -> int:
 
 def _shrink(args, plan, cache) -> int:
     from addt_dsl.plan import RunSpec
+    from addt_dsl.printer import check_spec
     from addt_dsl.search import NotFailing, Shrinker
     from addt_dsl.search.artifacts import ReplayMismatch, write_counterexample
 
@@ -164,6 +165,15 @@ def _shrink(args, plan, cache) -> int:
             _err(f"cannot read a RunSpec from {args.run_key}: {detail}")
             return EXIT_USAGE
         source = source or spec.plan.source_file
+    if args.store or args.run_key:
+        # Read from a file, it met no compiler: the limits and checks of a scenario first
+        # (a RunSpec of 5000 agents ran for minutes; a duration of 1e308 s, a negative seed
+        # or a NaN parameter were internal errors at the end).
+        try:
+            check_spec(spec, SEARCH_LIMITS)
+        except ValueError as exc:
+            _err(f"the run in {args.run_key or args.store} is not one a scenario can state: {exc}")
+            return EXIT_USAGE
     else:
         try:
             spec = _first_failing(plan, args.run_id, args.limit, args.jobs, cache)

@@ -121,6 +121,8 @@ def _parse_tree(data: Union[str, bytes], source: str) -> _Node:
         ) from None
     except xml.sax.SAXParseException as exc:
         raise XodrError(f"malformed XML: {exc.getMessage()}", line=exc.getLineNumber(), source=source) from None
+    except (LookupError, UnicodeError) as exc:  # `<?xml ... encoding="abc"?>`: Python has no such codec
+        raise XodrError(f"cannot decode the file: {exc}", line=handler.line, source=source) from None
     if handler.root is None:
         raise XodrError("empty document", source=source)
     return handler.root

@@ -1,10 +1,15 @@
 """Success tables of fault studies rate only runs whose fault-free twin passed (issue 21):
 `addtc study table` on a classified runs.csv and the suite table of `addtc --classify --by`."""
 
+import csv
 from types import SimpleNamespace
 
 import pandas as pd
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from addt_dsl import cli
 
 from addt_dsl.runtime.outcome import wilson_interval
 from addt_dsl.studies import success_table
@@ -65,3 +70,27 @@ def test_the_outcome_table_rates_success_over_runs_whose_twin_passed():
     assert (row["runs"], row["fault_samples"], row["twin_failed"]) == (7, 4, 2)
     assert row["success_rate"] == pytest.approx(3 / 4)
     assert (row["success_lo"], row["success_hi"]) == pytest.approx(wilson_interval(3, 4))
+
+
+CELLS = ["", "nan", "inf", "-inf", "1e308", "x", "True", "False", "0", "-1", '"', ",", "None", "[]", "masked",
+         "hazard", "twin_failed", "\x00"]
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(edits=st.lists(st.tuples(st.integers(0, 12), st.integers(0, 4), st.sampled_from(CELLS)), min_size=1,
+                      max_size=4))
+def test_any_damaged_runs_csv_is_a_table_or_one_line(tmp_path, capsys, edits):
+    """Fuzz: cells of a classified runs.csv replaced by hostile text (a user file): `addtc study
+    table` prints a table (0) or one line (2), never an internal error or a traceback."""
+    rows = [["param.rate", "passed", "outcome", "run_id", "seed"]]
+    rows += [[str(0.1 * (i % 3)), str(i % 4 != 0), ("masked", "hazard", "twin_failed")[i % 3], f"c{i:03d}-r000",
+              str(i)] for i in range(12)]
+    for i, j, value in edits:
+        rows[i][j] = value
+    path = tmp_path / "runs.csv"
+    with path.open("w", newline="") as fh:
+        csv.writer(fh).writerows(rows)
+    capsys.readouterr()
+    code = cli.main(["study", "table", str(path), "--by", "rate"])
+    err = capsys.readouterr().err
+    assert code in (0, 2) and "internal error" not in err and "Traceback" not in err, err

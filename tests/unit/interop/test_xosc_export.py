@@ -285,3 +285,37 @@ def test_exporting_twice_gives_the_same_bytes(tmp_path, monkeypatch):
     monkeypatch.setenv("SOURCE_DATE_EPOCH", "1764115200")  # 2025-11-26 00:00 UTC
     third = export_run(spec, tmp_path / "c", "s")
     assert DET.parse(third.xosc_path).getroot().find("FileHeader").get("date") == "2025-11-26T00:00:00"
+
+
+@pytest.mark.parametrize(("params", "words"), [
+    (["lead_speed=1e308m/s"], "outside lead_speed's range [12 m/s, 22 m/s]"),
+    (["lead_speed=-99m/s"], "outside lead_speed's range"),
+    (["drop_rate=70%"], "outside drop_rate's range"),
+])
+def test_cli_export_refuses_values_beyond_a_parameters_range(params, words, tmp_path, capsys):
+    """The compiler checks what depends on a parameter over its range only: exported with a
+    value beyond it (a lead at 1e308 m/s, or at -99 m/s), the files held a run no scenario
+    can state, written with exit 0."""
+    assert main(["export", str(EXAMPLES / "lead_brake.addt"), "--params", *params, "--to", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: --params {params[0]}: ") and words in err and "Traceback" not in err
+    assert not list(tmp_path.iterdir())
+
+
+def test_cli_export_checks_a_parameter_without_a_range(tmp_path, capsys):
+    (tmp_path / "s.addt").write_text("""scenario norange {
+  duration 5 s
+  road r {
+    line length 400 m
+  }
+  param v = 10 m/s
+  ego car on r lane -1 at 20 m speed 10 m/s
+  agent lead car on r lane -1 at 60 m speed v {
+    behavior cruise speed v
+  }
+}
+""")
+    assert main(["export", str(tmp_path / "s.addt"), "--params", "v=1e308m/s", "--to", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "not a run the scenario can state" in err and "E0301" in err and not (tmp_path / "o").exists()
+    assert main(["export", str(tmp_path / "s.addt"), "--params", "v=12m/s", "--to", str(tmp_path / "o")]) == 0

@@ -10,6 +10,8 @@ import shutil
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from addt_dsl.cli import main
 from addt_dsl.compiler import compile_file, compile_source
@@ -176,7 +178,8 @@ def test_mutated_esmini_files_never_raise(seed, tmp_path):
                                     "FORMAT_OK, \"faults\": [{\"kind\": 3}]}",
                                     "FORMAT_OK, \"actors\": {\"ego\": {\"vehicle\": \"tank\"}}}",
                                     "FORMAT_OK, \"behaviors\": {\"lead_cruise\": {\"clause\": 5}}}",
-                                    "FORMAT_OK, \"params\": {\"x\": \"y\"}}"])
+                                    "FORMAT_OK, \"params\": {\"x\": \"y\"}}",
+                                    "FORMAT_OK, \"run_seed\": 1.5}", "FORMAT_OK, \"seed\": true}"])
 def test_damaged_side_file_is_a_diagnostic(damage, tmp_path):
     spec = expand(compile_file(ROOT / "examples" / "lead_brake.addt").plan).specs[0]
     done = export_run(spec, tmp_path)
@@ -184,6 +187,19 @@ def test_damaged_side_file_is_a_diagnostic(damage, tmp_path):
     got = import_xosc(done.xosc_path)
     assert got.text is None
     assert any(d.code == "E0802" and "side file" in d.message for d in got.diagnostics), got.diagnostics
+
+
+def test_a_side_file_of_another_export_is_refused(tmp_path):
+    """Two exports side by side, one side file copied over the other's: importing it
+    brought the other scenario's stack, faults, oracles and name into this one, silently."""
+    runs = {name: expand(compile_file(ROOT / "examples" / f"{name}.addt").plan).specs[0]
+            for name in ("lead_brake", "following")}
+    done = {name: export_run(spec, tmp_path / name) for name, spec in runs.items()}
+    done["lead_brake"].sidecar_path.write_bytes(done["following"].sidecar_path.read_bytes())
+    got = import_xosc(done["lead_brake"].xosc_path)
+    assert got.text is None
+    (d,) = [d for d in got.diagnostics if d.is_error]
+    assert d.code == "E0802" and "written for scenario 'following'" in d.message and "'lead_brake'" in d.message
 
 
 def _without_sidecar(spec, tmp_path):
@@ -660,3 +676,77 @@ def test_a_programs_phases_carry_its_offset(green, yellow, red, offset, tmp_path
     times = np.arange(0.0, 120.0, 0.25) + 0.01
     assert np.array_equal(back.state(times), Program(green, yellow, red, offset).state(times))
     assert not any(d.code == "W0802" and "cycle" in d.message for d in got.diagnostics)
+
+
+def _json_leaves(node, path=()):
+    """Paths to every value of a JSON tree (containers included)."""
+    yield path
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _json_leaves(v, (*path, k))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _json_leaves(v, (*path, i))
+
+
+@pytest.fixture(scope="module")
+def exported_with_side_file(tmp_path_factory):
+    spec = expand(compile_file(ROOT / "tests" / "data" / "interop" / "every_action.addt").plan).specs[0]
+    done = export_run(spec, tmp_path_factory.mktemp("export"))
+    return done.xosc_path, done.sidecar_path, json.loads(done.sidecar_path.read_text())
+
+
+SIDE_VALUES = st.one_of(st.none(), st.booleans(), st.integers(-2**70, 2**70), st.floats(allow_nan=True),
+                        st.text(max_size=8), st.just([]), st.just({}), st.just([[[[[]]]]]), st.just({"kind": "num"}),
+                        st.just({"keyword": "stack", "name": "nope", "settings": {}}))
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_any_value_anywhere_in_a_side_file_is_imported_or_a_diagnostic(exported_with_side_file, data):
+    """Fuzz: one value of an exported side file replaced by a hostile one (any JSON type,
+    huge or non-finite numbers, containers of the wrong shape): the import gives a scenario
+    that compiles or diagnostics, never an exception."""
+    xosc, side, original = exported_with_side_file
+    paths = sorted((p for p in _json_leaves(original) if p), key=repr)
+    path = data.draw(st.sampled_from(paths))
+    value = data.draw(SIDE_VALUES)
+    doc = json.loads(json.dumps(original))
+    node = doc
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    side.write_text(json.dumps(doc))
+    try:
+        got = import_xosc(xosc)
+    finally:
+        side.write_text(json.dumps(original))
+    assert got.text is not None or any(d.is_error for d in got.diagnostics)
+    assert "E0900" not in {d.code for d in got.diagnostics}
+
+
+WRONG_SHAPES = [  # found by the fuzz test above; each raised from the import (TypeError, KeyError, ...)
+    ("every_action", ("description",), None), ("every_action", ("description",), []),
+    ("every_action", ("seed",), None), ("every_action", ("run_seed",), []),
+    ("every_action", ("actors", "ego", "route"), True), ("every_action", ("actors", "ego", "yaw"), "x"),
+    ("every_action", ("actors", "ego", "wheelbase_m"), None),
+    ("every_action", ("actors", "ego", "stack", "keyword"), "x"),
+    ("every_light", ("lights", "steps", "light_main_red", "name"), "x"),
+    ("every_light", ("lights", "steps", "light_main_red", "settings"), {}),
+    ("every_behavior", ("conditions", "addt_condition_1", "formula", "left", "args"), []),
+]
+
+
+@pytest.mark.parametrize(("example", "path", "value"), WRONG_SHAPES)
+def test_a_side_file_value_of_the_wrong_shape_is_a_diagnostic(example, path, value, tmp_path):
+    spec = expand(compile_file(ROOT / "tests" / "data" / "interop" / f"{example}.addt").plan).specs[0]
+    done = export_run(spec, tmp_path)
+    doc = json.loads(done.sidecar_path.read_text())
+    node = doc
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    done.sidecar_path.write_text(json.dumps(doc))
+    got = import_xosc(done.xosc_path)
+    assert got.text is None
+    assert any(d.code == "E0802" for d in got.diagnostics), got.diagnostics

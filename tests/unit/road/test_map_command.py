@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from addt_dsl.cli import main
 
@@ -57,3 +61,35 @@ def test_map_lists_signal_validity_and_controllers():
     out = describe(parse_xodr(text))
     assert "facing +, lanes -1..1" in out
     assert "controllers:\n  5 'west': signals 1, 2" in out
+
+
+def test_a_map_that_declares_an_unknown_encoding_is_one_line(tmp_path, capsys):
+    """`<?xml ... encoding="abc"?>` was 'internal error: LookupError: unknown encoding' (exit 3)."""
+    bad = tmp_path / "enc.xodr"
+    text = (MAPS / "straight_500m.xodr").read_text()
+    bad.write_text(text.replace('<?xml version="1.0"', '<?xml version="1.0" encoding="abc"', 1))
+    assert main(["map", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: cannot read {bad}: {bad}:1: cannot decode the file: unknown encoding: abc\n", err
+
+
+VALUES = ["", "-1", "1e308", "nan", "inf", "0", "-5", "999999", "1.5", "abc", "1e-300", "3", "utf-16", "abc"]
+TEXTS = [p.read_text() for p in sorted(MAPS.glob("*.xodr"))]
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_any_attribute_value_is_a_map_or_one_line(tmp_path, capsys, data):
+    """Fuzz: attribute values of the example maps (the XML declaration's included) replaced by
+    hostile ones: `addtc map` prints the map (0) or one line (2), never an internal error."""
+    text = data.draw(st.sampled_from(TEXTS))
+    for _ in range(data.draw(st.integers(1, 4))):
+        spans = [m.span(2) for m in re.finditer(r'(\w+)="([^"]*)"', text)]
+        a, b = data.draw(st.sampled_from(spans))
+        text = text[:a] + data.draw(st.sampled_from(VALUES)) + text[b:]
+    path = tmp_path / "fuzz.xodr"
+    path.write_text(text)
+    capsys.readouterr()
+    code = main(["map", str(path)])
+    err = capsys.readouterr().err
+    assert code in (0, 2) and "internal error" not in err and "Traceback" not in err, err

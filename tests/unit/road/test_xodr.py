@@ -226,6 +226,11 @@ def test_malformed_xml_and_wrong_root():
     assert info.value.element == "Scenario" and info.value.line == 1
 
 
+def test_an_unknown_declared_encoding_is_an_xodr_error():
+    with pytest.raises(XodrError, match="cannot decode the file: unknown encoding: abc"):
+        parse_xodr(b'<?xml version="1.0" encoding="abc"?><OpenDRIVE/>')
+
+
 def test_road_without_planview_or_lanes():
     with pytest.raises(XodrError, match="planView"):
         parse_xodr('<OpenDRIVE><road id="1" length="5"><lanes/></road></OpenDRIVE>')

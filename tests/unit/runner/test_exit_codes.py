@@ -141,3 +141,26 @@ def test_report_of_a_store_with_failures_is_exit_1(tmp_path):
     store.close()
     assert cli.main(["report", str(tmp_path / "r.sqlite"), "--animations", "0"]) == EXIT_FAILED
     assert sqlite3.connect(tmp_path / "r.sqlite").execute("SELECT COUNT(*) FROM runs").fetchone() == (2,)
+
+
+@pytest.mark.timeout(120)  # before workers started on demand, this started 10**20 processes
+def test_more_jobs_than_runs_or_than_sqlite_holds(fake_runs, tmp_path, capsys):
+    path = _scenario(tmp_path, [0])
+    for jobs in ("100000", "99999999999999999999"):
+        assert cli.main([path, "--jobs", jobs, "--out", str(tmp_path / jobs), "--no-report"]) == EXIT_OK
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_an_output_path_that_is_a_directory_is_named(tmp_path, capsys):
+    """`--junit DIR`, `--export DIR`: one line naming the path the user gave (it named the
+    temporary file beside it: 'Is a directory: .../.out.qrqsau2x.tmp')."""
+    plan = plan_of(scenario([0]))
+    with ResultStore(tmp_path / "r.sqlite", plan) as store:
+        store.add(fake_record(expand(plan).specs[0], seq=0))
+    target = tmp_path / "out"
+    target.mkdir()
+    for option in ("--junit", "--export"):
+        assert cli.main(["report", str(tmp_path / "r.sqlite"), "--out", str(tmp_path / "rep"), option,
+                         str(target)]) == EXIT_USAGE
+        err = capsys.readouterr().err
+        assert err == f"error: Is a directory: {target}\n", err

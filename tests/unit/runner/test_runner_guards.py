@@ -2,6 +2,8 @@
 
 from collections import Counter
 
+import pytest
+
 from tests.unit.runner.runner_testkit import HANG, HOG, OK, RAISE, SEGFAULT, SPIKE, fake_run, plan_of, scenario
 
 from addt_dsl.runtime.executor import LocalExecutor, run_local, run_sweep
@@ -65,3 +67,18 @@ def test_kept_workers_serve_later_calls_until_closed():
     plain = LocalExecutor(2, run_fn=fake_run)
     list(plain.imap(enumerate(specs[:2])))
     assert plain._kept == []
+
+
+@pytest.mark.timeout(120)
+def test_workers_start_only_for_runs_that_need_them(monkeypatch):
+    """`--jobs 100000` on a sweep of 2 runs starts 2 processes (it started 100000: a 2-run
+    sweep with `--jobs 200` took ~40 s on a loaded 2-core machine, one with 100000 did not
+    end), and a session records the workers it could use (100000000000000000000 overflowed
+    SQLite's INTEGER: 'internal error: OverflowError')."""
+    plan = plan_of(scenario([OK], repeat=2))
+    executor = LocalExecutor(50, run_fn=fake_run)
+    spawned = []
+    spawn = executor._spawn
+    monkeypatch.setattr(executor, "_spawn", lambda ctx: spawned.append(1) or spawn(ctx))
+    assert [r.status for r in executor.imap(enumerate(SweepStream(plan)))] == ["ok", "ok"]
+    assert len(spawned) == 2
