@@ -34,7 +34,7 @@ from pydantic import TypeAdapter
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.compiler import compile_source
-from addt_dsl.compiler.rules.oracles import NO_CLAUSES
+from addt_dsl.compiler.rules.oracles import NO_CLAUSES, stay_in_lane_formula
 from addt_dsl.confine import Refused, confine
 from addt_dsl.diagnostics import Diagnostic, DiagnosticSink, Span
 from addt_dsl.expr import eval_param_expr
@@ -1809,15 +1809,13 @@ class _Translate(_Importer):
             road_id = next(i for i, r in self.roads.items() if r.name == ego.road)
             odr = self.network.road(road_id)
             s0 = min(max(float(eval_param_expr(ego.s, self.param_values())), 0.0), odr.length)
-            margin = 0.5 * (float(odr.lane_width(int(ego.lane.value), s0)) - ego.width_m)
-            if margin <= 0:
+            formula = stay_in_lane_formula(float(odr.lane_width(int(ego.lane.value), s0)), ego.width_m)
+            if formula is None:
                 self.skip(cond, f"criteria_{test}: the ego is wider than its lane: not translated")
                 return None
             self.approx(cond, f"criteria_{test} is translated as `stay in lane` (the body inside the lane); "
                               "ScenarioRunner fails it on any lane marking crossed")
-            return OraclePlan(name="keep_lane", formula=always(E.Binary(
-                op="<=", left=E.Call(fn="abs", args=(signal(name="lane_offset(ego)"),)),
-                right=E.Num(value=round(margin, 6)))), text="stay in lane")
+            return OraclePlan(name="keep_lane", formula=formula, text="stay in lane")
         if test == "DrivenDistanceTest" and arg is not None and arg > 0:
             return OraclePlan(name="driven_distance", formula=E.Temporal(
                 op="eventually", lo_s=0.0, hi_s=None,

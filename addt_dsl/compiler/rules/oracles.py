@@ -110,14 +110,22 @@ def _stay_in_lane(ctx: Context, b: ast.Builtin):
         lane_width = min(info.lane_width_m.values())
     else:
         lane_width = 3.5
-    margin = 0.5 * (lane_width - ego.width_m) + tol
-    if margin <= 0:
+    formula = stay_in_lane_formula(lane_width, ego.width_m, tol)
+    if formula is None:
         ctx.sink.error("E0301", f"the ego ({fmt(ego.width_m, units.LENGTH)} wide) does not fit in its lane "
                        f"({fmt(lane_width, units.LENGTH)})", b.span, "add a `tolerance`")
         return None
-    # Body inside the lane: |offset of the centre| + half the width <= half the lane.
+    return formula, "stay_in_lane"
+
+
+def stay_in_lane_formula(lane_width_m: float, ego_width_m: float, tolerance_m: float = 0.0):
+    """`stay in lane`: the body inside the lane, |offset of the centre| + half the width <=
+    half the lane (+ the tolerance); None when the ego does not fit."""
+    margin = 0.5 * (lane_width_m - ego_width_m) + tolerance_m
+    if margin <= 0:
+        return None
     return _always(E.Binary(op="<=", left=E.Call(fn="abs", args=(E.Signal(name="lane_offset(ego)"),)),
-                            right=E.Num(value=margin))), "stay_in_lane"
+                            right=E.Num(value=margin)))
 
 
 def _bound(ctx: Context, b: ast.Builtin):
