@@ -21,7 +21,8 @@ from pathlib import Path
 
 from addt_dsl.confine import Refused, confine
 from addt_dsl.reporting.atomic import write_text
-from addt_dsl.reporting.tables import fmt_param, terminal, wilson_interval
+from addt_dsl.reporting.tables import fmt_param, terminal
+from addt_dsl.stats import wilson_interval
 from addt_dsl.reporting.summary import store_summary
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from addt_dsl import units
 from addt_dsl.errors import is_error_status
 from addt_dsl.plan import ScenarioPlan
+from addt_dsl.stats import wilson_interval
 
 
 def run_row(r) -> dict:
@@ -212,17 +213,6 @@ def fmt_param(plan: ScenarioPlan, name: str, value: float) -> str:
     unit = units.CANONICAL_UNIT.get(units.DIMENSIONS_BY_NAME.get(p.dimension)) if p else None
     text = f"{value:.4g}"
     return f"{text} {unit}" if unit else text
-
-
-def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """95 % Wilson score interval of a success rate (sensible at 0 % and 100 %)."""
-    if n == 0:
-        return 0.0, 1.0
-    p = successes / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 @dataclass

@@ -41,9 +41,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import binomtest
 
 from addt_dsl.plan import RunSpec
+from addt_dsl.stats import wilson_interval
 from addt_dsl.runtime.execute import execute
 from addt_dsl.runtime.executor import local_executor, run_spec
 from addt_dsl.runtime.result import RunResult
@@ -278,15 +278,6 @@ def classify_many(specs: Iterable[RunSpec], jobs: int = 1, cache: GoldenCache | 
     out = [(r, r.outcome) for r in ClassifyingExecutor(executor, cache.store_path, tol).imap(enumerate(specs))]
     out.sort(key=lambda pair: pair[0].run_id)
     return out
-
-
-def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    """Wilson score interval of a proportion k/n (NaNs for n = 0): sound near 0 and 1, where
-    fault campaigns' rates usually are."""
-    if n == 0:
-        return math.nan, math.nan
-    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
-    return float(ci.low), float(ci.high)
 
 
 def outcome_table(pairs: Iterable[tuple[RunResult, str]], by: Sequence[str] = ()):

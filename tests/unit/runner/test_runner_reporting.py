@@ -1,6 +1,7 @@
 """Tables, JUnit XML and the HTML report over synthetic stores (no simulation)."""
 
 import base64
+import math
 import re
 from xml.etree import ElementTree as ET
 
@@ -10,7 +11,8 @@ from tests.unit.runner.runner_testkit import fake_record, plan_of, scenario
 
 from addt_dsl.reporting import build_report, write_junit
 from addt_dsl.reporting.summary import store_summary
-from addt_dsl.reporting.tables import cell_stats, success_pivot, wilson_interval
+from addt_dsl.reporting.tables import cell_stats, success_pivot
+from addt_dsl.stats import wilson_interval
 from addt_dsl.runtime.result import RunResult, Verdict
 from addt_dsl.runtime.store import ResultStore
 from addt_dsl.sweep import expand
@@ -59,9 +61,11 @@ def test_cell_success_rates_and_pivot():
 def test_wilson_interval_contains_the_rate(a, b):
     n, k = max(a, b), min(a, b)
     lo, hi = wilson_interval(k, n)
-    assert 0.0 <= lo <= hi <= 1.0
     if n:
+        assert 0.0 <= lo <= hi <= 1.0
         assert lo - 1e-12 <= k / n <= hi + 1e-12
+    else:  # no runs: no rate, and no interval
+        assert math.isnan(lo) and math.isnan(hi)
 
 
 def test_junit_has_one_testcase_per_run_with_failure_details(tmp_path):
