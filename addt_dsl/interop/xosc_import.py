@@ -874,7 +874,7 @@ class _Translate(_Importer):
                                   "signals) are not translated")
         # a light's state in Init: a step at time 0
         self.light_steps += [TriggerPlan(clause=c) for c in self.light_event(pairs)]
-        init_trajectories = []
+        init_trajectories, init_relative = [], []
         for private in init.iterfind("Actions/Private"):
             who = self.actor_name(private)
             if who is None or who not in self.actors:
@@ -899,10 +899,37 @@ class _Translate(_Importer):
                 elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
                                                                 "AbsoluteTargetSpeed") is not None:
                     target = _child(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
+                    dyn = _child(act, "SpeedAction", "SpeedActionDynamics")
+                    if dyn is not None and dyn.get("dynamicsShape", "step") != "step" and who != "ego" \
+                            and self.value(dyn, "value", default=0.0) > 0:
+                        # A speed change with dynamics in Init starts from standstill (OpenSCENARIO:
+                        # Init actions run as the simulation starts) and takes its time.
+                        clause = self.speed_action(dyn, target, self.actors[who])
+                        if clause is not None:
+                            self.actors[who]["behaviors"].append(clause)
+                        continue
                     self.actors[who]["speed"] = self.number(target, "value", units.SPEED)
                     self.actors[who]["speed_now"] = self.value(target, "value")
+                elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
+                                                                "RelativeTargetSpeed") is not None:
+                    init_relative.append((act, who))
                 else:
                     self.skip(act, f"<{act.tag}> in Init is not translated (positions and speeds are)")
+        for act, who in init_relative:  # relative to another entity's initial speed
+            rel = _child(act, "SpeedAction", "SpeedActionTarget", "RelativeTargetSpeed")
+            ref = self.actor_name(rel)
+            if ref is None or ref not in self.actors:
+                continue
+            base = self.actors[ref].get("speed", E.Num(value=0.0))
+            value = self.number(rel, "value", units.SPEED if rel.get("speedTargetValueType", "delta") == "delta"
+                                else units.DIMENSIONLESS)
+            op = "*" if rel.get("speedTargetValueType", "delta") == "factor" else "+"
+            self.actors[who]["speed"] = E.Binary(op=op, left=value, right=base) if op == "*" else _plus(base, value)
+            self.actors[who]["speed_now"] = eval_param_expr(self.actors[who]["speed"], self.param_values())
+            if rel.get("continuous", "false") in ("true", "1") and who != "ego":
+                clause = self.relative_speed(_child(act, "SpeedAction", "SpeedActionDynamics"), rel, self.actors[who])
+                if clause is not None:
+                    self.actors[who]["behaviors"].append(clause)
         for act, who in init_trajectories:  # no TeleportAction: start at the first vertex
             first_vertex = act.find("FollowTrajectoryAction//Polyline/Vertex/Position")
             if who not in self.placed and first_vertex is not None:
@@ -941,14 +968,14 @@ class _Translate(_Importer):
             target = _child(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
             if speed is None or target is None:
                 self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
-                          "absolute speed targets are translated (relative targets: issue 16)")
+                          "absolute and relative speed targets are translated")
                 return None
             return self.speed_action(speed.find("SpeedActionDynamics"), target, info)
         if act.tag == "LateralAction":
             change = _child(act, "LaneChangeAction")
             if change is None:
                 self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
-                          "the language has lane changes; lane offsets and lateral distances are issue 16")
+                          "the language has lane changes; lane offsets and lateral distances are not translated")
                 return None
             return self.lane_change(change, who, info)
         if act.tag == "ControllerAction":
@@ -1429,7 +1456,9 @@ class _Translate(_Importer):
     # -- storyboard
 
     def story(self, story) -> None:
+        self.story_name = story.get("name", "")
         for act in story.iterfind("Act"):
+            self.act_name = act.get("name", "")
             act_at = None
             for cond in act.iterfind("StartTrigger/ConditionGroup/Condition"):
                 time = cond.find("ByValueCondition/SimulationTimeCondition")
@@ -1542,6 +1571,12 @@ class _Translate(_Importer):
             conj = []
             for cond in group.iterfind("Condition"):
                 sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+                if sesc is not None and self.raw(sesc, "storyboardElementType") in ("act", "story") \
+                        and self.raw(sesc, "state") in ("startTransition", "runningState") \
+                        and self.raw(sesc, "storyboardElementRef") in (getattr(self, "act_name", None),
+                                                                       getattr(self, "story_name", None)) \
+                        and self.value(cond, "delay", units.TIME, 0.0) == 0.0:
+                    continue  # the event's own act (story) has started: true whenever the event is armed
                 if sesc is not None and len(groups) == 1 and len(list(group)) == 1:
                     if self.raw(sesc, "storyboardElementType") in ("event", "action"):
                         return "after_event", (self.raw(sesc, "storyboardElementRef"),
@@ -1643,12 +1678,30 @@ class _Translate(_Importer):
             b = self.actor_name(target)
             if b is None:
                 return None
+            # freespace="false": distances between the entities' reference points (the
+            # importer places an actor's centre there), i.e. the bumper gap plus half of
+            # both lengths along the road.
+            free = (c.get("freespace") or "false").lower() == "true"
+            half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
             if c.tag == "TimeToCollisionCondition":
-                return E.Binary(op=op, left=sig("ttc", a, b), right=self.number(c, "value", units.TIME))
+                value = self.number(c, "value", units.TIME)
+                if free:
+                    return E.Binary(op=op, left=sig("ttc", a, b), right=value)
+                # ttc = (gap + half) / closing speed, infinite when not closing
+                closing = E.Binary(op="-", left=sig("speed", a), right=sig("speed", b))
+                lhs = _plus(sig("gap", a, b), E.Num(value=half))
+                rhs = E.Binary(op="*", left=value, right=closing)
+                if op in ("<", "<="):
+                    return _all([E.Binary(op=">", left=closing, right=E.Num(value=0.0)),
+                                 E.Binary(op=op, left=lhs, right=rhs)])
+                if op in (">", ">="):
+                    return _any([E.Binary(op="<=", left=closing, right=E.Num(value=0.0)),
+                                 E.Binary(op=op, left=lhs, right=rhs)])
+                return E.Binary(op=op, left=sig("ttc", a, b), right=value)
             if c.tag == "TimeHeadwayCondition":
+                headway = E.Binary(op="*", left=self.number(c, "value", units.TIME), right=sig("speed", a))
                 return E.Binary(op=op, left=sig("gap", a, b),
-                                right=E.Binary(op="*", left=self.number(c, "value", units.TIME),
-                                               right=sig("speed", a)))
+                                right=_plus(headway, E.Num(value=-half)) if half else headway)
             kind = c.get("relativeDistanceType", "cartesianDistance")
             free = (c.get("freespace") or "false").lower() == "true"
             value = self.number(c, "value", units.LENGTH)
@@ -1678,7 +1731,7 @@ class _Translate(_Importer):
             return None
         self.skip(c, f"<{c.tag}> is not translated",
                   "translated: traveled distance, speed, acceleration, relative distance, time headway, TTC, "
-                  "reach position; held conditions and relative speed are issue 16")
+                  "reach position")
         return None
 
     def along_s(self, who: str) -> bool:
