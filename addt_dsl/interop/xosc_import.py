@@ -1738,7 +1738,8 @@ class _Translate(_Importer):
         """Whether the actor drives towards +s (its lane's OpenDRIVE direction)."""
         road_name, lane = self.placed[who][0], self.placed[who][1]
         road_id = next(i for i, r in self.roads.items() if r.name == road_name)
-        return lane == 0 or self.network.road(road_id).travel_direction(lane) > 0
+        way = -1 if self.actors[who].get("against_s") and self.actors[who]["vehicle"] != "obstacle" else 1
+        return lane == 0 or self.network.road(road_id).travel_direction(lane) * way > 0
 
     def size(self, who: str) -> tuple[float, float]:
         info = self.actors[who]
@@ -1894,9 +1895,6 @@ class _Translate(_Importer):
             road, lane, s, offset = self.placed[who]
             kind = VEHICLES[info["vehicle"]]
             extra = sc.get("actors", {}).get(who, {})
-            if info["vehicle"] not in ("pedestrian", "obstacle") and info.get("against_s"):
-                self.approx(info["el"], f"{who} faces against the driving direction of lane {lane}; addt-dsl "
-                                        "drives it in the lane's direction")
             fields = dict(name=who, vehicle=info["vehicle"], road=road, lane=E.Num(value=float(lane)), s=s,
                           speed=info.get("speed", E.Num(value=0.0)),
                           length_m=extra.get("length_m") or info["length_m"] or kind.length_m,
@@ -1916,6 +1914,10 @@ class _Translate(_Importer):
                     fields["route"], fields["s"] = got
             if extra.get("yaw") is not None:
                 fields["yaw"] = E.Num(value=float(extra["yaw"]))
+            if extra.get("reverse") is not None:
+                fields["reverse"] = bool(extra["reverse"])
+            elif info.get("against_s") and info["vehicle"] != "obstacle" and not fields.get("route"):
+                fields["reverse"] = True  # it faces against its lane: it drives that way
             if sc:
                 fields["ignore_lights"] = bool(extra.get("ignore_lights", False))
             elif self.light_ctls and who != "ego":
@@ -2021,6 +2023,8 @@ def _sidecar_problem(data: dict) -> str:
             for key in ("length_m", "width_m", "height_m", "mass_kg", "wheelbase_m", "goal_s", "mu", "yaw"):
                 if info.get(key) is not None:
                     float(info[key])
+            if not isinstance(info.get("reverse", False), bool):
+                return "an actor's 'reverse' is not true or false"
             if (info.get("mass_kg") is None) != (info.get("wheelbase_m") is None):
                 return "an actor's 'mass_kg' and 'wheelbase_m' come together"
             route = info.get("route", [])

@@ -71,3 +71,29 @@ scenario walk {
     k = int(round(3.0 / trace.period_s))
     assert p.speed[k] == pytest.approx(1.5, abs=1e-9)
     assert p.s[k] - p.s[0] == pytest.approx(4.5, abs=1e-6)
+
+
+def test_direction_reverse_drives_against_the_lane():
+    # An entity that faces against its lane (OpenSCENARIO: an Orientation of pi relative to
+    # the lane) drives that way: a car overtaking in the oncoming lane, a wrong-way driver.
+    trace = run("""
+scenario wrong_way {
+  duration 4 s
+  road r {
+    line length 300 m
+    lanes left 1 right 1 width 3.5 m
+  }
+  ego car on r lane -1 at 10 m speed 0 m/s {
+    stack bev cruise_speed 0 m/s
+  }
+  agent over car on r lane 1 at 100 m speed 10 m/s direction reverse
+  agent oncoming car on r lane 1 at 200 m speed 10 m/s
+  agent ghost car on r lane -1 at 150 m speed 10 m/s direction reverse
+}
+""")
+    end = len(trace.time) - 1
+    for name, x0, y, way in (("over", 100.0, 1.75, 1), ("oncoming", 200.0, 1.75, -1), ("ghost", 150.0, -1.75, -1)):
+        a = trace.actors[name]
+        assert a.x[end] == pytest.approx(x0 + way * 10.0 * trace.time[end], abs=1e-6), name
+        assert a.y[end] == pytest.approx(y, abs=1e-9), name
+        assert np.cos(a.heading[end]) == pytest.approx(way, abs=1e-9), name
