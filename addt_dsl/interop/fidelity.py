@@ -87,3 +87,41 @@ def tracks_of_trace(trace) -> dict[str, Track]:
     """The run's tracks by actor name (a runtime `Trace`)."""
     return {name: Track(np.asarray(trace.time, float), np.asarray(a.x, float), np.asarray(a.y, float))
             for name, a in trace.actors.items()}
+
+
+@dataclass(frozen=True)
+class ScenarioFidelity:
+    scenario: str
+    errors: tuple[EntityError, ...]  # one per reference entity the importer made an actor of
+    imported: bool
+    problem: str = ""  # why there are no figures (the import's first error)
+
+    @property
+    def ok(self) -> bool:
+        return self.imported and bool(self.errors) and all(e.ok for e in self.errors)
+
+    def ok_except(self, actor_names: set[str]) -> bool:
+        rest = [e for e in self.errors if e.entity not in actor_names]
+        return self.imported and bool(rest) and all(e.ok for e in rest)
+
+
+def scenario_fidelity(xosc: str | Path, root: str | Path, reference: str | Path, ref_end_s: float,
+                      **import_options) -> tuple[ScenarioFidelity, dict[str, str]]:
+    """Import `xosc`, run its first run up to the reference's end, and compare every entity the
+    reference has (and the import kept) with it. Returns the figures and the entity -> actor names."""
+    from addt_dsl.interop.xosc_import import import_xosc
+    from addt_dsl.runtime.execute import execute
+    from addt_dsl.sweep import expand
+
+    name = Path(xosc).stem
+    got = import_xosc(xosc, root=root, **import_options)
+    if got.plan is None:
+        first = next((d.message for d in got.diagnostics if d.is_error), "not imported")
+        return ScenarioFidelity(name, (), False, first), {}
+    plan = got.plan.model_copy(update={"duration_s": min(got.plan.duration_s, ref_end_s + 0.05)})
+    trace = execute(expand(plan).specs[0]).trace
+    ref = read_reference(reference)
+    tracks = tracks_of_trace(trace)
+    run = {entity: tracks[actor] for entity, actor in got.entities.items() if actor in tracks}
+    entities = [e for e in ref if e in got.entities]
+    return ScenarioFidelity(name, tuple(compare(run, ref, entities)), True), dict(got.entities)

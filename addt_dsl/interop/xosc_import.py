@@ -66,6 +66,7 @@ class Imported:
     diagnostics: list[Diagnostic]
     sources: dict[str, str]  # file -> text, for rendering diagnostics
     side_files: dict[str, str] = field(default_factory=dict)  # files the .addt imports, by name
+    entities: dict[str, str] = field(default_factory=dict)  # OpenSCENARIO entity name -> actor name
 
 
 class _Stop(Exception):
@@ -2180,4 +2181,4 @@ def import_xosc(path: str | Path, root: str | Path | None = None, maps=()) -> Im
                 imp.sink.error("E0802", f"the translated scenario does not compile: [{d.code}] {d.message}",
                                Span.point(imp.display, 1, 1))
         return Imported(None, None, imp.sink.items, {**imp.sources, **check.sources})
-    return Imported(text, check.plan, imp.sink.items, imp.sources, files)
+    return Imported(text, check.plan, imp.sink.items, imp.sources, files, dict(imp.renames))
