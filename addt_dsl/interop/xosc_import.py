@@ -977,7 +977,7 @@ class _Translate(_Importer):
             if _child(act, "SpeedProfileAction") is not None:
                 return self.speed_profile(_child(act, "SpeedProfileAction"), info)
             if _child(act, "LongitudinalDistanceAction") is not None:
-                return self.keep_gap(_child(act, "LongitudinalDistanceAction"))
+                return self.keep_gap(_child(act, "LongitudinalDistanceAction"), who)
             relative = _child(speed, "SpeedActionTarget", "RelativeTargetSpeed")
             if relative is not None:
                 return self.relative_speed(speed.find("SpeedActionDynamics"), relative, info)
@@ -1090,7 +1090,7 @@ class _Translate(_Importer):
             self.approx(dyn, f"a speed change over a {dim}: at the default rate limits")
         return out
 
-    def keep_gap(self, el) -> ClausePlan | None:
+    def keep_gap(self, el, who: str) -> ClausePlan | None:
         ref = self.actor_name(el)
         if ref is None:
             return None
@@ -1110,7 +1110,11 @@ class _Translate(_Importer):
             if src is not None and src.get(attr) is not None:
                 settings[key] = E.Num(value=max(self.value(src, attr), 0.01))
         if el.get("freespace") in ("false", "0"):
-            self.approx(el, "a reference-point distance: kept as a bumper-to-bumper gap")
+            if "distance" in settings:  # between reference points (the actors' centres here)
+                half = 0.5 * (self.size(who)[0] + self.size(ref)[0])
+                settings["distance"] = E.Num(value=max(settings["distance"].value - half, 0.0))
+            else:
+                self.approx(el, "a time gap between reference points: kept as a bumper-to-bumper gap")
         return ClausePlan(keyword="behavior", name="keep_gap", settings=settings)
 
     def road_point(self, pos_el, who: str):
