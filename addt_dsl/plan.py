@@ -101,6 +101,12 @@ class TriggerPlan(_Model):
     group: GroupPlan | None = None
     # `when C for D`: C must have held at every step for D [s] (past-time `historically`).
     hold_s: Expr | None = None
+    # `when rising C`: the condition counts only where it changes (OpenSCENARIO conditionEdge):
+    # rising false -> true, falling true -> false, changing either; never at its first evaluation.
+    edge: Literal["rising", "falling", "changing"] | None = None
+    # `when C delayed D`: fires D [s] after the condition (its edge) first counted
+    # (OpenSCENARIO's condition delay).
+    delay_s: Expr | None = None
     # `brake_hard: at 3 s ...`: a named step, whose state `started(lead.brake_hard)` and
     # `ended(lead.brake_hard)` read; unique in the scenario.
     label: str | None = None

@@ -156,6 +156,8 @@ class StepStart(Node):
     kind: str  # at | after | when
     value: Expression
     hold: Expression | None = None  # `when C for D`: C must have held for D
+    edge: str | None = None  # `when rising C`: rising | falling | changing
+    delay: Expression | None = None  # `when C delayed D`: fires D after C (its edge) fired
 
 
 @dataclass(frozen=True, slots=True)

@@ -300,7 +300,13 @@ class Builder:
         return ast.StepStart(span, "after", items[0])
 
     def b_start_when(self, span, items):
-        return ast.StepStart(span, "when", items[0], items[1] if len(items) > 1 else None)
+        edge = None
+        if isinstance(items[0], Token) and items[0].type in ("RISING", "FALLING", "CHANGING"):
+            edge, items = str(items[0]), items[1:]
+        delay = None
+        if len(items) >= 3 and isinstance(items[-2], Token) and items[-2].type == "DELAY":
+            delay, items = items[-1], items[:-2]
+        return ast.StepStart(span, "when", items[0], items[1] if len(items) > 1 else None, edge, delay)
 
     def b_group(self, span, items):
         return ast.Group(span, str(items[0]), tuple(items[1:]))

@@ -339,6 +339,40 @@ def check_trigger_condition(ctx: Context, condition, span: Span) -> bool:
     return ok
 
 
+@dataclass(frozen=True)
+class When:
+    """A lowered `when [EDGE] C [for D] [delay D]` start (None: an error was reported)."""
+
+    condition: E.Expr
+    hold_s: E.Expr | None
+    edge: str | None
+    delay_s: E.Expr | None
+
+
+def lower_when(ctx: Context, start: ast.StepStart) -> When | None:
+    """The `when` start of a step, for actors' and lights' steps alike."""
+    ok = True
+    condition = ctx.lowering(signals=True).lower_formula(start.value, "a trigger condition")
+    if condition is None or not check_trigger_condition(ctx, condition, start.value.span):
+        ok = False
+    low = ctx.lowering()
+    hold = delay = None
+    if start.hold is not None:
+        hold = low.lower_value(start.hold, units.TIME, "how long the condition must hold")
+        if hold is None or not check_time(ctx, hold, start.hold.span, "the hold of `when ... for`"):
+            ok = False
+    if start.delay is not None:
+        delay = low.lower_value(start.delay, units.TIME, "the delay of `when ... delayed`")
+        if delay is None or not check_time(ctx, delay, start.delay.span, "the delay of `when ... delayed`"):
+            ok = False
+    return When(condition, hold, start.edge, delay) if ok else None
+
+
+def when_fields(when: When) -> dict:
+    """The `TriggerPlan` fields of a lowered `when` start."""
+    return {"condition": when.condition, "hold_s": when.hold_s, "edge": when.edge, "delay_s": when.delay_s}
+
+
 def text_of(ctx: Context, span: Span) -> str:
     """The source text of a one-line span (oracle and constraint texts for reports)."""
     lines = ctx.lines.get(span.file)

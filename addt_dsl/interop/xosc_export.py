@@ -435,6 +435,10 @@ def _condition_groups(run: _Run, formula, event: str) -> list[list] | None:
     return groups if len(groups) <= 8 else None
 
 
+EXPORT_EDGES = {None: xosc.ConditionEdge.none, "rising": xosc.ConditionEdge.rising,
+                "falling": xosc.ConditionEdge.falling, "changing": xosc.ConditionEdge.risingOrFalling}
+
+
 def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str] | None) -> xosc.Trigger:
     """`armed_by`: the events whose start arms this step (None: armed at time 0)."""
     common = []
@@ -475,6 +479,18 @@ def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str]
                     c.delay = float(hold)
             run.carried.append(f"`when ... for {hold:g} s` ({event}): a condition delay of {hold:g} s (it does not "
                                "require the condition to keep holding)")
+        if step.delay_s is not None or step.edge is not None:
+            # `when EDGE C delayed D`: OpenSCENARIO's conditionEdge and delay, exactly (the edge
+            # of each condition: exact for one condition, listed for several).
+            delay = float(run.num(step.delay_s)) if step.delay_s is not None else 0.0
+            edge = EXPORT_EDGES[step.edge]
+            for conds in got:
+                for c in conds:
+                    c.delay = delay if step.hold_s is None else c.delay
+                    c.conditionedge = edge
+            if step.edge is not None and sum(len(conds) for conds in got) > 1:
+                run.carried.append(f"`when {step.edge} ...` ({event}): the edge of each of its conditions, not of "
+                                   "the whole condition")
         groups = got
     trigger = xosc.Trigger()
     for conds in groups:

@@ -53,6 +53,7 @@ DEFAULT_DURATION_S = 60.0
 MAX_DURATION_S = 3600.0
 CATEGORY_KIND = {"car": "car", "van": "car", "motorbike": "cyclist", "bicycle": "cyclist", "bus": "truck",
                  "truck": "truck", "semitrailer": "truck", "trailer": "truck", "train": "truck", "tram": "truck"}
+EDGES = {"none": None, "rising": "rising", "falling": "falling", "risingOrFalling": "changing"}
 RULE_OPS = {"lessThan": "<", "lessOrEqual": "<=", "greaterThan": ">", "greaterOrEqual": ">=", "equalTo": "==",
             "notEqualTo": "!="}
 _NAME = re.compile(r"[A-Za-z_]\w*")
@@ -1591,7 +1592,7 @@ class _Translate(_Importer):
     def start(self, trigger, who: str, act_at, event: str = ""):
         """('now', fields of a TriggerPlan) or ('after_event', (event, delay, state)); None: dropped."""
         groups = list(trigger.iterfind("ConditionGroup")) if trigger is not None else []
-        alternatives, at_s, holds = [], act_at, []
+        alternatives, at_s, holds, edges = [], act_at, [], []
         for group in groups:
             conj = []
             for cond in group.iterfind("Condition"):
@@ -1616,9 +1617,8 @@ class _Translate(_Importer):
                 if formula is None:
                     return None
                 conj.append(formula)
-                delay = self.value(cond, "delay", units.TIME, 0.0)
-                if delay > 0:
-                    holds.append((delay, cond))
+                holds.append((self.value(cond, "delay", units.TIME, 0.0), cond))
+                edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
             if conj:
                 alternatives.append(_all(conj))
         fields = {}
@@ -1626,13 +1626,24 @@ class _Translate(_Importer):
             fields["at_s"] = E.Num(value=at_s)
         if alternatives:
             fields["condition"] = _any(alternatives)
-        if holds:
-            # `when C for D` is the nearest form: the same start while C keeps holding, none if it breaks.
-            hold = max(d for d, _ in holds)
-            fields["hold_s"] = E.Num(value=hold)
-            if (self.sidecar or {}).get("holds", {}).get(event) != hold:  # exact when the side file says so
-                self.approx(holds[0][1], f"a condition delay of {hold:g} s: `when ... for {hold:g} s` (the condition "
-                                     "must keep holding for the delay)")
+        # One condition (the usual case): its edge and delay exactly. Several: the step's edge
+        # and delay act on the whole formula, exact when all conditions agree.
+        if any(e for e, _ in edges):
+            if len(edges) > 1:
+                self.approx(edges[0][1], "several conditions with edges: the edge applies to the whole start "
+                                         "condition")
+            fields["edge"] = next(e for e, _ in edges if e)
+        delays = sorted({d for d, _ in holds})
+        if delays and delays[-1] > 0:
+            delay = delays[-1]
+            if len(delays) > 1:
+                self.approx(holds[0][1], f"conditions with different delays: the step fires {delay:g} s after its "
+                                         "whole start condition")
+            if (self.sidecar or {}).get("holds", {}).get(event) == delay:  # an exported `when C for D`
+                fields["hold_s"] = E.Num(value=delay)
+                fields.pop("edge", None)
+            else:
+                fields["delay_s"] = E.Num(value=delay)
         return "now", fields
 
     def condition(self, cond, who: str):

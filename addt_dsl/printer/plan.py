@@ -244,7 +244,8 @@ def _step(pr: _Printer, tr: TriggerPlan, depth: int, in_group: bool) -> None:
     ex = pr.exprs
     starts = _join(f"at {ex.value(tr.at_s, units.TIME)}" if tr.at_s is not None else "",
                    f"after {ex.value(tr.after_s, units.TIME)}" if tr.after_s is not None else "",
-                   f"when {ex.formula(tr.condition)}{_hold(pr, tr)} then" if tr.condition is not None else "")
+                   f"when {tr.edge + ' ' if tr.edge else ''}{ex.formula(tr.condition)}{_hold(pr, tr)} then"
+                   if tr.condition is not None else "")
     if (tr.clause is None) == (tr.group is None):
         raise PrinterError("a step starts one behaviour or one group")
     if not starts and tr.clause is not None and not in_group:
@@ -265,9 +266,9 @@ def _step(pr: _Printer, tr: TriggerPlan, depth: int, in_group: bool) -> None:
 
 
 def _hold(pr: _Printer, tr: TriggerPlan) -> str:
-    if tr.hold_s is None:
-        return ""
-    return f" for {pr.exprs.value(tr.hold_s, units.TIME)}"
+    hold = f" for {pr.exprs.value(tr.hold_s, units.TIME)}" if tr.hold_s is not None else ""
+    delay = f" delayed {pr.exprs.value(tr.delay_s, units.TIME)}" if tr.delay_s is not None else ""
+    return hold + delay
 
 
 def _clause(pr: _Printer, c: ClausePlan) -> str:

@@ -44,6 +44,8 @@ class BoundStep:
     group: BoundGroup | None
     hold_s: float = 0.0  # the condition must have held this long [s]
     label: str | None = None  # a named step: its state is recorded as `actor.label`
+    edge: str | None = None  # rising | falling | changing: the condition counts where it changes
+    delay_s: float = 0.0  # fires this long after the condition counted [s]
 
 
 @dataclass(frozen=True)
@@ -151,7 +153,7 @@ def bind_step(t: TriggerPlan, params: dict[str, float]) -> BoundStep:
         at_s=_value(t.at_s, params) if t.at_s is not None else None,
         after_s=_value(t.after_s, params),
         group=_group(t.group, params) if t.group is not None else None,
-        hold_s=_value(t.hold_s, params), label=t.label)
+        hold_s=_value(t.hold_s, params), label=t.label, edge=t.edge, delay_s=_value(t.delay_s, params))
 
 
 def _group(g: GroupPlan, params: dict[str, float]) -> BoundGroup:

@@ -38,6 +38,10 @@ class StepState:
         self.condition = step.condition
         self.hold_s = step.hold_s
         self.held_since: float | None = None  # first instant of the condition's current run
+        self.edge = step.edge
+        self.delay_s = step.delay_s
+        self.last: bool | None = None  # the condition at its previous evaluation (edges)
+        self.counted_at: float | None = None  # when the condition (its edge) counted (delay)
         self.group = GroupState(step.group) if step.group is not None else None
         self.armed_at: float | None = None
         self.fired = False
@@ -86,16 +90,24 @@ class StepState:
                 return
             if self.at_s is not None and time_s + TIME_EPS_S < self.at_s:
                 return
-            if self.condition is not None:
+            if self.condition is not None and self.counted_at is None:
+                value = holds(self.condition)
+                last, self.last = self.last, value
+                if self.edge is not None:  # OpenSCENARIO's conditionEdge: never at the first evaluation
+                    value = last is not None and value != last and (
+                        self.edge == "changing" or value == (self.edge == "rising"))
                 # `when C for D`: the past-time `historically[0, D] C`, kept as the start of
                 # C's current run of true samples rather than re-evaluating a window.
-                if not holds(self.condition):
+                if not value:
                     self.held_since = None
                     return
                 if self.held_since is None:
                     self.held_since = time_s
                 if time_s + TIME_EPS_S < self.held_since + self.hold_s:
                     return
+                self.counted_at = time_s
+            if self.counted_at is not None and time_s + TIME_EPS_S < self.counted_at + self.delay_s:
+                return
             self.fired = True
             if self.clause is not None:
                 self.behavior = start(self.clause, time_s)

@@ -125,3 +125,35 @@ scenario follow {{
     f = trace.actors["follower"]
     expected = 0.5 * 2.0 - (24.9 - 25.0) * 2.0 * np.sqrt(2.0)
     assert (f.speed[1] - f.speed[0]) / trace.period_s == pytest.approx(expected, abs=1e-6)
+
+
+def test_edges_and_delays_of_a_step_condition():
+    # OpenSCENARIO's conditionEdge and delay: an edge never counts at the first evaluation
+    # (a condition true from the start does not fire `rising`), and a delay fires that long
+    # after the condition counted. The car ramps 0 -> 10 m/s at 2 m/s^2 (speed > 5 m/s
+    # from 2.5 s): `rising` + 1 s delay fires at 3.5 s; the level `speed < 1` fires at 0 s.
+    trace = run("""
+scenario edges {
+  duration 6 s
+  road r {
+    line length 800 m
+    lanes right 2 width 3.5 m
+  }
+  ego car on r lane -2 at 10 m speed 0 m/s {
+    stack bev cruise_speed 0 m/s
+  }
+  agent a car on r lane -1 at 100 m speed 0 m/s {
+    behavior cruise speed 10 m/s accel 2 m/s^2
+    up: when rising speed(a) > 5 m/s delayed 1 s then behavior brake decel 1 m/s^2 to_speed 1 m/s
+    never: when rising speed(a) < 1 m/s then behavior brake decel 1 m/s^2
+    level: when speed(a) < 1 m/s then behavior cruise speed 10 m/s accel 2 m/s^2
+  }
+}
+""")
+    fired = {e.detail["behavior"]: e.time_s for e in trace.events if e.kind == "trigger"}
+    starts = {name: float(trace.time[np.flatnonzero(v >= 1)[0]]) if (v >= 1).any() else None
+              for name, v in trace.steps.items()}
+    assert starts["a.level"] == pytest.approx(0.0)
+    assert starts["a.never"] is None
+    assert starts["a.up"] == pytest.approx(3.5, abs=trace.period_s + 1e-9)
+    assert "brake" in fired

@@ -10,8 +10,8 @@ from addt_dsl import expr as E
 from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
-from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, check_trigger_condition,
-                                       const_value, fmt, int_const, suggest)
+from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, const_value, fmt, int_const,
+                                       lower_when, suggest, when_fields)
 from addt_dsl.compiler.exprs import value_range
 from addt_dsl.compiler.xodr_check import check_route, route_length
 from addt_dsl.diagnostics import Span
@@ -541,7 +541,7 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
             ctx.sink.error("E0102", f"`{st.kind}` given twice in one step", st.span)
             ok = False
         starts[st.kind] = st
-    at = after = condition = hold = None
+    at = after = None
     low = ctx.lowering()
     for kind in ("at", "after"):
         if kind in starts:
@@ -555,15 +555,10 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
                 at = value
             else:
                 after = value
+    when = None
     if "when" in starts:
-        cond_node = starts["when"].value
-        condition = ctx.lowering(signals=True).lower_formula(cond_node, "a trigger condition")
-        if condition is None or not check_trigger_condition(ctx, condition, cond_node.span):
-            ok = False
-        if starts["when"].hold is not None:
-            hold = low.lower_value(starts["when"].hold, units.TIME, "how long the condition must hold")
-            if hold is None or not check_time(ctx, hold, starts["when"].hold.span, "the hold of `when ... for`"):
-                ok = False
+        when = lower_when(ctx, starts["when"])
+        ok = ok and when is not None
     if isinstance(node.action, ast.Group):
         group = _lower_group(ctx, node.action, actor, road)
         clause = None
@@ -574,8 +569,8 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
         ok = ok and clause is not None
     if not ok:
         return None
-    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after, group=group, hold_s=hold,
-                         label=node.label)
+    return P.TriggerPlan(clause=clause, at_s=at, after_s=after, group=group, label=node.label,
+                         **(when_fields(when) if when is not None else {}))
 
 
 def _lower_group(ctx: Context, node: ast.Group, actor: ast.ActorDecl, road: str | None) -> P.GroupPlan | None:

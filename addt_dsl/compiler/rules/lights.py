@@ -13,8 +13,8 @@ from addt_dsl import expr as E
 from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
-from addt_dsl.compiler.context import (Context, check_settings, check_time, check_trigger_condition, const_value,
-                                       int_const, suggest)
+from addt_dsl.compiler.context import (Context, check_settings, check_time, const_value, int_const, lower_when, suggest,
+                                       when_fields)
 from addt_dsl.registry import ParamSpec
 
 STATE_CHOICES = (*P.LIGHT_STATES, P.LIGHT_PROGRAM)
@@ -259,7 +259,7 @@ def _step(ctx: Context, node, controllers: set[str]) -> P.TriggerPlan | None:
     if len(starts) != len(node.starts):
         ctx.sink.error("E0102", "a start condition given twice in one step", node.span)
         return None
-    at = after = condition = hold = None
+    at = after = when = None
     ok = True
     low = ctx.lowering()
     for kind in ("at", "after"):
@@ -269,13 +269,8 @@ def _step(ctx: Context, node, controllers: set[str]) -> P.TriggerPlan | None:
                 ok = False
             at, after = (value, after) if kind == "at" else (at, value)
     if "when" in starts:
-        condition = ctx.lowering(signals=True).lower_formula(starts["when"].value, "a trigger condition")
-        if condition is None or not check_trigger_condition(ctx, condition, starts["when"].value.span):
-            ok = False
-        if getattr(starts["when"], "hold", None) is not None:  # `when C for D`: C held for D
-            hold = low.lower_value(starts["when"].hold, units.TIME, "how long the condition must hold")
-            if hold is None or not check_time(ctx, hold, starts["when"].hold.span, "the hold of `when ... for`"):
-                ok = False
+        when = lower_when(ctx, starts["when"])
+        ok = ok and when is not None
     if node.action.keyword != "light":
         ctx.sink.error("E0204", f"`{node.action.keyword}` clauses belong in an actor's block", node.action.span,
                        "a lights block's steps change lights: `at 5 s light west state red`")
@@ -283,4 +278,4 @@ def _step(ctx: Context, node, controllers: set[str]) -> P.TriggerPlan | None:
     clause = check_light_clause(ctx, node.action, controllers)
     if not ok or clause is None:
         return None
-    return P.TriggerPlan(condition=condition, clause=clause, at_s=at, after_s=after, hold_s=hold)
+    return P.TriggerPlan(clause=clause, at_s=at, after_s=after, **(when_fields(when) if when is not None else {}))

@@ -243,7 +243,7 @@ def test_actions_come_back_from_the_xosc_alone(tmp_path):
     gap = clause("keeper")
     assert (gap.name, gap.settings["target"], gap.settings["distance"].value) == ("keep_gap", "ego", 15.0)
     step = plan["walker"].triggers[0]
-    assert step.hold_s.value == 0.5  # the condition delay
+    assert step.delay_s.value == 0.5 and step.hold_s is None  # the condition delay
     sync = step.clause
     assert sync.name == "synchronize" and sync.settings["master"] == "ego"
     assert (sync.settings["master_at"].value, sync.settings["target_s"].value) == (150.0, 150.0)
@@ -258,7 +258,7 @@ def test_actions_come_back_from_the_xosc_alone(tmp_path):
     assert env["light"]["sun"].value == pytest.approx(0.5235987755982988)
     # What is approximated says so; nothing else is dropped.
     messages = [d.message for d in got.diagnostics if d.code in ("W0801", "W0802")]
-    assert any("condition delay of 0.5 s" in m for m in messages)
+    assert not any("delay" in m for m in messages)  # a condition delay is exact: `delayed 0.5 s`
     assert not any(d.code == "W0801" for d in got.diagnostics), messages
 
 
@@ -286,7 +286,7 @@ def test_esmini_trajectories_and_synchronisation(tmp_path):
     step = next(t for a in got.plan.agents for t in a.triggers if t.group is not None)
     first, clothoid = step.group.steps
     assert [v.value for v in first.clause.settings["times"]] == [0.0, 2.0, 4.0, 6.0]
-    assert step.hold_s.value == pytest.approx(0.2)
+    assert step.delay_s.value == pytest.approx(0.2) and step.hold_s is None
     # The clothoid starts when the polyline ends (its last vertex time), sampled and said so.
     assert step.group.mode == "sequence" and clothoid.after_s.value == 6.0 and "x" in clothoid.clause.settings
     assert {d.label for d in got.diagnostics if "sampled as a polyline" in d.message} == {"<Clothoid>", "<Nurbs>"}
@@ -374,12 +374,11 @@ def test_esmini_traffic_lights_translate(tmp_path):
     steps = [(tr.clause.name, tr.clause.settings["state"]) for tr in plan.light_steps]
     assert steps[:3] == [("signal_1", "green"), ("signal_2", "red"), ("signal_3", "red")]
     assert ("signal_1", "yellow") in steps and ("signal_1", "red") in steps
-    assert "when light(signal_1) == yellow for 3 s then light signal_1 state red" in got.text
-    assert "when light(signal_3) == green for 0.5 s then behavior" in got.text
+    assert "when light(signal_1) == yellow delayed 3 s then light signal_1 state red" in got.text
+    assert "when light(signal_3) == green delayed 0.5 s then behavior" in got.text
     assert not any("TrafficSignal" in d.message or "signals" in d.message
                    for d in got.diagnostics if d.code == "W0801"), [d.message for d in got.diagnostics]
-    delay = next(d for d in got.diagnostics if "condition delay of 3 s" in d.message)
-    assert delay.span.line == 192  # the <Condition> of StopLightEvent2
+    assert not any("delay" in d.message for d in got.diagnostics)  # delays translate exactly
     # The esmini file's actors follow their actions, not the lights.
     assert all(a.ignore_lights for a in plan.agents) and not plan.ego.ignore_lights
 
@@ -782,3 +781,29 @@ def test_direction_reverse_survives_export_and_import_without_the_side_file(tmp_
     assert back.plan is not None, [str(d) for d in back.diagnostics]
     flags = {a.name: a.reverse for a in back.plan.agents}
     assert flags == {"over": True, "oncoming": False}
+
+
+def test_edges_and_delays_survive_export_and_import_without_the_side_file(tmp_path):
+    from addt_dsl.interop.xosc_export import export_run
+    from addt_dsl.sweep import expand
+    source = """scenario edges {
+  duration 6 s
+  road r {
+    line length 800 m
+    lanes right 2 width 3.5 m
+  }
+  ego car on r lane -2 at 10 m speed 0 m/s
+  agent a car on r lane -1 at 100 m speed 10 m/s {
+    when rising speed(a) > 5 m/s then behavior brake decel 1 m/s^2
+    when falling speed(a) > 9.5 m/s delayed 1 s then behavior cruise speed 20 m/s
+  }
+}
+"""
+    done = export_run(expand(compile_source(source).plan).specs[0], tmp_path)
+    xml = done.xosc_path.read_text()
+    assert 'delay="1.0" conditionEdge="falling"' in xml and 'conditionEdge="rising"' in xml
+    done.sidecar_path.unlink()
+    back = import_xosc(done.xosc_path)
+    assert back.plan is not None, [str(d) for d in back.diagnostics]
+    steps = {t.clause.name: (t.edge, t.delay_s.value if t.delay_s else None) for t in back.plan.agents[0].triggers}
+    assert steps == {"brake": ("rising", None), "cruise": ("falling", 1.0)}
