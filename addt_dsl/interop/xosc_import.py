@@ -2088,6 +2088,10 @@ def import_xosc(path: str | Path, root: str | Path | None = None, maps=()) -> Im
     """Translate an OpenSCENARIO file; files are read only under `root` (default: its
     directory), and a road network named without a folder also from the `maps` directories."""
     path = Path(path)
+    from addt_dsl.interop.openscenario.distribution import import_distribution, names_distribution
+
+    if names_distribution(path):  # a logical scenario: the distribution, then the template it names
+        return import_distribution(path, root, maps)
     imp = _Translate(path, Path(root) if root is not None else path.parent, tuple(Path(m) for m in maps))
     if not path.resolve().is_relative_to(imp.root):
         imp.sink.error("E0402", f"{path} is outside the root directory", None)
