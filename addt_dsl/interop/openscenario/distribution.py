@@ -24,8 +24,10 @@ parameter handling (`xosc_import._Importer`).
 
 from __future__ import annotations
 
+import json
 import math
 import tempfile
+import xml.etree.ElementTree as ET
 from fractions import Fraction
 from pathlib import Path
 
@@ -33,9 +35,11 @@ from addt_dsl import expr as E
 from addt_dsl.compiler import compile_source
 from addt_dsl.confine import Refused, confine
 from addt_dsl.diagnostics import Span
+from addt_dsl.interop.openscenario.distribution_export import PARAMETRIC_KEY
+from addt_dsl.interop.xosc_export import SIDECAR_PARAM
 from addt_dsl.interop.xosc_import import MAX_XML_BYTES, RULE_OPS, Imported, _Importer, _Stop, import_xosc
 from addt_dsl.limits import DEFAULT, MAX_ABS_NUMBER, Limits
-from addt_dsl.plan import AssumptionPlan, CaseAxis, GridAxis, ParamPlan, SamplerPlan, SweepPlan
+from addt_dsl.plan import AssumptionPlan, CaseAxis, GridAxis, ParamPlan, SamplerPlan, ScenarioPlan, SweepPlan
 from addt_dsl.printer import PrinterError, print_plan, side_files
 from addt_dsl.sweep import count_runs, grid_cell_count
 
@@ -95,6 +99,7 @@ class _Distribution(_Importer):
         self.used: dict[str, object] = {}  # parameter -> the element that varies it
         self.template: _Importer | None = None  # the template, read again for its declarations
         self.decls: dict[str, object] = {}  # template parameter -> its <ParameterDeclaration>
+        self.from_side_file = False  # the parameters come from the side file of `addtc export --sweep`
 
     def run(self) -> Imported | None:
         got = self.read(self.path.name, self.path.parent, None)
@@ -176,7 +181,44 @@ class _Distribution(_Importer):
             if name and name not in self.decls:
                 self.decls[name] = decl
                 self.template.params[name] = (decl.get("parameterType", "string"), decl.get("value", ""))
+        parametric = self.parametric(doc, path)
+        if parametric is not None:  # its parameters: those the fault schedule reads are not in the OpenSCENARIO
+            self.from_side_file = True
+            return Imported(tmpl.text, parametric, [], {}, tmpl.side_files)
         return tmpl
+
+    def parametric(self, doc, path: Path) -> ScenarioPlan | None:
+        """The scenario with its parameters from the side file of `addtc export --sweep`
+        (the template's OpenSCENARIO holds one run's numbers), its domains and sweep
+        cleared for the distribution's; None without one."""
+        t = self.template
+        if SIDECAR_PARAM not in t.params:
+            return None
+        decls = doc.find("ParameterDeclarations")
+        got = t.read(t.params[SIDECAR_PARAM][1], path.parent, decls)
+        if got is None:  # the template's import has said why
+            t.sink.items.clear()
+            return None
+        try:
+            data = json.loads(got[1])
+            raw = data.get(PARAMETRIC_KEY) if isinstance(data, dict) else None
+            if raw is None:
+                return None
+            plan = ScenarioPlan.model_validate(raw)
+        except (ValueError, TypeError, RecursionError) as exc:
+            self.error(None, f"the side file {t.params[SIDECAR_PARAM][1]} of {path.name} has no valid "
+                             f"'{PARAMETRIC_KEY}': {str(exc).splitlines()[0][:200]}")
+            raise _Stop from None
+        if plan.name != data.get("scenario"):
+            self.error(None, f"the side file {t.params[SIDECAR_PARAM][1]} describes scenario {plan.name!r}, "
+                             f"not {data.get('scenario')!r}")
+            raise _Stop
+        self.sink.warning("W0802", f"the parameters of {path.name} and where they are used come from its addt-dsl "
+                          f"side file {t.params[SIDECAR_PARAM][1]} (the OpenSCENARIO holds one run's numbers)",
+                          self.span(None), label="")
+        params = [ParamPlan(name=p.name, dimension=p.dimension, default=p.default, integer=p.integer)
+                  for p in plan.params]
+        return plan.model_copy(update={"params": params, "sweep": SweepPlan()})
 
     # -- parameters
 
@@ -185,6 +227,8 @@ class _Distribution(_Importer):
         read by the translated scenario, or varied twice)."""
         name = self.raw(el, attr)
         decl = self.decls.get(name)
+        if decl is None and self.from_side_file and name in params:
+            decl = self.decls[name] = ET.Element("ParameterDeclaration", name=name, parameterType="double")
         if decl is None:
             self.error(el, f"the scenario declares no parameter '{name}'",
                        f"its parameters: {', '.join(self.decls) or 'none'}")
@@ -334,7 +378,8 @@ class _Distribution(_Importer):
         that depends on it over this range)."""
         lo, hi = min(vals + [p.default]), max(vals + [p.default])
         if lo < hi:
-            params[p.name] = p.model_copy(update={"low": lo, "high": hi, "integer": self.is_integer(p.name)})
+            params[p.name] = p.model_copy(update={"low": lo, "high": hi,
+                                                  "integer": p.integer or self.is_integer(p.name)})
 
     def refuse_kind(self, el, kind) -> None:
         tag = kind.tag if kind is not None else "nothing"
