@@ -332,7 +332,7 @@ class _Distribution(_Importer):
             if runs > self.limits.runs:
                 self.error(el, f"the distribution makes more than {self.limits.runs:,} runs (limit `runs`, "
                                "docs/limits.md); nothing was run",
-                           "raise it with --max runs=N or --allow-large on the imported file")
+                           "fewer values (a larger stepWidth, fewer elements) make fewer runs", code="E0701")
                 raise _Stop
         grid, cases = [], []
         for how, p, el, data in parts:
@@ -397,7 +397,7 @@ class _Distribution(_Importer):
             raise _Stop
         if runs > cap:
             self.error(sto, f"numberOfTestRuns={int(runs):,} is more than {cap:,} runs (limit `runs`, "
-                            "docs/limits.md; a sampler draws at most 1,000,000); nothing was run")
+                            "docs/limits.md; a sampler draws at most 1,000,000); nothing was run", code="E0701")
             raise _Stop
         seed = self.value(sto, "randomSeed", default=0.0)
         if sto.get("randomSeed") is None:
