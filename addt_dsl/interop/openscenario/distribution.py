@@ -154,8 +154,8 @@ class _Distribution(_Importer):
             self.sink.error(refused.code, refused.message, self.span(sf), *([refused.note] if refused.note else []),
                             label="<ScenarioFile>")
             raise _Stop from None
-        if path.resolve() == self.path.resolve():
-            self.error(sf, "the distribution names itself as its scenario")
+        if names_distribution(path):  # itself, or a chain of distributions: never followed
+            self.error(sf, f"{relative} is a ParameterValueDistribution, not a scenario")
             raise _Stop
         tmpl = import_xosc(path, self.root, self.maps)
         self.sink.items.extend(tmpl.diagnostics)
