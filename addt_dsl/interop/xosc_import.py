@@ -2084,15 +2084,17 @@ def _duration(clause: ClausePlan) -> float:
 
 # ---------------------------------------------------------------- entry point
 
-def import_xosc(path: str | Path, root: str | Path | None = None, maps=()) -> Imported:
+def import_xosc(path: str | Path, root: str | Path | None = None, maps=(), translator=None) -> Imported:
     """Translate an OpenSCENARIO file; files are read only under `root` (default: its
-    directory), and a road network named without a folder also from the `maps` directories."""
+    directory), and a road network named without a folder also from the `maps` directories.
+    A ParameterValueDistribution is translated with the template it names (`translator`:
+    the class that translates a template, openscenario/distribution.py)."""
     path = Path(path)
     from addt_dsl.interop.openscenario.distribution import import_distribution, names_distribution
 
-    if names_distribution(path):  # a logical scenario: the distribution, then the template it names
+    if translator is None and names_distribution(path):  # a logical scenario: the distribution and its template
         return import_distribution(path, root, maps)
-    imp = _Translate(path, Path(root) if root is not None else path.parent, tuple(Path(m) for m in maps))
+    imp = (translator or _Translate)(path, Path(root) if root is not None else path.parent, tuple(Path(m) for m in maps))
     if not path.resolve().is_relative_to(imp.root):
         imp.sink.error("E0402", f"{path} is outside the root directory", None)
         return Imported(None, None, imp.sink.items, imp.sources)

@@ -2,8 +2,10 @@
 it names -> one `.addt` whose `sweep` block is the distribution (docs/openscenario.md,
 "Logical scenarios").
 
-The template is imported by `import_xosc` (its parameters keep their names; each one's
-dimension is where the template uses it). Then, exactly or not at all:
+The template is imported by `import_xosc` with `_Template`, which keeps the varied
+parameters where `${...}` arithmetic uses them (esmini's `${$EgoSpeed / 3.6}`: EgoSpeed in
+km/h); parameters keep their names, each one's dimension is where the template uses it.
+Then, exactly or not at all:
 
 - Deterministic: `DistributionRange` and `DistributionSet` -> `grid` axes,
   `ValueSetDistribution` -> a `cases` axis (listed combinations); all multiplied, as
@@ -24,20 +26,24 @@ parameter handling (`xosc_import._Importer`).
 
 from __future__ import annotations
 
+import ast
 import json
 import math
+import re
 import tempfile
 import xml.etree.ElementTree as ET
 from fractions import Fraction
 from pathlib import Path
 
 from addt_dsl import expr as E
+from addt_dsl import units
 from addt_dsl.compiler import compile_source
 from addt_dsl.confine import Refused, confine
 from addt_dsl.diagnostics import Span
 from addt_dsl.interop.openscenario.distribution_export import PARAMETRIC_KEY
 from addt_dsl.interop.xosc_export import SIDECAR_PARAM
-from addt_dsl.interop.xosc_import import MAX_XML_BYTES, RULE_OPS, Imported, _Importer, _Stop, import_xosc
+from addt_dsl.interop.xosc_import import (MAX_XML_BYTES, RULE_OPS, Imported, _arith, _Importer, _Stop, _Translate,
+                                          import_xosc)
 from addt_dsl.limits import DEFAULT, MAX_ABS_NUMBER, Limits
 from addt_dsl.plan import AssumptionPlan, CaseAxis, GridAxis, ParamPlan, SamplerPlan, ScenarioPlan, SweepPlan
 from addt_dsl.printer import PrinterError, print_plan, side_files
@@ -100,6 +106,7 @@ class _Distribution(_Importer):
         self.template: _Importer | None = None  # the template, read again for its declarations
         self.decls: dict[str, object] = {}  # template parameter -> its <ParameterDeclaration>
         self.from_side_file = False  # the parameters come from the side file of `addtc export --sweep`
+        self.scales: dict[str, float] = {}  # the template's parameter scales (_Template)
 
     def run(self) -> Imported | None:
         got = self.read(self.path.name, self.path.parent, None)
@@ -157,7 +164,14 @@ class _Distribution(_Importer):
         if names_distribution(path):  # itself, or a chain of distributions: never followed
             self.error(sf, f"{relative} is a ParameterValueDistribution, not a scenario")
             raise _Stop
-        tmpl = import_xosc(path, self.root, self.maps)
+        made: list[_Template] = []
+
+        def translator(*args):
+            made.append(type("_Varied", (_Template,), {"varied": frozenset(self.named(pvd))})(*args))
+            return made[-1]
+
+        tmpl = import_xosc(path, self.root, self.maps, translator=translator)
+        self.scales = made[0].scales if made else {}
         self.sink.items.extend(tmpl.diagnostics)
         self.sources.update(tmpl.sources)
         if tmpl.plan is None:
@@ -220,7 +234,15 @@ class _Distribution(_Importer):
                   for p in plan.params]
         return plan.model_copy(update={"params": params, "sweep": SweepPlan()})
 
+    def named(self, pvd) -> set[str]:
+        """The parameter names the distribution varies (as written; checked later)."""
+        return {v for el in pvd.iter() for k, v in el.attrib.items() if k in ("parameterName", "parameterRef")}
+
     # -- parameters
+
+    def scale(self, name: str) -> float:
+        """SI per unit of the parameter's values in the files (1 but for `${$P / 3.6}`)."""
+        return self.scales.get(name, 1.0)
 
     def param(self, el, attr: str, params: dict[str, ParamPlan]) -> ParamPlan:
         """The template's parameter that `el` varies (refused: undeclared, not a number, not
@@ -270,7 +292,7 @@ class _Distribution(_Importer):
         if self.is_integer(name) and v != int(v):
             self.error(el, f"'{name}' is an {self.decls[name].get('parameterType')} parameter; {v!r} is not whole")
             raise _Stop
-        return v
+        return v * self.scale(name)
 
     def num(self, el, attr: str) -> float:
         v = self.value(el, attr)
@@ -279,7 +301,7 @@ class _Distribution(_Importer):
             raise _Stop
         return v
 
-    def range_of(self, el, name: str) -> tuple[float, float]:
+    def range_of(self, el, name: str, scaled: bool = True) -> tuple[float, float]:
         rng = el.find("Range")
         if rng is None:
             self.error(el, f"<{el.tag}> has no <Range>")
@@ -288,7 +310,8 @@ class _Distribution(_Importer):
         if lo > hi:
             self.error(rng, f"the range of '{name}' is empty: lowerLimit {lo!r} > upperLimit {hi!r}")
             raise _Stop
-        return lo, hi
+        k = self.scale(name) if scaled else 1.0
+        return lo * k, hi * k
 
     # -- deterministic
 
@@ -301,12 +324,12 @@ class _Distribution(_Importer):
                 kind = _only(el)
                 if kind is not None and kind.tag == "DistributionRange":
                     step = self.num(kind, "stepWidth")
-                    lo, hi = self.range_of(kind, p.name)
+                    lo, hi = self.range_of(kind, p.name, scaled=False)
                     if not step > 0:
                         self.error(kind, f"stepWidth of '{p.name}' must be positive, not {step!r}")
                         raise _Stop
                     size = math.floor((hi - lo) / step + 1e-9) + 1
-                    parts.append(("range", p, kind, (lo, step, size)))
+                    parts.append(("range", p, kind, (lo, step, size, hi)))
                 elif kind is not None and kind.tag == "DistributionSet":
                     texts = [self.raw(e, "value") for e in kind.iterfind("Element")]
                     if not texts:
@@ -337,8 +360,8 @@ class _Distribution(_Importer):
         grid, cases = [], []
         for how, p, el, data in parts:
             if how == "range":
-                lo, step, size = data
-                vals = [self.checked(el, p.name, min(lo + k * step, data[0] + (size - 1) * step)) for k in range(size)]
+                lo, step, size, hi = data  # in the file's unit; `checked` makes them SI
+                vals = [self.checked(el, p.name, min(lo + k * step, hi)) for k in range(size)]
                 grid.append(GridAxis(param=p.name, values=vals))
                 self.widen(params, p, vals)
             elif how == "set":
@@ -432,7 +455,7 @@ class _Distribution(_Importer):
         if var < 0:
             self.error(el, f"variance of '{p.name}' is negative ({var!r})")
             raise _Stop
-        sd = math.sqrt(var)
+        mean, sd = mean * self.scale(p.name), math.sqrt(var) * self.scale(p.name)
         if el.find("Range") is not None:
             lo, hi = self.range_of(el, p.name)
             if lo > mean - NORMAL_REACH_SD * sd or hi < mean + NORMAL_REACH_SD * sd:
@@ -522,6 +545,7 @@ class _Distribution(_Importer):
                     except (KeyError, SyntaxError, ValueError, ArithmeticError, RecursionError, MemoryError):
                         t.error(c, f"value=\"{c.get('value', '')[:40]}\" of a constraint on '{name}' is not a number")
                         continue
+                    v *= self.scale(name)
                     ands.append(E.Binary(op=RULE_OPS[rule], left=E.Param(name=name), right=E.Num(value=v)))
                     words.append(f"{name} {RULE_OPS[rule]} {v!r}")
                 if not ands:
@@ -573,6 +597,67 @@ class _Distribution(_Importer):
             self.sources.update(check.sources)
             return None
         return Imported(text, check.plan, self.sink.items, self.sources, files)
+
+
+class _Template(_Translate):
+    """The template, with the varied parameters kept where `${...}` arithmetic uses them.
+
+    The importer evaluates `${$EgoSpeed / 3.6}` to a number; a parameter the distribution
+    varies must stay a parameter there. An expression linear in one varied parameter
+    (a * x + b, checked at three points) becomes `c * P + b`, and P's unit is the one
+    whose factor is a where a matches a unit of the place's dimension (esmini's km/h:
+    `${$EgoSpeed / 3.6}` makes EgoSpeed a speed in km/h, 120 -> 33.3 m/s, and the
+    expression just `EgoSpeed`); otherwise SI (scale 1). A parameter's scale is fixed by
+    its first use (a plain `$P` fixes 1)."""
+
+    varied: frozenset[str] = frozenset()
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.scales: dict[str, float] = {}  # parameter -> SI per unit of its value in the file
+
+    def number(self, el, attr: str, dim=units.DIMENSIONLESS, default: float | None = None,
+               keep: bool = True) -> E.Expr:
+        ref = el.get(attr, "")
+        if keep and ref.startswith("${") and ref.endswith("}"):
+            got = self.linear(ref[2:-1], dim)
+            if got is not None:
+                return got
+        out = super().number(el, attr, dim, default, keep)
+        if isinstance(out, E.Param) and out.name in self.varied:
+            k = self.scales.setdefault(out.name, 1.0)
+            if k != 1.0:
+                return E.Binary(op="*", left=E.Num(value=1.0 / k), right=out)
+        return out
+
+    def linear(self, body: str, dim) -> E.Expr | None:
+        names = set(re.findall(r"\$([A-Za-z_]\w*)", body))
+        if len(names) != 1 or not names <= self.varied:
+            return None
+        (name,) = names
+        try:
+            f = [_arith(ast.parse(re.sub(r"\$" + name + r"\b", repr(float(x)), body), mode="eval"))
+                 for x in (0.0, 1.0, 2.0)]
+        except (SyntaxError, ValueError, ArithmeticError, RecursionError, MemoryError):
+            return None
+        a, b = f[1] - f[0], f[0]
+        if not all(map(math.isfinite, f)) or a == 0 or not math.isclose(f[2], b + 2 * a, rel_tol=1e-12, abs_tol=1e-12):
+            return None
+        if name not in self.scales:
+            unit = next((u for u in units.UNITS.values() if u.dim == dim and b == 0
+                         and math.isclose(u.factor, a, rel_tol=1e-12)), None)
+            self.scales[name] = unit.factor if unit is not None else 1.0
+        known = self.param_dims.get(name, dim)
+        self.param_dims[name] = dim if known == dim else None
+        c = a / self.scales[name]
+        out: E.Expr = E.Param(name=name) if math.isclose(c, 1.0, rel_tol=1e-12) else \
+            E.Binary(op="*", left=E.Num(value=c), right=E.Param(name=name))
+        return out if b == 0 else E.Binary(op="+", left=out, right=E.Num(value=b))
+
+    def plan(self, header, duration: float):
+        plan = super().plan(header, duration)
+        return plan.model_copy(update={"params": [p.model_copy(update={"default": p.default * self.scales.get(p.name, 1.0)})
+                                                  for p in plan.params]})
 
 
 STOCHASTIC = {"UniformDistribution": _Distribution.uniform, "NormalDistribution": _Distribution.normal,

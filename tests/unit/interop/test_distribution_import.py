@@ -13,6 +13,7 @@ import time
 import pytest
 
 from addt_dsl.cli import main
+from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xosc_import import import_xosc
 from addt_dsl.sweep import expand
 from tests.conftest import ROOT
@@ -91,6 +92,26 @@ def test_value_sets_are_listed_combinations(corpus):
     assert runs_of(got, "EgoS", "TargetS") == [(10.0, 60.0), (30.0, 90.0), (50.0, 100.0)]
 
 
+def test_a_parameter_used_as_km_per_h_stays_km_per_h(corpus):
+    # acc-test sets the ego's speed to ${$EgoSpeed / 3.6}: EgoSpeed is in km/h. The sweep's
+    # 90 and 120 are 25 and 33.3 m/s, the default 120 km/h too, and the ego's speed reads
+    # the parameter itself; a uniform draw in [90, 108] km/h is in [25, 30] m/s.
+    got = imported(corpus, "<Deterministic>\n" + single(
+        "EgoSpeed", '<DistributionSet><Element value="90"/><Element value="120"/></DistributionSet>')
+        + "</Deterministic>\n")
+    assert got.text is not None, errors(got)
+    (p,) = [p for p in got.plan.params if p.name == "EgoSpeed"]
+    assert p.dimension == "speed" and p.default == pytest.approx(120 / 3.6)
+    specs = expand(got.plan).specs
+    assert [s.params["EgoSpeed"] for s in specs] == pytest.approx([25.0, 120 / 3.6])
+    assert [eval_param_expr(got.plan.ego.speed, s.params) for s in specs] == pytest.approx([25.0, 120 / 3.6])
+    got = imported(corpus, stochastic(50, 3, {
+        "EgoSpeed": '<UniformDistribution><Range lowerLimit="90" upperLimit="108"/></UniformDistribution>'}))
+    assert got.text is not None, errors(got)
+    drawn = [s.params["EgoSpeed"] for s in expand(got.plan).specs]
+    assert min(drawn) >= 25.0 and max(drawn) <= 30.0 + 1e-12 and max(drawn) - min(drawn) > 3.0
+
+
 def test_a_fractional_step_reaches_its_upper_limit(corpus):
     # 0.3 / 0.1 is 2.9999999999999996 in floating point: the range still has its 4 values.
     got = imported(corpus, "<Deterministic>\n" + single(
@@ -165,7 +186,7 @@ def test_what_the_language_cannot_draw_is_refused_by_name(corpus, dist, missing)
 
 
 @pytest.mark.parametrize("name, said", [
-    ("EgoSpeed", "does not read parameter 'EgoSpeed' as a value"),  # used only in ${$EgoSpeed / 3.6}
+    ("LaneChange1Time", "does not read parameter 'LaneChange1Time' as a value"),  # a condition's time, as a number
     ("HostVehicle", "is a string: only numbers are swept"),
     ("Nobody", "declares no parameter 'Nobody'"),
 ])
