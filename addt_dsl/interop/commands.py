@@ -130,6 +130,10 @@ def _export_sweep(plan, args) -> int:
     for path in (done.distribution_path, t.xosc_path, t.xodr_path, t.sidecar_path):
         print(f"  {path}")
     print(f"note: {done.note}")
+    print(f"the template's starts that read the parameters: {len(done.referenced)} (other uses hold the first run's "
+          "numbers; addtc import reads the parameters from the side file)")
+    for line in done.referenced:
+        print(f"  - {line}")
     print(f"carried in {t.sidecar_path.name} (no OpenSCENARIO equivalent): {len(t.carried)}")
     for line in t.carried:
         print(f"  - {line}")

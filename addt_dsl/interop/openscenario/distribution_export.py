@@ -18,13 +18,16 @@ from __future__ import annotations
 
 import json
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+
+from addt_dsl import expr as E
+from addt_dsl.expr import eval_param_expr
 
 from addt_dsl.interop.xodr_export import ExportError, xml_text
 from addt_dsl.interop.xosc_export import OSC_MINOR, creation_date, export_run
 from addt_dsl.interop.xosc_import import MAX_XML_BYTES
-from addt_dsl.plan import ScenarioPlan, SweepPlan
+from addt_dsl.plan import ScenarioPlan, SweepPlan, _params_in
 from addt_dsl.sweep import SweepStream, axis_params, sampled_params
 
 
@@ -38,6 +41,69 @@ class SweepExport:
     form: str  # "deterministic" or "value sets"
     note: str
     runs: int
+    referenced: list[str] = field(default_factory=list)  # Init attributes that now read parameters
+
+
+# Init attributes that may read the parameters: (element path under <Private>, attribute, plan field).
+INIT_PLACES = (("PrivateAction/TeleportAction/Position/LanePosition", "s", "s"),
+               ("PrivateAction/TeleportAction/Position/LanePosition", "offset", "offset"),
+               ("PrivateAction/TeleportAction/Position/LanePosition", "laneId", "lane"),
+               ("PrivateAction/LongitudinalAction/SpeedAction/SpeedActionTarget/AbsoluteTargetSpeed", "value", "speed"))
+
+
+def osc_expression(e) -> str | None:
+    """An expression over parameters in OpenSCENARIO's `${...}` syntax (numbers, `$name`,
+    + - * /, negation); None for anything else (signals, functions)."""
+    if isinstance(e, E.Num):
+        return repr(float(e.value))
+    if isinstance(e, E.Param):
+        return f"${e.name}"
+    if isinstance(e, E.Unary) and e.op == "neg":
+        inner = osc_expression(e.arg)
+        return None if inner is None else f"-({inner})"
+    if isinstance(e, E.Binary) and e.op in ("+", "-", "*", "/"):
+        left, right = osc_expression(e.left), osc_expression(e.right)
+        return None if left is None or right is None else f"({left} {e.op} {right})"
+    return None
+
+
+def _reference_parameters(xosc_path: Path, plan: ScenarioPlan, params: dict[str, float]) -> list[str]:
+    """Where an actor's start (lane position, speed) depends on declared parameters, the
+    template reads them (`$gap`, `${(10.0 + $gap)}`) instead of the first run's number, so
+    that another player varies the starts too. Only where the number written is the
+    expression's value for that run (the exporter wrote it from that expression and
+    nothing else), so a convention of the exporter is never undone."""
+    tree = ET.parse(xosc_path)
+    root = tree.getroot()
+    declared = {d.get("name") for d in root.iterfind("ParameterDeclarations/ParameterDeclaration")}
+    actors = {a.name: a for a in plan.actors()}
+    done = []
+    for private in root.iterfind("Storyboard/Init/Actions/Private"):
+        actor = actors.get(private.get("entityRef", ""))
+        if actor is None:
+            continue
+        for path, attr, field_name in INIT_PLACES:
+            el = private.find(path)
+            expr = getattr(actor, field_name)
+            if el is None or expr is None or el.get(attr) is None or isinstance(expr, E.Num):
+                continue
+            if not _params_in(expr) or not _params_in(expr) <= declared:
+                continue
+            if field_name == "lane":  # a lane id is a string: a parameter alone, not arithmetic
+                text = f"${expr.name}" if isinstance(expr, E.Param) else None
+            else:
+                inner = osc_expression(expr)
+                text = None if inner is None else (inner if isinstance(expr, E.Param) else "${" + inner + "}")
+            try:
+                matches = float(el.get(attr)) == float(eval_param_expr(expr, params))
+            except (ValueError, ArithmeticError):
+                matches = False
+            if text is not None and matches:
+                el.set(attr, text)
+                done.append(f"{actor.name}: {el.tag} {attr}={text}")
+    if done:
+        xosc_path.write_text(xml_text(root))
+    return done
 
 
 def varied_params(plan: ScenarioPlan) -> list[str]:
@@ -56,6 +122,7 @@ def export_sweep(plan: ScenarioPlan, out_dir: str | Path, stem: str) -> SweepExp
     if not names:
         raise ExportError("the sweep varies no parameter: export one run without --sweep")
     template = export_run(first, out, stem)
+    referenced = _reference_parameters(template.xosc_path, plan, first.params)
     # The template's OpenSCENARIO holds the numbers of one run (export_run): the scenario
     # with its parameters goes into its side file, where `addtc import` reads it back.
     side = json.loads(template.sidecar_path.read_text())
@@ -108,4 +175,4 @@ def export_sweep(plan: ScenarioPlan, out_dir: str | Path, stem: str) -> SweepExp
     text = xml_text(root)
     path = out / f"{stem}.variation.xosc"
     path.write_text(text)
-    return SweepExport(template, path, form, note, runs)
+    return SweepExport(template, path, form, note, runs, referenced)

@@ -9,6 +9,7 @@ import pytest
 
 from addt_dsl.cli import main
 from addt_dsl.compiler import compile_file, compile_source
+from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.openscenario.distribution_export import export_sweep, varied_params
 from addt_dsl.interop.xosc_import import import_xosc
 from addt_dsl.plan import SweepPlan
@@ -95,3 +96,22 @@ def test_a_grid_is_deterministic_and_a_sampler_is_its_value_sets(tmp_path):
     drawn = sorted((s.params["gap"], s.params["lead_speed"]) for s in expand(lhs).specs)
     written = sorted(tuple(float(a.get("value")) for a in s) for s in sets)
     assert written == drawn  # the exact floats (repr)
+
+
+def test_the_template_starts_read_the_parameters_as_another_player_would(tmp_path):
+    # following.addt: `agent lead ... ahead of ego gap` starts at 20 m + gap with lead_speed.
+    plan = compile_file(str(ROOT / "examples" / "following.addt")).plan
+    done = export_sweep(plan, tmp_path, "following")
+    assert "lead: LanePosition s=${(20.0 + $gap)}" in done.referenced
+    assert "lead: AbsoluteTargetSpeed value=$lead_speed" in done.referenced
+    assert problems(done.template.xosc_path, "qc_openscenario") == []
+    # Without the side file (as another tool has the two files), the distribution still
+    # varies the lead's start and speed: the import keeps ${...} over varied parameters.
+    done.template.sidecar_path.unlink()
+    back = import_xosc(done.distribution_path)
+    assert back.plan is not None, [d.message for d in back.diagnostics if d.is_error]
+    starts = sorted((eval_param_expr(back.plan.agents[0].s, s.params), eval_param_expr(back.plan.agents[0].speed,
+                                                                                      s.params))
+                    for s in expand(back.plan).specs)
+    want = sorted((20.0 + s.params["gap"], s.params["lead_speed"]) for s in expand(plan).specs)
+    assert starts == want and len(want) == 9
