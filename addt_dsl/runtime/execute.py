@@ -221,9 +221,9 @@ class _Run:
             self.longitudinal[a.name] = None
             if any(_is_live(c) for c in a.behaviors):  # they read the first recorded state
                 self.deferred.extend((st, c) for c in a.behaviors)
-                continue
-            for clause in a.behaviors:
-                self._start_behavior(st, clause, 0.0)
+            else:
+                for clause in a.behaviors:
+                    self._start_behavior(st, clause, 0.0)
             if a.steps:
                 self.scripts[a.name] = Script(a.steps)
                 self.named_steps.extend((st, f"{a.name}.{n.label}", n) for n in self.scripts[a.name].named)
@@ -348,9 +348,10 @@ class _Run:
         """The plain road (no route, driven along +s), else the actor's path."""
         network = self.networks[actor.road]
         road_id = self._first_road(actor)
-        if not actor.route and network.road(road_id).travel_direction(actor.lane) > 0:
+        way = -1 if actor.reverse else 1
+        if not actor.route and network.road(road_id).travel_direction(actor.lane) * way > 0:
             return _Road(network, road_id, self._road_cache)
-        _, legs = resolve_route(network, list(actor.route or (road_id,)), actor.lane, actor.s)
+        _, legs = resolve_route(network, list(actor.route or (road_id,)), actor.lane, actor.s, reverse=actor.reverse)
         return _PathRoad(network, actor.road, legs, self._road_cache)
 
     def rng(self, name: str) -> np.random.Generator:

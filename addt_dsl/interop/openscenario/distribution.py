@@ -79,10 +79,12 @@ def names_distribution(path: str | Path) -> bool:
 
 
 def import_distribution(path: str | Path, root: str | Path | None = None, maps=(),
-                        limits: Limits = DEFAULT) -> Imported:
-    """Translate a ParameterValueDistribution and its template into one `.addt` with a sweep."""
+                        limits: Limits = DEFAULT, lenient: bool = False, ego: str = "stack") -> Imported:
+    """Translate a ParameterValueDistribution and its template into one `.addt` with a sweep
+    (`lenient` and `ego` are the template's import's, as for `import_xosc`)."""
     path = Path(path)
     imp = _Distribution(path, Path(root) if root is not None else path.parent, tuple(Path(m) for m in maps), limits)
+    imp.template_options = {"lenient": lenient, "ego": ego}
     if not path.resolve().is_relative_to(imp.root):
         imp.sink.error("E0402", f"{path} is outside the root directory", None)
         return Imported(None, None, imp.sink.items, imp.sources)
@@ -107,6 +109,7 @@ class _Distribution(_Importer):
         self.decls: dict[str, object] = {}  # template parameter -> its <ParameterDeclaration>
         self.from_side_file = False  # the parameters come from the side file of `addtc export --sweep`
         self.scales: dict[str, float] = {}  # the template's parameter scales (_Template)
+        self.template_options: dict = {}  # import_xosc's lenient and ego, for the template
 
     def run(self) -> Imported | None:
         got = self.read(self.path.name, self.path.parent, None)
@@ -166,11 +169,11 @@ class _Distribution(_Importer):
             raise _Stop
         made: list[_Template] = []
 
-        def translator(*args):
-            made.append(type("_Varied", (_Template,), {"varied": frozenset(self.named(pvd))})(*args))
+        def translator(*args, **options):
+            made.append(type("_Varied", (_Template,), {"varied": frozenset(self.named(pvd))})(*args, **options))
             return made[-1]
 
-        tmpl = import_xosc(path, self.root, self.maps, translator=translator)
+        tmpl = import_xosc(path, self.root, self.maps, translator=translator, **self.template_options)
         self.scales = made[0].scales if made else {}
         self.sink.items.extend(tmpl.diagnostics)
         self.sources.update(tmpl.sources)
@@ -198,7 +201,7 @@ class _Distribution(_Importer):
         parametric = self.parametric(doc, path)
         if parametric is not None:  # its parameters: those the fault schedule reads are not in the OpenSCENARIO
             self.from_side_file = True
-            return Imported(tmpl.text, parametric, [], {}, tmpl.side_files)
+            return Imported(tmpl.text, parametric, [], {}, tmpl.side_files, tmpl.entities)
         return tmpl
 
     def parametric(self, doc, path: Path) -> ScenarioPlan | None:
@@ -596,7 +599,7 @@ class _Distribution(_Importer):
                     self.error(pvd, f"the translated scenario does not compile: [{d.code}] {d.message}")
             self.sources.update(check.sources)
             return None
-        return Imported(text, check.plan, self.sink.items, self.sources, files)
+        return Imported(text, check.plan, self.sink.items, self.sources, files, tmpl.entities)
 
 
 class _Template(_Translate):
@@ -612,8 +615,8 @@ class _Template(_Translate):
 
     varied: frozenset[str] = frozenset()
 
-    def __init__(self, *args):
-        super().__init__(*args)
+    def __init__(self, *args, **options):
+        super().__init__(*args, **options)
         self.scales: dict[str, float] = {}  # parameter -> SI per unit of its value in the file
 
     def number(self, el, attr: str, dim=units.DIMENSIONLESS, default: float | None = None,
