@@ -168,9 +168,11 @@ class _Distribution(_Importer):
             self.error(sf, f"{relative} is a ParameterValueDistribution, not a scenario")
             raise _Stop
         made: list[_Template] = []
+        varied = frozenset(self.named(pvd))
 
         def translator(*args, **options):
-            made.append(type("_Varied", (_Template,), {"varied": frozenset(self.named(pvd))})(*args, **options))
+            made.append(_Template(*args, **options))
+            made[-1].varied = varied
             return made[-1]
 
         tmpl = import_xosc(path, self.root, self.maps, translator=translator, **self.template_options)
