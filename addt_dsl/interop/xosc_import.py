@@ -2162,6 +2162,15 @@ def _duration(clause: ClausePlan) -> float:
 
 # ---------------------------------------------------------------- entry point
 
+# Documents other than a scenario, translated elsewhere: (recognise(path) -> bool,
+# translate(path, root, maps, lenient=, ego=) -> Imported). openscenario/distribution.py
+# registers the ParameterValueDistribution (a logical scenario: a distribution and the
+# template it names); the interop package loads it.
+DOCUMENT_KINDS: list[tuple] = []
+# The reading machinery that module reuses for a distribution and its template.
+Importer, Translate, Stop, arith = _Importer, _Translate, _Stop, _arith
+
+
 def import_xosc(path: str | Path, root: str | Path | None = None, maps=(), lenient: bool = False,
                 ego: str = "stack", translator=None) -> Imported:
     """Translate an OpenSCENARIO file; files are read only under `root` (default: its
@@ -2172,10 +2181,9 @@ def import_xosc(path: str | Path, root: str | Path | None = None, maps=(), lenie
     translated with the template it names (`translator`: the class that translates a
     template, openscenario/distribution.py)."""
     path = Path(path)
-    from addt_dsl.interop.openscenario.distribution import import_distribution, names_distribution
-
-    if translator is None and names_distribution(path):  # a logical scenario: the distribution and its template
-        return import_distribution(path, root, maps, lenient=lenient, ego=ego)
+    for recognise, translate in DOCUMENT_KINDS if translator is None else ():
+        if recognise(path):
+            return translate(path, root, maps, lenient=lenient, ego=ego)
     imp = (translator or _Translate)(path, Path(root) if root is not None else path.parent,
                                      tuple(Path(m) for m in maps), lenient=lenient, ego=ego)
     if not path.resolve().is_relative_to(imp.root):

@@ -21,7 +21,7 @@ Then, exactly or not at all:
 
 A distribution that would make more runs than `Limits.runs` (docs/limits.md) is refused
 (E0701) before any value list is built. Reading reuses the importer's safe XML reader and
-parameter handling (`xosc_import._Importer`).
+parameter handling (`xosc_import.Importer`).
 """
 
 from __future__ import annotations
@@ -42,8 +42,8 @@ from addt_dsl.confine import Refused, confine
 from addt_dsl.diagnostics import Span
 from addt_dsl.interop.openscenario.distribution_export import PARAMETRIC_KEY
 from addt_dsl.interop.xosc_export import SIDECAR_PARAM
-from addt_dsl.interop.xosc_import import (MAX_XML_BYTES, RULE_OPS, Imported, _arith, _Importer, _Stop, _Translate,
-                                          import_xosc)
+from addt_dsl.interop.xosc_import import (DOCUMENT_KINDS, MAX_XML_BYTES, RULE_OPS, Imported, Importer, Stop,
+                                          Translate, arith, import_xosc)
 from addt_dsl.limits import DEFAULT, MAX_ABS_NUMBER, Limits
 from addt_dsl.plan import AssumptionPlan, CaseAxis, GridAxis, ParamPlan, SamplerPlan, ScenarioPlan, SweepPlan
 from addt_dsl.printer import PrinterError, print_plan, side_files
@@ -90,7 +90,7 @@ def import_distribution(path: str | Path, root: str | Path | None = None, maps=(
         return Imported(None, None, imp.sink.items, imp.sources)
     try:
         got = imp.run()
-    except _Stop:
+    except Stop:
         got = None
     except RecursionError:
         imp.sink.error("E0801", "the document is nested too deeply", Span.point(imp.display, 1, 1))
@@ -100,12 +100,12 @@ def import_distribution(path: str | Path, root: str | Path | None = None, maps=(
     return got
 
 
-class _Distribution(_Importer):
+class _Distribution(Importer):
     def __init__(self, path: Path, root: Path, maps: tuple[Path, ...], limits: Limits):
         super().__init__(path, root, maps)
         self.limits = limits
         self.used: dict[str, object] = {}  # parameter -> the element that varies it
-        self.template: _Importer | None = None  # the template, read again for its declarations
+        self.template: Importer | None = None  # the template, read again for its declarations
         self.decls: dict[str, object] = {}  # template parameter -> its <ParameterDeclaration>
         self.from_side_file = False  # the parameters come from the side file of `addtc export --sweep`
         self.scales: dict[str, float] = {}  # the template's parameter scales (_Template)
@@ -139,7 +139,7 @@ class _Distribution(_Importer):
             sampler = self.stochastic(sto, params)
         else:
             self.error(pvd, "<ParameterValueDistribution> has neither <Deterministic> nor <Stochastic>")
-            raise _Stop
+            raise Stop
         if self.sink.has_errors:
             return None
         assumptions = self.constraints(params)
@@ -156,17 +156,17 @@ class _Distribution(_Importer):
         sf = pvd.find("ScenarioFile")
         if sf is None:
             self.error(pvd, "<ParameterValueDistribution> has no <ScenarioFile>")
-            raise _Stop
+            raise Stop
         relative = self.raw(sf, "filepath")
         try:
             path = confine(relative, self.path.parent, self.root)
         except Refused as refused:
             self.sink.error(refused.code, refused.message, self.span(sf), *([refused.note] if refused.note else []),
                             label="<ScenarioFile>")
-            raise _Stop from None
+            raise Stop from None
         if names_distribution(path):  # itself, or a chain of distributions: never followed
             self.error(sf, f"{relative} is a ParameterValueDistribution, not a scenario")
-            raise _Stop
+            raise Stop
         made: list[_Template] = []
         varied = frozenset(self.named(pvd))
 
@@ -181,19 +181,19 @@ class _Distribution(_Importer):
         self.sources.update(tmpl.sources)
         if tmpl.plan is None:
             self.error(sf, f"the scenario {relative} does not import (see its diagnostics)")
-            raise _Stop
+            raise Stop
         if tmpl.plan.sweep != SweepPlan() or any(p.low is not None or p.choices for p in tmpl.plan.params):
             self.error(sf, f"the scenario {relative} already has a sweep (its addt-dsl side file): "
                            "a distribution of it would be a second one")
-            raise _Stop
+            raise Stop
         # The template once more, for its declarations (types, constraint groups); the
         # importer has read it without errors, so this parse succeeds.
-        self.template = _Importer(path, self.root)
+        self.template = Importer(path, self.root)
         got = self.template.read(path.name, path.parent, None)
         doc = self.template.parse(got[1], self.template.display) if got is not None else None
         if doc is None:
             self.sink.items.extend(self.template.sink.items)
-            raise _Stop
+            raise Stop
         for decl in [*doc.iterfind("ParameterDeclarations/ParameterDeclaration"),
                      *doc.iterfind("Storyboard//ParameterDeclaration")]:
             name = decl.get("name")
@@ -227,11 +227,11 @@ class _Distribution(_Importer):
         except (ValueError, TypeError, RecursionError) as exc:
             self.error(None, f"the side file {t.params[SIDECAR_PARAM][1]} of {path.name} has no valid "
                              f"'{PARAMETRIC_KEY}': {str(exc).splitlines()[0][:200]}")
-            raise _Stop from None
+            raise Stop from None
         if plan.name != data.get("scenario"):
             self.error(None, f"the side file {t.params[SIDECAR_PARAM][1]} describes scenario {plan.name!r}, "
                              f"not {data.get('scenario')!r}")
-            raise _Stop
+            raise Stop
         self.sink.warning("W0802", f"the parameters of {path.name} and where they are used come from its addt-dsl "
                           f"side file {t.params[SIDECAR_PARAM][1]} (the OpenSCENARIO holds one run's numbers)",
                           self.span(None), label="")
@@ -259,20 +259,20 @@ class _Distribution(_Importer):
         if decl is None:
             self.error(el, f"the scenario declares no parameter '{name}'",
                        f"its parameters: {', '.join(self.decls) or 'none'}")
-            raise _Stop
+            raise Stop
         kind = decl.get("parameterType", "string")
         if kind not in NUMERIC_TYPES:
             self.error(el, f"parameter '{name}' is a {kind}: only numbers are swept")
-            raise _Stop
+            raise Stop
         if name not in params:
             self.error(el, f"the translated scenario does not read parameter '{name}' as a value (it is used "
                            "inside a ${...} expression, as text, or not at all): a sweep over it would not vary "
                            "the runs")
-            raise _Stop
+            raise Stop
         if name in self.used:
             self.error(el, f"parameter '{name}' is varied twice",
                        f"first at line {self.lines.get(id(self.used[name]), 1)}")
-            raise _Stop
+            raise Stop
         self.used[name] = el
         return params[name]
 
@@ -286,35 +286,35 @@ class _Distribution(_Importer):
                 v = float(self.resolve(text))
             except (KeyError, SyntaxError, ValueError, ArithmeticError, RecursionError, MemoryError):
                 self.error(el, f"value \"{text[:40]}\" of '{name}' is not a number")
-                raise _Stop from None
+                raise Stop from None
             out.append(self.checked(el, name, v))
         return out
 
     def checked(self, el, name: str, v: float) -> float:
         if not math.isfinite(v) or abs(v) > MAX_ABS_NUMBER:
             self.error(el, f"value {v!r} of '{name}' is beyond {MAX_ABS_NUMBER:g} (docs/limits.md)")
-            raise _Stop
+            raise Stop
         if self.is_integer(name) and v != int(v):
             self.error(el, f"'{name}' is an {self.decls[name].get('parameterType')} parameter; {v!r} is not whole")
-            raise _Stop
+            raise Stop
         return v * self.scale(name)
 
     def num(self, el, attr: str) -> float:
         v = self.value(el, attr)
         if abs(v) > MAX_ABS_NUMBER:
             self.error(el, f"{attr}={v!r} is beyond {MAX_ABS_NUMBER:g} (docs/limits.md)")
-            raise _Stop
+            raise Stop
         return v
 
     def range_of(self, el, name: str, scaled: bool = True) -> tuple[float, float]:
         rng = el.find("Range")
         if rng is None:
             self.error(el, f"<{el.tag}> has no <Range>")
-            raise _Stop
+            raise Stop
         lo, hi = self.num(rng, "lowerLimit"), self.num(rng, "upperLimit")
         if lo > hi:
             self.error(rng, f"the range of '{name}' is empty: lowerLimit {lo!r} > upperLimit {hi!r}")
-            raise _Stop
+            raise Stop
         k = self.scale(name) if scaled else 1.0
         return lo * k, hi * k
 
@@ -332,14 +332,14 @@ class _Distribution(_Importer):
                     lo, hi = self.range_of(kind, p.name, scaled=False)
                     if not step > 0:
                         self.error(kind, f"stepWidth of '{p.name}' must be positive, not {step!r}")
-                        raise _Stop
+                        raise Stop
                     size = math.floor((hi - lo) / step + 1e-9) + 1
                     parts.append(("range", p, kind, (lo, step, size, hi)))
                 elif kind is not None and kind.tag == "DistributionSet":
                     texts = [self.raw(e, "value") for e in kind.iterfind("Element")]
                     if not texts:
                         self.error(kind, "<DistributionSet> has no <Element>")
-                        raise _Stop
+                        raise Stop
                     size = len(texts)
                     parts.append(("set", p, kind, texts))
                 else:
@@ -350,7 +350,7 @@ class _Distribution(_Importer):
                 if not sets:
                     self.error(el, "<DeterministicMultiParameterDistribution> has no <ValueSetDistribution> "
                                    "with a <ParameterValueSet>")
-                    raise _Stop
+                    raise Stop
                 size = len(sets)
                 parts.append(("sets", None, el, sets))
             else:
@@ -361,7 +361,7 @@ class _Distribution(_Importer):
                 self.error(el, f"the distribution makes more than {self.limits.runs:,} runs (limit `runs`, "
                                "docs/limits.md); nothing was run",
                            "fewer values (a larger stepWidth, fewer elements) make fewer runs", code="E0701")
-                raise _Stop
+                raise Stop
         grid, cases = [], []
         for how, p, el, data in parts:
             if how == "range":
@@ -387,14 +387,14 @@ class _Distribution(_Importer):
                 ref = a.get("parameterRef")
                 if ref is not None and ref in row:
                     self.error(a, f"parameter '{ref}' is assigned twice in one <ParameterValueSet>")
-                    raise _Stop
+                    raise Stop
                 if ref not in names:
                     self.param(a, "parameterRef", params)
                     names.append(ref)
                 row[ref] = self.values_of(a, ref, [self.raw(a, "value")])[0]
             if not row:
                 self.error(s, "<ParameterValueSet> assigns no parameter")
-                raise _Stop
+                raise Stop
             rows.append(row)
         table = [[row.get(n, params[n].default) for n in names] for row in rows]
         for k, n in enumerate(names):
@@ -413,7 +413,7 @@ class _Distribution(_Importer):
         tag = kind.tag if kind is not None else "nothing"
         self.error(_first_of(kind, el), f"<{tag}> is not translated: "
                    + NOT_DRAWN.get(tag, "not a distribution of OpenSCENARIO 1.2/1.3"))
-        raise _Stop
+        raise Stop
 
     # -- stochastic
 
@@ -422,22 +422,22 @@ class _Distribution(_Importer):
         cap = min(self.limits.runs, 1_000_000)
         if runs != int(runs) or runs < 1:
             self.error(sto, f"numberOfTestRuns={runs!r} is not a whole number of at least 1")
-            raise _Stop
+            raise Stop
         if runs > cap:
             self.error(sto, f"numberOfTestRuns={int(runs):,} is more than {cap:,} runs (limit `runs`, "
                             "docs/limits.md; a sampler draws at most 1,000,000); nothing was run", code="E0701")
-            raise _Stop
+            raise Stop
         seed = self.value(sto, "randomSeed", default=0.0)
         if sto.get("randomSeed") is None:
             self.approx(sto, "no randomSeed: seed 0 (the runs are reproducible; OpenSCENARIO leaves the seed "
                              "to the player)")
         elif seed != int(seed) or not 0 <= seed <= MAX_SEED:
             self.error(sto, f"randomSeed={seed!r} is not a whole number in [0, {MAX_SEED}] (the language's seeds are)")
-            raise _Stop
+            raise Stop
         dists = list(sto.iterfind("StochasticDistribution"))
         if not dists:
             self.error(sto, "<Stochastic> has no <StochasticDistribution>")
-            raise _Stop
+            raise Stop
         for el in dists:
             p = self.param(el, "parameterName", params)
             kind = _only(el)
@@ -447,7 +447,7 @@ class _Distribution(_Importer):
             if self.is_integer(p.name) and kind.tag != "ProbabilityDistributionSet":
                 self.error(kind, f"'{p.name}' is an {self.decls[p.name].get('parameterType')} parameter and "
                                  f"<{kind.tag}> draws fractions: the language's samplers do not round")
-                raise _Stop
+                raise Stop
             params[p.name] = draw(self, kind, p)
         return SamplerPlan(kind="random", count=int(runs), seed=int(seed))
 
@@ -459,7 +459,7 @@ class _Distribution(_Importer):
         mean, var = self.num(el, "expectedValue"), self.num(el, "variance")
         if var < 0:
             self.error(el, f"variance of '{p.name}' is negative ({var!r})")
-            raise _Stop
+            raise Stop
         mean, sd = mean * self.scale(p.name), math.sqrt(var) * self.scale(p.name)
         if el.find("Range") is not None:
             lo, hi = self.range_of(el, p.name)
@@ -476,7 +476,7 @@ class _Distribution(_Importer):
         elements = list(el.iterfind("Element"))
         if not elements:
             self.error(el, "<ProbabilityDistributionSet> has no <Element>")
-            raise _Stop
+            raise Stop
         values = self.values_of(el, p.name, [self.raw(e, "value") for e in elements])
         weights = []
         for e in elements:
@@ -485,22 +485,22 @@ class _Distribution(_Importer):
                 w = Fraction(text)
             except (ValueError, ZeroDivisionError):
                 self.error(e, f"weight=\"{text[:40]}\" is not a number")
-                raise _Stop from None
+                raise Stop from None
             if w < 0 or abs(w) > MAX_ABS_NUMBER:
                 self.error(e, f"weight {text} must be a number in [0, {MAX_ABS_NUMBER:g}]")
-                raise _Stop
+                raise Stop
             weights.append(w)
         total = sum(weights)
         if total == 0:
             self.error(el, f"the weights of '{p.name}' are all zero")
-            raise _Stop
+            raise Stop
         shares = [w / total for w in weights]
         common = math.lcm(*(s.denominator for s in shares))
         if common > MAX_WEIGHTED_CHOICES:
             self.error(el, f"the weights of '{p.name}' are not multiples of 1/{MAX_WEIGHTED_CHOICES}: the language's "
                            "choice draws each listed value with equal probability, so a weighted set is written with "
                            f"values repeated by weight, at most {MAX_WEIGHTED_CHOICES} of them")
-            raise _Stop
+            raise Stop
         choices = [v for v, s in zip(values, shares) for _ in range(int(s * common))]
         if len(set(choices)) == 1:
             return p.model_copy(update={"default": choices[0]})
@@ -515,7 +515,7 @@ class _Distribution(_Importer):
             bins.append((lo, hi, self.num(b, "weight")))
         if not bins:
             self.error(el, "<Histogram> has no <Bin>")
-            raise _Stop
+            raise Stop
         width, weight = bins[0][1] - bins[0][0], bins[0][2]
         even = all(b[0] == a[1] for a, b in zip(bins, bins[1:])) and all(
             math.isclose(hi - lo, width, rel_tol=1e-12, abs_tol=0) and w == weight for lo, hi, w in bins)
@@ -523,7 +523,7 @@ class _Distribution(_Importer):
             self.error(el, f"<Histogram> of '{p.name}' is not translated: its bins differ in width or weight, and the "
                            "language has no piecewise-uniform distribution (`dist` is uniform, normal or choice); "
                            "contiguous bins of one width and one weight are a uniform distribution")
-            raise _Stop
+            raise Stop
         return _domain(p, bins[0][0], bins[-1][1], distribution="uniform")
 
     # -- constraints
@@ -604,7 +604,7 @@ class _Distribution(_Importer):
         return Imported(text, check.plan, self.sink.items, self.sources, files, tmpl.entities)
 
 
-class _Template(_Translate):
+class _Template(Translate):
     """The template, with the varied parameters kept where `${...}` arithmetic uses them.
 
     The importer evaluates `${$EgoSpeed / 3.6}` to a number; a parameter the distribution
@@ -641,7 +641,7 @@ class _Template(_Translate):
             return None
         (name,) = names
         try:
-            f = [_arith(ast.parse(re.sub(r"\$" + name + r"\b", repr(float(x)), body), mode="eval"))
+            f = [arith(ast.parse(re.sub(r"\$" + name + r"\b", repr(float(x)), body), mode="eval"))
                  for x in (0.0, 1.0, 2.0)]
         except (SyntaxError, ValueError, ArithmeticError, RecursionError, MemoryError):
             return None
@@ -691,3 +691,6 @@ def _fold(op: str, parts: list) -> E.Expr:
     for p in parts[1:]:
         out = E.Binary(op=op, left=out, right=p)
     return out
+
+
+DOCUMENT_KINDS.append((names_distribution, import_distribution))

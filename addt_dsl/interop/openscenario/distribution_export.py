@@ -22,12 +22,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from addt_dsl import expr as E
-from addt_dsl.expr import eval_param_expr
+from addt_dsl.expr import eval_param_expr, params_used
 
 from addt_dsl.interop.xodr_export import ExportError, xml_text
 from addt_dsl.interop.xosc_export import OSC_MINOR, creation_date, export_run
 from addt_dsl.interop.xosc_import import MAX_XML_BYTES
-from addt_dsl.plan import ScenarioPlan, SweepPlan, _params_in
+from addt_dsl.plan import ScenarioPlan, SweepPlan
 from addt_dsl.sweep import SweepStream, axis_params, sampled_params
 
 
@@ -87,7 +87,7 @@ def _reference_parameters(xosc_path: Path, plan: ScenarioPlan, params: dict[str,
             expr = getattr(actor, field_name)
             if el is None or expr is None or el.get(attr) is None or isinstance(expr, E.Num):
                 continue
-            if not _params_in(expr) or not _params_in(expr) <= declared:
+            if not params_used(expr) or not params_used(expr) <= declared:
                 continue
             if field_name == "lane":  # a lane id is a string: a parameter alone, not arithmetic
                 text = f"${expr.name}" if isinstance(expr, E.Param) else None
