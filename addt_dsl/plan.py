@@ -202,6 +202,15 @@ class GridAxis(_Model):
     values: list[float]
 
 
+class CaseAxis(_Model):
+    """Listed combinations (`cases a in [1, 2] m, b in [3, 4] s`; OpenSCENARIO's
+    ValueSetDistribution): row i sets each parameter to its i-th value. One axis of the
+    grid's product, after the `grid` axes."""
+
+    params: list[str]
+    rows: list[list[float]]  # SI units, one value per parameter
+
+
 class SamplerPlan(_Model):
     kind: Literal["random", "halton", "lhs"]
     count: int
@@ -210,6 +219,7 @@ class SamplerPlan(_Model):
 
 class SweepPlan(_Model):
     grid: list[GridAxis] = Field(default_factory=list)
+    cases: list[CaseAxis] = Field(default_factory=list)
     sampler: SamplerPlan | None = None
     repeat: int = 1
     seed: int = 0

@@ -150,9 +150,20 @@ class SweepStream:
 
 def _grid_cells(plan: ScenarioPlan):
     """The grid's cells in order, one at a time (a 12-axis grid of 1e12 cells is never built)."""
-    names = [g.param for g in plan.sweep.grid]
-    for combo in itertools.product(*[g.values for g in plan.sweep.grid]):
-        yield dict(zip(names, combo))
+    for combo in itertools.product(*_axes(plan)):
+        yield {k: v for part in combo for k, v in part}
+
+
+def _axes(plan: ScenarioPlan) -> list[list[tuple]]:
+    """Each axis of the grid's product as its list of cell parts ((name, value) pairs):
+    the `grid` axes, then the `cases` axes (one part per listed combination)."""
+    return ([[((g.param, v),) for v in g.values] for g in plan.sweep.grid]
+            + [[tuple(zip(c.params, row)) for row in c.rows] for c in plan.sweep.cases])
+
+
+def axis_params(plan: ScenarioPlan) -> set[str]:
+    """The parameters the grid's axes fix (`grid` and `cases`)."""
+    return {g.param for g in plan.sweep.grid} | {n for c in plan.sweep.cases for n in c.params}
 
 
 def _instances(plan: ScenarioPlan):
@@ -162,8 +173,9 @@ def _instances(plan: ScenarioPlan):
     same scenarios (paired runs) and share their fault-free twins. Without such axes it
     is the cell index."""
     fault_only = plan.fault_only_params()
-    kept = [(k, len(g.values)) for k, g in enumerate(plan.sweep.grid) if g.param not in fault_only]
-    for combo in itertools.product(*[range(len(g.values)) for g in plan.sweep.grid]):
+    axes = [([g.param], len(g.values)) for g in plan.sweep.grid] + [(c.params, len(c.rows)) for c in plan.sweep.cases]
+    kept = [(k, size) for k, (names, size) in enumerate(axes) if not set(names) <= fault_only]
+    for combo in itertools.product(*[range(size) for _, size in axes]):
         index = 0
         for k, size in kept:
             index = index * size + combo[k]
@@ -172,12 +184,12 @@ def _instances(plan: ScenarioPlan):
 
 def grid_cell_count(plan: ScenarioPlan) -> int:
     """Cells of the grid (1 without a grid), counted without building them."""
-    return math.prod(len(g.values) for g in plan.sweep.grid)
+    return math.prod(len(g.values) for g in plan.sweep.grid) * math.prod(len(c.rows) for c in plan.sweep.cases)
 
 
 def sampled_params(plan: ScenarioPlan) -> list[ParamPlan]:
     """The parameters the sampler draws (those with a range or choices that no grid fixes)."""
-    return _sampled_params(plan, {g.param for g in plan.sweep.grid})
+    return _sampled_params(plan, axis_params(plan))
 
 
 def count_runs(plan: ScenarioPlan) -> int:
@@ -230,15 +242,14 @@ def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:
         return None
     sweep = plan.sweep
     nominal = plan.nominal_params()
-    axes = [(g.param, g.values) for g in sweep.grid]
-    sampled = _sampled_params(plan, {a for a, _ in axes}) if sweep.sampler else []
+    sampled = _sampled_params(plan, axis_params(plan)) if sweep.sampler else []
     rejected: Counter = Counter()
     tried = 0
-    n_cells = math.prod(len(v) for _, v in axes)
+    n_cells = grid_cell_count(plan)
     per_cell = max(1, budget // max(1, min(n_cells, budget)))
     engine = _unit_engine(sweep.sampler.kind, len(sampled), derive_seed(plan.seed, 15485863)) if sampled else None
-    for combo in itertools.islice(itertools.product(*[v for _, v in axes]), budget):
-        base = {**nominal, **dict(zip([a for a, _ in axes], combo))}
+    for cell in itertools.islice(_grid_cells(plan), budget):
+        base = {**nominal, **cell}
         if sampled:
             n = max(1, min(budget - tried, per_cell, SAMPLE_BATCH_VALUES // len(sampled)))
             rows = engine.random(n)

@@ -263,7 +263,7 @@ class OracleDecl(Node):
 
 @dataclass(frozen=True, slots=True)
 class SweepItem(Node):
-    kind: str  # grid | random | halton | lhs | repeat | seed
+    kind: str  # grid | cases | random | halton | lhs | repeat | seed
     name: str | None
     value: Expression
     settings: tuple[Setting, ...] = ()

@@ -21,7 +21,7 @@ MAX_EXPR_DEPTH = 200  # operators chained or nested in one expression
 _POSITION_ONLY = frozenset({
     "INCLUDE", "SCENARIO", "ROAD", "IMPORT", "PARAM", "ASSUME", "KEEP", "AGENT", "AHEAD", "BEHIND",
     "LANE", "AT", "AFTER", "WHEN", "SET", "FAULTS", "DURING", "FROM", "EXPECT", "NO", "STAY", "REACH",
-    "SWEEP", "GRID", "REPEAT", "SEED", "MAX_REJECTIONS", "WITHIN", "LSQB", "LIGHTS",
+    "SWEEP", "GRID", "CASES", "REPEAT", "SEED", "MAX_REJECTIONS", "WITHIN", "LSQB", "LIGHTS",
 })
 
 
@@ -404,6 +404,13 @@ class Builder:
 
     def b_grid(self, span, items):
         return ast.SweepItem(span, "grid", str(items[0]), items[1])
+
+    def b_cases(self, span, items):
+        columns = tuple(items)
+        return ast.SweepItem(span, "cases", None, columns[0].value, columns)
+
+    def b_case_column(self, span, items):
+        return self.b_setting(span, items)
 
     def b_sample(self, span, items):
         return ast.SweepItem(span, str(items[0]), None, items[1], items[2])

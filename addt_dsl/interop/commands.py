@@ -1,6 +1,6 @@
 """`addtc export` and `addtc import`: OpenSCENARIO in and out (docs/openscenario.md).
 
-    addtc export FILE.addt [--run ID | --params NAME=VALUE ...] --to DIR
+    addtc export FILE.addt [--run ID | --params NAME=VALUE ... | --sweep] --to DIR
     addtc import FILE.xosc [-o FILE.addt] [--root DIR] [--maps DIR] [--format text|json]
 
 Exit codes follow `addtc` (addt_dsl/errors.py): 0 done, 2 usage or scenario error (an
@@ -33,6 +33,9 @@ def add_commands(sub) -> None:
     pick.add_argument("--run", metavar="ID", help="the sweep's run to export (e.g. c002-r000; default: the first)")
     pick.add_argument("--params", nargs="+", metavar="NAME=VALUE", default=[],
                       help="parameter values (with units, e.g. gap=30m); the others keep their defaults")
+    pick.add_argument("--sweep", action="store_true",
+                      help="the whole sweep: the first run as the template and a ParameterValueDistribution "
+                           "(FILE.variation.xosc) of the sweep's parameter values")
     exp.add_argument("--to", required=True, metavar="DIR", help="output directory")
     exp.set_defaults(func=cmd_export)
     imp = sub.add_parser("import", help="translate an OpenSCENARIO file into .addt")
@@ -92,6 +95,8 @@ def cmd_export(args) -> int:
     if not result.ok:
         return EXIT_USAGE
     plan = result.plan
+    if args.sweep:
+        return _export_sweep(plan, args)
     specs = expand(plan).specs
     if args.run:
         spec = next((s for s in specs if s.run_id == args.run), None)
@@ -114,6 +119,29 @@ def cmd_export(args) -> int:
         print(f"  {path}")
     print(f"carried in {done.sidecar_path.name} (no OpenSCENARIO equivalent): {len(done.carried)}")
     for line in done.carried:
+        print(f"  - {line}")
+    return EXIT_OK
+
+
+def _export_sweep(plan, args) -> int:
+    from addt_dsl.interop.openscenario.distribution_export import export_sweep
+    from addt_dsl.interop.xodr_export import ExportError
+
+    try:
+        done = export_sweep(plan, args.to, Path(args.file).stem)
+    except ExportError as exc:
+        raise UsageError(f"cannot export the sweep of {args.file}: {exc}") from None
+    t = done.template
+    print(f"exported the sweep of {args.file} ({done.runs} run(s), {done.form}):")
+    for path in (done.distribution_path, t.xosc_path, t.xodr_path, t.sidecar_path):
+        print(f"  {path}")
+    print(f"note: {done.note}")
+    print(f"the template's starts that read the parameters: {len(done.referenced)} (other uses hold the first run's "
+          "numbers; addtc import reads the parameters from the side file)")
+    for line in done.referenced:
+        print(f"  - {line}")
+    print(f"carried in {t.sidecar_path.name} (no OpenSCENARIO equivalent): {len(t.carried)}")
+    for line in t.carried:
         print(f"  - {line}")
     return EXIT_OK
 

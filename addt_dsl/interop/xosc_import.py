@@ -2177,16 +2177,30 @@ def _duration(clause: ClausePlan) -> float:
 
 # ---------------------------------------------------------------- entry point
 
+# Documents other than a scenario, translated elsewhere: (recognise(path) -> bool,
+# translate(path, root, maps, lenient=, ego=) -> Imported). openscenario/distribution.py
+# registers the ParameterValueDistribution (a logical scenario: a distribution and the
+# template it names); the interop package loads it.
+DOCUMENT_KINDS: list[tuple] = []
+# The reading machinery that module reuses for a distribution and its template.
+Importer, Translate, Stop, arith = _Importer, _Translate, _Stop, _arith
+
+
 def import_xosc(path: str | Path, root: str | Path | None = None, maps=(), lenient: bool = False,
-                ego: str = "stack") -> Imported:
+                ego: str = "stack", translator=None) -> Imported:
     """Translate an OpenSCENARIO file; files are read only under `root` (default: its
     directory), and a road network named without a folder also from the `maps` directories.
     An element that is not translated is an error (E0803) unless `lenient`; `ego` is "stack"
     (the stack under test drives the ego; actions on it are not translated) or "scripted"
-    (the ego follows every action the file gives it)."""
+    (the ego follows every action the file gives it). A ParameterValueDistribution is
+    translated with the template it names (`translator`: the class that translates a
+    template, openscenario/distribution.py)."""
     path = Path(path)
-    imp = _Translate(path, Path(root) if root is not None else path.parent, tuple(Path(m) for m in maps),
-                     lenient=lenient, ego=ego)
+    for recognise, translate in DOCUMENT_KINDS if translator is None else ():
+        if recognise(path):
+            return translate(path, root, maps, lenient=lenient, ego=ego)
+    imp = (translator or _Translate)(path, Path(root) if root is not None else path.parent,
+                                     tuple(Path(m) for m in maps), lenient=lenient, ego=ego)
     if not path.resolve().is_relative_to(imp.root):
         imp.sink.error("E0402", f"{path} is outside the root directory", None)
         return Imported(None, None, imp.sink.items, imp.sources)

@@ -427,6 +427,13 @@ def _sweep(pr: _Printer) -> None:
         if axis.param not in dims:
             raise PrinterError(f"grid over unknown parameter {axis.param!r}")
         items.append(f"grid {axis.param} in [{', '.join(format_const(v, dims[axis.param]) for v in axis.values)}]")
+    for axis in sw.cases:
+        unknown = [n for n in axis.params if n not in dims]
+        if unknown:
+            raise PrinterError(f"cases over unknown parameter {unknown[0]!r}")
+        items.append("cases " + ", ".join(
+            f"{n} in [{', '.join(format_const(row[k], dims[n]) for row in axis.rows)}]"
+            for k, n in enumerate(axis.params)))
     if sw.sampler is not None:
         items.append(_join(f"{sw.sampler.kind} {sw.sampler.count}",
                            f"seed {sw.sampler.seed}" if sw.sampler.seed else ""))

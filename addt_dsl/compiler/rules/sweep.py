@@ -19,45 +19,30 @@ class Sweep:
 
 
 def rule_sweep(ctx: Context) -> Sweep:
-    grid, sampler, repeat, seed, max_rej = [], None, 1, 0, P.SweepPlan().max_rejections
+    grid, cases, sampler, repeat, seed, max_rej = [], [], None, 1, 0, P.SweepPlan().max_rejections
     seen: dict[str, Span] = {}
     sampler_span: Span | None = None
     for block in ctx.blocks("sweep"):
         for item in block.items:
             key = item.name if item.kind == "grid" else ("sampler" if item.kind in ("random", "halton", "lhs")
                                                           else item.kind)
+            if item.kind == "cases":
+                key = None  # each column is checked against the other axes in _cases
             if key in seen:
                 ctx.sink.error("E0102", f"{'grid of ' + key if item.kind == 'grid' else key} given twice",
                                item.span, f"first given at {seen[key]}")
                 continue
-            seen[key] = item.span
+            if key is not None:
+                seen[key] = item.span
             if item.kind == "grid":
-                if item.name not in ctx.param_dims:
-                    ctx.sink.error("E0101", f"unknown parameter '{item.name}'", item.span,
-                                   *suggest(item.name, ctx.param_dims))
-                    continue
-                if not isinstance(item.value, ast.ListExpr):
-                    ctx.sink.error("E0204", "a grid takes a list: `grid x in [1, 2, 3] m`", item.value.span)
-                    continue
-                vals = lower_list(ctx, item.value, ctx.param_dims[item.name], f"the grid of '{item.name}'")
+                vals = _axis_values(ctx, item.name, item.value, item.span, "grid")
                 if vals is None:
                     continue
-                p = next((p for p in ctx.params if p.name == item.name), None)
-                if p is not None and p.low is not None:
-                    outside = [v for v in vals if v < p.low - 1e-12 or v > p.high + 1e-12]
-                    if outside:
-                        dim = ctx.param_dims[item.name]
-                        unit = item.value.unit or source_unit(ctx.params_ast[item.name].default)
-                        ctx.sink.error("E0301", f"grid value {fmt(outside[0], dim, unit)} is outside the range of "
-                                       f"'{item.name}' [{fmt(p.low, dim, unit)}, {fmt(p.high, dim, unit)}]",
-                                       item.value.span, "a parameter's range is its domain: widen it to "
-                                       "include the grid")
-                        continue
-                if p is not None and p.integer and any(abs(v - round(v)) > INT_EPS for v in vals):
-                    ctx.sink.error("E0204", f"'{item.name}' is an integer parameter; the grid has fractions",
-                                   item.value.span)
-                    continue
                 grid.append(P.GridAxis(param=item.name, values=vals))
+            elif item.kind == "cases":
+                axis = _cases(ctx, item, seen)
+                if axis is not None:
+                    cases.append(axis)
             elif item.kind in ("random", "halton", "lhs"):
                 count = _int_of(ctx, item.value, "a sample count", 1, 1_000_000)
                 sseed = 0
@@ -78,13 +63,69 @@ def rule_sweep(ctx: Context) -> Sweep:
                 got = _int_of(ctx, item.value, "a rejection cap", 0, 10_000_000)
                 max_rej = got if got is not None else max_rej
     if sampler is not None:
-        gridded = {g.param for g in grid}
+        gridded = {g.param for g in grid} | {n for c in cases for n in c.params}
         sampled = [p for p in ctx.params if p.name not in gridded and
                    (p.choices or (p.low is not None and p.low < p.high))]
         if not sampled:
             ctx.sink.warning("W0002", f"`{sampler.kind}` has nothing to sample", sampler_span,
                              "give a parameter a range (`in [low, high]`) that no grid fixes")
-    return Sweep(P.SweepPlan(grid=grid, sampler=sampler, repeat=repeat, seed=seed, max_rejections=max_rej))
+    return Sweep(P.SweepPlan(grid=grid, cases=cases, sampler=sampler, repeat=repeat, seed=seed, max_rejections=max_rej))
+
+
+def _axis_values(ctx: Context, name: str, node, span: Span, what: str) -> list[float] | None:
+    """The values of a `grid` axis or a `cases` column: a list in the parameter's unit,
+    inside its range, whole numbers for an integer parameter (None after a diagnostic)."""
+    if name not in ctx.param_dims:
+        ctx.sink.error("E0101", f"unknown parameter '{name}'", span, *suggest(name, ctx.param_dims))
+        return None
+    if not isinstance(node, ast.ListExpr):
+        ctx.sink.error("E0204", f"a {what} takes a list: `{what} x in [1, 2, 3] m`", node.span)
+        return None
+    vals = lower_list(ctx, node, ctx.param_dims[name], f"the {what} of '{name}'")
+    if vals is None:
+        return None
+    p = next((p for p in ctx.params if p.name == name), None)
+    if p is not None and p.low is not None:
+        outside = [v for v in vals if v < p.low - 1e-12 or v > p.high + 1e-12]
+        if outside:
+            dim = ctx.param_dims[name]
+            unit = node.unit or source_unit(ctx.params_ast[name].default)
+            ctx.sink.error("E0301", f"{what} value {fmt(outside[0], dim, unit)} is outside the range of "
+                           f"'{name}' [{fmt(p.low, dim, unit)}, {fmt(p.high, dim, unit)}]",
+                           node.span, f"a parameter's range is its domain: widen it to include the {what}")
+            return None
+    if p is not None and p.integer and any(abs(v - round(v)) > INT_EPS for v in vals):
+        ctx.sink.error("E0204", f"'{name}' is an integer parameter; the {what} has fractions", node.span)
+        return None
+    return vals
+
+
+def _cases(ctx: Context, item, seen: dict[str, Span]) -> P.CaseAxis | None:
+    """`cases a in [1, 2] m, b in [3, 4] s`: columns of equal length, each parameter once
+    in the sweep's axes."""
+    columns: list[tuple[str, list[float]]] = []
+    ok = True
+    for col in item.settings:
+        if col.key in seen:
+            ctx.sink.error("E0102", f"'{col.key}' is already an axis of the sweep", col.key_span,
+                           f"first given at {seen[col.key]}")
+            ok = False
+            continue
+        seen[col.key] = col.key_span
+        vals = _axis_values(ctx, col.key, col.value, col.key_span, "cases")
+        if vals is None:
+            ok = False
+            continue
+        columns.append((col.key, vals))
+    if not ok:
+        return None
+    lengths = {len(v) for _, v in columns}
+    if len(lengths) != 1:
+        ctx.sink.error("E0204", "the columns of `cases` have different lengths ("
+                       + ", ".join(f"{n}: {len(v)}" for n, v in columns) + ")", item.span,
+                       "row i of `cases` is the i-th value of every column")
+        return None
+    return P.CaseAxis(params=[n for n, _ in columns], rows=[list(r) for r in zip(*[v for _, v in columns])])
 
 
 def _int_of(ctx: Context, node, what: str, lo: int, hi: int) -> int | None:
