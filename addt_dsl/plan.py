@@ -142,6 +142,11 @@ class ActorPlan(_Model):
     yaw: Expr | None = None  # body yaw relative to the lane's driving direction [rad] (None: 0)
     ignore_lights: bool = False  # runs red lights (agents otherwise stop at red and yellow)
 
+    @property
+    def scripted(self) -> bool:
+        """Moved by its behaviours and steps (every agent; an ego that has any), not by a stack."""
+        return bool(self.behaviors or self.triggers)
+
 
 # Traffic-light states as numbers (traces and formulas: `light(west) == red`), and the state
 # change that hands a light back to its phase program.

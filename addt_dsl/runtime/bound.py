@@ -69,6 +69,11 @@ class BoundActor:
     yaw: float = 0.0  # body yaw relative to the driving direction [rad]
     ignore_lights: bool = False  # runs red lights
 
+    @property
+    def scripted(self) -> bool:
+        """Moved by its behaviours and steps (`ActorPlan.scripted`)."""
+        return bool(self.behaviors or self.steps)
+
 
 @dataclass(frozen=True)
 class BoundOracle:
