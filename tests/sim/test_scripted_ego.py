@@ -1,0 +1,173 @@
+"""A scripted ego (behaviours and steps, as an agent's) moves as the agents' code moves
+agents, recorded like the stack-driven ego: checked against hand calculations of the
+loop's kinematics (speed first, then position: v += a dt, s += v dt)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from addt_dsl.compiler import compile_source
+from addt_dsl.diagnostics import render_text
+from addt_dsl.runtime.execute import execute
+from addt_dsl.sweep import expand
+
+DT = 0.01
+
+
+def _run(source: str):
+    result = compile_source(source, path="scripted.addt")
+    assert result.ok, render_text(result.diagnostics, result.sources)
+    return execute(expand(result.plan).specs[0])
+
+
+def _index(run, time_s: float) -> int:
+    return int(round(time_s / DT))
+
+
+CRUISE = """
+scenario cruise {
+  duration 5 s
+  step 10 ms
+  road r {
+    line length 400 m
+    lanes right 2
+  }
+  ego car on r lane -1 at 10 m speed 15 m/s {
+    %s
+    behavior cruise speed 15 m/s
+  }
+  agent lead car on r lane -2 at 30 m speed 10 m/s
+  expect {
+    slow: always speed(ego) < 15.01 m/s
+    short: always s(ego) < 70.05 m
+    no collision
+  }
+}
+"""
+
+
+def test_cruising_ego_matches_hand_calculation_and_oracles_judge_it():
+    run = _run(CRUISE % "")
+    ego = run.trace.actors["ego"]
+    t = run.trace.time
+    assert run.status == "ok" and len(t) == 501
+    # s0 + v t on a straight road along x, in the centre of lane -1 (t = -1.75 m).
+    assert np.max(np.abs(ego.s - (10.0 + 15.0 * t))) < 1e-6
+    assert np.max(np.abs(ego.x - (10.0 + 15.0 * t))) < 1e-6
+    assert np.all(ego.y == -1.75) and np.all(ego.t == -1.75) and np.all(ego.lane_offset == 0.0)
+    assert np.all(ego.speed == 15.0) and np.all(ego.accel == 0.0) and np.all(ego.heading == 0.0)
+    # No stack: nothing runs, nothing is commanded.
+    assert not run.trace.latency["e2e"].any() and not run.trace.outputs["control.accel"].any()
+    verdicts = {v.name: v for v in run.verdicts}
+    assert verdicts["slow"].passed and verdicts["no_collision"].passed
+    # s = 10 + 15 t passes 70.05 m between 4.00 s (70.00 m) and 4.01 s (70.15 m).
+    assert not verdicts["short"].passed and verdicts["short"].first_violation_s == pytest.approx(4.01, abs=1e-9)
+
+
+def test_same_spec_same_digest_and_an_open_loop_stack_changes_no_motion():
+    first, second = _run(CRUISE % ""), _run(CRUISE % "")
+    assert first.digest == second.digest
+    with_stack = _run(CRUISE % "stack bev cruise_speed 30 m/s")
+    assert _run(CRUISE % "stack bev cruise_speed 30 m/s").digest == with_stack.digest
+    a, b = first.trace.actors["ego"], with_stack.trace.actors["ego"]
+    for field in ("x", "y", "heading", "speed", "s", "t"):
+        assert np.array_equal(getattr(a, field), getattr(b, field)), field
+    # The stack ran on the scripted world: it wants 30 m/s, so it commands throttle (recorded only).
+    assert with_stack.trace.outputs["control.accel"].max() > 0.5
+    assert with_stack.trace.latency["e2e"].max() > 0.0
+
+
+BRAKE = """
+scenario brake {
+  duration 8 s
+  step 10 ms
+  road r {
+    line length 400 m
+    lanes right 1
+  }
+  ego car on r lane -1 at 10 m speed 20 m/s {
+    behavior cruise speed 20 m/s
+    at 1 s behavior brake decel 4 m/s^2
+  }
+}
+"""
+
+
+def test_braking_ego_matches_hand_calculation():
+    run = _run(BRAKE)
+    ego = run.trace.actors["ego"]
+    # 1 s at 20 m/s, then n steps at -4 m/s^2: v_n = 20 - 4 n dt, s_n = s_1 + dt sum v_i
+    # = 30 + 20 n dt - 4 dt^2 n (n + 1) / 2, down to standstill at n = 500 (79.9 m).
+    for n in (0, 1, 100, 250, 499, 500):
+        k = _index(run, 1.0) + n
+        assert ego.speed[k] == pytest.approx(20.0 - 4.0 * n * DT, abs=1e-9)
+        assert abs(ego.s[k] - (30.0 + 20.0 * n * DT - 4.0 * DT * DT * n * (n + 1) / 2)) < 1e-6
+    assert ego.speed[_index(run, 6.0)] < 1e-9 and np.all(ego.speed[_index(run, 6.0) + 1:] == 0.0)
+    assert abs(ego.s[-1] - 79.9) < 1e-6
+    assert ego.accel[_index(run, 2.0)] == -4.0
+
+
+TRIGGER = """
+scenario trigger {
+  duration 10 s
+  step 10 ms
+  road r {
+    line length 400 m
+    lanes right 1
+  }
+  ego car on r lane -1 at 10 m speed 20 m/s {
+    behavior cruise speed 20 m/s
+    when gap(ego, lead) < 30 m then behavior brake decel 5 m/s^2
+  }
+  agent lead car on r lane -1 at 101.23 m speed 10 m/s
+  expect {
+    no collision
+    min gap to lead 5 m
+  }
+}
+"""
+
+
+def test_gap_trigger_on_the_ego_fires_at_the_hand_computed_time():
+    run = _run(TRIGGER)
+    # gap = (101.23 + 10 t) - (10 + 20 t) - 4.6 m = 86.63 - 10 t < 30 m from t > 5.663 s:
+    # the first sample is 5.67 s, and the brake acts from that step on.
+    fired = [e.time_s for e in run.trace.events if e.kind == "trigger" and e.detail["actor"] == "ego"]
+    assert fired == [pytest.approx(5.67, abs=1e-9)]
+    ego = run.trace.actors["ego"]
+    k = _index(run, 5.67)
+    assert ego.speed[k] == 20.0 and ego.speed[k + 1] == pytest.approx(19.95, abs=1e-9)
+    # From 20 to 10 m/s at 5 m/s^2: 2 s, closing 10 m (discretely 10.05 m) of the 29.93 m gap.
+    lead = run.trace.actors["lead"]
+    gap = lead.s - ego.s - 4.6
+    assert gap[k] == pytest.approx(86.63 - 10.0 * 5.67, abs=1e-6)
+    assert all(v.passed for v in run.verdicts), run.verdicts
+
+
+COLLIDE = """
+scenario collide {
+  duration 10 s
+  step 10 ms
+  road r {
+    line length 400 m
+    lanes right 1
+  }
+  ego car on r lane -1 at 10 m speed 10 m/s {
+    behavior cruise speed 10 m/s
+  }
+  agent parked car on r lane -1 at 54.6 m speed 0 m/s
+  expect {
+    no collision
+  }
+}
+"""
+
+
+def test_a_scripted_ego_collides_as_the_stack_driven_one_does():
+    run = _run(COLLIDE)
+    # Bumpers touch when 10 + 10 t = 54.6 - 4.6 m: t = 4 s; the run ends at the contact.
+    hits = [e for e in run.trace.events if e.kind == "collision"]
+    assert len(hits) == 1 and hits[0].detail["actors"] == ["ego", "parked"]
+    assert hits[0].time_s == pytest.approx(4.0, abs=0.011)
+    assert not run.verdicts[0].passed
