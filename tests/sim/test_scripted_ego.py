@@ -138,10 +138,13 @@ def test_gap_trigger_on_the_ego_fires_at_the_hand_computed_time():
     ego = run.trace.actors["ego"]
     k = _index(run, 5.67)
     assert ego.speed[k] == 20.0 and ego.speed[k + 1] == pytest.approx(19.95, abs=1e-9)
-    # From 20 to 10 m/s at 5 m/s^2: 2 s, closing 10 m (discretely 10.05 m) of the 29.93 m gap.
+    # From 20 to 10 m/s at 5 m/s^2: 200 steps closing dt * sum(10 - 0.05 i) = 9.95 m of
+    # the 29.93 m gap, the least gap of the run (the ego goes on braking to a stop).
     lead = run.trace.actors["lead"]
     gap = lead.s - ego.s - 4.6
     assert gap[k] == pytest.approx(86.63 - 10.0 * 5.67, abs=1e-6)
+    assert ego.speed[k + 200] == pytest.approx(10.0, abs=1e-9)
+    assert abs(gap.min() - 19.98) < 1e-6 and abs(gap[k + 200] - 19.98) < 1e-6
     assert all(v.passed for v in run.verdicts), run.verdicts
 
 
