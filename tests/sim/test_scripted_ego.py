@@ -4,6 +4,8 @@ loop's kinematics (speed first, then position: v += a dt, s += v dt)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -174,3 +176,42 @@ def test_a_scripted_ego_collides_as_the_stack_driven_one_does():
     assert len(hits) == 1 and hits[0].detail["actors"] == ["ego", "parked"]
     assert hits[0].time_s == pytest.approx(4.0, abs=0.011)
     assert not run.verdicts[0].passed
+
+
+MAPS = Path(__file__).resolve().parents[2] / "examples" / "maps"
+
+# The same script on the ego, or on an agent (the ego then parked out of the way on
+# another road): the scripted ego is moved by the agents' code, so both record the same
+# motion bit for bit, on a route through a junction, with an offset, a lane id driven
+# against s (lane 1 of road 0) and a named step that another step waits for.
+ROUTED = """
+scenario routed {
+  duration 14 s
+  step 10 ms
+  road town import "fabriksgatan.xodr" road 0
+  %s car on town route 0 -> left lane 1 at 40 m speed 8 m/s offset 0.3 m {
+    behavior cruise speed 10 m/s accel 1 m/s^2
+    slow: at 4 s behavior brake decel 2 m/s^2 to_speed 5 m/s
+    when ended(%s.slow) then behavior speed_profile times [0 s, 3 s] speeds [5 m/s, 9 m/s]
+  }
+  %s car on town route 2 lane -1 at 150 m speed 0 m/s
+}
+"""
+
+
+def test_a_scripted_ego_moves_exactly_as_an_agent_with_its_script():
+    def run(scripted: str, parked: str):
+        result = compile_source(ROUTED % (scripted, scripted.split()[-1], parked), path="routed.addt",
+                                base_dir=MAPS)
+        assert result.ok, render_text(result.diagnostics, result.sources)
+        return execute(expand(result.plan).specs[0])
+
+    as_ego = run("ego", "agent parked")
+    as_agent = run("agent twin", "ego")
+    ego, twin = as_ego.trace.actors["ego"], as_agent.trace.actors["twin"]
+    for field in ("x", "y", "heading", "speed", "accel", "s", "t", "lane_offset"):
+        assert np.array_equal(getattr(ego, field), getattr(twin, field)), field
+    assert ego.frame == twin.frame and np.array_equal(as_ego.trace.steps["ego.slow"], as_agent.trace.steps["twin.slow"])
+    # It turned left through the junction (a quarter turn) and kept its offset.
+    assert abs(abs(ego.heading[-1] - ego.heading[0]) - np.pi / 2) < 0.2
+    assert abs(ego.t[-1] - ego.t[0]) < 1e-9 and abs(ego.lane_offset[0] - 0.3) < 1e-9
