@@ -215,3 +215,39 @@ def test_a_scripted_ego_moves_exactly_as_an_agent_with_its_script():
     # It turned left through the junction (a quarter turn) and kept its offset.
     assert abs(abs(ego.heading[-1] - ego.heading[0]) - np.pi / 2) < 0.2
     assert abs(ego.t[-1] - ego.t[0]) < 1e-9 and abs(ego.lane_offset[0] - 0.3) < 1e-9
+
+
+LIGHTS = """
+scenario lit {
+  duration 25 s
+  step 10 ms
+  road r {
+    line length 400 m
+    lanes right 2
+  }
+  lights {
+    signal s1 road r at 150 m
+    controller main signals [s1] green 5 s yellow 3 s red 30 s
+  }
+  ego car on r lane -2 at 10 m speed 10 m/s %s {
+    behavior cruise speed 10 m/s
+  }
+  expect {
+    no red_light
+  }
+}
+"""
+
+
+def test_a_scripted_ego_meets_traffic_lights_as_agents_do():
+    """It stops at red like an agent (its front short of the line), unless `at_red run`;
+    `no red_light` judges it either way."""
+    stops = _run(LIGHTS % "")
+    ego = stops.trace.actors["ego"]
+    assert stops.verdicts[0].passed and ego.speed[-1] < 0.1
+    front = ego.s[-1] + 2.3
+    assert 145.0 < front <= 150.0 and np.all(stops.trace.red_margin["ego"] >= 0.0)
+    runs = _run(LIGHTS % "at_red run")
+    # At 10 m/s the front (12.3 m at the start) reaches the line at 13.77 s, in red (8 s to 38 s).
+    assert np.all(runs.trace.actors["ego"].speed == 10.0)
+    assert not runs.verdicts[0].passed and runs.verdicts[0].first_violation_s == pytest.approx(13.77, abs=0.011)
