@@ -279,10 +279,10 @@ class _Run:
         self.longitudinal[a.name] = None
         if any(_is_live(c) for c in a.behaviors):  # they read the first recorded state
             self.deferred.extend((st, c) for c in a.behaviors)
-            return
-        for clause in a.behaviors:
-            self._start_behavior(st, clause, 0.0)
-        if a.steps:
+        else:
+            for clause in a.behaviors:
+                self._start_behavior(st, clause, 0.0)
+        if a.steps:  # (armed also when the behaviours wait for the first state: they start first)
             self.scripts[a.name] = Script(a.steps)
             self.named_steps.extend((st, f"{a.name}.{n.label}", n) for n in self.scripts[a.name].named)
 

@@ -251,3 +251,38 @@ def test_a_scripted_ego_meets_traffic_lights_as_agents_do():
     # At 10 m/s the front (12.3 m at the start) reaches the line at 13.77 s, in red (8 s to 38 s).
     assert np.all(runs.trace.actors["ego"].speed == 10.0)
     assert not runs.verdicts[0].passed and runs.verdicts[0].first_violation_s == pytest.approx(13.77, abs=0.011)
+
+
+LIVE = """
+scenario live {
+  duration 5 s
+  step 10 ms
+  road r {
+    line length 400 m
+    lanes right 2
+  }
+  ego car on r lane -1 at 10 m speed 10 m/s {
+    behavior cruise speed speed(lead) + 2 m/s
+    at 3 s behavior brake decel 2 m/s^2
+  }
+  agent lead car on r lane -2 at 60 m speed 10 m/s {
+    behavior cruise speed speed(pace)
+    at 2 s behavior brake decel 4 m/s^2
+  }
+  agent pace car on r lane -1 at 200 m speed 10 m/s
+}
+"""
+
+
+def test_steps_run_when_a_time_0_behaviour_reads_signals():
+    """A time-0 behaviour whose setting reads signals starts on the first recorded state;
+    the actor's steps are armed all the same (they were dropped, for agents too)."""
+    run = _run(LIVE)
+    fired = [(e.detail["actor"], e.detail["behavior"], round(e.time_s, 6)) for e in run.trace.events
+             if e.kind == "trigger"]
+    assert fired == [("lead", "brake", 2.0), ("ego", "brake", 3.0)]
+    lead, ego = run.trace.actors["lead"], run.trace.actors["ego"]
+    # Before 2 s the lead holds the pace car's 10 m/s: the ego wants 12 m/s (2 m/s^2, 1 s).
+    k2, k3 = _index(run, 2.0), _index(run, 3.0)
+    assert np.all(lead.speed[:k2 + 1] == 10.0) and ego.speed[k2] == pytest.approx(12.0, abs=1e-9)
+    assert lead.speed[k2 + 50] == pytest.approx(8.0, abs=1e-9) and ego.speed[k3 + 50] < ego.speed[k3]
