@@ -730,6 +730,9 @@ def _loop(run: _Run) -> Trace:
         if run.ego_agent is None:
             vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt, grade)
         else:  # a scripted ego moves as agents do; a stack's commands are recorded, not applied
+            if leaders_stale and not run.networked:  # it may ask for its leader
+                run.leaders.rebuild()
+                leaders_stale = False
             run.move(run.ego_agent, t_now, dt)
             run.ego.vx, run.ego.accel = run.ego_agent.speed, run.ego_agent.accel
         if not all(math.isfinite(v) for v in (run.ego.x, run.ego.y, run.ego.vx)):

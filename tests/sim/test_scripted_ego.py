@@ -286,3 +286,35 @@ def test_steps_run_when_a_time_0_behaviour_reads_signals():
     k2, k3 = _index(run, 2.0), _index(run, 3.0)
     assert np.all(lead.speed[:k2 + 1] == 10.0) and ego.speed[k2] == pytest.approx(12.0, abs=1e-9)
     assert lead.speed[k2 + 50] == pytest.approx(8.0, abs=1e-9) and ego.speed[k3 + 50] < ego.speed[k3]
+
+
+def _dense(n: int) -> str:
+    agents = "\n".join(f"  agent a{i} car on r lane {-1 - i % 2} at {40 + 15 * i} m speed 12 m/s {{\n"
+                       f"    behavior idm speed {10 + i % 3} m/s\n  }}" for i in range(n))
+    return f"""
+scenario dense {{
+  duration 8 s
+  step 10 ms
+  road r {{
+    line length 800 m
+    lanes right 2
+  }}
+  ego car on r lane -1 at 10 m speed 18 m/s {{
+    behavior idm speed 20 m/s
+  }}
+{agents}
+}}
+"""
+
+
+def test_a_scripted_ego_following_agents_stepped_as_arrays_sees_the_same_leaders(monkeypatch):
+    """Agents stepped as arrays leave the leader index stale; the scripted ego, which asks
+    it for its leader before the agents move, must see it rebuilt: the same run either way."""
+    from addt_dsl.runtime import execute as loop
+
+    one_by_one = _run(_dense(8))
+    ego = one_by_one.trace.actors["ego"]
+    assert ego.accel.min() < -1.0  # it closes on the agents ahead and brakes for them
+    monkeypatch.setattr(loop, "ARRAY_MIN_AGENTS", 1)
+    monkeypatch.setattr(loop, "STEP_MIN_AGENTS", 1)
+    assert _run(_dense(8)).digest == one_by_one.digest
