@@ -141,6 +141,7 @@ class ActorPlan(_Model):
     route: list[str] = Field(default_factory=list)
     yaw: Expr | None = None  # body yaw relative to the lane's driving direction [rad] (None: 0)
     ignore_lights: bool = False  # runs red lights (agents otherwise stop at red and yellow)
+    reverse: bool = False  # drives against its lane's OpenDRIVE driving direction (`direction reverse`)
 
     @property
     def scripted(self) -> bool:

@@ -181,8 +181,9 @@ def _position(run: _Run, a: ActorPlan) -> xosc.LanePosition:
     lane = int(round(run.num(a.lane)))
     road_id = a.route[0] if a.route else run.road_ids[a.road]
     s = run.num(a.s)  # `at S` is a station of the first road, on a route too (only `s(A)` runs along it)
-    if a.yaw is not None:  # both languages face an entity along its lane's driving direction
-        orientation = xosc.Orientation(h=run.num(a.yaw), reference=xosc.ReferenceContext.relative)
+    if a.yaw is not None or a.reverse:  # both languages face an entity along its lane's driving direction
+        h = (run.num(a.yaw) if a.yaw is not None else 0.0) + (math.pi if a.reverse else 0.0)
+        orientation = xosc.Orientation(h=h, reference=xosc.ReferenceContext.relative)
         return xosc.LanePosition(s, offset, str(lane), road_id, orientation)
     return xosc.LanePosition(s, offset, str(lane), road_id)
 
@@ -192,10 +193,11 @@ def _along_s(plan, a: ActorPlan, lane: int) -> bool:
     if a.route:
         return False
     road = plan.road(a.road)
+    way = -1 if a.reverse else 1
     if road.source != "xodr":
-        return lane < 0
+        return lane * way < 0
     network = build_network([road])[a.road]
-    return network.road(road.xodr_road_id or next(iter(network.roads))).travel_direction(lane) > 0
+    return network.road(road.xodr_road_id or next(iter(network.roads))).travel_direction(lane) * way > 0
 
 
 # ---------------------------------------------------------------- behaviours
@@ -742,7 +744,7 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
                             "mu": None if a.mu is None else run.num(a.mu),
                             "stack": None if a.stack is None else a.stack.model_dump(mode="json"),
                             "sensors": [s.model_dump(mode="json") for s in a.sensors],
-                            "ignore_lights": a.ignore_lights}
+                            "ignore_lights": a.ignore_lights, "reverse": a.reverse}
                    for a in plan.actors()},
         "faults": [f.model_dump(mode="json") for f in pinned.faults],
         "oracles": [o.model_dump(mode="json") for o in plan.oracles],

@@ -66,6 +66,7 @@ class Imported:
     diagnostics: list[Diagnostic]
     sources: dict[str, str]  # file -> text, for rendering diagnostics
     side_files: dict[str, str] = field(default_factory=dict)  # files the .addt imports, by name
+    entities: dict[str, str] = field(default_factory=dict)  # OpenSCENARIO entity name -> actor name
 
 
 class _Stop(Exception):
@@ -874,7 +875,7 @@ class _Translate(_Importer):
                                   "signals) are not translated")
         # a light's state in Init: a step at time 0
         self.light_steps += [TriggerPlan(clause=c) for c in self.light_event(pairs)]
-        init_trajectories = []
+        init_trajectories, init_relative = [], []
         for private in init.iterfind("Actions/Private"):
             who = self.actor_name(private)
             if who is None or who not in self.actors:
@@ -899,10 +900,37 @@ class _Translate(_Importer):
                 elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
                                                                 "AbsoluteTargetSpeed") is not None:
                     target = _child(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
+                    dyn = _child(act, "SpeedAction", "SpeedActionDynamics")
+                    if dyn is not None and dyn.get("dynamicsShape", "step") != "step" and who != "ego" \
+                            and self.value(dyn, "value", default=0.0) > 0:
+                        # A speed change with dynamics in Init starts from standstill (OpenSCENARIO:
+                        # Init actions run as the simulation starts) and takes its time.
+                        clause = self.speed_action(dyn, target, self.actors[who])
+                        if clause is not None:
+                            self.actors[who]["behaviors"].append(clause)
+                        continue
                     self.actors[who]["speed"] = self.number(target, "value", units.SPEED)
                     self.actors[who]["speed_now"] = self.value(target, "value")
+                elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
+                                                                "RelativeTargetSpeed") is not None:
+                    init_relative.append((act, who))
                 else:
                     self.skip(act, f"<{act.tag}> in Init is not translated (positions and speeds are)")
+        for act, who in init_relative:  # relative to another entity's initial speed
+            rel = _child(act, "SpeedAction", "SpeedActionTarget", "RelativeTargetSpeed")
+            ref = self.actor_name(rel)
+            if ref is None or ref not in self.actors:
+                continue
+            base = self.actors[ref].get("speed", E.Num(value=0.0))
+            value = self.number(rel, "value", units.SPEED if rel.get("speedTargetValueType", "delta") == "delta"
+                                else units.DIMENSIONLESS)
+            op = "*" if rel.get("speedTargetValueType", "delta") == "factor" else "+"
+            self.actors[who]["speed"] = E.Binary(op=op, left=value, right=base) if op == "*" else _plus(base, value)
+            self.actors[who]["speed_now"] = eval_param_expr(self.actors[who]["speed"], self.param_values())
+            if rel.get("continuous", "false") in ("true", "1") and who != "ego":
+                clause = self.relative_speed(_child(act, "SpeedAction", "SpeedActionDynamics"), rel, self.actors[who])
+                if clause is not None:
+                    self.actors[who]["behaviors"].append(clause)
         for act, who in init_trajectories:  # no TeleportAction: start at the first vertex
             first_vertex = act.find("FollowTrajectoryAction//Polyline/Vertex/Position")
             if who not in self.placed and first_vertex is not None:
@@ -941,14 +969,14 @@ class _Translate(_Importer):
             target = _child(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
             if speed is None or target is None:
                 self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
-                          "absolute speed targets are translated (relative targets: issue 16)")
+                          "absolute and relative speed targets are translated")
                 return None
             return self.speed_action(speed.find("SpeedActionDynamics"), target, info)
         if act.tag == "LateralAction":
             change = _child(act, "LaneChangeAction")
             if change is None:
                 self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
-                          "the language has lane changes; lane offsets and lateral distances are issue 16")
+                          "the language has lane changes; lane offsets and lateral distances are not translated")
                 return None
             return self.lane_change(change, who, info)
         if act.tag == "ControllerAction":
@@ -1429,7 +1457,9 @@ class _Translate(_Importer):
     # -- storyboard
 
     def story(self, story) -> None:
+        self.story_name = story.get("name", "")
         for act in story.iterfind("Act"):
+            self.act_name = act.get("name", "")
             act_at = None
             for cond in act.iterfind("StartTrigger/ConditionGroup/Condition"):
                 time = cond.find("ByValueCondition/SimulationTimeCondition")
@@ -1542,6 +1572,12 @@ class _Translate(_Importer):
             conj = []
             for cond in group.iterfind("Condition"):
                 sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+                if sesc is not None and self.raw(sesc, "storyboardElementType") in ("act", "story") \
+                        and self.raw(sesc, "state") in ("startTransition", "runningState") \
+                        and self.raw(sesc, "storyboardElementRef") in (getattr(self, "act_name", None),
+                                                                       getattr(self, "story_name", None)) \
+                        and self.value(cond, "delay", units.TIME, 0.0) == 0.0:
+                    continue  # the event's own act (story) has started: true whenever the event is armed
                 if sesc is not None and len(groups) == 1 and len(list(group)) == 1:
                     if self.raw(sesc, "storyboardElementType") in ("event", "action"):
                         return "after_event", (self.raw(sesc, "storyboardElementRef"),
@@ -1643,12 +1679,30 @@ class _Translate(_Importer):
             b = self.actor_name(target)
             if b is None:
                 return None
+            # freespace="false": distances between the entities' reference points (the
+            # importer places an actor's centre there), i.e. the bumper gap plus half of
+            # both lengths along the road.
+            free = (c.get("freespace") or "false").lower() == "true"
+            half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
             if c.tag == "TimeToCollisionCondition":
-                return E.Binary(op=op, left=sig("ttc", a, b), right=self.number(c, "value", units.TIME))
+                value = self.number(c, "value", units.TIME)
+                if free:
+                    return E.Binary(op=op, left=sig("ttc", a, b), right=value)
+                # ttc = (gap + half) / closing speed, infinite when not closing
+                closing = E.Binary(op="-", left=sig("speed", a), right=sig("speed", b))
+                lhs = _plus(sig("gap", a, b), E.Num(value=half))
+                rhs = E.Binary(op="*", left=value, right=closing)
+                if op in ("<", "<="):
+                    return _all([E.Binary(op=">", left=closing, right=E.Num(value=0.0)),
+                                 E.Binary(op=op, left=lhs, right=rhs)])
+                if op in (">", ">="):
+                    return _any([E.Binary(op="<=", left=closing, right=E.Num(value=0.0)),
+                                 E.Binary(op=op, left=lhs, right=rhs)])
+                return E.Binary(op=op, left=sig("ttc", a, b), right=value)
             if c.tag == "TimeHeadwayCondition":
+                headway = E.Binary(op="*", left=self.number(c, "value", units.TIME), right=sig("speed", a))
                 return E.Binary(op=op, left=sig("gap", a, b),
-                                right=E.Binary(op="*", left=self.number(c, "value", units.TIME),
-                                               right=sig("speed", a)))
+                                right=_plus(headway, E.Num(value=-half)) if half else headway)
             kind = c.get("relativeDistanceType", "cartesianDistance")
             free = (c.get("freespace") or "false").lower() == "true"
             value = self.number(c, "value", units.LENGTH)
@@ -1678,14 +1732,15 @@ class _Translate(_Importer):
             return None
         self.skip(c, f"<{c.tag}> is not translated",
                   "translated: traveled distance, speed, acceleration, relative distance, time headway, TTC, "
-                  "reach position; held conditions and relative speed are issue 16")
+                  "reach position")
         return None
 
     def along_s(self, who: str) -> bool:
         """Whether the actor drives towards +s (its lane's OpenDRIVE direction)."""
         road_name, lane = self.placed[who][0], self.placed[who][1]
         road_id = next(i for i, r in self.roads.items() if r.name == road_name)
-        return lane == 0 or self.network.road(road_id).travel_direction(lane) > 0
+        way = -1 if self.actors[who].get("against_s") and self.actors[who]["vehicle"] != "obstacle" else 1
+        return lane == 0 or self.network.road(road_id).travel_direction(lane) * way > 0
 
     def size(self, who: str) -> tuple[float, float]:
         info = self.actors[who]
@@ -1841,9 +1896,6 @@ class _Translate(_Importer):
             road, lane, s, offset = self.placed[who]
             kind = VEHICLES[info["vehicle"]]
             extra = sc.get("actors", {}).get(who, {})
-            if info["vehicle"] not in ("pedestrian", "obstacle") and info.get("against_s"):
-                self.approx(info["el"], f"{who} faces against the driving direction of lane {lane}; addt-dsl "
-                                        "drives it in the lane's direction")
             fields = dict(name=who, vehicle=info["vehicle"], road=road, lane=E.Num(value=float(lane)), s=s,
                           speed=info.get("speed", E.Num(value=0.0)),
                           length_m=extra.get("length_m") or info["length_m"] or kind.length_m,
@@ -1863,6 +1915,10 @@ class _Translate(_Importer):
                     fields["route"], fields["s"] = got
             if extra.get("yaw") is not None:
                 fields["yaw"] = E.Num(value=float(extra["yaw"]))
+            if extra.get("reverse") is not None:
+                fields["reverse"] = bool(extra["reverse"])
+            elif info.get("against_s") and info["vehicle"] != "obstacle" and not fields.get("route"):
+                fields["reverse"] = True  # it faces against its lane: it drives that way
             if sc:
                 fields["ignore_lights"] = bool(extra.get("ignore_lights", False))
             elif self.light_ctls and who != "ego":
@@ -1968,6 +2024,8 @@ def _sidecar_problem(data: dict) -> str:
             for key in ("length_m", "width_m", "height_m", "mass_kg", "wheelbase_m", "goal_s", "mu", "yaw"):
                 if info.get(key) is not None:
                     float(info[key])
+            if not isinstance(info.get("reverse", False), bool):
+                return "an actor's 'reverse' is not true or false"
             if (info.get("mass_kg") is None) != (info.get("wheelbase_m") is None):
                 return "an actor's 'mass_kg' and 'wheelbase_m' come together"
             route = info.get("route", [])
@@ -2123,4 +2181,4 @@ def import_xosc(path: str | Path, root: str | Path | None = None, maps=()) -> Im
                 imp.sink.error("E0802", f"the translated scenario does not compile: [{d.code}] {d.message}",
                                Span.point(imp.display, 1, 1))
         return Imported(None, None, imp.sink.items, {**imp.sources, **check.sources})
-    return Imported(text, check.plan, imp.sink.items, imp.sources, files)
+    return Imported(text, check.plan, imp.sink.items, imp.sources, files, dict(imp.renames))

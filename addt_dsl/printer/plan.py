@@ -182,7 +182,7 @@ VEHICLE_DEFAULTS = {  # what the compiler fills in when a setting is left out
 }
 ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLESS),  # optional, may use parameters
                ("offset", "offset", units.LENGTH), ("yaw", "yaw", units.ANGLE))
-ACTOR_FLAGS = (("at_red run", "ignore_lights"),)  # printed when the plan's flag is set
+ACTOR_FLAGS = (("at_red run", "ignore_lights"), ("direction reverse", "reverse"))  # printed when the plan's flag is set
 ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units.LENGTH),
                 ("height", "height_m", units.LENGTH),
                 ("mass", "mass_kg", units.MASS), ("wheelbase", "wheelbase_m", units.LENGTH))

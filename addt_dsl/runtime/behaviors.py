@@ -362,7 +362,8 @@ class Trajectory(Behavior):
         ParamSpec("y", units.LENGTH, kind="list", doc="instead of `s`/`t`: world y of the waypoints"),
         ParamSpec("times", units.TIME, kind="list", low=0.0,
                   doc="time to be at each waypoint, from the start of the behaviour (default: at `speed`)"),
-        ParamSpec("speed", units.SPEED, default=10.0, low=0.0, doc="speed without `times`"),
+        ParamSpec("speed", units.SPEED, default=None, low=0.0,
+                  doc="speed without `times` (default: the actor's speed when the behaviour starts)"),
         ParamSpec("max_speed", units.SPEED, default=40.0, low=0.1, doc="speed limit with `times`"),
         ParamSpec("accel", units.ACCELERATION, default=5.0, low=0.01, doc="max acceleration"),
         ParamSpec("decel", units.ACCELERATION, default=8.0, low=0.01, doc="max deceleration"),
@@ -401,6 +402,8 @@ class Trajectory(Behavior):
         self.times = [time_s + t for t in st["times"]] if st["times"] is not None else None
         self.index = 0
         self.origin = (agent.s, agent.t)
+        # OpenSCENARIO: a trajectory without timing is driven at the speed the entity has.
+        self.cruise = st["speed"] if st["speed"] is not None else agent.speed
 
     def accel(self, agent, world, time_s):
         st = self.settings
@@ -416,7 +419,7 @@ class Trajectory(Behavior):
             agent.heading_rel = math.atan2(pt - agent.t, ps - agent.s)
             agent.t_target, agent.lc_duration_s = agent.t, 0.0
             if self.times is None:
-                target = st["speed"]
+                target = self.cruise
             else:  # the remaining polyline over the time left to its waypoint
                 left_s = self.times[self.index] - time_s
                 dist = math.hypot(ps - agent.s, pt - agent.t)

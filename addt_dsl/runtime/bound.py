@@ -68,6 +68,7 @@ class BoundActor:
     route: tuple[str, ...] = ()  # road ids in driving order; () = the road it is placed on
     yaw: float = 0.0  # body yaw relative to the driving direction [rad]
     ignore_lights: bool = False  # runs red lights
+    reverse: bool = False  # drives against its lane's driving direction
 
     @property
     def scripted(self) -> bool:
@@ -172,4 +173,5 @@ def _actor(a: ActorPlan, params: dict[str, float]) -> BoundActor:
         steps=tuple(bind_step(t, params) for t in a.triggers),
         sensors=tuple(_clause(c, params) for c in a.sensors),
         stack=_clause(a.stack, params) if a.stack is not None else None, route=tuple(a.route),
-        yaw=_value(a.yaw, params), ignore_lights=a.ignore_lights)
+        yaw=_value(a.yaw, params), ignore_lights=a.ignore_lights,
+        reverse=a.reverse)

@@ -388,9 +388,10 @@ class _Run:
         """The plain road (no route, driven along +s), else the actor's path."""
         network = self.networks[actor.road]
         road_id = self._first_road(actor)
-        if not actor.route and network.road(road_id).travel_direction(actor.lane) > 0:
+        way = -1 if actor.reverse else 1
+        if not actor.route and network.road(road_id).travel_direction(actor.lane) * way > 0:
             return _Road(network, road_id, self._road_cache)
-        _, legs = resolve_route(network, list(actor.route or (road_id,)), actor.lane, actor.s)
+        _, legs = resolve_route(network, list(actor.route or (road_id,)), actor.lane, actor.s, reverse=actor.reverse)
         return _PathRoad(network, actor.road, legs, self._road_cache)
 
     def rng(self, name: str) -> np.random.Generator:

@@ -39,6 +39,9 @@ ACTOR_SETTINGS = (
               doc="start offset from the lane centre, left positive (e.g. a pedestrian on the kerb)"),
     ParamSpec("yaw", units.ANGLE, default=0.0, low=-3.1416, high=3.1416,
               doc="body yaw relative to the lane's driving direction, left positive (an angled or parked car)"),
+    ParamSpec("direction", None, kind="word", default="lane", choices=("lane", "reverse"),
+              doc="`lane`: drive the lane's way (OpenDRIVE); `reverse`: against it (a wrong-way driver, or a car "
+                  "overtaking in the oncoming lane)"),
     ParamSpec("at_red", None, kind="word", default="stop", choices=("stop", "run"),
               doc="agents: `stop` at red (and yellow) traffic lights on their lane, or `run` them"),
 )
@@ -239,7 +242,7 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
         length_m=length, width_m=width, height_m=body["height"], mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
         goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"), route=route, yaw=vals.get("yaw"),
-        ignore_lights=vals.get("at_red") == "run")
+        ignore_lights=vals.get("at_red") == "run", reverse=vals.get("direction") == "reverse")
 
 
 def is_scripted_ego(d: ast.ActorDecl) -> bool:

@@ -217,7 +217,8 @@ def _lanes_taken(ex: _Exit) -> str:
     return ", ".join(str(a) for a, _ in links) or "?"
 
 
-def resolve_route(network: RoadNetwork, stops: Sequence[str], lane: int, s_start: float | None = None
+def resolve_route(network: RoadNetwork, stops: Sequence[str], lane: int, s_start: float | None = None,
+                  reverse: bool = False
                   ) -> tuple[list[str], list[Leg]]:
     """Check a route and expand it: (every road id in driving order, connecting roads
     included; the legs). ``lane`` is the road lane id on the first road at ``s_start``
@@ -233,7 +234,7 @@ def resolve_route(network: RoadNetwork, stops: Sequence[str], lane: int, s_start
     road = network.road(first)
     if lane == 0:
         raise RouteError("lane 0 carries no traffic", 0)
-    direction = road.travel_direction(lane)
+    direction = -road.travel_direction(lane) if reverse else road.travel_direction(lane)
     if s_start is None:
         s_start = 0.0 if direction > 0 else road.length
     s_start = min(max(float(s_start), 0.0), road.length)

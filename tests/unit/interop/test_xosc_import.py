@@ -750,3 +750,27 @@ def test_a_side_file_value_of_the_wrong_shape_is_a_diagnostic(example, path, val
     got = import_xosc(done.xosc_path)
     assert got.text is None
     assert any(d.code == "E0802" for d in got.diagnostics), got.diagnostics
+
+
+def test_direction_reverse_survives_export_and_import_without_the_side_file(tmp_path):
+    from addt_dsl.interop.xosc_export import export_run
+    from addt_dsl.sweep import expand
+    source = """scenario wrong_way {
+  duration 4 s
+  road r {
+    line length 300 m
+    lanes left 1 right 1 width 3.5 m
+  }
+  ego car on r lane -1 at 10 m speed 0 m/s
+  agent over car on r lane 1 at 100 m speed 10 m/s direction reverse
+  agent oncoming car on r lane 1 at 200 m speed 10 m/s
+}
+"""
+    done = export_run(expand(compile_source(source).plan).specs[0], tmp_path)
+    xml = done.xosc_path.read_text()
+    assert 'h="3.14159' in xml  # an Orientation against the lane, relative to it
+    done.sidecar_path.unlink()
+    back = import_xosc(done.xosc_path)
+    assert back.plan is not None, [str(d) for d in back.diagnostics]
+    flags = {a.name: a.reverse for a in back.plan.agents}
+    assert flags == {"over": True, "oncoming": False}
