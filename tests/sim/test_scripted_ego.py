@@ -318,3 +318,58 @@ def test_a_scripted_ego_following_agents_stepped_as_arrays_sees_the_same_leaders
     monkeypatch.setattr(loop, "ARRAY_MIN_AGENTS", 1)
     monkeypatch.setattr(loop, "STEP_MIN_AGENTS", 1)
     assert _run(_dense(8)).digest == one_by_one.digest
+
+
+# One line per registered behaviour (keyword: the step started at 1 s on the ego).
+EVERY_BEHAVIOUR = {
+    "brake": "behavior brake decel 3 m/s^2",
+    "cross": "behavior cross speed 2 m/s direction left",
+    "cruise": "behavior cruise speed 14 m/s",
+    "cut_in": "behavior cut_in to -2 duration 2 s",
+    "idm": "behavior idm speed 15 m/s",
+    "keep_gap": "behavior keep_gap target lead distance 20 m",
+    "lane_change": "behavior lane_change to -2 duration 3 s",
+    "overtake": "behavior overtake speed 16 m/s target lead lane -2",
+    "speed_profile": "behavior speed_profile times [0 s, 2 s] speeds [12 m/s, 8 m/s]",
+    "synchronize": "behavior synchronize master lead master_at 150 m target_s 140 m",
+    "trajectory": "behavior trajectory s [40 m, 80 m] t [-1.75 m, -5.25 m] speed 10 m/s",
+    "walk": "behavior walk speed 2 m/s heading 30 deg",
+}
+
+EVERY = """
+scenario every {
+  duration 6 s
+  step 10 ms
+  road r {
+    line length 400 m
+    lanes right 2
+  }
+  ego car on r lane -1 at 10 m speed 12 m/s {
+    at 1 s %s
+  }
+  agent lead car on r lane -1 at 60 m speed 10 m/s {
+    behavior cruise speed 10 m/s
+  }
+}
+"""
+
+
+@pytest.mark.parametrize("keyword", sorted(EVERY_BEHAVIOUR))
+def test_every_behaviour_drives_a_scripted_ego(keyword):
+    """Each behaviour in the registry starts on the ego and moves it as an agent would
+    (same trace as an agent `twin` with the script, the ego then parked behind)."""
+    from addt_dsl.registry import BEHAVIORS
+
+    assert {cls.keyword for cls in BEHAVIORS.classes()} == set(EVERY_BEHAVIOUR)
+    as_ego = _run(EVERY % EVERY_BEHAVIOUR[keyword])
+    assert as_ego.status == "ok"
+    fired = [e.detail["behavior"] for e in as_ego.trace.events if e.kind == "trigger"]
+    assert fired == [keyword]
+    twin = (EVERY % "behavior cruise speed 0 m/s").replace("ego car on r lane -1 at 10 m speed 12 m/s",
+                                                             "ego car on r lane -2 at 300 m speed 0 m/s") \
+        .replace("agent lead", "agent twin car on r lane -1 at 10 m speed 12 m/s {\n    at 1 s %s\n  }\n"
+                 "  agent lead" % EVERY_BEHAVIOUR[keyword].replace("ego", "twin"))
+    as_agent = _run(twin)
+    ego, agent = as_ego.trace.actors["ego"], as_agent.trace.actors["twin"]
+    for field in ("x", "y", "heading", "speed", "s", "t"):
+        assert np.array_equal(getattr(ego, field), getattr(agent, field)), field
