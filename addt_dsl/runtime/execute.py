@@ -156,13 +156,16 @@ class _Context:
         self.run.command_queue.append((time_s, steer, accel))
 
 
+LATENCY_NODES = ("perception", "tracker", "planner", "control", "e2e")  # recorded per step
+
+
 class _NoStack:
     """The stack of a scripted ego that has none: nothing runs, latencies stay 0."""
 
     nodes: dict = {}
 
     def __init__(self):
-        self.latency = dict.fromkeys(("perception", "tracker", "planner", "control", "e2e"), 0.0)
+        self.latency = dict.fromkeys(LATENCY_NODES, 0.0)
         self.objects_seen = 0
 
     def on_frame(self, frame, time_s: float) -> None:
@@ -566,7 +569,7 @@ def _loop(run: _Run) -> Trace:
     # stores cost ~0.1 us each, 11 per actor per step); rec[name][field] are its columns.
     block = np.zeros((n, len(names), len(_FIELDS)))
     rec = {name: {f: block[:, i, j] for j, f in enumerate(_FIELDS)} for i, name in enumerate(names)}
-    lat_nodes = ("perception", "tracker", "planner", "control", "e2e")
+    lat_nodes = LATENCY_NODES
     latency = {k: np.zeros(n) for k in lat_nodes}
     outputs = {"control.steer": np.zeros(n), "control.accel": np.zeros(n)}
     objects = np.zeros(n)
