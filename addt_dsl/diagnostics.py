@@ -96,6 +96,7 @@ CODES: dict[str, str] = {
     "E0701": "beyond a documented limit (input size or sweep cost)",
     "E0801": "unreadable OpenSCENARIO file (malformed XML, a DTD or entity, too large)",
     "E0802": "invalid OpenSCENARIO content (missing element, attribute or reference)",
+    "E0803": "OpenSCENARIO element not translated (`addtc import --lenient` imports the rest without it)",
     "E0900": "internal compiler error",
     "W0001": "unused parameter",
     "W0002": "setting has no effect",

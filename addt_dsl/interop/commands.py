@@ -44,6 +44,12 @@ def add_commands(sub) -> None:
                      help="a folder of road networks (repeatable): a <LogicFile> named without a folder, or "
                           "without .xodr as CARLA names its towns (Town01), is also looked for here")
     imp.add_argument("--format", choices=("text", "json"), default="text")
+    imp.add_argument("--lenient", action="store_true",
+                     help="import what translates and leave out the rest with a warning (W0801); by default an "
+                          "element that is not translated is an error (E0803): the run would not be the scenario")
+    imp.add_argument("--ego", choices=("stack", "scripted"), default="stack",
+                     help="stack (default): the stack under test drives the ego and actions on it are not "
+                          "translated; scripted: the ego follows every action the file gives it")
     imp.set_defaults(func=cmd_import)
 
 
@@ -115,7 +121,7 @@ def cmd_export(args) -> int:
 def cmd_import(args) -> int:
     from addt_dsl.interop.xosc_import import import_xosc
 
-    got = import_xosc(args.file, args.root, args.maps)
+    got = import_xosc(args.file, args.root, args.maps, lenient=args.lenient, ego=args.ego)
     if args.format == "json":
         print(render_json(got.diagnostics))
     elif got.diagnostics:

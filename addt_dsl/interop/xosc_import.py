@@ -110,8 +110,13 @@ def _arith(node) -> float:
 
 
 class _Importer:
-    def __init__(self, path: Path, root: Path, maps: tuple[Path, ...] = ()):
+    def __init__(self, path: Path, root: Path, maps: tuple[Path, ...] = (), lenient: bool = False,
+                 ego: str = "stack"):
         self.path = path
+        # What is not translated is refused (E0803): a run without it is not the scenario in the
+        # file. `lenient` imports the rest and says what was left out (W0801).
+        self.lenient = lenient
+        self.ego_mode = ego  # "stack": the stack under test drives the ego; "scripted": its actions do
         self.root = root.resolve()
         self.maps = tuple(Path(m).resolve() for m in maps)  # where a road network named bare is looked for
         # CARLA ScenarioRunner's frame (FileHeader description "CARLA:..."): left-handed, so
@@ -155,7 +160,12 @@ class _Importer:
         self.sink.error(code, message, self.span(el), *notes, label=f"<{el.tag}>" if el is not None else "")
 
     def skip(self, el, message: str, *notes: str) -> None:
-        self.sink.warning("W0801", message, self.span(el), *notes, label=f"<{el.tag}>")
+        if self.lenient:
+            self.sink.warning("W0801", message, self.span(el), *notes, label=f"<{el.tag}>")
+            return
+        self.sink.error("E0803", message, self.span(el), *notes,
+                        "`addtc import --lenient` imports the rest without it (the run is then not the "
+                        "scenario in the file)", label=f"<{el.tag}>")
 
     def approx(self, el, message: str, *notes: str) -> None:
         self.sink.warning("W0802", message, self.span(el), *notes, label=f"<{el.tag}>" if el is not None else "")
@@ -360,7 +370,8 @@ class _Translate(_Importer):
             return None
         if self.sink.has_errors:
             return None
-        return self.plan(header, duration)
+        plan = self.plan(header, duration)
+        return None if self.sink.has_errors else plan
 
     # -- side file of an exported run
 
@@ -914,6 +925,9 @@ class _Translate(_Importer):
                 elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
                                                                 "RelativeTargetSpeed") is not None:
                     init_relative.append((act, who))
+                elif act.tag in ("ControllerAction", "ActivateControllerAction"):
+                    self.approx(act, "a controller: the entity follows its actions, as with OpenSCENARIO's default "
+                                     "controller (esmini's driver models are not emulated)")
                 else:
                     self.skip(act, f"<{act.tag}> in Init is not translated (positions and speeds are)")
         for act, who in init_relative:  # relative to another entity's initial speed
@@ -954,7 +968,8 @@ class _Translate(_Importer):
     def private_action(self, act, who: str):
         """The behaviour clause an action starts, or None after a diagnostic."""
         if who == "ego":
-            self.skip(act, f"<{act.tag}> on the ego is not translated: the ego is driven by the stack under test")
+            self.approx(act, f"<{act.tag}> on the ego: the stack under test drives the ego",
+                        "`addtc import --ego scripted` makes the ego follow the file's actions")
             return None
         info = self.actors[who]
         if act.tag == "LongitudinalAction":
@@ -979,6 +994,10 @@ class _Translate(_Importer):
                           "the language has lane changes; lane offsets and lateral distances are not translated")
                 return None
             return self.lane_change(change, who, info)
+        if act.tag == "ActivateControllerAction":
+            self.approx(act, "a controller: the entity follows its actions, as with OpenSCENARIO's default "
+                             "controller (esmini's driver models are not emulated)")
+            return None
         if act.tag == "ControllerAction":
             ctrl = act.find(".//Controller")
             if ctrl is not None and (ctrl.get("name") or "").startswith(CONTROLLER_PREFIX):
@@ -994,7 +1013,8 @@ class _Translate(_Importer):
                         except ValueError:
                             settings[prop.get("name")] = raw
                     return ClausePlan(keyword="behavior", name=keyword, settings=settings)
-            self.skip(act, "controller actions are not translated (agents follow behaviours)")
+            self.approx(act, "a controller: the entity follows its actions, as with OpenSCENARIO's default "
+                             "controller (esmini's driver models are not emulated)")
             return None
         if act.tag == "SynchronizeAction":
             return self.synchronize(act, who)
@@ -2142,11 +2162,16 @@ def _duration(clause: ClausePlan) -> float:
 
 # ---------------------------------------------------------------- entry point
 
-def import_xosc(path: str | Path, root: str | Path | None = None, maps=()) -> Imported:
+def import_xosc(path: str | Path, root: str | Path | None = None, maps=(), lenient: bool = False,
+                ego: str = "stack") -> Imported:
     """Translate an OpenSCENARIO file; files are read only under `root` (default: its
-    directory), and a road network named without a folder also from the `maps` directories."""
+    directory), and a road network named without a folder also from the `maps` directories.
+    An element that is not translated is an error (E0803) unless `lenient`; `ego` is "stack"
+    (the stack under test drives the ego; actions on it are not translated) or "scripted"
+    (the ego follows every action the file gives it)."""
     path = Path(path)
-    imp = _Translate(path, Path(root) if root is not None else path.parent, tuple(Path(m) for m in maps))
+    imp = _Translate(path, Path(root) if root is not None else path.parent, tuple(Path(m) for m in maps),
+                     lenient=lenient, ego=ego)
     if not path.resolve().is_relative_to(imp.root):
         imp.sink.error("E0402", f"{path} is outside the root directory", None)
         return Imported(None, None, imp.sink.items, imp.sources)

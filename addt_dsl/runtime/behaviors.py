@@ -262,17 +262,16 @@ class KeepGap(Behavior):
     params = (
         ParamSpec("target", None, kind="name", required=True, doc="actor to keep the gap to"),
         ParamSpec("distance", units.LENGTH, low=0.0, doc="bumper-to-bumper gap to keep"),
-        ParamSpec("time_gap", units.TIME, low=0.0, doc="instead of `distance`: gap as time at the own speed"),
+        ParamSpec("time_gap", units.TIME, low=0.0, doc="instead of `distance`: gap as time at the target's speed"),
         ParamSpec("side", None, kind="word", default="behind", choices=("behind", "ahead"),
                   doc="keep the gap behind the target or ahead of it"),
         ParamSpec("accel", units.ACCELERATION, default=3.0, low=0.01, doc="max acceleration"),
         ParamSpec("decel", units.ACCELERATION, default=6.0, low=0.01, doc="max deceleration"),
     )
     doc = ("Keep a distance or time gap to another actor, continuously (OpenSCENARIO "
-           "LongitudinalDistanceAction, freespace, continuous).")
-    # Critically damped spring on the gap error with a 1.5 s time constant: settles in a
-    # few seconds without overshooting into the target.
-    TAU_S = 1.5
+           "LongitudinalDistanceAction, freespace, continuous): a critically damped spring on the "
+           "gap error whose stiffness is 0.4/s^2 times the limit it pushes against, as esmini executes it.")
+    SPRING_PER_ACCEL = 0.4  # stiffness [1/s^2] per m/s^2 of the acceleration limit (esmini's)
 
     @staticmethod
     def validate(values: dict) -> list[tuple]:
@@ -287,11 +286,14 @@ class KeepGap(Behavior):
             return 0.0
         o_s, o_speed, o_length = other
         sign = 1.0 if s["side"] == "behind" else -1.0
-        gap = sign * (o_s - agent.s) - 0.5 * (agent.length_m + o_length)
-        want = s["distance"] if s["distance"] is not None else s["time_gap"] * agent.speed
-        closing = sign * (o_speed - agent.speed)  # d gap / dt
-        a = (gap - want) / self.TAU_S ** 2 + 2.0 * closing / self.TAU_S
-        return max(-s["decel"], min(s["accel"], sign * a))
+        # Signed bumper-to-bumper distance to the target (positive: it is ahead) and the one
+        # wanted: `sign * want`.
+        distance = (o_s - agent.s) - sign * 0.5 * (agent.length_m + o_length)
+        want = s["distance"] if s["distance"] is not None else s["time_gap"] * abs(o_speed)
+        error = distance - sign * want
+        stiffness = self.SPRING_PER_ACCEL * (s["accel"] if error < 0.0 else s["decel"])
+        a = error * stiffness - (agent.speed - o_speed) * 2.0 * math.sqrt(stiffness)
+        return max(-s["decel"], min(s["accel"], a))
 
 
 @BEHAVIORS.register

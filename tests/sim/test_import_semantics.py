@@ -97,3 +97,31 @@ scenario wrong_way {
         assert a.x[end] == pytest.approx(x0 + way * 10.0 * trace.time[end], abs=1e-6), name
         assert a.y[end] == pytest.approx(y, abs=1e-9), name
         assert np.cos(a.heading[end]) == pytest.approx(way, abs=1e-9), name
+
+
+@pytest.mark.parametrize("setting, want_m", [("distance 20 m", 20.0), ("time_gap 1 s", 25.0)])
+def test_keep_gap_is_esminis_damped_spring(setting, want_m):
+    # LongitudinalDistanceAction as esmini executes it: a = e * k - (v - v_target) * 2 sqrt(k)
+    # with k = 0.4 * (max deceleration when the gap is too long, else max acceleration), the
+    # time gap at the target's speed. Gap error e = +0.5 m, decel 5: k = 2, a = 1 m/s^2 on
+    # the first step, plus 0.1 m/s slower * 2 sqrt 2.
+    gap = want_m + 0.5
+    trace = run(f"""
+scenario follow {{
+  duration 1 s
+  road r {{
+    line length 800 m
+    lanes right 2 width 3.5 m
+  }}
+  ego car on r lane -2 at 10 m speed 0 m/s {{
+    stack bev cruise_speed 0 m/s
+  }}
+  agent follower car on r lane -1 at 100 m speed 24.9 m/s {{
+    behavior keep_gap target lead {setting} accel 3 m/s^2 decel 5 m/s^2
+  }}
+  agent lead car on r lane -1 at {100 + 4.6 + gap} m speed 25 m/s
+}}
+""")
+    f = trace.actors["follower"]
+    expected = 0.5 * 2.0 - (24.9 - 25.0) * 2.0 * np.sqrt(2.0)
+    assert (f.speed[1] - f.speed[0]) / trace.period_s == pytest.approx(expected, abs=1e-6)

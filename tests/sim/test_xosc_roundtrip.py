@@ -58,7 +58,7 @@ RUN_ESMINI = ["cut-in_simple", "acc-test", "alks_cut-in", "straight_500m_pedestr
 @pytest.mark.parametrize("name", RUN_ESMINI)
 def test_imported_esmini_scenario_runs(name, tmp_path):
     esmini = ROOT / "tests" / "data" / "esmini"
-    got = import_xosc(esmini / "xosc" / f"{name}.xosc", root=esmini)
+    got = import_xosc(esmini / "xosc" / f"{name}.xosc", root=esmini, lenient=True)
     for file, body in got.side_files.items():
         (tmp_path / file).write_text(body)
     (spec,) = expand(compile_source(got.text, f"{name}.addt", base_dir=tmp_path).plan).specs
@@ -66,6 +66,5 @@ def test_imported_esmini_scenario_runs(name, tmp_path):
     assert result.status == "ok", result.error
     assert [v.name for v in result.verdicts] == ["no_collision"]  # the default oracle
     if name == "cut-in_simple":
-        # The file turns the overtaker on lane 1 to drive along +s; addt-dsl drives lane 1 in
-        # its OpenDRIVE direction (against s), and the import says so.
-        assert any(d.code == "W0802" and "faces against" in d.message for d in got.diagnostics)
+        # The file turns the overtaker on lane 1 to drive along +s: it drives that way.
+        assert next(a for a in got.plan.agents if a.name == "OverTaker").reverse
