@@ -149,6 +149,11 @@ class ActorPlan(_Model):
     ignore_lights: bool = False  # runs red lights (agents otherwise stop at red and yellow)
     reverse: bool = False  # drives against its lane's OpenDRIVE driving direction (`direction reverse`)
 
+    @property
+    def scripted(self) -> bool:
+        """Moved by its behaviours and steps (every agent; an ego that has any), not by a stack."""
+        return bool(self.behaviors or self.triggers)
+
 
 # Traffic-light states as numbers (traces and formulas: `light(west) == red`), and the state
 # change that hands a light back to its phase program.

@@ -72,6 +72,11 @@ class BoundActor:
     ignore_lights: bool = False  # runs red lights
     reverse: bool = False  # drives against its lane's driving direction
 
+    @property
+    def scripted(self) -> bool:
+        """Moved by its behaviours and steps (`ActorPlan.scripted`)."""
+        return bool(self.behaviors or self.steps)
+
 
 @dataclass(frozen=True)
 class BoundOracle:

@@ -3,7 +3,8 @@
 One discrete loop in simulated time. Each physics step: traffic behaviours and
 triggers; sensors that are due capture (after spatial faults), temporal faults decide
 when (or whether) the frame reaches the stack; the stack ticks (its nodes publish at
-`t + latency`); the latest due command drives the ego dynamics; the state is recorded.
+`t + latency`); the latest due command drives the ego dynamics (a scripted ego moves by its behaviours
+as agents do, its stack, if any, running open loop); the state is recorded.
 Everything random draws from generators seeded by the RunSpec, so the same RunSpec
 gives the same trace bit for bit.
 """
@@ -155,6 +156,25 @@ class _Context:
         self.run.command_queue.append((time_s, steer, accel))
 
 
+LATENCY_NODES = ("perception", "tracker", "planner", "control", "e2e")  # recorded per step
+
+
+class _NoStack:
+    """The stack of a scripted ego that has none: nothing runs, latencies stay 0."""
+
+    nodes: dict = {}
+
+    def __init__(self):
+        self.latency = dict.fromkeys(LATENCY_NODES, 0.0)
+        self.objects_seen = 0
+
+    def on_frame(self, frame, time_s: float) -> None:
+        pass
+
+    def step(self, time_s: float, dt: float) -> None:
+        pass
+
+
 class _Run:
     def __init__(self, spec: RunSpec):
         self.spec = spec
@@ -208,6 +228,13 @@ class _Run:
         self.deferred: list[tuple[AgentState, BoundClause]] = []  # time-0 behaviours with live settings
         # Named steps (agent, `agent.label`, state), whose states are recorded per sample.
         self.named_steps: list[tuple[AgentState, str, object]] = []
+        # A scripted ego: an AgentState moved by the agents' code (`_script`), its
+        # VehicleState posed from it each step (`_pose_scripted_ego`); None: its stack drives.
+        self.ego_agent = None
+        if ego.scripted:
+            self.ego_agent = AgentState("ego", self.ego_road.road_id, s0, t0, ego.speed, 0.0, ego.length_m,
+                                        ego.width_m, self.ego_lane, t0)
+            self._script(self.ego_agent, ego, self.ego_road)
         for a in plan.agents:
             road = self._road_of(a)
             u = road.station(self._first_road(a), a.s)
@@ -215,18 +242,8 @@ class _Run:
             t = float(road.road.lane_center_t(lane, u)) + a.offset
             st = AgentState(a.name, road.road_id, u, t, a.speed, 0.0, a.length_m, a.width_m, lane, t)
             self.agents.append(st)
-            self.agent_plans[a.name] = a
-            self.agent_roads[a.name] = road
             self.physics.add_box(a.name, a.length_m, a.width_m, a.height_m, VEHICLES[a.vehicle].rgba)
-            self.longitudinal[a.name] = None
-            if any(_is_live(c) for c in a.behaviors):  # they read the first recorded state
-                self.deferred.extend((st, c) for c in a.behaviors)
-            else:
-                for clause in a.behaviors:
-                    self._start_behavior(st, clause, 0.0)
-            if a.steps:
-                self.scripts[a.name] = Script(a.steps)
-                self.named_steps.extend((st, f"{a.name}.{n.label}", n) for n in self.scripts[a.name].named)
+            self._script(st, a, road)
         self.agent_by_name = {a.name: a for a in self.agents}
         # Members in `occupants` order (agents, then the ego): the order breaks leader ties.
         self.leaders = LeaderIndex([*self.agents, _EgoOccupant(self)])
@@ -251,9 +268,35 @@ class _Run:
         self.ego_junctions = self._junctions(self.ego_road)
         self.ctx = _Context(self)
         stack_clause = ego.stack
-        stack_cls = STACKS.get(stack_clause.name)
-        self.stack = stack_cls(stack_clause.settings, self.ctx)
+        if stack_clause is None:  # a scripted ego without a stack
+            self.stack = _NoStack()
+        else:
+            self.stack = STACKS.get(stack_clause.name)(stack_clause.settings, self.ctx)
         self.faults.bind(self.stack, lambda: self.ctx.now)
+
+    def _script(self, st: AgentState, a: BoundActor, road: _Road) -> None:
+        """Start an actor's time-0 behaviours (deferred to the first recorded state when
+        one reads signals) and arm its script."""
+        self.agent_plans[a.name] = a
+        self.agent_roads[a.name] = road
+        self.longitudinal[a.name] = None
+        if any(_is_live(c) for c in a.behaviors):  # they read the first recorded state
+            self.deferred.extend((st, c) for c in a.behaviors)
+        else:
+            for clause in a.behaviors:
+                self._start_behavior(st, clause, 0.0)
+        if a.steps:  # (armed also when the behaviours wait for the first state: they start first)
+            self.scripts[a.name] = Script(a.steps)
+            self.named_steps.extend((st, f"{a.name}.{n.label}", n) for n in self.scripts[a.name].named)
+
+    def move(self, a: AgentState, t_now: float, dt: float) -> None:
+        """One step of a kinematic actor: its longitudinal behaviour's acceleration, held
+        for red lights on its path (unless it runs them), integrated along its road."""
+        beh = self.longitudinal[a.name]
+        accel = beh.accel(a, self, t_now) if beh is not None else 0.0
+        if self.lights is not None and not a.heading_rel and not self.agent_plans[a.name].ignore_lights:
+            accel = self.stop_for_lights(a, accel, t_now)
+        advance(a, accel, t_now, dt)
 
     def _setup_lights(self, plan: BoundScenario) -> None:
         """Traffic lights: each controller's program, the stop lines its signals make, and
@@ -526,7 +569,7 @@ def _loop(run: _Run) -> Trace:
     # stores cost ~0.1 us each, 11 per actor per step); rec[name][field] are its columns.
     block = np.zeros((n, len(names), len(_FIELDS)))
     rec = {name: {f: block[:, i, j] for j, f in enumerate(_FIELDS)} for i, name in enumerate(names)}
-    lat_nodes = ("perception", "tracker", "planner", "control", "e2e")
+    lat_nodes = LATENCY_NODES
     latency = {k: np.zeros(n) for k in lat_nodes}
     outputs = {"control.steer": np.zeros(n), "control.accel": np.zeros(n)}
     objects = np.zeros(n)
@@ -583,7 +626,10 @@ def _loop(run: _Run) -> Trace:
         elif agents:
             fleet_.pose(run, t_now, dt)
         e = run.ego
-        run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
+        if run.ego_agent is None:
+            run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
+        else:
+            _pose_scripted_ego(run, t_now, dt)
         if run.ego_s >= ego_road.road.length and not run.left_road:
             # Past the end of its road or route: `s` stays at the end, the map has nothing
             # beyond, and the run goes on off the map. Say so once (a route through the
@@ -685,7 +731,14 @@ def _loop(run: _Run) -> Trace:
         while queue and queue[0][0] <= t_now + 1e-12:
             _, steer, accel = queue.pop(0)
             run.command = (steer, accel)
-        vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt, grade)
+        if run.ego_agent is None:
+            vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt, grade)
+        else:  # a scripted ego moves as agents do; a stack's commands are recorded, not applied
+            if leaders_stale and not run.networked:  # it may ask for its leader
+                run.leaders.rebuild()
+                leaders_stale = False
+            run.move(run.ego_agent, t_now, dt)
+            run.ego.vx, run.ego.accel = run.ego_agent.speed, run.ego_agent.accel
         if not all(math.isfinite(v) for v in (run.ego.x, run.ego.y, run.ego.vx)):
             status, error = "detected", "vehicle state became non-finite"
             last = k + 1
@@ -698,11 +751,7 @@ def _loop(run: _Run) -> Trace:
             leaders.rebuild()
             leaders_stale = False
         for i, a in enumerate(agents):
-            beh = run.longitudinal[a.name]
-            accel = beh.accel(a, run, t_now) if beh is not None else 0.0
-            if run.lights is not None and not a.heading_rel and not run.agent_plans[a.name].ignore_lights:
-                accel = run.stop_for_lights(a, accel, t_now)
-            advance(a, accel, t_now, dt)
+            run.move(a, t_now, dt)
             if not networked:  # agents later in the order see this one where it is now
                 leaders.moved(i)
 
@@ -1196,11 +1245,21 @@ def _condition_checker(run: _Run, rec, k: int):
     return holds
 
 
+def _pose_scripted_ego(run: _Run, t_now: float, dt: float) -> None:
+    """The scripted ego's pose from its road-frame state, as an agent is posed (heading
+    along its road plus a lane change's or walk's relative heading and its yaw)."""
+    a, e, road = run.ego_agent, run.ego, run.ego_road.road
+    x, y, h = road.point(a.s, a.t)
+    e.x, e.y, e.heading = x, y, h + relative_heading(a, t_now, dt) + run.ego_plan.yaw
+    e.vx, e.accel = a.speed, a.accel
+    run.ego_s, run.ego_t = a.s, a.t
+
+
 def _advance_scripts(run: _Run, rec, k: int, t_now: float) -> None:
     holds = _condition_checker(run, rec, k)
 
     for name, script in list(run.scripts.items()):
-        agent = run.agent_by_name[name]
+        agent = run.ego_agent if name == "ego" else run.agent_by_name[name]
 
         def start(clause, time_s, _agent=agent, _name=name) -> None:
             run.events.append(Event(time_s, "trigger", {"actor": _name, "behavior": clause.name}))

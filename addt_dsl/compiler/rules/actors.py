@@ -1,5 +1,7 @@
 """Actors: vehicle kind, body, placement (absolute or relative, in dependency order), the
-ego's stack and sensors, agents' behaviours and scripts (steps and groups)."""
+ego's stack and sensors, behaviours and scripts (steps and groups) of agents and of a
+scripted ego (one with a behaviour or a step: no stack unless it names one, which then
+runs open loop)."""
 
 from __future__ import annotations
 
@@ -218,7 +220,15 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
             stack, stack_span = plan, c.span
     _check_lateral_conflicts(ctx, d)
     triggers = [t for t in (_lower_step(ctx, s, d, road) for s in d.steps) if t is not None]
-    if d.is_ego:
+    if is_scripted_ego(d) and not any(c.keyword == "stack" for c in d.clauses):
+        # A scripted ego without a `stack` clause has no stack, so nothing reads sensors.
+        for c in d.clauses:
+            if c.keyword == "sensor":
+                ctx.sink.error("E0204", "a scripted ego without a stack has no sensors", c.span,
+                               "its behaviours and steps drive it; add a `stack` to run one open loop "
+                               "on its sensors (its commands are recorded, not applied)")
+        sensors = []
+    elif d.is_ego:
         sensors = sensors or [DEFAULT_SENSOR]
         stack = stack or DEFAULT_STACK
         _check_stack_sensors(ctx, stack, sensors, stack_span or d.span)
@@ -233,6 +243,11 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
         goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"), route=route, yaw=vals.get("yaw"),
         ignore_lights=vals.get("at_red") == "run", reverse=vals.get("direction") == "reverse")
+
+
+def is_scripted_ego(d: ast.ActorDecl) -> bool:
+    """An ego with a behaviour or a step: its script moves it, not its stack."""
+    return d.is_ego and (bool(d.steps) or any(c.keyword == "behavior" for c in d.clauses))
 
 
 def _check_static(ctx: Context, d: ast.ActorDecl, vals: dict) -> None:
@@ -457,10 +472,6 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str |
         ctx.sink.error("E0204", f"only the ego has a {c.keyword}", c.span,
                        "traffic agents follow behaviours")
         return None
-    if c.keyword == "behavior" and actor.is_ego:
-        ctx.sink.error("E0204", "the ego is driven by its stack, not by behaviours", c.span,
-                       "configure the stack instead, e.g. `stack bev cruise_speed 20 m/s`")
-        return None
     cls = table.get(c.name)
     if cls is None:
         ctx.sink.error("E0106", f"unknown {c.keyword} '{c.name}'", c.name_span, *suggest(c.name, table.names()),
@@ -525,9 +536,6 @@ def _check_target_lane(ctx: Context, c: ast.Clause, lane, road: str | None) -> N
 def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P.TriggerPlan | None:
     """A step or group of an actor's block → TriggerPlan (groups become a step without
     a start condition that arms the group)."""
-    if actor.is_ego:
-        ctx.sink.error("E0204", "the ego is driven by its stack; steps and triggers are for agents", node.span)
-        return None
     if isinstance(node, ast.Clause):
         clause = _check_clause(ctx, node, actor, road)
         return P.TriggerPlan(clause=clause) if clause is not None else None

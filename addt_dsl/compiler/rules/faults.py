@@ -13,7 +13,7 @@ from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, const_value, fmt, int_const,
                                        suggest)
-from addt_dsl.compiler.rules.actors import DEFAULT_SENSOR, DEFAULT_STACK
+from addt_dsl.compiler.rules.actors import DEFAULT_SENSOR, DEFAULT_STACK, is_scripted_ego
 from addt_dsl.diagnostics import Span
 from addt_dsl.registry import FAULTS, SENSORS, STACKS, ParamSpec
 
@@ -64,8 +64,16 @@ def rule_faults(ctx: Context) -> Faults:
     sites_of = getattr(stack_cls, "sites_of", None)
     site_cls = sites_of(_stack_settings(ctx)) if sites_of is not None else stack_cls
     sites = _fault_sites(ctx, site_cls) if site_cls else set()
+    # A scripted ego without a `stack` clause has neither stack nor sensors to fault.
+    stackless = ego is not None and is_scripted_ego(ego) and not any(c.keyword == "stack" for c in clauses)
     for block in ctx.blocks("faults"):
         for f in block.items:
+            if stackless:
+                ctx.sink.error("E0107", f"'{f.kind}' targets the ego's stack or sensors, and the scripted ego "
+                                        "has neither", f.target_span,
+                               "its behaviours and steps drive it; add a `stack` to the ego to run one open loop "
+                               "(its commands are recorded, not applied) and fault that")
+                continue
             cls = FAULTS.get(f.kind)
             if cls is None:
                 ctx.sink.error("E0106", f"unknown fault kind '{f.kind}'", f.kind_span,

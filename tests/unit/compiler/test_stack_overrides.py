@@ -91,3 +91,17 @@ def test_the_studies_take_the_option_too(capsys):
     assert "expected KEY=VALUE" in capsys.readouterr().err
     assert main(["study", "classify", path, "--stack", "perception=grund_truth"]) == 2  # compiled, refused
     assert "--stack:1:12" in capsys.readouterr().err
+
+
+def test_an_override_gives_a_scripted_ego_an_open_loop_stack():
+    """A scripted ego without a stack has none (and no sensors); `--stack` makes the clause,
+    with the default lidar, as if the file said `stack bev ...`."""
+    text = ("scenario s {\n  duration 5 s\n  road r { line length 300 m }\n"
+            "  ego car on r lane -1 at 10 m speed 10 m/s {\n    behavior cruise speed 12 m/s\n  }\n}\n")
+    bare = compile_source(text).plan.ego
+    assert bare.stack is None and bare.sensors == [] and bare.scripted
+    given = compile_source(text, stack=["cruise_speed=20 m/s"])
+    assert given.ok, given.diagnostics
+    ego = given.plan.ego
+    assert ego.stack.name == "bev" and ego.stack.settings["cruise_speed"].value == pytest.approx(20.0)
+    assert [s.name for s in ego.sensors] == ["lidar"] and ego.scripted

@@ -25,7 +25,8 @@ def done_ids(done, plan) -> dict[str, str]:
     return {r.name: str(i) for i, r in enumerate(plan.roads, start=1)}
 
 SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / f"{n}.addt"
-                                               for n in ("every_behavior", "every_action", "every_light")]
+                                               for n in ("every_behavior", "every_action", "every_light")] + [
+    ROOT / "tests" / "unit" / "compiler" / "cases" / "scripted_ego_ok.addt"]
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])
@@ -81,6 +82,28 @@ def test_positions_speeds_and_the_brake_trigger(tmp_path):
     assert (dyn.get("dynamicsShape"), float(dyn.get("value"))) == ("linear", spec.params["decel"])
     stop = root.find("Storyboard/StopTrigger//SimulationTimeCondition")
     assert float(stop.get("value")) == spec.plan.duration_s
+
+
+def test_a_scripted_ego_exports_its_script_as_an_agent_does(tmp_path):
+    """The ego's behaviours and steps are events of its maneuver, its speed an Init action;
+    without a stack nothing says it has one."""
+    spec = expand(compile_file(ROOT / "tests" / "unit" / "compiler" / "cases" / "scripted_ego_ok.addt").plan).specs[0]
+    done = export_run(spec, tmp_path)
+    root = DET.parse(done.xosc_path).getroot()
+    ego = root.find("Storyboard/Init/Actions/Private[@entityRef='ego']")
+    assert float(ego.find(".//AbsoluteTargetSpeed").get("value")) == 15.0
+    group = root.find(".//ManeuverGroup[@name='ego_maneuver_group']")
+    assert group.find("Actors/EntityRef").get("entityRef") == "ego"
+    names = [e.get("name") for e in group.iterfind(".//Event")]
+    assert names[:2] == ["ego_cruise", "ego_brake"] and len(names) == 10, names
+    cruise = group.find(".//Event[@name='ego_cruise']")
+    assert float(cruise.find(".//AbsoluteTargetSpeed").get("value")) == 12.0
+    brake = group.find(".//Event[@name='ego_brake']")
+    gap = brake.find(".//RelativeDistanceCondition")
+    assert (gap.get("entityRef"), float(gap.get("value")), gap.get("rule")) == ("lead", 20.0, "lessThan")
+    assert float(brake.find("StartTrigger/ConditionGroup/Condition").get("delay")) == pytest.approx(0.2)
+    assert "stack" not in "\n".join(done.carried)
+    assert json.loads(done.sidecar_path.read_text())["actors"]["ego"]["stack"] is None
 
 
 def test_imported_map_is_copied_with_its_road_ids(tmp_path):

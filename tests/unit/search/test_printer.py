@@ -254,6 +254,26 @@ def test_every_registered_behaviour_sensor_and_fault_prints():
     assert semantic_key(_recompile(print_plan(plan, keep_user_text=False))) == semantic_key(plan)
 
 
+def test_a_scripted_ego_prints_back_with_every_behaviour():
+    """The ego driven by each registered behaviour (no stack, no sensors, no faults: a
+    scripted ego without a stack has none), and by a step, reads back as the same plan."""
+    from addt_dsl.registry import BEHAVIORS
+
+    plan = kitchen_sink_plan()
+    lead = plan.agents[0]
+    for cls in BEHAVIORS.classes():
+        clause = _clause("behavior", cls)
+        clause = clause.model_copy(update={"settings": {k: lead.name if v == "ego" else v
+                                                        for k, v in clause.settings.items()}})
+        step = TriggerPlan(at_s=E.Num(value=2.0), clause=clause)
+        ego = plan.ego.model_copy(update={"behaviors": [clause], "triggers": [step], "stack": None, "sensors": []})
+        scripted = plan.model_copy(update={"ego": ego, "faults": []})
+        assert scripted.ego.scripted
+        again = _recompile(print_plan(scripted, keep_user_text=False))
+        assert again.ego.stack is None and again.ego.sensors == []
+        assert semantic_key(again) == semantic_key(scripted), cls.keyword
+
+
 # -- routes and poses on a map: what the printer writes must read back as the same plan
 
 def _route_plan(route: list[str], lane: int, yaw_rad: float):
