@@ -27,7 +27,7 @@ from addt_dsl.runtime.behaviors import AgentState, Idm, advance, lateral_profile
 from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
 from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.neighbours import LeaderIndex
-from addt_dsl.runtime.lights import LightsRuntime, Program, StopStation, stations_on, stop_accel, stop_lines
+from addt_dsl.runtime.lights import LightsRuntime, Program, StopStation, next_stop, stations_on, stop_accel, stop_lines
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.path import RoutePath
 from addt_dsl.runtime.road import resolve_route
@@ -143,10 +143,7 @@ class _Context:
         if run.lights is None:
             return None
         front = s + 0.5 * run.ego_plan.length_m
-        for st in run.stop_stations["ego"]:
-            if st.u >= front - 0.5:
-                return st.u, run.lights.state(st.controller, self.now)
-        return None
+        return next_stop(run.stop_stations["ego"], front, lambda c: run.lights.state(c, self.now))
 
     def event(self, kind: str, **detail) -> None:
         self.run.events.append(Event(self.now, kind, detail))
@@ -309,13 +306,12 @@ class _Run:
         """An agent's acceleration [m/s^2] limited to stop at the next red (or yellow it can
         stop for) light on its path."""
         front = agent.s + 0.5 * agent.length_m
-        for st in self.stop_stations.get(agent.name, ()):
-            if st.u < front - 0.5:
-                continue
-            a_stop = stop_accel(agent.speed, st.u - front, self.lights.state(st.controller, time_s))
+        # Only the next line ahead holds the agent (its most restrictive light).
+        nxt = next_stop(self.stop_stations.get(agent.name, ()), front, lambda c: self.lights.state(c, time_s))
+        if nxt is not None:
+            a_stop = stop_accel(agent.speed, nxt[0] - front, nxt[1])
             if a_stop is not None:
                 accel = min(accel, a_stop)
-            break  # only the next line ahead holds the agent
         return accel
 
     def record_lights(self, lights_rec: dict, margins: dict, k: int, time_s: float) -> None:
