@@ -218,9 +218,9 @@ class _Run:
             self.longitudinal[a.name] = None
             if any(_is_live(c) for c in a.behaviors):  # they read the first recorded state
                 self.deferred.extend((st, c) for c in a.behaviors)
-                continue
-            for clause in a.behaviors:
-                self._start_behavior(st, clause, 0.0)
+            else:
+                for clause in a.behaviors:
+                    self._start_behavior(st, clause, 0.0)
             if a.steps:
                 self.scripts[a.name] = Script(a.steps)
                 self.named_steps.extend((st, f"{a.name}.{n.label}", n) for n in self.scripts[a.name].named)
