@@ -39,6 +39,19 @@ class AgentState:
     # walkers: they move at this angle instead of following a lane.
     heading_rel: float = 0.0
     lc_shape: str = "quintic"  # blend of the current lateral manoeuvre (see SHAPES)
+    moved: bool = False  # it has had a speed above 0: its declared yaw no longer holds
+
+
+def standing_yaw(agent: AgentState, yaw: float) -> float:
+    """The body yaw [rad] an agent adds to its path's heading: its declared `yaw` while it
+    has stood still since the start (a parked car, a waiting pedestrian); 0 from its first
+    motion on, when its body follows its path (the lane, a lane change, a walk)."""
+    if agent.moved:
+        return 0.0
+    if agent.speed > 0.0:
+        agent.moved = True
+        return 0.0
+    return yaw
 
 
 # A speed counts as reached within this [m/s] for `ended(step)` (tracking lands on it).

@@ -23,7 +23,7 @@ from addt_dsl.plan import RunSpec
 from addt_dsl.registry import BEHAVIORS, ENVIRONMENTS, FAULTS, SENSORS, STACKS
 from addt_dsl.runtime import oracles
 from addt_dsl.runtime import fleet
-from addt_dsl.runtime.behaviors import AgentState, Idm, advance, lateral_profile, relative_heading
+from addt_dsl.runtime.behaviors import AgentState, Idm, advance, lateral_profile, relative_heading, standing_yaw
 from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
 from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.neighbours import LeaderIndex
@@ -567,7 +567,7 @@ def _loop(run: _Run) -> Trace:
                 x, y, h = road.road.point(a.s, a.t)
                 heading = h + relative_heading(a, t_now, dt)
                 if yaw:
-                    heading += yaw
+                    heading += standing_yaw(a, yaw)
                 z, grade = road.elevation.at(a.s)
                 set_pose(a.name, x, y, z + half_height, heading, math.atan(grade) * math.cos(heading - h))
                 body_actor[a.name] = (x, y, heading, a.speed, length, width, kind)
@@ -833,7 +833,7 @@ class _Fleet:
             off = road.road.lane_offset(a.s, a.t)
             hi = h + relative_heading(a, t_now, dt)
             if yaw:
-                hi += yaw
+                hi += standing_yaw(a, yaw)
             set_pose(a.name, xi, yi, z + half_height, hi, math.atan(grade) * math.cos(hi - h))
             x.append(xi), y.append(yi), heading.append(hi), v.append(a.speed)
             rows.append((xi, yi, hi, a.speed, a.accel, 0.0, a.s, a.t, off, 0.0))
@@ -876,7 +876,7 @@ class _Fleet:
             x[i], y[i], ref_h[i], lane_off[i], z[i], grade[i] = self._road_pose(i)
         heading = ref_h + rel
         for i, yaw in self.yaw:
-            heading[i] += yaw
+            heading[i] += standing_yaw(agents[i], yaw)
         pitch = np.zeros(n)  # atan(0) * cos(0) where flat and along the road
         for i in np.flatnonzero((grade != 0.0) | (heading != ref_h)).tolist():
             pitch[i] = math.atan(grade[i]) * math.cos(heading[i] - ref_h[i])
