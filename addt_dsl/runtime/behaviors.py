@@ -40,6 +40,9 @@ class AgentState:
     heading_rel: float = 0.0
     lc_shape: str = "quintic"  # blend of the current lateral manoeuvre (see SHAPES)
     moved: bool = False  # it has had a speed above 0: its declared yaw no longer holds
+    # Ground covered per metre of station at its offset [m/m] (`FastRoad.ground_scale`),
+    # set where it is posed: its station advances by speed / ground_scale.
+    ground_scale: float = 1.0
 
 
 def standing_yaw(agent: AgentState, yaw: float) -> float:
@@ -643,12 +646,14 @@ def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
     """Integrate an agent's road-frame kinematics from `time_s` over `dt` [s]."""
     agent.accel = accel
     agent.speed = max(0.0, agent.speed + accel * dt)
+    # `speed` is the speed along the agent's own path: on a bend its station (measured on
+    # the reference line) moves by speed / ground_scale.
     if agent.heading_rel:
-        agent.s += agent.speed * math.cos(agent.heading_rel) * dt
+        agent.s += agent.speed * math.cos(agent.heading_rel) * dt / agent.ground_scale
         agent.t += agent.speed * math.sin(agent.heading_rel) * dt
         agent.t_target = agent.t
     else:
-        agent.s += agent.speed * dt
+        agent.s += agent.speed * dt / agent.ground_scale
         agent.t = lateral_profile(agent, time_s + dt)
 
 

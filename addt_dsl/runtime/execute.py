@@ -565,6 +565,7 @@ def _loop(run: _Run) -> Trace:
             row, boxes = [None], [None]  # the ego's first, below
             for a, road, yaw, half_height, kind, length, width in agent_consts:
                 x, y, h = road.road.point(a.s, a.t)
+                a.ground_scale = road.road.ground_scale(a.s, a.t)
                 heading = h + relative_heading(a, t_now, dt)
                 if yaw:
                     heading += standing_yaw(a, yaw)
@@ -829,6 +830,7 @@ class _Fleet:
         x, y, heading, v, rows = [], [], [], [], []
         for a, road, yaw, half_height in zip(self.agents, self.roads, self.yaws, self.half_height_m):
             xi, yi, h = road.road.point(a.s, a.t)
+            a.ground_scale = road.road.ground_scale(a.s, a.t)
             z, grade = road.elevation.at(a.s)
             off = road.road.lane_offset(a.s, a.t)
             hi = h + relative_heading(a, t_now, dt)
@@ -864,16 +866,20 @@ class _Fleet:
         for i in lateral:
             rel[i] = relative_heading(agents[i], t_now, dt)
         x, y, ref_h, lane_off = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        z, grade = np.zeros(n), np.zeros(n)
+        z, grade, scale = np.zeros(n), np.zeros(n), np.ones(n)
         for fast, elev, rows in self.groups:
             sr, tr = s[rows], t[rows]
             x[rows], y[rows], ref_h[rows], i, u = fast.points(sr, tr)
+            scale[rows] = fast.ground_scales(sr, tr, i, u)
             lane_off[rows] = fast.lane_offsets(sr, tr, i, u)
             zg = elev.at_arrays(sr)
             if zg is not None:
                 z[rows], grade[rows] = zg
         for i in self.path_rows:  # routes: one by one
             x[i], y[i], ref_h[i], lane_off[i], z[i], grade[i] = self._road_pose(i)
+            scale[i] = self.roads[i].road.ground_scale(float(s[i]), float(t[i]))
+        for a, g in zip(agents, scale.tolist()):
+            a.ground_scale = g
         heading = ref_h + rel
         for i, yaw in self.yaw:
             heading[i] += standing_yaw(agents[i], yaw)
@@ -943,6 +949,7 @@ class _Fleet:
         ego = (run.ego_s, run.ego_t, run.ego.speed)
         if not (np.isfinite(s).all() and np.isfinite(t).all() and math.isfinite(ego[0]) and math.isfinite(ego[1])):
             return False
+        scale = np.array([a.ground_scale for a in self.agents], dtype=float)
         t_new = target.copy()
         for i in changing:
             t_new[i] = lateral_profile(self.agents[i], t_now + dt)
@@ -952,7 +959,7 @@ class _Fleet:
         for _ in range(fleet.MAX_ROUNDS):
             v_new = v + accel * dt
             v_new = np.where(v_new > 0.0, v_new, 0.0)  # max(0.0, v), as `advance` picks
-            s_new = s + v_new * dt
+            s_new = s + v_new * dt / scale  # as `advance`: the station moves by speed / ground_scale
             table = views.sequential(s, t, v, (s_new, t_new, v_new), ego)
             again = self._accel(params, rows, v, free, views.leaders(table, s, t, length))
             if np.array_equal(again.view(np.int64), accel.view(np.int64)):  # the fixed point: write it back
