@@ -372,8 +372,10 @@ class Synchronize(Behavior):
 class Trajectory(Behavior):
     keyword = "trajectory"
     params = (
-        ParamSpec("s", units.LENGTH, kind="list", doc="stations of the waypoints along the road"),
-        ParamSpec("t", units.LENGTH, kind="list", doc="lateral offsets of the waypoints (left positive)"),
+        ParamSpec("s", units.LENGTH, kind="list",
+                  doc="stations of the waypoints along the road's reference line (OpenDRIVE s)"),
+        ParamSpec("t", units.LENGTH, kind="list",
+                  doc="lateral offsets of the waypoints from the reference line, left of +s positive (OpenDRIVE t)"),
         ParamSpec("x", units.LENGTH, kind="list", doc="instead of `s`/`t`: world x of the waypoints"),
         ParamSpec("y", units.LENGTH, kind="list", doc="instead of `s`/`t`: world y of the waypoints"),
         ParamSpec("times", units.TIME, kind="list", low=0.0,
@@ -410,8 +412,8 @@ class Trajectory(Behavior):
 
     def start(self, agent, world, time_s):
         st = self.settings
-        if st["s"] is not None:
-            self.points = list(zip(st["s"], st["t"]))
+        if st["s"] is not None:  # OpenDRIVE road coordinates, whichever way the agent drives
+            self.points = [world.from_road_coords(agent, ps, pt) for ps, pt in zip(st["s"], st["t"])]
         else:
             self.points = [world.road_coords(agent, x, y) for x, y in zip(st["x"], st["y"])]
         self.times = [time_s + t for t in st["times"]] if st["times"] is not None else None

@@ -380,6 +380,18 @@ class _Run:
         """(s, t) of a world point on an agent's road [m]."""
         return self.agent_roads[agent.name].road.project(x, y, agent.s)
 
+    def from_road_coords(self, agent: AgentState, s: float, t: float) -> tuple[float, float]:
+        """An agent's (s, t) [m] of OpenDRIVE road coordinates (`s`, `t`: along the
+        reference line, left of +s positive) on the road it is on now. The same on a road
+        driven along +s; on a path (a route, a lane driven against s) its station and its
+        offset from the route lane's centre, to the driver's left."""
+        road = self.agent_roads[agent.name]
+        if not isinstance(road, _PathRoad):
+            return s, t
+        road_id = road.road.road_at(agent.s)[0]
+        x, y = road.network.road(road_id).point_at(s, t)
+        return road.road.project(float(x), float(y), road.road.station(road_id, s))
+
     def actor_lane(self, name: str) -> int | None:
         """The lane an actor is in now (None off the lanes)."""
         if name == "ego":
