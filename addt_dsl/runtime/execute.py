@@ -218,7 +218,7 @@ class _Run:
             self.longitudinal[a.name] = None
             if any(_is_live(c) for c in a.behaviors):  # they read the first recorded state
                 self.deferred.extend((st, c) for c in a.behaviors)
-            else:
+            else:  # (its steps below either way: they were dropped with a live behaviour)
                 for clause in a.behaviors:
                     self._start_behavior(st, clause, 0.0)
             if a.steps:
@@ -461,7 +461,9 @@ class _Run:
         """A live behaviour setting (`speed(ego) + 5 km/h`) on the state recorded this step."""
         rec, k = self.recorded
         if self._live_snapshot is None or self._live_snapshot[0] != k:
-            self._live_snapshot = (k, _snapshot_trace(self, rec, k))
+            # Without step states: whether a step ended can itself ask a live setting (a
+            # cruise that follows `speed(other)` ends at that speed), which would recurse.
+            self._live_snapshot = (k, _snapshot_trace(self, rec, k, with_steps=False))
         trace = self._live_snapshot[1]
         return float(oracles.evaluate(expr, compute_signals(trace, oracles_signals(expr)), self.dt)[0])
 
@@ -1243,7 +1245,7 @@ def oracles_signals(expr) -> set[str]:
     return signals_used(expr)
 
 
-def _snapshot_trace(run: _Run, rec, k: int) -> Trace:
+def _snapshot_trace(run: _Run, rec, k: int, with_steps: bool = True) -> Trace:
     actors = {}
     sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m)}
     sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
@@ -1255,7 +1257,7 @@ def _snapshot_trace(run: _Run, rec, k: int) -> Trace:
     t = k * run.dt
     lights = {n: np.array([run.lights.state(n, t)]) for n in run.lights.programs} if run.lights else {}
     trace = Trace(run.dt, np.array([t]), actors, lat, lights=lights)
-    if run.named_steps:  # `when ended(lead.brake_hard)` reads the states now
+    if run.named_steps and with_steps:  # `when ended(lead.brake_hard)` reads the states now
         trace.steps = {name: np.array([code], dtype=np.int8) for name, code in run.step_states(t).items()}
     return trace
 

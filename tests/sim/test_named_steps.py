@@ -118,3 +118,14 @@ agent b car on r lane -3 at 40 m speed 6 m/s {
     assert ended * tr.period_s == pytest.approx(3.0, abs=0.05)
     assert tr.actors["a"].speed[ended] == pytest.approx(2.0, abs=0.05)
     assert first(tr, "b.after_a", STEP_STARTED) == ended
+
+
+def test_an_agent_with_a_live_behaviour_still_runs_its_steps():
+    """An agent whose behaviour follows another actor (`cruise speed speed(ego) + 3 m/s`)
+    had its steps dropped: `go` never started and it never braked."""
+    tr = run("""agent a car on r lane -1 at 40 m speed 8 m/s {
+  behavior cruise speed speed(ego) + 3 m/s
+  go: at 1 s behavior brake decel 4 m/s^2 to_speed 2 m/s
+}""", duration=5.0)
+    assert first(tr, "a.go", STEP_STARTED) == round(1.0 / tr.period_s)
+    assert tr.actors["a"].speed[-1] == pytest.approx(2.0, abs=1e-3)
