@@ -39,6 +39,22 @@ class AgentState:
     # walkers: they move at this angle instead of following a lane.
     heading_rel: float = 0.0
     lc_shape: str = "quintic"  # blend of the current lateral manoeuvre (see SHAPES)
+    moved: bool = False  # it has had a speed above 0: its declared yaw no longer holds
+    # Ground covered per metre of station at its offset [m/m] (`FastRoad.ground_scale`),
+    # set where it is posed: its station advances by speed / ground_scale.
+    ground_scale: float = 1.0
+
+
+def standing_yaw(agent: AgentState, yaw: float) -> float:
+    """The body yaw [rad] an agent adds to its path's heading: its declared `yaw` while it
+    has stood still since the start (a parked car, a waiting pedestrian); 0 from its first
+    motion on, when its body follows its path (the lane, a lane change, a walk)."""
+    if agent.moved:
+        return 0.0
+    if agent.speed > 0.0:
+        agent.moved = True
+        return 0.0
+    return yaw
 
 
 # A speed counts as reached within this [m/s] for `ended(step)` (tracking lands on it).
@@ -358,8 +374,10 @@ class Synchronize(Behavior):
 class Trajectory(Behavior):
     keyword = "trajectory"
     params = (
-        ParamSpec("s", units.LENGTH, kind="list", doc="stations of the waypoints along the road"),
-        ParamSpec("t", units.LENGTH, kind="list", doc="lateral offsets of the waypoints (left positive)"),
+        ParamSpec("s", units.LENGTH, kind="list",
+                  doc="stations of the waypoints along the road's reference line (OpenDRIVE s)"),
+        ParamSpec("t", units.LENGTH, kind="list",
+                  doc="lateral offsets of the waypoints from the reference line, left of +s positive (OpenDRIVE t)"),
         ParamSpec("x", units.LENGTH, kind="list", doc="instead of `s`/`t`: world x of the waypoints"),
         ParamSpec("y", units.LENGTH, kind="list", doc="instead of `s`/`t`: world y of the waypoints"),
         ParamSpec("times", units.TIME, kind="list", low=0.0,
@@ -397,8 +415,8 @@ class Trajectory(Behavior):
 
     def start(self, agent, world, time_s):
         st = self.settings
-        if st["s"] is not None:
-            self.points = list(zip(st["s"], st["t"]))
+        if st["s"] is not None:  # OpenDRIVE road coordinates, whichever way the agent drives
+            self.points = [world.from_road_coords(agent, ps, pt) for ps, pt in zip(st["s"], st["t"])]
         else:
             self.points = [world.road_coords(agent, x, y) for x, y in zip(st["x"], st["y"])]
         self.times = [time_s + t for t in st["times"]] if st["times"] is not None else None
@@ -635,12 +653,14 @@ def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
     """Integrate an agent's road-frame kinematics from `time_s` over `dt` [s]."""
     agent.accel = accel
     agent.speed = max(0.0, agent.speed + accel * dt)
+    # `speed` is the speed along the agent's own path: on a bend its station (measured on
+    # the reference line) moves by speed / ground_scale.
     if agent.heading_rel:
-        agent.s += agent.speed * math.cos(agent.heading_rel) * dt
+        agent.s += agent.speed * math.cos(agent.heading_rel) * dt / agent.ground_scale
         agent.t += agent.speed * math.sin(agent.heading_rel) * dt
         agent.t_target = agent.t
     else:
-        agent.s += agent.speed * dt
+        agent.s += agent.speed * dt / agent.ground_scale
         agent.t = lateral_profile(agent, time_s + dt)
 
 

@@ -24,11 +24,11 @@ from addt_dsl.plan import RunSpec
 from addt_dsl.registry import BEHAVIORS, ENVIRONMENTS, FAULTS, SENSORS, STACKS
 from addt_dsl.runtime import oracles
 from addt_dsl.runtime import fleet
-from addt_dsl.runtime.behaviors import AgentState, Idm, advance, lateral_profile, relative_heading
+from addt_dsl.runtime.behaviors import AgentState, Idm, advance, lateral_profile, relative_heading, standing_yaw
 from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
 from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.neighbours import LeaderIndex
-from addt_dsl.runtime.lights import LightsRuntime, Program, StopStation, stations_on, stop_accel, stop_lines
+from addt_dsl.runtime.lights import LightsRuntime, Program, StopStation, next_stop, stations_on, stop_accel, stop_lines
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.path import RoutePath
 from addt_dsl.runtime.road import resolve_route
@@ -144,10 +144,7 @@ class _Context:
         if run.lights is None:
             return None
         front = s + 0.5 * run.ego_plan.length_m
-        for st in run.stop_stations["ego"]:
-            if st.u >= front - 0.5:
-                return st.u, run.lights.state(st.controller, self.now)
-        return None
+        return next_stop(run.stop_stations["ego"], front, lambda c: run.lights.state(c, self.now))
 
     def event(self, kind: str, **detail) -> None:
         self.run.events.append(Event(self.now, kind, detail))
@@ -352,13 +349,12 @@ class _Run:
         """An agent's acceleration [m/s^2] limited to stop at the next red (or yellow it can
         stop for) light on its path."""
         front = agent.s + 0.5 * agent.length_m
-        for st in self.stop_stations.get(agent.name, ()):
-            if st.u < front - 0.5:
-                continue
-            a_stop = stop_accel(agent.speed, st.u - front, self.lights.state(st.controller, time_s))
+        # Only the next line ahead holds the agent (its most restrictive light).
+        nxt = next_stop(self.stop_stations.get(agent.name, ()), front, lambda c: self.lights.state(c, time_s))
+        if nxt is not None:
+            a_stop = stop_accel(agent.speed, nxt[0] - front, nxt[1])
             if a_stop is not None:
                 accel = min(accel, a_stop)
-            break  # only the next line ahead holds the agent
         return accel
 
     def record_lights(self, lights_rec: dict, margins: dict, k: int, time_s: float) -> None:
@@ -427,6 +423,18 @@ class _Run:
     def road_coords(self, agent: AgentState, x: float, y: float) -> tuple[float, float]:
         """(s, t) of a world point on an agent's road [m]."""
         return self.agent_roads[agent.name].road.project(x, y, agent.s)
+
+    def from_road_coords(self, agent: AgentState, s: float, t: float) -> tuple[float, float]:
+        """An agent's (s, t) [m] of OpenDRIVE road coordinates (`s`, `t`: along the
+        reference line, left of +s positive) on the road it is on now. The same on a road
+        driven along +s; on a path (a route, a lane driven against s) its station and its
+        offset from the route lane's centre, to the driver's left."""
+        road = self.agent_roads[agent.name]
+        if not isinstance(road, _PathRoad):
+            return s, t
+        road_id = road.road.road_at(agent.s)[0]
+        x, y = road.network.road(road_id).point_at(s, t)
+        return road.road.project(float(x), float(y), road.road.station(road_id, s))
 
     def actor_lane(self, name: str) -> int | None:
         """The lane an actor is in now (None off the lanes)."""
@@ -497,7 +505,9 @@ class _Run:
         """A live behaviour setting (`speed(ego) + 5 km/h`) on the state recorded this step."""
         rec, k = self.recorded
         if self._live_snapshot is None or self._live_snapshot[0] != k:
-            self._live_snapshot = (k, _snapshot_trace(self, rec, k))
+            # Without step states: whether a step ended can itself ask a live setting (a
+            # cruise that follows `speed(other)` ends at that speed), which would recurse.
+            self._live_snapshot = (k, _snapshot_trace(self, rec, k, with_steps=False))
         trace = self._live_snapshot[1]
         return float(oracles.evaluate(expr, compute_signals(trace, oracles_signals(expr)), self.dt)[0])
 
@@ -613,9 +623,10 @@ def _loop(run: _Run) -> Trace:
             row, boxes = [None], [None]  # the ego's first, below
             for a, road, yaw, half_height, kind, length, width in agent_consts:
                 x, y, h = road.road.point(a.s, a.t)
+                a.ground_scale = road.road.ground_scale(a.s, a.t)
                 heading = h + relative_heading(a, t_now, dt)
                 if yaw:
-                    heading += yaw
+                    heading += standing_yaw(a, yaw)
                 z, grade = road.elevation.at(a.s)
                 set_pose(a.name, x, y, z + half_height, heading, math.atan(grade) * math.cos(heading - h))
                 body_actor[a.name] = (x, y, heading, a.speed, length, width, kind)
@@ -883,11 +894,12 @@ class _Fleet:
         x, y, heading, v, rows = [], [], [], [], []
         for a, road, yaw, half_height in zip(self.agents, self.roads, self.yaws, self.half_height_m):
             xi, yi, h = road.road.point(a.s, a.t)
+            a.ground_scale = road.road.ground_scale(a.s, a.t)
             z, grade = road.elevation.at(a.s)
             off = road.road.lane_offset(a.s, a.t)
             hi = h + relative_heading(a, t_now, dt)
             if yaw:
-                hi += yaw
+                hi += standing_yaw(a, yaw)
             set_pose(a.name, xi, yi, z + half_height, hi, math.atan(grade) * math.cos(hi - h))
             x.append(xi), y.append(yi), heading.append(hi), v.append(a.speed)
             rows.append((xi, yi, hi, a.speed, a.accel, 0.0, a.s, a.t, off, 0.0))
@@ -918,19 +930,23 @@ class _Fleet:
         for i in lateral:
             rel[i] = relative_heading(agents[i], t_now, dt)
         x, y, ref_h, lane_off = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        z, grade = np.zeros(n), np.zeros(n)
+        z, grade, scale = np.zeros(n), np.zeros(n), np.ones(n)
         for fast, elev, rows in self.groups:
             sr, tr = s[rows], t[rows]
             x[rows], y[rows], ref_h[rows], i, u = fast.points(sr, tr)
+            scale[rows] = fast.ground_scales(sr, tr, i, u)
             lane_off[rows] = fast.lane_offsets(sr, tr, i, u)
             zg = elev.at_arrays(sr)
             if zg is not None:
                 z[rows], grade[rows] = zg
         for i in self.path_rows:  # routes: one by one
             x[i], y[i], ref_h[i], lane_off[i], z[i], grade[i] = self._road_pose(i)
+            scale[i] = self.roads[i].road.ground_scale(float(s[i]), float(t[i]))
+        for a, g in zip(agents, scale.tolist()):
+            a.ground_scale = g
         heading = ref_h + rel
         for i, yaw in self.yaw:
-            heading[i] += yaw
+            heading[i] += standing_yaw(agents[i], yaw)
         pitch = np.zeros(n)  # atan(0) * cos(0) where flat and along the road
         for i in np.flatnonzero((grade != 0.0) | (heading != ref_h)).tolist():
             pitch[i] = math.atan(grade[i]) * math.cos(heading[i] - ref_h[i])
@@ -997,6 +1013,7 @@ class _Fleet:
         ego = (run.ego_s, run.ego_t, run.ego.speed)
         if not (np.isfinite(s).all() and np.isfinite(t).all() and math.isfinite(ego[0]) and math.isfinite(ego[1])):
             return False
+        scale = np.array([a.ground_scale for a in self.agents], dtype=float)
         t_new = target.copy()
         for i in changing:
             t_new[i] = lateral_profile(self.agents[i], t_now + dt)
@@ -1006,7 +1023,7 @@ class _Fleet:
         for _ in range(fleet.MAX_ROUNDS):
             v_new = v + accel * dt
             v_new = np.where(v_new > 0.0, v_new, 0.0)  # max(0.0, v), as `advance` picks
-            s_new = s + v_new * dt
+            s_new = s + v_new * dt / scale  # as `advance`: the station moves by speed / ground_scale
             table = views.sequential(s, t, v, (s_new, t_new, v_new), ego)
             again = self._accel(params, rows, v, free, views.leaders(table, s, t, length))
             if np.array_equal(again.view(np.int64), accel.view(np.int64)):  # the fixed point: write it back
@@ -1288,7 +1305,7 @@ def oracles_signals(expr) -> set[str]:
     return signals_used(expr)
 
 
-def _snapshot_trace(run: _Run, rec, k: int) -> Trace:
+def _snapshot_trace(run: _Run, rec, k: int, with_steps: bool = True) -> Trace:
     actors = {}
     sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m)}
     sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
@@ -1300,7 +1317,7 @@ def _snapshot_trace(run: _Run, rec, k: int) -> Trace:
     t = k * run.dt
     lights = {n: np.array([run.lights.state(n, t)]) for n in run.lights.programs} if run.lights else {}
     trace = Trace(run.dt, np.array([t]), actors, lat, lights=lights)
-    if run.named_steps:  # `when ended(lead.brake_hard)` reads the states now
+    if run.named_steps and with_steps:  # `when ended(lead.brake_hard)` reads the states now
         trace.steps = {name: np.array([code], dtype=np.int8) for name, code in run.step_states(t).items()}
     return trace
 

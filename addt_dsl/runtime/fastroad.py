@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 STEP_M = 0.25
+MIN_GROUND_SCALE = 0.2  # [m/m] `ground_scale` near a bend's centre of curvature
 _BLOCK = 8192  # samples evaluated at once
 
 
@@ -126,6 +127,30 @@ class FastRoad:
     def curvature(self, s: float) -> float:
         i, u = self._index(s)
         return self._k[i] + u * (self._k[i + 1] - self._k[i])
+
+    def ground_scale(self, s: float, t: float) -> float:
+        """Ground covered per metre of station [m/m] by an actor at offset `t` [m]: the
+        offset curve's length element, 1 - kappa * t for the reference line's curvature
+        kappa (more on the outside of a bend, less on the inside), at least
+        `MIN_GROUND_SCALE` (near the centre of curvature). An actor moving at `speed`
+        advances its station by speed / ground_scale. Past the ends, where the line goes on
+        straight, 1."""
+        if s > self.length or s < 0.0:
+            return 1.0
+        i, u = self._index(s)
+        ks = self._k
+        g = 1.0 - (ks[i] + u * (ks[i + 1] - ks[i])) * t
+        return g if g > MIN_GROUND_SCALE else MIN_GROUND_SCALE
+
+    def ground_scales(self, s: np.ndarray, t: np.ndarray, i: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """`ground_scale` of many actors (`i`, `u`: `points`' index and fraction), bit for bit."""
+        if self._k_a is None:
+            self._k_a = np.array(self._k)
+            self._s_k = np.array(self._s)
+        lo = self._k_a[i]
+        g = 1.0 - (lo + u * (self._k_a[i + 1] - lo)) * t
+        g = np.where(g > MIN_GROUND_SCALE, g, MIN_GROUND_SCALE)
+        return np.where((s > self.length) | (s < 0.0), 1.0, g)
 
     def curvature_ahead(self, s: float, distance: float) -> tuple[np.ndarray, np.ndarray]:
         """(distance past `s` [m], curvature [1/m]) of the line's samples from `s` to `s +

@@ -10,7 +10,12 @@ States are numbers in traces and formulas (`light(west) == red`): `STATE_CODES`.
 
 A stop line is where a signal stands on its road (its `s`), for traffic driving the way
 the signal faces (`orientation` "+": along s, "-": against, "none": both) in the lanes of
-its `<validity>` (all lanes of that direction without one).
+its `<validity>` (all lanes of that direction without one). Only signals that govern
+vehicles make stop lines (`SIGNAL_KINDS`): a pedestrian light governs the crossing.
+
+Several lights on one stop line (one station, different controllers) hold traffic by the
+most restrictive state among them (`next_stop`); nothing depends on the order they were
+found in (set or hash order), so every process gives the same run.
 """
 
 from __future__ import annotations
@@ -66,6 +71,23 @@ def state_at(program: Program, changes: Sequence[tuple[float, str]], t):
     return float(out) if out.ndim == 0 else out
 
 
+# What an OpenDRIVE signal `type` (country "OpenDRIVE", ASAM OpenDRIVE's signal catalogue)
+# governs: "vehicle" signals make stop lines, "pedestrian" ones do not (they still belong to
+# their controller, whose state `light(NAME)` records). A type not listed, and a signal
+# declared in the language, is a vehicle light.
+SIGNAL_KINDS = {
+    "1000001": "vehicle",  # traffic light: red, yellow, green
+    "1000002": "pedestrian",  # pedestrian light: red, green
+    "1000009": "vehicle",  # two-lamp traffic light (red/yellow, yellow/green)
+    "1000011": "vehicle",  # traffic light with arrows
+}
+
+
+def governs_vehicles(sig_type: str) -> bool:
+    """Whether a signal of OpenDRIVE `type` holds vehicles at its stop line (`SIGNAL_KINDS`)."""
+    return SIGNAL_KINDS.get(str(sig_type).strip(), "vehicle") == "vehicle"
+
+
 @dataclass(frozen=True)
 class StopLine:
     """Where traffic governed by a controller stops: road station `s` [m] of `road_id`, for
@@ -101,6 +123,8 @@ def stop_lines(network, controller: str, signal_ids: Iterable[str], inline: dict
         if found is None:
             continue
         road_id, sig = found
+        if not governs_vehicles(sig.type):
+            continue  # a pedestrian light: its stop line is the crossing's, not the road's
         road = network.road(road_id)
         directions = {"+": (1,), "-": (-1,)}.get(sig.orientation, (1, -1))
         driving = road.driving_lane_ids(sig.s)
@@ -115,7 +139,8 @@ def stop_lines(network, controller: str, signal_ids: Iterable[str], inline: dict
 
 @dataclass(frozen=True)
 class StopStation:
-    """A stop line on one actor's road or path: path station `u` [m] of the line."""
+    """A stop line on one actor's road or path: path station `u` [m] of the line, held by
+    `controller` (several controllers on one line: one station each)."""
 
     u: float
     controller: str
@@ -130,7 +155,29 @@ def stations_on(lines: Sequence[StopLine], legs, station) -> list[StopStation]:
         for line in lines:
             if line.governs(leg.road_id, leg.direction, leg.lane) and lo - 1e-6 <= line.s <= hi + 1e-6:
                 out.append(StopStation(float(station(leg.road_id, line.s)), line.controller))
-    return sorted(set(out), key=lambda st: st.u)
+    # Sorted by station, then controller: the order never depends on set or hash order.
+    return sorted(set(out), key=lambda st: (st.u, st.controller))
+
+
+SAME_LINE_M = 1e-6  # [m] stations closer than this are one stop line
+
+
+def next_stop(stations: Sequence[StopStation], front_u: float, state_of) -> tuple[float, float] | None:
+    """(station [m], state code) of the first stop line at or ahead of `front_u - 0.5` [m]
+    among `stations` (in path order), or None; where several controllers hold one line,
+    its state is the most restrictive of theirs (red over yellow over green).
+    `state_of(controller)` gives a controller's state code now."""
+    found = None
+    for st in stations:
+        if st.u < front_u - 0.5:
+            continue
+        if found is None:
+            found = (st.u, state_of(st.controller))
+        elif st.u - found[0] <= SAME_LINE_M:
+            found = (found[0], max(found[1], state_of(st.controller)))
+        else:
+            break
+    return found
 
 
 COMFORT_DECEL = 2.5  # [m/s^2] an agent stops for a red light braking at most this hard
@@ -175,7 +222,7 @@ class LightsRuntime:
         behind when (or while) the light was red; `REACH_M` when none."""
         margin = REACH_M
         for st in stations:
-            key = (actor, st.u)
+            key = (actor, st.u, st.controller)
             if self.state(st.controller, time_s) != RED:
                 self._armed[key] = False
                 continue

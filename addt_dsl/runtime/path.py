@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from addt_dsl.runtime.fastroad import STEP_M, FastRoad
+from addt_dsl.runtime.fastroad import MIN_GROUND_SCALE, STEP_M, FastRoad
 
 class _Seg:
     __slots__ = ("fast", "elevation", "road_id", "dir", "s_from", "s_to", "u0", "u1", "lane", "h_shift",
@@ -83,7 +83,7 @@ class RoutePath(FastRoad):
         n = max(2, int(math.ceil(length / STEP_M)) + 1)
         u = np.linspace(0.0, length, n)
         idx = np.clip(np.searchsorted(self._u0, u, side="right") - 1, 0, len(self._segs) - 1)
-        x, y, h, k = (np.empty(n) for _ in range(4))
+        x, y, h, k, g = (np.empty(n) for _ in range(5))
         for i, sg in enumerate(self._segs):
             m = idx == i
             if not np.any(m):
@@ -96,14 +96,27 @@ class RoutePath(FastRoad):
             x[m], y[m], hh, kk = sg.fast.sample_arrays(s, t)
             h[m] = hh + sg.h_shift
             kd = sg.dir * kk  # reference curvature as driven; the lane centre's, at its offset
-            k[m] = kd / np.maximum(0.2, 1.0 - kd * sg.dir * t)
+            g[m] = np.maximum(0.2, 1.0 - kd * sg.dir * t)  # the lane centre's length per metre of u
+            k[m] = kd / g[m]
         self._s = u.tolist()
         self._x, self._y = x.tolist(), y.tolist()
         self._h = np.unwrap(h).tolist()
         self._k = k.tolist()
+        self._g = g.tolist()
         self._xy = np.stack([x, y], axis=1)
         self._ds = self._s[1] - self._s[0]
         self._last_i = len(self._s) - 2
+
+    def ground_scale(self, s: float, t: float) -> float:
+        """`FastRoad.ground_scale` on a path: `u` advances with the road's station, so the
+        ground per metre of `u` at offset `t` from the lane centre is the lane centre's
+        (1 - kappa_ref * t_centre) times the offset factor on the lane centre's curvature."""
+        if s > self.length or s < 0.0:
+            return 1.0
+        i, u = self._index(s)
+        ks, gs = self._k, self._g
+        g = (gs[i] + u * (gs[i + 1] - gs[i])) * (1.0 - (ks[i] + u * (ks[i + 1] - ks[i])) * t)
+        return g if g > MIN_GROUND_SCALE else MIN_GROUND_SCALE
 
     # ---- legs
     def _seg(self, u: float) -> _Seg:

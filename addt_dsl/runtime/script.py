@@ -5,8 +5,9 @@ run into `BoundStep`/`BoundGroup` (runtime/bound.py); this module runs that tree
 simulated time. A step is armed, fires when its start conditions hold (a `when`
 condition with `for D` must have held at every step for D)
 (starting its behaviour and arming its group), and is done once it fired and its group
-is done. A sequence arms each step when the previous one is done; a parallel group arms
-all its steps at once and is done when all are.
+is done. A sequence arms each step when the previous one is done (fired: not when its
+behaviour ended, which `when ended(X)` waits for); a parallel group arms all its steps
+at once and is done when all are.
 
 A step has *started* once it fired; it has *ended* once the behaviour it started has
 completed (`Behavior.ended`) and its group, if any, has ended (every step of it). A

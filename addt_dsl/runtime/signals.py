@@ -153,24 +153,55 @@ class LatGap(SignalFn):
         return np.abs(b.t - a.t) - 0.5 * (a.width_m + b.width_m)
 
 
+def time_to_overlap(a, b, horizon_s: float = TTC_CAP_S) -> np.ndarray:
+    """Per sample, the time [s] until the boxes of actor tracks `a` and `b` first overlap if
+    both keep their velocity (speed along heading) and heading from that sample on: 0 when
+    they overlap already, `horizon_s` when they do not within it (never, for two actors
+    that pass each other clear).
+
+    Exact for two rectangles moving without rotation: they overlap while their centres'
+    relative position projects, on each of the four box axes, within the sum of both boxes'
+    half-extents on that axis (separating axes); each axis gives the interval of times it
+    holds, and the first overlap is the start of the intersection of the four."""
+    ha, hb = np.asarray(a.heading, float), np.asarray(b.heading, float)
+    ua, ub = np.stack([np.cos(ha), np.sin(ha)]), np.stack([np.cos(hb), np.sin(hb)])
+    na, nb = np.stack([-ua[1], ua[0]]), np.stack([-ub[1], ub[0]])
+    d = np.stack([np.asarray(b.x, float) - a.x, np.asarray(b.y, float) - a.y])
+    v = ub * np.asarray(b.speed, float) - ua * np.asarray(a.speed, float)
+    la, wa, lb, wb = 0.5 * a.length_m, 0.5 * a.width_m, 0.5 * b.length_m, 0.5 * b.width_m
+    lo = np.zeros(d.shape[1])
+    hi = np.full(d.shape[1], float(horizon_s))
+    for e in (ua, na, ub, nb):
+        def along(w):
+            return np.abs(np.sum(w * e, axis=0))
+
+        reach = la * along(ua) + wa * along(na) + lb * along(ub) + wb * along(nb)
+        p, q = np.sum(d * e, axis=0), np.sum(v * e, axis=0)
+        moving = np.abs(q) > 1e-9
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            t1, t2 = (-reach - p) / q, (reach - p) / q
+        enter = np.where(moving, np.minimum(t1, t2), np.where(np.abs(p) <= reach, -np.inf, np.inf))
+        leave = np.where(moving, np.maximum(t1, t2), np.where(np.abs(p) <= reach, np.inf, -np.inf))
+        lo, hi = np.maximum(lo, enter), np.minimum(hi, leave)
+    return np.where(lo <= hi, lo, float(horizon_s))
+
+
 @SIGNALS.register
 class Ttc(SignalFn):
     keyword = "ttc"
     args = ("actor", "actor")
     dim = units.TIME
-    doc = (f"time to collision of the first actor into the second along the road (or shared route), "
-           f"when they overlap laterally and close in; between actors on different roads or routes, "
-           f"the Euclidean gap over the rate it shrinks at; capped at {TTC_CAP_S:g} s [s]")
+    doc = (f"time to collision of the first actor into the second: along the road (or shared route), "
+           f"the bumper gap over the closing speed when they overlap laterally and close in; between "
+           f"actors on different roads or routes (or driving different ways), the time until their boxes "
+           f"first overlap if both keep their velocity and heading; capped at {TTC_CAP_S:g} s, also "
+           f"when they never meet [s]")
 
     @staticmethod
     def compute(trace, args):
         a, b = trace.actors[args[0]], trace.actors[args[1]]
         if not same_frame(a, b):
-            gap = np.hypot(a.x - b.x, a.y - b.y) - 0.5 * (a.length_m + b.length_m)
-            closing = -np.gradient(gap, trace.period_s) if len(gap) > 1 else np.zeros_like(gap)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ttc = np.where(closing > 1e-6, np.maximum(gap, 0.0) / closing, TTC_CAP_S)
-            return np.minimum(ttc, TTC_CAP_S)
+            return time_to_overlap(a, b, TTC_CAP_S)
         gap = (b.s - a.s) - 0.5 * (a.length_m + b.length_m)
         closing = a.speed - b.speed
         overlap = np.abs(a.t - b.t) < 0.5 * (a.width_m + b.width_m) + 0.2

@@ -96,3 +96,36 @@ def test_a_replaced_behaviour_never_ends():
 }""")
     assert first(tr, "lead.slow", STEP_STARTED) is not None
     assert first(tr, "lead.slow", STEP_ENDED) is None
+
+
+def test_a_named_cruise_that_follows_another_actors_speed_ends_at_that_speed():
+    """Whether such a step ended reads its live setting (`speed(ego)`), which used to build
+    the step states again: RecursionError. It ends when the follower reaches the ego's speed;
+    in a sequence, and with two actors following each other, the run completes."""
+    tr = run("""agent a car on r lane -1 at 40 m speed 8 m/s {
+  go: at 1 s behavior cruise speed speed(ego) + 2 m/s decel 3 m/s^2
+}
+agent b car on r lane -3 at 40 m speed 6 m/s {
+  sequence {
+    wait: at 0.5 s behavior cruise speed 6 m/s
+    follow: after 0.5 s behavior cruise speed speed(a)
+  }
+  after_a: when ended(a.go) then behavior cruise speed 3 m/s
+}""")
+    ended = first(tr, "a.go", STEP_ENDED)
+    assert ended is not None
+    # The ego holds 0 m/s (cruise_speed 0): `a` slows from 8 m/s to 2 m/s at 3 m/s^2 from 1 s: 2 s.
+    assert ended * tr.period_s == pytest.approx(3.0, abs=0.05)
+    assert tr.actors["a"].speed[ended] == pytest.approx(2.0, abs=0.05)
+    assert first(tr, "b.after_a", STEP_STARTED) == ended
+
+
+def test_an_agent_with_a_live_behaviour_still_runs_its_steps():
+    """An agent whose behaviour follows another actor (`cruise speed speed(ego) + 3 m/s`)
+    had its steps dropped: `go` never started and it never braked."""
+    tr = run("""agent a car on r lane -1 at 40 m speed 8 m/s {
+  behavior cruise speed speed(ego) + 3 m/s
+  go: at 1 s behavior brake decel 4 m/s^2 to_speed 2 m/s
+}""", duration=5.0)
+    assert first(tr, "a.go", STEP_STARTED) == round(1.0 / tr.period_s)
+    assert tr.actors["a"].speed[-1] == pytest.approx(2.0, abs=1e-3)

@@ -9,7 +9,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from addt_dsl.runtime.lights import (COMFORT_DECEL, GREEN, PAST_M, RED, REACH_M, YELLOW, LightsRuntime, Program, StopStation,
-                                     state_at, stations_on, stop_accel, stop_lines)
+                                     governs_vehicles, next_stop, state_at, stations_on, stop_accel, stop_lines)
 from addt_dsl.runtime.road import build_road, line, load_xodr, parse_xodr
 
 MAPS = Path(__file__).resolve().parents[3] / "examples" / "maps"
@@ -42,12 +42,41 @@ def test_changes_override_the_program_until_it_is_resumed():
 def test_signals_of_the_traffic_light_map_give_stop_lines_for_their_lanes():
     net = load_xodr(MAPS / "fabriksgatan_traffic_lights.xodr")
     lines = stop_lines(net, "west", ["1", "2", "3"])
-    # All three face +s traffic on road 3 (right-hand traffic: lane -1); 2 and 3 carry
-    # <validity fromLane="-1" toLane="1"/>, which leaves lane -1 of that direction too.
-    assert {(ln.signal, ln.road_id, ln.s, ln.direction, ln.lanes) for ln in lines} == {
-        ("1", "3", 109.0, 1, (-1,)), ("2", "3", 114.0, 1, (-1,)), ("3", "3", 109.0, 1, (-1,))}
+    # All three face +s traffic on road 3 (right-hand traffic: lane -1), but only signal 1
+    # (type 1000001) is a vehicle light; 2 and 3 (type 1000002) are pedestrian lights,
+    # which govern the crossing and make no stop line for vehicles.
+    assert [net.signal(i)[1].type for i in ("1", "2", "3")] == ["1000001", "1000002", "1000002"]
+    assert {(ln.signal, ln.road_id, ln.s, ln.direction, ln.lanes) for ln in lines} == {("1", "3", 109.0, 1, (-1,))}
+    assert stop_lines(net, "walkers", ["2", "3"]) == []
     assert net.signal("2")[1].validity == (-1, 1)
     assert stop_lines(net, "west", ["404"]) == []
+
+
+def test_which_signal_types_hold_vehicles():
+    assert governs_vehicles("1000001") and governs_vehicles("1000011") and governs_vehicles("")
+    assert not governs_vehicles("1000002")
+
+
+def test_lights_on_one_line_hold_by_the_most_restrictive_whatever_their_order():
+    lights = LightsRuntime({"a": Program(5.0, 1.0, 10.0), "b": Program(0.0, 0.0, 10.0)})  # a green, b red
+    one = [StopStation(50.0, "a"), StopStation(50.0, "b")]
+    for stations in (one, one[::-1]):
+        assert next_stop(stations, 30.0, lambda c: lights.state(c, 1.0)) == (50.0, RED)
+        assert lights.red_margin("x", 30.0, stations, 1.0) == 20.0
+    later = [StopStation(50.0, "a"), StopStation(70.0, "b")]
+    assert next_stop(later, 30.0, lambda c: lights.state(c, 1.0)) == (50.0, GREEN)
+    assert next_stop(later, 60.0, lambda c: lights.state(c, 1.0)) == (70.0, RED)
+    assert next_stop(later, 80.0, lambda c: lights.state(c, 1.0)) is None
+
+
+def test_red_margin_of_a_line_with_two_controllers_does_not_depend_on_their_order():
+    # Before it, `a` is red and `b` green; it crosses once `b` turned red too: a violation,
+    # in either order of the stations (the armed state is kept per controller).
+    lights = LightsRuntime({"a": Program(0.0, 0.0, 100.0), "b": Program(2.0, 0.0, 100.0)})
+    for stations in ([StopStation(50.0, "a"), StopStation(50.0, "b")], [StopStation(50.0, "b"), StopStation(50.0, "a")]):
+        lights._armed.clear()
+        assert lights.red_margin("x", 45.0, stations, 1.0) == 5.0
+        assert lights.red_margin("x", 52.0, stations, 3.0) == -2.0
 
 
 def test_controllers_are_read_from_opendrive():
@@ -73,10 +102,11 @@ class _Leg:
 
 def test_stations_on_a_route_only_for_lines_on_its_legs_and_lanes():
     net = load_xodr(MAPS / "fabriksgatan_traffic_lights.xodr")
-    lines = stop_lines(net, "west", ["1", "2"])
+    lines = stop_lines(net, "west", ["1"]) + stop_lines(net, "east", ["1"]) + stop_lines(net, "west", ["1"])
     legs = [_Leg("3", 1, 50.0, 114.3, -1), _Leg("13", 1, 0.0, 14.9, -1)]
     got = stations_on(lines, legs, lambda road_id, s: s - 50.0)  # the route starts at s = 50 m on road 3
-    assert got == [StopStation(59.0, "west"), StopStation(64.0, "west")]
+    # One station per controller on the line, in (station, controller) order, duplicates once.
+    assert got == [StopStation(59.0, "east"), StopStation(59.0, "west")]
     assert stations_on(lines, [_Leg("3", -1, 114.3, 0.0, 1)], lambda r, s: s) == []  # the other direction
     assert stations_on(lines, [_Leg("3", 1, 0.0, 100.0, -1)], lambda r, s: s) == []  # ends before the lines
 

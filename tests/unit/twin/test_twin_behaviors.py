@@ -28,6 +28,9 @@ class FakeWorld:
     def road_band_t(self, road, s):
         return -7.0, 3.5
 
+    def from_road_coords(self, agent, s, t):
+        return s, t  # a road driven along +s: its frame is the agent's
+
     def occupants(self, road):
         for o in self.others.values():
             yield o.name, o.s, o.t, o.speed, o.length_m
