@@ -432,7 +432,7 @@ def sample_lanes(roads, elevation=None, step_m: float = LANE_STEP_M) -> tuple[li
                 left, right = (inner_id, base + lane_id) if lane_id < 0 else (base + lane_id, inner_id)
                 lanes.append(LaneGeometry(base + lane_id, points(0.5 * (inner + outer)),
                                           sec.lane(lane_id).type in DRIVING_TYPES, along, left, right))
-            outermost = {min(ids, default=0), max(ids, default=0)}
+            outermost = {min((i for i in ids if i < 0), default=0), max((i for i in ids if i > 0), default=0)}
             for k in sorted(borders):
                 if k == 0 and not two_way and ids:
                     solid = True  # a one-way road's centre line is its edge
