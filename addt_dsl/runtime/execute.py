@@ -253,6 +253,9 @@ class _Run:
         stack_clause = ego.stack
         stack_cls = STACKS.get(stack_clause.name)
         self.stack = stack_cls(stack_clause.settings, self.ctx)
+        # A stack that moves its host itself (an OSI stack answering TrafficUpdates) sets the
+        # ego's state in place of the dynamics step: `move_host(state, time_s)`.
+        self.move_host = getattr(self.stack, "move_host", None)
         self.faults.bind(self.stack, lambda: self.ctx.now)
 
     def _setup_lights(self, plan: BoundScenario) -> None:
@@ -684,7 +687,10 @@ def _loop(run: _Run) -> Trace:
         while queue and queue[0][0] <= t_now + 1e-12:
             _, steer, accel = queue.pop(0)
             run.command = (steer, accel)
-        vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt, grade)
+        if run.move_host is None:
+            vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt, grade)
+        else:
+            run.move_host(run.ego, t_now + dt)
         if not all(math.isfinite(v) for v in (run.ego.x, run.ego.y, run.ego.vx)):
             status, error = "detected", "vehicle state became non-finite"
             last = k + 1

@@ -354,11 +354,11 @@ class _Handler(socketserver.BaseRequestHandler):
     def handle(self):
         server: BridgeServer = self.server  # type: ignore[assignment]
         if not server.slots.acquire(blocking=False):
-            _reply_error(self.request, f"busy: {server.max_connections} runs already connected",
+            server.refuse(self.request, f"busy: {server.max_connections} runs already connected",
                          time.monotonic() + 1.0)
             return
         try:
-            serve_connection(self.request, server.limits)
+            server.serve(self.request, server.limits)
         except Exception as exc:  # noqa: BLE001 - one bad session must not print a traceback
             print(f"bridge: session ended: {type(exc).__name__}: {escape(str(exc))}", file=sys.stderr)
         finally:
@@ -369,7 +369,11 @@ class BridgeServer(socketserver.ThreadingTCPServer):
     daemon_threads = True
     allow_reuse_address = True
 
-    def __init__(self, address: str, limits: Limits = Limits(), max_connections: int = MAX_CONNECTIONS):
+    def __init__(self, address: str, limits: Limits = Limits(), max_connections: int = MAX_CONNECTIONS,
+                 serve=None, refuse=None):
+        # One session on a connected socket, and the error reply to a connection over the
+        # limit, in the server's protocol (the OSI server's differ).
+        self.serve, self.refuse = serve or serve_connection, refuse or _reply_error
         host, port = parse_address(address)
         if not is_loopback(host):
             print(f"warning: the bridge server listens on {escape(host)}, not loopback: any host that can reach "
@@ -386,9 +390,9 @@ class BridgeServer(socketserver.ThreadingTCPServer):
 
 
 def start_in_thread(address: str = "127.0.0.1:0", limits: Limits = Limits(),
-                    max_connections: int = MAX_CONNECTIONS) -> BridgeServer:
+                    max_connections: int = MAX_CONNECTIONS, serve=None, refuse=None) -> BridgeServer:
     """A server on a background thread (for tests and notebooks); `shutdown()` it when done."""
-    server = BridgeServer(address, limits, max_connections)
+    server = BridgeServer(address, limits, max_connections, serve, refuse)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     return server
 
