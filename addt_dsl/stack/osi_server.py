@@ -41,7 +41,6 @@ from addt_dsl.stack.bridge_server import (MAX_CONNECTIONS, BridgeServer, Limits,
                                           _RemoteContext)
 
 from osi3.osi_motionrequest_pb2 import MotionRequest
-from osi3.osi_object_pb2 import MovingObject
 from osi3.osi_sensorview_pb2 import SensorView
 from osi3.osi_trafficlight_pb2 import TrafficLight
 from osi3.osi_trafficupdate_pb2 import TrafficUpdate
