@@ -110,6 +110,16 @@ class OsiStack(ExternalStack):
             raise StackError(f"OSI stack sent {T.TYPE_NAMES[got]}, expected {T.TYPE_NAMES[expect]}")
         return got, reply
 
+    def close(self) -> None:
+        if getattr(self, "sock", None) is None:
+            return
+        try:
+            T.send_message(self.sock, T.BYE, b"", time.monotonic() + 1.0)
+        except OSError:
+            pass
+        self.sock.close()
+        self.sock = None
+
     # ---- the stack interface the loop drives
     def on_frame(self, frame, arrive_s: float) -> None:
         if "hit_body" in frame.data:  # lidar frames make views; other sensors' are not sent
