@@ -1,0 +1,68 @@
+"""The bundled `bev` stack behind OSI in another process (`python -m addt_dsl.stack.osi_server`)
+gives the verdicts it gives in process, answering with MotionRequests or TrafficUpdates."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("osi3", reason="the `osi` extra (osi-python) is not installed")
+
+from addt_dsl.compiler import compile_file  # noqa: E402
+from addt_dsl.runtime.execute import execute  # noqa: E402
+from addt_dsl.sweep import expand  # noqa: E402
+
+pytestmark = pytest.mark.slow
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def server_address():
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "addt_dsl.stack.osi_server", "--address", "127.0.0.1:0"],
+                            stdout=subprocess.PIPE, text=True, env=env, cwd=ROOT)
+    try:
+        line = proc.stdout.readline().strip()
+        assert line.startswith("listening "), line
+        yield line.split()[1]
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def _through_osi(spec, address: str, answer: str):
+    """The same RunSpec with the ego's `stack bev ...` as `stack external protocol osi ...`."""
+    stack = spec.plan.ego.stack
+    remote = stack.model_copy(update={"name": "external", "settings": {
+        **stack.settings, "protocol": "osi", "answer": answer, "address": address}})
+    plan = spec.plan.model_copy(update={"ego": spec.plan.ego.model_copy(update={"stack": remote})})
+    return spec.model_copy(update={"plan": plan})
+
+
+# Examples on one road (the reference server, like the bridge's, plans on the ego's first
+# road: routes through junctions are not served). `lead_brake` delays its lidar frames:
+# its OSI views carry the world of the frame's capture, the in-process perception the
+# world on arrival (docs/bridge.md), so only its verdicts are compared.
+EXAMPLES = {"following": True, "overtake": True, "broken_down": True, "curve": True, "oncoming_overtake": True,
+            "lead_brake": False}
+
+
+@pytest.mark.parametrize("answer", ["motion_request", "traffic_update"])
+@pytest.mark.parametrize("name", sorted(EXAMPLES))
+def test_osi_verdicts_match_the_in_process_stack(server_address, name, answer):
+    result = compile_file(ROOT / "examples" / f"{name}.addt")
+    assert result.ok, result.diagnostics
+    spec = expand(result.plan).specs[0]
+    local = execute(spec)
+    remote = execute(_through_osi(spec, server_address, answer))
+    assert remote.status == local.status == "ok", remote.error
+    assert [(v.name, v.passed) for v in remote.verdicts] == [(v.name, v.passed) for v in local.verdicts]
+    assert remote.trace.object_count.max() >= 1
+    if EXAMPLES[name]:
+        # Not only the verdicts: the ego drives the same path (to rounding).
+        a, b = local.trace.actors["ego"], remote.trace.actors["ego"]
+        assert len(a.x) == len(b.x)
+        assert np.abs(a.x - b.x).max() < 1e-6 and np.abs(a.y - b.y).max() < 1e-6
