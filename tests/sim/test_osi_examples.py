@@ -66,3 +66,24 @@ def test_osi_verdicts_match_the_in_process_stack(server_address, name, answer):
         a, b = local.trace.actors["ego"], remote.trace.actors["ego"]
         assert len(a.x) == len(b.x)
         assert np.abs(a.x - b.x).max() < 1e-6 and np.abs(a.y - b.y).max() < 1e-6
+
+
+def test_the_minimal_example_client_follows_and_keeps_its_lane():
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "examples/osi_client.py", "127.0.0.1:0"], stdout=subprocess.PIPE,
+                            text=True, env=env, cwd=ROOT)
+    try:
+        line = proc.stdout.readline().strip()
+        assert line.startswith("listening "), line
+        result = compile_file(ROOT / "examples" / "following.addt")
+        spec = next(s for s in expand(result.plan).specs if s.params["gap"] == 25.0 and s.params["lead_speed"] == 10.0)
+        res = execute(_through_osi(spec, line.split()[1], "motion_request"))
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    assert res.status == "ok", res.error
+    assert all(v.passed for v in res.verdicts), res.verdicts  # no collision, lane kept
+    ego, lead = res.trace.actors["ego"], res.trace.actors["lead"]
+    # Settled behind the 10 m/s lead: its speed, about 5 m + 2 s x 10 m/s between the boxes.
+    assert ego.speed[-1] == pytest.approx(10.0, abs=0.5)
+    assert lead.x[-1] - ego.x[-1] - 4.6 == pytest.approx(25.0, abs=3.0)
