@@ -159,6 +159,58 @@ def test_a_delay_sends_an_older_view_and_a_shift_moves_the_objects():
     assert b.orientation.yaw == pytest.approx(a.orientation.yaw - 0.05)
 
 
+def lane_change(sv: SensorView) -> tuple[int, bytes]:
+    """A trajectory along lane -2's centre (y = -5.25 m) at the host's speed, points every 0.2 s."""
+    loc = sv.host_vehicle_data.location
+    now = M.seconds(sv.host_vehicle_data.timestamp)
+    v = math.hypot(loc.velocity.x, loc.velocity.y)
+    mr = MotionRequest()
+    mr.motion_request_type = MotionRequest.MOTION_REQUEST_TYPE_TRAJECTORY
+    for k in range(1, 11):
+        p = mr.desired_trajectory.trajectory_point.add()
+        M.set_timestamp(p.timestamp, now + 0.2 * k)
+        p.position.x, p.position.y = loc.position.x + v * 0.2 * k + 10.0, -5.25
+    return T.MOTION_REQUEST, mr.SerializeToString()
+
+
+def test_a_desired_trajectory_is_followed_into_the_next_lane():
+    res = run(Peer(lane_change).address, duration="6 s")
+    assert res.status == "ok", res.error
+    ego = res.trace.actors["ego"]
+    assert ego.y[0] == pytest.approx(-1.75)
+    assert ego.y[-1] == pytest.approx(-5.25, abs=0.1)  # lane -2's centre
+    assert abs(ego.heading[-1]) < 0.02 and ego.speed[-1] > 14.0
+
+
+def mover(sv: SensorView) -> tuple[int, bytes]:
+    """TrafficUpdate: the host 1 m/s^2 faster each second along +x from where it is, at the next step."""
+    from osi3.osi_trafficupdate_pb2 import TrafficUpdate
+
+    loc = sv.host_vehicle_data.location
+    now = M.seconds(sv.host_vehicle_data.timestamp)
+    tu = TrafficUpdate()
+    M.set_timestamp(tu.timestamp, now + 0.01)
+    u = tu.update.add()
+    u.id.value = 1
+    v = loc.velocity.x
+    u.base.position.x, u.base.position.y = loc.position.x + v * 0.01 + 0.5 * 0.01 ** 2, -1.75
+    u.base.orientation.yaw = 0.0
+    u.base.velocity.x, u.base.acceleration.x = v + 0.01, 1.0
+    return T.TRAFFIC_UPDATE, tu.SerializeToString()
+
+
+def test_a_traffic_update_moves_the_host():
+    result = compile_source(SOURCE.format(address=Peer(mover).address, faults="", duration="2 s", timeout="5 s")
+                            .replace("timeout 5 s", "timeout 5 s answer traffic_update"))
+    assert result.ok, result.diagnostics
+    res = execute(expand(result.plan).specs[0])
+    assert res.status == "ok", res.error
+    ego = res.trace.actors["ego"]
+    # x = 10 + 15 t + t^2 / 2 (constant 1 m/s^2 from 15 m/s), speed 15 + t: by hand at 2 s, 42 m and 17 m/s.
+    assert ego.x[-1] == pytest.approx(42.0, abs=1e-6) and ego.speed[-1] == pytest.approx(17.0, abs=1e-9)
+    assert (ego.y == -1.75).all() and ego.accel[-1] == pytest.approx(1.0)
+
+
 @pytest.mark.parametrize("answer, message", [
     (lambda sv: (T.TRAFFIC_UPDATE, b""), "sent TrafficUpdate, expected MotionRequest"),
     (lambda sv: (T.MOTION_REQUEST, b"\xff\xff\xff"), "malformed MotionRequest"),
