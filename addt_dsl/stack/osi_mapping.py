@@ -378,7 +378,7 @@ def follow(targets: list[Target], pose: tuple[float, float, float, float], now_s
     accel = target.accel if target.accel is not None else 0.0
     if target.speed is not None:
         dt = max(target.time_s - now_s, 0.0)
-        accel += SPEED_GAIN * (target.speed - (speed + accel * dt))
+        accel += SPEED_GAIN * (target.speed - max(0.0, speed + accel * dt))  # braking stops, never reverses
     return steer, accel
 
 

@@ -176,7 +176,7 @@ class OsiStack(ExternalStack):
         state.heading = yaw
         state.vx, state.vy = c * vx + s * vy, -s * vx + c * vy  # body frame
         state.yaw_rate = h.yaw_rate
-        state.accel = c * h.ax + s * h.ay
+        state.accel, state.ay = c * h.ax + s * h.ay, -s * h.ax + c * h.ay  # body frame
 
     # ---- the world as the views report it
     def _snapshot(self, time_s: float) -> None:

@@ -11,7 +11,7 @@ import pytest
 
 pytest.importorskip("osi3", reason="the `osi` extra (osi-python) is not installed")
 
-from addt_dsl.compiler import compile_file  # noqa: E402
+from addt_dsl.compiler import compile_file, compile_source  # noqa: E402
 from addt_dsl.runtime.execute import execute  # noqa: E402
 from addt_dsl.sweep import expand  # noqa: E402
 
@@ -87,3 +87,46 @@ def test_the_minimal_example_client_follows_and_keeps_its_lane():
     # Settled behind the 10 m/s lead: its speed, about 5 m + 2 s x 10 m/s between the boxes.
     assert ego.speed[-1] == pytest.approx(10.0, abs=0.5)
     assert lead.x[-1] - ego.x[-1] - 4.6 == pytest.approx(25.0, abs=3.0)
+
+
+# docs/language.md's inline light, with a lidar: the lights reach the OSI stack as
+# TrafficLight bulbs at the stop line, and the ego waits at red as in process.
+LIGHTS = """
+scenario signal_inline {
+  duration 25 s
+  road r {
+    line length 400 m
+    lanes right 2
+  }
+  lights {
+    signal s1 road r at 150 m
+    controller main signals [s1] green 5 s yellow 3 s red 30 s
+  }
+  ego car on r lane -2 at 10 m speed 8 m/s {
+    stack bev cruise_speed 8 m/s
+    sensor lidar rate 10 Hz rays 360 range 80 m
+  }
+  agent stopper car on r lane -2 at 60 m speed 10 m/s {
+    behavior cruise speed 10 m/s
+  }
+  expect {
+    no collision
+    no red_light
+  }
+}
+"""
+
+
+@pytest.mark.parametrize("answer", ["motion_request", "traffic_update"])
+def test_the_osi_stack_stops_at_a_red_light_as_in_process(server_address, answer):
+    result = compile_source(LIGHTS)
+    assert result.ok, result.diagnostics
+    spec = expand(result.plan).specs[0]
+    local = execute(spec)
+    remote = execute(_through_osi(spec, server_address, answer))
+    assert [(v.name, v.passed) for v in remote.verdicts] == [(v.name, v.passed) for v in local.verdicts]
+    assert all(v.passed for v in remote.verdicts)
+    a, b = local.trace.actors["ego"], remote.trace.actors["ego"]
+    assert b.speed.min() < 0.1  # it stood at the red light, its front before the stop line at 150 m
+    assert b.x.max() + 0.5 * b.length_m < 150.0
+    assert np.abs(a.x - b.x).max() < 1e-6

@@ -131,6 +131,15 @@ def test_follow_inverts_a_kinematic_rollout():
     assert got == pytest.approx((steer, accel), abs=1e-9)
 
 
+def test_follow_a_stop_within_the_horizon():
+    """Full braking (-7.848 m/s^2) from 3 m/s stops in 0.38 s, inside the 0.5 s horizon: the
+    desired state stands 3^2 / (2 * 7.848) = 0.573 m ahead at 0 m/s, and the command is the
+    braking itself, not braking eased by the speed the vehicle would have had in reverse."""
+    mr = _desired_state(10.5, 9 / (2 * 7.848), 0.0, 0.0, 0.0, -7.848)
+    steer, accel = M.follow(M.targets_from_motion_request(mr), (0.0, 0.0, 0.0, 3.0), 10.0, 2.7)
+    assert accel == pytest.approx(-7.848, abs=1e-9) and steer == pytest.approx(0.0, abs=1e-12)
+
+
 def test_trajectory_is_pursued_ahead_in_time():
     mr = MotionRequest()
     mr.motion_request_type = MotionRequest.MOTION_REQUEST_TYPE_TRAJECTORY
