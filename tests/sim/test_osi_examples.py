@@ -46,7 +46,7 @@ def _through_osi(spec, address: str, answer: str):
 # road: routes through junctions are not served). `lead_brake` delays its lidar frames:
 # its OSI views carry the world of the frame's capture, the in-process perception the
 # world on arrival (docs/bridge.md), so only its verdicts are compared.
-EXAMPLES = {"following": True, "overtake": True, "broken_down": True, "curve": True, "oncoming_overtake": True,
+EXAMPLES = {"following": True, "following_brake": True, "overtake": True, "broken_down": True, "curve": True, "oncoming_overtake": True,
             "lead_brake": False}
 
 
