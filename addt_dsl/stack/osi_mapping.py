@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 
 from addt_dsl.plan import LIGHT_STATES
 
-from osi3.osi_common_pb2 import Timestamp  # noqa: F401 - re-exported for the transport
 from osi3.osi_groundtruth_pb2 import GroundTruth
 from osi3.osi_lane_pb2 import Lane, LaneBoundary
 from osi3.osi_motionrequest_pb2 import MotionRequest

@@ -17,6 +17,7 @@ state now travels in `host_vehicle_data`.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import socket
@@ -52,7 +53,6 @@ class OsiStack(ExternalStack):
         self._static: bytes = b""  # the lanes, as SensorView bytes (protobuf merges concatenated messages)
         self._targets: list[M.Target] | None = None
         self._host: M.HostState | None = None
-        self._ids: dict[str, int] = {}
         run = ctx.run
         self._ids = {"ego": M.HOST_ID, **{a.name: M.HOST_ID + 1 + k for k, a in enumerate(run.agents)}}
         if self.answer == "traffic_update":
@@ -83,8 +83,6 @@ class OsiStack(ExternalStack):
             raise
 
     def _osi_hello(self) -> bytes:
-        import json
-
         hello = self._hello()  # the bridge's: seed, step, ego body, sensors, map, remote settings
         hello.pop("protocol", None)
         hello.update(type="hello", protocol=T.PROTOCOL_NAME, version=T.VERSION,

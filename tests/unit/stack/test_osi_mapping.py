@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 pytest.importorskip("osi3", reason="the `osi` extra (osi-python) is not installed")
 
@@ -194,3 +196,30 @@ def test_lanes_of_a_straight_two_lane_road():
     gt = M.lanes_ground_truth(lanes, boundaries)
     assert gt.lane_boundary[1].classification.type == LaneBoundary.Classification.TYPE_DASHED_LINE
     assert gt.lane[0].classification.centerline_is_driving_direction
+
+
+@settings(max_examples=300, deadline=None)
+@given(steer=st.floats(-0.5, 0.5), accel=st.floats(-9.0, 4.0), speed=st.floats(0.5, 40.0),
+       heading=st.floats(-math.pi, math.pi), x=st.floats(-1e4, 1e4), t=st.floats(0.0, 3600.0))
+def test_follow_recovers_the_command_of_a_rollout(steer, accel, speed, heading, x, t):
+    """The reference server's MotionRequest (a kinematic bicycle's state 0.5 s ahead under a
+    command) gives that command back through the twin's follower, whenever the vehicle
+    moves more than the follower's 5 cm in that time."""
+    from addt_dsl.stack.osi_server import motion_request, rollout
+
+    pose = (x, -x / 3, heading, speed)
+    end = rollout(pose, steer, accel, 2.7)
+    if math.hypot(end[0] - pose[0], end[1] - pose[1]) < 0.1:
+        return
+    mr = motion_request(t, pose, steer, accel, 2.7)
+    got = M.follow(M.targets_from_motion_request(mr), pose, t, 2.7)
+    assert got[0] == pytest.approx(steer, abs=1e-6)
+    assert got[1] == pytest.approx(accel, abs=1e-6)
+
+
+@given(st.floats(0.0, 1e6))
+def test_timestamps_round_trip_to_the_nanosecond(t):
+    sv = SensorView()
+    M.set_timestamp(sv.timestamp, t)
+    assert 0 <= sv.timestamp.nanos < 1_000_000_000
+    assert abs(M.seconds(sv.timestamp) - t) <= 1e-9 + 1e-15 * t
