@@ -358,7 +358,10 @@ class ExternalStack:
         hello = {
             "type": "hello", "protocol": 1, "seed": spec.seed, "step_s": run.dt,
             "stack": _jsonable(remote),
-            "ego": {"lane": self.ctx.ego_lane, "wheelbase_m": self.ctx.wheelbase_m,
+            # `route`, `map_lane`, `s_m`: the ego's path as the map names it, so the remote
+            # plans along the same route (its lane id on the first road, its start station).
+            "ego": {"lane": self.ctx.ego_lane, "route": list(run.ego_plan.route), "map_lane": run.ego_plan.lane,
+                    "s_m": run.ego_plan.s, "wheelbase_m": self.ctx.wheelbase_m,
                     "length_m": run.ego_plan.length_m, "width_m": run.ego_plan.width_m,
                     "mass_kg": run.ego_plan.mass_kg, "mu": run.ego_plan.mu},
             "sensors": sensors,

@@ -86,15 +86,26 @@ class _RemoteContext:
 
     def __init__(self, hello: dict):
         from addt_dsl.plan import RoadPlan
-        from addt_dsl.runtime.fastroad import FastRoad
+        from addt_dsl.runtime.execute import _PathRoad, _Road, _Run
+        from addt_dsl.runtime.road import resolve_route
         from addt_dsl.runtime.roadspec import build_network
 
         road_plan = RoadPlan.model_validate(hello["map"]["road"])
         network = build_network([road_plan])[road_plan.name]
-        road_id = road_plan.xodr_road_id if road_plan.source == "xodr" and road_plan.xodr_road_id \
-            else next(iter(network.roads))
-        self.road = FastRoad(network.road(road_id))
-        self.road_id = road_id
+        ego = hello["ego"]
+        route = [str(r) for r in ego.get("route") or ()]
+        road_id = route[0] if route else road_plan.xodr_road_id if road_plan.source == "xodr" and \
+            road_plan.xodr_road_id else next(iter(network.roads))
+        # The ego's road or route, as the simulator builds it (`_Run._road_of`): a client that
+        # sends no route (an older one) gets its first road.
+        lane = int(ego.get("map_lane", ego["lane"]))
+        if not route and network.road(road_id).travel_direction(lane) > 0:
+            path = _Road(network, road_id, {})
+        else:
+            _, legs = resolve_route(network, route or [road_id], lane, float(ego.get("s_m", 0.0)))
+            path = _PathRoad(network, road_plan.name, legs, {})
+        self.road, self.road_id = path.road, path.road_id
+        self.junctions = _Run._junctions(path)
         self.seed = int(hello["seed"])
         self.wheelbase_m = float(hello["ego"]["wheelbase_m"])
         body = hello["ego"]
@@ -137,7 +148,12 @@ class _RemoteContext:
         return None  # traffic-light states are not sent over the bridge protocol (yet)
 
     def junction_ahead(self, s: float):
-        return None  # nor the junctions of the ego's route
+        """As the simulator's context: the next junction on the route the ego's front has not left."""
+        front = s + 0.5 * self.ego_length_m
+        for entry, exit_, cx, cy in self.junctions:
+            if exit_ > front:
+                return entry, cx, cy
+        return None
 
     def actor_by_body(self, body: int):
         return self.actors.get(body)
