@@ -72,6 +72,7 @@ class Peer:
 
     def _serve(self):
         conn, _ = self.listener.accept()
+        self.listener.close()  # one run per peer
         with conn:
             try:
                 kind, payload = T.recv_message(conn)
