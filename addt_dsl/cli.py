@@ -394,6 +394,14 @@ def cmd_trace(args) -> int:
     from addt_dsl.printer import check_spec
     from addt_dsl.reporting.trace_view import events_path, events_table, print_trace, rerun, signals_table
 
+    if args.osi:  # before the run is executed again
+        from addt_dsl import extras
+
+        missing = extras.missing_message("osi3", "`--osi`")
+        if missing:
+            raise UsageError(missing)
+        if Path(args.osi).suffix.lower() not in (".osi", ".mcap"):
+            raise UsageError(f"--osi writes FILE.osi or FILE.mcap, not {args.osi!r}")
     with _open_store(Path(args.dir)) as store:
         record = next(store.records("run_id = ?", (args.run_id,), limit=1), None)
         if record is None:
@@ -413,6 +421,11 @@ def cmd_trace(args) -> int:
             getattr(table, write)(path, index=False)
             getattr(events, write)(events_path(path), index=False)
             print(f"wrote {path} and {events_path(path)}")
+    if args.osi:
+        from addt_dsl.stack import osi_trace
+
+        n = osi_trace.write(run.spec, run.trace, args.osi)
+        print(f"wrote {args.osi} ({n} OSI SensorViews)")
     if args.plot:
         from addt_dsl.reporting.plots import run_signals_png
 
@@ -518,6 +531,8 @@ def build_parser() -> argparse.ArgumentParser:
     trace.add_argument("--parquet", metavar="FILE", help="the same as Parquet")
     trace.add_argument("--plot", metavar="FILE.png", help="plot speeds, gaps, TTC, lane offset and each "
                                                           "oracle's margin over time")
+    trace.add_argument("--osi", metavar="FILE", help="write the run's ground truth as an ASAM OSI trace: "
+                                                     "FILE.osi (binary, length-prefixed SensorViews) or FILE.mcap")
     trace.set_defaults(func=cmd_trace)
     check = sub.add_parser("check", help="compile only")
     check.add_argument("files", nargs="+")

@@ -25,6 +25,7 @@ class Extra:
 EXTRAS: dict[str, Extra] = {
     "torch": Extra("learned", 'pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu '
                               '&& pip install -e ".[learned]"'),
+    "osi3": Extra("osi", 'pip install -e ".[osi]"'),
 }
 
 

@@ -269,6 +269,9 @@ class _Run:
             self.stack = _NoStack()
         else:
             self.stack = STACKS.get(stack_clause.name)(stack_clause.settings, self.ctx)
+        # A stack that moves its host itself (an OSI stack answering TrafficUpdates) sets the
+        # ego's state in place of the dynamics step: `move_host(state, time_s)`.
+        self.move_host = getattr(self.stack, "move_host", None)
         self.faults.bind(self.stack, lambda: self.ctx.now)
 
     def _script(self, st: AgentState, a: BoundActor, road: _Road) -> None:
@@ -742,7 +745,9 @@ def _loop(run: _Run) -> Trace:
         while queue and queue[0][0] <= t_now + 1e-12:
             _, steer, accel = queue.pop(0)
             run.command = (steer, accel)
-        if run.ego_agent is None:
+        if run.ego_agent is None and run.move_host is not None:
+            run.move_host(run.ego, t_now + dt)
+        elif run.ego_agent is None:
             vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt, grade)
         else:  # a scripted ego moves as agents do; a stack's commands are recorded, not applied
             if leaders_stale and not run.networked:  # it may ask for its leader

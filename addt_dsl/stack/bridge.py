@@ -195,8 +195,20 @@ def extrinsics_dict(ext) -> dict[str, float]:
 # ---------------------------------------------------------------- the client stack
 
 # Settings the client keeps: never sent to the remote as stack settings.
-CLIENT_SETTINGS = ("address", "timeout", "sites")
+CLIENT_SETTINGS = ("address", "timeout", "sites", "protocol", "answer")
 SITE_STACKS = ("bev", "none")  # registered stacks whose fault sites a remote may declare
+
+
+def _osi_stack():
+    from addt_dsl.stack.osi_stack import OsiStack  # osi3 (the `osi` extra): only when asked for
+
+    return OsiStack
+
+
+# `stack external protocol WORD` -> the client class that speaks it (ExternalStack or a subclass).
+PROTOCOL_CLIENTS = {"bridge": lambda: ExternalStack, "osi": _osi_stack}
+# The package a protocol's client imports outside the core install (addt_dsl.extras).
+PROTOCOL_MODULES = {"osi": "osi3"}
 
 
 @STACKS.register
@@ -211,6 +223,12 @@ class ExternalStack:
                   doc="HOST:PORT of the remote stack's bridge server"),
         ParamSpec("timeout", units.TIME, default=30.0, low=0.001, high=3600.0,
                   doc="wall-clock wait for each reply before the run is marked detected"),
+        ParamSpec("protocol", None, kind="word", default="bridge", choices=("bridge", "osi"),
+                  doc="what the remote speaks: bridge (this project's JSON messages with the sensor frames) or "
+                      "osi (ASAM OSI: a SensorView per step, answered by a MotionRequest or TrafficUpdate)"),
+        ParamSpec("answer", None, kind="word", default="motion_request", choices=("motion_request", "traffic_update"),
+                  doc="protocol osi: what the stack answers each SensorView with: motion_request (a desired "
+                      "state or trajectory the twin's dynamics follow) or traffic_update (the host's new state)"),
         ParamSpec("sites", None, kind="word", default="bev", choices=SITE_STACKS,
                   doc="whose fault sites the remote stack has: bev (the reference server's: stack-internal "
                       "faults are checked against `stack bev` and sent to the remote in protocol 2) or "
@@ -220,12 +238,44 @@ class ExternalStack:
     nodes = {name: () for name in NODE_NAMES}
     doc = "A stack in another process or language, lock-step over a socket (docs/bridge.md)."
 
+    def __new__(cls, settings: dict | None = None, ctx=None):
+        # `protocol osi` runs the OSI client (a subclass): the registered stack stays one.
+        impl = PROTOCOL_CLIENTS[str((settings or {}).get("protocol", "bridge"))]() if cls is ExternalStack else cls
+        return object.__new__(impl)
+
     @classmethod
     def sites_of(cls, settings: dict | None = None):
         """The registered stack whose fault sites the remote has (`sites bev`), or None
-        (`sites none`): the compiler checks stack-internal fault targets against it."""
+        (`sites none`, or `protocol osi`, whose messages carry no faults): the compiler
+        checks stack-internal fault targets against it."""
         name = str((settings or {}).get("sites", "bev"))
-        return None if name == "none" else STACKS.get(name)
+        if name == "none" or (settings or {}).get("protocol") == "osi":
+            return None
+        return STACKS.get(name)
+
+    @classmethod
+    def no_sites_reason(cls, settings: dict | None = None) -> tuple[str, str]:
+        """(why, what to do) for a stack-internal fault the remote cannot take (E0109)."""
+        if (settings or {}).get("protocol") == "osi":
+            return ("`stack external protocol osi` cannot apply it: OSI's messages carry no fault schedule, "
+                    "and an OSI stack reports no injections back",
+                    "sensor faults (drop, delay, skew, shift, noise) act on the SensorViews sent; for "
+                    "stack-internal faults serve the stack over `protocol bridge` with `sites bev` "
+                    "(docs/bridge.md)")
+        return ("`stack external sites none` declares none",
+                "the reference server (python -m addt_dsl.stack.bridge_server) has the sites of "
+                "`stack bev`: `sites bev` (the default) checks targets against them and sends the "
+                "faults to the remote (bridge protocol 2, docs/bridge.md)")
+
+    @classmethod
+    def required_sensors(cls, settings: dict) -> set[str]:
+        """`protocol osi` builds each SensorView on a lidar frame (what it saw, when)."""
+        return {"lidar"} if settings.get("protocol") == "osi" else set()
+
+    @classmethod
+    def required_modules(cls, settings: dict) -> dict[str, str]:
+        module = PROTOCOL_MODULES.get(str(settings.get("protocol", "bridge")))
+        return {"protocol": module} if module else {}
 
     @classmethod
     def fault_sites(cls, settings: dict | None = None) -> set[str]:
@@ -308,7 +358,10 @@ class ExternalStack:
         hello = {
             "type": "hello", "protocol": 1, "seed": spec.seed, "step_s": run.dt,
             "stack": _jsonable(remote),
-            "ego": {"lane": self.ctx.ego_lane, "wheelbase_m": self.ctx.wheelbase_m,
+            # `route`, `map_lane`, `s_m`: the ego's path as the map names it, so the remote
+            # plans along the same route (its lane id on the first road, its start station).
+            "ego": {"lane": self.ctx.ego_lane, "route": list(run.ego_plan.route), "map_lane": run.ego_plan.lane,
+                    "s_m": run.ego_plan.s, "wheelbase_m": self.ctx.wheelbase_m,
                     "length_m": run.ego_plan.length_m, "width_m": run.ego_plan.width_m,
                     "mass_kg": run.ego_plan.mass_kg, "mu": run.ego_plan.mu},
             "sensors": sensors,

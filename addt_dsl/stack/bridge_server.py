@@ -86,15 +86,26 @@ class _RemoteContext:
 
     def __init__(self, hello: dict):
         from addt_dsl.plan import RoadPlan
-        from addt_dsl.runtime.fastroad import FastRoad
+        from addt_dsl.runtime.execute import _PathRoad, _Road, _Run
+        from addt_dsl.runtime.road import resolve_route
         from addt_dsl.runtime.roadspec import build_network
 
         road_plan = RoadPlan.model_validate(hello["map"]["road"])
         network = build_network([road_plan])[road_plan.name]
-        road_id = road_plan.xodr_road_id if road_plan.source == "xodr" and road_plan.xodr_road_id \
-            else next(iter(network.roads))
-        self.road = FastRoad(network.road(road_id))
-        self.road_id = road_id
+        ego = hello["ego"]
+        route = [str(r) for r in ego.get("route") or ()]
+        road_id = route[0] if route else road_plan.xodr_road_id if road_plan.source == "xodr" and \
+            road_plan.xodr_road_id else next(iter(network.roads))
+        # The ego's road or route, as the simulator builds it (`_Run._road_of`): a client that
+        # sends no route (an older one) gets its first road.
+        lane = int(ego.get("map_lane", ego["lane"]))
+        if not route and network.road(road_id).travel_direction(lane) > 0:
+            path = _Road(network, road_id, {})
+        else:
+            _, legs = resolve_route(network, route or [road_id], lane, float(ego.get("s_m", 0.0)))
+            path = _PathRoad(network, road_plan.name, legs, {})
+        self.road, self.road_id = path.road, path.road_id
+        self.junctions = _Run._junctions(path)
         self.seed = int(hello["seed"])
         self.wheelbase_m = float(hello["ego"]["wheelbase_m"])
         body = hello["ego"]
@@ -137,7 +148,12 @@ class _RemoteContext:
         return None  # traffic-light states are not sent over the bridge protocol (yet)
 
     def junction_ahead(self, s: float):
-        return None  # nor the junctions of the ego's route
+        """As the simulator's context: the next junction on the route the ego's front has not left."""
+        front = s + 0.5 * self.ego_length_m
+        for entry, exit_, cx, cy in self.junctions:
+            if exit_ > front:
+                return entry, cx, cy
+        return None
 
     def actor_by_body(self, body: int):
         return self.actors.get(body)
@@ -354,11 +370,11 @@ class _Handler(socketserver.BaseRequestHandler):
     def handle(self):
         server: BridgeServer = self.server  # type: ignore[assignment]
         if not server.slots.acquire(blocking=False):
-            _reply_error(self.request, f"busy: {server.max_connections} runs already connected",
+            server.refuse(self.request, f"busy: {server.max_connections} runs already connected",
                          time.monotonic() + 1.0)
             return
         try:
-            serve_connection(self.request, server.limits)
+            server.serve(self.request, server.limits)
         except Exception as exc:  # noqa: BLE001 - one bad session must not print a traceback
             print(f"bridge: session ended: {type(exc).__name__}: {escape(str(exc))}", file=sys.stderr)
         finally:
@@ -369,7 +385,11 @@ class BridgeServer(socketserver.ThreadingTCPServer):
     daemon_threads = True
     allow_reuse_address = True
 
-    def __init__(self, address: str, limits: Limits = Limits(), max_connections: int = MAX_CONNECTIONS):
+    def __init__(self, address: str, limits: Limits = Limits(), max_connections: int = MAX_CONNECTIONS,
+                 serve=None, refuse=None):
+        # One session on a connected socket, and the error reply to a connection over the
+        # limit, in the server's protocol (the OSI server's differ).
+        self.serve, self.refuse = serve or serve_connection, refuse or _reply_error
         host, port = parse_address(address)
         if not is_loopback(host):
             print(f"warning: the bridge server listens on {escape(host)}, not loopback: any host that can reach "
@@ -386,9 +406,9 @@ class BridgeServer(socketserver.ThreadingTCPServer):
 
 
 def start_in_thread(address: str = "127.0.0.1:0", limits: Limits = Limits(),
-                    max_connections: int = MAX_CONNECTIONS) -> BridgeServer:
+                    max_connections: int = MAX_CONNECTIONS, serve=None, refuse=None) -> BridgeServer:
     """A server on a background thread (for tests and notebooks); `shutdown()` it when done."""
-    server = BridgeServer(address, limits, max_connections)
+    server = BridgeServer(address, limits, max_connections, serve, refuse)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     return server
 

@@ -81,11 +81,9 @@ def rule_faults(ctx: Context) -> Faults:
                 continue
             target = ".".join(f.target)
             if cls.target_kind != "sensor" and stack_cls is not None and site_cls is None:
-                ctx.sink.error("E0109", f"'{f.kind}' needs fault sites of the remote stack, and "
-                                        f"`stack {stack_name} sites none` declares none", f.target_span,
-                               "the reference server (python -m addt_dsl.stack.bridge_server) has the sites of "
-                               "`stack bev`: `sites bev` (the default) checks targets against them and sends the "
-                               "faults to the remote (bridge protocol 2, docs/bridge.md)")
+                why, hint = stack_cls.no_sites_reason(_stack_settings(ctx))
+                ctx.sink.error("E0109", f"'{f.kind}' needs fault sites of the remote stack, and {why}",
+                               f.target_span, hint)
                 continue
             # Each kind says which targets it takes (an image fault only a camera, a bit flip
             # a site or a whole node); sites come with the ego's stack settings (tensors).
