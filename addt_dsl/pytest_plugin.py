@@ -284,7 +284,7 @@ class AddtItem(pytest.Item):
 
     def _report(self, plan, failing, cache, opts, notes) -> None:
         from addt_dsl.search import Shrinker
-        from addt_dsl.search.artifacts import write_counterexample
+        from addt_dsl.search.artifacts import ReplayMismatch, write_counterexample
 
         spec, outcome, n_failing = failing
         first = outcome.primary()
@@ -294,7 +294,11 @@ class AddtItem(pytest.Item):
                               f"({n_failing} failing run(s); shrinking is off)", props)
         result = Shrinker(spec, nominal_plan=plan, oracle=first.oracle, cache=cache,
                           max_simulations=opts["shrink_budget"]).run()
-        arts = write_counterexample(result, self.corpus_dir(), self.source_name(), animate=False)
+        try:
+            arts = write_counterexample(result, self.corpus_dir(), self.source_name(), animate=False)
+        except ReplayMismatch as exc:  # the failure stands; only its counterexample could not be kept
+            raise AddtFailure(f"{first.oracle} fails in run {spec.run_id or spec.key()}: {result.target.describe()} "
+                              f"({n_failing} failing run(s)); no counterexample written: {exc}", props) from None
         path = self.relative(arts.addt)
         props.append(("counterexample", path))
         lines = [f"{first.oracle} fails: minimal counterexample {path}",

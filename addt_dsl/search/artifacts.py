@@ -34,6 +34,10 @@ class ReplayMismatch(RuntimeError):
     """The written file does not replay the shrunk run."""
 
 
+class NotCompilable(ReplayMismatch):
+    """The shrunk run printed as `.addt` does not compile (nothing of it is written)."""
+
+
 @dataclass
 class Artifacts:
     addt: Path
@@ -70,12 +74,16 @@ def write_counterexample(result, out_dir: str | Path, source_file: str = "", ste
     stem = stem or counterexample_stem(source_file, result.best)
     text = print_spec(result.best, comment=header_comment(result, source_file))
     path = out / f"{stem}.addt"
-    write_text(path, text)
-    written = [path]
+    written = []
     for name, body in side_files(result.best.plan).items():
         write_text(out / name, body)
         written.append(out / name)
-    replay = compile_pinned(text, path=str(path), base_dir=out)
+    try:  # compiled before it is written: a counterexample that does not compile is never left behind
+        replay = compile_pinned(text, path=str(path), base_dir=out)
+    except ValueError as exc:
+        raise NotCompilable(f"the shrunk run cannot be written as a scenario that compiles: {exc}") from None
+    write_text(path, text)
+    written.insert(0, path)
     outcome = evaluate(replay, keep_trace=True)
     trace = outcome.trace
     if outcome.failure(result.target.id) is None or outcome.digest != result.outcome.digest:
