@@ -13,7 +13,9 @@ collected on its own.
 A test, in the order of Hypothesis's phases (the current settings profile decides which
 run, and `max_examples` sizes the search):
   reuse     replay this file's entries in the failure corpus (`.addt-failures/`, ini
-            `addt_failures`): a counterexample found once fails the test again until fixed
+            `addt_failures`): a counterexample found once fails the test again until fixed;
+            an entry shrunk from another version of the scenario (its `# scenario key:`
+            header) is skipped with a note, not replayed
   explicit  run the scenario's sweep (or the cell's runs)
   generate  falsify: more runs searching parameters and faults (budget by profile)
             (guided by robustness when the `target` phase is on, else uniform)
@@ -222,10 +224,15 @@ class AddtItem(pytest.Item):
             self._report(plan, failing, cache, opts, notes)
 
     def _replay_corpus(self, plan, cache, notes) -> None:
-        from addt_dsl.printer import compile_pinned
+        from addt_dsl.printer import compile_pinned, semantic_key
 
-        for path in corpus_entries(self.corpus_dir(), self.path, plan.name):
+        current = semantic_key(plan)
+        for path, key in corpus_entries(self.corpus_dir(), self.path, plan.name):
             shown = self.relative(path)
+            if key and key != current:  # shrunk from an earlier version of the scenario
+                notes.append(f"skipped {shown}: written for an earlier version of {self.source_name()} "
+                             f"(scenario key {key}, now {current}); delete it once the fix is kept")
+                continue
             try:
                 spec = compile_pinned(path.read_bytes(), path=shown, base_dir=path.parent)
             except ValueError as exc:  # damaged, hand-edited, or older than the language: say which, no traceback
@@ -327,17 +334,23 @@ class AddtItem(pytest.Item):
         return self.path, None, f"addt: {self.name}"
 
 
-def corpus_entries(corpus: Path, source: Path, scenario: str) -> list[Path]:
+def corpus_entries(corpus: Path, source: Path, scenario: str) -> list[tuple[Path, str]]:
     """Pinned counterexamples of `source`: files whose `# source:` header names a file
-    with the same name and whose scenario has the same name."""
+    with the same name and whose scenario has the same name, each with the scenario key
+    its header records ("" for entries written before keys were)."""
+    from addt_dsl.search.artifacts import SCENARIO_KEY_LABEL
+
     if not corpus.is_dir():
         return []
     out = []
     for path in sorted(corpus.glob("*.addt")):
-        head = path.read_text(errors="replace").splitlines()[:8]
+        text = path.read_text(errors="replace")
+        head = text.splitlines()[:8]
         named = next((line.split(":", 1)[1].strip() for line in head if line.startswith("# source:")), "")
-        if Path(named).name == source.name and f"scenario {scenario} {{" in path.read_text(errors="replace"):
-            out.append(path)
+        key = next((line.split(SCENARIO_KEY_LABEL, 1)[1].strip() for line in head
+                    if line.startswith(f"# {SCENARIO_KEY_LABEL}")), "")
+        if Path(named).name == source.name and f"scenario {scenario} {{" in text:
+            out.append((path, key))
     return out
 
 

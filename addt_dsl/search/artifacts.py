@@ -50,6 +50,11 @@ class Artifacts:
     xosc_note: str = ""  # why not
 
 
+# The header line that ties a counterexample to the content of the scenario it was shrunk
+# from (`printer.semantic_key` of its plan): an edited scenario does not replay it.
+SCENARIO_KEY_LABEL = "scenario key:"
+
+
 def counterexample_stem(source_file: str, spec: RunSpec) -> str:
     stem = Path(source_file).stem if source_file else spec.plan.name
     return f"{stem}-{semantic_key(spec)[:8]}"
@@ -60,6 +65,7 @@ def header_comment(result, source_file: str) -> str:
     lines = [f"Minimal counterexample, written by addtc shrink from {source_file or '<spec>'}"
              + (f" ({result.original.run_id})" if result.original.run_id else ""),
              f"source: {source_file}" if source_file else "source: -",
+             *([f"{SCENARIO_KEY_LABEL} {result.scenario_key}"] if getattr(result, "scenario_key", "") else []),
              f"fails: {f.describe()}",
              f"shrunk in {result.simulations} simulations ({result.cache_hits} cache hits, {result.rounds} rounds)",
              "replay: addtc THIS_FILE  (exit 1)"]

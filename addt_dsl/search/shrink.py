@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 from addt_dsl import expr as E
 from addt_dsl.plan import RunSpec, ScenarioPlan
-from addt_dsl.printer import check_spec
+from addt_dsl.printer import check_spec, semantic_key
 from addt_dsl.registry import FAULTS
 from addt_dsl.runtime.result import Failure, RunResult
 from addt_dsl.search import candidates as C
@@ -74,6 +74,7 @@ class ShrinkResult:
     budget_exhausted: bool
     seconds: float
     changes: list[str] = field(default_factory=list)  # what did not matter / was reduced
+    scenario_key: str = ""  # `semantic_key` of the scenario shrunk from: ties a corpus entry to its content
 
 
 class NotFailing(ValueError):
@@ -98,6 +99,7 @@ class Shrinker:
         self.scales = {p.name: (p.high - p.low) if p.low is not None and p.high is not None and p.high > p.low
                        else max(1.0, abs(p.default)) for p in plan.params}
         self.assumptions_plan = plan
+        self.scenario_key = semantic_key(plan)
         self.best = C.pinned(spec)
         self.original = self.best
         self.judged.add(self.best.key())
@@ -183,7 +185,8 @@ class Shrinker:
                 break
         return ShrinkResult(self.original, self.best, self.outcome, self.outcome.failure(self.target), self.stats,
                             self.simulations, self.repeats, rounds, self.exhausted,
-                            time.perf_counter() - t0, describe_changes(self.original, self.best, self.nominal))
+                            time.perf_counter() - t0, describe_changes(self.original, self.best, self.nominal),
+                            self.scenario_key)
 
     def compiles(self, candidate: RunSpec, key: str | None = None) -> bool:
         """Whether `candidate` printed as a pinned `.addt` file compiles back (cached by key)."""

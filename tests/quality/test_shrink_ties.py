@@ -1,6 +1,7 @@
 """A failure in a scenario with `reach goal within T` is shrunk, reported and written as a
 counterexample that compiles, by `addtc shrink`, `addtc falsify` and the pytest plugin
-(the shrinker cut the run below T: exit 3 and a broken `.addt-failures/` entry)."""
+(the shrinker cut the run below T: exit 3 and a broken `.addt-failures/` entry); a corpus
+entry is tied to the content of its scenario (an edited scenario replayed a stale one)."""
 
 from __future__ import annotations
 
@@ -76,3 +77,13 @@ def test_pytest_plugin_keeps_a_corpus_entry_that_compiles(tmp_path):
     replay = subprocess.run([sys.executable, "-m", "addt_dsl.cli", str(entry), "--jobs", "1", "--no-report"],
                             env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True)
     assert replay.returncode == 1, replay.stderr
+    # Unchanged but for a comment, the scenario replays its entry first: it fails again.
+    (tmp_path / "within.addt").write_text("# a comment\n" + WITHIN)
+    again = _pytest(tmp_path, "-rA", "within.addt")
+    assert again.returncode == 1 and "still fails" in again.stdout, again.stdout
+    # Fixed (the fault gone, the lead moving), the entry of the old content is not replayed.
+    fixed = WITHIN.replace("  faults {\n    from 1 s stuck control.accel value 3\n  }\n", "")
+    (tmp_path / "within.addt").write_text(fixed.replace("speed 0 m/s", "speed 14 m/s"))
+    after = _pytest(tmp_path, "-rA", "within.addt")
+    assert after.returncode == 0, after.stdout
+    assert f"skipped .addt-failures/{entry.name}: written for an earlier version of within.addt" in after.stdout
