@@ -39,7 +39,7 @@ from addt_dsl.console import compile_and_report, stack_option
 from addt_dsl.diagnostics import render_json
 from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, ToolError, UsageError, nonneg_float,
                              nonneg_int, positive_int, time_bound, verdict_exit_code)
-from addt_dsl.limits import DEFAULT, INPUT_LIMITS, parse_limit
+from addt_dsl.limits import DEFAULT, DEFAULT_ANIMATION_BUDGET_S, INPUT_LIMITS, parse_limit
 
 SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map", "export", "import")
 
@@ -289,7 +289,8 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
 
         write_tables(out, store)
         if not args.no_report:
-            build_report(store, out / "report.html", max_animations=args.animations)
+            build_report(store, out / "report.html", max_animations=args.animations,
+                         animation_budget_s=args.animation_budget)
     if args.junit:
         from addt_dsl.reporting import write_junit
 
@@ -344,7 +345,8 @@ def cmd_report(args) -> int:
     with _open_store(target) as store:
         totals = store_summary(store)
         write_tables(out, store)
-        path = build_report(store, out / "report.html", max_animations=args.animations)
+        path = build_report(store, out / "report.html", max_animations=args.animations,
+                         animation_budget_s=args.animation_budget)
         if args.junit:
             write_junit(args.junit, store.plan(), store.records())
         for export in args.export or ():
@@ -459,6 +461,12 @@ def _limit_options(parser) -> None:
                         help="raise one input limit or cost threshold, e.g. --max agents=5000 (docs/limits.md)")
 
 
+ANIMATIONS_HELP = ("animate the N worst failing runs in report.html (default 0: none; each is re-run with its "
+                   "trace and drawn, 5-15 s apiece)")
+ANIMATION_BUDGET_HELP = (f"wall seconds the animations may take in all (default {DEFAULT_ANIMATION_BUDGET_S:g}); "
+                         "failing runs left over are listed in the report, not drawn")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="addtc", description="Compile and run .addt driving scenarios.")
     sub = parser.add_subparsers(dest="command")
@@ -490,8 +498,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--max-tasks-per-child", type=positive_int, default=500, metavar="N",
                      help="replace a worker process after N runs")
     run.add_argument("--no-report", action="store_true", help="with --out: skip report.html")
-    run.add_argument("--animations", type=nonneg_int, default=4, metavar="N",
-                     help="failing runs to animate in report.html")
+    run.add_argument("--animations", type=nonneg_int, default=0, metavar="N",
+                     help=ANIMATIONS_HELP)
+    run.add_argument("--animation-budget", type=nonneg_float, default=DEFAULT_ANIMATION_BUDGET_S,
+                     metavar="SECONDS", help=ANIMATION_BUDGET_HELP)
     run.add_argument("--limit", type=nonneg_int, default=0, help="run only the first N runs of the sweep")
     run.add_argument("--format", choices=("text", "json"), default="text")
     run.add_argument("--classify", action="store_true",
@@ -505,7 +515,9 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--junit", metavar="FILE", help="also write JUnit XML")
     report.add_argument("--export", action="append", metavar="FILE",
                         help="also export the runs table (.csv or .parquet); repeatable")
-    report.add_argument("--animations", type=nonneg_int, default=4, metavar="N")
+    report.add_argument("--animations", type=nonneg_int, default=0, metavar="N", help=ANIMATIONS_HELP)
+    report.add_argument("--animation-budget", type=nonneg_float, default=DEFAULT_ANIMATION_BUDGET_S,
+                        metavar="SECONDS", help=ANIMATION_BUDGET_HELP)
     report.add_argument("--salvage", metavar="NEW.sqlite",
                         help="copy the readable runs of a damaged store into a new store (then resume with "
                              "--store NEW.sqlite)")

@@ -26,6 +26,11 @@ GIB = 1024 ** 3
 MAX_ABS_NUMBER = 1.0e12
 
 
+# Wall seconds `report.html` may spend animating failing runs (`--animations N` asks for
+# them; each re-runs its run and draws every frame): the rest are listed, not drawn.
+DEFAULT_ANIMATION_BUDGET_S = 60.0
+
+
 @dataclass(frozen=True)
 class Limits:
     # Input limits [count or bytes]: what one compilation may read and check.
@@ -94,5 +99,5 @@ def _num(value: float) -> str:
     return f"{int(value):,}" if float(value).is_integer() and abs(value) < 1e15 else f"{value:.3g}"
 
 
-__all__ = ["COST_LIMITS", "DEFAULT", "GIB", "INPUT_LIMITS", "MAX_ABS_NUMBER", "Limits", "beyond_message",
+__all__ = ["COST_LIMITS", "DEFAULT", "DEFAULT_ANIMATION_BUDGET_S", "GIB", "INPUT_LIMITS", "MAX_ABS_NUMBER", "Limits", "beyond_message",
            "how_to_raise", "parse_limit"]
