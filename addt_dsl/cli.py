@@ -592,9 +592,14 @@ def guarded(command, *args) -> int:
     is one line and exit 3 (never 1, which means a run failed), with the traceback only
     when ADDT_DEBUG is set."""
     try:
-        return command(*args)
+        code = command(*args)
+        sys.stdout.flush()  # here, not at exit: a reader that went away is handled below
+        return code
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # `addtc map X | head`: the reader has what it wanted; end quietly
+        _stdout_to_devnull()
+        return EXIT_OK
     except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -609,6 +614,16 @@ def guarded(command, *args) -> int:
             traceback.print_exc()
         print(f"error: {_incomplete_message(exc)}", file=sys.stderr)
         return EXIT_INCOMPLETE
+
+
+def _stdout_to_devnull() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush of what is still
+    buffered does not raise again (Python's documented recipe for SIGPIPE)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # no file descriptor (captured in tests): nothing to flush to
+        pass
 
 
 def _incomplete_message(exc: Exception) -> str:
