@@ -54,10 +54,10 @@ def cmd_check(args) -> int:
     limits = _limits(args)
     for path in args.files:
         if args.format == "json":
-            result = compile_file(path, limits, args.stack)
+            result = compile_file(path, limits, args.stack, args.root)
             collected.extend(result.diagnostics)
         else:
-            result = compile_and_report(path, args.format, limits, args.stack)
+            result = compile_and_report(path, args.format, limits, args.stack, args.root)
             if result.ok:
                 print(f"ok: {path}")
                 print("\n".join(result.estimate.lines()))
@@ -68,7 +68,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_plan(args) -> int:
-    result = compile_and_report(args.file, args.format, _limits(args), args.stack)
+    result = compile_and_report(args.file, args.format, _limits(args), args.stack, args.root)
     if not result.ok:
         return EXIT_USAGE
     if args.format == "text":  # stdout stays the plan's JSON
@@ -156,7 +156,7 @@ def _run_suite(args, paths: list[Path]) -> int:
 
 def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
     """Compile and run one file; `collect(plan, store)` sees the store before it closes."""
-    result = compile_and_report(str(path), args.format, _limits(args), args.stack)
+    result = compile_and_report(str(path), args.format, _limits(args), args.stack, args.root)
     if not result.ok:
         return EXIT_USAGE
     from addt_dsl.runtime.store import ResultStore, StoreMismatch
@@ -455,6 +455,9 @@ def _limits(args):
 
 def _limit_options(parser) -> None:
     stack_option(parser)
+    parser.add_argument("--root", metavar="DIR",
+                        help="read includes and maps from anywhere under DIR, e.g. a repository's root (default: "
+                             "the scenario's directory; DIR must hold the scenario)")
     parser.add_argument("--allow-large", action="store_true",
                         help="run a sweep whose cost estimate is beyond the thresholds (docs/limits.md)")
     parser.add_argument("--max", action="append", default=[], metavar="NAME=N",

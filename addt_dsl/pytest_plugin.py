@@ -203,8 +203,10 @@ class AddtItem(pytest.Item):
         from addt_dsl.diagnostics import render_text
         from addt_dsl.search import RunCache
 
-        # Compiled under its rootdir-relative name, so reports say `scenarios/x.addt:29`.
-        result = compile_source(self.path.read_bytes(), path=self.source_name(), base_dir=self.path.parent)
+        # Compiled under its rootdir-relative name, so reports say `scenarios/x.addt:29`; its
+        # includes and maps may lie anywhere under the rootdir (`addtc --root`), e.g. maps/.
+        result = compile_source(self.path.read_bytes(), path=self.source_name(), base_dir=self.path.parent,
+                                root=self.config.rootpath)
         if not result.ok:
             raise AddtCompileError(render_text(result.diagnostics, result.sources))
         plan = result.plan
