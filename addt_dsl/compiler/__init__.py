@@ -237,7 +237,7 @@ def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: 
     if refused:  # one diagnostic: the first threshold passed, the others as notes
         (name, message), others = refused[0], refused[1:]
         sweeps = ctx.blocks("sweep")
-        span = sweeps[0].span if sweeps and name in ("runs", "sim_seconds", "agent_steps") else scenario.span
+        span = sweeps[0].span if sweeps and name in ("runs", "sim_seconds", "agent_steps", "wall_seconds") else scenario.span
         sink.error("E0701", message, span, *(f"also {m}" for _, m in others), *estimate.lines(),
                    how_to_raise(name))
     if refused or not check_feasible(plan, ctx):
