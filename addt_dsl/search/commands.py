@@ -24,7 +24,8 @@ CACHE_NAME = "runs.sqlite"  # the search's run cache, in the output directory by
 
 # Falsify and shrink run their own budget of runs, never the file's sweep: only the
 # per-run cost thresholds apply to them, not the sweep-wide ones (docs/limits.md).
-SEARCH_LIMITS = DEFAULT.raised(runs=2 ** 62, sim_seconds=float("inf"), agent_steps=float("inf"))
+SEARCH_LIMITS = DEFAULT.raised(runs=2 ** 62, sim_seconds=float("inf"), agent_steps=float("inf"),
+                               wall_seconds=float("inf"))  # the sweep is not run: only per-run thresholds
 
 
 def add_commands(sub) -> None:
