@@ -39,7 +39,7 @@ from addt_dsl.console import compile_and_report, stack_option
 from addt_dsl.diagnostics import render_json
 from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, ToolError, UsageError, nonneg_float,
                              nonneg_int, positive_int, time_bound, verdict_exit_code)
-from addt_dsl.limits import DEFAULT, INPUT_LIMITS, parse_limit
+from addt_dsl.limits import DEFAULT, DEFAULT_ANIMATION_BUDGET_S, INPUT_LIMITS, parse_limit
 
 SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map", "export", "import")
 
@@ -54,10 +54,10 @@ def cmd_check(args) -> int:
     limits = _limits(args)
     for path in args.files:
         if args.format == "json":
-            result = compile_file(path, limits, args.stack)
+            result = compile_file(path, limits, args.stack, args.root)
             collected.extend(result.diagnostics)
         else:
-            result = compile_and_report(path, args.format, limits, args.stack)
+            result = compile_and_report(path, args.format, limits, args.stack, args.root)
             if result.ok:
                 print(f"ok: {path}")
                 print("\n".join(result.estimate.lines()))
@@ -68,7 +68,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_plan(args) -> int:
-    result = compile_and_report(args.file, args.format, _limits(args), args.stack)
+    result = compile_and_report(args.file, args.format, _limits(args), args.stack, args.root)
     if not result.ok:
         return EXIT_USAGE
     if args.format == "text":  # stdout stays the plan's JSON
@@ -156,7 +156,7 @@ def _run_suite(args, paths: list[Path]) -> int:
 
 def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
     """Compile and run one file; `collect(plan, store)` sees the store before it closes."""
-    result = compile_and_report(str(path), args.format, _limits(args), args.stack)
+    result = compile_and_report(str(path), args.format, _limits(args), args.stack, args.root)
     if not result.ok:
         return EXIT_USAGE
     from addt_dsl.runtime.store import ResultStore, StoreMismatch
@@ -289,7 +289,8 @@ def _run_and_report(args, plan, stream, store, executor, out) -> int:
 
         write_tables(out, store)
         if not args.no_report:
-            build_report(store, out / "report.html", max_animations=args.animations)
+            build_report(store, out / "report.html", max_animations=args.animations,
+                         animation_budget_s=args.animation_budget)
     if args.junit:
         from addt_dsl.reporting import write_junit
 
@@ -344,7 +345,8 @@ def cmd_report(args) -> int:
     with _open_store(target) as store:
         totals = store_summary(store)
         write_tables(out, store)
-        path = build_report(store, out / "report.html", max_animations=args.animations)
+        path = build_report(store, out / "report.html", max_animations=args.animations,
+                         animation_budget_s=args.animation_budget)
         if args.junit:
             write_junit(args.junit, store.plan(), store.records())
         for export in args.export or ():
@@ -466,10 +468,19 @@ def _limits(args):
 
 def _limit_options(parser) -> None:
     stack_option(parser)
+    parser.add_argument("--root", metavar="DIR",
+                        help="read includes and maps from anywhere under DIR, e.g. a repository's root (default: "
+                             "the scenario's directory; DIR must hold the scenario)")
     parser.add_argument("--allow-large", action="store_true",
                         help="run a sweep whose cost estimate is beyond the thresholds (docs/limits.md)")
     parser.add_argument("--max", action="append", default=[], metavar="NAME=N",
                         help="raise one input limit or cost threshold, e.g. --max agents=5000 (docs/limits.md)")
+
+
+ANIMATIONS_HELP = ("animate the N worst failing runs in report.html (default 0: none; each is re-run with its "
+                   "trace and drawn, 5-15 s apiece)")
+ANIMATION_BUDGET_HELP = (f"wall seconds the animations may take in all (default {DEFAULT_ANIMATION_BUDGET_S:g}); "
+                         "failing runs left over are listed in the report, not drawn")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -503,8 +514,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--max-tasks-per-child", type=positive_int, default=500, metavar="N",
                      help="replace a worker process after N runs")
     run.add_argument("--no-report", action="store_true", help="with --out: skip report.html")
-    run.add_argument("--animations", type=nonneg_int, default=4, metavar="N",
-                     help="failing runs to animate in report.html")
+    run.add_argument("--animations", type=nonneg_int, default=0, metavar="N",
+                     help=ANIMATIONS_HELP)
+    run.add_argument("--animation-budget", type=nonneg_float, default=DEFAULT_ANIMATION_BUDGET_S,
+                     metavar="SECONDS", help=ANIMATION_BUDGET_HELP)
     run.add_argument("--limit", type=nonneg_int, default=0, help="run only the first N runs of the sweep")
     run.add_argument("--format", choices=("text", "json"), default="text")
     run.add_argument("--classify", action="store_true",
@@ -518,7 +531,9 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--junit", metavar="FILE", help="also write JUnit XML")
     report.add_argument("--export", action="append", metavar="FILE",
                         help="also export the runs table (.csv or .parquet); repeatable")
-    report.add_argument("--animations", type=nonneg_int, default=4, metavar="N")
+    report.add_argument("--animations", type=nonneg_int, default=0, metavar="N", help=ANIMATIONS_HELP)
+    report.add_argument("--animation-budget", type=nonneg_float, default=DEFAULT_ANIMATION_BUDGET_S,
+                        metavar="SECONDS", help=ANIMATION_BUDGET_HELP)
     report.add_argument("--salvage", metavar="NEW.sqlite",
                         help="copy the readable runs of a damaged store into a new store (then resume with "
                              "--store NEW.sqlite)")
@@ -595,9 +610,14 @@ def guarded(command, *args) -> int:
     is one line and exit 3 (never 1, which means a run failed), with the traceback only
     when ADDT_DEBUG is set."""
     try:
-        return command(*args)
+        code = command(*args)
+        sys.stdout.flush()  # here, not at exit: a reader that went away is handled below
+        return code
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # `addtc map X | head`: the reader has what it wanted; end quietly
+        _stdout_to_devnull()
+        return EXIT_OK
     except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -612,6 +632,16 @@ def guarded(command, *args) -> int:
             traceback.print_exc()
         print(f"error: {_incomplete_message(exc)}", file=sys.stderr)
         return EXIT_INCOMPLETE
+
+
+def _stdout_to_devnull() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush of what is still
+    buffered does not raise again (Python's documented recipe for SIGPIPE)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # no file descriptor (captured in tests): nothing to flush to
+        pass
 
 
 def _incomplete_message(exc: Exception) -> str:

@@ -43,7 +43,8 @@ def confine(relative: str, base: Path, root: Path) -> Path:
                       f"{'a symbolic-link loop' if isinstance(exc, RuntimeError) else exc.strerror or exc}") from None
     if not candidate.is_relative_to(root):
         raise Refused("E0402", f"'{shown(relative)}' is outside the scenario's directory",
-                      "files may only come from the scenario's directory and below")
+                      "files may only come from the scenario's directory and below, or from under "
+                      "`addtc --root DIR` (pytest: the rootdir)")
     try:
         regular = candidate.is_file()
     except OSError as exc:

@@ -15,10 +15,10 @@ from addt_dsl.limits import DEFAULT, Limits
 
 
 def compile_and_report(path: str, fmt: str = "text", limits: Limits = DEFAULT,
-                       stack: Sequence[str] = ()) -> CompileResult:
-    """Compile `path` (with `--stack KEY=VALUE` settings); its diagnostics go to stderr (as
-    JSON on stdout with `fmt="json"`)."""
-    result = compile_file(path, limits, stack)
+                       stack: Sequence[str] = (), root: str | None = None) -> CompileResult:
+    """Compile `path` (with `--stack KEY=VALUE` settings, includes and maps read from under
+    `root`, `--root`); its diagnostics go to stderr (as JSON on stdout with `fmt="json"`)."""
+    result = compile_file(path, limits, stack, root)
     if result.diagnostics:
         text = render_json(result.diagnostics) if fmt == "json" else render_text(result.diagnostics, result.sources)
         print(text, file=sys.stderr if fmt != "json" else sys.stdout)

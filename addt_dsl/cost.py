@@ -8,6 +8,10 @@ The model, per run (the runtime's fixed clock: one physics step every `step_s`):
     camera pixels     = sum over cameras and rigs of pixels per frame x rate x duration
     memory [bytes]    = RUN_BASE_BYTES + samples x 8 x (1 + TRACE_FIELDS x actors + LATENCY_SERIES)
 
+    wall time [s]     = WALL_RUN_S + samples x (WALL_STEP_S + WALL_ACTOR_STEP_S x actors)
+                        + lidar rays x WALL_LIDAR_RAY_S + camera pixels x WALL_CAMERA_PIXEL_S
+                        + perception frames x the stack's per-frame network cost (`frame_cost`)
+
 and per sweep: runs x each of them (simulated seconds = runs x duration). The memory
 term is the trace the run keeps (runtime/trace.py: TRACE_FIELDS float64 signals per
 actor per sample, a clock, latency series) over a fixed allowance for the interpreter,
@@ -23,7 +27,7 @@ from dataclasses import dataclass
 
 from addt_dsl.limits import Limits, beyond_message
 from addt_dsl.plan import ScenarioPlan, resolve_settings
-from addt_dsl.registry import SENSORS
+from addt_dsl.registry import SENSORS, STACKS
 from addt_dsl.sweep import count_runs, grid_cell_count, sampled_params
 
 # Interpreter, pybullet world, stack and sensors, before the trace: one inline run of
@@ -33,6 +37,18 @@ RUN_BASE_BYTES = 512 * 1024 ** 2
 TRACE_FIELDS = 11  # float64 signals per actor per sample (runtime/trace.py ACTOR_FIELDS)
 LATENCY_SERIES = 8  # per-node latency series of the stack, "e2e" included
 EXACT_COUNT_CELLS = 100_000  # above this many grid cells assumptions are not evaluated to count runs
+
+# Wall time of one run on one core [s], measured by benchmarks/bench_cost_model.py (probes
+# of the `bev` stack with ground-truth perception, 10 ms steps; MEASURED below):
+#   wall = WALL_RUN_S + steps x (WALL_STEP_S + WALL_ACTOR_STEP_S x actors)
+#          + lidar rays x WALL_LIDAR_RAY_S + camera pixels x WALL_CAMERA_PIXEL_S
+WALL_RUN_S = 0.06
+WALL_STEP_S = 3.2e-5
+WALL_ACTOR_STEP_S = 3.6e-5
+WALL_LIDAR_RAY_S = 2.7e-7
+WALL_CAMERA_PIXEL_S = 4.7e-7
+MEASURED = ("2026-12-06, a 2-core machine shared with other work (so on the slow side); learned "
+            "perception costs more per step than this model says")
 
 
 @dataclass(frozen=True)
@@ -46,6 +62,7 @@ class CostEstimate:
     lidar_rays_per_run: float
     run_memory_bytes: float
     camera_pixels_per_run: float = 0.0  # rendered (a camera's cost grows with its pixels, docs/twin.md)
+    network_s_per_run: float = 0.0  # perception network inference [s] (the stack's `frame_cost`)
 
     @property
     def sim_seconds(self) -> float:
@@ -63,6 +80,16 @@ class CostEstimate:
     def camera_pixels(self) -> float:
         return self.runs * self.camera_pixels_per_run
 
+    @property
+    def run_wall_s(self) -> float:
+        """Estimated wall time of one run on one core [s] (`wall_seconds_per_run`)."""
+        return wall_seconds_per_run(self)
+
+    @property
+    def wall_s(self) -> float:
+        """Estimated wall time of the sweep on one core [s]: divide by the workers."""
+        return self.runs * self.run_wall_s
+
     def lines(self) -> list[str]:
         """The estimate as `addtc check` and `addtc plan` print it."""
         runs = f"{self.runs:,}" if self.runs_exact else f"at most {self.runs:,}"
@@ -72,14 +99,47 @@ class CostEstimate:
                 f"  per run: {self.samples_per_run:,} steps x {self.actors} actor(s) = "
                 f"{self.agent_steps_per_run:.4g} actor-steps, {self.lidar_rays_per_run:.4g} lidar rays{pixels}, "
                 f"about {self.run_memory_bytes / 1024 ** 2:,.0f} MiB",
-                f"  sweep: {self.agent_steps:.4g} actor-steps, {self.lidar_rays:.4g} lidar rays{sweep_pixels}"]
+                f"  sweep: {self.agent_steps:.4g} actor-steps, {self.lidar_rays:.4g} lidar rays{sweep_pixels}",
+                f"  wall time: about {_duration(self.run_wall_s)} per run, {_duration(self.wall_s)} for the sweep "
+                "on one core (divide by --jobs)"]
+
+
+def wall_seconds_per_run(est: CostEstimate) -> float:
+    """One run's wall time on one core [s], from the measured coefficients (`WALL_*`)."""
+    return (WALL_RUN_S + est.samples_per_run * WALL_STEP_S + est.agent_steps_per_run * WALL_ACTOR_STEP_S
+            + est.lidar_rays_per_run * WALL_LIDAR_RAY_S + est.camera_pixels_per_run * WALL_CAMERA_PIXEL_S
+            + est.network_s_per_run)
+
+
+def _duration(seconds: float) -> str:
+    """`0.8 s`, `12 min`, `3.1 h`, `4.2e+03 days`: a wall time as a person reads it."""
+    if seconds < 120:
+        return f"{seconds:.2g} s"
+    if seconds < 2 * 3600:
+        return f"{seconds / 60:.3g} min"
+    if seconds < 3 * 86400:
+        return f"{seconds / 3600:.3g} h"
+    return f"{seconds / 86400:.3g} days"
 
 
 def estimate(plan: ScenarioPlan) -> CostEstimate:
+    runs, exact = run_count(plan)
+    return _per_run(plan, runs, exact)
+
+
+def run_wall_seconds(plan: ScenarioPlan) -> float:
+    """One run's estimated wall time on one core [s] (no run counting: cheap per run)."""
+    return _per_run(plan, 1, True).run_wall_s
+
+
+def _per_run(plan: ScenarioPlan, runs: int, exact: bool) -> CostEstimate:
     samples = int(math.floor(plan.duration_s / plan.step_s + 1e-9)) + 1
     actors = 1 + len(plan.agents)
     nominal = plan.nominal_params()
-    rays = pixels = 0.0
+    rays = pixels = network_s = 0.0
+    stack = plan.ego.stack
+    frame_cost = getattr(STACKS.get(stack.name), "frame_cost", None)
+    per_frame = frame_cost({k: v for k, v in stack.settings.items() if isinstance(v, str)}) if frame_cost else None
     for actor in plan.actors():
         for sensor in actor.sensors:
             cls = SENSORS.get(sensor.name)
@@ -95,11 +155,12 @@ def estimate(plan: ScenarioPlan) -> CostEstimate:
                 rays += float(spec["rays"]) * float(spec["channels"]) * float(spec["rate"]) * plan.duration_s
             else:
                 pixels += pixels_per_frame(spec) * float(spec["rate"]) * plan.duration_s
+            if per_frame is not None and actor is plan.ego and sensor.name == per_frame[0]:
+                network_s += per_frame[1] * float(spec["rate"]) * plan.duration_s
     memory = RUN_BASE_BYTES + samples * 8.0 * (1 + TRACE_FIELDS * actors + LATENCY_SERIES)
-    runs, exact = run_count(plan)
     return CostEstimate(runs=runs, runs_exact=exact, duration_s=plan.duration_s, samples_per_run=samples,
                         actors=actors, agent_steps_per_run=float(samples * actors), lidar_rays_per_run=rays,
-                        run_memory_bytes=memory, camera_pixels_per_run=pixels)
+                        run_memory_bytes=memory, camera_pixels_per_run=pixels, network_s_per_run=network_s)
 
 
 def run_count(plan: ScenarioPlan) -> tuple[int, bool]:
@@ -129,10 +190,12 @@ def over_thresholds(est: CostEstimate, limits: Limits) -> list[tuple[str, str]]:
         ("lidar_rays_per_run", "one run's lidar rays", est.lidar_rays_per_run),
         ("camera_pixels_per_run", "one run's rendered camera pixels", est.camera_pixels_per_run),
         ("run_memory_bytes", "one run's modelled memory [bytes]", est.run_memory_bytes),
+        ("run_wall_seconds", "one run's estimated wall time [s]", est.run_wall_s),
+        ("wall_seconds", "the sweep's estimated wall time on one core [s]", runs * est.run_wall_s),
     )
     return [(name, beyond_message(what, value, name, getattr(limits, name)))
             for name, what, value in checks if value > getattr(limits, name)]
 
 
 __all__ = ["CostEstimate", "EXACT_COUNT_CELLS", "LATENCY_SERIES", "RUN_BASE_BYTES", "TRACE_FIELDS", "estimate",
-           "over_thresholds", "run_count"]
+           "over_thresholds", "run_count", "run_wall_seconds", "wall_seconds_per_run"]

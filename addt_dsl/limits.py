@@ -26,6 +26,11 @@ GIB = 1024 ** 3
 MAX_ABS_NUMBER = 1.0e12
 
 
+# Wall seconds `report.html` may spend animating failing runs (`--animations N` asks for
+# them; each re-runs its run and draws every frame): the rest are listed, not drawn.
+DEFAULT_ANIMATION_BUDGET_S = 60.0
+
+
 @dataclass(frozen=True)
 class Limits:
     # Input limits [count or bytes]: what one compilation may read and check.
@@ -47,6 +52,8 @@ class Limits:
     lidar_rays_per_run: float = 1.0e9  # rays cast in one run (rays x channels x rate x duration)
     camera_pixels_per_run: float = 1.0e9  # pixels rendered in one run (pixels per frame x rate x duration)
     run_memory_bytes: float = 4.0 * GIB  # modelled memory of one run
+    run_wall_seconds: float = 3600.0  # estimated wall time of one run on one core (cost.py's measured model)
+    wall_seconds: float = 1.0e5  # estimated wall time of one sweep on one core (about 28 core-hours)
     allow_large: bool = False  # True: cost thresholds are not enforced (the estimate is still printed)
     run_cap: int = 0  # `addtc FILE --limit N` runs only the first N runs: the sweep's cost is of those (0: all)
 
@@ -58,7 +65,7 @@ DEFAULT = Limits()
 INPUT_LIMITS = ("source_bytes", "included_bytes", "map_bytes", "read_bytes", "roads_per_map",
                 "lanes_per_section", "agents", "params", "oracles", "faults")
 COST_LIMITS = ("runs", "sim_seconds", "agent_steps", "agent_steps_per_run", "lidar_rays_per_run",
-               "camera_pixels_per_run", "run_memory_bytes")
+               "camera_pixels_per_run", "run_memory_bytes", "run_wall_seconds", "wall_seconds")
 
 
 def parse_limit(text: str, limits: Limits = DEFAULT) -> Limits:
@@ -94,5 +101,5 @@ def _num(value: float) -> str:
     return f"{int(value):,}" if float(value).is_integer() and abs(value) < 1e15 else f"{value:.3g}"
 
 
-__all__ = ["COST_LIMITS", "DEFAULT", "GIB", "INPUT_LIMITS", "MAX_ABS_NUMBER", "Limits", "beyond_message",
+__all__ = ["COST_LIMITS", "DEFAULT", "DEFAULT_ANIMATION_BUDGET_S", "GIB", "INPUT_LIMITS", "MAX_ABS_NUMBER", "Limits", "beyond_message",
            "how_to_raise", "parse_limit"]

@@ -13,7 +13,9 @@ collected on its own.
 A test, in the order of Hypothesis's phases (the current settings profile decides which
 run, and `max_examples` sizes the search):
   reuse     replay this file's entries in the failure corpus (`.addt-failures/`, ini
-            `addt_failures`): a counterexample found once fails the test again until fixed
+            `addt_failures`): a counterexample found once fails the test again until fixed;
+            an entry shrunk from another version of the scenario (its `# scenario key:`
+            header) is skipped with a note, not replayed
   explicit  run the scenario's sweep (or the cell's runs)
   generate  falsify: more runs searching parameters and faults (budget by profile)
             (guided by robustness when the `target` phase is on, else uniform)
@@ -201,8 +203,10 @@ class AddtItem(pytest.Item):
         from addt_dsl.diagnostics import render_text
         from addt_dsl.search import RunCache
 
-        # Compiled under its rootdir-relative name, so reports say `scenarios/x.addt:29`.
-        result = compile_source(self.path.read_bytes(), path=self.source_name(), base_dir=self.path.parent)
+        # Compiled under its rootdir-relative name, so reports say `scenarios/x.addt:29`; its
+        # includes and maps may lie anywhere under the rootdir (`addtc --root`), e.g. maps/.
+        result = compile_source(self.path.read_bytes(), path=self.source_name(), base_dir=self.path.parent,
+                                root=self.config.rootpath)
         if not result.ok:
             raise AddtCompileError(render_text(result.diagnostics, result.sources))
         plan = result.plan
@@ -222,10 +226,15 @@ class AddtItem(pytest.Item):
             self._report(plan, failing, cache, opts, notes)
 
     def _replay_corpus(self, plan, cache, notes) -> None:
-        from addt_dsl.printer import compile_pinned
+        from addt_dsl.printer import compile_pinned, semantic_key
 
-        for path in corpus_entries(self.corpus_dir(), self.path, plan.name):
+        current = semantic_key(plan)
+        for path, key in corpus_entries(self.corpus_dir(), self.path, plan.name):
             shown = self.relative(path)
+            if key and key != current:  # shrunk from an earlier version of the scenario
+                notes.append(f"skipped {shown}: written for an earlier version of {self.source_name()} "
+                             f"(scenario key {key}, now {current}); delete it once the fix is kept")
+                continue
             try:
                 spec = compile_pinned(path.read_bytes(), path=shown, base_dir=path.parent)
             except ValueError as exc:  # damaged, hand-edited, or older than the language: say which, no traceback
@@ -284,7 +293,7 @@ class AddtItem(pytest.Item):
 
     def _report(self, plan, failing, cache, opts, notes) -> None:
         from addt_dsl.search import Shrinker
-        from addt_dsl.search.artifacts import write_counterexample
+        from addt_dsl.search.artifacts import ReplayMismatch, write_counterexample
 
         spec, outcome, n_failing = failing
         first = outcome.primary()
@@ -294,7 +303,11 @@ class AddtItem(pytest.Item):
                               f"({n_failing} failing run(s); shrinking is off)", props)
         result = Shrinker(spec, nominal_plan=plan, oracle=first.oracle, cache=cache,
                           max_simulations=opts["shrink_budget"]).run()
-        arts = write_counterexample(result, self.corpus_dir(), self.source_name(), animate=False)
+        try:
+            arts = write_counterexample(result, self.corpus_dir(), self.source_name(), animate=False)
+        except ReplayMismatch as exc:  # the failure stands; only its counterexample could not be kept
+            raise AddtFailure(f"{first.oracle} fails in run {spec.run_id or spec.key()}: {result.target.describe()} "
+                              f"({n_failing} failing run(s)); no counterexample written: {exc}", props) from None
         path = self.relative(arts.addt)
         props.append(("counterexample", path))
         lines = [f"{first.oracle} fails: minimal counterexample {path}",
@@ -323,17 +336,23 @@ class AddtItem(pytest.Item):
         return self.path, None, f"addt: {self.name}"
 
 
-def corpus_entries(corpus: Path, source: Path, scenario: str) -> list[Path]:
+def corpus_entries(corpus: Path, source: Path, scenario: str) -> list[tuple[Path, str]]:
     """Pinned counterexamples of `source`: files whose `# source:` header names a file
-    with the same name and whose scenario has the same name."""
+    with the same name and whose scenario has the same name, each with the scenario key
+    its header records ("" for entries written before keys were)."""
+    from addt_dsl.search.artifacts import SCENARIO_KEY_LABEL
+
     if not corpus.is_dir():
         return []
     out = []
     for path in sorted(corpus.glob("*.addt")):
-        head = path.read_text(errors="replace").splitlines()[:8]
+        text = path.read_text(errors="replace")
+        head = text.splitlines()[:8]
         named = next((line.split(":", 1)[1].strip() for line in head if line.startswith("# source:")), "")
-        if Path(named).name == source.name and f"scenario {scenario} {{" in path.read_text(errors="replace"):
-            out.append(path)
+        key = next((line.split(SCENARIO_KEY_LABEL, 1)[1].strip() for line in head
+                    if line.startswith(f"# {SCENARIO_KEY_LABEL}")), "")
+        if Path(named).name == source.name and f"scenario {scenario} {{" in text:
+            out.append((path, key))
     return out
 
 

@@ -40,6 +40,9 @@ class ParamSpec:
     # A live setting may use signals (`speed speed(ego) + 5 km/h`): evaluated on the
     # current state at every step, so the target follows other actors.
     live: bool = False
+    # Where the shrinker moves a numeric setting (None: 0 clipped into [low, high]); a count
+    # whose range starts at 0 (`bitflip count 0`: no flips) keeps 1, the fault still acting.
+    neutral: float | None = None
 
 
 class Registry(Generic[T]):

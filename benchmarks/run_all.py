@@ -47,6 +47,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "table1": ([], ["--limit", "8"]),
     "routes": ([], ["--runs", "1"]),
     "camera_bev": ([], ["--repeats", "1", "--duration", "10"]),
+    "cost_model": ([], ["--quick"]),
 }
 
 

@@ -137,8 +137,11 @@ def _read_at_most(fh, limit: int) -> bytes:
     return b"".join(chunks)
 
 
-def compile_file(path: str | Path, limits: Limits = DEFAULT, stack: Sequence[str] = ()) -> CompileResult:
-    """Compile one file; `stack` holds `KEY=VALUE` settings for the ego's stack (`--stack`)."""
+def compile_file(path: str | Path, limits: Limits = DEFAULT, stack: Sequence[str] = (),
+                 root: str | Path | None = None) -> CompileResult:
+    """Compile one file; `stack` holds `KEY=VALUE` settings for the ego's stack (`--stack`).
+    Includes and maps are read from under `root` (`--root`; default: the file's directory),
+    which must hold the file."""
     path = Path(path)
     sink = DiagnosticSink()
     sources: dict[str, str] = {}
@@ -159,21 +162,36 @@ def compile_file(path: str | Path, limits: Limits = DEFAULT, stack: Sequence[str
                                            limits.source_bytes), Span.point(display, 1, 1),
                    how_to_raise("source_bytes"))
         return CompileResult(None, sink.items, sources)
-    return _compile_guarded(data, display, path.parent, sink, sources, limits, stack)
+    if root is not None and not _holds(Path(root), path.parent):
+        sink.error("E0402", f"{display} is not under the root directory {root}", None,
+                   "--root names a directory that holds the scenario (a repository's root)")
+        return CompileResult(None, sink.items, sources)
+    return _compile_guarded(data, display, path.parent, sink, sources, limits, stack, root)
+
+
+def _holds(root: Path, directory: Path) -> bool:
+    try:
+        directory.resolve().relative_to(root.resolve())
+        return root.is_dir()
+    except (ValueError, OSError):
+        return False
 
 
 def compile_source(text: str | bytes, path: str = "<input>", base_dir: str | Path = ".",
-                   limits: Limits = DEFAULT, stack: Sequence[str] = ()) -> CompileResult:
+                   limits: Limits = DEFAULT, stack: Sequence[str] = (), root: str | Path | None = None) -> CompileResult:
     sink = DiagnosticSink()
-    return _compile_guarded(text, path, Path(base_dir), sink, {}, limits, stack)
+    if root is not None and not _holds(Path(root), Path(base_dir)):
+        root = None  # a root that does not hold the file confines nothing more than its directory
+    return _compile_guarded(text, path, Path(base_dir), sink, {}, limits, stack, root)
 
 
 def _compile_guarded(data, display: str, base_dir: Path, sink: DiagnosticSink,
-                     sources: dict[str, str], limits: Limits = DEFAULT, stack: Sequence[str] = ()) -> CompileResult:
+                     sources: dict[str, str], limits: Limits = DEFAULT, stack: Sequence[str] = (),
+                     root: str | Path | None = None) -> CompileResult:
     """Compile; a bug in the compiler is an "internal compiler error" diagnostic (E0900),
     never a traceback. The fuzz tests assert that E0900 never appears."""
     try:
-        return _compile(data, display, base_dir, sink, sources, limits, stack)
+        return _compile(data, display, base_dir, sink, sources, limits, stack, root)
     except RecursionError:
         sink.error("E0004", "source nested too deeply", Span.point(display, 1, 1))
     except Exception as exc:  # noqa: BLE001 - the last line of defence, reported as data
@@ -183,12 +201,12 @@ def _compile_guarded(data, display: str, base_dir: Path, sink: DiagnosticSink,
 
 
 def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: dict[str, str],
-             limits: Limits, stack: Sequence[str] = ()) -> CompileResult:
+             limits: Limits, stack: Sequence[str] = (), root: str | Path | None = None) -> CompileResult:
     sources[display] = data.decode("utf-8", errors="replace") if isinstance(data, bytes) else data
     tree = parse_source(data, display, sink, max_bytes=limits.source_bytes)
     if tree is None:
         return CompileResult(None, sink.items, sources)
-    loader = _Loader(base_dir, sink, sources, limits)
+    loader = _Loader(Path(root) if root is not None else base_dir, sink, sources, limits)
     loader.addt_bytes = len(data)
     if len(tree.scenarios) != 1:
         if not tree.scenarios:
@@ -219,7 +237,7 @@ def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: 
     if refused:  # one diagnostic: the first threshold passed, the others as notes
         (name, message), others = refused[0], refused[1:]
         sweeps = ctx.blocks("sweep")
-        span = sweeps[0].span if sweeps and name in ("runs", "sim_seconds", "agent_steps") else scenario.span
+        span = sweeps[0].span if sweeps and name in ("runs", "sim_seconds", "agent_steps", "wall_seconds") else scenario.span
         sink.error("E0701", message, span, *(f"also {m}" for _, m in others), *estimate.lines(),
                    how_to_raise(name))
     if refused or not check_feasible(plan, ctx):

@@ -22,7 +22,12 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    try:  # mkstemp makes it 0600: give it the mode a plain open() would (the user's umask) or the old file's
+        os.fchmod(fd, _mode_for(path))
+    except OSError:
+        pass  # a filesystem without modes: whatever it gives
+    finally:
+        os.close(fd)
     try:
         yield Path(tmp)
         with open(tmp, "rb+") as fh:  # on disk before the rename makes it the file
@@ -32,6 +37,29 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         with suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def _umask() -> int:
+    """The process's umask, read without changing it where Linux shows it (`os.umask` can
+    only be read by setting it, which would race with other threads' file creation)."""
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _mode_for(path: Path) -> int:
+    """The mode of the file being replaced, else 0666 less the umask (as `open(path, "w")`)."""
+    try:
+        return path.stat().st_mode & 0o7777
+    except OSError:
+        return 0o666 & ~_umask()
 
 
 def write_text(path: str | Path, text: str) -> Path:

@@ -13,8 +13,10 @@ from __future__ import annotations
 import base64
 import datetime as _dt
 import math
+import time
 from pathlib import Path
 
+from addt_dsl.limits import DEFAULT_ANIMATION_BUDGET_S
 from addt_dsl.reporting import plots
 from addt_dsl.reporting.atomic import write_text
 from addt_dsl.reporting.tables import (OUTCOME_CLASSES, cell_stats, fmt_number, fmt_param, latency_budget_s,
@@ -22,7 +24,9 @@ from addt_dsl.reporting.tables import (OUTCOME_CLASSES, cell_stats, fmt_number, 
 from addt_dsl.reporting.summary import store_summary
 
 MAX_TABLE_ROWS = 500
-DEFAULT_MAX_ANIMATIONS = 4
+# Animations re-run their run with the trace kept and draw every frame (5-15 s each): off
+# unless asked for (`--animations N`), and then bounded in wall time as well.
+DEFAULT_MAX_ANIMATIONS = 0
 
 
 def _environment():
@@ -112,10 +116,25 @@ def _animate(store, record) -> dict:
     }
 
 
+def _animations(store, candidates: list, budget_s: float, clock=time.monotonic) -> tuple[list, list]:
+    """Animate `candidates` in order until `budget_s` wall seconds are spent (the one in
+    progress finishes); returns (animations, run ids left out for time)."""
+    out, skipped = [], []
+    start = clock()
+    for r in candidates:
+        if out and clock() - start >= budget_s:
+            skipped.append(r.run_id)
+            continue
+        out.append(_animate(store, r))
+    return out, skipped
+
+
 def build_report(store, path: str | Path, max_animations: int = DEFAULT_MAX_ANIMATIONS,
-                 budget_s: float | None = None, max_rows: int = MAX_TABLE_ROWS) -> Path:
+                 budget_s: float | None = None, max_rows: int = MAX_TABLE_ROWS,
+                 animation_budget_s: float = DEFAULT_ANIMATION_BUDGET_S) -> Path:
     """Write the HTML report of `store` to `path` (`budget_s` overrides the latency budget
-    the plan's oracles declare)."""
+    the plan's oracles declare). Up to `max_animations` failing runs are animated (none by
+    default), within `animation_budget_s` wall seconds."""
     plan = store.plan()
     budget_s = budget_s if budget_s is not None else latency_budget_s(plan)
     collector = _Collector(plan, max_rows, max_animations)
@@ -137,14 +156,15 @@ def build_report(store, path: str | Path, max_animations: int = DEFAULT_MAX_ANIM
         "latency_objects": plots.latency_vs_objects(dict(latency.by_objects), budget_s),
     }
     table_rows = collector.rows if collector.total <= max_rows else collector.failing_rows
-    animations = [_animate(store, r) for r in collector.animation_candidates()]
+    animations, not_animated = _animations(store, collector.animation_candidates(), animation_budget_s)
     html = _environment().get_template("report.html.j2").render(
         plan=plan, totals=totals, store_path=str(store.path), generated=_dt.datetime.now().isoformat(timespec="seconds"),
         cells=cells, pivot=pivot, figures=figures, oracles=[o for o in plan.oracles],
         rows=table_rows, rows_truncated=collector.total > len(table_rows),
         budget_ms=None if budget_s is None else budget_s * 1e3, outcome_classes=OUTCOME_CLASSES,
         classified=bool(totals.get("outcomes")),
-        worst_latency=latency.worst, animations=animations, cell_params=sorted({k for r in table_rows for k in r.cell}),
+        worst_latency=latency.worst, animations=animations, not_animated=not_animated,
+        animation_budget_s=animation_budget_s, max_animations=max_animations, cell_params=sorted({k for r in table_rows for k in r.cell}),
         fmt_param=fmt_param)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -81,7 +81,7 @@ class LatencyStats:
             acc[2] = max(acc[2], mx)
 
     def summary(self, budget_s: float | None = 0.1) -> dict:
-        """Per node: percentiles [ms] (to the histogram's 2 ms bins, upper edges), worst
+        """Per node: percentiles [ms] (to the histogram's 2 ms bins, upper edges, at most the worst), worst
         and the share of time at or above the budget (when there is one); e2e mean/worst
         by object count."""
         nodes = {}
@@ -96,8 +96,12 @@ class LatencyStats:
                 for q in (50, 95, 99):
                     if q not in edges and cumulative >= q / 100 * total:
                         edges[q] = (i + 1) * LATENCY_BIN_S * 1e3
+            worst_ms = self.worst.get(node, float("nan")) * 1e3
+            # A bin's upper edge can lie above every sample in it: no percentile above the worst.
+            if math.isfinite(worst_ms):
+                edges = {q: min(v, worst_ms) for q, v in edges.items()}
             nodes[node] = {"p50_ms": edges[50], "p95_ms": edges[95], "p99_ms": edges[99],
-                           "max_ms": self.worst.get(node, float("nan")) * 1e3, "ticks": total}
+                           "max_ms": worst_ms, "ticks": total}
             if budget_s is not None:
                 over = sum(c for i, c in enumerate(counts) if i * LATENCY_BIN_S >= budget_s - 1e-12)
                 nodes[node]["share_at_or_over_budget"] = over / total

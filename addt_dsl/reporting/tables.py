@@ -271,6 +271,58 @@ def success_pivot(plan: ScenarioPlan, stats: list[CellStats]) -> dict | None:
 
 # ---------------------------------------------------------------------------- terminal
 
+def _value_dim(e, params: dict) -> units.Dim | None:
+    """The dimension of a value expression where it is certain (None: a bare number, whose
+    unit the plan no longer holds, or anything built from one by `*` or `/`)."""
+    from addt_dsl import expr as E
+    from addt_dsl.registry import SIGNALS
+
+    match e:
+        case E.Signal(name=name):
+            cls = SIGNALS.get(name.split("(", 1)[0])
+            return None if cls is None or cls.boolean else cls.dim
+        case E.Param(name=name):
+            return params.get(name)
+        case E.Unary(op="neg", arg=a):
+            return _value_dim(a, params)
+        case E.Call(fn=fn, args=args) if fn in ("abs", "min", "max"):
+            dims = {_value_dim(a, params) for a in args} - {None}
+            return dims.pop() if len(dims) == 1 else None
+        case E.Binary(op=op, left=l, right=r) if op in ("+", "-"):
+            dims = {_value_dim(l, params), _value_dim(r, params)} - {None}
+            return dims.pop() if len(dims) == 1 else None
+        case E.Binary(op=op, left=l, right=r) if op in ("*", "/"):
+            dl, dr = _value_dim(l, params), _value_dim(r, params)
+            if dl is None or dr is None:
+                return None
+            return dl * dr if op == "*" else dl / dr
+    return None
+
+
+def robustness_unit(plan: ScenarioPlan, formula) -> str:
+    """The unit of an oracle's robustness (`m`, `s`): that of its comparisons when they all
+    share one; "" when they do not, or it is not certain (the table then shows none)."""
+    from addt_dsl import expr as E
+
+    params = {p.name: units.DIMENSIONS_BY_NAME.get(p.dimension) for p in plan.params}
+    dims = set()
+    for node in E.walk(formula):
+        if isinstance(node, E.Binary) and node.op in E.COMPARE_OPS:
+            found = {_value_dim(node.left, params), _value_dim(node.right, params)} - {None}
+            dims.add(found.pop() if len(found) == 1 else None)
+        elif isinstance(node, E.Signal) and _value_dim(node, params) is None:
+            dims.add(None)  # a state used as a formula (`started(x)`): ±1, no unit
+    if len(dims) != 1:
+        return ""
+    dim = dims.pop()
+    return units.CANONICAL_UNIT.get(dim, "") if dim is not None else ""
+
+
+VERDICT_LEGEND = ("oracle columns: robustness, the margin by which the run kept (> 0) or broke (< 0) the oracle at "
+                  "its worst moment, in the unit in brackets; red: failed, yellow: a `warn` oracle violated "
+                  "(never fails a run)")
+
+
 def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None, fmt: str = "text") -> None:
     """Verdict table of `records` (at most 40 rows: failing runs first when more) and the
     totals line; `totals` is a `summary()` (defaults to one over `records`)."""
@@ -291,8 +343,11 @@ def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None
     table.add_column("verdict")
     if classified:
         table.add_column("outcome")
-    for n in names:
-        table.add_column(n, justify="right")
+    from rich.markup import escape
+
+    for o in plan.oracles:
+        unit = robustness_unit(plan, o.formula)
+        table.add_column(escape(f"{o.name} [{unit}]") if unit else o.name, justify="right")
     for r in records:
         by_name = {v.name: v for v in r.verdicts}
         verdict = "[green]pass[/]" if r.passed else f"[red]{'FAIL' if r.status == 'ok' else r.status.upper()}[/]"
@@ -303,9 +358,11 @@ def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None
             rho.append("-" if v is None else fmt_number(v.robustness) if v.passed else
                        f"[{'yellow' if v.severity == 'warn' else 'red'}]{fmt_number(v.robustness)}[/]")
         outcome = [OUTCOME_STYLE.get(r.outcome, "{}").format(r.outcome or "-")] if classified else []
-        table.add_row(r.run_id, *[fmt_number(r.cell[p]) if p in r.cell else "" for p in cell_params],
+        table.add_row(r.run_id, *[fmt_param(plan, p, r.cell[p]) if p in r.cell else "" for p in cell_params],
                       verdict, *outcome, *rho)
     console.print(table)
+    if names and records:
+        console.print(escape(VERDICT_LEGEND), style="dim")
     if totals["runs"] > len(records):
         console.print(f"(showing {len(records)} of {totals['runs']} runs)")
     console.print(totals_line(totals))
@@ -317,7 +374,7 @@ def print_verdicts(plan: ScenarioPlan, records: list, totals: dict | None = None
 
 
 def totals_line(totals: dict) -> str:
-    """`5 passed, 2 failed, 1 with warnings; failures per oracle: {...}; warnings per oracle: {...}`"""
+    """`5 passed, 2 failed, 1 with warnings; failures per oracle: a 2, b 1; warnings per oracle: c 1`"""
     line = f"{totals['passed']} passed, {totals['failed']} failed"
     if totals.get("errors"):
         kinds = ", ".join(f"{s} {n}" for s, n in totals["statuses"].items() if is_error_status(s))
@@ -325,10 +382,15 @@ def totals_line(totals: dict) -> str:
     if totals.get("warned"):
         line += f", {totals['warned']} with warnings"
     if totals["failed"] or totals.get("errors"):
-        line += f"; failures per oracle: {totals['failures_per_oracle']}"
+        line += f"; failures per oracle: {_counts(totals['failures_per_oracle'])}"
     if totals.get("warned"):
-        line += f"; warnings per oracle: {totals['warnings_per_oracle']}"
+        line += f"; warnings per oracle: {_counts(totals['warnings_per_oracle'])}"
     return line
+
+
+def _counts(counts: dict) -> str:
+    """`no_collision 2, reach_goal 1` (not a Python dict)."""
+    return ", ".join(f"{k} {v}" for k, v in counts.items()) or "none"
 
 
 def terminal():

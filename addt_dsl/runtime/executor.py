@@ -63,7 +63,12 @@ def run_time_bound_s(spec: RunSpec, timeout_s: float | str | None = AUTO) -> flo
     """The wall-clock bound of one run [s]: `timeout_s` when it is a number > 0, the default
     derived from the scenario for "auto", None (no bound) for None or 0."""
     if timeout_s == AUTO:
-        return BOUND_STARTUP_S + spec.plan.duration_s / BOUND_REAL_TIME_FACTOR
+        from addt_dsl.cost import run_wall_seconds
+
+        # A run the cost model expects to be slow (a large camera) gets the same tenfold margin
+        # over its estimate: the compiler accepted it (docs/limits.md), the bound must not kill it.
+        slowest = max(spec.plan.duration_s / BOUND_REAL_TIME_FACTOR, 10.0 * run_wall_seconds(spec.plan))
+        return BOUND_STARTUP_S + slowest
     return float(timeout_s) if timeout_s else None
 
 

@@ -34,6 +34,10 @@ class ReplayMismatch(RuntimeError):
     """The written file does not replay the shrunk run."""
 
 
+class NotCompilable(ReplayMismatch):
+    """The shrunk run printed as `.addt` does not compile (nothing of it is written)."""
+
+
 @dataclass
 class Artifacts:
     addt: Path
@@ -46,6 +50,11 @@ class Artifacts:
     xosc_note: str = ""  # why not
 
 
+# The header line that ties a counterexample to the content of the scenario it was shrunk
+# from (`printer.semantic_key` of its plan): an edited scenario does not replay it.
+SCENARIO_KEY_LABEL = "scenario key:"
+
+
 def counterexample_stem(source_file: str, spec: RunSpec) -> str:
     stem = Path(source_file).stem if source_file else spec.plan.name
     return f"{stem}-{semantic_key(spec)[:8]}"
@@ -56,6 +65,7 @@ def header_comment(result, source_file: str) -> str:
     lines = [f"Minimal counterexample, written by addtc shrink from {source_file or '<spec>'}"
              + (f" ({result.original.run_id})" if result.original.run_id else ""),
              f"source: {source_file}" if source_file else "source: -",
+             *([f"{SCENARIO_KEY_LABEL} {result.scenario_key}"] if getattr(result, "scenario_key", "") else []),
              f"fails: {f.describe()}",
              f"shrunk in {result.simulations} simulations ({result.cache_hits} cache hits, {result.rounds} rounds)",
              "replay: addtc THIS_FILE  (exit 1)"]
@@ -70,12 +80,16 @@ def write_counterexample(result, out_dir: str | Path, source_file: str = "", ste
     stem = stem or counterexample_stem(source_file, result.best)
     text = print_spec(result.best, comment=header_comment(result, source_file))
     path = out / f"{stem}.addt"
-    write_text(path, text)
-    written = [path]
+    written = []
     for name, body in side_files(result.best.plan).items():
         write_text(out / name, body)
         written.append(out / name)
-    replay = compile_pinned(text, path=str(path), base_dir=out)
+    try:  # compiled before it is written: a counterexample that does not compile is never left behind
+        replay = compile_pinned(text, path=str(path), base_dir=out)
+    except ValueError as exc:
+        raise NotCompilable(f"the shrunk run cannot be written as a scenario that compiles: {exc}") from None
+    write_text(path, text)
+    written.insert(0, path)
     outcome = evaluate(replay, keep_trace=True)
     trace = outcome.trace
     if outcome.failure(result.target.id) is None or outcome.digest != result.outcome.digest:

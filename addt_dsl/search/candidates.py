@@ -115,6 +115,8 @@ def neutral_value(kind: str, setting: str) -> float:
     (`slow factor` → 1, `count` → 1, `drop rate` → 0, `shift yaw` → 0)."""
     cls = FAULTS.get(kind)
     spec = next((p for p in cls.params if p.name == setting), None) if cls else None
+    if spec is not None and spec.neutral is not None:
+        return float(spec.neutral)
     lo = spec.low if spec is not None and spec.low is not None else -math.inf
     hi = spec.high if spec is not None and spec.high is not None else math.inf
     return min(max(0.0, lo), hi)

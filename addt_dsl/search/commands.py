@@ -24,7 +24,8 @@ CACHE_NAME = "runs.sqlite"  # the search's run cache, in the output directory by
 
 # Falsify and shrink run their own budget of runs, never the file's sweep: only the
 # per-run cost thresholds apply to them, not the sweep-wide ones (docs/limits.md).
-SEARCH_LIMITS = DEFAULT.raised(runs=2 ** 62, sim_seconds=float("inf"), agent_steps=float("inf"))
+SEARCH_LIMITS = DEFAULT.raised(runs=2 ** 62, sim_seconds=float("inf"), agent_steps=float("inf"),
+                               wall_seconds=float("inf"))  # the sweep is not run: only per-run thresholds
 
 
 def add_commands(sub) -> None:
@@ -212,7 +213,7 @@ def print_shrink_summary(result, arts) -> None:
     width = max(len(s.name) for s in result.stats)
     for s in result.stats:
         print(f"  {s.name:<{width}}  {s.candidates:4d} candidates {s.simulations:4d} simulated "
-              f"{s.accepted:3d} accepted {s.seconds:6.2f} s")
+              f"{s.accepted:3d} accepted {s.seconds:6.2f} s" + (f" ({s.rejected} did not compile)" if s.rejected else ""))
     for line in result.changes:
         print(f"  {line}")
     print(f"wrote {arts.addt}  (replay: addtc {arts.addt})")

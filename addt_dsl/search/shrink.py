@@ -14,6 +14,11 @@ the number of simulations (each costs 0.1-1 s, Hypothesis budgets in thousands o
 calls), and its notion of "the same failure" is an exception's type and location. The
 passes here are the ones issue 9 names, with per-pass statistics.
 
+A candidate must also compile as the `.addt` file it will be written as (`printer.check_spec`):
+a shorter run can end before a `reach goal within T`, a window, a fault time or a step
+tied to it, and such a candidate is refused as a step (counted in `rejected`), never
+written. The check costs milliseconds next to a simulation, and is done once per candidate.
+
 Passes, in order (cheap large steps first, like conjecture):
   cut_after_violation  faults and the run end where the failure is decided (the first
                        violation plus the formula's look-ahead; nothing later matters)
@@ -36,6 +41,7 @@ from dataclasses import dataclass, field
 
 from addt_dsl import expr as E
 from addt_dsl.plan import RunSpec, ScenarioPlan
+from addt_dsl.printer import check_spec, semantic_key
 from addt_dsl.registry import FAULTS
 from addt_dsl.runtime.result import Failure, RunResult
 from addt_dsl.search import candidates as C
@@ -51,6 +57,7 @@ class PassStats:
     candidates: int = 0  # proposed (cache hits included)
     simulations: int = 0
     accepted: int = 0
+    rejected: int = 0  # candidates that do not compile as a scenario (not simulated)
     seconds: float = 0.0
 
 
@@ -67,6 +74,7 @@ class ShrinkResult:
     budget_exhausted: bool
     seconds: float
     changes: list[str] = field(default_factory=list)  # what did not matter / was reduced
+    scenario_key: str = ""  # `semantic_key` of the scenario shrunk from: ties a corpus entry to its content
 
 
 class NotFailing(ValueError):
@@ -85,11 +93,13 @@ class Shrinker:
         # count these, so a shrink ends the same whatever the cache held before (a killed
         # shrink run again resumes from its cache and ends with the same result).
         self.judged: set[str] = set()
+        self.compiles_cache: dict[str, bool] = {}
         plan = nominal_plan or spec.plan
         self.nominal = plan.nominal_params()
         self.scales = {p.name: (p.high - p.low) if p.low is not None and p.high is not None and p.high > p.low
                        else max(1.0, abs(p.default)) for p in plan.params}
         self.assumptions_plan = plan
+        self.scenario_key = semantic_key(plan)
         self.best = C.pinned(spec)
         self.original = self.best
         self.judged.add(self.best.key())
@@ -127,6 +137,10 @@ class Shrinker:
         new = key not in self.judged
         if new and self.simulations >= self.max_simulations:
             self.exhausted = True
+            return False
+        if not self.compiles(candidate, key):
+            if self._current is not None:
+                self._current.rejected += 1
             return False
         self.judged.add(key)
         self.repeats += not new
@@ -171,7 +185,21 @@ class Shrinker:
                 break
         return ShrinkResult(self.original, self.best, self.outcome, self.outcome.failure(self.target), self.stats,
                             self.simulations, self.repeats, rounds, self.exhausted,
-                            time.perf_counter() - t0, describe_changes(self.original, self.best, self.nominal))
+                            time.perf_counter() - t0, describe_changes(self.original, self.best, self.nominal),
+                            self.scenario_key)
+
+    def compiles(self, candidate: RunSpec, key: str | None = None) -> bool:
+        """Whether `candidate` printed as a pinned `.addt` file compiles back (cached by key)."""
+        key = key or candidate.key()
+        ok = self.compiles_cache.get(key)
+        if ok is None:
+            try:
+                check_spec(candidate)
+                ok = True
+            except ValueError:
+                ok = False
+            self.compiles_cache[key] = ok
+        return ok
 
     # ---- helpers
     def violation_time(self) -> float | None:
@@ -240,8 +268,22 @@ class Shrinker:
         end = math.ceil((t_v + 0.5) / step - 1e-9) * step
         if end < plan.duration_s:
             failing = {f.oracle for f in self.outcome.failures}
-            self.consider(C.rebuild(self.best, plan_updates={"duration_s": round(end, 9)}),
-                          extra=lambda o: {f.oracle for f in o.failures} <= failing)
+
+            def shorter(d):
+                return C.rebuild(self.best, plan_updates={"duration_s": round(d, 9)})
+
+            cand = shorter(end)
+            if not self.compiles(cand):
+                if self._current is not None:
+                    self._current.rejected += 1
+                # Something is tied to the duration (`reach goal within 20 s`, a window, a
+                # fault time): the shortest run that still compiles, found by compiling only.
+                lo, hi = round(end / step), round(plan.duration_s / step)  # lo fails, hi compiles
+                while hi - lo > 1:
+                    mid = (lo + hi) // 2
+                    lo, hi = (lo, mid) if self.compiles(shorter(mid * step)) else (mid, hi)
+                cand = shorter(hi * step)
+            self.consider(cand, extra=lambda o: {f.oracle for f in o.failures} <= failing)
 
     def delete_faults(self) -> None:
         self._adaptive_delete(lambda s: len(s.faults), lambda s, idx: C.without_faults(s, idx))

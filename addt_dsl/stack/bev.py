@@ -52,6 +52,10 @@ class PerceptionMode:
     expects: tuple[str, dict] | None = None
     requires: str | None = None
     sites: tuple[str, ...] = GroundTruthPerception.sites
+    # Wall seconds per input frame beyond what the cost model counts for every stack
+    # (addt_dsl/cost.py): a network's inference. Measured 2026-12-06 with
+    # benchmarks/bench_cost_model.py's method on examples/suites/*table1_overtake.addt.
+    frame_cost_s: float = 0.0
 
 
 def _ground_truth(settings, ctx):
@@ -83,12 +87,13 @@ PERCEPTIONS = {
     "ground_truth": PerceptionMode(_ground_truth, "hit_body"),
     "learned": PerceptionMode(_learned, "hit_body", expects=("lidar", {
         "rays": DETECTOR_LIDAR.rays, "channels": DETECTOR_LIDAR.channels,
-        "vfov": math.radians(DETECTOR_LIDAR.vfov_deg)}), requires="torch", sites=NETWORK_OUTPUT_SITES),
+        "vfov": math.radians(DETECTOR_LIDAR.vfov_deg)}), requires="torch", sites=NETWORK_OUTPUT_SITES,
+        frame_cost_s=2e-3),
     "camera": PerceptionMode(_camera, "image", "camera"),
     # A fidelity mode (cost per frame: docs/stack.md), not the default.
     "camera_bev": PerceptionMode(_camera_bev, "images", "camera_rig", expects=("camera_rig", {
         k: v for k, v in DETECTOR_RIG.settings().items() if k in ("cameras", "width", "height", "fov")}),
-        requires="torch", sites=NETWORK_OUTPUT_SITES),
+        requires="torch", sites=NETWORK_OUTPUT_SITES, frame_cost_s=8e-3),
 }
 # Perception modes with a network whose layers are tensor fault sites (`perception.<layer>`).
 _TENSOR_SITES = {"learned": TENSOR_SITES, "camera_bev": CAMERA_BEV_TENSOR_SITES}
@@ -165,6 +170,16 @@ class BevStack:
         """Sensor keywords the ego must carry for these settings (the compiler checks)."""
         mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
         return {mode.needs_sensor} if mode is not None and mode.needs_sensor else set()
+
+    @classmethod
+    def frame_cost(cls, settings: dict) -> tuple[str, float] | None:
+        """(sensor keyword, wall seconds per frame of it) that these settings' perception
+        adds to the cost model's estimate (a network's inference); None: nothing."""
+        mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
+        if mode is None or not mode.frame_cost_s:
+            return None
+        sensor = mode.expects[0] if mode.expects else mode.needs_sensor or "lidar"
+        return sensor, mode.frame_cost_s
 
     @classmethod
     def required_modules(cls, settings: dict) -> dict[str, str]:

@@ -26,10 +26,11 @@ says hello in protocol 1, so servers that speak only protocol 1 still serve it.
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import math
-import ipaddress
 import os
+import re
 import socket
 import struct
 import time
@@ -71,17 +72,46 @@ class ProtocolError(ValueError):
 
 
 MAX_MESSAGE_BYTES = 64 * 2**20  # default limit on one message, checked before it is read
+# Limits on the JSON header, checked on its bytes before it is parsed: parsed JSON costs up
+# to ~30x its size (a 60 MiB reply of `[{},{},...]` took 1.8 GB). Blobs cost their size.
+MAX_HEADER_BYTES = 4 * 2**20  # a step or a reply (a hello may be larger: it carries the map's text)
+MAX_JSON_CONTAINERS = 100_000  # `{` and `[` bytes in one header (objects and lists; a bound from above)
+# Bounds on what one reply may ask of the run (a reply of 20,000 events per step turned a 6 s
+# run into 245 s and exit 3): more is a stack failure (the run is detected).
+MAX_COMMANDS_PER_STEP = 100
+MAX_EVENTS_PER_STEP = 2 * MAX_FAULTS  # every fault injecting at once, and as many stack events
+MAX_EVENTS_PER_RUN = 200_000
+MAX_LATENCY_S = 3600.0  # the largest `timeout` setting: a latency beyond it cannot have been waited for
+MAX_APPLY_DELAY_S = 3600.0  # a command takes effect at most this long after its step
+MAX_OBJECTS = 1_000_000
 _BLOB_KINDS = "biuf"  # numeric dtypes only (never object or void arrays)
 
 
-def decode(payload: bytes) -> tuple[dict, dict[str, np.ndarray]]:
+def header_bytes(payload: bytes) -> bytes:
+    """The JSON header of a message (the bytes after the length prefix), unparsed."""
+    if len(payload) < 4:
+        raise ProtocolError("message shorter than its header length")
+    (head_len,) = struct.unpack(">I", payload[:4])
+    if 4 + head_len > len(payload):
+        raise ProtocolError("header length runs past the message")
+    return payload[4:4 + head_len]
+
+
+def decode(payload: bytes, max_header_bytes: int | None = MAX_HEADER_BYTES,
+           max_containers: int = MAX_JSON_CONTAINERS) -> tuple[dict, dict[str, np.ndarray]]:
     """Inverse of `encode` for the bytes after the length prefix; ProtocolError on any
-    malformed input (bad JSON, a header that is not an object, blobs that do not fit)."""
+    malformed input (bad JSON, a header that is not an object, blobs that do not fit) and
+    on a header beyond the limits, refused before it is parsed."""
+    head = header_bytes(payload)
+    head_len = len(head)
+    if max_header_bytes is not None and head_len > max_header_bytes:
+        raise ProtocolError(f"message header of {head_len} bytes exceeds the limit of {max_header_bytes} bytes")
+    containers = head.count(b"{") + head.count(b"[")
+    if containers > max_containers:
+        raise ProtocolError(f"message header has {containers} objects or lists (brackets), beyond the limit of "
+                            f"{max_containers}")
     try:
-        (head_len,) = struct.unpack(">I", payload[:4])
-        if 4 + head_len > len(payload):
-            raise ProtocolError("header length runs past the message")
-        header = json.loads(payload[4:4 + head_len])
+        header = json.loads(head)
         if not isinstance(header, dict):
             raise ProtocolError("the header is not a JSON object")
         descs = header.pop("blobs", [])
@@ -137,16 +167,22 @@ def send(sock: socket.socket, header: dict, blobs: dict[str, np.ndarray] | None 
     sock.sendall(encode(header, blobs))
 
 
-def recv(sock: socket.socket, max_bytes: int = MAX_MESSAGE_BYTES,
-         deadline: float | None = None) -> tuple[dict, dict[str, np.ndarray]]:
-    """One message, refused (ProtocolError) if its length prefix exceeds `max_bytes`
-    before any of it is read."""
+def recv_payload(sock: socket.socket, max_bytes: int = MAX_MESSAGE_BYTES, deadline: float | None = None) -> bytes:
+    """One message's bytes after its length prefix, unparsed; refused (ProtocolError) if
+    the prefix exceeds `max_bytes` before any of it is read."""
     (length,) = struct.unpack(">I", _recv_exact(sock, 4, deadline))
     if length > max_bytes:
         raise ProtocolError(f"message of {length} bytes exceeds the limit of {max_bytes} bytes")
     if length < 4:
         raise ProtocolError(f"message of {length} bytes is shorter than its header length")
-    return decode(_recv_exact(sock, length, deadline))
+    return _recv_exact(sock, length, deadline)
+
+
+def recv(sock: socket.socket, max_bytes: int = MAX_MESSAGE_BYTES, deadline: float | None = None,
+         max_header_bytes: int | None = MAX_HEADER_BYTES) -> tuple[dict, dict[str, np.ndarray]]:
+    """One message, within `max_bytes` (checked before it is read) and the header limits
+    (checked before it is parsed)."""
+    return decode(recv_payload(sock, max_bytes, deadline), max_header_bytes)
 
 
 def escape(text: str, limit: int = 2000) -> str:
@@ -156,11 +192,34 @@ def escape(text: str, limit: int = 2000) -> str:
     return out + ("..." if len(text) > limit else "")
 
 
-def parse_address(address: str) -> tuple[str, int]:
+_HOSTNAME = re.compile(r"(?=.{1,253}$)[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?(?:\.[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*\.?")
+
+
+def parse_address(address: str, allow_port_zero: bool = False) -> tuple[str, int]:
+    """`HOST:PORT` as (host, port): an IPv4 address, a host name, or an IPv6 address in
+    brackets (`[::1]:5555`, returned without them, as the socket calls take it). A port
+    outside 1-65535 (0 only where `allow_port_zero`: a server picking a free one) or a host
+    that is none of these is a ValueError, never wrapped or passed on to fail later."""
     host, sep, port = address.rpartition(":")
-    if not sep or not port.isdigit():
-        raise ValueError(f"address must be HOST:PORT, not {address!r}")
-    return host or "127.0.0.1", int(port)
+    if not sep or not port.isascii() or not port.isdigit():
+        raise ValueError(f"address must be HOST:PORT, not {escape(address, 200)!r}")
+    number = int(port)
+    if not (0 if allow_port_zero else 1) <= number <= 65535:
+        raise ValueError(f"port {number} is outside {0 if allow_port_zero else 1}-65535 "
+                         f"(in {escape(address, 200)!r})")
+    if host.startswith("[") or host.endswith("]"):
+        try:
+            if not (host.startswith("[") and host.endswith("]")):
+                raise ValueError
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            raise ValueError(f"{escape(host, 200)!r} is not an IPv6 address") from None
+        return host[1:-1], number
+    if ":" in host:
+        raise ValueError(f"write an IPv6 address in brackets: [{escape(host, 200)}]:{number}")
+    if host and not _HOSTNAME.fullmatch(host):
+        raise ValueError(f"{escape(host, 200)!r} is not a host name or an IP address")
+    return host or "127.0.0.1", number
 
 
 ALLOW_HOSTS_ENV = "ADDT_BRIDGE_ALLOW_HOSTS"  # comma-separated; `addtc run --allow-host HOST` sets it
@@ -171,7 +230,7 @@ def is_loopback(host: str) -> bool:
     if host == "localhost":
         return True
     try:
-        return ipaddress.ip_address(host.strip("[]")).is_loopback
+        return ipaddress.ip_address(host).is_loopback  # IPv6 without brackets (`parse_address`)
     except ValueError:
         return False  # any other name could resolve anywhere
 
@@ -183,7 +242,7 @@ def allowed_hosts() -> set[str]:
 def check_address(host: str) -> None:
     """A scenario file may only point the runner at this machine, unless the person
     running it allowed the host on the command line."""
-    if not is_loopback(host) and host not in allowed_hosts():
+    if not is_loopback(host) and not {host, f"[{host}]"} & allowed_hosts():
         raise StackError(f"refused to connect to {escape(host)!r}: a scenario's bridge address must be loopback "
                          f"unless allowed with `addtc run --allow-host {escape(host)}`")
 
@@ -244,6 +303,20 @@ class ExternalStack:
         return object.__new__(impl)
 
     @classmethod
+    def setting_problems(cls, settings: dict) -> dict[str, str]:
+        """Settings the compiler refuses (E0204): an address that is not HOST:PORT with a
+        port in 1-65535 and a host name, IPv4 or bracketed IPv6 address (`port 99999` was
+        wrapped to 34463, `[::1]` passed the loopback check and could not resolve)."""
+        address = settings.get("address")
+        if not isinstance(address, str):
+            return {}
+        try:
+            parse_address(address)
+        except ValueError as exc:
+            return {"address": str(exc)}
+        return {}
+
+    @classmethod
     def sites_of(cls, settings: dict | None = None):
         """The registered stack whose fault sites the remote has (`sites bev`), or None
         (`sites none`, or `protocol osi`, whose messages carry no faults): the compiler
@@ -302,7 +375,10 @@ class ExternalStack:
             # The compiler refuses this (E0109); a RunSpec built by hand ends here, detected.
             raise StackError(f"`stack external sites none` declares no fault sites, but the run has "
                              f"{self._faults_text()}")
-        host, port = parse_address(str(self.settings["address"]))
+        try:
+            host, port = parse_address(str(self.settings["address"]))
+        except ValueError as exc:  # the compiler refuses these (E0204); a hand-built RunSpec ends here
+            raise StackError(f"external stack address: {exc}") from None
         check_address(host)
         timeout = float(self.settings["timeout"])
         try:
@@ -424,7 +500,9 @@ class ExternalStack:
             self._connect()
         reply, rblobs = self._request({"type": "step", "time_s": time_s, "dt": dt, "ego": ego, "frames": frames},
                                       blobs)
-        command, commands, latency, objects, events = _control(reply, time_s)
+        command, commands, latency, objects, events = _control(reply, time_s, dt)
+        if len(self._remote_events) + len(events) > MAX_EVENTS_PER_RUN:
+            raise StackError(f"external stack sent more than {MAX_EVENTS_PER_RUN} events in one run")
         for apply_s, steer, accel in commands:
             self.ctx.apply_command_at(apply_s, steer, accel)
         for name, value in latency.items():
@@ -459,14 +537,31 @@ class ExternalStack:
         self.sock = None
 
 
-def _control(reply: dict, time_s: float):
+def _control(reply: dict, time_s: float, dt: float = 0.0):
     """The fields of a `control` reply, checked: a number that is not finite (a NaN command
-    time would never be applied and block every later command) or a malformed field is a
-    stack failure (StackError, the run is *detected*); peer text is escaped."""
-    def number(v, what: str) -> float:
+    time would never be applied and block every later command), outside its bounds (a
+    command to apply before this step, a latency of 1e308 s, 20,000 events) or a malformed
+    field is a stack failure (StackError, the run is *detected*); peer text is escaped.
+    Command values themselves are the vehicle's to clip, as in process (a bit flip in the
+    stack's control makes the same)."""
+    def number(v, what: str, lo: float = -math.inf, hi: float = math.inf) -> float:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise StackError(f"external stack sent a non-finite or non-numeric {what}: {escape(repr(v))}")
+        if not lo <= v <= hi:
+            raise StackError(f"external stack sent {what} {escape(repr(v), 40)}, outside [{lo:g}, {hi:g}]")
         return float(v)
+
+    def bounded(items, limit: int, what: str) -> list:
+        if not isinstance(items, list):
+            raise StackError(f"external stack sent malformed {what}: not a list")
+        if len(items) > limit:
+            raise StackError(f"external stack sent {len(items)} {what} in one step, more than {limit}")
+        return items
+
+    def applied(c) -> tuple:
+        apply_s, steer, accel = triple(c, "command")
+        apply_s = number(apply_s, "command time [s]", time_s - 1e-9, time_s + MAX_APPLY_DELAY_S)
+        return apply_s, number(steer, "command steer"), number(accel, "command accel")
 
     def triple(v, what: str):
         if not isinstance(v, (list, tuple)) or len(v) != 3:
@@ -478,13 +573,20 @@ def _control(reply: dict, time_s: float):
         if not isinstance(raw, (list, tuple)) or len(raw) != 2:
             raise StackError(f"external stack sent a malformed command: {escape(repr(raw))}")
         command = (number(raw[0], "command steer"), number(raw[1], "command accel"))
-        commands = [tuple(number(x, "command") for x in triple(c, "command")) for c in reply.get("commands", [])]
-        latency = {escape(str(k)): number(v, "latency") for k, v in dict(reply.get("latency", {})).items()}
-        objects = int(number(reply.get("objects", 0), "object count"))
+        commands = [applied(c) for c in bounded(reply.get("commands", []), MAX_COMMANDS_PER_STEP, "commands")]
+        raw_latency = dict(reply.get("latency", {}))
+        if len(raw_latency) > 64:
+            raise StackError(f"external stack sent {len(raw_latency)} latency entries, more than 64")
+        latency = {escape(str(k), 80): number(v, "latency [s]", 0.0, MAX_LATENCY_S) for k, v in raw_latency.items()}
+        objects = number(reply.get("objects", 0), "object count", 0, MAX_OBJECTS)
+        if objects != int(objects):
+            raise StackError(f"external stack sent a fractional object count: {objects!r}")
+        objects = int(objects)
         events = []
-        for e in reply.get("events", []):
+        for e in bounded(reply.get("events", []), MAX_EVENTS_PER_STEP, "events"):
             t, kind, detail = triple(e, "event")
-            events.append((number(t, "event time"), escape(str(kind), 80), _escaped(dict(detail))))
+            events.append((number(t, "event time [s]", 0.0, time_s + dt + 1e-9), escape(str(kind), 80),
+                           _escaped(dict(detail))))
     except (TypeError, ValueError, AttributeError) as exc:
         raise StackError(f"external stack sent a malformed control reply: {escape(str(exc))}") from None
     return command, commands, latency, objects, events

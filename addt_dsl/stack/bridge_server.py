@@ -21,8 +21,10 @@ from __future__ import annotations
 
 import argparse
 import hmac
+import json
 import math
 import os
+import re
 import socket
 import socketserver
 import sys
@@ -39,14 +41,17 @@ from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.trace import SERIES_COLUMNS, Event
 from addt_dsl.stack.bridge import (
     MAX_FAULTS,
+    MAX_HEADER_BYTES,
     MAX_MESSAGE_BYTES,
     PROTOCOLS,
     TOKEN_ENV,
     ProtocolError,
+    decode,
     escape,
+    header_bytes,
     is_loopback,
     parse_address,
-    recv,
+    recv_payload,
     send,
 )
 
@@ -186,10 +191,20 @@ def serve_connection(sock: socket.socket, limits: Limits = Limits()) -> None:
         while True:
             deadline = time.monotonic() + limits.idle_timeout_s
             try:
-                header, blobs = recv(sock, limits.max_message_bytes, deadline)
+                payload = recv_payload(sock, limits.max_message_bytes, deadline)
             except (ConnectionError, TimeoutError):
                 return  # gone or idle: nothing to answer
             except (ProtocolError, OSError) as exc:
+                _reply_error(sock, str(exc), deadline)
+                return
+            try:
+                if ctx is None and limits.token is not None and not token_in_header(payload, limits.token):
+                    # Before anything is parsed: a peer without the token costs no more than its bytes.
+                    _reply_error(sock, "PermissionError: wrong or missing token", deadline)
+                    return
+                # Only a hello carries the map's text; every other header is small.
+                header, blobs = decode(payload, None if ctx is None else MAX_HEADER_BYTES)
+            except ProtocolError as exc:
                 _reply_error(sock, str(exc), deadline)
                 return
             kind = header.get("type")
@@ -221,6 +236,18 @@ def serve_connection(sock: socket.socket, limits: Limits = Limits()) -> None:
     finally:
         if ctx is not None:
             ctx.faults.close()  # undo persistent side effects (flipped weights), as in process
+
+
+def token_in_header(payload: bytes, token: str) -> bool:
+    """Whether the unparsed header holds `"token": "<token>"` (as any JSON encoder writes
+    it). Only a peer that knows the token can pass; `_check_hello` then compares the parsed
+    field exactly."""
+    try:
+        head = header_bytes(payload)
+    except ProtocolError:
+        return False
+    forms = {json.dumps(token).encode(), json.dumps(token, ensure_ascii=False).encode()}
+    return any(re.search(rb'"token"\s*:\s*' + re.escape(form), head) for form in forms)
 
 
 def _reply_error(sock: socket.socket, message: str, deadline: float) -> None:
@@ -390,7 +417,9 @@ class BridgeServer(socketserver.ThreadingTCPServer):
         # One session on a connected socket, and the error reply to a connection over the
         # limit, in the server's protocol (the OSI server's differ).
         self.serve, self.refuse = serve or serve_connection, refuse or _reply_error
-        host, port = parse_address(address)
+        host, port = parse_address(address, allow_port_zero=True)
+        if ":" in host:  # an IPv6 address (`[::1]:5555`)
+            self.address_family = socket.AF_INET6
         if not is_loopback(host):
             print(f"warning: the bridge server listens on {escape(host)}, not loopback: any host that can reach "
                   "it may drive the stack" + ("" if limits.token else "; set --token"), file=sys.stderr)
@@ -402,7 +431,7 @@ class BridgeServer(socketserver.ThreadingTCPServer):
     @property
     def address(self) -> str:
         host, port = self.server_address[:2]
-        return f"{host}:{port}"
+        return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
 
 
 def start_in_thread(address: str = "127.0.0.1:0", limits: Limits = Limits(),
@@ -425,7 +454,12 @@ def main(argv=None) -> int:
     ap.add_argument("--max-connections", type=int, default=MAX_CONNECTIONS, help="runs served at once")
     args = ap.parse_args(argv)
     limits = Limits(args.token or None, args.max_message_bytes, args.idle_timeout)
-    with BridgeServer(args.address, limits, args.max_connections) as server:
+    try:
+        server = BridgeServer(args.address, limits, args.max_connections)
+    except (ValueError, OSError) as exc:  # a bad address, a port in use: one line, not a traceback
+        print(f"error: cannot listen on {escape(args.address, 200)}: {exc}", file=sys.stderr)
+        return 2
+    with server:
         print(f"listening {server.address}", flush=True)
         try:
             server.serve_forever()

@@ -29,6 +29,7 @@ RULES = (
     rule_names,
     rule_header,
     rule_params,
+    rule_sweep,  # right after the parameters: its grids widen their ranges for every later check
     rule_roads,
     rule_assumptions,
     rule_actors,
@@ -37,7 +38,6 @@ RULES = (
     rule_environment,
     rule_oracles,
     rule_goal_oracle,
-    rule_sweep,
     rule_unused,
 )
 

@@ -232,6 +232,7 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
         sensors = sensors or [DEFAULT_SENSOR]
         stack = stack or DEFAULT_STACK
         _check_stack_sensors(ctx, stack, sensors, stack_span or d.span)
+        _check_stack_settings(ctx, stack, stack_span or d.span)
         _check_sensor_expectations(ctx, stack, sensors, sensor_spans, stack_span or d.span)
     if placement is None:
         return None
@@ -275,6 +276,16 @@ def _check_stack_sensors(ctx: Context, stack: P.ClausePlan, sensors: list, span:
     for keyword in sorted(set(needs(words)) - {s.name for s in sensors}):
         ctx.sink.error("E0103", f"the ego's stack settings need a {keyword} sensor", span,
                        f"add e.g. `sensor {keyword}` to the ego")
+
+
+def _check_stack_settings(ctx: Context, stack: P.ClausePlan, span: Span) -> None:
+    """Settings whose form the stack class checks itself (`setting_problems`: the bridge's address)."""
+    problems_of = getattr(STACKS.get(stack.name), "setting_problems", None)
+    if problems_of is None:
+        return
+    words = {k: v for k, v in stack.settings.items() if isinstance(v, str)}
+    for key, message in sorted(problems_of(words).items()):
+        ctx.sink.error("E0204", f"the stack's {key}: {message}", span)
 
 
 def _check_sensor_expectations(ctx: Context, stack: P.ClausePlan, sensors: list, spans: dict, span: Span) -> None:

@@ -1,4 +1,5 @@
-"""The sweep: grid axes inside their parameters' ranges, one sampler, repeats, seed, rejection cap."""
+"""The sweep: grid axes inside their parameters' ranges, one sampler, repeats, seed, rejection cap.
+Run right after the parameters: a grid over a parameter without a range widens its range."""
 
 from __future__ import annotations
 
@@ -16,6 +17,9 @@ from addt_dsl.diagnostics import Span
 @dataclass(frozen=True)
 class Sweep:
     sweep: P.SweepPlan
+    # A parameter without a range spans its default and its grid's values: every later
+    # check over parameter ranges (fault times, positions, windows) covers the whole sweep.
+    param_ranges: dict[str, tuple[float, float]]
 
 
 def rule_sweep(ctx: Context) -> Sweep:
@@ -69,7 +73,14 @@ def rule_sweep(ctx: Context) -> Sweep:
         if not sampled:
             ctx.sink.warning("W0002", f"`{sampler.kind}` has nothing to sample", sampler_span,
                              "give a parameter a range (`in [low, high]`) that no grid fixes")
-    return Sweep(P.SweepPlan(grid=grid, cases=cases, sampler=sampler, repeat=repeat, seed=seed, max_rejections=max_rej))
+    ranges = dict(ctx.param_ranges)
+    columns = [(a.param, a.values) for a in grid]
+    columns += [(name, [row[i] for row in c.rows]) for c in cases for i, name in enumerate(c.params)]
+    for name, values in columns:
+        lo, hi = ranges.get(name, (min(values), max(values)))
+        ranges[name] = (min(lo, *values), max(hi, *values))
+    return Sweep(P.SweepPlan(grid=grid, cases=cases, sampler=sampler, repeat=repeat, seed=seed,
+                             max_rejections=max_rej), ranges)
 
 
 def _axis_values(ctx: Context, name: str, node, span: Span, what: str) -> list[float] | None:

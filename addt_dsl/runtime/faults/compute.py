@@ -15,7 +15,8 @@ class BitFlip(FaultKind):
     target_kind = "site"
     drawn_setting = "bit"
     params = (
-        ParamSpec("count", None, kind="int", default=1, low=1, high=10000, doc="number of flips in the window"),
+        ParamSpec("count", None, kind="int", default=1, low=0, high=10000, neutral=1,
+                  doc="number of flips in the window (0: none, a fault-free baseline in the same grid)"),
         ParamSpec("bit", None, kind="int", default=-1, low=-1, high=63,
                   doc="bit index, 0 = least significant (-1: drawn from `field`)"),
         ParamSpec("field", None, kind="word", default="any", choices=FIELD_NAMES,

@@ -121,7 +121,9 @@ def test_allow_large_and_max_lift_a_cost_threshold():
                    duration="1 s")
     e0701(compile_source(src), "runs")
     assert compile_source(src, limits=DEFAULT.raised(allow_large=True)).ok
-    assert compile_source(src, limits=parse_limit("runs=2e6")).ok
+    # 2e6 runs of about 0.07 s are also beyond wall_seconds (1e5 s): each threshold is raised by name.
+    e0701(compile_source(src, limits=parse_limit("runs=2e6")), "wall_seconds")
+    assert compile_source(src, limits=parse_limit("wall_seconds=1e6", parse_limit("runs=2e6"))).ok
     assert compile_source(src, limits=DEFAULT.raised(run_cap=10)).ok  # `addtc FILE --limit 10`
 
 
@@ -188,7 +190,7 @@ def test_check_prints_the_estimate_and_takes_the_options(tmp_path, capsys):
     assert main(["check", "--allow-large", str(src)]) == 0
     out = capsys.readouterr().out
     assert "cost estimate: 2,000,000 run(s) x 1 s" in out and "actor-steps" in out and "MiB" in out
-    assert main(["plan", "--max", "runs=3000000", str(src)]) == 0
+    assert main(["plan", "--max", "runs=3000000", "--max", "wall_seconds=1e6", str(src)]) == 0
     assert "cost estimate" in capsys.readouterr().err
     assert main(["check", "--max", "bogus=1", str(src)]) == 2
     assert build_parser().parse_args(["run", "--allow-large", "--max", "agents=5", "x.addt"]).max == ["agents=5"]
@@ -225,5 +227,7 @@ def test_camera_pixels_are_estimated_and_bounded():
     assert "camera pixels" in est.lines()[1]
     big = src.replace("width 320 height 240 rate 10 Hz", "width 1920 height 1080 rate 30 Hz").replace("20 s", "600 s")
     e0701(compile_source(big), "camera_pixels_per_run")
-    assert compile_source(big, limits=parse_limit("camera_pixels_per_run=1e11")).ok
+    # 3.75e10 pixels also take about 5 h (run_wall_seconds, 3600 s): each threshold is raised by name.
+    e0701(compile_source(big, limits=parse_limit("camera_pixels_per_run=1e11")), "run_wall_seconds")
+    assert compile_source(big, limits=parse_limit("run_wall_seconds=1e5", parse_limit("camera_pixels_per_run=1e11"))).ok
     assert "camera pixels" not in compile_source(scenario()).estimate.lines()[1]  # none without a camera

@@ -62,7 +62,7 @@ def test_huge_length_prefix_is_refused_before_reading(server):
 
 def test_malformed_json_gets_an_error_reply_and_a_close(server):
     with _connect(server) as s:
-        head = b"{not json"
+        head = b'{"token": "s3cret", not json'  # the token is checked first, on the bytes
         s.sendall(struct.pack(">II", 4 + len(head), len(head)) + head)
         reply = _reply(s)
         assert reply["type"] == "error" and "malformed" in reply["message"]
@@ -129,7 +129,7 @@ def test_bad_hello_settings_are_refused(server, hello, words):
 
 def test_escape_sequences_in_a_message_type_are_escaped(server):
     with _connect(server) as s:
-        send(s, {"type": "\x1b[31mred\x1b[0m"})
+        send(s, {"type": "\x1b[31mred\x1b[0m", "token": "s3cret"})
         reply = _reply(s)
         assert "\x1b" not in reply["message"] and "\\x1b" in reply["message"]
 

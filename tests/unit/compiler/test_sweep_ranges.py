@@ -1,0 +1,59 @@
+"""A grid over a parameter without a range is checked wherever the parameter is used, over
+all its values: `grid t_flip in [-1.5, 1e6] s` on a 10 s run passed `check`, its far cell
+never injected and was recorded as a pass; `behind ego gap` with `grid gap in [1, 30] m`
+put the actor below s = 0 where `at -20 m` is refused."""
+
+from __future__ import annotations
+
+import pytest
+
+from addt_dsl.compiler import compile_source
+
+BASE = """scenario axis {{
+  duration 10 s
+  step 50 ms
+  road street {{
+    line length 400 m
+  }}
+  param t_flip = 2 s
+  param gap = 2 m
+  ego car on street lane -1 at 10 m speed 14 m/s {{
+    stack bev cruise_speed 15 m/s
+  }}
+  agent lead car {placement} speed 10 m/s {{
+    slow: at t_flip + 1 s then behavior brake decel 2 m/s^2
+  }}
+  faults {{
+    at t_flip bitflip control.steer count 1
+  }}
+  expect {{
+    no collision
+  }}
+  sweep {{
+    {grid}
+  }}
+}}
+"""
+
+
+def _codes(placement: str, grid: str) -> list[tuple[str, int]]:
+    result = compile_source(BASE.format(placement=placement, grid=grid), path="axis.addt")
+    return [(d.code, d.span.line) for d in result.diagnostics if d.severity == "error"]
+
+
+@pytest.mark.parametrize("grid, expected", [
+    ("grid t_flip in [-1.5, 1e6] s", [("E0302", 13), ("E0302", 16)]),  # a step's time, a fault's
+    ("grid t_flip in [2, 9.5] s", [("E0302", 13)]),
+    ("grid t_flip in [2, 10] s", [("E0302", 13)]),
+    ("grid t_flip in [0, 9] s", []),
+])
+def test_a_grid_is_checked_over_all_its_values(grid, expected):
+    assert _codes("on street lane -1 at 100 m", grid) == expected
+
+
+@pytest.mark.parametrize("placement", ["behind ego gap", "on street lane -1 at 10 m + -1 * gap"])
+def test_relative_and_absolute_placements_are_checked_alike(placement):
+    # gap = 30 m puts the lead below s = 0 either way; the nominal 2 m does not (the shrinker goes back to it).
+    assert _codes(placement, "grid gap in [1, 30] m") == [("E0301", 12)]
+    assert _codes(placement.replace("gap", "30 m"), "grid t_flip in [1, 2] s") == [("E0301", 12)]
+    assert _codes(placement, "grid gap in [1, 2] m") == []
