@@ -137,8 +137,8 @@ def _per_run(plan: ScenarioPlan, runs: int, exact: bool) -> CostEstimate:
     actors = 1 + len(plan.agents)
     nominal = plan.nominal_params()
     rays = pixels = network_s = 0.0
-    stack = plan.ego.stack
-    frame_cost = getattr(STACKS.get(stack.name), "frame_cost", None)
+    stack = plan.ego.stack  # None: a scripted ego without a stack
+    frame_cost = getattr(STACKS.get(stack.name), "frame_cost", None) if stack is not None else None
     per_frame = frame_cost({k: v for k, v in stack.settings.items() if isinstance(v, str)}) if frame_cost else None
     for actor in plan.actors():
         for sensor in actor.sensors:

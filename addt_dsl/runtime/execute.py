@@ -45,7 +45,7 @@ from addt_dsl.vehicles import VEHICLES
 
 
 
-class _Road:
+class ActorRoad:
     """The road an actor drives on, as a sampled fast view."""
 
     def __init__(self, network, road_id: str, cache: dict):
@@ -66,7 +66,7 @@ class _Road:
         return 1
 
 
-class _PathRoad(_Road):
+class ActorPath(ActorRoad):
     """An actor's route (or a lane driven against s) as one road: `runtime.path.RoutePath`."""
 
     def __init__(self, network, scenario_road: str, legs, cache: dict):
@@ -87,6 +87,21 @@ class _PathRoad(_Road):
 
     def direction(self, u: float) -> int:
         return self.road.direction(u)
+
+
+def junction_legs(road: ActorRoad) -> list[tuple[float, float, float, float]]:
+    """(entry, exit station [m], conflict point x, y [m]) of each junction leg of a path."""
+    if not isinstance(road, ActorPath):
+        return []
+    out = []
+    for leg in road.road.legs:
+        r = road.network.road(leg.road_id)
+        if r.junction in ("", "-1"):
+            continue
+        x, y, _ = r.lane_center(leg.lane, 0.5 * (leg.s_from + leg.s_to))
+        out.append((road.station(leg.road_id, leg.s_from), road.station(leg.road_id, leg.s_to), float(x), float(y)))
+    return out
+
 
 
 LANE_SETTINGS = ("to", "lane")  # behaviour settings that name a lane id
@@ -219,7 +234,7 @@ class _Run:
 
         self.agents: list[AgentState] = []
         self.agent_plans: dict[str, BoundActor] = {}
-        self.agent_roads: dict[str, _Road] = {}
+        self.agent_roads: dict[str, ActorRoad] = {}
         self.longitudinal: dict[str, object] = {}
         self.scripts: dict[str, Script] = {}
         self.deferred: list[tuple[AgentState, BoundClause]] = []  # time-0 behaviours with live settings
@@ -245,8 +260,8 @@ class _Run:
         # Members in `occupants` order (agents, then the ego): the order breaks leader ties.
         self.leaders = LeaderIndex([*self.agents, _EgoOccupant(self)])
         # Any actor on a path: agents find their leader by position (across roads), not by road.
-        self.networked = isinstance(self.ego_road, _PathRoad) or any(
-            isinstance(r, _PathRoad) for r in self.agent_roads.values())
+        self.networked = isinstance(self.ego_road, ActorPath) or any(
+            isinstance(r, ActorPath) for r in self.agent_roads.values())
         self.world_pose: dict[str, tuple[float, float, float]] = {}
         self.fleet = _Fleet(self)
         self.contacts: set[tuple[str, str]] = set()  # actor pairs overlapping at the last step
@@ -262,7 +277,7 @@ class _Run:
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self._setup_lights(plan)
-        self.ego_junctions = self._junctions(self.ego_road)
+        self.ego_junctions = junction_legs(self.ego_road)
         self.ctx = _Context(self)
         stack_clause = ego.stack
         if stack_clause is None:  # a scripted ego without a stack
@@ -274,7 +289,7 @@ class _Run:
         self.move_host = getattr(self.stack, "move_host", None)
         self.faults.bind(self.stack, lambda: self.ctx.now)
 
-    def _script(self, st: AgentState, a: BoundActor, road: _Road) -> None:
+    def _script(self, st: AgentState, a: BoundActor, road: ActorRoad) -> None:
         """Start an actor's time-0 behaviours (deferred to the first recorded state when
         one reads signals) and arm its script."""
         self.agent_plans[a.name] = a
@@ -326,24 +341,10 @@ class _Run:
             self.stop_stations[a.name] = self._stations(self.agent_roads[a.name], a, lines.get(a.road, []))
 
     @staticmethod
-    def _junctions(road: _Road) -> list[tuple[float, float, float, float]]:
-        """(entry, exit station [m], conflict point x, y [m]) of each junction leg of a path."""
-        if not isinstance(road, _PathRoad):
-            return []
-        out = []
-        for leg in road.road.legs:
-            r = road.network.road(leg.road_id)
-            if r.junction in ("", "-1"):
-                continue
-            x, y, _ = r.lane_center(leg.lane, 0.5 * (leg.s_from + leg.s_to))
-            out.append((road.station(leg.road_id, leg.s_from), road.station(leg.road_id, leg.s_to), float(x), float(y)))
-        return out
-
-    @staticmethod
-    def _stations(road: _Road, actor: BoundActor, lines) -> list[StopStation]:
+    def _stations(road: ActorRoad, actor: BoundActor, lines) -> list[StopStation]:
         if not lines:
             return []
-        if isinstance(road, _PathRoad):
+        if isinstance(road, ActorPath):
             return stations_on(lines, road.road.legs, road.station)
         plain = _PlainLeg(road.road_id, 1, 0.0, float(road.network.road(road.road_id).length), actor.lane)
         return stations_on(lines, [plain], road.station)
@@ -386,15 +387,15 @@ class _Run:
         rp = self.bound.road(actor.road)
         return rp.xodr_road_id if rp.source == "xodr" and rp.xodr_road_id else next(iter(self.networks[actor.road].roads))
 
-    def _road_of(self, actor: BoundActor) -> _Road:
+    def _road_of(self, actor: BoundActor) -> ActorRoad:
         """The plain road (no route, driven along +s), else the actor's path."""
         network = self.networks[actor.road]
         road_id = self._first_road(actor)
         way = -1 if actor.reverse else 1
         if not actor.route and network.road(road_id).travel_direction(actor.lane) * way > 0:
-            return _Road(network, road_id, self._road_cache)
+            return ActorRoad(network, road_id, self._road_cache)
         _, legs = resolve_route(network, list(actor.route or (road_id,)), actor.lane, actor.s, reverse=actor.reverse)
-        return _PathRoad(network, actor.road, legs, self._road_cache)
+        return ActorPath(network, actor.road, legs, self._road_cache)
 
     def rng(self, name: str) -> np.random.Generator:
         if name not in self._rngs:
@@ -433,7 +434,7 @@ class _Run:
         driven along +s; on a path (a route, a lane driven against s) its station and its
         offset from the route lane's centre, to the driver's left."""
         road = self.agent_roads[agent.name]
-        if not isinstance(road, _PathRoad):
+        if not isinstance(road, ActorPath):
             return s, t
         road_id = road.road.road_at(agent.s)[0]
         x, y = road.network.road(road_id).point_at(s, t)
@@ -518,7 +519,7 @@ class _Run:
         cls = BEHAVIORS.get(clause.name)
         settings = clause.settings
         road = self.agent_roads[agent.name]
-        if isinstance(road, _PathRoad):  # lane ids of settings are the map's: to driving convention
+        if isinstance(road, ActorPath):  # lane ids of settings are the map's: to driving convention
             sign = road.direction(agent.s)
             settings = {k: (v * sign if k in LANE_SETTINGS and isinstance(v, (int, float)) else v)
                         for k, v in settings.items()}
@@ -835,7 +836,7 @@ class _Fleet:
         groups: dict[int, tuple] = {}
         self.path_rows = []  # agents on a route: posed one by one (RoutePath)
         for i, road in enumerate(self.roads):
-            if isinstance(road, _PathRoad):
+            if isinstance(road, ActorPath):
                 self.path_rows.append(i)
             else:
                 groups.setdefault(id(road.road), (road.road, road.elevation, []))[2].append(i)

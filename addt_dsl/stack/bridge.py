@@ -26,6 +26,8 @@ says hello in protocol 1, so servers that speak only protocol 1 still serve it.
 
 from __future__ import annotations
 
+import importlib
+
 import ipaddress
 import json
 import math
@@ -138,7 +140,7 @@ def decode(payload: bytes, max_header_bytes: int | None = MAX_HEADER_BYTES,
     return header, blobs
 
 
-def _recv_exact(sock: socket.socket, n: int, deadline: float | None) -> bytes:
+def recv_exact(sock: socket.socket, n: int, deadline: float | None) -> bytes:
     """Read n bytes before `deadline` (time.monotonic()): the deadline bounds the whole
     message, so a peer trickling one byte a second still times out."""
     buf = bytearray(n)
@@ -170,12 +172,12 @@ def send(sock: socket.socket, header: dict, blobs: dict[str, np.ndarray] | None 
 def recv_payload(sock: socket.socket, max_bytes: int = MAX_MESSAGE_BYTES, deadline: float | None = None) -> bytes:
     """One message's bytes after its length prefix, unparsed; refused (ProtocolError) if
     the prefix exceeds `max_bytes` before any of it is read."""
-    (length,) = struct.unpack(">I", _recv_exact(sock, 4, deadline))
+    (length,) = struct.unpack(">I", recv_exact(sock, 4, deadline))
     if length > max_bytes:
         raise ProtocolError(f"message of {length} bytes exceeds the limit of {max_bytes} bytes")
     if length < 4:
         raise ProtocolError(f"message of {length} bytes is shorter than its header length")
-    return _recv_exact(sock, length, deadline)
+    return recv_exact(sock, length, deadline)
 
 
 def recv(sock: socket.socket, max_bytes: int = MAX_MESSAGE_BYTES, deadline: float | None = None,
@@ -259,9 +261,9 @@ SITE_STACKS = ("bev", "none")  # registered stacks whose fault sites a remote ma
 
 
 def _osi_stack():
-    from addt_dsl.stack.osi_stack import OsiStack  # osi3 (the `osi` extra): only when asked for
-
-    return OsiStack
+    # The OSI client subclasses ExternalStack and needs osi3 (the `osi` extra): loaded by name
+    # only when a scenario asks for it, so this module does not import its own subclass.
+    return importlib.import_module("addt_dsl.stack.osi_stack").OsiStack
 
 
 # `stack external protocol WORD` -> the client class that speaks it (ExternalStack or a subclass).
@@ -428,12 +430,12 @@ class ExternalStack:
         spec = run.spec
         road = spec.plan.road(run.ego_plan.road)
         remote = {k: v for k, v in self.settings.items() if k not in CLIENT_SETTINGS}
-        sensors = [{"name": name, "kind": s.keyword, "settings": _jsonable(s.settings),
+        sensors = [{"name": name, "kind": s.keyword, "settings": jsonable(s.settings),
                     "nominal": extrinsics_dict(s.nominal), "period_s": s.period_s}
                    for name, s in run.sensors.items()]
         hello = {
             "type": "hello", "protocol": 1, "seed": spec.seed, "step_s": run.dt,
-            "stack": _jsonable(remote),
+            "stack": jsonable(remote),
             # `route`, `map_lane`, `s_m`: the ego's path as the map names it, so the remote
             # plans along the same route (its lane id on the first road, its start station).
             "ego": {"lane": self.ctx.ego_lane, "route": list(run.ego_plan.route), "map_lane": run.ego_plan.lane,
@@ -491,7 +493,7 @@ class ExternalStack:
                 for key, arr in arrays.items():
                     blobs[f"{k}.{key}"] = arr
                 entry["arrays"] = {key: f"{k}.{key}" for key in arrays}
-                entry["values"] = _jsonable({key: v for key, v in data.items() if key not in arrays})
+                entry["values"] = jsonable({key: v for key, v in data.items() if key not in arrays})
             frames.append(entry)
         self._frames = []
         x, y, heading, speed = self.ctx.ego_pose()
@@ -632,7 +634,7 @@ def _event(t, kind, detail):
     return Event(float(t), str(kind), dict(detail))
 
 
-def _jsonable(d: dict) -> dict:
+def jsonable(d: dict) -> dict:
     out = {}
     for k, v in d.items():
         if isinstance(v, np.generic):

@@ -74,24 +74,24 @@ class _Sensor:
         self.actual = self.nominal
 
 
-class _Frame:
+class RemoteFrame:
     def __init__(self, sensor: str, stamp_s: float, data: dict):
         self.sensor, self.stamp_s, self.data = sensor, stamp_s, data
 
 
-class _GT:
+class RemoteActor:
     def __init__(self, d: dict):
         self.x, self.y, self.heading, self.speed = d["x"], d["y"], d["heading"], d["speed"]
         self.length_m, self.width_m = d["length_m"], d["width_m"]
         self.kind = str(d.get("kind", ""))  # the actor's vehicle kind ("" from a client that sends none)
 
 
-class _RemoteContext:
+class RemoteContext:
     """What `BevStack` asks of the simulator, answered from the bridge messages."""
 
     def __init__(self, hello: dict):
         from addt_dsl.plan import RoadPlan
-        from addt_dsl.runtime.execute import _PathRoad, _Road, _Run
+        from addt_dsl.runtime.execute import ActorPath, ActorRoad, junction_legs
         from addt_dsl.runtime.road import resolve_route
         from addt_dsl.runtime.roadspec import build_network
 
@@ -101,16 +101,16 @@ class _RemoteContext:
         route = [str(r) for r in ego.get("route") or ()]
         road_id = route[0] if route else road_plan.xodr_road_id if road_plan.source == "xodr" and \
             road_plan.xodr_road_id else next(iter(network.roads))
-        # The ego's road or route, as the simulator builds it (`_Run._road_of`): a client that
+        # The ego's road or route, as the simulator builds it (`execute._Run._road_of`): a client that
         # sends no route (an older one) gets its first road.
         lane = int(ego.get("map_lane", ego["lane"]))
         if not route and network.road(road_id).travel_direction(lane) > 0:
-            path = _Road(network, road_id, {})
+            path = ActorRoad(network, road_id, {})
         else:
             _, legs = resolve_route(network, route or [road_id], lane, float(ego.get("s_m", 0.0)))
-            path = _PathRoad(network, road_plan.name, legs, {})
+            path = ActorPath(network, road_plan.name, legs, {})
         self.road, self.road_id = path.road, path.road_id
-        self.junctions = _Run._junctions(path)
+        self.junctions = junction_legs(path)
         self.seed = int(hello["seed"])
         self.wheelbase_m = float(hello["ego"]["wheelbase_m"])
         body = hello["ego"]
@@ -121,7 +121,7 @@ class _RemoteContext:
         self.now = 0.0
         self.ego = (0.0, 0.0, 0.0, 0.0)
         self.ego_s = 0.0
-        self.actors: dict[int, _GT] = {}
+        self.actors: dict[int, RemoteActor] = {}
         # Every event of the run, the stack's and the faults' in the order they happened
         # (as in process); each reply carries those since the last one.
         self.events: list[Event] = []
@@ -213,7 +213,7 @@ def serve_connection(sock: socket.socket, limits: Limits = Limits()) -> None:
                     if ctx is not None:
                         raise ValueError("a second hello on one connection")
                     _check_hello(header, limits)
-                    ctx = _RemoteContext(header)
+                    ctx = RemoteContext(header)
                     stack = BevStack(header["stack"], ctx)
                     # As in process: faults learn the stack's sites (an unknown target is refused).
                     ctx.faults.bind(stack, lambda: ctx.now)
@@ -271,7 +271,7 @@ def _check_hello(header: dict, limits: Limits) -> None:
     settings = header.get("stack")
     if not isinstance(settings, dict):
         raise ValueError("'stack' must be an object of settings")
-    _check_settings(settings, BevStack.params, "stack")
+    check_settings(settings, BevStack.params, "stack")
     step = header.get("step_s")
     if isinstance(step, bool) or not isinstance(step, (int, float)) or not 0.0 < step <= 1.0:
         raise ValueError("'step_s' must be a number in (0, 1] s")
@@ -307,10 +307,10 @@ def _check_faults(header: dict) -> None:
             raise ValueError(f"{what}: the window must be finite, from 0 s, and not end before it starts")
         if not 0 <= f.seed < 2**32:
             raise ValueError(f"{what}: the seed must be in [0, 2^32)")
-        _check_settings(f.settings, cls.params, what)
+        check_settings(f.settings, cls.params, what)
 
 
-def _check_settings(settings, params, what: str) -> None:
+def check_settings(settings, params, what: str) -> None:
     """Settings against their ParamSpecs: known names, a word among its choices, a finite
     number in range (an integer where the spec says int)."""
     if not isinstance(settings, dict):
@@ -332,7 +332,7 @@ def _check_settings(settings, params, what: str) -> None:
             raise ValueError(f"{what} setting {key}={value!r} is outside [{spec.low}, {spec.high}]")
 
 
-def _step(stack, ctx: _RemoteContext, header: dict, blobs: dict) -> tuple[dict, dict]:
+def _step(stack, ctx: RemoteContext, header: dict, blobs: dict) -> tuple[dict, dict]:
     t = float(header["time_s"])
     ctx.now = t
     if t + 1e-12 >= ctx.faults.next_wake_s:  # fault timers, at the start of the step as in process
@@ -348,11 +348,11 @@ def _step(stack, ctx: _RemoteContext, header: dict, blobs: dict) -> tuple[dict, 
             data = {"points": blobs[f["points"]], "hit_body": hit}
             sensor = ctx.sensors[f["sensor"]]
             sensor.actual = _Extrinsics(truth["actual"]) if "actual" in truth else sensor.nominal
-            ctx.actors = {int(k): _GT(v) for k, v in truth.get("actors", {}).items()}
+            ctx.actors = {int(k): RemoteActor(v) for k, v in truth.get("actors", {}).items()}
         else:
             data = dict(f.get("values", {}))
             data.update({key: blobs[name] for key, name in f.get("arrays", {}).items()})
-        stack.on_frame(_Frame(f["sensor"], f["stamp_s"], data), f["arrive_s"])
+        stack.on_frame(RemoteFrame(f["sensor"], f["stamp_s"], data), f["arrive_s"])
     command = stack.step(t, float(header["dt"]))
     reply = {"type": "control", "command": list(command), "commands": ctx.commands,
              "latency": dict(stack.latency), "objects": stack.objects_seen, "events": _new_events(ctx)}
@@ -362,7 +362,7 @@ def _step(stack, ctx: _RemoteContext, header: dict, blobs: dict) -> tuple[dict, 
     return reply, blobs
 
 
-def _new_events(ctx: _RemoteContext) -> list:
+def _new_events(ctx: RemoteContext) -> list:
     """The events since the last reply as `[time_s, kind, detail]`; a series fault event
     goes with empty columns, its entries follow in `series`."""
     out = []
@@ -377,7 +377,7 @@ def _new_events(ctx: _RemoteContext) -> list:
     return out
 
 
-def _series(ctx: _RemoteContext) -> tuple[list, dict]:
+def _series(ctx: RemoteContext) -> tuple[list, dict]:
     """Entries added to series fault events since the last reply, as float64 blobs."""
     series, blobs = [], {}
     for seq, n in ctx.series_sent.items():

@@ -37,8 +37,8 @@ import numpy as np
 from addt_dsl.stack import osi_mapping as M
 from addt_dsl.stack import osi_transport as T
 from addt_dsl.stack.bridge import TOKEN_ENV, ProtocolError, escape
-from addt_dsl.stack.bridge_server import (MAX_CONNECTIONS, BridgeServer, Limits, _check_settings, _Frame, _GT,
-                                          _RemoteContext)
+from addt_dsl.stack.bridge_server import (MAX_CONNECTIONS, BridgeServer, Limits, check_settings, RemoteFrame, RemoteActor,
+                                          RemoteContext)
 
 from osi3.osi_motionrequest_pb2 import MotionRequest
 from osi3.osi_sensorview_pb2 import SensorView
@@ -53,7 +53,7 @@ _STATE_OF_COLOUR = {TrafficLight.Classification.COLOR_RED: 2.0, TrafficLight.Cla
                     TrafficLight.Classification.COLOR_GREEN: 0.0}
 
 
-class _OsiContext(_RemoteContext):
+class _OsiContext(RemoteContext):
     """The bridge server's context; the traffic lights come from the SensorViews."""
 
     def __init__(self, hello: dict):
@@ -130,7 +130,7 @@ def _check_hello(hello: dict, limits: Limits) -> None:
                          f"(this server speaks {T.PROTOCOL_NAME} {T.VERSION})")
     if hello.get("answer") not in T.ANSWERS:
         raise ValueError(f"'answer' must be one of {', '.join(T.ANSWERS)}")
-    _check_settings(hello.get("stack"), BevStack.params, "stack")
+    check_settings(hello.get("stack"), BevStack.params, "stack")
     step = hello.get("step_s")
     if isinstance(step, bool) or not isinstance(step, (int, float)) or not 0.0 < step <= 1.0:
         raise ValueError("'step_s' must be a number in (0, 1] s")
@@ -202,12 +202,12 @@ class _Session:
             if o.id.value == self.host_id:
                 continue
             b = o.base
-            actors[o.id.value] = _GT({"x": b.position.x, "y": b.position.y, "heading": b.orientation.yaw,
+            actors[o.id.value] = RemoteActor({"x": b.position.x, "y": b.position.y, "heading": b.orientation.yaw,
                                       "speed": math.hypot(b.velocity.x, b.velocity.y), "length_m": b.dimension.length,
                                       "width_m": b.dimension.width, "kind": M.object_kind(o)})
         for o in gt.stationary_object:
             b = o.base
-            actors[o.id.value] = _GT({"x": b.position.x, "y": b.position.y, "heading": b.orientation.yaw,
+            actors[o.id.value] = RemoteActor({"x": b.position.x, "y": b.position.y, "heading": b.orientation.yaw,
                                       "speed": 0.0, "length_m": b.dimension.length, "width_m": b.dimension.width,
                                       "kind": "obstacle"})
         for a in actors.values():
@@ -223,7 +223,7 @@ class _Session:
             lights[tl.id.value // 10] = (u, _STATE_OF_COLOUR.get(tl.classification.color, 2.0))
         ctx.lights = sorted(lights.values())
         hits = np.repeat(np.array(sorted(actors), dtype=np.int64), 2)  # two returns each: seen
-        self.stack.on_frame(_Frame(self.lidar, stamp, {"hit_body": hits}), now)
+        self.stack.on_frame(RemoteFrame(self.lidar, stamp, {"hit_body": hits}), now)
 
 
 class _Origin:

@@ -29,7 +29,7 @@ import numpy as np
 from addt_dsl.stack import osi_mapping as M
 from addt_dsl.stack import osi_transport as T
 from addt_dsl.stack.bev import StackError
-from addt_dsl.stack.bridge import (CLIENT_SETTINGS, TOKEN_ENV, ExternalStack, ProtocolError, _jsonable,
+from addt_dsl.stack.bridge import (CLIENT_SETTINGS, TOKEN_ENV, ExternalStack, ProtocolError, jsonable,
                                    check_address, escape, extrinsics_dict, parse_address)
 
 from osi3.osi_motionrequest_pb2 import MotionRequest
@@ -91,7 +91,7 @@ class OsiStack(ExternalStack):
         token = os.environ.get(TOKEN_ENV)
         if token:
             hello["token"] = token
-        return json.dumps(_jsonable(hello), separators=(",", ":"), allow_nan=False).encode()
+        return json.dumps(jsonable(hello), separators=(",", ":"), allow_nan=False).encode()
 
     def _exchange(self, kind: int, payload: bytes, expect: int) -> tuple[int, bytes]:
         """Send one message and read the reply, the whole exchange within `timeout`."""

@@ -22,7 +22,7 @@ import socket
 import struct
 import time
 
-from addt_dsl.stack.bridge import ProtocolError, _recv_exact, escape
+from addt_dsl.stack.bridge import ProtocolError, recv_exact, escape
 
 PROTOCOL_NAME = "addt-osi"
 VERSION = 1  # of this framing and handshake
@@ -59,17 +59,17 @@ def recv_message(sock: socket.socket, max_bytes: int = MAX_MESSAGE_BYTES,
                  deadline: float | None = None) -> tuple[int, bytes]:
     """(type, payload) of one whole message that arrived before `deadline`; ProtocolError
     for a length over `max_bytes` (before reading it), an empty message or an unknown type."""
-    (length,) = struct.unpack(">I", _recv_exact(sock, 4, deadline))
+    (length,) = struct.unpack(">I", recv_exact(sock, 4, deadline))
     if length > max_bytes:
         raise ProtocolError(f"message of {length} bytes exceeds the limit of {max_bytes} bytes")
     if length < 1:
         raise ProtocolError("message of 0 bytes has no type")
-    kind = _recv_exact(sock, 1, deadline)[0]
+    kind = recv_exact(sock, 1, deadline)[0]
     if kind not in TYPE_NAMES:
         raise ProtocolError(f"unknown message type {kind}")
     if kind in JSON_TYPES and length - 1 > MAX_JSON_BYTES:
         raise ProtocolError(f"{TYPE_NAMES[kind]} of {length - 1} bytes exceeds {MAX_JSON_BYTES} bytes")
-    return kind, _recv_exact(sock, length - 1, deadline)
+    return kind, recv_exact(sock, length - 1, deadline)
 
 
 def parse_json(payload: bytes, kind: int) -> dict:
