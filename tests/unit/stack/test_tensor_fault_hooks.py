@@ -191,7 +191,10 @@ def test_a_distant_flip_is_computed_apart_from_the_points(frames):
     flipped = node._forward.maps["head.center"].buf.clone()
     # conv1's cell (1, 1) is head cell (2, 2); the layers after it reach ~20 head cells.
     assert not torch.equal(flipped[..., :24, :24], clean[..., :24, :24])
-    assert torch.equal(flipped[..., 30:, :].view(torch.int32), clean[..., 30:, :].view(torch.int32))
+    # Far from it, the values of the frame without the flip: bit for bit on most CPUs; on some
+    # (Xeon with AVX-512) the box recompute's convolutions round differently, by ~1e-6 here.
+    far, far_clean = flipped[..., 30:, :], clean[..., 30:, :]
+    np.testing.assert_allclose(far.numpy(), far_clean.numpy(), rtol=0, atol=1e-5)
     node.flip_activation_bits(site, [index], [26])
     with torch.inference_mode():
         dense, _ = node.model(node._input)
