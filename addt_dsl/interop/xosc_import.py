@@ -53,6 +53,7 @@ DEFAULT_DURATION_S = 60.0
 MAX_DURATION_S = 3600.0
 CATEGORY_KIND = {"car": "car", "van": "car", "motorbike": "cyclist", "bicycle": "cyclist", "bus": "truck",
                  "truck": "truck", "semitrailer": "truck", "trailer": "truck", "train": "truck", "tram": "truck"}
+MAX_SCRIPTED_SPEED_MS = 70.0  # a scripted ego's default route is long enough at this speed [m/s]
 EDGES = {"none": None, "rising": "rising", "falling": "falling", "risingOrFalling": "changing"}
 RULE_OPS = {"lessThan": "<", "lessOrEqual": "<=", "greaterThan": ">", "greaterOrEqual": ">=", "equalTo": "==",
             "notEqualTo": "!="}
@@ -167,6 +168,16 @@ class _Importer:
         self.sink.error("E0803", message, self.span(el), *notes,
                         "`addtc import --lenient` imports the rest without it (the run is then not the "
                         "scenario in the file)", label=f"<{el.tag}>")
+
+    @property
+    def scripted_ego(self) -> bool:
+        """Whether the ego follows the file's actions: asked for, or an exported scripted ego
+        (its side file gives it no stack)."""
+        if self.ego_mode == "scripted":
+            return True
+        ego = next((n for n, a in self.renames.items() if a == "ego"), None)
+        actor = (self.sidecar or {}).get("actors", {}).get(ego or "ego")
+        return actor is not None and not actor.get("stack")
 
     def approx(self, el, message: str, *notes: str) -> None:
         self.sink.warning("W0802", message, self.span(el), *notes, label=f"<{el.tag}>" if el is not None else "")
@@ -907,13 +918,14 @@ class _Translate(_Importer):
                     if route_el is not None:
                         self.actors[who]["route_el"] = route_el
                 elif act.tag == "RoutingAction" and _child(act, "FollowTrajectoryAction") is not None \
-                        and who != "ego":
+                        and (who != "ego" or self.scripted_ego):
                     init_trajectories.append((act, who))
                 elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
                                                                 "AbsoluteTargetSpeed") is not None:
                     target = _child(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
                     dyn = _child(act, "SpeedAction", "SpeedActionDynamics")
-                    if dyn is not None and dyn.get("dynamicsShape", "step") != "step" and who != "ego" \
+                    if dyn is not None and dyn.get("dynamicsShape", "step") != "step" \
+                            and (who != "ego" or self.scripted_ego) \
                             and self.value(dyn, "value", default=0.0) > 0:
                         # A speed change with dynamics in Init starts from standstill (OpenSCENARIO:
                         # Init actions run as the simulation starts) and takes its time.
@@ -942,7 +954,7 @@ class _Translate(_Importer):
             op = "*" if rel.get("speedTargetValueType", "delta") == "factor" else "+"
             self.actors[who]["speed"] = E.Binary(op=op, left=value, right=base) if op == "*" else _plus(base, value)
             self.actors[who]["speed_now"] = eval_param_expr(self.actors[who]["speed"], self.param_values())
-            if rel.get("continuous", "false") in ("true", "1") and who != "ego":
+            if rel.get("continuous", "false") in ("true", "1") and (who != "ego" or self.scripted_ego):
                 clause = self.relative_speed(_child(act, "SpeedAction", "SpeedActionDynamics"), rel, self.actors[who])
                 if clause is not None:
                     self.actors[who]["behaviors"].append(clause)
@@ -968,7 +980,7 @@ class _Translate(_Importer):
 
     def private_action(self, act, who: str):
         """The behaviour clause an action starts, or None after a diagnostic."""
-        if who == "ego":
+        if who == "ego" and not self.scripted_ego:
             self.approx(act, f"<{act.tag}> on the ego: the stack under test drives the ego",
                         "`addtc import --ego scripted` makes the ego follow the file's actions")
             return None
@@ -1956,13 +1968,22 @@ class _Translate(_Importer):
                 fields["reverse"] = True  # it faces against its lane: it drives that way
             if sc:
                 fields["ignore_lights"] = bool(extra.get("ignore_lights", False))
-            elif self.light_ctls and who != "ego":
+            elif self.light_ctls and (who != "ego" or self.scripted_ego):
                 fields["ignore_lights"] = True  # OpenSCENARIO's actors follow their actions, not the lights
             if eval_param_expr(offset, self.param_values()) != 0.0:
                 fields["offset"] = offset
             fields["triggers"] = fields["triggers"] + [TriggerPlan.model_validate(g)
                                                        for g in sc.get("groups", {}).get(who, [])]
-            if who == "ego":
+            if who == "ego" and self.scripted_ego:
+                # The ego follows the file's actions like any entity: no stack, no sensors.
+                if not sc and not fields.get("route"):
+                    route = self.straight_on(road, lane, s, MAX_SCRIPTED_SPEED_MS * duration + 50.0)
+                    if route is not None and len(route) > 1:
+                        fields["route"] = route
+                        self.approx(info["el"], f"the ego has no route in the file: it drives on through junctions, "
+                                                f"straight where it can, else to the kerb side, else the other way "
+                                                f"(roads {' -> '.join(route)})")
+            elif who == "ego":
                 fields.update(behaviors=[], triggers=[])
                 if extra.get("stack"):
                     fields["stack"] = ClausePlan.model_validate(extra["stack"])
