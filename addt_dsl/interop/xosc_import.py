@@ -1975,7 +1975,12 @@ class _Translate(_Importer):
             fields["triggers"] = fields["triggers"] + [TriggerPlan.model_validate(g)
                                                        for g in sc.get("groups", {}).get(who, [])]
             if who == "ego" and self.scripted_ego:
-                # The ego follows the file's actions like any entity: no stack, no sensors.
+                # The ego follows the file's actions like any entity: no stack, no sensors. With
+                # none, it keeps its speed (OpenSCENARIO's default controller), said as a behaviour:
+                # an ego without behaviours or steps is the stack's.
+                if not fields["behaviors"] and not fields["triggers"]:
+                    fields["behaviors"] = [ClausePlan(keyword="behavior", name="cruise",
+                                                      settings={"speed": fields["speed"], "shape": "step"})]
                 if not sc and not fields.get("route"):
                     route = self.straight_on(road, lane, s, MAX_SCRIPTED_SPEED_MS * duration + 50.0)
                     if route is not None and len(route) > 1:
