@@ -1767,16 +1767,41 @@ class _Translate(_Importer):
             self.skip(c, f"a {kind} relative distance is not translated (longitudinal and cartesian are)")
             return None
         if c.tag == "ReachPositionCondition" or c.tag == "DistanceCondition":
+            # The Euclidean distance of the entity's reference point to the position's point
+            # (esmini: `dist < tolerance`; DistanceCondition: its rule against `value`).
             pos = c.find("Position")
-            lane_pos = _only_child(pos) if pos is not None else None
-            if lane_pos is not None and lane_pos.tag in ("LanePosition", "RoadPosition") and \
-                    self.placed[a][0] == self.road(self.raw(lane_pos, "roadId"), lane_pos):
-                tol = self.number(c, "tolerance" if c.tag == "ReachPositionCondition" else "value", units.LENGTH)
-                self.approx(c, "reaching a position: the actor's station passes it (less the tolerance)")
-                return E.Binary(op=">=", left=sig("s", a),
-                                right=E.Binary(op="-", left=self.number(lane_pos, "s", units.LENGTH), right=tol))
-            self.skip(c, f"<{c.tag}> is translated only for a lane or road position on the actor's road")
-            return None
+            if pos is None:
+                self.error(c, f"<{c.tag}> needs a <Position>")
+                return None
+            point = self.world_point(pos, a)
+            if point is None:
+                return None
+            x, y, _ = point
+            if c.tag == "ReachPositionCondition":
+                radius, op = self.number(c, "tolerance", units.LENGTH), "<"
+            else:
+                radius = self.number(c, "value", units.LENGTH)
+                if (c.get("freespace") or "false").lower() == "true":
+                    self.skip(c, "a free-space distance to a position is not translated (between reference points "
+                                 "it is)")
+                    return None
+                kind = c.get("relativeDistanceType", "cartesianDistance")
+                lane_pos = _only_child(pos)
+                if kind == "longitudinal" and lane_pos is not None and \
+                        lane_pos.tag in ("LanePosition", "RoadPosition") and self.along_s(a) and \
+                        self.placed[a][0] == self.road(self.raw(lane_pos, "roadId"), lane_pos):
+                    # along the road both are on: the stations' difference
+                    gap = E.Call(fn="abs", args=[E.Binary(op="-", left=sig("s", a),
+                                                          right=self.number(lane_pos, "s", units.LENGTH))])
+                    return E.Binary(op=op, left=gap, right=radius)
+                if kind not in ("cartesianDistance", "euclidianDistance"):
+                    self.skip(c, f"a {kind} distance to a position is not translated (cartesian is, and "
+                                 "longitudinal along the actor's own road)")
+                    return None
+            dx = E.Binary(op="-", left=sig("x", a), right=E.Num(value=round(x, 9)))
+            dy = E.Binary(op="-", left=sig("y", a), right=E.Num(value=round(y, 9)))
+            square = E.Binary(op="+", left=E.Binary(op="*", left=dx, right=dx), right=E.Binary(op="*", left=dy, right=dy))
+            return E.Binary(op=op, left=square, right=E.Binary(op="*", left=radius, right=radius))
         self.skip(c, f"<{c.tag}> is not translated",
                   "translated: traveled distance, speed, acceleration, relative distance, time headway, TTC, "
                   "reach position")
