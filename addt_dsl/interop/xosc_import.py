@@ -1732,20 +1732,14 @@ class _Translate(_Importer):
             free = (c.get("freespace") or "false").lower() == "true"
             half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
             if c.tag == "TimeToCollisionCondition":
+                # As esmini evaluates it: the longitudinal distance along the road over the
+                # speed difference; undefined (the condition false, whatever its rule) when
+                # they do not close in.
                 value = self.number(c, "value", units.TIME)
-                if free:
-                    return E.Binary(op=op, left=sig("ttc", a, b), right=value)
-                # ttc = (gap + half) / closing speed, infinite when not closing
                 closing = E.Binary(op="-", left=sig("speed", a), right=sig("speed", b))
-                lhs = _plus(sig("gap", a, b), E.Num(value=half))
-                rhs = E.Binary(op="*", left=value, right=closing)
-                if op in ("<", "<="):
-                    return _all([E.Binary(op=">", left=closing, right=E.Num(value=0.0)),
-                                 E.Binary(op=op, left=lhs, right=rhs)])
-                if op in (">", ">="):
-                    return _any([E.Binary(op="<=", left=closing, right=E.Num(value=0.0)),
-                                 E.Binary(op=op, left=lhs, right=rhs)])
-                return E.Binary(op=op, left=sig("ttc", a, b), right=value)
+                lhs = _plus(sig("gap", a, b), E.Num(value=half)) if half else sig("gap", a, b)
+                return _all([E.Binary(op=">", left=closing, right=E.Num(value=0.0)),
+                             E.Binary(op=op, left=lhs, right=E.Binary(op="*", left=value, right=closing))])
             if c.tag == "TimeHeadwayCondition":
                 headway = E.Binary(op="*", left=self.number(c, "value", units.TIME), right=sig("speed", a))
                 return E.Binary(op=op, left=sig("gap", a, b),
