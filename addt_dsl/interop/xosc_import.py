@@ -1577,6 +1577,7 @@ class _Translate(_Importer):
         if step is None:
             return
         kind, fields = step
+        clauses = _speed_into_trajectory(clauses)
         if len(clauses) > 1:
             self.approx(event, f"event '{name}' starts {len(clauses)} actions: one step each, same start")
         for clause in clauses:
@@ -1710,10 +1711,10 @@ class _Translate(_Importer):
         op = RULE_OPS.get(c.get("rule", ""), ">")
         sig = lambda fn, *args: E.Signal(name=f"{fn}({','.join(args)})")  # noqa: E731 - canonical names
         if c.tag == "TraveledDistanceCondition":
-            s0, travelled = self.placed[a][2], self.number(c, "value", units.LENGTH)
-            if self.along_s(a):
-                return E.Binary(op=">=", left=sig("s", a), right=_plus(s0, travelled))
-            return E.Binary(op="<=", left=sig("s", a), right=E.Binary(op="-", left=s0, right=travelled))
+            # `s(A)` grows in A's driving direction, from its station in its own frame
+            # (the road's station along +s; on a path, from the path's entry end).
+            travelled = self.number(c, "value", units.LENGTH)
+            return E.Binary(op=">=", left=sig("s", a), right=_plus(self.start_station(a), travelled))
         if c.tag == "SpeedCondition":
             return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
         if c.tag == "AccelerationCondition":
@@ -1800,6 +1801,36 @@ class _Translate(_Importer):
                   "translated: traveled distance, speed, acceleration, relative distance, time headway, TTC, "
                   "reach position")
         return None
+
+    def start_station(self, who: str):
+        """The actor's first `s(A)` as an expression: its road station where it drives a road
+        along +s; on a path (a lane driven against s, a reversed lane, a route), the
+        distance from the path's entry end, as the runtime measures it."""
+        road_name, lane, s, _ = self.placed[who]
+        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+        info = self.actors[who]
+        reverse = bool(info.get("against_s")) and info["vehicle"] != "obstacle"
+        routed = info.get("route_el") is not None or info.get("route_from_position") is not None
+        if lane == 0 or (not routed and self.along_s(who)):
+            return s
+        try:
+            _, legs = resolve_route(self.network, [road_id], lane, float(eval_param_expr(s, self.param_values())),
+                                    reverse=reverse)
+        except (RouteError, ValueError, ArithmeticError):
+            return s
+        first = legs[0]
+        entry = E.Num(value=round(float(first.s_from), 9))
+        return E.Binary(op="-", left=s, right=entry) if first.direction > 0 else \
+            E.Binary(op="-", left=entry, right=s)
+
+    def driving_way(self, who: str) -> int:
+        """+1 if the actor starts driving towards +s of its road, -1 against."""
+        road_name, lane, _, _ = self.placed[who]
+        if lane == 0:
+            return 1
+        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+        reverse = bool(self.actors[who].get("against_s")) and self.actors[who]["vehicle"] != "obstacle"
+        return self.network.road(road_id).travel_direction(lane) * (-1 if reverse else 1)
 
     def along_s(self, who: str) -> bool:
         """Whether the actor drives towards +s (its lane's OpenDRIVE direction)."""
@@ -1990,7 +2021,10 @@ class _Translate(_Importer):
             elif self.light_ctls and (who != "ego" or self.scripted_ego):
                 fields["ignore_lights"] = True  # OpenSCENARIO's actors follow their actions, not the lights
             if eval_param_expr(offset, self.param_values()) != 0.0:
-                fields["offset"] = offset
+                # OpenSCENARIO's lane offset is along the road's t (left of +s); the language's is
+                # to the driver's left: the other way for an actor driving against s.
+                fields["offset"] = offset if self.driving_way(who) > 0 else \
+                    E.Num(value=-offset.value) if isinstance(offset, E.Num) else E.Unary(op="neg", arg=offset)
             fields["triggers"] = fields["triggers"] + [TriggerPlan.model_validate(g)
                                                        for g in sc.get("groups", {}).get(who, [])]
             if who == "ego" and self.scripted_ego:
@@ -2181,6 +2215,21 @@ def _is_number(text: str) -> bool:
         return math.isfinite(float(text))
     except ValueError:
         return False
+
+
+def _speed_into_trajectory(clauses: list[ClausePlan]) -> list[ClausePlan]:
+    """A speed action and an untimed trajectory in one event: OpenSCENARIO moves the entity
+    along the trajectory at the speed the speed action sets; the language's trajectory holds
+    the longitudinal channel itself, so it takes that speed (and its rate limits)."""
+    cruise = next((c for c in clauses if c.name == "cruise" and c.settings.get("speed") is not None
+                   and not any(isinstance(n, E.Signal) for n in E.walk(c.settings["speed"]))), None)
+    traj = next((c for c in clauses if c.name == "trajectory" and "times" not in c.settings
+                 and "speed" not in c.settings), None)
+    if cruise is None or traj is None:
+        return clauses
+    extra = {k: cruise.settings[k] for k in ("accel", "decel") if k in cruise.settings}
+    merged = traj.model_copy(update={"settings": {**traj.settings, "speed": cruise.settings["speed"], **extra}})
+    return [merged if c is traj else c for c in clauses if c is not cruise]
 
 
 def _plus(a, b):
