@@ -177,8 +177,9 @@ def _entity(a: ActorPlan):
 
 
 def _position(run: _Run, a: ActorPlan) -> xosc.LanePosition:
-    offset = run.num(a.offset) if a.offset is not None else 0.0
     lane = int(round(run.num(a.lane)))
+    # The language's offset is to the driver's left; OpenSCENARIO's along the road's t.
+    offset = (run.num(a.offset) if a.offset is not None else 0.0) * _first_way(run.plan, a, lane)
     road_id = a.route[0] if a.route else run.road_ids[a.road]
     s = run.num(a.s)  # `at S` is a station of the first road, on a route too (only `s(A)` runs along it)
     if a.yaw is not None or a.reverse:  # both languages face an entity along its lane's driving direction
@@ -186,6 +187,17 @@ def _position(run: _Run, a: ActorPlan) -> xosc.LanePosition:
         orientation = xosc.Orientation(h=h, reference=xosc.ReferenceContext.relative)
         return xosc.LanePosition(s, offset, str(lane), road_id, orientation)
     return xosc.LanePosition(s, offset, str(lane), road_id)
+
+
+def _first_way(plan, a: ActorPlan, lane: int) -> int:
+    """+1 if the actor starts driving towards +s of its first road, -1 against."""
+    road = plan.road(a.road)
+    way = -1 if a.reverse else 1
+    if road.source != "xodr":
+        return way if lane < 0 else -way
+    network = build_network([road])[a.road]
+    first = a.route[0] if a.route else (road.xodr_road_id or next(iter(network.roads)))
+    return network.road(first).travel_direction(lane) * way
 
 
 def _along_s(plan, a: ActorPlan, lane: int) -> bool:

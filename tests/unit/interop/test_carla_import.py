@@ -46,7 +46,9 @@ def _world(plan, actor):
     odr = parse_xodr(road.xodr_text, road.xodr_file).road(road.xodr_road_id)
     s = float(eval_param_expr(actor.s, {}))
     lane = int(actor.lane.value)  # `at` is the first road's station, on a route too
-    t = float(odr.lane_center_t(lane, s)) + float(eval_param_expr(actor.offset, {}))
+    # `offset` is to the driver's left: against the road's t on a lane driven against s
+    way = odr.travel_direction(lane) * (-1 if actor.reverse else 1)
+    t = float(odr.lane_center_t(lane, s)) + way * float(eval_param_expr(actor.offset, {}))
     x, y = odr.point_at(s, t)
     return float(x), float(y)
 

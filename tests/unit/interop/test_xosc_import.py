@@ -807,3 +807,29 @@ def test_edges_and_delays_survive_export_and_import_without_the_side_file(tmp_pa
     assert back.plan is not None, [str(d) for d in back.diagnostics]
     steps = {t.clause.name: (t.edge, t.delay_s.value if t.delay_s else None) for t in back.plan.agents[0].triggers}
     assert steps == {"brake": ("rising", None), "cruise": ("falling", 1.0)}
+
+
+def test_a_lane_offset_is_along_the_roads_t_in_openscenario_and_to_the_drivers_left_here(tmp_path):
+    # OpenSCENARIO's LanePosition offset is along the road's t; the language's `offset` is to
+    # the driver's left, the other way on a lane driven against s (esmini's walkers were 1 m
+    # off, CARLA's CyclistCrossing hero 1 m from its WorldPosition).
+    from addt_dsl.interop.xosc_export import export_run
+    from addt_dsl.sweep import expand
+    source = """scenario offsets {
+  duration 2 s
+  road r {
+    line length 300 m
+    lanes left 1 right 1 width 3.5 m
+  }
+  ego car on r lane -1 at 10 m speed 0 m/s offset 0.25 m
+  agent oncoming car on r lane 1 at 200 m speed 10 m/s offset 0.5 m
+}
+"""
+    done = export_run(expand(compile_source(source).plan).specs[0], tmp_path)
+    xml = done.xosc_path.read_text()
+    assert 'offset="0.25"' in xml and 'offset="-0.5"' in xml
+    done.sidecar_path.unlink()
+    back = import_xosc(done.xosc_path)
+    assert back.plan is not None, [str(d) for d in back.diagnostics]
+    assert back.plan.agents[0].offset.value == pytest.approx(0.5)
+    assert back.plan.ego.offset.value == pytest.approx(0.25)
