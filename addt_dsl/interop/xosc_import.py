@@ -677,7 +677,16 @@ class _Translate(_Importer):
         if name == "ego" and kind != "car":
             self.approx(obj, f"the ego is a {kind} in the scenario; addt-dsl's stack drives a car")
             kind = "car"
-        self.actors[name] = {"vehicle": kind, "length_m": length if length and length > 0 else None,
+        # The catalog's Performance bounds every speed change (esmini clamps the acceleration
+        # of SpeedActions to it): [m/s^2]; None without one.
+        perf = body.find("Performance") if body is not None and body.tag == "Vehicle" else None
+        limits = {}
+        for attr, key in (("maxAcceleration", "max_accel"), ("maxDeceleration", "max_decel")):
+            if perf is not None and perf.get(attr) is not None:
+                value = self.value(perf, attr, units.ACCELERATION)
+                if value > 0 and math.isfinite(value):
+                    limits[key] = value
+        self.actors[name] = {**limits, "vehicle": kind, "length_m": length if length and length > 0 else None,
                              "width_m": width if width and width > 0 else None,
                              "height_m": height if height and 0.05 <= height <= 10.0 else None, "el": obj,
                              "behaviors": [], "triggers": [], "lane_now": None, "speed_now": 0.0}
@@ -1408,25 +1417,27 @@ class _Translate(_Importer):
         dim = self.raw(dyn, "dynamicsDimension") if dyn is not None else "time"
         amount = abs(self.value(dyn, "value")) if dyn is not None else 0.0
         dv = v_now - info["speed_now"]
-        if shape == "step" or amount == 0.0:
-            rate = 10.0
-            self.approx(dyn if dyn is not None else target, "a step change of speed: a cruise at up to 10 m/s^2")
-        elif dim == "rate":
+        if shape == "step" or amount == 0.0:  # at once, as esmini sets it when the action starts
+            info["speed_now"] = v_now
+            return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, "shape": "step"})
+        if dim == "rate":
             rate = amount
         elif dim == "time":
             rate = abs(dv) / amount if dv else 1.0
         else:  # distance: v1^2 - v0^2 = 2 a d
             rate = abs(v_now ** 2 - info["speed_now"] ** 2) / (2 * amount) if dv else 1.0
         rate = max(rate, 0.01)
+        if shape != "step" and amount > 0.0:
+            limit = info.get("max_accel" if dv > 0 else "max_decel")
+            rate = min(rate, limit) if limit is not None and dim in ("time", "rate") and shape == "linear" else rate
         info["speed_now"] = v_now
         if shape in ("cubic", "sinusoidal") and dv and dim in ("time", "rate"):
             return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, **self.speed_dynamics(dyn)})
         if dv < 0:  # constant deceleration to a speed: exactly `brake`
             return ClausePlan(keyword="behavior", name="brake",
                               settings={"decel": E.Num(value=min(rate, 12.0)), "to_speed": v})
-        if shape != "step" and dv:
-            self.approx(dyn, f"a {shape} speed change: `cruise`, which tracks the speed with a 1 s time constant "
-                             f"limited to {rate:.3g} m/s^2")
+        if shape != "step" and shape != "linear" and dv:
+            self.approx(dyn, f"a {shape} speed change over a distance: `cruise` at {rate:.3g} m/s^2")
         return ClausePlan(keyword="behavior", name="cruise",
                           settings={"speed": v, "accel": E.Num(value=rate), "decel": E.Num(value=rate)})
 
@@ -1498,13 +1509,24 @@ class _Translate(_Importer):
         for act in story.iterfind("Act"):
             self.act_name = act.get("name", "")
             act_at = None
+            groups = list(act.iterfind("StartTrigger/ConditionGroup"))
             for cond in act.iterfind("StartTrigger/ConditionGroup/Condition"):
                 time = cond.find("ByValueCondition/SimulationTimeCondition")
-                if time is not None:
+                sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+                if len(groups) > 1:
+                    self.skip(cond, "an act start trigger of several condition groups is not translated")
+                elif time is not None and (time.get("rule") or "").startswith("greater") \
+                        and self.value(cond, "delay", units.TIME, 0.0) == 0.0:
                     value = self.value(time, "value")
-                    act_at = value if value > 0 else None
+                    act_at = max(act_at or 0.0, value) if value > 0 else act_at
+                elif sesc is not None and self.raw(sesc, "storyboardElementType") == "story" \
+                        and self.raw(sesc, "storyboardElementRef") == self.story_name \
+                        and self.raw(sesc, "state") in ("startTransition", "runningState") \
+                        and self.value(cond, "delay", units.TIME, 0.0) == 0.0:
+                    continue  # its own story running: the act starts with it
                 else:
-                    self.skip(cond, "act start conditions other than the simulation time are not translated")
+                    self.skip(cond, "act start conditions other than the simulation time and the story running "
+                                    "are not translated")
             for stop in act.iterfind("StopTrigger/ConditionGroup"):
                 self.skip(stop, "act stop triggers are not translated")
             for group in act.iterfind("ManeuverGroup"):

@@ -660,8 +660,12 @@ def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
         agent.t += agent.speed * math.sin(agent.heading_rel) * dt
         agent.t_target = agent.t
     else:
-        agent.s += agent.speed * dt / agent.ground_scale
-        agent.t = lateral_profile(agent, time_s + dt)
+        t_next = lateral_profile(agent, time_s + dt)
+        step = agent.speed * dt
+        if t_next != agent.t:  # a lane change: the path's ground splits into along and across
+            step = math.sqrt(max(step * step - (t_next - agent.t) ** 2, 0.0))
+        agent.s += step / agent.ground_scale
+        agent.t = t_next
 
 
 def relative_heading(agent: AgentState, time_s: float, dt: float) -> float:

@@ -157,3 +157,29 @@ scenario edges {
     assert starts["a.never"] is None
     assert starts["a.up"] == pytest.approx(3.5, abs=trace.period_s + 1e-9)
     assert "brake" in fired
+
+
+def test_a_lane_change_splits_the_ground_covered_into_along_and_across():
+    # Speed is along the actor's own path: during a lane change part of it goes across the
+    # road (esmini moves an entity along its heading). 10 m/s, a linear 3.5 m change over
+    # 1 s: 3.5 m/s across, sqrt(100 - 12.25) = 9.3675 m/s along.
+    trace = run("""
+scenario change {
+  duration 3 s
+  road r {
+    line length 800 m
+    lanes right 2 width 3.5 m
+  }
+  ego car on r lane -2 at 10 m speed 0 m/s {
+    stack bev cruise_speed 0 m/s
+  }
+  agent a car on r lane -2 at 100 m speed 10 m/s {
+    at 1 s behavior lane_change to -1 duration 1 s shape linear
+  }
+}
+""")
+    a = trace.actors["a"]
+    k1, k2 = (int(round(t / trace.period_s)) for t in (1.0, 2.0))
+    assert a.s[k1] - a.s[0] == pytest.approx(10.0, abs=1e-9)
+    assert a.s[k2] - a.s[k1] == pytest.approx(np.sqrt(100.0 - 3.5 ** 2), abs=1e-6)
+    assert a.t[k2] - a.t[k1] == pytest.approx(3.5, abs=1e-9)
