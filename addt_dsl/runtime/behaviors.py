@@ -381,12 +381,14 @@ class Trajectory(Behavior):
         ParamSpec("x", units.LENGTH, kind="list", doc="instead of `s`/`t`: world x of the waypoints"),
         ParamSpec("y", units.LENGTH, kind="list", doc="instead of `s`/`t`: world y of the waypoints"),
         ParamSpec("times", units.TIME, kind="list", low=0.0,
-                  doc="time to be at each waypoint, from the start of the behaviour (default: at `speed`)"),
+                  doc="time to be at each waypoint, from the start of the behaviour, met exactly: the speed "
+                      "changes at the waypoints at once, a waypoint repeated with a later time is a wait, and "
+                      "after the last one it keeps its last segment's speed (default: at `speed`)"),
         ParamSpec("speed", units.SPEED, default=None, low=0.0,
                   doc="speed without `times` (default: the actor's speed when the behaviour starts)"),
         ParamSpec("max_speed", units.SPEED, default=40.0, low=0.1, doc="speed limit with `times`"),
-        ParamSpec("accel", units.ACCELERATION, default=5.0, low=0.01, doc="max acceleration"),
-        ParamSpec("decel", units.ACCELERATION, default=8.0, low=0.01, doc="max deceleration"),
+        ParamSpec("accel", units.ACCELERATION, default=5.0, low=0.01, doc="max acceleration (without `times`)"),
+        ParamSpec("decel", units.ACCELERATION, default=8.0, low=0.01, doc="max deceleration (without `times`)"),
     )
     doc = ("Follow waypoints in road (`s`, `t`) or world (`x`, `y`) coordinates, at a speed or "
            "meeting given times (OpenSCENARIO FollowTrajectoryAction, polyline); then drive on "
@@ -422,34 +424,46 @@ class Trajectory(Behavior):
         self.times = [time_s + t for t in st["times"]] if st["times"] is not None else None
         self.index = 0
         self.origin = (agent.s, agent.t)
+        self.last_speed = agent.speed
         # OpenSCENARIO: a trajectory without timing is driven at the speed the entity has.
         self.cruise = st["speed"] if st["speed"] is not None else agent.speed
 
     def accel(self, agent, world, time_s):
         st = self.settings
-        while self.index < len(self.points) and self._passed(agent):
+        while self.index < len(self.points) and self._passed(agent, time_s):
             self.origin = self.points[self.index]
             self.index += 1
         if self.index == len(self.points):  # done: on along the road at this offset
             if agent.heading_rel:
                 _walk_towards(agent, 0.0)
+            if self.times is not None:  # at the speed of its last segment (0 after a wait)
+                return (self.last_speed - agent.speed) / world.dt
             target = agent.speed
         else:
             ps, pt = self.points[self.index]
-            agent.heading_rel = math.atan2(pt - agent.t, ps - agent.s)
+            if (ps, pt) != (agent.s, agent.t):
+                agent.heading_rel = math.atan2(pt - agent.t, ps - agent.s)
             agent.t_target, agent.lc_duration_s = agent.t, 0.0
             if self.times is None:
                 target = self.cruise
-            else:  # the remaining polyline over the time left to its waypoint
+            else:
+                # Timed (OpenSCENARIO's position following): the remaining segment over the
+                # time left to its waypoint, whatever the acceleration: it is there on time.
                 left_s = self.times[self.index] - time_s
                 dist = math.hypot(ps - agent.s, pt - agent.t)
-                target = min(st["max_speed"], dist / left_s) if left_s > world.dt else st["max_speed"]
+                target = min(st["max_speed"], dist / left_s) if left_s > world.dt else \
+                    min(st["max_speed"], dist / world.dt)
+                self.last_speed = target
+                return (target - agent.speed) / world.dt
         return _speed_tracking(agent, target, st["accel"], st["decel"], world.dt)
 
-    def _passed(self, agent: AgentState) -> bool:
-        """Whether the agent is at or beyond the current waypoint along its segment."""
+    def _passed(self, agent: AgentState, time_s: float) -> bool:
+        """Whether the agent is at or beyond the current waypoint along its segment (a
+        waypoint where it already is, with a time: once that time has come: it waits)."""
         (s0, t0), (s1, t1) = self.origin, self.points[self.index]
         ds, dt_ = s1 - s0, t1 - t0
+        if ds * ds + dt_ * dt_ < 1e-12 and self.times is not None:
+            return time_s + 1e-9 >= self.times[self.index]
         return (agent.s - s0) * ds + (agent.t - t0) * dt_ >= ds * ds + dt_ * dt_ - 1e-9
 
 

@@ -183,3 +183,31 @@ scenario change {
     assert a.s[k1] - a.s[0] == pytest.approx(10.0, abs=1e-9)
     assert a.s[k2] - a.s[k1] == pytest.approx(np.sqrt(100.0 - 3.5 ** 2), abs=1e-6)
     assert a.t[k2] - a.t[k1] == pytest.approx(3.5, abs=1e-9)
+
+
+def test_a_timed_trajectory_is_at_each_waypoint_on_time():
+    # OpenSCENARIO's timed polyline (position following): on each segment at its length over
+    # its duration, whatever the acceleration; a repeated waypoint is a wait; after the last
+    # one the speed of the last segment (0 after a wait). It lagged behind its times before
+    # (its speed limited to 5 m/s^2 up and 8 m/s^2 down) and drove on at the end.
+    trace = run("""
+scenario timed {
+  duration 5 s
+  road r {
+    line length 800 m
+    lanes right 2 width 3.5 m
+  }
+  ego car on r lane -2 at 10 m speed 0 m/s {
+    stack bev cruise_speed 0 m/s
+  }
+  agent a cyclist on r lane -1 at 100 m speed 10 m/s {
+    behavior trajectory s [100, 120, 125, 125] m t [-1.75, -1.75, -1.75, -1.75] m times [0, 2, 2.5, 3.5] s
+  }
+}
+""")
+    a = trace.actors["a"]
+    at = {t: a.s[int(round(t / trace.period_s))] for t in (1.0, 2.0, 2.25, 3.0, 4.5)}
+    assert at[1.0] == pytest.approx(110.0, abs=0.02)
+    assert at[2.0] == pytest.approx(120.0, abs=0.11)
+    assert at[2.25] == pytest.approx(122.5, abs=0.11)
+    assert at[3.0] == pytest.approx(125.0, abs=0.11) and at[4.5] == pytest.approx(at[3.0], abs=1e-9)
