@@ -257,6 +257,9 @@ class ScenarioPlan(_Model):
     light_steps: list[TriggerPlan] = Field(default_factory=list)
     # Weather and light models acting on the sensors (`environment { fog visibility 150 m }`).
     environment: list[ClausePlan] = Field(default_factory=list)
+    # `end when C [delayed D]`: the run ends where this start fires (no clause), at the
+    # latest at `duration_s` (OpenSCENARIO's storyboard stop trigger).
+    end: TriggerPlan | None = None
 
     def road(self, name: str) -> RoadPlan:
         return next(r for r in self.roads if r.name == name)

@@ -161,6 +161,13 @@ class StepStart(Node):
 
 
 @dataclass(frozen=True, slots=True)
+class EndWhen(Node):
+    """`end when C [delayed D]` (or `end at T`, `end after D`): when the run ends."""
+
+    starts: tuple[StepStart, ...]
+
+
+@dataclass(frozen=True, slots=True)
 class Step(Node):
     """`at 5 s`, `after 2 s`, `when <cond>` (any combination), then a clause or a group."""
 
@@ -286,7 +293,7 @@ class Block(Node):
     items: tuple = ()
 
 
-Definition = RoadDecl | ParamDecl | AssumeDecl | ActorDecl | Block
+Definition = RoadDecl | ParamDecl | AssumeDecl | ActorDecl | Block | EndWhen
 
 
 @dataclass(frozen=True, slots=True)

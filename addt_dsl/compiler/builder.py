@@ -21,7 +21,7 @@ MAX_EXPR_DEPTH = 200  # operators chained or nested in one expression
 _POSITION_ONLY = frozenset({
     "INCLUDE", "SCENARIO", "ROAD", "IMPORT", "PARAM", "ASSUME", "KEEP", "AGENT", "AHEAD", "BEHIND",
     "LANE", "AT", "AFTER", "WHEN", "SET", "FAULTS", "DURING", "FROM", "EXPECT", "NO", "STAY", "REACH",
-    "SWEEP", "GRID", "CASES", "REPEAT", "SEED", "MAX_REJECTIONS", "WITHIN", "LSQB", "LIGHTS",
+    "SWEEP", "GRID", "CASES", "REPEAT", "SEED", "MAX_REJECTIONS", "WITHIN", "LSQB", "LIGHTS", "END",
 })
 
 
@@ -314,6 +314,9 @@ class Builder:
     def b_labelled(self, span, items):
         label, item = items
         return dataclasses.replace(item, span=span, label=label.value, label_span=label.span)
+
+    def b_end_when(self, span, items):
+        return ast.EndWhen(span, tuple(i for i in items if isinstance(i, ast.StepStart)))
 
     # ---- traffic lights
     def b_lights(self, span, items):

@@ -64,6 +64,7 @@ class Context:
     signals: list[P.SignalPlan] = field(default_factory=list)
     controllers: list[P.ControllerPlan] = field(default_factory=list)
     light_steps: list[P.TriggerPlan] = field(default_factory=list)
+    end: P.TriggerPlan | None = None
     used_params: set[str] = field(default_factory=set)
     read_file: object = None  # callable(path str, span) -> (display, text) | None
     sources: dict[str, str] = field(default_factory=dict)

@@ -33,6 +33,7 @@ def build_plan(ctx: Context) -> ScenarioPlan:
         signals=ctx.signals,
         controllers=ctx.controllers,
         light_steps=ctx.light_steps,
+        end=ctx.end,
     )
 
 

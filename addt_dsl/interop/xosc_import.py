@@ -139,6 +139,8 @@ class _Importer:
         self.xodr_name = ""
         self.xodr_text = ""
         self.events: dict[str, tuple] = {}  # event name -> (actor, kind, fields, clause)
+        self.maneuvers: dict[str, list[str]] = {}  # maneuver name -> its events' names
+        self.end: TriggerPlan | None = None  # the storyboard's stop trigger beyond its time
         self.pending: list[tuple] = []  # events started by another event: linked at the end
         self.anchors: dict[str, tuple] = {}  # no-op events that start a group: name -> (actor, start fields)
         self.placed: dict[str, tuple] = {}  # actor -> (road name, lane, s, offset)
@@ -378,6 +380,7 @@ class _Translate(_Importer):
             duration = self.stop_trigger(root.find("Storyboard/StopTrigger"))
             for story in root.iterfind("Storyboard/Story"):
                 self.story(story)
+            self.end_trigger(root.find("Storyboard/StopTrigger"))
         except _Stop:
             return None
         if self.sink.has_errors:
@@ -1496,10 +1499,17 @@ class _Translate(_Importer):
     # -- stop trigger
 
     def stop_trigger(self, trigger) -> float:
-        for cond in trigger.iterfind(".//SimulationTimeCondition") if trigger is not None else ():
-            if (cond.get("rule") or "").startswith("greater"):
-                return min(max(self.value(cond, "value"), 0.1), MAX_DURATION_S)
-        self.approx(trigger, f"no simulation-time stop trigger: duration {DEFAULT_DURATION_S:g} s")
+        """The run's duration: a stop condition group that is a simulation time alone (the
+        rest of the stop trigger is `end when ...`, `end_trigger`)."""
+        for group in trigger.iterfind("ConditionGroup") if trigger is not None else ():
+            conds = list(group.iterfind("Condition"))
+            time = conds[0].find("ByValueCondition/SimulationTimeCondition") if len(conds) == 1 else None
+            if time is not None and (time.get("rule") or "").startswith("greater"):
+                return min(max(self.value(time, "value") + self.value(conds[0], "delay", units.TIME, 0.0), 0.1),
+                           MAX_DURATION_S)
+        others = trigger is not None and any(True for _ in trigger.iterfind("ConditionGroup/Condition"))
+        self.approx(trigger, f"no simulation-time stop trigger: at most {DEFAULT_DURATION_S:g} s"
+                    + (" (the run ends when its stop condition holds)" if others else ""))
         return DEFAULT_DURATION_S
 
     # -- storyboard
@@ -1543,6 +1553,8 @@ class _Translate(_Importer):
         if group.find("CatalogReference") is not None:
             self.skip(group.find("CatalogReference"), "maneuver catalogs are not translated")
         for maneuver in maneuvers:
+            self.maneuvers.setdefault(maneuver.get("name", ""), []).extend(
+                e.get("name", "") for e in maneuver.iterfind("Event"))
             for event in maneuver.iterfind("Event"):
                 self.event(event, who, act_at)
 
@@ -1739,6 +1751,27 @@ class _Translate(_Importer):
             return E.Binary(op=">=", left=sig("s", a), right=_plus(self.start_station(a), travelled))
         if c.tag == "SpeedCondition":
             return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
+        if c.tag == "CollisionCondition":
+            # The twin ends a run at its first collision; as a condition, an overlap of the
+            # actor's box with any other (exact with one other actor or a type that is every one).
+            others = [n for n in self.actors if n != a]
+            target = c.find("EntityRef")
+            if target is not None and len(others) > 1:
+                self.approx(c, "a collision with one entity: a collision of the actor with any other")
+            elif c.find("ByType") is not None and len(others) > 1:
+                self.approx(c, "a collision with a type of object: a collision of the actor with any other")
+            return E.Binary(op="<=", left=sig("clearance", a), right=E.Num(value=0.0))
+        if c.tag == "RelativeSpeedCondition":
+            b = self.actor_name(c)
+            if b is None:
+                return None
+            if c.get("direction") not in (None, "longitudinal"):
+                self.skip(c, f"a {c.get('direction')} relative speed is not translated (longitudinal is)")
+                return None
+            if c.get("direction") == "longitudinal":
+                self.approx(c, "a longitudinal relative speed: the difference of the speeds (the same when they "
+                               "drive the same way)")
+            return E.Binary(op=op, left=sig("rel_speed", a, b), right=self.number(c, "value", units.SPEED))
         if c.tag == "AccelerationCondition":
             return E.Binary(op=op, left=sig("accel", a), right=self.number(c, "value", units.ACCELERATION))
         if c.tag in ("RelativeDistanceCondition", "TimeToCollisionCondition", "TimeHeadwayCondition"):
@@ -1923,21 +1956,90 @@ class _Translate(_Importer):
 
     def after_other_actor(self, who, ref, delay, state, cond, clause, first) -> bool:
         """An event on another actor's event: that event's step gets a name and this one
-        starts on its state (`when ended(lead.brake) then ...`)."""
-        other = first[0]
-        triggers = self.actors[other]["triggers"]
-        i = next((i for i, tr in enumerate(triggers) if tr.clause == first[3]), None)
-        if i is None:
+        starts on its state (`when ended(lead.brake) delayed D then ...`)."""
+        state_of = self.event_state(ref, state)
+        if state_of is None:
             return False
-        taken = {tr.label for a in self.actors.values() for tr in a["triggers"] if tr.label}
-        label = triggers[i].label or _safe_name(ref, taken)
-        triggers[i] = triggers[i].model_copy(update={"label": label})
-        if delay:
-            self.approx(cond, "a delay after another actor's event is not translated: the step starts on its state")
-        # A step state is a formula: the signal above 0, as the compiler lowers it.
-        state_of = E.Binary(op=">", left=E.Signal(name=f"{STATE_SIGNAL[state]}({other}.{label})"), right=E.Num(value=0.0))
-        self.actors[who]["triggers"].append(TriggerPlan(condition=state_of, clause=clause))
+        self.actors[who]["triggers"].append(TriggerPlan(condition=state_of, clause=clause,
+                                                        delay_s=E.Num(value=delay) if delay else None))
         return True
+
+    def event_state(self, ref: str, state: str):
+        """`started(A.x) > 0` / `ended(A.x) > 0` for an event, naming its step (an event
+        at time 0 becomes a named step `after 0 s`); None if the event has no step."""
+        first = self.events.get(ref)
+        if first is None or state not in STATE_SIGNAL:
+            return None
+        other = first[0]
+        info = self.actors[other]
+        taken = {tr.label for a in self.actors.values() for t in a["triggers"] for tr in _steps_of(t) if tr.label}
+        if not any(tr.clause == first[3] for t in info["triggers"] for tr in _steps_of(t)):
+            j = next((j for j, c in enumerate(info["behaviors"]) if c == first[3]), None)
+            if j is None:
+                return None
+            clause = info["behaviors"].pop(j)
+            info["triggers"].append(TriggerPlan(after_s=E.Num(value=0.0), clause=clause))
+        found: list[str] = []
+        info["triggers"] = [_labelled(t, first[3], _safe_name(ref, taken), found) for t in info["triggers"]]
+        label = found[0]
+        # A step state is a formula: the signal above 0, as the compiler lowers it.
+        return E.Binary(op=">", left=E.Signal(name=f"{STATE_SIGNAL[state]}({other}.{label})"), right=E.Num(value=0.0))
+
+    def end_trigger(self, trigger) -> None:
+        """The storyboard's stop trigger beyond its simulation time (the run's duration):
+        `end when ...`. Element states of events and maneuvers, and entity conditions."""
+        if trigger is None:
+            return
+        alternatives, delays, edges, at_s = [], [], [], None
+        groups = list(trigger.iterfind("ConditionGroup"))
+        for group in groups:
+            conj, timed = [], None
+            for cond in group.iterfind("Condition"):
+                time = cond.find("ByValueCondition/SimulationTimeCondition")
+                if time is not None and (time.get("rule") or "").startswith("greater"):
+                    timed = self.value(time, "value")  # alone: the duration
+                    continue
+                sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+                if sesc is not None:
+                    kind, ref, state = (self.raw(sesc, "storyboardElementType"), self.raw(sesc, "storyboardElementRef"),
+                                        self.raw(sesc, "state"))
+                    events = [ref] if kind in ("event", "action") else self.maneuvers.get(ref) \
+                        if kind == "maneuver" and state in ("endTransition", "completeState") else None
+                    parts = [self.event_state(e, state) for e in events] if events else [None]
+                    if not parts or any(p is None for p in parts):
+                        self.skip(cond, f"a stop trigger on the {kind} '{ref}' ({state}) is not translated",
+                                  "events and maneuvers that translate to steps are")
+                        return
+                    conj.append(_all(parts))
+                else:
+                    formula = self.condition(cond, "ego")
+                    if formula is None:
+                        return
+                    conj.append(formula)
+                delays.append((self.value(cond, "delay", units.TIME, 0.0), cond))
+                edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
+            if conj and timed is not None:
+                if len([g for g in groups if list(g)]) > 1:
+                    self.skip(group, "a stop condition group that mixes the simulation time with other conditions, "
+                                     "beside other groups, is not translated")
+                    return
+                at_s = timed  # `end at T when C`
+            if conj:
+                alternatives.append(_all(conj))
+        if not alternatives:
+            return
+        fields = {"condition": _any(alternatives)}
+        if at_s is not None and at_s > 0:
+            fields["at_s"] = E.Num(value=at_s)
+        if any(e for e, _ in edges):
+            if len(edges) > 1:
+                self.approx(edges[0][1], "several stop conditions with edges: the edge applies to the whole condition")
+            fields["edge"] = next(e for e, _ in edges if e)
+        if delays and max(d for d, _ in delays) > 0:
+            if len({d for d, _ in delays}) > 1:
+                self.approx(delays[0][1], "stop conditions with different delays: the run ends the longest after")
+            fields["delay_s"] = E.Num(value=max(d for d, _ in delays))
+        self.end = TriggerPlan(**fields)
 
     def speed_limit_at(self, road_name: str, s) -> float | None:
         """The map's speed limit [m/s] where an actor is placed (None: the map gives none)."""
@@ -2126,7 +2228,8 @@ class _Translate(_Importer):
         plan = ScenarioPlan(name=name, description=description[:500], duration_s=duration,
                             step_s=sc.get("step_s", 0.01), seed=sc.get("seed", 0), run_seed=sc.get("run_seed"),
                             roads=list(self.roads.values()), ego=ego, agents=agents, faults=faults, oracles=oracles,
-                            environment=self.environment, controllers=controllers, light_steps=self.light_steps)
+                            environment=self.environment, controllers=controllers, light_steps=self.light_steps,
+                            end=self.end)
         values = {**self.param_values(), **sc.get("params", {})}
         dims = {**{k: v for k, v in self.param_dims.items()},
                 **{k: units.DIMENSIONLESS for k in sc.get("params", {}) if k not in self.param_dims}}
@@ -2237,6 +2340,25 @@ def _is_number(text: str) -> bool:
         return math.isfinite(float(text))
     except ValueError:
         return False
+
+
+def _steps_of(step: TriggerPlan):
+    """A step and every step of its groups, depth first."""
+    yield step
+    for sub in step.group.steps if step.group is not None else ():
+        yield from _steps_of(sub)
+
+
+def _labelled(step: TriggerPlan, clause: ClausePlan, label: str, found: list) -> TriggerPlan:
+    """The step tree with the first step that starts `clause` named (its name if it has
+    one, else `label`); the name used is appended to `found`."""
+    if not found and step.clause == clause:
+        found.append(step.label or label)
+        return step if step.label else step.model_copy(update={"label": label})
+    if step.group is None:
+        return step
+    steps = [_labelled(s, clause, label, found) for s in step.group.steps]
+    return step.model_copy(update={"group": step.group.model_copy(update={"steps": steps})})
 
 
 def _speed_into_trajectory(clauses: list[ClausePlan]) -> list[ClausePlan]:

@@ -241,11 +241,7 @@ def _actor(pr: _Printer, a: ActorPlan, is_ego: bool) -> None:
 def _step(pr: _Printer, tr: TriggerPlan, depth: int, in_group: bool) -> None:
     """A step of an agent's script: `[at T] [after T] [when F then] action`, the action a
     behaviour or a `sequence`/`parallel` block of steps."""
-    ex = pr.exprs
-    starts = _join(f"at {ex.value(tr.at_s, units.TIME)}" if tr.at_s is not None else "",
-                   f"after {ex.value(tr.after_s, units.TIME)}" if tr.after_s is not None else "",
-                   f"when {tr.edge + ' ' if tr.edge else ''}{ex.formula(tr.condition)}{_hold(pr, tr)} then"
-                   if tr.condition is not None else "")
+    starts = _starts(pr, tr, "then")
     if (tr.clause is None) == (tr.group is None):
         raise PrinterError("a step starts one behaviour or one group")
     if not starts and tr.clause is not None and not in_group:
@@ -263,6 +259,29 @@ def _step(pr: _Printer, tr: TriggerPlan, depth: int, in_group: bool) -> None:
     for sub in tr.group.steps:
         _step(pr, sub, depth + 1, in_group=True)
     pr.emit(depth, "}")
+
+
+def _starts(pr: _Printer, tr: TriggerPlan, then: str) -> str:
+    """`[at T] [after T] [when [EDGE] F [for D] [delayed D] then]`."""
+    ex = pr.exprs
+    return _join(f"at {ex.value(tr.at_s, units.TIME)}" if tr.at_s is not None else "",
+                 f"after {ex.value(tr.after_s, units.TIME)}" if tr.after_s is not None else "",
+                 _join(f"when {tr.edge + ' ' if tr.edge else ''}{ex.formula(tr.condition)}{_hold(pr, tr)}", then)
+                 if tr.condition is not None else "")
+
+
+def _end(pr: _Printer) -> None:
+    """`end when ...`: the condition that ends the run."""
+    end = pr.plan.end
+    if end is None:
+        return
+    if end.clause is not None or end.group is not None or end.label is not None:
+        raise PrinterError("the run's end starts no behaviour")
+    starts = _starts(pr, end, "")
+    if not starts:
+        raise PrinterError("an `end` needs a start condition")
+    pr.emit(0)
+    pr.emit(1, f"end {starts}")
 
 
 def _hold(pr: _Printer, tr: TriggerPlan) -> str:
@@ -466,7 +485,7 @@ def _environment(pr: _Printer) -> None:
 
 
 SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _lights, _environment,
-                                                    _faults, _oracles, _sweep)
+                                                    _end, _faults, _oracles, _sweep)
 
 
 # ---------------------------------------------------------------- entry points

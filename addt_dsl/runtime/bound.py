@@ -113,6 +113,7 @@ class BoundScenario:
     controllers: tuple[BoundController, ...] = ()
     light_steps: tuple[BoundStep, ...] = ()
     environment: tuple[BoundClause, ...] = ()
+    end: BoundStep | None = None  # `end when ...`: the run ends where it fires
 
     def road(self, name: str) -> RoadPlan:
         return next(r for r in self.roads if r.name == name)
@@ -130,7 +131,8 @@ def bind(spec: RunSpec) -> BoundScenario:
         oracles=tuple(BoundOracle(o.name, o.severity, substitute_params(o.formula, params)) for o in plan.oracles),
         environment=tuple(_clause(c, params) for c in plan.environment),
         signals=tuple(plan.signals), controllers=tuple(_controller(c, params) for c in plan.controllers),
-        light_steps=tuple(bind_step(t, params) for t in plan.light_steps))
+        light_steps=tuple(bind_step(t, params) for t in plan.light_steps),
+        end=bind_step(plan.end, params) if plan.end is not None else None)
 
 
 def _controller(c: ControllerPlan, params: dict[str, float]) -> BoundController:

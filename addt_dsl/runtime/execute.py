@@ -277,6 +277,8 @@ class _Run:
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self._setup_lights(plan)
+        # `end when ...`: a start without a behaviour; the run ends where it fires.
+        self.end_script = Script((plan.end,)) if plan.end is not None else None
         self.ego_junctions = junction_legs(self.ego_road)
         self.ctx = _Context(self)
         stack_clause = ego.stack
@@ -695,7 +697,13 @@ def _loop(run: _Run) -> Trace:
         if steps:  # named steps: ended on the state just recorded
             for name, code in run.step_states(t_now).items():
                 steps[name][k] = code
-        if collided or k == n - 1:
+        ended = False
+        if run.end_script is not None:  # `end when ...`, on the state just recorded
+            run.end_script.advance(t_now, _condition_checker(run, rec, k), lambda clause, time_s: None)
+            if run.end_script.done:
+                ended = True
+                run.events.append(Event(t_now, "end", {}))
+        if collided or ended or k == n - 1:
             last = k + 1
             break
 

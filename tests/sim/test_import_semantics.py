@@ -211,3 +211,26 @@ scenario timed {
     assert at[2.0] == pytest.approx(120.0, abs=0.11)
     assert at[2.25] == pytest.approx(122.5, abs=0.11)
     assert at[3.0] == pytest.approx(125.0, abs=0.11) and at[4.5] == pytest.approx(at[3.0], abs=1e-9)
+
+
+def test_end_when_ends_the_run_where_its_condition_fires():
+    # `end when C delayed D` (OpenSCENARIO's stop trigger): 10 m/s braking at 5 m/s^2 from
+    # 2 s ends at 4 s; the run ends 1 s later, at 5 s, not at its 60 s duration.
+    trace = run("""
+scenario ends {
+  duration 60 s
+  road r {
+    line length 800 m
+    lanes right 2 width 3.5 m
+  }
+  ego car on r lane -2 at 10 m speed 0 m/s {
+    stack bev cruise_speed 0 m/s
+  }
+  agent lead car on r lane -1 at 50 m speed 10 m/s {
+    stopping: at 2 s behavior brake decel 5 m/s^2
+  }
+  end when ended(lead.stopping) delayed 1 s
+}
+""")
+    assert trace.duration_s == pytest.approx(5.0, abs=trace.period_s + 1e-9)
+    assert [e.time_s for e in trace.events if e.kind == "end"] == [pytest.approx(trace.duration_s)]

@@ -13,6 +13,7 @@ from __future__ import annotations
 from addt_dsl.compiler.context import Context
 from addt_dsl.compiler.rules.actors import rule_actors
 from addt_dsl.compiler.rules.assumptions import rule_assumptions
+from addt_dsl.compiler.rules.ending import rule_end
 from addt_dsl.compiler.rules.environment import rule_environment
 from addt_dsl.compiler.rules.faults import rule_faults
 from addt_dsl.compiler.rules.goal import rule_goal_oracle
@@ -37,6 +38,7 @@ RULES = (
     rule_faults,
     rule_environment,
     rule_oracles,
+    rule_end,
     rule_goal_oracle,
     rule_unused,
 )
