@@ -451,8 +451,10 @@ EXPORT_EDGES = {None: xosc.ConditionEdge.none, "rising": xosc.ConditionEdge.risi
                 "falling": xosc.ConditionEdge.falling, "changing": xosc.ConditionEdge.risingOrFalling}
 
 
-def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str] | None) -> xosc.Trigger:
-    """`armed_by`: the events whose start arms this step (None: armed at time 0)."""
+def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str] | None,
+                   point: str = "start") -> xosc.Trigger:
+    """`armed_by`: the events whose start arms this step (None: armed at time 0); `point`:
+    "start" (an event's StartTrigger) or "stop" (the storyboard's StopTrigger)."""
     common = []
     after = run.num(step.after_s) if step.after_s is not None else 0.0
     if armed_by is None:
@@ -504,9 +506,9 @@ def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str]
                 run.carried.append(f"`when {step.edge} ...` ({event}): the edge of each of its conditions, not of "
                                    "the whole condition")
         groups = got
-    trigger = xosc.Trigger()
+    trigger = xosc.Trigger(point)
     for conds in groups:
-        group = xosc.ConditionGroup()
+        group = xosc.ConditionGroup(point)
         for c in common + conds:
             group.add_condition(c)
         trigger.add_conditiongroup(group)
@@ -858,8 +860,15 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
         act.add_maneuver_group(group)
     story = xosc.Story("addt_story")
     story.add_act(act)
-    stop = xosc.ValueTrigger("addt_duration", 0, xosc.ConditionEdge.rising,
-                             xosc.SimulationTimeCondition(plan.duration_s, xosc.Rule.greaterThan), "stop")
+    duration = xosc.ValueTrigger("addt_duration", 0, xosc.ConditionEdge.rising,
+                                 xosc.SimulationTimeCondition(plan.duration_s, xosc.Rule.greaterThan), "stop")
+    if plan.end is None:
+        stop = duration
+    else:  # `end when ...`: its condition groups, or the duration
+        stop = _start_trigger(run, plan.end, "addt_end", None, "stop")
+        group = xosc.ConditionGroup("stop")
+        group.add_condition(duration)
+        stop.add_conditiongroup(group)
     storyboard = xosc.StoryBoard(init, stop)
     storyboard.add_story(story)
 

@@ -799,6 +799,7 @@ def test_edges_and_delays_survive_export_and_import_without_the_side_file(tmp_pa
     when rising speed(a) > 5 m/s then behavior brake decel 1 m/s^2
     when falling speed(a) > 9.5 m/s delayed 1 s then behavior cruise speed 20 m/s
   }
+  end when rising speed(a) < 1 m/s delayed 1 s
 }
 """
     done = export_run(expand(compile_source(source).plan).specs[0], tmp_path)
@@ -809,6 +810,8 @@ def test_edges_and_delays_survive_export_and_import_without_the_side_file(tmp_pa
     assert back.plan is not None, [str(d) for d in back.diagnostics]
     steps = {t.clause.name: (t.edge, t.delay_s.value if t.delay_s else None) for t in back.plan.agents[0].triggers}
     assert steps == {"brake": ("rising", None), "cruise": ("falling", 1.0)}
+    end = back.plan.end  # the storyboard's stop trigger, beside the duration's group
+    assert (end.edge, end.delay_s.value, back.plan.duration_s) == ("rising", 1.0, 6.0)
 
 
 def test_a_lane_offset_is_along_the_roads_t_in_openscenario_and_to_the_drivers_left_here(tmp_path):
