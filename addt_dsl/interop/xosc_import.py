@@ -28,6 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from defusedxml import DefusedXmlException
+from xml.etree.ElementTree import Element  # an empty <Init> only: files are parsed with defusedxml
+
 from defusedxml.ElementTree import DefusedXMLParser
 from pydantic import TypeAdapter
 
@@ -49,6 +51,9 @@ from addt_dsl.runtime.road import XodrError, parse_xodr
 from addt_dsl.vehicles import VEHICLES
 
 MAX_XML_BYTES = 8 * 1024 * 1024
+MAX_STATION_M = 1e6  # a road station beyond this is refused as content, not translated [m]
+MAX_LANE_ID = 100
+MAX_EXPRESSION_CHARS = 10_000  # a `${...}` expression's length (docs/limits.md)
 DEFAULT_DURATION_S = 60.0
 MAX_DURATION_S = 3600.0
 CATEGORY_KIND = {"car": "car", "van": "car", "motorbike": "cyclist", "bicycle": "cyclist", "bus": "truck",
@@ -130,6 +135,8 @@ class _Importer:
         self.sources: dict[str, str] = {}
         self.lines: dict[int, int] = {}
         self.params: dict[str, tuple[str, str]] = {}  # name -> (type, raw value)
+        self.resolved: dict[tuple[str, str], str] = {}  # (name, raw value) -> resolved value
+        self.catalog_docs: dict[Path, object] = {}  # catalog file -> its parsed root (None: unreadable)
         self.param_dims: dict[str, units.Dim | None] = {}  # used as a number: its dimension (None: clash)
         self.sidecar: dict | None = None
         self.renames: dict[str, str] = {}  # OpenSCENARIO entity name -> addt actor name
@@ -238,16 +245,24 @@ class _Importer:
             raise _Stop from None
 
     def resolve(self, value: str, depth: int = 0) -> str:
-        """`$name` and `${expression}` resolved (parameters may refer to parameters)."""
+        """`$name` and `${expression}` resolved (parameters may refer to parameters). Each
+        parameter's value is resolved once (a file whose parameters each refer to the one
+        before many times would otherwise take exponential time)."""
         if depth > 16:
             raise ValueError("parameters refer to each other too deeply")
         if value.startswith("${") and value.endswith("}"):
+            if len(value) > MAX_EXPRESSION_CHARS:
+                raise ValueError(f"an expression of {len(value)} characters (at most {MAX_EXPRESSION_CHARS})")
             body = re.sub(r"\$([A-Za-z_]\w*)", lambda m: self.resolve("$" + m.group(1), depth + 1), value[2:-1])
             return repr(_arith(ast.parse(body, mode="eval")))
         if value.startswith("$"):
             if value[1:] not in self.params:
                 raise KeyError(value[1:])
-            return self.resolve(self.params[value[1:]][1], depth + 1)
+            raw = self.params[value[1:]][1]
+            key = (value[1:], raw)
+            if key not in self.resolved:
+                self.resolved[key] = self.resolve(raw, depth + 1)
+            return self.resolved[key]
         return value
 
     def number(self, el, attr: str, dim=units.DIMENSIONLESS, default: float | None = None,
@@ -306,6 +321,14 @@ class _Importer:
 
 
 # ---------------------------------------------------------------- the document
+
+def _lane_ids(odr, s: float) -> tuple[int, ...]:
+    """Every lane id of a road's lane section at s (driving or not)."""
+    try:
+        return tuple(odr.lane_ids(s))
+    except ValueError:
+        return ()
+
 
 def _child(el, *path):
     for tag in path:
@@ -707,8 +730,10 @@ class _Translate(_Importer):
             if not self.inside(folder):
                 continue
             for candidate in sorted(folder.glob("*.xosc"))[:64]:
-                got = self.read(os.path.relpath(candidate, self.path.parent), self.path.parent, ref)
-                root = self.parse(got[1], candidate.name) if got is not None else None
+                if candidate not in self.catalog_docs:  # each catalog file read and parsed once
+                    got = self.read(os.path.relpath(candidate, self.path.parent), self.path.parent, ref)
+                    self.catalog_docs[candidate] = self.parse(got[1], candidate.name) if got is not None else None
+                root = self.catalog_docs[candidate]
                 for el in root.iterfind(f"Catalog/{kind}") if root is not None else ():
                     if el.get("name") == entry:
                         return el
@@ -738,8 +763,18 @@ class _Translate(_Importer):
         if pos.tag == "LanePosition":
             road = self.road(self.raw(pos, "roadId"), pos)
             lane = int(self.value(pos, "laneId"))
-            return road, lane, self.number(pos, "s", units.LENGTH), \
-                self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
+            s = self.number(pos, "s", units.LENGTH)
+            odr = self.network.road(next(i for i, r in self.roads.items() if r.name == road))
+            s_val = float(eval_param_expr(s, self.param_values()))
+            if not math.isfinite(s_val) or abs(s_val) > MAX_STATION_M or abs(lane) > MAX_LANE_ID:
+                self.error(pos, f"s = {s_val:g} m, lane {lane}: not a place on any road "
+                                f"(|s| at most {MAX_STATION_M:g} m, |laneId| at most {MAX_LANE_ID})")
+                raise _Stop
+            if 0.0 <= s_val <= odr.length + 1e-6 and lane not in _lane_ids(odr, s_val):
+                self.error(pos, f"road {odr.id} has no lane {lane} at s = {s_val:g} m",
+                           f"lanes there: {', '.join(str(i) for i in _lane_ids(odr, s_val))}")
+                raise _Stop
+            return road, lane, s, self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
         if pos.tag in ("RoadPosition", "WorldPosition", "RelativeRoadPosition", "RelativeLanePosition"):
             return self.position_from_road(pos, who)
         if pos.tag == "RoutePosition":
@@ -896,8 +931,8 @@ class _Translate(_Importer):
     # -- init
 
     def init(self, init) -> None:
-        if init is None:
-            return
+        if init is None:  # no <Init>: every entity at its documented default place
+            init = Element("Init")
         pairs = []
         for action in init.iterfind("Actions/GlobalAction"):
             env = _child(action, "EnvironmentAction", "Environment")
