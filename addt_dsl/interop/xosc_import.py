@@ -1076,6 +1076,8 @@ class _Translate(_Importer):
             self.approx(act, "a controller: the entity follows its actions, as with OpenSCENARIO's default "
                              "controller (esmini's driver models are not emulated)")
             return None
+        if act.tag == "TeleportAction":
+            return self.teleport(act, who)
         if act.tag == "SynchronizeAction":
             return self.synchronize(act, who)
         if act.tag == "RoutingAction" and _child(act, "FollowTrajectoryAction") is not None:
@@ -1198,6 +1200,32 @@ class _Translate(_Importer):
             self.skip(pos_el, f"a point the road does not have: {exc}")
             return None
         return s_val, t_val
+
+    def teleport(self, act, who: str) -> ClausePlan | None:
+        """A TeleportAction during the run: to a lane or road position of the road the actor
+        is on (`teleport s S t T`, road coordinates); to its own position moved only in
+        height, nothing (the twin's actors follow the road's height)."""
+        pos_el = act.find("Position")
+        pos = _only_child(pos_el) if pos_el is not None else None
+        if pos is None:
+            self.error(act, "a TeleportAction needs one <Position>")
+            return None
+        if pos.tag == "RelativeObjectPosition" and self.actor_name(pos) == who and \
+                self.value(pos, "dx", default=0.0) == 0.0 and self.value(pos, "dy", default=0.0) == 0.0:
+            self.approx(act, "a teleport that only raises or lowers the actor: nothing (actors follow the road's height)")
+            return None
+        if pos.tag in ("LanePosition", "RoadPosition"):
+            road = self.road(self.raw(pos, "roadId"), pos)
+            if road == self.placed[who][0] and not self.actors[who].get("route_el"):
+                got = self.road_point(pos_el, who)
+                if got is None:
+                    return None
+                s_val, t_val = got
+                return ClausePlan(keyword="behavior", name="teleport",
+                                  settings={"s": E.Num(value=round(s_val, 9)), "t": E.Num(value=round(t_val, 9))})
+        self.skip(act, f"a teleport to a <{pos.tag}> is not translated",
+                  "a lane or road position on the road the actor drives (without a route) is")
+        return None
 
     def synchronize(self, act, who: str) -> ClausePlan | None:
         master = self.actor_name(act, "masterEntityRef")

@@ -520,6 +520,29 @@ class LaneChange(Behavior):
 
 
 @BEHAVIORS.register
+class Teleport(Behavior):
+    keyword = "teleport"
+    channel = "lateral"
+    params = (
+        ParamSpec("s", units.LENGTH, required=True, doc="station on the road it is on (OpenDRIVE road coordinates)"),
+        ParamSpec("t", units.LENGTH, required=True, doc="lateral offset from the road's reference line, left of +s"),
+    )
+    doc = ("Move at once to a point of the road the actor is on, keeping its speed and direction "
+           "(OpenSCENARIO TeleportAction during the run).")
+
+    def start(self, agent, world, time_s):
+        s, t = world.from_road_coords(agent, self.settings["s"], self.settings["t"])
+        agent.s, agent.t = s, t
+        agent.t_target, agent.t_start, agent.lc_duration_s, agent.heading_rel = t, t, 0.0, 0.0
+        lane = world.actor_lane(agent.name)
+        if lane is not None:
+            agent.lane = lane
+
+    def ended(self, agent, world, time_s):
+        return True
+
+
+@BEHAVIORS.register
 class CutIn(LaneChange):
     keyword = "cut_in"
     params = (

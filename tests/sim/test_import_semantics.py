@@ -234,3 +234,26 @@ scenario ends {
 """)
     assert trace.duration_s == pytest.approx(5.0, abs=trace.period_s + 1e-9)
     assert [e.time_s for e in trace.events if e.kind == "end"] == [pytest.approx(trace.duration_s)]
+
+
+def test_teleport_moves_at_once_and_keeps_the_speed():
+    trace = run("""
+scenario jump {
+  duration 3 s
+  road r {
+    line length 800 m
+    lanes right 2 width 3.5 m
+  }
+  ego car on r lane -2 at 10 m speed 0 m/s {
+    stack bev cruise_speed 0 m/s
+  }
+  agent a car on r lane -1 at 100 m speed 10 m/s {
+    at 1 s behavior teleport s 300 m t -5.25 m
+  }
+}
+""")
+    a = trace.actors["a"]
+    k = int(round(1.0 / trace.period_s))
+    assert a.s[k] == pytest.approx(110.0, abs=1e-6)
+    assert a.s[k + 1] == pytest.approx(300.0 + 10.0 * trace.period_s, abs=1e-6)
+    assert a.t[k + 1] == pytest.approx(-5.25, abs=1e-9) and a.speed[k + 1] == pytest.approx(10.0)
