@@ -986,8 +986,8 @@ class _Translate(_Importer):
                                                                 "RelativeTargetSpeed") is not None:
                     init_relative.append((act, who))
                 elif act.tag in ("ControllerAction", "ActivateControllerAction"):
-                    self.approx(act, "a controller: the entity follows its actions, as with OpenSCENARIO's default "
-                                     "controller (esmini's driver models are not emulated)")
+                    self.approx(act, "a controller: the entity follows its actions, as under the default "
+                                     "controller of OpenSCENARIO (the driver models of esmini are not emulated)")
                 else:
                     self.skip(act, f"<{act.tag}> in Init is not translated (positions and speeds are)")
         for act, who in init_relative:  # relative to another entity's initial speed
@@ -1055,8 +1055,8 @@ class _Translate(_Importer):
                 return None
             return self.lane_change(change, who, info)
         if act.tag == "ActivateControllerAction":
-            self.approx(act, "a controller: the entity follows its actions, as with OpenSCENARIO's default "
-                             "controller (esmini's driver models are not emulated)")
+            self.approx(act, "a controller: the entity follows its actions, as under the default controller "
+                             "of OpenSCENARIO (the driver models of esmini are not emulated)")
             return None
         if act.tag == "ControllerAction":
             ctrl = act.find(".//Controller")
@@ -1073,8 +1073,8 @@ class _Translate(_Importer):
                         except ValueError:
                             settings[prop.get("name")] = raw
                     return ClausePlan(keyword="behavior", name=keyword, settings=settings)
-            self.approx(act, "a controller: the entity follows its actions, as with OpenSCENARIO's default "
-                             "controller (esmini's driver models are not emulated)")
+            self.approx(act, "a controller: the entity follows its actions, as under the default controller "
+                             "of OpenSCENARIO (the driver models of esmini are not emulated)")
             return None
         if act.tag == "TeleportAction":
             return self.teleport(act, who)
@@ -1601,6 +1601,8 @@ class _Translate(_Importer):
                     self.skip(cond, "act start conditions other than the simulation time and the story running "
                                     "are not translated")
             for stop in act.iterfind("StopTrigger/ConditionGroup"):
+                if all((c.get("name") or "").startswith("criteria_") for c in stop.iterfind("Condition")):
+                    continue  # CARLA ScenarioRunner's pass criteria: oracles (pass_criteria)
                 self.skip(stop, "act stop triggers are not translated")
             for group in act.iterfind("ManeuverGroup"):
                 self.maneuver_group(group, act_at)
@@ -2058,6 +2060,8 @@ class _Translate(_Importer):
         for group in groups:
             conj, timed = [], None
             for cond in group.iterfind("Condition"):
+                if (cond.get("name") or "").startswith("criteria_"):
+                    continue  # CARLA ScenarioRunner's pass criteria: oracles (pass_criteria)
                 time = cond.find("ByValueCondition/SimulationTimeCondition")
                 if time is not None and (time.get("rule") or "").startswith("greater"):
                     timed = self.value(time, "value")  # alone: the duration
