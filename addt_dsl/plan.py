@@ -107,6 +107,9 @@ class TriggerPlan(_Model):
     # `when C delayed D`: fires D [s] after the condition (its edge) first counted
     # (OpenSCENARIO's condition delay).
     delay_s: Expr | None = None
+    # `when C repeat N`: armed again once the behaviour it started has ended, up to N
+    # firings in all (OpenSCENARIO's maximumExecutionCount); None: once.
+    repeat: int | None = None
     # `brake_hard: at 3 s ...`: a named step, whose state `started(lead.brake_hard)` and
     # `ended(lead.brake_hard)` read; unique in the scenario.
     label: str | None = None

@@ -158,6 +158,7 @@ class StepStart(Node):
     hold: Expression | None = None  # `when C for D`: C must have held for D
     edge: str | None = None  # `when rising C`: rising | falling | changing
     delay: Expression | None = None  # `when C delayed D`: fires D after C (its edge) fired
+    repeat: Expression | None = None  # `when C repeat N`: fires up to N times
 
 
 @dataclass(frozen=True, slots=True)

@@ -303,10 +303,12 @@ class Builder:
         edge = None
         if isinstance(items[0], Token) and items[0].type in ("RISING", "FALLING", "CHANGING"):
             edge, items = str(items[0]), items[1:]
-        delay = None
+        repeat = delay = None
+        if isinstance(items[-1], _Marked) and items[-1].kind == "repeat":
+            repeat, items = items[-1].value, items[:-1]
         if len(items) >= 3 and isinstance(items[-2], Token) and items[-2].type == "DELAY":
             delay, items = items[-1], items[:-2]
-        return ast.StepStart(span, "when", items[0], items[1] if len(items) > 1 else None, edge, delay)
+        return ast.StepStart(span, "when", items[0], items[1] if len(items) > 1 else None, edge, delay, repeat)
 
     def b_group(self, span, items):
         return ast.Group(span, str(items[0]), tuple(items[1:]))
@@ -314,6 +316,9 @@ class Builder:
     def b_labelled(self, span, items):
         label, item = items
         return dataclasses.replace(item, span=span, label=label.value, label_span=label.span)
+
+    def b_step_repeat(self, span, items):
+        return _Marked(span, "repeat", items[-1])
 
     def b_end_when(self, span, items):
         return ast.EndWhen(span, tuple(i for i in items if isinstance(i, ast.StepStart)))

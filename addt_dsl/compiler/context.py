@@ -340,6 +340,9 @@ def check_trigger_condition(ctx: Context, condition, span: Span) -> bool:
     return ok
 
 
+MAX_STEP_REPEATS = 1_000_000  # `when C repeat N`
+
+
 @dataclass(frozen=True)
 class When:
     """A lowered `when [EDGE] C [for D] [delay D]` start (None: an error was reported)."""
@@ -348,6 +351,7 @@ class When:
     hold_s: E.Expr | None
     edge: str | None
     delay_s: E.Expr | None
+    repeat: int | None = None
 
 
 def lower_when(ctx: Context, start: ast.StepStart) -> When | None:
@@ -366,12 +370,22 @@ def lower_when(ctx: Context, start: ast.StepStart) -> When | None:
         delay = low.lower_value(start.delay, units.TIME, "the delay of `when ... delayed`")
         if delay is None or not check_time(ctx, delay, start.delay.span, "the delay of `when ... delayed`"):
             ok = False
-    return When(condition, hold, start.edge, delay) if ok else None
+    repeat = None
+    if start.repeat is not None:
+        value = low.lower_value(start.repeat, units.DIMENSIONLESS, "how many times the step fires")
+        count = const_value(value) if value is not None else None
+        if count is None or count != int(count) or not 1 <= count <= MAX_STEP_REPEATS:
+            ctx.sink.error("E0204", f"`repeat` takes a whole number from 1 to {MAX_STEP_REPEATS}", start.repeat.span)
+            ok = False
+        else:
+            repeat = int(count)
+    return When(condition, hold, start.edge, delay, repeat) if ok else None
 
 
 def when_fields(when: When) -> dict:
     """The `TriggerPlan` fields of a lowered `when` start."""
-    return {"condition": when.condition, "hold_s": when.hold_s, "edge": when.edge, "delay_s": when.delay_s}
+    return {"condition": when.condition, "hold_s": when.hold_s, "edge": when.edge, "delay_s": when.delay_s,
+            "repeat": when.repeat}
 
 
 def text_of(ctx: Context, span: Span) -> str:

@@ -1611,6 +1611,8 @@ class _Translate(_Importer):
     def maneuver_group(self, group, act_at) -> None:
         refs = [self.actor_name(r) for r in group.iterfind("Actors/EntityRef")]
         refs = [r for r in refs if r is not None]
+        if int(self.value(group, "maximumExecutionCount", default=1.0)) > 1:
+            self.skip(group, "a maneuver group that runs more than once is not translated")
         if len(refs) > 1:
             self.skip(group, f"maneuver group with {len(refs)} actors: translated for one actor only")
         who = refs[0] if refs else None  # no actor: its events' global actions (light steps) only
@@ -1679,6 +1681,15 @@ class _Translate(_Importer):
         clauses = _speed_into_trajectory(clauses)
         if len(clauses) > 1:
             self.approx(event, f"event '{name}' starts {len(clauses)} actions: one step each, same start")
+        runs = int(self.value(event, "maximumExecutionCount", default=1.0))
+        if runs > 1:
+            # It starts again when its actions have ended and its condition counts again.
+            if kind != "now" or fields.get("condition") is None or len(clauses) > 1:
+                self.skip(event, f"an event that runs up to {runs} times without a start condition of its own, or "
+                                 "with several actions, is not translated",
+                          "one action started by a condition translates (`when C repeat N`)")
+                return
+            fields = {**fields, "repeat": min(runs, 1_000_000)}
         for clause in clauses:
             self.events.setdefault(name, (who, kind, fields, clause))
             if kind == "after_event":

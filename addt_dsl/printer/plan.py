@@ -287,7 +287,8 @@ def _end(pr: _Printer) -> None:
 def _hold(pr: _Printer, tr: TriggerPlan) -> str:
     hold = f" for {pr.exprs.value(tr.hold_s, units.TIME)}" if tr.hold_s is not None else ""
     delay = f" delayed {pr.exprs.value(tr.delay_s, units.TIME)}" if tr.delay_s is not None else ""
-    return hold + delay
+    repeat = f" repeat {tr.repeat}" if tr.repeat is not None else ""
+    return hold + delay + repeat
 
 
 def _clause(pr: _Printer, c: ClausePlan) -> str:

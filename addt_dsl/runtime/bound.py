@@ -46,6 +46,7 @@ class BoundStep:
     label: str | None = None  # a named step: its state is recorded as `actor.label`
     edge: str | None = None  # rising | falling | changing: the condition counts where it changes
     delay_s: float = 0.0  # fires this long after the condition counted [s]
+    repeat: int = 1  # firings in all: armed again when its behaviour has ended
 
 
 @dataclass(frozen=True)
@@ -160,7 +161,8 @@ def bind_step(t: TriggerPlan, params: dict[str, float]) -> BoundStep:
         at_s=_value(t.at_s, params) if t.at_s is not None else None,
         after_s=_value(t.after_s, params),
         group=_group(t.group, params) if t.group is not None else None,
-        hold_s=_value(t.hold_s, params), label=t.label, edge=t.edge, delay_s=_value(t.delay_s, params))
+        hold_s=_value(t.hold_s, params), label=t.label, edge=t.edge, delay_s=_value(t.delay_s, params),
+        repeat=t.repeat or 1)
 
 
 def _group(g: GroupPlan, params: dict[str, float]) -> BoundGroup:

@@ -1296,7 +1296,7 @@ def _advance_scripts(run: _Run, rec, k: int, t_now: float) -> None:
             run.events.append(Event(time_s, "trigger", {"actor": _name, "behavior": clause.name}))
             return run._start_behavior(_agent, clause, time_s)
 
-        script.advance(t_now, holds, start)
+        script.advance(t_now, holds, start, lambda beh, time_s, _agent=agent: run.behavior_ended(_agent, beh, time_s))
         if script.done:
             del run.scripts[name]
 

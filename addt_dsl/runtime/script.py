@@ -43,6 +43,7 @@ class StepState:
         self.delay_s = step.delay_s
         self.last: bool | None = None  # the condition at its previous evaluation (edges)
         self.counted_at: float | None = None  # when the condition (its edge) counted (delay)
+        self.repeats_left = step.repeat - 1  # firings after the first (`repeat N`)
         self.group = GroupState(step.group) if step.group is not None else None
         self.armed_at: float | None = None
         self.fired = False
@@ -69,7 +70,7 @@ class StepState:
 
     @property
     def done(self) -> bool:
-        return self.fired and (self.group is None or self.group.done)
+        return self.fired and self.repeats_left <= 0 and (self.group is None or self.group.done)
 
     def arm(self, time_s: float) -> None:
         if self.armed_at is None:
@@ -79,12 +80,20 @@ class StepState:
         """Whether advancing now may evaluate a condition (so the caller builds a snapshot)."""
         if self.armed_at is None or self.done:
             return False
-        if not self.fired:
+        if not self.fired or self.repeats_left > 0:
             return self.condition is not None
         return self.group is not None and self.group.needs_state()
 
-    def advance(self, time_s: float, holds: Holds, start: Start) -> None:
-        if self.armed_at is None or self.done:
+    def advance(self, time_s: float, holds: Holds, start: Start, ended: Ended | None = None) -> None:
+        if self.armed_at is None:
+            return
+        if self.fired and self.repeats_left > 0 and ended is not None and self.group is None \
+                and (self.behavior is None or ended(self.behavior, time_s)):
+            # `repeat N`: its behaviour has ended, so it waits for its condition again (the
+            # edge's last value carries over, as an OpenSCENARIO event back in standby).
+            self.repeats_left -= 1
+            self.fired, self.counted_at, self.held_since, self.behavior = False, None, None, None
+        if self.done:
             return
         if not self.fired:
             if time_s + TIME_EPS_S < self.armed_at + self.after_s:
@@ -115,7 +124,7 @@ class StepState:
             if self.group is not None:
                 self.group.arm(time_s)
         if self.group is not None:
-            self.group.advance(time_s, holds, start)
+            self.group.advance(time_s, holds, start, ended)
 
 
 class GroupState:
@@ -141,15 +150,15 @@ class GroupState:
     def update_end(self, time_s: float, ended: Ended) -> bool:
         return all([s.update_end(time_s, ended) for s in self.steps])  # every step updated
 
-    def advance(self, time_s: float, holds: Holds, start: Start) -> None:
+    def advance(self, time_s: float, holds: Holds, start: Start, ended: Ended | None = None) -> None:
         if self.mode == "parallel":
             for s in self.steps:
-                s.advance(time_s, holds, start)
+                s.advance(time_s, holds, start, ended)
             return
         # A sequence may complete several zero-delay steps within one physics step.
         while self.current < len(self.steps):
             step = self.steps[self.current]
-            step.advance(time_s, holds, start)
+            step.advance(time_s, holds, start, ended)
             if not step.done or self.current + 1 == len(self.steps):
                 return
             self.current += 1
@@ -172,6 +181,6 @@ class Script:
     def needs_state(self) -> bool:
         return any(s.needs_state() for s in self.steps)
 
-    def advance(self, time_s: float, holds: Holds, start: Start) -> None:
+    def advance(self, time_s: float, holds: Holds, start: Start, ended: Ended | None = None) -> None:
         for s in self.steps:
-            s.advance(time_s, holds, start)
+            s.advance(time_s, holds, start, ended)

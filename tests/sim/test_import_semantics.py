@@ -257,3 +257,33 @@ scenario jump {
     assert a.s[k] == pytest.approx(110.0, abs=1e-6)
     assert a.s[k + 1] == pytest.approx(300.0 + 10.0 * trace.period_s, abs=1e-6)
     assert a.t[k + 1] == pytest.approx(-5.25, abs=1e-9) and a.speed[k + 1] == pytest.approx(10.0)
+
+
+def test_a_step_repeats_when_its_behaviour_has_ended_and_its_condition_counts_again():
+    # OpenSCENARIO's maximumExecutionCount: an event back in standby once its actions ended.
+    # The ego speeds up at 1 s and 9 s; `rising speed(ego) > 1 m/s repeat 2` fires at both
+    # (1.2 s and 9.2 s: 5 m/s^2 from 0), and a third rise would find no firing left.
+    trace = run("""
+scenario again {
+  duration 20 s
+  road r {
+    line length 800 m
+    lanes right 2 width 3.5 m
+  }
+  ego car on r lane -2 at 10 m speed 0 m/s {
+    behavior cruise speed 0 m/s
+    at 1 s behavior cruise speed 5 m/s accel 5 m/s^2
+    at 5 s behavior brake decel 5 m/s^2
+    at 9 s behavior cruise speed 5 m/s accel 5 m/s^2
+    at 13 s behavior brake decel 5 m/s^2
+    at 15 s behavior cruise speed 5 m/s accel 5 m/s^2
+  }
+  agent a car on r lane -1 at 100 m speed 0 m/s {
+    when rising speed(ego) > 1 m/s repeat 2 then behavior cruise speed 3 m/s accel 3 m/s^2
+    when rising speed(ego) < 1 m/s repeat 3 then behavior brake decel 3 m/s^2
+  }
+}
+""")
+    fired = [(round(e.time_s, 2), e.detail["behavior"]) for e in trace.events
+             if e.kind == "trigger" and e.detail["actor"] == "a"]
+    assert fired == [(1.2, "cruise"), (5.81, "brake"), (9.2, "cruise"), (13.81, "brake")]

@@ -578,6 +578,10 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
     if "when" in starts:
         when = lower_when(ctx, starts["when"])
         ok = ok and when is not None
+        if when is not None and when.repeat is not None and isinstance(node.action, ast.Group):
+            ctx.sink.error("E0204", "`repeat` starts one behaviour again, not a group", starts["when"].repeat.span,
+                           "repeat the steps inside the group")
+            ok = False
     if isinstance(node.action, ast.Group):
         group = _lower_group(ctx, node.action, actor, road)
         clause = None

@@ -43,6 +43,9 @@ def rule_end(ctx: Context) -> Ending:
         when = lower_when(ctx, starts["when"])
         if when is None:
             ok = False
+        elif when.repeat is not None:
+            ctx.sink.error("E0204", "a run ends once: `repeat` is for an actor's steps", starts["when"].repeat.span)
+            ok = False
         else:
             fields.update(when_fields(when))
     return Ending(P.TriggerPlan(**fields) if ok else None)

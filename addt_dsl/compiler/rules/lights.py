@@ -271,6 +271,10 @@ def _step(ctx: Context, node, controllers: set[str]) -> P.TriggerPlan | None:
     if "when" in starts:
         when = lower_when(ctx, starts["when"])
         ok = ok and when is not None
+        if when is not None and when.repeat is not None:
+            ctx.sink.error("E0204", "a light step fires once: `repeat` is for an actor's steps",
+                           starts["when"].repeat.span)
+            ok = False
     if node.action.keyword != "light":
         ctx.sink.error("E0204", f"`{node.action.keyword}` clauses belong in an actor's block", node.action.span,
                        "a lights block's steps change lights: `at 5 s light west state red`")
