@@ -111,7 +111,7 @@ class TriggerPlan(_Model):
     # firings in all (OpenSCENARIO's maximumExecutionCount); None: once.
     repeat: int | None = None
     # `brake_hard: at 3 s ...`: a named step, whose state `started(lead.brake_hard)` and
-    # `ended(lead.brake_hard)` read; unique in the scenario.
+    # `ended(lead.brake_hard)` read; unique per actor.
     label: str | None = None
 
 

@@ -33,15 +33,16 @@ def rule_names(ctx: Context) -> Declarations:
                                f"the parameter is defined at {out.params_ast[d.name].span}")
                 continue
             table[d.name] = d
-    labels: dict[str, Span] = {}  # unique in the scenario, so a label names one step
+    # Unique per actor: a step is always named with its actor (`started(lead.brake)`), so two
+    # actors may each have a step `brake`.
     for actor in out.actors_ast.values():
         for node in _named(actor.steps):
-            if node.label in labels:
-                ctx.sink.error("E0102", f"step '{node.label}' is named twice", node.label_span,
-                               f"first named at {labels[node.label]}")
+            key = f"{actor.name}.{node.label}"
+            if key in out.step_names:
+                ctx.sink.error("E0102", f"step '{node.label}' of '{actor.name}' is named twice", node.label_span,
+                               f"first named at {out.step_names[key]}")
                 continue
-            labels[node.label] = node.label_span
-            out.step_names[f"{actor.name}.{node.label}"] = node.label_span
+            out.step_names[key] = node.label_span
     egos = [a for a in ctx.defs(ast.ActorDecl) if a.is_ego]
     if not egos:
         ctx.sink.error("E0103", f"scenario '{ctx.scenario.name}' has no ego vehicle", ctx.scenario.span,
