@@ -439,13 +439,35 @@ def cmd_trace(args) -> int:
 
 def cmd_map(args) -> int:
     """Roads, lanes with direction, junction connections and signals of an OpenDRIVE file."""
+    from addt_dsl.compiler.xodr_check import count_roads
     from addt_dsl.reporting.roadmap import describe, map_png
-    from addt_dsl.runtime.road import XodrError, load_xodr
+    from addt_dsl.runtime.road import XodrError, parse_xodr
 
+    # The compiler's map limits (docs/limits.md), checked before anything is built.
+    limits = _limits(args)
     try:
-        network = load_xodr(args.file)
+        size = Path(args.file).stat().st_size
+        if size > limits.map_bytes:
+            raise UsageError(f"{args.file}: {size:,} bytes, more than map_bytes = {limits.map_bytes:,} "
+                             "(raise it with --max map_bytes=N)")
+        with open(args.file, "rb") as fh:
+            data = fh.read(limits.map_bytes + 1)
+    except OSError as exc:
+        raise UsageError(f"cannot read {args.file}: {exc.strerror or exc}") from None
+    text = data.decode("utf-8", errors="replace")
+    roads = count_roads(text)
+    if roads > limits.roads_per_map:
+        raise UsageError(f"{args.file}: {roads:,} roads, more than roads_per_map = {limits.roads_per_map:,} "
+                         "(raise it with --max roads_per_map=N)")
+    try:
+        network = parse_xodr(data, str(args.file))
     except XodrError as exc:
         raise UsageError(f"cannot read {args.file}: {exc}") from None
+    for road_id, road in network.roads.items():
+        widest = max((len(section.lane_ids) for section in road.sections), default=0)
+        if widest > limits.lanes_per_section:
+            raise UsageError(f"{args.file}: road {road_id} has a lane section of {widest} lanes, more than "
+                             f"lanes_per_section = {limits.lanes_per_section} (raise it with --max lanes_per_section=N)")
     print(describe(network, Path(args.file).name), end="")
     if args.png:
         Path(args.png).parent.mkdir(parents=True, exist_ok=True)
@@ -566,6 +588,8 @@ def build_parser() -> argparse.ArgumentParser:
                                           "(ids for routes); --png draws it")
     road_map.add_argument("file", help="an .xodr file")
     road_map.add_argument("--png", help="write a map image with the ids drawn on it")
+    road_map.add_argument("--max", action="append", metavar="NAME=N",
+                          help="raise one of the compiler's map limits (map_bytes, roads_per_map, lanes_per_section)")
     road_map.set_defaults(func=cmd_map)
     from addt_dsl.search.commands import add_commands
 
