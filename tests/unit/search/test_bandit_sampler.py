@@ -11,7 +11,10 @@ from tests.unit.search.test_bo_sampler import evaluations_to_failure
 
 from addt_dsl.runtime.result import Failure
 from addt_dsl.search.cache import RunCache
-from addt_dsl.search.falsify import BANDIT_MIN_MODEL, Axis, BanditSampler, BayesianSampler, Falsifier
+from addt_dsl.search.falsify import Falsifier
+from addt_dsl.search.samplers.bandit import BANDIT_MIN_MODEL, BanditSampler
+from addt_dsl.search.samplers.bo import BayesianSampler
+from addt_dsl.search.space import Axis
 
 FAULTS = 6
 CULPRIT = 3

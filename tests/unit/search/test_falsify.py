@@ -11,7 +11,10 @@ from tests.unit.search.search_testkit import KITCHEN_SINK, judged, kitchen_sink_
 from addt_dsl.compiler import compile_source
 from addt_dsl.plan import RunSpec
 from addt_dsl.search.cache import RunCache
-from addt_dsl.search.falsify import CrossEntropySampler, Falsifier, SearchSpace, UniformSampler, origin_of
+from addt_dsl.search.falsify import Falsifier, origin_of
+from addt_dsl.search.samplers.cem import CrossEntropySampler
+from addt_dsl.search.samplers.uniform import UniformSampler
+from addt_dsl.search.space import SearchSpace
 from addt_dsl.runtime.result import Failure, RunResult
 from addt_dsl.sweep import violated_assumptions
 
