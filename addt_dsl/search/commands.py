@@ -58,7 +58,8 @@ def add_commands(sub) -> None:
     fal.add_argument("--batch", type=positive_int, default=16,
                      help="candidates per generation (cem, random; bo runs --jobs at a time)")
     fal.add_argument("--sampler", choices=tuple(SAMPLERS), default=DEFAULT_SAMPLER,
-                     help="; ".join(f"{s.name}: {s.summary}" for s in SAMPLERS.values()))
+                     help="; ".join(f"{s.name}: {s.summary}" for s in SAMPLERS.values())
+                     + f" (default {DEFAULT_SAMPLER})")
     fal.add_argument("--shrink-simulations", type=nonneg_int, default=60,
                      help="per distinct failure, to find its origin (0: do not shrink)")
     fal.add_argument("--out", default=DEFAULT_OUT, help="write each distinct failure's counterexample here")

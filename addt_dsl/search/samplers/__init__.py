@@ -61,7 +61,7 @@ class SamplerSpec:
 
 
 SAMPLERS: dict[str, SamplerSpec] = {s.name: s for s in (
-    SamplerSpec("bo", "Bayesian optimisation of the failure probability (Gaussian process, trust region; the default)",
+    SamplerSpec("bo", "Bayesian optimisation of the failure probability (Gaussian process, trust region)",
                 "addt_dsl.search.samplers.bo:BayesianSampler"),
     SamplerSpec("bandit", "Thompson sampling over which fault is present, Bayesian optimisation inside "
                           "(for many faults)", "addt_dsl.search.samplers.bandit:BanditSampler"),
