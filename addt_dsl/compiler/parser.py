@@ -30,6 +30,7 @@ from addt_dsl.compiler.builder import MAX_EXPR_DEPTH, Builder
 from addt_dsl.compiler.lalr_driver import Driver, NotParsed
 from addt_dsl.compiler.recovery import MAX_SOURCE_BYTES, Recovery, check_source, report_syntax_error
 from addt_dsl.diagnostics import DiagnosticSink, Span
+from addt_dsl.lru import LruCache
 
 GRAMMAR_PATH = Path(__file__).resolve().parent.parent / "grammar" / "addt.lark"
 
@@ -124,8 +125,7 @@ def parse_source(data: bytes | str, path: str, sink: DiagnosticSink,
 
 
 INCLUDE_CACHE_SIZE = 64  # parsed files kept per process
-_INCLUDED: dict[tuple[str, bytes, int], ast.SourceFile] = {}  # insertion order = least recently used first
-_INCLUDED_LOCK = threading.Lock()
+_INCLUDED: LruCache[tuple[str, bytes, int], ast.SourceFile] = LruCache(INCLUDE_CACHE_SIZE)
 
 
 def parse_included(data: bytes, path: str, sink: DiagnosticSink,
@@ -137,18 +137,13 @@ def parse_included(data: bytes, path: str, sink: DiagnosticSink,
     name its spans carry and the size limit; the AST is frozen, so sharing it is safe. A
     parse that reported anything is not kept (its diagnostics are reported every time)."""
     key = (path, hashlib.sha256(data.encode("utf-8") if isinstance(data, str) else data).digest(), max_bytes)
-    with _INCLUDED_LOCK:
-        tree = _INCLUDED.pop(key, None)
-        if tree is not None:
-            _INCLUDED[key] = tree  # most recently used again
-            return tree
+    tree = _INCLUDED.get(key)
+    if tree is not None:
+        return tree
     before = len(sink.items)
     tree = parse_source(data, path, sink, max_bytes)
     if tree is not None and len(sink.items) == before:
-        with _INCLUDED_LOCK:
-            _INCLUDED[key] = tree
-            while len(_INCLUDED) > INCLUDE_CACHE_SIZE:
-                del _INCLUDED[next(iter(_INCLUDED))]
+        _INCLUDED.put(key, tree)
     return tree
 
 
