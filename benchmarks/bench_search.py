@@ -142,7 +142,8 @@ def bench_scenario(path: Path, args) -> dict:
 
 def print_table(results: list[dict], samplers: list[str]) -> None:
     guided = [s for s in samplers if s != "random"]
-    head = ["scenario", "seeds", "uniform failure rate (95 % CI)", "ln 2 / p", "random"] + guided + [f"ratio {s}" for s in guided]
+    head = (["scenario", "seeds", "uniform failure rate (95 % CI)", "ln 2 / p", "random"] + guided
+            + [f"ratio {s}" for s in guided])
     head += [f"distinct/1,000 {s}" for s in samplers]
     print("\n| " + " | ".join(head) + " |\n|" + " --- |" * len(head))
     for r in results:
@@ -182,7 +183,8 @@ def main() -> None:
     if args.cache:
         args.cache.mkdir(parents=True, exist_ok=True)
     results = [bench_scenario(p.resolve(), args) for p in args.scenarios]
-    figures: dict = {"budget_runs": args.budget, "random_budget_runs": budget_of("random", args), "seeds": args.seeds, "samplers": args.samplers, "scenarios": results}
+    figures: dict = {"budget_runs": args.budget, "random_budget_runs": budget_of("random", args), "seeds": args.seeds,
+                     "samplers": args.samplers, "scenarios": results}
     print()
     for sampler in args.samplers:
         ratios = [r[sampler]["ratio_random_median"] for r in results if "ratio_random_median" in r.get(sampler, {})]

@@ -213,7 +213,8 @@ def print_shrink_summary(result, arts) -> None:
     width = max(len(s.name) for s in result.stats)
     for s in result.stats:
         print(f"  {s.name:<{width}}  {s.candidates:4d} candidates {s.simulations:4d} simulated "
-              f"{s.accepted:3d} accepted {s.seconds:6.2f} s" + (f" ({s.rejected} did not compile)" if s.rejected else ""))
+              f"{s.accepted:3d} accepted {s.seconds:6.2f} s"
+              + (f" ({s.rejected} did not compile)" if s.rejected else ""))
     for line in result.changes:
         print(f"  {line}")
     print(f"wrote {arts.addt}  (replay: addtc {arts.addt})")

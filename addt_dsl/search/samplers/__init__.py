@@ -69,7 +69,8 @@ SAMPLERS: dict[str, SamplerSpec] = {s.name: s for s in (
                          "generation per batch", "addt_dsl.search.samplers.cmaes:CmaEsSampler"),
     SamplerSpec("cem", "cross-entropy method: per-axis distributions refitted to the best fifth",
                 "addt_dsl.search.samplers.cem:CrossEntropySampler"),
-    SamplerSpec("random", "uniform sampling (the benchmark's baseline)", "addt_dsl.search.samplers.uniform:UniformSampler"),
+    SamplerSpec("random", "uniform sampling (the benchmark's baseline)",
+                "addt_dsl.search.samplers.uniform:UniformSampler"),
 )}
 DEFAULT_SAMPLER = "bo"
 

@@ -63,7 +63,8 @@ class BanditSampler:
         names = [a.name for a in axes]
         self.present = np.array([i for i, n in enumerate(names) if n.endswith(":present")], dtype=int)
         params = [i for i, n in enumerate(names) if n.startswith("param:")]
-        # (name, present axis or -1, subspace axes). The fault arms come first: the first runs are their worst cases, in declaration order.
+        # (name, present axis or -1, subspace axes). The fault arms come first: the first runs
+        # are their worst cases, in declaration order.
         self.arms: list[tuple[str, int, list[int]]] = []
         for p in self.present:
             prefix = names[p].split(":")[0] + ":"

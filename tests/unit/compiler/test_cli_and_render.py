@@ -118,7 +118,8 @@ def test_diamond_includes_are_read_once_so_work_stays_linear(tmp_path, monkeypat
         "  road r { line length 100 m }\n  ego car on r lane -1 at shared"))
     reads = Counter()
     real = C._Loader.read_bytes
-    monkeypatch.setattr(C._Loader, "read_bytes", lambda self, path, *a: reads.update([path.name]) or real(self, path, *a))
+    monkeypatch.setattr(C._Loader, "read_bytes",
+                        lambda self, path, *a: reads.update([path.name]) or real(self, path, *a))
     result = compile_file(tmp_path / "main.addt")
     assert result.ok, result.diagnostics
     assert {f"l{i}.addt": 1 for i in range(16)} == {k: v for k, v in reads.items() if k.startswith("l")}

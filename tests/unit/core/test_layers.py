@@ -4,8 +4,8 @@ Every module of the package is imported, and every import statement in it (modul
 and inside functions) is checked against the layer order:
 
     app (cli, console, suite, studies, pytest_plugin, search.commands, interop.commands)
-      > search > reporting > stack > runtime > core (units, expr, diagnostics, registry, fingerprint, vehicles, plan, sweep,
-        confine, errors, extras, limits, cost)
+      > search > reporting > stack > runtime > core (units, expr, diagnostics, registry, fingerprint,
+        vehicles, plan, sweep, confine, errors, extras, limits, cost, lru)
       printer > compiler > core;   search > printer
       interop (OpenSCENARIO export/import) > printer, compiler, runtime;   search > interop
     the compiler and the runtime never import each other (nor the stack).

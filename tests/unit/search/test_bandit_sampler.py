@@ -75,7 +75,8 @@ def test_first_runs_are_each_faults_worst_case_then_no_fault():
     for k in range(FAULTS):
         on = first[k, PRESENT] >= 0.5
         assert on.sum() == 1 and on[k]
-        assert np.array_equal(first[k, PRESENT[k] + 1:PRESENT[k] + 4], [0.0, 1.0, 1.0])  # from the start, whole run, top
+        # from the start, for the whole run, at the top of its setting
+        assert np.array_equal(first[k, PRESENT[k] + 1:PRESENT[k] + 4], [0.0, 1.0, 1.0])
     assert not (first[FAULTS, PRESENT] >= 0.5).any()
     # Until its model, an arm's runs stay at the worst case; the parameters move.
     sampler.update(first, one_culprit_score(first))
