@@ -80,3 +80,13 @@ def make_sampler(name: str, ctx: SamplerContext) -> Sampler:
     if spec is None:
         raise ValueError(f"unknown sampler {name!r}: one of {', '.join(SAMPLERS)}")
     return spec.load().create(ctx)
+
+
+def markdown_table() -> str:
+    """The registry as the Markdown table of docs/falsify-and-shrink.md."""
+    lines = ["| `--sampler` | what it does | implementation |", "| --- | --- | --- |"]
+    for s in SAMPLERS.values():
+        module, cls = s.implementation.split(":")
+        default = " (default)" if s.name == DEFAULT_SAMPLER else ""
+        lines.append(f"| `{s.name}`{default} | {s.summary} | `{cls}` in `{module.replace('.', '/')}.py` |")
+    return "\n".join(lines) + "\n"
