@@ -4,7 +4,7 @@ One grammar (`grammar/addt.lark`, LALR(1), contextual lexer), two stages: lark p
 with `builder.Builder` as its transformer (the AST is built while parsing) and
 `recovery.Recovery` as its error handler (every broken statement reported, panic mode).
 
-Speed (issue 22): a file is first run through `lalr_driver.Driver`, a tight loop over the
+Speed: a file is first run through `lalr_driver.Driver`, a tight loop over the
 same lark tables and callbacks that gives up at the first syntax error; only then does
 lark parse it again with recovery, so diagnostics are exactly lark's. The built parser is
 cached on disk (lark's `cache`, keyed by the grammar text, lark and Python versions):

@@ -62,7 +62,7 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
     return road_id, info
 
 
-# ---- maps parsed once per process (issue 22: a suite's files import the same few maps)
+# ---- maps parsed once per process (a suite's files import the same few maps)
 
 MAP_CACHE_SIZE = 16
 _INFOS: dict[int, dict[str, RoadInfo | None]] = {}  # id of a cached network -> RoadInfo per road id

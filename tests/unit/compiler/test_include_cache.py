@@ -1,5 +1,5 @@
-"""Included files are parsed once per process while their content stays the same (issue 22:
-a suite's files include shared definitions). Correctness first: an edited include is parsed
+"""Included files are parsed once per process while their content stays the same (a
+suite's files include shared definitions). Correctness first: an edited include is parsed
 again, a broken one reports its errors on every compilation, and the cache is bounded."""
 
 from __future__ import annotations

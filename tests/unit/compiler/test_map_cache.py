@@ -1,5 +1,5 @@
 """Imported OpenDRIVE maps are parsed once per process while their content stays the same
-(issue 22: a suite's files import the same few maps). Correctness first: an edited map is
+(a suite's files import the same few maps). Correctness first: an edited map is
 parsed again, a broken one reports on every compilation, and results equal a cold compile."""
 
 from __future__ import annotations
