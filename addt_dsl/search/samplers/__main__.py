@@ -3,4 +3,5 @@
 
 from addt_dsl.search.samplers import markdown_table
 
-print(markdown_table(), end="")
+if __name__ == "__main__":
+    print(markdown_table(), end="")
