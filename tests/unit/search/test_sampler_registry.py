@@ -93,10 +93,12 @@ def test_cmaes_finds_a_small_region_far_sooner_than_uniform():
 
 
 def test_cmaes_infinite_scores_and_restarts():
-    """A crash (-inf) and a never-violable oracle (+inf) do not break `cma`; a converged
-    distribution starts again elsewhere, so a long search keeps proposing new points."""
+    """A crash (-inf) and a never-violable oracle (+inf) do not break `cma`; a distribution
+    that converged (here on a flat score) starts again elsewhere, so a long search keeps
+    proposing new points."""
     s = cmaes(1, batch=4)
-    pts, _ = drive(s, 600, lambda p: np.where(p[:, 0] > 0.9, -np.inf, np.where(p[:, 1] > 0.9, np.inf,
-                                                                               np.abs(p[:, 0] - 0.5))))
-    assert np.isfinite(pts).all()
+    first = s.es
+    pts, _ = drive(s, 400, lambda p: np.where(p[:, 0] > 0.9, -np.inf, np.where(p[:, 1] > 0.9, np.inf, 0.0)))
+    assert s.es is not first  # restarted
+    assert np.isfinite(pts).all() and (pts >= 0).all() and (pts <= 1).all()
     assert len(np.unique(np.round(pts[-100:], 6), axis=0)) == 100
