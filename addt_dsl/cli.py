@@ -20,7 +20,8 @@
 
 Exit codes (addt_dsl/errors.py): 0 every run passed, 1 at least one run failed an oracle,
 2 usage or scenario error, 3 the tool could not complete (runs crashed, timed out or were
-lost after their retries, the store is unusable or in use, the disk is full, internal error). Set ADDT_DEBUG=1 to see the traceback of an internal error.
+lost after their retries, the store is unusable or in use, the disk is full, internal error).
+Set ADDT_DEBUG=1 to see the traceback of an internal error.
 """
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ from addt_dsl.errors import (EXIT_INCOMPLETE, EXIT_OK, EXIT_USAGE, ToolError, Us
                              nonneg_int, positive_int, time_bound, verdict_exit_code)
 from addt_dsl.limits import DEFAULT, DEFAULT_ANIMATION_BUDGET_S, INPUT_LIMITS, parse_limit
 
-SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map", "export", "import")
+SUBCOMMANDS = ("run", "check", "plan", "schema", "report", "trace", "shrink", "falsify", "study", "map", "export",
+               "import")
 
 
 def cmd_check(args) -> int:

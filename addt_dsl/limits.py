@@ -101,5 +101,5 @@ def _num(value: float) -> str:
     return f"{int(value):,}" if float(value).is_integer() and abs(value) < 1e15 else f"{value:.3g}"
 
 
-__all__ = ["COST_LIMITS", "DEFAULT", "DEFAULT_ANIMATION_BUDGET_S", "GIB", "INPUT_LIMITS", "MAX_ABS_NUMBER", "Limits", "beyond_message",
-           "how_to_raise", "parse_limit"]
+__all__ = ["COST_LIMITS", "DEFAULT", "DEFAULT_ANIMATION_BUDGET_S", "GIB", "INPUT_LIMITS", "MAX_ABS_NUMBER", "Limits",
+           "beyond_message", "how_to_raise", "parse_limit"]

@@ -89,8 +89,8 @@ class TriggerPlan(_Model):
     A step is *armed* (top-level steps at time 0; steps of a group as the group says),
     then *fires* at the first physics step where all its start conditions hold:
     `after_s` has passed since it was armed, the time is at least `at_s`, and
-    `condition` holds on the current state (for `hold_s` without a break, when given). Firing starts `clause` (a behaviour) and
-    arms `group`. A step is *done* once it fired and its group (if any) is done.
+    `condition` holds on the current state (for `hold_s` without a break, when given). Firing
+    starts `clause` (a behaviour) and arms `group`. A step is *done* once it fired and its group (if any) is done.
     Source: `at 5 s behavior brake`, `after 2 s ...`, `when gap(ego, lead) < 20 m then ...`.
     """
 

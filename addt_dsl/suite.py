@@ -143,7 +143,9 @@ def suite_summary(rows: Sequence[SuiteRow], by: str | None) -> dict:
         "files": [{
             "path": str(r.path), "scenario": r.name, "exit_code": r.exit_code, "wall_s": r.wall_s,
             "runs": r.totals.get("runs", 0), "passed": r.totals.get("passed", 0),
-            "failed": r.totals.get("failed", 0), "errors": r.totals.get("errors", 0), "warned": r.totals.get("warned", 0), **({"outcomes": r.totals["outcomes"]} if "outcomes" in r.totals else {}),
+            "failed": r.totals.get("failed", 0), "errors": r.totals.get("errors", 0),
+            "warned": r.totals.get("warned", 0),
+            **({"outcomes": r.totals["outcomes"]} if "outcomes" in r.totals else {}),
             "by": [{"value": v, "label": r.labels.get(v, f"{v:g}"), **t.as_dict()} for v, t in r.by.items()],
         } for r in rows],
         "runs": sum(r.totals.get("runs", 0) for r in rows),
@@ -196,8 +198,8 @@ def print_suite(rows: Sequence[SuiteRow], by: str | None) -> None:
                          + (f"; {100 * lo:.1f}-{100 * hi:.1f}" if t.outcomes else "") + ")")
         colour = "green" if r.exit_code == 0 else ("red" if r.exit_code == 1 else "yellow")
         outcomes = r.totals.get("outcomes", {})
-        counts = ["/".join(str(outcomes.get(k, 0)) for k in ("masked", "silent", "detected", "hazard", "twin_failed"))] \
-            if classified else []
+        kinds = ("masked", "silent", "detected", "hazard", "twin_failed")
+        counts = ["/".join(str(outcomes.get(k, 0)) for k in kinds)] if classified else []
         table.add_row(f"[{colour}]{r.name or r.path.stem}[/]", str(r.totals.get("runs", 0)),
                       str(r.totals.get("passed", 0)), f"{r.wall_s:.1f}", *counts, *cells)
     console = terminal()  # off a terminal (CI logs): full width, no column cut

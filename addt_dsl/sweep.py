@@ -4,7 +4,8 @@ Seeds are derived from (plan seed, sweep seed, scenario instance, sample, repeat
 numpy's SeedSequence, so a RunSpec's seed does not depend on how many runs come before it
 or on the worker that executes it. The instance is the grid cell without its fault-only
 axes: cells that differ only in what the faults read (`grid drop_rate in [1, 5] %`) run
-the same scenarios, paired, and share one fault-free twin per run (`--classify`). Assumptions reject samples (bounded, counted); they never fail a run.
+the same scenarios, paired, and share one fault-free twin per run (`--classify`).
+Assumptions reject samples (bounded, counted); they never fail a run.
 """
 
 from __future__ import annotations

@@ -70,7 +70,8 @@ def scenario(i: int, rng: random.Random) -> str:
     for k in range(n_agents - 1):
         lane = -rng.randint(1, lanes)
         kind = rng.choice(["car", "car", "truck", "cyclist"])
-        parts += [f"  agent a{k} {kind} on main lane {lane} at {rng.randint(60, 300)} m speed {rng.randint(5, 20)} m/s {{",
+        at_m, speed = rng.randint(60, 300), rng.randint(5, 20)
+        parts += [f"  agent a{k} {kind} on main lane {lane} at {at_m} m speed {speed} m/s {{",
                   f"    behavior idm speed {rng.randint(10, 25)} m/s time_gap {rng.choice([1, 1.5, 2])} s",
                   f"    at {rng.randint(2, 8)} s behavior lane_change to {lane} duration 3 s",
                   "  }"]
@@ -164,7 +165,8 @@ def measure(paths: list[Path], cwd: Path) -> dict:
         chunk_cpu.append((time.process_time() - c0) / len(paths[k:k + 50]))
     compile_s = time.perf_counter() - t0
     best = min(chunk_cpu)
-    return {"files": len(paths), "kB": size_kb, "wall_s": wall, "cpu_s": cpu, "cpu_ms_per_file": 1000 * cpu / len(paths),
+    return {"files": len(paths), "kB": size_kb, "wall_s": wall, "cpu_s": cpu,
+            "cpu_ms_per_file": 1000 * cpu / len(paths),
             "load_during": load, "startup_s": startup, "compile_ms_per_file": 1000 * compile_s / len(paths),
             "parse_ms_per_file": 1000 * parse_s / len(paths), "parse_share": parse_s / compile_s,
             "idle_core_estimate_s": best * len(paths) + startup, "ratio_wall_to_target": wall / TARGET_S,
@@ -181,7 +183,8 @@ def report(name: str, f: dict) -> None:
     print(f"  in-process: compile {f['compile_ms_per_file']:.2f} ms/file, parse only {f['parse_ms_per_file']:.2f} "
           f"ms/file ({100 * f['parse_share']:.0f} % of compile)")
     print(f"  fastest 50-file chunk -> {f['idle_core_estimate_s']:.2f} s for the suite on an idle core (estimate)")
-    print(f"  target {TARGET_S:g} s: ratio {f['ratio_wall_to_target']:.2f} (wall) / {f['ratio_cpu_to_target']:.2f} (CPU)")
+    print(f"  target {TARGET_S:g} s: ratio {f['ratio_wall_to_target']:.2f} (wall) / "
+          f"{f['ratio_cpu_to_target']:.2f} (CPU)")
 
 
 def main() -> int:

@@ -46,7 +46,8 @@ def main() -> None:
         t_coords_v = per_call(lambda: net.to_road_coords_array(x, y), 3) / s.size
         t_offset_v = per_call(lambda: road.lane_offset(-1, x, y), 3) / s.size
         figures[name] = {"lane_center_us": t_center * 1e6, "lane_center_vectorised_us_per_point": t_center_v * 1e6,
-                          "to_road_coords_us": t_coords * 1e6, "to_road_coords_vectorised_us_per_point": t_coords_v * 1e6,
+                          "to_road_coords_us": t_coords * 1e6,
+                          "to_road_coords_vectorised_us_per_point": t_coords_v * 1e6,
                           "lane_offset_vectorised_us_per_point": t_offset_v * 1e6}
         print(
             f"{name:24s} ({len(road.geometries):2d} geometries, {len(road._sample_s):4d} samples): "

@@ -11,7 +11,7 @@ brake for emergencies: its collisions became rare, the Bayesian search's seed 0 
 104-134 runs). Schedules of several declared faults, one or two of which matter, are in
 `examples/search/many_faults/` (pass them with `--scenarios`; `--samplers random bo bandit`
 compares the bandit over which fault is present). Every sampler searches the same
-space (`addt_dsl.search.falsify.SearchSpace`: parameters, fault presence, times and
+space (`addt_dsl.search.space.SearchSpace`: parameters, fault presence, times and
 magnitudes) with the same budget and seeds; `random` is uniform sampling over that space
 (`UniformSampler`). A seed that finds no failure within the budget counts as budget + 1
 runs (censored; reported: a censored median is a lower bound). `--random-budget` gives
@@ -50,7 +50,8 @@ import _figures as figures_json  # noqa: E402
 from addt_dsl.compiler import compile_file  # noqa: E402
 from addt_dsl.runtime.outcome import wilson_interval  # noqa: E402
 from addt_dsl.search.cache import RunCache  # noqa: E402
-from addt_dsl.search.falsify import SAMPLERS, Falsifier  # noqa: E402
+from addt_dsl.search.falsify import Falsifier  # noqa: E402
+from addt_dsl.search.samplers import SAMPLERS  # noqa: E402
 
 SUITE = sorted((ROOT / "examples" / "search").glob("*.addt"))
 
@@ -141,7 +142,8 @@ def bench_scenario(path: Path, args) -> dict:
 
 def print_table(results: list[dict], samplers: list[str]) -> None:
     guided = [s for s in samplers if s != "random"]
-    head = ["scenario", "seeds", "uniform failure rate (95 % CI)", "ln 2 / p", "random"] + guided + [f"ratio {s}" for s in guided]
+    head = (["scenario", "seeds", "uniform failure rate (95 % CI)", "ln 2 / p", "random"] + guided
+            + [f"ratio {s}" for s in guided])
     head += [f"distinct/1,000 {s}" for s in samplers]
     print("\n| " + " | ".join(head) + " |\n|" + " --- |" * len(head))
     for r in results:
@@ -166,7 +168,7 @@ def print_table(results: list[dict], samplers: list[str]) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", nargs="*", type=Path, default=SUITE)
-    ap.add_argument("--samplers", nargs="+", choices=SAMPLERS, default=["random", "bo"])
+    ap.add_argument("--samplers", nargs="+", choices=tuple(SAMPLERS), default=["random", "bo"])
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--budget", type=int, default=150)
     ap.add_argument("--random-budget", type=int, default=0, help="budget of the random sampler (0: --budget)")
@@ -181,7 +183,8 @@ def main() -> None:
     if args.cache:
         args.cache.mkdir(parents=True, exist_ok=True)
     results = [bench_scenario(p.resolve(), args) for p in args.scenarios]
-    figures: dict = {"budget_runs": args.budget, "random_budget_runs": budget_of("random", args), "seeds": args.seeds, "samplers": args.samplers, "scenarios": results}
+    figures: dict = {"budget_runs": args.budget, "random_budget_runs": budget_of("random", args), "seeds": args.seeds,
+                     "samplers": args.samplers, "scenarios": results}
     print()
     for sampler in args.samplers:
         ratios = [r[sampler]["ratio_random_median"] for r in results if "ratio_random_median" in r.get(sampler, {})]

@@ -80,7 +80,8 @@ def physics_step_us(n_vehicles: int) -> dict[str, float]:
     try:
         trace = X._loop(run)  # move everyone into a realistic configuration first
         dt, names = run.dt, ["ego"] + [a.name for a in run.agents]
-        sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m), **{a.name: (a.length_m, a.width_m) for a in run.agents}}
+        sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m),
+                 **{a.name: (a.length_m, a.width_m) for a in run.agents}}
         rec = {n: {"clearance": [0.0]} for n in names}
 
         def one_step():

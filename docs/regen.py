@@ -8,7 +8,9 @@ A fenced block is regenerated when its info string carries `regen`:
 - ```` ```console regen ````: `$ COMMAND` lines, each followed by what COMMAND prints, as a
   terminal shows it (stdout and stderr, unbuffered);
 - any other block with `regen="COMMAND"` holds what COMMAND prints (e.g. the counterexample
-  a previous command wrote).
+  a previous command wrote);
+- between `<!-- regen="COMMAND" -->` and `<!-- /regen -->` (outside a fence): Markdown that
+  COMMAND prints, shown as Markdown (a table generated from a registry).
 
 The commands of one doc run in doc order, with bash, in one fresh directory holding a
 copy of `examples/` and the doc's blocks marked `file="NAME"` written as `NAME`; this
@@ -37,6 +39,7 @@ DOC_FILES = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "README.md"]
 
 _FENCE = re.compile(r"^(?P<indent> *)```(?P<info>[^\n`]*)\n(?P<body>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)
 _HEADING = re.compile(r"^#+ (.*)$", re.M)
+_SECTION = re.compile(r'^<!-- regen="(?P<command>[^"]+)" -->\n(?P<body>.*?)^<!-- /regen -->$', re.M | re.S)
 
 # What differs between two honest runs of the same commands: wall times, tool versions, widths
 # of pytest's rules around a wall time.
@@ -117,7 +120,8 @@ def regenerate(path: Path) -> str:
     text = path.read_text(encoding="utf-8")
     blocks = doc_blocks(path)
     todo = [b for b in blocks if "regen" in b.attrs]
-    if not todo:
+    sections = list(_SECTION.finditer(text))
+    if not todo and not sections:
         return text
     env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
                PYTHONPATH=str(ROOT), COLUMNS="80", PYTHONHASHSEED="0", PYTHONUNBUFFERED="1")
@@ -142,6 +146,8 @@ def regenerate(path: Path) -> str:
                 body = _run(block.attrs["regen"], work, env)
             new[block.span] = "".join(block.indent + ln if ln.strip() else ln
                                       for ln in body.splitlines(keepends=True))
+        for m in sections:
+            new[m.span("body")] = _run(m.group("command"), work, env)
     for (start, end), body in sorted(new.items(), reverse=True):
         text = text[:start] + body + text[end:]
     return text

@@ -178,7 +178,8 @@ def _holds(root: Path, directory: Path) -> bool:
 
 
 def compile_source(text: str | bytes, path: str = "<input>", base_dir: str | Path = ".",
-                   limits: Limits = DEFAULT, stack: Sequence[str] = (), root: str | Path | None = None) -> CompileResult:
+                   limits: Limits = DEFAULT, stack: Sequence[str] = (),
+                   root: str | Path | None = None) -> CompileResult:
     sink = DiagnosticSink()
     if root is not None and not _holds(Path(root), Path(base_dir)):
         root = None  # a root that does not hold the file confines nothing more than its directory
@@ -237,7 +238,8 @@ def _compile(data, display: str, base_dir: Path, sink: DiagnosticSink, sources: 
     if refused:  # one diagnostic: the first threshold passed, the others as notes
         (name, message), others = refused[0], refused[1:]
         sweeps = ctx.blocks("sweep")
-        span = sweeps[0].span if sweeps and name in ("runs", "sim_seconds", "agent_steps", "wall_seconds") else scenario.span
+        sweep_wide = name in ("runs", "sim_seconds", "agent_steps", "wall_seconds")
+        span = sweeps[0].span if sweeps and sweep_wide else scenario.span
         sink.error("E0701", message, span, *(f"also {m}" for _, m in others), *estimate.lines(),
                    how_to_raise(name))
     if refused or not check_feasible(plan, ctx):

@@ -4,7 +4,7 @@ One grammar (`grammar/addt.lark`, LALR(1), contextual lexer), two stages: lark p
 with `builder.Builder` as its transformer (the AST is built while parsing) and
 `recovery.Recovery` as its error handler (every broken statement reported, panic mode).
 
-Speed (issue 22): a file is first run through `lalr_driver.Driver`, a tight loop over the
+Speed: a file is first run through `lalr_driver.Driver`, a tight loop over the
 same lark tables and callbacks that gives up at the first syntax error; only then does
 lark parse it again with recovery, so diagnostics are exactly lark's. The built parser is
 cached on disk (lark's `cache`, keyed by the grammar text, lark and Python versions):
@@ -30,6 +30,7 @@ from addt_dsl.compiler.builder import MAX_EXPR_DEPTH, Builder
 from addt_dsl.compiler.lalr_driver import Driver, NotParsed
 from addt_dsl.compiler.recovery import MAX_SOURCE_BYTES, Recovery, check_source, report_syntax_error
 from addt_dsl.diagnostics import DiagnosticSink, Span
+from addt_dsl.lru import LruCache
 
 GRAMMAR_PATH = Path(__file__).resolve().parent.parent / "grammar" / "addt.lark"
 
@@ -124,8 +125,7 @@ def parse_source(data: bytes | str, path: str, sink: DiagnosticSink,
 
 
 INCLUDE_CACHE_SIZE = 64  # parsed files kept per process
-_INCLUDED: dict[tuple[str, bytes, int], ast.SourceFile] = {}  # insertion order = least recently used first
-_INCLUDED_LOCK = threading.Lock()
+_INCLUDED: LruCache[tuple[str, bytes, int], ast.SourceFile] = LruCache(INCLUDE_CACHE_SIZE)
 
 
 def parse_included(data: bytes, path: str, sink: DiagnosticSink,
@@ -137,18 +137,13 @@ def parse_included(data: bytes, path: str, sink: DiagnosticSink,
     name its spans carry and the size limit; the AST is frozen, so sharing it is safe. A
     parse that reported anything is not kept (its diagnostics are reported every time)."""
     key = (path, hashlib.sha256(data.encode("utf-8") if isinstance(data, str) else data).digest(), max_bytes)
-    with _INCLUDED_LOCK:
-        tree = _INCLUDED.pop(key, None)
-        if tree is not None:
-            _INCLUDED[key] = tree  # most recently used again
-            return tree
+    tree = _INCLUDED.get(key)
+    if tree is not None:
+        return tree
     before = len(sink.items)
     tree = parse_source(data, path, sink, max_bytes)
     if tree is not None and len(sink.items) == before:
-        with _INCLUDED_LOCK:
-            _INCLUDED[key] = tree
-            while len(_INCLUDED) > INCLUDE_CACHE_SIZE:
-                del _INCLUDED[next(iter(_INCLUDED))]
+        _INCLUDED.put(key, tree)
     return tree
 
 

@@ -19,6 +19,7 @@ from addt_dsl.compiler.context import Context, RoadInfo, const_value
 from addt_dsl.diagnostics import Span
 from addt_dsl.expr import eval_param_expr, params_used
 from addt_dsl.limits import beyond_message, how_to_raise
+from addt_dsl.lru import LruCache
 from addt_dsl.runtime.road import RouteError, XodrError, parse_xodr, resolve_route
 from addt_dsl.runtime.road.limits import RoadLimitError
 from addt_dsl.runtime.roadspec import build_network
@@ -61,11 +62,12 @@ def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):
     return road_id, info
 
 
-# ---- maps parsed once per process (issue 22: a suite's files import the same few maps)
+# ---- maps parsed once per process (a suite's files import the same few maps)
 
 MAP_CACHE_SIZE = 16
-_MAPS: dict[tuple[str, bytes], object] = {}  # (display name, digest of the text) -> RoadNetwork; LRU order
 _INFOS: dict[int, dict[str, RoadInfo | None]] = {}  # id of a cached network -> RoadInfo per road id
+_MAPS: LruCache[tuple[str, bytes], object] = LruCache(  # (display name, digest of the text) -> RoadNetwork
+    MAP_CACHE_SIZE, on_evict=lambda network: _INFOS.pop(id(network), None))
 _MAPS_LOCK = threading.RLock()
 
 
@@ -76,18 +78,13 @@ def parsed_map(text: str, display: str):
     raises every time. The network is only read afterwards (routes, road shapes), so
     compilations may share it; the runtime builds its own from the plan's text."""
     key = (display, hashlib.sha256(text.encode("utf-8", "surrogatepass")).digest())
-    with _MAPS_LOCK:
-        network = _MAPS.pop(key, None)
-        if network is not None:
-            _MAPS[key] = network  # most recently used again
-            return network
+    network = _MAPS.get(key)
+    if network is not None:
+        return network
     network = parse_xodr(text, display)
     with _MAPS_LOCK:
-        _MAPS[key] = network
         _INFOS[id(network)] = {}
-        while len(_MAPS) > MAP_CACHE_SIZE:
-            evicted = _MAPS.pop(next(iter(_MAPS)))
-            _INFOS.pop(id(evicted), None)
+        _MAPS.put(key, network)
     return network
 
 
@@ -181,14 +178,10 @@ def check_inline_road(ctx: Context, road_plan, span: Span) -> bool:
     The verdict is a function of the road's plan alone, kept per process (suite files
     share their roads through included families)."""
     key = road_plan.model_dump_json()
-    with _MAPS_LOCK:
-        verdict = _INLINE.pop(key, None)
+    verdict = _INLINE.get(key)
     if verdict is None:
         verdict = _build_inline(road_plan)
-    with _MAPS_LOCK:
-        _INLINE[key] = verdict  # most recently used last
-        while len(_INLINE) > INLINE_CACHE_SIZE:
-            del _INLINE[next(iter(_INLINE))]
+        _INLINE.put(key, verdict)
     if verdict == ():
         return True
     ctx.sink.error(verdict[0], verdict[1], span)
@@ -196,7 +189,7 @@ def check_inline_road(ctx: Context, road_plan, span: Span) -> bool:
 
 
 INLINE_CACHE_SIZE = 256
-_INLINE: dict[str, tuple] = {}  # RoadPlan JSON -> () when it builds, else (code, message)
+_INLINE: LruCache[str, tuple] = LruCache(INLINE_CACHE_SIZE)  # RoadPlan JSON -> () when it builds, else (code, message)
 
 
 def _build_inline(road_plan) -> tuple:

@@ -18,6 +18,7 @@ from pathlib import Path
 from addt_dsl.console import compile_and_report
 from addt_dsl.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, nonneg_float, nonneg_int, positive_int
 from addt_dsl.limits import DEFAULT
+from addt_dsl.search.samplers import DEFAULT_SAMPLER, SAMPLERS
 
 DEFAULT_OUT = ".addt-failures"
 CACHE_NAME = "runs.sqlite"  # the search's run cache, in the output directory by default
@@ -56,10 +57,9 @@ def add_commands(sub) -> None:
     fal.add_argument("--jobs", "-j", type=positive_int, default=1)
     fal.add_argument("--batch", type=positive_int, default=16,
                      help="candidates per generation (cem, random; bo runs --jobs at a time)")
-    fal.add_argument("--sampler", choices=("bo", "bandit", "cem", "random"), default="bo",
-                     help="bo: Bayesian optimisation of the failure probability (default); cem: "
-                          "cross-entropy; random: uniform sampling; bandit: Thompson sampling over which "
-                          "fault is present, Bayesian optimisation inside (for many faults)")
+    fal.add_argument("--sampler", choices=tuple(SAMPLERS), default=DEFAULT_SAMPLER,
+                     help="; ".join(f"{s.name}: {s.summary}" for s in SAMPLERS.values())
+                     + f" (default {DEFAULT_SAMPLER})")
     fal.add_argument("--shrink-simulations", type=nonneg_int, default=60,
                      help="per distinct failure, to find its origin (0: do not shrink)")
     fal.add_argument("--out", default=DEFAULT_OUT, help="write each distinct failure's counterexample here")
@@ -213,7 +213,8 @@ def print_shrink_summary(result, arts) -> None:
     width = max(len(s.name) for s in result.stats)
     for s in result.stats:
         print(f"  {s.name:<{width}}  {s.candidates:4d} candidates {s.simulations:4d} simulated "
-              f"{s.accepted:3d} accepted {s.seconds:6.2f} s" + (f" ({s.rejected} did not compile)" if s.rejected else ""))
+              f"{s.accepted:3d} accepted {s.seconds:6.2f} s"
+              + (f" ({s.rejected} did not compile)" if s.rejected else ""))
     for line in result.changes:
         print(f"  {line}")
     print(f"wrote {arts.addt}  (replay: addtc {arts.addt})")
@@ -271,7 +272,9 @@ def _falsify(args, result, cache, log) -> int:
         data["written"] = [str(p) for p in written]
         print(json.dumps(data, indent=2))
     else:
-        report.print_text()
+        from addt_dsl.search.render import falsify_text
+
+        print(falsify_text(report))
         for p in written:
             print(f"wrote {p}")
     return EXIT_FAILED if report.failures else EXIT_OK

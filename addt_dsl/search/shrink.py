@@ -12,7 +12,7 @@ would hide the structure that makes these passes cheap (delete a fault, cut a wi
 the violation time, fix the bit that was actually flipped), it gives no control over
 the number of simulations (each costs 0.1-1 s, Hypothesis budgets in thousands of
 calls), and its notion of "the same failure" is an exception's type and location. The
-passes here are the ones issue 9 names, with per-pass statistics.
+passes below are explicit, with per-pass statistics.
 
 A candidate must also compile as the `.addt` file it will be written as (`printer.check_spec`):
 a shorter run can end before a `reach goal within T`, a window, a fault time or a step

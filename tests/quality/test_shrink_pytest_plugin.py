@@ -42,7 +42,8 @@ CI_VARS = ("CI", "GITHUB_ACTIONS", "GITLAB_CI", "BUILD_ID", "TF_BUILD", "CIRCLEC
 
 
 # With the package installed the entry point loads the plugin; `-p` again would register it twice.
-PLUGIN_ARGS = [] if any(ep.name == "addt" for ep in entry_points(group="pytest11")) else ["-p", "addt_dsl.pytest_plugin"]
+PLUGIN_ARGS = ([] if any(ep.name == "addt" for ep in entry_points(group="pytest11"))
+               else ["-p", "addt_dsl.pytest_plugin"])
 
 
 def _pytest(project: Path, *args: str, github: bool = False) -> subprocess.CompletedProcess:

@@ -51,7 +51,8 @@ def test_classify_stores_classify_many_outcomes_and_reuses_golden_runs(tmp_path,
     assert set(stored.values()) - {"masked"}  # some flips show: the comparison is not trivial
 
     summary = json.loads((out / "summary.json").read_text())
-    counts = {k: list(stored.values()).count(k) for k in ("masked", "silent", "detected", "hazard", "twin_failed", "error")}
+    kinds = ("masked", "silent", "detected", "hazard", "twin_failed", "error")
+    counts = {k: list(stored.values()).count(k) for k in kinds}
     assert summary["outcomes"] == counts
     assert [c["n"] for c in summary["outcomes_per_cell"]] == [1.0, 4.0]
     assert sum(c["runs"] for c in summary["outcomes_per_cell"]) == 6

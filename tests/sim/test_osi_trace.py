@@ -22,7 +22,8 @@ REPO = Path(__file__).resolve().parents[2]
 @pytest.fixture(scope="module")
 def stored(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("osi")
-    assert cli.main([str(REPO / "examples" / "overtake.addt"), "--limit", "1", "--out", str(tmp / "results")]) == EXIT_OK
+    args = [str(REPO / "examples" / "overtake.addt"), "--limit", "1", "--out", str(tmp / "results")]
+    assert cli.main(args) == EXIT_OK
     return tmp
 
 

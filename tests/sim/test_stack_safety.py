@@ -188,7 +188,8 @@ def test_the_lidar_sees_a_box_only_if_it_reaches_the_rays(height_m, seen):
     # The default lidar's one channel is level at 1 m: a 1 m box (an obstacle's default
     # height) stays under it and is driven into; at 1.4 m the ego stops short of it.
     trace = run(straight("ego car on r lane -1 at 20 m speed 15 m/s",
-                         f"  agent box obstacle on r lane -1 at 150 m height {height_m} m", stack="cruise_speed 15 m/s"))
+                         f"  agent box obstacle on r lane -1 at 150 m height {height_m} m",
+                         stack="cruise_speed 15 m/s"))
     assert bool(trace.events_of("collision")) is not seen
     far = trace.actors["box"].clearance > 10.0  # detections from more than 10 m off
     assert bool(trace.object_count[far].max() > 0) is seen

@@ -120,7 +120,7 @@ scenario cpna {{
     drop lidar rate 1
   }}
 }}
-"""
+"""  # noqa: E501 (the scenario's lines)
 
 
 @pytest.mark.parametrize("fraction", [0.25, 0.5, 0.75])

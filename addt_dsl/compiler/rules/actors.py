@@ -103,7 +103,8 @@ def _check_lidar_reach(ctx: Context, actors: dict[str, P.ActorPlan]) -> None:
                     return  # set by a parameter: the rays move with it
                 values[key] = sensor.settings[key].value
         ch, vfov = int(values["channels"]), float(values["vfov"])
-        elevations = [(k / (ch - 1) - 0.5) * vfov - values["pitch"] for k in range(ch)] if ch > 1 else [-values["pitch"]]
+        elevations = ([(k / (ch - 1) - 0.5) * vfov - values["pitch"] for k in range(ch)] if ch > 1
+                      else [-values["pitch"]])
         rays.append((float(values["z"]), elevations, float(values["range"])))
     if not rays:
         return

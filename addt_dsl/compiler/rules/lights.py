@@ -72,7 +72,8 @@ def rule_lights(ctx: Context) -> Lights | None:
     for d in defs:
         if d.kind in ("signal", "controller"):
             if d.name in seen:
-                ctx.sink.error("E0102", f"'{d.name}' is defined twice", d.name_span, f"first defined at {seen[d.name].span}")
+                ctx.sink.error("E0102", f"'{d.name}' is defined twice", d.name_span,
+                               f"first defined at {seen[d.name].span}")
                 continue
             seen[d.name] = d
         if d.kind == "signal":
@@ -210,7 +211,8 @@ def _controller(ctx: Context, d: ast.LightDef, inline: dict[str, P.SignalPlan]) 
                 ctx.sink.error("E0405", f"no controller '{cid}' in {decl.import_path}", span,
                                *suggest(cid, network.controllers),
                                f"controllers on the map: {listed}" if listed else
-                               f"the map has no <controller>: list its signals instead, `signals [{', '.join(dynamic)}]`")
+                               "the map has no <controller>: list its signals instead, "
+                               f"`signals [{', '.join(dynamic)}]`")
                 ok = False
                 continue
             ids_out.extend(ctl.signal_ids)

@@ -105,15 +105,25 @@ def test_directory_and_missing_file(tmp_path):
     assert compile_file(tmp_path / "nope.addt").diagnostics[0].code == "E0401"
 
 
-def test_diamond_includes_are_read_once_so_work_stays_linear(tmp_path):
-    # Each level includes the next one twice: without include-once this is 2**15 parses.
+def test_diamond_includes_are_read_once_so_work_stays_linear(tmp_path, monkeypatch):
+    # Each level includes the next one twice: without include-once this is 2**15 reads and parses.
+    from collections import Counter
+
+    from addt_dsl import compiler as C
+
     for i in range(15):
         (tmp_path / f"l{i}.addt").write_text(f'include "l{i + 1}.addt"\ninclude "l{i + 1}.addt"\n')
     (tmp_path / "l15.addt").write_text("param shared = 1 m\n")
     (tmp_path / "main.addt").write_text('include "l0.addt"\n' + _scenario(
         "  road r { line length 100 m }\n  ego car on r lane -1 at shared"))
+    reads = Counter()
+    real = C._Loader.read_bytes
+    monkeypatch.setattr(C._Loader, "read_bytes",
+                        lambda self, path, *a: reads.update([path.name]) or real(self, path, *a))
     result = compile_file(tmp_path / "main.addt")
     assert result.ok, result.diagnostics
+    assert {f"l{i}.addt": 1 for i in range(16)} == {k: v for k, v in reads.items() if k.startswith("l")}
+    assert [p.name for p in result.plan.params].count("shared") == 1  # its definition came in once
 
 
 def test_imports_of_one_file_are_read_and_parsed_once(tmp_path, monkeypatch):

@@ -5,7 +5,8 @@ tokens and mutations of real scenarios (deleted, duplicated, swapped and spliced
 fragments), semantic faults planted in valid scenarios (temporal constraints, hostile
 numbers, hostile include paths) and hostile OpenDRIVE maps. Every result must be a
 `CompileResult`, every diagnostic must render, no diagnostic may be an internal compiler
-error (E0900), and a plan that compiles must serialise and expand. Budget: FUZZ (conftest; ADDT_FUZZ_EXAMPLES for longer runs).
+error (E0900), and a plan that compiles must serialise and expand. Budget: FUZZ (conftest;
+ADDT_FUZZ_EXAMPLES for longer runs).
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
-"""Included files are parsed once per process while their content stays the same (issue 22:
-a suite's files include shared definitions). Correctness first: an edited include is parsed
+"""Included files are parsed once per process while their content stays the same (a
+suite's files include shared definitions). Correctness first: an edited include is parsed
 again, a broken one reports its errors on every compilation, and the cache is bounded."""
 
 from __future__ import annotations
@@ -9,6 +9,7 @@ import pytest
 from addt_dsl.compiler import compile_file
 from addt_dsl.compiler import parser as P
 from addt_dsl.diagnostics import render_json
+from addt_dsl.lru import LruCache
 
 MAIN = """include "shared.addt"
 scenario s {{
@@ -36,7 +37,7 @@ def counted(monkeypatch):
         return real(data, path, sink, max_bytes)
 
     monkeypatch.setattr(P, "parse_source", spy)
-    monkeypatch.setattr(P, "_INCLUDED", {})
+    monkeypatch.setattr(P, "_INCLUDED", LruCache(P.INCLUDE_CACHE_SIZE))
     return calls
 
 
@@ -80,7 +81,7 @@ def test_a_broken_include_reports_every_time(tmp_path, counted):
 
 
 def test_the_cache_is_bounded(tmp_path, counted, monkeypatch):
-    monkeypatch.setattr(P, "INCLUDE_CACHE_SIZE", 2)
+    monkeypatch.setattr(P, "_INCLUDED", LruCache(2))
     sink = P.DiagnosticSink()
     for v in range(5):
         assert P.parse_included(SHARED.format(v=v).encode(), "shared.addt", sink) is not None

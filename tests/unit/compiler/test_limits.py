@@ -117,8 +117,8 @@ def test_absurd_but_compiling_scenarios_are_refused_by_the_estimate():
 
 
 def test_allow_large_and_max_lift_a_cost_threshold():
-    src = scenario("  param p = 1 m in [0 m, 2 m]\n  assume p > 0.5 m\n  sweep {\n    random 1000000\n    repeat 2\n  }",
-                   duration="1 s")
+    src = scenario("  param p = 1 m in [0 m, 2 m]\n  assume p > 0.5 m\n"
+                   "  sweep {\n    random 1000000\n    repeat 2\n  }", duration="1 s")
     e0701(compile_source(src), "runs")
     assert compile_source(src, limits=DEFAULT.raised(allow_large=True)).ok
     # 2e6 runs of about 0.07 s are also beyond wall_seconds (1e5 s): each threshold is raised by name.

@@ -1,5 +1,5 @@
 """Imported OpenDRIVE maps are parsed once per process while their content stays the same
-(issue 22: a suite's files import the same few maps). Correctness first: an edited map is
+(a suite's files import the same few maps). Correctness first: an edited map is
 parsed again, a broken one reports on every compilation, and results equal a cold compile."""
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from tests.unit.compiler.conftest import REPO
 from addt_dsl.compiler import compile_file
 from addt_dsl.compiler import xodr_check as X
 from addt_dsl.diagnostics import render_json
+from addt_dsl.lru import LruCache
 
 MAP_EXAMPLES = sorted(p for p in (REPO / "examples").glob("*.addt") if 'import "maps/' in p.read_text())
 
@@ -25,7 +26,7 @@ def counted(monkeypatch):
         return real(text, display)
 
     monkeypatch.setattr(X, "parse_xodr", spy)
-    monkeypatch.setattr(X, "_MAPS", {})
+    monkeypatch.setattr(X, "_MAPS", LruCache(X.MAP_CACHE_SIZE, on_evict=X._MAPS.on_evict))
     monkeypatch.setattr(X, "_INFOS", {})
     return calls
 
@@ -90,7 +91,7 @@ def test_a_broken_map_reports_every_time(tmp_path, counted):
 
 
 def test_the_map_cache_is_bounded(tmp_path, counted, monkeypatch):
-    monkeypatch.setattr(X, "MAP_CACHE_SIZE", 2)
+    X._MAPS.size = 2  # `counted` gave this test its own cache
     for n in range(1, 5):
         X.parsed_map(_map(n), "m.xodr")
     assert len(X._MAPS) == 2 and len(X._INFOS) == 2
@@ -115,7 +116,7 @@ def test_inline_road_verdicts_are_kept_per_road(tmp_path, monkeypatch):
     built = []
     real = X.build_network
     monkeypatch.setattr(X, "build_network", lambda plans: built.append(plans) or real(plans))
-    monkeypatch.setattr(X, "_INLINE", {})
+    monkeypatch.setattr(X, "_INLINE", LruCache(X.INLINE_CACHE_SIZE))
     for i in range(3):
         (tmp_path / f"a{i}.addt").write_text(INLINE.format(length=300))
     assert all(compile_file(tmp_path / f"a{i}.addt").ok for i in range(3))

@@ -1,5 +1,6 @@
 """Pyflakes' rules (ruff `F`) over the package, tests, benchmarks and docs scripts:
-unused imports and variables, undefined names, f-strings without fields. An unused import
+unused imports and variables, undefined names, f-strings without fields; and lines of at
+most 120 characters (E501; pyproject's `[tool.ruff]`, where a few files are exempt for now). An unused import
 of `runtime/` or `stack/` also changes the code fingerprint (run keys) for nothing."""
 
 import shutil
@@ -17,7 +18,7 @@ def test_pyflakes_rules_pass():
     ruff = shutil.which("ruff", path=str(Path(sys.executable).parent)) or shutil.which("ruff")
     if ruff is None:
         pytest.skip("ruff is not installed (it comes with the `test` extra)")
-    done = subprocess.run([ruff, "check", "--no-cache", "--select", "F", "--output-format", "concise",
+    done = subprocess.run([ruff, "check", "--no-cache", "--select", "F,E501", "--output-format", "concise",
                            "addt_dsl", "tests", "benchmarks", "docs"], cwd=ROOT, capture_output=True, text=True,
                           check=False)
     assert done.returncode == 0, done.stdout + done.stderr

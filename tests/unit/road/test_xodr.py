@@ -67,7 +67,8 @@ def test_elevation_profile():
     assert road.elevation(0.0) == 0.0
     s = 100.0
     ds = s - 72.149967203525861
-    expected = -1.4207722866392594 - 3.5625342062508572e-02 * ds - 1.6874417257835937e-04 * ds**2 + 3.2567351175048125e-06 * ds**3
+    expected = (-1.4207722866392594 - 3.5625342062508572e-02 * ds - 1.6874417257835937e-04 * ds**2
+                + 3.2567351175048125e-06 * ds**3)
     assert road.elevation(s) == pytest.approx(expected, abs=1e-12)
     z = road.elevation(np.linspace(0.0, road.length, 1000))
     assert np.max(np.abs(np.diff(z))) < 0.2  # the 16 records join up smoothly
@@ -200,13 +201,18 @@ def test_bytes_and_namespaced_input():
         ({"geometry": "<clothoidSpline/>"}, "clothoidSpline", 7, "unsupported planView geometry"),
         ({"geometry": '<arc curvature="abc"/>'}, "arc", 7, "not a number"),
         ({"geometry": "<arc/>"}, "arc", 7, "missing attribute 'curvature'"),
-        ({"geometry": '<paramPoly3 pRange="bogus" aU="0" bU="1" cU="0" dU="0" aV="0" bV="0" cV="0" dV="0"/>'}, "paramPoly3", 7, "pRange"),
+        ({"geometry": '<paramPoly3 pRange="bogus" aU="0" bU="1" cU="0" dU="0" aV="0" bV="0" cV="0" dV="0"/>'},
+         "paramPoly3", 7, "pRange"),
         ({"geometry": "<line/><arc curvature='0.1'/>"}, "geometry", 6, "exactly one"),
-        ({"lane": '<lane id="-1" type="driving"><border sOffset="0" a="3" b="0" c="0" d="0"/></lane>'}, "lane", 13, "border"),
-        ({"lane": '<lane id="-2" type="driving"><width sOffset="0" a="3" b="0" c="0" d="0"/></lane>'}, "laneSection", 11, "lane ids"),
-        ({"lane": '<lane id="1" type="driving"><width sOffset="0" a="3" b="0" c="0" d="0"/></lane>'}, "lane", 13, "does not belong"),
+        ({"lane": '<lane id="-1" type="driving"><border sOffset="0" a="3" b="0" c="0" d="0"/></lane>'},
+         "lane", 13, "border"),
+        ({"lane": '<lane id="-2" type="driving"><width sOffset="0" a="3" b="0" c="0" d="0"/></lane>'},
+         "laneSection", 11, "lane ids"),
+        ({"lane": '<lane id="1" type="driving"><width sOffset="0" a="3" b="0" c="0" d="0"/></lane>'},
+         "lane", 13, "does not belong"),
         ({"lane": '<lane id="-1" type="driving"/>'}, "lane", 13, "missing <width>"),
-        ({"extra": '<link><successor elementType="road" elementId="9" contactPoint="middle"/></link>'}, "successor", 16, "contactPoint"),
+        ({"extra": '<link><successor elementType="road" elementId="9" contactPoint="middle"/></link>'},
+         "successor", 16, "contactPoint"),
     ],
 )
 def test_errors_carry_element_and_line(kwargs, element, line, message):

@@ -14,7 +14,8 @@ from addt_dsl.sweep import expand
 
 def _plan(extra_oracles: str = ""):
     text = scenario([0, 6])
-    return plan_of(text.replace("moving: always ego.speed > 1 m/s", "moving: always ego.speed > 1 m/s\n" + extra_oracles))
+    moving = "moving: always ego.speed > 1 m/s"
+    return plan_of(text.replace(moving, moving + "\n" + extra_oracles))
 
 
 def test_latency_budget_comes_from_the_oracles():

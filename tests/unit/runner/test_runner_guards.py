@@ -14,7 +14,8 @@ from addt_dsl.sweep import SweepStream
 def test_each_failure_is_recorded_and_the_sweep_goes_on(tmp_path):
     plan = plan_of(scenario([OK, HANG, SEGFAULT, HOG, RAISE, SPIKE], repeat=2))
     store = ResultStore(tmp_path / "r.sqlite", plan)
-    executor = LocalExecutor(2, timeout_s=2.5, memory_limit_mb=250, run_fn=fake_run, retries=0)  # retries: test_runner_faults
+    # retries: test_runner_faults
+    executor = LocalExecutor(2, timeout_s=2.5, memory_limit_mb=250, run_fn=fake_run, retries=0)
     outcome = run_sweep(SweepStream(plan), store, executor)
 
     records = list(store.records())

@@ -42,7 +42,8 @@ def test_summary_counts_outcomes_and_tabulates_them_per_grid_cell():
     # Rates are over runs whose twin passed: a twin_failed run or a runner error is no sample.
     assert cells[0.0]["fault_samples"] == 3 and cells[0.0]["hazard_rate"] == pytest.approx(1 / 3)
     assert 0 < cells[0.0]["hazard_lo"] < 1 / 3 < cells[0.0]["hazard_hi"] < 1
-    assert (cells[6.0]["twin_failed"], cells[6.0]["detected"], cells[6.0]["error"], cells[6.0]["fault_samples"]) == (1, 1, 1, 1)
+    six = cells[6.0]
+    assert (six["twin_failed"], six["detected"], six["error"], six["fault_samples"]) == (1, 1, 1, 1)
     assert cells[6.0]["detected_rate"] == 1.0 and cells[6.0]["hazard_rate"] == 0.0
     json.dumps(s, allow_nan=False)  # plain JSON types, no NaN
 
@@ -71,8 +72,8 @@ def test_the_store_keeps_outcomes_and_upgrades_an_old_store(tmp_path):
             store.add(r)
     with ResultStore(path) as store:
         assert [r.outcome for r in store.records()] == ["silent", "hazard", "", "masked", "masked", "masked"]
-        assert store_summary(store)["outcomes"] == {"masked": 3, "silent": 1, "detected": 0, "hazard": 1, "twin_failed": 0,
-                                                   "error": 0}
+        assert store_summary(store)["outcomes"] == {"masked": 3, "silent": 1, "detected": 0, "hazard": 1,
+                                                   "twin_failed": 0, "error": 0}
         assert list(store_dataframe(store)["outcome"]) == ["silent", "hazard", "", "masked", "masked", "masked"]
 
 

@@ -83,7 +83,8 @@ def test_a_damaged_row_is_named_and_salvage_leaves_it_out(damage, good, tmp_path
 
 
 @pytest.mark.parametrize(("sql", "words"), [
-    ("UPDATE meta SET value = '{\"nope\": 1}' WHERE name = 'plan'", ("its plan cannot be read", "writes the plan again")),
+    ("UPDATE meta SET value = '{\"nope\": 1}' WHERE name = 'plan'",
+     ("its plan cannot be read", "writes the plan again")),
     ("UPDATE meta SET value = replace(value, '\"schema_version\":\"2\"', '\"schema_version\":\"1\",\"x\":1') "
      "WHERE name = 'plan'", ("plan of schema '1', made by another version of addtc",)),
     ("INSERT OR REPLACE INTO meta VALUES ('rejected', '[[')", ("its 'rejected' entry is not a JSON dict",)),

@@ -79,7 +79,7 @@ scenario kitchen_sink {
     seed 5
   }
 }
-'''
+'''  # noqa: E501 (the scenario's lines)
 
 
 @lru_cache(maxsize=None)

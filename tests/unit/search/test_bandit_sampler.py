@@ -11,7 +11,10 @@ from tests.unit.search.test_bo_sampler import evaluations_to_failure
 
 from addt_dsl.runtime.result import Failure
 from addt_dsl.search.cache import RunCache
-from addt_dsl.search.falsify import BANDIT_MIN_MODEL, Axis, BanditSampler, BayesianSampler, Falsifier
+from addt_dsl.search.falsify import Falsifier
+from addt_dsl.search.samplers.bandit import BANDIT_MIN_MODEL, BanditSampler
+from addt_dsl.search.samplers.bo import BayesianSampler
+from addt_dsl.search.space import Axis
 
 FAULTS = 6
 CULPRIT = 3
@@ -72,7 +75,8 @@ def test_first_runs_are_each_faults_worst_case_then_no_fault():
     for k in range(FAULTS):
         on = first[k, PRESENT] >= 0.5
         assert on.sum() == 1 and on[k]
-        assert np.array_equal(first[k, PRESENT[k] + 1:PRESENT[k] + 4], [0.0, 1.0, 1.0])  # from the start, whole run, top
+        # from the start, for the whole run, at the top of its setting
+        assert np.array_equal(first[k, PRESENT[k] + 1:PRESENT[k] + 4], [0.0, 1.0, 1.0])
     assert not (first[FAULTS, PRESENT] >= 0.5).any()
     # Until its model, an arm's runs stay at the worst case; the parameters move.
     sampler.update(first, one_culprit_score(first))

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from addt_dsl.search.falsify import BO_SPREAD, Axis, BayesianSampler, UniformSampler, warp
+from addt_dsl.search.samplers.bo import BO_SPREAD, BayesianSampler, warp
+from addt_dsl.search.samplers.uniform import UniformSampler
+from addt_dsl.search.space import Axis
 
 DIMS = 3
 

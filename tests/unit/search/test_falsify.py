@@ -11,7 +11,10 @@ from tests.unit.search.search_testkit import KITCHEN_SINK, judged, kitchen_sink_
 from addt_dsl.compiler import compile_source
 from addt_dsl.plan import RunSpec
 from addt_dsl.search.cache import RunCache
-from addt_dsl.search.falsify import CrossEntropySampler, Falsifier, SearchSpace, UniformSampler, origin_of
+from addt_dsl.search.falsify import Falsifier, origin_of
+from addt_dsl.search.samplers.cem import CrossEntropySampler
+from addt_dsl.search.samplers.uniform import UniformSampler
+from addt_dsl.search.space import SearchSpace
 from addt_dsl.runtime.result import Failure, RunResult
 from addt_dsl.sweep import violated_assumptions
 
@@ -87,9 +90,20 @@ def test_candidates_are_valid_pinned_runs():
 
 
 def test_same_seed_same_search():
-    a = _falsifier(seed=4).run(budget_runs=48, shrink_simulations=0)
-    b = _falsifier(seed=4).run(budget_runs=48, shrink_simulations=0)
-    assert a.to_json()["failures"] == b.to_json()["failures"] and a.first_failure_run == b.first_failure_run
+    def search(seed):
+        runs = []
+
+        def judge(spec):
+            runs.append(spec.key())
+            return corner_judge(spec)
+        report = _falsifier(seed=seed, judge=judge).run(budget_runs=48, shrink_simulations=0).to_json()
+        report.pop("seconds")
+        return report, runs
+
+    (a, runs_a), (b, runs_b), (_, runs_c) = search(3), search(3), search(4)
+    assert a["failures"] and a["first_failure_run"] is not None  # both found failures, so the comparison says something
+    assert len(runs_a) == 48 and runs_a == runs_b and a == b  # the same runs in the same order, the same report
+    assert runs_c != runs_a  # and another seed searches differently
 
 
 def test_guided_search_reaches_a_rare_corner_sooner_than_random():

@@ -166,8 +166,8 @@ def test_formula_layout():
 
 def test_subtraction_reads_back():
     plan = kitchen_sink_plan()
-    minus = E.Binary(op="<", left=E.Binary(op="-", left=E.Signal(name="speed(ego)"), right=E.Signal(name="speed(lead)")),
-                     right=E.Num(value=1.0))
+    closing = E.Binary(op="-", left=E.Signal(name="speed(ego)"), right=E.Signal(name="speed(lead)"))
+    minus = E.Binary(op="<", left=closing, right=E.Num(value=1.0))
     oracle = OraclePlan(name="closing", formula=E.Temporal(op="always", arg=minus))
     plan = plan.model_copy(update={"oracles": [oracle, *plan.oracles]})
     assert semantic_key(_recompile(print_plan(plan, keep_user_text=False))) == semantic_key(plan)
@@ -375,6 +375,7 @@ def _lights_scenario(draw) -> str:
         steps.append(f"    {start} light main state {draw(st.sampled_from(LIGHT_STATES_WORDS))}")
     bare = ["    light main state red"] if draw(st.booleans()) else []
     run = " at_red run" if draw(st.booleans()) else ""
+    cycle = " ".join(t for t in times if not (green and t.startswith("green")))
     return f"""scenario lit {{
   duration 10 s
   road r {{
@@ -384,7 +385,7 @@ def _lights_scenario(draw) -> str:
   param g = 10 s in [5 s, 20 s]
   lights {{
 {chr(10).join(signals)}
-    controller main signals [{', '.join(members)}] {' '.join(t for t in times if not (green and t.startswith('green')))}{green}
+    controller main signals [{', '.join(members)}] {cycle}{green}
 {chr(10).join(bare + steps)}
   }}
   ego car on r lane -1 at 10 m speed 10 m/s

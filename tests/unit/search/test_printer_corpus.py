@@ -169,7 +169,7 @@ def test_generated_scenarios_print_back(source, data):
 
 
 def test_reach_goal_within_prints_as_written():
-    """Issue 19: `reach goal within T` made the printer raise (`addtc shrink`, `falsify`, the plugin)."""
+    """`reach goal within T` once made the printer raise (`addtc shrink`, `falsify`, the plugin)."""
     source = ("scenario g {\n  duration 30 s\n  road r { line length 800 m }\n"
               "  ego car on r lane -1 at 10 m speed 20 m/s goal 790 m\n"
               "  expect {\n    warn late: reach goal within 20 s\n    no collision\n  }\n}\n")

@@ -101,3 +101,15 @@ def test_ci_jobs_are_valid_yaml():
     assert any(s.get("with", {}).get("path") == ".addt-failures/" for s in steps)
     assert gitlab["scenarios"]["artifacts"]["reports"]["junit"] == "scenario-report.xml"
     assert ".addt-failures/" in gitlab["scenarios"]["artifacts"]["paths"]
+
+
+def test_the_samplers_table_is_the_registry():
+    """The table between its regen markers is what `python -m addt_dsl.search.samplers` prints
+    (docs/regen.py rewrites it; this checks without running the doc's other commands)."""
+    from addt_dsl.search.samplers import markdown_table
+    from docs.regen import _SECTION
+
+    command = "python -m addt_dsl.search.samplers"
+    section = next(m for m in _SECTION.finditer(SHRINK_DOC) if m.group("command") == command)
+    assert section.group("body") == markdown_table()
+    assert "| `cmaes` |" in section.group("body")

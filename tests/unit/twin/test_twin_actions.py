@@ -172,7 +172,8 @@ def test_lane_change_to_the_lane_of_another_actor():
     assert a.lane == -1 and a.t == pytest.approx(LANES[-1])
 
 
-@pytest.mark.parametrize("gap_setting,want", [({"distance": 20.0}, lambda v: 20.0), ({"time_gap": 1.5}, lambda v: 1.5 * v)])
+@pytest.mark.parametrize("gap_setting,want", [({"distance": 20.0}, lambda v: 20.0),
+                                               ({"time_gap": 1.5}, lambda v: 1.5 * v)])
 def test_keep_gap_settles_on_the_gap_behind_a_moving_target(gap_setting, want):
     lead = agent("lead", s=80.0, speed=12.0)
     world = LiveWorld(lead)
