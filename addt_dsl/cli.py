@@ -469,7 +469,8 @@ def cmd_map(args) -> int:
         widest = max((len(section.lane_ids) for section in road.sections), default=0)
         if widest > limits.lanes_per_section:
             raise UsageError(f"{args.file}: road {road_id} has a lane section of {widest} lanes, more than "
-                             f"lanes_per_section = {limits.lanes_per_section} (raise it with --max lanes_per_section=N)")
+                             f"lanes_per_section = {limits.lanes_per_section} "
+                             "(raise it with --max lanes_per_section=N)")
     print(describe(network, Path(args.file).name), end="")
     if args.png:
         Path(args.png).parent.mkdir(parents=True, exist_ok=True)
