@@ -1281,7 +1281,9 @@ def _pose_scripted_ego(run: _Run, t_now: float, dt: float) -> None:
     along its road plus a lane change's or walk's relative heading and its yaw)."""
     a, e, road = run.ego_agent, run.ego, run.ego_road.road
     x, y, h = road.point(a.s, a.t)
-    e.x, e.y, e.heading = x, y, h + relative_heading(a, t_now, dt) + run.ego_plan.yaw
+    a.ground_scale = road.ground_scale(a.s, a.t)  # its station moves by speed / ground_scale, as an agent's
+    yaw = run.ego_plan.yaw
+    e.x, e.y, e.heading = x, y, h + relative_heading(a, t_now, dt) + (standing_yaw(a, yaw) if yaw else 0.0)
     e.vx, e.accel = a.speed, a.accel
     run.ego_s, run.ego_t = a.s, a.t
 

@@ -332,6 +332,7 @@ EVERY_BEHAVIOUR = {
     "overtake": "behavior overtake speed 16 m/s target lead lane -2",
     "speed_profile": "behavior speed_profile times [0 s, 2 s] speeds [12 m/s, 8 m/s]",
     "synchronize": "behavior synchronize master lead master_at 150 m target_s 140 m",
+    "teleport": "behavior teleport s 100 m t -1.75 m",
     "trajectory": "behavior trajectory s [40 m, 80 m] t [-1.75 m, -5.25 m] speed 10 m/s",
     "walk": "behavior walk speed 2 m/s heading 30 deg",
 }
