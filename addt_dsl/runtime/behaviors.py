@@ -700,7 +700,8 @@ def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
         t_next = lateral_profile(agent, time_s + dt)
         step = agent.speed * dt
         if t_next != agent.t:  # a lane change: the path's ground splits into along and across
-            step = math.sqrt(max(step * step - (t_next - agent.t) ** 2, 0.0))
+            across = t_next - agent.t
+            step = math.sqrt(max(step * step - across * across, 0.0))
         agent.s += step / agent.ground_scale
         agent.t = t_next
 

@@ -1037,7 +1037,11 @@ class _Fleet:
         for _ in range(fleet.MAX_ROUNDS):
             v_new = v + accel * dt
             v_new = np.where(v_new > 0.0, v_new, 0.0)  # max(0.0, v), as `advance` picks
-            s_new = s + v_new * dt / scale  # as `advance`: the station moves by speed / ground_scale
+            # as `advance`: the station moves by speed / ground_scale, less what a lane change
+            # takes across the road
+            step, across = v_new * dt, t_new - t
+            step = np.where(across != 0.0, np.sqrt(np.maximum(step * step - across * across, 0.0)), step)
+            s_new = s + step / scale
             table = views.sequential(s, t, v, (s_new, t_new, v_new), ego)
             again = self._accel(params, rows, v, free, views.leaders(table, s, t, length))
             if np.array_equal(again.view(np.int64), accel.view(np.int64)):  # the fixed point: write it back
