@@ -432,7 +432,8 @@ def cmd_trace(args) -> int:
         from addt_dsl.reporting.plots import run_signals_png
 
         Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.plot).write_bytes(run_signals_png(table, run.verdicts, f"{run.spec.plan.name} {record.run_id}"))
+        Path(args.plot).write_bytes(run_signals_png(table, run.verdicts, f"{run.spec.plan.name} {record.run_id}",
+                                                   events))
         print(f"wrote {args.plot}")
     return EXIT_OK
 

@@ -101,11 +101,12 @@ def _worst_rho(record) -> float:
 def _animate(store, record) -> dict:
     """A failing run executed again: its GIF and its signals over time."""
     from addt_dsl.reporting.animation import render_gif
-    from addt_dsl.reporting.trace_view import rerun, signals_table
+    from addt_dsl.reporting.trace_view import events_table, rerun, signals_table
 
     run = rerun(store, record)
     gif = render_gif(run.spec.plan, run.trace, run.verdicts, label=record.run_id)
-    signals = plots.run_signals_png(signals_table(run.spec, run.trace), run.verdicts)
+    signals = plots.run_signals_png(signals_table(run.spec, run.trace), run.verdicts,
+                                    events=events_table(run.trace))
     return {
         "record": record,
         "gif": base64.b64encode(gif).decode("ascii"),

@@ -5,7 +5,8 @@ The store keeps no traces: `rerun` executes the stored RunSpec again with the tr
 flattens the trace into one row per clock sample:
 
     time_s, ego.speed, ego.accel, ego.s, ego.lane_offset, ..., lead.speed, ...,
-    gap(ego,lead), ttc(ego,lead), latency.e2e, ..., objects, rho.<oracle>, ...
+    gap(ego,lead), ttc(ego,lead), latency.e2e, ..., objects, light(<controller>), ...,
+    step.<actor.step>, ..., rho.<oracle>, ...
 
 where `rho.<oracle>` is the oracle's margin at each sample (`robustness_over_time`:
 negative where it is violated). `events_table` lists the events (collisions, faults,
@@ -97,6 +98,8 @@ def signals_table(spec, trace):
         columns[f"latency.{node}"] = np.asarray(values)
     if trace.object_count is not None:
         columns["objects"] = np.asarray(trace.object_count)
+    for name, state in trace.lights.items():  # `light(C)`: 0 green, 1 yellow, 2 red (plan.LIGHT_STATES)
+        columns[f"light({name})"] = np.asarray(state, dtype=float)
     for name, state in trace.steps.items():  # named steps: 0 waiting, 1 started, 2 ended
         columns[f"step.{name}"] = np.asarray(state)
     for name, rho in oracle_margins(spec, trace).items():
