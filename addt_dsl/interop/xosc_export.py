@@ -39,10 +39,8 @@ short (docs/openscenario.md has the full table):
 
 from __future__ import annotations
 
-import datetime
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,7 +49,7 @@ from scenariogeneration import xosc
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.interop.xodr_export import ExportError, road_file, xml_text
+from addt_dsl.interop.xodr_export import ExportError, creation_date, road_file, xml_text
 from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
 from addt_dsl.registry import BEHAVIORS
@@ -840,17 +838,6 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
 
 
 # ---------------------------------------------------------------- entry point
-
-def creation_date() -> datetime.datetime:
-    """The FileHeader's date: `SOURCE_DATE_EPOCH` (the reproducible-builds convention) when
-    set, else the Unix epoch, so that exporting one RunSpec twice gives the same bytes (an
-    exported counterexample diffs clean in version control)."""
-    try:
-        epoch_s = int(os.environ.get("SOURCE_DATE_EPOCH", "0"))
-    except ValueError:
-        epoch_s = 0
-    return datetime.datetime.fromtimestamp(epoch_s, tz=datetime.timezone.utc).replace(tzinfo=None)
-
 
 def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> Export:
     """Write `<stem>.xosc`, its OpenDRIVE file and `<stem>.addt.json` into `out_dir`."""

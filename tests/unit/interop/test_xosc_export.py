@@ -310,6 +310,19 @@ def test_exporting_twice_gives_the_same_bytes(tmp_path, monkeypatch):
     assert DET.parse(third.xosc_path).getroot().find("FileHeader").get("date") == "2025-11-26T00:00:00"
 
 
+def test_an_inline_roads_xodr_is_the_same_bytes_each_time(tmp_path, monkeypatch):
+    """The generated .xodr's header carried the time of writing; it carries the export's
+    date (SOURCE_DATE_EPOCH, else the epoch) as the .xosc does."""
+    spec = expand(compile_file(ROOT / "tests" / "data" / "interop" / "every_light.addt").plan).specs[0]
+    first = export_run(spec, tmp_path / "a", "s")
+    second = export_run(spec, tmp_path / "b", "s")
+    assert first.xodr_path.read_bytes() == second.xodr_path.read_bytes()
+    assert DET.parse(first.xodr_path).getroot().find("header").get("date") == "1970-01-01T00:00:00"
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1764115200")  # 2025-11-26 00:00 UTC
+    third = export_run(spec, tmp_path / "c", "s")
+    assert DET.parse(third.xodr_path).getroot().find("header").get("date") == "2025-11-26T00:00:00"
+
+
 @pytest.mark.parametrize(("params", "words"), [
     (["lead_speed=1e308m/s"], "outside lead_speed's range [12 m/s, 22 m/s]"),
     (["lead_speed=-99m/s"], "outside lead_speed's range"),
