@@ -15,6 +15,7 @@ or writing fails. Outputs, for a stem `S`:
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, field
@@ -73,16 +74,41 @@ def header_comment(result, source_file: str) -> str:
     return "\n".join(lines)
 
 
+def shared_map_name(road) -> str:
+    """`town-3fa2c1d9e0b4.xodr`: an imported map by its name and the hash of its content."""
+    digest = hashlib.sha256((road.xodr_text or "").encode()).hexdigest()[:12]
+    stem = Path(road.xodr_file or road.name).stem
+    return f"{stem.removesuffix('-' + digest)}-{digest}.xodr"
+
+
+def shared_maps(spec: RunSpec) -> RunSpec:
+    """The run with each imported map named by its content: counterexamples written to one
+    directory share one file per map (a 1 MB map is not copied per entry), and a map edited
+    since never overwrites the one an older entry replays (the name changes with the content)."""
+    roads = [r.model_copy(update={"xodr_file": shared_map_name(r)}) if r.source == "xodr" else r
+             for r in spec.plan.roads]
+    return spec.model_copy(update={"plan": spec.plan.model_copy(update={"roads": roads})})
+
+
+def _holds(path: Path, text: str) -> bool:
+    try:
+        return path.is_file() and path.read_text() == text
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
 def write_counterexample(result, out_dir: str | Path, source_file: str = "", stem: str | None = None,
                          animate: bool = True) -> Artifacts:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     stem = stem or counterexample_stem(source_file, result.best)
-    text = print_spec(result.best, comment=header_comment(result, source_file))
+    best = shared_maps(result.best)
+    text = print_spec(best, comment=header_comment(result, source_file))
     path = out / f"{stem}.addt"
     written = []
-    for name, body in side_files(result.best.plan).items():
-        write_text(out / name, body)
+    for name, body in side_files(best.plan).items():
+        if not _holds(out / name, body):  # named by content: one copy however many entries import it
+            write_text(out / name, body)
         written.append(out / name)
     try:  # compiled before it is written: a counterexample that does not compile is never left behind
         replay = compile_pinned(text, path=str(path), base_dir=out)
