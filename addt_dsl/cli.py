@@ -82,7 +82,9 @@ def cmd_schema(args) -> int:
 
     text = json.dumps(plan_json_schema(), indent=2) + "\n"
     if args.write:
-        Path(args.write).write_text(text)
+        from addt_dsl.reporting.atomic import write_text
+
+        write_text(args.write, text)
         print(f"wrote {args.write}")
     else:
         print(text, end="")
@@ -419,9 +421,11 @@ def cmd_trace(args) -> int:
     print_trace(run, table, events)
     for path, write in ((args.csv, "to_csv"), (args.parquet, "to_parquet")):
         if path:
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
-            getattr(table, write)(path, index=False)
-            getattr(events, write)(events_path(path), index=False)
+            from addt_dsl.reporting.atomic import atomic_path
+
+            for frame, target in ((table, path), (events, events_path(path))):
+                with atomic_path(target) as tmp:
+                    getattr(frame, write)(tmp, index=False)
             print(f"wrote {path} and {events_path(path)}")
     if args.osi:
         from addt_dsl.stack import osi_trace
@@ -429,11 +433,11 @@ def cmd_trace(args) -> int:
         n = osi_trace.write(run.spec, run.trace, args.osi)
         print(f"wrote {args.osi} ({n} OSI SensorViews)")
     if args.plot:
+        from addt_dsl.reporting.atomic import write_bytes
         from addt_dsl.reporting.plots import run_signals_png
 
-        Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.plot).write_bytes(run_signals_png(table, run.verdicts, f"{run.spec.plan.name} {record.run_id}",
-                                                   events))
+        write_bytes(args.plot, run_signals_png(table, run.verdicts, f"{run.spec.plan.name} {record.run_id}",
+                                               events))
         print(f"wrote {args.plot}")
     return EXIT_OK
 
@@ -449,8 +453,9 @@ def cmd_map(args) -> int:
         raise UsageError(f"cannot read {args.file}: {exc}") from None
     print(describe(network, Path(args.file).name), end="")
     if args.png:
-        Path(args.png).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.png).write_bytes(map_png(network, Path(args.file).name))
+        from addt_dsl.reporting.atomic import write_bytes
+
+        write_bytes(args.png, map_png(network, Path(args.file).name))
         print(f"wrote {args.png}")
     return EXIT_OK
 
