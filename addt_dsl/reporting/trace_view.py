@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from addt_dsl.errors import ToolError
 from addt_dsl.expr import signals_used, substitute_params
 from addt_dsl.fingerprint import code_identity, describe
 from addt_dsl.runtime.oracles import robustness_over_time
@@ -58,11 +59,36 @@ def stored_by_other_code(store) -> str:
     return describe(identity) if identity != code_identity() else ""
 
 
-def rerun(store, record) -> RunTrace:
+class RerunFailed(ToolError):
+    """A stored run, executed again, did not finish (its time or memory bound, a crash)."""
+
+
+def run_keeping_trace(spec, seq: int = -1, worker: str = ""):
+    """A worker's `run_fn` that keeps the trace (the sweep's `run_spec` drops it)."""
     from addt_dsl.runtime.execute import execute
+    from addt_dsl.runtime.result import RunResult
+
+    try:
+        result = execute(spec, keep_trace=True)
+    except Exception as exc:  # noqa: BLE001 - reported as the run's failure to finish
+        return RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", 0.0, seq=seq, worker=worker)
+    result.seq, result.worker = seq, worker
+    return result
+
+
+def rerun(store, record) -> RunTrace:
+    """Execute a stored run again, with its trace, in a worker process bounded as a sweep's
+    (`LocalExecutor`: the run's time bound and the memory limit, docs/limits.md): a store
+    names the run, and a run that hangs or grows without bound must not take this process
+    with it. Raises `RerunFailed` when it does not finish."""
+    from addt_dsl.runtime.executor import LocalExecutor
 
     spec = store.spec(record)
-    result = execute(spec, keep_trace=True)
+    executor = LocalExecutor(1, run_fn=run_keeping_trace, retries=0, max_tasks_per_child=1)
+    (result,) = list(executor.imap([(0, spec)]))
+    if result.status not in ("ok", "detected"):
+        first = (result.error.splitlines() or [""])[0]
+        raise RerunFailed(f"run {record.run_id}, executed again, did not finish ({result.status}: {first})")
     return RunTrace(record, spec, result.trace, result.verdicts,
                     reproduced=not record.digest or result.digest == record.digest,
                     other_code=stored_by_other_code(store))

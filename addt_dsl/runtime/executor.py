@@ -157,18 +157,52 @@ def spec_fields(spec: RunSpec) -> dict:
 
 # ---------------------------------------------------------------------------- executors
 
+class _OverTime(BaseException):
+    """Raised into an inline run at its time bound (a BaseException: `run_spec` records
+    exceptions as crashes; this one is the bound, recorded as `timeout`)."""
+
+
 class InlineExecutor:
-    """Runs in the calling process, one after another (no timeout or memory guard)."""
+    """Runs in the calling process, one after another, for debugging. Each run has the time
+    bound of a sweep worker's (`timeout_s`, "auto" by default; SIGALRM, so on Unix in the
+    main thread only); memory is not bounded (a limit would bind this process)."""
 
     name = "inline"
     workers = 1
 
-    def __init__(self, run_fn: Callable | None = None):
+    def __init__(self, run_fn: Callable | None = None, timeout_s: float | str | None = AUTO):
         self.run_fn = run_fn  # as LocalExecutor's
+        self.timeout_s = timeout_s
 
     def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunResult]:
         for seq, spec in items:
-            yield (self.run_fn or run_spec)(spec, seq, worker="inline")
+            yield self._bounded(spec, seq)
+
+    def _bounded(self, spec: RunSpec, seq: int) -> RunResult:
+        run = self.run_fn or run_spec
+        bound_s = run_time_bound_s(spec, self.timeout_s)
+        import threading
+
+        if (bound_s is None or not hasattr(signal, "setitimer")
+                or threading.current_thread() is not threading.main_thread()):
+            return run(spec, seq, worker="inline")
+
+        def over(signum, frame):
+            raise _OverTime()
+
+        t0 = time.monotonic()
+        previous = signal.signal(signal.SIGALRM, over)
+        try:
+            signal.setitimer(signal.ITIMER_REAL, bound_s)
+            try:
+                return run(spec, seq, worker="inline")
+            finally:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+        except _OverTime:
+            return RunResult.unfinished(spec, "timeout", f"run exceeded the {bound_s:g} s timeout",
+                                        time.monotonic() - t0, seq=seq, worker="inline")
+        finally:
+            signal.signal(signal.SIGALRM, previous)
 
     def close(self) -> None:
         pass
