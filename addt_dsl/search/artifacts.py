@@ -11,6 +11,8 @@ or writing fails. Outputs, for a stem `S`:
     S.gif           top-down animation, when the reporting package provides one
     S.xosc          the same run as OpenSCENARIO XML, with its road (S.xodr or the imported
                     map) and S.addt.json (what OpenSCENARIO cannot hold), addt_dsl/interop
+    S.osi           the replay's ground truth as an ASAM OSI trace (the `osi` extra; without
+                    it, `Artifacts.osi_note` says so)
 """
 
 from __future__ import annotations
@@ -49,6 +51,8 @@ class Artifacts:
     files: list[Path] = field(default_factory=list)
     xosc: Path | None = None  # the OpenSCENARIO replay file (None: the run has no OpenSCENARIO form)
     xosc_note: str = ""  # why not
+    osi: Path | None = None  # the replay's ground truth as an ASAM OSI trace (None: see osi_note)
+    osi_note: str = ""  # why not (the `osi` extra is not installed)
 
 
 # The header line that ties a counterexample to the content of the scenario it was shrunk
@@ -127,6 +131,9 @@ def write_counterexample(result, out_dir: str | Path, source_file: str = "", ste
         write_text(arts.events, json.dumps([{"time_s": e.time_s, "kind": e.kind, "detail": _jsonable(e.detail)}
                                            for e in trace.events], indent=1) + "\n")
         written += [arts.trace, arts.events]
+        arts.osi, arts.osi_note = _osi_trace(replay, trace, out / f"{stem}.osi")
+        if arts.osi is not None:
+            written.append(arts.osi)
         if animate:
             arts.animation = _animation(replay, trace, outcome, out / f"{stem}.gif")
             if arts.animation:
@@ -141,6 +148,19 @@ def write_counterexample(result, out_dir: str | Path, source_file: str = "", ste
     written.append(arts.report)
     arts.files = written
     return arts
+
+
+def _osi_trace(spec: RunSpec, trace, path: Path) -> tuple[Path | None, str]:
+    """The replay as an OSI trace (`.osi`: what OSI tools replay, docs/bridge.md), or why not."""
+    from addt_dsl import extras
+
+    missing = extras.missing_message("osi3", f"an OSI trace ({path.name})")
+    if missing:
+        return None, missing
+    from addt_dsl.stack import osi_trace
+
+    osi_trace.write(spec, trace, path)
+    return path, ""
 
 
 def trace_arrays(trace) -> dict[str, np.ndarray]:
