@@ -26,6 +26,7 @@ lost after their retries, the store is unusable or in use, the disk is full, int
 from __future__ import annotations
 
 import argparse
+import errno
 import itertools
 import json
 import os
@@ -84,6 +85,8 @@ def cmd_schema(args) -> int:
     if args.write:
         from addt_dsl.reporting.atomic import write_text
 
+        if not Path(args.write).parent.is_dir():  # a mistyped path: said, not created
+            raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), args.write)
         write_text(args.write, text)
         print(f"wrote {args.write}")
     else:

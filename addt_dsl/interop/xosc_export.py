@@ -52,7 +52,6 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, creation_date, road_file, xml_text
 from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
-from addt_dsl.reporting.atomic import write_text
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
 from addt_dsl.runtime.road.route import resolve_route
@@ -910,8 +909,8 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
     xosc_path = out / f"{stem}.xosc"
     xodr_path = out / roads.name
     sidecar_path = out / f"{stem}.addt.json"
-    write_text(xosc_path, xml_text(scenario.get_element()))
-    write_text(xodr_path, roads.text)
-    write_text(sidecar_path, json.dumps(sidecar, indent=2) + "\n")
+    xosc_path.write_text(xml_text(scenario.get_element()))
+    xodr_path.write_text(roads.text)
+    sidecar_path.write_text(json.dumps(sidecar, indent=2) + "\n")
     return Export(xosc_path, xodr_path, sidecar_path, run.carried)
 
