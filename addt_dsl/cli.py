@@ -27,6 +27,7 @@ Set ADDT_DEBUG=1 to see the traceback of an internal error.
 from __future__ import annotations
 
 import argparse
+import errno
 import itertools
 import json
 import os
@@ -84,7 +85,11 @@ def cmd_schema(args) -> int:
 
     text = json.dumps(plan_json_schema(), indent=2) + "\n"
     if args.write:
-        Path(args.write).write_text(text)
+        from addt_dsl.reporting.atomic import write_text
+
+        if not Path(args.write).parent.is_dir():  # a mistyped path: said, not created
+            raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), args.write)
+        write_text(args.write, text)
         print(f"wrote {args.write}")
     else:
         print(text, end="")
@@ -421,9 +426,11 @@ def cmd_trace(args) -> int:
     print_trace(run, table, events)
     for path, write in ((args.csv, "to_csv"), (args.parquet, "to_parquet")):
         if path:
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
-            getattr(table, write)(path, index=False)
-            getattr(events, write)(events_path(path), index=False)
+            from addt_dsl.reporting.atomic import atomic_path
+
+            for frame, target in ((table, path), (events, events_path(path))):
+                with atomic_path(target) as tmp:
+                    getattr(frame, write)(tmp, index=False)
             print(f"wrote {path} and {events_path(path)}")
     if args.osi:
         from addt_dsl.stack import osi_trace
@@ -431,10 +438,11 @@ def cmd_trace(args) -> int:
         n = osi_trace.write(run.spec, run.trace, args.osi)
         print(f"wrote {args.osi} ({n} OSI SensorViews)")
     if args.plot:
+        from addt_dsl.reporting.atomic import write_bytes
         from addt_dsl.reporting.plots import run_signals_png
 
-        Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.plot).write_bytes(run_signals_png(table, run.verdicts, f"{run.spec.plan.name} {record.run_id}"))
+        write_bytes(args.plot, run_signals_png(table, run.verdicts, f"{run.spec.plan.name} {record.run_id}",
+                                               events))
         print(f"wrote {args.plot}")
     return EXIT_OK
 
@@ -473,8 +481,9 @@ def cmd_map(args) -> int:
                              "(raise it with --max lanes_per_section=N)")
     print(describe(network, Path(args.file).name), end="")
     if args.png:
-        Path(args.png).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.png).write_bytes(map_png(network, Path(args.file).name))
+        from addt_dsl.reporting.atomic import write_bytes
+
+        write_bytes(args.png, map_png(network, Path(args.file).name))
         print(f"wrote {args.png}")
     return EXIT_OK
 

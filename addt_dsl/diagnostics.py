@@ -70,6 +70,7 @@ CODES: dict[str, str] = {
     "E0002": "unexpected end of file",
     "E0003": "unreadable source (encoding, binary data or size)",
     "E0004": "nesting too deep",
+    "E0005": "unknown block keyword",
     "E0101": "unknown name",
     "E0102": "duplicate definition",
     "E0103": "missing required element",

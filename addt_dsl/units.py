@@ -139,6 +139,17 @@ def to_si(value: float, symbol: str | None) -> tuple[float, Dim]:
     return float(value) * unit.factor, unit.dim
 
 
+# A literal with more significant digits than this is float noise of arithmetic
+# (`3.8000000000000003`, `13.88888888888889` for 50 km/h), not a value anyone wrote.
+NOISE_DIGITS = 12
+
+
+def significant_digits(text: str) -> int:
+    """Significant digits of a decimal literal (`0.0012` -> 2, `1.5e-07` -> 2, `13.88888888888889` -> 16)."""
+    mantissa = text.lower().lstrip("+-").split("e")[0].replace(".", "").lstrip("0")
+    return len(mantissa.rstrip("0")) or 1
+
+
 def number_literal(value: float) -> str:
     """A float as source text that reads back bit for bit (repr; `1e999` for infinity)."""
     if math.isnan(value):

@@ -15,6 +15,7 @@ UTF-8, a huge file, brackets nested too deeply).
 
 from __future__ import annotations
 
+import difflib
 import functools
 import re
 
@@ -456,6 +457,52 @@ def _unclosed_brace(text: str) -> tuple[int, int] | None:
     return suspicious or stack[-1][:2]
 
 
+# Words that open a block (`expect {`); a line `WORD {` with another word is a misspelt one.
+_BLOCK_WORDS = ("faults", "expect", "sweep", "lights", "environment", "sequence", "parallel")
+_BLOCK_LINE = re.compile(r"\s*([A-Za-z_]\w*)\s*\{\s*(#.*)?")
+
+
+def _misspelt_block(token: Token, text: str, path: str, sink: DiagnosticSink) -> bool:
+    """`expcet {`: the parser reads the word as a name and fails at '{', listing tokens; say
+    which block was meant instead (E0005)."""
+    if str(token) != "{" or token.line is None:
+        return False
+    lines = text.splitlines()
+    line = lines[token.line - 1] if 0 < token.line <= len(lines) else ""
+    m = _BLOCK_LINE.fullmatch(line)
+    if m is None or m.group(1) in _BLOCK_WORDS:
+        return False
+    word = m.group(1)
+    close = difflib.get_close_matches(word.lower(), _BLOCK_WORDS, n=1, cutoff=0.6)
+    notes = [f"did you mean `{close[0]}`?"] if close else []
+    notes.append("blocks: " + ", ".join(f"`{w} {{`" for w in _BLOCK_WORDS))
+    start = m.start(1) + 1
+    sink.error("E0005", f"`{word}` does not open a block", Span(path, token.line, start, token.line,
+                                                                    start + len(word)),
+               *notes, label="not a block keyword")
+    return True
+
+
+def _named_light_step(token: Token, text: str, path: str, sink: DiagnosticSink) -> bool:
+    """`to_red: at 3 s light west state red` inside `lights { }`: only an actor's steps have
+    names (what `started(A.step)`/`ended(A.step)` read)."""
+    if str(token) != ":" or token.line is None:
+        return False
+    opened = _open_brace_at(text, token.line)
+    if opened is None or not re.match(r"\s*lights\s*\{", opened[2]):
+        return False
+    lines = text.splitlines()
+    line = lines[token.line - 1] if 0 < token.line <= len(lines) else ""
+    label = line[:token.column - 1].strip()
+    rest = line[token.column:].strip()
+    sink.error("E0001", f"a step in `lights` cannot be named (`{label}:`)",
+               Span(path, token.line, token.column - len(label), token.line, token.column + 1),
+               f"write `{rest}`" if rest else "write the step without its name",
+               "only an actor's steps have names, which `started(A.step)` and `ended(A.step)` read; "
+               "`light(C)` reads a controller's state", label="a name here")
+    return True
+
+
 def report_syntax_error(lark: Lark, exc: UnexpectedInput, path: str, sink: DiagnosticSink, text: str = "") -> None:
     """One syntax error as a diagnostic: what was found, what the grammar expected there,
     and a curated hint for common slips (a unit typo, `=` for `==`, a missing '}')."""
@@ -484,6 +531,8 @@ def report_syntax_error(lark: Lark, exc: UnexpectedInput, path: str, sink: Diagn
         return
     assert isinstance(exc, UnexpectedToken)
     token = exc.token
+    if _misspelt_block(token, text, path, sink) or _named_light_step(token, text, path, sink):
+        return
     shown = "end of line" if token.type == "_NL" else repr(str(token))
     notes = _curated_hint(token, expected, text)
     if words:

@@ -157,11 +157,12 @@ def cmd_import(args) -> int:
     if got.text is None:
         return EXIT_USAGE
     if args.output:
+        from addt_dsl.reporting.atomic import write_text
+
         out = Path(args.output)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(got.text)
+        write_text(out, got.text)
         for name, body in got.side_files.items():
-            (out.parent / name).write_text(body)
+            write_text(out.parent / name, body)
         if args.format == "text":
             print(f"wrote {out}" + "".join(f", {out.parent / n}" for n in got.side_files))
     elif args.format == "text":

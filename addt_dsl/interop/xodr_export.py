@@ -10,6 +10,8 @@ single OpenDRIVE file: `ExportError`.
 
 from __future__ import annotations
 
+import datetime
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from xml.etree import ElementTree as ET  # serialises trees we build; untrusted XML is read with defusedxml
@@ -17,6 +19,17 @@ from xml.etree import ElementTree as ET  # serialises trees we build; untrusted 
 from scenariogeneration import xodr
 
 from addt_dsl.plan import RoadPlan, ScenarioPlan, SignalPlan
+
+
+def creation_date() -> datetime.datetime:
+    """The date in an exported file's header (.xosc FileHeader, .xodr header): `SOURCE_DATE_EPOCH`
+    (the reproducible-builds convention) when set, else the Unix epoch, so that exporting one
+    RunSpec twice gives the same bytes (an exported counterexample diffs clean in version control)."""
+    try:
+        epoch_s = int(os.environ.get("SOURCE_DATE_EPOCH", "0"))
+    except ValueError:
+        epoch_s = 0
+    return datetime.datetime.fromtimestamp(epoch_s, tz=datetime.timezone.utc).replace(tzinfo=None)
 
 
 class ExportError(Exception):
@@ -112,6 +125,8 @@ def road_file(plan: ScenarioPlan, stem: str) -> RoadFile:
         ids[road.name] = str(i)
     odr.adjust_startpoints()
     element = odr.get_element()
+    # scenariogeneration stamps the header with the time of writing: the export's own date instead.
+    element.find("header").set("date", creation_date().isoformat(timespec="seconds"))
     for sig in element.iter("signal"):
         # scenariogeneration always writes a country; OpenDRIVE 1.8 takes ISO 3166 codes only
         # and 1000001 is OpenDRIVE's own generic traffic light: the optional attribute goes.

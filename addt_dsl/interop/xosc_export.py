@@ -39,10 +39,8 @@ short (docs/openscenario.md has the full table):
 
 from __future__ import annotations
 
-import datetime
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,7 +49,7 @@ from scenariogeneration import xosc
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.interop.xodr_export import ExportError, road_file, xml_text
+from addt_dsl.interop.xodr_export import ExportError, creation_date, road_file, xml_text
 from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
 from addt_dsl.registry import BEHAVIORS
@@ -144,6 +142,12 @@ class _Run:
         self.signal_ids: dict[str, str] = {}  # inline signal name -> its id in the generated .xodr
         self.signal_lamps: dict[str, tuple[str, ...]] = {}  # map signal id -> lamp colours
         self.light_steps: dict[str, dict] = {}  # event -> exact light clause (side file)
+        # `actor.label` -> the named step whose state `started(...)`/`ended(...)` read; the event that
+        # stands for it is known once that step is exported, so its conditions are filled in then.
+        self.labels = {f"{a.name}.{tr.label}": tr for a in self.plan.actors() for tr in _all_steps(a.triggers)
+                       if tr.label}
+        self.label_events: dict[str, str] = {}  # `actor.label` -> its event (a group's: its anchor)
+        self.state_refs: list[tuple[xosc.StoryboardElementStateCondition, str]] = []
 
     def signal_id(self, sid: str) -> str:
         return self.signal_ids.get(sid, sid)
@@ -160,6 +164,37 @@ class _Run:
             name, i = f"{base}_{i}", i + 1
         self.names.add(name)
         return name
+
+
+def _all_steps(steps):
+    for tr in steps:
+        yield tr
+        if tr.group is not None:
+            yield from _all_steps(tr.group.steps)
+
+
+# A step state as an event state: `started` when the event starts; `ended` when its actions end.
+STEP_STATES = {"started": xosc.StoryboardElementState.startTransition,
+               "ended": xosc.StoryboardElementState.endTransition}
+
+
+def _state_condition(run: _Run, fn: str, key: str, op: str, value: float, name: str):
+    """`started(A.step) > 0` / `ended(A.step) > 0` as a StoryboardElementStateCondition on the
+    step's event, or None where the comparison is not the state itself or the step has no one event
+    (a group's end, a group without an anchor event)."""
+    step = run.labels.get(key)
+    if step is None or fn not in STEP_STATES:
+        return None
+    truth = {v: {"<": v < value, "<=": v <= value, ">": v > value, ">=": v >= value, "==": v == value,
+                 "!=": v != value}.get(op) for v in (0.0, 1.0)}
+    if truth != {0.0: False, 1.0: True}:  # a state signal is 0 or 1: only `state is true` has this form
+        return None
+    if step.group is not None and (fn == "ended" or (step.at_s is None and step.after_s is None
+                                                      and step.condition is None)):
+        return None
+    cond = xosc.StoryboardElementStateCondition(xosc.StoryboardElementType.event, key, STEP_STATES[fn])
+    run.state_refs.append((cond, key))
+    return xosc.ValueTrigger(name, 0, xosc.ConditionEdge.none, cond)
 
 
 # ---------------------------------------------------------------- entities
@@ -402,6 +437,8 @@ def _compare(run: _Run, node, name: str):
     if sig is None or value is None:
         return None
     fn, args = sig
+    if fn in STEP_STATES and len(args) == 1:
+        return _state_condition(run, fn, args[0], op, value, name)
     rule = RULES[op]
     if fn == "s" and op in (">", ">=") and len(args) == 1 and args[0] in run.along:
         cond = xosc.TraveledDistanceCondition(max(0.0, value - run.s0[args[0]]))
@@ -518,7 +555,8 @@ def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str]
 def _event(run: _Run, actor: str, clause: ClausePlan, step: TriggerPlan | None, armed_by: str | None):
     settings = _resolve(run, clause.settings)
     cls_settings = _with_defaults(clause.name, settings)
-    name = run.unique(f"{actor}_{clause.name}")
+    # A named step's event carries its name (an importer names the step after it).
+    name = run.unique(step.label if step is not None and step.label else f"{actor}_{clause.name}")
     run.event_names.append(name)
     keyword = BEHAVIORS.get(clause.name).keyword  # aliases (`follow`) export as their behaviour
     actions, standard = ACTIONS[keyword](run, actor, cls_settings)
@@ -560,7 +598,7 @@ def _literal(value):
 def _steps(run: _Run, actor: str, steps, maneuver: xosc.Maneuver) -> None:
     for step in steps:
         if step.group is None:
-            maneuver.add_event(_event(run, actor, step.clause, step, None))
+            maneuver.add_event(_named(run, actor, step, _event(run, actor, step.clause, step, None)))
             continue
         first = len(run.event_names)
         _flatten(run, actor, step, maneuver, None)
@@ -571,20 +609,27 @@ def _steps(run: _Run, actor: str, steps, maneuver: xosc.Maneuver) -> None:
                            "conditions (the step semantics exactly in the side file)")
 
 
+def _named(run: _Run, actor: str, step: TriggerPlan, event: xosc.Event) -> xosc.Event:
+    """Remember the event of a named step (for the conditions that read its state)."""
+    if step.label:
+        run.label_events[f"{actor}.{step.label}"] = event.name
+    return event
+
+
 def _flatten(run: _Run, actor: str, step: TriggerPlan, maneuver: xosc.Maneuver, armed_by: list[str] | None):
     """Events for one step; returns the events whose start together mean the step is done."""
     if step.group is None:
-        event = _event(run, actor, step.clause, step, armed_by)
+        event = _named(run, actor, step, _event(run, actor, step.clause, step, armed_by))
         maneuver.add_event(event)
         return [event.name]
     if step.at_s is not None or step.after_s is not None or step.condition is not None:
         # An anchor event marks the moment the group step fires (a no-op action).
-        name = run.unique(f"{actor}_{step.group.mode}")
+        name = run.unique(step.label or f"{actor}_{step.group.mode}")
         run.event_names.append(name)
         anchor = xosc.Event(name, xosc.Priority.parallel)
         anchor.add_action(run.unique(f"{name}_action"), xosc.VisibilityAction(True, True, True))
         anchor.add_trigger(_start_trigger(run, step, name, armed_by))
-        maneuver.add_event(anchor)
+        maneuver.add_event(_named(run, actor, step, anchor))
         armed_by = [name]
     if step.group.mode == "parallel":
         done = []
@@ -796,17 +841,6 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
 
 # ---------------------------------------------------------------- entry point
 
-def creation_date() -> datetime.datetime:
-    """The FileHeader's date: `SOURCE_DATE_EPOCH` (the reproducible-builds convention) when
-    set, else the Unix epoch, so that exporting one RunSpec twice gives the same bytes (an
-    exported counterexample diffs clean in version control)."""
-    try:
-        epoch_s = int(os.environ.get("SOURCE_DATE_EPOCH", "0"))
-    except ValueError:
-        epoch_s = 0
-    return datetime.datetime.fromtimestamp(epoch_s, tz=datetime.timezone.utc).replace(tzinfo=None)
-
-
 def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> Export:
     """Write `<stem>.xosc`, its OpenDRIVE file and `<stem>.addt.json` into `out_dir`."""
     pinned = pin_spec(spec)
@@ -852,6 +886,8 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
     lights = _lights_group(run)
     if lights is not None:
         act.add_maneuver_group(lights)
+    for cond, key in run.state_refs:  # every named step is exported by now
+        cond.reference = run.label_events[key]
     for param in run.placeholders:
         params.add_parameter(xosc.Parameter(param, xosc.ParameterType.boolean, "false"))
     if not act.maneuvergroup:  # an act needs a maneuver group: an empty one for the ego

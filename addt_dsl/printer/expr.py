@@ -42,8 +42,23 @@ def _number(value: float) -> str:
         raise PrinterError(str(exc)) from None
 
 
+def _noisy(text: str) -> bool:
+    return units.significant_digits(text) > units.NOISE_DIGITS
+
+
+def _exact_in(value: float, unit: units.Unit) -> str | None:
+    """`value` [SI] as a short literal in `unit` that reads back bit for bit, or None."""
+    scaled = value / unit.factor
+    if not math.isfinite(scaled):
+        return None
+    text = units.number_literal(float(f"{scaled:.{units.NOISE_DIGITS}g}"))
+    return text if float(text) * unit.factor == value else None
+
+
 def format_quantity(value: float, dim: Dim) -> str:
-    """An SI value as a literal of dimension `dim` that reads back bit for bit."""
+    """An SI value as a literal of dimension `dim` that reads back bit for bit. Where the
+    canonical unit's number is float noise (`13.88888888888889 m/s`), a unit of the dimension
+    that writes it short and exactly (`50 km/h`)."""
     value = float(value)
     for symbol in PREFERRED_UNITS.get(dim, ()):
         unit = units.UNITS[symbol]
@@ -56,7 +71,12 @@ def format_quantity(value: float, dim: Dim) -> str:
     unit = units.CANONICAL_UNIT.get(dim)
     if unit is None:
         raise PrinterError(f"no unit for a {units.dim_name(dim)} literal")
-    return f"{_number(value)} {unit}"
+    text = _number(value)
+    if _noisy(text) and math.isfinite(value):
+        for other in units.UNITS.values():
+            if other.dim == dim and other.symbol != unit and (short := _exact_in(value, other)) is not None:
+                return f"{short} {other.symbol}"
+    return f"{text} {unit}"
 
 
 def format_const(value: float, dim: Dim) -> str:

@@ -21,7 +21,10 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     if path.is_dir():  # refused by name: the rename would fail naming the temporary file
         raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR), str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise naming(exc, path) from exc
     try:  # mkstemp makes it 0600: give it the mode a plain open() would (the user's umask) or the old file's
         os.fchmod(fd, _mode_for(path))
     except OSError:
@@ -33,10 +36,21 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         with open(tmp, "rb+") as fh:  # on disk before the rename makes it the file
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with suppress(OSError):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.filename in (None, tmp, Path(tmp)):  # not another file's error
+            raise naming(exc, path) from exc
         raise
+
+
+def naming(exc: OSError, path: str | Path) -> OSError:
+    """`exc` naming the file being written: a write or flush that fails (`No space left on
+    device`) names no file, and a failed temporary names one the user never asked for."""
+    try:
+        return type(exc)(exc.errno, exc.strerror or str(exc), str(path))
+    except TypeError:  # an OSError subclass with another signature
+        return OSError(exc.errno, exc.strerror or str(exc), str(path))
 
 
 def _umask() -> int:

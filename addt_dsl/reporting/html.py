@@ -101,11 +101,12 @@ def _worst_rho(record) -> float:
 def _animate(store, record) -> dict:
     """A failing run executed again: its GIF and its signals over time."""
     from addt_dsl.reporting.animation import render_gif
-    from addt_dsl.reporting.trace_view import rerun, signals_table
+    from addt_dsl.reporting.trace_view import events_table, rerun, signals_table
 
     run = rerun(store, record)
     gif = render_gif(run.spec.plan, run.trace, run.verdicts, label=record.run_id)
-    signals = plots.run_signals_png(signals_table(run.spec, run.trace), run.verdicts)
+    signals = plots.run_signals_png(signals_table(run.spec, run.trace), run.verdicts,
+                                    events=events_table(run.trace))
     return {
         "record": record,
         "gif": base64.b64encode(gif).decode("ascii"),
@@ -118,14 +119,20 @@ def _animate(store, record) -> dict:
 
 def _animations(store, candidates: list, budget_s: float, clock=time.monotonic) -> tuple[list, list]:
     """Animate `candidates` in order until `budget_s` wall seconds are spent (the one in
-    progress finishes); returns (animations, run ids left out for time)."""
+    progress finishes); returns (animations, run ids left out for time, or past their bounds when
+    executed again)."""
+    from addt_dsl.reporting.trace_view import RerunFailed
+
     out, skipped = [], []
     start = clock()
     for r in candidates:
         if out and clock() - start >= budget_s:
             skipped.append(r.run_id)
             continue
-        out.append(_animate(store, r))
+        try:
+            out.append(_animate(store, r))
+        except RerunFailed:  # executed again past its time or memory bound: left out, as for time
+            skipped.append(r.run_id)
     return out, skipped
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import io
+import json
 import math
 from collections import defaultdict
 
@@ -185,11 +186,29 @@ def success_rate_chart(labels: list[str], rates: list[float], intervals: list[tu
 TTC_PLOT_MAX_S = 15.0  # TTC is capped at 99 s ("not closing"); the interesting part is low
 
 
-def run_signals_png(table, verdicts, title: str = "") -> bytes:
-    """PNG of one run over time (a `trace_view.signals_table`): speeds, gaps and TTC from
-    the ego, the ego's lane offset, and one panel per oracle with its margin (negative:
-    violated), the zero line and the time its violation became certain (red; amber for
-    a `warn` oracle)."""
+def fault_injections(events) -> dict[str, list[float]]:
+    """Fault -> the times [s] it acted (the trace's `fault` events; an events table of
+    `trace_view.events_table`), labelled `#index kind target`, in the scenario's order."""
+    if events is None or not len(events):
+        return {}
+    out: dict[tuple[int, str], list[float]] = {}
+    for row in events[events["kind"] == "fault"].itertuples():
+        detail = json.loads(row.detail)
+        key = (int(detail.get("index", 0)), f"#{detail.get('index', '?')} {detail.get('kind', '?')} "
+                                            f"{detail.get('target', '')}".rstrip())
+        out.setdefault(key, []).append(float(row.time_s))
+    return {label: times for (_, label), times in sorted(out.items())}
+
+
+LIGHT_COLOURS = {0.0: "#55a868", 1.0: "#dd8452", 2.0: "#c44e52"}  # plan.LIGHT_STATES: green, yellow, red
+
+
+def signals_figure(table, verdicts, events=None, title: str = ""):
+    """One run over time (a `trace_view.signals_table`): speeds, gaps and TTC from the ego,
+    the ego's lane offset, each light's state, when each fault acted (one row per fault of
+    the scenario, a tick at each injection; `events`: `trace_view.events_table`), and one
+    panel per oracle with its margin (negative: violated), the zero line and the time its
+    violation became certain (red; amber for a `warn` oracle). A matplotlib figure."""
     plt = _pyplot()
     t = table["time_s"].to_numpy()
     groups = [("speed [m/s]", [c for c in table.columns if c.endswith(".speed")]),
@@ -197,10 +216,34 @@ def run_signals_png(table, verdicts, title: str = "") -> bytes:
               ("TTC from ego [s]", [c for c in table.columns if c.startswith("ttc(")]),
               ("ego lane offset [m]", [c for c in ("ego.lane_offset",) if c in table.columns])]
     groups = [(label, cols) for label, cols in groups if cols]
+    lights = [c for c in table.columns if c.startswith("light(")]
+    faults = fault_injections(events)
     rho = [v for v in verdicts if f"rho.{v.name}" in table.columns]
-    n = len(groups) + len(rho)
+    extra = bool(lights) + bool(faults)
+    n = len(groups) + extra + len(rho)
     fig, axes = plt.subplots(n, 1, figsize=(7.0, 1.25 * n + 0.6), sharex=True, squeeze=False)
     axes = list(axes[:, 0])
+    panel = iter(axes[len(groups):len(groups) + extra])
+    if lights:
+        ax = next(panel)
+        for row, c in enumerate(lights):
+            states = table[c].to_numpy(dtype=float)
+            for code, colour in LIGHT_COLOURS.items():  # a coloured band where the light shows that state
+                ax.fill_between(t, row - 0.4, row + 0.4, where=states == code, color=colour, step="post",
+                                linewidth=0)
+        ax.set_yticks(range(len(lights)), [c[len("light("):-1] for c in lights], fontsize=6)
+        ax.set_ylim(-0.6, len(lights) - 0.4)
+        ax.set_ylabel("lights", fontsize=7)
+    if faults:
+        ax = next(panel)
+        ax.eventplot(list(faults.values()), lineoffsets=list(range(len(faults))), linelengths=0.7,
+                     colors="#8172b2", linewidths=1.0)
+        ax.set_yticks(range(len(faults)), list(faults), fontsize=6)
+        ax.set_ylim(-0.6, len(faults) - 0.4)
+        ax.set_ylabel("faults\ninjected", fontsize=7)
+        for times in faults.values():  # the first injection of each fault across the other panels
+            for other in axes[:len(groups)]:
+                other.axvline(times[0], color="#8172b2", linewidth=0.6, linestyle=":")
     for ax, (label, cols) in zip(axes, groups):
         for c in cols:
             ax.plot(t, table[c].to_numpy(), linewidth=1.0, label=c.replace(".speed", ""))
@@ -209,7 +252,7 @@ def run_signals_png(table, verdicts, title: str = "") -> bytes:
         ax.set_ylabel(label, fontsize=7)
         if len(cols) > 1 or label.startswith(("gap", "TTC")):
             ax.legend(fontsize=6, loc="upper right")
-    for ax, v in zip(axes[len(groups):], rho):
+    for ax, v in zip(axes[len(groups) + extra:], rho):
         y = table[f"rho.{v.name}"].to_numpy(dtype=float)
         colour = "#55a868" if v.passed else ("#dd8452" if v.severity == "warn" else "#c44e52")
         finite = np.where(np.isfinite(y), y, np.nan)
@@ -230,4 +273,9 @@ def run_signals_png(table, verdicts, title: str = "") -> bytes:
     if title:
         fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    return _png_bytes(fig)
+    return fig
+
+
+def run_signals_png(table, verdicts, title: str = "", events=None) -> bytes:
+    """`signals_figure` as PNG bytes."""
+    return _png_bytes(signals_figure(table, verdicts, events, title))

@@ -5,7 +5,8 @@ The store keeps no traces: `rerun` executes the stored RunSpec again with the tr
 flattens the trace into one row per clock sample:
 
     time_s, ego.speed, ego.accel, ego.s, ego.lane_offset, ..., lead.speed, ...,
-    gap(ego,lead), ttc(ego,lead), latency.e2e, ..., objects, rho.<oracle>, ...
+    gap(ego,lead), ttc(ego,lead), latency.e2e, ..., objects, light(<controller>), ...,
+    step.<actor.step>, ..., rho.<oracle>, ...
 
 where `rho.<oracle>` is the oracle's margin at each sample (`robustness_over_time`:
 negative where it is violated). `events_table` lists the events (collisions, faults,
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from addt_dsl.errors import ToolError
 from addt_dsl.expr import signals_used, substitute_params
 from addt_dsl.fingerprint import code_identity, describe
 from addt_dsl.runtime.oracles import robustness_over_time
@@ -57,11 +59,36 @@ def stored_by_other_code(store) -> str:
     return describe(identity) if identity != code_identity() else ""
 
 
-def rerun(store, record) -> RunTrace:
+class RerunFailed(ToolError):
+    """A stored run, executed again, did not finish (its time or memory bound, a crash)."""
+
+
+def run_keeping_trace(spec, seq: int = -1, worker: str = ""):
+    """A worker's `run_fn` that keeps the trace (the sweep's `run_spec` drops it)."""
     from addt_dsl.runtime.execute import execute
+    from addt_dsl.runtime.result import RunResult
+
+    try:
+        result = execute(spec, keep_trace=True)
+    except Exception as exc:  # noqa: BLE001 - reported as the run's failure to finish
+        return RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", 0.0, seq=seq, worker=worker)
+    result.seq, result.worker = seq, worker
+    return result
+
+
+def rerun(store, record) -> RunTrace:
+    """Execute a stored run again, with its trace, in a worker process bounded as a sweep's
+    (`LocalExecutor`: the run's time bound and the memory limit, docs/limits.md): a store
+    names the run, and a run that hangs or grows without bound must not take this process
+    with it. Raises `RerunFailed` when it does not finish."""
+    from addt_dsl.runtime.executor import LocalExecutor
 
     spec = store.spec(record)
-    result = execute(spec, keep_trace=True)
+    executor = LocalExecutor(1, run_fn=run_keeping_trace, retries=0, max_tasks_per_child=1)
+    (result,) = list(executor.imap([(0, spec)]))
+    if result.status not in ("ok", "detected"):
+        first = (result.error.splitlines() or [""])[0]
+        raise RerunFailed(f"run {record.run_id}, executed again, did not finish ({result.status}: {first})")
     return RunTrace(record, spec, result.trace, result.verdicts,
                     reproduced=not record.digest or result.digest == record.digest,
                     other_code=stored_by_other_code(store))
@@ -97,6 +124,8 @@ def signals_table(spec, trace):
         columns[f"latency.{node}"] = np.asarray(values)
     if trace.object_count is not None:
         columns["objects"] = np.asarray(trace.object_count)
+    for name, state in trace.lights.items():  # `light(C)`: 0 green, 1 yellow, 2 red (plan.LIGHT_STATES)
+        columns[f"light({name})"] = np.asarray(state, dtype=float)
     for name, state in trace.steps.items():  # named steps: 0 waiting, 1 started, 2 ended
         columns[f"step.{name}"] = np.asarray(state)
     for name, rho in oracle_margins(spec, trace).items():

@@ -22,6 +22,7 @@ order. Three executors:
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 import resource
@@ -34,6 +35,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from multiprocessing.connection import wait
 
+from addt_dsl.errors import ToolError
 from addt_dsl.plan import RunSpec
 from addt_dsl.runtime.execute import execute
 from addt_dsl.runtime.result import RunResult
@@ -155,18 +157,52 @@ def spec_fields(spec: RunSpec) -> dict:
 
 # ---------------------------------------------------------------------------- executors
 
+class _OverTime(BaseException):
+    """Raised into an inline run at its time bound (a BaseException: `run_spec` records
+    exceptions as crashes; this one is the bound, recorded as `timeout`)."""
+
+
 class InlineExecutor:
-    """Runs in the calling process, one after another (no timeout or memory guard)."""
+    """Runs in the calling process, one after another, for debugging. Each run has the time
+    bound of a sweep worker's (`timeout_s`, "auto" by default; SIGALRM, so on Unix in the
+    main thread only); memory is not bounded (a limit would bind this process)."""
 
     name = "inline"
     workers = 1
 
-    def __init__(self, run_fn: Callable | None = None):
+    def __init__(self, run_fn: Callable | None = None, timeout_s: float | str | None = AUTO):
         self.run_fn = run_fn  # as LocalExecutor's
+        self.timeout_s = timeout_s
 
     def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunResult]:
         for seq, spec in items:
-            yield (self.run_fn or run_spec)(spec, seq, worker="inline")
+            yield self._bounded(spec, seq)
+
+    def _bounded(self, spec: RunSpec, seq: int) -> RunResult:
+        run = self.run_fn or run_spec
+        bound_s = run_time_bound_s(spec, self.timeout_s)
+        import threading
+
+        if (bound_s is None or not hasattr(signal, "setitimer")
+                or threading.current_thread() is not threading.main_thread()):
+            return run(spec, seq, worker="inline")
+
+        def over(signum, frame):
+            raise _OverTime()
+
+        t0 = time.monotonic()
+        previous = signal.signal(signal.SIGALRM, over)
+        try:
+            signal.setitimer(signal.ITIMER_REAL, bound_s)
+            try:
+                return run(spec, seq, worker="inline")
+            finally:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+        except _OverTime:
+            return RunResult.unfinished(spec, "timeout", f"run exceeded the {bound_s:g} s timeout",
+                                        time.monotonic() - t0, seq=seq, worker="inline")
+        finally:
+            signal.signal(signal.SIGALRM, previous)
 
     def close(self) -> None:
         pass
@@ -224,6 +260,68 @@ class _Worker:
     plans: set = field(default_factory=set)
     tasks: int = 0
     job: tuple | None = None  # (seq, spec, started_at)
+    server: int | None = None  # pid of the forkserver it was forked from (its parent)
+
+
+SPAWN_ATTEMPTS = 5  # starts of a worker, each on a new forkserver if the last one died
+
+
+class WorkerStartError(ToolError):
+    """No worker process can be started (message for the user)."""
+
+
+# The forkserver's state lives in `multiprocessing.forkserver._forkserver` (no public API):
+# its pid, read to tell a worker lost with its server from one that crashed, and reset when
+# the server is gone so that the next start launches a new one.
+def _forkserver_pid() -> int | None:
+    from multiprocessing import forkserver
+
+    return getattr(forkserver._forkserver, "_forkserver_pid", None)
+
+
+def _process_gone(pid: int) -> bool:
+    """Whether `pid` has exited (Linux /proc: no entry, or a zombie; elsewhere: signal 0)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
+    except (OSError, IndexError):
+        if sys.platform.startswith("linux"):
+            return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except OSError:
+        return False
+    return False
+
+
+def _server_lost(server: int | None) -> bool:
+    """Whether the forkserver a worker was forked from is gone (killed, or replaced since)."""
+    return server is not None and (_forkserver_pid() != server or _process_gone(server))
+
+
+def _forget_dead_forkserver() -> None:
+    """Reset multiprocessing's record of a forkserver that can no longer be reaped by it (reaped
+    elsewhere), so that the next start launches a new one; a live or reapable one is left to
+    `ensure_running`, which restarts a dead server itself."""
+    from multiprocessing import forkserver
+
+    server = forkserver._forkserver
+    pid = getattr(server, "_forkserver_pid", None)
+    if pid is None:
+        return
+    try:  # WNOWAIT: look without reaping (ensure_running reaps it and starts a new one)
+        os.waitid(os.P_PID, pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+        return
+    except ChildProcessError:
+        pass
+    with server._lock:
+        fd, server._forkserver_alive_fd = server._forkserver_alive_fd, None
+        server._forkserver_pid = server._forkserver_address = None
+        if fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(fd)
 
 
 class LocalExecutor:
@@ -277,12 +375,25 @@ class LocalExecutor:
         return ctx
 
     def _spawn(self, ctx) -> _Worker:
-        parent, child = ctx.Pipe(duplex=True)
-        process = ctx.Process(target=_worker_main, args=(child, self.memory_limit_mb, self.run_fn), daemon=True,
-                              name="addt-worker")
-        process.start()
-        child.close()
-        return _Worker(process, parent)
+        """A new worker. A forkserver killed from outside (it dies while forking this worker:
+        `EOFError` where its pid should be) is started again and the worker with it."""
+        for attempt in range(SPAWN_ATTEMPTS):
+            parent, child = ctx.Pipe(duplex=True)
+            process = ctx.Process(target=_worker_main, args=(child, self.memory_limit_mb, self.run_fn),
+                                  daemon=True, name="addt-worker")
+            try:
+                process.start()
+            except (EOFError, OSError) as exc:
+                parent.close()
+                child.close()
+                if self.start_method != "forkserver" or attempt == SPAWN_ATTEMPTS - 1:
+                    raise WorkerStartError(f"cannot start a worker process ({type(exc).__name__}: {exc})") from exc
+                _forget_dead_forkserver()
+                time.sleep(0.1 * (attempt + 1))  # a server killed a moment ago may not be reaped yet
+                continue
+            child.close()
+            return _Worker(process, parent, server=_forkserver_pid() if self.start_method == "forkserver" else None)
+        raise AssertionError("unreachable")
 
     def _dispatch(self, w: _Worker, seq: int, spec: RunSpec) -> bool:
         """Hand a run to an idle worker; False if the worker turned out to be dead (it died
@@ -308,7 +419,9 @@ class LocalExecutor:
         w.process.join(timeout=5)
         if w.process.is_alive():
             w.process.kill()
-            w.process.join()
+            # Bounded: a forkserver worker's exit status comes through the server, which may
+            # be gone or stopped; the worker itself is killed either way.
+            w.process.join(timeout=5)
 
     def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunResult]:
         ctx = self._context()
@@ -398,6 +511,8 @@ class LocalExecutor:
             code = w.process.exitcode
             why = f"killed by signal {-code}" if code is not None and code < 0 else f"exited with code {code}"
             external = code is not None and code < 0 and -code in EXTERNAL_SIGNALS
+            if _server_lost(w.server):  # it dies with the forkserver it was forked from: infrastructure
+                why, external = "lost with the forkserver, which was killed", True
             self._stop(w, kill=True)
             return RunResult.unfinished(spec, "crashed", f"worker process {why} during the run", elapsed,
                                         seq=seq, worker=f"pid{w.process.pid}"), True, external

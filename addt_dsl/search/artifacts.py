@@ -11,10 +11,13 @@ or writing fails. Outputs, for a stem `S`:
     S.gif           top-down animation, when the reporting package provides one
     S.xosc          the same run as OpenSCENARIO XML, with its road (S.xodr or the imported
                     map) and S.addt.json (what OpenSCENARIO cannot hold), addt_dsl/interop
+    S.osi           the replay's ground truth as an ASAM OSI trace (the `osi` extra; without
+                    it, `Artifacts.osi_note` says so)
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, field
@@ -48,6 +51,8 @@ class Artifacts:
     files: list[Path] = field(default_factory=list)
     xosc: Path | None = None  # the OpenSCENARIO replay file (None: the run has no OpenSCENARIO form)
     xosc_note: str = ""  # why not
+    osi: Path | None = None  # the replay's ground truth as an ASAM OSI trace (None: see osi_note)
+    osi_note: str = ""  # why not (the `osi` extra is not installed)
 
 
 # The header line that ties a counterexample to the content of the scenario it was shrunk
@@ -73,16 +78,41 @@ def header_comment(result, source_file: str) -> str:
     return "\n".join(lines)
 
 
+def shared_map_name(road) -> str:
+    """`town-3fa2c1d9e0b4.xodr`: an imported map by its name and the hash of its content."""
+    digest = hashlib.sha256((road.xodr_text or "").encode()).hexdigest()[:12]
+    stem = Path(road.xodr_file or road.name).stem
+    return f"{stem.removesuffix('-' + digest)}-{digest}.xodr"
+
+
+def shared_maps(spec: RunSpec) -> RunSpec:
+    """The run with each imported map named by its content: counterexamples written to one
+    directory share one file per map (a 1 MB map is not copied per entry), and a map edited
+    since never overwrites the one an older entry replays (the name changes with the content)."""
+    roads = [r.model_copy(update={"xodr_file": shared_map_name(r)}) if r.source == "xodr" else r
+             for r in spec.plan.roads]
+    return spec.model_copy(update={"plan": spec.plan.model_copy(update={"roads": roads})})
+
+
+def _holds(path: Path, text: str) -> bool:
+    try:
+        return path.is_file() and path.read_text() == text
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
 def write_counterexample(result, out_dir: str | Path, source_file: str = "", stem: str | None = None,
                          animate: bool = True) -> Artifacts:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     stem = stem or counterexample_stem(source_file, result.best)
-    text = print_spec(result.best, comment=header_comment(result, source_file))
+    best = shared_maps(result.best)
+    text = print_spec(best, comment=header_comment(result, source_file))
     path = out / f"{stem}.addt"
     written = []
-    for name, body in side_files(result.best.plan).items():
-        write_text(out / name, body)
+    for name, body in side_files(best.plan).items():
+        if not _holds(out / name, body):  # named by content: one copy however many entries import it
+            write_text(out / name, body)
         written.append(out / name)
     try:  # compiled before it is written: a counterexample that does not compile is never left behind
         replay = compile_pinned(text, path=str(path), base_dir=out)
@@ -101,6 +131,9 @@ def write_counterexample(result, out_dir: str | Path, source_file: str = "", ste
         write_text(arts.events, json.dumps([{"time_s": e.time_s, "kind": e.kind, "detail": _jsonable(e.detail)}
                                            for e in trace.events], indent=1) + "\n")
         written += [arts.trace, arts.events]
+        arts.osi, arts.osi_note = _osi_trace(replay, trace, out / f"{stem}.osi")
+        if arts.osi is not None:
+            written.append(arts.osi)
         if animate:
             arts.animation = _animation(replay, trace, outcome, out / f"{stem}.gif")
             if arts.animation:
@@ -115,6 +148,19 @@ def write_counterexample(result, out_dir: str | Path, source_file: str = "", ste
     written.append(arts.report)
     arts.files = written
     return arts
+
+
+def _osi_trace(spec: RunSpec, trace, path: Path) -> tuple[Path | None, str]:
+    """The replay as an OSI trace (`.osi`: what OSI tools replay, docs/bridge.md), or why not."""
+    from addt_dsl import extras
+
+    missing = extras.missing_message("osi3", f"an OSI trace ({path.name})")
+    if missing:
+        return None, missing
+    from addt_dsl.stack import osi_trace
+
+    osi_trace.write(spec, trace, path)
+    return path, ""
 
 
 def trace_arrays(trace) -> dict[str, np.ndarray]:

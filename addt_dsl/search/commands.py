@@ -220,6 +220,8 @@ def print_shrink_summary(result, arts) -> None:
     print(f"wrote {arts.addt}  (replay: addtc {arts.addt})")
     for p in arts.files[1:]:
         print(f"      {p}")
+    if arts.osi_note:
+        print(f"      no OSI trace: {arts.osi_note}")
 
 
 def cmd_falsify(args) -> int:
@@ -255,7 +257,7 @@ def _falsify(args, result, cache, log) -> int:
         log(f"run cache {cache.path}: {len(cache.store)} run(s) kept from before are reused")
     report = fal.run(budget_runs=args.budget_runs, budget_seconds=args.budget_seconds,
                      shrink_simulations=args.shrink_simulations)
-    written = []
+    written, notes = [], []
     if not args.no_write:
         from addt_dsl.search.artifacts import ReplayMismatch, write_counterexample
 
@@ -265,6 +267,9 @@ def _falsify(args, result, cache, log) -> int:
             try:
                 arts = write_counterexample(found.shrunk, args.out, args.file, animate=False)
                 written += [arts.addt] + ([arts.xosc] if arts.xosc else [])  # .xosc: docs/openscenario.md
+                written += [arts.osi] if arts.osi else []  # .osi: docs/bridge.md
+                if arts.osi_note and arts.osi_note not in notes:
+                    notes.append(arts.osi_note)
             except ReplayMismatch as exc:
                 _err(str(exc))
     if args.format == "json":
@@ -277,4 +282,6 @@ def _falsify(args, result, cache, log) -> int:
         print(falsify_text(report))
         for p in written:
             print(f"wrote {p}")
+        for note in notes:
+            print(f"no OSI trace: {note}")
     return EXIT_FAILED if report.failures else EXIT_OK

@@ -186,6 +186,6 @@ def test_a_full_disk_stops_the_sweep_cleanly_and_resume_completes(sweep, tmp_pat
         free = os.statvfs(fs).f_bavail * os.statvfs(fs).f_frsize
         filler.write_bytes(b"\0" * max(0, free - 8 * 1024))
         again = addtc("report", out, "--animations", "0")
-        _one_line_error(again, "No space left on device")
+        _one_line_error(again, "No space left on device", str(out))  # names the file it was writing
         assert (out / "report.html").read_bytes() == report
         assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]

@@ -95,10 +95,10 @@ def test_a_scripted_ego_exports_its_script_as_an_agent_does(tmp_path):
     group = root.find(".//ManeuverGroup[@name='ego_maneuver_group']")
     assert group.find("Actors/EntityRef").get("entityRef") == "ego"
     names = [e.get("name") for e in group.iterfind(".//Event")]
-    assert names[:2] == ["ego_cruise", "ego_brake"] and len(names) == 10, names
+    assert names[:2] == ["ego_cruise", "slow"] and len(names) == 10, names  # a named step's event: its name
     cruise = group.find(".//Event[@name='ego_cruise']")
     assert float(cruise.find(".//AbsoluteTargetSpeed").get("value")) == 12.0
-    brake = group.find(".//Event[@name='ego_brake']")
+    brake = group.find(".//Event[@name='slow']")
     gap = brake.find(".//RelativeDistanceCondition")
     assert (gap.get("entityRef"), float(gap.get("value")), gap.get("rule")) == ("lead", 20.0, "lessThan")
     assert float(brake.find("StartTrigger/ConditionGroup/Condition").get("delay")) == pytest.approx(0.2)
@@ -310,6 +310,19 @@ def test_exporting_twice_gives_the_same_bytes(tmp_path, monkeypatch):
     assert DET.parse(third.xosc_path).getroot().find("FileHeader").get("date") == "2025-11-26T00:00:00"
 
 
+def test_an_inline_roads_xodr_is_the_same_bytes_each_time(tmp_path, monkeypatch):
+    """The generated .xodr's header carried the time of writing; it carries the export's
+    date (SOURCE_DATE_EPOCH, else the epoch) as the .xosc does."""
+    spec = expand(compile_file(ROOT / "tests" / "data" / "interop" / "every_light.addt").plan).specs[0]
+    first = export_run(spec, tmp_path / "a", "s")
+    second = export_run(spec, tmp_path / "b", "s")
+    assert first.xodr_path.read_bytes() == second.xodr_path.read_bytes()
+    assert DET.parse(first.xodr_path).getroot().find("header").get("date") == "1970-01-01T00:00:00"
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1764115200")  # 2025-11-26 00:00 UTC
+    third = export_run(spec, tmp_path / "c", "s")
+    assert DET.parse(third.xodr_path).getroot().find("header").get("date") == "2025-11-26T00:00:00"
+
+
 @pytest.mark.parametrize(("params", "words"), [
     (["lead_speed=1e308m/s"], "outside lead_speed's range [12 m/s, 22 m/s]"),
     (["lead_speed=-99m/s"], "outside lead_speed's range"),
@@ -342,3 +355,56 @@ def test_cli_export_checks_a_parameter_without_a_range(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "not a run the scenario can state" in err and "E0301" in err and not (tmp_path / "o").exists()
     assert main(["export", str(tmp_path / "s.addt"), "--params", "v=12m/s", "--to", str(tmp_path / "o")]) == 0
+
+
+NAMED = """
+scenario named {
+  duration 8 s
+  road main {
+    line length 300 m
+    lanes right 2
+  }
+  ego car on main lane -1 at 10 m speed 10 m/s goal 200 m {
+    stack bev cruise_speed 10 m/s
+  }
+  agent lead car on main lane -1 at 50 m speed 10 m/s {
+    brake_hard: at 2 s behavior brake decel 4 m/s^2 to_speed 3 m/s
+  }
+  agent other car on main lane -2 at 30 m speed 10 m/s {
+    when %s(lead.brake_hard) then behavior brake decel 3 m/s^2 to_speed 6 m/s
+  }
+  expect {
+    no collision
+  }
+}
+"""
+
+
+@pytest.mark.parametrize("fn,state", [("ended", "endTransition"), ("started", "startTransition")])
+def test_a_named_steps_state_exports_as_its_events_state_and_imports_back(fn, state, tmp_path):
+    """`when ended(lead.brake_hard)` is a StoryboardElementStateCondition on the step's event (named
+    after the step), not a ParameterCondition that nothing sets; without the side file the import
+    names the step again and the condition reads it."""
+    from addt_dsl.interop.xosc_import import import_xosc
+
+    spec = expand(compile_source(NAMED % fn, "named.addt").plan).specs[0]
+    done = export_run(spec, tmp_path, "named")
+    root = DET.fromstring(done.xosc_path.read_text())
+    assert root.find(".//ParameterCondition") is None
+    conds = root.findall(".//StoryboardElementStateCondition")
+    assert [(c.get("storyboardElementRef"), c.get("state"), c.get("storyboardElementType")) for c in conds] == [
+        ("brake_hard", state, "event")]
+    assert root.find(".//Event[@name='brake_hard']") is not None
+    assert not any("ParameterCondition" in line for line in done.carried)
+    done.sidecar_path.unlink()
+    got = import_xosc(done.xosc_path)
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    assert not [d for d in got.diagnostics if d.code.startswith("E")], [d.message for d in got.diagnostics]
+    assert "brake_hard: at 2 s behavior brake" in got.text
+    assert f"when {fn}(lead.brake_hard) then behavior" in got.text
+    back = tmp_path / "back"
+    back.mkdir()
+    for name, body in got.side_files.items():
+        (back / name).write_text(body)
+    result = compile_source(got.text, "named.addt", base_dir=back)
+    assert result.ok, [d.message for d in result.diagnostics]

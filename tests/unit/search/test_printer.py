@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from tests.unit.search.search_testkit import example_plans, fitting_settings, formulas, kitchen_sink_plan, run_specs
+from tests.unit.search.search_testkit import ROOT, example_plans, fitting_settings, formulas, kitchen_sink_plan, run_specs
 
 from addt_dsl import expr as E
 from addt_dsl import units
@@ -131,9 +131,36 @@ def test_formulas_round_trip(generated, data):
     (0.002, units.CURVATURE, "0.002 1/m"),
     (1e-05, units.TIME, "1e-05 s"),
     (float("inf"), units.LENGTH, "1e999 m"),
+    # Float noise of a unit conversion: the unit that writes it short and exactly.
+    (50 * 1000.0 / 3600.0, units.SPEED, "50 km/h"),
+    (120 / 3.6, units.SPEED, "120 km/h"),
+    (0.1 * 38, units.LENGTH, "380 cm"),  # 3.8000000000000003 m, which 380 cm reads back as
+    # Noise with no exact short form stays exact (a pinned run reads back bit for bit).
+    (0.1 + 0.2, units.LENGTH, "0.30000000000000004 m"),
+    (0.1 + 0.2, units.DIMENSIONLESS, "0.30000000000000004"),
 ])
 def test_quantities(value, dim, text):
     assert format_quantity(value, dim) == text
+    assert units.to_si(float(text.split()[0]), text.split()[1] if " " in text else None)[0] == value
+
+
+@FAST
+@given(st.floats(allow_nan=False, allow_infinity=False, min_value=-1e9, max_value=1e9),
+       st.sampled_from([units.SPEED, units.LENGTH, units.TIME, units.ANGLE, units.ACCELERATION]))
+def test_every_quantity_reads_back_bit_for_bit(value, dim):
+    text = format_quantity(value, dim)
+    number, symbol = text.split(" ", 1)
+    assert units.to_si(float(number), symbol)[0] == value, text
+
+
+def test_an_imported_speed_in_km_h_prints_as_km_h():
+    """esmini's acc-test.xosc states 120 km/h as 33.333333333333336 m/s: the import writes `120 km/h`."""
+    from addt_dsl.interop.xosc_import import import_xosc
+
+    root = ROOT / "tests" / "data" / "esmini"
+    got = import_xosc(root / "xosc" / "acc-test.xosc", root=root)
+    assert got.text is not None
+    assert "33.333333333333336" not in got.text and "120 km/h" in got.text
 
 
 def test_a_free_product_puts_the_unit_where_it_can_be_written():
