@@ -406,7 +406,9 @@ class BevStack:
     YIELD_WAIT_CLEARANCE_M = 1.5
     YIELD_ACCEL = 1.5  # [m/s^2] below the planner's 2 m/s^2: the estimate errs long
     YIELD_COMMIT_DECEL = 4.0  # [m/s^2]
-    YIELD_CLEARED_S = 0.5  # [s] an object that leaves the zone this long before the ego arrives is gone
+    CLEAR_MAX_SPEED = 30.0 / 3.6  # [m/s] clearing a junction: up to its curve speed, at most this
+    YIELD_CLEARED_S = 0.5
+    REACTION_S = 0.2  # [s] from the plan to the brakes' full effect  # [s] an object that leaves the zone this long before the ego arrives is gone
     YIELD_STEP_M = 0.5
     STOP_MARGIN_M = 1.0  # the wait station is this far before the zone (the stop adds its own gap)
 
@@ -420,7 +422,7 @@ class BevStack:
         junction = self.ctx.junction_ahead(s0)
         if junction is None:
             return None
-        entry, _cx, _cy, exit_ = junction
+        entry, cx, cy, exit_ = junction
         road, _ = self.ctx.ego_road()
         half_len = 0.5 * self.body.length_m
         front = s0 + half_len
@@ -439,7 +441,7 @@ class BevStack:
         v_top = self._junction_speed(road, lo, hi)
         approach = float(road.reference_pose(s0)[2])
         green = self._green_at(entry, s0)
-        wait, clear = None, False
+        wait, clear, cover = None, False, math.inf
         for o, (so, to, *_rest) in zip(tracked, objs):
             if so > s0 and abs(to - t0) < 1.8:
                 continue  # traffic ahead in the ego's lane: the planner follows it
@@ -453,6 +455,8 @@ class BevStack:
             if o.kind != "pedestrian" and abs(math.cos(o.heading) * ux + math.sin(o.heading) * uy) > 0.7:
                 way = 1.0 if math.cos(o.heading) * ux + math.sin(o.heading) * uy > 0.0 else -1.0
                 ux, uy = way * math.cos(o.heading), way * math.sin(o.heading)
+            cover = min(cover, self._cover_speed(o, ux, uy, v, approach, cx, cy, front, entry, exit_,
+                                                 s0, speed, v_top))
             # The ego's box at each station, turned with the path: its half extent across the
             # object's line and along it.
             rel = hs - math.atan2(uy, ux)
@@ -488,7 +492,7 @@ class BevStack:
                 # stop keeps `LatticePlanner.STOP_GAP_M` before the station), else clear the
                 # zone as fast as the junction's curves allow.
                 line = zone_front
-                if speed * speed > 2.0 * self.body.max_brake * max(line - front - 1.5, 0.0):
+                if speed * speed / (2.0 * self.body.max_brake) + self.REACTION_S * speed > line - front:
                     clear = True
                     continue
             if wait is None or line < wait:
@@ -496,10 +500,37 @@ class BevStack:
         if wait is not None:
             clear = False
         # Clearing: the plan's speed may rise over the cruise speed to the junction's curve
-        # speed (a slow cruise, 10 km/h, would leave the ego in the other's path for seconds).
+        # speed, at most `CLEAR_MAX_SPEED` (a slow cruise, 10 km/h, would leave the ego in
+        # the other's path for seconds).
         if clear:
-            self.planner.cruise = max(self.cruise, self._junction_speed(road, lo, hi, math.inf))
+            self.planner.cruise = max(self.cruise, self._junction_speed(road, lo, hi, self.CLEAR_MAX_SPEED))
+        elif cover < self.cruise:
+            self.planner.cruise = cover
         return wait
+
+    # Covering the brake: an oncoming vehicle that reaches the junction's middle about when
+    # the ego does may turn across its path (its turn is seen only once its heading turns:
+    # esmini's ltap-od turns 0.7 s before the contact, in the near half of the junction).
+    # The ego keeps a speed from which it slows at `COVER_DECEL` to `COVER_SPEED` at the
+    # junction entry, until that vehicle is past the junction's middle or the ego is.
+    COVER_SPEED = 2.0  # [m/s]
+    COVER_DECEL = 2.0  # [m/s^2]
+    COVER_WINDOW_S = 3.0
+
+    def _cover_speed(self, o, ux, uy, v, approach, cx, cy, front, entry, exit_, s0, speed, v_top) -> float:
+        """The speed cap [m/s] an object sets as an oncoming vehicle that may turn across the
+        ego's path at the junction (middle at `cx`, `cy`), or inf."""
+        if math.cos(math.atan2(uy, ux) - approach) > -0.7:
+            return math.inf  # not oncoming
+        to_mid = (cx - o.x) * ux + (cy - o.y) * uy
+        middle = 0.5 * (entry + exit_)
+        if to_mid < 0.0 or front >= middle:
+            return math.inf  # it is past the middle, or the ego is
+        t_e = _time_to_cover(front, middle, speed, v_top, self.YIELD_ACCEL)
+        if to_mid / v > t_e + self.COVER_WINDOW_S:
+            return math.inf  # it comes later
+        d = max(entry - front, 0.0)
+        return math.sqrt(self.COVER_SPEED ** 2 + 2.0 * self.COVER_DECEL * d)
 
     def _junction_speed(self, road, lo: float, hi: float, cruise: float | None = None) -> float:
         """The speed [m/s] the ego drives through the junction at most: `cruise` (default its

@@ -69,3 +69,12 @@ def test_time_to_cover_is_the_kinematic_time():
     assert _time_to_cover(5.0, 4.0, 3.0, 3.0, 1.0) == 0.0
     # Faster than the top speed: holds its speed.
     assert _time_to_cover(0.0, 10.0, 5.0, 2.0, 1.0) == pytest.approx(2.0)
+
+
+def test_esmini_ltap_od_the_ego_covers_the_brake_for_the_turning_npc():
+    """esmini's ltap-od as written (sync point 7 m, both at 10 m/s; it collided before):
+    the NPC turns across the ego's path 0.7 s before the contact; the ego slows while it
+    may turn (`COVER_SPEED` at the entry) and gets through."""
+    out = execute(_spec("junction_ltap_od", EgoSyncPoint1S=7.0, HostSpeed=10.0, NPCInitialSpeed=10.0))
+    assert out.passed, out.verdicts
+    assert out.trace.actors["ego"].speed.min() < 8.0  # it slowed from its 10 m/s
