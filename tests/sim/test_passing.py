@@ -3,7 +3,6 @@ leaves room (a car parked 0.9 m into the lane), into a free lane of the same dir
 and never through the oncoming lane (the stack does not pass through it: see
 docs/stack.md)."""
 
-import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
