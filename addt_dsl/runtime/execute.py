@@ -143,12 +143,12 @@ class _Context:
         return self.run.sensors[name]
 
     def junction_ahead(self, s: float):
-        """(entry station [m], x, y of its conflict point [m]) of the next junction on the
-        ego's route that its front has not left, or None (no route, or past the last)."""
+        """(entry station [m], x, y of its middle [m], exit station [m]) of the next junction
+        on the ego's route that its front has not left, or None (no route, or past the last)."""
         front = s + 0.5 * self.run.ego_plan.length_m
         for entry, exit_, cx, cy in self.run.ego_junctions:
             if exit_ > front:
-                return entry, cx, cy
+                return entry, cx, cy, exit_
         return None
 
     def stop_line_ahead(self, s: float):

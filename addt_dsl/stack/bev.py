@@ -15,6 +15,8 @@ import time as _time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
 from addt_dsl import units
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.registry import STACKS, ParamSpec
@@ -143,9 +145,9 @@ class BevStack:
                   doc="partial braking (40 % of mu g) below this time to collision"),
         ParamSpec("aeb_full_ttc", units.TIME, default=0.9, low=0.0, high=10.0,
                   doc="full braking (mu g) below this time to collision"),
-        ParamSpec("yield_gap", units.TIME, default=0.0, low=0.0, high=20.0,
-                  doc="gap acceptance at junctions on the route: give way to traffic that reaches the "
-                      "junction within this time (0: off)"),
+        ParamSpec("yield_gap", units.TIME, default=1.5, low=0.0, high=20.0,
+                  doc="gap acceptance at junctions on the route: the ego goes when other traffic reaches "
+                      "the conflict zone at least this long after the ego has left it (0: off)"),
         ParamSpec("synthetic_objects", None, kind="int", default=0, low=0, high=500,
                   doc="extra objects perception reports in every frame (vehicles keeping pace beside "
                       "the road, 12 m or more to either side): a controllable workload for latency "
@@ -232,6 +234,7 @@ class BevStack:
         self.body = EgoBody(float(ctx.ego_length_m), float(ctx.ego_width_m), float(ctx.ego_mass_kg),
                             float(ctx.ego_mu))
         self.planner = LatticePlanner(self.settings, self.body)
+        self.cruise = self.planner.cruise  # the setting (the planner's may rise to clear a junction)
         self.controller = Controller(self.settings, ctx.wheelbase_m, self.body)
         self.aeb_stage = 0
         self.emergency = False
@@ -368,7 +371,7 @@ class BevStack:
                          o.length * rc + o.width * rs, o.length * rs + o.width * rc))
         hdg0 = heading - float(road.reference_pose(s0)[2])
         stop = self.ctx.stop_line_ahead(float(s0))
-        give_way = self._give_way(float(s0), float(t0), tracked, objs)
+        give_way = self._give_way(float(s0), float(t0), speed, tracked, objs)
         if give_way is not None and (stop is None or give_way < stop[0]):
             stop = (give_way, LIGHT_STATES["red"])  # wait before the junction like at a red light
         plan = self.planner.plan((float(s0), float(t0), lane0), speed, objs, road, road_id, time_s,
@@ -383,37 +386,164 @@ class BevStack:
         stamp = self.tracks_stamp if self.tracks_stamp is not None else time_s
         self.bus.publish("plan", plan, stamp, time_s + lat)
 
-    # Gap acceptance at junctions (`yield_gap` > 0): before entering a junction on its route,
-    # the ego gives way to every tracked object (other than traffic ahead in its own lane,
-    # which the planner follows) that would reach the junction's conflict point (the middle
-    # of the ego's connecting road) within `yield_gap` [s] at its current velocity, or is
-    # within `YIELD_RADIUS_M` of it and moving: it waits at the junction entry until the gap
-    # is long enough. Inside the junction it no longer waits (it clears it).
-    YIELD_RADIUS_M = 6.0
+    # Gap acceptance at junctions (`yield_gap` > 0, 1.5 s by default): before it reaches the
+    # part of a junction on its route where another road user's path crosses its own, the ego
+    # judges the gap. Each moving tracked object (other than traffic ahead in its own lane,
+    # which the planner follows) is predicted along a straight line at its velocity; the
+    # conflict zone is where the ego's path (its route's lane centre through the junction)
+    # comes within both half widths + `YIELD_LATERAL_M` of that line. The ego occupies it from
+    # its front's arrival until its rear has left, the object likewise (times from the ego's
+    # speed accelerating at `YIELD_ACCEL`, up to its cruise and the junction's curve speed,
+    # and from the object's constant speed). It goes when the object clears the zone before
+    # the ego arrives or arrives `yield_gap` after the ego has left; otherwise it waits before
+    # the zone: at the junction entry for crossing traffic, inside the junction short of the
+    # conflict point for an oncoming car it turns across (creeping up to it). Once it cannot
+    # stop before the zone at `YIELD_COMMIT_DECEL` it clears it. Priority from the map's
+    # lights: with a green light at the entry, crossing traffic that can still stop at its
+    # own red (at `YIELD_COMMIT_DECEL`) is not waited for; oncoming traffic is (a permissive
+    # green) and so is a red-light runner that can no longer stop.
+    YIELD_LATERAL_M = 0.5
+    YIELD_WAIT_CLEARANCE_M = 1.5
+    YIELD_ACCEL = 1.5  # [m/s^2] below the planner's 2 m/s^2: the estimate errs long
+    YIELD_COMMIT_DECEL = 4.0  # [m/s^2]
+    CLEAR_MAX_SPEED = 30.0 / 3.6  # [m/s] clearing a junction: up to its curve speed, at most this
+    YIELD_CLEARED_S = 0.5
+    REACTION_S = 0.2  # [s] from the plan to the brakes' full effect  # [s] an object that leaves the zone this long before the ego arrives is gone
+    YIELD_STEP_M = 0.5
+    STOP_MARGIN_M = 1.0  # the wait station is this far before the zone (the stop adds its own gap)
 
-    def _give_way(self, s0: float, t0: float, tracked: list, objs) -> float | None:
-        """The station [m] to wait at before a junction, or None (go); `tracked` are the
-        planned-for tracks, `objs` the same in road coordinates."""
-        gap = float(self.settings["yield_gap"])
-        if gap <= 0.0:
+    def _give_way(self, s0: float, t0: float, speed: float, tracked: list, objs) -> float | None:
+        """The station [m] the ego's front waits at before a junction's conflict zone, or
+        None (go); `tracked` are the planned-for tracks, `objs` the same in road coordinates."""
+        self.planner.cruise = self.cruise
+        margin = float(self.settings["yield_gap"])
+        if margin <= 0.0:
             return None
         junction = self.ctx.junction_ahead(s0)
         if junction is None:
             return None
-        entry, cx, cy = junction
-        if s0 + 0.5 * self.body.length_m > entry + 0.5:
-            return None  # already in the junction: clear it
+        entry, cx, cy, exit_ = junction
+        road, _ = self.ctx.ego_road()
+        half_len = 0.5 * self.body.length_m
+        front = s0 + half_len
+        length, width = self.body.length_m, self.body.width_m
+        lo = max(s0, entry - half_len - 2.0)
+        hi = min(exit_ + half_len + 2.0, road.length)
+        if hi <= lo:
+            return None
+        # Stations on a fixed grid (not from the ego's station): the waiting point moves with
+        # the objects, not with the ego's last millimetre (the OSI bridge's rounding).
+        step = self.YIELD_STEP_M
+        ss = np.arange(math.ceil(lo / step) * step, hi, step)
+        if len(ss) == 0:
+            return None
+        xs, ys, hs, _ = road.sample_arrays(ss, 0.0)
+        v_top = self._junction_speed(road, lo, hi)
+        approach = float(road.reference_pose(s0)[2])
+        green = self._green_at(entry, s0)
+        wait, clear, cover = None, False, math.inf
         for o, (so, to, *_rest) in zip(tracked, objs):
             if so > s0 and abs(to - t0) < 1.8:
                 continue  # traffic ahead in the ego's lane: the planner follows it
-            dx, dy = o.x - cx, o.y - cy
-            dist = math.hypot(dx, dy)
-            closing = -(dx * o.vx + dy * o.vy) / max(dist, 1e-6)
-            moving = math.hypot(o.vx, o.vy) > 0.5
-            if (dist < self.YIELD_RADIUS_M and moving) or \
-                    (closing > 0.3 and (dist - self.YIELD_RADIUS_M) / closing < gap):
-                return entry
-        return None
+            v = math.hypot(o.vx, o.vy)
+            if v < 0.5:
+                continue  # standing: the planner's checks keep the ego off one on its path
+            ux, uy = o.vx / v, o.vy / v
+            # A vehicle's box axis gives its direction better than its velocity estimated
+            # from 10 Hz positions (±15 deg for 0.1 m noise: metres across at the conflict
+            # point): the axis, turned to the way it moves; the velocity for a walker.
+            if o.kind != "pedestrian" and abs(math.cos(o.heading) * ux + math.sin(o.heading) * uy) > 0.7:
+                way = 1.0 if math.cos(o.heading) * ux + math.sin(o.heading) * uy > 0.0 else -1.0
+                ux, uy = way * math.cos(o.heading), way * math.sin(o.heading)
+            cover = min(cover, self._cover_speed(o, ux, uy, v, approach, cx, cy, front, entry, exit_,
+                                                 s0, speed, v_top))
+            # The ego's box at each station, turned with the path: its half extent across the
+            # object's line and along it.
+            rel = hs - math.atan2(uy, ux)
+            sin_r, cos_r = np.abs(np.sin(rel)), np.abs(np.cos(rel))
+            across = 0.5 * (o.width + length * sin_r + width * cos_r) + self.YIELD_LATERAL_M
+            reach = 0.5 * (o.length + length * cos_r + width * sin_r)
+            dx, dy = xs - o.x, ys - o.y
+            along = dx * ux + dy * uy
+            hit = (np.abs(dx * uy - dy * ux) < across) & (along + reach > 0.0)
+            if not hit.any():
+                continue
+            zone_s = ss[hit]
+            near = np.abs(dx * uy - dy * ux) < across + self.YIELD_WAIT_CLEARANCE_M - self.YIELD_LATERAL_M
+            d_in = float(np.min(along[hit] - reach[hit]))
+            d_out = float(np.max(along[hit] + reach[hit]))
+            t_o_in, t_o_out = max(0.0, d_in) / v, d_out / v
+            # Stations of the ego's centre while its box overlaps the object's lane: its front
+            # enters at the first plus half a length. It waits where its box keeps
+            # `YIELD_WAIT_CLEARANCE_M` from the object's (a left turn starts almost
+            # antiparallel to the oncoming lane: the lateral gap closes slowly along the path).
+            zone_front = float(zone_s[0]) + half_len
+            wait_front = float(ss[near & (along + reach > 0.0)][0]) + half_len
+            if green and abs(math.sin(math.atan2(uy, ux) - approach)) > 0.7 and \
+                    v * v < 2.0 * self.YIELD_COMMIT_DECEL * max(d_in, 0.0):
+                continue  # crossing traffic at its red: it stops
+            t_e_in = _time_to_cover(front, zone_front, speed, v_top, self.YIELD_ACCEL)
+            t_e_out = _time_to_cover(s0, float(zone_s[-1]), speed, v_top, self.YIELD_ACCEL)
+            if t_e_in > t_o_out + self.YIELD_CLEARED_S or t_o_in > t_e_out + margin:
+                continue  # the gap is long enough
+            line = wait_front - self.STOP_MARGIN_M
+            if speed * speed > 2.0 * self.YIELD_COMMIT_DECEL * max(line - front, 0.0) and speed > 0.5:
+                # Past its waiting point: stop short of the zone if the brakes still can (the
+                # stop keeps `LatticePlanner.STOP_GAP_M` before the station), else clear the
+                # zone as fast as the junction's curves allow.
+                line = zone_front
+                if speed * speed / (2.0 * self.body.max_brake) + self.REACTION_S * speed > line - front:
+                    clear = True
+                    continue
+            if wait is None or line < wait:
+                wait = line
+        if wait is not None:
+            clear = False
+        # Clearing: the plan's speed may rise over the cruise speed to the junction's curve
+        # speed, at most `CLEAR_MAX_SPEED` (a slow cruise, 10 km/h, would leave the ego in
+        # the other's path for seconds).
+        if clear:
+            self.planner.cruise = max(self.cruise, self._junction_speed(road, lo, hi, self.CLEAR_MAX_SPEED))
+        elif cover < self.cruise:
+            self.planner.cruise = cover
+        return wait
+
+    # Covering the brake: an oncoming vehicle that reaches the junction's middle about when
+    # the ego does may turn across its path (its turn is seen only once its heading turns:
+    # esmini's ltap-od turns 0.7 s before the contact, in the near half of the junction).
+    # The ego keeps a speed from which it slows at `COVER_DECEL` to `COVER_SPEED` at the
+    # junction entry, until that vehicle is past the junction's middle or the ego is.
+    COVER_SPEED = 2.0  # [m/s]
+    COVER_DECEL = 2.0  # [m/s^2]
+    COVER_WINDOW_S = 3.0
+
+    def _cover_speed(self, o, ux, uy, v, approach, cx, cy, front, entry, exit_, s0, speed, v_top) -> float:
+        """The speed cap [m/s] an object sets as an oncoming vehicle that may turn across the
+        ego's path at the junction (middle at `cx`, `cy`), or inf."""
+        if math.cos(math.atan2(uy, ux) - approach) > -0.7:
+            return math.inf  # not oncoming
+        to_mid = (cx - o.x) * ux + (cy - o.y) * uy
+        middle = 0.5 * (entry + exit_)
+        if to_mid < 0.0 or front >= middle:
+            return math.inf  # it is past the middle, or the ego is
+        t_e = _time_to_cover(front, middle, speed, v_top, self.YIELD_ACCEL)
+        if to_mid / v > t_e + self.COVER_WINDOW_S:
+            return math.inf  # it comes later
+        d = max(entry - front, 0.0)
+        return math.sqrt(self.COVER_SPEED ** 2 + 2.0 * self.COVER_DECEL * d)
+
+    def _junction_speed(self, road, lo: float, hi: float, cruise: float | None = None) -> float:
+        """The speed [m/s] the ego drives through the junction at most: `cruise` (default its
+        cruise speed), capped by the curve speed of the sharpest bend between stations `lo` and `hi`."""
+        cruise = self.cruise if cruise is None else cruise
+        _, kappa = road.curvature_ahead(lo, hi - lo)
+        k = float(np.max(np.abs(kappa))) if len(kappa) else 0.0
+        return min(cruise, math.sqrt(self.planner.max_lateral_accel / k)) if k > 1e-6 else cruise
+
+    def _green_at(self, entry: float, s0: float) -> bool:
+        """Whether a green light governs the ego's approach to the junction at `entry`."""
+        stop = self.ctx.stop_line_ahead(s0)
+        return stop is not None and stop[1] == LIGHT_STATES["green"] and stop[0] <= entry + 1.0
 
     def _run_control(self, time_s: float, dt: float) -> None:
         if self.plan is None:
@@ -433,6 +563,19 @@ class BevStack:
         # End-to-end: sensor timestamp → actuation, for the newest frame the command derives from.
         self.latency["e2e"] = self.pipeline_s + lat
         self.ctx.apply_command_at(time_s + lat, steer, accel)
+
+
+def _time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: float) -> float:
+    """Time [s] to drive from station `s_from` to `s_to` [m] starting at `v0` [m/s] and
+    accelerating at `accel` [m/s^2] up to `v_top` (or holding `v0` if that is faster)."""
+    d = s_to - s_from
+    if d <= 0.0:
+        return 0.0
+    v_top = max(v_top, v0, 0.1)
+    d_acc = (v_top * v_top - v0 * v0) / (2.0 * accel)
+    if d <= d_acc:
+        return (math.sqrt(v0 * v0 + 2.0 * accel * d) - v0) / accel
+    return (v_top - v0) / accel + (d - d_acc) / v_top
 
 
 def synthetic_objects(count: int, ego_pose) -> list[Obj]:

@@ -157,7 +157,7 @@ class RemoteContext:
         front = s + 0.5 * self.ego_length_m
         for entry, exit_, cx, cy in self.junctions:
             if exit_ > front:
-                return entry, cx, cy
+                return entry, cx, cy, exit_
         return None
 
     def actor_by_body(self, body: int):

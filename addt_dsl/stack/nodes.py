@@ -283,6 +283,7 @@ class LatticePlanner:
         self.current_lane: int | None = None
         self.home_lane: int | None = None
         self.maneuver: tuple[int, float, float, float] | None = None
+        self.maneuver_target = math.nan  # the offset [m] the manoeuvre steers to (lane centre or a nudge)
         self.last_change_s = -1e9
         self.emergency = False  # the last plan was an emergency stop
 
@@ -319,11 +320,15 @@ class LatticePlanner:
         best = None
         for lane in candidates_lanes:
             t_lane = float(road.lane_center_t(lane, s0))
-            for speed in self._speeds(ego_speed):
-                cost = corrupt("planner.cost",
-                               self._cost(lane, t_lane, speed, s0, t0, ego_speed, objs_sc, current, home, stamp_s))
-                if best is None or cost < best[0]:
-                    best = (cost, lane, t_lane, speed)
+            targets = [(t_lane, 0.0)]
+            if lane == current:
+                targets += self._nudges(lane, t_lane, lanes, road, s0, objs_sc)
+            for t_cand, extra in targets:
+                for speed in self._speeds(ego_speed):
+                    cost = corrupt("planner.cost", self._cost(lane, t_cand, speed, s0, t0, ego_speed, objs_sc,
+                                                              current, home, stamp_s) + extra)
+                    if best is None or cost < best[0]:
+                        best = (cost, lane, t_cand, speed)
         brake = 0.0
         self.emergency = best is None or not best[0] < math.inf  # NaN (a corrupted cost) too
         if self.emergency:
@@ -353,8 +358,9 @@ class LatticePlanner:
         t_lane = corrupt("planner.t_target", t_lane)
         # The lateral manoeuvre keeps its start while its target lane stays the same, so
         # replanning does not restart the profile (which would flatten it every cycle).
-        if self.maneuver is None or self.maneuver[0] != lane:
+        if self.maneuver is None or self.maneuver[0] != lane or abs(self.maneuver_target - t_lane) > 0.05:
             self.maneuver = (lane, s0, t0, max(30.0, 3.0 * ego_speed))
+            self.maneuver_target = t_lane
         _, s_start, t_start, lateral_len = self.maneuver
         # The published trajectory: lateral path from (s_start, t_start) to t_target over path_length.
         t_start = corrupt("planner.t_start", t_start)
@@ -409,6 +415,43 @@ class LatticePlanner:
             # Right lanes have the most negative ids.
             return min(lanes) if min(lanes) < 0 else max(lanes)
         return self.home_lane if self.home_lane in lanes else self.current_lane
+
+    # Passing within the lane: a standing object ahead that overlaps the lane only partly (a
+    # car parked half on the kerb) makes a candidate in the current lane offset away from it,
+    # just enough to clear it with the collision check's margin, while the ego stays within
+    # `NUDGE_LANE_MARGIN_M` of its lane's edges. The offset costs `NUDGE_COST` + 1 per metre,
+    # so the lane centre wins whenever it is as good.
+    NUDGE_COST = 1.0
+    NUDGE_LANE_MARGIN_M = 0.3  # [m] how far the ego's side may reach past its lane's edge
+    NUDGE_REACH_M = 80.0  # [m] objects further ahead do not move the ego yet
+    # [m/s] along the road: what stands (the tracker's velocity of a standing car is ±1 m/s of
+    # noise from 0.1 m position noise at 10 Hz)
+    NUDGE_STANDING_MS = 1.5
+    NUDGE_SPARE_M = 0.3  # [m] beyond the collision check's margin: perception noise, tracking error
+
+    def _nudges(self, lane, t_lane, lanes, road, s0, objs) -> list[tuple[float, float]]:
+        """(offset target [m], extra cost) of in-lane passing candidates; none without a
+        partial blocker ahead."""
+        others = [abs(float(road.lane_center_t(l, s0)) - t_lane) for l in lanes if l != lane]
+        width = min(others) if others else 3.5
+        room = 0.5 * (width - self.body.width_m) + self.NUDGE_LANE_MARGIN_M
+        if room <= 0.0:
+            return []
+        need = 0.0
+        for os_, ot, ov, ovt, _olen, owid in objs:
+            if not 0.0 < os_ - s0 < self.NUDGE_REACH_M or abs(ov) > self.NUDGE_STANDING_MS or abs(ovt) > 0.3:
+                continue  # only what stands: moving traffic is followed or overtaken by lane
+            off = ot - t_lane
+            reach = 0.5 * (owid + self.body.width_m) + 0.3 + self.NUDGE_SPARE_M
+            if abs(off) < reach and abs(off) + room >= reach and abs(off) > 0.5:
+                shift = -math.copysign(reach - abs(off), off)
+                if need == 0.0 or shift * need > 0.0 and abs(shift) > abs(need):
+                    need = shift
+                elif shift * need < 0.0:
+                    return []  # blockers on both sides
+        if need == 0.0:
+            return []
+        return [(t_lane + need, self.NUDGE_COST + abs(need))]
 
     def _speeds(self, ego_speed: float):
         return (self.cruise, max(0.0, ego_speed - 2.0), max(0.0, ego_speed - 5.0), 0.0)

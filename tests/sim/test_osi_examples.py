@@ -42,12 +42,17 @@ def _through_osi(spec, address: str, answer: str):
     return spec.model_copy(update={"plan": plan})
 
 
-# Examples on roads and routes through junctions, lights and a merge. `lead_brake` delays
-# its lidar frames: its OSI views carry the world of the frame's capture, the in-process
-# perception the world on arrival (docs/bridge.md), so only its verdicts are compared.
-EXAMPLES = {"following": True, "following_brake": True, "overtake": True, "broken_down": True,
-            "left_turn_yield": True, "junction_cyclist": True, "red_light_runner": True, "ramp_merge": True,
-            "lead_brake": False}
+# Examples on roads and routes through junctions, lights and a merge, with how far [m] the
+# ego's path through OSI may stray from the in-process one. `lead_brake` delays its lidar
+# frames: its OSI views carry the world of the frame's capture, the in-process perception
+# the world on arrival (docs/bridge.md), so only its verdicts are compared (None). Where the
+# ego stands and waits at a junction (`left_turn_yield`, `red_light_runner`: the gap
+# judgement) the lateral control at walking pace grows the OSI messages' rounding from
+# micrometres at the stop to about 2 mm by the end.
+STANDS = 5e-3
+EXAMPLES = {"following": 1e-4, "following_brake": 1e-4, "overtake": 1e-4, "broken_down": 1e-4,
+            "left_turn_yield": STANDS, "junction_cyclist": 1e-4, "red_light_runner": STANDS, "ramp_merge": 1e-4,
+            "lead_brake": None}
 
 
 @pytest.mark.parametrize("answer", ["motion_request", "traffic_update"])
@@ -61,11 +66,12 @@ def test_osi_verdicts_match_the_in_process_stack(server_address, name, answer):
     assert remote.status == local.status == "ok", remote.error
     assert [(v.name, v.passed) for v in remote.verdicts] == [(v.name, v.passed) for v in local.verdicts]
     assert remote.trace.object_count.max() >= 1
-    if EXAMPLES[name]:
+    tol = EXAMPLES[name]
+    if tol is not None:
         # Not only the verdicts: the ego drives the same path (to rounding).
         a, b = local.trace.actors["ego"], remote.trace.actors["ego"]
         assert len(a.x) == len(b.x)
-        assert np.abs(a.x - b.x).max() < 1e-4 and np.abs(a.y - b.y).max() < 1e-4  # [m]
+        assert np.abs(a.x - b.x).max() < tol and np.abs(a.y - b.y).max() < tol  # [m]
 
 
 def test_the_minimal_example_client_follows_and_keeps_its_lane():

@@ -101,7 +101,7 @@ def test_the_estimate_follows_the_documented_model():
     est = result.estimate
     assert (est.runs, est.runs_exact, est.samples_per_run, est.actors) == (3, True, 401, 2)
     assert est.agent_steps_per_run == 802 and est.agent_steps == 3 * 802 and est.sim_seconds == 60
-    assert est.lidar_rays_per_run == 360 * 1 * 10.0 * 20  # the ego's default lidar
+    assert est.lidar_rays_per_run == 360 * 5 * 10.0 * 20  # the ego's default lidar: 5 channels
     assert est.run_memory_bytes == cost.RUN_BASE_BYTES + 401 * 8 * (1 + cost.TRACE_FIELDS * 2 + cost.LATENCY_SERIES)
 
 
