@@ -407,8 +407,8 @@ class BevStack:
     YIELD_ACCEL = 1.5  # [m/s^2] below the planner's 2 m/s^2: the estimate errs long
     YIELD_COMMIT_DECEL = 4.0  # [m/s^2]
     CLEAR_MAX_SPEED = 30.0 / 3.6  # [m/s] clearing a junction: up to its curve speed, at most this
-    YIELD_CLEARED_S = 0.5
-    REACTION_S = 0.2  # [s] from the plan to the brakes' full effect  # [s] an object that leaves the zone this long before the ego arrives is gone
+    YIELD_CLEARED_S = 0.5  # [s] an object that leaves the zone this long before the ego arrives is gone
+    REACTION_S = 0.2  # [s] from the plan to the brakes' full effect
     YIELD_STEP_M = 0.5
     STOP_MARGIN_M = 1.0  # the wait station is this far before the zone (the stop adds its own gap)
 

@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from tests.unit.search.search_testkit import ROOT, example_plans, fitting_settings, formulas, kitchen_sink_plan, run_specs
+from tests.unit.search.search_testkit import (ROOT, example_plans, fitting_settings, formulas, kitchen_sink_plan,
+                                              run_specs)
 
 from addt_dsl import expr as E
 from addt_dsl import units
