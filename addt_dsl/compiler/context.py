@@ -382,6 +382,43 @@ def lower_when(ctx: Context, start: ast.StepStart) -> When | None:
     return When(condition, hold, start.edge, delay, repeat) if ok else None
 
 
+@dataclass(frozen=True)
+class Starts:
+    """A step's lowered starts: `TriggerPlan` fields, the `when` (None without one) and the
+    start nodes by kind; `ok` False after an error was reported."""
+
+    ok: bool
+    fields: dict
+    when: When | None
+    nodes: dict
+
+
+def lower_starts(ctx: Context, starts: tuple[ast.StepStart, ...]) -> Starts:
+    """`at T`, `after T`, `when ...` of an actor's step, a light step or `end`: each kind at
+    most once (E0102), times as times (the one lowering of a step's start)."""
+    nodes: dict[str, ast.StepStart] = {}
+    ok = True
+    for st in starts:
+        if st.kind in nodes:
+            ctx.sink.error("E0102", f"`{st.kind}` given twice in one step", st.span)
+            ok = False
+        nodes[st.kind] = st
+    fields: dict = {}
+    low = ctx.lowering()
+    for kind, key in (("at", "at_s"), ("after", "after_s")):
+        if kind in nodes:
+            value = low.lower_value(nodes[kind].value, units.TIME, f"the time of `{kind}`")
+            if value is None or not check_time(ctx, value, nodes[kind].value.span, f"`{kind}`"):
+                ok = False
+            fields[key] = value
+    when = lower_when(ctx, nodes["when"]) if "when" in nodes else None
+    if "when" in nodes and when is None:
+        ok = False
+    if when is not None:
+        fields.update(when_fields(when))
+    return Starts(ok, fields, when, nodes)
+
+
 def when_fields(when: When) -> dict:
     """The `TriggerPlan` fields of a lowered `when` start."""
     return {"condition": when.condition, "hold_s": when.hold_s, "edge": when.edge, "delay_s": when.delay_s,

@@ -12,8 +12,8 @@ from addt_dsl import expr as E
 from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
-from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, const_value, fmt, int_const,
-                                       lower_when, suggest, when_fields)
+from addt_dsl.compiler.context import (Context, check_range, check_settings, const_value, fmt, int_const,
+                                       lower_starts, suggest)
 from addt_dsl.compiler.exprs import value_range
 from addt_dsl.compiler.xodr_check import check_route, route_length
 from addt_dsl.diagnostics import Span
@@ -561,35 +561,12 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
     if isinstance(node, ast.Group):
         group = _lower_group(ctx, node, actor, road)
         return P.TriggerPlan(group=group, label=node.label) if group is not None else None
-    starts: dict[str, ast.StepStart] = {}
-    ok = True
-    for st in node.starts:
-        if st.kind in starts:
-            ctx.sink.error("E0102", f"`{st.kind}` given twice in one step", st.span)
-            ok = False
-        starts[st.kind] = st
-    at = after = None
-    low = ctx.lowering()
-    for kind in ("at", "after"):
-        if kind in starts:
-            value = low.lower_value(starts[kind].value, units.TIME, f"the time of `{kind}`")
-            if value is None:
-                ok = False
-                continue
-            if not check_time(ctx, value, starts[kind].value.span, f"`{kind}`"):
-                ok = False
-            if kind == "at":
-                at = value
-            else:
-                after = value
-    when = None
-    if "when" in starts:
-        when = lower_when(ctx, starts["when"])
-        ok = ok and when is not None
-        if when is not None and when.repeat is not None and isinstance(node.action, ast.Group):
-            ctx.sink.error("E0204", "`repeat` starts one behaviour again, not a group", starts["when"].repeat.span,
-                           "repeat the steps inside the group")
-            ok = False
+    starts = lower_starts(ctx, node.starts)
+    ok = starts.ok
+    if starts.when is not None and starts.when.repeat is not None and isinstance(node.action, ast.Group):
+        ctx.sink.error("E0204", "`repeat` starts one behaviour again, not a group", starts.nodes["when"].repeat.span,
+                       "repeat the steps inside the group")
+        ok = False
     if isinstance(node.action, ast.Group):
         group = _lower_group(ctx, node.action, actor, road)
         clause = None
@@ -600,8 +577,7 @@ def _lower_step(ctx: Context, node, actor: ast.ActorDecl, road: str | None) -> P
         ok = ok and clause is not None
     if not ok:
         return None
-    return P.TriggerPlan(clause=clause, at_s=at, after_s=after, group=group, label=node.label,
-                         **(when_fields(when) if when is not None else {}))
+    return P.TriggerPlan(clause=clause, group=group, label=node.label, **starts.fields)
 
 
 def _lower_group(ctx: Context, node: ast.Group, actor: ast.ActorDecl, road: str | None) -> P.GroupPlan | None:

@@ -13,8 +13,8 @@ from addt_dsl import expr as E
 from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
-from addt_dsl.compiler.context import (Context, check_settings, check_time, const_value, int_const, lower_when, suggest,
-                                       when_fields)
+from addt_dsl.compiler.context import (Context, check_settings, const_value, int_const, lower_starts,
+                                       suggest)
 from addt_dsl.registry import ParamSpec
 
 STATE_CHOICES = (*P.LIGHT_STATES, P.LIGHT_PROGRAM)
@@ -257,26 +257,12 @@ def _step(ctx: Context, node, controllers: set[str]) -> P.TriggerPlan | None:
         ctx.sink.error("E0204", "a lights block takes steps, not `sequence`/`parallel` groups", node.span,
                        "write one step per change: `at 5 s light west state red`")
         return None
-    starts = {st.kind: st for st in node.starts}
-    if len(starts) != len(node.starts):
-        ctx.sink.error("E0102", "a start condition given twice in one step", node.span)
-        return None
-    at = after = when = None
-    ok = True
-    low = ctx.lowering()
-    for kind in ("at", "after"):
-        if kind in starts:
-            value = low.lower_value(starts[kind].value, units.TIME, f"the time of `{kind}`")
-            if value is None or not check_time(ctx, value, starts[kind].value.span, f"`{kind}`"):
-                ok = False
-            at, after = (value, after) if kind == "at" else (at, value)
-    if "when" in starts:
-        when = lower_when(ctx, starts["when"])
-        ok = ok and when is not None
-        if when is not None and when.repeat is not None:
-            ctx.sink.error("E0204", "a light step fires once: `repeat` is for an actor's steps",
-                           starts["when"].repeat.span)
-            ok = False
+    starts = lower_starts(ctx, node.starts)
+    ok = starts.ok
+    if starts.when is not None and starts.when.repeat is not None:
+        ctx.sink.error("E0204", "a light step fires once: `repeat` is for an actor's steps",
+                       starts.nodes["when"].repeat.span)
+        ok = False
     if node.action.keyword != "light":
         ctx.sink.error("E0204", f"`{node.action.keyword}` clauses belong in an actor's block", node.action.span,
                        "a lights block's steps change lights: `at 5 s light west state red`")
@@ -284,4 +270,4 @@ def _step(ctx: Context, node, controllers: set[str]) -> P.TriggerPlan | None:
     clause = check_light_clause(ctx, node.action, controllers)
     if not ok or clause is None:
         return None
-    return P.TriggerPlan(clause=clause, at_s=at, after_s=after, **(when_fields(when) if when is not None else {}))
+    return P.TriggerPlan(clause=clause, **starts.fields)
