@@ -1235,8 +1235,12 @@ class _Translate(_Importer):
         own = self.road_point(_first(act.find("TargetPosition"), act), who)
         if master_pos is None or own is None:
             return None
-        settings = {"master": master, "master_at": master_pos[2],
-                    "target_s": E.Num(value=round(own[0], 9)), "target_t": E.Num(value=round(own[1], 9))}
+        # Stations as `s(A)` measures them: along each actor's own path (a lane driven
+        # against s, a route: from the path's entry end).
+        settings = {"master": master, "master_at": self.frame_station(master, master_pos[2])
+                    if master_pos[0] == self.placed[master][0] else master_pos[2],
+                    "target_s": self.frame_station(who, E.Num(value=round(own[0], 9))),
+                    "target_t": E.Num(value=round(own[1], 9))}
         road, lane, s0, off0 = self.placed[who]
         params = self.param_values()
         road_id = next(i for i, r in self.roads.items() if r.name == road)
@@ -1937,7 +1941,11 @@ class _Translate(_Importer):
         """The actor's first `s(A)` as an expression: its road station where it drives a road
         along +s; on a path (a lane driven against s, a reversed lane, a route), the
         distance from the path's entry end, as the runtime measures it."""
-        road_name, lane, s, _ = self.placed[who]
+        return self.frame_station(who, self.placed[who][2])
+
+    def frame_station(self, who: str, s):
+        """A station `s` of the actor's first road as `s(A)` measures it (see start_station)."""
+        road_name, lane, s_start, _ = self.placed[who]
         road_id = next(i for i, r in self.roads.items() if r.name == road_name)
         info = self.actors[who]
         reverse = bool(info.get("against_s")) and info["vehicle"] != "obstacle"
@@ -1945,8 +1953,8 @@ class _Translate(_Importer):
         if lane == 0 or (not routed and self.along_s(who)):
             return s
         try:
-            _, legs = resolve_route(self.network, [road_id], lane, float(eval_param_expr(s, self.param_values())),
-                                    reverse=reverse)
+            _, legs = resolve_route(self.network, [road_id], lane,
+                                    float(eval_param_expr(s_start, self.param_values())), reverse=reverse)
         except (RouteError, ValueError, ArithmeticError):
             return s
         first = legs[0]
