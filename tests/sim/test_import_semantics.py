@@ -28,6 +28,23 @@ scenario live {{
 """
 
 
+def scene(name: str, duration: str, actors: str, length_m: int = 800, lanes: str = "right 2") -> str:
+    """A scenario on a straight road with a standing stack-driven ego in lane -2 at 10 m."""
+    return f"""
+scenario {name} {{
+  duration {duration}
+  road r {{
+    line length {length_m} m
+    lanes {lanes} width 3.5 m
+  }}
+  ego car on r lane -2 at 10 m speed 0 m/s {{
+    stack bev cruise_speed 0 m/s
+  }}
+{actors.strip(chr(10))}
+}}
+"""
+
+
 def run(source: str):
     result = compile_source(source)
     assert result.plan is not None, [str(d) for d in result.diagnostics]
@@ -52,21 +69,11 @@ def test_a_live_behaviour_at_the_start_keeps_the_actors_steps(speed):
 def test_a_trajectory_without_timing_keeps_the_actors_speed():
     # OpenSCENARIO's FollowTrajectoryAction without timing keeps the entity's speed; it ran
     # at a 10 m/s default instead.
-    trace = run("""
-scenario walk {
-  duration 4 s
-  road r {
-    line length 400 m
-    lanes right 2 width 3.5 m
-  }
-  ego car on r lane -2 at 10 m speed 0 m/s {
-    stack bev cruise_speed 0 m/s
-  }
+    trace = run(scene("walk", "4 s", """
   agent p pedestrian on r lane -1 at 100 m speed 1.5 m/s {
     behavior trajectory s [110, 120] m t [-1.75, -1.75] m
   }
-}
-""")
+""", length_m=400, lanes="right 2"))
     p = trace.actors["p"]
     k = int(round(3.0 / trace.period_s))
     assert p.speed[k] == pytest.approx(1.5, abs=1e-9)
@@ -132,24 +139,14 @@ def test_edges_and_delays_of_a_step_condition():
     # (a condition true from the start does not fire `rising`), and a delay fires that long
     # after the condition counted. The car ramps 0 -> 10 m/s at 2 m/s^2 (speed > 5 m/s
     # from 2.5 s): `rising` + 1 s delay fires at 3.5 s; the level `speed < 1` fires at 0 s.
-    trace = run("""
-scenario edges {
-  duration 6 s
-  road r {
-    line length 800 m
-    lanes right 2 width 3.5 m
-  }
-  ego car on r lane -2 at 10 m speed 0 m/s {
-    stack bev cruise_speed 0 m/s
-  }
+    trace = run(scene("edges", "6 s", """
   agent a car on r lane -1 at 100 m speed 0 m/s {
     behavior cruise speed 10 m/s accel 2 m/s^2
     up: when rising speed(a) > 5 m/s delayed 1 s then behavior brake decel 1 m/s^2 to_speed 1 m/s
     never: when rising speed(a) < 1 m/s then behavior brake decel 1 m/s^2
     level: when speed(a) < 1 m/s then behavior cruise speed 10 m/s accel 2 m/s^2
   }
-}
-""")
+""", length_m=800, lanes="right 2"))
     fired = {e.detail["behavior"]: e.time_s for e in trace.events if e.kind == "trigger"}
     starts = {name: float(trace.time[np.flatnonzero(v >= 1)[0]]) if (v >= 1).any() else None
               for name, v in trace.steps.items()}
@@ -163,21 +160,11 @@ def test_a_lane_change_splits_the_ground_covered_into_along_and_across():
     # Speed is along the actor's own path: during a lane change part of it goes across the
     # road (esmini moves an entity along its heading). 10 m/s, a linear 3.5 m change over
     # 1 s: 3.5 m/s across, sqrt(100 - 12.25) = 9.3675 m/s along.
-    trace = run("""
-scenario change {
-  duration 3 s
-  road r {
-    line length 800 m
-    lanes right 2 width 3.5 m
-  }
-  ego car on r lane -2 at 10 m speed 0 m/s {
-    stack bev cruise_speed 0 m/s
-  }
+    trace = run(scene("change", "3 s", """
   agent a car on r lane -2 at 100 m speed 10 m/s {
     at 1 s behavior lane_change to -1 duration 1 s shape linear
   }
-}
-""")
+""", length_m=800, lanes="right 2"))
     a = trace.actors["a"]
     k1, k2 = (int(round(t / trace.period_s)) for t in (1.0, 2.0))
     assert a.s[k1] - a.s[0] == pytest.approx(10.0, abs=1e-9)
@@ -190,21 +177,11 @@ def test_a_timed_trajectory_is_at_each_waypoint_on_time():
     # its duration, whatever the acceleration; a repeated waypoint is a wait; after the last
     # one the speed of the last segment (0 after a wait). It lagged behind its times before
     # (its speed limited to 5 m/s^2 up and 8 m/s^2 down) and drove on at the end.
-    trace = run("""
-scenario timed {
-  duration 5 s
-  road r {
-    line length 800 m
-    lanes right 2 width 3.5 m
-  }
-  ego car on r lane -2 at 10 m speed 0 m/s {
-    stack bev cruise_speed 0 m/s
-  }
+    trace = run(scene("timed", "5 s", """
   agent a cyclist on r lane -1 at 100 m speed 10 m/s {
     behavior trajectory s [100, 120, 125, 125] m t [-1.75, -1.75, -1.75, -1.75] m times [0, 2, 2.5, 3.5] s
   }
-}
-""")
+""", length_m=800, lanes="right 2"))
     a = trace.actors["a"]
     at = {t: a.s[int(round(t / trace.period_s))] for t in (1.0, 2.0, 2.25, 3.0, 4.5)}
     assert at[1.0] == pytest.approx(110.0, abs=0.02)
@@ -216,42 +193,22 @@ scenario timed {
 def test_end_when_ends_the_run_where_its_condition_fires():
     # `end when C delayed D` (OpenSCENARIO's stop trigger): 10 m/s braking at 5 m/s^2 from
     # 2 s ends at 4 s; the run ends 1 s later, at 5 s, not at its 60 s duration.
-    trace = run("""
-scenario ends {
-  duration 60 s
-  road r {
-    line length 800 m
-    lanes right 2 width 3.5 m
-  }
-  ego car on r lane -2 at 10 m speed 0 m/s {
-    stack bev cruise_speed 0 m/s
-  }
+    trace = run(scene("ends", "60 s", """
   agent lead car on r lane -1 at 50 m speed 10 m/s {
     stopping: at 2 s behavior brake decel 5 m/s^2
   }
   end when ended(lead.stopping) delayed 1 s
-}
-""")
+""", length_m=800, lanes="right 2"))
     assert trace.duration_s == pytest.approx(5.0, abs=trace.period_s + 1e-9)
     assert [e.time_s for e in trace.events if e.kind == "end"] == [pytest.approx(trace.duration_s)]
 
 
 def test_teleport_moves_at_once_and_keeps_the_speed():
-    trace = run("""
-scenario jump {
-  duration 3 s
-  road r {
-    line length 800 m
-    lanes right 2 width 3.5 m
-  }
-  ego car on r lane -2 at 10 m speed 0 m/s {
-    stack bev cruise_speed 0 m/s
-  }
+    trace = run(scene("jump", "3 s", """
   agent a car on r lane -1 at 100 m speed 10 m/s {
     at 1 s behavior teleport s 300 m t -5.25 m
   }
-}
-""")
+""", length_m=800, lanes="right 2"))
     a = trace.actors["a"]
     k = int(round(1.0 / trace.period_s))
     assert a.s[k] == pytest.approx(110.0, abs=1e-6)
