@@ -442,20 +442,23 @@ def start_in_thread(address: str = "127.0.0.1:0", limits: Limits = Limits(),
     return server
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m addt_dsl.stack.bridge_server", description=__doc__.split("\n")[0])
-    ap.add_argument("--address", default="127.0.0.1:5555", help="HOST:PORT to listen on (port 0: any free one)")
+def run_server_cli(argv, prog: str, description: str, default_address: str, serve=None, refuse=None,
+                   max_message_bytes: int = MAX_MESSAGE_BYTES, idle_timeout_s: float = IDLE_TIMEOUT_S) -> int:
+    """The command line of a reference server (this one, the OSI server): address, token and
+    limits, then serve until interrupted; a bad address or a port in use is one line, exit 2."""
+    ap = argparse.ArgumentParser(prog=prog, description=description)
+    ap.add_argument("--address", default=default_address, help="HOST:PORT to listen on (port 0: any free one)")
     ap.add_argument("--token", default=os.environ.get(TOKEN_ENV),
                     help=f"shared token every hello must carry (default: ${TOKEN_ENV}, else none)")
-    ap.add_argument("--max-message-bytes", type=int, default=MAX_MESSAGE_BYTES,
+    ap.add_argument("--max-message-bytes", type=int, default=max_message_bytes,
                     help="largest message accepted, checked before it is read")
-    ap.add_argument("--idle-timeout", type=float, default=IDLE_TIMEOUT_S,
+    ap.add_argument("--idle-timeout", type=float, default=idle_timeout_s,
                     help="seconds to wait for each whole message before closing the connection")
     ap.add_argument("--max-connections", type=int, default=MAX_CONNECTIONS, help="runs served at once")
     args = ap.parse_args(argv)
     limits = Limits(args.token or None, args.max_message_bytes, args.idle_timeout)
     try:
-        server = BridgeServer(args.address, limits, args.max_connections)
+        server = BridgeServer(args.address, limits, args.max_connections, serve, refuse)
     except (ValueError, OSError) as exc:  # a bad address, a port in use: one line, not a traceback
         print(f"error: cannot listen on {escape(args.address, 200)}: {exc}", file=sys.stderr)
         return 2
@@ -467,6 +470,9 @@ def main(argv=None) -> int:
             pass
     return 0
 
+
+def main(argv=None) -> int:
+    return run_server_cli(argv, "python -m addt_dsl.stack.bridge_server", __doc__.split("\n")[0], "127.0.0.1:5555")
 
 if __name__ == "__main__":
     sys.exit(main())

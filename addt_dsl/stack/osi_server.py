@@ -24,10 +24,8 @@ included) is answered:
 
 from __future__ import annotations
 
-import argparse
 import hmac
 import math
-import os
 import socket
 import sys
 import time
@@ -36,9 +34,9 @@ import numpy as np
 
 from addt_dsl.stack import osi_mapping as M
 from addt_dsl.stack import osi_transport as T
-from addt_dsl.stack.bridge import TOKEN_ENV, ProtocolError, escape
+from addt_dsl.stack.bridge import ProtocolError, escape
 from addt_dsl.stack.bridge_server import (MAX_CONNECTIONS, BridgeServer, Limits, check_settings, RemoteFrame, RemoteActor,
-                                          RemoteContext)
+                                          RemoteContext, run_server_cli)
 
 from osi3.osi_motionrequest_pb2 import MotionRequest
 from osi3.osi_sensorview_pb2 import SensorView
@@ -290,25 +288,8 @@ def start_in_thread(address: str = "127.0.0.1:0", limits: Limits | None = None,
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m addt_dsl.stack.osi_server", description=__doc__.split("\n")[0])
-    ap.add_argument("--address", default=DEFAULT_ADDRESS, help="HOST:PORT to listen on (port 0: any free one)")
-    ap.add_argument("--token", default=os.environ.get(TOKEN_ENV),
-                    help=f"shared token every hello must carry (default: ${TOKEN_ENV}, else none)")
-    ap.add_argument("--max-message-bytes", type=int, default=MAX_MESSAGE_BYTES,
-                    help="largest message accepted, checked before it is read")
-    ap.add_argument("--idle-timeout", type=float, default=IDLE_TIMEOUT_S,
-                    help="seconds to wait for each whole message before closing the connection")
-    ap.add_argument("--max-connections", type=int, default=MAX_CONNECTIONS, help="runs served at once")
-    args = ap.parse_args(argv)
-    limits = Limits(args.token or None, args.max_message_bytes, args.idle_timeout)
-    with BridgeServer(args.address, limits, args.max_connections, serve_connection, reply_error) as server:
-        print(f"listening {server.address}", flush=True)
-        try:
-            server.serve_forever()
-        except KeyboardInterrupt:
-            pass
-    return 0
-
+    return run_server_cli(argv, "python -m addt_dsl.stack.osi_server", __doc__.split("\n")[0], DEFAULT_ADDRESS,
+                          serve_connection, reply_error, MAX_MESSAGE_BYTES, IDLE_TIMEOUT_S)
 
 if __name__ == "__main__":
     sys.exit(main())
