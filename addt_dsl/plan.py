@@ -260,6 +260,9 @@ class ScenarioPlan(_Model):
     light_steps: list[TriggerPlan] = Field(default_factory=list)
     # Weather and light models acting on the sensors (`environment { fog visibility 150 m }`).
     environment: list[ClausePlan] = Field(default_factory=list)
+    # Their changes during the run (`at 10 s fog visibility 20 m`): steps armed at time 0 whose
+    # clause replaces the model's settings from then on.
+    environment_steps: list[TriggerPlan] = Field(default_factory=list)
     # `end when C [delayed D]`: the run ends where this start fires (no clause), at the
     # latest at `duration_s` (OpenSCENARIO's storyboard stop trigger).
     end: TriggerPlan | None = None

@@ -93,6 +93,7 @@ _UNITS = (
     Unit("s", 1.0, TIME),
     Unit("ms", 1e-3, TIME),
     Unit("min", 60.0, TIME),
+    Unit("h", 3600.0, TIME),
     Unit("kg", 1.0, MASS),
     Unit("m/s", 1.0, SPEED),
     Unit("km/h", 1000.0 / 3600.0, SPEED),

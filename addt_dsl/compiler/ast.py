@@ -287,6 +287,14 @@ class EnvItem(Node):
 
 
 @dataclass(frozen=True, slots=True)
+class EnvStep(Node):
+    """`at 10 s fog visibility 20 m`: a change of the conditions during the run."""
+
+    starts: tuple[StepStart, ...]
+    item: EnvItem
+
+
+@dataclass(frozen=True, slots=True)
 class Block(Node):
     """`faults { }`, `expect { }`, `sweep { }`, `environment { }` — kept as blocks for span reporting."""
 

@@ -333,11 +333,14 @@ class Builder:
 
     # ---- environment
     def b_environment(self, span, items):
-        return ast.Block(span, "environment", tuple(i for i in items if isinstance(i, ast.EnvItem)))
+        return ast.Block(span, "environment", tuple(i for i in items if isinstance(i, (ast.EnvItem, ast.EnvStep))))
 
     def b_env_item(self, span, items):
         name, settings = items
         return ast.EnvItem(span, str(name), self._tspan(name), settings)
+
+    def b_env_step(self, span, items):
+        return ast.EnvStep(span, tuple(i for i in items if isinstance(i, ast.StepStart)), items[-1])
 
     # ---- faults
     def b_faults(self, span, items):

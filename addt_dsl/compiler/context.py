@@ -59,6 +59,7 @@ class Context:
     actors: dict[str, P.ActorPlan] = field(default_factory=dict)
     faults: list[P.FaultPlan] = field(default_factory=list)
     environment: list[P.ClausePlan] = field(default_factory=list)
+    environment_steps: list[P.TriggerPlan] = field(default_factory=list)
     oracles: list[P.OraclePlan] = field(default_factory=list)
     sweep: P.SweepPlan = field(default_factory=P.SweepPlan)
     signals: list[P.SignalPlan] = field(default_factory=list)
@@ -417,6 +418,27 @@ def lower_starts(ctx: Context, starts: tuple[ast.StepStart, ...]) -> Starts:
     if when is not None:
         fields.update(when_fields(when))
     return Starts(ok, fields, when, nodes)
+
+
+def validate_settings(ctx: Context, cls, vals: dict, settings: tuple, span: Span) -> bool:
+    """A registered class's own checks across its settings (`validate(values) -> [(setting,
+    message[, code])]`, e.g. a speed profile's times and speeds), on the settings that are
+    constants (a setting that is not one is passed as None)."""
+    validate = getattr(cls, "validate", None)
+    if validate is None:
+        return True
+    consts = {}
+    for key, value in vals.items():
+        if isinstance(value, list):
+            items = [const_value(v) for v in value]
+            consts[key] = None if any(i is None for i in items) else items
+        else:
+            consts[key] = value if isinstance(value, str) else const_value(value)
+    problems = validate(consts)
+    for key, message, *code in problems:  # E0204 unless the class gives a code
+        at = next((st.value.span for st in settings if st.key == key), span)
+        ctx.sink.error(code[0] if code else "E0204", message, at)
+    return not problems
 
 
 def when_fields(when: When) -> dict:

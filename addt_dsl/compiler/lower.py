@@ -28,6 +28,7 @@ def build_plan(ctx: Context) -> ScenarioPlan:
         agents=agents,
         faults=ctx.faults,
         environment=ctx.environment,
+        environment_steps=ctx.environment_steps,
         oracles=ctx.oracles,
         sweep=ctx.sweep,
         signals=ctx.signals,

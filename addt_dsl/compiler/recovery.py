@@ -72,7 +72,8 @@ _FOREIGN_WORDS = ("if", "else", "elif", "while", "for", "def", "return", "lambda
 UNIT_TYPOS = {
     "kph": "km/h", "kmh": "km/h", "kmph": "km/h", "mps": "m/s", "sec": "s", "secs": "s", "second": "s",
     "seconds": "s", "msec": "ms", "millis": "ms", "meter": "m", "meters": "m", "metre": "m", "metres": "m",
-    "mins": "min", "minute": "min", "minutes": "min", "hz": "Hz", "HZ": "Hz", "hertz": "Hz", "degree": "deg",
+    "mins": "min", "minute": "min", "minutes": "min", "hr": "h", "hour": "h", "hours": "h",
+    "hz": "Hz", "HZ": "Hz", "hertz": "Hz", "degree": "deg",
     "degrees": "deg", "radian": "rad", "radians": "rad", "percent": "%", "pct": "%", "M": "m", "S": "s",
     "KM": "km", "Km": "km", "kilometers": "km", "kilograms": "kg",
 }

@@ -54,6 +54,7 @@ from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, Ru
 from addt_dsl.printer import format_expr, pin_spec
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
+from addt_dsl.runtime.environment import Light
 from addt_dsl.runtime.road.route import resolve_route
 from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.vehicles import VEHICLES
@@ -74,6 +75,7 @@ LAMPS = {"1000001": ("red", "yellow", "green"), "1000011": ("red", "yellow", "gr
          "1000013": ("red", "yellow", "green"), "1000002": ("red", "green"),
          "1000002.30": ("red", "red", "green"), "1000009.10": ("red", "yellow"), "1000009.20": ("yellow", "green")}
 LIGHTS_GROUP = "addt_lights"  # the maneuver group (no actors) of the light steps
+ENVIRONMENT_GROUP = "addt_environment_changes"  # ... and of the environment's changes
 __all__ = ["Export", "ExportError", "export_run", "SIDECAR_FORMAT", "SIDECAR_PARAM", "CONTROLLER_PREFIX", "LAMPS",
            "LIGHTS_GROUP", "lamps_of", "lamp_state", "state_of_lamps"]
 
@@ -672,8 +674,9 @@ def _route_action(run: _Run, a: ActorPlan) -> xosc.AssignRouteAction:
 SUN_LUX = 100000.0
 
 
-def _environment(run: _Run, models: list[ClausePlan]):
-    """`environment { rain rate R  fog visibility V  light sun E }` as an EnvironmentAction."""
+def _environment(run: _Run, models: list[ClausePlan], name: str = "addt_environment"):
+    """`environment { rain rate R  fog visibility V  light sun E }` as an EnvironmentAction (a
+    change during the run: the models it gives; OpenSCENARIO keeps what it leaves out)."""
     if not models:
         return None
     got = {m.name: resolve_settings(m.settings, run.params) for m in models}
@@ -684,13 +687,30 @@ def _environment(run: _Run, models: list[ClausePlan]):
     if "fog" in got:
         fog = xosc.Fog(got["fog"]["visibility"])
     if "light" in got:
-        elevation = got["light"]["sun"]
+        elevation = Light(got["light"]).elevation()  # a time of day as the elevation it gives
         sun = xosc.Sun(SUN_LUX * max(0.0, math.sin(elevation)), 0.0, elevation)
-    for name in got.keys() - {"rain", "fog", "light"}:
-        run.carried.append(f"environment model {name} (side file only)")
+    for other in sorted(got.keys() - {"rain", "fog", "light"}):
+        run.carried.append(f"environment model {other} (side file only)")
     weather = xosc.Weather(sun=sun, fog=fog, precipitation=precipitation)
-    run.carried.append("environment as an EnvironmentAction (the sensor models' settings exactly in the side file)")
-    return xosc.EnvironmentAction(xosc.Environment("addt_environment", weather=weather))
+    run.carried.append(f"environment as an EnvironmentAction ({name}; the sensor models' settings exactly in the "
+                       "side file)")
+    return xosc.EnvironmentAction(xosc.Environment(name, weather=weather))
+
+
+def _environment_group(run: _Run) -> xosc.ManeuverGroup | None:
+    """Changes of the conditions during the run: one event per step, its EnvironmentAction."""
+    if not run.plan.environment_steps:
+        return None
+    maneuver = xosc.Maneuver(f"{ENVIRONMENT_GROUP}_maneuver")
+    for step in run.plan.environment_steps:
+        name = run.unique(f"environment_{step.clause.name}")
+        event = xosc.Event(name, xosc.Priority.parallel)
+        event.add_action(run.unique(f"{name}_action"), _environment(run, [step.clause], name))
+        event.add_trigger(_start_trigger(run, step, name, None))
+        maneuver.add_event(event)
+    group = xosc.ManeuverGroup(ENVIRONMENT_GROUP)
+    group.add_maneuver(maneuver)
+    return group
 
 
 # ---------------------------------------------------------------- traffic lights
@@ -883,9 +903,9 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
             group.add_actor(a.name)
             group.add_maneuver(maneuver)
             act.add_maneuver_group(group)
-    lights = _lights_group(run)
-    if lights is not None:
-        act.add_maneuver_group(lights)
+    for group in (_lights_group(run), _environment_group(run)):
+        if group is not None:
+            act.add_maneuver_group(group)
     for cond, key in run.state_refs:  # every named step is exported by now
         cond.reference = run.label_events[key]
     for param in run.placeholders:

@@ -473,16 +473,25 @@ def _sweep(pr: _Printer) -> None:
 
 
 def _environment(pr: _Printer) -> None:
-    if not pr.plan.environment:
+    if not (pr.plan.environment or pr.plan.environment_steps):
         return
     pr.emit(0)
     pr.emit(1, "environment {")
     for c in pr.plan.environment:
-        cls = ENVIRONMENTS.get(c.name)
-        if cls is None:
-            raise PrinterError(f"unknown environment model {c.name!r}")
-        pr.emit(2, _join(c.name, pr.settings(cls.params, c.settings)))
+        pr.emit(2, _env_model(pr, c))
+    for tr in pr.plan.environment_steps:  # `at 10 s fog visibility 20 m`
+        starts = _starts(pr, tr, "then")
+        if not starts or tr.clause is None or tr.group is not None or tr.label is not None:
+            raise PrinterError("an environment change is one model's settings from a start on")
+        pr.emit(2, _join(starts, _env_model(pr, tr.clause)))
     pr.emit(1, "}")
+
+
+def _env_model(pr: _Printer, c: ClausePlan) -> str:
+    cls = ENVIRONMENTS.get(c.name)
+    if cls is None:
+        raise PrinterError(f"unknown environment model {c.name!r}")
+    return _join(c.name, pr.settings(cls.params, c.settings))
 
 
 SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _lights, _environment,

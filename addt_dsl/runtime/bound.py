@@ -114,6 +114,7 @@ class BoundScenario:
     controllers: tuple[BoundController, ...] = ()
     light_steps: tuple[BoundStep, ...] = ()
     environment: tuple[BoundClause, ...] = ()
+    environment_steps: tuple[BoundStep, ...] = ()
     end: BoundStep | None = None  # `end when ...`: the run ends where it fires
 
     def road(self, name: str) -> RoadPlan:
@@ -131,6 +132,7 @@ def bind(spec: RunSpec) -> BoundScenario:
         faults=tuple(spec.faults),
         oracles=tuple(BoundOracle(o.name, o.severity, substitute_params(o.formula, params)) for o in plan.oracles),
         environment=tuple(_clause(c, params) for c in plan.environment),
+        environment_steps=tuple(bind_step(t, params) for t in plan.environment_steps),
         signals=tuple(plan.signals), controllers=tuple(_controller(c, params) for c in plan.controllers),
         light_steps=tuple(bind_step(t, params) for t in plan.light_steps),
         end=bind_step(plan.end, params) if plan.end is not None else None)

@@ -33,6 +33,16 @@ class EnvironmentModel:
         return frame
 
 
+def sun_elevation(time_s: float, latitude_rad: float, day: float) -> float:
+    """The sun's elevation [rad] at local solar time `time_s` [s since midnight]: declination
+    23.44 deg sin(360 deg (284 + day) / 365) (Cooper 1969), hour angle 15 deg per hour from
+    noon, sin(el) = sin(lat) sin(dec) + cos(lat) cos(dec) cos(hour angle)."""
+    dec = math.radians(23.44) * math.sin(2.0 * math.pi * (284.0 + day) / 365.0)
+    hour_angle = (time_s / 3600.0 - 12.0) * math.radians(15.0)
+    s = math.sin(latitude_rad) * math.sin(dec) + math.cos(latitude_rad) * math.cos(dec) * math.cos(hour_angle)
+    return math.asin(max(-1.0, min(1.0, s)))
+
+
 def lidar_detected(dist_m: np.ndarray, range_m: float, extinction_per_m: float) -> np.ndarray:
     """Returns still above the detection threshold after two-way attenuation: the lidar
     equation P ~ rho exp(-2 alpha d) / d^2, with the threshold that makes `range_m` the
@@ -124,18 +134,42 @@ class Fog(EnvironmentModel):
 @ENVIRONMENTS.register
 class Light(EnvironmentModel):
     keyword = "light"
-    params = (ParamSpec("sun", units.ANGLE, required=True, low=-math.pi / 2, high=math.pi / 2,
-                        doc="sun elevation above the horizon (below -6 deg: night)"),)
+    params = (ParamSpec("sun", units.ANGLE, low=-math.pi / 2, high=math.pi / 2,
+                        doc="sun elevation above the horizon (below -6 deg: night); or give `time`"),
+              ParamSpec("time", units.TIME, low=0.0, high=86400.0,
+                        doc="local solar time of day since midnight (`6.5 h`): the sun's elevation follows "
+                            "from it, `latitude` and `day`"),
+              ParamSpec("latitude", units.ANGLE, default=math.radians(45.0), low=-math.pi / 2, high=math.pi / 2,
+                        doc="where the sun is seen from, with `time`"),
+              ParamSpec("day", None, default=80.0, low=1.0, high=366.0,
+                        doc="day of the year, with `time` (80: the March equinox)"))
     doc = ("Camera exposure: ambient light k = sin(elevation)/sin(30 deg) in [0.02, 1] (0.02: a "
            "lit road at night); photon shot noise of a 10 000 e- full well plus 5 e- read noise, "
-           "auto-gain up to 8x: darker, noisier, lower-contrast images. Lidar: active, unaffected.")
+           "auto-gain up to 8x: darker, noisier, lower-contrast images. Lidar: active, unaffected. "
+           "A time of day gives the elevation by the declination of Cooper (1969) and the hour angle.")
     FULL_WELL_E = 10000.0
     READ_NOISE_E = 5.0
     MAX_GAIN = 8.0
     NIGHT_LEVEL = 0.02
 
+    @staticmethod
+    def validate(values: dict) -> list[tuple[str, str]]:
+        given = [key for key in ("sun", "time") if values.get(key, "absent") != "absent"]
+        if not given:
+            return [("sun", "`light` needs the sun's elevation (`sun 20 deg`) or a time of day (`time 6.5 h`)",
+                     "E0105")]
+        if len(given) > 1:
+            return [("time", "give the sun's elevation or a time of day, not both", "E0204")]
+        return []
+
+    def elevation(self) -> float:
+        """The sun's elevation [rad]: given, or from the time of day, latitude and day."""
+        if self.settings["sun"] is not None:
+            return self.settings["sun"]
+        return sun_elevation(self.settings["time"], self.settings["latitude"], self.settings["day"])
+
     def ambient(self) -> float:
-        level = math.sin(self.settings["sun"]) / math.sin(math.radians(30.0))
+        level = math.sin(self.elevation()) / math.sin(math.radians(30.0))
         return min(1.0, max(self.NIGHT_LEVEL, level))
 
     def on_frame(self, sensor, frame, rng):

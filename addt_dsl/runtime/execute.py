@@ -274,6 +274,8 @@ class _Run:
             self.sensors[clause.name] = sensor
             self.sensor_next[clause.name] = 0.0
         self.environment = [ENVIRONMENTS.get(c.name)(c.settings) for c in plan.environment]
+        # Changes of the conditions during the run (`at 10 s fog visibility 20 m`).
+        self.environment_script = Script(plan.environment_steps) if plan.environment_steps else None
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self._setup_lights(plan)
@@ -680,6 +682,8 @@ def _loop(run: _Run) -> Trace:
         else:
             block[k, 0, :-1] = ego_row
             fleet_.record(block[k, 1:])
+        if run.environment_script is not None:  # weather changes fire on the state just recorded
+            _advance_environment_script(run, rec, k, t_now)
         if run.lights is not None:
             if run.light_script is not None:  # light changes fire on the state just recorded
                 _advance_light_script(run, rec, k, t_now)
@@ -1317,6 +1321,21 @@ def _advance_light_script(run: _Run, rec, k: int, t_now: float) -> None:
     run.light_script.advance(t_now, holds, start)
     if run.light_script.done:
         run.light_script = None
+
+
+def _advance_environment_script(run: _Run, rec, k: int, t_now: float) -> None:
+    def start(clause, time_s) -> None:
+        run.events.append(Event(time_s, "environment", {"model": clause.name, **clause.settings}))
+        model = ENVIRONMENTS.get(clause.name)(clause.settings)
+        at = next((i for i, m in enumerate(run.environment) if m.keyword == clause.name), None)
+        if at is None:  # a model not declared before acts from now on, after the others
+            run.environment.append(model)
+        else:
+            run.environment[at] = model
+
+    run.environment_script.advance(t_now, _condition_checker(run, rec, k), start)
+    if run.environment_script.done:
+        run.environment_script = None
 
 
 def oracles_signals(expr) -> set[str]:

@@ -13,7 +13,7 @@ from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import (Context, check_range, check_settings, const_value, fmt, int_const,
-                                       lower_starts, suggest)
+                                       lower_starts, suggest, validate_settings)
 from addt_dsl.compiler.exprs import value_range
 from addt_dsl.compiler.xodr_check import check_route, route_length
 from addt_dsl.diagnostics import Span
@@ -515,23 +515,7 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str |
 
 
 def _validate_clause(ctx: Context, c: ast.Clause, cls, vals: dict) -> bool:
-    """The class's own checks across settings (`validate(values) -> [(setting, message[, code])]`,
-    e.g. a speed profile's times and speeds), on the settings that are constants."""
-    validate = getattr(cls, "validate", None)
-    if validate is None:
-        return True
-    consts = {}
-    for key, value in vals.items():
-        if isinstance(value, list):
-            items = [const_value(v) for v in value]
-            consts[key] = None if any(i is None for i in items) else items
-        else:
-            consts[key] = value if isinstance(value, str) else const_value(value)
-    problems = validate(consts)  # a setting that is not a constant is there as None
-    for key, message, *code in problems:  # (setting, message[, code]): E0204 unless given
-        span = next((st.value.span for st in c.settings + c.block if st.key == key), c.span)
-        ctx.sink.error(code[0] if code else "E0204", message, span)
-    return not problems
+    return validate_settings(ctx, cls, vals, c.settings + c.block, c.span)
 
 
 def _check_target_lane(ctx: Context, c: ast.Clause, lane, road: str | None) -> None:

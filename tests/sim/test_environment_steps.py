@@ -1,0 +1,100 @@
+"""Environment changes during a run: `at T MODEL ...` replaces the model's settings from its
+start on (what the sensors see changes then, not before), `when C then MODEL ...` fires on
+the state; a time of day sets the sun's elevation."""
+
+import math
+
+import numpy as np
+import pytest
+
+from addt_dsl.compiler import compile_source
+from addt_dsl.printer import print_plan
+from addt_dsl.runtime.environment import Light, sun_elevation
+from addt_dsl.runtime.execute import execute
+from addt_dsl.sweep import expand
+
+pytestmark = pytest.mark.slow
+
+SCENE = """
+scenario env_change {
+  duration 4 s
+  road r {
+    line length 400 m
+    lanes right 1
+  }
+  ego car on r lane -1 at 10 m speed 10 m/s {
+    stack bev cruise_speed 10 m/s
+    sensor lidar
+  }
+  agent lead car ahead of ego 40 m speed 10 m/s {
+    behavior cruise speed 10 m/s
+  }
+  environment {
+ENV
+  }
+}
+"""
+
+
+def _run(env: str):
+    result = compile_source(SCENE.replace("ENV", env), "env.addt")
+    assert result.ok, [str(d) for d in result.diagnostics]
+    out = execute(expand(result.plan).specs[0])
+    assert out.status == "ok", out.error
+    return result.plan, out.trace
+
+
+def test_fog_from_a_time_on_hides_the_lead_from_then_only():
+    _, tr = _run("    at 2 s fog visibility 30 m")
+    seen = np.asarray(tr.object_count) >= 1
+    t = np.asarray(tr.time)
+    assert seen[(t > 0.3) & (t < 2.0)].all()  # clear air: the lead 40 m ahead is seen
+    assert not seen[t > 2.3].any()  # fog of 30 m visibility: it is not (docs/twin.md's lidar equation)
+    events = [e for e in tr.events if e.kind == "environment"]
+    assert [(e.time_s, e.detail["model"]) for e in events] == [(2.0, "fog")]
+
+
+def test_a_change_replaces_the_declared_model_and_a_condition_starts_one():
+    _, tr = _run("    fog visibility 30 m\n    at 2 s fog visibility 10 km\n"
+                 "    when s(ego) >= 40 m then rain rate 1 mm/h")
+    seen = np.asarray(tr.object_count) >= 1
+    t = np.asarray(tr.time)
+    assert not seen[t < 2.0].any()
+    assert seen[t > 2.3].all()  # the fog lifted at 2 s; light rain leaves the lead in sight
+    kinds = [(e.time_s, e.detail["model"]) for e in tr.events if e.kind == "environment"]
+    assert [k for _, k in kinds] == ["fog", "rain"]
+    assert kinds[0][0] == 2.0 and kinds[1][0] == pytest.approx(3.0, abs=0.02)  # 30 m at 10 m/s
+
+
+def test_environment_steps_print_and_read_back():
+    plan, _ = _run("    light time 6.5 h latitude 48 deg\n    at 2 s fog visibility 30 m\n"
+                   "    when rising objects() >= 1 delayed 0.5 s then light sun -10 deg")
+    text = print_plan(plan)
+    assert "at 2 s fog visibility 30 m" in text
+    again = compile_source(text, "again.addt")
+    assert again.ok, [str(d) for d in again.diagnostics]
+    assert again.plan.environment == plan.environment
+    assert again.plan.environment_steps == plan.environment_steps
+
+
+def test_time_of_day_gives_the_sun_elevation():
+    # Hand values: at noon on the equinox (declination ~0) the sun stands 90 deg - latitude
+    # high; at midnight of the June solstice at 45 deg N, -(90 - 45 - 23.44) deg.
+    assert math.degrees(sun_elevation(12 * 3600.0, math.radians(45.0), 80.0)) == pytest.approx(45.0, abs=0.5)
+    assert math.degrees(sun_elevation(0.0, math.radians(45.0), 172.0)) == pytest.approx(-21.56, abs=0.05)
+    dawn = Light({"time": 6.0 * 3600.0, "latitude": math.radians(45.0), "day": 80.0})
+    noon = Light({"time": 12.0 * 3600.0, "latitude": math.radians(45.0), "day": 80.0})
+    assert dawn.ambient() < 0.1 < noon.ambient() == 1.0
+
+
+@pytest.mark.parametrize("line, code", [
+    ("light latitude 48 deg", "E0105"),  # neither sun nor time
+    ("light sun 10 deg time 12 h", "E0204"),  # both
+    ("at 2 s fgo visibility 30 m", "E0106"),
+    ("fog visibility 30 m\n    fog visibility 50 m", "E0102"),
+    ("when s(ego) > 20 m repeat 2 then fog visibility 30 m", "E0204"),
+])
+def test_bad_environment_lines_are_diagnostics(line, code):
+    result = compile_source(SCENE.replace("ENV", "    " + line), "env.addt")
+    assert not result.ok
+    assert code in [d.code for d in result.diagnostics], [str(d) for d in result.diagnostics]
