@@ -57,10 +57,13 @@ class ParamPlan(_Model):
     default: float
     low: float | None = None
     high: float | None = None
-    distribution: Literal["uniform", "normal", "choice"] = "uniform"
+    # addt_dsl/distributions.py: uniform, normal, lognormal, poisson, histogram, choice
+    distribution: Literal["uniform", "normal", "lognormal", "poisson", "histogram", "choice"] = "uniform"
     mean: float | None = None
     sd: float | None = None
     choices: list[float] = Field(default_factory=list)
+    bins: list[float] = Field(default_factory=list)  # a histogram's bin edges (SI)
+    weights: list[float] = Field(default_factory=list)  # a histogram's bins' or a choice's weights
     integer: bool = False
 
 

@@ -14,10 +14,10 @@ import itertools
 import math
 from collections import Counter
 from dataclasses import dataclass, field
-from statistics import NormalDist
 
 import numpy as np
 
+from addt_dsl.distributions import from_unit
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.plan import ConcreteFault, FaultPlan, ParamPlan, RunSpec, ScenarioPlan, resolve_settings
 
@@ -98,20 +98,6 @@ def _unit_engine(kind: str, dims: int, seed: int):
     from scipy.stats import qmc
 
     return {"halton": qmc.Halton, "lhs": qmc.LatinHypercube}[kind](dims, rng=rng)
-
-
-def from_unit(p: ParamPlan, u: float) -> float:
-    if p.distribution == "choice" and p.choices:
-        return p.choices[min(int(u * len(p.choices)), len(p.choices) - 1)]
-    if p.distribution == "normal":
-        mean = p.mean if p.mean is not None else p.default
-        value = mean + (p.sd or 0.0) * NormalDist().inv_cdf(min(max(u, 1e-12), 1 - 1e-12))
-        lo = p.low if p.low is not None else -math.inf
-        hi = p.high if p.high is not None else math.inf
-        return min(max(value, lo), hi)
-    lo = p.low if p.low is not None else p.default
-    hi = p.high if p.high is not None else p.default
-    return lo + (hi - lo) * u
 
 
 def expand(plan: ScenarioPlan) -> Expansion:

@@ -168,7 +168,11 @@ def _param_line(p: ParamPlan) -> str:
         parts.append(f"mean {format_const(p.mean, dim)}")
     if p.sd is not None:
         parts.append(f"sd {format_const(p.sd, dim)}")
-    if p.integer:
+    if p.bins:
+        parts.append(f"bins [{', '.join(format_const(b, dim) for b in p.bins)}]")
+    if p.weights:
+        parts.append(f"weights [{', '.join(format_const(w, units.DIMENSIONLESS) for w in p.weights)}]")
+    if p.integer and p.distribution != "poisson":  # a Poisson parameter counts: integer by itself
         parts.append("integer true")
     return " ".join(parts)
 

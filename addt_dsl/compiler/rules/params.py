@@ -10,9 +10,11 @@ from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import INT_EPS, Context, const_value, fmt, lower_list, range_text, suggest
 from addt_dsl.compiler.exprs import ExprLowering, Scope
+from addt_dsl.distributions import DISTRIBUTIONS, MAX_POISSON_MEAN
 from addt_dsl.limits import MAX_ABS_NUMBER
 
-PARAM_SETTINGS = ("dist", "mean", "sd", "integer")
+PARAM_SETTINGS = ("dist", "mean", "sd", "bins", "weights", "integer")
+DIST_SETTINGS = ("mean", "sd", "bins", "weights")  # each distribution's own (distributions.py)
 
 
 @dataclass(frozen=True)
@@ -59,7 +61,8 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
     for st in d.settings:
         if st.key not in PARAM_SETTINGS:
             ctx.sink.error("E0104", f"parameter has no setting '{st.key}'", st.key_span,
-                           *suggest(st.key, PARAM_SETTINGS), "settings of a parameter: dist, mean, sd, integer")
+                           *suggest(st.key, PARAM_SETTINGS),
+                           f"settings of a parameter: {', '.join(PARAM_SETTINGS)}")
         elif st.key in opts:
             ctx.sink.error("E0102", f"setting '{st.key}' given twice", st.key_span)
         else:
@@ -67,10 +70,10 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
     dist = "uniform"
     if "dist" in opts:
         v = opts["dist"].value
-        if isinstance(v, ast.Ref) and v.dotted in ("uniform", "normal", "choice"):
+        if isinstance(v, ast.Ref) and v.dotted in DISTRIBUTIONS:
             dist = v.dotted
         else:
-            ctx.sink.error("E0204", "`dist` is one of uniform, normal, choice", v.span)
+            ctx.sink.error("E0204", f"`dist` is one of {', '.join(DISTRIBUTIONS)}", v.span)
             return None
     lo = hi = None
     choices: list[float] = []
@@ -126,15 +129,48 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
             return None
         if sd is not None and _absurd(ctx, [sd], f"'sd' of '{d.name}'", opts["sd"].value.span, dim):
             return None
-    if dist == "normal" and "sd" not in opts:
-        ctx.sink.error("E0105", f"normal parameter '{d.name}' needs 'sd'", d.span,
-                       f"e.g. `param {d.name} = ... dist normal sd ...`")
+    spec = DISTRIBUTIONS[dist]
+    for key in spec.required:
+        if key not in opts:
+            ctx.sink.error("E0105", f"{dist} parameter '{d.name}' needs '{key}'", d.span,
+                           f"e.g. `param {d.name} = ... dist {dist} {key} ...`")
+            return None
+    for key in DIST_SETTINGS:
+        if key in opts and key not in spec.required + spec.optional:
+            takes = [name for name, other in DISTRIBUTIONS.items() if key in other.required + other.optional]
+            ctx.sink.warning("W0002", f"'{key}' has no effect on a {dist} parameter", opts[key].key_span,
+                             f"distributions that take it: {', '.join(takes)}")
+    if spec.needs_range and (lo is None or choices):
+        ctx.sink.error("E0105", f"{dist} parameter '{d.name}' needs a range: `in [low, high]`", d.span)
         return None
-    if dist != "normal":
-        for key in ("mean", "sd"):
-            if key in opts:
-                ctx.sink.warning("W0002", f"'{key}' has no effect on a {dist} parameter", opts[key].key_span,
-                                 "add `dist normal`")
+    bins: list[float] = []
+    weights: list[float] = []
+    if "weights" in opts and "weights" in spec.required + spec.optional:
+        weights = _weights(ctx, opts["weights"], d.name)
+        if weights is None:
+            return None
+    if dist == "choice" and weights and len(weights) != len(choices):
+        ctx.sink.error("E0204", f"{len(weights)} weights for {len(choices)} choices of '{d.name}'",
+                       opts["weights"].value.span, "give one weight per choice")
+        return None
+    if dist == "histogram":
+        bins = _bins(ctx, opts["bins"], d.name, dim, lo, hi, len(weights))
+        if bins is None:
+            return None
+    center = mean if mean is not None else default
+    if dist == "lognormal" and not center > 0.0:
+        ctx.sink.error("E0301", f"a log-normal parameter's mean must be positive ('{d.name}': {fmt(center, dim)})",
+                       (opts.get("mean") or opts["dist"]).value.span)
+        return None
+    if dist == "poisson":
+        if dim != units.DIMENSIONLESS:
+            ctx.sink.error("E0204", f"a Poisson parameter counts: '{d.name}' has dimension {units.dim_name(dim)}",
+                           opts["dist"].value.span)
+            return None
+        if not 0.0 < center <= MAX_POISSON_MEAN:
+            ctx.sink.error("E0301", f"a Poisson parameter's mean must lie in (0, {MAX_POISSON_MEAN:g}] "
+                           f"('{d.name}': {center:g})", (opts.get("mean") or opts["dist"]).value.span)
+            return None
     integer = False
     if "integer" in opts:
         v = opts["integer"].value
@@ -143,6 +179,8 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
         else:
             ctx.sink.error("E0204", "`integer` is true or false", v.span)
             return None
+    if dist == "poisson":
+        integer = True  # counts
     if integer:
         bad = [x for x in [default, *choices, *(b for b in (lo, hi) if b is not None)]
                if abs(x - round(x)) > INT_EPS]
@@ -152,7 +190,42 @@ def _check_param(ctx: Context, d: ast.ParamDecl, dims: dict) -> P.ParamPlan | No
             return None
     return P.ParamPlan(name=d.name, dimension=units.dim_name(dim), default=default,
                        low=lo, high=hi, distribution=dist, mean=mean, sd=sd,
-                       choices=choices, integer=integer)
+                       choices=choices, bins=bins, weights=weights, integer=integer)
+
+
+def _weights(ctx: Context, st: ast.Setting, name: str) -> list[float] | None:
+    if not isinstance(st.value, ast.ListExpr):
+        ctx.sink.error("E0204", f"the weights of '{name}' are a list: `weights [1, 2, 1]`", st.value.span)
+        return None
+    vals = lower_list(ctx, st.value, units.DIMENSIONLESS, f"the weights of '{name}'")
+    if vals is None:
+        return None
+    if any(w < 0.0 for w in vals) or not sum(vals) > 0.0 or _absurd(ctx, vals, f"the weights of '{name}'",
+                                                                     st.value.span, units.DIMENSIONLESS):
+        ctx.sink.error("E0301", f"the weights of '{name}' must be non-negative with a positive sum", st.value.span)
+        return None
+    return vals
+
+
+def _bins(ctx: Context, st: ast.Setting, name: str, dim, lo: float, hi: float, n_weights: int) -> list[float] | None:
+    if not isinstance(st.value, ast.ListExpr):
+        ctx.sink.error("E0204", f"the bins of '{name}' are a list of edges: `bins [0, 2, 10] m`", st.value.span)
+        return None
+    edges = lower_list(ctx, st.value, dim, f"the bins of '{name}'")
+    if edges is None or _absurd(ctx, edges, f"the bins of '{name}'", st.value.span, dim):
+        return None
+    if len(edges) != n_weights + 1:
+        ctx.sink.error("E0204", f"{len(edges)} bin edges for {n_weights} weights of '{name}'", st.value.span,
+                       "n bins have n + 1 edges and n weights")
+        return None
+    if any(b <= a for a, b in zip(edges, edges[1:])):
+        ctx.sink.error("E0204", f"the bin edges of '{name}' must increase", st.value.span)
+        return None
+    if edges[0] < lo or edges[-1] > hi:
+        ctx.sink.error("E0301", f"the bins of '{name}' reach outside its range {range_text(lo, hi, dim)}",
+                       st.value.span)
+        return None
+    return edges
 
 
 def _absurd(ctx: Context, values, what: str, span, dim) -> bool:

@@ -12,10 +12,11 @@ Then, exactly or not at all:
   OpenSCENARIO combines them.
 - Stochastic (`numberOfTestRuns`, `randomSeed`) -> `random N seed S` over parameter
   domains: `UniformDistribution` -> `in [lo, hi]`, `NormalDistribution` -> `dist normal`
-  (mean, sd = sqrt(variance), the range if given), `ProbabilityDistributionSet` -> a
-  choice whose values repeat in proportion to their weights, a `Histogram` of equal bins
-  and weights -> uniform over them. What the language cannot draw (log-normal, Poisson,
-  unequal histograms, user-defined distributions) is refused with a diagnostic saying so.
+  (mean, sd = sqrt(variance), truncated to the range if given), `LogNormalDistribution`
+  -> `dist lognormal` (its own mean and sd), `PoissonDistribution` -> `dist poisson`,
+  `ProbabilityDistributionSet` -> a choice with `weights`, a `Histogram` -> `dist
+  histogram` (bins and weights; uniform where the bins are even). A user-defined
+  distribution is refused with a diagnostic saying so.
 - `ValueConstraintGroup`s on the template's declarations of varied parameters ->
   `assume`s: combinations outside them are skipped and counted by the sweep.
 
@@ -32,7 +33,6 @@ import math
 import re
 import tempfile
 import xml.etree.ElementTree as ET
-from fractions import Fraction
 from pathlib import Path
 
 from addt_dsl import expr as E
@@ -47,21 +47,16 @@ from addt_dsl.interop.xosc_import import (DOCUMENT_KINDS, MAX_XML_BYTES, RULE_OP
 from addt_dsl.limits import DEFAULT, MAX_ABS_NUMBER, Limits
 from addt_dsl.plan import AssumptionPlan, CaseAxis, GridAxis, ParamPlan, SamplerPlan, ScenarioPlan, SweepPlan
 from addt_dsl.printer import PrinterError, print_plan, side_files
+from addt_dsl.distributions import MAX_POISSON_MEAN, lognormal_mu_sigma
 from addt_dsl.sweep import count_runs, grid_cell_count
 
 NUMERIC_TYPES = ("double", "integer", "int", "unsignedInt", "unsignedShort")
 INTEGER_TYPES = ("integer", "int", "unsignedInt", "unsignedShort")
-# A ProbabilityDistributionSet becomes a choice with each value repeated in proportion to
-# its weight (exact for weights written as decimals); at most this many entries.
-MAX_WEIGHTED_CHOICES = 1000
 # A NormalDistribution without a range gets mean +- this many sd: the sampler's inverse CDF
 # is clipped at u in [1e-12, 1 - 1e-12] (+-7.03 sd), so such a range never binds.
 NORMAL_UNBOUNDED_SD = 8.0
-NORMAL_REACH_SD = 7.03
 MAX_SEED = 2**31 - 1
 NOT_DRAWN = {
-    "LogNormalDistribution": "the language's `dist` has no log-normal distribution (uniform, normal, choice)",
-    "PoissonDistribution": "the language's `dist` has no Poisson distribution (uniform, normal, choice)",
     "UserDefinedDistribution": "a user-defined distribution has no definition a player can share",
 }
 
@@ -444,7 +439,7 @@ class _Distribution(Importer):
             draw = STOCHASTIC.get(kind.tag if kind is not None else "")
             if draw is None:
                 self.refuse_kind(el, kind)
-            if self.is_integer(p.name) and kind.tag != "ProbabilityDistributionSet":
+            if self.is_integer(p.name) and kind.tag not in ("ProbabilityDistributionSet", "PoissonDistribution"):
                 self.error(kind, f"'{p.name}' is an {self.decls[p.name].get('parameterType')} parameter and "
                                  f"<{kind.tag}> draws fractions: the language's samplers do not round")
                 raise Stop
@@ -456,21 +451,54 @@ class _Distribution(Importer):
         return _domain(p, lo, hi, distribution="uniform")
 
     def normal(self, el, p: ParamPlan) -> ParamPlan:
+        mean, sd = self.mean_sd(el, p)
+        lo, hi = self.range_of(el, p.name) if el.find("Range") is not None else \
+            (mean - NORMAL_UNBOUNDED_SD * sd, mean + NORMAL_UNBOUNDED_SD * sd)
+        if sd == 0 or lo == hi:
+            return p.model_copy(update={"default": min(max(mean, lo), hi)})
+        return _domain(p, lo, hi, distribution="normal", mean=mean, sd=sd)
+
+    def mean_sd(self, el, p: ParamPlan) -> tuple[float, float]:
         mean, var = self.num(el, "expectedValue"), self.num(el, "variance")
         if var < 0:
             self.error(el, f"variance of '{p.name}' is negative ({var!r})")
             raise Stop
-        mean, sd = mean * self.scale(p.name), math.sqrt(var) * self.scale(p.name)
+        return mean * self.scale(p.name), math.sqrt(var) * self.scale(p.name)
+
+    def lognormal(self, el, p: ParamPlan) -> ParamPlan:
+        """expectedValue and variance are the log-normal's own (the standard's names), not
+        its logarithm's; a range truncates it."""
+        mean, sd = self.mean_sd(el, p)
+        if not mean > 0:
+            self.error(el, f"expectedValue of the log-normal '{p.name}' must be positive ({mean!r})")
+            raise Stop
         if el.find("Range") is not None:
             lo, hi = self.range_of(el, p.name)
-            if lo > mean - NORMAL_REACH_SD * sd or hi < mean + NORMAL_REACH_SD * sd:
-                self.approx(el, f"'{p.name}': a draw beyond the range [{lo!r}, {hi!r}] is set to the range's "
-                                "nearer end (the language's `dist normal`), not drawn again")
         else:
-            lo, hi = mean - NORMAL_UNBOUNDED_SD * sd, mean + NORMAL_UNBOUNDED_SD * sd
+            mu, sigma = lognormal_mu_sigma(mean, sd) if sd > 0 else (math.log(mean), 0.0)
+            lo, hi = math.exp(mu - NORMAL_UNBOUNDED_SD * sigma), math.exp(mu + NORMAL_UNBOUNDED_SD * sigma)
         if sd == 0 or lo == hi:
-            return p.model_copy(update={"default": mean})
-        return _domain(p, lo, hi, distribution="normal", mean=min(max(mean, lo), hi), sd=sd)
+            return p.model_copy(update={"default": min(max(mean, lo), hi)})
+        return _domain(p, lo, hi, distribution="lognormal", mean=mean, sd=sd)
+
+    def poisson(self, el, p: ParamPlan) -> ParamPlan:
+        if p.dimension != "dimensionless":
+            self.error(el, f"a Poisson distribution counts: '{p.name}' is used as a {p.dimension}")
+            raise Stop
+        lam = self.num(el, "expectedValue")
+        if not 0 < lam <= MAX_POISSON_MEAN:
+            self.error(el, f"expectedValue of the Poisson '{p.name}' must lie in (0, {MAX_POISSON_MEAN:g}] ({lam!r})")
+            raise Stop
+        if el.find("Range") is not None:
+            lo, hi = self.range_of(el, p.name)
+            lo, hi = float(max(0, math.ceil(lo))), float(math.floor(hi))
+            if lo > hi:
+                self.error(el, f"the range of the Poisson '{p.name}' holds no whole number")
+                raise Stop
+        else:  # beyond mean + 40 sd + 40 the mass is below double precision
+            lo, hi = 0.0, float(math.ceil(lam + 40.0 * math.sqrt(lam) + 40.0))
+        shaped = _domain(p, lo, hi, distribution="poisson", mean=lam, integer=True)
+        return shaped.model_copy(update={"default": float(min(max(round(shaped.default), lo), hi))})
 
     def probability_set(self, el, p: ParamPlan) -> ParamPlan:
         elements = list(el.iterfind("Element"))
@@ -478,53 +506,53 @@ class _Distribution(Importer):
             self.error(el, "<ProbabilityDistributionSet> has no <Element>")
             raise Stop
         values = self.values_of(el, p.name, [self.raw(e, "value") for e in elements])
-        weights = []
-        for e in elements:
-            text = self.raw(e, "weight")
-            try:
-                w = Fraction(text)
-            except (ValueError, ZeroDivisionError):
-                self.error(e, f"weight=\"{text[:40]}\" is not a number")
-                raise Stop from None
-            if w < 0 or abs(w) > MAX_ABS_NUMBER:
-                self.error(e, f"weight {text} must be a number in [0, {MAX_ABS_NUMBER:g}]")
-                raise Stop
-            weights.append(w)
-        total = sum(weights)
-        if total == 0:
+        weights = [self.weight(e, p) for e in elements]
+        if not sum(weights) > 0:
             self.error(el, f"the weights of '{p.name}' are all zero")
             raise Stop
-        shares = [w / total for w in weights]
-        common = math.lcm(*(s.denominator for s in shares))
-        if common > MAX_WEIGHTED_CHOICES:
-            self.error(el, f"the weights of '{p.name}' are not multiples of 1/{MAX_WEIGHTED_CHOICES}: the language's "
-                           "choice draws each listed value with equal probability, so a weighted set is written with "
-                           f"values repeated by weight, at most {MAX_WEIGHTED_CHOICES} of them")
+        if len(set(values)) == 1:
+            return p.model_copy(update={"default": values[0]})
+        default = p.default if p.default in values else values[0]
+        uniform = len(set(weights)) == 1
+        return p.model_copy(update={"default": default, "choices": values, "distribution": "choice",
+                                    "weights": [] if uniform else weights, "integer": self.is_integer(p.name),
+                                    "low": min(values), "high": max(values)})
+
+    def weight(self, e, p: ParamPlan) -> float:
+        w = self.num(e, "weight")
+        if not 0 <= w <= MAX_ABS_NUMBER:
+            self.error(e, f"weight {w!r} of '{p.name}' must be a number in [0, {MAX_ABS_NUMBER:g}]")
             raise Stop
-        choices = [v for v, s in zip(values, shares) for _ in range(int(s * common))]
-        if len(set(choices)) == 1:
-            return p.model_copy(update={"default": choices[0]})
-        default = p.default if p.default in choices else choices[0]
-        return p.model_copy(update={"default": default, "choices": choices, "distribution": "choice",
-                                    "integer": self.is_integer(p.name)})
+        return w
 
     def histogram(self, el, p: ParamPlan) -> ParamPlan:
+        """Bins as a piecewise-uniform density; gaps between bins have none (a zero-weight bin)."""
         bins = []
         for b in el.iterfind("Bin"):
             lo, hi = self.range_of(b, p.name)
-            bins.append((lo, hi, self.num(b, "weight")))
+            bins.append((lo, hi, self.weight(b, p)))
         if not bins:
             self.error(el, "<Histogram> has no <Bin>")
             raise Stop
-        width, weight = bins[0][1] - bins[0][0], bins[0][2]
-        even = all(b[0] == a[1] for a, b in zip(bins, bins[1:])) and all(
-            math.isclose(hi - lo, width, rel_tol=1e-12, abs_tol=0) and w == weight for lo, hi, w in bins)
-        if not even or weight <= 0:
-            self.error(el, f"<Histogram> of '{p.name}' is not translated: its bins differ in width or weight, and the "
-                           "language has no piecewise-uniform distribution (`dist` is uniform, normal or choice); "
-                           "contiguous bins of one width and one weight are a uniform distribution")
+        bins.sort(key=lambda b: b[0])
+        if any(b[0] < a[1] for a, b in zip(bins, bins[1:])) or any(hi <= lo for lo, hi, _ in bins):
+            self.error(el, f"the bins of '{p.name}' overlap or are empty")
             raise Stop
-        return _domain(p, bins[0][0], bins[-1][1], distribution="uniform")
+        edges, weights = [bins[0][0]], []
+        for lo, hi, w in bins:
+            if lo > edges[-1]:  # a gap: a bin of no weight
+                edges.append(lo)
+                weights.append(0.0)
+            edges.append(hi)
+            weights.append(w)
+        if not sum(weights) > 0:
+            self.error(el, f"the weights of '{p.name}' are all zero")
+            raise Stop
+        if len(set(weights)) == 1 and len(weights) == len(bins):  # contiguous, even weights: uniform
+            widths = {round((b - a) / (edges[-1] - edges[0]), 12) for a, b in zip(edges, edges[1:])}
+            if len(widths) == 1:
+                return _domain(p, edges[0], edges[-1], distribution="uniform")
+        return _domain(p, edges[0], edges[-1], distribution="histogram", bins=edges, weights=weights)
 
     # -- constraints
 
@@ -666,6 +694,7 @@ class _Template(Translate):
 
 
 STOCHASTIC = {"UniformDistribution": _Distribution.uniform, "NormalDistribution": _Distribution.normal,
+              "LogNormalDistribution": _Distribution.lognormal, "PoissonDistribution": _Distribution.poisson,
               "ProbabilityDistributionSet": _Distribution.probability_set, "Histogram": _Distribution.histogram}
 
 

@@ -159,23 +159,54 @@ def test_uniform_and_an_even_histogram_draw_uniformly(corpus):
     assert sum(r[1] < 12.0 for r in runs) / len(runs) == pytest.approx(0.5, abs=5 * math.sqrt(0.25 / 2000))
 
 
-def test_a_normal_range_that_binds_is_said(corpus):
-    got = imported(corpus, stochastic(5, 1, {
+def test_a_normal_range_truncates_the_distribution(corpus):
+    # N(20, sd 2) in [18, 30]: a truncated normal (density renormalised inside the range), so
+    # no draw sits on the bound (clipping would put P(X < 18) = 16 % of them at 18).
+    got = imported(corpus, stochastic(2000, 1, {
         "EgoS": '<NormalDistribution expectedValue="20" variance="4"><Range lowerLimit="18" upperLimit="30"/>'
                 "</NormalDistribution>"}))
     assert got.text is not None, errors(got)
     assert "param EgoS = 20 m in [18 m, 30 m] dist normal mean 20 m sd 2 m" in got.text
-    assert any(d.code == "W0802" and "nearer end" in d.message for d in got.diagnostics)
+    assert not any(d.code == "W0802" and "EgoS" in d.message for d in got.diagnostics)
+    ego = [r[0] for r in runs_of(got, "EgoS")]
+    assert all(18.0 <= v <= 30.0 for v in ego) and sum(v == 18.0 for v in ego) == 0
+    # The mean of N(20, 2) truncated below at 18 (alpha = -1): 20 + 2 phi(-1) / (1 - Phi(-1)) = 20.575.
+    assert statistics.fmean(ego) == pytest.approx(20.575, abs=5 * 1.7 / math.sqrt(2000))
+
+
+def test_log_normal_uneven_histogram_and_weighted_set_draw_as_the_standard_says(corpus):
+    got = imported(corpus, stochastic(3000, 5, {
+        "EgoS": '<LogNormalDistribution expectedValue="20" variance="16"/>',
+        "TargetS": '<Histogram><Bin weight="1"><Range lowerLimit="10" upperLimit="12"/></Bin>'
+                   '<Bin weight="3"><Range lowerLimit="12" upperLimit="14"/></Bin></Histogram>',
+        "EgoSpeed": '<ProbabilityDistributionSet><Element value="100" weight="0.3333"/>'
+                    '<Element value="120" weight="0.6667"/></ProbabilityDistributionSet>'}))
+    assert got.text is not None, errors(got)
+    assert "dist lognormal mean 20 m sd 4 m" in got.text
+    assert "dist histogram bins [10 m, 12 m, 14 m] weights [1, 3]" in got.text
+    assert "weights [0.3333, 0.6667]" in got.text
+    runs = runs_of(got, "EgoS", "TargetS", "EgoSpeed")
+    ego = [r[0] for r in runs]
+    # The log-normal's own mean 20 and sd 4 (variance 16); standard errors 0.07 and ~0.08.
+    assert min(ego) > 0 and abs(statistics.fmean(ego) - 20.0) < 0.4 and abs(statistics.stdev(ego) - 4.0) < 0.5
+    low_bin = sum(r[1] < 12.0 for r in runs) / len(runs)
+    assert low_bin == pytest.approx(0.25, abs=5 * math.sqrt(0.25 * 0.75 / 3000))
+    assert len({r[2] for r in runs}) == 2
+    share = sum(r[2] == min(r[2] for r in runs) for r in runs) / len(runs)
+    assert share == pytest.approx(0.3333, abs=5 * math.sqrt(0.2222 / 3000))
+
+
+def test_a_poisson_distribution_of_a_length_is_refused(corpus):
+    # Poisson counts (`dist poisson` is dimensionless): EgoS is a station in metres.
+    refused = imported(corpus, stochastic(10, 1, {"EgoS": '<PoissonDistribution expectedValue="3"/>'}))
+    assert refused.text is None and any("counts" in e for e in errors(refused)), errors(refused)
 
 
 @pytest.mark.parametrize("dist, missing", [
-    ('<LogNormalDistribution expectedValue="1" variance="1"/>', "no log-normal distribution"),
-    ('<PoissonDistribution expectedValue="3"/>', "no Poisson distribution"),
     ('<UserDefinedDistribution type="mine">x</UserDefinedDistribution>', "user-defined"),
-    ('<Histogram><Bin weight="1"><Range lowerLimit="10" upperLimit="12"/></Bin>'
-     '<Bin weight="3"><Range lowerLimit="12" upperLimit="14"/></Bin></Histogram>', "no piecewise-uniform"),
-    ('<ProbabilityDistributionSet><Element value="10" weight="0.3333"/><Element value="20" weight="0.6667"/>'
-     "</ProbabilityDistributionSet>", "at most 1000"),
+    ('<LogNormalDistribution expectedValue="-1" variance="1"/>', "must be positive"),
+    ('<Histogram><Bin weight="1"><Range lowerLimit="10" upperLimit="13"/></Bin>'
+     '<Bin weight="3"><Range lowerLimit="12" upperLimit="14"/></Bin></Histogram>', "overlap"),
 ])
 def test_what_the_language_cannot_draw_is_refused_by_name(corpus, dist, missing):
     got = imported(corpus, stochastic(10, 1, {"EgoS": dist}))

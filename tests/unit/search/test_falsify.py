@@ -188,7 +188,7 @@ def test_the_model_keeps_searching_where_a_failure_borders_an_assumption(sampler
 
 
 def test_a_search_the_assumptions_starve_says_why_it_ended():
-    plan = compile_source(KITCHEN_SINK.replace("assume gap > 12 m", "assume gap > 59.99999 m"),
+    plan = compile_source(KITCHEN_SINK.replace("assume gap > 12 m", "assume gap > 59 m"),
                           path="starved.addt").plan
     report = Falsifier(plan, seed=0, batch=8, sampler="random",
                        cache=RunCache(evaluator=corner_judge)).run(budget_runs=50, shrink_simulations=0)
