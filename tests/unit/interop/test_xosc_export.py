@@ -385,7 +385,7 @@ def test_a_named_steps_state_exports_as_its_events_state_and_imports_back(fn, st
     """`when ended(lead.brake_hard)` is a StoryboardElementStateCondition on the step's event (named
     after the step), not a ParameterCondition that nothing sets; without the side file the import
     names the step again and the condition reads it."""
-    from addt_dsl.interop.xosc_import import import_xosc
+    from addt_dsl.interop.openscenario.importer import import_xosc
 
     spec = expand(compile_source(NAMED % fn, "named.addt").plan).specs[0]
     done = export_run(spec, tmp_path, "named")

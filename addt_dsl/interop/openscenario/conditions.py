@@ -1,0 +1,235 @@
+"""Conditions: by value and by entity, as formulas over the language's signals."""
+
+
+
+
+from addt_dsl import expr as E
+from addt_dsl import units
+from addt_dsl.expr import eval_param_expr
+from addt_dsl.plan import (LIGHT_STATES)
+from addt_dsl.runtime.road.route import RouteError, resolve_route
+from addt_dsl.interop.openscenario.params import EXPR
+from addt_dsl.interop.openscenario.params import _all
+from addt_dsl.interop.openscenario.params import _any
+from addt_dsl.interop.openscenario.xml import _child
+from addt_dsl.interop.openscenario.xml import _only_child
+from addt_dsl.interop.openscenario.params import _plus
+
+
+EDGES = {"none": None, "rising": "rising", "falling": "falling", "risingOrFalling": "changing"}
+
+
+RULE_OPS = {"lessThan": "<", "lessOrEqual": "<=", "greaterThan": ">", "greaterOrEqual": ">=", "equalTo": "==",
+            "notEqualTo": "!="}
+
+
+def _ahead(placed, a, b, params) -> bool:
+    """Whether b starts ahead of a (so `gap(a, b)` is the positive one)."""
+    return eval_param_expr(placed[b][2], params) >= eval_param_expr(placed[a][2], params)
+
+
+class Conditions:
+    def condition(self, cond, who: str):
+        """One <Condition> as a formula over signals, or None after a diagnostic."""
+        value_cond = _only_child(cond.find("ByValueCondition")) if cond.find("ByValueCondition") is not None else None
+        if value_cond is not None:
+            if value_cond.tag == "ParameterCondition":
+                ref = self.raw(value_cond, "parameterRef")
+                exact = (self.sidecar or {}).get("conditions", {}).get(ref)
+                if exact:
+                    return EXPR.validate_python(exact["formula"])
+            if value_cond.tag in ("TrafficSignalCondition", "TrafficSignalControllerCondition"):
+                return self.light_condition(value_cond)
+            self.skip(value_cond, f"<{value_cond.tag}> is not translated")
+            return None
+        by_entity = cond.find("ByEntityCondition")
+        entity = _only_child(_child(by_entity, "EntityCondition"))
+        if by_entity is None or entity is None:
+            self.error(cond, "a condition needs a ByValueCondition or a ByEntityCondition")
+            return None
+        triggering = by_entity.find("TriggeringEntities")
+        rule = triggering.get("triggeringEntitiesRule", "any") if triggering is not None else "any"
+        actors = [self.actor_name(r) for r in by_entity.iterfind("TriggeringEntities/EntityRef")]
+        if not actors or any(a is None for a in actors):
+            return None
+        parts = [self.entity_condition(entity, a) for a in actors]
+        if any(p is None for p in parts):
+            return None
+        return _all(parts) if rule == "all" else _any(parts)
+
+    def light_condition(self, c):
+        """`light(C) == S`: a signal's state (its controller's) or a controller's phase."""
+        if c.tag == "TrafficSignalCondition":
+            sid = self.raw(c, "name")
+            ctl = self.light_controller(sid, c)
+            state = self.signal_state(sid, self.raw(c, "state"), c) if ctl else None
+        else:
+            raw, phase = self.raw(c, "trafficSignalControllerRef"), self.raw(c, "phase")
+            ctl = self.ctl_names.get(raw, raw)
+            if ctl not in self.light_ctls or self.light_ctls[ctl].get("solo"):
+                self.error(c, f"no traffic signal controller '{raw}'")
+                return None
+            state = self.light_ctls[ctl]["phases"].get(phase)
+            if state is None:
+                self.error(c, f"controller '{ctl}' has no phase '{phase}'",
+                           f"phases: {', '.join(self.light_ctls[ctl]['phases'])}")
+        if state is None:
+            return None
+        return E.Binary(op="==", left=E.Signal(name=f"light({ctl})"), right=E.Num(value=LIGHT_STATES[state]))
+
+    def entity_condition(self, c, a: str):
+        op = RULE_OPS.get(c.get("rule", ""), ">")
+        sig = lambda fn, *args: E.Signal(name=f"{fn}({','.join(args)})")  # noqa: E731 - canonical names
+        if c.tag == "TraveledDistanceCondition":
+            # `s(A)` grows in A's driving direction, from its station in its own frame
+            # (the road's station along +s; on a path, from the path's entry end).
+            travelled = self.number(c, "value", units.LENGTH)
+            return E.Binary(op=">=", left=sig("s", a), right=_plus(self.start_station(a), travelled))
+        if c.tag == "SpeedCondition":
+            return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
+        if c.tag == "CollisionCondition":
+            # The twin ends a run at its first collision; as a condition, an overlap of the
+            # actor's box with any other (exact with one other actor or a type that is every one).
+            others = [n for n in self.actors if n != a]
+            target = c.find("EntityRef")
+            if target is not None and len(others) > 1:
+                self.approx(c, "a collision with one entity: a collision of the actor with any other")
+            elif c.find("ByType") is not None and len(others) > 1:
+                self.approx(c, "a collision with a type of object: a collision of the actor with any other")
+            return E.Binary(op="<=", left=sig("clearance", a), right=E.Num(value=0.0))
+        if c.tag == "RelativeSpeedCondition":
+            b = self.actor_name(c)
+            if b is None:
+                return None
+            if c.get("direction") not in (None, "longitudinal"):
+                self.skip(c, f"a {c.get('direction')} relative speed is not translated (longitudinal is)")
+                return None
+            if c.get("direction") == "longitudinal":
+                self.approx(c, "a longitudinal relative speed: the difference of the speeds (the same when they "
+                               "drive the same way)")
+            return E.Binary(op=op, left=sig("rel_speed", a, b), right=self.number(c, "value", units.SPEED))
+        if c.tag == "AccelerationCondition":
+            return E.Binary(op=op, left=sig("accel", a), right=self.number(c, "value", units.ACCELERATION))
+        if c.tag in ("RelativeDistanceCondition", "TimeToCollisionCondition", "TimeHeadwayCondition"):
+            target = c.find("TimeToCollisionConditionTarget/EntityRef") if c.tag == "TimeToCollisionCondition" else c
+            if target is None:
+                self.skip(c, "time to collision with a position is not translated (with an entity it is)")
+                return None
+            b = self.actor_name(target)
+            if b is None:
+                return None
+            # freespace="false": distances between the entities' reference points (the
+            # importer places an actor's centre there), i.e. the bumper gap plus half of
+            # both lengths along the road.
+            free = (c.get("freespace") or "false").lower() == "true"
+            half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
+            if c.tag == "TimeToCollisionCondition":
+                # As esmini evaluates it: the longitudinal distance along the road over the
+                # speed difference; undefined (the condition false, whatever its rule) when
+                # they do not close in.
+                value = self.number(c, "value", units.TIME)
+                closing = E.Binary(op="-", left=sig("speed", a), right=sig("speed", b))
+                lhs = _plus(sig("gap", a, b), E.Num(value=half)) if half else sig("gap", a, b)
+                return _all([E.Binary(op=">", left=closing, right=E.Num(value=0.0)),
+                             E.Binary(op=op, left=lhs, right=E.Binary(op="*", left=value, right=closing))])
+            if c.tag == "TimeHeadwayCondition":
+                headway = E.Binary(op="*", left=self.number(c, "value", units.TIME), right=sig("speed", a))
+                return E.Binary(op=op, left=sig("gap", a, b),
+                                right=_plus(headway, E.Num(value=-half)) if half else headway)
+            kind = c.get("relativeDistanceType", "cartesianDistance")
+            free = (c.get("freespace") or "false").lower() == "true"
+            value = self.number(c, "value", units.LENGTH)
+            if kind == "longitudinal":
+                half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
+                ahead = _ahead(self.placed, a, b, self.param_values())
+                left = sig("gap", a, b) if ahead else sig("gap", b, a)
+                return E.Binary(op=op, left=left, right=_plus(value, E.Num(value=-half)) if half else value)
+            if kind in ("cartesianDistance", "euclidianDistance"):
+                if free:
+                    self.approx(c, "a free-space distance: the centre distance less half of both lengths")
+                    half = 0.5 * (self.size(a)[0] + self.size(b)[0])
+                    return E.Binary(op=op, left=sig("distance", a, b), right=_plus(value, E.Num(value=half)))
+                return E.Binary(op=op, left=sig("distance", a, b), right=value)
+            self.skip(c, f"a {kind} relative distance is not translated (longitudinal and cartesian are)")
+            return None
+        if c.tag == "ReachPositionCondition" or c.tag == "DistanceCondition":
+            # The Euclidean distance of the entity's reference point to the position's point
+            # (esmini: `dist < tolerance`; DistanceCondition: its rule against `value`).
+            pos = c.find("Position")
+            if pos is None:
+                self.error(c, f"<{c.tag}> needs a <Position>")
+                return None
+            point = self.world_point(pos, a)
+            if point is None:
+                return None
+            x, y, _ = point
+            if c.tag == "ReachPositionCondition":
+                radius, op = self.number(c, "tolerance", units.LENGTH), "<"
+            else:
+                radius = self.number(c, "value", units.LENGTH)
+                if (c.get("freespace") or "false").lower() == "true":
+                    self.skip(c, "a free-space distance to a position is not translated (between reference points "
+                                 "it is)")
+                    return None
+                kind = c.get("relativeDistanceType", "cartesianDistance")
+                lane_pos = _only_child(pos)
+                if kind == "longitudinal" and lane_pos is not None and \
+                        lane_pos.tag in ("LanePosition", "RoadPosition") and self.along_s(a) and \
+                        self.placed[a][0] == self.road(self.raw(lane_pos, "roadId"), lane_pos):
+                    # along the road both are on: the stations' difference
+                    gap = E.Call(fn="abs", args=[E.Binary(op="-", left=sig("s", a),
+                                                          right=self.number(lane_pos, "s", units.LENGTH))])
+                    return E.Binary(op=op, left=gap, right=radius)
+                if kind not in ("cartesianDistance", "euclidianDistance"):
+                    self.skip(c, f"a {kind} distance to a position is not translated (cartesian is, and "
+                                 "longitudinal along the actor's own road)")
+                    return None
+            dx = E.Binary(op="-", left=sig("x", a), right=E.Num(value=round(x, 9)))
+            dy = E.Binary(op="-", left=sig("y", a), right=E.Num(value=round(y, 9)))
+            square = E.Binary(op="+", left=E.Binary(op="*", left=dx, right=dx), right=E.Binary(op="*", left=dy, right=dy))
+            return E.Binary(op=op, left=square, right=E.Binary(op="*", left=radius, right=radius))
+        self.skip(c, f"<{c.tag}> is not translated",
+                  "translated: traveled distance, speed, acceleration, relative distance, time headway, TTC, "
+                  "reach position")
+        return None
+
+    def start_station(self, who: str):
+        """The actor's first `s(A)` as an expression: its road station where it drives a road
+        along +s; on a path (a lane driven against s, a reversed lane, a route), the
+        distance from the path's entry end, as the runtime measures it."""
+        return self.frame_station(who, self.placed[who][2])
+
+    def frame_station(self, who: str, s):
+        """A station `s` of the actor's first road as `s(A)` measures it (see start_station)."""
+        road_name, lane, s_start, _ = self.placed[who]
+        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+        info = self.actors[who]
+        reverse = bool(info.get("against_s")) and info["vehicle"] != "obstacle"
+        routed = info.get("route_el") is not None or info.get("route_from_position") is not None
+        if lane == 0 or (not routed and self.along_s(who)):
+            return s
+        try:
+            _, legs = resolve_route(self.network, [road_id], lane,
+                                    float(eval_param_expr(s_start, self.param_values())), reverse=reverse)
+        except (RouteError, ValueError, ArithmeticError):
+            return s
+        first = legs[0]
+        entry = E.Num(value=round(float(first.s_from), 9))
+        return E.Binary(op="-", left=s, right=entry) if first.direction > 0 else \
+            E.Binary(op="-", left=entry, right=s)
+
+    def driving_way(self, who: str) -> int:
+        """+1 if the actor starts driving towards +s of its road, -1 against."""
+        road_name, lane, _, _ = self.placed[who]
+        if lane == 0:
+            return 1
+        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+        reverse = bool(self.actors[who].get("against_s")) and self.actors[who]["vehicle"] != "obstacle"
+        return self.network.road(road_id).travel_direction(lane) * (-1 if reverse else 1)
+
+    def along_s(self, who: str) -> bool:
+        """Whether the actor drives towards +s (its lane's OpenDRIVE direction)."""
+        road_name, lane = self.placed[who][0], self.placed[who][1]
+        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
+        way = -1 if self.actors[who].get("against_s") and self.actors[who]["vehicle"] != "obstacle" else 1
+        return lane == 0 or self.network.road(road_id).travel_direction(lane) * way > 0
