@@ -13,15 +13,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from xml.etree.ElementTree import Element
 
-from defusedxml import DefusedXmlException
+from defusedxml import DefusedXmlException, ExternalReferenceForbidden
 from defusedxml.ElementTree import DefusedXMLParser
 from xml.parsers.expat import ErrorString
 
 
 class XmlReadError(ValueError):
     """A document that is not read: `unsafe` (a DTD or an entity; `exception` names defusedxml's
-    refusal) or `malformed` (`detail`: expat's message with its position, `reason`: without);
-    `line` is 1-based."""
+    refusal), `decode` (an encoding Python does not have) or `malformed` (`detail`: expat's
+    message with its position, `reason`: without); `line` is 1-based."""
 
     def __init__(self, kind: str, exception: str, detail: str, reason: str, line: int):
         super().__init__(detail)
@@ -34,6 +34,14 @@ class _LineParser(DefusedXMLParser):
     def __init__(self, forbid_dtd: bool):
         super().__init__(forbid_dtd=forbid_dtd, forbid_entities=True, forbid_external=True)
         self.lines: dict[int, int] = {}
+        if not forbid_dtd:
+            self.parser.StartDoctypeDeclHandler = self._refuse_external_dtd
+
+    @staticmethod
+    def _refuse_external_dtd(name, sysid, pubid, has_internal_subset):
+        """A plain DOCTYPE is read; one that names an external DTD is refused (it is never fetched)."""
+        if sysid is not None or pubid is not None:
+            raise ExternalReferenceForbidden(name, None, sysid, pubid)
 
     def _start(self, tag, attr_list):
         element = super()._start(tag, attr_list)
@@ -60,6 +68,9 @@ def read_xml(data: str | bytes, *, forbid_dtd: bool = True) -> XmlDocument:
     except DefusedXmlException as exc:
         line = parser.parser.CurrentLineNumber if parser.parser is not None else 1
         raise XmlReadError("unsafe", type(exc).__name__, str(exc), str(exc), max(1, line)) from None
+    except (LookupError, UnicodeError) as exc:  # `<?xml ... encoding="abc"?>`: no such codec
+        line = parser.parser.CurrentLineNumber if parser.parser is not None else 1
+        raise XmlReadError("decode", type(exc).__name__, str(exc), str(exc), max(1, line)) from None
     except Exception as exc:  # noqa: BLE001 - expat's ParseError, and any error on hostile input
         line = getattr(exc, "position", (1, 0))[0] if hasattr(exc, "position") else 1
         code = getattr(exc, "code", None)

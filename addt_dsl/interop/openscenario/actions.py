@@ -7,10 +7,10 @@ import json
 from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX
 from addt_dsl.plan import (ClausePlan)
 from addt_dsl.registry import BEHAVIORS
-from addt_dsl.interop.openscenario.xml import _child
-from addt_dsl.interop.openscenario.xml import _first
-from addt_dsl.interop.openscenario.xml import _only_child
-from addt_dsl.interop.openscenario.actions_misc import _setting
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.interop.openscenario.xml import first_of
+from addt_dsl.interop.openscenario.xml import only_child
+from addt_dsl.interop.openscenario.actions_misc import setting_of
 
 
 class Actions:
@@ -24,24 +24,24 @@ class Actions:
             return None
         info = self.actors[who]
         if act.tag == "LongitudinalAction":
-            speed = _child(act, "SpeedAction")
-            if _child(act, "SpeedProfileAction") is not None:
-                return self.speed_profile(_child(act, "SpeedProfileAction"), info)
-            if _child(act, "LongitudinalDistanceAction") is not None:
-                return self.keep_gap(_child(act, "LongitudinalDistanceAction"), who)
-            relative = _child(speed, "SpeedActionTarget", "RelativeTargetSpeed")
+            speed = child_at(act, "SpeedAction")
+            if child_at(act, "SpeedProfileAction") is not None:
+                return self.speed_profile(child_at(act, "SpeedProfileAction"), info)
+            if child_at(act, "LongitudinalDistanceAction") is not None:
+                return self.keep_gap(child_at(act, "LongitudinalDistanceAction"), who)
+            relative = child_at(speed, "SpeedActionTarget", "RelativeTargetSpeed")
             if relative is not None:
                 return self.relative_speed(speed.find("SpeedActionDynamics"), relative, info)
-            target = _child(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
+            target = child_at(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
             if speed is None or target is None:
-                self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
+                self.skip(first_of(only_child(act), act), f"<{first_of(only_child(act), act).tag}> is not translated",
                           "absolute and relative speed targets are translated")
                 return None
             return self.speed_action(speed.find("SpeedActionDynamics"), target, info)
         if act.tag == "LateralAction":
-            change = _child(act, "LaneChangeAction")
+            change = child_at(act, "LaneChangeAction")
             if change is None:
-                self.skip(_first(_only_child(act), act), f"<{_first(_only_child(act), act).tag}> is not translated",
+                self.skip(first_of(only_child(act), act), f"<{first_of(only_child(act), act).tag}> is not translated",
                           "the language has lane changes; lane offsets and lateral distances are not translated")
                 return None
             return self.lane_change(change, who, info)
@@ -60,7 +60,7 @@ class Actions:
                         if raw == "":
                             continue  # an empty setting is the default
                         try:
-                            settings[prop.get("name")] = _setting(json.loads(raw))
+                            settings[prop.get("name")] = setting_of(json.loads(raw))
                         except ValueError:
                             settings[prop.get("name")] = raw
                     return ClausePlan(keyword="behavior", name=keyword, settings=settings)
@@ -71,8 +71,8 @@ class Actions:
             return self.teleport(act, who)
         if act.tag == "SynchronizeAction":
             return self.synchronize(act, who)
-        if act.tag == "RoutingAction" and _child(act, "FollowTrajectoryAction") is not None:
-            return self.trajectory(_child(act, "FollowTrajectoryAction"), who)
+        if act.tag == "RoutingAction" and child_at(act, "FollowTrajectoryAction") is not None:
+            return self.trajectory(child_at(act, "FollowTrajectoryAction"), who)
         self.skip(act, f"<{act.tag}> is not translated",
                   "translated: speed (absolute, relative, profiles), lane changes, longitudinal distance, "
                   "synchronize, polyline trajectories, routes in Init")

@@ -9,8 +9,8 @@ from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.interop.xosc_export import lamps_of, state_of_lamps
 from addt_dsl.plan import (LIGHT_PROGRAM, LIGHT_STATES, ClausePlan)
-from addt_dsl.interop.openscenario.xml import _child
-from addt_dsl.interop.openscenario.entities import _safe_name
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.interop.openscenario.entities import safe_name
 
 
 class Global:
@@ -59,7 +59,7 @@ class Global:
         """A TrafficSignalController: its phases as one green -> yellow -> red cycle (phases in
         a rotation of that order: the offset is where the cycle's first colour starts). A
         phase's colour is its first signal's."""
-        name = _safe_name(self.raw(ctl, "name"), set(self.light_ctls))
+        name = safe_name(self.raw(ctl, "name"), set(self.light_ctls))
         self.ctl_names.setdefault(self.raw(ctl, "name"), name)
         phases, signals = [], []
         for phase in ctl.iterfind("Phase"):
@@ -119,7 +119,7 @@ class Global:
             self.skip(el, f"{self.xodr_name} has no signal '{sid}'",
                       f"traffic lights on the map: {', '.join(self.network.signal_ids(dynamic_only=True)) or '(none)'}")
             return None
-        name = _safe_name(f"signal_{sid}" if re.fullmatch(r"\w+", sid) else "signal", set(self.light_ctls))
+        name = safe_name(f"signal_{sid}" if re.fullmatch(r"\w+", sid) else "signal", set(self.light_ctls))
         self.light_ctls[name] = {"signals": [sid], "el": el, "offset": 0.0, "phases": {}, "solo": True,
                                  "green": 0.0, "yellow": 0.0, "red": 0.0}
         self.signal_owner[sid] = name
@@ -127,8 +127,8 @@ class Global:
 
     def light_clauses(self, action) -> list[ClausePlan]:
         """A GlobalAction's TrafficSignalAction as `light C state S` clauses ([] after a diagnostic)."""
-        state_action = _child(action, "InfrastructureAction", "TrafficSignalAction", "TrafficSignalStateAction")
-        ctl_action = _child(action, "InfrastructureAction", "TrafficSignalAction", "TrafficSignalControllerAction")
+        state_action = child_at(action, "InfrastructureAction", "TrafficSignalAction", "TrafficSignalStateAction")
+        ctl_action = child_at(action, "InfrastructureAction", "TrafficSignalAction", "TrafficSignalControllerAction")
         if ctl_action is not None:
             raw = self.raw(ctl_action, "trafficSignalControllerRef")
             ref = self.ctl_names.get(raw, raw)

@@ -5,13 +5,13 @@
 
 from addt_dsl import expr as E
 from addt_dsl.plan import (ClausePlan)
-from addt_dsl.interop.openscenario.xml import _only_child
+from addt_dsl.interop.openscenario.xml import only_child
 
 
 class Lateral:
     def lane_change(self, change, who, info) -> ClausePlan | None:
         dyn, target = change.find("LaneChangeActionDynamics"), change.find("LaneChangeTarget")
-        tgt = _only_child(target)
+        tgt = only_child(target)
         if tgt is None or dyn is None:
             self.error(change, "a lane change needs dynamics and a target")
             return None

@@ -8,12 +8,12 @@ from addt_dsl import expr as E
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.plan import (ClausePlan)
 from addt_dsl.interop.openscenario.params import EXPR
-from addt_dsl.interop.openscenario.xml import _child
-from addt_dsl.interop.openscenario.xml import _first
-from addt_dsl.interop.openscenario.xml import _only_child
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.interop.openscenario.xml import first_of
+from addt_dsl.interop.openscenario.xml import only_child
 
 
-def _setting(value):
+def setting_of(value):
     if isinstance(value, str):
         return value
     if isinstance(value, dict):  # a live expression (`speed 2 * speed(ego) - 1 m/s`), as the export writes it
@@ -29,7 +29,7 @@ class Misc:
         is on (`teleport s S t T`, road coordinates); to its own position moved only in
         height, nothing (the twin's actors follow the road's height)."""
         pos_el = act.find("Position")
-        pos = _only_child(pos_el) if pos_el is not None else None
+        pos = only_child(pos_el) if pos_el is not None else None
         if pos is None:
             self.error(act, "a TeleportAction needs one <Position>")
             return None
@@ -54,8 +54,8 @@ class Misc:
         master = self.actor_name(act, "masterEntityRef")
         if master is None:
             return None
-        master_pos = self.position(_first(act.find("TargetPositionMaster"), act), master)
-        own = self.road_point(_first(act.find("TargetPosition"), act), who)
+        master_pos = self.position(first_of(act.find("TargetPositionMaster"), act), master)
+        own = self.road_point(first_of(act.find("TargetPosition"), act), who)
         if master_pos is None or own is None:
             return None
         # Stations as `s(A)` measures them: along each actor's own path (a lane driven
@@ -76,7 +76,7 @@ class Misc:
             # Across the road: head for the point (the language's synchronize moves along a heading).
             settings["heading"] = E.Num(value=round(math.atan2(own[1] - t0, own[0] - s0_val), 9))
             self.approx(act, f"{who} heads straight for its target point from where it starts")
-        final = _child(act, "FinalSpeed", "AbsoluteSpeed")
+        final = child_at(act, "FinalSpeed", "AbsoluteSpeed")
         if final is not None:
             settings["final_speed"] = E.Num(value=self.value(final, "value"))
         elif act.find("FinalSpeed") is not None:

@@ -5,19 +5,19 @@
 
 from addt_dsl import expr as E
 from addt_dsl.plan import (ClausePlan)
-from addt_dsl.interop.openscenario.xml import _first
-from addt_dsl.interop.openscenario.xml import _only_child
+from addt_dsl.interop.openscenario.xml import first_of
+from addt_dsl.interop.openscenario.xml import only_child
 
 
 class Routing:
     def trajectory(self, follow, who: str) -> ClausePlan | None:
-        traj = _first(follow.find("TrajectoryRef/Trajectory"), follow.find("Trajectory"))
+        traj = first_of(follow.find("TrajectoryRef/Trajectory"), follow.find("Trajectory"))
         if traj is None:
             self.skip(follow, "a trajectory from a catalog is not translated")
             return None
-        shape = _only_child(traj.find("Shape")) if traj.find("Shape") is not None else None
+        shape = only_child(traj.find("Shape")) if traj.find("Shape") is not None else None
         if shape is None:
-            self.error(_first(traj.find("Shape"), traj), "a trajectory needs one shape")
+            self.error(first_of(traj.find("Shape"), traj), "a trajectory needs one shape")
             return None
         if shape.tag in ("Clothoid", "Nurbs"):
             got = self.clothoid(shape, who) if shape.tag == "Clothoid" else self.nurbs(shape, who)
@@ -30,7 +30,7 @@ class Routing:
         elif shape.tag == "Polyline":
             points, times, keys = [], [], ("s", "t")
             for vertex in shape.iterfind("Vertex"):
-                got = self.road_point(_first(vertex.find("Position"), vertex), who)
+                got = self.road_point(first_of(vertex.find("Position"), vertex), who)
                 if got is None:
                     return None
                 points.append(got)

@@ -9,11 +9,11 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.plan import (LIGHT_STATES)
 from addt_dsl.runtime.road.route import RouteError, resolve_route
 from addt_dsl.interop.openscenario.params import EXPR
-from addt_dsl.interop.openscenario.params import _all
-from addt_dsl.interop.openscenario.params import _any
-from addt_dsl.interop.openscenario.xml import _child
-from addt_dsl.interop.openscenario.xml import _only_child
-from addt_dsl.interop.openscenario.params import _plus
+from addt_dsl.interop.openscenario.params import all_of
+from addt_dsl.interop.openscenario.params import any_of
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.interop.openscenario.xml import only_child
+from addt_dsl.interop.openscenario.params import plus_expr
 
 
 EDGES = {"none": None, "rising": "rising", "falling": "falling", "risingOrFalling": "changing"}
@@ -23,7 +23,7 @@ RULE_OPS = {"lessThan": "<", "lessOrEqual": "<=", "greaterThan": ">", "greaterOr
             "notEqualTo": "!="}
 
 
-def _ahead(placed, a, b, params) -> bool:
+def is_ahead(placed, a, b, params) -> bool:
     """Whether b starts ahead of a (so `gap(a, b)` is the positive one)."""
     return eval_param_expr(placed[b][2], params) >= eval_param_expr(placed[a][2], params)
 
@@ -31,7 +31,7 @@ def _ahead(placed, a, b, params) -> bool:
 class Conditions:
     def condition(self, cond, who: str):
         """One <Condition> as a formula over signals, or None after a diagnostic."""
-        value_cond = _only_child(cond.find("ByValueCondition")) if cond.find("ByValueCondition") is not None else None
+        value_cond = only_child(cond.find("ByValueCondition")) if cond.find("ByValueCondition") is not None else None
         if value_cond is not None:
             if value_cond.tag == "ParameterCondition":
                 ref = self.raw(value_cond, "parameterRef")
@@ -43,7 +43,7 @@ class Conditions:
             self.skip(value_cond, f"<{value_cond.tag}> is not translated")
             return None
         by_entity = cond.find("ByEntityCondition")
-        entity = _only_child(_child(by_entity, "EntityCondition"))
+        entity = only_child(child_at(by_entity, "EntityCondition"))
         if by_entity is None or entity is None:
             self.error(cond, "a condition needs a ByValueCondition or a ByEntityCondition")
             return None
@@ -55,7 +55,7 @@ class Conditions:
         parts = [self.entity_condition(entity, a) for a in actors]
         if any(p is None for p in parts):
             return None
-        return _all(parts) if rule == "all" else _any(parts)
+        return all_of(parts) if rule == "all" else any_of(parts)
 
     def light_condition(self, c):
         """`light(C) == S`: a signal's state (its controller's) or a controller's phase."""
@@ -84,7 +84,7 @@ class Conditions:
             # `s(A)` grows in A's driving direction, from its station in its own frame
             # (the road's station along +s; on a path, from the path's entry end).
             travelled = self.number(c, "value", units.LENGTH)
-            return E.Binary(op=">=", left=sig("s", a), right=_plus(self.start_station(a), travelled))
+            return E.Binary(op=">=", left=sig("s", a), right=plus_expr(self.start_station(a), travelled))
         if c.tag == "SpeedCondition":
             return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
         if c.tag == "CollisionCondition":
@@ -129,26 +129,26 @@ class Conditions:
                 # they do not close in.
                 value = self.number(c, "value", units.TIME)
                 closing = E.Binary(op="-", left=sig("speed", a), right=sig("speed", b))
-                lhs = _plus(sig("gap", a, b), E.Num(value=half)) if half else sig("gap", a, b)
-                return _all([E.Binary(op=">", left=closing, right=E.Num(value=0.0)),
+                lhs = plus_expr(sig("gap", a, b), E.Num(value=half)) if half else sig("gap", a, b)
+                return all_of([E.Binary(op=">", left=closing, right=E.Num(value=0.0)),
                              E.Binary(op=op, left=lhs, right=E.Binary(op="*", left=value, right=closing))])
             if c.tag == "TimeHeadwayCondition":
                 headway = E.Binary(op="*", left=self.number(c, "value", units.TIME), right=sig("speed", a))
                 return E.Binary(op=op, left=sig("gap", a, b),
-                                right=_plus(headway, E.Num(value=-half)) if half else headway)
+                                right=plus_expr(headway, E.Num(value=-half)) if half else headway)
             kind = c.get("relativeDistanceType", "cartesianDistance")
             free = (c.get("freespace") or "false").lower() == "true"
             value = self.number(c, "value", units.LENGTH)
             if kind == "longitudinal":
                 half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
-                ahead = _ahead(self.placed, a, b, self.param_values())
+                ahead = is_ahead(self.placed, a, b, self.param_values())
                 left = sig("gap", a, b) if ahead else sig("gap", b, a)
-                return E.Binary(op=op, left=left, right=_plus(value, E.Num(value=-half)) if half else value)
+                return E.Binary(op=op, left=left, right=plus_expr(value, E.Num(value=-half)) if half else value)
             if kind in ("cartesianDistance", "euclidianDistance"):
                 if free:
                     self.approx(c, "a free-space distance: the centre distance less half of both lengths")
                     half = 0.5 * (self.size(a)[0] + self.size(b)[0])
-                    return E.Binary(op=op, left=sig("distance", a, b), right=_plus(value, E.Num(value=half)))
+                    return E.Binary(op=op, left=sig("distance", a, b), right=plus_expr(value, E.Num(value=half)))
                 return E.Binary(op=op, left=sig("distance", a, b), right=value)
             self.skip(c, f"a {kind} relative distance is not translated (longitudinal and cartesian are)")
             return None
@@ -172,7 +172,7 @@ class Conditions:
                                  "it is)")
                     return None
                 kind = c.get("relativeDistanceType", "cartesianDistance")
-                lane_pos = _only_child(pos)
+                lane_pos = only_child(pos)
                 if kind == "longitudinal" and lane_pos is not None and \
                         lane_pos.tag in ("LanePosition", "RoadPosition") and self.along_s(a) and \
                         self.placed[a][0] == self.road(self.raw(lane_pos, "roadId"), lane_pos):

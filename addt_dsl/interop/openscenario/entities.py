@@ -10,18 +10,18 @@ from pathlib import Path
 from addt_dsl import units
 from addt_dsl.vehicles import VEHICLES
 from addt_dsl.interop.openscenario.xml import Stop
-from addt_dsl.interop.openscenario.params import _NAME
-from addt_dsl.interop.openscenario.xml import _child
-from addt_dsl.interop.openscenario.xml import _only_child
+from addt_dsl.interop.openscenario.params import NAME_RE
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.interop.openscenario.xml import only_child
 
 
 CATEGORY_KIND = {"car": "car", "van": "car", "motorbike": "cyclist", "bicycle": "cyclist", "bus": "truck",
                  "truck": "truck", "semitrailer": "truck", "trailer": "truck", "train": "truck", "tram": "truck"}
 
 
-def _safe_name(name: str, taken: set[str]) -> str:
+def safe_name(name: str, taken: set[str]) -> str:
     base = re.sub(r"\W", "_", name) or "actor"
-    if not _NAME.fullmatch(base):
+    if not NAME_RE.fullmatch(base):
         base = f"a_{base}"
     out, i = base, 2
     while out in taken:
@@ -41,7 +41,7 @@ class Entities:
             self.approx(objects[0], f"no entity named Ego: '{ego}' becomes the ego (driven by the stack)")
         taken: set[str] = set()
         for obj, name in zip(objects, names):
-            addt = "ego" if name == ego else _safe_name(name, taken | {"ego"})
+            addt = "ego" if name == ego else safe_name(name, taken | {"ego"})
             taken.add(addt)
             self.renames[name] = addt
         for obj in objects:
@@ -53,7 +53,7 @@ class Entities:
             raise Stop
 
     def entity(self, obj, name: str) -> None:
-        body = _only_child(obj) if obj.find("ObjectController") is None else \
+        body = only_child(obj) if obj.find("ObjectController") is None else \
             next((c for c in obj if c.tag != "ObjectController"), None)
         saved = dict(self.params)
         if body is not None and body.tag == "CatalogReference":
@@ -83,7 +83,7 @@ class Entities:
         else:
             self.skip(body, f"<{body.tag}> '{obj.get('name')}' is not translated")
             return
-        dims = _child(body, "BoundingBox", "Dimensions") if body is not None else None
+        dims = child_at(body, "BoundingBox", "Dimensions") if body is not None else None
         height = None
         if dims is not None:
             length, width = self.value(dims, "length"), self.value(dims, "width")

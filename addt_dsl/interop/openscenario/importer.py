@@ -50,9 +50,9 @@ from addt_dsl.interop.openscenario.actions_routing import Routing
 from addt_dsl.interop.openscenario.sidefile import SideFile
 from addt_dsl.interop.openscenario.xml import Stop
 from addt_dsl.interop.openscenario.storyboard import Storyboard
-from addt_dsl.interop.openscenario.xml import _child
-from addt_dsl.interop.openscenario.xml import _first
-from addt_dsl.interop.openscenario.entities import _safe_name
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.interop.openscenario.xml import first_of
+from addt_dsl.interop.openscenario.entities import safe_name
 
 
 MAX_SCRIPTED_SPEED_MS = 70.0  # a scripted ego's default route is long enough at this speed [m/s]
@@ -82,7 +82,7 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
         if root.tag != "OpenSCENARIO":
             self.error(root, f"the root element is <{root.tag}>, not <OpenSCENARIO>")
             return None
-        header = _child(root, "FileHeader")
+        header = child_at(root, "FileHeader")
         if header is not None and (header.get("description") or "").startswith("CARLA:"):
             self.carla = True
             self.sink.warning("W0803", "read in CARLA's coordinate frame (the description starts with 'CARLA:'): "
@@ -98,7 +98,7 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                 self.params.setdefault(name, (kind, value))
         if SIDECAR_PARAM in self.params:
             self.load_sidecar(root.find("ParameterDeclarations"), header)
-        if _child(root, "Storyboard") is None or _child(root, "Entities") is None:
+        if child_at(root, "Storyboard") is None or child_at(root, "Entities") is None:
             self.error(root, "no <Storyboard> or <Entities>: not a scenario (a catalog?)")
             return None
         try:
@@ -139,7 +139,7 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                 if info.get("route_el") is None:
                     self.approx(info["route_from_position"], f"{who} is placed on a route that nothing assigns: "
                                                              "it drives that route")
-                got = self.route(_first(info.get("route_el"), info.get("route_from_position")), who, lane, s)
+                got = self.route(first_of(info.get("route_el"), info.get("route_from_position")), who, lane, s)
                 if got is not None:
                     fields["route"], fields["s"] = got
             if extra.get("yaw") is not None:
@@ -217,9 +217,9 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
         if not sc and not oracles:  # OpenSCENARIO states no pass criteria: the one every scenario here has
             oracles = [OraclePlan(name="no_collision", formula=NO_CLAUSES["collision"]("ego", None))]
         description = sc["description"] if sc else (header.get("description", "") if header is not None else "")
-        name = sc.get("scenario") or _safe_name(self.path.stem, set())
+        name = sc.get("scenario") or safe_name(self.path.stem, set())
         if self.light_ctls and not sc and agents:
-            self.approx(_first(self.signals_el, self.doc), "OpenSCENARIO's actors follow their actions, not the "
+            self.approx(first_of(self.signals_el, self.doc), "OpenSCENARIO's actors follow their actions, not the "
                                                            "traffic lights: the agents get `at_red run`")
         controllers = []
         for cname, info in self.light_ctls.items():

@@ -18,7 +18,7 @@ from addt_dsl.interop.openscenario.xml import Stop
 MAX_EXPRESSION_CHARS = 10_000  # a `${...}` expression's length (docs/limits.md)
 
 
-_NAME = re.compile(r"[A-Za-z_]\w*")
+NAME_RE = re.compile(r"[A-Za-z_]\w*")
 
 
 EXPR = TypeAdapter(E.Expr)
@@ -47,14 +47,14 @@ def arith(node) -> float:
     raise ValueError("unsupported expression")
 
 
-def _is_number(text: str) -> bool:
+def is_number(text: str) -> bool:
     try:
         return math.isfinite(float(text))
     except ValueError:
         return False
 
 
-def _plus(a, b):
+def plus_expr(a, b):
     if isinstance(a, E.Num) and isinstance(b, E.Num):
         return E.Num(value=a.value + b.value)
     if isinstance(b, E.Num) and b.value == 0.0:
@@ -62,14 +62,14 @@ def _plus(a, b):
     return E.Binary(op="+", left=a, right=b)
 
 
-def _all(parts):
+def all_of(parts):
     out = parts[0]
     for p in parts[1:]:
         out = E.Binary(op="and", left=out, right=p)
     return out
 
 
-def _any(parts):
+def any_of(parts):
     out = parts[0]
     for p in parts[1:]:
         out = E.Binary(op="or", left=out, right=p)
@@ -131,8 +131,8 @@ class Parameters:
             self.error(el, f"{attr}=\"{text[:40]}\" is not finite")
             raise Stop
         ref = el.get(attr, "")
-        plain = _is_number(self.params.get(ref[1:], ("", ""))[1])
-        if keep and plain and ref.startswith("$") and not ref.startswith("${") and _NAME.fullmatch(ref[1:]):
+        plain = is_number(self.params.get(ref[1:], ("", ""))[1])
+        if keep and plain and ref.startswith("$") and not ref.startswith("${") and NAME_RE.fullmatch(ref[1:]):
             name = ref[1:]
             known = self.param_dims.get(name, dim)
             self.param_dims[name] = dim if known == dim else None

@@ -9,9 +9,9 @@ from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.runtime.road.route import RouteError, exits, resolve_route, turn_of
 from addt_dsl.interop.openscenario.xml import Stop
-from addt_dsl.interop.openscenario.xml import _first
-from addt_dsl.interop.openscenario.xml import _only_child
-from addt_dsl.interop.openscenario.params import _plus
+from addt_dsl.interop.openscenario.xml import first_of
+from addt_dsl.interop.openscenario.xml import only_child
+from addt_dsl.interop.openscenario.params import plus_expr
 
 
 MAX_STATION_M = 1e6  # a road station beyond this is refused as content, not translated [m]
@@ -22,7 +22,7 @@ MAX_LANE_ID = 100
 
 # ---------------------------------------------------------------- the document
 
-def _lane_ids(odr, s: float) -> tuple[int, ...]:
+def lane_ids_at(odr, s: float) -> tuple[int, ...]:
     """Every lane id of a road's lane section at s (driving or not)."""
     try:
         return tuple(odr.lane_ids(s))
@@ -30,7 +30,7 @@ def _lane_ids(odr, s: float) -> tuple[int, ...]:
         return ()
 
 
-def _bspline_basis(knots: list[float], order: int, n: int, u: float) -> list[float]:
+def bspline_basis(knots: list[float], order: int, n: int, u: float) -> list[float]:
     """The n B-spline basis functions of `order` (degree order - 1) at `u` (Cox-de Boor)."""
     basis = [1.0 if knots[i] <= u < knots[i + 1] else 0.0 for i in range(len(knots) - 1)]
     for k in range(2, order + 1):
@@ -51,7 +51,7 @@ class Positions:
 
     def position(self, pos_el, who: str):
         """(road name, lane, s, offset) as expressions, or None after a diagnostic."""
-        pos = _only_child(pos_el)
+        pos = only_child(pos_el)
         if pos is None:
             self.error(pos_el, "a <Position> holds one position")
             return None
@@ -65,9 +65,9 @@ class Positions:
                 self.error(pos, f"s = {s_val:g} m, lane {lane}: not a place on any road "
                                 f"(|s| at most {MAX_STATION_M:g} m, |laneId| at most {MAX_LANE_ID})")
                 raise Stop
-            if 0.0 <= s_val <= odr.length + 1e-6 and lane not in _lane_ids(odr, s_val):
+            if 0.0 <= s_val <= odr.length + 1e-6 and lane not in lane_ids_at(odr, s_val):
                 self.error(pos, f"road {odr.id} has no lane {lane} at s = {s_val:g} m",
-                           f"lanes there: {', '.join(str(i) for i in _lane_ids(odr, s_val))}")
+                           f"lanes there: {', '.join(str(i) for i in lane_ids_at(odr, s_val))}")
                 raise Stop
             return road, lane, s, self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
         if pos.tag in ("RoadPosition", "WorldPosition", "RelativeRoadPosition", "RelativeLanePosition"):
@@ -99,7 +99,7 @@ class Positions:
                 if lane * new_lane <= 0 and d_lane:  # lane 0 is the reference line
                     new_lane += 1 if d_lane > 0 else -1
                 ds = self.number(pos, "ds", units.LENGTH, 0.0)
-                return road_name, new_lane, _plus(s_ref, ds), self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
+                return road_name, new_lane, plus_expr(s_ref, ds), self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
             road = self.network.road(road_id)
             s = eval_param_expr(s_ref, params) + self.value(pos, "ds")
             t = road.lane_center_t(lane, eval_param_expr(s_ref, params)) + eval_param_expr(off_ref, params) \
@@ -157,11 +157,11 @@ class Positions:
         `at S` along the route from its entry end), in the first-road lane whose route leg
         is `laneId` where the point is; the route becomes the actor's when nothing assigns
         one. (road, lane, s, offset) or None after a diagnostic."""
-        route_el = self.route_element(_first(pos.find("RouteRef"), pos))
+        route_el = self.route_element(first_of(pos.find("RouteRef"), pos))
         lane_coords = pos.find("InRoutePosition/FromLaneCoordinates")
         if route_el is None or lane_coords is None:
             if route_el is not None:
-                self.skip(_first(_only_child(pos.find("InRoutePosition")) if pos.find("InRoutePosition") is not None
+                self.skip(first_of(only_child(pos.find("InRoutePosition")) if pos.find("InRoutePosition") is not None
                                  else None, pos), "a route position is translated from lane coordinates only")
             return None
         path_s, lane_id = self.value(lane_coords, "pathS", units.LENGTH), int(self.value(lane_coords, "laneId"))
@@ -209,7 +209,7 @@ class Positions:
         road_name, lane, s, _ = placed
         road_id = next(i for i, r in self.roads.items() if r.name == road_name)
         odr = self.network.road(road_id)
-        orient = _only_child(pos_el).find("Orientation") if _only_child(pos_el) is not None else None
+        orient = only_child(pos_el).find("Orientation") if only_child(pos_el) is not None else None
         if orient is None or orient.get("h") is None or lane == 0:
             return False
         try:
@@ -217,7 +217,7 @@ class Positions:
             if orient.get("type", "relative") == "absolute":
                 s_now = float(eval_param_expr(s, self.param_values()))
                 h -= odr.reference_pose(s_now)[2] + (0.0 if odr.travel_direction(lane) > 0 else math.pi)
-            elif _only_child(pos_el).tag != "LanePosition":  # relative to the road's +s
+            elif only_child(pos_el).tag != "LanePosition":  # relative to the road's +s
                 h -= 0.0 if odr.travel_direction(lane) > 0 else math.pi
             return math.cos(h) < 0
         except (ValueError, ArithmeticError, Stop):
@@ -267,7 +267,7 @@ class Positions:
     def clothoid(self, el, who: str):
         """A clothoid (curvature k0 + k' u over its length) from its start pose, sampled
         about every 2 m; times linear in arc length from startTime to stopTime."""
-        start = self.world_point(_first(el.find("Position"), el), who)
+        start = self.world_point(first_of(el.find("Position"), el), who)
         if start is None:
             return None
         k0 = self.mirror(self.value(el, "curvature"))  # a left turn is a right one in CARLA's frame
@@ -309,7 +309,7 @@ class Positions:
             return None
         pts, weights, stamps = [], [], []
         for cp in cps:
-            got = self.world_point(_first(cp.find("Position"), cp), who)
+            got = self.world_point(first_of(cp.find("Position"), cp), who)
             if got is None:
                 return None
             pts.append(got[:2])
@@ -320,7 +320,7 @@ class Positions:
         points, times = [], []
         for j in range(count + 1):
             u = lo + (hi - lo) * j / count
-            basis = _bspline_basis(knots, order, len(cps), min(u, hi - 1e-9 * (hi - lo)))
+            basis = bspline_basis(knots, order, len(cps), min(u, hi - 1e-9 * (hi - lo)))
             w = [b * wt for b, wt in zip(basis, weights)]
             total = sum(w)
             if total <= 0.0:
@@ -337,7 +337,7 @@ class Positions:
         included) and its start station along the route; None after a diagnostic."""
         stops = []
         for wp in route_el.iterfind("Waypoint"):
-            pos = _only_child(wp.find("Position")) if wp.find("Position") is not None else None
+            pos = only_child(wp.find("Position")) if wp.find("Position") is not None else None
             road_id = pos.get("roadId") if pos is not None else None
             if road_id is None:
                 self.skip(wp, "a waypoint that is not a lane or road position: the route is not translated")

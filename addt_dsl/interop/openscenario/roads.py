@@ -10,9 +10,9 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.plan import (RoadPlan)
 from addt_dsl.runtime.road import XodrError, parse_xodr
 from addt_dsl.interop.openscenario.xml import Stop
-from addt_dsl.interop.openscenario.params import _NAME
-from addt_dsl.interop.openscenario.xml import _first
-from addt_dsl.interop.openscenario.entities import _safe_name
+from addt_dsl.interop.openscenario.params import NAME_RE
+from addt_dsl.interop.openscenario.xml import first_of
+from addt_dsl.interop.openscenario.entities import safe_name
 
 
 class Roads:
@@ -21,7 +21,7 @@ class Roads:
     def road_network(self, root) -> None:
         logic = root.find("RoadNetwork/LogicFile")
         if logic is None:
-            self.error(_first(root.find("RoadNetwork"), root), "no <RoadNetwork><LogicFile>: addt-dsl actors need a road")
+            self.error(first_of(root.find("RoadNetwork"), root), "no <RoadNetwork><LogicFile>: addt-dsl actors need a road")
             raise Stop
         got = self.read_road_network(self.raw(logic, "filepath"), logic)
         if got is None:
@@ -77,7 +77,7 @@ class Roads:
             raise Stop
         if road_id not in self.roads:
             odr = self.network.road(road_id)
-            name = _safe_name(f"r{road_id}" if not odr.name or not _NAME.fullmatch(str(odr.name))
+            name = safe_name(f"r{road_id}" if not odr.name or not NAME_RE.fullmatch(str(odr.name))
                               else str(odr.name), {r.name for r in self.roads.values()} | set(self.actors))
             if not re.fullmatch(r"\d+", road_id):
                 self.error(el, f"road id '{road_id}' is not a number: the language imports roads by number")

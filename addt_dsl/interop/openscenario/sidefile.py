@@ -17,7 +17,7 @@ SIDECAR_PARAM = "addt_sidecar"  # the OpenSCENARIO parameter that names the side
 CONTROLLER_PREFIX = "addt_"  # a controller named addt_<behaviour>: that behaviour, its settings as properties
 
 
-def _sidecar_problem(data: dict) -> str:
+def sidecar_problem(data: dict) -> str:
     """What is wrong with a side file's contents ("" if nothing): each part is validated
     before the import uses it, so a damaged file is a diagnostic, not an exception."""
     try:
@@ -103,7 +103,7 @@ class SideFile:
         if not isinstance(data, dict) or data.get("format") != SIDECAR_FORMAT:
             self.error(decls, f"side file {name} is not an addt-dsl export side file ({SIDECAR_FORMAT})")
             return
-        problem = _sidecar_problem(data)
+        problem = sidecar_problem(data)
         if problem:
             self.error(decls, f"side file {name} is not what addtc export writes: {problem}")
             return

@@ -12,13 +12,13 @@ from addt_dsl.plan import (ClausePlan, GroupPlan,
                            TriggerPlan)
 from addt_dsl.interop.openscenario.conditions import EDGES
 from addt_dsl.interop.openscenario.xml import Stop
-from addt_dsl.interop.openscenario.params import _all
-from addt_dsl.interop.openscenario.params import _any
-from addt_dsl.interop.openscenario.xml import _child
-from addt_dsl.interop.openscenario.xml import _first
-from addt_dsl.interop.openscenario.xml import _only_child
-from addt_dsl.interop.openscenario.params import _plus
-from addt_dsl.interop.openscenario.entities import _safe_name
+from addt_dsl.interop.openscenario.params import all_of
+from addt_dsl.interop.openscenario.params import any_of
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.interop.openscenario.xml import first_of
+from addt_dsl.interop.openscenario.xml import only_child
+from addt_dsl.interop.openscenario.params import plus_expr
+from addt_dsl.interop.openscenario.entities import safe_name
 
 
 DEFAULT_DURATION_S = 60.0
@@ -32,14 +32,14 @@ STATE_SIGNAL = {"startTransition": "started",
                 "endTransition": "ended", "completeState": "ended"}
 
 
-def _steps_of(step: TriggerPlan):
+def steps_of(step: TriggerPlan):
     """A step and every step of its groups, depth first."""
     yield step
     for sub in step.group.steps if step.group is not None else ():
-        yield from _steps_of(sub)
+        yield from steps_of(sub)
 
 
-def _labelled(step: TriggerPlan, clause: ClausePlan, label: str, found: list) -> TriggerPlan:
+def labelled(step: TriggerPlan, clause: ClausePlan, label: str, found: list) -> TriggerPlan:
     """The step tree with the first step that starts `clause` named (its name if it has
     one, else `label`); the name used is appended to `found`."""
     if not found and step.clause == clause:
@@ -47,11 +47,11 @@ def _labelled(step: TriggerPlan, clause: ClausePlan, label: str, found: list) ->
         return step if step.label else step.model_copy(update={"label": label})
     if step.group is None:
         return step
-    steps = [_labelled(s, clause, label, found) for s in step.group.steps]
+    steps = [labelled(s, clause, label, found) for s in step.group.steps]
     return step.model_copy(update={"group": step.group.model_copy(update={"steps": steps})})
 
 
-def _speed_into_trajectory(clauses: list[ClausePlan]) -> list[ClausePlan]:
+def speed_into_trajectory(clauses: list[ClausePlan]) -> list[ClausePlan]:
     """A speed action and an untimed trajectory in one event: OpenSCENARIO moves the entity
     along the trajectory at the speed the speed action sets; the language's trajectory holds
     the longitudinal channel itself, so it takes that speed (and its rate limits)."""
@@ -66,7 +66,7 @@ def _speed_into_trajectory(clauses: list[ClausePlan]) -> list[ClausePlan]:
     return [merged if c is traj else c for c in clauses if c is not cruise]
 
 
-def _duration(clause: ClausePlan) -> float:
+def duration_of(clause: ClausePlan) -> float:
     """How long a behaviour runs [s], where its settings say: `duration`, or a timed
     trajectory's last vertex time; else 0."""
     d = clause.settings.get("duration")
@@ -84,10 +84,10 @@ class Storyboard:
             init = Element("Init")
         pairs = []
         for action in init.iterfind("Actions/GlobalAction"):
-            env = _child(action, "EnvironmentAction", "Environment")
+            env = child_at(action, "EnvironmentAction", "Environment")
             if env is not None:
                 self.environment_action(env)
-            elif _child(action, "InfrastructureAction", "TrafficSignalAction") is not None:
+            elif child_at(action, "InfrastructureAction", "TrafficSignalAction") is not None:
                 pairs += [(action, c) for c in self.light_clauses(action)]
             else:
                 self.skip(action, "global actions other than the environment (traffic, parameters, "
@@ -100,7 +100,7 @@ class Storyboard:
             if who is None or who not in self.actors:
                 continue
             for pa in private.iterfind("PrivateAction"):
-                act = _only_child(pa)
+                act = only_child(pa)
                 if act is None:
                     continue
                 if act.tag == "TeleportAction":
@@ -109,17 +109,17 @@ class Storyboard:
                         self.placed[who] = got
                         self.actors[who]["lane_now"] = got[1]
                         self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
-                elif act.tag == "RoutingAction" and _child(act, "AssignRouteAction") is not None:
-                    route_el = self.route_element(_child(act, "AssignRouteAction"))
+                elif act.tag == "RoutingAction" and child_at(act, "AssignRouteAction") is not None:
+                    route_el = self.route_element(child_at(act, "AssignRouteAction"))
                     if route_el is not None:
                         self.actors[who]["route_el"] = route_el
-                elif act.tag == "RoutingAction" and _child(act, "FollowTrajectoryAction") is not None \
+                elif act.tag == "RoutingAction" and child_at(act, "FollowTrajectoryAction") is not None \
                         and (who != "ego" or self.scripted_ego):
                     init_trajectories.append((act, who))
-                elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
+                elif act.tag == "LongitudinalAction" and child_at(act, "SpeedAction", "SpeedActionTarget",
                                                                 "AbsoluteTargetSpeed") is not None:
-                    target = _child(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
-                    dyn = _child(act, "SpeedAction", "SpeedActionDynamics")
+                    target = child_at(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
+                    dyn = child_at(act, "SpeedAction", "SpeedActionDynamics")
                     if dyn is not None and dyn.get("dynamicsShape", "step") != "step" \
                             and (who != "ego" or self.scripted_ego) \
                             and self.value(dyn, "value", default=0.0) > 0:
@@ -131,7 +131,7 @@ class Storyboard:
                         continue
                     self.actors[who]["speed"] = self.number(target, "value", units.SPEED)
                     self.actors[who]["speed_now"] = self.value(target, "value")
-                elif act.tag == "LongitudinalAction" and _child(act, "SpeedAction", "SpeedActionTarget",
+                elif act.tag == "LongitudinalAction" and child_at(act, "SpeedAction", "SpeedActionTarget",
                                                                 "RelativeTargetSpeed") is not None:
                     init_relative.append((act, who))
                 elif act.tag in ("ControllerAction", "ActivateControllerAction"):
@@ -140,7 +140,7 @@ class Storyboard:
                 else:
                     self.skip(act, f"<{act.tag}> in Init is not translated (positions and speeds are)")
         for act, who in init_relative:  # relative to another entity's initial speed
-            rel = _child(act, "SpeedAction", "SpeedActionTarget", "RelativeTargetSpeed")
+            rel = child_at(act, "SpeedAction", "SpeedActionTarget", "RelativeTargetSpeed")
             ref = self.actor_name(rel)
             if ref is None or ref not in self.actors:
                 continue
@@ -148,10 +148,10 @@ class Storyboard:
             value = self.number(rel, "value", units.SPEED if rel.get("speedTargetValueType", "delta") == "delta"
                                 else units.DIMENSIONLESS)
             op = "*" if rel.get("speedTargetValueType", "delta") == "factor" else "+"
-            self.actors[who]["speed"] = E.Binary(op=op, left=value, right=base) if op == "*" else _plus(base, value)
+            self.actors[who]["speed"] = E.Binary(op=op, left=value, right=base) if op == "*" else plus_expr(base, value)
             self.actors[who]["speed_now"] = eval_param_expr(self.actors[who]["speed"], self.param_values())
             if rel.get("continuous", "false") in ("true", "1") and (who != "ego" or self.scripted_ego):
-                clause = self.relative_speed(_child(act, "SpeedAction", "SpeedActionDynamics"), rel, self.actors[who])
+                clause = self.relative_speed(child_at(act, "SpeedAction", "SpeedActionDynamics"), rel, self.actors[who])
                 if clause is not None:
                     self.actors[who]["behaviors"].append(clause)
         for act, who in init_trajectories:  # no TeleportAction: start at the first vertex
@@ -168,7 +168,7 @@ class Storyboard:
                 first = self.road(next(iter(self.network.roads)), info["el"])
                 self.placed[who] = (first, -1, E.Num(value=0.0), E.Num(value=0.0))
         for act, who in init_trajectories:  # a trajectory from the start: once every actor is placed
-            clause = self.trajectory(_child(act, "FollowTrajectoryAction"), who)
+            clause = self.trajectory(child_at(act, "FollowTrajectoryAction"), who)
             if clause is not None:
                 self.actors[who]["behaviors"].append(clause)
 
@@ -245,10 +245,10 @@ class Storyboard:
         actions = list(event.iterfind("Action"))
         clauses, lights = [], []
         for action in actions:
-            body = _only_child(action)
+            body = only_child(action)
             if body is None:
                 continue
-            if body.tag == "GlobalAction" and _child(body, "InfrastructureAction", "TrafficSignalAction") is not None:
+            if body.tag == "GlobalAction" and child_at(body, "InfrastructureAction", "TrafficSignalAction") is not None:
                 exact = ((self.sidecar or {}).get("lights") or {}).get("steps", {}).get(name)
                 if exact and exact.get("name") not in self.light_ctls:
                     self.error(body, f"the side file's light step {name!r} names controller "
@@ -266,10 +266,10 @@ class Storyboard:
                 self.skip(body, f"<{body.tag}> is not translated (private actions are)")
                 continue
             if who is None:
-                self.skip(body, f"<{_first(_only_child(body), body).tag}> in a maneuver group without actors is "
+                self.skip(body, f"<{first_of(only_child(body), body).tag}> in a maneuver group without actors is "
                                 "not translated")
                 continue
-            inner = _only_child(body)
+            inner = only_child(body)
             if inner is None:
                 continue
             if inner.tag == "VisibilityAction" and len(actions) == 1:
@@ -291,7 +291,7 @@ class Storyboard:
         if step is None:
             return
         kind, fields = step
-        clauses = _speed_into_trajectory(clauses)
+        clauses = speed_into_trajectory(clauses)
         if len(clauses) > 1:
             self.approx(event, f"event '{name}' starts {len(clauses)} actions: one step each, same start")
         runs = int(self.value(event, "maximumExecutionCount", default=1.0))
@@ -356,12 +356,12 @@ class Storyboard:
                 holds.append((self.value(cond, "delay", units.TIME, 0.0), cond))
                 edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
             if conj:
-                alternatives.append(_all(conj))
+                alternatives.append(all_of(conj))
         fields = {}
         if at_s is not None:
             fields["at_s"] = E.Num(value=at_s)
         if alternatives:
-            fields["condition"] = _any(alternatives)
+            fields["condition"] = any_of(alternatives)
         # One condition (the usual case): its edge and delay exactly. Several: the step's edge
         # and delay act on the whole formula, exact when all conditions agree.
         if any(e for e, _ in edges):
@@ -409,7 +409,7 @@ class Storyboard:
                 continue
             after = delay
             if state in ("endTransition", "completeState"):
-                after += _duration(first[3])
+                after += duration_of(first[3])
             info = self.actors[who]
             prev_clause = first[3]
             # Lift the first step into a sequence that also starts this one.
@@ -455,15 +455,15 @@ class Storyboard:
             return None
         other = first[0]
         info = self.actors[other]
-        taken = {tr.label for a in self.actors.values() for t in a["triggers"] for tr in _steps_of(t) if tr.label}
-        if not any(tr.clause == first[3] for t in info["triggers"] for tr in _steps_of(t)):
+        taken = {tr.label for a in self.actors.values() for t in a["triggers"] for tr in steps_of(t) if tr.label}
+        if not any(tr.clause == first[3] for t in info["triggers"] for tr in steps_of(t)):
             j = next((j for j, c in enumerate(info["behaviors"]) if c == first[3]), None)
             if j is None:
                 return None
             clause = info["behaviors"].pop(j)
             info["triggers"].append(TriggerPlan(after_s=E.Num(value=0.0), clause=clause))
         found: list[str] = []
-        info["triggers"] = [_labelled(t, first[3], _safe_name(ref, taken), found) for t in info["triggers"]]
+        info["triggers"] = [labelled(t, first[3], safe_name(ref, taken), found) for t in info["triggers"]]
         label = found[0]
         # A step state is a formula: the signal above 0, as the compiler lowers it.
         return E.Binary(op=">", left=E.Signal(name=f"{STATE_SIGNAL[state]}({other}.{label})"), right=E.Num(value=0.0))
@@ -495,7 +495,7 @@ class Storyboard:
                         self.skip(cond, f"a stop trigger on the {kind} '{ref}' ({state}) is not translated",
                                   "events and maneuvers that translate to steps are")
                         return
-                    conj.append(_all(parts))
+                    conj.append(all_of(parts))
                 else:
                     formula = self.condition(cond, "ego")
                     if formula is None:
@@ -510,10 +510,10 @@ class Storyboard:
                     return
                 at_s = timed  # `end at T when C`
             if conj:
-                alternatives.append(_all(conj))
+                alternatives.append(all_of(conj))
         if not alternatives:
             return
-        fields = {"condition": _any(alternatives)}
+        fields = {"condition": any_of(alternatives)}
         if at_s is not None and at_s > 0:
             fields["at_s"] = E.Num(value=at_s)
         if any(e for e, _ in edges):

@@ -13,7 +13,7 @@ class Stop(Exception):
     """An error that ends the import (already reported)."""
 
 
-def _child(el, *path):
+def child_at(el, *path):
     for tag in path:
         if el is None:
             return None
@@ -21,11 +21,11 @@ def _child(el, *path):
     return el
 
 
-def _first(*elements):
+def first_of(*elements):
     """The first element that is not None (elements without children are false)."""
     return next((e for e in elements if e is not None), None)
 
 
-def _only_child(el):
+def only_child(el):
     kids = list(el) if el is not None else []
     return kids[0] if len(kids) == 1 else None
