@@ -1,5 +1,8 @@
 """Lateral actions: lane changes."""
 
+from addt_dsl.interop.openscenario.registry import ACTIONS
+
+
 
 
 
@@ -9,6 +12,12 @@ from addt_dsl.interop.openscenario.xml import only_child
 
 
 class Lateral:
+    @ACTIONS.register("LaneChangeAction", "approx", "`lane_change` over a time exactly; over a distance or at "
+                      "a rate, the time at the speed then (W0802); a target lane relative to another entity: its "
+                      "lane at the start (W0802)")
+    def act_lane_change(self, change, who: str, act) -> ClausePlan | None:
+        return self.lane_change(change, who, self.actors[who])
+
     def lane_change(self, change, who, info) -> ClausePlan | None:
         dyn, target = change.find("LaneChangeActionDynamics"), change.find("LaneChangeTarget")
         tgt = only_child(target)

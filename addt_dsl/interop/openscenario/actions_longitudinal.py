@@ -1,5 +1,9 @@
 """Longitudinal actions: speed (absolute, relative, profiles) and longitudinal distance."""
 
+from addt_dsl.interop.openscenario.registry import ACTIONS
+from addt_dsl.interop.openscenario.xml import child_at
+
+
 
 
 
@@ -11,6 +15,28 @@ from addt_dsl.runtime.behaviors import PEAK_SLOPE
 
 
 class Longitudinal:
+    @ACTIONS.register("SpeedAction", "approx", "absolute and relative targets, step, linear, cubic and sinusoidal "
+                      "shapes over a time or at a rate exactly; over a distance, `cruise` at the mean rate (W0802)")
+    def act_speed(self, speed, who: str, act) -> ClausePlan | None:
+        info = self.actors[who]
+        relative = child_at(speed, "SpeedActionTarget", "RelativeTargetSpeed")
+        if relative is not None:
+            return self.relative_speed(speed.find("SpeedActionDynamics"), relative, info)
+        target = child_at(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
+        if target is None:
+            return self.refuse_inner(act, "absolute and relative speed targets are translated")
+        return self.speed_action(speed.find("SpeedActionDynamics"), target, info)
+
+    @ACTIONS.register("SpeedProfileAction", "approx", "`speed_profile` through entries with times; "
+                      "followingMode follow meets every point (W0802); entries without times are refused")
+    def act_speed_profile(self, el, who: str, act) -> ClausePlan | None:
+        return self.speed_profile(el, self.actors[who])
+
+    @ACTIONS.register("LongitudinalDistanceAction", "approx", "`keep_gap`; a time gap between reference points "
+                      "is kept bumper to bumper (W0802)")
+    def act_keep_gap(self, el, who: str, act) -> ClausePlan | None:
+        return self.keep_gap(el, who)
+
     def speed_action(self, dyn, target, info) -> ClausePlan | None:
         v = self.number(target, "value", units.SPEED)
         v_now = float(eval_param_expr(v, self.param_values()))

@@ -1,5 +1,12 @@
 """Teleport, synchronize and controller actions."""
 
+import json
+
+from addt_dsl.interop.openscenario.registry import ACTIONS
+from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX
+from addt_dsl.registry import BEHAVIORS
+
+
 import math
 
 
@@ -24,6 +31,44 @@ def setting_of(value):
 
 
 class Misc:
+    @ACTIONS.register("TeleportAction", "approx", "in Init: the start position; in an event: to a lane or road "
+                      "position on the road the actor drives (others refused)")
+    def act_teleport(self, act, who: str, wrapper) -> ClausePlan | None:
+        return self.teleport(act, who)
+
+    @ACTIONS.register("SynchronizeAction", "approx", "`synchronize`; a final speed relative to the master keeps "
+                      "the speed reached (W0802)")
+    def act_synchronize(self, act, who: str, wrapper) -> ClausePlan | None:
+        return self.synchronize(act, who)
+
+    @ACTIONS.register("ActivateControllerAction", "approx", "the entity follows its actions, as under "
+                      "OpenSCENARIO's default controller (esmini's driver models are not emulated; W0802)")
+    def act_activate_controller(self, act, who: str, wrapper) -> None:
+        self.approx(act, "a controller: the entity follows its actions, as under the default controller "
+                         "of OpenSCENARIO (the driver models of esmini are not emulated)")
+        return None
+
+    @ACTIONS.register("ControllerAction", "approx", "a controller named addt_<behaviour> (addtc export): that "
+                      "behaviour exactly; others: the entity follows its actions (W0802)")
+    def act_controller(self, act, who: str, wrapper) -> ClausePlan | None:
+        ctrl = act.find(".//Controller")
+        if ctrl is not None and (ctrl.get("name") or "").startswith(CONTROLLER_PREFIX):
+            keyword = ctrl.get("name")[len(CONTROLLER_PREFIX):]
+            if keyword in BEHAVIORS:
+                settings = {}
+                for prop in ctrl.iterfind("Properties/Property"):
+                    raw = prop.get("value", "")
+                    if raw == "":
+                        continue  # an empty setting is the default
+                    try:
+                        settings[prop.get("name")] = setting_of(json.loads(raw))
+                    except ValueError:
+                        settings[prop.get("name")] = raw
+                return ClausePlan(keyword="behavior", name=keyword, settings=settings)
+        self.approx(act, "a controller: the entity follows its actions, as under the default controller "
+                         "of OpenSCENARIO (the driver models of esmini are not emulated)")
+        return None
+
     def teleport(self, act, who: str) -> ClausePlan | None:
         """A TeleportAction during the run: to a lane or road position of the road the actor
         is on (`teleport s S t T`, road coordinates); to its own position moved only in

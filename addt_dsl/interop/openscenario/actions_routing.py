@@ -1,5 +1,8 @@
 """Routing actions: trajectories to follow."""
 
+from addt_dsl.interop.openscenario.registry import ACTIONS
+
+
 
 
 
@@ -10,6 +13,11 @@ from addt_dsl.interop.openscenario.xml import only_child
 
 
 class Routing:
+    @ACTIONS.register("FollowTrajectoryAction", "approx", "polylines exactly; clothoids and NURBS sampled as "
+                      "polylines (W0802); trajectories from catalogs refused")
+    def act_trajectory(self, follow, who: str, act) -> ClausePlan | None:
+        return self.trajectory(follow, who)
+
     def trajectory(self, follow, who: str) -> ClausePlan | None:
         traj = first_of(follow.find("TrajectoryRef/Trajectory"), follow.find("Trajectory"))
         if traj is None:
