@@ -1,5 +1,8 @@
 """Conditions: by value and by entity, as formulas over the language's signals."""
 
+from addt_dsl.interop.openscenario.registry import ENTITY_CONDITIONS, VALUE_CONDITIONS
+
+
 
 
 
@@ -23,6 +26,11 @@ RULE_OPS = {"lessThan": "<", "lessOrEqual": "<=", "greaterThan": ">", "greaterOr
             "notEqualTo": "!="}
 
 
+def sig(fn: str, *args: str):
+    """A signal by its canonical name: `fn(A,B)`."""
+    return E.Signal(name=f"{fn}({','.join(args)})")
+
+
 def is_ahead(placed, a, b, params) -> bool:
     """Whether b starts ahead of a (so `gap(a, b)` is the positive one)."""
     return eval_param_expr(placed[b][2], params) >= eval_param_expr(placed[a][2], params)
@@ -33,13 +41,9 @@ class Conditions:
         """One <Condition> as a formula over signals, or None after a diagnostic."""
         value_cond = only_child(cond.find("ByValueCondition")) if cond.find("ByValueCondition") is not None else None
         if value_cond is not None:
-            if value_cond.tag == "ParameterCondition":
-                ref = self.raw(value_cond, "parameterRef")
-                exact = (self.sidecar or {}).get("conditions", {}).get(ref)
-                if exact:
-                    return EXPR.validate_python(exact["formula"])
-            if value_cond.tag in ("TrafficSignalCondition", "TrafficSignalControllerCondition"):
-                return self.light_condition(value_cond)
+            translate = VALUE_CONDITIONS.translator(value_cond.tag)
+            if translate is not None:
+                return translate(self, value_cond, who)
             self.skip(value_cond, f"<{value_cond.tag}> is not translated")
             return None
         by_entity = cond.find("ByEntityCondition")
@@ -56,6 +60,22 @@ class Conditions:
         if any(p is None for p in parts):
             return None
         return all_of(parts) if rule == "all" else any_of(parts)
+
+    @VALUE_CONDITIONS.register("ParameterCondition", "approx", "exact when the side file of an export carries "
+                               "the formula; other parameter conditions are refused (parameters are constant)")
+    def cond_parameter(self, value_cond, who: str):
+        ref = self.raw(value_cond, "parameterRef")
+        exact = (self.sidecar or {}).get("conditions", {}).get(ref)
+        if exact:
+            return EXPR.validate_python(exact["formula"])
+        self.skip(value_cond, f"<{value_cond.tag}> is not translated")
+        return None
+
+    @VALUE_CONDITIONS.register("TrafficSignalCondition", "exact", "`light(C) == S`: the state of the signal's "
+                               "controller")
+    @VALUE_CONDITIONS.register("TrafficSignalControllerCondition", "exact", "`light(C) == S`: the controller's phase")
+    def cond_light(self, c, who: str):
+        return self.light_condition(c)
 
     def light_condition(self, c):
         """`light(C) == S`: a signal's state (its controller's) or a controller's phase."""
@@ -78,120 +98,151 @@ class Conditions:
         return E.Binary(op="==", left=E.Signal(name=f"light({ctl})"), right=E.Num(value=LIGHT_STATES[state]))
 
     def entity_condition(self, c, a: str):
-        op = RULE_OPS.get(c.get("rule", ""), ">")
-        sig = lambda fn, *args: E.Signal(name=f"{fn}({','.join(args)})")  # noqa: E731 - canonical names
-        if c.tag == "TraveledDistanceCondition":
-            # `s(A)` grows in A's driving direction, from its station in its own frame
-            # (the road's station along +s; on a path, from the path's entry end).
-            travelled = self.number(c, "value", units.LENGTH)
-            return E.Binary(op=">=", left=sig("s", a), right=plus_expr(self.start_station(a), travelled))
-        if c.tag == "SpeedCondition":
-            return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
-        if c.tag == "CollisionCondition":
-            # The twin ends a run at its first collision; as a condition, an overlap of the
-            # actor's box with any other (exact with one other actor or a type that is every one).
-            others = [n for n in self.actors if n != a]
-            target = c.find("EntityRef")
-            if target is not None and len(others) > 1:
-                self.approx(c, "a collision with one entity: a collision of the actor with any other")
-            elif c.find("ByType") is not None and len(others) > 1:
-                self.approx(c, "a collision with a type of object: a collision of the actor with any other")
-            return E.Binary(op="<=", left=sig("clearance", a), right=E.Num(value=0.0))
-        if c.tag == "RelativeSpeedCondition":
-            b = self.actor_name(c)
-            if b is None:
-                return None
-            if c.get("direction") not in (None, "longitudinal"):
-                self.skip(c, f"a {c.get('direction')} relative speed is not translated (longitudinal is)")
-                return None
-            if c.get("direction") == "longitudinal":
-                self.approx(c, "a longitudinal relative speed: the difference of the speeds (the same when they "
-                               "drive the same way)")
-            return E.Binary(op=op, left=sig("rel_speed", a, b), right=self.number(c, "value", units.SPEED))
-        if c.tag == "AccelerationCondition":
-            return E.Binary(op=op, left=sig("accel", a), right=self.number(c, "value", units.ACCELERATION))
-        if c.tag in ("RelativeDistanceCondition", "TimeToCollisionCondition", "TimeHeadwayCondition"):
-            target = c.find("TimeToCollisionConditionTarget/EntityRef") if c.tag == "TimeToCollisionCondition" else c
-            if target is None:
-                self.skip(c, "time to collision with a position is not translated (with an entity it is)")
-                return None
-            b = self.actor_name(target)
-            if b is None:
-                return None
-            # freespace="false": distances between the entities' reference points (the
-            # importer places an actor's centre there), i.e. the bumper gap plus half of
-            # both lengths along the road.
-            free = (c.get("freespace") or "false").lower() == "true"
-            half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
-            if c.tag == "TimeToCollisionCondition":
-                # As esmini evaluates it: the longitudinal distance along the road over the
-                # speed difference; undefined (the condition false, whatever its rule) when
-                # they do not close in.
-                value = self.number(c, "value", units.TIME)
-                closing = E.Binary(op="-", left=sig("speed", a), right=sig("speed", b))
-                lhs = plus_expr(sig("gap", a, b), E.Num(value=half)) if half else sig("gap", a, b)
-                return all_of([E.Binary(op=">", left=closing, right=E.Num(value=0.0)),
-                             E.Binary(op=op, left=lhs, right=E.Binary(op="*", left=value, right=closing))])
-            if c.tag == "TimeHeadwayCondition":
-                headway = E.Binary(op="*", left=self.number(c, "value", units.TIME), right=sig("speed", a))
-                return E.Binary(op=op, left=sig("gap", a, b),
-                                right=plus_expr(headway, E.Num(value=-half)) if half else headway)
-            kind = c.get("relativeDistanceType", "cartesianDistance")
-            free = (c.get("freespace") or "false").lower() == "true"
-            value = self.number(c, "value", units.LENGTH)
-            if kind == "longitudinal":
-                half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
-                ahead = is_ahead(self.placed, a, b, self.param_values())
-                left = sig("gap", a, b) if ahead else sig("gap", b, a)
-                return E.Binary(op=op, left=left, right=plus_expr(value, E.Num(value=-half)) if half else value)
-            if kind in ("cartesianDistance", "euclidianDistance"):
-                if free:
-                    self.approx(c, "a free-space distance: the centre distance less half of both lengths")
-                    half = 0.5 * (self.size(a)[0] + self.size(b)[0])
-                    return E.Binary(op=op, left=sig("distance", a, b), right=plus_expr(value, E.Num(value=half)))
-                return E.Binary(op=op, left=sig("distance", a, b), right=value)
-            self.skip(c, f"a {kind} relative distance is not translated (longitudinal and cartesian are)")
-            return None
-        if c.tag == "ReachPositionCondition" or c.tag == "DistanceCondition":
-            # The Euclidean distance of the entity's reference point to the position's point
-            # (esmini: `dist < tolerance`; DistanceCondition: its rule against `value`).
-            pos = c.find("Position")
-            if pos is None:
-                self.error(c, f"<{c.tag}> needs a <Position>")
-                return None
-            point = self.world_point(pos, a)
-            if point is None:
-                return None
-            x, y, _ = point
-            if c.tag == "ReachPositionCondition":
-                radius, op = self.number(c, "tolerance", units.LENGTH), "<"
-            else:
-                radius = self.number(c, "value", units.LENGTH)
-                if (c.get("freespace") or "false").lower() == "true":
-                    self.skip(c, "a free-space distance to a position is not translated (between reference points "
-                                 "it is)")
-                    return None
-                kind = c.get("relativeDistanceType", "cartesianDistance")
-                lane_pos = only_child(pos)
-                if kind == "longitudinal" and lane_pos is not None and \
-                        lane_pos.tag in ("LanePosition", "RoadPosition") and self.along_s(a) and \
-                        self.placed[a][0] == self.road(self.raw(lane_pos, "roadId"), lane_pos):
-                    # along the road both are on: the stations' difference
-                    gap = E.Call(fn="abs", args=[E.Binary(op="-", left=sig("s", a),
-                                                          right=self.number(lane_pos, "s", units.LENGTH))])
-                    return E.Binary(op=op, left=gap, right=radius)
-                if kind not in ("cartesianDistance", "euclidianDistance"):
-                    self.skip(c, f"a {kind} distance to a position is not translated (cartesian is, and "
-                                 "longitudinal along the actor's own road)")
-                    return None
-            dx = E.Binary(op="-", left=sig("x", a), right=E.Num(value=round(x, 9)))
-            dy = E.Binary(op="-", left=sig("y", a), right=E.Num(value=round(y, 9)))
-            square = E.Binary(op="+", left=E.Binary(op="*", left=dx, right=dx), right=E.Binary(op="*", left=dy, right=dy))
-            return E.Binary(op=op, left=square, right=E.Binary(op="*", left=radius, right=radius))
+        translate = ENTITY_CONDITIONS.translator(c.tag)
+        if translate is not None:
+            return translate(self, c, a)
         self.skip(c, f"<{c.tag}> is not translated",
                   "translated: traveled distance, speed, acceleration, relative distance, time headway, TTC, "
                   "reach position")
         return None
+
+
+    @ENTITY_CONDITIONS.register("TraveledDistanceCondition", "exact",
+                                "`s(A)` from the actor's start station, in its own frame")
+    def cond_traveled(self, c, a: str):
+        # `s(A)` grows in A's driving direction, from its station in its own frame
+        # (the road's station along +s; on a path, from the path's entry end).
+        travelled = self.number(c, "value", units.LENGTH)
+        return E.Binary(op=">=", left=sig("s", a), right=plus_expr(self.start_station(a), travelled))
+
+    @ENTITY_CONDITIONS.register("SpeedCondition", "exact",
+                                "`speed(A)` against the value")
+    def cond_speed(self, c, a: str):
+        op = RULE_OPS.get(c.get("rule", ""), ">")
+        return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
+
+    @ENTITY_CONDITIONS.register("CollisionCondition", "approx",
+                                "a collision of the actor with any other; with one entity or a type among several others W0802")
+    def cond_collision(self, c, a: str):
+        # The twin ends a run at its first collision; as a condition, an overlap of the
+        # actor's box with any other (exact with one other actor or a type that is every one).
+        others = [n for n in self.actors if n != a]
+        target = c.find("EntityRef")
+        if target is not None and len(others) > 1:
+            self.approx(c, "a collision with one entity: a collision of the actor with any other")
+        elif c.find("ByType") is not None and len(others) > 1:
+            self.approx(c, "a collision with a type of object: a collision of the actor with any other")
+        return E.Binary(op="<=", left=sig("clearance", a), right=E.Num(value=0.0))
+
+    @ENTITY_CONDITIONS.register("RelativeSpeedCondition", "approx",
+                                "`rel_speed(A, B)`; longitudinal: the difference of the speeds (W0802); lateral refused")
+    def cond_relative_speed(self, c, a: str):
+        op = RULE_OPS.get(c.get("rule", ""), ">")
+        b = self.actor_name(c)
+        if b is None:
+            return None
+        if c.get("direction") not in (None, "longitudinal"):
+            self.skip(c, f"a {c.get('direction')} relative speed is not translated (longitudinal is)")
+            return None
+        if c.get("direction") == "longitudinal":
+            self.approx(c, "a longitudinal relative speed: the difference of the speeds (the same when they "
+                           "drive the same way)")
+        return E.Binary(op=op, left=sig("rel_speed", a, b), right=self.number(c, "value", units.SPEED))
+
+    @ENTITY_CONDITIONS.register("AccelerationCondition", "exact",
+                                "`accel(A)` against the value")
+    def cond_acceleration(self, c, a: str):
+        op = RULE_OPS.get(c.get("rule", ""), ">")
+        return E.Binary(op=op, left=sig("accel", a), right=self.number(c, "value", units.ACCELERATION))
+
+    @ENTITY_CONDITIONS.register("RelativeDistanceCondition", "approx",
+                                "longitudinal and cartesian between entities (free space: W0802); TTC with a position and lateral distances refused")
+    @ENTITY_CONDITIONS.register("TimeToCollisionCondition", "approx", "see RelativeDistanceCondition")
+    @ENTITY_CONDITIONS.register("TimeHeadwayCondition", "approx", "see RelativeDistanceCondition")
+    def cond_relative_distance(self, c, a: str):
+        op = RULE_OPS.get(c.get("rule", ""), ">")
+        target = c.find("TimeToCollisionConditionTarget/EntityRef") if c.tag == "TimeToCollisionCondition" else c
+        if target is None:
+            self.skip(c, "time to collision with a position is not translated (with an entity it is)")
+            return None
+        b = self.actor_name(target)
+        if b is None:
+            return None
+        # freespace="false": distances between the entities' reference points (the
+        # importer places an actor's centre there), i.e. the bumper gap plus half of
+        # both lengths along the road.
+        free = (c.get("freespace") or "false").lower() == "true"
+        half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
+        if c.tag == "TimeToCollisionCondition":
+            # As esmini evaluates it: the longitudinal distance along the road over the
+            # speed difference; undefined (the condition false, whatever its rule) when
+            # they do not close in.
+            value = self.number(c, "value", units.TIME)
+            closing = E.Binary(op="-", left=sig("speed", a), right=sig("speed", b))
+            lhs = plus_expr(sig("gap", a, b), E.Num(value=half)) if half else sig("gap", a, b)
+            return all_of([E.Binary(op=">", left=closing, right=E.Num(value=0.0)),
+                         E.Binary(op=op, left=lhs, right=E.Binary(op="*", left=value, right=closing))])
+        if c.tag == "TimeHeadwayCondition":
+            headway = E.Binary(op="*", left=self.number(c, "value", units.TIME), right=sig("speed", a))
+            return E.Binary(op=op, left=sig("gap", a, b),
+                            right=plus_expr(headway, E.Num(value=-half)) if half else headway)
+        kind = c.get("relativeDistanceType", "cartesianDistance")
+        free = (c.get("freespace") or "false").lower() == "true"
+        value = self.number(c, "value", units.LENGTH)
+        if kind == "longitudinal":
+            half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
+            ahead = is_ahead(self.placed, a, b, self.param_values())
+            left = sig("gap", a, b) if ahead else sig("gap", b, a)
+            return E.Binary(op=op, left=left, right=plus_expr(value, E.Num(value=-half)) if half else value)
+        if kind in ("cartesianDistance", "euclidianDistance"):
+            if free:
+                self.approx(c, "a free-space distance: the centre distance less half of both lengths")
+                half = 0.5 * (self.size(a)[0] + self.size(b)[0])
+                return E.Binary(op=op, left=sig("distance", a, b), right=plus_expr(value, E.Num(value=half)))
+            return E.Binary(op=op, left=sig("distance", a, b), right=value)
+        self.skip(c, f"a {kind} relative distance is not translated (longitudinal and cartesian are)")
+        return None
+
+    @ENTITY_CONDITIONS.register("ReachPositionCondition", "approx",
+                                "the Euclidean distance to the position's point; longitudinal along the actor's own road; free space and other kinds refused")
+    @ENTITY_CONDITIONS.register("DistanceCondition", "approx", "see ReachPositionCondition")
+    def cond_distance_to_position(self, c, a: str):
+        op = RULE_OPS.get(c.get("rule", ""), ">")
+        # The Euclidean distance of the entity's reference point to the position's point
+        # (esmini: `dist < tolerance`; DistanceCondition: its rule against `value`).
+        pos = c.find("Position")
+        if pos is None:
+            self.error(c, f"<{c.tag}> needs a <Position>")
+            return None
+        point = self.world_point(pos, a)
+        if point is None:
+            return None
+        x, y, _ = point
+        if c.tag == "ReachPositionCondition":
+            radius, op = self.number(c, "tolerance", units.LENGTH), "<"
+        else:
+            radius = self.number(c, "value", units.LENGTH)
+            if (c.get("freespace") or "false").lower() == "true":
+                self.skip(c, "a free-space distance to a position is not translated (between reference points "
+                             "it is)")
+                return None
+            kind = c.get("relativeDistanceType", "cartesianDistance")
+            lane_pos = only_child(pos)
+            if kind == "longitudinal" and lane_pos is not None and \
+                    lane_pos.tag in ("LanePosition", "RoadPosition") and self.along_s(a) and \
+                    self.placed[a][0] == self.road(self.raw(lane_pos, "roadId"), lane_pos):
+                # along the road both are on: the stations' difference
+                gap = E.Call(fn="abs", args=[E.Binary(op="-", left=sig("s", a),
+                                                      right=self.number(lane_pos, "s", units.LENGTH))])
+                return E.Binary(op=op, left=gap, right=radius)
+            if kind not in ("cartesianDistance", "euclidianDistance"):
+                self.skip(c, f"a {kind} distance to a position is not translated (cartesian is, and "
+                             "longitudinal along the actor's own road)")
+                return None
+        dx = E.Binary(op="-", left=sig("x", a), right=E.Num(value=round(x, 9)))
+        dy = E.Binary(op="-", left=sig("y", a), right=E.Num(value=round(y, 9)))
+        square = E.Binary(op="+", left=E.Binary(op="*", left=dx, right=dx), right=E.Binary(op="*", left=dy, right=dy))
+        return E.Binary(op=op, left=square, right=E.Binary(op="*", left=radius, right=radius))
 
     def start_station(self, who: str):
         """The actor's first `s(A)` as an expression: its road station where it drives a road

@@ -1,5 +1,8 @@
 """Positions (lane, road, world, relative, route), routes and trajectory shapes (clothoids, NURBS)."""
 
+from addt_dsl.interop.openscenario.registry import POSITIONS
+
+
 import math
 
 
@@ -45,6 +48,14 @@ def bspline_basis(knots: list[float], order: int, n: int, u: float) -> list[floa
         basis = nxt
     return basis[:n]
 
+for _name, _note in (
+        ("RelativeWorldPosition", "the language places actors on lanes; a world offset from another entity is not read"),
+        ("RelativeObjectPosition", "the language places actors on lanes; an offset in another entity's frame is not read"),
+        ("GeoPosition", "the twin has no geodetic reference"),
+        ("TrajectoryPosition", "a position along a trajectory is not read"),
+):
+    POSITIONS.declare(_name, "refused", _note)
+
 
 class Positions:
     # -- positions
@@ -55,29 +66,35 @@ class Positions:
         if pos is None:
             self.error(pos_el, "a <Position> holds one position")
             return None
-        if pos.tag == "LanePosition":
-            road = self.road(self.raw(pos, "roadId"), pos)
-            lane = int(self.value(pos, "laneId"))
-            s = self.number(pos, "s", units.LENGTH)
-            odr = self.network.road(next(i for i, r in self.roads.items() if r.name == road))
-            s_val = float(eval_param_expr(s, self.param_values()))
-            if not math.isfinite(s_val) or abs(s_val) > MAX_STATION_M or abs(lane) > MAX_LANE_ID:
-                self.error(pos, f"s = {s_val:g} m, lane {lane}: not a place on any road "
-                                f"(|s| at most {MAX_STATION_M:g} m, |laneId| at most {MAX_LANE_ID})")
-                raise Stop
-            if 0.0 <= s_val <= odr.length + 1e-6 and lane not in lane_ids_at(odr, s_val):
-                self.error(pos, f"road {odr.id} has no lane {lane} at s = {s_val:g} m",
-                           f"lanes there: {', '.join(str(i) for i in lane_ids_at(odr, s_val))}")
-                raise Stop
-            return road, lane, s, self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
-        if pos.tag in ("RoadPosition", "WorldPosition", "RelativeRoadPosition", "RelativeLanePosition"):
-            return self.position_from_road(pos, who)
-        if pos.tag == "RoutePosition":
-            return self.route_position(pos, who)
+        translate = POSITIONS.translator(pos.tag)
+        if translate is not None:
+            return translate(self, pos, who)
         self.skip(pos, f"<{pos.tag}> is not translated: {who} starts at the start of the first road",
                   "lane, road, world and relative road/lane positions are translated")
         return None
 
+    @POSITIONS.register("LanePosition", "exact", "road, lane, s and offset (parameters stay parameters)")
+    def lane_position(self, pos, who: str):
+        road = self.road(self.raw(pos, "roadId"), pos)
+        lane = int(self.value(pos, "laneId"))
+        s = self.number(pos, "s", units.LENGTH)
+        odr = self.network.road(next(i for i, r in self.roads.items() if r.name == road))
+        s_val = float(eval_param_expr(s, self.param_values()))
+        if not math.isfinite(s_val) or abs(s_val) > MAX_STATION_M or abs(lane) > MAX_LANE_ID:
+            self.error(pos, f"s = {s_val:g} m, lane {lane}: not a place on any road "
+                            f"(|s| at most {MAX_STATION_M:g} m, |laneId| at most {MAX_LANE_ID})")
+            raise Stop
+        if 0.0 <= s_val <= odr.length + 1e-6 and lane not in lane_ids_at(odr, s_val):
+            self.error(pos, f"road {odr.id} has no lane {lane} at s = {s_val:g} m",
+                       f"lanes there: {', '.join(str(i) for i in lane_ids_at(odr, s_val))}")
+            raise Stop
+        return road, lane, s, self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
+
+    @POSITIONS.register("RoadPosition", "exact", "the lane at (s, t) and the offset from its centre")
+    @POSITIONS.register("WorldPosition", "approx", "the lane of the nearest road at (x, y) facing h (a point off "
+                        "every road: the nearest reference line)")
+    @POSITIONS.register("RelativeRoadPosition", "exact", "relative to an entity placed before it")
+    @POSITIONS.register("RelativeLanePosition", "exact", "relative to an entity placed before it (dLane, ds)")
     def position_from_road(self, pos, who):
         if pos.tag == "RoadPosition":
             road_id, s, t = self.raw(pos, "roadId"), self.value(pos, "s"), self.mirror(self.value(pos, "t"))
@@ -151,6 +168,8 @@ class Positions:
             return None
         return self.catalog_entry(ref, kinds=("Route",))
 
+    @POSITIONS.register("RoutePosition", "approx", "from lane coordinates on a route of lane or road "
+                        "positions; other in-route positions refused")
     def route_position(self, pos, who: str):
         """A RoutePosition `FromLaneCoordinates`: `pathS` along the route from its first
         waypoint, in `laneId` there. Placed on the route's first road (the language counts

@@ -59,7 +59,8 @@ class ElementRegistry:
 
 
 ACTIONS = ElementRegistry("action")
-CONDITIONS = ElementRegistry("condition")
+VALUE_CONDITIONS = ElementRegistry("condition")  # in a ByValueCondition
+ENTITY_CONDITIONS = ElementRegistry("condition")  # in a ByEntityCondition
 POSITIONS = ElementRegistry("position")
 STORYBOARD = ElementRegistry("storyboard")
-REGISTRIES = (ACTIONS, CONDITIONS, POSITIONS, STORYBOARD)
+REGISTRIES = (ACTIONS, VALUE_CONDITIONS, ENTITY_CONDITIONS, POSITIONS, STORYBOARD)
