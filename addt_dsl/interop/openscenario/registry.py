@@ -58,9 +58,10 @@ class ElementRegistry:
         return [self._entries[n] for n in sorted(self._entries)]
 
 
-ACTIONS = ElementRegistry("action")
+ACTIONS = ElementRegistry("action")  # in an event
+INIT_ACTIONS = ElementRegistry("action in Init")  # private actions in the storyboard's Init
 VALUE_CONDITIONS = ElementRegistry("condition")  # in a ByValueCondition
 ENTITY_CONDITIONS = ElementRegistry("condition")  # in a ByEntityCondition
 POSITIONS = ElementRegistry("position")
 STORYBOARD = ElementRegistry("storyboard")
-REGISTRIES = (ACTIONS, VALUE_CONDITIONS, ENTITY_CONDITIONS, POSITIONS, STORYBOARD)
+REGISTRIES = (ACTIONS, INIT_ACTIONS, VALUE_CONDITIONS, ENTITY_CONDITIONS, POSITIONS, STORYBOARD)

@@ -1,6 +1,11 @@
 """The storyboard: Init, stories, acts, maneuver groups, maneuvers and events, their start
 triggers, sequences of events, and the stop trigger."""
 
+from dataclasses import dataclass
+
+from addt_dsl.interop.openscenario.registry import INIT_ACTIONS
+
+
 
 from xml.etree.ElementTree import Element  # an empty <Init> only: files are parsed with defusedxml
 
@@ -76,6 +81,18 @@ def duration_of(clause: ClausePlan) -> float:
     return float(d.value) if isinstance(d, E.Num) else 0.0
 
 
+@dataclass(frozen=True)
+class InitLater:
+    """Init actions translated once every actor is placed: (RoutingAction, actor) of a trajectory
+    from the start, (LongitudinalAction, actor) of a speed relative to another entity's."""
+    trajectories: list
+    relative: list
+
+
+# Init's wrappers: the inner actions tried, in this order.
+INIT_WRAPPERS = {"RoutingAction": ("AssignRouteAction", "FollowTrajectoryAction"), "LongitudinalAction": ("SpeedAction",)}
+
+
 class Storyboard:
     # -- init
 
@@ -94,51 +111,16 @@ class Storyboard:
                                   "signals) are not translated")
         # a light's state in Init: a step at time 0
         self.light_steps += [TriggerPlan(clause=c) for c in self.light_event(pairs)]
-        init_trajectories, init_relative = [], []
+        later = InitLater([], [])
         for private in init.iterfind("Actions/Private"):
             who = self.actor_name(private)
             if who is None or who not in self.actors:
                 continue
             for pa in private.iterfind("PrivateAction"):
                 act = only_child(pa)
-                if act is None:
-                    continue
-                if act.tag == "TeleportAction":
-                    got = self.position(act.find("Position"), who)
-                    if got is not None:
-                        self.placed[who] = got
-                        self.actors[who]["lane_now"] = got[1]
-                        self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
-                elif act.tag == "RoutingAction" and child_at(act, "AssignRouteAction") is not None:
-                    route_el = self.route_element(child_at(act, "AssignRouteAction"))
-                    if route_el is not None:
-                        self.actors[who]["route_el"] = route_el
-                elif act.tag == "RoutingAction" and child_at(act, "FollowTrajectoryAction") is not None \
-                        and (who != "ego" or self.scripted_ego):
-                    init_trajectories.append((act, who))
-                elif act.tag == "LongitudinalAction" and child_at(act, "SpeedAction", "SpeedActionTarget",
-                                                                "AbsoluteTargetSpeed") is not None:
-                    target = child_at(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
-                    dyn = child_at(act, "SpeedAction", "SpeedActionDynamics")
-                    if dyn is not None and dyn.get("dynamicsShape", "step") != "step" \
-                            and (who != "ego" or self.scripted_ego) \
-                            and self.value(dyn, "value", default=0.0) > 0:
-                        # A speed change with dynamics in Init starts from standstill (OpenSCENARIO:
-                        # Init actions run as the simulation starts) and takes its time.
-                        clause = self.speed_action(dyn, target, self.actors[who])
-                        if clause is not None:
-                            self.actors[who]["behaviors"].append(clause)
-                        continue
-                    self.actors[who]["speed"] = self.number(target, "value", units.SPEED)
-                    self.actors[who]["speed_now"] = self.value(target, "value")
-                elif act.tag == "LongitudinalAction" and child_at(act, "SpeedAction", "SpeedActionTarget",
-                                                                "RelativeTargetSpeed") is not None:
-                    init_relative.append((act, who))
-                elif act.tag in ("ControllerAction", "ActivateControllerAction"):
-                    self.approx(act, "a controller: the entity follows its actions, as under the default "
-                                     "controller of OpenSCENARIO (the driver models of esmini are not emulated)")
-                else:
-                    self.skip(act, f"<{act.tag}> in Init is not translated (positions and speeds are)")
+                if act is not None:
+                    self.init_action(act, who, later)
+        init_trajectories, init_relative = later.trajectories, later.relative
         for act, who in init_relative:  # relative to another entity's initial speed
             rel = child_at(act, "SpeedAction", "SpeedActionTarget", "RelativeTargetSpeed")
             ref = self.actor_name(rel)
@@ -173,6 +155,72 @@ class Storyboard:
                 self.actors[who]["behaviors"].append(clause)
 
     # -- stop trigger
+
+    def init_action(self, act, who: str, later: "InitLater") -> None:
+        """A private action of Init, dispatched through registry.INIT_ACTIONS (a wrapper's inner
+        actions in the order of INIT_WRAPPERS); what no translation takes is refused."""
+        for name in INIT_WRAPPERS.get(act.tag, (act.tag,)):
+            inner = act if name == act.tag else act.find(name)
+            translate = INIT_ACTIONS.translator(name)
+            if inner is not None and translate is not None and translate(self, inner, who, act, later):
+                return
+        self.skip(act, f"<{act.tag}> in Init is not translated (positions and speeds are)")
+
+    @INIT_ACTIONS.register("TeleportAction", "exact", "the actor's start position (see the position types)")
+    def init_teleport(self, act, who: str, wrapper, later) -> bool:
+        got = self.position(act.find("Position"), who)
+        if got is not None:
+            self.placed[who] = got
+            self.actors[who]["lane_now"] = got[1]
+            self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
+        return True
+
+    @INIT_ACTIONS.register("AssignRouteAction", "exact", "the actor's route (inline or from a route catalog)")
+    def init_route(self, el, who: str, wrapper, later) -> bool:
+        route_el = self.route_element(el)
+        if route_el is not None:
+            self.actors[who]["route_el"] = route_el
+        return True
+
+    @INIT_ACTIONS.register("FollowTrajectoryAction", "approx", "a trajectory from the start (as in an event); "
+                           "the ego's only when it is scripted")
+    def init_trajectory(self, el, who: str, wrapper, later) -> bool:
+        if who != "ego" or self.scripted_ego:
+            later.trajectories.append((wrapper, who))
+            return True
+        return False
+
+    @INIT_ACTIONS.register("SpeedAction", "exact", "the start speed (absolute, or relative to another entity's "
+                           "start speed); with dynamics, a speed change from standstill")
+    def init_speed(self, speed, who: str, wrapper, later) -> bool:
+        act = wrapper
+        if child_at(speed, "SpeedActionTarget", "AbsoluteTargetSpeed") is not None:
+            target = child_at(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
+            dyn = child_at(act, "SpeedAction", "SpeedActionDynamics")
+            if dyn is not None and dyn.get("dynamicsShape", "step") != "step" \
+                    and (who != "ego" or self.scripted_ego) \
+                    and self.value(dyn, "value", default=0.0) > 0:
+                # A speed change with dynamics in Init starts from standstill (OpenSCENARIO:
+                # Init actions run as the simulation starts) and takes its time.
+                clause = self.speed_action(dyn, target, self.actors[who])
+                if clause is not None:
+                    self.actors[who]["behaviors"].append(clause)
+                return True
+            self.actors[who]["speed"] = self.number(target, "value", units.SPEED)
+            self.actors[who]["speed_now"] = self.value(target, "value")
+            return True
+        if child_at(speed, "SpeedActionTarget", "RelativeTargetSpeed") is not None:
+            later.relative.append((act, who))
+            return True
+        return False
+
+    @INIT_ACTIONS.register("ControllerAction", "approx", "the entity follows its actions, as under OpenSCENARIO's "
+                           "default controller (W0802)")
+    @INIT_ACTIONS.register("ActivateControllerAction", "approx", "as ControllerAction")
+    def init_controller(self, act, who: str, wrapper, later) -> bool:
+        self.approx(act, "a controller: the entity follows its actions, as under the default "
+                         "controller of OpenSCENARIO (the driver models of esmini are not emulated)")
+        return True
 
     def stop_trigger(self, trigger) -> float:
         """The run's duration: a stop condition group that is a simulation time alone (the
