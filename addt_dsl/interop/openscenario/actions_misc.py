@@ -31,8 +31,8 @@ def setting_of(value):
 
 
 class Misc:
-    @ACTIONS.register("TeleportAction", "approx", "in Init: the start position; in an event: to a lane or road "
-                      "position on the road the actor drives (others refused)")
+    @ACTIONS.register("TeleportAction", "approx", "to a lane or road position on the road the actor drives "
+                      "(others refused)")
     def act_teleport(self, act, who: str, wrapper) -> ClausePlan | None:
         return self.teleport(act, who)
 

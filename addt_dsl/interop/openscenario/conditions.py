@@ -35,6 +35,26 @@ def is_ahead(placed, a, b, params) -> bool:
     """Whether b starts ahead of a (so `gap(a, b)` is the positive one)."""
     return eval_param_expr(placed[b][2], params) >= eval_param_expr(placed[a][2], params)
 
+VALUE_CONDITIONS.declare("SimulationTimeCondition", "exact", "a step's `at` time (one condition group, greater "
+                         "than); as a stop trigger the run's duration; other uses refused")
+VALUE_CONDITIONS.declare("StoryboardElementStateCondition", "approx", "another event's or action's start or end "
+                         "(`after`, `when started/ended(A.step)`); its own act or story running: always true")
+for _name, _note in (
+        ("TimeOfDayCondition", "the twin has no time of day"),
+        ("UserDefinedValueCondition", "a user-defined value means nothing to the twin"),
+        ("VariableCondition", "the language has no variables"),
+):
+    VALUE_CONDITIONS.declare(_name, "refused", _note)
+for _name, _note in (
+        ("EndOfRoadCondition", "the language has no end-of-road signal"),
+        ("OffroadCondition", "the language has no off-road signal"),
+        ("StandStillCondition", "the language has no standstill-duration signal"),
+        ("RelativeClearanceCondition", "the language has no free-lane signal"),
+        ("AngleCondition", "the language has no heading signal"),
+        ("RelativeAngleCondition", "the language has no relative heading signal"),
+):
+    ENTITY_CONDITIONS.declare(_name, "refused", _note)
+
 
 class Conditions:
     def condition(self, cond, who: str):

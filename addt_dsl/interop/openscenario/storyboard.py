@@ -3,7 +3,7 @@ triggers, sequences of events, and the stop trigger."""
 
 from dataclasses import dataclass
 
-from addt_dsl.interop.openscenario.registry import INIT_ACTIONS
+from addt_dsl.interop.openscenario.registry import ACTIONS, INIT_ACTIONS, STORYBOARD
 
 
 
@@ -79,6 +79,61 @@ def duration_of(clause: ClausePlan) -> float:
     if not isinstance(d, E.Num) and isinstance(times, list) and times and isinstance(times[-1], E.Num):
         d = times[-1]
     return float(d.value) if isinstance(d, E.Num) else 0.0
+
+# The storyboard's structure (walked by `Storyboard`, not dispatched): each element under its
+# parent, as the schema names it (docs/osc_schema.py).
+for _path, _status, _note in (
+        ("Storyboard/Init", "exact", "actions at the start: positions, speeds, routes, environment, lights"),
+        ("Storyboard/Story", "exact", "stories run from the start"),
+        ("Storyboard/StopTrigger", "approx", "a simulation time alone: the run's duration; other conditions "
+                                             "end the run when they hold (`end when`); without one, 60 s (W0802)"),
+        ("Story/Act", "exact", "acts start with their story"),
+        ("Story/ParameterDeclarations", "exact", "one scope with the global parameters (a global value wins)"),
+        ("Act/ManeuverGroup", "approx", "one actor per group (more: refused); maximumExecutionCount above 1 refused"),
+        ("Act/StartTrigger", "approx", "a simulation time or the story running; other conditions refused"),
+        ("Act/StopTrigger", "refused", "the language has no act that ends; CARLA's criteria_* groups are oracles"),
+        ("ManeuverGroup/Actors", "exact", "the actor the group's private actions drive"),
+        ("ManeuverGroup/CatalogReference", "refused", "maneuver catalogs are not read"),
+        ("ManeuverGroup/Maneuver", "exact", "maneuvers run with their group"),
+        ("Maneuver/Event", "approx", "each action a step; priority and maximumExecutionCount as `when C repeat N` "
+                                    "when a condition of its own starts it"),
+        ("Maneuver/ParameterDeclarations", "exact", "one scope with the global parameters (a global value wins)"),
+        ("Event/Action", "exact", "private actions and traffic signal actions (see the actions)"),
+        ("Event/StartTrigger", "approx", "condition groups as `any`/`all`, edges and delays; several edges or "
+                                         "delays act on the whole condition (W0802)"),
+        ("Init/Actions", "exact", "see the actions in Init"),
+        ("InitActions/GlobalAction", "approx", "environment and traffic signals; others refused"),
+        ("InitActions/Private", "exact", "see the actions in Init"),
+        ("InitActions/UserDefinedAction", "refused", "a user-defined action means nothing to the twin"),
+        ("Private/PrivateAction", "exact", "see the actions in Init"),
+        ("Trigger/ConditionGroup", "exact", "groups are alternatives (`or`), conditions in a group `and`"),
+        ("ConditionGroup/Condition", "exact", "see the conditions; delay and conditionEdge kept"),
+):
+    STORYBOARD.declare(_path, _status, _note)
+
+# Global actions (dispatched by `Storyboard.event` and `init` by where they stand).
+for _registry, _name, _status, _note in (
+        (INIT_ACTIONS, "EnvironmentAction", "approx", "fog, rain and the sun's elevation; other precipitation W0802"),
+        (ACTIONS, "EnvironmentAction", "refused", "the language has no environment steps: `environment { }` holds "
+                                                  "for the whole run"),
+        (INIT_ACTIONS, "TrafficSignalStateAction", "exact", "`light C state S` at time 0"),
+        (ACTIONS, "TrafficSignalStateAction", "exact", "a step `light C state S`"),
+        (INIT_ACTIONS, "TrafficSignalControllerAction", "approx", "the controller resumes its program in its own "
+                                                                  "cycle (W0802)"),
+        (ACTIONS, "TrafficSignalControllerAction", "approx", "the controller resumes its program in its own cycle "
+                                                             "(W0802)"),
+):
+    _registry.declare(_name, _status, _note)
+for _name, _note in (
+        ("EntityAction", "the language's actors exist for the whole run (no adding or deleting)"),
+        ("ParameterAction", "parameters are constant during a run"),
+        ("VariableAction", "the language has no variables"),
+        ("TrafficAction", "the twin has no traffic swarms, sources, sinks or areas"),
+        ("SetMonitorAction", "monitors are the language's oracles, not set by actions"),
+        ("UserDefinedAction", "a user-defined action means nothing to the twin"),
+):
+    ACTIONS.declare(_name, "refused", _note)
+    INIT_ACTIONS.declare(_name, "refused", _note)
 
 
 @dataclass(frozen=True)
