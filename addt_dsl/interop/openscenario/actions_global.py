@@ -3,14 +3,12 @@
 import math
 import re
 
-
-
 from addt_dsl import expr as E
 from addt_dsl import units
-from addt_dsl.interop.xosc_export import lamps_of, state_of_lamps
-from addt_dsl.plan import (LIGHT_PROGRAM, LIGHT_STATES, ClausePlan)
-from addt_dsl.interop.openscenario.xml import child_at
 from addt_dsl.interop.openscenario.entities import safe_name
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.interop.xosc_export import lamps_of, state_of_lamps
+from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ClausePlan
 
 
 class Global:

@@ -1,14 +1,9 @@
 """Lateral actions: lane changes."""
 
-from addt_dsl.interop.openscenario.registry import ACTIONS
-
-
-
-
-
 from addt_dsl import expr as E
-from addt_dsl.plan import (ClausePlan)
+from addt_dsl.interop.openscenario.registry import ACTIONS
 from addt_dsl.interop.openscenario.xml import only_child
+from addt_dsl.plan import ClausePlan
 
 
 class Lateral:

@@ -1,16 +1,11 @@
 """Longitudinal actions: speed (absolute, relative, profiles) and longitudinal distance."""
 
-from addt_dsl.interop.openscenario.registry import ACTIONS
-from addt_dsl.interop.openscenario.xml import child_at
-
-
-
-
-
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.plan import (ClausePlan)
+from addt_dsl.interop.openscenario.registry import ACTIONS
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.plan import ClausePlan
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
 
 

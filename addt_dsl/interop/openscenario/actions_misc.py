@@ -1,23 +1,16 @@
 """Teleport, synchronize and controller actions."""
 
 import json
-
-from addt_dsl.interop.openscenario.registry import ACTIONS
-from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX
-from addt_dsl.registry import BEHAVIORS
-
-
 import math
-
-
 
 from addt_dsl import expr as E
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.plan import (ClausePlan)
 from addt_dsl.interop.openscenario.params import EXPR
-from addt_dsl.interop.openscenario.xml import child_at
-from addt_dsl.interop.openscenario.xml import first_of
-from addt_dsl.interop.openscenario.xml import only_child
+from addt_dsl.interop.openscenario.registry import ACTIONS
+from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX
+from addt_dsl.interop.openscenario.xml import child_at, first_of, only_child
+from addt_dsl.plan import ClausePlan
+from addt_dsl.registry import BEHAVIORS
 
 
 def setting_of(value):

@@ -1,15 +1,9 @@
 """Routing actions: trajectories to follow."""
 
-from addt_dsl.interop.openscenario.registry import ACTIONS
-
-
-
-
-
 from addt_dsl import expr as E
-from addt_dsl.plan import (ClausePlan)
-from addt_dsl.interop.openscenario.xml import first_of
-from addt_dsl.interop.openscenario.xml import only_child
+from addt_dsl.interop.openscenario.registry import ACTIONS
+from addt_dsl.interop.openscenario.xml import first_of, only_child
+from addt_dsl.plan import ClausePlan
 
 
 class Routing:

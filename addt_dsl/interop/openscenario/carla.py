@@ -1,13 +1,10 @@
 """CARLA ScenarioRunner's conventions: its left-handed frame (a FileHeader description starting
 with 'CARLA:') and its `criteria_*` pass criteria, which become oracles."""
 
-
-
-
 from addt_dsl import expr as E
 from addt_dsl.compiler.rules.oracles import NO_CLAUSES, stay_in_lane_formula
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.plan import (ActorPlan, OraclePlan)
+from addt_dsl.plan import ActorPlan, OraclePlan
 
 
 class CarlaFrame:

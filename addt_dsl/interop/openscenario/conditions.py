@@ -1,27 +1,15 @@
 """Conditions: by value and by entity, as formulas over the language's signals."""
 
-from addt_dsl.interop.openscenario.registry import ENTITY_CONDITIONS, VALUE_CONDITIONS
-
-
-
-
-
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.plan import (LIGHT_STATES)
+from addt_dsl.interop.openscenario.params import EXPR, all_of, any_of, plus_expr
+from addt_dsl.interop.openscenario.registry import ENTITY_CONDITIONS, VALUE_CONDITIONS
+from addt_dsl.interop.openscenario.xml import child_at, only_child
+from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.runtime.road.route import RouteError, resolve_route
-from addt_dsl.interop.openscenario.params import EXPR
-from addt_dsl.interop.openscenario.params import all_of
-from addt_dsl.interop.openscenario.params import any_of
-from addt_dsl.interop.openscenario.xml import child_at
-from addt_dsl.interop.openscenario.xml import only_child
-from addt_dsl.interop.openscenario.params import plus_expr
-
 
 EDGES = {"none": None, "rising": "rising", "falling": "falling", "risingOrFalling": "changing"}
-
-
 RULE_OPS = {"lessThan": "<", "lessOrEqual": "<=", "greaterThan": ">", "greaterOrEqual": ">=", "equalTo": "==",
             "notEqualTo": "!="}
 

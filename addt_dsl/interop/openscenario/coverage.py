@@ -6,8 +6,17 @@ element path, e.g. ("action", "PrivateAction/LongitudinalAction/SpeedAction").""
 from __future__ import annotations
 
 from addt_dsl.interop.openscenario import importer  # noqa: F401 - its modules register their elements
-from addt_dsl.interop.openscenario.registry import (ACTIONS, ENTITY_CONDITIONS, INIT_ACTIONS, POSITIONS, REGISTRIES,
-                                                    STORYBOARD, VALUE_CONDITIONS, ElementEntry, ElementRegistry)
+from addt_dsl.interop.openscenario.registry import (
+    ACTIONS,
+    ENTITY_CONDITIONS,
+    INIT_ACTIONS,
+    POSITIONS,
+    REGISTRIES,
+    STORYBOARD,
+    VALUE_CONDITIONS,
+    ElementEntry,
+    ElementRegistry,
+)
 
 
 def coverage() -> list[ElementEntry]:

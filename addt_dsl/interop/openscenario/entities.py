@@ -5,15 +5,10 @@ import os
 import re
 from pathlib import Path
 
-
-
 from addt_dsl import units
-from addt_dsl.vehicles import VEHICLES
-from addt_dsl.interop.openscenario.xml import Stop
 from addt_dsl.interop.openscenario.params import NAME_RE
-from addt_dsl.interop.openscenario.xml import child_at
-from addt_dsl.interop.openscenario.xml import only_child
-
+from addt_dsl.interop.openscenario.xml import Stop, child_at, only_child
+from addt_dsl.vehicles import VEHICLES
 
 CATEGORY_KIND = {"car": "car", "van": "car", "motorbike": "cyclist", "bicycle": "cyclist", "bus": "truck",
                  "truck": "truck", "semitrailer": "truck", "trailer": "truck", "train": "truck", "tram": "truck"}

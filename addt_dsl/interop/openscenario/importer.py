@@ -22,38 +22,40 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-
-
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.compiler import compile_source
 from addt_dsl.compiler.rules.oracles import NO_CLAUSES
 from addt_dsl.diagnostics import Diagnostic, Span
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.interop.openscenario.sidefile import SIDECAR_PARAM
-from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, ControllerPlan, OraclePlan, ParamPlan, ScenarioPlan, TriggerPlan)
-from addt_dsl.printer import PrinterError, params_referenced, pinned_fault_plan, print_plan, side_files
-from addt_dsl.registry import STACKS
-from addt_dsl.vehicles import VEHICLES
 from addt_dsl.interop.openscenario.actions import Actions
-from addt_dsl.interop.openscenario.carla import CarlaCriteria
-from addt_dsl.interop.openscenario.conditions import Conditions
-from addt_dsl.interop.openscenario.entities import Entities
 from addt_dsl.interop.openscenario.actions_global import Global
-from addt_dsl.interop.openscenario.reader import Importer
 from addt_dsl.interop.openscenario.actions_lateral import Lateral
 from addt_dsl.interop.openscenario.actions_longitudinal import Longitudinal
 from addt_dsl.interop.openscenario.actions_misc import Misc
-from addt_dsl.interop.openscenario.positions import Positions
-from addt_dsl.interop.openscenario.roads import Roads
 from addt_dsl.interop.openscenario.actions_routing import Routing
-from addt_dsl.interop.openscenario.sidefile import SideFile
-from addt_dsl.interop.openscenario.xml import Stop
+from addt_dsl.interop.openscenario.carla import CarlaCriteria
+from addt_dsl.interop.openscenario.conditions import Conditions
+from addt_dsl.interop.openscenario.entities import Entities, safe_name
+from addt_dsl.interop.openscenario.positions import Positions
+from addt_dsl.interop.openscenario.reader import Importer
+from addt_dsl.interop.openscenario.roads import Roads
+from addt_dsl.interop.openscenario.sidefile import SIDECAR_PARAM, SideFile
 from addt_dsl.interop.openscenario.storyboard import Storyboard
-from addt_dsl.interop.openscenario.xml import child_at
-from addt_dsl.interop.openscenario.xml import first_of
-from addt_dsl.interop.openscenario.entities import safe_name
-
+from addt_dsl.interop.openscenario.xml import Stop, child_at, first_of
+from addt_dsl.plan import (
+    ActorPlan,
+    ClausePlan,
+    ConcreteFault,
+    ControllerPlan,
+    OraclePlan,
+    ParamPlan,
+    ScenarioPlan,
+    TriggerPlan,
+)
+from addt_dsl.printer import PrinterError, params_referenced, pinned_fault_plan, print_plan, side_files
+from addt_dsl.registry import STACKS
+from addt_dsl.vehicles import VEHICLES
 
 MAX_SCRIPTED_SPEED_MS = 70.0  # a scripted ego's default route is long enough at this speed [m/s]
 

@@ -6,7 +6,6 @@ import math
 import operator
 import re
 
-
 from pydantic import TypeAdapter
 
 from addt_dsl import expr as E
@@ -14,13 +13,8 @@ from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.openscenario.xml import Stop
 
-
 MAX_EXPRESSION_CHARS = 10_000  # a `${...}` expression's length (docs/limits.md)
-
-
 NAME_RE = re.compile(r"[A-Za-z_]\w*")
-
-
 EXPR = TypeAdapter(E.Expr)
 
 

@@ -1,25 +1,16 @@
 """Positions (lane, road, world, relative, route), routes and trajectory shapes (clothoids, NURBS)."""
 
-from addt_dsl.interop.openscenario.registry import POSITIONS
-
-
 import math
-
-
 
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.runtime.road.route import RouteError, exits, resolve_route, turn_of
-from addt_dsl.interop.openscenario.xml import Stop
-from addt_dsl.interop.openscenario.xml import first_of
-from addt_dsl.interop.openscenario.xml import only_child
 from addt_dsl.interop.openscenario.params import plus_expr
-
+from addt_dsl.interop.openscenario.registry import POSITIONS
+from addt_dsl.interop.openscenario.xml import Stop, first_of, only_child
+from addt_dsl.runtime.road.route import RouteError, exits, resolve_route, turn_of
 
 MAX_STATION_M = 1e6  # a road station beyond this is refused as content, not translated [m]
-
-
 MAX_LANE_ID = 100
 
 

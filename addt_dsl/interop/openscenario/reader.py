@@ -3,16 +3,14 @@ root directory, entity names. `distribution.py` reuses it for a distribution fil
 
 from pathlib import Path
 
-
-
 from addt_dsl import units
 from addt_dsl.confine import Refused, confine
 from addt_dsl.diagnostics import DiagnosticSink, Span
-from addt_dsl.plan import (ClausePlan, RoadPlan, TriggerPlan)
 from addt_dsl.interop.openscenario.carla import CarlaFrame
-from addt_dsl.interop.openscenario.xml import MAX_XML_BYTES
-from addt_dsl.xmlread import XmlReadError, read_xml
 from addt_dsl.interop.openscenario.params import Parameters
+from addt_dsl.interop.openscenario.xml import MAX_XML_BYTES
+from addt_dsl.plan import ClausePlan, RoadPlan, TriggerPlan
+from addt_dsl.xmlread import XmlReadError, read_xml
 
 
 class Importer(Parameters, CarlaFrame):
@@ -44,11 +42,11 @@ class Importer(Parameters, CarlaFrame):
         self.network = None
         self.xodr_name = ""
         self.xodr_text = ""
-        self.events: dict[str, tuple] = {}  # event name -> (actor, kind, fields, clause)
+        self.events: dict = {}  # event name -> storyboard.EventStep
         self.maneuvers: dict[str, list[str]] = {}  # maneuver name -> its events' names
         self.end: TriggerPlan | None = None  # the storyboard's stop trigger beyond its time
-        self.pending: list[tuple] = []  # events started by another event: linked at the end
-        self.anchors: dict[str, tuple] = {}  # no-op events that start a group: name -> (actor, start fields)
+        self.pending: list = []  # storyboard.PendingEvent: events started by another event, linked at the end
+        self.anchors: dict = {}  # no-op events that start a group: name -> storyboard.Anchor
         self.placed: dict[str, tuple] = {}  # actor -> (road name, lane, s, offset)
         self.environment: list[ClausePlan] = []  # weather and light from an EnvironmentAction
         # Traffic lights: controllers by name (signal ids, phase times, the element), the

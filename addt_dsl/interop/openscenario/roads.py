@@ -3,16 +3,13 @@
 import re
 from pathlib import Path
 
-
-
 from addt_dsl.confine import Refused, confine
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.plan import (RoadPlan)
-from addt_dsl.runtime.road import XodrError, parse_xodr
-from addt_dsl.interop.openscenario.xml import Stop
-from addt_dsl.interop.openscenario.params import NAME_RE
-from addt_dsl.interop.openscenario.xml import first_of
 from addt_dsl.interop.openscenario.entities import safe_name
+from addt_dsl.interop.openscenario.params import NAME_RE
+from addt_dsl.interop.openscenario.xml import Stop, first_of
+from addt_dsl.plan import RoadPlan
+from addt_dsl.runtime.road import XodrError, parse_xodr
 
 
 class Roads:

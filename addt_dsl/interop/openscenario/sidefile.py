@@ -3,14 +3,11 @@ name, the parameter that names it, the controller prefix of exact behaviours, an
 
 import json
 
-
-
 from addt_dsl import units
 from addt_dsl.confine import Refused, confine
-from addt_dsl.plan import (LIGHT_PROGRAM, LIGHT_STATES, ClausePlan, ConcreteFault, OraclePlan, TriggerPlan)
-from addt_dsl.vehicles import VEHICLES
 from addt_dsl.interop.openscenario.params import EXPR
-
+from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ClausePlan, ConcreteFault, OraclePlan, TriggerPlan
+from addt_dsl.vehicles import VEHICLES
 
 SIDECAR_FORMAT = "addt-xosc-sidecar/1"  # the side file's "format"
 SIDECAR_PARAM = "addt_sidecar"  # the OpenSCENARIO parameter that names the side file

@@ -2,33 +2,19 @@
 triggers, sequences of events, and the stop trigger."""
 
 from dataclasses import dataclass
-
-from addt_dsl.interop.openscenario.registry import ACTIONS, INIT_ACTIONS, STORYBOARD
-
-
-
 from xml.etree.ElementTree import Element  # an empty <Init> only: files are parsed with defusedxml
-
 
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.plan import (ClausePlan, GroupPlan,
-                           TriggerPlan)
 from addt_dsl.interop.openscenario.conditions import EDGES
-from addt_dsl.interop.openscenario.xml import Stop
-from addt_dsl.interop.openscenario.params import all_of
-from addt_dsl.interop.openscenario.params import any_of
-from addt_dsl.interop.openscenario.xml import child_at
-from addt_dsl.interop.openscenario.xml import first_of
-from addt_dsl.interop.openscenario.xml import only_child
-from addt_dsl.interop.openscenario.params import plus_expr
 from addt_dsl.interop.openscenario.entities import safe_name
-
+from addt_dsl.interop.openscenario.params import all_of, any_of, plus_expr
+from addt_dsl.interop.openscenario.registry import ACTIONS, INIT_ACTIONS, STORYBOARD
+from addt_dsl.interop.openscenario.xml import Stop, child_at, first_of, only_child
+from addt_dsl.plan import ClausePlan, GroupPlan, TriggerPlan
 
 DEFAULT_DURATION_S = 60.0
-
-
 MAX_DURATION_S = 3600.0
 
 
@@ -134,6 +120,49 @@ for _name, _note in (
 ):
     ACTIONS.declare(_name, "refused", _note)
     INIT_ACTIONS.declare(_name, "refused", _note)
+
+
+@dataclass(frozen=True)
+class AfterEvent:
+    """A start on another event's state: that event, the delay [s], the state, the condition element."""
+    ref: str
+    delay: float
+    state: str
+    cond: object
+
+    def fields(self) -> tuple:
+        return self.ref, self.delay, self.state, self.cond
+
+
+@dataclass(frozen=True)
+class Start:
+    """How a step starts: the fields of its TriggerPlan (at_s, condition, edge, delay_s, hold_s;
+    none: at once), or, `after` another event, linked once every event is read."""
+    fields: dict
+    after: AfterEvent | None = None
+
+
+@dataclass(frozen=True)
+class EventStep:
+    """A translated event: its actor and the clause of its (first) action."""
+    actor: str
+    clause: ClausePlan
+
+
+@dataclass(frozen=True)
+class PendingEvent:
+    """An event started by another event: linked at the end (`link_sequences`)."""
+    name: str
+    actor: str
+    after: AfterEvent
+    clause: ClausePlan
+
+
+@dataclass(frozen=True)
+class Anchor:
+    """An exported group's no-op event: the actor and the start of the group it starts."""
+    actor: str
+    fields: dict
 
 
 @dataclass(frozen=True)
@@ -378,8 +407,8 @@ class Storyboard:
             if inner.tag == "VisibilityAction" and len(actions) == 1:
                 # An exported group's anchor (a no-op): the events it starts form one group.
                 step = self.start(event.find("StartTrigger"), who, act_at)
-                if step is not None and step[0] == "now":
-                    self.anchors[name] = (who, step[1])
+                if step is not None and step.after is None:
+                    self.anchors[name] = Anchor(who, step.fields)
                 return
             exact = (self.sidecar or {}).get("behaviors", {}).get(name)
             clause = ClausePlan.model_validate(exact["clause"]) if exact else self.private_action(inner, who)
@@ -393,23 +422,23 @@ class Storyboard:
         step = self.start(trigger, who, act_at, name)
         if step is None:
             return
-        kind, fields = step
+        fields = step.fields
         clauses = speed_into_trajectory(clauses)
         if len(clauses) > 1:
             self.approx(event, f"event '{name}' starts {len(clauses)} actions: one step each, same start")
         runs = int(self.value(event, "maximumExecutionCount", default=1.0))
         if runs > 1:
             # It starts again when its actions have ended and its condition counts again.
-            if kind != "now" or fields.get("condition") is None or len(clauses) > 1:
+            if step.after is not None or fields.get("condition") is None or len(clauses) > 1:
                 self.skip(event, f"an event that runs up to {runs} times without a start condition of its own, or "
                                  "with several actions, is not translated",
                           "one action started by a condition translates (`when C repeat N`)")
                 return
             fields = {**fields, "repeat": min(runs, 1_000_000)}
         for clause in clauses:
-            self.events.setdefault(name, (who, kind, fields, clause))
-            if kind == "after_event":
-                self.pending.append((name, who, fields, clause))
+            self.events.setdefault(name, EventStep(who, clause))
+            if step.after is not None:
+                self.pending.append(PendingEvent(name, who, step.after, clause))
             elif not fields:
                 self.actors[who]["behaviors"].append(clause)
             else:
@@ -421,15 +450,15 @@ class Storyboard:
         step = self.start(event.find("StartTrigger"), who, act_at, event.get("name", ""))
         if step is None:
             return
-        kind, fields = step
-        if kind == "after_event":
-            self.skip(fields[3], f"light step '{event.get('name')}' starts on another event: not translated",
+        if step.after is not None:
+            self.skip(step.after.cond, f"light step '{event.get('name')}' starts on another event: not translated",
                       "a lights block's steps start at a time, after a delay or on a condition")
             return
-        self.light_steps += [TriggerPlan(clause=c, **fields) for c in clauses]
+        self.light_steps += [TriggerPlan(clause=c, **step.fields) for c in clauses]
 
     def start(self, trigger, who: str, act_at, event: str = ""):
-        """('now', fields of a TriggerPlan) or ('after_event', (event, delay, state)); None: dropped."""
+        """How the step starts (a Start: the fields of a TriggerPlan, or after another event); None:
+        dropped."""
         groups = list(trigger.iterfind("ConditionGroup")) if trigger is not None else []
         alternatives, at_s, holds, edges = [], act_at, [], []
         for group in groups:
@@ -444,9 +473,9 @@ class Storyboard:
                     continue  # the event's own act (story) has started: true whenever the event is armed
                 if sesc is not None and len(groups) == 1 and len(list(group)) == 1:
                     if self.raw(sesc, "storyboardElementType") in ("event", "action"):
-                        return "after_event", (self.raw(sesc, "storyboardElementRef"),
-                                               self.value(cond, "delay", units.TIME, 0.0),
-                                               self.raw(sesc, "state"), cond)
+                        return Start({}, AfterEvent(self.raw(sesc, "storyboardElementRef"),
+                                                    self.value(cond, "delay", units.TIME, 0.0),
+                                                    self.raw(sesc, "state"), cond))
                 time = cond.find("ByValueCondition/SimulationTimeCondition")
                 if time is not None and (time.get("rule") or "").startswith("greater") and len(groups) == 1:
                     value = self.value(time, "value")
@@ -483,38 +512,41 @@ class Storyboard:
                 fields.pop("edge", None)
             else:
                 fields["delay_s"] = E.Num(value=delay)
-        return "now", fields
+        return Start(fields)
 
     # -- sequences: an event started by another event of the same actor
 
     def link_sequences(self) -> None:
         grouped: dict[str, list] = {}
-        for name, who, (ref, delay, state, cond), clause in self.pending:
-            if ref in self.anchors and self.anchors[ref][0] == who:
+        for p in self.pending:
+            name, who, clause, (ref, delay, state, cond) = p.name, p.actor, p.clause, p.after.fields()
+            if ref in self.anchors and self.anchors[ref].actor == who:
                 grouped.setdefault(ref, []).append(TriggerPlan(clause=clause, after_s=E.Num(value=delay)
                                                                if delay else None))
-                self.events[name] = (who, "now", {}, clause)
+                self.events[name] = EventStep(who, clause)
         for ref, steps in grouped.items():
-            who, fields = self.anchors[ref]
-            self.actors[who]["triggers"].append(TriggerPlan(group=GroupPlan(mode="parallel", steps=steps), **fields))
+            anchor = self.anchors[ref]
+            self.actors[anchor.actor]["triggers"].append(TriggerPlan(group=GroupPlan(mode="parallel", steps=steps),
+                                                                     **anchor.fields))
         other_actor = []  # after the sequences are built: a named step never gets lifted
-        for name, who, (ref, delay, state, cond), clause in self.pending:
+        for p in self.pending:
+            name, who, clause, (ref, delay, state, cond) = p.name, p.actor, p.clause, p.after.fields()
             if ref in grouped:
                 continue
             first = self.events.get(ref)
-            if first is not None and first[0] != who and state in STATE_SIGNAL:
+            if first is not None and first.actor != who and state in STATE_SIGNAL:
                 other_actor.append((name, who, (ref, delay, state, cond), clause, first))
                 continue
-            if first is None or first[0] != who:
+            if first is None or first.actor != who:
                 self.skip(cond, f"event '{name}' starts on '{ref}', "
                                 + ("not an event of the same actor" if first else "which is not translated"),
                           "a step after another actor's event has no form in the language")
                 continue
             after = delay
             if state in ("endTransition", "completeState"):
-                after += duration_of(first[3])
+                after += duration_of(first.clause)
             info = self.actors[who]
-            prev_clause = first[3]
+            prev_clause = first.clause
             # Lift the first step into a sequence that also starts this one.
             for i, tr in enumerate(info["triggers"]):
                 if tr.clause == prev_clause or (tr.group and tr.group.steps and tr.group.steps[0].clause ==
@@ -532,13 +564,13 @@ class Storyboard:
                 else:
                     self.skip(cond, f"event '{name}' follows '{ref}' in a way the language cannot say")
                     continue
-            self.events[name] = (who, "now", {}, clause)
+            self.events[name] = EventStep(who, clause)
         for name, who, (ref, delay, state, cond), clause, first in other_actor:
             if not self.after_other_actor(who, ref, delay, state, cond, clause, first):
-                self.skip(cond, f"event '{name}' starts on '{ref}' of '{first[0]}', which is not a step",
+                self.skip(cond, f"event '{name}' starts on '{ref}' of '{first.actor}', which is not a step",
                           "only an event that starts a step can be named for `started`/`ended`")
                 continue
-            self.events[name] = (who, "now", {}, clause)
+            self.events[name] = EventStep(who, clause)
 
     def after_other_actor(self, who, ref, delay, state, cond, clause, first) -> bool:
         """An event on another actor's event: that event's step gets a name and this one
@@ -556,17 +588,17 @@ class Storyboard:
         first = self.events.get(ref)
         if first is None or state not in STATE_SIGNAL:
             return None
-        other = first[0]
+        other = first.actor
         info = self.actors[other]
         taken = {tr.label for a in self.actors.values() for t in a["triggers"] for tr in steps_of(t) if tr.label}
-        if not any(tr.clause == first[3] for t in info["triggers"] for tr in steps_of(t)):
-            j = next((j for j, c in enumerate(info["behaviors"]) if c == first[3]), None)
+        if not any(tr.clause == first.clause for t in info["triggers"] for tr in steps_of(t)):
+            j = next((j for j, c in enumerate(info["behaviors"]) if c == first.clause), None)
             if j is None:
                 return None
             clause = info["behaviors"].pop(j)
             info["triggers"].append(TriggerPlan(after_s=E.Num(value=0.0), clause=clause))
         found: list[str] = []
-        info["triggers"] = [labelled(t, first[3], safe_name(ref, taken), found) for t in info["triggers"]]
+        info["triggers"] = [labelled(t, first.clause, safe_name(ref, taken), found) for t in info["triggers"]]
         label = found[0]
         # A step state is a formula: the signal above 0, as the compiler lowers it.
         return E.Binary(op=">", left=E.Signal(name=f"{STATE_SIGNAL[state]}({other}.{label})"), right=E.Num(value=0.0))

@@ -1,11 +1,6 @@
 """Reading an OpenSCENARIO document: the size limit, the tree helpers and the error that ends an import
 (the line-numbered, defused XML reader itself is `addt_dsl/xmlread.py`, shared with the OpenDRIVE reader)."""
 
-
-
-
-
-
 MAX_XML_BYTES = 8 * 1024 * 1024
 
 
