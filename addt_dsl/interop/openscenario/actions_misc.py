@@ -77,7 +77,7 @@ class Misc:
             return None
         if pos.tag in ("LanePosition", "RoadPosition"):
             road = self.road(self.raw(pos, "roadId"), pos)
-            if road == self.placed[who][0] and not self.actors[who].get("route_el"):
+            if road == self.placed[who].road and not self.actors[who].get("route_el"):
                 got = self.road_point(pos_el, who)
                 if got is None:
                     return None
@@ -98,11 +98,12 @@ class Misc:
             return None
         # Stations as `s(A)` measures them: along each actor's own path (a lane driven
         # against s, a route: from the path's entry end).
-        settings = {"master": master, "master_at": self.frame_station(master, master_pos[2])
-                    if master_pos[0] == self.placed[master][0] else master_pos[2],
+        settings = {"master": master, "master_at": self.frame_station(master, master_pos.s)
+                    if master_pos.road == self.placed[master].road else master_pos.s,
                     "target_s": self.frame_station(who, E.Num(value=round(own[0], 9))),
                     "target_t": E.Num(value=round(own[1], 9))}
-        road, lane, s0, off0 = self.placed[who]
+        at = self.placed[who]
+        road, lane, s0, off0 = at.road, at.lane, at.s, at.offset
         params = self.param_values()
         road_id = next(i for i, r in self.roads.items() if r.name == road)
         s0_val = float(eval_param_expr(s0, params))

@@ -21,7 +21,7 @@ def sig(fn: str, *args: str):
 
 def is_ahead(placed, a, b, params) -> bool:
     """Whether b starts ahead of a (so `gap(a, b)` is the positive one)."""
-    return eval_param_expr(placed[b][2], params) >= eval_param_expr(placed[a][2], params)
+    return eval_param_expr(placed[b].s, params) >= eval_param_expr(placed[a].s, params)
 
 VALUE_CONDITIONS.declare("SimulationTimeCondition", "exact", "a step's `at` time (one condition group, greater "
                          "than); as a stop trigger the run's duration; other uses refused")
@@ -238,7 +238,7 @@ class Conditions:
             lane_pos = only_child(pos)
             if kind == "longitudinal" and lane_pos is not None and \
                     lane_pos.tag in ("LanePosition", "RoadPosition") and self.along_s(a) and \
-                    self.placed[a][0] == self.road(self.raw(lane_pos, "roadId"), lane_pos):
+                    self.placed[a].road == self.road(self.raw(lane_pos, "roadId"), lane_pos):
                 # along the road both are on: the stations' difference
                 gap = E.Call(fn="abs", args=[E.Binary(op="-", left=sig("s", a),
                                                       right=self.number(lane_pos, "s", units.LENGTH))])
@@ -256,11 +256,12 @@ class Conditions:
         """The actor's first `s(A)` as an expression: its road station where it drives a road
         along +s; on a path (a lane driven against s, a reversed lane, a route), the
         distance from the path's entry end, as the runtime measures it."""
-        return self.frame_station(who, self.placed[who][2])
+        return self.frame_station(who, self.placed[who].s)
 
     def frame_station(self, who: str, s):
         """A station `s` of the actor's first road as `s(A)` measures it (see start_station)."""
-        road_name, lane, s_start, _ = self.placed[who]
+        at = self.placed[who]
+        road_name, lane, s_start = at.road, at.lane, at.s
         road_id = next(i for i, r in self.roads.items() if r.name == road_name)
         info = self.actors[who]
         reverse = bool(info.get("against_s")) and info["vehicle"] != "obstacle"
@@ -279,7 +280,7 @@ class Conditions:
 
     def driving_way(self, who: str) -> int:
         """+1 if the actor starts driving towards +s of its road, -1 against."""
-        road_name, lane, _, _ = self.placed[who]
+        road_name, lane = self.placed[who].road, self.placed[who].lane
         if lane == 0:
             return 1
         road_id = next(i for i, r in self.roads.items() if r.name == road_name)
@@ -288,7 +289,7 @@ class Conditions:
 
     def along_s(self, who: str) -> bool:
         """Whether the actor drives towards +s (its lane's OpenDRIVE direction)."""
-        road_name, lane = self.placed[who][0], self.placed[who][1]
+        road_name, lane = self.placed[who].road, self.placed[who].lane
         road_id = next(i for i, r in self.roads.items() if r.name == road_name)
         way = -1 if self.actors[who].get("against_s") and self.actors[who]["vehicle"] != "obstacle" else 1
         return lane == 0 or self.network.road(road_id).travel_direction(lane) * way > 0

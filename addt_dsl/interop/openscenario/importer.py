@@ -124,7 +124,8 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
         sc = self.sidecar or {}
         actors = []
         for who, info in self.actors.items():
-            road, lane, s, offset = self.placed[who]
+            at = self.placed[who]
+            road, lane, s, offset = at.road, at.lane, at.s, at.offset
             kind = VEHICLES[info["vehicle"]]
             extra = sc.get("actors", {}).get(who, {})
             fields = dict(name=who, vehicle=info["vehicle"], road=road, lane=E.Num(value=float(lane)), s=s,

@@ -1,6 +1,7 @@
 """Positions (lane, road, world, relative, route), routes and trajectory shapes (clothoids, NURBS)."""
 
 import math
+from dataclasses import dataclass
 
 from addt_dsl import expr as E
 from addt_dsl import units
@@ -48,11 +49,21 @@ for _name, _note in (
     POSITIONS.declare(_name, "refused", _note)
 
 
+@dataclass(frozen=True)
+class Placement:
+    """A place on a lane: the plan's road name, the lane id, the station s [m] and the offset from
+    the lane's centre [m] (to the left of +s), s and offset as expressions (parameters stay)."""
+    road: str
+    lane: int
+    s: E.Expr
+    offset: E.Expr
+
+
 class Positions:
     # -- positions
 
     def position(self, pos_el, who: str):
-        """(road name, lane, s, offset) as expressions, or None after a diagnostic."""
+        """Where the position is (a Placement), or None after a diagnostic."""
         pos = only_child(pos_el)
         if pos is None:
             self.error(pos_el, "a <Position> holds one position")
@@ -79,7 +90,7 @@ class Positions:
             self.error(pos, f"road {odr.id} has no lane {lane} at s = {s_val:g} m",
                        f"lanes there: {', '.join(str(i) for i in lane_ids_at(odr, s_val))}")
             raise Stop
-        return road, lane, s, self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
+        return Placement(road, lane, s, self.mirror(self.number(pos, "offset", units.LENGTH, 0.0)))
 
     @POSITIONS.register("RoadPosition", "exact", "the lane at (s, t) and the offset from its centre")
     @POSITIONS.register("WorldPosition", "approx", "the lane of the nearest road at (x, y) facing h (a point off "
@@ -98,7 +109,8 @@ class Positions:
             if ref is None or ref not in self.placed:
                 self.error(pos, f"{pos.tag} relative to '{pos.get('entityRef')}', which has no position yet")
                 return None
-            road_name, lane, s_ref, off_ref = self.placed[ref]
+            ref_at = self.placed[ref]
+            road_name, lane, s_ref, off_ref = ref_at.road, ref_at.lane, ref_at.s, ref_at.offset
             params = self.param_values()
             road_id = next(i for i, r in self.roads.items() if r.name == road_name)
             if pos.tag == "RelativeLanePosition":
@@ -107,7 +119,8 @@ class Positions:
                 if lane * new_lane <= 0 and d_lane:  # lane 0 is the reference line
                     new_lane += 1 if d_lane > 0 else -1
                 ds = self.number(pos, "ds", units.LENGTH, 0.0)
-                return road_name, new_lane, plus_expr(s_ref, ds), self.mirror(self.number(pos, "offset", units.LENGTH, 0.0))
+                return Placement(road_name, new_lane, plus_expr(s_ref, ds),
+                                 self.mirror(self.number(pos, "offset", units.LENGTH, 0.0)))
             road = self.network.road(road_id)
             s = eval_param_expr(s_ref, params) + self.value(pos, "ds")
             t = road.lane_center_t(lane, eval_param_expr(s_ref, params)) + eval_param_expr(off_ref, params) \
@@ -119,7 +132,7 @@ class Positions:
             self.error(pos, f"{who}: no lane at s={s:g} m, t={t:g} m of road {road_id}")
             return None
         offset = t - odr.lane_center_t(lane, s)
-        return road_name, lane, E.Num(value=round(s, 9)), E.Num(value=round(offset, 9))
+        return Placement(road_name, lane, E.Num(value=round(s, 9)), E.Num(value=round(offset, 9)))
 
     def world_to_road(self, x: float, y: float, h: float | None) -> tuple[str, float, float]:
         """(road id, s, t) of world point (x, y) [m]: among the roads with a lane there (the
@@ -211,12 +224,12 @@ class Positions:
             return None
         s_road = s_wp + legs[0].direction * path_s  # a station on the first road, or its continuation
         self.actors.get(who, {}).setdefault("route_from_position", route_el)
-        return road_name, lane, E.Num(value=round(s_road, 9)), offset
+        return Placement(road_name, lane, E.Num(value=round(s_road, 9)), offset)
 
     def against_s(self, pos_el, placed) -> bool:
         """Whether the entity faces against its lane's driving direction (addt-dsl, like
         OpenSCENARIO's default, drives an actor in its lane's direction)."""
-        road_name, lane, s, _ = placed
+        road_name, lane, s = placed.road, placed.lane, placed.s
         road_id = next(i for i, r in self.roads.items() if r.name == road_name)
         odr = self.network.road(road_id)
         orient = only_child(pos_el).find("Orientation") if only_child(pos_el) is not None else None
@@ -238,10 +251,10 @@ class Positions:
         got = self.position(pos_el, who)
         if got is None:
             return None
-        road, lane, s, offset = got
+        road, lane, s, offset = got.road, got.lane, got.s, got.offset
         params = self.param_values()
         road_id = next(i for i, r in self.roads.items() if r.name == road)
-        if road != self.placed[who][0]:
+        if road != self.placed[who].road:
             self.approx(pos_el, f"a point on road {road_id}, not {who}'s road: its s and t are used as they are")
         s_val = float(eval_param_expr(s, params))
         odr = self.network.road(road_id)
@@ -261,7 +274,7 @@ class Positions:
         got = self.position(pos_el, who)
         if got is None:
             return None
-        road, lane, s, offset = got
+        road, lane, s, offset = got.road, got.lane, got.s, got.offset
         params = self.param_values()
         odr = self.network.road(next(i for i, r in self.roads.items() if r.name == road))
         s_val = min(max(float(eval_param_expr(s, params)), 0.0), odr.length)
@@ -354,7 +367,7 @@ class Positions:
                 return None
             if not stops or stops[-1] != road_id:
                 stops.append(self.resolve(road_id))
-        first = self.placed[who][0]
+        first = self.placed[who].road
         if self.roads.get(stops[0]) is None or self.roads[stops[0]].name != first:
             self.skip(route_el, f"a route that does not start on {who}'s road: not translated")
             return None

@@ -47,7 +47,7 @@ class Importer(Parameters, CarlaFrame):
         self.end: TriggerPlan | None = None  # the storyboard's stop trigger beyond its time
         self.pending: list = []  # storyboard.PendingEvent: events started by another event, linked at the end
         self.anchors: dict = {}  # no-op events that start a group: name -> storyboard.Anchor
-        self.placed: dict[str, tuple] = {}  # actor -> (road name, lane, s, offset)
+        self.placed: dict = {}  # actor -> positions.Placement
         self.environment: list[ClausePlan] = []  # weather and light from an EnvironmentAction
         # Traffic lights: controllers by name (signal ids, phase times, the element), the
         # controller of each signal, phase name -> state per controller, the light steps.

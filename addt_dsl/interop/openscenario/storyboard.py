@@ -10,6 +10,7 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.openscenario.conditions import EDGES
 from addt_dsl.interop.openscenario.entities import safe_name
 from addt_dsl.interop.openscenario.params import all_of, any_of, plus_expr
+from addt_dsl.interop.openscenario.positions import Placement
 from addt_dsl.interop.openscenario.registry import ACTIONS, INIT_ACTIONS, STORYBOARD
 from addt_dsl.interop.openscenario.xml import Stop, child_at, first_of, only_child
 from addt_dsl.plan import ClausePlan, GroupPlan, TriggerPlan
@@ -226,13 +227,13 @@ class Storyboard:
                 got = self.position(first_vertex, who)
                 if got is not None:
                     self.placed[who] = got
-                    self.actors[who]["lane_now"] = got[1]
+                    self.actors[who]["lane_now"] = got.lane
         for who, info in self.actors.items():
             if who not in self.placed:
                 self.approx(info["el"], f"{who} has no translated initial position: lane -1 at s = 0 m of the "
                                         "first road")
                 first = self.road(next(iter(self.network.roads)), info["el"])
-                self.placed[who] = (first, -1, E.Num(value=0.0), E.Num(value=0.0))
+                self.placed[who] = Placement(first, -1, E.Num(value=0.0), E.Num(value=0.0))
         for act, who in init_trajectories:  # a trajectory from the start: once every actor is placed
             clause = self.trajectory(child_at(act, "FollowTrajectoryAction"), who)
             if clause is not None:
@@ -255,7 +256,7 @@ class Storyboard:
         got = self.position(act.find("Position"), who)
         if got is not None:
             self.placed[who] = got
-            self.actors[who]["lane_now"] = got[1]
+            self.actors[who]["lane_now"] = got.lane
             self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
         return True
 
