@@ -6,17 +6,9 @@ element path, e.g. ("action", "PrivateAction/LongitudinalAction/SpeedAction").""
 from __future__ import annotations
 
 from addt_dsl.interop.openscenario import importer  # noqa: F401 - its modules register their elements
-from addt_dsl.interop.openscenario.registry import (
-    ACTIONS,
-    ENTITY_CONDITIONS,
-    INIT_ACTIONS,
-    POSITIONS,
-    REGISTRIES,
-    STORYBOARD,
-    VALUE_CONDITIONS,
-    ElementEntry,
-    ElementRegistry,
-)
+from addt_dsl.interop.openscenario.registry import (ACTIONS, ENTITY_CONDITIONS, GLOBAL_ACTIONS, INIT_ACTIONS,
+                                                    INIT_GLOBAL_ACTIONS, POSITIONS, REGISTRIES, STORYBOARD,
+                                                    VALUE_CONDITIONS, ElementEntry, ElementRegistry)
 
 
 def coverage() -> list[ElementEntry]:
@@ -36,6 +28,8 @@ def _lookup(registry: ElementRegistry, path: str) -> ElementEntry | None:
 def status_of(category: str, path: str) -> dict[str, ElementEntry | None]:
     """The entries that answer for a schema element: by context (an action: in an event and in
     Init). None where no registry has it (the import refuses it)."""
+    if category == "action" and path.split("/")[0] in ("GlobalAction", "UserDefinedAction"):
+        return {"event": _lookup(GLOBAL_ACTIONS, path), "Init": _lookup(INIT_GLOBAL_ACTIONS, path)}
     if category == "action":
         return {"event": _lookup(ACTIONS, path), "Init": _lookup(INIT_ACTIONS, path)}
     if category == "condition":

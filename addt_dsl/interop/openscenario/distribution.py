@@ -40,12 +40,12 @@ from addt_dsl import units
 from addt_dsl.compiler import compile_source
 from addt_dsl.confine import Refused, confine
 from addt_dsl.diagnostics import Span
-from addt_dsl.interop.openscenario.distribution_export import PARAMETRIC_KEY
-from addt_dsl.interop.openscenario.sidefile import SIDECAR_PARAM
 from addt_dsl.interop.openscenario.conditions import RULE_OPS
+from addt_dsl.interop.openscenario.distribution_export import PARAMETRIC_KEY
 from addt_dsl.interop.openscenario.importer import DOCUMENT_KINDS, Imported, Translate, import_xosc
 from addt_dsl.interop.openscenario.params import arith
 from addt_dsl.interop.openscenario.reader import Importer
+from addt_dsl.interop.openscenario.sidefile import SIDECAR_PARAM
 from addt_dsl.interop.openscenario.xml import MAX_XML_BYTES, Stop
 from addt_dsl.limits import DEFAULT, MAX_ABS_NUMBER, Limits
 from addt_dsl.plan import AssumptionPlan, CaseAxis, GridAxis, ParamPlan, SamplerPlan, ScenarioPlan, SweepPlan

@@ -60,8 +60,10 @@ class ElementRegistry:
 
 ACTIONS = ElementRegistry("action")  # in an event
 INIT_ACTIONS = ElementRegistry("action in Init")  # private actions in the storyboard's Init
+GLOBAL_ACTIONS = ElementRegistry("global action")  # in an event
+INIT_GLOBAL_ACTIONS = ElementRegistry("global action in Init")
 VALUE_CONDITIONS = ElementRegistry("condition")  # in a ByValueCondition
 ENTITY_CONDITIONS = ElementRegistry("condition")  # in a ByEntityCondition
 POSITIONS = ElementRegistry("position")
 STORYBOARD = ElementRegistry("storyboard")
-REGISTRIES = (ACTIONS, INIT_ACTIONS, VALUE_CONDITIONS, ENTITY_CONDITIONS, POSITIONS, STORYBOARD)
+REGISTRIES = (ACTIONS, INIT_ACTIONS, GLOBAL_ACTIONS, INIT_GLOBAL_ACTIONS, VALUE_CONDITIONS, ENTITY_CONDITIONS, POSITIONS, STORYBOARD)

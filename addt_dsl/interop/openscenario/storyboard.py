@@ -11,7 +11,7 @@ from addt_dsl.interop.openscenario.conditions import EDGES
 from addt_dsl.interop.openscenario.entities import safe_name
 from addt_dsl.interop.openscenario.params import all_of, any_of, plus_expr
 from addt_dsl.interop.openscenario.positions import Placement
-from addt_dsl.interop.openscenario.registry import ACTIONS, INIT_ACTIONS, STORYBOARD
+from addt_dsl.interop.openscenario.registry import GLOBAL_ACTIONS, INIT_ACTIONS, INIT_GLOBAL_ACTIONS, STORYBOARD
 from addt_dsl.interop.openscenario.xml import Stop, child_at, first_of, only_child
 from addt_dsl.plan import ClausePlan, GroupPlan, TriggerPlan
 
@@ -98,29 +98,28 @@ for _path, _status, _note in (
 ):
     STORYBOARD.declare(_path, _status, _note)
 
-# Global actions (dispatched by `Storyboard.event` and `init` by where they stand).
-for _registry, _name, _status, _note in (
-        (INIT_ACTIONS, "EnvironmentAction", "approx", "fog, rain and the sun's elevation; other precipitation W0802"),
-        (ACTIONS, "EnvironmentAction", "refused", "the language has no environment steps: `environment { }` holds "
-                                                  "for the whole run"),
-        (INIT_ACTIONS, "TrafficSignalStateAction", "exact", "`light C state S` at time 0"),
-        (ACTIONS, "TrafficSignalStateAction", "exact", "a step `light C state S`"),
-        (INIT_ACTIONS, "TrafficSignalControllerAction", "approx", "the controller resumes its program in its own "
-                                                                  "cycle (W0802)"),
-        (ACTIONS, "TrafficSignalControllerAction", "approx", "the controller resumes its program in its own cycle "
-                                                             "(W0802)"),
-):
-    _registry.declare(_name, _status, _note)
-for _name, _note in (
-        ("EntityAction", "the language's actors exist for the whole run (no adding or deleting)"),
-        ("ParameterAction", "parameters are constant during a run"),
-        ("VariableAction", "the language has no variables"),
-        ("TrafficAction", "the twin has no traffic swarms, sources, sinks or areas"),
-        ("SetMonitorAction", "monitors are the language's oracles, not set by actions"),
-        ("UserDefinedAction", "a user-defined action means nothing to the twin"),
-):
-    ACTIONS.declare(_name, "refused", _note)
-    INIT_ACTIONS.declare(_name, "refused", _note)
+# Global actions, by where they stand (Init, an event): the inner element each translation takes,
+# found along its path under <GlobalAction>, in the order tried.
+GLOBAL_PATHS = {"global action in Init": (("EnvironmentAction", ("EnvironmentAction", "Environment")),
+                                          ("TrafficSignalAction", ("InfrastructureAction", "TrafficSignalAction"))),
+                "global action": (("TrafficSignalAction", ("InfrastructureAction", "TrafficSignalAction")),
+                                  ("EnvironmentAction", ("EnvironmentAction",)))}
+# The traffic signal actions are translated by TrafficSignalAction's entry (documented here).
+for _registry, _where in ((GLOBAL_ACTIONS, "a light step"), (INIT_GLOBAL_ACTIONS, "at time 0")):
+    _registry.declare("TrafficSignalStateAction", "exact", f"`light C state S` ({_where}), C the signal's controller "
+                      "(setting some of a controller's signals switches it all, W0802)")
+    _registry.declare("TrafficSignalControllerAction", "approx", f"`light C state program` ({_where}): the program "
+                      "resumes its own cycle, not the named phase (W0802)")
+for _registry in (GLOBAL_ACTIONS, INIT_GLOBAL_ACTIONS):
+    for _name, _note in (
+            ("EntityAction", "the language's actors exist for the whole run (no adding or deleting)"),
+            ("ParameterAction", "parameters are constant during a run"),
+            ("VariableAction", "the language has no variables"),
+            ("TrafficAction", "the twin has no traffic swarms, sources, sinks or areas"),
+            ("SetMonitorAction", "monitors are the language's oracles, not set by actions"),
+            ("UserDefinedAction", "a user-defined action means nothing to the twin"),
+    ):
+        _registry.declare(_name, "refused", _note)
 
 
 @dataclass(frozen=True)
@@ -186,12 +185,7 @@ class Storyboard:
             init = Element("Init")
         pairs = []
         for action in init.iterfind("Actions/GlobalAction"):
-            env = child_at(action, "EnvironmentAction", "Environment")
-            if env is not None:
-                self.environment_action(env)
-            elif child_at(action, "InfrastructureAction", "TrafficSignalAction") is not None:
-                pairs += [(action, c) for c in self.light_clauses(action)]
-            else:
+            if not self.global_action(INIT_GLOBAL_ACTIONS, action, "", pairs):
                 self.skip(action, "global actions other than the environment (traffic, parameters, "
                                   "signals) are not translated")
         # a light's state in Init: a step at time 0
@@ -240,6 +234,45 @@ class Storyboard:
                 self.actors[who]["behaviors"].append(clause)
 
     # -- stop trigger
+
+    def global_action(self, registry, action, event: str, lights: list) -> bool:
+        """A GlobalAction through `registry` (Init's or an event's), its inner actions tried in the
+        order of GLOBAL_PATHS; the light clauses it sets are added to `lights` as (element,
+        clause) pairs. False: no translation takes it."""
+        for name, path in GLOBAL_PATHS[registry.family]:
+            translate = registry.translator(name)
+            if child_at(action, *path) is not None and translate is not None:
+                translate(self, action, event, lights)
+                return True
+        return False
+
+    @INIT_GLOBAL_ACTIONS.register("EnvironmentAction", "approx", "fog, rain and the sun's elevation; other "
+                                  "precipitation W0802")
+    def init_environment(self, action, event: str, lights: list) -> None:
+        self.environment_action(child_at(action, "EnvironmentAction", "Environment"))
+
+    @INIT_GLOBAL_ACTIONS.register("TrafficSignalAction", "approx", "see TrafficSignalStateAction and "
+                                  "TrafficSignalControllerAction")
+    def init_lights(self, action, event: str, lights: list) -> None:
+        lights += [(action, c) for c in self.light_clauses(action)]
+
+    @GLOBAL_ACTIONS.register("TrafficSignalAction", "approx", "see TrafficSignalStateAction and "
+                             "TrafficSignalControllerAction")
+    def event_lights(self, body, event: str, lights: list) -> None:
+        exact = ((self.sidecar or {}).get("lights") or {}).get("steps", {}).get(event)
+        if exact and exact.get("name") not in self.light_ctls:
+            self.error(body, f"the side file's light step {event!r} names controller "
+                             f"{exact.get('name')!r}, which this file does not have")
+            raise Stop
+        lights += [(body, ClausePlan.model_validate(exact))] if exact else \
+            [(body, c) for c in self.light_clauses(body)]
+
+    @GLOBAL_ACTIONS.register("EnvironmentAction", "refused", "the language has no environment steps: "
+                             "`environment { }` holds for the whole run")
+    def event_environment(self, body, event: str, lights: list) -> None:
+        self.skip(body.find("EnvironmentAction"), "an environment change in an event is not translated: "
+                  "`environment { }` holds for the whole run (the language has no environment steps)",
+                  "an EnvironmentAction in Init is translated")
 
     def init_action(self, act, who: str, later: "InitLater") -> None:
         """A private action of Init, dispatched through registry.INIT_ACTIONS (a wrapper's inner
@@ -381,19 +414,7 @@ class Storyboard:
             body = only_child(action)
             if body is None:
                 continue
-            if body.tag == "GlobalAction" and child_at(body, "InfrastructureAction", "TrafficSignalAction") is not None:
-                exact = ((self.sidecar or {}).get("lights") or {}).get("steps", {}).get(name)
-                if exact and exact.get("name") not in self.light_ctls:
-                    self.error(body, f"the side file's light step {name!r} names controller "
-                                     f"{exact.get('name')!r}, which this file does not have")
-                    raise Stop
-                lights += [(body, ClausePlan.model_validate(exact))] if exact else \
-                    [(body, c) for c in self.light_clauses(body)]
-                continue
-            if body.tag == "GlobalAction" and body.find("EnvironmentAction") is not None:
-                self.skip(body.find("EnvironmentAction"), "an environment change in an event is not translated: "
-                          "`environment { }` holds for the whole run (the language has no environment steps)",
-                          "an EnvironmentAction in Init is translated")
+            if body.tag == "GlobalAction" and self.global_action(GLOBAL_ACTIONS, body, name, lights):
                 continue
             if body.tag != "PrivateAction":
                 self.skip(body, f"<{body.tag}> is not translated (private actions are)")

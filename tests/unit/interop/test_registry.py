@@ -11,8 +11,9 @@ import pytest
 
 from addt_dsl.interop.openscenario.coverage import coverage, status_of
 from addt_dsl.interop.openscenario.importer import import_xosc
-from addt_dsl.interop.openscenario.registry import (ACTIONS, ENTITY_CONDITIONS, INIT_ACTIONS, POSITIONS, STATUSES,
-                                                    STORYBOARD, VALUE_CONDITIONS, ElementRegistry)
+from addt_dsl.interop.openscenario.registry import (ACTIONS, ENTITY_CONDITIONS, GLOBAL_ACTIONS, INIT_ACTIONS,
+                                                    INIT_GLOBAL_ACTIONS, POSITIONS, STATUSES, STORYBOARD,
+                                                    VALUE_CONDITIONS, ElementRegistry)
 from tests.conftest import ROOT
 
 ESMINI = ROOT / "tests" / "data" / "esmini"
@@ -65,6 +66,7 @@ def test_every_entry_names_an_element_of_the_schema():
                 for cat in ("action", "condition", "position")}
     paths = {e.path for e in entries if e.category == "storyboard"}
     for registry, names in ((ACTIONS, segments["action"]), (INIT_ACTIONS, segments["action"]),
+                            (GLOBAL_ACTIONS, segments["action"]), (INIT_GLOBAL_ACTIONS, segments["action"]),
                             (VALUE_CONDITIONS, segments["condition"]), (ENTITY_CONDITIONS, segments["condition"]),
                             (POSITIONS, segments["position"]), (STORYBOARD, paths)):
         unknown = [e.name for e in registry.entries() if e.name not in names]
@@ -78,6 +80,7 @@ def test_every_storyboard_element_and_translated_action_has_an_entry():
             assert status_of(e.category, e.path)[""] is not None, e.path
     assert status_of("action", "PrivateAction/LongitudinalAction/SpeedAction")["event"].translate is not None
     assert status_of("action", "GlobalAction/TrafficAction/TrafficSwarmAction")["event"].status == "refused"
+    assert status_of("action", "GlobalAction/EnvironmentAction")["Init"].translate is not None
 
 
 @needs_schema
