@@ -73,7 +73,8 @@ class Misc:
             return None
         if pos.tag == "RelativeObjectPosition" and self.actor_name(pos) == who and \
                 self.value(pos, "dx", default=0.0) == 0.0 and self.value(pos, "dy", default=0.0) == 0.0:
-            self.approx(act, "a teleport that only raises or lowers the actor: nothing (actors follow the road's height)")
+            self.approx(act, "a teleport that only raises or lowers the actor: nothing (actors follow the road's "
+                             "height)")
             return None
         if pos.tag in ("LanePosition", "RoadPosition"):
             road = self.road(self.raw(pos, "roadId"), pos)

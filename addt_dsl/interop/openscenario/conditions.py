@@ -130,7 +130,8 @@ class Conditions:
         return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
 
     @ENTITY_CONDITIONS.register("CollisionCondition", "approx",
-                                "a collision of the actor with any other; with one entity or a type among several others W0802")
+                                "a collision of the actor with any other; with one entity or a type among several "
+                                "others W0802")
     def cond_collision(self, c, a: str):
         # The twin ends a run at its first collision; as a condition, an overlap of the
         # actor's box with any other (exact with one other actor or a type that is every one).
@@ -143,7 +144,8 @@ class Conditions:
         return E.Binary(op="<=", left=sig("clearance", a), right=E.Num(value=0.0))
 
     @ENTITY_CONDITIONS.register("RelativeSpeedCondition", "approx",
-                                "`rel_speed(A, B)`; longitudinal: the difference of the speeds (W0802); lateral refused")
+                                "`rel_speed(A, B)`; longitudinal: the difference of the speeds (W0802); lateral "
+                                "refused")
     def cond_relative_speed(self, c, a: str):
         op = RULE_OPS.get(c.get("rule", ""), ">")
         b = self.actor_name(c)
@@ -164,7 +166,8 @@ class Conditions:
         return E.Binary(op=op, left=sig("accel", a), right=self.number(c, "value", units.ACCELERATION))
 
     @ENTITY_CONDITIONS.register("RelativeDistanceCondition", "approx",
-                                "longitudinal and cartesian between entities (free space: W0802); TTC with a position and lateral distances refused")
+                                "longitudinal and cartesian between entities (free space: W0802); TTC with a position "
+                                "and lateral distances refused")
     @ENTITY_CONDITIONS.register("TimeToCollisionCondition", "approx", "see RelativeDistanceCondition")
     @ENTITY_CONDITIONS.register("TimeHeadwayCondition", "approx", "see RelativeDistanceCondition")
     def cond_relative_distance(self, c, a: str):
@@ -212,7 +215,8 @@ class Conditions:
         return None
 
     @ENTITY_CONDITIONS.register("ReachPositionCondition", "approx",
-                                "the Euclidean distance to the position's point; longitudinal along the actor's own road; free space and other kinds refused")
+                                "the Euclidean distance to the position's point; longitudinal along the actor's own "
+                                "road; free space and other kinds refused")
     @ENTITY_CONDITIONS.register("DistanceCondition", "approx", "see ReachPositionCondition")
     def cond_distance_to_position(self, c, a: str):
         op = RULE_OPS.get(c.get("rule", ""), ">")

@@ -70,7 +70,8 @@ class Imported:
     entities: dict[str, str] = field(default_factory=dict)  # OpenSCENARIO entity name -> actor name
 
 
-class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lateral, Routing, Misc, Global, Conditions, Storyboard, CarlaCriteria, Importer):
+class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lateral, Routing, Misc, Global, Conditions,
+                Storyboard, CarlaCriteria, Importer):
     def run(self) -> ScenarioPlan | None:
         got = self.read(self.path.name, self.path.parent, None)
         if got is None:
@@ -184,7 +185,8 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                 elif not sc and eval_param_expr(fields["speed"], self.param_values()) > 0:
                     # The stack cruises at the ego's initial speed, as OpenSCENARIO's default
                     # controller keeps the speed the file gives it.
-                    fields["stack"] = ClausePlan(keyword="stack", name="bev", settings={"cruise_speed": fields["speed"]})
+                    fields["stack"] = ClausePlan(keyword="stack", name="bev",
+                                                 settings={"cruise_speed": fields["speed"]})
                 elif not sc:
                     limit = self.speed_limit_at(road, s)
                     if limit is not None:
@@ -204,9 +206,9 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                     route = self.straight_on(road, lane, s, speed * duration + 50.0)
                     if route is not None:
                         fields["route"] = route
-                        self.approx(info["el"], f"the ego has no route in the file: it drives on through junctions, "
-                                                f"straight where it can, else to the kerb side, else the other way (roads "
-                                                f"{' -> '.join(route)})")
+                        self.approx(info["el"], "the ego has no route in the file: it drives on through junctions, "
+                                                "straight where it can, else to the kerb side, else the other way "
+                                                f"(roads {' -> '.join(route)})")
                 for key in ("goal_s", "mu"):
                     if extra.get(key) is not None:
                         fields[key] = E.Num(value=float(extra[key]))

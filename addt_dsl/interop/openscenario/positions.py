@@ -41,8 +41,10 @@ def bspline_basis(knots: list[float], order: int, n: int, u: float) -> list[floa
     return basis[:n]
 
 for _name, _note in (
-        ("RelativeWorldPosition", "the language places actors on lanes; a world offset from another entity is not read"),
-        ("RelativeObjectPosition", "the language places actors on lanes; an offset in another entity's frame is not read"),
+        ("RelativeWorldPosition", "the language places actors on lanes; a world offset from another entity is "
+                                  "not read"),
+        ("RelativeObjectPosition", "the language places actors on lanes; an offset in another entity's frame is "
+                                   "not read"),
         ("GeoPosition", "the twin has no geodetic reference"),
         ("TrajectoryPosition", "a position along a trajectory is not read"),
 ):

@@ -18,7 +18,8 @@ class Roads:
     def road_network(self, root) -> None:
         logic = root.find("RoadNetwork/LogicFile")
         if logic is None:
-            self.error(first_of(root.find("RoadNetwork"), root), "no <RoadNetwork><LogicFile>: addt-dsl actors need a road")
+            self.error(first_of(root.find("RoadNetwork"), root),
+                       "no <RoadNetwork><LogicFile>: addt-dsl actors need a road")
             raise Stop
         got = self.read_road_network(self.raw(logic, "filepath"), logic)
         if got is None:

@@ -174,7 +174,8 @@ class InitLater:
 
 
 # Init's wrappers: the inner actions tried, in this order.
-INIT_WRAPPERS = {"RoutingAction": ("AssignRouteAction", "FollowTrajectoryAction"), "LongitudinalAction": ("SpeedAction",)}
+INIT_WRAPPERS = {"RoutingAction": ("AssignRouteAction", "FollowTrajectoryAction"),
+                 "LongitudinalAction": ("SpeedAction",)}
 
 
 class Storyboard:
