@@ -1,5 +1,6 @@
 """The side file of an exported run (`addtc export` writes it, the import reads it back): its format
-name, the parameter that names it, the controller prefix of exact behaviours, and its check."""
+name, the parameter that names it, the controller prefix of exact behaviours, its top-level keys
+(the exporter writes exactly these: tests/unit/interop/test_xosc_export.py), and its check."""
 
 import json
 
@@ -12,18 +13,23 @@ from addt_dsl.vehicles import VEHICLES
 SIDECAR_FORMAT = "addt-xosc-sidecar/1"  # the side file's "format"
 SIDECAR_PARAM = "addt_sidecar"  # the OpenSCENARIO parameter that names the side file
 CONTROLLER_PREFIX = "addt_"  # a controller named addt_<behaviour>: that behaviour, its settings as properties
+# The side file's top-level keys: containers (with their JSON type), texts, and the rest.
+SIDE_FILE_CONTAINERS = (("actors", dict), ("behaviors", dict), ("conditions", dict), ("groups", dict),
+                        ("faults", list), ("oracles", list), ("params", dict), ("param_dims", dict),
+                        ("group_events", list), ("holds", dict))
+SIDE_FILE_TEXTS = ("scenario", "description", "source_file", "run_id")
+SIDE_FILE_KEYS = ("format", *SIDE_FILE_TEXTS, "step_s", "seed", "run_seed", *(k for k, _ in SIDE_FILE_CONTAINERS),
+                  "lights")
 
 
 def sidecar_problem(data: dict) -> str:
     """What is wrong with a side file's contents ("" if nothing): each part is validated
     before the import uses it, so a damaged file is a diagnostic, not an exception."""
     try:
-        for key, kind in (("actors", dict), ("behaviors", dict), ("conditions", dict), ("groups", dict),
-                          ("faults", list), ("oracles", list), ("params", dict), ("param_dims", dict),
-                          ("group_events", list), ("holds", dict)):
+        for key, kind in SIDE_FILE_CONTAINERS:
             if not isinstance(data.get(key, kind()), kind):
                 return f"'{key}' is not a {kind.__name__}"
-        for key in ("scenario", "description", "source_file", "run_id"):
+        for key in SIDE_FILE_TEXTS:
             if not isinstance(data.get(key, ""), str):
                 return f"'{key}' is not a string"
         for info in data.get("actors", {}).values():
