@@ -147,7 +147,7 @@ def _export_sweep(plan, args) -> int:
 
 
 def cmd_import(args) -> int:
-    from addt_dsl.interop.xosc_import import import_xosc
+    from addt_dsl.interop.openscenario.importer import import_xosc
 
     got = import_xosc(args.file, args.root, args.maps, lenient=args.lenient, ego=args.ego)
     if args.format == "json":

@@ -109,7 +109,7 @@ def scenario_fidelity(xosc: str | Path, root: str | Path, reference: str | Path,
                       **import_options) -> tuple[ScenarioFidelity, dict[str, str]]:
     """Import `xosc`, run its first run up to the reference's end, and compare every entity the
     reference has (and the import kept) with it. Returns the figures and the entity -> actor names."""
-    from addt_dsl.interop.xosc_import import import_xosc
+    from addt_dsl.interop.openscenario.importer import import_xosc
     from addt_dsl.runtime.execute import execute
     from addt_dsl.sweep import expand
 

@@ -34,7 +34,7 @@ short (docs/openscenario.md has the full table):
 - what OpenSCENARIO cannot say (the ego's stack and sensors, goal, tyre friction,
   the fault schedule, oracles, step, seeds, script groups, exact behaviour settings
   and trigger formulas, `at_red run`) -> the side file `<stem>.addt.json` (named by the declared
-  parameter `addt_sidecar`), listed in `Export.carried`. `xosc_import` reads it back.
+  parameter `addt_sidecar`), listed in `Export.carried`. `openscenario/sidefile.py` defines it; import reads it.
 """
 
 from __future__ import annotations
@@ -52,6 +52,7 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, creation_date, road_file, xml_text
 from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
+from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
 from addt_dsl.runtime.environment import Light
@@ -60,9 +61,6 @@ from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.vehicles import VEHICLES
 
 OSC_MINOR = 2  # OpenSCENARIO 1.2
-SIDECAR_FORMAT = "addt-xosc-sidecar/1"
-SIDECAR_PARAM = "addt_sidecar"
-CONTROLLER_PREFIX = "addt_"
 RULES = {"<": xosc.Rule.lessThan, "<=": xosc.Rule.lessOrEqual, ">": xosc.Rule.greaterThan,
          ">=": xosc.Rule.greaterOrEqual, "==": xosc.Rule.equalTo, "!=": xosc.Rule.notEqualTo}
 FLIP = {"<": ">", "<=": ">=", ">": "<", ">=": "<=", "==": "==", "!=": "!="}

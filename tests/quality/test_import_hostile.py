@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from addt_dsl.cli import main
-from addt_dsl.interop import xosc_import
-from addt_dsl.interop.xosc_import import import_xosc
+from addt_dsl.interop.openscenario.importer import import_xosc
+from addt_dsl.interop.openscenario.reader import Importer
 
 ROOT = Path(__file__).resolve().parents[2]
 ESMINI = ROOT / "tests" / "data" / "esmini"
@@ -65,14 +65,13 @@ def test_a_place_no_road_has_is_invalid_content(tree, capsys, old, new):
 
 def test_each_catalog_file_is_read_once(tree, monkeypatch):
     reads: list[str] = []
-    real = xosc_import._Importer.read if hasattr(xosc_import, "_Importer") else xosc_import.Importer.read
+    real = Importer.read
 
     def counting(self, relative, base, el, *args, **kwargs):
         reads.append(relative)
         return real(self, relative, base, el, *args, **kwargs)
 
-    cls = xosc_import._Importer if hasattr(xosc_import, "_Importer") else xosc_import.Importer
-    monkeypatch.setattr(cls, "read", counting)
+    monkeypatch.setattr(Importer, "read", counting)
     got = import_xosc(ESMINI / "xosc" / "highway_merge.xosc", root=ESMINI, lenient=True)
     assert got.plan is not None
     catalogs = [r for r in reads if "Catalogs" in r]

@@ -9,7 +9,7 @@ import pytest
 
 from addt_dsl.cli import main
 from addt_dsl.compiler import compile_file, compile_source
-from addt_dsl.interop.xosc_import import import_xosc
+from addt_dsl.interop.openscenario.importer import import_xosc
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 from tests.conftest import EXAMPLES, ROOT, needs_torch

@@ -22,7 +22,7 @@ Then, exactly or not at all:
 
 A distribution that would make more runs than `Limits.runs` (docs/limits.md) is refused
 (E0701) before any value list is built. Reading reuses the importer's safe XML reader and
-parameter handling (`xosc_import.Importer`).
+parameter handling (`reader.Importer`).
 """
 
 from __future__ import annotations
@@ -40,10 +40,13 @@ from addt_dsl import units
 from addt_dsl.compiler import compile_source
 from addt_dsl.confine import Refused, confine
 from addt_dsl.diagnostics import Span
+from addt_dsl.interop.openscenario.conditions import RULE_OPS
 from addt_dsl.interop.openscenario.distribution_export import PARAMETRIC_KEY
-from addt_dsl.interop.xosc_export import SIDECAR_PARAM
-from addt_dsl.interop.xosc_import import (DOCUMENT_KINDS, MAX_XML_BYTES, RULE_OPS, Imported, Importer, Stop,
-                                          Translate, arith, import_xosc)
+from addt_dsl.interop.openscenario.importer import DOCUMENT_KINDS, Imported, Translate, import_xosc
+from addt_dsl.interop.openscenario.params import arith
+from addt_dsl.interop.openscenario.reader import Importer
+from addt_dsl.interop.openscenario.sidefile import SIDECAR_PARAM
+from addt_dsl.interop.openscenario.xml import MAX_XML_BYTES, Stop
 from addt_dsl.limits import DEFAULT, MAX_ABS_NUMBER, Limits
 from addt_dsl.plan import AssumptionPlan, CaseAxis, GridAxis, ParamPlan, SamplerPlan, ScenarioPlan, SweepPlan
 from addt_dsl.printer import PrinterError, print_plan, side_files

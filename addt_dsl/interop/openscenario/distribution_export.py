@@ -23,13 +23,11 @@ from pathlib import Path
 
 from addt_dsl import expr as E
 from addt_dsl.expr import eval_param_expr, params_used
-
+from addt_dsl.interop.openscenario.xml import MAX_XML_BYTES
 from addt_dsl.interop.xodr_export import ExportError, xml_text
 from addt_dsl.interop.xosc_export import OSC_MINOR, creation_date, export_run
-from addt_dsl.interop.xosc_import import MAX_XML_BYTES
 from addt_dsl.plan import ScenarioPlan, SweepPlan
 from addt_dsl.sweep import SweepStream, axis_params, sampled_params
-
 
 PARAMETRIC_KEY = "parametric_plan"  # the side file's copy of the scenario with its parameters (no sweep)
 

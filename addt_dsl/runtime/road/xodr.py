@@ -1,26 +1,23 @@
 """Safe OpenDRIVE (.xodr) reader.
 
-XML is read with ``defusedxml``'s SAX parser: entity declarations (billion laughs) and
-external entities/DTDs are refused. A tiny element tree records the source line of every
-element so that errors can point at it. Elements that do not change road geometry
+XML is read by the one safe reader, ``addt_dsl/xmlread.py`` (defusedxml: entity declarations
+(billion laughs) and external entities are refused), into a tiny element tree that keeps the
+source line of every element so that errors can point at it. Elements that do not change road geometry
 (signals, objects, roadMark, userData, ...) are ignored; anything that does and cannot
 be evaluated raises :class:`XodrError`.
 """
 
 from __future__ import annotations
 
-import io
 import math
 import os
-import xml.sax
 from dataclasses import dataclass, field
 from typing import Optional, Union
 
-import defusedxml.sax
 import numpy as np
-from defusedxml import DefusedXmlException
 
 from addt_dsl import units
+from addt_dsl.xmlread import XmlDocument, XmlReadError, read_xml
 
 from .geometry import Arc, CubicProfile, Line, ParamPoly3, Poly3, Spiral
 from .lanes import Lane, LaneSection
@@ -67,65 +64,46 @@ class _Node:
         return [c for c in self.children if c.tag == tag]
 
 
-class _TreeBuilder(xml.sax.handler.ContentHandler):
-    def __init__(self) -> None:
-        super().__init__()
-        self.root: Optional[_Node] = None
-        self._stack: list[_Node] = []
-        self._locator = None
-
-    def setDocumentLocator(self, locator) -> None:
-        self._locator = locator
-
-    @property
-    def line(self) -> Optional[int]:
-        return self._locator.getLineNumber() if self._locator is not None else None
-
-    def startElement(self, name, attrs) -> None:
-        # Drop a namespace prefix ("xodr:road" -> "road"); default xmlns is an attribute only.
-        tag = name.split(":", 1)[-1]
-        node = _Node(tag, dict(attrs.items()), self.line or 0)
-        if self._stack:
-            self._stack[-1].children.append(node)
-        elif self.root is None:
-            self.root = node
-        self._stack.append(node)
-
-    def endElement(self, name) -> None:
-        self._stack.pop()
-
-
 def _parse_tree(data: Union[str, bytes], source: str) -> _Node:
-    handler = _TreeBuilder()
-    parser = defusedxml.sax.make_parser()
-    parser.setContentHandler(handler)
-    parser.forbid_dtd = False  # a plain DOCTYPE is harmless; entities below are what bite
-    parser.forbid_entities = True
-    parser.forbid_external = True
-    inp = xml.sax.InputSource(source)
-    if isinstance(data, bytes):
-        inp.setByteStream(io.BytesIO(data))
-    else:
+    if isinstance(data, str):
         # Text is already decoded: hand expat UTF-8 and drop a conflicting declaration.
         if data.startswith("<?xml"):
             end = data.find("?>")
             data = data[end + 2:] if end >= 0 else data
-        inp.setByteStream(io.BytesIO(data.encode("utf-8")))
+        try:
+            data = data.encode("utf-8")
+        except UnicodeError as exc:
+            raise XodrError(f"cannot decode the file: {exc}", line=None, source=source) from None
     try:
-        parser.parse(inp)
-    except DefusedXmlException as exc:
-        raise XodrError(
-            f"refused unsafe XML ({type(exc).__name__}: entity/DTD declarations and external "
-            "references are not allowed in OpenDRIVE files)",
-            element="!ENTITY", line=handler.line, source=source,
-        ) from None
-    except xml.sax.SAXParseException as exc:
-        raise XodrError(f"malformed XML: {exc.getMessage()}", line=exc.getLineNumber(), source=source) from None
-    except (LookupError, UnicodeError) as exc:  # `<?xml ... encoding="abc"?>`: Python has no such codec
-        raise XodrError(f"cannot decode the file: {exc}", line=handler.line, source=source) from None
-    if handler.root is None:
-        raise XodrError("empty document", source=source)
-    return handler.root
+        doc = read_xml(data, forbid_dtd=False)  # a plain DOCTYPE is harmless; entities are what bite
+    except XmlReadError as exc:
+        if exc.kind == "unsafe":
+            raise XodrError(
+                f"refused unsafe XML ({exc.exception}: entity/DTD declarations and external "
+                "references are not allowed in OpenDRIVE files)",
+                element="!ENTITY", line=exc.line, source=source,
+            ) from None
+        if exc.kind == "decode":
+            raise XodrError(f"cannot decode the file: {exc.detail}", line=exc.line, source=source) from None
+        raise XodrError(f"malformed XML: {exc.reason}", line=exc.line, source=source) from None
+    return _node(doc, doc.root)
+
+
+def _node(doc: XmlDocument, element) -> _Node:
+    """The element tree as _Nodes, without recursion (a deeply nested file is data, not a crash).
+    A namespace is dropped ("{uri}road", "xodr:road" -> "road"): OpenDRIVE's tags are read bare."""
+    def make(el) -> _Node:
+        return _Node(el.tag.rsplit("}", 1)[-1].split(":", 1)[-1], dict(el.attrib), doc.line(el))
+
+    root = make(element)
+    todo = [(element, root)]
+    while todo:
+        el, node = todo.pop()
+        for child in el:
+            kid = make(child)
+            node.children.append(kid)
+            todo.append((child, kid))
+    return root
 
 
 class _Reader:

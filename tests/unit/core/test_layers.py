@@ -5,7 +5,7 @@ and inside functions) is checked against the layer order:
 
     app (cli, console, suite, studies, pytest_plugin, search.commands, interop.commands)
       > search > reporting > stack > runtime > core (units, expr, diagnostics, registry, fingerprint,
-        vehicles, plan, sweep, distributions, confine, errors, extras, limits, cost, lru)
+        vehicles, plan, sweep, distributions, confine, errors, extras, limits, cost, lru, xmlread)
       printer > compiler > core;   search > printer
       interop (OpenSCENARIO export/import) > printer, compiler, runtime;   search > interop
     the compiler and the runtime never import each other (nor the stack).
@@ -34,7 +34,7 @@ CORE = {"addt_dsl", "addt_dsl.units", "addt_dsl.expr", "addt_dsl.diagnostics", "
         "addt_dsl.fingerprint", "addt_dsl.vehicles", "addt_dsl.plan", "addt_dsl.sweep", "addt_dsl.distributions",
         "addt_dsl.confine",
         "addt_dsl.errors", "addt_dsl.extras", "addt_dsl.limits", "addt_dsl.cost", "addt_dsl.stats",
-        "addt_dsl.lru"}
+        "addt_dsl.lru", "addt_dsl.xmlread"}
 APP = {"addt_dsl.cli", "addt_dsl.console", "addt_dsl.suite", "addt_dsl.studies", "addt_dsl.pytest_plugin",
        "addt_dsl.search.commands", "addt_dsl.interop.commands"}
 # layer -> the layers its modules may import (besides their own)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import re
 import sys
 
-from addt_dsl.interop.xosc_import import import_xosc
+from addt_dsl.interop.openscenario.importer import import_xosc
 from tests.conftest import ROOT
 
 ESMINI = ROOT / "tests" / "data" / "esmini"

@@ -10,7 +10,7 @@ import numpy as np
 
 from addt_dsl.compiler import compile_source
 from addt_dsl.interop.xosc_export import export_run
-from addt_dsl.interop.xosc_import import import_xosc
+from addt_dsl.interop.openscenario.importer import import_xosc
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 

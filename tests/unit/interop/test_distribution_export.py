@@ -11,7 +11,7 @@ from addt_dsl.cli import main
 from addt_dsl.compiler import compile_file, compile_source
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.openscenario.distribution_export import export_sweep, varied_params
-from addt_dsl.interop.xosc_import import import_xosc
+from addt_dsl.interop.openscenario.importer import import_xosc
 from addt_dsl.plan import SweepPlan
 from addt_dsl.sweep import expand
 from tests.conftest import ROOT

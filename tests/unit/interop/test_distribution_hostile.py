@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.interop.xosc_import import import_xosc
+from addt_dsl.interop.openscenario.importer import import_xosc
 from tests.conftest import ROOT
 
 ESMINI = ROOT / "tests" / "data" / "esmini"

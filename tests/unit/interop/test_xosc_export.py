@@ -12,7 +12,8 @@ from defusedxml import ElementTree as DET
 
 from addt_dsl.cli import main
 from addt_dsl.compiler import compile_file, compile_source
-from addt_dsl.interop.xosc_export import SIDECAR_FORMAT, export_run
+from addt_dsl.interop.openscenario.sidefile import SIDE_FILE_KEYS, SIDECAR_FORMAT
+from addt_dsl.interop.xosc_export import export_run
 from addt_dsl.runtime.road import parse_xodr
 from addt_dsl.runtime.roadspec import build_network
 from addt_dsl.sweep import expand
@@ -56,6 +57,7 @@ def test_export_passes_the_asam_checkers(path, tmp_path):
     assert {o.get("name") for o in root.iterfind("Entities/ScenarioObject")} == {a.name for a in plan.actors()}
     side = json.loads(done.sidecar_path.read_text())
     assert side["format"] == SIDECAR_FORMAT and side["run_seed"] == spec.seed
+    assert sorted(side) == sorted(SIDE_FILE_KEYS)  # the keys the import checks, one definition
     # Nothing OpenSCENARIO cannot say is dropped: each fault and oracle is listed and carried.
     assert len(side["faults"]) == len(spec.faults) and len(side["oracles"]) == len(plan.oracles)
     listed = "\n".join(done.carried)
@@ -385,7 +387,7 @@ def test_a_named_steps_state_exports_as_its_events_state_and_imports_back(fn, st
     """`when ended(lead.brake_hard)` is a StoryboardElementStateCondition on the step's event (named
     after the step), not a ParameterCondition that nothing sets; without the side file the import
     names the step again and the condition reads it."""
-    from addt_dsl.interop.xosc_import import import_xosc
+    from addt_dsl.interop.openscenario.importer import import_xosc
 
     spec = expand(compile_source(NAMED % fn, "named.addt").plan).specs[0]
     done = export_run(spec, tmp_path, "named")

@@ -156,7 +156,7 @@ def test_every_quantity_reads_back_bit_for_bit(value, dim):
 
 def test_an_imported_speed_in_km_h_prints_as_km_h():
     """esmini's acc-test.xosc states 120 km/h as 33.333333333333336 m/s: the import writes `120 km/h`."""
-    from addt_dsl.interop.xosc_import import import_xosc
+    from addt_dsl.interop.openscenario.importer import import_xosc
 
     root = ROOT / "tests" / "data" / "esmini"
     got = import_xosc(root / "xosc" / "acc-test.xosc", root=root)

@@ -1,0 +1,156 @@
+"""Longitudinal actions: speed (absolute, relative, profiles) and longitudinal distance."""
+
+from addt_dsl import expr as E
+from addt_dsl import units
+from addt_dsl.expr import eval_param_expr
+from addt_dsl.interop.openscenario.registry import ACTIONS
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.plan import ClausePlan
+from addt_dsl.runtime.behaviors import PEAK_SLOPE
+
+
+class Longitudinal:
+    @ACTIONS.register("SpeedAction", "approx", "absolute and relative targets, step, linear, cubic and sinusoidal "
+                      "shapes over a time or at a rate exactly; over a distance, `cruise` at the mean rate (W0802)")
+    def act_speed(self, speed, who: str, act) -> ClausePlan | None:
+        info = self.actors[who]
+        relative = child_at(speed, "SpeedActionTarget", "RelativeTargetSpeed")
+        if relative is not None:
+            return self.relative_speed(speed.find("SpeedActionDynamics"), relative, info)
+        target = child_at(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
+        if target is None:
+            return self.refuse_inner(act, "absolute and relative speed targets are translated")
+        return self.speed_action(speed.find("SpeedActionDynamics"), target, info)
+
+    @ACTIONS.register("SpeedProfileAction", "approx", "`speed_profile` through entries with times; "
+                      "followingMode follow meets every point (W0802); entries without times are refused")
+    def act_speed_profile(self, el, who: str, act) -> ClausePlan | None:
+        return self.speed_profile(el, self.actors[who])
+
+    @ACTIONS.register("LongitudinalDistanceAction", "approx", "`keep_gap`; a time gap between reference points "
+                      "is kept bumper to bumper (W0802)")
+    def act_keep_gap(self, el, who: str, act) -> ClausePlan | None:
+        return self.keep_gap(el, who)
+
+    def speed_action(self, dyn, target, info) -> ClausePlan | None:
+        v = self.number(target, "value", units.SPEED)
+        v_now = float(eval_param_expr(v, self.param_values()))
+        shape = self.raw(dyn, "dynamicsShape") if dyn is not None else "step"
+        dim = self.raw(dyn, "dynamicsDimension") if dyn is not None else "time"
+        amount = abs(self.value(dyn, "value")) if dyn is not None else 0.0
+        dv = v_now - info["speed_now"]
+        if shape == "step" or amount == 0.0:  # at once, as esmini sets it when the action starts
+            info["speed_now"] = v_now
+            return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, "shape": "step"})
+        if dim == "rate":
+            rate = amount
+        elif dim == "time":
+            rate = abs(dv) / amount if dv else 1.0
+        else:  # distance: v1^2 - v0^2 = 2 a d
+            rate = abs(v_now ** 2 - info["speed_now"] ** 2) / (2 * amount) if dv else 1.0
+        rate = max(rate, 0.01)
+        if shape != "step" and amount > 0.0:
+            limit = info.get("max_accel" if dv > 0 else "max_decel")
+            rate = min(rate, limit) if limit is not None and dim in ("time", "rate") and shape == "linear" else rate
+        info["speed_now"] = v_now
+        if shape in ("cubic", "sinusoidal") and dv and dim in ("time", "rate"):
+            return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, **self.speed_dynamics(dyn)})
+        if dv < 0:  # constant deceleration to a speed: exactly `brake`
+            return ClausePlan(keyword="behavior", name="brake",
+                              settings={"decel": E.Num(value=min(rate, 12.0)), "to_speed": v})
+        if shape != "step" and shape != "linear" and dv:
+            self.approx(dyn, f"a {shape} speed change over a distance: `cruise` at {rate:.3g} m/s^2")
+        return ClausePlan(keyword="behavior", name="cruise",
+                          settings={"speed": v, "accel": E.Num(value=rate), "decel": E.Num(value=rate)})
+
+    def speed_profile(self, el, info) -> ClausePlan | None:
+        entries = list(el.iterfind("SpeedProfileEntry"))
+        if not entries or any(e.get("time") is None for e in entries):
+            self.skip(el, "a speed profile without entry times is not translated",
+                      "`speed_profile` needs the time of each point")
+            return None
+        # Entry times are durations from the previous entry: cumulative times from the start.
+        times, clock = [], 0.0
+        for e in entries:
+            clock += max(self.value(e, "time"), 0.0)
+            times.append(clock)
+        if any(b <= a for a, b in zip(times, times[1:])):
+            self.skip(el, "a speed profile whose entries take no time is not translated")
+            return None
+        if el.get("followingMode") == "follow":
+            self.approx(el, "followingMode follow (smoothed within dynamic constraints): `speed_profile` meets "
+                            "every point, as followingMode position")
+        speeds = [self.value(e, "speed") for e in entries]
+        if times[0] > 0.0:  # the language's first point is at its own time: from the current speed
+            pass
+        info["speed_now"] = speeds[-1]
+        return ClausePlan(keyword="behavior", name="speed_profile",
+                          settings={"times": [E.Num(value=x) for x in times],
+                                    "speeds": [E.Num(value=v) for v in speeds]})
+
+    def relative_speed(self, dyn, rel, info) -> ClausePlan | None:
+        ref = self.actor_name(rel)
+        if ref is None:
+            return None
+        value = self.value(rel, "value")
+        kind = rel.get("speedTargetValueType", "delta")
+        if rel.get("continuous", "false") not in ("true", "1"):
+            self.approx(rel, "a relative speed target that is not continuous: followed continuously")
+        other = E.Signal(name=f"speed({ref})")
+        if kind == "factor":
+            speed = E.Binary(op="*", left=E.Num(value=value), right=other)
+        elif value:
+            speed = E.Binary(op="+", left=other, right=E.Num(value=value))
+        else:
+            speed = other
+        settings = {"speed": speed}
+        if dyn is not None:
+            settings.update(self.speed_dynamics(dyn))
+        return ClausePlan(keyword="behavior", name="cruise", settings=settings)
+
+    def speed_dynamics(self, dyn) -> dict:
+        """Shape and rate/duration of a speed change as `cruise` settings (rate: the average)."""
+        shape = self.raw(dyn, "dynamicsShape")
+        dim = self.raw(dyn, "dynamicsDimension")
+        amount = abs(self.value(dyn, "value"))
+        if shape not in PEAK_SLOPE or shape == "quintic":
+            self.approx(dyn, f"dynamics shape {shape}: linear")
+            shape = "linear"
+        out = {"shape": shape} if shape != "linear" else {}
+        if shape == "step":
+            return out
+        if dim == "time":
+            out["duration"] = E.Num(value=amount)
+        elif dim == "rate":
+            rate = max(amount * PEAK_SLOPE[shape], 0.01)
+            out.update(accel=E.Num(value=rate), decel=E.Num(value=rate))
+        else:
+            self.approx(dyn, f"a speed change over a {dim}: at the default rate limits")
+        return out
+
+    def keep_gap(self, el, who: str) -> ClausePlan | None:
+        ref = self.actor_name(el)
+        if ref is None:
+            return None
+        settings = {"target": ref}
+        if el.get("distance") is not None:
+            settings["distance"] = E.Num(value=self.value(el, "distance"))
+        elif el.get("timeGap") is not None:
+            settings["time_gap"] = E.Num(value=self.value(el, "timeGap"))
+        else:
+            self.error(el, "a LongitudinalDistanceAction needs a distance or a timeGap")
+            return None
+        if el.get("displacement") == "leadingReferencedEntity":
+            settings["side"] = "ahead"
+        limits = el.find("DynamicConstraints")
+        for attr, key in (("maxAcceleration", "accel"), ("maxDeceleration", "decel")):
+            src = el if el.get(attr) is not None else limits
+            if src is not None and src.get(attr) is not None:
+                settings[key] = E.Num(value=max(self.value(src, attr), 0.01))
+        if el.get("freespace") in ("false", "0"):
+            if "distance" in settings:  # between reference points (the actors' centres here)
+                half = 0.5 * (self.size(who)[0] + self.size(ref)[0])
+                settings["distance"] = E.Num(value=max(settings["distance"].value - half, 0.0))
+            else:
+                self.approx(el, "a time gap between reference points: kept as a bumper-to-bumper gap")
+        return ClausePlan(keyword="behavior", name="keep_gap", settings=settings)

@@ -1,0 +1,685 @@
+"""The storyboard: Init, stories, acts, maneuver groups, maneuvers and events, their start
+triggers, sequences of events, and the stop trigger."""
+
+from dataclasses import dataclass
+from xml.etree.ElementTree import Element  # an empty <Init> only: files are parsed with defusedxml
+
+from addt_dsl import expr as E
+from addt_dsl import units
+from addt_dsl.expr import eval_param_expr
+from addt_dsl.interop.openscenario.conditions import EDGES
+from addt_dsl.interop.openscenario.entities import safe_name
+from addt_dsl.interop.openscenario.params import all_of, any_of, plus_expr
+from addt_dsl.interop.openscenario.positions import Placement
+from addt_dsl.interop.openscenario.registry import GLOBAL_ACTIONS, INIT_ACTIONS, INIT_GLOBAL_ACTIONS, STORYBOARD
+from addt_dsl.interop.openscenario.xml import Stop, child_at, first_of, only_child
+from addt_dsl.plan import ClausePlan, GroupPlan, TriggerPlan
+
+DEFAULT_DURATION_S = 60.0
+MAX_DURATION_S = 3600.0
+
+
+# StoryboardElementStateCondition states on another actor's event, as step states.
+STATE_SIGNAL = {"startTransition": "started",
+                "endTransition": "ended", "completeState": "ended"}
+
+
+def steps_of(step: TriggerPlan):
+    """A step and every step of its groups, depth first."""
+    yield step
+    for sub in step.group.steps if step.group is not None else ():
+        yield from steps_of(sub)
+
+
+def labelled(step: TriggerPlan, clause: ClausePlan, label: str, found: list) -> TriggerPlan:
+    """The step tree with the first step that starts `clause` named (its name if it has
+    one, else `label`); the name used is appended to `found`."""
+    if not found and step.clause == clause:
+        found.append(step.label or label)
+        return step if step.label else step.model_copy(update={"label": label})
+    if step.group is None:
+        return step
+    steps = [labelled(s, clause, label, found) for s in step.group.steps]
+    return step.model_copy(update={"group": step.group.model_copy(update={"steps": steps})})
+
+
+def speed_into_trajectory(clauses: list[ClausePlan]) -> list[ClausePlan]:
+    """A speed action and an untimed trajectory in one event: OpenSCENARIO moves the entity
+    along the trajectory at the speed the speed action sets; the language's trajectory holds
+    the longitudinal channel itself, so it takes that speed (and its rate limits)."""
+    cruise = next((c for c in clauses if c.name == "cruise" and c.settings.get("speed") is not None
+                   and not any(isinstance(n, E.Signal) for n in E.walk(c.settings["speed"]))), None)
+    traj = next((c for c in clauses if c.name == "trajectory" and "times" not in c.settings
+                 and "speed" not in c.settings), None)
+    if cruise is None or traj is None:
+        return clauses
+    extra = {k: cruise.settings[k] for k in ("accel", "decel") if k in cruise.settings}
+    merged = traj.model_copy(update={"settings": {**traj.settings, "speed": cruise.settings["speed"], **extra}})
+    return [merged if c is traj else c for c in clauses if c is not cruise]
+
+
+def duration_of(clause: ClausePlan) -> float:
+    """How long a behaviour runs [s], where its settings say: `duration`, or a timed
+    trajectory's last vertex time; else 0."""
+    d = clause.settings.get("duration")
+    times = clause.settings.get("times")
+    if not isinstance(d, E.Num) and isinstance(times, list) and times and isinstance(times[-1], E.Num):
+        d = times[-1]
+    return float(d.value) if isinstance(d, E.Num) else 0.0
+
+# The storyboard's structure (walked by `Storyboard`, not dispatched): each element under its
+# parent, as the schema names it (docs/osc_schema.py).
+for _path, _status, _note in (
+        ("Storyboard/Init", "exact", "actions at the start: positions, speeds, routes, environment, lights"),
+        ("Storyboard/Story", "exact", "stories run from the start"),
+        ("Storyboard/StopTrigger", "approx", "a simulation time alone: the run's duration; other conditions "
+                                             "end the run when they hold (`end when`); without one, 60 s (W0802)"),
+        ("Story/Act", "exact", "acts start with their story"),
+        ("Story/ParameterDeclarations", "exact", "one scope with the global parameters (a global value wins)"),
+        ("Act/ManeuverGroup", "approx", "one actor per group (more: refused); maximumExecutionCount above 1 refused"),
+        ("Act/StartTrigger", "approx", "a simulation time or the story running; other conditions refused"),
+        ("Act/StopTrigger", "refused", "the language has no act that ends; CARLA's criteria_* groups are oracles"),
+        ("ManeuverGroup/Actors", "exact", "the actor the group's private actions drive"),
+        ("ManeuverGroup/CatalogReference", "refused", "maneuver catalogs are not read"),
+        ("ManeuverGroup/Maneuver", "exact", "maneuvers run with their group"),
+        ("Maneuver/Event", "approx", "each action a step; priority and maximumExecutionCount as `when C repeat N` "
+                                    "when a condition of its own starts it"),
+        ("Maneuver/ParameterDeclarations", "exact", "one scope with the global parameters (a global value wins)"),
+        ("Event/Action", "exact", "private actions and traffic signal actions (see the actions)"),
+        ("Event/StartTrigger", "approx", "condition groups as `any`/`all`, edges and delays; several edges or "
+                                         "delays act on the whole condition (W0802)"),
+        ("Init/Actions", "exact", "see the actions in Init"),
+        ("InitActions/GlobalAction", "approx", "environment and traffic signals; others refused"),
+        ("InitActions/Private", "exact", "see the actions in Init"),
+        ("InitActions/UserDefinedAction", "refused", "a user-defined action means nothing to the twin"),
+        ("Private/PrivateAction", "exact", "see the actions in Init"),
+        ("Trigger/ConditionGroup", "exact", "groups are alternatives (`or`), conditions in a group `and`"),
+        ("ConditionGroup/Condition", "exact", "see the conditions; delay and conditionEdge kept"),
+):
+    STORYBOARD.declare(_path, _status, _note)
+
+# Global actions, by where they stand (Init, an event): the inner element each translation takes,
+# found along its path under <GlobalAction>, in the order tried.
+GLOBAL_PATHS = {"global action in Init": (("EnvironmentAction", ("EnvironmentAction", "Environment")),
+                                          ("TrafficSignalAction", ("InfrastructureAction", "TrafficSignalAction"))),
+                "global action": (("TrafficSignalAction", ("InfrastructureAction", "TrafficSignalAction")),
+                                  ("EnvironmentAction", ("EnvironmentAction",)))}
+# The traffic signal actions are translated by TrafficSignalAction's entry (documented here).
+for _registry, _where in ((GLOBAL_ACTIONS, "a light step"), (INIT_GLOBAL_ACTIONS, "at time 0")):
+    _registry.declare("TrafficSignalStateAction", "exact", f"`light C state S` ({_where}), C the signal's controller "
+                      "(setting some of a controller's signals switches it all, W0802)")
+    _registry.declare("TrafficSignalControllerAction", "approx", f"`light C state program` ({_where}): the program "
+                      "resumes its own cycle, not the named phase (W0802)")
+for _registry in (GLOBAL_ACTIONS, INIT_GLOBAL_ACTIONS):
+    for _name, _note in (
+            ("EntityAction", "the language's actors exist for the whole run (no adding or deleting)"),
+            ("ParameterAction", "parameters are constant during a run"),
+            ("VariableAction", "the language has no variables"),
+            ("TrafficAction", "the twin has no traffic swarms, sources, sinks or areas"),
+            ("SetMonitorAction", "monitors are the language's oracles, not set by actions"),
+            ("UserDefinedAction", "a user-defined action means nothing to the twin"),
+    ):
+        _registry.declare(_name, "refused", _note)
+
+
+@dataclass(frozen=True)
+class AfterEvent:
+    """A start on another event's state: that event, the delay [s], the state, the condition element."""
+    ref: str
+    delay: float
+    state: str
+    cond: object
+
+    def fields(self) -> tuple:
+        return self.ref, self.delay, self.state, self.cond
+
+
+@dataclass(frozen=True)
+class Start:
+    """How a step starts: the fields of its TriggerPlan (at_s, condition, edge, delay_s, hold_s;
+    none: at once), or, `after` another event, linked once every event is read."""
+    fields: dict
+    after: AfterEvent | None = None
+
+
+@dataclass(frozen=True)
+class EventStep:
+    """A translated event: its actor and the clause of its (first) action."""
+    actor: str
+    clause: ClausePlan
+
+
+@dataclass(frozen=True)
+class PendingEvent:
+    """An event started by another event: linked at the end (`link_sequences`)."""
+    name: str
+    actor: str
+    after: AfterEvent
+    clause: ClausePlan
+
+
+@dataclass(frozen=True)
+class Anchor:
+    """An exported group's no-op event: the actor and the start of the group it starts."""
+    actor: str
+    fields: dict
+
+
+@dataclass(frozen=True)
+class InitLater:
+    """Init actions translated once every actor is placed: (RoutingAction, actor) of a trajectory
+    from the start, (LongitudinalAction, actor) of a speed relative to another entity's."""
+    trajectories: list
+    relative: list
+
+
+# Init's wrappers: the inner actions tried, in this order.
+INIT_WRAPPERS = {"RoutingAction": ("AssignRouteAction", "FollowTrajectoryAction"),
+                 "LongitudinalAction": ("SpeedAction",)}
+
+
+class Storyboard:
+    # -- init
+
+    def init(self, init) -> None:
+        if init is None:  # no <Init>: every entity at its documented default place
+            init = Element("Init")
+        pairs = []
+        for action in init.iterfind("Actions/GlobalAction"):
+            if not self.global_action(INIT_GLOBAL_ACTIONS, action, "", pairs):
+                self.skip(action, "global actions other than the environment (traffic, parameters, "
+                                  "signals) are not translated")
+        # a light's state in Init: a step at time 0
+        self.light_steps += [TriggerPlan(clause=c) for c in self.light_event(pairs)]
+        later = InitLater([], [])
+        for private in init.iterfind("Actions/Private"):
+            who = self.actor_name(private)
+            if who is None or who not in self.actors:
+                continue
+            for pa in private.iterfind("PrivateAction"):
+                act = only_child(pa)
+                if act is not None:
+                    self.init_action(act, who, later)
+        init_trajectories, init_relative = later.trajectories, later.relative
+        for act, who in init_relative:  # relative to another entity's initial speed
+            rel = child_at(act, "SpeedAction", "SpeedActionTarget", "RelativeTargetSpeed")
+            ref = self.actor_name(rel)
+            if ref is None or ref not in self.actors:
+                continue
+            base = self.actors[ref].get("speed", E.Num(value=0.0))
+            value = self.number(rel, "value", units.SPEED if rel.get("speedTargetValueType", "delta") == "delta"
+                                else units.DIMENSIONLESS)
+            op = "*" if rel.get("speedTargetValueType", "delta") == "factor" else "+"
+            self.actors[who]["speed"] = E.Binary(op=op, left=value, right=base) if op == "*" else plus_expr(base, value)
+            self.actors[who]["speed_now"] = eval_param_expr(self.actors[who]["speed"], self.param_values())
+            if rel.get("continuous", "false") in ("true", "1") and (who != "ego" or self.scripted_ego):
+                clause = self.relative_speed(child_at(act, "SpeedAction", "SpeedActionDynamics"), rel, self.actors[who])
+                if clause is not None:
+                    self.actors[who]["behaviors"].append(clause)
+        for act, who in init_trajectories:  # no TeleportAction: start at the first vertex
+            first_vertex = act.find("FollowTrajectoryAction//Polyline/Vertex/Position")
+            if who not in self.placed and first_vertex is not None:
+                got = self.position(first_vertex, who)
+                if got is not None:
+                    self.placed[who] = got
+                    self.actors[who]["lane_now"] = got.lane
+        for who, info in self.actors.items():
+            if who not in self.placed:
+                self.approx(info["el"], f"{who} has no translated initial position: lane -1 at s = 0 m of the "
+                                        "first road")
+                first = self.road(next(iter(self.network.roads)), info["el"])
+                self.placed[who] = Placement(first, -1, E.Num(value=0.0), E.Num(value=0.0))
+        for act, who in init_trajectories:  # a trajectory from the start: once every actor is placed
+            clause = self.trajectory(child_at(act, "FollowTrajectoryAction"), who)
+            if clause is not None:
+                self.actors[who]["behaviors"].append(clause)
+
+    # -- stop trigger
+
+    def global_action(self, registry, action, event: str, lights: list) -> bool:
+        """A GlobalAction through `registry` (Init's or an event's), its inner actions tried in the
+        order of GLOBAL_PATHS; the light clauses it sets are added to `lights` as (element,
+        clause) pairs. False: no translation takes it."""
+        for name, path in GLOBAL_PATHS[registry.family]:
+            translate = registry.translator(name)
+            if child_at(action, *path) is not None and translate is not None:
+                translate(self, action, event, lights)
+                return True
+        return False
+
+    @INIT_GLOBAL_ACTIONS.register("EnvironmentAction", "approx", "fog, rain and the sun's elevation; other "
+                                  "precipitation W0802")
+    def init_environment(self, action, event: str, lights: list) -> None:
+        self.environment_action(child_at(action, "EnvironmentAction", "Environment"))
+
+    @INIT_GLOBAL_ACTIONS.register("TrafficSignalAction", "approx", "see TrafficSignalStateAction and "
+                                  "TrafficSignalControllerAction")
+    def init_lights(self, action, event: str, lights: list) -> None:
+        lights += [(action, c) for c in self.light_clauses(action)]
+
+    @GLOBAL_ACTIONS.register("TrafficSignalAction", "approx", "see TrafficSignalStateAction and "
+                             "TrafficSignalControllerAction")
+    def event_lights(self, body, event: str, lights: list) -> None:
+        exact = ((self.sidecar or {}).get("lights") or {}).get("steps", {}).get(event)
+        if exact and exact.get("name") not in self.light_ctls:
+            self.error(body, f"the side file's light step {event!r} names controller "
+                             f"{exact.get('name')!r}, which this file does not have")
+            raise Stop
+        lights += [(body, ClausePlan.model_validate(exact))] if exact else \
+            [(body, c) for c in self.light_clauses(body)]
+
+    @GLOBAL_ACTIONS.register("EnvironmentAction", "refused", "the language has no environment steps: "
+                             "`environment { }` holds for the whole run")
+    def event_environment(self, body, event: str, lights: list) -> None:
+        self.skip(body.find("EnvironmentAction"), "an environment change in an event is not translated: "
+                  "`environment { }` holds for the whole run (the language has no environment steps)",
+                  "an EnvironmentAction in Init is translated")
+
+    def init_action(self, act, who: str, later: "InitLater") -> None:
+        """A private action of Init, dispatched through registry.INIT_ACTIONS (a wrapper's inner
+        actions in the order of INIT_WRAPPERS); what no translation takes is refused."""
+        for name in INIT_WRAPPERS.get(act.tag, (act.tag,)):
+            inner = act if name == act.tag else act.find(name)
+            translate = INIT_ACTIONS.translator(name)
+            if inner is not None and translate is not None and translate(self, inner, who, act, later):
+                return
+        self.skip(act, f"<{act.tag}> in Init is not translated (positions and speeds are)")
+
+    @INIT_ACTIONS.register("TeleportAction", "exact", "the actor's start position (see the position types)")
+    def init_teleport(self, act, who: str, wrapper, later) -> bool:
+        got = self.position(act.find("Position"), who)
+        if got is not None:
+            self.placed[who] = got
+            self.actors[who]["lane_now"] = got.lane
+            self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
+        return True
+
+    @INIT_ACTIONS.register("AssignRouteAction", "exact", "the actor's route (inline or from a route catalog)")
+    def init_route(self, el, who: str, wrapper, later) -> bool:
+        route_el = self.route_element(el)
+        if route_el is not None:
+            self.actors[who]["route_el"] = route_el
+        return True
+
+    @INIT_ACTIONS.register("FollowTrajectoryAction", "approx", "a trajectory from the start (as in an event); "
+                           "the ego's only when it is scripted")
+    def init_trajectory(self, el, who: str, wrapper, later) -> bool:
+        if who != "ego" or self.scripted_ego:
+            later.trajectories.append((wrapper, who))
+            return True
+        return False
+
+    @INIT_ACTIONS.register("SpeedAction", "exact", "the start speed (absolute, or relative to another entity's "
+                           "start speed); with dynamics, a speed change from standstill")
+    def init_speed(self, speed, who: str, wrapper, later) -> bool:
+        act = wrapper
+        if child_at(speed, "SpeedActionTarget", "AbsoluteTargetSpeed") is not None:
+            target = child_at(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
+            dyn = child_at(act, "SpeedAction", "SpeedActionDynamics")
+            if dyn is not None and dyn.get("dynamicsShape", "step") != "step" \
+                    and (who != "ego" or self.scripted_ego) \
+                    and self.value(dyn, "value", default=0.0) > 0:
+                # A speed change with dynamics in Init starts from standstill (OpenSCENARIO:
+                # Init actions run as the simulation starts) and takes its time.
+                clause = self.speed_action(dyn, target, self.actors[who])
+                if clause is not None:
+                    self.actors[who]["behaviors"].append(clause)
+                return True
+            self.actors[who]["speed"] = self.number(target, "value", units.SPEED)
+            self.actors[who]["speed_now"] = self.value(target, "value")
+            return True
+        if child_at(speed, "SpeedActionTarget", "RelativeTargetSpeed") is not None:
+            later.relative.append((act, who))
+            return True
+        return False
+
+    @INIT_ACTIONS.register("ControllerAction", "approx", "the entity follows its actions, as under OpenSCENARIO's "
+                           "default controller (W0802)")
+    @INIT_ACTIONS.register("ActivateControllerAction", "approx", "as ControllerAction")
+    def init_controller(self, act, who: str, wrapper, later) -> bool:
+        self.approx(act, "a controller: the entity follows its actions, as under the default "
+                         "controller of OpenSCENARIO (the driver models of esmini are not emulated)")
+        return True
+
+    def stop_trigger(self, trigger) -> float:
+        """The run's duration: a stop condition group that is a simulation time alone (the
+        rest of the stop trigger is `end when ...`, `end_trigger`)."""
+        for group in trigger.iterfind("ConditionGroup") if trigger is not None else ():
+            conds = list(group.iterfind("Condition"))
+            time = conds[0].find("ByValueCondition/SimulationTimeCondition") if len(conds) == 1 else None
+            if time is not None and (time.get("rule") or "").startswith("greater"):
+                return min(max(self.value(time, "value") + self.value(conds[0], "delay", units.TIME, 0.0), 0.1),
+                           MAX_DURATION_S)
+        others = trigger is not None and any(True for _ in trigger.iterfind("ConditionGroup/Condition"))
+        self.approx(trigger, f"no simulation-time stop trigger: at most {DEFAULT_DURATION_S:g} s"
+                    + (" (the run ends when its stop condition holds)" if others else ""))
+        return DEFAULT_DURATION_S
+
+    # -- storyboard
+
+    def story(self, story) -> None:
+        self.story_name = story.get("name", "")
+        for act in story.iterfind("Act"):
+            self.act_name = act.get("name", "")
+            act_at = None
+            groups = list(act.iterfind("StartTrigger/ConditionGroup"))
+            for cond in act.iterfind("StartTrigger/ConditionGroup/Condition"):
+                time = cond.find("ByValueCondition/SimulationTimeCondition")
+                sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+                if len(groups) > 1:
+                    self.skip(cond, "an act start trigger of several condition groups is not translated")
+                elif time is not None and (time.get("rule") or "").startswith("greater") \
+                        and self.value(cond, "delay", units.TIME, 0.0) == 0.0:
+                    value = self.value(time, "value")
+                    act_at = max(act_at or 0.0, value) if value > 0 else act_at
+                elif sesc is not None and self.raw(sesc, "storyboardElementType") == "story" \
+                        and self.raw(sesc, "storyboardElementRef") == self.story_name \
+                        and self.raw(sesc, "state") in ("startTransition", "runningState") \
+                        and self.value(cond, "delay", units.TIME, 0.0) == 0.0:
+                    continue  # its own story running: the act starts with it
+                else:
+                    self.skip(cond, "act start conditions other than the simulation time and the story running "
+                                    "are not translated")
+            for stop in act.iterfind("StopTrigger/ConditionGroup"):
+                if all((c.get("name") or "").startswith("criteria_") for c in stop.iterfind("Condition")):
+                    continue  # CARLA ScenarioRunner's pass criteria: oracles (pass_criteria)
+                self.skip(stop, "act stop triggers are not translated")
+            for group in act.iterfind("ManeuverGroup"):
+                self.maneuver_group(group, act_at)
+        self.link_sequences()
+
+    def maneuver_group(self, group, act_at) -> None:
+        refs = [self.actor_name(r) for r in group.iterfind("Actors/EntityRef")]
+        refs = [r for r in refs if r is not None]
+        if int(self.value(group, "maximumExecutionCount", default=1.0)) > 1:
+            self.skip(group, "a maneuver group that runs more than once is not translated")
+        if len(refs) > 1:
+            self.skip(group, f"maneuver group with {len(refs)} actors: translated for one actor only")
+        who = refs[0] if refs else None  # no actor: its events' global actions (light steps) only
+        maneuvers = list(group.iterfind("Maneuver"))
+        if group.find("CatalogReference") is not None:
+            self.skip(group.find("CatalogReference"), "maneuver catalogs are not translated")
+        for maneuver in maneuvers:
+            self.maneuvers.setdefault(maneuver.get("name", ""), []).extend(
+                e.get("name", "") for e in maneuver.iterfind("Event"))
+            for event in maneuver.iterfind("Event"):
+                self.event(event, who, act_at)
+
+    def event(self, event, who: str, act_at) -> None:
+        name = event.get("name", "")
+        if name in (self.sidecar or {}).get("group_events", ()):
+            return  # a step of a group: the side file has the group (appended in `plan`)
+        actions = list(event.iterfind("Action"))
+        clauses, lights = [], []
+        for action in actions:
+            body = only_child(action)
+            if body is None:
+                continue
+            if body.tag == "GlobalAction" and self.global_action(GLOBAL_ACTIONS, body, name, lights):
+                continue
+            if body.tag != "PrivateAction":
+                self.skip(body, f"<{body.tag}> is not translated (private actions are)")
+                continue
+            if who is None:
+                self.skip(body, f"<{first_of(only_child(body), body).tag}> in a maneuver group without actors is "
+                                "not translated")
+                continue
+            inner = only_child(body)
+            if inner is None:
+                continue
+            if inner.tag == "VisibilityAction" and len(actions) == 1:
+                # An exported group's anchor (a no-op): the events it starts form one group.
+                step = self.start(event.find("StartTrigger"), who, act_at)
+                if step is not None and step.after is None:
+                    self.anchors[name] = Anchor(who, step.fields)
+                return
+            exact = (self.sidecar or {}).get("behaviors", {}).get(name)
+            clause = ClausePlan.model_validate(exact["clause"]) if exact else self.private_action(inner, who)
+            if clause is not None:
+                clauses.append(clause)
+        if lights:
+            self.light_step(event, self.light_event(lights), who, act_at)
+        if not clauses:
+            return
+        trigger = event.find("StartTrigger")
+        step = self.start(trigger, who, act_at, name)
+        if step is None:
+            return
+        fields = step.fields
+        clauses = speed_into_trajectory(clauses)
+        if len(clauses) > 1:
+            self.approx(event, f"event '{name}' starts {len(clauses)} actions: one step each, same start")
+        runs = int(self.value(event, "maximumExecutionCount", default=1.0))
+        if runs > 1:
+            # It starts again when its actions have ended and its condition counts again.
+            if step.after is not None or fields.get("condition") is None or len(clauses) > 1:
+                self.skip(event, f"an event that runs up to {runs} times without a start condition of its own, or "
+                                 "with several actions, is not translated",
+                          "one action started by a condition translates (`when C repeat N`)")
+                return
+            fields = {**fields, "repeat": min(runs, 1_000_000)}
+        for clause in clauses:
+            self.events.setdefault(name, EventStep(who, clause))
+            if step.after is not None:
+                self.pending.append(PendingEvent(name, who, step.after, clause))
+            elif not fields:
+                self.actors[who]["behaviors"].append(clause)
+            else:
+                self.actors[who]["triggers"].append(TriggerPlan(clause=clause, **fields))
+
+    def light_step(self, event, clauses: list[ClausePlan], who, act_at) -> None:
+        if not clauses:
+            return
+        step = self.start(event.find("StartTrigger"), who, act_at, event.get("name", ""))
+        if step is None:
+            return
+        if step.after is not None:
+            self.skip(step.after.cond, f"light step '{event.get('name')}' starts on another event: not translated",
+                      "a lights block's steps start at a time, after a delay or on a condition")
+            return
+        self.light_steps += [TriggerPlan(clause=c, **step.fields) for c in clauses]
+
+    def start(self, trigger, who: str, act_at, event: str = ""):
+        """How the step starts (a Start: the fields of a TriggerPlan, or after another event); None:
+        dropped."""
+        groups = list(trigger.iterfind("ConditionGroup")) if trigger is not None else []
+        alternatives, at_s, holds, edges = [], act_at, [], []
+        for group in groups:
+            conj = []
+            for cond in group.iterfind("Condition"):
+                sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+                if sesc is not None and self.raw(sesc, "storyboardElementType") in ("act", "story") \
+                        and self.raw(sesc, "state") in ("startTransition", "runningState") \
+                        and self.raw(sesc, "storyboardElementRef") in (getattr(self, "act_name", None),
+                                                                       getattr(self, "story_name", None)) \
+                        and self.value(cond, "delay", units.TIME, 0.0) == 0.0:
+                    continue  # the event's own act (story) has started: true whenever the event is armed
+                if sesc is not None and len(groups) == 1 and len(list(group)) == 1:
+                    if self.raw(sesc, "storyboardElementType") in ("event", "action"):
+                        return Start({}, AfterEvent(self.raw(sesc, "storyboardElementRef"),
+                                                    self.value(cond, "delay", units.TIME, 0.0),
+                                                    self.raw(sesc, "state"), cond))
+                time = cond.find("ByValueCondition/SimulationTimeCondition")
+                if time is not None and (time.get("rule") or "").startswith("greater") and len(groups) == 1:
+                    value = self.value(time, "value")
+                    at_s = max(at_s or 0.0, value) if value > 0 else at_s
+                    continue
+                formula = self.condition(cond, who)
+                if formula is None:
+                    return None
+                conj.append(formula)
+                holds.append((self.value(cond, "delay", units.TIME, 0.0), cond))
+                edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
+            if conj:
+                alternatives.append(all_of(conj))
+        fields = {}
+        if at_s is not None:
+            fields["at_s"] = E.Num(value=at_s)
+        if alternatives:
+            fields["condition"] = any_of(alternatives)
+        # One condition (the usual case): its edge and delay exactly. Several: the step's edge
+        # and delay act on the whole formula, exact when all conditions agree.
+        if any(e for e, _ in edges):
+            if len(edges) > 1:
+                self.approx(edges[0][1], "several conditions with edges: the edge applies to the whole start "
+                                         "condition")
+            fields["edge"] = next(e for e, _ in edges if e)
+        delays = sorted({d for d, _ in holds})
+        if delays and delays[-1] > 0:
+            delay = delays[-1]
+            if len(delays) > 1:
+                self.approx(holds[0][1], f"conditions with different delays: the step fires {delay:g} s after its "
+                                         "whole start condition")
+            if (self.sidecar or {}).get("holds", {}).get(event) == delay:  # an exported `when C for D`
+                fields["hold_s"] = E.Num(value=delay)
+                fields.pop("edge", None)
+            else:
+                fields["delay_s"] = E.Num(value=delay)
+        return Start(fields)
+
+    # -- sequences: an event started by another event of the same actor
+
+    def link_sequences(self) -> None:
+        grouped: dict[str, list] = {}
+        for p in self.pending:
+            name, who, clause, (ref, delay, state, cond) = p.name, p.actor, p.clause, p.after.fields()
+            if ref in self.anchors and self.anchors[ref].actor == who:
+                grouped.setdefault(ref, []).append(TriggerPlan(clause=clause, after_s=E.Num(value=delay)
+                                                               if delay else None))
+                self.events[name] = EventStep(who, clause)
+        for ref, steps in grouped.items():
+            anchor = self.anchors[ref]
+            self.actors[anchor.actor]["triggers"].append(TriggerPlan(group=GroupPlan(mode="parallel", steps=steps),
+                                                                     **anchor.fields))
+        other_actor = []  # after the sequences are built: a named step never gets lifted
+        for p in self.pending:
+            name, who, clause, (ref, delay, state, cond) = p.name, p.actor, p.clause, p.after.fields()
+            if ref in grouped:
+                continue
+            first = self.events.get(ref)
+            if first is not None and first.actor != who and state in STATE_SIGNAL:
+                other_actor.append((name, who, (ref, delay, state, cond), clause, first))
+                continue
+            if first is None or first.actor != who:
+                self.skip(cond, f"event '{name}' starts on '{ref}', "
+                                + ("not an event of the same actor" if first else "which is not translated"),
+                          "a step after another actor's event has no form in the language")
+                continue
+            after = delay
+            if state in ("endTransition", "completeState"):
+                after += duration_of(first.clause)
+            info = self.actors[who]
+            prev_clause = first.clause
+            # Lift the first step into a sequence that also starts this one.
+            for i, tr in enumerate(info["triggers"]):
+                if tr.clause == prev_clause or (tr.group and tr.group.steps and tr.group.steps[0].clause ==
+                                                prev_clause):
+                    steps = list(tr.group.steps) if tr.group else [TriggerPlan(clause=prev_clause)]
+                    steps.append(TriggerPlan(clause=clause, after_s=E.Num(value=after) if after else None))
+                    # The step's start (its hold and name too) now starts the sequence.
+                    info["triggers"][i] = tr.model_copy(update={"clause": None,
+                                                                "group": GroupPlan(mode="sequence", steps=steps)})
+                    break
+            else:
+                if prev_clause in info["behaviors"]:
+                    info["triggers"].append(TriggerPlan(after_s=E.Num(value=after), clause=clause)
+                                            if after else TriggerPlan(at_s=E.Num(value=0.0), clause=clause))
+                else:
+                    self.skip(cond, f"event '{name}' follows '{ref}' in a way the language cannot say")
+                    continue
+            self.events[name] = EventStep(who, clause)
+        for name, who, (ref, delay, state, cond), clause, first in other_actor:
+            if not self.after_other_actor(who, ref, delay, state, cond, clause, first):
+                self.skip(cond, f"event '{name}' starts on '{ref}' of '{first.actor}', which is not a step",
+                          "only an event that starts a step can be named for `started`/`ended`")
+                continue
+            self.events[name] = EventStep(who, clause)
+
+    def after_other_actor(self, who, ref, delay, state, cond, clause, first) -> bool:
+        """An event on another actor's event: that event's step gets a name and this one
+        starts on its state (`when ended(lead.brake) delayed D then ...`)."""
+        state_of = self.event_state(ref, state)
+        if state_of is None:
+            return False
+        self.actors[who]["triggers"].append(TriggerPlan(condition=state_of, clause=clause,
+                                                        delay_s=E.Num(value=delay) if delay else None))
+        return True
+
+    def event_state(self, ref: str, state: str):
+        """`started(A.x) > 0` / `ended(A.x) > 0` for an event, naming its step (an event
+        at time 0 becomes a named step `after 0 s`); None if the event has no step."""
+        first = self.events.get(ref)
+        if first is None or state not in STATE_SIGNAL:
+            return None
+        other = first.actor
+        info = self.actors[other]
+        taken = {tr.label for a in self.actors.values() for t in a["triggers"] for tr in steps_of(t) if tr.label}
+        if not any(tr.clause == first.clause for t in info["triggers"] for tr in steps_of(t)):
+            j = next((j for j, c in enumerate(info["behaviors"]) if c == first.clause), None)
+            if j is None:
+                return None
+            clause = info["behaviors"].pop(j)
+            info["triggers"].append(TriggerPlan(after_s=E.Num(value=0.0), clause=clause))
+        found: list[str] = []
+        info["triggers"] = [labelled(t, first.clause, safe_name(ref, taken), found) for t in info["triggers"]]
+        label = found[0]
+        # A step state is a formula: the signal above 0, as the compiler lowers it.
+        return E.Binary(op=">", left=E.Signal(name=f"{STATE_SIGNAL[state]}({other}.{label})"), right=E.Num(value=0.0))
+
+    def end_trigger(self, trigger) -> None:
+        """The storyboard's stop trigger beyond its simulation time (the run's duration):
+        `end when ...`. Element states of events and maneuvers, and entity conditions."""
+        if trigger is None:
+            return
+        alternatives, delays, edges, at_s = [], [], [], None
+        groups = list(trigger.iterfind("ConditionGroup"))
+        for group in groups:
+            conj, timed = [], None
+            for cond in group.iterfind("Condition"):
+                if (cond.get("name") or "").startswith("criteria_"):
+                    continue  # CARLA ScenarioRunner's pass criteria: oracles (pass_criteria)
+                time = cond.find("ByValueCondition/SimulationTimeCondition")
+                if time is not None and (time.get("rule") or "").startswith("greater"):
+                    timed = self.value(time, "value")  # alone: the duration
+                    continue
+                sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+                if sesc is not None:
+                    kind, ref, state = (self.raw(sesc, "storyboardElementType"), self.raw(sesc, "storyboardElementRef"),
+                                        self.raw(sesc, "state"))
+                    events = [ref] if kind in ("event", "action") else self.maneuvers.get(ref) \
+                        if kind == "maneuver" and state in ("endTransition", "completeState") else None
+                    parts = [self.event_state(e, state) for e in events] if events else [None]
+                    if not parts or any(p is None for p in parts):
+                        self.skip(cond, f"a stop trigger on the {kind} '{ref}' ({state}) is not translated",
+                                  "events and maneuvers that translate to steps are")
+                        return
+                    conj.append(all_of(parts))
+                else:
+                    formula = self.condition(cond, "ego")
+                    if formula is None:
+                        return
+                    conj.append(formula)
+                delays.append((self.value(cond, "delay", units.TIME, 0.0), cond))
+                edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
+            if conj and timed is not None:
+                if len([g for g in groups if list(g)]) > 1:
+                    self.skip(group, "a stop condition group that mixes the simulation time with other conditions, "
+                                     "beside other groups, is not translated")
+                    return
+                at_s = timed  # `end at T when C`
+            if conj:
+                alternatives.append(all_of(conj))
+        if not alternatives:
+            return
+        fields = {"condition": any_of(alternatives)}
+        if at_s is not None and at_s > 0:
+            fields["at_s"] = E.Num(value=at_s)
+        if any(e for e, _ in edges):
+            if len(edges) > 1:
+                self.approx(edges[0][1], "several stop conditions with edges: the edge applies to the whole condition")
+            fields["edge"] = next(e for e, _ in edges if e)
+        if delays and max(d for d, _ in delays) > 0:
+            if len({d for d, _ in delays}) > 1:
+                self.approx(delays[0][1], "stop conditions with different delays: the run ends the longest after")
+            fields["delay_s"] = E.Num(value=max(d for d, _ in delays))
+        self.end = TriggerPlan(**fields)
