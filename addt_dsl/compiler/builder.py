@@ -339,6 +339,9 @@ class Builder:
         name, settings = items
         return ast.EnvItem(span, str(name), self._tspan(name), settings)
 
+    def b_env_name(self, span, items):
+        return items[0]
+
     def b_env_step(self, span, items):
         return ast.EnvStep(span, tuple(i for i in items if isinstance(i, ast.StepStart)), items[-1])
 

@@ -687,12 +687,13 @@ def _environment(run: _Run, models: list[ClausePlan], name: str = "addt_environm
     if "light" in got:
         elevation = Light(got["light"]).elevation()  # a time of day as the elevation it gives
         sun = xosc.Sun(SUN_LUX * max(0.0, math.sin(elevation)), 0.0, elevation)
-    for other in sorted(got.keys() - {"rain", "fog", "light"}):
+    for other in sorted(got.keys() - {"rain", "fog", "light", "road"}):
         run.carried.append(f"environment model {other} (side file only)")
-    weather = xosc.Weather(sun=sun, fog=fog, precipitation=precipitation)
+    road = xosc.RoadCondition(got["road"]["friction"]) if "road" in got else None
+    weather = xosc.Weather(sun=sun, fog=fog, precipitation=precipitation) if got.keys() - {"road"} else None
     run.carried.append(f"environment as an EnvironmentAction ({name}; the sensor models' settings exactly in the "
                        "side file)")
-    return xosc.EnvironmentAction(xosc.Environment(name, weather=weather))
+    return xosc.EnvironmentAction(xosc.Environment(name, weather=weather, roadcondition=road))
 
 
 def _environment_group(run: _Run) -> xosc.ManeuverGroup | None:

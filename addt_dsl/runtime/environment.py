@@ -32,6 +32,10 @@ class EnvironmentModel:
         """The frame as the conditions leave it (the same object if unaffected)."""
         return frame
 
+    def friction_scale(self) -> float:
+        """The factor on the tyre-road friction coefficient mu these conditions give."""
+        return 1.0
+
 
 def sun_elevation(time_s: float, latitude_rad: float, day: float) -> float:
     """The sun's elevation [rad] at local solar time `time_s` [s since midnight]: declination
@@ -185,3 +189,25 @@ class Light(EnvironmentModel):
         out = noisy / self.FULL_WELL_E * 255.0 * gain
         data = dict(frame.data, image=np.clip(np.rint(out), 0, 255).astype(np.uint8))
         return type(frame)(frame.sensor, frame.stamp_s, data)
+
+
+@ENVIRONMENTS.register
+class Road(EnvironmentModel):
+    keyword = "road"
+    params = (ParamSpec("friction", units.DIMENSIONLESS, required=True, low=0.05, high=2.0,
+                        doc="scale on the tyre-road friction coefficient (OpenSCENARIO's frictionScaleFactor; "
+                            "0.5: a wet road, 0.1: ice)"),)
+    doc = ("Vehicle dynamics: the ego's tyre forces saturate at friction x mu x Fz (Fiala brush model) from "
+           "the moment the model acts; the stack's own braking limit keeps the declared mu (it is not told). "
+           "Agents follow their scripts. Sensors: unaffected.")
+
+    def friction_scale(self) -> float:
+        return float(self.settings["friction"])
+
+
+def friction_scale(models) -> float:
+    """The product of the models' friction factors (1: none acts on friction)."""
+    scale = 1.0
+    for m in models:
+        scale *= m.friction_scale()
+    return scale

@@ -11,6 +11,7 @@ gives the same trace bit for bit.
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import math
 import time as _time
@@ -22,6 +23,7 @@ import numpy as np
 
 from addt_dsl.plan import RunSpec
 from addt_dsl.registry import BEHAVIORS, ENVIRONMENTS, FAULTS, SENSORS, STACKS
+from addt_dsl.runtime.environment import friction_scale
 from addt_dsl.runtime import oracles
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.behaviors import AgentState, Idm, advance, lateral_profile, relative_heading, standing_yaw
@@ -227,6 +229,7 @@ class _Run:
         if ego.yaw:
             h += ego.yaw
         self.vehicle_params = VehicleParams.for_vehicle(ego.mass_kg, ego.wheelbase_m, ego.mu)
+        self.ego_mu = ego.mu  # the declared friction; `environment { road friction F }` scales it
         self.ego = VehicleState(x, y, h, ego.speed)
         self.ego_z, self.ego.pitch = 0.0, 0.0
         self.ego_s, self.ego_t = s0, t0
@@ -276,6 +279,7 @@ class _Run:
         self.environment = [ENVIRONMENTS.get(c.name)(c.settings) for c in plan.environment]
         # Changes of the conditions during the run (`at 10 s fog visibility 20 m`).
         self.environment_script = Script(plan.environment_steps) if plan.environment_steps else None
+        self.apply_friction()
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self._setup_lights(plan)
@@ -316,6 +320,12 @@ class _Run:
         if self.lights is not None and not a.heading_rel and not self.agent_plans[a.name].ignore_lights:
             accel = self.stop_for_lights(a, accel, t_now)
         advance(a, accel, t_now, dt)
+
+    def apply_friction(self) -> None:
+        """The ego's tyre-road friction under the current conditions (`road friction F`)."""
+        mu = self.ego_mu * friction_scale(self.environment)
+        if mu != self.vehicle_params.mu:
+            self.vehicle_params = dataclasses.replace(self.vehicle_params, mu=mu)
 
     def _setup_lights(self, plan: BoundScenario) -> None:
         """Traffic lights: each controller's program, the stop lines its signals make, and
@@ -1332,6 +1342,7 @@ def _advance_environment_script(run: _Run, rec, k: int, t_now: float) -> None:
             run.environment.append(model)
         else:
             run.environment[at] = model
+        run.apply_friction()
 
     run.environment_script.advance(t_now, _condition_checker(run, rec, k), start)
     if run.environment_script.done:

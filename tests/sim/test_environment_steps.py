@@ -98,3 +98,30 @@ def test_bad_environment_lines_are_diagnostics(line, code):
     result = compile_source(SCENE.replace("ENV", "    " + line), "env.addt")
     assert not result.ok
     assert code in [d.code for d in result.diagnostics], [str(d) for d in result.diagnostics]
+
+
+def test_environment_steps_survive_export_and_import(tmp_path):
+    from addt_dsl.compiler import compile_file
+    from addt_dsl.interop.openscenario.importer import import_xosc
+    from addt_dsl.interop.xosc_export import export_run
+    from tests.conftest import ROOT
+
+    spec = expand(compile_file(ROOT / "tests" / "data" / "interop" / "every_environment.addt").plan).specs[0]
+    done = export_run(spec, tmp_path, "env")
+    got = import_xosc(done.xosc_path)
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    back = compile_source(got.text, "back.addt", base_dir=tmp_path)
+    assert back.ok, [str(d) for d in back.diagnostics]
+    plan = spec.plan
+
+    def models(clauses):
+        return sorted((c.name, sorted((k, round(float(v.value), 9)) for k, v in c.settings.items())) for c in clauses)
+
+    assert models(back.plan.environment) == models(plan.environment)
+    # A top-level step is armed at 0 s: `after 4 s` and `at 4 s` are the same start.
+    steps = [(t.at_s or t.after_s, t.condition is not None, models([t.clause])) for t in plan.environment_steps]
+    again = [(t.at_s or t.after_s, t.condition is not None, models([t.clause])) for t in back.plan.environment_steps]
+    assert again == steps
+    a, b = execute(spec), execute(expand(back.plan).specs[0])
+    assert [e for e in a.trace.events if e.kind == "environment"] == \
+        [e for e in b.trace.events if e.kind == "environment"]

@@ -18,7 +18,8 @@ from tests.unit.interop.roundtrip_kit import round_trip
 
 pytestmark = pytest.mark.slow
 SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / f"{n}.addt"
-                                               for n in ("every_behavior", "every_action", "every_light")]
+                                               for n in ("every_behavior", "every_action", "every_light",
+                                                                         "every_environment")]
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=[p.stem for p in SCENARIOS])

@@ -2,6 +2,7 @@
 
 import math
 import re
+from datetime import datetime
 
 from addt_dsl import expr as E
 from addt_dsl import units
@@ -12,29 +13,74 @@ from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ClausePlan
 
 
 class Global:
-    def environment_action(self, env) -> None:
+    def environment_models(self, env) -> list[ClausePlan]:
+        """The models an <Environment> sets: fog, rain, the light (the sun's elevation, or a
+        time of day) and the road's friction scale. What the twin has no model for is said
+        (W0802)."""
+        out: list[ClausePlan] = []
         weather = env.find("Weather")
-        if weather is None:
-            self.approx(env, "an environment without weather: clear daylight")
-            return
+        road = env.find("RoadCondition")
+        if road is not None and road.get("frictionScaleFactor") is not None:
+            scale = min(max(self.value(road, "frictionScaleFactor"), 0.05), 2.0)
+            out.append(ClausePlan(keyword="environment", name="road", settings={"friction": E.Num(value=scale)}))
+        if road is not None and (road.find("Properties") is not None or road.get("wetness") is not None):
+            self.approx(road, "road wetness and properties: no model (rain, fog, light are)")
+        if weather is None and env.find("TimeOfDay") is None:
+            if not out:
+                self.approx(env, "an environment without weather or time of day: clear daylight")
+            return out
+        weather = weather if weather is not None else env.makeelement("Weather", {})
         fog, rain, sun = weather.find("Fog"), weather.find("Precipitation"), weather.find("Sun")
+        unmodelled = [f"<{el.tag}>" for el in (weather.find("Wind"), weather.find("DomeImage")) if el is not None]
+        unmodelled += [a for a in ("fractionalCloudCover", "cloudState", "temperature", "atmosphericPressure")
+                       if weather.get(a) is not None]
+        if unmodelled:
+            self.approx(weather, f"{', '.join(unmodelled)}: no model (the sensors see fog, rain and light only)")
         if fog is not None:
             visibility = min(max(self.value(fog, "visualRange"), 10.0), 100000.0)
-            self.environment.append(ClausePlan(keyword="environment", name="fog",
-                                               settings={"visibility": E.Num(value=visibility)}))
+            out.append(ClausePlan(keyword="environment", name="fog", settings={"visibility": E.Num(value=visibility)}))
         if rain is not None and rain.get("precipitationType") == "rain":
             intensity = rain.get("precipitationIntensity") or rain.get("intensity")
             if intensity is not None:
                 rate = min(float(self.resolve(intensity)), 200.0) * units.lookup("mm/h").factor
-                if rate > 0:
-                    self.environment.append(ClausePlan(keyword="environment", name="rain",
-                                                       settings={"rate": E.Num(value=rate)}))
-        elif rain is not None and rain.get("precipitationType") not in (None, "dry"):
+                # Rain that stops: a rate of 0 leaves the lidar as clear air does.
+                out.append(ClausePlan(keyword="environment", name="rain", settings={"rate": E.Num(value=rate)}))
+        elif rain is not None and rain.get("precipitationType") == "dry":
+            out.append(ClausePlan(keyword="environment", name="rain", settings={"rate": E.Num(value=0.0)}))
+        elif rain is not None and rain.get("precipitationType") is not None:
             self.approx(rain, f"precipitation {rain.get('precipitationType')}: no model (rain, fog, light are)")
+        light = self.light_model(env.find("TimeOfDay"), sun)
+        if light is not None:
+            out.append(light)
+        return out
+
+    def light_model(self, time_of_day, sun) -> ClausePlan | None:
+        """`light sun E` from a Sun's elevation, else `light time T day D` from a TimeOfDay's
+        local time and date (the latitude: the language's default, said)."""
         if sun is not None and sun.get("elevation") is not None:
+            if time_of_day is not None:
+                self.approx(time_of_day, "a time of day beside the sun's elevation: the elevation is used")
             elevation = min(max(self.value(sun, "elevation"), -math.pi / 2), math.pi / 2)
-            self.environment.append(ClausePlan(keyword="environment", name="light",
-                                               settings={"sun": E.Num(value=elevation)}))
+            return ClausePlan(keyword="environment", name="light", settings={"sun": E.Num(value=elevation)})
+        if time_of_day is None:
+            return None
+        text = self.raw(time_of_day, "dateTime")
+        try:
+            when = datetime.fromisoformat(text)
+        except ValueError:
+            self.error(time_of_day, f"dateTime \"{text[:40]}\" is not an ISO 8601 date and time")
+            return None
+        seconds = when.hour * 3600.0 + when.minute * 60.0 + when.second + when.microsecond * 1e-6
+        self.approx(time_of_day, "a time of day: the sun's elevation at that local time and date, at latitude "
+                                 "45 deg (OpenSCENARIO gives no place); `animation` (the clock running) is not "
+                                 "translated")
+        return ClausePlan(keyword="environment", name="light",
+                          settings={"time": E.Num(value=seconds), "day": E.Num(value=float(when.timetuple().tm_yday))})
+
+    def environment_action(self, env) -> None:
+        """An EnvironmentAction in Init: the run's conditions from the start."""
+        for model in self.environment_models(env):
+            self.environment = [m for m in self.environment if m.name != model.name] + [model]
 
     # -- traffic lights
 

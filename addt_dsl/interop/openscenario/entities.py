@@ -122,8 +122,8 @@ class Entities:
                 for el in root.iterfind(f"Catalog/{kind}") if root is not None else ():
                     if el.get("name") == entry:
                         return el
-        if "Route" in kinds:
-            self.skip(ref, f"route '{entry}' of catalog {catalog} not found",
+        if "Route" in kinds or "Environment" in kinds:
+            self.skip(ref, f"{kinds[0].lower()} '{entry}' of catalog {catalog} not found",
                       "catalogs are read from <CatalogLocations> inside the root directory")
             return None
         self.approx(ref, f"catalog entry '{entry}' of {catalog} not found: a default car "

@@ -241,7 +241,8 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
         plan = ScenarioPlan(name=name, description=description[:500], duration_s=duration,
                             step_s=sc.get("step_s", 0.01), seed=sc.get("seed", 0), run_seed=sc.get("run_seed"),
                             roads=list(self.roads.values()), ego=ego, agents=agents, faults=faults, oracles=oracles,
-                            environment=self.environment, controllers=controllers, light_steps=self.light_steps,
+                            environment=self.environment, environment_steps=self.environment_steps,
+                            controllers=controllers, light_steps=self.light_steps,
                             end=self.end)
         values = {**self.param_values(), **sc.get("params", {})}
         dims = {**{k: v for k, v in self.param_dims.items()},

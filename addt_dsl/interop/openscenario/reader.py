@@ -49,6 +49,7 @@ class Importer(Parameters, CarlaFrame):
         self.anchors: dict = {}  # no-op events that start a group: name -> storyboard.Anchor
         self.placed: dict = {}  # actor -> positions.Placement
         self.environment: list[ClausePlan] = []  # weather and light from an EnvironmentAction
+        self.environment_steps: list[TriggerPlan] = []  # ... and their changes in events
         # Traffic lights: controllers by name (signal ids, phase times, the element), the
         # controller of each signal, phase name -> state per controller, the light steps.
         self.light_ctls: dict[str, dict] = {}

@@ -247,8 +247,9 @@ class Storyboard:
                 return True
         return False
 
-    @INIT_GLOBAL_ACTIONS.register("EnvironmentAction", "approx", "fog, rain and the sun's elevation; other "
-                                  "precipitation W0802")
+    @INIT_GLOBAL_ACTIONS.register("EnvironmentAction", "approx", "fog, rain, the sun's elevation or a time of "
+                                  "day (latitude 45 deg), the road's friction scale; clouds, wind, temperature, "
+                                  "pressure and other precipitation have no model (W0802)")
     def init_environment(self, action, event: str, lights: list) -> None:
         self.environment_action(child_at(action, "EnvironmentAction", "Environment"))
 
@@ -268,12 +269,18 @@ class Storyboard:
         lights += [(body, ClausePlan.model_validate(exact))] if exact else \
             [(body, c) for c in self.light_clauses(body)]
 
-    @GLOBAL_ACTIONS.register("EnvironmentAction", "refused", "the language has no environment steps: "
-                             "`environment { }` holds for the whole run")
+    @GLOBAL_ACTIONS.register("EnvironmentAction", "approx", "an environment step (`at T fog visibility V`): as in "
+                             "Init")
     def event_environment(self, body, event: str, lights: list) -> None:
-        self.skip(body.find("EnvironmentAction"), "an environment change in an event is not translated: "
-                  "`environment { }` holds for the whole run (the language has no environment steps)",
-                  "an EnvironmentAction in Init is translated")
+        env = child_at(body, "EnvironmentAction", "Environment")
+        ref = child_at(body, "EnvironmentAction", "CatalogReference")
+        if env is None and ref is not None:
+            env = self.catalog_entry(ref, kinds=("Environment",))
+        if env is None:
+            if ref is None:
+                self.skip(body.find("EnvironmentAction"), "an EnvironmentAction without an <Environment>")
+            return
+        lights += [(body, model) for model in self.environment_models(env)]
 
     def init_action(self, act, who: str, later: "InitLater") -> None:
         """A private action of Init, dispatched through registry.INIT_ACTIONS (a wrapper's inner
@@ -437,8 +444,11 @@ class Storyboard:
             clause = ClausePlan.model_validate(exact["clause"]) if exact else self.private_action(inner, who)
             if clause is not None:
                 clauses.append(clause)
-        if lights:
-            self.light_step(event, self.light_event(lights), who, act_at)
+        if any(c.keyword == "light" for _, c in lights):
+            self.light_step(event, self.light_event([(el, c) for el, c in lights if c.keyword == "light"]), who,
+                            act_at)
+        if any(c.keyword == "environment" for _, c in lights):
+            self.environment_step(event, [c for _, c in lights if c.keyword == "environment"], who, act_at)
         if not clauses:
             return
         trigger = event.find("StartTrigger")
@@ -478,6 +488,17 @@ class Storyboard:
                       "a lights block's steps start at a time, after a delay or on a condition")
             return
         self.light_steps += [TriggerPlan(clause=c, **step.fields) for c in clauses]
+
+    def environment_step(self, event, models: list[ClausePlan], who, act_at) -> None:
+        step = self.start(event.find("StartTrigger"), who, act_at, event.get("name", ""))
+        if step is None:
+            return
+        if step.after is not None:
+            self.skip(step.after.cond, f"environment step '{event.get('name')}' starts on another event: not "
+                                       "translated", "an environment step starts at a time, after a delay or on a "
+                                                     "condition")
+            return
+        self.environment_steps += [TriggerPlan(clause=c, **step.fields) for c in models]
 
     def start(self, trigger, who: str, act_at, event: str = ""):
         """How the step starts (a Start: the fields of a TriggerPlan, or after another event); None:

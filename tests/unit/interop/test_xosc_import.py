@@ -513,14 +513,24 @@ def test_lights_come_back_from_the_xosc_alone(tmp_path):
     assert all(a.ignore_lights for a in got.plan.agents)  # OpenSCENARIO's actors follow their actions
 
 
-def test_an_environment_change_in_an_event_says_why_it_is_not_translated():
-    assert import_xosc(ESMINI / "xosc" / "cut-in_environment.xosc", root=ESMINI).text is None  # strict: refused
-    got = import_xosc(ESMINI / "xosc" / "cut-in_environment.xosc", root=ESMINI, lenient=True)
-    assert got.text is not None
-    changes = [d for d in got.diagnostics if "environment change in an event" in d.message]
-    assert changes and all(d.code == "W0801" and d.label == "<EnvironmentAction>" for d in changes)
-    assert [d.span.line for d in changes][:2] == [90, 110]
-    assert not any("<GlobalAction> is not translated" in d.message for d in got.diagnostics)
+def test_environment_changes_in_events_are_environment_steps():
+    # esmini's cut-in_environment.xosc: times of day at 1, 4, 7 s (2025-06-13, day 164), dense
+    # fog at 10 s lifted at 13 s, several changes at 15 s and the catalog's "winter" at 17 s.
+    got = import_xosc(ESMINI / "xosc" / "cut-in_environment.xosc", root=ESMINI)
+    assert got.text is not None, [d.message for d in got.diagnostics if d.is_error]
+    steps = [(t.at_s.value, t.clause.name, {k: v.value for k, v in t.clause.settings.items()})
+             for t in got.plan.environment_steps]
+    assert steps[:5] == [(1.0, "light", {"time": 0.0, "day": 164.0}), (4.0, "light", {"time": 21600.0, "day": 164.0}),
+                         (7.0, "light", {"time": 43200.0, "day": 164.0}), (10.0, "fog", {"visibility": 20.0}),
+                         (13.0, "fog", {"visibility": 10000.0})]
+    assert sorted(s[1:] for s in steps if s[0] == 15.0) == sorted(
+        [("road", {"friction": 0.9}), ("fog", {"visibility": 10000.0}), ("rain", {"rate": 0.0}),
+         ("light", {"sun": 0.4})])
+    assert sorted(s[1:] for s in steps if s[0] == 17.0) == sorted(  # the catalog's winter
+        [("road", {"friction": 0.5}), ("fog", {"visibility": 300.0}), ("light", {"sun": 0.3})])
+    said = {d.message for d in got.diagnostics if d.code == "W0802"}
+    assert "precipitation snow: no model (rain, fog, light are)" in said
+    assert any(m.startswith("<Wind>, fractionalCloudCover, temperature, atmosphericPressure: no model") for m in said)
 
 
 SHAPED = """<?xml version="1.0"?>
