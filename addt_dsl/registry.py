@@ -90,7 +90,7 @@ _BUILTIN_MODULES = (
     "addt_dsl.runtime.sensors",
     "addt_dsl.runtime.faults",
     "addt_dsl.runtime.signals",
-    "addt_dsl.runtime.roadspec",
+    "addt_dsl.road.roadspec",
     "addt_dsl.runtime.environment",
     "addt_dsl.stack",
 )

@@ -54,8 +54,8 @@ from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, Ru
 from addt_dsl.printer import format_expr, pin_spec
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
-from addt_dsl.runtime.road.route import resolve_route
-from addt_dsl.runtime.roadspec import build_network
+from addt_dsl.road.route import resolve_route
+from addt_dsl.road.roadspec import build_network
 from addt_dsl.vehicles import VEHICLES
 
 OSC_MINOR = 2  # OpenSCENARIO 1.2

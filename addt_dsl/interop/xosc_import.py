@@ -46,8 +46,8 @@ from addt_dsl.plan import (LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, C
 from addt_dsl.printer import PrinterError, params_referenced, pinned_fault_plan, print_plan, side_files
 from addt_dsl.registry import BEHAVIORS, STACKS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
-from addt_dsl.runtime.road.route import RouteError, exits, resolve_route, turn_of
-from addt_dsl.runtime.road import XodrError, parse_xodr
+from addt_dsl.road.route import RouteError, exits, resolve_route, turn_of
+from addt_dsl.road import XodrError, parse_xodr
 from addt_dsl.vehicles import VEHICLES
 
 MAX_XML_BYTES = 8 * 1024 * 1024

@@ -31,9 +31,9 @@ from addt_dsl.runtime.neighbours import LeaderIndex
 from addt_dsl.runtime.lights import LightsRuntime, Program, StopStation, next_stop, stations_on, stop_accel, stop_lines
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.path import RoutePath
-from addt_dsl.runtime.road import resolve_route
+from addt_dsl.road import resolve_route
 from addt_dsl.runtime.roadmesh import Elevation, build_scene
-from addt_dsl.runtime.roadspec import build_network
+from addt_dsl.road.roadspec import build_network
 from addt_dsl.runtime.script import Script
 from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED, STEP_WAITING, compute_signals
 from addt_dsl.runtime.result import RunResult, Verdict, spec_json

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from addt_dsl.runtime import roadmesh as RM
-from addt_dsl.runtime.road import arc, build_road, line, load_xodr
+from addt_dsl.road import arc, build_road, line, load_xodr
 
 XODR = Path(__file__).resolve().parents[2] / "data" / "xodr"
 

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from addt_dsl.runtime.fastroad import FastRoad
-from addt_dsl.runtime.road import build_road, line
+from addt_dsl.road import build_road, line
 from addt_dsl.runtime.vehicle import G, VehicleParams, VehicleState, fiala_lateral_force, step
 from addt_dsl.stack.nodes import Controller, Plan
 

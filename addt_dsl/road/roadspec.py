@@ -12,8 +12,8 @@ from __future__ import annotations
 from addt_dsl import units
 from addt_dsl.plan import RoadPlan, SegmentPlan
 from addt_dsl.registry import GEOMETRIES, ParamSpec
-from addt_dsl.runtime import road as R
-from addt_dsl.runtime.road.limits import MAX_COORDINATE_M, MAX_ROAD_LENGTH_M
+from addt_dsl import road as R
+from addt_dsl.road.limits import MAX_COORDINATE_M, MAX_ROAD_LENGTH_M
 
 
 class RoadItemKind:

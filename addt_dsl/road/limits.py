@@ -36,4 +36,4 @@ def beyond(name: str, value: float, limit: float, unit: str, remedy: str = "") -
     """The message for a value beyond a named limit."""
     hint = f"; {remedy}" if remedy else ""
     return (f"{value:.6g} {unit} is beyond the limit {name} = {limit:.6g} {unit} "
-            f"(addt_dsl/runtime/road/limits.py{hint})")
+            f"(addt_dsl/road/limits.py{hint})")
