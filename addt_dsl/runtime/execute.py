@@ -269,11 +269,11 @@ class _Run:
         self.sensors = {}
         self.sensor_next: dict[str, float] = {}
         for clause in ego.sensors:
-            cls = SENSORS.get(clause.name)
+            cls = SENSORS.implementation(clause.name)
             sensor = cls(clause.name, clause.settings)
             self.sensors[clause.name] = sensor
             self.sensor_next[clause.name] = 0.0
-        self.environment = [ENVIRONMENTS.get(c.name)(c.settings) for c in plan.environment]
+        self.environment = [ENVIRONMENTS.implementation(c.name)(c.settings) for c in plan.environment]
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self._setup_lights(plan)
@@ -285,7 +285,7 @@ class _Run:
         if stack_clause is None:  # a scripted ego without a stack
             self.stack = _NoStack()
         else:
-            self.stack = STACKS.get(stack_clause.name)(stack_clause.settings, self.ctx)
+            self.stack = STACKS.implementation(stack_clause.name)(stack_clause.settings, self.ctx)
         # A stack that moves its host itself (an OSI stack answering TrafficUpdates) sets the
         # ego's state in place of the dynamics step: `move_host(state, time_s)`.
         self.move_host = getattr(self.stack, "move_host", None)
@@ -518,7 +518,7 @@ class _Run:
         return float(oracles.evaluate(expr, compute_signals(trace, oracles_signals(expr)), self.dt)[0])
 
     def _start_behavior(self, agent: AgentState, clause: BoundClause, time_s: float):
-        cls = BEHAVIORS.get(clause.name)
+        cls = BEHAVIORS.implementation(clause.name)
         settings = clause.settings
         road = self.agent_roads[agent.name]
         if isinstance(road, ActorPath):  # lane ids of settings are the map's: to driving convention

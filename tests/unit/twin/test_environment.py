@@ -16,7 +16,7 @@ class _Sensor:
 
 
 def model(keyword, **settings):
-    return ENVIRONMENTS.get(keyword)(settings)
+    return ENVIRONMENTS.implementation(keyword)(settings)
 
 
 def lidar_frame(distances):

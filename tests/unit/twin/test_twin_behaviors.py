@@ -51,7 +51,7 @@ def agent(name="a", s=0.0, lane=-2, speed=10.0, length=4.6, width=1.9) -> AgentS
 
 
 def start(keyword: str, a: AgentState, world, time_s: float = 0.0, **settings):
-    beh = BEHAVIORS.get(keyword)(settings)
+    beh = BEHAVIORS.implementation(keyword)(settings)
     beh.start(a, world, time_s)
     return beh
 
@@ -113,7 +113,7 @@ def test_lane_change_is_smooth_and_ends_in_the_target_lane():
     a = agent(lane=-2)
     world = FakeWorld()
     start("lane_change", a, world, to=-1, duration=4.0)
-    rows = simulate(a, BEHAVIORS.get("cruise")({"speed": 10.0}), world, 6.0)
+    rows = simulate(a, BEHAVIORS.implementation("cruise")({"speed": 10.0}), world, 6.0)
     assert a.t == pytest.approx(LANES[-1]) and a.lane == -1
     heading = rows[:, 4]
     assert heading.max() > 0.05 and np.abs(np.diff(heading)).max() < 0.01  # no jumps
