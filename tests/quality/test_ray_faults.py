@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from tests.quality.faultkit import (alive, assert_same_results, descendants, kill, reference, rows, start, sweep_file,
+from tests.quality.crashkit import (alive, assert_same_results, descendants, kill, reference, rows, start, sweep_file,
                                     wait_for_rows)
 from tests.sim.runner_simkit import addtc
 

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from tests.quality.faultkit import start, sweep_file
+from tests.quality.crashkit import start, sweep_file
 from tests.conftest import EXAMPLES
 from tests.sim.runner_simkit import addtc
 

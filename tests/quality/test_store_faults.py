@@ -13,7 +13,7 @@ import subprocess
 
 import pytest
 
-from tests.quality.faultkit import assert_same_results, reference, rows, sweep_file
+from tests.quality.crashkit import assert_same_results, reference, rows, sweep_file
 from tests.sim.runner_simkit import addtc
 
 from addt_dsl.errors import EXIT_FAILED, EXIT_INCOMPLETE, EXIT_OK

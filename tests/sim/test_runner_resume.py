@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from tests.quality.faultkit import descendants
+from tests.quality.crashkit import descendants
 from tests.sim.runner_simkit import REPO, addtc, addtc_command, addtc_env, limit_scenario
 
 from addt_dsl.compiler import compile_file
