@@ -100,7 +100,7 @@ def headline(results: dict) -> dict:
 
     row("rtf_overtake_gt", _get(b["stack"], "rtf", "ground_truth"), 100.0, unit="x real time")
     row("rtf_overtake_learned", _get(b["stack"], "rtf", "learned"), 100.0, unit="x real time")
-    # Every paper family, not the cheapest (issue 22: learned >= 150x in each).
+    # Every paper family, not the cheapest (the target: learned >= 150x in each).
     for family, rtf in (_get(b["stack"], "rtf_families") or {}).items():
         if isinstance(rtf, dict):
             row(f"rtf_family_{family}_learned", rtf.get("learned"), 150.0, unit="x real time (wall)")

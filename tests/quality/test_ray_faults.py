@@ -1,4 +1,4 @@
-"""The fault tests on the Ray executor (issue 24), kept light (2 CPUs): a Ray worker
+"""The fault tests on the Ray executor, kept light (2 CPUs): a Ray worker
 killed mid-run is resubmitted, and a killed coordinator resumes; both end with the
 results of an uninterrupted run."""
 

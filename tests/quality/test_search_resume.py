@@ -1,6 +1,6 @@
 """`addtc falsify` and `addtc shrink` killed and run again with the same seed resume from
 their run cache (the one results store, OUT/runs.sqlite) and end with the same report and
-the same counterexample files as an uninterrupted search (issue 24)."""
+the same counterexample files as an uninterrupted search."""
 
 from __future__ import annotations
 

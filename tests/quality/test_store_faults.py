@@ -1,4 +1,4 @@
-"""A damaged, foreign, read-only, locked or full results store (issue 24): refused in one
+"""A damaged, foreign, read-only, locked or full results store: refused in one
 line that names the file, what is wrong and what to do, exit 3, never a traceback and never
 overwritten; what was committed is kept and a resume ends with the results of an
 uninterrupted run (0 lost, 0 duplicated, identical verdicts and digests)."""

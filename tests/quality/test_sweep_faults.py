@@ -1,4 +1,4 @@
-"""Sweeps that survive faults (issue 24): the coordinator killed at random points, workers
+"""Sweeps that survive faults: the coordinator killed at random points, workers
 killed busy and idle, a hung external stack, two sweeps on one store. Each ends with
 exactly the results of an uninterrupted run: 0 lost, 0 duplicated, identical verdicts and
 digests."""

@@ -1,4 +1,4 @@
-"""End-of-sweep tables are streamed (issue 22): the outcome table aggregates with running
+"""End-of-sweep tables are streamed: the outcome table aggregates with running
 counters and the runs table is written in chunks, yet both equal what pandas makes of all
 rows at once (the reference implementations below are the whole-frame pandas versions)."""
 

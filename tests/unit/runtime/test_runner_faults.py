@@ -1,4 +1,4 @@
-"""Faults of the tool itself (issue 24): the retry policy, lost runs kept out of the store
+"""Faults of the tool itself: the retry policy, lost runs kept out of the store
 and run again on resume, plan identity by content, the `--timeout` values, atomic writes."""
 
 import pytest

@@ -1,4 +1,4 @@
-"""Success tables of fault studies rate only runs whose fault-free twin passed (issue 21):
+"""Success tables of fault studies rate only runs whose fault-free twin passed:
 `addtc study table` on a classified runs.csv and the suite table of `addtc --classify --by`."""
 
 import csv
