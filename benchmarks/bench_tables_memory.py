@@ -127,7 +127,8 @@ def main() -> int:
         growth_whole = (whole[args.large] - whole[args.small]) / span
         print(f"growth per run, {args.small} -> {args.large} runs: write_tables {growth:+.1f} B/run "
               f"(streamed), whole DataFrame {growth_whole:+.0f} B/run")
-        print(f"target: flat, under 10 B/run (the unstreamed tables took +1.9 kB/run): ratio to target {growth / 10:.2f}; "
+        print(f"target: flat, under 10 B/run (the unstreamed tables took +1.9 kB/run): "
+              f"ratio to target {growth / 10:.2f}; "
               f"to the whole-DataFrame growth {growth / growth_whole:.3f}")
         print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (memory figures do not depend on it)")
         figures = {"small": args.small, "large": args.large, "peak_small_B": peaks[args.small],
