@@ -16,7 +16,7 @@ from addt_dsl.runtime.execute import execute  # noqa: E402
 from addt_dsl.sweep import expand  # noqa: E402
 
 pytestmark = pytest.mark.slow
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")

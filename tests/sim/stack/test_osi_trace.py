@@ -16,7 +16,7 @@ from addt_dsl.reporting.trace_view import rerun  # noqa: E402
 from addt_dsl.stack import osi_mapping as M  # noqa: E402
 
 pytestmark = pytest.mark.slow
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from tests.sim.conftest import EXAMPLES
 
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 # fabriksgatan_traffic_lights.xodr, road 3 at s = 109 m: signal 1 (type 1000001, a vehicle
 # light) and signal 3 (type 1000002, a pedestrian light), both facing +s traffic. The cars'

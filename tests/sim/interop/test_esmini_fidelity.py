@@ -16,7 +16,7 @@ from addt_dsl.interop.fidelity import scenario_fidelity
 
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 ESMINI = ROOT / "tests" / "data" / "esmini"
 REF = ROOT / "tests" / "data" / "esmini-ref"
 with open(REF / "INDEX.csv", newline="") as _fh:

@@ -13,7 +13,7 @@ from addt_dsl.sweep import expand
 
 pytestmark = [pytest.mark.slow, pytest.mark.torch]
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 STACK_LINE = "stack bev cruise_speed 25 m/s"
 
 

@@ -6,7 +6,7 @@ import pytest
 
 from addt_dsl.runtime.execute import execute
 from addt_dsl.runtime.executor import run_local
-from tests.sim.test_faults_outcomes import specs
+from tests.sim.runtime.test_faults_outcomes import specs
 
 pytestmark = pytest.mark.slow
 

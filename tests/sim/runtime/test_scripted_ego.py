@@ -178,7 +178,7 @@ def test_a_scripted_ego_collides_as_the_stack_driven_one_does():
     assert not run.verdicts[0].passed
 
 
-MAPS = Path(__file__).resolve().parents[2] / "examples" / "maps"
+MAPS = Path(__file__).resolve().parents[3] / "examples" / "maps"
 
 # The same script on the ego, or on an agent (the ego then parked out of the way on
 # another road): the scripted ego is moved by the agents' code, so both record the same

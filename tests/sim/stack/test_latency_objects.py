@@ -14,7 +14,7 @@ from addt_dsl.stack.bev import synthetic_objects
 from addt_dsl.stack.latency import at, e2e_ms, load_models
 from addt_dsl.sweep import expand
 
-SUITE = Path(__file__).resolve().parents[2] / "examples" / "suites" / "latency_objects.addt"
+SUITE = Path(__file__).resolve().parents[3] / "examples" / "suites" / "latency_objects.addt"
 
 
 def _specs(text: str | None = None) -> dict:

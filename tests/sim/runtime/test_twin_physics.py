@@ -12,7 +12,7 @@ from addt_dsl.runtime import execute as X
 from addt_dsl.sweep import expand
 
 pytestmark = pytest.mark.slow
-XODR = Path(__file__).resolve().parents[1] / "data" / "xodr"
+XODR = Path(__file__).resolve().parents[2] / "data" / "xodr"
 
 
 def spec_of(source: str, base_dir="."):
