@@ -19,6 +19,7 @@ no modules import each other (at any level).
 from __future__ import annotations
 
 import ast
+import functools
 import importlib.util
 import subprocess
 import sys
@@ -79,6 +80,11 @@ def modules() -> dict[str, Path]:
 MODULES = modules()
 
 
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    return ast.parse(path.read_text(), str(path))
+
+
 def _dynamic_load(node: ast.AST) -> ast.expr | None:
     """The module argument of `importlib.import_module(...)`, `import_module(...)` or
     `__import__(...)`, None for any other node."""
@@ -93,7 +99,7 @@ def imports(module: str, path: Path):
     """(imported module, names, line) of every import statement of a module, and of every
     load by name (`importlib.import_module("addt_dsl.x")`, `__import__`) with a literal name."""
     is_package = path.name == "__init__.py"
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+    for node in ast.walk(_tree(path)):
         target = _dynamic_load(node)
         if isinstance(target, ast.Constant) and isinstance(target.value, str):
             yield target.value, (), node.lineno
@@ -222,7 +228,7 @@ IMPLEMENTATION_CALLERS = {"runtime", "stack", "reporting", "interop", "search", 
 def test_loads_by_computed_name_are_the_known_ones():
     found = set()
     for module, path in MODULES.items():
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        for node in ast.walk(_tree(path)):
             target = _dynamic_load(node)
             if target is not None and not (isinstance(target, ast.Constant) and isinstance(target.value, str)):
                 found.add(module)
@@ -233,7 +239,7 @@ def test_only_the_runtime_side_asks_for_implementations():
     # The compiler, the printer and core read specs: `Registry.implementation` would load the runtime.
     bad = []
     for module, path in MODULES.items():
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        for node in ast.walk(_tree(path)):
             if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
                     and node.func.attr == "implementation" and layer(module) not in IMPLEMENTATION_CALLERS
                     and module != "addt_dsl.registry"):
