@@ -451,7 +451,7 @@ def cmd_map(args) -> int:
     """Roads, lanes with direction, junction connections and signals of an OpenDRIVE file."""
     from addt_dsl.compiler.xodr_check import count_roads
     from addt_dsl.reporting.roadmap import describe, map_png
-    from addt_dsl.runtime.road import XodrError, parse_xodr
+    from addt_dsl.road import XodrError, parse_xodr
 
     # The compiler's map limits (docs/limits.md), checked before anything is built.
     limits = _limits(args)

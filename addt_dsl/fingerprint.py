@@ -19,12 +19,12 @@ from pathlib import Path
 PACKAGE_DIR = Path(__file__).resolve().parent
 # Data files a run reads that change its result (paths inside the package).
 DATA_FILES = ("stack/perception_weights.pt", "stack/latency_model.json")
-# The source that runs a RunSpec: the loop, twin, faults, oracles, stack, and the plan-level
-# modules they import. The version alone would not do: an editable install keeps its
-# version across every change to the stack, and a run cache or store made before a change
-# would be taken for the new code's. (The compiler, CLI and reports are left out: what the
+# The source that runs a RunSpec: the loop, twin, faults, oracles, stack, road geometry,
+# the element specs, and the plan-level modules they import. The version alone would not do:
+# an editable install keeps its version across every change to the stack, and a run cache or
+# store made before a change would be taken for the new code's. (The compiler, CLI and reports are left out: what the
 # compiler makes is the plan, hashed on its own.)
-SOURCE_DIRS = ("runtime", "stack")
+SOURCE_DIRS = ("runtime", "stack", "road", "specs")
 SOURCE_EXCLUDED = ("cli.py",)
 
 

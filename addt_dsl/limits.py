@@ -10,7 +10,7 @@ limits=...)`), both reported as E0701 naming the limit and how to raise it:
   `--allow-large` lifts them all; `--max NAME=VALUE` raises one.
 
 Road geometry bounds that compiler and runtime must agree on (road length, turn, lane
-width...) are not here: they are constants of `addt_dsl/runtime/road/limits.py`.
+width...) are not here: they are constants of `addt_dsl/road/limits.py`.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The one safe XML reader, with line numbers: OpenSCENARIO files (`addt_dsl/interop/openscenario`)
-and OpenDRIVE files (`addt_dsl/runtime/road/xodr.py`) are both read here.
+and OpenDRIVE files (`addt_dsl/road/xodr.py`) are both read here.
 
 defusedxml's expat parser: entity declarations (billion laughs) and external entities or
 DTDs are refused, nothing is fetched from the network. Each element's source line is

@@ -1,4 +1,4 @@
-"""Compile speed: `addtc check` over suites of 1,000 scenario files, one core (issue 22:
+"""Compile speed: `addtc check` over suites of 1,000 scenario files, one core (target:
 1,000 suite files in <= 2 s).
 
     python benchmarks/bench_compile.py [--files 1000] [--corpus both|examples|generated] [--keep DIR]
@@ -126,7 +126,7 @@ def _one_core_prefix() -> list[str]:
     return ["taskset", "-c", "0"] if shutil.which("taskset") else []
 
 
-TARGET_S = 2.0  # issue 22: 1,000 suite files on one core
+TARGET_S = 2.0  # the target: 1,000 suite files on one core
 
 
 def measure(paths: list[Path], cwd: Path) -> dict:

@@ -1,4 +1,4 @@
-"""Compile time against input size (issue 25: checks must grow linearly, n log n at worst).
+"""Compile time against input size (checks must grow linearly, n log n at worst).
 
     python benchmarks/bench_compile_scaling.py [--quick] [--json FILE]
 

@@ -6,7 +6,7 @@ For each agent count, the real-time factor (simulated s per CPU s of the process
 wall s; best of a few runs: the machine is shared, and CPU time is the steadier of the two
 under load) with ground-truth perception (the default one-channel lidar) and
 with learned perception (`stack bev perception learned`, the lidar the detector is
-trained for), and its ratio to issue 22's targets for 50 agents (>= 100x ground truth,
+trained for), and its ratio to the targets for 50 agents (>= 100x ground truth,
 >= 50x learned). The run is single-threaded (torch is limited to one thread here).
 `--profile N` prints cProfile's top functions of one N-agent ground-truth run instead.
 """
@@ -23,7 +23,7 @@ import _figures as figures_json
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = "--quick" in sys.argv
 JSON_PATH = sys.argv[sys.argv.index("--json") + 1] if "--json" in sys.argv else None
-TARGET = {"ground_truth": 100.0, "learned": 50.0}  # issue 22, 50 agents, one core
+TARGET = {"ground_truth": 100.0, "learned": 50.0}  # real-time factors to reach: 50 agents, one core
 GT_LIDAR = "sensor lidar rate 10 Hz rays 360 range 80 m"
 LEARNED_LIDAR = "sensor lidar rate 10 Hz rays 360 channels 5 vfov 12 deg range 80 m"
 

@@ -13,7 +13,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _figures as figures_json  # noqa: E402
 
-from addt_dsl.runtime.road import load_xodr  # noqa: E402
+from addt_dsl.road import load_xodr  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "xodr"
 

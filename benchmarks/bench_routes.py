@@ -11,7 +11,7 @@ perception:
   machinery costs, `route_overhead` = 1 - rtf(route) / rtf(road).
 - `route_cost_vs_overtake`: that extra CPU time per simulated second as a fraction of the
   overtake run's CPU time per simulated second, (1/rtf(route) - 1/rtf(road)) * rtf(overtake):
-  how much slower the overtake run would be if its cars followed routes. The issue's
+  how much slower the overtake run would be if its cars followed routes. The
   target: under 0.10.
 - `junction_route`: the ego and a lead following `2 -> straight -> 0` through the junction
   of fabriksgatan.xodr (three roads and a connecting road), same stack and lidar as

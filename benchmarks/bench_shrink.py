@@ -3,7 +3,7 @@ which one (a stuck acceleration command) makes the run fail; the shrinker must r
 the scenario to that one fault. Reports simulations, cache hits, rounds and seconds.
 
 Run: python benchmarks/bench_shrink.py [--json out.json]
-Budget (issue 9): at most 150 simulations.
+Budget: at most 150 simulations.
 """
 
 from __future__ import annotations

@@ -11,10 +11,10 @@ lidar's ray casts. The real-time factor is simulated time over the wall time of
 `execute` (world set-up and judging included), median of `--repeats` runs after one
 warm-up run; also over the process's CPU time, which is the steadier figure on a shared
 machine (node timings are CPU time of the calling thread, for the same reason).
-Issue 10's target: >= 100x with learned perception. Then every paper family
+The target: >= 100x with learned perception. Then every paper family
 (examples/suites/families: overtake, curve, following_brake, following; 30 s, defaults,
 fault-free) with ground-truth and learned perception, runs interleaved, `uptime` printed
-before and after (issue 22's target: learned >= 150x in every family); then one timed
+before and after (the target: learned >= 150x in every family); then one timed
 learned run per family split into lidar, grid, network (and the conv calls inside it),
 decoding and the rest of the loop, and Table 1's time with learned perception on 2 cores
 estimated from the CPU factors; last, per detector layer, how many conv window shapes give

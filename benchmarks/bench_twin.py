@@ -213,7 +213,7 @@ def fidelity() -> list[str]:
                  f"K = {p.understeer_gradient * 1e3:.2f} mrad/(m/s^2)")
     # Lane change at 30 m/s: stack controller on the planner's smoothstep plan.
     from addt_dsl.runtime.fastroad import FastRoad
-    from addt_dsl.runtime.road import build_road, line
+    from addt_dsl.road import build_road, line
     from addt_dsl.stack.nodes import Controller, Plan
 
     road = FastRoad(build_road("r", [line(2000.0)], 0, 2, 3.5).road("r"))

@@ -5,7 +5,7 @@ Run: python benchmarks/run_all.py [--out bench-results.json] [--quick] [--only N
 Each `bench_*.py` runs in its own process (fresh imports, no shared caches) with
 `--json`, and its figures land under `benchmarks.<name>` together with its exit code,
 wall time and the load average before it started: the machines are shared, and a figure
-without its load is not comparable. `headline` collects the figures the issues set
+without its load is not comparable. `headline` collects the figures the project sets
 targets for, each with its target and ratio. `--quick` runs lighter settings (a smoke
 test of the whole set; its figures are not the targets' measurements).
 """
@@ -87,7 +87,7 @@ def _get(d: dict, *path, default=None):
 
 
 def headline(results: dict) -> dict:
-    """The figures the issues set targets for: value, target, ratio (value / target)."""
+    """The figures with a target: value, target, ratio (value / target)."""
     b = {name: r.get("figures", {}) for name, r in results.items()}
     rows = {}
 
@@ -100,7 +100,7 @@ def headline(results: dict) -> dict:
 
     row("rtf_overtake_gt", _get(b["stack"], "rtf", "ground_truth"), 100.0, unit="x real time")
     row("rtf_overtake_learned", _get(b["stack"], "rtf", "learned"), 100.0, unit="x real time")
-    # Every paper family, not the cheapest (issue 22: learned >= 150x in each).
+    # Every paper family, not the cheapest (the target: learned >= 150x in each).
     for family, rtf in (_get(b["stack"], "rtf_families") or {}).items():
         if isinstance(rtf, dict):
             row(f"rtf_family_{family}_learned", rtf.get("learned"), 150.0, unit="x real time (wall)")

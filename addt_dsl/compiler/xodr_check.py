@@ -1,6 +1,6 @@
 """Compile-time check of an imported `.xodr` file: it must parse, and the road id exist.
 
-`addt_dsl.runtime.road` is pure numpy and defusedxml (no pybullet or torch; the layer
+`addt_dsl.road` is pure numpy and defusedxml (no pybullet or torch; the layer
 test checks it), so the compiler reads OpenDRIVE with the same code the runtime drives
 on and turns its errors into diagnostics at the `road ... import` line.
 """
@@ -20,9 +20,9 @@ from addt_dsl.diagnostics import Span
 from addt_dsl.expr import eval_param_expr, params_used
 from addt_dsl.limits import beyond_message, how_to_raise
 from addt_dsl.lru import LruCache
-from addt_dsl.runtime.road import RouteError, XodrError, parse_xodr, resolve_route
-from addt_dsl.runtime.road.limits import RoadLimitError
-from addt_dsl.runtime.roadspec import build_network
+from addt_dsl.road import RouteError, XodrError, parse_xodr, resolve_route
+from addt_dsl.road.limits import RoadLimitError
+from addt_dsl.road.roadspec import build_network
 
 
 def check_xodr(ctx: Context, text: str, display: str, span: Span, road_value):

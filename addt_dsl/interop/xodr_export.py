@@ -2,7 +2,7 @@
 
 Inline roads (`road NAME { line ...; lanes ... }`) become one `<road>` each, numbered
 1, 2, ... in declaration order, every one starting at the origin heading east (as the
-runtime builds them: `runtime/roadspec.build_network`); one lane section, constant lane
+runtime builds them: `addt_dsl.road.roadspec.build_network`); one lane section, constant lane
 widths, a constant lane offset. Imported maps are copied as they are (their road ids
 kept). A plan mixing inline and imported roads, or importing several files, has no
 single OpenDRIVE file: `ExportError`.

@@ -56,8 +56,8 @@ from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX, SIDECAR_FO
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
 from addt_dsl.runtime.environment import Light
-from addt_dsl.runtime.road.route import resolve_route
-from addt_dsl.runtime.roadspec import build_network
+from addt_dsl.road.route import resolve_route
+from addt_dsl.road.roadspec import build_network
 from addt_dsl.vehicles import VEHICLES
 
 OSC_MINOR = 2  # OpenSCENARIO 1.2

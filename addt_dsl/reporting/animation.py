@@ -33,7 +33,7 @@ _TEXT = (255, 255, 255)
 
 def road_geometry(plan) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
     """(asphalt polygons, solid polylines, dashed polylines) in world coordinates [m]."""
-    from addt_dsl.runtime.roadspec import build_network
+    from addt_dsl.road.roadspec import build_network
 
     polygons, solid, dashed = [], [], []
     for network in build_network(plan.roads).values():

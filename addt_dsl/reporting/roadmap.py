@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from addt_dsl.runtime.road import RoadNetwork, exits, turn_of
+from addt_dsl.road import RoadNetwork, exits, turn_of
 
 
 def _key(text: str):

@@ -1,4 +1,4 @@
-"""Weather and light, one registered class per DSL keyword, acting on sensor frames.
+"""Weather and light acting on sensor frames: the implementations of `addt_dsl/specs/environment.py`.
 
 `environment { rain rate 10 mm/h; fog visibility 150 m; light sun 20 deg }` declares the
 conditions of a scenario; each model changes the frames of the sensors it affects right
@@ -13,18 +13,14 @@ import math
 
 import numpy as np
 
-from addt_dsl import units
-from addt_dsl.registry import ENVIRONMENTS, ParamSpec
+from addt_dsl.registry import ENVIRONMENTS
+from addt_dsl.specs import environment as S
 
 LIDAR_WAVELENGTH_NM = 905.0  # the common automotive lidar wavelength
 KOSCHMIEDER = 3.912  # -ln(0.02): visibility at a 2 % contrast threshold
 
 
-class EnvironmentModel:
-    keyword = ""
-    params: tuple[ParamSpec, ...] = ()
-    doc = ""
-
+class EnvironmentModel(S.EnvironmentModelSpec):
     def __init__(self, settings: dict):
         self.settings = {p.name: settings.get(p.name, p.default) for p in self.params}
 
@@ -78,14 +74,8 @@ def _fog_camera(frame, extinction_per_m: float, airlight: float):
     return type(frame)(frame.sensor, frame.stamp_s, data)
 
 
-@ENVIRONMENTS.register
-class Rain(EnvironmentModel):
-    keyword = "rain"
-    params = (ParamSpec("rate", units.SPEED, required=True, low=0.0, high=200.0 * 1e-3 / 3600.0,
-                        doc="rain rate (e.g. 2 mm/h light, 10 mm/h heavy, 50 mm/h a downpour)"),)
-    doc = ("Lidar: extinction of the Marshall-Palmer drop sizes for drops much larger than the "
-           "wavelength, 3.65e-4 R^0.63 per metre (R in mm/h), drops far returns by the lidar "
-           "equation. Camera: not modelled.")
+@ENVIRONMENTS.implements
+class Rain(S.Rain, EnvironmentModel):
 
     def extinction_per_m(self) -> float:
         """pi N0 / Lambda^3 [1/m]: extinction efficiency 2 over N(D) = N0 exp(-Lambda D),
@@ -102,14 +92,8 @@ class Rain(EnvironmentModel):
         return _attenuate_lidar(sensor, frame, self.extinction_per_m(), 0.0, rng)
 
 
-@ENVIRONMENTS.register
-class Fog(EnvironmentModel):
-    keyword = "fog"
-    params = (ParamSpec("visibility", units.LENGTH, required=True, low=10.0, high=100000.0,
-                        doc="meteorological visibility (fog: below 1 km)"),)
-    doc = ("Extinction from visibility V by Koschmieder (3.912 / V at 550 nm); lidar at 905 nm "
-           "scaled by Kim et al. 2001 (lambda/550)^-q, returns dropped by the lidar equation; "
-           "camera pixels blend towards the fog's airlight with their depth.")
+@ENVIRONMENTS.implements
+class Fog(S.Fog, EnvironmentModel):
 
     def q(self) -> float:
         """Kim's size-distribution exponent for visibility V [km]."""
@@ -135,36 +119,12 @@ class Fog(EnvironmentModel):
         return frame
 
 
-@ENVIRONMENTS.register
-class Light(EnvironmentModel):
-    keyword = "light"
-    params = (ParamSpec("sun", units.ANGLE, low=-math.pi / 2, high=math.pi / 2,
-                        doc="sun elevation above the horizon (below -6 deg: night); or give `time`"),
-              ParamSpec("time", units.TIME, low=0.0, high=86400.0,
-                        doc="local solar time of day since midnight (`6.5 h`): the sun's elevation follows "
-                            "from it, `latitude` and `day`"),
-              ParamSpec("latitude", units.ANGLE, default=math.radians(45.0), low=-math.pi / 2, high=math.pi / 2,
-                        doc="where the sun is seen from, with `time`"),
-              ParamSpec("day", None, default=80.0, low=1.0, high=366.0,
-                        doc="day of the year, with `time` (80: the March equinox)"))
-    doc = ("Camera exposure: ambient light k = sin(elevation)/sin(30 deg) in [0.02, 1] (0.02: a "
-           "lit road at night); photon shot noise of a 10 000 e- full well plus 5 e- read noise, "
-           "auto-gain up to 8x: darker, noisier, lower-contrast images. Lidar: active, unaffected. "
-           "A time of day gives the elevation by the declination of Cooper (1969) and the hour angle.")
+@ENVIRONMENTS.implements
+class Light(S.Light, EnvironmentModel):
     FULL_WELL_E = 10000.0
     READ_NOISE_E = 5.0
     MAX_GAIN = 8.0
     NIGHT_LEVEL = 0.02
-
-    @staticmethod
-    def validate(values: dict) -> list[tuple[str, str]]:
-        given = [key for key in ("sun", "time") if values.get(key, "absent") != "absent"]
-        if not given:
-            return [("sun", "`light` needs the sun's elevation (`sun 20 deg`) or a time of day (`time 6.5 h`)",
-                     "E0105")]
-        if len(given) > 1:
-            return [("time", "give the sun's elevation or a time of day, not both", "E0204")]
-        return []
 
     def elevation(self) -> float:
         """The sun's elevation [rad]: given, or from the time of day, latitude and day."""
@@ -191,16 +151,8 @@ class Light(EnvironmentModel):
         return type(frame)(frame.sensor, frame.stamp_s, data)
 
 
-@ENVIRONMENTS.register
-class Road(EnvironmentModel):
-    keyword = "road"
-    params = (ParamSpec("friction", units.DIMENSIONLESS, required=True, low=0.05, high=2.0,
-                        doc="scale on the tyre-road friction coefficient (OpenSCENARIO's frictionScaleFactor; "
-                            "0.5: a wet road, 0.1: ice)"),)
-    doc = ("Vehicle dynamics: the ego's tyre forces saturate at friction x mu x Fz (Fiala brush model) from "
-           "the moment the model acts; the stack's own braking limit keeps the declared mu (it is not told). "
-           "Agents follow their scripts. Sensors: unaffected.")
-
+@ENVIRONMENTS.implements
+class Road(S.Road, EnvironmentModel):
     def friction_scale(self) -> float:
         return float(self.settings["friction"])
 

@@ -33,9 +33,9 @@ from addt_dsl.runtime.neighbours import LeaderIndex
 from addt_dsl.runtime.lights import LightsRuntime, Program, StopStation, next_stop, stations_on, stop_accel, stop_lines
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.path import RoutePath
-from addt_dsl.runtime.road import resolve_route
+from addt_dsl.road import resolve_route
 from addt_dsl.runtime.roadmesh import Elevation, build_scene
-from addt_dsl.runtime.roadspec import build_network
+from addt_dsl.road.roadspec import build_network
 from addt_dsl.runtime.script import Script
 from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED, STEP_WAITING, compute_signals
 from addt_dsl.runtime.result import RunResult, Verdict, spec_json
@@ -272,11 +272,11 @@ class _Run:
         self.sensors = {}
         self.sensor_next: dict[str, float] = {}
         for clause in ego.sensors:
-            cls = SENSORS.get(clause.name)
+            cls = SENSORS.implementation(clause.name)
             sensor = cls(clause.name, clause.settings)
             self.sensors[clause.name] = sensor
             self.sensor_next[clause.name] = 0.0
-        self.environment = [ENVIRONMENTS.get(c.name)(c.settings) for c in plan.environment]
+        self.environment = [ENVIRONMENTS.implementation(c.name)(c.settings) for c in plan.environment]
         # Changes of the conditions during the run (`at 10 s fog visibility 20 m`).
         self.environment_script = Script(plan.environment_steps) if plan.environment_steps else None
         self.apply_friction()
@@ -291,7 +291,7 @@ class _Run:
         if stack_clause is None:  # a scripted ego without a stack
             self.stack = _NoStack()
         else:
-            self.stack = STACKS.get(stack_clause.name)(stack_clause.settings, self.ctx)
+            self.stack = STACKS.implementation(stack_clause.name)(stack_clause.settings, self.ctx)
         # A stack that moves its host itself (an OSI stack answering TrafficUpdates) sets the
         # ego's state in place of the dynamics step: `move_host(state, time_s)`.
         self.move_host = getattr(self.stack, "move_host", None)
@@ -530,7 +530,7 @@ class _Run:
         return float(oracles.evaluate(expr, compute_signals(trace, oracles_signals(expr)), self.dt)[0])
 
     def _start_behavior(self, agent: AgentState, clause: BoundClause, time_s: float):
-        cls = BEHAVIORS.get(clause.name)
+        cls = BEHAVIORS.implementation(clause.name)
         settings = clause.settings
         road = self.agent_roads[agent.name]
         if isinstance(road, ActorPath):  # lane ids of settings are the map's: to driving convention
@@ -1336,7 +1336,7 @@ def _advance_light_script(run: _Run, rec, k: int, t_now: float) -> None:
 def _advance_environment_script(run: _Run, rec, k: int, t_now: float) -> None:
     def start(clause, time_s) -> None:
         run.events.append(Event(time_s, "environment", {"model": clause.name, **clause.settings}))
-        model = ENVIRONMENTS.get(clause.name)(clause.settings)
+        model = ENVIRONMENTS.implementation(clause.name)(clause.settings)
         at = next((i for i, m in enumerate(run.environment) if m.keyword == clause.name), None)
         if at is None:  # a model not declared before acts from now on, after the others
             run.environment.append(model)

@@ -1,6 +1,6 @@
 """A sampled view of one road for the simulation loop's hot path.
 
-`Road` (runtime.road) evaluates OpenDRIVE geometry exactly but costs ~10-500 µs per
+`Road` (addt_dsl.road) evaluates OpenDRIVE geometry exactly but costs ~10-500 µs per
 scalar call; the loop asks for poses and projections thousands of times per run. This
 view samples the reference line once per run (every `STEP_M`) and answers by
 interpolation in plain Python (a few µs). The interpolation error on a sample spacing

@@ -1,6 +1,6 @@
 """A route as one drivable road: the loop's view of an actor's path through a network.
 
-`RoutePath` strings a route's legs (`runtime.road.route.Leg`: road, direction, s-range,
+`RoutePath` strings a route's legs (`addt_dsl.road.route.Leg`: road, direction, s-range,
 route lane) into one station `u` [m] that grows in the driving direction, and answers
 the queries the loop, the behaviours and the stack ask of a road (`FastRoad`'s
 interface: `reference_pose`, `point`, `project`, `curvature`, `driving_lane_ids`,

@@ -7,7 +7,7 @@ per-ray overhead of the engine: a vectorised slab test per box in the box's fram
 float64. `PhysicsWorld.ray_cast` uses it whenever the world is eligible (no collision
 meshes) and falls back to pybullet otherwise.
 
-Matched pybullet semantics (checked against `rayTestBatch` in tests/unit/twin/test_raycast.py):
+Matched pybullet semantics (checked against `rayTestBatch` in tests/unit/runtime/test_raycast.py):
 - a ray that starts inside a box does not hit that box (it may hit others);
 - the ground plane is hit from either side, by segments that strictly cross it;
 - hits are reported as the fraction of the segment start → end, endpoints included.

@@ -1,4 +1,4 @@
-"""Sensors, one registered class per DSL keyword.
+"""Sensors: the implementations of the specs in `addt_dsl/specs/sensors.py`.
 
 A sensor has a rate, a field of view and extrinsics (mounting pose on the vehicle); the
 fault engine may shift the *actual* extrinsics while the stack keeps using the nominal
@@ -17,20 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from addt_dsl import units
-from addt_dsl.registry import SENSORS, ParamSpec
+from addt_dsl.registry import SENSORS
+from addt_dsl.specs import sensors as S
 
 G = 9.81  # [m/s^2]
-
-EXTRINSICS = (
-    ParamSpec("x", units.LENGTH, default=1.0, doc="mount position forward of the vehicle centre"),
-    ParamSpec("y", units.LENGTH, default=0.0, doc="mount position, left positive"),
-    ParamSpec("z", units.LENGTH, default=1.0, doc="mount height above the road"),
-    ParamSpec("roll", units.ANGLE, default=0.0, doc="mount roll about the forward axis"),
-    ParamSpec("pitch", units.ANGLE, default=0.0, doc="mount pitch; positive tilts the sensor down"),
-    ParamSpec("yaw", units.ANGLE, default=0.0, doc="mount yaw; positive turns the sensor left"),
-)
-
 
 @dataclass
 class Extrinsics:
@@ -57,11 +47,7 @@ class Frame:
     data: dict = field(default_factory=dict)
 
 
-class Sensor:
-    keyword = ""
-    params: tuple[ParamSpec, ...] = ()
-    doc = ""
-
+class Sensor(S.SensorSpec):
     def __init__(self, name: str, settings: dict):
         self.name = name
         self.settings = {p.name: settings.get(p.name, p.default) for p in self.params}
@@ -74,20 +60,8 @@ class Sensor:
         raise NotImplementedError
 
 
-@SENSORS.register
-class Lidar(Sensor):
-    keyword = "lidar"
-    params = (
-        ParamSpec("rate", units.FREQUENCY, default=10.0, low=0.1, high=100.0, doc="scan rate"),
-        ParamSpec("rays", None, kind="int", default=360, low=8, high=8192, doc="rays per channel"),
-        ParamSpec("channels", None, kind="int", default=1, low=1, high=64, doc="vertical channels"),
-        ParamSpec("range", units.LENGTH, default=80.0, low=1.0, high=300.0, doc="max range"),
-        ParamSpec("fov", units.ANGLE, default=2 * math.pi, low=0.01, high=2 * math.pi, doc="horizontal field of view"),
-        ParamSpec("vfov", units.ANGLE, default=math.radians(10.0), low=0.0, high=math.pi, doc="vertical field of view"),
-        *EXTRINSICS,
-    )
-    doc = ("Rotating lidar by batched ray casts: exact ray-box intersection in numpy when the world is "
-           "boxes on flat ground (runtime/raycast.py), else pybullet rayTestBatch.")
+@SENSORS.implements
+class Lidar(S.Lidar, Sensor):
 
     def __init__(self, name, settings):
         super().__init__(name, settings)
@@ -114,16 +88,8 @@ class Lidar(Sensor):
         return Frame(self.name, time_s, {"points": pts, "hit_body": hit_ids[hit]})
 
 
-@SENSORS.register
-class Gnss(Sensor):
-    keyword = "gnss"
-    params = (
-        ParamSpec("rate", units.FREQUENCY, default=10.0, low=0.1, high=100.0, doc="fix rate"),
-        ParamSpec("noise", units.LENGTH, default=0.02, low=0.0, high=50.0, doc="position noise (1 sigma)"),
-        *EXTRINSICS,
-    )
-    doc = ("Position fix of the antenna (the mount position on the vehicle) with Gaussian noise; "
-           "heading and speed of the vehicle. Omnidirectional: no field of view.")
+@SENSORS.implements
+class Gnss(S.Gnss, Sensor):
 
     def capture(self, world, time_s):
         x, y, z, heading, pitch = _ego_frame(world)
@@ -137,24 +103,8 @@ class Gnss(Sensor):
                                          "heading": heading, "speed": speed})
 
 
-@SENSORS.register
-class Imu(Sensor):
-    keyword = "imu"
-    params = (
-        ParamSpec("rate", units.FREQUENCY, default=100.0, low=1.0, high=1000.0, doc="sample rate"),
-        ParamSpec("accel_noise", units.ACCELERATION, default=0.05, low=0.0, high=10.0,
-                  doc="accelerometer white noise (1 sigma)"),
-        ParamSpec("gyro_noise", units.ANGULAR_RATE, default=0.002, low=0.0, high=1.0,
-                  doc="gyroscope white noise (1 sigma)"),
-        ParamSpec("accel_bias", units.ACCELERATION, default=0.0, low=-5.0, high=5.0,
-                  doc="constant accelerometer bias (all axes)"),
-        ParamSpec("gyro_bias", units.ANGULAR_RATE, default=0.0, low=-0.5, high=0.5,
-                  doc="constant gyroscope bias (all axes)"),
-        *(ParamSpec(p.name, p.dim, default={"x": 0.0, "z": 0.5}.get(p.name, p.default), doc=p.doc)
-          for p in EXTRINSICS),
-    )
-    doc = ("Accelerometer (specific force, gravity included) and gyroscope in the sensor frame, "
-           "with white noise and bias. Omnidirectional: no field of view.")
+@SENSORS.implements
+class Imu(S.Imu, Sensor):
 
     def capture(self, world, time_s):
         st = world.ego_state()
@@ -175,30 +125,8 @@ class Imu(Sensor):
         return Frame(self.name, time_s, {"accel": accel, "gyro": gyro})
 
 
-@SENSORS.register
-class Camera(Sensor):
-    keyword = "camera"
-    renders = True  # the run builds visual road meshes and coloured actors
-    params = (
-        ParamSpec("rate", units.FREQUENCY, default=10.0, low=0.1, high=60.0, doc="frame rate"),
-        ParamSpec("width", None, kind="int", default=320, low=16, high=1920, doc="image width [px]"),
-        ParamSpec("height", None, kind="int", default=240, low=16, high=1080, doc="image height [px]"),
-        ParamSpec("fov", units.ANGLE, default=math.radians(90.0), low=math.radians(5.0),
-                  high=math.radians(170.0), doc="horizontal field of view"),
-        ParamSpec("near", units.LENGTH, default=0.1, low=0.01, high=10.0, doc="near clipping distance"),
-        ParamSpec("range", units.LENGTH, default=150.0, low=1.0, high=1000.0, doc="far clipping distance"),
-        ParamSpec("segmentation", None, kind="word", default="on", choices=("on", "off"),
-                  doc="also return the per-pixel body id image"),
-        *(ParamSpec(p.name, p.dim, default={"x": 1.0, "z": 1.4}.get(p.name, p.default), doc=p.doc)
-          for p in EXTRINSICS),
-    )
-    doc = ("Pinhole camera rendered headless by pybullet's TinyRenderer: RGB image (uint8, HxWx3), "
-           "metric depth and per-pixel body ids. Cost grows with pixels; see docs/twin.md.")
-
-    @staticmethod
-    def pixels_per_frame(settings: dict) -> float:
-        """Pixels rendered per frame (the compile-time cost estimate counts them)."""
-        return float(settings["width"]) * float(settings["height"])
+@SENSORS.implements
+class Camera(S.Camera, Sensor):
 
     def __init__(self, name, settings):
         super().__init__(name, settings)
@@ -224,35 +152,12 @@ class Camera(Sensor):
                                          "intrinsics": self.intrinsics})
 
 
-@SENSORS.register
-class CameraRig(Sensor):
+@SENSORS.implements
+class CameraRig(S.CameraRig, Sensor):
     """`cameras` pinhole cameras at one mount, evenly spread in yaw (camera k looks
     `yaw + k * 360 deg / cameras`), rendered each frame like `camera`. The rig's
     extrinsics are the mount's; camera k's are those turned by its yaw offset."""
 
-    keyword = "camera_rig"
-    renders = True
-    params = (
-        ParamSpec("rate", units.FREQUENCY, default=10.0, low=0.1, high=60.0, doc="frame rate (all cameras)"),
-        ParamSpec("cameras", None, kind="int", default=6, low=1, high=12,
-                  doc="cameras, evenly spread in yaw from the mount's yaw"),
-        ParamSpec("width", None, kind="int", default=128, low=16, high=1920, doc="image width per camera [px]"),
-        ParamSpec("height", None, kind="int", default=40, low=16, high=1080, doc="image height per camera [px]"),
-        ParamSpec("fov", units.ANGLE, default=math.radians(64.0), low=math.radians(5.0),
-                  high=math.radians(170.0), doc="horizontal field of view per camera"),
-        ParamSpec("near", units.LENGTH, default=0.1, low=0.01, high=10.0, doc="near clipping distance"),
-        ParamSpec("range", units.LENGTH, default=150.0, low=1.0, high=1000.0, doc="far clipping distance"),
-        *(ParamSpec(p.name, p.dim, default={"x": 0.0, "z": 1.5}.get(p.name, p.default), doc=p.doc)
-          for p in EXTRINSICS),
-    )
-    doc = ("Multi-camera rig (the paper's surround view): `cameras` pinhole cameras around one mount, "
-           "rendered like `camera` (RGB only: images uint8, cameras x H x W x 3). For "
-           "`perception camera_bev`.")
-
-    @staticmethod
-    def pixels_per_frame(settings: dict) -> float:
-        """Pixels rendered per frame, all cameras (the compile-time cost estimate counts them)."""
-        return float(settings["cameras"]) * float(settings["width"]) * float(settings["height"])
 
     def __init__(self, name, settings):
         super().__init__(name, settings)

@@ -1,75 +1,41 @@
-"""Signal functions usable in oracles and triggers, one registered class each.
-
-`ego.speed` and `speed(ego)` are the same signal; its canonical name is `speed(ego)`.
-Each class declares its argument kinds (actor or node) and its dimension so the compiler
-can check formulas; `compute` derives the signal from a `Trace`.
+"""Signal functions usable in oracles and triggers: `compute` derives each from a `Trace`
+(the implementations of the specs in `addt_dsl/specs/signals.py`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from addt_dsl import units
 from addt_dsl.registry import SIGNALS
-
-TTC_CAP_S = 99.0  # a TTC above this means "not closing"; keeps robustness finite
-
+from addt_dsl.specs import signals as S
+from addt_dsl.specs.signals import TTC_CAP_S
 
 def canonical(fn: str, args: tuple[str, ...]) -> str:
     return f"{fn}({','.join(args)})"
 
 
-class SignalFn:
-    keyword: str = ""
-    args: tuple[str, ...] = ("actor",)  # "actor" | "node" | "step" (a named step, `lead.brake_hard`)
-    dim = units.DIMENSIONLESS
-    boolean = False  # a state (+1 holds, -1 not), usable as a formula on its own
-    # Its value at an instant needs the samples before it: oracles only (a `when` condition
-    # is checked on the current state alone, where it would read 0).
-    history = False
-    doc = ""
-
+class SignalFn(S.SignalSpec):
     @staticmethod
     def compute(trace, args: tuple[str, ...]) -> np.ndarray:
         raise NotImplementedError
 
 
-def _field_signal(field_name: str, dim, doc: str) -> type[SignalFn]:
-    class _Field(SignalFn):
-        keyword = field_name
-
+def _field_signal(field_name: str) -> type[SignalFn]:
+    class _Field(S.FIELD_SPECS[field_name], SignalFn):
         @staticmethod
         def compute(trace, args):
             return getattr(trace.actors[args[0]], field_name)
 
-    _Field.dim = dim
-    _Field.doc = doc
     _Field.__name__ = _Field.__qualname__ = f"Signal_{field_name}"
-    return SIGNALS.register(_Field)
+    return SIGNALS.implements(_Field)
 
 
-for _name, _dim, _doc in (
-    ("x", units.LENGTH, "world x position of the actor's centre [m]"),
-    ("y", units.LENGTH, "world y position of the actor's centre [m]"),
-    ("heading", units.ANGLE, "yaw [rad]"),
-    ("speed", units.SPEED, "speed [m/s]"),
-    ("accel", units.ACCELERATION, "longitudinal acceleration [m/s^2]"),
-    ("yaw_rate", units.ANGULAR_RATE, "yaw rate [rad/s]"),
-    ("s", units.LENGTH, "station along the actor's road [m]"),
-    ("t", units.LENGTH, "lateral offset from the road reference line, left positive [m]"),
-    ("lane_offset", units.LENGTH, "signed offset from the centre of the actor's current lane [m]"),
-    ("steer", units.ANGLE, "front wheel angle [rad]"),
-    ("clearance", units.LENGTH, "gap to the nearest other actor's box, negative when overlapping [m]"),
-):
-    _field_signal(_name, _dim, _doc)
+for _name in S.FIELD_SPECS:
+    _field_signal(_name)
 
 
-@SIGNALS.register
-class Jerk(SignalFn):
-    keyword = "jerk"
-    dim = units.JERK
-    history = True
-    doc = "time derivative of longitudinal acceleration [m/s^3]"
+@SIGNALS.implements
+class Jerk(S.Jerk, SignalFn):
 
     @staticmethod
     def compute(trace, args):
@@ -77,13 +43,8 @@ class Jerk(SignalFn):
         return np.gradient(a, trace.period_s) if len(a) > 1 else np.zeros_like(a)
 
 
-@SIGNALS.register
-class Travelled(SignalFn):
-    keyword = "travelled"
-    dim = units.LENGTH
-    history = True
-    doc = ("distance the actor's centre has covered since the start, summed over the steps [m] "
-           "(CARLA's DrivenDistanceTest)")
+@SIGNALS.implements
+class Travelled(S.Travelled, SignalFn):
 
     @staticmethod
     def compute(trace, args):
@@ -91,12 +52,8 @@ class Travelled(SignalFn):
         return np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(a.x), np.diff(a.y)))))
 
 
-@SIGNALS.register
-class Distance(SignalFn):
-    keyword = "distance"
-    args = ("actor", "actor")
-    dim = units.LENGTH
-    doc = "centre-to-centre distance between two actors [m]"
+@SIGNALS.implements
+class Distance(S.Distance, SignalFn):
 
     @staticmethod
     def compute(trace, args):
@@ -104,14 +61,8 @@ class Distance(SignalFn):
         return np.hypot(a.x - b.x, a.y - b.y)
 
 
-@SIGNALS.register
-class Gap(SignalFn):
-    keyword = "gap"
-    args = ("actor", "actor")
-    dim = units.LENGTH
-    doc = ("bumper-to-bumper gap along the road (or the shared route) from the first actor to the "
-           "second; between actors on different roads or routes, the centre distance less half "
-           "of both lengths [m]")
+@SIGNALS.implements
+class Gap(S.Gap, SignalFn):
 
     @staticmethod
     def compute(trace, args):
@@ -126,26 +77,16 @@ def same_frame(a, b) -> bool:
     return a.frame == b.frame
 
 
-@SIGNALS.register
-class RelSpeed(SignalFn):
-    keyword = "rel_speed"
-    args = ("actor", "actor")
-    dim = units.SPEED
-    doc = ("speed of the first actor minus that of the second, positive when the first is faster "
-           "(OpenSCENARIO RelativeSpeedCondition) [m/s]")
+@SIGNALS.implements
+class RelSpeed(S.RelSpeed, SignalFn):
 
     @staticmethod
     def compute(trace, args):
         return trace.actors[args[0]].speed - trace.actors[args[1]].speed
 
 
-@SIGNALS.register
-class LatGap(SignalFn):
-    keyword = "lat_gap"
-    args = ("actor", "actor")
-    dim = units.LENGTH
-    doc = ("side-to-side gap across the road between two actors' boxes, negative when they overlap "
-           "laterally (OpenSCENARIO RelativeDistanceCondition, lateral, freespace) [m]")
+@SIGNALS.implements
+class LatGap(S.LatGap, SignalFn):
 
     @staticmethod
     def compute(trace, args):
@@ -186,16 +127,8 @@ def time_to_overlap(a, b, horizon_s: float = TTC_CAP_S) -> np.ndarray:
     return np.where(lo <= hi, lo, float(horizon_s))
 
 
-@SIGNALS.register
-class Ttc(SignalFn):
-    keyword = "ttc"
-    args = ("actor", "actor")
-    dim = units.TIME
-    doc = (f"time to collision of the first actor into the second: along the road (or shared route), "
-           f"the bumper gap over the closing speed when they overlap laterally and close in; between "
-           f"actors on different roads or routes (or driving different ways), the time until their boxes "
-           f"first overlap if both keep their velocity and heading; capped at {TTC_CAP_S:g} s, also "
-           f"when they never meet [s]")
+@SIGNALS.implements
+class Ttc(S.Ttc, SignalFn):
 
     @staticmethod
     def compute(trace, args):
@@ -211,24 +144,16 @@ class Ttc(SignalFn):
         return np.minimum(ttc, TTC_CAP_S)
 
 
-@SIGNALS.register
-class Latency(SignalFn):
-    keyword = "latency"
-    args = ("node",)
-    dim = units.TIME
-    doc = "latency of a stack node, or `e2e` from sensor timestamp to actuation [s]"
+@SIGNALS.implements
+class Latency(S.Latency, SignalFn):
 
     @staticmethod
     def compute(trace, args):
         return trace.latency[args[0]]
 
 
-@SIGNALS.register
-class ObjectCount(SignalFn):
-    keyword = "objects"
-    args = ()
-    dim = units.DIMENSIONLESS
-    doc = "number of objects the perception reports"
+@SIGNALS.implements
+class ObjectCount(S.ObjectCount, SignalFn):
 
     @staticmethod
     def compute(trace, args):
@@ -244,52 +169,32 @@ def _step_state(trace, name: str) -> np.ndarray:
     return np.zeros_like(trace.time) if state is None else np.asarray(state)
 
 
-@SIGNALS.register
-class Started(SignalFn):
-    keyword = "started"
-    args = ("step",)
-    boolean = True
-    doc = ("whether a named step has fired (started its behaviour or group), also once it ended "
-           "(OpenSCENARIO StoryboardElementStateCondition, startTransition)")
+@SIGNALS.implements
+class Started(S.Started, SignalFn):
 
     @staticmethod
     def compute(trace, args):
         return np.where(_step_state(trace, args[0]) >= STEP_STARTED, 1.0, -1.0)
 
 
-@SIGNALS.register
-class Ended(SignalFn):
-    keyword = "ended"
-    args = ("step",)
-    boolean = True
-    doc = ("whether a named step's behaviour has completed: a lane change in its lane, a brake at "
-           "its speed, a speed profile past its last point, a group when all its steps ended "
-           "(OpenSCENARIO StoryboardElementStateCondition, endTransition)")
+@SIGNALS.implements
+class Ended(S.Ended, SignalFn):
 
     @staticmethod
     def compute(trace, args):
         return np.where(_step_state(trace, args[0]) >= STEP_ENDED, 1.0, -1.0)
 
 
-@SIGNALS.register
-class Light(SignalFn):
-    keyword = "light"
-    args = ("light",)
-    dim = units.DIMENSIONLESS
-    doc = "state of a traffic-light controller: compare with `green`, `yellow`, `red` (0, 1, 2)"
+@SIGNALS.implements
+class Light(S.Light, SignalFn):
 
     @staticmethod
     def compute(trace, args):
         return trace.lights[args[0]]
 
 
-@SIGNALS.register
-class RedLight(SignalFn):
-    keyword = "red_light"
-    dim = units.LENGTH
-    doc = ("margin to running a red light: while a light that governs the actor's lane is red, "
-           "the distance of its front bumper to the stop line, negative once it crosses it (until "
-           "30 m past it); 100 m when no red light is ahead within 100 m [m]")
+@SIGNALS.implements
+class RedLight(S.RedLight, SignalFn):
 
     @staticmethod
     def compute(trace, args):
@@ -303,8 +208,8 @@ def compute_signals(trace, names: set[str]) -> dict[str, np.ndarray]:
     for name in names:
         fn, _, rest = name.partition("(")
         args = tuple(a for a in rest.rstrip(")").split(",") if a)
-        cls = SIGNALS.get(fn)
-        if cls is None:
+        if SIGNALS.get(fn) is None:
             raise KeyError(f"unknown signal {name!r}")
+        cls = SIGNALS.implementation(fn)
         out[name] = np.asarray(cls.compute(trace, args), dtype=float)
     return out

@@ -12,52 +12,20 @@ from __future__ import annotations
 
 import math
 import time as _time
-from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl import units
 from addt_dsl.plan import LIGHT_STATES
-from addt_dsl.registry import STACKS, ParamSpec
-from addt_dsl.stack.bev_grid import CAMERA_BEV_TENSOR_SITES, DETECTOR_LIDAR, DETECTOR_RIG, TENSOR_SITES
+from addt_dsl.registry import STACKS
+from addt_dsl.specs import stacks as S
+from addt_dsl.specs.stacks import NODE_NAMES, PERCEPTIONS
 from addt_dsl.stack.bus import Bus
-from addt_dsl.stack.latency import DEFAULT_TARGET, load_models, target_names
-from addt_dsl.stack.nodes import (LANE_POLICIES, Controller, EgoBody, GroundTruthPerception, LatticePlanner, Obj,
+from addt_dsl.stack.latency import load_models
+from addt_dsl.stack.nodes import (Controller, EgoBody, GroundTruthPerception, LatticePlanner, Obj,
                                   Tracker)
 
-NODE_NAMES = ("perception", "tracker", "planner", "control")
 CROSSING_SIN = 0.5  # an object whose box is turned more than 30 deg from the road ...
 CROSSING_MIN_SPEED = 0.5  # [m/s] ... and moves across it faster than this is predicted across it
-
-
-@dataclass(frozen=True)
-class PerceptionMode:
-    """One value of `stack bev perception NAME`: how to build the node and what it reads.
-
-    `build(settings, ctx)` makes the node (importing torch or opencv only for the mode
-    that needs them); `frame_key` is the frame data entry that marks its input (lidar
-    frames carry `hit_body`, camera frames `image`); `needs_sensor` is the sensor keyword
-    the compiler requires on the ego (None: not enforced, as for the lidar modes, since
-    existing scenarios run the default stack with a camera only, to exercise the renderer).
-    `expects` is the sensor the mode is made for, `(keyword, {setting: value in SI})`: the
-    compiler warns when the ego's differs (the learned detector is trained on one lidar).
-    `requires` names a package outside the core install that `build` imports (see
-    `addt_dsl.extras`): the compiler reports its absence instead of the run failing.
-    `sites` are the node's scalar fault sites (a network's detections carry no count to
-    corrupt), what a fault on the node `perception` draws from.
-    """
-
-    build: Callable
-    frame_key: str
-    needs_sensor: str | None = None
-    expects: tuple[str, dict] | None = None
-    requires: str | None = None
-    sites: tuple[str, ...] = GroundTruthPerception.sites
-    # Wall seconds per input frame beyond what the cost model counts for every stack
-    # (addt_dsl/cost.py): a network's inference. Measured 2026-12-06 with
-    # benchmarks/bench_cost_model.py's method on examples/suites/*table1_overtake.addt.
-    frame_cost_s: float = 0.0
 
 
 def _ground_truth(settings, ctx):
@@ -82,136 +50,18 @@ def _camera_bev(settings, ctx):
     return CameraBevPerception(settings, ctx)
 
 
-# The learned detectors' decoded detections (LearnedPerception.sites, CameraBevPerception.sites).
-NETWORK_OUTPUT_SITES = ("perception.x", "perception.y")
-
-PERCEPTIONS = {
-    "ground_truth": PerceptionMode(_ground_truth, "hit_body"),
-    "learned": PerceptionMode(_learned, "hit_body", expects=("lidar", {
-        "rays": DETECTOR_LIDAR.rays, "channels": DETECTOR_LIDAR.channels,
-        "vfov": math.radians(DETECTOR_LIDAR.vfov_deg)}), requires="torch", sites=NETWORK_OUTPUT_SITES,
-        frame_cost_s=2e-3),
-    "camera": PerceptionMode(_camera, "image", "camera"),
-    # A fidelity mode (cost per frame: docs/stack.md), not the default.
-    "camera_bev": PerceptionMode(_camera_bev, "images", "camera_rig", expects=("camera_rig", {
-        k: v for k, v in DETECTOR_RIG.settings().items() if k in ("cameras", "width", "height", "fov")}),
-        requires="torch", sites=NETWORK_OUTPUT_SITES, frame_cost_s=8e-3),
-}
-# Perception modes with a network whose layers are tensor fault sites (`perception.<layer>`).
-_TENSOR_SITES = {"learned": TENSOR_SITES, "camera_bev": CAMERA_BEV_TENSOR_SITES}
+# How each perception mode builds its node (importing torch or opencv only for the mode that
+# needs them); what each reads and what the compiler checks: `specs.stacks.PERCEPTIONS`.
+BUILDERS = {"ground_truth": _ground_truth, "learned": _learned, "camera": _camera, "camera_bev": _camera_bev}
+assert set(BUILDERS) == set(PERCEPTIONS)
 
 
 class StackError(RuntimeError):
     """Raised by the stack's watchdog (e.g. non-finite commands)."""
 
 
-@STACKS.register
-class BevStack:
-    keyword = "bev"
-    params = (
-        ParamSpec("perception", None, kind="word", default="ground_truth",
-                  choices=tuple(PERCEPTIONS), doc="perception model: ground_truth, learned (lidar CNN), "
-                                                  "camera (colour detector on the camera image) or camera_bev "
-                                                  "(surround cameras lifted to a BEV grid by a network)"),
-        ParamSpec("cruise_speed", units.SPEED, default=25.0, low=0.0, high=70.0, doc="desired speed"),
-        ParamSpec("time_gap", units.TIME, default=1.5, low=0.1, high=10.0, doc="desired headway"),
-        ParamSpec("max_lateral_accel", units.ACCELERATION, default=4.0, low=0.5, high=10.0,
-                  doc="the planner slows for curves ahead to keep the lateral acceleration under this"),
-        ParamSpec("stale", units.TIME, default=0.15, low=0.0, high=10.0,
-                  doc="frames older than this on arrival are discarded"),
-        ParamSpec("latency", None, kind="word", default="model", choices=("model", "median", "measured"),
-                  doc="node latency: model (measured trend and jitter, drawn from the run seed), median "
-                      "(the trend alone, no jitter) or measured (this run's compute time, HIL-like)"),
-        ParamSpec("latency_target", None, kind="word", default=DEFAULT_TARGET, choices=target_names(),
-                  doc="the hardware the modelled latency stands for: host (as measured) or a target "
-                      "profile of latency_model.json (xavier: assumed factors, see docs/stack.md#latency)"),
-        ParamSpec("planner_rate", units.FREQUENCY, default=10.0, low=1.0, high=100.0, doc="planning rate"),
-        ParamSpec("control_rate", units.FREQUENCY, default=100.0, low=10.0, high=1000.0, doc="control rate"),
-        ParamSpec("perception_noise", units.LENGTH, default=0.1, low=0.0, high=10.0,
-                  doc="position noise of ground-truth perception (1 sigma)"),
-        ParamSpec("track_max_age", units.TIME, default=1.0, low=0.0, high=10.0,
-                  doc="how long the tracker coasts an object it no longer sees (0.15 s: no coasting "
-                      "beyond one lidar period, like a detector without tracking)"),
-        ParamSpec("lane_policy", None, kind="word", default="keep", choices=LANE_POLICIES,
-                  doc="lane preference: keep (the lane the ego starts in: lane changes only when traffic "
-                      "makes them) or keep_right (the rightmost driving lane)"),
-        ParamSpec("lane_change_cooldown", units.TIME, default=3.0, low=0.0, high=60.0,
-                  doc="a lane change within this time of the last one costs extra"),
-        ParamSpec("aeb", None, kind="word", default="on", choices=("on", "off"),
-                  doc="forward-collision check braking stages (warnings are reported either way)"),
-        ParamSpec("aeb_warn_ttc", units.TIME, default=2.6, low=0.0, high=10.0,
-                  doc="forward-collision warning below this time to collision"),
-        ParamSpec("aeb_partial_ttc", units.TIME, default=1.6, low=0.0, high=10.0,
-                  doc="partial braking (40 % of mu g) below this time to collision"),
-        ParamSpec("aeb_full_ttc", units.TIME, default=0.9, low=0.0, high=10.0,
-                  doc="full braking (mu g) below this time to collision"),
-        ParamSpec("yield_gap", units.TIME, default=1.5, low=0.0, high=20.0,
-                  doc="gap acceptance at junctions on the route: the ego goes when other traffic reaches "
-                      "the conflict zone at least this long after the ego has left it (0: off)"),
-        ParamSpec("synthetic_objects", None, kind="int", default=0, low=0, high=500,
-                  doc="extra objects perception reports in every frame (vehicles keeping pace beside "
-                      "the road, 12 m or more to either side): a controllable workload for latency "
-                      "studies, as the paper synthesises objects"),
-    )
-    nodes = {
-        "perception": GroundTruthPerception.sites,
-        "tracker": Tracker.sites,
-        "planner": LatticePlanner.sites,
-        "control": Controller.sites,
-    }
-    # Stored state a bit flip stays in (`bitflip` only; a node target draws these too).
-    state_nodes = {
-        "tracker": Tracker.state_sites,
-        "planner": LatticePlanner.state_sites,
-    }
-    doc = ("BEV-style stack: lidar, camera or surround-camera BEV perception, CV tracker, lattice planner, "
-           "PID + pure pursuit.")
-
-    @classmethod
-    def required_sensors(cls, settings: dict) -> set[str]:
-        """Sensor keywords the ego must carry for these settings (the compiler checks)."""
-        mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
-        return {mode.needs_sensor} if mode is not None and mode.needs_sensor else set()
-
-    @classmethod
-    def frame_cost(cls, settings: dict) -> tuple[str, float] | None:
-        """(sensor keyword, wall seconds per frame of it) that these settings' perception
-        adds to the cost model's estimate (a network's inference); None: nothing."""
-        mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
-        if mode is None or not mode.frame_cost_s:
-            return None
-        sensor = mode.expects[0] if mode.expects else mode.needs_sensor or "lidar"
-        return sensor, mode.frame_cost_s
-
-    @classmethod
-    def required_modules(cls, settings: dict) -> dict[str, str]:
-        """Setting → package outside the core install that these settings need."""
-        mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
-        return {"perception": mode.requires} if mode is not None and mode.requires else {}
-
-    @classmethod
-    def sensor_mismatches(cls, settings: dict, sensor: str, values: dict) -> list[tuple[str, float]]:
-        """(setting, expected value) where the ego's `sensor` (its settings, SI, defaults
-        filled in) differs from what these stack settings are made for."""
-        mode = PERCEPTIONS.get(str(settings.get("perception", "ground_truth")))
-        if mode is None or mode.expects is None or mode.expects[0] != sensor:
-            return []
-        return [(key, want) for key, want in mode.expects[1].items()
-                if key in values and not math.isclose(values[key], want, rel_tol=1e-9, abs_tol=1e-12)]
-
-    @classmethod
-    def fault_sites(cls, settings: dict | None = None) -> set[str]:
-        """Fault targets of this stack; with `perception learned` or `camera_bev`, also the
-        network's tensor sites `perception.<layer>` (all modes' when `settings` is not given)."""
-        sites = {site for node, sites in cls.nodes.items() if node != "perception" for site in sites}
-        for name, mode in PERCEPTIONS.items():
-            if settings is None or settings.get("perception", "ground_truth") == name:
-                sites |= set(mode.sites)
-        for mode, tensor_sites in _TENSOR_SITES.items():
-            if settings is None or settings.get("perception") == mode:
-                sites |= set(tensor_sites)
-        return sites
-
+@STACKS.implements
+class BevStack(S.BevStack):
     def tensor_sites(self) -> dict:
         """Tensor fault sites (site name → torch module); empty unless perception is a network."""
         modules = getattr(self.perception, "tensor_modules", None)
@@ -252,9 +102,9 @@ class BevStack:
         self.synthetic_objects = int(self.settings["synthetic_objects"])
 
     def _make_perception(self):
-        mode = PERCEPTIONS[self.settings["perception"]]
-        self.perception_input = mode.frame_key
-        return mode.build(self.settings, self.ctx)
+        mode = self.settings["perception"]
+        self.perception_input = PERCEPTIONS[mode].frame_key
+        return BUILDERS[mode](self.settings, self.ctx)
 
     # ---- timing helpers
     def _latency(self, node: str, objects: int, started: float, time_s: float) -> float:

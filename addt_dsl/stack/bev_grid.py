@@ -24,6 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# The shipped detectors' sensors and tensor sites: the compiler checks against them too.
+from addt_dsl.specs.stacks import (CAMERA_BEV_SITES, CAMERA_BEV_TENSOR_SITES, DETECTOR_LIDAR,  # noqa: F401
+                                   DETECTOR_RIG, ENCODER_SITES, LAYER_SITES, TENSOR_SITES, DetectorLidar,
+                                   DetectorRig)
+
 CHANNELS = 6
 OUTPUT_STRIDE = 2  # detector head cells are OUTPUT_STRIDE × cell = 1.6 m
 # The box axis, not the heading, is regressed, as (sin 2θ, cos 2θ): a lidar box looks the
@@ -36,14 +41,6 @@ HEAD_CHANNELS = ("heat", "off_x", "off_y", "log_l", "log_w", "sin2", "cos2")
 CLASSES = ("car", "truck", "pedestrian", "cyclist")
 BOX_CHANNELS = 6
 
-# Tensor fault sites of the learned detector, `perception.<layer>`: the network in
-# `learned.py` names its layers exactly so (a unit test checks it). Listed here so the
-# compiler can check fault targets without importing torch.
-LAYER_SITES = (
-    "backbone.conv0", "backbone.conv1", "backbone.conv2", "backbone.conv3",
-    "neck.lateral", "neck.fuse", "neck.lateral_fine", "neck.fine", "head.center", "head.box",
-)
-TENSOR_SITES = tuple(f"perception.{name}" for name in LAYER_SITES)
 
 
 @dataclass(frozen=True)
@@ -75,35 +72,6 @@ class GridSpec:
 GRID = GridSpec()
 
 
-@dataclass(frozen=True)
-class DetectorLidar:
-    """The lidar the shipped detector is trained for (`train.py` scans with it; the
-    weights' metadata records it and a unit test holds the two together).
-
-    360 rays × 5 channels at -6, -3, 0, +3, +6 deg, mounted at the default 1 m. The
-    horizontal beam is the default one-channel lidar's; the upper beams see a truck's
-    height (+3 deg clears a 1.5 m car beyond 9.5 m but meets a 3.5 m truck out to 48 m;
-    +6 deg from 4.8 to 24 m), without which a truck seen from behind is just a wide car;
-    the lower beams reach the road and are dropped as ground (`GridSpec.ground_m`).
-    """
-
-    rays: int = 360
-    channels: int = 5
-    vfov_deg: float = 12.0
-    range_m: float = 80.0
-
-    @property
-    def config(self) -> str:
-        """"RAYSxCHANNELS", as `synth` and `train --lidars` name lidars."""
-        return f"{self.rays}x{self.channels}"
-
-    def clause(self, rate_hz: float = 10.0) -> str:
-        """The `.addt` sensor declaration of this lidar."""
-        return (f"sensor lidar rate {rate_hz:g} Hz rays {self.rays} channels {self.channels} "
-                f"vfov {self.vfov_deg:g} deg range {self.range_m:g} m")
-
-
-DETECTOR_LIDAR = DetectorLidar()
 
 
 def build_grid(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec: GridSpec = GRID,
@@ -310,34 +278,3 @@ def _keep_non_overlapping(boxes: np.ndarray, max_overlap_m: float) -> np.ndarray
 
 # ---------------------------------------------------------------- camera BEV (`perception camera_bev`)
 
-@dataclass(frozen=True)
-class DetectorRig:
-    """The camera rig the shipped camera BEV weights are trained for (`camera_train`
-    renders with it; the weights' metadata records it): six cameras around a mount above
-    the vehicle centre, as the paper's surround view, at a low resolution so a frame
-    costs little. 64 deg per camera (a little overlap), 128 x 40 px each."""
-
-    cameras: int = 6
-    width: int = 128
-    height: int = 40
-    fov_deg: float = 64.0
-    x_m: float = 0.0
-    z_m: float = 1.5
-
-    def settings(self) -> dict:
-        """The `camera_rig` sensor's settings (SI) for this rig."""
-        return {"cameras": self.cameras, "width": self.width, "height": self.height,
-                "fov": math.radians(self.fov_deg), "x": self.x_m, "z": self.z_m}
-
-    def clause(self, rate_hz: float = 10.0) -> str:
-        """The `.addt` sensor declaration of this rig."""
-        return (f"sensor camera_rig rate {rate_hz:g} Hz cameras {self.cameras} width {self.width} "
-                f"height {self.height} fov {self.fov_deg:g} deg")
-
-
-DETECTOR_RIG = DetectorRig()
-# The camera network's per-camera image encoder; its BEV part is the lidar detector's
-# layout (`LAYER_SITES`). Sites `perception.<layer>` as for `perception learned`.
-ENCODER_SITES = ("encoder.conv0", "encoder.conv1", "encoder.conv2")
-CAMERA_BEV_SITES = ENCODER_SITES + LAYER_SITES
-CAMERA_BEV_TENSOR_SITES = tuple(f"perception.{name}" for name in CAMERA_BEV_SITES)

@@ -32,17 +32,17 @@ import ipaddress
 import json
 import math
 import os
-import re
 import socket
 import struct
 import time
 
 import numpy as np
 
-from addt_dsl import units
-from addt_dsl.registry import STACKS, ParamSpec
+from addt_dsl.registry import STACKS
+from addt_dsl.specs import stacks as S
+from addt_dsl.specs.stacks import CLIENT_SETTINGS, escape, parse_address
 from addt_dsl.runtime.trace import SERIES_COLUMNS, Event
-from addt_dsl.stack.bev import NODE_NAMES, BevStack, StackError
+from addt_dsl.stack.bev import NODE_NAMES, StackError
 
 PROTOCOL = 2  # the newest protocol; a hello says 1 when the run has no stack-internal faults
 PROTOCOLS = (1, 2)  # what the reference server accepts
@@ -187,43 +187,6 @@ def recv(sock: socket.socket, max_bytes: int = MAX_MESSAGE_BYTES, deadline: floa
     return decode(recv_payload(sock, max_bytes, deadline), max_header_bytes)
 
 
-def escape(text: str, limit: int = 2000) -> str:
-    """Peer text made safe to print or store: control characters (terminal escape
-    sequences among them) written as \\xNN, and at most `limit` characters."""
-    out = "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text[:limit])
-    return out + ("..." if len(text) > limit else "")
-
-
-_HOSTNAME = re.compile(r"(?=.{1,253}$)[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?(?:\.[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*\.?")
-
-
-def parse_address(address: str, allow_port_zero: bool = False) -> tuple[str, int]:
-    """`HOST:PORT` as (host, port): an IPv4 address, a host name, or an IPv6 address in
-    brackets (`[::1]:5555`, returned without them, as the socket calls take it). A port
-    outside 1-65535 (0 only where `allow_port_zero`: a server picking a free one) or a host
-    that is none of these is a ValueError, never wrapped or passed on to fail later."""
-    host, sep, port = address.rpartition(":")
-    if not sep or not port.isascii() or not port.isdigit():
-        raise ValueError(f"address must be HOST:PORT, not {escape(address, 200)!r}")
-    number = int(port)
-    if not (0 if allow_port_zero else 1) <= number <= 65535:
-        raise ValueError(f"port {number} is outside {0 if allow_port_zero else 1}-65535 "
-                         f"(in {escape(address, 200)!r})")
-    if host.startswith("[") or host.endswith("]"):
-        try:
-            if not (host.startswith("[") and host.endswith("]")):
-                raise ValueError
-            ipaddress.IPv6Address(host[1:-1])
-        except ValueError:
-            raise ValueError(f"{escape(host, 200)!r} is not an IPv6 address") from None
-        return host[1:-1], number
-    if ":" in host:
-        raise ValueError(f"write an IPv6 address in brackets: [{escape(host, 200)}]:{number}")
-    if host and not _HOSTNAME.fullmatch(host):
-        raise ValueError(f"{escape(host, 200)!r} is not a host name or an IP address")
-    return host or "127.0.0.1", number
-
-
 ALLOW_HOSTS_ENV = "ADDT_BRIDGE_ALLOW_HOSTS"  # comma-separated; `addtc run --allow-host HOST` sets it
 TOKEN_ENV = "ADDT_BRIDGE_TOKEN"  # the shared token both sides send and expect in `hello`
 
@@ -255,9 +218,6 @@ def extrinsics_dict(ext) -> dict[str, float]:
 
 # ---------------------------------------------------------------- the client stack
 
-# Settings the client keeps: never sent to the remote as stack settings.
-CLIENT_SETTINGS = ("address", "timeout", "sites", "protocol", "answer")
-SITE_STACKS = ("bev", "none")  # registered stacks whose fault sites a remote may declare
 
 
 def _osi_stack():
@@ -268,99 +228,16 @@ def _osi_stack():
 
 # `stack external protocol WORD` -> the client class that speaks it (ExternalStack or a subclass).
 PROTOCOL_CLIENTS = {"bridge": lambda: ExternalStack, "osi": _osi_stack}
-# The package a protocol's client imports outside the core install (addt_dsl.extras).
-PROTOCOL_MODULES = {"osi": "osi3"}
 
 
-@STACKS.register
-class ExternalStack:
+@STACKS.implements
+class ExternalStack(S.ExternalStack):
     """A stack in another process behind the bridge; the remote's own settings pass through."""
-
-    keyword = "external"
-    # Settings of the default stack pass through to the remote (the reference server
-    # hosts `bev`); a user's stack reads what it understands.
-    params = (
-        ParamSpec("address", None, kind="string", default="127.0.0.1:5555",
-                  doc="HOST:PORT of the remote stack's bridge server"),
-        ParamSpec("timeout", units.TIME, default=30.0, low=0.001, high=3600.0,
-                  doc="wall-clock wait for each reply before the run is marked detected"),
-        ParamSpec("protocol", None, kind="word", default="bridge", choices=("bridge", "osi"),
-                  doc="what the remote speaks: bridge (this project's JSON messages with the sensor frames) or "
-                      "osi (ASAM OSI: a SensorView per step, answered by a MotionRequest or TrafficUpdate)"),
-        ParamSpec("answer", None, kind="word", default="motion_request", choices=("motion_request", "traffic_update"),
-                  doc="protocol osi: what the stack answers each SensorView with: motion_request (a desired "
-                      "state or trajectory the twin's dynamics follow) or traffic_update (the host's new state)"),
-        ParamSpec("sites", None, kind="word", default="bev", choices=SITE_STACKS,
-                  doc="whose fault sites the remote stack has: bev (the reference server's: stack-internal "
-                      "faults are checked against `stack bev` and sent to the remote in protocol 2) or "
-                      "none (a stack without them: such faults are compile errors)"),
-        *BevStack.params,
-    )
-    nodes = {name: () for name in NODE_NAMES}
-    doc = "A stack in another process or language, lock-step over a socket (docs/bridge.md)."
 
     def __new__(cls, settings: dict | None = None, ctx=None):
         # `protocol osi` runs the OSI client (a subclass): the registered stack stays one.
         impl = PROTOCOL_CLIENTS[str((settings or {}).get("protocol", "bridge"))]() if cls is ExternalStack else cls
         return object.__new__(impl)
-
-    @classmethod
-    def setting_problems(cls, settings: dict) -> dict[str, str]:
-        """Settings the compiler refuses (E0204): an address that is not HOST:PORT with a
-        port in 1-65535 and a host name, IPv4 or bracketed IPv6 address (`port 99999` was
-        wrapped to 34463, `[::1]` passed the loopback check and could not resolve)."""
-        address = settings.get("address")
-        if not isinstance(address, str):
-            return {}
-        try:
-            parse_address(address)
-        except ValueError as exc:
-            return {"address": str(exc)}
-        return {}
-
-    @classmethod
-    def sites_of(cls, settings: dict | None = None):
-        """The registered stack whose fault sites the remote has (`sites bev`), or None
-        (`sites none`, or `protocol osi`, whose messages carry no faults): the compiler
-        checks stack-internal fault targets against it."""
-        name = str((settings or {}).get("sites", "bev"))
-        if name == "none" or (settings or {}).get("protocol") == "osi":
-            return None
-        return STACKS.get(name)
-
-    @classmethod
-    def no_sites_reason(cls, settings: dict | None = None) -> tuple[str, str]:
-        """(why, what to do) for a stack-internal fault the remote cannot take (E0109)."""
-        if (settings or {}).get("protocol") == "osi":
-            return ("`stack external protocol osi` cannot apply it: OSI's messages carry no fault schedule, "
-                    "and an OSI stack reports no injections back",
-                    "sensor faults (drop, delay, skew, shift, noise) act on the SensorViews sent; for "
-                    "stack-internal faults serve the stack over `protocol bridge` with `sites bev` "
-                    "(docs/bridge.md)")
-        return ("`stack external sites none` declares none",
-                "the reference server (python -m addt_dsl.stack.bridge_server) has the sites of "
-                "`stack bev`: `sites bev` (the default) checks targets against them and sends the "
-                "faults to the remote (bridge protocol 2, docs/bridge.md)")
-
-    @classmethod
-    def required_sensors(cls, settings: dict) -> set[str]:
-        """`protocol osi` builds each SensorView on a lidar frame (what it saw, when)."""
-        return {"lidar"} if settings.get("protocol") == "osi" else set()
-
-    @classmethod
-    def required_modules(cls, settings: dict) -> dict[str, str]:
-        module = PROTOCOL_MODULES.get(str(settings.get("protocol", "bridge")))
-        return {"protocol": module} if module else {}
-
-    @classmethod
-    def fault_sites(cls, settings: dict | None = None) -> set[str]:
-        """The remote's scalar and tensor fault sites, as `sites` declares them."""
-        stack_cls = cls.sites_of(settings)
-        if stack_cls is None:
-            return set()
-        if settings is None:
-            return stack_cls.fault_sites()
-        return stack_cls.fault_sites({k: v for k, v in settings.items() if k not in CLIENT_SETTINGS})
 
     def __init__(self, settings: dict, ctx):
         self.settings = {p.name: settings.get(p.name, p.default) for p in self.params}

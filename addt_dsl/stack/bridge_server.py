@@ -92,8 +92,8 @@ class RemoteContext:
     def __init__(self, hello: dict):
         from addt_dsl.plan import RoadPlan
         from addt_dsl.runtime.execute import ActorPath, ActorRoad, junction_legs
-        from addt_dsl.runtime.road import resolve_route
-        from addt_dsl.runtime.roadspec import build_network
+        from addt_dsl.road import resolve_route
+        from addt_dsl.road.roadspec import build_network
 
         road_plan = RoadPlan.model_validate(hello["map"]["road"])
         network = build_network([road_plan])[road_plan.name]

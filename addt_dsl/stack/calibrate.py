@@ -113,7 +113,7 @@ def measure_tracker(repeats: int) -> list[tuple[int, list[float], list[float]]]:
 def _road():
     from addt_dsl.plan import RoadPlan, SegmentPlan
     from addt_dsl.runtime.fastroad import FastRoad
-    from addt_dsl.runtime.roadspec import build_network
+    from addt_dsl.road.roadspec import build_network
 
     plan = RoadPlan(name="r", source="inline", segments=[SegmentPlan(kind="line", length_m=1000.0)],
                     right_lanes=2)

@@ -55,7 +55,7 @@ class _RenderWorld:
     """A visual pybullet world (the runtime's) with one road and a pool of coloured bodies."""
 
     def __init__(self, kappa: float, n_right: int, n_left: int):
-        from addt_dsl.runtime import road as R
+        from addt_dsl import road as R
         from addt_dsl.runtime.roadmesh import build_scene
         from addt_dsl.runtime.world import PhysicsWorld
         from addt_dsl.vehicles import CAR, VEHICLES

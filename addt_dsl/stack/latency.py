@@ -26,9 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-MODEL_PATH = Path(__file__).with_name("latency_model.json")
+from addt_dsl.specs.stacks import DEFAULT_LATENCY_TARGET, LATENCY_MODEL_PATH, latency_targets
+
+MODEL_PATH = LATENCY_MODEL_PATH
 NODES = ("perception", "tracker", "planner", "control")
-DEFAULT_TARGET = "xavier"
+DEFAULT_TARGET = DEFAULT_LATENCY_TARGET
 
 
 @dataclass(frozen=True)
@@ -73,9 +75,7 @@ def read(path: Path = MODEL_PATH) -> dict:
     return json.loads(path.read_text())
 
 
-def target_names(path: Path = MODEL_PATH) -> tuple[str, ...]:
-    """The targets the model file declares (the `latency_target` setting's choices)."""
-    return tuple(read(path)["targets"])
+target_names = latency_targets  # the `latency_target` setting's choices
 
 
 def load_models(target: str = DEFAULT_TARGET, path: Path = MODEL_PATH, data: dict | None = None

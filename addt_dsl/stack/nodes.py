@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from addt_dsl.plan import LIGHT_STATES
+from addt_dsl.specs import stacks as S
 from addt_dsl.vehicles import CAR
 
 G = 9.81  # [m/s^2]
@@ -68,7 +69,7 @@ class GroundTruthPerception:
     """
 
     name = "perception"
-    sites = ("perception.x", "perception.y", "perception.count")
+    sites = S.GROUND_TRUTH_SITES
 
     def __init__(self, settings: dict, rng: np.random.Generator):
         self.noise_m = float(settings.get("perception_noise", 0.1))
@@ -128,9 +129,8 @@ class Tracker:
     """
 
     name = "tracker"
-    sites = ("tracker.vx",)
-    # Stored state (memory a flip stays in): every live track's fields and last update time.
-    state_sites = ("tracker.tracks",)
+    sites = S.TRACKER_SITES
+    state_sites = S.TRACKER_STATE_SITES
     TRACK_FIELDS = ("x", "y", "heading", "vx", "vy", "length", "width", "stamp")
     gate_m = 4.0
     max_age_s = 1.0
@@ -238,7 +238,7 @@ class Plan:
 # `stack bev lane_policy`: `keep` prefers the lane the ego started in (it changes lanes
 # only when traffic makes it, and returns there after an overtake); `keep_right` prefers
 # the rightmost driving lane (moves over on an empty multi-lane road).
-LANE_POLICIES = ("keep", "keep_right")
+LANE_POLICIES = S.LANE_POLICIES
 
 
 class LatticePlanner:
@@ -257,11 +257,8 @@ class LatticePlanner:
     """
 
     name = "planner"
-    sites = ("planner.speed", "planner.t_target", "planner.t_start", "planner.path_length", "planner.cost")
-    # Stored state (memory a flip stays in until the planner's own logic overwrites it):
-    # the manoeuvre state (lanes, the last lane change, the forward-collision check's held
-    # stage) and the committed lateral manoeuvre every plan publishes.
-    state_sites = ("planner.state", "planner.trajectory")
+    sites = S.PLANNER_SITES
+    state_sites = S.PLANNER_STATE_SITES
     horizon_s = 5.0
     dt_s = 0.5
     comfort_brake = 6.0  # [m/s^2] the speed candidates' braking limit (less where friction is lower)
@@ -623,10 +620,7 @@ class Controller:
     """
 
     name = "control"
-    # Commands (transient), PID state (kept) and the gains (parameters in memory: a
-    # changed gain stays changed for the rest of the run, like a memory upset).
-    sites = ("control.steer", "control.accel", "control.integral",
-             "control.kp", "control.ki", "control.kd", "control.lateral_wn", "control.understeer")
+    sites = S.CONTROL_SITES
     lateral_zeta = 1.0
     preview_s = 0.2  # [s]
 

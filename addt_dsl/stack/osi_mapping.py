@@ -395,7 +395,7 @@ LANE_STEP_M = 5.0  # centre lines and boundaries sampled this far apart along th
 
 def sample_lanes(roads, elevation=None, step_m: float = LANE_STEP_M) -> tuple[list[LaneGeometry],
                                                                              list[BoundaryGeometry]]:
-    """OSI lanes and boundaries of `roads` (runtime.road.Road objects, in a fixed order):
+    """OSI lanes and boundaries of `roads` (addt_dsl.road.Road objects, in a fixed order):
     per lane section, each lane's centre line and its two borders sampled every `step_m`
     (and at the section's ends). Ids: `LANE_ID_BASE` + 10000 road + 100 section + 50 +
     lane id (a lane) or border index (a boundary: 0 the centre line, +-k the outer border
@@ -403,7 +403,7 @@ def sample_lanes(roads, elevation=None, step_m: float = LANE_STEP_M) -> tuple[li
     dashed between lanes of one direction. `elevation(road_index, s) -> z` [m] or None (0)."""
     import numpy as np
 
-    from addt_dsl.runtime.road.lanes import DRIVING_TYPES
+    from addt_dsl.road.lanes import DRIVING_TYPES
 
     lanes, boundaries = [], []
     for ri, road in enumerate(roads):

@@ -56,7 +56,7 @@ def views(spec, trace):
 
 
 def _lanes(plan):
-    from addt_dsl.runtime.roadspec import build_network
+    from addt_dsl.road.roadspec import build_network
 
     network = build_network(plan.roads)[plan.ego.road]
     return M.sample_lanes([network.road(rid) for rid in sorted(network.roads)])

@@ -13,7 +13,7 @@ from multiprocessing import forkserver
 
 import pytest
 
-from tests.quality.faultkit import assert_same_results, reference, rows, sweep_file
+from tests.quality.crashkit import assert_same_results, reference, rows, sweep_file
 
 from addt_dsl.compiler import compile_file
 from addt_dsl.runtime.executor import LocalExecutor, run_sweep

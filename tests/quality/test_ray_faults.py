@@ -1,4 +1,4 @@
-"""The fault tests on the Ray executor (issue 24), kept light (2 CPUs): a Ray worker
+"""The fault tests on the Ray executor, kept light (2 CPUs): a Ray worker
 killed mid-run is resubmitted, and a killed coordinator resumes; both end with the
 results of an uninterrupted run."""
 
@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from tests.quality.faultkit import (alive, assert_same_results, descendants, kill, reference, rows, start, sweep_file,
+from tests.quality.crashkit import (alive, assert_same_results, descendants, kill, reference, rows, start, sweep_file,
                                     wait_for_rows)
 from tests.sim.runner_simkit import addtc
 

@@ -1,6 +1,6 @@
 """`addtc falsify` and `addtc shrink` killed and run again with the same seed resume from
 their run cache (the one results store, OUT/runs.sqlite) and end with the same report and
-the same counterexample files as an uninterrupted search (issue 24)."""
+the same counterexample files as an uninterrupted search."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from tests.quality.faultkit import start, sweep_file
+from tests.quality.crashkit import start, sweep_file
 from tests.conftest import EXAMPLES
 from tests.sim.runner_simkit import addtc
 

@@ -1,6 +1,6 @@
 """Quality: ten injected faults, exactly one causes the failure; shrinking finds it.
 
-Issue 9's bar: the scenario shrinks to that one fault within 150 simulations, the
+The bar: the scenario shrinks to that one fault within 150 simulations, the
 written `.addt` file replays the failure with `addtc` (exit 1), and the same input
 shrinks to the same result. Two culprits: a stuck acceleration command (collision with
 the lead) and a stuck steering command (lane departure to the left).

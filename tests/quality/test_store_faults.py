@@ -1,4 +1,4 @@
-"""A damaged, foreign, read-only, locked or full results store (issue 24): refused in one
+"""A damaged, foreign, read-only, locked or full results store: refused in one
 line that names the file, what is wrong and what to do, exit 3, never a traceback and never
 overwritten; what was committed is kept and a resume ends with the results of an
 uninterrupted run (0 lost, 0 duplicated, identical verdicts and digests)."""
@@ -13,7 +13,7 @@ import subprocess
 
 import pytest
 
-from tests.quality.faultkit import assert_same_results, reference, rows, sweep_file
+from tests.quality.crashkit import assert_same_results, reference, rows, sweep_file
 from tests.sim.runner_simkit import addtc
 
 from addt_dsl.errors import EXIT_FAILED, EXIT_INCOMPLETE, EXIT_OK

@@ -1,4 +1,4 @@
-"""Sweeps that survive faults (issue 24): the coordinator killed at random points, workers
+"""Sweeps that survive faults: the coordinator killed at random points, workers
 killed busy and idle, a hung external stack, two sweeps on one store. Each ends with
 exactly the results of an uninterrupted run: 0 lost, 0 duplicated, identical verdicts and
 digests."""
@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from tests.quality.faultkit import (assert_same_results, kill, local_workers, reference, rows, start,
+from tests.quality.crashkit import (assert_same_results, kill, local_workers, reference, rows, start,
                                     sweep_file, wait_dead, wait_for_rows)
 from tests.sim.runner_simkit import addtc
 
@@ -217,7 +217,7 @@ def test_two_sweeps_on_one_store_never_mix(tmp_path, fresh):
 
 def test_the_default_time_bound_follows_the_scenario(tmp_path, monkeypatch):
     from addt_dsl.runtime import executor as executor_module
-    from tests.unit.runner.runner_testkit import HANG, OK, fake_run, scenario
+    from tests.unit.runtime.runner_testkit import HANG, OK, fake_run, scenario
 
     plan = compile_source(scenario([OK, HANG], duration="0.5 s")).plan
     # 1 s start-up + 0.5 s simulated at 0.25x real time: a 3 s bound (computed by the coordinator).

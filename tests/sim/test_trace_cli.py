@@ -1,6 +1,6 @@
 """`addtc trace`: the docs/running.md example runs as written (a passing run, re-executed
 from the store), its CSV holds the signals it promises and its output is what the docs
-quote. (Failing runs' plots: tests/sim/test_runner_report.py.)"""
+quote. (Failing runs' plots: tests/sim/reporting/test_runner_report.py.)"""
 
 import re
 from pathlib import Path

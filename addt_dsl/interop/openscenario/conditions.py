@@ -7,7 +7,7 @@ from addt_dsl.interop.openscenario.params import EXPR, all_of, any_of, plus_expr
 from addt_dsl.interop.openscenario.registry import ENTITY_CONDITIONS, VALUE_CONDITIONS
 from addt_dsl.interop.openscenario.xml import child_at, only_child
 from addt_dsl.plan import LIGHT_STATES
-from addt_dsl.runtime.road.route import RouteError, resolve_route
+from addt_dsl.road.route import RouteError, resolve_route
 
 EDGES = {"none": None, "rising": "rising", "falling": "falling", "risingOrFalling": "changing"}
 RULE_OPS = {"lessThan": "<", "lessOrEqual": "<=", "greaterThan": ">", "greaterOrEqual": ">=", "equalTo": "==",

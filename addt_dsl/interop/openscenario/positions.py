@@ -9,7 +9,7 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.openscenario.params import plus_expr
 from addt_dsl.interop.openscenario.registry import POSITIONS
 from addt_dsl.interop.openscenario.xml import Stop, first_of, only_child
-from addt_dsl.runtime.road.route import RouteError, exits, resolve_route, turn_of
+from addt_dsl.road.route import RouteError, exits, resolve_route, turn_of
 
 MAX_STATION_M = 1e6  # a road station beyond this is refused as content, not translated [m]
 MAX_LANE_ID = 100

@@ -9,7 +9,7 @@ from addt_dsl.interop.openscenario.entities import safe_name
 from addt_dsl.interop.openscenario.params import NAME_RE
 from addt_dsl.interop.openscenario.xml import Stop, first_of
 from addt_dsl.plan import RoadPlan
-from addt_dsl.runtime.road import XodrError, parse_xodr
+from addt_dsl.road import XodrError, parse_xodr
 
 
 class Roads:

@@ -1,8 +1,8 @@
 """The fault base class, the schedule that applies faults, and bit-level helpers.
 
-A fault kind is one small class registered under its DSL keyword. It declares its
-settings (`ParamSpec`s), which targets it accepts (`valid_targets`, checked by the
-compiler) and overrides the hooks it needs:
+A fault kind's spec (`addt_dsl/specs/faults.py`) declares its settings (`ParamSpec`s) and
+which targets it accepts (`valid_targets`, checked by the compiler); its implementation here
+subclasses the spec and overrides the hooks it needs:
 
 - `before_capture(sensor, t)`  the loop, before a sensor captures (extrinsics);
 - `on_frame(frame, t)`         the loop, after capture: drop, delay, skew, corrupt data;
@@ -30,7 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from addt_dsl.registry import FAULTS, ParamSpec
+from addt_dsl.registry import FAULTS
+from addt_dsl.specs import faults as S
 
 # Bit ranges [lo, hi) of the IEEE-754 fields, by storage width in bits.
 IEEE_FIELDS: dict[int, dict[str, tuple[int, int]]] = {
@@ -41,7 +42,7 @@ IEEE_FIELDS: dict[int, dict[str, tuple[int, int]]] = {
 # bfloat16 shares float32's exponent width: 8 exponent bits, 7 mantissa bits.
 IEEE_FIELDS_BF16 = {"sign": (15, 16), "exponent": (7, 15), "mantissa": (0, 7), "any": (0, 16)}
 BIT_FIELDS_F64 = IEEE_FIELDS[64]
-FIELD_NAMES = ("any", "sign", "exponent", "mantissa")
+FIELD_NAMES = S.FIELD_NAMES
 
 
 def flip_float64_bit(value: float, bit: int) -> float:
@@ -102,18 +103,7 @@ class Binding:
         return {s for sites in self.nodes.values() for s in sites}
 
 
-class FaultKind:
-    keyword = ""
-    target_kind = "sensor"  # "sensor" | "site" (a stack variable/output/tensor) | "node"
-    # For sensor faults: the sensor keywords the kind applies to (None: any sensor).
-    sensor_kinds: tuple[str, ...] | None = None
-    params: tuple[ParamSpec, ...] = ()
-    doc = ""
-    # A setting whose negative default means "drawn from the fault's seed", with every drawn
-    # value recorded in the fault event under the same name (bitflip: `bit`). The search
-    # pins it to the value the run drew, then lowers it; it is never a magnitude.
-    drawn_setting: str | None = None
-
+class FaultKind(S.FaultSpec):
     def __init__(self, fault, step_s: float, duration_s: float, record):
         self.fault = fault
         self.settings = {p.name: fault.settings.get(p.name, p.default) for p in self.params}
@@ -128,18 +118,6 @@ class FaultKind:
         self._record = record  # callable(time_s, detail dict)
         self.duration_s = duration_s
         self._series: dict[str, tuple[list, list, list]] = {}  # location -> (times, value, before)
-
-    # ---- compile-time target check (the compiler calls this; no runtime state)
-    @classmethod
-    def valid_targets(cls, sensors: Mapping[str, str], stack_cls) -> set[str]:
-        """Targets this kind accepts, given the ego's sensors (name → keyword) and stack class."""
-        if cls.target_kind == "sensor":
-            return {n for n, kw in sensors.items() if cls.sensor_kinds is None or kw in cls.sensor_kinds}
-        if stack_cls is None:
-            return set()
-        if cls.target_kind == "node":
-            return set(stack_cls.nodes)
-        return set(stack_cls.fault_sites()) | set(getattr(stack_cls, "static_tensor_sites", lambda: ())())
 
     def active(self, time_s: float) -> bool:
         return self.start <= time_s <= self.end
@@ -210,7 +188,7 @@ class FaultSchedule:
         self._timer_seq = 0
         self.next_wake_s = math.inf
         for f in faults:
-            cls = FAULTS.get(f.kind)
+            cls = FAULTS.implementation(f.kind)
 
             def record(time_s, detail, _f=f):
                 events.append(Event(time_s, "fault", {"index": _f.index, "kind": _f.kind,

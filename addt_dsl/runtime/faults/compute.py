@@ -4,46 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from addt_dsl.registry import FAULTS, ParamSpec
-from addt_dsl.runtime.faults.base import (BIT_FIELDS_F64, FIELD_NAMES, Binding, FaultKind, flip_float64_bit,
+from addt_dsl.registry import FAULTS
+from addt_dsl.specs import faults as S
+from addt_dsl.runtime.faults.base import (BIT_FIELDS_F64, Binding, FaultKind, flip_float64_bit,
                                           flip_stored_bit)
 
 
-@FAULTS.register
-class BitFlip(FaultKind):
-    keyword = "bitflip"
-    target_kind = "site"
-    drawn_setting = "bit"
-    params = (
-        ParamSpec("count", None, kind="int", default=1, low=0, high=10000, neutral=1,
-                  doc="number of flips in the window (0: none, a fault-free baseline in the same grid)"),
-        ParamSpec("bit", None, kind="int", default=-1, low=-1, high=63,
-                  doc="bit index, 0 = least significant (-1: drawn from `field`)"),
-        ParamSpec("field", None, kind="word", default="any", choices=FIELD_NAMES,
-                  doc="IEEE-754 field the random bit is drawn from"),
-        ParamSpec("tensor", None, kind="word", default="weights", choices=("weights", "activations"),
-                  doc="for tensor sites: weights (persistent) or activations (one inference)"),
-    )
-    doc = ("Flip bits, as a radiation-induced or marginal-hardware fault would. `count` flips "
-           "happen at instants drawn from the fault's seed inside the window (all at the instant "
-           "for `at`). On a scalar site (`control.steer`) each flip inverts one bit of the "
-           "float64 value passing through the site at or after its instant (transient: the "
-           "next value is clean unless the node keeps it as state, like `control.integral`). "
-           "On a node (`control`) each flip goes to one of the node's sites, drawn uniformly. "
-           "On a tensor site of a learned model (`perception.backbone_0`) each flip inverts one "
-           "bit of one element of the layer's weights (`tensor weights`, persistent) or of its "
-           "output in one inference (`tensor activations`). On a state site (`planner.trajectory`, "
-           "`tracker.tracks`) each flip inverts one bit of one element of the node's stored state, "
-           "drawn uniformly, when the node next reads it: it persists until the node overwrites it. "
-           "Recorded per flip: `location` (site, `site:element`, or `layer:param[index]`), `value` "
-           "(after), `before`, `bit`.")
-
-    @classmethod
-    def valid_targets(cls, sensors, stack_cls):
-        if stack_cls is None:
-            return super().valid_targets(sensors, stack_cls)
-        state = {s for sites in getattr(stack_cls, "state_nodes", {}).values() for s in sites}
-        return super().valid_targets(sensors, stack_cls) | set(stack_cls.nodes) | state
+@FAULTS.implements
+class BitFlip(S.BitFlip, FaultKind):
 
     def __init__(self, *a):
         super().__init__(*a)
@@ -143,14 +111,8 @@ class BitFlip(FaultKind):
         return out
 
 
-@FAULTS.register
-class StuckAt(FaultKind):
-    keyword = "stuck"
-    target_kind = "site"
-    params = (ParamSpec("value", None, kind="number", default=0.0, doc="value the site is stuck at (SI)"),)
-    doc = ("A variable or output is stuck at a value during the window. Recorded when the site "
-           "starts to hold the stuck value (and again after the true value has matched it): "
-           "`value` is the stuck value, `before` the true one.")
+@FAULTS.implements
+class StuckAt(S.StuckAt, FaultKind):
 
     def __init__(self, *a):
         super().__init__(*a)
@@ -168,15 +130,8 @@ class StuckAt(FaultKind):
         return stuck
 
 
-@FAULTS.register
-class RandomValue(FaultKind):
-    keyword = "random_value"
-    target_kind = "site"
-    params = (ParamSpec("low", None, kind="number", default=-1.0, doc="lower bound (SI)"),
-              ParamSpec("high", None, kind="number", default=1.0, doc="upper bound (SI)"))
-    doc = ("A variable or output takes uniform random values in [low, high] during the window. "
-           "Recorded as one series event per site: `times`, `value` (the random values) and "
-           "`before` (the true ones) are parallel lists, one entry per injected value.")
+@FAULTS.implements
+class RandomValue(S.RandomValue, FaultKind):
     _BATCH = 256
 
     def __init__(self, *a):

@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from addt_dsl.registry import FAULTS, ParamSpec
+from addt_dsl.registry import FAULTS
+from addt_dsl.specs import faults as S
 from addt_dsl.runtime.faults.base import FaultKind
 
 
@@ -32,31 +33,7 @@ def _back_to(img_f: np.ndarray, like: np.ndarray) -> np.ndarray:
     return out.astype(like.dtype, copy=False)
 
 
-# Which camera of a rig: every one (-1), or camera k (k counted from the one looking along
-# the mount's yaw, as `camera_rig` spreads them). A plain `camera` has one: lens 0.
-LENS = ParamSpec("lens", None, kind="int", default=-1, low=-1, high=11,
-                 doc="camera_rig only: the camera whose image is corrupted (0 = the one along the "
-                     "mount's yaw, counting round as the rig spreads them; -1: every camera)")
-
-
-class ImageFault(FaultKind):
-    sensor_kinds = ("camera", "camera_rig")
-
-    @classmethod
-    def setting_problems(cls, settings: dict, sensor_keyword: str, sensor_settings: dict) -> dict[str, str]:
-        """{setting: why it is wrong} for settings that do not fit the target sensor."""
-        lens = settings.get("lens", -1)
-        if lens in (-1, 0) and sensor_keyword != "camera_rig":
-            return {}
-        if sensor_keyword != "camera_rig":
-            return {"lens": "a `camera` has one image, lens 0; `lens K` picks camera K of a `camera_rig`"}
-        if lens == -1:
-            return {}
-        cameras = int(sensor_settings["cameras"])
-        if lens >= cameras:
-            return {"lens": f"the rig has {cameras} camera(s), numbered 0 to {cameras - 1}"}
-        return {}
-
+class ImageFault(S.ImageFaultSpec, FaultKind):
     def on_frame(self, frame, time_s):
         if not self.active(time_s):
             return frame, 0.0
@@ -81,20 +58,8 @@ class ImageFault(FaultKind):
         raise NotImplementedError
 
 
-@FAULTS.register
-class Blur(ImageFault):
-    keyword = "blur"
-    params = (
-        ParamSpec("sigma", None, kind="number", default=2.0, low=0.0, high=100.0,
-                  doc="Gaussian blur standard deviation [px] (0: none)"),
-        ParamSpec("motion", None, kind="number", default=0.0, low=0.0, high=500.0,
-                  doc="motion blur length [px] along `angle` (0: none)"),
-        ParamSpec("angle", None, kind="number", default=0.0, low=-360.0, high=360.0,
-                  doc="direction of the motion blur [deg in the image, 0 = horizontal]"),
-        LENS,
-    )
-    doc = ("Camera image blur during the window: Gaussian defocus (`sigma` px) and/or linear "
-           "motion blur (`motion` px at `angle`). Recorded per frame: `value` is sigma [px].")
+@FAULTS.implements
+class Blur(S.Blur, ImageFault):
 
     def corrupt(self, img, lens=0):
         import cv2
@@ -114,21 +79,8 @@ class Blur(ImageFault):
         return _back_to(out, img), sigma, {"motion_px": motion}
 
 
-@FAULTS.register
-class ImageNoise(ImageFault):
-    keyword = "image_noise"
-    params = (
-        ParamSpec("sigma", None, kind="number", default=10.0, low=0.0, high=255.0,
-                  doc="additive Gaussian noise [8-bit intensity levels] (1 sigma)"),
-        ParamSpec("salt", None, kind="number", default=0.0, low=0.0, high=1.0,
-                  doc="fraction of pixels set to black or white (salt and pepper)"),
-        LENS,
-    )
-    doc = ("Camera sensor noise during the window: additive Gaussian noise per pixel and channel "
-           "(`sigma` in 8-bit levels; scaled to 1/255 for float images) and salt-and-pepper "
-           "pixels. The Gaussian field is drawn once per fault and used at a random offset and "
-           "sign each frame (cheap, and different every frame). Recorded per frame: `value` is "
-           "sigma, `pixels` the number of salt/pepper pixels.")
+@FAULTS.implements
+class ImageNoise(S.ImageNoise, ImageFault):
 
     # Drawing fresh normals for every pixel of every frame costs more than rendering the
     # frame; instead a noise field a little larger than the image is drawn once, and each
@@ -166,23 +118,8 @@ class ImageNoise(ImageFault):
         return _back_to(out, img), float(self.settings["sigma"]), {"pixels": salted}
 
 
-@FAULTS.register
-class Occlude(ImageFault):
-    keyword = "occlude"
-    params = (
-        ParamSpec("fraction", None, kind="number", default=0.2, low=0.0, high=1.0,
-                  doc="fraction of the image area covered"),
-        ParamSpec("patches", None, kind="int", default=1, low=1, high=100,
-                  doc="number of rectangular patches sharing that area"),
-        ParamSpec("value", None, kind="number", default=0.0, low=0.0, high=255.0,
-                  doc="patch intensity [8-bit levels] (0: black, e.g. dirt or tape on the lens)"),
-        LENS,
-    )
-    doc = ("Part of the camera image is covered (dirt, a sticker, a wiper) by `patches` "
-           "rectangles covering `fraction` of the area. Where the patches sit is drawn once from "
-           "the fault's seed and stays fixed during the window (on a `camera_rig`, each camera's "
-           "patches are drawn the first time it is corrupted). Recorded per frame: `value` is "
-           "the covered fraction, `location` the sensor (`camera_rig.K` for camera K of a rig), `boxes` the patches (x0, y0, x1, y1 px).")
+@FAULTS.implements
+class Occlude(S.Occlude, ImageFault):
 
     def __init__(self, *a):
         super().__init__(*a)

@@ -6,26 +6,15 @@ import math
 
 import numpy as np
 
-from addt_dsl import units
-from addt_dsl.registry import FAULTS, ParamSpec
+from addt_dsl.registry import FAULTS
+from addt_dsl.specs import faults as S
 from addt_dsl.runtime.faults.base import FaultKind
 
-_AXES = ("x", "y", "z", "roll", "pitch", "yaw")
+_AXES = S._AXES
 
 
-@FAULTS.register
-class Shift(FaultKind):
-    keyword = "shift"
-    params = tuple(ParamSpec(a, units.LENGTH if a in "xyz" else units.ANGLE, default=0.0,
-                             low=-10.0 if a in "xyz" else -math.pi, high=10.0 if a in "xyz" else math.pi,
-                             doc=f"{a} offset of the actual mount from the calibrated one")
-                   for a in _AXES) + (
-        ParamSpec("ramp", units.TIME, default=0.0, low=0.0, doc="drift: reach the full shift over this time"),)
-    doc = ("The sensor's mount moves (a sudden shift, or a linear drift reaching the full shift "
-           "after `ramp`) while the stack keeps the calibrated extrinsics, so detections are "
-           "misplaced more the farther away they are. The shift stays after the window opens "
-           "(a mount does not move back). Recorded when it starts and when a drift completes: "
-           "`value` is the offset per axis [m, rad].")
+@FAULTS.implements
+class Shift(S.Shift, FaultKind):
 
     def __init__(self, *a):
         super().__init__(*a)
@@ -45,23 +34,8 @@ class Shift(FaultKind):
                         ramp_s=ramp, fraction=k)
 
 
-@FAULTS.register
-class Noise(FaultKind):
-    keyword = "noise"
-    sensor_kinds = ("lidar", "gnss")
-    params = (
-        ParamSpec("range", units.LENGTH, default=0.0, low=0.0, high=50.0,
-                  doc="lidar: Gaussian range noise per return (1 sigma)"),
-        ParamSpec("dropout", units.DIMENSIONLESS, default=0.0, low=0.0, high=1.0,
-                  doc="lidar: fraction of returns lost (independently per point)"),
-        ParamSpec("position", units.LENGTH, default=0.0, low=0.0, high=1000.0,
-                  doc="gnss: Gaussian position noise added to x and y (1 sigma)"),
-    )
-    doc = ("Additive sensor noise during the window. Lidar: each return's range gets Gaussian "
-           "noise (`range`) and returns are lost with probability `dropout` (an object with "
-           "fewer returns than the perception's minimum is missed). GNSS: Gaussian noise on the "
-           "position fix. Recorded per frame: `value` is the RMS range error [m] and the number "
-           "of returns lost (lidar) or the position error [m] (gnss).")
+@FAULTS.implements
+class Noise(S.Noise, FaultKind):
 
     def on_frame(self, frame, time_s):
         if not self.active(time_s):

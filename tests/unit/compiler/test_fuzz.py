@@ -239,7 +239,7 @@ def test_hostile_maps(xodr):
     import tempfile
 
     from addt_dsl.runtime.fastroad import FastRoad
-    from addt_dsl.runtime.roadspec import build_network
+    from addt_dsl.road.roadspec import build_network
 
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / "m.xodr").write_text(xodr)

@@ -1,4 +1,4 @@
-"""The built parser is cached on disk (issue 22: building it took longer than compiling a
+"""The built parser is cached on disk (building it took longer than compiling a
 hundred files). A cached parser parses exactly like a fresh one; a changed grammar, lark or
 Python version gets a new cache file; a damaged file is rebuilt, never trusted."""
 

@@ -1,4 +1,4 @@
-"""Issue 25's hostile inputs: each is refused with its diagnostic at its file:line:col, in
+"""Hostile inputs: each is refused with its diagnostic at its file:line:col, in
 bounded time, never with an internal error (E0900). Data files in hostile/ state their
 expected diagnostics (`# expect: CODE @ line:col`); the file-system cases (over-long names,
 symlink loops, suite members that lead out) are built in a temporary directory."""

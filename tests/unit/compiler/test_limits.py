@@ -1,4 +1,4 @@
-"""Issue 25: documented input limits and the sweep's cost estimate (docs/limits.md).
+"""Documented input limits and the sweep's cost estimate (docs/limits.md).
 
 Each limit is enforced by E0701 naming it and how to raise it (the limits are lowered
 here so the inputs stay small); the estimate refuses absurd-but-compiling scenarios unless
@@ -111,7 +111,7 @@ def test_absurd_but_compiling_scenarios_are_refused_by_the_estimate():
     names = [n for n, _ in cost.over_thresholds(cost.estimate(crowd), DEFAULT)]
     assert "agent_steps_per_run" in names and "run_memory_bytes" in names
     assert cost.over_thresholds(cost.estimate(crowd), DEFAULT.raised(allow_large=True)) == []
-    # 50 agents for 3,600 s at 1 ms: about 16 GB of trace per run (issue 25)
+    # 50 agents for 3,600 s at 1 ms: about 16 GB of trace per run
     long = plan.model_copy(update={"agents": plan.agents * 50, "duration_s": 3600.0, "step_s": 0.001})
     assert cost.estimate(long).run_memory_bytes > 16e9
 

@@ -1,11 +1,13 @@
 """Layer boundaries (docs/architecture.md, "Rules that keep it simple").
 
 Every module of the package is imported, and every import statement in it (module level
-and inside functions) is checked against the layer order:
+and inside functions) and every load by a literal name (`importlib.import_module("...")`,
+`__import__`) is checked against the layer order:
 
     app (cli, console, suite, studies, pytest_plugin, search.commands, interop.commands)
       > search > reporting > stack > runtime > core (units, expr, diagnostics, registry, fingerprint,
-        vehicles, plan, sweep, distributions, confine, errors, extras, limits, cost, lru, xmlread)
+        vehicles, plan, sweep, distributions, confine, errors, extras, limits, cost, lru, xmlread, road/,
+        specs/)
       printer > compiler > core;   search > printer
       interop (OpenSCENARIO export/import) > printer, compiler, runtime;   search > interop
     the compiler and the runtime never import each other (nor the stack).
@@ -18,6 +20,7 @@ no modules import each other (at any level).
 from __future__ import annotations
 
 import ast
+import functools
 import importlib.util
 import subprocess
 import sys
@@ -49,17 +52,14 @@ ALLOWED = {
     "search": {"core", "runtime", "stack", "reporting", "printer", "interop"},
     "app": {"core", "compiler", "runtime", "stack", "reporting", "printer", "search", "interop"},
 }
-# Edges that break the order today, each owned by an open issue (20): fix, then delete here.
-KNOWN = {
-    ("addt_dsl.compiler.xodr_check", "addt_dsl.runtime.road"),  # the xodr import check evaluates roads
-    ("addt_dsl.compiler.xodr_check", "addt_dsl.runtime.roadspec"),  # ...and builds inline roads under its limits
-}
+# Edges that break the order: none (add one only with the reason beside it).
+KNOWN: set[tuple[str, str]] = set()
 
 
 def layer(module: str) -> str:
     if module in APP:
         return "app"
-    if module in CORE:
+    if module in CORE or module.split(".")[:2] in (["addt_dsl", "road"], ["addt_dsl", "specs"]):
         return "core"
     if module == "addt_dsl.printer" or module.startswith("addt_dsl.printer."):
         return "printer"
@@ -82,11 +82,30 @@ def modules() -> dict[str, Path]:
 MODULES = modules()
 
 
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    return ast.parse(path.read_text(), str(path))
+
+
+def _dynamic_load(node: ast.AST) -> ast.expr | None:
+    """The module argument of `importlib.import_module(...)`, `import_module(...)` or
+    `__import__(...)`, None for any other node."""
+    if not isinstance(node, ast.Call) or not node.args:
+        return None
+    fn = node.func
+    name = fn.attr if isinstance(fn, ast.Attribute) else fn.id if isinstance(fn, ast.Name) else None
+    return node.args[0] if name in ("import_module", "__import__") else None
+
+
 def imports(module: str, path: Path):
-    """(imported module, names, line) of every import statement of a module."""
+    """(imported module, names, line) of every import statement of a module, and of every
+    load by name (`importlib.import_module("addt_dsl.x")`, `__import__`) with a literal name."""
     is_package = path.name == "__init__.py"
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
+    for node in ast.walk(_tree(path)):
+        target = _dynamic_load(node)
+        if isinstance(target, ast.Constant) and isinstance(target.value, str):
+            yield target.value, (), node.lineno
+        elif isinstance(node, ast.Import):
             for alias in node.names:
                 yield alias.name, (), node.lineno
         elif isinstance(node, ast.ImportFrom):
@@ -140,8 +159,12 @@ def test_known_exceptions_still_exist():
     assert KNOWN <= found, f"fixed, delete from KNOWN: {KNOWN - found}"
 
 
-# Import circles allowed: none (a function-level import does not hide one).
-KNOWN_CYCLES: list[set[str]] = []
+# Import circles allowed (a function-level import or a load by name does not hide one):
+KNOWN_CYCLES: list[set[str]] = [
+    # `stack external protocol osi`: bridge loads its OSI client (a subclass of ExternalStack,
+    # needing the `osi` extra) by name, only when a scenario asks for it.
+    {"addt_dsl.stack.bridge", "addt_dsl.stack.osi_stack", "addt_dsl.stack.osi_transport"},
+]
 
 
 def cycles(graph: dict[str, set[str]]) -> list[set[str]]:
@@ -194,11 +217,54 @@ def test_no_private_names_across_modules():
     assert private == KNOWN_PRIVATE
 
 
+# Loads by a computed name, which the checks above cannot follow: each module that makes one,
+# and what it loads.
+DYNAMIC_LOADS = {
+    "addt_dsl.registry": "a table's spec module (core) and, from `implementation()`, its implementation modules",
+    "addt_dsl.search.samplers": "the sampler implementations of its own table (search)",
+}
+# Layers that may ask the registry for an implementation (which imports the runtime or the stack).
+IMPLEMENTATION_CALLERS = {"runtime", "stack", "reporting", "interop", "search", "app"}
+
+
+def test_loads_by_computed_name_are_the_known_ones():
+    found = set()
+    for module, path in MODULES.items():
+        for node in ast.walk(_tree(path)):
+            target = _dynamic_load(node)
+            if target is not None and not (isinstance(target, ast.Constant) and isinstance(target.value, str)):
+                found.add(module)
+    assert found == set(DYNAMIC_LOADS)
+
+
+def test_only_the_runtime_side_asks_for_implementations():
+    # The compiler, the printer and core read specs: `Registry.implementation` would load the runtime.
+    bad = []
+    for module, path in MODULES.items():
+        for node in ast.walk(_tree(path)):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and node.func.attr == "implementation" and layer(module) not in IMPLEMENTATION_CALLERS
+                    and module != "addt_dsl.registry"):
+                bad.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno}: {module} ({layer(module)})")
+    assert not bad, "implementations asked for outside the runtime side:\n" + "\n".join(bad)
+
+
+def test_the_registry_loads_specs_from_core_and_implementations_from_the_runtime_side():
+    from addt_dsl import registry
+
+    for table in (registry.BEHAVIORS, registry.SENSORS, registry.FAULTS, registry.STACKS, registry.SIGNALS,
+                  registry.GEOMETRIES, registry.ENVIRONMENTS):
+        assert layer(table._specs_module) == "core", table.what
+        assert all(layer(m) in ("runtime", "stack") for m in table._implementation_modules), table.what
+
+
 def test_the_checker_sees_function_level_imports(tmp_path):
     # A sanity check of `imports` itself: a function-level import is an edge too.
     path = tmp_path / "m.py"
-    path.write_text("def f():\n    from addt_dsl.search import shrink\n    import addt_dsl.cli\n")
-    assert [t for t, _, _ in imports("addt_dsl.runtime.x", path)] == ["addt_dsl.search.shrink", "addt_dsl.cli"]
+    path.write_text("def f():\n    from addt_dsl.search import shrink\n    import addt_dsl.cli\n"
+                    "    importlib.import_module('addt_dsl.stack.bev')\n    __import__('addt_dsl.printer')\n")
+    assert sorted(t for t, _, _ in imports("addt_dsl.runtime.x", path)) == [
+        "addt_dsl.cli", "addt_dsl.printer", "addt_dsl.search.shrink", "addt_dsl.stack.bev"]
     assert importlib.util.find_spec("addt_dsl.search.shrink") is not None
 
 

@@ -12,7 +12,7 @@ from addt_dsl.cli import main
 from addt_dsl.compiler import compile_source
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.openscenario.importer import import_xosc
-from addt_dsl.runtime.road import parse_xodr
+from addt_dsl.road import parse_xodr
 from tests.conftest import ROOT
 
 CARLA = ROOT / "tests" / "data" / "carla"

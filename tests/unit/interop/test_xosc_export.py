@@ -14,8 +14,8 @@ from addt_dsl.cli import main
 from addt_dsl.compiler import compile_file, compile_source
 from addt_dsl.interop.openscenario.sidefile import SIDE_FILE_KEYS, SIDECAR_FORMAT
 from addt_dsl.interop.xosc_export import export_run
-from addt_dsl.runtime.road import parse_xodr
-from addt_dsl.runtime.roadspec import build_network
+from addt_dsl.road import parse_xodr
+from addt_dsl.road.roadspec import build_network
 from addt_dsl.sweep import expand
 from tests.conftest import EXAMPLES, ROOT, needs_torch
 from tests.unit.interop.asam_qc import check, problems

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from addt_dsl.runtime.road.geometry import (
+from addt_dsl.road.geometry import (
     Arc,
     CubicProfile,
     Line,

@@ -53,7 +53,7 @@ def test_map_of_a_bad_file_is_one_line(tmp_path, capsys):
 
 def test_map_lists_signal_validity_and_controllers():
     from addt_dsl.reporting.roadmap import describe
-    from addt_dsl.runtime.road import parse_xodr
+    from addt_dsl.road import parse_xodr
 
     path = Path(__file__).resolve().parents[3] / "examples" / "maps" / "fabriksgatan_traffic_lights.xodr"
     text = path.read_text().replace("</OpenDRIVE>", '<controller id="5" name="west"><control signalId="1"/>'

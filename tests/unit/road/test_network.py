@@ -8,7 +8,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.runtime.road import (
+from addt_dsl.road import (
     RoadCoords,
     arc,
     build_road,

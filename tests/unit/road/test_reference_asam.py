@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from addt_dsl.runtime.road import load_xodr
+from addt_dsl.road import load_xodr
 
 SAMPLE_MAPS = sorted((Path(__file__).resolve().parents[2] / "data" / "xodr").glob("*.xodr"))
 

@@ -11,7 +11,7 @@ import pytest
 
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.path import RoutePath
-from addt_dsl.runtime.road import RouteError, load_xodr, resolve_route
+from addt_dsl.road import RouteError, load_xodr, resolve_route
 from addt_dsl.runtime.roadmesh import Elevation
 
 MAPS = Path(__file__).resolve().parents[3] / "examples" / "maps"

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from addt_dsl.runtime.road import XodrError, load_xodr, parse_xodr
-from addt_dsl.runtime.road.geometry import end_pose
+from addt_dsl.road import XodrError, load_xodr, parse_xodr
+from addt_dsl.road.geometry import end_pose
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "xodr"
 SAMPLE_MAPS = sorted(DATA.glob("*.xodr"))

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from addt_dsl.runtime.lights import (COMFORT_DECEL, GREEN, PAST_M, RED, REACH_M, YELLOW, LightsRuntime, Program, StopStation,
                                      governs_vehicles, next_stop, state_at, stations_on, stop_accel, stop_lines)
-from addt_dsl.runtime.road import build_road, line, load_xodr, parse_xodr
+from addt_dsl.road import build_road, line, load_xodr, parse_xodr
 
 MAPS = Path(__file__).resolve().parents[3] / "examples" / "maps"
 

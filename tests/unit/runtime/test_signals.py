@@ -25,7 +25,7 @@ class _Trace:
 def test_travelled_sums_the_path_not_the_displacement():
     # Out 3 m east, 4 m north, and back to the start: 14 m travelled, 0 m away.
     track = _track([0, 3, 3, 3, 0], [0, 0, 4, 0, 0])
-    got = SIGNALS.get("travelled").compute(_Trace(track), ("ego",))
+    got = SIGNALS.implementation("travelled").compute(_Trace(track), ("ego",))
     assert got == pytest.approx([0, 3, 7, 11, 14])
 
 
@@ -45,7 +45,7 @@ def _ttc(a, b):
     class _T:
         actors = {a.name: a, b.name: b}
         period_s = 0.1
-    return SIGNALS.get("ttc").compute(_T(), (a.name, b.name))
+    return SIGNALS.implementation("ttc").compute(_T(), (a.name, b.name))
 
 
 def test_ttc_of_an_oncoming_car_passing_a_stopped_ego_is_never_a_collision():

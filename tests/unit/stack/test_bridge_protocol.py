@@ -55,6 +55,6 @@ def test_address_parsing():
 
 
 def test_external_stack_is_registered_with_pass_through_settings():
-    assert STACKS.get("external") is ExternalStack
+    assert STACKS.implementation("external") is ExternalStack
     names = {p.name for p in ExternalStack.params}
     assert {"address", "timeout", "sites", "perception", "cruise_speed"} <= names

@@ -88,7 +88,7 @@ def test_two_vehicles_of_different_colours_are_two_objects():
 
 
 def test_occluding_the_vehicle_removes_the_detection_and_noise_does_not_invent_one():
-    from tests.unit.faults.faultkit import one
+    from tests.unit.runtime.faults.faultkit import one
 
     img, depth = scene([("car", 25.0, 0.0, 1.9, 1.5, 0.8)])
     assert len(detect(img, depth)) == 1
@@ -101,7 +101,7 @@ def test_occluding_the_vehicle_removes_the_detection_and_noise_does_not_invent_o
 
 
 def test_blur_loses_a_distant_vehicle_first():
-    from tests.unit.faults.faultkit import one
+    from tests.unit.runtime.faults.faultkit import one
 
     img, depth = scene([("car", 12.0, -2.0, 1.9, 1.5, 0.8), ("car", 70.0, 3.5, 1.9, 1.5, 0.8)])
     assert sorted(round(f[0]) for _, f, _ in detect(img, depth)) == [12, 70]

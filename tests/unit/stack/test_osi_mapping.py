@@ -18,7 +18,7 @@ from osi3.osi_trafficupdate_pb2 import TrafficUpdate  # noqa: E402
 from osi3.osi_lane_pb2 import LaneBoundary  # noqa: E402
 
 from addt_dsl.plan import LIGHT_STATES, RoadPlan, SegmentPlan  # noqa: E402
-from addt_dsl.runtime.roadspec import build_network  # noqa: E402
+from addt_dsl.road.roadspec import build_network  # noqa: E402
 from addt_dsl.stack import osi_mapping as M  # noqa: E402
 
 HOST = M.ObjectState(1, "ego", 10.0, 2.0, 0.75, 0.5, 3.0, 4.0, 4.6, 1.9, 1.5, ax=0.6, ay=0.8, yaw_rate=0.1,

@@ -1,0 +1,257 @@
+"""Traffic behaviours' specs: keyword, channel, settings, docs and the checks across settings
+(`validate`); the implementations are in `addt_dsl/runtime/behaviors.py`."""
+
+from __future__ import annotations
+
+import math
+
+from addt_dsl import units
+from addt_dsl.registry import BEHAVIORS, ParamSpec
+
+
+# Dynamics shapes (OpenSCENARIO TransitionDynamics; the blends are in the runtime's `SHAPES`):
+# lane changes take any, speed changes all but `quintic`.
+SHAPES = ("step", "linear", "cubic", "sinusoidal", "quintic")
+SPEED_SHAPES = ("step", "linear", "cubic", "sinusoidal")
+SHAPE_SETTING = ParamSpec("shape", None, kind="word", default="linear", choices=SPEED_SHAPES,
+                          doc="dynamics shape of the speed change")
+DURATION_SETTING = ParamSpec("duration", units.TIME, default=None, low=0.0,
+                             doc="time the speed change takes (default: from the rate limits and shape)")
+
+
+class BehaviorSpec:
+    keyword = ""
+    channel = "longitudinal"  # "longitudinal" | "lateral"
+    params: tuple[ParamSpec, ...] = ()
+    doc = ""
+
+
+@BEHAVIORS.register
+class Cruise(BehaviorSpec):
+    keyword = "cruise"
+    params = (
+        ParamSpec("speed", units.SPEED, required=True, low=0.0, live=True,
+                  doc="target speed; may follow other actors (`1.2 * speed(ego)`)"),
+        ParamSpec("accel", units.ACCELERATION, default=2.0, low=0.0, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=3.0, low=0.0, doc="max deceleration"),
+        SHAPE_SETTING,
+        DURATION_SETTING,
+    )
+    doc = ("Change to a target speed (at the rate limits, or over `duration`, with a dynamics "
+           "shape) and hold it.")
+
+@BEHAVIORS.register
+class SpeedProfile(BehaviorSpec):
+    keyword = "speed_profile"
+    params = (
+        ParamSpec("times", units.TIME, kind="list", required=True, low=0.0,
+                  doc="times of the points, from the start of the behaviour, increasing"),
+        ParamSpec("speeds", units.SPEED, kind="list", required=True, low=0.0, doc="speed at each time"),
+        ParamSpec("shape", None, kind="word", default="linear", choices=SPEED_SHAPES,
+                  doc="dynamics shape between consecutive points"),
+    )
+    doc = ("Follow time/speed points (OpenSCENARIO SpeedProfileAction, its `position` mode: every "
+           "point is met); then hold the last speed.")
+    @staticmethod
+    def validate(values: dict) -> list[tuple[str, str]]:
+        """Problems of constant settings, as (setting, message)."""
+        times, speeds = values.get("times"), values.get("speeds")  # None: not constants
+        out = []
+        if isinstance(times, list) and isinstance(speeds, list) and len(times) != len(speeds):
+            out.append(("speeds", f"{len(speeds)} speeds for {len(times)} times: give one speed per time"))
+        if isinstance(times, list) and any(b <= a for a, b in zip(times, times[1:])):
+            out.append(("times", "the times of a speed profile must increase"))
+        return out
+
+@BEHAVIORS.register
+class Idm(BehaviorSpec):
+    keyword = "idm"
+    aliases = ("follow",)
+    params = (
+        ParamSpec("speed", units.SPEED, required=True, low=0.0, doc="desired speed"),
+        ParamSpec("time_gap", units.TIME, default=1.5, low=0.0, doc="desired time headway"),
+        ParamSpec("min_gap", units.LENGTH, default=2.0, low=0.0, doc="jam distance"),
+        ParamSpec("accel", units.ACCELERATION, default=1.5, low=0.01, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=2.0, low=0.01, doc="comfortable deceleration"),
+    )
+    doc = "Intelligent Driver Model car-following behind the nearest actor ahead in the lane."
+
+@BEHAVIORS.register
+class KeepGap(BehaviorSpec):
+    keyword = "keep_gap"
+    params = (
+        ParamSpec("target", None, kind="name", required=True, doc="actor to keep the gap to"),
+        ParamSpec("distance", units.LENGTH, low=0.0, doc="bumper-to-bumper gap to keep"),
+        ParamSpec("time_gap", units.TIME, low=0.0, doc="instead of `distance`: gap as time at the target's speed"),
+        ParamSpec("side", None, kind="word", default="behind", choices=("behind", "ahead"),
+                  doc="keep the gap behind the target or ahead of it"),
+        ParamSpec("accel", units.ACCELERATION, default=3.0, low=0.01, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=6.0, low=0.01, doc="max deceleration"),
+    )
+    doc = ("Keep a distance or time gap to another actor, continuously (OpenSCENARIO "
+           "LongitudinalDistanceAction, freespace, continuous): a critically damped spring on the "
+           "gap error whose stiffness is 0.4/s^2 times the limit it pushes against, as esmini executes it.")
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if ("distance" in values) == ("time_gap" in values):
+            return [("distance", "give the gap once: `distance D` or `time_gap T`", "E0105")]
+        return []
+
+@BEHAVIORS.register
+class Synchronize(BehaviorSpec):
+    keyword = "synchronize"
+    params = (
+        ParamSpec("master", None, kind="name", required=True, doc="actor whose arrival sets the time"),
+        ParamSpec("master_at", units.LENGTH, required=True, low=0.0,
+                  doc="station along its road the master arrives at (its centre)"),
+        ParamSpec("target_s", units.LENGTH, low=0.0, doc="station of the own target point"),
+        ParamSpec("target_t", units.LENGTH, doc="lateral offset of the own target point (left positive)"),
+        ParamSpec("heading", units.ANGLE, low=-math.pi, high=math.pi,
+                  doc="direction to move relative to the road, as `walk` (default: as it moves now)"),
+        ParamSpec("max_speed", units.SPEED, default=15.0, low=0.1, doc="speed limit while synchronising"),
+        ParamSpec("accel", units.ACCELERATION, default=5.0, low=0.01, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=5.0, low=0.01, doc="max deceleration"),
+        ParamSpec("final_speed", units.SPEED, low=0.0,
+                  doc="speed to change to once the master has arrived (default: keep the speed)"),
+    )
+    doc = ("Adjust the speed to reach a point when another actor reaches its point (OpenSCENARIO "
+           "SynchronizeAction): at every step, the remaining distance over the master's time to "
+           "arrival at its current speed.")
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if "target_s" not in values and "target_t" not in values:
+            return [("master", "give the own target point: `target_s S` and/or `target_t T`", "E0105")]
+        return []
+
+@BEHAVIORS.register
+class Trajectory(BehaviorSpec):
+    keyword = "trajectory"
+    params = (
+        ParamSpec("s", units.LENGTH, kind="list",
+                  doc="stations of the waypoints along the road's reference line (OpenDRIVE s)"),
+        ParamSpec("t", units.LENGTH, kind="list",
+                  doc="lateral offsets of the waypoints from the reference line, left of +s positive (OpenDRIVE t)"),
+        ParamSpec("x", units.LENGTH, kind="list", doc="instead of `s`/`t`: world x of the waypoints"),
+        ParamSpec("y", units.LENGTH, kind="list", doc="instead of `s`/`t`: world y of the waypoints"),
+        ParamSpec("times", units.TIME, kind="list", low=0.0,
+                  doc="time to be at each waypoint, from the start of the behaviour, met exactly: the speed "
+                      "changes at the waypoints at once, a waypoint repeated with a later time is a wait, and "
+                      "after the last one it keeps its last segment's speed (default: at `speed`)"),
+        ParamSpec("speed", units.SPEED, default=None, low=0.0,
+                  doc="speed without `times` (default: the actor's speed when the behaviour starts)"),
+        ParamSpec("max_speed", units.SPEED, default=40.0, low=0.1, doc="speed limit with `times`"),
+        ParamSpec("accel", units.ACCELERATION, default=5.0, low=0.01, doc="max acceleration (without `times`)"),
+        ParamSpec("decel", units.ACCELERATION, default=8.0, low=0.01, doc="max deceleration (without `times`)"),
+    )
+    doc = ("Follow waypoints in road (`s`, `t`) or world (`x`, `y`) coordinates, at a speed or "
+           "meeting given times (OpenSCENARIO FollowTrajectoryAction, polyline); then drive on "
+           "along the road at the reached offset.")
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        road = [k for k in ("s", "t") if k in values]
+        world = [k for k in ("x", "y") if k in values]
+        if not (len(road) == 2 and not world) and not (len(world) == 2 and not road):
+            # Name a setting to drop where there is one too many, else the first missing.
+            key = world[0] if len(road) == 2 else road[0] if len(world) == 2 else (road + world + ["s"])[0]
+            return [(key, "give the waypoints once: `s [...] t [...]` (road) or `x [...] y [...]` (world)",
+                     "E0105")]
+        lists = [values[k] for k in ("s", "t", "x", "y", "times") if isinstance(values.get(k), list)]
+        if len({len(v) for v in lists}) > 1:
+            return [("times" if "times" in values else "t",
+                     "the waypoint lists differ in length: one value per waypoint in each", "E0204")]
+        times = values.get("times")
+        if isinstance(times, list) and any(b <= a for a, b in zip(times, times[1:])):
+            return [("times", "the times of a trajectory must increase")]
+        return []
+
+@BEHAVIORS.register
+class Brake(BehaviorSpec):
+    keyword = "brake"
+    aliases = ("sudden_brake",)
+    params = (
+        ParamSpec("decel", units.ACCELERATION, default=6.0, low=0.0, high=12.0, doc="braking deceleration"),
+        ParamSpec("to_speed", units.SPEED, default=0.0, low=0.0, doc="speed at which braking ends"),
+    )
+    doc = "Brake at a fixed deceleration down to a speed (default: standstill)."
+
+@BEHAVIORS.register
+class LaneChange(BehaviorSpec):
+    keyword = "lane_change"
+    channel = "lateral"
+    params = (
+        ParamSpec("to", None, kind="int", doc="target lane id (OpenDRIVE convention)"),
+        ParamSpec("to_lane_of", None, kind="name", default="",
+                  doc="instead of `to`: the lane another actor is in when the change starts"),
+        ParamSpec("duration", units.TIME, default=4.0, low=0.5, doc="time to complete the change"),
+        ParamSpec("shape", None, kind="word", default="quintic", choices=SHAPES,
+                  doc="lateral dynamics shape (quintic: zero lateral speed and acceleration at both ends)"),
+    )
+    doc = "Move to another lane with a smooth (quintic, or another dynamics shape) lateral profile."
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if ("to" in values) == bool(values.get("to_lane_of")):
+            return [("to", "give the target lane once: `to LANE` or `to_lane_of ACTOR`", "E0105")]
+        return []
+
+@BEHAVIORS.register
+class Teleport(BehaviorSpec):
+    keyword = "teleport"
+    channel = "lateral"
+    params = (
+        ParamSpec("s", units.LENGTH, required=True, doc="station on the road it is on (OpenDRIVE road coordinates)"),
+        ParamSpec("t", units.LENGTH, required=True, doc="lateral offset from the road's reference line, left of +s"),
+    )
+    doc = ("Move at once to a point of the road the actor is on, keeping its speed and direction "
+           "(OpenSCENARIO TeleportAction during the run).")
+
+@BEHAVIORS.register
+class CutIn(LaneChange):
+    keyword = "cut_in"
+    params = (
+        ParamSpec("to", None, kind="int", doc="lane to cut into"),
+        ParamSpec("to_lane_of", None, kind="name", default="",
+                  doc="instead of `to`: the lane another actor is in when the cut-in starts"),
+        ParamSpec("duration", units.TIME, default=2.0, low=0.5, doc="time to complete the cut-in"),
+        ParamSpec("shape", None, kind="word", default="quintic", choices=SHAPES,
+                  doc="lateral dynamics shape"),
+    )
+    doc = "An abrupt lane change into another lane (typically in front of the ego)."
+
+@BEHAVIORS.register
+class Overtake(BehaviorSpec):
+    keyword = "overtake"
+    params = (
+        ParamSpec("speed", units.SPEED, required=True, low=0.0, doc="passing speed"),
+        ParamSpec("target", None, kind="name", default="",
+                  doc="actor to pass (default: the nearest one ahead in the lane)"),
+        ParamSpec("lane", None, kind="int", default=0, doc="passing lane (default: the next lane to the left)"),
+        ParamSpec("margin", units.LENGTH, default=8.0, low=0.0, doc="gap ahead of the target before cutting back in"),
+        ParamSpec("duration", units.TIME, default=3.0, low=0.5, doc="duration of each lane change"),
+        ParamSpec("accel", units.ACCELERATION, default=2.0, low=0.0, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=3.0, low=0.0, doc="max deceleration"),
+    )
+    doc = ("Pull out into the passing lane, pass the target at `speed` and return to the "
+           "original lane once `margin` ahead of it; then hold `speed`.")
+
+@BEHAVIORS.register
+class Walk(BehaviorSpec):
+    keyword = "walk"
+    params = (
+        ParamSpec("speed", units.SPEED, default=1.4, low=0.0, high=15.0, doc="walking (or riding) speed"),
+        ParamSpec("heading", units.ANGLE, default=0.0, low=-math.pi, high=math.pi,
+                  doc="direction relative to the road: 0 along +s, 90 deg to the left"),
+        ParamSpec("accel", units.ACCELERATION, default=1.0, low=0.01, doc="max acceleration"),
+    )
+    doc = "Move at a speed and a heading relative to the road (pedestrians, cyclists off the lane)."
+
+@BEHAVIORS.register
+class Cross(BehaviorSpec):
+    keyword = "cross"
+    params = (
+        ParamSpec("speed", units.SPEED, default=1.4, low=0.0, high=15.0, doc="crossing speed"),
+        ParamSpec("direction", None, kind="word", default="left", choices=("left", "right"),
+                  doc="side of the road to walk to, seen along +s"),
+        ParamSpec("beyond", units.LENGTH, default=1.0, low=0.0, doc="stop this far past the road edge"),
+        ParamSpec("accel", units.ACCELERATION, default=1.0, low=0.01, doc="max acceleration"),
+    )
+    doc = "Walk straight across the road to the other side and stop there."

@@ -1,0 +1,164 @@
+"""Traffic behaviours as pure road-frame kinematics, against a small fake world."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from addt_dsl.registry import BEHAVIORS
+from addt_dsl.runtime.behaviors import AgentState, advance, lateral_profile, relative_heading
+
+DT = 0.01
+LANES = {-1: -1.75, -2: -5.25, 1: 1.75}  # centre t of each lane
+
+
+class FakeWorld:
+    """Straight road, lanes as above, band t in [-7, 3.5]; other actors by name."""
+
+    dt = DT
+
+    def __init__(self, *others: AgentState):
+        self.others = {o.name: o for o in others}
+
+    def lane_t(self, road, lane, s):
+        return LANES.get(lane, math.nan)
+
+    def road_band_t(self, road, s):
+        return -7.0, 3.5
+
+    def from_road_coords(self, agent, s, t):
+        return s, t  # a road driven along +s: its frame is the agent's
+
+    def occupants(self, road):
+        for o in self.others.values():
+            yield o.name, o.s, o.t, o.speed, o.length_m
+
+    def actor_station(self, name):
+        o = self.others.get(name)
+        return None if o is None else (o.s, o.speed, o.length_m)
+
+    def leader_of(self, agent):
+        ahead = [(o.s - agent.s - 0.5 * (o.length_m + agent.length_m), o.speed)
+                 for o in self.others.values() if o.s > agent.s and abs(o.t - agent.t) < 1.8]
+        return min(ahead) if ahead else None
+
+
+def agent(name="a", s=0.0, lane=-2, speed=10.0, length=4.6, width=1.9) -> AgentState:
+    t = LANES[lane]
+    return AgentState(name, "r", s, t, speed, 0.0, length, width, lane, t)
+
+
+def start(keyword: str, a: AgentState, world, time_s: float = 0.0, **settings):
+    beh = BEHAVIORS.implementation(keyword)(settings)
+    beh.start(a, world, time_s)
+    return beh
+
+
+def simulate(a: AgentState, beh, world, seconds: float, t0: float = 0.0, others=()):
+    t = t0
+    rows = []
+    for _ in range(int(round(seconds / DT))):
+        rows.append((t, a.s, a.t, a.speed, relative_heading(a, t, DT)))
+        acc = beh.accel(a, world, t) if beh.channel == "longitudinal" else 0.0
+        advance(a, acc, t, DT)
+        for o in others:
+            advance(o, 0.0, t, DT)
+        t += DT
+    return np.array(rows)
+
+
+@given(st.floats(-5.0, 5.0), st.floats(-5.0, 5.0), st.floats(0.5, 10.0))
+def test_quintic_profile_starts_and_ends_at_rest(t_start, t_target, duration):
+    a = agent()
+    a.t_start, a.t_target, a.lc_start_s, a.lc_duration_s = t_start, t_target, 1.0, duration
+    assert lateral_profile(a, 1.0) == pytest.approx(t_start)
+    assert lateral_profile(a, 1.0 + duration) == pytest.approx(t_target)
+    h = 1e-4 * duration
+    # Zero lateral speed at both ends; monotone in between.
+    for edge in (1.0 + h, 1.0 + duration - h):
+        rate = (lateral_profile(a, edge + h) - lateral_profile(a, edge - h)) / (2 * h)
+        assert abs(rate) < 1e-3 * (abs(t_target - t_start) + 1e-9) / duration * 100
+    ts = [lateral_profile(a, 1.0 + u * duration) for u in np.linspace(0, 1, 50)]
+    assert np.all(np.diff(ts) * np.sign(t_target - t_start) >= -1e-12)
+
+
+def test_cruise_reaches_its_speed_within_comfort_limits():
+    a = agent(speed=5.0)
+    rows = simulate(a, start("cruise", a, FakeWorld(), speed=15.0, accel=2.0, decel=3.0), FakeWorld(), 10.0)
+    assert a.speed == pytest.approx(15.0, abs=0.05)
+    assert np.diff(rows[:, 3]).max() <= 2.0 * DT + 1e-12
+
+
+def test_idm_keeps_a_safe_gap_behind_a_slow_leader():
+    lead = agent("lead", s=40.0, speed=8.0)
+    world = FakeWorld(lead)
+    a = agent(speed=20.0)
+    beh = start("idm", a, world, speed=25.0, time_gap=1.5, min_gap=2.0)
+    simulate(a, beh, world, 40.0, others=[lead])
+    gap = lead.s - a.s - 4.6
+    assert a.speed == pytest.approx(8.0, abs=0.2)
+    assert gap == pytest.approx(2.0 + 8.0 * 1.5, rel=0.15)
+
+
+def test_sudden_brake_decelerates_at_its_rate_and_stops():
+    a = agent(speed=20.0)
+    rows = simulate(a, start("brake", a, FakeWorld(), decel=6.0, to_speed=0.0), FakeWorld(), 5.0)
+    assert rows[1, 3] - rows[0, 3] == pytest.approx(-6.0 * DT)
+    assert a.speed == 0.0
+
+
+def test_lane_change_is_smooth_and_ends_in_the_target_lane():
+    a = agent(lane=-2)
+    world = FakeWorld()
+    start("lane_change", a, world, to=-1, duration=4.0)
+    rows = simulate(a, BEHAVIORS.implementation("cruise")({"speed": 10.0}), world, 6.0)
+    assert a.t == pytest.approx(LANES[-1]) and a.lane == -1
+    heading = rows[:, 4]
+    assert heading.max() > 0.05 and np.abs(np.diff(heading)).max() < 0.01  # no jumps
+
+
+def test_overtake_pulls_out_passes_and_returns():
+    slow = agent("slow", s=30.0, lane=-2, speed=8.0)
+    world = FakeWorld(slow)
+    a = agent(s=0.0, lane=-2, speed=12.0)
+    beh = start("overtake", a, world, speed=16.0, margin=8.0, duration=3.0)
+    assert beh.target == "slow" and a.lane == -1  # pulled out towards the passing lane
+    rows = simulate(a, beh, world, 25.0, others=[slow])
+    assert beh.phase == "done" and a.lane == -2
+    assert a.t == pytest.approx(LANES[-2])
+    assert a.s - slow.s > 8.0 + 4.6
+    # It was in the passing lane while level with the slow car.
+    level = np.abs(rows[:, 1] - (30.0 + 8.0 * rows[:, 0])) < 4.6
+    assert np.all(rows[level, 2] > LANES[-2] + 2.5)
+    assert a.speed == pytest.approx(16.0, abs=0.05)
+
+
+def test_overtake_without_a_passing_lane_just_holds_speed():
+    a = agent(lane=1)
+    a.t = a.t_target = LANES[1]
+    beh = start("overtake", a, FakeWorld(), speed=12.0)  # agents drive +s: lane 2, which does not exist
+    assert beh.phase == "done" and a.lane == 1 and a.lc_duration_s == 0.0
+
+
+def test_walk_moves_at_a_heading_relative_to_the_road():
+    a = agent(speed=0.0, length=0.5, width=0.5)
+    beh = start("walk", a, FakeWorld(), speed=1.4, heading=math.radians(90.0))
+    rows = simulate(a, beh, FakeWorld(), 6.0)
+    assert a.speed == pytest.approx(1.4, abs=0.01)
+    assert np.diff(rows[:, 3]).max() <= 1.0 * DT + 1e-12  # accel limit
+    assert a.s == pytest.approx(0.0, abs=1e-9)
+    speeds = np.append(rows[1:, 3], a.speed)
+    assert a.t - LANES[-2] == pytest.approx(speeds.sum() * DT, rel=1e-9)
+    assert rows[-1, 4] == pytest.approx(math.pi / 2)
+
+
+@pytest.mark.parametrize("direction,edge", [("left", 3.5), ("right", -7.0)])
+def test_cross_walks_over_the_road_and_stops_beyond_the_edge(direction, edge):
+    a = agent(lane=-1, speed=0.0, length=0.5, width=0.5)
+    beh = start("cross", a, FakeWorld(), speed=1.4, direction=direction, beyond=1.0)
+    simulate(a, beh, FakeWorld(), 20.0)
+    stop = edge + (1.0 if direction == "left" else -1.0)
+    assert a.speed < 1e-3
+    assert a.t == pytest.approx(stop, abs=0.05)
