@@ -306,10 +306,14 @@ class LatticePlanner:
             self.maneuver = tuple(values)
 
     def plan(self, ego_sc, ego_speed, objs_sc, road, road_id, stamp_s, corrupt,
-             ego_v_st: tuple[float, float] | None = None, stop: tuple[float, float] | None = None) -> Plan:
+             ego_v_st: tuple[float, float] | None = None, stop: tuple[float, float] | None = None,
+             oncoming: tuple[float, float] | None = None) -> Plan:
         """`ego_sc` = (s, t, lane); `ego_v_st` = the ego's velocity along and across the
         road [m/s] for the forward-collision check (default: `ego_speed` along it); `stop` =
-        the next traffic light's stop line on the ego's road (station [m], state code)."""
+        the next traffic light's stop line on the ego's road (station [m], state code);
+        `oncoming` = (sight [m], speed [m/s]) for passing through the oncoming lane: how far
+        perception is sure to see an oncoming car, and how fast one it has not seen may come
+        (None: the ego never uses the oncoming lane)."""
         s0, t0, lane0 = ego_sc
         if self.current_lane is None:
             self.current_lane = self.home_lane = lane0
@@ -317,12 +321,22 @@ class LatticePlanner:
         current = self.current_lane
         home = self._home_lane(lanes)
         candidates_lanes = [l for l in lanes if abs(l - current) <= 1 and _same_side(l, current)]
+        nudges = self._nudges(current, float(road.lane_center_t(current, s0)), lanes, road, s0, objs_sc) \
+            if current in lanes else []
+        peek = None  # (offset target [m] in the current lane, wait station [m]) while a pass waits
+        if oncoming is not None:
+            candidates_lanes, peek = self._oncoming_candidates(candidates_lanes, current, home, lanes, road, s0, t0,
+                                                               ego_speed, objs_sc, oncoming, bool(nudges))
+            if peek is not None and (stop is None or peek[1] < stop[0]):
+                stop = (peek[1], LIGHT_STATES["red"])  # wait where the oncoming lane can be seen
         best = None
         for lane in candidates_lanes:
             t_lane = float(road.lane_center_t(lane, s0))
             targets = [(t_lane, 0.0)]
             if lane == current:
-                targets += self._nudges(lane, t_lane, lanes, road, s0, objs_sc)
+                if peek is not None:
+                    targets = [(peek[0], 0.0)]
+                targets += nudges
             for t_cand, extra in targets:
                 for speed in self._speeds(ego_speed):
                     cost = corrupt("planner.cost", self._cost(lane, t_cand, speed, s0, t0, ego_speed, objs_sc,
@@ -453,6 +467,124 @@ class LatticePlanner:
             return []
         return [(t_lane + need, self.NUDGE_COST + abs(need))]
 
+    # Passing through the oncoming lane. A standing or slow object ahead in the ego's lane
+    # (slower than `PASS_SLOW_SHARE` of the cruise speed, within `PASS_REACH_M`) makes the
+    # lane over the centre line a candidate once its rear is within `PASS_START_S` x speed +
+    # `PASS_START_M` of the ego's front, and only while no oncoming vehicle could reach the
+    # ego's path before it is back in its lane, `PASS_MARGIN_S` included: the manoeuvre ends
+    # when its rear is `PASS_GAP_M` past the last object of the group (objects closer than the
+    # ego's length + 2 gaps are passed at once) and it has made `RETURN_CLEAR_SHARE` of its
+    # way back (its side is then over the line), driving at its cruise speed from its speed
+    # now (accelerating at 2 m/s^2): T seconds, D metres. The rule: every object in the
+    # oncoming lane stays beyond D over T + margin (one coming towards the ego at its tracked
+    # speed; a standing one is beyond D now), none comes from behind faster than the ego, and
+    # one the ego cannot see may be just beyond its sight coming at the road's speed limit:
+    # sight - v_limit x (T + margin) >= D. The sight is the distance at which its lidar is
+    # sure to return `min_hits` rays from a car head-on, shortened by what stands between the
+    # ego and the oncoming lane's centre line of sight (the blocker itself). A pass that
+    # waits stops `PASS_WAIT_GAP_M` short of the blocker, its side `PASS_PEEK_SPARE_M` from
+    # its lane's edge towards the centre line, where it sees past it. Once over the line it goes on; before, a rule
+    # that no longer holds turns it back.
+    PASS_REACH_M = 80.0
+    PASS_SLOW_SHARE = 0.5
+    # [m/s] along the road: what stands (a tracked standing obstacle's velocity flickers by up
+    # to ±2 m/s with 0.1 m position noise at 10 Hz)
+    PASS_STANDING_MS = 2.5
+    PASS_START_S = 3.0  # [s]
+    PASS_START_M = 25.0
+    PASS_GAP_M = 5.0
+    PASS_MARGIN_S = 2.0  # [s]
+    PASS_WAIT_GAP_M = 10.0
+    PASS_PEEK_SPARE_M = 0.3  # [m] the waiting ego's side keeps this from its lane's edge
+    PASS_ACCEL = 2.0  # [m/s^2] the candidates' speed ramp
+    # The share of the return path (a smoothstep over `Plan.lateral_length_m`) after which
+    # the side of a car in a 3.5 m lane is back over the centre line (the smoothstep is at
+    # 0.8 of the way at 0.71 of the length).
+    RETURN_CLEAR_SHARE = 0.75
+
+    def _oncoming_candidates(self, lanes_in, current, home, lanes, road, s0, t0, v0, objs, oncoming, nudged):
+        """(candidate lanes, peek) with the oncoming lane's pass added or taken away; peek =
+        (offset target [m], wait station [m]) while a standing blocker waits for a clear lane."""
+        own, opp = current, _across_lane(current, lanes)
+        if opp is None:
+            return lanes_in, None
+        in_opp = not _same_side(current, home)
+        if in_opp:
+            own, opp = opp, current  # passing: `own` is the lane passed, the way back
+        allowed, standing, rear = self._oncoming_clear(own, opp, road, s0, t0, v0, objs, *oncoming)
+        t_own, t_opp = float(road.lane_center_t(own, s0)), float(road.lane_center_t(opp, s0))
+        if in_opp:
+            out = [*lanes_in, own]
+            if not allowed and abs(t0 - t_own) < abs(t0 - t_opp):
+                out.remove(opp)  # not over the line yet and no longer clear: back
+            return out, None
+        if allowed:
+            return [*lanes_in, opp], None
+        if standing and not nudged:
+            room = 0.5 * (abs(t_opp - t_own) - self.body.width_m) - self.PASS_PEEK_SPARE_M
+            return lanes_in, (t_own + math.copysign(max(room, 0.0), t_opp - t_own), rear - self.PASS_WAIT_GAP_M)
+        return lanes_in, None
+
+    def _oncoming_clear(self, own, opp, road, s0, t0, v0, objs, sight_m, v_limit):
+        """(the oncoming lane may be used, the blocker stands, its rear station [m]) for
+        passing the group of blockers ahead in lane `own` through lane `opp`."""
+        t_own, t_opp = float(road.lane_center_t(own, s0)), float(road.lane_center_t(opp, s0))
+        lane_w, side = abs(t_opp - t_own), math.copysign(1.0, t_opp - t_own)
+        ego_len, ego_wid = self.body.length_m, self.body.width_m
+        front = s0 + 0.5 * ego_len
+        v_pass = self.cruise
+        blockers, others = [], []
+        for o in objs:
+            os_, ot, ov, _ovt, olen, owid = o
+            if abs(ot - t_own) < 0.5 * (owid + ego_wid) + 0.3 and 0.0 < os_ - s0 < self.PASS_REACH_M \
+                    and -self.PASS_STANDING_MS < ov < max(self.PASS_SLOW_SHARE * v_pass, self.PASS_STANDING_MS):
+                blockers.append((os_ - 0.5 * olen, os_ + 0.5 * olen, ov))
+            else:
+                others.append(o)
+        if not blockers or v_pass < 1.0:
+            return False, False, None
+        blockers.sort()
+        rear = blockers[0][0]
+        if rear - front > self.PASS_START_S * v0 + self.PASS_START_M:
+            return False, False, None
+        far, v_far = blockers[0][1], blockers[0][2]
+        standing = abs(v_far) < self.PASS_STANDING_MS
+        for b_rear, b_front, b_v in blockers[1:]:
+            if b_rear - far > ego_len + 2.0 * self.PASS_GAP_M:
+                break
+            if b_front + b_v > far + v_far:
+                far, v_far = b_front, b_v
+            standing = standing and abs(b_v) < self.PASS_STANDING_MS
+        back = self.RETURN_CLEAR_SHARE * max(30.0, 3.0 * v_pass)
+
+        def distance(t_s: float) -> float:  # the ego's centre travels this far until the end
+            return far + max(v_far, 0.0) * t_s + self.PASS_GAP_M + 0.5 * ego_len + back - s0
+
+        t_end = 0.0
+        for _ in range(10):  # converges by v_far / v_pass <= PASS_SLOW_SHARE per step
+            t_end = _time_to_cover(0.0, distance(t_end), v0, v_pass, self.PASS_ACCEL)
+        reach = distance(t_end) + 0.5 * ego_len  # the ego's front at the end, from its centre
+        window = t_end + self.PASS_MARGIN_S
+        sight = sight_m
+        for os_, ot, ov, _ovt, olen, owid in objs:  # what stands between the ego and the lane's centre line
+            x = os_ - 0.5 * olen - front
+            edge, target = side * (ot - t0) + 0.5 * owid, side * (t_opp - t0)
+            if x > 0.0 and edge > 0.0:
+                sight = min(sight, x * target / edge if edge < target else x)
+        if sight - v_limit * window < reach:
+            return False, standing, rear
+        for os_, ot, ov, _ovt, olen, owid in others:
+            if abs(ot - t_opp) >= 0.5 * (owid + lane_w):
+                continue  # not in the oncoming lane
+            near = os_ - 0.5 * olen - s0
+            if os_ + 0.5 * olen < s0 - ego_len:
+                if ov > v0:
+                    return False, standing, rear  # coming up from behind
+                continue
+            if near + ov * (window if ov < 0.0 else t_end) < reach:
+                return False, standing, rear
+        return True, standing, rear
+
     def _speeds(self, ego_speed: float):
         return (self.cruise, max(0.0, ego_speed - 2.0), max(0.0, ego_speed - 5.0), 0.0)
 
@@ -517,8 +649,30 @@ class LatticePlanner:
         return cost
 
 
+def _time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: float) -> float:
+    """Time [s] to drive from station `s_from` to `s_to` [m] starting at `v0` [m/s] and
+    accelerating at `accel` [m/s^2] up to `v_top` (or holding `v0` if that is faster)."""
+    d = s_to - s_from
+    if d <= 0.0:
+        return 0.0
+    v_top = max(v_top, v0, 0.1)
+    d_acc = (v_top * v_top - v0 * v0) / (2.0 * accel)
+    if d <= d_acc:
+        return (math.sqrt(v0 * v0 + 2.0 * accel * d) - v0) / accel
+    return (v_top - v0) / accel + (d - d_acc) / v_top
+
+
 def _same_side(a: int, b: int) -> bool:
     return (a > 0) == (b > 0)
+
+
+def _across_lane(lane: int, lanes) -> int | None:
+    """The driving lane over the centre line from `lane` (its innermost neighbour of the
+    other direction), or None where `lane` is not beside the centre line or there is none."""
+    if abs(lane) != 1:
+        return None
+    other = 1 if lane < 0 else -1
+    return other if other in lanes else None
 
 
 def _overlap_times(a: float, b: float, c: float) -> tuple[float, float]:
