@@ -355,7 +355,12 @@ class LatticePlanner:
             self.last_change_s = stamp_s
             self.current_lane = lane
         if speed > 0.0:
-            cap, curve_brake = self._curve_speed(road, s0, t0, ego_speed, max(speed, ego_speed))
+            # The lateral manoeuvre the plan publishes (below): its own curvature adds to the road's.
+            if self.maneuver is None or self.maneuver[0] != lane or abs(self.maneuver_target - t_lane) > 0.05:
+                lateral = (s0, t0, t_lane, self._lateral_length(road, s0, t0, t_lane, ego_speed))
+            else:
+                lateral = (self.maneuver[1], self.maneuver[2], t_lane, self.maneuver[3])
+            cap, curve_brake = self._curve_speed(road, s0, t0, ego_speed, max(speed, ego_speed), lateral)
             speed = min(speed, cap)
             brake = max(brake, curve_brake)
         if stop is not None:  # a stop station: hold the speed so the ego stops at the line
@@ -373,7 +378,7 @@ class LatticePlanner:
         # The lateral manoeuvre keeps its start while its target lane stays the same, so
         # replanning does not restart the profile (which would flatten it every cycle).
         if self.maneuver is None or self.maneuver[0] != lane or abs(self.maneuver_target - t_lane) > 0.05:
-            self.maneuver = (lane, s0, t0, max(30.0, 3.0 * ego_speed))
+            self.maneuver = (lane, s0, t0, self._lateral_length(road, s0, t0, t_lane, ego_speed))
             self.maneuver_target = t_lane
         _, s_start, t_start, lateral_len = self.maneuver
         # The published trajectory: lateral path from (s_start, t_start) to t_target over path_length.
@@ -381,17 +386,25 @@ class LatticePlanner:
         lateral_len = corrupt("planner.path_length", lateral_len)
         return Plan(lane, t_lane, speed, s_start, t_start, lateral_len, stamp_s, brake, stage, ttc)
 
-    def _curve_speed(self, road, s0: float, t0: float, ego_speed: float, speed: float) -> tuple[float, float]:
+    def _curve_speed(self, road, s0: float, t0: float, ego_speed: float, speed: float,
+                     lateral: tuple[float, float, float, float] | None = None) -> tuple[float, float]:
         """(speed cap [m/s], braking [m/s^2]) for the curves ahead (a junction's corner, a
-        bend): the fastest speed now from which slowing at `curve_decel` keeps the lateral
-        acceleration on the lane ahead under `max_lateral_accel` (v^2 <= a_lat / kappa +
-        2 * decel * distance, over the stopping preview), and, once the ego is at or past
-        that envelope, the deceleration that reaches each bend's speed at the bend (like a
-        stop line's: the speed loop alone lags by a couple of m/s)."""
+        bend, a lane change): the fastest speed now from which slowing at `curve_decel` keeps
+        the lateral acceleration on the path ahead under `max_lateral_accel` (v^2 <= a_lat /
+        kappa + 2 * decel * distance, over the stopping preview), and, once the ego is at or
+        past that envelope, the deceleration that reaches each bend's speed at the bend (like
+        a stop line's: the speed loop alone lags by a couple of m/s). `lateral` = (s_start,
+        t_start, t_target, length) [m] of the lateral manoeuvre the ego follows: the path's
+        curvature is the road's at the manoeuvre's offset plus the manoeuvre's own, as the
+        controller steers it (a lane change in a bend curves more than either)."""
         reach = min(self.curve_preview_max_m, speed * speed / (2.0 * self.curve_decel) + 2.0 * self.body.length_m)
         dist, kappa = road.curvature_ahead(s0, reach)
-        # The curvature of the line the ego drives, offset t0 from the sampled one.
-        lane_kappa = np.abs(kappa) / np.maximum(1.0 - kappa * t0, 0.1)
+        if lateral is None or (s0 - lateral[0]) >= lateral[3] or lateral[2] == lateral[1]:
+            # The curvature of the line the ego drives, offset t0 from the sampled one.
+            lane_kappa = np.abs(kappa) / np.maximum(1.0 - kappa * t0, 0.1)
+        else:
+            t_path, bend = _lateral_path(s0 + dist, *lateral)
+            lane_kappa = np.abs(kappa / np.maximum(1.0 - kappa * t_path, 0.2) + bend)
         bends = lane_kappa > 1e-6
         if not bends.any():
             return math.inf, 0.0
@@ -401,6 +414,25 @@ class LatticePlanner:
             return cap, 0.0
         needed = float(np.max((ego_speed * ego_speed - bend_v2) / (2.0 * np.maximum(d, 1.0))))
         return cap, min(self.max_brake, needed) if needed > 0.0 else 0.0
+
+    LATERAL_MIN_M = 30.0  # [m] a lateral manoeuvre's shortest length ...
+    LATERAL_S = 3.0  # [s] ... and its duration at speed
+    LATERAL_MAX_S = 8.0  # [s] the longest it is stretched to in a bend
+
+    def _lateral_length(self, road, s0: float, t0: float, t_target: float, speed: float) -> float:
+        """Length [m] of a lateral manoeuvre from offset `t0` to `t_target` [m]: 3 s at the
+        ego's speed, at least 30 m, and in a bend long enough that the smoothstep's peak
+        curvature (6 |d| / L^2) on top of the road's keeps the lateral acceleration under
+        `max_lateral_accel` (up to 8 s; beyond, the curve speed cap slows the ego)."""
+        length = max(self.LATERAL_MIN_M, self.LATERAL_S * speed)
+        d = abs(t_target - t0)
+        if d < 1e-3 or speed < 1.0:
+            return length
+        _, kappa = road.curvature_ahead(s0, length)
+        k_road = float(np.max(np.abs(kappa))) if len(kappa) else 0.0
+        spare = self.max_lateral_accel / (speed * speed) - k_road  # [1/m] curvature left for the manoeuvre
+        need = math.sqrt(6.0 * d / spare) if spare > 0.0 else math.inf
+        return min(max(length, need), max(length, self.LATERAL_MAX_S * speed))
 
     # Stopping at traffic lights: the ego stops `STOP_GAP_M` before a red light's line,
     # braking when the constant deceleration that stops it there reaches `STOP_DECEL`; at
@@ -535,8 +567,10 @@ class LatticePlanner:
         v_pass = self.cruise
         blockers, others = [], []
         for o in objs:
-            os_, ot, ov, _ovt, olen, owid = o
+            os_, ot, ov, ovt, olen, owid = o
+            # (not what crosses the road: a walker or a turning car is waited for, not passed)
             if abs(ot - t_own) < 0.5 * (owid + ego_wid) + 0.3 and 0.0 < os_ - s0 < self.PASS_REACH_M \
+                    and abs(ovt) <= 0.3 \
                     and -self.PASS_STANDING_MS < ov < max(self.PASS_SLOW_SHARE * v_pass, self.PASS_STANDING_MS):
                 blockers.append((os_ - 0.5 * olen, os_ + 0.5 * olen, ov))
             else:
@@ -660,6 +694,16 @@ def _time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: f
     if d <= d_acc:
         return (math.sqrt(v0 * v0 + 2.0 * accel * d) - v0) / accel
     return (v_top - v0) / accel + (d - d_acc) / v_top
+
+
+def _lateral_path(s: np.ndarray, s_start: float, t_start: float, t_target: float,
+                  length: float) -> tuple[np.ndarray, np.ndarray]:
+    """The planned lateral offset t(s) [m] and its d2t/ds2 [1/m] at stations `s` [m]: the
+    smoothstep `Controller._path` steers (that one per control step, on floats)."""
+    u = np.clip((s - s_start) / length, 0.0, 1.0)
+    d = t_target - t_start
+    inside = (u > 0.0) & (u < 1.0)
+    return t_start + d * u * u * (3.0 - 2.0 * u), np.where(inside, d * (6.0 - 12.0 * u) / (length * length), 0.0)
 
 
 def _same_side(a: int, b: int) -> bool:
