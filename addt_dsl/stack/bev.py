@@ -358,7 +358,8 @@ class BevStack:
         # taken as standing, set off an emergency stop and the full AEB stage in the first
         # 0.1 s of a learned-perception overtake. The second sighting (0.1 s later at
         # 10 Hz) gives the velocity.
-        tracked = [o for o in self.tracker.objects_at(time_s) if o.velocity_known]
+        # Weak tracks (seen once with fewer returns than `min_hits`) wait for their confirmation.
+        tracked = [o for o in self.tracker.objects_at(time_s) if o.velocity_known and not o.weak]
         for o in tracked:
             so, to = road.project(o.x, o.y)
             # Velocity along the road, and the box's extent along and across it.

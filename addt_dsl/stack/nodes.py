@@ -55,12 +55,17 @@ class Obj:
     # False for a track seen once by a detector that measures no velocity: its velocity
     # (reported as 0) is a guess, not an estimate.
     velocity_known: bool = True
+    # A detection from fewer returns than perception's `min_hits` (a small object at range:
+    # one 1-degree ray on a 0.5 m walker to 29 m); a track is weak until a second sighting
+    # in the next frame confirms it (2 of 2), and the stack does not plan for a weak track.
+    weak: bool = False
 
 
 # ---------------------------------------------------------------- perception
 
 class GroundTruthPerception:
-    """Objects hit by at least `min_hits` lidar returns, positions from ground truth + noise.
+    """Objects hit by at least `min_hits` lidar returns, positions from ground truth + noise;
+    objects with fewer (at least one) are reported `weak`, for the tracker to confirm.
 
     Positions are computed where the *actual* (possibly shifted) sensor sees them and
     mapped back with the *nominal* extrinsics, so a misaligned mount produces the
@@ -89,8 +94,6 @@ class GroundTruthPerception:
         rot_n = rotation(nominal.roll, nominal.pitch, nominal.yaw)
         objs = []
         for body, count in zip(ids.tolist(), counts.tolist()):
-            if count < self.min_hits:
-                continue
             gt = world.actor_by_body(body)
             if gt is None:
                 continue
@@ -109,7 +112,7 @@ class GroundTruthPerception:
             wx = x + cos_h * px - sin_h * py
             wy = y + sin_h * px + cos_h * py
             objs.append(Obj(wx, wy, gt.heading - yaw_err, vx_w, vy_w, gt.length_m, gt.width_m,
-                            kind=gt.kind))
+                            kind=gt.kind, weak=count < self.min_hits))
         # The detection count bounds the list the downstream nodes read: a corrupted count
         # hides objects (a NaN or infinite count raises, which the loop records as detected).
         count = int(corrupt("perception.count", float(len(objs))))
@@ -139,6 +142,9 @@ class Tracker:
     # ... and for a detection of these classes: a walker or a bicycle that jumped further
     # is another object (a 45 m/s gate lets a pedestrian's track grab a passing car's box).
     class_max_speed = {"pedestrian": 4.0, "cyclist": 15.0}
+
+    # [s] a weak track seen again within this (1.5 lidar periods at 10 Hz) is confirmed
+    confirm_s = 0.15
 
     def __init__(self, max_age_s: float = 1.0):
         self.max_age_s = max_age_s
@@ -174,8 +180,9 @@ class Tracker:
                 else:
                     vx = prev.vx + self.velocity_gain * (mvx - prev.vx)
                     vy = prev.vy + self.velocity_gain * (mvy - prev.vy)
+                # A second sighting in a row confirms a weak track (2 of 2).
                 det = Obj(det.x, det.y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width,
-                          kind=det.kind)
+                          kind=det.kind, weak=det.weak and prev.weak and stamp_s - ts > self.confirm_s)
             new_tracks.append((det, stamp_s))
         # Keep unmatched tracks alive (coasting) so a dropped frame does not erase an object.
         for i, (p, ts) in enumerate(self.tracks):
@@ -190,14 +197,16 @@ class Tracker:
 
     def write_state(self, site: str, values: list[float | int]) -> None:
         n = len(self.TRACK_FIELDS)
-        self.tracks = [(Obj(*values[k:k + 7], confidence=o.confidence, s=o.s, t=o.t, kind=o.kind), values[k + 7])
+        self.tracks = [(Obj(*values[k:k + 7], confidence=o.confidence, s=o.s, t=o.t, kind=o.kind, weak=o.weak),
+                        values[k + 7])
                        for (o, _), k in zip(self.tracks, range(0, len(values), n))]
 
     @staticmethod
     def _predict(o: Obj, dt: float) -> Obj:
         if math.isnan(o.vx):  # velocity not measured yet: stays where it was seen
             return o
-        return Obj(o.x + o.vx * dt, o.y + o.vy * dt, o.heading, o.vx, o.vy, o.length, o.width, kind=o.kind)
+        return Obj(o.x + o.vx * dt, o.y + o.vy * dt, o.heading, o.vx, o.vy, o.length, o.width, kind=o.kind,
+                   weak=o.weak)
 
     def objects_at(self, time_s: float) -> list[Obj]:
         """Predicted tracks; one whose velocity is not known yet is reported as standing still
@@ -208,7 +217,7 @@ class Tracker:
                 p = self._predict(o, time_s - ts)
                 out.append(p if not math.isnan(p.vx) else
                            Obj(p.x, p.y, p.heading, 0.0, 0.0, p.length, p.width, p.confidence, kind=p.kind,
-                               velocity_known=False))
+                               velocity_known=False, weak=p.weak))
         return out
 
 
