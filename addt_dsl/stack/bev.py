@@ -386,11 +386,12 @@ class BevStack:
         if give_way is not None and (stop is None or give_way < stop[0]):
             stop = (give_way, LIGHT_STATES["red"])  # wait before the junction like at a red light
         oncoming = None
-        if self.sight_m and self.settings["pass_oncoming"] == "on" and self._may_pass(float(s0), stop):
+        if self.sight_m and self.settings["pass_oncoming"] == "on":
             # An oncoming car not seen may come at the road's speed limit (the ego's cruise
             # speed where the map gives none).
             limit = road.speed_limit(float(s0))
-            oncoming = (max(self.sight_m.values()), limit if limit is not None else self.cruise)
+            oncoming = (max(self.sight_m.values()), limit if limit is not None else self.cruise,
+                        self._pass_end(float(s0), stop))
         plan = self.planner.plan((float(s0), float(t0), lane0), speed, objs, road, road_id, time_s,
                                  self.corrupt, (speed * math.cos(hdg0), speed * math.sin(hdg0)), stop,
                                  oncoming)
@@ -404,18 +405,13 @@ class BevStack:
         stamp = self.tracks_stamp if self.tracks_stamp is not None else time_s
         self.bus.publish("plan", plan, stamp, time_s + lat)
 
-    # No pass through the oncoming lane within this distance of a junction on the route or a
-    # traffic light's stop line, nor inside a junction (what stands there is a queue, and
-    # the rules forbid overtaking there).
-    PASS_CLEAR_OF_JUNCTION_M = 150.0
-
-    def _may_pass(self, s0: float, stop) -> bool:
-        """Whether the ego is far enough from junctions and lights to pass through the oncoming lane."""
-        front = s0 + 0.5 * self.body.length_m
-        if stop is not None and stop[0] - front < self.PASS_CLEAR_OF_JUNCTION_M:
-            return False
+    def _pass_end(self, s0: float, stop) -> float:
+        """The station [m] a pass through the oncoming lane must be over by: the next junction
+        on the route or stop line (a light's, or where the ego gives way), inf without one.
+        No overtaking into a junction; what stands before a stop line is a queue."""
+        end = stop[0] if stop is not None else math.inf
         junction = self.ctx.junction_ahead(s0)
-        return junction is None or junction[0] - front > self.PASS_CLEAR_OF_JUNCTION_M
+        return min(end, junction[0]) if junction is not None else end
 
     # Gap acceptance at junctions (`yield_gap` > 0, 1.5 s by default): before it reaches the
     # part of a junction on its route where another road user's path crosses its own, the ego

@@ -320,9 +320,10 @@ class LatticePlanner:
         """`ego_sc` = (s, t, lane); `ego_v_st` = the ego's velocity along and across the
         road [m/s] for the forward-collision check (default: `ego_speed` along it); `stop` =
         the next traffic light's stop line on the ego's road (station [m], state code);
-        `oncoming` = (sight [m], speed [m/s]) for passing through the oncoming lane: how far
-        perception is sure to see an oncoming car, and how fast one it has not seen may come
-        (None: the ego never uses the oncoming lane)."""
+        `oncoming` = (sight [m], speed [m/s], end station [m]) for passing through the
+        oncoming lane: how far perception is sure to see an oncoming car, how fast one it has
+        not seen may come, and where the pass must be over (the next junction or stop line;
+        None: the ego never uses the oncoming lane)."""
         s0, t0, lane0 = ego_sc
         if self.current_lane is None:
             self.current_lane = self.home_lane = lane0
@@ -566,7 +567,7 @@ class LatticePlanner:
             return lanes_in, (t_own + math.copysign(max(room, 0.0), t_opp - t_own), rear - self.PASS_WAIT_GAP_M)
         return lanes_in, None
 
-    def _oncoming_clear(self, own, opp, road, s0, t0, v0, objs, sight_m, v_limit):
+    def _oncoming_clear(self, own, opp, road, s0, t0, v0, objs, sight_m, v_limit, end_s=math.inf):
         """(the oncoming lane may be used, the blocker stands, its rear station [m]) for
         passing the group of blockers ahead in lane `own` through lane `opp`."""
         t_own, t_opp = float(road.lane_center_t(own, s0)), float(road.lane_center_t(opp, s0))
@@ -607,6 +608,8 @@ class LatticePlanner:
         for _ in range(10):  # converges by v_far / v_pass <= PASS_SLOW_SHARE per step
             t_end = _time_to_cover(0.0, distance(t_end), v0, v_pass, self.PASS_ACCEL)
         reach = distance(t_end) + 0.5 * ego_len  # the ego's front at the end, from its centre
+        if s0 + reach > end_s:
+            return False, standing, rear  # it would not be back before the junction or stop line
         window = t_end + self.PASS_MARGIN_S
         sight = sight_m
         for os_, ot, ov, _ovt, olen, owid in objs:  # what stands between the ego and the lane's centre line
