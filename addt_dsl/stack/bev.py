@@ -62,7 +62,7 @@ class PerceptionMode:
 
 
 def _ground_truth(settings, ctx):
-    return GroundTruthPerception(settings, ctx.rng("perception"))
+    return GroundTruthPerception(settings, ctx.rng("perception"), ctx.rng("perception.weak"))
 
 
 def _learned(settings, ctx):

@@ -75,10 +75,12 @@ class GroundTruthPerception:
     name = "perception"
     sites = ("perception.x", "perception.y", "perception.count")
 
-    def __init__(self, settings: dict, rng: np.random.Generator):
+    def __init__(self, settings: dict, rng: np.random.Generator, weak_rng: np.random.Generator | None = None):
         self.noise_m = float(settings.get("perception_noise", 0.1))
         self.min_hits = int(settings.get("min_hits", 2))
         self.rng = rng
+        # Weak detections draw their noise apart: the others' draws stay what they were.
+        self.weak_rng = weak_rng if weak_rng is not None else rng
 
     def run(self, frame, world, sensor, ego_pose, corrupt) -> list[Obj]:
         from addt_dsl.runtime.sensors import rotation
@@ -105,8 +107,9 @@ class GroundTruthPerception:
             yaw_err = (actual.yaw - nominal.yaw)
             vx_w = gt.speed * math.cos(gt.heading)
             vy_w = gt.speed * math.sin(gt.heading)
-            px = float(pn[0]) + self.rng.normal(0.0, self.noise_m)
-            py = float(pn[1]) + self.rng.normal(0.0, self.noise_m)
+            rng = self.rng if count >= self.min_hits else self.weak_rng
+            px = float(pn[0]) + rng.normal(0.0, self.noise_m)
+            py = float(pn[1]) + rng.normal(0.0, self.noise_m)
             px = corrupt("perception.x", px)
             py = corrupt("perception.y", py)
             wx = x + cos_h * px - sin_h * py
