@@ -1,8 +1,7 @@
 """Curvature-limited speed on each kind of path the bev stack's ego follows: its lateral
 acceleration (speed x course rate, 0.2 s smoothing) stays under `max_lateral_accel` (4 m/s^2)
-+ 0.5 m/s^2 of controller ripple. Routes through junction connecting roads and ramps:
-test_ramp_curve_speed.py and test_junction_gaps.py; a written arc's corner:
-test_stack_safety.py::test_the_planner_slows_for_a_tight_corner."""
++ 0.5 m/s^2 of controller ripple. A route through a ramp: test_ramp_curve_speed.py; a
+written arc's corner: test_stack_safety.py::test_the_planner_slows_for_a_tight_corner."""
 
 import numpy as np
 import pytest
@@ -85,3 +84,28 @@ def test_imported_spirals_and_arcs_in_both_directions(lane, start):
     assert a.max() < A_LAT + 0.75
     assert ego.speed.max() > 24.0  # it does cruise on the straighter parts
     assert np.abs(ego.lane_offset).max() < 0.6
+
+
+JUNCTION_TURN = """
+scenario junction_turn {
+  duration 20 s
+  road town import "maps/fabriksgatan.xodr" road 0
+  ego car on town route 0 -> DIRECTION lane 1 at 40 m speed 12 m/s goal 110 m {
+    stack bev cruise_speed 15 m/s
+  }
+  expect {
+    reach goal within 20 s
+  }
+}
+"""
+
+
+@pytest.mark.parametrize("direction", ["left", "right"])
+def test_a_route_through_a_junctions_connecting_road(direction):
+    """fabriksgatan.xodr's 4-way junction: the connecting roads' corners (radius ~10 m and
+    less) at a 15 m/s cruise would be well over 10 m/s^2; the route's legs give the cap."""
+    out, ego = _run(JUNCTION_TURN.replace("DIRECTION", direction))
+    assert out.passed, out.verdicts
+    a = np.abs(_lateral_accel(ego))
+    assert np.percentile(a, 99) < A_LAT + 0.5
+    assert a.max() < A_LAT + 0.75
