@@ -125,11 +125,11 @@ def test_slalom_stays_behind_when_its_lidar_cannot_see_far_enough():
 
 
 def test_slalom_waits_for_the_oncoming_car_then_passes():
-    """An oncoming car at 10 m/s is 150 m off when the ego nears the containers: the ego
+    """An oncoming car at 10 m/s is about 90 m off when the ego nears the containers: the ego
     waits in its lane (its side 0.3 m from the centre line, where it sees past them) until
     the car is by, then passes; it is never over the line while the car is ahead of it.
-    Clearance oracle: 1 m (two cars 1.8 m wide in the centres of 3.5 m lanes pass 1.7 m
-    apart; the waiting ego stands 0.55 m nearer the line)."""
+    Clearance oracle: 1 m (two cars 1.9 m wide in the centres of 3.5 m lanes pass 1.6 m
+    apart; the waiting ego stands up to 0.5 m nearer the line)."""
     out = _slalom(oncoming="agent oncoming car on r lane 1 at 260 m speed 10 m/s {\n"
                            "    behavior cruise speed 10 m/s\n  }\n"
                            "  expect { clear_of_oncoming: always clearance(oncoming) > 1 m }")
