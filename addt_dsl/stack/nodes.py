@@ -534,8 +534,8 @@ class LatticePlanner:
     # sure to return `min_hits` rays from a car head-on, shortened by what stands between the
     # ego and the oncoming lane's centre line of sight (the blocker itself). A pass that
     # waits stops `PASS_WAIT_GAP_M` short of the blocker, its side `PASS_PEEK_SPARE_M` from
-    # its lane's edge towards the centre line, where it sees past it. Once over the line it goes on; before, a rule
-    # that no longer holds turns it back.
+    # its lane's edge towards the centre line, where it sees past it. Once over the line it
+    # goes on; before, a rule that no longer holds turns it back.
     PASS_REACH_M = 80.0
     PASS_SLOW_SHARE = 0.5
     # [m/s] along the road: what stands (a tracked standing obstacle's velocity flickers by up
@@ -608,7 +608,7 @@ class LatticePlanner:
             if b_front + b_v > far + v_far:
                 far, v_far = b_front, b_v
             standing = standing and abs(b_v) < self.PASS_STANDING_MS
-        back = self.RETURN_CLEAR_SHARE * max(30.0, 3.0 * v_pass)
+        back = self.RETURN_CLEAR_SHARE * self._lateral_length(road, s0, t_opp, t_own, v_pass)
 
         def distance(t_s: float) -> float:  # the ego's centre travels this far until the end
             return far + max(v_far, 0.0) * t_s + self.PASS_GAP_M + 0.5 * ego_len + back - s0
