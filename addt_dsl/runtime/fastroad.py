@@ -226,6 +226,10 @@ class FastRoad:
     def _section_key(self, s: float) -> int:
         return max(0, bisect.bisect_right(self._section_starts, s) - 1)
 
+    def speed_limit(self, s: float) -> float | None:
+        """The map's speed limit [m/s] at station `s` [m] (None where it gives none)."""
+        return self.road.speed_limit(s)
+
     def driving_lane_ids(self, s: float) -> tuple[int, ...]:
         key = self._section_key(s)
         lanes = self._lanes_cache.get(key)  # hot (each actor's lane offset, every step): no call layer

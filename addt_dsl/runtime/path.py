@@ -151,6 +151,11 @@ class RoutePath(FastRoad):
             raise ValueError(f"road {road_id} is not on route {self.key}")
         return first.u0 + first.dir * (s - first.s_from)
 
+    def speed_limit(self, u: float) -> float | None:
+        """The map's speed limit [m/s] of the leg at path station `u` [m] (None where it gives none)."""
+        sg = self._seg(u)
+        return sg.fast.speed_limit(sg.s_from + sg.dir * (u - sg.u0))
+
     # ---- lanes (driving convention: road lane id x direction)
     def driving_lane_ids(self, u: float) -> tuple[int, ...]:
         sg = self._seg(u)

@@ -257,6 +257,9 @@ class BevStack:
         ParamSpec("yield_gap", units.TIME, default=1.5, low=0.0, high=20.0,
                   doc="gap acceptance at junctions on the route: the ego goes when other traffic reaches "
                       "the conflict zone at least this long after the ego has left it (0: off)"),
+        ParamSpec("pass_oncoming", None, kind="word", default="on", choices=("on", "off"),
+                  doc="pass a standing or slow obstacle through the oncoming lane when the lane is seen "
+                      "clear for the whole manoeuvre (off: never)"),
         ParamSpec("synthetic_objects", None, kind="int", default=0, low=0, high=500,
                   doc="extra objects perception reports in every frame (vehicles keeping pace beside "
                       "the road, 12 m or more to either side): a controllable workload for latency "

@@ -22,14 +22,15 @@ from addt_dsl.specs.stacks import NODE_NAMES, PERCEPTIONS
 from addt_dsl.stack.bus import Bus
 from addt_dsl.stack.latency import load_models
 from addt_dsl.stack.nodes import (Controller, EgoBody, GroundTruthPerception, LatticePlanner, Obj,
-                                  Tracker)
+                                  Tracker, _time_to_cover)
+from addt_dsl.vehicles import CAR
 
 CROSSING_SIN = 0.5  # an object whose box is turned more than 30 deg from the road ...
 CROSSING_MIN_SPEED = 0.5  # [m/s] ... and moves across it faster than this is predicted across it
 
 
 def _ground_truth(settings, ctx):
-    return GroundTruthPerception(settings, ctx.rng("perception"))
+    return GroundTruthPerception(settings, ctx.rng("perception"), ctx.rng("perception.weak"))
 
 
 def _learned(settings, ctx):
@@ -100,6 +101,9 @@ class BevStack(S.BevStack):
         self.pipeline_s = 0.0
         self.objects_seen = 0
         self.synthetic_objects = int(self.settings["synthetic_objects"])
+        # Lidar name -> the distance [m] it is sure to see a car head-on at (passing through
+        # the oncoming lane; none for camera perception: the ego never passes there).
+        self.sight_m: dict[str, float] = {}
 
     def _make_perception(self):
         mode = self.settings["perception"]
@@ -143,6 +147,9 @@ class BevStack(S.BevStack):
             return
         started = _time.perf_counter()
         sensor = self.ctx.sensor(frame.sensor)
+        if frame.sensor not in self.sight_m and self.perception_input == "hit_body":
+            self.sight_m[frame.sensor] = lidar_sight(sensor.settings, sensor.nominal,
+                                                     int(getattr(self.perception, "min_hits", 2)))
         objs = self.perception.run(frame, self.ctx.world, sensor, self.ctx.ego_pose(), self.corrupt)
         if self.synthetic_objects:
             objs = objs + synthetic_objects(self.synthetic_objects, self.ctx.ego_pose())
@@ -198,7 +205,8 @@ class BevStack(S.BevStack):
         # taken as standing, set off an emergency stop and the full AEB stage in the first
         # 0.1 s of a learned-perception overtake. The second sighting (0.1 s later at
         # 10 Hz) gives the velocity.
-        tracked = [o for o in self.tracker.objects_at(time_s) if o.velocity_known]
+        # Weak tracks (seen once with fewer returns than `min_hits`) wait for their confirmation.
+        tracked = [o for o in self.tracker.objects_at(time_s) if o.velocity_known and not o.weak]
         for o in tracked:
             so, to = road.project(o.x, o.y)
             # Velocity along the road, and the box's extent along and across it.
@@ -224,8 +232,16 @@ class BevStack(S.BevStack):
         give_way = self._give_way(float(s0), float(t0), speed, tracked, objs)
         if give_way is not None and (stop is None or give_way < stop[0]):
             stop = (give_way, LIGHT_STATES["red"])  # wait before the junction like at a red light
+        oncoming = None
+        if self.sight_m and self.settings["pass_oncoming"] == "on":
+            # An oncoming car not seen may come at the road's speed limit (the ego's cruise
+            # speed where the map gives none).
+            limit = road.speed_limit(float(s0))
+            oncoming = (max(self.sight_m.values()), limit if limit is not None else self.cruise,
+                        self._pass_end(float(s0), stop))
         plan = self.planner.plan((float(s0), float(t0), lane0), speed, objs, road, road_id, time_s,
-                                 self.corrupt, (speed * math.cos(hdg0), speed * math.sin(hdg0)), stop)
+                                 self.corrupt, (speed * math.cos(hdg0), speed * math.sin(hdg0)), stop,
+                                 oncoming)
         if plan.aeb_stage != self.aeb_stage:
             self.ctx.event("aeb", stage=plan.aeb_stage, ttc_s=plan.ttc_s if math.isfinite(plan.ttc_s) else None)
             self.aeb_stage = plan.aeb_stage
@@ -235,6 +251,14 @@ class BevStack(S.BevStack):
         lat = self._latency("planner", len(objs), started, time_s)
         stamp = self.tracks_stamp if self.tracks_stamp is not None else time_s
         self.bus.publish("plan", plan, stamp, time_s + lat)
+
+    def _pass_end(self, s0: float, stop) -> float:
+        """The station [m] a pass through the oncoming lane must be over by: the next junction
+        on the route or stop line (a light's, or where the ego gives way), inf without one.
+        No overtaking into a junction; what stands before a stop line is a queue."""
+        end = stop[0] if stop is not None else math.inf
+        junction = self.ctx.junction_ahead(s0)
+        return min(end, junction[0]) if junction is not None else end
 
     # Gap acceptance at junctions (`yield_gap` > 0, 1.5 s by default): before it reaches the
     # part of a junction on its route where another road user's path crosses its own, the ego
@@ -415,17 +439,27 @@ class BevStack(S.BevStack):
         self.ctx.apply_command_at(time_s + lat, steer, accel)
 
 
-def _time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: float) -> float:
-    """Time [s] to drive from station `s_from` to `s_to` [m] starting at `v0` [m/s] and
-    accelerating at `accel` [m/s^2] up to `v_top` (or holding `v0` if that is faster)."""
-    d = s_to - s_from
-    if d <= 0.0:
-        return 0.0
-    v_top = max(v_top, v0, 0.1)
-    d_acc = (v_top * v_top - v0 * v0) / (2.0 * accel)
-    if d <= d_acc:
-        return (math.sqrt(v0 * v0 + 2.0 * accel * d) - v0) / accel
-    return (v_top - v0) / accel + (d - d_acc) / v_top
+# What a lidar must return from a car to see it (passing through the oncoming lane): a box
+# of the catalogue car's width, 1.5 m tall on the road, facing it.
+SIGHT_TARGET_WIDTH_M = CAR.width_m
+SIGHT_TARGET_HEIGHT_M = 1.5
+
+
+def lidar_sight(settings: dict, mount, min_hits: int) -> float:
+    """The distance [m] up to which a lidar (`settings` in SI, `mount` its nominal
+    extrinsics) returns at least `min_hits` rays from a car head-on wherever its box falls
+    between the rays: per channel whose ray at that distance meets the box's height,
+    floor(angular width / ray spacing) rays. A level 360-ray channel sees one to 54 m."""
+    rays, channels = int(settings["rays"]), int(settings["channels"])
+    spacing = float(settings["fov"]) / rays
+    elev = (np.linspace(-0.5, 0.5, channels) * float(settings["vfov"]) if channels > 1 else np.zeros(1)) \
+        - float(mount.pitch)
+    d = np.arange(1.0, float(settings["range"]) + 0.5, 0.5)
+    z = float(mount.z) + d[:, None] * np.tan(elev[None, :])
+    on_box = ((z > 0.0) & (z < SIGHT_TARGET_HEIGHT_M)).sum(axis=1)
+    hits = on_box * np.floor(SIGHT_TARGET_WIDTH_M / (d * spacing))
+    short = np.nonzero(hits < min_hits)[0]
+    return float(d[short[0] - 1]) if len(short) and short[0] > 0 else (0.0 if len(short) else float(d[-1]))
 
 
 def synthetic_objects(count: int, ego_pose) -> list[Obj]:

@@ -168,6 +168,8 @@ def main(argv=None) -> int:
     ap.add_argument("--lidar-vfov", type=float, default=None, metavar="DEG",
                     help="vertical field of view of a multi-channel lidar (default: the weights' training "
                          "value, else bev_grid.DETECTOR_LIDAR's)")
+    ap.add_argument("--lidar-pitch", type=float, default=None, metavar="DEG",
+                    help="mount pitch, positive down (default: level; the default sensor: 2)")
     ap.add_argument("--min-hits", type=int, default=2)
     ap.add_argument("--threshold", type=float, default=None)
     ap.add_argument("--yaw-shift", type=float, nargs="*", default=[0.0], metavar="DEG",
@@ -184,7 +186,10 @@ def main(argv=None) -> int:
     node = LearnedPerception(settings, weights=args.weights or WEIGHTS_PATH)
     lidar = args.lidar or node.meta.get("lidars", ["360x1"])[0]
     vfov_deg = args.lidar_vfov if args.lidar_vfov is not None else node.meta.get("lidar_vfov_deg")
-    lidar_settings = None if vfov_deg is None else {"vfov": math.radians(vfov_deg)}
+    lidar_settings = {} if vfov_deg is None else {"vfov": math.radians(vfov_deg)}
+    if args.lidar_pitch is not None:
+        lidar_settings["pitch"] = math.radians(args.lidar_pitch)
+    lidar_settings = lidar_settings or None
     for shift in args.yaw_shift:
         if args.cache:
             samples = load_samples(args.cache)[: args.scenes]

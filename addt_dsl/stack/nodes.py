@@ -56,12 +56,17 @@ class Obj:
     # False for a track seen once by a detector that measures no velocity: its velocity
     # (reported as 0) is a guess, not an estimate.
     velocity_known: bool = True
+    # A detection from fewer returns than perception's `min_hits` (a small object at range:
+    # one 1-degree ray on a 0.5 m walker to 29 m); a track is weak until a second sighting
+    # in the next frame confirms it (2 of 2), and the stack does not plan for a weak track.
+    weak: bool = False
 
 
 # ---------------------------------------------------------------- perception
 
 class GroundTruthPerception:
-    """Objects hit by at least `min_hits` lidar returns, positions from ground truth + noise.
+    """Objects hit by at least `min_hits` lidar returns, positions from ground truth + noise;
+    objects with fewer (at least one) are reported `weak`, for the tracker to confirm.
 
     Positions are computed where the *actual* (possibly shifted) sensor sees them and
     mapped back with the *nominal* extrinsics, so a misaligned mount produces the
@@ -71,10 +76,12 @@ class GroundTruthPerception:
     name = "perception"
     sites = S.GROUND_TRUTH_SITES
 
-    def __init__(self, settings: dict, rng: np.random.Generator):
+    def __init__(self, settings: dict, rng: np.random.Generator, weak_rng: np.random.Generator | None = None):
         self.noise_m = float(settings.get("perception_noise", 0.1))
         self.min_hits = int(settings.get("min_hits", 2))
         self.rng = rng
+        # Weak detections draw their noise apart: the others' draws stay what they were.
+        self.weak_rng = weak_rng if weak_rng is not None else rng
 
     def run(self, frame, world, sensor, ego_pose, corrupt) -> list[Obj]:
         from addt_dsl.runtime.sensors import rotation
@@ -90,8 +97,6 @@ class GroundTruthPerception:
         rot_n = rotation(nominal.roll, nominal.pitch, nominal.yaw)
         objs = []
         for body, count in zip(ids.tolist(), counts.tolist()):
-            if count < self.min_hits:
-                continue
             gt = world.actor_by_body(body)
             if gt is None:
                 continue
@@ -103,14 +108,15 @@ class GroundTruthPerception:
             yaw_err = (actual.yaw - nominal.yaw)
             vx_w = gt.speed * math.cos(gt.heading)
             vy_w = gt.speed * math.sin(gt.heading)
-            px = float(pn[0]) + self.rng.normal(0.0, self.noise_m)
-            py = float(pn[1]) + self.rng.normal(0.0, self.noise_m)
+            rng = self.rng if count >= self.min_hits else self.weak_rng
+            px = float(pn[0]) + rng.normal(0.0, self.noise_m)
+            py = float(pn[1]) + rng.normal(0.0, self.noise_m)
             px = corrupt("perception.x", px)
             py = corrupt("perception.y", py)
             wx = x + cos_h * px - sin_h * py
             wy = y + sin_h * px + cos_h * py
             objs.append(Obj(wx, wy, gt.heading - yaw_err, vx_w, vy_w, gt.length_m, gt.width_m,
-                            kind=gt.kind))
+                            kind=gt.kind, weak=count < self.min_hits))
         # The detection count bounds the list the downstream nodes read: a corrupted count
         # hides objects (a NaN or infinite count raises, which the loop records as detected).
         count = int(corrupt("perception.count", float(len(objs))))
@@ -139,6 +145,9 @@ class Tracker:
     # ... and for a detection of these classes: a walker or a bicycle that jumped further
     # is another object (a 45 m/s gate lets a pedestrian's track grab a passing car's box).
     class_max_speed = {"pedestrian": 4.0, "cyclist": 15.0}
+
+    # [s] a weak track seen again within this (1.5 lidar periods at 10 Hz) is confirmed
+    confirm_s = 0.15
 
     def __init__(self, max_age_s: float = 1.0):
         self.max_age_s = max_age_s
@@ -169,13 +178,20 @@ class Tracker:
                 if not math.isnan(det.vx):
                     # Blend measured displacement with the detector's velocity estimate.
                     vx, vy = 0.5 * det.vx + 0.5 * mvx, 0.5 * det.vy + 0.5 * mvy
+                    if det.kind == "pedestrian" and not math.isnan(prev.vx):
+                        # ... smoothed for a walker: the blend's ±0.7 m/s of noise (0.1 m
+                        # positions at 10 Hz) is a walking speed, and a standing walker at
+                        # the kerb, tracked from afar, "stepped" into the lane every few frames.
+                        vx = prev.vx + self.velocity_gain * (vx - prev.vx)
+                        vy = prev.vy + self.velocity_gain * (vy - prev.vy)
                 elif math.isnan(prev.vx):
                     vx, vy = mvx, mvy
                 else:
                     vx = prev.vx + self.velocity_gain * (mvx - prev.vx)
                     vy = prev.vy + self.velocity_gain * (mvy - prev.vy)
+                # A second sighting in a row confirms a weak track (2 of 2).
                 det = Obj(det.x, det.y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width,
-                          kind=det.kind)
+                          kind=det.kind, weak=det.weak and prev.weak and stamp_s - ts > self.confirm_s)
             new_tracks.append((det, stamp_s))
         # Keep unmatched tracks alive (coasting) so a dropped frame does not erase an object.
         for i, (p, ts) in enumerate(self.tracks):
@@ -190,14 +206,16 @@ class Tracker:
 
     def write_state(self, site: str, values: list[float | int]) -> None:
         n = len(self.TRACK_FIELDS)
-        self.tracks = [(Obj(*values[k:k + 7], confidence=o.confidence, s=o.s, t=o.t, kind=o.kind), values[k + 7])
+        self.tracks = [(Obj(*values[k:k + 7], confidence=o.confidence, s=o.s, t=o.t, kind=o.kind, weak=o.weak),
+                        values[k + 7])
                        for (o, _), k in zip(self.tracks, range(0, len(values), n))]
 
     @staticmethod
     def _predict(o: Obj, dt: float) -> Obj:
         if math.isnan(o.vx):  # velocity not measured yet: stays where it was seen
             return o
-        return Obj(o.x + o.vx * dt, o.y + o.vy * dt, o.heading, o.vx, o.vy, o.length, o.width, kind=o.kind)
+        return Obj(o.x + o.vx * dt, o.y + o.vy * dt, o.heading, o.vx, o.vy, o.length, o.width, kind=o.kind,
+                   weak=o.weak)
 
     def objects_at(self, time_s: float) -> list[Obj]:
         """Predicted tracks; one whose velocity is not known yet is reported as standing still
@@ -208,7 +226,7 @@ class Tracker:
                 p = self._predict(o, time_s - ts)
                 out.append(p if not math.isnan(p.vx) else
                            Obj(p.x, p.y, p.heading, 0.0, 0.0, p.length, p.width, p.confidence, kind=p.kind,
-                               velocity_known=False))
+                               velocity_known=False, weak=p.weak))
         return out
 
 
@@ -303,10 +321,15 @@ class LatticePlanner:
             self.maneuver = tuple(values)
 
     def plan(self, ego_sc, ego_speed, objs_sc, road, road_id, stamp_s, corrupt,
-             ego_v_st: tuple[float, float] | None = None, stop: tuple[float, float] | None = None) -> Plan:
+             ego_v_st: tuple[float, float] | None = None, stop: tuple[float, float] | None = None,
+             oncoming: tuple[float, float] | None = None) -> Plan:
         """`ego_sc` = (s, t, lane); `ego_v_st` = the ego's velocity along and across the
         road [m/s] for the forward-collision check (default: `ego_speed` along it); `stop` =
-        the next traffic light's stop line on the ego's road (station [m], state code)."""
+        the next traffic light's stop line on the ego's road (station [m], state code);
+        `oncoming` = (sight [m], speed [m/s], end station [m]) for passing through the
+        oncoming lane: how far perception is sure to see an oncoming car, how fast one it has
+        not seen may come, and where the pass must be over (the next junction or stop line;
+        None: the ego never uses the oncoming lane)."""
         s0, t0, lane0 = ego_sc
         if self.current_lane is None:
             self.current_lane = self.home_lane = lane0
@@ -314,12 +337,22 @@ class LatticePlanner:
         current = self.current_lane
         home = self._home_lane(lanes)
         candidates_lanes = [l for l in lanes if abs(l - current) <= 1 and _same_side(l, current)]
+        nudges = self._nudges(current, float(road.lane_center_t(current, s0)), lanes, road, s0, objs_sc) \
+            if current in lanes else []
+        peek = None  # (offset target [m] in the current lane, wait station [m]) while a pass waits
+        if oncoming is not None:
+            candidates_lanes, peek = self._oncoming_candidates(candidates_lanes, current, home, lanes, road, s0, t0,
+                                                               ego_speed, objs_sc, oncoming, bool(nudges))
+            if peek is not None and (stop is None or peek[1] < stop[0]):
+                stop = (peek[1], LIGHT_STATES["red"])  # wait where the oncoming lane can be seen
         best = None
         for lane in candidates_lanes:
             t_lane = float(road.lane_center_t(lane, s0))
             targets = [(t_lane, 0.0)]
             if lane == current:
-                targets += self._nudges(lane, t_lane, lanes, road, s0, objs_sc)
+                if peek is not None:
+                    targets = [(peek[0], 0.0)]
+                targets += nudges
             for t_cand, extra in targets:
                 for speed in self._speeds(ego_speed):
                     cost = corrupt("planner.cost", self._cost(lane, t_cand, speed, s0, t0, ego_speed, objs_sc,
@@ -338,7 +371,12 @@ class LatticePlanner:
             self.last_change_s = stamp_s
             self.current_lane = lane
         if speed > 0.0:
-            cap, curve_brake = self._curve_speed(road, s0, t0, ego_speed, max(speed, ego_speed))
+            # The lateral manoeuvre the plan publishes (below): its own curvature adds to the road's.
+            if self.maneuver is None or self.maneuver[0] != lane or abs(self.maneuver_target - t_lane) > 0.05:
+                lateral = (s0, t0, t_lane, self._lateral_length(road, s0, t0, t_lane, ego_speed))
+            else:
+                lateral = (self.maneuver[1], self.maneuver[2], t_lane, self.maneuver[3])
+            cap, curve_brake = self._curve_speed(road, s0, t0, ego_speed, max(speed, ego_speed), lateral)
             speed = min(speed, cap)
             brake = max(brake, curve_brake)
         if stop is not None:  # a stop station: hold the speed so the ego stops at the line
@@ -356,7 +394,7 @@ class LatticePlanner:
         # The lateral manoeuvre keeps its start while its target lane stays the same, so
         # replanning does not restart the profile (which would flatten it every cycle).
         if self.maneuver is None or self.maneuver[0] != lane or abs(self.maneuver_target - t_lane) > 0.05:
-            self.maneuver = (lane, s0, t0, max(30.0, 3.0 * ego_speed))
+            self.maneuver = (lane, s0, t0, self._lateral_length(road, s0, t0, t_lane, ego_speed))
             self.maneuver_target = t_lane
         _, s_start, t_start, lateral_len = self.maneuver
         # The published trajectory: lateral path from (s_start, t_start) to t_target over path_length.
@@ -364,17 +402,25 @@ class LatticePlanner:
         lateral_len = corrupt("planner.path_length", lateral_len)
         return Plan(lane, t_lane, speed, s_start, t_start, lateral_len, stamp_s, brake, stage, ttc)
 
-    def _curve_speed(self, road, s0: float, t0: float, ego_speed: float, speed: float) -> tuple[float, float]:
+    def _curve_speed(self, road, s0: float, t0: float, ego_speed: float, speed: float,
+                     lateral: tuple[float, float, float, float] | None = None) -> tuple[float, float]:
         """(speed cap [m/s], braking [m/s^2]) for the curves ahead (a junction's corner, a
-        bend): the fastest speed now from which slowing at `curve_decel` keeps the lateral
-        acceleration on the lane ahead under `max_lateral_accel` (v^2 <= a_lat / kappa +
-        2 * decel * distance, over the stopping preview), and, once the ego is at or past
-        that envelope, the deceleration that reaches each bend's speed at the bend (like a
-        stop line's: the speed loop alone lags by a couple of m/s)."""
+        bend, a lane change): the fastest speed now from which slowing at `curve_decel` keeps
+        the lateral acceleration on the path ahead under `max_lateral_accel` (v^2 <= a_lat /
+        kappa + 2 * decel * distance, over the stopping preview), and, once the ego is at or
+        past that envelope, the deceleration that reaches each bend's speed at the bend (like
+        a stop line's: the speed loop alone lags by a couple of m/s). `lateral` = (s_start,
+        t_start, t_target, length) [m] of the lateral manoeuvre the ego follows: the path's
+        curvature is the road's at the manoeuvre's offset plus the manoeuvre's own, as the
+        controller steers it (a lane change in a bend curves more than either)."""
         reach = min(self.curve_preview_max_m, speed * speed / (2.0 * self.curve_decel) + 2.0 * self.body.length_m)
         dist, kappa = road.curvature_ahead(s0, reach)
-        # The curvature of the line the ego drives, offset t0 from the sampled one.
-        lane_kappa = np.abs(kappa) / np.maximum(1.0 - kappa * t0, 0.1)
+        if lateral is None or (s0 - lateral[0]) >= lateral[3] or lateral[2] == lateral[1]:
+            # The curvature of the line the ego drives, offset t0 from the sampled one.
+            lane_kappa = np.abs(kappa) / np.maximum(1.0 - kappa * t0, 0.1)
+        else:
+            t_path, bend = _lateral_path(s0 + dist, *lateral)
+            lane_kappa = np.abs(kappa / np.maximum(1.0 - kappa * t_path, 0.2) + bend)
         bends = lane_kappa > 1e-6
         if not bends.any():
             return math.inf, 0.0
@@ -384,6 +430,25 @@ class LatticePlanner:
             return cap, 0.0
         needed = float(np.max((ego_speed * ego_speed - bend_v2) / (2.0 * np.maximum(d, 1.0))))
         return cap, min(self.max_brake, needed) if needed > 0.0 else 0.0
+
+    LATERAL_MIN_M = 30.0  # [m] a lateral manoeuvre's shortest length ...
+    LATERAL_S = 3.0  # [s] ... and its duration at speed
+    LATERAL_MAX_S = 8.0  # [s] the longest it is stretched to in a bend
+
+    def _lateral_length(self, road, s0: float, t0: float, t_target: float, speed: float) -> float:
+        """Length [m] of a lateral manoeuvre from offset `t0` to `t_target` [m]: 3 s at the
+        ego's speed, at least 30 m, and in a bend long enough that the smoothstep's peak
+        curvature (6 |d| / L^2) on top of the road's keeps the lateral acceleration under
+        `max_lateral_accel` (up to 8 s; beyond, the curve speed cap slows the ego)."""
+        length = max(self.LATERAL_MIN_M, self.LATERAL_S * speed)
+        d = abs(t_target - t0)
+        if d < 1e-3 or speed < 1.0:
+            return length
+        _, kappa = road.curvature_ahead(s0, length)
+        k_road = float(np.max(np.abs(kappa))) if len(kappa) else 0.0
+        spare = self.max_lateral_accel / (speed * speed) - k_road  # [1/m] curvature left for the manoeuvre
+        need = math.sqrt(6.0 * d / spare) if spare > 0.0 else math.inf
+        return min(max(length, need), max(length, self.LATERAL_MAX_S * speed))
 
     # Stopping at traffic lights: the ego stops `STOP_GAP_M` before a red light's line,
     # braking when the constant deceleration that stops it there reaches `STOP_DECEL`; at
@@ -450,6 +515,128 @@ class LatticePlanner:
             return []
         return [(t_lane + need, self.NUDGE_COST + abs(need))]
 
+    # Passing through the oncoming lane. A standing or slow object ahead in the ego's lane
+    # (slower than `PASS_SLOW_SHARE` of the cruise speed, within `PASS_REACH_M`) makes the
+    # lane over the centre line a candidate once its rear is within `PASS_START_S` x speed +
+    # `PASS_START_M` of the ego's front, and only while no oncoming vehicle could reach the
+    # ego's path before it is back in its lane, `PASS_MARGIN_S` included: the manoeuvre ends
+    # when its rear is `PASS_GAP_M` past the last object of the group (objects closer than the
+    # ego's length + 2 gaps are passed at once) and it has made `RETURN_CLEAR_SHARE` of its
+    # way back (its side is then over the line), driving at its cruise speed from its speed
+    # now (accelerating at 2 m/s^2): T seconds, D metres. The rule: every object in the
+    # oncoming lane stays beyond D over T + margin (one coming towards the ego at its tracked
+    # speed; a standing one is beyond D now), none comes from behind faster than the ego, and
+    # one the ego cannot see may be just beyond its sight coming at the road's speed limit:
+    # sight - v_limit x (T + margin) >= D. The sight is the distance at which its lidar is
+    # sure to return `min_hits` rays from a car head-on, shortened by what stands between the
+    # ego and the oncoming lane's centre line of sight (the blocker itself). A pass that
+    # waits stops `PASS_WAIT_GAP_M` short of the blocker, its side `PASS_PEEK_SPARE_M` from
+    # its lane's edge towards the centre line, where it sees past it. Once over the line it
+    # goes on; before, a rule that no longer holds turns it back.
+    PASS_REACH_M = 80.0
+    PASS_SLOW_SHARE = 0.5
+    # [m/s] along the road: what stands (a tracked standing obstacle's velocity flickers by up
+    # to ±2 m/s with 0.1 m position noise at 10 Hz)
+    PASS_STANDING_MS = 2.5
+    PASS_START_S = 3.0  # [s]
+    PASS_START_M = 25.0
+    PASS_GAP_M = 5.0
+    PASS_MARGIN_S = 2.0  # [s]
+    PASS_WAIT_GAP_M = 10.0
+    PASS_PEEK_SPARE_M = 0.3  # [m] the waiting ego's side keeps this from its lane's edge
+    PASS_ACCEL = 2.0  # [m/s^2] the candidates' speed ramp
+    # The share of the return path (a smoothstep over `Plan.lateral_length_m`) after which
+    # the side of a car in a 3.5 m lane is back over the centre line (the smoothstep is at
+    # 0.8 of the way at 0.71 of the length).
+    RETURN_CLEAR_SHARE = 0.75
+
+    def _oncoming_candidates(self, lanes_in, current, home, lanes, road, s0, t0, v0, objs, oncoming, nudged):
+        """(candidate lanes, peek) with the oncoming lane's pass added or taken away; peek =
+        (offset target [m], wait station [m]) while a standing blocker waits for a clear lane."""
+        own, opp = current, _across_lane(current, lanes)
+        if opp is None:
+            return lanes_in, None
+        in_opp = not _same_side(current, home)
+        if in_opp:
+            own, opp = opp, current  # passing: `own` is the lane passed, the way back
+        allowed, standing, rear = self._oncoming_clear(own, opp, road, s0, t0, v0, objs, *oncoming)
+        t_own, t_opp = float(road.lane_center_t(own, s0)), float(road.lane_center_t(opp, s0))
+        if in_opp:
+            out = [*lanes_in, own]
+            if not allowed and abs(t0 - t_own) < abs(t0 - t_opp):
+                out.remove(opp)  # not over the line yet and no longer clear: back
+            return out, None
+        if allowed:
+            return [*lanes_in, opp], None
+        if standing and not nudged:
+            room = 0.5 * (abs(t_opp - t_own) - self.body.width_m) - self.PASS_PEEK_SPARE_M
+            return lanes_in, (t_own + math.copysign(max(room, 0.0), t_opp - t_own), rear - self.PASS_WAIT_GAP_M)
+        return lanes_in, None
+
+    def _oncoming_clear(self, own, opp, road, s0, t0, v0, objs, sight_m, v_limit, end_s=math.inf):
+        """(the oncoming lane may be used, the blocker stands, its rear station [m]) for
+        passing the group of blockers ahead in lane `own` through lane `opp`."""
+        t_own, t_opp = float(road.lane_center_t(own, s0)), float(road.lane_center_t(opp, s0))
+        lane_w, side = abs(t_opp - t_own), math.copysign(1.0, t_opp - t_own)
+        ego_len, ego_wid = self.body.length_m, self.body.width_m
+        front = s0 + 0.5 * ego_len
+        v_pass = self.cruise
+        blockers, others = [], []
+        for o in objs:
+            os_, ot, ov, ovt, olen, owid = o
+            # (not what crosses the road: a walker or a turning car is waited for, not passed)
+            if abs(ot - t_own) < 0.5 * (owid + ego_wid) + 0.3 and 0.0 < os_ - s0 < self.PASS_REACH_M \
+                    and abs(ovt) <= 0.3 \
+                    and -self.PASS_STANDING_MS < ov < max(self.PASS_SLOW_SHARE * v_pass, self.PASS_STANDING_MS):
+                blockers.append((os_ - 0.5 * olen, os_ + 0.5 * olen, ov))
+            else:
+                others.append(o)
+        if not blockers or v_pass < 1.0:
+            return False, False, None
+        blockers.sort()
+        rear = blockers[0][0]
+        if rear - front > self.PASS_START_S * v0 + self.PASS_START_M:
+            return False, False, None
+        far, v_far = blockers[0][1], blockers[0][2]
+        standing = abs(v_far) < self.PASS_STANDING_MS
+        for b_rear, b_front, b_v in blockers[1:]:
+            if b_rear - far > ego_len + 2.0 * self.PASS_GAP_M:
+                break
+            if b_front + b_v > far + v_far:
+                far, v_far = b_front, b_v
+            standing = standing and abs(b_v) < self.PASS_STANDING_MS
+        back = self.RETURN_CLEAR_SHARE * self._lateral_length(road, s0, t_opp, t_own, v_pass)
+
+        def distance(t_s: float) -> float:  # the ego's centre travels this far until the end
+            return far + max(v_far, 0.0) * t_s + self.PASS_GAP_M + 0.5 * ego_len + back - s0
+
+        t_end = 0.0
+        for _ in range(10):  # converges by v_far / v_pass <= PASS_SLOW_SHARE per step
+            t_end = _time_to_cover(0.0, distance(t_end), v0, v_pass, self.PASS_ACCEL)
+        reach = distance(t_end) + 0.5 * ego_len  # the ego's front at the end, from its centre
+        if s0 + reach > end_s:
+            return False, standing, rear  # it would not be back before the junction or stop line
+        window = t_end + self.PASS_MARGIN_S
+        sight = sight_m
+        for os_, ot, ov, _ovt, olen, owid in objs:  # what stands between the ego and the lane's centre line
+            x = os_ - 0.5 * olen - front
+            edge, target = side * (ot - t0) + 0.5 * owid, side * (t_opp - t0)
+            if x > 0.0 and edge > 0.0:
+                sight = min(sight, x * target / edge if edge < target else x)
+        if sight - v_limit * window < reach:
+            return False, standing, rear
+        for os_, ot, ov, _ovt, olen, owid in others:
+            if abs(ot - t_opp) >= 0.5 * (owid + lane_w):
+                continue  # not in the oncoming lane
+            near = os_ - 0.5 * olen - s0
+            if os_ + 0.5 * olen < s0 - ego_len:
+                if ov > v0:
+                    return False, standing, rear  # coming up from behind
+                continue
+            if near + ov * (window if ov < 0.0 else t_end) < reach:
+                return False, standing, rear
+        return True, standing, rear
+
     def _speeds(self, ego_speed: float):
         return (self.cruise, max(0.0, ego_speed - 2.0), max(0.0, ego_speed - 5.0), 0.0)
 
@@ -514,8 +701,40 @@ class LatticePlanner:
         return cost
 
 
+def _time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: float) -> float:
+    """Time [s] to drive from station `s_from` to `s_to` [m] starting at `v0` [m/s] and
+    accelerating at `accel` [m/s^2] up to `v_top` (or holding `v0` if that is faster)."""
+    d = s_to - s_from
+    if d <= 0.0:
+        return 0.0
+    v_top = max(v_top, v0, 0.1)
+    d_acc = (v_top * v_top - v0 * v0) / (2.0 * accel)
+    if d <= d_acc:
+        return (math.sqrt(v0 * v0 + 2.0 * accel * d) - v0) / accel
+    return (v_top - v0) / accel + (d - d_acc) / v_top
+
+
+def _lateral_path(s: np.ndarray, s_start: float, t_start: float, t_target: float,
+                  length: float) -> tuple[np.ndarray, np.ndarray]:
+    """The planned lateral offset t(s) [m] and its d2t/ds2 [1/m] at stations `s` [m]: the
+    smoothstep `Controller._path` steers (that one per control step, on floats)."""
+    u = np.clip((s - s_start) / length, 0.0, 1.0)
+    d = t_target - t_start
+    inside = (u > 0.0) & (u < 1.0)
+    return t_start + d * u * u * (3.0 - 2.0 * u), np.where(inside, d * (6.0 - 12.0 * u) / (length * length), 0.0)
+
+
 def _same_side(a: int, b: int) -> bool:
     return (a > 0) == (b > 0)
+
+
+def _across_lane(lane: int, lanes) -> int | None:
+    """The driving lane over the centre line from `lane` (its innermost neighbour of the
+    other direction), or None where `lane` is not beside the centre line or there is none."""
+    if abs(lane) != 1:
+        return None
+    other = 1 if lane < 0 else -1
+    return other if other in lanes else None
 
 
 def _overlap_times(a: float, b: float, c: float) -> tuple[float, float]:

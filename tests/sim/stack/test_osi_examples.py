@@ -49,9 +49,14 @@ def _through_osi(spec, address: str, answer: str):
 # ego stands and waits at a junction (`left_turn_yield`, `red_light_runner`: the gap
 # judgement) the lateral control at walking pace grows the OSI messages' rounding from
 # micrometres at the stop to about 2 mm by the end.
+# The OSI view carries objects with 2 returns or more, not the one-return weak detections
+# the in-process perception tracks once confirmed (docs/bridge.md): where they matter
+# (`broken_down`'s small warning box, `left_turn_yield`'s far cars) the paths part by up to
+# 0.35 m (WEAK).
 STANDS = 5e-3
-EXAMPLES = {"following": 1e-4, "following_brake": 1e-4, "overtake": 1e-4, "broken_down": 1e-4,
-            "left_turn_yield": STANDS, "junction_cyclist": 1e-4, "red_light_runner": STANDS, "ramp_merge": 1e-4,
+WEAK = 0.5
+EXAMPLES = {"following": 1e-4, "following_brake": 1e-4, "overtake": 1e-4, "broken_down": WEAK,
+            "left_turn_yield": WEAK, "junction_cyclist": 1e-4, "red_light_runner": STANDS, "ramp_merge": 1e-4,
             "lead_brake": None}
 
 

@@ -60,3 +60,25 @@ def test_the_class_bounds_the_first_association_and_is_kept():
     walkers = second_sighting("pedestrian")  # no walker moves 5 m in 0.1 s: a second object
     assert len(walkers) == 2 and {o.kind for o in walkers} == {"pedestrian"}
     assert all(o.vx == 0.0 for o in walkers)
+
+
+def test_a_weak_detection_is_confirmed_by_a_second_sighting_in_a_row():
+    """A detection from fewer returns than `min_hits` (weak) makes a weak track; seen again
+    in the next frame it is confirmed; a weak sighting after a missed frame is not."""
+    def weak(x):
+        return Obj(x, 0.0, 0.0, 1.0, 0.0, 0.5, 0.5, weak=True)
+
+    tr = Tracker()
+    tr.update([weak(30.0)], 0.0, NO_FAULT)
+    assert [o.weak for o in tr.objects_at(0.05)] == [True]
+    tr.update([weak(30.1)], 0.1, NO_FAULT)
+    assert [o.weak for o in tr.objects_at(0.1)] == [False]
+    tr.update([weak(30.2)], 0.2, NO_FAULT)  # confirmed stays confirmed
+    assert [o.weak for o in tr.objects_at(0.2)] == [False]
+    late = Tracker()
+    late.update([weak(30.0)], 0.0, NO_FAULT)
+    late.update([weak(30.2)], 0.2, NO_FAULT)  # a frame missed in between: still weak
+    assert [o.weak for o in late.objects_at(0.2)] == [True]
+    full = Tracker()
+    full.update([Obj(30.0, 0.0, 0.0, 1.0, 0.0, 0.5, 0.5)], 0.0, NO_FAULT)  # min_hits returns: confirmed at once
+    assert [o.weak for o in full.objects_at(0.0)] == [False]
