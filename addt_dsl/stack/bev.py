@@ -22,7 +22,7 @@ from addt_dsl.specs.stacks import NODE_NAMES, PERCEPTIONS
 from addt_dsl.stack.bus import Bus
 from addt_dsl.stack.latency import load_models
 from addt_dsl.stack.nodes import (Controller, EgoBody, GroundTruthPerception, LatticePlanner, Obj,
-                                  Tracker, _time_to_cover)
+                                  Tracker, time_to_cover)
 from addt_dsl.vehicles import CAR
 
 CROSSING_SIN = 0.5  # an object whose box is turned more than 30 deg from the road ...
@@ -356,8 +356,8 @@ class BevStack(S.BevStack):
             if green and abs(math.sin(math.atan2(uy, ux) - approach)) > 0.7 and \
                     v * v < 2.0 * self.YIELD_COMMIT_DECEL * max(d_in, 0.0):
                 continue  # crossing traffic at its red: it stops
-            t_e_in = _time_to_cover(front, zone_front, speed, v_top, self.YIELD_ACCEL)
-            t_e_out = _time_to_cover(s0, float(zone_s[-1]), speed, v_top, self.YIELD_ACCEL)
+            t_e_in = time_to_cover(front, zone_front, speed, v_top, self.YIELD_ACCEL)
+            t_e_out = time_to_cover(s0, float(zone_s[-1]), speed, v_top, self.YIELD_ACCEL)
             if t_e_in > t_o_out + self.YIELD_CLEARED_S or t_o_in > t_e_out + margin:
                 continue  # the gap is long enough
             line = wait_front - self.STOP_MARGIN_M
@@ -400,7 +400,7 @@ class BevStack(S.BevStack):
         middle = 0.5 * (entry + exit_)
         if to_mid < 0.0 or front >= middle:
             return math.inf  # it is past the middle, or the ego is
-        t_e = _time_to_cover(front, middle, speed, v_top, self.YIELD_ACCEL)
+        t_e = time_to_cover(front, middle, speed, v_top, self.YIELD_ACCEL)
         if to_mid / v > t_e + self.COVER_WINDOW_S:
             return math.inf  # it comes later
         d = max(entry - front, 0.0)

@@ -612,7 +612,7 @@ class LatticePlanner:
 
         t_end = 0.0
         for _ in range(10):  # converges by v_far / v_pass <= PASS_SLOW_SHARE per step
-            t_end = _time_to_cover(0.0, distance(t_end), v0, v_pass, self.PASS_ACCEL)
+            t_end = time_to_cover(0.0, distance(t_end), v0, v_pass, self.PASS_ACCEL)
         reach = distance(t_end) + 0.5 * ego_len  # the ego's front at the end, from its centre
         if s0 + reach > end_s:
             return False, standing, rear  # it would not be back before the junction or stop line
@@ -701,7 +701,7 @@ class LatticePlanner:
         return cost
 
 
-def _time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: float) -> float:
+def time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: float) -> float:
     """Time [s] to drive from station `s_from` to `s_to` [m] starting at `v0` [m/s] and
     accelerating at `accel` [m/s^2] up to `v_top` (or holding `v0` if that is faster)."""
     d = s_to - s_from

@@ -60,15 +60,15 @@ def test_ccftap_at_60_kmh_the_vut_lets_the_gvt_pass():
 
 
 def test_time_to_cover_is_the_kinematic_time():
-    from addt_dsl.stack.bev import _time_to_cover
+    from addt_dsl.stack.bev import time_to_cover
 
     # From rest at 2 m/s^2 up to 4 m/s: 4 m in 2 s, then 6 m at 4 m/s in 1.5 s.
-    assert _time_to_cover(10.0, 20.0, 0.0, 4.0, 2.0) == pytest.approx(3.5)
+    assert time_to_cover(10.0, 20.0, 0.0, 4.0, 2.0) == pytest.approx(3.5)
     # Within the acceleration: d = v0 t + a t^2 / 2 -> 3 = 1 t + t^2 / 2 -> t = 1.6458
-    assert _time_to_cover(0.0, 3.0, 1.0, 10.0, 1.0) == pytest.approx(-1.0 + np.sqrt(7.0))
-    assert _time_to_cover(5.0, 4.0, 3.0, 3.0, 1.0) == 0.0
+    assert time_to_cover(0.0, 3.0, 1.0, 10.0, 1.0) == pytest.approx(-1.0 + np.sqrt(7.0))
+    assert time_to_cover(5.0, 4.0, 3.0, 3.0, 1.0) == 0.0
     # Faster than the top speed: holds its speed.
-    assert _time_to_cover(0.0, 10.0, 5.0, 2.0, 1.0) == pytest.approx(2.0)
+    assert time_to_cover(0.0, 10.0, 5.0, 2.0, 1.0) == pytest.approx(2.0)
 
 
 def test_esmini_ltap_od_the_ego_covers_the_brake_for_the_turning_npc():
