@@ -27,7 +27,7 @@ from addt_dsl.runtime import fleet
 from addt_dsl.runtime.behaviors import AgentState, Idm, advance, lateral_profile, relative_heading, standing_yaw
 from addt_dsl.runtime.bound import BoundActor, BoundClause, BoundScenario, bind
 from addt_dsl.runtime.faults import FaultSchedule
-from addt_dsl.runtime.neighbours import LeaderIndex
+from addt_dsl.runtime.neighbours import LeaderIndex, Member, leader_scan
 from addt_dsl.runtime.lights import LightsRuntime, Program, StopStation, next_stop, stations_on, stop_accel, stop_lines
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.path import RoutePath
@@ -40,7 +40,7 @@ from addt_dsl.runtime.result import RunResult, Verdict, spec_json
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace, injection_count
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
 from addt_dsl.runtime.vehicle import step as vehicle_step
-from addt_dsl.runtime.world import PhysicsWorld, box_separation
+from addt_dsl.runtime.world import PhysicsWorld, box_separation, separation
 from addt_dsl.vehicles import VEHICLES
 
 
@@ -117,12 +117,17 @@ def _stable_seed(*parts) -> list[int]:
 
 
 class _Context:
-    """What the stack may see and do: its sensors, the map, the fault schedule, the clock."""
+    """What the stack may see and do (`views.HostContext`): its sensors, the map, the fault
+    schedule, the clock, and for an external stack's client the run's ground truth."""
 
     def __init__(self, run: _Run):
-        self.run = run
-        self.world = run
+        self._run = run
+        self.world = run  # views.PerceptionWorld
         self.faults = run.faults
+        self.spec = run.spec
+        self.step_s, self.duration_s = run.dt, run.bound.duration_s
+        self.ego_plan = run.ego_plan
+        self.sensors = run.sensors
         self.now = 0.0
         self.wheelbase_m = run.vehicle_params.wheelbase_m
         ego = run.ego_plan  # the declared body reaches the stack's planner and controller
@@ -131,22 +136,22 @@ class _Context:
         self.ego_lane = run.ego_lane
 
     def rng(self, name: str) -> np.random.Generator:
-        return np.random.default_rng(_stable_seed(self.run.bound.seed, "stack", name))
+        return np.random.default_rng(_stable_seed(self._run.bound.seed, "stack", name))
 
     def ego_pose(self):
-        return self.run.ego_pose()
+        return self._run.ego_pose()
 
     def ego_road(self):
-        return self.run.ego_road.road, self.run.ego_road.road_id
+        return self._run.ego_road.road, self._run.ego_road.road_id
 
     def sensor(self, name: str):
-        return self.run.sensors[name]
+        return self._run.sensors[name]
 
     def junction_ahead(self, s: float):
         """(entry station [m], x, y of its middle [m], exit station [m]) of the next junction
         on the ego's route that its front has not left, or None (no route, or past the last)."""
-        front = s + 0.5 * self.run.ego_plan.length_m
-        for entry, exit_, cx, cy in self.run.ego_junctions:
+        front = s + 0.5 * self._run.ego_plan.length_m
+        for entry, exit_, cx, cy in self._run.ego_junctions:
             if exit_ > front:
                 return entry, cx, cy, exit_
         return None
@@ -155,17 +160,60 @@ class _Context:
         """(station [m] on the ego's road or route, state code) of the next traffic light's
         stop line ahead of the ego's front at station `s`, or None: the map and the light's
         state as a connected vehicle would know them (no camera detection of lights)."""
-        run = self.run
+        run = self._run
         if run.lights is None:
             return None
         front = s + 0.5 * run.ego_plan.length_m
         return next_stop(run.stop_stations["ego"], front, lambda c: run.lights.state(c, self.now))
 
+    def ego_station(self) -> float:
+        return self._run.ego_s
+
     def event(self, kind: str, **detail) -> None:
-        self.run.events.append(Event(self.now, kind, detail))
+        self._run.events.append(Event(self.now, kind, detail))
+
+    def emit(self, event: Event) -> None:
+        self._run.events.append(event)
 
     def apply_command_at(self, time_s: float, steer: float, accel: float) -> None:
-        self.run.command_queue.append((time_s, steer, accel))
+        self._run.command_queue.append((time_s, steer, accel))
+
+    # ---- the ground truth an external stack's client sends (views.HostContext)
+    def ego_body(self):
+        return self._run.ego, self._run.ego_z
+
+    def agent_names(self) -> list[str]:
+        return [a.name for a in self._run.agents]
+
+    def agent_truths(self):
+        run = self._run
+        for a in run.agents:
+            plan = run.agent_plans[a.name]
+            z, grade = run.agent_roads[a.name].elevation.at(a.s)
+            yield a.name, plan.vehicle, run.fleet.ground_truth(a.name), a.accel, plan.height_m, z, grade
+
+    def body_name(self, body: int) -> str | None:
+        return self._run.physics.body_names.get(body)
+
+    def ego_stop_lines(self):
+        run = self._run
+        if run.lights is None:
+            return []
+        road, out = run.ego_road, []
+        for st in run.stop_stations.get("ego", ()):
+            x, y, h = road.pose(st.u, float(road.road.lane_center_t(run.ego_lane, st.u)))
+            z, _ = road.elevation.at(st.u)
+            out.append((st.controller, x, y, z, h))
+        return out
+
+    def light_state(self, controller: str, time_s: float) -> int:
+        return self._run.lights.state(controller, time_s)
+
+    def ego_route_roads(self) -> list:
+        ego_road = self._run.ego_road
+        legs = getattr(ego_road.road, "legs", None)
+        ids = list(dict.fromkeys(leg.road_id for leg in legs)) if legs else [ego_road.road_id]
+        return [ego_road.network.road(rid) for rid in ids]
 
 
 LATENCY_NODES = ("perception", "tracker", "planner", "control", "e2e")  # recorded per step
@@ -467,12 +515,12 @@ class _Run:
         return self.leaders.leader(agent)
 
     def _leader_by_position(self, agent: AgentState, reach_m: float = 150.0):
-        """`leader_of` across roads: every actor within `reach_m` projected onto the agent's
-        path; one ahead whose offset is within 1.8 m of the agent's is a leader, its speed
-        taken along the path."""
+        """`leader_of` across roads: `neighbours.leader_scan` over every actor within `reach_m`
+        projected onto the agent's path (station and offset on it), its speed taken along
+        the path."""
         road = self.agent_roads[agent.name].road
         ax, ay, _ = self.world_pose.get(agent.name, road.point(agent.s, agent.t))
-        best = None
+        near = []
         for name, (x, y, heading) in self.world_pose.items():
             if name == agent.name or abs(x - ax) > reach_m or abs(y - ay) > reach_m:
                 continue
@@ -480,27 +528,20 @@ class _Run:
             if dist > reach_m:
                 continue
             u, t = road.project(x, y, agent.s + dist)
-            if u <= agent.s or abs(t - agent.t) > 1.8:
-                continue
-            speed, length = (self.ego.speed, self.ego_plan.length_m) if name == "ego" else (
-                self.agent_by_name[name].speed, self.agent_by_name[name].length_m)
-            gap = u - agent.s - 0.5 * (length + agent.length_m)
-            if best is None or gap < best[0]:
-                along = speed * math.cos(heading - road.reference_pose(u)[2])
-                best = (gap, along)
-        return best
+            near.append(_Projected(name, agent.road, u, t, self, heading, road))
+        return leader_scan(near, agent)
 
     def direction_of(self, agent: AgentState) -> int:
         """+1 / -1: the agent's road direction at its station (its path's, on a route)."""
         return self.agent_roads[agent.name].direction(agent.s)
 
     def occupants(self, road_id: str):
-        """(name, s, t, speed, length) of every actor on a road."""
+        """Every actor on a road (`neighbours.Member`), agents in declaration order, then the ego."""
         for a in self.agents:
             if a.road == road_id:
-                yield a.name, a.s, a.t, a.speed, a.length_m
+                yield Member(a.name, road_id, a.s, a.t, a.speed, a.length_m)
         if self.ego_road.road_id == road_id:
-            yield "ego", self.ego_s, self.ego_t, self.ego.speed, self.ego_plan.length_m
+            yield Member("ego", road_id, self.ego_s, self.ego_t, self.ego.speed, self.ego_plan.length_m)
 
     def lane_t(self, road_id: str, lane: int, s: float) -> float:
         road = next(r for r in self.agent_roads.values() if r.road_id == road_id)
@@ -606,7 +647,6 @@ def _loop(run: _Run) -> Trace:
     # Few agents (most runs): posed, recorded and checked one by one in straight-line code
     # below; the fleet's lists, arrays and calls cost more than they save there.
     few = len(agents) < ARRAY_MIN_AGENTS
-    few_pairs = few and len(names) <= _ALL_PAIRS_MAX
     if few:
         # Per agent, fixed for the run: (state, road, extra yaw [rad], half its body height [m],
         # vehicle kind, length [m], width [m]).
@@ -616,8 +656,6 @@ def _loop(run: _Run) -> Trace:
         set_pose, body_actor, world_pose = run.physics.set_pose, fleet_.body_actor, run.world_pose
         networked = run.networked
         ego_size = sizes["ego"]
-        reach = [0.5 * math.hypot(length, width) for length, width in zip(lengths, widths)]
-        clear_cols = [block[:, i, -1] for i in range(len(names))]
 
     for k in range(n):
         t_now = k * dt
@@ -684,11 +722,8 @@ def _loop(run: _Run) -> Trace:
             if run.light_script is not None:  # light changes fire on the state just recorded
                 _advance_light_script(run, rec, k, t_now)
             run.record_lights(lights_rec, margins, k, t_now)
-        if few_pairs:
-            collided = _clearances_few(clear_cols, k, names, boxes, reach, run, t_now)
-        else:
-            xs, ys, hs = ([box[c] for box in boxes] for c in range(3)) if few else fleet_.columns(e)
-            collided = _clearances(block[k, :, -1], names, xs, ys, hs, lengths, widths, run, t_now)
+        xs, ys, hs = ([box[c] for box in boxes] for c in range(3)) if few else fleet_.columns(e)
+        collided = _clearances(block[k, :, -1], names, xs, ys, hs, lengths, widths, run, t_now)
         for node in lat_nodes:
             latency[node][k] = run.stack.latency[node]
         outputs["control.steer"][k] = run.command[0]
@@ -793,6 +828,28 @@ def _loop(run: _Run) -> Trace:
                  {k: v[:last] for k, v in outputs.items()}, objects[:last], status, error,
                  steps={k: v[:last] for k, v in steps.items()},
                  lights={k: v[:last] for k, v in lights_rec.items()}, red_margin={k: v[:last] for k, v in margins.items()})
+
+
+class _Projected:
+    """An actor projected onto another's path (`_Run._leader_by_position`): its speed
+    along the path is computed only when it is the leader."""
+
+    __slots__ = ("name", "road", "s", "t", "_run", "_heading", "_path")
+
+    def __init__(self, name, road, s, t, run, heading, path):
+        self.name, self.road, self.s, self.t = name, road, s, t
+        self._run, self._heading, self._path = run, heading, path
+
+    @property
+    def length_m(self) -> float:
+        run = self._run
+        return run.ego_plan.length_m if self.name == "ego" else run.agent_by_name[self.name].length_m
+
+    @property
+    def speed(self) -> float:
+        run = self._run
+        speed = run.ego.speed if self.name == "ego" else run.agent_by_name[self.name].speed
+        return speed * math.cos(self._heading - self._path.reference_pose(self.s)[2])
 
 
 class _EgoOccupant:
@@ -1009,7 +1066,7 @@ class _Fleet:
             settings.append(beh.settings)
         changing = [i for i, a in enumerate(self.agents) if a.lc_duration_s > 0.0]
         target = np.array([a.t_target for a in self.agents], dtype=float)
-        self._plan = (fleet.IdmParams(settings), slice(None) if len(rows) == self.n else np.array(rows, dtype=np.intp),
+        self._plan = (fleet.idm_params(settings), slice(None) if len(rows) == self.n else np.array(rows, dtype=np.intp),
                       changing, target)
         return self._plan
 
@@ -1123,39 +1180,6 @@ def _clearances(out, names, x, y, heading, length, width, run, t_now) -> bool:
     return collided
 
 
-def _clearances_few(columns, k, names, boxes, reach, run, t_now) -> bool:
-    """`_clearances` of few actors, every pair one by one: `boxes` (x, y, heading, length,
-    width) and `reach` (half-diagonals [m]) in names' order; each actor's clearance goes
-    to `columns[i][k]`."""
-    n = len(boxes)
-    clear = [math.inf] * n
-    collided = False
-    touching = set()
-    for a in range(n):
-        box_a, reach_a = boxes[a], reach[a]
-        xa, ya = box_a[0], box_a[1]
-        for b in range(a + 1, n):
-            box_b = boxes[b]
-            dist = math.hypot(xa - box_b[0], ya - box_b[1])  # `_pair_separation`, inline
-            r = reach_a + reach[b]
-            sep = dist - r if dist > r + 5.0 else box_separation(box_a, box_b)
-            if sep < clear[a]:
-                clear[a] = sep
-            if sep < clear[b]:
-                clear[b] = sep
-            if sep <= 0.0:
-                pair = (names[a], names[b])
-                touching.add(pair)
-                if pair not in run.contacts:
-                    run.events.append(Event(t_now, "collision", {"actors": list(pair)}))
-                if a == 0:  # the ego is first
-                    collided = True
-    run.contacts = touching
-    for column, c in zip(columns, clear):
-        column[k] = c if math.isfinite(c) else 1e3
-    return collided
-
-
 def _floats(values) -> list:
     return values.tolist() if isinstance(values, np.ndarray) else values
 
@@ -1252,17 +1276,14 @@ def _exact_separations(p, dx, dy, iu, ju, r, r_exact, x, y, heading, length, wid
             trig[:] = [np.fromiter(map(math.cos, hl), float, len(hl)), np.fromiter(map(math.sin, hl), float, len(hl))]
         cos_h, sin_h = trig
         a, b = iu[p[boxed]], ju[p[boxed]]
-        ca, sa, cb, sb = cos_h[a], sin_h[a], cos_h[b], sin_h[b]
-        ddx, ddy = x[b] - x[a], y[b] - y[a]
-        cos_d = np.abs(ca * cb + sa * sb)
-        sin_d = np.abs(sa * cb - ca * sb)
-        la, wa, lb, wb = 0.5 * length[a], 0.5 * width[a], 0.5 * length[b], 0.5 * width[b]
-        out[boxed] = np.maximum(np.maximum(np.maximum(
-            np.abs(ddx * ca + ddy * sa) - (la + lb * cos_d + wb * sin_d),
-            np.abs(ddy * ca - ddx * sa) - (wa + lb * sin_d + wb * cos_d)),
-            np.abs(ddx * cb + ddy * sb) - (lb + la * cos_d + wa * sin_d)),
-            np.abs(ddy * cb - ddx * sb) - (wb + la * sin_d + wa * cos_d))
+        out[boxed] = separation(x[b] - x[a], y[b] - y[a], cos_h[a], sin_h[a], cos_h[b], sin_h[b],
+                                length[a], width[a], length[b], width[b], _maximum)
     return out
+
+
+def _maximum(a, b, c, d) -> np.ndarray:
+    """`max` of four arrays, elementwise, in `max`'s order (finite values)."""
+    return np.maximum(np.maximum(np.maximum(a, b), c), d)
 
 
 def _condition_checker(run: _Run, rec, k: int):

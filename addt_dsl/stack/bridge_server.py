@@ -87,7 +87,8 @@ class RemoteActor:
 
 
 class RemoteContext:
-    """What `BevStack` asks of the simulator, answered from the bridge messages."""
+    """What `BevStack` asks of the simulator (`runtime.views.StackContext`), answered from the
+    bridge messages."""
 
     def __init__(self, hello: dict):
         from addt_dsl.plan import RoadPlan
@@ -133,8 +134,7 @@ class RemoteContext:
         self.faults = FaultSchedule(faults, float(hello["step_s"]), float(hello.get("duration_s", math.inf)),
                                     self.events)
         self.commands: list = []
-        self.run = self  # BevStack reads ctx.run.ego_s
-        self.world = self  # ... and passes ctx.world to perception (actor_by_body)
+        self.world = self  # perception's view (views.PerceptionWorld): actor_by_body
 
     # The same derivation as the in-process context, so a remote run matches a local one.
     def rng(self, name: str) -> np.random.Generator:
@@ -160,11 +160,17 @@ class RemoteContext:
                 return entry, cx, cy, exit_
         return None
 
+    def ego_station(self) -> float:
+        return self.ego_s
+
     def actor_by_body(self, body: int):
         return self.actors.get(body)
 
     def event(self, kind: str, **detail) -> None:
         self.events.append(Event(self.now, kind, detail))
+
+    def emit(self, event: Event) -> None:
+        self.events.append(event)
 
     def apply_command_at(self, time_s: float, steer: float, accel: float) -> None:
         self.commands.append([time_s, steer, accel])
