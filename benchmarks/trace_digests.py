@@ -79,10 +79,13 @@ def main() -> None:
     args = sys.argv[1:]
     if args[:1] == ["--compare"]:
         sys.exit(compare(args[1], args[2]))
-    from addt_dsl.runtime import execute as loop
     from addt_dsl.runtime.execute import execute
 
     if "--arrays" in args:
+        try:
+            from addt_dsl.runtime import agents as loop  # the agents' arrays (runtime/agents.py)
+        except ImportError:  # a checkout before the phases split
+            from addt_dsl.runtime import execute as loop
         loop.ARRAY_MIN_AGENTS = loop.STEP_MIN_AGENTS = 1
         args.remove("--arrays")
     out = None

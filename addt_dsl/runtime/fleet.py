@@ -10,7 +10,7 @@ Its answer for agent i is `neighbours.leader_scan` over the members as agent i s
 them: the nearest member ahead on its road within the lane window, the first in member
 order on equal gaps (agents in declaration order, then the ego).
 
-The loop (`_Fleet.step` in execute.py) solves the sequential step as a fixed point: it
+The agents phase (`agents.Fleet.step`) solves the sequential step as a fixed point: it
 steps every agent against the Jacobi view, then asks the sequential view with the earlier
 agents moved; when no acceleration changes, the new states are those of the sequential
 loop (agent i's answer depends only on agents before it, so the fixed point is unique).

@@ -1,8 +1,8 @@
 """What the twin offers the code it hosts: the declared interfaces.
 
 Behaviours, sensors, perception, stacks and faults see the world only through these
-Protocols; none reaches into the run's state (`execute._Run`). The twin implements them
-(`execute._Run` the world views, `execute._Context` the stack's context); a remote
+Protocols; none reaches into the run's state (`state.RunState`). The twin implements them
+(`state.RunState` the world views, `state.Context` the stack's context); a remote
 stack's server implements `StackContext` from what the bridge protocol sends
 (`stack.bridge_server.RemoteContext`). `tests/unit/runtime/test_views.py` checks that
 each consumer uses only the members declared here.

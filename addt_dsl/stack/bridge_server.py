@@ -92,7 +92,7 @@ class RemoteContext:
 
     def __init__(self, hello: dict):
         from addt_dsl.plan import RoadPlan
-        from addt_dsl.runtime.execute import ActorPath, ActorRoad, junction_legs
+        from addt_dsl.runtime.actor_road import ActorPath, ActorRoad, junction_legs
         from addt_dsl.runtime.road import resolve_route
         from addt_dsl.runtime.roadspec import build_network
 
@@ -102,7 +102,7 @@ class RemoteContext:
         route = [str(r) for r in ego.get("route") or ()]
         road_id = route[0] if route else road_plan.xodr_road_id if road_plan.source == "xodr" and \
             road_plan.xodr_road_id else next(iter(network.roads))
-        # The ego's road or route, as the simulator builds it (`execute._Run._road_of`): a client that
+        # The ego's road or route, as the simulator builds it (`state.RunState._road_of`): a client that
         # sends no route (an older one) gets its first road.
         lane = int(ego.get("map_lane", ego["lane"]))
         if not route and network.road(road_id).travel_direction(lane) > 0:

@@ -13,7 +13,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.runtime import execute as X
+from addt_dsl.runtime import collision as C
 from addt_dsl.runtime.neighbours import LeaderIndex, leader_scan
 from addt_dsl.runtime.world import box_separation
 
@@ -150,7 +150,7 @@ def test_broad_phase_clearances_equal_all_pairs(rows):
     run = SimpleNamespace(contacts=set(), events=[])
     x, y, h = (np.array([poses[n][c] for n in names]) for c in range(3))
     length, width = (np.array([sizes[n][c] for n in names]) for c in range(2))
-    collided = X._clearances(out, names, x, y, h, length, width, run, 0.0)
+    collided = C.clearances(out, names, x, y, h, length, width, run, 0.0)
     clear, touching = all_pairs(names, boxes)
     for i, n in enumerate(names):
         assert struct.pack("<d", out[i]) == struct.pack("<d", clear[n])

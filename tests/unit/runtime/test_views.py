@@ -100,10 +100,10 @@ def offered(path: Path, class_name: str) -> set[str]:
 
 
 IMPLEMENTATIONS = [
-    ("runtime/execute.py", "_Context", views.HostContext),
-    ("runtime/execute.py", "_Run", views.BehaviorWorld),
-    ("runtime/execute.py", "_Run", views.SensorWorld),
-    ("runtime/execute.py", "_Run", views.PerceptionWorld),
+    ("runtime/state.py", "Context", views.HostContext),
+    ("runtime/state.py", "RunState", views.BehaviorWorld),
+    ("runtime/state.py", "RunState", views.SensorWorld),
+    ("runtime/state.py", "RunState", views.PerceptionWorld),
     ("stack/bridge_server.py", "RemoteContext", views.StackContext),
     ("stack/bridge_server.py", "RemoteContext", views.PerceptionWorld),
 ]
