@@ -1,11 +1,11 @@
 """Collisions and clearances: each actor's least separation from every other box, and a
 `collision` event when two boxes start to overlap.
 
-`_pair_separation` is the definition of two actors' separation [m] (their centres'
+`_all_pairs` visits every pair and defines two actors' separation [m] (their centres'
 distance less their half-diagonals when that is over 5 m, else `world.box_separation`);
-`_all_pairs` visits every pair with it; `_pair_separations` gives the same figures for
-many actors from a numpy broad phase, evaluating exactly (`_exact_separations`, the same
-formulas over arrays: `world.separation`) only the pairs that can matter.
+`_pair_separations` gives the same figures for many actors from a numpy broad phase,
+evaluating exactly (`_exact_separations`, the same formulas over arrays: `world.separation`)
+only the pairs that can matter.
 """
 
 from __future__ import annotations
@@ -18,20 +18,12 @@ from addt_dsl.runtime.trace import Event
 from addt_dsl.runtime.world import box_separation, separation
 
 
-def _pair_separation(box_a, box_b, reach_a: float, reach_b: float) -> float:
-    """Separation [m] of two actors' boxes: their centre distance less their half-diagonals
-    when that is over 5 m (cheap, a lower bound of the boxes' gap), else exact (SAT)."""
-    dist = math.hypot(box_a[0] - box_b[0], box_a[1] - box_b[1])
-    r = reach_a + reach_b
-    return dist - r if dist > r + 5.0 else box_separation(box_a, box_b)
-
-
 def clearances(out, names, x, y, heading, length, width, run, t_now) -> bool:
     """Record each actor's clearance in `out` (names' order; x, y, heading, length and width
     are arrays in that order); a collision event when two boxes start to overlap (any pair,
     agents included). Returns True if the ego is in a collision (the run ends).
 
-    Each actor's clearance is its least separation over all pairs (`_pair_separation`).
+    Each actor's clearance is its least separation over all pairs (`_all_pairs`).
     A numpy broad phase over all pairs finds the pairs that can matter (those near enough
     for the exact test, and those whose approximate separation is within a tolerance of
     an actor's least); only these are evaluated, with the arithmetic of the all-pairs
@@ -58,9 +50,16 @@ def _floats(values) -> list:
 
 
 def _all_pairs(x, y, heading, length, width, reach=None):
-    """Every pair one by one: (i, j, separation of each pair, each actor's least);
-    `reach`: each actor's half-diagonal [m] (computed when not given)."""
-    boxes = list(zip(*(_floats(v) for v in (x, y, heading, length, width))))
+    """Every pair one by one: (i, j, separation) of the pairs that touch (separation <= 0),
+    in all-pairs order, and each actor's least separation; `reach`: each actor's
+    half-diagonal [m] (computed when not given).
+
+    The separation of two actors' boxes [m] is defined here: their centre distance less
+    their half-diagonals when that is over 5 m (cheap, a lower bound of the boxes' gap),
+    else exact (`world.box_separation`, the separating axis test)."""
+    cols = (x, y, heading, length, width)
+    # (the loop's few actors come as lists: no conversion)
+    boxes = list(zip(*cols) if all(type(v) is list for v in cols) else zip(*map(_floats, cols)))
     if reach is None:
         reach = [0.5 * math.hypot(b[3], b[4]) for b in boxes]
     n = len(boxes)
@@ -68,15 +67,20 @@ def _all_pairs(x, y, heading, length, width, reach=None):
     iu, ju, seps = [], [], []
     for a in range(n):
         box_a, reach_a = boxes[a], reach[a]
+        xa, ya = box_a[0], box_a[1]
         for b in range(a + 1, n):
-            sep = _pair_separation(box_a, boxes[b], reach_a, reach[b])
+            box_b = boxes[b]
+            dist = math.hypot(xa - box_b[0], ya - box_b[1])
+            r = reach_a + reach[b]
+            sep = dist - r if dist > r + 5.0 else box_separation(box_a, box_b)
             if sep < clear[a]:
                 clear[a] = sep
             if sep < clear[b]:
                 clear[b] = sep
-            iu.append(a)
-            ju.append(b)
-            seps.append(sep)
+            if sep <= 0.0:
+                iu.append(a)
+                ju.append(b)
+                seps.append(sep)
     return iu, ju, seps, clear
 
 
@@ -133,7 +137,7 @@ def _pair_separations(run, names, x, y, heading, length, width):
 
 
 def _exact_separations(p, dx, dy, iu, ju, r, r_exact, x, y, heading, length, width, trig) -> np.ndarray:
-    """`_pair_separation` of pairs `p`, bit for bit: math.hypot of the centres, and where
+    """`_all_pairs`' separation of pairs `p`, bit for bit: math.hypot of the centres, and where
     they are within reach + 5 m the separating-axis test of `world.box_separation`,
     written elementwise in its order."""
     dist = np.fromiter(map(math.hypot, dx[p].tolist(), dy[p].tolist()), float, len(p))
