@@ -1,11 +1,12 @@
 """What the twin offers the code it hosts: the declared interfaces.
 
-Behaviours, sensors, perception, stacks and faults see the world only through these
-Protocols; none reaches into the run's state (`state.RunState`). The twin implements them
-(`state.RunState` the world views, `state.Context` the stack's context); a remote
-stack's server implements `StackContext` from what the bridge protocol sends
-(`stack.bridge_server.RemoteContext`). `tests/unit/runtime/test_views.py` checks that
-each consumer uses only the members declared here.
+Behaviours, sensors, perception, stacks and faults see the world (faults: the sensor,
+frame and stack they act on) only through these Protocols; none reaches into the run's
+state (`state.RunState`). The twin implements them (`state.RunState` the world views,
+`state.Context` the stack's context); a remote stack's server implements `StackContext`
+from what the bridge protocol sends (`stack.bridge_server.RemoteContext`).
+`tests/unit/runtime/test_views.py` checks that each consumer uses only the members
+declared here.
 
 Units: positions and stations [m], headings [rad], speeds [m/s], times [s].
 """
@@ -154,3 +155,35 @@ class HostContext(StackContext, Protocol):
 
     def ego_route_roads(self) -> list:
         """The map roads of the ego's road or route, in driving order."""
+
+
+class SensorFrame(Protocol):
+    """What a fault and the stack may read of a captured frame (`sensors.Frame`)."""
+
+    sensor: str  # the sensor's name
+    stamp_s: float  # capture time [s]
+    data: dict  # the measurement: arrays (points, image, ...) and scalars
+
+
+class FaultSensor(Protocol):
+    """What a sensor fault may read and change of its sensor: its name and its mounts
+    (`shift` moves the `actual` one; the stack keeps the `nominal` calibration)."""
+
+    name: str
+    actual: object  # `sensors.Extrinsics`
+    nominal: object
+
+
+class FaultStack(Protocol):
+    """What the fault schedule binds to (`FaultSchedule.bind`; each member optional): the
+    stack's nodes with their scalar sites, the sites of their stored state, its tensor
+    sites, and, for a stack that applies its internal faults itself, their hand-over."""
+
+    nodes: dict  # node -> its scalar fault sites
+    state_nodes: dict  # node -> the sites of its stored state
+
+    def tensor_sites(self) -> dict:
+        """site -> the learned model's tensor it names."""
+
+    def take_internal_faults(self, faults: list) -> None:
+        """Take the faults that are not a sensor's (an external stack's client sends them on)."""

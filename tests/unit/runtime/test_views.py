@@ -66,10 +66,15 @@ CONSUMERS = [
     ("stack/bev.py", ("ctx",), views.StackContext),
     ("stack/bridge.py", ("ctx",), views.HostContext),
     ("stack/osi_stack.py", ("ctx",), views.HostContext),
+    # every fault module that reads a sensor or a frame
+    *((f"runtime/faults/{p.name}", (name,), protocol)
+      for name, protocol in (("sensor", views.FaultSensor), ("frame", views.SensorFrame))
+      for p in sorted((PKG / "runtime" / "faults").glob("*.py")) if uses(parse(p), (name,))),
+    ("runtime/faults/base.py", ("stack",), views.FaultStack),
 ]
 
 
-@pytest.mark.parametrize("rel, names, protocol", CONSUMERS, ids=[c[0] for c in CONSUMERS])
+@pytest.mark.parametrize("rel, names, protocol", CONSUMERS, ids=[f"{c[0]}-{c[2].__name__}" for c in CONSUMERS])
 def test_consumers_use_only_declared_members(rel, names, protocol):
     found = uses(parse(PKG / rel), names)
     assert found, f"{rel}: no use of {names} found (the check would pass vacuously)"
