@@ -76,13 +76,17 @@ def physics_step_us(n_vehicles: int) -> dict[str, float]:
     from addt_dsl.runtime.behaviors import advance
     from addt_dsl.runtime.vehicle import step as vehicle_step
 
-    run = X._Run(compile_spec(traffic_source(n_vehicles - 1)))
+    from addt_dsl.runtime.collision import clearances
+    from addt_dsl.runtime.state import RunState
+
+    run = RunState(compile_spec(traffic_source(n_vehicles - 1)))
     try:
         trace = X._loop(run)  # move everyone into a realistic configuration first
         dt, names = run.dt, ["ego"] + [a.name for a in run.agents]
         sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m),
                  **{a.name: (a.length_m, a.width_m) for a in run.agents}}
-        rec = {n: {"clearance": [0.0]} for n in names}
+        out = [0.0] * len(names)
+        lengths, widths = [sizes[n][0] for n in names], [sizes[n][1] for n in names]
 
         def one_step():
             poses = {}
@@ -94,7 +98,7 @@ def physics_step_us(n_vehicles: int) -> dict[str, float]:
             e = run.ego
             run.physics.set_pose("ego", e.x, e.y, 0.75, e.heading)
             poses["ego"] = (e.x, e.y, e.heading)
-            X._clearances(rec, 0, names, poses, sizes, run, 0.0)
+            clearances(out, names, *([poses[n][c] for n in names] for c in range(3)), lengths, widths, run, 0.0)
             vehicle_step(e, run.vehicle_params, 0.0, 0.0, dt)
             for a in run.agents:
                 beh = run.longitudinal[a.name]
@@ -141,7 +145,9 @@ def loop_step_us(n_vehicles: int) -> float:
 def sensor_ms(sensor_line: str, n_agents: int = 5, repeat: int = 5) -> tuple[float, object]:
     from addt_dsl.runtime import execute as X
 
-    run = X._Run(compile_spec(traffic_source(n_agents, sensors=sensor_line, duration=2.0)))
+    from addt_dsl.runtime.state import RunState
+
+    run = RunState(compile_spec(traffic_source(n_agents, sensors=sensor_line, duration=2.0)))
     try:
         X._loop(run)  # pose the bodies
         sensor = next(iter(run.sensors.values()))

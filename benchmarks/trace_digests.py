@@ -5,12 +5,15 @@ Run: PYTHONPATH=. python benchmarks/trace_digests.py > digests.txt   (on each ch
      [--arrays: agents posed and stepped as arrays whatever their count, as the loop does
      from `ARRAY_MIN_AGENTS` / `STEP_MIN_AGENTS` agents on: the digests must not change]
      [NAME ...: only the runs whose name contains one of these]
+     [--json OUT: also write {name: "status digest"} to OUT; compare two with --compare A B]
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import sys
+import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -43,8 +46,7 @@ def specs():
         plan = compile_file(path).plan
         if plan is None:
             continue
-        top = path.parent.name == "examples"  # nested (suites, search): the first RunSpec only
-        for i, spec in enumerate(expand(plan).specs[:2 if top else 1]):
+        for i, spec in enumerate(expand(plan).specs[:2]):  # the first two runs of each sweep
             yield f"{path.relative_to(ROOT / 'examples')}#{i}", spec
     for n in (5, 20, 50):
         for perception in ("ground_truth", "learned"):
@@ -63,18 +65,44 @@ def specs():
         yield f"family-following-learned-{label}", family_spec("following", "learned", faults=faults)
 
 
+def compare(before: str, after: str) -> int:
+    """Print every run whose digest differs or is missing; the exit status says whether all match."""
+    a, b = json.loads(Path(before).read_text()), json.loads(Path(after).read_text())
+    bad = [k for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+    for k in bad:
+        print(f"{k:56s} {a.get(k)!s:28s} -> {b.get(k)}")
+    print(f"identical {len(a) - len(bad)}/{len(a)}" + (f"; {len(b)} after" if len(b) != len(a) else ""))
+    return 1 if bad else 0
+
+
 def main() -> None:
-    from addt_dsl.runtime import execute as loop
+    args = sys.argv[1:]
+    if args[:1] == ["--compare"]:
+        sys.exit(compare(args[1], args[2]))
     from addt_dsl.runtime.execute import execute
 
-    if "--arrays" in sys.argv:
+    if "--arrays" in args:
+        try:
+            from addt_dsl.runtime import agents as loop  # the agents' arrays (runtime/agents.py)
+        except ImportError:  # a checkout before the phases split
+            from addt_dsl.runtime import execute as loop
         loop.ARRAY_MIN_AGENTS = loop.STEP_MIN_AGENTS = 1
-    only = [a for a in sys.argv[1:] if a != "--arrays"]
+        args.remove("--arrays")
+    out = None
+    if "--json" in args:
+        i = args.index("--json")
+        out = Path(args[i + 1])
+        del args[i:i + 2]
+    found = {}
     for name, spec in specs():
-        if only and not any(o in name for o in only):
+        if args and not any(o in name for o in args):
             continue
+        t0 = time.perf_counter()
         r = execute(spec)
-        print(f"{name:56s} {r.status:9s} {full_digest(r.trace)}", flush=True)
+        found[name] = f"{r.status} {full_digest(r.trace)}"
+        print(f"{name:56s} {r.status:9s} {full_digest(r.trace)} {time.perf_counter() - t0:6.2f}s", flush=True)
+        if out is not None:
+            out.write_text(json.dumps(found, indent=1))
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass
 
 from addt_dsl.registry import BEHAVIORS
+from addt_dsl.runtime.neighbours import nearest_ahead
 from addt_dsl.specs import behaviors as S
 
 
@@ -208,17 +209,54 @@ class SpeedProfile(S.SpeedProfile, Behavior):
 class Idm(S.Idm, Behavior):
 
     def accel(self, agent, world, time_s):
-        p = self.settings
-        v0 = max(p["speed"], 0.1)
-        free = 1.0 - (agent.speed / v0) ** 4
+        p = self._params
+        if p is None:
+            p = self._params = IdmParams.of(self.settings)
+        free = idm_free(p, agent.speed)
         lead = world.leader_of(agent)
         if lead is None:
-            return p["accel"] * free
-        gap, lead_speed = lead
-        dv = agent.speed - lead_speed
-        s_star = p["min_gap"] + max(0.0, agent.speed * p["time_gap"]
-                                    + agent.speed * dv / (2.0 * math.sqrt(p["accel"] * p["decel"])))
-        return p["accel"] * (free - (s_star / max(gap, 0.1)) ** 2)
+            return p.accel * free
+        return idm_accel(p, agent.speed, free, *lead)
+
+    _params = None
+
+
+class IdmParams:
+    """IDM settings with their per-agent constants: floats (one agent) or arrays over agents."""
+
+    def __init__(self, v0, accel, time_gap, min_gap, two_sqrt_ab):
+        self.v0, self.accel, self.time_gap, self.min_gap, self.two_sqrt_ab = v0, accel, time_gap, min_gap, two_sqrt_ab
+
+    @classmethod
+    def of(cls, p: dict) -> IdmParams:
+        return cls(max(p["speed"], 0.1), p["accel"], p["time_gap"], p["min_gap"], 2.0 * math.sqrt(p["accel"] * p["decel"]))
+
+
+class _Floats:
+    """The operations of the IDM formulas on floats (`fleet.ARRAYS`: on numpy arrays, the same values)."""
+
+    power = staticmethod(pow)  # libm's pow, as Python's `**`
+
+    @staticmethod
+    def positive(x):
+        return max(0.0, x)
+
+    @staticmethod
+    def at_least(x, low):
+        return max(x, low)
+
+
+def idm_free(p: IdmParams, v, ops=_Floats):
+    """The free-road term `1 - (v / v0) ** 4` of IDM."""
+    return 1.0 - ops.power(v / p.v0, 4)
+
+
+def idm_accel(p: IdmParams, v, free, gap, lead_speed, ops=_Floats):
+    """IDM's acceleration [m/s^2] behind a leader `gap` [m] ahead at `lead_speed` [m/s]
+    (`free`: `idm_free`): the one definition, for floats or, with `ops`, arrays over agents."""
+    dv = v - lead_speed
+    s_star = p.min_gap + ops.positive(v * p.time_gap + v * dv / p.two_sqrt_ab)
+    return p.accel * (free - ops.power(s_star / ops.at_least(gap, 0.1), 2))
 
 
 @BEHAVIORS.implements
@@ -461,11 +499,9 @@ def _lane_to_the_left(lane: int) -> int:
 
 
 def _nearest_ahead(agent: AgentState, world) -> str:
-    best, best_s = "", math.inf
-    for name, s, t, _, _ in world.occupants(agent.road):
-        if name != agent.name and s > agent.s and abs(t - agent.t) < 1.8 and s < best_s:
-            best, best_s = name, s
-    return best
+    """The name of the actor ahead in the agent's lane (`neighbours.nearest_ahead`), or ""."""
+    m, _ = nearest_ahead(world.occupants(agent.road), agent)
+    return "" if m is None else m.name
 
 
 def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, time_s: float,

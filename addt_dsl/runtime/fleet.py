@@ -10,7 +10,7 @@ Its answer for agent i is `neighbours.leader_scan` over the members as agent i s
 them: the nearest member ahead on its road within the lane window, the first in member
 order on equal gaps (agents in declaration order, then the ego).
 
-The loop (`_Fleet.step` in execute.py) solves the sequential step as a fixed point: it
+The agents phase (`agents.Fleet.step`) solves the sequential step as a fixed point: it
 steps every agent against the Jacobi view, then asks the sequential view with the earlier
 agents moved; when no acceleration changes, the new states are those of the sequential
 loop (agent i's answer depends only on agents before it, so the fixed point is unique).
@@ -23,12 +23,13 @@ the same order of operations; powers stay Python's (`pow`, libm), as numpy's may
 
 from __future__ import annotations
 
-import math
 from itertools import repeat
 
 import numpy as np
 
-from addt_dsl.runtime.neighbours import LANE_WINDOW_M, STOP_SLACK_M
+from addt_dsl.runtime import behaviors
+from addt_dsl.runtime.behaviors import IdmParams
+from addt_dsl.runtime.neighbours import LANE_WINDOW_M, STOP_SLACK_M, bumper_gap, outside_lane
 
 WINDOW = 12  # view entries examined per agent at first (widened where not enough) [-]
 MAX_ROUNDS = 3  # fixed-point checks before a step is left to the scalar loop
@@ -100,8 +101,8 @@ class Views:
         cols = np.minimum(first[:, None] + np.arange(width), last)
         es, et, ev, el, em, lo, hi = table[:, cols]
         k = key[:, None]
-        mask = (lo <= k) & (k <= hi) & ~(np.abs(et - t[:, None]) > window_m)
-        g = np.where(mask, (es - s[:, None]) - 0.5 * (el + length[:, None]), np.inf)
+        mask = (lo <= k) & (k <= hi) & ~outside_lane(et, t[:, None], window_m)
+        g = np.where(mask, bumper_gap(es, el, s[:, None], length[:, None]), np.inf)
         best = g.min(axis=1)
         tied = mask & (g == best[:, None])  # equal gaps: the least member index
         col = np.where(tied, em, np.inf).argmin(axis=1)
@@ -111,31 +112,37 @@ class Views:
         return best < np.inf, best, speed, done
 
 
-class IdmParams:
-    """Per-agent IDM settings as arrays, with the per-agent constants of `Idm.accel`."""
+class ARRAYS:
+    """`behaviors.Idm`'s float operations on numpy arrays, with the same values: `max(0.0, x)`
+    and `max(x, low)` as the first argument where the second is not larger, powers by libm."""
 
-    def __init__(self, settings: list[dict]):
-        col = lambda key: np.array([float(p[key]) for p in settings])  # noqa: E731
-        self.v0 = np.array([max(p["speed"], 0.1) for p in settings], dtype=float)
-        self.accel = col("accel")
-        self.time_gap = col("time_gap")
-        self.min_gap = col("min_gap")
-        self.two_sqrt_ab = np.array([2.0 * math.sqrt(p["accel"] * p["decel"]) for p in settings])
+    @staticmethod
+    def power(x, n: int) -> np.ndarray:
+        k = len(x)
+        return np.fromiter(map(pow, x.tolist(), repeat(n, k)), float, k)
+
+    @staticmethod
+    def positive(x):
+        return np.where(x > 0.0, x, 0.0)
+
+    @staticmethod
+    def at_least(x, low):
+        return np.where(low > x, low, x)
+
+
+def idm_params(settings: list[dict]) -> IdmParams:
+    """Per-agent IDM settings as arrays (`behaviors.IdmParams.of` of each)."""
+    ps = [IdmParams.of(p) for p in settings]
+    return IdmParams(*(np.array([float(getattr(p, k)) for p in ps]) for k in
+                       ("v0", "accel", "time_gap", "min_gap", "two_sqrt_ab")))
 
 
 def idm_free(p: IdmParams, v) -> np.ndarray:
-    """The free-road term `1 - (v / v0) ** 4` of `Idm.accel` (libm's pow, as Python's `**`)."""
-    n = len(v)
-    return 1.0 - np.fromiter(map(pow, (v / p.v0).tolist(), repeat(4, n)), float, n)
+    """`behaviors.idm_free` of every agent."""
+    return behaviors.idm_free(p, v, ARRAYS)
 
 
 def idm_accel(p: IdmParams, v, free, found, gap, lead_speed) -> np.ndarray:
-    """`behaviors.Idm.accel` of every agent [m/s^2] (`free`: `idm_free`)."""
-    n = len(v)
-    dv = v - lead_speed
-    inner = v * p.time_gap + v * dv / p.two_sqrt_ab
-    s_star = p.min_gap + np.where(inner > 0.0, inner, 0.0)
+    """`behaviors.Idm.accel` of every agent [m/s^2] (`free`: `idm_free`; no leader where not `found`)."""
     g = np.where(found, gap, 1.0)
-    g = np.where(0.1 > g, 0.1, g)
-    ratio2 = np.fromiter(map(pow, (s_star / g).tolist(), repeat(2, n)), float, n)
-    return np.where(found, p.accel * (free - ratio2), p.accel * free)
+    return np.where(found, behaviors.idm_accel(p, v, free, g, lead_speed, ARRAYS), p.accel * free)

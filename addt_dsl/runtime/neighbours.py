@@ -1,6 +1,6 @@
 """Who is ahead of whom on a road: the leader lookup of car-following behaviours.
 
-`leader_scan` is the definition: among the actors on the agent's road strictly ahead
+`nearest_ahead` is the definition (`leader_scan` its gap and speed): among the actors on the agent's road strictly ahead
 of it (station `s` greater) whose lateral offset `t` is within `window_m` of its own,
 the one with the smallest bumper-to-bumper gap; on equal gaps the first in member
 order (agents in declaration order, then the ego). It visits every actor, so a step
@@ -18,26 +18,56 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_left, bisect_right
+from typing import NamedTuple
 
-LANE_WINDOW_M = 1.8  # |t - t_agent| within this: the same lane [m]
+LANE_WINDOW_M = 1.8  # |t - t_agent| within this: the same lane [m] (the one lane window of the runtime)
 # Slack of the walk's stopping bound [m]: the bound is a lower limit of later gaps, in
 # floating point within far less than this of the gap itself.
 STOP_SLACK_M = 1e-6
 
 
-def leader_scan(members, agent, window_m: float = LANE_WINDOW_M):
-    """(gap [m], speed [m/s]) of the nearest member ahead of `agent` on its road and
-    within `window_m` of its offset, or None: every member visited (the reference).
+class Member(NamedTuple):
+    """An actor as the lookup sees it: its road (or path), station and offset [m], speed [m/s]."""
 
-    Members have `name`, `road`, `s`, `t`, `speed`, `length_m`."""
-    best = None
+    name: str
+    road: str
+    s: float
+    t: float
+    speed: float
+    length_m: float
+
+
+# The two formulas of the definition, written once for floats and for arrays over
+# agents (`fleet.Views` passes numpy columns; the same operations in the same order).
+def bumper_gap(s_m, length_m, s_agent, length_agent):
+    """Bumper-to-bumper gap [m] from an agent at `s_agent` to a member at `s_m` ahead."""
+    return s_m - s_agent - 0.5 * (length_m + length_agent)
+
+
+def outside_lane(t_m, t_agent, window_m: float = LANE_WINDOW_M):
+    """Whether a member's offset `t_m` is outside the agent's lane window."""
+    return abs(t_m - t_agent) > window_m
+
+
+def nearest_ahead(members, agent, window_m: float = LANE_WINDOW_M):
+    """(member, gap [m]) of the nearest member ahead of `agent` on its road and within
+    `window_m` of its offset, or (None, None): every member visited (the definition).
+
+    Members have `name`, `road`, `s`, `t`, `length_m` (and `speed`, which `leader_scan` reads)."""
+    best = best_gap = None
     for m in members:
-        if m.road != agent.road or m.name == agent.name or abs(m.t - agent.t) > window_m:
+        if m.road != agent.road or m.name == agent.name or outside_lane(m.t, agent.t, window_m):
             continue
-        gap = m.s - agent.s - 0.5 * (m.length_m + agent.length_m)
-        if m.s > agent.s and (best is None or gap < best[0]):
-            best = (gap, m.speed)
-    return best
+        gap = bumper_gap(m.s, m.length_m, agent.s, agent.length_m)
+        if m.s > agent.s and (best is None or gap < best_gap):
+            best, best_gap = m, gap
+    return best, best_gap
+
+
+def leader_scan(members, agent, window_m: float = LANE_WINDOW_M):
+    """(gap [m], speed [m/s]) of `nearest_ahead`, or None: the leader car-following reads."""
+    m, gap = nearest_ahead(members, agent, window_m)
+    return None if m is None else (gap, m.speed)
 
 
 class LeaderIndex:
@@ -115,9 +145,9 @@ class LeaderIndex:
                 break
             i = ids[j]
             m = members[i]
-            if m.name == agent.name or abs(m.t - t_a) > window:
+            if m.name == agent.name or outside_lane(m.t, t_a, window):
                 continue
-            gap = s - s_a - 0.5 * (m.length_m + len_a)
+            gap = bumper_gap(s, m.length_m, s_a, len_a)
             if best_gap is None or gap < best_gap or (gap == best_gap and i < best_i):
                 best_gap, best_speed, best_i = gap, m.speed, i
         return None if best_gap is None else (best_gap, best_speed)

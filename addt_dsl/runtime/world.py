@@ -290,12 +290,17 @@ def box_separation(a: tuple, b: tuple) -> float:
     """
     xa, ya, ha, la, wa = a
     xb, yb, hb, lb, wb = b
-    ca, sa, cb, sb = math.cos(ha), math.sin(ha), math.cos(hb), math.sin(hb)
-    dx, dy = xb - xa, yb - ya
+    return separation(xb - xa, yb - ya, math.cos(ha), math.sin(ha), math.cos(hb), math.sin(hb), la, wa, lb, wb)
+
+
+def separation(dx, dy, ca, sa, cb, sb, la, wa, lb, wb, maximum=max):
+    """`box_separation` from the centres' offset (dx, dy) [m], each box's heading cosine and
+    sine and its length and width [m]: floats, or arrays over pairs with an elementwise
+    `maximum` of four (the same operations in the same order)."""
     cos_d = abs(ca * cb + sa * sb)  # |cos(hb - ha)|
     sin_d = abs(sa * cb - ca * sb)  # |sin(hb - ha)|
     la, wa, lb, wb = 0.5 * la, 0.5 * wa, 0.5 * lb, 0.5 * wb
-    return max(
+    return maximum(
         abs(dx * ca + dy * sa) - (la + lb * cos_d + wb * sin_d),
         abs(dy * ca - dx * sa) - (wa + lb * sin_d + wb * cos_d),
         abs(dx * cb + dy * sb) - (lb + la * cos_d + wa * sin_d),

@@ -195,7 +195,7 @@ class BevStack(S.BevStack):
         started = _time.perf_counter()
         road, road_id = self.ctx.ego_road()
         x, y, heading, speed = self.ctx.ego_pose()
-        s0, t0 = road.project(x, y, self.ctx.run.ego_s)
+        s0, t0 = road.project(x, y, self.ctx.ego_station())
         lane0 = road.lane_at(s0, t0) or self.ctx.ego_lane
         objs = []
         self.upset(self.tracker)
@@ -426,7 +426,7 @@ class BevStack(S.BevStack):
         started = _time.perf_counter()
         road, _ = self.ctx.ego_road()
         x, y, heading, speed = self.ctx.ego_pose()
-        s_now, t_now = road.project(x, y, self.ctx.run.ego_s)
+        s_now, t_now = road.project(x, y, self.ctx.ego_station())
         steer, accel = self.controller.command(self.plan, (x, y, heading, speed), road,
                                                float(s_now), float(t_now), self.control_period,
                                                self.corrupt)

@@ -303,28 +303,28 @@ class ExternalStack(S.ExternalStack):
                              f"{escape(repr(taken), 200)}, expected protocol 2 and {sent} (docs/bridge.md)")
 
     def _hello(self) -> dict:
-        run = self.ctx.run
-        spec = run.spec
-        road = spec.plan.road(run.ego_plan.road)
+        ctx = self.ctx
+        spec, ego_plan = ctx.spec, ctx.ego_plan
+        road = spec.plan.road(ego_plan.road)
         remote = {k: v for k, v in self.settings.items() if k not in CLIENT_SETTINGS}
         sensors = [{"name": name, "kind": s.keyword, "settings": jsonable(s.settings),
                     "nominal": extrinsics_dict(s.nominal), "period_s": s.period_s}
-                   for name, s in run.sensors.items()]
+                   for name, s in ctx.sensors.items()]
         hello = {
-            "type": "hello", "protocol": 1, "seed": spec.seed, "step_s": run.dt,
+            "type": "hello", "protocol": 1, "seed": spec.seed, "step_s": ctx.step_s,
             "stack": jsonable(remote),
             # `route`, `map_lane`, `s_m`: the ego's path as the map names it, so the remote
             # plans along the same route (its lane id on the first road, its start station).
-            "ego": {"lane": self.ctx.ego_lane, "route": list(run.ego_plan.route), "map_lane": run.ego_plan.lane,
-                    "s_m": run.ego_plan.s, "wheelbase_m": self.ctx.wheelbase_m,
-                    "length_m": run.ego_plan.length_m, "width_m": run.ego_plan.width_m,
-                    "mass_kg": run.ego_plan.mass_kg, "mu": run.ego_plan.mu},
+            "ego": {"lane": ctx.ego_lane, "route": list(ego_plan.route), "map_lane": ego_plan.lane,
+                    "s_m": ego_plan.s, "wheelbase_m": ctx.wheelbase_m,
+                    "length_m": ego_plan.length_m, "width_m": ego_plan.width_m,
+                    "mass_kg": ego_plan.mass_kg, "mu": ego_plan.mu},
             "sensors": sensors,
             "map": {"format": "addt-road-plan", "road": road.model_dump(mode="json")},
         }
         if self.internal_faults:
             # Protocol 2 only when the run needs it, so protocol-1 servers serve the rest.
-            hello.update(protocol=PROTOCOL, duration_s=run.bound.duration_s,
+            hello.update(protocol=PROTOCOL, duration_s=ctx.duration_s,
                          faults=[f.model_dump(mode="json") for f in self.internal_faults])
         token = os.environ.get(TOKEN_ENV)
         if token:
@@ -374,7 +374,7 @@ class ExternalStack(S.ExternalStack):
             frames.append(entry)
         self._frames = []
         x, y, heading, speed = self.ctx.ego_pose()
-        ego = {"x": x, "y": y, "heading": heading, "speed": speed, "s_hint": self.ctx.run.ego_s}
+        ego = {"x": x, "y": y, "heading": heading, "speed": speed, "s_hint": self.ctx.ego_station()}
         if self.sock is None:
             self._connect()
         reply, rblobs = self._request({"type": "step", "time_s": time_s, "dt": dt, "ego": ego, "frames": frames},
@@ -391,7 +391,7 @@ class ExternalStack(S.ExternalStack):
         for t, kind, detail in events:
             event = _event(t, kind, detail)
             self._remote_events.append(event)
-            self.ctx.run.events.append(event)
+            self.ctx.emit(event)
         if "series" in reply:
             _grow_series(reply["series"], rblobs, self._remote_events)
         return command

@@ -87,11 +87,12 @@ class RemoteActor:
 
 
 class RemoteContext:
-    """What `BevStack` asks of the simulator, answered from the bridge messages."""
+    """What `BevStack` asks of the simulator (`runtime.views.StackContext`), answered from the
+    bridge messages."""
 
     def __init__(self, hello: dict):
         from addt_dsl.plan import RoadPlan
-        from addt_dsl.runtime.execute import ActorPath, ActorRoad, junction_legs
+        from addt_dsl.runtime.actor_road import ActorPath, ActorRoad, junction_legs
         from addt_dsl.road import resolve_route
         from addt_dsl.road.roadspec import build_network
 
@@ -101,7 +102,7 @@ class RemoteContext:
         route = [str(r) for r in ego.get("route") or ()]
         road_id = route[0] if route else road_plan.xodr_road_id if road_plan.source == "xodr" and \
             road_plan.xodr_road_id else next(iter(network.roads))
-        # The ego's road or route, as the simulator builds it (`execute._Run._road_of`): a client that
+        # The ego's road or route, as the simulator builds it (`state.RunState._road_of`): a client that
         # sends no route (an older one) gets its first road.
         lane = int(ego.get("map_lane", ego["lane"]))
         if not route and network.road(road_id).travel_direction(lane) > 0:
@@ -133,8 +134,7 @@ class RemoteContext:
         self.faults = FaultSchedule(faults, float(hello["step_s"]), float(hello.get("duration_s", math.inf)),
                                     self.events)
         self.commands: list = []
-        self.run = self  # BevStack reads ctx.run.ego_s
-        self.world = self  # ... and passes ctx.world to perception (actor_by_body)
+        self.world = self  # perception's view (views.PerceptionWorld): actor_by_body
 
     # The same derivation as the in-process context, so a remote run matches a local one.
     def rng(self, name: str) -> np.random.Generator:
@@ -160,11 +160,17 @@ class RemoteContext:
                 return entry, cx, cy, exit_
         return None
 
+    def ego_station(self) -> float:
+        return self.ego_s
+
     def actor_by_body(self, body: int):
         return self.actors.get(body)
 
     def event(self, kind: str, **detail) -> None:
         self.events.append(Event(self.now, kind, detail))
+
+    def emit(self, event: Event) -> None:
+        self.events.append(event)
 
     def apply_command_at(self, time_s: float, steer: float, accel: float) -> None:
         self.commands.append([time_s, steer, accel])

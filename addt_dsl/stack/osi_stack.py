@@ -53,8 +53,7 @@ class OsiStack(ExternalStack):
         self._static: bytes = b""  # the lanes, as SensorView bytes (protobuf merges concatenated messages)
         self._targets: list[M.Target] | None = None
         self._host: M.HostState | None = None
-        run = ctx.run
-        self._ids = {"ego": M.HOST_ID, **{a.name: M.HOST_ID + 1 + k for k, a in enumerate(run.agents)}}
+        self._ids = {"ego": M.HOST_ID, **{name: M.HOST_ID + 1 + k for k, name in enumerate(ctx.agent_names())}}
         if self.answer == "traffic_update":
             self.move_host = self._move_host
 
@@ -65,7 +64,7 @@ class OsiStack(ExternalStack):
             raise StackError(f"`stack external protocol osi` cannot apply {self._faults_text()}")
         host, port = parse_address(str(self.settings["address"]))
         check_address(host)
-        self._static = _lanes_bytes(self.ctx.run)
+        self._static = _lanes_bytes(self.ctx.ego_route_roads())
         try:
             self.sock = socket.create_connection((host, port), timeout=float(self.settings["timeout"]))
         except OSError as exc:
@@ -178,26 +177,23 @@ class OsiStack(ExternalStack):
 
     # ---- the world as the views report it
     def _snapshot(self, time_s: float) -> None:
-        run = self.ctx.run
-        e = run.ego
-        ego = run.ego_plan
+        ctx = self.ctx
+        e, ego_z = ctx.ego_body()
+        ego = ctx.ego_plan
         c, s = math.cos(e.heading), math.sin(e.heading)
         objects = {"ego": M.ObjectState(
-            M.HOST_ID, "ego", e.x, e.y, run.ego_z + 0.5 * ego.height_m, e.heading, c * e.vx - s * e.vy,
+            M.HOST_ID, "ego", e.x, e.y, ego_z + 0.5 * ego.height_m, e.heading, c * e.vx - s * e.vy,
             s * e.vx + c * e.vy, ego.length_m, ego.width_m, ego.height_m, c * e.accel - s * e.ay,
             s * e.accel + c * e.ay, e.yaw_rate, e.pitch)}
-        for a in run.agents:
-            gt = run.fleet.ground_truth(a.name)
+        for name, vehicle, gt, accel, height_m, z, grade in ctx.agent_truths():
             if gt is None:
                 continue
-            plan = run.agent_plans[a.name]
-            z, grade = run.agent_roads[a.name].elevation.at(a.s)
             ch, sh = math.cos(gt.heading), math.sin(gt.heading)
-            objects[a.name] = M.ObjectState(
-                self._ids[a.name], plan.vehicle, gt.x, gt.y, z + 0.5 * plan.height_m, gt.heading,
-                gt.speed * ch, gt.speed * sh, gt.length_m, gt.width_m, plan.height_m, a.accel * ch, a.accel * sh,
+            objects[name] = M.ObjectState(
+                self._ids[name], vehicle, gt.x, gt.y, z + 0.5 * height_m, gt.heading,
+                gt.speed * ch, gt.speed * sh, gt.length_m, gt.width_m, height_m, accel * ch, accel * sh,
                 0.0, math.atan(grade))
-        self._history.append((time_s, objects, _lights(run, time_s)))
+        self._history.append((time_s, objects, _lights(ctx, time_s)))
         while self._history and self._history[0][0] < time_s - HISTORY_S:
             self._history.popleft()
 
@@ -211,9 +207,8 @@ class OsiStack(ExternalStack):
             else:
                 break
         _, objects, lights = snap
-        names = self.ctx.run.physics.body_names
         ids, counts = np.unique(np.asarray(frame.data["hit_body"]), return_counts=True)
-        seen = {names.get(int(b)) for b, n in zip(ids.tolist(), counts.tolist()) if n >= MIN_HITS}
+        seen = {self.ctx.body_name(int(b)) for b, n in zip(ids.tolist(), counts.tolist()) if n >= MIN_HITS}
         sensor = self.ctx.sensor(frame.sensor)
         host = objects["ego"]
         out = [_as_mounted(objects[name], host, sensor) for name in objects
@@ -241,28 +236,17 @@ def _as_mounted(o: M.ObjectState, host: M.ObjectState, sensor) -> M.ObjectState:
                    yaw=o.yaw - (actual.yaw - nominal.yaw))
 
 
-def _lights(run, time_s: float) -> list[M.LightState]:
+def _lights(ctx, time_s: float) -> list[M.LightState]:
     """Each stop line on the ego's road or route, at the ego lane's centre, with its state."""
-    if run.lights is None:
-        return []
-    out = []
-    road = run.ego_road
-    for k, st in enumerate(run.stop_stations.get("ego", ())):
-        x, y, h = road.pose(st.u, float(road.road.lane_center_t(run.ego_lane, st.u)))
-        z, _ = road.elevation.at(st.u)
-        out.append(M.LightState(k, st.controller, x, y, z, h + math.pi, run.lights.state(st.controller, time_s)))
-    return out
+    return [M.LightState(k, controller, x, y, z, h + math.pi, ctx.light_state(controller, time_s))
+            for k, (controller, x, y, z, h) in enumerate(ctx.ego_stop_lines())]
 
 
-def _lanes_bytes(run) -> bytes:
-    """Every road's lanes, once per run, as a SensorView's bytes (appended to each view's)."""
+def _lanes_bytes(roads) -> bytes:
+    """The roads' lanes, once per run, as a SensorView's bytes (appended to each view's):
+    those of the ego's road or route (a whole imported map would make every view megabytes)."""
     from addt_dsl.runtime.roadmesh import Elevation
 
-    # The roads of the ego's road or route (a whole imported map would make every view megabytes).
-    ego_road = run.ego_road
-    legs = getattr(ego_road.road, "legs", None)
-    ids = list(dict.fromkeys(leg.road_id for leg in legs)) if legs else [ego_road.road_id]
-    roads = [ego_road.network.road(rid) for rid in ids]
     elevations = [Elevation(r) for r in roads]
     lanes, boundaries = M.sample_lanes(roads, lambda i, s: elevations[i].at(s)[0])
     sv = SensorView()

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
+from addt_dsl.runtime import agents as A
+from addt_dsl.runtime import collision as C
 from addt_dsl.runtime import execute as X
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.neighbours import LeaderIndex, leader_scan
@@ -59,7 +61,7 @@ EXTRAS = """  agent parked car on r lane -3 at 150 m speed 0 m/s
 
 def all_pairs(run, names, x, y, heading, length, width):
     """Every pair, in order: the clearance loop without its broad phase."""
-    return X._all_pairs(x, y, heading, length, width)
+    return C._all_pairs(x, y, heading, length, width)
 
 
 def one_by_one_points(self, s, t):
@@ -86,9 +88,9 @@ def brute_force(monkeypatch):
         eager_many(self, *args)
         self._sync_bodies()
 
-    monkeypatch.setattr(X, "ARRAY_MIN_AGENTS", 10 ** 9)
+    monkeypatch.setattr(A, "ARRAY_MIN_AGENTS", 10 ** 9)
     monkeypatch.setattr(LeaderIndex, "leader", lambda self, agent: leader_scan(self.members, agent))
-    monkeypatch.setattr(X, "_pair_separations", all_pairs)
+    monkeypatch.setattr(C, "_pair_separations", all_pairs)
     monkeypatch.setattr(FastRoad, "points", one_by_one_points)
     monkeypatch.setattr(FastRoad, "lane_offsets", one_by_one_offsets)
     monkeypatch.setattr(PhysicsWorld, "set_pose", set_pose_now)
@@ -101,7 +103,7 @@ def test_array_step_gives_the_brute_force_trace(monkeypatch, reverse):
     assert result.plan is not None, [str(d) for d in result.diagnostics]
     spec = expand(result.plan).specs[0]
     stepped = Counter()
-    array_step = X._Fleet.step
+    array_step = A.Fleet.step
 
     def counted(self, *args):
         done = array_step(self, *args)
@@ -109,8 +111,8 @@ def test_array_step_gives_the_brute_force_trace(monkeypatch, reverse):
         return done
 
     with monkeypatch.context() as m:
-        m.setattr(X._Fleet, "step", counted)
-        m.setattr(X, "STEP_MIN_AGENTS", 1)  # arrays whatever the count (by default from 64 agents)
+        m.setattr(A.Fleet, "step", counted)
+        m.setattr(A, "STEP_MIN_AGENTS", 1)  # arrays whatever the count (by default from 64 agents)
         fast = X.execute(spec)
     assert fast.status == "ok", fast.error
     assert fast.trace.events_of("collision")  # the pairs start overlapping: contacts are exercised

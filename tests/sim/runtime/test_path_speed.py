@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
-from addt_dsl.runtime import execute as loop
+from addt_dsl.runtime import agents as array_agents
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 
@@ -61,8 +61,8 @@ def ground_speed(track, period_s):
 @pytest.mark.parametrize("arrays", [False, True], ids=["one_by_one", "arrays"])
 def test_speed_is_the_speed_along_the_agents_own_path(arrays, monkeypatch):
     if arrays:
-        monkeypatch.setattr(loop, "ARRAY_MIN_AGENTS", 1)
-        monkeypatch.setattr(loop, "STEP_MIN_AGENTS", 1)
+        monkeypatch.setattr(array_agents, "ARRAY_MIN_AGENTS", 1)
+        monkeypatch.setattr(array_agents, "STEP_MIN_AGENTS", 1)
     tr = run(CRUISE)
     dt = tr.period_s
     outer, inner = tr.actors["outer"], tr.actors["inner"]
@@ -81,8 +81,8 @@ def test_speed_is_the_speed_along_the_agents_own_path(arrays, monkeypatch):
 
 def test_the_array_step_moves_stations_as_the_per_agent_step(monkeypatch):
     one = run(IDM)
-    monkeypatch.setattr(loop, "ARRAY_MIN_AGENTS", 1)
-    monkeypatch.setattr(loop, "STEP_MIN_AGENTS", 1)
+    monkeypatch.setattr(array_agents, "ARRAY_MIN_AGENTS", 1)
+    monkeypatch.setattr(array_agents, "STEP_MIN_AGENTS", 1)
     arrays = run(IDM)
     assert one.digest() == arrays.digest()
     outer = one.actors["outer"]

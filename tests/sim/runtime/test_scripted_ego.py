@@ -310,13 +310,13 @@ scenario dense {{
 def test_a_scripted_ego_following_agents_stepped_as_arrays_sees_the_same_leaders(monkeypatch):
     """Agents stepped as arrays leave the leader index stale; the scripted ego, which asks
     it for its leader before the agents move, must see it rebuilt: the same run either way."""
-    from addt_dsl.runtime import execute as loop
+    from addt_dsl.runtime import agents as array_agents
 
     one_by_one = _run(_dense(8))
     ego = one_by_one.trace.actors["ego"]
     assert ego.accel.min() < -1.0  # it closes on the agents ahead and brakes for them
-    monkeypatch.setattr(loop, "ARRAY_MIN_AGENTS", 1)
-    monkeypatch.setattr(loop, "STEP_MIN_AGENTS", 1)
+    monkeypatch.setattr(array_agents, "ARRAY_MIN_AGENTS", 1)
+    monkeypatch.setattr(array_agents, "STEP_MIN_AGENTS", 1)
     assert _run(_dense(8)).digest == one_by_one.digest
 
 

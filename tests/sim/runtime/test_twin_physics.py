@@ -9,6 +9,7 @@ import pytest
 
 from addt_dsl.compiler import compile_source
 from addt_dsl.runtime import execute as X
+from addt_dsl.runtime.state import RunState
 from addt_dsl.sweep import expand
 
 pytestmark = pytest.mark.slow
@@ -110,7 +111,7 @@ scenario hills {
     stack bev cruise_speed 12 m/s
   }
 }""", base_dir=XODR)
-    run = X._Run(spec)
+    run = RunState(spec)
     try:
         assert run.scene.elevated and run.scene.collision_triangles > 0
         trace = X._loop(run)
@@ -164,7 +165,7 @@ scenario crest {{
     behavior cruise speed 0 m/s
   }}
 }}""", base_dir=XODR)
-    run = X._Run(spec)
+    run = RunState(spec)
     try:
         X._loop(run)
         frame = run.sensors["lidar"].capture(run, 0.1)

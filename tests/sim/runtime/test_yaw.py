@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
-from addt_dsl.runtime import execute as loop
+from addt_dsl.runtime import agents as array_agents
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 
@@ -39,8 +39,8 @@ scenario yawed {
 @pytest.mark.parametrize("arrays", [False, True], ids=["one_by_one", "arrays"])
 def test_yaw_holds_while_standing_and_the_path_takes_over_once_moving(arrays, monkeypatch):
     if arrays:  # the agents posed and stepped as arrays, as with many agents
-        monkeypatch.setattr(loop, "ARRAY_MIN_AGENTS", 1)
-        monkeypatch.setattr(loop, "STEP_MIN_AGENTS", 1)
+        monkeypatch.setattr(array_agents, "ARRAY_MIN_AGENTS", 1)
+        monkeypatch.setattr(array_agents, "STEP_MIN_AGENTS", 1)
     result = compile_source(SOURCE)
     assert result.plan is not None, [str(d) for d in result.diagnostics]
     tr = execute(expand(result.plan).specs[0]).trace

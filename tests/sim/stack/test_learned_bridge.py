@@ -84,16 +84,16 @@ def test_stack_internal_flips_through_the_bridge_match_the_in_process_run(
 def test_unreachable_remote_is_a_detected_stack_failure_and_releases_the_world(overtake_source, monkeypatch):
     import pybullet
 
-    from addt_dsl.runtime import execute as execute_module
+    from addt_dsl.runtime import state as state_module  # where the run's state opens its world
 
     opened = []
 
-    class Recorded(execute_module.PhysicsWorld):
+    class Recorded(state_module.PhysicsWorld):
         def __init__(self, *args, **kwargs):
             super().__init__(*args, **kwargs)
             opened.append((self, self.client))
 
-    monkeypatch.setattr(execute_module, "PhysicsWorld", Recorded)
+    monkeypatch.setattr(state_module, "PhysicsWorld", Recorded)
     spec = _spec(overtake_source, 'stack external address "127.0.0.1:9" timeout 1 s')
     result = execute(spec)  # the stack connects at its first step: failing there is an outcome, not a crash
     assert result.status == "detected" and "cannot reach" in result.error

@@ -65,7 +65,7 @@ def test_idm_accelerations_are_the_behaviours(rows):
     settings_ = [{"speed": desired, "time_gap": 1.5, "min_gap": 2.0, "accel": 1.5, "decel": 2.0} if k % 2 else
                  {"speed": desired, "time_gap": 0.7, "min_gap": 0.5, "accel": 3.0, "decel": 5.5}
                  for k, (_, desired, _, _, _) in enumerate(rows)]
-    params = fleet.IdmParams(settings_)
+    params = fleet.idm_params(settings_)
     v = np.array([r[0] for r in rows])
     found = np.array([r[2] for r in rows])
     gap, lead = np.array([r[3] for r in rows]), np.array([r[4] for r in rows])

@@ -13,7 +13,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.runtime import execute as X
+from addt_dsl.runtime import collision as C
 from addt_dsl.runtime.neighbours import LeaderIndex, leader_scan
 from addt_dsl.runtime.world import box_separation
 
@@ -150,9 +150,98 @@ def test_broad_phase_clearances_equal_all_pairs(rows):
     run = SimpleNamespace(contacts=set(), events=[])
     x, y, h = (np.array([poses[n][c] for n in names]) for c in range(3))
     length, width = (np.array([sizes[n][c] for n in names]) for c in range(2))
-    collided = X._clearances(out, names, x, y, h, length, width, run, 0.0)
+    collided = C.clearances(out, names, x, y, h, length, width, run, 0.0)
     clear, touching = all_pairs(names, boxes)
     for i, n in enumerate(names):
         assert struct.pack("<d", out[i]) == struct.pack("<d", clear[n])
     assert [tuple(e.detail["actors"]) for e in run.events] == touching
     assert collided == any("ego" in pair for pair in touching)
+
+
+# ---------------------------------------------------------------- the lookups that became nearest_ahead
+
+class _Straight:
+    """A road along +x: station = x, offset = y, heading 0 (what `_leader_by_position` asks)."""
+
+    def point(self, s, t):
+        return s, t, 0.0
+
+    def project(self, x, y, hint):
+        return x, y
+
+    def reference_pose(self, u):
+        return u, 0.0, 0.0
+
+
+def old_leader_by_position(run, agent, reach_m=150.0):
+    """`_Run._leader_by_position` before it was `leader_scan` over projected actors (verbatim)."""
+    road = run.agent_roads[agent.name].road
+    ax, ay, _ = run.world_pose.get(agent.name, road.point(agent.s, agent.t))
+    best = None
+    for name, (x, y, heading) in run.world_pose.items():
+        if name == agent.name or abs(x - ax) > reach_m or abs(y - ay) > reach_m:
+            continue
+        dist = math.hypot(x - ax, y - ay)
+        if dist > reach_m:
+            continue
+        u, t = road.project(x, y, agent.s + dist)
+        if u <= agent.s or abs(t - agent.t) > 1.8:
+            continue
+        speed, length = (run.ego.speed, run.ego_plan.length_m) if name == "ego" else (
+            run.agent_by_name[name].speed, run.agent_by_name[name].length_m)
+        gap = u - agent.s - 0.5 * (length + agent.length_m)
+        if best is None or gap < best[0]:
+            along = speed * math.cos(heading - road.reference_pose(u)[2])
+            best = (gap, along)
+    return best
+
+
+def fake_run(members, headings):
+    """A run state with `members` (the last is the ego) posed on one straight road."""
+    *agents, ego = members
+    road = SimpleNamespace(road=_Straight())
+    return SimpleNamespace(
+        agent_roads={m.name: road for m in agents}, agent_by_name={m.name: m for m in agents},
+        world_pose={m.name: (m.s, m.t, h) for m, h in zip(members, headings)},
+        ego=SimpleNamespace(speed=ego.speed), ego_plan=SimpleNamespace(length_m=ego.length_m))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(member.map(lambda row: ("r", *row[1:])), min_size=2, max_size=20),
+       st.lists(st.floats(-3.0, 3.0), min_size=20, max_size=20))
+def test_leader_by_position_is_the_old_lookup(rows, headings):
+    from addt_dsl.runtime.state import RunState
+
+    members = make_members(rows)
+    run = fake_run(members, headings)
+    for m in members[:-1]:
+        assert bits(RunState._leader_by_position(run, m)) == bits(old_leader_by_position(run, m))
+
+
+def old_nearest_ahead(agent, occupants) -> str:
+    """`behaviors._nearest_ahead` before it was `nearest_ahead` (verbatim): the least
+    station ahead within `< 1.8` m."""
+    best, best_s = "", math.inf
+    for name, s, t, _, _ in occupants:
+        if name != agent.name and s > agent.s and abs(t - agent.t) < 1.8 and s < best_s:
+            best, best_s = name, s
+    return best
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.just("r"), st.integers(0, 12).map(lambda i: 5.0 * i), offsets, st.floats(0.0, 40.0),
+                          st.just(4.6)), min_size=1, max_size=20))
+def test_the_overtake_target_is_the_old_one_among_equal_lengths(rows):
+    """With equal lengths and stations on a grid (gaps exact), least gap is least station;
+    off the window's edge the two agree (exactly 1.8 m apart: now in the lane, as `idm`
+    has always counted it). Elsewhere the target is now the least bumper gap, a longer
+    vehicle ahead counted by its rear, and gaps that round equal go to the first declared."""
+    from addt_dsl.runtime.behaviors import _nearest_ahead
+
+    members = make_members(rows)
+    world = SimpleNamespace(occupants=lambda road: iter(members))
+    for m in members:
+        old = [(o.name, o.s, o.t, o.speed, o.length_m) for o in members]
+        if any(abs(abs(o.t - m.t) - 1.8) < 1e-12 for o in members if o is not m):
+            continue  # the window's edge: `<` before, `<=` (the lane window) now
+        assert _nearest_ahead(m, world) == old_nearest_ahead(m, old)

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.behaviors import AgentState, advance, lateral_profile, relative_heading
+from addt_dsl.runtime.neighbours import Member
 
 DT = 0.01
 LANES = {-1: -1.75, -2: -5.25, 1: 1.75}  # centre t of each lane
@@ -33,7 +34,7 @@ class FakeWorld:
 
     def occupants(self, road):
         for o in self.others.values():
-            yield o.name, o.s, o.t, o.speed, o.length_m
+            yield Member(o.name, road, o.s, o.t, o.speed, o.length_m)
 
     def actor_station(self, name):
         o = self.others.get(name)

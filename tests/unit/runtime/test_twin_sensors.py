@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
-from addt_dsl.runtime import execute as X
+from addt_dsl.runtime.state import RunState
 from addt_dsl.runtime.sensors import Extrinsics, _look_at, _perspective, rotation, _sensor_world_pose
 from addt_dsl.sweep import expand
 
@@ -30,13 +30,13 @@ scenario sensors {{
 """
 
 
-def make_run(sensors: str) -> X._Run:
+def make_run(sensors: str) -> RunState:
     result = compile_source(SCENARIO.format(sensors=sensors))
     assert result.plan is not None, result.diagnostics
-    return X._Run(expand(result.plan).specs[0])
+    return RunState(expand(result.plan).specs[0])
 
 
-def pose_agents(run: X._Run) -> None:
+def pose_agents(run: RunState) -> None:
     for a in run.agents:
         x, y, h = run.agent_roads[a.name].pose(a.s, a.t)
         run.physics.set_pose(a.name, x, y, 0.75, h)

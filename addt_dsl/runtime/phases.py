@@ -1,0 +1,268 @@
+"""One physics step of the twin as named phases over the run's state (`state.RunState`).
+
+`execute._loop` runs them in this order at each sample k (time t = k * dt):
+
+  clock       the stack's clock; fault timers wake
+  pose        agents on their roads (`agents.Fleet.pose`), the ego (projected onto its
+              road, or posed from its script), their bodies in the physics world
+  record      the state row of every actor (clearance, the last field, below)
+  environment changes of the weather, light and road that fire on the recorded state
+  lights      light changes that fire on the recorded state; light states and red margins
+  collisions  each actor's clearance; `collision` events (`collision.py`)
+  outputs     latencies, the command, objects seen, named steps' states
+  end         `end when ...` on the recorded state
+  -- the run stops here on an ego collision, its end, or its last sample --
+  triggers    deferred time-0 behaviours; scripted steps (`triggers.py`)
+  sense       due sensors capture, spatial and temporal faults act, frames travel
+  stack       frames that arrived reach the stack, which steps
+  ego         due commands take effect; the ego's dynamics (or its script, or an OSI stack)
+  agents      every agent's longitudinal step (as arrays where `Fleet.step` can)
+
+Each phase reads and writes the run's state; `Record` holds the recorded arrays.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+
+import numpy as np
+
+from addt_dsl.runtime import agents as _agents  # (its ARRAY_MIN_AGENTS read at each step: benchmarks set it)
+from addt_dsl.runtime.agents import pose_scripted_ego
+from addt_dsl.runtime.collision import ALL_PAIRS_MAX, clearances
+from addt_dsl.runtime.state import LATENCY_NODES, RunState
+from addt_dsl.runtime.trace import ActorTrack, Event, Trace
+from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
+                                       condition_checker)
+from addt_dsl.runtime.vehicle import step as vehicle_step
+
+# The recorded fields of an actor, in the order of a step's row; clearance last.
+FIELDS = ("x", "y", "heading", "speed", "accel", "yaw_rate", "s", "t", "lane_offset", "steer", "clearance")
+
+
+class Record:
+    """The recorded arrays of a run, one row per sample: actors' fields (one block
+    [sample, actor, field]: a step's state goes in as one row, per-value numpy stores cost
+    ~0.1 us each), latencies, outputs, objects seen, named steps, lights."""
+
+    def __init__(self, run: RunState):
+        n = self.n = run.n_steps + 1
+        plan = run.bound
+        names = self.names = ["ego"] + [a.name for a in run.agents]
+        self.block = block = np.zeros((n, len(names), len(FIELDS)))
+        self.rec = {name: {f: block[:, i, j] for j, f in enumerate(FIELDS)} for i, name in enumerate(names)}
+        self.latency = {k: np.zeros(n) for k in LATENCY_NODES}
+        self.outputs = {"control.steer": np.zeros(n), "control.accel": np.zeros(n)}
+        self.objects = np.zeros(n)
+        self.steps = {name: np.zeros(n, dtype=np.int8) for _, name, _ in run.named_steps}
+        self.lights = {c.name: np.zeros(n) for c in plan.controllers} if run.lights else {}
+        self.margins = {name: np.zeros(n) for name in names} if run.lights else {}
+        self.sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
+        self.sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
+        lengths = [self.sizes[m][0] for m in names]
+        widths = [self.sizes[m][1] for m in names]
+        if len(names) > ALL_PAIRS_MAX:  # the broad phase's arrays
+            lengths, widths = np.array(lengths), np.array(widths)
+        self.lengths, self.widths = lengths, widths
+        self.last = n  # samples recorded
+
+    def trace(self, run: RunState) -> Trace:
+        last = self.last
+        frames = {"ego": run.ego_road.road_id}
+        frames.update({a.name: run.agent_roads[a.name].road_id for a in run.agents})
+        actors = {}
+        for name in self.names:
+            length, width = self.sizes[name]
+            actors[name] = ActorTrack(name, length, width,
+                                      **{f: np.ascontiguousarray(v[:last]) for f, v in self.rec[name].items()},
+                                      frame=frames[name])
+        cut = lambda d: {k: v[:last] for k, v in d.items()}  # noqa: E731
+        return Trace(run.dt, np.arange(last) * run.dt, actors, cut(self.latency), run.events, cut(self.outputs),
+                     self.objects[:last], run.status, run.error, steps=cut(self.steps), lights=cut(self.lights),
+                     red_margin=cut(self.margins))
+
+
+def clock(run: RunState, t: float) -> None:
+    run.ctx.now = t
+    if t + 1e-12 >= run.faults.next_wake_s:  # fault timers (tensor hooks attach at their instants)
+        run.faults.wake(t)
+
+
+def pose(run: RunState, t: float) -> None:
+    """Agents kinematic along their roads, the ego where its dynamics or script put it; the
+    bodies in the physics world (for perception) and the ego's road height and grade."""
+    dt, plan, ego_road = run.dt, run.bound, run.ego_road
+    if run.agents:
+        run.fleet.pose(run, t, dt)
+    e = run.ego
+    if run.ego_agent is None:
+        run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
+    else:
+        pose_scripted_ego(run, t, dt)
+    if run.ego_s >= ego_road.road.length and not run.left_road:
+        # Past the end of its road or route: `s` stays at the end, the map has nothing
+        # beyond, and the run goes on off the map. Say so once (a route through the
+        # junction keeps the ego on the network); from then on it is in no lane: its
+        # `lane_offset` is unknown (NaN), which fails `stay in lane`.
+        rx, ry, h = ego_road.road.reference_pose(run.ego_s)
+        if (e.x - rx) * math.cos(h) + (e.y - ry) * math.sin(h) > 0.5 * plan.ego.length_m:
+            run.left_road = True
+            run.events.append(Event(t, "left_road", {"actor": "ego", "road": plan.ego.road,
+                                                     "s": round(float(run.ego_s), 3)}))
+    if not run.networked and not run.leaders_stale:  # (networked runs find leaders by position)
+        run.leaders.moved(len(run.agents))  # the ego, last member; agents move in their phase
+    # The ego follows the road height; its dynamics feel the grade along its heading.
+    z, grade = ego_road.elevation.at(run.ego_s)
+    if grade:
+        grade *= math.cos(e.heading - ego_road.road.reference_pose(run.ego_s)[2])
+    run.ego_z, e.pitch, run.ego_grade = z, math.atan(grade), grade
+    run.physics.set_pose("ego", e.x, e.y, z + plan.ego.height_m / 2, e.heading, e.pitch)
+    if run.networked:
+        run.world_pose["ego"] = (e.x, e.y, e.heading)
+
+
+def record(run: RunState, rec: Record, k: int) -> None:
+    """Every actor's fields at sample k but the clearance."""
+    e = run.ego
+    ego_row = (e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
+               math.nan if run.left_road else run.ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)
+    fleet = run.fleet
+    if fleet.rows is not None:  # agents posed one by one: the rows at once
+        rec.block[k, :, :-1] = [ego_row, *fleet.rows]
+    else:
+        rec.block[k, 0, :-1] = ego_row
+        fleet.record(rec.block[k, 1:])
+
+
+def environment(run: RunState, rec: Record, k: int, t: float) -> None:
+    """Environment steps (`at 3 s fog visibility 30 m`) fire on the state just recorded."""
+    if run.environment_script is not None:
+        advance_environment_script(run, rec.rec, k, t)
+
+
+def lights(run: RunState, rec: Record, k: int, t: float) -> None:
+    """Light changes fire on the state just recorded; then each light's state and every
+    actor's margin to its next red."""
+    if run.lights is None:
+        return
+    if run.light_script is not None:
+        advance_light_script(run, rec.rec, k, t)
+    for name in rec.lights:
+        rec.lights[name][k] = run.lights.state(name, t)
+    rec.margins["ego"][k] = run.lights.red_margin("ego", run.ego_s + 0.5 * run.ego_plan.length_m,
+                                                  run.stop_stations["ego"], t)
+    for a in run.agents:
+        rec.margins[a.name][k] = run.lights.red_margin(a.name, a.s + 0.5 * a.length_m, run.stop_stations[a.name], t)
+
+
+def collisions(run: RunState, rec: Record, k: int, t: float) -> bool:
+    """Each actor's clearance at sample k and `collision` events; True if the ego collided."""
+    xs, ys, hs = run.fleet.columns(run.ego)
+    return clearances(rec.block[k, :, -1], rec.names, xs, ys, hs, rec.lengths, rec.widths, run, t)
+
+
+def outputs(run: RunState, rec: Record, k: int, t: float) -> None:
+    """The stack's latencies, the command, the objects it saw, named steps' states."""
+    for node in LATENCY_NODES:
+        rec.latency[node][k] = run.stack.latency[node]
+    rec.outputs["control.steer"][k] = run.command[0]
+    rec.outputs["control.accel"][k] = run.command[1]
+    rec.objects[k] = run.stack.objects_seen
+    if rec.steps:  # named steps: ended on the state just recorded
+        for name, code in run.step_states(t).items():
+            rec.steps[name][k] = code
+
+
+def end(run: RunState, rec: Record, k: int, t: float) -> bool:
+    """Whether `end when ...` holds on the state just recorded."""
+    if run.end_script is None:
+        return False
+    run.end_script.advance(t, condition_checker(run, rec.rec, k), lambda clause, time_s: None)
+    if run.end_script.done:
+        run.events.append(Event(t, "end", {}))
+        return True
+    return False
+
+
+def triggers(run: RunState, rec: Record, k: int, t: float) -> None:
+    """Behaviours waiting for the first recorded state start; scripted steps fire."""
+    run.recorded = (rec.rec, k)  # live behaviour settings read the state just recorded
+    if run.deferred:
+        for agent, clause in run.deferred:
+            run._start_behavior(agent, clause, t)
+        run.deferred.clear()
+    if run.scripts:
+        advance_scripts(run, rec.rec, k, t)
+        if rec.steps:  # steps that fired now are started at this sample
+            for name, code in run.step_states(t).items():
+                rec.steps[name][k] = code
+
+
+def sense(run: RunState, t: float) -> None:
+    """Sensors that are due capture; faults act on them; frames leave for the stack."""
+    for name, sensor in run.sensors.items():
+        if t + 1e-9 < run.sensor_next[name]:
+            continue
+        run.sensor_next[name] += sensor.period_s
+        for f in run.faults.for_target(name):
+            f.before_capture(sensor, t)
+        frame = sensor.capture(run, t)
+        for env in run.environment:  # weather and light act on what the sensor captured
+            frame = env.on_frame(sensor, frame, run.rng(f"environment:{env.keyword}:{name}"))
+        delay = 0.0
+        for f in run.faults.for_target(name):
+            frame, extra = f.on_frame(frame, t)
+            delay += extra
+            if frame is None:
+                break
+        if frame is not None:
+            run._frame_seq += 1
+            heapq.heappush(run.inflight, (t + delay, run._frame_seq, frame))
+
+
+def stack(run: RunState, t: float) -> None:
+    """Frames that have arrived reach the stack; the stack steps."""
+    while run.inflight and run.inflight[0][0] <= t + 1e-12:
+        _, _, frame = heapq.heappop(run.inflight)
+        run.stack.on_frame(frame, t)
+    run.stack.step(t, run.dt)
+
+
+def ego(run: RunState, t: float) -> bool:
+    """Commands due by now take effect; the ego moves over the step (its dynamics, an OSI
+    stack's update, or, scripted, as agents do: a stack's commands are then recorded, not
+    applied). False if its state became non-finite."""
+    dt = run.dt
+    queue = run.command_queue
+    while queue and queue[0][0] <= t + 1e-12:
+        _, steer, accel = queue.pop(0)
+        run.command = (steer, accel)
+    if run.ego_agent is None and run.move_host is not None:
+        run.move_host(run.ego, t + dt)
+    elif run.ego_agent is None:
+        vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt, run.ego_grade)
+    else:
+        if run.leaders_stale and not run.networked:  # it may ask for its leader
+            run.leaders.rebuild()
+            run.leaders_stale = False
+        run.move(run.ego_agent, t, dt)
+        run.ego.vx, run.ego.accel = run.ego_agent.speed, run.ego_agent.accel
+    return all(math.isfinite(v) for v in (run.ego.x, run.ego.y, run.ego.vx))
+
+
+def agents(run: RunState, t: float) -> None:
+    """Every agent's step: all at once as arrays where they allow it, else one after
+    another in declaration order, each seeing the earlier ones moved."""
+    dt, fleet = run.dt, run.fleet
+    if fleet.n >= _agents.ARRAY_MIN_AGENTS and fleet.step(run, t, dt):
+        run.leaders_stale = True
+        return
+    leaders, networked = run.leaders, run.networked
+    if run.leaders_stale and not networked:
+        leaders.rebuild()
+        run.leaders_stale = False
+    for i, a in enumerate(run.agents):
+        run.move(a, t, dt)
+        if not networked:  # agents later in the order see this one where it is now
+            leaders.moved(i)
