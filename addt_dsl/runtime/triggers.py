@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from addt_dsl.registry import ENVIRONMENTS
 from addt_dsl.runtime import oracles
 from addt_dsl.runtime.signals import compute_signals
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
@@ -53,8 +54,6 @@ def advance_light_script(run, rec, k: int, t_now: float) -> None:
 
 
 def advance_environment_script(run, rec, k: int, t_now: float) -> None:
-    from addt_dsl.registry import ENVIRONMENTS
-
     def start(clause, time_s) -> None:
         run.events.append(Event(time_s, "environment", {"model": clause.name, **clause.settings}))
         model = ENVIRONMENTS.implementation(clause.name)(clause.settings)
