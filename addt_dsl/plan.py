@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from addt_dsl.expr import Expr, Num, Param, eval_param_expr
 from addt_dsl.fingerprint import code_fingerprint
-from addt_dsl.vehicles import VEHICLES
+from addt_dsl.vehicles import DEFAULT_MASS_KG, DEFAULT_WHEELBASE_M, VEHICLES
 
 # Bump when a plan written by this version cannot be read by the previous one.
 SCHEMA_VERSION = "2"
@@ -139,14 +139,14 @@ class ActorPlan(_Model):
     length_m: float
     width_m: float
     height_m: float | None = None  # body height [m] (None: the vehicle kind's; the compiler fills it in)
-    mass_kg: float = 1500.0
-    wheelbase_m: float = 2.7
+    mass_kg: float = DEFAULT_MASS_KG
+    wheelbase_m: float = DEFAULT_WHEELBASE_M
     behaviors: list[ClausePlan] = Field(default_factory=list)
     triggers: list[TriggerPlan] = Field(default_factory=list)
     sensors: list[ClausePlan] = Field(default_factory=list)
     stack: ClausePlan | None = None
     goal_s: Expr | None = None
-    mu: Expr | None = None  # tyre-road friction coefficient of the ego dynamics (None: 0.8)
+    mu: Expr | None = None  # tyre-road friction coefficient of the ego dynamics (None: vehicles.DEFAULT_MU)
     offset: Expr | None = None  # start offset from the lane centre, left positive [m]
     # Road ids of the actor's route through an imported network, connecting roads included
     # (`route 1 -> left -> 3` expanded by the compiler); empty: the road it is placed on.

@@ -29,6 +29,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from addt_dsl import units
 from addt_dsl.console import compile_and_report, stack_option
 from addt_dsl.errors import EXIT_USAGE, UsageError, nonneg_int, positive_int
 from addt_dsl.runtime.executor import local_executor, run_spec
@@ -36,10 +37,6 @@ from addt_dsl.runtime.outcome import FAULT_OUTCOMES, classify_many, outcome_tabl
 from addt_dsl.sweep import expand
 
 DEFAULT_BANDS_M = (0.0, 20.0, 40.0, 60.0, 80.0)
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 def perception_errors(trace, gate_m: float = 15.0) -> list[dict]:
@@ -67,7 +64,7 @@ def perception_errors(trace, gate_m: float = 15.0) -> list[dict]:
                 "time_s": float(trace.time[k]), "actor": others[j],
                 "range_m": float(math.hypot(actor.x[k] - ego.x[k], actor.y[k] - ego.y[k])),
                 "position_error_m": float(cost[i, j]),
-                "heading_error_rad": abs(_wrap(float(e.detail["objects"][i][2]) - float(actor.heading[k]))),
+                "heading_error_rad": abs(units.wrap_angle(float(e.detail["objects"][i][2]) - float(actor.heading[k]))),
             })
     return rows
 

@@ -62,6 +62,11 @@ DIMENSION_NAMES: dict[Dim, str] = {
 DIMENSIONS_BY_NAME: dict[str, Dim] = {v: k for k, v in DIMENSION_NAMES.items()}
 
 
+def wrap_angle(angle_rad: float) -> float:
+    """An angle [rad] wrapped into [-pi, pi)."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
+
+
 def dim_name(dim: Dim) -> str:
     """`speed`, `length`, ... or the units of an unnamed dimension, e.g. `m^2/s`."""
     named = DIMENSION_NAMES.get(dim)

@@ -24,5 +24,10 @@ VEHICLES: dict[str, VehicleKind] = {
     # `width`; it does not move (speed 0, no behaviours).
     "obstacle": VehicleKind(1.0, 1.0, 1.0, (0.10, 0.60, 0.55, 1.0)),
 }
+# The dynamics of a vehicle the scenario leaves unset (every kind; the ego's `mass`,
+# `wheelbase` and `mu` settings override them): the one place these defaults live.
+DEFAULT_MASS_KG = 1500.0
+DEFAULT_WHEELBASE_M = 2.7
+DEFAULT_MU = 0.8  # tyre-road friction coefficient (dry asphalt)
 STATIC_KINDS = frozenset({"obstacle"})  # kinds that never move
 CAR = VEHICLES["car"]

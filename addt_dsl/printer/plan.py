@@ -42,7 +42,7 @@ from addt_dsl.printer.expr import (ExprPrinter, PrinterError, dim_of_name, forma
                                    string_literal)
 from addt_dsl.registry import ENVIRONMENTS, FAULTS, GEOMETRIES, ParamSpec
 from addt_dsl.sweep import expand
-from addt_dsl.vehicles import VEHICLES
+from addt_dsl.vehicles import DEFAULT_MASS_KG, DEFAULT_WHEELBASE_M, VEHICLES
 
 INDENT = "  "
 
@@ -182,7 +182,7 @@ def _param_line(p: ParamPlan) -> str:
 VEHICLE_DEFAULTS = {  # what the compiler fills in when a setting is left out
     "length": lambda a: _vehicle_size(a.vehicle)[0], "width": lambda a: _vehicle_size(a.vehicle)[1],
     "height": lambda a: VEHICLES[a.vehicle].height_m if a.height_m is not None else None,
-    "mass": lambda a: 1500.0, "wheelbase": lambda a: 2.7,
+    "mass": lambda a: DEFAULT_MASS_KG, "wheelbase": lambda a: DEFAULT_WHEELBASE_M,
 }
 ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLESS),  # optional, may use parameters
                ("offset", "offset", units.LENGTH), ("yaw", "yaw", units.ANGLE))

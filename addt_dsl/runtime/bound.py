@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from addt_dsl.expr import Expr, eval_param_expr, signals_used, substitute_params
 from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, ControllerPlan, GroupPlan, RoadPlan, RunSpec,
                            SignalPlan, TriggerPlan, resolve_settings)
-from addt_dsl.vehicles import VEHICLES
+from addt_dsl.vehicles import DEFAULT_MU, VEHICLES
 
 
 @dataclass(frozen=True)
@@ -121,7 +121,6 @@ class BoundScenario:
         return next(r for r in self.roads if r.name == name)
 
 
-DEFAULT_MU = 0.8
 
 
 def bind(spec: RunSpec) -> BoundScenario:

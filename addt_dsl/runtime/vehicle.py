@@ -19,6 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from addt_dsl.vehicles import DEFAULT_MASS_KG, DEFAULT_MU, DEFAULT_WHEELBASE_M
+
 G = 9.81  # [m/s^2]
 MAX_SUBSTEP_S = 0.01  # explicit integration of the tyre dynamics stays stable below this
 KINEMATIC_BELOW_MPS = 2.0
@@ -26,8 +28,8 @@ KINEMATIC_BELOW_MPS = 2.0
 
 @dataclass
 class VehicleParams:
-    mass_kg: float = 1500.0
-    wheelbase_m: float = 2.7
+    mass_kg: float = DEFAULT_MASS_KG
+    wheelbase_m: float = DEFAULT_WHEELBASE_M
     cg_to_front_m: float = 1.215  # 0.45 * wheelbase: front-heavy, like most cars
     cg_height_m: float = 0.55
     yaw_inertia_kgm2: float = 2707.0  # ~ m * lf * lr (radius of gyration sqrt(lf * lr))
@@ -35,7 +37,7 @@ class VehicleParams:
     # gradient K = m/L * (lr/Cf - lf/Cr) ~ 2.8e-3 rad/(m/s^2) for the defaults.
     cornering_stiffness_front: float = 80000.0
     cornering_stiffness_rear: float = 90000.0
-    mu: float = 0.8  # tyre-road friction coefficient (dry asphalt)
+    mu: float = DEFAULT_MU
     max_steer_rad: float = 0.55  # front wheel angle
     steer_rate_rad_s: float = 0.8  # steering actuator rate limit (at the wheel)
     steer_lag_s: float = 0.08
@@ -56,7 +58,8 @@ class VehicleParams:
         return self.mass_kg / L * (lr / self.cornering_stiffness_front - lf / self.cornering_stiffness_rear)
 
     @classmethod
-    def for_vehicle(cls, mass_kg: float = 1500.0, wheelbase_m: float = 2.7, mu: float = 0.8,
+    def for_vehicle(cls, mass_kg: float = DEFAULT_MASS_KG, wheelbase_m: float = DEFAULT_WHEELBASE_M,
+                    mu: float = DEFAULT_MU,
                     **overrides) -> VehicleParams:
         """Parameters scaled from a 1500 kg, 2.7 m reference car to another mass and wheelbase.
 

@@ -47,7 +47,7 @@ import numpy as np
 
 from addt_dsl import extras
 from addt_dsl.stack.latency import MODEL_PATH, NODES, at, crossing, e2e_ms, e2e_quantile_ms, load_models, pipeline_ms
-from addt_dsl.vehicles import CAR
+from addt_dsl.vehicles import CAR, DEFAULT_WHEELBASE_M
 
 COUNTS = (0, 5, 10, 20, 40, 60, 100, 200, 400)  # the object counts the studies use
 # Quantile levels of the jitter table; p99.9 is the last: above it a shared host's
@@ -145,7 +145,7 @@ def measure_control(repeats: int) -> list[tuple[int, list[float], list[float]]]:
     from addt_dsl.stack.nodes import Controller, Plan
 
     road = _road()
-    ctl = Controller({}, 2.7)
+    ctl = Controller({}, DEFAULT_WHEELBASE_M)
     t_lane = float(road.lane_center_t(-1, 100.0))
     plan = Plan(-1, t_lane, 25.0, 100.0, t_lane, 60.0, 0.0)
     x, y, h = road.reference_pose(100.0)

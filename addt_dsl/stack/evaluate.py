@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl import extras
+from addt_dsl import extras, units
 from addt_dsl.stack.bev_grid import CLASSES
 from addt_dsl.stack.synth import generate, in_grid, load_samples
 
@@ -124,7 +124,7 @@ def evaluate(samples, detector, min_hits: int = 2, by_kind: dict | None = None,
             if gb < 2:
                 by_kind.setdefault(name, [0, 0])[0] += 1
             pos_err = math.hypot(gt[match, 0] - row[0], gt[match, 1] - row[1])
-            dh = abs((row[2] - gt[match, 2] + math.pi) % (2 * math.pi) - math.pi)
+            dh = abs(units.wrap_angle(row[2] - gt[match, 2]))
             for st in (stats[gb], by_class[name][gb]):
                 st.found += 1
                 st.matched += 1

@@ -14,7 +14,7 @@ import numpy as np
 
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.specs import stacks as S
-from addt_dsl.vehicles import CAR
+from addt_dsl.vehicles import CAR, DEFAULT_MASS_KG, DEFAULT_MU
 
 G = 9.81  # [m/s^2]
 
@@ -27,8 +27,8 @@ class EgoBody:
 
     length_m: float = CAR.length_m
     width_m: float = CAR.width_m
-    mass_kg: float = 1500.0
-    mu: float = 0.8
+    mass_kg: float = DEFAULT_MASS_KG
+    mu: float = DEFAULT_MU
 
     @property
     def max_brake(self) -> float:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from addt_dsl import units
 from addt_dsl.stack.bev_grid import CLASSES, DETECTOR_LIDAR, GRID, sensor_points_to_vehicle
 from addt_dsl.vehicles import CAR, VEHICLES
 
@@ -222,11 +223,7 @@ def _rot(x: float, y: float, angle: float) -> tuple[float, float]:
     return c * x - s * y, s * x + c * y
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
-wrap_angle = _wrap
+wrap_angle = units.wrap_angle
 
 
 class ScanGenerator:
@@ -287,7 +284,7 @@ class ScanGenerator:
             gx, gy = _rot(x, y, wh)
             phys.set_pose(name, wx + gx, wy + gy, height / 2, wh + h)
             used.add(idx)
-            boxes.append((x, y, _wrap(h), length, width))
+            boxes.append((x, y, units.wrap_angle(h), length, width))
         for idx, (name, _, _, _, height) in enumerate(pool):
             if idx not in used:
                 phys.set_pose(name, PARK_X0 + 30.0 * idx, 0.0, height / 2, 0.0)

@@ -18,7 +18,7 @@ from addt_dsl.compiler.exprs import value_range
 from addt_dsl.compiler.xodr_check import check_route, route_length
 from addt_dsl.diagnostics import Span
 from addt_dsl.registry import BEHAVIORS, SENSORS, STACKS, ParamSpec
-from addt_dsl.vehicles import STATIC_KINDS, VEHICLES
+from addt_dsl.vehicles import DEFAULT_MASS_KG, DEFAULT_MU, DEFAULT_WHEELBASE_M, STATIC_KINDS, VEHICLES
 
 
 ACTOR_SETTINGS = (
@@ -31,9 +31,9 @@ ACTOR_SETTINGS = (
     ParamSpec("width", units.LENGTH, low=0.1, high=5.0, doc="body width"),
     ParamSpec("height", units.LENGTH, low=0.05, high=10.0,
               doc="body height (what a lidar ray or a camera meets; default: the kind's)"),
-    ParamSpec("mass", units.MASS, default=1500.0, low=50.0, high=60000.0, doc="mass"),
-    ParamSpec("wheelbase", units.LENGTH, default=2.7, low=0.5, high=10.0, doc="wheelbase"),
-    ParamSpec("mu", units.DIMENSIONLESS, default=0.8, low=0.05, high=1.5,
+    ParamSpec("mass", units.MASS, default=DEFAULT_MASS_KG, low=50.0, high=60000.0, doc="mass"),
+    ParamSpec("wheelbase", units.LENGTH, default=DEFAULT_WHEELBASE_M, low=0.5, high=10.0, doc="wheelbase"),
+    ParamSpec("mu", units.DIMENSIONLESS, default=DEFAULT_MU, low=0.05, high=1.5,
               doc="tyre-road friction coefficient (0.8 dry asphalt, 0.5 wet, 0.1 ice)"),
     ParamSpec("offset", units.LENGTH, default=0.0, low=-20.0, high=20.0,
               doc="start offset from the lane centre, left positive (e.g. a pedestrian on the kerb)"),
@@ -176,8 +176,8 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
     what = "the ego" if d.is_ego else f"agent '{d.name}'"
     vals = check_settings(ctx, d.settings + d.block_settings, ACTOR_SETTINGS, what, d.span)
     kind = VEHICLES[d.vehicle]
-    body = {"length": kind.length_m, "width": kind.width_m, "height": kind.height_m, "mass": 1500.0,
-            "wheelbase": 2.7}
+    body = {"length": kind.length_m, "width": kind.width_m, "height": kind.height_m, "mass": DEFAULT_MASS_KG,
+            "wheelbase": DEFAULT_WHEELBASE_M}
     for key in body:
         if key in vals:
             value = const_value(vals[key])
