@@ -1,5 +1,6 @@
-"""The import coverage table of docs/openscenario.md: every action, condition, position type and
-storyboard element of the OpenSCENARIO 1.3 schema (docs/osc_schema.py), each with the status the
+"""The import coverage table of docs/openscenario.md: every action, condition, position type,
+storyboard element and parameter distribution of the OpenSCENARIO 1.3 schema (docs/osc_schema.py),
+each with the status the
 importer's own registries give it (addt_dsl/interop/openscenario/registry.py): `exact`, `approx`
 (translated with a W0802 diagnostic; the note says what differs) or `refused` (E0803 unless
 `--lenient`; the note says what the twin or the language lacks). An element in no registry is
@@ -18,7 +19,7 @@ from pathlib import Path
 from addt_dsl.interop.openscenario.coverage import status_of
 from docs.osc_schema import table
 
-CATEGORIES = ("action", "condition", "position", "storyboard")
+CATEGORIES = ("action", "condition", "position", "storyboard", "distribution")
 UNKNOWN = "not in the importer's registries"
 IN_INIT = "in Init, positions, speeds, routes, trajectories, controllers, the environment and lights are"
 

@@ -5,10 +5,10 @@ element path, e.g. ("action", "PrivateAction/LongitudinalAction/SpeedAction").""
 
 from __future__ import annotations
 
-from addt_dsl.interop.openscenario import importer  # noqa: F401 - its modules register their elements
-from addt_dsl.interop.openscenario.registry import (ACTIONS, ENTITY_CONDITIONS, GLOBAL_ACTIONS, INIT_ACTIONS,
-                                                    INIT_GLOBAL_ACTIONS, POSITIONS, REGISTRIES, STORYBOARD,
-                                                    VALUE_CONDITIONS, ElementEntry, ElementRegistry)
+from addt_dsl.interop.openscenario import distribution, importer  # noqa: F401 - they register their elements
+from addt_dsl.interop.openscenario.registry import (ACTIONS, DISTRIBUTIONS, ENTITY_CONDITIONS, GLOBAL_ACTIONS,
+                                                    INIT_ACTIONS, INIT_GLOBAL_ACTIONS, POSITIONS, REGISTRIES,
+                                                    STORYBOARD, VALUE_CONDITIONS, ElementEntry, ElementRegistry)
 
 
 def coverage() -> list[ElementEntry]:
@@ -39,4 +39,6 @@ def status_of(category: str, path: str) -> dict[str, ElementEntry | None]:
         return {"": _lookup(POSITIONS, path)}
     if category == "storyboard":
         return {"": _lookup(STORYBOARD, path)}
+    if category == "distribution":
+        return {"": _lookup(DISTRIBUTIONS, path)}
     return {}

@@ -45,6 +45,7 @@ from addt_dsl.interop.openscenario.distribution_export import PARAMETRIC_KEY
 from addt_dsl.interop.openscenario.importer import DOCUMENT_KINDS, Imported, Translate, import_xosc
 from addt_dsl.interop.openscenario.params import arith
 from addt_dsl.interop.openscenario.reader import Importer
+from addt_dsl.interop.openscenario.registry import DISTRIBUTIONS
 from addt_dsl.interop.openscenario.sidefile import SIDECAR_PARAM
 from addt_dsl.interop.openscenario.xml import MAX_XML_BYTES, Stop
 from addt_dsl.limits import DEFAULT, MAX_ABS_NUMBER, Limits
@@ -439,7 +440,7 @@ class _Distribution(Importer):
         for el in dists:
             p = self.param(el, "parameterName", params)
             kind = _only(el)
-            draw = STOCHASTIC.get(kind.tag if kind is not None else "")
+            draw = DISTRIBUTIONS.translator(kind.tag if kind is not None else "")
             if draw is None:
                 self.refuse_kind(el, kind)
             if self.is_integer(p.name) and kind.tag not in ("ProbabilityDistributionSet", "PoissonDistribution"):
@@ -449,10 +450,13 @@ class _Distribution(Importer):
             params[p.name] = draw(self, kind, p)
         return SamplerPlan(kind="random", count=int(runs), seed=int(seed))
 
+    @DISTRIBUTIONS.register("UniformDistribution", "exact", "`in [lo, hi]` (the range)")
     def uniform(self, el, p: ParamPlan) -> ParamPlan:
         lo, hi = self.range_of(el, p.name)
         return _domain(p, lo, hi, distribution="uniform")
 
+    @DISTRIBUTIONS.register("NormalDistribution", "exact", "`dist normal mean M sd sqrt(variance)`, truncated to "
+                            "the range (without one: mean +- 8 sd)")
     def normal(self, el, p: ParamPlan) -> ParamPlan:
         mean, sd = self.mean_sd(el, p)
         lo, hi = self.range_of(el, p.name) if el.find("Range") is not None else \
@@ -468,6 +472,8 @@ class _Distribution(Importer):
             raise Stop
         return mean * self.scale(p.name), math.sqrt(var) * self.scale(p.name)
 
+    @DISTRIBUTIONS.register("LogNormalDistribution", "exact", "`dist lognormal mean M sd S`: expectedValue and "
+                            "variance read as the log-normal's own; truncated to the range")
     def lognormal(self, el, p: ParamPlan) -> ParamPlan:
         """expectedValue and variance are the log-normal's own (the standard's names), not
         its logarithm's; a range truncates it."""
@@ -484,6 +490,8 @@ class _Distribution(Importer):
             return p.model_copy(update={"default": min(max(mean, lo), hi)})
         return _domain(p, lo, hi, distribution="lognormal", mean=mean, sd=sd)
 
+    @DISTRIBUTIONS.register("PoissonDistribution", "exact", "`dist poisson mean L` on a dimensionless parameter; a "
+                            "parameter with a unit is refused")
     def poisson(self, el, p: ParamPlan) -> ParamPlan:
         if p.dimension != "dimensionless":
             self.error(el, f"a Poisson distribution counts: '{p.name}' is used as a {p.dimension}")
@@ -503,6 +511,7 @@ class _Distribution(Importer):
         shaped = _domain(p, lo, hi, distribution="poisson", mean=lam, integer=True)
         return shaped.model_copy(update={"default": float(min(max(round(shaped.default), lo), hi))})
 
+    @DISTRIBUTIONS.register("ProbabilityDistributionSet", "exact", "a choice with `weights [...]`")
     def probability_set(self, el, p: ParamPlan) -> ParamPlan:
         elements = list(el.iterfind("Element"))
         if not elements:
@@ -528,6 +537,8 @@ class _Distribution(Importer):
             raise Stop
         return w
 
+    @DISTRIBUTIONS.register("Histogram", "exact", "`dist histogram bins [...] weights [...]` (gaps: bins of weight "
+                            "0); overlapping bins are refused")
     def histogram(self, el, p: ParamPlan) -> ParamPlan:
         """Bins as a piecewise-uniform density; gaps between bins have none (a zero-weight bin)."""
         bins = []
@@ -696,9 +707,16 @@ class _Template(Translate):
                                                   for p in plan.params]})
 
 
-STOCHASTIC = {"UniformDistribution": _Distribution.uniform, "NormalDistribution": _Distribution.normal,
-              "LogNormalDistribution": _Distribution.lognormal, "PoissonDistribution": _Distribution.poisson,
-              "ProbabilityDistributionSet": _Distribution.probability_set, "Histogram": _Distribution.histogram}
+for _name, _note in (
+        ("Deterministic", "`grid` and `cases` axes, multiplied as OpenSCENARIO combines them"),
+        ("Stochastic", "`random N seed S` (numberOfTestRuns, randomSeed; no seed: 0, W0802)"),
+        ("DeterministicSingleParameterDistribution", "a `grid` axis of the parameter"),
+        ("DeterministicMultiParameterDistribution", "a `cases` axis"),
+        ("DistributionRange", "`grid P in [lo, lo + step, ...]` up to the upper limit"),
+        ("DistributionSet", "`grid P in [a, b, ...]`"),
+        ("ValueSetDistribution", "`cases P in [...], Q in [...]`: the listed combinations")):
+    DISTRIBUTIONS.declare(_name, "exact", _note)
+DISTRIBUTIONS.declare("UserDefinedDistribution", "refused", NOT_DRAWN["UserDefinedDistribution"])
 
 
 def _domain(p: ParamPlan, lo: float, hi: float, **fields) -> ParamPlan:

@@ -66,5 +66,6 @@ VALUE_CONDITIONS = ElementRegistry("condition")  # in a ByValueCondition
 ENTITY_CONDITIONS = ElementRegistry("condition")  # in a ByEntityCondition
 POSITIONS = ElementRegistry("position")
 STORYBOARD = ElementRegistry("storyboard")
+DISTRIBUTIONS = ElementRegistry("distribution")  # a ParameterValueDistribution's (distribution.py)
 REGISTRIES = (ACTIONS, INIT_ACTIONS, GLOBAL_ACTIONS, INIT_GLOBAL_ACTIONS, VALUE_CONDITIONS, ENTITY_CONDITIONS,
-              POSITIONS, STORYBOARD)
+              POSITIONS, STORYBOARD, DISTRIBUTIONS)
