@@ -116,6 +116,9 @@ class Misc:
             # Across the road: head for the point (the language's synchronize moves along a heading).
             settings["heading"] = E.Num(value=round(math.atan2(own[1] - t0, own[0] - s0_val), 9))
             self.approx(act, f"{who} heads straight for its target point from where it starts")
+        for attr, key in (("targetTolerance", "tolerance"), ("targetToleranceMaster", "master_tolerance")):
+            if act.get(attr) is not None:
+                settings[key] = E.Num(value=self.value(act, attr))
         final = child_at(act, "FinalSpeed", "AbsoluteSpeed")
         if final is not None:
             settings["final_speed"] = E.Num(value=self.value(final, "value"))
