@@ -54,7 +54,6 @@ from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, Ru
 from addt_dsl.printer import format_expr, pin_spec
 from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM
 from addt_dsl.registry import BEHAVIORS
-from addt_dsl.runtime.behaviors import PEAK_SLOPE
 from addt_dsl.runtime.environment import Light
 from addt_dsl.road.route import resolve_route
 from addt_dsl.road.roadspec import build_network
@@ -261,14 +260,14 @@ def _speed_action(target: float, rate: float):
 
 
 def _speed_dynamics(shape: str, rate: float, duration: float | None) -> xosc.TransitionDynamics:
-    """A shaped speed change. Without a duration addt-dsl takes PEAK_SLOPE * |dv| / rate,
-    i.e. an average rate of rate / PEAK_SLOPE: that average is OpenSCENARIO's `rate`."""
+    """A shaped speed change. Without a duration addt-dsl takes PEAK_SLOPE * |dv| / rate:
+    `rate` is the peak rate of change, as esmini reads OpenSCENARIO's `rate`
+    (TransitionDynamics::GetTargetParamValByPrimPeak)."""
     if shape == "step":
         return xosc.TransitionDynamics(xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0.0)
     if duration is not None:
         return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.time, max(duration, 0.0))
-    return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.rate,
-                                   max(rate / PEAK_SLOPE[shape], 1e-3))
+    return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.rate, max(rate, 1e-3))
 
 
 def _relative_speed(node) -> tuple[str, float, str] | None:
