@@ -352,10 +352,20 @@ def _synchronize(run, actor, s):
                                    _road_of(run, s["master"]))
     target_s = s["target_s"] if s["target_s"] is not None else run.s0[actor]
     target_t = s["target_t"] if s["target_t"] is not None else run.t0[actor]
-    final = None if s["final_speed"] is None else xosc.AbsoluteSpeed(s["final_speed"])
+    final = s["final_speed"]
+    if final is not None and not isinstance(final, float):  # live: `speed(master) - 3 m/s`
+        rel = _relative_speed(final)
+        if rel is None or rel[0] != s["master"]:
+            # No OpenSCENARIO final speed: a controller whose `final_speed` property is the expression.
+            return _controller("synchronize")(run, actor, {**s, "final_speed": final.model_dump(mode="json")})
+        kind = xosc.SpeedTargetValueType.factor if rel[2] == "factor" else xosc.SpeedTargetValueType.delta
+        final = xosc.RelativeSpeedToMaster(rel[1], kind)
+    elif final is not None:
+        final = xosc.AbsoluteSpeed(final)
     action = xosc.SynchronizeAction(s["master"], master_pos, xosc.RoadPosition(target_s, target_t,
                                                                                _road_of(run, actor)),
-                                    final_speed=final)
+                                    target_tolerance_master=s["master_tolerance"] or None,
+                                    target_tolerance=s["tolerance"] or None, final_speed=final)
     extra = [k for k in ("heading", "max_speed") if s.get(k) is not None and k in s]
     run.carried.append(f"{actor}: synchronize {', '.join(extra)} and rate limits (side file)")
     return [action], True

@@ -95,3 +95,31 @@ def test_synchronize_tolerances_and_absolute_final_speed():
     sync = _sync(next(a for a in got.plan.agents if a.name == "NPC"))
     assert sync.settings["tolerance"].value == 1.0 and sync.settings["master_tolerance"].value == 1.0
     assert sync.settings["final_speed"].value == 7.0
+
+
+def test_export_writes_tolerances_relative_final_speeds_and_peak_rates(tmp_path):
+    import defusedxml.ElementTree as DET
+
+    from addt_dsl.interop.xosc_export import export_run
+    from addt_dsl.sweep import expand
+
+    got = import_xosc(ESMINI / "xosc" / "synchronize.xosc", root=ESMINI)
+    done = export_run(expand(got.plan).specs[0], tmp_path)
+    root = DET.parse(done.xosc_path).getroot()
+    syncs = root.findall(".//SynchronizeAction")
+    assert len(syncs) == 4
+    for action in syncs:
+        assert (action.get("targetTolerance"), action.get("targetToleranceMaster")) == ("1.0", "1.0")
+        rel = action.find("FinalSpeed/RelativeSpeedToMaster")
+        assert (float(rel.get("value")), rel.get("speedTargetValueType")) == (0.0, "delta")
+    rates = {float(d.get("value")) for d in root.findall(".//SpeedActionDynamics")
+             if d.get("dynamicsShape") == "sinusoidal"}
+    assert rates == {3.0}  # esmini's rate: the peak rate of change, as imported
+    # And back: the same settings.
+    again = import_xosc(done.xosc_path)
+    assert again.plan is not None, [d.message for d in again.diagnostics if d.is_error]
+    for name in ("NPC1", "NPC4"):
+        before = _sync(next(a for a in got.plan.agents if a.name == name)).settings
+        after = _sync(next(a for a in again.plan.agents if a.name == name)).settings
+        for key in ("tolerance", "master_tolerance", "final_speed"):
+            assert after[key] == before[key], key
