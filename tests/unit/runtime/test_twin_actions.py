@@ -255,6 +255,23 @@ def test_synchronize_stops_and_waits_when_the_master_is_far():
     assert rows[:, 1].min() >= 0.0 and np.all(np.diff(rows[:, 1]) >= 0.0)
 
 
+@pytest.mark.parametrize("final", [None, 5.0])
+def test_synchronize_ends_within_the_master_tolerance(final):
+    # The master at 10 m/s from s = 0 is within 5 m of s = 100 m from 9.5 s on.
+    car = agent("car", s=0.0, lane=-1, speed=10.0)
+    world = LiveWorld(car)
+    a = agent(s=0.0, speed=10.0)
+    settings = {"final_speed": final} if final is not None else {}
+    beh = start("synchronize", a, world, master="car", master_at=100.0, target_s=80.0, master_tolerance=5.0,
+                **settings)
+    t = 0.0
+    while not beh.ended(a, world, t):
+        advance(a, beh.accel(a, world, t), t, DT)
+        advance(car, 0.0, t, DT)
+        t += DT
+    assert t == pytest.approx(9.5, abs=0.02)
+
+
 class ProjectingWorld(LiveWorld):
     """World coordinates are road coordinates shifted by (100, 0)."""
 
