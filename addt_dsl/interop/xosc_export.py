@@ -54,7 +54,6 @@ from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, Ru
 from addt_dsl.printer import format_expr, pin_spec
 from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM
 from addt_dsl.registry import BEHAVIORS
-from addt_dsl.runtime.behaviors import PEAK_SLOPE
 from addt_dsl.runtime.environment import Light
 from addt_dsl.road.route import resolve_route
 from addt_dsl.road.roadspec import build_network
@@ -261,14 +260,14 @@ def _speed_action(target: float, rate: float):
 
 
 def _speed_dynamics(shape: str, rate: float, duration: float | None) -> xosc.TransitionDynamics:
-    """A shaped speed change. Without a duration addt-dsl takes PEAK_SLOPE * |dv| / rate,
-    i.e. an average rate of rate / PEAK_SLOPE: that average is OpenSCENARIO's `rate`."""
+    """A shaped speed change. Without a duration addt-dsl takes PEAK_SLOPE * |dv| / rate:
+    `rate` is the peak rate of change, as esmini reads OpenSCENARIO's `rate`
+    (TransitionDynamics::GetTargetParamValByPrimPeak)."""
     if shape == "step":
         return xosc.TransitionDynamics(xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0.0)
     if duration is not None:
         return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.time, max(duration, 0.0))
-    return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.rate,
-                                   max(rate / PEAK_SLOPE[shape], 1e-3))
+    return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.rate, max(rate, 1e-3))
 
 
 def _relative_speed(node) -> tuple[str, float, str] | None:
@@ -353,10 +352,20 @@ def _synchronize(run, actor, s):
                                    _road_of(run, s["master"]))
     target_s = s["target_s"] if s["target_s"] is not None else run.s0[actor]
     target_t = s["target_t"] if s["target_t"] is not None else run.t0[actor]
-    final = None if s["final_speed"] is None else xosc.AbsoluteSpeed(s["final_speed"])
+    final = s["final_speed"]
+    if final is not None and not isinstance(final, float):  # live: `speed(master) - 3 m/s`
+        rel = _relative_speed(final)
+        if rel is None or rel[0] != s["master"]:
+            # No OpenSCENARIO final speed: a controller whose `final_speed` property is the expression.
+            return _controller("synchronize")(run, actor, {**s, "final_speed": final.model_dump(mode="json")})
+        kind = xosc.SpeedTargetValueType.factor if rel[2] == "factor" else xosc.SpeedTargetValueType.delta
+        final = xosc.RelativeSpeedToMaster(rel[1], kind)
+    elif final is not None:
+        final = xosc.AbsoluteSpeed(final)
     action = xosc.SynchronizeAction(s["master"], master_pos, xosc.RoadPosition(target_s, target_t,
                                                                                _road_of(run, actor)),
-                                    final_speed=final)
+                                    target_tolerance_master=s["master_tolerance"] or None,
+                                    target_tolerance=s["tolerance"] or None, final_speed=final)
     extra = [k for k in ("heading", "max_speed") if s.get(k) is not None and k in s]
     run.carried.append(f"{actor}: synchronize {', '.join(extra)} and rate limits (side file)")
     return [action], True

@@ -280,6 +280,14 @@ class KeepGap(S.KeepGap, Behavior):
         return max(-s["decel"], min(s["accel"], a))
 
 
+# esmini's SynchronizeAction with a final speed (OSCPrivateAction.cpp, SynchronizeAction::Step):
+# its phases, its "no time left" and "master standing" sentinels and its hardest braking.
+SYNC_NONE, SYNC_NON_LINEAR, SYNC_LINEAR, SYNC_STOPPED, SYNC_STOP_NOW, SYNC_WAITING = range(6)
+SYNC_SMALL = 1e-6
+SYNC_LARGE = 1e10
+SYNC_MAX_DECEL = 8.0  # [m/s^2]
+
+
 @BEHAVIORS.implements
 class Synchronize(S.Synchronize, Behavior):
 
@@ -287,6 +295,9 @@ class Synchronize(S.Synchronize, Behavior):
         if self.settings["heading"] is not None:
             _walk_towards(agent, self.settings["heading"])
         self.final = None
+        self.mode = SYNC_NONE
+        self.convex = False
+        self.last_m = self.last_master_m = SYNC_LARGE
 
     def remaining_m(self, agent: AgentState) -> float:
         """Distance to the own target point along the direction of motion [m]."""
@@ -300,18 +311,106 @@ class Synchronize(S.Synchronize, Behavior):
 
     def accel(self, agent, world, time_s):
         s = self.settings
+        if s["final_speed"] is not None:
+            return (self.profile_speed(agent, world) - agent.speed) / world.dt
         master = world.actor_station(s["master"])
         to_go = s["master_at"] - master[0] if master is not None else 0.0
-        if self.final is None and to_go <= 0.0:  # the master has arrived: synchronisation ends
-            self.final = s["final_speed"] if s["final_speed"] is not None else agent.speed
+        if self.final is None and (to_go <= s["master_tolerance"] or
+                                   abs(self.remaining_m(agent)) <= s["tolerance"]):
+            self.final = agent.speed  # the master has arrived: synchronisation ends
         if self.final is not None:
             return _speed_tracking(agent, self.final, s["accel"], s["decel"], world.dt)
         arrival_s = to_go / master[1] if master[1] > 1e-3 else math.inf
         wanted = max(0.0, self.remaining_m(agent)) / arrival_s
         return _speed_tracking(agent, min(wanted, s["max_speed"]), s["accel"], s["decel"], world.dt)
 
+    def profile_speed(self, agent, world) -> float:
+        """The speed [m/s] for this step with a final speed, as esmini plans it: the speed
+        profile that reaches the final speed at the target just when the master reaches its
+        point - one constant acceleration where that fits (linear), else two phases that
+        first speed up and then slow down or the reverse (convex/concave), or a stop and a
+        wait when even that would need moving backwards. Ends (holding the final speed) when
+        either is within its tolerance of its point or has passed it."""
+        s, dt = self.settings, world.dt
+        if self.final is not None:
+            return self.final
+        master = world.actor_station(s["master"])
+        to_go = s["master_at"] - master[0] if master is not None else 0.0
+        master_m, dist = abs(to_go), abs(self.remaining_m(agent))
+        done = (dist < s["tolerance"] + SYNC_SMALL or master_m < s["master_tolerance"] + SYNC_SMALL
+                or dist > self.last_m or master_m > self.last_master_m)
+        self.last_m, self.last_master_m = dist, master_m
+        dist = max(dist - s["tolerance"], SYNC_SMALL)
+        master_m = max(master_m - s["master_tolerance"], SYNC_SMALL)
+        v_master = (master[1] if master is not None else 0.0) * (1.0 if to_go >= 0.0 else -1.0)
+        speed = agent.speed
+        time_left = SYNC_LARGE  # the master's time to its point [s]
+        if v_master > SYNC_SMALL:
+            time_left = master_m / v_master
+            done = done or time_left < dt
+        elif self.mode != SYNC_WAITING:
+            self.mode, speed = SYNC_WAITING, 0.0  # the master stands: so does it
+        v1 = self.value("final_speed", world)
+        if done:
+            self.final = v1
+            return v1
+        if self.mode == SYNC_WAITING:
+            if time_left >= SYNC_LARGE:
+                return speed
+            self.mode = SYNC_NONE
+        if self.mode == SYNC_STOP_NOW:
+            speed -= SYNC_MAX_DECEL * dt
+            if speed < 0.0:
+                self.mode, speed = SYNC_WAITING, 0.0
+            return speed
+        if self.mode == SYNC_STOPPED:
+            if v1 > 0.0 and time_left < 2.0 * dist / v1 or v1 <= 0.0 and time_left < SYNC_LARGE:
+                self.mode = SYNC_LINEAR  # time to move again
+            else:
+                return 0.0
+        if self.mode == SYNC_LINEAR:
+            if time_left > SYNC_LARGE - 1.0:
+                return 0.0
+            return max(0.0, 2.0 * dist / time_left - max(0.0, v1)) if time_left >= 1e-3 and dist >= 1e-3 else 0.0
+        if self.mode == SYNC_NON_LINEAR and time_left < SYNC_LARGE:
+            if abs(speed - (2.0 * dist / time_left - v1)) < 0.1:
+                self.mode = SYNC_LINEAR  # on the straight line to the end: past the apex
+                return speed
+        if self.mode == SYNC_NONE:
+            self.mode = SYNC_NON_LINEAR
+            self.convex = (v1 + speed) / 2.0 < dist / time_left
+        # Two phases of constant acceleration meeting at speed vx after x seconds.
+        t, v0, vx, acc = time_left, speed, 0.0, 0.0
+        if abs(v1 - v0) < SYNC_SMALL:
+            vx = (dist - t / 2.0 * v0) / (t / 2.0)
+            acc = (vx - v0) / (t / 2.0)
+        else:
+            root = math.sqrt(2.0) * math.sqrt(max(0.0, 2.0 * dist * dist - 2.0 * (v1 + v0) * t * dist
+                                                  + (v1 * v1 + v0 * v0) * t * t))
+            x1 = -(root + 2.0 * dist - 2.0 * v1 * t) / (2.0 * (v1 - v0))
+            x2 = -(-root + 2.0 * dist - 2.0 * v1 * t) / (2.0 * (v1 - v0))
+            if 0.0 < x1 < t:
+                vx = (2.0 * dist - root) / (2.0 * t)
+                acc = (vx - v0) / x1
+            elif 0.0 < x2 < t:
+                vx = (2.0 * dist + root) / (2.0 * t)
+                acc = (vx - v0) / x2
+        if self.mode == SYNC_NON_LINEAR and (acc < 0.0 if self.convex else acc > 0.0):
+            self.mode, acc = SYNC_LINEAR, 0.0  # the apex: keep the speed for this step
+        if self.mode == SYNC_NON_LINEAR and vx < 0.0:
+            # Slowing to a stop, waiting and starting again: brake over the share of the
+            # distance the current speed stands for; at once if that takes over half of it.
+            t1 = 2.0 * v0 * dist / (v0 * v0 + v1 * v1) if v0 or v1 else 0.0
+            acc = -v0 / t1 if abs(t1) > SYNC_SMALL else 0.0
+            if t1 * v0 / 2.0 > dist / 2.0:
+                self.mode, acc = SYNC_STOP_NOW, -SYNC_MAX_DECEL
+            if v0 + acc * dt < 0.0:
+                self.mode = SYNC_STOPPED
+                return 0.0
+        return speed + acc * dt
+
     def ended(self, agent, world, time_s):
-        return self.final is not None  # the master has arrived
+        return self.final is not None  # the master (or it) has arrived
 
 
 @BEHAVIORS.implements

@@ -111,12 +111,20 @@ class Synchronize(BehaviorSpec):
         ParamSpec("max_speed", units.SPEED, default=15.0, low=0.1, doc="speed limit while synchronising"),
         ParamSpec("accel", units.ACCELERATION, default=5.0, low=0.01, doc="max acceleration"),
         ParamSpec("decel", units.ACCELERATION, default=5.0, low=0.01, doc="max deceleration"),
-        ParamSpec("final_speed", units.SPEED, low=0.0,
-                  doc="speed to change to once the master has arrived (default: keep the speed)"),
+        ParamSpec("final_speed", units.SPEED, low=0.0, live=True,
+                  doc="speed to have on arrival, planned as esmini does (may follow the master: "
+                      "`speed(ego) - 3 m/s`; default: keep the speed)"),
+        ParamSpec("tolerance", units.LENGTH, default=0.0, low=0.0,
+                  doc="arrived within this distance of the own target point"),
+        ParamSpec("master_tolerance", units.LENGTH, default=0.0, low=0.0,
+                  doc="the master arrived within this distance of its point"),
     )
     doc = ("Adjust the speed to reach a point when another actor reaches its point (OpenSCENARIO "
-           "SynchronizeAction): at every step, the remaining distance over the master's time to "
-           "arrival at its current speed.")
+           "SynchronizeAction): without `final_speed`, at every step the remaining distance over the "
+           "master's time to arrival at its current speed (within `max_speed`, `accel`, `decel`); "
+           "with it, esmini's speed profile that arrives at that speed: one constant acceleration, "
+           "or two phases (speed up then slow down, or the reverse), or a stop and a wait, without "
+           "the limits. Ends when either is within its tolerance of its point or has passed it.")
     @staticmethod
     def validate(values: dict) -> list[tuple]:
         if "target_s" not in values and "target_t" not in values:

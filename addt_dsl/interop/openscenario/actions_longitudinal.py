@@ -53,7 +53,10 @@ class Longitudinal:
             limit = info.get("max_accel" if dv > 0 else "max_decel")
             rate = min(rate, limit) if limit is not None and dim in ("time", "rate") and shape == "linear" else rate
         info["speed_now"] = v_now
-        if shape in ("cubic", "sinusoidal") and dv and dim in ("time", "rate"):
+        # At a rate the change's length follows from the speed it starts at when it runs (the
+        # speed the importer expects, `speed_now`, misses what synchronisations and live
+        # targets did before).
+        if shape in ("cubic", "sinusoidal") and (dv and dim == "time" or dim == "rate"):
             return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, **self.speed_dynamics(dyn)})
         if dv < 0:  # constant deceleration to a speed: exactly `brake`
             return ClausePlan(keyword="behavior", name="brake",
@@ -109,7 +112,8 @@ class Longitudinal:
         return ClausePlan(keyword="behavior", name="cruise", settings=settings)
 
     def speed_dynamics(self, dyn) -> dict:
-        """Shape and rate/duration of a speed change as `cruise` settings (rate: the average)."""
+        """Shape and rate/duration of a speed change as `cruise` settings (rate: the peak rate
+        of change, as esmini reads it: TransitionDynamics::GetTargetParamValByPrimPeak)."""
         shape = self.raw(dyn, "dynamicsShape")
         dim = self.raw(dyn, "dynamicsDimension")
         amount = abs(self.value(dyn, "value"))
@@ -122,7 +126,7 @@ class Longitudinal:
         if dim == "time":
             out["duration"] = E.Num(value=amount)
         elif dim == "rate":
-            rate = max(amount * PEAK_SLOPE[shape], 0.01)
+            rate = max(amount, 0.01)
             out.update(accel=E.Num(value=rate), decel=E.Num(value=rate))
         else:
             self.approx(dyn, f"a speed change over a {dim}: at the default rate limits")

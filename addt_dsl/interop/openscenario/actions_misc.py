@@ -29,8 +29,9 @@ class Misc:
     def act_teleport(self, act, who: str, wrapper) -> ClausePlan | None:
         return self.teleport(act, who)
 
-    @ACTIONS.register("SynchronizeAction", "approx", "`synchronize`; a final speed relative to the master keeps "
-                      "the speed reached (W0802)")
+    @ACTIONS.register("SynchronizeAction", "approx", "`synchronize` (with a final speed: esmini's speed "
+                      "profile); a steady state refused; an own target point across the road: headed for "
+                      "straight (W0802)")
     def act_synchronize(self, act, who: str, wrapper) -> ClausePlan | None:
         return self.synchronize(act, who)
 
@@ -116,11 +117,24 @@ class Misc:
             # Across the road: head for the point (the language's synchronize moves along a heading).
             settings["heading"] = E.Num(value=round(math.atan2(own[1] - t0, own[0] - s0_val), 9))
             self.approx(act, f"{who} heads straight for its target point from where it starts")
+        for attr, key in (("targetTolerance", "tolerance"), ("targetToleranceMaster", "master_tolerance")):
+            if act.get(attr) is not None:
+                settings[key] = E.Num(value=self.value(act, attr))
         final = child_at(act, "FinalSpeed", "AbsoluteSpeed")
+        relative = child_at(act, "FinalSpeed", "RelativeSpeedToMaster")
+        for steady in act.iterfind("FinalSpeed/*/*"):
+            self.skip(steady, f"a <{steady.tag}> (a final stretch at the final speed) is not translated")
+            return None
         if final is not None:
             settings["final_speed"] = E.Num(value=self.value(final, "value"))
-        elif act.find("FinalSpeed") is not None:
-            self.approx(act.find("FinalSpeed"), "a final speed relative to the master: the speed reached is kept")
+        elif relative is not None:
+            # esmini reads the master's speed at every step (a continuous relative target).
+            other, value = E.Signal(name=f"speed({master})"), self.value(relative, "value")
+            if relative.get("speedTargetValueType", "delta") == "factor":
+                settings["final_speed"] = E.Binary(op="*", left=E.Num(value=value), right=other)
+            else:
+                settings["final_speed"] = E.Binary(op="+" if value >= 0.0 else "-", left=other,
+                                                   right=E.Num(value=abs(value)))
         if act.find("TargetPositionMaster/LanePosition") is None and act.find("TargetPositionMaster") is not None:
             self.approx(act.find("TargetPositionMaster"), "the master's target point: its station on its road")
         return ClausePlan(keyword="behavior", name="synchronize", settings=settings)

@@ -14,6 +14,9 @@ RULE_OPS = {"lessThan": "<", "lessOrEqual": "<=", "greaterThan": ">", "greaterOr
             "notEqualTo": "!="}
 
 
+STAND_STILL_MS = 1e-3  # esmini: an entity below this speed [m/s] stands still (ScenarioEngine.cpp)
+
+
 def sig(fn: str, *args: str):
     """A signal by its canonical name: `fn(A,B)`."""
     return E.Signal(name=f"{fn}({','.join(args)})")
@@ -36,7 +39,6 @@ for _name, _note in (
 for _name, _note in (
         ("EndOfRoadCondition", "the language has no end-of-road signal"),
         ("OffroadCondition", "the language has no off-road signal"),
-        ("StandStillCondition", "the language has no standstill-duration signal"),
         ("RelativeClearanceCondition", "the language has no free-lane signal"),
         ("AngleCondition", "the language has no heading signal"),
         ("RelativeAngleCondition", "the language has no relative heading signal"),
@@ -104,6 +106,26 @@ class Conditions:
         if state is None:
             return None
         return E.Binary(op="==", left=E.Signal(name=f"light({ctl})"), right=E.Num(value=LIGHT_STATES[state]))
+
+    @ENTITY_CONDITIONS.register("StandStillCondition", "approx", "`speed(A) < 0.001 m/s` (esmini's standstill "
+                                "threshold) held for the duration (`for D`); beside other conditions or entities "
+                                "the hold covers them all (W0802)")
+    def cond_stand_still(self, c, a: str):
+        # The hold is the step's (`when C for D`): `start` and `end_trigger` collect it.
+        self.stand_still.append((self.value(c, "duration", units.TIME), c))
+        return E.Binary(op="<", left=sig("speed", a), right=E.Num(value=STAND_STILL_MS))
+
+    def stand_still_hold(self, since: int, conditions: int):
+        """The hold [s] of the StandStillConditions read since index `since` of a trigger of
+        `conditions` conditions in all (None: none); approximate unless it is the only one."""
+        found = self.stand_still[since:]
+        if not found:
+            return None
+        hold = max(d for d, _ in found)
+        if conditions > 1 or len(found) > 1:
+            self.approx(found[0][1], f"a standstill of {hold:g} s beside other conditions or entities: the whole "
+                                     "condition must hold that long")
+        return E.Num(value=hold)
 
     def entity_condition(self, c, a: str):
         translate = ENTITY_CONDITIONS.translator(c.tag)

@@ -122,7 +122,7 @@ class Entities:
                 for el in root.iterfind(f"Catalog/{kind}") if root is not None else ():
                     if el.get("name") == entry:
                         return el
-        if "Route" in kinds or "Environment" in kinds:
+        if "Route" in kinds or "Environment" in kinds or "Maneuver" in kinds:
             self.skip(ref, f"{kinds[0].lower()} '{entry}' of catalog {catalog} not found",
                       "catalogs are read from <CatalogLocations> inside the root directory")
             return None

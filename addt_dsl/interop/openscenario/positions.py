@@ -261,8 +261,11 @@ class Positions:
         s_val = float(eval_param_expr(s, params))
         odr = self.network.road(road_id)
         if not 0.0 <= s_val <= odr.length:
-            self.skip(pos_el, f"a point at s = {s_val:g} m, beyond road {road_id} ({odr.length:.6g} m): not translated")
-            return None
+            # esmini's Position::SetLongitudinalTrackPos clamps s to the road (with a warning).
+            clamped = min(max(s_val, 0.0), odr.length)
+            self.approx(pos_el, f"a point at s = {s_val:g} m, beyond road {road_id} ({odr.length:.6g} m): "
+                                f"at s = {clamped:.6g} m, the road's end, as esmini places it")
+            s_val = clamped
         try:
             t_val = odr.lane_center_t(lane, s_val) + float(eval_param_expr(offset, params))
         except ValueError as exc:

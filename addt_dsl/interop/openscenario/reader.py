@@ -47,6 +47,7 @@ class Importer(Parameters, CarlaFrame):
         self.end: TriggerPlan | None = None  # the storyboard's stop trigger beyond its time
         self.pending: list = []  # storyboard.PendingEvent: events started by another event, linked at the end
         self.anchors: dict = {}  # no-op events that start a group: name -> storyboard.Anchor
+        self.stand_still: list = []  # (duration [s], element) of each StandStillCondition read
         self.placed: dict = {}  # actor -> positions.Placement
         self.environment: list[ClausePlan] = []  # weather and light from an EnvironmentAction
         self.environment_steps: list[TriggerPlan] = []  # ... and their changes in events

@@ -9,7 +9,7 @@ from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.openscenario.conditions import EDGES
 from addt_dsl.interop.openscenario.entities import safe_name
-from addt_dsl.interop.openscenario.params import all_of, any_of, plus_expr
+from addt_dsl.interop.openscenario.params import all_of, any_of, is_number, plus_expr
 from addt_dsl.interop.openscenario.positions import Placement
 from addt_dsl.interop.openscenario.registry import GLOBAL_ACTIONS, INIT_ACTIONS, INIT_GLOBAL_ACTIONS, STORYBOARD
 from addt_dsl.interop.openscenario.xml import Stop, child_at, first_of, only_child
@@ -80,7 +80,8 @@ for _path, _status, _note in (
         ("Act/StartTrigger", "approx", "a simulation time or the story running; other conditions refused"),
         ("Act/StopTrigger", "refused", "the language has no act that ends; CARLA's criteria_* groups are oracles"),
         ("ManeuverGroup/Actors", "exact", "the actor the group's private actions drive"),
-        ("ManeuverGroup/CatalogReference", "refused", "maneuver catalogs are not read"),
+        ("ManeuverGroup/CatalogReference", "exact", "the Maneuver entry of the ManeuverCatalog's directory, its "
+                                                    "parameters as the reference assigns them"),
         ("ManeuverGroup/Maneuver", "exact", "maneuvers run with their group"),
         ("Maneuver/Event", "approx", "each action a step; priority and maximumExecutionCount as `when C repeat N` "
                                     "when a condition of its own starts it"),
@@ -403,14 +404,35 @@ class Storyboard:
         if len(refs) > 1:
             self.skip(group, f"maneuver group with {len(refs)} actors: translated for one actor only")
         who = refs[0] if refs else None  # no actor: its events' global actions (light steps) only
-        maneuvers = list(group.iterfind("Maneuver"))
-        if group.find("CatalogReference") is not None:
-            self.skip(group.find("CatalogReference"), "maneuver catalogs are not translated")
-        for maneuver in maneuvers:
-            self.maneuvers.setdefault(maneuver.get("name", ""), []).extend(
-                e.get("name", "") for e in maneuver.iterfind("Event"))
-            for event in maneuver.iterfind("Event"):
-                self.event(event, who, act_at)
+        for maneuver in group.iterfind("Maneuver"):
+            self.maneuver(maneuver, who, act_at)
+        for ref in group.iterfind("CatalogReference"):
+            maneuver = self.catalog_entry(ref, ("Maneuver",))
+            if maneuver is None:
+                continue
+            # The entry's parameters: its declarations as the reference assigns them, each
+            # assignment read where the reference stands (`$MS1EgoS` may assign `$MS1EgoS`).
+            # Local to this use: numbers, never plan parameters (a `${...}` literal).
+            local = {d.get("name", ""): d.get("value", "")
+                     for d in maneuver.iterfind("ParameterDeclarations/ParameterDeclaration")}
+            try:
+                local.update({a.get("parameterRef", "").removeprefix("$"): self.resolve(a.get("value", ""))
+                              for a in ref.iterfind("ParameterAssignments/ParameterAssignment")})
+            except (KeyError, SyntaxError, ValueError, ArithmeticError, RecursionError, MemoryError):
+                self.error(ref, "a parameter assignment that does not evaluate")
+                continue
+            saved = dict(self.params)
+            self.params.update({k: ("string", f"${{{v}}}" if is_number(v) else v) for k, v in local.items()})
+            try:
+                self.maneuver(maneuver, who, act_at)
+            finally:
+                self.params = saved
+
+    def maneuver(self, maneuver, who: str, act_at) -> None:
+        self.maneuvers.setdefault(maneuver.get("name", ""), []).extend(
+            e.get("name", "") for e in maneuver.iterfind("Event"))
+        for event in maneuver.iterfind("Event"):
+            self.event(event, who, act_at)
 
     def event(self, event, who: str, act_at) -> None:
         name = event.get("name", "")
@@ -505,6 +527,7 @@ class Storyboard:
         dropped."""
         groups = list(trigger.iterfind("ConditionGroup")) if trigger is not None else []
         alternatives, at_s, holds, edges = [], act_at, [], []
+        stand_still = len(self.stand_still)
         for group in groups:
             conj = []
             for cond in group.iterfind("Condition"):
@@ -556,6 +579,9 @@ class Storyboard:
                 fields.pop("edge", None)
             else:
                 fields["delay_s"] = E.Num(value=delay)
+        hold = self.stand_still_hold(stand_still, sum(len(list(g.iterfind("Condition"))) for g in groups))
+        if hold is not None and "hold_s" not in fields:
+            fields["hold_s"] = hold
         return Start(fields)
 
     # -- sequences: an event started by another event of the same actor
@@ -578,7 +604,10 @@ class Storyboard:
             if ref in grouped:
                 continue
             first = self.events.get(ref)
-            if first is not None and first.actor != who and state in STATE_SIGNAL:
+            # Another actor's event, or the end of one of its own whose length the settings do
+            # not give (a synchronisation, a speed change at a rate): on its step's state.
+            if first is not None and state in STATE_SIGNAL and (first.actor != who or (
+                    state != "startTransition" and not duration_of(first.clause))):
                 other_actor.append((name, who, (ref, delay, state, cond), clause, first))
                 continue
             if first is None or first.actor != who:
@@ -654,6 +683,7 @@ class Storyboard:
             return
         alternatives, delays, edges, at_s = [], [], [], None
         groups = list(trigger.iterfind("ConditionGroup"))
+        stand_still = len(self.stand_still)
         for group in groups:
             conj, timed = [], None
             for cond in group.iterfind("Condition"):
@@ -703,4 +733,7 @@ class Storyboard:
             if len({d for d, _ in delays}) > 1:
                 self.approx(delays[0][1], "stop conditions with different delays: the run ends the longest after")
             fields["delay_s"] = E.Num(value=max(d for d, _ in delays))
+        hold = self.stand_still_hold(stand_still, len(delays))
+        if hold is not None:
+            fields["hold_s"] = hold
         self.end = TriggerPlan(**fields)

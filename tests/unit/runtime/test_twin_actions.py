@@ -209,6 +209,69 @@ def test_synchronize_arrives_when_the_master_does(fraction):
     assert rows[:, 3].max() < 2.0  # a walking pace, not a sprint at the end
 
 
+def _synchronized(v0: float, target_s: float, final: float, master_speed: float, master_at: float,
+                  seconds: float):
+    car = agent("car", s=0.0, lane=-1, speed=master_speed)
+    world = LiveWorld(car)
+    a = agent(s=0.0, speed=v0)
+    beh = start("synchronize", a, world, master="car", master_at=master_at, target_s=target_s,
+                final_speed=final)
+    rows = simulate(a, beh, world, seconds, others=[car])
+    return a, beh, rows
+
+
+def test_synchronize_on_the_line_to_its_final_speed_slows_at_one_rate():
+    # esmini's linear case (SynchronizeAction::Step): 100 m in the master's 10 s from 15 m/s
+    # to 5 m/s is one constant deceleration of 1 m/s^2 (15 = 2 * 100 / 10 - 5). The speed
+    # that fills the time evenly (10 m/s) held up to the master's arrival is not it.
+    a, beh, rows = _synchronized(15.0, 100.0, 5.0, 10.0, 100.0, 10.5)
+    at = {round(t, 6): (s, v) for t, s, _, v, _ in rows}
+    assert at[2.5][1] == pytest.approx(12.5, abs=0.05)
+    assert at[7.5][1] == pytest.approx(7.5, abs=0.05)
+    assert at[9.99][0] == pytest.approx(100.0, abs=0.3)
+    assert beh.ended(a, None, 10.0) and a.speed == pytest.approx(5.0)
+
+
+def test_synchronize_rushes_then_slows_to_arrive_at_its_final_speed():
+    # From a standstill, 155 m in 10 s ending at 20 m/s needs more than 20 m/s on the way
+    # (esmini's convex case: as NPC1 in esmini's synchronize.xosc, whose peak is 26.6 m/s).
+    a, beh, rows = _synchronized(0.0, 155.0, 20.0, 20.0, 200.0, 12.0)
+    arrived = int(np.argmax(rows[:, 1] >= 155.0))
+    assert rows[arrived, 0] == pytest.approx(10.0, abs=0.05)
+    assert rows[arrived, 3] == pytest.approx(20.0, abs=0.05)
+    assert rows[:, 3].max() == pytest.approx(26.6, abs=0.3)
+    assert a.speed == pytest.approx(20.0)
+
+
+def test_synchronize_stops_and_waits_when_the_master_is_far():
+    # 20 m to cover in the master's 30 s, at 5 m/s in the end, from 10 m/s: even slowing at
+    # once would pass the point too early, so it stops, waits, and starts again.
+    a, beh, rows = _synchronized(10.0, 20.0, 5.0, 5.0, 150.0, 31.0)
+    stopped = rows[rows[:, 3] == 0.0, 0]
+    assert len(stopped) and stopped[-1] - stopped[0] > 10.0
+    arrived = int(np.argmax(rows[:, 1] >= 20.0))
+    assert rows[arrived, 0] == pytest.approx(30.0, abs=0.1)
+    assert rows[arrived, 3] == pytest.approx(5.0, abs=0.1)
+    assert rows[:, 1].min() >= 0.0 and np.all(np.diff(rows[:, 1]) >= 0.0)
+
+
+@pytest.mark.parametrize("final", [None, 5.0])
+def test_synchronize_ends_within_the_master_tolerance(final):
+    # The master at 10 m/s from s = 0 is within 5 m of s = 100 m from 9.5 s on.
+    car = agent("car", s=0.0, lane=-1, speed=10.0)
+    world = LiveWorld(car)
+    a = agent(s=0.0, speed=10.0)
+    settings = {"final_speed": final} if final is not None else {}
+    beh = start("synchronize", a, world, master="car", master_at=100.0, target_s=80.0, master_tolerance=5.0,
+                **settings)
+    t = 0.0
+    while not beh.ended(a, world, t):
+        advance(a, beh.accel(a, world, t), t, DT)
+        advance(car, 0.0, t, DT)
+        t += DT
+    assert t == pytest.approx(9.5, abs=0.02)
+
+
 class ProjectingWorld(LiveWorld):
     """World coordinates are road coordinates shifted by (100, 0)."""
 
