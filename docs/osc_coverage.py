@@ -4,7 +4,9 @@ each with the status the
 importer's own registries give it (addt_dsl/interop/openscenario/registry.py): `exact`, `approx`
 (translated with a W0802 diagnostic; the note says what differs) or `refused` (E0803 unless
 `--lenient`; the note says what the twin or the language lacks). An element in no registry is
-refused. Distributions are the logical-scenario importer's (openscenario/distribution.py).
+refused. Distributions are the logical-scenario importer's (openscenario/distribution.py). The
+export column is `xosc_export.EXPORTED`: the elements an export writes, and the constructs that
+write them (tests/unit/interop/test_export_coverage.py checks it against real exports).
 
     python -m docs.osc_coverage [--xsd-dir DIR]
 """
@@ -17,6 +19,7 @@ from collections import Counter
 from pathlib import Path
 
 from addt_dsl.interop.openscenario.coverage import status_of
+from addt_dsl.interop.xosc_export import EXPORTED
 from docs.osc_schema import table
 
 CATEGORIES = ("action", "condition", "position", "storyboard", "distribution")
@@ -43,7 +46,8 @@ def markdown(directory: Path | None = None) -> str:
     counts = Counter(_cell(entry) for _, _, _, by in found for entry in by.values())
     lines = [f"{len(found)} elements of OpenSCENARIO 1.3; statuses (an action counted in an event and in Init): "
              + ", ".join(f"{counts[s]} {s}" for s in ("exact", "approx", "refused")) + ".", "",
-             "| category | element | in 1.2 | import | note |", "|---|---|---|---|---|"]
+             f"An export writes {len(EXPORTED)} of them (the `export` column: what writes each).", "",
+             "| category | element | in 1.2 | import | note | export |", "|---|---|---|---|---|---|"]
     for category, path, in_1_2, by in found:
         if category == "action":
             event, init = by["event"], by["Init"]
@@ -54,7 +58,8 @@ def markdown(directory: Path | None = None) -> str:
         else:
             entry = by[""]
             status, note = _cell(entry), _note(entry)
-        lines.append(f"| {category} | `{path}` | {'yes' if in_1_2 else 'no'} | {status} | {note} |")
+        written = EXPORTED.get(path, "-").replace("|", "\\|")
+        lines.append(f"| {category} | `{path}` | {'yes' if in_1_2 else 'no'} | {status} | {note} | {written} |")
     return "\n".join(lines) + "\n"
 
 

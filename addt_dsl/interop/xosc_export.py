@@ -77,6 +77,39 @@ __all__ = ["Export", "ExportError", "export_run", "SIDECAR_FORMAT", "SIDECAR_PAR
            "LIGHTS_GROUP", "lamps_of", "lamp_state", "state_of_lamps"]
 
 
+# The OpenSCENARIO elements an export writes (schema paths as docs/osc_schema.py names them),
+# each with the `.addt` constructs that write it: the export column of docs/openscenario.md's
+# coverage table. tests/unit/interop/test_export_coverage.py exports a corpus and checks that
+# it writes exactly these.
+EXPORTED: dict[str, str] = {
+    "PrivateAction/TeleportAction": "every actor's start (Init)",
+    "PrivateAction/LongitudinalAction/SpeedAction": "start speeds; `cruise`, `brake` (absolute or relative target)",
+    "PrivateAction/LongitudinalAction/SpeedProfileAction": "`speed_profile`",
+    "PrivateAction/LongitudinalAction/LongitudinalDistanceAction": "`keep_gap`",
+    "PrivateAction/LateralAction/LaneChangeAction": "`lane_change` (absolute, or to another actor's lane)",
+    "PrivateAction/SynchronizeAction": "`synchronize`",
+    "PrivateAction/RoutingAction/AssignRouteAction": "`route ...` of an actor",
+    "PrivateAction/RoutingAction/FollowTrajectoryAction": "`trajectory` (road or world coordinates)",
+    "PrivateAction/ControllerAction/AssignControllerAction": "behaviours without an OpenSCENARIO action (`idm`, "
+                                                            "`overtake`, `walk`, ...): a named controller",
+    "PrivateAction/VisibilityAction": "the anchor of a `sequence`/`parallel` group (no effect)",
+    "GlobalAction/EnvironmentAction": "`environment { }` and its steps",
+    "GlobalAction/InfrastructureAction/TrafficSignalAction/TrafficSignalStateAction": "`light C state S`",
+    "GlobalAction/InfrastructureAction/TrafficSignalAction/TrafficSignalControllerAction": "`light C state program`",
+    "ByValueCondition/SimulationTimeCondition": "`at T`, `after T`, the duration",
+    "ByValueCondition/StoryboardElementStateCondition": "`started(...)`, `ended(...)`, steps after others",
+    "ByValueCondition/ParameterCondition": "a condition with no OpenSCENARIO form (a parameter the side file sets)",
+    "ByValueCondition/TrafficSignalCondition": "`light(C) == S`",
+    "ByEntityCondition/EntityCondition/RelativeDistanceCondition": "`distance(a, b)`, `gap(a, b)` compared",
+    "ByEntityCondition/EntityCondition/SpeedCondition": "`speed(a)` compared",
+    "ByEntityCondition/EntityCondition/TimeToCollisionCondition": "`ttc(a, b)` compared",
+    "ByEntityCondition/EntityCondition/TraveledDistanceCondition": "`travelled(a)` compared",
+    "LanePosition": "start positions",
+    "RoadPosition": "`trajectory s [...] t [...]`, `synchronize` targets",
+    "WorldPosition": "`trajectory x [...] y [...]`",
+}
+
+
 def lamps_of(sig_type: str, subtype: str = "") -> tuple[str, ...]:
     """The lamp colours of an OpenDRIVE signal of this type and subtype, top to bottom."""
     if subtype not in ("", "-1") and f"{sig_type}.{subtype}" in LAMPS:
