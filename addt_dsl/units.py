@@ -145,6 +145,11 @@ def to_si(value: float, symbol: str | None) -> tuple[float, Dim]:
     return float(value) * unit.factor, unit.dim
 
 
+def from_si(value_si: float, symbol: str) -> float:
+    """An SI value in unit `symbol` (20 m/s -> 72 for `km/h`): the inverse of `to_si`."""
+    return float(value_si) / lookup(symbol).factor
+
+
 # A literal with more significant digits than this is float noise of arithmetic
 # (`3.8000000000000003`, `13.88888888888889` for 50 km/h), not a value anyone wrote.
 NOISE_DIGITS = 12

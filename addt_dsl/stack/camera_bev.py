@@ -30,7 +30,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from addt_dsl.stack.bev_grid import CAMERA_BEV_SITES, CLASSES, GRID, decode
-from addt_dsl.stack.learned import BevDetector, load_weights, one_intra_op_thread
+from addt_dsl.stack.learned import BevDetector, boxes_to_world, load_weights, one_intra_op_thread
 from addt_dsl.stack.nodes import Obj
 from addt_dsl.stack.rig_lift import FEATURE_STRIDE, LIFT_HEIGHTS_M, lift_table, position_channels
 from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
@@ -131,16 +131,7 @@ class CameraBevPerception(ConvTensorSites):
     # ---- the node
     def run(self, frame, world, sensor, ego_pose, corrupt) -> list[Obj]:
         boxes = self.detect(frame.data["images"], self.geometry(sensor))
-        x, y, heading, _ = ego_pose
-        cos_h, sin_h = math.cos(heading), math.sin(heading)
-        objs = []
-        for bx, by, bh, length, width, conf, cls in boxes.tolist():
-            px = corrupt("perception.x", bx)
-            py = corrupt("perception.y", by)
-            objs.append(Obj(x + cos_h * px - sin_h * py, y + sin_h * px + cos_h * py, heading + bh,
-                            math.nan, math.nan, length, width, conf,
-                            kind=CLASSES[int(cls)] if 0 <= cls < len(CLASSES) else ""))
-        return objs
+        return boxes_to_world(boxes, ego_pose, corrupt)
 
     def detect(self, images: np.ndarray, geometry: RigGeometry) -> np.ndarray:
         """(cameras, H, W, 3) images → (N, 7) boxes in the vehicle frame: x, y, heading,

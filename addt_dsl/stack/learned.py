@@ -42,7 +42,7 @@ from torch import nn
 
 from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CLASSES, GRID, LAYER_SITES, build_grid_region, decode,
                                      sensor_points_to_vehicle)
-from addt_dsl.stack.nodes import Obj
+from addt_dsl.stack.nodes import Obj, vehicle_to_world
 from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
 
 WEIGHTS_PATH = Path(__file__).with_name("perception_weights.pt")
@@ -89,6 +89,20 @@ class BevDetector(nn.Module):
     def layers(self) -> dict[str, nn.Conv2d]:
         named = dict(self.named_modules())
         return {name: named[name] for name in self.sites}
+
+
+def boxes_to_world(boxes: np.ndarray, ego_pose, corrupt) -> list[Obj]:
+    """A detector's (N, 7) vehicle-frame boxes (x, y, heading, length, width, confidence,
+    class index into `bev_grid.CLASSES`) as objects in the world, the ego at `ego_pose`;
+    `corrupt` sees each box's position first (the `perception.x`/`.y` fault sites)."""
+    heading = ego_pose[2]
+    objs = []
+    for bx, by, bh, length, width, conf, cls in boxes.tolist():
+        px = corrupt("perception.x", bx)
+        py = corrupt("perception.y", by)
+        objs.append(Obj(*vehicle_to_world(ego_pose, px, py), heading + bh, math.nan, math.nan, length, width, conf,
+                        kind=CLASSES[int(cls)] if 0 <= cls < len(CLASSES) else ""))
+    return objs
 
 
 _CACHE: dict[Path, tuple[dict, dict]] = {}
@@ -584,16 +598,7 @@ class LearnedPerception(ConvTensorSites):
         nominal = sensor.nominal
         pts = sensor_points_to_vehicle(points, nominal) if len(points) else np.zeros((0, 3))
         boxes = self.detect(pts, (nominal.x, nominal.y))
-        x, y, heading, _ = ego_pose
-        cos_h, sin_h = math.cos(heading), math.sin(heading)
-        objs = []
-        for bx, by, bh, length, width, conf, cls in boxes.tolist():
-            px = corrupt("perception.x", bx)
-            py = corrupt("perception.y", by)
-            objs.append(Obj(x + cos_h * px - sin_h * py, y + sin_h * px + cos_h * py, heading + bh,
-                            math.nan, math.nan, length, width, conf,
-                            kind=CLASSES[int(cls)] if 0 <= cls < len(CLASSES) else ""))
-        return objs
+        return boxes_to_world(boxes, ego_pose, corrupt)
 
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
         """Vehicle-frame points → (N, 7) boxes: x, y, heading, length, width, confidence,

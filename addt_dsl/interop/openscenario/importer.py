@@ -195,7 +195,7 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                         fields["stack"] = ClausePlan(keyword="stack", name="bev",
                                                      settings={"cruise_speed": E.Num(value=round(limit, 6))})
                         self.approx(info["el"], f"the ego starts standing: the stack cruises at its road's speed "
-                                                f"limit, {limit * 3.6:.4g} km/h")
+                                                f"limit, {units.from_si(limit, 'km/h'):.4g} km/h")
                 if not sc and not fields.get("route"):
                     # Without a route the ego leaves the map where its road ends (a `left_road`
                     # event): give it the way straight on, as far as it can drive in the run.
