@@ -40,6 +40,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from addt_dsl.lru import LruCache
 from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CLASSES, GRID, LAYER_SITES, build_grid_region, decode,
                                      sensor_points_to_vehicle)
 from addt_dsl.stack.nodes import Obj, vehicle_to_world
@@ -105,17 +106,20 @@ def boxes_to_world(boxes: np.ndarray, ego_pose, corrupt) -> list[Obj]:
     return objs
 
 
-_CACHE: dict[Path, tuple[dict, dict]] = {}
+WEIGHTS_CACHE_SIZE = 4  # weight files kept per process (this detector's, the camera network's, a test's)
+_WEIGHTS: LruCache[Path, tuple[dict, dict]] = LruCache(WEIGHTS_CACHE_SIZE)
 
 
 def load_weights(path: Path = WEIGHTS_PATH) -> tuple[dict, dict]:
     """(state dict, metadata) from a weights file (this detector's or another's, e.g. the
     camera BEV network's), cached per process (read-only: copy it)."""
     path = Path(path)
-    if path not in _CACHE:
+    loaded = _WEIGHTS.get(path)
+    if loaded is None:
         blob = torch.load(path, map_location="cpu", weights_only=True)
-        _CACHE[path] = (blob["state_dict"], blob.get("meta", {}))
-    return _CACHE[path]
+        loaded = (blob["state_dict"], blob.get("meta", {}))
+        _WEIGHTS.put(path, loaded)
+    return loaded
 
 
 def load_model(path: Path = WEIGHTS_PATH, device: str = "cpu") -> tuple[BevDetector, dict]:
@@ -629,13 +633,15 @@ class LearnedPerception(ConvTensorSites):
         self._forward.invalidate()  # the backgrounds came from the old weights
 
 
-_SHAPES: dict[tuple, dict[str, tuple[int, ...]]] = {}
+SHAPES_CACHE_SIZE = 16  # (device, layer widths) -> shapes: a few models per process
+_SHAPES: LruCache[tuple, dict[str, tuple[int, ...]]] = LruCache(SHAPES_CACHE_SIZE)
 
 
 def _activation_shapes(model: BevDetector, device: str) -> dict[str, tuple[int, ...]]:
     """Output shape of every named layer at batch 1 (one dry run, cached per device and widths)."""
     key = (device, tuple(layer.out_channels for layer in model.layers().values()))
-    if key not in _SHAPES:
+    shapes = _SHAPES.get(key)
+    if shapes is None:
         shapes = {}
         hooks = [layer.register_forward_hook(
             lambda m, i, o, name=name: shapes.__setitem__(name, tuple(o.shape)))
@@ -644,5 +650,5 @@ def _activation_shapes(model: BevDetector, device: str) -> dict[str, tuple[int, 
             model(torch.zeros((1, *GRID.shape), device=device))
         for h in hooks:
             h.remove()
-        _SHAPES[key] = shapes
-    return _SHAPES[key]
+        _SHAPES.put(key, shapes)
+    return shapes
