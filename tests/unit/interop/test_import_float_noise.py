@@ -1,0 +1,57 @@
+"""Numbers the importer adds up from a file's decimals are the decimals' sum, not float
+noise: a stop trigger at 3.6 s with a 0.2 s delay ends the run at 3.8 s (float addition:
+3.8000000000000003, printed back as that), signal phases of 0.1 s and 0.2 s make a 0.3 s
+cycle. Whatever is printed reads back to the same float."""
+
+from fractions import Fraction
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from addt_dsl import units
+from addt_dsl.compiler import compile_file
+from addt_dsl.interop.openscenario.importer import import_xosc
+from tests.unit.interop.test_xosc_import import ESMINI, SMALL, _lights_file, _phase
+
+STOP = """<StopTrigger><ConditionGroup><Condition name="end" delay="0.2" conditionEdge="rising"><ByValueCondition>
+      <SimulationTimeCondition value="3.6" rule="greaterThan"/></ByValueCondition></Condition></ConditionGroup>
+    </StopTrigger>"""
+CAR = ('<Vehicle name="car" vehicleCategory="car"><BoundingBox><Center x="1.4" y="0" z="0.8"/>'
+       '<Dimensions width="2" length="5" height="1.5"/></BoundingBox><Performance maxSpeed="70" '
+       'maxAcceleration="10" maxDeceleration="10"/><Axles><FrontAxle maxSteering="0.5" wheelDiameter="0.8" '
+       'trackWidth="1.68" positionX="2.98" positionZ="0.4"/><RearAxle maxSteering="0" wheelDiameter="0.8" '
+       'trackWidth="1.68" positionX="0" positionZ="0.4"/></Axles><Properties/></Vehicle>')
+
+
+def test_a_stop_time_plus_its_delay_is_their_decimal_sum(tmp_path):
+    (tmp_path / "r.xodr").write_text((ESMINI / "xodr" / "straight_500m.xodr").read_text())
+    (tmp_path / "s.xosc").write_text(SMALL.replace("ENTITY", CAR).replace("<StopTrigger/>", STOP))
+    got = import_xosc(tmp_path / "s.xosc", lenient=True)
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    assert got.plan.duration_s == 3.8
+    assert "duration 3.8 s" in got.text and "3.8000000000000003" not in got.text
+    (tmp_path / "s.addt").write_text(got.text)
+    again = compile_file(tmp_path / "s.addt")
+    assert again.ok, again.diagnostics
+    assert again.plan.duration_s == got.plan.duration_s
+
+
+def test_signal_phases_sum_to_their_decimal_cycle(tmp_path):
+    phases = _phase("stop", 0.2, "on;off;off") + _phase("go", 0.1, "off;off;on") + _phase("go2", 0.2, "off;off;on") \
+        + _phase("wait", 0.1, "off;on;off")
+    got = _lights_file(tmp_path, phases)
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    (ctl,) = got.plan.controllers
+    # green 0.1 + 0.2 = 0.3 s (float addition: 0.30000000000000004), its run starting 0.2 s in.
+    assert [e.value for e in (ctl.green_s, ctl.yellow_s, ctl.red_s, ctl.offset_s)] == [0.3, 0.1, 0.2, 0.2]
+    assert "0.30000000000000004" not in got.text
+
+
+DECIMALS = st.decimals(min_value=-1e6, max_value=1e6, places=4, allow_nan=False, allow_infinity=False)
+
+
+@given(st.lists(DECIMALS, max_size=8))
+def test_decimal_sum_is_the_sum_of_the_decimals_rounded_once(values):
+    floats = [float(v) for v in values]
+    exact = sum((Fraction(v) for v in values), Fraction(0))
+    assert units.decimal_sum(floats) == float(exact)
