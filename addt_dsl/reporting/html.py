@@ -18,7 +18,7 @@ from pathlib import Path
 
 from addt_dsl.limits import DEFAULT_ANIMATION_BUDGET_S
 from addt_dsl.reporting import plots
-from addt_dsl.reporting.atomic import write_text
+from addt_dsl.atomic import write_text
 from addt_dsl.reporting.tables import (OUTCOME_CLASSES, cell_stats, fmt_number, fmt_param, latency_budget_s,
                                        success_pivot)
 from addt_dsl.reporting.summary import store_summary
