@@ -224,7 +224,7 @@ def _executor(args):
     if args.executor == "inline":
         from addt_dsl.runtime.executor import InlineExecutor
 
-        return InlineExecutor()
+        return InlineExecutor(timeout_s=args.timeout, memory_limit_mb=args.memory_limit)
     if args.executor == "ray":
         from addt_dsl.runtime.ray_executor import RayExecutor, ray_available
 

@@ -4,6 +4,7 @@ executor gives each run the same time bound."""
 
 from __future__ import annotations
 
+import os
 import time
 
 import pytest
@@ -75,3 +76,32 @@ def test_the_inline_executor_bounds_each_runs_time(monkeypatch):
     monkeypatch.undo()  # the default bound: the real run finishes within it
     (ok,) = list(ex.InlineExecutor().imap([(0, spec)]))
     assert ok.status == "ok"
+
+
+def _grows(spec, seq=-1, worker=""):
+    held = []
+    for _ in range(400):  # up to 4 GB, 10 MB every 5 ms, each page written (resident)
+        held.append(b"\x01" * (10 * 2**20))
+        time.sleep(0.005)
+    raise AssertionError("not stopped at its memory limit")
+
+
+@pytest.mark.skipif(ex.rss_mb(os.getpid()) is None, reason="needs /proc")
+def test_the_inline_executor_bounds_the_memory_a_run_adds():
+    spec = expand(compile_source(SRC, "short.addt").plan).specs[0]
+    before = ex.rss_mb(os.getpid())
+    (record,) = list(ex.InlineExecutor(_grows, memory_limit_mb=100).imap([(0, spec)]))
+    assert record.status == "memory" and "over the 100 MB limit" in record.error, record.error
+    import signal
+
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+    assert ex.rss_mb(os.getpid()) < before + 100  # what the run held was freed
+    # `--executor inline` passes the command's --memory-limit and --timeout on.
+    from addt_dsl.cli import _executor
+
+    class Args:  # the parsed command line, as far as `_executor` reads it
+        executor, timeout, memory_limit = "inline", 7.0, 123.0
+    got = _executor(Args())
+    assert (got.timeout_s, got.memory_limit_mb) == (7.0, 123.0)
+    single = ex.local_executor(1, _grows, memory_limit_mb=50, timeout_s=9.0)
+    assert isinstance(single, ex.InlineExecutor) and (single.timeout_s, single.memory_limit_mb) == (9.0, 50)
