@@ -55,3 +55,28 @@ def test_decimal_sum_is_the_sum_of_the_decimals_rounded_once(values):
     floats = [float(v) for v in values]
     exact = sum((Fraction(v) for v in values), Fraction(0))
     assert units.decimal_sum(floats) == float(exact)
+
+
+def test_speed_profile_times_are_decimal_sums_of_the_entry_durations(tmp_path):
+    # esmini's speed-profile.xosc with entry durations 0.1, 0.2, 0.3 s: points at 0.1, 0.3, 0.6 s
+    # (float addition: 0.30000000000000004, 0.6000000000000001).
+    import shutil
+
+    (tmp_path / "xodr").mkdir()
+    shutil.copy(ESMINI / "xodr" / "straight_500m.xodr", tmp_path / "xodr")
+    shutil.copytree(ESMINI / "xosc" / "Catalogs", tmp_path / "xosc" / "Catalogs")
+    text = (ESMINI / "xosc" / "speed-profile.xosc").read_text()
+    for old, new in (('time="4.0" speed="10.0"', 'time="0.1" speed="10.0"'),
+                     ('time="4.0" speed="4.0"', 'time="0.2" speed="4.0"'),
+                     ('time="2.0" speed="8.0"', 'time="0.3" speed="8.0"')):
+        assert old in text
+        text = text.replace(old, new)
+    (tmp_path / "xosc" / "sp.xosc").write_text(text)
+    got = import_xosc(tmp_path / "xosc" / "sp.xosc", root=tmp_path, lenient=True, ego="scripted")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    profiles = [c for a in got.plan.actors() for c in [*a.behaviors, *(t.clause for t in a.triggers)]
+                if c.name == "speed_profile"]
+    assert profiles
+    for clause in profiles:
+        assert [v.value for v in clause.settings["times"]] == [0.0, 0.1, 0.3, 0.6]
+    assert "0.30000000000000004" not in got.text and "0.6000000000000001" not in got.text
