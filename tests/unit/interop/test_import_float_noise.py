@@ -80,3 +80,18 @@ def test_speed_profile_times_are_decimal_sums_of_the_entry_durations(tmp_path):
     for clause in profiles:
         assert [v.value for v in clause.settings["times"]] == [0.0, 0.1, 0.3, 0.6]
     assert "0.30000000000000004" not in got.text and "0.6000000000000001" not in got.text
+
+
+def test_a_speed_limit_in_km_h_is_imported_exactly(tmp_path):
+    # A map's 50 km/h is 13.88888888888889 m/s: kept exactly (the printer writes `50 km/h`),
+    # not rounded to 13.888889 m/s, a value no one wrote.
+    xodr = (ESMINI / "xodr" / "straight_500m.xodr").read_text()
+    head = '<road name="" length="5.0000000000000000e+02" id="1" junction="-1">'
+    assert head in xodr
+    xodr = xodr.replace(head, head + '<type s="0" type="town"><speed max="50" unit="km/h"/></type>')
+    (tmp_path / "r.xodr").write_text(xodr)
+    (tmp_path / "s.xosc").write_text(SMALL.replace("ENTITY", CAR))
+    got = import_xosc(tmp_path / "s.xosc", lenient=True)
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    assert got.plan.ego.stack.settings["cruise_speed"].value == units.to_si(50, "km/h")[0]
+    assert "cruise_speed 50 km/h" in got.text
