@@ -85,7 +85,7 @@ def cmd_schema(args) -> int:
 
     text = json.dumps(plan_json_schema(), indent=2) + "\n"
     if args.write:
-        from addt_dsl.reporting.atomic import write_text
+        from addt_dsl.atomic import write_text
 
         if not Path(args.write).parent.is_dir():  # a mistyped path: said, not created
             raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), args.write)
@@ -224,7 +224,7 @@ def _executor(args):
     if args.executor == "inline":
         from addt_dsl.runtime.executor import InlineExecutor
 
-        return InlineExecutor()
+        return InlineExecutor(timeout_s=args.timeout, memory_limit_mb=args.memory_limit)
     if args.executor == "ray":
         from addt_dsl.runtime.ray_executor import RayExecutor, ray_available
 
@@ -426,7 +426,7 @@ def cmd_trace(args) -> int:
     print_trace(run, table, events)
     for path, write in ((args.csv, "to_csv"), (args.parquet, "to_parquet")):
         if path:
-            from addt_dsl.reporting.atomic import atomic_path
+            from addt_dsl.atomic import atomic_path
 
             for frame, target in ((table, path), (events, events_path(path))):
                 with atomic_path(target) as tmp:
@@ -438,7 +438,7 @@ def cmd_trace(args) -> int:
         n = osi_trace.write(run.spec, run.trace, args.osi)
         print(f"wrote {args.osi} ({n} OSI SensorViews)")
     if args.plot:
-        from addt_dsl.reporting.atomic import write_bytes
+        from addt_dsl.atomic import write_bytes
         from addt_dsl.reporting.plots import run_signals_png
 
         write_bytes(args.plot, run_signals_png(table, run.verdicts, f"{run.spec.plan.name} {record.run_id}",
@@ -481,7 +481,7 @@ def cmd_map(args) -> int:
                              "(raise it with --max lanes_per_section=N)")
     print(describe(network, Path(args.file).name), end="")
     if args.png:
-        from addt_dsl.reporting.atomic import write_bytes
+        from addt_dsl.atomic import write_bytes
 
         write_bytes(args.png, map_png(network, Path(args.file).name))
         print(f"wrote {args.png}")

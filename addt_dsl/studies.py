@@ -135,8 +135,8 @@ def impact(trace) -> dict:
     k = min(int(round(first.time_s / trace.period_s)), len(trace.actors["ego"].speed) - 1)
     ego, obj = trace.actors["ego"], trace.actors[other]
     along = obj.speed[k] * math.cos(obj.heading[k] - ego.heading[k])
-    return {"collided": True, "other": other, "impact_kmh": float(ego.speed[k]) * 3.6,
-            "relative_kmh": float(ego.speed[k] - along) * 3.6}
+    return {"collided": True, "other": other, "impact_kmh": units.from_si(float(ego.speed[k]), "km/h"),
+            "relative_kmh": units.from_si(float(ego.speed[k] - along), "km/h")}
 
 
 def impact_table(rows: Sequence[dict], by: Sequence[str]):
@@ -245,7 +245,7 @@ def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
         speeds = {p.name for p in plan.params if p.dimension == "speed" and p.name in by}
         for row in rows:
             for name in speeds:
-                row[f"{name} [km/h]"] = round(row[name] * 3.6, 6)
+                row[f"{name} [km/h]"] = round(units.from_si(row[name], "km/h"), 6)
         by = [f"{b} [km/h]" if b in speeds else b for b in by]
         print(impact_table(rows, by).to_string(float_format=lambda x: f"{x:.2f}"))
     else:

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from addt_dsl.confine import Refused, confine
-from addt_dsl.reporting.atomic import write_text
+from addt_dsl.atomic import write_text
 from addt_dsl.reporting.tables import fmt_param, terminal
 from addt_dsl.stats import wilson_interval
 from addt_dsl.reporting.summary import store_summary

@@ -9,7 +9,9 @@ exponents over (length, time, mass, angle), so arithmetic in formulas
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
+from fractions import Fraction
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,6 +147,11 @@ def to_si(value: float, symbol: str | None) -> tuple[float, Dim]:
     return float(value) * unit.factor, unit.dim
 
 
+def from_si(value_si: float, symbol: str) -> float:
+    """An SI value in unit `symbol` (20 m/s -> 72 for `km/h`): the inverse of `to_si`."""
+    return float(value_si) / lookup(symbol).factor
+
+
 # A literal with more significant digits than this is float noise of arithmetic
 # (`3.8000000000000003`, `13.88888888888889` for 50 km/h), not a value anyone wrote.
 NOISE_DIGITS = 12
@@ -154,6 +161,21 @@ def significant_digits(text: str) -> int:
     """Significant digits of a decimal literal (`0.0012` -> 2, `1.5e-07` -> 2, `13.88888888888889` -> 16)."""
     mantissa = text.lower().lstrip("+-").split("e")[0].replace(".", "").lstrip("0")
     return len(mantissa.rstrip("0")) or 1
+
+
+def decimal_fraction(value: float) -> Fraction:
+    """A finite float as the decimal it reads as (its shortest repr: 0.1 -> 1/10), exactly."""
+    return Fraction(repr(float(value)))
+
+
+def decimal_sum(values: Iterable[float]) -> float:
+    """The sum of numbers read from a file, as the decimals they were written as, rounded to
+    a float once: 3.6 + 0.2 is 3.8 (float addition gives 3.8000000000000003, noise that
+    would be printed back as written). Not finite: the float sum."""
+    values = [float(v) for v in values]
+    if not all(math.isfinite(v) for v in values):
+        return math.fsum(values) if not any(math.isnan(v) for v in values) else math.nan
+    return float(sum((decimal_fraction(v) for v in values), Fraction(0)))
 
 
 def number_literal(value: float) -> str:

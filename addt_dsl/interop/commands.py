@@ -157,7 +157,7 @@ def cmd_import(args) -> int:
     if got.text is None:
         return EXIT_USAGE
     if args.output:
-        from addt_dsl.reporting.atomic import write_text
+        from addt_dsl.atomic import write_text
 
         out = Path(args.output)
         write_text(out, got.text)

@@ -48,6 +48,7 @@ from scenariogeneration import xosc
 
 from addt_dsl import expr as E
 from addt_dsl import units
+from addt_dsl.atomic import write_text
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, creation_date, road_file, xml_text
 from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
@@ -979,8 +980,9 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
     xosc_path = out / f"{stem}.xosc"
     xodr_path = out / roads.name
     sidecar_path = out / f"{stem}.addt.json"
-    xosc_path.write_text(xml_text(scenario.get_element()))
-    xodr_path.write_text(roads.text)
-    sidecar_path.write_text(json.dumps(sidecar, indent=2) + "\n")
+    # Atomic, and a failed write (a full disk) names the file.
+    write_text(xosc_path, xml_text(scenario.get_element()))
+    write_text(xodr_path, roads.text)
+    write_text(sidecar_path, json.dumps(sidecar, indent=2) + "\n")
     return Export(xosc_path, xodr_path, sidecar_path, run.carried)
 

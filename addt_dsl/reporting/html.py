@@ -18,7 +18,7 @@ from pathlib import Path
 
 from addt_dsl.limits import DEFAULT_ANIMATION_BUDGET_S
 from addt_dsl.reporting import plots
-from addt_dsl.reporting.atomic import write_text
+from addt_dsl.atomic import write_text
 from addt_dsl.reporting.tables import (OUTCOME_CLASSES, cell_stats, fmt_number, fmt_param, latency_budget_s,
                                        success_pivot)
 from addt_dsl.reporting.summary import store_summary
@@ -165,13 +165,15 @@ def build_report(store, path: str | Path, max_animations: int = DEFAULT_MAX_ANIM
     table_rows = collector.rows if collector.total <= max_rows else collector.failing_rows
     animations, not_animated = _animations(store, collector.animation_candidates(), animation_budget_s)
     html = _environment().get_template("report.html.j2").render(
-        plan=plan, totals=totals, store_path=str(store.path), generated=_dt.datetime.now().isoformat(timespec="seconds"),
+        plan=plan, totals=totals, store_path=str(store.path),
+        generated=_dt.datetime.now().isoformat(timespec="seconds"),
         cells=cells, pivot=pivot, figures=figures, oracles=[o for o in plan.oracles],
         rows=table_rows, rows_truncated=collector.total > len(table_rows),
         budget_ms=None if budget_s is None else budget_s * 1e3, outcome_classes=OUTCOME_CLASSES,
         classified=bool(totals.get("outcomes")),
         worst_latency=latency.worst, animations=animations, not_animated=not_animated,
-        animation_budget_s=animation_budget_s, max_animations=max_animations, cell_params=sorted({k for r in table_rows for k in r.cell}),
+        animation_budget_s=animation_budget_s, max_animations=max_animations,
+        cell_params=sorted({k for r in table_rows for k in r.cell}),
         fmt_param=fmt_param)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

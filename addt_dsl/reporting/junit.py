@@ -15,7 +15,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 from addt_dsl.errors import is_error_status
-from addt_dsl.reporting.atomic import atomic_path
+from addt_dsl.atomic import atomic_path
 from addt_dsl.reporting.tables import fmt_number, fmt_param
 
 

@@ -108,7 +108,8 @@ class LatencyStats:
                 nodes[node]["share_at_or_over_budget"] = over / total
         by_objects = {str(n): {"mean_ms": acc[1] / acc[0] * 1e3, "max_ms": acc[2] * 1e3, "ticks": acc[0]}
                       for n, acc in sorted(self.by_objects.items()) if acc[0]}
-        return {"budget_ms": None if budget_s is None else budget_s * 1e3, "bin_ms": LATENCY_BIN_S * 1e3, "nodes": nodes, "e2e_by_objects": by_objects}
+        return {"budget_ms": None if budget_s is None else budget_s * 1e3, "bin_ms": LATENCY_BIN_S * 1e3,
+                "nodes": nodes, "e2e_by_objects": by_objects}
 
 
 def latency_distributions(hist: dict[str, list[int]], budget_s: float | None = 0.1) -> str | None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from addt_dsl.reporting.atomic import atomic_path, write_text
+from addt_dsl.atomic import atomic_path, write_text
 from addt_dsl.reporting.plots import LatencyStats
 from addt_dsl.reporting.tables import latency_budget_s, runs_layout, runs_table, runs_table_chunks, summary
 from addt_dsl.runtime.store import ResultStore

@@ -123,8 +123,8 @@ def runs_table_chunks(records: Iterable, layout: tuple[list[str], dict[str, str]
 
 def summary(plan: ScenarioPlan, records: Iterable, rejected: Counter | None = None,
             cells: Iterable | None = None) -> dict:
-    """Counts over runs: passed, failed, errors (runs the tool did not finish), failures per oracle (a crashed, timed-out or
-    out-of-memory run counts under its status), runs with a violated `warn` oracle
+    """Counts over runs: passed, failed, errors (runs the tool did not finish), failures per
+    oracle (a crashed, timed-out or out-of-memory run counts under its status), runs with a violated `warn` oracle
     (`warned`, whether they passed or not) and warnings per oracle. For classified runs (`addtc --classify`)
     also `outcomes` (runs per outcome class) and, for a sweep with grid axes,
     `outcomes_per_cell` over `cells` (the classified records; default `records`)."""

@@ -35,7 +35,8 @@ class XodrError(ValueError):
     unknown) and ``source`` the file name.
     """
 
-    def __init__(self, message: str, element: Optional[str] = None, line: Optional[int] = None, source: str = "<string>"):
+    def __init__(self, message: str, element: Optional[str] = None, line: Optional[int] = None,
+                 source: str = "<string>"):
         self.message = message
         self.element = element
         self.line = line

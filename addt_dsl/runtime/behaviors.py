@@ -229,7 +229,8 @@ class IdmParams:
 
     @classmethod
     def of(cls, p: dict) -> IdmParams:
-        return cls(max(p["speed"], 0.1), p["accel"], p["time_gap"], p["min_gap"], 2.0 * math.sqrt(p["accel"] * p["decel"]))
+        return cls(max(p["speed"], 0.1), p["accel"], p["time_gap"], p["min_gap"],
+                   2.0 * math.sqrt(p["accel"] * p["decel"]))
 
 
 class _Floats:

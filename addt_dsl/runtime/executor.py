@@ -16,7 +16,8 @@ order. Three executors:
   its run recorded as `crashed`. The worker is replaced and the sweep goes on. Workers are
   also recycled after `max_tasks_per_child` runs, like `multiprocessing.Pool`'s
   `maxtasksperchild`, to bound slow leaks.
-- `InlineExecutor`: in this process, no guards; for debugging.
+- `InlineExecutor`: in this process, one run after another, with the same time and memory
+  bounds checked by a timer; for debugging and single-job searches.
 - `addt_dsl.runtime.ray_executor.RayExecutor`: the same on a Ray cluster.
 """
 
@@ -162,17 +163,32 @@ class _OverTime(BaseException):
     exceptions as crashes; this one is the bound, recorded as `timeout`)."""
 
 
+class _OverMemory(BaseException):
+    """Raised into an inline run whose memory passed the limit (recorded as `memory`)."""
+
+    def __init__(self, grown_mb: float):
+        super().__init__(grown_mb)
+        self.grown_mb = grown_mb
+
+
 class InlineExecutor:
-    """Runs in the calling process, one after another, for debugging. Each run has the time
-    bound of a sweep worker's (`timeout_s`, "auto" by default; SIGALRM, so on Unix in the
-    main thread only); memory is not bounded (a limit would bind this process)."""
+    """Runs in the calling process, one after another (debugging; a search or study on one
+    job). Each run has a sweep worker's bounds, checked every `_GUARD_POLL_S` by a SIGALRM
+    timer (on Unix, in the main thread): its time bound (`timeout_s`, "auto" by default) and
+    `memory_limit_mb` of resident memory that the run may add to this process (a worker's
+    limit counts the whole worker; here what the process held before the run, its store
+    and search state, is not the run's). A run past either is stopped where it is and
+    recorded as `timeout` or `memory`; what it allocated is freed as it unwinds. A single
+    call into C that allocates past the limit cannot be stopped midway (a worker is killed)."""
 
     name = "inline"
     workers = 1
 
-    def __init__(self, run_fn: Callable | None = None, timeout_s: float | str | None = AUTO):
+    def __init__(self, run_fn: Callable | None = None, timeout_s: float | str | None = AUTO,
+                 memory_limit_mb: float | None = DEFAULT_MEMORY_LIMIT_MB):
         self.run_fn = run_fn  # as LocalExecutor's
         self.timeout_s = timeout_s
+        self.memory_limit_mb = memory_limit_mb if memory_limit_mb and memory_limit_mb > 0 else None
 
     def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunResult]:
         for seq, spec in items:
@@ -181,19 +197,33 @@ class InlineExecutor:
     def _bounded(self, spec: RunSpec, seq: int) -> RunResult:
         run = self.run_fn or run_spec
         bound_s = run_time_bound_s(spec, self.timeout_s)
+        limit_mb = self.memory_limit_mb
         import threading
 
-        if (bound_s is None or not hasattr(signal, "setitimer")
+        pid = os.getpid()
+        base_mb = rss_mb(pid) if limit_mb is not None else None
+        if base_mb is None:
+            limit_mb = None  # no /proc: the memory is not known
+        if ((bound_s is None and limit_mb is None) or not hasattr(signal, "setitimer")
                 or threading.current_thread() is not threading.main_thread()):
             return run(spec, seq, worker="inline")
-
-        def over(signum, frame):
-            raise _OverTime()
-
         t0 = time.monotonic()
-        previous = signal.signal(signal.SIGALRM, over)
+
+        def guard(signum, frame):
+            if bound_s is not None and time.monotonic() - t0 >= bound_s:
+                raise _OverTime()
+            if limit_mb is not None:
+                now_mb = rss_mb(pid)
+                if now_mb is not None and now_mb - base_mb > limit_mb:
+                    raise _OverMemory(now_mb - base_mb)
+
+        previous = signal.signal(signal.SIGALRM, guard)
+        outer = (0.0, 0.0)
         try:
-            signal.setitimer(signal.ITIMER_REAL, bound_s)
+            # The first alarm at the time bound when it comes before the first poll.
+            first = min(bound_s, _GUARD_POLL_S) if limit_mb is not None and bound_s is not None \
+                else (bound_s if limit_mb is None else _GUARD_POLL_S)
+            outer = signal.setitimer(signal.ITIMER_REAL, first, _GUARD_POLL_S)
             try:
                 return run(spec, seq, worker="inline")
             finally:
@@ -201,8 +231,14 @@ class InlineExecutor:
         except _OverTime:
             return RunResult.unfinished(spec, "timeout", f"run exceeded the {bound_s:g} s timeout",
                                         time.monotonic() - t0, seq=seq, worker="inline")
+        except _OverMemory as over:
+            return RunResult.unfinished(spec, "memory", f"resident memory grew {over.grown_mb:.0f} MB in the run, "
+                                        f"over the {limit_mb:.0f} MB limit", time.monotonic() - t0, seq=seq,
+                                        worker="inline")
         finally:
             signal.signal(signal.SIGALRM, previous)
+            if outer[0] > 0:  # an alarm the caller had set (pytest-timeout's): it goes on, less the run's time
+                signal.setitimer(signal.ITIMER_REAL, max(outer[0] - (time.monotonic() - t0), 1e-6), outer[1])
 
     def close(self) -> None:
         pass
@@ -533,8 +569,9 @@ class LocalExecutor:
 def local_executor(jobs: int = 1, run_fn: Callable | None = None, **options):
     """In this process for one job (nothing to supervise in parallel), else `jobs` guarded
     local workers: what the search, `--classify`'s golden runs and the studies run on."""
-    if jobs <= 1:
-        return InlineExecutor(run_fn)
+    if jobs <= 1:  # the same bounds in this process (`keep_workers` etc. are a pool's)
+        return InlineExecutor(run_fn, timeout_s=options.get("timeout_s", AUTO),
+                              memory_limit_mb=options.get("memory_limit_mb", DEFAULT_MEMORY_LIMIT_MB))
     return LocalExecutor(jobs, run_fn=run_fn, **options)
 
 

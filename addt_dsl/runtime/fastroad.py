@@ -65,7 +65,8 @@ class FastRoad:
         h = hs[i] + u * (hs[i + 1] - hs[i])
         if s > self.length:  # extrapolate straight past the end
             extra = s - self.length
-            x, y, h = self._x[-1] + extra * math.cos(self._h[-1]), self._y[-1] + extra * math.sin(self._h[-1]), self._h[-1]
+            h = self._h[-1]
+            x, y = self._x[-1] + extra * math.cos(h), self._y[-1] + extra * math.sin(h)
         elif s < 0.0:
             x, y, h = self._x[0] + s * math.cos(self._h[0]), self._y[0] + s * math.sin(self._h[0]), self._h[0]
         return x, y, h

@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from addt_dsl.lru import LruCache
 from addt_dsl.plan import RunSpec
 from addt_dsl.stats import wilson_interval
 from addt_dsl.runtime.execute import execute
@@ -54,6 +55,7 @@ OUTCOMES = ("masked", "silent", "detected", "hazard", "twin_failed")
 FAULT_OUTCOMES = ("masked", "silent", "detected", "hazard")
 # Differences below 1 µm, 1 µrad, 1 µm/s, 1 µm/s^2 are numerical ripples, not observable effects.
 TOLERANCE = 1e-6
+GOLDEN_MEMORY_SIZE = 4096  # golden fingerprints kept in memory per cache
 _EGO_FIELDS = ("x", "y", "heading", "speed")
 
 
@@ -120,7 +122,9 @@ class GoldenCache:
     the store read-only; `put` is the coordinator's."""
 
     def __init__(self, store_path: str | Path | None = None, *, readonly: bool = False):
-        self.memory: dict[str, Fingerprint] = {}
+        # The process-wide default cache lives as long as the process: its memory is bounded
+        # (the store keeps every fingerprint; a key dropped here is read back from it).
+        self.memory: LruCache[str, Fingerprint] = LruCache(GOLDEN_MEMORY_SIZE)
         self._tmp = None
         self._path = Path(store_path) if store_path is not None else None
         self.readonly = readonly
@@ -143,17 +147,19 @@ class GoldenCache:
         return self._store
 
     def get(self, key: str) -> Fingerprint | None:
-        if key in self.memory:
-            return self.memory[key]
+        fp = self.memory.get(key)
+        if fp is not None:
+            return fp
         db = self._db()
         data = db.blob(f"golden:{key}") if db is not None else None
         if data is None:
             return None
-        fp = self.memory[key] = Fingerprint.from_bytes(data)
+        fp = Fingerprint.from_bytes(data)
+        self.memory.put(key, fp)
         return fp
 
     def put(self, key: str, fp: Fingerprint) -> None:
-        self.memory[key] = fp
+        self.memory.put(key, fp)
         if not self.readonly:
             self._db().put_blob(f"golden:{key}", fp.to_bytes())
 

@@ -143,9 +143,9 @@ def plan_hash(plan: ScenarioPlan) -> str:
 def trace_stats(trace) -> dict:
     """Fixed-size summary of a trace for reports: latency histograms per node (bin index
     → ticks, bins of LATENCY_BIN_S) and e2e latency by object count (count → [ticks, sum,
-    max]); keys are strings so the summary is the same before and after JSON. Samples are clock ticks (sample-and-hold), so histograms
-    weigh latencies by how long they were in force; ticks before a node's first output
-    (latency 0) are left out."""
+    max]); keys are strings so the summary is the same before and after JSON. Samples are
+    clock ticks (sample-and-hold), so histograms weigh latencies by how long they were in
+    force; ticks before a node's first output (latency 0) are left out."""
     import numpy as np
 
     out: dict = {"latency_hist": {}, "latency_max_s": {}, "e2e_by_objects": {}}

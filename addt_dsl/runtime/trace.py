@@ -29,7 +29,9 @@ class ActorTrack:
     accel: np.ndarray
     yaw_rate: np.ndarray
     s: np.ndarray  # station along its road [m] (on a route: along the route, in driving direction)
-    t: np.ndarray  # lateral offset from the road reference line, left positive [m] (route: from the route lane's centre, driver's left positive)
+    # lateral offset from the road reference line, left positive [m] (route: from the route
+    # lane's centre, driver's left positive)
+    t: np.ndarray
     lane_offset: np.ndarray  # offset from the centre of the lane it started in / targets [m]
     steer: np.ndarray  # front wheel angle [rad]
     clearance: np.ndarray  # distance to the nearest other actor's box, negative = overlap [m]

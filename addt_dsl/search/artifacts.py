@@ -29,7 +29,7 @@ from addt_dsl.interop.xodr_export import ExportError
 from addt_dsl.interop.xosc_export import export_run
 from addt_dsl.plan import RunSpec
 from addt_dsl.printer import compile_pinned, print_spec, semantic_key, side_files
-from addt_dsl.reporting.atomic import write_text
+from addt_dsl.atomic import write_text
 from addt_dsl.search.outcome import evaluate
 
 

@@ -23,6 +23,7 @@ from addt_dsl.stack.bus import Bus
 from addt_dsl.stack.latency import load_models
 from addt_dsl.stack.nodes import (Controller, EgoBody, GroundTruthPerception, LatticePlanner, Obj,
                                   Tracker, time_to_cover)
+from addt_dsl.units import to_si
 from addt_dsl.vehicles import CAR
 
 CROSSING_SIN = 0.5  # an object whose box is turned more than 30 deg from the road ...
@@ -280,7 +281,7 @@ class BevStack(S.BevStack):
     YIELD_WAIT_CLEARANCE_M = 1.5
     YIELD_ACCEL = 1.5  # [m/s^2] below the planner's 2 m/s^2: the estimate errs long
     YIELD_COMMIT_DECEL = 4.0  # [m/s^2]
-    CLEAR_MAX_SPEED = 30.0 / 3.6  # [m/s] clearing a junction: up to its curve speed, at most this
+    CLEAR_MAX_SPEED = to_si(30.0, "km/h")[0]  # [m/s] clearing a junction: up to its curve speed, at most this
     YIELD_CLEARED_S = 0.5  # [s] an object that leaves the zone this long before the ego arrives is gone
     REACTION_S = 0.2  # [s] from the plan to the brakes' full effect
     YIELD_STEP_M = 0.5
@@ -463,7 +464,7 @@ def lidar_sight(settings: dict, mount, min_hits: int) -> float:
 
 
 def synthetic_objects(count: int, ego_pose) -> list[Obj]:
-    """`count` vehicles keeping pace with the ego, off the road on both sides.
+    """`count` vehicles of the catalogue car's size keeping pace with the ego, off the road on both sides.
 
     Deterministic in `count` (no randomness: same RunSpec, same workload): object k sits
     on side (-1)^k in one of six rows 12 m, 15.5 m, ... 29.5 m from the ego's centre line,
@@ -481,5 +482,5 @@ def synthetic_objects(count: int, ego_pose) -> list[Obj]:
         column = k // 12  # 0, +8, -8, +16, -16 m along, then the next 12 objects
         along = 8.0 * ((column + 1) // 2) * (1.0 if column % 2 else -1.0) + 4.0 * ((k // 2) % 2)
         out.append(Obj(x + c * along - s * lateral, y + s * along + c * lateral, heading,
-                       speed * c, speed * s, 4.5, 1.8))
+                       speed * c, speed * s, CAR.length_m, CAR.width_m))
     return out

@@ -195,9 +195,9 @@ def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec =
 
     Returns an (N, 7) array: x, y, heading, length, width, score (vehicle frame), class
     (index into `CLASSES`, the largest of the class logits that follow the six box rows of
-    `reg`; -1 when `reg` has none), sorted by score, highest first. With `max_overlap_m`, a box that overlaps a higher-scoring
-    one by more than that (vehicles cannot overlap) is dropped: the network may propose
-    a car and a truck for the same face, or a phantom behind a long vehicle.
+    `reg`; -1 when `reg` has none), sorted by score, highest first. With `max_overlap_m`, a
+    box that overlaps a higher-scoring one by more than that (vehicles cannot overlap) is
+    dropped: the network may propose a car and a truck for the same face, or a phantom behind a long vehicle.
     """
     hx, hy = heat.shape
     # Only cells at or above the threshold can be peaks (a handful per frame): compare

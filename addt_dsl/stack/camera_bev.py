@@ -29,8 +29,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from addt_dsl.lru import LruCache
 from addt_dsl.stack.bev_grid import CAMERA_BEV_SITES, CLASSES, GRID, decode
-from addt_dsl.stack.learned import BevDetector, load_weights, one_intra_op_thread
+from addt_dsl.stack.learned import SHAPES_CACHE_SIZE, BevDetector, boxes_to_world, load_weights, one_intra_op_thread
 from addt_dsl.stack.nodes import Obj
 from addt_dsl.stack.rig_lift import FEATURE_STRIDE, LIFT_HEIGHTS_M, lift_table, position_channels
 from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
@@ -131,16 +132,7 @@ class CameraBevPerception(ConvTensorSites):
     # ---- the node
     def run(self, frame, world, sensor, ego_pose, corrupt) -> list[Obj]:
         boxes = self.detect(frame.data["images"], self.geometry(sensor))
-        x, y, heading, _ = ego_pose
-        cos_h, sin_h = math.cos(heading), math.sin(heading)
-        objs = []
-        for bx, by, bh, length, width, conf, cls in boxes.tolist():
-            px = corrupt("perception.x", bx)
-            py = corrupt("perception.y", by)
-            objs.append(Obj(x + cos_h * px - sin_h * py, y + sin_h * px + cos_h * py, heading + bh,
-                            math.nan, math.nan, length, width, conf,
-                            kind=CLASSES[int(cls)] if 0 <= cls < len(CLASSES) else ""))
-        return objs
+        return boxes_to_world(boxes, ego_pose, corrupt)
 
     def detect(self, images: np.ndarray, geometry: RigGeometry) -> np.ndarray:
         """(cameras, H, W, 3) images → (N, 7) boxes in the vehicle frame: x, y, heading,
@@ -163,14 +155,15 @@ class CameraBevPerception(ConvTensorSites):
         return _activation_shapes(self.model, self.meta)[site.removeprefix("perception.")]
 
 
-_SHAPES: dict[tuple, dict[str, tuple[int, ...]]] = {}
+_SHAPES: LruCache[tuple, dict[str, tuple[int, ...]]] = LruCache(SHAPES_CACHE_SIZE)  # (widths, rig) -> shapes
 
 
 def _activation_shapes(model: CameraBevNet, meta: dict) -> dict[str, tuple[int, ...]]:
     rig = meta["rig"]
     key = (tuple(layer.out_channels for layer in model.layers().values()), rig["cameras"], rig["height"],
            rig["width"])
-    if key not in _SHAPES:
+    shapes = _SHAPES.get(key)
+    if shapes is None:
         shapes = {}
         hooks = [layer.register_forward_hook(lambda m, i, o, name=name: shapes.__setitem__(name, tuple(o.shape)))
                  for name, layer in model.layers().items()]
@@ -181,5 +174,5 @@ def _activation_shapes(model: CameraBevNet, meta: dict) -> dict[str, tuple[int, 
                                  torch.zeros((3, GRID.nx, GRID.ny)))
         for h in hooks:
             h.remove()
-        _SHAPES[key] = shapes
-    return _SHAPES[key]
+        _SHAPES.put(key, shapes)
+    return shapes

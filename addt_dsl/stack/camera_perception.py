@@ -36,7 +36,7 @@ import math
 
 import numpy as np
 
-from addt_dsl.stack.nodes import GroundTruthPerception, Obj
+from addt_dsl.stack.nodes import GroundTruthPerception, Obj, vehicle_to_world
 from addt_dsl.vehicles import VEHICLES
 
 HUE_TOLERANCE = 8  # [opencv hue units, 2 deg each]
@@ -122,8 +122,7 @@ class CameraPerception:
 
         data = frame.data
         far = getattr(sensor, "far", math.inf)
-        x, y, heading, _ = ego_pose
-        cos_h, sin_h = math.cos(heading), math.sin(heading)
+        heading = ego_pose[2]
         nominal = sensor.nominal
         objs = []
         for name, face, _pixels in self.detector.detect(data["image"], data["depth"], data["intrinsics"]):
@@ -135,7 +134,6 @@ class CameraPerception:
             px = float(pv[0]) + math.copysign(0.5 * length, float(pv[0]) - nominal.x)
             px = corrupt("perception.x", px)
             py = corrupt("perception.y", float(pv[1]))
-            objs.append(Obj(x + cos_h * px - sin_h * py, y + sin_h * px + cos_h * py, heading,
-                            math.nan, math.nan, length, width))
+            objs.append(Obj(*vehicle_to_world(ego_pose, px, py), heading, math.nan, math.nan, length, width))
         count = int(corrupt("perception.count", float(len(objs))))
         return objs[:max(0, count)]

@@ -2,11 +2,11 @@
 
 `latency_model.json` holds, per node, what `python -m addt_dsl.stack.calibrate --write`
 measured on the host: the trend `base_s + per_object_s * N + per_object_sq_s * N²` for N
-objects (through the medians per object count) and the jitter, a table of quantiles of `sample / median at that object count`
-over all the timed calls (pooled over counts). Its `targets` are hand-written inputs,
-never fitted: the factors that carry host costs to a target (`host`: 1 and 1; `xavier`:
-a Jetson AGX Xavier-class board, each factor with its source or stated as an
-assumption). A node's latency in a run is
+objects (through the medians per object count) and the jitter, a table of quantiles of
+`sample / median at that object count` over all the timed calls (pooled over counts). Its
+`targets` are hand-written inputs, never fitted: the factors that carry host costs to a
+target (`host`: 1 and 1; `xavier`: a Jetson AGX Xavier-class board, each factor with its
+source or stated as an assumption). A node's latency in a run is
 
     (base_s * f_base + (per_object_s * N + per_object_sq_s * N²) * cpu_scale) * ratio
 

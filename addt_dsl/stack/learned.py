@@ -40,9 +40,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from addt_dsl.lru import LruCache
 from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CLASSES, GRID, LAYER_SITES, build_grid_region, decode,
                                      sensor_points_to_vehicle)
-from addt_dsl.stack.nodes import Obj
+from addt_dsl.stack.nodes import Obj, vehicle_to_world
 from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
 
 WEIGHTS_PATH = Path(__file__).with_name("perception_weights.pt")
@@ -91,17 +92,34 @@ class BevDetector(nn.Module):
         return {name: named[name] for name in self.sites}
 
 
-_CACHE: dict[Path, tuple[dict, dict]] = {}
+def boxes_to_world(boxes: np.ndarray, ego_pose, corrupt) -> list[Obj]:
+    """A detector's (N, 7) vehicle-frame boxes (x, y, heading, length, width, confidence,
+    class index into `bev_grid.CLASSES`) as objects in the world, the ego at `ego_pose`;
+    `corrupt` sees each box's position first (the `perception.x`/`.y` fault sites)."""
+    heading = ego_pose[2]
+    objs = []
+    for bx, by, bh, length, width, conf, cls in boxes.tolist():
+        px = corrupt("perception.x", bx)
+        py = corrupt("perception.y", by)
+        objs.append(Obj(*vehicle_to_world(ego_pose, px, py), heading + bh, math.nan, math.nan, length, width, conf,
+                        kind=CLASSES[int(cls)] if 0 <= cls < len(CLASSES) else ""))
+    return objs
+
+
+WEIGHTS_CACHE_SIZE = 4  # weight files kept per process (this detector's, the camera network's, a test's)
+_WEIGHTS: LruCache[Path, tuple[dict, dict]] = LruCache(WEIGHTS_CACHE_SIZE)
 
 
 def load_weights(path: Path = WEIGHTS_PATH) -> tuple[dict, dict]:
     """(state dict, metadata) from a weights file (this detector's or another's, e.g. the
     camera BEV network's), cached per process (read-only: copy it)."""
     path = Path(path)
-    if path not in _CACHE:
+    loaded = _WEIGHTS.get(path)
+    if loaded is None:
         blob = torch.load(path, map_location="cpu", weights_only=True)
-        _CACHE[path] = (blob["state_dict"], blob.get("meta", {}))
-    return _CACHE[path]
+        loaded = (blob["state_dict"], blob.get("meta", {}))
+        _WEIGHTS.put(path, loaded)
+    return loaded
 
 
 def load_model(path: Path = WEIGHTS_PATH, device: str = "cpu") -> tuple[BevDetector, dict]:
@@ -584,16 +602,7 @@ class LearnedPerception(ConvTensorSites):
         nominal = sensor.nominal
         pts = sensor_points_to_vehicle(points, nominal) if len(points) else np.zeros((0, 3))
         boxes = self.detect(pts, (nominal.x, nominal.y))
-        x, y, heading, _ = ego_pose
-        cos_h, sin_h = math.cos(heading), math.sin(heading)
-        objs = []
-        for bx, by, bh, length, width, conf, cls in boxes.tolist():
-            px = corrupt("perception.x", bx)
-            py = corrupt("perception.y", by)
-            objs.append(Obj(x + cos_h * px - sin_h * py, y + sin_h * px + cos_h * py, heading + bh,
-                            math.nan, math.nan, length, width, conf,
-                            kind=CLASSES[int(cls)] if 0 <= cls < len(CLASSES) else ""))
-        return objs
+        return boxes_to_world(boxes, ego_pose, corrupt)
 
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
         """Vehicle-frame points → (N, 7) boxes: x, y, heading, length, width, confidence,
@@ -624,13 +633,15 @@ class LearnedPerception(ConvTensorSites):
         self._forward.invalidate()  # the backgrounds came from the old weights
 
 
-_SHAPES: dict[tuple, dict[str, tuple[int, ...]]] = {}
+SHAPES_CACHE_SIZE = 16  # (device, layer widths) -> shapes: a few models per process
+_SHAPES: LruCache[tuple, dict[str, tuple[int, ...]]] = LruCache(SHAPES_CACHE_SIZE)
 
 
 def _activation_shapes(model: BevDetector, device: str) -> dict[str, tuple[int, ...]]:
     """Output shape of every named layer at batch 1 (one dry run, cached per device and widths)."""
     key = (device, tuple(layer.out_channels for layer in model.layers().values()))
-    if key not in _SHAPES:
+    shapes = _SHAPES.get(key)
+    if shapes is None:
         shapes = {}
         hooks = [layer.register_forward_hook(
             lambda m, i, o, name=name: shapes.__setitem__(name, tuple(o.shape)))
@@ -639,5 +650,5 @@ def _activation_shapes(model: BevDetector, device: str) -> dict[str, tuple[int, 
             model(torch.zeros((1, *GRID.shape), device=device))
         for h in hooks:
             h.remove()
-        _SHAPES[key] = shapes
-    return _SHAPES[key]
+        _SHAPES.put(key, shapes)
+    return shapes

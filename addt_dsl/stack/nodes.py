@@ -62,6 +62,14 @@ class Obj:
     weak: bool = False
 
 
+def vehicle_to_world(ego_pose, px: float, py: float) -> tuple[float, float]:
+    """A point of the ego's vehicle frame (`px` forward, `py` left [m]) in world coordinates
+    [m], the ego at `ego_pose` (x, y, heading, ...): the one place perception maps boxes out."""
+    x, y, heading = ego_pose[0], ego_pose[1], ego_pose[2]
+    cos_h, sin_h = math.cos(heading), math.sin(heading)
+    return x + cos_h * px - sin_h * py, y + sin_h * px + cos_h * py
+
+
 # ---------------------------------------------------------------- perception
 
 class GroundTruthPerception:
@@ -113,8 +121,7 @@ class GroundTruthPerception:
             py = float(pn[1]) + rng.normal(0.0, self.noise_m)
             px = corrupt("perception.x", px)
             py = corrupt("perception.y", py)
-            wx = x + cos_h * px - sin_h * py
-            wy = y + sin_h * px + cos_h * py
+            wx, wy = vehicle_to_world(ego_pose, px, py)
             objs.append(Obj(wx, wy, gt.heading - yaw_err, vx_w, vy_w, gt.length_m, gt.width_m,
                             kind=gt.kind, weak=count < self.min_hits))
         # The detection count bounds the list the downstream nodes read: a corrupted count

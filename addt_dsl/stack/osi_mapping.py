@@ -31,8 +31,8 @@ from osi3.osi_trafficlight_pb2 import TrafficLight
 from osi3.osi_trafficupdate_pb2 import TrafficUpdate
 from osi3 import osi_version_pb2
 
-OSI_VERSION = tuple(getattr(osi_version_pb2.DESCRIPTOR.GetOptions().Extensions[osi_version_pb2.current_interface_version],
-                            k) for k in ("version_major", "version_minor", "version_patch"))
+_OSI_INTERFACE = osi_version_pb2.DESCRIPTOR.GetOptions().Extensions[osi_version_pb2.current_interface_version]
+OSI_VERSION = tuple(getattr(_OSI_INTERFACE, k) for k in ("version_major", "version_minor", "version_patch"))
 
 HOST_ID = 1  # the ego's OSI id; agents follow in plan order (2, 3, ...)
 LIGHT_ID_BASE = 1_000_000  # traffic-light bulbs: base + 10 * signal index + bulb (0 red, 1 yellow, 2 green)

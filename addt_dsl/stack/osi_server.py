@@ -35,8 +35,8 @@ import numpy as np
 from addt_dsl.stack import osi_mapping as M
 from addt_dsl.stack import osi_transport as T
 from addt_dsl.stack.bridge import ProtocolError, escape
-from addt_dsl.stack.bridge_server import (MAX_CONNECTIONS, BridgeServer, Limits, check_settings, RemoteFrame, RemoteActor,
-                                          RemoteContext, run_server_cli)
+from addt_dsl.stack.bridge_server import (MAX_CONNECTIONS, BridgeServer, Limits, check_settings, RemoteFrame,
+                                          RemoteActor, RemoteContext, run_server_cli)
 
 from osi3.osi_motionrequest_pb2 import MotionRequest
 from osi3.osi_sensorview_pb2 import SensorView

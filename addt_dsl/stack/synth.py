@@ -4,9 +4,10 @@ A scene is a stretch of road (straight or curved, 1-4 lanes in the ego's directi
 beside them, often oncoming) with box vehicles of car and truck sizes in the lanes
 (queued at random gaps, some mid lane-change), a few parked at random headings beside
 the road, and vulnerable road users: pedestrians on the verges and crossing the lanes,
-cyclists along the road's edge and crossing. Every object carries its class (`CLASSES`). The ego sits in one of its lanes; the scan comes from the runtime's own `Lidar`
-class casting rays into a pybullet world built like the runtime's (same box bodies,
-same ground plane), so the detector is trained on exactly the points it will see.
+cyclists along the road's edge and crossing. Every object carries its class (`CLASSES`).
+The ego sits in one of its lanes; the scan comes from the runtime's own `Lidar` class
+casting rays into a pybullet world built like the runtime's (same box bodies, same ground
+plane), so the detector is trained on exactly the points it will see.
 
 Each sample keeps the points in the vehicle frame (mapped with the *nominal* extrinsics,
 as the stack does) and the ground-truth boxes in the vehicle frame with their lidar hit

@@ -151,7 +151,7 @@ def _stack_settings(ctx: Context) -> dict:
     return {k: v for k, v in settings.items() if v is not None}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.lru_cache(maxsize=64)  # stack classes: a few per registry
 def _takes_settings(stack_cls) -> bool:
     try:
         return len(inspect.signature(stack_cls.fault_sites).parameters) >= 1

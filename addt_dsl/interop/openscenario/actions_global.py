@@ -125,10 +125,9 @@ class Global:
         if not signals:
             self.skip(ctl, f"controller '{name}' switches no signal of {self.xodr_name}: not translated")
             return
-        cycle = {"green": 0.0, "yellow": 0.0, "red": 0.0}
-        for _, st, d in phases:
-            cycle[st] += d
-        total = sum(cycle.values())
+        # Sums of the file's decimals, exactly (phases of 0.1 s and 0.2 s make a 0.3 s cycle).
+        cycle = {k: units.decimal_sum(d for _, st, d in phases if st == k) for k in ("green", "yellow", "red")}
+        total = units.decimal_sum(d for _, _, d in phases)
         timed = [(st, d) for _, st, d in phases if d > 0]
         # Runs of one colour, the last joined to the first when they match (the cycle repeats).
         runs = [st for i, (st, _) in enumerate(timed) if i == 0 or timed[i - 1][0] != st]
@@ -141,7 +140,7 @@ class Global:
             lead = wanted[0]
             i = next(i for i, (st, _) in enumerate(timed) if st == lead and timed[i - 1][0] != lead) \
                 if len(timed) > 1 else 0
-            offset = sum(d for _, d in timed[:i]) % total if total > 0 else 0.0
+            offset = units.decimal_sum(d for _, d in timed[:i]) % total if total > 0 else 0.0
         elif timed:
             self.approx(ctl, f"controller '{name}': phases {', '.join(st for st, _ in timed)} as one green, "
                              "yellow, red cycle of their summed times")

@@ -73,10 +73,8 @@ class Longitudinal:
                       "`speed_profile` needs the time of each point")
             return None
         # Entry times are durations from the previous entry: cumulative times from the start.
-        times, clock = [], 0.0
-        for e in entries:
-            clock += max(self.value(e, "time"), 0.0)
-            times.append(clock)
+        gaps = [max(self.value(e, "time"), 0.0) for e in entries]
+        times = [units.decimal_sum(gaps[:k + 1]) for k in range(len(gaps))]  # 0.1 + 0.2 is 0.3
         if any(b <= a for a, b in zip(times, times[1:])):
             self.skip(el, "a speed profile whose entries take no time is not translated")
             return None

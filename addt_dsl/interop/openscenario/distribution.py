@@ -703,8 +703,8 @@ class _Template(Translate):
 
     def plan(self, header, duration: float):
         plan = super().plan(header, duration)
-        return plan.model_copy(update={"params": [p.model_copy(update={"default": p.default * self.scales.get(p.name, 1.0)})
-                                                  for p in plan.params]})
+        params = [p.model_copy(update={"default": p.default * self.scales.get(p.name, 1.0)}) for p in plan.params]
+        return plan.model_copy(update={"params": params})
 
 
 for _name, _note in (

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from addt_dsl import expr as E
+from addt_dsl.atomic import write_text
 from addt_dsl.expr import eval_param_expr, params_used
 from addt_dsl.interop.openscenario.xml import MAX_XML_BYTES
 from addt_dsl.interop.xodr_export import ExportError, xml_text
@@ -100,7 +101,7 @@ def _reference_parameters(xosc_path: Path, plan: ScenarioPlan, params: dict[str,
                 el.set(attr, text)
                 done.append(f"{actor.name}: {el.tag} {attr}={text}")
     if done:
-        xosc_path.write_text(xml_text(root))
+        write_text(xosc_path, xml_text(root))
     return done
 
 
@@ -125,7 +126,7 @@ def export_sweep(plan: ScenarioPlan, out_dir: str | Path, stem: str) -> SweepExp
     # with its parameters goes into its side file, where `addtc import` reads it back.
     side = json.loads(template.sidecar_path.read_text())
     side[PARAMETRIC_KEY] = plan.model_copy(update={"sweep": SweepPlan()}).model_dump(mode="json")
-    template.sidecar_path.write_text(json.dumps(side, indent=2) + "\n")
+    write_text(template.sidecar_path, json.dumps(side, indent=2) + "\n")
     sw = plan.sweep
     root = ET.Element("OpenSCENARIO")
     ET.SubElement(root, "FileHeader", revMajor="1", revMinor=str(OSC_MINOR),
@@ -172,5 +173,5 @@ def export_sweep(plan: ScenarioPlan, out_dir: str | Path, stem: str) -> SweepExp
                 "OpenSCENARIO's Stochastic would draw other values with the player's generator")
     text = xml_text(root)
     path = out / f"{stem}.variation.xosc"
-    path.write_text(text)
+    write_text(path, text)
     return SweepExport(template, path, form, note, runs, referenced)

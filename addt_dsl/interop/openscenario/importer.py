@@ -193,9 +193,9 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                         # A standing ego is someone else's to drive (CARLA's examples leave it to an
                         # external agent): the stack drives at the map's limit, not its own default.
                         fields["stack"] = ClausePlan(keyword="stack", name="bev",
-                                                     settings={"cruise_speed": E.Num(value=round(limit, 6))})
+                                                     settings={"cruise_speed": E.Num(value=limit)})  # exact: `50 km/h`
                         self.approx(info["el"], f"the ego starts standing: the stack cruises at its road's speed "
-                                                f"limit, {limit * 3.6:.4g} km/h")
+                                                f"limit, {units.from_si(limit, 'km/h'):.4g} km/h")
                 if not sc and not fields.get("route"):
                     # Without a route the ego leaves the map where its road ends (a `left_road`
                     # event): give it the way straight on, as far as it can drive in the run.

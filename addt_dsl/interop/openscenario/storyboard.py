@@ -356,8 +356,8 @@ class Storyboard:
             conds = list(group.iterfind("Condition"))
             time = conds[0].find("ByValueCondition/SimulationTimeCondition") if len(conds) == 1 else None
             if time is not None and (time.get("rule") or "").startswith("greater"):
-                return min(max(self.value(time, "value") + self.value(conds[0], "delay", units.TIME, 0.0), 0.1),
-                           MAX_DURATION_S)
+                end = units.decimal_sum((self.value(time, "value"), self.value(conds[0], "delay", units.TIME, 0.0)))
+                return min(max(end, 0.1), MAX_DURATION_S)
         others = trigger is not None and any(True for _ in trigger.iterfind("ConditionGroup/Condition"))
         self.approx(trigger, f"no simulation-time stop trigger: at most {DEFAULT_DURATION_S:g} s"
                     + (" (the run ends when its stop condition holds)" if others else ""))

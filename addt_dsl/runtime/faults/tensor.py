@@ -69,7 +69,9 @@ def bit_range(dtype, field: str) -> tuple[int, int]:
     return IEEE_FIELDS[width][field]
 
 
-_NUMPY_INT: dict = {}  # float dtype -> numpy integer type of its width (filled on first use)
+def _numpy_int(torch, np, dtype):
+    """The numpy integer type of a torch float dtype's width (None for bfloat16: numpy has none)."""
+    return {torch.float64: np.int64, torch.float32: np.int32, torch.float16: np.int16}.get(dtype)
 
 
 def flip_bit_(tensor, flat_index: int, bit: int) -> tuple[float, float]:
@@ -80,8 +82,6 @@ def flip_bit_(tensor, flat_index: int, bit: int) -> tuple[float, float]:
     import numpy as np
     import torch
 
-    if not _NUMPY_INT:
-        _NUMPY_INT.update({torch.float64: np.int64, torch.float32: np.int32, torch.float16: np.int16})
     itype = _int_dtype(torch, tensor.dtype)
     if itype is None:
         raise TypeError(f"bit flips need a floating-point tensor, not {tensor.dtype}")
@@ -91,7 +91,7 @@ def flip_bit_(tensor, flat_index: int, bit: int) -> tuple[float, float]:
     mask = 1 << bit
     if mask >= 1 << (width - 1):  # the sign bit, as the signed integer it is stored as
         mask -= 1 << width
-    numpy_int = _NUMPY_INT.get(tensor.dtype)
+    numpy_int = _numpy_int(torch, np, tensor.dtype)
     if numpy_int is not None and tensor.device.type == "cpu" and tensor.is_contiguous():
         # The same element and XOR through a numpy view of the memory: a few us, where the
         # torch indexing below costs ~40 us a flip (10 flips a second add up in a sweep).

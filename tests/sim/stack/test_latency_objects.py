@@ -13,6 +13,7 @@ from addt_dsl.runtime.execute import execute
 from addt_dsl.stack.bev import synthetic_objects
 from addt_dsl.stack.latency import at, e2e_ms, load_models
 from addt_dsl.sweep import expand
+from addt_dsl.vehicles import CAR
 
 SUITE = Path(__file__).resolve().parents[3] / "examples" / "suites" / "latency_objects.addt"
 
@@ -33,6 +34,7 @@ def test_synthetic_objects_are_distinct_off_road_and_deterministic():
         lateral = -s * (o.x - 100.0) + c * (o.y + 5.0)
         assert abs(lateral) >= 12.0 - 1e-9
         assert (o.heading, o.vx, o.vy) == (0.3, pytest.approx(20 * c), pytest.approx(20 * s))
+        assert (o.length, o.width) == (CAR.length_m, CAR.width_m)  # the catalogue car, not a size of its own
 
 
 @pytest.mark.slow

@@ -6,7 +6,7 @@ and inside functions) and every load by a literal name (`importlib.import_module
 
     app (cli, console, suite, studies, pytest_plugin, search.commands, interop.commands)
       > search > reporting > stack > runtime > core (units, expr, diagnostics, registry, fingerprint,
-        vehicles, plan, sweep, distributions, confine, errors, extras, limits, cost, lru, xmlread, road/,
+        vehicles, plan, sweep, distributions, confine, errors, extras, limits, cost, lru, xmlread, atomic, road/,
         specs/)
       printer > compiler > core;   search > printer
       interop (OpenSCENARIO export/import) > printer, compiler, runtime;   search > interop
@@ -37,7 +37,7 @@ CORE = {"addt_dsl", "addt_dsl.units", "addt_dsl.expr", "addt_dsl.diagnostics", "
         "addt_dsl.fingerprint", "addt_dsl.vehicles", "addt_dsl.plan", "addt_dsl.sweep", "addt_dsl.distributions",
         "addt_dsl.confine",
         "addt_dsl.errors", "addt_dsl.extras", "addt_dsl.limits", "addt_dsl.cost", "addt_dsl.stats",
-        "addt_dsl.lru", "addt_dsl.xmlread"}
+        "addt_dsl.lru", "addt_dsl.xmlread", "addt_dsl.atomic"}
 APP = {"addt_dsl.cli", "addt_dsl.console", "addt_dsl.suite", "addt_dsl.studies", "addt_dsl.pytest_plugin",
        "addt_dsl.search.commands", "addt_dsl.interop.commands"}
 # layer -> the layers its modules may import (besides their own)

@@ -41,12 +41,18 @@ STOCHASTIC = VALID.replace("""    <Deterministic>
         </ValueSetDistribution>
       </DeterministicMultiParameterDistribution>
     </Deterministic>""", """    <Stochastic numberOfTestRuns="3" randomSeed="7">
-      <StochasticDistribution parameterName="EgoS"><NormalDistribution expectedValue="20" variance="4"/></StochasticDistribution>
-      <StochasticDistribution parameterName="TargetS"><ProbabilityDistributionSet><Element value="80" weight="1"/><Element value="90" weight="2"/></ProbabilityDistributionSet></StochasticDistribution>
+      <StochasticDistribution parameterName="EgoS">
+        <NormalDistribution expectedValue="20" variance="4"/>
+      </StochasticDistribution>
+      <StochasticDistribution parameterName="TargetS">
+        <ProbabilityDistributionSet>
+          <Element value="80" weight="1"/><Element value="90" weight="2"/>
+        </ProbabilityDistributionSet>
+      </StochasticDistribution>
     </Stochastic>""")
 HOSTILE_VALUES = ["", "-1", "0", "nan", "inf", "-inf", "1e400", "1e300", "1e-320", "$nobody", "${1/0}", "${2**99999}",
-                  "${(((((1)))))}", "x" * 300, "4294967296", "0.5", "acc-test.xosc", "../../../etc/passwd", "/etc/passwd",
-                  "variation.xosc", "1,5", " 7 "]
+                  "${(((((1)))))}", "x" * 300, "4294967296", "0.5", "acc-test.xosc", "../../../etc/passwd",
+                  "/etc/passwd", "variation.xosc", "1,5", " 7 "]
 
 
 @pytest.fixture(scope="module")

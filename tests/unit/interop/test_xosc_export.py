@@ -192,10 +192,12 @@ def test_actions_are_real_openscenario(tmp_path):
         return found
 
     # Entry times are durations from the previous entry: points at 0, 4 and 8 s.
-    entries = event("profiler_speed_profile").findall(".//SpeedProfileAction[@followingMode='position']/SpeedProfileEntry")
+    entries = event("profiler_speed_profile").findall(
+        ".//SpeedProfileAction[@followingMode='position']/SpeedProfileEntry")
     assert [(float(e.get("time")), float(e.get("speed"))) for e in entries] == [(0.0, 10.0), (4.0, 14.0), (4.0, 8.0)]
     dyn = event("shaper_cruise").find(".//SpeedActionDynamics")
-    assert (dyn.get("dynamicsShape"), dyn.get("dynamicsDimension"), float(dyn.get("value"))) == ("sinusoidal", "time", 3.0)
+    assert (dyn.get("dynamicsShape"), dyn.get("dynamicsDimension"), float(dyn.get("value"))) == \
+        ("sinusoidal", "time", 3.0)
     lane = event("shaper_lane_change").find(".//LaneChangeAction")
     assert lane.find("LaneChangeTarget/RelativeTargetLane").attrib == {"entityRef": "profiler", "value": "0"}
     assert lane.find("LaneChangeActionDynamics").get("dynamicsShape") == "linear"

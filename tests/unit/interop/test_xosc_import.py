@@ -238,7 +238,8 @@ def test_actions_come_back_from_the_xosc_alone(tmp_path):
     shaped = clause("shaper")
     assert (shaped.name, shaped.settings["shape"], shaped.settings["duration"].value) == ("cruise", "sinusoidal", 3.0)
     change = plan["shaper"].triggers[0].clause
-    assert (change.name, change.settings["to_lane_of"], change.settings["shape"]) == ("lane_change", "profiler", "linear")
+    assert (change.name, change.settings["to_lane_of"], change.settings["shape"]) == \
+        ("lane_change", "profiler", "linear")
     assert "to" not in change.settings
     relative = clause("faster")
     assert relative.name == "cruise" and "1.2 * speed(ego)" in got.text
@@ -296,13 +297,15 @@ def test_esmini_trajectories_and_synchronisation(tmp_path):
 
 def test_a_live_target_without_an_openscenario_form_travels_as_a_controller(tmp_path):
     source = (ROOT / "tests" / "data" / "interop" / "every_action.addt").read_text().replace(
-        "behavior cruise speed 1.2 * speed(ego) accel 3 m/s^2", "behavior cruise speed 2 * speed(ego) - 1 m/s accel 3 m/s^2")
+        "behavior cruise speed 1.2 * speed(ego) accel 3 m/s^2",
+        "behavior cruise speed 2 * speed(ego) - 1 m/s accel 3 m/s^2")
     plan = compile_source(source, "live.addt").plan
     spec = expand(plan).specs[0]
     got = _without_sidecar(spec, tmp_path)
     assert "behavior cruise speed 2 * speed(ego) - 1 m/s" in got.text
     faster = next(a for a in got.plan.agents if a.name == "faster")
-    assert faster.behaviors[0].settings["speed"] == next(a for a in plan.agents if a.name == "faster").behaviors[0].settings["speed"]
+    original = next(a for a in plan.agents if a.name == "faster")
+    assert faster.behaviors[0].settings["speed"] == original.behaviors[0].settings["speed"]
 
 
 FOLLOWER_EVENT = """

@@ -12,7 +12,7 @@ import pytest
 
 from addt_dsl import cli
 from addt_dsl.errors import EXIT_INCOMPLETE
-from addt_dsl.reporting.atomic import write_bytes, write_text
+from addt_dsl.atomic import write_bytes, write_text
 
 
 def _full(*args, **kwargs):
@@ -38,3 +38,16 @@ def test_the_cli_line_names_the_file(tmp_path, monkeypatch, capsys):
     assert cli.main(["schema", "--write", str(out)]) == EXIT_INCOMPLETE
     err = capsys.readouterr().err.strip()
     assert err == f"error: No space left on device: {out}"
+
+
+def test_export_on_a_full_disk_names_the_file(tmp_path, monkeypatch, capsys):
+    # `addtc export` writes through the atomic writer too: the line names the .xosc it was writing.
+    from tests.conftest import EXAMPLES
+
+    monkeypatch.setattr(Path, "write_text", _full)
+    out = tmp_path / "out"
+    assert cli.main(["export", str(EXAMPLES / "following.addt"), "--to", str(out)]) == EXIT_INCOMPLETE
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("error: No space left on device: ") and err.endswith(".xosc"), err
+    assert str(out) in err
+    assert not out.exists() or not any(p.name.endswith(".tmp") for p in out.iterdir())

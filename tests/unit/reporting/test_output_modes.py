@@ -9,7 +9,7 @@ import stat
 
 import pytest
 
-from addt_dsl.reporting.atomic import write_bytes, write_text
+from addt_dsl.atomic import write_bytes, write_text
 
 
 @pytest.fixture

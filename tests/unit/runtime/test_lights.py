@@ -8,8 +8,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.runtime.lights import (COMFORT_DECEL, GREEN, PAST_M, RED, REACH_M, YELLOW, LightsRuntime, Program, StopStation,
-                                     governs_vehicles, next_stop, state_at, stations_on, stop_accel, stop_lines)
+from addt_dsl.runtime.lights import (COMFORT_DECEL, GREEN, PAST_M, RED, REACH_M, YELLOW, LightsRuntime, Program,
+                                     StopStation, governs_vehicles, next_stop, state_at, stations_on, stop_accel,
+                                     stop_lines)
 from addt_dsl.road import build_road, line, load_xodr, parse_xodr
 
 MAPS = Path(__file__).resolve().parents[3] / "examples" / "maps"
@@ -73,7 +74,8 @@ def test_red_margin_of_a_line_with_two_controllers_does_not_depend_on_their_orde
     # Before it, `a` is red and `b` green; it crosses once `b` turned red too: a violation,
     # in either order of the stations (the armed state is kept per controller).
     lights = LightsRuntime({"a": Program(0.0, 0.0, 100.0), "b": Program(2.0, 0.0, 100.0)})
-    for stations in ([StopStation(50.0, "a"), StopStation(50.0, "b")], [StopStation(50.0, "b"), StopStation(50.0, "a")]):
+    for stations in ([StopStation(50.0, "a"), StopStation(50.0, "b")],
+                     [StopStation(50.0, "b"), StopStation(50.0, "a")]):
         lights._armed.clear()
         assert lights.red_margin("x", 45.0, stations, 1.0) == 5.0
         assert lights.red_margin("x", 52.0, stations, 3.0) == -2.0

@@ -4,6 +4,7 @@ executor gives each run the same time bound."""
 
 from __future__ import annotations
 
+import os
 import time
 
 import pytest
@@ -66,12 +67,45 @@ def test_the_inline_executor_bounds_each_runs_time(monkeypatch):
     spec = expand(compile_source(SRC, "short.addt").plan).specs[0]
     monkeypatch.setattr(ex, "run_time_bound_s", lambda spec, timeout_s="auto": 0.2)
     t0 = time.monotonic()
-    (record,) = list(ex.InlineExecutor(_sleeps).imap([(0, spec)]))
-    assert record.status == "timeout" and time.monotonic() - t0 < 2
-    # The bound is lifted after the run: the process's alarm is as it was.
     import signal
 
-    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+    outer = signal.getitimer(signal.ITIMER_REAL)  # pytest-timeout's alarm, where it uses one
+    (record,) = list(ex.InlineExecutor(_sleeps).imap([(0, spec)]))
+    assert record.status == "timeout" and time.monotonic() - t0 < 2
+    # The bound is lifted after the run: the process's alarm is as it was, less the time spent.
+    after = signal.getitimer(signal.ITIMER_REAL)
+    assert after == (0.0, 0.0) if outer[0] == 0 else (0 < after[0] <= outer[0] and after[1] == outer[1])
     monkeypatch.undo()  # the default bound: the real run finishes within it
     (ok,) = list(ex.InlineExecutor().imap([(0, spec)]))
     assert ok.status == "ok"
+
+
+def _grows(spec, seq=-1, worker=""):
+    held = []
+    for _ in range(400):  # up to 4 GB, 10 MB every 5 ms, each page written (resident)
+        held.append(b"\x01" * (10 * 2**20))
+        time.sleep(0.005)
+    raise AssertionError("not stopped at its memory limit")
+
+
+@pytest.mark.skipif(ex.rss_mb(os.getpid()) is None, reason="needs /proc")
+def test_the_inline_executor_bounds_the_memory_a_run_adds():
+    spec = expand(compile_source(SRC, "short.addt").plan).specs[0]
+    before = ex.rss_mb(os.getpid())
+    import signal
+
+    signal.setitimer(signal.ITIMER_REAL, 500.0)  # an outer alarm (pytest-timeout's): kept across the run
+    (record,) = list(ex.InlineExecutor(_grows, memory_limit_mb=100).imap([(0, spec)]))
+    left = signal.setitimer(signal.ITIMER_REAL, 0)[0]
+    assert 400.0 < left <= 500.0
+    assert record.status == "memory" and "over the 100 MB limit" in record.error, record.error
+    assert ex.rss_mb(os.getpid()) < before + 100  # what the run held was freed
+    # `--executor inline` passes the command's --memory-limit and --timeout on.
+    from addt_dsl.cli import _executor
+
+    class Args:  # the parsed command line, as far as `_executor` reads it
+        executor, timeout, memory_limit = "inline", 7.0, 123.0
+    got = _executor(Args())
+    assert (got.timeout_s, got.memory_limit_mb) == (7.0, 123.0)
+    single = ex.local_executor(1, _grows, memory_limit_mb=50, timeout_s=9.0)
+    assert isinstance(single, ex.InlineExecutor) and (single.timeout_s, single.memory_limit_mb) == (9.0, 50)

@@ -8,7 +8,7 @@ from tests.unit.runtime.runner_testkit import (KILLED, KILLED_ONCE, OK, RAISE, S
 from addt_dsl import cli
 from addt_dsl.compiler import compile_file
 from addt_dsl.errors import EXIT_INCOMPLETE, time_bound
-from addt_dsl.reporting.atomic import atomic_path, write_text
+from addt_dsl.atomic import atomic_path, write_text
 from addt_dsl.reporting.summary import store_dataframe, store_summary
 from addt_dsl.runtime.executor import BOUND_REAL_TIME_FACTOR, BOUND_STARTUP_S, Attempts, LocalExecutor, \
     run_sweep, run_time_bound_s
