@@ -89,12 +89,14 @@ class Entities:
             self.approx(obj, f"the ego is a {kind} in the scenario; addt-dsl's stack drives a car")
             kind = "car"
         # The catalog's Performance bounds every speed change (esmini clamps the acceleration
-        # of SpeedActions to it): [m/s^2]; None without one.
+        # of SpeedActions to it, and DynamicConstraints): [m/s^2], [m/s]; None without one.
         perf = body.find("Performance") if body is not None and body.tag == "Vehicle" else None
         limits = {}
-        for attr, key in (("maxAcceleration", "max_accel"), ("maxDeceleration", "max_decel")):
+        for attr, key, dim in (("maxAcceleration", "max_accel", units.ACCELERATION),
+                               ("maxDeceleration", "max_decel", units.ACCELERATION),
+                               ("maxSpeed", "max_speed", units.SPEED)):
             if perf is not None and perf.get(attr) is not None:
-                value = self.value(perf, attr, units.ACCELERATION)
+                value = self.value(perf, attr, dim)
                 if value > 0 and math.isfinite(value):
                     limits[key] = value
         self.actors[name] = {**limits, "vehicle": kind, "length_m": length if length and length > 0 else None,
