@@ -44,6 +44,12 @@ class AgentState:
     # Ground covered per metre of station at its offset [m/m] (`FastRoad.ground_scale`),
     # set where it is posed: its station advances by speed / ground_scale.
     ground_scale: float = 1.0
+    # After a lane change: (lane, road of the path's leg or None until the next step, that
+    # lane's centre t [m] last step). While it holds, a move of the lane's centre in the road's
+    # frame (a lane narrowing beside it, a route's reference crossing over where its own lane
+    # ends) moves the agent with it, as esmini keeps an entity's lane and offset
+    # (`RunState.follow_lane`); None: it keeps its offset t.
+    lane_anchor: tuple | None = None
 
 
 def standing_yaw(agent: AgentState, yaw: float) -> float:
@@ -710,6 +716,7 @@ def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, ti
     agent.heading_rel = 0.0
     agent.t_start = agent.t
     agent.t_target = world.lane_t(agent.road, lane, agent.s)
+    agent.lane_anchor = (lane, None, agent.t_target)
     agent.lc_start_s = time_s
     agent.lc_duration_s = duration_s
 
