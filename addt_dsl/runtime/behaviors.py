@@ -716,7 +716,7 @@ def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, ti
     agent.heading_rel = 0.0
     agent.t_start = agent.t
     agent.t_target = world.lane_t(agent.road, lane, agent.s)
-    agent.lane_anchor = (lane, None, agent.t_target)
+    agent.lane_anchor = (lane, None, agent.t_target) if world.lane_moves(agent.road, lane) else None
     agent.lc_start_s = time_s
     agent.lc_duration_s = duration_s
 

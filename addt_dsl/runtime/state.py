@@ -308,12 +308,12 @@ class RunState:
         """Keep an agent that changed lanes on its lane where the lane's centre moves in its
         road's frame: esmini's entities keep their lane and offset, so one that changed into
         road 0's lane -2 stays there while the route's reference (the ramp lane it left)
-        narrows and crosses over. Held on the leg's road of the change; dropped on a road whose
-        lane centre does not move (then nothing changes), on another road, or once it walks."""
+        narrows and crosses over. Set by a lane change into a lane that moves (`lane_moves`);
+        held on the leg's road of the change, dropped on another road or once it walks."""
         lane, leg, c_last = a.lane_anchor
         road = next(r for r in self.agent_roads.values() if r.road_id == a.road).road
         leg_now = road.road_at(a.s)[0] if isinstance(road, RoutePath) else a.road
-        if a.heading_rel or (leg is not None and leg_now != leg) or not self._lane_moves(road, lane):
+        if a.heading_rel or (leg is not None and leg_now != leg):
             a.lane_anchor = None
             return
         c = float(road.lane_center_t(lane, a.s))
@@ -327,9 +327,9 @@ class RunState:
             a.t_start += d
         a.lane_anchor = (lane, leg_now, c)
 
-    def _lane_moves(self, road, lane: int) -> bool:
-        """Whether `lane`'s centre t varies along `road` (a `FastRoad` or a route's path), by
-        its samples; cached per road and lane."""
+    def lane_moves(self, road_id: str, lane: int) -> bool:
+        """Whether `lane`'s centre t varies along the road or route (its samples); cached."""
+        road = next(r for r in self.agent_roads.values() if r.road_id == road_id).road
         key = (id(road), lane)
         got = self._lanes_moving.get(key)
         if got is None:
