@@ -83,6 +83,10 @@ class Entities:
         if dims is not None:
             length, width = self.value(dims, "length"), self.value(dims, "width")
             height = self.value(dims, "height") if dims.get("height") is not None else None
+        # The box centre ahead of the reference point (where the importer puts the actor's
+        # centre) [m]: distances between boxes (free space) measure from the box.
+        centre = child_at(body, "BoundingBox", "Center") if body is not None else None
+        box_x = self.value(centre, "x") if centre is not None and centre.get("x") is not None else 0.0
         if self.sidecar and name in self.sidecar.get("actors", {}):
             kind = self.sidecar["actors"][name]["vehicle"]
         if name == "ego" and kind != "car":
@@ -102,6 +106,7 @@ class Entities:
         self.actors[name] = {**limits, "vehicle": kind, "length_m": length if length and length > 0 else None,
                              "width_m": width if width and width > 0 else None,
                              "height_m": height if height and 0.05 <= height <= 10.0 else None, "el": obj,
+                             "box_x_m": box_x if math.isfinite(box_x) else 0.0,
                              "behaviors": [], "triggers": [], "lane_now": None, "speed_now": 0.0}
 
     def catalog_entry(self, ref, kinds=("Vehicle", "Pedestrian", "MiscObject")):

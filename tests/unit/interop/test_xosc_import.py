@@ -873,3 +873,15 @@ def test_a_follow_speed_profile_imports_with_its_dynamic_constraints(tmp_path):
     got = import_xosc(tmp_path / "xosc" / "s.xosc", root=tmp_path, ego="scripted")
     warns = [d for d in got.diagnostics if d.label == "<SpeedProfileAction>"]
     assert [d.code for d in warns] == ["W0802"] and "beyond the DynamicConstraints" in warns[0].message
+
+
+def test_time_to_collision_in_entity_coordinates_is_the_gap_along_the_heading():
+    """pedestrian.xosc: TimeToCollisionCondition freespace, coordinateSystem entity,
+    longitudinal: the boxes' gap along the ego's heading (`lon_gap`), its box 1.4 m and the
+    walker's 0.06 m ahead of their reference points (the actors' centres); was the gap
+    along the road, on different roads the Euclidean one, which braked 0.2 s late."""
+    got = import_xosc(ESMINI / "xosc" / "pedestrian.xosc", root=ESMINI, ego="scripted")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    assert "lon_gap(ego, pedestrian_adult) - 1.34 m < 1.2 s * (speed(ego) - speed(pedestrian_adult))" in got.text
+    said = [d.message for d in got.diagnostics if d.code == "W0802"]
+    assert any(m.startswith("time to collision in entity coordinates") for m in said)
