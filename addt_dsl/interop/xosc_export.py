@@ -372,6 +372,16 @@ def _speed_profile(run, actor, s):
     if s["shape"] != "linear":
         run.carried.append(f"{actor}: speed profile shape {s['shape']} (SpeedProfileAction interpolates "
                            "linearly in `position` mode; exact in the side file)")
+    if s.get("mode") == "follow":
+        # An unset limit is left out: esmini reads the vehicle's Performance there (rates: unlimited).
+        limits = {arg: s[name] for arg, name in (
+            ("max_acceleration", "accel"), ("max_deceleration", "decel"), ("max_acceleration_rate", "accel_rate"),
+            ("max_deceleration_rate", "decel_rate"), ("max_speed", "max_speed")) if s.get(name) is not None}
+        if len(limits) < 5:
+            run.carried.append(f"{actor}: speed profile limits left unset (unlimited) are the vehicle's "
+                               "Performance in esmini")
+        return [xosc.SpeedProfileAction(list(s["speeds"]), xosc.FollowingMode.follow, deltas,
+                                        xosc.DynamicsConstraints(**limits) if limits else None)], True
     return [xosc.SpeedProfileAction(list(s["speeds"]), xosc.FollowingMode.position, deltas)], True
 
 

@@ -195,6 +195,8 @@ class Fleet:
         agent can be stepped as arrays now, else None. Re-read when a behaviour starts."""
         if run.behavior_version == self._plan_version:
             return self._plan
+        if any(a.lane_anchor is not None for a in self.agents):
+            return None  # one by one while `RunState.follow_lane` may move one (asked again next step)
         self._plan_version, self._plan = run.behavior_version, None
         if run.networked or run.lights is not None or self.n < max(ARRAY_MIN_AGENTS, STEP_MIN_AGENTS):
             return None

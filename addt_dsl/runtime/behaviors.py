@@ -44,6 +44,12 @@ class AgentState:
     # Ground covered per metre of station at its offset [m/m] (`FastRoad.ground_scale`),
     # set where it is posed: its station advances by speed / ground_scale.
     ground_scale: float = 1.0
+    # After a lane change: (lane, road of the path's leg or None until the next step, that
+    # lane's centre t [m] last step). While it holds, a move of the lane's centre in the road's
+    # frame (a lane narrowing beside it, a route's reference crossing over where its own lane
+    # ends) moves the agent with it, as esmini keeps an entity's lane and offset
+    # (`RunState.follow_lane`); None: it keeps its offset t.
+    lane_anchor: tuple | None = None
 
 
 def standing_yaw(agent: AgentState, yaw: float) -> float:
@@ -172,10 +178,198 @@ class Cruise(S.Cruise, Behavior):
         return abs(agent.speed - max(0.0, self.value("speed", world))) < ENDED_SPEED_TOL_MS
 
 
+# esmini's numeric tolerance and its "unlimited" (CommonMini.hpp SMALL_NUMBER, LARGE_NUMBER).
+_SMALL, _LARGE = 1e-6, 1e10
+
+
+@dataclass
+class ProfileSegment:
+    """A piece of a planned speed profile from `t` [s]: v + k (τ - t) + j (τ - t)² / 2 [m/s]."""
+
+    t: float
+    v: float
+    k: float  # acceleration at `t` [m/s^2]
+    j: float  # jerk [m/s^3]
+
+    def speed_at(self, time_s: float) -> float:
+        d = time_s - self.t
+        return self.v + self.k * d + 0.5 * self.j * d * d
+
+
+def follow_profile(t0: float, v0: float, a0: float, deltas: list[float], speeds: list[float],
+                   accel: float, decel: float, accel_rate: float, decel_rate: float, max_speed: float,
+                   follow: bool = True) -> list[ProfileSegment]:
+    """esmini 3.6's plan of a SpeedProfileAction (LongSpeedProfileAction::Start), started at
+    `t0` [s] at speed `v0` [m/s] and acceleration `a0` [m/s^2]; `deltas[i]` [s] is entry i's
+    time after the previous one (OpenSCENARIO's convention), `speeds[i]` its speed.
+
+    The entries become vertices joined by straight lines (a slope beyond `accel`/`decel` is
+    cut to it and its entry comes later; a vertex on the line of the previous two is dropped).
+    In follow mode the plan keeps each line's slope and joins consecutive lines with a jerk
+    segment at `accel_rate` (speeding up) or `decel_rate`, placed so that it leaves the first
+    line and lands on the second; a single target is reached with two jerk segments and,
+    where time allows, a line between. A corner that cannot be placed, or a segment beyond a
+    limit, turns the rest of the plan into straight lines through the vertices (esmini's
+    fallback to position mode), as esmini does. Limits: `_LARGE` for unlimited."""
+    mode = {"follow": follow}
+
+    def check(v: float, k: float, j: float) -> None:  # esmini's CheckSpeed/Acceleration/Rate
+        if mode["follow"] and (abs(v) > max_speed + _SMALL or k > accel + _SMALL or k < -decel - _SMALL
+                               or j > accel_rate + _SMALL or j < -decel_rate - _SMALL):
+            mode["follow"] = False
+
+    segments: list[ProfileSegment] = []
+
+    def add(t: float, v: float, k: float, j: float) -> None:
+        check(v, k, j)
+        segments.append(ProfileSegment(t, v, k, j))
+
+    # Vertices [t, v, k, m]: time, speed, slope of the line to the next, its intercept v - k t
+    # (esmini's EntryVertex: without a slope, both 0).
+    def vertex(t, v, k=None):
+        return [t, v, 0.0, 0.0] if k is None else [t, v, k, v - k * t]
+    n = len(deltas)
+    index = 0
+    if deltas[0] > _SMALL:
+        vertices = [vertex(t0, v0)]
+    elif follow:  # a first entry at 0 is replaced by the current speed
+        vertices, index = [vertex(t0, v0)], 1
+    else:
+        vertices = [vertex(t0, speeds[0])]
+    time = t0
+    for index in range(index, n):
+        dt = deltas[index]
+        dv = speeds[index] - vertices[-1][1]
+        k = dv / dt if dt else (math.copysign(math.inf, dv) if dv else math.nan)  # C++'s division
+        if k < -decel or k > accel:  # beyond the limits: at the limit, the entry comes later
+            if abs(dv) < _SMALL:
+                continue
+            k = max(k, -decel) if k < 0 else min(k, accel)
+            vertices[-1][0] = time
+            time += dv / k
+        else:
+            time += dt
+        if index < n - 1 and dt < _SMALL:
+            vertices[-1] = vertex(time, speeds[index])
+            continue
+        last = vertices[-1]
+        last[2], last[3] = k, last[1] - k * last[0]
+        delta_k = last[2] - (vertices[-2][2] if index > 1 else a0)
+        if abs(delta_k) < _SMALL and index > 1:
+            prev = vertices[-2]
+            vertices[-1] = vertex(time, speeds[index], (speeds[index] - prev[1]) / (time - prev[0]))
+            continue
+        vertices.append(vertex(time, speeds[index], 0.0) if index == n - 1 else vertex(time, speeds[index]))
+
+    if len(vertices) == 1:
+        add(vertices[0][0], vertices[0][1], 0.0, 0.0)
+    elif follow and len(vertices) == 2:
+        _follow_single_target(vertices, a0, accel, decel, accel_rate, decel_rate, add)
+    else:
+        k1, m1, t3 = 0.0, 0.0, vertices[0][0]
+        if follow:
+            t, v, k, _ = vertices[0]
+            j = 0.0
+            if abs(k) > _SMALL:
+                j = -decel_rate if k - a0 < 0 else accel_rate
+                add(t, v, a0, j)
+                t3 = t + ((k - a0) / j if abs(j) > _SMALL else 0.0)
+            v3 = v + a0 * (t3 - t0) + 0.5 * j * (t3 - t0) ** 2  # speed after the first jerk
+            k1, m1 = k, v3 - k * t3
+            add(t3, v3, k1, 0.0)
+        for index in range(len(vertices)):
+            if not mode["follow"]:
+                t, v, k, _ = vertices[index]
+                add(t, v, k, 0.0)
+            elif index < len(vertices) - 1:
+                k0, t0_, v0_, m0 = k1, t3, v3, m1
+                _, _, k1, m1 = vertices[index + 1]
+                j = -decel_rate if k1 - k0 < 0 else accel_rate
+                if abs(k0 - k1) >= _SMALL:
+                    # The jerk segment from line (k0, m0) at t1 onto line (k1, m1) at t3.
+                    t1 = (k0 * k0 - 2 * k0 * k1 + k1 * k1 - 2 * j * (m0 - m1)) / (2 * j * (k0 - k1))
+                    if t1 < t0_:
+                        mode["follow"] = False
+                        continue
+                    v1 = v0_ + k0 * (t1 - t0_)
+                    t3 = t1 + (k1 - k0) / j
+                    v3 = v1 + k0 * (t3 - t1) + 0.5 * j * (t3 - t1) ** 2
+                    add(t1, v1, k0, j)
+                add(t3, v3, k1, 0.0)
+    return segments
+
+
+def _follow_single_target(vertices, k0, accel, decel, accel_rate, decel_rate, add) -> None:
+    """esmini's follow mode for one target: jerk away from the current acceleration `k0`,
+    a line where time allows, jerk back to zero acceleration on the target speed; beyond
+    the acceleration limits, a line at the limit and a later arrival."""
+    t0, v0, k_first, _ = vertices[0]
+    t3, v3 = vertices[1][0], vertices[1][1]
+    j0 = -decel_rate if k_first - k0 < 0 else accel_rate
+    add(t0, v0, k0, j0)
+    j1 = accel_rate if k_first < 0 else -decel_rate
+    t1 = t2 = v2 = k1 = 0.0  # esmini's values where it finds no solution
+
+    def in_span(k):
+        return -decel <= k <= accel
+    if abs(j1 - j0) < _SMALL:
+        if abs(t0 - t3) > _SMALL and abs(j1 * (t0 - t3) - k0) > _SMALL:
+            t1 = ((2 * j1 * (v0 + t0 * j1 * (t0 - t3) - v3) + k0 ** 2 + 2 * k0 * j1 * (t3 - 2 * t0))
+                  / (2 * j1 * (j1 * (t0 - t3) - k0)))
+            if t1 >= 0:
+                v1 = v0 + k0 * (t1 - t0) + j0 * 0.5 * (t1 - t0) ** 2
+                k1 = k0 + j0 * (t1 - t0)
+                t2 = k1 / j1 + t3
+                if t2 >= 0:
+                    v2 = v1 + k1 * (t2 - t1)
+                    if -decel < k1 < accel:
+                        add(t1, v1, k1, 0.0)
+    else:
+        factor = j0 * j1 * (2 * v0 * (j1 - j0) + k0 ** 2 + 2 * k0 * j1 * (t3 - t0) + j0 * j1 * (t0 - t3) ** 2
+                            + 2 * v3 * (j0 - j1))
+        if factor < 0.0:  # no time for a line: the two jerk segments meet
+            t2 = ((math.sqrt(j1 * (-(j0 - j1)) * (j0 * (2 * v3 - 2 * v0) + k0 ** 2)) + (j0 - j1) * (t0 * j0 - k0))
+                  / (j0 * (j0 - j1)))
+            v2 = v0 + k0 * (t2 - t0) + j0 * 0.5 * (t2 - t0) ** 2
+            k1 = k0 + j0 * (t2 - t0)
+            t3 = t2 - k1 / j1
+        else:  # a line to reach the speed on time
+            t1 = (-math.sqrt(factor) - j0 * (k0 + t3 * j1) + t0 * j0 ** 2) / (j0 * (j0 - j1))
+            v1 = v0 + k0 * (t1 - t0) + j0 * 0.5 * (t1 - t0) ** 2
+            k1 = k0 + j0 * (t1 - t0)
+            t2 = k1 / j1 + t3
+            v2 = v1 + k1 * (t2 - t1)
+            if in_span(k1):
+                add(t1, v1, k1, 0.0)
+    if in_span(k1):
+        add(t2, v2, k1, j1)
+        add(t3, v3, 0.0, 0.0)
+        return
+    k1 = min(max(k1, -decel), accel)  # at the limit: arrive later
+    t1 = t0 + (k1 - k0) / j0
+    v1 = v0 + k0 * (t1 - t0) + 0.5 * j0 * (t1 - t0) ** 2
+    t2 = (v3 - v1) / k1 + t1 + k1 / (2 * j1)
+    v2 = v3 + k1 ** 2 / (2 * j1)
+    t3 = -v1 / k1 + v3 / k1 + t1 - k1 / (2 * j1)
+    add(t1, v1, k1, 0.0)
+    add(t2, v2, k1, j1)
+    add(t3, v3, 0.0, 0.0)
+
+
 @BEHAVIORS.implements
 class SpeedProfile(S.SpeedProfile, Behavior):
+    plan: list[ProfileSegment] | None = None  # mode follow's segments, set by start()
 
     def start(self, agent, world, time_s):
+        self.plan = None
+        if self.settings["mode"] == "follow":
+            times = list(self.settings["times"])
+            deltas = [times[0]] + [b - a for a, b in zip(times, times[1:])]
+            limits = [_LARGE if self.settings[n] is None else self.settings[n] for n in self.FOLLOW_LIMITS]
+            self.plan = follow_profile(time_s, agent.speed, agent.accel, deltas, list(self.settings["speeds"]),
+                                       *limits)
+            self.end_s = self.plan[-1].t
+            return
         times = [time_s + t for t in self.settings["times"]]
         speeds = list(self.settings["speeds"])
         if times[0] > time_s:  # from the current speed to the first point
@@ -192,6 +386,13 @@ class SpeedProfile(S.SpeedProfile, Behavior):
 
     def speed_at(self, time_s: float) -> float:
         """The profile's speed [m/s] at `time_s`: on the segment begun last."""
+        if self.plan is not None:  # the plan's last segment holds its speed (esmini stops there)
+            seg = self.plan[0]
+            for nxt in self.plan[1:]:
+                if time_s <= nxt.t - _SMALL:
+                    break
+                seg = nxt
+            return 0.0 if abs(v := seg.speed_at(time_s)) < _SMALL else v
         v = self.first_speed
         for seg in self.segments:
             if time_s + 1e-9 < seg.start_s:
@@ -615,6 +816,7 @@ def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, ti
     agent.heading_rel = 0.0
     agent.t_start = agent.t
     agent.t_target = world.lane_t(agent.road, lane, agent.s)
+    agent.lane_anchor = (lane, None, agent.t_target) if world.lane_moves(agent.road, lane) else None
     agent.lc_start_s = time_s
     agent.lc_duration_s = duration_s
 

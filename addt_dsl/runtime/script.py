@@ -84,15 +84,18 @@ class StepState:
             return self.condition is not None
         return self.group is not None and self.group.needs_state()
 
+    def rearm(self, time_s: float, ended: Ended | None) -> None:
+        """`repeat N`: once its behaviour has ended, the step waits for its condition again
+        (the edge's last value carries over, as an OpenSCENARIO event back in standby)."""
+        if self.armed_at is not None and self.fired and self.repeats_left > 0 and ended is not None \
+                and self.group is None and (self.behavior is None or ended(self.behavior, time_s)):
+            self.repeats_left -= 1
+            self.fired, self.counted_at, self.held_since, self.behavior = False, None, None, None
+
     def advance(self, time_s: float, holds: Holds, start: Start, ended: Ended | None = None) -> None:
         if self.armed_at is None:
             return
-        if self.fired and self.repeats_left > 0 and ended is not None and self.group is None \
-                and (self.behavior is None or ended(self.behavior, time_s)):
-            # `repeat N`: its behaviour has ended, so it waits for its condition again (the
-            # edge's last value carries over, as an OpenSCENARIO event back in standby).
-            self.repeats_left -= 1
-            self.fired, self.counted_at, self.held_since, self.behavior = False, None, None, None
+        self.rearm(time_s, ended)
         if self.done:
             return
         if not self.fired:
@@ -182,5 +185,10 @@ class Script:
         return any(s.needs_state() for s in self.steps)
 
     def advance(self, time_s: float, holds: Holds, start: Start, ended: Ended | None = None) -> None:
+        # Every repeating step whose behaviour ended by now is back in standby before any step
+        # fires (esmini ends an event in the step its action completes): a step firing first
+        # must not replace that behaviour and so keep the other from ever re-arming.
+        for s in self.steps:
+            s.rearm(time_s, ended)
         for s in self.steps:
             s.advance(time_s, holds, start, ended)

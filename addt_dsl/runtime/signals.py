@@ -94,6 +94,22 @@ class LatGap(S.LatGap, SignalFn):
         return np.abs(b.t - a.t) - 0.5 * (a.width_m + b.width_m)
 
 
+@SIGNALS.implements
+class LonGap(S.LonGap, SignalFn):
+
+    @staticmethod
+    def compute(trace, args):
+        # esmini's Object::CollisionAndRelativeDistLatLong on the first actor's longitudinal
+        # axis: the gap between the projections of both boxes' corners on its heading.
+        a, b = trace.actors[args[0]], trace.actors[args[1]]
+        ha, hb = np.asarray(a.heading, float), np.asarray(b.heading, float)
+        along = (np.asarray(b.x, float) - a.x) * np.cos(ha) + (np.asarray(b.y, float) - a.y) * np.sin(ha)
+        reach_b = 0.5 * b.length_m * np.abs(np.cos(hb - ha)) + 0.5 * b.width_m * np.abs(np.sin(hb - ha))
+        ahead = along - reach_b - 0.5 * a.length_m
+        behind = along + reach_b + 0.5 * a.length_m
+        return np.where(ahead > 0.0, ahead, np.where(behind < 0.0, behind, 0.0))
+
+
 def time_to_overlap(a, b, horizon_s: float = TTC_CAP_S) -> np.ndarray:
     """Per sample, the time [s] until the boxes of actor tracks `a` and `b` first overlap if
     both keep their velocity (speed along heading) and heading from that sample on: 0 when

@@ -22,6 +22,7 @@ from addt_dsl.runtime.environment import friction_scale
 from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.lights import LightsRuntime, Program, StopStation, next_stop, stations_on, stop_accel, stop_lines
 from addt_dsl.runtime.neighbours import LeaderIndex, Member, leader_scan
+from addt_dsl.runtime.path import RoutePath
 from addt_dsl.road import resolve_route
 from addt_dsl.runtime.roadmesh import build_scene
 from addt_dsl.road.roadspec import build_network
@@ -175,6 +176,7 @@ class RunState:
         self.left_road = False  # the ego passed the end of its road or route (`left_road` event)
         self.networks = build_network(plan.roads)
         self._road_cache: dict = {}
+        self._lanes_moving: dict = {}  # (id(road), lane) -> whether its centre t varies (`follow_lane`)
         # Visual shapes (road meshes, coloured actors) only when a sensor renders.
         visual = any(getattr(SENSORS.get(c.name), "renders", False) for c in plan.ego.sensors)
         self.physics = PhysicsWorld(visual=visual)
@@ -299,6 +301,42 @@ class RunState:
         if self.lights is not None and not a.heading_rel and not self.agent_plans[a.name].ignore_lights:
             accel = self.stop_for_lights(a, accel, t_now)
         advance(a, accel, t_now, dt)
+        if a.lane_anchor is not None:
+            self.follow_lane(a)
+
+    def follow_lane(self, a: AgentState) -> None:
+        """Keep an agent that changed lanes on its lane where the lane's centre moves in its
+        road's frame: esmini's entities keep their lane and offset, so one that changed into
+        road 0's lane -2 stays there while the route's reference (the ramp lane it left)
+        narrows and crosses over. Set by a lane change into a lane that moves (`lane_moves`);
+        held on the leg's road of the change, dropped on another road or once it walks."""
+        lane, leg, c_last = a.lane_anchor
+        road = next(r for r in self.agent_roads.values() if r.road_id == a.road).road
+        leg_now = road.road_at(a.s)[0] if isinstance(road, RoutePath) else a.road
+        if a.heading_rel or (leg is not None and leg_now != leg):
+            a.lane_anchor = None
+            return
+        c = float(road.lane_center_t(lane, a.s))
+        if not math.isfinite(c):
+            a.lane_anchor = None
+            return
+        d = c - c_last
+        if d:
+            a.t += d
+            a.t_target += d
+            a.t_start += d
+        a.lane_anchor = (lane, leg_now, c)
+
+    def lane_moves(self, road_id: str, lane: int) -> bool:
+        """Whether `lane`'s centre t varies along the road or route (its samples); cached."""
+        road = next(r for r in self.agent_roads.values() if r.road_id == road_id).road
+        key = (id(road), lane)
+        got = self._lanes_moving.get(key)
+        if got is None:
+            c = np.array([road.lane_center_t(lane, u) for u in road._s], dtype=float)
+            c = c[np.isfinite(c)]
+            got = self._lanes_moving[key] = bool(c.size) and float(np.ptp(c)) > 1e-9
+        return got
 
     def apply_friction(self) -> None:
         """The ego's tyre-road friction under the current conditions (`road friction F`)."""

@@ -44,6 +44,10 @@ class BehaviorWorld(Protocol):
     def lane_t(self, road_id: str, lane: int, s: float) -> float:
         """Offset [m] of a lane's centre at station `s`."""
 
+    def lane_moves(self, road_id: str, lane: int) -> bool:
+        """Whether a lane's centre offset varies along the road (a lane beside it narrows, a
+        route's reference crosses over): an agent changing into it then follows it."""
+
     def road_band_t(self, road_id: str, s: float) -> tuple[float, float]:
         """(right, left) offsets [m] of the drivable band at station `s`."""
 

@@ -48,15 +48,34 @@ class SpeedProfile(BehaviorSpec):
                   doc="times of the points, from the start of the behaviour, increasing"),
         ParamSpec("speeds", units.SPEED, kind="list", required=True, low=0.0, doc="speed at each time"),
         ParamSpec("shape", None, kind="word", default="linear", choices=SPEED_SHAPES,
-                  doc="dynamics shape between consecutive points"),
+                  doc="dynamics shape between consecutive points (mode `position`)"),
+        ParamSpec("mode", None, kind="word", default="position", choices=("position", "follow"),
+                  doc="`position`: meet every point; `follow`: follow the slopes between the points "
+                      "within the limits below, with limited jerk at the corners (esmini's plan)"),
+        # The limits of mode `follow` (OpenSCENARIO DynamicConstraints); unset: unlimited.
+        ParamSpec("accel", units.ACCELERATION, default=None, low=0.0, doc="max acceleration (mode `follow`)"),
+        ParamSpec("decel", units.ACCELERATION, default=None, low=0.0, doc="max deceleration (mode `follow`)"),
+        ParamSpec("accel_rate", units.JERK, default=None, low=0.0,
+                  doc="max rate of change of acceleration, speeding up (mode `follow`)"),
+        ParamSpec("decel_rate", units.JERK, default=None, low=0.0,
+                  doc="max rate of change of acceleration, slowing down (mode `follow`)"),
+        ParamSpec("max_speed", units.SPEED, default=None, low=0.0, doc="max speed (mode `follow`)"),
     )
-    doc = ("Follow time/speed points (OpenSCENARIO SpeedProfileAction, its `position` mode: every "
-           "point is met); then hold the last speed.")
+    FOLLOW_LIMITS = ("accel", "decel", "accel_rate", "decel_rate", "max_speed")
+    doc = ("Follow time/speed points (OpenSCENARIO SpeedProfileAction): mode `position` meets "
+           "every point; mode `follow` plans esmini's jerk-limited profile along the slopes "
+           "between them; then hold the last speed.")
     @staticmethod
     def validate(values: dict) -> list[tuple[str, str]]:
         """Problems of constant settings, as (setting, message)."""
         times, speeds = values.get("times"), values.get("speeds")  # None: not constants
         out = []
+        follow = values.get("mode") == "follow"
+        for name in SpeedProfile.FOLLOW_LIMITS if not follow else ():
+            if name in values:
+                out.append((name, f"`{name}` limits a speed profile in `mode follow` only: add `mode follow`"))
+        if follow and values.get("shape", "linear") != "linear":
+            out.append(("shape", "a speed profile in `mode follow` has no shape: it plans its own corners"))
         if isinstance(times, list) and isinstance(speeds, list) and len(times) != len(speeds):
             out.append(("speeds", f"{len(speeds)} speeds for {len(times)} times: give one speed per time"))
         if isinstance(times, list) and any(b <= a for a, b in zip(times, times[1:])):

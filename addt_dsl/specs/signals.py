@@ -92,6 +92,16 @@ class LatGap(SignalSpec):
            "laterally (OpenSCENARIO RelativeDistanceCondition, lateral, freespace) [m]")
 
 @SIGNALS.register
+class LonGap(SignalSpec):
+    keyword = "lon_gap"
+    args = ("actor", "actor")
+    dim = units.LENGTH
+    doc = ("free-space gap along the first actor's heading from its box to the second's, both boxes "
+           "projected on that heading: positive ahead, negative behind, 0 where the projections "
+           "overlap (OpenSCENARIO entity coordinates, longitudinal, freespace, as esmini measures "
+           "them) [m]")
+
+@SIGNALS.register
 class Ttc(SignalSpec):
     keyword = "ttc"
     args = ("actor", "actor")

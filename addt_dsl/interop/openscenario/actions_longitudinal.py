@@ -1,5 +1,7 @@
 """Longitudinal actions: speed (absolute, relative, profiles) and longitudinal distance."""
 
+import math
+
 from addt_dsl import expr as E
 from addt_dsl import units
 from addt_dsl.expr import eval_param_expr
@@ -22,8 +24,10 @@ class Longitudinal:
             return self.refuse_inner(act, "absolute and relative speed targets are translated")
         return self.speed_action(speed.find("SpeedActionDynamics"), target, info)
 
-    @ACTIONS.register("SpeedProfileAction", "approx", "`speed_profile` through entries with times; "
-                      "followingMode follow meets every point (W0802); entries without times are refused")
+    @ACTIONS.register("SpeedProfileAction", "approx", "`speed_profile` through entries with times; followingMode "
+                      "follow as `mode follow` with the DynamicConstraints, exactly; in position mode, slopes "
+                      "beyond the DynamicConstraints are not cut (W0802); entries without times and an "
+                      "EntityRef are refused")
     def act_speed_profile(self, el, who: str, act) -> ClausePlan | None:
         return self.speed_profile(el, self.actors[who])
 
@@ -78,16 +82,47 @@ class Longitudinal:
         if any(b <= a for a, b in zip(times, times[1:])):
             self.skip(el, "a speed profile whose entries take no time is not translated")
             return None
-        if el.get("followingMode") == "follow":
-            self.approx(el, "followingMode follow (smoothed within dynamic constraints): `speed_profile` meets "
-                            "every point, as followingMode position")
+        if el.find("EntityRef") is not None:
+            self.skip(el.find("EntityRef"), "a speed profile relative to another entity's speed is not translated")
+            return None
         speeds = [self.value(e, "speed") for e in entries]
-        if times[0] > 0.0:  # the language's first point is at its own time: from the current speed
-            pass
+        settings = {"times": [E.Num(value=x) for x in times], "speeds": [E.Num(value=v) for v in speeds]}
+        limits = self.dynamic_constraints(el.find("DynamicConstraints"), info)
+        if el.get("followingMode") == "follow":
+            settings["mode"] = "follow"
+            settings.update({k: E.Num(value=v) for k, v in limits.items()})
+        else:
+            # esmini cuts a slope beyond the limits (its entry comes later) in position mode too.
+            slopes = [(b - a) / dt for a, b, dt in zip([info["speed_now"]] + speeds, speeds,
+                                                       [times[0]] + [y - x for x, y in zip(times, times[1:])]) if dt]
+            if any(k > limits.get("accel", math.inf) or -k > limits.get("decel", math.inf) for k in slopes):
+                self.approx(el, "a slope beyond the DynamicConstraints in followingMode position: met as given "
+                                "(esmini cuts it to the limit and meets the entry later)")
         info["speed_now"] = speeds[-1]
-        return ClausePlan(keyword="behavior", name="speed_profile",
-                          settings={"times": [E.Num(value=x) for x in times],
-                                    "speeds": [E.Num(value=v) for v in speeds]})
+        return ClausePlan(keyword="behavior", name="speed_profile", settings=settings)
+
+    def dynamic_constraints(self, dc, info) -> dict[str, float]:
+        """DynamicConstraints as `speed_profile` limits, as esmini reads them: an attribute left
+        out is the vehicle's Performance (rates: unlimited), one above it is cut to it, one
+        below 1e-6 is replaced by the smaller of esmini's default and the Performance; no
+        element: unlimited (no setting)."""
+        if dc is None:
+            return {}
+        out = {}
+        for attr, key, perf_key, default, dim in (
+                ("maxAcceleration", "accel", "max_accel", 5.0, units.ACCELERATION),
+                ("maxDeceleration", "decel", "max_decel", 10.0, units.ACCELERATION),
+                ("maxAccelerationRate", "accel_rate", None, math.inf, units.JERK),
+                ("maxDecelerationRate", "decel_rate", None, math.inf, units.JERK),
+                ("maxSpeed", "max_speed", "max_speed", 250.0 / 3.6, units.SPEED)):
+            perf = info.get(perf_key, math.inf) if perf_key else math.inf
+            value = perf if dc.get(attr) is None else self.value(dc, attr, dim)
+            if value < 1e-6:
+                value = min(default, perf)
+            value = min(value, perf)
+            if math.isfinite(value):
+                out[key] = value
+        return out
 
     def relative_speed(self, dyn, rel, info) -> ClausePlan | None:
         ref = self.actor_name(rel)

@@ -213,6 +213,16 @@ class Conditions:
             value = self.number(c, "value", units.TIME)
             closing = E.Binary(op="-", left=sig("speed", a), right=sig("speed", b))
             lhs = plus_expr(sig("gap", a, b), E.Num(value=half)) if half else sig("gap", a, b)
+            if free and c.get("coordinateSystem") == "entity" and c.get("relativeDistanceType") == "longitudinal":
+                # In a's coordinates: the boxes' gap along a's heading (esmini's boxes sit
+                # their centre's x ahead of the reference point, where the actors' are).
+                lhs = sig("lon_gap", a, b)
+                shift = round(self.actors[b].get("box_x_m", 0.0) - self.actors[a].get("box_x_m", 0.0), 9)
+                if shift:
+                    lhs = E.Binary(op="+" if shift > 0 else "-", left=lhs, right=E.Num(value=abs(shift)))
+                self.approx(c, "time to collision in entity coordinates: the closing speed is the speed "
+                               "difference (esmini: the first's velocity along the second's direction of "
+                               "motion less the second's speed, the same while they move alike)")
             return all_of([E.Binary(op=">", left=closing, right=E.Num(value=0.0)),
                          E.Binary(op=op, left=lhs, right=E.Binary(op="*", left=value, right=closing))])
         if c.tag == "TimeHeadwayCondition":

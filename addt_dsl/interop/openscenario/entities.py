@@ -83,23 +83,30 @@ class Entities:
         if dims is not None:
             length, width = self.value(dims, "length"), self.value(dims, "width")
             height = self.value(dims, "height") if dims.get("height") is not None else None
+        # The box centre ahead of the reference point (where the importer puts the actor's
+        # centre) [m]: distances between boxes (free space) measure from the box.
+        centre = child_at(body, "BoundingBox", "Center") if body is not None else None
+        box_x = self.value(centre, "x") if centre is not None and centre.get("x") is not None else 0.0
         if self.sidecar and name in self.sidecar.get("actors", {}):
             kind = self.sidecar["actors"][name]["vehicle"]
         if name == "ego" and kind != "car":
             self.approx(obj, f"the ego is a {kind} in the scenario; addt-dsl's stack drives a car")
             kind = "car"
         # The catalog's Performance bounds every speed change (esmini clamps the acceleration
-        # of SpeedActions to it): [m/s^2]; None without one.
+        # of SpeedActions to it, and DynamicConstraints): [m/s^2], [m/s]; None without one.
         perf = body.find("Performance") if body is not None and body.tag == "Vehicle" else None
         limits = {}
-        for attr, key in (("maxAcceleration", "max_accel"), ("maxDeceleration", "max_decel")):
+        for attr, key, dim in (("maxAcceleration", "max_accel", units.ACCELERATION),
+                               ("maxDeceleration", "max_decel", units.ACCELERATION),
+                               ("maxSpeed", "max_speed", units.SPEED)):
             if perf is not None and perf.get(attr) is not None:
-                value = self.value(perf, attr, units.ACCELERATION)
+                value = self.value(perf, attr, dim)
                 if value > 0 and math.isfinite(value):
                     limits[key] = value
         self.actors[name] = {**limits, "vehicle": kind, "length_m": length if length and length > 0 else None,
                              "width_m": width if width and width > 0 else None,
                              "height_m": height if height and 0.05 <= height <= 10.0 else None, "el": obj,
+                             "box_x_m": box_x if math.isfinite(box_x) else 0.0,
                              "behaviors": [], "triggers": [], "lane_now": None, "speed_now": 0.0}
 
     def catalog_entry(self, ref, kinds=("Vehicle", "Pedestrian", "MiscObject")):

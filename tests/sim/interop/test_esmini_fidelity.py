@@ -25,9 +25,10 @@ with open(REF / "INDEX.csv", newline="") as _fh:
 # Every entity within 0.5 m RMS with a scripted ego (a scenario leaves this list only with
 # a reason in docs/openscenario.md).
 FAITHFUL_SCRIPTED = ("acc-test", "alks_cut-in", "alks_cut-out", "alks_decelerate", "alks_pedestrian",
-                     "alks_r157_cut_in_quick_brake", "cut-in", "cut-in_environment", "cut-in_simple", "follow_ghost",
-                     "ltap-od", "ltap-od-relative-speed", "slow-lead-vehicle",
-                     "straight_500m_pedestrian", "synchronize", "traffic_lights")
+                     "alks_r157_cut_in_quick_brake", "cut-in", "cut-in_environment", "cut-in_simple",
+                     "drive_when_close", "follow_ghost", "highway_merge", "ltap-od", "ltap-od-relative-speed",
+                     "pedestrian", "slow-lead-vehicle", "speed-profile", "straight_500m_pedestrian", "synchronize",
+                     "traffic_lights")
 # Every entity but the ego within 0.5 m RMS with the stack driving the ego (the entities
 # whose triggers do not depend on the ego's motion).
 FAITHFUL_OTHERS = ("alks_cut-out", "alks_decelerate", "alks_pedestrian", "alks_r157_cut_in_quick_brake",

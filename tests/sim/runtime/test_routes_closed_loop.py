@@ -1,6 +1,7 @@
 """Routes through junctions and both driving directions in short closed-loop runs."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from tests.sim.conftest import EXAMPLES
 pytestmark = pytest.mark.slow
 
 MAPS = EXAMPLES / "maps"
+ESMINI = Path(__file__).resolve().parents[2] / "data" / "esmini"
 
 
 def run_text(text: str):
@@ -89,3 +91,31 @@ def test_the_merge_follows_the_ramp_into_the_highway():
     # Off the ramp (road 5 ends at x = 7.9 m) and in lane -2 of road 0 after the merge lane ends.
     assert merger.x[-1] > 100.0 and abs(merger.y[-1] - out.trace.actors["ego"].y[0]) < 5.0
     assert np.max(np.abs(merger.t)) < 1e-6
+
+
+def test_a_lane_change_keeps_its_lane_where_the_route_lane_ends():
+    """esmini's highway_merge: from the ramp (road 1 -> 5 -> 0, whose lane -3 narrows to
+    nothing from s 75 to 100 m of road 0) into road 0's lane -2. The route's reference is
+    the ramp lane's centre, then crosses over to lane -2 where it ends: the agent that
+    changed into lane -2 stays there (esmini keeps lane and offset; it ended 3.5 m left, in
+    lane -1, while it kept its offset from the reference). Past the crossing the reference
+    is lane -2's centre: t = 0."""
+    result = compile_source("""
+scenario merge {
+  duration 14 s
+  road r1 import "xodr/soderleden.xodr" road 1
+  road r0 import "xodr/soderleden.xodr" road 0
+  ego car on r0 lane -1 at 300 m speed 0 m/s {
+    stack bev cruise_speed 0 m/s
+  }
+  agent merger car on r1 route 1 -> 5 -> 0 lane -1 at 10 m speed 25 m/s {
+    at 7 s behavior lane_change to -2 duration 2.8 s shape sinusoidal
+  }
+}
+""", "merge.addt", base_dir=ESMINI)
+    assert result.plan is not None, [str(d) for d in result.diagnostics]
+    out = execute(expand(result.plan).specs[0])
+    a = out.trace.actors["merger"]
+    assert a.s[-1] > 166.6 + 121.0 + 10.0  # past road 1, road 5 and the crossing on road 0
+    assert a.t[-1] == pytest.approx(0.0, abs=0.02)
+    assert a.lane_offset[-1] == pytest.approx(0.0, abs=0.02)

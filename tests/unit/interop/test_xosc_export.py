@@ -13,6 +13,7 @@ from defusedxml import ElementTree as DET
 from addt_dsl.cli import main
 from addt_dsl.compiler import compile_file, compile_source
 from addt_dsl.interop.openscenario.sidefile import SIDE_FILE_KEYS, SIDECAR_FORMAT
+from addt_dsl.interop.openscenario.importer import import_xosc
 from addt_dsl.interop.xosc_export import export_run
 from addt_dsl.road import parse_xodr
 from addt_dsl.road.roadspec import build_network
@@ -222,6 +223,36 @@ def test_actions_are_real_openscenario(tmp_path):
     assert float(weather.find("Fog").get("visualRange")) == 300.0
     assert float(weather.find("Precipitation").get("precipitationIntensity")) == pytest.approx(5.0)
     assert float(weather.find("Sun").get("elevation")) == pytest.approx(np.radians(30.0))
+
+
+def test_a_follow_speed_profile_is_followingmode_follow_with_its_limits(tmp_path):
+    """Exported as SpeedProfileAction followingMode follow with DynamicConstraints; the .xosc
+    alone imports back to the same profile (mode, limits); a limit left unset is listed."""
+    text = """scenario prof {
+  duration 14 s
+  road r {
+    line length 500 m
+    lanes right 1
+  }
+  ego car on r lane -1 at 100 m speed 10 m/s
+  agent a car on r lane -1 at 20 m speed 0 m/s {
+    at 2 s behavior speed_profile times [0, 4, 8, 10] s speeds [0, 10, 4, 8] m/s mode follow accel 5 m/s^2 decel 10 m/s^2 accel_rate 4 m/s^3 decel_rate 3 m/s^3
+  }
+}
+"""
+    done = export_run(expand(compile_source(text, "prof.addt").plan).specs[0], tmp_path)
+    action = DET.parse(done.xosc_path).getroot().find(".//SpeedProfileAction")
+    assert action.get("followingMode") == "follow"
+    assert {k: float(v) for k, v in action.find("DynamicConstraints").attrib.items()} == {
+        "maxAcceleration": 5.0, "maxDeceleration": 10.0, "maxAccelerationRate": 4.0, "maxDecelerationRate": 3.0}
+    assert any("limits left unset" in c for c in done.carried)
+    done.sidecar_path.unlink()
+    got = import_xosc(done.xosc_path)
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    clause = next(t.clause for a in got.plan.actors() for t in a.triggers if t.clause.name == "speed_profile")
+    assert clause.settings["mode"] == "follow"
+    assert {k: clause.settings[k].value for k in ("accel", "decel", "accel_rate", "decel_rate")} == {
+        "accel": 5.0, "decel": 10.0, "accel_rate": 4.0, "decel_rate": 3.0}
 
 
 def test_routes_are_assign_route_actions(tmp_path):

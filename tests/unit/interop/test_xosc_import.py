@@ -851,3 +851,40 @@ def test_a_lane_offset_is_along_the_roads_t_in_openscenario_and_to_the_drivers_l
     assert back.plan is not None, [str(d) for d in back.diagnostics]
     assert back.plan.agents[0].offset.value == pytest.approx(0.5)
     assert back.plan.ego.offset.value == pytest.approx(0.25)
+
+
+def test_a_follow_speed_profile_imports_with_its_dynamic_constraints(tmp_path):
+    """followingMode follow is `mode follow` with the DynamicConstraints (speed-profile.xosc's
+    Car1, the ego); in position mode a slope beyond them is met as given, with a W0802."""
+    got = import_xosc(ESMINI / "xosc" / "speed-profile.xosc", root=ESMINI, ego="scripted")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    profiles = {a.name: next(t.clause for t in a.triggers) for a in got.plan.actors()}
+    follow = profiles["ego"].settings
+    assert follow["mode"] == "follow"
+    assert {k: follow[k].value for k in ("accel", "decel", "accel_rate", "decel_rate", "max_speed")} == {
+        "accel": 5.0, "decel": 10.0, "accel_rate": 4.0, "decel_rate": 3.0, "max_speed": 50.0}
+    assert "mode" not in profiles["Car2"].settings and "accel" not in profiles["Car2"].settings
+    assert not [d for d in got.diagnostics if d.label == "<SpeedProfileAction>"]
+    # Car2 (position mode) 0 -> 10 m/s in 1 s: 10 m/s^2 beyond maxAcceleration 5.
+    text = (ESMINI / "xosc" / "speed-profile.xosc").read_text()
+    head, tail = text.split('followingMode="position"')
+    steep = head + 'followingMode="position"' + tail.replace('time="4.0" speed="10.0"', 'time="1.0" speed="10.0"', 1)
+    (tmp_path / "xosc").mkdir()
+    shutil.copytree(ESMINI / "xodr", tmp_path / "xodr")
+    shutil.copytree(ESMINI / "xosc" / "Catalogs", tmp_path / "xosc" / "Catalogs")
+    (tmp_path / "xosc" / "s.xosc").write_text(steep)
+    got = import_xosc(tmp_path / "xosc" / "s.xosc", root=tmp_path, ego="scripted")
+    warns = [d for d in got.diagnostics if d.label == "<SpeedProfileAction>"]
+    assert [d.code for d in warns] == ["W0802"] and "beyond the DynamicConstraints" in warns[0].message
+
+
+def test_time_to_collision_in_entity_coordinates_is_the_gap_along_the_heading():
+    """pedestrian.xosc: TimeToCollisionCondition freespace, coordinateSystem entity,
+    longitudinal: the boxes' gap along the ego's heading (`lon_gap`), its box 1.4 m and the
+    walker's 0.06 m ahead of their reference points (the actors' centres); was the gap
+    along the road, on different roads the Euclidean one, which braked 0.2 s late."""
+    got = import_xosc(ESMINI / "xosc" / "pedestrian.xosc", root=ESMINI, ego="scripted")
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    assert "lon_gap(ego, pedestrian_adult) - 1.34 m < 1.2 s * (speed(ego) - speed(pedestrian_adult))" in got.text
+    said = [d.message for d in got.diagnostics if d.code == "W0802"]
+    assert any(m.startswith("time to collision in entity coordinates") for m in said)

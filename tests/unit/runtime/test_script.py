@@ -150,3 +150,34 @@ def test_a_held_condition_fires_after_an_unbroken_run_of_its_duration(samples, h
             expected = round(k * DT, 6)
             break
     assert started == ([] if expected is None else [expected])
+
+
+def test_repeating_steps_rearm_before_another_fires_in_the_same_step():
+    # esmini's drive_when_close: `go` and `stop` repeat on rising conditions that take turns
+    # every 4 s from 6 s; each behaviour lasts 4 s unless a later one replaces it. At 14 s the stop's
+    # behaviour has just ended and the go condition rises: the stop step must be back in
+    # standby first (before, `go` fired first and replaced it: `stop` never re-armed and
+    # its condition's rise at 18 s was lost).
+    clock = {"t": 0.0}
+    current: dict[str, object] = {}
+
+    def holds(cond):  # go from 6 to 10 s, stop from 10 to 14 s, go from 14 s, ...
+        k = math.floor((clock["t"] - 6.0) / 4.0 + 1e-9)
+        return k >= 0 and (k % 2 == 0) == (cond.name == "go")
+
+    def start(c, time_s):
+        started.append((c.name, round(time_s, 6)))
+        current["beh"] = beh = (c.name, time_s)
+        return beh
+
+    def ended(beh, time_s):
+        return current.get("beh") is beh and time_s + 1e-9 >= beh[1] + 4.0
+
+    steps = [TriggerPlan(condition=Signal(name=name), edge="rising", repeat=100, clause=clause(name))
+             for name in ("go", "stop")]
+    script = Script(tuple(bind_step(t, {}) for t in steps))
+    started: list[tuple[str, float]] = []
+    for k in range(int(round(23.0 / DT)) + 1):
+        clock["t"] = k * DT
+        script.advance(clock["t"], holds, start, ended)
+    assert started == [("go", 6.0), ("stop", 10.0), ("go", 14.0), ("stop", 18.0), ("go", 22.0)]

@@ -86,3 +86,21 @@ def test_time_to_overlap_is_when_stepped_boxes_first_overlap(x, y, hb, vb, ha, v
             want = t
             break
     assert got == pytest.approx(want, abs=2e-3) or (want == 5.0 and got >= 4.998)
+
+
+def test_lon_gap_projects_both_boxes_on_the_first_actors_heading():
+    # A 4 x 2 m car at the origin heading 30 deg; a 0.6 x 0.5 m walker crossing (heading
+    # 120 deg: its box reaches 0.25 m along the car's heading) 10 m ahead and 3 m to the
+    # side: 10 - 0.25 - 2 = 7.75 m; 10 m behind (heading 30 deg, reaching 0.3 m):
+    # -(10 - 0.3 - 2) = -7.7 m; beside the car, within its length: 0.
+    h = np.radians(30.0)
+    u, n = np.array([np.cos(h), np.sin(h)]), np.array([-np.sin(h), np.cos(h)])
+    at = [10 * u + 3 * n, -10 * u, 1.0 * u + 4 * n]
+    car = _mover("car", [0.0] * 3, [0.0] * 3, h, 10.0, "r1")
+    walker = _mover("walker", [p[0] for p in at], [p[1] for p in at], 0.0, 1.5, "r2", length=0.6, width=0.5)
+    walker.heading[:] = [h + np.pi / 2, h, h]
+
+    class _T:
+        actors = {"car": car, "walker": walker}
+    got = SIGNALS.implementation("lon_gap").compute(_T(), ("car", "walker"))
+    assert got == pytest.approx([7.75, -7.7, 0.0])

@@ -122,6 +122,58 @@ def test_speed_profile_starts_from_the_current_speed_and_steps_at_points():
     assert at[1.99] == pytest.approx(10.0) and at[2.0] == pytest.approx(5.0)
 
 
+# speed-profile.xosc's Car1: followingMode follow, maxAcceleration 5, maxDeceleration 10,
+# maxAccelerationRate 4, maxDecelerationRate 3 (m/s^2, m/s^3), started at 2 s from standstill.
+FOLLOW = {"mode": "follow", "accel": 5.0, "decel": 10.0, "accel_rate": 4.0, "decel_rate": 3.0, "max_speed": 50.0}
+
+
+def test_follow_profile_keeps_the_slopes_and_rounds_the_corners_at_the_jerk_limits():
+    a = agent(speed=0.0)
+    beh = start("speed_profile", a, FakeWorld(), 2.0, times=ESMINI_TIMES, speeds=ESMINI_SPEEDS, **FOLLOW)
+    plan = [(s.t, s.v, s.k, s.j) for s in beh.plan]
+    # By hand: the lines between the points have slopes 2.5, -1.5, 2 m/s^2. From rest the
+    # acceleration rises at 4 m/s^3 to 2.5 m/s^2: 0.625 s, 0.5 * 4 * 0.625^2 m/s. The corner
+    # onto v = 19 - 1.5 t (through (6 s, 10 m/s)) takes 4 / 3 s at -3 m/s^3 and gains
+    # 2.5 * 4/3 - 1.5 * (4/3)^2 = 2/3 m/s: from v = 2.5 t1 - 5.78125, 2.5 t1 - 5.78125 + 2/3
+    # = 19 - 1.5 (t1 + 4/3), t1 = 22.114583 / 4. Likewise onto v = 2 t - 16 (through (10 s,
+    # 4 m/s)) at +4 m/s^3 for 0.875 s, and onto 8 m/s at -3 m/s^3 for 2/3 s.
+    t1 = 22.114583333 / 4
+    expected = [(2.0, 0.0, 0.0, 4.0), (2.625, 0.78125, 2.5, 0.0), (t1, 2.5 * t1 - 5.78125, 2.5, -3.0),
+                (t1 + 4 / 3, 19 - 1.5 * (t1 + 4 / 3), -1.5, 0.0), (9.5625, 4.65625, -1.5, 4.0),
+                (10.4375, 4.875, 2.0, 0.0), (35 / 3, 2 * 35 / 3 - 16 + 0.0, 2.0, -3.0), (37 / 3, 8.0, 0.0, 0.0)]
+    assert np.array(plan) == pytest.approx(np.array(expected), abs=1e-6)
+    rows = simulate(a, beh, FakeWorld(), 12.0, t0=2.0)
+    at = {round(t, 6): v for t, v in zip(rows[:, 0], rows[:, 3])}
+    # esmini 3.6's speeds of Car1 (tests/data/esmini-ref/traj/speed-profile.csv.gz, 4 decimals).
+    for t, v in ((3.0, 1.7188), (6.0, 8.8855), (6.5, 9.0535), (10.0, 4.3828), (12.0, 7.8333), (12.5, 8.0)):
+        assert at[t] == pytest.approx(v, abs=1e-4)
+    assert not beh.ended(a, FakeWorld(), 12.3) and beh.ended(a, FakeWorld(), 12.34)
+
+
+def test_follow_profile_to_one_speed_holds_the_acceleration_between_the_jerks():
+    # By hand: up at 4 m/s^3 to a, hold it, down at 3 m/s^3 to 0 at 4 s, gaining 10 m/s:
+    # a^2/8 + a (4 - a/4 - a/3) + a^2/6 = 10, 7 a^2 - 96 a + 240 = 0.
+    acc = (96 - math.sqrt(96 ** 2 - 28 * 240)) / 14
+    a = agent(speed=0.0)
+    beh = start("speed_profile", a, FakeWorld(), 0.0, times=[4.0], speeds=[10.0], **FOLLOW)
+    assert np.array([(s.t, s.k, s.j) for s in beh.plan]) == pytest.approx(np.array(
+        [(0.0, 0.0, 4.0), (acc / 4, acc, 0.0), (4 - acc / 3, acc, -3.0), (4.0, 0.0, 0.0)]))
+    rows = simulate(a, beh, FakeWorld(), 5.0)
+    assert rows[:, 3].max() == pytest.approx(10.0) and a.speed == pytest.approx(10.0)
+    assert np.diff(rows[:, 3]).max() == pytest.approx(acc * DT, abs=1e-9)
+
+
+def test_follow_profile_cuts_a_slope_beyond_the_acceleration_limit():
+    # 0 -> 10 m/s in 1 s needs 10 m/s^2; at most 5: the entry comes at 2 s (esmini's cut), and
+    # without jerk limits the speed follows the 5 m/s^2 line.
+    a = agent(speed=0.0)
+    beh = start("speed_profile", a, FakeWorld(), 0.0, times=[0.0, 1.0, 3.0], speeds=[0.0, 10.0, 10.0],
+                mode="follow", accel=5.0)
+    rows = simulate(a, beh, FakeWorld(), 3.0)
+    at = {round(t, 6): v for t, v in zip(rows[:, 0], rows[:, 3])}
+    assert at[1.0] == pytest.approx(5.0, abs=1e-6) and at[2.0] == pytest.approx(10.0, abs=1e-6)
+
+
 class LiveWorld(FakeWorld):
     """The fake world with other actors' lanes and live values (a signal: that actor's speed)."""
 

@@ -26,6 +26,9 @@ class FakeWorld:
     def lane_t(self, road, lane, s):
         return LANES.get(lane, math.nan)
 
+    def lane_moves(self, road, lane):
+        return False
+
     def road_band_t(self, road, s):
         return -7.0, 3.5
 
