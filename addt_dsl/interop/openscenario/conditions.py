@@ -25,8 +25,10 @@ def is_ahead(placed, a, b, params) -> bool:
 
 VALUE_CONDITIONS.declare("SimulationTimeCondition", "exact", "a step's `at` time (one condition group, greater "
                          "than); as a stop trigger the run's duration; other uses refused")
-VALUE_CONDITIONS.declare("StoryboardElementStateCondition", "approx", "another event's or action's start or end "
-                         "(`after`, `when started/ended(A.step)`); its own act or story running: always true")
+VALUE_CONDITIONS.declare("StoryboardElementStateCondition", "approx", "another event's or action's start, run or "
+                         "end (`after`, `when started/ended(A.step)`; running: started and not ended); an event of "
+                         "teleports that do nothing here: the state that starts it; its own act or story running: "
+                         "always true")
 for _name, _note in (
         ("TimeOfDayCondition", "the twin has no time of day"),
         ("UserDefinedValueCondition", "a user-defined value means nothing to the twin"),

@@ -1,0 +1,90 @@
+"""Storyboard element states in stop triggers: running states, states of actions, and of
+events that translate to no step (esmini's pedestrian_collision.xosc)."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+
+import pytest
+
+from addt_dsl.compiler import compile_source
+from addt_dsl.interop.openscenario.importer import import_xosc
+from tests.conftest import ROOT
+
+ESMINI = ROOT / "tests" / "data" / "esmini"
+
+STOP_ON_STATE = """      <StopTrigger>
+          <ConditionGroup>
+              <Condition conditionEdge="%s" delay="4" name="AfterCutIn">
+                  <ByValueCondition>
+                      <StoryboardElementStateCondition storyboardElementType="%s"
+                          storyboardElementRef="%s" state="%s"/>
+                  </ByValueCondition>
+              </Condition>
+          </ConditionGroup>
+      </StopTrigger>
+   </Storyboard>"""
+
+
+def _compiles(got, tmp_path):
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    for name, body in got.side_files.items():
+        (tmp_path / name).write_text(body)
+    result = compile_source(got.text, "imported.addt", base_dir=tmp_path)
+    assert result.ok, [d.message for d in result.diagnostics]
+    return result.plan
+
+
+def _cut_in_stopping_on(tmp_path, kind, ref, state, edge="none"):
+    text = (ESMINI / "xosc" / "cut-in_simple.xosc").read_text()
+    text = re.sub(r"      <StopTrigger>.*</Storyboard>", STOP_ON_STATE % (edge, kind, ref, state), text,
+                  flags=re.S)
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "stop.xosc"
+    path.write_text(text)
+    return import_xosc(path, root=tmp_path / "esmini")
+
+
+@pytest.mark.parametrize("state,text", [
+    ("runningState", "end when started(OverTaker.CutInEvent) and not ended(OverTaker.CutInEvent) delayed 4 s"),
+    ("startTransition", "end when started(OverTaker.CutInEvent) delayed 4 s"),
+    ("endTransition", "end when ended(OverTaker.CutInEvent) delayed 4 s")])
+def test_a_stop_trigger_on_an_events_state(state, text, tmp_path):
+    """runningState is started and not yet ended (it was refused)."""
+    got = _cut_in_stopping_on(tmp_path, "event", "CutInEvent", state)
+    assert text in (got.text or ""), [d.message for d in got.diagnostics]
+    plan = _compiles(got, tmp_path)
+    assert plan.end.delay_s.value == 4.0
+
+
+def test_a_stop_trigger_on_an_actions_state_names_that_actions_step(tmp_path):
+    got = _cut_in_stopping_on(tmp_path, "action", "BrakeAction", "completeState", "rising")
+    assert "BrakeAction: when" in (got.text or ""), [d.message for d in got.diagnostics]
+    assert "end when rising ended(OverTaker.BrakeAction) delayed 4 s" in got.text
+    _compiles(got, tmp_path)
+
+
+def test_a_stop_trigger_on_an_instant_event_is_on_the_state_that_starts_it(tmp_path):
+    """pedestrian_collision.xosc: the run stops 3 s after 'raise_action' completes, a teleport
+    that only raises the pedestrian (no step here); it happens 0.8 s after the pedestrian's
+    'be_still_action' ended, so the run stops 3.8 s after that."""
+    got = import_xosc(ESMINI / "xosc" / "pedestrian_collision.xosc", root=ESMINI, ego="scripted")
+    plan = _compiles(got, tmp_path)
+    assert "be_still_action: when" in got.text
+    assert plan.end.delay_s.value == pytest.approx(3.8) and plan.end.edge == "rising"
+    assert "ended(pedestrian_adult.be_still_action)" in json.dumps(plan.end.condition.model_dump())
+
+
+def test_an_instant_event_started_otherwise_is_still_refused(tmp_path):
+    text = (ESMINI / "xosc" / "pedestrian_collision.xosc").read_text()
+    text = re.sub(r'<StoryboardElementStateCondition\s+storyboardElementType="action"\s+'
+                  r'storyboardElementRef="be_still_action"\s+state="endTransition"\s*/>',
+                  '<SimulationTimeCondition value="2" rule="greaterThan"/>', text, count=1)
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "raise.xosc"
+    path.write_text(text)
+    got = import_xosc(path, root=tmp_path / "esmini", ego="scripted")
+    assert got.text is None
+    assert any("stop trigger on the action 'raise_action'" in d.message for d in got.diagnostics if d.is_error)
