@@ -46,6 +46,7 @@ class Importer(Parameters, CarlaFrame):
         self.instant: dict = {}  # event (and action) name -> storyboard.InstantEvent: no step, only a start
         self.maneuvers: dict[str, list[str]] = {}  # maneuver name -> its events' names
         self.end: TriggerPlan | None = None  # the storyboard's stop trigger beyond its time
+        self.relative_paths: list = []  # (clause, shape element, entity): a trajectory relative to an entity
         self.pending: list = []  # storyboard.PendingEvent: events started by another event, linked at the end
         self.anchors: dict = {}  # no-op events that start a group: name -> storyboard.Anchor
         self.placed: dict = {}  # actor -> positions.Placement

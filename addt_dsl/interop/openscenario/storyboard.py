@@ -485,6 +485,18 @@ class Storyboard:
         if step is None:
             return
         fields = step.fields
+        at_once = step.after is None and set(fields) <= {"at_s"} \
+            and float(fields.get("at_s", E.Num(value=0.0)).value) == 0
+        for clause, el, ref in self.relative_paths:
+            if not at_once and any(c is clause for c in clauses):
+                # esmini places such a trajectory where the entity is when the action starts.
+                self.skip(el, f"a trajectory relative to '{ref}' in an event that starts after time 0 is not "
+                              "translated (its points would be placed from where the entity starts the run)",
+                          "a trajectory relative to an entity translates from the start (Init, or an event at "
+                          "time 0)")
+                clauses = [c for c in clauses if c is not clause]
+        if not clauses:
+            return
         clauses = speed_into_trajectory(clauses)
         if len(clauses) > 1:
             self.approx(event, f"event '{name}' starts {len(clauses)} actions: one step each, same start")
