@@ -88,3 +88,35 @@ def test_an_instant_event_started_otherwise_is_still_refused(tmp_path):
     got = import_xosc(path, root=tmp_path / "esmini", ego="scripted")
     assert got.text is None
     assert any("stop trigger on the action 'raise_action'" in d.message for d in got.diagnostics if d.is_error)
+
+
+RUNNING_SOURCE = """scenario running {
+  duration 20 s
+  road r {
+    line length 800 m
+    lanes right 2 width 3.5 m
+  }
+  ego car on r lane -2 at 10 m speed 0 m/s
+  agent a car on r lane -1 at 100 m speed 10 m/s {
+    go: at 2 s behavior lane_change to -2 duration 3 s
+  }
+  end when %s delayed 1 s
+}
+"""
+
+
+@pytest.mark.parametrize("formula,state", [("started(a.go) and not ended(a.go)", "runningState"),
+                                           ("ended(a.go)", "endTransition")])
+def test_a_stop_condition_on_a_steps_state_survives_export_and_import_without_the_side_file(formula, state,
+                                                                                             tmp_path):
+    """The storyboard's stop trigger names the step's event (it named `a.go`, which no event is)."""
+    from addt_dsl.interop.xosc_export import export_run
+    from addt_dsl.sweep import expand
+    plan = compile_source(RUNNING_SOURCE % formula).plan
+    done = export_run(expand(plan).specs[0], tmp_path)
+    xml = done.xosc_path.read_text()
+    assert f'storyboardElementRef="go" state="{state}"' in xml
+    done.sidecar_path.unlink()
+    back = import_xosc(done.xosc_path)
+    assert back.plan is not None, [str(d) for d in back.diagnostics]
+    assert back.plan.end.condition == plan.end.condition and back.plan.end.delay_s.value == 1.0
