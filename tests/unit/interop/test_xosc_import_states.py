@@ -120,3 +120,14 @@ def test_a_stop_condition_on_a_steps_state_survives_export_and_import_without_th
     back = import_xosc(done.xosc_path)
     assert back.plan is not None, [str(d) for d in back.diagnostics]
     assert back.plan.end.condition == plan.end.condition and back.plan.end.delay_s.value == 1.0
+
+
+def test_a_stop_condition_without_an_openscenario_form_declares_its_parameter(tmp_path):
+    """Its ParameterCondition's parameter is declared (it was not: the stop trigger was built
+    after the declarations)."""
+    from addt_dsl.interop.xosc_export import export_run
+    from addt_dsl.sweep import expand
+    plan = compile_source(RUNNING_SOURCE % "lat_gap(a, ego) > 1 m").plan
+    xml = export_run(expand(plan).specs[0], tmp_path).xosc_path.read_text()
+    assert '<ParameterCondition parameterRef="addt_condition_1"' in xml
+    assert '<ParameterDeclaration name="addt_condition_1" parameterType="boolean"' in xml
