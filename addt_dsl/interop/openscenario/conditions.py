@@ -19,10 +19,6 @@ def sig(fn: str, *args: str):
     return E.Signal(name=f"{fn}({','.join(args)})")
 
 
-def is_ahead(placed, a, b, params) -> bool:
-    """Whether b starts ahead of a (so `gap(a, b)` is the positive one)."""
-    return eval_param_expr(placed[b].s, params) >= eval_param_expr(placed[a].s, params)
-
 VALUE_CONDITIONS.declare("SimulationTimeCondition", "exact", "a step's `at` time (one condition group, greater "
                          "than); as a stop trigger the run's duration; other uses refused")
 VALUE_CONDITIONS.declare("StoryboardElementStateCondition", "approx", "another event's or action's start, run or "
@@ -203,10 +199,12 @@ class Conditions:
         free = (c.get("freespace") or "false").lower() == "true"
         value = self.number(c, "value", units.LENGTH)
         if kind == "longitudinal":
-            half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
-            ahead = is_ahead(self.placed, a, b, self.param_values())
-            left = sig("gap", a, b) if ahead else sig("gap", b, a)
-            return E.Binary(op=op, left=left, right=plus_expr(value, E.Num(value=-half)) if half else value)
+            # esmini compares the absolute distance, whichever is ahead (an overtake passes
+            # through 0): |gap(a, b) + half of both lengths| between reference points; free
+            # space, that less the half lengths.
+            half = 0.5 * (self.size(a)[0] + self.size(b)[0])
+            left = E.Call(fn="abs", args=(plus_expr(sig("gap", a, b), E.Num(value=half)),))
+            return E.Binary(op=op, left=left, right=plus_expr(value, E.Num(value=half)) if free else value)
         if kind in ("cartesianDistance", "euclidianDistance"):
             if free:
                 self.approx(c, "a free-space distance: the centre distance less half of both lengths")

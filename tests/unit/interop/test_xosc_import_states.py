@@ -131,3 +131,11 @@ def test_a_stop_condition_without_an_openscenario_form_declares_its_parameter(tm
     xml = export_run(expand(plan).specs[0], tmp_path).xosc_path.read_text()
     assert '<ParameterCondition parameterRef="addt_condition_1"' in xml
     assert '<ParameterDeclaration name="addt_condition_1" parameterType="boolean"' in xml
+
+
+def test_a_longitudinal_relative_distance_is_absolute_whichever_is_ahead():
+    """two_plus_one_road.xosc: the Target, 15 m behind the Ego, overtakes it and cuts in once
+    the distance exceeds 20 m again, now ahead (esmini compares |ds|; the distance was signed
+    with the order at the start, so it never held)."""
+    got = import_xosc(ESMINI / "xosc" / "two_plus_one_road.xosc", root=ESMINI, ego="scripted", lenient=True)
+    assert "CutInEvent: when abs(gap(ego, Target) + 5.04 m) > 20 m then" in got.text
