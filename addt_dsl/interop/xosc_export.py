@@ -331,7 +331,7 @@ def _lane_change(run, actor, s):
         run.carried.append(f"{actor}: lane change shape {s['shape']} written as cubic (OpenSCENARIO 1.2 has no "
                            "quintic; exact in the side file)")
     if s.get("to_lane_of"):
-        return [xosc.RelativeLaneChangeAction(0, s["to_lane_of"], dyn)], True
+        return [xosc.RelativeLaneChangeAction(int(round(s.get("lanes") or 0)), s["to_lane_of"], dyn)], True
     return [xosc.AbsoluteLaneChangeAction(int(round(s["to"])), dyn)], True
 
 

@@ -391,6 +391,8 @@ class LaneChange(S.LaneChange, Behavior):
         lane = world.actor_lane(other) if other else int(round(self.settings["to"]))
         if lane is None:  # the other actor is off the lanes: keep to the current one
             lane = agent.lane
+        elif other and self.settings.get("lanes"):
+            lane = S.lanes_over(lane, int(round(self.settings["lanes"])))
         begin_lane_change(agent, world, lane, self.settings["duration"], time_s, self.settings["shape"])
         self.move = (agent.lc_start_s, agent.lc_duration_s)
 
