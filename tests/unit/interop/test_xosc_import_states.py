@@ -139,3 +139,36 @@ def test_a_longitudinal_relative_distance_is_absolute_whichever_is_ahead():
     with the order at the start, so it never held)."""
     got = import_xosc(ESMINI / "xosc" / "two_plus_one_road.xosc", root=ESMINI, ego="scripted", lenient=True)
     assert "CutInEvent: when abs(gap(ego, Target) + 5.04 m) > 20 m then" in got.text
+
+
+def _two_plus_one(tmp_path, old, new):
+    text = (ESMINI / "xosc" / "two_plus_one_road.xosc").read_text()
+    assert old in text
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "clear.xosc"
+    path.write_text(text.replace(old, new, 1))
+    return import_xosc(path, root=tmp_path / "esmini", ego="scripted")
+
+
+def test_a_relative_clearance_is_lane_ids_and_stations(tmp_path):
+    """two_plus_one_road.xosc: the Target overtakes when the lane left of its own (+1) exists
+    and no other actor is in it from 20 m behind to 40 m ahead (it was refused)."""
+    got = import_xosc(ESMINI / "xosc" / "two_plus_one_road.xosc", root=ESMINI, ego="scripted")
+    plan = _compiles(got, tmp_path)
+    assert "not (lane_id(ego) - lane_id(Target) >= 1 and lane_id(ego) - lane_id(Target) <= 1 and lane_id(ego) * " \
+           "lane_id(Target) > 0 and s(ego) - s(Target) >= -20 m and s(ego) - s(Target) <= 40 m)" in got.text
+    # Lane -2 has a lane -1 beside it from s = 125 m to 375 m (two sections); lane -1 none.
+    assert "lane_id(Target) == -2 and s(Target) >= 125 m and s(Target) < 175 m" in got.text
+    assert "lane_id(Target) == -2 and s(Target) >= 325 m and s(Target) < 375 m" in got.text
+    assert "lane_id(Target) == -1" not in got.text
+    overtake = plan.agents[0].triggers[0]
+    assert overtake.clause.name == "cruise" and overtake.edge is None
+
+
+@pytest.mark.parametrize("old,new", [('freeSpace="false"', 'freeSpace="true"'),
+                                     ('oppositeLanes="false"', 'oppositeLanes="true"'),
+                                     ('<RelativeLaneRange from="1" to="1"/>', '')])
+def test_a_clearance_not_translated_says_so(old, new, tmp_path):
+    got = _two_plus_one(tmp_path, old, new)
+    assert got.text is None
+    assert any("a clearance in free space, over opposite lanes" in d.message for d in got.diagnostics if d.is_error)
