@@ -430,10 +430,30 @@ def _const(run: _Run, node) -> float | None:
         return None
 
 
+def _abs_distance(run: _Run, node, value, name: str):
+    """`abs(gap(A, B) + H) OP D`, H half of both lengths (the importer's form of esmini's absolute
+    longitudinal distance between reference points) as that RelativeDistanceCondition, or None."""
+    if not (isinstance(node.left, E.Call) and node.left.fn == "abs" and isinstance(node.left.args[0], E.Binary)
+            and node.left.args[0].op == "+" and isinstance(node.left.args[0].right, E.Num) and value is not None):
+        return None
+    sig = _signal(node.left.args[0].left)
+    if sig is None or sig[0] != "gap" or len(sig[1]) != 2 or not all(a in run.by_name for a in sig[1]):
+        return None
+    a, b = (run.by_name[x] for x in sig[1])
+    if abs(node.left.args[0].right.value - 0.5 * (a.length_m + b.length_m)) > 1e-9:
+        return None
+    cond = xosc.RelativeDistanceCondition(value, RULES[node.op], xosc.RelativeDistanceType.longitudinal, b.name,
+                                          alongroute=False, freespace=False,
+                                          coordinate_system=xosc.CoordinateSystem.road)
+    return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, a.name)
+
+
 def _compare(run: _Run, node, name: str):
     """One comparison `signal op constant` as an OpenSCENARIO condition, or None."""
     if not isinstance(node, E.Binary) or node.op not in RULES:
         return None
+    if isinstance(node.left, E.Call):
+        return _abs_distance(run, node, _const(run, node.right), name)
     op, sig, value = node.op, _signal(node.left), _const(run, node.right)
     if sig is None:
         op, sig, value = FLIP[node.op], _signal(node.right), _const(run, node.left)

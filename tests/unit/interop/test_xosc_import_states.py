@@ -172,3 +172,22 @@ def test_a_clearance_not_translated_says_so(old, new, tmp_path):
     got = _two_plus_one(tmp_path, old, new)
     assert got.text is None
     assert any("a clearance in free space, over opposite lanes" in d.message for d in got.diagnostics if d.is_error)
+
+
+def test_an_absolute_longitudinal_distance_survives_export_and_import_without_the_side_file(tmp_path):
+    """`abs(gap(A, B) + H) OP D` (H half of both lengths: the import's form of esmini's
+    longitudinal distance) goes out as that RelativeDistanceCondition and comes back."""
+    from addt_dsl.interop.xosc_export import export_run
+    from addt_dsl.sweep import expand
+    source = RUNNING_SOURCE % "ended(a.go)"
+    plan = compile_source(source).plan
+    half = 0.5 * (plan.ego.length_m + plan.agents[0].length_m)
+    source = source.replace("go: at 2 s", f"go: when abs(gap(a, ego) + {half:g} m) > 120 m")
+    plan = compile_source(source).plan
+    done = export_run(expand(plan).specs[0], tmp_path)
+    xml = done.xosc_path.read_text()
+    assert 'relativeDistanceType="longitudinal"' in xml and 'freespace="false"' in xml
+    done.sidecar_path.unlink()
+    back = import_xosc(done.xosc_path)
+    assert back.plan is not None, [str(d) for d in back.diagnostics]
+    assert back.plan.agents[0].triggers[0].condition == plan.agents[0].triggers[0].condition
