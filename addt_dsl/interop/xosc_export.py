@@ -209,6 +209,8 @@ def _all_steps(steps):
 # A step state as an event state: `started` when the event starts; `ended` when its actions end.
 STEP_STATES = {"started": xosc.StoryboardElementState.startTransition,
                "ended": xosc.StoryboardElementState.endTransition}
+# `started(A.step) > 0 and not ended(A.step) > 0` in one conjunction (`_running`).
+RUNNING = xosc.StoryboardElementState.runningState
 
 
 def _state_condition(run: _Run, fn: str, key: str, op: str, value: float, name: str):
@@ -216,16 +218,17 @@ def _state_condition(run: _Run, fn: str, key: str, op: str, value: float, name: 
     step's event, or None where the comparison is not the state itself or the step has no one event
     (a group's end, a group without an anchor event)."""
     step = run.labels.get(key)
-    if step is None or fn not in STEP_STATES:
+    if step is None or (fn not in STEP_STATES and fn != "running"):
         return None
     truth = {v: {"<": v < value, "<=": v <= value, ">": v > value, ">=": v >= value, "==": v == value,
                  "!=": v != value}.get(op) for v in (0.0, 1.0)}
     if truth != {0.0: False, 1.0: True}:  # a state signal is 0 or 1: only `state is true` has this form
         return None
-    if step.group is not None and (fn == "ended" or (step.at_s is None and step.after_s is None
-                                                      and step.condition is None)):
+    if step.group is not None and (fn != "started" or (step.at_s is None and step.after_s is None
+                                                        and step.condition is None)):
         return None
-    cond = xosc.StoryboardElementStateCondition(xosc.StoryboardElementType.event, key, STEP_STATES[fn])
+    cond = xosc.StoryboardElementStateCondition(xosc.StoryboardElementType.event, key,
+                                                RUNNING if fn == "running" else STEP_STATES[fn])
     run.state_refs.append((cond, key))
     return xosc.ValueTrigger(name, 0, xosc.ConditionEdge.none, cond)
 
@@ -361,7 +364,7 @@ def _lane_change(run, actor, s):
         run.carried.append(f"{actor}: lane change shape {s['shape']} written as cubic (OpenSCENARIO 1.2 has no "
                            "quintic; exact in the side file)")
     if s.get("to_lane_of"):
-        return [xosc.RelativeLaneChangeAction(0, s["to_lane_of"], dyn)], True
+        return [xosc.RelativeLaneChangeAction(int(round(s.get("lanes") or 0)), s["to_lane_of"], dyn)], True
     return [xosc.AbsoluteLaneChangeAction(int(round(s["to"])), dyn)], True
 
 
@@ -480,10 +483,30 @@ def _const(run: _Run, node) -> float | None:
         return None
 
 
+def _abs_distance(run: _Run, node, value, name: str):
+    """`abs(gap(A, B) + H) OP D`, H half of both lengths (the importer's form of esmini's absolute
+    longitudinal distance between reference points) as that RelativeDistanceCondition, or None."""
+    if not (isinstance(node.left, E.Call) and node.left.fn == "abs" and isinstance(node.left.args[0], E.Binary)
+            and node.left.args[0].op == "+" and isinstance(node.left.args[0].right, E.Num) and value is not None):
+        return None
+    sig = _signal(node.left.args[0].left)
+    if sig is None or sig[0] != "gap" or len(sig[1]) != 2 or not all(a in run.by_name for a in sig[1]):
+        return None
+    a, b = (run.by_name[x] for x in sig[1])
+    if abs(node.left.args[0].right.value - 0.5 * (a.length_m + b.length_m)) > 1e-9:
+        return None
+    cond = xosc.RelativeDistanceCondition(value, RULES[node.op], xosc.RelativeDistanceType.longitudinal, b.name,
+                                          alongroute=False, freespace=False,
+                                          coordinate_system=xosc.CoordinateSystem.road)
+    return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, a.name)
+
+
 def _compare(run: _Run, node, name: str):
     """One comparison `signal op constant` as an OpenSCENARIO condition, or None."""
     if not isinstance(node, E.Binary) or node.op not in RULES:
         return None
+    if isinstance(node.left, E.Call):
+        return _abs_distance(run, node, _const(run, node.right), name)
     op, sig, value = node.op, _signal(node.left), _const(run, node.right)
     if sig is None:
         op, sig, value = FLIP[node.op], _signal(node.right), _const(run, node.left)
@@ -527,10 +550,30 @@ def _dnf(node) -> list[list]:
     return [[node]]
 
 
+def _running(conj: list) -> tuple[list, list[str]]:
+    """The conjunction without the pairs `started(K) > 0`, `not ended(K) > 0` (a step running),
+    and the keys K of those pairs."""
+    def state_of(leaf):
+        if isinstance(leaf, E.Binary) and leaf.op == ">" and isinstance(leaf.right, E.Num) \
+                and leaf.right.value == 0.0 and _signal(leaf.left) is not None:
+            fn, args = _signal(leaf.left)
+            return (fn, args[0]) if len(args) == 1 else None
+        return None
+    started = {state_of(x)[1] for x in conj if state_of(x) and state_of(x)[0] == "started"}
+    not_ended = {state_of(x.arg)[1] for x in conj if isinstance(x, E.Unary) and x.op == "not" and state_of(x.arg)
+                 and state_of(x.arg)[0] == "ended"}
+    keys = sorted(started & not_ended)
+    rest = [x for x in conj if not any(state_of(x) == ("started", k) or
+                                       (isinstance(x, E.Unary) and state_of(x.arg) == ("ended", k)) for k in keys)]
+    return rest, keys
+
+
 def _condition_groups(run: _Run, formula, event: str) -> list[list] | None:
     groups = []
     for conj in _dnf(formula):
-        conds = [_compare(run, leaf, run.unique(f"{event}_cond")) for leaf in conj]
+        conj, running = _running(conj)
+        conds = [_compare(run, leaf, run.unique(f"{event}_cond")) for leaf in conj] + \
+            [_state_condition(run, "running", key, ">", 0.0, run.unique(f"{event}_cond")) for key in running]
         if any(c is None for c in conds):
             return None
         groups.append(conds)
@@ -958,6 +1001,16 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
     for group in (_lights_group(run), _environment_group(run)):
         if group is not None:
             act.add_maneuver_group(group)
+    # The stop trigger before the references and parameters: its conditions may add some.
+    duration = xosc.ValueTrigger("addt_duration", 0, xosc.ConditionEdge.rising,
+                                 xosc.SimulationTimeCondition(plan.duration_s, xosc.Rule.greaterThan), "stop")
+    if plan.end is None:
+        stop = duration
+    else:  # `end when ...`: its condition groups, or the duration
+        stop = _start_trigger(run, plan.end, "addt_end", None, "stop")
+        group = xosc.ConditionGroup("stop")
+        group.add_condition(duration)
+        stop.add_conditiongroup(group)
     for cond, key in run.state_refs:  # every named step is exported by now
         cond.reference = run.label_events[key]
     for param in run.placeholders:
@@ -968,15 +1021,6 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
         act.add_maneuver_group(group)
     story = xosc.Story("addt_story")
     story.add_act(act)
-    duration = xosc.ValueTrigger("addt_duration", 0, xosc.ConditionEdge.rising,
-                                 xosc.SimulationTimeCondition(plan.duration_s, xosc.Rule.greaterThan), "stop")
-    if plan.end is None:
-        stop = duration
-    else:  # `end when ...`: its condition groups, or the duration
-        stop = _start_trigger(run, plan.end, "addt_end", None, "stop")
-        group = xosc.ConditionGroup("stop")
-        group.add_condition(duration)
-        stop.add_conditiongroup(group)
     storyboard = xosc.StoryBoard(init, stop)
     storyboard.add_story(story)
 

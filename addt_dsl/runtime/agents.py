@@ -11,7 +11,7 @@ import numpy as np
 
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.actor_road import ActorPath
-from addt_dsl.runtime.behaviors import Idm, lateral_profile, relative_heading, standing_yaw
+from addt_dsl.runtime.behaviors import Idm, lateral_profile, relative_heading, settle_lane_change, standing_yaw
 from addt_dsl.runtime.vehicle import VehicleState
 
 
@@ -252,6 +252,7 @@ class Fleet:
                 for a, ai, vi, si, ti in zip(self.agents, accel.tolist(), v_new.tolist(), s_new.tolist(),
                                              t_new.tolist()):
                     a.accel, a.speed, a.s, a.t = ai, vi, si, ti
+                    settle_lane_change(a, t_now + dt, ti)
                 return True
             accel = again
         return False

@@ -11,6 +11,7 @@ loop calls once per step.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -50,6 +51,10 @@ class AgentState:
     # ends) moves the agent with it, as esmini keeps an entity's lane and offset
     # (`RunState.follow_lane`); None: it keeps its offset t.
     lane_anchor: tuple | None = None
+    # A lane change onto a lane whose centre moves along s (a lane that widens, a lane
+    # offset): (stations, the target lane's centre there, its centre at the start); None
+    # where the centre stays put (the change ends at `t_target`).
+    lc_centre: tuple | None = None
 
 
 def standing_yaw(agent: AgentState, yaw: float) -> float:
@@ -66,6 +71,10 @@ def standing_yaw(agent: AgentState, yaw: float) -> float:
 
 # A speed counts as reached within this [m/s] for `ended(step)` (tracking lands on it).
 ENDED_SPEED_TOL_MS = 1e-3
+# A lane change onto a moving lane centre samples that centre every LC_SAMPLE_M [m] over
+# LC_SPAN_FACTOR times the distance it covers at its start speed plus LC_SPAN_MARGIN_M [m]
+# (room to speed up; beyond it, the last centre).
+LC_SAMPLE_M, LC_SPAN_FACTOR, LC_SPAN_MARGIN_M = 1.0, 2.0, 30.0
 
 
 class Behavior(S.BehaviorSpec):
@@ -692,6 +701,8 @@ class LaneChange(S.LaneChange, Behavior):
         lane = world.actor_lane(other) if other else int(round(self.settings["to"]))
         if lane is None:  # the other actor is off the lanes: keep to the current one
             lane = agent.lane
+        elif other and self.settings.get("lanes"):
+            lane = S.lanes_over(lane, int(round(self.settings["lanes"])))
         begin_lane_change(agent, world, lane, self.settings["duration"], time_s, self.settings["shape"])
         self.move = (agent.lc_start_s, agent.lc_duration_s)
 
@@ -819,6 +830,14 @@ def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, ti
     agent.lane_anchor = (lane, None, agent.t_target) if world.lane_moves(agent.road, lane) else None
     agent.lc_start_s = time_s
     agent.lc_duration_s = duration_s
+    agent.lc_centre = None
+    if duration_s > 0.0:
+        # As esmini: the move is an offset from the target lane's centre, which it follows.
+        span_m = max(agent.speed, 1.0) * duration_s * LC_SPAN_FACTOR + LC_SPAN_MARGIN_M
+        stations = [agent.s + i * LC_SAMPLE_M for i in range(int(span_m / LC_SAMPLE_M) + 2)]
+        centres = [world.lane_t(agent.road, lane, x) for x in stations]
+        if all(math.isfinite(c) for c in centres) and max(centres) - min(centres) > 1e-9:
+            agent.lc_centre = (stations, centres, agent.t_target)
 
 
 def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
@@ -839,6 +858,7 @@ def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
             step = math.sqrt(max(step * step - across * across, 0.0))
         agent.s += step / agent.ground_scale
         agent.t = t_next
+        settle_lane_change(agent, time_s + dt, t_next)
 
 
 def relative_heading(agent: AgentState, time_s: float, dt: float) -> float:
@@ -853,8 +873,22 @@ def relative_heading(agent: AgentState, time_s: float, dt: float) -> float:
 
 
 def lateral_profile(agent: AgentState, time_s: float) -> float:
-    """Lateral offset [m] of an agent on its lane-change profile at `time_s`."""
+    """Lateral offset [m] of an agent on its lane-change profile at `time_s` (onto a lane
+    whose centre moves: that centre where the agent is, plus the offset left)."""
     if agent.lc_duration_s <= 0.0:
         return agent.t_target
     u = (time_s - agent.lc_start_s) / agent.lc_duration_s
+    if agent.lc_centre is not None:
+        stations, centres, start_centre = agent.lc_centre
+        i = min(max(bisect.bisect_right(stations, agent.s) - 1, 0), len(stations) - 2)
+        f = min(max((agent.s - stations[i]) / (stations[i + 1] - stations[i]), 0.0), 1.0)
+        centre = centres[i] + f * (centres[i + 1] - centres[i])
+        return centre + (agent.t_start - start_centre) * (1.0 - blend(agent.lc_shape, u))
     return agent.t_start + (agent.t_target - agent.t_start) * blend(agent.lc_shape, u)
+
+
+def settle_lane_change(agent: AgentState, time_s: float, t: float) -> None:
+    """Once a change onto a moving lane centre is over, the agent holds the offset it ended
+    at (as after any change)."""
+    if agent.lc_centre is not None and time_s + 1e-9 >= agent.lc_start_s + agent.lc_duration_s:
+        agent.t_target, agent.t_start, agent.lc_centre = t, t, None

@@ -202,6 +202,15 @@ class Ended(S.Ended, SignalFn):
 
 
 @SIGNALS.implements
+class LaneId(S.LaneId, SignalFn):
+
+    @staticmethod
+    def compute(trace, args):
+        lanes = trace.lanes.get(args[0])
+        return lanes if lanes is not None else np.full_like(trace.time, np.nan)
+
+
+@SIGNALS.implements
 class Light(S.Light, SignalFn):
 
     @staticmethod

@@ -221,6 +221,8 @@ class RunState:
         self.deferred: list[tuple[AgentState, BoundClause]] = []  # time-0 behaviours with live settings
         # Named steps (agent, `agent.label`, state), whose states are recorded per sample.
         self.named_steps: list[tuple[AgentState, str, object]] = []
+        # Whether a formula reads `lane_id(A)`: then lanes are recorded per sample.
+        self.lane_ids = '"lane_id(' in self.spec.model_dump_json()
         # A scripted ego: an AgentState moved by the agents' code (`_script`), its
         # VehicleState posed from it each step (`_pose_scripted_ego`); None: its stack drives.
         self.ego_agent = None
@@ -321,6 +323,8 @@ class RunState:
             a.lane_anchor = None
             return
         d = c - c_last
+        if a.lc_centre is not None:  # the change itself follows the moving centre (`lateral_profile`)
+            d = 0.0
         if d:
             a.t += d
             a.t_target += d
@@ -470,6 +474,11 @@ class RunState:
             return self.ego_road.road.lane_at(self.ego_s, self.ego_t)
         a = self.agent_by_name[name]
         return self.agent_roads[name].road.lane_at(a.s, a.t)
+
+    def lane_number(self, name: str) -> float:
+        """`actor_lane` as a number: NaN off the lanes (the ego past its road's end too)."""
+        lane = None if name == "ego" and self.left_road else self.actor_lane(name)
+        return math.nan if lane is None else float(lane)
 
     def road_band_t(self, road_id: str, s: float) -> tuple[float, float]:
         road = next(r for r in self.agent_roads.values() if r.road_id == road_id)

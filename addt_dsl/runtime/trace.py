@@ -77,6 +77,8 @@ class Trace:
     # without lights.
     lights: dict[str, np.ndarray] = field(default_factory=dict)
     red_margin: dict[str, np.ndarray] = field(default_factory=dict)
+    # Each actor's lane id per sample (signal `lane_id`), in runs whose formulas read it.
+    lanes: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -140,7 +142,7 @@ class Trace:
             h.update(np.ascontiguousarray(self.object_count, dtype=np.float64).tobytes())
         # (The step is in `time`; an error's text is in its `stack_error` event or fixed by
         # `status`.) Only scenarios with lights hash them: digests of the others stay what they were.
-        for label, table in (("light:", self.lights), ("red_margin:", self.red_margin)):
+        for label, table in (("light:", self.lights), ("red_margin:", self.red_margin), ("lane_id:", self.lanes)):
             for name in sorted(table):
                 h.update((label + name).encode())
                 h.update(np.ascontiguousarray(table[name]).tobytes())

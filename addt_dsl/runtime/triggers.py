@@ -87,6 +87,8 @@ def snapshot_trace(run, rec, k: int, with_steps: bool = True) -> Trace:
     t = k * run.dt
     lights = {n: np.array([run.lights.state(n, t)]) for n in run.lights.programs} if run.lights else {}
     trace = Trace(run.dt, np.array([t]), actors, lat, lights=lights)
+    if run.lane_ids:  # `lane_id(A)` reads the lanes now
+        trace.lanes = {name: np.array([run.lane_number(name)]) for name in rec}
     if run.named_steps and with_steps:  # `when ended(lead.brake_hard)` reads the states now
         trace.steps = {name: np.array([code], dtype=np.int8) for name, code in run.step_states(t).items()}
     return trace

@@ -201,6 +201,16 @@ class Brake(BehaviorSpec):
     )
     doc = "Brake at a fixed deceleration down to a speed (default: standstill)."
 
+def lanes_over(lane: int, count: int) -> int:
+    """The lane `count` lanes to the left (negative: right) of `lane` for a driver in it
+    under right-hand traffic (lanes right of the reference line drive along +s), lane 0
+    skipped (as esmini's relative target lane)."""
+    target = lane + count * (1 if lane < 0 else -1)
+    if target == 0 or (target > 0) != (lane > 0):
+        target = (1 if target > lane else -1) * (abs(target) + 1)
+    return target
+
+
 @BEHAVIORS.register
 class LaneChange(BehaviorSpec):
     keyword = "lane_change"
@@ -209,6 +219,9 @@ class LaneChange(BehaviorSpec):
         ParamSpec("to", None, kind="int", doc="target lane id (OpenDRIVE convention)"),
         ParamSpec("to_lane_of", None, kind="name", default="",
                   doc="instead of `to`: the lane another actor is in when the change starts"),
+        ParamSpec("lanes", None, kind="int", default=0, low=-20, high=20,
+                  doc="with `to_lane_of`: that many lanes to the actor's left (negative: right), "
+                      "as its driver sees it under right-hand traffic, lane 0 skipped"),
         ParamSpec("duration", units.TIME, default=4.0, low=0.5, doc="time to complete the change"),
         ParamSpec("shape", None, kind="word", default="quintic", choices=SHAPES,
                   doc="lateral dynamics shape (quintic: zero lateral speed and acceleration at both ends)"),
@@ -218,6 +231,8 @@ class LaneChange(BehaviorSpec):
     def validate(values: dict) -> list[tuple]:
         if ("to" in values) == bool(values.get("to_lane_of")):
             return [("to", "give the target lane once: `to LANE` or `to_lane_of ACTOR`", "E0105")]
+        if values.get("lanes") and not values.get("to_lane_of"):
+            return [("lanes", "`lanes N` counts from another actor's lane: give `to_lane_of ACTOR`", "E0105")]
         return []
 
 @BEHAVIORS.register

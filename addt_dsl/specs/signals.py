@@ -144,6 +144,14 @@ class Ended(SignalSpec):
            "(OpenSCENARIO StoryboardElementStateCondition, endTransition)")
 
 @SIGNALS.register
+class LaneId(SignalSpec):
+    keyword = "lane_id"
+    args = ("actor",)
+    dim = units.DIMENSIONLESS
+    doc = ("the OpenDRIVE id of the driving lane the actor is in (the nearest lane centre on "
+           "its road or route; NaN off the lanes), recorded only in runs whose formulas read it")
+
+@SIGNALS.register
 class Light(SignalSpec):
     keyword = "light"
     args = ("light",)

@@ -3,13 +3,14 @@
 from addt_dsl import expr as E
 from addt_dsl.interop.openscenario.registry import ACTIONS
 from addt_dsl.interop.openscenario.xml import only_child
+from addt_dsl.specs.behaviors import lanes_over
 from addt_dsl.plan import ClausePlan
 
 
 class Lateral:
     @ACTIONS.register("LaneChangeAction", "approx", "`lane_change` over a time exactly; over a distance or at "
                       "a rate, the time at the speed then (W0802); a target lane relative to another entity: its "
-                      "lane at the start (W0802)")
+                      "lane when the change starts (`to_lane_of X lanes N`)")
     def act_lane_change(self, change, who: str, act) -> ClausePlan | None:
         return self.lane_change(change, who, self.actors[who])
 
@@ -23,26 +24,25 @@ class Lateral:
         shape = self.raw(dyn, "dynamicsShape", required=False)
         if shape in ("linear", "cubic", "sinusoidal", "step"):
             extra["shape"] = shape
-        if tgt.tag == "RelativeTargetLane" and tgt.get("entityRef") not in (None, who) \
-                and int(self.value(tgt, "value")) == 0:
-            ref = self.actor_name(tgt)
-            if ref is None:
-                return None
+        ref = self.actor_name(tgt) if tgt.tag == "RelativeTargetLane" and tgt.get("entityRef") else who
+        if ref is None:
+            return None
+        if ref != who:
+            # Another actor's lane when the change starts, `value` lanes to its driver's left.
+            d = int(self.value(tgt, "value"))
             lane = self.actors[ref]["lane_now"] if ref in self.actors else None
+            if lane is not None and d:  # where it is expected (a later change relative to its own lane)
+                lane = lanes_over(lane, d)
             extra["to_lane_of"] = ref
+            if d:
+                extra["lanes"] = E.Num(value=float(d))
         elif tgt.tag == "AbsoluteTargetLane":
             lane = int(self.value(tgt, "value"))
-        else:
-            ref = self.actor_name(tgt)
-            if ref is None:
-                return None
-            base = self.actors[ref]["lane_now"] if ref != who else info["lane_now"]
+        else:  # its own lane: where the importer expects it then
+            base = info["lane_now"]
             if base is None:
-                self.skip(tgt, f"lane relative to {ref}, whose lane is not known (no translated position)")
+                self.skip(tgt, f"lane relative to {who}, whose lane is not known (no translated position)")
                 return None
-            if ref != who:
-                self.approx(tgt, f"lane relative to {ref}: its lane at the start ({base}), not at the change",
-                            "`lane_change to_lane_of X` takes X's lane when the change starts (offset 0)")
             d = int(self.value(tgt, "value"))
             lane = base + d
             if base * lane <= 0 and d:

@@ -58,4 +58,11 @@ class Routing:
                 settings["times"] = [E.Num(value=round(x, 9)) for x in times]
             else:
                 self.approx(timing, "vertex times that do not increase: driven at the default speed")
-        return ClausePlan(keyword="behavior", name="trajectory", settings=settings)
+        clause = ClausePlan(keyword="behavior", name="trajectory", settings=settings)
+        # Positions relative to an entity are placed from its initial place: exact for a
+        # trajectory from the start; an event checks when it starts (`Storyboard.event`).
+        for el in shape.iter():
+            if el.tag.startswith("Relative") and el.get("entityRef"):
+                self.relative_paths.append((clause, el, el.get("entityRef")))
+                break
+        return clause

@@ -7,6 +7,7 @@ from addt_dsl.interop.openscenario.params import EXPR, all_of, any_of, plus_expr
 from addt_dsl.interop.openscenario.registry import ENTITY_CONDITIONS, VALUE_CONDITIONS
 from addt_dsl.interop.openscenario.xml import child_at, only_child
 from addt_dsl.plan import LIGHT_STATES
+from addt_dsl.road.lanes import DRIVING_TYPES
 from addt_dsl.road.route import RouteError, resolve_route
 
 EDGES = {"none": None, "rising": "rising", "falling": "falling", "risingOrFalling": "changing"}
@@ -22,14 +23,12 @@ def sig(fn: str, *args: str):
     return E.Signal(name=f"{fn}({','.join(args)})")
 
 
-def is_ahead(placed, a, b, params) -> bool:
-    """Whether b starts ahead of a (so `gap(a, b)` is the positive one)."""
-    return eval_param_expr(placed[b].s, params) >= eval_param_expr(placed[a].s, params)
-
 VALUE_CONDITIONS.declare("SimulationTimeCondition", "exact", "a step's `at` time (one condition group, greater "
                          "than); as a stop trigger the run's duration; other uses refused")
-VALUE_CONDITIONS.declare("StoryboardElementStateCondition", "approx", "another event's or action's start or end "
-                         "(`after`, `when started/ended(A.step)`); its own act or story running: always true")
+VALUE_CONDITIONS.declare("StoryboardElementStateCondition", "approx", "another event's or action's start, run or "
+                         "end (`after`, `when started/ended(A.step)`; running: started and not ended); an event of "
+                         "teleports that do nothing here: the state that starts it; its own act or story running: "
+                         "always true")
 for _name, _note in (
         ("TimeOfDayCondition", "the twin has no time of day"),
         ("UserDefinedValueCondition", "a user-defined value means nothing to the twin"),
@@ -39,7 +38,6 @@ for _name, _note in (
 for _name, _note in (
         ("EndOfRoadCondition", "the language has no end-of-road signal"),
         ("OffroadCondition", "the language has no off-road signal"),
-        ("RelativeClearanceCondition", "the language has no free-lane signal"),
         ("AngleCondition", "the language has no heading signal"),
         ("RelativeAngleCondition", "the language has no relative heading signal"),
 ):
@@ -187,6 +185,59 @@ class Conditions:
         op = RULE_OPS.get(c.get("rule", ""), ">")
         return E.Binary(op=op, left=sig("accel", a), right=self.number(c, "value", units.ACCELERATION))
 
+    @ENTITY_CONDITIONS.register("RelativeClearanceCondition", "exact", "no other actor in the lanes "
+                                "`from`..`to` of the actor's lane id (same side of the reference line) "
+                                "within `distanceBackward`..`distanceForward` along s, and such a driving "
+                                "lane there, as esmini (`lane_id`, `s`); every actor on one road without "
+                                "a route; free space, opposite lanes and several lane ranges refused")
+    def cond_clearance(self, c, a: str):
+        ranges = list(c.iterfind("RelativeLaneRange"))
+        if (c.get("freeSpace") or "false").lower() == "true" or (c.get("oppositeLanes") or "false").lower() == "true" \
+                or len(ranges) != 1 or ranges[0].get("from") is None or ranges[0].get("to") is None:
+            self.skip(c, "a clearance in free space, over opposite lanes, or without one lane range with `from` "
+                         "and `to` is not translated")
+            return None
+        low, high = int(self.value(ranges[0], "from")), int(self.value(ranges[0], "to"))
+        refs = [self.actor_name(r) for r in c.iterfind("EntityRef")]
+        if None in refs:
+            return None
+        others = refs or [w for w in self.actors if w != a]
+        road = self.placed[a].road
+        if any(self.placed[w].road != road or self.actors[w].get("route_el") is not None
+               or self.actors[w].get("against_s") for w in [a, *others]):
+            self.skip(c, "a clearance among actors on several roads, on routes or driving against s is not "
+                         "translated (stations along one road are)")
+            return None
+        forward, backward = self.number(c, "distanceForward", units.LENGTH), \
+            self.number(c, "distanceBackward", units.LENGTH)
+        lane, s = sig("lane_id", a), sig("s", a)
+        # The area exists: a driving lane of the same side within the range, at the actor's s
+        # (intervals of the road's lane sections, for each lane the actor may be in).
+        odr = self.network.road(next(i for i, r in self.roads.items() if r.name == road))
+        cases = []
+        for sec in odr.sections:
+            ids = {lane.id for lane in sec.left + sec.right if lane.type in DRIVING_TYPES}  # (a lane 0 m wide too)
+            for own in sorted(ids):
+                if any((own + k) in ids and (own + k) * own > 0 for k in range(low, high + 1)):
+                    cases.append(all_of([E.Binary(op="==", left=lane, right=E.Num(value=float(own))),
+                                         E.Binary(op=">=", left=s, right=E.Num(value=round(sec.s0, 9)))]
+                                        + ([E.Binary(op="<", left=s, right=E.Num(value=round(sec.s1, 9)))]
+                                           if sec.s1 < odr.length else [])))
+        if not cases:
+            return E.Binary(op="<", left=E.Num(value=1.0), right=E.Num(value=0.0))  # never
+        parts = [any_of(cases)]
+        for w in others:  # and none of the others in that area
+            dl = E.Binary(op="-", left=sig("lane_id", w), right=lane)
+            ds = E.Binary(op="-", left=sig("s", w), right=s)
+            parts.append(E.Unary(op="not", arg=all_of([
+                E.Binary(op=">=", left=dl, right=E.Num(value=float(low))),
+                E.Binary(op="<=", left=dl, right=E.Num(value=float(high))),
+                E.Binary(op=">", left=E.Binary(op="*", left=sig("lane_id", w), right=lane), right=E.Num(value=0.0)),
+                E.Binary(op=">=", left=ds, right=E.Num(value=-backward.value) if isinstance(backward, E.Num)
+                         else E.Unary(op="neg", arg=backward)),
+                E.Binary(op="<=", left=ds, right=forward)])))
+        return all_of(parts)
+
     @ENTITY_CONDITIONS.register("RelativeDistanceCondition", "approx",
                                 "longitudinal and cartesian between entities (free space: W0802); TTC with a position "
                                 "and lateral distances refused")
@@ -233,10 +284,12 @@ class Conditions:
         free = (c.get("freespace") or "false").lower() == "true"
         value = self.number(c, "value", units.LENGTH)
         if kind == "longitudinal":
-            half = 0.0 if free else 0.5 * (self.size(a)[0] + self.size(b)[0])
-            ahead = is_ahead(self.placed, a, b, self.param_values())
-            left = sig("gap", a, b) if ahead else sig("gap", b, a)
-            return E.Binary(op=op, left=left, right=plus_expr(value, E.Num(value=-half)) if half else value)
+            # esmini compares the absolute distance, whichever is ahead (an overtake passes
+            # through 0): |gap(a, b) + half of both lengths| between reference points; free
+            # space, that less the half lengths.
+            half = 0.5 * (self.size(a)[0] + self.size(b)[0])
+            left = E.Call(fn="abs", args=(plus_expr(sig("gap", a, b), E.Num(value=half)),))
+            return E.Binary(op=op, left=left, right=plus_expr(value, E.Num(value=half)) if free else value)
         if kind in ("cartesianDistance", "euclidianDistance"):
             if free:
                 self.approx(c, "a free-space distance: the centre distance less half of both lengths")

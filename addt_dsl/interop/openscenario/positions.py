@@ -276,6 +276,10 @@ class Positions:
     def world_point(self, pos_el, who: str):
         """(x, y, heading) [m, m, rad] of a position, facing its lane's driving direction (or
         its `Orientation`); None after a diagnostic."""
+        world = only_child(pos_el)
+        if world is not None and world.tag == "WorldPosition" and world.get("h") is not None:
+            # Where it says, facing where it says (a clothoid starts with that heading, not the road's).
+            return self.value(world, "x"), self.mirror(self.value(world, "y")), self.mirror(self.value(world, "h"))
         got = self.position(pos_el, who)
         if got is None:
             return None

@@ -42,9 +42,11 @@ class Importer(Parameters, CarlaFrame):
         self.network = None
         self.xodr_name = ""
         self.xodr_text = ""
-        self.events: dict = {}  # event name -> storyboard.EventStep
+        self.events: dict = {}  # event (and action) name -> storyboard.EventStep
+        self.instant: dict = {}  # event (and action) name -> storyboard.InstantEvent: no step, only a start
         self.maneuvers: dict[str, list[str]] = {}  # maneuver name -> its events' names
         self.end: TriggerPlan | None = None  # the storyboard's stop trigger beyond its time
+        self.relative_paths: list = []  # (clause, shape element, entity): a trajectory relative to an entity
         self.pending: list = []  # storyboard.PendingEvent: events started by another event, linked at the end
         self.anchors: dict = {}  # no-op events that start a group: name -> storyboard.Anchor
         self.stand_still: list = []  # (duration [s], element) of each StandStillCondition read

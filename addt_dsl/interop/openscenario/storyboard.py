@@ -19,9 +19,23 @@ DEFAULT_DURATION_S = 60.0
 MAX_DURATION_S = 3600.0
 
 
-# StoryboardElementStateCondition states on another actor's event, as step states.
-STATE_SIGNAL = {"startTransition": "started",
+# StoryboardElementStateCondition states on another actor's event, as step states
+# (runningState: started and not ended, `step_state`).
+STATE_SIGNAL = {"startTransition": "started", "runningState": "started",
                 "endTransition": "ended", "completeState": "ended"}
+# Actions that happen in one step: an event of only these that translates to no step
+# (a teleport that only raises the actor) still starts, and ends at once (`instant_state`).
+INSTANT_ACTIONS = frozenset({"TeleportAction"})
+
+
+def step_state(state: str, step: str):
+    """A storyboard element state as a formula on a named step's signals (a signal above 0,
+    as the compiler lowers a state): running is started and not yet ended."""
+    def on(signal: str):
+        return E.Binary(op=">", left=E.Signal(name=f"{signal}({step})"), right=E.Num(value=0.0))
+    if state == "runningState":
+        return E.Binary(op="and", left=on("started"), right=E.Unary(op="not", arg=on("ended")))
+    return on(STATE_SIGNAL[state])
 
 
 def steps_of(step: TriggerPlan):
@@ -148,6 +162,15 @@ class EventStep:
     """A translated event: its actor and the clause of its (first) action."""
     actor: str
     clause: ClausePlan
+
+
+@dataclass(frozen=True)
+class InstantEvent:
+    """An event whose actions happen at once and do nothing in the twin: its actor, its
+    element and its act's start time [s] (its start read when a state of it is asked for)."""
+    actor: str
+    el: object
+    act_at: float | None
 
 
 @dataclass(frozen=True)
@@ -466,18 +489,36 @@ class Storyboard:
             clause = ClausePlan.model_validate(exact["clause"]) if exact else self.private_action(inner, who)
             if clause is not None:
                 clauses.append(clause)
+                if action.get("name"):  # a state of the action: its own step's
+                    self.events.setdefault(action.get("name"), EventStep(who, clause))
         if any(c.keyword == "light" for _, c in lights):
             self.light_step(event, self.light_event([(el, c) for el, c in lights if c.keyword == "light"]), who,
                             act_at)
         if any(c.keyword == "environment" for _, c in lights):
             self.environment_step(event, [c for _, c in lights if c.keyword == "environment"], who, act_at)
         if not clauses:
+            if actions and not lights and who is not None and all(
+                    any(child_at(a, "PrivateAction", t) is not None for t in sorted(INSTANT_ACTIONS)) for a in actions):
+                for key in [name] + [a.get("name") for a in actions if a.get("name")]:
+                    self.instant.setdefault(key, InstantEvent(who, event, act_at))
             return
         trigger = event.find("StartTrigger")
         step = self.start(trigger, who, act_at, name)
         if step is None:
             return
         fields = step.fields
+        at_once = step.after is None and set(fields) <= {"at_s"} \
+            and float(fields.get("at_s", E.Num(value=0.0)).value) == 0
+        for clause, el, ref in self.relative_paths:
+            if not at_once and any(c is clause for c in clauses):
+                # esmini places such a trajectory where the entity is when the action starts.
+                self.skip(el, f"a trajectory relative to '{ref}' in an event that starts after time 0 is not "
+                              "translated (its points would be placed from where the entity starts the run)",
+                          "a trajectory relative to an entity translates from the start (Init, or an event at "
+                          "time 0)")
+                clauses = [c for c in clauses if c is not clause]
+        if not clauses:
+            return
         clauses = speed_into_trajectory(clauses)
         if len(clauses) > 1:
             self.approx(event, f"event '{name}' starts {len(clauses)} actions: one step each, same start")
@@ -673,8 +714,21 @@ class Storyboard:
         found: list[str] = []
         info["triggers"] = [labelled(t, first.clause, safe_name(ref, taken), found) for t in info["triggers"]]
         label = found[0]
-        # A step state is a formula: the signal above 0, as the compiler lowers it.
-        return E.Binary(op=">", left=E.Signal(name=f"{STATE_SIGNAL[state]}({other}.{label})"), right=E.Num(value=0.0))
+        return step_state(state, f"{other}.{label}")
+
+    def instant_state(self, ref: str, state: str):
+        """A state of an event (or action) that does nothing in the twin but happen at once: it
+        starts, runs and ends at its start, so its state is the state of the event that starts
+        it, and the delay of that start [s]. (None, 0): its start is not on another event's state."""
+        got = self.instant.get(ref)
+        if got is None or state not in STATE_SIGNAL:
+            return None, 0.0
+        step = self.start(got.el.find("StartTrigger"), got.actor, got.act_at, got.el.get("name", ""))
+        if step is None or step.after is None or step.after.ref in self.instant:
+            return None, 0.0
+        if step.after.cond.get("conditionEdge", "none") not in ("none", "rising"):
+            return None, 0.0  # a transition's falling edge: one step after it (not said)
+        return self.event_state(step.after.ref, step.after.state), step.after.delay
 
     def end_trigger(self, trigger) -> None:
         """The storyboard's stop trigger beyond its simulation time (the run's duration):
@@ -700,17 +754,22 @@ class Storyboard:
                     events = [ref] if kind in ("event", "action") else self.maneuvers.get(ref) \
                         if kind == "maneuver" and state in ("endTransition", "completeState") else None
                     parts = [self.event_state(e, state) for e in events] if events else [None]
+                    extra = 0.0  # an event that does nothing but start: the state of the event starting it
+                    if kind in ("event", "action") and parts == [None]:
+                        instant, extra = self.instant_state(ref, state)
+                        parts = [instant]
                     if not parts or any(p is None for p in parts):
                         self.skip(cond, f"a stop trigger on the {kind} '{ref}' ({state}) is not translated",
                                   "events and maneuvers that translate to steps are")
                         return
                     conj.append(all_of(parts))
                 else:
+                    extra = 0.0
                     formula = self.condition(cond, "ego")
                     if formula is None:
                         return
                     conj.append(formula)
-                delays.append((self.value(cond, "delay", units.TIME, 0.0), cond))
+                delays.append((self.value(cond, "delay", units.TIME, 0.0) + extra, cond))
                 edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
             if conj and timed is not None:
                 if len([g for g in groups if list(g)]) > 1:

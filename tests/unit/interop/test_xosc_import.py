@@ -284,8 +284,22 @@ def test_esmini_trajectories_and_synchronisation(tmp_path):
     traj = walker.behaviors[0]
     assert traj.name == "trajectory" and [v.value for v in traj.settings["s"]][:2] == [110.0, 110.0]
     assert walker.s.value == 110.0
-    # A timed polyline started by a held condition (delay 0.2 s).
-    got = import_xosc(ESMINI / "xosc" / "trajectory-test.xosc", root=ESMINI, lenient=True)
+    # Points relative to an entity in an event after time 0: esmini places them from where
+    # the entity is when the action starts, which the language cannot say (refused).
+    strict = import_xosc(ESMINI / "xosc" / "trajectory-test.xosc", root=ESMINI)
+    assert sum("a trajectory relative to 'Target' in an event" in d.message
+               for d in strict.diagnostics if d.code == "E0803") == 3
+    # The same file with the points absolute (where they were from the Target's start, s =
+    # 10 m of lane -1): a timed polyline started by a held condition (delay 0.2 s).
+    text = (ESMINI / "xosc" / "trajectory-test.xosc").read_text()
+    text = re.sub(r'<RelativeLanePosition dLane="(-?\d)" ds="(\d+)" entityRef="Target" offset="([-.\d]+)"/>',
+                  lambda m: f'<LanePosition roadId="1" laneId="{-1 + int(m[1]) + (int(m[1]) > 0)}" '
+                            f's="{10 + int(m[2])}" offset="{m[3]}"/>', text)
+    text = text.replace('<RelativeRoadPosition dt="0" ds="0" entityRef="Target"/>',
+                        '<LanePosition roadId="1" laneId="-1" s="10" offset="0"/>')
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    (tmp_path / "esmini" / "xosc" / "absolute.xosc").write_text(text)
+    got = import_xosc(tmp_path / "esmini" / "xosc" / "absolute.xosc", root=tmp_path / "esmini", lenient=True)
     step = next(t for a in got.plan.agents for t in a.triggers if t.group is not None)
     first, clothoid = step.group.steps
     assert [v.value for v in first.clause.settings["times"]] == [0.0, 2.0, 4.0, 6.0]
