@@ -400,6 +400,46 @@ class LaneChange(S.LaneChange, Behavior):
         return (agent.lc_start_s, agent.lc_duration_s) == self.move and time_s + 1e-9 >= start + duration
 
 
+# A shape's peak second derivative relative to (change / duration^2), as esmini's
+# TransitionDynamics (GetTargetParamValByPrimPrimPeak) gives it: the duration that keeps a
+# lateral move's peak acceleration at a limit is sqrt(factor * |change| / limit). esmini uses
+# the cubic's 6 for `linear` too (a linear blend's acceleration is infinite at its ends);
+# the quintic's peak is 10 / sqrt(3).
+PEAK_CURVATURE = {"linear": 6.0, "cubic": 6.0, "sinusoidal": math.pi ** 2 / 2, "quintic": 10.0 / math.sqrt(3.0)}
+
+
+def duration_for_peak_accel(shape: str, change_m: float, accel: float) -> float:
+    """Time [s] a lateral move of `change_m` [m] with `shape` takes when its peak lateral
+    acceleration is `accel` [m/s^2]; 0 for `step`."""
+    if shape == "step":
+        return 0.0
+    return math.sqrt(PEAK_CURVATURE[shape] * abs(change_m) / accel)
+
+
+@BEHAVIORS.implements
+class LaneOffset(S.LaneOffset, Behavior):
+
+    def start(self, agent, world, time_s):
+        s = self.settings
+        centre = world.lane_t(agent.road, agent.lane, agent.s)
+        if math.isnan(centre):  # its lane ends here: the offset counts from where it is
+            centre = agent.t
+        target = centre + s["to"]
+        duration = s["duration"] if s["duration"] is not None else \
+            duration_for_peak_accel(s["shape"], target - agent.t, s["max_lat_accel"])
+        agent.lc_shape = s["shape"]
+        agent.heading_rel = 0.0
+        agent.t_start, agent.t_target = agent.t, target
+        agent.lc_start_s = time_s
+        agent.lc_duration_s = 0.0 if s["shape"] == "step" else duration
+        self.move = (agent.lc_start_s, agent.lc_duration_s)
+
+    def ended(self, agent, world, time_s):
+        # At the offset; a later lateral move replacing this one means it never ends.
+        start, duration = self.move
+        return (agent.lc_start_s, agent.lc_duration_s) == self.move and time_s + 1e-9 >= start + duration
+
+
 @BEHAVIORS.implements
 class Teleport(S.Teleport, Behavior):
 

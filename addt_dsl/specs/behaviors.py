@@ -194,6 +194,26 @@ class LaneChange(BehaviorSpec):
         return []
 
 @BEHAVIORS.register
+class LaneOffset(BehaviorSpec):
+    keyword = "lane_offset"
+    channel = "lateral"
+    params = (
+        ParamSpec("to", units.LENGTH, required=True,
+                  doc="target offset from the centre of the actor's lane, left of +s positive"),
+        ParamSpec("duration", units.TIME, default=None, low=0.0, doc="time the move takes"),
+        ParamSpec("max_lat_accel", units.ACCELERATION, default=None, low=0.01,
+                  doc="instead of `duration`: the shape's peak lateral acceleration, which sets the time"),
+        ParamSpec("shape", None, kind="word", default="quintic", choices=SHAPES, doc="lateral dynamics shape"),
+    )
+    doc = ("Move sideways to an offset from the centre of the lane the actor is in and hold it "
+           "(OpenSCENARIO LaneOffsetAction).")
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if ("duration" in values) == ("max_lat_accel" in values):
+            return [("to", "give the time of the move once: `duration D` or `max_lat_accel A`", "E0105")]
+        return []
+
+@BEHAVIORS.register
 class Teleport(BehaviorSpec):
     keyword = "teleport"
     channel = "lateral"

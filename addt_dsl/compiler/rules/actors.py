@@ -499,7 +499,8 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str |
     vals = check_settings(ctx, c.settings + c.block, cls.params, f"{c.keyword} '{c.name}'", c.span)
     if not _validate_clause(ctx, c, cls, vals):
         return None
-    if c.keyword == "behavior" and getattr(cls, "channel", "") == "lateral" and "to" in vals:
+    if c.keyword == "behavior" and getattr(cls, "channel", "") == "lateral" and "to" in vals \
+            and any(p.name == "to" and p.kind == "int" for p in cls.params):  # a lane id (not an offset)
         _check_target_lane(ctx, c, vals["to"], road)
     for spec in cls.params:  # a `name` setting of a behaviour names another actor
         if c.keyword == "behavior" and spec.kind == "name" and isinstance(vals.get(spec.name), str):
