@@ -201,7 +201,7 @@ class Fleet:
         rows, settings = [], []
         for i, a in enumerate(self.agents):
             beh = run.longitudinal[a.name]
-            if a.heading_rel:
+            if a.heading_rel or a.lc_keeps_station:  # (the loop steps lane offsets' stations)
                 return None
             if beh is None:
                 continue

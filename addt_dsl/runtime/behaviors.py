@@ -40,6 +40,9 @@ class AgentState:
     # walkers: they move at this angle instead of following a lane.
     heading_rel: float = 0.0
     lc_shape: str = "quintic"  # blend of the current lateral manoeuvre (see SHAPES)
+    # The current lateral manoeuvre leaves the station's progress whole (a lane offset, as
+    # esmini moves one); a lane change takes its sideways part from the step along the road.
+    lc_keeps_station: bool = False
     moved: bool = False  # it has had a speed above 0: its declared yaw no longer holds
     # Ground covered per metre of station at its offset [m/m] (`FastRoad.ground_scale`),
     # set where it is posed: its station advances by speed / ground_scale.
@@ -427,7 +430,7 @@ class LaneOffset(S.LaneOffset, Behavior):
         target = centre + s["to"]
         duration = s["duration"] if s["duration"] is not None else \
             duration_for_peak_accel(s["shape"], target - agent.t, s["max_lat_accel"])
-        agent.lc_shape = s["shape"]
+        agent.lc_shape, agent.lc_keeps_station = s["shape"], True
         agent.heading_rel = 0.0
         agent.t_start, agent.t_target = agent.t, target
         agent.lc_start_s = time_s
@@ -550,6 +553,7 @@ def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, ti
     current offset to `lane`'s centre; `step` jumps there at the next step."""
     agent.lane = lane
     agent.lc_shape = shape
+    agent.lc_keeps_station = False
     if shape == "step":
         duration_s = 0.0
     agent.heading_rel = 0.0
@@ -572,7 +576,7 @@ def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
     else:
         t_next = lateral_profile(agent, time_s + dt)
         step = agent.speed * dt
-        if t_next != agent.t:  # a lane change: the path's ground splits into along and across
+        if t_next != agent.t and not agent.lc_keeps_station:  # a lane change: the ground splits into along and across
             across = t_next - agent.t
             step = math.sqrt(max(step * step - across * across, 0.0))
         agent.s += step / agent.ground_scale
