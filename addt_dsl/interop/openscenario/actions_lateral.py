@@ -44,7 +44,9 @@ class Lateral:
             if ref != who:
                 self.approx(tgt, f"lane relative to {ref}: its lane at the start ({base}), not at the change",
                             "`lane_change to_lane_of X` takes X's lane when the change starts (offset 0)")
-            d = int(self.value(tgt, "value"))
+            # Positive is to the left of the way the reference drives (esmini: the lane id
+            # plus the value for an entity heading along +s, minus it against s).
+            d = int(self.value(tgt, "value")) * (self.driving_way(ref) if ref in self.placed else 1)
             lane = base + d
             if base * lane <= 0 and d:
                 lane += 1 if d > 0 else -1
