@@ -848,3 +848,19 @@ def test_a_lane_offset_is_along_the_roads_t_in_openscenario_and_to_the_drivers_l
     assert back.plan is not None, [str(d) for d in back.diagnostics]
     assert back.plan.agents[0].offset.value == pytest.approx(0.5)
     assert back.plan.ego.offset.value == pytest.approx(0.25)
+
+
+def test_lane_offsets_and_relative_lanes_as_esmini_takes_them(tmp_path):
+    """esmini's lane_change.xosc: the ego's LaneOffsetAction (8 m, sinusoidal, 3.5 m/s^2) in
+    lane 1 is 8 m toward +t (esmini: the value times the sign of the lane id); the truck in
+    lane 1 drives against s, so a lane to its left (+1) is lane -1, not 2."""
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "lane_change.xosc"
+    path.write_text(path.read_text().replace('<ParameterCondition parameterRef="DummyParameter" value="10" '
+                                             'rule="greaterThan"/>', '<SimulationTimeCondition value="3" '
+                                                                     'rule="greaterThan"/>'))
+    got = import_xosc(path, root=tmp_path / "esmini", ego="scripted", lenient=True)
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    assert "behavior lane_offset to 8 m max_lat_accel 3.5 m/s^2 shape sinusoidal" in got.text
+    assert "behavior lane_change to -1 duration 2 s shape sinusoidal" in got.text
+    assert not any("LaneOffsetAction" in d.message for d in got.diagnostics)
