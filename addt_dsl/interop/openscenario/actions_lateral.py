@@ -70,8 +70,8 @@ class Lateral:
 
     @ACTIONS.register("LaneOffsetAction", "approx", "`lane_offset to O max_lat_accel A shape S` to an absolute "
                       "target: esmini's dynamics (the time from the shape's peak lateral acceleration, from the "
-                      "offset the move starts at; ends at the offset); the value's side as esmini takes it "
-                      "(toward the lane's right for its driving direction, by the lane the importer tracks); "
+                      "offset the move starts at; ends at the offset); a positive value away from the road's "
+                      "reference line, as esmini takes it (by the lane the importer tracks the actor in); "
                       "no maxLateralAcc: esmini's 0.5 m/s^2 (W0802); continuous: ends at the offset as in esmini "
                       "(W0802); a relative target is refused")
     def act_lane_offset(self, offset, who: str, act) -> ClausePlan | None:
