@@ -52,6 +52,7 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, creation_date, road_file, xml_text
 from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
+from addt_dsl.specs.behaviors import PEAK_CURVATURE
 from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.behaviors import PEAK_SLOPE
@@ -332,6 +333,23 @@ def _lane_change(run, actor, s):
     return [xosc.AbsoluteLaneChangeAction(int(round(s["to"])), dyn)], True
 
 
+def _lane_offset(run, actor, s):
+    shape = "cubic" if s["shape"] == "quintic" else s["shape"]
+    if s["shape"] == "quintic":
+        run.carried.append(f"{actor}: lane offset shape quintic written as cubic (exact in the side file)")
+    accel = s["max_lat_accel"]
+    if accel is None:  # OpenSCENARIO times a lane offset by its peak lateral acceleration only
+        change = abs(s["to"])
+        accel = max(PEAK_CURVATURE.get(shape, 6.0) * change / max(s["duration"], 1e-3) ** 2, 0.01)
+        run.carried.append(f"{actor}: lane offset over {s['duration']:g} s written as maxLateralAcc "
+                           f"{accel:.4g} m/s^2 (the time from the lane's centre; exact in the side file)")
+    # esmini's value: away from the reference line, by the sign of the lane id (the lane
+    # the actor starts in; a lane changed before the offset is in the side file).
+    lane = int(round(run.num(run.by_name[actor].lane)))
+    value = s["to"] * (1.0 if lane > 0 else -1.0)
+    return [xosc.AbsoluteLaneOffsetAction(value, OSC_SHAPE[shape], accel, continuous=False)], True
+
+
 def _speed_profile(run, actor, s):
     # OpenSCENARIO entry times are durations from the previous entry (the first: from the start).
     times = list(s["times"])
@@ -403,6 +421,7 @@ def _controller(keyword: str):
 
 # keyword -> (run, actor, resolved settings) -> (OpenSCENARIO actions, whether they are standard actions)
 ACTIONS = {"cruise": _cruise, "brake": _brake, "lane_change": _lane_change, "cut_in": _lane_change,
+           "lane_offset": _lane_offset,
            "speed_profile": _speed_profile, "synchronize": _synchronize, "trajectory": _trajectory,
            "keep_gap": _keep_gap,
            "idm": _controller("idm"), "overtake": _controller("overtake"), "walk": _controller("walk"),

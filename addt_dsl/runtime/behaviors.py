@@ -403,12 +403,6 @@ class LaneChange(S.LaneChange, Behavior):
         return (agent.lc_start_s, agent.lc_duration_s) == self.move and time_s + 1e-9 >= start + duration
 
 
-# A shape's peak second derivative relative to (change / duration^2), as esmini's
-# TransitionDynamics (GetTargetParamValByPrimPrimPeak) gives it: the duration that keeps a
-# lateral move's peak acceleration at a limit is sqrt(factor * |change| / limit). esmini uses
-# the cubic's 6 for `linear` too (a linear blend's acceleration is infinite at its ends);
-# the quintic's peak is 10 / sqrt(3).
-PEAK_CURVATURE = {"linear": 6.0, "cubic": 6.0, "sinusoidal": math.pi ** 2 / 2, "quintic": 10.0 / math.sqrt(3.0)}
 
 
 def duration_for_peak_accel(shape: str, change_m: float, accel: float) -> float:
@@ -416,7 +410,7 @@ def duration_for_peak_accel(shape: str, change_m: float, accel: float) -> float:
     acceleration is `accel` [m/s^2]; 0 for `step`."""
     if shape == "step":
         return 0.0
-    return math.sqrt(PEAK_CURVATURE[shape] * abs(change_m) / accel)
+    return math.sqrt(S.PEAK_CURVATURE[shape] * abs(change_m) / accel)
 
 
 @BEHAVIORS.implements

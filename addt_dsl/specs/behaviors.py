@@ -13,6 +13,12 @@ from addt_dsl.registry import BEHAVIORS, ParamSpec
 # lane changes take any, speed changes all but `quintic`.
 SHAPES = ("step", "linear", "cubic", "sinusoidal", "quintic")
 SPEED_SHAPES = ("step", "linear", "cubic", "sinusoidal")
+# A shape's peak second derivative relative to (change / duration^2), as esmini's
+# TransitionDynamics (GetTargetParamValByPrimPrimPeak) gives it: the duration that keeps a
+# lateral move's peak acceleration at a limit is sqrt(factor * |change| / limit). esmini uses
+# the cubic's 6 for `linear` too (a linear blend's acceleration is infinite at its ends);
+# the quintic's peak is 10 / sqrt(3).
+PEAK_CURVATURE = {"linear": 6.0, "cubic": 6.0, "sinusoidal": math.pi ** 2 / 2, "quintic": 10.0 / math.sqrt(3.0)}
 SHAPE_SETTING = ParamSpec("shape", None, kind="word", default="linear", choices=SPEED_SHAPES,
                           doc="dynamics shape of the speed change")
 DURATION_SETTING = ParamSpec("duration", units.TIME, default=None, low=0.0,

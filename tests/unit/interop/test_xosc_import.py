@@ -7,6 +7,7 @@ import json
 import random
 import re
 import shutil
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
@@ -864,3 +865,30 @@ def test_lane_offsets_and_relative_lanes_as_esmini_takes_them(tmp_path):
     assert "behavior lane_offset to 8 m max_lat_accel 3.5 m/s^2 shape sinusoidal" in got.text
     assert "behavior lane_change to -1 duration 2 s shape sinusoidal" in got.text
     assert not any("LaneOffsetAction" in d.message for d in got.diagnostics)
+
+
+def test_a_lane_offset_comes_back_from_the_xosc_alone(tmp_path):
+    """`lane_offset` exports as a LaneOffsetAction (esmini's sign: a right lane's offset to
+    the left of +s is a negative value) and imports back to the same behaviour."""
+    source = """scenario offsets {
+  duration 5 s
+  road r {
+    line length 300 m
+    lanes right 2
+  }
+  ego car on r lane -2 at 10 m speed 10 m/s {
+    stack bev cruise_speed 10 m/s
+  }
+  agent drifter car on r lane -1 at 20 m speed 10 m/s {
+    at 1 s behavior lane_offset to 1.2 m max_lat_accel 1.5 m/s^2 shape sinusoidal
+  }
+}
+"""
+    spec = expand(compile_source(source, "offsets.addt").plan).specs[0]
+    done = export_run(spec, tmp_path, "scenario")
+    target = ET.parse(done.xosc_path).getroot().find(".//LaneOffsetAction/LaneOffsetTarget/AbsoluteTargetLaneOffset")
+    assert float(target.get("value")) == -1.2
+    got = _without_sidecar(spec, tmp_path / "again")
+    (step,) = next(a for a in got.plan.agents if a.name == "drifter").triggers
+    assert step.clause.name == "lane_offset" and step.clause.settings["shape"] == "sinusoidal"
+    assert (step.clause.settings["to"].value, step.clause.settings["max_lat_accel"].value) == (1.2, 1.5)
