@@ -154,6 +154,7 @@ class ActorPlan(_Model):
     yaw: Expr | None = None  # body yaw relative to the lane's driving direction [rad] (None: 0)
     ignore_lights: bool = False  # runs red lights (agents otherwise stop at red and yellow)
     reverse: bool = False  # drives against its lane's OpenDRIVE driving direction (`direction reverse`)
+    stop_at_road_end: bool = False  # stops at the end of its road or route (`at_road_end stop`)
 
     @property
     def scripted(self) -> bool:

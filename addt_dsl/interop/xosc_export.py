@@ -857,7 +857,8 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
                             "mu": None if a.mu is None else run.num(a.mu),
                             "stack": None if a.stack is None else a.stack.model_dump(mode="json"),
                             "sensors": [s.model_dump(mode="json") for s in a.sensors],
-                            "ignore_lights": a.ignore_lights, "reverse": a.reverse}
+                            "ignore_lights": a.ignore_lights, "reverse": a.reverse,
+                            "stop_at_road_end": a.stop_at_road_end}
                    for a in plan.actors()},
         "faults": [f.model_dump(mode="json") for f in pinned.faults],
         "oracles": [o.model_dump(mode="json") for o in plan.oracles],

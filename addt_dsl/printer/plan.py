@@ -186,7 +186,8 @@ VEHICLE_DEFAULTS = {  # what the compiler fills in when a setting is left out
 }
 ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLESS),  # optional, may use parameters
                ("offset", "offset", units.LENGTH), ("yaw", "yaw", units.ANGLE))
-ACTOR_FLAGS = (("at_red run", "ignore_lights"), ("direction reverse", "reverse"))  # printed when the plan's flag is set
+ACTOR_FLAGS = (("at_red run", "ignore_lights"), ("direction reverse", "reverse"),
+               ("at_road_end stop", "stop_at_road_end"))  # printed when the plan's flag is set
 ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units.LENGTH),
                 ("height", "height_m", units.LENGTH),
                 ("mass", "mass_kg", units.MASS), ("wheelbase", "wheelbase_m", units.LENGTH))

@@ -72,6 +72,7 @@ class BoundActor:
     yaw: float = 0.0  # body yaw relative to the driving direction [rad]
     ignore_lights: bool = False  # runs red lights
     reverse: bool = False  # drives against its lane's driving direction
+    stop_at_road_end: bool = False  # stops at the end of its road or route
 
     @property
     def scripted(self) -> bool:
@@ -181,4 +182,4 @@ def _actor(a: ActorPlan, params: dict[str, float]) -> BoundActor:
         sensors=tuple(_clause(c, params) for c in a.sensors),
         stack=_clause(a.stack, params) if a.stack is not None else None, route=tuple(a.route),
         yaw=_value(a.yaw, params), ignore_lights=a.ignore_lights,
-        reverse=a.reverse)
+        reverse=a.reverse, stop_at_road_end=a.stop_at_road_end)

@@ -299,6 +299,10 @@ class RunState:
         if self.lights is not None and not a.heading_rel and not self.agent_plans[a.name].ignore_lights:
             accel = self.stop_for_lights(a, accel, t_now)
         advance(a, accel, t_now, dt)
+        if self.agent_plans[a.name].stop_at_road_end:  # `at_road_end stop`: held at its road's end
+            end = self.agent_roads[a.name].road.length
+            if a.s >= end:
+                a.s, a.speed, a.accel = end, 0.0, 0.0
 
     def apply_friction(self) -> None:
         """The ego's tyre-road friction under the current conditions (`road friction F`)."""

@@ -44,6 +44,9 @@ ACTOR_SETTINGS = (
                   "overtaking in the oncoming lane)"),
     ParamSpec("at_red", None, kind="word", default="stop", choices=("stop", "run"),
               doc="agents: `stop` at red (and yellow) traffic lights on their lane, or `run` them"),
+    ParamSpec("at_road_end", None, kind="word", default="go", choices=("go", "stop"),
+              doc="agents and a scripted ego: `go` on straight past the end of their road or route, or `stop` "
+                  "there (as esmini's entities do)"),
 )
 
 # The ego's lidar when it declares no sensor: five channels from level to 4 deg down (0, -1,
@@ -251,7 +254,8 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
         length_m=length, width_m=width, height_m=body["height"], mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
         goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"), route=route, yaw=vals.get("yaw"),
-        ignore_lights=vals.get("at_red") == "run", reverse=vals.get("direction") == "reverse")
+        ignore_lights=vals.get("at_red") == "run", reverse=vals.get("direction") == "reverse",
+        stop_at_road_end=vals.get("at_road_end") == "stop")
 
 
 def is_scripted_ego(d: ast.ActorDecl) -> bool:

@@ -153,6 +153,10 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
             elif info.get("against_s") and info["vehicle"] != "obstacle" and not fields.get("route"):
                 fields["reverse"] = True  # it faces against its lane: it drives that way
             if sc:
+                fields["stop_at_road_end"] = bool(extra.get("stop_at_road_end", False))
+            elif who != "ego" or self.scripted_ego:
+                fields["stop_at_road_end"] = True  # esmini holds an entity at the end of its road
+            if sc:
                 fields["ignore_lights"] = bool(extra.get("ignore_lights", False))
             elif self.light_ctls and (who != "ego" or self.scripted_ego):
                 fields["ignore_lights"] = True  # OpenSCENARIO's actors follow their actions, not the lights
