@@ -121,6 +121,14 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
 
     # -- the plan
 
+    def dead_end(self, who: str) -> bool:
+        """Whether the road the actor starts on ends without a link the way it drives (where
+        esmini holds it; a linked road it would drive on, which the twin does not follow)."""
+        at = self.placed[who]
+        road_id = next(i for i, r in self.roads.items() if r.name == at.road)
+        odr = self.network.road(road_id)
+        return (odr.successor if self.driving_way(who) > 0 else odr.predecessor) is None
+
     def plan(self, header, duration: float) -> ScenarioPlan:
         sc = self.sidecar or {}
         actors = []
@@ -154,7 +162,7 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                 fields["reverse"] = True  # it faces against its lane: it drives that way
             if sc:
                 fields["stop_at_road_end"] = bool(extra.get("stop_at_road_end", False))
-            elif who != "ego" or self.scripted_ego:
+            elif (who != "ego" or self.scripted_ego) and not fields.get("route") and self.dead_end(who):
                 fields["stop_at_road_end"] = True  # esmini holds an entity at the end of its road
             if sc:
                 fields["ignore_lights"] = bool(extra.get("ignore_lights", False))
