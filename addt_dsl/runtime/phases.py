@@ -58,6 +58,7 @@ class Record:
         self.steps = {name: np.zeros(n, dtype=np.int8) for _, name, _ in run.named_steps}
         self.lights = {c.name: np.zeros(n) for c in plan.controllers} if run.lights else {}
         self.margins = {name: np.zeros(n) for name in names} if run.lights else {}
+        self.edges = run.edges = {name: np.zeros(n) for name in run.edge_actors}  # (conditions read them)
         self.sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
         self.sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
         lengths = [self.sizes[m][0] for m in names]
@@ -80,7 +81,7 @@ class Record:
         cut = lambda d: {k: v[:last] for k, v in d.items()}  # noqa: E731
         return Trace(run.dt, np.arange(last) * run.dt, actors, cut(self.latency), run.events, cut(self.outputs),
                      self.objects[:last], run.status, run.error, steps=cut(self.steps), lights=cut(self.lights),
-                     red_margin=cut(self.margins))
+                     red_margin=cut(self.margins), road_edge=cut(self.edges))
 
 
 def clock(run: RunState, t: float) -> None:
@@ -133,6 +134,14 @@ def record(run: RunState, rec: Record, k: int) -> None:
     else:
         rec.block[k, 0, :-1] = ego_row
         fleet.record(rec.block[k, 1:])
+    for name, edges in rec.edges.items():  # `road_edge(A)`: to the outer edge of A's road
+        if name == "ego":
+            road, s, t = run.ego_road.road, run.ego_s, run.ego_t
+        else:
+            a = run.agent_by_name[name]
+            road, s, t = run.agent_roads[name].road, a.s, a.t
+        lo, hi = road.paved_band_t(s)
+        edges[k] = min(t - lo, hi - t)
 
 
 def environment(run: RunState, rec: Record, k: int, t: float) -> None:

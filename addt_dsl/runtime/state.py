@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import zlib
 
 import numpy as np
@@ -173,6 +174,9 @@ class RunState:
         self.n_steps = int(round(plan.duration_s / self.dt))
         self.events: list[Event] = []
         self.left_road = False  # the ego passed the end of its road or route (`left_road` event)
+        # Actors whose `road_edge` a condition or an oracle reads: recorded for them only.
+        self.edge_actors = sorted(set(re.findall(r"road_edge\((\w+)\)", spec.plan.model_dump_json())))
+        self.edges: dict = {}  # their recorded arrays (`phases.Record`)
         self.networks = build_network(plan.roads)
         self._road_cache: dict = {}
         # Visual shapes (road meshes, coloured actors) only when a sensor renders.

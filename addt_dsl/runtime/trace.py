@@ -75,6 +75,9 @@ class Trace:
     # without lights.
     lights: dict[str, np.ndarray] = field(default_factory=dict)
     red_margin: dict[str, np.ndarray] = field(default_factory=dict)
+    # Each actor's distance to its road's outer edge [m] (signal `road_edge`), for the actors
+    # the scenario reads it of.
+    road_edge: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -138,7 +141,7 @@ class Trace:
             h.update(np.ascontiguousarray(self.object_count, dtype=np.float64).tobytes())
         # (The step is in `time`; an error's text is in its `stack_error` event or fixed by
         # `status`.) Only scenarios with lights hash them: digests of the others stay what they were.
-        for label, table in (("light:", self.lights), ("red_margin:", self.red_margin)):
+        for label, table in (("light:", self.lights), ("red_margin:", self.red_margin), ("road_edge:", self.road_edge)):
             for name in sorted(table):
                 h.update((label + name).encode())
                 h.update(np.ascontiguousarray(table[name]).tobytes())

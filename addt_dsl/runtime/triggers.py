@@ -86,7 +86,8 @@ def snapshot_trace(run, rec, k: int, with_steps: bool = True) -> Trace:
     lat = {n: np.array([v]) for n, v in run.stack.latency.items()}
     t = k * run.dt
     lights = {n: np.array([run.lights.state(n, t)]) for n in run.lights.programs} if run.lights else {}
-    trace = Trace(run.dt, np.array([t]), actors, lat, lights=lights)
+    trace = Trace(run.dt, np.array([t]), actors, lat, lights=lights,
+                  road_edge={n: v[k:k + 1] for n, v in run.edges.items()})
     if run.named_steps and with_steps:  # `when ended(lead.brake_hard)` reads the states now
         trace.steps = {name: np.array([code], dtype=np.int8) for name, code in run.step_states(t).items()}
     return trace

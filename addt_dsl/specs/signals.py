@@ -60,6 +60,14 @@ class Travelled(SignalSpec):
            "(CARLA's DrivenDistanceTest)")
 
 @SIGNALS.register
+class RoadEdge(SignalSpec):
+    keyword = "road_edge"
+    dim = units.LENGTH
+    doc = ("distance from the actor's centre to the outer edge of its road on its side (the lanes of any "
+           "type but `none`), negative beyond it: off the road (OpenSCENARIO OffroadCondition, as esmini "
+           "measures it) [m]")
+
+@SIGNALS.register
 class Distance(SignalSpec):
     keyword = "distance"
     args = ("actor", "actor")
