@@ -35,7 +35,6 @@ for _name, _note in (
     VALUE_CONDITIONS.declare(_name, "refused", _note)
 for _name, _note in (
         ("EndOfRoadCondition", "the language has no end-of-road signal"),
-        ("OffroadCondition", "the language has no off-road signal"),
         ("StandStillCondition", "the language has no standstill-duration signal"),
         ("RelativeClearanceCondition", "the language has no free-lane signal"),
         ("AngleCondition", "the language has no heading signal"),
@@ -128,6 +127,22 @@ class Conditions:
     def cond_speed(self, c, a: str):
         op = RULE_OPS.get(c.get("rule", ""), ">")
         return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
+
+    @ENTITY_CONDITIONS.register("OffroadCondition", "approx",
+                                "`road_edge(A) < 0 m for D` (off the road's lanes of any type but none, as "
+                                "esmini measures it, for the duration); in a start trigger of one condition, "
+                                "else refused; an entity off the road for D already when the event is armed "
+                                "starts it D later (esmini: never, its rising edge has passed) (W0802)")
+    def cond_offroad(self, c, a: str):
+        duration = self.value(c, "duration", units.TIME)
+        if duration > 0:
+            if not getattr(self, "hold_allowed", False):
+                self.skip(c, "an off-road duration is translated in a start trigger of one condition only")
+                return None
+            self.approx(c, f"off the road for {duration:g} s: `for {duration:g} s` counts from the event's arming "
+                           "(esmini's rising edge never fires for an entity off the road that long already)")
+            self.cond_hold = duration
+        return E.Binary(op="<", left=sig("road_edge", a), right=E.Num(value=0.0))
 
     @ENTITY_CONDITIONS.register("CollisionCondition", "approx",
                                 "a collision of the actor with any other; with one entity or a type among several "

@@ -525,9 +525,19 @@ class Storyboard:
                     value = self.value(time, "value")
                     at_s = max(at_s or 0.0, value) if value > 0 else at_s
                     continue
+                # A condition held for a duration (OffroadCondition) sets `cond_hold`: the step's
+                # `for D`, in a trigger of that one condition only.
+                self.hold_allowed, self.cond_hold = len(groups) == 1 and len(list(group)) == 1, None
                 formula = self.condition(cond, who)
+                self.hold_allowed = False
                 if formula is None:
                     return None
+                if self.cond_hold is not None:
+                    if self.value(cond, "delay", units.TIME, 0.0) > 0:
+                        self.skip(cond, "a condition held for a duration with a delay is not translated")
+                        return None
+                    return Start({**({"at_s": E.Num(value=at_s)} if at_s is not None else {}),
+                                  "condition": formula, "hold_s": E.Num(value=self.cond_hold)})
                 conj.append(formula)
                 holds.append((self.value(cond, "delay", units.TIME, 0.0), cond))
                 edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
