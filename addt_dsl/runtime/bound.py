@@ -116,6 +116,8 @@ class BoundScenario:
     light_steps: tuple[BoundStep, ...] = ()
     environment: tuple[BoundClause, ...] = ()
     environment_steps: tuple[BoundStep, ...] = ()
+    variables: tuple[tuple[str, float], ...] = ()  # scenario variables and their first values
+    variable_steps: tuple[BoundStep, ...] = ()
     end: BoundStep | None = None  # `end when ...`: the run ends where it fires
 
     def road(self, name: str) -> RoadPlan:
@@ -135,6 +137,8 @@ def bind(spec: RunSpec) -> BoundScenario:
         environment_steps=tuple(bind_step(t, params) for t in plan.environment_steps),
         signals=tuple(plan.signals), controllers=tuple(_controller(c, params) for c in plan.controllers),
         light_steps=tuple(bind_step(t, params) for t in plan.light_steps),
+        variables=tuple((v.name, v.value) for v in plan.variables),
+        variable_steps=tuple(bind_step(t, params) for t in plan.variable_steps),
         end=bind_step(plan.end, params) if plan.end is not None else None)
 
 

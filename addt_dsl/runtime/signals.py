@@ -202,6 +202,14 @@ class Light(S.Light, SignalFn):
 
 
 @SIGNALS.implements
+class Var(S.Var, SignalFn):
+
+    @staticmethod
+    def compute(trace, args):
+        return trace.variables[args[0]]
+
+
+@SIGNALS.implements
 class RedLight(S.RedLight, SignalFn):
 
     @staticmethod

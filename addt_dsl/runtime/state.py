@@ -266,6 +266,10 @@ class RunState:
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self._setup_lights(plan)
+        # Scenario variables now, and the steps that set them (`at 3 s set phase 1`).
+        self.variables = dict(plan.variables)
+        self.variable_script = Script(plan.variable_steps) if plan.variable_steps else None
+        self.variable_records: dict = {}  # their recorded arrays (`phases.Record`)
         # `end when ...`: a start without a behaviour; the run ends where it fires.
         self.end_script = Script((plan.end,)) if plan.end is not None else None
         self.ego_junctions = junction_legs(self.ego_road)

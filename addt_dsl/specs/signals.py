@@ -149,6 +149,14 @@ class Light(SignalSpec):
     doc = "state of a traffic-light controller: compare with `green`, `yellow`, `red` (0, 1, 2)"
 
 @SIGNALS.register
+class Var(SignalSpec):
+    keyword = "var"
+    args = ("variable",)
+    dim = units.DIMENSIONLESS
+    doc = ("value of a scenario variable (`variables { }`), as the steps that set it left it "
+           "(OpenSCENARIO ParameterCondition on a parameter a ParameterSetAction sets)")
+
+@SIGNALS.register
 class RedLight(SignalSpec):
     keyword = "red_light"
     dim = units.LENGTH
