@@ -492,6 +492,23 @@ def _environment(pr: _Printer) -> None:
     pr.emit(1, "}")
 
 
+def _variables(pr: _Printer) -> None:
+    if not (pr.plan.variables or pr.plan.variable_steps):
+        return
+    pr.emit(0)
+    pr.emit(1, "variables {")
+    for v in pr.plan.variables:
+        pr.emit(2, f"{v.name} = {pr.exprs.value(E.Num(value=v.value), units.DIMENSIONLESS)}")
+    for tr in pr.plan.variable_steps:  # `at 3 s set phase 1`
+        starts = _starts(pr, tr, "then")
+        if not starts or tr.clause is None or tr.clause.keyword != "set" or tr.group is not None \
+                or tr.label is not None:
+            raise PrinterError("a variable step sets one variable from a start on")
+        pr.emit(2, _join(starts, f"set {tr.clause.name}",
+                         pr.exprs.value(tr.clause.settings["value"], units.DIMENSIONLESS)))
+    pr.emit(1, "}")
+
+
 def _env_model(pr: _Printer, c: ClausePlan) -> str:
     cls = ENVIRONMENTS.get(c.name)
     if cls is None:
@@ -500,7 +517,7 @@ def _env_model(pr: _Printer, c: ClausePlan) -> str:
 
 
 SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _lights, _environment,
-                                                    _end, _faults, _oracles, _sweep)
+                                                    _variables, _end, _faults, _oracles, _sweep)
 
 
 # ---------------------------------------------------------------- entry points
