@@ -75,6 +75,7 @@ LAMPS = {"1000001": ("red", "yellow", "green"), "1000011": ("red", "yellow", "gr
          "1000002.30": ("red", "red", "green"), "1000009.10": ("red", "yellow"), "1000009.20": ("yellow", "green")}
 LIGHTS_GROUP = "addt_lights"  # the maneuver group (no actors) of the light steps
 ENVIRONMENT_GROUP = "addt_environment_changes"  # ... and of the environment's changes
+VARIABLE_GROUP = "addt_variable_steps"  # ... and of the steps that set scenario variables
 __all__ = ["Export", "ExportError", "export_run", "SIDECAR_FORMAT", "SIDECAR_PARAM", "CONTROLLER_PREFIX", "LAMPS",
            "LIGHTS_GROUP", "lamps_of", "lamp_state", "state_of_lamps"]
 
@@ -477,6 +478,10 @@ def _compare(run: _Run, node, name: str):
         sid = run.controllers[args[0]].signals[0]  # the controller's signals all show its state
         return xosc.ValueTrigger(name, 0, xosc.ConditionEdge.none,
                                  xosc.TrafficSignalCondition(run.signal_id(sid), run.lamp_state(sid, state)))
+    if fn == "var" and len(args) == 1 and op != "!=":
+        return xosc.ValueTrigger(name, 0, xosc.ConditionEdge.none, xosc.VariableCondition(args[0], value, rule))
+    if fn == "road_edge" and len(args) == 1 and op == "<" and value == 0.0:
+        return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.OffroadCondition(0.0), args[0])
     if fn == "ttc" and len(args) == 2:
         cond = xosc.TimeToCollisionCondition(value, rule, alongroute=False, freespace=True, entity=args[1],
                                              coordinate_system=xosc.CoordinateSystem.road)
@@ -731,6 +736,24 @@ def _environment_group(run: _Run) -> xosc.ManeuverGroup | None:
     return group
 
 
+def _variable_group(run: _Run) -> xosc.ManeuverGroup | None:
+    """Steps that set scenario variables: one event per step, its VariableSetAction
+    (OpenSCENARIO 1.2's variables; the declarations are the scenario's)."""
+    if not run.plan.variable_steps:
+        return None
+    maneuver = xosc.Maneuver(f"{VARIABLE_GROUP}_maneuver")
+    for step in run.plan.variable_steps:
+        name = run.unique(f"set_{step.clause.name}")
+        event = xosc.Event(name, xosc.Priority.parallel)
+        event.add_action(run.unique(f"{name}_action"),
+                         xosc.VariableSetAction(step.clause.name, run.num(step.clause.settings["value"])))
+        event.add_trigger(_start_trigger(run, step, name, None))
+        maneuver.add_event(event)
+    group = xosc.ManeuverGroup(VARIABLE_GROUP)
+    group.add_maneuver(maneuver)
+    return group
+
+
 # ---------------------------------------------------------------- traffic lights
 
 def _program_phases(times: list[tuple[str, float]], offset: float) -> list[tuple[str, str, float]]:
@@ -922,7 +945,7 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
             group.add_actor(a.name)
             group.add_maneuver(maneuver)
             act.add_maneuver_group(group)
-    for group in (_lights_group(run), _environment_group(run)):
+    for group in (_lights_group(run), _environment_group(run), _variable_group(run)):
         if group is not None:
             act.add_maneuver_group(group)
     for cond, key in run.state_refs:  # every named step is exported by now
@@ -951,9 +974,14 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
     for ctl in _signal_controllers(run):
         network.add_traffic_signal_controller(ctl)
     sidecar = _sidecar(run, pinned)
+    variables = None
+    if plan.variables:
+        variables = xosc.VariableDeclarations()
+        for v in plan.variables:
+            variables.add_variable(xosc.Variable(v.name, xosc.ParameterType.double, repr(float(v.value))))
     scenario = xosc.Scenario(plan.name, "addt-dsl", params, entities, storyboard,
                              network, xosc.Catalog(), osc_minor_version=OSC_MINOR,
-                             creation_date=creation_date())
+                             creation_date=creation_date(), variable_declaration=variables)
     xosc_path = out / f"{stem}.xosc"
     xodr_path = out / roads.name
     sidecar_path = out / f"{stem}.addt.json"
