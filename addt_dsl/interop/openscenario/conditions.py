@@ -30,7 +30,6 @@ VALUE_CONDITIONS.declare("StoryboardElementStateCondition", "approx", "another e
 for _name, _note in (
         ("TimeOfDayCondition", "the twin has no time of day"),
         ("UserDefinedValueCondition", "a user-defined value means nothing to the twin"),
-        ("VariableCondition", "the language has no variables"),
 ):
     VALUE_CONDITIONS.declare(_name, "refused", _note)
 for _name, _note in (
@@ -68,15 +67,35 @@ class Conditions:
             return None
         return all_of(parts) if rule == "all" else any_of(parts)
 
-    @VALUE_CONDITIONS.register("ParameterCondition", "approx", "exact when the side file of an export carries "
-                               "the formula; other parameter conditions are refused (parameters are constant)")
+    @VALUE_CONDITIONS.register("ParameterCondition", "exact", "on a number parameter that a ParameterAction's "
+                               "SetAction sets in an event: `var(P) OP V` (a scenario variable); an export's "
+                               "placeholder: the formula in its side file; others refused (the parameter is "
+                               "constant)")
     def cond_parameter(self, value_cond, who: str):
         ref = self.raw(value_cond, "parameterRef")
         exact = (self.sidecar or {}).get("conditions", {}).get(ref)
         if exact:
             return EXPR.validate_python(exact["formula"])
-        self.skip(value_cond, f"<{value_cond.tag}> is not translated")
+        if any(a.get("parameterRef") == ref for a in self.doc.iterfind(".//Story//GlobalAction/ParameterAction")):
+            return self.variable_condition(value_cond, ref)
+        self.skip(value_cond, f"<{value_cond.tag}> is not translated",
+                  "a condition on a parameter that a ParameterAction sets is (a scenario variable)")
         return None
+
+    @VALUE_CONDITIONS.register("VariableCondition", "exact", "`var(V) OP X` on a number variable")
+    def cond_variable(self, value_cond, who: str):
+        return self.variable_condition(value_cond, self.raw(value_cond, "variableRef"))
+
+    def variable_condition(self, c, ref: str):
+        """`var(NAME) OP value`: a scenario variable against a number."""
+        op = RULE_OPS.get(c.get("rule", ""))
+        name = self.variable(ref, c)
+        if name is None:
+            return None
+        if op is None:
+            self.error(c, f"rule \"{c.get('rule')}\" is not one of {', '.join(RULE_OPS)}")
+            return None
+        return E.Binary(op=op, left=sig("var", name), right=E.Num(value=self.value(c, "value")))
 
     @VALUE_CONDITIONS.register("TrafficSignalCondition", "exact", "`light(C) == S`: the state of the signal's "
                                "controller")

@@ -52,6 +52,7 @@ from addt_dsl.plan import (
     ParamPlan,
     ScenarioPlan,
     TriggerPlan,
+    VariablePlan,
 )
 from addt_dsl.printer import PrinterError, params_referenced, pinned_fault_plan, print_plan, side_files
 from addt_dsl.registry import STACKS
@@ -255,7 +256,8 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                             roads=list(self.roads.values()), ego=ego, agents=agents, faults=faults, oracles=oracles,
                             environment=self.environment, environment_steps=self.environment_steps,
                             controllers=controllers, light_steps=self.light_steps,
-                            end=self.end)
+                            variables=[VariablePlan(name=k, value=v) for k, v in self.variables.items()],
+                            variable_steps=self.variable_steps, end=self.end)
         values = {**self.param_values(), **sc.get("params", {})}
         dims = {**{k: v for k, v in self.param_dims.items()},
                 **{k: units.DIMENSIONLESS for k in sc.get("params", {}) if k not in self.param_dims}}
