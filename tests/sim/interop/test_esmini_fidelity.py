@@ -26,7 +26,7 @@ with open(REF / "INDEX.csv", newline="") as _fh:
 # a reason in docs/openscenario.md).
 FAITHFUL_SCRIPTED = ("acc-test", "alks_cut-in", "alks_cut-out", "alks_decelerate", "alks_pedestrian",
                      "alks_r157_cut_in_quick_brake", "cut-in", "cut-in_environment", "cut-in_simple", "follow_ghost",
-                     "slow-lead-vehicle",
+                     "lane_change", "slow-lead-vehicle",
                      "straight_500m_pedestrian", "traffic_lights")
 # Every entity but the ego within 0.5 m RMS with the stack driving the ego (the entities
 # whose triggers do not depend on the ego's motion).
