@@ -216,7 +216,8 @@ class LaneOffset(BehaviorSpec):
     @staticmethod
     def validate(values: dict) -> list[tuple]:
         if ("duration" in values) == ("max_lat_accel" in values):
-            return [("to", "give the time of the move once: `duration D` or `max_lat_accel A`", "E0105")]
+            return [("max_lat_accel" if "duration" in values else "to",
+                     "give the time of the move once: `duration D` or `max_lat_accel A`", "E0105")]
         return []
 
 @BEHAVIORS.register
