@@ -851,20 +851,36 @@ def test_a_lane_offset_is_along_the_roads_t_in_openscenario_and_to_the_drivers_l
     assert back.plan.ego.offset.value == pytest.approx(0.25)
 
 
-def test_lane_offsets_and_relative_lanes_as_esmini_takes_them(tmp_path):
-    """esmini's lane_change.xosc: the ego's LaneOffsetAction (8 m, sinusoidal, 3.5 m/s^2) in
-    lane 1 is 8 m toward +t (esmini: the value times the sign of the lane id); the truck in
-    lane 1 drives against s, so a lane to its left (+1) is lane -1, not 2."""
+def test_lane_change_xosc_translates_every_construct_strictly():
+    """esmini's lane_change.xosc imports without --lenient: the ego's LaneOffsetAction (8 m,
+    sinusoidal, 3.5 m/s^2) in lane 1 is 8 m toward +t (esmini: the value times the sign of
+    the lane id); the truck in lane 1 drives against s, so a lane to its left (+1) is lane
+    -1, not 2; its ParameterCondition reads the parameter an event's ParameterSetAction sets
+    (a scenario variable); the OffroadCondition held 2.5 s is `road_edge(ego) < 0 m for
+    2.5 s`; the stop trigger waits on that event's end; both actors stop at the road's end."""
+    got = import_xosc(ESMINI / "xosc" / "lane_change.xosc", root=ESMINI, ego="scripted")
+    assert got.text is not None, [d.message for d in got.diagnostics if d.is_error]
+    for line in ("behavior lane_offset to 8 m max_lat_accel 3.5 m/s^2 shape sinusoidal",
+                 "EgoGoOnRoadEvent: when road_edge(ego) < 0 m for 2.5 s then behavior lane_change to 1 duration 3 s",
+                 "when rising var(DummyParameter) > 10 then behavior lane_change to -1 duration 2 s shape sinusoidal",
+                 "DummyParameter = 2", "at 3 s set DummyParameter 11",
+                 "end when rising ended(ego.EgoGoOnRoadEvent) delayed 3 s"):
+        assert line in got.text, line
+    assert got.text.count("at_road_end stop") == 2
+    warned = [d.message for d in got.diagnostics if d.code == "W0802"]
+    assert any("off the road for 2.5 s" in m for m in warned), warned
+
+
+def test_an_offroad_duration_beside_another_condition_is_refused(tmp_path):
     shutil.copytree(ESMINI, tmp_path / "esmini")
     path = tmp_path / "esmini" / "xosc" / "lane_change.xosc"
-    path.write_text(path.read_text().replace('<ParameterCondition parameterRef="DummyParameter" value="10" '
-                                             'rule="greaterThan"/>', '<SimulationTimeCondition value="3" '
-                                                                     'rule="greaterThan"/>'))
-    got = import_xosc(path, root=tmp_path / "esmini", ego="scripted", lenient=True)
-    assert got.text is not None, [d.message for d in got.diagnostics]
-    assert "behavior lane_offset to 8 m max_lat_accel 3.5 m/s^2 shape sinusoidal" in got.text
-    assert "behavior lane_change to -1 duration 2 s shape sinusoidal" in got.text
-    assert not any("LaneOffsetAction" in d.message for d in got.diagnostics)
+    text = path.read_text()
+    cond = text[text.index('<Condition name="EgoGoOnRoadCondition"'):]
+    cond = cond[:cond.index("</Condition>") + len("</Condition>")]
+    path.write_text(text.replace(cond, cond + cond.replace("EgoGoOnRoadCondition", "Second"), 1))
+    got = import_xosc(path, root=tmp_path / "esmini", ego="scripted")
+    assert got.text is None
+    assert any(d.code == "E0803" and "off-road duration" in d.message for d in got.diagnostics)
 
 
 def test_a_lane_offset_comes_back_from_the_xosc_alone(tmp_path):
