@@ -154,6 +154,7 @@ class ActorPlan(_Model):
     yaw: Expr | None = None  # body yaw relative to the lane's driving direction [rad] (None: 0)
     ignore_lights: bool = False  # runs red lights (agents otherwise stop at red and yellow)
     reverse: bool = False  # drives against its lane's OpenDRIVE driving direction (`direction reverse`)
+    stop_at_road_end: bool = False  # stops at the end of its road or route (`at_road_end stop`)
 
     @property
     def scripted(self) -> bool:
@@ -237,6 +238,13 @@ class SweepPlan(_Model):
     max_rejections: int = 1000
 
 
+class VariablePlan(_Model):
+    """A scenario variable: a number steps set during the run and conditions read (`var(NAME)`)."""
+
+    name: str
+    value: float  # its value at the start
+
+
 class ScenarioPlan(_Model):
     schema_version: Literal["2"] = SCHEMA_VERSION
     name: str
@@ -266,6 +274,10 @@ class ScenarioPlan(_Model):
     # Their changes during the run (`at 10 s fog visibility 20 m`): steps armed at time 0 whose
     # clause replaces the model's settings from then on.
     environment_steps: list[TriggerPlan] = Field(default_factory=list)
+    # Scenario variables (`variables { phase = 0 }`) and the steps that set them (`at 3 s set
+    # phase 1`: a clause `set` named after the variable, its setting `value`).
+    variables: list[VariablePlan] = Field(default_factory=list)
+    variable_steps: list[TriggerPlan] = Field(default_factory=list)
     # `end when C [delayed D]`: the run ends where this start fires (no clause), at the
     # latest at `duration_s` (OpenSCENARIO's storyboard stop trigger).
     end: TriggerPlan | None = None

@@ -295,6 +295,25 @@ class EnvStep(Node):
 
 
 @dataclass(frozen=True, slots=True)
+class VarDef(Node):
+    """`phase = 0` in a `variables { }` block: a scenario variable and its first value."""
+
+    name: str
+    name_span: Span
+    value: Expression
+
+
+@dataclass(frozen=True, slots=True)
+class VarStep(Node):
+    """`at 3 s set phase 1`: a step that sets a scenario variable."""
+
+    starts: tuple[StepStart, ...]
+    name: str
+    name_span: Span
+    value: Expression
+
+
+@dataclass(frozen=True, slots=True)
 class Block(Node):
     """`faults { }`, `expect { }`, `sweep { }`, `environment { }` — kept as blocks for span reporting."""
 

@@ -21,7 +21,7 @@ MAX_EXPR_DEPTH = 200  # operators chained or nested in one expression
 _POSITION_ONLY = frozenset({
     "INCLUDE", "SCENARIO", "ROAD", "IMPORT", "PARAM", "ASSUME", "KEEP", "AGENT", "AHEAD", "BEHIND",
     "LANE", "AT", "AFTER", "WHEN", "SET", "FAULTS", "DURING", "FROM", "EXPECT", "NO", "STAY", "REACH",
-    "SWEEP", "GRID", "CASES", "REPEAT", "SEED", "MAX_REJECTIONS", "WITHIN", "LSQB", "LIGHTS", "END",
+    "SWEEP", "GRID", "CASES", "REPEAT", "SEED", "MAX_REJECTIONS", "WITHIN", "LSQB", "LIGHTS", "END", "VARIABLES",
 })
 
 
@@ -344,6 +344,19 @@ class Builder:
 
     def b_env_step(self, span, items):
         return ast.EnvStep(span, tuple(i for i in items if isinstance(i, ast.StepStart)), items[-1])
+
+    # ---- variables
+    def b_variables(self, span, items):
+        return ast.Block(span, "variables", tuple(i for i in items if isinstance(i, (ast.VarDef, ast.VarStep))))
+
+    def b_var_def(self, span, items):
+        name, value = items
+        return ast.VarDef(span, str(name), self._tspan(name), value)
+
+    def b_var_step(self, span, items):
+        starts = tuple(i for i in items if isinstance(i, ast.StepStart))
+        name, value = items[-2], items[-1]
+        return ast.VarStep(span, starts, str(name), self._tspan(name), value)
 
     # ---- faults
     def b_faults(self, span, items):

@@ -60,6 +60,8 @@ class Context:
     faults: list[P.FaultPlan] = field(default_factory=list)
     environment: list[P.ClausePlan] = field(default_factory=list)
     environment_steps: list[P.TriggerPlan] = field(default_factory=list)
+    variables: list[P.VariablePlan] = field(default_factory=list)
+    variable_steps: list[P.TriggerPlan] = field(default_factory=list)
     oracles: list[P.OraclePlan] = field(default_factory=list)
     sweep: P.SweepPlan = field(default_factory=P.SweepPlan)
     signals: list[P.SignalPlan] = field(default_factory=list)
@@ -96,9 +98,13 @@ class Context:
             if cls is not None:
                 nodes |= set(cls.nodes)
         scope = Scope(dict(self.param_dims), set(self.actors_ast), nodes | {"e2e"}, signals, self.used_params,
-                      steps=set(self.step_names), lights=self.light_names())
+                      steps=set(self.step_names), lights=self.light_names(), variables=self.variable_names())
         self._scopes[key] = scope
         return scope
+
+    def variable_names(self) -> set[str]:
+        """Variables declared in `variables { }` (formulas read them: `var(phase)`)."""
+        return {d.name for b in self.blocks("variables") for d in b.items if isinstance(d, ast.VarDef)}
 
     def light_names(self) -> set[str]:
         """Controllers declared in `lights { }` (formulas refer to them: `light(west)`)."""

@@ -36,6 +36,7 @@ class Scope:
     named_signals: dict[str, Dim] = field(default_factory=dict)
     steps: set[str] = field(default_factory=set)  # named steps, `lead.brake_hard`
     lights: set[str] = field(default_factory=set)  # traffic-light controllers: `light(west)`
+    variables: set[str] = field(default_factory=set)  # scenario variables: `var(phase)`
 
 
 def _ty_str(ty) -> str:
@@ -150,7 +151,7 @@ class ExprLowering:
             self.sink.error("E0204", f"'{fn}' takes {len(cls.args)} argument(s), got {len(args)}", node.span)
             return None, None
         pools = {"actor": self.scope.actors, "node": self.scope.nodes, "step": self.scope.steps,
-                 "light": self.scope.lights}
+                 "light": self.scope.lights, "variable": self.scope.variables}
         for kind, arg in zip(cls.args, args):
             pool = pools[kind]
             if arg not in pool:
@@ -158,7 +159,8 @@ class ExprLowering:
                 known = f"{what}s: {', '.join(sorted(pool))}" if pool else (
                     "no step is named: name one with a label, `brake_hard: at 3 s behavior brake`"
                     if kind == "step" else "traffic-light controllers: (none; declare one in `lights { }`)"
-                    if kind == "light" else f"no {kind}s")
+                    if kind == "light" else "variables: (none; declare one in `variables { }`)"
+                    if kind == "variable" else f"no {kind}s")
                 self.sink.error("E0405" if kind == "light" else "E0101", f"unknown {what} '{arg}' in {fn}(...)",
                                 node.span, known)
                 return None, None

@@ -54,7 +54,7 @@ def parse_formula(text: str, params: Mapping[str, Dim] | None = None,
     if node is not None:
         names = _actor_and_node_names(node)
         scope = Scope(dict(params or {}), names, names, True, set(), dict(signals or {}), _step_names(node),
-                      lights=names)
+                      lights=names, variables=names)
         formula = ExprLowering(sink, scope).lower_formula(node, "a formula")
     if formula is None or sink.has_errors:
         raise FormulaError(text, sink.items)

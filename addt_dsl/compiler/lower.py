@@ -29,6 +29,8 @@ def build_plan(ctx: Context) -> ScenarioPlan:
         faults=ctx.faults,
         environment=ctx.environment,
         environment_steps=ctx.environment_steps,
+        variables=ctx.variables,
+        variable_steps=ctx.variable_steps,
         oracles=ctx.oracles,
         sweep=ctx.sweep,
         signals=ctx.signals,

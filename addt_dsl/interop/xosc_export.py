@@ -53,6 +53,7 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, creation_date, road_file, xml_text
 from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
+from addt_dsl.specs.behaviors import PEAK_CURVATURE
 from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.environment import Light
@@ -74,6 +75,7 @@ LAMPS = {"1000001": ("red", "yellow", "green"), "1000011": ("red", "yellow", "gr
          "1000002.30": ("red", "red", "green"), "1000009.10": ("red", "yellow"), "1000009.20": ("yellow", "green")}
 LIGHTS_GROUP = "addt_lights"  # the maneuver group (no actors) of the light steps
 ENVIRONMENT_GROUP = "addt_environment_changes"  # ... and of the environment's changes
+VARIABLE_GROUP = "addt_variable_steps"  # ... and of the steps that set scenario variables
 __all__ = ["Export", "ExportError", "export_run", "SIDECAR_FORMAT", "SIDECAR_PARAM", "CONTROLLER_PREFIX", "LAMPS",
            "LIGHTS_GROUP", "lamps_of", "lamp_state", "state_of_lamps"]
 
@@ -368,6 +370,23 @@ def _lane_change(run, actor, s):
     return [xosc.AbsoluteLaneChangeAction(int(round(s["to"])), dyn)], True
 
 
+def _lane_offset(run, actor, s):
+    shape = "cubic" if s["shape"] == "quintic" else s["shape"]
+    if s["shape"] == "quintic":
+        run.carried.append(f"{actor}: lane offset shape quintic written as cubic (exact in the side file)")
+    accel = s["max_lat_accel"]
+    if accel is None:  # OpenSCENARIO times a lane offset by its peak lateral acceleration only
+        change = abs(s["to"])
+        accel = max(PEAK_CURVATURE.get(shape, 6.0) * change / max(s["duration"], 1e-3) ** 2, 0.01)
+        run.carried.append(f"{actor}: lane offset over {s['duration']:g} s written as maxLateralAcc "
+                           f"{accel:.4g} m/s^2 (the time from the lane's centre; exact in the side file)")
+    # esmini's value: away from the reference line, by the sign of the lane id (the lane
+    # the actor starts in; a lane changed before the offset is in the side file).
+    lane = int(round(run.num(run.by_name[actor].lane)))
+    value = s["to"] * (1.0 if lane > 0 else -1.0)
+    return [xosc.AbsoluteLaneOffsetAction(value, OSC_SHAPE[shape], accel, continuous=False)], True
+
+
 def _speed_profile(run, actor, s):
     # OpenSCENARIO entry times are durations from the previous entry (the first: from the start).
     times = list(s["times"])
@@ -459,6 +478,7 @@ def _controller(keyword: str):
 
 # keyword -> (run, actor, resolved settings) -> (OpenSCENARIO actions, whether they are standard actions)
 ACTIONS = {"cruise": _cruise, "brake": _brake, "lane_change": _lane_change, "cut_in": _lane_change,
+           "lane_offset": _lane_offset,
            "speed_profile": _speed_profile, "synchronize": _synchronize, "trajectory": _trajectory,
            "keep_gap": _keep_gap,
            "idm": _controller("idm"), "overtake": _controller("overtake"), "walk": _controller("walk"),
@@ -534,6 +554,10 @@ def _compare(run: _Run, node, name: str):
         sid = run.controllers[args[0]].signals[0]  # the controller's signals all show its state
         return xosc.ValueTrigger(name, 0, xosc.ConditionEdge.none,
                                  xosc.TrafficSignalCondition(run.signal_id(sid), run.lamp_state(sid, state)))
+    if fn == "var" and len(args) == 1 and op != "!=":
+        return xosc.ValueTrigger(name, 0, xosc.ConditionEdge.none, xosc.VariableCondition(args[0], value, rule))
+    if fn == "road_edge" and len(args) == 1 and op == "<" and value == 0.0:
+        return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.OffroadCondition(0.0), args[0])
     if fn == "ttc" and len(args) == 2:
         cond = xosc.TimeToCollisionCondition(value, rule, alongroute=False, freespace=True, entity=args[1],
                                              coordinate_system=xosc.CoordinateSystem.road)
@@ -808,6 +832,24 @@ def _environment_group(run: _Run) -> xosc.ManeuverGroup | None:
     return group
 
 
+def _variable_group(run: _Run) -> xosc.ManeuverGroup | None:
+    """Steps that set scenario variables: one event per step, its VariableSetAction
+    (OpenSCENARIO 1.2's variables; the declarations are the scenario's)."""
+    if not run.plan.variable_steps:
+        return None
+    maneuver = xosc.Maneuver(f"{VARIABLE_GROUP}_maneuver")
+    for step in run.plan.variable_steps:
+        name = run.unique(f"set_{step.clause.name}")
+        event = xosc.Event(name, xosc.Priority.parallel)
+        event.add_action(run.unique(f"{name}_action"),
+                         xosc.VariableSetAction(step.clause.name, run.num(step.clause.settings["value"])))
+        event.add_trigger(_start_trigger(run, step, name, None))
+        maneuver.add_event(event)
+    group = xosc.ManeuverGroup(VARIABLE_GROUP)
+    group.add_maneuver(maneuver)
+    return group
+
+
 # ---------------------------------------------------------------- traffic lights
 
 def _program_phases(times: list[tuple[str, float]], offset: float) -> list[tuple[str, str, float]]:
@@ -934,7 +976,8 @@ def _sidecar(run: _Run, pinned: RunSpec) -> dict:
                             "mu": None if a.mu is None else run.num(a.mu),
                             "stack": None if a.stack is None else a.stack.model_dump(mode="json"),
                             "sensors": [s.model_dump(mode="json") for s in a.sensors],
-                            "ignore_lights": a.ignore_lights, "reverse": a.reverse}
+                            "ignore_lights": a.ignore_lights, "reverse": a.reverse,
+                            "stop_at_road_end": a.stop_at_road_end}
                    for a in plan.actors()},
         "faults": [f.model_dump(mode="json") for f in pinned.faults],
         "oracles": [o.model_dump(mode="json") for o in plan.oracles],
@@ -998,7 +1041,7 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
             group.add_actor(a.name)
             group.add_maneuver(maneuver)
             act.add_maneuver_group(group)
-    for group in (_lights_group(run), _environment_group(run)):
+    for group in (_lights_group(run), _environment_group(run), _variable_group(run)):
         if group is not None:
             act.add_maneuver_group(group)
     # The stop trigger before the references and parameters: its conditions may add some.
@@ -1028,9 +1071,14 @@ def export_run(spec: RunSpec, out_dir: str | Path, stem: str | None = None) -> E
     for ctl in _signal_controllers(run):
         network.add_traffic_signal_controller(ctl)
     sidecar = _sidecar(run, pinned)
+    variables = None
+    if plan.variables:
+        variables = xosc.VariableDeclarations()
+        for v in plan.variables:
+            variables.add_variable(xosc.Variable(v.name, xosc.ParameterType.double, repr(float(v.value))))
     scenario = xosc.Scenario(plan.name, "addt-dsl", params, entities, storyboard,
                              network, xosc.Catalog(), osc_minor_version=OSC_MINOR,
-                             creation_date=creation_date())
+                             creation_date=creation_date(), variable_declaration=variables)
     xosc_path = out / f"{stem}.xosc"
     xodr_path = out / roads.name
     sidecar_path = out / f"{stem}.addt.json"

@@ -186,7 +186,8 @@ VEHICLE_DEFAULTS = {  # what the compiler fills in when a setting is left out
 }
 ACTOR_EXPRS = (("goal", "goal_s", units.LENGTH), ("mu", "mu", units.DIMENSIONLESS),  # optional, may use parameters
                ("offset", "offset", units.LENGTH), ("yaw", "yaw", units.ANGLE))
-ACTOR_FLAGS = (("at_red run", "ignore_lights"), ("direction reverse", "reverse"))  # printed when the plan's flag is set
+ACTOR_FLAGS = (("at_red run", "ignore_lights"), ("direction reverse", "reverse"),
+               ("at_road_end stop", "stop_at_road_end"))  # printed when the plan's flag is set
 ACTOR_FLOATS = (("length", "length_m", units.LENGTH), ("width", "width_m", units.LENGTH),
                 ("height", "height_m", units.LENGTH),
                 ("mass", "mass_kg", units.MASS), ("wheelbase", "wheelbase_m", units.LENGTH))
@@ -491,6 +492,23 @@ def _environment(pr: _Printer) -> None:
     pr.emit(1, "}")
 
 
+def _variables(pr: _Printer) -> None:
+    if not (pr.plan.variables or pr.plan.variable_steps):
+        return
+    pr.emit(0)
+    pr.emit(1, "variables {")
+    for v in pr.plan.variables:
+        pr.emit(2, f"{v.name} = {pr.exprs.value(E.Num(value=v.value), units.DIMENSIONLESS)}")
+    for tr in pr.plan.variable_steps:  # `at 3 s set phase 1`
+        starts = _starts(pr, tr, "then")
+        if not starts or tr.clause is None or tr.clause.keyword != "set" or tr.group is not None \
+                or tr.label is not None:
+            raise PrinterError("a variable step sets one variable from a start on")
+        pr.emit(2, _join(starts, f"set {tr.clause.name}",
+                         pr.exprs.value(tr.clause.settings["value"], units.DIMENSIONLESS)))
+    pr.emit(1, "}")
+
+
 def _env_model(pr: _Printer, c: ClausePlan) -> str:
     cls = ENVIRONMENTS.get(c.name)
     if cls is None:
@@ -499,7 +517,7 @@ def _env_model(pr: _Printer, c: ClausePlan) -> str:
 
 
 SECTIONS: tuple[Callable[[_Printer], None], ...] = (_header, _roads, _params, _actors, _lights, _environment,
-                                                    _end, _faults, _oracles, _sweep)
+                                                    _variables, _end, _faults, _oracles, _sweep)
 
 
 # ---------------------------------------------------------------- entry points

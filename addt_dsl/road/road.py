@@ -385,6 +385,16 @@ class Road:
             return float(lo[0]), float(hi[0])
         return lo.reshape(np.shape(s_arr)), hi.reshape(np.shape(s_arr))
 
+    def paved_band_t(self, s: float) -> tuple[float, float]:
+        """``(t_min, t_max)`` [m] at ``s`` [m]: the centre lane's t less (plus) the widths of the
+        right (left) lanes whose type is not ``none`` (esmini's road width, beyond which an
+        entity is off the road)."""
+        sec = self.section_at(s)
+        ds, off = float(s) - sec.s0, float(self.lane_offset_at(s))
+        right = sum(float(lane.width(ds)) for lane in sec.right if lane.type != "none")
+        left = sum(float(lane.width(ds)) for lane in sec.left if lane.type != "none")
+        return off - right, off + left
+
     # -------------------------------------------------------------- projection
 
     def project(self, x: float, y: float) -> tuple[float, float]:

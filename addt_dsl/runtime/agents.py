@@ -203,8 +203,8 @@ class Fleet:
         rows, settings = [], []
         for i, a in enumerate(self.agents):
             beh = run.longitudinal[a.name]
-            if a.heading_rel:
-                return None
+            if a.heading_rel or a.lc_keeps_station or run.agent_plans[a.name].stop_at_road_end:
+                return None  # (the loop steps lane offsets' stations and stops at road ends)
             if beh is None:
                 continue
             if type(beh) is not Idm or not all(isinstance(v, (int, float)) for v in beh.settings.values()):

@@ -41,6 +41,9 @@ class AgentState:
     # walkers: they move at this angle instead of following a lane.
     heading_rel: float = 0.0
     lc_shape: str = "quintic"  # blend of the current lateral manoeuvre (see SHAPES)
+    # The current lateral manoeuvre leaves the station's progress whole (a lane offset, as
+    # esmini moves one); a lane change takes its sideways part from the step along the road.
+    lc_keeps_station: bool = False
     moved: bool = False  # it has had a speed above 0: its declared yaw no longer holds
     # Ground covered per metre of station at its offset [m/m] (`FastRoad.ground_scale`),
     # set where it is posed: its station advances by speed / ground_scale.
@@ -712,6 +715,40 @@ class LaneChange(S.LaneChange, Behavior):
         return (agent.lc_start_s, agent.lc_duration_s) == self.move and time_s + 1e-9 >= start + duration
 
 
+
+
+def duration_for_peak_accel(shape: str, change_m: float, accel: float) -> float:
+    """Time [s] a lateral move of `change_m` [m] with `shape` takes when its peak lateral
+    acceleration is `accel` [m/s^2]; 0 for `step`."""
+    if shape == "step":
+        return 0.0
+    return math.sqrt(S.PEAK_CURVATURE[shape] * abs(change_m) / accel)
+
+
+@BEHAVIORS.implements
+class LaneOffset(S.LaneOffset, Behavior):
+
+    def start(self, agent, world, time_s):
+        s = self.settings
+        centre = world.lane_t(agent.road, agent.lane, agent.s)
+        if math.isnan(centre):  # its lane ends here: the offset counts from where it is
+            centre = agent.t
+        target = centre + s["to"]
+        duration = s["duration"] if s["duration"] is not None else \
+            duration_for_peak_accel(s["shape"], target - agent.t, s["max_lat_accel"])
+        agent.lc_shape, agent.lc_keeps_station = s["shape"], True
+        agent.heading_rel = 0.0
+        agent.t_start, agent.t_target = agent.t, target
+        agent.lc_start_s = time_s
+        agent.lc_duration_s = 0.0 if s["shape"] == "step" else duration
+        self.move = (agent.lc_start_s, agent.lc_duration_s)
+
+    def ended(self, agent, world, time_s):
+        # At the offset; a later lateral move replacing this one means it never ends.
+        start, duration = self.move
+        return (agent.lc_start_s, agent.lc_duration_s) == self.move and time_s + 1e-9 >= start + duration
+
+
 @BEHAVIORS.implements
 class Teleport(S.Teleport, Behavior):
 
@@ -822,6 +859,7 @@ def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, ti
     current offset to `lane`'s centre; `step` jumps there at the next step."""
     agent.lane = lane
     agent.lc_shape = shape
+    agent.lc_keeps_station = False
     if shape == "step":
         duration_s = 0.0
     agent.heading_rel = 0.0
@@ -853,7 +891,7 @@ def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
     else:
         t_next = lateral_profile(agent, time_s + dt)
         step = agent.speed * dt
-        if t_next != agent.t:  # a lane change: the path's ground splits into along and across
+        if t_next != agent.t and not agent.lc_keeps_station:  # a lane change: the ground splits into along and across
             across = t_next - agent.t
             step = math.sqrt(max(step * step - across * across, 0.0))
         agent.s += step / agent.ground_scale

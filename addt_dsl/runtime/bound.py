@@ -72,6 +72,7 @@ class BoundActor:
     yaw: float = 0.0  # body yaw relative to the driving direction [rad]
     ignore_lights: bool = False  # runs red lights
     reverse: bool = False  # drives against its lane's driving direction
+    stop_at_road_end: bool = False  # stops at the end of its road or route
 
     @property
     def scripted(self) -> bool:
@@ -115,6 +116,8 @@ class BoundScenario:
     light_steps: tuple[BoundStep, ...] = ()
     environment: tuple[BoundClause, ...] = ()
     environment_steps: tuple[BoundStep, ...] = ()
+    variables: tuple[tuple[str, float], ...] = ()  # scenario variables and their first values
+    variable_steps: tuple[BoundStep, ...] = ()
     end: BoundStep | None = None  # `end when ...`: the run ends where it fires
 
     def road(self, name: str) -> RoadPlan:
@@ -134,6 +137,8 @@ def bind(spec: RunSpec) -> BoundScenario:
         environment_steps=tuple(bind_step(t, params) for t in plan.environment_steps),
         signals=tuple(plan.signals), controllers=tuple(_controller(c, params) for c in plan.controllers),
         light_steps=tuple(bind_step(t, params) for t in plan.light_steps),
+        variables=tuple((v.name, v.value) for v in plan.variables),
+        variable_steps=tuple(bind_step(t, params) for t in plan.variable_steps),
         end=bind_step(plan.end, params) if plan.end is not None else None)
 
 
@@ -181,4 +186,4 @@ def _actor(a: ActorPlan, params: dict[str, float]) -> BoundActor:
         sensors=tuple(_clause(c, params) for c in a.sensors),
         stack=_clause(a.stack, params) if a.stack is not None else None, route=tuple(a.route),
         yaw=_value(a.yaw, params), ignore_lights=a.ignore_lights,
-        reverse=a.reverse)
+        reverse=a.reverse, stop_at_road_end=a.stop_at_road_end)

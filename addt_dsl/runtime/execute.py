@@ -59,6 +59,7 @@ def _loop(run: RunState) -> Trace:
         phases.pose(run, t)
         phases.record(run, rec, k)
         phases.environment(run, rec, k, t)
+        phases.variables(run, rec, k, t)
         phases.lights(run, rec, k, t)
         collided = phases.collisions(run, rec, k, t)
         phases.outputs(run, rec, k, t)

@@ -216,6 +216,10 @@ class FastRoad:
         """(t_min, t_max) [m] of the road's outermost lane borders at `s` (clamped to the road)."""
         return self.road.road_band_t(min(max(s, 0.0), self.length))
 
+    def paved_band_t(self, s: float) -> tuple[float, float]:
+        """`Road.paved_band_t` at `s` (clamped to the road)."""
+        return self.road.paved_band_t(min(max(s, 0.0), self.length))
+
     def project_along(self, x: float, y: float, hint: float) -> tuple[float, float, float]:
         """`project` from a hint, plus the point's distance along the tangent beyond the
         clamped station [m] (non-zero only past the road's ends): for routes."""

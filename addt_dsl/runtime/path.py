@@ -194,13 +194,17 @@ class RoutePath(FastRoad):
         lane, centre = self._nearest_lane(u, t)
         return t if lane is None else t - centre
 
-    def road_band_t(self, u: float) -> tuple[float, float]:
+    def road_band_t(self, u: float, paved: bool = False) -> tuple[float, float]:
         sg = self._seg(u)
         s = min(max(sg.s_from + sg.dir * (u - sg.u0), 0.0), sg.fast.length)
-        lo, hi = sg.fast.road_band_t(s)
+        lo, hi = sg.fast.paved_band_t(s) if paved else sg.fast.road_band_t(s)
         ref = _reference_t(sg, s)
         a, b = sg.dir * (lo - ref), sg.dir * (hi - ref)
         return (a, b) if a <= b else (b, a)
+
+
+    def paved_band_t(self, u: float) -> tuple[float, float]:
+        return self.road_band_t(u, paved=True)
 
 
 def _reference_t(sg: _Seg, s: float) -> float:

@@ -34,7 +34,7 @@ from addt_dsl.runtime.collision import ALL_PAIRS_MAX, clearances
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
-                                       condition_checker)
+                                       advance_variable_script, condition_checker)
 from addt_dsl.runtime.vehicle import step as vehicle_step
 
 # The recorded fields of an actor, in the order of a step's row; clearance last.
@@ -59,6 +59,8 @@ class Record:
         self.lights = {c.name: np.zeros(n) for c in plan.controllers} if run.lights else {}
         self.margins = {name: np.zeros(n) for name in names} if run.lights else {}
         self.lanes = {name: np.full(n, np.nan) for name in names} if run.lane_ids else {}
+        self.edges = run.edges = {name: np.zeros(n) for name in run.edge_actors}  # (conditions read them)
+        self.variables = run.variable_records = {name: np.zeros(n) for name in run.variables}
         self.sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
         self.sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
         lengths = [self.sizes[m][0] for m in names]
@@ -81,7 +83,8 @@ class Record:
         cut = lambda d: {k: v[:last] for k, v in d.items()}  # noqa: E731
         return Trace(run.dt, np.arange(last) * run.dt, actors, cut(self.latency), run.events, cut(self.outputs),
                      self.objects[:last], run.status, run.error, steps=cut(self.steps), lights=cut(self.lights),
-                     red_margin=cut(self.margins), lanes=cut(self.lanes))
+                     red_margin=cut(self.margins), lanes=cut(self.lanes), road_edge=cut(self.edges),
+                     variables=cut(self.variables))
 
 
 def clock(run: RunState, t: float) -> None:
@@ -136,12 +139,29 @@ def record(run: RunState, rec: Record, k: int) -> None:
         fleet.record(rec.block[k, 1:])
     for name, lanes in rec.lanes.items():  # `lane_id(A)`: only in runs that read it
         lanes[k] = run.lane_number(name)
+    for name, edges in rec.edges.items():  # `road_edge(A)`: to the outer edge of A's road
+        if name == "ego":
+            road, s, t = run.ego_road.road, run.ego_s, run.ego_t
+        else:
+            a = run.agent_by_name[name]
+            road, s, t = run.agent_roads[name].road, a.s, a.t
+        lo, hi = road.paved_band_t(s)
+        edges[k] = min(t - lo, hi - t)
 
 
 def environment(run: RunState, rec: Record, k: int, t: float) -> None:
     """Environment steps (`at 3 s fog visibility 30 m`) fire on the state just recorded."""
     if run.environment_script is not None:
         advance_environment_script(run, rec.rec, k, t)
+
+
+def variables(run: RunState, rec: Record, k: int, t: float) -> None:
+    """Scenario variables as they are at sample k; then the steps that set them fire on the
+    state just recorded (a value set now is read from the next sample on)."""
+    for name, values in rec.variables.items():
+        values[k] = run.variables[name]
+    if run.variable_script is not None:
+        advance_variable_script(run, rec.rec, k, t)
 
 
 def lights(run: RunState, rec: Record, k: int, t: float) -> None:

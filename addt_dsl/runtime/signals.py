@@ -53,6 +53,14 @@ class Travelled(S.Travelled, SignalFn):
 
 
 @SIGNALS.implements
+class RoadEdge(S.RoadEdge, SignalFn):
+
+    @staticmethod
+    def compute(trace, args):
+        return trace.road_edge[args[0]]  # (recorded for each actor a condition or oracle names)
+
+
+@SIGNALS.implements
 class Distance(S.Distance, SignalFn):
 
     @staticmethod
@@ -216,6 +224,14 @@ class Light(S.Light, SignalFn):
     @staticmethod
     def compute(trace, args):
         return trace.lights[args[0]]
+
+
+@SIGNALS.implements
+class Var(S.Var, SignalFn):
+
+    @staticmethod
+    def compute(trace, args):
+        return trace.variables[args[0]]
 
 
 @SIGNALS.implements

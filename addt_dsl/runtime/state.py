@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import zlib
 
 import numpy as np
@@ -174,6 +175,9 @@ class RunState:
         self.n_steps = int(round(plan.duration_s / self.dt))
         self.events: list[Event] = []
         self.left_road = False  # the ego passed the end of its road or route (`left_road` event)
+        # Actors whose `road_edge` a condition or an oracle reads: recorded for them only.
+        self.edge_actors = sorted(set(re.findall(r"road_edge\((\w+)\)", spec.plan.model_dump_json())))
+        self.edges: dict = {}  # their recorded arrays (`phases.Record`)
         self.networks = build_network(plan.roads)
         self._road_cache: dict = {}
         self._lanes_moving: dict = {}  # (id(road), lane) -> whether its centre t varies (`follow_lane`)
@@ -266,6 +270,10 @@ class RunState:
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self._setup_lights(plan)
+        # Scenario variables now, and the steps that set them (`at 3 s set phase 1`).
+        self.variables = dict(plan.variables)
+        self.variable_script = Script(plan.variable_steps) if plan.variable_steps else None
+        self.variable_records: dict = {}  # their recorded arrays (`phases.Record`)
         # `end when ...`: a start without a behaviour; the run ends where it fires.
         self.end_script = Script((plan.end,)) if plan.end is not None else None
         self.ego_junctions = junction_legs(self.ego_road)
@@ -305,6 +313,10 @@ class RunState:
         advance(a, accel, t_now, dt)
         if a.lane_anchor is not None:
             self.follow_lane(a)
+        if self.agent_plans[a.name].stop_at_road_end:  # `at_road_end stop`: held at its road's end
+            end = self.agent_roads[a.name].road.length
+            if a.s >= end:
+                a.s, a.speed, a.accel = end, 0.0, 0.0
 
     def follow_lane(self, a: AgentState) -> None:
         """Keep an agent that changed lanes on its lane where the lane's centre moves in its

@@ -43,7 +43,7 @@ class ActorTrack:
 @dataclass
 class Event:
     time_s: float
-    kind: str  # collision | fault | stack_error | trigger | goal | watchdog | left_road | behavior
+    kind: str  # collision | fault | stack_error | trigger | goal | watchdog | left_road | behavior | variable
     detail: dict = field(default_factory=dict)
 
 
@@ -79,6 +79,11 @@ class Trace:
     red_margin: dict[str, np.ndarray] = field(default_factory=dict)
     # Each actor's lane id per sample (signal `lane_id`), in runs whose formulas read it.
     lanes: dict[str, np.ndarray] = field(default_factory=dict)
+    # Each actor's distance to its road's outer edge [m] (signal `road_edge`), for the actors
+    # the scenario reads it of.
+    road_edge: dict[str, np.ndarray] = field(default_factory=dict)
+    # Scenario variables' values per sample (signal `var`); empty without variables.
+    variables: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -142,7 +147,8 @@ class Trace:
             h.update(np.ascontiguousarray(self.object_count, dtype=np.float64).tobytes())
         # (The step is in `time`; an error's text is in its `stack_error` event or fixed by
         # `status`.) Only scenarios with lights hash them: digests of the others stay what they were.
-        for label, table in (("light:", self.lights), ("red_margin:", self.red_margin), ("lane_id:", self.lanes)):
+        for label, table in (("light:", self.lights), ("red_margin:", self.red_margin), ("lane_id:", self.lanes),
+                             ("road_edge:", self.road_edge), ("var:", self.variables)):
             for name in sorted(table):
                 h.update((label + name).encode())
                 h.update(np.ascontiguousarray(table[name]).tobytes())

@@ -53,6 +53,16 @@ def advance_light_script(run, rec, k: int, t_now: float) -> None:
         run.light_script = None
 
 
+def advance_variable_script(run, rec, k: int, t_now: float) -> None:
+    def start(clause, time_s) -> None:
+        run.events.append(Event(time_s, "variable", {"variable": clause.name, "value": clause.settings["value"]}))
+        run.variables[clause.name] = float(clause.settings["value"])
+
+    run.variable_script.advance(t_now, condition_checker(run, rec, k), start)
+    if run.variable_script.done:
+        run.variable_script = None
+
+
 def advance_environment_script(run, rec, k: int, t_now: float) -> None:
     def start(clause, time_s) -> None:
         run.events.append(Event(time_s, "environment", {"model": clause.name, **clause.settings}))
@@ -86,7 +96,9 @@ def snapshot_trace(run, rec, k: int, with_steps: bool = True) -> Trace:
     lat = {n: np.array([v]) for n, v in run.stack.latency.items()}
     t = k * run.dt
     lights = {n: np.array([run.lights.state(n, t)]) for n in run.lights.programs} if run.lights else {}
-    trace = Trace(run.dt, np.array([t]), actors, lat, lights=lights)
+    trace = Trace(run.dt, np.array([t]), actors, lat, lights=lights,
+                  road_edge={n: v[k:k + 1] for n, v in run.edges.items()},
+                  variables={n: v[k:k + 1] for n, v in run.variable_records.items()})
     if run.lane_ids:  # `lane_id(A)` reads the lanes now
         trace.lanes = {name: np.array([run.lane_number(name)]) for name in rec}
     if run.named_steps and with_steps:  # `when ended(lead.brake_hard)` reads the states now

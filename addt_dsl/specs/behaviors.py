@@ -13,6 +13,12 @@ from addt_dsl.registry import BEHAVIORS, ParamSpec
 # lane changes take any, speed changes all but `quintic`.
 SHAPES = ("step", "linear", "cubic", "sinusoidal", "quintic")
 SPEED_SHAPES = ("step", "linear", "cubic", "sinusoidal")
+# A shape's peak second derivative relative to (change / duration^2), as esmini's
+# TransitionDynamics (GetTargetParamValByPrimPrimPeak) gives it: the duration that keeps a
+# lateral move's peak acceleration at a limit is sqrt(factor * |change| / limit). esmini uses
+# the cubic's 6 for `linear` too (a linear blend's acceleration is infinite at its ends);
+# the quintic's peak is 10 / sqrt(3).
+PEAK_CURVATURE = {"linear": 6.0, "cubic": 6.0, "sinusoidal": math.pi ** 2 / 2, "quintic": 10.0 / math.sqrt(3.0)}
 SHAPE_SETTING = ParamSpec("shape", None, kind="word", default="linear", choices=SPEED_SHAPES,
                           doc="dynamics shape of the speed change")
 DURATION_SETTING = ParamSpec("duration", units.TIME, default=None, low=0.0,
@@ -233,6 +239,27 @@ class LaneChange(BehaviorSpec):
             return [("to", "give the target lane once: `to LANE` or `to_lane_of ACTOR`", "E0105")]
         if values.get("lanes") and not values.get("to_lane_of"):
             return [("lanes", "`lanes N` counts from another actor's lane: give `to_lane_of ACTOR`", "E0105")]
+        return []
+
+@BEHAVIORS.register
+class LaneOffset(BehaviorSpec):
+    keyword = "lane_offset"
+    channel = "lateral"
+    params = (
+        ParamSpec("to", units.LENGTH, required=True,
+                  doc="target offset from the centre of the actor's lane, left of +s positive"),
+        ParamSpec("duration", units.TIME, default=None, low=0.0, doc="time the move takes"),
+        ParamSpec("max_lat_accel", units.ACCELERATION, default=None, low=0.01,
+                  doc="instead of `duration`: the shape's peak lateral acceleration, which sets the time"),
+        ParamSpec("shape", None, kind="word", default="quintic", choices=SHAPES, doc="lateral dynamics shape"),
+    )
+    doc = ("Move sideways to an offset from the centre of the lane the actor is in and hold it "
+           "(OpenSCENARIO LaneOffsetAction).")
+    @staticmethod
+    def validate(values: dict) -> list[tuple]:
+        if ("duration" in values) == ("max_lat_accel" in values):
+            return [("max_lat_accel" if "duration" in values else "to",
+                     "give the time of the move once: `duration D` or `max_lat_accel A`", "E0105")]
         return []
 
 @BEHAVIORS.register

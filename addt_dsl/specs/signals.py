@@ -60,6 +60,14 @@ class Travelled(SignalSpec):
            "(CARLA's DrivenDistanceTest)")
 
 @SIGNALS.register
+class RoadEdge(SignalSpec):
+    keyword = "road_edge"
+    dim = units.LENGTH
+    doc = ("distance from the actor's centre to the outer edge of its road on its side (the lanes of any "
+           "type but `none`), negative beyond it: off the road (OpenSCENARIO OffroadCondition, as esmini "
+           "measures it) [m]")
+
+@SIGNALS.register
 class Distance(SignalSpec):
     keyword = "distance"
     args = ("actor", "actor")
@@ -157,6 +165,14 @@ class Light(SignalSpec):
     args = ("light",)
     dim = units.DIMENSIONLESS
     doc = "state of a traffic-light controller: compare with `green`, `yellow`, `red` (0, 1, 2)"
+
+@SIGNALS.register
+class Var(SignalSpec):
+    keyword = "var"
+    args = ("variable",)
+    dim = units.DIMENSIONLESS
+    doc = ("value of a scenario variable (`variables { }`), as the steps that set it left it "
+           "(OpenSCENARIO ParameterCondition on a parameter a ParameterSetAction sets)")
 
 @SIGNALS.register
 class RedLight(SignalSpec):

@@ -25,6 +25,7 @@ from addt_dsl.compiler.rules.params import rule_params
 from addt_dsl.compiler.rules.roads import rule_roads
 from addt_dsl.compiler.rules.sweep import rule_sweep
 from addt_dsl.compiler.rules.unused import rule_unused
+from addt_dsl.compiler.rules.variables import rule_variables
 
 RULES = (
     rule_names,
@@ -37,6 +38,7 @@ RULES = (
     rule_lights,
     rule_faults,
     rule_environment,
+    rule_variables,
     rule_oracles,
     rule_end,
     rule_goal_oracle,

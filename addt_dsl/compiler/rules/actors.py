@@ -44,6 +44,9 @@ ACTOR_SETTINGS = (
                   "overtaking in the oncoming lane)"),
     ParamSpec("at_red", None, kind="word", default="stop", choices=("stop", "run"),
               doc="agents: `stop` at red (and yellow) traffic lights on their lane, or `run` them"),
+    ParamSpec("at_road_end", None, kind="word", default="go", choices=("go", "stop"),
+              doc="agents and a scripted ego: `go` on straight past the end of their road or route, or `stop` "
+                  "there (as esmini's entities do)"),
 )
 
 # The ego's lidar when it declares no sensor: five channels from level to 4 deg down (0, -1,
@@ -251,7 +254,8 @@ def _check_actor(ctx: Context, d: ast.ActorDecl, placed: dict[str, P.ActorPlan])
         length_m=length, width_m=width, height_m=body["height"], mass_kg=body["mass"], wheelbase_m=body["wheelbase"],
         behaviors=behaviors, triggers=triggers, sensors=sensors, stack=stack,
         goal_s=vals.get("goal"), mu=vals.get("mu"), offset=vals.get("offset"), route=route, yaw=vals.get("yaw"),
-        ignore_lights=vals.get("at_red") == "run", reverse=vals.get("direction") == "reverse")
+        ignore_lights=vals.get("at_red") == "run", reverse=vals.get("direction") == "reverse",
+        stop_at_road_end=vals.get("at_road_end") == "stop")
 
 
 def is_scripted_ego(d: ast.ActorDecl) -> bool:
@@ -499,7 +503,8 @@ def _check_clause(ctx: Context, c: ast.Clause, actor: ast.ActorDecl, road: str |
     vals = check_settings(ctx, c.settings + c.block, cls.params, f"{c.keyword} '{c.name}'", c.span)
     if not _validate_clause(ctx, c, cls, vals):
         return None
-    if c.keyword == "behavior" and getattr(cls, "channel", "") == "lateral" and "to" in vals:
+    if c.keyword == "behavior" and getattr(cls, "channel", "") == "lateral" and "to" in vals \
+            and any(p.name == "to" and p.kind == "int" for p in cls.params):  # a lane id (not an offset)
         _check_target_lane(ctx, c, vals["to"], road)
     for spec in cls.params:  # a `name` setting of a behaviour names another actor
         if c.keyword == "behavior" and spec.kind == "name" and isinstance(vals.get(spec.name), str):

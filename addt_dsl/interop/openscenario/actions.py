@@ -6,7 +6,8 @@ from addt_dsl.interop.openscenario.registry import ACTIONS
 from addt_dsl.interop.openscenario.xml import first_of, only_child
 
 # What an action that is not translated names as translated (the diagnostic's note).
-TRANSLATED = ("translated: speed (absolute, relative, profiles), lane changes, longitudinal distance, "
+TRANSLATED = ("translated: speed (absolute, relative, profiles), lane changes, lane offsets, "
+              "longitudinal distance, "
               "synchronize, polyline trajectories, routes in Init")
 # An action that wraps one of several (LongitudinalAction: a SpeedAction, ...): the inner
 # elements tried in this order, and the note of a refused inner element (None: the wrapper
@@ -14,13 +15,12 @@ TRANSLATED = ("translated: speed (absolute, relative, profiles), lane changes, l
 WRAPPERS = {
     "LongitudinalAction": (("SpeedProfileAction", "LongitudinalDistanceAction", "SpeedAction"),
                            "absolute and relative speed targets are translated"),
-    "LateralAction": (("LaneChangeAction",),
-                      "the language has lane changes; lane offsets and lateral distances are not translated"),
+    "LateralAction": (("LaneChangeAction", "LaneOffsetAction"),
+                      "the language has lane changes and lane offsets; lateral distances are not translated"),
     "RoutingAction": (("FollowTrajectoryAction",), None),
 }
 
 for _name, _status, _note in (
-        ("LaneOffsetAction", "refused", "the language has no lateral offset steps (lane changes only)"),
         ("LateralDistanceAction", "refused", "the language has no behaviour that keeps a lateral distance"),
         ("AssignRouteAction", "approx", "in Init only (the actor's route); in an event it is refused: the "
                                         "language has no route change during a run"),

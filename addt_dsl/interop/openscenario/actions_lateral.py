@@ -1,6 +1,7 @@
-"""Lateral actions: lane changes."""
+"""Lateral actions: lane changes and lane offsets."""
 
 from addt_dsl import expr as E
+from addt_dsl import units
 from addt_dsl.interop.openscenario.registry import ACTIONS
 from addt_dsl.interop.openscenario.xml import only_child
 from addt_dsl.specs.behaviors import lanes_over
@@ -43,7 +44,9 @@ class Lateral:
             if base is None:
                 self.skip(tgt, f"lane relative to {who}, whose lane is not known (no translated position)")
                 return None
-            d = int(self.value(tgt, "value"))
+            # Positive is to the left of the way the actor drives (esmini: the lane id plus the
+            # value for an entity heading along +s, minus it against s).
+            d = int(self.value(tgt, "value")) * (self.driving_way(who) if who in self.placed else 1)
             lane = base + d
             if base * lane <= 0 and d:
                 lane += 1 if d > 0 else -1
@@ -64,3 +67,41 @@ class Lateral:
         return ClausePlan(keyword="behavior", name="lane_change",
                           settings={"to": E.Num(value=float(lane)), "duration": E.Num(value=max(duration, 0.5)),
                                     **extra})
+
+    @ACTIONS.register("LaneOffsetAction", "approx", "`lane_offset to O max_lat_accel A shape S` to an absolute "
+                      "target: esmini's dynamics (the time from the shape's peak lateral acceleration, from the "
+                      "offset the move starts at; ends at the offset); a positive value away from the road's "
+                      "reference line, as esmini takes it (by the lane the importer tracks the actor in); "
+                      "no maxLateralAcc: esmini's 0.5 m/s^2 (W0802); continuous: ends at the offset as in esmini "
+                      "(W0802); a relative target is refused")
+    def act_lane_offset(self, offset, who: str, act) -> ClausePlan | None:
+        dyn, target = offset.find("LaneOffsetActionDynamics"), offset.find("LaneOffsetTarget")
+        tgt = only_child(target)
+        if dyn is None or tgt is None:
+            self.error(offset, "a lane offset needs dynamics and a target")
+            return None
+        if tgt.tag != "AbsoluteTargetLaneOffset":
+            self.skip(tgt, f"a <{tgt.tag}> is not translated (an absolute target is)")
+            return None
+        lane = self.actors[who]["lane_now"]
+        if not lane:
+            self.skip(tgt, f"a lane offset of {who}, whose lane is not known (no translated position)")
+            return None
+        shape = self.raw(dyn, "dynamicsShape")
+        if shape not in ("linear", "cubic", "sinusoidal", "step"):
+            self.error(dyn, f"dynamicsShape \"{shape}\" is not one of linear, cubic, sinusoidal, step")
+            return None
+        if dyn.get("maxLateralAcc") is None:
+            accel = 0.5
+            self.approx(dyn, "no maxLateralAcc: 0.5 m/s^2, esmini's default")
+        else:
+            accel = max(self.value(dyn, "maxLateralAcc", units.ACCELERATION), 0.01)
+        if (offset.get("continuous") or "false").lower() in ("true", "1"):
+            self.approx(offset, "a continuous lane offset: ends once at the offset, as esmini's does (it holds "
+                                "the offset until another lateral action)")
+        # esmini: the offset along t is the value times the sign of the lane id (toward the
+        # right of the lane's driving direction for a positive value).
+        to = self.value(tgt, "value", units.LENGTH) * (1.0 if lane > 0 else -1.0)
+        return ClausePlan(keyword="behavior", name="lane_offset",
+                          settings={"to": E.Num(value=to), "max_lat_accel": E.Num(value=accel),
+                                    "shape": shape})

@@ -32,12 +32,10 @@ VALUE_CONDITIONS.declare("StoryboardElementStateCondition", "approx", "another e
 for _name, _note in (
         ("TimeOfDayCondition", "the twin has no time of day"),
         ("UserDefinedValueCondition", "a user-defined value means nothing to the twin"),
-        ("VariableCondition", "the language has no variables"),
 ):
     VALUE_CONDITIONS.declare(_name, "refused", _note)
 for _name, _note in (
         ("EndOfRoadCondition", "the language has no end-of-road signal"),
-        ("OffroadCondition", "the language has no off-road signal"),
         ("AngleCondition", "the language has no heading signal"),
         ("RelativeAngleCondition", "the language has no relative heading signal"),
 ):
@@ -69,15 +67,35 @@ class Conditions:
             return None
         return all_of(parts) if rule == "all" else any_of(parts)
 
-    @VALUE_CONDITIONS.register("ParameterCondition", "approx", "exact when the side file of an export carries "
-                               "the formula; other parameter conditions are refused (parameters are constant)")
+    @VALUE_CONDITIONS.register("ParameterCondition", "exact", "on a number parameter that a ParameterAction's "
+                               "SetAction sets in an event: `var(P) OP V` (a scenario variable); an export's "
+                               "placeholder: the formula in its side file; others refused (the parameter is "
+                               "constant)")
     def cond_parameter(self, value_cond, who: str):
         ref = self.raw(value_cond, "parameterRef")
         exact = (self.sidecar or {}).get("conditions", {}).get(ref)
         if exact:
             return EXPR.validate_python(exact["formula"])
-        self.skip(value_cond, f"<{value_cond.tag}> is not translated")
+        if any(a.get("parameterRef") == ref for a in self.doc.iterfind(".//Story//GlobalAction/ParameterAction")):
+            return self.variable_condition(value_cond, ref)
+        self.skip(value_cond, f"<{value_cond.tag}> is not translated",
+                  "a condition on a parameter that a ParameterAction sets is (a scenario variable)")
         return None
+
+    @VALUE_CONDITIONS.register("VariableCondition", "exact", "`var(V) OP X` on a number variable")
+    def cond_variable(self, value_cond, who: str):
+        return self.variable_condition(value_cond, self.raw(value_cond, "variableRef"))
+
+    def variable_condition(self, c, ref: str):
+        """`var(NAME) OP value`: a scenario variable against a number."""
+        op = RULE_OPS.get(c.get("rule", ""))
+        name = self.variable(ref, c)
+        if name is None:
+            return None
+        if op is None:
+            self.error(c, f"rule \"{c.get('rule')}\" is not one of {', '.join(RULE_OPS)}")
+            return None
+        return E.Binary(op=op, left=sig("var", name), right=E.Num(value=self.value(c, "value")))
 
     @VALUE_CONDITIONS.register("TrafficSignalCondition", "exact", "`light(C) == S`: the state of the signal's "
                                "controller")
@@ -148,6 +166,22 @@ class Conditions:
     def cond_speed(self, c, a: str):
         op = RULE_OPS.get(c.get("rule", ""), ">")
         return E.Binary(op=op, left=sig("speed", a), right=self.number(c, "value", units.SPEED))
+
+    @ENTITY_CONDITIONS.register("OffroadCondition", "approx",
+                                "`road_edge(A) < 0 m for D` (off the road's lanes of any type but none, as "
+                                "esmini measures it, for the duration); in a start trigger of one condition, "
+                                "else refused; an entity off the road for D already when the event is armed "
+                                "starts it D later (esmini: never, its rising edge has passed) (W0802)")
+    def cond_offroad(self, c, a: str):
+        duration = self.value(c, "duration", units.TIME)
+        if duration > 0:
+            if not getattr(self, "hold_allowed", False):
+                self.skip(c, "an off-road duration is translated in a start trigger of one condition only")
+                return None
+            self.approx(c, f"off the road for {duration:g} s: `for {duration:g} s` counts from the event's arming "
+                           "(esmini's rising edge never fires for an entity off the road that long already)")
+            self.cond_hold = duration
+        return E.Binary(op="<", left=sig("road_edge", a), right=E.Num(value=0.0))
 
     @ENTITY_CONDITIONS.register("CollisionCondition", "approx",
                                 "a collision of the actor with any other; with one entity or a type among several "

@@ -52,6 +52,7 @@ from addt_dsl.plan import (
     ParamPlan,
     ScenarioPlan,
     TriggerPlan,
+    VariablePlan,
 )
 from addt_dsl.printer import PrinterError, params_referenced, pinned_fault_plan, print_plan, side_files
 from addt_dsl.registry import STACKS
@@ -121,6 +122,14 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
 
     # -- the plan
 
+    def dead_end(self, who: str) -> bool:
+        """Whether the road the actor starts on ends without a link the way it drives (where
+        esmini holds it; a linked road it would drive on, which the twin does not follow)."""
+        at = self.placed[who]
+        road_id = next(i for i, r in self.roads.items() if r.name == at.road)
+        odr = self.network.road(road_id)
+        return (odr.successor if self.driving_way(who) > 0 else odr.predecessor) is None
+
     def plan(self, header, duration: float) -> ScenarioPlan:
         sc = self.sidecar or {}
         actors = []
@@ -152,6 +161,10 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                 fields["reverse"] = bool(extra["reverse"])
             elif info.get("against_s") and info["vehicle"] != "obstacle" and not fields.get("route"):
                 fields["reverse"] = True  # it faces against its lane: it drives that way
+            if sc:
+                fields["stop_at_road_end"] = bool(extra.get("stop_at_road_end", False))
+            elif (who != "ego" or self.scripted_ego) and not fields.get("route") and self.dead_end(who):
+                fields["stop_at_road_end"] = True  # esmini holds an entity at the end of its road
             if sc:
                 fields["ignore_lights"] = bool(extra.get("ignore_lights", False))
             elif self.light_ctls and (who != "ego" or self.scripted_ego):
@@ -243,7 +256,8 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                             roads=list(self.roads.values()), ego=ego, agents=agents, faults=faults, oracles=oracles,
                             environment=self.environment, environment_steps=self.environment_steps,
                             controllers=controllers, light_steps=self.light_steps,
-                            end=self.end)
+                            variables=[VariablePlan(name=k, value=v) for k, v in self.variables.items()],
+                            variable_steps=self.variable_steps, end=self.end)
         values = {**self.param_values(), **sc.get("params", {})}
         dims = {**{k: v for k, v in self.param_dims.items()},
                 **{k: units.DIMENSIONLESS for k in sc.get("params", {}) if k not in self.param_dims}}

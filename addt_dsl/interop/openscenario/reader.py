@@ -53,6 +53,10 @@ class Importer(Parameters, CarlaFrame):
         self.placed: dict = {}  # actor -> positions.Placement
         self.environment: list[ClausePlan] = []  # weather and light from an EnvironmentAction
         self.environment_steps: list[TriggerPlan] = []  # ... and their changes in events
+        # Scenario variables: parameters (and 1.2 variables) that a SetAction in an event sets,
+        # with their first values, and the steps that set them.
+        self.variables: dict[str, float] = {}
+        self.variable_steps: list[TriggerPlan] = []
         # Traffic lights: controllers by name (signal ids, phase times, the element), the
         # controller of each signal, phase name -> state per controller, the light steps.
         self.light_ctls: dict[str, dict] = {}

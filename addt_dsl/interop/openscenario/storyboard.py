@@ -1,6 +1,7 @@
 """The storyboard: Init, stories, acts, maneuver groups, maneuvers and events, their start
 triggers, sequences of events, and the stop trigger."""
 
+import re
 from dataclasses import dataclass
 from xml.etree.ElementTree import Element  # an empty <Init> only: files are parsed with defusedxml
 
@@ -118,18 +119,20 @@ for _path, _status, _note in (
 GLOBAL_PATHS = {"global action in Init": (("EnvironmentAction", ("EnvironmentAction", "Environment")),
                                           ("TrafficSignalAction", ("InfrastructureAction", "TrafficSignalAction"))),
                 "global action": (("TrafficSignalAction", ("InfrastructureAction", "TrafficSignalAction")),
-                                  ("EnvironmentAction", ("EnvironmentAction",)))}
+                                  ("EnvironmentAction", ("EnvironmentAction",)),
+                                  ("ParameterAction", ("ParameterAction", "SetAction")),
+                                  ("VariableAction", ("VariableAction", "SetAction")))}
 # The traffic signal actions are translated by TrafficSignalAction's entry (documented here).
 for _registry, _where in ((GLOBAL_ACTIONS, "a light step"), (INIT_GLOBAL_ACTIONS, "at time 0")):
     _registry.declare("TrafficSignalStateAction", "exact", f"`light C state S` ({_where}), C the signal's controller "
                       "(setting some of a controller's signals switches it all, W0802)")
     _registry.declare("TrafficSignalControllerAction", "approx", f"`light C state program` ({_where}): the program "
                       "resumes its own cycle, not the named phase (W0802)")
+INIT_GLOBAL_ACTIONS.declare("ParameterAction", "refused", "a parameter's value at the start is its declaration's")
+INIT_GLOBAL_ACTIONS.declare("VariableAction", "refused", "a variable's value at the start is its declaration's")
 for _registry in (GLOBAL_ACTIONS, INIT_GLOBAL_ACTIONS):
     for _name, _note in (
             ("EntityAction", "the language's actors exist for the whole run (no adding or deleting)"),
-            ("ParameterAction", "parameters are constant during a run"),
-            ("VariableAction", "the language has no variables"),
             ("TrafficAction", "the twin has no traffic swarms, sources, sinks or areas"),
             ("SetMonitorAction", "monitors are the language's oracles, not set by actions"),
             ("UserDefinedAction", "a user-defined action means nothing to the twin"),
@@ -305,6 +308,38 @@ class Storyboard:
                 self.skip(body.find("EnvironmentAction"), "an EnvironmentAction without an <Environment>")
             return
         lights += [(body, model) for model in self.environment_models(env)]
+
+    @GLOBAL_ACTIONS.register("ParameterAction", "exact", "a SetAction to a number: a step of the `variables` "
+                             "block (`set P V`), the parameter a scenario variable (its declaration's value at "
+                             "the start) that ParameterConditions read as `var(P)`; ModifyAction refused")
+    @GLOBAL_ACTIONS.register("VariableAction", "exact", "a SetAction to a number: as ParameterAction's (`set V X`); "
+                             "ModifyAction refused")
+    def event_set(self, body, event: str, lights: list) -> None:
+        inner = only_child(body)
+        ref = self.raw(inner, "parameterRef" if inner.tag == "ParameterAction" else "variableRef")
+        name = self.variable(ref, inner)
+        if name is None:
+            return
+        value = self.value(child_at(inner, "SetAction"), "value")
+        lights.append((body, ClausePlan(keyword="set", name=name, settings={"value": E.Num(value=value)})))
+
+    def variable(self, ref: str, el) -> str | None:
+        """The scenario variable of a parameter (or a 1.2 variable) that actions set, declared
+        with its first value at its first use; None after a diagnostic."""
+        if ref in self.variables:
+            return ref
+        decl = self.doc.find(f"ParameterDeclarations/ParameterDeclaration[@name='{ref}']") \
+            if re.fullmatch(r"[A-Za-z_]\w*", ref or "") else None
+        if decl is None:
+            decl = self.doc.find(f"VariableDeclarations/VariableDeclaration[@name='{ref}']") \
+                if re.fullmatch(r"[A-Za-z_]\w*", ref or "") else None
+        kind = (decl.get("parameterType") or decl.get("variableType") or "") if decl is not None else ""
+        if decl is None or kind not in ("double", "integer", "unsignedInt", "unsignedShort", "int"):
+            self.skip(el, f"'{ref}' is not a number declared at the scenario's top level: not translated",
+                      "scenario variables are numbers (double, integer)")
+            return None
+        self.variables[ref] = self.value(decl, "value")
+        return ref
 
     def init_action(self, act, who: str, later: "InitLater") -> None:
         """A private action of Init, dispatched through registry.INIT_ACTIONS (a wrapper's inner
@@ -496,6 +531,8 @@ class Storyboard:
                             act_at)
         if any(c.keyword == "environment" for _, c in lights):
             self.environment_step(event, [c for _, c in lights if c.keyword == "environment"], who, act_at)
+        if any(c.keyword == "set" for _, c in lights):
+            self.variable_step(event, [c for _, c in lights if c.keyword == "set"], who, act_at)
         if not clauses:
             if actions and not lights and who is not None and all(
                     any(child_at(a, "PrivateAction", t) is not None for t in sorted(INSTANT_ACTIONS)) for a in actions):
@@ -552,6 +589,20 @@ class Storyboard:
             return
         self.light_steps += [TriggerPlan(clause=c, **step.fields) for c in clauses]
 
+    def variable_step(self, event, sets: list[ClausePlan], who, act_at) -> None:
+        step = self.start(event.find("StartTrigger"), who, act_at, event.get("name", ""))
+        if step is None:
+            return
+        if step.after is not None:
+            self.skip(step.after.cond, f"variable step '{event.get('name')}' starts on another event: not "
+                                       "translated", "a variable step starts at a time, after a delay or on a "
+                                                     "condition")
+            return
+        if int(self.value(event, "maximumExecutionCount", default=1.0)) > 1:
+            self.skip(event, "a variable step that runs more than once is not translated")
+            return
+        self.variable_steps += [TriggerPlan(clause=c, **step.fields) for c in sets]
+
     def environment_step(self, event, models: list[ClausePlan], who, act_at) -> None:
         step = self.start(event.find("StartTrigger"), who, act_at, event.get("name", ""))
         if step is None:
@@ -589,9 +640,19 @@ class Storyboard:
                     value = self.value(time, "value")
                     at_s = max(at_s or 0.0, value) if value > 0 else at_s
                     continue
+                # A condition held for a duration (OffroadCondition) sets `cond_hold`: the step's
+                # `for D`, in a trigger of that one condition only.
+                self.hold_allowed, self.cond_hold = len(groups) == 1 and len(list(group)) == 1, None
                 formula = self.condition(cond, who)
+                self.hold_allowed = False
                 if formula is None:
                     return None
+                if self.cond_hold is not None:
+                    if self.value(cond, "delay", units.TIME, 0.0) > 0:
+                        self.skip(cond, "a condition held for a duration with a delay is not translated")
+                        return None
+                    return Start({**({"at_s": E.Num(value=at_s)} if at_s is not None else {}),
+                                  "condition": formula, "hold_s": E.Num(value=self.cond_hold)})
                 conj.append(formula)
                 holds.append((self.value(cond, "delay", units.TIME, 0.0), cond))
                 edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))

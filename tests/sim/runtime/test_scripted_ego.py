@@ -329,6 +329,7 @@ EVERY_BEHAVIOUR = {
     "idm": "behavior idm speed 15 m/s",
     "keep_gap": "behavior keep_gap target lead distance 20 m",
     "lane_change": "behavior lane_change to -2 duration 3 s",
+    "lane_offset": "behavior lane_offset to -1 m max_lat_accel 1 m/s^2 shape sinusoidal",
     "overtake": "behavior overtake speed 16 m/s target lead lane -2",
     "speed_profile": "behavior speed_profile times [0 s, 2 s] speeds [12 m/s, 8 m/s]",
     "synchronize": "behavior synchronize master lead master_at 150 m target_s 140 m",

@@ -7,6 +7,7 @@ import json
 import random
 import re
 import shutil
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
@@ -902,3 +903,62 @@ def test_time_to_collision_in_entity_coordinates_is_the_gap_along_the_heading():
     assert "lon_gap(ego, pedestrian_adult) - 1.34 m < 1.2 s * (speed(ego) - speed(pedestrian_adult))" in got.text
     said = [d.message for d in got.diagnostics if d.code == "W0802"]
     assert any(m.startswith("time to collision in entity coordinates") for m in said)
+
+
+def test_lane_change_xosc_translates_every_construct_strictly():
+    """esmini's lane_change.xosc imports without --lenient: the ego's LaneOffsetAction (8 m,
+    sinusoidal, 3.5 m/s^2) in lane 1 is 8 m toward +t (esmini: the value times the sign of
+    the lane id); the truck in lane 1 drives against s, so a lane to its left (+1) is lane
+    -1, not 2; its ParameterCondition reads the parameter an event's ParameterSetAction sets
+    (a scenario variable); the OffroadCondition held 2.5 s is `road_edge(ego) < 0 m for
+    2.5 s`; the stop trigger waits on that event's end; both actors stop at the road's end."""
+    got = import_xosc(ESMINI / "xosc" / "lane_change.xosc", root=ESMINI, ego="scripted")
+    assert got.text is not None, [d.message for d in got.diagnostics if d.is_error]
+    for line in ("behavior lane_offset to 8 m max_lat_accel 3.5 m/s^2 shape sinusoidal",
+                 "EgoGoOnRoadEvent: when road_edge(ego) < 0 m for 2.5 s then behavior lane_change to 1 duration 3 s",
+                 "when rising var(DummyParameter) > 10 then behavior lane_change to -1 duration 2 s shape sinusoidal",
+                 "DummyParameter = 2", "at 3 s set DummyParameter 11",
+                 "end when rising ended(ego.EgoGoOnRoadEvent) delayed 3 s"):
+        assert line in got.text, line
+    assert got.text.count("at_road_end stop") == 2
+    warned = [d.message for d in got.diagnostics if d.code == "W0802"]
+    assert any("off the road for 2.5 s" in m for m in warned), warned
+
+
+def test_an_offroad_duration_beside_another_condition_is_refused(tmp_path):
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "lane_change.xosc"
+    text = path.read_text()
+    cond = text[text.index('<Condition name="EgoGoOnRoadCondition"'):]
+    cond = cond[:cond.index("</Condition>") + len("</Condition>")]
+    path.write_text(text.replace(cond, cond + cond.replace("EgoGoOnRoadCondition", "Second"), 1))
+    got = import_xosc(path, root=tmp_path / "esmini", ego="scripted")
+    assert got.text is None
+    assert any(d.code == "E0803" and "off-road duration" in d.message for d in got.diagnostics)
+
+
+def test_a_lane_offset_comes_back_from_the_xosc_alone(tmp_path):
+    """`lane_offset` exports as a LaneOffsetAction (esmini's sign: a right lane's offset to
+    the left of +s is a negative value) and imports back to the same behaviour."""
+    source = """scenario offsets {
+  duration 5 s
+  road r {
+    line length 300 m
+    lanes right 2
+  }
+  ego car on r lane -2 at 10 m speed 10 m/s {
+    stack bev cruise_speed 10 m/s
+  }
+  agent drifter car on r lane -1 at 20 m speed 10 m/s {
+    at 1 s behavior lane_offset to 1.2 m max_lat_accel 1.5 m/s^2 shape sinusoidal
+  }
+}
+"""
+    spec = expand(compile_source(source, "offsets.addt").plan).specs[0]
+    done = export_run(spec, tmp_path, "scenario")
+    target = ET.parse(done.xosc_path).getroot().find(".//LaneOffsetAction/LaneOffsetTarget/AbsoluteTargetLaneOffset")
+    assert float(target.get("value")) == -1.2
+    got = _without_sidecar(spec, tmp_path / "again")
+    (step,) = next(a for a in got.plan.agents if a.name == "drifter").triggers
+    assert step.clause.name == "lane_offset" and step.clause.settings["shape"] == "sinusoidal"
+    assert (step.clause.settings["to"].value, step.clause.settings["max_lat_accel"].value) == (1.2, 1.5)

@@ -452,3 +452,35 @@ def test_map_controllers_print_their_signal_ids():
     text = print_plan(plan)
     assert "controller west road town signals [1, 2, 3] red 25 s" in text
     assert semantic_key(_recompile(text)) == semantic_key(plan)
+
+
+NEW_CONSTRUCTS = """
+scenario esmini_constructs {
+  duration 6 s
+  road r {
+    line length 300 m
+    lanes right 2
+  }
+  ego car on r lane -2 at 10 m speed 10 m/s at_road_end stop {
+    behavior cruise speed 10 m/s
+    when road_edge(ego) < 0 m for 1 s then behavior lane_change to -2 duration 2 s
+  }
+  agent a car on r lane -1 at 20 m speed 10 m/s at_road_end stop {
+    moves: when rising var(phase) > 10 then behavior lane_offset to -1.5 m max_lat_accel 2 m/s^2 shape cubic
+    at 4 s behavior lane_offset to 0.5 m duration 1 s
+  }
+  variables {
+    phase = 2
+    at 3 s set phase 11
+    when speed(ego) > 30 m/s then set phase -1
+  }
+}
+"""
+
+
+def test_lane_offsets_road_ends_and_variables_round_trip():
+    plan = compile_source(NEW_CONSTRUCTS, path="new.addt").plan
+    assert plan is not None
+    text = print_plan(plan, keep_user_text=False)
+    assert "variables {" in text and "at 3 s set phase 11" in text and "at_road_end stop" in text
+    assert semantic_key(_recompile(text)) == semantic_key(plan)

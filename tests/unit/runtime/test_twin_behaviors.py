@@ -123,6 +123,50 @@ def test_lane_change_is_smooth_and_ends_in_the_target_lane():
     assert heading.max() > 0.05 and np.abs(np.diff(heading)).max() < 0.01  # no jumps
 
 
+@pytest.mark.parametrize("shape, factor", [("sinusoidal", math.pi ** 2 / 2), ("cubic", 6.0), ("linear", 6.0),
+                                           ("quintic", 10.0 / math.sqrt(3.0))])
+def test_lane_offset_takes_the_time_its_peak_lateral_acceleration_allows(shape, factor):
+    # esmini's LaneOffsetAction: the time of an 8 m move at 3.5 m/s^2 is pi sqrt(8 / 7) s
+    # (3.359 s) sinusoidal, sqrt(6 * 8 / 3.5) s cubic (and linear); from where the move starts.
+    a = agent(lane=-1, speed=20.0)
+    a.t = a.t_target = LANES[-1] + 0.5  # already 0.5 m left of its lane's centre
+    world = FakeWorld()
+    beh = start("lane_offset", a, world, time_s=1.0, to=-7.5, max_lat_accel=3.5, shape=shape)
+    duration = math.sqrt(factor * 8.0 / 3.5)
+    assert a.lc_duration_s == pytest.approx(duration)
+    assert not beh.ended(a, world, 1.0 + duration - 0.01) and beh.ended(a, world, 1.0 + duration)
+    rows = simulate(a, BEHAVIORS.implementation("cruise")({"speed": 20.0}), world, duration + 1.0, t0=1.0)
+    assert a.t == pytest.approx(LANES[-1] - 7.5) and a.lane == -1
+    if shape != "linear":  # (a linear blend's acceleration is unbounded at its ends)
+        lat = rows[:, 2]
+        peak = np.abs(np.diff(lat, 2)).max() / DT ** 2
+        assert peak == pytest.approx(3.5, rel=0.02)
+
+
+def test_lane_offset_keeps_the_station_moving_at_the_full_speed():
+    # esmini moves a lane offset sideways without taking from the progress along the road
+    # (a lane change's sideways part comes out of its step).
+    a, b = agent(lane=-1, speed=20.0), agent(lane=-2, speed=20.0)
+    world = FakeWorld()
+    start("lane_offset", a, world, to=3.0, duration=2.0, shape="sinusoidal")
+    start("lane_change", b, world, to=-1, duration=2.0, shape="sinusoidal")
+    cruise = BEHAVIORS.implementation("cruise")
+    simulate(a, cruise({"speed": 20.0}), world, 3.0)
+    simulate(b, cruise({"speed": 20.0}), world, 3.0)
+    assert a.s == pytest.approx(60.0) and b.s < 60.0 - 0.1
+
+
+def test_lane_offset_after_a_lane_change_counts_from_the_new_lane():
+    a = agent(lane=-2)
+    world = FakeWorld()
+    start("lane_change", a, world, to=-1, duration=1.0)
+    cruise = BEHAVIORS.implementation("cruise")({"speed": 10.0})
+    simulate(a, cruise, world, 1.5)
+    start("lane_offset", a, world, time_s=1.5, to=1.0, duration=1.0, shape="cubic")
+    simulate(a, cruise, world, 2.0, t0=1.5)
+    assert a.t == pytest.approx(LANES[-1] + 1.0)
+
+
 def test_overtake_pulls_out_passes_and_returns():
     slow = agent("slow", s=30.0, lane=-2, speed=8.0)
     world = FakeWorld(slow)

@@ -111,7 +111,8 @@ NODES = ("perception", "tracker", "planner", "control", "e2e")
 def _signals_of(dim) -> list[E.Signal]:
     out = []
     for cls in SIGNALS.classes():
-        if cls.dim != dim or cls.boolean or "light" in cls.args:  # step states are formulas; no lights here
+        # step states are formulas; no lights or variables here (the plan declares none)
+        if cls.dim != dim or cls.boolean or "light" in cls.args or "variable" in cls.args:
             continue
         pools = [ACTORS if kind == "actor" else NODES for kind in cls.args]
         if not pools:
