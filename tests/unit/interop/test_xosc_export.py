@@ -236,7 +236,8 @@ def test_a_follow_speed_profile_is_followingmode_follow_with_its_limits(tmp_path
   }
   ego car on r lane -1 at 100 m speed 10 m/s
   agent a car on r lane -1 at 20 m speed 0 m/s {
-    at 2 s behavior speed_profile times [0, 4, 8, 10] s speeds [0, 10, 4, 8] m/s mode follow accel 5 m/s^2 decel 10 m/s^2 accel_rate 4 m/s^3 decel_rate 3 m/s^3
+    at 2 s behavior speed_profile times [0, 4, 8, 10] s speeds [0, 10, 4, 8] m/s mode follow \\
+      accel 5 m/s^2 decel 10 m/s^2 accel_rate 4 m/s^3 decel_rate 3 m/s^3
   }
 }
 """
