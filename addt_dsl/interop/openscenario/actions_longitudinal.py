@@ -114,7 +114,7 @@ class Longitudinal:
                 ("maxDeceleration", "decel", "max_decel", 10.0, units.ACCELERATION),
                 ("maxAccelerationRate", "accel_rate", None, math.inf, units.JERK),
                 ("maxDecelerationRate", "decel_rate", None, math.inf, units.JERK),
-                ("maxSpeed", "max_speed", "max_speed", 250.0 / 3.6, units.SPEED)):
+                ("maxSpeed", "max_speed", "max_speed", units.to_si(250.0, "km/h")[0], units.SPEED)):
             perf = info.get(perf_key, math.inf) if perf_key else math.inf
             value = perf if dc.get(attr) is None else self.value(dc, attr, dim)
             if value < 1e-6:
