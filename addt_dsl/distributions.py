@@ -94,15 +94,13 @@ def _poisson(p: ParamPlan, u: float) -> float:
     lo, hi = _bounds(p)
     k_lo = max(0, math.ceil(lo)) if math.isfinite(lo) else 0
     k_hi = math.floor(hi) if math.isfinite(hi) else math.inf
-    pmf, k, cum, below = math.exp(-lam), 0, 0.0, 0.0
+    pmf, k, cum = math.exp(-lam), 0, 0.0
     masses: list[tuple[int, float]] = []
     tail_end = max(k_lo, lam + 40.0 * math.sqrt(lam) + 40.0)  # beyond it the mass is below 1e-300
     while k <= min(k_hi, tail_end):
         if k >= k_lo:
             masses.append((k, pmf))
             cum += pmf
-        else:
-            below += pmf
         k += 1
         pmf *= lam / k
     if cum <= 0.0:
