@@ -273,7 +273,8 @@ class BevStack(S.BevStack):
     # the ego arrives or arrives `yield_gap` after the ego has left; otherwise it waits before
     # the zone: at the junction entry for crossing traffic, inside the junction short of the
     # conflict point for an oncoming car it turns across (creeping up to it). Once it cannot
-    # stop before the zone at `YIELD_COMMIT_DECEL` it clears it. Priority from the map's
+    # stop before the zone at `YIELD_COMMIT_DECEL` it clears it if it can leave before the
+    # object arrives, else it brakes. Priority from the map's
     # lights: with a green light at the entry, crossing traffic that can still stop at its
     # own red (at `YIELD_COMMIT_DECEL`) is not waited for; oncoming traffic is (a permissive
     # green) and so is a red-light runner that can no longer stop.
@@ -368,8 +369,14 @@ class BevStack(S.BevStack):
                 # zone as fast as the junction's curves allow.
                 line = zone_front
                 if speed * speed / (2.0 * self.body.max_brake) + self.REACTION_S * speed > line - front:
-                    clear = True
-                    continue
+                    # It cannot stop short: it clears the zone if it can leave before the
+                    # object arrives, else it brakes as hard as it may (a car turning across
+                    # its path passes in front of a stopped ego; one clearing slowly is hit).
+                    v_clear = self._junction_speed(road, lo, hi, self.CLEAR_MAX_SPEED)
+                    if time_to_cover(s0, float(zone_s[-1]), speed, v_clear, self.YIELD_ACCEL) < t_o_in:
+                        clear = True
+                        continue
+                    line = max(line, front)
             if wait is None or line < wait:
                 wait = line
         if wait is not None:

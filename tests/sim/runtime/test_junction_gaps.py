@@ -78,3 +78,17 @@ def test_esmini_ltap_od_the_ego_covers_the_brake_for_the_turning_npc():
     out = execute(_spec("junction_ltap_od", EgoSyncPoint1S=7.0, HostSpeed=10.0, NPCInitialSpeed=10.0))
     assert out.passed, out.verdicts
     assert out.trace.actors["ego"].speed.min() < 8.0  # it slowed from its 10 m/s
+
+
+@pytest.mark.parametrize("npc_speed", [10.0, 12.0])
+def test_ltap_od_a_committed_ego_brakes_rather_than_clear_in_front_of_the_turning_npc(npc_speed):
+    """Sync point 0 m: the NPC starts its turn as the ego, slowed to its cover speed, is
+    just inside the junction and can no longer stop short of the zone. Clearing it at
+    1.5 m/s^2 from ~3.3 m/s takes longer than the NPC needs to arrive (it collided so,
+    overlapping by 0.02-0.04 m); braking leaves the ego short of the NPC's path."""
+    out = execute(_spec("junction_ltap_od", EgoSyncPoint1S=0.0, HostSpeed=10.0, NPCInitialSpeed=npc_speed))
+    assert out.passed, out.verdicts
+    ego = out.trace.actors["ego"]
+    # It braked in the junction (close to a stop), then went on to its goal.
+    inside = (ego.s > 93.7) & (ego.s < 110.0)
+    assert ego.speed[inside].min() < 1.0
