@@ -230,9 +230,14 @@ class BevStack(S.BevStack):
                          o.length * rc + o.width * rs, o.length * rs + o.width * rc))
         hdg0 = heading - float(road.reference_pose(s0)[2])
         stop = self.ctx.stop_line_ahead(float(s0))
-        give_way = self._give_way(float(s0), float(t0), speed, tracked, objs)
+        give_way, judged = self._give_way(float(s0), float(t0), speed, tracked, objs)
         if give_way is not None and (stop is None or give_way < stop[0]):
             stop = (give_way, LIGHT_STATES["red"])  # wait before the junction like at a red light
+        # An object whose path crosses the ego's in the junction, with a gap judged long
+        # enough (or the ego clearing its zone before it arrives), is the gap rule's: the
+        # planner's road-frame checks, which take it as coming head-on along the ego's
+        # path, would stop the ego inside its path.
+        objs = [ob for i, ob in enumerate(objs) if i not in judged]
         oncoming = None
         if self.sight_m and self.settings["pass_oncoming"] == "on":
             # An oncoming car not seen may come at the road's speed limit (the ego's cruise
@@ -288,16 +293,18 @@ class BevStack(S.BevStack):
     YIELD_STEP_M = 0.5
     STOP_MARGIN_M = 1.0  # the wait station is this far before the zone (the stop adds its own gap)
 
-    def _give_way(self, s0: float, t0: float, speed: float, tracked: list, objs) -> float | None:
+    def _give_way(self, s0: float, t0: float, speed: float, tracked: list, objs) -> tuple[float | None, set]:
         """The station [m] the ego's front waits at before a junction's conflict zone, or
-        None (go); `tracked` are the planned-for tracks, `objs` the same in road coordinates."""
+        None (go), and the indices of the objects whose gap it judged long enough or whose
+        zone it clears; `tracked` are the planned-for tracks, `objs` the same in road coordinates."""
+        judged: set = set()
         self.planner.cruise = self.cruise
         margin = float(self.settings["yield_gap"])
         if margin <= 0.0:
-            return None
+            return None, judged
         junction = self.ctx.junction_ahead(s0)
         if junction is None:
-            return None
+            return None, judged
         entry, cx, cy, exit_ = junction
         road, _ = self.ctx.ego_road()
         half_len = 0.5 * self.body.length_m
@@ -306,19 +313,19 @@ class BevStack(S.BevStack):
         lo = max(s0, entry - half_len - 2.0)
         hi = min(exit_ + half_len + 2.0, road.length)
         if hi <= lo:
-            return None
+            return None, judged
         # Stations on a fixed grid (not from the ego's station): the waiting point moves with
         # the objects, not with the ego's last millimetre (the OSI bridge's rounding).
         step = self.YIELD_STEP_M
         ss = np.arange(math.ceil(lo / step) * step, hi, step)
         if len(ss) == 0:
-            return None
+            return None, judged
         xs, ys, hs, _ = road.sample_arrays(ss, 0.0)
         v_top = self._junction_speed(road, lo, hi)
         approach = float(road.reference_pose(s0)[2])
         green = self._green_at(entry, s0)
         wait, clear, cover = None, False, math.inf
-        for o, (so, to, *_rest) in zip(tracked, objs):
+        for i, (o, (so, to, *_rest)) in enumerate(zip(tracked, objs)):
             if so > s0 and abs(to - t0) < 1.8:
                 continue  # traffic ahead in the ego's lane: the planner follows it
             v = math.hypot(o.vx, o.vy)
@@ -361,6 +368,7 @@ class BevStack(S.BevStack):
             t_e_in = time_to_cover(front, zone_front, speed, v_top, self.YIELD_ACCEL)
             t_e_out = time_to_cover(s0, float(zone_s[-1]), speed, v_top, self.YIELD_ACCEL)
             if t_e_in > t_o_out + self.YIELD_CLEARED_S or t_o_in > t_e_out + margin:
+                judged.add(i)
                 continue  # the gap is long enough
             line = wait_front - self.STOP_MARGIN_M
             if speed * speed > 2.0 * self.YIELD_COMMIT_DECEL * max(line - front, 0.0) and speed > 0.5:
@@ -375,6 +383,7 @@ class BevStack(S.BevStack):
                     v_clear = self._junction_speed(road, lo, hi, self.CLEAR_MAX_SPEED)
                     if time_to_cover(s0, float(zone_s[-1]), speed, v_clear, self.YIELD_ACCEL) < t_o_in:
                         clear = True
+                        judged.add(i)
                         continue
                     line = max(line, front)
             if wait is None or line < wait:
@@ -388,7 +397,7 @@ class BevStack(S.BevStack):
             self.planner.cruise = max(self.cruise, self._junction_speed(road, lo, hi, self.CLEAR_MAX_SPEED))
         elif cover < self.cruise:
             self.planner.cruise = cover
-        return wait
+        return wait, judged
 
     # Covering the brake: an oncoming vehicle that reaches the junction's middle about when
     # the ego does may turn across its path (its turn is seen only once its heading turns:

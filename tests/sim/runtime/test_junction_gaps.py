@@ -92,3 +92,13 @@ def test_ltap_od_a_committed_ego_brakes_rather_than_clear_in_front_of_the_turnin
     # It braked in the junction (close to a stop), then went on to its goal.
     inside = (ego.s > 93.7) & (ego.s < 110.0)
     assert ego.speed[inside].min() < 1.0
+
+
+@pytest.mark.parametrize("gvt_kmh", [45.0, 60.0])
+def test_ccftap_the_vut_in_its_turn_is_not_stopped_in_the_gvts_path(gvt_kmh):
+    """GVT arriving 14 s in: the VUT, in its turn, judges that it leaves the GVT's path well
+    before the GVT arrives. The planner's road-frame checks took the GVT, projected on the
+    VUT's turning path, as coming head-on and stopped the VUT (emergency brake) half a metre
+    short of leaving that path, where the GVT hit it; objects the gap rule judged are its own."""
+    out = execute(_spec("junction_ccftap", gvt_arrival=14.0, gvt_speed=gvt_kmh / 3.6))
+    assert out.passed, out.verdicts
