@@ -569,7 +569,12 @@ class LatticePlanner:
         in_opp = not _same_side(current, home)
         if in_opp:
             own, opp = opp, current  # passing: `own` is the lane passed, the way back
-        allowed, standing, rear = self._oncoming_clear(own, opp, road, s0, t0, v0, objs, *oncoming)
+        # Once it has begun to pull out, what the blocker hides no longer turns it back: it hides
+        # less as the ego moves over (a standing blocker's tracked offset flickers by ±0.2 m,
+        # enough to flip the rule at a threshold every few cycles: on Town01 the ego went out
+        # and back until it stood too close to the blocker to pull out); what it sees still does.
+        allowed, standing, rear = self._oncoming_clear(own, opp, road, s0, t0, v0, objs, *oncoming,
+                                                       occlusion=not in_opp)
         t_own, t_opp = float(road.lane_center_t(own, s0)), float(road.lane_center_t(opp, s0))
         if in_opp:
             out = [*lanes_in, own]
@@ -588,9 +593,11 @@ class LatticePlanner:
             return lanes_in, (peek_t, rear - self.PASS_WAIT_GAP_M)
         return lanes_in, None
 
-    def _oncoming_clear(self, own, opp, road, s0, t0, v0, objs, sight_m, v_limit, end_s=math.inf):
+    def _oncoming_clear(self, own, opp, road, s0, t0, v0, objs, sight_m, v_limit, end_s=math.inf,
+                        occlusion: bool = True):
         """(the oncoming lane may be used, the blocker stands, its rear station [m]) for
-        passing the group of blockers ahead in lane `own` through lane `opp`."""
+        passing the group of blockers ahead in lane `own` through lane `opp`; `occlusion`:
+        the sight is shortened by what stands between the ego and that lane's centre."""
         t_own, t_opp = float(road.lane_center_t(own, s0)), float(road.lane_center_t(opp, s0))
         lane_w, side = abs(t_opp - t_own), math.copysign(1.0, t_opp - t_own)
         ego_len, ego_wid = self.body.length_m, self.body.width_m
@@ -633,7 +640,7 @@ class LatticePlanner:
             return False, standing, rear  # it would not be back before the junction or stop line
         window = t_end + self.PASS_MARGIN_S
         sight = sight_m
-        for os_, ot, ov, _ovt, olen, owid in objs:  # what stands between the ego and the lane's centre line
+        for os_, ot, ov, _ovt, olen, owid in objs if occlusion else ():  # what stands between the ego and the lane's centre line
             x = os_ - 0.5 * olen - front
             edge, target = side * (ot - t0) + 0.5 * owid, side * (t_opp - t0)
             if x > 0.0 and edge > 0.0:
