@@ -640,7 +640,8 @@ class LatticePlanner:
             return False, standing, rear  # it would not be back before the junction or stop line
         window = t_end + self.PASS_MARGIN_S
         sight = sight_m
-        for os_, ot, ov, _ovt, olen, owid in objs if occlusion else ():  # what stands between the ego and the lane's centre line
+        # What stands between the ego and the lane's centre line.
+        for os_, ot, ov, _ovt, olen, owid in objs if occlusion else ():
             x = os_ - 0.5 * olen - front
             edge, target = side * (ot - t0) + 0.5 * owid, side * (t_opp - t0)
             if x > 0.0 and edge > 0.0:
