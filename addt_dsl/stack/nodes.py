@@ -346,11 +346,13 @@ class LatticePlanner:
         candidates_lanes = [l for l in lanes if abs(l - current) <= 1 and _same_side(l, current)]
         nudges = self._nudges(current, float(road.lane_center_t(current, s0)), lanes, road, s0, objs_sc) \
             if current in lanes else []
-        peek = None  # (offset target [m] in the current lane, wait station [m]) while a pass waits
+        # (offset target [m] in the current lane, wait station [m] or None) while a pass waits
+        # or may start
+        peek = None
         if oncoming is not None:
             candidates_lanes, peek = self._oncoming_candidates(candidates_lanes, current, home, lanes, road, s0, t0,
                                                                ego_speed, objs_sc, oncoming, bool(nudges))
-            if peek is not None and (stop is None or peek[1] < stop[0]):
+            if peek is not None and peek[1] is not None and (stop is None or peek[1] < stop[0]):
                 stop = (peek[1], LIGHT_STATES["red"])  # wait where the oncoming lane can be seen
         best = None
         for lane in candidates_lanes:
@@ -559,30 +561,43 @@ class LatticePlanner:
 
     def _oncoming_candidates(self, lanes_in, current, home, lanes, road, s0, t0, v0, objs, oncoming, nudged):
         """(candidate lanes, peek) with the oncoming lane's pass added or taken away; peek =
-        (offset target [m], wait station [m]) while a standing blocker waits for a clear lane."""
+        (offset target [m], wait station [m]) while a standing blocker waits for a clear lane,
+        (offset target, None) while the pass may start."""
         own, opp = current, _across_lane(current, lanes)
         if opp is None:
             return lanes_in, None
         in_opp = not _same_side(current, home)
         if in_opp:
             own, opp = opp, current  # passing: `own` is the lane passed, the way back
-        allowed, standing, rear = self._oncoming_clear(own, opp, road, s0, t0, v0, objs, *oncoming)
+        # Once it has begun to pull out, what the blocker hides no longer turns it back: it hides
+        # less as the ego moves over (a standing blocker's tracked offset flickers by ±0.2 m,
+        # enough to flip the rule at a threshold every few cycles: on Town01 the ego went out
+        # and back until it stood too close to the blocker to pull out); what it sees still does.
+        allowed, standing, rear = self._oncoming_clear(own, opp, road, s0, t0, v0, objs, *oncoming,
+                                                       occlusion=not in_opp)
         t_own, t_opp = float(road.lane_center_t(own, s0)), float(road.lane_center_t(opp, s0))
         if in_opp:
             out = [*lanes_in, own]
             if not allowed and abs(t0 - t_own) < abs(t0 - t_opp):
                 out.remove(opp)  # not over the line yet and no longer clear: back
             return out, None
+        room = 0.5 * (abs(t_opp - t_own) - self.body.width_m) - self.PASS_PEEK_SPARE_M
+        peek_t = t_own + math.copysign(max(room, 0.0), t_opp - t_own)
         if allowed:
-            return [*lanes_in, opp], None
+            # Behind a standing blocker the lane keeps the offset it sees from: back at its
+            # centre the blocker hides more of the oncoming lane, the rule fails and the
+            # ego waits, moves over to see, and the rule holds again (it crept up to the
+            # blocker, too close to pull out, on Town01).
+            return [*lanes_in, opp], ((peek_t, None) if standing and not nudged else None)
         if standing and not nudged:
-            room = 0.5 * (abs(t_opp - t_own) - self.body.width_m) - self.PASS_PEEK_SPARE_M
-            return lanes_in, (t_own + math.copysign(max(room, 0.0), t_opp - t_own), rear - self.PASS_WAIT_GAP_M)
+            return lanes_in, (peek_t, rear - self.PASS_WAIT_GAP_M)
         return lanes_in, None
 
-    def _oncoming_clear(self, own, opp, road, s0, t0, v0, objs, sight_m, v_limit, end_s=math.inf):
+    def _oncoming_clear(self, own, opp, road, s0, t0, v0, objs, sight_m, v_limit, end_s=math.inf,
+                        occlusion: bool = True):
         """(the oncoming lane may be used, the blocker stands, its rear station [m]) for
-        passing the group of blockers ahead in lane `own` through lane `opp`."""
+        passing the group of blockers ahead in lane `own` through lane `opp`; `occlusion`:
+        the sight is shortened by what stands between the ego and that lane's centre."""
         t_own, t_opp = float(road.lane_center_t(own, s0)), float(road.lane_center_t(opp, s0))
         lane_w, side = abs(t_opp - t_own), math.copysign(1.0, t_opp - t_own)
         ego_len, ego_wid = self.body.length_m, self.body.width_m
@@ -625,7 +640,8 @@ class LatticePlanner:
             return False, standing, rear  # it would not be back before the junction or stop line
         window = t_end + self.PASS_MARGIN_S
         sight = sight_m
-        for os_, ot, ov, _ovt, olen, owid in objs:  # what stands between the ego and the lane's centre line
+        # What stands between the ego and the lane's centre line.
+        for os_, ot, ov, _ovt, olen, owid in objs if occlusion else ():
             x = os_ - 0.5 * olen - front
             edge, target = side * (ot - t0) + 0.5 * owid, side * (t_opp - t0)
             if x > 0.0 and edge > 0.0:
@@ -704,7 +720,7 @@ class LatticePlanner:
         cost += 1.0 * abs(self.cruise - speed) / max(self.cruise, 1.0) * 10.0
         if lane != current:
             cost += 1.5 + (3.0 if now - self.last_change_s < self.lane_change_cooldown_s else 0.0)
-        cost += 2.5 * abs(lane - home)
+        cost += 2.5 * _lane_steps(lane, home)
         return cost
 
 
@@ -729,6 +745,12 @@ def _lateral_path(s: np.ndarray, s_start: float, t_start: float, t_target: float
     d = t_target - t_start
     inside = (u > 0.0) & (u < 1.0)
     return t_start + d * u * u * (3.0 - 2.0 * u), np.where(inside, d * (6.0 - 12.0 * u) / (length * length), 0.0)
+
+
+def _lane_steps(a: int, b: int) -> int:
+    """Lanes between `a` and `b` counted as crossed: ids skip 0 at the centre line (-1 and 1
+    are neighbours), so the oncoming lane's pass is one lane over, not two."""
+    return abs(a - b) - (1 if (a > 0) != (b > 0) else 0)
 
 
 def _same_side(a: int, b: int) -> bool:

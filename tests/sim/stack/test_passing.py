@@ -3,6 +3,9 @@ leaves room (a car parked 0.9 m into the lane), into a free lane of the same dir
 and through the oncoming lane only when it is seen clear for the whole manoeuvre (CARLA's
 Slalom on a written road; docs/stack.md's passing rule), never into oncoming traffic."""
 
+from pathlib import Path
+
+import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
@@ -142,3 +145,66 @@ def test_slalom_waits_for_the_oncoming_car_then_passes():
     assert ahead[:100].all() and not ahead[-100:].any()
     assert (ego.t[ahead] + 0.5 * ego.width_m).max() < 0.05  # its side stays in its lane meanwhile
     assert ego.t.max() > 1.0  # and then it passes
+
+
+# CARLA's Slalom as imported (tests/data/carla: Town01, road 24, the ego in lane 1 driving
+# against s on its route, 4 m lanes, the oncoming lane the road's driving lane -1; a 0.3 m
+# shoulder and a sidewalk on each side). The five containers of the file are replaced by three
+# centred in the ego's lane, 12 m apart (CARLA's stand at and across the centre line: see
+# `test_imported_slalom_waits_where_a_container_at_the_line_hides_the_oncoming_lane`).
+def _town01_slalom(oncoming: str = "", containers: bool = False):
+    from addt_dsl.interop.openscenario.importer import import_xosc
+
+    carla = Path(__file__).resolve().parents[2] / "data" / "carla"
+    got = import_xosc(carla / "xosc" / "Slalom.xosc", maps=[carla / "maps"], lenient=True)
+    lines = [ln for ln in got.text.splitlines() if containers or not ln.lstrip().startswith("agent c")]
+    text = "\n".join(lines).replace("stack bev cruise_speed 11.176 m/s",
+                                    "stack bev cruise_speed 11.176 m/s\n    " + FAR_LIDAR)
+    if not containers:
+        mine = "".join(f"  agent k{i} obstacle on r24 lane 1 at {s} m length 2 m width 1 m height 1.7 m\n"
+                       for i, s in enumerate((79.67, 67.67, 55.67)))
+        text = text.replace("  environment {", mine + oncoming + "  environment {")
+    result = compile_source(text, "slalom.addt", base_dir=carla / "maps")
+    assert result.ok, [d.message for d in result.diagnostics]
+    return execute(expand(result.plan).specs[0])
+
+
+def test_town01_slalom_passes_through_the_roads_other_driving_lane_and_returns():
+    """Was a stop 2.3 m behind the first container with the rule holding: the lane
+    preference counted lane -1 -> 1 as two lanes (ids skip 0), and back at its lane centre
+    the container hid more of the oncoming lane, so the rule flickered while it crept up."""
+    out = _town01_slalom()
+    verdicts = {v.name: v.passed for v in out.verdicts}
+    assert verdicts["no_collision"] and verdicts["driven_distance"], verdicts
+    ego = out.trace.actors["ego"]
+    # Path frame: t = 0 the ego lane's centre, the centre line at +2 m, lane -1's centre at
+    # +4 m and its outer edge at +6 m (then the shoulder): it drives in that lane, no further.
+    assert ego.t.max() > 3.5 and (ego.t + 0.5 * ego.width_m).max() < 6.0
+    passing = ego.t > 1.0
+    # Over the line only around the containers (path stations of their rears 28-52 m).
+    assert ego.s[passing].min() > 5.0 and ego.s[passing].max() < 110.0
+    back = (ego.s > 100.0) & (ego.s < 250.0)  # road 24's end, the junction, road 23 (the run ends in a corner)
+    assert np.abs(ego.t[back]).max() < 0.2  # back in its lane
+
+
+def test_town01_slalom_waits_for_the_oncoming_car_then_passes():
+    """An oncoming car on lane -1 at s = 30 m, 10 m/s, is 75.7 m ahead of the ego's centre
+    (the ego's at s = 105.67 m). Hand check of the rule at the start, with the first container
+    only in sight (it hides the two behind it): its front at 30.3 m (path), the end of the pass
+    30.3 + 5 + 2.25 (half the ego) + 25.15 (0.75 of a 33.5 m return at 11.176 m/s) - 3.3 =
+    59.4 m of travel from standstill at 2 m/s^2 to 11.176 m/s: 31.2 m in 5.59 s, then 2.52 s,
+    T = 8.11 s; the car's near end (73.4 m) must stay beyond 61.65 m (the ego's front at the
+    end) over T + 2 s: 73.4 - 10 x 10.11 = -27.7 m < 61.65 m. The gap would need the car
+    162.8 m off, beyond road 24's 109 m: the ego waits until the car is by, then passes."""
+    out = _town01_slalom(oncoming="  agent oncoming car on r24 lane -1 at 30 m speed 10 m/s {\n"
+                                  "    behavior cruise speed 10 m/s\n  }\n"
+                                  "  expect { clear_of_oncoming: always clearance(oncoming) > 1 m }\n")
+    verdicts = {v.name: v.passed for v in out.verdicts}
+    assert verdicts["no_collision"] and verdicts["driven_distance"] and verdicts["clear_of_oncoming"], verdicts
+    ego, car = out.trace.actors["ego"], out.trace.actors["oncoming"]
+    # The ego drives towards +y, the car towards -y: the car has not gone by while its rear
+    # (high y) is beyond the ego's rear (low y).
+    ahead = car.y + 0.5 * car.length_m > ego.y - 0.5 * ego.length_m
+    assert ahead[:50].all() and not ahead[-50:].any()
+    assert (ego.t[ahead] + 0.5 * ego.width_m).max() < 2.0  # its side stays in its lane meanwhile
+    assert ego.t.max() > 3.5  # and then it passes
