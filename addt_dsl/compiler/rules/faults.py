@@ -125,7 +125,10 @@ def rule_faults(ctx: Context) -> Faults:
             start, end = _window_of(ctx, f.timing)
             if start is None or (f.timing is not None and f.timing.kind == "during" and end is None):
                 continue
-            if not _check_window(ctx, start, end, f.timing.span if f.timing else f.span):
+            if opens is not None:  # the length counts from the opening: at most the duration
+                if end is not None and not check_time(ctx, end, f.timing.length.span, "the window's length"):
+                    continue
+            elif not _check_window(ctx, start, end, f.timing.span if f.timing else f.span):
                 continue
             out.faults.append(P.FaultPlan(kind=f.kind, target=target, start_s=start, end_s=end, settings=vals,
                                           seed=int_const(seed) if seed is not None else None,
