@@ -33,6 +33,8 @@ def _window_of(ctx: Context, timing: ast.Timing | None):
                 return None, None
             if not check_range(ctx, length, 0.0, None, units.TIME, "the fault's duration", timing.length.span):
                 return None, None
+            if timing.kind == "when":  # counted from the opening: the length is the end
+                return start, length
             return start, _simplify(E.Binary(op="+", left=start, right=length))
         return (start, None) if timing.kind == "when" else (start, start)
     if timing.kind == "from":
