@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from addt_dsl.compiler import compile_source
+from addt_dsl.reporting.trace_view import unopened_windows
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 
@@ -51,11 +52,15 @@ scenario opened {{
 OPENED = "when started(lead.go) for 0.95 s"
 
 
-def _run(threshold: str = "50.05 m", fault: str = OPENED, rate: str = "100 %"):
+def _spec(threshold: str = "50.05 m", fault: str = OPENED, rate: str = "100 %"):
     source = TEMPLATE.format(threshold=threshold, fault=fault, rate=rate)
     result = compile_source(source, "opened.addt")
     assert result.ok, [str(d) for d in result.diagnostics]
-    return execute(expand(result.plan).specs[0])
+    return expand(result.plan).specs[0]
+
+
+def _run(*a, **kw):
+    return execute(_spec(*a, **kw))
 
 
 def _drops(result) -> list[float]:
@@ -86,14 +91,20 @@ def test_the_opened_window_draws_what_the_timed_window_at_t_fire_draws():
 
 
 def test_without_the_step_firing_nothing_is_dropped():
-    result = _run(threshold="500 m")  # the lead never gets there in 6 s
+    spec = _spec(threshold="500 m")  # the lead never gets there in 6 s
+    result = execute(spec)
     assert not [e for e in result.trace.events if e.kind in ("fault", "fault_window")]
     assert result.fault_events == 0
+    # `addtc trace` says why: the window never opened.
+    (line,) = unopened_windows(spec, result.trace)
+    assert line.startswith("fault 0 (drop lidar): its window never opened")
+    assert unopened_windows(_spec(), _run().trace) == []
 
 
 RUNNER = """
 import json, sys
 from addt_dsl.compiler import compile_source
+from addt_dsl.reporting.trace_view import unopened_windows
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 spec = expand(compile_source(sys.argv[1], "opened.addt").plan).specs[0]
