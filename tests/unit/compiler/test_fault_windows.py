@@ -158,3 +158,33 @@ def test_a_make_spec_of_a_plan_without_when_windows_has_no_openers():
     plan = _plan()
     spec = make_spec(plan.model_copy(update={"faults": plan.faults[3:]}), plan.nominal_params(), 0)
     assert [f.opens for f in spec.faults] == [None]
+
+
+def test_a_tensor_flip_at_the_opening_instant_is_taken_by_the_next_forward_pass():
+    """`when C for 0 s bitflip perception... tensor weights`: the flip's timer is due at the
+    opening itself, which the schedule wakes at once (the loop's clock phase has passed)."""
+    import pytest
+
+    torch = pytest.importorskip("torch")
+    from addt_dsl.runtime.faults.tensor import tensor_sites_of
+
+    torch.manual_seed(0)
+    model = torch.nn.Sequential(torch.nn.Linear(4, 3)).eval()
+    sites = tensor_sites_of(model, "perception")
+    target = sorted(sites)[0]
+    sched, events = _schedule(_fault("bitflip", 0.0, 0.0, _opener(), target=target, count=1, tensor="weights",
+                                     field="any", bit=-1.0))
+    now = [0.0]
+    stack = type("Stack", (), {"nodes": {}, "tensor_sites": lambda self: sites})()
+    sched.bind(stack, lambda: now[0])
+    before = [p.detach().clone() for p in model.parameters()]
+    x = torch.ones(1, 4)
+    model(x)  # not opened: no hook, nothing flipped
+    assert all(torch.equal(a, b) for a, b in zip(before, model.parameters()))
+    now[0] = 1.5
+    sched.open_windows(1.5, lambda c: True)
+    model(x)
+    flips = [e for e in events if e.kind == "fault"]
+    assert len(flips) == 1 and flips[0].time_s == 1.5
+    sched.close()  # weight flips are undone
+    assert all(torch.equal(a, b) for a, b in zip(before, model.parameters()))
