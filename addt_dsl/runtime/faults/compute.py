@@ -21,14 +21,13 @@ class BitFlip(S.BitFlip, FaultKind):
         # Flip instants are fixed up front from the fault's seed: same RunSpec, same flips. A
         # window a condition opens draws the same fractions of its length now, and places them
         # when it opens (`opened`).
-        f = self.fault
-        spread = not self.instant and (f.end_s is None or f.end_s > f.start_s)
-        if self.start < math.inf:
-            spread = min(self.end, self.duration_s) > self.start and not self.instant
+        f, waits = self.fault, self.start == math.inf
+        spread = not self.instant and (f.end_s is None or f.end_s > f.start_s if waits
+                                       else min(self.end, self.duration_s) > self.start)
         self._fractions = self.rng.random(n) if spread else None
         self._picks = None  # a node target: the site index of each flip
         self._sites: list[str] = []
-        self.times = self._place() if self.start < math.inf else np.zeros(0)
+        self.times = np.zeros(0) if waits else self._place()
         self._queues: dict[str, list[float]] = {self.fault.target: list(self.times)}
         self._next = 0  # tensor sites: flips consumed so far
         self._tensor = None
