@@ -200,6 +200,9 @@ class FaultPlan(_Model):
     settings: dict[str, SettingValue] = Field(default_factory=dict)
     seed: int | None = None
     source: str = ""  # file:line, for reports
+    # `when C [delayed D] [for W]`: a step's start (no clause, fires once) that opens the window
+    # where it fires; `start_s` and `end_s` then count from that instant (0 and W, or None).
+    opens: TriggerPlan | None = None
 
 
 class OraclePlan(_Model):
@@ -342,6 +345,8 @@ class ConcreteFault(_Model):
     end_s: float | None
     settings: dict[str, float | str | list[float]] = Field(default_factory=dict)
     seed: int
+    # The start that opens the window (parameters substituted); the times then count from it.
+    opens: TriggerPlan | None = None
 
 
 class RunSpec(_Model):

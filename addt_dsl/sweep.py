@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from addt_dsl.distributions import from_unit
-from addt_dsl.expr import eval_param_expr
-from addt_dsl.plan import ConcreteFault, FaultPlan, ParamPlan, RunSpec, ScenarioPlan, resolve_settings
+from addt_dsl.expr import Num, eval_param_expr, substitute_params
+from addt_dsl.plan import ConcreteFault, FaultPlan, ParamPlan, RunSpec, ScenarioPlan, TriggerPlan, resolve_settings
 
 
 SAMPLE_BATCH_VALUES = 1_000_000  # numbers drawn at once by a sampler (8 MB)
@@ -48,7 +48,16 @@ def concrete_fault(index: int, f: FaultPlan, params: dict[str, float], run_seed:
     end = eval_param_expr(f.end_s, params) if f.end_s is not None else None
     seed = f.seed if f.seed is not None else derive_seed(run_seed, 7919, index)
     return ConcreteFault(index=index, kind=f.kind, target=f.target, start_s=start, end_s=end,
-                         settings=resolve_settings(f.settings, params), seed=seed)
+                         settings=resolve_settings(f.settings, params), seed=seed,
+                         opens=_resolved_start(f.opens, params) if f.opens is not None else None)
+
+
+def _resolved_start(t: TriggerPlan, params: dict[str, float]) -> TriggerPlan:
+    """A step's start with its parameters substituted: the run's values, nothing left to bind."""
+    times = {k: Num(value=eval_param_expr(getattr(t, k), params))
+             for k in ("at_s", "after_s", "hold_s", "delay_s") if getattr(t, k) is not None}
+    condition = substitute_params(t.condition, params) if t.condition is not None else None
+    return t.model_copy(update={"condition": condition, **times})
 
 
 def make_spec(plan: ScenarioPlan, params: dict[str, float], seed: int, run_id: str = "",

@@ -231,10 +231,12 @@ class LightDef(Node):
 
 @dataclass(frozen=True, slots=True)
 class Timing(Node):
-    kind: str  # at | during | from
-    start: Expression
+    kind: str  # at | during | from | when
+    start: Expression  # `when`: the condition
     end: Expression | None = None
-    length: Expression | None = None  # `at T for D`
+    length: Expression | None = None  # `at T for D`, `when C for D`
+    edge: str | None = None  # `when rising C`: rising | falling | changing
+    delay: Expression | None = None  # `when C delayed D`
 
 
 @dataclass(frozen=True, slots=True)

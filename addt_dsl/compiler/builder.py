@@ -381,6 +381,17 @@ class Builder:
     def b_from_time(self, span, items):
         return ast.Timing(span, "from", items[0])
 
+    def b_when_time(self, span, items):
+        edge = delay = length = None
+        if isinstance(items[0], Token) and items[0].type in ("RISING", "FALLING", "CHANGING"):
+            edge, items = str(items[0]), items[1:]
+        condition, rest = items[0], list(items[1:])
+        if rest and isinstance(rest[0], Token) and rest[0].type == "DELAY":
+            delay, rest = rest[1], rest[2:]
+        if rest:
+            length = rest[0]
+        return ast.Timing(span, "when", condition, None, length, edge, delay)
+
     def b_interval(self, span, items):
         return items[0], items[1]
 

@@ -349,11 +349,24 @@ def _faults(pr: _Printer) -> None:
 
 def _timing(pr: _Printer, f: FaultPlan) -> str:
     ex = pr.exprs
+    if f.opens is not None:
+        return _fault_opening(pr, f)
     if f.end_s is None:
         return "" if f.start_s == E.Num(value=0.0) else f"from {ex.value(f.start_s, units.TIME)}"
     if f.end_s == f.start_s:
         return f"at {ex.value(f.start_s, units.TIME)}"
     return f"during [{ex.value(f.start_s, units.TIME)}, {ex.value(f.end_s, units.TIME)}]"
+
+
+def _fault_opening(pr: _Printer, f: FaultPlan) -> str:
+    """`when [EDGE] F [delayed D] [for W]`: the window counts from where its start fires."""
+    tr, ex = f.opens, pr.exprs
+    if tr.condition is None or f.start_s != E.Num(value=0.0) or any(
+            v is not None for v in (tr.at_s, tr.after_s, tr.hold_s, tr.repeat, tr.clause, tr.group, tr.label)):
+        raise PrinterError("a fault window opens on a `when` condition alone, at the instant it fires")
+    delay = f" delayed {ex.value(tr.delay_s, units.TIME)}" if tr.delay_s is not None else ""
+    length = f" for {ex.value(f.end_s, units.TIME)}" if f.end_s is not None else ""
+    return f"when {tr.edge + ' ' if tr.edge else ''}{ex.formula(tr.condition)}{delay}{length}"
 
 
 def _fault_line(pr: _Printer, f: FaultPlan) -> str:
@@ -594,7 +607,8 @@ def pinned_fault_plan(f: ConcreteFault, source: str = "") -> FaultPlan:
     start = E.Num(value=float(f.start_s))
     end = None if f.end_s is None else (start if f.end_s == f.start_s else E.Num(value=float(f.end_s)))
     return FaultPlan(kind=f.kind, target=f.target, start_s=start, end_s=end,
-                     settings={k: _literal(v) for k, v in f.settings.items()}, seed=int(f.seed), source=source)
+                     settings={k: _literal(v) for k, v in f.settings.items()}, seed=int(f.seed), source=source,
+                     opens=f.opens)
 
 
 def pin_spec(spec: RunSpec) -> RunSpec:

@@ -194,3 +194,14 @@ def print_trace(run: RunTrace, table, events, max_events: int = 40) -> None:
         console.print(f"  {row.time_s:7.2f} s  {row.kind:<12} {row.detail}", markup=False)
     if len(listed) > max_events:
         console.print(f"  ... {len(listed) - max_events} more (write them with --csv)")
+    for line in unopened_windows(run.spec, run.trace):
+        console.print(f"  {line}", markup=False)
+
+
+def unopened_windows(spec, trace) -> list[str]:
+    """The faults whose window a condition opens (`when C for W`) and that never opened: their
+    condition did not fire before the run ended, so they never acted (no event says so)."""
+    opened = {e.detail["index"] for e in trace.events if e.kind == "fault_window"}
+    return [f"fault {f.index} ({f.kind} {f.target}): its window never opened, its condition did not "
+            f"fire before the run ended; it never acted" for f in spec.faults
+            if f.opens is not None and f.index not in opened]

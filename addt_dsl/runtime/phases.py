@@ -12,7 +12,8 @@
   outputs     latencies, the command, objects seen, named steps' states
   end         `end when ...` on the recorded state
   -- the run stops here on an ego collision, its end, or its last sample --
-  triggers    deferred time-0 behaviours; scripted steps (`triggers.py`)
+  triggers    deferred time-0 behaviours; scripted steps (`triggers.py`); fault windows
+              that a condition opens
   sense       due sensors capture, spatial and temporal faults act, frames travel
   stack       frames that arrived reach the stack, which steps
   ego         due commands take effect; the ego's dynamics (or its script, or an OSI stack)
@@ -220,6 +221,8 @@ def triggers(run: RunState, rec: Record, k: int, t: float) -> None:
         if rec.steps:  # steps that fired now are started at this sample
             for name, code in run.step_states(t).items():
                 rec.steps[name][k] = code
+    if run.faults.openers:  # `when C for W` faults: on the state as recorded at k, these steps included
+        run.faults.open_windows(t, condition_checker(run, rec.rec, k))
 
 
 def sense(run: RunState, t: float) -> None:

@@ -43,7 +43,8 @@ class ActorTrack:
 @dataclass
 class Event:
     time_s: float
-    kind: str  # collision | fault | stack_error | trigger | goal | watchdog | left_road | behavior | variable
+    # collision | fault | fault_window | stack_error | trigger | goal | watchdog | left_road | behavior | variable
+    kind: str
     detail: dict = field(default_factory=dict)
 
 

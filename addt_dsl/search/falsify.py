@@ -222,7 +222,9 @@ def origin_of(spec: RunSpec, nominal: dict[str, float]) -> str:
     parts = []
     for f in spec.faults:
         settings = " ".join(f"{k} {_short(v)}" for k, v in sorted(f.settings.items()))
-        window = (f"from {_short(f.start_s)} s" if f.end_s is None else
+        window = (("when its condition holds" + (f", for {_short(f.end_s)} s" if f.end_s is not None else ""))
+                  if f.opens is not None else
+                  f"from {_short(f.start_s)} s" if f.end_s is None else
                   f"at {_short(f.start_s)} s" if f.end_s == f.start_s else
                   f"during [{_short(f.start_s)} s, {_short(f.end_s)} s]")
         parts.append(f"{f.kind} {f.target} {settings} {window}".replace("  ", " "))

@@ -256,6 +256,8 @@ class Shrinker:
             f = e.fault
             if f.start_s >= t_v:
                 continue
+            # (A window a condition opens counts from there, at or after 0 s: a length of t_v
+            # still covers all of it before the violation.)
             end = f.end_s if f.end_s is not None and f.end_s <= t_v else t_v
             cut.append(C.FaultEntry(f.model_copy(update={"end_s": end}), e.label))
         self.consider(C.rebuild(spec, faults=cut))
@@ -325,6 +327,8 @@ class Shrinker:
             self.bisect(end, start, lambda e: C.with_fault(self.best, i, end_s=e) if e > start else None)
             end = self.best.faults[i].end_s
             end = duration if end is None else end
+            if f.opens is not None:  # a window a condition opens starts where it fires: only its length shrinks
+                continue
             self.bisect(start, end, lambda s: C.with_fault(self.best, i, start_s=s) if s < end else None)
 
     def reduce_settings(self) -> None:
@@ -451,6 +455,8 @@ def _fmt(v) -> str:
 
 
 def _window(f) -> str:
+    if f.opens is not None:  # counted from where its condition fires
+        return "when its condition holds" + (f", for {_fmt(f.end_s)} s" if f.end_s is not None else "")
     if f.end_s is None:
         return f"from {_fmt(f.start_s)} s"
     if f.end_s == f.start_s:

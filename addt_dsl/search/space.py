@@ -73,7 +73,9 @@ class SearchSpace:
                 if hi > lo:
                     settings.append((name, lo, hi, spec.kind == "int"))
                     severe[name] = 1.0 if abs(hi - neutral) >= abs(lo - neutral) else 0.0
-            timed = not E.params_used(fp.start_s) and (fp.end_s is None or not E.params_used(fp.end_s))
+            # A window a condition opens (`when C for W`) stays where its condition puts it.
+            timed = fp.opens is None and not E.params_used(fp.start_s) and (
+                fp.end_s is None or not E.params_used(fp.end_s))
             instant = f.end_s is not None and f.end_s == f.start_s
             self.faults.append((f.index, f, settings, instant, timed))
             self.axes.append(Axis(f"fault{f.index}:present", "bool", severe=1.0))

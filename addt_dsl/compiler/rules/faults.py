@@ -12,7 +12,7 @@ from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import (Context, check_range, check_settings, check_time, const_value, fmt, int_const,
-                                       suggest)
+                                       lower_when, suggest, when_fields)
 from addt_dsl.compiler.rules.actors import DEFAULT_SENSOR, DEFAULT_STACK, is_scripted_ego
 from addt_dsl.diagnostics import Span
 from addt_dsl.registry import FAULTS, SENSORS, STACKS, ParamSpec
@@ -22,22 +22,33 @@ def _window_of(ctx: Context, timing: ast.Timing | None):
     low = ctx.lowering(signals=False)
     if timing is None:
         return P.num(0.0), None
-    start = low.lower_value(timing.start, units.TIME, "a fault time")
+    # `when C for W`: the times count from where the condition fires, as `at 0 s for W` would.
+    start = P.num(0.0) if timing.kind == "when" else low.lower_value(timing.start, units.TIME, "a fault time")
     if start is None:
         return None, None
-    if timing.kind == "at":
+    if timing.kind in ("at", "when"):
         if timing.length is not None:
             length = low.lower_value(timing.length, units.TIME, "a fault duration")
             if length is None:
                 return None, None
             if not check_range(ctx, length, 0.0, None, units.TIME, "the fault's duration", timing.length.span):
                 return None, None
+            if timing.kind == "when":  # counted from the opening: the length is the end
+                return start, length
             return start, _simplify(E.Binary(op="+", left=start, right=length))
-        return start, start
+        return (start, None) if timing.kind == "when" else (start, start)
     if timing.kind == "from":
         return start, None
     end = low.lower_value(timing.end, units.TIME, "a fault time")
     return start, end
+
+
+def _opening(ctx: Context, timing: ast.Timing) -> P.TriggerPlan | None:
+    """`when [rising] C [delayed D]` of a fault: a step's start, lowered and checked as one
+    (conditions on the state, named steps, edges, delay); it fires once."""
+    start = ast.StepStart(timing.span, "when", timing.start, None, timing.edge, timing.delay)
+    when = lower_when(ctx, start)
+    return P.TriggerPlan(**when_fields(when)) if when is not None else None
 
 
 def _simplify(expr):
@@ -102,14 +113,28 @@ def rule_faults(ctx: Context) -> Faults:
             seed = vals.pop("seed", None)
             if cls.target_kind == "sensor" and not _fits_sensor(ctx, cls, f, target, vals):
                 continue
+            opens = None
+            if f.timing is not None and f.timing.kind == "when":
+                if cls.target_kind != "sensor" and sites_of is not None:
+                    ctx.sink.error("E0204", f"'{f.kind}' on a remote stack cannot wait for a condition",
+                                   f.timing.span, "the remote stack applies its internal faults on its own "
+                                                  "clock, without the scenario's state: give the fault a time "
+                                                  "window (`at T for D`, `during [A, B]`)")
+                    continue
+                opens = _opening(ctx, f.timing)
+                if opens is None:
+                    continue
             start, end = _window_of(ctx, f.timing)
             if start is None or (f.timing is not None and f.timing.kind == "during" and end is None):
                 continue
-            if not _check_window(ctx, start, end, f.timing.span if f.timing else f.span):
+            if opens is not None:  # the length counts from the opening: at most the duration
+                if end is not None and not check_time(ctx, end, f.timing.length.span, "the window's length"):
+                    continue
+            elif not _check_window(ctx, start, end, f.timing.span if f.timing else f.span):
                 continue
             out.faults.append(P.FaultPlan(kind=f.kind, target=target, start_s=start, end_s=end, settings=vals,
                                           seed=int_const(seed) if seed is not None else None,
-                                          source=f"{f.span.file}:{f.span.line}"))
+                                          source=f"{f.span.file}:{f.span.line}", opens=opens))
     return out
 
 

@@ -10,7 +10,13 @@ subclasses the spec and overrides the hooks it needs:
 - `on_state(site, state, t)`   the stack, when a node reads its stored state (a state site);
 - `extra_latency(node, t, base)` the stack, when a node publishes;
 - `bind(binding)`              once the stack exists: stack sites, tensor sites, clock, timers;
+- `opened()`                   a window opened by a condition (`when C for W`) has its times now;
 - `close()`                    at the end of the run: undo persistent side effects.
+
+A fault whose window a condition opens (`opens`: a step's start) is closed (`start` is
+infinite) until the schedule's `open_windows` sees the start fire, on the state recorded
+at that sample; its window then counts from there and a `fault_window` event records it.
+Its random draws do not depend on when that is: the same stream, drawn in the same order.
 
 Every injection is recorded as a trace event `fault` with the same fields for every
 kind: `index`, `kind`, `target`, `location` (where: sensor, site, node, tensor element)
@@ -31,6 +37,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from addt_dsl.registry import FAULTS
+from addt_dsl.runtime.bound import bind_step
+from addt_dsl.runtime.script import StepState
 from addt_dsl.specs import faults as S
 
 # Bit ranges [lo, hi) of the IEEE-754 fields, by storage width in bits.
@@ -107,17 +115,31 @@ class FaultKind(S.FaultSpec):
     def __init__(self, fault, step_s: float, duration_s: float, record):
         self.fault = fault
         self.settings = {p.name: fault.settings.get(p.name, p.default) for p in self.params}
-        self.start = fault.start_s
-        self.end = fault.end_s if fault.end_s is not None else math.inf
+        self.step_s = step_s
         self.instant = fault.end_s is not None and fault.end_s == fault.start_s
-        if self.instant:
-            self.end = fault.start_s + step_s * 0.999
+        if getattr(fault, "opens", None) is None:
+            self._window_from(0.0)
+        else:  # closed until its start fires (`open`)
+            self.start = self.end = math.inf
         # Each fault draws from its own generator: adding or removing another fault never
         # changes when or how this one fires.
         self.rng = np.random.default_rng(fault.seed)
         self._record = record  # callable(time_s, detail dict)
         self.duration_s = duration_s
         self._series: dict[str, tuple[list, list, list]] = {}  # location -> (times, value, before)
+
+    def _window_from(self, origin_s: float) -> None:
+        """The window [start, end] [s] of times counted from `origin_s` (0, or where it opened)."""
+        f = self.fault
+        self.start = origin_s + f.start_s
+        self.end = origin_s + f.end_s if f.end_s is not None else math.inf
+        if self.instant:
+            self.end = self.start + self.step_s * 0.999
+
+    def open(self, time_s: float) -> None:
+        """The condition that opens the window fired at `time_s` [s]."""
+        self._window_from(time_s)
+        self.opened()
 
     def active(self, time_s: float) -> bool:
         return self.start <= time_s <= self.end
@@ -145,6 +167,9 @@ class FaultKind(S.FaultSpec):
 
     # ---- hooks; a kind overrides the ones it needs
     def bind(self, binding: Binding) -> None:
+        pass
+
+    def opened(self) -> None:
         pass
 
     def close(self) -> None:
@@ -187,6 +212,9 @@ class FaultSchedule:
         self._timers: list[tuple[float, int, Callable[[], None]]] = []
         self._timer_seq = 0
         self.next_wake_s = math.inf
+        # Windows a condition opens (`when C for W`): (its start, armed at 0 s; the fault), in
+        # schedule order; each leaves the list once it fired.
+        self.openers: list[tuple[StepState, FaultKind]] = []
         for f in faults:
             cls = FAULTS.implementation(f.kind)
 
@@ -197,6 +225,10 @@ class FaultSchedule:
             kind = cls(f, step_s, duration_s, record)
             self.kinds.append(kind)
             self.by_target.setdefault(f.target, []).append(kind)
+            if getattr(f, "opens", None) is not None:
+                self.openers.append((StepState(bind_step(f.opens, {})), kind))
+        for opener, _ in self.openers:
+            opener.arm(0.0)
 
     def bind(self, stack, clock: Callable[[], float]) -> None:
         """Tell every fault about the stack: its nodes and sites, its tensor sites, the clock.
@@ -212,6 +244,11 @@ class FaultSchedule:
         if hand_over is not None:
             # A stack that applies its internal faults itself (the bridge sends them to the
             # remote stack, which runs this same machinery): only sensor faults stay here.
+            # It has no scenario state to open a window on (the compiler refuses it, E0204).
+            waiting = [k.fault for _, k in self.openers if k.target_kind != "sensor"]
+            if waiting:
+                raise ValueError(f"fault '{waiting[0].kind}' on '{waiting[0].target}' waits for a condition, "
+                                 "which a remote stack cannot evaluate")
             hand_over([k.fault for k in self.kinds if k.target_kind != "sensor"])
             self.kinds = [k for k in self.kinds if k.target_kind == "sensor"]
             kept = {t: [k for k in ks if k.target_kind == "sensor"] for t, ks in self.by_target.items()}
@@ -244,6 +281,27 @@ class FaultSchedule:
         while timers and timers[0][0] <= time_s + 1e-12:
             heapq.heappop(timers)[2]()
         self.next_wake_s = timers[0][0] if timers else math.inf
+
+    def open_windows(self, time_s: float, holds: Callable[[object], bool]) -> None:
+        """Open the windows whose start fires now (`holds(condition)` on the state recorded at
+        `time_s`, the steps that fired at this sample included); one-shot, as a step without
+        `repeat`. Due timers (a tensor flip at the opening instant) wake at once."""
+        from addt_dsl.runtime.trace import Event
+
+        waiting = []
+        for opener, kind in self.openers:
+            opener.advance(time_s, holds, lambda clause, t: None)
+            if not opener.fired:
+                waiting.append((opener, kind))
+                continue
+            kind.open(time_s)
+            f = kind.fault
+            self.events.append(Event(time_s, "fault_window", {
+                "index": f.index, "kind": f.kind, "target": f.target, "start_s": kind.start,
+                "end_s": None if math.isinf(kind.end) else (kind.start if kind.instant else kind.end)}))
+        self.openers = waiting
+        if time_s + 1e-12 >= self.next_wake_s:
+            self.wake(time_s)
 
     def upset(self, node, time_s: float) -> None:
         """Memory faults in a node's stored state, applied when the node is about to read it.

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from addt_dsl.registry import FAULTS
@@ -15,24 +17,51 @@ class BitFlip(S.BitFlip, FaultKind):
 
     def __init__(self, *a):
         super().__init__(*a)
-        end = min(self.end, self.duration_s)
-        n = int(self.settings["count"])
-        # Flip instants are fixed up front from the fault's seed: same RunSpec, same flips.
-        self.times = (np.sort(self.start + (end - self.start) * self.rng.random(n))
-                      if end > self.start and not self.instant else np.full(n, float(self.start)))
+        n = self.count = int(self.settings["count"])
+        # Flip instants are fixed up front from the fault's seed: same RunSpec, same flips. A
+        # window a condition opens draws the same fractions of its length now, and places them
+        # when it opens (`opened`).
+        f, waits = self.fault, self.start == math.inf
+        spread = not self.instant and (f.end_s is None or f.end_s > f.start_s if waits
+                                       else min(self.end, self.duration_s) > self.start)
+        self._fractions = self.rng.random(n) if spread else None
+        self._picks = None  # a node target: the site index of each flip
+        self._sites: list[str] = []
+        self.times = np.zeros(0) if waits else self._place()
         self._queues: dict[str, list[float]] = {self.fault.target: list(self.times)}
         self._next = 0  # tensor sites: flips consumed so far
         self._tensor = None
         self.clock = lambda: 0.0
+
+    def _place(self):
+        """The flip instants [s] in the window (all at its start for an instant or an empty one)."""
+        end = min(self.end, self.duration_s)
+        if self._fractions is None or end <= self.start:
+            return np.full(self.count, float(self.start))
+        return np.sort(self.start + (end - self.start) * self._fractions)
+
+    def _queue_flips(self) -> None:
+        if self._picks is None:
+            if self._tensor is None:
+                self._queues = {self.fault.target: list(self.times)}
+            return
+        self._queues = {s: [float(t) for t, p in zip(self.times, self._picks) if p == i]
+                        for i, s in enumerate(self._sites)}
+
+    def opened(self) -> None:
+        self.times = self._place()
+        self._queue_flips()
+        if self._tensor is not None:
+            self._tensor.arm_next()
 
     def bind(self, binding: Binding) -> None:
         self.clock = binding.clock
         target = self.fault.target
         if target in binding.nodes:
             # A node target: each flip lands on one of the node's sites, drawn up front.
-            sites = sorted(binding.nodes[target])
-            picks = self.rng.integers(len(sites), size=len(self.times))
-            self._queues = {s: [float(t) for t, p in zip(self.times, picks) if p == i] for i, s in enumerate(sites)}
+            self._sites = sorted(binding.nodes[target])
+            self._picks = self.rng.integers(len(self._sites), size=self.count)
+            self._queue_flips()
         elif target in binding.tensor_sites and target not in binding.sites():
             from addt_dsl.runtime.faults.tensor import TensorFlipper
 

@@ -137,10 +137,10 @@ class TensorFlipper:
             self.params = [(n, p) for n, p in module.named_parameters() if p.is_floating_point()]
             if not self.params:
                 raise ValueError(f"tensor site '{site}' has no floating-point weights to flip")
-        self._arm_next()
+        self.arm_next()
 
     # ---- attaching the hook while a flip is pending
-    def _arm_next(self) -> None:
+    def arm_next(self) -> None:
         if self.fault.pending():
             self._at(self.fault.next_time(), self.arm)
 
@@ -157,7 +157,7 @@ class TensorFlipper:
     def _taken(self) -> None:
         """The due flips are done: detach until the next instant."""
         self.disarm()
-        self._arm_next()
+        self.arm_next()
 
     # ---- weights
     def _pre_hook(self, module, inputs):
