@@ -47,6 +47,7 @@ class StepState:
         self.group = GroupState(step.group) if step.group is not None else None
         self.armed_at: float | None = None
         self.fired = False
+        self.started = False  # it has fired at least once (stays so through `repeat`'s standby)
         self.label = step.label
         self.behavior = None  # the behaviour this step started
         self.ended = False
@@ -127,7 +128,7 @@ class StepState:
                 self.counted_at = time_s
             if self.counted_at is not None and time_s + TIME_EPS_S < self.counted_at + self.delay_s:
                 return
-            self.fired = True
+            self.fired = self.started = True
             if self.clause is not None:
                 self.behavior = start(self.clause, time_s)
             if self.group is not None:

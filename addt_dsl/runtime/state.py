@@ -594,7 +594,7 @@ class RunState:
         out = {}
         for agent, name, step in self.named_steps:
             ended = step.update_end(time_s, lambda beh, t, _a=agent: self.behavior_ended(_a, beh, t))
-            out[name] = STEP_ENDED if ended else STEP_STARTED if step.fired else STEP_WAITING
+            out[name] = STEP_ENDED if ended else STEP_STARTED if step.started else STEP_WAITING
         return out
 
 

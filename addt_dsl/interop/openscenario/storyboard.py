@@ -90,18 +90,22 @@ for _path, _status, _note in (
         ("Storyboard/Init", "exact", "actions at the start: positions, speeds, routes, environment, lights"),
         ("Storyboard/Story", "exact", "stories run from the start"),
         ("Storyboard/StopTrigger", "approx", "a simulation time alone: the run's duration; other conditions "
-                                             "end the run when they hold (`end when`); without one, 60 s (W0802)"),
+                                             "end the run when they hold (`end when`, the run at most 300 s); "
+                                             "without a simulation time, 60 s at most (W0802)"),
         ("Story/Act", "exact", "acts start with their story"),
         ("Story/ParameterDeclarations", "exact", "one scope with the global parameters (a global value wins)"),
         ("Act/ManeuverGroup", "approx", "one actor per group (more: refused); maximumExecutionCount above 1 refused"),
-        ("Act/StartTrigger", "approx", "a simulation time or the story running; other conditions refused"),
+        ("Act/StartTrigger", "approx", "a simulation time, the story running, or another act complete (one "
+                                       "condition: the act's steps a named group started on every event of that "
+                                       "act ended, with its edge and delay); other conditions refused"),
         ("Act/StopTrigger", "refused", "the language has no act that ends; CARLA's criteria_* groups are oracles"),
         ("ManeuverGroup/Actors", "exact", "the actor the group's private actions drive"),
         ("ManeuverGroup/CatalogReference", "exact", "the Maneuver entry of the ManeuverCatalog's directory, its "
                                                     "parameters as the reference assigns them"),
         ("ManeuverGroup/Maneuver", "exact", "maneuvers run with their group"),
         ("Maneuver/Event", "approx", "each action a step; priority and maximumExecutionCount as `when C repeat N` "
-                                    "when a condition of its own starts it"),
+                                    "when a condition of its own starts it (without one, in an act started by "
+                                    "another: `when started(A.ACT) repeat N`); complete after its last run"),
         ("Maneuver/ParameterDeclarations", "exact", "one scope with the global parameters (a global value wins)"),
         ("Event/Action", "exact", "private actions and traffic signal actions (see the actions)"),
         ("Event/StartTrigger", "approx", "condition groups as `any`/`all`, edges and delays; several edges or "
@@ -411,7 +415,8 @@ class Storyboard:
 
     def stop_trigger(self, trigger) -> float:
         """The run's duration: a stop condition group that is a simulation time alone (the
-        rest of the stop trigger is `end when ...`, `end_trigger`)."""
+        rest of the stop trigger is `end when ...`, `end_trigger`); without one, a bound:
+        longer where other stop conditions end the run."""
         for group in trigger.iterfind("ConditionGroup") if trigger is not None else ():
             conds = list(group.iterfind("Condition"))
             time = conds[0].find("ByValueCondition/SimulationTimeCondition") if len(conds) == 1 else None
@@ -482,8 +487,10 @@ class Storyboard:
         parallel { ... }`."""
         self.act_events[self.act_name] = self.event_order[self.act_first_event:]
         label, self.act_label = self.act_label, None
-        if after_act is None:
-            return
+        added = [who for who, info in self.actors.items()
+                 if (len(info["triggers"]), len(info["behaviors"])) != before.get(who, (0, 0))]
+        if after_act is None or not added:
+            return  # (nothing of it translates: its events said why)
         if (len(self.pending), len(self.light_steps) + len(self.variable_steps) + len(self.environment_steps)) \
                 != before[""]:
             self.skip(after_act, "an act started by another act's completion whose events start on other events, "
