@@ -85,7 +85,7 @@ __all__ = ["Export", "ExportError", "export_run", "SIDECAR_FORMAT", "SIDECAR_PAR
 # coverage table. tests/unit/interop/test_export_coverage.py exports a corpus and checks that
 # it writes exactly these.
 EXPORTED: dict[str, str] = {
-    "PrivateAction/TeleportAction": "every actor's start (Init)",
+    "PrivateAction/TeleportAction": "every actor's start (Init); `teleport` (a RoadPosition)",
     "PrivateAction/LongitudinalAction/SpeedAction": "start speeds; `cruise`, `brake` (absolute or relative target)",
     "PrivateAction/LongitudinalAction/SpeedProfileAction": "`speed_profile`",
     "PrivateAction/LongitudinalAction/LongitudinalDistanceAction": "`keep_gap`",
@@ -111,6 +111,7 @@ EXPORTED: dict[str, str] = {
     "ByEntityCondition/EntityCondition/TimeToCollisionCondition": "`ttc(a, b)` compared",
     "ByEntityCondition/EntityCondition/TraveledDistanceCondition": "`travelled(a)` compared",
     "ByEntityCondition/EntityCondition/OffroadCondition": "`road_edge(a) < 0 m`",
+    "ByEntityCondition/EntityCondition/EndOfRoadCondition": "`road_end(a) <= 0 m` (`for D`: its duration)",
     "LanePosition": "start positions",
     "RoadPosition": "`trajectory s [...] t [...]`, `synchronize` targets",
     "WorldPosition": "`trajectory x [...] y [...]`",
@@ -459,6 +460,11 @@ def _trajectory(run, actor, s):
     return [follow, _speed_action(s["speed"], s["accel"] if s["speed"] >= run.v0[actor] else s["decel"])], True
 
 
+def _teleport(run, actor, s):
+    # OpenDRIVE road coordinates of the road it is on, as the language's `teleport`.
+    return [xosc.TeleportAction(xosc.RoadPosition(s["s"], s["t"], _road_of(run, actor)))], True
+
+
 def _keep_gap(run, actor, s):
     side = (xosc.LongitudinalDisplacement.trailingReferencedEntity if s["side"] == "behind"
             else xosc.LongitudinalDisplacement.leadingReferencedEntity)
@@ -484,7 +490,7 @@ def _controller(keyword: str):
 ACTIONS = {"cruise": _cruise, "brake": _brake, "lane_change": _lane_change, "cut_in": _lane_change,
            "lane_offset": _lane_offset,
            "speed_profile": _speed_profile, "synchronize": _synchronize, "trajectory": _trajectory,
-           "keep_gap": _keep_gap,
+           "keep_gap": _keep_gap, "teleport": _teleport,
            "idm": _controller("idm"), "overtake": _controller("overtake"), "walk": _controller("walk"),
            "cross": _controller("cross")}
 
@@ -560,6 +566,8 @@ def _compare(run: _Run, node, name: str):
                                  xosc.TrafficSignalCondition(run.signal_id(sid), run.lamp_state(sid, state)))
     if fn == "var" and len(args) == 1 and op != "!=":
         return xosc.ValueTrigger(name, 0, xosc.ConditionEdge.none, xosc.VariableCondition(args[0], value, rule))
+    if fn == "road_end" and len(args) == 1 and op == "<=" and value == 0.0:  # (its duration: `for D`)
+        return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.EndOfRoadCondition(0.0), args[0])
     if fn == "road_edge" and len(args) == 1 and op == "<" and value == 0.0:
         return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.OffroadCondition(0.0), args[0])
     if fn == "ttc" and len(args) == 2:
@@ -644,7 +652,11 @@ def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str]
                                f"{param}, which nothing sets")
             got = [[xosc.ValueTrigger(run.unique(f"{event}_when"), 0, xosc.ConditionEdge.none,
                                       xosc.ParameterCondition(param, "true", xosc.Rule.equalTo))]]
-        if step.hold_s is not None:
+        ends = [c for conds in got for c in conds if isinstance(getattr(c, "entitycondition", None),
+                                                                     xosc.EndOfRoadCondition)]
+        if step.hold_s is not None and len(ends) == 1 and sum(len(conds) for conds in got) == 1:
+            ends[0].entitycondition.duration = float(run.num(step.hold_s))  # at the end for D: exactly
+        elif step.hold_s is not None:
             # `when C for D`: OpenSCENARIO's condition delay fires D after C first holds; it
             # does not ask C to keep holding (exact in the side file).
             hold = run.num(step.hold_s)
@@ -684,7 +696,9 @@ def _event(run: _Run, actor: str, clause: ClausePlan, step: TriggerPlan | None, 
     run.event_names.append(name)
     keyword = BEHAVIORS.get(clause.name).keyword  # aliases (`follow`) export as their behaviour
     actions, standard = ACTIONS[keyword](run, actor, cls_settings)
-    event = xosc.Event(name, xosc.Priority.parallel)
+    # `repeat N`: the event back in standby after each run, N runs at most
+    repeat = step.repeat if step is not None and step.repeat else 1
+    event = xosc.Event(name, xosc.Priority.parallel, maxexecution=repeat)
     for action in actions:
         event.add_action(run.unique(f"{name}_action"), action)
     event.add_trigger(_start_trigger(run, step or TriggerPlan(), name, armed_by))

@@ -834,6 +834,11 @@ class Storyboard:
         """`started(A.x) > 0` / `ended(A.x) > 0` for an event, naming its step (an event
         at time 0 becomes a named step `after 0 s`); None if the event has no step."""
         first = self.events.get(ref)
+        if first is None and state in STATE_SIGNAL and ref in (self.sidecar or {}).get("group_events", ()):
+            # A step of an exported group (the side file has the group): its name is the event's.
+            for who, groups in sorted(self.sidecar.get("groups", {}).items()):
+                if any(s.label == ref for g in groups for s in steps_of(TriggerPlan.model_validate(g))):
+                    return step_state(state, f"{who}.{ref}")
         if first is None or state not in STATE_SIGNAL:
             return None
         other = first.actor
