@@ -53,6 +53,7 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, creation_date, road_file, xml_text
 from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
+from addt_dsl.printer.expr import dim_of_name
 from addt_dsl.specs.behaviors import PEAK_CURVATURE
 from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM
 from addt_dsl.registry import BEHAVIORS
@@ -108,6 +109,8 @@ EXPORTED: dict[str, str] = {
     "ByValueCondition/VariableCondition": "`var(NAME)` compared",
     "ByEntityCondition/EntityCondition/RelativeDistanceCondition": "`distance(a, b)`, `gap(a, b)` compared",
     "ByEntityCondition/EntityCondition/SpeedCondition": "`speed(a)` compared",
+    "ByEntityCondition/EntityCondition/AccelerationCondition": "`accel(a)` compared",
+    "ByEntityCondition/EntityCondition/TimeHeadwayCondition": "`gap(a, b) OP T * speed(a)` (the import's form)",
     "ByEntityCondition/EntityCondition/TimeToCollisionCondition": "`ttc(a, b)` compared",
     "ByEntityCondition/EntityCondition/TraveledDistanceCondition": "`travelled(a)` compared",
     "ByEntityCondition/EntityCondition/OffroadCondition": "`road_edge(a) < 0 m`",
@@ -531,12 +534,33 @@ def _abs_distance(run: _Run, node, value, name: str):
     return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, a.name)
 
 
+def _headway(run: _Run, node, name: str):
+    """`gap(A, B) OP T * speed(A)` (free space) or `... OP T * speed(A) + -H`, H half of both
+    lengths (between reference points): the importer's form of a TimeHeadwayCondition, or None."""
+    gap, right, free = _signal(node.left), node.right, True
+    if isinstance(right, E.Binary) and right.op == "+" and isinstance(right.right, E.Num):
+        right, half, free = right.left, -right.right.value, False
+    if gap is None or gap[0] != "gap" or len(gap[1]) != 2 or not all(a in run.by_name for a in gap[1]) \
+            or not (isinstance(right, E.Binary) and right.op == "*") or _signal(right.right) != ("speed", gap[1][:1]):
+        return None
+    a, b = (run.by_name[x] for x in gap[1])
+    value = _const(run, right.left)
+    if value is None or (not free and abs(half - 0.5 * (a.length_m + b.length_m)) > 1e-9):
+        return None
+    cond = xosc.TimeHeadwayCondition(b.name, value, RULES[node.op], alongroute=False, freespace=free,
+                                     distance_type=xosc.RelativeDistanceType.longitudinal,
+                                     coordinate_system=xosc.CoordinateSystem.road)
+    return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, a.name)
+
+
 def _compare(run: _Run, node, name: str):
     """One comparison `signal op constant` as an OpenSCENARIO condition, or None."""
     if not isinstance(node, E.Binary) or node.op not in RULES:
         return None
     if isinstance(node.left, E.Call):
         return _abs_distance(run, node, _const(run, node.right), name)
+    if E.signals_used(node.right):
+        return _headway(run, node, name)
     op, sig, value = node.op, _signal(node.left), _const(run, node.right)
     if sig is None:
         op, sig, value = FLIP[node.op], _signal(node.right), _const(run, node.left)
@@ -551,6 +575,9 @@ def _compare(run: _Run, node, name: str):
         return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, args[0])
     if fn == "speed" and len(args) == 1:
         return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.SpeedCondition(value, rule), args[0])
+    if fn == "accel" and len(args) == 1 and op != "!=":
+        return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.AccelerationCondition(value, rule),
+                                  args[0])
     if fn in ("gap", "distance") and len(args) == 2:
         kind = xosc.RelativeDistanceType.longitudinal if fn == "gap" else xosc.RelativeDistanceType.euclidianDistance
         cond = xosc.RelativeDistanceCondition(value, rule, kind, args[1], alongroute=False, freespace=fn == "gap",
@@ -645,7 +672,8 @@ def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str]
         if got is None:
             param = f"addt_condition_{len(run.placeholders) + 1}"
             run.placeholders.append(param)
-            text = format_expr(step.condition)
+            # (a parameter's dimension writes `P * speed(ego)` with P in its unit)
+            text = format_expr(step.condition, param_dims={p.name: dim_of_name(p.dimension) for p in run.plan.params})
             run.conditions[param] = {"event": event, "formula": step.condition.model_dump(mode="json"),
                                      "text": text}
             run.carried.append(f"trigger `{text}` ({event}): no OpenSCENARIO condition; a ParameterCondition on "

@@ -874,6 +874,12 @@ class Storyboard:
             return None, 0.0  # a transition's falling edge: one step after it (not said)
         return self.event_state(step.after.ref, step.after.state), step.after.delay
 
+    def duration_group(self, group) -> bool:
+        """Whether a stop condition group is a simulation time alone (the run's duration)."""
+        conds = list(group.iterfind("Condition"))
+        time = conds[0].find("ByValueCondition/SimulationTimeCondition") if len(conds) == 1 else None
+        return time is not None and (time.get("rule") or "").startswith("greater")
+
     def end_trigger(self, trigger) -> None:
         """The storyboard's stop trigger beyond its simulation time (the run's duration):
         `end when ...`. Element states of events and maneuvers, and entity conditions."""
@@ -918,7 +924,8 @@ class Storyboard:
                 delays.append((self.value(cond, "delay", units.TIME, 0.0) + extra, cond))
                 edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
             if conj and timed is not None:
-                if len([g for g in groups if list(g)]) > 1:
+                # (a group of a simulation time alone beside it is the run's duration: `stop_trigger`)
+                if len([g for g in groups if list(g) and not self.duration_group(g)]) > 1:
                     self.skip(group, "a stop condition group that mixes the simulation time with other conditions, "
                                      "beside other groups, is not translated")
                     return
