@@ -148,7 +148,7 @@ class Conditions:
             return translate(self, c, a)
         self.skip(c, f"<{c.tag}> is not translated",
                   "translated: traveled distance, speed, acceleration, relative distance, time headway, TTC, "
-                  "reach position")
+                  "reach position, end of road")
         return None
 
 
