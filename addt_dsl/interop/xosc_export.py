@@ -53,6 +53,7 @@ from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.xodr_export import ExportError, creation_date, road_file, xml_text
 from addt_dsl.plan import LIGHT_PROGRAM, LIGHT_STATES, ActorPlan, ClausePlan, RunSpec, TriggerPlan, resolve_settings
 from addt_dsl.printer import format_expr, pin_spec
+from addt_dsl.printer.expr import dim_of_name
 from addt_dsl.specs.behaviors import PEAK_CURVATURE
 from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX, SIDECAR_FORMAT, SIDECAR_PARAM
 from addt_dsl.registry import BEHAVIORS
@@ -85,7 +86,7 @@ __all__ = ["Export", "ExportError", "export_run", "SIDECAR_FORMAT", "SIDECAR_PAR
 # coverage table. tests/unit/interop/test_export_coverage.py exports a corpus and checks that
 # it writes exactly these.
 EXPORTED: dict[str, str] = {
-    "PrivateAction/TeleportAction": "every actor's start (Init)",
+    "PrivateAction/TeleportAction": "every actor's start (Init); `teleport` (a RoadPosition)",
     "PrivateAction/LongitudinalAction/SpeedAction": "start speeds; `cruise`, `brake` (absolute or relative target)",
     "PrivateAction/LongitudinalAction/SpeedProfileAction": "`speed_profile`",
     "PrivateAction/LongitudinalAction/LongitudinalDistanceAction": "`keep_gap`",
@@ -108,9 +109,12 @@ EXPORTED: dict[str, str] = {
     "ByValueCondition/VariableCondition": "`var(NAME)` compared",
     "ByEntityCondition/EntityCondition/RelativeDistanceCondition": "`distance(a, b)`, `gap(a, b)` compared",
     "ByEntityCondition/EntityCondition/SpeedCondition": "`speed(a)` compared",
+    "ByEntityCondition/EntityCondition/AccelerationCondition": "`accel(a)` compared",
+    "ByEntityCondition/EntityCondition/TimeHeadwayCondition": "`gap(a, b) OP T * speed(a)` (the import's form)",
     "ByEntityCondition/EntityCondition/TimeToCollisionCondition": "`ttc(a, b)` compared",
     "ByEntityCondition/EntityCondition/TraveledDistanceCondition": "`travelled(a)` compared",
     "ByEntityCondition/EntityCondition/OffroadCondition": "`road_edge(a) < 0 m`",
+    "ByEntityCondition/EntityCondition/EndOfRoadCondition": "`road_end(a) <= 0 m` (`for D`: its duration)",
     "LanePosition": "start positions",
     "RoadPosition": "`trajectory s [...] t [...]`, `synchronize` targets",
     "WorldPosition": "`trajectory x [...] y [...]`",
@@ -459,6 +463,11 @@ def _trajectory(run, actor, s):
     return [follow, _speed_action(s["speed"], s["accel"] if s["speed"] >= run.v0[actor] else s["decel"])], True
 
 
+def _teleport(run, actor, s):
+    # OpenDRIVE road coordinates of the road it is on, as the language's `teleport`.
+    return [xosc.TeleportAction(xosc.RoadPosition(s["s"], s["t"], _road_of(run, actor)))], True
+
+
 def _keep_gap(run, actor, s):
     side = (xosc.LongitudinalDisplacement.trailingReferencedEntity if s["side"] == "behind"
             else xosc.LongitudinalDisplacement.leadingReferencedEntity)
@@ -484,7 +493,7 @@ def _controller(keyword: str):
 ACTIONS = {"cruise": _cruise, "brake": _brake, "lane_change": _lane_change, "cut_in": _lane_change,
            "lane_offset": _lane_offset,
            "speed_profile": _speed_profile, "synchronize": _synchronize, "trajectory": _trajectory,
-           "keep_gap": _keep_gap,
+           "keep_gap": _keep_gap, "teleport": _teleport,
            "idm": _controller("idm"), "overtake": _controller("overtake"), "walk": _controller("walk"),
            "cross": _controller("cross")}
 
@@ -525,12 +534,33 @@ def _abs_distance(run: _Run, node, value, name: str):
     return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, a.name)
 
 
+def _headway(run: _Run, node, name: str):
+    """`gap(A, B) OP T * speed(A)` (free space) or `... OP T * speed(A) + -H`, H half of both
+    lengths (between reference points): the importer's form of a TimeHeadwayCondition, or None."""
+    gap, right, free = _signal(node.left), node.right, True
+    if isinstance(right, E.Binary) and right.op == "+" and isinstance(right.right, E.Num):
+        right, half, free = right.left, -right.right.value, False
+    if gap is None or gap[0] != "gap" or len(gap[1]) != 2 or not all(a in run.by_name for a in gap[1]) \
+            or not (isinstance(right, E.Binary) and right.op == "*") or _signal(right.right) != ("speed", gap[1][:1]):
+        return None
+    a, b = (run.by_name[x] for x in gap[1])
+    value = _const(run, right.left)
+    if value is None or (not free and abs(half - 0.5 * (a.length_m + b.length_m)) > 1e-9):
+        return None
+    cond = xosc.TimeHeadwayCondition(b.name, value, RULES[node.op], alongroute=False, freespace=free,
+                                     distance_type=xosc.RelativeDistanceType.longitudinal,
+                                     coordinate_system=xosc.CoordinateSystem.road)
+    return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, a.name)
+
+
 def _compare(run: _Run, node, name: str):
     """One comparison `signal op constant` as an OpenSCENARIO condition, or None."""
     if not isinstance(node, E.Binary) or node.op not in RULES:
         return None
     if isinstance(node.left, E.Call):
         return _abs_distance(run, node, _const(run, node.right), name)
+    if E.signals_used(node.right):
+        return _headway(run, node, name)
     op, sig, value = node.op, _signal(node.left), _const(run, node.right)
     if sig is None:
         op, sig, value = FLIP[node.op], _signal(node.right), _const(run, node.left)
@@ -545,6 +575,9 @@ def _compare(run: _Run, node, name: str):
         return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, args[0])
     if fn == "speed" and len(args) == 1:
         return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.SpeedCondition(value, rule), args[0])
+    if fn == "accel" and len(args) == 1 and op != "!=":
+        return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.AccelerationCondition(value, rule),
+                                  args[0])
     if fn in ("gap", "distance") and len(args) == 2:
         kind = xosc.RelativeDistanceType.longitudinal if fn == "gap" else xosc.RelativeDistanceType.euclidianDistance
         cond = xosc.RelativeDistanceCondition(value, rule, kind, args[1], alongroute=False, freespace=fn == "gap",
@@ -560,6 +593,8 @@ def _compare(run: _Run, node, name: str):
                                  xosc.TrafficSignalCondition(run.signal_id(sid), run.lamp_state(sid, state)))
     if fn == "var" and len(args) == 1 and op != "!=":
         return xosc.ValueTrigger(name, 0, xosc.ConditionEdge.none, xosc.VariableCondition(args[0], value, rule))
+    if fn == "road_end" and len(args) == 1 and op == "<=" and value == 0.0:  # (its duration: `for D`)
+        return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.EndOfRoadCondition(0.0), args[0])
     if fn == "road_edge" and len(args) == 1 and op == "<" and value == 0.0:
         return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, xosc.OffroadCondition(0.0), args[0])
     if fn == "ttc" and len(args) == 2:
@@ -637,14 +672,19 @@ def _start_trigger(run: _Run, step: TriggerPlan, event: str, armed_by: list[str]
         if got is None:
             param = f"addt_condition_{len(run.placeholders) + 1}"
             run.placeholders.append(param)
-            text = format_expr(step.condition)
+            # (a parameter's dimension writes `P * speed(ego)` with P in its unit)
+            text = format_expr(step.condition, param_dims={p.name: dim_of_name(p.dimension) for p in run.plan.params})
             run.conditions[param] = {"event": event, "formula": step.condition.model_dump(mode="json"),
                                      "text": text}
             run.carried.append(f"trigger `{text}` ({event}): no OpenSCENARIO condition; a ParameterCondition on "
                                f"{param}, which nothing sets")
             got = [[xosc.ValueTrigger(run.unique(f"{event}_when"), 0, xosc.ConditionEdge.none,
                                       xosc.ParameterCondition(param, "true", xosc.Rule.equalTo))]]
-        if step.hold_s is not None:
+        ends = [c for conds in got for c in conds if isinstance(getattr(c, "entitycondition", None),
+                                                                     xosc.EndOfRoadCondition)]
+        if step.hold_s is not None and len(ends) == 1 and sum(len(conds) for conds in got) == 1:
+            ends[0].entitycondition.duration = float(run.num(step.hold_s))  # at the end for D: exactly
+        elif step.hold_s is not None:
             # `when C for D`: OpenSCENARIO's condition delay fires D after C first holds; it
             # does not ask C to keep holding (exact in the side file).
             hold = run.num(step.hold_s)
@@ -684,7 +724,9 @@ def _event(run: _Run, actor: str, clause: ClausePlan, step: TriggerPlan | None, 
     run.event_names.append(name)
     keyword = BEHAVIORS.get(clause.name).keyword  # aliases (`follow`) export as their behaviour
     actions, standard = ACTIONS[keyword](run, actor, cls_settings)
-    event = xosc.Event(name, xosc.Priority.parallel)
+    # `repeat N`: the event back in standby after each run, N runs at most
+    repeat = step.repeat if step is not None and step.repeat else 1
+    event = xosc.Event(name, xosc.Priority.parallel, maxexecution=repeat)
     for action in actions:
         event.add_action(run.unique(f"{name}_action"), action)
     event.add_trigger(_start_trigger(run, step or TriggerPlan(), name, armed_by))

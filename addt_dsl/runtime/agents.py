@@ -225,6 +225,8 @@ class Fleet:
         if plan is None:
             return False
         params, rows, changing, target = plan
+        if any(a.placed for a in self.agents):
+            return False  # (a teleported agent stays put this step: `advance`)
         if run.behavior_version != self._posed_version:  # a behaviour started since the poses: read anew
             self.gather()
         s, t, v = self.s, self.t, self.v

@@ -58,6 +58,9 @@ class AgentState:
     # offset): (stations, the target lane's centre there, its centre at the start); None
     # where the centre stays put (the change ends at `t_target`).
     lc_centre: tuple | None = None
+    # Teleported in this step: it does not move along its road until the next one (esmini
+    # moves no entity whose position an action set in the step).
+    placed: bool = False
 
 
 def standing_yaw(agent: AgentState, yaw: float) -> float:
@@ -172,8 +175,13 @@ class Cruise(S.Cruise, Behavior):
         self.transition = None
         if s["shape"] != "linear" or s["duration"] is not None:
             # A live target is taken as it is at the start; it is followed once reached.
-            self.transition = SpeedTransition(agent.speed, max(0.0, self.value("speed", world)), time_s,
-                                              s["shape"], s["accel"], s["decel"], s["duration"])
+            v1 = max(0.0, self.value("speed", world))
+            duration = s["duration"]
+            bound = s.get("max_accel") if v1 >= agent.speed else s.get("max_decel")
+            if duration is not None and bound and s["shape"] in PEAK_SLOPE:
+                # esmini (TransitionDynamics::SetMaxRate): the time scaled so the peak is the bound
+                duration = max(duration, PEAK_SLOPE[s["shape"]] * abs(v1 - agent.speed) / bound)
+            self.transition = SpeedTransition(agent.speed, v1, time_s, s["shape"], s["accel"], s["decel"], duration)
 
     def accel(self, agent, world, time_s):
         s = self.settings
@@ -756,6 +764,7 @@ class Teleport(S.Teleport, Behavior):
         s, t = world.from_road_coords(agent, self.settings["s"], self.settings["t"])
         agent.s, agent.t = s, t
         agent.t_target, agent.t_start, agent.lc_duration_s, agent.heading_rel = t, t, 0.0, 0.0
+        agent.placed = True
         lane = world.actor_lane(agent.name)
         if lane is not None:
             agent.lane = lane
@@ -890,7 +899,8 @@ def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
         agent.t_target = agent.t
     else:
         t_next = lateral_profile(agent, time_s + dt)
-        step = agent.speed * dt
+        step = agent.speed * dt if not agent.placed else 0.0
+        agent.placed = False
         if t_next != agent.t and not agent.lc_keeps_station:  # a lane change: the ground splits into along and across
             across = t_next - agent.t
             step = math.sqrt(max(step * step - across * across, 0.0))

@@ -61,6 +61,7 @@ class Record:
         self.margins = {name: np.zeros(n) for name in names} if run.lights else {}
         self.lanes = {name: np.full(n, np.nan) for name in names} if run.lane_ids else {}
         self.edges = run.edges = {name: np.zeros(n) for name in run.edge_actors}  # (conditions read them)
+        self.ends = run.ends = {name: np.zeros(n) for name in run.end_actors}
         self.variables = run.variable_records = {name: np.zeros(n) for name in run.variables}
         self.sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
         self.sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
@@ -85,7 +86,7 @@ class Record:
         return Trace(run.dt, np.arange(last) * run.dt, actors, cut(self.latency), run.events, cut(self.outputs),
                      self.objects[:last], run.status, run.error, steps=cut(self.steps), lights=cut(self.lights),
                      red_margin=cut(self.margins), lanes=cut(self.lanes), road_edge=cut(self.edges),
-                     variables=cut(self.variables))
+                     road_end=cut(self.ends), variables=cut(self.variables))
 
 
 def clock(run: RunState, t: float) -> None:
@@ -148,6 +149,12 @@ def record(run: RunState, rec: Record, k: int) -> None:
             road, s, t = run.agent_roads[name].road, a.s, a.t
         lo, hi = road.paved_band_t(s)
         edges[k] = min(t - lo, hi - t)
+    for name, ends in rec.ends.items():  # `road_end(A)`: left to the end of A's road or route
+        if name == "ego":
+            road, s = run.ego_road.road, run.ego_s
+        else:
+            road, s = run.agent_roads[name].road, run.agent_by_name[name].s
+        ends[k] = road.length - s
 
 
 def environment(run: RunState, rec: Record, k: int, t: float) -> None:

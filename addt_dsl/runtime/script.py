@@ -47,6 +47,7 @@ class StepState:
         self.group = GroupState(step.group) if step.group is not None else None
         self.armed_at: float | None = None
         self.fired = False
+        self.started = False  # it has fired at least once (stays so through `repeat`'s standby)
         self.label = step.label
         self.behavior = None  # the behaviour this step started
         self.ended = False
@@ -57,7 +58,9 @@ class StepState:
             return self.ended
         own = self.behavior is None or ended(self.behavior, time_s)
         group = self.group is None or self.group.update_end(time_s, ended)
-        self.ended = own and group
+        # `repeat N`: ended once its last firing's behaviour has (an OpenSCENARIO event is
+        # complete when it has run maximumExecutionCount times).
+        self.ended = own and group and self.repeats_left <= 0
         return self.ended
 
     def named(self):
@@ -90,7 +93,9 @@ class StepState:
         if self.armed_at is not None and self.fired and self.repeats_left > 0 and ended is not None \
                 and self.group is None and (self.behavior is None or ended(self.behavior, time_s)):
             self.repeats_left -= 1
-            self.fired, self.counted_at, self.held_since, self.behavior = False, None, None, None
+            self.fired, self.counted_at, self.behavior = False, None, None
+            if self.edge is None:  # (with an edge, the held level goes on: only its next edge counts)
+                self.held_since = None
 
     def advance(self, time_s: float, holds: Holds, start: Start, ended: Ended | None = None) -> None:
         if self.armed_at is None:
@@ -105,23 +110,25 @@ class StepState:
                 return
             if self.condition is not None and self.counted_at is None:
                 value = holds(self.condition)
-                last, self.last = self.last, value
-                if self.edge is not None:  # OpenSCENARIO's conditionEdge: never at the first evaluation
-                    value = last is not None and value != last and (
-                        self.edge == "changing" or value == (self.edge == "rising"))
                 # `when C for D`: the past-time `historically[0, D] C`, kept as the start of
                 # C's current run of true samples rather than re-evaluating a window.
                 if not value:
                     self.held_since = None
-                    return
-                if self.held_since is None:
+                elif self.held_since is None:
                     self.held_since = time_s
-                if time_s + TIME_EPS_S < self.held_since + self.hold_s:
+                value = value and time_s + TIME_EPS_S >= self.held_since + self.hold_s
+                # An edge is an edge of the held condition (OpenSCENARIO's conditionEdge on a
+                # condition with a duration): never at the first evaluation.
+                last, self.last = self.last, value
+                if self.edge is not None:
+                    value = last is not None and value != last and (
+                        self.edge == "changing" or value == (self.edge == "rising"))
+                if not value:
                     return
                 self.counted_at = time_s
             if self.counted_at is not None and time_s + TIME_EPS_S < self.counted_at + self.delay_s:
                 return
-            self.fired = True
+            self.fired = self.started = True
             if self.clause is not None:
                 self.behavior = start(self.clause, time_s)
             if self.group is not None:

@@ -61,6 +61,14 @@ class RoadEdge(S.RoadEdge, SignalFn):
 
 
 @SIGNALS.implements
+class RoadEnd(S.RoadEnd, SignalFn):
+
+    @staticmethod
+    def compute(trace, args):
+        return trace.road_end[args[0]]  # (recorded for each actor a condition or oracle names)
+
+
+@SIGNALS.implements
 class Distance(S.Distance, SignalFn):
 
     @staticmethod

@@ -178,6 +178,8 @@ class RunState:
         # Actors whose `road_edge` a condition or an oracle reads: recorded for them only.
         self.edge_actors = sorted(set(re.findall(r"road_edge\((\w+)\)", spec.plan.model_dump_json())))
         self.edges: dict = {}  # their recorded arrays (`phases.Record`)
+        self.end_actors = sorted(set(re.findall(r"road_end\((\w+)\)", spec.plan.model_dump_json())))  # `road_end`
+        self.ends: dict = {}
         self.networks = build_network(plan.roads)
         self._road_cache: dict = {}
         self._lanes_moving: dict = {}  # (id(road), lane) -> whether its centre t varies (`follow_lane`)
@@ -199,6 +201,7 @@ class RunState:
         self._rngs: dict[str, np.random.Generator] = {}
         self._live_snapshot = None  # (step, state) that live behaviour settings read
         self.behavior_version = 0  # behaviours started so far
+        self.released: set[str] = set()  # actors whose completed speed behaviour let go (`move`)
 
         ego = plan.ego
         self.ego_plan = ego
@@ -307,16 +310,25 @@ class RunState:
         """One step of a kinematic actor: its longitudinal behaviour's acceleration, held
         for red lights on its path (unless it runs them), integrated along its road."""
         beh = self.longitudinal[a.name]
-        accel = beh.accel(a, self, t_now) if beh is not None else 0.0
+        stop_at_end = self.agent_plans[a.name].stop_at_road_end
+        # `at_road_end stop`: held at its road's end; as esmini, its speed drops to 0 in the step
+        # after it arrived (one teleported away from the end at once keeps its speed), and a
+        # speed behaviour that had completed lets go: the actor stands until another starts.
+        at_end = stop_at_end and a.s >= self.agent_roads[a.name].road.length
+        if at_end and beh is not None and a.name not in self.released and beh.ended(a, self, t_now):
+            self.released.add(a.name)
+        accel = beh.accel(a, self, t_now) if beh is not None and a.name not in self.released else 0.0
         if self.lights is not None and not a.heading_rel and not self.agent_plans[a.name].ignore_lights:
             accel = self.stop_for_lights(a, accel, t_now)
         advance(a, accel, t_now, dt)
         if a.lane_anchor is not None:
             self.follow_lane(a)
-        if self.agent_plans[a.name].stop_at_road_end:  # `at_road_end stop`: held at its road's end
+        if stop_at_end:
             end = self.agent_roads[a.name].road.length
             if a.s >= end:
-                a.s, a.speed, a.accel = end, 0.0, 0.0
+                a.s = end
+                if at_end:
+                    a.speed, a.accel = 0.0, 0.0
 
     def follow_lane(self, a: AgentState) -> None:
         """Keep an agent that changed lanes on its lane where the lane's centre moves in its
@@ -566,6 +578,7 @@ class RunState:
         beh.start(agent, self, time_s)
         if beh.channel == "longitudinal":
             self.longitudinal[agent.name] = beh
+            self.released.discard(agent.name)
         self.events.append(Event(time_s, "behavior", {"actor": agent.name, "behavior": clause.name}))
         return beh
 
@@ -581,7 +594,7 @@ class RunState:
         out = {}
         for agent, name, step in self.named_steps:
             ended = step.update_end(time_s, lambda beh, t, _a=agent: self.behavior_ended(_a, beh, t))
-            out[name] = STEP_ENDED if ended else STEP_STARTED if step.fired else STEP_WAITING
+            out[name] = STEP_ENDED if ended else STEP_STARTED if step.started else STEP_WAITING
         return out
 
 

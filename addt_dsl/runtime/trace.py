@@ -83,6 +83,9 @@ class Trace:
     # Each actor's distance to its road's outer edge [m] (signal `road_edge`), for the actors
     # the scenario reads it of.
     road_edge: dict[str, np.ndarray] = field(default_factory=dict)
+    # Each actor's distance left to the end of its road or route [m] (signal `road_end`), for
+    # the actors the scenario reads it of.
+    road_end: dict[str, np.ndarray] = field(default_factory=dict)
     # Scenario variables' values per sample (signal `var`); empty without variables.
     variables: dict[str, np.ndarray] = field(default_factory=dict)
 
@@ -149,7 +152,8 @@ class Trace:
         # (The step is in `time`; an error's text is in its `stack_error` event or fixed by
         # `status`.) Only scenarios with lights hash them: digests of the others stay what they were.
         for label, table in (("light:", self.lights), ("red_margin:", self.red_margin), ("lane_id:", self.lanes),
-                             ("road_edge:", self.road_edge), ("var:", self.variables)):
+                             ("road_edge:", self.road_edge), ("road_end:", self.road_end),
+                             ("var:", self.variables)):
             for name in sorted(table):
                 h.update((label + name).encode())
                 h.update(np.ascontiguousarray(table[name]).tobytes())

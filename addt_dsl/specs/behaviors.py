@@ -42,6 +42,13 @@ class Cruise(BehaviorSpec):
         ParamSpec("decel", units.ACCELERATION, default=3.0, low=0.0, doc="max deceleration"),
         SHAPE_SETTING,
         DURATION_SETTING,
+        # A vehicle's Performance in OpenSCENARIO: esmini stretches a change over a time whose
+        # peak rate exceeds it.
+        ParamSpec("max_accel", units.ACCELERATION, default=None, low=0.0,
+                  doc="with `duration`: a change whose peak acceleration would exceed this takes longer, "
+                      "its peak at this (unset: unbounded)"),
+        ParamSpec("max_decel", units.ACCELERATION, default=None, low=0.0,
+                  doc="with `duration`: the same bound on slowing down"),
     )
     doc = ("Change to a target speed (at the rate limits, or over `duration`, with a dynamics "
            "shape) and hold it.")

@@ -68,6 +68,13 @@ class RoadEdge(SignalSpec):
            "measures it) [m]")
 
 @SIGNALS.register
+class RoadEnd(SignalSpec):
+    keyword = "road_end"
+    dim = units.LENGTH
+    doc = ("distance left from the actor's centre to the end of its road or route in its driving direction, 0 "
+           "at the end (where `at_road_end stop` holds it: OpenSCENARIO EndOfRoadCondition) [m]")
+
+@SIGNALS.register
 class Distance(SignalSpec):
     keyword = "distance"
     args = ("actor", "actor")

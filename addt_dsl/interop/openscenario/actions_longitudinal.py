@@ -60,8 +60,13 @@ class Longitudinal:
         # At a rate the change's length follows from the speed it starts at when it runs (the
         # speed the importer expects, `speed_now`, misses what synchronisations and live
         # targets did before).
-        if shape in ("cubic", "sinusoidal") and (dv and dim == "time" or dim == "rate"):
-            return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, **self.speed_dynamics(dyn)})
+        # (Over a time, from the speed the entity has when it runs: the importer's `speed_now`
+        # misses a teleport's or a road end's.)
+        if shape in ("cubic", "sinusoidal") and dim in ("time", "rate"):
+            settings = {"speed": v, **self.speed_dynamics(dyn)}
+            if "duration" in settings:  # esmini stretches the change to the vehicle's Performance
+                settings.update({k: E.Num(value=info[k]) for k in ("max_accel", "max_decel") if info.get(k)})
+            return ClausePlan(keyword="behavior", name="cruise", settings=settings)
         if dv < 0:  # constant deceleration to a speed: exactly `brake`
             return ClausePlan(keyword="behavior", name="brake",
                               settings={"decel": E.Num(value=min(rate, 12.0)), "to_speed": v})

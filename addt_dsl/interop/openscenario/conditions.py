@@ -35,7 +35,6 @@ for _name, _note in (
 ):
     VALUE_CONDITIONS.declare(_name, "refused", _note)
 for _name, _note in (
-        ("EndOfRoadCondition", "the language has no end-of-road signal"),
         ("AngleCondition", "the language has no heading signal"),
         ("RelativeAngleCondition", "the language has no relative heading signal"),
 ):
@@ -149,7 +148,7 @@ class Conditions:
             return translate(self, c, a)
         self.skip(c, f"<{c.tag}> is not translated",
                   "translated: traveled distance, speed, acceleration, relative distance, time headway, TTC, "
-                  "reach position")
+                  "reach position, end of road")
         return None
 
 
@@ -182,6 +181,20 @@ class Conditions:
                            "(esmini's rising edge never fires for an entity off the road that long already)")
             self.cond_hold = duration
         return E.Binary(op="<", left=sig("road_edge", a), right=E.Num(value=0.0))
+
+    @ENTITY_CONDITIONS.register("EndOfRoadCondition", "exact",
+                                "`road_end(A) <= 0 m for D`: held at the end of its road (the importer sets "
+                                "`at_road_end stop` on every scripted actor, as esmini stops its entities there) "
+                                "for the duration; with a duration, in a start trigger of one condition, else "
+                                "refused")
+    def cond_end_of_road(self, c, a: str):
+        duration = self.value(c, "duration", units.TIME)
+        if duration > 0:
+            if not getattr(self, "hold_allowed", False):
+                self.skip(c, "an end-of-road duration is translated in a start trigger of one condition only")
+                return None
+            self.cond_hold, self.cond_hold_edge = duration, True  # (esmini: an edge of the held condition)
+        return E.Binary(op="<=", left=sig("road_end", a), right=E.Num(value=0.0))
 
     @ENTITY_CONDITIONS.register("CollisionCondition", "approx",
                                 "a collision of the actor with any other; with one entity or a type among several "

@@ -18,6 +18,8 @@ The translation is one class, `Translate`, composed of one mixin per part of the
 (the modules of this package, laid out like esmini's ScenarioEngine).
 """
 
+import json
+import re
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -132,6 +134,12 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
 
     def plan(self, header, duration: float) -> ScenarioPlan:
         sc = self.sidecar or {}
+        # The side file's groups read the states of steps outside them (`when ended(ego.x) then
+        # parallel {...}`): those events' steps get their names.
+        for ref in sorted({m.group(1) for g in sc.get("groups", {}).values()
+                           for m in re.finditer(r"(?:started|ended)\(\w+\.(\w+)\)", json.dumps(g))}):
+            if ref not in sc.get("group_events", ()):
+                self.event_state(ref, "endTransition")
         actors = []
         for who, info in self.actors.items():
             at = self.placed[who]

@@ -45,6 +45,8 @@ class Importer(Parameters, CarlaFrame):
         self.events: dict = {}  # event (and action) name -> storyboard.EventStep
         self.instant: dict = {}  # event (and action) name -> storyboard.InstantEvent: no step, only a start
         self.maneuvers: dict[str, list[str]] = {}  # maneuver name -> its events' names
+        self.act_events: dict[str, list[str]] = {}  # act name -> its events' names (those with steps)
+        self.event_order: list[str] = []  # events that became steps, in file order
         self.end: TriggerPlan | None = None  # the storyboard's stop trigger beyond its time
         self.relative_paths: list = []  # (clause, shape element, entity): a trajectory relative to an entity
         self.pending: list = []  # storyboard.PendingEvent: events started by another event, linked at the end

@@ -17,6 +17,7 @@ from addt_dsl.interop.openscenario.xml import Stop, child_at, first_of, only_chi
 from addt_dsl.plan import ClausePlan, GroupPlan, TriggerPlan
 
 DEFAULT_DURATION_S = 60.0
+ENDED_DURATION_S = 300.0  # the bound on a run that a stop condition ends (`end when`)
 MAX_DURATION_S = 3600.0
 
 
@@ -46,15 +47,16 @@ def steps_of(step: TriggerPlan):
         yield from steps_of(sub)
 
 
-def labelled(step: TriggerPlan, clause: ClausePlan, label: str, found: list) -> TriggerPlan:
+def labelled(step: TriggerPlan, clause: ClausePlan, label: str, found: list, same=None) -> TriggerPlan:
     """The step tree with the first step that starts `clause` named (its name if it has
-    one, else `label`); the name used is appended to `found`."""
-    if not found and step.clause == clause:
+    one, else `label`); the name used is appended to `found`. `same(a, b)`: how a step's
+    clause is matched (default: equal)."""
+    if not found and step.clause is not None and (same or ClausePlan.__eq__)(step.clause, clause):
         found.append(step.label or label)
         return step if step.label else step.model_copy(update={"label": label})
     if step.group is None:
         return step
-    steps = [labelled(s, clause, label, found) for s in step.group.steps]
+    steps = [labelled(s, clause, label, found, same) for s in step.group.steps]
     return step.model_copy(update={"group": step.group.model_copy(update={"steps": steps})})
 
 
@@ -88,18 +90,22 @@ for _path, _status, _note in (
         ("Storyboard/Init", "exact", "actions at the start: positions, speeds, routes, environment, lights"),
         ("Storyboard/Story", "exact", "stories run from the start"),
         ("Storyboard/StopTrigger", "approx", "a simulation time alone: the run's duration; other conditions "
-                                             "end the run when they hold (`end when`); without one, 60 s (W0802)"),
+                                             "end the run when they hold (`end when`, the run at most 300 s); "
+                                             "without a simulation time, 60 s at most (W0802)"),
         ("Story/Act", "exact", "acts start with their story"),
         ("Story/ParameterDeclarations", "exact", "one scope with the global parameters (a global value wins)"),
         ("Act/ManeuverGroup", "approx", "one actor per group (more: refused); maximumExecutionCount above 1 refused"),
-        ("Act/StartTrigger", "approx", "a simulation time or the story running; other conditions refused"),
+        ("Act/StartTrigger", "approx", "a simulation time, the story running, or another act complete (one "
+                                       "condition: the act's steps a named group started on every event of that "
+                                       "act ended, with its edge and delay); other conditions refused"),
         ("Act/StopTrigger", "refused", "the language has no act that ends; CARLA's criteria_* groups are oracles"),
         ("ManeuverGroup/Actors", "exact", "the actor the group's private actions drive"),
         ("ManeuverGroup/CatalogReference", "exact", "the Maneuver entry of the ManeuverCatalog's directory, its "
                                                     "parameters as the reference assigns them"),
         ("ManeuverGroup/Maneuver", "exact", "maneuvers run with their group"),
         ("Maneuver/Event", "approx", "each action a step; priority and maximumExecutionCount as `when C repeat N` "
-                                    "when a condition of its own starts it"),
+                                    "when a condition of its own starts it (without one, in an act started by "
+                                    "another: `when started(A.ACT) repeat N`); complete after its last run"),
         ("Maneuver/ParameterDeclarations", "exact", "one scope with the global parameters (a global value wins)"),
         ("Event/Action", "exact", "private actions and traffic signal actions (see the actions)"),
         ("Event/StartTrigger", "approx", "condition groups as `any`/`all`, edges and delays; several edges or "
@@ -409,7 +415,8 @@ class Storyboard:
 
     def stop_trigger(self, trigger) -> float:
         """The run's duration: a stop condition group that is a simulation time alone (the
-        rest of the stop trigger is `end when ...`, `end_trigger`)."""
+        rest of the stop trigger is `end when ...`, `end_trigger`); without one, a bound:
+        longer where other stop conditions end the run."""
         for group in trigger.iterfind("ConditionGroup") if trigger is not None else ():
             conds = list(group.iterfind("Condition"))
             time = conds[0].find("ByValueCondition/SimulationTimeCondition") if len(conds) == 1 else None
@@ -417,9 +424,10 @@ class Storyboard:
                 end = units.decimal_sum((self.value(time, "value"), self.value(conds[0], "delay", units.TIME, 0.0)))
                 return min(max(end, 0.1), MAX_DURATION_S)
         others = trigger is not None and any(True for _ in trigger.iterfind("ConditionGroup/Condition"))
-        self.approx(trigger, f"no simulation-time stop trigger: at most {DEFAULT_DURATION_S:g} s"
+        bound = ENDED_DURATION_S if others else DEFAULT_DURATION_S
+        self.approx(trigger, f"no simulation-time stop trigger: at most {bound:g} s"
                     + (" (the run ends when its stop condition holds)" if others else ""))
-        return DEFAULT_DURATION_S
+        return bound
 
     # -- storyboard
 
@@ -427,9 +435,10 @@ class Storyboard:
         self.story_name = story.get("name", "")
         for act in story.iterfind("Act"):
             self.act_name = act.get("name", "")
-            act_at = None
+            act_at = after_act = None
             groups = list(act.iterfind("StartTrigger/ConditionGroup"))
-            for cond in act.iterfind("StartTrigger/ConditionGroup/Condition"):
+            conds = list(act.iterfind("StartTrigger/ConditionGroup/Condition"))
+            for cond in conds:
                 time = cond.find("ByValueCondition/SimulationTimeCondition")
                 sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
                 if len(groups) > 1:
@@ -443,6 +452,10 @@ class Storyboard:
                         and self.raw(sesc, "state") in ("startTransition", "runningState") \
                         and self.value(cond, "delay", units.TIME, 0.0) == 0.0:
                     continue  # its own story running: the act starts with it
+                elif sesc is not None and len(conds) == 1 and self.raw(sesc, "storyboardElementType") == "act" \
+                        and self.raw(sesc, "state") in ("endTransition", "completeState") \
+                        and self.raw(sesc, "storyboardElementRef") in self.act_events:
+                    after_act = cond  # an earlier act complete: the act's steps form a group started then
                 else:
                     self.skip(cond, "act start conditions other than the simulation time and the story running "
                                     "are not translated")
@@ -450,9 +463,61 @@ class Storyboard:
                 if all((c.get("name") or "").startswith("criteria_") for c in stop.iterfind("Condition")):
                     continue  # CARLA ScenarioRunner's pass criteria: oracles (pass_criteria)
                 self.skip(stop, "act stop triggers are not translated")
+            before = self.act_begin(after_act)
             for group in act.iterfind("ManeuverGroup"):
                 self.maneuver_group(group, act_at)
+            self.act_end(act, after_act, before)
         self.link_sequences()
+
+    def act_begin(self, after_act) -> dict:
+        """Where each actor's steps stand before an act (`act_end` takes what the act added);
+        an act started by another's completion names its group (`self.act_label`) first."""
+        self.act_label = None
+        self.act_first_event = len(self.event_order)
+        if after_act is not None:
+            taken = {tr.label for a in self.actors.values() for t in a["triggers"] for tr in steps_of(t) if tr.label}
+            self.act_label = safe_name(self.act_name, taken)
+        return {who: (len(info["triggers"]), len(info["behaviors"])) for who, info in self.actors.items()} | {
+            "": (len(self.pending), len(self.light_steps) + len(self.variable_steps) + len(self.environment_steps))}
+
+    def act_end(self, act, after_act, before: dict) -> None:
+        """Record the act's events (an act's completion is all of them complete); an act
+        started by another act's completion (esmini: its events are armed from then) becomes,
+        per actor, a named parallel group of its steps: `ACT: when ended(...) delayed D then
+        parallel { ... }`."""
+        self.act_events[self.act_name] = self.event_order[self.act_first_event:]
+        label, self.act_label = self.act_label, None
+        added = [who for who, info in self.actors.items()
+                 if (len(info["triggers"]), len(info["behaviors"])) != before.get(who, (0, 0))]
+        if after_act is None or not added:
+            return  # (nothing of it translates: its events said why)
+        if (len(self.pending), len(self.light_steps) + len(self.variable_steps) + len(self.environment_steps)) \
+                != before[""]:
+            self.skip(after_act, "an act started by another act's completion whose events start on other events, "
+                                 "or set lights, variables or the environment, is not translated")
+            return
+        sesc = after_act.find("ByValueCondition/StoryboardElementStateCondition")
+        ref = self.raw(sesc, "storyboardElementRef")
+        parts = [self.event_state(e, "completeState") for e in self.act_events.get(ref, ())]
+        if not parts or any(p is None for p in parts):
+            self.skip(after_act, f"act '{self.act_name}' starts when act '{ref}' is complete, and not every event "
+                                 f"of '{ref}' translates to a step")
+            return
+        fields = {"condition": all_of(parts)}
+        edge = EDGES.get(after_act.get("conditionEdge", "none"))
+        if edge:
+            fields["edge"] = edge
+        delay = self.value(after_act, "delay", units.TIME, 0.0)
+        if delay > 0:
+            fields["delay_s"] = E.Num(value=delay)
+        for who, info in self.actors.items():
+            t0, b0 = before.get(who, (0, 0))
+            steps = [TriggerPlan(clause=c) for c in info["behaviors"][b0:]] + info["triggers"][t0:]
+            if not steps:
+                continue
+            del info["behaviors"][b0:], info["triggers"][t0:]
+            info["triggers"].append(TriggerPlan(label=label, group=GroupPlan(mode="parallel", steps=steps),
+                                                **fields))
 
     def maneuver_group(self, group, act_at) -> None:
         refs = [self.actor_name(r) for r in group.iterfind("Actors/EntityRef")]
@@ -562,12 +627,17 @@ class Storyboard:
         runs = int(self.value(event, "maximumExecutionCount", default=1.0))
         if runs > 1:
             # It starts again when its actions have ended and its condition counts again.
+            if fields.get("condition") is None and not fields.get("at_s") and step.after is None \
+                    and len(clauses) == 1 and getattr(self, "act_label", None):
+                # No start condition of its own: true whenever armed, which is once its act has started.
+                fields = {**fields, "condition": step_state("startTransition", f"{who}.{self.act_label}")}
             if step.after is not None or fields.get("condition") is None or len(clauses) > 1:
                 self.skip(event, f"an event that runs up to {runs} times without a start condition of its own, or "
                                  "with several actions, is not translated",
                           "one action started by a condition translates (`when C repeat N`)")
                 return
             fields = {**fields, "repeat": min(runs, 1_000_000)}
+        self.event_order.append(name)
         for clause in clauses:
             self.events.setdefault(name, EventStep(who, clause))
             if step.after is not None:
@@ -643,6 +713,7 @@ class Storyboard:
                 # A condition held for a duration (OffroadCondition) sets `cond_hold`: the step's
                 # `for D`, in a trigger of that one condition only.
                 self.hold_allowed, self.cond_hold = len(groups) == 1 and len(list(group)) == 1, None
+                self.cond_hold_edge = False  # the condition's edge is on the held condition (runtime order)
                 formula = self.condition(cond, who)
                 self.hold_allowed = False
                 if formula is None:
@@ -651,8 +722,10 @@ class Storyboard:
                     if self.value(cond, "delay", units.TIME, 0.0) > 0:
                         self.skip(cond, "a condition held for a duration with a delay is not translated")
                         return None
+                    edge = EDGES.get(cond.get("conditionEdge", "none")) if self.cond_hold_edge else None
                     return Start({**({"at_s": E.Num(value=at_s)} if at_s is not None else {}),
-                                  "condition": formula, "hold_s": E.Num(value=self.cond_hold)})
+                                  "condition": formula, "hold_s": E.Num(value=self.cond_hold),
+                                  **({"edge": edge} if edge else {})})
                 conj.append(formula)
                 holds.append((self.value(cond, "delay", units.TIME, 0.0), cond))
                 edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
@@ -761,6 +834,11 @@ class Storyboard:
         """`started(A.x) > 0` / `ended(A.x) > 0` for an event, naming its step (an event
         at time 0 becomes a named step `after 0 s`); None if the event has no step."""
         first = self.events.get(ref)
+        if first is None and state in STATE_SIGNAL and ref in (self.sidecar or {}).get("group_events", ()):
+            # A step of an exported group (the side file has the group): its name is the event's.
+            for who, groups in sorted(self.sidecar.get("groups", {}).items()):
+                if any(s.label == ref for g in groups for s in steps_of(TriggerPlan.model_validate(g))):
+                    return step_state(state, f"{who}.{ref}")
         if first is None or state not in STATE_SIGNAL:
             return None
         other = first.actor
@@ -773,7 +851,12 @@ class Storyboard:
             clause = info["behaviors"].pop(j)
             info["triggers"].append(TriggerPlan(after_s=E.Num(value=0.0), clause=clause))
         found: list[str] = []
-        info["triggers"] = [labelled(t, first.clause, safe_name(ref, taken), found) for t in info["triggers"]]
+        # The event's own step (two events may start equal actions), else one that starts the same.
+        for same in ((lambda a, b: a is b), None):
+            info["triggers"] = [labelled(t, first.clause, safe_name(ref, taken), found, same)
+                                for t in info["triggers"]]
+            if found:
+                break
         label = found[0]
         return step_state(state, f"{other}.{label}")
 
@@ -790,6 +873,12 @@ class Storyboard:
         if step.after.cond.get("conditionEdge", "none") not in ("none", "rising"):
             return None, 0.0  # a transition's falling edge: one step after it (not said)
         return self.event_state(step.after.ref, step.after.state), step.after.delay
+
+    def duration_group(self, group) -> bool:
+        """Whether a stop condition group is a simulation time alone (the run's duration)."""
+        conds = list(group.iterfind("Condition"))
+        time = conds[0].find("ByValueCondition/SimulationTimeCondition") if len(conds) == 1 else None
+        return time is not None and (time.get("rule") or "").startswith("greater")
 
     def end_trigger(self, trigger) -> None:
         """The storyboard's stop trigger beyond its simulation time (the run's duration):
@@ -813,7 +902,9 @@ class Storyboard:
                     kind, ref, state = (self.raw(sesc, "storyboardElementType"), self.raw(sesc, "storyboardElementRef"),
                                         self.raw(sesc, "state"))
                     events = [ref] if kind in ("event", "action") else self.maneuvers.get(ref) \
-                        if kind == "maneuver" and state in ("endTransition", "completeState") else None
+                        if kind == "maneuver" and state in ("endTransition", "completeState") else \
+                        self.act_events.get(ref) if kind == "act" and state in ("endTransition", "completeState") \
+                        else None
                     parts = [self.event_state(e, state) for e in events] if events else [None]
                     extra = 0.0  # an event that does nothing but start: the state of the event starting it
                     if kind in ("event", "action") and parts == [None]:
@@ -833,7 +924,8 @@ class Storyboard:
                 delays.append((self.value(cond, "delay", units.TIME, 0.0) + extra, cond))
                 edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
             if conj and timed is not None:
-                if len([g for g in groups if list(g)]) > 1:
+                # (a group of a simulation time alone beside it is the run's duration: `stop_trigger`)
+                if len([g for g in groups if list(g) and not self.duration_group(g)]) > 1:
                     self.skip(group, "a stop condition group that mixes the simulation time with other conditions, "
                                      "beside other groups, is not translated")
                     return

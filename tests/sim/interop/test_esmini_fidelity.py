@@ -27,7 +27,8 @@ with open(REF / "INDEX.csv", newline="") as _fh:
 FAITHFUL_SCRIPTED = ("acc-test", "alks_cut-in", "alks_cut-out", "alks_decelerate", "alks_pedestrian",
                      "alks_r157_cut_in_quick_brake", "bicycle_fall_over", "cut-in", "cut-in_environment",
                      "cut-in_simple",
-                     "drive_when_close", "follow_ghost", "highway_merge", "lane_change", "ltap-od",
+                     "drive_when_close", "follow_ghost", "highway_merge", "lane_change", "lane_change_simple",
+                     "ltap-od",
                      "ltap-od-relative-speed", "pedestrian", "pedestrian_collision", "slow-lead-vehicle",
                      "speed-profile", "straight_500m_pedestrian", "synchronize", "traffic_lights",
                      "two_plus_one_road")

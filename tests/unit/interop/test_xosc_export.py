@@ -27,7 +27,8 @@ def done_ids(done, plan) -> dict[str, str]:
     return {r.name: str(i) for i, r in enumerate(plan.roads, start=1)}
 
 SCENARIOS = sorted(EXAMPLES.glob("*.addt")) + [ROOT / "tests" / "data" / "interop" / f"{n}.addt"
-                                               for n in ("every_behavior", "every_action", "every_light")] + [
+                                               for n in ("every_behavior", "every_action", "every_light",
+                                                         "every_road_end")] + [
     ROOT / "tests" / "unit" / "compiler" / "cases" / "scripted_ego_ok.addt"]
 
 

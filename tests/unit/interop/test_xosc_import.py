@@ -61,7 +61,7 @@ def test_cut_in_translates_positions_speeds_and_triggers():
     got = import_xosc(ESMINI / "xosc" / "cut-in_simple.xosc", root=ESMINI)
     plan = got.plan
     # Its stop trigger: after 10 s, once the cutter's acceleration has come back to 0 (2 s later).
-    assert plan.duration_s == 60.0 and plan.end.at_s.value == 10.0 and plan.end.delay_s.value == 2.0
+    assert plan.duration_s == 300.0 and plan.end.at_s.value == 10.0 and plan.end.delay_s.value == 2.0
     assert plan.end.edge == "rising" and "accel(OverTaker)" in got.text
     ego, cutter = plan.ego, plan.agents[0]
     assert (ego.s.value, ego.lane.value, ego.speed.value) == (50.0, -1.0, 20.0)
