@@ -383,7 +383,8 @@ def _builtin_clause(plan: ScenarioPlan, o: OraclePlan) -> tuple[str, str] | None
         if f.hi_s is None or isinstance(f.hi_s, float):
             within = "" if f.hi_s is None else f" within {format_quantity(f.hi_s, units.TIME)}"
         else:  # over parameters: `reach goal within t_max`
-            within = f" within {ExprPrinter({p.name: dim_of_name(p.dimension) for p in plan.params}).value(f.hi_s, units.TIME)}"
+            exprs = ExprPrinter({p.name: dim_of_name(p.dimension) for p in plan.params})
+            within = f" within {exprs.value(f.hi_s, units.TIME)}"
         return "reach goal" + within, "reach_goal"
     return None
 
