@@ -58,3 +58,19 @@ def test_a_swept_window_changes_the_verdict():
     assert verdicts[0].robustness == pytest.approx(5.0, abs=0.02)
     assert verdicts[1].robustness == pytest.approx(3.0, abs=0.05)
     assert verdicts[2].first_violation_s == pytest.approx(5.0 + math.sqrt(2.5), abs=0.03)
+
+
+def test_export_and_import_keep_the_parameter_window(tmp_path):
+    """OpenSCENARIO has no oracles: the export's side file carries the window over t_end
+    with the run's value of t_end, and the import gives back the same oracle and verdict."""
+    from addt_dsl.interop.openscenario.importer import import_xosc
+    from addt_dsl.interop.xosc_export import export_run
+    from tests.unit.interop.roundtrip_kit import round_trip
+
+    plan = compile_source(SOURCE.replace("G_MIN", "20 m")).plan
+    spec = expand(plan).specs[2]  # t_end = 8 s: fails
+    got = round_trip(spec, tmp_path)
+    assert got.verdicts_before == got.verdicts_after == {"keeps_gap": False}
+    done = export_run(spec, tmp_path / "again", "scenario")
+    text = import_xosc(done.xosc_path).text
+    assert "param t_end = 8 s" in text and "keeps_gap: always during [0 s, t_end] gap(ego, lead) > 20 m" in text
