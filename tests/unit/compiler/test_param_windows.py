@@ -132,7 +132,7 @@ def test_a_sampled_parameter_is_checked_per_run():
     with pytest.raises(WindowError) as info:
         bind(bad)
     assert str(info.value) == ("oracle 'w': the window ends before it starts: its window is [5.5 s, 4 s] "
-                               "with t_s = 5.5 (SI units)")
+                               "with t_s = 5.5 s")
 
 
 def test_the_runs_of_a_sweep_resolve_their_windows():
