@@ -256,10 +256,11 @@ def _check_param_window(ctx: Context, node, span: Span) -> bool:
     dur = ctx.duration if isinstance(ctx.duration, float) else None
     lo, hi = node.lo_s, node.hi_s
     used = set().union(*(E.params_used(b) for b in E.window_exprs(node)))
-    view = P.ScenarioPlan.model_construct(params=ctx.params, assumptions=ctx.assumptions, sweep=ctx.sweep)
-    cells = known_assignments(view, used, WINDOW_CHECK_CELLS)
     if not used <= {p.name for p in ctx.params}:
         return True  # a parameter with an error of its own (reported there)
+    # The sweep's pieces as far as the rules have them (sweep.py reads nothing else).
+    view = P.ScenarioPlan.model_construct(params=ctx.params, assumptions=ctx.assumptions, sweep=ctx.sweep)
+    cells = known_assignments(view, used, WINDOW_CHECK_CELLS)
     if cells is not None:
         for values in cells:
             try:
