@@ -226,3 +226,13 @@ def test_a_parameter_window_prints_and_parses_back():
     text = format_expr(f, param_dims=TIME)
     assert text == "always during [a, a + d] eventually within (d) (-speed(ego) < 0 m/s)"
     assert parse_formula(text, params=TIME) == f
+
+
+def test_a_bound_read_as_a_call_gets_a_hint():
+    result = _compile("always within t_end (speed(ego) > 1 m/s)")
+    (error,) = [d for d in result.diagnostics if d.severity == "error"]
+    assert error.code == "E0001"
+    assert "`t_end (` reads as a call: put a window bound over parameters in parentheses, " \
+           "`within (t_end) (...)`" in error.notes
+    assert [d.code for d in _compile("always within (t_end) (speed(ego) > 1 m/s)").diagnostics
+            if d.severity == "error"] == []
