@@ -60,21 +60,24 @@ class Binary(_Node):
 
 
 class Temporal(_Node):
-    """`always` / `eventually` over the window [t + lo_s, t + hi_s]; hi_s None = to the end."""
+    """`always` / `eventually` over the window [t + lo_s, t + hi_s]; hi_s None = to the end.
+
+    A bound is a number [s], or an expression over parameters (`during [0 s, t_end]`) that
+    `substitute_params` turns into its number for a run."""
 
     kind: Literal["temporal"] = "temporal"
     op: Literal["always", "eventually"]
-    lo_s: float = 0.0
-    hi_s: float | None = None
+    lo_s: float | Expr = 0.0
+    hi_s: float | Expr | None = None
     arg: Expr
 
 
 class Until(_Node):
-    """`left until right` with right required within [t + lo_s, t + hi_s]."""
+    """`left until right` with right required within [t + lo_s, t + hi_s] (bounds as in `Temporal`)."""
 
     kind: Literal["until"] = "until"
-    lo_s: float = 0.0
-    hi_s: float | None = None
+    lo_s: float | Expr = 0.0
+    hi_s: float | Expr | None = None
     left: Expr
     right: Expr
 
@@ -132,10 +135,36 @@ _BINARY = {
 
 
 def walk(expr: Expr):
-    """Yield every node of the tree, parents first."""
+    """Yield every node of the tree, parents first (a window's bound expressions after
+    their operator, before its operands)."""
     yield expr
+    for bound in window_exprs(expr):
+        yield from walk(bound)
     for child in children(expr):
         yield from walk(child)
+
+
+def window_exprs(expr: Expr) -> tuple:
+    """The bounds of a temporal operator's window that are expressions over parameters."""
+    if isinstance(expr, (Temporal, Until)):
+        return tuple(b for b in (expr.lo_s, expr.hi_s) if b is not None and not isinstance(b, float))
+    return ()
+
+
+def window_problem(lo_s: float, hi_s: float | None, duration_s: float | None = None) -> tuple[str, str] | None:
+    """What is wrong with a window of resolved bounds [s], as (kind, text), or None: a bound
+    that is not a finite time >= 0 (`bound`), an end before the start (`inverted`), an end
+    beyond the scenario's duration (`beyond`). The compiler and the per-run binding both
+    judge windows by this."""
+    for b in (lo_s, hi_s):
+        if b is not None and not (math.isfinite(b) and b >= 0.0):
+            return "bound", "a window bound must be a finite time >= 0 s"
+    if hi_s is not None and hi_s < lo_s:
+        return "inverted", "the window ends before it starts"
+    for b in (lo_s, hi_s):
+        if duration_s is not None and b is not None and b > duration_s + 1e-9:
+            return "beyond", f"the time window reaches {b:g} s, beyond the scenario's duration ({duration_s:g} s)"
+    return None
 
 
 def children(expr: Expr) -> tuple:
@@ -173,8 +202,17 @@ def substitute_params(expr: Expr, params: dict[str, float]) -> Expr:
         case Binary(op=op, left=l, right=r):
             return Binary(op=op, left=substitute_params(l, params), right=substitute_params(r, params))
         case Temporal(op=op, lo_s=lo, hi_s=hi, arg=a):
-            return Temporal(op=op, lo_s=lo, hi_s=hi, arg=substitute_params(a, params))
+            return Temporal(op=op, lo_s=_bound_value(lo, params), hi_s=_bound_value(hi, params),
+                            arg=substitute_params(a, params))
         case Until(lo_s=lo, hi_s=hi, left=l, right=r):
-            return Until(lo_s=lo, hi_s=hi, left=substitute_params(l, params),
-                         right=substitute_params(r, params))
+            return Until(lo_s=_bound_value(lo, params), hi_s=_bound_value(hi, params),
+                         left=substitute_params(l, params), right=substitute_params(r, params))
     raise TypeError(f"unknown node {expr!r}")
+
+
+def _bound_value(bound, params: dict[str, float]):
+    """A window bound as a number [s] (a number stays the same object: float windows keep
+    their exact value)."""
+    if bound is None or isinstance(bound, float):
+        return bound
+    return float(eval_param_expr(bound, params))

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from addt_dsl.distributions import from_unit
-from addt_dsl.expr import Num, eval_param_expr, substitute_params
+from addt_dsl.expr import Num, eval_param_expr, params_used, substitute_params
 from addt_dsl.plan import ConcreteFault, FaultPlan, ParamPlan, RunSpec, ScenarioPlan, TriggerPlan, resolve_settings
 
 
@@ -228,6 +228,26 @@ def _iter_specs(plan: ScenarioPlan, rejected: Counter):
 def _sampled_params(plan: ScenarioPlan, gridded: set[str]) -> list[ParamPlan]:
     return [p for p in plan.params if p.name not in gridded
             and (p.low is not None and p.high is not None and p.low < p.high or p.choices)]
+
+
+def known_assignments(plan: ScenarioPlan, names: set[str], max_cells: int) -> list[dict[str, float]] | None:
+    """The distinct values the parameters `names` take over the sweep's runs, in grid order,
+    when every run's are known before sampling: none of them is drawn by the sampler and the
+    grid has at most `max_cells` cells (None otherwise). A cell that an assumption on known
+    parameters rejects runs nothing and is left out. For checks at compile time."""
+    sampled = {p.name for p in sampled_params(plan)} if plan.sweep.sampler else set()
+    if names & sampled or grid_cell_count(plan) > max_cells:
+        return None
+    known = [a for a in plan.assumptions if not (params_used(a.expr) & sampled)]
+    nominal = plan.nominal_params()
+    out: dict[tuple, dict[str, float]] = {}
+    for cell in _grid_cells(plan):
+        base = {**nominal, **cell}
+        if any(not _holds(a.expr, base) for a in known):
+            continue
+        values = {n: base[n] for n in sorted(names) if n in base}
+        out.setdefault(tuple(values.values()), values)
+    return list(out.values())
 
 
 def probe_feasibility(plan: ScenarioPlan, budget: int = 2000) -> Counter | None:

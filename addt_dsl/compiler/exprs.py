@@ -251,24 +251,31 @@ class ExprLowering:
         return E.Binary(op=op, left=left, right=right), lty
 
     def window(self, window: ast.Window | None):
-        """Lower a time window to (lo_s, hi_s): finite, non-negative constants."""
+        """Lower a time window to (lo_s, hi_s): each bound a finite, non-negative constant [s],
+        or an expression over parameters that each run resolves (`during [0 s, t_end]`; its
+        values are checked over the sweep by rules/oracles.py). (None, None) after a diagnostic."""
         if window is None:
-            return E.Num(value=0.0), None
+            return 0.0, None
         lo = self.lower_value(window.lo, units.TIME, "a window bound") if window.lo is not None else E.Num(value=0.0)
         hi = self.lower_value(window.hi, units.TIME, "a window bound") if window.hi is not None else None
         if lo is None or (window.hi is not None and hi is None):
             return None, None
+        bounds = []
         for bound in (lo, hi):
-            if bound is not None and E.params_used(bound):
-                self.sink.error("E0204", "window bounds must be constants, not parameters", window.span)
+            if bound is None or E.params_used(bound):
+                bounds.append(bound)
+                continue
+            value = E.eval_param_expr(bound, {})
+            if not (math.isfinite(value) and value >= 0.0):
+                self.sink.error("E0301", "a window bound must be a finite time >= 0 s", window.span,
+                                "windows are relative to the current instant: `within 5 s`, "
+                                "`during [2 s, 5 s]`")
                 return None, None
-            if bound is not None:
-                value = E.eval_param_expr(bound, {})
-                if not (math.isfinite(value) and value >= 0.0):
-                    self.sink.error("E0301", "a window bound must be a finite time >= 0 s", window.span,
-                                    "windows are relative to the current instant: `within 5 s`, "
-                                    "`during [2 s, 5 s]`")
-                    return None, None
+            bounds.append(value)
+        lo, hi = bounds
+        if isinstance(lo, float) and isinstance(hi, float) and hi < lo:
+            self.sink.error("E0303", "the window ends before it starts", window.span)
+            return None, None
         return lo, hi
 
     def _no_time(self, node, op: str) -> bool:
@@ -285,12 +292,9 @@ class ExprLowering:
             return None, None
         arg = self.lower_formula(node.arg, f"the operand of '{node.op}'")
         lo, hi = self.window(node.window)
-        if arg is None or lo is None or (node.window is not None and node.window.hi is not None and hi is None):
+        if arg is None or lo is None:
             return None, None
-        if hi is not None and _const(hi) < _const(lo):
-            self.sink.error("E0303", "the window ends before it starts", node.window.span)
-            return None, None
-        return _WindowedTemporal(node.op, lo, hi, arg), BOOL
+        return E.Temporal(op=node.op, lo_s=lo, hi_s=hi, arg=arg), BOOL
 
     def _UntilExpr(self, node: ast.UntilExpr):
         if self._no_time(node, "until"):
@@ -300,29 +304,7 @@ class ExprLowering:
         lo, hi = self.window(node.window)
         if left is None or right is None or lo is None:
             return None, None
-        return _WindowedUntil(lo, hi, left, right), BOOL
-
-
-# Window bounds may use parameters; they are bound per run. Until then the formula keeps
-# them as `Param`-bearing placeholders stored in the plan through these wrappers.
-def _WindowedTemporal(op, lo, hi, arg):
-    return E.Temporal(op=op, lo_s=_const(lo), hi_s=None if hi is None else _const(hi), arg=arg)
-
-
-def _WindowedUntil(lo, hi, left, right):
-    return E.Until(lo_s=_const(lo), hi_s=None if hi is None else _const(hi), left=left, right=right)
-
-
-def _const(expr) -> float:
-    """Window bounds are constants in plan v1 (parameters there are rejected earlier)."""
-    try:
-        return E.eval_param_expr(expr, {})
-    except E.UnboundParameter:
-        raise WindowParamError() from None
-
-
-class WindowParamError(Exception):
-    pass
+        return E.Until(lo_s=lo, hi_s=hi, left=left, right=right), BOOL
 
 
 def value_range(expr, ranges: dict[str, tuple[float, float]]) -> tuple[float, float] | None:

@@ -117,7 +117,15 @@ def _curated_hint(token: Token, expected: set[str], text: str) -> list[str]:
                      "`when <condition> then ...`, `at <time> ...` or `after <time> ...`")
     if "THEN" in expected and first == "when":
         hints.append("write `when <condition> then <behaviour>`")
+    call = _WINDOW_CALL_RE.search(line)
+    if call and kind == "_NL" and call.group(2) not in ("min", "max", "abs", "sqrt"):
+        hints.append(f"`{call.group(2)} (` reads as a call: put a window bound over parameters in parentheses, "
+                     f"`{call.group(1)} ({call.group(2)}) (...)`")
     return hints
+
+
+# `always within t_end (x > 1 m)`: the bound and the parenthesis read as a call `t_end(...)`.
+_WINDOW_CALL_RE = re.compile(r"\b(within|after)\s+([A-Za-z_]\w*)\s*\(")
 
 
 _DEFINITION_LINE = re.compile(r"\s*(agent\s+\w+\s+\w+|ego\s+(car|truck)\b|param\s+\w+\s*=|road\s+\w+\s+(\{|import)|"

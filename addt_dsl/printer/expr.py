@@ -317,31 +317,40 @@ def _product(p: ExprPrinter, e: E.Binary, want: Dim, left_slot: int, right_slot:
     raise PrinterError(f"cannot write `{e.op}` of dimension {units.dim_name(want)} with these literals")
 
 
-def _window(lo: float, hi: float | None) -> str:
+def _window(p: ExprPrinter, lo, hi) -> tuple[str, bool]:
+    """The window's text and whether a bound is an expression over parameters."""
+    def bound(b) -> str:
+        return format_quantity(b, units.TIME) if isinstance(b, float) else p.format(b, units.TIME, SUM)
+
+    exprs = not isinstance(lo, float) or (hi is not None and not isinstance(hi, float))
     if hi is None:
-        return "" if lo == 0 else f" after {format_quantity(lo, units.TIME)}"
+        return ("" if lo == 0 else f" after {bound(lo)}"), exprs
     if lo == 0:
-        return f" within {format_quantity(hi, units.TIME)}"
-    return f" during [{format_quantity(lo, units.TIME)}, {format_quantity(hi, units.TIME)}]"
+        return f" within {bound(hi)}", exprs
+    return f" during [{bound(lo)}, {bound(hi)}]", exprs
 
 
-def _after_window(window: str, operand: str) -> str:
+def _after_window(window: tuple[str, bool], operand: str) -> str:
     """After `within T` / `after T` an operand starting with '-' or '(' would be read as
-    part of the time bound (`within 5 s - x`): parenthesise it there."""
-    if window and not window.endswith("]") and operand[:1] in "-(":
-        return f"({operand})"
-    return operand
+    part of the time bound (`within 5 s - x`): parenthesise it there, and a bound over
+    parameters too (`within t_end (x)` would read as a call)."""
+    text, exprs = window
+    if text and not text.endswith("]") and operand[:1] in "-(":
+        if exprs:
+            keyword, _, bound = text.strip().partition(" ")
+            text = f" {keyword} ({bound})"
+        return f"{text} ({operand})"
+    return f"{text} {operand}"
 
 
 def _p_temporal(p: ExprPrinter, e: E.Temporal, want):
-    window = _window(e.lo_s, e.hi_s)
-    return f"{e.op}{window} {_after_window(window, p.format(e.arg, BOOL, TEMPORAL))}", TEMPORAL
+    window = _window(p, e.lo_s, e.hi_s)
+    return f"{e.op}{_after_window(window, p.format(e.arg, BOOL, TEMPORAL))}", TEMPORAL
 
 
 def _p_until(p: ExprPrinter, e: E.Until, want):
-    window = _window(e.lo_s, e.hi_s)
-    return (f"{p.format(e.left, BOOL, NOT)} until{window} "
-            f"{_after_window(window, p.format(e.right, BOOL, NOT))}"), UNTIL
+    window = _window(p, e.lo_s, e.hi_s)
+    return (f"{p.format(e.left, BOOL, NOT)} until{_after_window(window, p.format(e.right, BOOL, NOT))}"), UNTIL
 
 
 _NODE_PRINTERS: dict[type, Callable] = {

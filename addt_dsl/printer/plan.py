@@ -393,8 +393,12 @@ def _builtin_clause(plan: ScenarioPlan, o: OraclePlan) -> tuple[str, str] | None
                 return f"no collision with {other}", f"no_collision_with_{other}"
     goal, f = plan.ego.goal_s, o.formula
     if goal is not None and isinstance(f, E.Temporal) and f == reach_goal_formula(goal, f.hi_s):
-        return "reach goal" + ("" if f.hi_s is None else f" within {format_quantity(f.hi_s, units.TIME)}"), \
-            "reach_goal"
+        if f.hi_s is None or isinstance(f.hi_s, float):
+            within = "" if f.hi_s is None else f" within {format_quantity(f.hi_s, units.TIME)}"
+        else:  # over parameters: `reach goal within t_max`
+            exprs = ExprPrinter({p.name: dim_of_name(p.dimension) for p in plan.params})
+            within = f" within {exprs.value(f.hi_s, units.TIME)}"
+        return "reach goal" + within, "reach_goal"
     return None
 
 

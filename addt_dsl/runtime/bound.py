@@ -11,9 +11,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from addt_dsl.expr import Expr, eval_param_expr, signals_used, substitute_params
-from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, ControllerPlan, GroupPlan, RoadPlan, RunSpec,
-                           SignalPlan, TriggerPlan, resolve_settings)
+from addt_dsl import units
+from addt_dsl.expr import (Expr, Temporal, Until, eval_param_expr, params_used, signals_used, substitute_params,
+                           walk, window_exprs, window_problem)
+from addt_dsl.plan import (ActorPlan, ClausePlan, ConcreteFault, ControllerPlan, GroupPlan, OraclePlan, RoadPlan,
+                           RunSpec, ScenarioPlan, SignalPlan, TriggerPlan, resolve_settings)
 from addt_dsl.vehicles import DEFAULT_MU, VEHICLES
 
 
@@ -132,7 +134,7 @@ def bind(spec: RunSpec) -> BoundScenario:
         name=plan.name, duration_s=plan.duration_s, step_s=plan.step_s, seed=spec.seed, roads=tuple(plan.roads),
         ego=_actor(plan.ego, params), agents=tuple(_actor(a, params) for a in plan.agents),
         faults=tuple(spec.faults),
-        oracles=tuple(BoundOracle(o.name, o.severity, substitute_params(o.formula, params)) for o in plan.oracles),
+        oracles=tuple(_oracle(o, params, plan) for o in plan.oracles),
         environment=tuple(_clause(c, params) for c in plan.environment),
         environment_steps=tuple(bind_step(t, params) for t in plan.environment_steps),
         signals=tuple(plan.signals), controllers=tuple(_controller(c, params) for c in plan.controllers),
@@ -140,6 +142,32 @@ def bind(spec: RunSpec) -> BoundScenario:
         variables=tuple((v.name, v.value) for v in plan.variables),
         variable_steps=tuple(bind_step(t, params) for t in plan.variable_steps),
         end=bind_step(plan.end, params) if plan.end is not None else None)
+
+
+class WindowError(ValueError):
+    """An oracle's window over parameters is invalid with this run's values (a sampled
+    parameter the compiler could not check for every run)."""
+
+
+def _oracle(o: OraclePlan, params: dict[str, float], plan: ScenarioPlan) -> BoundOracle:
+    """The oracle with its parameters substituted; each window over parameters is checked
+    with this run's values as the compiler checks constant ones (`expr.window_problem`)."""
+    formula = substitute_params(o.formula, params)
+    for plain, bound in zip(_windowed(o.formula), _windowed(formula)):
+        problem = window_problem(bound.lo_s, bound.hi_s, plan.duration_s) if window_exprs(plain) else None
+        if problem is not None:
+            used = sorted(set().union(*(params_used(b) for b in window_exprs(plain))))
+            dims = {p.name: units.DIMENSIONS_BY_NAME.get(p.dimension) for p in plan.params}
+            values = ", ".join(f"{n} = {params[n]:g} {units.CANONICAL_UNIT.get(dims.get(n), '')}".rstrip()
+                               for n in used)
+            hi = "the end" if bound.hi_s is None else f"{bound.hi_s:g} s"
+            raise WindowError(f"oracle '{o.name}': {problem[1]}: its window is [{bound.lo_s:g} s, {hi}] "
+                              f"with {values}")
+    return BoundOracle(o.name, o.severity, formula)
+
+
+def _windowed(formula: Expr) -> list:
+    return [n for n in walk(formula) if isinstance(n, (Temporal, Until))]
 
 
 def _controller(c: ControllerPlan, params: dict[str, float]) -> BoundController:

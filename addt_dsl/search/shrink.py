@@ -215,7 +215,7 @@ class Shrinker:
         oracle = next((o for o in self.best.plan.oracles if o.name == self.target[0]), None)
         if oracle is None:  # stack_health: the run stopped at the error
             return t_v
-        return evidence_end(oracle.formula, t_v)
+        return evidence_end(E.substitute_params(oracle.formula, self.best.params), t_v)  # windows of this run
 
     def bisect(self, current: float, target: float, make: Callable[[float], RunSpec | None],
                integer: bool = False, steps: int = BISECT_STEPS) -> None:

@@ -10,8 +10,10 @@ from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import Context, check_settings, check_time, const_value, fmt, int_const, suggest, text_of
+from addt_dsl.compiler.exprs import value_range
 from addt_dsl.diagnostics import Span
 from addt_dsl.registry import SIGNALS, ParamSpec
+from addt_dsl.sweep import known_assignments
 
 
 def _always(formula):
@@ -40,7 +42,7 @@ NO_CLAUSES = {
 }
 
 
-def reach_goal_formula(goal, within_s: float | None = None):
+def reach_goal_formula(goal, within_s: float | E.Expr | None = None):
     """`reach goal [within T]`, and the oracle a goal on the ego adds by itself."""
     return E.Temporal(op="eventually", lo_s=0.0, hi_s=within_s,
                       arg=E.Binary(op=">=", left=E.Signal(name="s(ego)"), right=goal))
@@ -82,9 +84,9 @@ def _builtin(ctx: Context, b: ast.Builtin) -> tuple[E.Expr, str] | None:
             if hi_e is None:
                 return None
             hi = const_value(hi_e)
-            if hi is None:
-                ctx.sink.error("E0204", "the time limit must be a constant", b.value.span)
-                return None
+            if hi is None:  # over parameters: checked as a window for every run of the sweep
+                formula = reach_goal_formula(ego.goal_s, hi_e)
+                return (formula, "reach_goal") if _check_param_window(ctx, formula, b.value.span) else None
             if not check_time(ctx, hi_e, b.value.span, "the time limit"):
                 return None
         return reach_goal_formula(ego.goal_s, hi), "reach_goal"
@@ -218,19 +220,78 @@ def rule_oracles(ctx: Context) -> Oracles:
 
 
 def _check_formula_windows(ctx: Context, formula, span: Span) -> bool:
-    """Time windows of temporal operators must end within the scenario."""
+    """Time windows of temporal operators must end within the scenario; a window over
+    parameters is checked for every run of the sweep (`_check_param_window`)."""
     dur = ctx.duration
-    if not isinstance(dur, float):
-        return True
     for node in E.walk(formula):
-        if isinstance(node, (E.Temporal, E.Until)):
-            for bound in (node.lo_s, node.hi_s):
-                if bound is not None and bound > dur + 1e-9:
-                    ctx.sink.error("E0302", f"the time window reaches {fmt(bound, units.TIME)}, beyond the "
-                                   f"scenario's duration ({fmt(dur, units.TIME)})", span,
-                                   "shorten the window or lengthen `duration`")
-                    return False
+        if not isinstance(node, (E.Temporal, E.Until)):
+            continue
+        if E.window_exprs(node):
+            if not _check_param_window(ctx, node, span):
+                return False
+            continue
+        if not isinstance(dur, float):
+            continue
+        for bound in (node.lo_s, node.hi_s):
+            if bound is not None and bound > dur + 1e-9:
+                ctx.sink.error("E0302", f"the time window reaches {fmt(bound, units.TIME)}, beyond the "
+                               f"scenario's duration ({fmt(dur, units.TIME)})", span,
+                               "shorten the window or lengthen `duration`")
+                return False
     return True
+
+
+# A window over parameters is checked per run where the sweep fixes its values (grid,
+# cases, defaults: up to this many cells); a sampled one where its range decides, else
+# the run whose values make it invalid stops with an error (runtime/bound.py).
+WINDOW_CHECK_CELLS = 10_000
+_WINDOW_CODES = {"bound": "E0301", "inverted": "E0303", "beyond": "E0302"}
+_WINDOW_TEXT = {"bound": "a window bound must be a finite time >= 0 s", "inverted": "the window ends before it starts",
+                "beyond": "the time window reaches beyond the scenario's duration"}
+_WINDOW_HINTS = {"bound": "windows are relative to the current instant: `within 5 s`, `during [2 s, 5 s]`",
+                 "inverted": "a window [A, B] needs A <= B", "beyond": "shorten the window or lengthen `duration`"}
+
+
+def _check_param_window(ctx: Context, node, span: Span) -> bool:
+    dur = ctx.duration if isinstance(ctx.duration, float) else None
+    lo, hi = node.lo_s, node.hi_s
+    used = set().union(*(E.params_used(b) for b in E.window_exprs(node)))
+    if not used <= {p.name for p in ctx.params}:
+        return True  # a parameter with an error of its own (reported there)
+    # The sweep's pieces as far as the rules have them (sweep.py reads nothing else).
+    view = P.ScenarioPlan.model_construct(params=ctx.params, assumptions=ctx.assumptions, sweep=ctx.sweep)
+    cells = known_assignments(view, used, WINDOW_CHECK_CELLS)
+    if cells is not None:
+        for values in cells:
+            try:
+                got = E.window_problem(_bound_at(lo, values), _bound_at(hi, values), dur)
+            except (ValueError, ArithmeticError):
+                got = "bound", "a window bound must be a finite time >= 0 s"
+            if got is not None:
+                kind, text = got
+                shown = ", ".join(f"{n} = {fmt(v, ctx.param_dims.get(n))}" for n, v in values.items())
+                ctx.sink.error(_WINDOW_CODES[kind], text, span, f"with {shown} (a run of the sweep)",
+                               _WINDOW_HINTS[kind])
+                return False
+        return True
+    # A sampled parameter: an error only where its whole range makes the window invalid.
+    lo_r = (lo, lo) if isinstance(lo, float) else value_range(lo, ctx.param_ranges)
+    hi_r = None if hi is None else (hi, hi) if isinstance(hi, float) else value_range(hi, ctx.param_ranges)
+    if lo_r is None or (hi is not None and hi_r is None):
+        return True
+    checks = [("bound", lo_r[1] < 0.0), ("bound", hi_r is not None and hi_r[1] < 0.0),
+              ("inverted", hi_r is not None and hi_r[1] < lo_r[0]),
+              ("beyond", dur is not None and max(lo_r[0], hi_r[0] if hi_r else 0.0) > dur + 1e-9)]
+    for kind, always_bad in checks:
+        if always_bad:
+            ctx.sink.error(_WINDOW_CODES[kind], _WINDOW_TEXT[kind], span,
+                           f"for every value of {', '.join(sorted(used))} in its range", _WINDOW_HINTS[kind])
+            return False
+    return True
+
+
+def _bound_at(bound, values: dict[str, float]):
+    return bound if bound is None or isinstance(bound, float) else float(E.eval_param_expr(bound, values))
 
 
 def _auto_name(ctx: Context, o: ast.OracleDecl) -> str:

@@ -26,7 +26,7 @@ from enum import Enum
 import numpy as np
 
 from addt_dsl.expr import (Binary, Call, Expr, Num, Param, Signal, Temporal, Unary, UnboundParameter,
-                           Until, walk)
+                           Until, walk, window_exprs)
 from addt_dsl.runtime.oracles.windows import until as _until
 from addt_dsl.runtime.oracles.windows import window_reduce
 
@@ -102,13 +102,22 @@ def sort_of(expr: Expr) -> Sort:
             _expect(r, Sort.FORMULA, f"right operand of '{op}'")
             return Sort.FORMULA
         case Temporal(op=op, arg=a):
+            _numeric_window(expr)
             _expect(a, Sort.FORMULA, f"operand of '{op}'")
             return Sort.FORMULA
         case Until(left=l, right=r):
+            _numeric_window(expr)
             _expect(l, Sort.FORMULA, "left operand of 'until'")
             _expect(r, Sort.FORMULA, "right operand of 'until'")
             return Sort.FORMULA
     raise TypeError(f"not an expression node: {expr!r}")
+
+
+def _numeric_window(expr: Temporal | Until) -> None:
+    """A window bound over parameters is a number only once the run's values are substituted."""
+    for bound in window_exprs(expr):
+        sort_of(bound)  # raises on its first parameter
+        raise FormulaTypeError(f"a window bound must be a number of seconds, not {bound!r}")
 
 
 def _expect(expr: Expr, want: Sort, where: str) -> None:

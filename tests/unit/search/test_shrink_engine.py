@@ -196,3 +196,28 @@ def test_evidence_ends_where_the_formula_stops_looking():
     assert evidence_end(E.Temporal(op="eventually", arg=atom), 0.0) is None  # reach_goal: the whole run
     assert evidence_end(E.Temporal(op="eventually", hi_s=5.0, arg=atom), 0.0) == 5.0
     assert horizon(E.Until(hi_s=1.0, left=atom, right=E.Temporal(op="always", hi_s=2.0, arg=atom))) == 3.0
+
+
+def test_evidence_ends_where_the_runs_parameter_window_stops_looking():
+    """A window over a parameter looks as far as the run's value makes it (the horizon of
+    `eventually within t_look` was `Param + float`: a TypeError)."""
+    from addt_dsl.compiler import compile_source
+    from addt_dsl.sweep import make_spec
+
+    plan = compile_source("""scenario look {
+  duration 10 s
+  param t_look = 2 s in [1 s, 4 s]
+  road r { line length 400 m }
+  ego car on r lane -1 at 20 m speed 10 m/s
+  agent lead car on r lane -1 at 60 m speed 10 m/s
+  expect {
+    w: always eventually within t_look gap(ego, lead) > 5 m
+  }
+}""", path="look.addt").plan
+    spec = make_spec(plan, {**plan.nominal_params(), "t_look": 3.5}, 1)
+
+    def judge(s):
+        return judged(s, {"w": -1.0}, (Failure("w", "", 3.0, -1.0),))
+
+    shrinker = Shrinker(spec, nominal_plan=plan, cache=RunCache(evaluator=judge), max_simulations=5)
+    assert shrinker.evidence_end() == 6.5
