@@ -161,6 +161,11 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                 fields["reverse"] = bool(extra["reverse"])
             elif info.get("against_s") and info["vehicle"] != "obstacle" and not fields.get("route"):
                 fields["reverse"] = True  # it faces against its lane: it drives that way
+            if extra.get("yaw") is None and info.get("heading") is not None:
+                # The file's heading, relative to the way the actor drives where it is placed.
+                yaw = self.heading_from_lane(info["heading"], at, bool(fields.get("reverse")))
+                if abs(yaw) > 1e-12:
+                    fields["yaw"] = E.Num(value=yaw)
             if sc:
                 fields["stop_at_road_end"] = bool(extra.get("stop_at_road_end", False))
             elif (who != "ego" or self.scripted_ego) and not fields.get("route") and self.dead_end(who):
