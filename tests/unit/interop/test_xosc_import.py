@@ -962,3 +962,27 @@ def test_a_lane_offset_comes_back_from_the_xosc_alone(tmp_path):
     (step,) = next(a for a in got.plan.agents if a.name == "drifter").triggers
     assert step.clause.name == "lane_offset" and step.clause.settings["shape"] == "sinusoidal"
     assert (step.clause.settings["to"].value, step.clause.settings["max_lat_accel"].value) == (1.2, 1.5)
+
+
+def test_a_relative_orientation_on_a_lane_position_is_the_bodys_yaw():
+    # alks_cut-out's Box: <LanePosition ...><Orientation type="relative" h="0.1"/>: esmini
+    # stands it at 0.1 rad to its lane (its trajectory's heading 0.10000 at t = 0); it stood
+    # along the lane.
+    got = import_xosc(ROOT / "tests" / "data" / "esmini" / "xosc" / "alks_cut-out.xosc",
+                      root=ROOT / "tests" / "data" / "esmini")
+    box = next(a for a in got.plan.agents if a.name == "Box")
+    assert box.yaw is not None and box.yaw.value == 0.1
+    assert "yaw 0.1 rad" in got.text
+
+
+def test_a_pitch_or_roll_is_said_not_modelled():
+    # bicycle_fall_over's trajectory rolls the cyclist over (r = 1.5 rad): the twin keeps
+    # bodies level, so the import says so (W0802) rather than dropping it.
+    got = import_xosc(ROOT / "tests" / "data" / "esmini" / "xosc" / "bicycle_fall_over.xosc",
+                      root=ROOT / "tests" / "data" / "esmini", ego="scripted")
+    rolls = [d for d in got.diagnostics if d.code == "W0802" and "roll 1.5 rad" in d.message]
+    assert len(rolls) == 3 and "not modelled" in rolls[0].message
+    # A zero pitch and roll (pedestrian's Orientation p="0" r="0") is no warning.
+    quiet = import_xosc(ROOT / "tests" / "data" / "esmini" / "xosc" / "pedestrian.xosc",
+                        root=ROOT / "tests" / "data" / "esmini", ego="scripted")
+    assert not [d for d in quiet.diagnostics if "pitch" in d.message or "roll" in d.message]
