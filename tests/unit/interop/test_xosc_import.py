@@ -986,3 +986,25 @@ def test_a_pitch_or_roll_is_said_not_modelled():
     quiet = import_xosc(ROOT / "tests" / "data" / "esmini" / "xosc" / "pedestrian.xosc",
                         root=ROOT / "tests" / "data" / "esmini", ego="scripted")
     assert not [d for d in quiet.diagnostics if "pitch" in d.message or "roll" in d.message]
+    # pedestrian_collision lays its walker down (a teleport in place, roll 1.57 rad) and back up.
+    down = import_xosc(ROOT / "tests" / "data" / "esmini" / "xosc" / "pedestrian_collision.xosc",
+                       root=ROOT / "tests" / "data" / "esmini", ego="scripted")
+    assert [d.message.split(":")[0] for d in down.diagnostics if "roll" in d.message] == \
+        ["roll 1.57 rad of pedestrian_adult", "roll -1.57 rad of pedestrian_adult"]
+
+
+def test_a_teleport_that_turns_the_actor_says_it_does_not(tmp_path):
+    # lane_change_simple's teleport back to s = 10 m, given a heading (0.5 rad to its lane):
+    # the language's `teleport` moves and does not turn, so the import says so (W0802); the
+    # same teleport facing its lane (h = 0) is said nothing.
+    text = (ESMINI / "xosc" / "lane_change_simple.xosc").read_text()
+    lane = '<LanePosition roadId="0" laneId="-1" offset="0" s="10"/>'
+    assert lane in text
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "turned.xosc"
+    said = {}
+    for h in ("0.5", "0"):
+        path.write_text(text.replace(lane, lane[:-2] + f'><Orientation type="relative" h="{h}"/></LanePosition>'))
+        got = import_xosc(path, root=tmp_path / "esmini", lenient=True, ego="scripted")
+        said[h] = [d.message for d in got.diagnostics if "heading after the teleport" in d.message]
+    assert len(said["0.5"]) == 2 and "does not turn" in said["0.5"][0] and said["0"] == []
