@@ -26,7 +26,7 @@ def setting_of(value):
 
 class Misc:
     @ACTIONS.register("TeleportAction", "approx", "to a lane or road position on the road the actor drives "
-                      "(others refused)")
+                      "(others refused); it keeps facing its lane (another heading: W0802)")
     def act_teleport(self, act, who: str, wrapper) -> ClausePlan | None:
         return self.teleport(act, who)
 

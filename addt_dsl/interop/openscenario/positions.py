@@ -90,7 +90,8 @@ class Positions:
             self.approx(orient, f"{' and '.join(tilted)} of {who}: not modelled (the body stays level across the road "
                                 "and follows its grade)")
 
-    @POSITIONS.register("LanePosition", "exact", "road, lane, s and offset (parameters stay parameters)")
+    @POSITIONS.register("LanePosition", "exact", "road, lane, s and offset (parameters stay parameters); an "
+                        "Orientation's h as the body's `yaw` (pitch and roll other than 0: W0802)")
     def lane_position(self, pos, who: str):
         road = self.road(self.raw(pos, "roadId"), pos)
         lane = int(self.value(pos, "laneId"))
@@ -109,7 +110,7 @@ class Positions:
 
     @POSITIONS.register("RoadPosition", "exact", "the lane at (s, t) and the offset from its centre")
     @POSITIONS.register("WorldPosition", "approx", "the lane of the nearest road at (x, y) facing h (a point off "
-                        "every road: the nearest reference line)")
+                        "every road: the nearest reference line); h as the body's `yaw` to that lane")
     @POSITIONS.register("RelativeRoadPosition", "exact", "relative to an entity placed before it")
     @POSITIONS.register("RelativeLanePosition", "exact", "relative to an entity placed before it (dLane, ds)")
     def position_from_road(self, pos, who):
