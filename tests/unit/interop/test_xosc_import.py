@@ -1008,3 +1008,19 @@ def test_a_teleport_that_turns_the_actor_says_it_does_not(tmp_path):
         got = import_xosc(path, root=tmp_path / "esmini", lenient=True, ego="scripted")
         said[h] = [d.message for d in got.diagnostics if "heading after the teleport" in d.message]
     assert len(said["0.5"]) == 2 and "does not turn" in said["0.5"][0] and said["0"] == []
+
+
+def test_a_heading_on_an_entity_moving_from_the_start_is_said_to_give_way_to_its_path(tmp_path):
+    # cut-in_simple's OverTaker starts at speed facing its lane (absolute h = 0 on a road
+    # along +x): nothing said. Turned 0.2 rad, it is placed with that yaw, but an agent
+    # moving from the start follows its path from t = 0: W0802 says so.
+    text = (ESMINI / "xosc" / "cut-in_simple.xosc").read_text()
+    orient = '<Orientation type="absolute" h="0"'
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "turned.xosc"
+    for h, said in (("0", 0), ("0.2", 1)):
+        path.write_text(text.replace(orient, orient.replace('h="0"', f'h="{h}"')))
+        got = import_xosc(path, root=tmp_path / "esmini")
+        notes = [d.message for d in got.diagnostics if "moves from the start" in d.message]
+        assert len(notes) == said, notes
+        assert ("yaw 0.2 rad" in got.text) == bool(said)
