@@ -263,3 +263,27 @@ def test_the_files_headings_as_read_here_are_esminis(path):
     want = expected_headings(Doc(path))
     assert want, "no entity read"
     assert {w: (round(h, 5), ref[w]) for w, (h, _) in want.items() if w in ref and angle_error(h, ref[w]) > 1e-5} == {}
+
+
+def test_slaloms_containers_are_turned_for_collisions_sensors_and_osi():
+    """The heading in the trace is the one the twin's bodies have: the box table that
+    collisions and lidar rays meet, and the ground truth an OSI view and perception report
+    (CARLA's Slalom: c1 +pi/2, c2 -pi/2, c3-c5 0 in the map's frame)."""
+    from addt_dsl.runtime import phases
+    from addt_dsl.runtime.state import RunState
+    from addt_dsl.sweep import expand
+
+    path = CARLA / "xosc" / "Slalom.xosc"
+    want = {w: h for w, (h, _) in expected_headings(Doc(path)).items() if w.startswith("c")}
+    run = RunState(expand(_import(path, "stack").plan).specs[0])
+    try:
+        phases.clock(run, 0.0)
+        phases.pose(run, 0.0)
+        table = run.physics.box_poses()
+        bodies = dict(zip(want, table[run.physics.box_slots(list(want)), 3]))
+        truth = {w: run.fleet.ground_truth(w).heading for w in want}
+    finally:
+        run.close()
+    assert {w: angle_error(h, bodies[w]) < TOL_RAD for w, h in want.items()} == dict.fromkeys(want, True), bodies
+    assert {w: angle_error(h, truth[w]) < TOL_RAD for w, h in want.items()} == dict.fromkeys(want, True), truth
+    assert abs(want["c3"]) < TOL_RAD and abs(abs(want["c1"]) - math.pi / 2) < 1e-9
