@@ -1,9 +1,9 @@
 """Every imported entity starts facing where its file says: for each corpus file (esmini's 27 and
 CARLA ScenarioRunner's examples), each entity's heading at t = 0 in the trace equals the heading
 of its Init TeleportAction position (else of the first vertex of its Init trajectory), read from
-the XML here (not from the importer, not from our export), within 1e-6 rad modulo 2 pi (where the heading is a lane's, plus the twin's sampling of
-the reference line, `sampling_bound`: 0 on lines and arcs), the ego driven by the stack and
-scripted.
+the XML here (not from the importer, not from our export), within 1e-6 rad modulo 2 pi (where
+the heading is a lane's, plus the twin's sampling of the reference line, `sampling_bound`: 0 on
+lines and arcs), the ego driven by the stack and scripted.
 
 The heading a position gives, as OpenSCENARIO 1.2 defines it and esmini 3.6 places it
 (OSCPosition.cpp, RoadManager.cpp `Position::SetRelativePosition`), in the OpenDRIVE frame
