@@ -6,6 +6,7 @@ import math
 from addt_dsl import expr as E
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.openscenario.params import EXPR
+from addt_dsl.interop.openscenario.positions import Placement
 from addt_dsl.interop.openscenario.registry import ACTIONS
 from addt_dsl.interop.openscenario.sidefile import CONTROLLER_PREFIX
 from addt_dsl.interop.openscenario.xml import child_at, first_of, only_child
@@ -25,7 +26,7 @@ def setting_of(value):
 
 class Misc:
     @ACTIONS.register("TeleportAction", "approx", "to a lane or road position on the road the actor drives "
-                      "(others refused)")
+                      "(others refused); it keeps facing its lane (another heading: W0802)")
     def act_teleport(self, act, who: str, wrapper) -> ClausePlan | None:
         return self.teleport(act, who)
 
@@ -76,6 +77,7 @@ class Misc:
                 self.value(pos, "dx", default=0.0) == 0.0 and self.value(pos, "dy", default=0.0) == 0.0:
             self.approx(act, "a teleport that only raises or lowers the actor: nothing (actors follow the road's "
                              "height)")
+            self.level_body(pos, who)
             return None
         if pos.tag in ("LanePosition", "RoadPosition"):
             road = self.road(self.raw(pos, "roadId"), pos)
@@ -84,6 +86,13 @@ class Misc:
                 if got is None:
                     return None
                 s_val, t_val = got
+                odr = self.network.road(next(i for i, r in self.roads.items() if r.name == road))
+                lane = odr.lane_at(s_val, t_val)
+                target = Placement(road, lane, E.Num(value=s_val), E.Num(value=0.0)) if lane else None
+                heading = self.file_heading(pos_el, target) if target is not None else None
+                if heading is not None and abs(self.heading_from_lane(heading, target, False)) > 1e-9:
+                    self.approx(pos.find("Orientation"), f"{who}'s heading after the teleport: its lane's driving "
+                                                         "direction (`teleport` moves, it does not turn)")
                 return ClausePlan(keyword="behavior", name="teleport",
                                   settings={"s": E.Num(value=round(s_val, 9)), "t": E.Num(value=round(t_val, 9))})
         self.skip(act, f"a teleport to a <{pos.tag}> is not translated",

@@ -169,6 +169,15 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                 fields["reverse"] = bool(extra["reverse"])
             elif info.get("against_s") and info["vehicle"] != "obstacle" and not fields.get("route"):
                 fields["reverse"] = True  # it faces against its lane: it drives that way
+            if extra.get("yaw") is None and info.get("heading") is not None:
+                # The file's heading, relative to the way the actor drives where it is placed.
+                yaw = self.heading_from_lane(info["heading"], at, bool(fields.get("reverse")))
+                if abs(yaw) > HEADING_TOL_RAD:
+                    fields["yaw"] = E.Num(value=yaw)
+                    if (who != "ego" or self.scripted_ego) and \
+                            float(eval_param_expr(fields["speed"], self.param_values())) > 0.0:
+                        self.approx(info["el"], f"{who} moves from the start: its body follows its path from "
+                                                f"t = 0, not the file's heading ({yaw:.3g} rad off it)")
             if sc:
                 fields["stop_at_road_end"] = bool(extra.get("stop_at_road_end", False))
             elif (who != "ego" or self.scripted_ego) and not fields.get("route") and self.dead_end(who):
@@ -288,6 +297,11 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
 # registers the ParameterValueDistribution (a logical scenario: a distribution and the
 # template it names); the interop package loads it.
 DOCUMENT_KINDS: list[tuple] = []
+
+
+# A heading this close to the lane's is the lane's: the files' own rounding (alks_cut-in's h =
+# 3.141593 turning an entity round) [rad].
+HEADING_TOL_RAD = 1e-6
 
 
 def import_xosc(path: str | Path, root: str | Path | None = None, maps=(), lenient: bool = False,

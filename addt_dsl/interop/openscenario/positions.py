@@ -72,12 +72,26 @@ class Positions:
             return None
         translate = POSITIONS.translator(pos.tag)
         if translate is not None:
+            self.level_body(pos, who)
             return translate(self, pos, who)
         self.skip(pos, f"<{pos.tag}> is not translated: {who} starts at the start of the first road",
                   "lane, road, world and relative road/lane positions are translated")
         return None
 
-    @POSITIONS.register("LanePosition", "exact", "road, lane, s and offset (parameters stay parameters)")
+    def level_body(self, pos, who: str) -> None:
+        """W0802 for a pitch or roll (a WorldPosition's `p`/`r`, an Orientation's) other than 0:
+        the twin poses bodies level across the road and along its grade."""
+        orient = pos if pos.tag == "WorldPosition" else pos.find("Orientation")
+        if orient is None:
+            return
+        tilted = [f"{name} {self.value(orient, attr):g} rad" for attr, name in (("p", "pitch"), ("r", "roll"))
+                  if orient.get(attr) is not None and self.value(orient, attr) != 0.0]
+        if tilted:
+            self.approx(orient, f"{' and '.join(tilted)} of {who}: not modelled (the body stays level across the road "
+                                "and follows its grade)")
+
+    @POSITIONS.register("LanePosition", "exact", "road, lane, s and offset (parameters stay parameters); an "
+                        "Orientation's h as the body's `yaw` (pitch and roll other than 0: W0802)")
     def lane_position(self, pos, who: str):
         road = self.road(self.raw(pos, "roadId"), pos)
         lane = int(self.value(pos, "laneId"))
@@ -96,7 +110,7 @@ class Positions:
 
     @POSITIONS.register("RoadPosition", "exact", "the lane at (s, t) and the offset from its centre")
     @POSITIONS.register("WorldPosition", "approx", "the lane of the nearest road at (x, y) facing h (a point off "
-                        "every road: the nearest reference line)")
+                        "every road: the nearest reference line); h as the body's `yaw` to that lane")
     @POSITIONS.register("RelativeRoadPosition", "exact", "relative to an entity placed before it")
     @POSITIONS.register("RelativeLanePosition", "exact", "relative to an entity placed before it (dLane, ds)")
     def position_from_road(self, pos, who):
@@ -228,23 +242,49 @@ class Positions:
         self.actors.get(who, {}).setdefault("route_from_position", route_el)
         return Placement(road_name, lane, E.Num(value=round(s_road, 9)), offset)
 
+    def file_heading(self, pos_el, placed) -> tuple[str, float] | None:
+        """The heading a position gives its entity, as esmini places it (OSCPosition.cpp), in
+        OpenDRIVE's frame: ("world", h) for a WorldPosition's `h` or an absolute Orientation;
+        ("lane", h) relative to the lane's driving direction (a LanePosition's or
+        RelativeLanePosition's relative Orientation); ("road", h) relative to the road's +s (a
+        road position's relative Orientation). None: the lane's driving direction (no heading
+        given)."""
+        pos = only_child(pos_el) if pos_el is not None else None
+        if pos is None or placed.lane == 0:
+            return None
+        if pos.tag == "WorldPosition":
+            return ("world", self.mirror(self.value(pos, "h"))) if pos.get("h") is not None else None
+        orient = pos.find("Orientation")
+        if orient is None or orient.get("h") is None:
+            return None
+        h = self.mirror(self.value(orient, "h"))
+        if orient.get("type", "relative") == "absolute":
+            return "world", h
+        return ("lane" if pos.tag in ("LanePosition", "RelativeLanePosition") else "road"), h
+
+    def heading_from_lane(self, heading: tuple[str, float], placed, reverse: bool) -> float:
+        """`file_heading` relative to the actor's driving direction where it is placed (its
+        lane's, turned round when it drives against it) [rad], in [-pi, pi]: the language's
+        `yaw`. Relative orientations stay exact; a world heading takes the road's exact
+        reference heading at the placement's station."""
+        kind, h = heading
+        odr = self.network.road(next(i for i, r in self.roads.items() if r.name == placed.road))
+        along_s = (odr.travel_direction(placed.lane) > 0) != reverse
+        if kind == "lane":
+            rel = h - (math.pi if reverse else 0.0)
+        elif kind == "road":
+            rel = h - (0.0 if along_s else math.pi)
+        else:
+            s_now = min(max(float(eval_param_expr(placed.s, self.param_values())), 0.0), odr.length)
+            rel = h - float(odr.reference_pose(s_now)[2]) - (0.0 if along_s else math.pi)
+        return math.remainder(rel, 2.0 * math.pi)
+
     def against_s(self, pos_el, placed) -> bool:
         """Whether the entity faces against its lane's driving direction (addt-dsl, like
         OpenSCENARIO's default, drives an actor in its lane's direction)."""
-        road_name, lane, s = placed.road, placed.lane, placed.s
-        road_id = next(i for i, r in self.roads.items() if r.name == road_name)
-        odr = self.network.road(road_id)
-        orient = only_child(pos_el).find("Orientation") if only_child(pos_el) is not None else None
-        if orient is None or orient.get("h") is None or lane == 0:
-            return False
         try:
-            h = self.mirror(self.value(orient, "h"))
-            if orient.get("type", "relative") == "absolute":
-                s_now = float(eval_param_expr(s, self.param_values()))
-                h -= odr.reference_pose(s_now)[2] + (0.0 if odr.travel_direction(lane) > 0 else math.pi)
-            elif only_child(pos_el).tag != "LanePosition":  # relative to the road's +s
-                h -= 0.0 if odr.travel_direction(lane) > 0 else math.pi
-            return math.cos(h) < 0
+            heading = self.file_heading(pos_el, placed)
+            return heading is not None and math.cos(self.heading_from_lane(heading, placed, False)) < 0
         except (ValueError, ArithmeticError, Stop):
             return False
 

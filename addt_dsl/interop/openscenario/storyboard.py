@@ -364,6 +364,7 @@ class Storyboard:
             self.placed[who] = got
             self.actors[who]["lane_now"] = got.lane
             self.actors[who]["against_s"] = self.against_s(act.find("Position"), got)
+            self.actors[who]["heading"] = self.file_heading(act.find("Position"), got)
         return True
 
     @INIT_ACTIONS.register("AssignRouteAction", "exact", "the actor's route (inline or from a route catalog)")

@@ -122,3 +122,27 @@ def test_an_ego_without_a_route_drives_on_straight_through_junctions():
     assert any(d.code == "W0802" and "no route in the file" in d.message for d in got.diagnostics)
     # A road met twice ends the route: it never loops.
     assert len(set(route)) == len(route)
+
+
+def _body_heading(plan, actor) -> float:
+    """The world heading [rad] the plan gives an actor at its place: its lane's driving
+    direction (turned round for `reverse`) plus its `yaw`, from the map, not the runtime."""
+    road = next(r for r in plan.roads if r.name == actor.road)
+    odr = parse_xodr(road.xodr_text, road.xodr_file).road(road.xodr_road_id)
+    s = float(eval_param_expr(actor.s, {}))
+    way = odr.travel_direction(int(actor.lane.value)) * (-1 if actor.reverse else 1)
+    yaw = float(eval_param_expr(actor.yaw, {})) if actor.yaw is not None else 0.0
+    return float(odr.reference_pose(s)[2]) + (0.0 if way > 0 else math.pi) + yaw
+
+
+def test_slaloms_containers_keep_their_world_headings():
+    # Slalom places c1, c2 along the road (h = -pi/2, pi/2 in CARLA's frame: +pi/2, -pi/2 in
+    # the map's) and c3-c5 across it (h = 0). Imported, each stood facing its lane's way:
+    # c1 and c2 turned round, c3-c5 along the road.
+    plan = _import("Slalom.xosc").plan
+    want = {"c1": math.pi / 2, "c2": -math.pi / 2, "c3": 0.0, "c4": 0.0, "c5": 0.0}
+    got = {a.name: _body_heading(plan, a) for a in plan.agents}
+    off = {n: abs(math.remainder(got[n] - h, 2 * math.pi)) for n, h in want.items()}
+    assert max(off.values()) < 1e-9, got
+    # The hero faces where the file says (-pi/2 in CARLA's frame), not its lane's 1.5e-4 rad off it.
+    assert abs(math.remainder(_body_heading(plan, plan.ego) - math.pi / 2, 2 * math.pi)) < 1e-9

@@ -962,3 +962,65 @@ def test_a_lane_offset_comes_back_from_the_xosc_alone(tmp_path):
     (step,) = next(a for a in got.plan.agents if a.name == "drifter").triggers
     assert step.clause.name == "lane_offset" and step.clause.settings["shape"] == "sinusoidal"
     assert (step.clause.settings["to"].value, step.clause.settings["max_lat_accel"].value) == (1.2, 1.5)
+
+
+def test_a_relative_orientation_on_a_lane_position_is_the_bodys_yaw():
+    # alks_cut-out's Box: <LanePosition ...><Orientation type="relative" h="0.1"/>: esmini
+    # stands it at 0.1 rad to its lane (its trajectory's heading 0.10000 at t = 0); it stood
+    # along the lane.
+    got = import_xosc(ROOT / "tests" / "data" / "esmini" / "xosc" / "alks_cut-out.xosc",
+                      root=ROOT / "tests" / "data" / "esmini")
+    box = next(a for a in got.plan.agents if a.name == "Box")
+    assert box.yaw is not None and box.yaw.value == 0.1
+    assert "yaw 0.1 rad" in got.text
+
+
+def test_a_pitch_or_roll_is_said_not_modelled():
+    # bicycle_fall_over's trajectory rolls the cyclist over (r = 1.5 rad): the twin keeps
+    # bodies level, so the import says so (W0802) rather than dropping it.
+    got = import_xosc(ROOT / "tests" / "data" / "esmini" / "xosc" / "bicycle_fall_over.xosc",
+                      root=ROOT / "tests" / "data" / "esmini", ego="scripted")
+    rolls = [d for d in got.diagnostics if d.code == "W0802" and "roll 1.5 rad" in d.message]
+    assert len(rolls) == 3 and "not modelled" in rolls[0].message
+    # A zero pitch and roll (pedestrian's Orientation p="0" r="0") is no warning.
+    quiet = import_xosc(ROOT / "tests" / "data" / "esmini" / "xosc" / "pedestrian.xosc",
+                        root=ROOT / "tests" / "data" / "esmini", ego="scripted")
+    assert not [d for d in quiet.diagnostics if "pitch" in d.message or "roll" in d.message]
+    # pedestrian_collision lays its walker down (a teleport in place, roll 1.57 rad) and back up.
+    down = import_xosc(ROOT / "tests" / "data" / "esmini" / "xosc" / "pedestrian_collision.xosc",
+                       root=ROOT / "tests" / "data" / "esmini", ego="scripted")
+    assert [d.message.split(":")[0] for d in down.diagnostics if "roll" in d.message] == \
+        ["roll 1.57 rad of pedestrian_adult", "roll -1.57 rad of pedestrian_adult"]
+
+
+def test_a_teleport_that_turns_the_actor_says_it_does_not(tmp_path):
+    # lane_change_simple's teleport back to s = 10 m, given a heading (0.5 rad to its lane):
+    # the language's `teleport` moves and does not turn, so the import says so (W0802); the
+    # same teleport facing its lane (h = 0) is said nothing.
+    text = (ESMINI / "xosc" / "lane_change_simple.xosc").read_text()
+    lane = '<LanePosition roadId="0" laneId="-1" offset="0" s="10"/>'
+    assert lane in text
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "turned.xosc"
+    said = {}
+    for h in ("0.5", "0"):
+        path.write_text(text.replace(lane, lane[:-2] + f'><Orientation type="relative" h="{h}"/></LanePosition>'))
+        got = import_xosc(path, root=tmp_path / "esmini", lenient=True, ego="scripted")
+        said[h] = [d.message for d in got.diagnostics if "heading after the teleport" in d.message]
+    assert len(said["0.5"]) == 2 and "does not turn" in said["0.5"][0] and said["0"] == []
+
+
+def test_a_heading_on_an_entity_moving_from_the_start_is_said_to_give_way_to_its_path(tmp_path):
+    # cut-in_simple's OverTaker starts at speed facing its lane (absolute h = 0 on a road
+    # along +x): nothing said. Turned 0.2 rad, it is placed with that yaw, but an agent
+    # moving from the start follows its path from t = 0: W0802 says so.
+    text = (ESMINI / "xosc" / "cut-in_simple.xosc").read_text()
+    orient = '<Orientation type="absolute" h="0"'
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "turned.xosc"
+    for h, said in (("0", 0), ("0.2", 1)):
+        path.write_text(text.replace(orient, orient.replace('h="0"', f'h="{h}"')))
+        got = import_xosc(path, root=tmp_path / "esmini")
+        notes = [d.message for d in got.diagnostics if "moves from the start" in d.message]
+        assert len(notes) == said, notes
+        assert ("yaw 0.2 rad" in got.text) == bool(said)

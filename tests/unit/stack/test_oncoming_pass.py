@@ -92,15 +92,18 @@ def test_when_the_rule_holds_the_pass_wins_over_waiting_behind(gap_m, speed):
 
 def test_carlas_slalom_containers_at_the_line_hide_the_oncoming_lane():
     """CARLA's Slalom as imported, seen from where the ego stands behind the containers (its
-    centre at path station 18.6 m): c1 across the centre line (behind it now), c2 on the
-    shoulder, c3 and c5 0.1 m short of the line, c4 in the right half of the lane (the
-    tracked stations and offsets of the closed-loop run; the centre line at t = 0 here). The
-    group c3-c5 takes the oncoming lane to pass; with a lidar seeing 200 m the rule fails
-    only because c3 hides that lane (its centre past c3's edge only to 7.45 x 4.03 / 1.93 =
-    15.6 m): with nothing hidden it would hold."""
+    centre at path station 17.0 m): c1 along the centre line, across it (behind it now), c2
+    on the shoulder, c3 and c5 across the road (their 2 m length across it, as the file's
+    h = 0 stands them) reaching 0.4 m over the line, c4 across the right half of the lane
+    (the tracked stations and offsets of the closed-loop run; the centre line at t = 0 here;
+    boxes as the stack takes them, along and across the road). The group c3-c5 takes the
+    oncoming lane to pass; with a lidar seeing 200 m the rule fails only because c3 hides
+    that lane (its centre past c3's edge only to 9.55 x 4.03 / 2.43 = 15.8 m): with nothing
+    hidden it would hold."""
     planner = LatticePlanner({"cruise_speed": V_LIMIT}, HERO)
     path = [(9.3, 2.4), (19.3, -2.6), (29.3, 1.4), (39.3, -0.6), (49.3, 1.4)]  # (s, t) from the lane centre
-    objs = [(s, t - 2.0, 0.0, 0.0, *CONTAINER) for s, t in path]
-    args = (-1, 1, ROAD, 18.6, -2.03, 0.0, objs, 200.0, V_LIMIT, 109.0)
-    assert planner._oncoming_clear(*args) == (False, True, pytest.approx(28.3))
+    boxes = [CONTAINER, CONTAINER, CONTAINER[::-1], CONTAINER[::-1], CONTAINER[::-1]]  # (along, across) the road
+    objs = [(s, t - 2.0, 0.0, 0.0, *box) for (s, t), box in zip(path, boxes)]
+    args = (-1, 1, ROAD, 17.0, -2.03, 0.0, objs, 200.0, V_LIMIT, 109.0)
+    assert planner._oncoming_clear(*args) == (False, True, pytest.approx(28.8))
     assert planner._oncoming_clear(*args, occlusion=False)[0]
