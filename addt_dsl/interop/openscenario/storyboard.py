@@ -685,8 +685,36 @@ class Storyboard:
             return False
         if event.get("name", "") in self.ended_before(other, events, (), started=True):
             return False
+        mine, theirs_at = self.start_time(event), self.start_time(other)
+        if mine is not None and theirs_at is not None and theirs_at >= mine \
+                and events.index(other) > events.index(event) \
+                and self.value(event, "maximumExecutionCount", default=1.0) <= 1:
+            return False  # (events are started in their order: in one step, it starts first)
         ours = event_domains(event, running=False)
         return not (prio == "override" and theirs is not None and ours is not None and theirs <= ours)
+
+    def start_time(self, event) -> float | None:
+        """The earliest an event can start [s] when its start trigger is only simulation times
+        past a value (and its own act or story starting): the largest value (-inf: as its act
+        starts); None otherwise. It starts at that time or its act's start, whichever is later
+        (or, on a rising edge, never)."""
+        out = float("-inf")
+        if len(list(event.iterfind("StartTrigger/ConditionGroup"))) > 1:
+            return None
+        for cond in event.iterfind("StartTrigger/ConditionGroup/Condition"):
+            sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+            time = cond.find("ByValueCondition/SimulationTimeCondition")
+            if self.value(cond, "delay", units.TIME, 0.0) != 0.0 \
+                    or cond.get("conditionEdge", "none") not in ("none", "rising"):
+                return None
+            if time is not None and (time.get("rule") or "").startswith("greater"):
+                out = max(out, self.value(time, "value"))
+            elif sesc is None or self.raw(sesc, "storyboardElementType", required=False) not in ("act", "story") \
+                    or self.raw(sesc, "storyboardElementRef", required=False) not in (
+                        getattr(self, "act_name", None), getattr(self, "story_name", None)) \
+                    or self.raw(sesc, "state", required=False) not in ("startTransition", "runningState"):
+                return None
+        return out
 
     def ended_before(self, event, events: list, seen: tuple, started: bool = False) -> set:
         """The events of `events` that have ended when `event` starts, each run once (with
@@ -716,7 +744,10 @@ class Storyboard:
             at = next((i for i, t in enumerate(info["triggers"]) if t.clause is first.clause), None) \
                 if info is not None else None
             step = info["triggers"][at] if at is not None else None
+            conds = list(event.iterfind("StartTrigger/ConditionGroup/Condition"))
             if step is None or step.edge or step.delay_s is not None or step.hold_s is not None \
+                    or any(c.get("conditionEdge", "none") != "none" or self.value(c, "delay", units.TIME, 0.0)
+                           for c in conds) \
                     or len(event.findall("Action")) > 1 \
                     or any(len(o.findall("Action")) > 1 for o in running):
                 self.skip(event, f"event '{name}' has priority skip, and its start (an edge, a delay, a duration, "
