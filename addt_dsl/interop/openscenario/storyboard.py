@@ -686,7 +686,7 @@ class Storyboard:
         if event.get("name", "") in self.ended_before(other, events, (), started=True):
             return False
         mine, theirs_at = self.start_time(event), self.start_time(other)
-        if mine is not None and theirs_at is not None and theirs_at >= mine \
+        if mine is not None and (mine == float("-inf") or (theirs_at is not None and theirs_at >= mine)) \
                 and events.index(other) > events.index(event) \
                 and self.value(event, "maximumExecutionCount", default=1.0) <= 1:
             return False  # (events are started in their order: in one step, it starts first)
