@@ -158,9 +158,16 @@ for _path, _status, _note in (
         ("ManeuverGroup/CatalogReference", "exact", "the Maneuver entry of the ManeuverCatalog's directory, its "
                                                     "parameters as the reference assigns them"),
         ("ManeuverGroup/Maneuver", "exact", "maneuvers run with their group"),
-        ("Maneuver/Event", "approx", "each action a step; priority and maximumExecutionCount as `when C repeat N` "
-                                    "when a condition of its own starts it (without one, in an act started by "
-                                    "another: `when started(A.ACT) repeat N`); complete after its last run"),
+        ("Maneuver/Event", "approx", "each action a step; maximumExecutionCount as `when C repeat N` when a "
+                                    "condition of its own starts it (without one, in an act started by another: "
+                                    "`when started(A.ACT) repeat N`); complete after its last run. Priority: "
+                                    "exact where no other event of the maneuver can be running when it starts "
+                                    "(it starts on their end, they start on its state, their actions end as they "
+                                    "start, or it and they start on simulation times in file order) and for "
+                                    "parallel; an override whose actions take every domain of theirs replaces "
+                                    "them (exact), else W0802 (their actions on other domains run on); skip as "
+                                    "`when C and not (started(A.x) and not ended(A.x))` on a condition without "
+                                    "edge or delay, else refused; a priority other than these refused"),
         ("Maneuver/ParameterDeclarations", "exact", "one scope with the global parameters (a global value wins)"),
         ("Event/Action", "exact", "private actions and traffic signal actions (see the actions)"),
         ("Event/StartTrigger", "approx", "condition groups as `any`/`all`, edges and delays; several edges or "
