@@ -26,14 +26,16 @@ TEMPLATE = """<?xml version="1.0" encoding="UTF-8"?>
           <SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>
           <SpeedActionTarget><AbsoluteTargetSpeed value="10"/></SpeedActionTarget>
         </SpeedAction></LongitudinalAction></PrivateAction>
-        <PrivateAction><TeleportAction><Position><LanePosition roadId="1" laneId="-1" offset="0" s="20"/></Position></TeleportAction></PrivateAction>
+        <PrivateAction><TeleportAction><Position>
+          <LanePosition roadId="1" laneId="-1" offset="0" s="20"/></Position></TeleportAction></PrivateAction>
       </Private>
       <Private entityRef="Car">
         <PrivateAction><LongitudinalAction><SpeedAction>
           <SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" value="0"/>
           <SpeedActionTarget><AbsoluteTargetSpeed value="10"/></SpeedActionTarget>
         </SpeedAction></LongitudinalAction></PrivateAction>
-        <PrivateAction><TeleportAction><Position><LanePosition roadId="1" laneId="-1" offset="0" s="100"/></Position></TeleportAction></PrivateAction>
+        <PrivateAction><TeleportAction><Position>
+          <LanePosition roadId="1" laneId="-1" offset="0" s="100"/></Position></TeleportAction></PrivateAction>
       </Private>
     </Actions></Init>
     <Story name="S">

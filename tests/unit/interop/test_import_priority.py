@@ -37,7 +37,7 @@ def test_an_override_that_may_end_actions_on_another_domain_is_approximate(tmp_p
     got = imported(tmp_path, speed("ramp", "override", 20, at(1)), lane_change("lc", "override", -2, at(3)))
     notes = priority_notes(got)
     assert got.plan is not None
-    assert [(d.code, d.span.line) for d in notes] == [("W0802", 33)], notes  # the lane change's event
+    assert [(d.code, d.span.line) for d in notes] == [("W0802", 35)], notes  # the lane change's event
     assert "'lc' has priority override" in notes[0].message and "('ramp' may)" in notes[0].message
     assert "only those on a domain of its own actions (lat)" in notes[0].message
 
