@@ -105,6 +105,7 @@ AT_ONCE_ACTIONS = frozenset({"TeleportAction", "AssignRouteAction", "VisibilityA
 ACTION_WRAPPERS = frozenset({"PrivateAction", "GlobalAction", "LongitudinalAction", "LateralAction",
                              "RoutingAction"})
 ENDED_STATES = ("endTransition", "completeState")
+END_MARGIN_S = 0.1  # an action's end against another's start on times: a few steps of esmini's either way
 
 
 def action_leaf(action):
@@ -163,7 +164,8 @@ for _path, _status, _note in (
                                     "`when started(A.ACT) repeat N`); complete after its last run. Priority: "
                                     "exact where no other event of the maneuver can be running when it starts "
                                     "(it starts on their end, they start on its state, their actions end as they "
-                                    "start, or it and they start on simulation times in file order) and for "
+                                    "start, it and they start on simulation times in file order, or their lane "
+                                    "changes of a given time end 0.1 s before its time) and for "
                                     "parallel; an override whose actions take every domain of theirs replaces "
                                     "them (exact), else W0802 (their actions on other domains run on); skip as "
                                     "`when C and not (started(A.x) and not ended(A.x))` on a condition without "
@@ -618,13 +620,15 @@ class Storyboard:
         self.maneuvers.setdefault(maneuver.get("name", ""), []).extend(
             e.get("name", "") for e in maneuver.iterfind("Event"))
         events = list(maneuver.iterfind("Event"))
+        # Where the act's start time is known: a time, else 0 s (an act started by another's end: not).
+        act_start = None if getattr(self, "act_label", None) else (act_at or 0.0)
         for event in events:
-            if self.priority(event, events):
+            if self.priority(event, events, act_start):
                 self.event(event, who, act_at)
 
     # -- event priority
 
-    def priority(self, event, events: list) -> bool:
+    def priority(self, event, events: list, act_start: float | None = None) -> bool:
         """An event's priority against the other events of its maneuver (`events`); False: the
         event is refused. Where no other event can be running when it starts, the priority
         changes nothing; an override whose start ends others' actions beyond the domains it
@@ -640,7 +644,7 @@ class Storyboard:
             return False
         if prio == "parallel":
             return True
-        running = [o for o in events if o is not event and self.may_run_at_start(event, o, prio, events)]
+        running = [o for o in events if o is not event and self.may_run_at_start(event, o, prio, events, act_start)]
         if not running:
             return True
         names = ", ".join(f"'{o.get('name', '')}'" for o in running)
@@ -678,7 +682,7 @@ class Storyboard:
             found.append((owner, self.raw(sesc, "state", required=False)))
         return found[0] if len(found) == 1 and found[0][0] is not None else None
 
-    def may_run_at_start(self, event, other, prio: str, events: list) -> bool:
+    def may_run_at_start(self, event, other, prio: str, events: list, act_start: float | None = None) -> bool:
         """Whether `other` may be running when `event` starts, so that the priority makes a
         difference. Provably not: its actions all end as they start; it has ended before `event`
         starts (a chain of starts on ends: `ended_before`); it starts after `event` starts (a
@@ -697,8 +701,28 @@ class Storyboard:
                 and events.index(other) > events.index(event) \
                 and self.value(event, "maximumExecutionCount", default=1.0) <= 1:
             return False  # (events are started in their order: in one step, it starts first)
+        length = self.known_length(other)
+        if mine is not None and theirs_at is not None and length is not None and act_start is not None \
+                and max(mine, act_start) >= max(theirs_at, act_start) + length + END_MARGIN_S:
+            return False  # it ends before this one starts
         ours = event_domains(event, running=False)
         return not (prio == "override" and theirs is not None and ours is not None and theirs <= ours)
+
+    def known_length(self, event) -> float | None:
+        """How long an event's actions run [s] where the file says it: lane changes over a time
+        (the others end as they start); None otherwise, or when it may run more than once."""
+        if self.value(event, "maximumExecutionCount", default=1.0) > 1:
+            return None
+        out = 0.0
+        for action in event.iterfind("Action"):
+            leaf = action_leaf(action)
+            if at_once(leaf):
+                continue
+            dyn = child_at(leaf, "LaneChangeActionDynamics") if leaf.tag == "LaneChangeAction" else None
+            if dyn is None or dyn.get("dynamicsDimension") != "time":
+                return None
+            out = max(out, self.value(dyn, "value", units.TIME))
+        return out
 
     def start_time(self, event) -> float | None:
         """The earliest an event can start [s] when its start trigger is only simulation times

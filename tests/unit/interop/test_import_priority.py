@@ -18,12 +18,13 @@ def car_lines(got) -> list[str]:
 
 def test_one_event_or_events_that_cannot_overlap_translate_without_a_note(tmp_path):
     # Alone; after the other's end; started on simulation times in file order (the lane change,
-    # later, cannot run when the speed change starts; it runs in parallel); an override whose
-    # speed action replaces the other's.
+    # later, cannot run when the speed change starts; it runs in parallel); after a lane change
+    # of 2 s from 1 s; an override whose speed action replaces the other's.
     for events in ((speed("ramp", "override", 20, at(1)),),
                    (speed("ramp", "override", 20, at(1)), lane_change("lc", "override", -2, after("ramp"))),
                    (speed("ramp", "skip", 20, at(1)), lane_change("lc", "skip", -2, after("ramp"))),
                    (speed("ramp", "override", 20, at(1)), lane_change("lc", "parallel", -2, at(3))),
+                   (lane_change("lc", "override", -2, at(1), duration_s=2.0), speed("ramp", "override", 20, at(3.2))),
                    (speed("ramp", "override", 20, at(1)), speed("hold", "override", 14, at(4), shape="step"))):
         got = imported(tmp_path, *events)
         assert got.plan is not None and not priority_notes(got), got.diagnostics
@@ -40,6 +41,13 @@ def test_an_override_that_may_end_actions_on_another_domain_is_approximate(tmp_p
     assert [(d.code, d.span.line) for d in notes] == [("W0802", 35)], notes  # the lane change's event
     assert "'lc' has priority override" in notes[0].message and "('ramp' may)" in notes[0].message
     assert "only those on a domain of its own actions (lat)" in notes[0].message
+
+
+def test_a_lane_change_of_a_given_time_may_still_run_at_an_override_a_few_steps_after_it(tmp_path):
+    # From 1 s over 2 s: it ends at 3 s, give or take a step; an override at 3.05 s may find it.
+    got = imported(tmp_path, lane_change("lc", "override", -2, at(1), duration_s=2.0),
+                   speed("ramp", "override", 20, at(3.05)))
+    assert [d.code for d in priority_notes(got)] == ["W0802"] and "('lc' may)" in priority_notes(got)[0].message
 
 
 def test_the_same_events_in_parallel_need_no_note(tmp_path):
