@@ -631,9 +631,9 @@ class Storyboard:
     def priority(self, event, events: list, act_start: float | None = None) -> bool:
         """An event's priority against the other events of its maneuver (`events`); False: the
         event is refused. Where no other event can be running when it starts, the priority
-        changes nothing; an override whose start ends others' actions beyond the domains it
-        takes has no form in the language (refused); a skip waits on the others' states
-        (`skip_priority`, once every step is named)."""
+        changes nothing; an override whose start may end others' actions beyond the domains it
+        takes has no form in the language (W0802: they run on); a skip waits on the others'
+        states (`skip_priority`, once every step is named)."""
         name = event.get("name", "")
         prio = self.raw(event, "priority", required=False)
         if prio == "overwrite":  # OpenSCENARIO 1.0's name of 1.2's override
@@ -672,7 +672,9 @@ class Storyboard:
             sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
             kind = self.raw(sesc, "storyboardElementType", required=False) if sesc is not None else None
             if kind in ("act", "story") and self.raw(sesc, "state", required=False) in ("startTransition",
-                                                                                         "runningState"):
+                                                                                         "runningState") \
+                    and self.raw(sesc, "storyboardElementRef", required=False) in (
+                        getattr(self, "act_name", None), getattr(self, "story_name", None)):
                 continue  # its own act (story) has started: true whenever the event is armed
             if kind not in ("event", "action"):
                 return None
@@ -685,10 +687,12 @@ class Storyboard:
     def may_run_at_start(self, event, other, prio: str, events: list, act_start: float | None = None) -> bool:
         """Whether `other` may be running when `event` starts, so that the priority makes a
         difference. Provably not: its actions all end as they start; it has ended before `event`
-        starts (a chain of starts on ends: `ended_before`); it starts after `event` starts (a
-        chain of starts on states: `started_after`). For an override, also not where `event`'s
-        actions take every domain of `other`'s running ones: its start ends them whatever the
-        priority (esmini's domain conflict, the twin's behaviour replaced on its channel)."""
+        starts, or starts after it (chains of starts on states: `ended_before`); both start on
+        simulation times, `other` no earlier and listed after `event`; `other` starts on a time
+        and its lane changes of a given time end before `event`'s time. For an override, also
+        not where `event`'s actions take every domain of `other`'s running ones: its start ends
+        them whatever the priority (esmini's domain conflict, the twin's behaviour replaced on
+        its channel)."""
         theirs = event_domains(other)
         if theirs == set():
             return False
