@@ -82,3 +82,13 @@ def test_an_event_without_a_known_priority_is_refused(tmp_path):
         assert got.plan is None
         assert any(d.code == "E0803" and f"'ramp' has {said}: esmini never starts it" in d.message
                    for d in got.diagnostics), got.diagnostics
+
+
+def test_an_event_started_on_anothers_start_finds_it_running(tmp_path):
+    # The lane change starts as the speed change starts: the speed change's override cannot
+    # find it running (it starts after), the lane change's may end the speed change (W0802).
+    got = imported(tmp_path, speed("ramp", "override", 20, at(1)),
+                   lane_change("lc", "override", -2, after("ramp", "startTransition")))
+    notes = priority_notes(got)
+    assert [d.code for d in notes] == ["W0802"]
+    assert "event 'lc'" in notes[0].message and "('ramp' may)" in notes[0].message
