@@ -47,6 +47,7 @@ class Importer(Parameters, CarlaFrame):
         self.maneuvers: dict[str, list[str]] = {}  # maneuver name -> its events' names
         self.act_events: dict[str, list[str]] = {}  # act name -> its events' names (those with steps)
         self.event_order: list[str] = []  # events that became steps, in file order
+        self.skipping: list = []  # (event, the events of its maneuver that may run): priority skip, at the end
         self.end: TriggerPlan | None = None  # the storyboard's stop trigger beyond its time
         self.relative_paths: list = []  # (clause, shape element, entity): a trajectory relative to an entity
         self.pending: list = []  # storyboard.PendingEvent: events started by another event, linked at the end

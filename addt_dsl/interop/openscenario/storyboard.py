@@ -84,6 +84,62 @@ def duration_of(clause: ClausePlan) -> float:
         d = times[-1]
     return float(d.value) if isinstance(d, E.Num) else 0.0
 
+# -- event priority (OpenSCENARIO 1.2 Event/@priority, esmini's Event::Start)
+#
+# override (1.0's overwrite): starting, the event ends every other running event of its
+# maneuver (their actions stop where they are); skip: it does not start while another event
+# of its maneuver runs (its start condition is asked again at the next step); parallel: it
+# starts anyway. Whatever the priority, an event's start ends the running actions of the same
+# actor on a control domain it shares (esmini's domain conflict; the twin's behaviour that
+# replaces another on its channel). The domains of esmini's private actions
+# (OSCPrivateAction.hpp); a wrapper element is looked through.
+ACTION_DOMAINS = {"SpeedAction": {"long"}, "SpeedProfileAction": {"long"}, "LongitudinalDistanceAction": {"long"},
+                  "SynchronizeAction": {"long"}, "AcquirePositionAction": {"long"}, "LaneChangeAction": {"lat"},
+                  "LaneOffsetAction": {"lat"}, "LateralDistanceAction": {"lat"},
+                  "FollowTrajectoryAction": {"lat", "long"}, "TeleportAction": {"lat", "long"},
+                  "AssignRouteAction": set(), "VisibilityAction": set()}
+# Actions that end in the step they start (a speed action of step dynamics too): nothing of
+# them runs for another event to end.
+AT_ONCE_ACTIONS = frozenset({"TeleportAction", "AssignRouteAction", "VisibilityAction", "EnvironmentAction",
+                             "ParameterAction", "VariableAction", "TrafficSignalAction", "InfrastructureAction"})
+ACTION_WRAPPERS = frozenset({"PrivateAction", "GlobalAction", "LongitudinalAction", "LateralAction",
+                             "RoutingAction"})
+ENDED_STATES = ("endTransition", "completeState")
+END_MARGIN_S = 0.1  # an action's end against another's start on times: a few steps of esmini's either way
+
+
+def action_leaf(action):
+    """The element of the action an <Action> performs, through its wrappers (None: empty)."""
+    el = only_child(action)
+    while el is not None and el.tag in ACTION_WRAPPERS:
+        inner = only_child(el)
+        if inner is None:
+            break
+        el = inner
+    return el
+
+
+def at_once(leaf) -> bool:
+    return leaf is not None and (leaf.tag in AT_ONCE_ACTIONS or (
+        leaf.tag == "SpeedAction" and child_at(leaf, "SpeedActionDynamics") is not None
+        and child_at(leaf, "SpeedActionDynamics").get("dynamicsShape") == "step"))
+
+
+def event_domains(event, running: bool = True) -> set | None:
+    """The control domains an event's actions take ({"long", "lat"}): of those that run on after
+    their start (`running`; empty: they all end as they start), or of all (the domains whose
+    running actions its start ends); None: an action whose domains are not known here."""
+    out: set = set()
+    for action in event.iterfind("Action"):
+        leaf = action_leaf(action)
+        if running and at_once(leaf):
+            continue
+        if leaf is None or leaf.tag not in ACTION_DOMAINS:
+            return None
+        out |= ACTION_DOMAINS[leaf.tag]
+    return out
+
+
 # The storyboard's structure (walked by `Storyboard`, not dispatched): each element under its
 # parent, as the schema names it (docs/osc_schema.py).
 for _path, _status, _note in (
@@ -103,9 +159,17 @@ for _path, _status, _note in (
         ("ManeuverGroup/CatalogReference", "exact", "the Maneuver entry of the ManeuverCatalog's directory, its "
                                                     "parameters as the reference assigns them"),
         ("ManeuverGroup/Maneuver", "exact", "maneuvers run with their group"),
-        ("Maneuver/Event", "approx", "each action a step; priority and maximumExecutionCount as `when C repeat N` "
-                                    "when a condition of its own starts it (without one, in an act started by "
-                                    "another: `when started(A.ACT) repeat N`); complete after its last run"),
+        ("Maneuver/Event", "approx", "each action a step; maximumExecutionCount as `when C repeat N` when a "
+                                    "condition of its own starts it (without one, in an act started by another: "
+                                    "`when started(A.ACT) repeat N`); complete after its last run. Priority: "
+                                    "exact where no other event of the maneuver can be running when it starts "
+                                    "(it starts on their end, they start on its state, their actions end as they "
+                                    "start, it and they start on simulation times in file order, or their lane "
+                                    "changes of a given time end 0.1 s before its time) and for "
+                                    "parallel; an override whose actions take every domain of theirs replaces "
+                                    "them (exact), else W0802 (their actions on other domains run on); skip as "
+                                    "`when C and not (started(A.x) and not ended(A.x))` on a condition without "
+                                    "edge or delay, else refused; a priority other than these refused"),
         ("Maneuver/ParameterDeclarations", "exact", "one scope with the global parameters (a global value wins)"),
         ("Event/Action", "exact", "private actions and traffic signal actions (see the actions)"),
         ("Event/StartTrigger", "approx", "condition groups as `any`/`all`, edges and delays; several edges or "
@@ -469,6 +533,7 @@ class Storyboard:
                 self.maneuver_group(group, act_at)
             self.act_end(act, after_act, before)
         self.link_sequences()
+        self.skip_priority()
 
     def act_begin(self, after_act) -> dict:
         """Where each actor's steps stand before an act (`act_end` takes what the act added);
@@ -555,8 +620,194 @@ class Storyboard:
     def maneuver(self, maneuver, who: str, act_at) -> None:
         self.maneuvers.setdefault(maneuver.get("name", ""), []).extend(
             e.get("name", "") for e in maneuver.iterfind("Event"))
-        for event in maneuver.iterfind("Event"):
-            self.event(event, who, act_at)
+        events = list(maneuver.iterfind("Event"))
+        # Where the act's start time is known: a time, else 0 s (an act started by another's end: not).
+        act_start = None if getattr(self, "act_label", None) else (act_at or 0.0)
+        for event in events:
+            if self.priority(event, events, act_start):
+                self.event(event, who, act_at)
+
+    # -- event priority
+
+    def priority(self, event, events: list, act_start: float | None = None) -> bool:
+        """An event's priority against the other events of its maneuver (`events`); False: the
+        event is refused. Where no other event can be running when it starts, the priority
+        changes nothing; an override whose start may end others' actions beyond the domains it
+        takes has no form in the language (W0802: they run on); a skip waits on the others'
+        states (`skip_priority`, once every step is named)."""
+        name = event.get("name", "")
+        prio = self.raw(event, "priority", required=False)
+        if prio == "overwrite":  # OpenSCENARIO 1.0's name of 1.2's override
+            prio = "override"
+        if prio not in ("override", "skip", "parallel"):
+            self.skip(event, f"event '{name}' has " + (f"priority '{prio}'" if prio else "no priority")
+                      + ": esmini never starts it", "an event's priority is override, skip or parallel")
+            return False
+        if prio == "parallel":
+            return True
+        running = [o for o in events if o is not event and self.may_run_at_start(event, o, prio, events, act_start)]
+        if not running:
+            return True
+        names = ", ".join(f"'{o.get('name', '')}'" for o in running)
+        if prio == "override":
+            # The language ends a running behaviour only by another on its channel: the others'
+            # actions on domains this event does not take run on.
+            ours = event_domains(event, running=False) or set()
+            self.approx(event, f"event '{name}' has priority override: esmini ends the other events of its maneuver "
+                               f"that run when it starts ({names} may), their actions on every domain; here only "
+                               "those on a domain of its own actions (" + (", ".join(sorted(ours)) or "none") + ")",
+                        "an override whose other events cannot be running when it starts, or whose actions take "
+                        "every domain of theirs, is exact")
+            return True
+        self.skipping.append((event, running, events))
+        return True
+
+    def starts_on(self, event, events: list):
+        """(event name, state) when an event's start trigger is one StoryboardElementStateCondition on
+        an event (or an action of one) of `events`, beside only its own act or story starting; else None."""
+        conds = list(event.iterfind("StartTrigger/ConditionGroup/Condition"))
+        if len(list(event.iterfind("StartTrigger/ConditionGroup"))) != 1:
+            return None
+        found = []
+        for cond in conds:
+            sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+            kind = self.raw(sesc, "storyboardElementType", required=False) if sesc is not None else None
+            if kind in ("act", "story") and self.raw(sesc, "state", required=False) in ("startTransition",
+                                                                                         "runningState") \
+                    and self.raw(sesc, "storyboardElementRef", required=False) in (
+                        getattr(self, "act_name", None), getattr(self, "story_name", None)):
+                continue  # its own act (story) has started: true whenever the event is armed
+            if kind not in ("event", "action"):
+                return None
+            ref = self.raw(sesc, "storyboardElementRef", required=False)
+            owner = next((e.get("name", "") for e in events if e.get("name") == ref or (
+                kind == "action" and any(a.get("name") == ref for a in e.iterfind("Action")))), None)
+            found.append((owner, self.raw(sesc, "state", required=False)))
+        return found[0] if len(found) == 1 and found[0][0] is not None else None
+
+    def may_run_at_start(self, event, other, prio: str, events: list, act_start: float | None = None) -> bool:
+        """Whether `other` may be running when `event` starts, so that the priority makes a
+        difference. Provably not: its actions all end as they start; it has ended before `event`
+        starts, or starts after it (chains of starts on states: `ended_before`); both start on
+        simulation times, `other` no earlier and listed after `event`; `other` starts on a time
+        and its lane changes of a given time end before `event`'s time. For an override, also
+        not where `event`'s actions take every domain of `other`'s running ones: its start ends
+        them whatever the priority (esmini's domain conflict, the twin's behaviour replaced on
+        its channel)."""
+        theirs = event_domains(other)
+        if theirs == set():
+            return False
+        if other.get("name", "") in self.ended_before(event, events, ()):
+            return False
+        if event.get("name", "") in self.ended_before(other, events, (), started=True):
+            return False
+        mine, theirs_at = self.start_time(event), self.start_time(other)
+        if mine is not None and (mine == float("-inf") or (theirs_at is not None and theirs_at >= mine)) \
+                and events.index(other) > events.index(event) \
+                and self.value(event, "maximumExecutionCount", default=1.0) <= 1:
+            return False  # (events are started in their order: in one step, it starts first)
+        length = self.known_length(other)
+        if mine is not None and theirs_at is not None and length is not None and act_start is not None \
+                and max(mine, act_start) >= max(theirs_at, act_start) + length + END_MARGIN_S:
+            return False  # it ends before this one starts
+        ours = event_domains(event, running=False)
+        return not (prio == "override" and theirs is not None and ours is not None and theirs <= ours)
+
+    def known_length(self, event) -> float | None:
+        """How long an event's actions run [s] where the file says it: lane changes over a time
+        (the others end as they start); None otherwise, or when it may run more than once."""
+        if self.value(event, "maximumExecutionCount", default=1.0) > 1:
+            return None
+        out = 0.0
+        for action in event.iterfind("Action"):
+            leaf = action_leaf(action)
+            if at_once(leaf):
+                continue
+            dyn = child_at(leaf, "LaneChangeActionDynamics") if leaf.tag == "LaneChangeAction" else None
+            if dyn is None or dyn.get("dynamicsDimension") != "time":
+                return None
+            out = max(out, self.value(dyn, "value", units.TIME))
+        return out
+
+    def start_time(self, event) -> float | None:
+        """The earliest an event can start [s] when its start trigger is only simulation times
+        past a value (and its own act or story starting): the largest value (-inf: as its act
+        starts); None otherwise. It starts at that time or its act's start, whichever is later
+        (or, on a rising edge, never)."""
+        out = float("-inf")
+        if len(list(event.iterfind("StartTrigger/ConditionGroup"))) > 1:
+            return None
+        for cond in event.iterfind("StartTrigger/ConditionGroup/Condition"):
+            sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
+            time = cond.find("ByValueCondition/SimulationTimeCondition")
+            if self.value(cond, "delay", units.TIME, 0.0) != 0.0 \
+                    or cond.get("conditionEdge", "none") not in ("none", "rising"):
+                return None
+            if time is not None and (time.get("rule") or "").startswith("greater"):
+                out = max(out, self.value(time, "value"))
+            elif sesc is None or self.raw(sesc, "storyboardElementType", required=False) not in ("act", "story") \
+                    or self.raw(sesc, "storyboardElementRef", required=False) not in (
+                        getattr(self, "act_name", None), getattr(self, "story_name", None)) \
+                    or self.raw(sesc, "state", required=False) not in ("startTransition", "runningState"):
+                return None
+        return out
+
+    def ended_before(self, event, events: list, seen: tuple, started: bool = False) -> set:
+        """The events of `events` that have ended when `event` starts, each run once (with
+        `started`: those that have at least started): along its start on another event's state."""
+        on = self.starts_on(event, events)
+        name = event.get("name", "")
+        if on is None or name in seen:
+            return set()
+        ref, state = on
+        first = next(e for e in events if e.get("name", "") == ref)
+        if self.value(first, "maximumExecutionCount", default=1.0) > 1:
+            return set()
+        out = self.ended_before(first, events, seen + (name,), started)
+        if started or state in ENDED_STATES:
+            out.add(ref)
+        return out
+
+    def skip_priority(self) -> None:
+        """Events of priority skip: their step also waits until no other event of the maneuver
+        runs (`... and not (started(A.x) and not ended(A.x))`), asked at each physics step as
+        esmini asks the start trigger again. Exact on a start condition without edge, delay or
+        duration; otherwise refused."""
+        for event, running, events in self.skipping:
+            name = event.get("name", "")
+            first = self.events.get(name)
+            info = self.actors.get(first.actor) if first is not None else None
+            at = next((i for i, t in enumerate(info["triggers"]) if t.clause is first.clause), None) \
+                if info is not None else None
+            step = info["triggers"][at] if at is not None else None
+            conds = list(event.iterfind("StartTrigger/ConditionGroup/Condition"))
+            if step is None or step.edge or step.delay_s is not None or step.hold_s is not None \
+                    or any(c.get("conditionEdge", "none") != "none" or self.value(c, "delay", units.TIME, 0.0)
+                           for c in conds) \
+                    or len(event.findall("Action")) > 1 \
+                    or any(len(o.findall("Action")) > 1 for o in running):
+                self.skip(event, f"event '{name}' has priority skip, and its start (an edge, a delay, a duration, "
+                                 "several actions, or a step in a group) cannot also wait for the other events "
+                                 "of its maneuver to stop running",
+                          "a skip event of one action started by a condition or a time translates")
+                continue
+            states = [self.event_state(o.get("name", ""), "runningState") for o in running]
+            if any(s is None for s in states):
+                self.skip(event, f"event '{name}' has priority skip, and not every other event of its maneuver that "
+                                 "may run when it starts is a step whose state can be read")
+                continue
+            step = info["triggers"][at]  # (naming the others' steps may have named this one)
+            free = all_of([E.Unary(op="not", arg=s) for s in states])
+            cond = free if step.condition is None else all_of([step.condition, free])
+            info["triggers"][at] = step.model_copy(update={"condition": cond})
+            for o in running:
+                if any(p is not event and p is not o and (event_domains(p) is None or event_domains(o) is None
+                                                          or event_domains(p) & event_domains(o))
+                       for p in events):
+                    self.approx(event, f"event '{name}' (priority skip) waits for '{o.get('name', '')}' to end; a "
+                                       "behaviour replaced before it completes never ends here, where esmini ends "
+                                       "its event")
+        self.skipping = []
 
     def event(self, event, who: str, act_at) -> None:
         name = event.get("name", "")
