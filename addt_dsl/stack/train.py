@@ -84,9 +84,13 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
           cache: Path | None = None, device: str = "cpu", widths: tuple[int, int, int] = (32, 48, 64),
           lidars: tuple[str, ...] = (DETECTOR_LIDAR.config,), lidar_p: tuple[float, ...] | None = None,
           lidar_settings: dict | None = None, init: Path | None = None,
-          class_weights: tuple[float, ...] | None = None, cyclists: float = CYCLISTS_PER_SCENE):
-    """A trained detector and its timings; `init`: weights file to start from (fine-tuning),
-    `class_weights`: per-class weights of the class loss, `cyclists`: see `synth.sample_scene`."""
+          class_weights: tuple[float, ...] | None = None, cyclists: float = CYCLISTS_PER_SCENE,
+          logit_offsets: tuple[float, ...] | None = None):
+    """A trained detector and its timings; `init`: weights file to start from (fine-tuning;
+    `epochs` 0 with `init`: no scans, no training), `class_weights`: per-class weights of the
+    class loss, `cyclists`: see `synth.sample_scene`; `logit_offsets`: added to the class
+    logits' biases after training (logit adjustment: data with more of a class than the
+    scenes the detector meets make it guess that class too readily)."""
     import torch
 
     from addt_dsl.stack.learned import BevDetector
@@ -94,6 +98,10 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
     torch.set_num_threads(threads)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
+    if epochs == 0 and init is not None:
+        model = _initial_model(init, device)
+        _offset_logits(model, logit_offsets)
+        return model.cpu().eval(), {"generate_s": 0.0, "train_s": 0.0}
     t0 = time.perf_counter()
     if cache is not None and cache.exists():
         samples = load_samples(cache)[:scenes]
@@ -111,13 +119,7 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         f"{np.mean([(s.hits >= 1).sum() for s in samples]):.1f} visible objects per scan; "
         + ", ".join(f"{n} {c}" for c, n in zip(CLASSES, seen.tolist())) + ")")
 
-    if init is not None:
-        from addt_dsl.stack.learned import load_model
-
-        model, _ = load_model(init)
-        model = model.to(device)
-    else:
-        model = BevDetector(widths).to(device)
+    model = _initial_model(init, device) if init is not None else BevDetector(widths).to(device)
     weight = None if class_weights is None else torch.tensor(class_weights, dtype=torch.float32, device=device)
     buf = np.zeros((batch, *GRID.shape), dtype=np.float32)
 
@@ -127,7 +129,24 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         return heat_logits, box, (torch.from_numpy(a[idx]).to(device) for a in (heat_all, reg_all, mask_all))
 
     t_train = fit(model, lr, scenes, batch, epochs, rng, forward, log, class_weight=weight)
+    _offset_logits(model, logit_offsets)
     return model.cpu().eval(), {"generate_s": round(t_gen, 1), "train_s": round(t_train, 1)}
+
+
+def _initial_model(init: Path, device: str):
+    from addt_dsl.stack.learned import load_model
+
+    model, _ = load_model(init)
+    return model.to(device)
+
+
+def _offset_logits(model, offsets: tuple[float, ...] | None) -> None:
+    import torch
+
+    if offsets is not None:
+        with torch.no_grad():
+            bias = model.head["box"].bias
+            bias[BOX_CHANNELS:] += torch.tensor(offsets, dtype=bias.dtype, device=bias.device)
 
 
 def fit(model, lr: float, scenes: int, batch: int, epochs: int, rng, forward, log=print,
@@ -183,6 +202,9 @@ def main(argv=None) -> int:
                     help="fine-tune from this weights file (its widths replace --widths)")
     ap.add_argument("--class-weights", type=float, nargs=len(CLASSES), default=None, metavar="W",
                     help="weights of the class loss per class (" + ", ".join(CLASSES) + "; default: all 1)")
+    ap.add_argument("--class-logit-offsets", type=float, nargs=len(CLASSES), default=None, metavar="B",
+                    help="added to the class logits' biases after training (with --init and --epochs 0: "
+                         "only that)")
     ap.add_argument("--cyclists", type=float, default=CYCLISTS_PER_SCENE, metavar="MEAN",
                     help="mean cyclists tried per scene (the pool holds 6)")
     args = ap.parse_args(argv)
@@ -204,11 +226,13 @@ def main(argv=None) -> int:
                           cache=args.cache, device=args.device, widths=tuple(widths),
                           lidars=tuple(args.lidars), lidar_p=None if args.lidar_p is None else tuple(args.lidar_p),
                           lidar_settings=lidar_settings, init=args.init, class_weights=args.class_weights,
-                          cyclists=args.cyclists)
+                          cyclists=args.cyclists, logit_offsets=args.class_logit_offsets)
     meta = {
-        "seed": args.seed, "scenes": args.scenes, "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
+        "seed": args.seed, "scenes": args.scenes if args.epochs or args.init is None else 0,
+        "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
         "threads": args.threads, "lidars": args.lidars, "lidar_p": args.lidar_p, "threshold": args.threshold,
         "widths": widths, "cyclists": args.cyclists, "class_weights": args.class_weights,
+        "class_logit_offsets": args.class_logit_offsets,
         "command": "python -m addt_dsl.stack.train " + " ".join(sys.argv[1:] if argv is None else argv),
         "classes": list(CLASSES),
         "grid": {"x_min": GRID.x_min, "y_min": GRID.y_min, "cell_m": GRID.cell_m, "nx": GRID.nx, "ny": GRID.ny},

@@ -95,3 +95,25 @@ def test_cyclists_per_scene_leaves_the_default_scenes_alone():
     few = sum(int((s.classes == cyc).sum()) for s in generate(20, 11, cyclists=0.0))
     many = sum(int((s.classes == cyc).sum()) for s in generate(20, 11, cyclists=4.0))
     assert few == 0 and many > 40
+
+
+def test_epochs_0_with_init_only_offsets_the_class_logits(tmp_path):
+    from addt_dsl.stack.bev_grid import BOX_CHANNELS
+    from addt_dsl.stack.learned import load_weights
+    from addt_dsl.stack.train import main
+
+    base = tmp_path / "base.pt"
+    assert main(["--scenes", "16", "--epochs", "1", "--batch", "8", "--widths", "8", "12", "16",
+                 "--threads", "1", "--out", str(base)]) == 0
+    start, _ = load_weights(base)
+    out = tmp_path / "offset.pt"
+    assert main(["--init", str(base), "--epochs", "0", "--class-logit-offsets", "0", "0", "0.5", "-1",
+                 "--out", str(out)]) == 0
+    blob = torch.load(out, weights_only=True)
+    bias = blob["state_dict"]["head.box.bias"]
+    assert torch.equal(bias[:BOX_CHANNELS], start["head.box.bias"][:BOX_CHANNELS])
+    assert torch.allclose(bias[BOX_CHANNELS:] - start["head.box.bias"][BOX_CHANNELS:],
+                          torch.tensor([0.0, 0.0, 0.5, -1.0]))
+    assert all(torch.equal(v, start[k]) for k, v in blob["state_dict"].items() if k != "head.box.bias")
+    meta = blob["meta"]
+    assert meta["class_logit_offsets"] == [0.0, 0.0, 0.5, -1.0] and meta["scenes"] == 0 and meta["epochs"] == 0
