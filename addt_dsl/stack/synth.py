@@ -105,13 +105,19 @@ def _overlaps(box, placed, margin: float) -> bool:
     return False
 
 
+CYCLISTS_PER_SCENE = 1.2  # mean of the Poisson count of cyclists tried per scene (the pool holds 6)
+
+
 def sample_scene(rng: np.random.Generator, pool, road: tuple[float, int, int] | None = None,
-                 ego: list | None = None) -> list[tuple[int, float, float, float]]:
+                 ego: list | None = None,
+                 cyclists: float = CYCLISTS_PER_SCENE) -> list[tuple[int, float, float, float]]:
     """Poses (pool index, x, y, heading) in the ego's vehicle frame for one random scene.
 
     `road` = (curvature [1/m], lanes right, lanes left) fixes the road instead of drawing
     it (the camera data renders a road mesh built beforehand); `ego`, if given, receives
-    the ego's pose (x, y, heading) in the road's frame (the arc through the origin)."""
+    the ego's pose (x, y, heading) in the road's frame (the arc through the origin).
+    `cyclists`: mean number of cyclists tried (training may ask for more than the
+    default, which the held-out evaluation set keeps)."""
     if road is None:
         kappa = float(rng.choice([0.0, rng.uniform(-0.004, 0.004)]))
         n_right = int(rng.integers(1, 5))
@@ -189,7 +195,7 @@ def sample_scene(rng: np.random.Generator, pool, road: tuple[float, int, int] | 
     # stand or walk on the verges or cross the lanes at any station; cyclists ride along
     # the edge of the outer lanes (with or against the oncoming side) or cross.
     road_half = {True: edge_left, False: edge_right}
-    for kind, mean in (("pedestrian", 3.0), ("cyclist", 1.2)):
+    for kind, mean in (("pedestrian", 3.0), ("cyclist", cyclists)):
         for _ in range(int(rng.poisson(mean))):
             idx = take(kind)
             if idx is None:
@@ -232,10 +238,11 @@ class ScanGenerator:
 
     def __init__(self, seed: int, lidars: tuple[str, ...] = (DETECTOR_LIDAR.config,),
                  lidar_p: tuple[float, ...] | None = None, yaw_shift_rad: float = 0.0,
-                 lidar_settings: dict | None = None):
+                 lidar_settings: dict | None = None, cyclists: float = CYCLISTS_PER_SCENE):
         """`lidars` are "RAYSxCHANNELS" configurations of the runtime's `Lidar` (range and
         vertical field of view those of `DETECTOR_LIDAR` unless `lidar_settings` says
-        otherwise; other settings at the Lidar's defaults), drawn per scan with `lidar_p`."""
+        otherwise; other settings at the Lidar's defaults), drawn per scan with `lidar_p`;
+        `cyclists` as in `sample_scene`."""
         from addt_dsl.runtime.sensors import Lidar
 
         self.rng = np.random.default_rng(seed)
@@ -250,6 +257,7 @@ class ScanGenerator:
                 self.lidars[config].actual = self.lidars[config].nominal.shifted(yaw=yaw_shift_rad)
         self.configs = tuple(lidars)
         self.lidar_p = lidar_p
+        self.cyclists = cyclists
 
     def close(self):
         self.world.close()
@@ -257,7 +265,7 @@ class ScanGenerator:
     def sample(self) -> Sample:
         """One random scene, seen from a random world pose with a lidar drawn from `lidars`."""
         rng = self.rng
-        poses = sample_scene(rng, self.world.pool)
+        poses = sample_scene(rng, self.world.pool, cyclists=self.cyclists)
         world_pose = (rng.uniform(-500.0, 500.0), rng.uniform(-500.0, 500.0), rng.uniform(-math.pi, math.pi))
         config = self.configs[int(rng.choice(len(self.configs), p=self.lidar_p))]
         return self._scan(poses, world_pose, config)

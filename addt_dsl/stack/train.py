@@ -6,8 +6,11 @@ Generates `--scenes` labelled scans with `synth.ScanGenerator` (the runtime's `L
 a pybullet world of car and truck boxes), then trains `learned.BevDetector` with Adam on
 a CenterNet loss (focal loss on the centre heatmap; L1 at object centres on the sub-cell
 offset, weighted 2, on log length/width and on the box axis as sin 2θ, cos 2θ; cross
-entropy at object centres on the class, car / truck / pedestrian / cyclist). Objects
-with at least one lidar return are positives.
+entropy at object centres on the class, car / truck / pedestrian / cyclist, optionally
+weighted per class with `--class-weights`). Objects with at least one lidar return are
+positives. `--init WEIGHTS` fine-tunes from a weights file instead of starting afresh
+(its layer widths are used); `--cyclists MEAN` puts more cyclists in the scenes than
+the held-out evaluation set has.
 
 Reproducible from the seed: the scenes, the initial weights and the batch order all
 derive from it, and training runs on `--threads` CPU threads (default 2; the same
@@ -26,7 +29,7 @@ import numpy as np
 
 from addt_dsl import extras
 from addt_dsl.stack.bev_grid import BOX_CHANNELS, CLASSES, DETECTOR_LIDAR, GRID, build_grid, encode_targets
-from addt_dsl.stack.synth import generate, in_grid, load_samples, save_samples
+from addt_dsl.stack.synth import CYCLISTS_PER_SCENE, generate, in_grid, load_samples, save_samples
 
 
 def make_targets(samples):
@@ -47,7 +50,9 @@ def grids(samples, out: np.ndarray) -> np.ndarray:
     return out[: len(samples)]
 
 
-def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
+def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t, class_weight=None):
+    """The loss and its parts; `class_weight` (a tensor, one weight per class) scales
+    each object's class cross entropy by its true class's weight."""
     import torch
     import torch.nn.functional as F
 
@@ -66,7 +71,10 @@ def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
     size = l1[:, 2:4].sum() / n_pos
     heading = l1[:, 4:6].sum() / n_pos
     # Class: cross entropy over the logits at the object centres.
-    ce = F.cross_entropy(box[:, BOX_CHANNELS:], reg_t[:, BOX_CHANNELS].long(), reduction="none")
+    target = reg_t[:, BOX_CHANNELS].long()
+    ce = F.cross_entropy(box[:, BOX_CHANNELS:], target, reduction="none")
+    if class_weight is not None:
+        ce = ce * class_weight[target]
     cls = (ce * mask_t).sum() / n_pos
     return (focal + 2.0 * offset + size + heading + cls,
             (focal.item(), offset.item(), size.item(), heading.item(), cls.item()))
@@ -75,7 +83,14 @@ def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t):
 def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: float, log=print,
           cache: Path | None = None, device: str = "cpu", widths: tuple[int, int, int] = (32, 48, 64),
           lidars: tuple[str, ...] = (DETECTOR_LIDAR.config,), lidar_p: tuple[float, ...] | None = None,
-          lidar_settings: dict | None = None):
+          lidar_settings: dict | None = None, init: Path | None = None,
+          class_weights: tuple[float, ...] | None = None, cyclists: float = CYCLISTS_PER_SCENE,
+          logit_offsets: tuple[float, ...] | None = None):
+    """A trained detector and its timings; `init`: weights file to start from (fine-tuning;
+    `epochs` 0 with `init`: no scans, no training), `class_weights`: per-class weights of the
+    class loss, `cyclists`: see `synth.sample_scene`; `logit_offsets`: added to the class
+    logits' biases after training (logit adjustment: data with more of a class than the
+    scenes the detector meets make it guess that class too readily)."""
     import torch
 
     from addt_dsl.stack.learned import BevDetector
@@ -83,12 +98,17 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
     torch.set_num_threads(threads)
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
+    if epochs == 0 and init is not None:
+        model = _initial_model(init, device)
+        _offset_logits(model, logit_offsets)
+        return model.cpu().eval(), {"generate_s": 0.0, "train_s": 0.0}
     t0 = time.perf_counter()
     if cache is not None and cache.exists():
         samples = load_samples(cache)[:scenes]
         scenes = len(samples)
     else:
-        samples = generate(scenes, seed, lidars=lidars, lidar_p=lidar_p, lidar_settings=lidar_settings)
+        samples = generate(scenes, seed, lidars=lidars, lidar_p=lidar_p, lidar_settings=lidar_settings,
+                           cyclists=cyclists)
         if cache is not None:
             save_samples(cache, samples)
     heat_all, reg_all, mask_all = make_targets(samples)
@@ -99,7 +119,8 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         f"{np.mean([(s.hits >= 1).sum() for s in samples]):.1f} visible objects per scan; "
         + ", ".join(f"{n} {c}" for c, n in zip(CLASSES, seen.tolist())) + ")")
 
-    model = BevDetector(widths).to(device)
+    model = _initial_model(init, device) if init is not None else BevDetector(widths).to(device)
+    weight = None if class_weights is None else torch.tensor(class_weights, dtype=torch.float32, device=device)
     buf = np.zeros((batch, *GRID.shape), dtype=np.float32)
 
     def forward(idx):
@@ -107,15 +128,33 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
         heat_logits, box = model(x)
         return heat_logits, box, (torch.from_numpy(a[idx]).to(device) for a in (heat_all, reg_all, mask_all))
 
-    t_train = fit(model, lr, scenes, batch, epochs, rng, forward, log)
+    t_train = fit(model, lr, scenes, batch, epochs, rng, forward, log, class_weight=weight)
+    _offset_logits(model, logit_offsets)
     return model.cpu().eval(), {"generate_s": round(t_gen, 1), "train_s": round(t_train, 1)}
 
 
-def fit(model, lr: float, scenes: int, batch: int, epochs: int, rng, forward, log=print) -> float:
+def _initial_model(init: Path, device: str):
+    from addt_dsl.stack.learned import load_model
+
+    model, _ = load_model(init)
+    return model.to(device)
+
+
+def _offset_logits(model, offsets: tuple[float, ...] | None) -> None:
+    import torch
+
+    if offsets is not None:
+        with torch.no_grad():
+            bias = model.head["box"].bias
+            bias[BOX_CHANNELS:] += torch.tensor(offsets, dtype=bias.dtype, device=bias.device)
+
+
+def fit(model, lr: float, scenes: int, batch: int, epochs: int, rng, forward, log=print,
+        class_weight=None) -> float:
     """The training loop of both detectors (this one and `camera_train`'s): AdamW with a
     one-cycle schedule on the CenterNet loss, scenes in a fresh order from `rng` every
     epoch; `forward(idx)` gives (heat logits, box, targets) for a batch's scene indices.
-    Returns the training time [s]."""
+    `class_weight`: see `centernet_loss`. Returns the training time [s]."""
     import torch
 
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
@@ -128,7 +167,7 @@ def fit(model, lr: float, scenes: int, batch: int, epochs: int, rng, forward, lo
         model.train()
         for start in range(0, scenes, batch):
             heat_logits, box, targets = forward(order[start:start + batch])
-            loss, parts = centernet_loss(heat_logits, box, *targets)
+            loss, parts = centernet_loss(heat_logits, box, *targets, class_weight=class_weight)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
@@ -159,6 +198,15 @@ def main(argv=None) -> int:
     ap.add_argument("--lidar-vfov", type=float, default=DETECTOR_LIDAR.vfov_deg, metavar="DEG",
                     help="vertical field of view of multi-channel lidars")
     ap.add_argument("--device", default="cpu", help="torch device (the shipped weights are trained on cpu)")
+    ap.add_argument("--init", type=Path, default=None, metavar="WEIGHTS",
+                    help="fine-tune from this weights file (its widths replace --widths)")
+    ap.add_argument("--class-weights", type=float, nargs=len(CLASSES), default=None, metavar="W",
+                    help="weights of the class loss per class (" + ", ".join(CLASSES) + "; default: all 1)")
+    ap.add_argument("--class-logit-offsets", type=float, nargs=len(CLASSES), default=None, metavar="B",
+                    help="added to the class logits' biases after training (with --init and --epochs 0: "
+                         "only that)")
+    ap.add_argument("--cyclists", type=float, default=CYCLISTS_PER_SCENE, metavar="MEAN",
+                    help="mean cyclists tried per scene (the pool holds 6)")
     args = ap.parse_args(argv)
     if (message := extras.missing_message("torch", "training the learned detector")) is not None:
         print(message, file=sys.stderr)
@@ -167,19 +215,33 @@ def main(argv=None) -> int:
 
     import torch
 
+    widths = list(args.widths)
+    init_meta = None
+    if args.init is not None:
+        from addt_dsl.stack.learned import load_weights
+
+        init_meta = load_weights(args.init)[1]
+        widths = list(init_meta["widths"])
     model, timing = train(args.seed, args.scenes, args.epochs, args.batch, args.threads, args.lr,
-                          cache=args.cache, device=args.device, widths=tuple(args.widths),
+                          cache=args.cache, device=args.device, widths=tuple(widths),
                           lidars=tuple(args.lidars), lidar_p=None if args.lidar_p is None else tuple(args.lidar_p),
-                          lidar_settings=lidar_settings)
+                          lidar_settings=lidar_settings, init=args.init, class_weights=args.class_weights,
+                          cyclists=args.cyclists, logit_offsets=args.class_logit_offsets)
     meta = {
-        "seed": args.seed, "scenes": args.scenes, "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
+        "seed": args.seed, "scenes": args.scenes if args.epochs or args.init is None else 0,
+        "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
         "threads": args.threads, "lidars": args.lidars, "lidar_p": args.lidar_p, "threshold": args.threshold,
-        "widths": list(args.widths),
+        "widths": widths, "cyclists": args.cyclists, "class_weights": args.class_weights,
+        "class_logit_offsets": args.class_logit_offsets,
+        "command": "python -m addt_dsl.stack.train " + " ".join(sys.argv[1:] if argv is None else argv),
         "classes": list(CLASSES),
         "grid": {"x_min": GRID.x_min, "y_min": GRID.y_min, "cell_m": GRID.cell_m, "nx": GRID.nx, "ny": GRID.ny},
         "torch": str(torch.__version__), **timing,
     }
     meta["lidar_vfov_deg"] = args.lidar_vfov
+    if init_meta is not None:  # the run this one started from, and what it cost
+        meta["init"] = {"path": str(args.init), "meta": init_meta}
+        meta["train_s_total"] = round(timing["train_s"] + init_meta.get("train_s_total", init_meta["train_s"]), 1)
     save_weights(model, meta, args.out, "generation")
     return 0
 

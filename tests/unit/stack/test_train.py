@@ -1,5 +1,6 @@
 """Training is reproducible from the seed (same seed and thread count: same weights, bit for bit)."""
 
+import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
@@ -37,3 +38,82 @@ def test_lidar_vfov_reaches_the_scans_and_the_weights_meta(tmp_path):
                  "--lidar-vfov", "4", "--out", str(out)]) == 0
     meta = torch.load(out, weights_only=True)["meta"]
     assert meta["lidar_vfov_deg"] == 4.0 and meta["lidars"] == ["360x3"]
+
+
+def test_init_fine_tunes_from_a_weights_file(tmp_path):
+    """`--init`: training starts from the file's weights (lr 0 leaves them as they are) and
+    the meta says where from; without it, from fresh ones."""
+    from addt_dsl.stack.learned import load_weights
+    from addt_dsl.stack.train import main
+
+    base = tmp_path / "base.pt"
+    assert main(["--scenes", "16", "--epochs", "1", "--batch", "8", "--widths", "8", "12", "16",
+                 "--threads", "1", "--out", str(base)]) == 0
+    start, base_meta = load_weights(base)
+    frozen = tmp_path / "frozen.pt"
+    assert main(["--scenes", "16", "--epochs", "1", "--batch", "8", "--lr", "0", "--seed", "5",
+                 "--init", str(base), "--threads", "1", "--out", str(frozen)]) == 0
+    blob = torch.load(frozen, weights_only=True)
+    assert all(torch.equal(start[k], blob["state_dict"][k]) for k in start)
+    meta = blob["meta"]
+    assert meta["widths"] == [8, 12, 16] and meta["init"]["meta"]["seed"] == base_meta["seed"]
+    assert meta["train_s_total"] >= meta["train_s"] and "--init" in meta["command"]
+    moved, _ = train(seed=5, scenes=16, epochs=1, batch=8, threads=1, lr=1e-3, log=lambda *_: None, init=base)
+    assert any(not torch.equal(start[k], v) for k, v in moved.state_dict().items())
+
+
+def test_class_weights_scale_each_objects_class_loss():
+    from addt_dsl.stack.train import centernet_loss
+
+    torch.manual_seed(0)
+    heat = torch.randn(1, 1, 4, 4)
+    box = torch.randn(1, 10, 4, 4)
+    reg = torch.zeros(1, 7, 4, 4)
+    mask = torch.zeros(1, 4, 4)
+    heat_t = torch.zeros(1, 4, 4)
+    for (i, j), cls in (((0, 0), 3), ((2, 3), 2)):
+        heat_t[0, i, j] = mask[0, i, j] = 1.0
+        reg[0, 6, i, j] = cls
+    plain = centernet_loss(heat, box, heat_t, reg, mask)[1][4]
+    same = centernet_loss(heat, box, heat_t, reg, mask, class_weight=torch.ones(4))[1][4]
+    ce = torch.nn.functional.cross_entropy(box[0, 6:, [0, 2], [0, 3]].T, torch.tensor([3, 2]), reduction="none")
+    weighted = centernet_loss(heat, box, heat_t, reg, mask, class_weight=torch.tensor([1.0, 1.0, 1.0, 3.0]))[1][4]
+    assert same == plain
+    assert abs(plain - ce.sum().item() / 2) < 1e-6
+    assert abs(weighted - (3 * ce[0] + ce[1]).item() / 2) < 1e-6
+
+
+def test_cyclists_per_scene_leaves_the_default_scenes_alone():
+    from addt_dsl.stack.bev_grid import CLASSES
+    from addt_dsl.stack.synth import CYCLISTS_PER_SCENE, generate
+
+    default = generate(6, 11)
+    explicit = generate(6, 11, cyclists=CYCLISTS_PER_SCENE)
+    assert all(np.array_equal(a.boxes, b.boxes) and np.array_equal(a.points, b.points)
+               for a, b in zip(default, explicit))
+    cyc = CLASSES.index("cyclist")
+    few = sum(int((s.classes == cyc).sum()) for s in generate(20, 11, cyclists=0.0))
+    many = sum(int((s.classes == cyc).sum()) for s in generate(20, 11, cyclists=4.0))
+    assert few == 0 and many > 40
+
+
+def test_epochs_0_with_init_only_offsets_the_class_logits(tmp_path):
+    from addt_dsl.stack.bev_grid import BOX_CHANNELS
+    from addt_dsl.stack.learned import load_weights
+    from addt_dsl.stack.train import main
+
+    base = tmp_path / "base.pt"
+    assert main(["--scenes", "16", "--epochs", "1", "--batch", "8", "--widths", "8", "12", "16",
+                 "--threads", "1", "--out", str(base)]) == 0
+    start, _ = load_weights(base)
+    out = tmp_path / "offset.pt"
+    assert main(["--init", str(base), "--epochs", "0", "--class-logit-offsets", "0", "0", "0.5", "-1",
+                 "--out", str(out)]) == 0
+    blob = torch.load(out, weights_only=True)
+    bias = blob["state_dict"]["head.box.bias"]
+    assert torch.equal(bias[:BOX_CHANNELS], start["head.box.bias"][:BOX_CHANNELS])
+    assert torch.allclose(bias[BOX_CHANNELS:] - start["head.box.bias"][BOX_CHANNELS:],
+                          torch.tensor([0.0, 0.0, 0.5, -1.0]))
+    assert all(torch.equal(v, start[k]) for k, v in blob["state_dict"].items() if k != "head.box.bias")
+    meta = blob["meta"]
+    assert meta["class_logit_offsets"] == [0.0, 0.0, 0.5, -1.0] and meta["scenes"] == 0 and meta["epochs"] == 0
