@@ -2,8 +2,9 @@
 
 A batch of one: the engine (`batch.execute_batch`) steps many runs in lockstep over their
 states (`state.RunState`); each sample runs the step's named phases (`phases.py`: pose,
-record, lights, collisions, triggers, sense, stack, ego dynamics, agents) in order. Behaviours, sensors and the stack see the
-world only through the declared interfaces (`views.py`). Everything random draws from
+record, lights, collisions, triggers, sense, stack, ego dynamics, agents) in order.
+Behaviours, sensors and the stack see the world only through the declared interfaces
+(`views.py`). Everything random draws from
 generators seeded by the RunSpec, so the same RunSpec gives the same trace bit for bit.
 """
 
