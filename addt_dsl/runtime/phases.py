@@ -254,10 +254,11 @@ def stack(run: RunState, t: float) -> None:
 
 
 def ego(runs: list[RunState], ts: list[float]) -> list[bool]:
-    """Over the batch: commands due by now take effect; each ego moves over the step (its
-    dynamics, an OSI stack's update, or, scripted, as agents do: a stack's commands are then
-    recorded, not applied). Whether each ego's state stayed finite."""
-    out = []
+    """Over the batch: commands due by now take effect; each ego moves over the step: the
+    dynamics of every driven ego at once (`vehicle.step` over arrays, per step length), an OSI
+    stack's update, or, scripted, as agents do (a stack's commands are then recorded, not
+    applied). Whether each ego's state stayed finite."""
+    driven: dict[float, list[RunState]] = {}
     for run, t in zip(runs, ts):
         dt = run.dt
         queue = run.command_queue
@@ -267,15 +268,17 @@ def ego(runs: list[RunState], ts: list[float]) -> list[bool]:
         if run.ego_agent is None and run.move_host is not None:
             run.move_host(run.ego, t + dt)
         elif run.ego_agent is None:
-            vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt, run.ego_grade)
+            driven.setdefault(dt, []).append(run)
         else:
             if run.leaders_stale and not run.networked:  # it may ask for its leader
                 run.leaders.rebuild()
                 run.leaders_stale = False
             run.move(run.ego_agent, t, dt)
             run.ego.vx, run.ego.accel = run.ego_agent.speed, run.ego_agent.accel
-        out.append(all(math.isfinite(v) for v in (run.ego.x, run.ego.y, run.ego.vx)))
-    return out
+    for dt, group in driven.items():
+        vehicle_step([r.ego for r in group], [r.vehicle_params for r in group], [r.command[0] for r in group],
+                     [r.command[1] for r in group], dt, [r.ego_grade for r in group])
+    return [math.isfinite(run.ego.x) and math.isfinite(run.ego.y) and math.isfinite(run.ego.vx) for run in runs]
 
 
 def agents(run: RunState, t: float) -> None:

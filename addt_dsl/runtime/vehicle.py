@@ -16,8 +16,12 @@ where slip angles are ill-defined. Units: SI throughout (m, s, rad, kg, N).
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import operator
 from dataclasses import dataclass
+
+import numpy as np
 
 from addt_dsl.vehicles import DEFAULT_MASS_KG, DEFAULT_MU, DEFAULT_WHEELBASE_M
 
@@ -109,122 +113,135 @@ class VehicleState:
         return math.hypot(self.vx, self.vy)
 
 
-def step(state: VehicleState, p: VehicleParams, steer_cmd: float, accel_cmd: float, dt: float,
-         grade: float = 0.0) -> None:
-    """Advance `state` in place by `dt` [s] under steering [rad] and acceleration [m/s^2] commands.
+STATE_FIELDS = tuple(f.name for f in dataclasses.fields(VehicleState))
+PARAM_FIELDS = tuple(f.name for f in dataclasses.fields(VehicleParams))
+_state_row = operator.attrgetter(*STATE_FIELDS)
+_param_row = operator.attrgetter(*PARAM_FIELDS)
+
+
+def step(states, params, steer_cmd, accel_cmd, dt: float, grade=0.0) -> None:
+    """Advance each vehicle state in place by `dt` [s] under its steering [rad] and
+    acceleration [m/s^2] commands: one state and its numbers, or sequences of them (a batch
+    of runs; one is a batch of one: the same array code steps both).
 
     `grade` is the road slope dz/ds under the vehicle (uphill positive): gravity acts
     along it and the normal load shrinks by its cosine.
     """
+    if isinstance(states, VehicleState):
+        states, params, steer_cmd, accel_cmd, grade = [states], [params], [steer_cmd], [accel_cmd], [grade]
+    # Columns of the batch: state[field] and p[field] are arrays over the runs.
+    cols = np.array([_state_row(v) for v in states], dtype=float).T.copy()
+    state = dict(zip(STATE_FIELDS, cols))
+    p = dict(zip(PARAM_FIELDS, np.array([_param_row(q) for q in params], dtype=float).T))
+    steer_cmd, accel_cmd = np.asarray(steer_cmd, dtype=float), np.asarray(accel_cmd, dtype=float)
+    grade = np.asarray(grade, dtype=float)
     n = max(1, math.ceil(dt / MAX_SUBSTEP_S - 1e-9))
     h = dt / n
-    for _ in range(n):
-        _substep(state, p, steer_cmd, accel_cmd, h, grade)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for _ in range(n):
+            _substep(state, p, steer_cmd, accel_cmd, h, grade)
+    for v, row in zip(states, cols.T.tolist()):
+        v.__dict__.update(zip(STATE_FIELDS, row))
 
 
-def _substep(state: VehicleState, p: VehicleParams, steer_cmd: float, accel_cmd: float, dt: float,
-             grade: float) -> None:
+def _substep(state: dict, p: dict, steer_cmd, accel_cmd, dt: float, grade) -> None:
+    """One integration step over the batch's columns (arrays over runs), in place. Both
+    regimes are computed and selected per run (`np.where`); what the other regime would
+    give (e.g. a division by a zero speed) is discarded."""
+    # fmin / fmax: a NaN command (a bit flip) is clamped as Python's min / max clamp it.
+    mn, mx, where = np.fmin, np.fmax, np.where
     # Actuators: first-order lag, then rate limits.
-    steer_target = max(-p.max_steer_rad, min(p.max_steer_rad, steer_cmd))
-    d_steer = (steer_target - state.steer) * min(1.0, dt / p.steer_lag_s)
-    max_d = p.steer_rate_rad_s * dt
-    state.steer += max(-max_d, min(max_d, d_steer))
-    d_acc = (accel_cmd - state.accel_cmd_actual) * min(1.0, dt / p.accel_lag_s)
-    max_da = p.jerk_limit * dt
-    state.accel_cmd_actual += max(-max_da, min(max_da, d_acc))
+    steer_target = mx(-p["max_steer_rad"], mn(p["max_steer_rad"], steer_cmd))
+    d_steer = (steer_target - state["steer"]) * mn(1.0, dt / p["steer_lag_s"])
+    max_d = p["steer_rate_rad_s"] * dt
+    state["steer"] += mx(-max_d, mn(max_d, d_steer))
+    d_acc = (accel_cmd - state["accel_cmd_actual"]) * mn(1.0, dt / p["accel_lag_s"])
+    max_da = p["jerk_limit"] * dt
+    state["accel_cmd_actual"] += mx(-max_da, mn(max_da, d_acc))
 
-    theta = math.atan(grade) if grade else 0.0
-    state.pitch = theta
-    m = p.mass_kg
-    mg = m * G * math.cos(theta)  # normal load
-    g_along = G * math.sin(theta)  # gravity component along the slope
-    lf, lr, L = p.cg_to_front_m, p.wheelbase_m - p.cg_to_front_m, p.wheelbase_m
-    vx = state.vx
-    fx_demand = m * min(state.accel_cmd_actual, p.max_drive_accel)
-    drag = p.drag * vx * vx
+    theta = np.arctan(grade)
+    state["pitch"][:] = theta
+    m = p["mass_kg"]
+    mg = m * G * np.cos(theta)  # normal load
+    g_along = G * np.sin(theta)  # gravity component along the slope
+    lf, L = p["cg_to_front_m"], p["wheelbase_m"]
+    lr = L - lf
+    mu = p["mu"]
+    vx, vy, r, steer = state["vx"], state["vy"], state["yaw_rate"], state["steer"]
+    fx_demand = m * mn(state["accel_cmd_actual"], p["max_drive_accel"])
+    drag = p["drag"] * vx * vx
+    tan_steer = np.tan(steer)
+    slow = vx < KINEMATIC_BELOW_MPS
 
-    if vx < KINEMATIC_BELOW_MPS:
-        # Kinematic regime at low speed: the path follows the wheels; the friction circle
-        # still bounds the longitudinal force by what the cornering leaves.
-        lateral = m * vx * vx * math.tan(state.steer) / L
-        f_max = math.sqrt(max(0.0, (p.mu * mg) ** 2 - lateral * lateral))
-        fx = max(-f_max, min(f_max, fx_demand))
-        ax = fx / m - drag - g_along
-        if vx <= 0.0 and ax < 0.0:
-            ax = 0.0  # brakes hold the car; no reversing
-        state.vx = max(0.0, vx + ax * dt)
-        state.vy = 0.0
-        yaw_rate = state.vx * math.tan(state.steer) / L
-        # The tyres cannot turn the car harder than the friction circle leaves after the
-        # longitudinal force: past that they slide and the path widens.
-        ay_max = math.sqrt(max(0.0, (p.mu * G) ** 2 - (fx / m) ** 2))
-        if state.vx * abs(yaw_rate) > ay_max:
-            yaw_rate = math.copysign(ay_max / state.vx, yaw_rate)
-        state.yaw_acc = (yaw_rate - state.yaw_rate) / dt
-        state.yaw_rate = yaw_rate
-        state.accel = ax
-        state.ax_specific = ax + g_along
-        state.ay = state.vx * state.yaw_rate
-        state.slip_front = state.slip_rear = 0.0
-    else:
-        # Axle loads with longitudinal load transfer from the last step's specific force
-        # (clipped so that an axle never carries less than nothing).
-        transfer = max(-mg * lf / L, min(mg * lr / L, m * state.ax_specific * p.cg_height_m / L))
-        fz_f = mg * lr / L - transfer
-        fz_r = mg * lf / L + transfer
-        if fx_demand < 0.0:  # braking in proportion to the axle loads
-            share_f = fz_f / max(fz_f + fz_r, 1e-9)
-        else:
-            share_f = p.drive_front_share
-        fx_f, fx_r = share_f * fx_demand, (1.0 - share_f) * fx_demand
-        alpha_f = state.steer - math.atan2(state.vy + lf * state.yaw_rate, vx)
-        alpha_r = -math.atan2(state.vy - lr * state.yaw_rate, vx)
-        fyf = fiala_lateral_force(p.cornering_stiffness_front, alpha_f, p.mu * fz_f)
-        fyr = fiala_lateral_force(p.cornering_stiffness_rear, alpha_r, p.mu * fz_r)
-        fyf, fx_f = _friction_circle(fyf, fx_f, p.mu * fz_f)
-        fyr, fx_r = _friction_circle(fyr, fx_r, p.mu * fz_r)
-        cs, sn = math.cos(state.steer), math.sin(state.steer)
-        fx_body = fx_f * cs - fyf * sn + fx_r
-        fy_body = fyf * cs + fx_f * sn + fyr
-        ax = fx_body / m + state.vy * state.yaw_rate - drag - g_along
-        ay = fy_body / m
-        yaw_acc = (lf * (fyf * cs + fx_f * sn) - lr * fyr) / p.yaw_inertia_kgm2
-        state.vx = max(0.0, vx + ax * dt)
-        state.vy += (ay - vx * state.yaw_rate) * dt
-        state.yaw_rate += yaw_acc * dt
-        state.yaw_acc = yaw_acc
-        state.accel = ax
-        state.ax_specific = fx_body / m - drag
-        state.ay = ay
-        state.slip_front, state.slip_rear = alpha_f, alpha_r
-    state.heading += state.yaw_rate * dt
-    c, s = math.cos(state.heading), math.sin(state.heading)
-    horizontal = math.cos(theta)  # x, y are the horizontal projection of the motion
-    state.x += (state.vx * c - state.vy * s) * horizontal * dt
-    state.y += (state.vx * s + state.vy * c) * horizontal * dt
+    # Kinematic regime at low speed: the path follows the wheels; the friction circle
+    # still bounds the longitudinal force by what the cornering leaves.
+    lateral = m * vx * vx * tan_steer / L
+    f_max = np.sqrt(mx(0.0, (mu * mg) ** 2 - lateral * lateral))
+    fx_k = mx(-f_max, mn(f_max, fx_demand))
+    ax_k = fx_k / m - drag - g_along
+    ax_k = where((vx <= 0.0) & (ax_k < 0.0), 0.0, ax_k)  # brakes hold the car; no reversing
+    vx_k = mx(0.0, vx + ax_k * dt)
+    yaw_k = vx_k * tan_steer / L
+    # The tyres cannot turn the car harder than the friction circle leaves after the
+    # longitudinal force: past that they slide and the path widens.
+    ay_max = np.sqrt(mx(0.0, (mu * G) ** 2 - (fx_k / m) ** 2))
+    yaw_k = where(vx_k * np.abs(yaw_k) > ay_max, np.copysign(ay_max / vx_k, yaw_k), yaw_k)
+
+    # Dynamic regime. Axle loads with longitudinal load transfer from the last step's
+    # specific force (clipped so that an axle never carries less than nothing).
+    transfer = mx(-mg * lf / L, mn(mg * lr / L, m * state["ax_specific"] * p["cg_height_m"] / L))
+    fz_f = mg * lr / L - transfer
+    fz_r = mg * lf / L + transfer
+    # Braking in proportion to the axle loads, drive by the drivetrain's split.
+    share_f = where(fx_demand < 0.0, fz_f / mx(fz_f + fz_r, 1e-9), p["drive_front_share"])
+    fx_f, fx_r = share_f * fx_demand, (1.0 - share_f) * fx_demand
+    alpha_f = steer - np.arctan2(vy + lf * r, vx)
+    alpha_r = -np.arctan2(vy - lr * r, vx)
+    fyf = fiala_lateral_force(p["cornering_stiffness_front"], alpha_f, mu * fz_f)
+    fyr = fiala_lateral_force(p["cornering_stiffness_rear"], alpha_r, mu * fz_r)
+    fyf, fx_f = _friction_circle(fyf, fx_f, mu * fz_f)
+    fyr, fx_r = _friction_circle(fyr, fx_r, mu * fz_r)
+    cs, sn = np.cos(steer), np.sin(steer)
+    fx_body = fx_f * cs - fyf * sn + fx_r
+    fy_body = fyf * cs + fx_f * sn + fyr
+    ax_d = fx_body / m + vy * r - drag - g_along
+    ay_d = fy_body / m
+    yaw_acc_d = (lf * (fyf * cs + fx_f * sn) - lr * fyr) / p["yaw_inertia_kgm2"]
+
+    new_vx = where(slow, vx_k, mx(0.0, vx + ax_d * dt))
+    new_vy = where(slow, 0.0, vy + (ay_d - vx * r) * dt)
+    new_r = where(slow, yaw_k, r + yaw_acc_d * dt)
+    state["yaw_acc"][:] = where(slow, (yaw_k - r) / dt, yaw_acc_d)
+    state["accel"][:] = where(slow, ax_k, ax_d)
+    state["ax_specific"][:] = where(slow, ax_k + g_along, fx_body / m - drag)
+    state["ay"][:] = where(slow, vx_k * yaw_k, ay_d)
+    state["slip_front"][:] = where(slow, 0.0, alpha_f)
+    state["slip_rear"][:] = where(slow, 0.0, alpha_r)
+    state["vx"][:], state["vy"][:], state["yaw_rate"][:] = new_vx, new_vy, new_r
+    state["heading"] += new_r * dt
+    c, s = np.cos(state["heading"]), np.sin(state["heading"])
+    horizontal = np.cos(theta)  # x, y are the horizontal projection of the motion
+    state["x"] += (new_vx * c - new_vy * s) * horizontal * dt
+    state["y"] += (new_vx * s + new_vy * c) * horizontal * dt
 
 
-def fiala_lateral_force(stiffness: float, alpha: float, f_max: float) -> float:
-    """Fiala brush-model lateral force [N] at slip angle `alpha` [rad], saturating at `f_max`.
+def fiala_lateral_force(stiffness, alpha, f_max):
+    """Fiala brush-model lateral force [N] at slip angle `alpha` [rad], saturating at `f_max`
+    (numbers or arrays over a batch).
 
     Linear (`stiffness * alpha`) at small slip, cubic roll-off, full sliding at
     tan(alpha) >= 3 f_max / stiffness.
     """
-    if f_max <= 0.0:
-        return 0.0
-    ta = math.tan(alpha)
-    x = abs(ta)
-    if x * stiffness >= 3.0 * f_max:
-        return math.copysign(f_max, alpha)
-    cx = stiffness * x
-    force = cx - cx * cx / (3.0 * f_max) + cx * cx * cx / (27.0 * f_max * f_max)
-    return math.copysign(force, alpha)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.abs(np.tan(alpha))
+        cx = stiffness * x
+        force = cx - cx * cx / (3.0 * f_max) + cx * cx * cx / (27.0 * f_max * f_max)
+        force = np.where(x * stiffness >= 3.0 * f_max, f_max, force)
+        return np.where(f_max <= 0.0, 0.0, np.copysign(force, alpha))
 
 
-def _friction_circle(fy: float, fx: float, limit: float) -> tuple[float, float]:
-    """Scale the tyre force vector back onto the friction circle of radius `limit` [N]."""
-    mag = math.hypot(fx, fy)
-    if mag <= limit or mag == 0.0:
-        return fy, fx
-    k = limit / mag
-    return fy * k, fx * k
+def _friction_circle(fy, fx, limit):
+    """Scale the tyre force vectors back onto the friction circle of radius `limit` [N]."""
+    mag = np.hypot(fx, fy)
+    k = np.where((mag <= limit) | (mag == 0.0), 1.0, limit / mag)
+    return np.where(k == 1.0, fy, fy * k), np.where(k == 1.0, fx, fx * k)
