@@ -1,0 +1,43 @@
+"""Workers step batches of runs (`LocalExecutor(batch=N)`): the records are those of runs
+stepped one by one, a resumed sweep skips what the store holds, and a batch that does not
+finish (a hung, crashing or memory-hogging run in it) is isolated: each of its runs goes
+again alone, so only the guilty run is recorded as failed."""
+
+from collections import Counter
+
+from tests.unit.runtime.runner_testkit import HANG, HOG, OK, RAISE, SEGFAULT, fake_run, plan_of, scenario
+
+from addt_dsl.runtime.executor import LocalExecutor, run_local, run_sweep
+from addt_dsl.runtime.store import ResultStore
+from addt_dsl.sweep import SweepStream
+
+
+def test_a_failing_run_in_a_batch_fails_alone(tmp_path):
+    plan = plan_of(scenario([OK, HANG, OK, SEGFAULT, OK, HOG, RAISE, OK]))
+    store = ResultStore(tmp_path / "r.sqlite", plan)
+    executor = LocalExecutor(2, timeout_s=1.0, memory_limit_mb=250, run_fn=fake_run, retries=0, batch=4)
+    outcome = run_sweep(SweepStream(plan), store, executor)
+    records = list(store.records())
+    assert len(records) == outcome.ran == 8
+    by_mode = Counter((int(r.cell["mode"]), r.status) for r in records)
+    assert by_mode == Counter({(OK, "ok"): 4, (HANG, "timeout"): 1, (SEGFAULT, "crashed"): 1,
+                               (HOG, "memory"): 1, (RAISE, "crashed"): 1})
+    errors = {int(r.cell["mode"]): r.error for r in records}
+    assert "1 s timeout" in errors[HANG] and "batch" not in errors[HANG]  # its own bound, alone
+    assert "signal 11" in errors[SEGFAULT]
+
+
+def test_batched_records_equal_one_by_one_and_resume_skips(tmp_path):
+    plan = plan_of(scenario([0, 2], repeat=4, duration="0.3 s"))  # real closed-loop runs
+    one = run_local(SweepStream(plan), jobs=1)
+    batched = run_local(SweepStream(plan), jobs=2, batch=3)
+    key = lambda r: (r.run_id, r.status, r.digest, repr(r.verdicts))  # noqa: E731
+    assert [key(r) for r in batched] == [key(r) for r in one]
+    assert len({r.digest for r in one}) > 1
+    # A store that holds three runs: a batched sweep runs the other five only.
+    store = ResultStore(tmp_path / "r.sqlite", plan)
+    for r in one[:3]:
+        store.add(r)
+    outcome = run_sweep(SweepStream(plan), store, LocalExecutor(1, batch=4))
+    assert (outcome.skipped, outcome.ran) == (3, 5)
+    assert sorted(key(r) for r in store.records()) == sorted(key(r) for r in one)
