@@ -63,6 +63,20 @@ BOUND_STARTUP_S = 60.0
 EXTERNAL_SIGNALS = frozenset({signal.SIGKILL, signal.SIGTERM, signal.SIGHUP, signal.SIGINT})
 
 
+# Runs a worker steps together by default (`default_batch`): at most BATCH_MAX (each run
+# holds its own pybullet client and world, so a worker's memory grows with its batch:
+# docs/twin.md gives the measured bound; a killed sweep loses at most a batch per worker),
+# and small enough that each worker gets BATCHES_PER_WORKER batches (the last batches of
+# a sweep do not leave the other workers idle).
+BATCH_MAX = 16
+BATCHES_PER_WORKER = 4
+
+
+def default_batch(n_runs: int, workers: int) -> int:
+    """The batch size for a sweep of `n_runs` runs on `workers` workers."""
+    return max(1, min(BATCH_MAX, n_runs // (max(1, workers) * BATCHES_PER_WORKER)))
+
+
 def run_time_bound_s(spec: RunSpec, timeout_s: float | str | None = AUTO) -> float | None:
     """The wall-clock bound of one run [s]: `timeout_s` when it is a number > 0, the default
     derived from the scenario for "auto", None (no bound) for None or 0."""
