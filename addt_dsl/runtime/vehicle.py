@@ -119,129 +119,200 @@ _state_row = operator.attrgetter(*STATE_FIELDS)
 _param_row = operator.attrgetter(*PARAM_FIELDS)
 
 
+def _libm(fn):
+    """`fn` of libm (`math`) mapped over an array: numpy's vectorised sin, tan, atan... may
+    differ from libm in the last bit, and a run's bits must not depend on its batch."""
+    def mapped(*arrays):
+        return np.array(list(map(fn, *(a.tolist() for a in np.broadcast_arrays(*arrays)))), dtype=float)
+    return mapped
+
+
+def _float_fmin(a: float, b: float) -> float:
+    return b if a != a or b < a else a  # numpy's fmin: a NaN loses (Python's min keeps a first NaN)
+
+
+def _float_fmax(a: float, b: float) -> float:
+    return b if a != a or b > a else a
+
+
+def _float_div(a: float, b: float) -> float:
+    """a / b; by zero as numpy gives it (inf or NaN: a value the step then discards)."""
+    if b:
+        return a / b
+    return math.nan if a == 0.0 or a != a else math.copysign(math.inf, a) * math.copysign(1.0, b)
+
+
+class Ops:
+    """The operations the dynamics are written in: `ARRAYS` (numpy over the runs of a batch,
+    libm's transcendental functions mapped) or `FLOATS` (one run, Python floats). Both give
+    the same bits for a run: one formula (`_substep`), never a scalar twin."""
+
+    def __init__(self, **ops):
+        self.__dict__.update(ops)
+
+
+ARRAYS = Ops(min=np.fmin, max=np.fmax, where=np.where, div=np.divide, sqrt=np.sqrt, abs=np.abs,
+             copysign=np.copysign, hypot=_libm(math.hypot), tan=_libm(math.tan), atan=_libm(math.atan),
+             atan2=_libm(math.atan2), sin=_libm(math.sin), cos=_libm(math.cos),
+             all=lambda c: bool(c.all()), any=lambda c: bool(c.any()))
+FLOATS = Ops(min=_float_fmin, max=_float_fmax, where=lambda c, a, b: a if c else b, div=_float_div, sqrt=math.sqrt,
+             abs=abs, copysign=math.copysign, hypot=math.hypot, tan=math.tan, atan=math.atan, atan2=math.atan2,
+             sin=math.sin, cos=math.cos, all=bool, any=bool)
+
+
+# From how many runs `step` takes the batch as arrays: each numpy call costs ~1-2 us
+# whatever its size (the step makes ~100, and maps libm's functions), the float step
+# 7-11 us per run. Measured per run-step on the shared 2 cores (load 5-7, bench lines in
+# docs/twin.md): floats 9.7-11.5 us; arrays 21 us at 8 runs, 16 at 16, 8.1 at 64, 5.8 at 256.
+ARRAY_MIN_RUNS = 64
+
+
 def step(states, params, steer_cmd, accel_cmd, dt: float, grade=0.0) -> None:
     """Advance each vehicle state in place by `dt` [s] under its steering [rad] and
     acceleration [m/s^2] commands: one state and its numbers, or sequences of them (a batch
-    of runs; one is a batch of one: the same array code steps both).
+    of runs: as arrays over the runs from `ARRAY_MIN_RUNS` runs on, else run by run in
+    floats; both give the same bits).
 
     `grade` is the road slope dz/ds under the vehicle (uphill positive): gravity acts
     along it and the normal load shrinks by its cosine.
     """
+    n = max(1, math.ceil(dt / MAX_SUBSTEP_S - 1e-9))
+    h = dt / n
     if isinstance(states, VehicleState):
         states, params, steer_cmd, accel_cmd, grade = [states], [params], [steer_cmd], [accel_cmd], [grade]
+    if len(states) < ARRAY_MIN_RUNS:  # run by run, in floats
+        for v, q, steer, accel, g in zip(states, params, steer_cmd, accel_cmd, grade):
+            state = dict(zip(STATE_FIELDS, _state_row(v)))
+            p = dict(zip(PARAM_FIELDS, _param_row(q)))
+            for _ in range(n):
+                _substep(state, p, float(steer), float(accel), h, float(g), FLOATS)
+            v.__dict__.update(state)
+        return
     # Columns of the batch: state[field] and p[field] are arrays over the runs.
-    cols = np.array([_state_row(v) for v in states], dtype=float).T.copy()
+    cols = np.array([_state_row(v) for v in states], dtype=float).T
     state = dict(zip(STATE_FIELDS, cols))
     p = dict(zip(PARAM_FIELDS, np.array([_param_row(q) for q in params], dtype=float).T))
     steer_cmd, accel_cmd = np.asarray(steer_cmd, dtype=float), np.asarray(accel_cmd, dtype=float)
     grade = np.asarray(grade, dtype=float)
-    n = max(1, math.ceil(dt / MAX_SUBSTEP_S - 1e-9))
-    h = dt / n
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         for _ in range(n):
-            _substep(state, p, steer_cmd, accel_cmd, h, grade)
-    for v, row in zip(states, cols.T.tolist()):
+            _substep(state, p, steer_cmd, accel_cmd, h, grade, ARRAYS)
+    rows = np.array([state[f] for f in STATE_FIELDS]).T.tolist()
+    for v, row in zip(states, rows):
         v.__dict__.update(zip(STATE_FIELDS, row))
 
 
-def _substep(state: dict, p: dict, steer_cmd, accel_cmd, dt: float, grade) -> None:
-    """One integration step over the batch's columns (arrays over runs), in place. Both
-    regimes are computed and selected per run (`np.where`); what the other regime would
-    give (e.g. a division by a zero speed) is discarded."""
-    # fmin / fmax: a NaN command (a bit flip) is clamped as Python's min / max clamp it.
-    mn, mx, where = np.fmin, np.fmax, np.where
+def _substep(state: dict, p: dict, steer_cmd, accel_cmd, dt: float, grade, o: Ops) -> None:
+    """One integration step of the state (floats, or arrays over runs), in `o`'s operations.
+    Each run takes its regime's result (`o.where`); a regime no run is in is not computed,
+    and what the other regime would give a run (e.g. a division by a zero speed) is discarded."""
+    mn, mx = o.min, o.max
     # Actuators: first-order lag, then rate limits.
     steer_target = mx(-p["max_steer_rad"], mn(p["max_steer_rad"], steer_cmd))
     d_steer = (steer_target - state["steer"]) * mn(1.0, dt / p["steer_lag_s"])
     max_d = p["steer_rate_rad_s"] * dt
-    state["steer"] += mx(-max_d, mn(max_d, d_steer))
+    state["steer"] = state["steer"] + mx(-max_d, mn(max_d, d_steer))
     d_acc = (accel_cmd - state["accel_cmd_actual"]) * mn(1.0, dt / p["accel_lag_s"])
     max_da = p["jerk_limit"] * dt
-    state["accel_cmd_actual"] += mx(-max_da, mn(max_da, d_acc))
+    state["accel_cmd_actual"] = state["accel_cmd_actual"] + mx(-max_da, mn(max_da, d_acc))
 
-    theta = np.arctan(grade)
-    state["pitch"][:] = theta
+    theta = o.atan(grade)
+    state["pitch"] = theta
     m = p["mass_kg"]
-    mg = m * G * np.cos(theta)  # normal load
-    g_along = G * np.sin(theta)  # gravity component along the slope
-    lf, L = p["cg_to_front_m"], p["wheelbase_m"]
-    lr = L - lf
-    mu = p["mu"]
-    vx, vy, r, steer = state["vx"], state["vy"], state["yaw_rate"], state["steer"]
+    mg = m * G * o.cos(theta)  # normal load
+    g_along = G * o.sin(theta)  # gravity component along the slope
     fx_demand = m * mn(state["accel_cmd_actual"], p["max_drive_accel"])
+    vx = state["vx"]
     drag = p["drag"] * vx * vx
-    tan_steer = np.tan(steer)
     slow = vx < KINEMATIC_BELOW_MPS
+    args = (state, p, dt, mg, g_along, fx_demand, drag, o)
+    if o.all(slow):
+        out = _kinematic(*args)
+    elif not o.any(slow):
+        out = _dynamic(*args)
+    else:
+        out = tuple(o.where(slow, k, d) for k, d in zip(_kinematic(*args), _dynamic(*args)))
+    (state["vx"], state["vy"], state["yaw_rate"], state["yaw_acc"], state["accel"], state["ax_specific"],
+     state["ay"], state["slip_front"], state["slip_rear"]) = out
+    state["heading"] = heading = state["heading"] + state["yaw_rate"] * dt
+    c, s = o.cos(heading), o.sin(heading)
+    horizontal = o.cos(theta)  # x, y are the horizontal projection of the motion
+    vx, vy = state["vx"], state["vy"]
+    state["x"] = state["x"] + (vx * c - vy * s) * horizontal * dt
+    state["y"] = state["y"] + (vx * s + vy * c) * horizontal * dt
 
-    # Kinematic regime at low speed: the path follows the wheels; the friction circle
-    # still bounds the longitudinal force by what the cornering leaves.
+
+def _kinematic(state, p, dt, mg, g_along, fx_demand, drag, o) -> tuple:
+    """Kinematic regime at low speed: the path follows the wheels; the friction circle
+    still bounds the longitudinal force by what the cornering leaves. (vx, vy, yaw rate,
+    yaw acceleration, accel, specific force, lateral accel, slips) after the step."""
+    mn, mx = o.min, o.max
+    m, L, mu = p["mass_kg"], p["wheelbase_m"], p["mu"]
+    vx, r = state["vx"], state["yaw_rate"]
+    tan_steer = o.tan(state["steer"])
     lateral = m * vx * vx * tan_steer / L
-    f_max = np.sqrt(mx(0.0, (mu * mg) ** 2 - lateral * lateral))
-    fx_k = mx(-f_max, mn(f_max, fx_demand))
-    ax_k = fx_k / m - drag - g_along
-    ax_k = where((vx <= 0.0) & (ax_k < 0.0), 0.0, ax_k)  # brakes hold the car; no reversing
-    vx_k = mx(0.0, vx + ax_k * dt)
-    yaw_k = vx_k * tan_steer / L
+    f_max = o.sqrt(mx(0.0, (mu * mg) ** 2 - lateral * lateral))
+    fx = mx(-f_max, mn(f_max, fx_demand))
+    ax = fx / m - drag - g_along
+    ax = o.where((vx <= 0.0) & (ax < 0.0), 0.0, ax)  # brakes hold the car; no reversing
+    new_vx = mx(0.0, vx + ax * dt)
+    yaw = new_vx * tan_steer / L
     # The tyres cannot turn the car harder than the friction circle leaves after the
     # longitudinal force: past that they slide and the path widens.
-    ay_max = np.sqrt(mx(0.0, (mu * G) ** 2 - (fx_k / m) ** 2))
-    yaw_k = where(vx_k * np.abs(yaw_k) > ay_max, np.copysign(ay_max / vx_k, yaw_k), yaw_k)
+    ay_max = o.sqrt(mx(0.0, (mu * G) ** 2 - (fx / m) ** 2))
+    yaw = o.where(new_vx * o.abs(yaw) > ay_max, o.copysign(o.div(ay_max, new_vx), yaw), yaw)
+    zero = vx * 0.0  # (a zero of the batch's shape)
+    return new_vx, zero, yaw, (yaw - r) / dt, ax, ax + g_along, new_vx * yaw, zero, zero
 
-    # Dynamic regime. Axle loads with longitudinal load transfer from the last step's
-    # specific force (clipped so that an axle never carries less than nothing).
+
+def _dynamic(state, p, dt, mg, g_along, fx_demand, drag, o) -> tuple:
+    """Dynamic regime: axle loads with longitudinal load transfer from the last step's
+    specific force (clipped so that an axle never carries less than nothing), Fiala tyres
+    on the friction circle. The same quantities as `_kinematic`."""
+    mn, mx = o.min, o.max
+    m, mu = p["mass_kg"], p["mu"]
+    lf, L = p["cg_to_front_m"], p["wheelbase_m"]
+    lr = L - lf
+    vx, vy, r, steer = state["vx"], state["vy"], state["yaw_rate"], state["steer"]
     transfer = mx(-mg * lf / L, mn(mg * lr / L, m * state["ax_specific"] * p["cg_height_m"] / L))
     fz_f = mg * lr / L - transfer
     fz_r = mg * lf / L + transfer
     # Braking in proportion to the axle loads, drive by the drivetrain's split.
-    share_f = where(fx_demand < 0.0, fz_f / mx(fz_f + fz_r, 1e-9), p["drive_front_share"])
+    share_f = o.where(fx_demand < 0.0, fz_f / mx(fz_f + fz_r, 1e-9), p["drive_front_share"])
     fx_f, fx_r = share_f * fx_demand, (1.0 - share_f) * fx_demand
-    alpha_f = steer - np.arctan2(vy + lf * r, vx)
-    alpha_r = -np.arctan2(vy - lr * r, vx)
-    fyf = fiala_lateral_force(p["cornering_stiffness_front"], alpha_f, mu * fz_f)
-    fyr = fiala_lateral_force(p["cornering_stiffness_rear"], alpha_r, mu * fz_r)
-    fyf, fx_f = _friction_circle(fyf, fx_f, mu * fz_f)
-    fyr, fx_r = _friction_circle(fyr, fx_r, mu * fz_r)
-    cs, sn = np.cos(steer), np.sin(steer)
+    alpha_f = steer - o.atan2(vy + lf * r, vx)
+    alpha_r = -o.atan2(vy - lr * r, vx)
+    fyf = fiala_lateral_force(p["cornering_stiffness_front"], alpha_f, mu * fz_f, o)
+    fyr = fiala_lateral_force(p["cornering_stiffness_rear"], alpha_r, mu * fz_r, o)
+    fyf, fx_f = _friction_circle(fyf, fx_f, mu * fz_f, o)
+    fyr, fx_r = _friction_circle(fyr, fx_r, mu * fz_r, o)
+    cs, sn = o.cos(steer), o.sin(steer)
     fx_body = fx_f * cs - fyf * sn + fx_r
     fy_body = fyf * cs + fx_f * sn + fyr
-    ax_d = fx_body / m + vy * r - drag - g_along
-    ay_d = fy_body / m
-    yaw_acc_d = (lf * (fyf * cs + fx_f * sn) - lr * fyr) / p["yaw_inertia_kgm2"]
-
-    new_vx = where(slow, vx_k, mx(0.0, vx + ax_d * dt))
-    new_vy = where(slow, 0.0, vy + (ay_d - vx * r) * dt)
-    new_r = where(slow, yaw_k, r + yaw_acc_d * dt)
-    state["yaw_acc"][:] = where(slow, (yaw_k - r) / dt, yaw_acc_d)
-    state["accel"][:] = where(slow, ax_k, ax_d)
-    state["ax_specific"][:] = where(slow, ax_k + g_along, fx_body / m - drag)
-    state["ay"][:] = where(slow, vx_k * yaw_k, ay_d)
-    state["slip_front"][:] = where(slow, 0.0, alpha_f)
-    state["slip_rear"][:] = where(slow, 0.0, alpha_r)
-    state["vx"][:], state["vy"][:], state["yaw_rate"][:] = new_vx, new_vy, new_r
-    state["heading"] += new_r * dt
-    c, s = np.cos(state["heading"]), np.sin(state["heading"])
-    horizontal = np.cos(theta)  # x, y are the horizontal projection of the motion
-    state["x"] += (new_vx * c - new_vy * s) * horizontal * dt
-    state["y"] += (new_vx * s + new_vy * c) * horizontal * dt
+    ax = fx_body / m + vy * r - drag - g_along
+    ay = fy_body / m
+    yaw_acc = (lf * (fyf * cs + fx_f * sn) - lr * fyr) / p["yaw_inertia_kgm2"]
+    return (mx(0.0, vx + ax * dt), vy + (ay - vx * r) * dt, r + yaw_acc * dt, yaw_acc, ax, fx_body / m - drag, ay,
+            alpha_f, alpha_r)
 
 
-def fiala_lateral_force(stiffness, alpha, f_max):
+def fiala_lateral_force(stiffness, alpha, f_max, o: Ops = FLOATS):
     """Fiala brush-model lateral force [N] at slip angle `alpha` [rad], saturating at `f_max`
-    (numbers or arrays over a batch).
+    (floats, or arrays over a batch with `o` = ARRAYS).
 
     Linear (`stiffness * alpha`) at small slip, cubic roll-off, full sliding at
     tan(alpha) >= 3 f_max / stiffness.
     """
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = np.abs(np.tan(alpha))
-        cx = stiffness * x
-        force = cx - cx * cx / (3.0 * f_max) + cx * cx * cx / (27.0 * f_max * f_max)
-        force = np.where(x * stiffness >= 3.0 * f_max, f_max, force)
-        return np.where(f_max <= 0.0, 0.0, np.copysign(force, alpha))
+    x = o.abs(o.tan(alpha))
+    cx = stiffness * x
+    force = cx - o.div(cx * cx, 3.0 * f_max) + o.div(cx * cx * cx, 27.0 * f_max * f_max)
+    force = o.where(x * stiffness >= 3.0 * f_max, f_max, force)
+    return o.where(f_max <= 0.0, 0.0 * f_max, o.copysign(force, alpha))
 
 
-def _friction_circle(fy, fx, limit):
+def _friction_circle(fy, fx, limit, o: Ops):
     """Scale the tyre force vectors back onto the friction circle of radius `limit` [N]."""
-    mag = np.hypot(fx, fy)
-    k = np.where((mag <= limit) | (mag == 0.0), 1.0, limit / mag)
-    return np.where(k == 1.0, fy, fy * k), np.where(k == 1.0, fx, fx * k)
+    mag = o.hypot(fx, fy)
+    inside = (mag <= limit) | (mag == 0.0)
+    k = o.div(limit, mag)
+    return o.where(inside, fy, fy * k), o.where(inside, fx, fx * k)

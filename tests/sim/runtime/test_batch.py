@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from addt_dsl.compiler import compile_file
+from addt_dsl.runtime import vehicle
 from addt_dsl.runtime.execute import execute, execute_batch
 from addt_dsl.sweep import expand
 
@@ -56,7 +57,9 @@ def check_batches(specs) -> None:
         assert not bad, f"batched runs differ from alone: {bad}"
 
 
-def test_fast_examples_same_alone_batched_reversed():
+def test_fast_examples_same_alone_batched_reversed(monkeypatch):
+    # Batched egos step as arrays over the runs (forced from 2 runs), alone in floats.
+    monkeypatch.setattr(vehicle, "ARRAY_MIN_RUNS", 2)
     specs = [first_spec(n) for n in FAST]
     # Durations differ: runs leave the batch at different samples.
     assert len({s.plan.duration_s for s in specs}) > 1

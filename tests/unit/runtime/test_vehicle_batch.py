@@ -1,22 +1,31 @@
-"""The ego's dynamics over a batch (`vehicle.step` on sequences): each state ends the same
-bit for bit as stepped alone, whatever its batch and place in it; a NaN command is clamped
-(as Python's min / max clamp it), not carried into the state."""
+"""The ego's dynamics over a batch (`vehicle.step` on sequences, as arrays over the runs:
+forced here from 2 runs on): each state ends the same bit for bit as stepped alone in
+floats, whatever its batch and place in it; a NaN command is clamped (as Python's min / max
+clamp it), not carried into the state."""
 
 import copy
 import math
 
-from hypothesis import given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import pytest
+
+from addt_dsl.runtime import vehicle
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState, step
 
 DT = 0.01
+
+
+@pytest.fixture(autouse=True)
+def arrays_from_two_runs(monkeypatch):
+    monkeypatch.setattr(vehicle, "ARRAY_MIN_RUNS", 2)
 
 car = st.tuples(st.floats(0.2, 1.2), st.floats(-3.0, 3.0), st.floats(0.0, 40.0))
 command = st.tuples(st.floats(-0.7, 0.7), st.floats(-12.0, 6.0), st.sampled_from([0.0, 0.06, -0.04]))
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.lists(car, min_size=1, max_size=9), st.lists(command, min_size=1, max_size=40), st.randoms())
 def test_batch_equals_one_by_one(cars, commands, rnd):
     params = [VehicleParams.for_vehicle(mu=mu) for mu, _, _ in cars]
@@ -38,9 +47,11 @@ def test_batch_equals_one_by_one(cars, commands, rnd):
     assert [again[i] for i in order] == shuffled
 
 
-def test_nan_command_is_clamped_not_carried():
+@pytest.mark.parametrize("runs", [1, 3])
+def test_nan_command_is_clamped_not_carried(runs):
     p = VehicleParams.for_vehicle()
-    v = VehicleState(0.0, 0.0, 0.0, 20.0)
-    step(v, p, math.nan, math.nan, DT)
-    assert all(math.isfinite(getattr(v, f)) for f in ("x", "y", "vx", "vy", "yaw_rate", "steer"))
-    assert v.steer == p.steer_rate_rad_s * DT  # toward +max steer at the rate limit, as before
+    cars = [VehicleState(0.0, 0.0, 0.0, 20.0) for _ in range(runs)]
+    step(cars, [p] * runs, [math.nan] * runs, [math.nan] * runs, DT, [0.0] * runs)
+    for v in cars:
+        assert all(math.isfinite(getattr(v, f)) for f in ("x", "y", "vx", "vy", "yaw_rate", "steer"))
+        assert v.steer == p.steer_rate_rad_s * DT  # toward +max steer at the rate limit, as before
