@@ -154,10 +154,10 @@ class Ops:
 ARRAYS = Ops(min=np.fmin, max=np.fmax, where=np.where, div=np.divide, sqrt=np.sqrt, abs=np.abs,
              copysign=np.copysign, hypot=_libm(math.hypot), tan=_libm(math.tan), atan=_libm(math.atan),
              atan2=_libm(math.atan2), sin=_libm(math.sin), cos=_libm(math.cos),
-             all=lambda c: bool(c.all()), any=lambda c: bool(c.any()))
+             all=lambda c: bool(c.all()), any=lambda c: bool(c.any()), zero=np.zeros_like)
 FLOATS = Ops(min=_float_fmin, max=_float_fmax, where=lambda c, a, b: a if c else b, div=_float_div, sqrt=math.sqrt,
              abs=abs, copysign=math.copysign, hypot=math.hypot, tan=math.tan, atan=math.atan, atan2=math.atan2,
-             sin=math.sin, cos=math.cos, all=bool, any=bool)
+             sin=math.sin, cos=math.cos, all=bool, any=bool, zero=lambda like: 0.0)
 
 
 # From how many runs `step` takes the batch as arrays: each numpy call costs ~1-2 us
@@ -182,11 +182,8 @@ def step(states, params, steer_cmd, accel_cmd, dt: float, grade=0.0) -> None:
         states, params, steer_cmd, accel_cmd, grade = [states], [params], [steer_cmd], [accel_cmd], [grade]
     if len(states) < ARRAY_MIN_RUNS:  # run by run, in floats
         for v, q, steer, accel, g in zip(states, params, steer_cmd, accel_cmd, grade):
-            state = dict(zip(STATE_FIELDS, _state_row(v)))
-            p = dict(zip(PARAM_FIELDS, _param_row(q)))
-            for _ in range(n):
-                _substep(state, p, float(steer), float(accel), h, float(g), FLOATS)
-            v.__dict__.update(state)
+            for _ in range(n):  # (the dataclasses' own field dicts: read and written in place)
+                _substep(v.__dict__, q.__dict__, float(steer), float(accel), h, float(g), FLOATS)
         return
     # Columns of the batch: state[field] and p[field] are arrays over the runs.
     cols = np.array([_state_row(v) for v in states], dtype=float).T
@@ -261,7 +258,7 @@ def _kinematic(state, p, dt, mg, g_along, fx_demand, drag, o) -> tuple:
     # longitudinal force: past that they slide and the path widens.
     ay_max = o.sqrt(mx(0.0, (mu * G) ** 2 - (fx / m) ** 2))
     yaw = o.where(new_vx * o.abs(yaw) > ay_max, o.copysign(o.div(ay_max, new_vx), yaw), yaw)
-    zero = vx * 0.0  # (a zero of the batch's shape)
+    zero = o.zero(vx)
     return new_vx, zero, yaw, (yaw - r) / dt, ax, ax + g_along, new_vx * yaw, zero, zero
 
 
@@ -307,7 +304,7 @@ def fiala_lateral_force(stiffness, alpha, f_max, o: Ops = FLOATS):
     cx = stiffness * x
     force = cx - o.div(cx * cx, 3.0 * f_max) + o.div(cx * cx * cx, 27.0 * f_max * f_max)
     force = o.where(x * stiffness >= 3.0 * f_max, f_max, force)
-    return o.where(f_max <= 0.0, 0.0 * f_max, o.copysign(force, alpha))
+    return o.where(f_max <= 0.0, o.zero(f_max), o.copysign(force, alpha))
 
 
 def _friction_circle(fy, fx, limit, o: Ops):
