@@ -100,13 +100,14 @@ def test_batch_same_under_another_hash_seed():
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # ~180 closed-loop runs, camera suites among them: minutes on a loaded machine
 def test_every_example_and_suite_same_alone_and_batched():
-    """Every example's and suite's first run (and a sweep's second), alone and in batches of 7
-    mixed with other plans, in order and reversed."""
+    """Every example's and suite's first run, alone and in batches of 7 mixed with other
+    plans, in order and reversed."""
     specs = []
     for path in sorted(EXAMPLES.rglob("*.addt")):
         plan = compile_file(path).plan
         if plan is not None:
-            specs.extend(expand(plan).specs[:2])
+            specs.append(expand(plan).specs[0])
     assert len(specs) > 40
     check_batches(specs)
