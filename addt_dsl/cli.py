@@ -178,7 +178,8 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
         print(f"error[E0501]: {exc}", file=sys.stderr)
         return EXIT_USAGE
     try:
-        executor = _executor(args, len(stream))
+        args.sweep_runs = len(stream)  # (the default batch size comes from it)
+        executor = _executor(args)
     except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -220,14 +221,15 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
             tmp.cleanup()
 
 
-def _executor(args, n_runs: int = 0):
-    from addt_dsl.runtime.executor import default_batch
-
-    batch = args.batch or default_batch(n_runs, args.jobs)
+def _executor(args):
     if args.executor == "inline":
         from addt_dsl.runtime.executor import InlineExecutor
 
         return InlineExecutor(timeout_s=args.timeout, memory_limit_mb=args.memory_limit)
+    from addt_dsl.runtime.executor import default_batch
+
+    # (inline runs one by one)
+    batch = getattr(args, "batch", None) or default_batch(getattr(args, "sweep_runs", 0), args.jobs)
     if args.executor == "ray":
         from addt_dsl.runtime.ray_executor import RayExecutor, ray_available
 

@@ -7,7 +7,9 @@ from collections import Counter
 
 from tests.unit.runtime.runner_testkit import HANG, HOG, OK, RAISE, SEGFAULT, fake_run, plan_of, scenario
 
-from addt_dsl.runtime.executor import LocalExecutor, run_local, run_sweep
+from addt_dsl import cli
+from addt_dsl.runtime import executor as executor_module
+from addt_dsl.runtime.executor import LocalExecutor, default_batch, run_local, run_sweep
 from addt_dsl.runtime.store import ResultStore
 from addt_dsl.sweep import SweepStream
 
@@ -41,3 +43,29 @@ def test_batched_records_equal_one_by_one_and_resume_skips(tmp_path):
     outcome = run_sweep(SweepStream(plan), store, LocalExecutor(1, batch=4))
     assert (outcome.skipped, outcome.ran) == (3, 5)
     assert sorted(key(r) for r in store.records()) == sorted(key(r) for r in one)
+
+
+def test_default_batch_from_the_sweep_size():
+    assert default_batch(64, 1) == 16  # capped
+    assert default_batch(40, 2) == 5  # each worker 4 batches
+    assert default_batch(3, 2) == 1
+    assert default_batch(0, 4) == 1
+
+
+def test_cli_batch_reaches_the_executor(tmp_path, monkeypatch):
+    made = []
+    real = executor_module.LocalExecutor
+
+    def spy(*args, **kwargs):
+        made.append(kwargs.get("batch"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(executor_module, "LocalExecutor", spy)
+    path = tmp_path / "s.addt"
+    path.write_text(scenario([0, 2], repeat=3, duration="0.2 s"))
+    assert cli.main([str(path), "--jobs", "1", "--batch", "4", "--store", str(tmp_path / "a.sqlite")]) == 0
+    assert cli.main([str(path), "--jobs", "1", "--store", str(tmp_path / "b.sqlite")]) == 0
+    assert made == [4, 1]  # given; the default for 6 runs on one worker
+    with ResultStore(tmp_path / "a.sqlite", plan_of(path.read_text())) as a, \
+            ResultStore(tmp_path / "b.sqlite", plan_of(path.read_text())) as b:
+        assert sorted((r.run_id, r.digest) for r in a.records()) == sorted((r.run_id, r.digest) for r in b.records())
