@@ -3,12 +3,12 @@ second (and per CPU second of the process) for the same runs stepped one at a ti
 batches, in one process on one core; the peak memory of each batch.
 
 Run: PYTHONPATH=. python benchmarks/bench_batch.py [--quick] [--json FILE] [--profile B]
-     [--scaling]
+     [--scaling | --scaling-only]
 
 - a ground-truth sweep: `examples/overtake.addt` (30 s, lidar, bev stack, drop faults) with
   64 runs (its grid cells, each repeated with other seeds), at batch 1, 16 and 64;
 - 50 IDM agents (`bench_twin.traffic_source(50)`, 5 s): one run, and 16 runs at batch 16;
-- `--scaling`: agents 1/5/20/50/100 x batch 1/16/256 (2 s runs; 256-run batches: minutes);
+- `--scaling`: agents 1/5/20/50/100 x batch 1/16/64 (1 s runs, 16 runs or one batch);
 - `--profile B`: cProfile's top functions of the ground-truth sweep at batch B instead.
 
 Each configuration runs in a fresh process (its peak RSS is its own); ratios are to batch 1
@@ -31,6 +31,9 @@ import _figures as figures_json  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = "--quick" in sys.argv
 JSON_PATH = sys.argv[sys.argv.index("--json") + 1] if "--json" in sys.argv else None
+# Batch sizes of the scaling table. Not 256: a run holds ~40-45 MB until its batch ends, so
+# 256 runs are ~11 GB in one process (docs/twin.md, Batches), more than a shared machine lends.
+SCALING_BATCHES = (1, 16, 64)
 
 
 def overtake_specs(n: int) -> list:
@@ -106,6 +109,8 @@ def profile(batch: int) -> None:
 
 
 def main() -> None:
+    if "--scaling-only" in sys.argv:
+        sys.argv.append("--scaling")
     if "--child" in sys.argv:
         print(json.dumps(measure(**json.loads(sys.argv[sys.argv.index("--child") + 1]))))
         return
@@ -117,21 +122,23 @@ def main() -> None:
     figures: dict = {"overtake": {}, "idm50": {}, "scaling": {}}
     runs = 16 if QUICK else 64
     ref = None
-    for batch in ((1, 16) if QUICK else (1, 16, 64)):
+    for batch in () if "--scaling-only" in sys.argv else ((1, 16) if QUICK else (1, 16, 64)):
         m = figures["overtake"][batch] = in_child(workload="overtake", runs=runs, batch=batch)
         print(row(f"overtake x{runs}, batch {batch}", m, ref), flush=True)
         ref = ref or m
-    one = figures["idm50"]["one"] = in_child(workload="traffic", runs=1, batch=1, agents=50)
-    print(row("50 IDM agents, one run", one, None), flush=True)
-    for batch in (1, 16):
+    for batch in () if "--scaling-only" in sys.argv else ("one", 1, 16):
+        if batch == "one":
+            one = figures["idm50"]["one"] = in_child(workload="traffic", runs=1, batch=1, agents=50)
+            print(row("50 IDM agents, one run", one, None), flush=True)
+            continue
         m = figures["idm50"][batch] = in_child(workload="traffic", runs=16, batch=batch, agents=50)
         print(row(f"50 IDM agents x16, batch {batch}", m, figures["idm50"][1]), flush=True)
     if "--scaling" in sys.argv:
         for agents in (1, 5, 20, 50, 100):
             ref = None
-            for batch in (1, 16, 256):
-                m = figures["scaling"][f"{agents}x{batch}"] = in_child(workload="traffic", runs=batch, batch=batch,
-                                                                      agents=agents, duration=2.0)
+            for batch in SCALING_BATCHES:
+                m = figures["scaling"][f"{agents}x{batch}"] = in_child(workload="traffic", runs=max(16, batch),
+                                                                      batch=batch, agents=agents, duration=1.0)
                 m["agent_s_per_wall"] = m["sim_per_wall"] * agents
                 print(row(f"{agents} agents, batch {batch}", m, ref), flush=True)
                 ref = ref or m
