@@ -178,6 +178,7 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
         print(f"error[E0501]: {exc}", file=sys.stderr)
         return EXIT_USAGE
     try:
+        args.sweep_runs = len(stream)  # (the default batch size comes from it)
         executor = _executor(args)
     except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -225,19 +226,24 @@ def _executor(args):
         from addt_dsl.runtime.executor import InlineExecutor
 
         return InlineExecutor(timeout_s=args.timeout, memory_limit_mb=args.memory_limit)
+    from addt_dsl.runtime.executor import default_batch
+
+    # (inline runs one by one)
+    batch = getattr(args, "batch", None) or default_batch(getattr(args, "sweep_runs", 0), args.jobs)
     if args.executor == "ray":
         from addt_dsl.runtime.ray_executor import RayExecutor, ray_available
 
         if not ray_available():
             raise UsageError("--executor ray needs the `ray` package (pip install 'addt-dsl[ray]')")
         return RayExecutor(address=args.address, jobs=args.jobs if args.jobs_given else None,
-                           timeout_s=args.timeout, memory_limit_mb=args.memory_limit, retries=args.retries)
+                           timeout_s=args.timeout, memory_limit_mb=args.memory_limit, retries=args.retries,
+                           batch=batch)
     if args.address:
         raise UsageError("--address is for --executor ray")
     from addt_dsl.runtime.executor import LocalExecutor
 
     return LocalExecutor(args.jobs, timeout_s=args.timeout, memory_limit_mb=args.memory_limit,
-                         max_tasks_per_child=args.max_tasks_per_child, retries=args.retries)
+                         max_tasks_per_child=args.max_tasks_per_child, retries=args.retries, batch=batch)
 
 
 def _classifying(args, stream, store, executor):
@@ -527,6 +533,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="suite table: success rate per value of this parameter (e.g. drop_rate)")
     run.add_argument("--jobs", "-j", type=positive_int, default=None,
                      help="worker processes (default: CPU count; Ray: the cluster's CPUs)")
+    run.add_argument("--batch", type=positive_int, default=None, metavar="N",
+                     help="runs a worker steps together (default: from the sweep's size, at most "
+                          "16, each worker at least 4 batches; see docs/twin.md)")
     run.add_argument("--executor", choices=("local", "ray", "inline"), default="local",
                      help="local worker processes (default), a Ray cluster, or this process (debugging)")
     run.add_argument("--address", help="Ray cluster address (default: start a local Ray instance)")

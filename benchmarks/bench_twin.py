@@ -72,7 +72,7 @@ scenario traffic_{n_agents} {{
 
 def physics_step_us(n_vehicles: int) -> dict[str, float]:
     """Per-step cost of the loop's physics with `n_vehicles` (ego + agents)."""
-    from addt_dsl.runtime import execute as X
+    from addt_dsl.runtime import batch as X
     from addt_dsl.runtime.behaviors import advance
     from addt_dsl.runtime.vehicle import step as vehicle_step
 
@@ -81,7 +81,7 @@ def physics_step_us(n_vehicles: int) -> dict[str, float]:
 
     run = RunState(compile_spec(traffic_source(n_vehicles - 1)))
     try:
-        trace = X._loop(run)  # move everyone into a realistic configuration first
+        trace = X._loop([run])[0]  # move everyone into a realistic configuration first
         dt, names = run.dt, ["ego"] + [a.name for a in run.agents]
         sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m),
                  **{a.name: (a.length_m, a.width_m) for a in run.agents}}
@@ -143,13 +143,13 @@ def loop_step_us(n_vehicles: int) -> float:
 # ---------------------------------------------------------------- sensors
 
 def sensor_ms(sensor_line: str, n_agents: int = 5, repeat: int = 5) -> tuple[float, object]:
-    from addt_dsl.runtime import execute as X
+    from addt_dsl.runtime import batch as X
 
     from addt_dsl.runtime.state import RunState
 
     run = RunState(compile_spec(traffic_source(n_agents, sensors=sensor_line, duration=2.0)))
     try:
-        X._loop(run)  # pose the bodies
+        X._loop([run])  # pose the bodies
         sensor = next(iter(run.sensors.values()))
         frame = sensor.capture(run, 0.0)
         return best_of(lambda: sensor.capture(run, 0.0), repeat=repeat) * 1e3, (frame, run.scene)

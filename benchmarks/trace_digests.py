@@ -5,7 +5,8 @@ Run: PYTHONPATH=. python benchmarks/trace_digests.py > digests.txt   (on each ch
      [--arrays: agents posed and stepped as arrays whatever their count, as the loop does
      from `ARRAY_MIN_AGENTS` / `STEP_MIN_AGENTS` agents on: the digests must not change]
      [NAME ...: only the runs whose name contains one of these]
-     [--json OUT: also write {name: "status digest"} to OUT; compare two with --compare A B]
+     [--json OUT: also write {name: "status digest | oracle:P oracle:F ..."} to OUT; compare two
+     with --compare A B: digests, then verdicts (where both files have them)]
 """
 
 from __future__ import annotations
@@ -66,13 +67,22 @@ def specs():
 
 
 def compare(before: str, after: str) -> int:
-    """Print every run whose digest differs or is missing; the exit status says whether all match."""
+    """Print every run whose digest differs or is missing, then every run whose verdicts
+    differ (runs both files give verdicts for); the exit status says whether all match."""
     a, b = json.loads(Path(before).read_text()), json.loads(Path(after).read_text())
-    bad = [k for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+    digest = lambda v: None if v is None else v.split(" | ")[0]  # noqa: E731
+    verdicts = lambda v: v.split(" | ", 1)[1] if v is not None and " | " in v else None  # noqa: E731
+    bad = [k for k in sorted(set(a) | set(b)) if digest(a.get(k)) != digest(b.get(k))]
     for k in bad:
-        print(f"{k:56s} {a.get(k)!s:28s} -> {b.get(k)}")
+        print(f"{k:56s} {digest(a.get(k))!s:28s} -> {digest(b.get(k))}")
     print(f"identical {len(a) - len(bad)}/{len(a)}" + (f"; {len(b)} after" if len(b) != len(a) else ""))
-    return 1 if bad else 0
+    both = [k for k in sorted(set(a) & set(b)) if verdicts(a[k]) is not None and verdicts(b[k]) is not None]
+    changed = [k for k in both if verdicts(a[k]) != verdicts(b[k])]
+    for k in changed:
+        print(f"verdicts {k}: {verdicts(a[k])} -> {verdicts(b[k])}")
+    if both:
+        print(f"verdicts identical {len(both) - len(changed)}/{len(both)}")
+    return 1 if bad or changed else 0
 
 
 def main() -> None:
@@ -99,7 +109,8 @@ def main() -> None:
             continue
         t0 = time.perf_counter()
         r = execute(spec)
-        found[name] = f"{r.status} {full_digest(r.trace)}"
+        passed = " ".join(f"{v.name}:{'P' if v.passed else 'F'}" for v in r.verdicts)
+        found[name] = f"{r.status} {full_digest(r.trace)} | {passed}"
         print(f"{name:56s} {r.status:9s} {full_digest(r.trace)} {time.perf_counter() - t0:6.2f}s", flush=True)
         if out is not None:
             out.write_text(json.dumps(found, indent=1))

@@ -24,6 +24,7 @@ order. Three executors:
 from __future__ import annotations
 
 import contextlib
+import itertools
 import multiprocessing as mp
 import os
 import resource
@@ -38,7 +39,7 @@ from multiprocessing.connection import wait
 
 from addt_dsl.errors import ToolError
 from addt_dsl.plan import RunSpec
-from addt_dsl.runtime.execute import execute
+from addt_dsl.runtime.execute import execute, execute_batch
 from addt_dsl.runtime.result import RunResult
 from addt_dsl.runtime.store import ResultStore, trace_stats
 
@@ -60,6 +61,20 @@ BOUND_STARTUP_S = 60.0
 # scheduler SIGTERM): infrastructure, not the run. A run that loses its worker to one is
 # run again; one that loses it on every attempt is `lost`, never stored as a verdict.
 EXTERNAL_SIGNALS = frozenset({signal.SIGKILL, signal.SIGTERM, signal.SIGHUP, signal.SIGINT})
+
+
+# Runs a worker steps together by default (`default_batch`): at most BATCH_MAX (each run
+# holds its own pybullet client and world, so a worker's memory grows with its batch:
+# docs/twin.md gives the measured bound; a killed sweep loses at most a batch per worker),
+# and small enough that each worker gets BATCHES_PER_WORKER batches (the last batches of
+# a sweep do not leave the other workers idle).
+BATCH_MAX = 16
+BATCHES_PER_WORKER = 4
+
+
+def default_batch(n_runs: int, workers: int) -> int:
+    """The batch size for a sweep of `n_runs` runs on `workers` workers."""
+    return max(1, min(BATCH_MAX, n_runs // (max(1, workers) * BATCHES_PER_WORKER)))
 
 
 def run_time_bound_s(spec: RunSpec, timeout_s: float | str | None = AUTO) -> float | None:
@@ -135,6 +150,22 @@ def run_spec(spec: RunSpec, seq: int = -1, worker: str = "",
             spec, "crashed", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=4)}",
             time.perf_counter() - t0, seq=seq, worker=worker)
     return record
+
+
+def run_batch(specs: list[RunSpec], seqs: list[int], worker: str = "") -> list[RunResult]:
+    """`run_spec` over a batch stepped together (`execute_batch`): the same records as one by
+    one (a run's trace does not depend on its batch). A batch whose set-up fails (one run's
+    world or stack cannot be built) runs its runs one by one, so only that run is `crashed`."""
+    if len(specs) == 1:
+        return [run_spec(specs[0], seqs[0], worker)]
+    try:
+        records = execute_batch(specs, keep_trace=True)
+    except Exception:  # noqa: BLE001 - isolate the run that failed: each alone
+        return [run_spec(spec, seq, worker) for spec, seq in zip(specs, seqs)]
+    for record, seq in zip(records, seqs):
+        record.stats = trace_stats(record.trace)
+        record.seq, record.worker, record.trace = seq, worker, None
+    return records
 
 
 def peak_rss_mb() -> float:
@@ -270,22 +301,29 @@ def _worker_main(conn, memory_limit_mb: float | None, run_fn=None) -> None:
         if msg[0] == "plan":
             plans[msg[1]] = msg[2]
             continue
-        _, seq, token, fields = msg
-        spec = RunSpec.model_construct(plan=plans[token], **fields)
+        # ("run", [(seq, plan token, spec fields), ...]): a batch, stepped together.
+        specs = [RunSpec.model_construct(plan=plans[token], **fields) for _, token, fields in msg[1]]
+        seqs = [seq for seq, _, _ in msg[1]]
         try:
-            record = (run_fn or run_spec)(spec, seq, worker=name)
+            if run_fn is None:
+                records = run_batch(specs, seqs, worker=name)
+            else:  # a custom run function takes one run at a time
+                records = [run_fn(spec, seq, worker=name) for spec, seq in zip(specs, seqs)]
         except Exception as exc:  # noqa: BLE001 - run_spec catches its own; this guards a custom run_fn
-            record = RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", 0.0, seq=seq, worker=name)
+            records = [RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", 0.0, seq=seq,
+                                            worker=name) for spec, seq in zip(specs, seqs)]
         # A spike between the coordinator's RSS polls still shows in the peak.
         peak_mb = peak_rss_mb()
-        if memory_limit_mb and peak_mb > memory_limit_mb:
-            record.status = "memory"
-            record.error = f"peak resident memory {peak_mb:.0f} MB over the {memory_limit_mb:.0f} MB limit"
+        over = bool(memory_limit_mb and peak_mb > memory_limit_mb)
+        if over:
+            for record in records:
+                record.status = "memory"
+                record.error = f"peak resident memory {peak_mb:.0f} MB over the {memory_limit_mb:.0f} MB limit"
         try:
-            conn.send(record)
+            conn.send(records)
         except (BrokenPipeError, OSError):
             return
-        if record.status == "memory":
+        if over:
             return  # the peak stays high for the rest of this process: retire
 
 
@@ -295,7 +333,7 @@ class _Worker:
     conn: object
     plans: set = field(default_factory=set)
     tasks: int = 0
-    job: tuple | None = None  # (seq, spec, started_at)
+    job: tuple | None = None  # ([(seq, spec), ...], started_at, time bound [s])
     server: int | None = None  # pid of the forkserver it was forked from (its parent)
 
 
@@ -373,6 +411,11 @@ class LocalExecutor:
     `keep_workers`: keep the idle workers between `imap` calls until `close()` (the search
     calls `imap` once per small batch; starting two workers per batch cost more than the
     runs themselves).
+    `batch`: runs a worker steps together (`execute_batch`; a run's record does not depend
+    on its batch). A batch's time bound is the sum of its runs' bounds. A batch that does
+    not finish (past its bound, over the memory limit, its worker crashed or killed) is
+    not judged: each of its runs goes again alone, under its own bound and the retry policy,
+    so one hung or crashing run costs the others a rerun, never their records.
     """
 
     name = "local"
@@ -381,8 +424,9 @@ class LocalExecutor:
                  memory_limit_mb: float | None = DEFAULT_MEMORY_LIMIT_MB,
                  max_tasks_per_child: int | None = DEFAULT_MAX_TASKS_PER_CHILD,
                  start_method: str | None = None, run_fn: Callable | None = None,
-                 retries: int = DEFAULT_RETRIES, keep_workers: bool = False):
+                 retries: int = DEFAULT_RETRIES, keep_workers: bool = False, batch: int = 1):
         self.workers = max(1, int(jobs))
+        self.batch = max(1, int(batch))
         self.keep_workers = keep_workers
         self._kept: list[_Worker] = []  # idle workers kept from the last `imap` (keep_workers)
         self.timeout_s = timeout_s if timeout_s == AUTO or (timeout_s and timeout_s > 0) else None
@@ -431,20 +475,24 @@ class LocalExecutor:
             return _Worker(process, parent, server=_forkserver_pid() if self.start_method == "forkserver" else None)
         raise AssertionError("unreachable")
 
-    def _dispatch(self, w: _Worker, seq: int, spec: RunSpec) -> bool:
-        """Hand a run to an idle worker; False if the worker turned out to be dead (it died
-        while idle: its pipe is broken), so the caller replaces it."""
+    def _dispatch(self, w: _Worker, batch: list[tuple[int, RunSpec]]) -> bool:
+        """Hand a batch of runs to an idle worker; False if the worker turned out to be dead
+        (it died while idle: its pipe is broken), so the caller replaces it."""
         if not w.process.is_alive():
             return False
-        token, _ = self._plans.setdefault(id(spec.plan), (len(self._plans), spec.plan))
+        runs = []
         try:
-            if token not in w.plans:
-                w.conn.send(("plan", token, spec.plan))
-                w.plans.add(token)
-            w.conn.send(("run", seq, token, spec_fields(spec)))
+            for seq, spec in batch:
+                token, _ = self._plans.setdefault(id(spec.plan), (len(self._plans), spec.plan))
+                if token not in w.plans:
+                    w.conn.send(("plan", token, spec.plan))
+                    w.plans.add(token)
+                runs.append((seq, token, spec_fields(spec)))
+            w.conn.send(("run", runs))
         except (BrokenPipeError, ConnectionResetError, EOFError, OSError):
             return False
-        w.job = (seq, spec, time.monotonic(), run_time_bound_s(spec, self.timeout_s))
+        bounds = [run_time_bound_s(spec, self.timeout_s) for _, spec in batch]
+        w.job = (batch, time.monotonic(), None if None in bounds else sum(bounds))
         return True
 
     @staticmethod
@@ -480,8 +528,9 @@ class LocalExecutor:
         try:
             while True:
                 while (idle or len(pool) < self.workers) and (again or not exhausted):
-                    nxt = again.popleft() if again else next(items, None)
-                    if nxt is None:
+                    # A run going again (a retry, or a run of a batch that did not finish) goes alone.
+                    nxt = [again.popleft()] if again else list(itertools.islice(items, self.batch))
+                    if not nxt:
                         exhausted = True
                         break
                     if idle:
@@ -489,7 +538,7 @@ class LocalExecutor:
                     else:
                         w = self._spawn(ctx)
                         pool.append(w)
-                    while not self._dispatch(w, *nxt):  # died while idle: a new one takes the run
+                    while not self._dispatch(w, nxt):  # died while idle: a new one takes the run
                         self._stop(w, kill=True)
                         w = replace(w)
                     busy.append(w)
@@ -502,16 +551,20 @@ class LocalExecutor:
                     result = self._check(w, ready)
                     if result is None:
                         continue
-                    record, retire, external = result
-                    seq, spec = w.job[0], w.job[1]
+                    records, retire, unfinished = result
+                    batch = w.job[0]
                     busy.remove(w)
                     w.job = None
                     idle.append(replace(w) if retire else w)
-                    verdict = attempts.judge(seq, record, external)
-                    if verdict == "retry":
-                        again.append((seq, spec))
-                    else:
-                        yield record
+                    if unfinished and len(batch) > 1:  # isolated: each run again, alone
+                        again.extend(batch)
+                        continue
+                    for (seq, spec), record in zip(batch, records):
+                        verdict = attempts.judge(seq, record, unfinished == "external")
+                        if verdict == "retry":
+                            again.append((seq, spec))
+                        else:
+                            yield record
         finally:
             for w in pool:
                 if self.keep_workers and w.job is None and w.process.is_alive():
@@ -526,23 +579,31 @@ class LocalExecutor:
         for w in kept:
             self._stop(w)
 
-    def _check(self, w: _Worker, ready: set) -> tuple[RunResult, bool, bool] | None:
-        """(record, replace the worker, killed from outside) once the worker's run is over,
-        None while it runs on."""
-        seq, spec, started, bound_s = w.job
+    def _check(self, w: _Worker, ready: set) -> tuple[list[RunResult], bool, str] | None:
+        """(a record per run of the worker's batch, replace the worker, how the batch did not
+        finish: "" it finished, "external" its worker was killed from outside, else "failed")
+        once the batch is over; None while it runs on."""
+        batch, started, bound_s = w.job
         elapsed = time.monotonic() - started
+        worker = f"pid{w.process.pid}"
+        size = f" (a batch of {len(batch)})" if len(batch) > 1 else ""
+
+        def each(status: str, why: str) -> list[RunResult]:
+            return [RunResult.unfinished(spec, status, why + size, elapsed, seq=seq, worker=worker)
+                    for seq, spec in batch]
+
         if w.conn in ready or w.process.sentinel in ready:
             try:
-                record = w.conn.recv() if w.conn.poll() else None
+                records = w.conn.recv() if w.conn.poll() else None
             except (EOFError, OSError):
-                record = None
-            if record is not None:
-                w.tasks += 1
-                retire = (record.status == "memory"
-                          or (self.max_tasks_per_child and w.tasks >= self.max_tasks_per_child))
+                records = None
+            if records is not None:
+                w.tasks += len(records)
+                memory = any(r.status == "memory" for r in records)
+                retire = memory or (self.max_tasks_per_child and w.tasks >= self.max_tasks_per_child)
                 if retire:
                     self._stop(w)
-                return record, bool(retire), False
+                return records, bool(retire), "failed" if memory else ""
             w.process.join(timeout=5)
             code = w.process.exitcode
             why = f"killed by signal {-code}" if code is not None and code < 0 else f"exited with code {code}"
@@ -550,19 +611,17 @@ class LocalExecutor:
             if _server_lost(w.server):  # it dies with the forkserver it was forked from: infrastructure
                 why, external = "lost with the forkserver, which was killed", True
             self._stop(w, kill=True)
-            return RunResult.unfinished(spec, "crashed", f"worker process {why} during the run", elapsed,
-                                        seq=seq, worker=f"pid{w.process.pid}"), True, external
+            return each("crashed", f"worker process {why} during the run"), True, \
+                "external" if external else "failed"
         if self.memory_limit_mb is not None:
             rss = rss_mb(w.process.pid)
             if rss is not None and rss > self.memory_limit_mb:
                 self._stop(w, kill=True)
-                return RunResult.unfinished(
-                    spec, "memory", f"resident memory {rss:.0f} MB over the {self.memory_limit_mb:.0f} MB limit",
-                    elapsed, seq=seq, worker=f"pid{w.process.pid}"), True, False
+                return each("memory", f"resident memory {rss:.0f} MB over the {self.memory_limit_mb:.0f} MB "
+                                      "limit"), True, "failed"
         if bound_s is not None and elapsed > bound_s:
             self._stop(w, kill=True)
-            return RunResult.unfinished(spec, "timeout", f"run exceeded the {bound_s:g} s timeout",
-                                        elapsed, seq=seq, worker=f"pid{w.process.pid}"), True, False
+            return each("timeout", f"run exceeded the {bound_s:g} s timeout"), True, "failed"
         return None
 
 

@@ -1,6 +1,7 @@
 """One physics step of the twin as named phases over the run's state (`state.RunState`).
 
-`execute._loop` runs them in this order at each sample k (time t = k * dt):
+`batch._loop` runs them in this order at each sample k (time t = k * dt), each phase over
+every live run of the batch before the next:
 
   clock       the stack's clock; fault timers wake
   pose        agents on their roads (`agents.Fleet.pose`), the ego (projected onto its
@@ -262,26 +263,32 @@ def stack(run: RunState, t: float) -> None:
     run.stack.step(t, run.dt)
 
 
-def ego(run: RunState, t: float) -> bool:
-    """Commands due by now take effect; the ego moves over the step (its dynamics, an OSI
-    stack's update, or, scripted, as agents do: a stack's commands are then recorded, not
-    applied). False if its state became non-finite."""
-    dt = run.dt
-    queue = run.command_queue
-    while queue and queue[0][0] <= t + 1e-12:
-        _, steer, accel = queue.pop(0)
-        run.command = (steer, accel)
-    if run.ego_agent is None and run.move_host is not None:
-        run.move_host(run.ego, t + dt)
-    elif run.ego_agent is None:
-        vehicle_step(run.ego, run.vehicle_params, run.command[0], run.command[1], dt, run.ego_grade)
-    else:
-        if run.leaders_stale and not run.networked:  # it may ask for its leader
-            run.leaders.rebuild()
-            run.leaders_stale = False
-        run.move(run.ego_agent, t, dt)
-        run.ego.vx, run.ego.accel = run.ego_agent.speed, run.ego_agent.accel
-    return all(math.isfinite(v) for v in (run.ego.x, run.ego.y, run.ego.vx))
+def ego(runs: list[RunState], ts: list[float]) -> list[bool]:
+    """Over the batch: commands due by now take effect; each ego moves over the step: the
+    dynamics of every driven ego at once (`vehicle.step` over arrays, per step length), an OSI
+    stack's update, or, scripted, as agents do (a stack's commands are then recorded, not
+    applied). Whether each ego's state stayed finite."""
+    driven: dict[float, list[RunState]] = {}
+    for run, t in zip(runs, ts):
+        dt = run.dt
+        queue = run.command_queue
+        while queue and queue[0][0] <= t + 1e-12:
+            _, steer, accel = queue.pop(0)
+            run.command = (steer, accel)
+        if run.ego_agent is None and run.move_host is not None:
+            run.move_host(run.ego, t + dt)
+        elif run.ego_agent is None:
+            driven.setdefault(dt, []).append(run)
+        else:
+            if run.leaders_stale and not run.networked:  # it may ask for its leader
+                run.leaders.rebuild()
+                run.leaders_stale = False
+            run.move(run.ego_agent, t, dt)
+            run.ego.vx, run.ego.accel = run.ego_agent.speed, run.ego_agent.accel
+    for dt, group in driven.items():
+        vehicle_step([r.ego for r in group], [r.vehicle_params for r in group], [r.command[0] for r in group],
+                     [r.command[1] for r in group], dt, [r.ego_grade for r in group])
+    return [math.isfinite(run.ego.x) and math.isfinite(run.ego.y) and math.isfinite(run.ego.vx) for run in runs]
 
 
 def agents(run: RunState, t: float) -> None:

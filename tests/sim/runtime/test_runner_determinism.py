@@ -47,6 +47,11 @@ def test_one_and_two_workers_give_the_same_runs(plan, one_worker, tmp_path):
                                                              "c003": True}
 
 
+def test_batched_workers_give_the_same_runs(plan, one_worker, tmp_path):
+    """Workers stepping batches of 3 (runs of different cells side by side): the same records."""
+    assert _sweep(plan, tmp_path / "r.sqlite", LocalExecutor(2, batch=3))[0] == one_worker
+
+
 def test_in_process_execution_matches_workers(plan, one_worker, tmp_path):
     assert _sweep(plan, tmp_path / "r.sqlite", InlineExecutor())[0] == one_worker
 
@@ -57,7 +62,7 @@ def test_ray_executor_matches_local_workers(plan, one_worker, tmp_path):
 
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
-        results, workers = _sweep(plan, tmp_path / "r.sqlite", RayExecutor(timeout_s=120))
+        results, workers = _sweep(plan, tmp_path / "r.sqlite", RayExecutor(timeout_s=120, batch=3))
     finally:
         ray.shutdown()
     assert results == one_worker

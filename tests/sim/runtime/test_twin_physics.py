@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
+from addt_dsl.runtime import batch
 from addt_dsl.runtime import execute as X
 from addt_dsl.runtime.state import RunState
 from addt_dsl.sweep import expand
@@ -114,7 +115,7 @@ scenario hills {
     run = RunState(spec)
     try:
         assert run.scene.elevated and run.scene.collision_triangles > 0
-        trace = X._loop(run)
+        trace = batch._loop([run])[0]
     finally:
         run.physics.close()
     assert trace.status == "ok"
@@ -167,7 +168,7 @@ scenario crest {{
 }}""", base_dir=XODR)
     run = RunState(spec)
     try:
-        X._loop(run)
+        batch._loop([run])
         frame = run.sensors["lidar"].capture(run, 0.1)
         hits = int((frame.data["hit_body"] == run.physics.bodies["lead"]).sum())
         # Without the road surface the truck would be in plain view.

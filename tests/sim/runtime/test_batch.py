@@ -1,0 +1,113 @@
+"""One engine over a batch: a RunSpec's trace is the same bit for bit stepped alone, in a
+batch of 7 beside runs of other plans, in reversed order, and in a process with another
+hash seed (`batch.execute_batch`). A run that ends early (a collision, `end when`, a
+shorter duration) leaves the batch; the others go on unchanged."""
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from addt_dsl.compiler import compile_file
+from addt_dsl.runtime import vehicle
+from addt_dsl.runtime.execute import execute, execute_batch
+from addt_dsl.sweep import expand
+
+ROOT = Path(__file__).resolve().parents[3]
+EXAMPLES = ROOT / "examples"
+
+# Seven plans that differ in what the step does: a lead that brakes, a cut-in, a latency
+# spike and a stuck actuator (faults), a follower, a junction with a cyclist, a curve shift.
+FAST = ["lead_brake.addt", "search/cut_in.addt", "search/latency_spike.addt", "search/stuck_accel.addt",
+        "following.addt", "junction_cyclist.addt", "search/curve_shift.addt"]
+
+
+def full_digest(result) -> str:
+    """The trace's digest and what it leaves out: every event, step and light state, the status."""
+    trace = result.trace
+    h = hashlib.sha256(trace.digest().encode())
+    h.update(repr([(e.time_s, e.kind, sorted(e.detail.items())) for e in trace.events]).encode())
+    for group in (trace.steps, trace.lights, trace.red_margin):
+        for k in sorted(group or {}):
+            h.update(k.encode())
+            h.update(group[k].tobytes())
+    h.update(f"{trace.status}|{trace.error}|{result.verdicts!r}".encode())
+    return h.hexdigest()[:16]
+
+
+def first_spec(name: str):
+    return expand(compile_file(EXAMPLES / name).plan).specs[0]
+
+
+def check_batches(specs) -> None:
+    """Each spec alone, then in batches of 7 in order and reversed: the same digests."""
+    alone = [full_digest(execute(s)) for s in specs]
+    for order in (list(range(len(specs))), list(reversed(range(len(specs))))):
+        got = {}
+        for j in range(0, len(order), 7):
+            chunk = order[j:j + 7]
+            for i, r in zip(chunk, execute_batch([specs[i] for i in chunk])):
+                assert r.key == specs[i].key()
+                got[i] = full_digest(r)
+        bad = [specs[i].plan.name for i in range(len(specs)) if got[i] != alone[i]]
+        assert not bad, f"batched runs differ from alone: {bad}"
+
+
+def test_fast_examples_same_alone_batched_reversed(monkeypatch):
+    # Batched egos step as arrays over the runs (forced from 2 runs), alone in floats.
+    monkeypatch.setattr(vehicle, "ARRAY_MIN_RUNS", 2)
+    specs = [first_spec(n) for n in FAST]
+    # Durations differ: runs leave the batch at different samples.
+    assert len({s.plan.duration_s for s in specs}) > 1
+    check_batches(specs)
+
+
+def test_batch_of_one_is_execute_and_results_keep_order():
+    specs = [first_spec(n) for n in FAST[:3]]
+    results = execute_batch(specs, keep_trace=False)
+    assert [r.key for r in results] == [s.key() for s in specs]
+    assert all(r.trace is None and r.wall_time_s > 0 for r in results)
+    assert [r.digest for r in results] == [execute(s).digest for s in specs]
+
+
+RUNNER = """
+import json, sys
+from pathlib import Path
+from addt_dsl.compiler import compile_file
+from addt_dsl.runtime.execute import execute_batch
+from addt_dsl.sweep import expand
+sys.path.insert(0, sys.argv[1])
+from tests.sim.runtime.test_batch import full_digest
+specs = [expand(compile_file(Path(sys.argv[1]) / "examples" / n).plan).specs[0] for n in sys.argv[2:]]
+print(json.dumps([full_digest(r) for r in execute_batch(specs[::-1])[::-1]]))
+"""
+
+
+@pytest.mark.slow
+def test_batch_same_under_another_hash_seed():
+    """A reversed batch in processes with other hash seeds gives the digests of each run alone here."""
+    specs = [first_spec(n) for n in FAST]
+    here = [full_digest(execute(s)) for s in specs]
+    for seed in ("1", "4242"):
+        env = dict(os.environ, PYTHONHASHSEED=seed, PYTHONPATH=str(ROOT))
+        out = subprocess.run([sys.executable, "-c", RUNNER, str(ROOT), *FAST], env=env, cwd=ROOT,
+                             capture_output=True, text=True, check=True, timeout=600)
+        assert json.loads(out.stdout.strip().splitlines()[-1]) == here
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)  # ~180 closed-loop runs, camera suites among them: minutes on a loaded machine
+def test_every_example_and_suite_same_alone_and_batched():
+    """Every example's and suite's first run, alone and in batches of 7 mixed with other
+    plans, in order and reversed."""
+    specs = []
+    for path in sorted(EXAMPLES.rglob("*.addt")):
+        plan = compile_file(path).plan
+        if plan is not None:
+            specs.append(expand(plan).specs[0])
+    assert len(specs) > 40
+    check_batches(specs)
