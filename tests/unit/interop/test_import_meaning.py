@@ -82,3 +82,37 @@ def test_a_speed_change_over_a_distance_without_a_difference_is_at_once(tmp_path
     plan = _compiled(import_xosc(path, root=tmp_path / "esmini", ego="scripted"), tmp_path)
     (step,) = [t for t in plan.agents[0].triggers if t.label == "BrakeEvent"]
     assert step.clause.settings["shape"] == "step" and "accel" not in step.clause.settings
+
+
+def test_a_standing_ego_under_the_stack_stands_when_the_file_keeps_it_standing(tmp_path):
+    """`--ego stack`: the stack cruises at the speed the file gives its ego; an ego that
+    starts at 0 m/s and that nothing sets going (and no speed limit on the map) gets
+    `cruise_speed 0 m/s` and stands, as under OpenSCENARIO's default controller (it had no
+    stack line: the stack's default 25 m/s drove it off)."""
+    path = _edited(tmp_path, "cut-in_simple.xosc",
+                   (r'(<Private entityRef="Ego">.*?<AbsoluteTargetSpeed value=)"20"', r'\1"0"'),
+                   (r'<StopTrigger>\s*<ConditionGroup>.*</StopTrigger>',
+                    '<StopTrigger><ConditionGroup><Condition name="e" delay="0" conditionEdge="none">'
+                    '<ByValueCondition><SimulationTimeCondition value="3" rule="greaterThan"/></ByValueCondition>'
+                    '</Condition></ConditionGroup></StopTrigger>'))
+    got = import_xosc(path, root=tmp_path / "esmini")
+    assert "stack bev cruise_speed 0 m/s" in (got.text or ""), [d.message for d in got.diagnostics]
+    assert any(d.code == "W0802" and "nothing in the file sets it going" in d.message for d in got.diagnostics)
+    trace = execute(expand(_compiled(got, tmp_path)).specs[0]).trace
+    ego = trace.actors["ego"]
+    assert trace.duration_s >= 2.9
+    assert np.hypot(ego.x[-1] - ego.x[0], ego.y[-1] - ego.y[0]) < 0.05
+
+
+@pytest.mark.parametrize("name,speed,label", [("follow_ghost", 100 / 3.6, "<AbsoluteTargetSpeed>"),
+                                               ("speed-profile", 10.0, "<SpeedProfileEntry>")])
+def test_a_standing_ego_set_going_by_the_file_cruises_at_the_first_speed_asked(name, speed, label):
+    """follow_ghost.xosc starts its Ego at 0 m/s and sets it going at 100/3.6 m/s when the
+    story starts (speed-profile.xosc: a profile whose first speed above 0 is 10 m/s): under
+    the stack, that cruise speed (W0802 at that element), not the stack's default."""
+    got = import_xosc(ESMINI / "xosc" / f"{name}.xosc", root=ESMINI, lenient=True)
+    assert got.plan is not None, [d.message for d in got.diagnostics]
+    stack = got.plan.ego.stack
+    assert stack is not None and stack.settings["cruise_speed"].value == pytest.approx(speed)
+    note = next(d for d in got.diagnostics if "the file's actions set it going" in d.message)
+    assert note.code == "W0802" and note.label == label and note.span.line == 88
