@@ -116,3 +116,26 @@ def test_a_standing_ego_set_going_by_the_file_cruises_at_the_first_speed_asked(n
     assert stack is not None and stack.settings["cruise_speed"].value == pytest.approx(speed)
     note = next(d for d in got.diagnostics if "the file's actions set it going" in d.message)
     assert note.code == "W0802" and note.label == label and note.span.line == 88
+
+
+def test_a_distance_to_a_point_survives_export_and_import_without_the_side_file(tmp_path):
+    """The import's form of ReachPositionCondition (the Euclidean distance of the entity's
+    reference point to the position's point, below the tolerance) exports as a
+    DistanceCondition to a WorldPosition (OpenSCENARIO 1.2 deprecates ReachPositionCondition
+    for it; it was a ParameterCondition that only the side file explained) and imports back
+    as the same condition."""
+    from addt_dsl.compiler import compile_file
+    from addt_dsl.interop.xosc_export import export_run
+    import xml.etree.ElementTree as ET
+
+    plan = compile_file(ROOT / "tests" / "data" / "interop" / "every_position.addt").plan
+    done = export_run(expand(plan).specs[0], tmp_path / "x", "scenario")
+    (cond,) = ET.parse(done.xosc_path).getroot().iter("DistanceCondition")
+    assert (cond.get("value"), cond.get("rule"), cond.get("freespace"), cond.get("relativeDistanceType")) == \
+        ("2.0", "lessThan", "false", "euclidianDistance")
+    assert cond.find("Position/WorldPosition").attrib == {"x": "120.0", "y": "-5.25"}
+    assert not list(ET.parse(done.xosc_path).getroot().iter("ParameterCondition"))
+    done.sidecar_path.unlink()
+    got = import_xosc(done.xosc_path)
+    back = next(a for a in got.plan.agents if a.name == "late").triggers[0].condition
+    assert back == next(a for a in plan.agents if a.name == "late").triggers[0].condition
