@@ -116,9 +116,9 @@ EXPORTED: dict[str, str] = {
     "ByEntityCondition/EntityCondition/TraveledDistanceCondition": "`travelled(a)` compared",
     "ByEntityCondition/EntityCondition/OffroadCondition": "`road_edge(a) < 0 m`",
     "ByEntityCondition/EntityCondition/EndOfRoadCondition": "`road_end(a) <= 0 m` (`for D`: its duration)",
-    "ByEntityCondition/EntityCondition/DistanceCondition": "`(x(a) - X) * (x(a) - X) + (y(a) - Y) * (y(a) - Y) < R * R` "
-                                                           "(the import's form of ReachPositionCondition: the "
-                                                           "distance to a WorldPosition, reference point)",
+    "ByEntityCondition/EntityCondition/DistanceCondition": (
+        "`(x(a) - X) * (x(a) - X) + (y(a) - Y) * (y(a) - Y) < R * R` (the import's form of ReachPositionCondition: "
+        "the distance to a WorldPosition, reference point)"),
     "LanePosition": "start positions",
     "RoadPosition": "`trajectory s [...] t [...]`, `synchronize` targets",
     "WorldPosition": "`trajectory x [...] y [...]`",
