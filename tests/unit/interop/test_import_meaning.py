@@ -139,3 +139,16 @@ def test_a_distance_to_a_point_survives_export_and_import_without_the_side_file(
     got = import_xosc(done.xosc_path)
     back = next(a for a in got.plan.agents if a.name == "late").triggers[0].condition
     assert back == next(a for a in plan.agents if a.name == "late").triggers[0].condition
+
+
+def test_a_reach_position_orientation_is_said_not_dropped(tmp_path):
+    """esmini's ReachPositionCondition with an Orientation in its position also requires the
+    entity's heading, pitch and roll within 0.05 rad (TrigByReachPosition): the translation
+    checks the distance alone, and says so (it said nothing)."""
+    path = _edited(tmp_path, "pedestrian.xosc",
+                   (r'<LanePosition roadId="0" laneId="-3" s="0"/>',
+                    '<LanePosition roadId="0" laneId="-3" s="0"><Orientation type="relative" h="0"/></LanePosition>'))
+    got = import_xosc(path, root=tmp_path / "esmini")
+    note = next(d for d in got.diagnostics if "the position's Orientation" in d.message)
+    assert note.code == "W0802" and note.label == "<Orientation>" and note.span.line == 260
+    assert got.plan is not None and got.plan.end is not None
