@@ -5,15 +5,19 @@ from __future__ import annotations
 
 import re
 import shutil
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
 
-from addt_dsl.compiler import compile_source
+from addt_dsl.compiler import compile_file, compile_source
 from addt_dsl.interop.openscenario.importer import import_xosc
+from addt_dsl.interop.xosc_export import export_run
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 from tests.conftest import ROOT
+from tests.unit.interop.test_import_float_noise import CAR, CONTROLLER
+from tests.unit.interop.test_xosc_import import SMALL
 
 ESMINI = ROOT / "tests" / "data" / "esmini"
 
@@ -124,10 +128,6 @@ def test_a_distance_to_a_point_survives_export_and_import_without_the_side_file(
     DistanceCondition to a WorldPosition (OpenSCENARIO 1.2 deprecates ReachPositionCondition
     for it; it was a ParameterCondition that only the side file explained) and imports back
     as the same condition."""
-    from addt_dsl.compiler import compile_file
-    from addt_dsl.interop.xosc_export import export_run
-    import xml.etree.ElementTree as ET
-
     plan = compile_file(ROOT / "tests" / "data" / "interop" / "every_position.addt").plan
     done = export_run(expand(plan).specs[0], tmp_path / "x", "scenario")
     (cond,) = ET.parse(done.xosc_path).getroot().iter("DistanceCondition")
@@ -152,3 +152,18 @@ def test_a_reach_position_orientation_is_said_not_dropped(tmp_path):
     note = next(d for d in got.diagnostics if "the position's Orientation" in d.message)
     assert note.code == "W0802" and note.label == "<Orientation>" and note.span.line == 260
     assert got.plan is not None and got.plan.end is not None
+
+
+@pytest.mark.parametrize("controller,speed", [(False, 0.0), (True, 50 / 3.6)])
+def test_a_speed_limit_drives_a_standing_ego_only_when_the_file_gives_it_a_controller(controller, speed, tmp_path):
+    """A standing ego on OpenSCENARIO's default controller stays standing whatever the map's
+    limit; one the file gives a controller (ScenarioRunner's external agent) is the stack's
+    to drive, at the limit."""
+    xodr = (ESMINI / "xodr" / "straight_500m.xodr").read_text()
+    head = '<road name="" length="5.0000000000000000e+02" id="1" junction="-1">'
+    (tmp_path / "r.xodr").write_text(xodr.replace(head, head + '<type s="0" type="town"><speed max="50" '
+                                                              'unit="km/h"/></type>'))
+    (tmp_path / "s.xosc").write_text(SMALL.replace("ENTITY", CAR + (CONTROLLER if controller else "")))
+    got = import_xosc(tmp_path / "s.xosc", lenient=True)
+    assert got.plan is not None, [d.message for d in got.diagnostics]
+    assert got.plan.ego.stack.settings["cruise_speed"].value == pytest.approx(speed)
