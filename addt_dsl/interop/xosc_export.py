@@ -20,7 +20,8 @@ short (docs/openscenario.md has the full table):
 - step start conditions -> the event's start trigger: `at T` / `after T` a
   `SimulationTimeCondition`, `s(A) > x` a `TraveledDistanceCondition`, `speed(A)`
   a `SpeedCondition`, `gap(A, B)` and `distance(A, B)` `RelativeDistanceCondition`s,
-  `ttc(A, B)` a `TimeToCollisionCondition`; `when C for D` a condition delay D; `and`
+  `ttc(A, B)` a `TimeToCollisionCondition`, the distance to a point (the import's form of
+  ReachPositionCondition) a `DistanceCondition`; `when C for D` a condition delay D; `and`
   within a condition group, `or`
   across groups; a formula with no such form becomes a `ParameterCondition` on a
   declared, never-set parameter `addt_condition_N`;
@@ -115,6 +116,9 @@ EXPORTED: dict[str, str] = {
     "ByEntityCondition/EntityCondition/TraveledDistanceCondition": "`travelled(a)` compared",
     "ByEntityCondition/EntityCondition/OffroadCondition": "`road_edge(a) < 0 m`",
     "ByEntityCondition/EntityCondition/EndOfRoadCondition": "`road_end(a) <= 0 m` (`for D`: its duration)",
+    "ByEntityCondition/EntityCondition/DistanceCondition": (
+        "`(x(a) - X) * (x(a) - X) + (y(a) - Y) * (y(a) - Y) < R * R` (the import's form of ReachPositionCondition: "
+        "the distance to a WorldPosition, reference point)"),
     "LanePosition": "start positions",
     "RoadPosition": "`trajectory s [...] t [...]`, `synchronize` targets",
     "WorldPosition": "`trajectory x [...] y [...]`",
@@ -553,10 +557,39 @@ def _headway(run: _Run, node, name: str):
     return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, a.name)
 
 
+def _to_point(run: _Run, node, name: str):
+    """`(x(A) - X) * (x(A) - X) + (y(A) - Y) * (y(A) - Y) OP R * R` (the importer's form of a
+    ReachPositionCondition and of a DistanceCondition to a position) as a DistanceCondition:
+    the Euclidean distance of A's reference point to the point (X, Y), OP R, or None.
+    OpenSCENARIO 1.2 deprecates ReachPositionCondition for DistanceCondition (and the export
+    writes 1.2); esmini reads `freespace="false"` `euclidianDistance` as exactly this distance."""
+    def square(term):  # (sig - C) * (sig - C) -> (signal, C)
+        if not (isinstance(term, E.Binary) and term.op == "*" and term.left == term.right
+                and isinstance(term.left, E.Binary) and term.left.op == "-"):
+            return None
+        sig, value = _signal(term.left.left), _const(run, term.left.right)
+        return None if sig is None or value is None or len(sig[1]) != 1 else (sig, value)
+    left, right = node.left, node.right
+    if not (isinstance(left, E.Binary) and left.op == "+" and isinstance(right, E.Binary) and right.op == "*"
+            and right.left == right.right):
+        return None
+    sx, sy, radius = square(left.left), square(left.right), _const(run, right.left)
+    if sx is None or sy is None or radius is None or radius < 0 or sx[0][0] != "x" or sy[0][0] != "y" \
+            or sx[0][1] != sy[0][1] or sx[0][1][0] not in run.by_name:
+        return None
+    cond = xosc.DistanceCondition(radius, RULES[node.op], xosc.WorldPosition(sx[1], sy[1]), alongroute=False,
+                                  freespace=False, distance_type=xosc.RelativeDistanceType.euclidianDistance,
+                                  coordinate_system=xosc.CoordinateSystem.entity)
+    return xosc.EntityTrigger(name, 0, xosc.ConditionEdge.none, cond, sx[0][1][0])
+
+
 def _compare(run: _Run, node, name: str):
     """One comparison `signal op constant` as an OpenSCENARIO condition, or None."""
     if not isinstance(node, E.Binary) or node.op not in RULES:
         return None
+    point = _to_point(run, node, name) if isinstance(node.left, E.Binary) and node.left.op == "+" else None
+    if point is not None:
+        return point
     if isinstance(node.left, E.Call):
         return _abs_distance(run, node, _const(run, node.right), name)
     if E.signals_used(node.right):

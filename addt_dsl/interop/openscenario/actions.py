@@ -2,8 +2,9 @@
 the translations are in the actions_* modules); global actions are the storyboard's
 (`storyboard.Storyboard.event`, `init`)."""
 
+from addt_dsl import units
 from addt_dsl.interop.openscenario.registry import ACTIONS
-from addt_dsl.interop.openscenario.xml import first_of, only_child
+from addt_dsl.interop.openscenario.xml import child_at, first_of, only_child
 
 # What an action that is not translated names as translated (the diagnostic's note).
 TRANSLATED = ("translated: speed (absolute, relative, profiles), lane changes, lane offsets, "
@@ -43,6 +44,12 @@ class Actions:
     def private_action(self, act, who: str):
         """The behaviour clause an action starts, or None after a diagnostic."""
         if who == "ego" and not self.scripted_ego:
+            # The speeds the file asks of its ego: the stack's cruise speed where it starts standing.
+            target = child_at(act, "SpeedAction", "SpeedActionTarget", "AbsoluteTargetSpeed")
+            profile = act.find("SpeedProfileAction")
+            for el, attr in ([(target, "value")] if target is not None else []) + \
+                    [(e, "speed") for e in (profile.iterfind("SpeedProfileEntry") if profile is not None else ())]:
+                self.actors[who].setdefault("speed_targets", []).append((self.number(el, attr, units.SPEED), el))
             self.approx(act, f"<{act.tag}> on the ego: the stack under test drives the ego",
                         "`addtc import --ego scripted` makes the ego follow the file's actions")
             return None

@@ -43,9 +43,17 @@ class Longitudinal:
         dim = self.raw(dyn, "dynamicsDimension") if dyn is not None else "time"
         amount = abs(self.value(dyn, "value")) if dyn is not None else 0.0
         dv = v_now - info["speed_now"]
-        if shape == "step" or amount == 0.0:  # at once, as esmini sets it when the action starts
+        if shape == "step" or amount == 0.0 or (dim == "distance" and not dv):
+            # At once, as esmini sets it when the action starts (a change over a distance with
+            # no speed difference has a parameter range of 0: esmini's step).
             info["speed_now"] = v_now
             return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, "shape": "step"})
+        if dim == "time" and not dv and shape == "linear":
+            # No speed difference over a time: the action still runs for that time and then
+            # completes (esmini's TransitionDynamics steps its parameter to the time; the speed
+            # stays), which `ended(step)` waits for. (Cubic and sinusoidal take the time below.)
+            return ClausePlan(keyword="behavior", name="cruise",
+                              settings={"speed": v, "shape": "linear", "duration": E.Num(value=amount)})
         if dim == "rate":
             rate = amount
         elif dim == "time":

@@ -347,8 +347,9 @@ class Conditions:
         return None
 
     @ENTITY_CONDITIONS.register("ReachPositionCondition", "approx",
-                                "the Euclidean distance to the position's point; longitudinal along the actor's own "
-                                "road; free space and other kinds refused")
+                                "the Euclidean distance to the position's point (an Orientation in it is not "
+                                "checked: W0802); longitudinal along the actor's own road; free space and other "
+                                "kinds refused")
     @ENTITY_CONDITIONS.register("DistanceCondition", "approx", "see ReachPositionCondition")
     def cond_distance_to_position(self, c, a: str):
         op = RULE_OPS.get(c.get("rule", ""), ">")
@@ -364,6 +365,10 @@ class Conditions:
         x, y, _ = point
         if c.tag == "ReachPositionCondition":
             radius, op = self.number(c, "tolerance", units.LENGTH), "<"
+            if pos.find("*/Orientation") is not None:
+                self.approx(pos.find("*/Orientation"), "the position's Orientation: esmini also requires the "
+                                                       "entity's heading, pitch and roll within 0.05 rad of it; "
+                                                       "here the distance alone")
         else:
             radius = self.number(c, "value", units.LENGTH)
             if (c.get("freespace") or "false").lower() == "true":

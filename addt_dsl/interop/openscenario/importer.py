@@ -132,6 +132,15 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
         odr = self.network.road(road_id)
         return (odr.successor if self.driving_way(who) > 0 else odr.predecessor) is None
 
+    def controller_assigned(self, obj) -> bool:
+        """Whether the file gives the entity a controller of its own (an ObjectController, or
+        an AssignControllerAction in Init: CARLA's external agent, esmini's driver models):
+        someone else drives it, not OpenSCENARIO's default controller."""
+        name = obj.get("name")
+        return obj.find("ObjectController") is not None or any(
+            p.get("entityRef") == name and p.find(".//AssignControllerAction") is not None
+            for p in self.doc.iterfind("Storyboard/Init/Actions/Private"))
+
     def plan(self, header, duration: float) -> ScenarioPlan:
         sc = self.sidecar or {}
         # The side file's groups read the states of steps outside them (`when ended(ego.x) then
@@ -217,8 +226,18 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                     # controller keeps the speed the file gives it.
                     fields["stack"] = ClausePlan(keyword="stack", name="bev",
                                                  settings={"cruise_speed": fields["speed"]})
+                elif not sc and any(eval_param_expr(v, self.param_values()) > 0
+                                    for v, _ in info.get("speed_targets", ())):
+                    # The file starts its ego standing and its actions set it going: the stack
+                    # cruises at the first speed they ask, not its own default.
+                    v, el = next((v, el) for v, el in info["speed_targets"]
+                                 if eval_param_expr(v, self.param_values()) > 0)
+                    fields["stack"] = ClausePlan(keyword="stack", name="bev", settings={"cruise_speed": v})
+                    self.approx(el, "the ego starts standing and the file's actions set it going: the stack "
+                                    "drives from the start, cruising at this first speed they ask",
+                                "`addtc import --ego scripted` makes the ego follow the file's actions")
                 elif not sc:
-                    limit = self.speed_limit_at(road, s)
+                    limit = self.speed_limit_at(road, s) if self.controller_assigned(info["el"]) else None
                     if limit is not None:
                         # A standing ego is someone else's to drive (CARLA's examples leave it to an
                         # external agent): the stack drives at the map's limit, not its own default.
@@ -226,6 +245,17 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
                                                      settings={"cruise_speed": E.Num(value=limit)})  # exact: `50 km/h`
                         self.approx(info["el"], f"the ego starts standing: the stack cruises at its road's speed "
                                                 f"limit, {units.from_si(limit, 'km/h'):.4g} km/h")
+                    elif self.controller_assigned(info["el"]):
+                        self.approx(info["el"], "the ego starts standing and the file gives it a controller to "
+                                                "drive it: the stack drives at its default cruise speed")
+                    else:
+                        # Standing, on OpenSCENARIO's default controller, and nothing in the file
+                        # sets it going: the stack keeps it standing, as that controller keeps the
+                        # speed it is given (without a stack line the stack's default drove it off).
+                        fields["stack"] = ClausePlan(keyword="stack", name="bev",
+                                                     settings={"cruise_speed": fields["speed"]})
+                        self.approx(info["el"], "the ego starts standing and nothing in the file sets it going: "
+                                                "the stack keeps it standing (cruise_speed 0 m/s)")
                 if not sc and not fields.get("route"):
                     # Without a route the ego leaves the map where its road ends (a `left_road`
                     # event): give it the way straight on, as far as it can drive in the run.

@@ -1,0 +1,169 @@
+"""Imported OpenSCENARIO does what the file says, as the standard defines it and esmini 3.6
+executes it (its source: OSCPrivateAction.cpp, OSCCondition.cpp), nothing dropped silently."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from addt_dsl.compiler import compile_file, compile_source
+from addt_dsl.interop.openscenario.importer import import_xosc
+from addt_dsl.interop.xosc_export import export_run
+from addt_dsl.runtime.execute import execute
+from addt_dsl.sweep import expand
+from tests.conftest import ROOT
+from tests.unit.interop.test_import_float_noise import CAR, CONTROLLER
+from tests.unit.interop.test_xosc_import import SMALL
+
+ESMINI = ROOT / "tests" / "data" / "esmini"
+
+
+def _compiled(got, tmp_path):
+    assert got.text is not None, [d.message for d in got.diagnostics]
+    for name, body in got.side_files.items():
+        (tmp_path / name).write_text(body)
+    result = compile_source(got.text, "imported.addt", base_dir=tmp_path)
+    assert result.ok, [d.message for d in result.diagnostics]
+    return result.plan
+
+
+def _edited(tmp_path, name: str, *edits: tuple[str, str]):
+    """An esmini file with regex edits, in a copy of the esmini tree (its maps and catalogs)."""
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    text = (ESMINI / "xosc" / name).read_text()
+    for pattern, repl in edits:
+        text, n = re.subn(pattern, repl, text, flags=re.S)
+        assert n == 1, pattern
+    path = tmp_path / "esmini" / "xosc" / "edited.xosc"
+    path.write_text(text)
+    return path
+
+
+# cut-in_simple.xosc's OverTaker (25 m/s from Init) gets a linear change over 3 s to the speed
+# it has, at 2 s, and the run stops when that event ends.
+NO_CHANGE = (
+    (r'<SpeedActionDynamics dynamicsShape="linear" value="-5" dynamicsDimension="rate"/>\s*'
+     r'<SpeedActionTarget>\s*<AbsoluteTargetSpeed value="0"/>',
+     '<SpeedActionDynamics dynamicsShape="linear" value="3" dynamicsDimension="DIM"/>'
+     '<SpeedActionTarget><AbsoluteTargetSpeed value="25"/>'),
+    (r'(<Condition name="BrakeCondition".*?)<ByEntityCondition>.*?</ByEntityCondition>',
+     r'\1<ByValueCondition><SimulationTimeCondition value="2" rule="greaterThan"/></ByValueCondition>'),
+    (r'<StopTrigger>\s*<ConditionGroup>.*</StopTrigger>',
+     '<StopTrigger><ConditionGroup><Condition name="e" delay="0" conditionEdge="none"><ByValueCondition>'
+     '<StoryboardElementStateCondition storyboardElementType="event" storyboardElementRef="BrakeEvent" '
+     'state="endTransition"/></ByValueCondition></Condition></ConditionGroup></StopTrigger>'),
+)
+
+
+def test_a_speed_change_over_a_time_without_a_difference_takes_that_time(tmp_path):
+    """OpenSCENARIO: a SpeedAction over a time T runs for T and completes. With no speed
+    difference esmini's TransitionDynamics still steps its parameter from 0 to T (the speed
+    stays) and ends the action then: the event ends 3 s after it starts (it was read as a
+    1 m/s^2 change, complete at once)."""
+    path = _edited(tmp_path, "cut-in_simple.xosc", *((p, r.replace("DIM", "time")) for p, r in NO_CHANGE))
+    got = import_xosc(path, root=tmp_path / "esmini", ego="scripted")
+    plan = _compiled(got, tmp_path)
+    (step,) = [t for t in plan.agents[0].triggers if t.label == "BrakeEvent"]
+    assert step.clause.name == "cruise" and step.clause.settings["duration"].value == 3.0
+    trace = execute(expand(plan).specs[0]).trace
+    state, t = trace.steps["OverTaker.BrakeEvent"], trace.time
+    started, ended = t[np.argmax(state >= 1)], t[np.argmax(state >= 2)]
+    assert started == pytest.approx(2.0, abs=0.02)
+    assert ended - started == pytest.approx(3.0, abs=0.02)
+    assert trace.duration_s == pytest.approx(ended, abs=0.02)  # the stop trigger waits for it
+    speed = np.hypot(np.diff(trace.actors["OverTaker"].x), np.diff(trace.actors["OverTaker"].y)) / trace.period_s
+    assert np.allclose(speed[t[1:] > started + 0.1], 25.0, atol=0.05)  # unchanged
+
+
+def test_a_speed_change_over_a_distance_without_a_difference_is_at_once(tmp_path):
+    """esmini converts a distance to a time, 0 where the speeds are equal: a step (it was a
+    1 m/s^2 change)."""
+    path = _edited(tmp_path, "cut-in_simple.xosc", *((p, r.replace("DIM", "distance")) for p, r in NO_CHANGE))
+    plan = _compiled(import_xosc(path, root=tmp_path / "esmini", ego="scripted"), tmp_path)
+    (step,) = [t for t in plan.agents[0].triggers if t.label == "BrakeEvent"]
+    assert step.clause.settings["shape"] == "step" and "accel" not in step.clause.settings
+
+
+def test_a_standing_ego_under_the_stack_stands_when_the_file_keeps_it_standing(tmp_path):
+    """`--ego stack`: the stack cruises at the speed the file gives its ego; an ego that
+    starts at 0 m/s and that nothing sets going (and no speed limit on the map) gets
+    `cruise_speed 0 m/s` and stands, as under OpenSCENARIO's default controller (it had no
+    stack line: the stack's default 25 m/s drove it off)."""
+    path = _edited(tmp_path, "cut-in_simple.xosc",
+                   (r'(<Private entityRef="Ego">.*?<AbsoluteTargetSpeed value=)"20"', r'\1"0"'),
+                   (r'<StopTrigger>\s*<ConditionGroup>.*</StopTrigger>',
+                    '<StopTrigger><ConditionGroup><Condition name="e" delay="0" conditionEdge="none">'
+                    '<ByValueCondition><SimulationTimeCondition value="3" rule="greaterThan"/></ByValueCondition>'
+                    '</Condition></ConditionGroup></StopTrigger>'))
+    got = import_xosc(path, root=tmp_path / "esmini")
+    assert "stack bev cruise_speed 0 m/s" in (got.text or ""), [d.message for d in got.diagnostics]
+    assert any(d.code == "W0802" and "nothing in the file sets it going" in d.message for d in got.diagnostics)
+    trace = execute(expand(_compiled(got, tmp_path)).specs[0]).trace
+    ego = trace.actors["ego"]
+    assert trace.duration_s >= 2.9
+    assert np.hypot(ego.x[-1] - ego.x[0], ego.y[-1] - ego.y[0]) < 0.05
+
+
+@pytest.mark.parametrize("name,speed,label", [("follow_ghost", 100 / 3.6, "<AbsoluteTargetSpeed>"),
+                                               ("speed-profile", 10.0, "<SpeedProfileEntry>")])
+def test_a_standing_ego_set_going_by_the_file_cruises_at_the_first_speed_asked(name, speed, label):
+    """follow_ghost.xosc starts its Ego at 0 m/s and sets it going at 100/3.6 m/s when the
+    story starts (speed-profile.xosc: a profile whose first speed above 0 is 10 m/s): under
+    the stack, that cruise speed (W0802 at that element), not the stack's default."""
+    got = import_xosc(ESMINI / "xosc" / f"{name}.xosc", root=ESMINI, lenient=True)
+    assert got.plan is not None, [d.message for d in got.diagnostics]
+    stack = got.plan.ego.stack
+    assert stack is not None and stack.settings["cruise_speed"].value == pytest.approx(speed)
+    note = next(d for d in got.diagnostics if "the file's actions set it going" in d.message)
+    assert note.code == "W0802" and note.label == label and note.span.line == 88
+
+
+def test_a_distance_to_a_point_survives_export_and_import_without_the_side_file(tmp_path):
+    """The import's form of ReachPositionCondition (the Euclidean distance of the entity's
+    reference point to the position's point, below the tolerance) exports as a
+    DistanceCondition to a WorldPosition (OpenSCENARIO 1.2 deprecates ReachPositionCondition
+    for it; it was a ParameterCondition that only the side file explained) and imports back
+    as the same condition."""
+    plan = compile_file(ROOT / "tests" / "data" / "interop" / "every_position.addt").plan
+    done = export_run(expand(plan).specs[0], tmp_path / "x", "scenario")
+    (cond,) = ET.parse(done.xosc_path).getroot().iter("DistanceCondition")
+    assert (cond.get("value"), cond.get("rule"), cond.get("freespace"), cond.get("relativeDistanceType")) == \
+        ("2.0", "lessThan", "false", "euclidianDistance")
+    assert cond.find("Position/WorldPosition").attrib == {"x": "120.0", "y": "-5.25"}
+    assert not list(ET.parse(done.xosc_path).getroot().iter("ParameterCondition"))
+    done.sidecar_path.unlink()
+    got = import_xosc(done.xosc_path)
+    back = next(a for a in got.plan.agents if a.name == "late").triggers[0].condition
+    assert back == next(a for a in plan.agents if a.name == "late").triggers[0].condition
+
+
+def test_a_reach_position_orientation_is_said_not_dropped(tmp_path):
+    """esmini's ReachPositionCondition with an Orientation in its position also requires the
+    entity's heading, pitch and roll within 0.05 rad (TrigByReachPosition): the translation
+    checks the distance alone, and says so (it said nothing)."""
+    path = _edited(tmp_path, "pedestrian.xosc",
+                   (r'<LanePosition roadId="0" laneId="-3" s="0"/>',
+                    '<LanePosition roadId="0" laneId="-3" s="0"><Orientation type="relative" h="0"/></LanePosition>'))
+    got = import_xosc(path, root=tmp_path / "esmini")
+    note = next(d for d in got.diagnostics if "the position's Orientation" in d.message)
+    assert note.code == "W0802" and note.label == "<Orientation>" and note.span.line == 260
+    assert got.plan is not None and got.plan.end is not None
+
+
+@pytest.mark.parametrize("controller,speed", [(False, 0.0), (True, 50 / 3.6)])
+def test_a_speed_limit_drives_a_standing_ego_only_when_the_file_gives_it_a_controller(controller, speed, tmp_path):
+    """A standing ego on OpenSCENARIO's default controller stays standing whatever the map's
+    limit; one the file gives a controller (ScenarioRunner's external agent) is the stack's
+    to drive, at the limit."""
+    xodr = (ESMINI / "xodr" / "straight_500m.xodr").read_text()
+    head = '<road name="" length="5.0000000000000000e+02" id="1" junction="-1">'
+    (tmp_path / "r.xodr").write_text(xodr.replace(head, head + '<type s="0" type="town"><speed max="50" '
+                                                              'unit="km/h"/></type>'))
+    (tmp_path / "s.xosc").write_text(SMALL.replace("ENTITY", CAR + (CONTROLLER if controller else "")))
+    got = import_xosc(tmp_path / "s.xosc", lenient=True)
+    assert got.plan is not None, [d.message for d in got.diagnostics]
+    assert got.plan.ego.stack.settings["cruise_speed"].value == pytest.approx(speed)
