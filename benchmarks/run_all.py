@@ -48,6 +48,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "routes": ([], ["--runs", "1"]),
     "camera_bev": ([], ["--repeats", "1", "--duration", "10"]),
     "cost_model": ([], ["--quick"]),
+    "batch": (["--scaling"], ["--quick"]),
 }
 
 
