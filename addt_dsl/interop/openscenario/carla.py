@@ -36,6 +36,8 @@ AT_ONCE_ACCEL = 1000.0
 
 
 class CarlaWalkers:
+    carla_warned: frozenset[str] = frozenset()  # entities told how their speed changes differ
+
     def carla_controller(self, who: str) -> str | None:
         """The ScenarioRunner controller that moves `who` along its heading (a HEADING_CONTROLLERS
         value), or None (it follows its lane; not a CARLA-frame file): the `module` property of
@@ -68,8 +70,8 @@ class CarlaWalkers:
         info = self.actors[who]
         target = child_at(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
         if target is None or info.get("route_el") is not None or info.get("route_from_position") is not None:
-            self.approx(speed, f"{who} moves along its lane: ScenarioRunner's {controller} moves it along "
-                               "its heading (translated so for absolute target speeds without a route)")
+            self.approx(speed, f"{who} moves along its lane: the ScenarioRunner controller {controller} moves "
+                               "it along its heading (translated so for absolute target speeds without a route)")
             return None
         v = self.number(target, "value", units.SPEED)
         info["speed_now"] = float(eval_param_expr(v, self.param_values()))
@@ -84,10 +86,11 @@ class CarlaWalkers:
                 settings["distance"] = self.number(dyn, "value", units.LENGTH)
             else:
                 settings["duration"] = self.number(dyn, "value", units.TIME)
-        if controller == "VehicleLongitudinalControl":
-            self.approx(speed, f"{who} reaches its speed at once: ScenarioRunner's {controller} opens the "
-                               "throttle until it is reached and closes it above (CARLA's vehicle physics, "
-                               "no brake)")
+        if controller == "VehicleLongitudinalControl" and who not in self.carla_warned:
+            self.carla_warned = self.carla_warned | {who}  # once per entity: each speed action differs so
+            self.approx(speed, f"{who} reaches the speed of each speed action at once: the ScenarioRunner "
+                               f"controller {controller} opens the throttle below it and closes it above, "
+                               "without braking (the speed then follows the vehicle physics of CARLA)")
         return ClausePlan(keyword="behavior", name="walk", settings=settings)
 
 
