@@ -8,6 +8,7 @@ from addt_dsl.compiler.rules.oracles import NO_CLAUSES, stay_in_lane_formula
 from addt_dsl.expr import eval_param_expr
 from addt_dsl.interop.openscenario.xml import child_at
 from addt_dsl.plan import ActorPlan, ClausePlan, OraclePlan
+from addt_dsl.registry import BEHAVIORS
 
 
 class CarlaFrame:
@@ -31,6 +32,8 @@ class CarlaFrame:
 # (NpcVehicleControl, a vehicle's default, with CARLA's LocalPlanner; SimpleVehicleControl).
 HEADING_CONTROLLERS = {"pedestrian_control": "PedestrianControl",
                        "vehicle_longitudinal_control": "VehicleLongitudinalControl"}
+# The fastest `walk` (its spec's bound) [m/s].
+WALK_MAX_SPEED_MS = next(p.high for p in BEHAVIORS.get("walk").params if p.name == "speed")
 # A speed the controller sets at once: within one 0.01 s step up to 10 m/s [m/s^2].
 AT_ONCE_ACCEL = 1000.0
 
@@ -74,7 +77,12 @@ class CarlaWalkers:
                                "it along its heading (translated so for absolute target speeds without a route)")
             return None
         v = self.number(target, "value", units.SPEED)
-        info["speed_now"] = float(eval_param_expr(v, self.param_values()))
+        v_now = float(eval_param_expr(v, self.param_values()))
+        if v_now > WALK_MAX_SPEED_MS:
+            self.approx(speed, f"{who} moves along its lane: the ScenarioRunner controller {controller} moves "
+                               f"it along its heading (translated so up to {WALK_MAX_SPEED_MS:g} m/s, `walk`)")
+            return None
+        info["speed_now"] = v_now
         heading = 0.0
         if info.get("heading") is not None:
             heading = self.heading_from_lane(info["heading"], self.placed[who], bool(info.get("against_s")))

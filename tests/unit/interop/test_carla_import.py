@@ -173,3 +173,9 @@ def test_a_walker_or_a_longitudinal_only_controller_walks_along_the_files_headin
     (tmp_path / "Lanes.xosc").write_text(text)
     got = import_xosc(tmp_path / "Lanes.xosc", maps=[MAPS], lenient=True)
     assert {c.name for c in _speed_clauses(got, "adversary")} == {"cruise"}
+    # Faster than a `walk` goes: along its lane, said so.
+    (tmp_path / "Fast.xosc").write_text((CARLA / "xosc" / "CyclistCrossing.xosc").read_text().replace(
+        '<AbsoluteTargetSpeed value="2.0"/>', '<AbsoluteTargetSpeed value="20.0"/>'))
+    got = import_xosc(tmp_path / "Fast.xosc", maps=[MAPS], lenient=True)
+    assert {c.name for c in _speed_clauses(got, "adversary")} == {"cruise"}
+    assert any(d.code == "W0802" and "moves along its lane" in d.message for d in got.diagnostics)
