@@ -812,9 +812,20 @@ class Walk(S.Walk, Behavior):
 
     def start(self, agent, world, time_s):
         _walk_towards(agent, self.settings["heading"])
+        self.origin = (agent.s, agent.t, time_s)
 
     def accel(self, agent, world, time_s):
-        return _speed_tracking(agent, self.settings["speed"], self.settings["accel"], 3.0, world.dt)
+        s = self.settings
+        return _speed_tracking(agent, s["speed"], s["accel"], s["decel"], world.dt)
+
+    def ended(self, agent, world, time_s):
+        # After its distance (ground: station steps times the ground scale) or its time;
+        # neither set: never.
+        s, (s0, t0, start) = self.settings, self.origin
+        if s["distance"] is not None and \
+                math.hypot((agent.s - s0) * agent.ground_scale, agent.t - t0) + 1e-9 >= s["distance"]:
+            return True
+        return s["duration"] is not None and time_s + 1e-9 >= start + s["duration"]
 
 
 @BEHAVIORS.implements

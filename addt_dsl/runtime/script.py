@@ -12,7 +12,7 @@ at once and is done when all are.
 A step has *started* once it fired; it has *ended* once the behaviour it started has
 completed (`Behavior.ended`) and its group, if any, has ended (every step of it). A
 behaviour replaced on its channel before it completes, or one without a natural end
-(`idm`, `keep_gap`, `walk`), never ends. Named steps record these states for
+(`idm`, `keep_gap`, `walk` without a distance or duration), never ends. Named steps record these states for
 `started(...)`/`ended(...)`.
 """
 

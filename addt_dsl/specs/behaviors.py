@@ -317,6 +317,14 @@ class Walk(BehaviorSpec):
         ParamSpec("heading", units.ANGLE, default=0.0, low=-math.pi, high=math.pi,
                   doc="direction relative to the road: 0 along +s, 90 deg to the left"),
         ParamSpec("accel", units.ACCELERATION, default=1.0, low=0.01, doc="max acceleration"),
+        ParamSpec("decel", units.ACCELERATION, default=3.0, low=0.01, doc="max deceleration"),
+        # OpenSCENARIO as CARLA ScenarioRunner runs it: a speed action on a walker completes
+        # after a distance or a time, while the walker walks on.
+        ParamSpec("distance", units.LENGTH, default=None, low=0.0,
+                  doc="it ends once this far in a straight line from where it started (unset: never); "
+                      "it walks on"),
+        ParamSpec("duration", units.TIME, default=None, low=0.0,
+                  doc="it ends this long after it started (unset: never); it walks on"),
     )
     doc = "Move at a speed and a heading relative to the road (pedestrians, cyclists off the lane)."
 

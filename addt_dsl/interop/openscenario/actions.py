@@ -53,6 +53,8 @@ class Actions:
             self.approx(act, f"<{act.tag}> on the ego: the stack under test drives the ego",
                         "`addtc import --ego scripted` makes the ego follow the file's actions")
             return None
+        if act.tag == "LongitudinalAction" and (walk := self.carla_walk(act, who)) is not None:
+            return walk  # ScenarioRunner moves it along its heading
         if act.tag in WRAPPERS:
             names, note = WRAPPERS[act.tag]
             for name in names:

@@ -1,10 +1,14 @@
 """CARLA ScenarioRunner's conventions: its left-handed frame (a FileHeader description starting
-with 'CARLA:') and its `criteria_*` pass criteria, which become oracles."""
+with 'CARLA:'), its controllers that move an entity along its body heading, and its `criteria_*`
+pass criteria, which become oracles."""
 
 from addt_dsl import expr as E
+from addt_dsl import units
 from addt_dsl.compiler.rules.oracles import NO_CLAUSES, stay_in_lane_formula
 from addt_dsl.expr import eval_param_expr
-from addt_dsl.plan import ActorPlan, OraclePlan
+from addt_dsl.interop.openscenario.xml import child_at
+from addt_dsl.plan import ActorPlan, ClausePlan, OraclePlan
+from addt_dsl.registry import BEHAVIORS
 
 
 class CarlaFrame:
@@ -19,6 +23,83 @@ class CarlaFrame:
         if isinstance(value, E.Num):
             return E.Num(value=-value.value)
         return E.Unary(op="neg", arg=value)
+
+
+# ScenarioRunner's controllers (srunner/scenariomanager/actorcontrols) that move an entity along
+# its body heading when a speed action sets it moving without waypoints: PedestrianControl (the
+# default for a walker, actor_control.py) gives the walker its forward vector and the target speed;
+# VehicleLongitudinalControl only opens the throttle (no steering). The others follow the lanes
+# (NpcVehicleControl, a vehicle's default, with CARLA's LocalPlanner; SimpleVehicleControl).
+HEADING_CONTROLLERS = {"pedestrian_control": "PedestrianControl",
+                       "vehicle_longitudinal_control": "VehicleLongitudinalControl"}
+# The fastest `walk` (its spec's bound) [m/s].
+WALK_MAX_SPEED_MS = next(p.high for p in BEHAVIORS.get("walk").params if p.name == "speed")
+# A speed the controller sets at once: within one 0.01 s step up to 10 m/s [m/s^2].
+AT_ONCE_ACCEL = 1000.0
+
+
+class CarlaWalkers:
+    carla_warned: frozenset[str] = frozenset()  # entities told how their speed changes differ
+
+    def carla_controller(self, who: str) -> str | None:
+        """The ScenarioRunner controller that moves `who` along its heading (a HEADING_CONTROLLERS
+        value), or None (it follows its lane; not a CARLA-frame file): the `module` property of
+        its Init AssignControllerAction, else ScenarioRunner's default for its kind."""
+        if not self.carla or who == "ego":
+            return None
+        module = None
+        for private in self.doc.iterfind("Storyboard/Init/Actions/Private"):
+            if self.renames.get(private.get("entityRef")) != who:
+                continue
+            for prop in private.iterfind("PrivateAction/ControllerAction/AssignControllerAction/Controller/"
+                                         "Properties/Property"):
+                if prop.get("name") == "module":
+                    module = prop.get("value")
+        if module is None and self.actors[who]["vehicle"] == "pedestrian":
+            module = "pedestrian_control"
+        return HEADING_CONTROLLERS.get(module or "")
+
+    def carla_walk(self, act, who: str) -> ClausePlan | None:
+        """A SpeedAction on an entity a heading controller moves (`carla_controller`), as
+        ScenarioRunner runs it (ChangeActorTargetSpeed, openscenario_parser.py): the target speed
+        at once, whatever the dynamics' shape, along the body's heading (`walk` at the file's
+        heading relative to the lane); the action completes after its `value` as a distance
+        (dynamicsDimension distance) or as a time (any other dimension), and the entity keeps
+        the speed. None: not such an action (the caller translates it as any other)."""
+        controller = self.carla_controller(who)
+        speed = act.find("SpeedAction")
+        if controller is None or speed is None:
+            return None
+        info = self.actors[who]
+        target = child_at(speed, "SpeedActionTarget", "AbsoluteTargetSpeed")
+        if target is None or info.get("route_el") is not None or info.get("route_from_position") is not None:
+            self.approx(speed, f"{who} moves along its lane: the ScenarioRunner controller {controller} moves "
+                               "it along its heading (translated so for absolute target speeds without a route)")
+            return None
+        v = self.number(target, "value", units.SPEED)
+        v_now = float(eval_param_expr(v, self.param_values()))
+        if v_now > WALK_MAX_SPEED_MS:
+            self.approx(speed, f"{who} moves along its lane: the ScenarioRunner controller {controller} moves "
+                               f"it along its heading (translated so up to {WALK_MAX_SPEED_MS:g} m/s, `walk`)")
+            return None
+        info["speed_now"] = v_now
+        heading = 0.0
+        if info.get("heading") is not None:
+            heading = self.heading_from_lane(info["heading"], self.placed[who], bool(info.get("against_s")))
+        at_once = E.Num(value=AT_ONCE_ACCEL)
+        settings = {"speed": v, "heading": E.Num(value=heading), "accel": at_once, "decel": at_once}
+        dyn = speed.find("SpeedActionDynamics")
+        if dyn is not None and dyn.get("value") is not None:
+            if dyn.get("dynamicsDimension") == "distance":
+                settings["distance"] = self.number(dyn, "value", units.LENGTH)
+            else:
+                settings["duration"] = self.number(dyn, "value", units.TIME)
+        if controller == "VehicleLongitudinalControl" and who not in self.carla_warned:
+            self.carla_warned = self.carla_warned | {who}  # once per entity: each speed action differs so
+            self.approx(speed, f"{who} reaches the speed of each speed action at once: the ScenarioRunner "
+                               f"controller {controller} opens the throttle below it and closes it above, "
+                               "without braking (the speed then follows the vehicle physics of CARLA)")
+        return ClausePlan(keyword="behavior", name="walk", settings=settings)
 
 
 class CarlaCriteria:

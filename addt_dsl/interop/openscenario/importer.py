@@ -36,7 +36,7 @@ from addt_dsl.interop.openscenario.actions_lateral import Lateral
 from addt_dsl.interop.openscenario.actions_longitudinal import Longitudinal
 from addt_dsl.interop.openscenario.actions_misc import Misc
 from addt_dsl.interop.openscenario.actions_routing import Routing
-from addt_dsl.interop.openscenario.carla import CarlaCriteria
+from addt_dsl.interop.openscenario.carla import CarlaCriteria, CarlaWalkers
 from addt_dsl.interop.openscenario.conditions import Conditions
 from addt_dsl.interop.openscenario.entities import Entities, safe_name
 from addt_dsl.interop.openscenario.positions import Positions
@@ -74,7 +74,7 @@ class Imported:
 
 
 class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lateral, Routing, Misc, Global, Conditions,
-                Storyboard, CarlaCriteria, Importer):
+                Storyboard, CarlaCriteria, CarlaWalkers, Importer):
     def run(self) -> ScenarioPlan | None:
         got = self.read(self.path.name, self.path.parent, None)
         if got is None:

@@ -146,3 +146,36 @@ def test_slaloms_containers_keep_their_world_headings():
     assert max(off.values()) < 1e-9, got
     # The hero faces where the file says (-pi/2 in CARLA's frame), not its lane's 1.5e-4 rad off it.
     assert abs(math.remainder(_body_heading(plan, plan.ego) - math.pi / 2, 2 * math.pi)) < 1e-9
+
+
+def _speed_clauses(got, who: str):
+    actor = next(a for a in got.plan.agents if a.name == who)
+    return [c for c in [*actor.behaviors, *[t.clause for t in actor.triggers if t.clause is not None]]
+            if c.name in ("walk", "cruise", "brake")]
+
+
+def test_a_walker_or_a_longitudinal_only_controller_walks_along_the_files_heading(tmp_path):
+    # ScenarioRunner moves a walker (PedestrianControl, its default) and an entity under
+    # vehicle_longitudinal_control (no steering) along its body heading; the target speed at
+    # once, the action complete after its distance or time.
+    for name in ("CyclistCrossing.xosc", "PedestrianCrossingFront.xosc"):
+        got = _import(name)
+        adversary = next(a for a in got.plan.agents if a.name == "adversary")
+        clauses = _speed_clauses(got, "adversary")
+        assert clauses and {c.name for c in clauses} == {"walk"}, name
+        first = clauses[0].settings
+        assert float(eval_param_expr(first["heading"], {})) == float(eval_param_expr(adversary.yaw, {}))
+        assert float(eval_param_expr(first["distance"], {})) == 1.5
+        assert "duration" not in first and float(eval_param_expr(first["accel"], {})) >= 1000.0
+    # The same cyclist under a vehicle's lane-following controller keeps to its lane.
+    text = (CARLA / "xosc" / "CyclistCrossing.xosc").read_text().replace(
+        '"vehicle_longitudinal_control"', '"npc_vehicle_control"')
+    (tmp_path / "Lanes.xosc").write_text(text)
+    got = import_xosc(tmp_path / "Lanes.xosc", maps=[MAPS], lenient=True)
+    assert {c.name for c in _speed_clauses(got, "adversary")} == {"cruise"}
+    # Faster than a `walk` goes: along its lane, said so.
+    (tmp_path / "Fast.xosc").write_text((CARLA / "xosc" / "CyclistCrossing.xosc").read_text().replace(
+        '<AbsoluteTargetSpeed value="2.0"/>', '<AbsoluteTargetSpeed value="20.0"/>'))
+    got = import_xosc(tmp_path / "Fast.xosc", maps=[MAPS], lenient=True)
+    assert {c.name for c in _speed_clauses(got, "adversary")} == {"cruise"}
+    assert any(d.code == "W0802" and "moves along its lane" in d.message for d in got.diagnostics)

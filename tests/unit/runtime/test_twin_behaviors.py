@@ -202,6 +202,37 @@ def test_walk_moves_at_a_heading_relative_to_the_road():
     assert rows[-1, 4] == pytest.approx(math.pi / 2)
 
 
+def test_walk_ends_after_its_distance_or_its_time_and_walks_on():
+    # As CARLA ScenarioRunner completes a speed action on a walker: after a distance (in a
+    # straight line from where it started) or a time; the walker keeps its speed.
+    heading = math.radians(30.0)
+    a = agent(speed=0.0, length=0.5, width=0.5)
+    beh = start("walk", a, FakeWorld(), speed=2.0, heading=heading, accel=1000.0, decel=1000.0, distance=1.5)
+    ends = []
+    for i in range(200):
+        t = i * DT
+        ends.append(beh.ended(a, FakeWorld(), t))
+        advance(a, beh.accel(a, FakeWorld(), t), t, DT)
+    first = ends.index(True)
+    assert all(ends[first:]) and first == 75  # 1.5 m at 2 m/s: 0.75 s (the speed at once)
+    assert a.speed == 2.0 and math.hypot(a.s, a.t - LANES[-2]) == pytest.approx(4.0, abs=1e-9)
+    assert math.atan2(a.t - LANES[-2], a.s) == pytest.approx(heading, abs=1e-12)
+    timed = start("walk", agent(speed=2.0), FakeWorld(), time_s=3.0, duration=10.0)
+    assert not timed.ended(a, FakeWorld(), 12.99) and timed.ended(a, FakeWorld(), 13.0)
+    endless = start("walk", agent(speed=2.0), FakeWorld())
+    assert not endless.ended(a, FakeWorld(), 1e6)
+
+
+def test_walk_stops_at_its_decel():
+    a = agent(speed=2.0, length=0.5, width=0.5)
+    beh = start("walk", a, FakeWorld(), speed=0.0, heading=math.radians(90.0), decel=1000.0)
+    simulate(a, beh, FakeWorld(), 0.01)
+    assert a.speed == 0.0
+    b = agent(speed=2.0, length=0.5, width=0.5)
+    rows = simulate(b, start("walk", b, FakeWorld(), speed=0.0, heading=0.5), FakeWorld(), 0.5)
+    assert np.diff(rows[:, 3]).min() == pytest.approx(-3.0 * DT)  # the default: 3 m/s^2
+
+
 @pytest.mark.parametrize("direction,edge", [("left", 3.5), ("right", -7.0)])
 def test_cross_walks_over_the_road_and_stops_beyond_the_edge(direction, edge):
     a = agent(lane=-1, speed=0.0, length=0.5, width=0.5)
