@@ -153,6 +153,12 @@ class Longitudinal:
         settings = {"speed": speed}
         if dyn is not None:
             settings.update(self.speed_dynamics(dyn))
+        if "duration" in settings:
+            # From the speed the entity has when it runs, over the time, stretched to the
+            # vehicle's Performance as esmini does (TransitionDynamics::SetMaxRate).
+            settings.update({k: E.Num(value=info[k]) for k in ("max_accel", "max_decel") if info.get(k)})
+            self.approx(dyn, "a relative target over a time: the change aims at the reference's speed when it "
+                             "starts and follows it once reached (esmini aims at its speed at each step)")
         return ClausePlan(keyword="behavior", name="cruise", settings=settings)
 
     def speed_dynamics(self, dyn) -> dict:
