@@ -13,7 +13,10 @@ from addt_dsl.runtime.behaviors import PEAK_SLOPE
 
 class Longitudinal:
     @ACTIONS.register("SpeedAction", "approx", "absolute and relative targets, step, linear, cubic and sinusoidal "
-                      "shapes over a time or at a rate exactly; over a distance, `cruise` at the mean rate (W0802)")
+                      "shapes over a time (`cruise ... duration`, from the speed the entity has when it runs, "
+                      "longer where the Performance bounds it) or at a rate exactly; a relative target over a "
+                      "time aims at the reference's speed at the start (W0802); over a distance, `cruise` at "
+                      "the mean rate (W0802)")
     def act_speed(self, speed, who: str, act) -> ClausePlan | None:
         info = self.actors[who]
         relative = child_at(speed, "SpeedActionTarget", "RelativeTargetSpeed")
@@ -48,33 +51,31 @@ class Longitudinal:
             # no speed difference has a parameter range of 0: esmini's step).
             info["speed_now"] = v_now
             return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, "shape": "step"})
-        if dim == "time" and not dv and shape == "linear":
-            # No speed difference over a time: the action still runs for that time and then
-            # completes (esmini's TransitionDynamics steps its parameter to the time; the speed
-            # stays), which `ended(step)` waits for. (Cubic and sinusoidal take the time below.)
-            return ClausePlan(keyword="behavior", name="cruise",
-                              settings={"speed": v, "shape": "linear", "duration": E.Num(value=amount)})
+        if dim == "time":
+            # Over a time T: from the speed the entity has when the action runs (esmini's
+            # LongSpeedAction::Start; the importer's `speed_now` misses what conditions,
+            # teleports and road ends did before) to the target in T, longer only where the
+            # peak rate exceeds the vehicle's Performance (TransitionDynamics::SetMaxRate). With
+            # no difference the action still runs for T and completes, as `ended(step)` waits.
+            info["speed_now"] = v_now
+            settings = {"speed": v, **self.speed_dynamics(dyn)}
+            settings.setdefault("shape", "linear")
+            settings.update({k: E.Num(value=info[k]) for k in ("max_accel", "max_decel") if info.get(k)})
+            return ClausePlan(keyword="behavior", name="cruise", settings=settings)
         if dim == "rate":
             rate = amount
-        elif dim == "time":
-            rate = abs(dv) / amount if dv else 1.0
         else:  # distance: v1^2 - v0^2 = 2 a d
             rate = abs(v_now ** 2 - info["speed_now"] ** 2) / (2 * amount) if dv else 1.0
         rate = max(rate, 0.01)
         if shape != "step" and amount > 0.0:
             limit = info.get("max_accel" if dv > 0 else "max_decel")
-            rate = min(rate, limit) if limit is not None and dim in ("time", "rate") and shape == "linear" else rate
+            rate = min(rate, limit) if limit is not None and dim == "rate" and shape == "linear" else rate
         info["speed_now"] = v_now
         # At a rate the change's length follows from the speed it starts at when it runs (the
         # speed the importer expects, `speed_now`, misses what synchronisations and live
         # targets did before).
-        # (Over a time, from the speed the entity has when it runs: the importer's `speed_now`
-        # misses a teleport's or a road end's.)
-        if shape in ("cubic", "sinusoidal") and dim in ("time", "rate"):
-            settings = {"speed": v, **self.speed_dynamics(dyn)}
-            if "duration" in settings:  # esmini stretches the change to the vehicle's Performance
-                settings.update({k: E.Num(value=info[k]) for k in ("max_accel", "max_decel") if info.get(k)})
-            return ClausePlan(keyword="behavior", name="cruise", settings=settings)
+        if shape in ("cubic", "sinusoidal") and dim == "rate":
+            return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, **self.speed_dynamics(dyn)})
         if dv < 0:  # constant deceleration to a speed: exactly `brake`
             return ClausePlan(keyword="behavior", name="brake",
                               settings={"decel": E.Num(value=min(rate, 12.0)), "to_speed": v})
@@ -155,6 +156,12 @@ class Longitudinal:
         settings = {"speed": speed}
         if dyn is not None:
             settings.update(self.speed_dynamics(dyn))
+        if "duration" in settings:
+            # From the speed the entity has when it runs, over the time, stretched to the
+            # vehicle's Performance as esmini does (TransitionDynamics::SetMaxRate).
+            settings.update({k: E.Num(value=info[k]) for k in ("max_accel", "max_decel") if info.get(k)})
+            self.approx(dyn, "a relative target over a time: the change aims at the reference's speed when it "
+                             "starts and follows it once reached (esmini aims at its speed at each step)")
         return ClausePlan(keyword="behavior", name="cruise", settings=settings)
 
     def speed_dynamics(self, dyn) -> dict:

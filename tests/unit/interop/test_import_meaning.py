@@ -167,3 +167,71 @@ def test_a_speed_limit_drives_a_standing_ego_only_when_the_file_gives_it_a_contr
     got = import_xosc(tmp_path / "s.xosc", lenient=True)
     assert got.plan is not None, [d.message for d in got.diagnostics]
     assert got.plan.ego.stack.settings["cruise_speed"].value == pytest.approx(speed)
+
+
+# cut-in_simple.xosc's OverTaker (25 m/s from Init): its first event (in the file) steps it to
+# 10 m/s when the time passes 30 s (never, in this run); its second changes it linearly over 4 s
+# to 15 m/s when the time passes 1 s, and the run stops when that event ends.
+GUESS_MISSED = (
+    (r'<LateralAction>\s*<LaneChangeAction >.*?</LateralAction>',
+     '<LongitudinalAction><SpeedAction><SpeedActionDynamics dynamicsShape="step" dynamicsDimension="time" '
+     'value="0"/><SpeedActionTarget><AbsoluteTargetSpeed value="10"/></SpeedActionTarget></SpeedAction>'
+     '</LongitudinalAction>'),
+    (r'(<Condition name="CutInStartCondition".*?)<ByEntityCondition>.*?</ByEntityCondition>',
+     r'\1<ByValueCondition><SimulationTimeCondition value="30" rule="greaterThan"/></ByValueCondition>'),
+    (NO_CHANGE[0][0], NO_CHANGE[0][1].replace('value="3" dynamicsDimension="DIM"', 'value="4" dynamicsDimension="time"')
+     .replace('value="25"', 'value="15"')),
+    (NO_CHANGE[1][0], NO_CHANGE[1][1].replace('value="2"', 'value="1"')),
+    NO_CHANGE[2],
+)
+
+
+def test_a_linear_speed_change_over_a_time_starts_from_the_speed_the_entity_has(tmp_path):
+    """OpenSCENARIO: a linear SpeedAction over a time T goes from the speed the entity has when
+    it starts (esmini's LongSpeedAction::Start) to the target in T. The importer's guess of
+    that speed, 10 m/s from the event before it in the file, is wrong here (that event has
+    not run): 25 m/s to 15 m/s in 4 s, 2.5 m/s^2 (it was read as a 1.25 m/s^2 change, from
+    the guessed 10 m/s, and took 8 s)."""
+    path = _edited(tmp_path, "cut-in_simple.xosc", *GUESS_MISSED)
+    got = import_xosc(path, root=tmp_path / "esmini", ego="scripted")
+    trace = execute(expand(_compiled(got, tmp_path)).specs[0]).trace
+    state, t = trace.steps["OverTaker.BrakeEvent"], trace.time
+    started, ended = t[np.argmax(state >= 1)], t[np.argmax(state >= 2)]
+    assert started == pytest.approx(1.0, abs=0.02)
+    assert ended - started == pytest.approx(4.0, abs=0.02)
+    over = trace.actors["OverTaker"]
+    speed = np.hypot(np.diff(over.x), np.diff(over.y)) / trace.period_s  # over each step
+    mid = 0.5 * (t[1:] + t[:-1])
+    # Linear from 25 m/s to 15 m/s over exactly 4 s from the start (hand-computed).
+    expected = np.where(mid < started, 25.0, np.maximum(25.0 - 2.5 * (mid - started), 15.0))
+    assert np.max(np.abs(speed - expected)) < 0.1
+
+
+def test_a_relative_speed_change_over_a_time_is_stretched_to_the_performance(tmp_path):
+    """esmini stretches a speed change over a time whose rate exceeds the vehicle's
+    Performance (TransitionDynamics::SetMaxRate), relative targets too: 25 m/s to the Ego's
+    20 m/s - 5 m/s in 1 s would take 10 m/s^2; with maxDeceleration 2 m/s^2 it takes 5 s
+    (it took 1 s), and the translation says where it differs from esmini (W0802)."""
+    path = _edited(tmp_path, "cut-in_simple.xosc",
+                   (r'entryName="\$TargetVehicle"/>',
+                    r'entryName="$TargetVehicle"><ParameterAssignments><ParameterAssignment '
+                    r'parameterRef="MaxDeceleration" value="2"/></ParameterAssignments></CatalogReference>'),
+                   (NO_CHANGE[0][0], '<SpeedActionDynamics dynamicsShape="linear" value="1" dynamicsDimension="time"/>'
+                    '<SpeedActionTarget><RelativeTargetSpeed entityRef="Ego" value="-5" '
+                    'speedTargetValueType="delta" continuous="true"/>'),
+                   (NO_CHANGE[1][0], NO_CHANGE[1][1].replace('value="2"', 'value="1"')),
+                   (r'<StopTrigger>\s*<ConditionGroup>.*</StopTrigger>',
+                    '<StopTrigger><ConditionGroup><Condition name="e" delay="0" conditionEdge="none">'
+                    '<ByValueCondition><SimulationTimeCondition value="8" rule="greaterThan"/></ByValueCondition>'
+                    '</Condition></ConditionGroup></StopTrigger>'))
+    got = import_xosc(path, root=tmp_path / "esmini", ego="scripted")
+    assert any(d.code == "W0802" and "a relative target over a time" in d.message for d in got.diagnostics)
+    trace = execute(expand(_compiled(got, tmp_path)).specs[0]).trace
+    t = trace.time
+    over = trace.actors["OverTaker"]
+    speed = np.hypot(np.diff(over.x), np.diff(over.y)) / trace.period_s
+    started = t[np.argmax(speed < 25.0 - 1e-6)]  # the step it starts in: the condition's, t > 1 s
+    assert started == pytest.approx(1.0, abs=0.02)
+    mid = 0.5 * (t[1:] + t[:-1])
+    expected = np.where(mid < started, 25.0, np.maximum(25.0 - 2.0 * (mid - started), 15.0))  # by hand
+    assert np.max(np.abs(speed - expected)) < 0.1

@@ -28,7 +28,8 @@ def test_one_event_or_events_that_cannot_overlap_translate_without_a_note(tmp_pa
                    (speed("ramp", "override", 20, at(1)), speed("hold", "override", 14, at(4), shape="step"))):
         got = imported(tmp_path, *events)
         assert got.plan is not None and not priority_notes(got), got.diagnostics
-    assert car_lines(got) == ["at 1 s behavior cruise speed 20 m/s accel 1 m/s^2 decel 1 m/s^2",
+    assert car_lines(got) == ["at 1 s behavior cruise speed 20 m/s duration 10 s shape linear max_accel 5 m/s^2 "
+                              "max_decel 10 m/s^2",
                               "at 4 s behavior cruise speed 14 m/s shape step"]
 
 
@@ -59,7 +60,7 @@ def test_a_skip_event_waits_until_no_other_event_of_its_maneuver_runs(tmp_path):
     got = imported(tmp_path, speed("ramp", "override", 20, at(1)), speed("low", "skip", 5, at(2), shape="step"))
     assert got.plan is not None and not priority_notes(got), got.diagnostics
     assert car_lines(got) == [
-        "ramp: at 1 s behavior cruise speed 20 m/s accel 1 m/s^2 decel 1 m/s^2",
+        "ramp: at 1 s behavior cruise speed 20 m/s duration 10 s shape linear max_accel 5 m/s^2 max_decel 10 m/s^2",
         "at 2 s when not (started(Car.ramp) and not ended(Car.ramp)) then behavior cruise speed 5 m/s shape step"]
 
 
