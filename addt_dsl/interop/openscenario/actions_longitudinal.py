@@ -13,10 +13,10 @@ from addt_dsl.runtime.behaviors import PEAK_SLOPE
 
 class Longitudinal:
     @ACTIONS.register("SpeedAction", "approx", "absolute and relative targets, step, linear, cubic and sinusoidal "
-                      "shapes over a time (`cruise ... duration`, from the speed the entity has when it runs, "
-                      "longer where the Performance bounds it) or at a rate exactly; a relative target over a "
-                      "time aims at the reference's speed at the start (W0802); over a distance, `cruise` at "
-                      "the mean rate (W0802)")
+                      "shapes over a time (`cruise ... duration`), over a distance (`cruise ... distance`) or "
+                      "at a rate (toward the target whichever way), exactly: from the speed the entity has "
+                      "when it runs, the Performance bounding the rate; a relative target over a time or a "
+                      "distance aims at the reference's speed at the start (W0802)")
     def act_speed(self, speed, who: str, act) -> ClausePlan | None:
         info = self.actors[who]
         relative = child_at(speed, "SpeedActionTarget", "RelativeTargetSpeed")
