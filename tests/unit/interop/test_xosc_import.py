@@ -836,8 +836,10 @@ def test_edges_and_delays_survive_export_and_import_without_the_side_file(tmp_pa
     done.sidecar_path.unlink()
     back = import_xosc(done.xosc_path)
     assert back.plan is not None, [str(d) for d in back.diagnostics]
-    steps = {t.clause.name: (t.edge, t.delay_s.value if t.delay_s else None) for t in back.plan.agents[0].triggers}
-    assert steps == {"brake": ("rising", None), "cruise": ("falling", 1.0)}
+    # (the brake comes back as a change to 0 m/s at its rate: `cruise`)
+    steps = sorted((t.clause.settings["speed"].value, t.edge, t.delay_s.value if t.delay_s else None)
+                   for t in back.plan.agents[0].triggers)
+    assert steps == [(0.0, "rising", None), (20.0, "falling", 1.0)]
     end = back.plan.end  # the storyboard's stop trigger, beside the duration's group
     assert (end.edge, end.delay_s.value, back.plan.duration_s) == ("rising", 1.0, 6.0)
 
