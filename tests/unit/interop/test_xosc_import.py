@@ -68,7 +68,7 @@ def test_cut_in_translates_positions_speeds_and_triggers():
     # RelativeRoadPosition ds=-20 dt=3.1 from the ego: 30 m, the lane to the left.
     assert cutter.s.value == pytest.approx(30.0) and cutter.lane.value == 1.0
     names = [t.clause.name for t in cutter.triggers]
-    assert names == ["lane_change", "brake"]
+    assert names == ["lane_change", "cruise"]  # the brake to 0 m/s at its rate
     # The ego's time headway to the cutter: gap(ego, cutter) > headway * speed(ego).
     text = json.dumps(cutter.triggers[0].condition.model_dump())
     assert "gap(ego,OverTaker)" in text and "speed(ego)" in text and "HeadwayTime_LaneChange" in text
@@ -375,7 +375,7 @@ def test_another_actors_event_state_becomes_a_named_step(state, fn, tmp_path):
     path.write_text(text)
     got = import_xosc(path, root=tmp_path / "esmini")
     assert got.text is not None, [d.message for d in got.diagnostics]
-    assert "BrakeEvent: when " in got.text and f"when {fn}(OverTaker.BrakeEvent) then behavior brake" in got.text
+    assert "BrakeEvent: when " in got.text and f"when {fn}(OverTaker.BrakeEvent) then behavior cruise" in got.text
     for name, body in got.side_files.items():
         (tmp_path / name).write_text(body)
     result = compile_source(got.text, "imported.addt", base_dir=tmp_path)
