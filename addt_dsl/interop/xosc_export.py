@@ -310,14 +310,17 @@ def _speed_action(target: float, rate: float):
         xosc.DynamicsShapes.linear, xosc.DynamicsDimension.rate, max(rate, 1e-3)))
 
 
-def _speed_dynamics(shape: str, rate: float, duration: float | None) -> xosc.TransitionDynamics:
-    """A shaped speed change. Without a duration addt-dsl takes PEAK_SLOPE * |dv| / rate:
-    `rate` is the peak rate of change, as esmini reads OpenSCENARIO's `rate`
+def _speed_dynamics(shape: str, rate: float, duration: float | None,
+                    distance: float | None = None) -> xosc.TransitionDynamics:
+    """A shaped speed change. Without a duration or distance addt-dsl takes PEAK_SLOPE *
+    |dv| / rate: `rate` is the peak rate of change, as esmini reads OpenSCENARIO's `rate`
     (TransitionDynamics::GetTargetParamValByPrimPeak)."""
     if shape == "step":
         return xosc.TransitionDynamics(xosc.DynamicsShapes.step, xosc.DynamicsDimension.time, 0.0)
     if duration is not None:
         return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.time, max(duration, 0.0))
+    if distance is not None:
+        return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.distance, max(distance, 0.0))
     return xosc.TransitionDynamics(OSC_SHAPE[shape], xosc.DynamicsDimension.rate, max(rate, 1e-3))
 
 
@@ -359,13 +362,14 @@ def _cruise(run, actor, s):
             # No OpenSCENARIO target: a controller whose `speed` property is the expression (JSON).
             return _controller("cruise")(run, actor, {**s, "speed": live.model_dump(mode="json")})
         other, value, kind = rel
-        dyn = _speed_dynamics(s["shape"], s["accel"], s["duration"])
+        dyn = _speed_dynamics(s["shape"], s["accel"], s["duration"], s["distance"])
         valuetype = xosc.SpeedTargetValueType.factor if kind == "factor" else xosc.SpeedTargetValueType.delta
         return [xosc.RelativeSpeedAction(value, other, dyn, valuetype, continuous=True)], True
     rate = s["accel"] if s["speed"] >= run.v0[actor] else s["decel"]
-    if s["shape"] == "linear" and s["duration"] is None:
+    if s["shape"] == "linear" and s["duration"] is None and s["distance"] is None:
         return [_speed_action(s["speed"], rate)], True
-    return [xosc.AbsoluteSpeedAction(s["speed"], _speed_dynamics(s["shape"], rate, s["duration"]))], True
+    return [xosc.AbsoluteSpeedAction(s["speed"], _speed_dynamics(s["shape"], rate, s["duration"],
+                                                                 s["distance"]))], True
 
 
 def _brake(run, actor, s):

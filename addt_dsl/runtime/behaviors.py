@@ -166,6 +166,19 @@ class SpeedTransition:
 
 
 
+def distance_duration(v0: float, v1: float, distance: float) -> float:
+    """The time [s] of a speed change from `v0` to `v1` [m/s] over `distance` [m], as esmini
+    converts it (LongSpeedAction::Start): 2 d / |v0 + v1|, the mean speed of a symmetric
+    shape; through standstill, each part's share of the distance in proportion to its v^2;
+    no change in speed: at once."""
+    if abs(v1 - v0) < _SMALL:
+        return 0.0
+    if abs(v0) > _SMALL and abs(v1) > _SMALL and (v0 > 0) != (v1 > 0):
+        d0 = distance * v0 * v0 / (v0 * v0 + v1 * v1)
+        return 2.0 * d0 / abs(v0) + 2.0 * (distance - d0) / abs(v1)
+    return 2.0 * distance / abs(v0 + v1)
+
+
 @BEHAVIORS.implements
 class Cruise(S.Cruise, Behavior):
     transition: SpeedTransition | None = None  # a shaped or timed change, set by start()
@@ -173,23 +186,32 @@ class Cruise(S.Cruise, Behavior):
     def start(self, agent, world, time_s):
         s = self.settings
         self.transition = None
-        if s["shape"] != "linear" or s["duration"] is not None:
+        if s["shape"] != "linear" or s["duration"] is not None or s["distance"] is not None:
             # A live target is taken as it is at the start; it is followed once reached.
             v1 = max(0.0, self.value("speed", world))
             duration = s["duration"]
+            if s["distance"] is not None:
+                duration = distance_duration(agent.speed, v1, s["distance"])
             bound = s.get("max_accel") if v1 >= agent.speed else s.get("max_decel")
             if duration is not None and bound and s["shape"] in PEAK_SLOPE:
                 # esmini (TransitionDynamics::SetMaxRate): the time scaled so the peak is the bound
                 duration = max(duration, PEAK_SLOPE[s["shape"]] * abs(v1 - agent.speed) / bound)
-            self.transition = SpeedTransition(agent.speed, v1, time_s, s["shape"], s["accel"], s["decel"], duration)
+            accel, decel = self.rates()
+            self.transition = SpeedTransition(agent.speed, v1, time_s, s["shape"], accel, decel, duration)
+
+    def rates(self) -> tuple[float, float]:
+        """The rate limits [m/s^2], each within the vehicle's bound where one is set (at a rate
+        the Performance caps the peak as it stretches a change over a time)."""
+        s = self.settings
+        return (min(s["accel"], s.get("max_accel") or math.inf),
+                min(s["decel"], s.get("max_decel") or math.inf))
 
     def accel(self, agent, world, time_s):
-        s = self.settings
         tr = self.transition
         if tr is not None and tr.active(time_s, world.dt):
             return tr.accel(agent, time_s, world.dt)
         # Linear at the rate limits: the same as tracking the target.
-        return _speed_tracking(agent, max(0.0, self.value("speed", world)), s["accel"], s["decel"], world.dt)
+        return _speed_tracking(agent, max(0.0, self.value("speed", world)), *self.rates(), world.dt)
 
     def ended(self, agent, world, time_s):
         # At the target speed: the shaped change is over, or the speed is on the target.

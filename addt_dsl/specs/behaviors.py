@@ -42,16 +42,26 @@ class Cruise(BehaviorSpec):
         ParamSpec("decel", units.ACCELERATION, default=3.0, low=0.0, doc="max deceleration"),
         SHAPE_SETTING,
         DURATION_SETTING,
-        # A vehicle's Performance in OpenSCENARIO: esmini stretches a change over a time whose
-        # peak rate exceeds it.
+        ParamSpec("distance", units.LENGTH, default=None, low=0.0,
+                  doc="distance the speed change covers: it takes 2 distance / (v0 + v1), v0 the speed "
+                      "at its start (OpenSCENARIO's dynamicsDimension distance)"),
+        # A vehicle's Performance in OpenSCENARIO: esmini stretches a change whose peak rate
+        # exceeds it (TransitionDynamics::SetMaxRate), at a rate, over a time or a distance.
         ParamSpec("max_accel", units.ACCELERATION, default=None, low=0.0,
-                  doc="with `duration`: a change whose peak acceleration would exceed this takes longer, "
-                      "its peak at this (unset: unbounded)"),
+                  doc="a change whose peak acceleration would exceed this takes longer, its peak at "
+                      "this (unset: unbounded)"),
         ParamSpec("max_decel", units.ACCELERATION, default=None, low=0.0,
-                  doc="with `duration`: the same bound on slowing down"),
+                  doc="the same bound on slowing down"),
     )
-    doc = ("Change to a target speed (at the rate limits, or over `duration`, with a dynamics "
-           "shape) and hold it.")
+    doc = ("Change to a target speed (at the rate limits, over `duration` or over `distance`, "
+           "with a dynamics shape) and hold it.")
+
+    @staticmethod
+    def validate(values: dict) -> list[tuple[str, str]]:
+        """Problems of constant settings, as (setting, message)."""
+        if "duration" in values and "distance" in values:
+            return [("distance", "a speed change takes a `duration` or a `distance`, not both")]
+        return []
 
 @BEHAVIORS.register
 class SpeedProfile(BehaviorSpec):

@@ -13,10 +13,10 @@ from addt_dsl.runtime.behaviors import PEAK_SLOPE
 
 class Longitudinal:
     @ACTIONS.register("SpeedAction", "approx", "absolute and relative targets, step, linear, cubic and sinusoidal "
-                      "shapes over a time (`cruise ... duration`, from the speed the entity has when it runs, "
-                      "longer where the Performance bounds it) or at a rate exactly; a relative target over a "
-                      "time aims at the reference's speed at the start (W0802); over a distance, `cruise` at "
-                      "the mean rate (W0802)")
+                      "shapes over a time (`cruise ... duration`), over a distance (`cruise ... distance`) or "
+                      "at a rate (toward the target whichever way), exactly: from the speed the entity has "
+                      "when it runs, the Performance bounding the rate; a relative target over a time or a "
+                      "distance aims at the reference's speed at the start (W0802)")
     def act_speed(self, speed, who: str, act) -> ClausePlan | None:
         info = self.actors[who]
         relative = child_at(speed, "SpeedActionTarget", "RelativeTargetSpeed")
@@ -45,44 +45,23 @@ class Longitudinal:
         shape = self.raw(dyn, "dynamicsShape") if dyn is not None else "step"
         dim = self.raw(dyn, "dynamicsDimension") if dyn is not None else "time"
         amount = abs(self.value(dyn, "value")) if dyn is not None else 0.0
-        dv = v_now - info["speed_now"]
-        if shape == "step" or amount == 0.0 or (dim == "distance" and not dv):
-            # At once, as esmini sets it when the action starts (a change over a distance with
-            # no speed difference has a parameter range of 0: esmini's step).
+        if shape == "step" or amount == 0.0:
+            # At once, as esmini sets it when the action starts.
             info["speed_now"] = v_now
             return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, "shape": "step"})
-        if dim == "time":
-            # Over a time T: from the speed the entity has when the action runs (esmini's
-            # LongSpeedAction::Start; the importer's `speed_now` misses what conditions,
-            # teleports and road ends did before) to the target in T, longer only where the
-            # peak rate exceeds the vehicle's Performance (TransitionDynamics::SetMaxRate). With
-            # no difference the action still runs for T and completes, as `ended(step)` waits.
-            info["speed_now"] = v_now
-            settings = {"speed": v, **self.speed_dynamics(dyn)}
-            settings.setdefault("shape", "linear")
-            settings.update({k: E.Num(value=info[k]) for k in ("max_accel", "max_decel") if info.get(k)})
-            return ClausePlan(keyword="behavior", name="cruise", settings=settings)
-        if dim == "rate":
-            rate = amount
-        else:  # distance: v1^2 - v0^2 = 2 a d
-            rate = abs(v_now ** 2 - info["speed_now"] ** 2) / (2 * amount) if dv else 1.0
-        rate = max(rate, 0.01)
-        if shape != "step" and amount > 0.0:
-            limit = info.get("max_accel" if dv > 0 else "max_decel")
-            rate = min(rate, limit) if limit is not None and dim == "rate" and shape == "linear" else rate
+        # From the speed the entity has when the action runs (esmini's LongSpeedAction::Start;
+        # the importer's `speed_now` misses what conditions, synchronisations, teleports and
+        # road ends did before), whichever way that is from the target: over a time T; at a
+        # rate, toward the target at it; over a distance d, in 2 d / (v0 + v1). Each takes
+        # longer only where the peak rate exceeds the vehicle's Performance
+        # (TransitionDynamics::SetMaxRate). With no difference a change over a time still runs
+        # for T and completes, as `ended(step)` waits; over a distance it is a step.
         info["speed_now"] = v_now
-        # At a rate the change's length follows from the speed it starts at when it runs (the
-        # speed the importer expects, `speed_now`, misses what synchronisations and live
-        # targets did before).
-        if shape in ("cubic", "sinusoidal") and dim == "rate":
-            return ClausePlan(keyword="behavior", name="cruise", settings={"speed": v, **self.speed_dynamics(dyn)})
-        if dv < 0:  # constant deceleration to a speed: exactly `brake`
-            return ClausePlan(keyword="behavior", name="brake",
-                              settings={"decel": E.Num(value=min(rate, 12.0)), "to_speed": v})
-        if shape != "step" and shape != "linear" and dv:
-            self.approx(dyn, f"a {shape} speed change over a distance: `cruise` at {rate:.3g} m/s^2")
-        return ClausePlan(keyword="behavior", name="cruise",
-                          settings={"speed": v, "accel": E.Num(value=rate), "decel": E.Num(value=rate)})
+        settings = {"speed": v, **self.speed_dynamics(dyn)}
+        if dim == "time":
+            settings.setdefault("shape", "linear")
+        settings.update({k: E.Num(value=info[k]) for k in ("max_accel", "max_decel") if info.get(k)})
+        return ClausePlan(keyword="behavior", name="cruise", settings=settings)
 
     def speed_profile(self, el, info) -> ClausePlan | None:
         entries = list(el.iterfind("SpeedProfileEntry"))
@@ -156,11 +135,12 @@ class Longitudinal:
         settings = {"speed": speed}
         if dyn is not None:
             settings.update(self.speed_dynamics(dyn))
-        if "duration" in settings:
-            # From the speed the entity has when it runs, over the time, stretched to the
-            # vehicle's Performance as esmini does (TransitionDynamics::SetMaxRate).
+            # From the speed the entity has when it runs, stretched to the vehicle's
+            # Performance as esmini does (TransitionDynamics::SetMaxRate).
             settings.update({k: E.Num(value=info[k]) for k in ("max_accel", "max_decel") if info.get(k)})
-            self.approx(dyn, "a relative target over a time: the change aims at the reference's speed when it "
+        if "duration" in settings or "distance" in settings:
+            over = "time" if "duration" in settings else "distance"
+            self.approx(dyn, f"a relative target over a {over}: the change aims at the reference's speed when it "
                              "starts and follows it once reached (esmini aims at its speed at each step)")
         return ClausePlan(keyword="behavior", name="cruise", settings=settings)
 
@@ -181,6 +161,8 @@ class Longitudinal:
         elif dim == "rate":
             rate = max(amount, 0.01)
             out.update(accel=E.Num(value=rate), decel=E.Num(value=rate))
+        elif dim == "distance":
+            out["distance"] = E.Num(value=amount)
         else:
             self.approx(dyn, f"a speed change over a {dim}: at the default rate limits")
         return out

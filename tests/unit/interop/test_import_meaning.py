@@ -81,11 +81,17 @@ def test_a_speed_change_over_a_time_without_a_difference_takes_that_time(tmp_pat
 
 def test_a_speed_change_over_a_distance_without_a_difference_is_at_once(tmp_path):
     """esmini converts a distance to a time, 0 where the speeds are equal: a step (it was a
-    1 m/s^2 change)."""
+    1 m/s^2 change); the event ends a step after it starts."""
     path = _edited(tmp_path, "cut-in_simple.xosc", *((p, r.replace("DIM", "distance")) for p, r in NO_CHANGE))
     plan = _compiled(import_xosc(path, root=tmp_path / "esmini", ego="scripted"), tmp_path)
     (step,) = [t for t in plan.agents[0].triggers if t.label == "BrakeEvent"]
-    assert step.clause.settings["shape"] == "step" and "accel" not in step.clause.settings
+    assert step.clause.settings["distance"].value == 3.0 and "accel" not in step.clause.settings
+    trace = execute(expand(plan).specs[0]).trace
+    state, t = trace.steps["OverTaker.BrakeEvent"], trace.time
+    started, ended = t[np.argmax(state >= 1)], t[np.argmax(state >= 2)]
+    assert started == pytest.approx(2.0, abs=0.02) and ended - started <= trace.period_s + 1e-9
+    speed = np.hypot(np.diff(trace.actors["OverTaker"].x), np.diff(trace.actors["OverTaker"].y)) / trace.period_s
+    assert np.allclose(speed, 25.0, atol=0.05)
 
 
 def test_a_standing_ego_under_the_stack_stands_when_the_file_keeps_it_standing(tmp_path):
@@ -235,3 +241,53 @@ def test_a_relative_speed_change_over_a_time_is_stretched_to_the_performance(tmp
     mid = 0.5 * (t[1:] + t[:-1])
     expected = np.where(mid < started, 25.0, np.maximum(25.0 - 2.0 * (mid - started), 15.0))  # by hand
     assert np.max(np.abs(speed - expected)) < 0.1
+
+
+def _guess_missed(target: float, dynamics: str, guess: float = 10.0) -> tuple:
+    """GUESS_MISSED with the second event's target and dynamics (attributes), the first's
+    (never run) step to `guess`."""
+    change = (NO_CHANGE[0][0], '<SpeedActionDynamics dynamicsShape="linear" ' + dynamics + '/>'
+              f'<SpeedActionTarget><AbsoluteTargetSpeed value="{target:g}"/>')
+    return ((GUESS_MISSED[0][0], GUESS_MISSED[0][1].replace('value="10"', f'value="{guess:g}"')),
+            GUESS_MISSED[1], change, *GUESS_MISSED[3:])
+
+
+def _speed_from(tmp_path, edits, event: str = "OverTaker.BrakeEvent"):
+    """The OverTaker's speed over each step [m/s], the steps' mid times, and when the event
+    started and ended [s]."""
+    path = _edited(tmp_path, "cut-in_simple.xosc", *edits)
+    got = import_xosc(path, root=tmp_path / "esmini", ego="scripted")
+    trace = execute(expand(_compiled(got, tmp_path)).specs[0]).trace
+    state, t = trace.steps[event], trace.time
+    over = trace.actors["OverTaker"]
+    speed = np.hypot(np.diff(over.x), np.diff(over.y)) / trace.period_s
+    return speed, 0.5 * (t[1:] + t[:-1]), t[np.argmax(state >= 1)], t[np.argmax(state >= 2)]
+
+
+def test_a_speed_change_at_a_rate_goes_toward_the_target_from_the_speed_the_entity_has(tmp_path):
+    """OpenSCENARIO: a SpeedAction at a rate changes the speed toward the target at that rate
+    whichever way it is from the speed the entity has when it starts (esmini's
+    LongSpeedAction::Start signs the rate then), the peak within the Performance
+    (maxAcceleration 5 m/s^2 here: 8 m/s^2 is cut to it). The importer's guess, 40 m/s from the
+    event before it in the file (never run), is above the 30 m/s target; the entity is at
+    25 m/s: it speeds up at 5 m/s^2 for 1 s (it was read as braking to 30 m/s and never moved)."""
+    speed, mid, started, ended = _speed_from(
+        tmp_path, _guess_missed(30.0, 'value="8" dynamicsDimension="rate"', guess=40.0))
+    assert started == pytest.approx(1.0, abs=0.02)
+    assert ended - started == pytest.approx(1.0, abs=0.03)
+    expected = np.where(mid < started, 25.0, np.minimum(25.0 + 5.0 * (mid - started), 30.0))  # hand-computed
+    assert np.max(np.abs(speed - expected)) < 0.1
+
+
+def test_a_speed_change_over_a_distance_takes_its_time_from_the_speed_the_entity_has(tmp_path):
+    """OpenSCENARIO: a SpeedAction over a distance d from v0 (the speed when it starts) to v1
+    takes 2 d / (v0 + v1) (esmini's LongSpeedAction::Start): 60 m from 25 m/s to 15 m/s is
+    3 s at 10/3 m/s^2. The importer's guess, 10 m/s, is below the target (it was read as a
+    speed-up at (15^2 - 10^2) / 120 = 1.04 m/s^2, and took 9.6 s)."""
+    speed, mid, started, ended = _speed_from(tmp_path, _guess_missed(15.0, 'value="60" dynamicsDimension="distance"'))
+    assert started == pytest.approx(1.0, abs=0.02)
+    assert ended - started == pytest.approx(3.0, abs=0.03)
+    expected = np.where(mid < started, 25.0, np.maximum(25.0 - 10.0 / 3.0 * (mid - started), 15.0))  # hand-computed
+    assert np.max(np.abs(speed - expected)) < 0.1
+    over = np.sum(speed[(mid > started) & (mid < ended)]) * (mid[1] - mid[0])
+    assert over == pytest.approx(60.0, abs=0.5)  # the distance it takes

@@ -437,7 +437,7 @@ def test_a_named_steps_state_exports_as_its_events_state_and_imports_back(fn, st
     got = import_xosc(done.xosc_path)
     assert got.text is not None, [d.message for d in got.diagnostics]
     assert not [d for d in got.diagnostics if d.code.startswith("E")], [d.message for d in got.diagnostics]
-    assert "brake_hard: at 2 s behavior brake" in got.text
+    assert "brake_hard: at 2 s behavior cruise speed 3 m/s accel 4 m/s^2 decel 4 m/s^2" in got.text
     assert f"when {fn}(lead.brake_hard) then behavior" in got.text
     back = tmp_path / "back"
     back.mkdir()

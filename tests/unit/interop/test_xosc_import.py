@@ -68,7 +68,7 @@ def test_cut_in_translates_positions_speeds_and_triggers():
     # RelativeRoadPosition ds=-20 dt=3.1 from the ego: 30 m, the lane to the left.
     assert cutter.s.value == pytest.approx(30.0) and cutter.lane.value == 1.0
     names = [t.clause.name for t in cutter.triggers]
-    assert names == ["lane_change", "brake"]
+    assert names == ["lane_change", "cruise"]  # the brake to 0 m/s at its rate
     # The ego's time headway to the cutter: gap(ego, cutter) > headway * speed(ego).
     text = json.dumps(cutter.triggers[0].condition.model_dump())
     assert "gap(ego,OverTaker)" in text and "speed(ego)" in text and "HeadwayTime_LaneChange" in text
@@ -375,7 +375,7 @@ def test_another_actors_event_state_becomes_a_named_step(state, fn, tmp_path):
     path.write_text(text)
     got = import_xosc(path, root=tmp_path / "esmini")
     assert got.text is not None, [d.message for d in got.diagnostics]
-    assert "BrakeEvent: when " in got.text and f"when {fn}(OverTaker.BrakeEvent) then behavior brake" in got.text
+    assert "BrakeEvent: when " in got.text and f"when {fn}(OverTaker.BrakeEvent) then behavior cruise" in got.text
     for name, body in got.side_files.items():
         (tmp_path / name).write_text(body)
     result = compile_source(got.text, "imported.addt", base_dir=tmp_path)
@@ -836,8 +836,10 @@ def test_edges_and_delays_survive_export_and_import_without_the_side_file(tmp_pa
     done.sidecar_path.unlink()
     back = import_xosc(done.xosc_path)
     assert back.plan is not None, [str(d) for d in back.diagnostics]
-    steps = {t.clause.name: (t.edge, t.delay_s.value if t.delay_s else None) for t in back.plan.agents[0].triggers}
-    assert steps == {"brake": ("rising", None), "cruise": ("falling", 1.0)}
+    # (the brake comes back as a change to 0 m/s at its rate: `cruise`)
+    steps = sorted((t.clause.settings["speed"].value, t.edge, t.delay_s.value if t.delay_s else None)
+                   for t in back.plan.agents[0].triggers)
+    assert steps == [(0.0, "rising", None), (20.0, "falling", 1.0)]
     end = back.plan.end  # the storyboard's stop trigger, beside the duration's group
     assert (end.edge, end.delay_s.value, back.plan.duration_s) == ("rising", 1.0, 6.0)
 

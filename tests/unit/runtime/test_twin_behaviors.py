@@ -241,3 +241,38 @@ def test_cross_walks_over_the_road_and_stops_beyond_the_edge(direction, edge):
     stop = edge + (1.0 if direction == "left" else -1.0)
     assert a.speed < 1e-3
     assert a.t == pytest.approx(stop, abs=0.05)
+
+
+@pytest.mark.parametrize("shape", ["linear", "cubic", "sinusoidal"])
+def test_cruise_over_a_distance_takes_its_time_from_the_speed_at_the_start(shape):
+    # 60 m from 25 m/s to 15 m/s: 2 * 60 / (25 + 15) = 3 s (esmini's LongSpeedAction::Start),
+    # the same for every symmetric shape; the mean speed 20 m/s covers the 60 m.
+    a = agent(speed=25.0)
+    beh = start("cruise", a, FakeWorld(), speed=15.0, distance=60.0, shape=shape)
+    rows = simulate(a, beh, FakeWorld(), 4.0)
+    at_3 = int(round(3.0 / DT))
+    assert rows[at_3 - 20, 3] > 15.05 and rows[at_3 + 1, 3] == pytest.approx(15.0, abs=1e-9)
+    assert rows[at_3 + 1, 1] - rows[0, 1] == pytest.approx(60.0, abs=0.2)
+    assert not beh.ended(a, FakeWorld(), 2.9) and beh.ended(a, FakeWorld(), 3.0)
+
+
+def test_cruise_over_a_distance_is_stretched_to_max_decel_and_is_at_once_without_a_change():
+    # Linear 25 -> 15 m/s in 3 s is 10/3 m/s^2: max_decel 2 m/s^2 makes it 5 s (esmini's SetMaxRate).
+    a = agent(speed=25.0)
+    rows = simulate(a, start("cruise", a, FakeWorld(), speed=15.0, distance=60.0, max_decel=2.0), FakeWorld(), 6.0)
+    assert np.diff(rows[:, 3]).min() == pytest.approx(-2.0 * DT, abs=1e-9)
+    assert rows[int(round(4.9 / DT)), 3] > 15.1 and a.speed == pytest.approx(15.0, abs=1e-9)
+    b = agent(speed=15.0)
+    beh = start("cruise", b, FakeWorld(), speed=15.0, distance=60.0)
+    assert beh.ended(b, FakeWorld(), DT)
+
+
+def test_cruise_at_a_rate_goes_either_way_within_max_accel():
+    # At 8 m/s^2 toward the target whichever way; speeding up, max_accel 5 m/s^2 bounds it.
+    up, down = agent(speed=25.0), agent(speed=25.0)
+    rows_up = simulate(up, start("cruise", up, FakeWorld(), speed=30.0, accel=8.0, decel=8.0, max_accel=5.0),
+                       FakeWorld(), 2.0)
+    rows_down = simulate(down, start("cruise", down, FakeWorld(), speed=17.0, accel=8.0, decel=8.0, max_accel=5.0),
+                         FakeWorld(), 2.0)
+    assert rows_up[int(round(0.5 / DT)), 3] == pytest.approx(27.5, abs=1e-6) and up.speed == pytest.approx(30.0)
+    assert rows_down[int(round(0.5 / DT)), 3] == pytest.approx(21.0, abs=1e-6) and down.speed == pytest.approx(17.0)
