@@ -168,6 +168,28 @@ def run_batch(specs: list[RunSpec], seqs: list[int], worker: str = "") -> list[R
     return records
 
 
+def answer(batch: list[tuple[int, RunSpec]], records: list[RunResult], worker: str = "") -> list[RunResult]:
+    """Exactly one record per dispatched run, in the batch's order, each under the run's seq
+    and key as the coordinator computes them. A worker keys a spec with the code fingerprint
+    it read from the source files when it first needed it: one started after an edit (a long
+    run, a kept worker) keys the same spec otherwise, and its record would be filed under a
+    key nobody asked for. A run the worker returned no record for (a custom run function
+    that dropped one) is `crashed`, never left out."""
+    seqs = [seq for seq, _ in batch]
+    by_seq = {r.seq: r for r in records}
+    if len(records) == len(batch) and sorted(by_seq) != sorted(seqs):
+        by_seq = dict(zip(seqs, records))  # all there, numbered otherwise: by position
+    out = []
+    for seq, spec in batch:
+        record = by_seq.get(seq)
+        if record is None:
+            record = RunResult.unfinished(spec, "crashed", f"the worker returned {len(records)} record(s) for a "
+                                          f"batch of {len(batch)} runs, none for this one", 0.0, worker=worker)
+        record.seq, record.key = seq, spec.key()
+        out.append(record)
+    return out
+
+
 def peak_rss_mb() -> float:
     """Peak resident set size of this process [MB]."""
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -237,7 +259,7 @@ class InlineExecutor:
             limit_mb = None  # no /proc: the memory is not known
         if ((bound_s is None and limit_mb is None) or not hasattr(signal, "setitimer")
                 or threading.current_thread() is not threading.main_thread()):
-            return run(spec, seq, worker="inline")
+            return answer([(seq, spec)], [run(spec, seq, worker="inline")], "inline")[0]
         t0 = time.monotonic()
 
         def guard(signum, frame):
@@ -256,7 +278,7 @@ class InlineExecutor:
                 else (bound_s if limit_mb is None else _GUARD_POLL_S)
             outer = signal.setitimer(signal.ITIMER_REAL, first, _GUARD_POLL_S)
             try:
-                return run(spec, seq, worker="inline")
+                return answer([(seq, spec)], [run(spec, seq, worker="inline")], "inline")[0]
             finally:
                 signal.setitimer(signal.ITIMER_REAL, 0)
         except _OverTime:
@@ -559,7 +581,7 @@ class LocalExecutor:
                     if unfinished and len(batch) > 1:  # isolated: each run again, alone
                         again.extend(batch)
                         continue
-                    for (seq, spec), record in zip(batch, records):
+                    for (seq, spec), record in zip(batch, answer(batch, records, f"pid{w.process.pid}")):
                         verdict = attempts.judge(seq, record, unfinished == "external")
                         if verdict == "retry":
                             again.append((seq, spec))

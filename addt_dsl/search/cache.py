@@ -87,13 +87,23 @@ class RunCache:
         if todo:
             executor = self._executor(min(jobs, len(todo)))
             pending = list(todo.values())
+            pending_keys = list(todo)
+            answered = set()
             for result in executor.imap(enumerate(pending)):
                 if result.status == "lost":  # never a verdict: the search cannot go on without it
                     raise ToolError(f"candidate {result.run_id or result.key} could not be run ({result.error}); "
                                     "run the same command again: every run so far is kept"
                                     + (f" in {self.path}" if self.path else ""))
+                # Filed under the key of the run asked for (its seq), never one the worker computed.
+                key = pending_keys[result.seq]
+                result.key = key
                 self.store.add(result, pending[result.seq].plan)
-                self.results[result.key] = result
+                self.results[key] = result
+                answered.add(key)
+            if len(answered) != len(todo):
+                raise ToolError(f"{len(todo) - len(answered)} of {len(todo)} candidate(s) came back without a "
+                                "result; run the same command again: every run so far is kept"
+                                + (f" in {self.path}" if self.path else ""))
             self.simulations += len(todo)
         return [self.results[k] for k in keys]
 
