@@ -222,14 +222,13 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
 
 
 def _executor(args):
+    from addt_dsl.runtime.executor import default_batch
+
+    batch = getattr(args, "batch", None) or default_batch(getattr(args, "sweep_runs", 0), getattr(args, "jobs", 1))
     if args.executor == "inline":
         from addt_dsl.runtime.executor import InlineExecutor
 
-        return InlineExecutor(timeout_s=args.timeout, memory_limit_mb=args.memory_limit)
-    from addt_dsl.runtime.executor import default_batch
-
-    # (inline runs one by one)
-    batch = getattr(args, "batch", None) or default_batch(getattr(args, "sweep_runs", 0), args.jobs)
+        return InlineExecutor(timeout_s=args.timeout, memory_limit_mb=args.memory_limit, batch=batch)
     if args.executor == "ray":
         from addt_dsl.runtime.ray_executor import RayExecutor, ray_available
 
