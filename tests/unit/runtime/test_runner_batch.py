@@ -5,7 +5,7 @@ again alone, so only the guilty run is recorded as failed."""
 
 from collections import Counter
 
-from tests.unit.runtime.runner_testkit import HANG, HOG, OK, RAISE, SEGFAULT, fake_run, plan_of, scenario
+from tests.unit.runtime.runner_testkit import HANG, HOG, OK, RAISE, SEGFAULT, fake_record, fake_run, plan_of, scenario
 
 from addt_dsl import cli
 from addt_dsl.runtime import executor as executor_module
@@ -69,3 +69,28 @@ def test_cli_batch_reaches_the_executor(tmp_path, monkeypatch):
     with ResultStore(tmp_path / "a.sqlite", plan_of(path.read_text())) as a, \
             ResultStore(tmp_path / "b.sqlite", plan_of(path.read_text())) as b:
         assert sorted((r.run_id, r.digest) for r in a.records()) == sorted((r.run_id, r.digest) for r in b.records())
+
+
+class DropsRaising:
+    """A batched run function (`run_batch`) that returns no record for a RAISE run."""
+
+    def __call__(self, spec, seq: int = -1, worker: str = ""):
+        return self.run_batch([spec], [seq], worker)[0]
+
+    def run_batch(self, specs, seqs, worker: str = ""):
+        return [fake_record(s, q, worker) for s, q in zip(specs, seqs) if int(s.params["mode"]) != RAISE]
+
+
+def test_a_run_without_a_record_is_recorded_crashed_never_left_out():
+    """Every dispatched run yields exactly one record: one a batched run function dropped is
+    `crashed`, and the others keep their own seqs (zipping the batch with fewer records
+    filed them under their neighbours')."""
+    plan = plan_of(scenario([OK, RAISE, OK, OK, RAISE, OK]))
+    specs = list(SweepStream(plan))
+    for executor in (LocalExecutor(2, run_fn=DropsRaising(), retries=1, batch=3),
+                     executor_module.InlineExecutor(DropsRaising(), batch=3)):
+        records = sorted(executor.imap(enumerate(specs)), key=lambda r: r.seq)
+        assert [r.seq for r in records] == list(range(6))
+        assert [r.key for r in records] == [s.key() for s in specs]
+        assert [r.status for r in records] == ["ok", "crashed", "ok", "ok", "crashed", "ok"]
+        assert "none for this one" in records[1].error
