@@ -94,3 +94,13 @@ def test_a_run_without_a_record_is_recorded_crashed_never_left_out():
         assert [r.key for r in records] == [s.key() for s in specs]
         assert [r.status for r in records] == ["ok", "crashed", "ok", "ok", "crashed", "ok"]
         assert "none for this one" in records[1].error
+
+
+def test_an_inline_batch_past_its_bound_runs_each_alone():
+    """`InlineExecutor(batch=N)`: a batch past its bound (the sum of its runs') is not judged;
+    each run goes again alone under its own bound, so only the hung one is `timeout`."""
+    plan = plan_of(scenario([OK, HANG, OK, OK]))
+    specs = list(SweepStream(plan))
+    records = list(executor_module.InlineExecutor(fake_run, timeout_s=0.3, batch=4).imap(enumerate(specs)))
+    assert [(r.seq, r.status) for r in records] == [(0, "ok"), (1, "timeout"), (2, "ok"), (3, "ok")]
+    assert "0.3 s timeout" in records[1].error
