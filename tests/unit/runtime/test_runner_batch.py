@@ -104,3 +104,22 @@ def test_an_inline_batch_past_its_bound_runs_each_alone():
     records = list(executor_module.InlineExecutor(fake_run, timeout_s=0.3, batch=4).imap(enumerate(specs)))
     assert [(r.seq, r.status) for r in records] == [(0, "ok"), (1, "timeout"), (2, "ok"), (3, "ok")]
     assert "0.3 s timeout" in records[1].error
+
+
+def test_cli_batch_reaches_the_inline_executor(tmp_path, monkeypatch):
+    made = []
+    real = executor_module.InlineExecutor
+
+    def spy(*args, **kwargs):
+        made.append(kwargs.get("batch"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(executor_module, "InlineExecutor", spy)
+    path = tmp_path / "s.addt"
+    path.write_text(scenario([0, 2], repeat=4, duration="0.2 s"))
+    for name, extra in (("a", ["--batch", "3"]), ("b", [])):
+        assert cli.main([str(path), "--executor", "inline", *extra, "--store", str(tmp_path / f"{name}.sqlite")]) == 0
+    assert made == [3, 2]  # given; the default for 8 runs in one process
+    with ResultStore(tmp_path / "a.sqlite", plan_of(path.read_text())) as a, \
+            ResultStore(tmp_path / "b.sqlite", plan_of(path.read_text())) as b:
+        assert sorted((r.run_id, r.digest) for r in a.records()) == sorted((r.run_id, r.digest) for r in b.records())
