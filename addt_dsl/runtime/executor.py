@@ -16,8 +16,9 @@ order. Three executors:
   its run recorded as `crashed`. The worker is replaced and the sweep goes on. Workers are
   also recycled after `max_tasks_per_child` runs, like `multiprocessing.Pool`'s
   `maxtasksperchild`, to bound slow leaks.
-- `InlineExecutor`: in this process, one run after another, with the same time and memory
-  bounds checked by a timer; for debugging and single-job searches.
+- `InlineExecutor`: in this process, one batch after another (`batch=1`: one run after
+  another), with the same time and memory bounds checked by a timer; for debugging and
+  single-job searches.
 - `addt_dsl.runtime.ray_executor.RayExecutor`: the same on a Ray cluster.
 """
 
@@ -461,7 +462,8 @@ class LocalExecutor:
     `memory_limit_mb`: resident memory a worker may use (None: no limit); checked while a
     run is in flight and against the worker's peak when it finishes.
     `run_fn`: what a worker calls per run (default `run_spec`; a module-level function
-    with the same signature, e.g. to test the guards).
+    with the same signature, e.g. to test the guards); one with a `run_batch(specs, seqs,
+    worker)` is handed whole batches (the search's `Judge`).
     `keep_workers`: keep the idle workers between `imap` calls until `close()` (the search
     calls `imap` once per small batch; starting two workers per batch cost more than the
     runs themselves).
