@@ -222,14 +222,15 @@ def _run_file(args, path: Path, out: Path | None, collect=None) -> int:
 
 
 def _executor(args):
-    if args.executor == "inline":
-        from addt_dsl.runtime.executor import InlineExecutor
-
-        return InlineExecutor(timeout_s=args.timeout, memory_limit_mb=args.memory_limit)
     from addt_dsl.runtime.executor import default_batch
 
-    # (inline runs one by one)
-    batch = getattr(args, "batch", None) or default_batch(getattr(args, "sweep_runs", 0), args.jobs)
+    inline = args.executor == "inline"  # one process: one worker's batches
+    batch = getattr(args, "batch", None) or default_batch(getattr(args, "sweep_runs", 0),
+                                                          1 if inline else getattr(args, "jobs", 1))
+    if inline:
+        from addt_dsl.runtime.executor import InlineExecutor
+
+        return InlineExecutor(timeout_s=args.timeout, memory_limit_mb=args.memory_limit, batch=batch)
     if args.executor == "ray":
         from addt_dsl.runtime.ray_executor import RayExecutor, ray_available
 

@@ -3,6 +3,7 @@
     PYTHONPATH=. python benchmarks/bench_search.py [--scenarios FILE ...] [--samplers random bo]
         [--seeds 20] [--budget 150] [--random-budget 300] [--batch 8] [--jobs 2] [--cache DIR]
         [--distinct-seeds 2] [--distinct-budget 100] [--distinct-shrink 20]
+    PYTHONPATH=. python benchmarks/bench_search.py --throughput 32 [--samplers random bo] [--jobs 1]
 
 The suite (default): the scenarios in `examples/search/`, each written so that a
 failure needs several things at once (a small failure region: uniform sampling fails
@@ -28,6 +29,10 @@ and, from `--distinct-seeds` whole searches of `--distinct-budget` runs with shr
 distinct failures per 1,000 runs (search and shrink runs both count) and failing search
 runs per 1,000. Then one table of all scenarios; the suite figure is the median over
 scenarios of the per-scenario median ratios.
+
+`--throughput N` measures instead falsification runs per wall second (searches of N runs)
+with the run cache stepping each call's misses one by one against together (the batch
+engine), and prints the ratio with the load beside it.
 
 `--cache DIR` keeps every run in `DIR/<scenario file>.sqlite` (the search's run cache):
 runs are pure functions of their RunSpec, so a killed benchmark run again replays what it
@@ -165,6 +170,36 @@ def print_table(results: list[dict], samplers: list[str]) -> None:
         print("| " + " | ".join(cells) + " |")
 
 
+def throughput(paths: list[Path], args) -> dict:
+    """Falsification runs per wall second with the run cache's misses run one by one (engine
+    batch 1) against the default (each call's misses stepped together: `RunCache(batch=None)`),
+    per sampler, the two alternated `--throughput-repeats` times so that the machine's load
+    drifts over both alike; fresh in-memory caches (every run simulated)."""
+    figures: dict = {}
+    for path in paths:
+        plan = compile_file(path).plan
+        Falsifier(plan, seed=99, batch=args.batch, jobs=args.jobs, sampler="random",
+                  cache=RunCache()).run(budget_runs=4, shrink_simulations=0)  # warm-up: imports, first worlds
+        for sampler in args.samplers:
+            totals = {1: [0, 0.0], None: [0, 0.0]}
+            for rep in range(args.throughput_repeats):
+                for engine_batch in (1, None):
+                    cache = RunCache(batch=engine_batch)
+                    t0 = time.perf_counter()
+                    report = Falsifier(plan, seed=rep, batch=args.batch, jobs=args.jobs, sampler=sampler,
+                                       cache=cache).run(budget_runs=args.throughput, shrink_simulations=0)
+                    totals[engine_batch][0] += cache.simulations
+                    totals[engine_batch][1] += time.perf_counter() - t0
+                    cache.close()
+                    assert report.runs == args.throughput
+            one, default = (totals[b][0] / totals[b][1] for b in (1, None))
+            figures[f"{path.stem}/{sampler}"] = {"runs_per_s_batch1": one, "runs_per_s_default": default,
+                                                  "ratio": default / one}
+            print(f"{path.stem} {sampler} (generation {args.batch}, jobs {args.jobs}): {one:.2f} runs/s at engine "
+                  f"batch 1, {default:.2f} at the default: x{default / one:.2f} (load {figures_json.load()})")
+    return figures
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", nargs="*", type=Path, default=SUITE)
@@ -179,7 +214,15 @@ def main() -> None:
     ap.add_argument("--distinct-budget", type=int, default=100)
     ap.add_argument("--distinct-shrink", type=int, default=20, help="shrink simulations per failure group")
     ap.add_argument("--json", help="also write the figures here")
+    ap.add_argument("--throughput", type=int, default=0,
+                    help="only measure falsification runs per wall second at engine batch 1 against the default, "
+                         "this many runs per search")
+    ap.add_argument("--throughput-repeats", type=int, default=2)
     args = ap.parse_args()
+    if args.throughput:
+        figures_json.write(args.json, {"throughput": throughput([p.resolve() for p in args.scenarios], args),
+                                       "generation": args.batch, "jobs": args.jobs})
+        return
     if args.cache:
         args.cache.mkdir(parents=True, exist_ok=True)
     results = [bench_scenario(p.resolve(), args) for p in args.scenarios]

@@ -16,8 +16,9 @@ order. Three executors:
   its run recorded as `crashed`. The worker is replaced and the sweep goes on. Workers are
   also recycled after `max_tasks_per_child` runs, like `multiprocessing.Pool`'s
   `maxtasksperchild`, to bound slow leaks.
-- `InlineExecutor`: in this process, one run after another, with the same time and memory
-  bounds checked by a timer; for debugging and single-job searches.
+- `InlineExecutor`: in this process, one batch after another (`batch=1`: one run after
+  another), with the same time and memory bounds checked by a timer; for debugging and
+  single-job searches.
 - `addt_dsl.runtime.ray_executor.RayExecutor`: the same on a Ray cluster.
 """
 
@@ -75,6 +76,13 @@ BATCHES_PER_WORKER = 4
 def default_batch(n_runs: int, workers: int) -> int:
     """The batch size for a sweep of `n_runs` runs on `workers` workers."""
     return max(1, min(BATCH_MAX, n_runs // (max(1, workers) * BATCHES_PER_WORKER)))
+
+
+def batch_size(n_runs: int, workers: int) -> int:
+    """The batch size for `n_runs` runs handed at once (a search's generation): on one
+    worker (in this process) all of them, up to BATCH_MAX (no other worker to balance
+    against); on several, `default_batch`."""
+    return max(1, min(BATCH_MAX, n_runs)) if workers <= 1 else default_batch(n_runs, workers)
 
 
 def run_time_bound_s(spec: RunSpec, timeout_s: float | str | None = AUTO) -> float | None:
@@ -168,6 +176,40 @@ def run_batch(specs: list[RunSpec], seqs: list[int], worker: str = "") -> list[R
     return records
 
 
+def answer(batch: list[tuple[int, RunSpec]], records: list[RunResult], worker: str = "") -> list[RunResult]:
+    """Exactly one record per dispatched run, in the batch's order, each under the run's seq
+    and key as the coordinator computes them. A worker keys a spec with the code fingerprint
+    it read from the source files when it first needed it: one started after an edit (a long
+    run, a kept worker) keys the same spec otherwise, and its record would be filed under a
+    key nobody asked for. A run the worker returned no record for (a custom run function
+    that dropped one) is `crashed`, never left out."""
+    seqs = [seq for seq, _ in batch]
+    by_seq = {r.seq: r for r in records}
+    if len(records) == len(batch) and sorted(by_seq) != sorted(seqs):
+        by_seq = dict(zip(seqs, records))  # all there, numbered otherwise: by position
+    out = []
+    for seq, spec in batch:
+        record = by_seq.get(seq)
+        if record is None:
+            record = RunResult.unfinished(spec, "crashed", f"the worker returned {len(records)} record(s) for a "
+                                          f"batch of {len(batch)} runs, none for this one", 0.0, worker=worker)
+        record.seq, record.key = seq, spec.key()
+        out.append(record)
+    return out
+
+
+def _run_fn_batch(run_fn: Callable | None) -> Callable:
+    """What runs a batch for `run_fn`: `run_batch` for the default, the function's own
+    `run_batch(specs, seqs, worker)` where it has one (`search.cache.Judge`), else it one
+    run at a time."""
+    if run_fn is None:
+        return run_batch
+    batched = getattr(run_fn, "run_batch", None)
+    if batched is not None:
+        return batched
+    return lambda specs, seqs, worker="": [run_fn(spec, seq, worker=worker) for spec, seq in zip(specs, seqs)]
+
+
 def peak_rss_mb() -> float:
     """Peak resident set size of this process [MB]."""
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -216,18 +258,29 @@ class InlineExecutor:
     workers = 1
 
     def __init__(self, run_fn: Callable | None = None, timeout_s: float | str | None = AUTO,
-                 memory_limit_mb: float | None = DEFAULT_MEMORY_LIMIT_MB):
+                 memory_limit_mb: float | None = DEFAULT_MEMORY_LIMIT_MB, batch: int = 1):
         self.run_fn = run_fn  # as LocalExecutor's
         self.timeout_s = timeout_s
         self.memory_limit_mb = memory_limit_mb if memory_limit_mb and memory_limit_mb > 0 else None
+        self.batch = max(1, int(batch))  # as LocalExecutor's
 
     def imap(self, items: Iterable[tuple[int, RunSpec]]) -> Iterator[RunResult]:
-        for seq, spec in items:
-            yield self._bounded(spec, seq)
+        items = iter(items)
+        while batch := list(itertools.islice(items, self.batch)):
+            records = self._bounded(batch)
+            if records is None:  # a batch past its bound: each run again alone, under its own
+                for run in batch:
+                    yield from self._bounded([run])
+            else:
+                yield from records
 
-    def _bounded(self, spec: RunSpec, seq: int) -> RunResult:
-        run = self.run_fn or run_spec
-        bound_s = run_time_bound_s(spec, self.timeout_s)
+    def _bounded(self, batch: list[tuple[int, RunSpec]]) -> list[RunResult] | None:
+        """A record per run of `batch`, stepped together; None when a batch of several went
+        past its bound (the sum of its runs') or the memory limit."""
+        run = _run_fn_batch(self.run_fn)
+        specs, seqs = [spec for _, spec in batch], [seq for seq, _ in batch]
+        bounds = [run_time_bound_s(spec, self.timeout_s) for spec in specs]
+        bound_s = None if None in bounds else sum(bounds)
         limit_mb = self.memory_limit_mb
         import threading
 
@@ -237,7 +290,7 @@ class InlineExecutor:
             limit_mb = None  # no /proc: the memory is not known
         if ((bound_s is None and limit_mb is None) or not hasattr(signal, "setitimer")
                 or threading.current_thread() is not threading.main_thread()):
-            return run(spec, seq, worker="inline")
+            return answer(batch, run(specs, seqs, worker="inline"), "inline")
         t0 = time.monotonic()
 
         def guard(signum, frame):
@@ -250,22 +303,27 @@ class InlineExecutor:
 
         previous = signal.signal(signal.SIGALRM, guard)
         outer = (0.0, 0.0)
+        spec, seq = batch[0][1], batch[0][0]
         try:
             # The first alarm at the time bound when it comes before the first poll.
             first = min(bound_s, _GUARD_POLL_S) if limit_mb is not None and bound_s is not None \
                 else (bound_s if limit_mb is None else _GUARD_POLL_S)
             outer = signal.setitimer(signal.ITIMER_REAL, first, _GUARD_POLL_S)
             try:
-                return run(spec, seq, worker="inline")
+                return answer(batch, run(specs, seqs, worker="inline"), "inline")
             finally:
                 signal.setitimer(signal.ITIMER_REAL, 0)
         except _OverTime:
-            return RunResult.unfinished(spec, "timeout", f"run exceeded the {bound_s:g} s timeout",
-                                        time.monotonic() - t0, seq=seq, worker="inline")
+            if len(batch) > 1:
+                return None
+            return [RunResult.unfinished(spec, "timeout", f"run exceeded the {bound_s:g} s timeout",
+                                         time.monotonic() - t0, seq=seq, worker="inline")]
         except _OverMemory as over:
-            return RunResult.unfinished(spec, "memory", f"resident memory grew {over.grown_mb:.0f} MB in the run, "
-                                        f"over the {limit_mb:.0f} MB limit", time.monotonic() - t0, seq=seq,
-                                        worker="inline")
+            if len(batch) > 1:
+                return None
+            return [RunResult.unfinished(spec, "memory", f"resident memory grew {over.grown_mb:.0f} MB in the run, "
+                                         f"over the {limit_mb:.0f} MB limit", time.monotonic() - t0, seq=seq,
+                                         worker="inline")]
         finally:
             signal.signal(signal.SIGALRM, previous)
             if outer[0] > 0:  # an alarm the caller had set (pytest-timeout's): it goes on, less the run's time
@@ -305,10 +363,7 @@ def _worker_main(conn, memory_limit_mb: float | None, run_fn=None) -> None:
         specs = [RunSpec.model_construct(plan=plans[token], **fields) for _, token, fields in msg[1]]
         seqs = [seq for seq, _, _ in msg[1]]
         try:
-            if run_fn is None:
-                records = run_batch(specs, seqs, worker=name)
-            else:  # a custom run function takes one run at a time
-                records = [run_fn(spec, seq, worker=name) for spec, seq in zip(specs, seqs)]
+            records = _run_fn_batch(run_fn)(specs, seqs, worker=name)
         except Exception as exc:  # noqa: BLE001 - run_spec catches its own; this guards a custom run_fn
             records = [RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}", 0.0, seq=seq,
                                             worker=name) for spec, seq in zip(specs, seqs)]
@@ -407,7 +462,8 @@ class LocalExecutor:
     `memory_limit_mb`: resident memory a worker may use (None: no limit); checked while a
     run is in flight and against the worker's peak when it finishes.
     `run_fn`: what a worker calls per run (default `run_spec`; a module-level function
-    with the same signature, e.g. to test the guards).
+    with the same signature, e.g. to test the guards); one with a `run_batch(specs, seqs,
+    worker)` is handed whole batches (the search's `Judge`).
     `keep_workers`: keep the idle workers between `imap` calls until `close()` (the search
     calls `imap` once per small batch; starting two workers per batch cost more than the
     runs themselves).
@@ -559,7 +615,7 @@ class LocalExecutor:
                     if unfinished and len(batch) > 1:  # isolated: each run again, alone
                         again.extend(batch)
                         continue
-                    for (seq, spec), record in zip(batch, records):
+                    for (seq, spec), record in zip(batch, answer(batch, records, f"pid{w.process.pid}")):
                         verdict = attempts.judge(seq, record, unfinished == "external")
                         if verdict == "retry":
                             again.append((seq, spec))
@@ -630,7 +686,8 @@ def local_executor(jobs: int = 1, run_fn: Callable | None = None, **options):
     local workers: what the search, `--classify`'s golden runs and the studies run on."""
     if jobs <= 1:  # the same bounds in this process (`keep_workers` etc. are a pool's)
         return InlineExecutor(run_fn, timeout_s=options.get("timeout_s", AUTO),
-                              memory_limit_mb=options.get("memory_limit_mb", DEFAULT_MEMORY_LIMIT_MB))
+                              memory_limit_mb=options.get("memory_limit_mb", DEFAULT_MEMORY_LIMIT_MB),
+                              batch=options.get("batch", 1))
     return LocalExecutor(jobs, run_fn=run_fn, **options)
 
 

@@ -31,7 +31,8 @@ from collections.abc import Iterable, Iterator
 
 from addt_dsl.plan import RunSpec
 from addt_dsl.runtime.executor import (AUTO, DEFAULT_MAX_TASKS_PER_CHILD, DEFAULT_MEMORY_LIMIT_MB,
-                                       DEFAULT_RETRIES, Attempts, rss_mb, run_batch, run_time_bound_s, spec_fields)
+                                       DEFAULT_RETRIES, Attempts, answer, rss_mb, run_batch, run_time_bound_s,
+                                       spec_fields)
 from addt_dsl.runtime.result import RunResult
 
 _POLL_S = 0.2
@@ -158,7 +159,7 @@ class RayExecutor:
                     if not done and len(batch) > 1:  # isolated: each run again, alone
                         again.extend(batch)
                         continue
-                    for (seq, spec), record in zip(batch, records):
+                    for (seq, spec), record in zip(batch, answer(batch, records, "ray")):
                         verdict = attempts.judge(seq, record, external)
                         if verdict == "retry":
                             again.append((seq, spec))

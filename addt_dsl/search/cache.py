@@ -14,7 +14,7 @@ from pathlib import Path
 
 from addt_dsl.errors import ToolError
 from addt_dsl.plan import RunSpec
-from addt_dsl.runtime.executor import local_executor
+from addt_dsl.runtime.executor import batch_size, local_executor
 from addt_dsl.runtime.result import RunResult
 from addt_dsl.runtime.store import ResultStore, StoreBusy, StoreError
 from addt_dsl.search.outcome import evaluate
@@ -22,22 +22,33 @@ from addt_dsl.search.outcome import evaluate
 
 class Judge:
     """What an executor's worker runs for the search: `evaluator(spec)` (default
-    `search.outcome.evaluate`), a module-level function so workers can be handed it."""
+    `search.outcome.evaluate`), a module-level function so workers can be handed it.
+    Executors hand it batches (`run_batch`): an evaluator with a batched form
+    (`evaluator.batched(specs)`, e.g. `evaluate_batch`) steps them together, any other
+    judges them one by one."""
 
     def __init__(self, evaluator: Callable[[RunSpec], RunResult] = evaluate):
         self.evaluator = evaluator
 
     def __call__(self, spec: RunSpec, seq: int = -1, worker: str = "") -> RunResult:
-        result = self.evaluator(spec)
-        result.seq, result.worker, result.trace = seq, worker, None
-        return result
+        return self.run_batch([spec], [seq], worker)[0]
+
+    def run_batch(self, specs: list[RunSpec], seqs: list[int], worker: str = "") -> list[RunResult]:
+        batched = getattr(self.evaluator, "batched", None)
+        results = batched(specs) if batched is not None and len(specs) > 1 else [self.evaluator(s) for s in specs]
+        for result, seq in zip(results, seqs):
+            result.seq, result.worker, result.trace = seq, worker, None
+        return results
 
 
 class RunCache:
     _store: ResultStore | None = None
 
-    def __init__(self, path: str | Path | None = None, evaluator: Callable[[RunSpec], RunResult] = evaluate):
+    def __init__(self, path: str | Path | None = None, evaluator: Callable[[RunSpec], RunResult] = evaluate,
+                 batch: int | None = None):
         self.judge = Judge(evaluator)
+        # Misses a worker steps together (the batch engine); None: `batch_size` of each call's misses.
+        self.batch = batch
         self.path = Path(path) if path is not None else None
         if self.path is not None and self.path.exists():
             self.store  # a file that is no store is refused now, not at the first run
@@ -86,14 +97,25 @@ class RunCache:
                 todo[k] = s
         if todo:
             executor = self._executor(min(jobs, len(todo)))
+            executor.batch = self.batch or batch_size(len(todo), executor.workers)
             pending = list(todo.values())
+            pending_keys = list(todo)
+            answered = set()
             for result in executor.imap(enumerate(pending)):
                 if result.status == "lost":  # never a verdict: the search cannot go on without it
                     raise ToolError(f"candidate {result.run_id or result.key} could not be run ({result.error}); "
                                     "run the same command again: every run so far is kept"
                                     + (f" in {self.path}" if self.path else ""))
+                # Filed under the key of the run asked for (its seq), never one the worker computed.
+                key = pending_keys[result.seq]
+                result.key = key
                 self.store.add(result, pending[result.seq].plan)
-                self.results[result.key] = result
+                self.results[key] = result
+                answered.add(key)
+            if len(answered) != len(todo):
+                raise ToolError(f"{len(todo) - len(answered)} of {len(todo)} candidate(s) came back without a "
+                                "result; run the same command again: every run so far is kept"
+                                + (f" in {self.path}" if self.path else ""))
             self.simulations += len(todo)
         return [self.results[k] for k in keys]
 

@@ -23,7 +23,7 @@ from addt_dsl.plan import RunSpec
 from addt_dsl.printer import PrinterError, format_expr
 from addt_dsl.runtime import oracles
 from addt_dsl.runtime.bound import BoundScenario, bind
-from addt_dsl.runtime.execute import execute
+from addt_dsl.runtime.execute import execute, execute_batch
 from addt_dsl.runtime.result import RunResult
 from addt_dsl.runtime.signals import compute_signals
 
@@ -48,6 +48,27 @@ def evaluate(spec: RunSpec, keep_trace: bool = False) -> RunResult:
     if not keep_trace:
         result.trace = None
     return result
+
+
+def evaluate_batch(specs: list[RunSpec], keep_trace: bool = False) -> list[RunResult]:
+    """`evaluate` over runs stepped together (`execute_batch`): the same results as one by
+    one (a run's trace does not depend on its batch). A batch whose set-up fails (one run's
+    world or stack cannot be built) is judged run by run, so only that run is `crashed`."""
+    if len(specs) == 1:
+        return [evaluate(specs[0], keep_trace)]
+    try:
+        results = execute_batch(specs, keep_trace=True)
+    except Exception:  # noqa: BLE001 - isolate the run that failed: each alone
+        return [evaluate(spec, keep_trace) for spec in specs]
+    for spec, result in zip(specs, results):
+        annotate_modes(spec, result)
+        if not keep_trace:
+            result.trace = None
+    return results
+
+
+# An evaluator that can judge a batch names its batched form (`search.cache.Judge` uses it).
+evaluate.batched = evaluate_batch
 
 
 # ---------------------------------------------------------------- failure modes

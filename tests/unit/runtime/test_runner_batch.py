@@ -5,7 +5,7 @@ again alone, so only the guilty run is recorded as failed."""
 
 from collections import Counter
 
-from tests.unit.runtime.runner_testkit import HANG, HOG, OK, RAISE, SEGFAULT, fake_run, plan_of, scenario
+from tests.unit.runtime.runner_testkit import HANG, HOG, OK, RAISE, SEGFAULT, fake_record, fake_run, plan_of, scenario
 
 from addt_dsl import cli
 from addt_dsl.runtime import executor as executor_module
@@ -66,6 +66,60 @@ def test_cli_batch_reaches_the_executor(tmp_path, monkeypatch):
     assert cli.main([str(path), "--jobs", "1", "--batch", "4", "--store", str(tmp_path / "a.sqlite")]) == 0
     assert cli.main([str(path), "--jobs", "1", "--store", str(tmp_path / "b.sqlite")]) == 0
     assert made == [4, 1]  # given; the default for 6 runs on one worker
+    with ResultStore(tmp_path / "a.sqlite", plan_of(path.read_text())) as a, \
+            ResultStore(tmp_path / "b.sqlite", plan_of(path.read_text())) as b:
+        assert sorted((r.run_id, r.digest) for r in a.records()) == sorted((r.run_id, r.digest) for r in b.records())
+
+
+class DropsRaising:
+    """A batched run function (`run_batch`) that returns no record for a RAISE run."""
+
+    def __call__(self, spec, seq: int = -1, worker: str = ""):
+        return self.run_batch([spec], [seq], worker)[0]
+
+    def run_batch(self, specs, seqs, worker: str = ""):
+        return [fake_record(s, q, worker) for s, q in zip(specs, seqs) if int(s.params["mode"]) != RAISE]
+
+
+def test_a_run_without_a_record_is_recorded_crashed_never_left_out():
+    """Every dispatched run yields exactly one record: one a batched run function dropped is
+    `crashed`, and the others keep their own seqs (zipping the batch with fewer records
+    filed them under their neighbours')."""
+    plan = plan_of(scenario([OK, RAISE, OK, OK, RAISE, OK]))
+    specs = list(SweepStream(plan))
+    for executor in (LocalExecutor(2, run_fn=DropsRaising(), retries=1, batch=3),
+                     executor_module.InlineExecutor(DropsRaising(), batch=3)):
+        records = sorted(executor.imap(enumerate(specs)), key=lambda r: r.seq)
+        assert [r.seq for r in records] == list(range(6))
+        assert [r.key for r in records] == [s.key() for s in specs]
+        assert [r.status for r in records] == ["ok", "crashed", "ok", "ok", "crashed", "ok"]
+        assert "none for this one" in records[1].error
+
+
+def test_an_inline_batch_past_its_bound_runs_each_alone():
+    """`InlineExecutor(batch=N)`: a batch past its bound (the sum of its runs') is not judged;
+    each run goes again alone under its own bound, so only the hung one is `timeout`."""
+    plan = plan_of(scenario([OK, HANG, OK, OK]))
+    specs = list(SweepStream(plan))
+    records = list(executor_module.InlineExecutor(fake_run, timeout_s=0.3, batch=4).imap(enumerate(specs)))
+    assert [(r.seq, r.status) for r in records] == [(0, "ok"), (1, "timeout"), (2, "ok"), (3, "ok")]
+    assert "0.3 s timeout" in records[1].error
+
+
+def test_cli_batch_reaches_the_inline_executor(tmp_path, monkeypatch):
+    made = []
+    real = executor_module.InlineExecutor
+
+    def spy(*args, **kwargs):
+        made.append(kwargs.get("batch"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(executor_module, "InlineExecutor", spy)
+    path = tmp_path / "s.addt"
+    path.write_text(scenario([0, 2], repeat=4, duration="0.2 s"))
+    for name, extra in (("a", ["--batch", "3"]), ("b", [])):
+        assert cli.main([str(path), "--executor", "inline", *extra, "--store", str(tmp_path / f"{name}.sqlite")]) == 0
+    assert made == [3, 2]  # given; the default for 8 runs in one process
     with ResultStore(tmp_path / "a.sqlite", plan_of(path.read_text())) as a, \
             ResultStore(tmp_path / "b.sqlite", plan_of(path.read_text())) as b:
         assert sorted((r.run_id, r.digest) for r in a.records()) == sorted((r.run_id, r.digest) for r in b.records())

@@ -62,3 +62,54 @@ def test_a_file_that_is_no_store_is_refused_with_a_message(tmp_path):
     old.write_text('{"key": "0123", "status": "ok"}\n')  # an earlier version's JSON-lines cache
     with pytest.raises(ValueError, match="is not a results store.*JSON lines"):
         RunCache(old, evaluator=flaky_judge)
+
+
+def test_a_worker_that_keys_a_run_otherwise_still_answers_for_it(monkeypatch):
+    """The code fingerprint is read from the source files when a process first needs it: a
+    worker started after an edit (a long test run, a kept worker) keys the same spec
+    otherwise. The cache found its miss under another key (KeyError); the coordinator, which
+    dispatched the run, owns its key."""
+    from addt_dsl import fingerprint
+
+    specs = [_spec(g) for g in (10.0, 50.0)]
+    identity = dict(fingerprint._identity())
+    # This process reads other code than the workers, which fork from a server that did not.
+    monkeypatch.setattr(fingerprint, "_identity", lambda: tuple({**identity, "source": "edited"}.items()))
+    cache = RunCache(evaluator=flaky_judge)
+    try:
+        results = cache.get_many(specs, jobs=2)
+    finally:
+        cache.close()
+    assert [r.key for r in results] == [s.key() for s in specs]
+    assert [r.passed for r in results] == [False, True]
+
+
+def sized_judge(spec: RunSpec):
+    return flaky_judge(spec)
+
+
+def _sized_batch(specs):
+    """flaky_judge over a batch, each result noting its batch's size (drawn value 9)."""
+    results = [flaky_judge(s) for s in specs]
+    for r in results:
+        r.drawn_values[9] = (len(specs),)
+    return results
+
+
+sized_judge.batched = _sized_batch
+
+
+@pytest.mark.parametrize("jobs, batch, size", [(1, None, 6), (2, 3, 3), (1, 1, None)])
+def test_misses_are_judged_in_batches(jobs, batch, size):
+    """An evaluator with a batched form gets a call's misses as batches (all of them on one
+    job; `batch` given: that many), with the results of one by one."""
+    specs = [_spec(g) for g in (10.0, 25.0, 35.0, 50.0, 12.0, 44.0)]
+    cache = RunCache(evaluator=sized_judge, batch=batch)
+    try:
+        results = cache.get_many(specs, jobs=jobs)
+    finally:
+        cache.close()
+    assert [r.drawn_values.get(9, (None,))[0] for r in results] == [size] * 6
+    alone = [flaky_judge(s) for s in specs]
+    assert [(r.key, r.passed, r.robustness, r.failures) for r in results] == \
+        [(r.key, r.passed, r.robustness, r.failures) for r in alone]
