@@ -325,9 +325,12 @@ class BevStack(S.BevStack):
         approach = float(road.reference_pose(s0)[2])
         green = self._green_at(entry, s0)
         wait, clear, cover = None, False, math.inf
-        for i, (o, (so, to, *_rest)) in enumerate(zip(tracked, objs)):
-            if so > s0 and abs(to - t0) < 1.8:
-                continue  # traffic ahead in the ego's lane: the planner follows it
+        for i, (o, (so, to, v_s, *_rest)) in enumerate(zip(tracked, objs)):
+            if abs(to - t0) < 1.8 and (so > s0 or v_s > 0.0):
+                # Traffic ahead in the ego's lane (the planner follows it) or following it
+                # (its path is the ego's own: no conflict to give way to, and braking for it
+                # would stop the ego in front of it).
+                continue
             v = math.hypot(o.vx, o.vy)
             if v < 0.5:
                 continue  # standing: the planner's checks keep the ego off one on its path
