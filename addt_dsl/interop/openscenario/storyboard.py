@@ -844,12 +844,12 @@ class Storyboard:
                 if action.get("name"):  # a state of the action: its own step's
                     self.events.setdefault(action.get("name"), EventStep(who, clause))
         if any(c.keyword == "light" for _, c in lights):
-            self.light_step(event, self.light_event([(el, c) for el, c in lights if c.keyword == "light"]), who,
-                            act_at)
+            self.global_step("light", event, self.light_event([(el, c) for el, c in lights if c.keyword == "light"]),
+                             who, act_at)
         if any(c.keyword == "environment" for _, c in lights):
-            self.environment_step(event, [c for _, c in lights if c.keyword == "environment"], who, act_at)
+            self.global_step("environment", event, [c for _, c in lights if c.keyword == "environment"], who, act_at)
         if any(c.keyword == "set" for _, c in lights):
-            self.variable_step(event, [c for _, c in lights if c.keyword == "set"], who, act_at)
+            self.global_step("variable", event, [c for _, c in lights if c.keyword == "set"], who, act_at)
         if not clauses:
             if actions and not lights and who is not None and all(
                     any(child_at(a, "PrivateAction", t) is not None for t in sorted(INSTANT_ACTIONS)) for a in actions):
@@ -899,42 +899,25 @@ class Storyboard:
             else:
                 self.actors[who]["triggers"].append(TriggerPlan(clause=clause, **fields))
 
-    def light_step(self, event, clauses: list[ClausePlan], who, act_at) -> None:
-        if not clauses:
-            return
-        step = self.start(event.find("StartTrigger"), who, act_at, event.get("name", ""))
-        if step is None:
-            return
-        if step.after is not None:
-            self.skip(step.after.cond, f"light step '{event.get('name')}' starts on another event: not translated",
-                      "a lights block's steps start at a time, after a delay or on a condition")
-            return
-        self.light_steps += [TriggerPlan(clause=c, **step.fields) for c in clauses]
+    # Steps of an event's global actions: the list each kind goes to, and what it may start on.
+    GLOBAL_STEPS = {"light": ("light_steps", "a light step", "a lights block's steps start"),
+                    "environment": ("environment_steps", "an environment step", "an environment step starts"),
+                    "variable": ("variable_steps", "a variable step", "a variable step starts")}
 
-    def variable_step(self, event, sets: list[ClausePlan], who, act_at) -> None:
+    def global_step(self, kind: str, event, clauses: list[ClausePlan], who, act_at) -> None:
+        """The lights, environment or variable step of an event's global actions."""
+        steps, noun, starts = self.GLOBAL_STEPS[kind]
         step = self.start(event.find("StartTrigger"), who, act_at, event.get("name", ""))
         if step is None:
             return
         if step.after is not None:
-            self.skip(step.after.cond, f"variable step '{event.get('name')}' starts on another event: not "
-                                       "translated", "a variable step starts at a time, after a delay or on a "
-                                                     "condition")
+            self.skip(step.after.cond, f"{kind} step '{event.get('name')}' starts on another event: not translated",
+                      f"{starts} at a time, after a delay or on a condition")
             return
         if int(self.value(event, "maximumExecutionCount", default=1.0)) > 1:
-            self.skip(event, "a variable step that runs more than once is not translated")
+            self.skip(event, f"{noun} that runs more than once is not translated")
             return
-        self.variable_steps += [TriggerPlan(clause=c, **step.fields) for c in sets]
-
-    def environment_step(self, event, models: list[ClausePlan], who, act_at) -> None:
-        step = self.start(event.find("StartTrigger"), who, act_at, event.get("name", ""))
-        if step is None:
-            return
-        if step.after is not None:
-            self.skip(step.after.cond, f"environment step '{event.get('name')}' starts on another event: not "
-                                       "translated", "an environment step starts at a time, after a delay or on a "
-                                                     "condition")
-            return
-        self.environment_steps += [TriggerPlan(clause=c, **step.fields) for c in models]
+        getattr(self, steps).extend(TriggerPlan(clause=c, **step.fields) for c in clauses)
 
     def start(self, trigger, who: str, act_at, event: str = ""):
         """How the step starts (a Start: the fields of a TriggerPlan, or after another event); None:

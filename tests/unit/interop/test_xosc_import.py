@@ -551,6 +551,21 @@ def test_environment_changes_in_events_are_environment_steps():
     assert any(m.startswith("<Wind>, fractionalCloudCover, temperature, atmosphericPressure: no model") for m in said)
 
 
+
+@pytest.mark.parametrize("event", ["fogEventDense", "nightTimeEvent"])
+def test_an_environment_step_that_runs_more_than_once_is_refused(tmp_path, event):
+    """A global action's event with maximumExecutionCount > 1 ran once (its repeats dropped)."""
+    shutil.copytree(ESMINI, tmp_path / "esmini")
+    path = tmp_path / "esmini" / "xosc" / "cut-in_environment.xosc"
+    text = path.read_text()
+    old = f'<Event name="{event}" priority="overwrite" maximumExecutionCount="1">'
+    assert old in text
+    path.write_text(text.replace(old, old.replace('Count="1"', 'Count="2"')))
+    got = import_xosc(path, root=tmp_path / "esmini")
+    assert got.text is None
+    assert "an environment step that runs more than once is not translated" in \
+        {d.message for d in got.diagnostics if d.code == "E0803"}
+
 SHAPED = """<?xml version="1.0"?>
 <OpenSCENARIO>
   <FileHeader revMajor="1" revMinor="2" date="2024-01-01T00:00:00" description="d" author="a"/>
