@@ -172,15 +172,24 @@ class Conditions:
                                 "else refused; an entity off the road for D already when the event is armed "
                                 "starts it D later (esmini: never, its rising edge has passed) (W0802)")
     def cond_offroad(self, c, a: str):
+        duration = self.held(c, "an off-road duration")
+        if duration is None:
+            return None
+        if duration > 0:
+            self.approx(c, f"off the road for {duration:g} s: `for {duration:g} s` counts from the event's arming "
+                           "(esmini's rising edge never fires for an entity off the road that long already)")
+        return E.Binary(op="<", left=sig("road_edge", a), right=E.Num(value=0.0))
+
+    def held(self, c, what: str) -> float | None:
+        """The condition's `duration` [s], held as `for D` where it is positive; None (refused)
+        where a hold cannot be translated: outside a start trigger of one condition."""
         duration = self.value(c, "duration", units.TIME)
         if duration > 0:
             if not getattr(self, "hold_allowed", False):
-                self.skip(c, "an off-road duration is translated in a start trigger of one condition only")
+                self.skip(c, f"{what} is translated in a start trigger of one condition only")
                 return None
-            self.approx(c, f"off the road for {duration:g} s: `for {duration:g} s` counts from the event's arming "
-                           "(esmini's rising edge never fires for an entity off the road that long already)")
             self.cond_hold = duration
-        return E.Binary(op="<", left=sig("road_edge", a), right=E.Num(value=0.0))
+        return duration
 
     @ENTITY_CONDITIONS.register("EndOfRoadCondition", "exact",
                                 "`road_end(A) <= 0 m for D`: held at the end of its road (the importer sets "
@@ -188,12 +197,11 @@ class Conditions:
                                 "for the duration; with a duration, in a start trigger of one condition, else "
                                 "refused")
     def cond_end_of_road(self, c, a: str):
-        duration = self.value(c, "duration", units.TIME)
+        duration = self.held(c, "an end-of-road duration")
+        if duration is None:
+            return None
         if duration > 0:
-            if not getattr(self, "hold_allowed", False):
-                self.skip(c, "an end-of-road duration is translated in a start trigger of one condition only")
-                return None
-            self.cond_hold, self.cond_hold_edge = duration, True  # (esmini: an edge of the held condition)
+            self.cond_hold_edge = True  # (esmini: an edge of the held condition)
         return E.Binary(op="<=", left=sig("road_end", a), right=E.Num(value=0.0))
 
     @ENTITY_CONDITIONS.register("CollisionCondition", "approx",

@@ -52,15 +52,21 @@ def test_default_batch_from_the_sweep_size():
     assert default_batch(0, 4) == 1
 
 
-def test_cli_batch_reaches_the_executor(tmp_path, monkeypatch):
+def _batches_made(monkeypatch, executor: str) -> list:
+    """The `batch` each new `executor` (a class of the executor module) is made with, as made."""
     made = []
-    real = executor_module.LocalExecutor
+    real = getattr(executor_module, executor)
 
     def spy(*args, **kwargs):
         made.append(kwargs.get("batch"))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(executor_module, "LocalExecutor", spy)
+    monkeypatch.setattr(executor_module, executor, spy)
+    return made
+
+
+def test_cli_batch_reaches_the_executor(tmp_path, monkeypatch):
+    made = _batches_made(monkeypatch, "LocalExecutor")
     path = tmp_path / "s.addt"
     path.write_text(scenario([0, 2], repeat=3, duration="0.2 s"))
     assert cli.main([str(path), "--jobs", "1", "--batch", "4", "--store", str(tmp_path / "a.sqlite")]) == 0
@@ -107,14 +113,7 @@ def test_an_inline_batch_past_its_bound_runs_each_alone():
 
 
 def test_cli_batch_reaches_the_inline_executor(tmp_path, monkeypatch):
-    made = []
-    real = executor_module.InlineExecutor
-
-    def spy(*args, **kwargs):
-        made.append(kwargs.get("batch"))
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(executor_module, "InlineExecutor", spy)
+    made = _batches_made(monkeypatch, "InlineExecutor")
     path = tmp_path / "s.addt"
     path.write_text(scenario([0, 2], repeat=4, duration="0.2 s"))
     for name, extra in (("a", ["--batch", "3"]), ("b", [])):
