@@ -40,11 +40,20 @@ class Extrinsics:
 
 @dataclass
 class Frame:
-    """One sensor frame. `stamp_s` is when it was captured (faults may skew it)."""
+    """One sensor frame. `stamp_s` is when it was captured (faults may skew it).
+
+    What was true at the capture travels with the frame (set by the loop as it captures):
+    `ego_pose` (x, y, heading, speed) where the ego was, which a stack maps the frame's
+    measurements out with (the pose at the frame's time, as a stack's timestamped transform
+    gives it), and `actors`, the ground truth of the bodies a lidar hit then (body id ->
+    `actor_by_body`'s answer). A frame that arrives late shows the world as it was.
+    """
 
     sensor: str
     stamp_s: float
     data: dict = field(default_factory=dict)
+    ego_pose: tuple | None = None
+    actors: dict | None = None
 
 
 class Sensor(S.SensorSpec):

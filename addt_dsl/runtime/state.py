@@ -50,11 +50,10 @@ def _stable_seed(*parts) -> list[int]:
 
 class Context:
     """What the stack may see and do (`views.HostContext`): its sensors, the map, the fault
-    schedule, the clock, and for an external stack's client the run's ground truth."""
+    schedule, the clock."""
 
     def __init__(self, run: RunState):
         self._run = run
-        self.world = run  # views.PerceptionWorld
         self.faults = run.faults
         self.spec = run.spec
         self.step_s, self.duration_s = run.dt, run.bound.duration_s

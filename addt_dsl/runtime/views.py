@@ -77,19 +77,11 @@ class SensorWorld(Protocol):
         """(rgb, z-buffer, body ids) of a pinhole view."""
 
 
-class PerceptionWorld(Protocol):
-    """What ground-truth perception may read: the actor a body id belongs to."""
-
-    def actor_by_body(self, body: int):
-        """The actor's ground truth (x, y, heading, speed, length_m, width_m, kind) or None."""
-
-
 class StackContext(Protocol):
     """What an in-process stack (`stack.bev`) may read and do."""
 
     now: float  # the stack's clock [s]
     faults: object  # the fault schedule (`runtime.faults.FaultSchedule`): the stack's hooks ask it
-    world: PerceptionWorld
     wheelbase_m: float
     ego_length_m: float
     ego_width_m: float
@@ -167,6 +159,8 @@ class SensorFrame(Protocol):
     sensor: str  # the sensor's name
     stamp_s: float  # capture time [s]
     data: dict  # the measurement: arrays (points, image, ...) and scalars
+    ego_pose: tuple | None  # (x, y, heading, speed) of the ego at the capture
+    actors: dict | None  # body id -> ground truth at the capture, of the bodies a lidar hit
 
 
 class FaultSensor(Protocol):

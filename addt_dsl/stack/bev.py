@@ -151,9 +151,10 @@ class BevStack(S.BevStack):
         if frame.sensor not in self.sight_m and self.perception_input == "hit_body":
             self.sight_m[frame.sensor] = lidar_sight(sensor.settings, sensor.nominal,
                                                      int(getattr(self.perception, "min_hits", 2)))
-        objs = self.perception.run(frame, self.ctx.world, sensor, self.ctx.ego_pose(), self.corrupt)
+        # Measurements leave the vehicle frame through the pose the ego had at the capture.
+        objs = self.perception.run(frame, sensor, frame.ego_pose, self.corrupt)
         if self.synthetic_objects:
-            objs = objs + synthetic_objects(self.synthetic_objects, self.ctx.ego_pose())
+            objs = objs + synthetic_objects(self.synthetic_objects, frame.ego_pose)
         self.objects_seen = len(objs)
         # What perception reported, in world coordinates: perception-error studies compare it
         # with the ground truth in the trace (addt_dsl.studies).

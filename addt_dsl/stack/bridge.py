@@ -363,7 +363,7 @@ class ExternalStack(S.ExternalStack):
                 blobs[f"{k}.hit_body"] = hit
                 sensor = self.ctx.sensor(frame.sensor)
                 entry["truth"] = {"hit_body": f"{k}.hit_body", "actual": extrinsics_dict(sensor.actual),
-                                  "actors": self._actors(hit)}
+                                  "actors": _actors(frame.actors or {})}
             else:
                 # Other sensors: arrays (camera images, IMU vectors) as blobs, scalars inline.
                 arrays = {key: v for key, v in data.items() if isinstance(v, np.ndarray)}
@@ -371,6 +371,8 @@ class ExternalStack(S.ExternalStack):
                     blobs[f"{k}.{key}"] = arr
                 entry["arrays"] = {key: f"{k}.{key}" for key in arrays}
                 entry["values"] = jsonable({key: v for key, v in data.items() if key not in arrays})
+            if frame.ego_pose is not None:  # where the ego was at the capture
+                entry["ego_pose"] = [float(v) for v in frame.ego_pose]
             frames.append(entry)
         self._frames = []
         x, y, heading, speed = self.ctx.ego_pose()
@@ -395,15 +397,6 @@ class ExternalStack(S.ExternalStack):
         if "series" in reply:
             _grow_series(reply["series"], rblobs, self._remote_events)
         return command
-
-    def _actors(self, hit_ids: np.ndarray) -> dict[str, dict]:
-        out = {}
-        for body in np.unique(hit_ids).tolist():
-            gt = self.ctx.world.actor_by_body(body)
-            if gt is not None:
-                out[str(body)] = {"x": gt.x, "y": gt.y, "heading": gt.heading, "speed": gt.speed,
-                                  "length_m": gt.length_m, "width_m": gt.width_m, "kind": gt.kind}
-        return out
 
     def close(self) -> None:
         if getattr(self, "sock", None) is None:
@@ -520,3 +513,10 @@ def jsonable(d: dict) -> dict:
             v = v.tolist()
         out[k] = v
     return out
+
+
+def _actors(actors: dict) -> dict[str, dict]:
+    """The ground truth a lidar frame captured (body id -> actor), as the protocol sends it."""
+    return {str(body): {"x": gt.x, "y": gt.y, "heading": gt.heading, "speed": gt.speed,
+                        "length_m": gt.length_m, "width_m": gt.width_m, "kind": gt.kind}
+            for body, gt in actors.items() if gt is not None}

@@ -75,8 +75,11 @@ class _Sensor:
 
 
 class RemoteFrame:
-    def __init__(self, sensor: str, stamp_s: float, data: dict):
+    """A frame as a client sent it (`runtime.views.SensorFrame`)."""
+
+    def __init__(self, sensor: str, stamp_s: float, data: dict, ego_pose: tuple, actors: dict | None = None):
         self.sensor, self.stamp_s, self.data = sensor, stamp_s, data
+        self.ego_pose, self.actors = ego_pose, actors
 
 
 class RemoteActor:
@@ -122,7 +125,6 @@ class RemoteContext:
         self.now = 0.0
         self.ego = (0.0, 0.0, 0.0, 0.0)
         self.ego_s = 0.0
-        self.actors: dict[int, RemoteActor] = {}
         # Every event of the run, the stack's and the faults' in the order they happened
         # (as in process); each reply carries those since the last one.
         self.events: list[Event] = []
@@ -134,7 +136,6 @@ class RemoteContext:
         self.faults = FaultSchedule(faults, float(hello["step_s"]), float(hello.get("duration_s", math.inf)),
                                     self.events)
         self.commands: list = []
-        self.world = self  # perception's view (views.PerceptionWorld): actor_by_body
 
     # The same derivation as the in-process context, so a remote run matches a local one.
     def rng(self, name: str) -> np.random.Generator:
@@ -162,9 +163,6 @@ class RemoteContext:
 
     def ego_station(self) -> float:
         return self.ego_s
-
-    def actor_by_body(self, body: int):
-        return self.actors.get(body)
 
     def event(self, kind: str, **detail) -> None:
         self.events.append(Event(self.now, kind, detail))
@@ -348,17 +346,20 @@ def _step(stack, ctx: RemoteContext, header: dict, blobs: dict) -> tuple[dict, d
     ctx.ego_s = e["s_hint"]
     ctx.commands = []
     for f in header["frames"]:
+        actors = None
         if "points" in f:
             truth = f.get("truth", {})
             hit = blobs[truth["hit_body"]] if "hit_body" in truth else np.zeros(0, dtype=np.int64)
             data = {"points": blobs[f["points"]], "hit_body": hit}
             sensor = ctx.sensors[f["sensor"]]
             sensor.actual = _Extrinsics(truth["actual"]) if "actual" in truth else sensor.nominal
-            ctx.actors = {int(k): RemoteActor(v) for k, v in truth.get("actors", {}).items()}
+            actors = {int(k): RemoteActor(v) for k, v in truth.get("actors", {}).items()}
         else:
             data = dict(f.get("values", {}))
             data.update({key: blobs[name] for key, name in f.get("arrays", {}).items()})
-        stack.on_frame(RemoteFrame(f["sensor"], f["stamp_s"], data), f["arrive_s"])
+        # A client that sends no capture pose: the frame is taken as captured now.
+        pose = tuple(float(v) for v in f["ego_pose"]) if "ego_pose" in f else ctx.ego
+        stack.on_frame(RemoteFrame(f["sensor"], f["stamp_s"], data, pose, actors), f["arrive_s"])
     command = stack.step(t, float(header["dt"]))
     reply = {"type": "control", "command": list(command), "commands": ctx.commands,
              "latency": dict(stack.latency), "objects": stack.objects_seen, "events": _new_events(ctx)}

@@ -130,7 +130,7 @@ class CameraBevPerception(ConvTensorSites):
         return self._geometry[key]
 
     # ---- the node
-    def run(self, frame, world, sensor, ego_pose, corrupt) -> list[Obj]:
+    def run(self, frame, sensor, ego_pose, corrupt) -> list[Obj]:
         boxes = self.detect(frame.data["images"], self.geometry(sensor))
         return boxes_to_world(boxes, ego_pose, corrupt)
 

@@ -117,7 +117,7 @@ class CameraPerception:
         """Camera frames (with an image and a depth image) are this node's input."""
         return "image" in frame.data and "depth" in frame.data
 
-    def run(self, frame, world, sensor, ego_pose, corrupt) -> list[Obj]:
+    def run(self, frame, sensor, ego_pose, corrupt) -> list[Obj]:
         from addt_dsl.runtime.sensors import sensor_to_vehicle
 
         data = frame.data

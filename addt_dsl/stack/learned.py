@@ -597,7 +597,7 @@ class LearnedPerception(ConvTensorSites):
         self.detect(np.zeros((0, 3)), (0.0, 0.0))
 
     # ---- the node
-    def run(self, frame, world, sensor, ego_pose, corrupt) -> list[Obj]:
+    def run(self, frame, sensor, ego_pose, corrupt) -> list[Obj]:
         points = frame.data["points"]
         nominal = sensor.nominal
         pts = sensor_points_to_vehicle(points, nominal) if len(points) else np.zeros((0, 3))

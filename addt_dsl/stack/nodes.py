@@ -91,7 +91,7 @@ class GroundTruthPerception:
         # Weak detections draw their noise apart: the others' draws stay what they were.
         self.weak_rng = weak_rng if weak_rng is not None else rng
 
-    def run(self, frame, world, sensor, ego_pose, corrupt) -> list[Obj]:
+    def run(self, frame, sensor, ego_pose, corrupt) -> list[Obj]:
         from addt_dsl.runtime.sensors import rotation
 
         hits = frame.data["hit_body"]
@@ -105,7 +105,7 @@ class GroundTruthPerception:
         rot_n = rotation(nominal.roll, nominal.pitch, nominal.yaw)
         objs = []
         for body, count in zip(ids.tolist(), counts.tolist()):
-            gt = world.actor_by_body(body)
+            gt = frame.actors.get(body)  # as it was when the frame was captured
             if gt is None:
                 continue
             # World → vehicle frame → actual sensor frame → vehicle frame via nominal calibration.

@@ -196,8 +196,11 @@ class _Session:
     def _frame(self, gt, stamp: float, now: float) -> None:
         ctx = self.ctx
         actors = {}
+        host = ctx.ego  # the host where the view's ground truth has it (at the view's time), else now
         for o in gt.moving_object:
             if o.id.value == self.host_id:
+                b = o.base
+                host = (b.position.x, b.position.y, b.orientation.yaw, math.hypot(b.velocity.x, b.velocity.y))
                 continue
             b = o.base
             actors[o.id.value] = RemoteActor({"x": b.position.x, "y": b.position.y, "heading": b.orientation.yaw,
@@ -211,7 +214,6 @@ class _Session:
         for a in actors.values():
             if not all(math.isfinite(v) for v in (a.x, a.y, a.heading, a.speed, a.length_m, a.width_m)):
                 raise ValueError("an object's state is not finite")
-        ctx.actors = actors
         lights = {}
         for tl in gt.traffic_light:
             if tl.classification.mode == TrafficLight.Classification.MODE_OFF:
@@ -221,7 +223,7 @@ class _Session:
             lights[tl.id.value // 10] = (u, _STATE_OF_COLOUR.get(tl.classification.color, 2.0))
         ctx.lights = sorted(lights.values())
         hits = np.repeat(np.array(sorted(actors), dtype=np.int64), 2)  # two returns each: seen
-        self.stack.on_frame(RemoteFrame(self.lidar, stamp, {"hit_body": hits}), now)
+        self.stack.on_frame(RemoteFrame(self.lidar, stamp, {"hit_body": hits}, host, actors), now)
 
 
 class _Origin:

@@ -62,7 +62,7 @@ def test_no_hosted_module_reads_the_runs_state(path):
 CONSUMERS = [
     ("runtime/behaviors.py", ("world",), views.BehaviorWorld),
     ("runtime/sensors.py", ("world",), views.SensorWorld),
-    ("stack/nodes.py", ("world",), views.PerceptionWorld),
+    ("stack/nodes.py", ("frame",), views.SensorFrame),
     ("stack/bev.py", ("ctx",), views.StackContext),
     ("stack/bridge.py", ("ctx",), views.HostContext),
     ("stack/osi_stack.py", ("ctx",), views.HostContext),
@@ -108,9 +108,7 @@ IMPLEMENTATIONS = [
     ("runtime/state.py", "Context", views.HostContext),
     ("runtime/state.py", "RunState", views.BehaviorWorld),
     ("runtime/state.py", "RunState", views.SensorWorld),
-    ("runtime/state.py", "RunState", views.PerceptionWorld),
     ("stack/bridge_server.py", "RemoteContext", views.StackContext),
-    ("stack/bridge_server.py", "RemoteContext", views.PerceptionWorld),
 ]
 
 

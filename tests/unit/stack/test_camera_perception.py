@@ -116,12 +116,12 @@ def test_the_node_places_the_box_centre_in_world_coordinates_through_the_nominal
     node = CameraPerception({})
     assert node.accepts(frame) and not node.accepts(Frame("lidar", 0.0, {"points": [], "hit_body": []}))
     ego = (100.0, 50.0, math.pi / 2, 10.0)  # facing +y
-    (obj,) = node.run(frame, None, CAMERA, ego, lambda site, v: v)
+    (obj,) = node.run(frame, CAMERA, ego, lambda site, v: v)
     x_v = 20.0 + CAMERA.nominal.x + CLASS_SIZE_M["car"][0] / 2  # face + half a car
     assert (obj.x, obj.y) == pytest.approx((100.0 - 1.0, 50.0 + x_v), abs=0.1)
     assert obj.heading == ego[2] and math.isnan(obj.vx)
     # A fault site corrupts what the node hands on, as for the lidar perceptions.
-    (moved,) = node.run(frame, None, CAMERA, ego, lambda site, v: v + 5.0 if site == "perception.x" else v)
+    (moved,) = node.run(frame, CAMERA, ego, lambda site, v: v + 5.0 if site == "perception.x" else v)
     assert moved.y == pytest.approx(obj.y + 5.0)
 
 
