@@ -319,6 +319,45 @@ def value_range(expr, ranges: dict[str, tuple[float, float]]) -> tuple[float, fl
     return lo, hi
 
 
+_FLIPPED = {"<": ">", "<=": ">=", ">": "<", ">=": "<=", "==": "=="}
+
+
+def narrowed_ranges(ranges: dict[str, tuple[float, float]], constraints) -> dict[str, tuple[float, float]]:
+    """`ranges` narrowed by the constraints (`assume`) that bound one parameter by a
+    constant range: `t_s <= 9 s`, `v > 2 * 5 m/s`, the sides of an `and`. Every run
+    meets every constraint (a sample that breaks one is drawn again, a grid cell that
+    breaks one runs nothing), so its values lie in the narrowed ranges; a strict bound
+    narrows as its closure (sound, possibly wider). Constraints that bound none, or
+    that would leave a range empty (reported as never holding elsewhere), narrow nothing."""
+    out = dict(ranges)
+    todo = list(constraints)
+    while todo:
+        c = todo.pop()
+        if not isinstance(c, E.Binary):
+            continue
+        if c.op == "and":
+            todo += [c.left, c.right]
+            continue
+        if c.op not in _FLIPPED:
+            continue
+        op, param, bound = c.op, c.left, c.right
+        if not isinstance(param, E.Param):
+            op, param, bound = _FLIPPED[op], c.right, c.left
+        if not isinstance(param, E.Param) or param.name not in out or E.params_used(bound):
+            continue
+        got = value_range(bound, {})
+        if got is None:
+            continue
+        lo, hi = out[param.name]
+        if op in ("<", "<=", "=="):
+            hi = min(hi, got[1])
+        if op in (">", ">=", "=="):
+            lo = max(lo, got[0])
+        if lo <= hi:
+            out[param.name] = (lo, hi)
+    return out
+
+
 def _interval(expr, ranges):
     match expr:
         case E.Num(value=v):

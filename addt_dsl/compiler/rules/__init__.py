@@ -32,8 +32,8 @@ RULES = (
     rule_header,
     rule_params,
     rule_sweep,  # right after the parameters: its grids widen their ranges for every later check
+    rule_assumptions,  # and the constraints narrow them
     rule_roads,
-    rule_assumptions,
     rule_actors,
     rule_lights,
     rule_faults,

@@ -8,16 +8,20 @@ from addt_dsl import expr as E
 from addt_dsl import plan as P
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import Context, const_value, text_of
+from addt_dsl.compiler.exprs import narrowed_ranges
 from addt_dsl.diagnostics import Span
 
 
 @dataclass(frozen=True)
 class Assumptions:
     assumptions: list[P.AssumptionPlan]
+    # The parameters' ranges narrowed by the constraints, for every later check of a
+    # value over parameters ("can be outside ...": the runs' values, not the declared ranges).
+    param_ranges: dict[str, tuple[float, float]]
 
 
 def rule_assumptions(ctx: Context) -> Assumptions:
-    out = Assumptions([])
+    out = Assumptions([], {})
     names: dict[str, Span] = {}
     for d in ctx.defs(ast.AssumeDecl):
         if d.label is not None:
@@ -39,4 +43,5 @@ def rule_assumptions(ctx: Context) -> Assumptions:
                 ctx.sink.warning("W0002", "this constraint always holds: it uses no parameter", d.expr.span)
             continue
         out.assumptions.append(P.AssumptionPlan(name=d.label or "", text=text_of(ctx, d.expr.span), expr=formula))
+    out.param_ranges.update(narrowed_ranges(ctx.param_ranges, [a.expr for a in out.assumptions]))
     return out

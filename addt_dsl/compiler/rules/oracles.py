@@ -9,7 +9,8 @@ from addt_dsl import expr as E
 from addt_dsl import plan as P
 from addt_dsl import units
 from addt_dsl.compiler import ast
-from addt_dsl.compiler.context import Context, check_settings, check_time, const_value, fmt, int_const, suggest, text_of
+from addt_dsl.compiler.context import (Context, check_settings, check_time, const_value, fmt, int_const, range_text,
+                                       suggest, text_of)
 from addt_dsl.compiler.exprs import value_range
 from addt_dsl.diagnostics import Span
 from addt_dsl.registry import SIGNALS, ParamSpec
@@ -242,12 +243,11 @@ def _check_formula_windows(ctx: Context, formula, span: Span) -> bool:
 
 
 # A window over parameters is checked per run where the sweep fixes its values (grid,
-# cases, defaults: up to this many cells); a sampled one where its range decides, else
-# the run whose values make it invalid stops with an error (runtime/bound.py).
+# cases, defaults: up to this many cells); a sampled one over the values its runs can draw.
 WINDOW_CHECK_CELLS = 10_000
 _WINDOW_CODES = {"bound": "E0301", "inverted": "E0303", "beyond": "E0302"}
-_WINDOW_TEXT = {"bound": "a window bound must be a finite time >= 0 s", "inverted": "the window ends before it starts",
-                "beyond": "the time window reaches beyond the scenario's duration"}
+_WINDOW_CAN = {"bound": "a window bound can be negative", "inverted": "the window can end before it starts",
+               "beyond": "the time window can reach beyond the scenario's duration"}
 _WINDOW_HINTS = {"bound": "windows are relative to the current instant: `within 5 s`, `during [2 s, 5 s]`",
                  "inverted": "a window [A, B] needs A <= B", "beyond": "shorten the window or lengthen `duration`"}
 
@@ -274,20 +274,44 @@ def _check_param_window(ctx: Context, node, span: Span) -> bool:
                                _WINDOW_HINTS[kind])
                 return False
         return True
-    # A sampled parameter: an error only where its whole range makes the window invalid.
+    # A sampled parameter: an error where a value the runs can draw (the ranges narrowed by
+    # the constraints) makes the window invalid, as for every other value over parameters
+    # (`context.check_range`). An inverted window is excluded by a constraint that orders
+    # its bounds (`assume t0 <= t1` for `during [t0, t1]`).
     lo_r = (lo, lo) if isinstance(lo, float) else value_range(lo, ctx.param_ranges)
     hi_r = None if hi is None else (hi, hi) if isinstance(hi, float) else value_range(hi, ctx.param_ranges)
     if lo_r is None or (hi is not None and hi_r is None):
         return True
-    checks = [("bound", lo_r[1] < 0.0), ("bound", hi_r is not None and hi_r[1] < 0.0),
-              ("inverted", hi_r is not None and hi_r[1] < lo_r[0]),
-              ("beyond", dur is not None and max(lo_r[0], hi_r[0] if hi_r else 0.0) > dur + 1e-9)]
-    for kind, always_bad in checks:
-        if always_bad:
-            ctx.sink.error(_WINDOW_CODES[kind], _WINDOW_TEXT[kind], span,
-                           f"for every value of {', '.join(sorted(used))} in its range", _WINDOW_HINTS[kind])
+    ordered = hi is not None and _ordered_by_constraint(ctx, lo, hi)
+    checks = [("bound", lo_r, lo_r[0] < 0.0), ("bound", hi_r, hi_r is not None and hi_r[0] < 0.0),
+              ("inverted", None, hi_r is not None and hi_r[0] < lo_r[1] and not ordered),
+              ("beyond", hi_r or lo_r, dur is not None and max(lo_r[1], hi_r[1] if hi_r else 0.0) > dur + 1e-9)]
+    for kind, spans, can_be_bad in checks:
+        if can_be_bad:
+            names = ", ".join(sorted(used))
+            note = f"over the ranges of {names} it spans {range_text(*spans, units.TIME)}" if spans else \
+                f"over the ranges of {names} its end can come before its start"
+            ctx.sink.error(_WINDOW_CODES[kind], _WINDOW_CAN[kind], span, note,
+                           "narrow the parameter range, or add an `assume` that excludes those values")
             return False
     return True
+
+
+def _ordered_by_constraint(ctx: Context, lo, hi) -> bool:
+    """Whether a constraint states `lo <= hi` (or `<`, either way round) of these bounds."""
+    lo_e = E.Num(value=lo) if isinstance(lo, float) else lo
+    hi_e = E.Num(value=hi) if isinstance(hi, float) else hi
+    todo = [a.expr for a in ctx.assumptions]
+    while todo:
+        c = todo.pop()
+        if not isinstance(c, E.Binary):
+            continue
+        if c.op == "and":
+            todo += [c.left, c.right]
+        elif (c.op in ("<", "<=") and (c.left, c.right) == (lo_e, hi_e)) or \
+                (c.op in (">", ">=") and (c.left, c.right) == (hi_e, lo_e)):
+            return True
+    return False
 
 
 def _bound_at(bound, values: dict[str, float]):

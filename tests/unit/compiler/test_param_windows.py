@@ -1,6 +1,7 @@
 """Oracle windows over parameters (`always during [0 s, t_end] ...`): compiled to bounds
 that each run resolves, checked at compile time for every run whose values the sweep
-fixes (grid, cases, defaults), per run where a sampler draws them; printed back to the
+fixes (grid, cases, defaults), over the values a sampler can draw where it draws them
+(the ranges narrowed by the constraints); printed back to the
 same plan; evaluated exactly like the same literal window."""
 
 from __future__ import annotations
@@ -116,16 +117,36 @@ def test_constant_windows_keep_their_diagnostics():
 SAMPLED = "  param t_s = 3 s in [1 s, 6 s]"
 
 
-def test_a_sampled_parameter_is_checked_per_run():
-    """Where a sampler draws the bound, only a range that is bad everywhere is refused at
-    compile time; otherwise a run whose values make the window invalid stops with an error
-    that names the oracle, the window and the values."""
-    assert [c for c, _, _ in _errors("w: always during [t_s, 2 s] gap(ego, lead) > 5 m", "sweep { random 4 }",
-                                     "  param t_s = 3 s in [3 s, 6 s]")] == ["E0303"]
-    result = _compile("w: always during [t_s, 4 s] gap(ego, lead) > 5 m", "sweep { random 4 }", SAMPLED)
+def test_a_sampled_parameter_is_checked_over_the_values_its_runs_can_draw():
+    """Where a sampler draws the bound, a window that some drawable value makes invalid is
+    refused at compile time (as a fault's time over the same parameter is); the constraints
+    narrow what can be drawn, so an `assume` that excludes the bad values lets it compile."""
+    assert _errors("w: always during [t_s, 4 s] gap(ego, lead) > 5 m", "sweep { random 4 }", SAMPLED) == [
+        ("E0303", "the window can end before it starts",
+         ("over the ranges of t_s its end can come before its start",
+          "narrow the parameter range, or add an `assume` that excludes those values"))]
+    assert [c for c, _, _ in _errors("w: always within t_s + 5 s gap(ego, lead) > 5 m", "sweep { random 4 }",
+                                     SAMPLED)] == ["E0302"]
+    result = _compile("w: always during [t_s, 4 s] gap(ego, lead) > 5 m", "sweep { random 4 }",
+                      SAMPLED + "\n  assume t_s <= 4 s")
     assert result.plan is not None, result.diagnostics
-    good = make_spec(result.plan, {**result.plan.nominal_params(), "t_s": 2.0}, 0)
-    assert bind(good).oracles[0].formula.lo_s == 2.0
+    for spec in expand(result.plan).specs:  # every run draws a value the window takes
+        assert 1.0 <= bind(spec).oracles[0].formula.lo_s <= 4.0
+    # A constraint that orders the bounds excludes an inverted window; one that bounds
+    # only one side does not.
+    two = SAMPLED + "\n  param t_e = 5 s in [2 s, 8 s]"
+    assert _errors("w: always during [t_s, t_e] gap(ego, lead) > 5 m", "sweep { random 4 }",
+                   two + "\n  assume t_s < t_e") == []
+    assert [c for c, _, _ in _errors("w: always during [t_s, t_e] gap(ego, lead) > 5 m", "sweep { random 4 }",
+                                     two + "\n  assume t_e > 3 s")] == ["E0303"]
+
+
+def test_the_run_time_check_names_the_oracle_the_window_and_the_values():
+    # The check as a run binds stays the guard: a RunSpec made by hand with a value the
+    # constraints exclude (make_spec does not check them) fails with a clear error, not in
+    # the evaluator.
+    result = _compile("w: always during [t_s, 4 s] gap(ego, lead) > 5 m", "sweep { random 4 }",
+                      SAMPLED + "\n  assume t_s <= 4 s")
     bad = make_spec(result.plan, {**result.plan.nominal_params(), "t_s": 5.5}, 0)
     with pytest.raises(WindowError) as info:
         bind(bad)

@@ -57,3 +57,57 @@ def test_relative_and_absolute_placements_are_checked_alike(placement):
     assert _codes(placement, "grid gap in [1, 30] m") == [("E0301", 12)]
     assert _codes(placement.replace("gap", "30 m"), "grid t_flip in [1, 2] s") == [("E0301", 12)]
     assert _codes(placement, "grid gap in [1, 2] m") == []
+
+
+# ---------------------------------------------------------------- constraints narrow ranges
+
+SAMPLED_FAULT = """scenario s {{
+  duration 10 s
+  road r {{
+    line length 400 m
+  }}
+  param t_s = 3 s in [1 s, 20 s]
+{assume}
+  ego car on r lane -1 at 20 m speed 10 m/s {{
+    stack bev
+    sensor lidar rate 10 Hz rays 360 range 80 m
+  }}
+  faults {{
+    at t_s for 1 s drop lidar
+  }}
+  sweep {{ random 4 }}
+}}
+"""
+
+
+@pytest.mark.parametrize("assume, codes", [
+    ("", ["E0302"]),  # t_s can be 20 s: past the end
+    ("  assume t_s <= 9 s", []),  # what the error's help asks for
+    ("  assume 9 s >= t_s and t_s > 2 s", []),  # either way round, inside an `and`
+    ("  assume t_s <= 15 s", ["E0302"]),  # still reaches past the end
+    ("  assume t_s <= 9 s or t_s > 30 s", ["E0302"]),  # an `or` bounds nothing for sure
+])
+def test_a_constraint_that_excludes_the_bad_values_is_what_the_help_says(assume, codes):
+    # The help of "can be outside" says: narrow the range, or add an `assume` that excludes
+    # those values. An `assume` did not count: the check read the declared range only.
+    result = compile_source(SAMPLED_FAULT.format(assume=assume), path="s.addt")
+    assert [d.code for d in result.diagnostics if d.severity == "error"] == codes
+
+
+def test_narrowed_ranges_is_sound_and_leaves_what_it_cannot_bound():
+    from addt_dsl import expr as E
+    from addt_dsl.compiler.exprs import narrowed_ranges
+
+    p, q = E.Param(name="p"), E.Param(name="q")
+    ranges = {"p": (0.0, 10.0), "q": (0.0, 10.0)}
+
+    def cmp(op, left, right):
+        return E.Binary(op=op, left=left, right=right)
+
+    five = E.Binary(op="*", left=E.Num(value=2.0), right=E.Num(value=2.5))
+    assert narrowed_ranges(ranges, [cmp("<", p, five)]) == {"p": (0.0, 5.0), "q": (0.0, 10.0)}
+    assert narrowed_ranges(ranges, [cmp("<=", E.Num(value=3.0), q)]) == {"p": (0.0, 10.0), "q": (3.0, 10.0)}
+    assert narrowed_ranges(ranges, [cmp("==", p, E.Num(value=4.0))])["p"] == (4.0, 4.0)
+    assert narrowed_ranges(ranges, [cmp("<", p, q)]) == ranges  # relational: no constant bound
+    assert narrowed_ranges(ranges, [cmp("<", p, E.Num(value=-1.0))]) == ranges  # never holds: reported elsewhere
+    assert narrowed_ranges(ranges, [cmp("!=", p, E.Num(value=4.0))]) == ranges
