@@ -214,7 +214,7 @@ def test_town01_slalom_waits_for_the_oncoming_car_then_passes():
 # CARLA's Slalom as the file places it (tests/data/carla/xosc/Slalom.xosc, with the default
 # sensor set the importer gives its ego).
 CARLA = Path(__file__).resolve().parents[2] / "data" / "carla"
-WAIT_S = 88.67  # [m] road 24's station of the ego's centre where it waits behind c3 (path station 17.0)
+WAIT_S = 88.67  # [m] road 24's station of the ego's centre 9.55 m short of c3 (path station 17.0)
 
 
 def _slalom_file(sensor: str = "", extra: str = "", duration_s: float = 300.0, ego_s: float | None = None):
@@ -296,7 +296,7 @@ def test_a_car_behind_slaloms_containers_is_hidden_below_their_top_and_seen_over
 
 
 def test_imported_slalom_waits_behind_its_containers_whatever_comes():
-    """The file as imported, default sensors: it passes c1 within its lane and waits behind
+    """The file as imported, default sensors: it passes c1 within its lane and stays behind
     c3 (c3 hides the oncoming lane beyond about 16 m; the pass needs 186 m seen clear,
     `test_carlas_slalom_needs_the_oncoming_lane_seen_clear_to_186_m`), its body never over
     the centre line, while a car comes at 10 m/s in the oncoming lane, hidden behind the
