@@ -214,7 +214,7 @@ def test_town01_slalom_waits_for_the_oncoming_car_then_passes():
 # CARLA's Slalom as the file places it (tests/data/carla/xosc/Slalom.xosc, with the default
 # sensor set the importer gives its ego).
 CARLA = Path(__file__).resolve().parents[2] / "data" / "carla"
-WAIT_S = 88.67  # [m] road 24's station of the ego's centre 9.55 m short of c3 (path station 17.0)
+WAIT_S = 88.67  # [m] road 24's station of the ego's centre, its front 9.55 m short of c3 (path station 17.0)
 
 
 def _slalom_file(sensor: str = "", extra: str = "", duration_s: float = 300.0, ego_s: float | None = None):
