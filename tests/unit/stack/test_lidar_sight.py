@@ -31,3 +31,19 @@ def test_the_default_five_channels_add_the_one_degree_down_beam():
 def test_fine_rays_reach_the_range():
     assert lidar_sight(_lidar(rays=1440, range_m=200.0), Extrinsics(), 2) == 200.0
     assert lidar_sight(_lidar(), Extrinsics(), 1) == 80.0  # one ray suffices: the range
+
+
+def test_a_roof_lidar_sees_to_its_range():
+    """CARLA's leaderboard lidar (its agent wrapper sets 64 channels from +10 to -30 deg, 85 m,
+    600000 points a second at 10 Hz: 937 rays a channel, 0.384 deg) on a 2.5 m roof mount.
+    Beside the mount its rays pass over a 1.5 m car (the lowest, -30 deg, is at 1.5 m only
+    1.73 m out), which ended the sight at 0 m: the pass rule never held with a roof lidar.
+    At 85 m: floor(1.9 / (85 m x 0.384 deg)) = 3 rays on each channel whose ray meets the
+    car, those between atan(-2.5 / 85) = -1.68 deg and atan(-1 / 85) = -0.67 deg (the one at
+    -0.79 deg): 85 m, the range."""
+    roof = dict(rays=937, channels=64, vfov=math.radians(40.0), range=85.0, fov=2 * math.pi)
+    mount = Extrinsics(z=2.5, pitch=math.radians(10.0))
+    assert lidar_sight(roof, mount, 2) == 85.0
+    # With a 200 m range: two rays a channel to 1.9 / (2 x 0.384 deg) = 141.67 m; beyond, one,
+    # and the car's height spans 0.61 deg at 142 m, less than the 0.635 deg between channels.
+    assert lidar_sight(dict(roof, range=200.0), mount, 2) == pytest.approx(141.5)

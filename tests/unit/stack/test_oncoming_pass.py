@@ -90,6 +90,13 @@ def test_when_the_rule_holds_the_pass_wins_over_waiting_behind(gap_m, speed):
     assert plan.lane == 1 and plan.speed >= speed
 
 
+def _slalom_containers():
+    """CARLA's Slalom containers as the waiting ego's stack tracks them (planner tuples)."""
+    path = [(9.3, 2.4), (19.3, -2.6), (29.3, 1.4), (39.3, -0.6), (49.3, 1.4)]  # (s, t) from the lane centre
+    boxes = [CONTAINER, CONTAINER, CONTAINER[::-1], CONTAINER[::-1], CONTAINER[::-1]]  # (along, across) the road
+    return [(s, t - 2.0, 0.0, 0.0, *box) for (s, t), box in zip(path, boxes)]
+
+
 def test_carlas_slalom_containers_at_the_line_hide_the_oncoming_lane():
     """CARLA's Slalom as imported, seen from where the ego stands behind the containers (its
     centre at path station 17.0 m): c1 along the centre line, across it (behind it now), c2
@@ -101,9 +108,30 @@ def test_carlas_slalom_containers_at_the_line_hide_the_oncoming_lane():
     that lane (its centre past c3's edge only to 9.55 x 4.03 / 2.43 = 15.8 m): with nothing
     hidden it would hold."""
     planner = LatticePlanner({"cruise_speed": V_LIMIT}, HERO)
-    path = [(9.3, 2.4), (19.3, -2.6), (29.3, 1.4), (39.3, -0.6), (49.3, 1.4)]  # (s, t) from the lane centre
-    boxes = [CONTAINER, CONTAINER, CONTAINER[::-1], CONTAINER[::-1], CONTAINER[::-1]]  # (along, across) the road
-    objs = [(s, t - 2.0, 0.0, 0.0, *box) for (s, t), box in zip(path, boxes)]
-    args = (-1, 1, ROAD, 17.0, -2.03, 0.0, objs, 200.0, V_LIMIT, 109.0)
+    args = (-1, 1, ROAD, 17.0, -2.03, 0.0, _slalom_containers(), 200.0, V_LIMIT, 109.0)
     assert planner._oncoming_clear(*args) == (False, True, pytest.approx(28.8))
     assert planner._oncoming_clear(*args, occlusion=False)[0]
+
+
+def test_carlas_slalom_needs_the_oncoming_lane_seen_clear_to_186_m():
+    """How far the waiting ego must see the oncoming lane clear, nothing hidden (by hand, the
+    stations of `test_carlas_slalom_containers_at_the_line_hide_the_oncoming_lane`): the group
+    is c3-c5 (c2 stands on the shoulder, 2.6 m from the lane centre), from c3's rear (28.8 m)
+    to c5's front (49.8 m); the pass ends when the ego's rear is 5 m past it and it has made
+    0.75 of a 33.53 m return: its centre travels 49.8 + 5 + 2.25 + 25.15 - 17.0 = 65.2 m, from
+    standstill at 2 m/s^2 to 11.176 m/s (31.23 m in 5.588 s), then 33.97 m in 3.040 s:
+    T = 8.628 s, its front 67.45 m ahead of its centre now. An unseen car at 11.176 m/s comes
+    11.176 x (8.628 + 2) = 118.78 m: the sight must be 67.45 + 118.78 = 186.2 m (163.9 m
+    without the 2 s margin: 67.45 + 11.176 x 8.628). What its lidar can be sure of is far
+    less: the default lidar returns two rays from a car head-on to 57 m and nothing beyond its
+    80 m range; CARLA's leaderboard lidar (85 m) as much. Road 24 is 109 m from junction to
+    junction: beyond it a car may come in from the roads that meet there."""
+    planner = LatticePlanner({"cruise_speed": V_LIMIT}, HERO)
+
+    def clear(sight_m: float) -> bool:
+        return planner._oncoming_clear(-1, 1, ROAD, 17.0, -2.03, 0.0, _slalom_containers(), sight_m, V_LIMIT,
+                                       109.0, occlusion=False)[0]
+
+    assert clear(186.3) and not clear(186.1)
+    planner.PASS_MARGIN_S = 0.0
+    assert clear(164.0) and not clear(163.8)
