@@ -70,8 +70,9 @@ def main() -> None:
     (one, t1), (many, tn) = rows[1], rows[args.batch]
     same = one.best.key() == many.best.key() and one.simulations == many.simulations
     figures.update({"batch_speedup": t1 / tn, "same_result": same})
-    print(f"batch {args.batch} vs 1: {t1 / tn:.2f}x wall time, {(many.simulations + many.ran_ahead) / one.simulations:.2f}x "
-          f"runs; same shrunk scenario: {same}; load {figures_json.load()}")
+    runs_ratio = (many.simulations + many.ran_ahead) / one.simulations
+    print(f"batch {args.batch} vs 1: {t1 / tn:.2f}x wall time, {runs_ratio:.2f}x runs; "
+          f"same shrunk scenario: {same}; load {figures_json.load()}")
     figures_json.write(args.json, figures)
     if not same:
         sys.exit("the batched shrink differs from the one at a time")

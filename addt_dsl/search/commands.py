@@ -73,7 +73,8 @@ def add_commands(sub) -> None:
     fal.add_argument("--shrink-simulations", type=nonneg_int, default=60,
                      help="per distinct failure, to find its origin (0: do not shrink)")
     fal.add_argument("--shrink-batch", type=positive_int, default=DEFAULT_SHRINK_BATCH, metavar="N",
-                     help=f"candidates each shrink runs together, as `addtc shrink --batch` (default {DEFAULT_SHRINK_BATCH})")
+                     help="candidates each shrink runs together, as `addtc shrink --batch` "
+                          f"(default {DEFAULT_SHRINK_BATCH})")
     fal.add_argument("--out", default=DEFAULT_OUT, help="write each distinct failure's counterexample here")
     fal.add_argument("--no-write", action="store_true", help="report only (no counterexamples, no run cache "
                                                               "unless --cache is given)")
