@@ -30,7 +30,7 @@ SEARCH_LIMITS = DEFAULT.raised(runs=2 ** 62, sim_seconds=float("inf"), agent_ste
 
 # Candidates `addtc shrink` runs together by default (`--batch`): 1, because batches run
 # ~40 % more runs for the same shrink and today's engine steps a batch barely faster than its
-# runs one by one (benchmarks/bench_shrink.py: 0.94x wall time at batch 8 on one job).
+# runs one by one (benchmarks/bench_shrink.py: 0.85-0.94x wall time at batch 8 on one job).
 DEFAULT_SHRINK_BATCH = 1
 
 
