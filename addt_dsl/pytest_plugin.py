@@ -72,6 +72,10 @@ def pytest_addoption(parser) -> None:
                     help="one test per sweep cell instead of one per file")
     group.addoption("--addt-seed", type=int, default=0, help="seed of the search (default 0)")
     group.addoption("--addt-jobs", type=int, default=1, help="worker processes per scenario")
+    group.addoption("--addt-batch", type=int, default=None,
+                    help="runs stepped together: the corpus and the sweep hand each worker batches of N runs "
+                         "(default: the executors' default), the shrink runs N candidates at a time "
+                         "(default 1); the verdicts and counterexamples are the same at any N")
     group.addoption("--addt-shrink-simulations", type=int, default=None,
                     help="simulation budget for shrinking a failure (default from the profile)")
     group.addoption("--addt-failures", default=None, help="failure corpus directory (ini: addt_failures)")
@@ -182,6 +186,7 @@ class AddtItem(pytest.Item):
             "shrink_budget": shrink_budget,
             "seed": self.config.getoption("addt_seed"),
             "jobs": self.config.getoption("addt_jobs"),
+            "batch": self.config.getoption("addt_batch"),
         }
 
     def corpus_dir(self) -> Path:
@@ -211,10 +216,10 @@ class AddtItem(pytest.Item):
             raise AddtCompileError(render_text(result.diagnostics, result.sources))
         plan = result.plan
         opts = self._settings()
-        cache = RunCache()
+        cache = RunCache(batch=opts["batch"])
         notes: list[str] = []
         if opts["reuse"]:
-            self._replay_corpus(plan, cache, notes)
+            self._replay_corpus(plan, cache, opts, notes)
         failing = None
         if opts["explicit"]:
             failing = self._run_sweep(plan, cache, opts, notes)
@@ -225,22 +230,32 @@ class AddtItem(pytest.Item):
         if failing is not None:
             self._report(plan, failing, cache, opts, notes)
 
-    def _replay_corpus(self, plan, cache, notes) -> None:
+    def _replay_corpus(self, plan, cache, opts, notes) -> None:
         from addt_dsl.printer import compile_pinned, semantic_key
 
         current = semantic_key(plan)
+        entries = []  # (shown, spec), in corpus order, up to the first that cannot be replayed
+        damaged = None
         for path, key in corpus_entries(self.corpus_dir(), self.path, plan.name):
             shown = self.relative(path)
             if key and key != current:  # shrunk from an earlier version of the scenario
-                notes.append(f"skipped {shown}: written for an earlier version of {self.source_name()} "
-                             f"(scenario key {key}, now {current}); delete it once the fix is kept")
+                entries.append((shown, key))
                 continue
             try:
-                spec = compile_pinned(path.read_bytes(), path=shown, base_dir=path.parent)
+                entries.append((shown, compile_pinned(path.read_bytes(), path=shown, base_dir=path.parent)))
             except ValueError as exc:  # damaged, hand-edited, or older than the language: say which, no traceback
-                raise AddtCorpusError(f"corpus entry {shown} cannot be replayed: {exc}\n"
-                                       f"fix it, or delete it if it is stale") from None
-            outcome = cache.get(spec)
+                damaged = AddtCorpusError(f"corpus entry {shown} cannot be replayed: {exc}\n"
+                                          f"fix it, or delete it if it is stale")
+                break
+        # The entries run together (one batch), then are reported in corpus order as one by one.
+        specs = [spec for _, spec in entries if not isinstance(spec, str)]
+        outcomes = iter(cache.get_many(specs, opts["jobs"]) if specs else [])
+        for shown, spec in entries:
+            if isinstance(spec, str):
+                notes.append(f"skipped {shown}: written for an earlier version of {self.source_name()} "
+                             f"(scenario key {spec}, now {current}); delete it once the fix is kept")
+                continue
+            outcome = next(outcomes)
             notes.append(f"replayed {shown}: {'still fails' if outcome.failures else 'passes'}")
             if outcome.failures:
                 f = outcome.primary()
@@ -248,6 +263,8 @@ class AddtItem(pytest.Item):
                     f"{f.oracle} fails again: known counterexample {shown} still fails ({f.describe()})\n"
                     f"replay: addtc {shown}",
                     [("oracle", f.oracle), ("mode", f.mode), ("counterexample", shown), ("regression", "1")])
+        if damaged is not None:
+            raise damaged from None
 
     def _run_sweep(self, plan, cache, opts, notes):
         from addt_dsl.sweep import expand
@@ -302,7 +319,7 @@ class AddtItem(pytest.Item):
             raise AddtFailure(f"{first.oracle} fails in run {spec.run_id or spec.key()}: {first.describe()} "
                               f"({n_failing} failing run(s); shrinking is off)", props)
         result = Shrinker(spec, nominal_plan=plan, oracle=first.oracle, cache=cache,
-                          max_simulations=opts["shrink_budget"]).run()
+                          max_simulations=opts["shrink_budget"], batch=opts["batch"] or 1, jobs=opts["jobs"]).run()
         try:
             arts = write_counterexample(result, self.corpus_dir(), self.source_name(), animate=False)
         except ReplayMismatch as exc:  # the failure stands; only its counterexample could not be kept

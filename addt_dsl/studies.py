@@ -32,7 +32,7 @@ import numpy as np
 from addt_dsl import units
 from addt_dsl.console import compile_and_report, stack_option
 from addt_dsl.errors import EXIT_USAGE, UsageError, nonneg_int, positive_int
-from addt_dsl.runtime.executor import local_executor, run_spec
+from addt_dsl.runtime.executor import default_batch, local_executor, run_batch, run_spec
 from addt_dsl.runtime.outcome import FAULT_OUTCOMES, classify_many, outcome_table, wilson_interval
 from addt_dsl.sweep import expand
 
@@ -171,6 +171,14 @@ def perception_run(spec, seq: int = -1, worker: str = ""):
     return run_spec(spec, seq, worker, on_result=_record_errors)
 
 
+def perception_batch(specs, seqs, worker: str = ""):
+    """`perception_run` over a batch stepped together (the executors hand it `--batch` runs)."""
+    return run_batch(specs, seqs, worker, on_result=_record_errors)
+
+
+perception_run.run_batch = perception_batch
+
+
 def _record_impact(result) -> None:
     result.stats["impact"] = impact(result.trace)
 
@@ -179,6 +187,14 @@ def impact_run(spec, seq: int = -1, worker: str = ""):
     """What an executor's worker runs for `study impact`: the run, with its first ego
     collision in `stats["impact"]`."""
     return run_spec(spec, seq, worker, on_result=_record_impact)
+
+
+def impact_batch(specs, seqs, worker: str = ""):
+    """`impact_run` over a batch stepped together."""
+    return run_batch(specs, seqs, worker, on_result=_record_impact)
+
+
+impact_run.run_batch = impact_batch
 
 
 def _bands(text: str) -> list[float]:
@@ -201,6 +217,9 @@ def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
         p = sub.add_parser(name)
         p.add_argument("file")
         p.add_argument("--jobs", type=positive_int, default=1)
+        p.add_argument("--batch", type=positive_int, default=None, metavar="N",
+                       help="runs each worker steps together (default: the executors' default for the runs "
+                            "and --jobs; the same tables at any N)")
         p.add_argument("--by", default="", help="grid parameters to group by (default: all grid axes)")
         p.add_argument("--limit", type=nonneg_int, default=0)
         stack_option(p)
@@ -232,11 +251,13 @@ def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
     if unknown:
         raise UsageError(f"--by {','.join(unknown)}: not a parameter of {plan.name} "
                          f"(parameters: {', '.join(p.name for p in plan.params) or 'none'})")
+    batch = args.batch or default_batch(len(specs), args.jobs)
     if args.what == "classify":
-        print(outcome_table(classify_many(specs, jobs=args.jobs), by=by).to_string())
+        executor = local_executor(args.jobs, batch=batch)
+        print(outcome_table(classify_many(specs, jobs=args.jobs, executor=executor), by=by).to_string())
     elif args.what == "impact":
         rows = []
-        for record in local_executor(args.jobs, impact_run).imap(enumerate(specs)):
+        for record in local_executor(args.jobs, impact_run, batch=batch).imap(enumerate(specs)):
             if record.status in ("crashed", "timeout", "memory"):
                 print(f"error: run {record.run_id} {record.status}: {record.error.splitlines()[0]}", file=sys.stderr)
                 return EXIT_USAGE
@@ -250,7 +271,7 @@ def main(argv: list[str] | None = None, prog: str = "addtc study") -> int:
         print(impact_table(rows, by).to_string(float_format=lambda x: f"{x:.2f}"))
     else:
         rows = []
-        for record in local_executor(args.jobs, perception_run).imap(enumerate(specs)):
+        for record in local_executor(args.jobs, perception_run, batch=batch).imap(enumerate(specs)):
             if record.status in ("crashed", "timeout", "memory"):
                 print(f"error: run {record.run_id} {record.status}: {record.error.splitlines()[0]}", file=sys.stderr)
                 return EXIT_USAGE

@@ -160,20 +160,30 @@ def run_spec(spec: RunSpec, seq: int = -1, worker: str = "",
     return record
 
 
-def run_batch(specs: list[RunSpec], seqs: list[int], worker: str = "") -> list[RunResult]:
+def run_batch(specs: list[RunSpec], seqs: list[int], worker: str = "",
+              on_result: Callable | None = None) -> list[RunResult]:
     """`run_spec` over a batch stepped together (`execute_batch`): the same records as one by
     one (a run's trace does not depend on its batch). A batch whose set-up fails (one run's
-    world or stack cannot be built) runs its runs one by one, so only that run is `crashed`."""
+    world or stack cannot be built) runs its runs one by one, so only that run is `crashed`;
+    so is a run whose `on_result` raises, as alone."""
     if len(specs) == 1:
-        return [run_spec(specs[0], seqs[0], worker)]
+        return [run_spec(specs[0], seqs[0], worker, on_result)]
     try:
         records = execute_batch(specs, keep_trace=True)
     except Exception:  # noqa: BLE001 - isolate the run that failed: each alone
-        return [run_spec(spec, seq, worker) for spec, seq in zip(specs, seqs)]
-    for record, seq in zip(records, seqs):
-        record.stats = trace_stats(record.trace)
+        return [run_spec(spec, seq, worker, on_result) for spec, seq in zip(specs, seqs)]
+    out = []
+    for spec, record, seq in zip(specs, records, seqs):
+        try:
+            record.stats = trace_stats(record.trace)
+            if on_result is not None:
+                on_result(record)
+        except Exception as exc:  # noqa: BLE001 - as `run_spec`: a crashing run is recorded
+            record = RunResult.unfinished(spec, "crashed", f"{type(exc).__name__}: {exc}\n"
+                                          f"{traceback.format_exc(limit=4)}", record.wall_time_s)
         record.seq, record.worker, record.trace = seq, worker, None
-    return records
+        out.append(record)
+    return out
 
 
 def answer(batch: list[tuple[int, RunSpec]], records: list[RunResult], worker: str = "") -> list[RunResult]:

@@ -46,7 +46,7 @@ from addt_dsl.lru import LruCache
 from addt_dsl.plan import RunSpec
 from addt_dsl.stats import wilson_interval
 from addt_dsl.runtime.execute import execute
-from addt_dsl.runtime.executor import local_executor, run_spec
+from addt_dsl.runtime.executor import local_executor, run_batch, run_spec
 from addt_dsl.runtime.result import RunResult
 from addt_dsl.runtime.store import ResultStore
 
@@ -379,6 +379,21 @@ class ClassifyingRun:
         record = run_spec(spec, seq, worker=worker, on_result=judge)
         record.outcome = outcomes[0] if outcomes else "error"  # no result: the run crashed
         return record
+
+    def run_batch(self, specs: list[RunSpec], seqs: list[int], worker: str = "") -> list[RunResult]:
+        """The runs of a batch stepped together (`executor.run_batch`), each classified as alone."""
+        if self._cache is None:
+            self._cache = GoldenCache(self.golden_store, readonly=True)
+        # By key, not by position: a run that crashes is never handed to `judge`.
+        goldens = {spec.key(): self._cache.golden(spec) if spec.faults else None for spec in specs}
+
+        def judge(result):
+            result.outcome = _outcome(result, goldens[result.key], self.tol)
+
+        records = run_batch(specs, seqs, worker, on_result=judge)
+        for record in records:
+            record.outcome = record.outcome or "error"  # no result: the run crashed
+        return records
 
 
 class ClassifyingExecutor:

@@ -211,6 +211,8 @@ def report(result, source_file: str, path: Path) -> dict:
         "faults": {"before": len(result.original.faults), "after": len(result.best.faults)},
         "agents": {"before": len(result.original.plan.agents), "after": len(result.best.plan.agents)},
         "simulations": result.simulations,
+        "batch": result.batch,  # candidates run together (`--batch`)
+        "ran_ahead": result.ran_ahead,  # runs a batch ran ahead that the shrink never judged
         "cache_hits": result.cache_hits,
         "rounds": result.rounds,
         "budget_exhausted": result.budget_exhausted,

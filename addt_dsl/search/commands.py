@@ -1,6 +1,6 @@
 """`addtc shrink` and `addtc falsify`.
 
-    addtc shrink FILE [--run-id ID] [--oracle NAME] [--max-simulations N] [--out DIR]
+    addtc shrink FILE [--run-id ID] [--oracle NAME] [--max-simulations N] [--batch N] [--out DIR]
     addtc shrink --run-key SPEC.json [FILE]      a RunSpec as JSON
     addtc shrink --store DIR [--run-id ID]       a stored run (`addtc FILE --out DIR`)
     addtc falsify FILE [--budget-runs N] [--budget-seconds S] [--seed K] [--jobs J] [--out DIR]
@@ -28,6 +28,11 @@ CACHE_NAME = "runs.sqlite"  # the search's run cache, in the output directory by
 SEARCH_LIMITS = DEFAULT.raised(runs=2 ** 62, sim_seconds=float("inf"), agent_steps=float("inf"),
                                wall_seconds=float("inf"))  # the sweep is not run: only per-run thresholds
 
+# Candidates `addtc shrink` runs together by default (`--batch`): 1, because batches run
+# ~40 % more runs for the same shrink and today's engine steps a batch barely faster than its
+# runs one by one (benchmarks/bench_shrink.py: 0.85-0.94x wall time at batch 8 on one job).
+DEFAULT_SHRINK_BATCH = 1
+
 
 def add_commands(sub) -> None:
     shrink = sub.add_parser("shrink", help="shrink a failing run to a minimal replayable .addt file")
@@ -41,7 +46,12 @@ def add_commands(sub) -> None:
     shrink.add_argument("--oracle", help="the failing oracle to keep (default: the earliest violation)")
     shrink.add_argument("--max-simulations", type=positive_int, default=300)
     shrink.add_argument("--limit", type=nonneg_int, default=0, help="look for a failure in the first N runs only")
-    shrink.add_argument("--jobs", "-j", type=positive_int, default=1, help="processes while looking for a failing run")
+    shrink.add_argument("--jobs", "-j", type=positive_int, default=1,
+                        help="processes while looking for a failing run and for each batch of candidates")
+    shrink.add_argument("--batch", type=positive_int, default=DEFAULT_SHRINK_BATCH, metavar="N",
+                        help="candidates run together where one must be simulated: it and the next ones its "
+                             "pass would try (the same shrink at any N; runs ahead count against "
+                             f"--max-simulations; default {DEFAULT_SHRINK_BATCH}, see docs/falsify-and-shrink.md)")
     shrink.add_argument("--out", default=DEFAULT_OUT, help=f"output directory (default {DEFAULT_OUT})")
     shrink.add_argument("--cache", help=f"results store (SQLite) to keep runs in and reuse across invocations "
                                         f"(default OUT/{CACHE_NAME}: a killed shrink run again resumes)")
@@ -62,6 +72,9 @@ def add_commands(sub) -> None:
                      + f" (default {DEFAULT_SAMPLER})")
     fal.add_argument("--shrink-simulations", type=nonneg_int, default=60,
                      help="per distinct failure, to find its origin (0: do not shrink)")
+    fal.add_argument("--shrink-batch", type=positive_int, default=DEFAULT_SHRINK_BATCH, metavar="N",
+                     help="candidates each shrink runs together, as `addtc shrink --batch` "
+                          f"(default {DEFAULT_SHRINK_BATCH})")
     fal.add_argument("--out", default=DEFAULT_OUT, help="write each distinct failure's counterexample here")
     fal.add_argument("--no-write", action="store_true", help="report only (no counterexamples, no run cache "
                                                               "unless --cache is given)")
@@ -187,7 +200,7 @@ def _shrink(args, plan, cache) -> int:
     log = (lambda m: print(m, file=sys.stderr)) if args.format == "text" else None
     try:
         shrinker = Shrinker(spec, nominal_plan=plan or spec.plan, oracle=args.oracle, cache=cache,
-                            max_simulations=args.max_simulations, log=log)
+                            max_simulations=args.max_simulations, log=log, batch=args.batch, jobs=args.jobs)
     except NotFailing as exc:
         print(str(exc))
         return EXIT_OK
@@ -209,7 +222,9 @@ def print_shrink_summary(result, arts) -> None:
     print(f"shrunk: {len(result.original.faults)} -> {len(result.best.faults)} fault(s), "
           f"{len(result.original.plan.agents)} -> {len(result.best.plan.agents)} agent(s) in "
           f"{result.simulations} simulations ({result.cache_hits} cache hits, {result.rounds} rounds, "
-          f"{result.seconds:.1f} s)" + (" [budget exhausted]" if result.budget_exhausted else ""))
+          f"{result.seconds:.1f} s" + (f"; {result.ran_ahead} more run ahead in batches of {result.batch}"
+                                       if result.batch > 1 else "")
+          + ")" + (" [budget exhausted]" if result.budget_exhausted else ""))
     width = max(len(s.name) for s in result.stats)
     for s in result.stats:
         print(f"  {s.name:<{width}}  {s.candidates:4d} candidates {s.simulations:4d} simulated "
@@ -249,7 +264,7 @@ def _falsify(args, result, cache, log) -> int:
 
     try:
         fal = Falsifier(result.plan, seed=args.seed, batch=args.batch, jobs=args.jobs, sampler=args.sampler,
-                        log=log, cache=cache)
+                        log=log, cache=cache, shrink_batch=args.shrink_batch)
     except UnsatisfiableAssumptions as exc:
         _err(str(exc))
         return EXIT_USAGE

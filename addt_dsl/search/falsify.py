@@ -81,8 +81,9 @@ class FalsifyReport:
 
 class Falsifier:
     def __init__(self, plan: ScenarioPlan, *, seed: int = 0, batch: int = 16, jobs: int = 1,
-                 sampler: str = DEFAULT_SAMPLER, cache: RunCache | None = None, log=None):
+                 sampler: str = DEFAULT_SAMPLER, cache: RunCache | None = None, log=None, shrink_batch: int = 1):
         self.plan = plan
+        self.shrink_batch = shrink_batch  # candidates each shrink runs together (`Shrinker`)
         self.space = SearchSpace(plan)
         self.seed = seed
         self.batch = max(2, batch)
@@ -188,7 +189,8 @@ class Falsifier:
             if shrink_simulations > 0 and i < MAX_SHRINKS:
                 try:
                     g.shrunk = Shrinker(g.example, nominal_plan=self.plan, oracle=g.oracle, cache=self.cache,
-                                        max_simulations=shrink_simulations).run()
+                                        max_simulations=shrink_simulations, batch=self.shrink_batch,
+                                        jobs=self.jobs).run()
                 except ValueError:
                     g.shrunk = None
             best = g.shrunk.best if g.shrunk else g.example

@@ -19,6 +19,20 @@ a shorter run can end before a `reach goal within T`, a window, a fault time or 
 tied to it, and such a candidate is refused as a step (counted in `rejected`), never
 written. The check costs milliseconds next to a simulation, and is done once per candidate.
 
+Batches (`batch` > 1): where a candidate must be simulated, the shrink runs it together
+with the candidates the pass would propose next were each of them rejected (a look-ahead:
+the pass replayed from its start with its answers so far, unknown candidates assumed not to
+fail), up to `batch` runs stepped together (`RunCache.get_many`: the batch engine, on
+`jobs` workers). The pass then goes on as at batch 1 and takes the first failing candidate
+in its own order, never by finish order; the runs after it were run ahead for nothing.
+So the kept candidates, the result, its per-pass stats, `simulations` and `cache_hits` are
+those of batch 1. The budget counts every run: `simulations` (candidates judged) plus
+`ran_ahead` (run ahead, never judged) stays within `max_simulations`; a batch is cut to the
+budget left. What is true (tests/unit/search/test_shrink_batches.py):
+  - a shrink at batch N that does not spend its budget ends exactly as at batch 1;
+  - one that spends it ends exactly as the batch-1 shrink given a budget of its
+    `simulations` (it stops at the same candidate, having kept the same ones before).
+
 Passes, in order (cheap large steps first, like conjecture):
   cut_after_violation  faults and the run end where the failure is decided (the first
                        violation plus the formula's look-ahead; nothing later matters)
@@ -75,24 +89,51 @@ class ShrinkResult:
     seconds: float
     changes: list[str] = field(default_factory=list)  # what did not matter / was reduced
     scenario_key: str = ""  # `semantic_key` of the scenario shrunk from: ties a corpus entry to its content
+    ran_ahead: int = 0  # runs a batch ran ahead that the shrink never judged (0 at batch 1)
+    batch: int = 1
 
 
 class NotFailing(ValueError):
     """The run to shrink does not fail (or not the requested oracle)."""
 
 
+class _Ahead(Exception):
+    """A look-ahead has its batch (or lost its way): stop replaying the pass."""
+
+
+@dataclass
+class _Replay:
+    """A pass replayed for its look-ahead: the answers it had (`log`), then the candidates
+    it would propose were each unknown one rejected (`collected`, at most `size`)."""
+
+    log: list[tuple[str, bool, RunResult | None]]
+    size: int
+    pos: int = 0
+    collected: list[RunSpec] = field(default_factory=list)
+    keys: set[str] = field(default_factory=set)
+
+
 class Shrinker:
     def __init__(self, spec: RunSpec, *, nominal_plan: ScenarioPlan | None = None, oracle: str | None = None,
                  cache: RunCache | None = None, max_simulations: int = 300,
-                 log: Callable[[str], None] | None = None):
+                 log: Callable[[str], None] | None = None, batch: int = 1, jobs: int = 1):
         self.cache = cache or RunCache()
         self.max_simulations = max_simulations
+        self.batch = max(1, batch)  # candidates run together where one must be simulated
+        self.jobs = max(1, jobs)  # workers a batch runs on
         self.log = log or (lambda msg: None)
         self.repeats = 0  # candidates proposed again after this shrink judged them (`cache_hits`)
         # Distinct runs this shrink judged, cached or not: its budget and its `simulations`
         # count these, so a shrink ends the same whatever the cache held before (a killed
         # shrink run again resumes from its cache and ends with the same result).
         self.judged: set[str] = set()
+        # Runs this shrink asked for, judged or run ahead (cached or not): the budget bounds these.
+        self.seen: set[str] = set()
+        # The pass running, the best run at its start and its answers so far (the look-ahead replays them).
+        self._pass: Callable[[], None] | None = None
+        self._pass_start: tuple[RunSpec, RunResult] | None = None
+        self._answers: list[tuple[str, bool, RunResult | None]] = []
+        self._replay: _Replay | None = None
         self.compiles_cache: dict[str, bool] = {}
         plan = nominal_plan or spec.plan
         self.nominal = plan.nominal_params()
@@ -103,6 +144,8 @@ class Shrinker:
         self.best = C.pinned(spec)
         self.original = self.best
         self.judged.add(self.best.key())
+        self.seen.add(self.best.key())
+        self.kept: list[str] = []  # keys of the candidates accepted, in order
         self.outcome = self.cache.get(self.best)
         failure = (self.outcome.primary() if oracle is None else
                    next((f for f in self.outcome.failures if f.oracle == oracle), None))
@@ -125,23 +168,31 @@ class Shrinker:
     def interesting(self, outcome: RunResult) -> bool:
         return outcome.failure(self.target) is not None
 
+    @property
+    def ran_ahead(self) -> int:
+        return len(self.seen - self.judged)
+
     def consider(self, candidate: RunSpec, extra: Callable[[RunResult], bool] | None = None) -> bool:
         """Run `candidate` (cached); make it the best if it fails the same way and is simpler."""
+        if self._replay is not None:
+            return self._consider_ahead(candidate, extra)
         if self.exhausted:
             return False
         if not self.key(candidate) < self.key(self.best):
-            return False
+            return self._answer("", False)
         if violated_assumptions(self.assumptions_plan, {**self.nominal, **candidate.params}):
-            return False
+            return self._answer("", False)
         key = candidate.key()
         new = key not in self.judged
-        if new and self.simulations >= self.max_simulations:
+        if key not in self.seen and len(self.seen) >= self.max_simulations:
             self.exhausted = True
             return False
         if not self.compiles(candidate, key):
             if self._current is not None:
                 self._current.rejected += 1
-            return False
+            return self._answer(key, False)
+        if key not in self.seen:
+            self._simulate(candidate, key)
         self.judged.add(key)
         self.repeats += not new
         outcome = self.cache.get(candidate)
@@ -150,11 +201,76 @@ class Shrinker:
             st.candidates += 1
             st.simulations += new
         if not self.interesting(outcome) or (extra is not None and not extra(outcome)):
-            return False
+            return self._answer(key, False)
         self.best, self.outcome = candidate, outcome
+        self.kept.append(key)
         if st is not None:
             st.accepted += 1
-        return True
+        return self._answer(key, True, outcome)
+
+    def _answer(self, key: str, accepted: bool, outcome: RunResult | None = None) -> bool:
+        self._answers.append((key, accepted, outcome))
+        return accepted
+
+    def _simulate(self, candidate: RunSpec, key: str) -> None:
+        """Simulate `candidate`, with the candidates the pass would propose after it (`look_ahead`)."""
+        room = self.max_simulations - len(self.seen)
+        batch = [candidate]
+        if self.batch > 1 and room > 1 and self._pass is not None:
+            batch = self.look_ahead(candidate, key, min(self.batch, room))
+        self.cache.get_many(batch, self.jobs)
+        self.seen.update(s.key() for s in batch)
+
+    def look_ahead(self, candidate: RunSpec, key: str, size: int) -> list[RunSpec]:
+        """`candidate` and the next candidates to simulate were it and each of them rejected:
+        the running pass replayed from its start with the answers it had (no stats, no runs),
+        then every candidate not yet run taken as not failing, until `size` are found (or
+        the pass ends). Candidates this shrink has results for are answered as they will be."""
+        replay = _Replay(list(self._answers), size)
+        saved = (self.best, self.outcome, self._current, self._answers)
+        self.best, self.outcome = self._pass_start
+        self._current, self._replay = None, replay
+        try:
+            self._pass()
+        except _Ahead:
+            pass
+        finally:
+            self.best, self.outcome, self._current, self._answers = saved
+            self._replay = None
+        if not replay.collected or replay.collected[0].key() != key:  # cannot happen: passes are deterministic
+            return [candidate]
+        return replay.collected
+
+    def _consider_ahead(self, candidate: RunSpec, extra: Callable[[RunResult], bool] | None) -> bool:
+        """`consider` while replaying a pass for its look-ahead."""
+        r = self._replay
+        if r.pos < len(r.log):  # answered before: the same answer
+            key, accepted, outcome = r.log[r.pos]
+            r.pos += 1
+            if accepted:
+                self.best, self.outcome = candidate, outcome
+            return accepted
+        r.pos += 1
+        if not self.key(candidate) < self.key(self.best):
+            return False
+        if violated_assumptions(self.assumptions_plan, {**self.nominal, **candidate.params}):
+            return False
+        key = candidate.key()
+        if key in self.seen:  # its result is known: the answer the pass will get
+            if not self.compiles(candidate, key):
+                return False
+            outcome = self.cache.get(candidate)
+            if not self.interesting(outcome) or (extra is not None and not extra(outcome)):
+                return False
+            self.best, self.outcome = candidate, outcome
+            return True
+        if key in r.keys or not self.compiles(candidate, key):
+            return False
+        r.collected.append(candidate)
+        r.keys.add(key)
+        if len(r.collected) >= r.size:
+            raise _Ahead
+        return False  # assumed: the look-ahead's candidates run as if each before failed to fail
 
     def run(self) -> ShrinkResult:
         try:
@@ -176,17 +292,18 @@ class Shrinker:
                 if self.exhausted:
                     break
                 self._current = stats[p.__name__]
+                self._pass, self._pass_start, self._answers = p, (self.best, self.outcome), []
                 tp = time.perf_counter()
                 p()
                 self._current.seconds += time.perf_counter() - tp
-                self._current = None
+                self._current, self._pass, self._pass_start, self._answers = None, None, None, []
             self.log(f"round {rounds}: {self.simulations} simulations, {len(self.best.faults)} fault(s)")
             if self.key(self.best) == before:
                 break
         return ShrinkResult(self.original, self.best, self.outcome, self.outcome.failure(self.target), self.stats,
                             self.simulations, self.repeats, rounds, self.exhausted,
                             time.perf_counter() - t0, describe_changes(self.original, self.best, self.nominal),
-                            self.scenario_key)
+                            self.scenario_key, self.ran_ahead, self.batch)
 
     def compiles(self, candidate: RunSpec, key: str | None = None) -> bool:
         """Whether `candidate` printed as a pinned `.addt` file compiles back (cached by key)."""

@@ -133,3 +133,38 @@ def test_violated_warn_oracle_is_a_warning_not_a_failure(project):
     assert '<property name="warning.crawl" value="2"' in junit.read_text()
     strict = _pytest(project, "-W", "error::addt_dsl.pytest_plugin.AddtWarning", "scenarios")
     assert strict.returncode == 1
+
+
+def _plugin_output(project: Path, batch: int) -> tuple[str, str, str]:
+    """The test's report (timings out), the corpus entry it wrote, and the next run's report (the corpus replayed)."""
+    import re
+
+    def report(proc):
+        return re.sub(r" in [0-9.]+s", "", proc.stdout)
+
+    first = _pytest(project, "--hypothesis-profile", "ci", "-rA", "--addt-batch", str(batch),
+                    "scenarios/ten_faults.addt")
+    assert first.returncode == 1, first.stdout + first.stderr
+    (entry,) = sorted((project / ".addt-failures").glob("ten_faults-*.addt"))
+    again = _pytest(project, "--hypothesis-profile", "ci", "-rA", "--addt-batch", str(batch),
+                    "scenarios/ten_faults.addt")
+    return report(first), entry.read_text(), report(again)
+
+
+def test_batched_runs_give_the_same_test_reports_and_counterexamples(tmp_path):
+    """`--addt-batch`: the sweep, the corpus and the shrink step runs together; the reports
+    and the corpus entry are those of one run at a time."""
+    import shutil
+
+    outputs = []
+    project = tmp_path / "project"  # the same directory each time: reports name it
+    for batch in (1, 8):
+        shutil.rmtree(project, ignore_errors=True)
+        (project / "scenarios").mkdir(parents=True)
+        (project / "pytest.ini").write_text("[pytest]\n")
+        (project / "scenarios" / "ten_faults.addt").write_text(TEN_FAULTS)
+        outputs.append(_plugin_output(project, batch))
+    assert outputs[1] == outputs[0]
+    first, entry, again = outputs[0]
+    assert "no_collision fails: minimal counterexample" in first and "stuck control.accel" in entry
+    assert "still fails" in again

@@ -194,3 +194,20 @@ def test_a_search_the_assumptions_starve_says_why_it_ended():
                        cache=RunCache(evaluator=corner_judge)).run(budget_runs=50, shrink_simulations=0)
     assert report.runs == 0 and "assumptions rejected all 400 points" in report.ended_early
     assert report.to_json()["ended_early"] == report.ended_early
+
+
+def test_falsify_shrinks_the_same_in_batches():
+    """`--shrink-batch`: each distinct failure's shrink runs its candidates in batches, the
+    same shrunk runs and report as one at a time (budget not spent)."""
+    reports = []
+    for shrink_batch in (1, 6):
+        fal = Falsifier(kitchen_sink_plan(), seed=0, batch=8, sampler="cem", cache=RunCache(evaluator=corner_judge),
+                        shrink_batch=shrink_batch)
+        report = fal.run(budget_runs=96, shrink_simulations=200)
+        shrunk = [f.shrunk for f in report.failures]
+        assert shrunk and all(s is not None and not s.budget_exhausted for s in shrunk)
+        assert all(s.batch == shrink_batch and (s.ran_ahead > 0) == (shrink_batch > 1) for s in shrunk)
+        summary = report.to_json()
+        del summary["seconds"]
+        reports.append((summary, [(s.best.key(), s.simulations, s.cache_hits) for s in shrunk]))
+    assert reports[1] == reports[0]
