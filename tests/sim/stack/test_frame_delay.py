@@ -76,3 +76,17 @@ def test_a_frames_detections_do_not_depend_on_when_it_arrives(perception):
     on_time = detections(run(source(perception, "during [1 s, 2 s] drop lidar rate 0 %")))
     late = detections(run(source(perception, "during [1 s, 2 s] delay lidar by 100 ms")))
     assert on_time[1.0] and late[1.0] == on_time[1.0]
+
+
+def test_a_frame_the_weather_thinned_keeps_what_was_true_at_its_capture():
+    # Fog and rain hand the stack a new frame with fewer returns: it must keep the capture's
+    # ego pose and ground truth (a thinned frame without them stopped the stack).
+    src = source("perception_noise 0 m", "at 0.5 s drop lidar rate 0 %").replace(
+        "  faults {", "  environment {\n    fog visibility 2 km\n  }\n  faults {")
+    trace = run(src)
+    lead = trace.actors["lead"]
+    seen = {s: o for s, o in detections(trace).items() if o}
+    assert len(seen) >= 20
+    for stamp, objs in seen.items():
+        k = int(np.searchsorted(trace.time, stamp - 1e-9))
+        assert objs[0][0] == pytest.approx(lead.x[k], abs=1e-6)
