@@ -158,6 +158,13 @@ class Conditions:
         # `s(A)` grows in A's driving direction, from its station in its own frame
         # (the road's station along +s; on a path, from the path's entry end).
         travelled = self.number(c, "value", units.LENGTH)
+        since = getattr(self, "events_travel", None)  # CARLA: an event's distance counts from its act's start
+        if since is not None:
+            if since[0] == a:
+                travelled = plus_expr(travelled, E.Num(value=since[1]))
+            else:
+                self.approx(c, f"a distance {a} travels in an event of an act that starts on {since[0]}'s: "
+                               "counted from the run's start (ScenarioRunner: from the act's start)")
         return E.Binary(op=">=", left=sig("s", a), right=plus_expr(self.start_station(a), travelled))
 
     @ENTITY_CONDITIONS.register("SpeedCondition", "exact",

@@ -115,6 +115,12 @@ class Translate(SideFile, Roads, Entities, Positions, Actions, Longitudinal, Lat
             for story in root.iterfind("Storyboard/Story"):
                 self.story(story)
             self.end_trigger(root.find("Storyboard/StopTrigger"))
+            if self.act_stop is not None:  # (a CARLA file's storyboard stop trigger is its criteria)
+                self.end = TriggerPlan(condition=self.act_stop) if self.end is None else \
+                    self.end.model_copy(update={"condition": E.Binary(op="or", left=self.end.condition,
+                                                                      right=self.act_stop)})
+            if self.act_stop_s is not None:
+                duration = min(duration, max(self.act_stop_s, 0.1))
         except Stop:
             return None
         if self.sink.has_errors:

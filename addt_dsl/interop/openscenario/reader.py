@@ -49,6 +49,8 @@ class Importer(Parameters, CarlaFrame):
         self.event_order: list[str] = []  # events that became steps, in file order
         self.skipping: list = []  # (event, the events of its maneuver that may run): priority skip, at the end
         self.end: TriggerPlan | None = None  # the storyboard's stop trigger beyond its time
+        self.act_stop = None  # CARLA: a story's only act's stop trigger (a formula), `end when` it
+        self.act_stop_s: float | None = None  # ... and the time it ends the run at
         self.relative_paths: list = []  # (clause, shape element, entity): a trajectory relative to an entity
         self.pending: list = []  # storyboard.PendingEvent: events started by another event, linked at the end
         self.anchors: dict = {}  # no-op events that start a group: name -> storyboard.Anchor

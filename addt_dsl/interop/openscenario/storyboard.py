@@ -498,11 +498,14 @@ class Storyboard:
 
     def story(self, story) -> None:
         self.story_name = story.get("name", "")
-        for act in story.iterfind("Act"):
+        acts = list(story.iterfind("Act"))
+        self.act_travel = None  # (entity, distance [m]) of a CARLA act started on its travelled distance
+        for act in acts:
             self.act_name = act.get("name", "")
             act_at = after_act = None
             groups = list(act.iterfind("StartTrigger/ConditionGroup"))
             conds = list(act.iterfind("StartTrigger/ConditionGroup/Condition"))
+            runner_conds = []  # CARLA: conditions ScenarioRunner's reading translates (`runner_act_start`)
             for cond in conds:
                 time = cond.find("ByValueCondition/SimulationTimeCondition")
                 sesc = cond.find("ByValueCondition/StoryboardElementStateCondition")
@@ -521,17 +524,41 @@ class Storyboard:
                         and self.raw(sesc, "state") in ("endTransition", "completeState") \
                         and self.raw(sesc, "storyboardElementRef") in self.act_events:
                     after_act = cond  # an earlier act complete: the act's steps form a group started then
+                elif self.carla and len(groups) == 1:
+                    runner_conds.append(cond)
                 else:
                     self.skip(cond, "act start conditions other than the simulation time and the story running "
                                     "are not translated")
-            for stop in act.iterfind("StopTrigger/ConditionGroup"):
-                if all((c.get("name") or "").startswith("criteria_") for c in stop.iterfind("Condition")):
-                    continue  # CARLA ScenarioRunner's pass criteria: oracles (pass_criteria)
-                self.skip(stop, "act stop triggers are not translated")
-            before = self.act_begin(after_act)
+            runner_start = start = self.runner_act_start(runner_conds) if runner_conds else None
+            if start is not None and start.get("at_s") is not None:
+                act_at = max(act_at or 0.0, start.pop("at_s"))  # (ScenarioRunner: both once true)
+            if start is not None and not start:
+                runner_start = start = None  # (only conditions that hold from the first tick)
+            # An act that starts once an entity has travelled a distance, which then stays true:
+            # each of its events starts on that and its own condition at once (no group, so
+            # events may follow each other); events counting time from the act's start need
+            # the act as a group armed at its start.
+            self.act_condition = None
+            if start is not None and self.act_travel is not None and not any(
+                    ev.find("StartTrigger//SimulationTimeCondition") is not None for ev in act.iter("Event")):
+                self.act_condition, start = start["condition"], None
+            stops = [g for g in act.iterfind("StopTrigger/ConditionGroup")
+                     if not all((c.get("name") or "").startswith("criteria_") for c in g.iterfind("Condition"))]
+            if stops and not (self.carla and len(acts) == 1):
+                for stop in stops:  # (CARLA ScenarioRunner's pass criteria are oracles: pass_criteria)
+                    self.skip(stop, "act stop triggers are not translated")
+            before = self.act_begin(after_act if start is None else act)
+            if start is not None and act_at is not None:
+                start["at_s"] = E.Num(value=act_at)
+            # (ScenarioRunner: an event's conditions are checked from its act's start on)
+            self.events_travel = self.act_travel if runner_start is not None else None
             for group in act.iterfind("ManeuverGroup"):
-                self.maneuver_group(group, act_at)
-            self.act_end(act, after_act, before)
+                self.maneuver_group(group, act_at if start is None else None)
+            self.events_travel = None
+            self.act_end(act, after_act, before, start)
+            self.act_condition = None
+            if stops and self.carla and len(acts) == 1:
+                self.runner_act_stop(stops, runner_start, act_at)
         self.link_sequences()
         self.skip_priority()
 
@@ -546,36 +573,40 @@ class Storyboard:
         return {who: (len(info["triggers"]), len(info["behaviors"])) for who, info in self.actors.items()} | {
             "": (len(self.pending), len(self.light_steps) + len(self.variable_steps) + len(self.environment_steps))}
 
-    def act_end(self, act, after_act, before: dict) -> None:
+    def act_end(self, act, after_act, before: dict, start: dict | None = None) -> None:
         """Record the act's events (an act's completion is all of them complete); an act
-        started by another act's completion (esmini: its events are armed from then) becomes,
-        per actor, a named parallel group of its steps: `ACT: when ended(...) delayed D then
-        parallel { ... }`."""
+        started by another act's completion (esmini: its events are armed from then), or on
+        the conditions ScenarioRunner reads (`start`: a step's fields), becomes, per actor, a
+        named parallel group of its steps: `ACT: when ended(...) delayed D then parallel { ... }`."""
         self.act_events[self.act_name] = self.event_order[self.act_first_event:]
         label, self.act_label = self.act_label, None
         added = [who for who, info in self.actors.items()
                  if (len(info["triggers"]), len(info["behaviors"])) != before.get(who, (0, 0))]
-        if after_act is None or not added:
+        if (after_act is None and start is None) or not added:
             return  # (nothing of it translates: its events said why)
+        where = after_act if start is None else act.find("StartTrigger")
         if (len(self.pending), len(self.light_steps) + len(self.variable_steps) + len(self.environment_steps)) \
                 != before[""]:
-            self.skip(after_act, "an act started by another act's completion whose events start on other events, "
-                                 "or set lights, variables or the environment, is not translated")
+            self.skip(where, "an act started by another act's completion or an entity's condition whose events "
+                             "start on other events, or set lights, variables or the environment, is not translated")
             return
-        sesc = after_act.find("ByValueCondition/StoryboardElementStateCondition")
-        ref = self.raw(sesc, "storyboardElementRef")
-        parts = [self.event_state(e, "completeState") for e in self.act_events.get(ref, ())]
-        if not parts or any(p is None for p in parts):
-            self.skip(after_act, f"act '{self.act_name}' starts when act '{ref}' is complete, and not every event "
-                                 f"of '{ref}' translates to a step")
-            return
-        fields = {"condition": all_of(parts)}
-        edge = EDGES.get(after_act.get("conditionEdge", "none"))
-        if edge:
-            fields["edge"] = edge
-        delay = self.value(after_act, "delay", units.TIME, 0.0)
-        if delay > 0:
-            fields["delay_s"] = E.Num(value=delay)
+        if start is not None:
+            fields = start
+        else:
+            sesc = after_act.find("ByValueCondition/StoryboardElementStateCondition")
+            ref = self.raw(sesc, "storyboardElementRef")
+            parts = [self.event_state(e, "completeState") for e in self.act_events.get(ref, ())]
+            if not parts or any(p is None for p in parts):
+                self.skip(after_act, f"act '{self.act_name}' starts when act '{ref}' is complete, and not every "
+                                     f"event of '{ref}' translates to a step")
+                return
+            fields = {"condition": all_of(parts)}
+            edge = EDGES.get(after_act.get("conditionEdge", "none"))
+            if edge:
+                fields["edge"] = edge
+            delay = self.value(after_act, "delay", units.TIME, 0.0)
+            if delay > 0:
+                fields["delay_s"] = E.Num(value=delay)
         for who, info in self.actors.items():
             t0, b0 = before.get(who, (0, 0))
             steps = [TriggerPlan(clause=c) for c in info["behaviors"][b0:]] + info["triggers"][t0:]
@@ -584,6 +615,90 @@ class Storyboard:
             del info["behaviors"][b0:], info["triggers"][t0:]
             info["triggers"].append(TriggerPlan(label=label, group=GroupPlan(mode="parallel", steps=steps),
                                                 **fields))
+
+    def runner_act_start(self, conds: list) -> dict | None:
+        """A CARLA act's start trigger as ScenarioRunner reads it (srunner/scenarios/
+        open_scenario.py, `_create_condition_container`): its conditions start being checked
+        with the story (time 0); each counts once it has held (a one-shot behaviour), with
+        no edge; a `delay` D waits D before the condition is first checked; a
+        SimulationTimeCondition measures from then. The fields of the act's step ({} when
+        every condition holds from the first tick); None after a diagnostic."""
+        at_s, formulas = None, []
+        for cond in conds:
+            delay = self.value(cond, "delay", units.TIME, 0.0)
+            time = cond.find("ByValueCondition/SimulationTimeCondition")
+            if time is not None:
+                value, rule = self.value(time, "value"), time.get("rule") or ""
+                if rule == "equalTo" and value == 0.0:
+                    continue  # true at the first check, and it stays counted
+                if rule.startswith("greater"):
+                    at_s = max(at_s or 0.0, delay + value)
+                    continue
+                self.skip(cond, f"an act start condition on the simulation time ({rule}) is not translated")
+                return None
+            if delay > 0:
+                at_s = max(at_s or 0.0, delay)  # (then the condition, each instant from D on)
+            formulas.append((self.condition(cond, "ego"), cond))
+            travel = cond.find("ByEntityCondition/EntityCondition/TraveledDistanceCondition")
+            refs = list(cond.iterfind("ByEntityCondition/TriggeringEntities/EntityRef"))
+            if travel is not None and len(refs) == 1:
+                self.act_travel = (self.actor_name(refs[0]), self.value(travel, "value", units.LENGTH))
+        if any(f is None for f, _ in formulas):
+            return None
+        if len(formulas) > 1:
+            self.skip(formulas[1][1], "several entity conditions in an act start trigger (ScenarioRunner: each "
+                                      "counts once it has held) are not translated")
+            return None
+        fields = {"condition": formulas[0][0]} if formulas else {}
+        if at_s is not None:
+            fields["at_s"] = at_s
+        if formulas:
+            self.approx(formulas[0][1], "an act start condition read as CARLA ScenarioRunner reads it: once it "
+                                        "has held (no edge); the act's events are armed then, their simulation "
+                                        "times counted from then")
+        return fields
+
+    def runner_act_stop(self, groups: list, start: dict | None, act_at: float | None) -> None:
+        """A CARLA story's only act's stop trigger as ScenarioRunner reads it: its conditions
+        are checked from the act's start, any one counts (`success_on_all=False`), and when
+        one holds the act ends, and with it the story and the run: `end when ...`. A
+        TraveledDistanceCondition counts from where the entity was when the act started; a
+        SimulationTimeCondition from then, after the condition's delay."""
+        alternatives, ends_at = [], []
+        for cond in (c for g in groups for c in g.iterfind("Condition")):
+            if (cond.get("name") or "").startswith("criteria_"):
+                continue
+            delay = self.value(cond, "delay", units.TIME, 0.0)
+            time = cond.find("ByValueCondition/SimulationTimeCondition")
+            travel = cond.find("ByEntityCondition/EntityCondition/TraveledDistanceCondition")
+            if time is not None and (time.get("rule") or "").startswith("greater") and \
+                    (start is None or "condition" not in start):
+                ends_at.append((act_at or 0.0) + delay + self.value(time, "value"))
+                continue
+            refs = list(cond.iterfind("ByEntityCondition/TriggeringEntities/EntityRef"))
+            who = self.actor_name(refs[0]) if len(refs) == 1 else None
+            # Travelled since the act started: from the start threshold where the act starts on
+            # that entity's travelled distance, from 0 where it starts with the story.
+            since = 0.0 if start is None and act_at is None else \
+                self.act_travel[1] if start is not None and self.act_travel and self.act_travel[0] == who else None
+            if travel is not None and delay == 0.0 and who is not None and since is not None:
+                d = self.value(travel, "value", units.LENGTH)
+                alternatives.append(E.Binary(op=">=", left=E.Signal(name=f"s({who})"),
+                                             right=plus_expr(self.start_station(who), E.Num(value=since + d))))
+                if since:
+                    self.approx(cond, "an act stop after a travelled distance: counted from the act's start "
+                                      "threshold (ScenarioRunner: from where the entity was at the act's start, "
+                                      "up to one tick past it)")
+                continue
+            self.skip(cond, "act stop conditions other than a time or a distance travelled since the act's start "
+                            "are not translated")
+            return
+        if ends_at:
+            self.act_stop_s = min(ends_at)  # the run's duration
+        if alternatives:
+            self.act_stop = any_of(alternatives)
+        self.approx(groups[0], "the run ends at the act's stop, not when all of the act's events are complete "
+                               "(ScenarioRunner ends the story then)")
 
     def maneuver_group(self, group, act_at) -> None:
         refs = [self.actor_name(r) for r in group.iterfind("Actors/EntityRef")]
@@ -923,7 +1038,7 @@ class Storyboard:
         """How the step starts (a Start: the fields of a TriggerPlan, or after another event); None:
         dropped."""
         groups = list(trigger.iterfind("ConditionGroup")) if trigger is not None else []
-        alternatives, at_s, holds, edges = [], act_at, [], []
+        alternatives, at_s, holds, edges, after_s = [], act_at, [], [], None
         stand_still = len(self.stand_still)
         for group in groups:
             conj = []
@@ -943,7 +1058,13 @@ class Storyboard:
                 time = cond.find("ByValueCondition/SimulationTimeCondition")
                 if time is not None and (time.get("rule") or "").startswith("greater") and len(groups) == 1:
                     value = self.value(time, "value")
-                    at_s = max(at_s or 0.0, value) if value > 0 else at_s
+                    if self.carla:  # ScenarioRunner: counted from when the event's act started
+                        if getattr(self, "act_label", None):
+                            after_s = max(after_s or 0.0, value)
+                        else:
+                            at_s = max(at_s or 0.0, (act_at or 0.0) + value)
+                    else:
+                        at_s = max(at_s or 0.0, value) if value > 0 else at_s
                     continue
                 # A condition held for a duration (OffroadCondition) sets `cond_hold`: the step's
                 # `for D`, in a trigger of that one condition only.
@@ -957,7 +1078,10 @@ class Storyboard:
                     if self.value(cond, "delay", units.TIME, 0.0) > 0:
                         self.skip(cond, "a condition held for a duration with a delay is not translated")
                         return None
-                    edge = EDGES.get(cond.get("conditionEdge", "none")) if self.cond_hold_edge else None
+                    edge = EDGES.get(cond.get("conditionEdge", "none")) if self.cond_hold_edge and not self.carla \
+                        else None
+                    if getattr(self, "act_condition", None) is not None:
+                        formula = all_of([self.act_condition, formula])
                     return Start({**({"at_s": E.Num(value=at_s)} if at_s is not None else {}),
                                   "condition": formula, "hold_s": E.Num(value=self.cond_hold),
                                   **({"edge": edge} if edge else {})})
@@ -969,6 +1093,12 @@ class Storyboard:
         fields = {}
         if at_s is not None:
             fields["at_s"] = E.Num(value=at_s)
+        if after_s is not None:
+            fields["after_s"] = E.Num(value=after_s)
+        if getattr(self, "act_condition", None) is not None:  # (CARLA: its act's start, `story`)
+            alternatives = [all_of([self.act_condition, a]) for a in alternatives] or [self.act_condition]
+        if self.carla:
+            edges = []  # ScenarioRunner reads no conditionEdge: a condition counts whenever it holds
         if alternatives:
             fields["condition"] = any_of(alternatives)
         # One condition (the usual case): its edge and delay exactly. Several: the step's edge
