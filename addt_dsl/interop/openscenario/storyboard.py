@@ -1086,6 +1086,9 @@ class Storyboard:
                                   "condition": formula, "hold_s": E.Num(value=self.cond_hold),
                                   **({"edge": edge} if edge else {})})
                 conj.append(formula)
+                if self.carla and self.value(cond, "delay", units.TIME, 0.0) > 0:
+                    self.approx(cond, "a condition's delay as OpenSCENARIO reads it (the step fires D after the "
+                                      "condition held); ScenarioRunner waits D, then checks the condition")
                 holds.append((self.value(cond, "delay", units.TIME, 0.0), cond))
                 edges.append((EDGES.get(cond.get("conditionEdge", "none")), cond))
             if conj:
