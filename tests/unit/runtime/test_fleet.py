@@ -43,8 +43,8 @@ def test_views_answer_like_the_scan_of_what_each_agent_sees(rows, data, window):
         m.s += ds
     roads = {"r": 0, "q": 1}
     s, t, v, length = (np.array([getattr(a, f) for a in agents]) for f in ("s", "t", "speed", "length_m"))
-    views = fleet.Views(length, np.array([roads[a.road] for a in agents]), ego.length_m, roads[ego.road])
-    ego_state = (ego.s, ego.t, ego.speed)
+    views = fleet.Views([(length, np.array([roads[a.road] for a in agents]), ego.length_m, roads[ego.road])])
+    ego_state = (np.array([ego.s]), np.array([ego.t]), np.array([ego.speed]))
     new = tuple(np.array([getattr(a, f) for a in moved]) for f in ("s", "t", "speed"))
     fleet.WINDOW, window = window, fleet.WINDOW  # small windows: the widening is exercised
     try:
