@@ -38,10 +38,11 @@ def execute_batch(specs: Sequence[RunSpec], keep_trace: bool = True) -> list[Run
     """
     runs: list[RunState] = []
     setup: list[float] = []
+    roads: dict = {}  # road networks and views, shared by runs of equal road plans
     try:
         for spec in specs:
             t0 = _time.perf_counter()
-            runs.append(RunState(spec))
+            runs.append(RunState(spec, roads))
             setup.append(_time.perf_counter() - t0)
         t0 = _time.perf_counter()
         traces = _loop(runs)
