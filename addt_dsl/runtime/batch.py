@@ -110,7 +110,8 @@ def _loop(runs: list[RunState]) -> list[Trace]:
             phases.variables(run, rec, k, t)
         for run, rec, t in batch:
             phases.lights(run, rec, k, t)
-        collided = [phases.collisions(run, rec, k, t) for run, rec, t in batch]
+        collided = phases.collisions([run for run, _, _ in batch], [rec for _, rec, _ in batch], k,
+                                     [t for _, _, t in batch])
         for run, rec, t in batch:
             phases.outputs(run, rec, k, t)
         going = []

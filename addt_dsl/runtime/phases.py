@@ -10,7 +10,8 @@ every live run of the batch before the next:
   record      the state row of every actor (clearance, the last field, below)
   environment changes of the weather, light and road that fire on the recorded state
   lights      light changes that fire on the recorded state; light states and red margins
-  collisions  each actor's clearance; `collision` events (`collision.py`)
+  collisions  each actor's clearance; `collision` events (`collision.py`: every run's
+              pairs in one broad phase)
   outputs     latencies, the command, objects seen, named steps' states
   end         `end when ...` on the recorded state
   -- the run stops here on an ego collision, its end, or its last sample --
@@ -23,8 +24,8 @@ every live run of the batch before the next:
               `agents.Fleets.step` can, else one by one)
 
 Each phase reads and writes the run's state; `Record` holds the recorded arrays. The
-phases that take the whole batch (`pose`, `ego`, `agents`) run array programs over it; the
-others step per run.
+phases that take the whole batch (`pose`, `collisions`, `ego`, `agents`) run array
+programs over it; the others step per run.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ import math
 import numpy as np
 
 from addt_dsl.runtime.agents import Fleets, pose_scripted_ego
-from addt_dsl.runtime.collision import ALL_PAIRS_MAX, clearances
+from addt_dsl.runtime.collision import ALL_PAIRS_MAX, clearances_batch
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
@@ -196,10 +197,14 @@ def lights(run: RunState, rec: Record, k: int, t: float) -> None:
         rec.margins[a.name][k] = run.lights.red_margin(a.name, a.s + 0.5 * a.length_m, run.stop_stations[a.name], t)
 
 
-def collisions(run: RunState, rec: Record, k: int, t: float) -> bool:
-    """Each actor's clearance at sample k and `collision` events; True if the ego collided."""
-    xs, ys, hs = run.fleet.columns(run.ego)
-    return clearances(rec.block[k, :, -1], rec.names, xs, ys, hs, rec.lengths, rec.widths, run, t)
+def collisions(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> list[bool]:
+    """Over the batch: each actor's clearance at sample k and `collision` events (every run's
+    pairs in one broad phase: `collision.clearances_batch`); whether each ego collided."""
+    items = []
+    for run, rec, t in zip(runs, recs, ts):
+        xs, ys, hs = run.fleet.columns(run.ego)
+        items.append((rec.block[k, :, -1], rec.names, xs, ys, hs, rec.lengths, rec.widths, run, t))
+    return clearances_batch(items)
 
 
 def outputs(run: RunState, rec: Record, k: int, t: float) -> None:

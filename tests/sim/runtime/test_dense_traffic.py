@@ -59,9 +59,9 @@ EXTRAS = """  agent parked car on r lane -3 at 150 m speed 0 m/s
   }"""
 
 
-def all_pairs(run, names, x, y, heading, length, width):
-    """Every pair, in order: the clearance loop without its broad phase."""
-    return C._all_pairs(x, y, heading, length, width)
+def all_pairs(runs):
+    """Every pair of each run, in order: the clearance loop without its broad phase."""
+    return [C._all_pairs(x, y, heading, length, width) for x, y, heading, length, width, _ in runs]
 
 
 def one_by_one_points(self, s, t):
@@ -90,7 +90,7 @@ def brute_force(monkeypatch):
 
     monkeypatch.setattr(A, "ARRAY_MIN_AGENTS", 10 ** 9)
     monkeypatch.setattr(LeaderIndex, "leader", lambda self, agent: leader_scan(self.members, agent))
-    monkeypatch.setattr(C, "_pair_separations", all_pairs)
+    monkeypatch.setattr(C, "_broad_phase", all_pairs)
     monkeypatch.setattr(FastRoad, "points", one_by_one_points)
     monkeypatch.setattr(FastRoad, "lane_offsets", one_by_one_offsets)
     monkeypatch.setattr(PhysicsWorld, "set_pose", set_pose_now)
