@@ -1,19 +1,22 @@
 """Car-following agents stepped as arrays: the leader lookup and the IDM step of every
-agent at once (numpy over agents), with the floats of the per-agent code.
+agent of a batch's runs at once (numpy over runs x agents, concatenated run after run),
+with the floats of the per-agent code.
 
 The loop steps agents one after another in declaration order, so agent i reads the
 agents before it where they have already moved this step (their new station, offset
 and speed) and those after it where they were. `Views.leaders` answers that lookup for
-every agent at once from a *view*, a table of members sorted by station: the Jacobi view
+every agent at once from a *view*, a table of members with a block per run sorted by
+station (no run sees another's members): the Jacobi view
 (everyone where they were, and the ego) or the sequential one (earlier agents moved).
 Its answer for agent i is `neighbours.leader_scan` over the members as agent i sees
 them: the nearest member ahead on its road within the lane window, the first in member
 order on equal gaps (agents in declaration order, then the ego).
 
-The agents phase (`agents.Fleet.step`) solves the sequential step as a fixed point: it
+The agents phase (`agents.Fleets.step`) solves the sequential step as a fixed point: it
 steps every agent against the Jacobi view, then asks the sequential view with the earlier
 agents moved; when no acceleration changes, the new states are those of the sequential
-loop (agent i's answer depends only on agents before it, so the fixed point is unique).
+loop (agent i's answer depends only on agents before it, so the fixed point is unique;
+checked per run: runs do not see each other, so a run once settled stays settled).
 Agents declared behind their leaders settle at the first check; a chain declared front
 to back needs a round per car and is left to the per-agent loop after `MAX_ROUNDS`.
 
