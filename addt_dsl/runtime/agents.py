@@ -13,7 +13,8 @@ import numpy as np
 
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.actor_road import ActorPath
-from addt_dsl.runtime.behaviors import Idm, IdmParams, lateral_profile, relative_heading, settle_lane_change, standing_yaw
+from addt_dsl.runtime.behaviors import (Idm, IdmParams, lateral_profile, relative_heading, settle_lane_change,
+                                        standing_yaw)
 from addt_dsl.runtime.vehicle import VehicleState
 
 
@@ -77,7 +78,8 @@ class Fleet:
         codes: dict[str, int] = {}
         road_code = np.array([codes.setdefault(a.road, len(codes)) for a in agents], dtype=np.int64)
         # Who sees whom (`fleet.Views`): lengths, road codes, the ego's length and road code.
-        self.members = (self.length, road_code, run.ego_plan.length_m, codes.setdefault(run.ego_road.road_id, len(codes)))
+        ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
+        self.members = (self.length, road_code, run.ego_plan.length_m, ego_code)
         self.posed = False
         self.x, self.y, self.heading = [], [], []
         self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
