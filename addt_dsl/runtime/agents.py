@@ -81,6 +81,7 @@ class Fleet:
         ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
         self.members = (self.length, road_code, run.ego_plan.length_m, ego_code)
         self.posed = False
+        self.scale = None
         self.x, self.y, self.heading = [], [], []
         self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
         self._posed_version = -1
@@ -107,6 +108,7 @@ class Fleet:
             x.append(xi), y.append(yi), heading.append(hi), v.append(a.speed)
             rows.append((xi, yi, hi, a.speed, a.accel, 0.0, a.s, a.t, off, 0.0))
         self.x, self.y, self.heading, self.v, self.rows = x, y, heading, v, rows
+        self.scale = None  # (the ground scales are the agents')
         self._posed_version = -1
         self.posed = True
 
@@ -303,7 +305,7 @@ class Fleets:
             f, rows = run.fleet, slice(lo[j], lo[j + 1])
             run.physics.set_poses(f.slots, x[rows], y[rows], z[rows], heading[rows], pitch[rows])
             f.x, f.y, f.heading, f.lane_offset, f.rows = x[rows], y[rows], heading[rows], lane_off[rows], None
-            f.s, f.t, f.v, f.accel = s[rows], t[rows], v[rows], accel[rows]
+            f.s, f.t, f.v, f.accel, f.scale = s[rows], t[rows], v[rows], accel[rows], scale[rows]
             f._posed_version = run.behavior_version  # nothing else moves agents before their step
             f.posed = True
         return []
@@ -346,7 +348,9 @@ class Fleets:
                     zip(*((run.ego_s, run.ego_t, run.ego.speed) for run, _ in items)))
         sizes = np.diff(lo)
         dt = np.repeat([run.dt for run, _ in items], sizes)
-        scale = np.array([a.ground_scale for a in layout.agents], dtype=float)
+        # The ground scales of this step's poses (nothing else sets them before the step).
+        scale = np.concatenate([f.scale if f.scale is not None else
+                                np.array([a.ground_scale for a in f.agents], dtype=float) for f in fleets])
         t_new = target.copy()
         for j, ((run, t_now), plan) in enumerate(zip(items, plans)):
             for i in plan[2]:
