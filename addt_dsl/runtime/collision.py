@@ -12,6 +12,7 @@ only the pairs that can matter.
 from __future__ import annotations
 
 import math
+from itertools import accumulate
 
 import numpy as np
 
@@ -129,7 +130,12 @@ def _separations(items) -> list:
             reach = np.array([0.5 * math.hypot(a, b) for a, b in zip(length.tolist(), width.tolist())])
             iu, ju = np.triu_indices(n, 1)
             r = reach[iu] + reach[ju]
-            run.clearance_pairs = pairs = (iu, ju, r, r + 5.0)
+            # For each actor's least (`_least`): where each actor's pairs as i start (iu is
+            # sorted), the pairs ordered by j and where each actor's start.
+            by_j = np.argsort(ju, kind="stable")
+            i_starts = np.flatnonzero(np.r_[True, iu[1:] != iu[:-1]])
+            j_starts = np.flatnonzero(np.r_[True, ju[by_j][1:] != ju[by_j][:-1]])
+            run.clearance_pairs = pairs = (iu, ju, r, r + 5.0, by_j, i_starts, j_starts)
         many.append((k, x, y, heading, length, width, pairs))
     start = 0
     while start < len(many):  # runs of at most ~BROAD_PAIRS pairs at once (their arrays stay in cache)
@@ -148,10 +154,13 @@ def _broad_phase(runs) -> list:
     its pairs (i, j, reach sum, reach sum + 5 m)): every run's pairs as one array."""
     sizes = [len(x) for x, *_ in runs]
     counts = [len(p[0]) for *_, p in runs]
-    first = np.cumsum([0, *sizes])[:-1]
-    x, y, heading, length, width = (np.concatenate([run[c] for run in runs]) for c in range(5))
-    iu, ju = (np.concatenate([p[c] + lo for (*_, p), lo in zip(runs, first)]) for c in range(2))
-    r, r_exact = (np.concatenate([p[c] for *_, p in runs]) for c in (2, 3))
+    first = list(accumulate(sizes[:-1], initial=0))  # each run's first actor
+    at = list(accumulate(counts[:-1], initial=0))  # and first pair
+    x, y, heading, length, width = (_join([run[c] for run in runs]) for c in range(5))
+    iu, ju = (_join([p[c] + lo for (*_, p), lo in zip(runs, first)]) for c in range(2))
+    r, r_exact = (_join([p[c] for *_, p in runs]) for c in (2, 3))
+    by_j, i_starts, j_starts = (_join([p[c] + lo for (*_, p), lo in zip(runs, at)]) for c in (4, 5, 6))
+    segments = (i_starts, iu[i_starts], by_j, j_starts, ju[by_j[j_starts]])
     dx, dy = x[iu] - x[ju], y[iu] - y[ju]
     d = np.sqrt(dx * dx + dy * dy)
     slack = _BROAD_SLACK_M * (1.0 + d)
@@ -160,7 +169,7 @@ def _broad_phase(runs) -> list:
     sep = d - r
     trig = []  # per actor (cos, sin) of the heading, from math, when a box test needs them
     sep[near] = _exact_separations(near, dx, dy, iu, ju, r, r_exact, x, y, heading, length, width, trig)
-    least = _least(len(x), iu, ju, sep)
+    least = _least(len(x), sep, segments)
     # Pairs whose approximate separation is within the slack of an actor's least: exact
     # too. The others are farther than every actor's least by more than the slack, so the
     # least over them then is the least over exact values.
@@ -168,20 +177,30 @@ def _broad_phase(runs) -> list:
     if len(extra):
         exact = sep.copy()
         exact[extra] = _exact_separations(extra, dx, dy, iu, ju, r, r_exact, x, y, heading, length, width, trig)
-        least = _least(len(x), iu, ju, exact)
+        least = _least(len(x), exact, segments)
+    if len(runs) == 1:
+        return [(iu[near], ju[near], sep[near], least)]
     # Each run's share: its near pairs (in its all-pairs order) and its actors.
-    cut = np.searchsorted(near, np.cumsum(counts)[:-1]).tolist()
+    cut = np.searchsorted(near, at[1:]).tolist()
     out = []
-    for lo, n, rows in zip(first.tolist(), sizes, np.split(near, cut)):
+    for lo, n, rows in zip(first, sizes, np.split(near, cut)):
         out.append((iu[rows] - lo, ju[rows] - lo, sep[rows], least[lo:lo + n]))
     return out
 
 
-def _least(n: int, iu, ju, sep) -> np.ndarray:
-    """Each of `n` actors' least separation over the pairs (iu, ju) it is in [m] (inf: none)."""
+def _join(arrays: list) -> np.ndarray:
+    return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
+
+
+def _least(n: int, sep, segments) -> np.ndarray:
+    """Each of `n` actors' least separation over the pairs it is in [m]: the least of the
+    segment of pairs where it is i (pairs in all-pairs order), then of those where it is j
+    (pairs ordered by j); `segments`: (the i segments' starts, their actors, the order by j,
+    the j segments' starts, their actors)."""
+    i_starts, i_actor, by_j, j_starts, j_actor = segments
     least = np.full(n, np.inf)
-    np.minimum.at(least, iu, sep)
-    np.minimum.at(least, ju, sep)
+    least[i_actor] = np.minimum.reduceat(sep, i_starts)
+    least[j_actor] = np.minimum(least[j_actor], np.minimum.reduceat(sep[by_j], j_starts))
     return least
 
 

@@ -105,7 +105,7 @@ class Views:
         table = self._jacobi.copy()
         table[:3, self._j_old] = (s, t, v)
         table[:3, self._j_ego] = ego
-        return table[:, np.lexsort((table[0], self._j_run))], self._j_run, self._j_end
+        return self._sorted(table, self._j_run, self._j_old), self._j_end
 
     def sequential(self, s, t, v, new, ego):
         """Earlier agents at their `new` (station, offset, speed), later ones where they were."""
@@ -113,19 +113,25 @@ class Views:
         table[:3, self._s_old] = (s, t, v)
         table[:3, self._s_new] = new
         table[:3, self._s_ego] = ego
-        return table[:, np.lexsort((table[0], self._s_run))], self._s_run, self._s_end
+        return self._sorted(table, self._s_run, self._s_old), self._s_end
+
+    @staticmethod
+    def _sorted(table, run, own):
+        """The table sorted by (run, station), stably, and the column of the first entry of
+        its run strictly ahead of each agent (`own`: its own entry's column, at its station):
+        the start of the next group of equal (run, station) after its own entry's."""
+        order = np.lexsort((table[0], run))
+        table = table[:, order]
+        at = np.empty_like(order)
+        at[order] = np.arange(len(order))
+        station = table[0]
+        starts = np.flatnonzero((station[1:] != station[:-1]) | (run[1:] != run[:-1])) + 1
+        return table, starts[np.searchsorted(starts, at[own], side="right")]
 
     def leaders(self, view, s, t, length, window_m: float = LANE_WINDOW_M):
-        """(found, gap [m], leader speed [m/s]) per agent from a view (`jacobi`, `sequential`)."""
-        table, run, end = view
-        # The first entry of its run strictly ahead of each agent: the entries and the agents
-        # sorted together by (run, station), an agent after the entries at its station.
-        cols = table.shape[1]
-        order = np.lexsort((np.repeat((0, 1), (cols, self.n)), np.concatenate((table[0], s)),
-                            np.concatenate((run, self.run_of))))
-        entry = order < cols
-        first = np.empty(self.n, dtype=np.intp)
-        first[order[~entry] - cols] = np.cumsum(entry)[~entry]
+        """(found, gap [m], leader speed [m/s]) per agent from a view (`jacobi`, `sequential`);
+        `s`: the agents' stations where they were (their own entries' in the view)."""
+        (table, first), end = view
         key, longest = self.key, self.longest
         found, best, speed, done = self._window(table, first, WINDOW, s, t, length, key, longest, end, window_m)
         if done.all():
