@@ -1,6 +1,8 @@
 """The agents: how actors are posed on their roads (`pose_on_road`, the one way: agents one
-by one or as arrays, the scripted ego), and the agents as arrays (`Fleet`: poses, rows,
-ground truth, and the longitudinal step of car-following agents over numpy arrays)."""
+by one or as arrays, the scripted ego), one run's agents (`Fleet`: poses, rows, ground
+truth), and the agents' phases over a batch (`Fleets`: the poses and the longitudinal step
+of car-following agents as one numpy program over every live run's agents, concatenated
+run after run; a single run is a batch of one)."""
 
 from __future__ import annotations
 
@@ -11,7 +13,8 @@ import numpy as np
 
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.actor_road import ActorPath
-from addt_dsl.runtime.behaviors import Idm, lateral_profile, relative_heading, settle_lane_change, standing_yaw
+from addt_dsl.runtime.behaviors import (Idm, IdmParams, lateral_profile, relative_heading, settle_lane_change,
+                                        standing_yaw)
 from addt_dsl.runtime.vehicle import VehicleState
 
 
@@ -19,8 +22,8 @@ def pose_on_road(a, road, yaw: float, t_now: float, dt: float) -> tuple[float, f
     """(x, y, road heading, body heading) of an actor on its road or path at its (s, t): the
     road's heading plus a lane change's or walk's relative heading and, while it has
     stood still, its declared yaw [rad]; keeps its ground scale (its station moves by
-    speed / ground_scale). Every actor posed one by one is posed here (`Fleet._pose_arrays`
-    is the same over arrays)."""
+    speed / ground_scale). Every actor posed one by one is posed here (`Fleets.pose` is the
+    same over arrays)."""
     x, y, h = road.point(a.s, a.t)
     a.ground_scale = road.ground_scale(a.s, a.t)
     heading = h + relative_heading(a, t_now, dt)
@@ -29,19 +32,21 @@ def pose_on_road(a, road, yaw: float, t_now: float, dt: float) -> tuple[float, f
     return x, y, h, heading
 
 
-# Agents posed as arrays from this many on, and stepped as arrays from STEP_MIN_AGENTS on:
-# fewer, and the per-agent code is quicker (posing: ~30 us of numpy calls against ~2 us
-# per agent, measured break-even at ~24 agents; the array step asks two leader lookups of
-# ~30 numpy calls each per step, a sorted-list bisect per agent costs ~2.5 us: measured
-# break-even at 65-75 agents).
+# Agents posed as arrays from this many on in a batch (all its runs' together), and stepped
+# as arrays from STEP_MIN_AGENTS on: fewer, and the per-agent code is quicker (posing: ~30 us
+# of numpy calls against ~2 us per agent, measured break-even at ~24 agents; the array step
+# asks two leader lookups of ~30 numpy calls each per step, a sorted-list bisect per agent
+# costs ~2.5 us: measured break-even at 65-75 agents in one run). Both ways give the same bits.
 ARRAY_MIN_AGENTS = 24
 STEP_MIN_AGENTS = 64
 
 
 class Fleet:
-    """The agents as arrays for the loop: each step's poses, road points and recorded
-    rows computed for all agents at once (numpy over agents), and the longitudinal step
-    of car-following agents (`step` below), with the floats of the per-agent code.
+    """One run's agents for the loop: what does not change over the run (their roads,
+    sizes, physics slots, IDM plan), the poses of the step (arrays, or lists of floats when
+    posed one by one), the recorded rows and perception's ground truth. The array
+    programs over the agents of every run of a batch are `Fleets.pose` and `Fleets.step`;
+    a single run is a batch of one.
 
     The `AgentState` objects stay the agents' state (behaviours, scripts and oracles read
     them): a step gathers their stations, offsets and speeds into arrays and, when it
@@ -59,8 +64,7 @@ class Fleet:
                 self.path_rows.append(i)
             else:
                 groups.setdefault(id(road.road), (road.road, road.elevation, []))[2].append(i)
-        self.groups = [(fast, elev, slice(None) if len(rows) == n else np.array(rows))
-                       for fast, elev, rows in groups.values()]
+        self.groups = [(fast, elev, np.array(rows, dtype=np.intp)) for fast, elev, rows in groups.values()]
         plans = [run.agent_plans[a.name] for a in agents]
         self.yaws = [p.yaw for p in plans]
         self.yaw = [(i, p.yaw) for i, p in enumerate(plans) if p.yaw]
@@ -72,10 +76,12 @@ class Fleet:
         contiguous = bool(slots) and slots == list(range(slots[0], slots[0] + n))
         self.slots = slice(slots[0], slots[0] + n) if contiguous else np.array(slots, dtype=np.intp)
         codes: dict[str, int] = {}
-        self.road_code = np.array([codes.setdefault(a.road, len(codes)) for a in agents], dtype=np.int64)
-        self.ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
-        self.views = fleet.Views(self.length, self.road_code, run.ego_plan.length_m, self.ego_code) if n else None
+        road_code = np.array([codes.setdefault(a.road, len(codes)) for a in agents], dtype=np.int64)
+        # Who sees whom (`fleet.Views`): lengths, road codes, the ego's length and road code.
+        ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
+        self.members = (self.length, road_code, run.ego_plan.length_m, ego_code)
         self.posed = False
+        self.scale = None
         self.x, self.y, self.heading = [], [], []
         self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
         self._posed_version = -1
@@ -83,35 +89,15 @@ class Fleet:
         self._plan = None
 
     def gather(self) -> None:
-        """Stations, offsets, speeds and accelerations of the agents now."""
+        """Stations, offsets and speeds of the agents now."""
         agents = self.agents
         self.s = np.array([a.s for a in agents], dtype=float)
         self.t = np.array([a.t for a in agents], dtype=float)
         self.v = np.array([a.speed for a in agents], dtype=float)
 
-    def pose(self, run, t_now: float, dt: float) -> None:
-        """Pose every agent on its road (`road.point`, the relative heading of a lane change
-        or a walk, the extra yaw, the elevation) and hand the poses to the physics world;
-        keep them, and each agent's lane offset, for the row."""
-        agents, n = self.agents, self.n
-        self._posed_version = -1
-        if n < ARRAY_MIN_AGENTS:
-            self._pose_one_by_one(run, t_now, dt)  # few agents: the per-agent calls are quicker
-        else:
-            self.gather()
-            self.accel = np.array([a.accel for a in agents], dtype=float)
-            if np.isfinite(self.s).all() and np.isfinite(self.t).all():
-                self._pose_arrays(run, t_now, dt)
-                self._posed_version = run.behavior_version  # nothing else moves agents before their step
-            else:
-                self._pose_one_by_one(run, t_now, dt)
-        self.posed = True
-        if run.networked:
-            for a, xi, yi, hi in zip(agents, self.x, self.y, self.heading):
-                run.world_pose[a.name] = (float(xi), float(yi), float(hi))
-
-    def _pose_one_by_one(self, run, t_now: float, dt: float) -> None:
-        """The per-agent code: poses, and the rows as lists of floats."""
+    def pose_one_by_one(self, run, t_now: float, dt: float) -> None:
+        """The per-agent code (`pose_on_road`, the same formulas as `Fleets.pose`): poses,
+        and the rows as lists of floats."""
         set_pose = run.physics.set_pose
         x, y, heading, v, rows = [], [], [], [], []
         for a, road, yaw, half_height in zip(self.agents, self.roads, self.yaws, self.half_height_m):
@@ -122,6 +108,9 @@ class Fleet:
             x.append(xi), y.append(yi), heading.append(hi), v.append(a.speed)
             rows.append((xi, yi, hi, a.speed, a.accel, 0.0, a.s, a.t, off, 0.0))
         self.x, self.y, self.heading, self.v, self.rows = x, y, heading, v, rows
+        self.scale = None  # (the ground scales are the agents')
+        self._posed_version = -1
+        self.posed = True
 
     def columns(self, ego: VehicleState):
         """(x, y, heading) of every actor, the ego first: lists or arrays as posed."""
@@ -130,47 +119,12 @@ class Fleet:
         return tuple(np.concatenate(([v], a))
                      for v, a in ((ego.x, self.x), (ego.y, self.y), (ego.heading, self.heading)))
 
-    def _road_pose(self, i: int):
+    def road_pose(self, i: int):
         """(x, y, road heading, lane offset, z, grade) of agent i, one by one."""
         a, road = self.agents[i], self.roads[i]
         x, y, h = road.road.point(a.s, a.t)
         z, grade = road.elevation.at(a.s)
         return x, y, h, road.road.lane_offset(a.s, a.t), z, grade
-
-    def _pose_arrays(self, run, t_now: float, dt: float) -> None:
-        """`_pose_one_by_one` as arrays (numpy over agents), bit for bit: the road points
-        and lane offsets of each road's agents at once (`FastRoad.points`), and the scalar
-        calls only where an agent turns off its road's heading or the road is not flat."""
-        agents, n, s, t = self.agents, self.n, self.s, self.t
-        rel = np.zeros(n)
-        plan = self._array_plan(run)  # with one, only lane changes turn agents off their road's heading
-        lateral = plan[2] if plan is not None else \
-            [i for i, a in enumerate(agents) if a.heading_rel or a.lc_duration_s > 0.0]
-        for i in lateral:
-            rel[i] = relative_heading(agents[i], t_now, dt)
-        x, y, ref_h, lane_off = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        z, grade, scale = np.zeros(n), np.zeros(n), np.ones(n)
-        for fast, elev, rows in self.groups:
-            sr, tr = s[rows], t[rows]
-            x[rows], y[rows], ref_h[rows], i, u = fast.points(sr, tr)
-            scale[rows] = fast.ground_scales(sr, tr, i, u)
-            lane_off[rows] = fast.lane_offsets(sr, tr, i, u)
-            zg = elev.at_arrays(sr)
-            if zg is not None:
-                z[rows], grade[rows] = zg
-        for i in self.path_rows:  # routes: one by one
-            x[i], y[i], ref_h[i], lane_off[i], z[i], grade[i] = self._road_pose(i)
-            scale[i] = self.roads[i].road.ground_scale(float(s[i]), float(t[i]))
-        for a, g in zip(agents, scale.tolist()):
-            a.ground_scale = g
-        heading = ref_h + rel
-        for i, yaw in self.yaw:
-            heading[i] += standing_yaw(agents[i], yaw)
-        pitch = np.zeros(n)  # atan(0) * cos(0) where flat and along the road
-        for i in np.flatnonzero((grade != 0.0) | (heading != ref_h)).tolist():
-            pitch[i] = math.atan(grade[i]) * math.cos(heading[i] - ref_h[i])
-        run.physics.set_poses(self.slots, x, y, z + self.half_height, heading, pitch)
-        self.x, self.y, self.heading, self.lane_offset, self.rows = x, y, heading, lane_off, None
 
     def record(self, row: np.ndarray) -> None:
         """The agents' fields of a step's row (`_FIELDS` but the clearance; yaw rate and
@@ -190,7 +144,7 @@ class Fleet:
         return _GT(float(self.x[i]), float(self.y[i]), float(self.heading[i]), float(self.v[i]),
                    a.length_m, a.width_m, self.kinds[i])
 
-    def _array_plan(self, run):
+    def array_plan(self, run):
         """(IDM settings, their rows, rows in a lane change, lateral targets) when every
         agent can be stepped as arrays now, else None. Re-read when a behaviour starts."""
         if run.behavior_version == self._plan_version:
@@ -198,7 +152,7 @@ class Fleet:
         if any(a.lane_anchor is not None for a in self.agents):
             return None  # one by one while `RunState.follow_lane` may move one (asked again next step)
         self._plan_version, self._plan = run.behavior_version, None
-        if run.networked or run.lights is not None or self.n < max(ARRAY_MIN_AGENTS, STEP_MIN_AGENTS):
+        if run.networked or run.lights is not None or not self.n:
             return None
         rows, settings = [], []
         for i, a in enumerate(self.agents):
@@ -213,33 +167,198 @@ class Fleet:
             settings.append(beh.settings)
         changing = [i for i, a in enumerate(self.agents) if a.lc_duration_s > 0.0]
         target = np.array([a.t_target for a in self.agents], dtype=float)
-        self._plan = (fleet.idm_params(settings), slice(None) if len(rows) == self.n else np.array(rows, dtype=np.intp),
-                      changing, target)
+        self._plan = (fleet.idm_params(settings), np.array(rows, dtype=np.intp), changing, target)
         return self._plan
 
-    def step(self, run, t_now: float, dt: float) -> bool:
-        """Advance every agent as the per-agent loop would (in declaration order, each
-        seeing the earlier ones moved), as arrays; False (nothing changed) where the agents'
-        behaviours or states leave it to that loop."""
-        plan = self._array_plan(run)
-        if plan is None:
-            return False
-        params, rows, changing, target = plan
-        if any(a.placed for a in self.agents):
-            return False  # (a teleported agent stays put this step: `advance`)
-        if run.behavior_version != self._posed_version:  # a behaviour started since the poses: read anew
-            self.gather()
-        s, t, v = self.s, self.t, self.v
-        ego = (run.ego_s, run.ego_t, run.ego.speed)
-        if not (np.isfinite(s).all() and np.isfinite(t).all() and math.isfinite(ego[0]) and math.isfinite(ego[1])):
-            return False
-        scale = np.array([a.ground_scale for a in self.agents], dtype=float)
+
+class _Layout:
+    """The agents of some runs concatenated, run after run: run j's agents are rows
+    lo[j]:lo[j + 1] of every array; the rows of each road (roads shared by runs, as the
+    batch's runs share their roads' sampled views, are one group), and who sees whom."""
+
+    def __init__(self, fleets: list[Fleet]):
+        self.fleets = fleets
+        sizes = [f.n for f in fleets]
+        self.lo = np.cumsum([0, *sizes]).tolist()
+        self.starts = np.array(self.lo[:-1], dtype=np.intp)  # (for `reduceat` per run)
+        self.n = self.lo[-1]
+        self.agents = [a for f in fleets for a in f.agents]
+        groups: dict[int, tuple] = {}
+        self.path_rows = []
+        self.yaw = []
+        for f, lo in zip(fleets, self.lo):
+            for fast, elev, rows in f.groups:
+                groups.setdefault(id(fast), (fast, elev, []))[2].append(rows + lo)
+            self.path_rows += [(lo + i, f, i) for i in f.path_rows]
+            self.yaw += [(lo + i, f.agents[i], yaw) for i, yaw in f.yaw]
+        whole = np.arange(self.n)
+        self.groups = []
+        for fast, elev, parts in groups.values():
+            rows = np.concatenate(parts)
+            self.groups.append((fast, elev, slice(None) if np.array_equal(rows, whole) else rows))
+        self.half_height = np.concatenate([f.half_height for f in fleets])
+        self.length = np.concatenate([f.length for f in fleets])
+        self._views = None
+        self._plans: list = []
+        self._idm = None
+
+    @property
+    def views(self) -> fleet.Views:
+        if self._views is None:
+            self._views = fleet.Views([f.members for f in self.fleets])
+        return self._views
+
+    def idm(self, plans):
+        """The runs' IDM settings and their rows, and the lateral targets, concatenated."""
+        if len(plans) != len(self._plans) or any(p is not q for p, q in zip(plans, self._plans)):
+            params = [p[0] for p in plans]
+            rows = np.concatenate([p[1] + lo for p, lo in zip(plans, self.lo)])
+            self._idm = (IdmParams(*(np.concatenate([getattr(p, k) for p in params]) for k in fleet.IDM_FIELDS)),
+                         slice(None) if len(rows) == self.n else rows,
+                         np.concatenate([p[3] for p in plans]))
+            self._plans = list(plans)
+        return self._idm
+
+
+class Fleets:
+    """The agents' phases over a batch of runs: every run's agents as one array program
+    (`pose`, `step`), numpy over runs x agents, with the floats of the per-agent code. Runs
+    whose agents cannot go as arrays (non-finite stations; for the step: networked runs,
+    lights, behaviours other than IDM with fixed settings, see `Fleet.array_plan`) and
+    batches of few agents (the per-agent calls are quicker: `ARRAY_MIN_AGENTS`,
+    `STEP_MIN_AGENTS`) go one by one inside the same phase."""
+
+    def __init__(self):
+        self._layouts: dict[tuple[int, ...], _Layout] = {}
+
+    def _layout(self, fleets: list[Fleet]) -> _Layout:
+        key = tuple(id(f) for f in fleets)
+        layout = self._layouts.get(key)
+        if layout is None or any(f is not g for f, g in zip(layout.fleets, fleets)):
+            layout = self._layouts[key] = _Layout(fleets)
+            while len(self._layouts) > 4:  # live sets change as runs end: keep the recent ones
+                del self._layouts[next(iter(self._layouts))]
+        return layout
+
+    def pose(self, runs, ts) -> None:
+        """Pose every agent of the batch on its road (`road.point`, the relative heading of a
+        lane change or a walk, the extra yaw, the elevation) and hand the poses to each run's
+        physics world; keep them, and each agent's lane offset, for the row."""
+        items = [(run, t) for run, t in zip(runs, ts) if run.fleet.n]
+        if sum(run.fleet.n for run, _ in items) >= ARRAY_MIN_AGENTS:
+            items = self._pose_arrays(items)
+        for run, t in items:
+            run.fleet.pose_one_by_one(run, t, run.dt)
+        for run in runs:
+            if run.networked:
+                f = run.fleet
+                for a, xi, yi, hi in zip(f.agents, f.x, f.y, f.heading):
+                    run.world_pose[a.name] = (float(xi), float(yi), float(hi))
+
+    def _pose_arrays(self, items):
+        """`Fleet.pose_one_by_one` as arrays over the batch's agents, bit for bit: the road
+        points and lane offsets of each road's agents at once (`FastRoad.points`), the scalar
+        calls only where an agent turns off its road's heading or the road is not flat. The
+        runs left one by one (non-finite stations)."""
+        if not items:
+            return []
+        layout = self._layout([run.fleet for run, _ in items])
+        state = np.array([(a.s, a.t, a.speed, a.accel) for a in layout.agents], dtype=float).reshape(-1, 4)
+        s, t = state[:, 0].copy(), state[:, 1].copy()
+        finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts)
+        if not finite.all():
+            left = [item for item, ok in zip(items, finite.tolist()) if not ok]
+            return left + self._pose_arrays([item for item, ok in zip(items, finite.tolist()) if ok])
+        n, lo = layout.n, layout.lo
+        rel = np.zeros(n)
+        for j, (run, t_now) in enumerate(items):
+            f = run.fleet
+            plan = f.array_plan(run)  # with one, only lane changes turn agents off their road's heading
+            lateral = plan[2] if plan is not None else \
+                [i for i, a in enumerate(f.agents) if a.heading_rel or a.lc_duration_s > 0.0]
+            for i in lateral:
+                rel[lo[j] + i] = relative_heading(f.agents[i], t_now, run.dt)
+        x, y, ref_h, lane_off = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        z, grade, scale = np.zeros(n), np.zeros(n), np.ones(n)
+        for fast, elev, rows in layout.groups:
+            sr, tr = s[rows], t[rows]
+            x[rows], y[rows], ref_h[rows], i, u = fast.points(sr, tr)
+            scale[rows] = fast.ground_scales(sr, tr, i, u)
+            lane_off[rows] = fast.lane_offsets(sr, tr, i, u)
+            zg = elev.at_arrays(sr)
+            if zg is not None:
+                z[rows], grade[rows] = zg
+        for k, f, i in layout.path_rows:  # routes: one by one
+            x[k], y[k], ref_h[k], lane_off[k], z[k], grade[k] = f.road_pose(i)
+            scale[k] = f.roads[i].road.ground_scale(float(s[k]), float(t[k]))
+        for a, g in zip(layout.agents, scale.tolist()):
+            a.ground_scale = g
+        heading = ref_h + rel
+        for k, a, yaw in layout.yaw:
+            heading[k] += standing_yaw(a, yaw)
+        pitch = np.zeros(n)  # atan(0) * cos(0) where flat and along the road
+        for k in np.flatnonzero((grade != 0.0) | (heading != ref_h)).tolist():
+            pitch[k] = math.atan(grade[k]) * math.cos(heading[k] - ref_h[k])
+        z += layout.half_height
+        v, accel = state[:, 2].copy(), state[:, 3].copy()
+        for j, (run, _) in enumerate(items):
+            f, rows = run.fleet, slice(lo[j], lo[j + 1])
+            run.physics.set_poses(f.slots, x[rows], y[rows], z[rows], heading[rows], pitch[rows])
+            f.x, f.y, f.heading, f.lane_offset, f.rows = x[rows], y[rows], heading[rows], lane_off[rows], None
+            f.s, f.t, f.v, f.accel, f.scale = s[rows], t[rows], v[rows], accel[rows], scale[rows]
+            f._posed_version = run.behavior_version  # nothing else moves agents before their step
+            f.posed = True
+        return []
+
+    def step(self, runs, ts) -> list:
+        """Advance every agent of the batch as the per-agent loop would (in each run's
+        declaration order, each seeing the earlier ones moved), as arrays; the (run, t) of
+        the runs left to that loop."""
+        items, rest = [], []
+        for run, t in zip(runs, ts):
+            f = run.fleet
+            if f.array_plan(run) is None or any(a.placed for a in f.agents) or \
+                    not (math.isfinite(run.ego_s) and math.isfinite(run.ego_t)):
+                rest.append((run, t))  # (a teleported agent stays put this step: `advance`)
+            else:
+                items.append((run, t))
+        if sum(run.fleet.n for run, _ in items) < max(ARRAY_MIN_AGENTS, STEP_MIN_AGENTS):
+            return rest + items
+        return rest + self._step_arrays(items)
+
+    def _step_arrays(self, items) -> list:
+        """`step` over runs whose agents all go as arrays: the sequential step as a fixed
+        point (`fleet`); the runs whose chains do not settle in `fleet.MAX_ROUNDS`."""
+        if not items:
+            return []
+        layout = self._layout([run.fleet for run, _ in items])
+        for run, _ in items:
+            f = run.fleet
+            if run.behavior_version != f._posed_version:  # a behaviour started since the poses: read anew
+                f.gather()
+        fleets, lo = layout.fleets, layout.lo
+        s, t, v = (np.concatenate([getattr(f, k) for f in fleets]) for k in "stv")
+        finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts)
+        if not finite.all():
+            left = [item for item, ok in zip(items, finite.tolist()) if not ok]
+            return left + self._step_arrays([item for item, ok in zip(items, finite.tolist()) if ok])
+        plans = [f.array_plan(run) for f, (run, _) in zip(fleets, items)]
+        params, rows, target = layout.idm(plans)
+        ego = tuple(np.array(col, dtype=float) for col in
+                    zip(*((run.ego_s, run.ego_t, run.ego.speed) for run, _ in items)))
+        sizes = np.diff(lo)
+        dt = np.repeat([run.dt for run, _ in items], sizes)
+        # The ground scales of this step's poses (nothing else sets them before the step).
+        scale = np.concatenate([f.scale if f.scale is not None else
+                                np.array([a.ground_scale for a in f.agents], dtype=float) for f in fleets])
         t_new = target.copy()
-        for i in changing:
-            t_new[i] = lateral_profile(self.agents[i], t_now + dt)
-        views, length = self.views, self.length
+        for j, ((run, t_now), plan) in enumerate(zip(items, plans)):
+            for i in plan[2]:
+                t_new[lo[j] + i] = lateral_profile(fleets[j].agents[i], t_now + run.dt)
+        views, length = layout.views, layout.length
         free = fleet.idm_free(params, v if isinstance(rows, slice) else v[rows])
-        accel = self._accel(params, rows, v, free, views.leaders(views.jacobi(s, t, v, ego), s, t, length))
+        accel = _accel(params, rows, v, free, views.leaders(views.jacobi(s, t, v, ego), s, t, length))
+        settled = np.zeros(len(items), dtype=bool)
         for _ in range(fleet.MAX_ROUNDS):
             v_new = v + accel * dt
             v_new = np.where(v_new > 0.0, v_new, 0.0)  # max(0.0, v), as `advance` picks
@@ -249,24 +368,35 @@ class Fleet:
             step = np.where(across != 0.0, np.sqrt(np.maximum(step * step - across * across, 0.0)), step)
             s_new = s + step / scale
             table = views.sequential(s, t, v, (s_new, t_new, v_new), ego)
-            again = self._accel(params, rows, v, free, views.leaders(table, s, t, length))
-            if np.array_equal(again.view(np.int64), accel.view(np.int64)):  # the fixed point: write it back
-                for a, ai, vi, si, ti in zip(self.agents, accel.tolist(), v_new.tolist(), s_new.tolist(),
-                                             t_new.tolist()):
-                    a.accel, a.speed, a.s, a.t = ai, vi, si, ti
-                    settle_lane_change(a, t_now + dt, ti)
-                return True
+            again = _accel(params, rows, v, free, views.leaders(table, s, t, length))
+            # A run whose accelerations did not change is at its fixed point (and stays there:
+            # runs do not see each other).
+            settled |= ~np.logical_or.reduceat(again.view(np.int64) != accel.view(np.int64), layout.starts)
+            if settled.all():
+                break
             accel = again
-        return False
+        values = [col.tolist() for col in (accel, v_new, s_new, t_new)]
+        rest = []
+        for j, (run, t_now) in enumerate(items):
+            if not settled[j]:
+                rest.append((run, t_now))  # a chain declared front to back: the per-agent loop
+                continue
+            done = t_now + run.dt
+            for a, ai, vi, si, ti in zip(fleets[j].agents, *(col[lo[j]:lo[j + 1]] for col in values)):
+                a.accel, a.speed, a.s, a.t = ai, vi, si, ti
+                if a.lc_centre is not None:
+                    settle_lane_change(a, done, ti)
+            run.leaders_stale = True
+        return rest
 
-    @staticmethod
-    def _accel(params, rows, v, free, answer) -> np.ndarray:
-        found, gap, speed = answer
-        if isinstance(rows, slice):
-            return fleet.idm_accel(params, v, free, found, gap, speed)
-        accel = np.zeros(len(v))  # no longitudinal behaviour: 0
-        accel[rows] = fleet.idm_accel(params, v[rows], free, found[rows], gap[rows], speed[rows])
-        return accel
+
+def _accel(params, rows, v, free, answer) -> np.ndarray:
+    found, gap, speed = answer
+    if isinstance(rows, slice):
+        return fleet.idm_accel(params, v, free, found, gap, speed)
+    accel = np.zeros(len(v))  # no longitudinal behaviour: 0
+    accel[rows] = fleet.idm_accel(params, v[rows], free, found[rows], gap[rows], speed[rows])
+    return accel
 
 
 @dataclass

@@ -7,8 +7,9 @@ error, a non-finite ego state). A single run is a batch of one (`execute.execute
 is no other loop. Runs share nothing but the code: each owns its state (`state.RunState`),
 its pybullet client and its random streams (seeded by its RunSpec), so a run's trace is the
 same bit for bit alone, beside any other runs, in any order (tests/sim/runtime/test_batch.py).
-The phases that are pure numerics run as arrays over the batch (the ego's dynamics:
-`phases.ego`); behaviours, sensors, triggers and the stack step per run.
+The phases that are pure numerics run as arrays over the batch: the agents' poses and
+their car-following step (every live run's agents concatenated: `agents.Fleets`) and the
+ego's dynamics (`phases.ego`); behaviours, sensors, triggers and the stack step per run.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import Sequence
 from addt_dsl.plan import RunSpec
 from addt_dsl.registry import FAULTS
 from addt_dsl.runtime import phases
+from addt_dsl.runtime.agents import Fleets
 from addt_dsl.runtime.judge import judge
 from addt_dsl.runtime.result import RunResult, spec_json
 from addt_dsl.runtime.state import RunState
@@ -36,10 +38,11 @@ def execute_batch(specs: Sequence[RunSpec], keep_trace: bool = True) -> list[Run
     """
     runs: list[RunState] = []
     setup: list[float] = []
+    roads: dict = {}  # road networks and views, shared by runs of equal road plans
     try:
         for spec in specs:
             t0 = _time.perf_counter()
-            runs.append(RunState(spec))
+            runs.append(RunState(spec, roads))
             setup.append(_time.perf_counter() - t0)
         t0 = _time.perf_counter()
         traces = _loop(runs)
@@ -91,14 +94,14 @@ def _stop(run: RunState, rec: phases.Record, k: int, error: str, t: float | None
 def _loop(runs: list[RunState]) -> list[Trace]:
     """Step every run from time 0 until its end, an ego collision or a failure; their traces."""
     recs = [phases.Record(run) for run in runs]
+    fleets = Fleets()  # the agents of the live runs as arrays
     live = list(range(len(runs)))
     k = 0
     while live:
         batch = [(runs[i], recs[i], k * runs[i].dt) for i in live]
         for run, rec, t in batch:
             phases.clock(run, t)
-        for run, rec, t in batch:
-            phases.pose(run, t)
+        phases.pose([run for run, _, _ in batch], [t for _, _, t in batch], fleets)
         for run, rec, t in batch:
             phases.record(run, rec, k)
         for run, rec, t in batch:
@@ -107,7 +110,8 @@ def _loop(runs: list[RunState]) -> list[Trace]:
             phases.variables(run, rec, k, t)
         for run, rec, t in batch:
             phases.lights(run, rec, k, t)
-        collided = [phases.collisions(run, rec, k, t) for run, rec, t in batch]
+        collided = phases.collisions([run for run, _, _ in batch], [rec for _, rec, _ in batch], k,
+                                     [t for _, _, t in batch])
         for run, rec, t in batch:
             phases.outputs(run, rec, k, t)
         going = []
@@ -135,8 +139,7 @@ def _loop(runs: list[RunState]) -> list[Trace]:
                 stepped.append((run, rec, t))
             else:
                 _stop(run, rec, k, "vehicle state became non-finite")
-        for run, rec, t in stepped:
-            phases.agents(run, t)
+        phases.agents([run for run, _, _ in stepped], [t for _, _, t in stepped], fleets)
         alive = {id(run) for run, _, _ in stepped}
         live = [i for i in live if id(runs[i]) in alive]
         k += 1

@@ -1,19 +1,22 @@
 """Car-following agents stepped as arrays: the leader lookup and the IDM step of every
-agent at once (numpy over agents), with the floats of the per-agent code.
+agent of a batch's runs at once (numpy over runs x agents, concatenated run after run),
+with the floats of the per-agent code.
 
 The loop steps agents one after another in declaration order, so agent i reads the
 agents before it where they have already moved this step (their new station, offset
 and speed) and those after it where they were. `Views.leaders` answers that lookup for
-every agent at once from a *view*, a table of members sorted by station: the Jacobi view
+every agent at once from a *view*, a table of members with a block per run sorted by
+station (no run sees another's members): the Jacobi view
 (everyone where they were, and the ego) or the sequential one (earlier agents moved).
 Its answer for agent i is `neighbours.leader_scan` over the members as agent i sees
 them: the nearest member ahead on its road within the lane window, the first in member
 order on equal gaps (agents in declaration order, then the ego).
 
-The agents phase (`agents.Fleet.step`) solves the sequential step as a fixed point: it
+The agents phase (`agents.Fleets.step`) solves the sequential step as a fixed point: it
 steps every agent against the Jacobi view, then asks the sequential view with the earlier
 agents moved; when no acceleration changes, the new states are those of the sequential
-loop (agent i's answer depends only on agents before it, so the fixed point is unique).
+loop (agent i's answer depends only on agents before it, so the fixed point is unique;
+checked per run: runs do not see each other, so a run once settled stays settled).
 Agents declared behind their leaders settle at the first check; a chain declared front
 to back needs a round per car and is left to the per-agent loop after `MAX_ROUNDS`.
 
@@ -36,67 +39,115 @@ MAX_ROUNDS = 3  # fixed-point checks before a step is left to the scalar loop
 
 
 class Views:
-    """The members as the agents see them, as one table per view sorted by station: a column
-    per entry with rows (station, offset, speed, length, member index, and the keys lo..hi
-    of the agents that see it, key = road code * (n + 1) + agent index: an entry is seen
-    only on its road), and a last column past every station that nobody sees.
+    """The members as the agents of a batch of runs see them, as one table per view: a block
+    of columns per run (its entries sorted by station), then a last column past every
+    station that nobody sees. A column's rows: station, offset, speed, length, member index,
+    and the keys lo..hi of the agents that see it (key = the run's base + road code * (n + 1)
+    + agent index, the run's bases apart: an entry is seen only on its road, in its run).
 
     The Jacobi view has each agent's old state (seen by all: an agent's own entry is never
     strictly ahead of it) and the ego. The sequential view has the old states seen by the
-    agents before them, the new states seen by the agents after them, and the ego."""
+    agents before them, the new states seen by the agents after them, and the ego.
 
-    def __init__(self, length: np.ndarray, road: np.ndarray, ego_length: float, ego_road: int):
-        n = self.n = len(length)
-        self.longest = max(float(length.max()), ego_length)
-        m = np.arange(n, dtype=float)
-        base = road * (n + 1.0)
-        self.key = base + m  # each agent's own key
-        ego_base = ego_road * (n + 1.0)
-        ego = (ego_length, n, ego_base, ego_base + n - 1)
-        self._jacobi = np.zeros((7, n + 2))
-        self._jacobi[3:, :n] = (length, m, base, base + n - 1)
-        self._jacobi[3:, n] = ego
-        self._seq = np.zeros((7, 2 * n + 2))
-        self._seq[3:, :n] = (length, m, base, base + m - 1.0)
-        self._seq[3:, n:2 * n] = (length, m, base + m + 1.0, base + n - 1)
-        self._seq[3:, 2 * n] = ego
-        for table in (self._jacobi, self._seq):
-            table[:, -1] = (np.inf, 0.0, 0.0, 0.0, -1.0, 0.0, -1.0)
+    `runs`: per run (agents' lengths [m], their road codes, the ego's length [m], its road
+    code); a single run is a batch of one."""
 
-    def jacobi(self, s, t, v, ego) -> np.ndarray:
-        """Everyone where they were (`ego`: station, offset, speed)."""
+    def __init__(self, runs):
+        jacobi, seq, keys, longest, run_of = [], [], [], [], []
+        jac_end, seq_end = [], []
+        base_key = 0.0
+        j_cols = s_cols = 0
+        for r, (length, road, ego_length, ego_road) in enumerate(runs):
+            n = len(length)
+            m = np.arange(n, dtype=float)
+            base = base_key + road * (n + 1.0)
+            keys.append(base + m)  # each agent's own key
+            ego_base = base_key + ego_road * (n + 1.0)
+            ego = (ego_length, n, ego_base, ego_base + n - 1)
+            block = np.zeros((7, n + 1))
+            block[3:, :n] = (length, m, base, base + n - 1)
+            block[3:, n] = ego
+            jacobi.append(block)
+            block = np.zeros((7, 2 * n + 1))
+            block[3:, :n] = (length, m, base, base + m - 1.0)
+            block[3:, n:2 * n] = (length, m, base + m + 1.0, base + n - 1)
+            block[3:, 2 * n] = ego
+            seq.append(block)
+            longest.append(np.full(n, max(float(length.max()), ego_length)))
+            run_of.append(np.full(n, r))
+            j_cols, s_cols = j_cols + n + 1, s_cols + 2 * n + 1
+            jac_end.append(np.full(n, j_cols))
+            seq_end.append(np.full(n, s_cols))
+            base_key += (max(int(road.max()), ego_road) + 1) * (n + 1.0)
+        self.runs = len(runs)
+        sizes = [len(length) for length, *_ in runs]
+        self.key, self.longest = np.concatenate(keys), np.concatenate(longest)
+        self.run_of = np.concatenate(run_of)  # each agent's run
+        self.n = len(self.key)
+        sentinel = np.array([[np.inf], [0.0], [0.0], [0.0], [-1.0], [0.0], [-1.0]])
+        self._jacobi = np.concatenate([*jacobi, sentinel], axis=1)
+        self._seq = np.concatenate([*seq, sentinel], axis=1)
+        # The columns of each run's agents (old, new) and ego in the templates; each column's run.
+        starts = np.cumsum([0, *sizes])[:-1]
+        within = np.arange(self.n) - np.repeat(starts, sizes)
+        self._j_old = within + np.repeat(starts + np.arange(self.runs), sizes)
+        self._j_ego = starts + sizes + np.arange(self.runs)
+        seq_starts = 2 * starts + np.arange(self.runs)
+        self._s_old = within + np.repeat(seq_starts, sizes)
+        self._s_new = self._s_old + np.repeat(sizes, sizes)
+        self._s_ego = seq_starts + 2 * np.array(sizes)
+        self._j_run = np.append(np.repeat(np.arange(self.runs), np.add(sizes, 1)), self.runs)
+        self._s_run = np.append(np.repeat(np.arange(self.runs), 2 * np.array(sizes) + 1), self.runs)
+        self._j_end, self._s_end = np.concatenate(jac_end), np.concatenate(seq_end)
+
+    def jacobi(self, s, t, v, ego):
+        """Everyone where they were (`ego`: station, offset, speed arrays, one per run)."""
         table = self._jacobi.copy()
-        n = self.n
-        table[:3, :n] = (s, t, v)
-        table[:3, n] = ego
-        return table[:, np.argsort(table[0], kind="stable")]
+        table[:3, self._j_old] = (s, t, v)
+        table[:3, self._j_ego] = ego
+        return self._sorted(table, self._j_run, self._j_old), self._j_end
 
-    def sequential(self, s, t, v, new, ego) -> np.ndarray:
+    def sequential(self, s, t, v, new, ego):
         """Earlier agents at their `new` (station, offset, speed), later ones where they were."""
         table = self._seq.copy()
-        n = self.n
-        table[:3, :n] = (s, t, v)
-        table[:3, n:2 * n] = new
-        table[:3, 2 * n] = ego
-        return table[:, np.argsort(table[0], kind="stable")]
+        table[:3, self._s_old] = (s, t, v)
+        table[:3, self._s_new] = new
+        table[:3, self._s_ego] = ego
+        return self._sorted(table, self._s_run, self._s_old), self._s_end
 
-    def leaders(self, table, s, t, length, window_m: float = LANE_WINDOW_M):
-        """(found, gap [m], leader speed [m/s]) per agent from a view's sorted table."""
-        first = np.searchsorted(table[0], s, side="right")  # the first entry strictly ahead
-        found, best, speed, done = self._window(table, first, WINDOW, s, t, length, self.key, window_m)
+    @staticmethod
+    def _sorted(table, run, own):
+        """The table sorted by (run, station), stably, and the column of the first entry of
+        its run strictly ahead of each agent (`own`: its own entry's column, at its station):
+        the start of the next group of equal (run, station) after its own entry's."""
+        order = np.lexsort((table[0], run))
+        table = table[:, order]
+        at = np.empty_like(order)
+        at[order] = np.arange(len(order))
+        station = table[0]
+        starts = np.flatnonzero((station[1:] != station[:-1]) | (run[1:] != run[:-1])) + 1
+        return table, starts[np.searchsorted(starts, at[own], side="right")]
+
+    def leaders(self, view, s, t, length, window_m: float = LANE_WINDOW_M):
+        """(found, gap [m], leader speed [m/s]) per agent from a view (`jacobi`, `sequential`);
+        `s`: the agents' stations where they were (their own entries' in the view)."""
+        (table, first), end = view
+        key, longest = self.key, self.longest
+        found, best, speed, done = self._window(table, first, WINDOW, s, t, length, key, longest, end, window_m)
         if done.all():
             return found, best, speed
         rows, width = np.flatnonzero(~done), 4 * WINDOW
         while len(rows):  # not settled within the window: a wider one
-            f, b, v, done = self._window(table, first[rows], width, s[rows], t[rows], length[rows],
-                                         self.key[rows], window_m)
+            f, b, v, done = self._window(table, first[rows], width, s[rows], t[rows], length[rows], key[rows],
+                                         longest[rows], end[rows], window_m)
             found[rows], best[rows], speed[rows] = f, b, v
             rows, width = rows[~done], 4 * width
         return found, best, speed
 
-    def _window(self, table, first, width, s, t, length, key, window_m):
-        """`leaders` from the `width` entries ahead of each agent; `done` where no entry
-        beyond can be nearer (none left, or `neighbours.LeaderIndex`'s bound)."""
+    @staticmethod
+    def _window(table, first, width, s, t, length, key, longest, end, window_m):
+        """`leaders` from the `width` entries ahead of each agent; `done` where no entry of
+        its run beyond can be nearer (none left, or `neighbours.LeaderIndex`'s bound)."""
         last = table.shape[1] - 1
         cols = np.minimum(first[:, None] + np.arange(width), last)
         es, et, ev, el, em, lo, hi = table[:, cols]
@@ -107,9 +158,13 @@ class Views:
         tied = mask & (g == best[:, None])  # equal gaps: the least member index
         col = np.where(tied, em, np.inf).argmin(axis=1)
         speed = ev[np.arange(len(s)), col]
-        next_s = table[0, np.minimum(first + width, last)]
-        done = (next_s == np.inf) | (next_s - s - 0.5 * (self.longest + length) > best + STOP_SLACK_M)
+        beyond = first + width
+        next_s = table[0, np.minimum(beyond, last)]
+        done = (beyond >= end) | (next_s - s - 0.5 * (longest + length) > best + STOP_SLACK_M)
         return best < np.inf, best, speed, done
+
+
+IDM_FIELDS = ("v0", "accel", "time_gap", "min_gap", "two_sqrt_ab")  # `IdmParams`' arrays
 
 
 class ARRAYS:
@@ -133,8 +188,7 @@ class ARRAYS:
 def idm_params(settings: list[dict]) -> IdmParams:
     """Per-agent IDM settings as arrays (`behaviors.IdmParams.of` of each)."""
     ps = [IdmParams.of(p) for p in settings]
-    return IdmParams(*(np.array([float(getattr(p, k)) for p in ps]) for k in
-                       ("v0", "accel", "time_gap", "min_gap", "two_sqrt_ab")))
+    return IdmParams(*(np.array([float(getattr(p, k)) for p in ps]) for k in IDM_FIELDS))
 
 
 def idm_free(p: IdmParams, v) -> np.ndarray:

@@ -4,12 +4,14 @@
 every live run of the batch before the next:
 
   clock       the stack's clock; fault timers wake
-  pose        agents on their roads (`agents.Fleet.pose`), the ego (projected onto its
-              road, or posed from its script), their bodies in the physics world
+  pose        agents on their roads (every run's agents at once: `agents.Fleets.pose`),
+              the ego (projected onto its road, or posed from its script), their bodies
+              in the physics world
   record      the state row of every actor (clearance, the last field, below)
   environment changes of the weather, light and road that fire on the recorded state
   lights      light changes that fire on the recorded state; light states and red margins
-  collisions  each actor's clearance; `collision` events (`collision.py`)
+  collisions  each actor's clearance; `collision` events (`collision.py`: every run's
+              pairs in one broad phase)
   outputs     latencies, the command, objects seen, named steps' states
   end         `end when ...` on the recorded state
   -- the run stops here on an ego collision, its end, or its last sample --
@@ -18,9 +20,12 @@ every live run of the batch before the next:
   sense       due sensors capture, spatial and temporal faults act, frames travel
   stack       frames that arrived reach the stack, which steps
   ego         due commands take effect; the ego's dynamics (or its script, or an OSI stack)
-  agents      every agent's longitudinal step (as arrays where `Fleet.step` can)
+  agents      every agent's longitudinal step (every run's agents at once as arrays where
+              `agents.Fleets.step` can, else one by one)
 
-Each phase reads and writes the run's state; `Record` holds the recorded arrays.
+Each phase reads and writes the run's state; `Record` holds the recorded arrays. The
+phases that take the whole batch (`pose`, `collisions`, `ego`, `agents`) run array
+programs over it; the others step per run.
 """
 
 from __future__ import annotations
@@ -30,9 +35,8 @@ import math
 
 import numpy as np
 
-from addt_dsl.runtime import agents as _agents  # (its ARRAY_MIN_AGENTS read at each step: benchmarks set it)
-from addt_dsl.runtime.agents import pose_scripted_ego
-from addt_dsl.runtime.collision import ALL_PAIRS_MAX, clearances
+from addt_dsl.runtime.agents import Fleets, pose_scripted_ego
+from addt_dsl.runtime.collision import ALL_PAIRS_MAX, clearances_batch
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
@@ -96,12 +100,17 @@ def clock(run: RunState, t: float) -> None:
         run.faults.wake(t)
 
 
-def pose(run: RunState, t: float) -> None:
-    """Agents kinematic along their roads, the ego where its dynamics or script put it; the
-    bodies in the physics world (for perception) and the ego's road height and grade."""
+def pose(runs: list[RunState], ts: list[float], fleets: Fleets) -> None:
+    """Over the batch: agents kinematic along their roads (every run's at once,
+    `agents.Fleets.pose`), each ego where its dynamics or script put it; the bodies in the
+    physics world (for perception) and the ego's road height and grade."""
+    fleets.pose(runs, ts)
+    for run, t in zip(runs, ts):
+        _pose_ego(run, t)
+
+
+def _pose_ego(run: RunState, t: float) -> None:
     dt, plan, ego_road = run.dt, run.bound, run.ego_road
-    if run.agents:
-        run.fleet.pose(run, t, dt)
     e = run.ego
     if run.ego_agent is None:
         run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
@@ -188,10 +197,14 @@ def lights(run: RunState, rec: Record, k: int, t: float) -> None:
         rec.margins[a.name][k] = run.lights.red_margin(a.name, a.s + 0.5 * a.length_m, run.stop_stations[a.name], t)
 
 
-def collisions(run: RunState, rec: Record, k: int, t: float) -> bool:
-    """Each actor's clearance at sample k and `collision` events; True if the ego collided."""
-    xs, ys, hs = run.fleet.columns(run.ego)
-    return clearances(rec.block[k, :, -1], rec.names, xs, ys, hs, rec.lengths, rec.widths, run, t)
+def collisions(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> list[bool]:
+    """Over the batch: each actor's clearance at sample k and `collision` events (every run's
+    pairs in one broad phase: `collision.clearances_batch`); whether each ego collided."""
+    items = []
+    for run, rec, t in zip(runs, recs, ts):
+        xs, ys, hs = run.fleet.columns(run.ego)
+        items.append((rec.block[k, :, -1], rec.names, xs, ys, hs, rec.lengths, rec.widths, run, t))
+    return clearances_batch(items)
 
 
 def outputs(run: RunState, rec: Record, k: int, t: float) -> None:
@@ -294,18 +307,16 @@ def ego(runs: list[RunState], ts: list[float]) -> list[bool]:
     return [math.isfinite(run.ego.x) and math.isfinite(run.ego.y) and math.isfinite(run.ego.vx) for run in runs]
 
 
-def agents(run: RunState, t: float) -> None:
-    """Every agent's step: all at once as arrays where they allow it, else one after
-    another in declaration order, each seeing the earlier ones moved."""
-    dt, fleet = run.dt, run.fleet
-    if fleet.n >= _agents.ARRAY_MIN_AGENTS and fleet.step(run, t, dt):
-        run.leaders_stale = True
-        return
-    leaders, networked = run.leaders, run.networked
-    if run.leaders_stale and not networked:
-        leaders.rebuild()
-        run.leaders_stale = False
-    for i, a in enumerate(run.agents):
-        run.move(a, t, dt)
-        if not networked:  # agents later in the order see this one where it is now
-            leaders.moved(i)
+def agents(runs: list[RunState], ts: list[float], fleets: Fleets) -> None:
+    """Over the batch: every agent's step, all runs' at once as arrays where they allow it
+    (`agents.Fleets.step`), else one after another in declaration order, each seeing the
+    earlier ones moved."""
+    for run, t in fleets.step(runs, ts):
+        leaders, networked = run.leaders, run.networked
+        if run.leaders_stale and not networked:
+            leaders.rebuild()
+            run.leaders_stale = False
+        for i, a in enumerate(run.agents):
+            run.move(a, t, run.dt)
+            if not networked:  # agents later in the order see this one where it is now
+                leaders.moved(i)

@@ -167,7 +167,11 @@ class _NoStack:
 
 
 class RunState:
-    def __init__(self, spec: RunSpec):
+    def __init__(self, spec: RunSpec, roads: dict | None = None):
+        """`roads`: road networks and their sampled views by road plans, shared by the runs
+        of a batch (`batch.execute_batch`): runs of equal road plans read the same roads
+        (read-only, the views' caches fill alike whichever run asks), and the agents' phase
+        poses all their agents on one road at once (`agents.Fleets`)."""
         self.spec = spec
         self.bound = plan = bind(spec)  # every parameter expression evaluated here, once
         self.dt = plan.step_s
@@ -179,8 +183,13 @@ class RunState:
         self.edges: dict = {}  # their recorded arrays (`phases.Record`)
         self.end_actors = sorted(set(re.findall(r"road_end\((\w+)\)", spec.plan.model_dump_json())))  # `road_end`
         self.ends: dict = {}
-        self.networks = build_network(plan.roads)
-        self._road_cache: dict = {}
+        key = tuple(rp.model_dump_json() for rp in plan.roads)
+        shared = None if roads is None else roads.get(key)
+        if shared is None:
+            shared = (build_network(plan.roads), {})  # (networks, their roads' sampled views)
+            if roads is not None:
+                roads[key] = shared
+        self.networks, self._road_cache = shared
         self._lanes_moving: dict = {}  # (id(road), lane) -> whether its centre t varies (`follow_lane`)
         # Visual shapes (road meshes, coloured actors) only when a sensor renders.
         visual = any(getattr(SENSORS.get(c.name), "renders", False) for c in plan.ego.sensors)

@@ -276,6 +276,7 @@ def test_slaloms_containers_are_turned_for_collisions_sensors_and_osi():
     collisions and lidar rays meet, and the ground truth an OSI view and perception report
     (CARLA's Slalom: c1 +pi/2, c2 -pi/2, c3-c5 0 in the map's frame)."""
     from addt_dsl.runtime import phases
+    from addt_dsl.runtime.agents import Fleets
     from addt_dsl.runtime.state import RunState
     from addt_dsl.sweep import expand
 
@@ -284,7 +285,7 @@ def test_slaloms_containers_are_turned_for_collisions_sensors_and_osi():
     run = RunState(expand(_import(path, "stack").plan).specs[0])
     try:
         phases.clock(run, 0.0)
-        phases.pose(run, 0.0)
+        phases.pose([run], [0.0], Fleets())
         table = run.physics.box_poses()
         bodies = dict(zip(want, table[run.physics.box_slots(list(want)), 3]))
         truth = {w: run.fleet.ground_truth(w).heading for w in want}

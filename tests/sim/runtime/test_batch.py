@@ -111,3 +111,44 @@ def test_every_example_and_suite_same_alone_and_batched():
             specs.append(expand(plan).specs[0])
     assert len(specs) > 40
     check_batches(specs)
+
+
+@pytest.mark.slow
+def test_traffic_batch_steps_agents_as_one_array_program_with_solo_digests(monkeypatch):
+    """Seven traffic runs of other plans and agent counts (lane changes, chains declared
+    front to back, a parked car, a car leaving its road, a shorter run, an example without
+    IDM traffic) batched: each run's digest is its digest alone with every agent stepped one
+    by one; the agents' step went as arrays over several runs at once."""
+    from addt_dsl.compiler import compile_source
+    from addt_dsl.runtime import agents as A
+    from tests.sim.runtime.test_dense_traffic import EXTRAS, dense
+
+    sources = [dense(24), dense(24, reverse=True), dense(10, extra=EXTRAS), dense(40),
+               dense(5).replace("duration 4 s", "duration 2 s"), dense(3, reverse=True), dense(30)]
+    specs = []
+    for i, source in enumerate(sources):
+        plan = compile_source(source.replace("scenario dense", f"scenario dense{i}")).plan
+        specs.append(expand(plan).specs[0])
+    specs.insert(3, first_spec("lead_brake.addt"))
+    with monkeypatch.context() as m:  # the reference: every agent one by one
+        m.setattr(A, "ARRAY_MIN_AGENTS", 10 ** 9)
+        m.setattr(A, "STEP_MIN_AGENTS", 10 ** 9)
+        alone = [full_digest(execute(s)) for s in specs]
+    stepped = []
+    step_arrays = A.Fleets._step_arrays
+
+    def counted(self, items):
+        rest = step_arrays(self, items)
+        stepped.append(len(items) - len(rest))
+        return rest
+
+    monkeypatch.setattr(A.Fleets, "_step_arrays", counted)
+    for minimum in (1, None):  # arrays whatever the count; the default thresholds
+        with monkeypatch.context() as m:
+            if minimum:
+                m.setattr(A, "ARRAY_MIN_AGENTS", minimum)
+                m.setattr(A, "STEP_MIN_AGENTS", minimum)
+            for order in (list(range(len(specs))), list(reversed(range(len(specs))))):
+                got = dict(zip(order, (full_digest(r) for r in execute_batch([specs[i] for i in order]))))
+                assert [got[i] for i in range(len(specs))] == alone, (minimum, order)
+    assert max(stepped) >= 5, stepped  # most runs' agents in one step

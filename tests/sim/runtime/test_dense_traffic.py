@@ -59,9 +59,9 @@ EXTRAS = """  agent parked car on r lane -3 at 150 m speed 0 m/s
   }"""
 
 
-def all_pairs(run, names, x, y, heading, length, width):
-    """Every pair, in order: the clearance loop without its broad phase."""
-    return C._all_pairs(x, y, heading, length, width)
+def all_pairs(runs):
+    """Every pair of each run, in order: the clearance loop without its broad phase."""
+    return [C._all_pairs(x, y, heading, length, width) for x, y, heading, length, width, _ in runs]
 
 
 def one_by_one_points(self, s, t):
@@ -90,7 +90,7 @@ def brute_force(monkeypatch):
 
     monkeypatch.setattr(A, "ARRAY_MIN_AGENTS", 10 ** 9)
     monkeypatch.setattr(LeaderIndex, "leader", lambda self, agent: leader_scan(self.members, agent))
-    monkeypatch.setattr(C, "_pair_separations", all_pairs)
+    monkeypatch.setattr(C, "_broad_phase", all_pairs)
     monkeypatch.setattr(FastRoad, "points", one_by_one_points)
     monkeypatch.setattr(FastRoad, "lane_offsets", one_by_one_offsets)
     monkeypatch.setattr(PhysicsWorld, "set_pose", set_pose_now)
@@ -103,15 +103,15 @@ def test_array_step_gives_the_brute_force_trace(monkeypatch, reverse):
     assert result.plan is not None, [str(d) for d in result.diagnostics]
     spec = expand(result.plan).specs[0]
     stepped = Counter()
-    array_step = A.Fleet.step
+    array_step = A.Fleets._step_arrays
 
-    def counted(self, *args):
-        done = array_step(self, *args)
-        stepped[done] += 1
-        return done
+    def counted(self, items):
+        rest = array_step(self, items)
+        stepped[not rest] += 1  # (one run: stepped as arrays, or left to the per-agent loop)
+        return rest
 
     with monkeypatch.context() as m:
-        m.setattr(A.Fleet, "step", counted)
+        m.setattr(A.Fleets, "_step_arrays", counted)
         m.setattr(A, "STEP_MIN_AGENTS", 1)  # arrays whatever the count (by default from 64 agents)
         fast = X.execute(spec)
     assert fast.status == "ok", fast.error

@@ -43,8 +43,8 @@ def test_views_answer_like_the_scan_of_what_each_agent_sees(rows, data, window):
         m.s += ds
     roads = {"r": 0, "q": 1}
     s, t, v, length = (np.array([getattr(a, f) for a in agents]) for f in ("s", "t", "speed", "length_m"))
-    views = fleet.Views(length, np.array([roads[a.road] for a in agents]), ego.length_m, roads[ego.road])
-    ego_state = (ego.s, ego.t, ego.speed)
+    views = fleet.Views([(length, np.array([roads[a.road] for a in agents]), ego.length_m, roads[ego.road])])
+    ego_state = (np.array([ego.s]), np.array([ego.t]), np.array([ego.speed]))
     new = tuple(np.array([getattr(a, f) for a in moved]) for f in ("s", "t", "speed"))
     fleet.WINDOW, window = window, fleet.WINDOW  # small windows: the widening is exercised
     try:
@@ -75,3 +75,42 @@ def test_idm_accelerations_are_the_behaviours(rows):
         world = SimpleNamespace(leader_of=lambda agent, answer=((g, ls) if has else None): answer)
         expected = behaviour.accel(SimpleNamespace(speed=speed), world, 0.0)
         assert struct.pack("<d", got[k]) == struct.pack("<d", expected)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.lists(member, min_size=2, max_size=12), min_size=2, max_size=4), st.data(),
+       st.sampled_from([1, 2, 12]))
+def test_views_of_a_batch_answer_as_each_run_alone(runs, data, window):
+    """Several runs' views at once (a block per run; stations, roads and keys that overlap
+    across runs): each agent's answer is its run's alone, bit for bit."""
+    roads = {"r": 0, "q": 1}
+    members, states, alone = [], [], []
+    for rows in runs:
+        *agents, ego = [Member(f"a{i}", *row) for i, row in enumerate(rows)]
+        s, t, v, length = (np.array([getattr(a, f) for a in agents]) for f in ("s", "t", "speed", "length_m"))
+        new = tuple(np.array([getattr(a, f) + data.draw(moves)[0] * (f == "s") for a in agents])
+                    for f in ("s", "t", "speed"))
+        member_ = (length, np.array([roads[a.road] for a in agents]), ego.length_m, roads[ego.road])
+        ego_state = (np.array([ego.s]), np.array([ego.t]), np.array([ego.speed]))
+        members.append(member_)
+        states.append((s, t, v, length, new, ego_state))
+    fleet.WINDOW, window = window, fleet.WINDOW  # small windows: the widening is exercised
+    try:
+        for member_, (s, t, v, length, new, ego_state) in zip(members, states):
+            one = fleet.Views([member_])
+            alone.append((one.leaders(one.jacobi(s, t, v, ego_state), s, t, length),
+                          one.leaders(one.sequential(s, t, v, new, ego_state), s, t, length)))
+        views = fleet.Views(members)
+        s, t, v, length = (np.concatenate([x[k] for x in states]) for k in range(4))
+        new = tuple(np.concatenate([x[4][k] for x in states]) for k in range(3))
+        ego = tuple(np.concatenate([x[5][k] for x in states]) for k in range(3))
+        batch = (views.leaders(views.jacobi(s, t, v, ego), s, t, length),
+                 views.leaders(views.sequential(s, t, v, new, ego), s, t, length))
+    finally:
+        fleet.WINDOW = window
+    for which in range(2):  # (found, gap, leader speed), the speed where a leader is found
+        found, gap, speed = (np.concatenate([a[which][k] for a in alone]) for k in range(3))
+        got_found, got_gap, got_speed = batch[which]
+        assert (got_found == found).all()
+        assert got_gap.tobytes() == gap.tobytes()
+        assert got_speed[found].tobytes() == speed[found].tobytes()

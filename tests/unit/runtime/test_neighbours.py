@@ -158,6 +158,27 @@ def test_broad_phase_clearances_equal_all_pairs(rows):
     assert collided == any("ego" in pair for pair in touching)
 
 
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.lists(box, min_size=1, max_size=40), min_size=1, max_size=4))
+def test_batch_clearances_equal_each_run_alone(runs):
+    """Runs' clearances in one broad phase (`clearances_batch`) are each run's all pairs."""
+    items, expected = [], []
+    for rows in runs:
+        names = ["ego"] + [f"a{i}" for i in range(len(rows) - 1)]
+        boxes = {n: (x, y, h, *size) for n, (x, y, h, size) in zip(names, rows)}
+        x, y, h, length, width = (np.array([boxes[n][c] for n in names]) for c in range(5))
+        run = SimpleNamespace(contacts=set(), events=[])
+        items.append((np.zeros(len(names)), names, x, y, h, length, width, run, 0.0))
+        expected.append(all_pairs(names, boxes))
+    collided = C.clearances_batch(items)
+    for item, (clear, touching), hit in zip(items, expected, collided):
+        out, names, run = item[0], item[1], item[7]
+        assert [struct.pack("<d", out[i]) for i in range(len(names))] == \
+            [struct.pack("<d", clear[n]) for n in names]
+        assert [tuple(e.detail["actors"]) for e in run.events] == touching
+        assert hit == any("ego" in pair for pair in touching)
+
+
 # ---------------------------------------------------------------- the lookups that became nearest_ahead
 
 class _Straight:
