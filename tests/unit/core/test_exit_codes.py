@@ -19,13 +19,15 @@ EXAMPLE = str(EXAMPLES / "overtake.addt")
 FAIL, CRASH = 6, 7  # `mode` values the fake run turns into a failed and a crashed run
 
 
-def _fake_run(spec, seq=-1, worker=""):
+def _fake_run(spec, seq=-1, worker="", on_result=None):
     mode = int(spec.params["mode"])
     if mode == CRASH:
         return RunResult.unfinished(spec, "crashed", "worker died (SIGKILL)", 0.01, seq=seq, worker=worker)
     record = fake_record(spec, seq, worker)
     if mode == FAIL:
         record.verdicts = [Verdict("moving", "hard", -1.0, False, 0.1)]
+    if on_result is not None:
+        on_result(record)
     return record
 
 

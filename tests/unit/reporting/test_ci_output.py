@@ -14,6 +14,14 @@ from addt_dsl.runtime import executor as executor_module
 LONG = "no_collision_with_any_other_road_user_whatsoever"
 
 
+def _fake_run(spec, seq=-1, worker="", on_result=None):
+    """`executor.run_spec` without a simulation."""
+    record = fake_record(spec, seq, worker)
+    if on_result is not None:
+        on_result(record)
+    return record
+
+
 class _Clock:
     def __init__(self):
         self.t = 0.0
@@ -49,7 +57,7 @@ def test_progress_lines_every_5_percent_or_10_seconds():
 def test_sweep_prints_progress_lines_and_full_width_table_off_a_terminal(monkeypatch, tmp_path, capsys):
     assert not sys.stdout.isatty() and not sys.stderr.isatty()
     monkeypatch.delenv("COLUMNS", raising=False)
-    monkeypatch.setattr(executor_module, "run_spec", lambda spec, seq=-1, worker="": fake_record(spec, seq, worker))
+    monkeypatch.setattr(executor_module, "run_spec", _fake_run)
     path = tmp_path / "s.addt"
     path.write_text(scenario([0, 1, 2, 3, 4, 5], repeat=4).replace("moving:", f"{LONG}:"))
     assert cli.main([str(path), "--executor", "inline"]) == 0
@@ -64,7 +72,7 @@ def test_sweep_prints_progress_lines_and_full_width_table_off_a_terminal(monkeyp
 @pytest.mark.parametrize("columns", ["60"])
 def test_columns_still_wins(monkeypatch, tmp_path, capsys, columns):
     monkeypatch.setenv("COLUMNS", columns)
-    monkeypatch.setattr(executor_module, "run_spec", lambda spec, seq=-1, worker="": fake_record(spec, seq, worker))
+    monkeypatch.setattr(executor_module, "run_spec", _fake_run)
     path = tmp_path / "s.addt"
     path.write_text(scenario([0]).replace("moving:", f"{LONG}:"))
     assert cli.main([str(path), "--executor", "inline"]) == 0
