@@ -162,31 +162,22 @@ def sensor_points_to_vehicle(points_sensor: np.ndarray, ext) -> np.ndarray:
 # ---------------------------------------------------------------- targets and decoding
 
 def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float = 0.8,
-                   classes: np.ndarray | None = None, class_heat: float | None = None):
+                   classes: np.ndarray | None = None):
     """CenterNet targets for vehicle-frame boxes (N×5: x, y, heading, length, width).
 
     Returns (heat (hx, hy), regression (6, hx, hy), mask (hx, hy)): a Gaussian peak per
     object on the head grid; at each object's centre cell the regression targets
     (offset from the cell centre in head cells, log length, log width, sin 2θ, cos 2θ of the
     heading θ). With `classes` (N indices into `CLASSES`) the regression has a 7th row,
-    the class index at each centre cell. With `class_heat` too, it also holds the class on
-    every cell where an object's Gaussian is at least `class_heat` (the object's whose
-    Gaussian is highest there), and an 8th row is 1 on those cells and the centres (where
-    the class loss applies): the decoder reads the class at the heatmap's peak, and for a
-    thinly seen object the peak may sit a cell away from the true centre (a cyclist's side
-    taken for a car's rear peaks where a car's centre would be).
+    the class index at each centre cell.
     """
     hx, hy = spec.head_shape
     heat = np.zeros((hx, hy), dtype=np.float32)
-    area = classes is not None and class_heat is not None
-    reg = np.zeros((BOX_CHANNELS + (classes is not None) + area, hx, hy), dtype=np.float32)
+    reg = np.zeros((BOX_CHANNELS + (classes is not None), hx, hy), dtype=np.float32)
     mask = np.zeros((hx, hy), dtype=np.float32)
     c = spec.head_cell_m
     gi = np.arange(hx)[:, None]
     gj = np.arange(hy)[None, :]
-    owner_g = np.zeros((hx, hy), dtype=np.float32)  # with `class_heat`: the highest Gaussian so far, its class
-    owner_cls = np.zeros((hx, hy), dtype=np.float32)
-    centres = []
     for k, (x, y, heading, length, width) in enumerate(boxes):
         fi = (x - spec.x_min) / c - 0.5
         fj = (y - spec.y_min) / c - 0.5
@@ -195,24 +186,12 @@ def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float 
             continue
         g = np.exp(-((gi - fi) ** 2 + (gj - fj) ** 2) / (2.0 * sigma_cells ** 2)).astype(np.float32)
         np.maximum(heat, g, out=heat)
-        if area:
-            higher = g > owner_g
-            owner_g[higher] = g[higher]
-            owner_cls[higher] = classes[k]
-            centres.append((i, j, classes[k]))
         heat[i, j] = 1.0
         reg[:BOX_CHANNELS, i, j] = (fi - i, fj - j, math.log(length), math.log(width),
                                     math.sin(2.0 * heading), math.cos(2.0 * heading))
         if classes is not None:
             reg[BOX_CHANNELS, i, j] = classes[k]
         mask[i, j] = 1.0
-    if area:
-        region = owner_g >= class_heat
-        reg[BOX_CHANNELS][region] = owner_cls[region]
-        reg[BOX_CHANNELS + 1][region] = 1.0
-        for i, j, cls in centres:  # a centre keeps its own object's class
-            reg[BOX_CHANNELS, i, j] = cls
-            reg[BOX_CHANNELS + 1, i, j] = 1.0
     return heat, reg, mask
 
 

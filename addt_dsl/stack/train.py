@@ -32,16 +32,15 @@ from addt_dsl.stack.bev_grid import BOX_CHANNELS, CLASSES, DETECTOR_LIDAR, GRID,
 from addt_dsl.stack.synth import CYCLISTS_PER_SCENE, generate, in_grid, load_samples, save_samples
 
 
-def make_targets(samples, class_heat: float | None = None):
-    """Stacked CenterNet targets for `samples` (objects with ≥ 1 return are positives);
-    `class_heat`: see `bev_grid.encode_targets`."""
+def make_targets(samples):
+    """Stacked CenterNet targets for `samples` (objects with ≥ 1 return are positives)."""
     hx, hy = GRID.head_shape
     heat = np.zeros((len(samples), hx, hy), dtype=np.float32)
-    reg = np.zeros((len(samples), BOX_CHANNELS + 1 + (class_heat is not None), hx, hy), dtype=np.float32)
+    reg = np.zeros((len(samples), BOX_CHANNELS + 1, hx, hy), dtype=np.float32)
     mask = np.zeros((len(samples), hx, hy), dtype=np.float32)
     for k, s in enumerate(samples):
         keep = in_grid(s.boxes) & (s.hits >= 1)
-        heat[k], reg[k], mask[k] = encode_targets(s.boxes[keep], classes=s.classes[keep], class_heat=class_heat)
+        heat[k], reg[k], mask[k] = encode_targets(s.boxes[keep], classes=s.classes[keep])
     return heat, reg, mask
 
 
@@ -53,9 +52,7 @@ def grids(samples, out: np.ndarray) -> np.ndarray:
 
 def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t, class_weight=None):
     """The loss and its parts; `class_weight` (a tensor, one weight per class) scales
-    each object's class cross entropy by its true class's weight. With a class-area row in
-    `reg_t` (`encode_targets(class_heat=...)`) the class loss is the mean over those cells,
-    else over the object centres."""
+    each object's class cross entropy by its true class's weight."""
     import torch
     import torch.nn.functional as F
 
@@ -78,11 +75,7 @@ def centernet_loss(heat_logits, box, heat_t, reg_t, mask_t, class_weight=None):
     ce = F.cross_entropy(box[:, BOX_CHANNELS:], target, reduction="none")
     if class_weight is not None:
         ce = ce * class_weight[target]
-    if reg_t.shape[1] > BOX_CHANNELS + 1:
-        area = reg_t[:, BOX_CHANNELS + 1]
-        cls = (ce * area).sum() / area.sum().clamp(min=1.0)
-    else:
-        cls = (ce * mask_t).sum() / n_pos
+    cls = (ce * mask_t).sum() / n_pos
     return (focal + 2.0 * offset + size + heading + cls,
             (focal.item(), offset.item(), size.item(), heading.item(), cls.item()))
 
@@ -92,13 +85,12 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
           lidars: tuple[str, ...] = (DETECTOR_LIDAR.config,), lidar_p: tuple[float, ...] | None = None,
           lidar_settings: dict | None = None, init: Path | None = None,
           class_weights: tuple[float, ...] | None = None, cyclists: float = CYCLISTS_PER_SCENE,
-          logit_offsets: tuple[float, ...] | None = None, class_heat: float | None = None):
+          logit_offsets: tuple[float, ...] | None = None):
     """A trained detector and its timings; `init`: weights file to start from (fine-tuning;
     `epochs` 0 with `init`: no scans, no training), `class_weights`: per-class weights of the
     class loss, `cyclists`: see `synth.sample_scene`; `logit_offsets`: added to the class
     logits' biases after training (logit adjustment: data with more of a class than the
-    scenes the detector meets make it guess that class too readily); `class_heat`: the class
-    loss on the cells around each centre too (`bev_grid.encode_targets`)."""
+    scenes the detector meets make it guess that class too readily)."""
     import torch
 
     from addt_dsl.stack.learned import BevDetector
@@ -119,7 +111,7 @@ def train(seed: int, scenes: int, epochs: int, batch: int, threads: int, lr: flo
                            cyclists=cyclists)
         if cache is not None:
             save_samples(cache, samples)
-    heat_all, reg_all, mask_all = make_targets(samples, class_heat)
+    heat_all, reg_all, mask_all = make_targets(samples)
     t_gen = time.perf_counter() - t0
     seen = np.bincount(np.concatenate([s.classes[s.hits >= 1] for s in samples]), minlength=len(CLASSES))
     log(f"generated {scenes} scans in {t_gen:.1f} s "
@@ -216,9 +208,6 @@ def main(argv=None) -> int:
                          "only that)")
     ap.add_argument("--cyclists", type=float, default=CYCLISTS_PER_SCENE, metavar="MEAN",
                     help="mean cyclists tried per scene (the pool holds 6)")
-    ap.add_argument("--class-heat", type=float, default=None, metavar="H",
-                    help="class loss on every cell where an object's target Gaussian is at least H (the peak "
-                         "the decoder reads the class at may sit a cell off the centre; default: centres only)")
     args = ap.parse_args(argv)
     if (message := extras.missing_message("torch", "training the learned detector")) is not None:
         print(message, file=sys.stderr)
@@ -238,15 +227,14 @@ def main(argv=None) -> int:
                           cache=args.cache, device=args.device, widths=tuple(widths),
                           lidars=tuple(args.lidars), lidar_p=None if args.lidar_p is None else tuple(args.lidar_p),
                           lidar_settings=lidar_settings, init=args.init, class_weights=args.class_weights,
-                          cyclists=args.cyclists, logit_offsets=args.class_logit_offsets,
-                          class_heat=args.class_heat)
+                          cyclists=args.cyclists, logit_offsets=args.class_logit_offsets)
     meta = {
         "seed": args.seed, "scenes": args.scenes if args.epochs or args.init is None else 0,
         "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
         "threads": args.threads, "lidars": args.lidars, "lidar_p": args.lidar_p, "threshold": args.threshold,
         "widths": widths, "in_channels": model.in_channels, "cyclists": args.cyclists,
         "class_weights": args.class_weights,
-        "class_logit_offsets": args.class_logit_offsets, "class_heat": args.class_heat,
+        "class_logit_offsets": args.class_logit_offsets,
         "command": "python -m addt_dsl.stack.train " + " ".join(sys.argv[1:] if argv is None else argv),
         "classes": list(CLASSES),
         "grid": {"x_min": GRID.x_min, "y_min": GRID.y_min, "cell_m": GRID.cell_m, "nx": GRID.nx, "ny": GRID.ny},

@@ -153,31 +153,6 @@ def test_class_targets_and_the_class_output():
     assert sorted(CLASSES[int(c)] for c in found[:, 6]) == ["cyclist", "pedestrian"]
 
 
-def test_class_area_labels_the_cells_around_each_centre_with_the_nearest_objects_class():
-    """`class_heat`: the class is a target on every cell where an object's Gaussian is at
-    least that high (the decoder may find the peak a cell off the centre), the nearer
-    object's class where two meet, each centre its own class; without it only centres."""
-    cyc, car = CLASSES.index("cyclist"), CLASSES.index("car")
-    boxes = np.array([[10.0, 0.0, 0.0, 1.8, 0.6], [10.0, 2.4, 0.0, 4.6, 1.9]])
-    heat, reg, mask = encode_targets(boxes, classes=np.array([cyc, car]), class_heat=0.2)
-    assert reg.shape[0] == BOX_CHANNELS + 2
-    area = reg[BOX_CHANNELS + 1] > 0
-    c = GRID.head_cell_m
-    fi = (boxes[:, 0] - GRID.x_min) / c - 0.5
-    fj = (boxes[:, 1] - GRID.y_min) / c - 0.5
-    gi, gj = np.meshgrid(np.arange(GRID.head_shape[0]), np.arange(GRID.head_shape[1]), indexing="ij")
-    d2 = (gi[None] - fi[:, None, None]) ** 2 + (gj[None] - fj[:, None, None]) ** 2  # (objects, hx, hy)
-    g = np.exp(-d2 / (2 * 0.8 ** 2))
-    assert np.array_equal(area, g.max(axis=0) >= 0.2)
-    nearer = np.where(d2[0] < d2[1], cyc, car)
-    assert np.array_equal(reg[BOX_CHANNELS][area], nearer[area])
-    assert area.sum() > 2 * mask.sum()  # more than the centres
-    for (i, j), cls in zip(np.argwhere(mask > 0), (cyc, car)):
-        assert area[i, j] and reg[BOX_CHANNELS, i, j] == cls
-    plain = encode_targets(boxes, classes=np.array([cyc, car]))[1]
-    assert plain.shape[0] == BOX_CHANNELS + 1 and np.array_equal(plain, reg[:BOX_CHANNELS + 1] * (mask > 0))
-
-
 def test_decode_works_on_logits_at_the_border():
     heat = np.full(GRID.head_shape, -9.0, dtype=np.float32)
     reg = np.zeros((6, *GRID.head_shape), dtype=np.float32)

@@ -117,29 +117,3 @@ def test_epochs_0_with_init_only_offsets_the_class_logits(tmp_path):
     assert all(torch.equal(v, start[k]) for k, v in blob["state_dict"].items() if k != "head.box.bias")
     meta = blob["meta"]
     assert meta["class_logit_offsets"] == [0.0, 0.0, 0.5, -1.0] and meta["scenes"] == 0 and meta["epochs"] == 0
-
-
-def test_class_loss_over_the_class_area_when_the_targets_have_one():
-    """With a class-area row (`encode_targets(class_heat=...)`), the class loss is the
-    (weighted) mean cross entropy over those cells, not only at the centres."""
-    from addt_dsl.stack.train import centernet_loss
-
-    torch.manual_seed(1)
-    heat = torch.randn(1, 1, 4, 4)
-    box = torch.randn(1, 10, 4, 4)
-    reg = torch.zeros(1, 8, 4, 4)
-    mask = torch.zeros(1, 4, 4)
-    heat_t = torch.zeros(1, 4, 4)
-    heat_t[0, 1, 1] = mask[0, 1, 1] = 1.0
-    cells = [(1, 1), (1, 2), (2, 1)]
-    for i, j in cells:
-        reg[0, 6, i, j] = 3
-        reg[0, 7, i, j] = 1.0
-    ce = torch.nn.functional.cross_entropy(box[0, 6:, [i for i, _ in cells], [j for _, j in cells]].T,
-                                           torch.tensor([3, 3, 3]), reduction="none")
-    area = centernet_loss(heat, box, heat_t, reg, mask)[1][4]
-    assert abs(area - ce.mean().item()) < 1e-6
-    centre_only = centernet_loss(heat, box, heat_t, reg[:, :7], mask)[1][4]
-    assert abs(centre_only - ce[0].item()) < 1e-6 and abs(centre_only - area) > 1e-3
-    weighted = centernet_loss(heat, box, heat_t, reg, mask, class_weight=torch.tensor([1.0, 1.0, 1.0, 2.0]))[1][4]
-    assert abs(weighted - 2 * ce.mean().item()) < 1e-6
