@@ -8,13 +8,21 @@ Grid (vehicle frame, x forward, y left, origin at the vehicle centre):
   x in [-60.8, 60.8) m, y in [-25.6, 25.6) m, 0.8 m cells → 152 × 64 cells.
   Objects up to about 60 m ahead or behind, and four lanes either side, are in view;
   the lateral extent is narrower because the detector is trained on road scenes.
-Features per cell (6 channels, zero where no point falls):
+Features per cell (8 channels, zero where no point falls):
   0 occupancy      min(count, 4) / 4
   1 mean dx        mean offset of the points from the cell centre, in cells ([-0.5, 0.5))
   2 mean dy        (sub-cell position: the grid is coarse, the points are not)
   3 max z          highest point above the ground [m] / 2
   4 ray cos        mean direction from the sensor to the points (where the sensor is:
   5 ray sin        a CNN is translation-equivariant and would not know it otherwise)
+  6 range          mean horizontal distance from the sensor to the points [m] / 60
+  7 count          log2(1 + count) / 5, not saturated at 4
+The last two say how far the points are and how many there are: with them a height
+tells which beam it came from (so whether the next beam passed over the object) and a
+count of returns tells a width (the rays are 1° apart). A cyclist seen end on and a
+pedestrian, or a crossing cyclist's side and a car's rear, differ mainly in those
+(docs/stack.md, Evaluation). Weights trained on the first six channels still run:
+the detector reads the channels its first layer has (`learned.load_model`).
 """
 
 from __future__ import annotations
@@ -29,7 +37,9 @@ from addt_dsl.specs.stacks import (CAMERA_BEV_SITES, CAMERA_BEV_TENSOR_SITES, DE
                                    DETECTOR_RIG, ENCODER_SITES, LAYER_SITES, TENSOR_SITES, DetectorLidar,
                                    DetectorRig)
 
-CHANNELS = 6
+CHANNELS = 8
+RANGE_SCALE_M = 60.0  # channel 6: range / this
+COUNT_LOG2_SCALE = 5.0  # channel 7: log2(1 + count) / this
 OUTPUT_STRIDE = 2  # detector head cells are OUTPUT_STRIDE × cell = 1.6 m
 # The box axis, not the heading, is regressed, as (sin 2θ, cos 2θ): a lidar box looks the
 # same from either end, and regressing the heading spent the network on an unlearnable
@@ -76,7 +86,7 @@ GRID = GridSpec()
 
 def build_grid(points_vehicle: np.ndarray, sensor_xy: tuple[float, float], spec: GridSpec = GRID,
                out: np.ndarray | None = None) -> np.ndarray:
-    """Scatter vehicle-frame points (N×3, z up from the ground) into a (6, nx, ny) float32 grid.
+    """Scatter vehicle-frame points (N×3, z up from the ground) into a (CHANNELS, nx, ny) float32 grid.
 
     `sensor_xy` is where the stack believes the sensor is (nominal extrinsics) [m];
     `out`, if given, is overwritten in place (saves an allocation per frame).
@@ -130,6 +140,8 @@ def build_grid_region(points_vehicle: np.ndarray, sensor_xy: tuple[float, float]
     views[3, cells] = pz[order][last] / 2.0
     views[4, cells] = np.bincount(inv, rx / rnorm, m) / n
     views[5, cells] = np.bincount(inv, ry / rnorm, m) / n
+    views[6, cells] = np.bincount(inv, rnorm, m) / n / RANGE_SCALE_M
+    views[7, cells] = np.log2(1.0 + n) / COUNT_LOG2_SCALE
     # `cells` is sorted: its first and last give the rows (flat = row * ny + column).
     return grid, (int(cells[0]) // spec.ny, int(cells[-1]) // spec.ny + 1, int(iy.min()), int(iy.max()) + 1)
 

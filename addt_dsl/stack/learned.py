@@ -1,14 +1,14 @@
 """Learned perception: a small CenterNet-style CNN over a lidar BEV grid (torch).
 
 Points (sensor frame) are mapped to the vehicle frame with the *nominal* extrinsics and
-scattered into the 6×152×64 grid of `bev_grid` (0.8 m cells, ±60.8 m × ±25.6 m). The
+scattered into the 8×152×64 grid of `bev_grid` (0.8 m cells, ±60.8 m × ±25.6 m). The
 network is strided from the first layer (PERFORMANCE.md: a stride-1 first layer costs
 ~10×), goes down to 1/8 resolution for context (a truck's centre is 6 m from the rear
 face the lidar sees) and back up to a 76×32 head grid of 1.6 m cells (fine enough that
 cars in adjacent lanes are separate peaks). Per head cell it predicts an object-centre
 heatmap, a sub-cell offset, log length, log width and the box axis as (sin 2θ, cos 2θ):
 
-    backbone.conv0     conv 3×3 s2   6→32   76×32  ─────────────────────┐
+    backbone.conv0     conv 3×3 s2   8→32   76×32  ─────────────────────┐
     backbone.conv1     conv 3×3 s2  32→48   38×16  ──────────┐          │
     backbone.conv2     conv 3×3 s2  48→64   19×8             │          │
     backbone.conv3     conv 3×3     64→64   19×8             │          │
@@ -41,8 +41,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from addt_dsl.lru import LruCache
-from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CLASSES, GRID, LAYER_SITES, build_grid_region, decode,
-                                     sensor_points_to_vehicle)
+from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CHANNELS, CLASSES, GRID, LAYER_SITES, build_grid_region,
+                                     decode, sensor_points_to_vehicle)
 from addt_dsl.stack.nodes import Obj, vehicle_to_world
 from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
 
@@ -55,11 +55,12 @@ class BevDetector(nn.Module):
 
     sites = LAYER_SITES  # the named layers `layers()` returns, in this order
 
-    def __init__(self, widths: tuple[int, int, int] = (32, 48, 64), in_channels: int = 6,
+    def __init__(self, widths: tuple[int, int, int] = (32, 48, 64), in_channels: int = CHANNELS,
                  classes: int = len(CLASSES)):
         """`classes`: class logits after the box channels of `head.box` (0: no class output,
         as weights trained before it)."""
         super().__init__()
+        self.in_channels = in_channels  # the first grid channels it reads (weights before range/count: 6)
         c1, c2, c3 = widths
         # Named convN, not 0..3: fault targets are dotted names in the DSL (`perception.backbone.conv0`).
         self.backbone = nn.ModuleDict({
@@ -90,6 +91,21 @@ class BevDetector(nn.Module):
     def layers(self) -> dict[str, nn.Conv2d]:
         named = dict(self.named_modules())
         return {name: named[name] for name in self.sites}
+
+    def widen_input(self, channels: int = CHANNELS) -> None:
+        """Read `channels` grid channels instead of fewer, computing the same function: the
+        first layer's kernel gets zero weights for the new channels (a fine-tune from weights
+        trained before the grid had them then learns what they add)."""
+        old = self.backbone["conv0"]
+        if old.in_channels >= channels:
+            return
+        new = nn.Conv2d(channels, old.out_channels, old.kernel_size, old.stride, old.padding).to(old.weight.device)
+        with torch.no_grad():
+            new.weight.zero_()
+            new.weight[:, :old.in_channels] = old.weight
+            new.bias.copy_(old.bias)
+        self.backbone["conv0"] = new
+        self.in_channels = channels
 
 
 def boxes_to_world(boxes: np.ndarray, ego_pose, corrupt) -> list[Obj]:
@@ -125,7 +141,8 @@ def load_weights(path: Path = WEIGHTS_PATH) -> tuple[dict, dict]:
 def load_model(path: Path = WEIGHTS_PATH, device: str = "cpu") -> tuple[BevDetector, dict]:
     """A fresh detector with the shipped weights: weight faults in one run touch only its copy."""
     state, meta = load_weights(path)
-    model = BevDetector(tuple(meta["widths"]), classes=len(meta.get("classes", ())))
+    model = BevDetector(tuple(meta["widths"]), in_channels=state["backbone.conv0.weight"].shape[1],
+                        classes=len(meta.get("classes", ())))
     model.load_state_dict(state)
     return model.to(device).eval(), meta
 
@@ -342,7 +359,8 @@ class RegionForward:
         self._geometry = {n: (m.kernel_size[0], m.stride[0], m.padding[0], m.weight, m.bias)
                           for n, m in self.layers.items()}
         weight = self.layers["backbone.conv0"].weight
-        bg: dict[str, torch.Tensor] = {"grid": torch.zeros((1, *GRID.shape), dtype=weight.dtype, device=weight.device)}
+        bg: dict[str, torch.Tensor] = {"grid": torch.zeros((1, weight.shape[1], GRID.nx, GRID.ny), dtype=weight.dtype,
+                                                           device=weight.device)}
         changed: set[str] = set()  # maps that differ bit for bit from the last rebuild's
         for name, op, inputs in self._GRAPH:
             if name in last and not changed.intersection(inputs) and \
@@ -584,7 +602,8 @@ class LearnedPerception(ConvTensorSites):
         self._logit_threshold = math.log(self.threshold / (1.0 - self.threshold))
         self._grid = np.zeros(GRID.shape, dtype=np.float32)
         self._grid_region: tuple[int, int, int, int] | None = None  # None: clear the whole grid
-        self._input = torch.from_numpy(self._grid)[None]  # shares memory with the grid buffer
+        # Shares memory with the grid buffer; the channels the weights read (a leading slice: contiguous).
+        self._input = torch.from_numpy(self._grid)[None, :self.model.in_channels]
         # On another device, one input tensor kept there (RegionForward's views of it stay valid).
         self._device_input = self._input if device == "cpu" else torch.empty_like(self._input, device=device)
         self._layers = self.model.layers()
@@ -639,7 +658,7 @@ _SHAPES: LruCache[tuple, dict[str, tuple[int, ...]]] = LruCache(SHAPES_CACHE_SIZ
 
 def _activation_shapes(model: BevDetector, device: str) -> dict[str, tuple[int, ...]]:
     """Output shape of every named layer at batch 1 (one dry run, cached per device and widths)."""
-    key = (device, tuple(layer.out_channels for layer in model.layers().values()))
+    key = (device, model.in_channels, tuple(layer.out_channels for layer in model.layers().values()))
     shapes = _SHAPES.get(key)
     if shapes is None:
         shapes = {}
@@ -647,7 +666,7 @@ def _activation_shapes(model: BevDetector, device: str) -> dict[str, tuple[int, 
             lambda m, i, o, name=name: shapes.__setitem__(name, tuple(o.shape)))
             for name, layer in model.layers().items()]
         with torch.inference_mode():
-            model(torch.zeros((1, *GRID.shape), device=device))
+            model(torch.zeros((1, model.in_channels, GRID.nx, GRID.ny), device=device))
         for h in hooks:
             h.remove()
         _SHAPES.put(key, shapes)

@@ -137,6 +137,7 @@ def _initial_model(init: Path, device: str):
     from addt_dsl.stack.learned import load_model
 
     model, _ = load_model(init)
+    model.widen_input()  # weights from before the grid's range and count channels: zero weights for them
     return model.to(device)
 
 
@@ -231,7 +232,8 @@ def main(argv=None) -> int:
         "seed": args.seed, "scenes": args.scenes if args.epochs or args.init is None else 0,
         "epochs": args.epochs, "batch": args.batch, "lr": args.lr,
         "threads": args.threads, "lidars": args.lidars, "lidar_p": args.lidar_p, "threshold": args.threshold,
-        "widths": widths, "cyclists": args.cyclists, "class_weights": args.class_weights,
+        "widths": widths, "in_channels": model.in_channels, "cyclists": args.cyclists,
+        "class_weights": args.class_weights,
         "class_logit_offsets": args.class_logit_offsets,
         "command": "python -m addt_dsl.stack.train " + " ".join(sys.argv[1:] if argv is None else argv),
         "classes": list(CLASSES),

@@ -24,9 +24,30 @@ def test_single_point_lands_in_its_cell_with_subcell_features():
     assert math.isclose(cell[2], -0.25, abs_tol=1e-5)
     assert math.isclose(cell[3], 0.6, abs_tol=1e-6)  # max z / 2
     d = np.array([10.1 - 1.0, -3.0])
-    d /= np.linalg.norm(d)
-    assert np.allclose(cell[4:], d, atol=1e-6)
+    r = np.linalg.norm(d)
+    assert np.allclose(cell[4:6], d / r, atol=1e-6)
+    assert math.isclose(cell[6], r / 60.0, rel_tol=1e-6)  # range from the sensor [m] / 60
+    assert math.isclose(cell[7], 1.0 / 5.0, rel_tol=1e-6)  # log2(1 + 1) / 5
     assert np.count_nonzero(grid) == CHANNELS  # nothing else set
+
+
+def test_range_and_count_channels_say_how_far_and_how_many():
+    """Ten returns in one cell: occupancy saturates at 4, the count channel does not, and
+    the range channel is their mean horizontal distance from the sensor (what tells a
+    height's beam and a count's width: a cyclist end on from a pedestrian)."""
+    sensor = (1.0, 0.5)
+    pts = np.column_stack([np.linspace(20.05, 20.7, 10), np.full(10, 3.3), np.linspace(0.5, 1.6, 10)])
+    grid = build_grid(pts, sensor)
+    (i, j), = np.argwhere(grid[0] > 0).tolist()
+    cell = grid[:, i, j]
+    assert cell[0] == 1.0
+    assert math.isclose(cell[7], math.log2(11.0) / 5.0, rel_tol=1e-6)
+    r = np.hypot(pts[:, 0] - sensor[0], pts[:, 1] - sensor[1]).mean()
+    assert math.isclose(cell[6], r / 60.0, rel_tol=1e-6)
+    # The same returns 20 m further on: a longer range, the same count.
+    far = build_grid(pts + [20.0, 0.0, 0.0], sensor)
+    (i2, j2), = np.argwhere(far[0] > 0).tolist()
+    assert far[7, i2, j2] == cell[7] and far[6, i2, j2] > cell[6] + 19.0 / 60.0
 
 
 def test_points_outside_the_grid_are_dropped_and_empty_input_is_empty():
@@ -184,6 +205,8 @@ def _reference_grid(points, sensor_xy):
         dirs = [((x - sensor_xy[0]), (y - sensor_xy[1])) for x, y, _ in pts]
         grid[4, i, j] = sum(dx / max(math.hypot(dx, dy), 1e-6) for dx, dy in dirs) / n
         grid[5, i, j] = sum(dy / max(math.hypot(dx, dy), 1e-6) for dx, dy in dirs) / n
+        grid[6, i, j] = sum(max(math.hypot(dx, dy), 1e-6) for dx, dy in dirs) / n / 60.0
+        grid[7, i, j] = math.log2(1 + n) / 5
     return grid
 
 

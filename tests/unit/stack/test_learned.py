@@ -97,7 +97,8 @@ def test_finds_and_classes_road_users_on_held_out_scans():
     assert car[0] > 0.85 and car[1] > 0.95
     assert pedestrian[0] > 0.6 and pedestrian[1] > 0.5
     assert cyclist[0] > 0.4
-    # Cyclists classed right: 8 of 17 here (3 of 16 before the cyclist fine-tune).
+    # Cyclists classed right: 9 of 17 here (8 before the range and count channels, 3 of 16 before the cyclist
+    # fine-tune).
     assert cyclist[1] > 0.35
 
 
@@ -187,7 +188,7 @@ def test_region_forward_matches_the_dense_network(clusters, seed):
     pts = [np.column_stack([x + rng.normal(0, 1.5, n), y + rng.normal(0, 1.5, n), rng.uniform(0, 3, n)])
            for x, y, n in clusters]
     grid = build_grid(np.concatenate(pts) if pts else np.zeros((0, 3)), (1.0, 0.0))
-    x = torch.from_numpy(grid)[None]
+    x = torch.from_numpy(grid)[None, :node.model.in_channels]  # the channels the weights read
     with torch.inference_mode():
         dense = node.model(x)
         sparse = node._forward(x, _region_of(grid))
@@ -251,3 +252,48 @@ def test_inference_runs_on_one_thread_without_changing_the_process_setting(scans
         assert seen == [1] and torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(previous)
+
+
+def test_weights_from_before_the_range_and_count_channels_run_and_widen_exactly(scans, tmp_path):
+    """A 6-channel weights file (trained before the grid had range and count) reads the
+    grid's first six channels; `widen_input` (what a fine-tune from it does) gives the
+    same outputs with zero weights on the new channels, and then the new channels count."""
+    from addt_dsl.stack.bev_grid import CHANNELS, GRID, build_grid
+
+    torch.manual_seed(0)
+    old = BevDetector((8, 12, 16), in_channels=6).eval()
+    path = tmp_path / "six.pt"
+    torch.save({"state_dict": old.state_dict(), "meta": {"widths": [8, 12, 16], "classes": list(CLASSES),
+                                                          "threshold": 1e-3}}, path)
+    s = scans["two"]
+    grid = torch.from_numpy(build_grid(s.points, s.sensor_xy))[None]
+    assert grid.shape[1] == CHANNELS == 8 and grid[0, 6:].abs().sum() > 0
+    node = LearnedPerception({}, weights=path)
+    assert node.model.in_channels == 6
+    with torch.inference_mode():
+        heat, box = old(grid[:, :6])
+    found = node.detect(s.points, s.sensor_xy)
+    assert len(found) > 0  # threshold 0.001: nearly every peak
+    i = np.floor((found[:, 0] - GRID.x_min) / GRID.head_cell_m).astype(int)
+    j = np.floor((found[:, 1] - GRID.y_min) / GRID.head_cell_m).astype(int)
+    expected = torch.sigmoid(heat[0, 0, i, j]).numpy()
+    assert np.allclose(found[:, 5], expected, atol=1e-5)
+
+    wide = BevDetector((8, 12, 16), in_channels=6).eval()
+    wide.load_state_dict(old.state_dict())
+    wide.widen_input()
+    assert wide.in_channels == CHANNELS and wide.backbone["conv0"].weight.shape[1] == CHANNELS
+    with torch.inference_mode():
+        assert all(torch.equal(a, b) for a, b in zip(wide(grid), (heat, box)))
+        with torch.no_grad():
+            wide.backbone["conv0"].weight[:, 6:] = 0.1
+        assert not torch.equal(wide(grid)[0], heat)
+
+
+def test_shipped_weights_read_the_range_and_count_channels():
+    """The shipped detector was fine-tuned with the grid's range and count channels, and uses them."""
+    from addt_dsl.stack.bev_grid import CHANNELS
+
+    node = LearnedPerception({})
+    assert node.meta["in_channels"] == CHANNELS == node.model.in_channels
+    assert node.model.backbone["conv0"].weight[:, 6:].abs().max() > 1e-3
