@@ -206,7 +206,8 @@ def part_dispatch(runs: int) -> dict:
     out["start_2_workers_ms"] = 1e3 * min(starts)
     short = shared[:16]
     out["short_runs"] = len(short)
-    executors = {"inline": lambda: InlineExecutor(), "jobs1": lambda: LocalExecutor(1), "jobs2": lambda: LocalExecutor(2)}
+    executors = {"inline": lambda: InlineExecutor(), "jobs1": lambda: LocalExecutor(1),
+                 "jobs2": lambda: LocalExecutor(2)}
     for name, make in executors.items():
         out[f"short_{name}_s"] = wall(make(), short)
     out["load"] = [round(x, 2) for x in os.getloadavg()]
@@ -217,9 +218,9 @@ def _print_dispatch(d: dict) -> None:
     print(f"Dispatch: per-run cost of the local executor [ms] beside the run (no-op runs, {d['runs']} a "
           "measurement, best of 3, minus inline)")
     for label, what in (("one_plan", "runs of one plan (a sweep)"), ("own_plans", "each its own plan (a search)")):
-        print(f"  {what}: inline {d[f'{label}_inline_ms']:.2f} ms/run itself; local executor +"
-              f"{d[f'{label}_jobs1_batch1_ms']:.2f} ms/run on 1 worker, +{d[f'{label}_jobs2_batch1_ms']:.2f} on 2, "
-              f"+{d[f'{label}_jobs2_batch8_ms']:.2f} on 2 at batch 8")
+        print(f"  {what}: inline {d[f'{label}_inline_ms']:.2f} ms/run itself; local executor "
+              f"{d[f'{label}_jobs1_batch1_ms']:+.2f} ms/run on 1 worker, {d[f'{label}_jobs2_batch1_ms']:+.2f} on 2, "
+              f"{d[f'{label}_jobs2_batch8_ms']:+.2f} on 2 at batch 8")
     print(f"  starting 2 workers (forkserver running) and 2 no-op runs: {d['start_2_workers_ms']:.0f} ms")
     print(f"  {d['short_runs']} short closed-loop runs (3 s simulated): inline {d['short_inline_s']:.2f} s, "
           f"1 worker {d['short_jobs1_s']:.2f} s, 2 workers {d['short_jobs2_s']:.2f} s "
