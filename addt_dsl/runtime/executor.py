@@ -9,8 +9,8 @@ Executors yield `RunResult`s in completion order; a record is fully determined b
 RunSpec, so the store's contents do not depend on the executor, the worker count or the
 order. Three executors:
 
-- `LocalExecutor` (default): long-lived worker processes, each fed one run at a time over
-  its own pipe. The coordinator watches every busy worker: a run past its timeout is
+- `LocalExecutor` (default): long-lived worker processes, each fed a batch of runs at a
+  time over its own pipe (one message: the runs and the plans the worker lacks). The coordinator watches every busy worker: a run past its timeout is
   killed and recorded as `timeout`; a worker whose resident memory passes the limit is
   killed and its run recorded as `memory`; a worker that dies (segfault, OOM killer) has
   its run recorded as `crashed`. The worker is replaced and the sweep goes on. Workers are
