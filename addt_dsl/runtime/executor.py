@@ -10,10 +10,11 @@ RunSpec, so the store's contents do not depend on the executor, the worker count
 order. Three executors:
 
 - `LocalExecutor` (default): long-lived worker processes, each fed a batch of runs at a
-  time over its own pipe (one message: the runs and the plans the worker lacks). The coordinator watches every busy worker: a run past its timeout is
-  killed and recorded as `timeout`; a worker whose resident memory passes the limit is
-  killed and its run recorded as `memory`; a worker that dies (segfault, OOM killer) has
-  its run recorded as `crashed`. The worker is replaced and the sweep goes on. Workers are
+  time over its own pipe (one message: the runs and the plans the worker lacks). The
+  coordinator watches every busy worker: a run past its timeout is killed and recorded as
+  `timeout`; a worker whose resident memory passes the limit is killed and its run
+  recorded as `memory`; a worker that dies (segfault, OOM killer) has its run recorded as
+  `crashed`. The worker is replaced and the sweep goes on. Workers are
   also recycled after `max_tasks_per_child` runs, like `multiprocessing.Pool`'s
   `maxtasksperchild`, to bound slow leaks.
 - `InlineExecutor`: in this process, one batch after another (`batch=1`: one run after
