@@ -9,10 +9,16 @@
    10,000-run sweep of a trivial scenario (0.1 s, no agents, no sensors), sampled every
    1,000 runs, and its peak. Flat means the coordinator keeps nothing per run beyond the
    store: RunSpecs are streamed and share one plan, results go to SQLite.
+3. Dispatch (`--dispatch-only` for this part alone): the local executor's cost per run
+   beside the run, from no-op runs (a run function that returns a record at once) on 1 and
+   2 warm workers, at batch 1 and 8, minus the same runs in this process (inline); runs
+   sharing one plan (a sweep) and each with its own (a search's candidates); the start of 2
+   workers; then 16 short closed-loop runs inline, on 1 and on 2 workers (the session's CPU
+   share decides whether 2 workers are faster: the load average is printed beside).
 
 Each part runs in a fresh interpreter so one part's peak does not hide the other's.
 
-Run: PYTHONPATH=. python benchmarks/bench_runner.py [--runs 200] [--memory-runs 10000]
+Run: PYTHONPATH=. python benchmarks/bench_runner.py [--runs 200] [--memory-runs 10000] [--dispatch-only]
 """
 
 from __future__ import annotations
@@ -156,6 +162,71 @@ def part_memory(runs: int, jobs: int) -> dict:
     return {"runs": stored, "wall_s": wall, "samples": samples, "peak_rss_mb": peak, "eager_list_mb": list_mb}
 
 
+def _noop_run(spec, seq: int = -1, worker: str = ""):
+    """A run that does nothing: what is left of its wall time is the executor's."""
+    from addt_dsl.runtime.result import RunResult
+
+    return RunResult.unfinished(spec, "ok", "", 0.0, seq=seq, worker=worker)
+
+
+def part_dispatch(runs: int) -> dict:
+    from addt_dsl.runtime.executor import InlineExecutor, LocalExecutor
+
+    plan = _plan(SHORT, max(1, runs // 2))
+    from addt_dsl.sweep import expand
+
+    shared = expand(plan).specs[:runs]
+    # A search's candidates: each its own plan object (sent to a worker with its run).
+    own = [s.model_copy(update={"plan": plan.model_copy(deep=True)}) for s in shared]
+
+    def wall(executor, specs) -> float:
+        t0 = time.perf_counter()
+        records = list(executor.imap(enumerate(specs)))
+        assert len(records) == len(specs) and all(r.status == "ok" for r in records)
+        return time.perf_counter() - t0
+
+    out: dict = {"runs": len(shared)}
+    for label, specs in (("one_plan", shared), ("own_plans", own)):
+        inline = InlineExecutor(_noop_run, timeout_s=None, memory_limit_mb=None)
+        wall(inline, specs[:4])
+        base = min(wall(inline, specs) for _ in range(3))
+        out[f"{label}_inline_ms"] = 1e3 * base / len(specs)
+        for jobs, batch in ((1, 1), (2, 1), (2, 8)):
+            executor = LocalExecutor(jobs, run_fn=_noop_run, keep_workers=True, batch=batch)
+            try:
+                wall(executor, specs[:2 * jobs])  # workers started: not timed
+                t = min(wall(executor, specs) for _ in range(3))
+            finally:
+                executor.close()
+            out[f"{label}_jobs{jobs}_batch{batch}_ms"] = 1e3 * (t - base) / len(specs)
+    starts = []
+    for _ in range(3):
+        executor = LocalExecutor(2, run_fn=_noop_run)
+        starts.append(wall(executor, shared[:2]))
+    out["start_2_workers_ms"] = 1e3 * min(starts)
+    short = shared[:16]
+    out["short_runs"] = len(short)
+    executors = {"inline": lambda: InlineExecutor(), "jobs1": lambda: LocalExecutor(1),
+                 "jobs2": lambda: LocalExecutor(2)}
+    for name, make in executors.items():
+        out[f"short_{name}_s"] = wall(make(), short)
+    out["load"] = [round(x, 2) for x in os.getloadavg()]
+    return out
+
+
+def _print_dispatch(d: dict) -> None:
+    print(f"Dispatch: per-run cost of the local executor [ms] beside the run (no-op runs, {d['runs']} a "
+          "measurement, best of 3, minus inline)")
+    for label, what in (("one_plan", "runs of one plan (a sweep)"), ("own_plans", "each its own plan (a search)")):
+        print(f"  {what}: inline {d[f'{label}_inline_ms']:.2f} ms/run itself; local executor "
+              f"{d[f'{label}_jobs1_batch1_ms']:+.2f} ms/run on 1 worker, {d[f'{label}_jobs2_batch1_ms']:+.2f} on 2, "
+              f"{d[f'{label}_jobs2_batch8_ms']:+.2f} on 2 at batch 8")
+    print(f"  starting 2 workers (forkserver running) and 2 no-op runs: {d['start_2_workers_ms']:.0f} ms")
+    print(f"  {d['short_runs']} short closed-loop runs (3 s simulated): inline {d['short_inline_s']:.2f} s, "
+          f"1 worker {d['short_jobs1_s']:.2f} s, 2 workers {d['short_jobs2_s']:.2f} s "
+          f"(load average {', '.join(f'{x:.1f}' for x in d['load'])})")
+
+
 def _in_subprocess(part: str, runs: int, jobs: int, executor: str = "local") -> dict:
     out = subprocess.run([sys.executable, __file__, "--part", part, "--runs", str(runs), "--jobs", str(jobs),
                           "--executor", executor], capture_output=True, text=True, check=True)
@@ -167,7 +238,9 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=200)
     parser.add_argument("--memory-runs", type=int, default=10_000)
     parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--part", choices=("throughput", "memory"))
+    parser.add_argument("--part", choices=("throughput", "memory", "dispatch"))
+    parser.add_argument("--dispatch-runs", type=int, default=200)
+    parser.add_argument("--dispatch-only", action="store_true", help="only the dispatch part")
     parser.add_argument("--executor", choices=("local", "ray"), default="local")
     parser.add_argument("--no-ray", action="store_true", help="skip the Ray comparison")
     parser.add_argument("--json", help="also write the figures here")
@@ -177,6 +250,15 @@ def main() -> None:
         return
     if args.part == "memory":
         print(json.dumps(part_memory(args.runs, args.jobs)))
+        return
+    if args.part == "dispatch":
+        print(json.dumps(part_dispatch(args.runs)))
+        return
+    if args.dispatch_only:
+        print(f"load average before: {', '.join(f'{x:.1f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs")
+        d = _in_subprocess("dispatch", args.dispatch_runs, 2)
+        _print_dispatch(d)
+        figures_json.write(args.json, {"dispatch": d})
         return
 
     print(f"load average before: {', '.join(f'{x:.1f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs "
@@ -216,7 +298,10 @@ def main() -> None:
     print(f"  growth from 1,000 to {m['samples'][-1][0]:,} runs: {last - first:+.1f} MB; "
           f"peak RSS {m['peak_rss_mb']:.1f} MB")
     print(f"  (for contrast, the same {m['runs']} RunSpecs held as a list: {m['eager_list_mb']:.1f} MB)")
+    d = _in_subprocess("dispatch", args.dispatch_runs, 2)
+    _print_dispatch(d)
     figures_json.write(args.json, {
+        "dispatch": d,
         "throughput": {str(j): r for j, r in results.items()},
         "scaling_2_vs_1": results[2]["runs_per_min"] / results[1]["runs_per_min"],
         "ray": ray_figures,

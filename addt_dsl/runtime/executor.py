@@ -9,11 +9,12 @@ Executors yield `RunResult`s in completion order; a record is fully determined b
 RunSpec, so the store's contents do not depend on the executor, the worker count or the
 order. Three executors:
 
-- `LocalExecutor` (default): long-lived worker processes, each fed one run at a time over
-  its own pipe. The coordinator watches every busy worker: a run past its timeout is
-  killed and recorded as `timeout`; a worker whose resident memory passes the limit is
-  killed and its run recorded as `memory`; a worker that dies (segfault, OOM killer) has
-  its run recorded as `crashed`. The worker is replaced and the sweep goes on. Workers are
+- `LocalExecutor` (default): long-lived worker processes, each fed a batch of runs at a
+  time over its own pipe (one message: the runs and the plans the worker lacks). The
+  coordinator watches every busy worker: a run past its timeout is killed and recorded as
+  `timeout`; a worker whose resident memory passes the limit is killed and its run
+  recorded as `memory`; a worker that dies (segfault, OOM killer) has its run recorded as
+  `crashed`. The worker is replaced and the sweep goes on. Workers are
   also recycled after `max_tasks_per_child` runs, like `multiprocessing.Pool`'s
   `maxtasksperchild`, to bound slow leaks.
 - `InlineExecutor`: in this process, one batch after another (`batch=1`: one run after
@@ -47,6 +48,13 @@ from addt_dsl.runtime.store import ResultStore, trace_stats
 DEFAULT_MEMORY_LIMIT_MB = 4096
 DEFAULT_MAX_TASKS_PER_CHILD = 500
 DEFAULT_RETRIES = 2
+# Plans a worker (and the coordinator, to hand them on) keeps between runs. A sweep has one
+# plan; each candidate of a search has its own (~50 kB in memory), so an unbounded registry
+# grew with every candidate in the coordinator and in each kept worker.
+PLANS_KEPT = 64
+# Modules the forkserver imports once for every worker beside the executor's: what a run
+# imports at its first use (the default stack: ~35 ms a worker otherwise).
+WORKER_PRELOAD = ("addt_dsl.runtime.executor", "addt_dsl.stack.bev")
 _GUARD_POLL_S = 0.2  # how often busy workers are checked against timeout and memory limit
 
 # The default time bound of a run (`timeout_s="auto"`): its simulated duration over a
@@ -79,10 +87,12 @@ def default_batch(n_runs: int, workers: int) -> int:
 
 
 def batch_size(n_runs: int, workers: int) -> int:
-    """The batch size for `n_runs` runs handed at once (a search's generation): on one
-    worker (in this process) all of them, up to BATCH_MAX (no other worker to balance
-    against); on several, `default_batch`."""
-    return max(1, min(BATCH_MAX, n_runs)) if workers <= 1 else default_batch(n_runs, workers)
+    """The batch size for `n_runs` runs handed at once and awaited together (a search's
+    generation, a shrink's candidates): an even share per worker, up to BATCH_MAX. Unlike a
+    sweep's stream there is no tail to balance beyond the call (the call ends when its last
+    run does), and runs of one call are alike (candidates of one scenario); batches of one
+    (`default_batch` of 8 runs on 2 workers) gave up the batch engine's gain for nothing."""
+    return max(1, min(BATCH_MAX, -(-n_runs // max(1, workers))))
 
 
 def run_time_bound_s(spec: RunSpec, timeout_s: float | str | None = AUTO) -> float | None:
@@ -366,12 +376,15 @@ def _worker_main(conn, memory_limit_mb: float | None, run_fn=None) -> None:
             msg = conn.recv()
         except (EOFError, OSError):
             return
-        if msg[0] == "plan":
-            plans[msg[1]] = msg[2]
-            continue
-        # ("run", [(seq, plan token, spec fields), ...]): a batch, stepped together.
-        specs = [RunSpec.model_construct(plan=plans[token], **fields) for _, token, fields in msg[1]]
-        seqs = [seq for seq, _, _ in msg[1]]
+        # ("run", [(seq, plan token, spec fields), ...], {token: plan} new to this worker,
+        # [tokens to forget]): a batch, stepped together, in one message. The coordinator
+        # decides what this worker keeps (`_Worker.plans` mirrors `plans`).
+        _, runs, new_plans, forget = msg
+        plans.update(new_plans)
+        for token in forget:
+            plans.pop(token, None)
+        specs = [RunSpec.model_construct(plan=plans[token], **fields) for _, token, fields in runs]
+        seqs = [seq for seq, _, _ in runs]
         try:
             records = _run_fn_batch(run_fn)(specs, seqs, worker=name)
         except Exception as exc:  # noqa: BLE001 - run_spec catches its own; this guards a custom run_fn
@@ -396,7 +409,7 @@ def _worker_main(conn, memory_limit_mb: float | None, run_fn=None) -> None:
 class _Worker:
     process: object
     conn: object
-    plans: set = field(default_factory=set)
+    plans: dict = field(default_factory=dict)  # plan tokens the worker holds, least recently used first
     tasks: int = 0
     job: tuple | None = None  # ([(seq, spec), ...], started_at, time bound [s])
     server: int | None = None  # pid of the forkserver it was forked from (its parent)
@@ -506,17 +519,28 @@ class LocalExecutor:
             start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
         self.start_method = start_method
         self.run_fn = run_fn
-        self._plans: dict[int, tuple[int, object]] = {}  # id(plan) -> (token, plan)
+        # id(plan) -> (token, plan), least recently used first, at most PLANS_KEPT: the plan is
+        # held so its id is not reused while registered; tokens are never reused.
+        self._plans: dict[int, tuple[int, object]] = {}
+        self._tokens = itertools.count()
 
     def _context(self):
         ctx = mp.get_context(self.start_method)
         if self.start_method == "forkserver":
             # The server imports the runtime (and the module of a custom run_fn, e.g. the
-            # search's judge) once; every worker forks from it with both loaded.
-            preload = ["addt_dsl.runtime.executor"]
+            # search's judge) once; every worker forks from it with both loaded. Each worker
+            # also runs the caller's main module again (multiprocessing's `prepare`; Python
+            # 3.11's forkserver never preloads `__main__`: it asks for a key spawn does not
+            # give), so the addt_dsl modules this process has are preloaded too: with `addtc`
+            # as main a worker otherwise imported the CLI, the compiler and the search
+            # itself (~300 ms a worker start on the shared 2 cores).
+            preload = list(WORKER_PRELOAD)
             if self.run_fn is not None:
                 preload.append(type(self.run_fn).__module__ if not hasattr(self.run_fn, "__code__")
                                else self.run_fn.__module__)
+            preload += sorted(name for name, module in list(sys.modules.items())
+                              if name.startswith("addt_dsl.") and name not in preload
+                              and getattr(module, "__file__", None))
             ctx.set_forkserver_preload(preload)
         return ctx
 
@@ -546,20 +570,35 @@ class LocalExecutor:
         (it died while idle: its pipe is broken), so the caller replaces it."""
         if not w.process.is_alive():
             return False
-        runs = []
+        runs, new_plans = [], {}
+        for seq, spec in batch:
+            token = self._plan_token(spec.plan)
+            if token in w.plans:
+                w.plans[token] = w.plans.pop(token)  # most recently used
+            else:
+                w.plans[token] = new_plans[token] = spec.plan
+            runs.append((seq, token, spec_fields(spec)))
+        used = {token for _, token, _ in runs}
+        forget = [t for t in w.plans if t not in used][:max(0, len(w.plans) - PLANS_KEPT)]
+        for token in forget:
+            del w.plans[token]
         try:
-            for seq, spec in batch:
-                token, _ = self._plans.setdefault(id(spec.plan), (len(self._plans), spec.plan))
-                if token not in w.plans:
-                    w.conn.send(("plan", token, spec.plan))
-                    w.plans.add(token)
-                runs.append((seq, token, spec_fields(spec)))
-            w.conn.send(("run", runs))
+            w.conn.send(("run", runs, new_plans, forget))
         except (BrokenPipeError, ConnectionResetError, EOFError, OSError):
             return False
         bounds = [run_time_bound_s(spec, self.timeout_s) for _, spec in batch]
         w.job = (batch, time.monotonic(), None if None in bounds else sum(bounds))
         return True
+
+    def _plan_token(self, plan) -> int:
+        """The token `plan` goes under to the workers (a new one for a plan not registered)."""
+        entry = self._plans.pop(id(plan), None)
+        if entry is None or entry[1] is not plan:
+            entry = (next(self._tokens), plan)
+        self._plans[id(plan)] = entry
+        while len(self._plans) > PLANS_KEPT:
+            del self._plans[next(iter(self._plans))]
+        return entry[0]
 
     @staticmethod
     def _stop(w: _Worker, kill: bool = False) -> None:

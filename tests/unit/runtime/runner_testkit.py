@@ -87,3 +87,10 @@ def fake_record(spec, seq: int = -1, worker: str = "") -> RunResult:
     record.verdicts = [Verdict("moving", "hard", 1.0 + spec.repeat_index, True)]
     record.digest = f"fake-{spec.seed}"
     return record
+
+
+def plan_echo_run(spec, seq: int = -1, worker: str = "") -> RunResult:
+    """`fake_run`, whose record names the plan the worker ran it with (its description)."""
+    record = fake_run(spec, seq, worker)
+    record.digest = spec.plan.description
+    return record
