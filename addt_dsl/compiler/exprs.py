@@ -319,6 +319,17 @@ def value_range(expr, ranges: dict[str, tuple[float, float]]) -> tuple[float, fl
     return lo, hi
 
 
+def comparisons(constraints):
+    """The comparisons each constraint holds for sure: itself, or the sides of its `and`s."""
+    todo = list(constraints)
+    while todo:
+        c = todo.pop()
+        if isinstance(c, E.Binary) and c.op == "and":
+            todo += [c.left, c.right]
+        elif isinstance(c, E.Binary) and c.op in E.COMPARE_OPS:
+            yield c
+
+
 _FLIPPED = {"<": ">", "<=": ">=", ">": "<", ">=": "<=", "==": "=="}
 
 
@@ -330,14 +341,7 @@ def narrowed_ranges(ranges: dict[str, tuple[float, float]], constraints) -> dict
     narrows as its closure (sound, possibly wider). Constraints that bound none, or
     that would leave a range empty (reported as never holding elsewhere), narrow nothing."""
     out = dict(ranges)
-    todo = list(constraints)
-    while todo:
-        c = todo.pop()
-        if not isinstance(c, E.Binary):
-            continue
-        if c.op == "and":
-            todo += [c.left, c.right]
-            continue
+    for c in comparisons(constraints):
         if c.op not in _FLIPPED:
             continue
         op, param, bound = c.op, c.left, c.right

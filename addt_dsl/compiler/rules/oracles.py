@@ -11,7 +11,7 @@ from addt_dsl import units
 from addt_dsl.compiler import ast
 from addt_dsl.compiler.context import (Context, check_settings, check_time, const_value, fmt, int_const, range_text,
                                        suggest, text_of)
-from addt_dsl.compiler.exprs import value_range
+from addt_dsl.compiler.exprs import comparisons, value_range
 from addt_dsl.diagnostics import Span
 from addt_dsl.registry import SIGNALS, ParamSpec
 from addt_dsl.sweep import known_assignments
@@ -301,17 +301,9 @@ def _ordered_by_constraint(ctx: Context, lo, hi) -> bool:
     """Whether a constraint states `lo <= hi` (or `<`, either way round) of these bounds."""
     lo_e = E.Num(value=lo) if isinstance(lo, float) else lo
     hi_e = E.Num(value=hi) if isinstance(hi, float) else hi
-    todo = [a.expr for a in ctx.assumptions]
-    while todo:
-        c = todo.pop()
-        if not isinstance(c, E.Binary):
-            continue
-        if c.op == "and":
-            todo += [c.left, c.right]
-        elif (c.op in ("<", "<=") and (c.left, c.right) == (lo_e, hi_e)) or \
-                (c.op in (">", ">=") and (c.left, c.right) == (hi_e, lo_e)):
-            return True
-    return False
+    return any((c.op in ("<", "<=") and (c.left, c.right) == (lo_e, hi_e)) or
+               (c.op in (">", ">=") and (c.left, c.right) == (hi_e, lo_e))
+               for c in comparisons(a.expr for a in ctx.assumptions))
 
 
 def _bound_at(bound, values: dict[str, float]):
