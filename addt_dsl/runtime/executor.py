@@ -530,17 +530,14 @@ class LocalExecutor:
             # The server imports the runtime (and the module of a custom run_fn, e.g. the
             # search's judge) once; every worker forks from it with both loaded. Each worker
             # also runs the caller's main module again (multiprocessing's `prepare`; Python
-            # 3.11's forkserver never preloads `__main__`: it asks for a key spawn does not
-            # give), so the addt_dsl modules this process has are preloaded too: with `addtc`
-            # as main a worker otherwise imported the CLI, the compiler and the search
-            # itself (~300 ms a worker start on the shared 2 cores).
+            # 3.11's forkserver never preloads `__main__`), ~300 ms a worker start with
+            # `addtc` as main. Not every module this process has: one that loads torch (the
+            # learned stack, here or in a test session) would sit in every worker's memory,
+            # past `--memory-limit`'s budget for a run.
             preload = list(WORKER_PRELOAD)
             if self.run_fn is not None:
                 preload.append(type(self.run_fn).__module__ if not hasattr(self.run_fn, "__code__")
                                else self.run_fn.__module__)
-            preload += sorted(name for name, module in list(sys.modules.items())
-                              if name.startswith("addt_dsl.") and name not in preload
-                              and getattr(module, "__file__", None))
             ctx.set_forkserver_preload(preload)
         return ctx
 

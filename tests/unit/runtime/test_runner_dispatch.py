@@ -4,6 +4,8 @@ candidates each have one) and when a crashed worker is replaced; exactly one rec
 run; and the runs of a search's call, split evenly over the workers, give the same records
 as on one job."""
 
+from pathlib import Path
+
 import pytest
 from tests.unit.runtime.runner_testkit import OK, SEGFAULT, plan_echo_run, plan_of, scenario
 
@@ -68,3 +70,21 @@ def test_a_search_call_gives_the_same_records_on_one_and_two_jobs():
             cache.close()
     assert results[1] == results[2]
     assert len({d for _, _, d, _ in results[1]}) > 1
+
+
+def test_workers_stay_small_in_a_process_that_loaded_the_whole_package(tmp_path):
+    # A test session (or a notebook) may have loaded every addt_dsl module, torch's too:
+    # preloading all of them in the forkserver put ~300 MB in every worker, and each run of
+    # the full suite's guard tests ended `memory` under their 250 MB limit.
+    import subprocess
+    import sys
+
+    code = (
+        "import importlib, pkgutil, sys, pytest, addt_dsl\n"
+        "for m in pkgutil.walk_packages(addt_dsl.__path__, 'addt_dsl.'):\n"
+        "    try:\n        importlib.import_module(m.name)\n"
+        "    except Exception:\n        pass\n"
+        "sys.exit(pytest.main(['-q', '-p', 'no:cacheprovider', 'tests/unit/runtime/test_runner_batch.py']))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                          cwd=Path(__file__).resolve().parents[3])
+    assert done.returncode == 0, done.stdout[-2000:]
