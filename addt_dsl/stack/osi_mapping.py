@@ -206,12 +206,14 @@ def lanes_ground_truth(lanes: list[LaneGeometry], boundaries: list[BoundaryGeome
     return gt
 
 
-def ground_truth(view: WorldView, static: GroundTruth | None = None) -> GroundTruth:
+def ground_truth(view: WorldView, static: GroundTruth | None = None, sensed: bool = True) -> GroundTruth:
     """The GroundTruth of a view: the host among the moving objects, the other actors
-    (stationary kinds as StationaryObjects), the lights' bulbs, `static`'s lanes."""
+    (stationary kinds as StationaryObjects), the lights' bulbs, `static`'s lanes; stamped
+    with the view's time where a frame made it (`sensed`)."""
     gt = GroundTruth()
     set_version(gt.version)
-    set_timestamp(gt.timestamp, view.time_s)
+    if sensed:
+        set_timestamp(gt.timestamp, view.time_s)
     gt.host_vehicle_id.value = view.host.id
     fill_moving(gt.moving_object.add(), view.host)
     for o in view.objects:
@@ -227,16 +229,19 @@ def ground_truth(view: WorldView, static: GroundTruth | None = None) -> GroundTr
 
 
 def sensor_view(view: WorldView, host_now: ObjectState, now_s: float,
-                static: GroundTruth | None = None) -> SensorView:
+                static: GroundTruth | None = None, sensed: bool = True) -> SensorView:
     """A SensorView: `view`'s ground truth (stamped with the view's time, which a delayed,
     skewed or dropped frame makes older than now) and the host's own state now
-    (`host_vehicle_data`, stamped `now_s`: the vehicle knows its odometry on time)."""
+    (`host_vehicle_data`, stamped `now_s`: the vehicle knows its odometry on time).
+    Before the sensor's first frame (`sensed` false) the view has no `timestamp`: there is
+    no frame to stamp, and a stamp would collide with the first frame's when that arrives late."""
     sv = SensorView()
     set_version(sv.version)
-    set_timestamp(sv.timestamp, view.time_s)
+    if sensed:
+        set_timestamp(sv.timestamp, view.time_s)
     sv.sensor_id.value = 0
     sv.host_vehicle_id.value = host_now.id
-    sv.global_ground_truth.CopyFrom(ground_truth(view, static))
+    sv.global_ground_truth.CopyFrom(ground_truth(view, static, sensed))
     hv = sv.host_vehicle_data
     set_version(hv.version)
     set_timestamp(hv.timestamp, now_s)

@@ -175,7 +175,9 @@ class _Session:
         ctx.ego = (x, y, yaw, speed)
         ctx.ego_s = float(ctx.road.project(x, y, ctx.ego_s)[0])
         stamp = M.seconds(sv.timestamp)
-        if stamp != self.last_view:  # a new view is a perception frame; a resent one is not
+        # A new stamp is a perception frame; a view sent again, or one without a stamp (no frame
+        # yet: the host alone), is not.
+        if sv.HasField("timestamp") and stamp != self.last_view:
             self.last_view = stamp
             self._frame(sv.global_ground_truth, stamp, now)
         self.stack.step(now, self.dt)

@@ -44,12 +44,10 @@ def _through_osi(spec, address: str, answer: str):
 
 # Examples on roads and routes through junctions, lights and a merge, with how far [m] the
 # ego's path through OSI may stray from the in-process one. `lead_brake` delays its lidar
-# frames: until its first frame arrives (20 ms) the OSI host sends a view of the host alone
-# stamped 0 s, which the OSI stack takes as a frame without objects, and the first frame,
-# stamped 0 s too, as that view sent again (docs/bridge.md): only its verdicts are compared
-# (None); without that first frame's difference (a delay from 0.1 s on) the paths agree. Where the
-# ego stands and waits at a junction (`left_turn_yield`, `red_light_runner`: the gap
-# judgement) the lateral control at walking pace grows the OSI messages' rounding from
+# frames: until its first frame arrives the OSI host sends views of the host alone without a
+# timestamp (no frame yet), so the first frame, stamped 0 s, reaches the OSI stack when it
+# arrives, as in process. Where the ego stands and waits at a junction (`left_turn_yield`,
+# `red_light_runner`: the gap judgement) the lateral control at walking pace grows the OSI messages' rounding from
 # micrometres at the stop to about 2 mm by the end.
 # The OSI view carries objects with 2 returns or more, not the one-return weak detections
 # the in-process perception tracks once confirmed (docs/bridge.md): where they matter
@@ -59,7 +57,7 @@ STANDS = 5e-3
 WEAK = 0.5
 EXAMPLES = {"following": 1e-4, "following_brake": 1e-4, "overtake": 1e-4, "broken_down": WEAK,
             "left_turn_yield": WEAK, "junction_cyclist": 1e-4, "red_light_runner": STANDS, "ramp_merge": 1e-4,
-            "lead_brake": None}
+            "lead_brake": 1e-4}
 
 
 @pytest.mark.parametrize("answer", ["motion_request", "traffic_update"])

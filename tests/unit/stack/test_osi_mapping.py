@@ -40,6 +40,17 @@ def test_timestamps_are_seconds_and_nanoseconds():
     assert M.seconds(sv.timestamp) == pytest.approx(0.07, abs=1e-12)
 
 
+def test_a_view_before_the_first_frame_has_no_stamp():
+    # The host alone, before the sensor's first frame: its odometry stamped now, but no view
+    # stamp (a stamp 0 s would be taken for the late first frame's, stamped 0 s too).
+    sv = SensorView.FromString(M.sensor_view(M.WorldView(0.0, HOST), HOST, 0.02, sensed=False).SerializeToString())
+    assert not sv.HasField("timestamp") and not sv.global_ground_truth.HasField("timestamp")
+    assert M.seconds(sv.host_vehicle_data.timestamp) == pytest.approx(0.02, abs=1e-12)
+    assert [o.id.value for o in sv.global_ground_truth.moving_object] == [1]
+    stamped = SensorView.FromString(M.sensor_view(M.WorldView(0.0, HOST), HOST, 0.02).SerializeToString())
+    assert stamped.HasField("timestamp") and stamped.global_ground_truth.HasField("timestamp")
+
+
 def test_ground_truth_objects_frames_and_classes():
     view = M.WorldView(3.5, HOST, [TRUCK, WALKER, BOX], [LIGHT])
     sv = SensorView.FromString(M.sensor_view(view, HOST, 3.6).SerializeToString())  # as the peer reads it
