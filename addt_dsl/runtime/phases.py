@@ -7,7 +7,8 @@ every live run of the batch before the next:
   pose        agents on their roads (every run's agents at once: `agents.Fleets.pose`),
               the ego (projected onto its road, or posed from its script), their bodies
               in the physics world
-  record      the state row of every actor (clearance, the last field, below)
+  record      the state row of every actor (clearance, the last field, below); margins to
+              red lights
   environment changes of the weather, light and road that fire on the recorded state
   lights      light changes that fire on the recorded state; light states and red margins
   collisions  each actor's clearance; `collision` events (`collision.py`: every run's
@@ -63,7 +64,7 @@ class Record:
         self.objects = np.zeros(n)
         self.steps = {name: np.zeros(n, dtype=np.int8) for _, name, _ in run.named_steps}
         self.lights = {c.name: np.zeros(n) for c in plan.controllers} if run.lights else {}
-        self.margins = {name: np.zeros(n) for name in names} if run.lights else {}
+        self.margins = run.red_margins = {name: np.zeros(n) for name in names} if run.lights else {}
         self.lanes = {name: np.full(n, np.nan) for name in names} if run.lane_ids else {}
         self.edges = run.edges = {name: np.zeros(n) for name in run.edge_actors}  # (conditions read them)
         self.ends = run.ends = {name: np.zeros(n) for name in run.end_actors}
@@ -165,6 +166,16 @@ def record(run: RunState, rec: Record, k: int) -> None:
         else:
             road, s = run.agent_roads[name].road, run.agent_by_name[name].s
         ends[k] = road.length - s
+    if run.lights is not None:  # (the conditions of this sample's steps read them)
+        _red_margins(run, rec, k, k * run.dt)
+
+
+def _red_margins(run: RunState, rec: Record, k: int, t: float) -> None:
+    """Every actor's margin to its next red at sample k (signal `red_light`)."""
+    rec.margins["ego"][k] = run.lights.red_margin("ego", run.ego_s + 0.5 * run.ego_plan.length_m,
+                                                  run.stop_stations["ego"], t)
+    for a in run.agents:
+        rec.margins[a.name][k] = run.lights.red_margin(a.name, a.s + 0.5 * a.length_m, run.stop_stations[a.name], t)
 
 
 def environment(run: RunState, rec: Record, k: int, t: float) -> None:
@@ -183,18 +194,17 @@ def variables(run: RunState, rec: Record, k: int, t: float) -> None:
 
 
 def lights(run: RunState, rec: Record, k: int, t: float) -> None:
-    """Light changes fire on the state just recorded; then each light's state and every
-    actor's margin to its next red."""
+    """Light changes fire on the state just recorded (their conditions, as the environment's
+    and the variables', read the red margins `record` took with the lights as they were);
+    then each light's state, and the margins again with the changes that fired now
+    (`red_margin` gives the same for the same states: recomputing is exact)."""
     if run.lights is None:
         return
     if run.light_script is not None:
         advance_light_script(run, rec.rec, k, t)
+        _red_margins(run, rec, k, t)
     for name in rec.lights:
         rec.lights[name][k] = run.lights.state(name, t)
-    rec.margins["ego"][k] = run.lights.red_margin("ego", run.ego_s + 0.5 * run.ego_plan.length_m,
-                                                  run.stop_stations["ego"], t)
-    for a in run.agents:
-        rec.margins[a.name][k] = run.lights.red_margin(a.name, a.s + 0.5 * a.length_m, run.stop_stations[a.name], t)
 
 
 def collisions(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> list[bool]:

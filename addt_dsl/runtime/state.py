@@ -183,6 +183,7 @@ class RunState:
         self.edges: dict = {}  # their recorded arrays (`phases.Record`)
         self.end_actors = sorted(set(re.findall(r"road_end\((\w+)\)", spec.plan.model_dump_json())))  # `road_end`
         self.ends: dict = {}
+        self.red_margins: dict = {}  # each actor's recorded `red_light` margin (`phases.Record`)
         key = tuple(rp.model_dump_json() for rp in plan.roads)
         shared = None if roads is None else roads.get(key)
         if shared is None:
