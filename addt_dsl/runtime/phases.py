@@ -8,7 +8,7 @@ every live run of the batch before the next:
               the ego (projected onto its road, or posed from its script), their bodies
               in the physics world
   record      the state row of every actor (clearance, the last field, below); margins to
-              red lights
+              red lights and stop signs
   environment changes of the weather, light and road that fire on the recorded state
   lights      light changes that fire on the recorded state; light states and red margins
   collisions  each actor's clearance; `collision` events (`collision.py`: every run's
@@ -65,6 +65,7 @@ class Record:
         self.steps = {name: np.zeros(n, dtype=np.int8) for _, name, _ in run.named_steps}
         self.lights = {c.name: np.zeros(n) for c in plan.controllers} if run.lights else {}
         self.margins = run.red_margins = {name: np.zeros(n) for name in names} if run.lights else {}
+        self.sign_margins = run.sign_margins = {name: np.zeros(n) for name in names} if run.signs else {}
         self.lanes = {name: np.full(n, np.nan) for name in names} if run.lane_ids else {}
         self.edges = run.edges = {name: np.zeros(n) for name in run.edge_actors}  # (conditions read them)
         self.ends = run.ends = {name: np.zeros(n) for name in run.end_actors}
@@ -91,7 +92,8 @@ class Record:
         cut = lambda d: {k: v[:last] for k, v in d.items()}  # noqa: E731
         return Trace(run.dt, np.arange(last) * run.dt, actors, cut(self.latency), run.events, cut(self.outputs),
                      self.objects[:last], run.status, run.error, steps=cut(self.steps), lights=cut(self.lights),
-                     red_margin=cut(self.margins), lanes=cut(self.lanes), road_edge=cut(self.edges),
+                     red_margin=cut(self.margins), stop_margin=cut(self.sign_margins), lanes=cut(self.lanes),
+                     road_edge=cut(self.edges),
                      road_end=cut(self.ends), variables=cut(self.variables))
 
 
@@ -168,6 +170,12 @@ def record(run: RunState, rec: Record, k: int) -> None:
         ends[k] = road.length - s
     if run.lights is not None:  # (the conditions of this sample's steps read them)
         _red_margins(run, rec, k, k * run.dt)
+    if run.signs is not None:  # `stop_sign(A)`: to the next stop sign not stopped for
+        rec.sign_margins["ego"][k] = run.signs.margin("ego", run.ego_s + 0.5 * run.ego_plan.length_m, e.speed,
+                                                      run.sign_stations["ego"])
+        for a in run.agents:
+            rec.sign_margins[a.name][k] = run.signs.margin(a.name, a.s + 0.5 * a.length_m, a.speed,
+                                                           run.sign_stations[a.name])
 
 
 def _red_margins(run: RunState, rec: Record, k: int, t: float) -> None:

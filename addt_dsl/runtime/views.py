@@ -110,6 +110,9 @@ class StackContext(Protocol):
     def stop_line_ahead(self, s: float):
         """(station, state code) of the next traffic light's stop line ahead, or None."""
 
+    def stop_sign_ahead(self, s: float, stopped: tuple[float, ...] = ()) -> float | None:
+        """Station of the next stop sign's line ahead but those in `stopped`, or None."""
+
     def event(self, kind: str, **detail) -> None:
         """Record an event now."""
 
@@ -145,6 +148,9 @@ class HostContext(StackContext, Protocol):
 
     def ego_stop_lines(self) -> list[tuple[str, float, float, float, float]]:
         """(controller, x, y, z, heading) of each stop line on the ego's road or route."""
+
+    def ego_stop_signs(self) -> list[tuple[float, float, float, float]]:
+        """(x, y, z, lane heading) where each stop sign's line on the ego's route meets its lane."""
 
     def light_state(self, controller: str, time_s: float) -> int:
         """A light's state code at `time_s` (`lights`)."""

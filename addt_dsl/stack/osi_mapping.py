@@ -28,6 +28,7 @@ from osi3.osi_motionrequest_pb2 import MotionRequest
 from osi3.osi_object_pb2 import MovingObject, StationaryObject
 from osi3.osi_sensorview_pb2 import SensorView
 from osi3.osi_trafficlight_pb2 import TrafficLight
+from osi3.osi_trafficsign_pb2 import TrafficSign
 from osi3.osi_trafficupdate_pb2 import TrafficUpdate
 from osi3 import osi_version_pb2
 
@@ -37,6 +38,7 @@ OSI_VERSION = tuple(getattr(_OSI_INTERFACE, k) for k in ("version_major", "versi
 HOST_ID = 1  # the ego's OSI id; agents follow in plan order (2, 3, ...)
 LIGHT_ID_BASE = 1_000_000  # traffic-light bulbs: base + 10 * signal index + bulb (0 red, 1 yellow, 2 green)
 LANE_ID_BASE = 2_000_000  # lanes and lane boundaries (`lane_id`, `boundary_id`)
+SIGN_ID_BASE = 3_000_000  # stop signs: base + index along the ego's route
 
 # The vehicle catalogue's kinds (addt_dsl.vehicles) as OSI classifications.
 _MOVING_TYPE = {
@@ -178,6 +180,27 @@ def fill_light(gt: GroundTruth, light: LightState) -> None:
         tl.classification.icon = TrafficLight.Classification.ICON_NONE
         tl.classification.mode = TrafficLight.Classification.MODE_CONSTANT if name == lit \
             else TrafficLight.Classification.MODE_OFF
+
+
+def stop_signs_ground_truth(signs: list[tuple[float, float, float, float]]) -> GroundTruth:
+    """Stop signs as TrafficSigns (`TYPE_STOP`), each where its line meets the ego's lane,
+    facing the traffic it holds: (x, y, z, yaw of the ego's lane there) each."""
+    gt = GroundTruth()
+    for k, (x, y, z, yaw) in enumerate(signs):
+        ts = gt.traffic_sign.add()
+        ts.id.value = SIGN_ID_BASE + k
+        b = ts.main_sign.base
+        b.dimension.length, b.dimension.width, b.dimension.height = 0.05, 0.9, 0.9
+        b.position.x, b.position.y, b.position.z = x, y, z
+        b.orientation.yaw = math.remainder(yaw + math.pi, 2.0 * math.pi)  # its face towards the traffic
+        ts.main_sign.classification.type = TrafficSign.MainSign.Classification.TYPE_STOP
+    return gt
+
+
+def stop_sign_positions(gt: GroundTruth) -> list[tuple[float, float]]:
+    """(x, y) of each stop sign (`TYPE_STOP` main sign) in a GroundTruth, in message order."""
+    return [(ts.main_sign.base.position.x, ts.main_sign.base.position.y) for ts in gt.traffic_sign
+            if ts.main_sign.classification.type == TrafficSign.MainSign.Classification.TYPE_STOP]
 
 
 def lanes_ground_truth(lanes: list[LaneGeometry], boundaries: list[BoundaryGeometry]) -> GroundTruth:

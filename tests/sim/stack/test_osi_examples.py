@@ -175,3 +175,20 @@ def test_the_bridge_server_plans_along_the_route_too():
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_stop_signs_reach_the_osi_stack_as_traffic_signs(server_address, tmp_path):
+    # The map's stop sign crosses OSI as a TrafficSign (TYPE_STOP): the OSI stack stops the ego
+    # at its line as the in-process one does, on the same path.
+    from tests.sim.runtime.test_stop_signs import MAP, SIGNS, SOURCE
+
+    (tmp_path / "signs.xodr").write_text(MAP.read_text().replace("<signals>\n        </signals>", SIGNS))
+    result = compile_source(SOURCE, "stop_sign.addt", base_dir=tmp_path)
+    assert result.plan is not None, result.diagnostics
+    spec = expand(result.plan).specs[0]
+    local, remote = execute(spec), execute(_through_osi(spec, server_address, "motion_request"))
+    assert remote.status == local.status == "ok", remote.error
+    assert {v.name: v.passed for v in remote.verdicts}["no_stop_sign"]
+    a, b = local.trace.actors["ego"], remote.trace.actors["ego"]
+    assert min(b.speed[(b.s > 100.0) & (b.s < 150.0)]) < 0.05  # it stood before the line
+    assert np.hypot(a.x - b.x, a.y - b.y).max() < 1e-4  # [m]
