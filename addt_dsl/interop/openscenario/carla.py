@@ -133,11 +133,16 @@ class CarlaCriteria:
         if test == "CollisionTest":
             return OraclePlan(name="no_collision", formula=NO_CLAUSES["collision"]("ego", None), text="no collision")
         if test == "RunningRedLightTest":
+            if self.doc.find(".//TrafficSignalController") is None:
+                self.approx(cond, f"criteria_{test} is translated as `no red_light`, which judges the lights of the "
+                                  "file's TrafficSignalControllers: it declares none, so no light turns red in the "
+                                  "twin (CARLA cycles the town's lights itself)")
             return OraclePlan(name="no_red_light", formula=NO_CLAUSES["red_light"]("ego", None), text="no red_light")
         if test == "RunningStopTest":
             self.approx(cond, f"criteria_{test} is translated as `no stop_sign`: the stop signs of the map's "
-                              "OpenDRIVE (type 206), stopped below 0.1 m/s within 4 m before the line; "
-                              "ScenarioRunner judges CARLA's stop actors and their trigger volumes")
+                              "OpenDRIVE (type 206) on the lanes of their own <validity> (<signalReference>s are "
+                              "not read), stopped below 0.1 m/s within 4 m before the line; ScenarioRunner judges "
+                              "CARLA's stop actors and their trigger volumes")
             return OraclePlan(name="no_stop_sign", formula=NO_CLAUSES["stop_sign"]("ego", None), text="no stop_sign")
         if test == "KeepLaneTest":
             road_id = next(i for i, r in self.roads.items() if r.name == ego.road)

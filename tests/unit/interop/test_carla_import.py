@@ -90,6 +90,9 @@ def test_criteria_become_oracles_and_the_rest_say_why_not():
     # RunningStopTest: the map's stop signs (Town01's OpenDRIVE has none: it holds trivially).
     assert oracles["no_stop_sign"].text == "no stop_sign" and "no stop_sign" in got.text
     assert any(d.code == "W0802" and d.message.startswith("criteria_RunningStopTest") for d in got.diagnostics)
+    # RunningRedLightTest: the file declares no light controllers, so no light runs (said).
+    assert any(d.code == "W0802" and d.message.startswith("criteria_RunningRedLightTest") and "declares none"
+               in d.message for d in got.diagnostics)
 
 
 def test_a_town_not_found_names_where_it_looked(tmp_path, capsys):
