@@ -8,7 +8,7 @@ every live run of the batch before the next:
               the ego (projected onto its road, or posed from its script), their bodies
               in the physics world
   record      the state row of every actor (clearance, the last field, below); margins to
-              red lights and stop signs
+              red lights and stop signs; the scenario variables
   environment changes of the weather, light and road that fire on the recorded state
   lights      light changes that fire on the recorded state; light states and red margins
   collisions  each actor's clearance; `collision` events (`collision.py`: every run's
@@ -168,6 +168,8 @@ def record(run: RunState, rec: Record, k: int) -> None:
         else:
             road, s = run.agent_roads[name].road, run.agent_by_name[name].s
         ends[k] = road.length - s
+    for name, values in rec.variables.items():  # `var(P)`: as it is at sample k
+        values[k] = run.variables[name]
     if run.lights is not None:  # (the conditions of this sample's steps read them)
         _red_margins(run, rec, k, k * run.dt)
     if run.signs is not None:  # `stop_sign(A)`: to the next stop sign not stopped for
@@ -193,10 +195,8 @@ def environment(run: RunState, rec: Record, k: int, t: float) -> None:
 
 
 def variables(run: RunState, rec: Record, k: int, t: float) -> None:
-    """Scenario variables as they are at sample k; then the steps that set them fire on the
-    state just recorded (a value set now is read from the next sample on)."""
-    for name, values in rec.variables.items():
-        values[k] = run.variables[name]
+    """The steps that set scenario variables fire on the state just recorded (a value set now
+    is read from the next sample on: `record` took the values at sample k)."""
     if run.variable_script is not None:
         advance_variable_script(run, rec.rec, k, t)
 
