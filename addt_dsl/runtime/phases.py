@@ -9,10 +9,11 @@ every live run of the batch before the next:
               in the physics world
   record      the state row of every actor (clearance, the last field, below); margins to
               red lights and stop signs; the scenario variables
-  environment changes of the weather, light and road that fire on the recorded state
-  lights      light changes that fire on the recorded state; light states and red margins
   collisions  each actor's clearance; `collision` events (`collision.py`: every run's
               pairs in one broad phase)
+  environment changes of the weather, light and road that fire on the recorded state
+  variables   steps that set scenario variables, on the recorded state
+  lights      light changes that fire on the recorded state; light states
   outputs     latencies, the command, objects seen, named steps' states
   end         `end when ...` on the recorded state
   -- the run stops here on an ego collision, its end, or its last sample --
