@@ -13,7 +13,7 @@ import numpy as np
 
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.actor_road import ActorPath
-from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S, T
+from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S
 from addt_dsl.runtime.behaviors import (Idm, IdmParams, lateral_profile, relative_heading, settle_lane_change,
                                         standing_yaw)
 from addt_dsl.runtime.vehicle import VehicleState
@@ -36,10 +36,11 @@ def pose_on_road(a, road, yaw: float, t_now: float, dt: float) -> tuple[float, f
 # Agents posed as arrays from this many on in a batch (all its runs' together), and stepped
 # as arrays from STEP_MIN_AGENTS on: fewer, and the per-agent code is quicker (posing: ~30 us
 # of numpy calls against ~2 us per agent, measured break-even at ~24 agents; the array step
-# asks two leader lookups of ~30 numpy calls each per step, a sorted-list bisect per agent
-# costs ~2.5 us: measured break-even at 65-75 agents in one run). Both ways give the same bits.
+# asks two leader lookups of ~30 numpy calls each per step, the per-agent step costs ~4 us an
+# agent through the agents' views (`AgentState`): measured break-even at 45-50 agents in one
+# run, loaded). Both ways give the same bits.
 ARRAY_MIN_AGENTS = 24
-STEP_MIN_AGENTS = 64
+STEP_MIN_AGENTS = 40
 
 
 class Fleet:
@@ -273,7 +274,7 @@ class Fleets:
             return []
         layout = self._layout([run.fleet for run, _ in items])
         flat, cells = layout.block.flat, layout.cells
-        s, t, v = flat[S, cells], flat[T, cells], flat[SPEED, cells]
+        s, t, v = flat[S:SPEED + 1, cells]
         finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts)
         if not finite.all():
             left = [item for item, ok in zip(items, finite.tolist()) if not ok]
@@ -342,7 +343,7 @@ class Fleets:
             return []
         layout = self._layout([run.fleet for run, _ in items])
         fleets, lo, flat, cells = layout.fleets, layout.lo, layout.block.flat, layout.cells
-        s, t, v = flat[S, cells], flat[T, cells], flat[SPEED, cells]
+        s, t, v = flat[S:SPEED + 1, cells]
         finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts)
         if not finite.all():
             left = [item for item, ok in zip(items, finite.tolist()) if not ok]
@@ -351,8 +352,8 @@ class Fleets:
         params, rows, target = layout.idm(plans)
         ego = tuple(np.array(col, dtype=float) for col in
                     zip(*((run.ego_s, run.ego_t, run.ego.speed) for run, _ in items)))
-        sizes = np.diff(lo)
-        dt = np.repeat([run.dt for run, _ in items], sizes)
+        dts = [run.dt for run, _ in items]
+        dt = dts[0] if dts.count(dts[0]) == len(dts) else np.repeat(dts, np.diff(lo))
         scale = flat[SCALE, cells]  # (of this step's poses)
         t_new = target.copy()
         for j, ((run, t_now), plan) in enumerate(zip(items, plans)):

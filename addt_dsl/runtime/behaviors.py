@@ -881,19 +881,21 @@ def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, ti
 def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
     """Integrate an agent's road-frame kinematics from `time_s` over `dt` [s]."""
     agent.accel = accel
-    agent.speed = max(0.0, agent.speed + accel * dt)
+    # (each of the agent's numbers read once: they are views of the agents' arrays)
+    speed = agent.speed = max(0.0, agent.speed + accel * dt)
     # `speed` is the speed along the agent's own path: on a bend its station (measured on
     # the reference line) moves by speed / ground_scale.
     if agent.heading_rel:
-        agent.s += agent.speed * math.cos(agent.heading_rel) * dt / agent.ground_scale
-        agent.t += agent.speed * math.sin(agent.heading_rel) * dt
-        agent.t_target = agent.t
+        agent.s += speed * math.cos(agent.heading_rel) * dt / agent.ground_scale
+        agent.t = agent.t_target = agent.t + speed * math.sin(agent.heading_rel) * dt
     else:
         t_next = lateral_profile(agent, time_s + dt)
-        step = agent.speed * dt if not agent.placed else 0.0
-        agent.placed = False
-        if t_next != agent.t and not agent.lc_keeps_station:  # a lane change: the ground splits into along and across
-            across = t_next - agent.t
+        step = speed * dt
+        if agent.placed:
+            step, agent.placed = 0.0, False
+        t = agent.t
+        if t_next != t and not agent.lc_keeps_station:  # a lane change: the ground splits into along and across
+            across = t_next - t
             step = math.sqrt(max(step * step - across * across, 0.0))
         agent.s += step / agent.ground_scale
         agent.t = t_next
