@@ -36,11 +36,11 @@ def pose_on_road(a, road, yaw: float, t_now: float, dt: float) -> tuple[float, f
 # Agents posed as arrays from this many on in a batch (all its runs' together), and stepped
 # as arrays from STEP_MIN_AGENTS on: fewer, and the per-agent code is quicker (posing: ~30 us
 # of numpy calls against ~2 us per agent, measured break-even at ~24 agents; the array step
-# asks two leader lookups of ~30 numpy calls each per step, the per-agent step costs ~4 us an
-# agent through the agents' views (`AgentState`): measured break-even at 45-50 agents in one
-# run, loaded). Both ways give the same bits.
+# asks two leader lookups of ~30 numpy calls each per step, ~250 us of CPU for 50 agents in
+# one run; the per-agent step costs ~4.3 us an agent through the agents' views (`AgentState`):
+# measured break-even at ~50 agents in one run). Both ways give the same bits.
 ARRAY_MIN_AGENTS = 24
-STEP_MIN_AGENTS = 40
+STEP_MIN_AGENTS = 48
 
 
 class Fleet:
