@@ -83,7 +83,6 @@ class Fleet:
         ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
         self.members = (self.length, road_code, run.ego_plan.length_m, ego_code)
         self.posed = False
-        self.scale = None
         self.x, self.y, self.heading = [], [], []
         self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
         self._plan_version = -1
