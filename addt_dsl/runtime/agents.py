@@ -19,18 +19,18 @@ from addt_dsl.runtime.behaviors import (Idm, IdmParams, lateral_profile, relativ
 from addt_dsl.runtime.vehicle import VehicleState
 
 
-def pose_on_road(a, road, yaw: float, t_now: float, dt: float) -> tuple[float, float, float, float]:
-    """(x, y, road heading, body heading) of an actor on its road or path at its (s, t): the
-    road's heading plus a lane change's or walk's relative heading and, while it has
-    stood still, its declared yaw [rad]; keeps its ground scale (its station moves by
-    speed / ground_scale). Every actor posed one by one is posed here (`Fleets.pose` is the
-    same over arrays)."""
-    x, y, h = road.point(a.s, a.t)
-    a.ground_scale = road.ground_scale(a.s, a.t)
+def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: float) \
+        -> tuple[float, float, float, float, float]:
+    """(x, y, road heading, body heading, ground scale) of an actor on its road or path at its
+    (s, t): the road's heading plus a lane change's or walk's relative heading and, while it
+    has stood still, its declared yaw [rad]; its ground scale, which its caller keeps (its
+    station moves by speed / ground_scale). Every actor posed one by one is posed here
+    (`Fleets.pose` is the same over arrays)."""
+    x, y, h = road.point(s, t)
     heading = h + relative_heading(a, t_now, dt)
     if yaw:
         heading += standing_yaw(a, yaw)
-    return x, y, h, heading
+    return x, y, h, heading, road.ground_scale(s, t)
 
 
 # Agents posed as arrays from this many on in a batch (all its runs' together), and stepped
@@ -97,14 +97,18 @@ class Fleet:
         """The per-agent code (`pose_on_road`, the same formulas as `Fleets.pose`): poses,
         and the rows as lists of floats."""
         set_pose = run.physics.set_pose
-        x, y, heading, v, rows = [], [], [], [], []
-        for a, road, yaw, half_height in zip(self.agents, self.roads, self.yaws, self.half_height_m):
-            xi, yi, h, hi = pose_on_road(a, road.road, yaw, t_now, dt)
-            z, grade = road.elevation.at(a.s)
-            off = road.road.lane_offset(a.s, a.t)
+        x, y, heading, rows, scale = [], [], [], [], []
+        state = self.block.values[:, self.run_row, :self.n]  # (the run's block, read once)
+        s_, t_, v, accel = state[:ACCEL + 1].tolist()
+        for a, road, yaw, half_height, s, t, vi, ai in zip(self.agents, self.roads, self.yaws, self.half_height_m,
+                                                           s_, t_, v, accel):
+            xi, yi, h, hi, g = pose_on_road(a, road.road, yaw, t_now, dt, s, t)
+            z, grade = road.elevation.at(s)
+            off = road.road.lane_offset(s, t)
             set_pose(a.name, xi, yi, z + half_height, hi, math.atan(grade) * math.cos(hi - h))
-            x.append(xi), y.append(yi), heading.append(hi), v.append(a.speed)
-            rows.append((xi, yi, hi, a.speed, a.accel, 0.0, a.s, a.t, off, 0.0))
+            x.append(xi), y.append(yi), heading.append(hi), scale.append(g)
+            rows.append((xi, yi, hi, vi, ai, 0.0, s, t, off, 0.0))
+        state[SCALE] = scale
         self.x, self.y, self.heading, self.v, self.rows = x, y, heading, v, rows
         self.posed = True
 
@@ -420,6 +424,7 @@ class _GT:
 def pose_scripted_ego(run, t_now: float, dt: float) -> None:
     """The scripted ego's vehicle state from its road-frame state, posed as an agent is."""
     a, e = run.ego_agent, run.ego
-    e.x, e.y, _, e.heading = pose_on_road(a, run.ego_road.road, run.ego_plan.yaw, t_now, dt)
+    e.x, e.y, _, e.heading, a.ground_scale = pose_on_road(a, run.ego_road.road, run.ego_plan.yaw, t_now, dt,
+                                                          a.s, a.t)
     e.vx, e.accel = a.speed, a.accel
     run.ego_s, run.ego_t = a.s, a.t
