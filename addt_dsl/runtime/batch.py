@@ -94,7 +94,7 @@ def _stop(run: RunState, rec: phases.Record, k: int, error: str, t: float | None
 def _loop(runs: list[RunState]) -> list[Trace]:
     """Step every run from time 0 until its end, an ego collision or a failure; their traces."""
     recs = [phases.Record(run) for run in runs]
-    fleets = Fleets()  # the agents of the live runs as arrays
+    fleets = Fleets(runs)  # the agents of every run in one block of arrays
     live = list(range(len(runs)))
     k = 0
     while live:
