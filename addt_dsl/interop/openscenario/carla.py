@@ -169,7 +169,8 @@ class CarlaCriteria:
                               "driving lane of its road or route whose traffic runs against the way it drives there, "
                               "outside junctions; ScenarioRunner fails it when the ego passes, outside a junction, "
                               "into a lane whose direction differs from the last one's by more than 150 deg, or "
-                              "leaves a junction heading more than 120 deg off its lane, on the nearest lane of any road")
+                              "leaves a junction heading more than 120 deg off its lane, on the nearest lane of "
+                              "any road")
             return OraclePlan(name="wrong_lane", formula=always(E.Unary(op="not", arg=signal(name="wrong_way(ego)"))),
                               text="always not wrong_way(ego)")
         if test == "OnSidewalkTest":
