@@ -101,3 +101,23 @@ scenario into_oncoming {
     assert fired == [trace.time[crossed]]
     verdicts = [(v.passed, v.first_violation_s) for v in out.verdicts]
     assert verdicts == [(False, trace.time[crossed]), (True, None)]
+
+
+def test_against_traffic_on_a_lane_driven_against_s():
+    # A path along lane 1 (driven against s): its own lane is with the traffic, lane -1 against.
+    from addt_dsl.road.route import Leg
+    from addt_dsl.runtime.roadmesh import Elevation
+    from addt_dsl.runtime.path import RoutePath
+
+    network = parse_xodr(XODR)
+    road_id = next(iter(network.roads))
+    path = RoutePath("r", [Leg(road_id, -1, 400.0, 100.0, 1)],
+                     {road_id: (FastRoad(network.road(road_id)), Elevation(network.road(road_id)))})
+    assert not against_traffic(path, 50.0, 0.0)  # its lane's centre (path t = 0)
+    assert against_traffic(path, 50.0, 3.07)  # lane -1's centre, to the driver's left
+    # To the driver's right lie lane 1's shoulder and border (road t 3.07 to 10.75 m): the centre
+    # on the border, its corners on the shoulder and the border, is inside a lane (not off).
+    x, y, h = path.point(50.0, -3.5)
+    assert not off_lanes(path, 50.0, -3.5, x, y, h, LENGTH, WIDTH, False)
+    x, y, h = path.point(50.0, -11.0)
+    assert off_lanes(path, 50.0, -11.0, x, y, h, LENGTH, WIDTH, False)
