@@ -8,7 +8,7 @@ every live run of the batch before the next:
               the ego (projected onto its road, or posed from its script), their bodies
               in the physics world
   record      the state row of every actor (clearance, the last field, below); margins to
-              red lights and stop signs; the scenario variables
+              red lights and stop signs; lane states (`lanestate.py`); the scenario variables
   collisions  each actor's clearance; `collision` events (`collision.py`: every run's
               pairs in one broad phase)
   environment changes of the weather, light and road that fire on the recorded state
