@@ -54,6 +54,14 @@ def test_off_lanes_on_a_sidewalk():
 def test_off_lanes_keeps_its_state_only_beside_a_junctions_driving_lane():
     path = _road()
     assert _off(path, -11.0, was=False) and not _off(path, -1.5, was=True)
+    # Every lane driving: past the edge the nearest lane is a driving one (ScenarioRunner's case 3):
+    # not off, except in a junction, where the waypoint is too far to tell and the state stays.
+    paved = XODR.replace('type="border"', 'type="driving"').replace('type="shoulder"', 'type="driving"')
+    assert not _off(_road(paved), -11.0, was=True)
+    junction = _road(paved.replace('id="1" junction="-1"', 'id="1" junction="7"'))
+    assert _off(junction, -11.0, was=True) and not _off(junction, -11.0, was=False)
+    assert not _off(junction, -1.5, was=True)
+    assert not against_traffic(junction, 100.0, 1.5)  # no wrong way inside a junction
 
 
 def test_against_traffic_by_lane():
