@@ -9,7 +9,6 @@ road's: ScenarioRunner asks CARLA for the nearest lane of any road.
 
 from __future__ import annotations
 
-import bisect
 import math
 
 ALLOWED_TYPES = ("driving", "parking")  # OnSidewalkTest's allowed zones (carla.LaneType Driving, Parking)
@@ -32,8 +31,8 @@ def _lane_of(road, s: float, t: float) -> tuple[str, bool]:
     """(type, whether `t` lies inside it) of the lane at road coordinates (`s`, `t`): the lane
     that contains the point, else the nearest (the outermost one past the road's edge);
     lanes of type `none` are not lanes (carla.LaneType.Any leaves NONE out)."""
-    # Scalar profile calls (`value_and_rate`), as `Road._lane_t_scalar`: a few us, not numpy's ~40.
-    sec = road.sections[max(0, bisect.bisect_right(road._section_starts_t, s) - 1)]
+    # Scalar profile calls (`value_and_rate`): a few us, not numpy's ~40.
+    sec = road.section_at_scalar(s)
     ds = s - sec.s0
     centre = road.offset_profile.value_and_rate(s)[0]
     best, best_d = None, math.inf
