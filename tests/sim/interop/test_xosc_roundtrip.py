@@ -35,11 +35,9 @@ def test_export_import_run_gives_the_same_run(path, tmp_path):
     assert not [d for d in got.diagnostics if d.startswith("W")], got.diagnostics
 
 
-def test_shrunk_counterexample_has_a_replayable_xosc(tmp_path):
-    out = tmp_path / "min"
-    code = main(["shrink", str(EXAMPLES / "ten_faults.addt"), "--out", str(out), "--no-animation",
-                 "--max-simulations", "150"])
-    assert code == 1
+def test_shrunk_counterexample_has_a_replayable_xosc(ten_faults_shrunk, tmp_path):
+    out, proc = ten_faults_shrunk(1)  # `addtc shrink examples/ten_faults.addt ...`
+    assert proc.returncode == 1, proc.stderr
     (addt,) = out.glob("*.addt")
     xosc = addt.with_suffix(".xosc")
     assert xosc.is_file() and (out / f"{addt.stem}.addt.json").is_file()
