@@ -41,8 +41,10 @@ import torch.nn.functional as F
 from torch import nn
 
 from addt_dsl.lru import LruCache
+from addt_dsl.stack import cluster_class
 from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CHANNELS, CLASSES, GRID, LAYER_SITES, build_grid_region,
                                      decode, sensor_points_to_vehicle)
+from addt_dsl.stack.cluster_class import TreeEnsemble
 from addt_dsl.stack.nodes import Obj, vehicle_to_world
 from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
 
@@ -143,8 +145,20 @@ def load_model(path: Path = WEIGHTS_PATH, device: str = "cpu") -> tuple[BevDetec
     state, meta = load_weights(path)
     model = BevDetector(tuple(meta["widths"]), in_channels=state["backbone.conv0.weight"].shape[1],
                         classes=len(meta.get("classes", ())))
-    model.load_state_dict(state)
+    model.load_state_dict({k: v for k, v in state.items() if not k.startswith(cluster_class.PREFIX)})
     return model.to(device).eval(), meta
+
+
+def load_cluster_classes(path: Path = WEIGHTS_PATH) -> tuple[TreeEnsemble, np.ndarray | None] | None:
+    """The cluster class reader shipped with the weights (`cluster_class`) and its class
+    logit offsets; None for weights without one (the class stays the CNN's at the peak)."""
+    state, meta = load_weights(path)
+    arrays = {k.removeprefix(cluster_class.PREFIX): v.numpy() for k, v in state.items()
+              if k.startswith(cluster_class.PREFIX)}
+    if not arrays:
+        return None
+    offsets = meta.get("cluster", {}).get("logit_offsets")
+    return TreeEnsemble.from_state(arrays), None if offsets is None else np.asarray(offsets, dtype=np.float64)
 
 
 Region = tuple[int, int, int, int]  # rows [r0, r1), columns [c0, c1) of a feature map
@@ -597,6 +611,7 @@ class LearnedPerception(ConvTensorSites):
 
     def __init__(self, settings: dict, ctx=None, weights: Path = WEIGHTS_PATH, device: str = "cpu"):
         self.model, self.meta = load_model(weights, device)
+        self.cluster_classes = load_cluster_classes(weights)
         self.device = device
         self.threshold = float(settings.get("detect_threshold", self.meta.get("threshold", DEFAULT_THRESHOLD)))
         self._logit_threshold = math.log(self.threshold / (1.0 - self.threshold))
@@ -639,6 +654,8 @@ class LearnedPerception(ConvTensorSites):
         if len(found):
             with np.errstate(over="ignore"):
                 found[:, 5] = 1.0 / (1.0 + np.exp(-found[:, 5]))
+            if self.cluster_classes is not None:
+                cluster_class.reclass(found, points_vehicle, sensor_xy, box, *self.cluster_classes)
         return found
 
     # ---- tensor fault sites
