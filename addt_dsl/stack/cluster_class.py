@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from addt_dsl.stack.bev_grid import BOX_CHANNELS, GRID, GridSpec
+from addt_dsl.stack.bev_grid import BOX_CHANNELS, CLASSES, GRID, GridSpec
 
 CLUSTER_MARGIN_M = 0.3  # returns this far outside a detection's box still count as its own
 FEATURES = (
@@ -135,7 +135,7 @@ class TreeEnsemble:
 
     @classmethod
     def from_state(cls, state: dict[str, np.ndarray]) -> TreeEnsemble:
-        return cls(**{k: (int(v) if k == "depth" else v) for k, v in state.items()})
+        return cls(**{k: (int(np.asarray(v).item()) if k == "depth" else v) for k, v in state.items()})
 
     def logits(self, x: np.ndarray) -> np.ndarray:
         """(K, F) features -> (K, classes) logits."""
@@ -170,11 +170,18 @@ def reclass(boxes: np.ndarray, points: np.ndarray, sensor_xy: tuple[float, float
 def fit(features: np.ndarray, labels: np.ndarray, seed: int, iterations: int = 200):
     """A fitted HistGradientBoostingClassifier (scikit-learn, a core dependency) on cluster
     features and the matched boxes' classes; the seed and the data fix it (no early stopping,
-    no subsampling)."""
+    no subsampling, one OpenMP thread: on shared cores more threads spin, and their
+    partial sums could differ in the last bits)."""
     from sklearn.ensemble import HistGradientBoostingClassifier
+    from threadpoolctl import threadpool_limits
 
+    missing = set(range(len(CLASSES))) - set(np.asarray(labels).tolist())
+    if missing:  # the trees' outputs are the classes seen, in order: every class must be
+        raise ValueError("no detection of class " + ", ".join(CLASSES[k] for k in sorted(missing))
+                         + " to fit the cluster class reader on: use more scans")
     clf = HistGradientBoostingClassifier(max_iter=iterations, early_stopping=False, random_state=seed)
-    return clf.fit(features, labels)
+    with threadpool_limits(1):
+        return clf.fit(features, labels)
 
 
 def labelled_clusters(samples, detect_raw, min_hits: int = 2, match_m: float = 2.0):

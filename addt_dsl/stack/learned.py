@@ -20,6 +20,11 @@ heatmap, a sub-cell offset, log length, log width and the box axis as (sin 2θ, 
     head.box           conv 1×1     32→10   offset x/y, log l/w, box axis (sin 2θ, cos 2θ),
                                             class logits (car, truck, pedestrian, cyclist)
 
+The class of each detection is then read from its own cluster of returns (how many, how
+far, how high, how wide and deep, and the class logits at the peak) by the tree ensemble
+shipped in the same weights file (`cluster_class`); weights without one keep the class
+at the heatmap peak.
+
 One frame per inference: velocity is not estimated here but by the tracker from
 successive detections (objects carry `vx = vy = nan`, "not measured").
 

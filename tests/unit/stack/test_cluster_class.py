@@ -29,6 +29,12 @@ def test_flat_trees_give_scikit_learns_logits_and_survive_storing():
     assert ensemble.logits(np.zeros((0, len(cluster_class.FEATURES)))).shape == (0, 4)
 
 
+def test_fitting_needs_every_class():
+    x, y = _toy()
+    with pytest.raises(ValueError, match="cyclist"):
+        cluster_class.fit(x, np.minimum(y, 2), seed=0, iterations=2)
+
+
 def test_same_seed_and_data_same_trees():
     x, y = _toy()
     a, b = (cluster_class.TreeEnsemble.from_sklearn(cluster_class.fit(x, y, seed=3, iterations=10)) for _ in range(2))
