@@ -646,6 +646,14 @@ class LearnedPerception(ConvTensorSites):
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
         """Vehicle-frame points → (N, 7) boxes: x, y, heading, length, width, confidence,
         class (index into `bev_grid.CLASSES`)."""
+        found, box = self.detect_raw(points_vehicle, sensor_xy)
+        if len(found) and self.cluster_classes is not None:
+            cluster_class.reclass(found, points_vehicle, sensor_xy, box, *self.cluster_classes)
+        return found
+
+    def detect_raw(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+        """`detect` with the CNN's class at the peak, and its `head.box` map (a view of a
+        buffer the next inference overwrites): what the cluster class reader reads."""
         # The grid is zero outside the last frame's region: clear only that.
         _, region = build_grid_region(points_vehicle, sensor_xy, out=self._grid, dirty=self._grid_region)
         self._grid_region = region
@@ -659,9 +667,7 @@ class LearnedPerception(ConvTensorSites):
         if len(found):
             with np.errstate(over="ignore"):
                 found[:, 5] = 1.0 / (1.0 + np.exp(-found[:, 5]))
-            if self.cluster_classes is not None:
-                cluster_class.reclass(found, points_vehicle, sensor_xy, box, *self.cluster_classes)
-        return found
+        return found, box
 
     # ---- tensor fault sites
     def activation_shape(self, site: str) -> tuple[int, ...]:

@@ -265,29 +265,22 @@ def fit_cluster_classes(model, seed: int, scenes: int, lidars: tuple[str, ...], 
                         iterations: int = 200, log=print):
     """The cluster class reader (`cluster_class.TreeEnsemble`) for `model`'s detections on
     `scenes` scans of the default scenes (seed `seed`), and its timing and sample counts."""
+    import tempfile
+
     import torch
 
     from addt_dsl.stack import cluster_class
-    from addt_dsl.stack.bev_grid import decode
-    from addt_dsl.stack.learned import DEFAULT_THRESHOLD
+    from addt_dsl.stack.learned import LearnedPerception
 
     t0 = time.perf_counter()
     samples = generate(scenes, seed, lidars=lidars, lidar_settings=lidar_settings)
     t_gen = time.perf_counter() - t0
-    logit_threshold = math.log(DEFAULT_THRESHOLD / (1.0 - DEFAULT_THRESHOLD))
-    buf = np.zeros((1, *GRID.shape), dtype=np.float32)
-    model = model.cpu().eval()
-
-    def detect_raw(points, sensor_xy):
-        grid = build_grid(points, sensor_xy, out=buf[0])
-        with torch.inference_mode():
-            heat, box = model(torch.from_numpy(grid[None, :model.in_channels]))
-        box = box[0].numpy()
-        found = decode(heat[0, 0].numpy(), box, logit_threshold)
-        found[:, 5] = 1.0 / (1.0 + np.exp(-found[:, 5]))
-        return found, box
-
-    feats, labels, _ = cluster_class.labelled_clusters(samples, detect_raw)
+    with tempfile.TemporaryDirectory() as tmp:  # the runtime node, so the features are the loop's
+        path = Path(tmp) / "cnn.pt"
+        torch.save({"state_dict": model.cpu().state_dict(), "meta": {"widths": [
+            model.backbone[f"conv{k}"].out_channels for k in range(3)], "classes": list(CLASSES)}}, path)
+        node = LearnedPerception({}, weights=path)
+    feats, labels, _ = cluster_class.labelled_clusters(samples, node.detect_raw)
     clf = cluster_class.fit(feats, labels, seed, iterations)
     t_fit = time.perf_counter() - t0 - t_gen
     counts = np.bincount(labels, minlength=len(CLASSES)).tolist()
