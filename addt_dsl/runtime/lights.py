@@ -125,15 +125,21 @@ def stop_lines(network, controller: str, signal_ids: Iterable[str], inline: dict
         road_id, sig = found
         if not governs_vehicles(sig.type):
             continue  # a pedestrian light: its stop line is the crossing's, not the road's
-        road = network.road(road_id)
-        directions = {"+": (1,), "-": (-1,)}.get(sig.orientation, (1, -1))
-        driving = road.driving_lane_ids(sig.s)
-        for direction in directions:
-            lanes = [i for i in driving if road.travel_direction(i) == direction]
-            if sig.validity is not None:
-                lanes = [i for i in lanes if sig.validity[0] <= i <= sig.validity[1]]
-            if lanes:
-                out.append(StopLine(controller, sid, road_id, sig.s, direction, tuple(lanes)))
+        out.extend(signal_lines(network.road(road_id), road_id, sig, controller))
+    return out
+
+
+def signal_lines(road, road_id: str, sig, controller: str) -> list[StopLine]:
+    """The stop lines a map's signal (`road.Signal`) makes on its road: one per direction it
+    faces with a driving lane of its `<validity>` there."""
+    out = []
+    driving = road.driving_lane_ids(sig.s)
+    for direction in {"+": (1,), "-": (-1,)}.get(sig.orientation, (1, -1)):
+        lanes = [i for i in driving if road.travel_direction(i) == direction]
+        if sig.validity is not None:
+            lanes = [i for i in lanes if sig.validity[0] <= i <= sig.validity[1]]
+        if lanes:
+            out.append(StopLine(controller, sig.id, road_id, sig.s, direction, tuple(lanes)))
     return out
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from addt_dsl.runtime.lights import REACH_M, PAST_M, StopLine, StopStation
+from addt_dsl.runtime.lights import REACH_M, PAST_M, StopLine, StopStation, signal_lines
 
 # Signal types of a stop sign: ASAM OpenDRIVE's catalogue (country "OpenDRIVE") and
 # Germany's StVO use 206, the US MUTCD R1-1.
@@ -40,16 +40,8 @@ def stop_sign_lines(network) -> list[StopLine]:
     for road_id in sorted(network.roads, key=_natural):
         road = network.roads[road_id]
         for sig in road.signals:
-            if not is_stop_sign(sig):
-                continue
-            directions = {"+": (1,), "-": (-1,)}.get(sig.orientation, (1, -1))
-            driving = road.driving_lane_ids(sig.s)
-            for direction in directions:
-                lanes = [i for i in driving if road.travel_direction(i) == direction]
-                if sig.validity is not None:
-                    lanes = [i for i in lanes if sig.validity[0] <= i <= sig.validity[1]]
-                if lanes:
-                    out.append(StopLine(SIGN, sig.id, road_id, sig.s, direction, tuple(lanes)))
+            if is_stop_sign(sig):
+                out.extend(signal_lines(road, road_id, sig, SIGN))
     return out
 
 
