@@ -61,6 +61,7 @@ def check_batches(specs, orders=None) -> None:
         assert not bad, f"batched runs differ from alone: {bad}"
 
 
+@pytest.mark.slow  # 14 closed-loop runs (~17 s loaded): part (a) of CI runs it, the core selection does not
 def test_fast_examples_same_alone_batched_reversed(monkeypatch):
     specs = [first_spec(n) for n in FAST]
     [solo(s) for s in specs]  # the references, alone, before the patch
