@@ -89,32 +89,6 @@ def test_profiles_size_the_search(project):
     assert "search" not in default.stdout.split("addt", 1)[-1]
 
 
-def test_failure_is_shrunk_reported_and_replayed_first(project):
-    (project / "scenarios" / "ten_faults.addt").write_text(TEN_FAULTS)
-    junit = project / "report.xml"
-    first = _pytest(project, "--hypothesis-profile", "ci", f"--junitxml={junit}", "scenarios/ten_faults.addt",
-                    github=True)
-    assert first.returncode == 1, first.stdout
-    corpus = sorted((project / ".addt-failures").glob("ten_faults-*.addt"))
-    assert len(corpus) == 1
-    shown = corpus[0].relative_to(project)
-    assert f"no_collision fails: minimal counterexample {shown}" in first.stdout
-    assert "did not matter: fault drop lidar from 0 s (scenarios/ten_faults.addt:29)" in first.stdout
-    assert "did not matter: fault drop lidar" in first.stdout
-    assert "::error file=scenarios/ten_faults.addt,title=addt: no_collision fails::" in first.stdout
-    xml = junit.read_text()
-    assert "<failure message=\"no_collision fails: minimal counterexample" in xml
-    assert 'name="counterexample"' in xml
-    # The counterexample replays with addtc: exit 1.
-    replay = subprocess.run([sys.executable, "-m", "addt_dsl.cli", str(corpus[0]), "--jobs", "1"],
-                            env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True)
-    assert replay.returncode == 1
-    # Next time the known counterexample is replayed first and fails the test by itself.
-    again = _pytest(project, "--hypothesis-profile", "ci", "scenarios/ten_faults.addt")
-    assert again.returncode == 1
-    assert f"known counterexample {shown} still fails" in again.stdout
-
-
 def test_project_suite_does_not_collect_examples():
     out = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", *PLUGIN_ARGS,
                           "tests/unit/search"], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
@@ -135,38 +109,74 @@ def test_violated_warn_oracle_is_a_warning_not_a_failure(project):
     assert strict.returncode == 1
 
 
-def _plugin_output(project: Path, batch: int) -> tuple[str, str, str]:
-    """The test's report (timings out), the corpus entry it wrote, and the next run's report (the corpus replayed)."""
+def _plugin_output(project: Path, batch: int) -> dict:
+    """A child pytest on ten_faults at `--addt-batch N` (CI profile, GitHub annotations, a
+    JUnit report) in a fresh `project`, then again with its corpus: the reports (timings and
+    the project's path out), the JUnit XML and the corpus entry it wrote."""
     import re
+
+    (project / "scenarios").mkdir(parents=True)
+    (project / "pytest.ini").write_text("[pytest]\n")
+    (project / "scenarios" / "ten_faults.addt").write_text(TEN_FAULTS)
 
     def report(proc):
         # Timings out, and the '=' padding pytest sizes around them ("in 9.9s" and "in 10.1s"
-        # pad the summary line differently).
-        return re.sub(r"={2,}", "==", re.sub(r" in [0-9.]+s", "", proc.stdout))
+        # pad the summary line differently); each batch size has its own project directory.
+        text = proc.stdout.replace(str(project), "<project>")
+        return re.sub(r"={2,}", "==", re.sub(r" in [0-9.]+s", "", text))
 
+    junit = project / "report.xml"
     first = _pytest(project, "--hypothesis-profile", "ci", "-rA", "--addt-batch", str(batch),
-                    "scenarios/ten_faults.addt")
+                    f"--junitxml={junit}", "scenarios/ten_faults.addt", github=True)
     assert first.returncode == 1, first.stdout + first.stderr
-    (entry,) = sorted((project / ".addt-failures").glob("ten_faults-*.addt"))
+    corpus = sorted((project / ".addt-failures").glob("ten_faults-*.addt"))
+    assert len(corpus) == 1, corpus
+    entry = corpus[0]
     again = _pytest(project, "--hypothesis-profile", "ci", "-rA", "--addt-batch", str(batch),
                     "scenarios/ten_faults.addt")
-    return report(first), entry.read_text(), report(again)
+    return {"first": report(first), "junit": junit.read_text(), "entry": entry.read_text(),
+            "again": report(again), "again_rc": again.returncode, "entry_path": entry, "project": project}
 
 
-def test_batched_runs_give_the_same_test_reports_and_counterexamples(tmp_path):
-    """`--addt-batch`: the sweep, the corpus and the shrink step runs together; the reports
-    and the corpus entry are those of one run at a time."""
-    import shutil
+@pytest.fixture(scope="module")
+def ten_faults_plugin(tmp_path_factory) -> dict:
+    """`_plugin_output` at `--addt-batch` 1 and 8: batch -> outputs. Both tests below read
+    them; each ran its own child pytests on ten_faults before (six in all, now four). The two
+    batch sizes run at once, each in its own project (a child pytest uses one core:
+    `--addt-jobs` 1)."""
+    from concurrent.futures import ThreadPoolExecutor
 
-    outputs = []
-    project = tmp_path / "project"  # the same directory each time: reports name it
-    for batch in (1, 8):
-        shutil.rmtree(project, ignore_errors=True)
-        (project / "scenarios").mkdir(parents=True)
-        (project / "pytest.ini").write_text("[pytest]\n")
-        (project / "scenarios" / "ten_faults.addt").write_text(TEN_FAULTS)
-        outputs.append(_plugin_output(project, batch))
-    assert outputs[1] == outputs[0]
-    first, entry, again = outputs[0]
-    assert "no_collision fails: minimal counterexample" in first and "stuck control.accel" in entry
-    assert "still fails" in again
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        futures = {batch: pool.submit(_plugin_output, tmp_path_factory.mktemp(f"batch{batch}") / "project", batch)
+                   for batch in (1, 8)}
+        return {batch: future.result() for batch, future in futures.items()}
+
+
+def test_failure_is_shrunk_reported_and_replayed_first(ten_faults_plugin):
+    """One run at a time (`--addt-batch 1`; the shrink's default)."""
+    out = ten_faults_plugin[1]
+    project = out["project"]
+    first, xml, entry = out["first"], out["junit"], out["entry_path"]
+    shown = entry.relative_to(project)
+    assert f"no_collision fails: minimal counterexample {shown}" in first
+    assert "did not matter: fault drop lidar from 0 s (scenarios/ten_faults.addt:29)" in first
+    assert "::error file=scenarios/ten_faults.addt,title=addt: no_collision fails::" in first
+    assert "<failure message=\"no_collision fails: minimal counterexample" in xml
+    assert 'name="counterexample"' in xml
+    # The counterexample replays with addtc: exit 1.
+    replay = subprocess.run([sys.executable, "-m", "addt_dsl.cli", str(entry), "--jobs", "1"],
+                            env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True)
+    assert replay.returncode == 1
+    # Next time the known counterexample is replayed first and fails the test by itself.
+    assert out["again_rc"] == 1
+    assert f"known counterexample {shown} still fails" in out["again"]
+
+
+def test_batched_runs_give_the_same_test_reports_and_counterexamples(ten_faults_plugin):
+    """`--addt-batch`: the sweep, the corpus and the shrink step runs together; the reports,
+    the corpus entry and the replay are those of one run at a time."""
+    keys = ("first", "entry", "again", "again_rc")
+    assert {k: ten_faults_plugin[8][k] for k in keys} == {k: ten_faults_plugin[1][k] for k in keys}
+    out = ten_faults_plugin[1]
+    assert "no_collision fails: minimal counterexample" in out["first"] and "stuck control.accel" in out["entry"]
+    assert "still fails" in out["again"]
