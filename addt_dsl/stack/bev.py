@@ -81,7 +81,10 @@ class BevStack(S.BevStack):
         self.perception = self._make_perception()
         # A fault on the node `perception` draws from the sites this mode's node has.
         self.nodes = {**type(self).nodes, "perception": tuple(self.perception.sites)}
-        self.tracker = Tracker(float(self.settings["track_max_age"]))
+        # The filter weighs positions and velocities by the detector's stated noises.
+        self.tracker = Tracker(float(self.settings["track_max_age"]),
+                               getattr(self.perception, "position_noise_m", None),
+                               getattr(self.perception, "velocity_noise_mps", None))
         # The ego's declared body and friction: the planner's boxes and braking limits.
         self.body = EgoBody(float(ctx.ego_length_m), float(ctx.ego_width_m), float(ctx.ego_mass_kg),
                             float(ctx.ego_mu))
