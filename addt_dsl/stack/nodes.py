@@ -736,8 +736,14 @@ class LatticePlanner:
                 return False, standing, rear
         return True, standing, rear
 
+    # [m/s] the slowest moving candidate: below 4 m/s "ego speed - 2" becomes this crawl, so
+    # an ego at rest whose cruise candidate meets a blocker within the horizon can still roll
+    # up to where it waits (at rest the candidates were cruise or 0, and only the tracker's
+    # velocity noise, now filtered out, ever moved it).
+    CRAWL_MS = 2.0
+
     def _speeds(self, ego_speed: float):
-        return (self.cruise, max(0.0, ego_speed - 2.0), max(0.0, ego_speed - 5.0), 0.0)
+        return (self.cruise, max(ego_speed - 2.0, min(self.cruise, self.CRAWL_MS)), max(0.0, ego_speed - 5.0), 0.0)
 
     def _cost(self, lane, t_lane, speed, s0, t0, v0, objs, current, home, now) -> float:
         # Collision check along the candidate: ego moves from t0 to t_lane over ~3 s with a
