@@ -627,7 +627,11 @@ class LatticePlanner:
     PASS_START_M = 25.0
     PASS_GAP_M = 5.0
     PASS_MARGIN_S = 2.0  # [s]
-    PASS_WAIT_GAP_M = 10.0
+    # The pull-out from a stand follows the 30 m minimum lateral path (`LATERAL_MIN_M`): its
+    # side clears a blocker centred in a 4 m lane (the check's 0.3 m across, 2 m along) about
+    # 14 m along it. From 10 m short, once the ego rolled up to wait there (Town01 with an
+    # oncoming car), it could not.
+    PASS_WAIT_GAP_M = 15.0
     PASS_PEEK_SPARE_M = 0.3  # [m] the waiting ego's side keeps this from its lane's edge
     PASS_ACCEL = 2.0  # [m/s^2] the candidates' speed ramp
     # The share of the return path (a smoothstep over `Plan.lateral_length_m`) after which
