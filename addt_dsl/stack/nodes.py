@@ -571,8 +571,8 @@ class LatticePlanner:
     NUDGE_COST = 1.0
     NUDGE_LANE_MARGIN_M = 0.3  # [m] how far the ego's side may reach past its lane's edge
     NUDGE_REACH_M = 80.0  # [m] objects further ahead do not move the ego yet
-    # [m/s] along the road: what stands (the tracker's velocity of a standing car is ±1 m/s of
-    # noise from 0.1 m position noise at 10 Hz)
+    # [m/s] along the road: what stands (set when the tracker's velocity of a standing car
+    # had ±1 m/s of noise; its filter leaves 0.3 m/s from positions alone)
     NUDGE_STANDING_MS = 1.5
     NUDGE_SPARE_M = 0.3  # [m] beyond the collision check's margin: perception noise, tracking error
 
@@ -620,8 +620,8 @@ class LatticePlanner:
     # goes on; before, a rule that no longer holds turns it back.
     PASS_REACH_M = 80.0
     PASS_SLOW_SHARE = 0.5
-    # [m/s] along the road: what stands (a tracked standing obstacle's velocity flickers by up
-    # to ±2 m/s with 0.1 m position noise at 10 Hz)
+    # [m/s] along the road: what stands (set when a tracked standing obstacle's velocity
+    # flickered by up to ±2 m/s; the tracker's filter leaves 0.3 m/s from positions alone)
     PASS_STANDING_MS = 2.5
     PASS_START_S = 3.0  # [s]
     PASS_START_M = 25.0
