@@ -301,9 +301,9 @@ def test_imported_slalom_rolls_up_and_waits_at_a_steady_point():
     """Default sensors, no traffic: the ego rolls up past c1 at the 2 m/s crawl and waits about
     11 m short of c3 (where the crawl's 5 s path would come within 2 m of it) without
     creeping: the containers' tracked velocities stay near 0 (standing, seen with 0.1 m noise
-    and their velocity by ground-truth perception), so c3 stays a blocker. Before the tracker's filter it crept on (14.6 m short of c3 after 30 s,
-    2.3 m after 300 s): a tracked velocity across the road of up to 1.5 m/s made c3 crossing
-    every few cycles."""
+    and their velocity by ground-truth perception), so c3 stays a blocker. Before the
+    tracker's filter it crept on (14.6 m short of c3 after 30 s, 2.3 m after 300 s): a tracked
+    velocity across the road of up to 1.5 m/s made c3 crossing every few cycles."""
     out = execute(_slalom_file(duration_s=40.0))
     ego = out.trace.actors["ego"]
     front = ego.s + 0.5 * ego.length_m
