@@ -10,6 +10,7 @@ untouched. docs/twin.md states each model and its source.
 from __future__ import annotations
 
 import dataclasses
+
 import math
 
 import numpy as np
@@ -62,7 +63,7 @@ def _attenuate_lidar(sensor, frame, extinction_per_m: float, range_sigma_m: floa
         noisy = np.maximum(dist + rng.normal(0.0, range_sigma_m, len(dist)), 0.0)
         pts = pts * (noisy / np.maximum(dist, 1e-9))[:, None]
     data = dict(frame.data, points=pts, hit_body=ids)
-    return dataclasses.replace(frame, data=data)  # the capture's pose and actors stay
+    return dataclasses.replace(frame, data=data)  # (what was true at the capture stays)
 
 
 def _fog_camera(frame, extinction_per_m: float, airlight: float):
@@ -72,7 +73,7 @@ def _fog_camera(frame, extinction_per_m: float, airlight: float):
     trans = np.exp(-extinction_per_m * frame.data["depth"].astype(np.float32))[..., None]
     out = image * trans + airlight * (1.0 - trans)
     data = dict(frame.data, image=np.clip(np.rint(out), 0, 255).astype(np.uint8))
-    return dataclasses.replace(frame, data=data)  # the capture's pose and actors stay
+    return dataclasses.replace(frame, data=data)  # (what was true at the capture stays)
 
 
 @ENVIRONMENTS.implements
@@ -149,7 +150,7 @@ class Light(S.Light, EnvironmentModel):
         gain = min(1.0 / k, self.MAX_GAIN)
         out = noisy / self.FULL_WELL_E * 255.0 * gain
         data = dict(frame.data, image=np.clip(np.rint(out), 0, 255).astype(np.uint8))
-        return dataclasses.replace(frame, data=data)  # the capture's pose and actors stay
+        return dataclasses.replace(frame, data=data)  # (what was true at the capture stays)
 
 
 @ENVIRONMENTS.implements

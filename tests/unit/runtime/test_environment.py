@@ -93,18 +93,3 @@ def test_night_darkens_and_adds_noise_daylight_leaves_the_image():
     # Less light: a lower signal-to-noise ratio (shot noise grows as the root of the light).
     assert night.mean() / night.std() < dusk.mean() / dusk.std() < math.inf
     assert dusk.std() > 0.0
-
-
-def test_weather_keeps_what_was_true_at_the_capture():
-    # A frame carries the ego's pose and the hit actors of its capture; rain, fog and light
-    # that rebuilt the frame from (sensor, stamp, data) dropped them, and every run with
-    # weather stopped at 0 s with a stack error (perception maps boxes out through the pose).
-    pose, actors = (1.0, 2.0, 0.3, 4.0), {0: "a"}
-    frames = {"lidar": lidar_frame([10.0, 500.0]), "camera": _camera_frame(value=40, depth=50.0)}
-    for keyword, settings, sensor in (("rain", {"rate": 1e-5}, "lidar"), ("fog", {"visibility": 200.0}, "lidar"),
-                                      ("fog", {"visibility": 200.0}, "camera"),
-                                      ("light", {"sun": math.radians(-20.0)}, "camera")):
-        frame = frames[sensor]
-        frame.ego_pose, frame.actors = pose, actors
-        out = model(keyword, **settings).on_frame(_Sensor(sensor), frame, np.random.default_rng(0))
-        assert out is not frame and (out.ego_pose, out.actors) == (pose, actors), (keyword, sensor)
