@@ -83,9 +83,13 @@ class GroundTruthPerception:
 
     name = "perception"
     sites = S.GROUND_TRUTH_SITES
+    # [m/s] the velocity accuracy the tracker assumes: ground truth is exact, but a real
+    # detector's (a radar's range rate) is good to about 0.1 m/s.
+    velocity_noise_mps = 0.1
 
     def __init__(self, settings: dict, rng: np.random.Generator, weak_rng: np.random.Generator | None = None):
         self.noise_m = float(settings.get("perception_noise", 0.1))
+        self.position_noise_m = self.noise_m  # what the tracker's filter weighs positions by
         self.min_hits = int(settings.get("min_hits", 2))
         self.rng = rng
         # Weak detections draw their noise apart: the others' draws stay what they were.
@@ -133,40 +137,70 @@ class GroundTruthPerception:
 # ---------------------------------------------------------------- tracking
 
 class Tracker:
-    """Nearest-neighbour association with constant-velocity prediction between frames.
+    """Nearest-neighbour association and a constant-velocity Kalman filter per track.
 
-    A detector that measures no velocity (learned perception: `vx = vy = nan`) gets one
-    from the tracker: a track's second sighting initialises it from the displacement
-    (gated by a maximum speed, since the first prediction has no velocity), later
-    sightings smooth the displacement velocity with `velocity_gain`.
+    Per axis (x and y apart, with the same noises: one covariance serves both) the state is
+    position p [m] and velocity v [m/s]:
+
+    - motion between frames dt apart: p += v dt, with piecewise-constant white acceleration
+      of std `accel_noise` [m/s^2] (by class): Q = sa^2 [[dt^4/4, dt^3/2], [dt^3/2, dt^2]];
+    - measurements: the detected position, std `position_noise_m` (the detector's: ground
+      truth perception's `perception_noise`), and the detector's velocity where it gives one,
+      std `velocity_noise_mps`.
+
+    A detector that measures no velocity (learned perception: `vx = vy = nan`) leaves a track
+    seen once without one (`vx` nan: a tentative track, gated by a class's maximum speed since
+    its first prediction has no velocity); the second sighting starts the filter from the two
+    positions (what the filter gives from an unknown velocity: v = displacement / dt, variance
+    2 R / dt^2).
     """
 
     name = "tracker"
     sites = S.TRACKER_SITES
     state_sites = S.TRACKER_STATE_SITES
-    TRACK_FIELDS = ("x", "y", "heading", "vx", "vy", "length", "width", "stamp")
+    # A track's stored fields, in memory order (`tracker.tracks`, the bit-flip fault's site):
+    # the box, its velocity, the last update's stamp and the filter's covariance per axis
+    # (position variance [m^2], position-velocity covariance [m^2/s], velocity variance [m^2/s^2]).
+    TRACK_FIELDS = ("x", "y", "heading", "vx", "vy", "length", "width", "stamp", "var_p", "cov_pv", "var_v")
     gate_m = 4.0
     max_age_s = 1.0
-    velocity_gain = 0.35
     max_speed = 45.0  # [m/s] gate for a track whose velocity is not yet known
     # ... and for a detection of these classes: a walker or a bicycle that jumped further
     # is another object (a 45 m/s gate lets a pedestrian's track grab a passing car's box).
     class_max_speed = {"pedestrian": 4.0, "cyclist": 15.0}
+    # [m/s^2] process noise: the acceleration a class shows in ordinary traffic (a walker
+    # starting or stopping, a cyclist, a vehicle braking firmly; an obstacle moves only when
+    # moved). Larger follows manoeuvres sooner and passes more position noise into the
+    # velocity (docs/stack.md, "Tracking").
+    accel_noise = {"pedestrian": 1.0, "cyclist": 2.0, "obstacle": 0.5}
+    default_accel_noise = 3.0
+    # [m] and [m/s] measurement noises when the detector states none (the learned detector's
+    # position error within 40 m is 0.29 m on average: about 0.25 m per axis).
+    position_noise_m = 0.25
+    velocity_noise_mps = 0.1
 
     # [s] a weak track seen again within this (1.5 lidar periods at 10 Hz) is confirmed
     confirm_s = 0.15
 
-    def __init__(self, max_age_s: float = 1.0):
+    def __init__(self, max_age_s: float = 1.0, position_noise_m: float | None = None,
+                 velocity_noise_mps: float | None = None):
         self.max_age_s = max_age_s
-        self.tracks: list[tuple[Obj, float]] = []  # (object, last update time)
+        if position_noise_m is not None:
+            # A floor: noise-free positions would make the filter's first covariance singular.
+            self.position_noise_m = max(float(position_noise_m), 1e-3)
+        if velocity_noise_mps is not None:
+            self.velocity_noise_mps = max(float(velocity_noise_mps), 1e-3)
+        # (object, last update time, (var_p, cov_pv, var_v)); the object holds the estimate.
+        self.tracks: list[tuple[Obj, float, tuple[float, float, float]]] = []
 
     def update(self, objs: list[Obj], stamp_s: float, corrupt) -> None:
-        predicted = [(self._predict(o, stamp_s - ts), ts) for o, ts in self.tracks]
+        predicted = [self._predict(o, stamp_s - ts) for o, ts, _ in self.tracks]
         new_tracks = []
         used = set()
+        r_p = self.position_noise_m ** 2
         for det in objs:
             best, best_d = None, math.inf
-            for i, (p, ts) in enumerate(predicted):
+            for i, (p, (_, ts, _)) in enumerate(zip(predicted, self.tracks)):
                 if i in used:
                     continue
                 d = math.hypot(p.x - det.x, p.y - det.y)
@@ -177,45 +211,87 @@ class Tracker:
                     gate = self.gate_m
                 if d < gate and d < best_d:
                     best, best_d = i, d
-            if best is not None:
-                used.add(best)
-                prev, ts = self.tracks[best]
-                dt = max(stamp_s - ts, 1e-3)
-                mvx, mvy = (det.x - prev.x) / dt, (det.y - prev.y) / dt
-                if not math.isnan(det.vx):
-                    # Blend measured displacement with the detector's velocity estimate.
-                    vx, vy = 0.5 * det.vx + 0.5 * mvx, 0.5 * det.vy + 0.5 * mvy
-                    if det.kind == "pedestrian" and not math.isnan(prev.vx):
-                        # ... smoothed for a walker: the blend's ±0.7 m/s of noise (0.1 m
-                        # positions at 10 Hz) is a walking speed, and a standing walker at
-                        # the kerb, tracked from afar, "stepped" into the lane every few frames.
-                        vx = prev.vx + self.velocity_gain * (vx - prev.vx)
-                        vy = prev.vy + self.velocity_gain * (vy - prev.vy)
-                elif math.isnan(prev.vx):
-                    vx, vy = mvx, mvy
+            measured_v = not math.isnan(det.vx)
+            if best is None:
+                # A new track: the detection, with its velocity if the detector gives one.
+                cov = (r_p, 0.0, self.velocity_noise_mps ** 2 if measured_v else math.inf)
+                new_tracks.append((det, stamp_s, cov))
+                continue
+            used.add(best)
+            prev, ts, cov = self.tracks[best]
+            dt = max(stamp_s - ts, 1e-3)
+            if math.isnan(prev.vx) and not measured_v:
+                # Second sighting without a velocity: two-point start.
+                x, y = det.x, det.y
+                vx, vy = (det.x - prev.x) / dt, (det.y - prev.y) / dt
+                cov = (r_p, r_p / dt, 2.0 * r_p / dt ** 2)
+            else:
+                if math.isnan(prev.vx):  # a velocity-less track meets a detector's velocity
+                    pred, cov = prev, (cov[0], 0.0, math.inf)
                 else:
-                    vx = prev.vx + self.velocity_gain * (mvx - prev.vx)
-                    vy = prev.vy + self.velocity_gain * (mvy - prev.vy)
-                # A second sighting in a row confirms a weak track (2 of 2).
-                det = Obj(det.x, det.y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width,
-                          kind=det.kind, weak=det.weak and prev.weak and stamp_s - ts > self.confirm_s)
-            new_tracks.append((det, stamp_s))
+                    pred = predicted[best]
+                    cov = self._predict_cov(cov, dt, self.accel_noise.get(det.kind, self.default_accel_noise))
+                (x, vx), (y, vy), cov = self._correct(
+                    (pred.x, 0.0 if math.isnan(pred.vx) else pred.vx),
+                    (pred.y, 0.0 if math.isnan(pred.vy) else pred.vy), cov, (det.x, det.y),
+                    (det.vx, det.vy) if measured_v else None)
+            # A second sighting in a row confirms a weak track (2 of 2).
+            est = Obj(x, y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width,
+                      kind=det.kind, weak=det.weak and prev.weak and stamp_s - ts > self.confirm_s)
+            new_tracks.append((est, stamp_s, cov))
         # Keep unmatched tracks alive (coasting) so a dropped frame does not erase an object.
-        for i, (p, ts) in enumerate(self.tracks):
+        for i, (p, ts, cov) in enumerate(self.tracks):
             if i not in used and stamp_s - ts <= self.max_age_s:
-                new_tracks.append((p, ts))
+                new_tracks.append((p, ts, cov))
         self.tracks = new_tracks
+
+    @staticmethod
+    def _predict_cov(cov, dt: float, accel_std: float) -> tuple[float, float, float]:
+        """P <- F P F' + Q for F = [[1, dt], [0, 1]], Q of white acceleration `accel_std`."""
+        pp, pv, vv = cov
+        q = accel_std ** 2
+        return (pp + 2.0 * dt * pv + dt * dt * vv + q * dt ** 4 / 4.0,
+                pv + dt * vv + q * dt ** 3 / 2.0,
+                vv + q * dt * dt)
+
+    def _correct(self, state_x, state_y, cov, z_pos, z_vel):
+        """Kalman update of both axes' (p, v) with the position, then the velocity if measured
+        (independent measurements: one after the other is the joint update)."""
+        pp, pv, vv = cov
+        r_p = self.position_noise_m ** 2
+        if math.isinf(vv):  # no velocity known yet: the position resets p, v stays unknown
+            k_p, k_v = 1.0, 0.0
+            pp, pv = r_p, 0.0
+        else:
+            s = pp + r_p
+            k_p, k_v = pp / s, pv / s
+            pp, pv, vv = pp - k_p * pp, pv - k_p * pv, vv - k_v * pv
+        (px, vx), (py, vy) = state_x, state_y
+        px, vx = px + k_p * (z_pos[0] - px), vx + k_v * (z_pos[0] - px)
+        py, vy = py + k_p * (z_pos[1] - py), vy + k_v * (z_pos[1] - py)
+        if z_vel is not None:
+            r_v = self.velocity_noise_mps ** 2
+            if math.isinf(vv):
+                k_p, k_v = 0.0, 1.0
+                vv = r_v
+            else:
+                s = vv + r_v
+                k_p, k_v = pv / s, vv / s
+                pp, pv, vv = pp - k_p * pv, pv - k_p * vv, vv - k_v * vv
+            px, vx = px + k_p * (z_vel[0] - vx), vx + k_v * (z_vel[0] - vx)
+            py, vy = py + k_p * (z_vel[1] - vy), vy + k_v * (z_vel[1] - vy)
+        return (px, vx), (py, vy), (pp, pv, vv)
 
     def read_state(self, site: str) -> list[tuple[str, float | int]]:
         """`tracker.tracks`: (name, value) of every field of every live track, in memory order."""
-        return [(f"{i}.{name}", v) for i, (o, ts) in enumerate(self.tracks)
-                for name, v in zip(self.TRACK_FIELDS, (o.x, o.y, o.heading, o.vx, o.vy, o.length, o.width, ts))]
+        return [(f"{i}.{name}", v) for i, (o, ts, cov) in enumerate(self.tracks)
+                for name, v in zip(self.TRACK_FIELDS, (o.x, o.y, o.heading, o.vx, o.vy, o.length, o.width, ts, *cov))]
 
     def write_state(self, site: str, values: list[float | int]) -> None:
         n = len(self.TRACK_FIELDS)
         self.tracks = [(Obj(*values[k:k + 7], confidence=o.confidence, s=o.s, t=o.t, kind=o.kind, weak=o.weak),
-                        values[k + 7])
-                       for (o, _), k in zip(self.tracks, range(0, len(values), n))]
+                        values[k + 7], tuple(values[k + 8:k + 11]))
+                       for (o, _, _), k in zip(self.tracks, range(0, len(values), n))]
 
     @staticmethod
     def _predict(o: Obj, dt: float) -> Obj:
@@ -228,7 +304,7 @@ class Tracker:
         """Predicted tracks; one whose velocity is not known yet is reported as standing still
         (`velocity_known` False: a tentative track, which the stack does not plan for)."""
         out = []
-        for o, ts in self.tracks:
+        for o, ts, _ in self.tracks:
             if time_s - ts <= self.max_age_s:
                 p = self._predict(o, time_s - ts)
                 out.append(p if not math.isnan(p.vx) else
@@ -495,8 +571,8 @@ class LatticePlanner:
     NUDGE_COST = 1.0
     NUDGE_LANE_MARGIN_M = 0.3  # [m] how far the ego's side may reach past its lane's edge
     NUDGE_REACH_M = 80.0  # [m] objects further ahead do not move the ego yet
-    # [m/s] along the road: what stands (the tracker's velocity of a standing car is ±1 m/s of
-    # noise from 0.1 m position noise at 10 Hz)
+    # [m/s] along the road: what stands (set when the tracker's velocity of a standing car
+    # had ±1 m/s of noise; its filter leaves 0.3 m/s from positions alone)
     NUDGE_STANDING_MS = 1.5
     NUDGE_SPARE_M = 0.3  # [m] beyond the collision check's margin: perception noise, tracking error
 
@@ -544,14 +620,18 @@ class LatticePlanner:
     # goes on; before, a rule that no longer holds turns it back.
     PASS_REACH_M = 80.0
     PASS_SLOW_SHARE = 0.5
-    # [m/s] along the road: what stands (a tracked standing obstacle's velocity flickers by up
-    # to ±2 m/s with 0.1 m position noise at 10 Hz)
+    # [m/s] along the road: what stands (set when a tracked standing obstacle's velocity
+    # flickered by up to ±2 m/s; the tracker's filter leaves 0.3 m/s from positions alone)
     PASS_STANDING_MS = 2.5
     PASS_START_S = 3.0  # [s]
     PASS_START_M = 25.0
     PASS_GAP_M = 5.0
     PASS_MARGIN_S = 2.0  # [s]
-    PASS_WAIT_GAP_M = 10.0
+    # The pull-out from a stand follows the 30 m minimum lateral path (`LATERAL_MIN_M`): its
+    # side clears a blocker centred in a 4 m lane (the check's 0.3 m across, 2 m along) about
+    # 14 m along it. From 10 m short, once the ego rolled up to wait there (Town01 with an
+    # oncoming car), it could not.
+    PASS_WAIT_GAP_M = 15.0
     PASS_PEEK_SPARE_M = 0.3  # [m] the waiting ego's side keeps this from its lane's edge
     PASS_ACCEL = 2.0  # [m/s^2] the candidates' speed ramp
     # The share of the return path (a smoothstep over `Plan.lateral_length_m`) after which
@@ -660,8 +740,14 @@ class LatticePlanner:
                 return False, standing, rear
         return True, standing, rear
 
+    # [m/s] the slowest moving candidate: below 4 m/s "ego speed - 2" becomes this crawl, so
+    # an ego at rest whose cruise candidate meets a blocker within the horizon can still roll
+    # up to where it waits (at rest the candidates were cruise or 0, and only the tracker's
+    # velocity noise, now filtered out, ever moved it).
+    CRAWL_MS = 2.0
+
     def _speeds(self, ego_speed: float):
-        return (self.cruise, max(0.0, ego_speed - 2.0), max(0.0, ego_speed - 5.0), 0.0)
+        return (self.cruise, max(ego_speed - 2.0, min(self.cruise, self.CRAWL_MS)), max(0.0, ego_speed - 5.0), 0.0)
 
     def _cost(self, lane, t_lane, speed, s0, t0, v0, objs, current, home, now) -> float:
         # Collision check along the candidate: ego moves from t0 to t_lane over ~3 s with a
