@@ -749,7 +749,7 @@ class LatticePlanner:
                 sight = min(sight, x * target / edge if edge < target else x)
         if sight - v_limit * window < reach:
             return False, standing, rear
-        for os_, ot, ov, _ovt, olen, owid in others:
+        for os_, ot, ov, _ovt, olen, owid, *_ in others:
             if abs(ot - t_opp) >= 0.5 * (owid + lane_w):
                 continue  # not in the oncoming lane
             near = os_ - 0.5 * olen - s0
