@@ -849,17 +849,19 @@ def predict_travel(v: float, a: float, tau: float, v_cap: float) -> float:
     `v_cap` [m/s] (a speed already above it is held)."""
     if a == 0.0:
         return v * tau
+    # (the phases' distances as mean speed x time: finite for an infinite a, a corrupted track's)
     if a * v < 0.0:  # braking: stops after -v / a
         t_stop = -v / a
         if tau >= t_stop:
-            tau = t_stop
+            return 0.5 * v * t_stop
         return v * tau + 0.5 * a * tau * tau
     if abs(v) >= v_cap:
         return v * tau
-    t_top = (math.copysign(v_cap, a) - v) / a  # [s] to reach the cap
+    top = math.copysign(v_cap, a)
+    t_top = (top - v) / a  # [s] to reach the cap
     if tau <= t_top:
         return v * tau + 0.5 * a * tau * tau
-    return v * t_top + 0.5 * a * t_top * t_top + math.copysign(v_cap, a) * (tau - t_top)
+    return 0.5 * (v + top) * t_top + top * (tau - t_top)
 
 
 def time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: float) -> float:

@@ -34,6 +34,8 @@ ROAD = _road()
     (0.0, 1.5, 5.0, 6.0, 12.0 + 6.0),  # at the 6 m/s cap after 4 s: 12 m, then 6 m/s for 1 s
     (0.0, -1.5, 5.0, 6.0, -18.0),  # setting off the other way
     (7.0, 1.5, 2.0, 6.0, 14.0),  # faster than the cap already: held
+    (20.0, -math.inf, 1.0, math.inf, 0.0),  # a corrupted estimate: stops at once, not NaN
+    (0.0, math.inf, 1.0, 6.0, 6.0),
 ])
 def test_predict_travel_by_hand(v, a, tau, cap, expected):
     assert predict_travel(v, a, tau, cap) == pytest.approx(expected, abs=1e-9)
