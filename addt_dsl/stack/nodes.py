@@ -191,8 +191,9 @@ class Tracker:
 
     # [s] a weak track seen again within this (1.5 lidar periods at 10 Hz) is confirmed
     confirm_s = 0.15
-    # Smoothing gain of the acceleration estimate per update: 0.5 at 10 Hz follows a step
-    # to 90 % in 0.3 s; a standing box's 0.005 m/s velocity noise gives ~0.05 m/s^2.
+    # Smoothing gain of the acceleration estimate per update: 0.5 follows a step to 87.5 %
+    # in three updates (0.3 s at 10 Hz); a standing box's 0.005 m/s velocity noise gives
+    # ~0.05 m/s^2.
     accel_gain = 0.5
 
     def __init__(self, max_age_s: float = 1.0, position_noise_m: float | None = None,
