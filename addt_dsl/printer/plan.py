@@ -32,7 +32,7 @@ from addt_dsl import units
 from addt_dsl.compiler import compile_source
 from addt_dsl.compiler.rules.actors import CLAUSE_TABLES
 from addt_dsl.compiler.rules.lights import CONTROLLER_SPECS, LIGHT_CLAUSE_SPECS
-from addt_dsl.compiler.rules.oracles import NO_CLAUSES, reach_goal_formula
+from addt_dsl.compiler.rules.oracles import EGO_ONLY, NO_CLAUSES, reach_goal_formula
 from addt_dsl.diagnostics import render_text
 from addt_dsl.limits import DEFAULT as DEFAULT_LIMITS
 from addt_dsl.limits import Limits
@@ -384,8 +384,9 @@ def _builtin_clause(plan: ScenarioPlan, o: OraclePlan) -> tuple[str, str] | None
     built-in lowers to: `no collision [with X]`, `reach goal [within T]`."""
     if o.formula == NO_CLAUSES["collision"]("ego", None):
         return "no collision", "no_collision"
-    if o.formula == NO_CLAUSES["red_light"]("ego", None):
-        return "no red_light", "no_red_light"
+    for word in EGO_ONLY:
+        if o.formula == NO_CLAUSES[word]("ego", None):
+            return f"no {word}", f"no_{word}"
     for signal in E.signals_used(o.formula):
         if signal.startswith("distance(ego,"):
             other = signal[len("distance(ego,"):-1]

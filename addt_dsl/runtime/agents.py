@@ -1,8 +1,8 @@
 """The agents: how actors are posed on their roads (`pose_on_road`, the one way: agents one
 by one or as arrays, the scripted ego), one run's agents (`Fleet`: poses, rows, ground
 truth), and the agents' phases over a batch (`Fleets`: the poses and the longitudinal step
-of car-following agents as one numpy program over every live run's agents, concatenated
-run after run; a single run is a batch of one)."""
+of car-following agents as one numpy program over every live run's agents, read from and
+written to the batch's `agent_arrays.AgentArrays` block; a single run is a batch of one)."""
 
 from __future__ import annotations
 
@@ -13,32 +13,34 @@ import numpy as np
 
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.actor_road import ActorPath
+from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S
 from addt_dsl.runtime.behaviors import (Idm, IdmParams, lateral_profile, relative_heading, settle_lane_change,
                                         standing_yaw)
 from addt_dsl.runtime.vehicle import VehicleState
 
 
-def pose_on_road(a, road, yaw: float, t_now: float, dt: float) -> tuple[float, float, float, float]:
-    """(x, y, road heading, body heading) of an actor on its road or path at its (s, t): the
-    road's heading plus a lane change's or walk's relative heading and, while it has
-    stood still, its declared yaw [rad]; keeps its ground scale (its station moves by
-    speed / ground_scale). Every actor posed one by one is posed here (`Fleets.pose` is the
-    same over arrays)."""
-    x, y, h = road.point(a.s, a.t)
-    a.ground_scale = road.ground_scale(a.s, a.t)
+def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: float) \
+        -> tuple[float, float, float, float, float]:
+    """(x, y, road heading, body heading, ground scale) of an actor on its road or path at its
+    (s, t): the road's heading plus a lane change's or walk's relative heading and, while it
+    has stood still, its declared yaw [rad]; its ground scale, which its caller keeps (its
+    station moves by speed / ground_scale). Every actor posed one by one is posed here
+    (`Fleets.pose` is the same over arrays)."""
+    x, y, h = road.point(s, t)
     heading = h + relative_heading(a, t_now, dt)
     if yaw:
         heading += standing_yaw(a, yaw)
-    return x, y, h, heading
+    return x, y, h, heading, road.ground_scale(s, t)
 
 
 # Agents posed as arrays from this many on in a batch (all its runs' together), and stepped
 # as arrays from STEP_MIN_AGENTS on: fewer, and the per-agent code is quicker (posing: ~30 us
 # of numpy calls against ~2 us per agent, measured break-even at ~24 agents; the array step
-# asks two leader lookups of ~30 numpy calls each per step, a sorted-list bisect per agent
-# costs ~2.5 us: measured break-even at 65-75 agents in one run). Both ways give the same bits.
+# asks two leader lookups of ~30 numpy calls each per step, ~250 us of CPU for 50 agents in
+# one run; the per-agent step costs ~4.3 us an agent through the agents' views (`AgentState`):
+# measured break-even at ~50 agents in one run). Both ways give the same bits.
 ARRAY_MIN_AGENTS = 24
-STEP_MIN_AGENTS = 64
+STEP_MIN_AGENTS = 48
 
 
 class Fleet:
@@ -48,9 +50,9 @@ class Fleet:
     programs over the agents of every run of a batch are `Fleets.pose` and `Fleets.step`;
     a single run is a batch of one.
 
-    The `AgentState` objects stay the agents' state (behaviours, scripts and oracles read
-    them): a step gathers their stations, offsets and speeds into arrays and, when it
-    steps them as arrays, writes the new values back."""
+    The agents' numbers live in a block of arrays (`AgentArrays`: run `run_row`'s slots
+    `block_rows`); the `AgentState` objects are views of it for the code that reads or moves
+    one agent (behaviours, scripts, oracles, the per-agent step)."""
 
     def __init__(self, run):
         agents = self.agents = run.agents
@@ -81,35 +83,33 @@ class Fleet:
         ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
         self.members = (self.length, road_code, run.ego_plan.length_m, ego_code)
         self.posed = False
-        self.scale = None
         self.x, self.y, self.heading = [], [], []
         self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
-        self._posed_version = -1
         self._plan_version = -1
         self._plan = None
+        self.bind(AgentArrays.adopt([agents]), 0)  # a block of one run, until a batch adopts them
 
-    def gather(self) -> None:
-        """Stations, offsets and speeds of the agents now."""
-        agents = self.agents
-        self.s = np.array([a.s for a in agents], dtype=float)
-        self.t = np.array([a.t for a in agents], dtype=float)
-        self.v = np.array([a.speed for a in agents], dtype=float)
+    def bind(self, block: AgentArrays, run: int) -> None:
+        """The agents are run `run` of `block` now (they were moved there: `AgentArrays.adopt`)."""
+        self.block, self.run_row, self.block_rows = block, run, block.rows(run)
 
     def pose_one_by_one(self, run, t_now: float, dt: float) -> None:
         """The per-agent code (`pose_on_road`, the same formulas as `Fleets.pose`): poses,
         and the rows as lists of floats."""
         set_pose = run.physics.set_pose
-        x, y, heading, v, rows = [], [], [], [], []
-        for a, road, yaw, half_height in zip(self.agents, self.roads, self.yaws, self.half_height_m):
-            xi, yi, h, hi = pose_on_road(a, road.road, yaw, t_now, dt)
-            z, grade = road.elevation.at(a.s)
-            off = road.road.lane_offset(a.s, a.t)
+        x, y, heading, rows, scale = [], [], [], [], []
+        state = self.block.values[:, self.run_row, :self.n]  # (the run's block, read once)
+        s_, t_, v, accel = state[:ACCEL + 1].tolist()
+        for a, road, yaw, half_height, s, t, vi, ai in zip(self.agents, self.roads, self.yaws, self.half_height_m,
+                                                           s_, t_, v, accel):
+            xi, yi, h, hi, g = pose_on_road(a, road.road, yaw, t_now, dt, s, t)
+            z, grade = road.elevation.at(s)
+            off = road.road.lane_offset(s, t)
             set_pose(a.name, xi, yi, z + half_height, hi, math.atan(grade) * math.cos(hi - h))
-            x.append(xi), y.append(yi), heading.append(hi), v.append(a.speed)
-            rows.append((xi, yi, hi, a.speed, a.accel, 0.0, a.s, a.t, off, 0.0))
+            x.append(xi), y.append(yi), heading.append(hi), scale.append(g)
+            rows.append((xi, yi, hi, vi, ai, 0.0, s, t, off, 0.0))
+        state[SCALE] = scale
         self.x, self.y, self.heading, self.v, self.rows = x, y, heading, v, rows
-        self.scale = None  # (the ground scales are the agents')
-        self._posed_version = -1
         self.posed = True
 
     def columns(self, ego: VehicleState):
@@ -133,7 +133,8 @@ class Fleet:
             row[:, :-1] = self.rows
             return
         zero = np.zeros(self.n)
-        row[:, :9].T[:] = (self.x, self.y, self.heading, self.v, self.accel, zero, self.s, self.t, self.lane_offset)
+        s, t, _, accel = self.block.values[:ACCEL + 1, self.run_row, :self.n]  # (as posed: nothing moved since)
+        row[:, :9].T[:] = (self.x, self.y, self.heading, self.v, accel, zero, s, t, self.lane_offset)
 
     def ground_truth(self, name: str | None):
         """An agent as perception's ground truth sees it (pose of the step, speed then)."""
@@ -149,7 +150,7 @@ class Fleet:
         agent can be stepped as arrays now, else None. Re-read when a behaviour starts."""
         if run.behavior_version == self._plan_version:
             return self._plan
-        if any(a.lane_anchor is not None for a in self.agents):
+        if self.block.anchored[self.run_row]:
             return None  # one by one while `RunState.follow_lane` may move one (asked again next step)
         self._plan_version, self._plan = run.behavior_version, None
         if run.networked or run.lights is not None or not self.n:
@@ -173,16 +174,22 @@ class Fleet:
 
 class _Layout:
     """The agents of some runs concatenated, run after run: run j's agents are rows
-    lo[j]:lo[j + 1] of every array; the rows of each road (roads shared by runs, as the
-    batch's runs share their roads' sampled views, are one group), and who sees whom."""
+    lo[j]:lo[j + 1] of every array, read from and written to their block's slots `cells`
+    (`AgentArrays.flat`); the rows of each road (roads shared by runs, as the batch's runs
+    share their roads' sampled views, are one group), and who sees whom."""
 
     def __init__(self, fleets: list[Fleet]):
         self.fleets = fleets
+        self.block = fleets[0].block
+        if any(f.block is not self.block for f in fleets):  # runs not stepped as one batch yet
+            self.block = AgentArrays.adopt([f.agents for f in fleets])
+            for r, f in enumerate(fleets):
+                f.bind(self.block, r)
+        self.cells = np.concatenate([f.block_rows for f in fleets])
         sizes = [f.n for f in fleets]
         self.lo = np.cumsum([0, *sizes]).tolist()
         self.starts = np.array(self.lo[:-1], dtype=np.intp)  # (for `reduceat` per run)
         self.n = self.lo[-1]
-        self.agents = [a for f in fleets for a in f.agents]
         groups: dict[int, tuple] = {}
         self.path_rows = []
         self.yaw = []
@@ -226,15 +233,21 @@ class Fleets:
     whose agents cannot go as arrays (non-finite stations; for the step: networked runs,
     lights, behaviours other than IDM with fixed settings, see `Fleet.array_plan`) and
     batches of few agents (the per-agent calls are quicker: `ARRAY_MIN_AGENTS`,
-    `STEP_MIN_AGENTS`) go one by one inside the same phase."""
+    `STEP_MIN_AGENTS`) go one by one inside the same phase.
 
-    def __init__(self):
+    `runs`: the batch, whose agents move into one block (`AgentArrays`, a leading runs axis)."""
+
+    def __init__(self, runs=()):
         self._layouts: dict[tuple[int, ...], _Layout] = {}
+        if runs:
+            block = AgentArrays.adopt([run.fleet.agents for run in runs])
+            for r, run in enumerate(runs):
+                run.fleet.bind(block, r)
 
     def _layout(self, fleets: list[Fleet]) -> _Layout:
         key = tuple(id(f) for f in fleets)
         layout = self._layouts.get(key)
-        if layout is None or any(f is not g for f, g in zip(layout.fleets, fleets)):
+        if layout is None or any(f is not g or f.block is not layout.block for f, g in zip(layout.fleets, fleets)):
             layout = self._layouts[key] = _Layout(fleets)
             while len(self._layouts) > 4:  # live sets change as runs end: keep the recent ones
                 del self._layouts[next(iter(self._layouts))]
@@ -263,8 +276,8 @@ class Fleets:
         if not items:
             return []
         layout = self._layout([run.fleet for run, _ in items])
-        state = np.array([(a.s, a.t, a.speed, a.accel) for a in layout.agents], dtype=float).reshape(-1, 4)
-        s, t = state[:, 0].copy(), state[:, 1].copy()
+        flat, cells = layout.block.flat, layout.cells
+        s, t, v = flat[S:SPEED + 1, cells]
         finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts)
         if not finite.all():
             left = [item for item, ok in zip(items, finite.tolist()) if not ok]
@@ -291,8 +304,7 @@ class Fleets:
         for k, f, i in layout.path_rows:  # routes: one by one
             x[k], y[k], ref_h[k], lane_off[k], z[k], grade[k] = f.road_pose(i)
             scale[k] = f.roads[i].road.ground_scale(float(s[k]), float(t[k]))
-        for a, g in zip(layout.agents, scale.tolist()):
-            a.ground_scale = g
+        flat[SCALE, cells] = scale
         heading = ref_h + rel
         for k, a, yaw in layout.yaw:
             heading[k] += standing_yaw(a, yaw)
@@ -300,13 +312,11 @@ class Fleets:
         for k in np.flatnonzero((grade != 0.0) | (heading != ref_h)).tolist():
             pitch[k] = math.atan(grade[k]) * math.cos(heading[k] - ref_h[k])
         z += layout.half_height
-        v, accel = state[:, 2].copy(), state[:, 3].copy()
         for j, (run, _) in enumerate(items):
             f, rows = run.fleet, slice(lo[j], lo[j + 1])
             run.physics.set_poses(f.slots, x[rows], y[rows], z[rows], heading[rows], pitch[rows])
             f.x, f.y, f.heading, f.lane_offset, f.rows = x[rows], y[rows], heading[rows], lane_off[rows], None
-            f.s, f.t, f.v, f.accel, f.scale = s[rows], t[rows], v[rows], accel[rows], scale[rows]
-            f._posed_version = run.behavior_version  # nothing else moves agents before their step
+            f.v = v[rows]  # (perception's ground truth: the speed of the pose)
             f.posed = True
         return []
 
@@ -315,9 +325,12 @@ class Fleets:
         declaration order, each seeing the earlier ones moved), as arrays; the (run, t) of
         the runs left to that loop."""
         items, rest = [], []
+        placed: dict[int, list[bool]] = {}  # per block: its runs with an agent teleported this step
         for run, t in zip(runs, ts):
             f = run.fleet
-            if f.array_plan(run) is None or any(a.placed for a in f.agents) or \
+            if id(f.block) not in placed:
+                placed[id(f.block)] = f.block.placed.any(axis=1).tolist()
+            if f.array_plan(run) is None or placed[id(f.block)][f.run_row] or \
                     not (math.isfinite(run.ego_s) and math.isfinite(run.ego_t)):
                 rest.append((run, t))  # (a teleported agent stays put this step: `advance`)
             else:
@@ -332,12 +345,8 @@ class Fleets:
         if not items:
             return []
         layout = self._layout([run.fleet for run, _ in items])
-        for run, _ in items:
-            f = run.fleet
-            if run.behavior_version != f._posed_version:  # a behaviour started since the poses: read anew
-                f.gather()
-        fleets, lo = layout.fleets, layout.lo
-        s, t, v = (np.concatenate([getattr(f, k) for f in fleets]) for k in "stv")
+        fleets, lo, flat, cells = layout.fleets, layout.lo, layout.block.flat, layout.cells
+        s, t, v = flat[S:SPEED + 1, cells]
         finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts)
         if not finite.all():
             left = [item for item, ok in zip(items, finite.tolist()) if not ok]
@@ -346,11 +355,9 @@ class Fleets:
         params, rows, target = layout.idm(plans)
         ego = tuple(np.array(col, dtype=float) for col in
                     zip(*((run.ego_s, run.ego_t, run.ego.speed) for run, _ in items)))
-        sizes = np.diff(lo)
-        dt = np.repeat([run.dt for run, _ in items], sizes)
-        # The ground scales of this step's poses (nothing else sets them before the step).
-        scale = np.concatenate([f.scale if f.scale is not None else
-                                np.array([a.ground_scale for a in f.agents], dtype=float) for f in fleets])
+        dts = [run.dt for run, _ in items]
+        dt = dts[0] if dts.count(dts[0]) == len(dts) else np.repeat(dts, np.diff(lo))
+        scale = flat[SCALE, cells]  # (of this step's poses)
         t_new = target.copy()
         for j, ((run, t_now), plan) in enumerate(zip(items, plans)):
             for i in plan[2]:
@@ -375,17 +382,21 @@ class Fleets:
             if settled.all():
                 break
             accel = again
-        values = [col.tolist() for col in (accel, v_new, s_new, t_new)]
+        new = np.stack((s_new, t_new, v_new, accel))
+        if settled.all():
+            flat[:ACCEL + 1, cells] = new
+        else:  # a chain declared front to back: the per-agent loop
+            keep = np.repeat(settled, np.diff(lo))
+            flat[:ACCEL + 1, cells[keep]] = new[:, keep]
         rest = []
-        for j, (run, t_now) in enumerate(items):
+        for j, ((run, t_now), plan) in enumerate(zip(items, plans)):
             if not settled[j]:
-                rest.append((run, t_now))  # a chain declared front to back: the per-agent loop
+                rest.append((run, t_now))
                 continue
-            done = t_now + run.dt
-            for a, ai, vi, si, ti in zip(fleets[j].agents, *(col[lo[j]:lo[j + 1]] for col in values)):
-                a.accel, a.speed, a.s, a.t = ai, vi, si, ti
+            for i in plan[2]:  # (only agents in a lane change may hold a moving centre)
+                a = fleets[j].agents[i]
                 if a.lc_centre is not None:
-                    settle_lane_change(a, done, ti)
+                    settle_lane_change(a, t_now + run.dt, a.t)
             run.leaders_stale = True
         return rest
 
@@ -413,6 +424,7 @@ class _GT:
 def pose_scripted_ego(run, t_now: float, dt: float) -> None:
     """The scripted ego's vehicle state from its road-frame state, posed as an agent is."""
     a, e = run.ego_agent, run.ego
-    e.x, e.y, _, e.heading = pose_on_road(a, run.ego_road.road, run.ego_plan.yaw, t_now, dt)
+    e.x, e.y, _, e.heading, a.ground_scale = pose_on_road(a, run.ego_road.road, run.ego_plan.yaw, t_now, dt,
+                                                          a.s, a.t)
     e.vx, e.accel = a.speed, a.accel
     run.ego_s, run.ego_t = a.s, a.t

@@ -94,7 +94,7 @@ def _stop(run: RunState, rec: phases.Record, k: int, error: str, t: float | None
 def _loop(runs: list[RunState]) -> list[Trace]:
     """Step every run from time 0 until its end, an ego collision or a failure; their traces."""
     recs = [phases.Record(run) for run in runs]
-    fleets = Fleets()  # the agents of the live runs as arrays
+    fleets = Fleets(runs)  # the agents of every run in one block of arrays
     live = list(range(len(runs)))
     k = 0
     while live:
@@ -104,14 +104,14 @@ def _loop(runs: list[RunState]) -> list[Trace]:
         phases.pose([run for run, _, _ in batch], [t for _, _, t in batch], fleets)
         for run, rec, t in batch:
             phases.record(run, rec, k)
+        collided = phases.collisions([run for run, _, _ in batch], [rec for _, rec, _ in batch], k,
+                                     [t for _, _, t in batch])
         for run, rec, t in batch:
             phases.environment(run, rec, k, t)
         for run, rec, t in batch:
             phases.variables(run, rec, k, t)
         for run, rec, t in batch:
             phases.lights(run, rec, k, t)
-        collided = phases.collisions([run for run, _, _ in batch], [rec for _, rec, _ in batch], k,
-                                     [t for _, _, t in batch])
         for run, rec, t in batch:
             phases.outputs(run, rec, k, t)
         going = []

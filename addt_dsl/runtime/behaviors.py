@@ -16,51 +16,9 @@ import math
 from dataclasses import dataclass
 
 from addt_dsl.registry import BEHAVIORS
+from addt_dsl.runtime.agent_arrays import AgentState
 from addt_dsl.runtime.neighbours import nearest_ahead
 from addt_dsl.specs import behaviors as S
-
-
-@dataclass
-class AgentState:
-    """Road-frame state of a traffic agent (m, m/s)."""
-
-    name: str
-    road: str
-    s: float
-    t: float
-    speed: float
-    accel: float
-    length_m: float
-    width_m: float
-    lane: int
-    t_target: float
-    t_start: float = 0.0
-    lc_start_s: float = 0.0  # time the current lateral manoeuvre began [s]
-    lc_duration_s: float = 0.0
-    # Direction of motion relative to the road's +s direction [rad]; non-zero for
-    # walkers: they move at this angle instead of following a lane.
-    heading_rel: float = 0.0
-    lc_shape: str = "quintic"  # blend of the current lateral manoeuvre (see SHAPES)
-    # The current lateral manoeuvre leaves the station's progress whole (a lane offset, as
-    # esmini moves one); a lane change takes its sideways part from the step along the road.
-    lc_keeps_station: bool = False
-    moved: bool = False  # it has had a speed above 0: its declared yaw no longer holds
-    # Ground covered per metre of station at its offset [m/m] (`FastRoad.ground_scale`),
-    # set where it is posed: its station advances by speed / ground_scale.
-    ground_scale: float = 1.0
-    # After a lane change: (lane, road of the path's leg or None until the next step, that
-    # lane's centre t [m] last step). While it holds, a move of the lane's centre in the road's
-    # frame (a lane narrowing beside it, a route's reference crossing over where its own lane
-    # ends) moves the agent with it, as esmini keeps an entity's lane and offset
-    # (`RunState.follow_lane`); None: it keeps its offset t.
-    lane_anchor: tuple | None = None
-    # A lane change onto a lane whose centre moves along s (a lane that widens, a lane
-    # offset): (stations, the target lane's centre there, its centre at the start); None
-    # where the centre stays put (the change ends at `t_target`).
-    lc_centre: tuple | None = None
-    # Teleported in this step: it does not move along its road until the next one (esmini
-    # moves no entity whose position an action set in the step).
-    placed: bool = False
 
 
 def standing_yaw(agent: AgentState, yaw: float) -> float:
@@ -923,19 +881,21 @@ def begin_lane_change(agent: AgentState, world, lane: int, duration_s: float, ti
 def advance(agent: AgentState, accel: float, time_s: float, dt: float) -> None:
     """Integrate an agent's road-frame kinematics from `time_s` over `dt` [s]."""
     agent.accel = accel
-    agent.speed = max(0.0, agent.speed + accel * dt)
+    # (each of the agent's numbers read once: they are views of the agents' arrays)
+    speed = agent.speed = max(0.0, agent.speed + accel * dt)
     # `speed` is the speed along the agent's own path: on a bend its station (measured on
     # the reference line) moves by speed / ground_scale.
     if agent.heading_rel:
-        agent.s += agent.speed * math.cos(agent.heading_rel) * dt / agent.ground_scale
-        agent.t += agent.speed * math.sin(agent.heading_rel) * dt
-        agent.t_target = agent.t
+        agent.s += speed * math.cos(agent.heading_rel) * dt / agent.ground_scale
+        agent.t = agent.t_target = agent.t + speed * math.sin(agent.heading_rel) * dt
     else:
         t_next = lateral_profile(agent, time_s + dt)
-        step = agent.speed * dt if not agent.placed else 0.0
-        agent.placed = False
-        if t_next != agent.t and not agent.lc_keeps_station:  # a lane change: the ground splits into along and across
-            across = t_next - agent.t
+        step = speed * dt
+        if agent.placed:
+            step, agent.placed = 0.0, False
+        t = agent.t
+        if t_next != t and not agent.lc_keeps_station:  # a lane change: the ground splits into along and across
+            across = t_next - t
             step = math.sqrt(max(step * step - across * across, 0.0))
         agent.s += step / agent.ground_scale
         agent.t = t_next

@@ -45,7 +45,7 @@ import numpy as np
 from addt_dsl.lru import LruCache
 from addt_dsl.plan import RunSpec
 from addt_dsl.stats import wilson_interval
-from addt_dsl.runtime.execute import execute
+from addt_dsl.runtime.execute import execute, execute_batch
 from addt_dsl.runtime.executor import local_executor, run_batch, run_spec
 from addt_dsl.runtime.result import RunResult
 from addt_dsl.runtime.store import ResultStore
@@ -164,14 +164,19 @@ class GoldenCache:
             self._db().put_blob(f"golden:{key}", fp.to_bytes())
 
     def golden(self, spec: RunSpec) -> Fingerprint:
-        g = golden_spec(spec)
-        key = g.key()
-        fp = self.get(key)
-        if fp is None:
-            fp = golden_fingerprint(g)
+        return self.goldens([spec])[0]
+
+    def goldens(self, specs: Sequence[RunSpec]) -> list[Fingerprint]:
+        """The golden fingerprint of each spec; those not cached are run as one batch, once
+        per distinct golden key."""
+        keyed = [(g.key(), g) for g in map(golden_spec, specs)]
+        found = {key: self.get(key) for key, _ in keyed}
+        missing = dict((key, g) for key, g in keyed if found[key] is None)
+        for key, fp in zip(missing, golden_fingerprints(list(missing.values()))):
             self.runs += 1
             self.put(key, fp)
-        return fp
+            found[key] = fp
+        return [found[key] for key, _ in keyed]
 
 
 def golden_fingerprint(golden: RunSpec) -> Fingerprint:
@@ -180,6 +185,17 @@ def golden_fingerprint(golden: RunSpec) -> Fingerprint:
         return Fingerprint.of(execute(golden, keep_trace=True))
     except Exception:  # noqa: BLE001 - recorded, never fatal to a sweep
         return Fingerprint({}, "crashed", False)
+
+
+def golden_fingerprints(goldens: Sequence[RunSpec]) -> list[Fingerprint]:
+    """`golden_fingerprint` of each spec, stepped as one batch (a run's trace does not depend
+    on its batch); a batch whose set-up fails runs one by one, so only that run is `crashed`."""
+    if len(goldens) > 1:
+        try:
+            return [Fingerprint.of(r) for r in execute_batch(list(goldens), keep_trace=True)]
+        except Exception:  # noqa: BLE001 - isolate the run that failed: each alone
+            pass
+    return [golden_fingerprint(g) for g in goldens]
 
 
 _DEFAULT_CACHE = GoldenCache()
@@ -234,7 +250,15 @@ class GoldenRun:
     fingerprint sent back in the result (`stats["fingerprint"]`) for the coordinator to store."""
 
     def __call__(self, spec: RunSpec, seq: int = -1, worker: str = "") -> RunResult:
-        fp = golden_fingerprint(spec)
+        return self._record(spec, seq, worker, golden_fingerprint(spec))
+
+    def run_batch(self, specs: list[RunSpec], seqs: list[int], worker: str = "") -> list[RunResult]:
+        """The golden runs of a batch stepped together, each fingerprinted as alone."""
+        return [self._record(spec, seq, worker, fp)
+                for spec, seq, fp in zip(specs, seqs, golden_fingerprints(specs))]
+
+    @staticmethod
+    def _record(spec: RunSpec, seq: int, worker: str, fp: Fingerprint) -> RunResult:
         result = RunResult.unfinished(spec, "ok", "", 0.0, seq=seq, worker=worker)
         result.stats = {"fingerprint": base64.b64encode(fp.to_bytes()).decode()}
         return result
@@ -385,7 +409,9 @@ class ClassifyingRun:
         if self._cache is None:
             self._cache = GoldenCache(self.golden_store, readonly=True)
         # By key, not by position: a run that crashes is never handed to `judge`.
-        goldens = {spec.key(): self._cache.golden(spec) if spec.faults else None for spec in specs}
+        faulty = [spec for spec in specs if spec.faults]
+        goldens = {spec.key(): None for spec in specs}
+        goldens.update(zip((spec.key() for spec in faulty), self._cache.goldens(faulty)))
 
         def judge(result):
             result.outcome = _outcome(result, goldens[result.key], self.tol)

@@ -7,11 +7,13 @@ every live run of the batch before the next:
   pose        agents on their roads (every run's agents at once: `agents.Fleets.pose`),
               the ego (projected onto its road, or posed from its script), their bodies
               in the physics world
-  record      the state row of every actor (clearance, the last field, below)
-  environment changes of the weather, light and road that fire on the recorded state
-  lights      light changes that fire on the recorded state; light states and red margins
+  record      the state row of every actor (clearance, the last field, below); margins to
+              red lights and stop signs; the scenario variables
   collisions  each actor's clearance; `collision` events (`collision.py`: every run's
               pairs in one broad phase)
+  environment changes of the weather, light and road that fire on the recorded state
+  variables   steps that set scenario variables, on the recorded state
+  lights      light changes that fire on the recorded state; light states
   outputs     latencies, the command, objects seen, named steps' states
   end         `end when ...` on the recorded state
   -- the run stops here on an ego collision, its end, or its last sample --
@@ -63,7 +65,8 @@ class Record:
         self.objects = np.zeros(n)
         self.steps = {name: np.zeros(n, dtype=np.int8) for _, name, _ in run.named_steps}
         self.lights = {c.name: np.zeros(n) for c in plan.controllers} if run.lights else {}
-        self.margins = {name: np.zeros(n) for name in names} if run.lights else {}
+        self.margins = run.red_margins = {name: np.zeros(n) for name in names} if run.lights else {}
+        self.sign_margins = run.sign_margins = {name: np.zeros(n) for name in names} if run.signs else {}
         self.lanes = {name: np.full(n, np.nan) for name in names} if run.lane_ids else {}
         self.edges = run.edges = {name: np.zeros(n) for name in run.edge_actors}  # (conditions read them)
         self.ends = run.ends = {name: np.zeros(n) for name in run.end_actors}
@@ -90,7 +93,8 @@ class Record:
         cut = lambda d: {k: v[:last] for k, v in d.items()}  # noqa: E731
         return Trace(run.dt, np.arange(last) * run.dt, actors, cut(self.latency), run.events, cut(self.outputs),
                      self.objects[:last], run.status, run.error, steps=cut(self.steps), lights=cut(self.lights),
-                     red_margin=cut(self.margins), lanes=cut(self.lanes), road_edge=cut(self.edges),
+                     red_margin=cut(self.margins), stop_margin=cut(self.sign_margins), lanes=cut(self.lanes),
+                     road_edge=cut(self.edges),
                      road_end=cut(self.ends), variables=cut(self.variables))
 
 
@@ -165,6 +169,24 @@ def record(run: RunState, rec: Record, k: int) -> None:
         else:
             road, s = run.agent_roads[name].road, run.agent_by_name[name].s
         ends[k] = road.length - s
+    for name, values in rec.variables.items():  # `var(P)`: as it is at sample k
+        values[k] = run.variables[name]
+    if run.lights is not None:  # (the conditions of this sample's steps read them)
+        _red_margins(run, rec, k, k * run.dt)
+    if run.signs is not None:  # `stop_sign(A)`: to the next stop sign not stopped for
+        rec.sign_margins["ego"][k] = run.signs.margin("ego", run.ego_s + 0.5 * run.ego_plan.length_m, e.speed,
+                                                      run.sign_stations["ego"])
+        for a in run.agents:
+            rec.sign_margins[a.name][k] = run.signs.margin(a.name, a.s + 0.5 * a.length_m, a.speed,
+                                                           run.sign_stations[a.name])
+
+
+def _red_margins(run: RunState, rec: Record, k: int, t: float) -> None:
+    """Every actor's margin to its next red at sample k (signal `red_light`)."""
+    rec.margins["ego"][k] = run.lights.red_margin("ego", run.ego_s + 0.5 * run.ego_plan.length_m,
+                                                  run.stop_stations["ego"], t)
+    for a in run.agents:
+        rec.margins[a.name][k] = run.lights.red_margin(a.name, a.s + 0.5 * a.length_m, run.stop_stations[a.name], t)
 
 
 def environment(run: RunState, rec: Record, k: int, t: float) -> None:
@@ -174,27 +196,24 @@ def environment(run: RunState, rec: Record, k: int, t: float) -> None:
 
 
 def variables(run: RunState, rec: Record, k: int, t: float) -> None:
-    """Scenario variables as they are at sample k; then the steps that set them fire on the
-    state just recorded (a value set now is read from the next sample on)."""
-    for name, values in rec.variables.items():
-        values[k] = run.variables[name]
+    """The steps that set scenario variables fire on the state just recorded (a value set now
+    is read from the next sample on: `record` took the values at sample k)."""
     if run.variable_script is not None:
         advance_variable_script(run, rec.rec, k, t)
 
 
 def lights(run: RunState, rec: Record, k: int, t: float) -> None:
-    """Light changes fire on the state just recorded; then each light's state and every
-    actor's margin to its next red."""
+    """Light changes fire on the state just recorded (their conditions, as the environment's
+    and the variables', read the red margins `record` took with the lights as they were);
+    then each light's state, and the margins again with the changes that fired now
+    (`red_margin` gives the same for the same states: recomputing is exact)."""
     if run.lights is None:
         return
     if run.light_script is not None:
         advance_light_script(run, rec.rec, k, t)
+        _red_margins(run, rec, k, t)
     for name in rec.lights:
         rec.lights[name][k] = run.lights.state(name, t)
-    rec.margins["ego"][k] = run.lights.red_margin("ego", run.ego_s + 0.5 * run.ego_plan.length_m,
-                                                  run.stop_stations["ego"], t)
-    for a in run.agents:
-        rec.margins[a.name][k] = run.lights.red_margin(a.name, a.s + 0.5 * a.length_m, run.stop_stations[a.name], t)
 
 
 def collisions(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> list[bool]:

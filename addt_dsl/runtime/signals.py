@@ -251,6 +251,15 @@ class RedLight(S.RedLight, SignalFn):
         return margin if margin is not None else np.full_like(trace.time, 100.0)
 
 
+@SIGNALS.implements
+class StopSign(S.StopSign, SignalFn):
+
+    @staticmethod
+    def compute(trace, args):
+        margin = trace.stop_margin.get(args[0])
+        return margin if margin is not None else np.full_like(trace.time, 100.0)
+
+
 def compute_signals(trace, names: set[str]) -> dict[str, np.ndarray]:
     """Evaluate canonical signal names (`ttc(ego,lead)`) on a trace."""
     out: dict[str, np.ndarray] = {}

@@ -28,6 +28,7 @@ from addt_dsl.road import resolve_route
 from addt_dsl.runtime.roadmesh import build_scene
 from addt_dsl.road.roadspec import build_network
 from addt_dsl.runtime.script import Script
+from addt_dsl.runtime.signs import SignsRuntime, next_sign, stop_sign_lines
 from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED, STEP_WAITING, compute_signals
 from addt_dsl.runtime.trace import Event
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
@@ -97,6 +98,15 @@ class Context:
         front = s + 0.5 * run.ego_plan.length_m
         return next_stop(run.stop_stations["ego"], front, lambda c: run.lights.state(c, self.now))
 
+    def stop_sign_ahead(self, s: float, stopped: tuple[float, ...] = ()) -> float | None:
+        """Station [m] on the ego's road or route of the next stop sign's line ahead of the
+        ego's front at station `s`, other than the lines in `stopped`, or None: the map as a
+        connected vehicle would know it."""
+        run = self._run
+        if run.signs is None:
+            return None
+        return next_sign([st.u for st in run.sign_stations["ego"]], s + 0.5 * run.ego_plan.length_m, stopped)
+
     def ego_station(self) -> float:
         return self._run.ego_s
 
@@ -135,6 +145,16 @@ class Context:
             x, y, h = road.pose(st.u, float(road.road.lane_center_t(run.ego_lane, st.u)))
             z, _ = road.elevation.at(st.u)
             out.append((st.controller, x, y, z, h))
+        return out
+
+    def ego_stop_signs(self):
+        """(x, y, z, heading of the ego's lane) where each stop-sign line on the ego's road or
+        route meets the ego's lane, in route order."""
+        run = self._run
+        road, out = run.ego_road, []
+        for st in run.sign_stations.get("ego", ()):
+            x, y, h = road.pose(st.u, float(road.road.lane_center_t(run.ego_lane, st.u)))
+            out.append((x, y, road.elevation.at(st.u)[0], h))
         return out
 
     def light_state(self, controller: str, time_s: float) -> int:
@@ -183,6 +203,8 @@ class RunState:
         self.edges: dict = {}  # their recorded arrays (`phases.Record`)
         self.end_actors = sorted(set(re.findall(r"road_end\((\w+)\)", spec.plan.model_dump_json())))  # `road_end`
         self.ends: dict = {}
+        self.red_margins: dict = {}  # each actor's recorded `red_light` margin (`phases.Record`)
+        self.sign_margins: dict = {}  # and `stop_sign` margin
         key = tuple(rp.model_dump_json() for rp in plan.roads)
         shared = None if roads is None else roads.get(key)
         if shared is None:
@@ -281,6 +303,7 @@ class RunState:
         self.inflight: list[tuple[float, int, object]] = []  # frames in transit to the stack
         self._frame_seq = 0
         self._setup_lights(plan)
+        self._setup_signs(plan)
         # Scenario variables now, and the steps that set them (`at 3 s set phase 1`).
         self.variables = dict(plan.variables)
         self.variable_script = Script(plan.variable_steps) if plan.variable_steps else None
@@ -406,6 +429,25 @@ class RunState:
         self.stop_stations["ego"] = self._stations(self.ego_road, plan.ego, lines.get(plan.ego.road, []))
         for a in plan.agents:
             self.stop_stations[a.name] = self._stations(self.agent_roads[a.name], a, lines.get(a.road, []))
+
+    def _setup_signs(self, plan: BoundScenario) -> None:
+        """Stop signs: the lines of each map's stop signs, and where each actor meets them
+        along its road or route (none: `self.signs` is None)."""
+        self.signs: SignsRuntime | None = None
+        self.sign_stations: dict[str, list[StopStation]] = {}
+        by_map: dict[int, list] = {}  # one scan per network object (roads of one map may share it)
+        lines: dict[str, list] = {}
+        for r in plan.roads:
+            if r.source == "xodr":
+                network = self.networks[r.name]
+                if id(network) not in by_map:
+                    by_map[id(network)] = stop_sign_lines(network)
+                lines[r.name] = by_map[id(network)]
+        stations = {"ego": self._stations(self.ego_road, plan.ego, lines.get(plan.ego.road, []))}
+        for a in plan.agents:
+            stations[a.name] = self._stations(self.agent_roads[a.name], a, lines.get(a.road, []))
+        if any(stations.values()):
+            self.signs, self.sign_stations = SignsRuntime(), stations
 
     @staticmethod
     def _stations(road: ActorRoad, actor: BoundActor, lines) -> list[StopStation]:

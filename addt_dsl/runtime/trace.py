@@ -78,6 +78,9 @@ class Trace:
     # without lights.
     lights: dict[str, np.ndarray] = field(default_factory=dict)
     red_margin: dict[str, np.ndarray] = field(default_factory=dict)
+    # Each actor's margin to running a stop sign [m] (signal `stop_sign`); empty without
+    # stop signs on the maps.
+    stop_margin: dict[str, np.ndarray] = field(default_factory=dict)
     # Each actor's lane id per sample (signal `lane_id`), in runs whose formulas read it.
     lanes: dict[str, np.ndarray] = field(default_factory=dict)
     # Each actor's distance to its road's outer edge [m] (signal `road_edge`), for the actors
@@ -151,7 +154,8 @@ class Trace:
             h.update(np.ascontiguousarray(self.object_count, dtype=np.float64).tobytes())
         # (The step is in `time`; an error's text is in its `stack_error` event or fixed by
         # `status`.) Only scenarios with lights hash them: digests of the others stay what they were.
-        for label, table in (("light:", self.lights), ("red_margin:", self.red_margin), ("lane_id:", self.lanes),
+        for label, table in (("light:", self.lights), ("red_margin:", self.red_margin),
+                             ("stop_margin:", self.stop_margin), ("lane_id:", self.lanes),
                              ("road_edge:", self.road_edge), ("road_end:", self.road_end),
                              ("var:", self.variables)):
             for name in sorted(table):

@@ -97,6 +97,9 @@ def snapshot_trace(run, rec, k: int, with_steps: bool = True) -> Trace:
     t = k * run.dt
     lights = {n: np.array([run.lights.state(n, t)]) for n in run.lights.programs} if run.lights else {}
     trace = Trace(run.dt, np.array([t]), actors, lat, lights=lights,
+                  red_margin={n: v[k:k + 1] for n, v in run.red_margins.items()},
+                  stop_margin={n: v[k:k + 1] for n, v in run.sign_margins.items()},
+                  object_count=np.array([float(run.stack.objects_seen)]),  # (as `outputs` records it at k)
                   road_edge={n: v[k:k + 1] for n, v in run.edges.items()},
                   road_end={n: v[k:k + 1] for n, v in run.ends.items()},
                   variables={n: v[k:k + 1] for n, v in run.variable_records.items()})

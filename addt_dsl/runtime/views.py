@@ -18,6 +18,35 @@ from typing import Iterator, Protocol
 import numpy as np
 
 
+class AgentView(Protocol):
+    """One agent as a behaviour reads and moves it (its `start`, `accel`, `ended` get it as
+    `agent`): `agent_arrays.AgentState`, a view of its slot in the batch's agent arrays for the
+    numbers the loop moves, its own for the rest. Stations and offsets [m], speeds [m/s]."""
+
+    name: str
+    road: str  # the road (or path) it is on
+    length_m: float
+    width_m: float
+    s: float  # station [m]
+    t: float  # lateral offset from the reference line [m]
+    speed: float  # along its own path [m/s]
+    accel: float  # of the last step [m/s^2]
+    ground_scale: float  # ground per metre of station at its offset [m/m]
+    placed: bool  # teleported this step: it stays put until the next
+    moved: bool  # has had a speed above 0 (its declared yaw no longer holds)
+    lane: int
+    # the lateral manoeuvre: offsets [m], times [s], the blend, whether the station keeps its progress
+    t_target: float
+    t_start: float
+    lc_start_s: float
+    lc_duration_s: float
+    lc_shape: str
+    lc_keeps_station: bool
+    lc_centre: tuple | None  # a change onto a moving lane centre: its samples
+    heading_rel: float  # a walker's direction relative to its road [rad]
+    lane_anchor: tuple | None  # after a change into a lane that moves: kept on that lane
+
+
 class BehaviorWorld(Protocol):
     """What a behaviour may read (its `start`, `accel`, `ended` get it as `world`)."""
 
@@ -110,6 +139,9 @@ class StackContext(Protocol):
     def stop_line_ahead(self, s: float):
         """(station, state code) of the next traffic light's stop line ahead, or None."""
 
+    def stop_sign_ahead(self, s: float, stopped: tuple[float, ...] = ()) -> float | None:
+        """Station of the next stop sign's line ahead but those in `stopped`, or None."""
+
     def event(self, kind: str, **detail) -> None:
         """Record an event now."""
 
@@ -145,6 +177,9 @@ class HostContext(StackContext, Protocol):
 
     def ego_stop_lines(self) -> list[tuple[str, float, float, float, float]]:
         """(controller, x, y, z, heading) of each stop line on the ego's road or route."""
+
+    def ego_stop_signs(self) -> list[tuple[float, float, float, float]]:
+        """(x, y, z, lane heading) where each stop sign's line on the ego's route meets its lane."""
 
     def light_state(self, controller: str, time_s: float) -> int:
         """A light's state code at `time_s` (`lights`)."""

@@ -188,3 +188,13 @@ class RedLight(SignalSpec):
     doc = ("margin to running a red light: while a light that governs the actor's lane is red, "
            "the distance of its front bumper to the stop line, negative once it crosses it (until "
            "30 m past it); 100 m when no red light is ahead within 100 m [m]")
+
+
+@SIGNALS.register
+class StopSign(SignalSpec):
+    keyword = "stop_sign"
+    dim = units.LENGTH
+    doc = ("margin to running a stop sign of the map: the distance of the actor's front bumper to the "
+           "line of the next stop sign that governs its lane and that it has not stopped for (below "
+           "0.1 m/s with its front within 4 m before the line), negative once it crosses such a line "
+           "without stopping (until 30 m past it); 100 m when none is ahead within 100 m [m]")

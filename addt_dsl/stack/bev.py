@@ -96,6 +96,7 @@ class BevStack(S.BevStack):
         self.controller = Controller(self.settings, ctx.wheelbase_m, self.body)
         self.aeb_stage = 0
         self.emergency = False
+        self.signs_stopped: tuple[float, ...] = ()  # stations of the stop-sign lines it has stopped for
         self.planner_period = 1.0 / float(self.settings["planner_rate"])
         self.control_period = 1.0 / float(self.settings["control_rate"])
         self.next_plan_s = 0.0
@@ -242,7 +243,7 @@ class BevStack(S.BevStack):
             objs.append((float(so), float(to), o.vx * c + o.vy * s, v_t,
                          o.length * rc + o.width * rs, o.length * rs + o.width * rc, a_s, a_t))
         hdg0 = heading - float(road.reference_pose(s0)[2])
-        stop = self.ctx.stop_line_ahead(float(s0))
+        stop = self._stop_sign(float(s0), speed, self.ctx.stop_line_ahead(float(s0)))
         give_way, judged = self._give_way(float(s0), float(t0), speed, tracked, objs)
         if give_way is not None and (stop is None or give_way < stop[0]):
             stop = (give_way, LIGHT_STATES["red"])  # wait before the junction like at a red light
@@ -270,6 +271,26 @@ class BevStack(S.BevStack):
         lat = self._latency("planner", len(objs), started, time_s)
         stamp = self.tracks_stamp if self.tracks_stamp is not None else time_s
         self.bus.publish("plan", plan, stamp, time_s + lat)
+
+    # Stop signs: the ego stops at the line of the next stop sign of the map on its route as at
+    # a red light, and counts it done once it has stood (below `SIGN_STOPPED_MS`) with its
+    # front within `SIGN_ZONE_M` before the line; then the junction's gap judgement decides
+    # when it goes. The judge's `stop_sign` margin asks for less (0.1 m/s within 4 m).
+    SIGN_STOPPED_MS = 0.05
+    SIGN_ZONE_M = 3.0
+
+    def _stop_sign(self, s0: float, speed: float, stop):
+        """The stop line the planner holds the ego at: a light's (`stop`: station, state
+        code; or None) or the next stop sign's it has not stopped for, whichever is nearer."""
+        sign = self.ctx.stop_sign_ahead(s0, self.signs_stopped)
+        if sign is not None and speed < self.SIGN_STOPPED_MS \
+                and sign - (s0 + 0.5 * self.body.length_m) <= self.SIGN_ZONE_M:
+            self.signs_stopped = (*self.signs_stopped, sign)
+            self.ctx.event("stop_sign", station_m=round(sign, 3))
+            sign = self.ctx.stop_sign_ahead(s0, self.signs_stopped)
+        if sign is not None and (stop is None or sign < stop[0]):
+            return sign, LIGHT_STATES["red"]
+        return stop
 
     def _pass_end(self, s0: float, stop) -> float:
         """The station [m] a pass through the oncoming lane must be over by: the next junction

@@ -153,6 +153,9 @@ class RemoteContext:
     def stop_line_ahead(self, s: float):
         return None  # traffic-light states are not sent over the bridge protocol (yet)
 
+    def stop_sign_ahead(self, s: float, stopped: tuple[float, ...] = ()) -> float | None:
+        return None  # nor are stop signs
+
     def junction_ahead(self, s: float):
         """As the simulator's context: the next junction on the route the ego's front has not left."""
         front = s + 0.5 * self.ego_length_m

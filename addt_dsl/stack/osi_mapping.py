@@ -28,6 +28,7 @@ from osi3.osi_motionrequest_pb2 import MotionRequest
 from osi3.osi_object_pb2 import MovingObject, StationaryObject
 from osi3.osi_sensorview_pb2 import SensorView
 from osi3.osi_trafficlight_pb2 import TrafficLight
+from osi3.osi_trafficsign_pb2 import TrafficSign
 from osi3.osi_trafficupdate_pb2 import TrafficUpdate
 from osi3 import osi_version_pb2
 
@@ -37,6 +38,7 @@ OSI_VERSION = tuple(getattr(_OSI_INTERFACE, k) for k in ("version_major", "versi
 HOST_ID = 1  # the ego's OSI id; agents follow in plan order (2, 3, ...)
 LIGHT_ID_BASE = 1_000_000  # traffic-light bulbs: base + 10 * signal index + bulb (0 red, 1 yellow, 2 green)
 LANE_ID_BASE = 2_000_000  # lanes and lane boundaries (`lane_id`, `boundary_id`)
+SIGN_ID_BASE = 3_000_000  # stop signs: base + index along the ego's route
 
 # The vehicle catalogue's kinds (addt_dsl.vehicles) as OSI classifications.
 _MOVING_TYPE = {
@@ -180,6 +182,27 @@ def fill_light(gt: GroundTruth, light: LightState) -> None:
             else TrafficLight.Classification.MODE_OFF
 
 
+def stop_signs_ground_truth(signs: list[tuple[float, float, float, float]]) -> GroundTruth:
+    """Stop signs as TrafficSigns (`TYPE_STOP`), each where its line meets the ego's lane,
+    facing the traffic it holds: (x, y, z, yaw of the ego's lane there) each."""
+    gt = GroundTruth()
+    for k, (x, y, z, yaw) in enumerate(signs):
+        ts = gt.traffic_sign.add()
+        ts.id.value = SIGN_ID_BASE + k
+        b = ts.main_sign.base
+        b.dimension.length, b.dimension.width, b.dimension.height = 0.05, 0.9, 0.9
+        b.position.x, b.position.y, b.position.z = x, y, z
+        b.orientation.yaw = math.remainder(yaw + math.pi, 2.0 * math.pi)  # its face towards the traffic
+        ts.main_sign.classification.type = TrafficSign.MainSign.Classification.TYPE_STOP
+    return gt
+
+
+def stop_sign_positions(gt: GroundTruth) -> list[tuple[float, float]]:
+    """(x, y) of each stop sign (`TYPE_STOP` main sign) in a GroundTruth, in message order."""
+    return [(ts.main_sign.base.position.x, ts.main_sign.base.position.y) for ts in gt.traffic_sign
+            if ts.main_sign.classification.type == TrafficSign.MainSign.Classification.TYPE_STOP]
+
+
 def lanes_ground_truth(lanes: list[LaneGeometry], boundaries: list[BoundaryGeometry]) -> GroundTruth:
     """The static part of every GroundTruth (lanes and their boundaries)."""
     gt = GroundTruth()
@@ -206,12 +229,14 @@ def lanes_ground_truth(lanes: list[LaneGeometry], boundaries: list[BoundaryGeome
     return gt
 
 
-def ground_truth(view: WorldView, static: GroundTruth | None = None) -> GroundTruth:
+def ground_truth(view: WorldView, static: GroundTruth | None = None, sensed: bool = True) -> GroundTruth:
     """The GroundTruth of a view: the host among the moving objects, the other actors
-    (stationary kinds as StationaryObjects), the lights' bulbs, `static`'s lanes."""
+    (stationary kinds as StationaryObjects), the lights' bulbs, `static`'s lanes; stamped
+    with the view's time where a frame made it (`sensed`)."""
     gt = GroundTruth()
     set_version(gt.version)
-    set_timestamp(gt.timestamp, view.time_s)
+    if sensed:
+        set_timestamp(gt.timestamp, view.time_s)
     gt.host_vehicle_id.value = view.host.id
     fill_moving(gt.moving_object.add(), view.host)
     for o in view.objects:
@@ -227,16 +252,19 @@ def ground_truth(view: WorldView, static: GroundTruth | None = None) -> GroundTr
 
 
 def sensor_view(view: WorldView, host_now: ObjectState, now_s: float,
-                static: GroundTruth | None = None) -> SensorView:
+                static: GroundTruth | None = None, sensed: bool = True) -> SensorView:
     """A SensorView: `view`'s ground truth (stamped with the view's time, which a delayed,
     skewed or dropped frame makes older than now) and the host's own state now
-    (`host_vehicle_data`, stamped `now_s`: the vehicle knows its odometry on time)."""
+    (`host_vehicle_data`, stamped `now_s`: the vehicle knows its odometry on time).
+    Before the sensor's first frame (`sensed` false) the view has no `timestamp`: there is
+    no frame to stamp, and a stamp would collide with the first frame's when that arrives late."""
     sv = SensorView()
     set_version(sv.version)
-    set_timestamp(sv.timestamp, view.time_s)
+    if sensed:
+        set_timestamp(sv.timestamp, view.time_s)
     sv.sensor_id.value = 0
     sv.host_vehicle_id.value = host_now.id
-    sv.global_ground_truth.CopyFrom(ground_truth(view, static))
+    sv.global_ground_truth.CopyFrom(ground_truth(view, static, sensed))
     hv = sv.host_vehicle_data
     set_version(hv.version)
     set_timestamp(hv.timestamp, now_s)

@@ -35,6 +35,7 @@ import numpy as np
 from addt_dsl.stack import osi_mapping as M
 from addt_dsl.stack import osi_transport as T
 from addt_dsl.stack.bridge import ProtocolError, escape
+from addt_dsl.runtime.signs import next_sign
 from addt_dsl.stack.bridge_server import (MAX_CONNECTIONS, BridgeServer, Limits, check_settings, RemoteFrame,
                                           RemoteActor, RemoteContext, run_server_cli)
 
@@ -57,6 +58,7 @@ class _OsiContext(RemoteContext):
     def __init__(self, hello: dict):
         super().__init__(hello)
         self.lights: list[tuple[float, float]] = []  # (station on the road [m], state code), by station
+        self.signs: list[float] = []  # stations of the stop signs' lines [m], by station
 
     def stop_line_ahead(self, s: float):
         front = s + 0.5 * self.ego_length_m
@@ -64,6 +66,9 @@ class _OsiContext(RemoteContext):
             if u >= front - 0.5:
                 return u, state
         return None
+
+    def stop_sign_ahead(self, s: float, stopped: tuple[float, ...] = ()) -> float | None:
+        return next_sign(self.signs, s + 0.5 * self.ego_length_m, stopped)
 
 
 def rollout(pose: tuple[float, float, float, float], steer: float, accel: float, wheelbase_m: float,
@@ -175,7 +180,9 @@ class _Session:
         ctx.ego = (x, y, yaw, speed)
         ctx.ego_s = float(ctx.road.project(x, y, ctx.ego_s)[0])
         stamp = M.seconds(sv.timestamp)
-        if stamp != self.last_view:  # a new view is a perception frame; a resent one is not
+        # A new stamp is a perception frame; a view sent again, or one without a stamp (no frame
+        # yet: the host alone), is not.
+        if sv.HasField("timestamp") and stamp != self.last_view:
             self.last_view = stamp
             self._frame(sv.global_ground_truth, stamp, now)
         self.stack.step(now, self.dt)
@@ -222,6 +229,7 @@ class _Session:
             u = float(ctx.road.project(p.x, p.y, ctx.ego_s)[0])
             lights[tl.id.value // 10] = (u, _STATE_OF_COLOUR.get(tl.classification.color, 2.0))
         ctx.lights = sorted(lights.values())
+        ctx.signs = sorted(float(ctx.road.project(x, y, ctx.ego_s)[0]) for x, y in M.stop_sign_positions(gt))
         hits = np.repeat(np.array(sorted(actors), dtype=np.int64), 2)  # two returns each: seen
         self.stack.on_frame(RemoteFrame(self.lidar, stamp, {"hit_body": hits}, host, actors), now)
 

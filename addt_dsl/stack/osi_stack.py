@@ -49,6 +49,7 @@ class OsiStack(ExternalStack):
         self.answer = str(self.settings["answer"])
         self._history: deque = deque()  # (time_s, {name: ObjectState}, [LightState]) per step
         self._view: M.WorldView | None = None
+        self._sensed = False  # a lidar frame has made a view
         self._view_sensor = None
         self._static: bytes = b""  # the lanes, as SensorView bytes (protobuf merges concatenated messages)
         self._targets: list[M.Target] | None = None
@@ -65,6 +66,11 @@ class OsiStack(ExternalStack):
         host, port = parse_address(str(self.settings["address"]))
         check_address(host)
         self._static = _lanes_bytes(self.ctx.ego_route_roads())
+        signs = self.ctx.ego_stop_signs()
+        if signs:  # static too: sent with every view, as the lanes
+            sv = SensorView()
+            sv.global_ground_truth.CopyFrom(M.stop_signs_ground_truth(signs))
+            self._static += sv.SerializeToString()
         try:
             self.sock = socket.create_connection((host, port), timeout=float(self.settings["timeout"]))
         except OSError as exc:
@@ -130,12 +136,13 @@ class OsiStack(ExternalStack):
             frame, _ = self._frames[-1]  # the newest that arrived this step
             self._frames = []
             self._view = self._view_of(frame)
+            self._sensed = True
         if self._view is None:  # before the first frame: the host alone, now
             self._view = M.WorldView(time_s, self._history[-1][1]["ego"], [], self._history[-1][2])
         if self.sock is None:
             self._connect()
         host_now = self._history[-1][1]["ego"]
-        sv = M.sensor_view(self._view, host_now, time_s)
+        sv = M.sensor_view(self._view, host_now, time_s, sensed=self._sensed)
         self.objects_seen = len(self._view.objects)
         want = T.ANSWERS[self.answer]
         _, reply = self._exchange(T.SENSOR_VIEW, sv.SerializeToString() + self._static, want)

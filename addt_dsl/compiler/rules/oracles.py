@@ -29,7 +29,8 @@ def _collision_with(other: str):
         op=">", left=E.Signal(name=f"distance(ego,{other})"), right=E.Num(value=15.0))))
 
 
-BUILTIN_NAMES = ("no collision", "no red_light", "stay in lane", "reach goal", "min SIGNAL", "max SIGNAL")
+BUILTIN_NAMES = ("no collision", "no red_light", "no stop_sign", "stay in lane", "reach goal", "min SIGNAL",
+                 "max SIGNAL")
 
 # `no collision [with X]` → formula; the printer recognises built-ins through this table.
 NO_CLAUSES = {
@@ -40,7 +41,12 @@ NO_CLAUSES = {
     # margin signal `red_light`, runtime/lights.py).
     "red_light": lambda actor, other: _always(E.Binary(
         op=">=", left=E.Signal(name=f"red_light({actor})"), right=E.Num(value=0.0))),
+    # The ego stops for every stop sign of the map that governs its lane before crossing its
+    # line (the margin signal `stop_sign`, runtime/signs.py).
+    "stop_sign": lambda actor, other: _always(E.Binary(
+        op=">=", left=E.Signal(name=f"stop_sign({actor})"), right=E.Num(value=0.0))),
 }
+EGO_ONLY = ("red_light", "stop_sign")  # `no WORD` clauses that judge the ego and take no `with`
 
 
 def reach_goal_formula(goal, within_s: float | E.Expr | None = None):
@@ -56,12 +62,12 @@ def _builtin(ctx: Context, b: ast.Builtin) -> tuple[E.Expr, str] | None:
             ctx.sink.error("E0106", f"unknown built-in oracle 'no {b.word}'", b.word_span,
                            "built-ins: " + ", ".join(BUILTIN_NAMES))
             return None
-        if b.word == "red_light":
+        if b.word in EGO_ONLY:
             if b.actor is not None:
-                ctx.sink.error("E0204", "`no red_light` judges the ego; it takes no `with`", b.actor_span,
-                               f"for an agent write `always red_light({b.actor}) >= 0 m`")
+                ctx.sink.error("E0204", f"`no {b.word}` judges the ego; it takes no `with`", b.actor_span,
+                               f"for an agent write `always {b.word}({b.actor}) >= 0 m`")
                 return None
-            return NO_CLAUSES["red_light"]("ego", None), "no_red_light"
+            return NO_CLAUSES[b.word]("ego", None), f"no_{b.word}"
         if b.actor is None:
             return NO_CLAUSES["collision"]("ego", None), "no_collision"
         if b.actor not in ctx.actors_ast or b.actor == "ego":

@@ -133,7 +133,17 @@ class CarlaCriteria:
         if test == "CollisionTest":
             return OraclePlan(name="no_collision", formula=NO_CLAUSES["collision"]("ego", None), text="no collision")
         if test == "RunningRedLightTest":
+            if self.doc.find(".//TrafficSignalController") is None:
+                self.approx(cond, f"criteria_{test} is translated as `no red_light`, which judges the lights of the "
+                                  "file's TrafficSignalControllers: it declares none, so no light turns red in the "
+                                  "twin (CARLA cycles the town's lights itself)")
             return OraclePlan(name="no_red_light", formula=NO_CLAUSES["red_light"]("ego", None), text="no red_light")
+        if test == "RunningStopTest":
+            self.approx(cond, f"criteria_{test} is translated as `no stop_sign`: the stop signs of the map's "
+                              "OpenDRIVE (type 206) on the lanes of their own <validity> (<signalReference>s are "
+                              "not read), stopped below 0.1 m/s within 4 m before the line; ScenarioRunner judges "
+                              "CARLA's stop actors and their trigger volumes")
+            return OraclePlan(name="no_stop_sign", formula=NO_CLAUSES["stop_sign"]("ego", None), text="no stop_sign")
         if test == "KeepLaneTest":
             road_id = next(i for i, r in self.roads.items() if r.name == ego.road)
             odr = self.network.road(road_id)
@@ -154,9 +164,9 @@ class CarlaCriteria:
             return OraclePlan(name="max_velocity", formula=always(E.Binary(
                 op="<=", left=signal(name="speed(ego)"), right=E.Num(value=arg))),
                 text=f"always speed(ego) <= {arg:g} m/s")
-        why = {"RunningStopTest": "the twin has no stop signs",
-               "WrongLaneTest": "no signal gives the driving direction of the lane the ego is in",
+        why = {"WrongLaneTest": "no signal gives the driving direction of the lane the ego is in",
                "OnSidewalkTest": "no signal gives the type of the lane the ego is in"}.get(test, "no such oracle")
         self.skip(cond, f"criteria_{test} is not translated: {why}",
-                  "translated: CollisionTest, RunningRedLightTest, KeepLaneTest, DrivenDistanceTest, MaxVelocityTest")
+                  "translated: CollisionTest, RunningRedLightTest, RunningStopTest, KeepLaneTest, DrivenDistanceTest, "
+                  "MaxVelocityTest")
         return None

@@ -152,3 +152,49 @@ def test_traffic_batch_steps_agents_as_one_array_program_with_solo_digests(monke
                 got = dict(zip(order, (full_digest(r) for r in execute_batch([specs[i] for i in order]))))
                 assert [got[i] for i in range(len(specs))] == alone, (minimum, order)
     assert max(stepped) >= 5, stepped  # most runs' agents in one step
+
+
+@pytest.mark.slow
+def test_padded_agent_block_of_runs_with_other_agent_counts_gives_solo_digests(monkeypatch):
+    """Runs of 3, 12 (declared front to back), 1 and 7 agents (the last ending early) in one
+    block of agent arrays, padded to 12: with every phase on the arrays, each run's digest is
+    its digest alone with every agent one by one; the padding stays padding, and each run's
+    slots hold its agents' last state (what their views read)."""
+    from addt_dsl.compiler import compile_source
+    from addt_dsl.runtime import agents as A
+    from tests.sim.runtime.test_dense_traffic import dense
+
+    sources = [dense(3), dense(12, reverse=True), dense(7).replace("duration 4 s", "duration 3 s")]
+    specs = [expand(compile_source(src.replace("scenario dense", f"scenario dense{i}")).plan).specs[0]
+             for i, src in enumerate(sources)]
+    specs.insert(2, first_spec("lead_brake.addt"))
+    with monkeypatch.context() as m:
+        m.setattr(A, "ARRAY_MIN_AGENTS", 10 ** 9)
+        m.setattr(A, "STEP_MIN_AGENTS", 10 ** 9)
+        alone = [full_digest(execute(s)) for s in specs]
+    seen = []
+    init = A.Fleets.__init__
+
+    def keep(self, runs=()):
+        init(self, runs)
+        seen.append([r.fleet for r in runs])
+
+    monkeypatch.setattr(A.Fleets, "__init__", keep)
+    monkeypatch.setattr(A, "ARRAY_MIN_AGENTS", 1)
+    monkeypatch.setattr(A, "STEP_MIN_AGENTS", 1)
+    results = execute_batch(specs)
+    assert [full_digest(r) for r in results] == alone
+    fleets = seen[-1]
+    block = fleets[0].block
+    assert all(f.block is block for f in fleets)
+    assert block.sizes == [3, 12, 1, 7] and block.values.shape[1:] == (4, 12)
+    pad = ~block.valid
+    assert pad.sum() == 4 * 12 - 23
+    assert (block.values[:4][:, pad] == 0.0).all() and (block.values[4][pad] == 1.0).all()
+    for f, r in zip(fleets, results):
+        last = r.trace.actors
+        for i, a in enumerate(f.agents):
+            # the state after the last step a run took is its views' (the trace's last row is
+            # the pose before it): the block and the views agree
+            assert (a.s, a.t, a.speed, a.accel) == tuple(block.values[:4, f.run_row, i])
+            assert last[a.name].s[-1] <= a.s

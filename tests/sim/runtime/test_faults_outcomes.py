@@ -126,3 +126,28 @@ def test_classify_many_matches_classify_and_runs_each_golden_once():
     one_by_one = [classify(s, cache=GoldenCache())[1] for s in many]
     assert [o for _, o in pairs] == [o for _, o in again] == one_by_one
     assert [r.digest for r, _ in pairs] == [r.digest for r, _ in again]
+
+
+def test_golden_runs_are_stepped_as_a_batch_with_the_fingerprints_of_runs_alone(monkeypatch, tmp_path):
+    from addt_dsl.runtime import outcome
+
+    faulty = [spec("    at 1 s for 1 s drop lidar rate 100 %", duration_s=2.0),
+              spec("    at 1 s for 1 s drop lidar rate 100 %", duration_s=2.0, family="curve"),
+              spec("    at 1 s for 1 s drop lidar rate 100 %", duration_s=2.0)]
+    faulty[2] = faulty[2].model_copy(update={"run_id": "again"})
+    goldens = [golden_spec(s) for s in faulty]
+    assert len({g.key() for g in goldens}) == 2  # the first and third share their twin
+    alone = [outcome.golden_fingerprint(g) for g in goldens]
+    sizes = []
+    real = outcome.execute_batch
+    monkeypatch.setattr(outcome, "execute_batch", lambda specs, **kw: sizes.append(len(specs)) or real(specs, **kw))
+    records = outcome.GoldenRun().run_batch(goldens, [0, 1, 2])
+    assert sizes == [3]
+    got = [outcome.Fingerprint.from_bytes(__import__("base64").b64decode(r.stats["fingerprint"])) for r in records]
+    assert [g.to_bytes() for g in got] == [a.to_bytes() for a in alone]
+    # A worker missing its goldens in the store runs them as one batch, once per twin.
+    sizes.clear()
+    cache = GoldenCache(tmp_path / "golden.sqlite")
+    assert [fp.to_bytes() for fp in cache.goldens(faulty)] == [a.to_bytes() for a in alone]
+    assert sizes == [2] and cache.runs == 2
+    assert cache.goldens(faulty) and cache.runs == 2 and sizes == [2]

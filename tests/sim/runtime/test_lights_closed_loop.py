@@ -84,6 +84,25 @@ def test_same_run_same_digest():
     assert run_text(text).digest == run_text(text).digest
 
 
+def test_steps_and_end_conditions_read_the_red_light_margin_of_their_sample():
+    # `red_light(A)` in a condition: the margin as recorded at that sample (conditions read a
+    # fixed 100 m before, so a step on it never fired). The light turns red at 8 s, when the
+    # stopper, braking since the yellow, is about 10 m short of the line.
+    text = INLINE.replace("STEPS", "").replace(
+        "    behavior cruise speed 10 m/s\n  }\n  agent runner",
+        "    behavior cruise speed 10 m/s\n    when red_light(stopper) < 20 m then behavior cruise speed 3 m/s\n"
+        "  }\n  agent runner").replace("  expect {", "  end when red_light(ego) < 5 m\n  expect {")
+    assert "speed 3 m/s" in text
+    out = run_text(text)
+    tr = out.trace
+    steps = [e.time_s for e in tr.events if e.kind == "behavior" and e.detail.get("actor") == "stopper"]
+    k = int(np.argmax(tr.red_margin["stopper"] < 20.0))
+    assert tr.red_margin["stopper"][k - 1] >= 20.0 and steps == [0.0, tr.time[k]]
+    assert tr.time[k] == pytest.approx(8.0, abs=0.02)  # red from 8 s: at once
+    # The run ends at the first sample the ego's margin is below 5 m (it stops 1 m short).
+    assert tr.red_margin["ego"][-1] < 5.0 and (tr.red_margin["ego"][:-1] >= 5.0).all() and tr.time[-1] < 21.0
+
+
 def test_red_light_runner_example():
     result = compile_file(EXAMPLES / "red_light_runner.addt")
     assert result.ok

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
@@ -41,3 +42,29 @@ def test_sequence_runs_in_the_loop():
     lead = run.trace.actors["lead"]
     assert abs(lead.lane_offset[-1]) < 0.2 and lead.t[-1] > lead.t[0] + 3.0  # moved one lane left
     assert abs(lead.speed[-1] - 5.0) < 0.3
+
+
+def test_a_condition_on_objects_reads_what_the_stack_reports_at_its_sample():
+    # `objects()` in a condition read 0 at every sample (the condition's snapshot carried no
+    # object count), so this step never fired.
+    src = """scenario t {
+  duration 3 s
+  road r {
+    line length 400 m
+    lanes right 2
+  }
+  ego car on r lane -1 at 40 m speed 8 m/s {
+    stack bev cruise_speed 8 m/s
+  }
+  agent lead car on r lane -1 at 70 m speed 5 m/s {
+    behavior cruise speed 5 m/s
+    when objects() >= 1 then behavior cruise speed 12 m/s
+  }
+}
+"""
+    result = compile_source(src, "t.addt")
+    assert result.ok, result.diagnostics
+    tr = execute(expand(result.plan).specs[0]).trace
+    k = int(np.argmax(tr.object_count >= 1))
+    assert k > 0 and tr.object_count[k - 1] == 0
+    assert [e.time_s for e in tr.events if e.kind == "behavior"] == [0.0, tr.time[k]]

@@ -44,12 +44,10 @@ def _through_osi(spec, address: str, answer: str):
 
 # Examples on roads and routes through junctions, lights and a merge, with how far [m] the
 # ego's path through OSI may stray from the in-process one. `lead_brake` delays its lidar
-# frames: until its first frame arrives (20 ms) the OSI host sends a view of the host alone
-# stamped 0 s, which the OSI stack takes as a frame without objects, and the first frame,
-# stamped 0 s too, as that view sent again (docs/bridge.md): only its verdicts are compared
-# (None); without that first frame's difference (a delay from 0.1 s on) the paths agree. Where the
-# ego stands and waits at a junction (`left_turn_yield`, `red_light_runner`: the gap
-# judgement) the lateral control at walking pace grows the OSI messages' rounding from
+# frames: until its first frame arrives the OSI host sends views of the host alone without a
+# timestamp (no frame yet), so the first frame, stamped 0 s, reaches the OSI stack when it
+# arrives, as in process. Where the ego stands and waits at a junction (`left_turn_yield`,
+# `red_light_runner`: the gap judgement) the lateral control at walking pace grows the OSI messages' rounding from
 # micrometres at the stop to about 2 mm by the end.
 # The OSI view carries objects with 2 returns or more, not the one-return weak detections
 # the in-process perception tracks once confirmed (docs/bridge.md): where they matter
@@ -59,7 +57,7 @@ STANDS = 5e-3
 WEAK = 0.6
 EXAMPLES = {"following": 1e-4, "following_brake": 1e-4, "overtake": 1e-4, "broken_down": WEAK,
             "left_turn_yield": WEAK, "junction_cyclist": 1e-4, "red_light_runner": STANDS, "ramp_merge": 1e-4,
-            "lead_brake": None}
+            "lead_brake": 1e-4}
 
 
 @pytest.mark.parametrize("answer", ["motion_request", "traffic_update"])
@@ -177,3 +175,20 @@ def test_the_bridge_server_plans_along_the_route_too():
     finally:
         server.shutdown()
         server.server_close()
+
+
+def test_stop_signs_reach_the_osi_stack_as_traffic_signs(server_address, tmp_path):
+    # The map's stop sign crosses OSI as a TrafficSign (TYPE_STOP): the OSI stack stops the ego
+    # at its line as the in-process one does, on the same path.
+    from tests.sim.runtime.test_stop_signs import MAP, SIGNS, SOURCE
+
+    (tmp_path / "signs.xodr").write_text(MAP.read_text().replace("<signals>\n        </signals>", SIGNS))
+    result = compile_source(SOURCE, "stop_sign.addt", base_dir=tmp_path)
+    assert result.plan is not None, result.diagnostics
+    spec = expand(result.plan).specs[0]
+    local, remote = execute(spec), execute(_through_osi(spec, server_address, "motion_request"))
+    assert remote.status == local.status == "ok", remote.error
+    assert {v.name: v.passed for v in remote.verdicts}["no_stop_sign"]
+    a, b = local.trace.actors["ego"], remote.trace.actors["ego"]
+    assert min(b.speed[(b.s > 100.0) & (b.s < 150.0)]) < 0.05  # it stood before the line
+    assert np.hypot(a.x - b.x, a.y - b.y).max() < 1e-4  # [m]

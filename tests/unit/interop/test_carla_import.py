@@ -18,7 +18,7 @@ from tests.conftest import ROOT
 CARLA = ROOT / "tests" / "data" / "carla"
 MAPS = CARLA / "maps"
 SCENARIOS = sorted((CARLA / "xosc").glob("*.xosc"))
-CRITERIA = {"no_red_light", "keep_lane", "no_collision", "driven_distance"}
+CRITERIA = {"no_red_light", "no_stop_sign", "keep_lane", "no_collision", "driven_distance"}
 
 
 def _import(name: str):
@@ -85,8 +85,14 @@ def test_criteria_become_oracles_and_the_rest_say_why_not():
     assert oracles["driven_distance"].formula.arg.right.value == 100.0
     skipped = sorted(d.message.split(" ")[0] for d in got.diagnostics if d.code == "W0801"
                      and d.message.startswith("criteria_"))
-    assert skipped == ["criteria_OnSidewalkTest", "criteria_RunningStopTest", "criteria_WrongLaneTest"]
+    assert skipped == ["criteria_OnSidewalkTest", "criteria_WrongLaneTest"]
     assert "CARLA ScenarioRunner's criteria_*" in got.text
+    # RunningStopTest: the map's stop signs (Town01's OpenDRIVE has none: it holds trivially).
+    assert oracles["no_stop_sign"].text == "no stop_sign" and "no stop_sign" in got.text
+    assert any(d.code == "W0802" and d.message.startswith("criteria_RunningStopTest") for d in got.diagnostics)
+    # RunningRedLightTest: the file declares no light controllers, so no light runs (said).
+    assert any(d.code == "W0802" and d.message.startswith("criteria_RunningRedLightTest") and "declares none"
+               in d.message for d in got.diagnostics)
 
 
 def test_a_town_not_found_names_where_it_looked(tmp_path, capsys):

@@ -61,6 +61,7 @@ def test_no_hosted_module_reads_the_runs_state(path):
 
 CONSUMERS = [
     ("runtime/behaviors.py", ("world",), views.BehaviorWorld),
+    ("runtime/behaviors.py", ("agent",), views.AgentView),
     ("runtime/sensors.py", ("world",), views.SensorWorld),
     ("stack/nodes.py", ("frame",), views.SensorFrame),
     ("stack/bev.py", ("ctx",), views.StackContext),
@@ -83,7 +84,8 @@ def test_consumers_use_only_declared_members(rel, names, protocol):
 
 
 def offered(path: Path, class_name: str) -> set[str]:
-    """Methods and `self.x = ...` attributes of a class (and of its in-module bases)."""
+    """Methods, class attributes (properties made by a call) and `self.x = ...` attributes of
+    a class (and of its in-module bases)."""
     tree = parse(path)
     classes = {n.name: n for n in tree.body if isinstance(n, ast.ClassDef)}
     out: set[str] = set()
@@ -93,6 +95,8 @@ def offered(path: Path, class_name: str) -> set[str]:
         if cls is None:
             continue
         todo += [b.id for b in cls.bases if isinstance(b, ast.Name)]
+        out |= {t.id for node in cls.body if isinstance(node, ast.Assign) for t in node.targets
+                if isinstance(t, ast.Name)}
         for node in ast.walk(cls):
             if isinstance(node, ast.FunctionDef):
                 out.add(node.name)
@@ -109,6 +113,7 @@ IMPLEMENTATIONS = [
     ("runtime/state.py", "RunState", views.BehaviorWorld),
     ("runtime/state.py", "RunState", views.SensorWorld),
     ("stack/bridge_server.py", "RemoteContext", views.StackContext),
+    ("runtime/agent_arrays.py", "AgentState", views.AgentView),
 ]
 
 

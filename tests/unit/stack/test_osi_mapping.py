@@ -40,6 +40,17 @@ def test_timestamps_are_seconds_and_nanoseconds():
     assert M.seconds(sv.timestamp) == pytest.approx(0.07, abs=1e-12)
 
 
+def test_a_view_before_the_first_frame_has_no_stamp():
+    # The host alone, before the sensor's first frame: its odometry stamped now, but no view
+    # stamp (a stamp 0 s would be taken for the late first frame's, stamped 0 s too).
+    sv = SensorView.FromString(M.sensor_view(M.WorldView(0.0, HOST), HOST, 0.02, sensed=False).SerializeToString())
+    assert not sv.HasField("timestamp") and not sv.global_ground_truth.HasField("timestamp")
+    assert M.seconds(sv.host_vehicle_data.timestamp) == pytest.approx(0.02, abs=1e-12)
+    assert [o.id.value for o in sv.global_ground_truth.moving_object] == [1]
+    stamped = SensorView.FromString(M.sensor_view(M.WorldView(0.0, HOST), HOST, 0.02).SerializeToString())
+    assert stamped.HasField("timestamp") and stamped.global_ground_truth.HasField("timestamp")
+
+
 def test_ground_truth_objects_frames_and_classes():
     view = M.WorldView(3.5, HOST, [TRUCK, WALKER, BOX], [LIGHT])
     sv = SensorView.FromString(M.sensor_view(view, HOST, 3.6).SerializeToString())  # as the peer reads it
@@ -223,3 +234,17 @@ def test_timestamps_round_trip_to_the_nanosecond(t):
     M.set_timestamp(sv.timestamp, t)
     assert 0 <= sv.timestamp.nanos < 1_000_000_000
     assert abs(M.seconds(sv.timestamp) - t) <= 1e-9 + 1e-15 * t
+
+
+def test_stop_signs_are_traffic_signs_facing_the_traffic():
+    from osi3.osi_trafficsign_pb2 import TrafficSign
+
+    gt = M.stop_signs_ground_truth([(150.0, -1.75, 0.0, 0.0), (20.0, 5.0, 1.0, math.pi / 2)])
+    gt = type(gt).FromString(gt.SerializeToString())
+    assert [ts.id.value for ts in gt.traffic_sign] == [M.SIGN_ID_BASE, M.SIGN_ID_BASE + 1]
+    stop = TrafficSign.MainSign.Classification.TYPE_STOP
+    assert all(ts.main_sign.classification.type == stop for ts in gt.traffic_sign)
+    # Facing the traffic that drives towards it: turned half round from the lane's heading.
+    assert gt.traffic_sign[0].main_sign.base.orientation.yaw == pytest.approx(math.pi)
+    assert gt.traffic_sign[1].main_sign.base.orientation.yaw == pytest.approx(-math.pi / 2)
+    assert M.stop_sign_positions(gt) == [(150.0, -1.75), (20.0, 5.0)]
