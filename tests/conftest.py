@@ -40,6 +40,25 @@ def pytest_collection_modifyitems(items):
                 item.add_marker(pytest.mark.skip(reason="needs torch (the `learned` extra, see README)"))
 
 
+@pytest.fixture(scope="session")
+def ten_faults_shrunk(tmp_path_factory):
+    """`addtc shrink examples/ten_faults.addt --no-animation --format json --batch N --out DIR`,
+    run once per session for each N: N -> (DIR, the finished process). The same command is
+    the reference of the shrink batch test, of the killed and resumed shrink, and the source
+    of the replayable .xosc; each took its own shrink before. Tests only read DIR."""
+    from tests.sim.runner_simkit import addtc
+
+    done = {}
+
+    def shrink(batch: int):
+        if batch not in done:
+            out = tmp_path_factory.mktemp(f"ten_faults_batch{batch}") / "out"
+            done[batch] = out, addtc("shrink", EXAMPLES / "ten_faults.addt", "--no-animation", "--format", "json",
+                                     "--batch", str(batch), "--out", out)
+        return done[batch]
+    return shrink
+
+
 def compiled_as_installed(result) -> bool:
     """A scenario compiles, or (core install) its only errors are E0601: it needs torch."""
     errors = {d.code for d in result.diagnostics if d.is_error}

@@ -285,8 +285,12 @@ class Road:
                 outs[2][m], outs[3][m] = r[k - 1], r[k]
         return [o.reshape(np.shape(s_arr)) for o in outs]
 
+    def section_at_scalar(self, s: float) -> LaneSection:
+        """:meth:`section_at` for one float station (no numpy: a bisection, ~0.3 us)."""
+        return self.sections[max(0, bisect.bisect_right(self._section_starts_t, s) - 1)]
+
     def _lane_t_scalar(self, lane_id: int, s: float, rates: bool):
-        sec = self.sections[max(0, bisect.bisect_right(self._section_starts_t, s) - 1)]
+        sec = self.section_at_scalar(s)
         t, rate = self.offset_profile.value_and_rate(s)
         nan = (math.nan,) * (4 if rates else 2)
         if lane_id == 0:

@@ -228,6 +228,11 @@ class FastRoad:
         return s, t, (x - rx) * math.cos(h) + (y - ry) * math.sin(h)
 
     # ---- lanes
+    def road_coords(self, s: float, t: float):
+        """(OpenDRIVE road, its station [m], its t [m], the direction driven along it: +1) of
+        a point at (`s`, `t`): the road itself (a `RoutePath` answers with its leg's road)."""
+        return self.road, min(max(s, 0.0), self.length), t, 1
+
     def _section_key(self, s: float) -> int:
         return max(0, bisect.bisect_right(self._section_starts, s) - 1)
 

@@ -167,6 +167,13 @@ class RoutePath(FastRoad):
             self._lanes_memo[key] = out
         return out
 
+    def road_coords(self, u: float, t: float):
+        """`FastRoad.road_coords` of path coordinates: the leg's road, station and t, and
+        the leg's direction (-1: driven against s)."""
+        sg = self._seg(u)
+        s = min(max(sg.s_from + sg.dir * (u - sg.u0), 0.0), sg.fast.length)
+        return sg.fast.road, s, _reference_t(sg, s) + sg.dir * t, sg.dir
+
     def lane_center_t(self, lane: int, u: float) -> float:
         sg = self._seg(u)
         s = sg.s_from + sg.dir * (u - sg.u0)

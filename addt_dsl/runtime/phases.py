@@ -8,7 +8,7 @@ every live run of the batch before the next:
               the ego (projected onto its road, or posed from its script), their bodies
               in the physics world
   record      the state row of every actor (clearance, the last field, below); margins to
-              red lights and stop signs; the scenario variables
+              red lights and stop signs; lane states (`lanestate.py`); the scenario variables
   collisions  each actor's clearance; `collision` events (`collision.py`: every run's
               pairs in one broad phase)
   environment changes of the weather, light and road that fire on the recorded state
@@ -37,6 +37,7 @@ import math
 
 import numpy as np
 
+from addt_dsl.runtime import lanestate
 from addt_dsl.runtime.agents import Fleets, pose_scripted_ego
 from addt_dsl.runtime.collision import ALL_PAIRS_MAX, clearances_batch
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
@@ -70,6 +71,8 @@ class Record:
         self.lanes = {name: np.full(n, np.nan) for name in names} if run.lane_ids else {}
         self.edges = run.edges = {name: np.zeros(n) for name in run.edge_actors}  # (conditions read them)
         self.ends = run.ends = {name: np.zeros(n) for name in run.end_actors}
+        self.wrong_ways = run.wrong_ways = {name: np.full(n, -1.0) for name in run.wrong_way_actors}
+        self.offs = run.offs = {name: np.full(n, -1.0) for name in run.off_lanes_actors}
         self.variables = run.variable_records = {name: np.zeros(n) for name in run.variables}
         self.sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
         self.sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
@@ -95,7 +98,8 @@ class Record:
                      self.objects[:last], run.status, run.error, steps=cut(self.steps), lights=cut(self.lights),
                      red_margin=cut(self.margins), stop_margin=cut(self.sign_margins), lanes=cut(self.lanes),
                      road_edge=cut(self.edges),
-                     road_end=cut(self.ends), variables=cut(self.variables))
+                     road_end=cut(self.ends), variables=cut(self.variables), wrong_way=cut(self.wrong_ways),
+                     off_lanes=cut(self.offs))
 
 
 def clock(run: RunState, t: float) -> None:
@@ -169,6 +173,8 @@ def record(run: RunState, rec: Record, k: int) -> None:
         else:
             road, s = run.agent_roads[name].road, run.agent_by_name[name].s
         ends[k] = road.length - s
+    if rec.wrong_ways or rec.offs:  # `wrong_way(A)`, `off_lanes(A)`
+        lanestate.record(run, rec, k)
     for name, values in rec.variables.items():  # `var(P)`: as it is at sample k
         values[k] = run.variables[name]
     if run.lights is not None:  # (the conditions of this sample's steps read them)

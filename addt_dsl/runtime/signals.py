@@ -227,6 +227,24 @@ class LaneId(S.LaneId, SignalFn):
 
 
 @SIGNALS.implements
+class WrongWay(S.WrongWay, SignalFn):
+
+    @staticmethod
+    def compute(trace, args):
+        marks = trace.wrong_way.get(args[0])  # (recorded for each actor a formula names)
+        return marks if marks is not None else np.full_like(trace.time, -1.0)
+
+
+@SIGNALS.implements
+class OffLanes(S.OffLanes, SignalFn):
+
+    @staticmethod
+    def compute(trace, args):
+        marks = trace.off_lanes.get(args[0])
+        return marks if marks is not None else np.full_like(trace.time, -1.0)
+
+
+@SIGNALS.implements
 class Light(S.Light, SignalFn):
 
     @staticmethod

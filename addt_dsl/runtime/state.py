@@ -203,6 +203,11 @@ class RunState:
         self.edges: dict = {}  # their recorded arrays (`phases.Record`)
         self.end_actors = sorted(set(re.findall(r"road_end\((\w+)\)", spec.plan.model_dump_json())))  # `road_end`
         self.ends: dict = {}
+        # `wrong_way(A)`, `off_lanes(A)` (`lanestate.py`): recorded for the actors a formula reads
+        self.wrong_way_actors = sorted(set(re.findall(r"wrong_way\((\w+)\)", spec.plan.model_dump_json())))
+        self.off_lanes_actors = sorted(set(re.findall(r"off_lanes\((\w+)\)", spec.plan.model_dump_json())))
+        self.wrong_ways: dict = {}
+        self.offs: dict = {}
         self.red_margins: dict = {}  # each actor's recorded `red_light` margin (`phases.Record`)
         self.sign_margins: dict = {}  # and `stop_sign` margin
         key = tuple(rp.model_dump_json() for rp in plan.roads)

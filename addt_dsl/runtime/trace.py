@@ -91,6 +91,10 @@ class Trace:
     road_end: dict[str, np.ndarray] = field(default_factory=dict)
     # Scenario variables' values per sample (signal `var`); empty without variables.
     variables: dict[str, np.ndarray] = field(default_factory=dict)
+    # Each actor's `wrong_way` and `off_lanes` state per sample (+1 holds, -1 not), for the
+    # actors the scenario reads them of.
+    wrong_way: dict[str, np.ndarray] = field(default_factory=dict)
+    off_lanes: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -157,7 +161,8 @@ class Trace:
         for label, table in (("light:", self.lights), ("red_margin:", self.red_margin),
                              ("stop_margin:", self.stop_margin), ("lane_id:", self.lanes),
                              ("road_edge:", self.road_edge), ("road_end:", self.road_end),
-                             ("var:", self.variables)):
+                             ("var:", self.variables), ("wrong_way:", self.wrong_way),
+                             ("off_lanes:", self.off_lanes)):
             for name in sorted(table):
                 h.update((label + name).encode())
                 h.update(np.ascontiguousarray(table[name]).tobytes())

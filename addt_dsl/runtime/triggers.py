@@ -102,7 +102,9 @@ def snapshot_trace(run, rec, k: int, with_steps: bool = True) -> Trace:
                   object_count=np.array([float(run.stack.objects_seen)]),  # (as `outputs` records it at k)
                   road_edge={n: v[k:k + 1] for n, v in run.edges.items()},
                   road_end={n: v[k:k + 1] for n, v in run.ends.items()},
-                  variables={n: v[k:k + 1] for n, v in run.variable_records.items()})
+                  variables={n: v[k:k + 1] for n, v in run.variable_records.items()},
+                  wrong_way={n: v[k:k + 1] for n, v in run.wrong_ways.items()},
+                  off_lanes={n: v[k:k + 1] for n, v in run.offs.items()})
     if run.lane_ids:  # `lane_id(A)` reads the lanes now
         trace.lanes = {name: np.array([run.lane_number(name)]) for name in rec}
     if run.named_steps and with_steps:  # `when ended(lead.brake_hard)` reads the states now

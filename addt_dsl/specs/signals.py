@@ -167,6 +167,25 @@ class LaneId(SignalSpec):
            "its road or route; NaN off the lanes), recorded only in runs whose formulas read it")
 
 @SIGNALS.register
+class WrongWay(SignalSpec):
+    keyword = "wrong_way"
+    boolean = True
+    doc = ("whether the actor's centre is in a driving lane (the nearest lane centre on its road or route) "
+           "whose traffic runs against the direction the actor's road or route is driven there, outside "
+           "junctions (CARLA's WrongLaneTest); recorded only for the actors a formula reads it of")
+
+
+@SIGNALS.register
+class OffLanes(SignalSpec):
+    keyword = "off_lanes"
+    boolean = True
+    doc = ("whether the actor is off the lanes where vehicles may be, as CARLA's OnSidewalkTest tells it: its "
+           "centre in a sidewalk lane of its road or route, or in a lane neither driving nor parking with no "
+           "corner of its box in a driving lane and a corner in a sidewalk, or its centre off every lane "
+           "(lanes of type `none` are none); recorded only for the actors a formula reads it of")
+
+
+@SIGNALS.register
 class Light(SignalSpec):
     keyword = "light"
     args = ("light",)

@@ -20,6 +20,11 @@ heatmap, a sub-cell offset, log length, log width and the box axis as (sin 2θ, 
     head.box           conv 1×1     32→10   offset x/y, log l/w, box axis (sin 2θ, cos 2θ),
                                             class logits (car, truck, pedestrian, cyclist)
 
+The class of each detection is then read from its own cluster of returns (how many, how
+far, how high, how wide and deep, and the class logits at the peak) by the tree ensemble
+shipped in the same weights file (`cluster_class`); weights without one keep the class
+at the heatmap peak.
+
 One frame per inference: velocity is not estimated here but by the tracker from
 successive detections (objects carry `vx = vy = nan`, "not measured").
 
@@ -41,8 +46,10 @@ import torch.nn.functional as F
 from torch import nn
 
 from addt_dsl.lru import LruCache
+from addt_dsl.stack import cluster_class
 from addt_dsl.stack.bev_grid import (BOX_CHANNELS, CHANNELS, CLASSES, GRID, LAYER_SITES, build_grid_region,
                                      decode, sensor_points_to_vehicle)
+from addt_dsl.stack.cluster_class import TreeEnsemble
 from addt_dsl.stack.nodes import Obj, vehicle_to_world
 from addt_dsl.stack.tensorfaults import ActivationFlip, ConvTensorSites
 
@@ -143,8 +150,20 @@ def load_model(path: Path = WEIGHTS_PATH, device: str = "cpu") -> tuple[BevDetec
     state, meta = load_weights(path)
     model = BevDetector(tuple(meta["widths"]), in_channels=state["backbone.conv0.weight"].shape[1],
                         classes=len(meta.get("classes", ())))
-    model.load_state_dict(state)
+    model.load_state_dict({k: v for k, v in state.items() if not k.startswith(cluster_class.PREFIX)})
     return model.to(device).eval(), meta
+
+
+def load_cluster_classes(path: Path = WEIGHTS_PATH) -> tuple[TreeEnsemble, np.ndarray | None] | None:
+    """The cluster class reader shipped with the weights (`cluster_class`) and its class
+    logit offsets; None for weights without one (the class stays the CNN's at the peak)."""
+    state, meta = load_weights(path)
+    arrays = {k.removeprefix(cluster_class.PREFIX): v.numpy() for k, v in state.items()
+              if k.startswith(cluster_class.PREFIX)}
+    if not arrays:
+        return None
+    offsets = meta.get("cluster", {}).get("logit_offsets")
+    return TreeEnsemble.from_state(arrays), None if offsets is None else np.asarray(offsets, dtype=np.float64)
 
 
 Region = tuple[int, int, int, int]  # rows [r0, r1), columns [c0, c1) of a feature map
@@ -597,6 +616,7 @@ class LearnedPerception(ConvTensorSites):
 
     def __init__(self, settings: dict, ctx=None, weights: Path = WEIGHTS_PATH, device: str = "cpu"):
         self.model, self.meta = load_model(weights, device)
+        self.cluster_classes = load_cluster_classes(weights)
         self.device = device
         self.threshold = float(settings.get("detect_threshold", self.meta.get("threshold", DEFAULT_THRESHOLD)))
         self._logit_threshold = math.log(self.threshold / (1.0 - self.threshold))
@@ -626,6 +646,14 @@ class LearnedPerception(ConvTensorSites):
     def detect(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> np.ndarray:
         """Vehicle-frame points → (N, 7) boxes: x, y, heading, length, width, confidence,
         class (index into `bev_grid.CLASSES`)."""
+        found, box = self.detect_raw(points_vehicle, sensor_xy)
+        if len(found) and self.cluster_classes is not None:
+            cluster_class.reclass(found, points_vehicle, sensor_xy, box, *self.cluster_classes)
+        return found
+
+    def detect_raw(self, points_vehicle: np.ndarray, sensor_xy: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+        """`detect` with the CNN's class at the peak, and its `head.box` map (a view of a
+        buffer the next inference overwrites): what the cluster class reader reads."""
         # The grid is zero outside the last frame's region: clear only that.
         _, region = build_grid_region(points_vehicle, sensor_xy, out=self._grid, dirty=self._grid_region)
         self._grid_region = region
@@ -639,7 +667,7 @@ class LearnedPerception(ConvTensorSites):
         if len(found):
             with np.errstate(over="ignore"):
                 found[:, 5] = 1.0 / (1.0 + np.exp(-found[:, 5]))
-        return found
+        return found, box
 
     # ---- tensor fault sites
     def activation_shape(self, site: str) -> tuple[int, ...]:

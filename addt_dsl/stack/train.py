@@ -10,7 +10,9 @@ entropy at object centres on the class, car / truck / pedestrian / cyclist, opti
 weighted per class with `--class-weights`). Objects with at least one lidar return are
 positives. `--init WEIGHTS` fine-tunes from a weights file instead of starting afresh
 (its layer widths are used); `--cyclists MEAN` puts more cyclists in the scenes than
-the held-out evaluation set has.
+the held-out evaluation set has. `--cluster-scenes N` then fits the class reader on
+each detection's cluster of returns (`cluster_class`) to the trained detector's
+detections on N fresh scans (the default scenes) and ships it in the same file.
 
 Reproducible from the seed: the scenes, the initial weights and the batch order all
 derive from it, and training runs on `--threads` CPU threads (default 2; the same
@@ -208,6 +210,12 @@ def main(argv=None) -> int:
                          "only that)")
     ap.add_argument("--cyclists", type=float, default=CYCLISTS_PER_SCENE, metavar="MEAN",
                     help="mean cyclists tried per scene (the pool holds 6)")
+    ap.add_argument("--cluster-scenes", type=int, default=0, metavar="N",
+                    help="fit the class reader on each detection's cluster of returns on N scans (0: none; "
+                         "the class is the CNN's at the heatmap peak)")
+    ap.add_argument("--cluster-seed", type=int, default=None, help="seed of those scans (default: --seed)")
+    ap.add_argument("--cluster-logit-offsets", type=float, nargs=len(CLASSES), default=None, metavar="B",
+                    help="added to the cluster class reader's logits at run time")
     args = ap.parse_args(argv)
     if (message := extras.missing_message("torch", "training the learned detector")) is not None:
         print(message, file=sys.stderr)
@@ -241,11 +249,46 @@ def main(argv=None) -> int:
         "torch": str(torch.__version__), **timing,
     }
     meta["lidar_vfov_deg"] = args.lidar_vfov
+    if args.cluster_scenes:
+        seed = args.seed if args.cluster_seed is None else args.cluster_seed
+        model.cluster_classes, meta["cluster"] = fit_cluster_classes(
+            model, seed, args.cluster_scenes, tuple(args.lidars), lidar_settings)
+        meta["cluster"]["logit_offsets"] = args.cluster_logit_offsets
     if init_meta is not None:  # the run this one started from, and what it cost
         meta["init"] = {"path": str(args.init), "meta": init_meta}
         meta["train_s_total"] = round(timing["train_s"] + init_meta.get("train_s_total", init_meta["train_s"]), 1)
     save_weights(model, meta, args.out, "generation")
     return 0
+
+
+def fit_cluster_classes(model, seed: int, scenes: int, lidars: tuple[str, ...], lidar_settings: dict | None,
+                        iterations: int = 200, log=print):
+    """The cluster class reader (`cluster_class.TreeEnsemble`) for `model`'s detections on
+    `scenes` scans of the default scenes (seed `seed`), and its timing and sample counts."""
+    import tempfile
+
+    import torch
+
+    from addt_dsl.stack import cluster_class
+    from addt_dsl.stack.learned import LearnedPerception
+
+    t0 = time.perf_counter()
+    samples = generate(scenes, seed, lidars=lidars, lidar_settings=lidar_settings)
+    t_gen = time.perf_counter() - t0
+    with tempfile.TemporaryDirectory() as tmp:  # the runtime node, so the features are the loop's
+        path = Path(tmp) / "cnn.pt"
+        torch.save({"state_dict": model.cpu().state_dict(), "meta": {"widths": [
+            model.backbone[f"conv{k}"].out_channels for k in range(3)], "classes": list(CLASSES)}}, path)
+        node = LearnedPerception({}, weights=path)
+    feats, labels, _ = cluster_class.labelled_clusters(samples, node.detect_raw)
+    clf = cluster_class.fit(feats, labels, seed, iterations)
+    t_fit = time.perf_counter() - t0 - t_gen
+    counts = np.bincount(labels, minlength=len(CLASSES)).tolist()
+    log(f"cluster classes: {len(labels)} matched detections on {scenes} scans ("
+        + ", ".join(f"{n} {c}" for c, n in zip(CLASSES, counts)) + f"); scans {t_gen:.0f} s, fit {t_fit:.0f} s")
+    info = {"scenes": scenes, "seed": seed, "iterations": iterations, "features": list(cluster_class.FEATURES),
+            "detections": counts, "generate_s": round(t_gen, 1), "fit_s": round(t_fit, 1)}
+    return cluster_class.TreeEnsemble.from_sklearn(clf), info
 
 
 def save_weights(model, meta: dict, path: Path, data_step: str) -> None:
@@ -255,6 +298,11 @@ def save_weights(model, meta: dict, path: Path, data_step: str) -> None:
     import torch
 
     state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    ensemble = getattr(model, "cluster_classes", None)
+    if ensemble is not None:  # the cluster class reader: flat arrays beside the layers (`cluster_class`)
+        from addt_dsl.stack.cluster_class import PREFIX
+
+        state.update({PREFIX + k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in ensemble.state().items()})
     path.parent.mkdir(parents=True, exist_ok=True)
     torch.save({"state_dict": state, "meta": meta}, path)
     print(f"wrote {path} ({path.stat().st_size / 1024:.0f} KiB; "

@@ -19,7 +19,7 @@ from pathlib import Path
 from tests.sim.runner_simkit import REPO, addtc_command, addtc_env, limit_scenario
 
 from addt_dsl.compiler import compile_file
-from addt_dsl.runtime.executor import InlineExecutor, run_sweep
+from addt_dsl.runtime.executor import BATCH_MAX, InlineExecutor, run_sweep
 from addt_dsl.runtime.store import ResultStore
 from addt_dsl.sweep import SweepStream, expand
 
@@ -49,12 +49,12 @@ def rows(path: Path) -> list[tuple]:
 
 
 def reference(scenario: Path, tmp_path: Path) -> list[tuple]:
-    """The rows of an uninterrupted run of the sweep (in this process: a RunSpec determines
-    its run, so the executor does not matter)."""
+    """The rows of an uninterrupted run of the sweep (in this process, in batches as a
+    worker steps them: a RunSpec determines its run, so the executor does not matter)."""
     plan = compile_file(scenario).plan
     path = tmp_path / "reference.sqlite"
     with ResultStore(path, plan, fresh=True) as store:
-        run_sweep(SweepStream(plan), store, InlineExecutor())
+        run_sweep(SweepStream(plan), store, InlineExecutor(batch=BATCH_MAX))
     out = rows(path)
     assert len(out) == len(expand(plan).specs)
     return out

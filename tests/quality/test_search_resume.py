@@ -95,11 +95,10 @@ def test_falsify_killed_and_run_again_ends_with_the_same_report(tmp_path):
 
 
 @pytest.mark.parametrize("batch", ["1", "8"])  # at 8 a kill can fall inside a batch of candidates
-def test_shrink_killed_and_run_again_ends_with_the_same_counterexample(tmp_path, batch):
+def test_shrink_killed_and_run_again_ends_with_the_same_counterexample(tmp_path, batch, ten_faults_shrunk):
     scenario = EXAMPLES / "ten_faults.addt"  # ten faults shrink to one in about 50 simulations (+20 ahead at 8)
-    base = ("shrink", scenario, "--max-simulations", "80", "--no-animation", "--format", "json", "--batch", batch)
-    clean_out = tmp_path / "clean"
-    clean = addtc(*base, "--out", clean_out)
+    base = ("shrink", scenario, "--no-animation", "--format", "json", "--batch", batch)
+    clean_out, clean = ten_faults_shrunk(int(batch))  # the same command, uninterrupted (the session's)
     assert clean.returncode == EXIT_FAILED, clean.stderr
 
     out = tmp_path / "killed"

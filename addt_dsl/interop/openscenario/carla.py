@@ -164,9 +164,44 @@ class CarlaCriteria:
             return OraclePlan(name="max_velocity", formula=always(E.Binary(
                 op="<=", left=signal(name="speed(ego)"), right=E.Num(value=arg))),
                 text=f"always speed(ego) <= {arg:g} m/s")
-        why = {"WrongLaneTest": "no signal gives the driving direction of the lane the ego is in",
-               "OnSidewalkTest": "no signal gives the type of the lane the ego is in"}.get(test, "no such oracle")
-        self.skip(cond, f"criteria_{test} is not translated: {why}",
+        if test == "WrongLaneTest":
+            self.approx(cond, f"criteria_{test} is translated as `always not wrong_way(ego)`: the ego's centre in a "
+                              "driving lane of its road or route whose traffic runs against the way it drives there, "
+                              "outside junctions; ScenarioRunner fails it when the ego passes, outside a junction, "
+                              "into a lane whose direction differs from the last one's by more than 150 deg, or "
+                              "leaves a junction heading more than 120 deg off its lane, on the nearest lane of "
+                              "any road")
+            return OraclePlan(name="wrong_lane", formula=always(E.Unary(op="not", arg=signal(name="wrong_way(ego)"))),
+                              text="always not wrong_way(ego)")
+        if test == "OnSidewalkTest":
+            return self.on_sidewalk(test, cond, always, signal)
+        self.skip(cond, f"criteria_{test} is not translated: no such oracle",
                   "translated: CollisionTest, RunningRedLightTest, RunningStopTest, KeepLaneTest, DrivenDistanceTest, "
-                  "MaxVelocityTest")
+                  "MaxVelocityTest, WrongLaneTest, OnSidewalkTest")
         return None
+
+    def on_sidewalk(self, test: str, cond, always, signal) -> OraclePlan:
+        """OnSidewalkTest(duration D): ScenarioRunner fails it once the ego's time off the lanes
+        (`off_lanes`), summed over its stretches less each one's first tick, exceeds D; D is
+        the condition's value where it names a parameterRef, else 0 s (openscenario_parser.py)."""
+        param = cond.find("ByValueCondition/ParameterCondition")
+        raw = param.get("value", "") if param is not None and (param.get("parameterRef") or "") else ""
+        try:
+            limit = max(float(self.resolve(raw)), 0.0) if raw.strip() else 0.0
+        except (KeyError, SyntaxError, ValueError, ArithmeticError):
+            limit = 0.0
+        off = signal(name="off_lanes(ego)")
+        where = ("ScenarioRunner reads the nearest lane of any road, the twin the lanes of the ego's road or route "
+                 "(its leg's road in a junction)")
+        if limit == 0.0:
+            self.approx(cond, f"criteria_{test} is translated as `always not off_lanes(ego)`: it fails at the first "
+                              "sample off the lanes, ScenarioRunner at the second tick running (its time off them "
+                              f"above 0 s); {where}")
+            return OraclePlan(name="on_sidewalk", formula=always(E.Unary(op="not", arg=off)),
+                              text="always not off_lanes(ego)")
+        self.approx(cond, f"criteria_{test} {limit:g} s is translated as `always not (always within {limit:g} s "
+                          f"off_lanes(ego))`: one stretch of {limit:g} s off the lanes fails it, where ScenarioRunner "
+                          f"sums the stretches (each less its first tick) and fails above {limit:g} s; {where}")
+        return OraclePlan(name="on_sidewalk", formula=always(E.Unary(op="not", arg=E.Temporal(
+            op="always", lo_s=0.0, hi_s=limit, arg=off))),
+            text=f"always not (always within {limit:g} s off_lanes(ego))")

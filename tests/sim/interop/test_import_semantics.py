@@ -4,9 +4,7 @@ runs with esmini's trajectories, each pinned with a hand calculation."""
 import numpy as np
 import pytest
 
-from addt_dsl.compiler import compile_source
-from addt_dsl.runtime.execute import execute
-from addt_dsl.sweep import expand
+from tests.sim.kit import run
 
 pytestmark = pytest.mark.slow
 
@@ -43,14 +41,6 @@ scenario {name} {{
 {actors.strip(chr(10))}
 }}
 """
-
-
-def run(source: str):
-    result = compile_source(source)
-    assert result.plan is not None, [str(d) for d in result.diagnostics]
-    out = execute(expand(result.plan).specs[0])
-    assert out.status == "ok", out.error
-    return out.trace
 
 
 @pytest.mark.parametrize("speed", ["10 m/s", "speed(a)"])

@@ -13,6 +13,7 @@ from addt_dsl.interop.openscenario.importer import import_xosc
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
 from tests.conftest import EXAMPLES, ROOT, needs_torch
+from tests.sim.kit import solo
 from tests.unit.interop.asam_qc import problems
 from tests.unit.interop.roundtrip_kit import round_trip
 
@@ -27,18 +28,16 @@ def test_export_import_run_gives_the_same_run(path, tmp_path):
     if needs_torch(path):
         pytest.importorskip("torch")
     spec = expand(compile_file(path).plan).specs[0]
-    got = round_trip(spec, tmp_path)
+    got = round_trip(spec, tmp_path, original=solo(spec))  # the batch tests run it alone too
     print(path.stem, got.verdicts_before, {k: round(v, 6) for k, v in got.rms_m.items()})
     assert got.same_verdicts, (got.verdicts_before, got.verdicts_after)
     assert max(got.rms_m.values()) < 0.1, got.rms_m
     assert not [d for d in got.diagnostics if d.startswith("W")], got.diagnostics
 
 
-def test_shrunk_counterexample_has_a_replayable_xosc(tmp_path):
-    out = tmp_path / "min"
-    code = main(["shrink", str(EXAMPLES / "ten_faults.addt"), "--out", str(out), "--no-animation",
-                 "--max-simulations", "150"])
-    assert code == 1
+def test_shrunk_counterexample_has_a_replayable_xosc(ten_faults_shrunk, tmp_path):
+    out, proc = ten_faults_shrunk(1)  # `addtc shrink examples/ten_faults.addt ...`
+    assert proc.returncode == 1, proc.stderr
     (addt,) = out.glob("*.addt")
     xosc = addt.with_suffix(".xosc")
     assert xosc.is_file() and (out / f"{addt.stem}.addt.json").is_file()

@@ -16,6 +16,7 @@ from addt_dsl.compiler import compile_file
 from addt_dsl.runtime import vehicle
 from addt_dsl.runtime.execute import execute, execute_batch
 from addt_dsl.sweep import expand
+from tests.sim.kit import solo
 
 ROOT = Path(__file__).resolve().parents[3]
 EXAMPLES = ROOT / "examples"
@@ -43,10 +44,13 @@ def first_spec(name: str):
     return expand(compile_file(EXAMPLES / name).plan).specs[0]
 
 
-def check_batches(specs) -> None:
-    """Each spec alone, then in batches of 7 in order and reversed: the same digests."""
-    alone = [full_digest(execute(s)) for s in specs]
-    for order in (list(range(len(specs))), list(reversed(range(len(specs))))):
+def check_batches(specs, orders=None) -> None:
+    """Each spec alone, then in batches of 7 in each order (default: in order and
+    reversed): the same digests. The runs alone are the session's (`kit.solo`): other
+    tests need them too."""
+    alone = [full_digest(solo(s)) for s in specs]
+    n = len(specs)
+    for order in orders or (list(range(n)), list(reversed(range(n)))):
         got = {}
         for j in range(0, len(order), 7):
             chunk = order[j:j + 7]
@@ -58,9 +62,10 @@ def check_batches(specs) -> None:
 
 
 def test_fast_examples_same_alone_batched_reversed(monkeypatch):
+    specs = [first_spec(n) for n in FAST]
+    [solo(s) for s in specs]  # the references, alone, before the patch
     # Batched egos step as arrays over the runs (forced from 2 runs), alone in floats.
     monkeypatch.setattr(vehicle, "ARRAY_MIN_RUNS", 2)
-    specs = [first_spec(n) for n in FAST]
     # Durations differ: runs leave the batch at different samples.
     assert len({s.plan.duration_s for s in specs}) > 1
     check_batches(specs)
@@ -71,7 +76,7 @@ def test_batch_of_one_is_execute_and_results_keep_order():
     results = execute_batch(specs, keep_trace=False)
     assert [r.key for r in results] == [s.key() for s in specs]
     assert all(r.trace is None and r.wall_time_s > 0 for r in results)
-    assert [r.digest for r in results] == [execute(s).digest for s in specs]
+    assert [r.digest for r in results] == [solo(s).digest for s in specs]
 
 
 RUNNER = """
@@ -91,7 +96,7 @@ print(json.dumps([full_digest(r) for r in execute_batch(specs[::-1])[::-1]]))
 def test_batch_same_under_another_hash_seed():
     """A reversed batch in processes with other hash seeds gives the digests of each run alone here."""
     specs = [first_spec(n) for n in FAST]
-    here = [full_digest(execute(s)) for s in specs]
+    here = [full_digest(solo(s)) for s in specs]
     for seed in ("1", "4242"):
         env = dict(os.environ, PYTHONHASHSEED=seed, PYTHONPATH=str(ROOT))
         out = subprocess.run([sys.executable, "-c", RUNNER, str(ROOT), *FAST], env=env, cwd=ROOT,
@@ -103,14 +108,19 @@ def test_batch_same_under_another_hash_seed():
 @pytest.mark.timeout(1800)  # ~180 closed-loop runs, camera suites among them: minutes on a loaded machine
 def test_every_example_and_suite_same_alone_and_batched():
     """Every example's and suite's first run, alone and in batches of 7 mixed with other
-    plans, in order and reversed."""
+    plans: one batched pass, in an order that puts files 7 apart in one batch (sorted
+    neighbours are the same family, often the same road, which batches share), so each
+    batch mixes stacks, sensors, faults, maps and durations. Where a run sits in its batch
+    and its batch's order are checked both ways on the 7 FAST plans (forced array steps)
+    and the traffic batch below; a second full pass here (reversed, which kept nearly
+    every batch's members) cost a third of the suite's slowest test."""
     specs = []
     for path in sorted(EXAMPLES.rglob("*.addt")):
         plan = compile_file(path).plan
         if plan is not None:
             specs.append(expand(plan).specs[0])
     assert len(specs) > 40
-    check_batches(specs)
+    check_batches(specs, [sorted(range(len(specs)), key=lambda i: (i % 7, i))])
 
 
 @pytest.mark.slow

@@ -12,6 +12,7 @@ from addt_dsl.printer import print_plan
 from addt_dsl.runtime.environment import Light, sun_elevation
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
+from tests.sim import kit
 
 pytestmark = pytest.mark.slow
 
@@ -152,9 +153,7 @@ def test_an_environment_step_reads_a_variable_as_an_actors_step_does():
   }
 }
 """
-    result = compile_source(src, "t.addt")
-    assert result.ok, result.diagnostics
-    tr = execute(expand(result.plan).specs[0]).trace
+    tr = kit.run(src)
     fired = {e.kind: e.time_s for e in tr.events if e.kind in ("environment", "behavior")}
     assert fired == {"environment": pytest.approx(1.01), "behavior": pytest.approx(1.01)}
     assert tr.variables["phase"][100] == 0.0 and tr.variables["phase"][101] == 1.0
@@ -185,9 +184,7 @@ def test_environment_and_variable_steps_read_the_clearance_of_their_sample():
 }
 """
     def fired(close: str):
-        result = compile_source(src.replace("CLOSE", close), "t.addt")
-        assert result.ok, result.diagnostics
-        tr = execute(expand(result.plan).specs[0]).trace
+        tr = kit.run(src.replace("CLOSE", close))
         return tr, {e.kind: e.time_s for e in tr.events if e.kind in ("environment", "variable")}
 
     tr, got = fired("5 m")

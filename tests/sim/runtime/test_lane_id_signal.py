@@ -5,10 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from addt_dsl.compiler import compile_source
-from addt_dsl.diagnostics import render_text
-from addt_dsl.runtime.execute import execute
-from addt_dsl.sweep import expand
+from tests.sim.kit import first_run
+
 
 SOURCE = """scenario lanes {
   duration 4 s
@@ -30,9 +28,7 @@ SOURCE = """scenario lanes {
 
 
 def _run(source):
-    result = compile_source(source, path="lanes.addt")
-    assert result.ok, render_text(result.diagnostics, result.sources)
-    return execute(expand(result.plan).specs[0])
+    return first_run(source, "lanes.addt")
 
 
 def test_lane_id_in_a_trigger_and_in_oracles():

@@ -10,6 +10,7 @@ from addt_dsl.runtime.execute import execute
 from addt_dsl.runtime.lights import Program, state_at
 from addt_dsl.sweep import expand
 from tests.sim.conftest import EXAMPLES
+from tests.sim.kit import first_run
 
 pytestmark = pytest.mark.slow
 
@@ -43,9 +44,7 @@ scenario lights {
 
 
 def run_text(text: str):
-    result = compile_source(text, "lights.addt", base_dir=EXAMPLES)
-    assert result.ok, [str(d) for d in result.diagnostics]
-    return execute(expand(result.plan).specs[0])
+    return first_run(text, "lights.addt", base_dir=EXAMPLES)
 
 
 def test_agents_and_the_ego_stop_at_red_and_a_runner_crosses():

@@ -5,10 +5,8 @@ starts within one physics step of it."""
 import numpy as np
 import pytest
 
-from addt_dsl.compiler import compile_source
-from addt_dsl.runtime.execute import execute
 from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED
-from addt_dsl.sweep import expand
+from tests.sim import kit
 
 pytestmark = pytest.mark.slow
 
@@ -28,11 +26,7 @@ scenario steps {{
 
 
 def run(agents: str, duration: float = 8.0):
-    result = compile_source(TEMPLATE.format(agents=agents, duration=duration))
-    assert result.plan is not None, [str(d) for d in result.diagnostics]
-    out = execute(expand(result.plan).specs[0])
-    assert out.status == "ok", out.error
-    return out.trace
+    return kit.run(TEMPLATE.format(agents=agents, duration=duration))
 
 
 def first(trace, step: str, state: int) -> int | None:

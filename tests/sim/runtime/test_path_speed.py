@@ -6,10 +6,8 @@ alike (it covered 10.875 m/s for 10 on the outside of a 40 m radius)."""
 import numpy as np
 import pytest
 
-from addt_dsl.compiler import compile_source
 from addt_dsl.runtime import agents as array_agents
-from addt_dsl.runtime.execute import execute
-from addt_dsl.sweep import expand
+from tests.sim import kit
 
 pytestmark = pytest.mark.slow
 
@@ -49,9 +47,7 @@ IDM = """
 
 
 def run(agents: str):
-    result = compile_source(SOURCE.replace("AGENTS", agents))
-    assert result.plan is not None, [str(d) for d in result.diagnostics]
-    return execute(expand(result.plan).specs[0]).trace
+    return kit.first_run(SOURCE.replace("AGENTS", agents)).trace
 
 
 def ground_speed(track, period_s):

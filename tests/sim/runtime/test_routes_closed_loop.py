@@ -11,6 +11,7 @@ from addt_dsl.runtime.execute import execute
 from addt_dsl.runtime.signals import compute_signals
 from addt_dsl.sweep import expand
 from tests.sim.conftest import EXAMPLES
+from tests.sim.kit import first_run
 
 pytestmark = pytest.mark.slow
 
@@ -19,9 +20,7 @@ ESMINI = Path(__file__).resolve().parents[2] / "data" / "esmini"
 
 
 def run_text(text: str):
-    result = compile_source(text, "routes.addt", base_dir=EXAMPLES)
-    assert result.plan is not None, [str(d) for d in result.diagnostics]
-    out = execute(expand(result.plan).specs[0])
+    out = first_run(text, "routes.addt", base_dir=EXAMPLES)
     assert out.status == "ok", out.error
     return out
 

@@ -13,14 +13,13 @@ from addt_dsl.compiler import compile_source
 from addt_dsl.diagnostics import render_text
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
+from tests.sim.kit import first_run
 
 DT = 0.01
 
 
 def _run(source: str):
-    result = compile_source(source, path="scripted.addt")
-    assert result.ok, render_text(result.diagnostics, result.sources)
-    return execute(expand(result.plan).specs[0])
+    return first_run(source, "scripted.addt")
 
 
 def _index(run, time_s: float) -> int:

@@ -8,6 +8,7 @@ import pytest
 from addt_dsl.compiler import compile_source
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
+from tests.sim import kit
 
 SOURCE = """
 scenario scripted {
@@ -62,9 +63,7 @@ def test_a_condition_on_objects_reads_what_the_stack_reports_at_its_sample():
   }
 }
 """
-    result = compile_source(src, "t.addt")
-    assert result.ok, result.diagnostics
-    tr = execute(expand(result.plan).specs[0]).trace
+    tr = kit.run(src)
     k = int(np.argmax(tr.object_count >= 1))
     assert k > 0 and tr.object_count[k - 1] == 0
     assert [e.time_s for e in tr.events if e.kind == "behavior"] == [0.0, tr.time[k]]

@@ -4,9 +4,7 @@ tolerances (profile points within 0.1 m/s, relative speed within 0.1 m/s)."""
 import numpy as np
 import pytest
 
-from addt_dsl.compiler import compile_source
-from addt_dsl.runtime.execute import execute
-from addt_dsl.sweep import expand
+from tests.sim import kit
 
 pytestmark = pytest.mark.slow
 
@@ -26,11 +24,7 @@ scenario actions {{
 
 
 def run(agents: str, duration: float = 8.0, ego_speed: float = 0.0):
-    result = compile_source(TEMPLATE.format(agents=agents, duration=duration, ego_speed=ego_speed))
-    assert result.plan is not None, [str(d) for d in result.diagnostics]
-    out = execute(expand(result.plan).specs[0])
-    assert out.status == "ok", out.error
-    return out.trace
+    return kit.run(TEMPLATE.format(agents=agents, duration=duration, ego_speed=ego_speed))
 
 
 def at(trace, name, field, time_s):
@@ -129,10 +123,7 @@ def test_synchronized_pedestrian_meets_the_front_at_the_requested_offset(fractio
     # edge. The ego sees nothing (every lidar frame dropped) and keeps 11.1 m/s.
     ego_t, width = -1.75, 1.9
     target = ego_t - width / 2 + fraction * width
-    result = compile_source(CPNA.format(target=target))
-    assert result.plan is not None, [str(d) for d in result.diagnostics]
-    out = execute(expand(result.plan).specs[0])
-    tr = out.trace
+    tr = kit.first_run(CPNA.format(target=target)).trace
     hit = [e for e in tr.events_of("collision") if "walker" in e.detail["actors"]]
     assert hit, "the pedestrian never met the car"
     k = int(round(hit[0].time_s / tr.period_s))

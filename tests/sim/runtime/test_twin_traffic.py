@@ -3,9 +3,7 @@
 import numpy as np
 import pytest
 
-from addt_dsl.compiler import compile_source
-from addt_dsl.runtime.execute import execute
-from addt_dsl.sweep import expand
+from tests.sim import kit
 
 pytestmark = pytest.mark.slow
 
@@ -26,11 +24,7 @@ scenario traffic {{
 
 
 def run(agents: str, duration: float = 8.0):
-    result = compile_source(TEMPLATE.format(agents=agents, duration=duration))
-    assert result.plan is not None, [str(d) for d in result.diagnostics]
-    out = execute(expand(result.plan).specs[0])
-    assert out.status == "ok", out.error
-    return out.trace
+    return kit.run(TEMPLATE.format(agents=agents, duration=duration))
 
 
 def lane_t(lane: int) -> float:

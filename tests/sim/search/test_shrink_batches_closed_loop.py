@@ -6,9 +6,6 @@ as `--batch 1`. (The meaning at any batch: tests/unit/search/test_shrink_batches
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -50,20 +47,17 @@ def test_the_shrink_is_the_same_at_batch_1_and_n_on_one_job_and_two_workers():
         assert r.ran_ahead > 0 and r.simulations + r.ran_ahead <= 150
 
 
-def _cli(tmp: Path, batch: int) -> tuple[str, dict]:
-    out = tmp / f"b{batch}"
-    proc = subprocess.run([sys.executable, "-m", "addt_dsl.cli", "shrink", str(EXAMPLE), "--no-animation",
-                           "--format", "json", "--batch", str(batch), "--out", str(out)],
-                          env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True, timeout=600)
+def _cli(ten_faults_shrunk, batch: int) -> tuple[str, dict]:
+    out, proc = ten_faults_shrunk(batch)  # `addtc shrink examples/ten_faults.addt --batch N ...`
     assert proc.returncode == 1, proc.stderr
     (addt,) = out.glob("*.addt")
     report = json.loads(proc.stdout)
     return addt.read_text(), report
 
 
-def test_addtc_shrink_batch_writes_the_same_counterexample(tmp_path):
-    text1, report1 = _cli(tmp_path, 1)
-    text8, report8 = _cli(tmp_path, 8)
+def test_addtc_shrink_batch_writes_the_same_counterexample(ten_faults_shrunk):
+    text1, report1 = _cli(ten_faults_shrunk, 1)
+    text8, report8 = _cli(ten_faults_shrunk, 8)
     assert text8 == text1
 
     assert (report1["batch"], report1["ran_ahead"], report8["batch"]) == (1, 0, 8) and report8["ran_ahead"] > 0

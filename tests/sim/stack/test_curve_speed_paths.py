@@ -6,10 +6,8 @@ written arc's corner: test_stack_safety.py::test_the_planner_slows_for_a_tight_c
 import numpy as np
 import pytest
 
-from addt_dsl.compiler import compile_source
-from addt_dsl.runtime.execute import execute
-from addt_dsl.sweep import expand
 from tests.sim.conftest import EXAMPLES
+from tests.sim.kit import first_run
 
 pytestmark = pytest.mark.slow
 
@@ -22,9 +20,7 @@ def _lateral_accel(ego, dt: float = 0.01) -> np.ndarray:
 
 
 def _run(text: str):
-    result = compile_source(text, "paths.addt", base_dir=EXAMPLES)
-    assert result.ok, [d.message for d in result.diagnostics]
-    out = execute(expand(result.plan).specs[0])
+    out = first_run(text, "paths.addt", base_dir=EXAMPLES)
     return out, out.trace.actors["ego"]
 
 

@@ -5,9 +5,7 @@ arrives (`delay`: "frames arrive late", docs/faults.md)."""
 import numpy as np
 import pytest
 
-from addt_dsl.compiler import compile_source
-from addt_dsl.runtime.execute import execute
-from addt_dsl.sweep import expand
+from tests.sim.kit import run
 
 pytestmark = pytest.mark.slow
 
@@ -33,14 +31,6 @@ def source(perception: str, faults: str) -> str:
     {faults}
   }}
 }}"""
-
-
-def run(src: str):
-    result = compile_source(src)
-    assert result.plan is not None, [str(d) for d in result.diagnostics]
-    out = execute(expand(result.plan).specs[0])
-    assert out.status == "ok", out.error
-    return out.trace
 
 
 def detections(trace) -> dict[float, list]:

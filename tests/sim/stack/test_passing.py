@@ -12,6 +12,7 @@ import pytest
 from addt_dsl.compiler import compile_source
 from addt_dsl.runtime.execute import execute
 from addt_dsl.sweep import expand
+from tests.sim.kit import first_run
 
 pytestmark = pytest.mark.slow
 
@@ -37,9 +38,7 @@ scenario pass_it {
 
 def _run(lanes: str, offset: str, oncoming: str = ""):
     text = ROAD.replace("LANES", lanes).replace("OFFSET", offset).replace("ONCOMING", oncoming)
-    result = compile_source(text, "pass.addt")
-    assert result.ok, [d.message for d in result.diagnostics]
-    return execute(expand(result.plan).specs[0])
+    return first_run(text, "pass.addt")
 
 
 def test_a_car_parked_half_in_the_lane_is_passed_within_the_lane():

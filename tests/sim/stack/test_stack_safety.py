@@ -4,19 +4,9 @@ a crossing pedestrian, lane discipline and the declared ego body."""
 import numpy as np
 import pytest
 
-from addt_dsl.compiler import compile_source
-from addt_dsl.runtime.execute import execute
-from addt_dsl.sweep import expand
+from tests.sim.kit import run
 
 pytestmark = pytest.mark.slow
-
-
-def run(source: str):
-    result = compile_source(source)
-    assert result.plan is not None, [str(d) for d in result.diagnostics]
-    out = execute(expand(result.plan).specs[0])
-    assert out.status == "ok", out.error
-    return out.trace
 
 
 def straight(ego: str, agents: str, duration_s: float = 12.0, lanes: int = 1, stack: str = "") -> str:

@@ -27,7 +27,8 @@ class RoundTrip:
         return self.verdicts_before == self.verdicts_after
 
 
-def round_trip(spec, work: Path, sidecar: bool = True) -> RoundTrip:
+def round_trip(spec, work: Path, sidecar: bool = True, original=None) -> RoundTrip:
+    """`original`: the run of `spec` where the caller has it (one the session shares)."""
     done = export_run(spec, work / "xosc", "scenario")
     if not sidecar:
         done.sidecar_path.unlink()
@@ -40,7 +41,7 @@ def round_trip(spec, work: Path, sidecar: bool = True) -> RoundTrip:
     result = compile_source(got.text, "scenario.addt", base_dir=back)
     assert result.ok, [d.message for d in result.diagnostics]
     (again,) = expand(result.plan).specs
-    a, b = execute(spec), execute(again)
+    a, b = original or execute(spec), execute(again)
     out = RoundTrip({v.name: v.passed for v in a.verdicts}, {v.name: v.passed for v in b.verdicts},
                     diagnostics=[f"{d.code} {d.message}" for d in got.diagnostics])
     ta, tb = a.trace, b.trace

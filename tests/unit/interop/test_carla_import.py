@@ -18,7 +18,7 @@ from tests.conftest import ROOT
 CARLA = ROOT / "tests" / "data" / "carla"
 MAPS = CARLA / "maps"
 SCENARIOS = sorted((CARLA / "xosc").glob("*.xosc"))
-CRITERIA = {"no_red_light", "no_stop_sign", "keep_lane", "no_collision", "driven_distance"}
+CRITERIA = {"no_red_light", "no_stop_sign", "keep_lane", "no_collision", "driven_distance", "wrong_lane", "on_sidewalk"}
 
 
 def _import(name: str):
@@ -85,7 +85,12 @@ def test_criteria_become_oracles_and_the_rest_say_why_not():
     assert oracles["driven_distance"].formula.arg.right.value == 100.0
     skipped = sorted(d.message.split(" ")[0] for d in got.diagnostics if d.code == "W0801"
                      and d.message.startswith("criteria_"))
-    assert skipped == ["criteria_OnSidewalkTest", "criteria_WrongLaneTest"]
+    assert skipped == []
+    # WrongLaneTest and OnSidewalkTest: the lane states of the ego, each saying how it differs.
+    assert "always not wrong_way(ego)" in got.text and "always not off_lanes(ego)" in got.text
+    notes = {d.message.split(" ")[0]: d.message for d in got.diagnostics if d.code == "W0802"}
+    assert "150 deg" in notes["criteria_WrongLaneTest"] and "120 deg" in notes["criteria_WrongLaneTest"]
+    assert "second tick" in notes["criteria_OnSidewalkTest"]
     assert "CARLA ScenarioRunner's criteria_*" in got.text
     # RunningStopTest: the map's stop signs (Town01's OpenDRIVE has none: it holds trivially).
     assert oracles["no_stop_sign"].text == "no stop_sign" and "no stop_sign" in got.text
@@ -93,6 +98,26 @@ def test_criteria_become_oracles_and_the_rest_say_why_not():
     # RunningRedLightTest: the file declares no light controllers, so no light runs (said).
     assert any(d.code == "W0802" and d.message.startswith("criteria_RunningRedLightTest") and "declares none"
                in d.message for d in got.diagnostics)
+
+
+def test_on_sidewalk_with_a_duration_and_strict_imports(tmp_path):
+    # OnSidewalkTest takes the value as its duration only where the condition names a
+    # parameterRef (ScenarioRunner's openscenario_parser); 2 s off the lanes in one stretch fail.
+    text = (CARLA / "xosc" / "FollowLeadingVehicle.xosc").read_text()
+    head, tail = text.split('<Condition name="criteria_OnSidewalkTest"')
+    tail = tail.replace('parameterRef="" value=""', 'parameterRef="duration" value="2"', 1)
+    (tmp_path / "Timed.xosc").write_text(head + '<Condition name="criteria_OnSidewalkTest"' + tail)
+    got = import_xosc(tmp_path / "Timed.xosc", maps=[MAPS], lenient=True)
+    oracle = next(o for o in got.plan.oracles if o.name == "on_sidewalk")
+    assert oracle.formula.arg.arg.hi_s == 2.0 and "always not (always within 2 s off_lanes(ego))" in got.text
+    assert any(d.code == "W0802" and "sums the stretches" in d.message for d in got.diagnostics)
+    for name, body in got.side_files.items():
+        (tmp_path / name).write_text(body)
+    assert compile_source(got.text, "timed.addt", base_dir=tmp_path).ok
+    # Both examples that named only these two among what does not translate import strictly.
+    for name in ("FollowLeadingVehicle.xosc", "LaneChangeSimple.xosc"):
+        strict = import_xosc(CARLA / "xosc" / name, maps=[MAPS])
+        assert strict.text is not None, [d.message for d in strict.diagnostics if d.is_error]
 
 
 def test_a_town_not_found_names_where_it_looked(tmp_path, capsys):

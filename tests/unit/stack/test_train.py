@@ -117,3 +117,23 @@ def test_epochs_0_with_init_only_offsets_the_class_logits(tmp_path):
     assert all(torch.equal(v, start[k]) for k, v in blob["state_dict"].items() if k != "head.box.bias")
     meta = blob["meta"]
     assert meta["class_logit_offsets"] == [0.0, 0.0, 0.5, -1.0] and meta["scenes"] == 0 and meta["epochs"] == 0
+
+
+def test_cluster_scenes_fit_the_class_reader_and_ship_it_with_the_weights(tmp_path):
+    """`--cluster-scenes`: the cluster class reader is fitted to the detector's detections
+    and stored beside its layers; the node loads it, and the same command gives the same trees."""
+    from addt_dsl.stack.learned import WEIGHTS_PATH, LearnedPerception, load_cluster_classes
+    from addt_dsl.stack.train import main
+
+    outs = [tmp_path / "a.pt", tmp_path / "b.pt"]
+    for out in outs:
+        assert main(["--init", str(WEIGHTS_PATH), "--epochs", "0", "--cluster-scenes", "40", "--cluster-seed", "5",
+                     "--cluster-logit-offsets", "0", "0", "0", "0.5", "--out", str(out)]) == 0
+    blob = torch.load(outs[0], weights_only=True)
+    assert blob["meta"]["cluster"]["scenes"] == 40 and blob["meta"]["cluster"]["logit_offsets"] == [0, 0, 0, 0.5]
+    assert any(k.startswith("cluster.") for k in blob["state_dict"])
+    (a, offsets), (b, _) = load_cluster_classes(outs[0]), load_cluster_classes(outs[1])
+    assert offsets.tolist() == [0, 0, 0, 0.5]
+    assert all(np.array_equal(u, v) for u, v in zip(a.state().values(), b.state().values()))
+    node = LearnedPerception({}, weights=outs[0])
+    assert node.cluster_classes is not None
