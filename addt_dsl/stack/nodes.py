@@ -452,6 +452,9 @@ class LatticePlanner:
                                                                ego_speed, objs_sc, oncoming, bool(nudges))
             if peek is not None and peek[1] is not None and (stop is None or peek[1] < stop[0]):
                 stop = (peek[1], LIGHT_STATES["red"])  # wait where the oncoming lane can be seen
+        # The preference does not hold while the preferred lane has a slower vehicle to pass
+        # (keeping right, or to the start lane, is the rule except when overtaking).
+        pref = None if self._overtaking(home, road, s0, ego_speed, objs_sc) else home
         best = None
         for lane in candidates_lanes:
             t_lane = float(road.lane_center_t(lane, s0))
@@ -463,7 +466,7 @@ class LatticePlanner:
             for t_cand, extra in targets:
                 for speed in self._speeds(ego_speed):
                     cost = corrupt("planner.cost", self._cost(lane, t_cand, speed, s0, t0, ego_speed, objs_sc,
-                                                              current, home, stamp_s) + extra)
+                                                              current, pref, stamp_s) + extra)
                     if best is None or cost < best[0]:
                         best = (cost, lane, t_cand, speed)
         brake = 0.0
@@ -577,6 +580,21 @@ class LatticePlanner:
             return min(self.max_brake, max(1.0, speed / 0.2))  # at the line: stop and hold
         needed = speed * speed / (2.0 * room)
         return min(self.max_brake, needed) if needed >= self.STOP_DECEL else None
+
+    # Overtaking: a vehicle in the preferred lane moving along it (faster than a standing
+    # one, `NUDGE_STANDING_MS`) but at least `OVERTAKE_DEFICIT_MS` under the cruise speed,
+    # from the horizon's reach ahead to a time gap behind (the ego returns once that far past).
+    OVERTAKE_DEFICIT_MS = 2.0
+
+    def _overtaking(self, home: int, road, s0: float, ego_speed: float, objs) -> bool:
+        """Whether the preferred lane `home` holds a slower vehicle to overtake."""
+        reach = self.horizon_s * max(ego_speed, self.cruise)
+        behind = self.time_gap * ego_speed
+        for os_, ot, ov, *_ in objs:
+            if (-behind < os_ - s0 < reach and self.NUDGE_STANDING_MS < ov < self.cruise - self.OVERTAKE_DEFICIT_MS
+                    and road.lane_at(os_, ot) == home):
+                return True
+        return False
 
     def _home_lane(self, lanes: list[int]) -> int:
         """The lane the `lane_policy` prefers at this station."""
@@ -840,7 +858,8 @@ class LatticePlanner:
         cost += 1.0 * abs(self.cruise - speed) / max(self.cruise, 1.0) * 10.0
         if lane != current:
             cost += 1.5 + (3.0 if now - self.last_change_s < self.lane_change_cooldown_s else 0.0)
-        cost += 2.5 * _lane_steps(lane, home)
+        if home is not None:  # None: overtaking, the lane preference waived
+            cost += 2.5 * _lane_steps(lane, home)
         return cost
 
 
