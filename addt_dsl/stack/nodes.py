@@ -358,7 +358,8 @@ class Plan:
 
 # `stack bev lane_policy`: `keep` prefers the lane the ego started in (it changes lanes
 # only when traffic makes it, and returns there after an overtake); `keep_right` prefers
-# the rightmost driving lane (moves over on an empty multi-lane road).
+# the rightmost driving lane (moves over on an empty multi-lane road); neither holds while
+# that lane has a slower vehicle to overtake (`LatticePlanner._overtaking`).
 LANE_POLICIES = S.LANE_POLICIES
 
 
