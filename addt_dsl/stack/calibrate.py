@@ -103,7 +103,7 @@ def measure_tracker(repeats: int) -> list[tuple[int, list[float], list[float]]]:
 
         def once(objs=objs):
             tr = Tracker()
-            tr.tracks = [(o, 0.0) for o in objs]
+            tr.tracks = [(o, 0.0, (0.01, 0.0, 0.01)) for o in objs]
             tr.update(objs, 0.1, lambda site, v: v)
 
         cases.append((n, once))

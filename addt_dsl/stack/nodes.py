@@ -60,6 +60,10 @@ class Obj:
     # one 1-degree ray on a 0.5 m walker to 29 m); a track is weak until a second sighting
     # in the next frame confirms it (2 of 2), and the stack does not plan for a weak track.
     weak: bool = False
+    # [m/s^2] the tracker's acceleration estimate (0 where it has none: a detection, a track
+    # whose velocity comes from positions alone)
+    ax: float = 0.0
+    ay: float = 0.0
 
 
 def vehicle_to_world(ego_pose, px: float, py: float) -> tuple[float, float]:
@@ -83,9 +87,13 @@ class GroundTruthPerception:
 
     name = "perception"
     sites = S.GROUND_TRUTH_SITES
+    # [m/s] the velocity accuracy the tracker assumes: ground truth is exact, but a real
+    # detector's (a radar's range rate) is good to about 0.1 m/s.
+    velocity_noise_mps = 0.1
 
     def __init__(self, settings: dict, rng: np.random.Generator, weak_rng: np.random.Generator | None = None):
         self.noise_m = float(settings.get("perception_noise", 0.1))
+        self.position_noise_m = self.noise_m  # what the tracker's filter weighs positions by
         self.min_hits = int(settings.get("min_hits", 2))
         self.rng = rng
         # Weak detections draw their noise apart: the others' draws stay what they were.
@@ -133,40 +141,80 @@ class GroundTruthPerception:
 # ---------------------------------------------------------------- tracking
 
 class Tracker:
-    """Nearest-neighbour association with constant-velocity prediction between frames.
+    """Nearest-neighbour association and a constant-velocity Kalman filter per track.
 
-    A detector that measures no velocity (learned perception: `vx = vy = nan`) gets one
-    from the tracker: a track's second sighting initialises it from the displacement
-    (gated by a maximum speed, since the first prediction has no velocity), later
-    sightings smooth the displacement velocity with `velocity_gain`.
+    Per axis (x and y apart, with the same noises: one covariance serves both) the state is
+    position p [m] and velocity v [m/s]:
+
+    - motion between frames dt apart: p += v dt, with piecewise-constant white acceleration
+      of std `accel_noise` [m/s^2] (by class): Q = sa^2 [[dt^4/4, dt^3/2], [dt^3/2, dt^2]];
+    - measurements: the detected position, std `position_noise_m` (the detector's: ground
+      truth perception's `perception_noise`), and the detector's velocity where it gives one,
+      std `velocity_noise_mps`.
+
+    A detector that measures no velocity (learned perception: `vx = vy = nan`) leaves a track
+    seen once without one (`vx` nan: a tentative track, gated by a class's maximum speed since
+    its first prediction has no velocity); the second sighting starts the filter from the two
+    positions (what the filter gives from an unknown velocity: v = displacement / dt, variance
+    2 R / dt^2).
+
+    Acceleration: where the detector measures velocity, the change of the filtered velocity
+    between updates, smoothed with gain `accel_gain` (`Obj.ax`, `ay`; the planner predicts
+    braking and setting off with it). From positions alone the filtered velocity's noise
+    (0.24-0.30 m/s for a car at 10 Hz) differenced over 0.1 s would be metres per s^2: no
+    estimate there (0).
     """
 
     name = "tracker"
     sites = S.TRACKER_SITES
     state_sites = S.TRACKER_STATE_SITES
-    TRACK_FIELDS = ("x", "y", "heading", "vx", "vy", "length", "width", "stamp")
+    # A track's stored fields, in memory order (`tracker.tracks`, the bit-flip fault's site):
+    # the box, its velocity, the last update's stamp and the filter's covariance per axis
+    # (position variance [m^2], position-velocity covariance [m^2/s], velocity variance [m^2/s^2]).
+    TRACK_FIELDS = ("x", "y", "heading", "vx", "vy", "length", "width", "stamp", "var_p", "cov_pv", "var_v")
     gate_m = 4.0
     max_age_s = 1.0
-    velocity_gain = 0.35
     max_speed = 45.0  # [m/s] gate for a track whose velocity is not yet known
     # ... and for a detection of these classes: a walker or a bicycle that jumped further
     # is another object (a 45 m/s gate lets a pedestrian's track grab a passing car's box).
     class_max_speed = {"pedestrian": 4.0, "cyclist": 15.0}
+    # [m/s^2] process noise: the acceleration a class shows in ordinary traffic (a walker
+    # starting or stopping, a cyclist, a vehicle braking firmly; an obstacle moves only when
+    # moved). Larger follows manoeuvres sooner and passes more position noise into the
+    # velocity (docs/stack.md, "Tracking").
+    accel_noise = {"pedestrian": 1.0, "cyclist": 2.0, "obstacle": 0.5}
+    default_accel_noise = 3.0
+    # [m] and [m/s] measurement noises when the detector states none (the learned detector's
+    # position error within 40 m is 0.29 m on average: about 0.25 m per axis).
+    position_noise_m = 0.25
+    velocity_noise_mps = 0.1
 
     # [s] a weak track seen again within this (1.5 lidar periods at 10 Hz) is confirmed
     confirm_s = 0.15
+    # Smoothing gain of the acceleration estimate per update: 0.5 follows a step to 87.5 %
+    # in three updates (0.3 s at 10 Hz); a standing box's 0.005 m/s velocity noise gives
+    # ~0.05 m/s^2.
+    accel_gain = 0.5
 
-    def __init__(self, max_age_s: float = 1.0):
+    def __init__(self, max_age_s: float = 1.0, position_noise_m: float | None = None,
+                 velocity_noise_mps: float | None = None):
         self.max_age_s = max_age_s
-        self.tracks: list[tuple[Obj, float]] = []  # (object, last update time)
+        if position_noise_m is not None:
+            # A floor: noise-free positions would make the filter's first covariance singular.
+            self.position_noise_m = max(float(position_noise_m), 1e-3)
+        if velocity_noise_mps is not None:
+            self.velocity_noise_mps = max(float(velocity_noise_mps), 1e-3)
+        # (object, last update time, (var_p, cov_pv, var_v)); the object holds the estimate.
+        self.tracks: list[tuple[Obj, float, tuple[float, float, float]]] = []
 
     def update(self, objs: list[Obj], stamp_s: float, corrupt) -> None:
-        predicted = [(self._predict(o, stamp_s - ts), ts) for o, ts in self.tracks]
+        predicted = [self._predict(o, stamp_s - ts) for o, ts, _ in self.tracks]
         new_tracks = []
         used = set()
+        r_p = self.position_noise_m ** 2
         for det in objs:
             best, best_d = None, math.inf
-            for i, (p, ts) in enumerate(predicted):
+            for i, (p, (_, ts, _)) in enumerate(zip(predicted, self.tracks)):
                 if i in used:
                     continue
                 d = math.hypot(p.x - det.x, p.y - det.y)
@@ -177,58 +225,106 @@ class Tracker:
                     gate = self.gate_m
                 if d < gate and d < best_d:
                     best, best_d = i, d
-            if best is not None:
-                used.add(best)
-                prev, ts = self.tracks[best]
-                dt = max(stamp_s - ts, 1e-3)
-                mvx, mvy = (det.x - prev.x) / dt, (det.y - prev.y) / dt
-                if not math.isnan(det.vx):
-                    # Blend measured displacement with the detector's velocity estimate.
-                    vx, vy = 0.5 * det.vx + 0.5 * mvx, 0.5 * det.vy + 0.5 * mvy
-                    if det.kind == "pedestrian" and not math.isnan(prev.vx):
-                        # ... smoothed for a walker: the blend's ±0.7 m/s of noise (0.1 m
-                        # positions at 10 Hz) is a walking speed, and a standing walker at
-                        # the kerb, tracked from afar, "stepped" into the lane every few frames.
-                        vx = prev.vx + self.velocity_gain * (vx - prev.vx)
-                        vy = prev.vy + self.velocity_gain * (vy - prev.vy)
-                elif math.isnan(prev.vx):
-                    vx, vy = mvx, mvy
+            measured_v = not math.isnan(det.vx)
+            if best is None:
+                # A new track: the detection, with its velocity if the detector gives one.
+                cov = (r_p, 0.0, self.velocity_noise_mps ** 2 if measured_v else math.inf)
+                new_tracks.append((det, stamp_s, cov))
+                continue
+            used.add(best)
+            prev, ts, cov = self.tracks[best]
+            dt = max(stamp_s - ts, 1e-3)
+            if math.isnan(prev.vx) and not measured_v:
+                # Second sighting without a velocity: two-point start.
+                x, y = det.x, det.y
+                vx, vy = (det.x - prev.x) / dt, (det.y - prev.y) / dt
+                cov = (r_p, r_p / dt, 2.0 * r_p / dt ** 2)
+            else:
+                if math.isnan(prev.vx):  # a velocity-less track meets a detector's velocity
+                    pred, cov = prev, (cov[0], 0.0, math.inf)
                 else:
-                    vx = prev.vx + self.velocity_gain * (mvx - prev.vx)
-                    vy = prev.vy + self.velocity_gain * (mvy - prev.vy)
-                # A second sighting in a row confirms a weak track (2 of 2).
-                det = Obj(det.x, det.y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width,
-                          kind=det.kind, weak=det.weak and prev.weak and stamp_s - ts > self.confirm_s)
-            new_tracks.append((det, stamp_s))
+                    pred = predicted[best]
+                    cov = self._predict_cov(cov, dt, self.accel_noise.get(det.kind, self.default_accel_noise))
+                (x, vx), (y, vy), cov = self._correct(
+                    (pred.x, 0.0 if math.isnan(pred.vx) else pred.vx),
+                    (pred.y, 0.0 if math.isnan(pred.vy) else pred.vy), cov, (det.x, det.y),
+                    (det.vx, det.vy) if measured_v else None)
+            ax = ay = 0.0
+            if measured_v and not math.isnan(prev.vx):
+                g = self.accel_gain
+                ax = prev.ax + g * ((vx - prev.vx) / dt - prev.ax)
+                ay = prev.ay + g * ((vy - prev.vy) / dt - prev.ay)
+            # A second sighting in a row confirms a weak track (2 of 2).
+            est = Obj(x, y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width,
+                      kind=det.kind, weak=det.weak and prev.weak and stamp_s - ts > self.confirm_s, ax=ax, ay=ay)
+            new_tracks.append((est, stamp_s, cov))
         # Keep unmatched tracks alive (coasting) so a dropped frame does not erase an object.
-        for i, (p, ts) in enumerate(self.tracks):
+        for i, (p, ts, cov) in enumerate(self.tracks):
             if i not in used and stamp_s - ts <= self.max_age_s:
-                new_tracks.append((p, ts))
+                new_tracks.append((p, ts, cov))
         self.tracks = new_tracks
+
+    @staticmethod
+    def _predict_cov(cov, dt: float, accel_std: float) -> tuple[float, float, float]:
+        """P <- F P F' + Q for F = [[1, dt], [0, 1]], Q of white acceleration `accel_std`."""
+        pp, pv, vv = cov
+        q = accel_std ** 2
+        return (pp + 2.0 * dt * pv + dt * dt * vv + q * dt ** 4 / 4.0,
+                pv + dt * vv + q * dt ** 3 / 2.0,
+                vv + q * dt * dt)
+
+    def _correct(self, state_x, state_y, cov, z_pos, z_vel):
+        """Kalman update of both axes' (p, v) with the position, then the velocity if measured
+        (independent measurements: one after the other is the joint update)."""
+        pp, pv, vv = cov
+        r_p = self.position_noise_m ** 2
+        if math.isinf(vv):  # no velocity known yet: the position resets p, v stays unknown
+            k_p, k_v = 1.0, 0.0
+            pp, pv = r_p, 0.0
+        else:
+            s = pp + r_p
+            k_p, k_v = pp / s, pv / s
+            pp, pv, vv = pp - k_p * pp, pv - k_p * pv, vv - k_v * pv
+        (px, vx), (py, vy) = state_x, state_y
+        px, vx = px + k_p * (z_pos[0] - px), vx + k_v * (z_pos[0] - px)
+        py, vy = py + k_p * (z_pos[1] - py), vy + k_v * (z_pos[1] - py)
+        if z_vel is not None:
+            r_v = self.velocity_noise_mps ** 2
+            if math.isinf(vv):
+                k_p, k_v = 0.0, 1.0
+                vv = r_v
+            else:
+                s = vv + r_v
+                k_p, k_v = pv / s, vv / s
+                pp, pv, vv = pp - k_p * pv, pv - k_p * vv, vv - k_v * vv
+            px, vx = px + k_p * (z_vel[0] - vx), vx + k_v * (z_vel[0] - vx)
+            py, vy = py + k_p * (z_vel[1] - vy), vy + k_v * (z_vel[1] - vy)
+        return (px, vx), (py, vy), (pp, pv, vv)
 
     def read_state(self, site: str) -> list[tuple[str, float | int]]:
         """`tracker.tracks`: (name, value) of every field of every live track, in memory order."""
-        return [(f"{i}.{name}", v) for i, (o, ts) in enumerate(self.tracks)
-                for name, v in zip(self.TRACK_FIELDS, (o.x, o.y, o.heading, o.vx, o.vy, o.length, o.width, ts))]
+        return [(f"{i}.{name}", v) for i, (o, ts, cov) in enumerate(self.tracks)
+                for name, v in zip(self.TRACK_FIELDS, (o.x, o.y, o.heading, o.vx, o.vy, o.length, o.width, ts, *cov))]
 
     def write_state(self, site: str, values: list[float | int]) -> None:
         n = len(self.TRACK_FIELDS)
-        self.tracks = [(Obj(*values[k:k + 7], confidence=o.confidence, s=o.s, t=o.t, kind=o.kind, weak=o.weak),
-                        values[k + 7])
-                       for (o, _), k in zip(self.tracks, range(0, len(values), n))]
+        self.tracks = [(Obj(*values[k:k + 7], confidence=o.confidence, s=o.s, t=o.t, kind=o.kind, weak=o.weak,
+                            ax=o.ax, ay=o.ay),
+                        values[k + 7], tuple(values[k + 8:k + 11]))
+                       for (o, _, _), k in zip(self.tracks, range(0, len(values), n))]
 
     @staticmethod
     def _predict(o: Obj, dt: float) -> Obj:
         if math.isnan(o.vx):  # velocity not measured yet: stays where it was seen
             return o
         return Obj(o.x + o.vx * dt, o.y + o.vy * dt, o.heading, o.vx, o.vy, o.length, o.width, kind=o.kind,
-                   weak=o.weak)
+                   weak=o.weak, ax=o.ax, ay=o.ay)
 
     def objects_at(self, time_s: float) -> list[Obj]:
         """Predicted tracks; one whose velocity is not known yet is reported as standing still
         (`velocity_known` False: a tentative track, which the stack does not plan for)."""
         out = []
-        for o, ts in self.tracks:
+        for o, ts, _ in self.tracks:
             if time_s - ts <= self.max_age_s:
                 p = self._predict(o, time_s - ts)
                 out.append(p if not math.isnan(p.vx) else
@@ -262,23 +358,26 @@ class Plan:
 
 # `stack bev lane_policy`: `keep` prefers the lane the ego started in (it changes lanes
 # only when traffic makes it, and returns there after an overtake); `keep_right` prefers
-# the rightmost driving lane (moves over on an empty multi-lane road).
+# the rightmost driving lane (moves over on an empty multi-lane road); neither holds while
+# that lane has a slower vehicle to overtake (`LatticePlanner._overtaking`).
 LANE_POLICIES = S.LANE_POLICIES
 
 
 class LatticePlanner:
     """Lane-keep / lane-change candidates × speed profiles, costed and collision-checked.
 
-    Candidates are evaluated against constant-velocity predictions of the tracked
-    objects in road coordinates (along the road and across it, so a crossing pedestrian
-    is predicted into the ego's lane) over a fixed horizon; the cheapest collision-free
+    Candidates are evaluated against predictions of the tracked objects in road coordinates
+    (along the road and across it, so a crossing pedestrian is predicted into the ego's lane)
+    over a fixed horizon (`predict_travel`: constant velocity, with the tracker's acceleration
+    where it brakes or sets off across the road); the cheapest collision-free
     one wins. Costs: progress (speed deficit), comfort (lane changes, braking), clearance,
     and a lane preference (`lane_policy`). When no candidate is collision-free the plan
     is an emergency stop in the current lane at the deceleration the tyre-road friction
     allows (mu * g); never the cheapest of colliding candidates. The forward-collision
     check (`ForwardCollisionCheck`) runs on every plan and may add braking on top.
 
-    Objects are `(s, t, v_s, v_t, length_along, width_across)` in the ego road's frame.
+    Objects are `(s, t, v_s, v_t, length_along, width_across[, a_s, a_t])` in the ego road's
+    frame (accelerations [m/s^2] 0 where not given).
     """
 
     name = "planner"
@@ -354,6 +453,9 @@ class LatticePlanner:
                                                                ego_speed, objs_sc, oncoming, bool(nudges))
             if peek is not None and peek[1] is not None and (stop is None or peek[1] < stop[0]):
                 stop = (peek[1], LIGHT_STATES["red"])  # wait where the oncoming lane can be seen
+        # The preference does not hold while the preferred lane has a slower vehicle to pass
+        # (keeping right, or to the start lane, is the rule except when overtaking).
+        pref = None if self._overtaking(home, road, s0, ego_speed, objs_sc) else home
         best = None
         for lane in candidates_lanes:
             t_lane = float(road.lane_center_t(lane, s0))
@@ -365,7 +467,7 @@ class LatticePlanner:
             for t_cand, extra in targets:
                 for speed in self._speeds(ego_speed):
                     cost = corrupt("planner.cost", self._cost(lane, t_cand, speed, s0, t0, ego_speed, objs_sc,
-                                                              current, home, stamp_s) + extra)
+                                                              current, pref, stamp_s) + extra)
                     if best is None or cost < best[0]:
                         best = (cost, lane, t_cand, speed)
         brake = 0.0
@@ -480,6 +582,21 @@ class LatticePlanner:
         needed = speed * speed / (2.0 * room)
         return min(self.max_brake, needed) if needed >= self.STOP_DECEL else None
 
+    # Overtaking: a vehicle in the preferred lane moving along it (faster than a standing
+    # one, `NUDGE_STANDING_MS`) but at least `OVERTAKE_DEFICIT_MS` under the cruise speed,
+    # from the horizon's reach ahead to a time gap behind (the ego returns once that far past).
+    OVERTAKE_DEFICIT_MS = 2.0
+
+    def _overtaking(self, home: int, road, s0: float, ego_speed: float, objs) -> bool:
+        """Whether the preferred lane `home` holds a slower vehicle to overtake."""
+        reach = self.horizon_s * max(ego_speed, self.cruise)
+        behind = self.time_gap * ego_speed
+        for os_, ot, ov, *_ in objs:
+            if (-behind < os_ - s0 < reach and self.NUDGE_STANDING_MS < ov < self.cruise - self.OVERTAKE_DEFICIT_MS
+                    and road.lane_at(os_, ot) == home):
+                return True
+        return False
+
     def _home_lane(self, lanes: list[int]) -> int:
         """The lane the `lane_policy` prefers at this station."""
         if self.lane_policy == "keep_right":
@@ -495,8 +612,8 @@ class LatticePlanner:
     NUDGE_COST = 1.0
     NUDGE_LANE_MARGIN_M = 0.3  # [m] how far the ego's side may reach past its lane's edge
     NUDGE_REACH_M = 80.0  # [m] objects further ahead do not move the ego yet
-    # [m/s] along the road: what stands (the tracker's velocity of a standing car is ±1 m/s of
-    # noise from 0.1 m position noise at 10 Hz)
+    # [m/s] along the road: what stands (set when the tracker's velocity of a standing car
+    # had ±1 m/s of noise; its filter leaves 0.3 m/s from positions alone)
     NUDGE_STANDING_MS = 1.5
     NUDGE_SPARE_M = 0.3  # [m] beyond the collision check's margin: perception noise, tracking error
 
@@ -509,7 +626,7 @@ class LatticePlanner:
         if room <= 0.0:
             return []
         need = 0.0
-        for os_, ot, ov, ovt, _olen, owid in objs:
+        for os_, ot, ov, ovt, _olen, owid, *_ in objs:
             if not 0.0 < os_ - s0 < self.NUDGE_REACH_M or abs(ov) > self.NUDGE_STANDING_MS or abs(ovt) > 0.3:
                 continue  # only what stands: moving traffic is followed or overtaken by lane
             off = ot - t_lane
@@ -544,14 +661,18 @@ class LatticePlanner:
     # goes on; before, a rule that no longer holds turns it back.
     PASS_REACH_M = 80.0
     PASS_SLOW_SHARE = 0.5
-    # [m/s] along the road: what stands (a tracked standing obstacle's velocity flickers by up
-    # to ±2 m/s with 0.1 m position noise at 10 Hz)
+    # [m/s] along the road: what stands (set when a tracked standing obstacle's velocity
+    # flickered by up to ±2 m/s; the tracker's filter leaves 0.3 m/s from positions alone)
     PASS_STANDING_MS = 2.5
     PASS_START_S = 3.0  # [s]
     PASS_START_M = 25.0
     PASS_GAP_M = 5.0
     PASS_MARGIN_S = 2.0  # [s]
-    PASS_WAIT_GAP_M = 10.0
+    # The pull-out from a stand follows the 30 m minimum lateral path (`LATERAL_MIN_M`): its
+    # side clears a blocker centred in a 4 m lane (the check's 0.3 m across, 2 m along) about
+    # 14 m along it. From 10 m short, once the ego rolled up to wait there (Town01 with an
+    # oncoming car), it could not.
+    PASS_WAIT_GAP_M = 15.0
     PASS_PEEK_SPARE_M = 0.3  # [m] the waiting ego's side keeps this from its lane's edge
     PASS_ACCEL = 2.0  # [m/s^2] the candidates' speed ramp
     # The share of the return path (a smoothstep over `Plan.lateral_length_m`) after which
@@ -605,7 +726,7 @@ class LatticePlanner:
         v_pass = self.cruise
         blockers, others = [], []
         for o in objs:
-            os_, ot, ov, ovt, olen, owid = o
+            os_, ot, ov, ovt, olen, owid = o[:6]
             # (not what crosses the road: a walker or a turning car is waited for, not passed)
             if abs(ot - t_own) < 0.5 * (owid + ego_wid) + 0.3 and 0.0 < os_ - s0 < self.PASS_REACH_M \
                     and abs(ovt) <= 0.3 \
@@ -641,14 +762,14 @@ class LatticePlanner:
         window = t_end + self.PASS_MARGIN_S
         sight = sight_m
         # What stands between the ego and the lane's centre line.
-        for os_, ot, ov, _ovt, olen, owid in objs if occlusion else ():
+        for os_, ot, ov, _ovt, olen, owid, *_ in objs if occlusion else ():
             x = os_ - 0.5 * olen - front
             edge, target = side * (ot - t0) + 0.5 * owid, side * (t_opp - t0)
             if x > 0.0 and edge > 0.0:
                 sight = min(sight, x * target / edge if edge < target else x)
         if sight - v_limit * window < reach:
             return False, standing, rear
-        for os_, ot, ov, _ovt, olen, owid in others:
+        for os_, ot, ov, _ovt, olen, owid, *_ in others:
             if abs(ot - t_opp) >= 0.5 * (owid + lane_w):
                 continue  # not in the oncoming lane
             near = os_ - 0.5 * olen - s0
@@ -660,8 +781,21 @@ class LatticePlanner:
                 return False, standing, rear
         return True, standing, rear
 
+    # [m/s] the slowest moving candidate: below 4 m/s "ego speed - 2" becomes this crawl, so
+    # an ego at rest whose cruise candidate meets a blocker within the horizon can still roll
+    # up to where it waits (at rest the candidates were cruise or 0, and only the tracker's
+    # velocity noise, now filtered out, ever moved it).
+    CRAWL_MS = 2.0
+
+    # Prediction (`predict_travel`): an object's acceleration estimate below this is noise
+    # (a steady car's, from ground truth's velocity: ~0.05 m/s^2) and it keeps its velocity;
+    # across the road it sets off or speeds up to `PREDICT_CROSS_SPEED` at most (a walker
+    # runs, a rider crosses at 4-6 m/s), along it only braking counts (to a stop, no reversal).
+    PREDICT_ACCEL_MIN = 0.5  # [m/s^2]
+    PREDICT_CROSS_SPEED = 6.0  # [m/s]
+
     def _speeds(self, ego_speed: float):
-        return (self.cruise, max(0.0, ego_speed - 2.0), max(0.0, ego_speed - 5.0), 0.0)
+        return (self.cruise, max(ego_speed - 2.0, min(self.cruise, self.CRAWL_MS)), max(0.0, ego_speed - 5.0), 0.0)
 
     def _cost(self, lane, t_lane, speed, s0, t0, v0, objs, current, home, now) -> float:
         # Collision check along the candidate: ego moves from t0 to t_lane over ~3 s with a
@@ -696,14 +830,19 @@ class LatticePlanner:
                 u = 1.0
             path.append((tk, s, t0 + (t_lane - t0) * (u * u * (3 - 2 * u)), v))
         ego_len, ego_wid = self.body.length_m, self.body.width_m
-        for os_, ot, ov, ovt, olen, owid in objs:
+        for os_, ot, ov, ovt, olen, owid, *acc in objs:
+            a_s, a_t = acc if acc else (0.0, 0.0)
+            if not (a_s * ov < 0.0 and abs(a_s) >= self.PREDICT_ACCEL_MIN):
+                a_s = 0.0  # only braking: a lead that speeds up is followed as if it did not
+            if not abs(a_t) >= self.PREDICT_ACCEL_MIN:
+                a_t = 0.0
             lat_reach = 0.5 * (owid + ego_wid) + 0.3
             half_len = 0.5 * (olen + ego_len)
             gap_low = -(olen + ego_len) - 2.0
             prev = os_ - s0 - half_len
             for tk, s, t, v in path:
-                gap = os_ + ov * tk - s - half_len
-                if abs(t - ot - ovt * tk) < lat_reach:
+                gap = os_ + predict_travel(ov, a_s, tk, math.inf) - s - half_len
+                if abs(t - ot - predict_travel(ovt, a_t, tk, self.PREDICT_CROSS_SPEED)) < lat_reach:
                     # Boxes overlap along the road for -(olen + ego length) < gap < 0; keep 2 m
                     # either side. The gap may jump over that window between two checks (0.5 s
                     # at a 30 m/s closing speed is 15 m): what lies between counts too.
@@ -720,8 +859,30 @@ class LatticePlanner:
         cost += 1.0 * abs(self.cruise - speed) / max(self.cruise, 1.0) * 10.0
         if lane != current:
             cost += 1.5 + (3.0 if now - self.last_change_s < self.lane_change_cooldown_s else 0.0)
-        cost += 2.5 * _lane_steps(lane, home)
+        if home is not None:  # None: overtaking, the lane preference waived
+            cost += 2.5 * _lane_steps(lane, home)
         return cost
+
+
+def predict_travel(v: float, a: float, tau: float, v_cap: float) -> float:
+    """Displacement [m] after `tau` [s] of an object at velocity `v` [m/s] accelerating at `a`
+    [m/s^2]: braking (a against v) ends at rest, never reverses; speeding up ends at speed
+    `v_cap` [m/s] (a speed already above it is held)."""
+    if a == 0.0:
+        return v * tau
+    # (the phases' distances as mean speed x time: finite for an infinite a, a corrupted track's)
+    if a * v < 0.0:  # braking: stops after -v / a
+        t_stop = -v / a
+        if tau >= t_stop:
+            return 0.5 * v * t_stop
+        return v * tau + 0.5 * a * tau * tau
+    if abs(v) >= v_cap:
+        return v * tau
+    top = math.copysign(v_cap, a)
+    t_top = (top - v) / a  # [s] to reach the cap
+    if tau <= t_top:
+        return v * tau + 0.5 * a * tau * tau
+    return 0.5 * (v + top) * t_top + top * (tau - t_top)
 
 
 def time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: float) -> float:
@@ -815,7 +976,7 @@ class ForwardCollisionCheck:
         with an object ahead within the horizon; (inf, 0) when there is none."""
         half_len, half_wid = 0.5 * self.body.length_m, 0.5 * self.body.width_m
         best, closing = math.inf, 0.0
-        for os_, ot, ovs, ovt, olen, owid in objs:
+        for os_, ot, ovs, ovt, olen, owid, *_ in objs:
             d = os_ - s0
             if not d > 0.0:
                 continue

@@ -28,13 +28,14 @@ BEND_LANE_CHANGE = """
 scenario lane_change_in_bend {
   duration 14 s
   road r {
+    line length 60 m
     arc length 400 m curvature 0.01 /m
     lanes right 2 width 3.5 m
   }
   ego car on r lane -1 at 10 m speed 20 m/s {
     stack bev cruise_speed 20 m/s
   }
-  agent slow car on r lane -1 at 80 m speed 8 m/s {
+  agent slow car on r lane -1 at 160 m speed 8 m/s {
     behavior cruise speed 8 m/s
   }
   expect {
@@ -48,7 +49,10 @@ def test_a_lane_change_in_a_bend_keeps_the_lateral_acceleration_limit():
     """A 100 m radius left bend at 20 m/s is 3.9 m/s^2 in lane -1; overtaking a slow car
     there, the lane changes' own curvature added to the bend's: 6.5 m/s^2 before (a 3 s
     smoothstep, 6 x 3.5 m / 60 m^2 at its ends). The manoeuvre is stretched to fit and
-    the curve speed cap counts it."""
+    the curve speed cap counts it. The ego starts on a straight and meets the slow car
+    about 7 s in, well inside the bend: spawned at 20 m/s in the bend itself its start-up
+    alone reached 5.1 m/s^2, and the lane change (at the first plan, since a slower car
+    waives the lane preference) fell into it."""
     out, ego = _run(BEND_LANE_CHANGE)
     assert out.passed, out.verdicts
     assert ego.t.min() < -4.5  # it did change to lane -2 (centre t = -5.25 m) to overtake

@@ -90,6 +90,22 @@ def test_keep_overtakes_a_slow_car_and_returns_to_its_lane():
     assert _plan(planner, ROAD2, 200.0, -1, 25.0, [_obj(150.0, t2, v_s=10.0)], now=10.0).lane == -2
 
 
+def test_keep_right_overtakes_a_car_5_m_s_slower_and_returns_a_time_gap_past_it():
+    t2 = float(ROAD2.lane_center_t(-2, 100.0))
+    # Following at its speed, 45 m behind (a 1.5 s time gap plus its length): the preference
+    # for the right lane (2.5) would outweigh the 5 m/s deficit (2.33 to follow, against 1.98
+    # for the change); it does not hold while there is a slower car to pass.
+    planner = LatticePlanner({"cruise_speed": 30.0, "lane_policy": "keep_right"})
+    assert _plan(planner, ROAD2, 100.0, -2, 25.0, [_obj(145.0, t2, v_s=25.0)]).lane == -1
+    # Still beside it, and after the cooldown: stays left.
+    assert _plan(planner, ROAD2, 140.0, -1, 30.0, [_obj(135.0, t2, v_s=25.0)], now=10.0).lane == -1
+    # A time gap (1.5 s at 30 m/s: 45 m) past it: back right.
+    assert _plan(planner, ROAD2, 200.0, -1, 30.0, [_obj(150.0, t2, v_s=25.0)], now=10.0).lane == -2
+    # A car barely slower than the cruise speed is followed.
+    planner = LatticePlanner({"cruise_speed": 30.0, "lane_policy": "keep_right"})
+    assert _plan(planner, ROAD2, 100.0, -2, 29.0, [_obj(150.0, t2, v_s=29.0)]).lane == -2
+
+
 def test_lane_change_cooldown_is_the_setting():
     t1 = float(ROAD2.lane_center_t(-1, 100.0))
 

@@ -58,8 +58,8 @@ def test_a_track_flip_changes_the_stored_track_at_its_instant():
     assert e.time_s == 0.6 and e.detail["location"].startswith("tracker.tracks:0.")
     field = e.detail["location"].rsplit(".", 1)[1]
     i = Tracker.TRACK_FIELDS.index(field)
-    stored = [*vars(tr.tracks[0][0]).values()][:7] + [tr.tracks[0][1]]
-    old = [*vars(before[0][0]).values()][:7] + [before[0][1]]
+    stored = [*vars(tr.tracks[0][0]).values()][:7] + [tr.tracks[0][1], *tr.tracks[0][2]]
+    old = [*vars(before[0][0]).values()][:7] + [before[0][1], *before[0][2]]
     assert stored[i] == flip_float64_bit(old[i], 62) == e.detail["value"]
     assert [a for j, a in enumerate(stored) if j != i] == [a for j, a in enumerate(old) if j != i]
     sched.upset(tr, 0.7)  # one flip, applied once
