@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from addt_dsl.registry import SIGNALS
+from addt_dsl.runtime.lights import REACH_M
 from addt_dsl.specs import signals as S
 from addt_dsl.specs.signals import TTC_CAP_S
 
@@ -222,8 +223,7 @@ class LaneId(S.LaneId, SignalFn):
 
     @staticmethod
     def compute(trace, args):
-        lanes = trace.lanes.get(args[0])
-        return lanes if lanes is not None else np.full_like(trace.time, np.nan)
+        return _per_actor(trace, trace.lanes, args[0], np.nan)
 
 
 @SIGNALS.implements
@@ -231,8 +231,7 @@ class WrongWay(S.WrongWay, SignalFn):
 
     @staticmethod
     def compute(trace, args):
-        marks = trace.wrong_way.get(args[0])  # (recorded for each actor a formula names)
-        return marks if marks is not None else np.full_like(trace.time, -1.0)
+        return _per_actor(trace, trace.wrong_way, args[0], -1.0)
 
 
 @SIGNALS.implements
@@ -240,8 +239,7 @@ class OffLanes(S.OffLanes, SignalFn):
 
     @staticmethod
     def compute(trace, args):
-        marks = trace.off_lanes.get(args[0])
-        return marks if marks is not None else np.full_like(trace.time, -1.0)
+        return _per_actor(trace, trace.off_lanes, args[0], -1.0)
 
 
 @SIGNALS.implements
@@ -265,8 +263,7 @@ class RedLight(S.RedLight, SignalFn):
 
     @staticmethod
     def compute(trace, args):
-        margin = trace.red_margin.get(args[0])
-        return margin if margin is not None else np.full_like(trace.time, 100.0)
+        return _per_actor(trace, trace.red_margin, args[0], REACH_M)
 
 
 @SIGNALS.implements
@@ -274,8 +271,15 @@ class StopSign(S.StopSign, SignalFn):
 
     @staticmethod
     def compute(trace, args):
-        margin = trace.stop_margin.get(args[0])
-        return margin if margin is not None else np.full_like(trace.time, 100.0)
+        return _per_actor(trace, trace.stop_margin, args[0], REACH_M)
+
+
+def _per_actor(trace, table: dict, actor: str, default: float) -> np.ndarray:
+    """An actor's series from one of the trace's per-actor tables, recorded only for the
+    actors a formula names (or where the run has lights, stop signs): `default` throughout
+    where it was not recorded (no light, no sign, not on a lane)."""
+    values = table.get(actor)
+    return values if values is not None else np.full_like(trace.time, default)
 
 
 def compute_signals(trace, names: set[str]) -> dict[str, np.ndarray]:
