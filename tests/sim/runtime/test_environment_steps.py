@@ -128,32 +128,36 @@ def test_environment_steps_survive_export_and_import(tmp_path):
         [e for e in b.trace.events if e.kind == "environment"]
 
 
+# An ego following a slower lead on a two-lane road, with the blocks the test fills in.
+CONDITION_SCENE = """scenario t {{
+  duration 3 s
+  road r {{
+    line length 400 m
+    lanes right 2
+  }}
+  ego car on r lane -1 at 40 m speed 8 m/s {{
+    stack bev cruise_speed 8 m/s
+  }}
+  variables {{
+    {variables}
+  }}
+  environment {{
+    {environment}
+  }}
+  agent lead car on r lane -1 at 70 m speed 5 m/s {{
+    {lead}
+  }}
+}}
+"""
+
+
 def test_an_environment_step_reads_a_variable_as_an_actors_step_does():
     # `var(P)` in an environment step's condition read 0 (the variables were recorded after
     # the environment's steps fired), so this change never came; now it comes with the
     # lead's step, one sample after the variable is set.
-    src = """scenario t {
-  duration 3 s
-  road r {
-    line length 400 m
-    lanes right 2
-  }
-  ego car on r lane -1 at 40 m speed 8 m/s {
-    stack bev cruise_speed 8 m/s
-  }
-  variables {
-    phase = 0
-    at 1 s set phase 1
-  }
-  environment {
-    when var(phase) == 1 then fog visibility 30 m
-  }
-  agent lead car on r lane -1 at 70 m speed 5 m/s {
-    when var(phase) == 1 then behavior cruise speed 12 m/s
-  }
-}
-"""
-    tr = kit.run(src)
+    tr = kit.run(CONDITION_SCENE.format(variables="phase = 0\n    at 1 s set phase 1",
+                                        environment="when var(phase) == 1 then fog visibility 30 m",
+                                        lead="when var(phase) == 1 then behavior cruise speed 12 m/s"))
     fired = {e.kind: e.time_s for e in tr.events if e.kind in ("environment", "behavior")}
     assert fired == {"environment": pytest.approx(1.01), "behavior": pytest.approx(1.01)}
     assert tr.variables["phase"][100] == 0.0 and tr.variables["phase"][101] == 1.0
@@ -162,29 +166,11 @@ def test_an_environment_step_reads_a_variable_as_an_actors_step_does():
 def test_environment_and_variable_steps_read_the_clearance_of_their_sample():
     # Their steps fired before the collision phase had written the sample's clearance, so
     # they read 0 m: `clearance(ego) < 5 m` held at 0 s with the lead 16 m ahead.
-    src = """scenario t {
-  duration 3 s
-  road r {
-    line length 400 m
-    lanes right 2
-  }
-  ego car on r lane -1 at 40 m speed 8 m/s {
-    stack bev cruise_speed 8 m/s
-  }
-  variables {
-    close = 0
-    when clearance(ego) < CLOSE then set close 1
-  }
-  environment {
-    when clearance(ego) < CLOSE then fog visibility 30 m
-  }
-  agent lead car on r lane -1 at 70 m speed 5 m/s {
-    behavior cruise speed 5 m/s
-  }
-}
-"""
     def fired(close: str):
-        tr = kit.run(src.replace("CLOSE", close))
+        tr = kit.run(CONDITION_SCENE.format(
+            variables=f"close = 0\n    when clearance(ego) < {close} then set close 1",
+            environment=f"when clearance(ego) < {close} then fog visibility 30 m",
+            lead="behavior cruise speed 5 m/s"))
         return tr, {e.kind: e.time_s for e in tr.events if e.kind in ("environment", "variable")}
 
     tr, got = fired("5 m")
