@@ -116,17 +116,25 @@ class CarlaCriteria:
             if not name.startswith("criteria_"):
                 continue
             test = name[len("criteria_"):]
-            param = cond.find("ByValueCondition/ParameterCondition")
-            raw = param.get("value", "") if param is not None else ""
-            try:
-                arg = float(self.resolve(raw)) if raw.strip() else None
-            except (KeyError, SyntaxError, ValueError, ArithmeticError):
-                arg = None
-            oracle = self.criterion(test, arg, ego, cond)
+            oracle = self.criterion(test, self.criterion_argument(cond), ego, cond)
             if oracle is not None:
                 found.setdefault(oracle.name, oracle)
         self.criteria = bool(found)
         return list(found.values())
+
+    def criterion_argument(self, cond) -> float | None:
+        """A criterion's argument: its ParameterCondition's value where the condition names a
+        `parameterRef` (ScenarioRunner passes the value as the keyword argument so named, and
+        nothing without one: openscenario_parser.py); None where it names none or the value
+        does not resolve to a number."""
+        param = cond.find("ByValueCondition/ParameterCondition")
+        if param is None or not (param.get("parameterRef") or "").strip():
+            return None
+        raw = param.get("value", "")
+        try:
+            return float(self.resolve(raw)) if raw.strip() else None
+        except (KeyError, SyntaxError, ValueError, ArithmeticError):
+            return None
 
     def criterion(self, test: str, arg: float | None, ego: ActorPlan, cond) -> OraclePlan | None:
         always, signal = (lambda f: E.Temporal(op="always", lo_s=0.0, hi_s=None, arg=f)), E.Signal
@@ -175,6 +183,11 @@ class CarlaCriteria:
                               text="always not wrong_way(ego)")
         if test == "OnSidewalkTest":
             return self.on_sidewalk(test, cond, always, signal)
+        if test in ("DrivenDistanceTest", "MaxVelocityTest"):
+            self.skip(cond, f"criteria_{test} is not translated: its ParameterCondition gives no positive value with "
+                            "a parameterRef (ScenarioRunner passes the value only as the argument a parameterRef "
+                            "names, and the test needs one)")
+            return None
         self.skip(cond, f"criteria_{test} is not translated: no such oracle",
                   "translated: CollisionTest, RunningRedLightTest, RunningStopTest, KeepLaneTest, DrivenDistanceTest, "
                   "MaxVelocityTest, WrongLaneTest, OnSidewalkTest")
@@ -184,12 +197,7 @@ class CarlaCriteria:
         """OnSidewalkTest(duration D): ScenarioRunner fails it once the ego's time off the lanes
         (`off_lanes`), summed over its stretches less each one's first tick, exceeds D; D is
         the condition's value where it names a parameterRef, else 0 s (openscenario_parser.py)."""
-        param = cond.find("ByValueCondition/ParameterCondition")
-        raw = param.get("value", "") if param is not None and (param.get("parameterRef") or "") else ""
-        try:
-            limit = max(float(self.resolve(raw)), 0.0) if raw.strip() else 0.0
-        except (KeyError, SyntaxError, ValueError, ArithmeticError):
-            limit = 0.0
+        limit = max(self.criterion_argument(cond) or 0.0, 0.0)
         off = signal(name="off_lanes(ego)")
         where = ("ScenarioRunner reads the nearest lane of any road, the twin the lanes of the ego's road or route "
                  "(its leg's road in a junction)")

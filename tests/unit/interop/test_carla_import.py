@@ -210,3 +210,17 @@ def test_a_walker_or_a_longitudinal_only_controller_walks_along_the_files_headin
     got = import_xosc(tmp_path / "Fast.xosc", maps=[MAPS], lenient=True)
     assert {c.name for c in _speed_clauses(got, "adversary")} == {"cruise"}
     assert any(d.code == "W0802" and "moves along its lane" in d.message for d in got.diagnostics)
+
+
+def test_a_criterion_value_without_a_parameter_ref_is_no_argument(tmp_path):
+    # ScenarioRunner passes a criterion's value only as the argument its parameterRef names:
+    # DrivenDistanceTest with value="100" and no parameterRef has no distance (not translated,
+    # said), as OnSidewalkTest's value without one is no duration.
+    text = (CARLA / "xosc" / "FollowLeadingVehicle.xosc").read_text()
+    assert 'parameterRef="distance_success" value="100"' in text
+    (tmp_path / "NoRef.xosc").write_text(text.replace('parameterRef="distance_success" value="100"',
+                                                      'parameterRef="" value="100"', 1))
+    got = import_xosc(tmp_path / "NoRef.xosc", maps=[MAPS], lenient=True)
+    assert "driven_distance" not in {o.name for o in got.plan.oracles}
+    assert any(d.message.startswith("criteria_DrivenDistanceTest is not translated") and "parameterRef" in d.message
+               for d in got.diagnostics)
