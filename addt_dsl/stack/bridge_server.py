@@ -9,11 +9,11 @@ message must arrive whole within the idle timeout and fit the size limit (checke
 it is read); anything malformed gets an `error` reply and the connection is closed.
 
 Each connection is one run: `hello` builds a `BevStack` from the settings and the map it
-carries (and, in protocol 2, a fault schedule from the stack-internal faults it carries,
+carries (and, from protocol 2, a fault schedule from the stack-internal faults it carries,
 bound to the stack as in process; in protocol 3, the stations of the stop lines and stop
 signs on the ego's route), every `step` replays the step's frames (and, in protocol 3, the
-lights' states) into it and ticks it, and replies with its commands and events (the faults' injections among them),
-`bye` ends the run. Connections are served one thread each, so parallel runs may share a
+lights' states) into it and ticks it, and replies with its commands and events (the
+faults' injections among them), `bye` ends the run. Connections are served one thread each, so parallel runs may share a
 server. It is also the worked example of the protocol in docs/bridge.md: a stack in any
 language needs only to answer these three messages.
 """
