@@ -160,6 +160,16 @@ class Context:
     def light_state(self, controller: str, time_s: float) -> int:
         return self._run.lights.state(controller, time_s)
 
+    def ego_light_stations(self) -> list[tuple[float, str]]:
+        """(station [m] on the ego's road or route, controller) of each traffic light's stop
+        line, in path order: what `stop_line_ahead` reads (the bridge sends them)."""
+        return [(st.u, st.controller) for st in self._run.stop_stations.get("ego", ())]
+
+    def ego_sign_stations(self) -> list[float]:
+        """Station [m] on the ego's road or route of each stop sign's line, in path order:
+        what `stop_sign_ahead` reads (the bridge sends them)."""
+        return [st.u for st in self._run.sign_stations.get("ego", ())]
+
     def ego_route_roads(self) -> list:
         ego_road = self._run.ego_road
         legs = getattr(ego_road.road, "legs", None)

@@ -5,7 +5,7 @@ the simulator sends the step's sensor frames and the ego state and waits for the
 reply (the commands it publishes and when they take effect). A deterministic remote
 stack therefore gives a deterministic run, whatever the wall-clock speed of either side.
 
-Wire format (protocols 1 and 2), both directions, one message at a time over TCP:
+Wire format (protocols 1 to 3), both directions, one message at a time over TCP:
 
     u32 big-endian: length of the rest | u32 big-endian: header length | header | blobs
 
@@ -20,8 +20,11 @@ shared with the reference server `addt_dsl.stack.bridge_server`.
 Protocol 2 adds stack-internal faults: a run with faults on the stack's sites, state sites,
 tensors or nodes (bit flips, stuck values, latency spikes) sends them in `hello` as concrete
 schedule entries; the remote applies them with its own copy of the fault machinery and
-returns each injection as a `fault` event with its replies. A run without such faults
-says hello in protocol 1, so servers that speak only protocol 1 still serve it.
+returns each injection as a `fault` event with its replies. Protocol 3 adds what the
+in-process stack reads of the map's signals: the stations of the traffic lights' stop lines
+and of the stop signs' lines on the ego's road or route in `hello`, each light's state in
+every `step`. A hello says the lowest protocol that carries what its run has (1: neither
+faults nor signals; 2: faults; 3: signals), so older servers still serve the runs they can.
 """
 
 from __future__ import annotations
@@ -44,9 +47,12 @@ from addt_dsl.specs.stacks import CLIENT_SETTINGS, escape, parse_address
 from addt_dsl.runtime.trace import SERIES_COLUMNS, Event
 from addt_dsl.stack.bev import NODE_NAMES, StackError
 
-PROTOCOL = 2  # the newest protocol; a hello says 1 when the run has no stack-internal faults
-PROTOCOLS = (1, 2)  # what the reference server accepts
+PROTOCOL = 3  # the newest protocol; a hello says the lowest that carries what its run has
+FAULTS_PROTOCOL = 2  # stack-internal faults in `hello`
+SIGNALS_PROTOCOL = 3  # stop lines and stop signs in `hello`, the lights' states in `step`
+PROTOCOLS = (1, 2, 3)  # what the reference server accepts
 MAX_FAULTS = 1000  # stack-internal faults one hello may carry
+MAX_SIGNALS = 10_000  # stop lines, and stop signs, one hello may carry (each)
 _HEAD = struct.Struct(">II")
 
 
@@ -247,6 +253,7 @@ class ExternalStack(S.ExternalStack):
         self.latency = {n: 0.0 for n in (*NODE_NAMES, "e2e")}
         self.objects_seen = 0
         self._frames: list = []
+        self._controllers: list[str] = []  # the lights whose states each step sends (protocol 3)
         self.sock = None  # connected at the first step, so a failure there is a detected stack failure
 
     def _connect(self) -> None:
@@ -266,14 +273,14 @@ class ExternalStack(S.ExternalStack):
             raise StackError(f"cannot reach the external stack at {escape(host)}:{port}: {exc}") from None
         try:
             self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            hello = self._bridge_hello()
             try:
-                ready, _ = self._request(self._hello(), expect="ready")
+                ready, _ = self._request(hello, expect="ready")
             except StackError as exc:
-                if not self.internal_faults or "protocol" not in str(exc):
+                if hello["protocol"] == 1 or "protocol" not in str(exc):
                     raise
-                raise StackError(f"{exc} (this run's {self._faults_text()} need bridge protocol 2; "
-                                 "a server that speaks only protocol 1 cannot apply them)") from None
-            self._check_ready(ready)
+                raise StackError(f"{exc} ({self._needs_text(hello['protocol'])})") from None
+            self._check_ready(ready, hello["protocol"])
         except BaseException:
             self.sock.close()
             self.sock = None
@@ -289,20 +296,42 @@ class ExternalStack(S.ExternalStack):
         more = len(self.internal_faults) - len(names)
         return "stack-internal faults (" + ", ".join(names) + (f", {more} more" if more else "") + ")"
 
-    def _check_ready(self, ready: dict) -> None:
+    def _needs_text(self, protocol: int) -> str:
+        """Why a hello said `protocol` (2 or 3), for a server that refused it."""
+        if protocol == SIGNALS_PROTOCOL:
+            return (f"this run's {self._signals_text()} need bridge protocol 3; a server that speaks only "
+                    "protocols 1 and 2 cannot tell its stack of them")
+        return (f"this run's {self._faults_text()} need bridge protocol 2; a server that speaks only "
+                "protocol 1 cannot apply them")
+
+    def _signals_text(self) -> str:
+        lines, signs = self.ctx.ego_light_stations(), self.ctx.ego_sign_stations()
+        parts = []
+        if lines:
+            names = ", ".join(dict.fromkeys(c for _, c in lines))
+            parts.append(f"traffic lights ({escape(names, 200)})")
+        if signs:
+            parts.append(f"{len(signs)} stop sign{'s' if len(signs) > 1 else ''}")
+        return " and ".join(parts) + " on the ego's route"
+
+    def _check_ready(self, ready: dict, protocol: int) -> None:
         """A hello with faults must be answered by a remote that took every one of them:
-        a stack that ignores them would let the run pass as if it had been faulted."""
+        a stack that ignores them would let the run pass as if it had been faulted. (A stack
+        may ignore the signals of protocol 3: running a red light is its own failure, which
+        the run's oracles judge.)"""
         if not self.internal_faults:
             return
         sent = sorted(f.index for f in self.internal_faults)
         taken = ready.get("faults")
-        if ready.get("protocol") != 2 or not isinstance(taken, list) or \
+        if ready.get("protocol") != protocol or not isinstance(taken, list) or \
                 not all(type(t) is int for t in taken) or sorted(taken) != sent:
             raise StackError(f"the external stack did not confirm this run's {self._faults_text()}: its `ready` "
                              f"says protocol {escape(str(ready.get('protocol', 1)), 20)} and faults "
-                             f"{escape(repr(taken), 200)}, expected protocol 2 and {sent} (docs/bridge.md)")
+                             f"{escape(repr(taken), 200)}, expected protocol {protocol} and {sent} (docs/bridge.md)")
 
     def _hello(self) -> dict:
+        """What every protocol's hello says (the OSI client's too): the run, the ego, its
+        sensors, the map, the remote's settings, the token."""
         ctx = self.ctx
         spec, ego_plan = ctx.spec, ctx.ego_plan
         road = spec.plan.road(ego_plan.road)
@@ -322,13 +351,28 @@ class ExternalStack(S.ExternalStack):
             "sensors": sensors,
             "map": {"format": "addt-road-plan", "road": road.model_dump(mode="json")},
         }
-        if self.internal_faults:
-            # Protocol 2 only when the run needs it, so protocol-1 servers serve the rest.
-            hello.update(protocol=PROTOCOL, duration_s=ctx.duration_s,
-                         faults=[f.model_dump(mode="json") for f in self.internal_faults])
         token = os.environ.get(TOKEN_ENV)
         if token:
             hello["token"] = token
+        return hello
+
+    def _bridge_hello(self) -> dict:
+        """The bridge's hello, in the lowest protocol that carries what the run has, so
+        older servers serve the runs they can: 2 for stack-internal faults, 3 for the stop
+        lines and stop signs on the ego's route (the in-process stack reads them from the
+        map, `stop_line_ahead` and `stop_sign_ahead`)."""
+        ctx = self.ctx
+        hello = self._hello()
+        lines, signs = ctx.ego_light_stations(), ctx.ego_sign_stations()
+        if self.internal_faults or lines or signs:
+            hello.update(protocol=SIGNALS_PROTOCOL if lines or signs else FAULTS_PROTOCOL,
+                         duration_s=ctx.duration_s,
+                         faults=[f.model_dump(mode="json") for f in self.internal_faults])
+        if lines or signs:
+            hello.update(stop_lines=[{"station_m": float(u), "controller": c} for u, c in lines],
+                         stop_signs=[{"station_m": float(u)} for u in signs])
+        # The controllers whose states each step carries (in their first line's order).
+        self._controllers = list(dict.fromkeys(c for _, c in lines))
         return hello
 
     def _request(self, header: dict, blobs=None, expect: str = "control"):
@@ -379,8 +423,11 @@ class ExternalStack(S.ExternalStack):
         ego = {"x": x, "y": y, "heading": heading, "speed": speed, "s_hint": self.ctx.ego_station()}
         if self.sock is None:
             self._connect()
-        reply, rblobs = self._request({"type": "step", "time_s": time_s, "dt": dt, "ego": ego, "frames": frames},
-                                      blobs)
+        header = {"type": "step", "time_s": time_s, "dt": dt, "ego": ego, "frames": frames}
+        if self._controllers:
+            # Each light's state now, which the in-process stack reads as it plans this step.
+            header["lights"] = {c: float(self.ctx.light_state(c, time_s)) for c in self._controllers}
+        reply, rblobs = self._request(header, blobs)
         command, commands, latency, objects, events = _control(reply, time_s, dt)
         if len(self._remote_events) + len(events) > MAX_EVENTS_PER_RUN:
             raise StackError(f"external stack sent more than {MAX_EVENTS_PER_RUN} events in one run")

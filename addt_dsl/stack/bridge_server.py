@@ -9,10 +9,11 @@ message must arrive whole within the idle timeout and fit the size limit (checke
 it is read); anything malformed gets an `error` reply and the connection is closed.
 
 Each connection is one run: `hello` builds a `BevStack` from the settings and the map it
-carries (and, in protocol 2, a fault schedule from the stack-internal faults it carries,
-bound to the stack as in process), every `step` replays the step's frames into it and
-ticks it, and replies with its commands and events (the faults' injections among them),
-`bye` ends the run. Connections are served one thread each, so parallel runs may share a
+carries (and, from protocol 2, a fault schedule from the stack-internal faults it carries,
+bound to the stack as in process; in protocol 3, the stations of the stop lines and stop
+signs on the ego's route), every `step` replays the step's frames (and, in protocol 3, the
+lights' states) into it and ticks it, and replies with its commands and events (the
+faults' injections among them), `bye` ends the run. Connections are served one thread each, so parallel runs may share a
 server. It is also the worked example of the protocol in docs/bridge.md: a stack in any
 language needs only to answer these three messages.
 """
@@ -35,15 +36,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.plan import ConcreteFault
+from addt_dsl.plan import LIGHT_STATES, ConcreteFault
 from addt_dsl.registry import FAULTS
 from addt_dsl.runtime.faults import FaultSchedule
+from addt_dsl.runtime.lights import StopStation, next_stop
+from addt_dsl.runtime.signs import next_sign
 from addt_dsl.runtime.trace import SERIES_COLUMNS, Event
 from addt_dsl.stack.bridge import (
     MAX_FAULTS,
     MAX_HEADER_BYTES,
     MAX_MESSAGE_BYTES,
+    MAX_SIGNALS,
     PROTOCOLS,
+    SIGNALS_PROTOCOL,
     TOKEN_ENV,
     ProtocolError,
     decode,
@@ -136,6 +141,13 @@ class RemoteContext:
         self.faults = FaultSchedule(faults, float(hello["step_s"]), float(hello.get("duration_s", math.inf)),
                                     self.events)
         self.commands: list = []
+        # Protocol 3: the map's signals on the ego's route, as the in-process context reads
+        # them (path order: by station, then controller), and each light's state this step.
+        # An older client sends none: the stack then knows of no light and no sign.
+        self.stop_lines = sorted((StopStation(float(d["station_m"]), str(d["controller"]))
+                                  for d in hello.get("stop_lines", ())), key=lambda st: (st.u, st.controller))
+        self.sign_lines = sorted(float(d["station_m"]) for d in hello.get("stop_signs", ()))
+        self.light_states: dict[str, float] = {}
 
     # The same derivation as the in-process context, so a remote run matches a local one.
     def rng(self, name: str) -> np.random.Generator:
@@ -151,10 +163,13 @@ class RemoteContext:
         return self.sensors[name]
 
     def stop_line_ahead(self, s: float):
-        return None  # traffic-light states are not sent over the bridge protocol (yet)
+        """As the simulator's context: (station, state code) of the next stop line ahead of
+        the ego's front, from the hello's stop lines and this step's states; None without."""
+        return next_stop(self.stop_lines, s + 0.5 * self.ego_length_m, self.light_states.__getitem__)
 
     def stop_sign_ahead(self, s: float, stopped: tuple[float, ...] = ()) -> float | None:
-        return None  # nor are stop signs
+        """As the simulator's context: the next stop sign's line ahead but those in `stopped`."""
+        return next_sign(self.sign_lines, s + 0.5 * self.ego_length_m, stopped)
 
     def junction_ahead(self, s: float):
         """As the simulator's context: the next junction on the route the ego's front has not left."""
@@ -225,8 +240,8 @@ def serve_connection(sock: socket.socket, limits: Limits = Limits()) -> None:
                     # As in process: faults learn the stack's sites (an unknown target is refused).
                     ctx.faults.bind(stack, lambda: ctx.now)
                     ready = {"type": "ready", "stack": "bev", "nodes": list(stack.latency)}
-                    if header["protocol"] >= 2:
-                        ready.update(protocol=2, faults=[k.fault.index for k in ctx.faults.kinds])
+                    if header["protocol"] >= 2:  # the hello's protocol, and the faults it applies
+                        ready.update(protocol=header["protocol"], faults=[k.fault.index for k in ctx.faults.kinds])
                     send(sock, ready, deadline=deadline)
                 elif kind == "step":
                     if stack is None:
@@ -288,6 +303,52 @@ def _check_hello(header: dict, limits: Limits) -> None:
         _check_faults(header)
     elif "faults" in header:
         raise ValueError("'faults' needs protocol 2")
+    if protocol >= SIGNALS_PROTOCOL:
+        _check_signals(header)
+    elif "stop_lines" in header or "stop_signs" in header:
+        raise ValueError("'stop_lines' and 'stop_signs' need protocol 3")
+
+
+def _station(d, what: str) -> float:
+    if not isinstance(d, dict):
+        raise ValueError(f"{what} must be an object")
+    u = d.get("station_m")
+    if isinstance(u, bool) or not isinstance(u, (int, float)) or not math.isfinite(u):
+        raise ValueError(f"{what}: 'station_m' must be a finite number [m]")
+    return float(u)
+
+
+def _check_signals(header: dict) -> None:
+    """Protocol 3: the stop lines (station and the light's controller) and the stop signs'
+    lines (station) on the ego's road or route."""
+    for key in ("stop_lines", "stop_signs"):
+        items = header.get(key)
+        if not isinstance(items, list) or len(items) > MAX_SIGNALS:
+            raise ValueError(f"'{key}' must be a list of at most {MAX_SIGNALS} entries")
+        for k, d in enumerate(items):
+            _station(d, f"{key}[{k}]")
+            if key == "stop_lines":
+                c = d.get("controller")
+                if not isinstance(c, str) or not 0 < len(c) <= 200:
+                    raise ValueError(f"stop_lines[{k}]: 'controller' must be a name of 1 to 200 characters")
+
+
+_STATE_CODES = tuple(LIGHT_STATES.values())  # (a tuple: a peer's list or object is compared, not hashed)
+
+
+def _light_states(ctx: RemoteContext, header: dict) -> dict[str, float]:
+    """Protocol 3: each stop line's light's state code this step (0 green, 1 yellow, 2 red)."""
+    lights = header.get("lights")
+    if not isinstance(lights, dict):
+        raise ValueError("a step of a run with stop lines must carry 'lights': each light's state code")
+    states = {}
+    for st in ctx.stop_lines:
+        v = lights.get(st.controller)
+        if isinstance(v, bool) or v not in _STATE_CODES:
+            raise ValueError(f"'lights' must give light {escape(st.controller, 80)!r} a state code "
+                             f"(0 green, 1 yellow, 2 red), not {escape(repr(v), 40)}")
+        states[st.controller] = float(v)
+    return states
 
 
 def _check_faults(header: dict) -> None:
@@ -344,6 +405,8 @@ def _step(stack, ctx: RemoteContext, header: dict, blobs: dict) -> tuple[dict, d
     ctx.now = t
     if t + 1e-12 >= ctx.faults.next_wake_s:  # fault timers, at the start of the step as in process
         ctx.faults.wake(t)
+    if ctx.stop_lines:
+        ctx.light_states = _light_states(ctx, header)
     e = header["ego"]
     ctx.ego = (e["x"], e["y"], e["heading"], e["speed"])
     ctx.ego_s = e["s_hint"]
