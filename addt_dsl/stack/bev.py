@@ -316,7 +316,13 @@ class BevStack(S.BevStack):
     # object arrives, else it brakes. Priority from the map's
     # lights: with a green light at the entry, crossing traffic that can still stop at its
     # own red (at `YIELD_COMMIT_DECEL`) is not waited for; oncoming traffic is (a permissive
-    # green) and so is a red-light runner that can no longer stop.
+    # green) and so is a red-light runner that can no longer stop. The map's signs
+    # (`ctx.junction_rule`, runtime/signs.py): a priority sign (306, 301) on the approach
+    # counts as a green light; behind a yield sign (205, R1-2) the ego reaches the junction
+    # at `YIELD_SIGN_SPEED` at most (StVO 8(2): approach at a moderate speed that shows it
+    # will wait), slowing at `COVER_DECEL`; without a sign it gives way as at a yield sign
+    # but for that speed.
+    YIELD_SIGN_SPEED = to_si(20.0, "km/h")[0]  # [m/s]
     YIELD_LATERAL_M = 0.5
     YIELD_WAIT_CLEARANCE_M = 1.5
     YIELD_ACCEL = 1.5  # [m/s^2] below the planner's 2 m/s^2: the estimate errs long
@@ -357,8 +363,11 @@ class BevStack(S.BevStack):
         xs, ys, hs, _ = road.sample_arrays(ss, 0.0)
         v_top = self._junction_speed(road, lo, hi)
         approach = float(road.reference_pose(s0)[2])
-        green = self._green_at(entry, s0)
+        rule = self.ctx.junction_rule(s0)
+        green = self._green_at(entry, s0) or rule == "priority"
         wait, clear, cover = None, False, math.inf
+        if rule == "yield" and front < entry:
+            cover = math.sqrt(self.YIELD_SIGN_SPEED ** 2 + 2.0 * self.COVER_DECEL * (entry - front))
         for i, (o, (so, to, v_s, *_rest)) in enumerate(zip(tracked, objs)):
             if abs(to - t0) < 1.8 and (so > s0 or v_s > 0.0):
                 # Traffic ahead in the ego's lane (the planner follows it) or following it

@@ -156,6 +156,9 @@ class RemoteContext:
     def stop_sign_ahead(self, s: float, stopped: tuple[float, ...] = ()) -> float | None:
         return None  # nor are stop signs
 
+    def junction_rule(self, s: float) -> str | None:
+        return None  # nor yield or priority signs: every approach is given way to
+
     def junction_ahead(self, s: float):
         """As the simulator's context: the next junction on the route the ego's front has not left."""
         front = s + 0.5 * self.ego_length_m
