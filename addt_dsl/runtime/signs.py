@@ -50,7 +50,8 @@ SIGN_KINDS: dict[str, SignKind] = {k.name: k for k in (
              "reach the junction at 20 km/h at most"),
     SignKind("priority", ("306", "301"), ("TYPE_RIGHT_OF_WAY_BEGIN", "TYPE_RIGHT_OF_WAY_NEXT_INTERSECTION"),
              "priority road (306) or priority at the next junction (301): crossing traffic that can still "
-             "stop at 4 m/s^2 is not waited for; oncoming traffic and what is already in the junction are"),
+             "stop short of the ego's path braking at 2.5 m/s² (or as hard as it brakes) is not waited for; "
+             "oncoming traffic and what is already in the junction are"),
 )}
 _KIND_OF_TYPE = {typ: k.name for k in SIGN_KINDS.values() for typ in k.types}
 STOP_SIGN_TYPES = frozenset(SIGN_KINDS["stop"].types)
