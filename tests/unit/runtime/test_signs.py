@@ -2,6 +2,7 @@
 (signal references included), the stop-sign margin, the junction rule."""
 
 import math
+from pathlib import Path
 
 import pytest
 
@@ -73,7 +74,7 @@ def test_lines_of_a_maps_stop_signs_by_the_way_they_face():
     assert got == [("900", 150.0, 1, (-1,)), ("901", 300.0, -1, (1,)), ("903", 250.0, 1, (-1,))]
 
 
-TOWN07 = __import__("pathlib").Path(__file__).resolve().parents[2] / "data" / "xodr" / "town07_signal_refs.xodr"
+TOWN07 = Path(__file__).resolve().parents[2] / "data" / "carla" / "town07_signal_refs.xodr"
 
 
 def test_signal_references_place_town07s_signs_on_the_connecting_roads():
