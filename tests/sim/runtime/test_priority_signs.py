@@ -11,7 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.sim.kit import first_run
+from addt_dsl.compiler import compile_source
+from addt_dsl.runtime.execute import execute
+from addt_dsl.sweep import expand
 
 pytestmark = pytest.mark.slow
 
@@ -33,7 +35,9 @@ def _map(ego_sign: str | None) -> str:
     return text
 
 
-def _run(tmp_path, ego_sign: str | None, side_at: float, side_stops: bool):
+def spec(tmp_path, ego_sign: str | None, side_at: float, side_stops: bool):
+    """The RunSpec of the scene: a sign of type `ego_sign` on the ego's approach, the side
+    car starting at station `side_at` [m], braking to a stop before its line if `side_stops`."""
     (tmp_path / "signs.xodr").write_text(_map(ego_sign))
     stop = "    when s(side) > 99 m then behavior brake decel 3 m/s^2\n" if side_stops else ""
     source = f"""
@@ -52,7 +56,13 @@ scenario signs {{
   }}
 }}
 """
-    out = first_run(source, "signs.addt", tmp_path)
+    result = compile_source(source, "signs.addt", base_dir=tmp_path)
+    assert result.ok, [str(d) for d in result.diagnostics]
+    return expand(result.plan).specs[0]
+
+
+def _run(tmp_path, ego_sign: str | None, side_at: float, side_stops: bool):
+    out = execute(spec(tmp_path, ego_sign, side_at, side_stops))
     assert out.status == "ok", out.error
     assert all(v.passed for v in out.verdicts), out.verdicts
     return out.trace
