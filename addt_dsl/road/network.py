@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Optional, Sequence
 
 import numpy as np
@@ -77,6 +77,27 @@ class RoadNetwork:
                 if sig.id == signal_id:
                     return road.id, sig
         return None
+
+    def placements(self, signal_id: str | None = None) -> list:
+        """``(road_id, Signal)`` of every placement of a signal (of `signal_id`, or all):
+        where it stands, and each `<signalReference>` to it, which places it on the
+        referencing road with the reference's s, t, orientation and validity (OpenDRIVE 1.6,
+        13.8; `Signal.reference`). Roads in their numeric order, a road's own signals before
+        its references; a reference to no signal of the map is skipped."""
+        own = {}
+        for road in self.roads.values():
+            for sig in road.signals:
+                own.setdefault(sig.id, sig)
+        out = []
+        for road_id in sorted(self.roads, key=_natural_key):
+            road = self.roads[road_id]
+            out.extend((road_id, sig) for sig in road.signals if signal_id in (None, sig.id))
+            for ref in road.signal_refs:
+                sig = own.get(ref.id)
+                if sig is not None and signal_id in (None, ref.id):
+                    out.append((road_id, replace(sig, s=ref.s, t=ref.t, orientation=ref.orientation,
+                                                 validity=ref.validity, reference=True)))
+        return out
 
     def signal_ids(self, dynamic_only: bool = False) -> list[str]:
         return [sig.id for road in self.roads.values() for sig in road.signals

@@ -57,6 +57,22 @@ class Signal:
     # `<validity fromLane toLane>`: the lanes the signal governs (inclusive; None: every lane
     # of the direction it faces).
     validity: Optional[tuple[int, int]] = None
+    # Placed by a `<signalReference>` on another road (`RoadNetwork.placements`): `s`, `t`,
+    # `orientation` and `validity` are the reference's, the rest the signal's.
+    reference: bool = False
+
+
+@dataclass(frozen=True)
+class SignalRef:
+    """``<signals><signalReference>`` (OpenDRIVE 1.6, 13.8): the existing signal ``id`` placed
+    on this road at station ``s`` [m], offset ``t`` [m], with its own ``orientation`` and
+    ``validity`` (as `Signal`'s)."""
+
+    id: str
+    s: float
+    t: float
+    orientation: str = "none"
+    validity: Optional[tuple[int, int]] = None
 
 
 @dataclass(frozen=True)
@@ -83,6 +99,7 @@ class Road:
     predecessor: Optional[RoadLink] = None
     successor: Optional[RoadLink] = None
     signals: tuple[Signal, ...] = ()
+    signal_refs: tuple[SignalRef, ...] = ()
     # <type><speed max>: (start station [m], speed limit [m/s]) in order of s.
     speed_limits: tuple[tuple[float, float], ...] = ()
     _geom_starts: np.ndarray = field(init=False, repr=False, compare=False)

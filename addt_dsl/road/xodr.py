@@ -23,7 +23,7 @@ from .geometry import Arc, CubicProfile, Line, ParamPoly3, Poly3, Spiral
 from .lanes import Lane, LaneSection
 from . import limits as L
 from .network import Connection, Junction, RoadNetwork
-from .road import Controller, Road, RoadLink, Signal
+from .road import Controller, Road, RoadLink, Signal, SignalRef
 
 _GEOMETRY_TAGS = ("line", "arc", "spiral", "poly3", "paramPoly3")
 
@@ -256,6 +256,7 @@ class _Reader:
                 predecessor=predecessor,
                 successor=successor,
                 signals=self.signals(node.find("signals"), length),
+                signal_refs=self.signal_refs(node.find("signals"), length),
                 speed_limits=self.speed_limits(node),
             )
         except L.RoadLimitError as exc:
@@ -285,11 +286,28 @@ class _Reader:
         return tuple(sorted(out))
 
     def signals(self, node: Optional[_Node], length: float) -> tuple:
-        """The road's `<signal>`s (positions, type, dynamic); `<signalReference>` is skipped."""
+        """The road's `<signal>`s (positions, type, dynamic); references are `signal_refs`'."""
         if node is None:
             return ()
         out = []
-        for sn in node.findall("signal"):
+        for sn, sid, s, t, validity in self._placed(node, "signal", length):
+            out.append(Signal(sid, s, t, sn.attrs.get("name", ""),
+                              sn.attrs.get("type", ""), sn.attrs.get("subtype", ""),
+                              sn.attrs.get("dynamic", "no").strip().lower() == "yes",
+                              sn.attrs.get("orientation", "none").strip() or "none", validity))
+        return tuple(out)
+
+    def signal_refs(self, node: Optional[_Node], length: float) -> tuple:
+        """The road's `<signalReference>`s: another road's signal placed on this one
+        (`RoadNetwork.placements` resolves them)."""
+        if node is None:
+            return ()
+        return tuple(SignalRef(sid, s, t, sn.attrs.get("orientation", "none").strip() or "none", validity)
+                     for sn, sid, s, t, validity in self._placed(node, "signalReference", length))
+
+    def _placed(self, node: _Node, tag: str, length: float):
+        """(element, id, s, t, validity) of each `tag` child with a position on the road."""
+        for sn in node.findall(tag):
             try:
                 s = self.coord(sn, "s")
                 t = self.coord(sn, "t", 0.0)
@@ -306,11 +324,7 @@ class _Reader:
                     validity = (min(lo, hi), max(lo, hi))
                 except XodrError:
                     validity = None  # a malformed validity: the signal governs its whole side
-            out.append(Signal(sid, s, t, sn.attrs.get("name", ""),
-                              sn.attrs.get("type", ""), sn.attrs.get("subtype", ""),
-                              sn.attrs.get("dynamic", "no").strip().lower() == "yes",
-                              sn.attrs.get("orientation", "none").strip() or "none", validity))
-        return tuple(out)
+            yield sn, sid, s, t, validity
 
     def check_profiles(self, road: Road, node: _Node, sec_nodes: list[_Node]) -> None:
         """Lane widths, laneOffset, elevation and superelevation stay within their limits

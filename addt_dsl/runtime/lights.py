@@ -119,22 +119,28 @@ def stop_lines(network, controller: str, signal_ids: Iterable[str], inline: dict
                 out.append(StopLine(controller, sid, road_id, s, direction,
                                     tuple(i for i in lanes if road.travel_direction(i) == direction)))
             continue
-        found = network.signal(sid)
-        if found is None:
-            continue
-        road_id, sig = found
-        if not governs_vehicles(sig.type):
-            continue  # a pedestrian light: its stop line is the crossing's, not the road's
-        out.extend(signal_lines(network.road(road_id), road_id, sig, controller))
+        for road_id, sig in network.placements(sid):  # where it stands, and its references
+            if not governs_vehicles(sig.type):
+                continue  # a pedestrian light: its stop line is the crossing's, not the road's
+            out.extend(signal_lines(network.road(road_id), road_id, sig, controller))
     return out
 
 
 def signal_lines(road, road_id: str, sig, controller: str) -> list[StopLine]:
     """The stop lines a map's signal (`road.Signal`) makes on its road: one per direction it
-    faces with a driving lane of its `<validity>` there."""
+    faces with a driving lane of its `<validity>` there.
+
+    A placement by a `<signalReference>` whose validity names driving lanes holds those
+    lanes each in its own direction of travel, whatever its orientation: as CARLA reads
+    them (`Signal::IsLaneValid`, validity only); its towns write a reference's orientation
+    as the way the sign's face points, opposite to the standard's (on every reference of
+    Town01, Town07 and Town10HD)."""
     out = []
     driving = road.driving_lane_ids(sig.s)
-    for direction in {"+": (1,), "-": (-1,)}.get(sig.orientation, (1, -1)):
+    directions = {"+": (1,), "-": (-1,)}.get(sig.orientation, (1, -1))
+    if sig.reference and sig.validity is not None:
+        directions = (1, -1)
+    for direction in directions:
         lanes = [i for i in driving if road.travel_direction(i) == direction]
         if sig.validity is not None:
             lanes = [i for i in lanes if sig.validity[0] <= i <= sig.validity[1]]

@@ -28,7 +28,7 @@ from addt_dsl.road import resolve_route
 from addt_dsl.runtime.roadmesh import build_scene
 from addt_dsl.road.roadspec import build_network
 from addt_dsl.runtime.script import Script
-from addt_dsl.runtime.signs import SignsRuntime, next_sign, stop_sign_lines
+from addt_dsl.runtime.signs import SignsRuntime, junction_rule, next_sign, sign_lines, stop_sign_lines
 from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED, STEP_WAITING, compute_signals
 from addt_dsl.runtime.trace import Event
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
@@ -107,6 +107,12 @@ class Context:
             return None
         return next_sign([st.u for st in run.sign_stations["ego"]], s + 0.5 * run.ego_plan.length_m, stopped)
 
+    def junction_rule(self, s: float) -> str | None:
+        """The right-of-way rule of the ego's approach to the next junction on its route
+        (`signs.SIGN_KINDS`: "stop", "yield", "priority"), or None: no sign of the map."""
+        run = self._run
+        return junction_rule(run.rule_stations, run.ego_junctions, s + 0.5 * run.ego_plan.length_m)
+
     def ego_station(self) -> float:
         return self._run.ego_s
 
@@ -147,14 +153,14 @@ class Context:
             out.append((st.controller, x, y, z, h))
         return out
 
-    def ego_stop_signs(self):
-        """(x, y, z, heading of the ego's lane) where each stop-sign line on the ego's road or
-        route meets the ego's lane, in route order."""
+    def ego_signs(self):
+        """(kind, x, y, z, heading of the ego's lane) where each sign's line on the ego's road
+        or route meets the ego's lane, in route order (`signs.SIGN_KINDS`)."""
         run = self._run
         road, out = run.ego_road, []
-        for st in run.sign_stations.get("ego", ()):
+        for st in run.rule_stations:
             x, y, h = road.pose(st.u, float(road.road.lane_center_t(run.ego_lane, st.u)))
-            out.append((x, y, road.elevation.at(st.u)[0], h))
+            out.append((st.controller, x, y, road.elevation.at(st.u)[0], h))
         return out
 
     def light_state(self, controller: str, time_s: float) -> int:
@@ -450,14 +456,17 @@ class RunState:
         along its road or route (none: `self.signs` is None)."""
         self.signs: SignsRuntime | None = None
         self.sign_stations: dict[str, list[StopStation]] = {}
-        by_map: dict[int, list] = {}  # one scan per network object (roads of one map may share it)
+        self.rule_stations: list[StopStation] = []  # the ego's, `controller` the sign's kind
+        by_map: dict[int, tuple] = {}  # one scan per network object (roads of one map may share it)
         lines: dict[str, list] = {}
+        rules: dict[str, list] = {}  # every sign kind's lines, for the ego's junction rules
         for r in plan.roads:
             if r.source == "xodr":
                 network = self.networks[r.name]
                 if id(network) not in by_map:
-                    by_map[id(network)] = stop_sign_lines(network)
-                lines[r.name] = by_map[id(network)]
+                    by_map[id(network)] = (stop_sign_lines(network), sign_lines(network))
+                lines[r.name], rules[r.name] = by_map[id(network)]
+        self.rule_stations = self._stations(self.ego_road, plan.ego, rules.get(plan.ego.road, []))
         stations = {"ego": self._stations(self.ego_road, plan.ego, lines.get(plan.ego.road, []))}
         for a in plan.agents:
             stations[a.name] = self._stations(self.agent_roads[a.name], a, lines.get(a.road, []))

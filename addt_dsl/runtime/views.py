@@ -142,6 +142,10 @@ class StackContext(Protocol):
     def stop_sign_ahead(self, s: float, stopped: tuple[float, ...] = ()) -> float | None:
         """Station of the next stop sign's line ahead but those in `stopped`, or None."""
 
+    def junction_rule(self, s: float) -> str | None:
+        """The map's signs' rule for the approach to the next junction (`runtime.signs.SIGN_KINDS`
+        name: "stop", "yield", "priority"), or None (no sign)."""
+
     def event(self, kind: str, **detail) -> None:
         """Record an event now."""
 
@@ -178,8 +182,8 @@ class HostContext(StackContext, Protocol):
     def ego_stop_lines(self) -> list[tuple[str, float, float, float, float]]:
         """(controller, x, y, z, heading) of each stop line on the ego's road or route."""
 
-    def ego_stop_signs(self) -> list[tuple[float, float, float, float]]:
-        """(x, y, z, lane heading) where each stop sign's line on the ego's route meets its lane."""
+    def ego_signs(self) -> list[tuple[str, float, float, float, float]]:
+        """(kind, x, y, z, lane heading) where each sign's line on the ego's route meets its lane."""
 
     def light_state(self, controller: str, time_s: float) -> int:
         """A light's state code at `time_s` (`lights`)."""

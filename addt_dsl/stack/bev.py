@@ -316,7 +316,17 @@ class BevStack(S.BevStack):
     # object arrives, else it brakes. Priority from the map's
     # lights: with a green light at the entry, crossing traffic that can still stop at its
     # own red (at `YIELD_COMMIT_DECEL`) is not waited for; oncoming traffic is (a permissive
-    # green) and so is a red-light runner that can no longer stop.
+    # green) and so is a red-light runner that can no longer stop. The map's signs
+    # (`ctx.junction_rule`, runtime/signs.py): behind a priority sign (306, 301) crossing
+    # traffic that can still stop short of the zone braking at `PRIORITY_DECEL` (or at its
+    # own measured deceleration, if harder) is not waited for; behind a yield sign (205,
+    # R1-2) the ego reaches the junction entry at `YIELD_SIGN_SPEED` at most (StVO 8(2):
+    # a moderate speed that shows it will wait), slowing at `YIELD_SIGN_DECEL`; without a
+    # sign it gives way as behind a yield sign, at its own speed.
+    YIELD_SIGN_SPEED = to_si(20.0, "km/h")[0]  # [m/s]
+    YIELD_SIGN_DECEL = 1.0  # [m/s^2]
+    YIELD_SIGN_LEAD_S = 1.5  # [s]
+    PRIORITY_DECEL = 2.5  # [m/s^2] traffic that can stop braking this hard (or as it brakes) gives way
     YIELD_LATERAL_M = 0.5
     YIELD_WAIT_CLEARANCE_M = 1.5
     YIELD_ACCEL = 1.5  # [m/s^2] below the planner's 2 m/s^2: the estimate errs long
@@ -357,8 +367,13 @@ class BevStack(S.BevStack):
         xs, ys, hs, _ = road.sample_arrays(ss, 0.0)
         v_top = self._junction_speed(road, lo, hi)
         approach = float(road.reference_pose(s0)[2])
+        rule = self.ctx.junction_rule(s0)
         green = self._green_at(entry, s0)
         wait, clear, cover = None, False, math.inf
+        if rule == "yield" and front < entry:
+            # The planner's speed follows its cruise about `YIELD_SIGN_LEAD_S` late: aim that much early.
+            d = max(entry - front - self.YIELD_SIGN_LEAD_S * speed, 0.0)
+            cover = math.sqrt(self.YIELD_SIGN_SPEED ** 2 + 2.0 * self.YIELD_SIGN_DECEL * d)
         for i, (o, (so, to, v_s, *_rest)) in enumerate(zip(tracked, objs)):
             if abs(to - t0) < 1.8 and (so > s0 or v_s > 0.0):
                 # Traffic ahead in the ego's lane (the planner follows it) or following it
@@ -399,8 +414,16 @@ class BevStack(S.BevStack):
             # antiparallel to the oncoming lane: the lateral gap closes slowly along the path).
             zone_front = float(zone_s[0]) + half_len
             wait_front = float(ss[near & (along + reach > 0.0)][0]) + half_len
-            if green and abs(math.sin(math.atan2(uy, ux) - approach)) > 0.7 and \
-                    v * v < 2.0 * self.YIELD_COMMIT_DECEL * max(d_in, 0.0):
+            crossing = abs(math.sin(math.atan2(uy, ux) - approach)) > 0.7
+            if rule == "priority" and crossing and \
+                    v * v < 2.0 * max(self.PRIORITY_DECEL, -(o.ax * ux + o.ay * uy)) * max(d_in, 0.0):
+                # Its own sign holds it: not waited for, nor taken by the planner's road-frame
+                # checks as crossing the ego's lane. Once it could stop short of the zone only
+                # braking harder than it does (and than `PRIORITY_DECEL`) it is the gap rule's
+                # and the planner's again: a driver who ignores the sign.
+                judged.add(i)
+                continue
+            if green and crossing and v * v < 2.0 * self.YIELD_COMMIT_DECEL * max(d_in, 0.0):
                 continue  # crossing traffic at its red: it stops
             t_e_in = time_to_cover(front, zone_front, speed, v_top, self.YIELD_ACCEL)
             t_e_out = time_to_cover(s0, float(zone_s[-1]), speed, v_top, self.YIELD_ACCEL)

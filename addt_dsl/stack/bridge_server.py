@@ -171,6 +171,9 @@ class RemoteContext:
         """As the simulator's context: the next stop sign's line ahead but those in `stopped`."""
         return next_sign(self.sign_lines, s + 0.5 * self.ego_length_m, stopped)
 
+    def junction_rule(self, s: float) -> str | None:
+        return None  # nor yield or priority signs: every approach is given way to
+
     def junction_ahead(self, s: float):
         """As the simulator's context: the next junction on the route the ego's front has not left."""
         front = s + 0.5 * self.ego_length_m

@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass, field
 
 from addt_dsl.plan import LIGHT_STATES
+from addt_dsl.runtime.signs import SIGN_KINDS
 
 from osi3.osi_groundtruth_pb2 import GroundTruth
 from osi3.osi_lane_pb2 import Lane, LaneBoundary
@@ -182,25 +183,33 @@ def fill_light(gt: GroundTruth, light: LightState) -> None:
             else TrafficLight.Classification.MODE_OFF
 
 
-def stop_signs_ground_truth(signs: list[tuple[float, float, float, float]]) -> GroundTruth:
-    """Stop signs as TrafficSigns (`TYPE_STOP`), each where its line meets the ego's lane,
-    facing the traffic it holds: (x, y, z, yaw of the ego's lane there) each."""
+def signs_ground_truth(signs: list[tuple[str, float, float, float, float]]) -> GroundTruth:
+    """Signs as TrafficSigns (their kind's first OSI type, `signs.SIGN_KINDS`), each where its
+    line meets the ego's lane, facing the traffic it holds: (kind, x, y, z, yaw of the ego's
+    lane there) each."""
     gt = GroundTruth()
-    for k, (x, y, z, yaw) in enumerate(signs):
+    for k, (kind, x, y, z, yaw) in enumerate(signs):
         ts = gt.traffic_sign.add()
         ts.id.value = SIGN_ID_BASE + k
         b = ts.main_sign.base
         b.dimension.length, b.dimension.width, b.dimension.height = 0.05, 0.9, 0.9
         b.position.x, b.position.y, b.position.z = x, y, z
         b.orientation.yaw = math.remainder(yaw + math.pi, 2.0 * math.pi)  # its face towards the traffic
-        ts.main_sign.classification.type = TrafficSign.MainSign.Classification.TYPE_STOP
+        ts.main_sign.classification.type = TrafficSign.MainSign.Classification.Type.Value(
+            SIGN_KINDS[kind].osi_types[0])
     return gt
 
 
-def stop_sign_positions(gt: GroundTruth) -> list[tuple[float, float]]:
-    """(x, y) of each stop sign (`TYPE_STOP` main sign) in a GroundTruth, in message order."""
-    return [(ts.main_sign.base.position.x, ts.main_sign.base.position.y) for ts in gt.traffic_sign
-            if ts.main_sign.classification.type == TrafficSign.MainSign.Classification.TYPE_STOP]
+_KIND_OF_OSI = {TrafficSign.MainSign.Classification.Type.Value(t): k.name
+                for k in SIGN_KINDS.values() for t in k.osi_types}
+
+
+def sign_positions(gt: GroundTruth) -> list[tuple[str, float, float]]:
+    """(kind, x, y) of each sign of a `SIGN_KINDS` kind (by its main sign's type) in a
+    GroundTruth, in message order."""
+    return [(_KIND_OF_OSI[ts.main_sign.classification.type], ts.main_sign.base.position.x,
+             ts.main_sign.base.position.y) for ts in gt.traffic_sign
+            if ts.main_sign.classification.type in _KIND_OF_OSI]
 
 
 def lanes_ground_truth(lanes: list[LaneGeometry], boundaries: list[BoundaryGeometry]) -> GroundTruth:

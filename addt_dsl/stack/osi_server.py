@@ -35,7 +35,8 @@ import numpy as np
 from addt_dsl.stack import osi_mapping as M
 from addt_dsl.stack import osi_transport as T
 from addt_dsl.stack.bridge import ProtocolError, escape
-from addt_dsl.runtime.signs import next_sign
+from addt_dsl.runtime.lights import StopStation
+from addt_dsl.runtime.signs import junction_rule, next_sign
 from addt_dsl.stack.bridge_server import (MAX_CONNECTIONS, BridgeServer, Limits, check_settings, RemoteFrame,
                                           RemoteActor, RemoteContext, run_server_cli)
 
@@ -59,6 +60,7 @@ class _OsiContext(RemoteContext):
         super().__init__(hello)
         self.lights: list[tuple[float, float]] = []  # (station on the road [m], state code), by station
         self.signs: list[float] = []  # stations of the stop signs' lines [m], by station
+        self.rules: list[StopStation] = []  # every sign's line: station [m], `controller` its kind
 
     def stop_line_ahead(self, s: float):
         front = s + 0.5 * self.ego_length_m
@@ -69,6 +71,9 @@ class _OsiContext(RemoteContext):
 
     def stop_sign_ahead(self, s: float, stopped: tuple[float, ...] = ()) -> float | None:
         return next_sign(self.signs, s + 0.5 * self.ego_length_m, stopped)
+
+    def junction_rule(self, s: float) -> str | None:
+        return junction_rule(self.rules, self.junctions, s + 0.5 * self.ego_length_m)
 
 
 def rollout(pose: tuple[float, float, float, float], steer: float, accel: float, wheelbase_m: float,
@@ -229,7 +234,9 @@ class _Session:
             u = float(ctx.road.project(p.x, p.y, ctx.ego_s)[0])
             lights[tl.id.value // 10] = (u, _STATE_OF_COLOUR.get(tl.classification.color, 2.0))
         ctx.lights = sorted(lights.values())
-        ctx.signs = sorted(float(ctx.road.project(x, y, ctx.ego_s)[0]) for x, y in M.stop_sign_positions(gt))
+        ctx.rules = sorted((StopStation(float(ctx.road.project(x, y, ctx.ego_s)[0]), kind)
+                            for kind, x, y in M.sign_positions(gt)), key=lambda st: (st.u, st.controller))
+        ctx.signs = [st.u for st in ctx.rules if st.controller == "stop"]
         hits = np.repeat(np.array(sorted(actors), dtype=np.int64), 2)  # two returns each: seen
         self.stack.on_frame(RemoteFrame(self.lidar, stamp, {"hit_body": hits}, host, actors), now)
 

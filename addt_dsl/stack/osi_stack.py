@@ -66,10 +66,10 @@ class OsiStack(ExternalStack):
         host, port = parse_address(str(self.settings["address"]))
         check_address(host)
         self._static = _lanes_bytes(self.ctx.ego_route_roads())
-        signs = self.ctx.ego_stop_signs()
+        signs = self.ctx.ego_signs()
         if signs:  # static too: sent with every view, as the lanes
             sv = SensorView()
-            sv.global_ground_truth.CopyFrom(M.stop_signs_ground_truth(signs))
+            sv.global_ground_truth.CopyFrom(M.signs_ground_truth(signs))
             self._static += sv.SerializeToString()
         try:
             self.sock = socket.create_connection((host, port), timeout=float(self.settings["timeout"]))

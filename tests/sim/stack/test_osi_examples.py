@@ -177,6 +177,19 @@ def test_the_bridge_server_plans_along_the_route_too():
         server.server_close()
 
 
+def test_a_priority_sign_reaches_the_osi_stack(server_address, tmp_path):
+    # The priority sign on the ego's approach crosses OSI as a TrafficSign
+    # (TYPE_RIGHT_OF_WAY_BEGIN): the OSI stack goes through as the in-process one does.
+    from tests.sim.runtime.test_priority_signs import spec
+
+    run = spec(tmp_path, "306", 52.0, True)
+    local, remote = execute(run), execute(_through_osi(run, server_address, "motion_request"))
+    assert remote.status == local.status == "ok", remote.error
+    a, b = local.trace.actors["ego"], remote.trace.actors["ego"]
+    assert b.speed.min() > 7.9  # not slowed for the side car (to 3.2 m/s without reading the sign)
+    assert np.hypot(a.x - b.x, a.y - b.y).max() < 1e-4  # [m]
+
+
 def test_stop_signs_reach_the_osi_stack_as_traffic_signs(server_address, tmp_path):
     # The map's stop sign crosses OSI as a TrafficSign (TYPE_STOP): the OSI stack stops the ego
     # at its line as the in-process one does, on the same path.

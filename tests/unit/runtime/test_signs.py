@@ -1,4 +1,10 @@
-"""Stop signs (runtime/signs.py): which signals are stop signs, their lines, the margin."""
+"""Signs (runtime/signs.py): which signals are stop, yield and priority signs, their lines
+(signal references included), the stop-sign margin, the junction rule."""
+
+import math
+from pathlib import Path
+
+import pytest
 
 from addt_dsl.road.road import Signal
 from addt_dsl.runtime.lights import PAST_M, REACH_M, StopStation
@@ -66,3 +72,71 @@ def test_lines_of_a_maps_stop_signs_by_the_way_they_face():
     got = [(ln.signal, ln.s, ln.direction, ln.lanes) for ln in stop_sign_lines(network)]
     # Lane -1 drives along +s, lane 1 against (right-hand traffic); the yield sign is none.
     assert got == [("900", 150.0, 1, (-1,)), ("901", 300.0, -1, (1,)), ("903", 250.0, 1, (-1,))]
+
+
+TOWN07 = Path(__file__).resolve().parents[2] / "data" / "carla" / "town07_signal_refs.xodr"
+
+
+def test_signal_references_place_town07s_signs_on_the_connecting_roads():
+    """Town07's stop sign 983 stands on road 1 with validity 0..0 (no lane: it held no one);
+    its `<signalReference>`s on connecting roads 151 (s 0.4857) and 153 (s 3.0462) name lane
+    -1 (along +s): a line on each. The yield sign 995 (road 3) is referenced by road 295 at
+    s 14.3507 for lane 1 (against s). The references' orientation ("-" for lane -1, "+" for
+    lane 1) is the way the sign's face points, opposite to the standard's: the validity decides."""
+    from addt_dsl.road.xodr import load_xodr
+    from addt_dsl.runtime.signs import sign_lines, stop_sign_lines
+
+    network = load_xodr(TOWN07)
+    got = [(ln.controller, ln.signal, ln.road_id, round(ln.s, 4), ln.direction, ln.lanes)
+           for ln in sign_lines(network)]
+    assert got == [("stop", "983", "151", 0.4857, 1, (-1,)), ("stop", "983", "153", 3.0462, 1, (-1,)),
+                   ("yield", "995", "295", 14.3507, -1, (1,))]
+    assert [ln.road_id for ln in stop_sign_lines(network)] == ["151", "153"]
+    # Where the line on road 151 meets its lane, by hand from the file: its first geometry
+    # is a line from (-192.20995, -50.01225) at hdg 3.1329194 rad; at s = 0.4856626:
+    # x = -192.20995 + 0.4856626 cos(hdg) = -192.69560, y = -50.01225 + 0.4856626 sin(hdg)
+    # = -50.00804; lane -1 (3.1 m wide) is centred at t = -1.55: (x + 1.55 sin hdg,
+    # y - 1.55 cos hdg) = (-192.68216, -48.45809).
+    road = network.road("151")
+    x, y, hdg = road.reference_pose(0.4856626104422759)
+    t = road.lane_center_t(-1, 0.4856626104422759)
+    assert t == pytest.approx(-1.55)
+    assert (x - t * math.sin(hdg), y + t * math.cos(hdg)) == pytest.approx((-192.68216, -48.45809), abs=1e-5)
+
+
+def test_a_reference_places_a_traffic_light_too():
+    """Light 980 (road 115, validity 0..0) holds lane 1 of connecting road 71 at s 11.4324."""
+    from addt_dsl.road.xodr import load_xodr
+    from addt_dsl.runtime.lights import StopLine, stop_lines
+
+    network = load_xodr(TOWN07)
+    assert stop_lines(network, "c", ["980"]) == [StopLine("c", "980", "71", 11.43236314212659, -1, (1,))]
+    # Without the references, as before: no line (the signal's own validity is lane 0).
+    bare = TOWN07.read_text().replace("<signalReference ", "<ignoredReference ").replace(
+        "</signalReference>", "</ignoredReference>")
+    from addt_dsl.road.xodr import parse_xodr
+    assert stop_lines(parse_xodr(bare), "c", ["980"]) == []
+
+
+def test_sign_kinds_by_type_from_the_registry():
+    from addt_dsl.runtime.signs import SIGN_KINDS, sign_kind
+
+    assert [sign_kind(Signal("1", 1.0, 0.0, type=t)) for t in ("206", "R1-1", "205", " R1-2", "306", "301")] == \
+        ["stop", "stop", "yield", "yield", "priority", "priority"]
+    assert sign_kind(Signal("1", 1.0, 0.0, type="274")) is None  # a speed limit
+    assert sign_kind(Signal("1", 1.0, 0.0, type="205", dynamic=True)) is None
+    assert list(SIGN_KINDS) == ["stop", "yield", "priority"]  # precedence on one approach
+
+
+def test_the_junction_rule_is_the_signs_between_the_previous_junction_and_this_ones_exit():
+    from addt_dsl.runtime.signs import junction_rule
+
+    junctions = [(100.0, 120.0, 0.0, 0.0), (300.0, 320.0, 0.0, 0.0)]
+    st = [StopStation(95.0, "priority"), StopStation(101.0, "yield"), StopStation(250.0, "priority")]
+    # Before and in the first junction: the yield (inside it, as a reference places it) wins.
+    assert junction_rule(st, junctions, 50.0) == "yield"
+    assert junction_rule(st, junctions, 119.0) == "yield"
+    assert junction_rule(st, junctions, 121.0) == "priority"  # the second's: its sign at 250 m
+    assert junction_rule(st, junctions, 321.0) is None  # past the last junction
+    assert junction_rule(st[2:], [(400.0, 420.0)], 0.0) is None  # 150 m before the entry: beyond REACH_M
+    assert junction_rule([], junctions, 50.0) is None

@@ -236,15 +236,20 @@ def test_timestamps_round_trip_to_the_nanosecond(t):
     assert abs(M.seconds(sv.timestamp) - t) <= 1e-9 + 1e-15 * t
 
 
-def test_stop_signs_are_traffic_signs_facing_the_traffic():
+def test_signs_are_traffic_signs_facing_the_traffic():
     from osi3.osi_trafficsign_pb2 import TrafficSign
 
-    gt = M.stop_signs_ground_truth([(150.0, -1.75, 0.0, 0.0), (20.0, 5.0, 1.0, math.pi / 2)])
+    gt = M.signs_ground_truth([("stop", 150.0, -1.75, 0.0, 0.0), ("yield", 20.0, 5.0, 1.0, math.pi / 2),
+                               ("priority", 40.0, 5.0, 1.0, 0.0)])
     gt = type(gt).FromString(gt.SerializeToString())
-    assert [ts.id.value for ts in gt.traffic_sign] == [M.SIGN_ID_BASE, M.SIGN_ID_BASE + 1]
-    stop = TrafficSign.MainSign.Classification.TYPE_STOP
-    assert all(ts.main_sign.classification.type == stop for ts in gt.traffic_sign)
+    assert [ts.id.value for ts in gt.traffic_sign] == [M.SIGN_ID_BASE + k for k in range(3)]
+    types = TrafficSign.MainSign.Classification
+    assert [ts.main_sign.classification.type for ts in gt.traffic_sign] == \
+        [types.TYPE_STOP, types.TYPE_GIVE_WAY, types.TYPE_RIGHT_OF_WAY_BEGIN]
     # Facing the traffic that drives towards it: turned half round from the lane's heading.
     assert gt.traffic_sign[0].main_sign.base.orientation.yaw == pytest.approx(math.pi)
     assert gt.traffic_sign[1].main_sign.base.orientation.yaw == pytest.approx(-math.pi / 2)
-    assert M.stop_sign_positions(gt) == [(150.0, -1.75), (20.0, 5.0)]
+    assert M.sign_positions(gt) == [("stop", 150.0, -1.75), ("yield", 20.0, 5.0), ("priority", 40.0, 5.0)]
+    # 301 (priority at the next junction) as OSI writes it reads back as a priority sign.
+    gt.traffic_sign[2].main_sign.classification.type = types.TYPE_RIGHT_OF_WAY_NEXT_INTERSECTION
+    assert M.sign_positions(gt)[2] == ("priority", 40.0, 5.0)
