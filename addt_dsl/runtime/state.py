@@ -171,10 +171,11 @@ class Context:
         line, in path order: what `stop_line_ahead` reads (the bridge sends them)."""
         return [(st.u, st.controller) for st in self._run.stop_stations.get("ego", ())]
 
-    def ego_sign_stations(self) -> list[float]:
-        """Station [m] on the ego's road or route of each stop sign's line, in path order:
-        what `stop_sign_ahead` reads (the bridge sends them)."""
-        return [st.u for st in self._run.sign_stations.get("ego", ())]
+    def ego_sign_stations(self) -> list[tuple[float, str]]:
+        """(station [m] on the ego's road or route, kind) of each sign's line (`signs.SIGN_KINDS`:
+        stop, yield, priority), in path order: what `stop_sign_ahead` (the stop signs) and
+        `junction_rule` read (the bridge sends them)."""
+        return [(st.u, st.controller) for st in self._run.rule_stations]
 
     def ego_route_roads(self) -> list:
         ego_road = self._run.ego_road

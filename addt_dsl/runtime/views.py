@@ -191,8 +191,8 @@ class HostContext(StackContext, Protocol):
     def ego_light_stations(self) -> list[tuple[float, str]]:
         """(station [m], controller) of each stop line on the ego's road or route, in path order."""
 
-    def ego_sign_stations(self) -> list[float]:
-        """Station [m] of each stop sign's line on the ego's road or route, in path order."""
+    def ego_sign_stations(self) -> list[tuple[float, str]]:
+        """(station [m], kind) of each sign's line on the ego's road or route, in path order."""
 
     def ego_route_roads(self) -> list:
         """The map roads of the ego's road or route, in driving order."""

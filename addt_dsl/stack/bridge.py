@@ -44,6 +44,7 @@ import numpy as np
 from addt_dsl.registry import STACKS
 from addt_dsl.specs import stacks as S
 from addt_dsl.specs.stacks import CLIENT_SETTINGS, escape, parse_address
+from addt_dsl.runtime.signs import SIGN_KINDS
 from addt_dsl.runtime.trace import SERIES_COLUMNS, Event
 from addt_dsl.stack.bev import NODE_NAMES, StackError
 
@@ -310,8 +311,10 @@ class ExternalStack(S.ExternalStack):
         if lines:
             names = ", ".join(dict.fromkeys(c for _, c in lines))
             parts.append(f"traffic lights ({escape(names, 200)})")
-        if signs:
-            parts.append(f"{len(signs)} stop sign{'s' if len(signs) > 1 else ''}")
+        for kind in SIGN_KINDS:
+            n = sum(k == kind for _, k in signs)
+            if n:
+                parts.append(f"{n} {kind} sign{'s' if n > 1 else ''}")
         return " and ".join(parts) + " on the ego's route"
 
     def _check_ready(self, ready: dict, protocol: int) -> None:
@@ -370,7 +373,7 @@ class ExternalStack(S.ExternalStack):
                          faults=[f.model_dump(mode="json") for f in self.internal_faults])
         if lines or signs:
             hello.update(stop_lines=[{"station_m": float(u), "controller": c} for u, c in lines],
-                         stop_signs=[{"station_m": float(u)} for u in signs])
+                         signs=[{"station_m": float(u), "kind": k} for u, k in signs])
         # The controllers whose states each step carries (in their first line's order).
         self._controllers = list(dict.fromkeys(c for _, c in lines))
         return hello

@@ -40,7 +40,7 @@ from addt_dsl.plan import LIGHT_STATES, ConcreteFault
 from addt_dsl.registry import FAULTS
 from addt_dsl.runtime.faults import FaultSchedule
 from addt_dsl.runtime.lights import StopStation, next_stop
-from addt_dsl.runtime.signs import next_sign
+from addt_dsl.runtime.signs import SIGN_KINDS, junction_rule, next_sign
 from addt_dsl.runtime.trace import SERIES_COLUMNS, Event
 from addt_dsl.stack.bridge import (
     MAX_FAULTS,
@@ -146,7 +146,9 @@ class RemoteContext:
         # An older client sends none: the stack then knows of no light and no sign.
         self.stop_lines = sorted((StopStation(float(d["station_m"]), str(d["controller"]))
                                   for d in hello.get("stop_lines", ())), key=lambda st: (st.u, st.controller))
-        self.sign_lines = sorted(float(d["station_m"]) for d in hello.get("stop_signs", ()))
+        self.rules = sorted((StopStation(float(d["station_m"]), str(d["kind"])) for d in hello.get("signs", ())),
+                            key=lambda st: (st.u, st.controller))
+        self.sign_lines = [st.u for st in self.rules if st.controller == "stop"]
         self.light_states: dict[str, float] = {}
 
     # The same derivation as the in-process context, so a remote run matches a local one.
@@ -172,7 +174,8 @@ class RemoteContext:
         return next_sign(self.sign_lines, s + 0.5 * self.ego_length_m, stopped)
 
     def junction_rule(self, s: float) -> str | None:
-        return None  # nor yield or priority signs: every approach is given way to
+        """As the simulator's context: the rule of the ego's approach to the next junction."""
+        return junction_rule(self.rules, self.junctions, s + 0.5 * self.ego_length_m)
 
     def junction_ahead(self, s: float):
         """As the simulator's context: the next junction on the route the ego's front has not left."""
@@ -308,8 +311,8 @@ def _check_hello(header: dict, limits: Limits) -> None:
         raise ValueError("'faults' needs protocol 2")
     if protocol >= SIGNALS_PROTOCOL:
         _check_signals(header)
-    elif "stop_lines" in header or "stop_signs" in header:
-        raise ValueError("'stop_lines' and 'stop_signs' need protocol 3")
+    elif "stop_lines" in header or "signs" in header:
+        raise ValueError("'stop_lines' and 'signs' need protocol 3")
 
 
 def _station(d, what: str) -> float:
@@ -322,9 +325,9 @@ def _station(d, what: str) -> float:
 
 
 def _check_signals(header: dict) -> None:
-    """Protocol 3: the stop lines (station and the light's controller) and the stop signs'
-    lines (station) on the ego's road or route."""
-    for key in ("stop_lines", "stop_signs"):
+    """Protocol 3: the stop lines (station and the light's controller) and the signs' lines
+    (station and kind) on the ego's road or route."""
+    for key in ("stop_lines", "signs"):
         items = header.get(key)
         if not isinstance(items, list) or len(items) > MAX_SIGNALS:
             raise ValueError(f"'{key}' must be a list of at most {MAX_SIGNALS} entries")
@@ -334,6 +337,8 @@ def _check_signals(header: dict) -> None:
                 c = d.get("controller")
                 if not isinstance(c, str) or not 0 < len(c) <= 200:
                     raise ValueError(f"stop_lines[{k}]: 'controller' must be a name of 1 to 200 characters")
+            elif not isinstance(d.get("kind"), str) or d["kind"] not in SIGN_KINDS:
+                raise ValueError(f"signs[{k}]: 'kind' must be one of {', '.join(SIGN_KINDS)}")
 
 
 _STATE_CODES = tuple(LIGHT_STATES.values())  # (a tuple: a peer's list or object is compared, not hashed)

@@ -93,3 +93,16 @@ def test_a_stop_sign_stops_the_bridged_stack_as_in_process(server, tmp_path):
     stops = [e for e in remote.trace.events if e.kind == "stop_sign"]
     assert len(stops) == 1 and stops[0].detail["station_m"] == pytest.approx(150.0, abs=1e-6)
     assert {v.name: v.passed for v in remote.verdicts}["no_stop_sign"]
+
+
+def test_a_priority_sign_gives_the_bridged_stack_the_right_of_way_as_in_process(server, tmp_path):
+    # test_priority_signs' scene: a priority sign on the ego's approach, the side car braking
+    # to a stop at its yield sign; behind the bridge without the sign's kind the ego slowed
+    # for the side car (every approach gives way).
+    from tests.sim.runtime.test_priority_signs import spec
+
+    local_spec = spec(tmp_path, "306", 52.0, True)
+    local, remote = execute(local_spec), execute(_bridged(local_spec, server.address))
+    assert local.status == remote.status == "ok", remote.error
+    _same_run(local, remote)
+    assert remote.trace.actors["ego"].speed.min() > 7.9

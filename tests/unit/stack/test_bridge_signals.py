@@ -66,7 +66,7 @@ def test_the_hello_carries_the_stop_lines_and_each_step_the_lights_states(sent):
     assert hello["protocol"] == 3 and hello["faults"] == [] and hello["duration_s"] == 2.5
     # The line at 40 m of the road, the ego's lane driving along +s: station 40 m.
     assert hello["stop_lines"] == [{"station_m": 40.0, "controller": "main"}]
-    assert hello["stop_signs"] == []
+    assert hello["signs"] == []
     # Green until 0.5 s, yellow until 1 s, then red (state codes 0, 1, 2), at each step's time.
     for step in steps:
         t = step["time_s"]
@@ -85,7 +85,7 @@ def test_a_run_without_lights_or_signs_says_hello_in_protocol_1_or_2():
         result = compile_source(source.replace("ADDR", address).replace("FAULTS", faults))
         assert result.ok, result.diagnostics
         execute(expand(result.plan).specs[0])
-        assert got[0]["protocol"] == protocol and "stop_lines" not in got[0] and "stop_signs" not in got[0]
+        assert got[0]["protocol"] == protocol and "stop_lines" not in got[0] and "signs" not in got[0]
 
 
 def test_a_faulted_run_with_a_light_through_the_server_equals_the_in_process_run(server):
@@ -124,7 +124,7 @@ def _exchange(server, *messages):
 
 def test_older_clients_are_served_and_their_stack_knows_of_no_light(server, sent):
     hello, steps = sent
-    old = {k: v for k, v in hello.items() if k not in ("stop_lines", "stop_signs", "faults", "duration_s")}
+    old = {k: v for k, v in hello.items() if k not in ("stop_lines", "signs", "faults", "duration_s")}
     step = {**{k: v for k, v in steps[0].items() if k != "lights"}, "frames": []}  # (the recorder keeps no blobs)
     for protocol, extra in ((1, {}), (2, {"faults": [], "duration_s": 2.5})):
         ready, control = _exchange(server, {**old, **extra, "protocol": protocol}, step)
@@ -159,9 +159,28 @@ def test_the_server_answers_stop_lines_and_signs_as_the_in_process_context():
     assert ctx.stop_sign_ahead(0.0) == 30.0 and ctx.stop_sign_ahead(0.0, (30.0,)) == 90.0
 
 
+def test_the_server_reads_each_junctions_rule_from_the_signs_kinds(server, sent):
+    from addt_dsl.runtime.lights import StopStation
+    from addt_dsl.runtime.signs import junction_rule
+
+    hello = {**sent[0], "signs": [{"station_m": 150.0, "kind": "yield"}, {"station_m": 20.0, "kind": "priority"},
+                                  {"station_m": 20.0, "kind": "stop"}]}
+    ctx = bridge_server.RemoteContext(hello)
+    assert ctx.sign_lines == [20.0]  # the stop signs' lines: what `stop_sign_ahead` reads
+    ctx.junctions = [(30.0, 45.0, 0.0, 0.0), (160.0, 175.0, 0.0, 0.0)]  # (entry, exit, centre x, y)
+    rules = [StopStation(20.0, "priority"), StopStation(20.0, "stop"), StopStation(150.0, "yield")]
+    for s in (0.0, 25.0, 44.0, 50.0, 150.0, 172.0, 200.0):
+        assert ctx.junction_rule(s) == junction_rule(rules, ctx.junctions, s + 0.5 * ctx.ego_length_m)
+    # A stop sign outranks a priority sign on one approach (`SIGN_KINDS`' order); the next
+    # junction's approach has a yield sign; past the last junction no rule.
+    assert [ctx.junction_rule(s) for s in (0.0, 50.0, 200.0)] == ["stop", "yield", None]
+    (reply,) = _exchange(server, hello)
+    assert reply["type"] == "ready", reply
+
+
 @pytest.mark.parametrize("over, words", [
     ({"stop_lines": "main"}, "'stop_lines' must be a list"),
-    ({"stop_signs": None}, "'stop_signs' must be a list"),
+    ({"signs": None}, "'signs' must be a list"),
     ({"stop_lines": [{"station_m": 40.0, "controller": "x"}] * 10_001}, "at most 10000"),
     ({"stop_lines": [{"station_m": float("nan"), "controller": "main"}]}, "finite number"),
     ({"stop_lines": [{"station_m": True, "controller": "main"}]}, "finite number"),
@@ -169,7 +188,10 @@ def test_the_server_answers_stop_lines_and_signs_as_the_in_process_context():
     ({"stop_lines": [{"station_m": 40.0}]}, "'controller'"),
     ({"stop_lines": [{"station_m": 40.0, "controller": ""}]}, "'controller'"),
     ({"stop_lines": [[40.0, "main"]]}, "must be an object"),
-    ({"stop_signs": [{"station_m": float("inf")}]}, "finite number"),
+    ({"signs": [{"station_m": float("inf"), "kind": "stop"}]}, "finite number"),
+    ({"signs": [{"station_m": 80.0}]}, "'kind' must be one of stop, yield, priority"),
+    ({"signs": [{"station_m": 80.0, "kind": "give_way"}]}, "'kind' must be one of"),
+    ({"signs": [{"station_m": 80.0, "kind": ["stop"]}]}, "'kind' must be one of"),
 ])
 def test_bad_signals_in_a_hello_are_refused(server, sent, over, words):
     (reply,) = _exchange(server, {**sent[0], **over})
