@@ -28,6 +28,10 @@ class ActorRoad:
     def station(self, road_id: str, s: float) -> float:
         return s
 
+    def placement(self, road_id: str, s: float) -> tuple[float, int]:
+        """(station [m], direction) of a place declared on `road_id` at its station `s`."""
+        return s, 1
+
     def direction(self, u: float) -> int:
         return 1
 
@@ -50,6 +54,9 @@ class ActorPath(ActorRoad):
 
     def station(self, road_id: str, s: float) -> float:
         return self.road.station(road_id, s)
+
+    def placement(self, road_id: str, s: float) -> tuple[float, int]:
+        return self.road.placement(road_id, s)
 
     def direction(self, u: float) -> int:
         return self.road.direction(u)

@@ -139,17 +139,23 @@ class RoutePath(FastRoad):
     def station(self, road_id: str, s: float) -> float:
         """Path station [m] of road station `s` on the first leg on `road_id` that holds it
         (else continued from the first leg on that road)."""
+        return self.placement(road_id, s)[0]
+
+    def placement(self, road_id: str, s: float) -> tuple[float, int]:
+        """(`station`, the direction of the leg that holds it): at a leg's end the path's
+        station is the next leg's start, whose direction may differ (a lane driven against
+        its road's s, then a connecting road along its own)."""
         first = None
         for sg in self._segs:
             if sg.road_id != road_id:
                 continue
             lo, hi = (sg.s_from, sg.s_to) if sg.dir > 0 else (sg.s_to, sg.s_from)
             if lo - 1e-9 <= s <= hi + 1e-9:
-                return sg.u0 + sg.dir * (s - sg.s_from)
+                return sg.u0 + sg.dir * (s - sg.s_from), sg.dir
             first = first or sg
         if first is None:
             raise ValueError(f"road {road_id} is not on route {self.key}")
-        return first.u0 + first.dir * (s - first.s_from)
+        return first.u0 + first.dir * (s - first.s_from), first.dir
 
     def speed_limit(self, u: float) -> float | None:
         """The map's speed limit [m/s] of the leg at path station `u` [m] (None where it gives none)."""

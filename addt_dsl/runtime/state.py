@@ -258,9 +258,10 @@ class RunState:
         ego = plan.ego
         self.ego_plan = ego
         self.ego_road = self._road_of(ego)
-        s0 = self.ego_road.station(self._first_road(ego), ego.s)
-        # On a path lane ids are in driving convention (road id x direction).
-        self.ego_lane = ego.lane * self.ego_road.direction(s0)
+        s0, direction = self.ego_road.placement(self._first_road(ego), ego.s)
+        # On a path lane ids are in driving convention (road id x direction), the direction
+        # the declared road's leg's (at its end the path's station is the next leg's start).
+        self.ego_lane = ego.lane * direction
         t0 = float(self.ego_road.road.lane_center_t(self.ego_lane, s0)) + ego.offset
         x, y, h = self.ego_road.pose(s0, t0)
         if ego.yaw:
@@ -291,8 +292,8 @@ class RunState:
             self._script(self.ego_agent, ego, self.ego_road)
         for a in plan.agents:
             road = self._road_of(a)
-            u = road.station(self._first_road(a), a.s)
-            lane = a.lane * road.direction(u)
+            u, direction = road.placement(self._first_road(a), a.s)
+            lane = a.lane * direction
             t = float(road.road.lane_center_t(lane, u)) + a.offset
             st = AgentState(a.name, road.road_id, u, t, a.speed, 0.0, a.length_m, a.width_m, lane, t)
             self.agents.append(st)

@@ -118,3 +118,30 @@ scenario merge {
     assert a.s[-1] > 166.6 + 121.0 + 10.0  # past road 1, road 5 and the crossing on road 0
     assert a.t[-1] == pytest.approx(0.0, abs=0.02)
     assert a.lane_offset[-1] == pytest.approx(0.0, abs=0.02)
+
+
+@pytest.mark.parametrize("who", ["ego", "other"])
+def test_actors_placed_at_the_end_of_their_first_road_start_in_its_lane(who):
+    # Lane 1 of fabriksgatan's road 0 is driven against s: `at 0 m` is the end of the route's
+    # first leg, where the path's station is the junction leg's start. The lane's direction
+    # was read from that leg (driven along its s): lane 1 there has no centre, the start was
+    # NaN and the run raised. The actor starts at road 0's lane 1 centre at s = 0 (the map's
+    # geometry, parsed apart from the twin); the other one 30 m behind it.
+    from addt_dsl.road.xodr import parse_xodr
+
+    at = {"ego": "0 m", "other": "30 m"} if who == "ego" else {"ego": "30 m", "other": "0 m"}
+    out = run_text(f"""
+scenario at_the_end {{
+  duration 1 s
+  road town import "maps/fabriksgatan.xodr" road 0
+  ego car on town route 0 -> straight lane 1 at {at["ego"]} speed 5 m/s
+  agent other car on town route 0 -> left lane 1 at {at["other"]} speed 5 m/s {{
+    behavior cruise speed 5 m/s
+  }}
+}}
+""")
+    x, y, _ = parse_xodr((MAPS / "fabriksgatan.xodr").read_text()).road("0").lane_center(1, 0.0)
+    actor = out.trace.actors[who]
+    # (the twin's roads are sampled: 0.14 mm from the exact geometry here)
+    assert math.hypot(actor.x[0] - float(x), actor.y[0] - float(y)) < 1e-3
+    assert np.isfinite(actor.x).all() and actor.s[-1] > actor.s[0] + 4.0
