@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 import importlib.util
+import os
 import re
 from pathlib import Path
 
 import pytest
+
+# The report tables take their width from COLUMNS where it is set (else a wide one off a
+# terminal); pytest-xdist's workers set COLUMNS=80, cutting the columns tests read. A test
+# of the width sets COLUMNS itself.
+os.environ.pop("COLUMNS", None)
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
