@@ -6,8 +6,10 @@ lookup call recorded, then replayed alone and timed (best of several repeats).
 Run: PYTHONPATH=. python benchmarks/bench_views.py [--agents 5,20,50,100] [--batches 1,16,64]
      [--repeat 5]
 Prints, per configuration, us per run-step of the lookup (views + leaders, the Jacobi
-and the sequential checks of the fixed point together) and a digest of every answer
-(two checkouts' digests must be equal), with the load average beside.
+and the sequential checks of the fixed point together; CPU time of the process and wall
+time, each the least of the repeats: on a shared machine the CPU time is the steadier)
+and a digest of every answer (two checkouts' digests must be equal), with the load
+average beside.
 """
 
 from __future__ import annotations
@@ -64,24 +66,24 @@ def record(agents: int, batch: int) -> tuple[list, list, int]:
     return layouts, calls, steps
 
 
-def replay(layouts, calls, lengths) -> tuple[float, str]:
-    """Seconds to answer every recorded call once; a digest of the answers."""
+def replay(layouts, calls, lengths) -> tuple[float, float, str]:
+    """CPU and wall seconds to answer every recorded call once; a digest of the answers."""
     from addt_dsl.runtime import fleet
 
     views = {k: fleet.Views(runs) for k, runs in layouts.items()}
     h = hashlib.sha256()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     out = []
     for key, kind, (s, t, v), *rest in calls:
         w = views[key]
         view = w.jacobi(s, t, v, *rest) if kind == "jacobi" else w.sequential(s, t, v, *rest)
         out.append(w.leaders(view, s, t, lengths[key]))
-    elapsed = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     for found, gap, speed in out:
         h.update(found.tobytes())
         h.update(gap.tobytes())
         h.update(speed[found].tobytes())
-    return elapsed, h.hexdigest()[:16]
+    return cpu, wall, h.hexdigest()[:16]
 
 
 def main() -> None:
@@ -89,15 +91,17 @@ def main() -> None:
 
     repeat = arg("--repeat", "5")[0]
     print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs")
-    print(f"{'agents':>6s} {'batch':>5s} {'calls':>6s} {'run-steps':>9s} {'us/run-step':>11s}  digest")
+    print(f"{'agents':>6s} {'batch':>5s} {'calls':>6s} {'run-steps':>9s} {'cpu us/run-step':>15s} "
+          f"{'wall':>7s}  digest")
     for agents in arg("--agents", "5,20,50,100"):
         for batch in arg("--batches", "1,16,64"):
             layouts, calls, steps = record(agents, batch)
             lengths = {k: np.concatenate([r[0] for r in runs]) for k, runs in layouts.items()}
-            best, digest = min(replay(layouts, calls, lengths) for _ in range(repeat))
+            times = [replay(layouts, calls, lengths) for _ in range(repeat)]
+            cpu, wall = min(c for c, _, _ in times), min(w for _, w, _ in times)
             load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-            print(f"{agents:6d} {batch:5d} {len(calls):6d} {steps:9d} {1e6 * best / steps:11.2f}  {digest}"
-                  f"  load {load}", flush=True)
+            print(f"{agents:6d} {batch:5d} {len(calls):6d} {steps:9d} {1e6 * cpu / steps:15.2f} "
+                  f"{1e6 * wall / steps:7.2f}  {times[0][2]}  load {load}", flush=True)
 
 
 if __name__ == "__main__":

@@ -90,7 +90,6 @@ class Views:
         self._jacobi = _View(jacobi, np.concatenate([self.run_of, runs_]), self.run_of, 1, self.PAD)
         self._seq = _View(seq, np.concatenate([self.run_of, self.run_of, runs_]), self.run_of, 2, self.PAD)
         self._pad = (np.full(self.PAD, np.inf), np.zeros(self.PAD))
-        self._key_col = self.key[:, None]
 
     def jacobi(self, s, t, v, ego):
         """Everyone where they were (`ego`: station, offset, speed arrays, one per run)."""
@@ -107,15 +106,15 @@ class Views:
     def leaders(self, view, s, t, length, window_m: float = LANE_WINDOW_M):
         """(found, gap [m], leader speed [m/s]; 0 where none) per agent from a view (`jacobi`,
         `sequential`); `s`: the agents' stations where they were (their own entries' in the view)."""
-        first, end = view[0], view[-1]
+        first, end, copies = view[0], view[-2], view[-1]
         key, longest = self.key, self.longest
-        found, best, speed, done = self._window(view, first, WINDOW, s, t, length, self._key_col, longest, end,
-                                                window_m)
+        width = max(1, WINDOW * copies // 2)  # (the Jacobi view has half the sequential one's entries)
+        found, best, speed, done = self._window(view, first, width, s, t, length, key, longest, end, window_m)
         if done.all():
             return found, best, speed
-        rows, width = np.flatnonzero(~done), 4 * WINDOW
+        rows, width = np.flatnonzero(~done), 4 * width
         while len(rows):  # not settled within the window: a wider one
-            f, b, v, done = self._window(view, first[rows], width, s[rows], t[rows], length[rows], key[rows, None],
+            f, b, v, done = self._window(view, first[rows], width, s[rows], t[rows], length[rows], key[rows],
                                          longest[rows], end[rows], window_m)
             found[rows], best[rows], speed[rows] = f, b, v
             rows, width = rows[~done], 4 * width
@@ -123,24 +122,30 @@ class Views:
 
     def _window(self, view, first, width, s, t, length, k, longest, end, window_m):
         """`leaders` from the `width` entries ahead of each agent; `done` where no entry of
-        its run beyond can be nearer (none left, or `neighbours.LeaderIndex`'s bound)."""
-        _, station, offset, speed, const, _ = view
-        cols = first[:, None] + np.arange(width)
+        its run beyond can be nearer (none left, or `neighbours.LeaderIndex`'s bound).
+
+        Arrays are (window entry, agent): the reductions over the window run along
+        contiguous rows (numpy's quick path; along short rows it is ~20x slower)."""
+        _, station, offset, speed, (el, em, lo, hi), *_ = view
+        cols = first + np.arange(width)[:, None]
         beyond = first + width
         if width >= self.PAD:  # (the sentinels cover a first window only)
             last = len(station) - 1
             cols, beyond = np.minimum(cols, last), np.minimum(beyond, last)
-        el, em, lo, hi = const[:, cols]
-        s_col = s[:, None]
-        mask = (lo <= k) & (k <= hi) & ~outside_lane(offset[cols], t[:, None], window_m)
-        g = np.where(mask, bumper_gap(station[cols], el, s_col, length[:, None]), np.inf)
-        best = g.min(axis=1)
+        hidden = (lo[cols] > k) | (k > hi[cols]) | outside_lane(offset[cols], t, window_m)
+        g = np.where(hidden, np.inf, bumper_gap(station[cols], el[cols], s, length))
+        best = g.min(axis=0)
         found = best < np.inf
-        # equal gaps: the least member index (where one is found, the gap's entries are seen ones)
-        col = np.where(g == best[:, None], em, np.inf).argmin(axis=1)
-        lead = np.where(found, speed[cols[np.arange(len(first)), col]], 0.0)
+        tied = g == best  # (where one is found, only seen entries have its gap)
+        sp = speed[cols]
+        lead = np.where(tied, sp, -np.inf).max(axis=0)  # the speed of the one entry with the least gap
+        several = found & (tied.sum(axis=0) > 1)
+        if several.any():  # equal gaps: the least member index
+            r = np.flatnonzero(several)
+            col = np.where(tied[:, r], em[cols[:, r]], np.inf).argmin(axis=0)
+            lead[r] = sp[col, r]
         done = (beyond >= end) | (station[beyond] - s - 0.5 * (longest + length) > best + STOP_SLACK_M)
-        return found, best, lead, done
+        return found, best, np.where(found, lead, 0.0), done
 
 
 class _View:
@@ -155,13 +160,13 @@ class _View:
         self.run_sorted = np.sort(self.run)  # (in every order sorted by (run, station))
         self.same_run = self.run_sorted[1:] == self.run_sorted[:-1]
         self.run_change = ~self.same_run
-        self.n = len(run_of)
+        self.n, self.copies = len(run_of), copies
         self.order = None
 
     def view(self, station, offset, speed):
         """(first entry strictly ahead of each agent: the start of the next group of equal
-        (run, station) after its own entry's, station, offset, speed, const rows, in sorted
-        order, each agent's run's end)."""
+        (run, station) after its own entry's; station, offset, speed, const rows in sorted
+        order; each agent's run's end; entries per agent)."""
         order = self.order
         if order is not None:
             st = station[order]
@@ -175,11 +180,11 @@ class _View:
             at = np.empty_like(order)
             at[order] = np.arange(len(order))
             self.own = at[:self.n]
-            self.const_sorted = self.const[:, order]
+            self.const_sorted = tuple(self.const[:, order])  # (contiguous rows)
             st = station[order]
         starts = np.flatnonzero((st[1:] != st[:-1]) | self.run_change) + 1
         first = starts[np.searchsorted(starts, self.own, side="right")]
-        return first, st, offset[order], speed[order], self.const_sorted, self.end
+        return first, st, offset[order], speed[order], self.const_sorted, self.end, self.copies
 
 
 IDM_FIELDS = ("v0", "accel", "time_gap", "min_gap", "two_sqrt_ab")  # `IdmParams`' arrays
