@@ -53,7 +53,9 @@ class Views:
     Each view keeps its last order (entries sort the same from one step to the next but for
     the few that overtook): a call checks it and repairs it where an entry moved past
     another. Entries of equal (run, station) may sit in any order: the lookup's answer does
-    not depend on it (the nearest gap, ties by member index, and the walk's bound).
+    not depend on it (the nearest gap, ties by member index, and the walk's bound). (A NaN
+    station, which the agents' step never passes, gives a NaN gap where it falls within an
+    agent's window, so there the answer depends on the window's width.)
 
     `runs`: per run (agents' lengths [m], their road codes, the ego's length [m], its road
     code); a single run is a batch of one."""
