@@ -163,6 +163,7 @@ class _View:
         self.same_run = self.run_sorted[1:] == self.run_sorted[:-1]
         self.run_change = ~self.same_run
         self.n, self.copies = len(run_of), copies
+        self.one_run = len(counts) == 1
         self.order = None
 
     def view(self, station, offset, speed):
@@ -179,13 +180,17 @@ class _View:
             order = np.lexsort((station, self.run))
         if order is not self.order:
             self.order = order
-            at = np.empty_like(order)
-            at[order] = np.arange(len(order))
-            self.own = at[:self.n]
+            if not self.one_run:
+                at = np.empty_like(order)
+                at[order] = np.arange(len(order))
+                self.own = at[:self.n]
             self.const_sorted = tuple(self.const[:, order])  # (contiguous rows)
             st = station[order]
-        starts = np.flatnonzero((st[1:] != st[:-1]) | self.run_change) + 1
-        first = starts[np.searchsorted(starts, self.own, side="right")]
+        if self.one_run:  # (its entries, then the sentinels, ascending: bisect the stations)
+            first = st.searchsorted(station[:self.n], side="right")
+        else:
+            starts = np.flatnonzero((st[1:] != st[:-1]) | self.run_change) + 1
+            first = starts[np.searchsorted(starts, self.own, side="right")]
         return first, st, offset[order], speed[order], self.const_sorted, self.end, self.copies
 
 
