@@ -4,7 +4,7 @@ traffic (1 s) stepped in a batch of B runs with the agents as arrays, every view
 lookup call recorded, then replayed alone and timed (best of several repeats).
 
 Run: PYTHONPATH=. python benchmarks/bench_views.py [--agents 5,20,50,100] [--batches 1,16,64]
-     [--repeat 5]
+     [--repeat 5] [--json FILE]
 Prints, per configuration, us per run-step of the lookup (views + leaders, the Jacobi
 and the sequential checks of the fixed point together; CPU time of the process and wall
 time, each the least of the repeats: on a shared machine the CPU time is the steadier)
@@ -21,6 +21,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import _figures as figures_json  # noqa: E402
 
 
 def arg(name: str, default: str) -> list[int]:
@@ -90,6 +92,7 @@ def main() -> None:
     import numpy as np
 
     repeat = arg("--repeat", "5")[0]
+    figures: dict = {}
     print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs")
     print(f"{'agents':>6s} {'batch':>5s} {'calls':>6s} {'run-steps':>9s} {'cpu us/run-step':>15s} "
           f"{'wall':>7s}  digest")
@@ -102,6 +105,9 @@ def main() -> None:
             load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
             print(f"{agents:6d} {batch:5d} {len(calls):6d} {steps:9d} {1e6 * cpu / steps:15.2f} "
                   f"{1e6 * wall / steps:7.2f}  {times[0][2]}  load {load}", flush=True)
+            figures[f"{agents}x{batch}"] = {"cpu_us_per_run_step": 1e6 * cpu / steps,
+                                            "wall_us_per_run_step": 1e6 * wall / steps, "digest": times[0][2]}
+    figures_json.write(sys.argv[sys.argv.index("--json") + 1] if "--json" in sys.argv else None, figures)
 
 
 if __name__ == "__main__":
