@@ -39,129 +39,159 @@ MAX_ROUNDS = 3  # fixed-point checks before a step is left to the scalar loop
 
 
 class Views:
-    """The members as the agents of a batch of runs see them, as one table per view: a block
-    of columns per run (its entries sorted by station), then a last column past every
-    station that nobody sees. A column's rows: station, offset, speed, length, member index,
+    """The members as the agents of a batch of runs see them, as one table per view, kept
+    sorted by (run, station): a block of entries per run, then `PAD` sentinel entries past
+    every station that nobody sees. An entry's rows: station, offset, length, member index,
     and the keys lo..hi of the agents that see it (key = the run's base + road code * (n + 1)
-    + agent index, the run's bases apart: an entry is seen only on its road, in its run).
+    + agent index, the run's bases apart: an entry is seen only on its road, in its run);
+    its speed is read only for the answer.
 
     The Jacobi view has each agent's old state (seen by all: an agent's own entry is never
     strictly ahead of it) and the ego. The sequential view has the old states seen by the
     agents before them, the new states seen by the agents after them, and the ego.
 
+    Each view keeps its last order (entries sort the same from one step to the next but for
+    the few that overtook): a call checks it and repairs it where an entry moved past
+    another. Entries of equal (run, station) may sit in any order: the lookup's answer does
+    not depend on it (the nearest gap, ties by member index, and the walk's bound). (A NaN
+    station, which the agents' step never passes, gives a NaN gap where it falls within an
+    agent's window, so there the answer depends on the window's width.)
+
     `runs`: per run (agents' lengths [m], their road codes, the ego's length [m], its road
     code); a single run is a batch of one."""
 
+    PAD = WINDOW + 1  # sentinels: the first window and the entry after it stay in the table
+
     def __init__(self, runs):
-        jacobi, seq, keys, longest, run_of = [], [], [], [], []
-        jac_end, seq_end = [], []
+        sizes = [len(length) for length, *_ in runs]
+        self.runs, self.n = len(runs), sum(sizes)
+        keys, longest, run_of, ego = [], [], [], []
         base_key = 0.0
-        j_cols = s_cols = 0
         for r, (length, road, ego_length, ego_road) in enumerate(runs):
             n = len(length)
-            m = np.arange(n, dtype=float)
             base = base_key + road * (n + 1.0)
-            keys.append(base + m)  # each agent's own key
+            keys.append(base + np.arange(n, dtype=float))  # each agent's own key
             ego_base = base_key + ego_road * (n + 1.0)
-            ego = (ego_length, n, ego_base, ego_base + n - 1)
-            block = np.zeros((7, n + 1))
-            block[3:, :n] = (length, m, base, base + n - 1)
-            block[3:, n] = ego
-            jacobi.append(block)
-            block = np.zeros((7, 2 * n + 1))
-            block[3:, :n] = (length, m, base, base + m - 1.0)
-            block[3:, n:2 * n] = (length, m, base + m + 1.0, base + n - 1)
-            block[3:, 2 * n] = ego
-            seq.append(block)
+            ego.append((ego_length, n, ego_base, ego_base + n - 1))
             longest.append(np.full(n, max(float(length.max()), ego_length)))
             run_of.append(np.full(n, r))
-            j_cols, s_cols = j_cols + n + 1, s_cols + 2 * n + 1
-            jac_end.append(np.full(n, j_cols))
-            seq_end.append(np.full(n, s_cols))
             base_key += (max(int(road.max()), ego_road) + 1) * (n + 1.0)
-        self.runs = len(runs)
-        sizes = [len(length) for length, *_ in runs]
         self.key, self.longest = np.concatenate(keys), np.concatenate(longest)
         self.run_of = np.concatenate(run_of)  # each agent's run
-        self.n = len(self.key)
-        sentinel = np.array([[np.inf], [0.0], [0.0], [0.0], [-1.0], [0.0], [-1.0]])
-        self._jacobi = np.concatenate([*jacobi, sentinel], axis=1)
-        self._seq = np.concatenate([*seq, sentinel], axis=1)
-        # The columns of each run's agents (old, new) and ego in the templates; each column's run.
-        starts = np.cumsum([0, *sizes])[:-1]
-        within = np.arange(self.n) - np.repeat(starts, sizes)
-        self._j_old = within + np.repeat(starts + np.arange(self.runs), sizes)
-        self._j_ego = starts + sizes + np.arange(self.runs)
-        seq_starts = 2 * starts + np.arange(self.runs)
-        self._s_old = within + np.repeat(seq_starts, sizes)
-        self._s_new = self._s_old + np.repeat(sizes, sizes)
-        self._s_ego = seq_starts + 2 * np.array(sizes)
-        self._j_run = np.append(np.repeat(np.arange(self.runs), np.add(sizes, 1)), self.runs)
-        self._s_run = np.append(np.repeat(np.arange(self.runs), 2 * np.array(sizes) + 1), self.runs)
-        self._j_end, self._s_end = np.concatenate(jac_end), np.concatenate(seq_end)
+        length = np.concatenate([length for length, *_ in runs])
+        within = np.concatenate([np.arange(n, dtype=float) for n in sizes])  # member index
+        base = self.key - within
+        last = base + np.repeat(np.add(sizes, -1.0), sizes)
+        ego, pad = np.array(ego, dtype=float).reshape(-1, 4).T, np.array([[0.0], [-1.0], [0.0], [-1.0]])
+        # Unsorted columns: the agents (old), [the agents (new),] the egos, the sentinels;
+        # rows: length, member index, lo, hi.
+        jacobi = np.hstack([(length, within, base, last), ego, np.repeat(pad, self.PAD, axis=1)])
+        seq = np.hstack([(length, within, base, base + within - 1.0), (length, within, base + within + 1.0, last),
+                         ego, np.repeat(pad, self.PAD, axis=1)])
+        runs_ = np.arange(self.runs)
+        self._jacobi = _View(jacobi, np.concatenate([self.run_of, runs_]), self.run_of, 1, self.PAD)
+        self._seq = _View(seq, np.concatenate([self.run_of, self.run_of, runs_]), self.run_of, 2, self.PAD)
+        self._pad = (np.full(self.PAD, np.inf), np.zeros(self.PAD))
 
     def jacobi(self, s, t, v, ego):
         """Everyone where they were (`ego`: station, offset, speed arrays, one per run)."""
-        table = self._jacobi.copy()
-        table[:3, self._j_old] = (s, t, v)
-        table[:3, self._j_ego] = ego
-        return self._sorted(table, self._j_run, self._j_old), self._j_end
+        inf, zero = self._pad
+        return self._jacobi.view(np.concatenate((s, ego[0], inf)), np.concatenate((t, ego[1], zero)),
+                                 np.concatenate((v, ego[2], zero)))
 
     def sequential(self, s, t, v, new, ego):
         """Earlier agents at their `new` (station, offset, speed), later ones where they were."""
-        table = self._seq.copy()
-        table[:3, self._s_old] = (s, t, v)
-        table[:3, self._s_new] = new
-        table[:3, self._s_ego] = ego
-        return self._sorted(table, self._s_run, self._s_old), self._s_end
-
-    @staticmethod
-    def _sorted(table, run, own):
-        """The table sorted by (run, station), stably, and the column of the first entry of
-        its run strictly ahead of each agent (`own`: its own entry's column, at its station):
-        the start of the next group of equal (run, station) after its own entry's."""
-        order = np.lexsort((table[0], run))
-        table = table[:, order]
-        at = np.empty_like(order)
-        at[order] = np.arange(len(order))
-        station = table[0]
-        starts = np.flatnonzero((station[1:] != station[:-1]) | (run[1:] != run[:-1])) + 1
-        return table, starts[np.searchsorted(starts, at[own], side="right")]
+        inf, zero = self._pad
+        return self._seq.view(np.concatenate((s, new[0], ego[0], inf)), np.concatenate((t, new[1], ego[1], zero)),
+                              np.concatenate((v, new[2], ego[2], zero)))
 
     def leaders(self, view, s, t, length, window_m: float = LANE_WINDOW_M):
-        """(found, gap [m], leader speed [m/s]) per agent from a view (`jacobi`, `sequential`);
-        `s`: the agents' stations where they were (their own entries' in the view)."""
-        (table, first), end = view
+        """(found, gap [m], leader speed [m/s]; 0 where none) per agent from a view (`jacobi`,
+        `sequential`); `s`: the agents' stations where they were (their own entries' in the view)."""
+        first, end, copies = view[0], view[-2], view[-1]
         key, longest = self.key, self.longest
-        found, best, speed, done = self._window(table, first, WINDOW, s, t, length, key, longest, end, window_m)
+        width = max(1, WINDOW * copies // 2)  # (the Jacobi view has half the sequential one's entries)
+        found, best, speed, done = self._window(view, first, width, s, t, length, key, longest, end, window_m)
         if done.all():
             return found, best, speed
-        rows, width = np.flatnonzero(~done), 4 * WINDOW
+        rows, width = np.flatnonzero(~done), 4 * width
         while len(rows):  # not settled within the window: a wider one
-            f, b, v, done = self._window(table, first[rows], width, s[rows], t[rows], length[rows], key[rows],
+            f, b, v, done = self._window(view, first[rows], width, s[rows], t[rows], length[rows], key[rows],
                                          longest[rows], end[rows], window_m)
             found[rows], best[rows], speed[rows] = f, b, v
             rows, width = rows[~done], 4 * width
         return found, best, speed
 
-    @staticmethod
-    def _window(table, first, width, s, t, length, key, longest, end, window_m):
+    def _window(self, view, first, width, s, t, length, k, longest, end, window_m):
         """`leaders` from the `width` entries ahead of each agent; `done` where no entry of
-        its run beyond can be nearer (none left, or `neighbours.LeaderIndex`'s bound)."""
-        last = table.shape[1] - 1
-        cols = np.minimum(first[:, None] + np.arange(width), last)
-        es, et, ev, el, em, lo, hi = table[:, cols]
-        k = key[:, None]
-        mask = (lo <= k) & (k <= hi) & ~outside_lane(et, t[:, None], window_m)
-        g = np.where(mask, bumper_gap(es, el, s[:, None], length[:, None]), np.inf)
-        best = g.min(axis=1)
-        tied = mask & (g == best[:, None])  # equal gaps: the least member index
-        col = np.where(tied, em, np.inf).argmin(axis=1)
-        speed = ev[np.arange(len(s)), col]
+        its run beyond can be nearer (none left, or `neighbours.LeaderIndex`'s bound).
+
+        Arrays are (window entry, agent): the reductions over the window run along
+        contiguous rows (numpy's quick path; along short rows it is ~20x slower)."""
+        _, station, offset, speed, (el, em, lo, hi), *_ = view
+        cols = first + np.arange(width)[:, None]
         beyond = first + width
-        next_s = table[0, np.minimum(beyond, last)]
-        done = (beyond >= end) | (next_s - s - 0.5 * (longest + length) > best + STOP_SLACK_M)
-        return best < np.inf, best, speed, done
+        if width >= self.PAD:  # (the sentinels cover a first window only)
+            last = len(station) - 1
+            cols, beyond = np.minimum(cols, last), np.minimum(beyond, last)
+        hidden = (lo[cols] > k) | (k > hi[cols]) | outside_lane(offset[cols], t, window_m)
+        g = np.where(hidden, np.inf, bumper_gap(station[cols], el[cols], s, length))
+        best = g.min(axis=0)
+        found = best < np.inf
+        tied = g == best  # (where one is found, only seen entries have its gap)
+        sp = speed[cols]
+        lead = np.where(tied, sp, -np.inf).max(axis=0)  # the speed of the one entry with the least gap
+        several = found & (tied.sum(axis=0) > 1)
+        if several.any():  # equal gaps: the least member index
+            r = np.flatnonzero(several)
+            col = np.where(tied[:, r], em[cols[:, r]], np.inf).argmin(axis=0)
+            lead[r] = sp[col, r]
+        done = (beyond >= end) | (station[beyond] - s - 0.5 * (longest + length) > best + STOP_SLACK_M)
+        return found, best, np.where(found, lead, 0.0), done
+
+
+class _View:
+    """One view's sorted order over its unsorted columns (`const`: the rows that do not
+    change, `run`: each column's run; each agent's own entry is column `agent`), kept from
+    call to call."""
+
+    def __init__(self, const, run, run_of, copies, pad):
+        self.const, self.run = const, np.concatenate([run, np.full(pad, run.max(initial=-1) + 1)])
+        counts = np.bincount(run, minlength=run_of.max(initial=-1) + 1)
+        self.end = np.cumsum(counts)[run_of]  # each agent's run's block ends before this sorted entry
+        self.run_sorted = np.sort(self.run)  # (in every order sorted by (run, station))
+        self.same_run = self.run_sorted[1:] == self.run_sorted[:-1]
+        self.run_change = ~self.same_run
+        self.n, self.copies = len(run_of), copies
+        self.one_run = len(counts) == 1
+        self.order = None
+
+    def view(self, station, offset, speed):
+        """(first entry strictly ahead of each agent: the start of the next group of equal
+        (run, station) after its own entry's; station, offset, speed, const rows in sorted
+        order; each agent's run's end; entries per agent)."""
+        order = self.order
+        if order is not None:
+            st = station[order]
+            # still sorted? (`not >=`: a NaN station is out of order, as lexsort puts it last)
+            if (~(st[1:] >= st[:-1]) & self.same_run).any():
+                order = order[np.lexsort((st, self.run_sorted))]  # repair (nearly sorted: quick)
+        else:
+            order = np.lexsort((station, self.run))
+        if order is not self.order:
+            self.order = order
+            if not self.one_run:
+                at = np.empty_like(order)
+                at[order] = np.arange(len(order))
+                self.own = at[:self.n]
+            self.const_sorted = tuple(self.const[:, order])  # (contiguous rows)
+            st = station[order]
+        if self.one_run:  # (its entries, then the sentinels, ascending: bisect the stations)
+            first = st.searchsorted(station[:self.n], side="right")
+        else:
+            starts = np.flatnonzero((st[1:] != st[:-1]) | self.run_change) + 1
+            first = starts[np.searchsorted(starts, self.own, side="right")]
+        return first, st, offset[order], speed[order], self.const_sorted, self.end, self.copies
 
 
 IDM_FIELDS = ("v0", "accel", "time_gap", "min_gap", "two_sqrt_ab")  # `IdmParams`' arrays

@@ -6,6 +6,7 @@ accelerations against `behaviors.Idm.accel`, bit for bit."""
 from __future__ import annotations
 
 import copy
+import math
 import struct
 from types import SimpleNamespace
 
@@ -114,3 +115,72 @@ def test_views_of_a_batch_answer_as_each_run_alone(runs, data, window):
         assert (got_found == found).all()
         assert got_gap.tobytes() == gap.tobytes()
         assert got_speed[found].tobytes() == speed[found].tobytes()
+
+
+def nearest_ahead_by_loop(seen, i, s, t, road, length, window_m=1.8):
+    """The lookup's definition, written out as a loop over every member: the nearest member
+    strictly ahead of agent `i` on its road within the lane window (a finite bumper gap),
+    the first in member order on equal gaps. `seen`: (member index, road, station, offset,
+    speed, length) as the agent sees them, in member order. (gap, speed) or None."""
+    best = None
+    for m, m_road, m_s, m_t, m_v, m_len in seen:
+        if m == i or m_road != road or abs(m_t - t) > window_m or not m_s > s:
+            continue
+        gap = m_s - s - 0.5 * (m_len + length)
+        if gap < math.inf and (best is None or gap < best[0]):
+            best = (gap, m_v)
+    return best
+
+
+# A run's step: per agent its road, where it was and where it moved (station, offset, speed);
+# stations on a coarse grid (ties), moves of 0 (equal old and new stations) or small ones
+# (the view's kept order stays valid from call to call), the ego's station possibly infinite.
+agent_state = st.tuples(st.sampled_from([0, 0, 1]), stations, offsets, st.floats(0.0, 40.0),
+                        st.sampled_from([4.6, 4.6, 12.0, 0.6]))
+ego_state_ = st.tuples(st.sampled_from([0, 1]), st.one_of(stations, st.just(math.inf)), offsets,
+                       st.floats(0.0, 40.0), st.sampled_from([4.6, 5.0]))
+run_ = st.tuples(st.lists(agent_state, min_size=1, max_size=10), ego_state_)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(run_, min_size=1, max_size=4), st.data(), st.sampled_from([1, 3, 12]))
+def test_views_of_batches_over_steps_answer_as_the_definition(runs, data, window):
+    """Several steps of a batch on the same `Views` (each view keeps and repairs its order
+    from call to call): every agent's (found, gap, leader speed) in both views is the loop's
+    over the members as it sees them, bit for bit; no leader: gap inf and speed 0."""
+    views = fleet.Views([(np.array([a[4] for a in agents]), np.array([a[0] for a in agents]), ego[4], ego[0])
+                         for agents, ego in runs])
+    length = np.array([a[4] for agents, _ in runs for a in agents])
+    s = np.array([a[1] for agents, _ in runs for a in agents])
+    t = np.array([a[2] for agents, _ in runs for a in agents])
+    v = np.array([a[3] for agents, _ in runs for a in agents])
+    ego_s = np.array([ego[1] for _, ego in runs])
+    fleet.WINDOW, window = window, fleet.WINDOW  # small windows: the widening is exercised
+    try:
+        for _ in range(3):
+            ds = np.array(data.draw(st.lists(st.sampled_from([0.0, 0.0, 0.1, 2.5, 5.0]) | st.floats(0.0, 20.0),
+                                             min_size=len(s), max_size=len(s))))
+            new = (s + ds, t + np.array(data.draw(st.lists(st.sampled_from([0.0, 0.0, 1.75, -3.5]),
+                                                             min_size=len(s), max_size=len(s)))), v[::-1].copy())
+            ego = (ego_s, np.array([e[2] for _, e in runs]), np.array([e[3] for _, e in runs]))
+            answers = {"jacobi": views.leaders(views.jacobi(s, t, v, ego), s, t, length),
+                       "sequential": views.leaders(views.sequential(s, t, v, new, ego), s, t, length)}
+            lo = 0
+            for r, (agents, ego_) in enumerate(runs):
+                n = len(agents)
+                for i in range(lo, lo + n):
+                    for kind, (found, gap, speed) in answers.items():
+                        moved = range(lo, i) if kind == "sequential" else ()
+                        state = lambda j: (new[0][j], new[1][j], new[2][j]) if j in moved else (s[j], t[j], v[j])  # noqa: E731
+                        seen = [(j - lo, agents[j - lo][0], *state(j), length[j]) for j in range(lo, lo + n)]
+                        seen.append((n, ego_[0], ego[0][r], ego[1][r], ego[2][r], ego_[4]))
+                        expected = nearest_ahead_by_loop(seen, i - lo, s[i], t[i], agents[i - lo][0], length[i])
+                        got = (gap[i], speed[i]) if found[i] else None
+                        assert bits(got) == bits(expected), (kind, r, i)
+                        if not found[i]:
+                            assert gap[i] == math.inf and bits((speed[i],)) == bits((0.0,))
+                lo += n
+            s, t, v = new  # the next step starts where this one moved to
+            ego_s = ego_s + 0.3
+    finally:
+        fleet.WINDOW = window
