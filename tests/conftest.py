@@ -93,6 +93,43 @@ def assert_scenarios_compile(patterns) -> None:
             assert compiled_as_installed(result), (path, [str(d) for d in result.diagnostics])
 
 
+def usable_cores(cgroup: Path = Path("/sys/fs/cgroup")) -> int:
+    """The cores this process may use: its CPU affinity, capped by its cgroup's CPU quota
+    (v2 `cpu.max`, v1 `cpu.cfs_quota_us` / `cpu.cfs_period_us`) where one is set: a
+    container limited by quota still sees every core of its host."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    quota = None
+    try:
+        text = (cgroup / "cpu.max").read_text().split()
+        if text and text[0] != "max":
+            quota = int(text[0]) / int(text[1])
+    except (OSError, ValueError, IndexError):
+        try:
+            q = int((cgroup / "cpu" / "cpu.cfs_quota_us").read_text())
+            if q > 0:
+                quota = q / int((cgroup / "cpu" / "cpu.cfs_period_us").read_text())
+        except (OSError, ValueError, ZeroDivisionError):
+            pass
+    if quota is not None:
+        cores = min(cores, max(1, int(quota)))
+    return max(1, cores)
+
+
+WORKER_MEMORY_BYTES = 3 * 2**30  # a worker that ran the learned and Ray tests peaks near 2 GB
+
+
+def pytest_xdist_auto_num_workers(config):
+    """`-n auto`: one worker per usable core, at most one per `WORKER_MEMORY_BYTES` of memory."""
+    try:
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        memory = None
+    workers = usable_cores()
+    if memory:
+        workers = min(workers, max(1, memory // WORKER_MEMORY_BYTES))
+    return workers
+
+
 def pytest_addoption(parser):
     parser.addoption("--no-skips", action="store_true",
                      help="fail the run if any test is skipped (CI installs every optional tool: chromium, "

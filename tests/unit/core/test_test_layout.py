@@ -4,6 +4,7 @@ tests/sim), and no test file name is in two folders (a failure names one file)."
 
 from __future__ import annotations
 
+import os
 from collections import Counter
 
 from tests.conftest import ROOT
@@ -31,3 +32,23 @@ def test_no_test_file_name_in_two_folders():
                     if p.name != "__init__.py" and p.name != "conftest.py"
                     and not DATA_FOLDERS & set(p.relative_to(TESTS).parts))
     assert not [n for n, k in names.items() if k > 1]
+
+
+def test_auto_workers_follow_the_cgroups_cpu_quota(tmp_path):
+    # `-n auto` (tests/conftest.py): a container held to 1.5 cores by quota sees its host's
+    # cores; the quota caps the workers (v2 `cpu.max`, v1 cfs files); no quota, the affinity.
+    from tests.conftest import usable_cores
+
+    cores = len(os.sched_getaffinity(0))
+    assert usable_cores(tmp_path / "none") == cores
+    (tmp_path / "v2").mkdir()
+    (tmp_path / "v2" / "cpu.max").write_text("150000 100000\n")
+    assert usable_cores(tmp_path / "v2") == 1
+    (tmp_path / "v2" / "cpu.max").write_text("max 100000\n")
+    assert usable_cores(tmp_path / "v2") == cores
+    (tmp_path / "v1" / "cpu").mkdir(parents=True)
+    (tmp_path / "v1" / "cpu" / "cpu.cfs_quota_us").write_text("100000\n")
+    (tmp_path / "v1" / "cpu" / "cpu.cfs_period_us").write_text("100000\n")
+    assert usable_cores(tmp_path / "v1") == 1
+    (tmp_path / "v1" / "cpu" / "cpu.cfs_quota_us").write_text("-1\n")
+    assert usable_cores(tmp_path / "v1") == cores
