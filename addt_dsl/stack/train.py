@@ -289,8 +289,9 @@ def fit_cluster_classes(model, seed: int, scenes: int, lidars: tuple[str, ...], 
     counts = np.bincount(labels, minlength=len(CLASSES)).tolist()
     log(f"cluster classes: {len(labels)} matched detections on {scenes} scans ("
         + ", ".join(f"{n} {c}" for c, n in zip(CLASSES, counts)) + f"); scans {t_gen:.0f} s, fit {t_fit:.0f} s")
-    info = {"scenes": scenes, "seed": seed, "cyclists": cyclists, "iterations": iterations, "features": list(cluster_class.FEATURES),
-            "detections": counts, "generate_s": round(t_gen, 1), "fit_s": round(t_fit, 1)}
+    info = {"scenes": scenes, "seed": seed, "cyclists": cyclists, "iterations": iterations,
+            "features": list(cluster_class.FEATURES), "detections": counts, "generate_s": round(t_gen, 1),
+            "fit_s": round(t_fit, 1)}
     return cluster_class.TreeEnsemble.from_sklearn(clf), info
 
 
