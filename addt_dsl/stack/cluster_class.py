@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from addt_dsl.specs.sensors import EXTRINSICS
 from addt_dsl.stack.bev_grid import BOX_CHANNELS, CLASSES, GRID, GridSpec
 
 CLUSTER_MARGIN_M = 0.3  # returns this far outside a detection's box still count as its own
@@ -36,7 +37,19 @@ FEATURES = (
     "box centre behind the centroid, along the line of sight [m]",
     "CNN P(car)", "CNN P(truck)", "CNN P(pedestrian)", "CNN P(cyclist)", "CNN confidence",
     "log box length", "log box width", "|sin| of the box axis against the line of sight",
+    # Per beam and height: which of the detector lidar's beams meet the object says how tall
+    # it is at a given range (a cyclist's 1.7 m against a car's 1.5 m).
+    "log2(1 + returns of the -6 deg beam) / 5", "... -3 deg", "... 0 deg", "... +3 deg", "... +6 deg",
+    "beams with returns", "share of returns above 1.2 m", "above 1.45 m", "above 1.6 m",
+    # The returns' shape in plan view, and the level beam's alone (the one every object meets).
+    "major principal spread [m]", "minor principal spread [m]", "|sin| of the major axis against the line of sight",
+    "level beam's 1-degree columns / 10", "level beam's extent across the line of sight [m]",
+    "highest beam with returns (0: -6 deg ... 4: +6 deg)",
+    "box centre across the line of sight from the centroid [m]",
+    "log2(1 + own returns up to 1.5 m outside the box) / 5",
 )
+BEAM_STEP_DEG = 3.0  # the detector lidar's beams: -6, -3, 0, +3, +6 deg (`DETECTOR_LIDAR`)
+MOUNT_Z_M = next(p.default for p in EXTRINSICS if p.name == "z")  # the lidar's default mount height
 PREFIX = "cluster."  # keys of the ensemble's tensors in the weights file's state dict
 
 
@@ -55,13 +68,16 @@ def cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], boxes: 
     owner = np.hypot(p[:, None, 0] - boxes[None, :, 0], p[:, None, 1] - boxes[None, :, 1]).argmin(axis=1)
     hx, hy = box_map.shape[1:]
     sx, sy = sensor_xy
+    beam = np.clip(np.round(np.degrees(np.arctan2(p[:, 2] - MOUNT_Z_M, np.hypot(p[:, 0] - sx, p[:, 1] - sy)))
+                            / BEAM_STEP_DEG).astype(np.int64) + 2, 0, 4)
     for k, (x, y, heading, length, width, conf, _) in enumerate(boxes.tolist()):
         if not all(map(math.isfinite, (x, y, heading, length, width))):
             continue  # a fault's NaN box: keep the CNN's class
         c, s = math.cos(heading), math.sin(heading)
         dx, dy = p[:, 0] - x, p[:, 1] - y
-        own = (owner == k) & (np.abs(c * dx + s * dy) < 0.5 * length + CLUSTER_MARGIN_M) \
-            & (np.abs(c * dy - s * dx) < 0.5 * width + CLUSTER_MARGIN_M)
+        a, b = np.abs(c * dx + s * dy), np.abs(c * dy - s * dx)
+        inbox = (a < 0.5 * length + CLUSTER_MARGIN_M) & (b < 0.5 * width + CLUSTER_MARGIN_M)
+        own = (owner == k) & inbox
         q = p[own]
         if len(q) == 0:
             continue
@@ -78,10 +94,29 @@ def cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], boxes: 
         across = (q[:, 1] - sy) * ux - (q[:, 0] - sx) * uy
         columns = len(np.unique(np.round(np.degrees(np.arctan2(q[:, 1] - sy, q[:, 0] - sx)))))
         wide = float(across.max() - across.min())
+        bq = beam[own]
+        per_beam = np.bincount(bq, minlength=5)
+        if len(q) >= 2:
+            spread, axes = np.linalg.eigh(np.cov(q[:, :2].T))
+            major, minor = math.sqrt(max(spread[1], 0.0)), math.sqrt(max(spread[0], 0.0))
+            major_sin = abs(axes[0, 1] * uy - axes[1, 1] * ux)
+        else:
+            major = minor = major_sin = 0.0
+        level = bq == 2
+        if level.any():
+            level_columns = len(np.unique(np.round(np.degrees(np.arctan2(q[level, 1] - sy, q[level, 0] - sx)))))
+            level_wide = float(across[level].max() - across[level].min())
+        else:
+            level_columns, level_wide = 0, 0.0
+        ring = (owner == k) & ~inbox & (a < 0.5 * length + 1.5) & (b < 0.5 * width + 1.5)
+        z = q[:, 2]
         feats[k] = (math.log2(1 + len(q)) / 5, r / 60, q[:, 2].max() / 2, q[:, 2].min() / 2, q[:, 2].mean() / 2,
                     along.max() - along.min(), wide, along.std(), across.std(), wide / r * 10,
                     len(q) / columns / 5, columns / 10, (x - cx) * ux + (y - cy) * uy, *prob, conf,
-                    math.log(length), math.log(width), abs(math.sin(heading - math.atan2(ry, rx))))
+                    math.log(length), math.log(width), abs(math.sin(heading - math.atan2(ry, rx))),
+                    *(np.log2(1 + per_beam) / 5), (per_beam > 0).sum(), (z > 1.2).mean(), (z > 1.45).mean(),
+                    (z > 1.6).mean(), major, minor, major_sin, level_columns / 10, level_wide, bq.max(),
+                    (x - cx) * uy - (y - cy) * ux, math.log2(1 + int(ring.sum())) / 5)
         valid[k] = True
     return feats, valid
 

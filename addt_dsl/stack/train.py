@@ -214,6 +214,8 @@ def main(argv=None) -> int:
                     help="fit the class reader on each detection's cluster of returns on N scans (0: none; "
                          "the class is the CNN's at the heatmap peak)")
     ap.add_argument("--cluster-seed", type=int, default=None, help="seed of those scans (default: --seed)")
+    ap.add_argument("--cluster-cyclists", type=float, default=CYCLISTS_PER_SCENE, metavar="MEAN",
+                    help="mean cyclists tried per scene of those scans (as --cyclists)")
     ap.add_argument("--cluster-logit-offsets", type=float, nargs=len(CLASSES), default=None, metavar="B",
                     help="added to the cluster class reader's logits at run time")
     args = ap.parse_args(argv)
@@ -252,7 +254,7 @@ def main(argv=None) -> int:
     if args.cluster_scenes:
         seed = args.seed if args.cluster_seed is None else args.cluster_seed
         model.cluster_classes, meta["cluster"] = fit_cluster_classes(
-            model, seed, args.cluster_scenes, tuple(args.lidars), lidar_settings)
+            model, seed, args.cluster_scenes, tuple(args.lidars), lidar_settings, cyclists=args.cluster_cyclists)
         meta["cluster"]["logit_offsets"] = args.cluster_logit_offsets
     if init_meta is not None:  # the run this one started from, and what it cost
         meta["init"] = {"path": str(args.init), "meta": init_meta}
@@ -262,9 +264,10 @@ def main(argv=None) -> int:
 
 
 def fit_cluster_classes(model, seed: int, scenes: int, lidars: tuple[str, ...], lidar_settings: dict | None,
-                        iterations: int = 200, log=print):
+                        iterations: int = 200, log=print, cyclists: float = CYCLISTS_PER_SCENE):
     """The cluster class reader (`cluster_class.TreeEnsemble`) for `model`'s detections on
-    `scenes` scans of the default scenes (seed `seed`), and its timing and sample counts."""
+    `scenes` scans of the default scenes (seed `seed`; `cyclists`: see `synth.sample_scene`),
+    and its timing and sample counts."""
     import tempfile
 
     import torch
@@ -273,7 +276,7 @@ def fit_cluster_classes(model, seed: int, scenes: int, lidars: tuple[str, ...], 
     from addt_dsl.stack.learned import LearnedPerception
 
     t0 = time.perf_counter()
-    samples = generate(scenes, seed, lidars=lidars, lidar_settings=lidar_settings)
+    samples = generate(scenes, seed, lidars=lidars, lidar_settings=lidar_settings, cyclists=cyclists)
     t_gen = time.perf_counter() - t0
     with tempfile.TemporaryDirectory() as tmp:  # the runtime node, so the features are the loop's
         path = Path(tmp) / "cnn.pt"
@@ -286,8 +289,9 @@ def fit_cluster_classes(model, seed: int, scenes: int, lidars: tuple[str, ...], 
     counts = np.bincount(labels, minlength=len(CLASSES)).tolist()
     log(f"cluster classes: {len(labels)} matched detections on {scenes} scans ("
         + ", ".join(f"{n} {c}" for c, n in zip(CLASSES, counts)) + f"); scans {t_gen:.0f} s, fit {t_fit:.0f} s")
-    info = {"scenes": scenes, "seed": seed, "iterations": iterations, "features": list(cluster_class.FEATURES),
-            "detections": counts, "generate_s": round(t_gen, 1), "fit_s": round(t_fit, 1)}
+    info = {"scenes": scenes, "seed": seed, "cyclists": cyclists, "iterations": iterations,
+            "features": list(cluster_class.FEATURES), "detections": counts, "generate_s": round(t_gen, 1),
+            "fit_s": round(t_fit, 1)}
     return cluster_class.TreeEnsemble.from_sklearn(clf), info
 
 

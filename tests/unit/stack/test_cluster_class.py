@@ -85,3 +85,28 @@ def test_reclass_replaces_the_class_where_a_cluster_says_otherwise():
     assert out[:, 6].tolist() == [3.0, 1.0]
     out = cluster_class.reclass(boxes.copy(), face, (1.0, 0.0), _head_map(0), ensemble)
     assert out[:, 6].tolist() == [float(wanted), 1.0]
+
+
+def test_beam_and_shape_features_count_each_beams_returns():
+    """A face 10 m ahead met by the level beam (4 returns at the mount's 1 m) and the +3°
+    beam (3 at 1 + 10 tan 3° = 1.52 m), and one return 0.9 m beside the box: the per-beam
+    counts, the highest beam, the height shares, the level beam's columns and extent and
+    the returns around the box follow by hand."""
+    sensor = (1.0, 0.0)
+    up = 1.0 + 10.0 * math.tan(math.radians(3.0))
+    face = np.array([[11.0, y, 1.0] for y in (-0.3, -0.1, 0.1, 0.3)] + [[11.0, y, up] for y in (-0.2, 0.0, 0.2)]
+                    + [[11.0, 1.2, 1.0]])
+    boxes = np.array([[11.3, 0.0, 0.0, 0.6, 0.6, 0.9, 3.0]])
+    feats, valid = cluster_class.cluster_features(face, sensor, boxes, _head_map(3))
+    assert valid.tolist() == [True]
+    f = dict(zip(cluster_class.FEATURES, feats[0]))
+    assert f["log2(1 + returns) / 5"] == pytest.approx(math.log2(8) / 5)  # the one beside the box is not its own
+    assert [f[k] for k in cluster_class.FEATURES[21:26]] == pytest.approx(
+        [0.0, 0.0, math.log2(5) / 5, math.log2(4) / 5, 0.0])
+    assert f["beams with returns"] == 2 and f["highest beam with returns (0: -6 deg ... 4: +6 deg)"] == 3
+    assert f["share of returns above 1.2 m"] == pytest.approx(3 / 7) and f["above 1.6 m"] == 0.0
+    assert f["level beam's 1-degree columns / 10"] == pytest.approx(0.4)  # at -1.7, -0.6, 0.6, 1.7 deg
+    assert f["level beam's extent across the line of sight [m]"] == pytest.approx(0.6, abs=1e-6)
+    assert f["box centre across the line of sight from the centroid [m]"] == pytest.approx(0.0, abs=1e-9)
+    assert f["log2(1 + own returns up to 1.5 m outside the box) / 5"] == pytest.approx(0.2)
+    assert f["major principal spread [m]"] > f["minor principal spread [m]"] == pytest.approx(0.0, abs=1e-9)

@@ -137,3 +137,20 @@ def test_cluster_scenes_fit_the_class_reader_and_ship_it_with_the_weights(tmp_pa
     assert all(np.array_equal(u, v) for u, v in zip(a.state().values(), b.state().values()))
     node = LearnedPerception({}, weights=outs[0])
     assert node.cluster_classes is not None
+
+
+def test_cluster_cyclists_put_more_cyclists_in_the_class_reader_scans(tmp_path):
+    """`--cluster-cyclists MEAN`: the reader's scans have that many cyclists tried per scene
+    (the detections it is fitted on count more of them), and the metadata says so."""
+    from addt_dsl.stack.learned import WEIGHTS_PATH
+    from addt_dsl.stack.train import main
+
+    counts = {}
+    for mean in ("1.2", "4"):
+        out = tmp_path / f"c{mean}.pt"
+        assert main(["--init", str(WEIGHTS_PATH), "--epochs", "0", "--cluster-scenes", "40", "--cluster-seed", "5",
+                     "--cluster-cyclists", mean, "--out", str(out)]) == 0
+        cluster = torch.load(out, weights_only=True)["meta"]["cluster"]
+        assert cluster["cyclists"] == float(mean)
+        counts[mean] = cluster["detections"]
+    assert counts["4"][3] > 2 * counts["1.2"][3]
