@@ -18,7 +18,7 @@ from addt_dsl.runtime.execute import execute
 from addt_dsl.runtime.trace import SERIES_COLUMNS, Event
 from addt_dsl.stack.bev import StackError
 from addt_dsl.stack.bridge import _grow_series, decode, encode, recv, send
-from addt_dsl.stack.bridge_server import Limits, _new_events, _series, start_in_thread
+from addt_dsl.stack.bridge_server import _new_events, _series
 
 SCENARIO = """
 scenario remote_faults {
@@ -53,14 +53,6 @@ def _spec(stack: str, faults: str = FAULTS):
     result = compile_source(SCENARIO.replace("STACK", stack).replace("FAULTS", faults))
     assert result.ok, result.diagnostics
     return expand(result.plan).specs[0]
-
-
-@pytest.fixture(scope="module")
-def server():
-    srv = start_in_thread("127.0.0.1:0", Limits(idle_timeout_s=5.0))
-    yield srv
-    srv.shutdown()
-    srv.server_close()
 
 
 @pytest.fixture(autouse=True)

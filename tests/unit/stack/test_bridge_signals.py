@@ -43,14 +43,6 @@ def _spec(stack: str, faults: str = ""):
 
 
 @pytest.fixture(scope="module")
-def server():
-    srv = start_in_thread("127.0.0.1:0", Limits(idle_timeout_s=5.0))
-    yield srv
-    srv.shutdown()
-    srv.server_close()
-
-
-@pytest.fixture(scope="module")
 def sent():
     """A real protocol-3 hello and the steps after it, as the client sends them."""
     control = {"type": "control", "command": [0.0, 0.0]}  # coasts
