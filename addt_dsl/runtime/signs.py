@@ -13,11 +13,14 @@ The twin's agents do not stop at signs (as OpenSCENARIO's default controller, th
 scripts decide); the `bev` stack stops the ego at them (docs/stack.md), and the signal
 `stop_sign(A)` with the oracle `no stop_sign` judges any actor.
 
-Right of way: each sign kind (`SIGN_KINDS`: stop, yield, priority) sets the rule of the
-approach it stands on (`junction_rule`); the `bev` stack reads it through its context
-(`views.StackContext.junction_rule`). A sign's lines come from where it stands and from
-each `<signalReference>` to it (`RoadNetwork.placements`: CARLA's towns place their signs
-on the junctions' connecting roads so).
+Right of way: each sign kind (`SIGN_KINDS`) says which rule it gives the approach it stands
+on (stop, yield, priority or none) and whether it begins or ends a priority road;
+`junction_rule` walks the ego's junctions with them (a priority road, StVO 306, keeps its
+priority at every junction until sign 307 or an approach with a yield or stop sign ends
+it; 301 gives priority at the next junction only). The `bev` stack reads the rule through
+its context (`views.StackContext.junction_rule`). A sign's lines come from where it stands
+and from each `<signalReference>` to it (`RoadNetwork.placements`: CARLA's towns place their
+signs on the junctions' connecting roads so).
 """
 
 from __future__ import annotations
@@ -33,26 +36,39 @@ class SignKind:
     """A kind of traffic sign the map may have: its OpenDRIVE signal `types` (ASAM
     OpenDRIVE's catalogue, country "OpenDRIVE", follows Germany's StVO numbers; the US
     MUTCD's R codes), the OSI TrafficSign types that carry it to an external stack (the
-    first is sent), and what it means for the ego's approach to the next junction."""
+    first is sent), the rule it gives the approach to the junction it stands before
+    (`RULES`; None: none), whether it begins (True) or ends (False) a priority road (None:
+    neither), and what it means for the ego."""
 
     name: str
     types: tuple[str, ...]
     osi_types: tuple[str, ...]
+    rule: str | None
+    road: bool | None
     means: str
 
 
-# In order of precedence: an approach with signs of several kinds follows the first.
+RULES = ("stop", "yield", "priority")  # in order of precedence on one approach
+
+# In order of precedence (ties at one station are taken in this order too).
 SIGN_KINDS: dict[str, SignKind] = {k.name: k for k in (
-    SignKind("stop", ("206", "R1-1"), ("TYPE_STOP",),
-             "stop at the line (below 0.05 m/s within 3 m of it), then judge the gaps as without a sign"),
-    SignKind("yield", ("205", "R1-2"), ("TYPE_GIVE_WAY",),
+    SignKind("stop", ("206", "R1-1"), ("TYPE_STOP",), "stop", False,
+             "stop at the line (below 0.05 m/s within 3 m of it), then judge the gaps as without a sign; "
+             "ends a priority road"),
+    SignKind("yield", ("205", "R1-2"), ("TYPE_GIVE_WAY",), "yield", False,
              "give way: judge the gaps in crossing and oncoming traffic, no stop required; "
-             "reach the junction at 20 km/h at most"),
-    SignKind("priority", ("306", "301"), ("TYPE_RIGHT_OF_WAY_BEGIN", "TYPE_RIGHT_OF_WAY_NEXT_INTERSECTION"),
-             "priority road (306) or priority at the next junction (301): crossing traffic that can still "
-             "stop short of the ego's path braking at 2.5 m/s² (or as hard as it brakes) is not waited for; "
-             "oncoming traffic and what is already in the junction are"),
+             "reach the junction at 20 km/h at most; ends a priority road"),
+    SignKind("priority", ("301",), ("TYPE_RIGHT_OF_WAY_NEXT_INTERSECTION",), "priority", None,
+             "priority at the next junction: crossing traffic that can still stop short of the ego's path "
+             "braking at 2.5 m/s² (or as hard as it brakes) is not waited for; oncoming traffic and what is "
+             "already in the junction are"),
+    SignKind("priority_road", ("306",), ("TYPE_RIGHT_OF_WAY_BEGIN",), "priority", True,
+             "priority road: priority as behind `priority` at this junction and at every one after it, "
+             "until a `priority_road_end` sign or an approach with a stop or yield sign"),
+    SignKind("priority_road_end", ("307",), ("TYPE_RIGHT_OF_WAY_END",), None, False,
+             "end of the priority road: the junctions after it follow their own signs"),
 )}
+_ORDER = {name: i for i, name in enumerate(SIGN_KINDS)}
 _KIND_OF_TYPE = {typ: k.name for k in SIGN_KINDS.values() for typ in k.types}
 STOP_SIGN_TYPES = frozenset(SIGN_KINDS["stop"].types)
 STOPPED_MS = 0.1  # [m/s] below this an actor has stopped (ScenarioRunner's SPEED_THRESHOLD)
@@ -90,18 +106,28 @@ def stop_sign_lines(network) -> list[StopLine]:
 
 
 def junction_rule(stations: Sequence[StopStation], junctions, front_u: float) -> str | None:
-    """The rule (a `SIGN_KINDS` name) of the approach to the next junction the front (path
+    """The rule (one of `RULES`) of the approach to the next junction the front (path
     station `front_u` [m]) has not left, or None (no sign: give way). `stations`: the
     signs' lines on the path, each `controller` its kind; `junctions`: (entry, exit, ...)
-    stations in path order. A sign governs the junction when its line lies after the
+    stations in path order. A sign's rule governs the junction when its line lies after the
     previous junction's exit, at most at this one's exit and at most `REACH_M` before its
-    entry (a reference places it on the connecting road, inside the junction)."""
-    lo = -float("inf")
+    entry (a reference places it on the connecting road, inside the junction); the most
+    precedent rule wins. An approach without a rule has priority while the ego is on a
+    priority road: the signs' lines up to each junction's exit, taken in station order,
+    begin and end it (`SignKind.road`)."""
+    signs = sorted(stations, key=lambda st: (st.u, _ORDER[st.controller]))
+    on_road, k = False, 0
     for entry, exit_, *_ in junctions:
+        rules = set()
+        while k < len(signs) and signs[k].u <= exit_:
+            kind = SIGN_KINDS[signs[k].controller]
+            if kind.rule is not None and signs[k].u >= entry - REACH_M:
+                rules.add(kind.rule)
+            if kind.road is not None:
+                on_road = kind.road
+            k += 1
         if exit_ > front_u:
-            kinds = {st.controller for st in stations if lo < st.u <= exit_ and st.u >= entry - REACH_M}
-            return next((k for k in SIGN_KINDS if k in kinds), None)
-        lo = exit_
+            return next((r for r in RULES if r in rules), "priority" if on_road else None)
     return None
 
 
@@ -145,10 +171,12 @@ class SignsRuntime:
 
 def markdown_table() -> str:
     """The sign kinds as a Markdown table (docs/language.md)."""
-    rows = ["| kind | OpenDRIVE `type` | OSI TrafficSign | the ego's approach (`bev`) |", "|---|---|---|---|"]
+    rows = ["| kind | OpenDRIVE `type` | OSI TrafficSign | approach rule | the ego's approach (`bev`) |",
+            "|---|---|---|---|---|"]
     for k in SIGN_KINDS.values():
         rows.append(f"| `{k.name}` | {', '.join(f'`{t}`' for t in k.types)} | "
-                    f"{', '.join(f'`{t}`' for t in k.osi_types)} | {k.means} |")
+                    f"{', '.join(f'`{t}`' for t in k.osi_types)} | {f'`{k.rule}`' if k.rule else 'none'} | "
+                    f"{k.means} |")
     return "\n".join(rows)
 
 

@@ -109,7 +109,8 @@ class Context:
 
     def junction_rule(self, s: float) -> str | None:
         """The right-of-way rule of the ego's approach to the next junction on its route
-        (`signs.SIGN_KINDS`: "stop", "yield", "priority"), or None: no sign of the map."""
+        (`signs.RULES`: "stop", "yield", "priority"), or None: no sign of the map (nor a
+        priority road)."""
         run = self._run
         return junction_rule(run.rule_stations, run.ego_junctions, s + 0.5 * run.ego_plan.length_m)
 
@@ -172,8 +173,8 @@ class Context:
         return [(st.u, st.controller) for st in self._run.stop_stations.get("ego", ())]
 
     def ego_sign_stations(self) -> list[tuple[float, str]]:
-        """(station [m] on the ego's road or route, kind) of each sign's line (`signs.SIGN_KINDS`:
-        stop, yield, priority), in path order: what `stop_sign_ahead` (the stop signs) and
+        """(station [m] on the ego's road or route, kind) of each sign's line (`signs.SIGN_KINDS`),
+        in path order: what `stop_sign_ahead` (the stop signs) and
         `junction_rule` read (the bridge sends them)."""
         return [(st.u, st.controller) for st in self._run.rule_stations]
 

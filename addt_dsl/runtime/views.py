@@ -143,8 +143,8 @@ class StackContext(Protocol):
         """Station of the next stop sign's line ahead but those in `stopped`, or None."""
 
     def junction_rule(self, s: float) -> str | None:
-        """The map's signs' rule for the approach to the next junction (`runtime.signs.SIGN_KINDS`
-        name: "stop", "yield", "priority"), or None (no sign)."""
+        """The map's signs' rule for the approach to the next junction (`runtime.signs.RULES`:
+        "stop", "yield", "priority"), or None (no sign, no priority road)."""
 
     def event(self, kind: str, **detail) -> None:
         """Record an event now."""

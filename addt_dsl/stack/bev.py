@@ -317,7 +317,7 @@ class BevStack(S.BevStack):
     # lights: with a green light at the entry, crossing traffic that can still stop at its
     # own red (at `YIELD_COMMIT_DECEL`) is not waited for; oncoming traffic is (a permissive
     # green) and so is a red-light runner that can no longer stop. The map's signs
-    # (`ctx.junction_rule`, runtime/signs.py): behind a priority sign (306, 301) crossing
+    # (`ctx.junction_rule`, runtime/signs.py): with priority (a 301 sign, or on a priority road: 306) crossing
     # traffic that can still stop short of the zone braking at `PRIORITY_DECEL` (or at its
     # own measured deceleration, if harder) is not waited for; behind a yield sign (205,
     # R1-2) the ego reaches the junction entry at `YIELD_SIGN_SPEED` at most (StVO 8(2):

@@ -121,11 +121,19 @@ def test_a_reference_places_a_traffic_light_too():
 def test_sign_kinds_by_type_from_the_registry():
     from addt_dsl.runtime.signs import SIGN_KINDS, sign_kind
 
-    assert [sign_kind(Signal("1", 1.0, 0.0, type=t)) for t in ("206", "R1-1", "205", " R1-2", "306", "301")] == \
-        ["stop", "stop", "yield", "yield", "priority", "priority"]
+    from addt_dsl.runtime.signs import RULES
+
+    types = ("206", "R1-1", "205", " R1-2", "301", "306", "307")
+    assert [sign_kind(Signal("1", 1.0, 0.0, type=t)) for t in types] == \
+        ["stop", "stop", "yield", "yield", "priority", "priority_road", "priority_road_end"]
     assert sign_kind(Signal("1", 1.0, 0.0, type="274")) is None  # a speed limit
     assert sign_kind(Signal("1", 1.0, 0.0, type="205", dynamic=True)) is None
-    assert list(SIGN_KINDS) == ["stop", "yield", "priority"]  # precedence on one approach
+    assert list(SIGN_KINDS) == ["stop", "yield", "priority", "priority_road", "priority_road_end"]
+    # What each gives its approach and the priority road (StVO: 306 begins one; 307, a yield
+    # or a stop sign ends it; 301 leaves it as it is).
+    assert [(k.rule, k.road) for k in SIGN_KINDS.values()] == \
+        [("stop", False), ("yield", False), ("priority", None), ("priority", True), (None, False)]
+    assert {k.rule for k in SIGN_KINDS.values()} - {None} == set(RULES)
 
 
 def test_the_junction_rule_is_the_signs_between_the_previous_junction_and_this_ones_exit():
@@ -140,3 +148,49 @@ def test_the_junction_rule_is_the_signs_between_the_previous_junction_and_this_o
     assert junction_rule(st, junctions, 321.0) is None  # past the last junction
     assert junction_rule(st[2:], [(400.0, 420.0)], 0.0) is None  # 150 m before the entry: beyond REACH_M
     assert junction_rule([], junctions, 50.0) is None
+
+
+# Three junctions 200 m apart on the ego's path: (entry, exit) stations [m].
+THREE = [(100.0, 120.0, 0.0, 0.0), (300.0, 320.0, 0.0, 0.0), (500.0, 520.0, 0.0, 0.0)]
+FRONTS = (50.0, 200.0, 400.0, 600.0)  # before each junction, then past the last
+
+
+def _rules(*signs: tuple[float, str]) -> list:
+    """The rule of each junction of `THREE` (and past them) for signs (station [m], OpenDRIVE
+    type) on the path, their kinds read from the registry as the runtime reads them."""
+    from addt_dsl.runtime.signs import junction_rule, sign_kind
+
+    stations = [StopStation(u, sign_kind(Signal("1", 1.0, 0.0, type=t))) for u, t in signs]
+    return [junction_rule(stations, THREE, front) for front in FRONTS]
+
+
+def test_a_priority_road_keeps_priority_at_every_junction_a_301_only_at_the_next():
+    # StVO 306: priority at every junction along the road until it ends; 301: at the next one.
+    assert _rules((90.0, "306")) == ["priority", "priority", "priority", None]
+    assert _rules((90.0, "301")) == ["priority", None, None, None]
+    # A 306 further than 100 m before the junction still begins the road (the approach's own
+    # rule reaches 100 m only, as a 301 so placed shows).
+    assert _rules((20.0, "306")) == ["priority", "priority", "priority", None]
+    assert _rules((250.0, "306")) == [None, "priority", "priority", None]
+    assert _rules((150.0, "301")) == [None, None, None, None]
+
+
+def test_sign_307_ends_the_priority_road():
+    assert _rules((90.0, "306"), (250.0, "307")) == ["priority", None, None, None]
+    # Begun again after it: priority from there on.
+    assert _rules((90.0, "306"), (250.0, "307"), (450.0, "306")) == ["priority", None, "priority", None]
+    # On one station, 307 after 306 (the registry's order): the 306 gives its own approach
+    # priority, the road ends there.
+    assert _rules((90.0, "306"), (90.0, "307")) == ["priority", None, None, None]
+    assert _rules((90.0, "306")) == ["priority"] * 3 + [None]  # without the 307
+
+
+def test_an_approach_with_a_yield_or_stop_sign_ends_the_priority_road():
+    # The junction's own sign outranks the road's priority, and the road ends with it.
+    assert _rules((90.0, "306"), (295.0, "205")) == ["priority", "yield", None, None]
+    assert _rules((90.0, "306"), (295.0, "R1-1")) == ["priority", "stop", None, None]
+    # A 301 after it gives the next junction priority again, only that one.
+    assert _rules((90.0, "306"), (295.0, "205"), (495.0, "301")) == ["priority", "yield", "priority", None]
+    # On the road, a junction's stop sign beside a 306 (stop > priority) still ends it.
+    assert _rules((90.0, "306"), (295.0, "306"), (296.0, "206")) == ["priority", "stop", None, None]
+    assert _rules((90.0, "306")) == ["priority"] * 3 + [None]  # without the yield sign

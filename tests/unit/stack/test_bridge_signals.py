@@ -181,7 +181,7 @@ def test_the_server_reads_each_junctions_rule_from_the_signs_kinds(server, sent)
     ({"stop_lines": [{"station_m": 40.0, "controller": ""}]}, "'controller'"),
     ({"stop_lines": [[40.0, "main"]]}, "must be an object"),
     ({"signs": [{"station_m": float("inf"), "kind": "stop"}]}, "finite number"),
-    ({"signs": [{"station_m": 80.0}]}, "'kind' must be one of stop, yield, priority"),
+    ({"signs": [{"station_m": 80.0}]}, "'kind' must be one of stop, yield, priority, priority_road, priority_road_end"),
     ({"signs": [{"station_m": 80.0, "kind": "give_way"}]}, "'kind' must be one of"),
     ({"signs": [{"station_m": 80.0, "kind": ["stop"]}]}, "'kind' must be one of"),
 ])

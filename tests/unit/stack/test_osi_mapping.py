@@ -245,11 +245,21 @@ def test_signs_are_traffic_signs_facing_the_traffic():
     assert [ts.id.value for ts in gt.traffic_sign] == [M.SIGN_ID_BASE + k for k in range(3)]
     types = TrafficSign.MainSign.Classification
     assert [ts.main_sign.classification.type for ts in gt.traffic_sign] == \
-        [types.TYPE_STOP, types.TYPE_GIVE_WAY, types.TYPE_RIGHT_OF_WAY_BEGIN]
+        [types.TYPE_STOP, types.TYPE_GIVE_WAY, types.TYPE_RIGHT_OF_WAY_NEXT_INTERSECTION]
     # Facing the traffic that drives towards it: turned half round from the lane's heading.
     assert gt.traffic_sign[0].main_sign.base.orientation.yaw == pytest.approx(math.pi)
     assert gt.traffic_sign[1].main_sign.base.orientation.yaw == pytest.approx(-math.pi / 2)
     assert M.sign_positions(gt) == [("stop", 150.0, -1.75), ("yield", 20.0, 5.0), ("priority", 40.0, 5.0)]
-    # 301 (priority at the next junction) as OSI writes it reads back as a priority sign.
-    gt.traffic_sign[2].main_sign.classification.type = types.TYPE_RIGHT_OF_WAY_NEXT_INTERSECTION
-    assert M.sign_positions(gt)[2] == ("priority", 40.0, 5.0)
+
+
+def test_the_priority_signs_cross_osi_as_three_types_and_back():
+    from osi3.osi_trafficsign_pb2 import TrafficSign
+
+    types = TrafficSign.MainSign.Classification
+    signs = [("priority", 40.0, 5.0), ("priority_road", 60.0, 5.0), ("priority_road_end", 80.0, 5.0)]
+    gt = M.signs_ground_truth([(kind, x, y, 0.0, 0.0) for kind, x, y in signs])
+    gt = type(gt).FromString(gt.SerializeToString())
+    # StVO 301, 306, 307 as OSI names them.
+    assert [ts.main_sign.classification.type for ts in gt.traffic_sign] == \
+        [types.TYPE_RIGHT_OF_WAY_NEXT_INTERSECTION, types.TYPE_RIGHT_OF_WAY_BEGIN, types.TYPE_RIGHT_OF_WAY_END]
+    assert M.sign_positions(gt) == signs
