@@ -22,7 +22,7 @@ tensors or nodes (bit flips, stuck values, latency spikes) sends them in `hello`
 schedule entries; the remote applies them with its own copy of the fault machinery and
 returns each injection as a `fault` event with its replies. Protocol 3 adds what the
 in-process stack reads of the map's signals: the stations of the traffic lights' stop lines
-and of the stop signs' lines on the ego's road or route in `hello`, each light's state in
+and of the signs' lines (with their kinds) on the ego's road or route in `hello`, each light's state in
 every `step`. A hello says the lowest protocol that carries what its run has (1: neither
 faults nor signals; 2: faults; 3: signals), so older servers still serve the runs they can.
 """
@@ -50,10 +50,10 @@ from addt_dsl.stack.bev import NODE_NAMES, StackError
 
 PROTOCOL = 3  # the newest protocol; a hello says the lowest that carries what its run has
 FAULTS_PROTOCOL = 2  # stack-internal faults in `hello`
-SIGNALS_PROTOCOL = 3  # stop lines and stop signs in `hello`, the lights' states in `step`
+SIGNALS_PROTOCOL = 3  # stop lines and signs in `hello`, the lights' states in `step`
 PROTOCOLS = (1, 2, 3)  # what the reference server accepts
 MAX_FAULTS = 1000  # stack-internal faults one hello may carry
-MAX_SIGNALS = 10_000  # stop lines, and stop signs, one hello may carry (each)
+MAX_SIGNALS = 10_000  # stop lines, and signs, one hello may carry (each)
 _HEAD = struct.Struct(">II")
 
 
@@ -362,8 +362,8 @@ class ExternalStack(S.ExternalStack):
     def _bridge_hello(self) -> dict:
         """The bridge's hello, in the lowest protocol that carries what the run has, so
         older servers serve the runs they can: 2 for stack-internal faults, 3 for the stop
-        lines and stop signs on the ego's route (the in-process stack reads them from the
-        map, `stop_line_ahead` and `stop_sign_ahead`)."""
+        lines and the signs on the ego's route (the in-process stack reads them from the
+        map: `stop_line_ahead`, `stop_sign_ahead`, `junction_rule`)."""
         ctx = self.ctx
         hello = self._hello()
         lines, signs = ctx.ego_light_stations(), ctx.ego_sign_stations()
