@@ -37,7 +37,7 @@ CORE = {"addt_dsl", "addt_dsl.units", "addt_dsl.expr", "addt_dsl.diagnostics", "
         "addt_dsl.fingerprint", "addt_dsl.vehicles", "addt_dsl.plan", "addt_dsl.sweep", "addt_dsl.distributions",
         "addt_dsl.confine",
         "addt_dsl.errors", "addt_dsl.extras", "addt_dsl.limits", "addt_dsl.cost", "addt_dsl.stats",
-        "addt_dsl.lru", "addt_dsl.xmlread", "addt_dsl.atomic"}
+        "addt_dsl.lru", "addt_dsl.xmlread", "addt_dsl.atomic", "addt_dsl.kernel"}
 APP = {"addt_dsl.cli", "addt_dsl.console", "addt_dsl.suite", "addt_dsl.studies", "addt_dsl.pytest_plugin",
        "addt_dsl.search.commands", "addt_dsl.interop.commands"}
 # layer -> the layers its modules may import (besides their own)
