@@ -21,6 +21,7 @@ process pays the compile (~0.3-1 s a kernel) only the first time on a machine.
 from __future__ import annotations
 
 import functools
+import math
 import types
 from typing import Callable
 
@@ -34,6 +35,7 @@ class Kernel:
     def __init__(self, fn: Callable):
         self.py_func = fn
         self._compiled: Callable | None = None
+        self._compiling = False
         functools.update_wrapper(self, fn)
 
     def __call__(self, *args):
@@ -48,16 +50,24 @@ class Kernel:
         fn = self.py_func
         callees = {name: fn.__globals__[name].dispatcher() for name in fn.__code__.co_names
                    if isinstance(fn.__globals__.get(name), Kernel)}
+        if any(d is None for d in callees.values()):
+            raise TypeError(f"kernel {fn.__qualname__} calls itself (write the recursion as a loop)")
         if callees:  # numba types dispatchers, not this class: the kernels it calls, compiled
             fn = types.FunctionType(fn.__code__, {**fn.__globals__, **callees}, fn.__name__, fn.__defaults__,
                                     fn.__closure__)
             fn.__qualname__, fn.__module__ = self.py_func.__qualname__, self.py_func.__module__
         return numba.njit(**OPTIONS)(fn)
 
-    def dispatcher(self) -> Callable:
-        """The compiled function (compiling it now if it is not yet)."""
+    def dispatcher(self) -> Callable | None:
+        """The compiled function (compiling it now if it is not yet); None while it compiles."""
         if self._compiled is None:
-            self._compiled = self.compile()
+            if self._compiling:
+                return None
+            self._compiling = True
+            try:
+                self._compiled = self.compile()
+            finally:
+                self._compiling = False
         return self._compiled
 
     def __reduce__(self):  # pickles by name (as the module-level function it is)
@@ -68,3 +78,69 @@ def kernel(fn: Callable) -> Kernel:
     """Mark a module-level function as a compiled kernel. A kernel may call other kernels by
     their module-level names (compiled, they are compiled in)."""
     return Kernel(fn)
+
+
+_SPLIT = 134217729.0  # 2**27 + 1: Veltkamp's splitter for doubles
+_DBL_MIN = 2.2250738585072014e-308
+
+
+@kernel
+def _dl_mul(x, y):
+    """x * y as (hi, lo), hi + lo exact (Dekker's mul12)."""
+    t = x * _SPLIT
+    xh = t - (t - x)
+    xl = x - xh
+    t = y * _SPLIT
+    yh = t - (t - y)
+    yl = y - yh
+    p = xh * yh
+    q = xh * yl + xl * yh
+    z = p + q
+    return z, p - z + q + xl * yl
+
+
+@kernel
+def _norm2(a, b, big):
+    _, e = math.frexp(big)
+    if e < -1023:  # ldexp(1, -e) would overflow: subnormals to normals first
+        return _DBL_MIN * _norm2_normal(a / _DBL_MIN, b / _DBL_MIN, big / _DBL_MIN)
+    return _norm2_normal(a, b, big)
+
+
+@kernel
+def _norm2_normal(a, b, big):
+    _, e = math.frexp(big)
+    scale = math.ldexp(1.0, -e)
+    csum, frac1, frac2 = 1.0, 0.0, 0.0
+    for v in (a, b):
+        x = v * scale  # lossless
+        hi, lo = _dl_mul(x, x)  # lossless squaring
+        s = csum + hi  # lossless addition (fast two-sum: |csum| >= |hi|)
+        frac2 += hi - (s - csum)
+        csum = s
+        frac1 += lo
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
+    hi, lo = _dl_mul(-h, h)
+    s = csum + hi
+    frac2 += hi - (s - csum)
+    csum = s
+    frac1 += lo
+    x = csum - 1.0 + (frac1 + frac2)
+    h += x / (2.0 * h)  # differential correction
+    return h / scale
+
+
+@kernel
+def hypot(x, y):
+    """sqrt(x*x + y*y) [same unit as x, y] with CPython 3.11's `math.hypot` bits (its
+    vector_norm: scaled, squared in double length, one correction). numba's `math.hypot` is
+    the C library's, which differs in the last bit: kernels call this one."""
+    a, b = abs(x), abs(y)
+    if math.isinf(a) or math.isinf(b):
+        return math.inf
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    big = a if a > b else b
+    if big == 0.0:
+        return big
+    return _norm2(a, b, big)
