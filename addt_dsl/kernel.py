@@ -23,7 +23,7 @@ from __future__ import annotations
 import functools
 import math
 import types
-from typing import Callable
+from collections.abc import Callable
 
 OPTIONS = {"cache": True, "error_model": "numpy", "fastmath": False, "nogil": True}
 
@@ -140,7 +140,7 @@ def hypot(x, y):
         return math.inf
     if math.isnan(a) or math.isnan(b):
         return math.nan
-    big = a if a > b else b
+    big = max(b, a)
     if big == 0.0:
         return big
     return _norm2(a, b, big)
