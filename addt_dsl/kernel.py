@@ -9,8 +9,10 @@ check the compiled form gives its bits), so there is one definition of each comp
 The settings keep IEEE semantics, so a kernel gives the bits of the Python it was written
 from: no fast-math (no reassociation, no fused multiply-add), numpy's error model (x / 0.0
 is inf or nan as in numpy, not ZeroDivisionError). numba calls the C library for `math.sin`,
-`math.exp`, `**` and the like, as CPython does; `math.hypot` is numba's own (it differs from
-the C library's in the last bit): write `math.sqrt(x * x + y * y)` where that is meant.
+`math.exp`, `math.pow` and the like, as CPython does, with two exceptions: `x ** 2` and
+`x ** 2.0` become `x * x` (CPython's is the C library's `pow`, ~0.1 % of doubles differ):
+write `pow(x, 2.0)` with this module's `pow` where the Python it replaces wrote `x ** 2`;
+and `math.hypot` is the C library's where CPython has its own: use this module's `hypot`.
 
 numba is imported at a kernel's first call, not at import (its import costs ~0.2-0.4 s that
 a compile-only command should not pay). Compiled code is cached on disk (numba's `cache`:
@@ -26,6 +28,33 @@ import types
 from collections.abc import Callable
 
 OPTIONS = {"cache": True, "error_model": "numpy", "fastmath": False, "nogil": True}
+
+
+class Libm:
+    """A C library function a kernel calls by a name of its own, so the compiler cannot
+    rewrite it: LLVM turns `pow(x, 2.0)` into `x * x`, which the C library's `pow` is not
+    (they differ in ~0.1 % of doubles), and CPython's `x ** 2.0` is the C library's."""
+
+    def __init__(self, name: str, python: Callable, arity: int):
+        self.name, self.python, self.arity = name, python, arity
+        self._external = None
+
+    def __call__(self, *args):
+        return self.python(*args)
+
+    def external(self):
+        if self._external is None:
+            import ctypes
+            import ctypes.util
+
+            import llvmlite.binding as llvm
+            from numba import types as nt
+
+            lib = ctypes.CDLL(ctypes.util.find_library("m") or ctypes.util.find_library("c"))
+            symbol = "addt_libm_" + self.name
+            llvm.add_symbol(symbol, ctypes.cast(getattr(lib, self.name), ctypes.c_void_p).value)
+            self._external = nt.ExternalFunction(symbol, nt.float64(*[nt.float64] * self.arity))
+        return self._external
 
 
 class Kernel:
@@ -50,9 +79,11 @@ class Kernel:
         fn = self.py_func
         callees = {name: fn.__globals__[name].dispatcher() for name in fn.__code__.co_names
                    if isinstance(fn.__globals__.get(name), Kernel)}
+        callees.update({name: fn.__globals__[name].external() for name in fn.__code__.co_names
+                        if isinstance(fn.__globals__.get(name), Libm)})
         if any(d is None for d in callees.values()):
             raise TypeError(f"kernel {fn.__qualname__} calls itself (write the recursion as a loop)")
-        if callees:  # numba types dispatchers, not this class: the kernels it calls, compiled
+        if callees:  # numba types dispatchers, not these classes: the kernels it calls, compiled
             fn = types.FunctionType(fn.__code__, {**fn.__globals__, **callees}, fn.__name__, fn.__defaults__,
                                     fn.__closure__)
             fn.__qualname__, fn.__module__ = self.py_func.__qualname__, self.py_func.__module__
@@ -79,6 +110,11 @@ def kernel(fn: Callable) -> Kernel:
     their module-level names (compiled, they are compiled in)."""
     return Kernel(fn)
 
+
+pow = Libm("pow", lambda x, y: float(x) ** float(y), 2)
+"""x ** y [-] as CPython's float power gives it (the C library's pow) for finite results;
+where CPython raises (0 ** -1, a negative base to a fractional power) this gives pow's inf
+or nan."""
 
 _SPLIT = 134217729.0  # 2**27 + 1: Veltkamp's splitter for doubles
 _DBL_MIN = 2.2250738585072014e-308
