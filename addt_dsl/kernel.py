@@ -22,12 +22,26 @@ process pays the compile (~0.3-1 s a kernel) only the first time on a machine.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import types
 from collections.abc import Callable
 
 OPTIONS = {"cache": True, "error_model": "numpy", "fastmath": False, "nogil": True}
+_interpreting = False  # `interpreted()`: every kernel call runs its Python
+
+
+@contextlib.contextmanager
+def interpreted():
+    """Within: kernels called from Python run their Python source, callees included (tests
+    compare it with the compiled code's bits)."""
+    global _interpreting
+    before, _interpreting = _interpreting, True
+    try:
+        yield
+    finally:
+        _interpreting = before
 
 
 class Libm:
@@ -68,6 +82,8 @@ class Kernel:
         functools.update_wrapper(self, fn)
 
     def __call__(self, *args):
+        if _interpreting:
+            return self.py_func(*args)
         compiled = self._compiled
         if compiled is None:
             compiled = self.dispatcher()
