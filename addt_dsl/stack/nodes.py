@@ -468,11 +468,12 @@ class LatticePlanner:
                 targets += nudges
             cands += [(lane, t_cand, speed, extra) for t_cand, extra in targets for speed in speeds]
         costs = np.empty(len(cands))
+        objs_arr = objects_array(objs_sc)
         if cands:
             candidate_costs(np.array([c[0] for c in cands], dtype=np.int64),
                             np.array([c[1] for c in cands], dtype=np.float64),
                             np.array([c[2] for c in cands], dtype=np.float64),
-                            *self._cost_args(s0, t0, ego_speed, objects_array(objs_sc), current, pref, stamp_s),
+                            *self._cost_args(s0, t0, ego_speed, objs_arr, current, pref, stamp_s),
                             costs)
         best = None
         for (lane, t_cand, speed, extra), cost in zip(cands, costs.tolist()):
@@ -504,7 +505,7 @@ class LatticePlanner:
             if stop_brake is not None:
                 speed, brake = 0.0, max(brake, stop_brake)
         v_s, v_t = ego_v_st if ego_v_st is not None else (ego_speed, 0.0)
-        stage, ttc, aeb_brake = self.fcw.check(s0, t0, v_s, v_t, objs_sc, stamp_s)
+        stage, ttc, aeb_brake = self.fcw.check(s0, t0, v_s, v_t, objs_arr, stamp_s)
         if aeb_brake > brake:
             brake = aeb_brake
         if brake > 0.0:
@@ -992,12 +993,42 @@ def _across_lane(lane: int, lanes) -> int | None:
     return other if other in lanes else None
 
 
+@kernel
 def _overlap_times(a: float, b: float, c: float) -> tuple[float, float]:
     """The times τ with |a + b τ| < c (an empty interval has start > end)."""
     if b == 0.0:
         return (-math.inf, math.inf) if abs(a) < c else (math.inf, -math.inf)
     t1, t2 = (-c - a) / b, (c - a) / b
     return (t1, t2) if t1 < t2 else (t2, t1)
+
+
+@kernel
+def first_collision(s0, t0, v_s, v_t, objs, half_len, half_wid, margin, horizon_s):
+    """`ForwardCollisionCheck.time_to_collision` over `objects_array` rows: (the first time
+    [s] within `horizon_s` an object ahead overlaps the ego's box along the road and, with
+    `margin` [m] to spare, across it, the closing speed then [m/s]); (inf, 0) for none. Both
+    move at constant velocity (the ego at `v_s`, `v_t` [m/s] from `s0`, `t0` [m])."""
+    best, closing = math.inf, 0.0
+    for j in range(objs.shape[0]):
+        os_, ot, ovs, ovt, olen, owid = objs[j, 0], objs[j, 1], objs[j, 2], objs[j, 3], objs[j, 4], objs[j, 5]
+        d = os_ - s0
+        if not d > 0.0:
+            continue
+        a0, a1 = _overlap_times(d, ovs - v_s, 0.5 * olen + half_len)
+        l0, l1 = _overlap_times(ot - t0, ovt - v_t, 0.5 * owid + half_wid + margin)
+        start = a0  # max(a0, l0, 0.0) and min(a1, l1, horizon_s) as the builtins compare (NaN too)
+        if l0 > start:
+            start = l0
+        if 0.0 > start:
+            start = 0.0
+        end = a1
+        if l1 < end:
+            end = l1
+        if horizon_s < end:
+            end = horizon_s
+        if start <= end and start < best:
+            best, closing = start, v_s - ovs
+    return best, closing
 
 
 class ForwardCollisionCheck:
@@ -1038,19 +1069,12 @@ class ForwardCollisionCheck:
 
     def time_to_collision(self, s0, t0, v_s, v_t, objs) -> tuple[float, float]:
         """(TTC [s], closing speed along the road [m/s]) of the first predicted collision
-        with an object ahead within the horizon; (inf, 0) when there is none."""
-        half_len, half_wid = 0.5 * self.body.length_m, 0.5 * self.body.width_m
-        best, closing = math.inf, 0.0
-        for os_, ot, ovs, ovt, olen, owid, *_ in objs:
-            d = os_ - s0
-            if not d > 0.0:
-                continue
-            a0, a1 = _overlap_times(d, ovs - v_s, 0.5 * olen + half_len)
-            l0, l1 = _overlap_times(ot - t0, ovt - v_t, 0.5 * owid + half_wid + self.lateral_margin_m)
-            start = max(a0, l0, 0.0)
-            if start <= min(a1, l1, self.horizon_s) and start < best:
-                best, closing = start, v_s - ovs
-        return best, closing
+        with an object ahead within the horizon; (inf, 0) when there is none. `objs`: the
+        planner's object tuples or their `objects_array`."""
+        if not isinstance(objs, np.ndarray):
+            objs = objects_array(objs)
+        return first_collision(float(s0), float(t0), float(v_s), float(v_t), objs, 0.5 * self.body.length_m,
+                               0.5 * self.body.width_m, float(self.lateral_margin_m), float(self.horizon_s))
 
     def check(self, s0, t0, v_s, v_t, objs, now: float = 0.0) -> tuple[int, float, float]:
         """(stage, TTC [s], deceleration to apply [m/s^2]) at time `now` [s]."""

@@ -181,3 +181,40 @@ def test_kernel_gives_the_python_loops_bits_over_a_grid_of_scenes():
             candidate_costs(lane_a, t_a, v_a, *args, got)
             want = [_loop_cost(planner, lane, t, v, 100.0, -1.75, v0, [o], -1, -1, 2.0) for lane, t, v in cands]
             assert _bits(got) == _bits(want), (v0, o)
+
+
+def _old_overlap(a, b, c):
+    if b == 0.0:
+        return (-math.inf, math.inf) if abs(a) < c else (math.inf, -math.inf)
+    t1, t2 = (-c - a) / b, (c - a) / b
+    return (t1, t2) if t1 < t2 else (t2, t1)
+
+
+def _loop_ttc(fcw, s0, t0, v_s, v_t, objs):
+    """`ForwardCollisionCheck.time_to_collision` as a Python loop (the code the kernel replaced)."""
+    half_len, half_wid = 0.5 * fcw.body.length_m, 0.5 * fcw.body.width_m
+    best, closing = math.inf, 0.0
+    for os_, ot, ovs, ovt, olen, owid, *_ in objs:
+        d = os_ - s0
+        if not d > 0.0:
+            continue
+        a0, a1 = _old_overlap(d, ovs - v_s, 0.5 * olen + half_len)
+        l0, l1 = _old_overlap(ot - t0, ovt - v_t, 0.5 * owid + half_wid + fcw.lateral_margin_m)
+        start = max(a0, l0, 0.0)
+        if start <= min(a1, l1, fcw.horizon_s) and start < best:
+            best, closing = start, v_s - ovs
+    return best, closing
+
+
+@settings(max_examples=300, deadline=None)
+@given(objects, st.floats(90.0, 110.0) | odd, offset, velocity, st.sampled_from([0.0, 0.5, -1.0]) | velocity)
+def test_first_collision_gives_the_python_loops_bits(objs, s0, t0, v_s, v_t):
+    from addt_dsl.stack.nodes import ForwardCollisionCheck, first_collision
+
+    fcw = ForwardCollisionCheck({})
+    args = (s0, t0, v_s, v_t, objects_array(objs), 0.5 * fcw.body.length_m, 0.5 * fcw.body.width_m,
+            fcw.lateral_margin_m, fcw.horizon_s)
+    with np.errstate(all="ignore"):
+        compiled, interpreted = first_collision(*args), first_collision.py_func(*args)
+    assert _bits(compiled) == _bits(interpreted) == _bits(_loop_ttc(fcw, s0, t0, v_s, v_t, objs)) \
+        == _bits(fcw.time_to_collision(s0, t0, v_s, v_t, objs))
