@@ -824,15 +824,11 @@ class LatticePlanner:
                 float(self.PREDICT_CROSS_SPEED))
 
 
-_NO_OBJECTS = np.empty((0, 8))
-_NO_OBJECTS.flags.writeable = False
-
-
 def objects_array(objs) -> np.ndarray:
     """The planner's objects as an (n, 8) float64 array: s, t, v_s, v_t, length along, width
     across, a_s, a_t (the accelerations 0 where a tuple has only six fields)."""
     if not objs:
-        return _NO_OBJECTS
+        return np.empty((0, 8))  # (writable, C order: the kernels' one signature)
     return np.array([o if len(o) == 8 else (*o[:6], 0.0, 0.0) for o in objs], dtype=np.float64)
 
 
