@@ -14,7 +14,7 @@ import numpy as np
 from addt_dsl.kernel import kernel
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.actor_road import ActorPath
-from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S
+from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S, T
 from addt_dsl.runtime.behaviors import (Idm, IdmParams, lateral_profile, relative_heading, settle_lane_change,
                                         standing_yaw)
 from addt_dsl.runtime.fastroad import POSE_GRADE, POSE_H, POSE_OFFSET, POSE_X, POSE_Y, POSE_Z
