@@ -36,12 +36,13 @@ def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: floa
 
 
 # Agents posed as arrays from this many on in a batch (all its runs' together), and stepped
-# as arrays from STEP_MIN_AGENTS on: fewer, and the per-agent code is quicker (posing: ~30 us
-# of numpy calls against ~2 us per agent, measured break-even at ~24 agents; the array step
+# as arrays from STEP_MIN_AGENTS on: fewer, and the per-agent code is quicker (posing: ~15 us
+# of calls, two kernels among them, against ~2-5 us per agent; the whole loop measured at
+# break-even at ~4 agents: with fewer, the rows as lists are quicker to record; the array step
 # asks two leader lookups of ~30 numpy calls each per step, ~250 us of CPU for 50 agents in
 # one run; the per-agent step costs ~4.3 us an agent through the agents' views (`AgentState`):
 # measured break-even at ~50 agents in one run). Both ways give the same bits.
-ARRAY_MIN_AGENTS = 24
+ARRAY_MIN_AGENTS = 4
 STEP_MIN_AGENTS = 48
 
 
@@ -202,6 +203,7 @@ class _Layout:
             self.yaw += [(lo + i, f.agents[i], yaw) for i, yaw in f.yaw]
         self.groups = [(fast, elev, np.concatenate(parts)) for fast, elev, parts in groups.values()]
         self.yaw_rows = np.array([k for k, _, _ in self.yaw], dtype=np.intp)
+        self.zeros = np.zeros(self.n)  # (no agent turned off its road's heading: never written)
         self.half_height = np.concatenate([f.half_height for f in fleets])
         self.length = np.concatenate([f.length for f in fleets])
         self._views = None
@@ -284,13 +286,15 @@ class Fleets:
             finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts).tolist()
             left = [item for item, ok in zip(items, finite) if not ok]
             return left + self._pose_arrays([item for item, ok in zip(items, finite) if ok])
-        rel = np.zeros(n)
+        rel = None
         for j, (run, t_now) in enumerate(items):
             f = run.fleet
             plan = f.array_plan(run)  # with one, only lane changes turn agents off their road's heading
             lateral = plan[2] if plan is not None else \
                 [i for i, a in enumerate(f.agents) if a.heading_rel or a.lc_duration_s > 0.0]
             for i in lateral:
+                if rel is None:
+                    rel = np.zeros(n)
                 rel[lo[j] + i] = relative_heading(f.agents[i], t_now, run.dt)
         for k, f, i in layout.path_rows:  # routes: one by one
             a = f.agents[i]
@@ -298,14 +302,13 @@ class Fleets:
                 out[POSE_GRADE, k] = f.road_pose(i)
             a.ground_scale = f.roads[i].road.ground_scale(a.s, a.t)
         yaw = np.array([standing_yaw(a, yaw) for _, a, yaw in layout.yaw], dtype=float) if layout.yaw else _NO_YAW
-        _body_poses(out, rel, layout.yaw_rows, yaw, layout.half_height)
-        v = flat[SPEED, cells]
+        _body_poses(out, layout.zeros if rel is None else rel, layout.yaw_rows, yaw, layout.half_height, flat, cells)
         for j, (run, _) in enumerate(items):
-            f, pose = run.fleet, out[:, lo[j]:lo[j + 1]]
+            f, pose = run.fleet, out if len(items) == 1 else out[:, lo[j]:lo[j + 1]]
             x, y, heading = pose[POSE_X], pose[POSE_Y], pose[_HEADING]
             run.physics.set_poses(f.slots, x, y, pose[POSE_Z], heading, pose[_PITCH])
             f.x, f.y, f.heading, f.lane_offset, f.rows = x, y, heading, pose[POSE_OFFSET], None
-            f.v = v[lo[j]:lo[j + 1]]  # (perception's ground truth: the speed of the pose)
+            f.v = pose[_SPEED]  # (perception's ground truth: the speed of the pose)
             f.posed = True
         return []
 
@@ -390,21 +393,22 @@ class Fleets:
         return rest
 
 
-# `_pose_arrays`' rows: `FastRoad.pose_rows`' and the body's heading and pitch [rad].
-_HEADING, _PITCH = 6, 7
-_POSE_ROWS = 8
+# `_pose_arrays`' rows: `FastRoad.pose_rows`' and the body's heading and pitch [rad], the speed [m/s].
+_HEADING, _PITCH, _SPEED = 6, 7, 8
+_POSE_ROWS = 9
 _NO_YAW = np.empty(0)
 
 
 @kernel
-def _body_poses(out, rel, yaw_rows, yaw, half_height):
+def _body_poses(out, rel, yaw_rows, yaw, half_height, flat, cells):
     """Each agent's body heading (its road's plus `rel`, plus `yaw` at `yaw_rows`, in that
     order) and pitch (the grade's angle seen along the body: atan(grade) * cos(heading -
-    road heading), 0 where flat and along the road), and its centre's height (road z plus
-    `half_height`), in `out`'s rows."""
+    road heading), 0 where flat and along the road), its centre's height (road z plus
+    `half_height`), and its speed (block slot `cells[k]`), in `out`'s rows."""
     n = out.shape[1]
     for k in range(n):
         out[_HEADING, k] = out[POSE_H, k] + rel[k]
+        out[_SPEED, k] = flat[SPEED, cells[k]]
     for j in range(yaw_rows.size):
         out[_HEADING, yaw_rows[j]] += yaw[j]
     for k in range(n):
