@@ -117,8 +117,9 @@ def main() -> None:
                       f"{row['project_us']:10.3f} {row['project_calls_per_run_step']:10.2f}  {row['digest']}",
                       flush=True)
             load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-            print(f"{'':6s} {'':5s} ratio [0]/[{len(rows) - 1}]: pose {rows[0]['pose_cpu_us'] / rows[-1]['pose_cpu_us']:.2f}x"
-                  f"  project {rows[0]['project_us'] / rows[-1]['project_us']:.2f}x"
+            first, last = rows[0], rows[-1]
+            print(f"{'':6s} {'':5s} ratio [0]/[{len(rows) - 1}]: pose {first['pose_cpu_us'] / last['pose_cpu_us']:.2f}x"
+                  f"  project {first['project_us'] / last['project_us']:.2f}x"
                   f"  digests {'equal' if len({r['digest'] for r in rows}) == 1 else 'DIFFER'}  load {load}",
                   flush=True)
             figures[f"{agents}x{batch}"] = rows
