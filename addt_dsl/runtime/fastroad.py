@@ -201,6 +201,7 @@ class FastRoad:
         self._section_starts = [sec.s0 for sec in road.sections]
         self._lanes_cache: dict[int, tuple[int, ...]] = {}
         self._center_cache: dict[int, list[float]] = {}
+        self._center_rows: dict[int, np.ndarray] = {}  # the same centres as arrays (`_lanes_tabled`)
 
     def _table(self) -> None:
         """The kernels' table of the samples (`_X`..`_S` rows) and its spacing."""
@@ -329,12 +330,13 @@ class FastRoad:
         table = self._center_cache.get(lane)
         if table is None:
             try:
-                vals = np.asarray(self.road.lane_center_t(lane, np.asarray(self._s)), dtype=float)
+                vals = np.array(self.road.lane_center_t(lane, self._tab[_S]), dtype=float)
             except ValueError:
                 vals = np.array([float(self.road.lane_center_t(lane, si)) if lane in self.road.lane_ids(si)
                                  else math.nan for si in self._s])
             table = vals.tolist()
             self._center_cache[lane] = table
+            self._center_rows[lane] = vals
         i, u = self._index(s)
         return table[i] + u * (table[i + 1] - table[i])
 
@@ -364,7 +366,7 @@ class FastRoad:
             for lane in self._lanes_of_section(key):
                 self.lane_center_t(lane, 0.0)  # fills the lane's table
         order = list(self._center_cache)
-        centres = np.array([self._center_cache[lane] for lane in order]).reshape(len(order), len(self._s))
+        centres = np.array([self._center_rows[lane] for lane in order]).reshape(len(order), len(self._s))
         starts = np.array(self._section_starts, dtype=float)
         counts = [len(self._lanes_cache[k]) for k in range(len(starts)) if k in self._lanes_cache]
         lanes = np.full((len(starts), 1 + max(counts, default=0)), -1, dtype=np.int64)
