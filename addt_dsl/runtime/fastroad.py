@@ -40,8 +40,10 @@ def _index(tab, ds, last_i, s):
     """(sample index, fraction) of station `s`: int(s / ds) clamped to the samples (clamping
     the quotient first gives the same index)."""
     q = s / ds
-    if not q - q == 0.0:  # (int() of it raised, as it does interpreted)
-        raise ValueError("a station must be finite")
+    if q != q:  # int() of it raised, and raises (as interpreted, its words too)
+        raise ValueError("cannot convert float NaN to integer")
+    if q - q != 0.0:
+        raise OverflowError("cannot convert float infinity to integer")
     if q < 0.0:
         q = 0.0
     elif q > last_i:

@@ -68,7 +68,7 @@ def _elevation(z, g, ds, length, s):
     u = 0.0 if 0.0 > s else s  # min(max(s, 0.0), length), as the builtins pick
     u = (length if length < u else u) / ds
     if u != u:
-        raise ValueError("a station must not be NaN")
+        raise ValueError("cannot convert float NaN to integer")  # (int()'s words, as interpreted)
     i = int(u)
     if i > z.size - 2:
         i = z.size - 2

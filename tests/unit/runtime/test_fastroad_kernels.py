@@ -260,5 +260,8 @@ def test_straight_road_by_hand():
     assert fast.lane_offset(80.0, -4.0) == pytest.approx(1.25)
     assert fast.project(120.25, -4.5, 100.0) == pytest.approx((120.25, -4.5))
     assert fast.project(120.25, -4.5) == pytest.approx((120.25, -4.5))
-    with pytest.raises(ValueError):
-        fast.reference_pose(math.nan)
+    for s, error in ((math.nan, ValueError), (math.inf, OverflowError)):  # as int() of them, interpreted
+        with pytest.raises(error, match="cannot convert float"):
+            fast.reference_pose(s)
+        with pytest.raises(error, match="cannot convert float"):
+            old_reference_pose(fast, s)
