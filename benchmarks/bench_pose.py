@@ -7,9 +7,10 @@ batch of B runs in a child process per checkout (its PYTHONPATH the checkout), a
 checkouts, with the pose phase timed inside the loop (the least of the repeats), and the
 `project` calls of the run (the ego's projection onto its road) recorded and replayed alone.
 `--pose-min K` sets `agents.ARRAY_MIN_AGENTS` (posing as arrays from K agents in a batch; by
-default each checkout's own) in both.
+default each checkout's own) in both. By default the one checkout `.`; before/after:
+`--checkouts /path/to/main,.`.
 
-Run: PYTHONPATH=. python benchmarks/bench_pose.py [--checkouts /work/main,.] [--agents 1,5,20,50,100]
+Run: PYTHONPATH=. python benchmarks/bench_pose.py [--checkouts A,B] [--agents 1,5,20,50,100]
      [--batches 1,16,64] [--repeat 3] [--pose-min K] [--json FILE]
 Prints per configuration and checkout the CPU us per run-step of the pose phase (process
 time; wall beside), us per `project` call, the ratio first/last checkout, and the load.
@@ -96,7 +97,7 @@ def main() -> None:
         pose_min = int(arg("--pose-min", "-1"))
         print(json.dumps(child(agents, batch, repeat, None if pose_min < 0 else pose_min)))
         return
-    checkouts = [str(Path(p).resolve()) for p in arg("--checkouts", "/work/main,.").split(",")]
+    checkouts = [str(Path(p).resolve()) for p in arg("--checkouts", ".").split(",")]
     repeat = int(arg("--repeat", "3"))
     extra = ["--pose-min", arg("--pose-min", "")] if "--pose-min" in sys.argv else []
     figures: dict = {"checkouts": checkouts}
