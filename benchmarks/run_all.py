@@ -50,6 +50,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "cost_model": ([], ["--quick"]),
     "batch": (["--scaling"], ["--quick"]),
     "views": ([], ["--agents", "50", "--batches", "1,16", "--repeat", "2"]),
+    "pose": ([], ["--agents", "5,50", "--batches", "1,16", "--repeat", "1"]),
 }
 
 

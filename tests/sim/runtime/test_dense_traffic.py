@@ -6,14 +6,12 @@ handed to pybullet at once)."""
 
 from collections import Counter
 
-import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
 from addt_dsl.runtime import agents as A
 from addt_dsl.runtime import collision as C
 from addt_dsl.runtime import execute as X
-from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.neighbours import LeaderIndex, leader_scan
 from addt_dsl.runtime.world import PhysicsWorld
 from addt_dsl.sweep import expand
@@ -64,19 +62,9 @@ def all_pairs(runs):
     return [C._all_pairs(x, y, heading, length, width) for x, y, heading, length, width, _ in runs]
 
 
-def one_by_one_points(self, s, t):
-    """`FastRoad.points` as a loop of the scalar calls."""
-    rows = [(*self.point(si, ti), *self._index(si)) for si, ti in zip(s.tolist(), t.tolist())]
-    return tuple(np.array(c) for c in zip(*rows))
-
-
-def one_by_one_offsets(self, s, t, i, u):
-    return np.array([self.lane_offset(si, ti) for si, ti in zip(s.tolist(), t.tolist())])
-
-
 def brute_force(monkeypatch):
     """The per-agent loop with the reference lookups: agents stepped one by one, leaders
-    found by scanning every actor, every pair tested, road points one at a time, every
+    found by scanning every actor, every pair tested, agents posed one at a time, every
     pose handed to pybullet at once."""
     eager, eager_many = PhysicsWorld.set_pose, PhysicsWorld.set_poses
 
@@ -91,8 +79,6 @@ def brute_force(monkeypatch):
     monkeypatch.setattr(A, "ARRAY_MIN_AGENTS", 10 ** 9)
     monkeypatch.setattr(LeaderIndex, "leader", lambda self, agent: leader_scan(self.members, agent))
     monkeypatch.setattr(C, "_broad_phase", all_pairs)
-    monkeypatch.setattr(FastRoad, "points", one_by_one_points)
-    monkeypatch.setattr(FastRoad, "lane_offsets", one_by_one_offsets)
     monkeypatch.setattr(PhysicsWorld, "set_pose", set_pose_now)
     monkeypatch.setattr(PhysicsWorld, "set_poses", set_poses_now)
 
