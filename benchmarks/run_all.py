@@ -51,6 +51,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "batch": (["--scaling"], ["--quick"]),
     "views": ([], ["--agents", "50", "--batches", "1,16", "--repeat", "2"]),
     "pose": ([], ["--agents", "5,50", "--batches", "1,16", "--repeat", "1"]),
+    "planner": ([], ["--repeats", "20", "--rounds", "1"]),
 }
 
 
