@@ -16,7 +16,6 @@ from addt_dsl.runtime.actor_road import ActorPath
 from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S
 from addt_dsl.runtime.behaviors import (Idm, IdmParams, lateral_profile, relative_heading, settle_lane_change,
                                         standing_yaw)
-from addt_dsl.runtime.vehicle import VehicleState
 
 
 def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: float) \
@@ -111,13 +110,6 @@ class Fleet:
         state[SCALE] = scale
         self.x, self.y, self.heading, self.v, self.rows = x, y, heading, v, rows
         self.posed = True
-
-    def columns(self, ego: VehicleState):
-        """(x, y, heading) of every actor, the ego first: lists or arrays as posed."""
-        if self.rows is not None:
-            return [ego.x, *self.x], [ego.y, *self.y], [ego.heading, *self.heading]
-        return tuple(np.concatenate(([v], a))
-                     for v, a in ((ego.x, self.x), (ego.y, self.y), (ego.heading, self.heading)))
 
     def road_pose(self, i: int):
         """(x, y, road heading, lane offset, z, grade) of agent i, one by one."""
