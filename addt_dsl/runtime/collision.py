@@ -39,13 +39,14 @@ def clearances_batch(items) -> list[bool]:
 
     Each actor's clearance is its least `_pair` separation over the pairs of its run, 1e3 m
     when there is none finite; every run of the batch in one call of `_clearances`."""
-    first = _first(tuple(len(item[1]) for item in items))
     if len(items) == 1:
-        rows, sizes = items[0][0], items[0][2]
+        rows, _, sizes, run, _ = items[0]
+        first = _first((len(rows),))
     else:
+        first = _first(tuple([len(item[0]) for item in items]))
         rows = np.concatenate([item[0] for item in items])
         sizes = np.concatenate([item[2] for item in items])
-    touch = np.empty((max(8, len(rows)), 3), dtype=np.int64)
+    touch = np.empty((len(rows) + 8, 3), dtype=np.int64)
     found = _clearances(first, rows, sizes, touch)
     if found > len(touch):  # more contacts than room: again with room for all
         touch = np.empty((found, 3), dtype=np.int64)
@@ -55,14 +56,14 @@ def clearances_batch(items) -> list[bool]:
             item[0][:, -1] = rows[lo:hi, -1]
     collided = [False] * len(items)
     pairs: dict[int, list] = {}
-    for k, a, b in touch[:found].tolist():  # in all-pairs order, run by run
-        pairs.setdefault(k, []).append((a, b))
+    if found:
+        for k, a, b in touch[:found].tolist():  # in all-pairs order, run by run
+            pairs.setdefault(k, []).append((a, b))
     for k, item in enumerate(items):
-        run = item[3]
         if k in pairs:
             collided[k] = _contacts(item, pairs[k])
-        elif run.contacts:
-            run.contacts = set()
+        elif item[3].contacts:
+            item[3].contacts = set()
     return collided
 
 
