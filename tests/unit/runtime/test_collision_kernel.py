@@ -1,7 +1,7 @@
-"""The clearances kernel (`collision._clearances`) and what it calls (`kernel.hypot`,
-`world.separation`): compiled, each gives its Python source's bits; `hypot` is CPython's
-`math.hypot`; `separation` is the plain `max` formula it replaced; hand-checked gaps and
-contacts; non-finite poses and more contacts than the first buffer holds."""
+"""The clearances kernel (`collision._clearances`) and the separation it calls
+(`world.separation`): compiled, each gives its Python source's bits; `separation` is the
+plain `max` formula it replaced; hand-checked gaps and contacts; non-finite poses as every
+pair; more contacts than the first buffer holds. (`kernel.hypot`: tests/unit/core/test_kernel.py.)"""
 
 from __future__ import annotations
 
@@ -13,7 +13,6 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.kernel import hypot
 from addt_dsl.runtime import collision as C
 from addt_dsl.runtime.world import box_separation, separation
 
@@ -25,27 +24,6 @@ def bits(values) -> list[bytes]:
 special = st.sampled_from([0.0, -0.0, 5e-324, 1e-310, 2.2250738585072014e-308, 1e-160, 1e160, 1.7976931348623157e308,
                            math.inf, -math.inf, math.nan, 3.0, 4.0, -4.0])
 anyfloat = st.floats(allow_nan=True, allow_infinity=True) | special
-
-
-# ---------------------------------------------------------------- hypot
-
-@settings(max_examples=300, deadline=None)
-@given(anyfloat, anyfloat)
-def test_hypot_is_cpythons(x, y):
-    want = bits([math.hypot(x, y)])
-    assert bits([hypot(x, y)]) == want  # compiled
-    assert bits([hypot.py_func(x, y)]) == want
-
-
-def test_hypot_over_many_scales_is_cpythons():
-    rng = np.random.default_rng(7)
-    n = 20000
-    scales = [rng.normal(size=n) * 100.0, np.exp(rng.uniform(-745.0, 709.0, n)) * rng.choice([-1.0, 1.0], n),
-              np.round(rng.uniform(-50.0, 50.0, n), 2), np.exp(rng.uniform(-745.0, -700.0, n))]
-    for a in scales:
-        for b in scales:
-            got = [hypot(u, v) for u, v in zip(a.tolist(), b.tolist())]
-            assert bits(got) == bits(map(math.hypot, a.tolist(), b.tolist()))
 
 
 # ---------------------------------------------------------------- separation
