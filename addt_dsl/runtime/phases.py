@@ -10,7 +10,7 @@ every live run of the batch before the next:
   record      the state row of every actor (clearance, the last field, below); margins to
               red lights and stop signs; lane states (`lanestate.py`); the scenario variables
   collisions  each actor's clearance; `collision` events (`collision.py`: every run's
-              pairs in one broad phase)
+              pairs in one compiled kernel)
   environment changes of the weather, light and road that fire on the recorded state
   variables   steps that set scenario variables, on the recorded state
   lights      light changes that fire on the recorded state; light states

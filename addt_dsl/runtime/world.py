@@ -287,8 +287,7 @@ def box_separation(a: tuple, b: tuple) -> float:
     Positive: the boxes are apart by at least this much [m]; zero or negative: they
     overlap (separating axis theorem over the four edge normals). On each axis u the gap
     is |d . u| minus both boxes' projected half-extents, which equals projecting all
-    eight corners; written out in plain floats because the loop calls it for every
-    close pair at every step.
+    eight corners (`separation`, compiled: the clearances kernel calls it too).
     """
     xa, ya, ha, la, wa = a
     xb, yb, hb, lb, wb = b
