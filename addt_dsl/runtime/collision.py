@@ -131,11 +131,15 @@ def _clearances(first, rows, sizes, touch):
     from the run's first), as many as fit. Returns how many pairs touch.
 
     The figures are those of visiting every pair in order (a < b) with `_pair` and keeping
-    a new least only when it is less. A pair whose distance sqrt(dx^2 + dy^2) is over its
-    reach + 5 m by more than the slack is far: `_pair` gives its distance (from `hypot`)
-    less the reach, within the slack of the distance's. Far pairs take the cheap distance
-    first; those within twice the slack of either actor's least then take `_pair`: the
-    others cannot be an actor's least (see `_broad_phase_is_exact` in the tests)."""
+    a new least only when it is less. A pair whose plain distance d = sqrt(dx^2 + dy^2) is
+    over its reach + 5 m by more than its slack s = 1e-6 (1 + d) m is far: `_pair` gives
+    its `hypot` distance less the reach, which differs from d less the reach by ulps, far
+    less than s. Far pairs take the plain figure first, the others `_pair`: each actor's
+    first least L, set by a pair of slack t (0 when exact), is at least the exact least E
+    less t. Then a far pair takes `_pair` where its plain figure is within L + t + s of
+    either actor: for the others the exact figure is over L + t >= E and the plain one
+    too, so neither can be an actor's least, and the least over the figures then is the
+    least over the exact ones (ties in the same order)."""
     x, y, heading, length, width = rows[:, 0], rows[:, 1], rows[:, 2], sizes[:, 0], sizes[:, 1]
     n = rows.shape[0]
     clear = rows[:, rows.shape[1] - 1]
@@ -143,6 +147,7 @@ def _clearances(first, rows, sizes, touch):
     cos_h = np.empty(n)
     sin_h = np.empty(n)
     trig = np.zeros(n, dtype=np.bool_)  # cos_h, sin_h computed (when a box test needs them)
+    tol = np.empty(n)  # the slack of the pair that set each actor's first least
     most = 0
     for k in range(first.size - 1):
         most = max(most, first[k + 1] - first[k])
@@ -155,17 +160,20 @@ def _clearances(first, rows, sizes, touch):
         for a in range(lo, hi):
             reach[a] = 0.5 * hypot(length[a], width[a])
             clear[a] = math.inf
+            tol[a] = 0.0
         p = 0
         for a in range(lo, hi):
             for b in range(a + 1, hi):
                 dx, dy = x[a] - x[b], y[a] - y[b]
                 d = math.sqrt(dx * dx + dy * dy)
                 r = reach[a] + reach[b]
-                if d > r + 5.0 + _BROAD_SLACK_M * (1.0 + d):  # (not inf, not NaN)
+                slack = _BROAD_SLACK_M * (1.0 + d)
+                if d > r + 5.0 + slack:  # (not inf, not NaN)
                     far[p] = True
                     value[p] = d
                     sep = d - r
                 else:
+                    slack = 0.0
                     sep = _exact(a, b, x, y, heading, length, width, reach, cos_h, sin_h, trig)
                     far[p] = False
                     value[p] = sep
@@ -174,12 +182,11 @@ def _clearances(first, rows, sizes, touch):
                             touch[found, 0], touch[found, 1], touch[found, 2] = k, a - lo, b - lo
                         found += 1
                 if sep < clear[a]:
-                    clear[a] = sep
+                    clear[a], tol[a] = sep, slack
                 if sep < clear[b]:
-                    clear[b] = sep
+                    clear[b], tol[b] = sep, slack
                 p += 1
-        # Far pairs within twice the slack of either actor's least: `_pair`; every
-        # actor's least again over the exact figures.
+        # Far pairs that may be an actor's least: `_pair`; every actor's least again.
         for a in range(lo, hi):
             least[a - lo] = math.inf
         p = 0
@@ -189,7 +196,8 @@ def _clearances(first, rows, sizes, touch):
                     d = value[p]
                     r = reach[a] + reach[b]
                     sep = d - r
-                    if sep <= max(clear[a], clear[b]) + 2.0 * _BROAD_SLACK_M * (1.0 + d):
+                    slack = _BROAD_SLACK_M * (1.0 + d)
+                    if sep <= clear[a] + tol[a] + slack or sep <= clear[b] + tol[b] + slack:
                         sep = _exact(a, b, x, y, heading, length, width, reach, cos_h, sin_h, trig)
                 else:
                     sep = value[p]

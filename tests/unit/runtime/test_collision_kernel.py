@@ -69,6 +69,7 @@ def rows_of(boxes):
 
 
 coordinate = st.one_of(st.integers(0, 12).map(lambda i: 6.0 * i), st.floats(-40.0, 120.0),
+                       st.floats(1e9, 1e9 + 30.0),  # far out: ulps of metres, slacks of kilometres
                        st.sampled_from([math.nan, math.inf, -math.inf, 1e200, -0.0]))
 offset = st.sampled_from([-5.25, -1.75, 1.75, 0.0, -0.0]) | st.floats(-8.0, 4.0) | st.just(math.nan)
 heading = st.floats(-0.4, 0.4) | st.sampled_from([0.0, -0.0, math.pi / 2, math.nan])
