@@ -147,12 +147,12 @@ def _clearances(first, rows, sizes, touch):
     cos_h = np.empty(n)
     sin_h = np.empty(n)
     trig = np.zeros(n, dtype=np.bool_)  # cos_h, sin_h computed (when a box test needs them)
-    tol = np.empty(n)  # the slack of the pair that set each actor's first least
+    tol = np.empty(n)  # the slack of the pair that set each actor's first least, then that least plus it
     most = 0
     for k in range(first.size - 1):
         most = max(most, first[k + 1] - first[k])
-    value = np.empty(most * (most - 1) // 2)  # a run's pairs: the separation, or the far distance
-    far = np.empty(most * (most - 1) // 2, dtype=np.bool_)
+    value = np.empty(most * (most - 1) // 2)  # a run's pairs: the plain figure or `_pair`'s
+    slacks = np.empty(most * (most - 1) // 2)  # and its slack (0: `_pair`'s)
     least = np.empty(most)
     found = 0
     for k in range(first.size - 1):
@@ -163,49 +163,46 @@ def _clearances(first, rows, sizes, touch):
             tol[a] = 0.0
         p = 0
         for a in range(lo, hi):
+            xa, ya, ra = x[a], y[a], reach[a]
+            clear_a, tol_a = clear[a], tol[a]  # (a's own, in a register along its pairs)
             for b in range(a + 1, hi):
-                dx, dy = x[a] - x[b], y[a] - y[b]
+                dx, dy = xa - x[b], ya - y[b]
                 d = math.sqrt(dx * dx + dy * dy)
-                r = reach[a] + reach[b]
+                r = ra + reach[b]
                 slack = _BROAD_SLACK_M * (1.0 + d)
-                if d > r + 5.0 + slack:  # (not inf, not NaN)
-                    far[p] = True
-                    value[p] = d
+                if d > r + 5.0 + slack:  # far (so not inf, not NaN)
                     sep = d - r
                 else:
                     slack = 0.0
                     sep = _exact(a, b, x, y, heading, length, width, reach, cos_h, sin_h, trig)
-                    far[p] = False
-                    value[p] = sep
                     if sep <= 0.0:
                         if found < touch.shape[0]:
                             touch[found, 0], touch[found, 1], touch[found, 2] = k, a - lo, b - lo
                         found += 1
-                if sep < clear[a]:
-                    clear[a], tol[a] = sep, slack
+                value[p], slacks[p] = sep, slack
+                if sep < clear_a:
+                    clear_a, tol_a = sep, slack
                 if sep < clear[b]:
                     clear[b], tol[b] = sep, slack
                 p += 1
+            clear[a], tol[a] = clear_a, tol_a
         # Far pairs that may be an actor's least: `_pair`; every actor's least again.
         for a in range(lo, hi):
+            tol[a] += clear[a]  # (now the bound)
             least[a - lo] = math.inf
         p = 0
         for a in range(lo, hi):
+            bound_a, least_a = tol[a], least[a - lo]
             for b in range(a + 1, hi):
-                if far[p]:
-                    d = value[p]
-                    r = reach[a] + reach[b]
-                    sep = d - r
-                    slack = _BROAD_SLACK_M * (1.0 + d)
-                    if sep <= clear[a] + tol[a] + slack or sep <= clear[b] + tol[b] + slack:
-                        sep = _exact(a, b, x, y, heading, length, width, reach, cos_h, sin_h, trig)
-                else:
-                    sep = value[p]
-                if sep < least[a - lo]:
-                    least[a - lo] = sep
+                sep, slack = value[p], slacks[p]
+                if slack > 0.0 and (sep <= bound_a + slack or sep <= tol[b] + slack):
+                    sep = _exact(a, b, x, y, heading, length, width, reach, cos_h, sin_h, trig)
+                if sep < least_a:
+                    least_a = sep
                 if sep < least[b - lo]:
                     least[b - lo] = sep
                 p += 1
+            least[a - lo] = least_a
         for a in range(lo, hi):
             c = least[a - lo]
             clear[a] = c if math.isfinite(c) else _NO_CLEARANCE_M
