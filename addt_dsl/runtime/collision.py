@@ -134,12 +134,12 @@ def _clearances(first, rows, sizes, touch):
     a new least only when it is less. A pair whose plain distance d = sqrt(dx^2 + dy^2) is
     over its reach + 5 m by more than its slack s = 1e-6 (1 + d) m is far: `_pair` gives
     its `hypot` distance less the reach, which differs from d less the reach by ulps, far
-    less than s. Far pairs take the plain figure first, the others `_pair`: each actor's
-    first least L, set by a pair of slack t (0 when exact), is at least the exact least E
-    less t. Then a far pair takes `_pair` where its plain figure is within L + t + s of
-    either actor: for the others the exact figure is over L + t >= E and the plain one
-    too, so neither can be an actor's least, and the least over the figures then is the
-    least over the exact ones (ties in the same order)."""
+    less than s. A first pass takes far pairs' plain figure, the others `_pair`: each
+    actor's first least L, set by a pair of slack t (0 when exact), is at least its exact
+    least E less t. A far pair whose plain figure is over L + t + s cannot be the actor's
+    least (its exact figure is over L + t >= E). Actors with a far pair within that bound
+    (`low`: the least plain figure less slack of its far pairs) visit their pairs again in
+    order, with `_pair` for those within it; the others' L is E."""
     x, y, heading, length, width = rows[:, 0], rows[:, 1], rows[:, 2], sizes[:, 0], sizes[:, 1]
     n = rows.shape[0]
     clear = rows[:, rows.shape[1] - 1]
@@ -147,24 +147,17 @@ def _clearances(first, rows, sizes, touch):
     cos_h = np.empty(n)
     sin_h = np.empty(n)
     trig = np.zeros(n, dtype=np.bool_)  # cos_h, sin_h computed (when a box test needs them)
-    tol = np.empty(n)  # the slack of the pair that set each actor's first least, then that least plus it
-    most = 0
-    for k in range(first.size - 1):
-        most = max(most, first[k + 1] - first[k])
-    value = np.empty(most * (most - 1) // 2)  # a run's pairs: the plain figure or `_pair`'s
-    slacks = np.empty(most * (most - 1) // 2)  # and its slack (0: `_pair`'s)
-    least = np.empty(most)
+    tol = np.empty(n)  # the slack of the pair that set each actor's first least
+    low = np.empty(n)  # each actor's least plain figure less slack over its far pairs
     found = 0
     for k in range(first.size - 1):
         lo, hi = first[k], first[k + 1]
         for a in range(lo, hi):
             reach[a] = 0.5 * hypot(length[a], width[a])
-            clear[a] = math.inf
-            tol[a] = 0.0
-        p = 0
+            clear[a], tol[a], low[a] = math.inf, 0.0, math.inf
         for a in range(lo, hi):
             xa, ya, ra = x[a], y[a], reach[a]
-            clear_a, tol_a = clear[a], tol[a]  # (a's own, in a register along its pairs)
+            clear_a, tol_a, low_a = clear[a], tol[a], low[a]  # (a's own, in registers along its pairs)
             for b in range(a + 1, hi):
                 dx, dy = xa - x[b], ya - y[b]
                 d = math.sqrt(dx * dx + dy * dy)
@@ -172,6 +165,11 @@ def _clearances(first, rows, sizes, touch):
                 slack = _BROAD_SLACK_M * (1.0 + d)
                 if d > r + 5.0 + slack:  # far (so not inf, not NaN)
                     sep = d - r
+                    q = sep - slack
+                    if q < low_a:
+                        low_a = q
+                    if q < low[b]:
+                        low[b] = q
                 else:
                     slack = 0.0
                     sep = _exact(a, b, x, y, heading, length, width, reach, cos_h, sin_h, trig)
@@ -179,31 +177,32 @@ def _clearances(first, rows, sizes, touch):
                         if found < touch.shape[0]:
                             touch[found, 0], touch[found, 1], touch[found, 2] = k, a - lo, b - lo
                         found += 1
-                value[p], slacks[p] = sep, slack
                 if sep < clear_a:
                     clear_a, tol_a = sep, slack
                 if sep < clear[b]:
                     clear[b], tol[b] = sep, slack
-                p += 1
-            clear[a], tol[a] = clear_a, tol_a
-        # Far pairs that may be an actor's least: `_pair`; every actor's least again.
-        for a in range(lo, hi):
-            tol[a] += clear[a]  # (now the bound)
-            least[a - lo] = math.inf
-        p = 0
-        for a in range(lo, hi):
-            bound_a, least_a = tol[a], least[a - lo]
-            for b in range(a + 1, hi):
-                sep, slack = value[p], slacks[p]
-                if slack > 0.0 and (sep <= bound_a + slack or sep <= tol[b] + slack):
+            clear[a], tol[a], low[a] = clear_a, tol_a, low_a
+        for c in range(lo, hi):
+            bound = clear[c] + tol[c]
+            if not low[c] <= bound:  # no far pair can be c's least: it has it
+                continue
+            least = math.inf  # c's pairs again, in all-pairs order (those with a < c first)
+            for other in range(lo, hi):
+                if other == c:
+                    continue
+                a, b = (other, c) if other < c else (c, other)
+                dx, dy = x[a] - x[b], y[a] - y[b]
+                d = math.sqrt(dx * dx + dy * dy)
+                r = reach[a] + reach[b]
+                slack = _BROAD_SLACK_M * (1.0 + d)
+                if d > r + 5.0 + slack and d - r > bound + slack:
+                    sep = d - r
+                else:
                     sep = _exact(a, b, x, y, heading, length, width, reach, cos_h, sin_h, trig)
-                if sep < least_a:
-                    least_a = sep
-                if sep < least[b - lo]:
-                    least[b - lo] = sep
-                p += 1
-            least[a - lo] = least_a
+                if sep < least:
+                    least = sep
+            clear[c] = least
         for a in range(lo, hi):
-            c = least[a - lo]
+            c = clear[a]
             clear[a] = c if math.isfinite(c) else _NO_CLEARANCE_M
     return found
