@@ -5,6 +5,7 @@ pair; more contacts than the first buffer holds. (`kernel.hypot`: tests/unit/cor
 
 from __future__ import annotations
 
+import contextlib
 import math
 import struct
 from types import SimpleNamespace
@@ -13,6 +14,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from addt_dsl.kernel import interpreted
 from addt_dsl.runtime import collision as C
 from addt_dsl.runtime.world import box_separation, separation
 
@@ -84,11 +86,11 @@ def test_compiled_gives_its_python_bits(runs):
     boxes = [b for run in runs for b in run]
     first = np.array([0, *np.cumsum([len(r) for r in runs])], dtype=np.int64)
     results = []
-    for fn in (C._clearances, C._clearances.py_func):
+    for python in (False, True):  # compiled; its Python, callees (`_pair`, hypot, separation) included
         rows, sizes = rows_of(boxes)
         touch = np.full((len(boxes) + 8, 3), -1, dtype=np.int64)
-        with np.errstate(all="ignore"):
-            found = fn(first, rows, sizes, touch)
+        with np.errstate(all="ignore"), interpreted() if python else contextlib.nullcontext():
+            found = C._clearances(first, rows, sizes, touch)
         results.append((found, bits(rows.ravel()), touch.tolist()))
     assert results[0] == results[1]
 
