@@ -40,7 +40,7 @@ def clearances_batch(items) -> list[bool]:
     Each actor's clearance is its least `_pair` separation over the pairs of its run, 1e3 m
     when there is none finite; every run of the batch in one call of `_clearances`."""
     if len(items) == 1:
-        rows, _, sizes, run, _ = items[0]
+        rows, sizes = items[0][0], items[0][2]
         first = _first((len(rows),))
     else:
         first = _first(tuple([len(item[0]) for item in items]))
