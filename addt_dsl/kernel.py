@@ -133,66 +133,64 @@ where CPython raises (0 ** -1, a negative base to a fractional power) this gives
 or nan."""
 
 _SPLIT = 134217729.0  # 2**27 + 1: Veltkamp's splitter for doubles
-_DBL_MIN = 2.2250738585072014e-308
-
-
-@kernel
-def _dl_mul(x, y):
-    """x * y as (hi, lo), hi + lo exact (Dekker's mul12)."""
-    t = x * _SPLIT
-    xh = t - (t - x)
-    xl = x - xh
-    t = y * _SPLIT
-    yh = t - (t - y)
-    yl = y - yh
-    p = xh * yh
-    q = xh * yl + xl * yh
-    z = p + q
-    return z, p - z + q + xl * yl
-
-
-@kernel
-def _norm2(a, b, big):
-    _, e = math.frexp(big)
-    if e < -1023:  # ldexp(1, -e) would overflow: subnormals to normals first
-        return _DBL_MIN * _norm2_normal(a / _DBL_MIN, b / _DBL_MIN, big / _DBL_MIN)
-    return _norm2_normal(a, b, big)
-
-
-@kernel
-def _norm2_normal(a, b, big):
-    _, e = math.frexp(big)
-    scale = math.ldexp(1.0, -e)
-    csum, frac1, frac2 = 1.0, 0.0, 0.0
-    for v in (a, b):
-        x = v * scale  # lossless
-        hi, lo = _dl_mul(x, x)  # lossless squaring
-        s = csum + hi  # lossless addition (fast two-sum: |csum| >= |hi|)
-        frac2 += hi - (s - csum)
-        csum = s
-        frac1 += lo
-    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
-    hi, lo = _dl_mul(-h, h)
-    s = csum + hi
-    frac2 += hi - (s - csum)
-    csum = s
-    frac1 += lo
-    x = csum - 1.0 + (frac1 + frac2)
-    h += x / (2.0 * h)  # differential correction
-    return h / scale
 
 
 @kernel
 def hypot(x, y):
     """sqrt(x*x + y*y) [same unit as x, y] with CPython 3.11's `math.hypot` bits (its
-    vector_norm: scaled, squared in double length, one correction). numba's `math.hypot` is
-    the C library's, which differs in the last bit: kernels call this one."""
-    a, b = abs(x), abs(y)
-    if math.isinf(a) or math.isinf(b):
+    vector_norm of two floats: scaled by a power of two, squared exactly by Veltkamp-Dekker
+    splitting, summed with the rounding errors of each term, one Newton correction of the
+    root; where the scale would overflow, divided by the larger instead). numba's
+    `math.hypot` is the C library's, which differs in the last bit: kernels call this one."""
+    x, y = abs(x), abs(y)
+    if math.isinf(x) or math.isinf(y):
         return math.inf
-    if math.isnan(a) or math.isnan(b):
+    if math.isnan(x) or math.isnan(y):
         return math.nan
-    big = max(b, a)
+    big = x if x > y else y
     if big == 0.0:
-        return big
-    return _norm2(a, b, big)
+        return 0.0
+    e = math.frexp(big)[1]
+    if e < -1023:  # (subnormal) 2 ** -e would overflow
+        csum, frac = 1.0, 0.0
+        for v in (x, y):
+            v = v / big
+            v = v * v
+            old = csum
+            csum += v
+            frac += (old - csum) + v
+        return big * math.sqrt(csum - 1.0 + frac)
+    scale = math.ldexp(1.0, -e)
+    csum, frac1, frac2, frac3 = 1.0, 0.0, 0.0, 0.0
+    for v in (x, y):
+        v *= scale  # lossless
+        t = v * _SPLIT
+        hi = t - (t - v)
+        lo = v - hi
+        v = hi * hi
+        old = csum
+        csum += v
+        frac1 += (old - csum) + v
+        v = 2.0 * hi * lo
+        old = csum
+        csum += v
+        frac2 += (old - csum) + v
+        frac3 += lo * lo
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2 + frac3))
+    t = h * _SPLIT
+    hi = t - (t - h)
+    lo = h - hi
+    v = -hi * hi
+    old = csum
+    csum += v
+    frac1 += (old - csum) + v
+    v = -2.0 * hi * lo
+    old = csum
+    csum += v
+    frac2 += (old - csum) + v
+    v = -lo * lo
+    old = csum
+    csum += v
+    frac3 += (old - csum) + v
+    v = csum - 1.0 + (frac1 + frac2 + frac3)
+    return (h + v / (2.0 * h)) / scale  # differential correction

@@ -115,13 +115,6 @@ class Fleet:
         self.x, self.y, self.heading, self.v, self.rows = x, y, heading, v, rows
         self.posed = True
 
-    def columns(self, ego: VehicleState):
-        """(x, y, heading) of every actor, the ego first: lists or arrays as posed."""
-        if self.rows is not None:
-            return [ego.x, *self.x], [ego.y, *self.y], [ego.heading, *self.heading]
-        return tuple(np.concatenate(([v], a))
-                     for v, a in ((ego.x, self.x), (ego.y, self.y), (ego.heading, self.heading)))
-
     def road_pose(self, i: int):
         """(x, y, road heading, lane offset, z, grade) of agent i, one by one."""
         a, road = self.agents[i], self.roads[i]

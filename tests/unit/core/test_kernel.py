@@ -72,9 +72,26 @@ def test_hypot_edges():
     from addt_dsl.kernel import hypot
 
     for x, y in [(3.0, 4.0), (1e308, 1e308), (5e-324, 5e-324), (1e-310, 3e-312), (-0.0, 0.0),
-                 (math.inf, math.nan), (math.nan, -math.inf), (0.1, 0.7)]:
+                 (math.inf, math.nan), (math.nan, -math.inf), (0.1, 0.7),
+                 (2.582449101461543e-309, 3.44863960473017e-310)]:  # 3.11 divides subnormals by the larger
         want = math.hypot(x, y)
         assert hypot(x, y) == want or (math.isnan(want) and math.isnan(hypot(x, y)))
+
+
+def test_hypot_over_many_scales_is_pythons():
+    """Bit for bit over magnitudes from subnormal to huge, each against each (subnormal
+    pairs take 3.11's division by the larger)."""
+    from addt_dsl.kernel import hypot
+
+    rng = np.random.default_rng(7)
+    n = 5000
+    scales = [rng.normal(size=n) * 100.0, np.exp(rng.uniform(-745.0, 709.0, n)) * rng.choice([-1.0, 1.0], n),
+              np.round(rng.uniform(-50.0, 50.0, n), 2), np.exp(rng.uniform(-745.0, -700.0, n))]
+    for a in scales:
+        for b in scales:
+            want = np.fromiter(map(math.hypot, a.tolist(), b.tolist()), float, n)
+            got = np.fromiter(map(hypot, a.tolist(), b.tolist()), float, n)
+            assert got.view(np.int64).tolist() == want.view(np.int64).tolist()
 
 
 @kernel
