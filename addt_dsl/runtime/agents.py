@@ -18,7 +18,6 @@ from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S, T
 from addt_dsl.runtime.behaviors import (Idm, IdmParams, lateral_profile, relative_heading, settle_lane_change,
                                         standing_yaw)
 from addt_dsl.runtime.fastroad import POSE_GRADE, POSE_H, POSE_OFFSET, POSE_X, POSE_Y, POSE_Z
-from addt_dsl.runtime.vehicle import VehicleState
 
 
 def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: float) \
