@@ -15,9 +15,11 @@ write `pow(x, 2.0)` with this module's `pow` where the Python it replaces wrote 
 and `math.hypot` is the C library's where CPython has its own: use this module's `hypot`.
 
 numba is imported at a kernel's first call, not at import (its import costs ~0.2-0.4 s that
-a compile-only command should not pay). Compiled code is cached on disk (numba's `cache`:
-beside the source, or numba's per-user cache directory where that is read-only), so a
-process pays the compile (~0.3-1 s a kernel) only the first time on a machine.
+a compile-only command should not pay). Compiled code is cached on disk, so a process pays
+the compile (~0.3-1 s a kernel) only the first time for a version of the code: in a folder
+per code fingerprint (`cache_dir`). numba's own cache checks only the kernel's own source
+file, and a kernel has its callees' code and the constants it reads from other modules
+compiled in: changed there, its cached code would be stale.
 """
 
 from __future__ import annotations
@@ -25,8 +27,12 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import os
+import shutil
+import time
 import types
 from collections.abc import Callable
+from pathlib import Path
 
 OPTIONS = {"cache": True, "error_model": "numpy", "fastmath": False, "nogil": True}
 _interpreting = False  # `interpreted()`: every kernel call runs its Python
@@ -103,7 +109,13 @@ class Kernel:
             fn = types.FunctionType(fn.__code__, {**fn.__globals__, **callees}, fn.__name__, fn.__defaults__,
                                     fn.__closure__)
             fn.__qualname__, fn.__module__ = self.py_func.__qualname__, self.py_func.__module__
-        return numba.njit(**OPTIONS)(fn)
+        from numba.core import config
+
+        before, config.CACHE_DIR = config.CACHE_DIR, cache_dir()  # (read as the dispatcher is made)
+        try:
+            return numba.njit(**OPTIONS)(fn)
+        finally:
+            config.CACHE_DIR = before
 
     def dispatcher(self) -> Callable | None:
         """The compiled function (compiling it now if it is not yet); None while it compiles."""
@@ -119,6 +131,30 @@ class Kernel:
 
     def __reduce__(self):  # pickles by name (as the module-level function it is)
         return self.__qualname__
+
+
+@functools.cache
+def cache_dir() -> str:
+    """The folder of this code's compiled kernels: `<base>/kernels/<code fingerprint>`, base
+    `$NUMBA_CACHE_DIR`, else the package's `__pycache__` where writable, else
+    `~/.cache/addt-dsl`. Made on first use; folders of other versions not used for a day are
+    removed then."""
+    from addt_dsl.fingerprint import code_fingerprint
+
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        base = Path(os.environ["NUMBA_CACHE_DIR"])
+    elif os.access(Path(__file__).parent, os.W_OK):
+        base = Path(__file__).parent / "__pycache__"
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "addt-dsl"
+    root = base / "kernels"
+    here = root / code_fingerprint()
+    if not here.is_dir():
+        here.mkdir(parents=True, exist_ok=True)
+        for old in root.iterdir():
+            if old != here and old.is_dir() and time.time() - old.stat().st_mtime > 86400.0:
+                shutil.rmtree(old, ignore_errors=True)
+    return str(here)
 
 
 def kernel(fn: Callable) -> Kernel:

@@ -21,7 +21,7 @@ import numpy as np
 
 from addt_dsl.kernel import kernel
 from addt_dsl.runtime.agent_arrays import SCALE, S, T
-from addt_dsl.runtime.roadmesh import _elevation
+from addt_dsl.runtime.roadmesh import elevation_at
 
 STEP_M = 0.25
 MIN_GROUND_SCALE = 0.2  # [m/m] `ground_scale` near a bend's centre of curvature
@@ -174,7 +174,7 @@ def _pose_rows(tab, ds, last_i, length, centres, starts, lanes, z, g, z_ds, z_le
         out[POSE_OFFSET, r] = off
         flat[SCALE, cell] = _ground_scale(tab, ds, last_i, length, s, t)
         if z.size:
-            out[POSE_Z, r], out[POSE_GRADE, r] = _elevation(z, g, z_ds, z_length, s)
+            out[POSE_Z, r], out[POSE_GRADE, r] = elevation_at(z, g, z_ds, z_length, s)
         else:
             out[POSE_Z, r], out[POSE_GRADE, r] = 0.0, 0.0
     return -1

@@ -63,7 +63,7 @@ class Mesh:
 
 
 @kernel
-def _elevation(z, g, ds, length, s):
+def elevation_at(z, g, ds, length, s):
     """(z [m], grade [-]) at station `s` of a profile sampled every `ds`, held beyond the ends."""
     u = 0.0 if 0.0 > s else s  # min(max(s, 0.0), length), as the builtins pick
     u = (length if length < u else u) / ds
@@ -89,7 +89,7 @@ class Elevation:
         grade = np.asarray(road.elevation_profile.derivative(s), dtype=float)
         self.flat = not (np.any(z != 0.0) or np.any(grade != 0.0))
         self._ds = s[1] - s[0]
-        self._z_a, self._g_a = np.array(z, dtype=float), np.array(grade, dtype=float)  # (`_elevation`'s)
+        self._z_a, self._g_a = np.array(z, dtype=float), np.array(grade, dtype=float)  # (`elevation_at`'s)
         self.z_min = float(z.min())
 
     def at(self, s: float) -> tuple[float, float]:
@@ -97,7 +97,7 @@ class Elevation:
         kernel `FastRoad.pose_rows` runs over many actors)."""
         if self.flat:
             return 0.0, 0.0
-        return _elevation(self._z_a, self._g_a, self._ds, self.length, s)
+        return elevation_at(self._z_a, self._g_a, self._ds, self.length, s)
 
 
 # ---------------------------------------------------------------- sampling

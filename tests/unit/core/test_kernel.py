@@ -113,3 +113,22 @@ def test_pow_is_pythons_where_numba_would_multiply():
         assert np.array_equal(row, want, equal_nan=True)
     # the same inputs as x * x: some differ, so the test would catch the rewrite
     assert (out[0] != x * x).any()
+
+
+def test_cache_folder_per_code_version(tmp_path, monkeypatch):
+    """Compiled kernels are kept per code fingerprint (numba would check the kernel's own file
+    only: a changed callee elsewhere would leave it stale); old versions' folders go after a day."""
+    import os
+    from pathlib import Path
+
+    from addt_dsl.fingerprint import code_fingerprint
+    from addt_dsl.kernel import cache_dir
+
+    assert Path(cache_dir()).name == code_fingerprint()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    for old, age in ((tmp_path / "kernels" / "old", 2 * 86400), (tmp_path / "kernels" / "recent", 3600)):
+        old.mkdir(parents=True)
+        os.utime(old, (os.stat(old).st_atime, os.stat(old).st_mtime - age))
+    here = Path(cache_dir.__wrapped__())
+    assert here == tmp_path / "kernels" / code_fingerprint() and here.is_dir()
+    assert sorted(p.name for p in (tmp_path / "kernels").iterdir()) == sorted([code_fingerprint(), "recent"])
