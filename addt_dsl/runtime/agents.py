@@ -213,15 +213,20 @@ class _Layout:
         self.road = np.concatenate([f.members[1] for f in fleets]).astype(np.int64)
         self.ego_length = np.array([f.members[2] for f in fleets], dtype=float)
         self.ego_road = np.array([f.members[3] for f in fleets], dtype=np.int64)
+        self.placed = self.block.placed.reshape(-1)  # (a view: teleports write it)
+        self.done = np.empty(len(fleets), dtype=bool)
+        self.dt = None  # the runs' steps [s], at the first step
         self._plans: list = []
         self._idm = None
 
     def idm(self, plans):
-        """The runs' IDM settings, whether IDM drives each agent, and the lateral targets,
-        concatenated."""
+        """The runs' IDM settings, whether IDM drives each agent, the lateral targets,
+        concatenated; the agents in a lane change (row, run, agent)."""
         if len(plans) != len(self._plans) or any(p is not q for p, q in zip(plans, self._plans)):
+            changing = [(lo + i, j, f.agents[i]) for j, (p, f, lo) in enumerate(zip(plans, self.fleets, self.lo))
+                        for i in p[2]]
             self._idm = (np.concatenate([p[0] for p in plans], axis=1), np.concatenate([p[1] for p in plans]),
-                         np.concatenate([p[3] for p in plans]))
+                         np.concatenate([p[3] for p in plans]), changing)
             self._plans = list(plans)
         return self._idm
 
@@ -325,45 +330,39 @@ class Fleets:
         have an array plan (`Fleet.array_plan`) in one call of `fleet.step`, whatever their
         number; the (run, t) of the runs left to that loop."""
         items, rest = [], []
-        placed: dict[int, list[bool]] = {}  # per block: its runs with an agent teleported this step
         for run, t in zip(runs, ts):
-            f = run.fleet
-            if id(f.block) not in placed:
-                placed[id(f.block)] = f.block.placed.any(axis=1).tolist()
-            if f.array_plan(run) is None or placed[id(f.block)][f.run_row] or \
-                    not (math.isfinite(run.ego_s) and math.isfinite(run.ego_t)):
-                rest.append((run, t))  # (a teleported agent stays put this step: `advance`)
-            else:
-                items.append((run, t))
+            (rest if run.fleet.array_plan(run) is None else items).append((run, t))
         return rest + self._step_arrays(items) if items else rest
 
     def _step_arrays(self, items) -> list:
         """`step` over runs whose agents all have an array plan: `fleet.step`; the runs it
-        left (a non-finite station or offset)."""
+        left (an agent teleported this step stays put, as `advance` has it; a non-finite
+        station or offset)."""
         layout = self._layout([run.fleet for run, _ in items])
-        fleets, lo = layout.fleets, layout.lo
-        plans = [f.array_plan(run) for f, (run, _) in zip(fleets, items)]
-        params, idm, target = layout.idm(plans)
+        params, idm, target, changing = layout.idm([run.fleet.array_plan(run) for run, _ in items])
         t_new = target.copy()
-        for j, ((run, t_now), plan) in enumerate(zip(items, plans)):
-            for i in plan[2]:  # (reads the agent's station before it moves, as `advance`)
-                t_new[lo[j] + i] = lateral_profile(fleets[j].agents[i], t_now + run.dt)
-        ego = np.array([(run.ego_s, run.ego_t, run.ego.speed) for run, _ in items], dtype=float).T.copy()
-        dt = np.array([run.dt for run, _ in items], dtype=float)
-        done = np.empty(len(items), dtype=bool)
-        fleet.step(layout.bounds, layout.cells, layout.block.flat, t_new, idm, params, layout.road, layout.length,
-                   ego, layout.ego_road, layout.ego_length, dt, fleet.POWERS, LANE_WINDOW_M, done)
-        rest = []
-        for j, ok in enumerate(done.tolist()):
+        for k, j, a in changing:  # (reads the agent's station before it moves, as `advance`)
             run, t_now = items[j]
-            if not ok:
-                rest.append((run, t_now))
-                continue
-            for i in plans[j][2]:  # (only agents in a lane change may hold a moving centre)
-                a = fleets[j].agents[i]
-                if a.lc_centre is not None:
-                    settle_lane_change(a, t_now + run.dt, a.t)
-            run.leaders_stale = True
+            t_new[k] = lateral_profile(a, t_now + run.dt)
+        ego = np.array([x for run, _ in items for x in (run.ego_s, run.ego_t, run.ego.speed)], dtype=float)
+        if layout.dt is None:
+            layout.dt = np.array([run.dt for run, _ in items], dtype=float)
+        left = fleet.step(layout.bounds, layout.cells, layout.block.flat, layout.placed, t_new, idm, params,
+                          layout.road, layout.length, ego, layout.ego_road, layout.ego_length, layout.dt,
+                          fleet.POWERS, LANE_WINDOW_M, layout.done)
+        for k, j, a in changing:  # (only agents in a lane change may hold a moving centre)
+            if a.lc_centre is not None and layout.done[j]:
+                settle_lane_change(a, items[j][1] + items[j][0].dt, a.t)
+        if not left:
+            for run, _ in items:
+                run.leaders_stale = True  # (the loop's index rebuilt before it is asked again)
+            return []
+        rest = []
+        for item, ok in zip(items, layout.done.tolist()):
+            if ok:
+                item[0].leaders_stale = True
+            else:
+                rest.append(item)
         return rest
 
 

@@ -43,17 +43,20 @@ def idm_params(settings: list[dict]) -> np.ndarray:
 
 
 @kernel
-def step(lo, cells, flat, t_new, idm, params, road, length, ego, ego_road, ego_length, dt, powers, window_m,
-         done):
+def step(lo, cells, flat, placed, t_new, idm, params, road, length, ego, ego_road, ego_length, dt, powers,
+         window_m, done):
     """One step of every agent of the runs: run r's agents are rows lo[r]:lo[r + 1] of the
     per-agent arrays, in declaration order, their state in `flat` (`agent_arrays`' fields
     x slots) at slots `cells`, moved there in place. Per agent: `t_new` its offset after the
     step [m] (lane change profile), `idm` whether IDM drives it (else its acceleration is 0),
     `params` its IDM settings (`IDM_FIELDS` x agents), `road` its road's code, `length` [m].
-    Per run: `ego` (station [m], offset [m], speed [m/s]) x runs, `ego_road`, `ego_length` [m],
-    `dt` [s]. `powers`: `POWERS`. `done[r]` False where a station or offset of run r's agents
-    is not finite (nothing of it moved: the caller steps it one by one)."""
+    Per run: `ego` (station [m], offset [m], speed [m/s]) run after run, `ego_road`,
+    `ego_length` [m], `dt` [s]. `powers`: `POWERS`. `done[r]` False where run r is left to
+    the per-agent loop, nothing of it moved: an agent teleported this step (`placed`, over
+    the slots), or a station or offset of its agents or its ego not finite. Returns how many
+    runs are left."""
     runs = lo.size - 1
+    left = 0
     width = 1
     for r in range(runs):
         width = max(width, lo[r + 1] - lo[r] + 1)
@@ -63,13 +66,14 @@ def step(lo, cells, flat, t_new, idm, params, road, length, ego, ego_road, ego_l
     four, two = powers[0], powers[1]
     for r in range(runs):
         a, n = lo[r], lo[r + 1] - lo[r]
-        finite = True
+        ok = math.isfinite(ego[3 * r]) and math.isfinite(ego[3 * r + 1])
         for i in range(n):
             c = cells[a + i]
-            if not (math.isfinite(flat[0, c]) and math.isfinite(flat[1, c])):
-                finite = False
-        done[r] = finite
-        if not finite:
+            if placed[c] or not (math.isfinite(flat[0, c]) and math.isfinite(flat[1, c])):
+                ok = False
+        done[r] = ok
+        if not ok:
+            left += 1
             continue
         # The members as agent 0 sees them: the agents where they were, then the ego.
         longest = ego_length[r]
@@ -78,8 +82,8 @@ def step(lo, cells, flat, t_new, idm, params, road, length, ego, ego_road, ego_l
             ms[i], mt[i], mv[i], ml[i], mroad[i] = flat[0, c], flat[1, c], flat[2, c], length[a + i], road[a + i]
             if ml[i] > longest:
                 longest = ml[i]
-        ms[n], mt[n], mv[n], ml[n], mroad[n] = ego[0, r], ego[1, r], ego[2, r], ego_length[r], ego_road[r]
-        scan = not math.isfinite(ego[0, r])  # a non-finite station: every member scanned
+        ms[n], mt[n], mv[n], ml[n], mroad[n] = ego[3 * r], ego[3 * r + 1], ego[3 * r + 2], ego_length[r], ego_road[r]
+        scan = False  # (a non-finite station: every member scanned)
         order = np.argsort(ms[:n + 1], kind="mergesort")
         for j in range(n + 1):
             ids[j] = order[j]
@@ -157,3 +161,4 @@ def step(lo, cells, flat, t_new, idm, params, road, length, ego, ego_road, ego_l
                 keys[j], ids[j] = keys[j - 1], ids[j - 1]
                 j -= 1
             keys[j], ids[j] = s_new, i
+    return left

@@ -24,29 +24,34 @@ SETTINGS = ({"speed": 25.0, "time_gap": 1.5, "min_gap": 2.0, "accel": 1.5, "dece
             {"speed": 12.0, "time_gap": 0.7, "min_gap": 0.5, "accel": 3.0, "decel": 5.5})
 
 
-def call(runs, width: int, kernel=fleet.step):
+def call(runs, width: int, kernel=fleet.step, placed=()):
     """`fleet.step` over `runs`: each (agents, ego, dt), an agent (road, s, t, v, length,
     scale, t_new, settings index or None), the ego (road, s, t, v, length); run r's agents
-    in slots r * width.. of a padded block. (the block's S..ACCEL rows per run, done)."""
+    in slots r * width.. of a padded block, those of `placed` (run, agent) teleported.
+    (the block's S..ACCEL rows per run, done)."""
     n_runs = len(runs)
     flat = np.zeros((5, n_runs * width))
     flat[4] = 1.0
+    teleported = np.zeros(n_runs * width, dtype=bool)
     cells, lo, t_new, idm, params, road, length = [], [0], [], [], [], [], []
     for r, (agents, _, _) in enumerate(runs):
         for i, (rd, s, t, v, ln, scale, tn, which) in enumerate(agents):
             c = r * width + i
             flat[:, c] = (s, t, v, 0.0, scale)
+            teleported[c] = (r, i) in placed
             cells.append(c), t_new.append(tn), idm.append(which is not None), road.append(rd), length.append(ln)
             params.append(fleet.idm_params([SETTINGS[which or 0]])[:, 0])
         lo.append(lo[-1] + len(agents))
-    ego = np.array([e[1:4] for _, e, _ in runs], dtype=float).T.reshape(3, n_runs).copy()
+    ego = np.array([x for _, e, _ in runs for x in e[1:4]], dtype=float)
     done = np.empty(n_runs, dtype=bool)
     with np.errstate(all="ignore"):
-        kernel(np.array(lo, dtype=np.int64), np.array(cells, dtype=np.int64), flat, np.array(t_new, dtype=float),
-               np.array(idm, dtype=bool), np.array(params, dtype=float).reshape(-1, 5).T.copy(),
-               np.array(road, dtype=np.int64), np.array(length, dtype=float), ego,
-               np.array([e[0] for _, e, _ in runs], dtype=np.int64), np.array([e[4] for _, e, _ in runs], dtype=float),
-               np.array([dt for _, _, dt in runs], dtype=float), fleet.POWERS, LANE_WINDOW_M, done)
+        left = kernel(np.array(lo, dtype=np.int64), np.array(cells, dtype=np.int64), flat, teleported,
+                      np.array(t_new, dtype=float), np.array(idm, dtype=bool),
+                      np.array(params, dtype=float).reshape(-1, 5).T.copy(), np.array(road, dtype=np.int64),
+                      np.array(length, dtype=float), ego, np.array([e[0] for _, e, _ in runs], dtype=np.int64),
+                      np.array([e[4] for _, e, _ in runs], dtype=float),
+                      np.array([dt for _, _, dt in runs], dtype=float), fleet.POWERS, LANE_WINDOW_M, done)
+    assert left == (~done).sum()
     return [flat[:4, r * width:r * width + len(agents)] for r, (agents, _, _) in enumerate(runs)], done
 
 
@@ -79,8 +84,7 @@ speeds = st.one_of(st.floats(0.0, 40.0), st.sampled_from([0.0, -0.0, 20.0]))
 agent = st.tuples(st.sampled_from([0, 0, 1]), stations, offsets, speeds, st.sampled_from([4.6, 4.6, 12.0, 0.6]),
                   st.sampled_from([1.0, 1.0, 0.97, 1.04]), st.none() | st.sampled_from([0.3, -3.5]) | offsets,
                   st.sampled_from([0, 1, 0, None]))
-ego_ = st.tuples(st.sampled_from([0, 1]), st.one_of(stations, st.just(math.inf)), offsets, speeds,
-                 st.sampled_from([4.6, 5.0]))
+ego_ = st.tuples(st.sampled_from([0, 1]), stations, offsets, speeds, st.sampled_from([4.6, 5.0]))
 
 
 def with_offsets(agents):
@@ -116,21 +120,25 @@ weird = st.sampled_from([math.nan, math.inf, -math.inf, -0.0, 0.0, 1e-300])
                 min_size=1, max_size=5), st.data())
 def test_compiled_gives_its_python_bits(runs, data):
     """The compiled kernel against `step.py_func` over padded batches of 0..8 agents a run,
-    with non-finite or signed-zero stations, offsets, speeds and ground scales (a run with a
-    non-finite station or offset is left untouched, `done` False)."""
+    with non-finite or signed-zero stations, offsets, speeds and ground scales, teleported
+    agents (a run with one, or with a non-finite station or offset, its ego's too, is left
+    untouched, `done` False)."""
     def odd(x):
         return data.draw(weird) if data.draw(st.integers(0, 9)) == 0 else x
 
     runs = [([(a[0], odd(a[1]), odd(a[2]), odd(a[3]), a[4], odd(a[5]), *a[6:]) for a in with_offsets(agents)],
-             ego, dt) for agents, ego, dt in runs]
+             (ego[0], odd(ego[1]), odd(ego[2]), odd(ego[3]), ego[4]), dt) for agents, ego, dt in runs]
+    placed = {(r, i) for r, (agents, _, _) in enumerate(runs) for i in range(len(agents))
+              if data.draw(st.integers(0, 19)) == 0}
     width = max(len(a) for a, _, _ in runs) + 2
-    got, done = call(runs, width)
-    want, done_py = call(runs, width, fleet.step.py_func)
+    got, done = call(runs, width, placed=placed)
+    want, done_py = call(runs, width, fleet.step.py_func, placed)
     assert done.tolist() == done_py.tolist()
     assert all(g.tobytes() == w.tobytes() for g, w in zip(got, want))
-    for (agents, _, _), g, ok in zip(runs, got, done.tolist()):
+    for r, ((agents, ego, _), g, ok) in enumerate(zip(runs, got, done.tolist())):
         finite = all(math.isfinite(a[1]) and math.isfinite(a[2]) for a in agents)
-        assert ok == finite
+        assert ok == (finite and math.isfinite(ego[1]) and math.isfinite(ego[2])
+                      and not any((r, i) in placed for i in range(len(agents))))
         if not ok:
             assert g.tobytes() == np.array([[a[1] for a in agents], [a[2] for a in agents], [a[3] for a in agents],
                                             [0.0] * len(agents)]).reshape(4, -1).tobytes()
