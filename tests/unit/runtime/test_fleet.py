@@ -198,3 +198,23 @@ def test_a_step_by_hand():
 
 def test_idm_is_the_behaviours_one_definition():
     assert fleet.idm_free is behaviors.idm_free and fleet.idm_accel is behaviors.idm_accel
+
+
+def test_equal_gaps_go_to_the_first_declared():
+    """Two cars at the same station ahead of a follower, the first declared having just moved
+    there (it lands after the other in the sorted list): the follower's leader is the first
+    declared (its speed, 5 m/s, not the other's 0), as the loop's scan has it; the ego at the
+    same station too, last in member order."""
+    dt = 0.1
+    mover, stander = (0, 49.5, -1.75, 5.0, 4.6, 1.0, -1.75, None), (0, 50.0, -1.75, 0.0, 4.6, 1.0, -1.75, None)
+    follower = (0, 20.0, -1.75, 20.0, 4.6, 1.0, -1.75, 0)
+    ego = (0, 50.0, -1.75, 30.0, 4.6)
+    agents = [mover, stander, follower]
+    (got,), _ = call([(agents, ego, dt)], 3)
+    assert got[0, :2].tolist() == [50.0, 50.0]  # (both at 50 m when the follower looks)
+    assert got.tobytes() == loop(agents, ego, dt).tobytes()
+    behind_mover = Idm(SETTINGS[0]).accel(SimpleNamespace(speed=20.0), SimpleNamespace(leader_of=lambda a: (25.4, 5.0)),
+                                          0.0)
+    assert got[3, 2] == behind_mover
+    assert got[3, 2] != Idm(SETTINGS[0]).accel(SimpleNamespace(speed=20.0),
+                                               SimpleNamespace(leader_of=lambda a: (25.4, 0.0)), 0.0)
