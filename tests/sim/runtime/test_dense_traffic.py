@@ -1,5 +1,5 @@
-"""Dense traffic: a closed-loop run with the agents stepped as arrays (`runtime.fleet`:
-leaders from sorted views, a fixed point for the sequential step), posed as arrays, with
+"""Dense traffic: a closed-loop run with the agents stepped by the kernel (`runtime.fleet`:
+per run in declaration order, leaders from the members sorted by station), posed as arrays, with
 the clearance broad phase and pybullet posed only when asked, gives the trace of the
 brute-force loop (agents one by one, every actor scanned, every pair tested, every pose
 handed to pybullet at once)."""
