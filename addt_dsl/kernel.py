@@ -9,8 +9,10 @@ check the compiled form gives its bits), so there is one definition of each comp
 The settings keep IEEE semantics, so a kernel gives the bits of the Python it was written
 from: no fast-math (no reassociation, no fused multiply-add), numpy's error model (x / 0.0
 is inf or nan as in numpy, not ZeroDivisionError). numba calls the C library for `math.sin`,
-`math.exp`, `**` and the like, as CPython does; `math.hypot` is numba's own (it differs from
-the C library's in the last bit): write `math.sqrt(x * x + y * y)` where that is meant.
+`math.exp`, `math.pow` and the like, as CPython does, with two exceptions: `x ** 2` and
+`x ** 2.0` become `x * x` (CPython's is the C library's `pow`, ~0.1 % of doubles differ):
+write `pow(x, 2.0)` with this module's `pow` where the Python it replaces wrote `x ** 2`;
+and `math.hypot` is the C library's where CPython has its own: use this module's `hypot`.
 
 numba is imported at a kernel's first call, not at import (its import costs ~0.2-0.4 s that
 a compile-only command should not pay). Compiled code is cached on disk (numba's `cache`:
@@ -20,11 +22,53 @@ process pays the compile (~0.3-1 s a kernel) only the first time on a machine.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import math
 import types
-from typing import Callable
+from collections.abc import Callable
 
 OPTIONS = {"cache": True, "error_model": "numpy", "fastmath": False, "nogil": True}
+_interpreting = False  # `interpreted()`: every kernel call runs its Python
+
+
+@contextlib.contextmanager
+def interpreted():
+    """Within: kernels called from Python run their Python source, callees included (tests
+    compare it with the compiled code's bits)."""
+    global _interpreting
+    before, _interpreting = _interpreting, True
+    try:
+        yield
+    finally:
+        _interpreting = before
+
+
+class Libm:
+    """A C library function a kernel calls by a name of its own, so the compiler cannot
+    rewrite it: LLVM turns `pow(x, 2.0)` into `x * x`, which the C library's `pow` is not
+    (they differ in ~0.1 % of doubles), and CPython's `x ** 2.0` is the C library's."""
+
+    def __init__(self, name: str, python: Callable, arity: int):
+        self.name, self.python, self.arity = name, python, arity
+        self._external = None
+
+    def __call__(self, *args):
+        return self.python(*args)
+
+    def external(self):
+        if self._external is None:
+            import ctypes
+            import ctypes.util
+
+            import llvmlite.binding as llvm
+            from numba import types as nt
+
+            lib = ctypes.CDLL(ctypes.util.find_library("m") or ctypes.util.find_library("c"))
+            symbol = "addt_libm_" + self.name
+            llvm.add_symbol(symbol, ctypes.cast(getattr(lib, self.name), ctypes.c_void_p).value)
+            self._external = nt.ExternalFunction(symbol, nt.float64(*[nt.float64] * self.arity))
+        return self._external
 
 
 class Kernel:
@@ -34,9 +78,12 @@ class Kernel:
     def __init__(self, fn: Callable):
         self.py_func = fn
         self._compiled: Callable | None = None
+        self._compiling = False
         functools.update_wrapper(self, fn)
 
     def __call__(self, *args):
+        if _interpreting:
+            return self.py_func(*args)
         compiled = self._compiled
         if compiled is None:
             compiled = self.dispatcher()
@@ -48,16 +95,26 @@ class Kernel:
         fn = self.py_func
         callees = {name: fn.__globals__[name].dispatcher() for name in fn.__code__.co_names
                    if isinstance(fn.__globals__.get(name), Kernel)}
-        if callees:  # numba types dispatchers, not this class: the kernels it calls, compiled
+        callees.update({name: fn.__globals__[name].external() for name in fn.__code__.co_names
+                        if isinstance(fn.__globals__.get(name), Libm)})
+        if any(d is None for d in callees.values()):
+            raise TypeError(f"kernel {fn.__qualname__} calls itself (write the recursion as a loop)")
+        if callees:  # numba types dispatchers, not these classes: the kernels it calls, compiled
             fn = types.FunctionType(fn.__code__, {**fn.__globals__, **callees}, fn.__name__, fn.__defaults__,
                                     fn.__closure__)
             fn.__qualname__, fn.__module__ = self.py_func.__qualname__, self.py_func.__module__
         return numba.njit(**OPTIONS)(fn)
 
-    def dispatcher(self) -> Callable:
-        """The compiled function (compiling it now if it is not yet)."""
+    def dispatcher(self) -> Callable | None:
+        """The compiled function (compiling it now if it is not yet); None while it compiles."""
         if self._compiled is None:
-            self._compiled = self.compile()
+            if self._compiling:
+                return None
+            self._compiling = True
+            try:
+                self._compiled = self.compile()
+            finally:
+                self._compiling = False
         return self._compiled
 
     def __reduce__(self):  # pickles by name (as the module-level function it is)
@@ -68,3 +125,74 @@ def kernel(fn: Callable) -> Kernel:
     """Mark a module-level function as a compiled kernel. A kernel may call other kernels by
     their module-level names (compiled, they are compiled in)."""
     return Kernel(fn)
+
+
+pow = Libm("pow", lambda x, y: float(x) ** float(y), 2)
+"""x ** y [-] as CPython's float power gives it (the C library's pow) for finite results;
+where CPython raises (0 ** -1, a negative base to a fractional power) this gives pow's inf
+or nan."""
+
+_SPLIT = 134217729.0  # 2**27 + 1: Veltkamp's splitter for doubles
+_DBL_MIN = 2.2250738585072014e-308
+
+
+@kernel
+def _dl_mul(x, y):
+    """x * y as (hi, lo), hi + lo exact (Dekker's mul12)."""
+    t = x * _SPLIT
+    xh = t - (t - x)
+    xl = x - xh
+    t = y * _SPLIT
+    yh = t - (t - y)
+    yl = y - yh
+    p = xh * yh
+    q = xh * yl + xl * yh
+    z = p + q
+    return z, p - z + q + xl * yl
+
+
+@kernel
+def _norm2(a, b, big):
+    _, e = math.frexp(big)
+    if e < -1023:  # ldexp(1, -e) would overflow: subnormals to normals first
+        return _DBL_MIN * _norm2_normal(a / _DBL_MIN, b / _DBL_MIN, big / _DBL_MIN)
+    return _norm2_normal(a, b, big)
+
+
+@kernel
+def _norm2_normal(a, b, big):
+    _, e = math.frexp(big)
+    scale = math.ldexp(1.0, -e)
+    csum, frac1, frac2 = 1.0, 0.0, 0.0
+    for v in (a, b):
+        x = v * scale  # lossless
+        hi, lo = _dl_mul(x, x)  # lossless squaring
+        s = csum + hi  # lossless addition (fast two-sum: |csum| >= |hi|)
+        frac2 += hi - (s - csum)
+        csum = s
+        frac1 += lo
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
+    hi, lo = _dl_mul(-h, h)
+    s = csum + hi
+    frac2 += hi - (s - csum)
+    csum = s
+    frac1 += lo
+    x = csum - 1.0 + (frac1 + frac2)
+    h += x / (2.0 * h)  # differential correction
+    return h / scale
+
+
+@kernel
+def hypot(x, y):
+    """sqrt(x*x + y*y) [same unit as x, y] with CPython 3.11's `math.hypot` bits (its
+    vector_norm: scaled, squared in double length, one correction). numba's `math.hypot` is
+    the C library's, which differs in the last bit: kernels call this one."""
+    a, b = abs(x), abs(y)
+    if math.isinf(a) or math.isinf(b):
+        return math.inf
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    big = max(b, a)
+    if big == 0.0:
+        return big
+    return _norm2(a, b, big)

@@ -3,13 +3,16 @@ second (and per CPU second of the process) for the same runs stepped one at a ti
 batches, in one process on one core; the peak memory of each batch.
 
 Run: PYTHONPATH=. python benchmarks/bench_batch.py [--quick] [--json FILE] [--profile B]
-     [--scaling | --scaling-only]
+     [--scaling | --scaling-only] [--versus CHECKOUT [--rounds N]]
 
 - a ground-truth sweep: `examples/overtake.addt` (30 s, lidar, bev stack, drop faults) with
   64 runs (its grid cells, each repeated with other seeds), at batch 1, 16 and 64;
 - 50 IDM agents (`bench_twin.traffic_source(50)`, 5 s): one run, and 16 runs at batch 16;
 - `--scaling`: agents 1/5/20/50/100 x batch 1/16/64 (1 s runs, 16 runs or one batch);
-- `--profile B`: cProfile's top functions of the ground-truth sweep at batch B instead.
+- `--profile B`: cProfile's top functions of the ground-truth sweep at batch B instead;
+- `--versus CHECKOUT`: each configuration in this checkout and in another one (e.g. a
+  worktree of an older commit), alternating, `--rounds` times (default 2), the best of each;
+  the ratio this / other per configuration (> 1: this checkout is faster).
 
 Each configuration runs in a fresh process (its peak RSS is its own); ratios are to batch 1
 of the same workload, measured in this one invocation, with the load average beside.
@@ -78,11 +81,36 @@ def measure(workload: str, runs: int, batch: int, agents: int = 50, duration: fl
             "rss_per_run_mb": (peak_mb - base_mb) / batch}
 
 
-def in_child(**kw) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1")
-    out = subprocess.run([sys.executable, __file__, "--child", json.dumps(kw)], env=env, cwd=ROOT,
+def in_child(root: Path = ROOT, **kw) -> dict:
+    """`measure(**kw)` in a fresh process of the checkout at `root` (this script's code,
+    that checkout's package)."""
+    env = dict(os.environ, PYTHONPATH=f"{root}{os.pathsep}{ROOT / 'benchmarks'}", OMP_NUM_THREADS="1")
+    out = subprocess.run([sys.executable, __file__, "--child", json.dumps(kw)], env=env, cwd=root,
                          capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def versus(other: Path, rounds: int) -> dict:
+    """The configurations in this checkout and `other`, alternating; the best of `rounds`."""
+    configs = [dict(workload="overtake", runs=16, batch=b) for b in (1, 16)]
+    configs += [dict(workload="traffic", runs=1, batch=1, agents=50)]
+    configs += [dict(workload="traffic", runs=max(16, b), batch=b, agents=a, duration=1.0)
+                for a in (1, 5, 20, 50, 100) for b in SCALING_BATCHES]
+    print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}; this = {ROOT}, other = {other}")
+    print(f"{'':34s} {'this':>9s} {'other':>9s}  sim-s per CPU-s, best of {rounds}; ratio this / other")
+    figures = {}
+    for kw in configs:
+        best = {"this": 0.0, "other": 0.0}
+        for _ in range(rounds):
+            for name, root in (("this", ROOT), ("other", other)):
+                best[name] = max(best[name], in_child(root, **kw)["sim_per_cpu"])
+        label = (f"overtake x{kw['runs']}, batch {kw['batch']}" if kw["workload"] == "overtake" else
+                 f"{kw['agents']} agents x{kw['runs']}, batch {kw['batch']}")
+        figures[label] = {**best, "ratio": best["this"] / best["other"]}
+        load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+        print(f"{label:34s} {best['this']:9.1f} {best['other']:9.1f}  {best['this'] / best['other']:5.2f}x  "
+              f"load {load}", flush=True)
+    return figures
 
 
 def row(label: str, m: dict, ref: dict | None) -> str:
@@ -116,6 +144,10 @@ def main() -> None:
         return
     if "--profile" in sys.argv:
         profile(int(sys.argv[sys.argv.index("--profile") + 1]))
+        return
+    if "--versus" in sys.argv:
+        rounds = int(sys.argv[sys.argv.index("--rounds") + 1]) if "--rounds" in sys.argv else 2
+        figures_json.write(JSON_PATH, versus(Path(sys.argv[sys.argv.index("--versus") + 1]).resolve(), rounds))
         return
     print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} CPUs")
     print(f"{'':34s} {'sim/wall':>9s} {'sim/cpu':>9s}  {'ratio w / cpu':13s} {'peak MB':>7s} {'MB/run':>7s}")

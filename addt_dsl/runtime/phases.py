@@ -306,7 +306,7 @@ def stack(run: RunState, t: float) -> None:
 
 def ego(runs: list[RunState], ts: list[float]) -> list[bool]:
     """Over the batch: commands due by now take effect; each ego moves over the step: the
-    dynamics of every driven ego at once (`vehicle.step` over arrays, per step length), an OSI
+    dynamics of every driven ego at once (`vehicle.step`: one kernel call per step length), an OSI
     stack's update, or, scripted, as agents do (a stack's commands are then recorded, not
     applied). Whether each ego's state stayed finite."""
     driven: dict[float, list[RunState]] = {}

@@ -1,11 +1,11 @@
-"""Exact ray casts against oriented boxes and a horizontal plane (pure numpy).
+"""Exact ray casts against oriented boxes and a horizontal plane (a compiled kernel).
 
 The twin's collision world is, on flat roads, just that: actor boxes posed by the loop
 and the infinite ground plane. For such a world `cast` answers what pybullet's
 `rayTestBatch` answers (the first body each ray segment meets, and where), without the
-per-ray overhead of the engine: a vectorised slab test per box in the box's frame, in
-float64. `PhysicsWorld.ray_cast` uses it whenever the world is eligible (no collision
-meshes) and falls back to pybullet otherwise.
+per-ray overhead of the engine: a slab test per box in the box's frame, in float64, one
+compiled call per cast (`addt_dsl/kernel.py`). `PhysicsWorld.ray_cast` uses it whenever
+the world is eligible (no collision meshes) and falls back to pybullet otherwise.
 
 Matched pybullet semantics (checked against `rayTestBatch` in tests/unit/runtime/test_raycast.py):
 - a ray that starts inside a box does not hit that box (it may hit others);
@@ -16,7 +16,11 @@ Rays that graze an edge or a face exactly (measure zero) may differ.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from addt_dsl.kernel import kernel
 
 
 def box_rotations(heading: np.ndarray, pitch: np.ndarray) -> np.ndarray:
@@ -41,90 +45,92 @@ def cast(starts: np.ndarray, ends: np.ndarray, centres: np.ndarray, rotations: n
     Returns (index, fraction): index k < M for box k, M for the plane, -1 for no hit
     (fraction 1.0 there). With `plane_hits=False` the plane only hides boxes behind it: a
     ray whose first hit is the plane reports -1 as well (for a caller that drops ground
-    hits), and the plane is tested on the rays that meet a box only, with the same
-    arithmetic (a lidar scan's rays mostly end on the ground or nowhere).
+    hits). Ties between boxes go to the lower index.
     """
-    n, m = len(starts), len(centres)
-    best = np.full(n, np.inf)
-    index = np.full(n, -1, dtype=np.int64)
-    seg = ends - starts
-    if n and m:
-        rays, boxes = _candidates(starts, seg, centres, rotations, half_extents)
-        if len(rays):
-            t = _slab(starts[rays] - centres[boxes], seg[rays], rotations[boxes], half_extents[boxes])
-            hit = np.isfinite(t)
-            rays, boxes, t = rays[hit], boxes[hit], t[hit]
-        if len(rays):
-            # The nearest hit per ray: sort by (ray, t) and keep each ray's first.
-            order = np.lexsort((t, rays))
-            rays, boxes, t = rays[order], boxes[order], t[order]
-            first = np.r_[True, rays[1:] != rays[:-1]]
-            best[rays[first]] = t[first]
-            index[rays[first]] = boxes[first]
-    if plane_z is not None and n:
-        rays = slice(None) if plane_hits else np.flatnonzero(index >= 0)
-        above_start, above_end = starts[rays, 2] - plane_z, ends[rays, 2] - plane_z
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = above_start / (above_start - above_end)
-        # Strictly crossing, as Bullet's triangle ray test: an endpoint on the plane is no hit.
-        closer = (above_start * above_end < 0.0) & (t < best[rays])
-        if plane_hits:
-            best[closer] = t[closer]
-            index[closer] = m
-        else:
-            index[rays[closer]] = -1
-    frac = np.where(index >= 0, best, 1.0)
+    n = len(starts)
+    index = np.empty(n, dtype=np.int64)
+    frac = np.empty(n)
+    f = np.float64
+    _cast(np.ascontiguousarray(starts, dtype=f), np.ascontiguousarray(ends, dtype=f),
+          np.ascontiguousarray(centres, dtype=f).reshape(-1, 3),
+          np.ascontiguousarray(rotations, dtype=f).reshape(-1, 3, 3),
+          np.ascontiguousarray(half_extents, dtype=f).reshape(-1, 3), 0.0 if plane_z is None else float(plane_z),
+          plane_z is not None, plane_hits, index, frac)
     return index, frac
 
 
-def _candidates(starts, seg, centres, rotations, half_extents):
-    """(ray, box) index pairs whose segment meets the box's bounding sphere.
+@kernel
+def _cast(starts, ends, centres, rotations, half, plane_z, has_plane, plane_hits, index, frac):
+    """`cast` into `index` and `frac`. Per ray, the boxes whose bounding sphere the segment
+    may meet (with slack: a false candidate costs one slab test) get the exact slab test."""
+    n, m = starts.shape[0], centres.shape[0]
+    radius = np.empty(m)
+    for k in range(m):
+        radius[k] = math.sqrt(half[k, 0] * half[k, 0] + half[k, 1] * half[k, 1] + half[k, 2] * half[k, 2])
+    for i in range(n):
+        sx, sy, sz = starts[i, 0], starts[i, 1], starts[i, 2]
+        gx, gy, gz = ends[i, 0] - sx, ends[i, 1] - sy, ends[i, 2] - sz
+        length = math.sqrt(gx * gx + gy * gy + gz * gz)
+        best, hit = math.inf, -1
+        for k in range(m):
+            rx, ry, rz = centres[k, 0] - sx, centres[k, 1] - sy, centres[k, 2] - sz
+            # distance from the centre to the segment's line, within the segment's reach
+            reach = length + radius[k]
+            d2 = rx * rx + ry * ry + rz * rz
+            if d2 > reach * reach * (1.0 + 1e-9) + 1e-9:
+                continue
+            if length > 0.0:  # the closest point of the segment to the centre
+                proj = (rx * gx + ry * gy + rz * gz) / length
+                along = min(max(proj, 0.0), length)
+                dist2 = d2 - along * (2.0 * proj - along)
+                if dist2 > radius[k] * radius[k] * (1.0 + 1e-9) + 1e-9 * (1.0 + d2):
+                    continue
+            t = _slab(sx - centres[k, 0], sy - centres[k, 1], sz - centres[k, 2], gx, gy, gz, rotations[k], half[k])
+            if t < best:
+                best, hit = t, k
+        if has_plane:
+            above_start, above_end = sz - plane_z, ends[i, 2] - plane_z
+            t = above_start / (above_start - above_end)
+            # Strictly crossing, as Bullet's triangle ray test: an endpoint on the plane is no hit.
+            if above_start * above_end < 0.0 and t < best and (plane_hits or hit >= 0):
+                if plane_hits:
+                    best, hit = t, m
+                else:
+                    hit = -1
+        index[i] = hit
+        frac[i] = best if hit >= 0 else 1.0
 
-    A scan's rays mostly share one origin and each box covers a few of them, so the
-    exact test runs on a small fraction of the ray × box pairs.
-    """
-    radius2 = (half_extents ** 2).sum(axis=1)
-    # (seg * seg).sum(axis=1) with the same bits ((x² + y²) + z², in numpy's order) in a
-    # fifth of the time: a reduction over rows of 3 is slow, whole-column operations are not.
-    len2 = (seg[:, 0] * seg[:, 0] + seg[:, 1] * seg[:, 1] + seg[:, 2] * seg[:, 2])[:, None]
-    if (starts == starts[0]).all():  # one origin (a lidar scan): (3,) vectors, not (N, 3)
-        rel = centres - starts[0]
-        # A box around the origin is never hit (pybullet ignores the box a ray starts in):
-        # the ego's own body, with the sensor mounted inside it.
-        local = np.einsum("kji,kj->ki", rotations, rel)
-        keep = ~np.all(np.abs(local) < half_extents, axis=1)
-        # Boxes beyond the longest ray's reach (their bounding spheres included) are never
-        # met: in dense traffic most of them, and the (rays x boxes) products below shrink.
-        reach = np.sqrt(len2.max()) + np.sqrt(radius2)
-        keep &= (rel * rel).sum(axis=1) <= reach * reach * (1.0 + 1e-6) + 1e-6
-        rel, radius2 = rel[keep], radius2[keep]
-        box_ids = np.flatnonzero(keep)
-        proj = seg @ rel.T  # (N, K): seg · (centre - start)
-        d2 = (rel * rel).sum(axis=1)[None, :]
-    else:
-        box_ids = np.arange(len(centres))
-        proj = seg @ centres.T - (seg * starts).sum(axis=1)[:, None]
-        d2 = ((centres * centres).sum(axis=1)[None, :] - 2.0 * (starts @ centres.T)
-              + (starts * starts).sum(axis=1)[:, None])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tp = np.clip(proj / len2, 0.0, 1.0)  # closest point of the segment to the centre
-    dist2 = d2 - tp * (2.0 * proj - tp * len2)
-    # Slack for rounding in the expanded distance: a false candidate only costs a test.
-    rays, k = np.nonzero(dist2 <= radius2 * (1.0 + 1e-9) + 1e-9 * (1.0 + d2))
-    return rays, box_ids[k]
+
+@kernel
+def _minimum(a, b):
+    """numpy's minimum: a NaN wins."""
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    return a if a <= b else b
 
 
-def _slab(rel_starts, seg, rotations, half_extents):
-    """Entry fraction of each segment (start relative to the box centre) into its box, inf
-    for a miss or a segment that starts inside (pybullet reports neither)."""
-    # Into the box frame: R^T v, as rows.
-    o = np.einsum("pji,pj->pi", rotations, rel_starts)
-    d = np.einsum("pji,pj->pi", rotations, seg)
-    with np.errstate(divide="ignore", invalid="ignore"):
+@kernel
+def _maximum(a, b):
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    return a if a >= b else b
+
+
+@kernel
+def _slab(ox, oy, oz, gx, gy, gz, rot, half):
+    """Entry fraction of a segment (start relative to the box centre, direction g) into
+    the box (axes the columns of `rot`, half extents `half`); inf for a miss or a segment
+    that starts inside (pybullet reports neither)."""
+    t_near, t_far = -math.inf, math.inf
+    for a in range(3):
+        # into the box frame: R^T v, summed in numpy's einsum order
+        o = rot[0, a] * ox + rot[1, a] * oy + rot[2, a] * oz
+        d = rot[0, a] * gx + rot[1, a] * gy + rot[2, a] * gz
         inv = 1.0 / d  # ±inf on an axis-parallel segment: the slab is all or nothing
-        t1 = (-half_extents - o) * inv
-        t2 = (half_extents - o) * inv
-    t_near = np.minimum(t1, t2).max(axis=1)
-    t_far = np.maximum(t1, t2).min(axis=1)
-    hit = (t_near <= t_far) & (t_near >= 0.0) & (t_near <= 1.0)
-    return np.where(hit, t_near, np.inf)
+        t1 = (-half[a] - o) * inv
+        t2 = (half[a] - o) * inv
+        t_near = _maximum(t_near, _minimum(t1, t2))
+        t_far = _minimum(t_far, _maximum(t1, t2))
+    if t_near <= t_far and t_near >= 0.0 and t_near <= 1.0:
+        return t_near
+    return math.inf

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from addt_dsl.kernel import hypot, kernel
+from addt_dsl.kernel import pow  # the C library's, as CPython's `**`
 from addt_dsl.vehicles import DEFAULT_MASS_KG, DEFAULT_MU, DEFAULT_WHEELBASE_M
 
 G = 9.81  # [m/s^2]
@@ -119,197 +121,176 @@ _state_row = operator.attrgetter(*STATE_FIELDS)
 _param_row = operator.attrgetter(*PARAM_FIELDS)
 
 
-def _libm(fn):
-    """`fn` of libm (`math`) mapped over an array: numpy's vectorised sin, tan, atan... may
-    differ from libm in the last bit, and a run's bits must not depend on its batch."""
-    def mapped(*arrays):
-        return np.array(list(map(fn, *(a.tolist() for a in np.broadcast_arrays(*arrays)))), dtype=float)
-    return mapped
-
-
-def _float_fmin(a: float, b: float) -> float:
-    return b if a != a or b < a else a  # numpy's fmin: a NaN loses (Python's min keeps a first NaN)
-
-
-def _float_fmax(a: float, b: float) -> float:
-    return b if a != a or b > a else a
-
-
-def _float_div(a: float, b: float) -> float:
-    """a / b; by zero as numpy gives it (inf or NaN: a value the step then discards)."""
-    if b:
-        return a / b
-    return math.nan if a == 0.0 or a != a else math.copysign(math.inf, a) * math.copysign(1.0, b)
-
-
-class Ops:
-    """The operations the dynamics are written in: `ARRAYS` (numpy over the runs of a batch,
-    libm's transcendental functions mapped) or `FLOATS` (one run, Python floats). Both give
-    the same bits for a run: one formula (`_substep`), never a scalar twin."""
-
-    def __init__(self, **ops):
-        self.__dict__.update(ops)
-
-
-ARRAYS = Ops(min=np.fmin, max=np.fmax, where=np.where, div=np.divide, sqrt=np.sqrt, abs=np.abs,
-             copysign=np.copysign, hypot=_libm(math.hypot), tan=_libm(math.tan), atan=_libm(math.atan),
-             atan2=_libm(math.atan2), sin=_libm(math.sin), cos=_libm(math.cos),
-             all=lambda c: bool(c.all()), any=lambda c: bool(c.any()), zero=np.zeros_like)
-FLOATS = Ops(min=_float_fmin, max=_float_fmax, where=lambda c, a, b: a if c else b, div=_float_div, sqrt=math.sqrt,
-             abs=abs, copysign=math.copysign, hypot=math.hypot, tan=math.tan, atan=math.atan, atan2=math.atan2,
-             sin=math.sin, cos=math.cos, all=bool, any=bool, zero=lambda like: 0.0)
-
-
-# From how many runs `step` takes the batch as arrays: each numpy call costs ~1-2 us
-# whatever its size (the step makes ~100, and maps libm's functions), the float step
-# 7-11 us per run. Measured per run-step on the shared 2 cores (load 5-7, bench lines in
-# docs/twin.md): floats 9.7-11.5 us; arrays 21 us at 8 runs, 16 at 16, 8.1 at 64, 5.8 at 256.
-ARRAY_MIN_RUNS = 64
+# Column of each field in the rows `step` hands its kernel.
+_ST = {f: i for i, f in enumerate(STATE_FIELDS)}
+_PA = {f: i for i, f in enumerate(PARAM_FIELDS)}
+N_STATE, N_PARAM = len(STATE_FIELDS), len(PARAM_FIELDS)
+X, Y, HEADING, VX, VY, YAW_RATE, YAW_ACC, STEER, ACCEL_CMD, ACCEL, AX_SPECIFIC, AY, PITCH, SLIP_F, SLIP_R = (
+    _ST[f] for f in ("x", "y", "heading", "vx", "vy", "yaw_rate", "yaw_acc", "steer", "accel_cmd_actual", "accel",
+                     "ax_specific", "ay", "pitch", "slip_front", "slip_rear"))
+(MASS, WHEELBASE, CG_FRONT, CG_HEIGHT, YAW_INERTIA, C_FRONT, C_REAR, MU, MAX_STEER, STEER_RATE, STEER_LAG, ACCEL_LAG,
+ JERK, MAX_DRIVE, DRIVE_FRONT, DRAG) = (
+    _PA[f] for f in ("mass_kg", "wheelbase_m", "cg_to_front_m", "cg_height_m", "yaw_inertia_kgm2",
+                     "cornering_stiffness_front", "cornering_stiffness_rear", "mu", "max_steer_rad", "steer_rate_rad_s",
+                     "steer_lag_s", "accel_lag_s", "jerk_limit", "max_drive_accel", "drive_front_share", "drag"))
 
 
 def step(states, params, steer_cmd, accel_cmd, dt: float, grade=0.0) -> None:
     """Advance each vehicle state in place by `dt` [s] under its steering [rad] and
     acceleration [m/s^2] commands: one state and its numbers, or sequences of them (a batch
-    of runs: as arrays over the runs from `ARRAY_MIN_RUNS` runs on, else run by run in
-    floats; both give the same bits).
+    of runs: one compiled call over them, each run's bits the same whatever its batch).
 
     `grade` is the road slope dz/ds under the vehicle (uphill positive): gravity acts
     along it and the normal load shrinks by its cosine.
     """
     n = max(1, math.ceil(dt / MAX_SUBSTEP_S - 1e-9))
-    h = dt / n
     if isinstance(states, VehicleState):
         states, params, steer_cmd, accel_cmd, grade = [states], [params], [steer_cmd], [accel_cmd], [grade]
-    if len(states) < ARRAY_MIN_RUNS:  # run by run, in floats
-        for v, q, steer, accel, g in zip(states, params, steer_cmd, accel_cmd, grade):
-            for _ in range(n):  # (the dataclasses' own field dicts: read and written in place)
-                _substep(v.__dict__, q.__dict__, float(steer), float(accel), h, float(g), FLOATS)
-        return
-    # Columns of the batch: state[field] and p[field] are arrays over the runs.
-    cols = np.array([_state_row(v) for v in states], dtype=float).T
-    state = dict(zip(STATE_FIELDS, cols))
-    p = dict(zip(PARAM_FIELDS, np.array([_param_row(q) for q in params], dtype=float).T))
-    steer_cmd, accel_cmd = np.asarray(steer_cmd, dtype=float), np.asarray(accel_cmd, dtype=float)
-    grade = np.asarray(grade, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        for _ in range(n):
-            _substep(state, p, steer_cmd, accel_cmd, h, grade, ARRAYS)
-    rows = np.array([state[f] for f in STATE_FIELDS]).T.tolist()
-    for v, row in zip(states, rows):
+    # One array per call (each array a numba call unboxes costs ~0.3 us): per run its state,
+    # its parameters, then steer, accel and grade.
+    rows = np.array([_state_row(v) + _param_row(q) + (a, b, c)
+                     for v, q, a, b, c in zip(states, params, steer_cmd, accel_cmd, grade)], dtype=float)
+    _step_rows(rows, n, dt / n)
+    for v, row in zip(states, rows[:, :N_STATE].tolist()):
         v.__dict__.update(zip(STATE_FIELDS, row))
 
 
-def _substep(state: dict, p: dict, steer_cmd, accel_cmd, dt: float, grade, o: Ops) -> None:
-    """One integration step of the state (floats, or arrays over runs), in `o`'s operations.
-    Each run takes its regime's result (`o.where`); a regime no run is in is not computed,
-    and what the other regime would give a run (e.g. a division by a zero speed) is discarded."""
-    mn, mx = o.min, o.max
+@kernel
+def _fmin(a, b):
+    return b if math.isnan(a) or b < a else a  # numpy's fmin: a NaN loses (Python's min keeps a first NaN)
+
+
+@kernel
+def _fmax(a, b):
+    return b if math.isnan(a) or b > a else a
+
+
+@kernel
+def _step_rows(rows, n, h):
+    """`n` substeps of `h` [s] of each row's state (its first `N_STATE` columns,
+    `STATE_FIELDS`) under its parameters (the next `N_PARAM`, `PARAM_FIELDS`), steering,
+    acceleration and grade (the last three)."""
+    for r in range(rows.shape[0]):
+        row = rows[r]
+        st, p = row[:N_STATE], row[N_STATE:N_STATE + N_PARAM]
+        steer, accel, grade = row[N_STATE + N_PARAM], row[N_STATE + N_PARAM + 1], row[N_STATE + N_PARAM + 2]
+        for _ in range(n):
+            _substep(st, p, steer, accel, h, grade)
+
+
+@kernel
+def _substep(st, p, steer_cmd, accel_cmd, dt, grade):
+    """One integration step of a state row in place: the kinematic regime below
+    `KINEMATIC_BELOW_MPS`, else the dynamic one."""
     # Actuators: first-order lag, then rate limits.
-    steer_target = mx(-p["max_steer_rad"], mn(p["max_steer_rad"], steer_cmd))
-    d_steer = (steer_target - state["steer"]) * mn(1.0, dt / p["steer_lag_s"])
-    max_d = p["steer_rate_rad_s"] * dt
-    state["steer"] = state["steer"] + mx(-max_d, mn(max_d, d_steer))
-    d_acc = (accel_cmd - state["accel_cmd_actual"]) * mn(1.0, dt / p["accel_lag_s"])
-    max_da = p["jerk_limit"] * dt
-    state["accel_cmd_actual"] = state["accel_cmd_actual"] + mx(-max_da, mn(max_da, d_acc))
+    steer_target = _fmax(-p[MAX_STEER], _fmin(p[MAX_STEER], steer_cmd))
+    d_steer = (steer_target - st[STEER]) * _fmin(1.0, dt / p[STEER_LAG])
+    max_d = p[STEER_RATE] * dt
+    st[STEER] = st[STEER] + _fmax(-max_d, _fmin(max_d, d_steer))
+    d_acc = (accel_cmd - st[ACCEL_CMD]) * _fmin(1.0, dt / p[ACCEL_LAG])
+    max_da = p[JERK] * dt
+    st[ACCEL_CMD] = st[ACCEL_CMD] + _fmax(-max_da, _fmin(max_da, d_acc))
 
-    theta = o.atan(grade)
-    state["pitch"] = theta
-    m = p["mass_kg"]
-    mg = m * G * o.cos(theta)  # normal load
-    g_along = G * o.sin(theta)  # gravity component along the slope
-    fx_demand = m * mn(state["accel_cmd_actual"], p["max_drive_accel"])
-    vx = state["vx"]
-    drag = p["drag"] * vx * vx
-    slow = vx < KINEMATIC_BELOW_MPS
-    args = (state, p, dt, mg, g_along, fx_demand, drag, o)
-    if o.all(slow):
-        out = _kinematic(*args)
-    elif not o.any(slow):
-        out = _dynamic(*args)
+    theta = math.atan(grade)
+    st[PITCH] = theta
+    m = p[MASS]
+    mg = m * G * math.cos(theta)  # normal load
+    g_along = G * math.sin(theta)  # gravity component along the slope
+    fx_demand = m * _fmin(st[ACCEL_CMD], p[MAX_DRIVE])
+    vx = st[VX]
+    drag = p[DRAG] * vx * vx
+    if vx < KINEMATIC_BELOW_MPS:
+        _kinematic(st, p, dt, mg, g_along, fx_demand, drag)
     else:
-        out = tuple(o.where(slow, k, d) for k, d in zip(_kinematic(*args), _dynamic(*args)))
-    (state["vx"], state["vy"], state["yaw_rate"], state["yaw_acc"], state["accel"], state["ax_specific"],
-     state["ay"], state["slip_front"], state["slip_rear"]) = out
-    state["heading"] = heading = state["heading"] + state["yaw_rate"] * dt
-    c, s = o.cos(heading), o.sin(heading)
-    horizontal = o.cos(theta)  # x, y are the horizontal projection of the motion
-    vx, vy = state["vx"], state["vy"]
-    state["x"] = state["x"] + (vx * c - vy * s) * horizontal * dt
-    state["y"] = state["y"] + (vx * s + vy * c) * horizontal * dt
+        _dynamic(st, p, dt, mg, g_along, fx_demand, drag)
+    st[HEADING] = heading = st[HEADING] + st[YAW_RATE] * dt
+    c, s = math.cos(heading), math.sin(heading)
+    horizontal = math.cos(theta)  # x, y are the horizontal projection of the motion
+    vx, vy = st[VX], st[VY]
+    st[X] = st[X] + (vx * c - vy * s) * horizontal * dt
+    st[Y] = st[Y] + (vx * s + vy * c) * horizontal * dt
 
 
-def _kinematic(state, p, dt, mg, g_along, fx_demand, drag, o) -> tuple:
+@kernel
+def _kinematic(st, p, dt, mg, g_along, fx_demand, drag):
     """Kinematic regime at low speed: the path follows the wheels; the friction circle
-    still bounds the longitudinal force by what the cornering leaves. (vx, vy, yaw rate,
-    yaw acceleration, accel, specific force, lateral accel, slips) after the step."""
-    mn, mx = o.min, o.max
-    m, L, mu = p["mass_kg"], p["wheelbase_m"], p["mu"]
-    vx, r = state["vx"], state["yaw_rate"]
-    tan_steer = o.tan(state["steer"])
+    still bounds the longitudinal force by what the cornering leaves. Writes vx, vy, yaw
+    rate, yaw acceleration, accel, specific force, lateral accel and slips."""
+    m, L, mu = p[MASS], p[WHEELBASE], p[MU]
+    vx, r = st[VX], st[YAW_RATE]
+    tan_steer = math.tan(st[STEER])
     lateral = m * vx * vx * tan_steer / L
-    f_max = o.sqrt(mx(0.0, (mu * mg) ** 2 - lateral * lateral))
-    fx = mx(-f_max, mn(f_max, fx_demand))
+    f_max = math.sqrt(_fmax(0.0, pow(mu * mg, 2.0) - lateral * lateral))
+    fx = _fmax(-f_max, _fmin(f_max, fx_demand))
     ax = fx / m - drag - g_along
-    ax = o.where((vx <= 0.0) & (ax < 0.0), 0.0, ax)  # brakes hold the car; no reversing
-    new_vx = mx(0.0, vx + ax * dt)
+    if vx <= 0.0 and ax < 0.0:  # brakes hold the car; no reversing
+        ax = 0.0
+    new_vx = _fmax(0.0, vx + ax * dt)
     yaw = new_vx * tan_steer / L
     # The tyres cannot turn the car harder than the friction circle leaves after the
     # longitudinal force: past that they slide and the path widens.
-    ay_max = o.sqrt(mx(0.0, (mu * G) ** 2 - (fx / m) ** 2))
-    yaw = o.where(new_vx * o.abs(yaw) > ay_max, o.copysign(o.div(ay_max, new_vx), yaw), yaw)
-    zero = o.zero(vx)
-    return new_vx, zero, yaw, (yaw - r) / dt, ax, ax + g_along, new_vx * yaw, zero, zero
+    ay_max = math.sqrt(_fmax(0.0, pow(mu * G, 2.0) - pow(fx / m, 2.0)))
+    if new_vx * abs(yaw) > ay_max:
+        yaw = math.copysign(ay_max / new_vx, yaw)
+    st[VX], st[VY], st[YAW_RATE], st[YAW_ACC] = new_vx, 0.0, yaw, (yaw - r) / dt
+    st[ACCEL], st[AX_SPECIFIC], st[AY], st[SLIP_F], st[SLIP_R] = ax, ax + g_along, new_vx * yaw, 0.0, 0.0
 
 
-def _dynamic(state, p, dt, mg, g_along, fx_demand, drag, o) -> tuple:
+@kernel
+def _dynamic(st, p, dt, mg, g_along, fx_demand, drag):
     """Dynamic regime: axle loads with longitudinal load transfer from the last step's
     specific force (clipped so that an axle never carries less than nothing), Fiala tyres
-    on the friction circle. The same quantities as `_kinematic`."""
-    mn, mx = o.min, o.max
-    m, mu = p["mass_kg"], p["mu"]
-    lf, L = p["cg_to_front_m"], p["wheelbase_m"]
+    on the friction circle. Writes what `_kinematic` writes."""
+    m, mu = p[MASS], p[MU]
+    lf, L = p[CG_FRONT], p[WHEELBASE]
     lr = L - lf
-    vx, vy, r, steer = state["vx"], state["vy"], state["yaw_rate"], state["steer"]
-    transfer = mx(-mg * lf / L, mn(mg * lr / L, m * state["ax_specific"] * p["cg_height_m"] / L))
+    vx, vy, r, steer = st[VX], st[VY], st[YAW_RATE], st[STEER]
+    transfer = _fmax(-mg * lf / L, _fmin(mg * lr / L, m * st[AX_SPECIFIC] * p[CG_HEIGHT] / L))
     fz_f = mg * lr / L - transfer
     fz_r = mg * lf / L + transfer
     # Braking in proportion to the axle loads, drive by the drivetrain's split.
-    share_f = o.where(fx_demand < 0.0, fz_f / mx(fz_f + fz_r, 1e-9), p["drive_front_share"])
+    share_f = fz_f / _fmax(fz_f + fz_r, 1e-9) if fx_demand < 0.0 else p[DRIVE_FRONT]
     fx_f, fx_r = share_f * fx_demand, (1.0 - share_f) * fx_demand
-    alpha_f = steer - o.atan2(vy + lf * r, vx)
-    alpha_r = -o.atan2(vy - lr * r, vx)
-    fyf = fiala_lateral_force(p["cornering_stiffness_front"], alpha_f, mu * fz_f, o)
-    fyr = fiala_lateral_force(p["cornering_stiffness_rear"], alpha_r, mu * fz_r, o)
-    fyf, fx_f = _friction_circle(fyf, fx_f, mu * fz_f, o)
-    fyr, fx_r = _friction_circle(fyr, fx_r, mu * fz_r, o)
-    cs, sn = o.cos(steer), o.sin(steer)
+    alpha_f = steer - math.atan2(vy + lf * r, vx)
+    alpha_r = -math.atan2(vy - lr * r, vx)
+    fyf = fiala_lateral_force(p[C_FRONT], alpha_f, mu * fz_f)
+    fyr = fiala_lateral_force(p[C_REAR], alpha_r, mu * fz_r)
+    fyf, fx_f = _friction_circle(fyf, fx_f, mu * fz_f)
+    fyr, fx_r = _friction_circle(fyr, fx_r, mu * fz_r)
+    cs, sn = math.cos(steer), math.sin(steer)
     fx_body = fx_f * cs - fyf * sn + fx_r
     fy_body = fyf * cs + fx_f * sn + fyr
     ax = fx_body / m + vy * r - drag - g_along
     ay = fy_body / m
-    yaw_acc = (lf * (fyf * cs + fx_f * sn) - lr * fyr) / p["yaw_inertia_kgm2"]
-    return (mx(0.0, vx + ax * dt), vy + (ay - vx * r) * dt, r + yaw_acc * dt, yaw_acc, ax, fx_body / m - drag, ay,
-            alpha_f, alpha_r)
+    yaw_acc = (lf * (fyf * cs + fx_f * sn) - lr * fyr) / p[YAW_INERTIA]
+    st[VX], st[VY], st[YAW_RATE], st[YAW_ACC] = _fmax(0.0, vx + ax * dt), vy + (ay - vx * r) * dt, r + yaw_acc * dt, \
+        yaw_acc
+    st[ACCEL], st[AX_SPECIFIC], st[AY], st[SLIP_F], st[SLIP_R] = ax, fx_body / m - drag, ay, alpha_f, alpha_r
 
 
-def fiala_lateral_force(stiffness, alpha, f_max, o: Ops = FLOATS):
-    """Fiala brush-model lateral force [N] at slip angle `alpha` [rad], saturating at `f_max`
-    (floats, or arrays over a batch with `o` = ARRAYS).
+@kernel
+def fiala_lateral_force(stiffness, alpha, f_max):
+    """Fiala brush-model lateral force [N] at slip angle `alpha` [rad], saturating at `f_max`.
 
     Linear (`stiffness * alpha`) at small slip, cubic roll-off, full sliding at
     tan(alpha) >= 3 f_max / stiffness.
     """
-    x = o.abs(o.tan(alpha))
+    if f_max <= 0.0:
+        return 0.0
+    x = abs(math.tan(alpha))
     cx = stiffness * x
-    force = cx - o.div(cx * cx, 3.0 * f_max) + o.div(cx * cx * cx, 27.0 * f_max * f_max)
-    force = o.where(x * stiffness >= 3.0 * f_max, f_max, force)
-    return o.where(f_max <= 0.0, o.zero(f_max), o.copysign(force, alpha))
+    if x * stiffness >= 3.0 * f_max:
+        force = f_max
+    else:
+        force = cx - cx * cx / (3.0 * f_max) + cx * cx * cx / (27.0 * f_max * f_max)
+    return math.copysign(force, alpha)
 
 
-def _friction_circle(fy, fx, limit, o: Ops):
+@kernel
+def _friction_circle(fy, fx, limit):
     """Scale the tyre force vectors back onto the friction circle of radius `limit` [N]."""
-    mag = o.hypot(fx, fy)
-    inside = (mag <= limit) | (mag == 0.0)
-    k = o.div(limit, mag)
-    return o.where(inside, fy, fy * k), o.where(inside, fx, fx * k)
+    mag = hypot(fx, fy)
+    if mag <= limit or mag == 0.0:
+        return fy, fx
+    k = limit / mag
+    return fy * k, fx * k

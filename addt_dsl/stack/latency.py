@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from addt_dsl.lru import LruCache
 from addt_dsl.specs.stacks import DEFAULT_LATENCY_TARGET, LATENCY_MODEL_PATH, latency_targets
 
 MODEL_PATH = LATENCY_MODEL_PATH
@@ -78,10 +79,25 @@ def read(path: Path = MODEL_PATH) -> dict:
 target_names = latency_targets  # the `latency_target` setting's choices
 
 
+# Parsed models per (target, file and its version): parsing the file cost ~7 ms a run.
+_MODELS: LruCache[tuple, dict[str, LatencyModel]] = LruCache(8)
+
+
 def load_models(target: str = DEFAULT_TARGET, path: Path = MODEL_PATH, data: dict | None = None
                 ) -> dict[str, LatencyModel]:
     """Per-node models scaled to `target` (a name in the file's `targets`)."""
-    data = data if data is not None else read(path)
+    if data is None:
+        stat = path.stat()
+        key = (target, str(path), stat.st_mtime_ns, stat.st_size)
+        models = _MODELS.get(key)
+        if models is None:
+            models = _scaled(target, read(path))
+            _MODELS.put(key, models)
+        return dict(models)  # (the models are frozen; the dict is the caller's)
+    return _scaled(target, data)
+
+
+def _scaled(target: str, data: dict) -> dict[str, LatencyModel]:
     t = data["targets"][target]
     levels = tuple(float(v) for v in data["jitter_levels"])
     models = {}

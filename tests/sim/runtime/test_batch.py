@@ -13,7 +13,6 @@ from pathlib import Path
 import pytest
 
 from addt_dsl.compiler import compile_file
-from addt_dsl.runtime import vehicle
 from addt_dsl.runtime.execute import execute, execute_batch
 from addt_dsl.sweep import expand
 from tests.sim.kit import solo
@@ -62,11 +61,9 @@ def check_batches(specs, orders=None) -> None:
 
 
 @pytest.mark.slow  # 14 closed-loop runs (~17 s loaded): part (a) of CI runs it, the core selection does not
-def test_fast_examples_same_alone_batched_reversed(monkeypatch):
+def test_fast_examples_same_alone_batched_reversed():
     specs = [first_spec(n) for n in FAST]
-    [solo(s) for s in specs]  # the references, alone, before the patch
-    # Batched egos step as arrays over the runs (forced from 2 runs), alone in floats.
-    monkeypatch.setattr(vehicle, "ARRAY_MIN_RUNS", 2)
+    [solo(s) for s in specs]  # the references, alone
     # Durations differ: runs leave the batch at different samples.
     assert len({s.plan.duration_s for s in specs}) > 1
     check_batches(specs)

@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from addt_dsl.kernel import OPTIONS, Kernel, kernel
+from addt_dsl.kernel import pow as kpow
 
 
 @kernel
@@ -51,3 +52,47 @@ def test_callee_compiled_in_and_pickled_by_name():
     assert pickle.loads(pickle.dumps(_loop)) is _loop
     _loop(np.array([2.0]), np.array([0.5]), np.empty(1))
     assert _mix._compiled is not None  # compiled as the caller's callee
+
+
+any_float = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True)
+
+
+@settings(max_examples=400, deadline=None)
+@given(any_float, any_float)
+def test_hypot_is_pythons(x, y):
+    from addt_dsl.kernel import hypot
+
+    want = math.hypot(x, y)
+    for got in (hypot(x, y), hypot.py_func(x, y)):
+        assert (got == want and math.copysign(1.0, got) == math.copysign(1.0, want)) or \
+            (math.isnan(got) and math.isnan(want))
+
+
+def test_hypot_edges():
+    from addt_dsl.kernel import hypot
+
+    for x, y in [(3.0, 4.0), (1e308, 1e308), (5e-324, 5e-324), (1e-310, 3e-312), (-0.0, 0.0),
+                 (math.inf, math.nan), (math.nan, -math.inf), (0.1, 0.7)]:
+        want = math.hypot(x, y)
+        assert hypot(x, y) == want or (math.isnan(want) and math.isnan(hypot(x, y)))
+
+
+@kernel
+def _powers(x, out):
+    for i in range(x.size):
+        out[0, i] = kpow(x[i], 2.0)  # (numba's x ** 2.0 would be x * x)
+        out[1, i] = kpow(x[i], 4.0)
+        out[2, i] = kpow(x[i], 0.5)
+
+
+def test_pow_is_pythons_where_numba_would_multiply():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=20000) * np.exp(rng.normal(size=20000) * 20)
+    out = np.empty((3, x.size))
+    _powers(x, out)
+    values = x.tolist()
+    for row, y in zip(out, (2.0, 4.0, 0.5)):
+        want = np.array([v ** y if v >= 0.0 or y != 0.5 else math.nan for v in values])
+        assert np.array_equal(row, want, equal_nan=True)
+    # the same inputs as x * x: some differ, so the test would catch the rewrite
+    assert (out[0] != x * x).any()

@@ -257,3 +257,23 @@ def test_plane_that_only_hides_boxes_answers_as_ground_hits_dropped(seed, n_boxe
     index_hide, frac_hide = raycast.cast(starts, ends, centres, rot, half, 0.0, plane_hits=False)
     assert np.array_equal(index_hide, index)
     assert np.array_equal(frac_hide, frac)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 6), st.integers(1, 40), st.integers(0, 2**32 - 1), st.booleans(), st.booleans())
+def test_compiled_cast_is_its_python(m, n, seed, one_origin, plane_hits):
+    """The kernel's bits are its Python source's (rounded scenes: rays along faces and edges)."""
+    from addt_dsl.kernel import interpreted
+
+    rng = np.random.default_rng(seed)
+    centres = np.round(rng.uniform(-6, 6, (m, 3)))
+    half = np.round(rng.uniform(0.5, 2.5, (m, 3)) * 2) / 2
+    rot = raycast.box_rotations(rng.choice([0.0, 0.3, np.pi / 2], m), rng.choice([0.0, 0.05], m))
+    starts = np.round(rng.uniform(-8, 8, (1 if one_origin else n, 3))) * np.ones((n, 1))
+    ends = np.round(starts + rng.uniform(-12, 12, (n, 3)))
+    with np.errstate(all="ignore"):
+        got = raycast.cast(starts, ends, centres, rot, half, 0.0, plane_hits=plane_hits)
+        with interpreted():
+            want = raycast.cast(starts, ends, centres, rot, half, 0.0, plane_hits=plane_hits)
+    assert got[0].tolist() == want[0].tolist()
+    assert got[1].view(np.int64).tolist() == want[1].view(np.int64).tolist()

@@ -1,31 +1,26 @@
-"""The ego's dynamics over a batch (`vehicle.step` on sequences, as arrays over the runs:
-forced here from 2 runs on): each state ends the same bit for bit as stepped alone in
-floats, whatever its batch and place in it; a NaN command is clamped (as Python's min / max
-clamp it), not carried into the state."""
+"""The ego's dynamics over a batch (`vehicle.step` on sequences: one compiled call over the
+runs): each state ends the same bit for bit as stepped alone, whatever its batch and place
+in it, and as the kernel's Python source gives it; a NaN command is clamped (as numpy's
+fmin / fmax clamp it), not carried into the state."""
 
 import copy
 import math
 
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import pytest
 
-from addt_dsl.runtime import vehicle
+from addt_dsl.kernel import interpreted
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState, step
 
 DT = 0.01
-
-
-@pytest.fixture(autouse=True)
-def arrays_from_two_runs(monkeypatch):
-    monkeypatch.setattr(vehicle, "ARRAY_MIN_RUNS", 2)
 
 car = st.tuples(st.floats(0.2, 1.2), st.floats(-3.0, 3.0), st.floats(0.0, 40.0))
 command = st.tuples(st.floats(-0.7, 0.7), st.floats(-12.0, 6.0), st.sampled_from([0.0, 0.06, -0.04]))
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=30, deadline=None)
 @given(st.lists(car, min_size=1, max_size=9), st.lists(command, min_size=1, max_size=40), st.randoms())
 def test_batch_equals_one_by_one(cars, commands, rnd):
     params = [VehicleParams.for_vehicle(mu=mu) for mu, _, _ in cars]
@@ -55,3 +50,18 @@ def test_nan_command_is_clamped_not_carried(runs):
     for v in cars:
         assert all(math.isfinite(getattr(v, f)) for f in ("x", "y", "vx", "vy", "yaw_rate", "steer"))
         assert v.steer == p.steer_rate_rad_s * DT  # toward +max steer at the rate limit, as before
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(car, min_size=1, max_size=5), st.lists(command, min_size=1, max_size=12),
+       st.sampled_from([0.01, 0.025, 0.004]))
+def test_compiled_is_its_python(cars, commands, dt):
+    params = [VehicleParams.for_vehicle(mu=mu) for mu, _, _ in cars]
+    compiled = [VehicleState(0.0, 0.0, h, v) for _, h, v in cars]
+    python = copy.deepcopy(compiled)
+    for steer, accel, grade in commands + [(math.nan, math.nan, 0.0)]:
+        n = len(cars)
+        step(compiled, params, [steer] * n, [accel] * n, dt, [grade] * n)
+        with interpreted():
+            step(python, params, [steer] * n, [accel] * n, dt, [grade] * n)
+    assert [repr(v) for v in compiled] == [repr(v) for v in python]

@@ -132,3 +132,26 @@ def test_jitter_is_relative_to_each_group_median():
     groups = [(0, [1.0, 2.0, 3.0]), (10, [10.0, 20.0, 30.0])]
     ratios, count = jitter(groups, levels=(0.0, 0.5, 1.0))
     assert count == 6 and ratios == [0.5, 1.0, 1.5]
+
+
+def test_models_parsed_once_per_file_version(tmp_path, monkeypatch):
+    """`load_models` parses a file once (it cost ~7 ms a run) and again when it changes."""
+    import json
+    import os
+
+    from addt_dsl.stack import latency
+
+    path = tmp_path / "model.json"
+    data = latency.read()
+    path.write_text(json.dumps(data))
+    reads = []
+    real_read = latency.read
+    monkeypatch.setattr(latency, "read", lambda p=latency.MODEL_PATH: reads.append(p) or real_read(p))
+    first = latency.load_models("host", path)
+    assert latency.load_models("host", path) == first and len(reads) == 1
+    assert first == latency.load_models("host", data=data)  # the same models as from the data
+    data["nodes"]["planner"]["base_s"] = 2.0 * data["nodes"]["planner"]["base_s"]
+    path.write_text(json.dumps(data))
+    os.utime(path, ns=(1, 1))  # another version even where the clock's resolution is coarse
+    changed = latency.load_models("host", path)
+    assert len(reads) == 2 and changed["planner"].base_s == 2.0 * first["planner"].base_s
