@@ -349,7 +349,7 @@ class Fleets:
             layout.dt = np.array([run.dt for run, _ in items], dtype=float)
         left = fleet.step(layout.bounds, layout.cells, layout.block.flat, layout.placed, t_new, idm, params,
                           layout.road, layout.length, ego, layout.ego_road, layout.ego_length, layout.dt,
-                          fleet.POWERS, LANE_WINDOW_M, layout.done)
+                          LANE_WINDOW_M, layout.done)
         for k, j, a in changing:  # (only agents in a lane change may hold a moving centre)
             if a.lc_centre is not None and layout.done[j]:
                 settle_lane_change(a, items[j][1] + items[j][0].dt, a.t)

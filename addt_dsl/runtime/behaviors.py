@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 from addt_dsl.kernel import kernel
+from addt_dsl.kernel import pow  # the C library's, as CPython's `**`
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.agent_arrays import AgentState
 from addt_dsl.runtime.neighbours import nearest_ahead
@@ -414,11 +415,11 @@ class Idm(S.Idm, Behavior):
         p = self._params
         if p is None:
             p = self._params = IdmParams.of(self.settings)
-        free = idm_free.py_func(agent.speed, p.v0, 4.0)
+        free = idm_free.py_func(agent.speed, p.v0)
         lead = world.leader_of(agent)
         if lead is None:
             return p.accel * free
-        return idm_accel.py_func(agent.speed, free, *lead, p.accel, p.time_gap, p.min_gap, p.two_sqrt_ab, 2.0)
+        return idm_accel.py_func(agent.speed, free, *lead, p.accel, p.time_gap, p.min_gap, p.two_sqrt_ab)
 
     _params = None
 
@@ -436,22 +437,21 @@ class IdmParams:
 
 
 # IDM's formulas, one definition: interpreted (`.py_func`) by `Idm`, compiled into the
-# agents' kernel (`fleet.step`). The exponents are arguments (4.0 and 2.0: `fleet.POWERS`),
-# so that both take libm's pow.
+# agents' kernel (`fleet.step`); powers by the C library's pow (`kernel.pow`), as Python's.
 @kernel
-def idm_free(v, v0, four):
+def idm_free(v, v0):
     """The free-road term `1 - (v / v0) ** 4` of IDM."""
-    return 1.0 - (v / v0) ** four
+    return 1.0 - pow(v / v0, 4.0)
 
 
 @kernel
-def idm_accel(v, free, gap, lead_speed, accel, time_gap, min_gap, two_sqrt_ab, two):
+def idm_accel(v, free, gap, lead_speed, accel, time_gap, min_gap, two_sqrt_ab):
     """IDM's acceleration [m/s^2] behind a leader `gap` [m] ahead at `lead_speed` [m/s]
     (`free`: `idm_free`). `max(0.0, x)` and `max(gap, 0.1)` written as Python's `max` picks."""
     dv = v - lead_speed
     x = v * time_gap + v * dv / two_sqrt_ab
     s_star = min_gap + (x if x > 0.0 else 0.0)
-    return accel * (free - (s_star / (0.1 if 0.1 > gap else gap)) ** two)
+    return accel * (free - pow(s_star / (0.1 if 0.1 > gap else gap), 2.0))
 
 
 @BEHAVIORS.implements

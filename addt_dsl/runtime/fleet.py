@@ -14,7 +14,7 @@ looks (`LeaderIndex.moved`); with a non-finite station among the members, the sc
 every member (`neighbours.leader_scan`), as the index does.
 
 Bit for bit: the kernel's +, -, *, /, sqrt and comparisons are Python's floats', `max`
-written as the comparison Python's `max` makes; powers are libm's `pow` (see `POWERS`).
+written as the comparison Python's `max` makes; powers are the C library's (`kernel.pow`).
 """
 
 from __future__ import annotations
@@ -29,11 +29,6 @@ from addt_dsl.runtime.neighbours import STOP_SLACK_M
 
 IDM_FIELDS = ("v0", "accel", "time_gap", "min_gap", "two_sqrt_ab")  # `IdmParams`' fields, `step`'s `params` rows
 
-# The exponents of IDM's powers (4, 2), passed to the kernel as values: with a constant 2.0
-# the compiler writes `x ** 2.0` as x * x, which differs from libm's pow (Python's `**`) in
-# the last bit for ~0.1% of x.
-POWERS = np.array([4.0, 2.0])
-
 
 def idm_params(settings: list[dict]) -> np.ndarray:
     """Per-agent IDM settings (`behaviors.IdmParams.of` of each) as `step`'s `params` rows
@@ -43,15 +38,15 @@ def idm_params(settings: list[dict]) -> np.ndarray:
 
 
 @kernel
-def step(lo, cells, flat, placed, t_new, idm, params, road, length, ego, ego_road, ego_length, dt, powers,
-         window_m, done):
+def step(lo, cells, flat, placed, t_new, idm, params, road, length, ego, ego_road, ego_length, dt, window_m,
+         done):
     """One step of every agent of the runs: run r's agents are rows lo[r]:lo[r + 1] of the
     per-agent arrays, in declaration order, their state in `flat` (`agent_arrays`' fields
     x slots) at slots `cells`, moved there in place. Per agent: `t_new` its offset after the
     step [m] (lane change profile), `idm` whether IDM drives it (else its acceleration is 0),
     `params` its IDM settings (`IDM_FIELDS` x agents), `road` its road's code, `length` [m].
     Per run: `ego` (station [m], offset [m], speed [m/s]) run after run, `ego_road`,
-    `ego_length` [m], `dt` [s]. `powers`: `POWERS`. `done[r]` False where run r is left to
+    `ego_length` [m], `dt` [s]. `done[r]` False where run r is left to
     the per-agent loop, nothing of it moved: an agent teleported this step (`placed`, over
     the slots), or a station or offset of its agents or its ego not finite. Returns how many
     runs are left."""
@@ -63,7 +58,6 @@ def step(lo, cells, flat, placed, t_new, idm, params, road, length, ego, ego_roa
     ms, mt, mv, ml = np.empty(width), np.empty(width), np.empty(width), np.empty(width)
     mroad = np.empty(width, dtype=np.int64)
     keys, ids = np.empty(width), np.empty(width, dtype=np.int64)
-    four, two = powers[0], powers[1]
     for r in range(runs):
         a, n = lo[r], lo[r + 1] - lo[r]
         ok = math.isfinite(ego[3 * r]) and math.isfinite(ego[3 * r + 1])
@@ -123,8 +117,8 @@ def step(lo, cells, flat, placed, t_new, idm, params, road, length, ego, ego_roa
                         if not found or gap < best or (gap == best and m < best_m):
                             found, best, lead, best_m = True, gap, mv[m], m
                 p = params[:, k]
-                free = idm_free(v, p[0], four)
-                accel = idm_accel(v, free, best, lead, p[1], p[2], p[3], p[4], two) if found else p[1] * free
+                free = idm_free(v, p[0])
+                accel = idm_accel(v, free, best, lead, p[1], p[2], p[3], p[4]) if found else p[1] * free
             # `behaviors.advance`: the station moves by speed / ground scale, less what a lane
             # change takes across the road
             speed = v + accel * h

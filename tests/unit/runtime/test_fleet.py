@@ -7,6 +7,7 @@ worked by hand."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 from types import SimpleNamespace
 
@@ -14,6 +15,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from addt_dsl.kernel import interpreted
 from addt_dsl.runtime import behaviors, fleet
 from addt_dsl.runtime.behaviors import Idm, advance, idm_accel, idm_free
 from addt_dsl.runtime.neighbours import LANE_WINDOW_M, leader_scan
@@ -24,11 +26,11 @@ SETTINGS = ({"speed": 25.0, "time_gap": 1.5, "min_gap": 2.0, "accel": 1.5, "dece
             {"speed": 12.0, "time_gap": 0.7, "min_gap": 0.5, "accel": 3.0, "decel": 5.5})
 
 
-def call(runs, width: int, kernel=fleet.step, placed=()):
+def call(runs, width: int, python=False, placed=()):
     """`fleet.step` over `runs`: each (agents, ego, dt), an agent (road, s, t, v, length,
     scale, t_new, settings index or None), the ego (road, s, t, v, length); run r's agents
-    in slots r * width.. of a padded block, those of `placed` (run, agent) teleported.
-    (the block's S..ACCEL rows per run, done)."""
+    in slots r * width.. of a padded block, those of `placed` (run, agent) teleported;
+    `python`: the kernel's Python (callees too). (the block's S..ACCEL rows per run, done)."""
     n_runs = len(runs)
     flat = np.zeros((5, n_runs * width))
     flat[4] = 1.0
@@ -44,13 +46,13 @@ def call(runs, width: int, kernel=fleet.step, placed=()):
         lo.append(lo[-1] + len(agents))
     ego = np.array([x for _, e, _ in runs for x in e[1:4]], dtype=float)
     done = np.empty(n_runs, dtype=bool)
-    with np.errstate(all="ignore"):
-        left = kernel(np.array(lo, dtype=np.int64), np.array(cells, dtype=np.int64), flat, teleported,
+    with np.errstate(all="ignore"), interpreted() if python else contextlib.nullcontext():
+        left = fleet.step(np.array(lo, dtype=np.int64), np.array(cells, dtype=np.int64), flat, teleported,
                       np.array(t_new, dtype=float), np.array(idm, dtype=bool),
                       np.array(params, dtype=float).reshape(-1, 5).T.copy(), np.array(road, dtype=np.int64),
                       np.array(length, dtype=float), ego, np.array([e[0] for _, e, _ in runs], dtype=np.int64),
                       np.array([e[4] for _, e, _ in runs], dtype=float),
-                      np.array([dt for _, _, dt in runs], dtype=float), fleet.POWERS, LANE_WINDOW_M, done)
+                      np.array([dt for _, _, dt in runs], dtype=float), LANE_WINDOW_M, done)
     assert left == (~done).sum()
     return [flat[:4, r * width:r * width + len(agents)] for r, (agents, _, _) in enumerate(runs)], done
 
@@ -119,7 +121,7 @@ weird = st.sampled_from([math.nan, math.inf, -math.inf, -0.0, 0.0, 1e-300])
 @given(st.lists(st.tuples(st.lists(agent, min_size=0, max_size=8), ego_, st.sampled_from([0.05, 0.1])),
                 min_size=1, max_size=5), st.data())
 def test_compiled_gives_its_python_bits(runs, data):
-    """The compiled kernel against `step.py_func` over padded batches of 0..8 agents a run,
+    """The compiled kernel against its Python (`kernel.interpreted`) over padded batches of 0..8 agents a run,
     with non-finite or signed-zero stations, offsets, speeds and ground scales, teleported
     agents (a run with one, or with a non-finite station or offset, its ego's too, is left
     untouched, `done` False)."""
@@ -132,7 +134,7 @@ def test_compiled_gives_its_python_bits(runs, data):
               if data.draw(st.integers(0, 19)) == 0}
     width = max(len(a) for a, _, _ in runs) + 2
     got, done = call(runs, width, placed=placed)
-    want, done_py = call(runs, width, fleet.step.py_func, placed)
+    want, done_py = call(runs, width, True, placed)
     assert done.tolist() == done_py.tolist()
     assert all(g.tobytes() == w.tobytes() for g, w in zip(got, want))
     for r, ((agents, ego, _), g, ok) in enumerate(zip(runs, got, done.tolist())):
@@ -154,10 +156,10 @@ def test_idm_powers_are_libm_pow():
     compiled = idm_accel.dispatcher()
     differ = 0
     for vi, gi, li in zip(v, gap, lead):
-        free = idm_free(vi, p[0], 4.0)
+        free = idm_free(vi, p[0])
         assert free == 1.0 - pow(vi / p[0], 4)
-        want = idm_accel.py_func(vi, free, gi, li, *p[1:], 2.0)
-        assert compiled(vi, free, gi, li, *p[1:], 2.0) == want
+        want = idm_accel.py_func(vi, free, gi, li, *p[1:])
+        assert compiled(vi, free, gi, li, *p[1:]) == want
         x = (p[3] + max(0.0, vi * p[2] + vi * (vi - li) / p[4])) / gi
         differ += want != p[1] * (free - x * x)
     assert differ > 0  # (the inputs reach cases where x * x would differ)
