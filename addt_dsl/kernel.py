@@ -15,9 +15,11 @@ write `pow(x, 2.0)` with this module's `pow` where the Python it replaces wrote 
 and `math.hypot` is the C library's where CPython has its own: use this module's `hypot`.
 
 numba is imported at a kernel's first call, not at import (its import costs ~0.2-0.4 s that
-a compile-only command should not pay). Compiled code is cached on disk (numba's `cache`:
-beside the source, or numba's per-user cache directory where that is read-only), so a
-process pays the compile (~0.3-1 s a kernel) only the first time on a machine.
+a compile-only command should not pay). Compiled code is cached on disk, so a process pays
+the compile (~0.3-1 s a kernel) only the first time for a version of the code: in a folder
+per code fingerprint (`cache_dir`). numba's own cache checks only the kernel's own source
+file, and a kernel has its callees' code and the constants it reads from other modules
+compiled in: changed there, its cached code would be stale.
 """
 
 from __future__ import annotations
@@ -25,8 +27,12 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import os
+import shutil
+import time
 import types
 from collections.abc import Callable
+from pathlib import Path
 
 OPTIONS = {"cache": True, "error_model": "numpy", "fastmath": False, "nogil": True}
 _interpreting = False  # `interpreted()`: every kernel call runs its Python
@@ -103,7 +109,13 @@ class Kernel:
             fn = types.FunctionType(fn.__code__, {**fn.__globals__, **callees}, fn.__name__, fn.__defaults__,
                                     fn.__closure__)
             fn.__qualname__, fn.__module__ = self.py_func.__qualname__, self.py_func.__module__
-        return numba.njit(**OPTIONS)(fn)
+        from numba.core import config
+
+        before, config.CACHE_DIR = config.CACHE_DIR, cache_dir()  # (read as the dispatcher is made)
+        try:
+            return numba.njit(**OPTIONS)(fn)
+        finally:
+            config.CACHE_DIR = before
 
     def dispatcher(self) -> Callable | None:
         """The compiled function (compiling it now if it is not yet); None while it compiles."""
@@ -121,6 +133,30 @@ class Kernel:
         return self.__qualname__
 
 
+@functools.cache
+def cache_dir() -> str:
+    """The folder of this code's compiled kernels: `<base>/kernels/<code fingerprint>`, base
+    `$NUMBA_CACHE_DIR`, else the package's `__pycache__` where writable, else
+    `~/.cache/addt-dsl`. Made on first use; folders of other versions not used for a day are
+    removed then."""
+    from addt_dsl.fingerprint import code_fingerprint
+
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        base = Path(os.environ["NUMBA_CACHE_DIR"])
+    elif os.access(Path(__file__).parent, os.W_OK):
+        base = Path(__file__).parent / "__pycache__"
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "addt-dsl"
+    root = base / "kernels"
+    here = root / code_fingerprint()
+    if not here.is_dir():
+        here.mkdir(parents=True, exist_ok=True)
+        for old in root.iterdir():
+            if old != here and old.is_dir() and time.time() - old.stat().st_mtime > 86400.0:
+                shutil.rmtree(old, ignore_errors=True)
+    return str(here)
+
+
 def kernel(fn: Callable) -> Kernel:
     """Mark a module-level function as a compiled kernel. A kernel may call other kernels by
     their module-level names (compiled, they are compiled in)."""
@@ -133,66 +169,64 @@ where CPython raises (0 ** -1, a negative base to a fractional power) this gives
 or nan."""
 
 _SPLIT = 134217729.0  # 2**27 + 1: Veltkamp's splitter for doubles
-_DBL_MIN = 2.2250738585072014e-308
-
-
-@kernel
-def _dl_mul(x, y):
-    """x * y as (hi, lo), hi + lo exact (Dekker's mul12)."""
-    t = x * _SPLIT
-    xh = t - (t - x)
-    xl = x - xh
-    t = y * _SPLIT
-    yh = t - (t - y)
-    yl = y - yh
-    p = xh * yh
-    q = xh * yl + xl * yh
-    z = p + q
-    return z, p - z + q + xl * yl
-
-
-@kernel
-def _norm2(a, b, big):
-    _, e = math.frexp(big)
-    if e < -1023:  # ldexp(1, -e) would overflow: subnormals to normals first
-        return _DBL_MIN * _norm2_normal(a / _DBL_MIN, b / _DBL_MIN, big / _DBL_MIN)
-    return _norm2_normal(a, b, big)
-
-
-@kernel
-def _norm2_normal(a, b, big):
-    _, e = math.frexp(big)
-    scale = math.ldexp(1.0, -e)
-    csum, frac1, frac2 = 1.0, 0.0, 0.0
-    for v in (a, b):
-        x = v * scale  # lossless
-        hi, lo = _dl_mul(x, x)  # lossless squaring
-        s = csum + hi  # lossless addition (fast two-sum: |csum| >= |hi|)
-        frac2 += hi - (s - csum)
-        csum = s
-        frac1 += lo
-    h = math.sqrt(csum - 1.0 + (frac1 + frac2))
-    hi, lo = _dl_mul(-h, h)
-    s = csum + hi
-    frac2 += hi - (s - csum)
-    csum = s
-    frac1 += lo
-    x = csum - 1.0 + (frac1 + frac2)
-    h += x / (2.0 * h)  # differential correction
-    return h / scale
 
 
 @kernel
 def hypot(x, y):
     """sqrt(x*x + y*y) [same unit as x, y] with CPython 3.11's `math.hypot` bits (its
-    vector_norm: scaled, squared in double length, one correction). numba's `math.hypot` is
-    the C library's, which differs in the last bit: kernels call this one."""
-    a, b = abs(x), abs(y)
-    if math.isinf(a) or math.isinf(b):
+    vector_norm of two floats: scaled by a power of two, squared exactly by Veltkamp-Dekker
+    splitting, summed with the rounding errors of each term, one Newton correction of the
+    root; where the scale would overflow, divided by the larger instead). numba's
+    `math.hypot` is the C library's, which differs in the last bit: kernels call this one."""
+    x, y = abs(x), abs(y)
+    if math.isinf(x) or math.isinf(y):
         return math.inf
-    if math.isnan(a) or math.isnan(b):
+    if math.isnan(x) or math.isnan(y):
         return math.nan
-    big = max(b, a)
+    big = x if x > y else y
     if big == 0.0:
-        return big
-    return _norm2(a, b, big)
+        return 0.0
+    e = math.frexp(big)[1]
+    if e < -1023:  # (subnormal) 2 ** -e would overflow
+        csum, frac = 1.0, 0.0
+        for v in (x, y):
+            v = v / big
+            v = v * v
+            old = csum
+            csum += v
+            frac += (old - csum) + v
+        return big * math.sqrt(csum - 1.0 + frac)
+    scale = math.ldexp(1.0, -e)
+    csum, frac1, frac2, frac3 = 1.0, 0.0, 0.0, 0.0
+    for v in (x, y):
+        v *= scale  # lossless
+        t = v * _SPLIT
+        hi = t - (t - v)
+        lo = v - hi
+        v = hi * hi
+        old = csum
+        csum += v
+        frac1 += (old - csum) + v
+        v = 2.0 * hi * lo
+        old = csum
+        csum += v
+        frac2 += (old - csum) + v
+        frac3 += lo * lo
+    h = math.sqrt(csum - 1.0 + (frac1 + frac2 + frac3))
+    t = h * _SPLIT
+    hi = t - (t - h)
+    lo = h - hi
+    v = -hi * hi
+    old = csum
+    csum += v
+    frac1 += (old - csum) + v
+    v = -2.0 * hi * lo
+    old = csum
+    csum += v
+    frac2 += (old - csum) + v
+    v = -lo * lo
+    old = csum
+    csum += v
+    frac3 += (old - csum) + v
+    v = csum - 1.0 + (frac1 + frac2 + frac3)
+    return (h + v / (2.0 * h)) / scale  # differential correction

@@ -72,6 +72,8 @@ scenario traffic_{n_agents} {{
 
 def physics_step_us(n_vehicles: int) -> dict[str, float]:
     """Per-step cost of the loop's physics with `n_vehicles` (ego + agents)."""
+    import numpy as np
+
     from addt_dsl.runtime import batch as X
     from addt_dsl.runtime.behaviors import advance
     from addt_dsl.runtime.vehicle import step as vehicle_step
@@ -85,8 +87,8 @@ def physics_step_us(n_vehicles: int) -> dict[str, float]:
         dt, names = run.dt, ["ego"] + [a.name for a in run.agents]
         sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m),
                  **{a.name: (a.length_m, a.width_m) for a in run.agents}}
-        out = [0.0] * len(names)
-        lengths, widths = [sizes[n][0] for n in names], [sizes[n][1] for n in names]
+        rows = np.zeros((len(names), 11))  # a step's rows of the record: x, y, heading first, the clearance last
+        footprints = np.array([sizes[n] for n in names])
 
         def one_step():
             poses = {}
@@ -98,7 +100,8 @@ def physics_step_us(n_vehicles: int) -> dict[str, float]:
             e = run.ego
             run.physics.set_pose("ego", e.x, e.y, 0.75, e.heading)
             poses["ego"] = (e.x, e.y, e.heading)
-            clearances(out, names, *([poses[n][c] for n in names] for c in range(3)), lengths, widths, run, 0.0)
+            rows[:, :3] = [poses[n] for n in names]
+            clearances(rows, names, footprints, run, 0.0)
             vehicle_step(e, run.vehicle_params, 0.0, 0.0, dt)
             for a in run.agents:
                 beh = run.longitudinal[a.name]

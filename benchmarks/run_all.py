@@ -50,6 +50,8 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "cost_model": ([], ["--quick"]),
     "batch": (["--scaling"], ["--quick"]),
     "agents_step": ([], ["--agents", "1,50", "--batches", "1,16", "--repeat", "2"]),
+    "pose": ([], ["--agents", "5,50", "--batches", "1,16", "--repeat", "1"]),
+    "planner": ([], ["--repeats", "20", "--rounds", "1"]),
 }
 
 

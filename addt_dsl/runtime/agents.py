@@ -12,12 +12,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from addt_dsl.kernel import kernel
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.actor_road import ActorPath
-from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S
+from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S, T
 from addt_dsl.runtime.behaviors import Idm, lateral_profile, relative_heading, settle_lane_change, standing_yaw
+from addt_dsl.runtime.fastroad import POSE_GRADE, POSE_H, POSE_OFFSET, POSE_X, POSE_Y, POSE_Z
 from addt_dsl.runtime.neighbours import LANE_WINDOW_M
-from addt_dsl.runtime.vehicle import VehicleState
 
 
 def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: float) \
@@ -35,10 +36,11 @@ def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: floa
 
 
 # Agents posed as arrays from this many on in a batch (all its runs' together): fewer, and
-# the per-agent code is quicker (posing: ~30 us of numpy calls against ~2 us per agent,
-# measured break-even at ~24 agents). Both ways give the same bits. (The step goes through
-# its kernel whatever the count: `Fleets.step`.)
-ARRAY_MIN_AGENTS = 24
+# the per-agent code is quicker (posing: ~15 us of calls, two kernels among them, against
+# ~2-5 us per agent; the whole loop measured at break-even at ~4 agents: with fewer, the
+# rows as lists are quicker to record). Both ways give the same bits. (The step goes
+# through its kernel whatever the count: `Fleets.step`.)
+ARRAY_MIN_AGENTS = 4
 
 
 class Fleet:
@@ -109,13 +111,6 @@ class Fleet:
         state[SCALE] = scale
         self.x, self.y, self.heading, self.v, self.rows = x, y, heading, v, rows
         self.posed = True
-
-    def columns(self, ego: VehicleState):
-        """(x, y, heading) of every actor, the ego first: lists or arrays as posed."""
-        if self.rows is not None:
-            return [ego.x, *self.x], [ego.y, *self.y], [ego.heading, *self.heading]
-        return tuple(np.concatenate(([v], a))
-                     for v, a in ((ego.x, self.x), (ego.y, self.y), (ego.heading, self.heading)))
 
     def road_pose(self, i: int):
         """(x, y, road heading, lane offset, z, grade) of agent i, one by one."""
@@ -201,11 +196,9 @@ class _Layout:
                 groups.setdefault(id(fast), (fast, elev, []))[2].append(rows + lo)
             self.path_rows += [(lo + i, f, i) for i in f.path_rows]
             self.yaw += [(lo + i, f.agents[i], yaw) for i, yaw in f.yaw]
-        whole = np.arange(self.n)
-        self.groups = []
-        for fast, elev, parts in groups.values():
-            rows = np.concatenate(parts)
-            self.groups.append((fast, elev, slice(None) if np.array_equal(rows, whole) else rows))
+        self.groups = [(fast, elev, np.concatenate(parts)) for fast, elev, parts in groups.values()]
+        self.yaw_rows = np.array([k for k, _, _ in self.yaw], dtype=np.intp)
+        self.zeros = np.zeros(self.n)  # (no agent turned off its road's heading: never written)
         self.half_height = np.concatenate([f.half_height for f in fleets])
         self.length = np.concatenate([f.length for f in fleets])
         # `fleet.step`'s arguments that stay: run bounds, road codes, the egos' lengths and codes
@@ -273,54 +266,45 @@ class Fleets:
                     run.world_pose[a.name] = (float(xi), float(yi), float(hi))
 
     def _pose_arrays(self, items):
-        """`Fleet.pose_one_by_one` as arrays over the batch's agents, bit for bit: the road
-        points and lane offsets of each road's agents at once (`FastRoad.points`), the scalar
-        calls only where an agent turns off its road's heading or the road is not flat. The
-        runs left one by one (non-finite stations)."""
+        """`Fleet.pose_one_by_one` as arrays over the batch's agents, bit for bit: each road's
+        agents in one kernel call (`FastRoad.pose_rows`: the scalar calls' code), the body
+        headings and pitches in another (`_body_poses`). The runs left one by one
+        (non-finite stations)."""
         if not items:
             return []
         layout = self._layout([run.fleet for run, _ in items])
         flat, cells = layout.block.flat, layout.cells
-        s, t, v = flat[S:SPEED + 1, cells]
-        finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts)
-        if not finite.all():
-            left = [item for item, ok in zip(items, finite.tolist()) if not ok]
-            return left + self._pose_arrays([item for item, ok in zip(items, finite.tolist()) if ok])
         n, lo = layout.n, layout.lo
-        rel = np.zeros(n)
+        out = np.empty((_POSE_ROWS, n))
+        if not (all(fast.pose_rows(elev, flat, cells, rows, out) for fast, elev, rows in layout.groups)
+                and all(math.isfinite(f.agents[i].s) and math.isfinite(f.agents[i].t) for _, f, i in layout.path_rows)):
+            s, t = flat[S:T + 1, cells]
+            finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts).tolist()
+            left = [item for item, ok in zip(items, finite) if not ok]
+            return left + self._pose_arrays([item for item, ok in zip(items, finite) if ok])
+        rel = None
         for j, (run, t_now) in enumerate(items):
             f = run.fleet
             plan = f.array_plan(run)  # with one, only lane changes turn agents off their road's heading
             lateral = plan[2] if plan is not None else \
                 [i for i, a in enumerate(f.agents) if a.heading_rel or a.lc_duration_s > 0.0]
             for i in lateral:
+                if rel is None:
+                    rel = np.zeros(n)
                 rel[lo[j] + i] = relative_heading(f.agents[i], t_now, run.dt)
-        x, y, ref_h, lane_off = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        z, grade, scale = np.zeros(n), np.zeros(n), np.ones(n)
-        for fast, elev, rows in layout.groups:
-            sr, tr = s[rows], t[rows]
-            x[rows], y[rows], ref_h[rows], i, u = fast.points(sr, tr)
-            scale[rows] = fast.ground_scales(sr, tr, i, u)
-            lane_off[rows] = fast.lane_offsets(sr, tr, i, u)
-            zg = elev.at_arrays(sr)
-            if zg is not None:
-                z[rows], grade[rows] = zg
         for k, f, i in layout.path_rows:  # routes: one by one
-            x[k], y[k], ref_h[k], lane_off[k], z[k], grade[k] = f.road_pose(i)
-            scale[k] = f.roads[i].road.ground_scale(float(s[k]), float(t[k]))
-        flat[SCALE, cells] = scale
-        heading = ref_h + rel
-        for k, a, yaw in layout.yaw:
-            heading[k] += standing_yaw(a, yaw)
-        pitch = np.zeros(n)  # atan(0) * cos(0) where flat and along the road
-        for k in np.flatnonzero((grade != 0.0) | (heading != ref_h)).tolist():
-            pitch[k] = math.atan(grade[k]) * math.cos(heading[k] - ref_h[k])
-        z += layout.half_height
+            a = f.agents[i]
+            out[POSE_X, k], out[POSE_Y, k], out[POSE_H, k], out[POSE_OFFSET, k], out[POSE_Z, k], \
+                out[POSE_GRADE, k] = f.road_pose(i)
+            a.ground_scale = f.roads[i].road.ground_scale(a.s, a.t)
+        yaw = np.array([standing_yaw(a, yaw) for _, a, yaw in layout.yaw], dtype=float) if layout.yaw else _NO_YAW
+        _body_poses(out, layout.zeros if rel is None else rel, layout.yaw_rows, yaw, layout.half_height, flat, cells)
         for j, (run, _) in enumerate(items):
-            f, rows = run.fleet, slice(lo[j], lo[j + 1])
-            run.physics.set_poses(f.slots, x[rows], y[rows], z[rows], heading[rows], pitch[rows])
-            f.x, f.y, f.heading, f.lane_offset, f.rows = x[rows], y[rows], heading[rows], lane_off[rows], None
-            f.v = v[rows]  # (perception's ground truth: the speed of the pose)
+            f, pose = run.fleet, out if len(items) == 1 else out[:, lo[j]:lo[j + 1]]
+            x, y, heading = pose[POSE_X], pose[POSE_Y], pose[_HEADING]
+            run.physics.set_poses(f.slots, x, y, pose[POSE_Z], heading, pose[_PITCH])
+            f.x, f.y, f.heading, f.lane_offset, f.rows = x, y, heading, pose[POSE_OFFSET], None
+            f.v = pose[_SPEED]  # (perception's ground truth: the speed of the pose)
             f.posed = True
         return []
 
@@ -364,6 +348,30 @@ class Fleets:
             else:
                 rest.append(item)
         return rest
+
+
+# `_pose_arrays`' rows: `FastRoad.pose_rows`' and the body's heading and pitch [rad], the speed [m/s].
+_HEADING, _PITCH, _SPEED = 6, 7, 8
+_POSE_ROWS = 9
+_NO_YAW = np.empty(0)
+
+
+@kernel
+def _body_poses(out, rel, yaw_rows, yaw, half_height, flat, cells):
+    """Each agent's body heading (its road's plus `rel`, plus `yaw` at `yaw_rows`, in that
+    order) and pitch (the grade's angle seen along the body: atan(grade) * cos(heading -
+    road heading), 0 where flat and along the road), its centre's height (road z plus
+    `half_height`), and its speed (block slot `cells[k]`), in `out`'s rows."""
+    n = out.shape[1]
+    for k in range(n):
+        out[_HEADING, k] = out[POSE_H, k] + rel[k]
+        out[_SPEED, k] = flat[SPEED, cells[k]]
+    for j in range(yaw_rows.size):
+        out[_HEADING, yaw_rows[j]] += yaw[j]
+    for k in range(n):
+        grade, heading, h = out[POSE_GRADE, k], out[_HEADING, k], out[POSE_H, k]
+        out[_PITCH, k] = math.atan(grade) * math.cos(heading - h) if grade != 0.0 or heading != h else 0.0
+        out[POSE_Z, k] += half_height[k]
 
 
 @dataclass

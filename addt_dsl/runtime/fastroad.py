@@ -3,8 +3,13 @@
 `Road` (addt_dsl.road) evaluates OpenDRIVE geometry exactly but costs ~10-500 µs per
 scalar call; the loop asks for poses and projections thousands of times per run. This
 view samples the reference line once per run (every `STEP_M`) and answers by
-interpolation in plain Python (a few µs). The interpolation error on a sample spacing
-of 0.25 m is below kappa * ds^2 / 8, i.e. under 1e-4 m for curvatures up to 0.01 /m.
+interpolation (a few µs; under 1 µs a call compiled). The interpolation error on a sample
+spacing of 0.25 m is below kappa * ds^2 / 8, i.e. under 1e-4 m for curvatures up to 0.01 /m.
+
+Each query is one compiled kernel (`addt_dsl.kernel`) over the road's sample table: the
+scalar calls (`reference_pose`, `point`, `ground_scale`, `lane_offset`, `project`) call it
+on one point, `pose_rows` runs the same functions over many actors in one call (the agents'
+pose phase, `agents.Fleets`), so the two give the same bits.
 """
 
 from __future__ import annotations
@@ -14,13 +19,171 @@ import math
 
 import numpy as np
 
+from addt_dsl.kernel import kernel
+from addt_dsl.runtime.agent_arrays import SCALE, S, T
+from addt_dsl.runtime.roadmesh import elevation_at
+
 STEP_M = 0.25
 MIN_GROUND_SCALE = 0.2  # [m/m] `ground_scale` near a bend's centre of curvature
 _BLOCK = 8192  # samples evaluated at once
+_NO_PROFILE = np.empty(0)  # `_pose_rows`' elevation samples on a flat road
+
+# Rows of a road's sample table (`FastRoad._tab`): the reference line's x, y [m], unwrapped
+# heading [rad], curvature [1/m] and station [m] at each sample.
+_X, _Y, _H, _K, _S = range(5)
+# Rows of `pose_rows`' output: x, y, z [m], the road's heading [rad], the lane offset [m], the grade [-].
+POSE_X, POSE_Y, POSE_Z, POSE_H, POSE_OFFSET, POSE_GRADE = range(6)
+
+
+@kernel
+def _index(tab, ds, last_i, s):
+    """(sample index, fraction) of station `s`: int(s / ds) clamped to the samples (clamping
+    the quotient first gives the same index)."""
+    q = s / ds
+    if q != q:  # int() of it raised, and raises (as interpreted, its words too)
+        raise ValueError("cannot convert float NaN to integer")
+    if q - q != 0.0:
+        raise OverflowError("cannot convert float infinity to integer")
+    if q < 0.0:
+        q = 0.0
+    elif q > last_i:
+        q = float(last_i)
+    i = int(q)
+    return i, (s - tab[_S, i]) / ds
+
+
+@kernel
+def _reference_pose(tab, ds, last_i, length, s):
+    i, u = _index(tab, ds, last_i, s)
+    x = tab[_X, i] + u * (tab[_X, i + 1] - tab[_X, i])
+    y = tab[_Y, i] + u * (tab[_Y, i + 1] - tab[_Y, i])
+    h = tab[_H, i] + u * (tab[_H, i + 1] - tab[_H, i])
+    if s > length:  # extrapolate straight past the end
+        extra = s - length
+        h = tab[_H, last_i + 1]
+        x, y = tab[_X, last_i + 1] + extra * math.cos(h), tab[_Y, last_i + 1] + extra * math.sin(h)
+    elif s < 0.0:
+        h = tab[_H, 0]
+        x, y = tab[_X, 0] + s * math.cos(h), tab[_Y, 0] + s * math.sin(h)
+    return x, y, h
+
+
+@kernel
+def _point(tab, ds, last_i, length, s, t):
+    x, y, h = _reference_pose(tab, ds, last_i, length, s)
+    return x - math.sin(h) * t, y + math.cos(h) * t, h
+
+
+@kernel
+def _ground_scale(tab, ds, last_i, length, s, t):
+    if s > length or s < 0.0:
+        return 1.0
+    i, u = _index(tab, ds, last_i, s)
+    g = 1.0 - (tab[_K, i] + u * (tab[_K, i + 1] - tab[_K, i])) * t
+    return g if g > MIN_GROUND_SCALE else MIN_GROUND_SCALE
+
+
+@kernel
+def _section(starts, s):
+    """The lane section at `s`: bisect_right(starts, s) - 1, at least 0."""
+    lo, hi = 0, starts.size
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if s < starts[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo - 1 if lo > 0 else 0
+
+
+@kernel
+def _lane_offset(centres, starts, lanes, i, u, s, t):
+    """(offset from the nearest driving lane's centre at sample `i` + fraction `u`, the first
+    of equal distances; -1, or the section whose lanes' centres are not in `centres` yet).
+    `lanes[k]`: section k's lane count (-1: not tabled yet), then its rows of `centres`."""
+    k = _section(starts, s)
+    n = lanes[k, 0]
+    if n < 0:
+        return t, k
+    best_d, best_c = math.inf, 0.0
+    found = False
+    for j in range(1, n + 1):
+        row = lanes[k, j]
+        c = centres[row, i] + u * (centres[row, i + 1] - centres[row, i])
+        d = abs(t - c)
+        if d < best_d:  # (an absent lane's NaN is never nearer)
+            best_d, best_c, found = d, c, True
+    return (t - best_c if found else t), -1
+
+
+@kernel
+def _lane_offset_at(tab, ds, last_i, centres, starts, lanes, s, t):
+    i, u = _index(tab, ds, last_i, s)
+    return _lane_offset(centres, starts, lanes, i, u, s, t)
+
+
+@kernel
+def _project(tab, ds, last_i, length, x, y, hint, hinted):
+    """(s, t) of the point (`x`, `y`): three Newton steps along the line from `hint`, or
+    without one from the nearest sample (the first of the nearest; the first NaN distance, as
+    numpy's argmin)."""
+    s = hint
+    if not hinted:
+        best, best_d = 0, (tab[_X, 0] - x) * (tab[_X, 0] - x) + (tab[_Y, 0] - y) * (tab[_Y, 0] - y)
+        if best_d == best_d:
+            for k in range(1, tab.shape[1]):
+                dx, dy = tab[_X, k] - x, tab[_Y, k] - y
+                d = dx * dx + dy * dy
+                if d != d:
+                    best = k
+                    break
+                if d < best_d:
+                    best, best_d = k, d
+        s = tab[_S, best]
+    for _ in range(3):
+        rx, ry, h = _reference_pose(tab, ds, last_i, length, s)
+        step = (x - rx) * math.cos(h) + (y - ry) * math.sin(h)
+        s += step
+        if s < 0.0:
+            s = 0.0
+        elif s > length:
+            s = length
+        if abs(step) < 1e-6:
+            break
+    rx, ry, h = _reference_pose(tab, ds, last_i, length, s)
+    return s, -(x - rx) * math.sin(h) + (y - ry) * math.cos(h)
+
+
+@kernel
+def _pose_rows(tab, ds, last_i, length, centres, starts, lanes, z, g, z_ds, z_length, flat, cells, rows, out):
+    """Every actor of one road: row r = rows[j] is block slot cells[r] (`AgentArrays.flat`):
+    its point, lane offset, elevation (`z` empty: a flat road) into out[:, r] (`POSE_*`),
+    its ground scale into the block. -1; or a section `lanes` lacks, or -2 at a station or
+    offset not finite (nothing is written from that actor on)."""
+    for j in range(rows.size):
+        r = rows[j]
+        cell = cells[r]
+        s, t = flat[S, cell], flat[T, cell]
+        if not (s - s == 0.0 and t - t == 0.0):
+            return -2
+        i, u = _index(tab, ds, last_i, s)
+        off, missing = _lane_offset(centres, starts, lanes, i, u, s, t)
+        if missing >= 0:
+            return missing
+        out[POSE_X, r], out[POSE_Y, r], out[POSE_H, r] = _point(tab, ds, last_i, length, s, t)
+        out[POSE_OFFSET, r] = off
+        flat[SCALE, cell] = _ground_scale(tab, ds, last_i, length, s, t)
+        if z.size:
+            out[POSE_Z, r], out[POSE_GRADE, r] = elevation_at(z, g, z_ds, z_length, s)
+        else:
+            out[POSE_Z, r], out[POSE_GRADE, r] = 0.0, 0.0
+    return -1
+
 
 
 class FastRoad:
     _k_a: np.ndarray | None = None  # the curvature samples (and `_s_k` their stations) as arrays, made when first asked
+    _lane_tables: tuple | None = None  # (centres, section starts, lanes) of `_lane_offset`, made when first asked
 
     def __init__(self, road):
         self.road = road
@@ -36,97 +199,43 @@ class FastRoad:
         self._h = np.unwrap(np.asarray(h, dtype=float)).tolist()
         self._k = np.asarray(road.curvature(s), dtype=float).tolist()
         self._xy = np.stack([np.asarray(x, float), np.asarray(y, float)], axis=1)
-        # The same samples as arrays, for `points` and `lane_offsets` (many actors at once).
-        self._s_a = np.array(self._s)
-        self._xyh = np.array([self._x, self._y, self._h])
-        self._center_arrays: dict[tuple[int, ...], np.ndarray] = {}  # a section's lanes -> their centres
-        self._ds = self._s[1] - self._s[0]
-        self._last_i = len(self._s) - 2
+        self._table()
         self._section_starts = [sec.s0 for sec in road.sections]
         self._lanes_cache: dict[int, tuple[int, ...]] = {}
         self._center_cache: dict[int, list[float]] = {}
+        self._center_rows: dict[int, np.ndarray] = {}  # the same centres as arrays (`_lanes_tabled`)
+
+    def _table(self) -> None:
+        """The kernels' table of the samples (`_X`..`_S` rows) and its spacing."""
+        self._tab = np.array([self._x, self._y, self._h, self._k, self._s])
+        self._ds = self._s[1] - self._s[0]
+        self._last_i = len(self._s) - 2
 
     # ---- reference line
     def _index(self, s: float) -> tuple[int, float]:
-        # Comparisons, not min/max: this runs ~50k times per run.
-        ds = self._ds
-        i = int(s / ds)
-        if i < 0:
-            i = 0
-        elif i > self._last_i:
-            i = self._last_i
-        return i, (s - self._s[i]) / ds
+        return _index(self._tab, self._ds, self._last_i, s)
 
     def reference_pose(self, s: float) -> tuple[float, float, float]:
-        i, u = self._index(s)
-        xs, ys, hs = self._x, self._y, self._h
-        x = xs[i] + u * (xs[i + 1] - xs[i])
-        y = ys[i] + u * (ys[i + 1] - ys[i])
-        h = hs[i] + u * (hs[i + 1] - hs[i])
-        if s > self.length:  # extrapolate straight past the end
-            extra = s - self.length
-            h = self._h[-1]
-            x, y = self._x[-1] + extra * math.cos(h), self._y[-1] + extra * math.sin(h)
-        elif s < 0.0:
-            x, y, h = self._x[0] + s * math.cos(self._h[0]), self._y[0] + s * math.sin(self._h[0]), self._h[0]
-        return x, y, h
+        return _reference_pose(self._tab, self._ds, self._last_i, self.length, s)
 
-    def _indices(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """`_index` of many finite stations: int(s / ds) clamped (clamping the quotient
-        first gives the same index), and the fraction, with the same arithmetic."""
-        ds = self._ds
-        i = np.minimum(np.maximum(s / ds, 0.0), self._last_i).astype(np.intp)
-        return i, (s - self._s_a[i]) / ds
-
-    def points(self, s: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """`point(s, t)` of many actors, bit for bit, plus the sample index and fraction
-        (`lane_offsets` takes them): the interpolation is elementwise in numpy, in the scalar
-        code's order; sin and cos stay libm's (`math`: numpy's SIMD versions may differ in
-        the last bit). Finite stations; those off the road's ends are posed by `point`."""
-        i, u = self._indices(s)
-        table = self._xyh
-        lo = table[:, i]
-        x, y, h = lo + u * (table[:, i + 1] - lo)
-        off = np.flatnonzero((s > self.length) | (s < 0.0))
-        for j in off.tolist():  # extrapolated straight: the scalar call
-            x[j], y[j], h[j] = self.reference_pose(float(s[j]))
-        hl = h.tolist()
-        px = x - np.fromiter(map(math.sin, hl), float, len(hl)) * t
-        py = y + np.fromiter(map(math.cos, hl), float, len(hl)) * t
-        return px, py, h, i, u
-
-    def lane_offsets(self, s: np.ndarray, t: np.ndarray, i: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """`lane_offset(s, t)` of many actors (`i`, `u`: `points`' index and fraction),
-        bit for bit: the nearest driving lane's centre, the first on equal distances."""
-        if len(self._section_starts) == 1:
-            keys, sec = [0], None
-        else:
-            sec = np.maximum(np.searchsorted(self._section_starts, s, side="right") - 1, 0)
-            keys = np.unique(sec).tolist()
-        out = t.copy()
-        for key in keys:
-            rows = slice(None) if len(keys) == 1 else np.flatnonzero(sec == key)
-            lanes = self._lanes_of_section(key)
-            if not lanes:
-                continue
-            table = self._center_arrays.get(lanes)
-            if table is None:
-                for lane in lanes:
-                    self.lane_center_t(lane, 0.0)  # fills the lane's table
-                table = self._center_arrays[lanes] = np.array([self._center_cache[lane] for lane in lanes])
-            ii, uu, tt = i[rows], u[rows], t[rows]
-            lo = table[:, ii]
-            c = lo + uu * (table[:, ii + 1] - lo)  # a row per lane
-            d = np.abs(tt - c)
-            d[np.isnan(d)] = np.inf  # an absent lane is never the nearest
-            nearest = d.argmin(axis=0)  # the first of equal distances, as the scalar loop's `<`
-            cols = np.arange(len(tt))
-            found = d[nearest, cols] < np.inf
-            out[rows] = np.where(found, tt - c[nearest, cols], tt)
-        return out
+    def pose_rows(self, elevation, flat: np.ndarray, cells: np.ndarray, rows: np.ndarray, out: np.ndarray) -> bool:
+        """`point`, `lane_offset` and `elevation.at` of the actors in block slots
+        cells[rows] (`AgentArrays.flat`) into out[POSE_*, rows], and `ground_scale` into the
+        block's ground scales: one kernel call, the scalar calls' code and bits. False (and
+        some left unposed) where a station or offset is not finite."""
+        centres, starts, lanes = self._lane_tables or self._lanes_tabled(-1)
+        z, g = (elevation._z_a, elevation._g_a) if not elevation.flat else (_NO_PROFILE, _NO_PROFILE)
+        while True:
+            missing = _pose_rows(self._tab, self._ds, self._last_i, self.length, centres, starts, lanes, z, g,
+                                 elevation._ds, elevation.length, flat, cells, rows, out)
+            if missing == -1:
+                return True
+            if missing == -2:
+                return False
+            centres, starts, lanes = self._lanes_tabled(missing)
 
     def curvature(self, s: float) -> float:
-        i, u = self._index(s)
+        i, u = _index(self._tab, self._ds, self._last_i, s)
         return self._k[i] + u * (self._k[i + 1] - self._k[i])
 
     def ground_scale(self, s: float, t: float) -> float:
@@ -136,22 +245,7 @@ class FastRoad:
         `MIN_GROUND_SCALE` (near the centre of curvature). An actor moving at `speed`
         advances its station by speed / ground_scale. Past the ends, where the line goes on
         straight, 1."""
-        if s > self.length or s < 0.0:
-            return 1.0
-        i, u = self._index(s)
-        ks = self._k
-        g = 1.0 - (ks[i] + u * (ks[i + 1] - ks[i])) * t
-        return g if g > MIN_GROUND_SCALE else MIN_GROUND_SCALE
-
-    def ground_scales(self, s: np.ndarray, t: np.ndarray, i: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """`ground_scale` of many actors (`i`, `u`: `points`' index and fraction), bit for bit."""
-        if self._k_a is None:
-            self._k_a = np.array(self._k)
-            self._s_k = np.array(self._s)
-        lo = self._k_a[i]
-        g = 1.0 - (lo + u * (self._k_a[i + 1] - lo)) * t
-        g = np.where(g > MIN_GROUND_SCALE, g, MIN_GROUND_SCALE)
-        return np.where((s > self.length) | (s < 0.0), 1.0, g)
+        return _ground_scale(self._tab, self._ds, self._last_i, self.length, s, t)
 
     def curvature_ahead(self, s: float, distance: float) -> tuple[np.ndarray, np.ndarray]:
         """(distance past `s` [m], curvature [1/m]) of the line's samples from `s` to `s +
@@ -165,30 +259,13 @@ class FastRoad:
         return np.maximum(self._s_k[i0:i1] - s, 0.0), self._k_a[i0:i1]
 
     def point(self, s: float, t: float) -> tuple[float, float, float]:
-        x, y, h = self.reference_pose(s)
-        return x - math.sin(h) * t, y + math.cos(h) * t, h
+        return _point(self._tab, self._ds, self._last_i, self.length, s, t)
 
     def project(self, x: float, y: float, hint: float | None = None) -> tuple[float, float]:
-        """(s, t) of a point; `hint` (a nearby s) makes it a local search of a few µs."""
-        if hint is None:
-            d = self._xy - (x, y)
-            s = self._s[int(np.argmin(np.einsum("ij,ij->i", d, d)))]
-        else:
-            s = hint
-        length = self.length
-        for _ in range(3):
-            rx, ry, h = self.reference_pose(s)
-            ds = (x - rx) * math.cos(h) + (y - ry) * math.sin(h)
-            s += ds
-            if s < 0.0:  # min(max(s, 0), length), without the calls
-                s = 0.0
-            elif s > length:
-                s = length
-            if abs(ds) < 1e-6:
-                break
-        rx, ry, h = self.reference_pose(s)
-        t = -(x - rx) * math.sin(h) + (y - ry) * math.cos(h)
-        return s, t
+        """(s, t) of a point; `hint` (a nearby s) makes it a local search (under 1 µs), without
+        one it starts from the nearest sample (~1 ns a sample)."""
+        return _project(self._tab, self._ds, self._last_i, self.length, x, y,
+                        0.0 if hint is None else hint, hint is not None)
 
     def sample_arrays(self, s, t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Vectorised `point` and `curvature` at stations `s` (within the road) and offsets
@@ -255,12 +332,13 @@ class FastRoad:
         table = self._center_cache.get(lane)
         if table is None:
             try:
-                vals = np.asarray(self.road.lane_center_t(lane, np.asarray(self._s)), dtype=float)
+                vals = np.array(self.road.lane_center_t(lane, self._tab[_S]), dtype=float)
             except ValueError:
                 vals = np.array([float(self.road.lane_center_t(lane, si)) if lane in self.road.lane_ids(si)
                                  else math.nan for si in self._s])
             table = vals.tolist()
             self._center_cache[lane] = table
+            self._center_rows[lane] = vals
         i, u = self._index(s)
         return table[i] + u * (table[i + 1] - table[i])
 
@@ -275,15 +353,28 @@ class FastRoad:
     def lane_offset(self, s: float, t: float) -> float:
         """Offset from the nearest driving lane's centre [m]: `lane_at`'s lane, each
         centre interpolated once (the loop asks for every actor at every step)."""
-        i, u = self._index(s)
-        best_d, best_c = math.inf, None
-        for lane in self.driving_lane_ids(s):
-            table = self._center_cache.get(lane)
-            if table is None:
-                self.lane_center_t(lane, s)  # fills the lane's table
-                table = self._center_cache[lane]
-            c = table[i] + u * (table[i + 1] - table[i])
-            d = abs(t - c)
-            if d < best_d:
-                best_d, best_c = d, c
-        return t if best_c is None else t - best_c
+        centres, starts, lanes = self._lane_tables or self._lanes_tabled(-1)
+        while True:
+            off, missing = _lane_offset_at(self._tab, self._ds, self._last_i, centres, starts, lanes, s, t)
+            if missing < 0:
+                return off
+            centres, starts, lanes = self._lanes_tabled(missing)
+
+    def _lanes_tabled(self, key: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`_lane_offset`'s tables with section `key`'s lanes in them (-1: none added): the
+        centres of the driving lanes of the sections asked for so far (a lane's centre is
+        sampled the first time a section with it is asked for, as `lane_center_t` does)."""
+        if key >= 0:
+            for lane in self._lanes_of_section(key):
+                self.lane_center_t(lane, 0.0)  # fills the lane's table
+        order = list(self._center_cache)
+        centres = np.array([self._center_rows[lane] for lane in order]).reshape(len(order), len(self._s))
+        starts = np.array(self._section_starts, dtype=float)
+        counts = [len(self._lanes_cache[k]) for k in range(len(starts)) if k in self._lanes_cache]
+        lanes = np.full((len(starts), 1 + max(counts, default=0)), -1, dtype=np.int64)
+        for k, ids in self._lanes_cache.items():
+            if all(lane in self._center_cache for lane in ids):
+                lanes[k, 0] = len(ids)
+                lanes[k, 1:1 + len(ids)] = [order.index(lane) for lane in ids]
+        self._lane_tables = (centres, starts, lanes)
+        return self._lane_tables

@@ -104,8 +104,7 @@ class RoutePath(FastRoad):
         self._k = k.tolist()
         self._g = g.tolist()
         self._xy = np.stack([x, y], axis=1)
-        self._ds = self._s[1] - self._s[0]
-        self._last_i = len(self._s) - 2
+        self._table()
 
     def ground_scale(self, s: float, t: float) -> float:
         """`FastRoad.ground_scale` on a path: `u` advances with the road's station, so the

@@ -10,7 +10,7 @@ every live run of the batch before the next:
   record      the state row of every actor (clearance, the last field, below); margins to
               red lights and stop signs; lane states (`lanestate.py`); the scenario variables
   collisions  each actor's clearance; `collision` events (`collision.py`: every run's
-              pairs in one broad phase)
+              pairs in one compiled kernel)
   environment changes of the weather, light and road that fire on the recorded state
   variables   steps that set scenario variables, on the recorded state
   lights      light changes that fire on the recorded state; light states
@@ -39,7 +39,7 @@ import numpy as np
 
 from addt_dsl.runtime import lanestate
 from addt_dsl.runtime.agents import Fleets, pose_scripted_ego
-from addt_dsl.runtime.collision import ALL_PAIRS_MAX, clearances_batch
+from addt_dsl.runtime.collision import clearances_batch
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
@@ -76,11 +76,7 @@ class Record:
         self.variables = run.variable_records = {name: np.zeros(n) for name in run.variables}
         self.sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
         self.sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
-        lengths = [self.sizes[m][0] for m in names]
-        widths = [self.sizes[m][1] for m in names]
-        if len(names) > ALL_PAIRS_MAX:  # the broad phase's arrays
-            lengths, widths = np.array(lengths), np.array(widths)
-        self.lengths, self.widths = lengths, widths
+        self.footprints = np.array([self.sizes[m] for m in names], dtype=np.float64).reshape(-1, 2)  # (length, width)
         self.last = n  # samples recorded
 
     def trace(self, run: RunState) -> Trace:
@@ -223,13 +219,10 @@ def lights(run: RunState, rec: Record, k: int, t: float) -> None:
 
 
 def collisions(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> list[bool]:
-    """Over the batch: each actor's clearance at sample k and `collision` events (every run's
-    pairs in one broad phase: `collision.clearances_batch`); whether each ego collided."""
-    items = []
-    for run, rec, t in zip(runs, recs, ts):
-        xs, ys, hs = run.fleet.columns(run.ego)
-        items.append((rec.block[k, :, -1], rec.names, xs, ys, hs, rec.lengths, rec.widths, run, t))
-    return clearances_batch(items)
+    """Over the batch: each actor's clearance at sample k (from the poses `record` wrote
+    into the step's rows) and `collision` events (every run's pairs in one compiled call:
+    `collision.clearances_batch`); whether each ego collided."""
+    return clearances_batch([(rec.block[k], rec.names, rec.footprints, run, t) for run, rec, t in zip(runs, recs, ts)])
 
 
 def outputs(run: RunState, rec: Record, k: int, t: float) -> None:

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from addt_dsl.kernel import kernel
+
 CHUNK_M = 100.0  # mesh chunk length along s [m]
 MAX_STEP_M = 4.0  # longest surface sample spacing [m]
 MAX_TURN_RAD = 0.02  # heading change between samples: chord error < R * 5e-5
@@ -60,6 +62,20 @@ class Mesh:
         return float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
 
 
+@kernel
+def elevation_at(z, g, ds, length, s):
+    """(z [m], grade [-]) at station `s` of a profile sampled every `ds`, held beyond the ends."""
+    u = 0.0 if 0.0 > s else s  # min(max(s, 0.0), length), as the builtins pick
+    u = (length if length < u else u) / ds
+    if u != u:
+        raise ValueError("cannot convert float NaN to integer")  # (int()'s words, as interpreted)
+    i = int(u)
+    if i > z.size - 2:
+        i = z.size - 2
+    f = u - i
+    return z[i] + f * (z[i + 1] - z[i]), g[i] + f * (g[i + 1] - g[i])
+
+
 class Elevation:
     """Sampled z(s) [m] and grade dz/ds [-] of one road, for per-step queries."""
 
@@ -73,33 +89,15 @@ class Elevation:
         grade = np.asarray(road.elevation_profile.derivative(s), dtype=float)
         self.flat = not (np.any(z != 0.0) or np.any(grade != 0.0))
         self._ds = s[1] - s[0]
-        self._z = z.tolist()
-        self._g = grade.tolist()
+        self._z_a, self._g_a = np.array(z, dtype=float), np.array(grade, dtype=float)  # (`elevation_at`'s)
         self.z_min = float(z.min())
 
     def at(self, s: float) -> tuple[float, float]:
-        """(z [m], grade [-]) at station `s`, held constant beyond the road's ends."""
+        """(z [m], grade [-]) at station `s`, held constant beyond the road's ends (the
+        kernel `FastRoad.pose_rows` runs over many actors)."""
         if self.flat:
             return 0.0, 0.0
-        u = min(max(s, 0.0), self.length) / self._ds
-        i = min(int(u), len(self._z) - 2)
-        f = u - i
-        return (self._z[i] + f * (self._z[i + 1] - self._z[i]),
-                self._g[i] + f * (self._g[i + 1] - self._g[i]))
-
-    def at_arrays(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """`at` of many stations, bit for bit (the same clamps and interpolation,
-        elementwise); None on a flat road (z and grade 0)."""
-        if self.flat:
-            return None
-        if not hasattr(self, "_z_a"):
-            self._z_a, self._g_a = np.array(self._z), np.array(self._g)
-        u = np.where(0.0 > s, 0.0, s)  # min(max(s, 0.0), length), as the scalar call picks
-        u = np.where(self.length < u, self.length, u) / self._ds
-        i = np.minimum(u.astype(np.intp), len(self._z) - 2)
-        f = u - i
-        z, g = self._z_a, self._g_a
-        return z[i] + f * (z[i + 1] - z[i]), g[i] + f * (g[i + 1] - g[i])
+        return elevation_at(self._z_a, self._g_a, self._ds, self.length, s)
 
 
 # ---------------------------------------------------------------- sampling

@@ -17,6 +17,8 @@ import sys
 
 import numpy as np
 
+from addt_dsl.kernel import kernel
+
 
 @contextlib.contextmanager
 def _quiet_stdout():
@@ -316,24 +318,32 @@ def box_separation(a: tuple, b: tuple) -> float:
     Positive: the boxes are apart by at least this much [m]; zero or negative: they
     overlap (separating axis theorem over the four edge normals). On each axis u the gap
     is |d . u| minus both boxes' projected half-extents, which equals projecting all
-    eight corners; written out in plain floats because the loop calls it for every
-    close pair at every step.
+    eight corners (`separation`, compiled: the clearances kernel calls it too).
     """
     xa, ya, ha, la, wa = a
     xb, yb, hb, lb, wb = b
-    return separation(xb - xa, yb - ya, math.cos(ha), math.sin(ha), math.cos(hb), math.sin(hb), la, wa, lb, wb)
+    # (floats: the compiled kernel keeps one signature; int * float converts the int alike)
+    return separation(float(xb - xa), float(yb - ya), math.cos(ha), math.sin(ha), math.cos(hb), math.sin(hb),
+                      float(la), float(wa), float(lb), float(wb))
 
 
-def separation(dx, dy, ca, sa, cb, sb, la, wa, lb, wb, maximum=max):
+@kernel
+def separation(dx, dy, ca, sa, cb, sb, la, wa, lb, wb):
     """`box_separation` from the centres' offset (dx, dy) [m], each box's heading cosine and
-    sine and its length and width [m]: floats, or arrays over pairs with an elementwise
-    `maximum` of four (the same operations in the same order)."""
+    sine and its length and width [m]: the largest of the four axes' gaps, taken as
+    `max(a, b, c, d)` takes it (a later value replaces the one kept only when greater). A
+    kernel: the clearances (`collision`) call it compiled, `box_separation` too."""
     cos_d = abs(ca * cb + sa * sb)  # |cos(hb - ha)|
     sin_d = abs(sa * cb - ca * sb)  # |sin(hb - ha)|
     la, wa, lb, wb = 0.5 * la, 0.5 * wa, 0.5 * lb, 0.5 * wb
-    return maximum(
-        abs(dx * ca + dy * sa) - (la + lb * cos_d + wb * sin_d),
-        abs(dy * ca - dx * sa) - (wa + lb * sin_d + wb * cos_d),
-        abs(dx * cb + dy * sb) - (lb + la * cos_d + wa * sin_d),
-        abs(dy * cb - dx * sb) - (wb + la * sin_d + wa * cos_d),
-    )
+    gap = abs(dx * ca + dy * sa) - (la + lb * cos_d + wb * sin_d)
+    other = abs(dy * ca - dx * sa) - (wa + lb * sin_d + wb * cos_d)
+    if other > gap:
+        gap = other
+    other = abs(dx * cb + dy * sb) - (lb + la * cos_d + wa * sin_d)
+    if other > gap:
+        gap = other
+    other = abs(dy * cb - dx * sb) - (wb + la * sin_d + wa * cos_d)
+    if other > gap:
+        gap = other
+    return gap

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from addt_dsl.kernel import kernel
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.specs import stacks as S
 from addt_dsl.vehicles import CAR, DEFAULT_MASS_KG, DEFAULT_MU
@@ -456,7 +457,8 @@ class LatticePlanner:
         # The preference does not hold while the preferred lane has a slower vehicle to pass
         # (keeping right, or to the start lane, is the rule except when overtaking).
         pref = None if self._overtaking(home, road, s0, ego_speed, objs_sc) else home
-        best = None
+        cands = []  # (lane, offset target [m], speed [m/s], extra cost)
+        speeds = self._speeds(ego_speed)
         for lane in candidates_lanes:
             t_lane = float(road.lane_center_t(lane, s0))
             targets = [(t_lane, 0.0)]
@@ -464,12 +466,20 @@ class LatticePlanner:
                 if peek is not None:
                     targets = [(peek[0], 0.0)]
                 targets += nudges
-            for t_cand, extra in targets:
-                for speed in self._speeds(ego_speed):
-                    cost = corrupt("planner.cost", self._cost(lane, t_cand, speed, s0, t0, ego_speed, objs_sc,
-                                                              current, pref, stamp_s) + extra)
-                    if best is None or cost < best[0]:
-                        best = (cost, lane, t_cand, speed)
+            cands += [(lane, t_cand, speed, extra) for t_cand, extra in targets for speed in speeds]
+        costs = np.empty(len(cands))
+        objs_arr = objects_array(objs_sc)
+        if cands:
+            candidate_costs(np.array([c[0] for c in cands], dtype=np.int64),
+                            np.array([c[1] for c in cands], dtype=np.float64),
+                            np.array([c[2] for c in cands], dtype=np.float64),
+                            *self._cost_args(s0, t0, ego_speed, objs_arr, current, pref, stamp_s),
+                            costs)
+        best = None
+        for (lane, t_cand, speed, extra), cost in zip(cands, costs.tolist()):
+            cost = corrupt("planner.cost", cost + extra)
+            if best is None or cost < best[0]:
+                best = (cost, lane, t_cand, speed)
         brake = 0.0
         self.emergency = best is None or not best[0] < math.inf  # NaN (a corrupted cost) too
         if self.emergency:
@@ -495,7 +505,7 @@ class LatticePlanner:
             if stop_brake is not None:
                 speed, brake = 0.0, max(brake, stop_brake)
         v_s, v_t = ego_v_st if ego_v_st is not None else (ego_speed, 0.0)
-        stage, ttc, aeb_brake = self.fcw.check(s0, t0, v_s, v_t, objs_sc, stamp_s)
+        stage, ttc, aeb_brake = self.fcw.check(s0, t0, v_s, v_t, objs_arr, stamp_s)
         if aeb_brake > brake:
             brake = aeb_brake
         if brake > 0.0:
@@ -798,15 +808,53 @@ class LatticePlanner:
         return (self.cruise, max(ego_speed - 2.0, min(self.cruise, self.CRAWL_MS)), max(0.0, ego_speed - 5.0), 0.0)
 
     def _cost(self, lane, t_lane, speed, s0, t0, v0, objs, current, home, now) -> float:
-        # Collision check along the candidate: ego moves from t0 to t_lane over ~3 s with a
-        # speed ramp to `speed` at a comfortable 2 m/s^2 (braking up to `brake_limit`).
+        """Cost of one candidate (`candidate_costs`'s for a single one)."""
+        out = np.empty(1)
+        candidate_costs(np.array([lane], dtype=np.int64), np.array([float(t_lane)]), np.array([float(speed)]),
+                        *self._cost_args(s0, t0, v0, objects_array(objs), current, home, now), out)
+        return float(out[0])
+
+    def _cost_args(self, s0, t0, v0, objs: np.ndarray, current, home, now) -> tuple:
+        """`candidate_costs`'s arguments after the candidates (typed: one compiled signature)."""
+        change_cost = 1.5 + (3.0 if now - self.last_change_s < self.lane_change_cooldown_s else 0.0)
+        return (float(s0), float(t0), float(v0), objs, int(current), 0 if home is None else int(home),
+                home is not None, change_cost, float(self.cruise), float(max(self.cruise, 1.0)),
+                float(self.time_gap), float(self.brake_limit), float(self.body.length_m), float(self.body.width_m),
+                float(self.horizon_s), float(self.dt_s), float(self.PREDICT_ACCEL_MIN),
+                float(self.PREDICT_CROSS_SPEED))
+
+
+def objects_array(objs) -> np.ndarray:
+    """The planner's objects as an (n, 8) float64 array: s, t, v_s, v_t, length along, width
+    across, a_s, a_t (the accelerations 0 where a tuple has only six fields)."""
+    if not objs:
+        return np.empty((0, 8))  # (writable, C order: the kernels' one signature)
+    return np.array([o if len(o) == 8 else (*o[:6], 0.0, 0.0) for o in objs], dtype=np.float64)
+
+
+@kernel
+def candidate_costs(lanes, t_lanes, speeds, s0, t0, v0, objs, current, home, has_home, change_cost,
+                    cruise, cruise_div, time_gap, brake_limit, ego_len, ego_wid, horizon_s, dt,
+                    accel_min, cross_speed, out):
+    """Cost of each candidate c (lane `lanes[c]`, offset target `t_lanes[c]` [m], speed
+    `speeds[c]` [m/s]) into `out[c]`: inf where it collides with a predicted object (`objs`,
+    `objects_array`); else clearance (time gap to what is ahead in its path), progress
+    (speed deficit to `cruise`), a lane change (`change_cost`) and the lane preference
+    (`home`, where `has_home`: not while overtaking).
+
+    Along a candidate the ego moves from `t0` to the target over ~3 s (smoothstep) with a
+    speed ramp to its speed at a comfortable 2 m/s^2 (braking up to `brake_limit`), checked
+    every `dt` [s] over `horizon_s`; objects move as `predict_travel` predicts."""
+    steps = int(horizon_s / dt)
+    brake = -brake_limit
+    path_t = np.empty(steps)  # (time, s, t, speed) of the candidate at each check
+    path_s = np.empty(steps)
+    path_o = np.empty(steps)
+    path_v = np.empty(steps)
+    for c in range(lanes.size):
+        t_lane, speed = t_lanes[c], speeds[c]
         cost = 0.0
         s, v = s0, v0
-        dt = self.dt_s
-        time_gap = self.time_gap
-        steps = int(self.horizon_s / dt)
-        brake = -self.brake_limit
-        path = []  # (time, s, t, speed) of the candidate at each check
         for k in range(1, steps + 1):
             tk = k * dt
             # The min/max below as comparisons with the builtins' results (NaN included).
@@ -828,27 +876,34 @@ class LatticePlanner:
             u = tk / 3.0
             if not u < 1.0:  # min(1.0, u)
                 u = 1.0
-            path.append((tk, s, t0 + (t_lane - t0) * (u * u * (3 - 2 * u)), v))
-        ego_len, ego_wid = self.body.length_m, self.body.width_m
-        for os_, ot, ov, ovt, olen, owid, *acc in objs:
-            a_s, a_t = acc if acc else (0.0, 0.0)
-            if not (a_s * ov < 0.0 and abs(a_s) >= self.PREDICT_ACCEL_MIN):
+            path_t[k - 1], path_s[k - 1], path_v[k - 1] = tk, s, v
+            path_o[k - 1] = t0 + (t_lane - t0) * (u * u * (3 - 2 * u))
+        collides = False
+        for j in range(objs.shape[0]):
+            os_, ot, ov, ovt, olen, owid = objs[j, 0], objs[j, 1], objs[j, 2], objs[j, 3], objs[j, 4], objs[j, 5]
+            a_s, a_t = objs[j, 6], objs[j, 7]
+            if not (a_s * ov < 0.0 and abs(a_s) >= accel_min):
                 a_s = 0.0  # only braking: a lead that speeds up is followed as if it did not
-            if not abs(a_t) >= self.PREDICT_ACCEL_MIN:
+            if not abs(a_t) >= accel_min:
                 a_t = 0.0
             lat_reach = 0.5 * (owid + ego_wid) + 0.3
             half_len = 0.5 * (olen + ego_len)
             gap_low = -(olen + ego_len) - 2.0
             prev = os_ - s0 - half_len
-            for tk, s, t, v in path:
+            for k in range(steps):
+                tk, s, v = path_t[k], path_s[k], path_v[k]
                 gap = os_ + predict_travel(ov, a_s, tk, math.inf) - s - half_len
-                if abs(t - ot - predict_travel(ovt, a_t, tk, self.PREDICT_CROSS_SPEED)) < lat_reach:
+                if abs(path_o[k] - ot - predict_travel(ovt, a_t, tk, cross_speed)) < lat_reach:
                     # Boxes overlap along the road for -(olen + ego length) < gap < 0; keep 2 m
                     # either side. The gap may jump over that window between two checks (0.5 s
                     # at a 30 m/s closing speed is 15 m): what lies between counts too.
-                    lo, hi = (prev, gap) if prev < gap else (gap, prev)
+                    if prev < gap:
+                        lo, hi = prev, gap
+                    else:
+                        lo, hi = gap, prev
                     if lo < 2.0 and hi > gap_low:
-                        return math.inf  # collision with a predicted object
+                        collides = True  # collision with a predicted object
+                        break
                     if gap >= 0.0:
                         desired = time_gap * v
                         if not desired > 5.0:  # max(5.0, desired)
@@ -856,14 +911,21 @@ class LatticePlanner:
                         if gap < desired:
                             cost += 4.0 * (desired - gap) / desired
                 prev = gap
-        cost += 1.0 * abs(self.cruise - speed) / max(self.cruise, 1.0) * 10.0
+            if collides:
+                break
+        if collides:
+            out[c] = math.inf
+            continue
+        cost += 1.0 * abs(cruise - speed) / cruise_div * 10.0
+        lane = lanes[c]
         if lane != current:
-            cost += 1.5 + (3.0 if now - self.last_change_s < self.lane_change_cooldown_s else 0.0)
-        if home is not None:  # None: overtaking, the lane preference waived
-            cost += 2.5 * _lane_steps(lane, home)
-        return cost
+            cost += change_cost
+        if has_home:  # (not overtaking: the lane preference holds)
+            cost += 2.5 * (abs(lane - home) - (1 if (lane > 0) != (home > 0) else 0))  # _lane_steps
+        out[c] = cost
 
 
+@kernel
 def predict_travel(v: float, a: float, tau: float, v_cap: float) -> float:
     """Displacement [m] after `tau` [s] of an object at velocity `v` [m/s] accelerating at `a`
     [m/s^2]: braking (a against v) ends at rest, never reverses; speeding up ends at speed
@@ -927,12 +989,42 @@ def _across_lane(lane: int, lanes) -> int | None:
     return other if other in lanes else None
 
 
+@kernel
 def _overlap_times(a: float, b: float, c: float) -> tuple[float, float]:
     """The times τ with |a + b τ| < c (an empty interval has start > end)."""
     if b == 0.0:
         return (-math.inf, math.inf) if abs(a) < c else (math.inf, -math.inf)
     t1, t2 = (-c - a) / b, (c - a) / b
     return (t1, t2) if t1 < t2 else (t2, t1)
+
+
+@kernel
+def first_collision(s0, t0, v_s, v_t, objs, half_len, half_wid, margin, horizon_s):
+    """`ForwardCollisionCheck.time_to_collision` over `objects_array` rows: (the first time
+    [s] within `horizon_s` an object ahead overlaps the ego's box along the road and, with
+    `margin` [m] to spare, across it, the closing speed then [m/s]); (inf, 0) for none. Both
+    move at constant velocity (the ego at `v_s`, `v_t` [m/s] from `s0`, `t0` [m])."""
+    best, closing = math.inf, 0.0
+    for j in range(objs.shape[0]):
+        os_, ot, ovs, ovt, olen, owid = objs[j, 0], objs[j, 1], objs[j, 2], objs[j, 3], objs[j, 4], objs[j, 5]
+        d = os_ - s0
+        if not d > 0.0:
+            continue
+        a0, a1 = _overlap_times(d, ovs - v_s, 0.5 * olen + half_len)
+        l0, l1 = _overlap_times(ot - t0, ovt - v_t, 0.5 * owid + half_wid + margin)
+        start = a0  # max(a0, l0, 0.0) and min(a1, l1, horizon_s) as the builtins compare (NaN too)
+        if l0 > start:
+            start = l0
+        if 0.0 > start:
+            start = 0.0
+        end = a1
+        if l1 < end:
+            end = l1
+        if horizon_s < end:
+            end = horizon_s
+        if start <= end and start < best:
+            best, closing = start, v_s - ovs
+    return best, closing
 
 
 class ForwardCollisionCheck:
@@ -973,19 +1065,12 @@ class ForwardCollisionCheck:
 
     def time_to_collision(self, s0, t0, v_s, v_t, objs) -> tuple[float, float]:
         """(TTC [s], closing speed along the road [m/s]) of the first predicted collision
-        with an object ahead within the horizon; (inf, 0) when there is none."""
-        half_len, half_wid = 0.5 * self.body.length_m, 0.5 * self.body.width_m
-        best, closing = math.inf, 0.0
-        for os_, ot, ovs, ovt, olen, owid, *_ in objs:
-            d = os_ - s0
-            if not d > 0.0:
-                continue
-            a0, a1 = _overlap_times(d, ovs - v_s, 0.5 * olen + half_len)
-            l0, l1 = _overlap_times(ot - t0, ovt - v_t, 0.5 * owid + half_wid + self.lateral_margin_m)
-            start = max(a0, l0, 0.0)
-            if start <= min(a1, l1, self.horizon_s) and start < best:
-                best, closing = start, v_s - ovs
-        return best, closing
+        with an object ahead within the horizon; (inf, 0) when there is none. `objs`: the
+        planner's object tuples or their `objects_array`."""
+        if not isinstance(objs, np.ndarray):
+            objs = objects_array(objs)
+        return first_collision(float(s0), float(t0), float(v_s), float(v_t), objs, 0.5 * self.body.length_m,
+                               0.5 * self.body.width_m, float(self.lateral_margin_m), float(self.horizon_s))
 
     def check(self, s0, t0, v_s, v_t, objs, now: float = 0.0) -> tuple[int, float, float]:
         """(stage, TTC [s], deceleration to apply [m/s^2]) at time `now` [s]."""

@@ -4,18 +4,17 @@ the clearance broad phase and pybullet posed only when asked, gives the trace of
 brute-force loop (agents one by one, every actor scanned, every pair tested, every pose
 handed to pybullet at once)."""
 
+import math
 from collections import Counter
 
-import numpy as np
 import pytest
 
 from addt_dsl.compiler import compile_source
 from addt_dsl.runtime import agents as A
 from addt_dsl.runtime import collision as C
 from addt_dsl.runtime import execute as X
-from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.neighbours import LeaderIndex, leader_scan
-from addt_dsl.runtime.world import PhysicsWorld
+from addt_dsl.runtime.world import PhysicsWorld, box_separation
 from addt_dsl.sweep import expand
 
 pytestmark = pytest.mark.slow
@@ -59,24 +58,31 @@ EXTRAS = """  agent parked car on r lane -3 at 150 m speed 0 m/s
   }"""
 
 
-def all_pairs(runs):
-    """Every pair of each run, in order: the clearance loop without its broad phase."""
-    return [C._all_pairs(x, y, heading, length, width) for x, y, heading, length, width, _ in runs]
-
-
-def one_by_one_points(self, s, t):
-    """`FastRoad.points` as a loop of the scalar calls."""
-    rows = [(*self.point(si, ti), *self._index(si)) for si, ti in zip(s.tolist(), t.tolist())]
-    return tuple(np.array(c) for c in zip(*rows))
-
-
-def one_by_one_offsets(self, s, t, i, u):
-    return np.array([self.lane_offset(si, ti) for si, ti in zip(s.tolist(), t.tolist())])
+def all_pairs(first, rows, sizes, touch):
+    """`collision._clearances` without its broad phase: every pair of each run in order,
+    the separation as the loop before the kernel wrote it (math.hypot, box_separation)."""
+    found = 0
+    for k, (lo, hi) in enumerate(zip(first[:-1].tolist(), first[1:].tolist())):
+        boxes = [(*rows[i, :3].tolist(), *sizes[i].tolist()) for i in range(lo, hi)]
+        reach = [0.5 * math.hypot(b[3], b[4]) for b in boxes]
+        clear = [math.inf] * len(boxes)
+        for a in range(len(boxes)):
+            for b in range(a + 1, len(boxes)):
+                dist = math.hypot(boxes[a][0] - boxes[b][0], boxes[a][1] - boxes[b][1])
+                r = reach[a] + reach[b]
+                sep = dist - r if dist > r + 5.0 else box_separation(boxes[a], boxes[b])
+                clear[a], clear[b] = min(clear[a], sep), min(clear[b], sep)
+                if sep <= 0.0:
+                    if found < len(touch):
+                        touch[found] = (k, a, b)
+                    found += 1
+        rows[lo:hi, -1] = [c if math.isfinite(c) else 1e3 for c in clear]
+    return found
 
 
 def brute_force(monkeypatch):
     """The per-agent loop with the reference lookups: agents stepped one by one, leaders
-    found by scanning every actor, every pair tested, road points one at a time, every
+    found by scanning every actor, every pair tested, agents posed one at a time, every
     pose handed to pybullet at once."""
     eager, eager_many = PhysicsWorld.set_pose, PhysicsWorld.set_poses
 
@@ -91,9 +97,7 @@ def brute_force(monkeypatch):
     monkeypatch.setattr(A, "ARRAY_MIN_AGENTS", 10 ** 9)
     monkeypatch.setattr(A.Fleets, "_step_arrays", lambda self, items: items)  # every run to the per-agent loop
     monkeypatch.setattr(LeaderIndex, "leader", lambda self, agent: leader_scan(self.members, agent))
-    monkeypatch.setattr(C, "_broad_phase", all_pairs)
-    monkeypatch.setattr(FastRoad, "points", one_by_one_points)
-    monkeypatch.setattr(FastRoad, "lane_offsets", one_by_one_offsets)
+    monkeypatch.setattr(C, "_clearances", all_pairs)
     monkeypatch.setattr(PhysicsWorld, "set_pose", set_pose_now)
     monkeypatch.setattr(PhysicsWorld, "set_poses", set_poses_now)
 

@@ -72,9 +72,26 @@ def test_hypot_edges():
     from addt_dsl.kernel import hypot
 
     for x, y in [(3.0, 4.0), (1e308, 1e308), (5e-324, 5e-324), (1e-310, 3e-312), (-0.0, 0.0),
-                 (math.inf, math.nan), (math.nan, -math.inf), (0.1, 0.7)]:
+                 (math.inf, math.nan), (math.nan, -math.inf), (0.1, 0.7),
+                 (2.582449101461543e-309, 3.44863960473017e-310)]:  # 3.11 divides subnormals by the larger
         want = math.hypot(x, y)
         assert hypot(x, y) == want or (math.isnan(want) and math.isnan(hypot(x, y)))
+
+
+def test_hypot_over_many_scales_is_pythons():
+    """Bit for bit over magnitudes from subnormal to huge, each against each (subnormal
+    pairs take 3.11's division by the larger)."""
+    from addt_dsl.kernel import hypot
+
+    rng = np.random.default_rng(7)
+    n = 5000
+    scales = [rng.normal(size=n) * 100.0, np.exp(rng.uniform(-745.0, 709.0, n)) * rng.choice([-1.0, 1.0], n),
+              np.round(rng.uniform(-50.0, 50.0, n), 2), np.exp(rng.uniform(-745.0, -700.0, n))]
+    for a in scales:
+        for b in scales:
+            want = np.fromiter(map(math.hypot, a.tolist(), b.tolist()), float, n)
+            got = np.fromiter(map(hypot, a.tolist(), b.tolist()), float, n)
+            assert got.view(np.int64).tolist() == want.view(np.int64).tolist()
 
 
 @kernel
@@ -96,3 +113,22 @@ def test_pow_is_pythons_where_numba_would_multiply():
         assert np.array_equal(row, want, equal_nan=True)
     # the same inputs as x * x: some differ, so the test would catch the rewrite
     assert (out[0] != x * x).any()
+
+
+def test_cache_folder_per_code_version(tmp_path, monkeypatch):
+    """Compiled kernels are kept per code fingerprint (numba would check the kernel's own file
+    only: a changed callee elsewhere would leave it stale); old versions' folders go after a day."""
+    import os
+    from pathlib import Path
+
+    from addt_dsl.fingerprint import code_fingerprint
+    from addt_dsl.kernel import cache_dir
+
+    assert Path(cache_dir()).name == code_fingerprint()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    for old, age in ((tmp_path / "kernels" / "old", 2 * 86400), (tmp_path / "kernels" / "recent", 3600)):
+        old.mkdir(parents=True)
+        os.utime(old, (os.stat(old).st_atime, os.stat(old).st_mtime - age))
+    here = Path(cache_dir.__wrapped__())
+    assert here == tmp_path / "kernels" / code_fingerprint() and here.is_dir()
+    assert sorted(p.name for p in (tmp_path / "kernels").iterdir()) == sorted([code_fingerprint(), "recent"])

@@ -15,7 +15,6 @@ from hypothesis import strategies as st
 
 from addt_dsl.runtime import collision as C
 from addt_dsl.runtime.neighbours import LeaderIndex, leader_scan
-from addt_dsl.runtime.world import box_separation
 
 
 @dataclass
@@ -114,6 +113,22 @@ def test_a_non_finite_station_falls_back_to_the_scan():
 
 # ---------------------------------------------------------------- clearances
 
+def old_box_separation(a, b):
+    """`world.box_separation` before it was a kernel (verbatim, with the plain `max`)."""
+    xa, ya, ha, la, wa = a
+    xb, yb, hb, lb, wb = b
+    dx, dy, ca, sa, cb, sb = xb - xa, yb - ya, math.cos(ha), math.sin(ha), math.cos(hb), math.sin(hb)
+    cos_d = abs(ca * cb + sa * sb)  # |cos(hb - ha)|
+    sin_d = abs(sa * cb - ca * sb)  # |sin(hb - ha)|
+    la, wa, lb, wb = 0.5 * la, 0.5 * wa, 0.5 * lb, 0.5 * wb
+    return max(
+        abs(dx * ca + dy * sa) - (la + lb * cos_d + wb * sin_d),
+        abs(dy * ca - dx * sa) - (wa + lb * sin_d + wb * cos_d),
+        abs(dx * cb + dy * sb) - (lb + la * cos_d + wa * sin_d),
+        abs(dy * cb - dx * sb) - (wb + la * sin_d + wa * cos_d),
+    )
+
+
 def all_pairs(names, boxes):
     """The clearance loop before the broad phase: every pair, in order (verbatim)."""
     reach = {n: 0.5 * math.hypot(boxes[n][3], boxes[n][4]) for n in names}
@@ -124,7 +139,7 @@ def all_pairs(names, boxes):
         for b in names[i + 1:]:
             dist = math.hypot(ax - boxes[b][0], ay - boxes[b][1])
             r = reach[a] + reach[b]
-            sep = dist - r if dist > r + 5.0 else box_separation(boxes[a], boxes[b])
+            sep = dist - r if dist > r + 5.0 else old_box_separation(boxes[a], boxes[b])
             if sep < clear[a]:
                 clear[a] = sep
             if sep < clear[b]:
@@ -132,6 +147,15 @@ def all_pairs(names, boxes):
             if sep <= 0.0:
                 touching.append((a, b))
     return {n: clear[n] if math.isfinite(clear[n]) else 1e3 for n in names}, touching
+
+
+def step_rows(names, boxes):
+    """A step's rows as `phases.Record` keeps them (x, y, heading first, the clearance
+    last) and the actors' (length, width)."""
+    rows = np.zeros((len(names), 11))
+    rows[:, :3] = [boxes[n][:3] for n in names]
+    rows[:, -1] = np.nan  # (written by the clearances)
+    return rows, np.array([boxes[n][3:] for n in names], dtype=float).reshape(-1, 2)
 
 
 box = st.tuples(st.one_of(st.integers(0, 20).map(lambda i: 6.0 * i), st.floats(-50.0, 200.0)),
@@ -146,14 +170,12 @@ def test_broad_phase_clearances_equal_all_pairs(rows):
     poses = {n: (x, y, h) for n, (x, y, h, _) in zip(names, rows)}
     sizes = {n: size for n, (_, _, _, size) in zip(names, rows)}
     boxes = {n: (*poses[n], *sizes[n]) for n in names}
-    out = np.zeros(len(names))
     run = SimpleNamespace(contacts=set(), events=[])
-    x, y, h = (np.array([poses[n][c] for n in names]) for c in range(3))
-    length, width = (np.array([sizes[n][c] for n in names]) for c in range(2))
-    collided = C.clearances(out, names, x, y, h, length, width, run, 0.0)
+    rows, footprints = step_rows(names, boxes)
+    collided = C.clearances(rows, names, footprints, run, 0.0)
     clear, touching = all_pairs(names, boxes)
     for i, n in enumerate(names):
-        assert struct.pack("<d", out[i]) == struct.pack("<d", clear[n])
+        assert struct.pack("<d", rows[i, -1]) == struct.pack("<d", clear[n])
     assert [tuple(e.detail["actors"]) for e in run.events] == touching
     assert collided == any("ego" in pair for pair in touching)
 
@@ -166,14 +188,14 @@ def test_batch_clearances_equal_each_run_alone(runs):
     for rows in runs:
         names = ["ego"] + [f"a{i}" for i in range(len(rows) - 1)]
         boxes = {n: (x, y, h, *size) for n, (x, y, h, size) in zip(names, rows)}
-        x, y, h, length, width = (np.array([boxes[n][c] for n in names]) for c in range(5))
         run = SimpleNamespace(contacts=set(), events=[])
-        items.append((np.zeros(len(names)), names, x, y, h, length, width, run, 0.0))
+        rows, footprints = step_rows(names, boxes)
+        items.append((rows, names, footprints, run, 0.0))
         expected.append(all_pairs(names, boxes))
     collided = C.clearances_batch(items)
     for item, (clear, touching), hit in zip(items, expected, collided):
-        out, names, run = item[0], item[1], item[7]
-        assert [struct.pack("<d", out[i]) for i in range(len(names))] == \
+        rows, names, run = item[0], item[1], item[3]
+        assert [struct.pack("<d", rows[i, -1]) for i in range(len(names))] == \
             [struct.pack("<d", clear[n]) for n in names]
         assert [tuple(e.detail["actors"]) for e in run.events] == touching
         assert hit == any("ego" in pair for pair in touching)
