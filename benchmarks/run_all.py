@@ -49,7 +49,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "camera_bev": ([], ["--repeats", "1", "--duration", "10"]),
     "cost_model": ([], ["--quick"]),
     "batch": (["--scaling"], ["--quick"]),
-    "views": ([], ["--agents", "50", "--batches", "1,16", "--repeat", "2"]),
+    "agents_step": ([], ["--agents", "1,50", "--batches", "1,16", "--repeat", "2"]),
     "pose": ([], ["--agents", "5,50", "--batches", "1,16", "--repeat", "1"]),
     "planner": ([], ["--repeats", "20", "--rounds", "1"]),
 }

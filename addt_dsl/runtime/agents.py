@@ -1,8 +1,9 @@
 """The agents: how actors are posed on their roads (`pose_on_road`, the one way: agents one
 by one or as arrays, the scripted ego), one run's agents (`Fleet`: poses, rows, ground
-truth), and the agents' phases over a batch (`Fleets`: the poses and the longitudinal step
-of car-following agents as one numpy program over every live run's agents, read from and
-written to the batch's `agent_arrays.AgentArrays` block; a single run is a batch of one)."""
+truth), and the agents' phases over a batch (`Fleets`: the poses as one numpy program and
+the longitudinal step of car-following agents as one compiled kernel, `fleet.step`, over
+every live run's agents, read from and written to the batch's `agent_arrays.AgentArrays`
+block; a single run is a batch of one)."""
 
 from __future__ import annotations
 
@@ -15,9 +16,9 @@ from addt_dsl.kernel import kernel
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.actor_road import ActorPath
 from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S, T
-from addt_dsl.runtime.behaviors import (Idm, IdmParams, lateral_profile, relative_heading, settle_lane_change,
-                                        standing_yaw)
+from addt_dsl.runtime.behaviors import Idm, lateral_profile, relative_heading, settle_lane_change, standing_yaw
 from addt_dsl.runtime.fastroad import POSE_GRADE, POSE_H, POSE_OFFSET, POSE_X, POSE_Y, POSE_Z
+from addt_dsl.runtime.neighbours import LANE_WINDOW_M
 
 
 def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: float) \
@@ -34,15 +35,12 @@ def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: floa
     return x, y, h, heading, road.ground_scale(s, t)
 
 
-# Agents posed as arrays from this many on in a batch (all its runs' together), and stepped
-# as arrays from STEP_MIN_AGENTS on: fewer, and the per-agent code is quicker (posing: ~15 us
-# of calls, two kernels among them, against ~2-5 us per agent; the whole loop measured at
-# break-even at ~4 agents: with fewer, the rows as lists are quicker to record; the array step
-# asks two leader lookups of ~30 numpy calls each per step, ~250 us of CPU for 50 agents in
-# one run; the per-agent step costs ~4.3 us an agent through the agents' views (`AgentState`):
-# measured break-even at ~50 agents in one run). Both ways give the same bits.
+# Agents posed as arrays from this many on in a batch (all its runs' together): fewer, and
+# the per-agent code is quicker (posing: ~15 us of calls, two kernels among them, against
+# ~2-5 us per agent; the whole loop measured at break-even at ~4 agents: with fewer, the
+# rows as lists are quicker to record). Both ways give the same bits. (The step goes
+# through its kernel whatever the count: `Fleets.step`.)
 ARRAY_MIN_AGENTS = 4
-STEP_MIN_AGENTS = 48
 
 
 class Fleet:
@@ -81,7 +79,7 @@ class Fleet:
         self.slots = slice(slots[0], slots[0] + n) if contiguous else np.array(slots, dtype=np.intp)
         codes: dict[str, int] = {}
         road_code = np.array([codes.setdefault(a.road, len(codes)) for a in agents], dtype=np.int64)
-        # Who sees whom (`fleet.Views`): lengths, road codes, the ego's length and road code.
+        # Who sees whom (`fleet.step`): lengths, road codes, the ego's length and road code.
         ego_code = codes.setdefault(run.ego_road.road_id, len(codes))
         self.members = (self.length, road_code, run.ego_plan.length_m, ego_code)
         self.posed = False
@@ -141,8 +139,9 @@ class Fleet:
                    a.length_m, a.width_m, self.kinds[i])
 
     def array_plan(self, run):
-        """(IDM settings, their rows, rows in a lane change, lateral targets) when every
-        agent can be stepped as arrays now, else None. Re-read when a behaviour starts."""
+        """(IDM settings (`fleet.IDM_FIELDS` x agents), whether IDM drives each agent, rows in
+        a lane change, lateral targets) when every agent can be stepped by the kernel now
+        (`Fleets.step`), else None. Re-read when a behaviour starts."""
         if run.behavior_version == self._plan_version:
             return self._plan
         if self.block.anchored[self.run_row]:
@@ -163,7 +162,11 @@ class Fleet:
             settings.append(beh.settings)
         changing = [i for i, a in enumerate(self.agents) if a.lc_duration_s > 0.0]
         target = np.array([a.t_target for a in self.agents], dtype=float)
-        self._plan = (fleet.idm_params(settings), np.array(rows, dtype=np.intp), changing, target)
+        params = np.ones((len(fleet.IDM_FIELDS), self.n))  # (read only where IDM drives the agent)
+        params[:, rows] = fleet.idm_params(settings)
+        idm = np.zeros(self.n, dtype=bool)
+        idm[rows] = True
+        self._plan = (params, idm, changing, target)
         return self._plan
 
 
@@ -198,35 +201,36 @@ class _Layout:
         self.zeros = np.zeros(self.n)  # (no agent turned off its road's heading: never written)
         self.half_height = np.concatenate([f.half_height for f in fleets])
         self.length = np.concatenate([f.length for f in fleets])
-        self._views = None
+        # `fleet.step`'s arguments that stay: run bounds, road codes, the egos' lengths and codes
+        self.bounds = np.array(self.lo, dtype=np.int64)
+        self.road = np.concatenate([f.members[1] for f in fleets]).astype(np.int64)
+        self.ego_length = np.array([f.members[2] for f in fleets], dtype=float)
+        self.ego_road = np.array([f.members[3] for f in fleets], dtype=np.int64)
+        self.placed = self.block.placed.reshape(-1)  # (a view: teleports write it)
+        self.done = np.empty(len(fleets), dtype=bool)
+        self.dt = None  # the runs' steps [s], at the first step
         self._plans: list = []
         self._idm = None
 
-    @property
-    def views(self) -> fleet.Views:
-        if self._views is None:
-            self._views = fleet.Views([f.members for f in self.fleets])
-        return self._views
-
     def idm(self, plans):
-        """The runs' IDM settings and their rows, and the lateral targets, concatenated."""
+        """The runs' IDM settings, whether IDM drives each agent, the lateral targets,
+        concatenated; the agents in a lane change (row, run, agent)."""
         if len(plans) != len(self._plans) or any(p is not q for p, q in zip(plans, self._plans)):
-            params = [p[0] for p in plans]
-            rows = np.concatenate([p[1] + lo for p, lo in zip(plans, self.lo)])
-            self._idm = (IdmParams(*(np.concatenate([getattr(p, k) for p in params]) for k in fleet.IDM_FIELDS)),
-                         slice(None) if len(rows) == self.n else rows,
-                         np.concatenate([p[3] for p in plans]))
+            changing = [(lo + i, j, f.agents[i]) for j, (p, f, lo) in enumerate(zip(plans, self.fleets, self.lo))
+                        for i in p[2]]
+            self._idm = (np.concatenate([p[0] for p in plans], axis=1), np.concatenate([p[1] for p in plans]),
+                         np.concatenate([p[3] for p in plans]), changing)
             self._plans = list(plans)
         return self._idm
 
 
 class Fleets:
-    """The agents' phases over a batch of runs: every run's agents as one array program
-    (`pose`, `step`), numpy over runs x agents, with the floats of the per-agent code. Runs
-    whose agents cannot go as arrays (non-finite stations; for the step: networked runs,
-    lights, behaviours other than IDM with fixed settings, see `Fleet.array_plan`) and
-    batches of few agents (the per-agent calls are quicker: `ARRAY_MIN_AGENTS`,
-    `STEP_MIN_AGENTS`) go one by one inside the same phase.
+    """The agents' phases over a batch of runs: every run's agents at once (`pose`: numpy
+    over runs x agents; `step`: the kernel `fleet.step`), with the floats of the per-agent
+    code. Runs whose agents cannot go so (non-finite stations; for the step: networked runs,
+    lights, behaviours other than IDM with fixed settings, see `Fleet.array_plan`) and, for
+    the poses, batches of few agents (the per-agent calls are quicker: `ARRAY_MIN_AGENTS`)
+    go one by one inside the same phase.
 
     `runs`: the batch, whose agents move into one block (`AgentArrays`, a leading runs axis)."""
 
@@ -306,82 +310,43 @@ class Fleets:
 
     def step(self, runs, ts) -> list:
         """Advance every agent of the batch as the per-agent loop would (in each run's
-        declaration order, each seeing the earlier ones moved), as arrays; the (run, t) of
-        the runs left to that loop."""
+        declaration order, each seeing the earlier ones moved): the runs whose agents all
+        have an array plan (`Fleet.array_plan`) in one call of `fleet.step`, whatever their
+        number; the (run, t) of the runs left to that loop."""
         items, rest = [], []
-        placed: dict[int, list[bool]] = {}  # per block: its runs with an agent teleported this step
         for run, t in zip(runs, ts):
-            f = run.fleet
-            if id(f.block) not in placed:
-                placed[id(f.block)] = f.block.placed.any(axis=1).tolist()
-            if f.array_plan(run) is None or placed[id(f.block)][f.run_row] or \
-                    not (math.isfinite(run.ego_s) and math.isfinite(run.ego_t)):
-                rest.append((run, t))  # (a teleported agent stays put this step: `advance`)
-            else:
-                items.append((run, t))
-        if sum(run.fleet.n for run, _ in items) < max(ARRAY_MIN_AGENTS, STEP_MIN_AGENTS):
-            return rest + items
-        return rest + self._step_arrays(items)
+            (rest if run.fleet.array_plan(run) is None else items).append((run, t))
+        return rest + self._step_arrays(items) if items else rest
 
     def _step_arrays(self, items) -> list:
-        """`step` over runs whose agents all go as arrays: the sequential step as a fixed
-        point (`fleet`); the runs whose chains do not settle in `fleet.MAX_ROUNDS`."""
-        if not items:
-            return []
+        """`step` over runs whose agents all have an array plan: `fleet.step`; the runs it
+        left (an agent teleported this step stays put, as `advance` has it; a non-finite
+        station or offset)."""
         layout = self._layout([run.fleet for run, _ in items])
-        fleets, lo, flat, cells = layout.fleets, layout.lo, layout.block.flat, layout.cells
-        s, t, v = flat[S:SPEED + 1, cells]
-        finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts)
-        if not finite.all():
-            left = [item for item, ok in zip(items, finite.tolist()) if not ok]
-            return left + self._step_arrays([item for item, ok in zip(items, finite.tolist()) if ok])
-        plans = [f.array_plan(run) for f, (run, _) in zip(fleets, items)]
-        params, rows, target = layout.idm(plans)
-        ego = tuple(np.array(col, dtype=float) for col in
-                    zip(*((run.ego_s, run.ego_t, run.ego.speed) for run, _ in items)))
-        dts = [run.dt for run, _ in items]
-        dt = dts[0] if dts.count(dts[0]) == len(dts) else np.repeat(dts, np.diff(lo))
-        scale = flat[SCALE, cells]  # (of this step's poses)
+        params, idm, target, changing = layout.idm([run.fleet.array_plan(run) for run, _ in items])
         t_new = target.copy()
-        for j, ((run, t_now), plan) in enumerate(zip(items, plans)):
-            for i in plan[2]:
-                t_new[lo[j] + i] = lateral_profile(fleets[j].agents[i], t_now + run.dt)
-        views, length = layout.views, layout.length
-        free = fleet.idm_free(params, v if isinstance(rows, slice) else v[rows])
-        accel = _accel(params, rows, v, free, views.leaders(views.jacobi(s, t, v, ego), s, t, length))
-        settled = np.zeros(len(items), dtype=bool)
-        for _ in range(fleet.MAX_ROUNDS):
-            v_new = v + accel * dt
-            v_new = np.where(v_new > 0.0, v_new, 0.0)  # max(0.0, v), as `advance` picks
-            # as `advance`: the station moves by speed / ground_scale, less what a lane change
-            # takes across the road
-            step, across = v_new * dt, t_new - t
-            step = np.where(across != 0.0, np.sqrt(np.maximum(step * step - across * across, 0.0)), step)
-            s_new = s + step / scale
-            table = views.sequential(s, t, v, (s_new, t_new, v_new), ego)
-            again = _accel(params, rows, v, free, views.leaders(table, s, t, length))
-            # A run whose accelerations did not change is at its fixed point (and stays there:
-            # runs do not see each other).
-            settled |= ~np.logical_or.reduceat(again.view(np.int64) != accel.view(np.int64), layout.starts)
-            if settled.all():
-                break
-            accel = again
-        new = np.stack((s_new, t_new, v_new, accel))
-        if settled.all():
-            flat[:ACCEL + 1, cells] = new
-        else:  # a chain declared front to back: the per-agent loop
-            keep = np.repeat(settled, np.diff(lo))
-            flat[:ACCEL + 1, cells[keep]] = new[:, keep]
+        for k, j, a in changing:  # (reads the agent's station before it moves, as `advance`)
+            run, t_now = items[j]
+            t_new[k] = lateral_profile(a, t_now + run.dt)
+        ego = np.array([x for run, _ in items for x in (run.ego_s, run.ego_t, run.ego.speed)], dtype=float)
+        if layout.dt is None:
+            layout.dt = np.array([run.dt for run, _ in items], dtype=float)
+        left = fleet.step(layout.bounds, layout.cells, layout.block.flat, layout.placed, t_new, idm, params,
+                          layout.road, layout.length, ego, layout.ego_road, layout.ego_length, layout.dt,
+                          LANE_WINDOW_M, layout.done)
+        for k, j, a in changing:  # (only agents in a lane change may hold a moving centre)
+            if a.lc_centre is not None and layout.done[j]:
+                settle_lane_change(a, items[j][1] + items[j][0].dt, a.t)
+        if not left:
+            for run, _ in items:
+                run.leaders_stale = True  # (the loop's index rebuilt before it is asked again)
+            return []
         rest = []
-        for j, ((run, t_now), plan) in enumerate(zip(items, plans)):
-            if not settled[j]:
-                rest.append((run, t_now))
-                continue
-            for i in plan[2]:  # (only agents in a lane change may hold a moving centre)
-                a = fleets[j].agents[i]
-                if a.lc_centre is not None:
-                    settle_lane_change(a, t_now + run.dt, a.t)
-            run.leaders_stale = True
+        for item, ok in zip(items, layout.done.tolist()):
+            if ok:
+                item[0].leaders_stale = True
+            else:
+                rest.append(item)
         return rest
 
 
@@ -407,15 +372,6 @@ def _body_poses(out, rel, yaw_rows, yaw, half_height, flat, cells):
         grade, heading, h = out[POSE_GRADE, k], out[_HEADING, k], out[POSE_H, k]
         out[_PITCH, k] = math.atan(grade) * math.cos(heading - h) if grade != 0.0 or heading != h else 0.0
         out[POSE_Z, k] += half_height[k]
-
-
-def _accel(params, rows, v, free, answer) -> np.ndarray:
-    found, gap, speed = answer
-    if isinstance(rows, slice):
-        return fleet.idm_accel(params, v, free, found, gap, speed)
-    accel = np.zeros(len(v))  # no longitudinal behaviour: 0
-    accel[rows] = fleet.idm_accel(params, v[rows], free, found[rows], gap[rows], speed[rows])
-    return accel
 
 
 @dataclass

@@ -15,6 +15,8 @@ import bisect
 import math
 from dataclasses import dataclass
 
+from addt_dsl.kernel import kernel
+from addt_dsl.kernel import pow  # the C library's, as CPython's `**`
 from addt_dsl.registry import BEHAVIORS
 from addt_dsl.runtime.agent_arrays import AgentState
 from addt_dsl.runtime.neighbours import nearest_ahead
@@ -413,17 +415,17 @@ class Idm(S.Idm, Behavior):
         p = self._params
         if p is None:
             p = self._params = IdmParams.of(self.settings)
-        free = idm_free(p, agent.speed)
+        free = idm_free.py_func(agent.speed, p.v0)
         lead = world.leader_of(agent)
         if lead is None:
             return p.accel * free
-        return idm_accel(p, agent.speed, free, *lead)
+        return idm_accel.py_func(agent.speed, free, *lead, p.accel, p.time_gap, p.min_gap, p.two_sqrt_ab)
 
     _params = None
 
 
 class IdmParams:
-    """IDM settings with their per-agent constants: floats (one agent) or arrays over agents."""
+    """IDM settings with their per-agent constants."""
 
     def __init__(self, v0, accel, time_gap, min_gap, two_sqrt_ab):
         self.v0, self.accel, self.time_gap, self.min_gap, self.two_sqrt_ab = v0, accel, time_gap, min_gap, two_sqrt_ab
@@ -434,31 +436,22 @@ class IdmParams:
                    2.0 * math.sqrt(p["accel"] * p["decel"]))
 
 
-class _Floats:
-    """The operations of the IDM formulas on floats (`fleet.ARRAYS`: on numpy arrays, the same values)."""
-
-    power = staticmethod(pow)  # libm's pow, as Python's `**`
-
-    @staticmethod
-    def positive(x):
-        return max(0.0, x)
-
-    @staticmethod
-    def at_least(x, low):
-        return max(x, low)
-
-
-def idm_free(p: IdmParams, v, ops=_Floats):
+# IDM's formulas, one definition: interpreted (`.py_func`) by `Idm`, compiled into the
+# agents' kernel (`fleet.step`); powers by the C library's pow (`kernel.pow`), as Python's.
+@kernel
+def idm_free(v, v0):
     """The free-road term `1 - (v / v0) ** 4` of IDM."""
-    return 1.0 - ops.power(v / p.v0, 4)
+    return 1.0 - pow(v / v0, 4.0)
 
 
-def idm_accel(p: IdmParams, v, free, gap, lead_speed, ops=_Floats):
+@kernel
+def idm_accel(v, free, gap, lead_speed, accel, time_gap, min_gap, two_sqrt_ab):
     """IDM's acceleration [m/s^2] behind a leader `gap` [m] ahead at `lead_speed` [m/s]
-    (`free`: `idm_free`): the one definition, for floats or, with `ops`, arrays over agents."""
+    (`free`: `idm_free`). `max(0.0, x)` and `max(gap, 0.1)` written as Python's `max` picks."""
     dv = v - lead_speed
-    s_star = p.min_gap + ops.positive(v * p.time_gap + v * dv / p.two_sqrt_ab)
-    return p.accel * (free - ops.power(s_star / ops.at_least(gap, 0.1), 2))
+    x = v * time_gap + v * dv / two_sqrt_ab
+    s_star = min_gap + (x if x > 0.0 else 0.0)
+    return accel * (free - pow(s_star / (0.1 if 0.1 > gap else gap), 2.0))
 
 
 @BEHAVIORS.implements

@@ -37,8 +37,8 @@ class Member(NamedTuple):
     length_m: float
 
 
-# The two formulas of the definition, written once for floats and for arrays over
-# agents (`fleet.Views` passes numpy columns; the same operations in the same order).
+# The two formulas of the definition (the agents' step kernel, `fleet.step`, writes them
+# out compiled: the same operations in the same order).
 def bumper_gap(s_m, length_m, s_agent, length_agent):
     """Bumper-to-bumper gap [m] from an agent at `s_agent` to a member at `s_m` ahead."""
     return s_m - s_agent - 0.5 * (length_m + length_agent)

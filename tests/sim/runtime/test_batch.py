@@ -149,7 +149,7 @@ def test_traffic_batch_steps_agents_as_one_array_program_with_solo_digests(monke
     specs.insert(3, first_spec("lead_brake.addt"))
     with monkeypatch.context() as m:  # the reference: every agent one by one
         m.setattr(A, "ARRAY_MIN_AGENTS", 10 ** 9)
-        m.setattr(A, "STEP_MIN_AGENTS", 10 ** 9)
+        m.setattr(A.Fleets, "_step_arrays", lambda self, items: items)
         alone = [full_digest(execute(s)) for s in specs]
     stepped = []
     step_arrays = A.Fleets._step_arrays
@@ -160,11 +160,10 @@ def test_traffic_batch_steps_agents_as_one_array_program_with_solo_digests(monke
         return rest
 
     monkeypatch.setattr(A.Fleets, "_step_arrays", counted)
-    for minimum in (1, None):  # arrays whatever the count; the default thresholds
+    for minimum in (1, None):  # posed as arrays whatever the count; the default threshold
         with monkeypatch.context() as m:
             if minimum:
                 m.setattr(A, "ARRAY_MIN_AGENTS", minimum)
-                m.setattr(A, "STEP_MIN_AGENTS", minimum)
             for order in (list(range(len(specs))), list(reversed(range(len(specs))))):
                 got = dict(zip(order, (full_digest(r) for r in execute_batch([specs[i] for i in order]))))
                 assert [got[i] for i in range(len(specs))] == alone, (minimum, order)
@@ -187,7 +186,7 @@ def test_padded_agent_block_of_runs_with_other_agent_counts_gives_solo_digests(m
     specs.insert(2, first_spec("lead_brake.addt"))
     with monkeypatch.context() as m:
         m.setattr(A, "ARRAY_MIN_AGENTS", 10 ** 9)
-        m.setattr(A, "STEP_MIN_AGENTS", 10 ** 9)
+        m.setattr(A.Fleets, "_step_arrays", lambda self, items: items)
         alone = [full_digest(execute(s)) for s in specs]
     seen = []
     init = A.Fleets.__init__
@@ -198,7 +197,6 @@ def test_padded_agent_block_of_runs_with_other_agent_counts_gives_solo_digests(m
 
     monkeypatch.setattr(A.Fleets, "__init__", keep)
     monkeypatch.setattr(A, "ARRAY_MIN_AGENTS", 1)
-    monkeypatch.setattr(A, "STEP_MIN_AGENTS", 1)
     results = execute_batch(specs)
     assert [full_digest(r) for r in results] == alone
     fleets = seen[-1]

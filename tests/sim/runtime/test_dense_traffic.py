@@ -1,5 +1,5 @@
-"""Dense traffic: a closed-loop run with the agents stepped as arrays (`runtime.fleet`:
-leaders from sorted views, a fixed point for the sequential step), posed as arrays, with
+"""Dense traffic: a closed-loop run with the agents stepped by the kernel (`runtime.fleet`:
+per run in declaration order, leaders from the members sorted by station), posed as arrays, with
 the clearance broad phase and pybullet posed only when asked, gives the trace of the
 brute-force loop (agents one by one, every actor scanned, every pair tested, every pose
 handed to pybullet at once)."""
@@ -95,6 +95,7 @@ def brute_force(monkeypatch):
         self._sync_bodies()
 
     monkeypatch.setattr(A, "ARRAY_MIN_AGENTS", 10 ** 9)
+    monkeypatch.setattr(A.Fleets, "_step_arrays", lambda self, items: items)  # every run to the per-agent loop
     monkeypatch.setattr(LeaderIndex, "leader", lambda self, agent: leader_scan(self.members, agent))
     monkeypatch.setattr(C, "_clearances", all_pairs)
     monkeypatch.setattr(PhysicsWorld, "set_pose", set_pose_now)
@@ -111,19 +112,18 @@ def test_array_step_gives_the_brute_force_trace(monkeypatch, reverse):
 
     def counted(self, items):
         rest = array_step(self, items)
-        stepped[not rest] += 1  # (one run: stepped as arrays, or left to the per-agent loop)
+        stepped[not rest] += 1  # (one run: stepped by the kernel, or left to the per-agent loop)
         return rest
 
     with monkeypatch.context() as m:
         m.setattr(A.Fleets, "_step_arrays", counted)
-        m.setattr(A, "STEP_MIN_AGENTS", 1)  # arrays whatever the count (by default from 64 agents)
         fast = X.execute(spec)
     assert fast.status == "ok", fast.error
     assert fast.trace.events_of("collision")  # the pairs start overlapping: contacts are exercised
     assert fast.trace.actors["leaving"].s[-1] > 600.0  # off the road's end
-    # Back to front, every step is taken as arrays; front to back, the chains leave some
-    # steps to the per-agent loop.
-    assert stepped[True] > 0 and (stepped[False] > 0) == reverse, stepped
+    # Every step the array plan allows is the kernel's, whatever the order of declaration
+    # (a chain declared front to back too).
+    assert stepped[True] > 0 and stepped[False] == 0, stepped
 
     brute_force(monkeypatch)
     brute = X.execute(spec)

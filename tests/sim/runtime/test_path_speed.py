@@ -58,7 +58,8 @@ def ground_speed(track, period_s):
 def test_speed_is_the_speed_along_the_agents_own_path(arrays, monkeypatch):
     if arrays:
         monkeypatch.setattr(array_agents, "ARRAY_MIN_AGENTS", 1)
-        monkeypatch.setattr(array_agents, "STEP_MIN_AGENTS", 1)
+    else:  # the step one by one too
+        monkeypatch.setattr(array_agents.Fleets, "_step_arrays", lambda self, items: items)
     tr = run(CRUISE)
     dt = tr.period_s
     outer, inner = tr.actors["outer"], tr.actors["inner"]
@@ -76,9 +77,10 @@ def test_speed_is_the_speed_along_the_agents_own_path(arrays, monkeypatch):
 
 
 def test_the_array_step_moves_stations_as_the_per_agent_step(monkeypatch):
-    one = run(IDM)
+    with monkeypatch.context() as m:
+        m.setattr(array_agents.Fleets, "_step_arrays", lambda self, items: items)  # one by one
+        one = run(IDM)
     monkeypatch.setattr(array_agents, "ARRAY_MIN_AGENTS", 1)
-    monkeypatch.setattr(array_agents, "STEP_MIN_AGENTS", 1)
     arrays = run(IDM)
     assert one.digest() == arrays.digest()
     outer = one.actors["outer"]

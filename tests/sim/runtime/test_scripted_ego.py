@@ -311,11 +311,12 @@ def test_a_scripted_ego_following_agents_stepped_as_arrays_sees_the_same_leaders
     it for its leader before the agents move, must see it rebuilt: the same run either way."""
     from addt_dsl.runtime import agents as array_agents
 
-    one_by_one = _run(_dense(8))
+    with monkeypatch.context() as m:  # the agents one by one
+        m.setattr(array_agents.Fleets, "_step_arrays", lambda self, items: items)
+        one_by_one = _run(_dense(8))
     ego = one_by_one.trace.actors["ego"]
     assert ego.accel.min() < -1.0  # it closes on the agents ahead and brakes for them
     monkeypatch.setattr(array_agents, "ARRAY_MIN_AGENTS", 1)
-    monkeypatch.setattr(array_agents, "STEP_MIN_AGENTS", 1)
     assert _run(_dense(8)).digest == one_by_one.digest
 
 

@@ -38,9 +38,10 @@ scenario yawed {
 
 @pytest.mark.parametrize("arrays", [False, True], ids=["one_by_one", "arrays"])
 def test_yaw_holds_while_standing_and_the_path_takes_over_once_moving(arrays, monkeypatch):
-    if arrays:  # the agents posed and stepped as arrays, as with many agents
+    if arrays:  # the agents posed as arrays, as with many agents (and stepped by the kernel)
         monkeypatch.setattr(array_agents, "ARRAY_MIN_AGENTS", 1)
-        monkeypatch.setattr(array_agents, "STEP_MIN_AGENTS", 1)
+    else:  # posed and stepped one by one
+        monkeypatch.setattr(array_agents.Fleets, "_step_arrays", lambda self, items: items)
     result = compile_source(SOURCE)
     assert result.plan is not None, [str(d) for d in result.diagnostics]
     tr = execute(expand(result.plan).specs[0]).trace

@@ -1,186 +1,222 @@
-"""The agents' array step (`runtime.fleet`) against the per-agent definitions: leaders
-from the sorted views against `neighbours.leader_scan` over the members as each agent
-sees them in the sequential step (earlier agents moved, later ones not), and the IDM
-accelerations against `behaviors.Idm.accel`, bit for bit."""
+"""The agents' step kernel (`runtime.fleet.step`) against the per-agent loop's definitions:
+each run's agents in declaration order, each finding its leader with
+`neighbours.leader_scan` over the members as it sees them (earlier agents moved, later
+ones not, then the ego), IDM's acceleration by `behaviors.Idm.accel` and the move by
+`behaviors.advance`, bit for bit; the compiled kernel against its Python source; a step
+worked by hand."""
 
 from __future__ import annotations
 
-import copy
+import contextlib
 import math
-import struct
 from types import SimpleNamespace
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.runtime import fleet
-from addt_dsl.runtime.behaviors import Idm
-from addt_dsl.runtime.neighbours import leader_scan
+from addt_dsl.kernel import interpreted
+from addt_dsl.runtime import behaviors, fleet
+from addt_dsl.runtime.behaviors import Idm, advance, idm_accel, idm_free
+from addt_dsl.runtime.neighbours import LANE_WINDOW_M, leader_scan
 from tests.unit.runtime.test_neighbours import Member
 
+ROADS = ("r", "q")
+SETTINGS = ({"speed": 25.0, "time_gap": 1.5, "min_gap": 2.0, "accel": 1.5, "decel": 2.0},
+            {"speed": 12.0, "time_gap": 0.7, "min_gap": 0.5, "accel": 3.0, "decel": 5.5})
 
-def bits(values):
-    return None if values is None else tuple(struct.pack("<d", float(v)) for v in values)
+
+def call(runs, width: int, python=False, placed=()):
+    """`fleet.step` over `runs`: each (agents, ego, dt), an agent (road, s, t, v, length,
+    scale, t_new, settings index or None), the ego (road, s, t, v, length); run r's agents
+    in slots r * width.. of a padded block, those of `placed` (run, agent) teleported;
+    `python`: the kernel's Python (callees too). (the block's S..ACCEL rows per run, done)."""
+    n_runs = len(runs)
+    flat = np.zeros((5, n_runs * width))
+    flat[4] = 1.0
+    teleported = np.zeros(n_runs * width, dtype=bool)
+    cells, lo, t_new, idm, params, road, length = [], [0], [], [], [], [], []
+    for r, (agents, _, _) in enumerate(runs):
+        for i, (rd, s, t, v, ln, scale, tn, which) in enumerate(agents):
+            c = r * width + i
+            flat[:, c] = (s, t, v, 0.0, scale)
+            teleported[c] = (r, i) in placed
+            cells.append(c), t_new.append(tn), idm.append(which is not None), road.append(rd), length.append(ln)
+            params.append(fleet.idm_params([SETTINGS[which or 0]])[:, 0])
+        lo.append(lo[-1] + len(agents))
+    ego = np.array([x for _, e, _ in runs for x in e[1:4]], dtype=float)
+    done = np.empty(n_runs, dtype=bool)
+    with np.errstate(all="ignore"), interpreted() if python else contextlib.nullcontext():
+        left = fleet.step(np.array(lo, dtype=np.int64), np.array(cells, dtype=np.int64), flat, teleported,
+                      np.array(t_new, dtype=float), np.array(idm, dtype=bool),
+                      np.array(params, dtype=float).reshape(-1, 5).T.copy(), np.array(road, dtype=np.int64),
+                      np.array(length, dtype=float), ego, np.array([e[0] for _, e, _ in runs], dtype=np.int64),
+                      np.array([e[4] for _, e, _ in runs], dtype=float),
+                      np.array([dt for _, _, dt in runs], dtype=float), LANE_WINDOW_M, done)
+    assert left == (~done).sum()
+    return [flat[:4, r * width:r * width + len(agents)] for r, (agents, _, _) in enumerate(runs)], done
 
 
-# Stations on a coarse grid (equal stations and gaps: ties), offsets at lane centres and
-# at the 1.8 m window's edges, two roads, a few lengths (equal gaps need equal ones).
+def loop(agents, ego, dt):
+    """The per-agent loop over one run: (s, t, v, accel) per agent after the step."""
+    members = [Member(f"a{i}", ROADS[a[0]], a[1], a[2], a[3], a[4]) for i, a in enumerate(agents)]
+    members.append(Member("ego", ROADS[ego[0]], ego[1], ego[2], ego[3], ego[4]))
+    out = []
+    for i, (_, _, _, _, _, scale, t_new, which) in enumerate(agents):
+        me = members[i]
+        accel = 0.0
+        if which is not None:
+            world = SimpleNamespace(leader_of=lambda agent: leader_scan(members, agent))
+            accel = Idm(SETTINGS[which]).accel(me, world, 0.0)
+        agent = SimpleNamespace(accel=0.0, speed=me.speed, heading_rel=0.0, lc_duration_s=0.0, t_target=t_new,
+                                placed=False, lc_keeps_station=False, s=me.s, t=me.t, ground_scale=scale,
+                                lc_centre=None)
+        advance(agent, accel, 0.0, dt)
+        me.s, me.t, me.speed = agent.s, agent.t, agent.speed  # later agents see it moved
+        out.append((agent.s, agent.t, agent.speed, agent.accel))
+    return np.array(out, dtype=float).reshape(-1, 4).T
+
+
+# Stations on a coarse grid (equal stations and gaps: ties), offsets at lane centres and at
+# the 1.8 m window's edges, two roads, a few lengths (equal gaps need equal ones), lane
+# changes (a new offset), agents without IDM, bends (ground scale).
 stations = st.one_of(st.integers(0, 12).map(lambda i: 5.0 * i), st.floats(-10.0, 80.0))
 offsets = st.one_of(st.sampled_from([-5.25, -1.75, 1.75, 0.05, -1.75 + 1.8, -1.75 - 1.8]), st.floats(-7.0, 3.5))
-member = st.tuples(st.sampled_from(["r", "r", "r", "q"]), stations, offsets, st.floats(0.0, 40.0),
-                   st.sampled_from([4.6, 4.6, 12.0, 0.6]))
-moves = st.tuples(st.sampled_from([0.0, 0.2, 5.0]) | st.floats(0.0, 20.0), offsets, st.floats(0.0, 40.0))
+speeds = st.one_of(st.floats(0.0, 40.0), st.sampled_from([0.0, -0.0, 20.0]))
+agent = st.tuples(st.sampled_from([0, 0, 1]), stations, offsets, speeds, st.sampled_from([4.6, 4.6, 12.0, 0.6]),
+                  st.sampled_from([1.0, 1.0, 0.97, 1.04]), st.none() | st.sampled_from([0.3, -3.5]) | offsets,
+                  st.sampled_from([0, 1, 0, None]))
+ego_ = st.tuples(st.sampled_from([0, 1]), stations, offsets, speeds, st.sampled_from([4.6, 5.0]))
 
 
-@settings(max_examples=200, deadline=None)
-@given(st.lists(member, min_size=2, max_size=25), st.data(), st.sampled_from([1, 2, 12]))
-def test_views_answer_like_the_scan_of_what_each_agent_sees(rows, data, window):
-    *agents, ego = [Member(f"a{i}", *row) for i, row in enumerate(rows)]
-    ego.name = "ego"
-    moved = copy.deepcopy(agents)
-    for m in moved:  # where the agents are after their step (stations only grow)
-        ds, m.t, m.speed = data.draw(moves)
-        m.s += ds
-    roads = {"r": 0, "q": 1}
-    s, t, v, length = (np.array([getattr(a, f) for a in agents]) for f in ("s", "t", "speed", "length_m"))
-    views = fleet.Views([(length, np.array([roads[a.road] for a in agents]), ego.length_m, roads[ego.road])])
-    ego_state = (np.array([ego.s]), np.array([ego.t]), np.array([ego.speed]))
-    new = tuple(np.array([getattr(a, f) for a in moved]) for f in ("s", "t", "speed"))
-    fleet.WINDOW, window = window, fleet.WINDOW  # small windows: the widening is exercised
-    try:
-        jacobi = views.leaders(views.jacobi(s, t, v, ego_state), s, t, length)
-        sequential = views.leaders(views.sequential(s, t, v, new, ego_state), s, t, length)
-    finally:
-        fleet.WINDOW = window
-    for i, agent in enumerate(agents):
-        for answer, seen in ((jacobi, [*agents, ego]), (sequential, [*moved[:i], *agents[i:], ego])):
-            found, gap, speed = (a[i] for a in answer)
-            assert bits((gap, speed) if found else None) == bits(leader_scan(seen, agent))
-
-
-@settings(max_examples=200, deadline=None)
-@given(st.lists(st.tuples(st.floats(0.0, 40.0), st.floats(0.0, 45.0), st.booleans(), st.floats(-3.0, 60.0),
-                          st.floats(0.0, 40.0)), min_size=1, max_size=12))
-def test_idm_accelerations_are_the_behaviours(rows):
-    settings_ = [{"speed": desired, "time_gap": 1.5, "min_gap": 2.0, "accel": 1.5, "decel": 2.0} if k % 2 else
-                 {"speed": desired, "time_gap": 0.7, "min_gap": 0.5, "accel": 3.0, "decel": 5.5}
-                 for k, (_, desired, _, _, _) in enumerate(rows)]
-    params = fleet.idm_params(settings_)
-    v = np.array([r[0] for r in rows])
-    found = np.array([r[2] for r in rows])
-    gap, lead = np.array([r[3] for r in rows]), np.array([r[4] for r in rows])
-    got = fleet.idm_accel(params, v, fleet.idm_free(params, v), found, gap, lead)
-    for k, (speed, _, has, g, ls) in enumerate(rows):
-        behaviour = Idm(settings_[k])
-        world = SimpleNamespace(leader_of=lambda agent, answer=((g, ls) if has else None): answer)
-        expected = behaviour.accel(SimpleNamespace(speed=speed), world, 0.0)
-        assert struct.pack("<d", got[k]) == struct.pack("<d", expected)
-
-
-@settings(max_examples=100, deadline=None)
-@given(st.lists(st.lists(member, min_size=2, max_size=12), min_size=2, max_size=4), st.data(),
-       st.sampled_from([1, 2, 12]))
-def test_views_of_a_batch_answer_as_each_run_alone(runs, data, window):
-    """Several runs' views at once (a block per run; stations, roads and keys that overlap
-    across runs): each agent's answer is its run's alone, bit for bit."""
-    roads = {"r": 0, "q": 1}
-    members, states, alone = [], [], []
-    for rows in runs:
-        *agents, ego = [Member(f"a{i}", *row) for i, row in enumerate(rows)]
-        s, t, v, length = (np.array([getattr(a, f) for a in agents]) for f in ("s", "t", "speed", "length_m"))
-        new = tuple(np.array([getattr(a, f) + data.draw(moves)[0] * (f == "s") for a in agents])
-                    for f in ("s", "t", "speed"))
-        member_ = (length, np.array([roads[a.road] for a in agents]), ego.length_m, roads[ego.road])
-        ego_state = (np.array([ego.s]), np.array([ego.t]), np.array([ego.speed]))
-        members.append(member_)
-        states.append((s, t, v, length, new, ego_state))
-    fleet.WINDOW, window = window, fleet.WINDOW  # small windows: the widening is exercised
-    try:
-        for member_, (s, t, v, length, new, ego_state) in zip(members, states):
-            one = fleet.Views([member_])
-            alone.append((one.leaders(one.jacobi(s, t, v, ego_state), s, t, length),
-                          one.leaders(one.sequential(s, t, v, new, ego_state), s, t, length)))
-        views = fleet.Views(members)
-        s, t, v, length = (np.concatenate([x[k] for x in states]) for k in range(4))
-        new = tuple(np.concatenate([x[4][k] for x in states]) for k in range(3))
-        ego = tuple(np.concatenate([x[5][k] for x in states]) for k in range(3))
-        batch = (views.leaders(views.jacobi(s, t, v, ego), s, t, length),
-                 views.leaders(views.sequential(s, t, v, new, ego), s, t, length))
-    finally:
-        fleet.WINDOW = window
-    for which in range(2):  # (found, gap, leader speed), the speed where a leader is found
-        found, gap, speed = (np.concatenate([a[which][k] for a in alone]) for k in range(3))
-        got_found, got_gap, got_speed = batch[which]
-        assert (got_found == found).all()
-        assert got_gap.tobytes() == gap.tobytes()
-        assert got_speed[found].tobytes() == speed[found].tobytes()
-
-
-def nearest_ahead_by_loop(seen, i, s, t, road, length, window_m=1.8):
-    """The lookup's definition, written out as a loop over every member: the nearest member
-    strictly ahead of agent `i` on its road within the lane window (a finite bumper gap),
-    the first in member order on equal gaps. `seen`: (member index, road, station, offset,
-    speed, length) as the agent sees them, in member order. (gap, speed) or None."""
-    best = None
-    for m, m_road, m_s, m_t, m_v, m_len in seen:
-        if m == i or m_road != road or abs(m_t - t) > window_m or not m_s > s:
-            continue
-        gap = m_s - s - 0.5 * (m_len + length)
-        if gap < math.inf and (best is None or gap < best[0]):
-            best = (gap, m_v)
-    return best
-
-
-# A run's step: per agent its road, where it was and where it moved (station, offset, speed);
-# stations on a coarse grid (ties), moves of 0 (equal old and new stations) or small ones
-# (the view's kept order stays valid from call to call), the ego's station possibly infinite.
-agent_state = st.tuples(st.sampled_from([0, 0, 1]), stations, offsets, st.floats(0.0, 40.0),
-                        st.sampled_from([4.6, 4.6, 12.0, 0.6]))
-ego_state_ = st.tuples(st.sampled_from([0, 1]), st.one_of(stations, st.just(math.inf)), offsets,
-                       st.floats(0.0, 40.0), st.sampled_from([4.6, 5.0]))
-run_ = st.tuples(st.lists(agent_state, min_size=1, max_size=10), ego_state_)
+def with_offsets(agents):
+    """t_new None: the agent keeps its offset; a number: its offset moves by it (a lane change)."""
+    return [(*a[:6], a[2] if a[6] is None else a[2] + a[6], a[7]) for a in agents]
 
 
 @settings(max_examples=150, deadline=None)
-@given(st.lists(run_, min_size=1, max_size=4), st.data(), st.sampled_from([1, 3, 12]))
-def test_views_of_batches_over_steps_answer_as_the_definition(runs, data, window):
-    """Several steps of a batch on the same `Views` (each view keeps and repairs its order
-    from call to call): every agent's (found, gap, leader speed) in both views is the loop's
-    over the members as it sees them, bit for bit; no leader: gap inf and speed 0."""
-    views = fleet.Views([(np.array([a[4] for a in agents]), np.array([a[0] for a in agents]), ego[4], ego[0])
-                         for agents, ego in runs])
-    length = np.array([a[4] for agents, _ in runs for a in agents])
-    s = np.array([a[1] for agents, _ in runs for a in agents])
-    t = np.array([a[2] for agents, _ in runs for a in agents])
-    v = np.array([a[3] for agents, _ in runs for a in agents])
-    ego_s = np.array([ego[1] for _, ego in runs])
-    fleet.WINDOW, window = window, fleet.WINDOW  # small windows: the widening is exercised
-    try:
-        for _ in range(3):
-            ds = np.array(data.draw(st.lists(st.sampled_from([0.0, 0.0, 0.1, 2.5, 5.0]) | st.floats(0.0, 20.0),
-                                             min_size=len(s), max_size=len(s))))
-            new = (s + ds, t + np.array(data.draw(st.lists(st.sampled_from([0.0, 0.0, 1.75, -3.5]),
-                                                             min_size=len(s), max_size=len(s)))), v[::-1].copy())
-            ego = (ego_s, np.array([e[2] for _, e in runs]), np.array([e[3] for _, e in runs]))
-            answers = {"jacobi": views.leaders(views.jacobi(s, t, v, ego), s, t, length),
-                       "sequential": views.leaders(views.sequential(s, t, v, new, ego), s, t, length)}
-            lo = 0
-            for r, (agents, ego_) in enumerate(runs):
-                n = len(agents)
-                for i in range(lo, lo + n):
-                    for kind, (found, gap, speed) in answers.items():
-                        moved = range(lo, i) if kind == "sequential" else ()
-                        state = lambda j: (new[0][j], new[1][j], new[2][j]) if j in moved else (s[j], t[j], v[j])  # noqa: E731
-                        seen = [(j - lo, agents[j - lo][0], *state(j), length[j]) for j in range(lo, lo + n)]
-                        seen.append((n, ego_[0], ego[0][r], ego[1][r], ego[2][r], ego_[4]))
-                        expected = nearest_ahead_by_loop(seen, i - lo, s[i], t[i], agents[i - lo][0], length[i])
-                        got = (gap[i], speed[i]) if found[i] else None
-                        assert bits(got) == bits(expected), (kind, r, i)
-                        if not found[i]:
-                            assert gap[i] == math.inf and bits((speed[i],)) == bits((0.0,))
-                lo += n
-            s, t, v = new  # the next step starts where this one moved to
-            ego_s = ego_s + 0.3
-    finally:
-        fleet.WINDOW = window
+@given(st.lists(st.tuples(st.lists(agent, min_size=1, max_size=10), ego_, st.sampled_from([0.05, 0.1])),
+                min_size=1, max_size=4), st.integers(2, 4))
+def test_each_run_steps_as_the_per_agent_loop(runs, steps):
+    """Several steps of a batch (each starting where the last ended): every agent's station,
+    offset, speed and acceleration are the loop's, bit for bit, whatever the other runs."""
+    runs = [(with_offsets(agents), ego, dt) for agents, ego, dt in runs]
+    width = max(len(a) for a, _, _ in runs) + 1
+    for _ in range(steps):
+        got, done = call(runs, width)
+        assert done.all()
+        nxt = []
+        for (agents, ego, dt), g in zip(runs, got):
+            want = loop(agents, ego, dt)
+            assert g.tobytes() == want.tobytes()
+            agents = [(a[0], s, t, v, *a[4:]) for a, (s, t, v) in zip(agents, g[:3].T.tolist())]
+            nxt.append((agents, (ego[0], ego[1] + 0.4, *ego[2:]), dt))
+        runs = nxt
+
+
+weird = st.sampled_from([math.nan, math.inf, -math.inf, -0.0, 0.0, 1e-300])
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(st.lists(agent, min_size=0, max_size=8), ego_, st.sampled_from([0.05, 0.1])),
+                min_size=1, max_size=5), st.data())
+def test_compiled_gives_its_python_bits(runs, data):
+    """The compiled kernel against its Python (`kernel.interpreted`) over padded batches of 0..8 agents a run,
+    with non-finite or signed-zero stations, offsets, speeds and ground scales, teleported
+    agents (a run with one, or with a non-finite station or offset, its ego's too, is left
+    untouched, `done` False)."""
+    def odd(x):
+        return data.draw(weird) if data.draw(st.integers(0, 9)) == 0 else x
+
+    runs = [([(a[0], odd(a[1]), odd(a[2]), odd(a[3]), a[4], odd(a[5]), *a[6:]) for a in with_offsets(agents)],
+             (ego[0], odd(ego[1]), odd(ego[2]), odd(ego[3]), ego[4]), dt) for agents, ego, dt in runs]
+    placed = {(r, i) for r, (agents, _, _) in enumerate(runs) for i in range(len(agents))
+              if data.draw(st.integers(0, 19)) == 0}
+    width = max(len(a) for a, _, _ in runs) + 2
+    got, done = call(runs, width, placed=placed)
+    want, done_py = call(runs, width, True, placed)
+    assert done.tolist() == done_py.tolist()
+    assert all(g.tobytes() == w.tobytes() for g, w in zip(got, want))
+    for r, ((agents, ego, _), g, ok) in enumerate(zip(runs, got, done.tolist())):
+        finite = all(math.isfinite(a[1]) and math.isfinite(a[2]) for a in agents)
+        assert ok == (finite and math.isfinite(ego[1]) and math.isfinite(ego[2])
+                      and not any((r, i) in placed for i in range(len(agents))))
+        if not ok:
+            assert g.tobytes() == np.array([[a[1] for a in agents], [a[2] for a in agents], [a[3] for a in agents],
+                                            [0.0] * len(agents)]).reshape(4, -1).tobytes()
+
+
+def test_idm_powers_are_libm_pow():
+    """IDM's (s* / gap) ** 2 compiled is libm's pow (Python's `**`), not x * x: they differ
+    in the last bit for ~0.1% of x, and the kernel must keep the loop's bits."""
+    rng = np.random.default_rng(7)
+    n = 40000
+    v, gap, lead = (rng.uniform(lo, hi, n).tolist() for lo, hi in ((0.0, 40.0), (0.2, 80.0), (0.0, 40.0)))
+    p = fleet.idm_params([SETTINGS[0]])[:, 0].tolist()
+    compiled = idm_accel.dispatcher()
+    differ = 0
+    for vi, gi, li in zip(v, gap, lead):
+        free = idm_free(vi, p[0])
+        assert free == 1.0 - pow(vi / p[0], 4)
+        want = idm_accel.py_func(vi, free, gi, li, *p[1:])
+        assert compiled(vi, free, gi, li, *p[1:]) == want
+        x = (p[3] + max(0.0, vi * p[2] + vi * (vi - li) / p[4])) / gi
+        differ += want != p[1] * (free - x * x)
+    assert differ > 0  # (the inputs reach cases where x * x would differ)
+
+
+def test_a_step_by_hand():
+    """Two IDM cars in one lane (settings 0: v0 25 m/s, a 1.5, b 2, T 1.5 s, s0 2 m), the
+    leader 30 m ahead at 10 m/s, the follower at 20 m/s, dt 0.1 s; the ego far behind on
+    another lane. Declared leader first, the follower sees it moved; follower first, where
+    it was."""
+    v0, a, b, T, s0, dt = 25.0, 1.5, 2.0, 1.5, 2.0, 0.1
+    lead_acc = a * (1.0 - (10.0 / v0) ** 4)  # no one ahead
+    lead_v = 10.0 + lead_acc * dt
+    lead_s = 50.0 + lead_v * dt
+
+    def follower(leader_s, leader_v):
+        gap = leader_s - 20.0 - 0.5 * (4.6 + 4.6)
+        s_star = s0 + max(0.0, 20.0 * T + 20.0 * (20.0 - leader_v) / (2.0 * math.sqrt(a * b)))
+        acc = a * (1.0 - (20.0 / v0) ** 4 - (s_star / gap) ** 2)
+        return acc, 20.0 + acc * dt
+
+    ego = (0, -100.0, -5.25, 20.0, 4.6)
+    lead, follow = (0, 50.0, -1.75, 10.0, 4.6, 1.0, -1.75, 0), (0, 20.0, -1.75, 20.0, 4.6, 1.0, -1.75, 0)
+    (first,), _ = call([([lead, follow], ego, dt)], 2)
+    acc, v = follower(lead_s, lead_v)
+    assert first[:, 0].tolist() == [lead_s, -1.75, lead_v, lead_acc]
+    assert first[:, 1].tolist() == [20.0 + v * dt, -1.75, v, acc]
+    (second,), _ = call([([follow, lead], ego, dt)], 2)
+    acc, v = follower(50.0, 10.0)
+    assert second[:, 0].tolist() == [20.0 + v * dt, -1.75, v, acc]
+    assert second[:, 1].tolist() == first[:, 0].tolist()
+    assert second[3, 0] != first[3, 1]  # (the order of declaration matters)
+    # a lane change: the ground step splits into along and across
+    (third,), _ = call([([(0, 50.0, -1.75, 10.0, 4.6, 0.5, -1.45, None)], ego, dt)], 1)
+    along, across = 10.0 * dt, -1.45 - -1.75
+    assert third[:, 0].tolist() == [50.0 + math.sqrt(along * along - across * across) / 0.5, -1.45, 10.0, 0.0]
+
+
+def test_idm_is_the_behaviours_one_definition():
+    assert fleet.idm_free is behaviors.idm_free and fleet.idm_accel is behaviors.idm_accel
+
+
+def test_equal_gaps_go_to_the_first_declared():
+    """Two cars at the same station ahead of a follower, the first declared having just moved
+    there (it lands after the other in the sorted list): the follower's leader is the first
+    declared (its speed, 5 m/s, not the other's 0), as the loop's scan has it; the ego at the
+    same station too, last in member order."""
+    dt = 0.1
+    mover, stander = (0, 49.5, -1.75, 5.0, 4.6, 1.0, -1.75, None), (0, 50.0, -1.75, 0.0, 4.6, 1.0, -1.75, None)
+    follower = (0, 20.0, -1.75, 20.0, 4.6, 1.0, -1.75, 0)
+    ego = (0, 50.0, -1.75, 30.0, 4.6)
+    agents = [mover, stander, follower]
+    (got,), _ = call([(agents, ego, dt)], 3)
+    assert got[0, :2].tolist() == [50.0, 50.0]  # (both at 50 m when the follower looks)
+    assert got.tobytes() == loop(agents, ego, dt).tobytes()
+    behind_mover = Idm(SETTINGS[0]).accel(SimpleNamespace(speed=20.0), SimpleNamespace(leader_of=lambda a: (25.4, 5.0)),
+                                          0.0)
+    assert got[3, 2] == behind_mover
+    assert got[3, 2] != Idm(SETTINGS[0]).accel(SimpleNamespace(speed=20.0),
+                                               SimpleNamespace(leader_of=lambda a: (25.4, 0.0)), 0.0)
