@@ -1,7 +1,7 @@
 """The collisions phase (`collision.clearances_batch`) per run-step, in two source trees.
 
 Run: PYTHONPATH=. python benchmarks/bench_collisions.py [--before TREE] [--after TREE]
-     [--agents 1,5,20,50,100] [--batch 1,16,64] [--rounds 3]
+     [--agents 1,5,20,50,100] [--batch 1,16,64] [--rounds 3] [--json FILE]
 
 Each run of a batch is the dense-traffic layout (`bench_dense.dense_source`): the ego and
 `n` agents in three lanes 3.5 m apart, 25 m apart in each lane, with a little jitter in
@@ -19,12 +19,16 @@ and the ratio before / after.
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 from types import SimpleNamespace
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _figures as figures_json  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -89,7 +93,7 @@ def child(cases, number_s: float = 0.2, repeat: int = 5) -> dict:
 
 
 def main() -> None:
-    before = _arg("--before", "/work/main")
+    before = _arg("--before", None)  # another checkout to compare with (else this one alone)
     after = _arg("--after", str(ROOT))
     agents = [int(v) for v in _arg("--agents", "1,5,20,50,100").split(",")]
     batches = [int(v) for v in _arg("--batch", "1,16,64").split(",")]
@@ -99,6 +103,8 @@ def main() -> None:
     print(f"load before: {os.getloadavg()[0]:.2f}")
     for _ in range(rounds):
         for label, tree in (("before", before), ("after", after)):
+            if tree is None:
+                continue
             env = {**os.environ, "PYTHONPATH": tree}
             res = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", json.dumps(cases)],
                                  env=env, cwd=tree, capture_output=True, text=True, check=True)
@@ -109,8 +115,10 @@ def main() -> None:
     print(f"{'agents':>6} {'batch':>5} {'before':>9} {'after':>9} {'ratio':>6}")
     for n, b in cases:
         key = f"{n},{b}"
-        t0, t1 = best["before"][key] / b * 1e6, best["after"][key] / b * 1e6
+        t0, t1 = best["before"].get(key, math.nan) / b * 1e6, best["after"][key] / b * 1e6
         print(f"{n:>6} {b:>5} {t0:>9.2f} {t1:>9.2f} {t0 / t1:>6.2f}")
+    figures_json.write(_arg("--json", None), {"us_per_run_step": {
+        label: {k: v / int(k.split(",")[1]) * 1e6 for k, v in values.items()} for label, values in best.items()}})
 
 
 if __name__ == "__main__":

@@ -52,6 +52,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "agents_step": ([], ["--agents", "1,50", "--batches", "1,16", "--repeat", "2"]),
     "pose": ([], ["--agents", "5,50", "--batches", "1,16", "--repeat", "1"]),
     "planner": ([], ["--repeats", "20", "--rounds", "1"]),
+    "collisions": ([], ["--agents", "5,50", "--batch", "1,16", "--rounds", "1"]),
 }
 
 

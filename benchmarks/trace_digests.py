@@ -2,8 +2,8 @@
 checkouts' output to show a change keeps every run bit for bit.
 
 Run: PYTHONPATH=. python benchmarks/trace_digests.py > digests.txt   (on each checkout; diff)
-     [--arrays: agents posed and stepped as arrays whatever their count, as the loop does
-     from `ARRAY_MIN_AGENTS` / `STEP_MIN_AGENTS` agents on: the digests must not change]
+     [--arrays: agents posed as arrays whatever their count, as the loop does from
+     `ARRAY_MIN_AGENTS` agents on: the digests must not change]
      [NAME ...: only the runs whose name contains one of these]
      [--json OUT: also write {name: "status digest | oracle:P oracle:F ..."} to OUT; compare two
      with --compare A B: digests, then verdicts (where both files have them)]
@@ -96,7 +96,7 @@ def main() -> None:
             from addt_dsl.runtime import agents as loop  # the agents' arrays (runtime/agents.py)
         except ImportError:  # a checkout before the phases split
             from addt_dsl.runtime import execute as loop
-        loop.ARRAY_MIN_AGENTS = loop.STEP_MIN_AGENTS = 1
+        loop.ARRAY_MIN_AGENTS = 1
         args.remove("--arrays")
     out = None
     if "--json" in args:

@@ -85,12 +85,14 @@ class PhysicsWorld:
     """
 
     def __init__(self, visual: bool = False):
-        import pybullet as p  # imported here: the compiler must never load pybullet
-
         self.client = CLIENTS.take()
         if self.client is None:
-            with _quiet_stdout():
+            with _quiet_stdout():  # (its first import prints a banner too)
+                import pybullet as p  # imported here: the compiler must never load pybullet
+
                 self.client = p.connect(p.DIRECT)
+        else:
+            import pybullet as p
         self.p = p
         self.visual = visual
         p.setGravity(0, 0, -9.81, physicsClientId=self.client)
