@@ -17,6 +17,7 @@ from itertools import accumulate
 import numpy as np
 
 from addt_dsl.kernel import hypot, kernel
+from addt_dsl.lru import LruCache
 from addt_dsl.runtime.trace import Event
 from addt_dsl.runtime.world import separation
 
@@ -67,17 +68,18 @@ def clearances_batch(items) -> list[bool]:
     return collided
 
 
-_FIRSTS: dict[tuple, np.ndarray] = {}  # runs' actor counts -> each run's first actor (and the total)
+# runs' actor counts -> each run's first actor (and the total); batches lose runs as they
+# end: a few keys each
+_FIRSTS: LruCache[tuple, np.ndarray] = LruCache(256)
 
 
 def _first(counts: tuple) -> np.ndarray:
     """Each run's first actor in the batch's rows, then their count (read only: shared)."""
     first = _FIRSTS.get(counts)
     if first is None:
-        if len(_FIRSTS) > 256:  # (batches lose runs as they end: a few keys each)
-            _FIRSTS.clear()
-        first = _FIRSTS[counts] = np.array(list(accumulate(counts, initial=0)), dtype=np.int64)
+        first = np.array(list(accumulate(counts, initial=0)), dtype=np.int64)
         first.flags.writeable = False
+        _FIRSTS.put(counts, first)
     return first
 
 
