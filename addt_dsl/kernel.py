@@ -168,6 +168,33 @@ pow = Libm("pow", lambda x, y: float(x) ** float(y), 2)
 where CPython raises (0 ** -1, a negative base to a fractional power) this gives pow's inf
 or nan."""
 
+@kernel
+def bisect_right(a, x, hi):
+    """`bisect.bisect_right(a, x, 0, hi)`: where x goes after its equals in the sorted
+    a[:hi], by the comparisons Python's `bisect` makes (a NaN x goes first)."""
+    lo = 0
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if x < a[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@kernel
+def bisect_left(a, x, hi):
+    """`bisect.bisect_left(a, x, 0, hi)`: where x goes before its equals in the sorted a[:hi]."""
+    lo = 0
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 _SPLIT = 134217729.0  # 2**27 + 1: Veltkamp's splitter for doubles
 
 

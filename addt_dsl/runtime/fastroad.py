@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from addt_dsl.kernel import kernel
+from addt_dsl.kernel import bisect_right, kernel
 from addt_dsl.runtime.agent_arrays import SCALE, S, T
 from addt_dsl.runtime.roadmesh import elevation_at
 
@@ -86,13 +86,7 @@ def _ground_scale(tab, ds, last_i, length, s, t):
 @kernel
 def _section(starts, s):
     """The lane section at `s`: bisect_right(starts, s) - 1, at least 0."""
-    lo, hi = 0, starts.size
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if s < starts[mid]:
-            hi = mid
-        else:
-            lo = mid + 1
+    lo = bisect_right(starts, s, starts.size)
     return lo - 1 if lo > 0 else 0
 
 

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from addt_dsl.kernel import kernel
+from addt_dsl.kernel import bisect_left, bisect_right, kernel
 from addt_dsl.runtime.behaviors import IdmParams, idm_accel, idm_free
 from addt_dsl.runtime.neighbours import STOP_SLACK_M
 
@@ -97,13 +97,7 @@ def step(lo, cells, flat, placed, t_new, idm, params, road, length, ego, ego_roa
                         if ms[m] > s and (not found or gap < best):
                             found, best, lead = True, gap, mv[m]
                 else:  # `LeaderIndex.leader`: from the first member strictly ahead
-                    lo_, hi_ = 0, n + 1
-                    while lo_ < hi_:
-                        mid = (lo_ + hi_) // 2
-                        if s < keys[mid]:
-                            hi_ = mid
-                        else:
-                            lo_ = mid + 1
+                    lo_ = bisect_right(keys, s, n + 1)
                     # (the longest of all the run's members: a lower bound of later gaps on any road)
                     half_longest = 0.5 * (longest + own)
                     for j in range(lo_, n + 1):
@@ -138,14 +132,7 @@ def step(lo, cells, flat, placed, t_new, idm, params, road, length, ego, ego_roa
                 scan = True
                 continue
             # `LeaderIndex.moved`: agent i to its new place in the sorted list
-            lo_, hi_ = 0, n + 1
-            while lo_ < hi_:  # (bisect_left of its old station, then to its own entry)
-                mid = (lo_ + hi_) // 2
-                if keys[mid] < s:
-                    lo_ = mid + 1
-                else:
-                    hi_ = mid
-            j = lo_
+            j = bisect_left(keys, s, n + 1)  # (its old station's place, then on to its own entry)
             while ids[j] != i:
                 j += 1
             while j < n and keys[j + 1] <= s_new:

@@ -10,7 +10,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.kernel import OPTIONS, Kernel, kernel
+from addt_dsl.kernel import OPTIONS, Kernel, interpreted, kernel
 from addt_dsl.kernel import pow as kpow
 
 
@@ -132,3 +132,21 @@ def test_cache_folder_per_code_version(tmp_path, monkeypatch):
     here = Path(cache_dir.__wrapped__())
     assert here == tmp_path / "kernels" / code_fingerprint() and here.is_dir()
     assert sorted(p.name for p in (tmp_path / "kernels").iterdir()) == sorted([code_fingerprint(), "recent"])
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-10, 10), max_size=12),
+       st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from([0.0, 1.0]), st.integers(0, 12))
+def test_bisects_are_pythons(values, x, hi):
+    """The kernels' bisections give `bisect`'s answers, a NaN x included (compiled and not)."""
+    import bisect
+
+    from addt_dsl.kernel import bisect_left, bisect_right
+
+    a = np.array(sorted(values) + [0.0])  # (a slot past the sorted part, as the callers' tables have)
+    hi = min(hi, len(values))
+    for mine, python in ((bisect_right, bisect.bisect_right), (bisect_left, bisect.bisect_left)):
+        want = python(a.tolist(), x, 0, hi)
+        assert mine(a, x, hi) == want
+        with interpreted():
+            assert mine(a, x, hi) == want
