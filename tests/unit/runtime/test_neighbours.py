@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from addt_dsl.runtime import collision as C
 from addt_dsl.runtime.neighbours import LeaderIndex, leader_scan
+from tests.unit.runtime.test_collision_kernel import max_separation
 
 
 @dataclass
@@ -114,19 +115,11 @@ def test_a_non_finite_station_falls_back_to_the_scan():
 # ---------------------------------------------------------------- clearances
 
 def old_box_separation(a, b):
-    """`world.box_separation` before it was a kernel (verbatim, with the plain `max`)."""
+    """`world.box_separation` before it was a kernel (its formula with the plain `max`:
+    `test_collision_kernel.max_separation`)."""
     xa, ya, ha, la, wa = a
     xb, yb, hb, lb, wb = b
-    dx, dy, ca, sa, cb, sb = xb - xa, yb - ya, math.cos(ha), math.sin(ha), math.cos(hb), math.sin(hb)
-    cos_d = abs(ca * cb + sa * sb)  # |cos(hb - ha)|
-    sin_d = abs(sa * cb - ca * sb)  # |sin(hb - ha)|
-    la, wa, lb, wb = 0.5 * la, 0.5 * wa, 0.5 * lb, 0.5 * wb
-    return max(
-        abs(dx * ca + dy * sa) - (la + lb * cos_d + wb * sin_d),
-        abs(dy * ca - dx * sa) - (wa + lb * sin_d + wb * cos_d),
-        abs(dx * cb + dy * sb) - (lb + la * cos_d + wa * sin_d),
-        abs(dy * cb - dx * sb) - (wb + la * sin_d + wa * cos_d),
-    )
+    return max_separation(xb - xa, yb - ya, math.cos(ha), math.sin(ha), math.cos(hb), math.sin(hb), la, wa, lb, wb)
 
 
 def all_pairs(names, boxes):
