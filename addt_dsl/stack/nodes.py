@@ -12,12 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import kernel
+from addt_dsl.kernel import Libm, kernel, pow
 from addt_dsl.plan import LIGHT_STATES
+from addt_dsl.runtime.fastroad import _K, _index, _reference_pose
 from addt_dsl.specs import stacks as S
 from addt_dsl.vehicles import CAR, DEFAULT_MASS_KG, DEFAULT_MU
 
 G = 9.81  # [m/s^2]
+remainder = Libm("remainder", math.remainder, 2)  # exact: the C library's is CPython's
 
 
 @dataclass(frozen=True)
@@ -963,7 +965,7 @@ def time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: fl
 def _lateral_path(s: np.ndarray, s_start: float, t_start: float, t_target: float,
                   length: float) -> tuple[np.ndarray, np.ndarray]:
     """The planned lateral offset t(s) [m] and its d2t/ds2 [1/m] at stations `s` [m]: the
-    smoothstep `Controller._path` steers (that one per control step, on floats)."""
+    smoothstep `Controller` steers by (`_smoothstep_path`: per control step, on floats)."""
     u = np.clip((s - s_start) / length, 0.0, 1.0)
     d = t_target - t_start
     inside = (u > 0.0) & (u < 1.0)
@@ -1101,6 +1103,65 @@ class ForwardCollisionCheck:
 
 # ---------------------------------------------------------------- control
 
+@kernel
+def _remainder_tau(a):
+    """math.remainder(a, math.tau) [rad]: exact, so the C library's has its bits; raises
+    where CPython's does (an infinite `a`)."""
+    if a - a != 0.0 and a == a:
+        raise ValueError("math domain error")
+    return remainder(a, math.tau)
+
+
+@kernel
+def _smoothstep_path(s, s_start, t_start, t_target, length):
+    """The planned lateral offset t(s) [m] (smoothstep from `t_start` at `s_start` to
+    `t_target` over `length` [m]), its slope dt/ds and d2t/ds2 [1/m]; raises where Python's
+    float division by zero does."""
+    if length == 0.0:
+        raise ZeroDivisionError("float division by zero")
+    u = (s - s_start) / length
+    u = u if u > 0.0 else 0.0  # min(1.0, max(0.0, u)) as Python's (a NaN gives 0)
+    u = u if u < 1.0 else 1.0
+    d = t_target - t_start
+    if u <= 0.0 or u >= 1.0:
+        return t_start + d * u, 0.0, 0.0
+    if length * length == 0.0:
+        raise ZeroDivisionError("float division by zero")
+    return (t_start + d * u * u * (3 - 2 * u), d * 6.0 * u * (1.0 - u) / length,
+            d * (6.0 - 12.0 * u) / (length * length))
+
+
+@kernel
+def _steer(tab, ds, last_i, length, s_start, t_start, t_target, lateral_m, x, y, heading, speed, has_last, last_x,
+           last_y, dt, s_now, t_now, preview_s, wheelbase, understeer, wn, zeta, max_steer):
+    """`Controller`'s steering [rad] (before its fault site) on the road of sample table
+    `tab` (`FastRoad`), the plan's lateral path (`_smoothstep_path`), the ego at (`x`, `y`,
+    `heading`, `speed`), at (`last_x`, `last_y`) a cycle ago if `has_last`."""
+    # The course (direction of travel) from successive poses, where the ego moved enough.
+    course = heading
+    if has_last:
+        dx, dy = x - last_x, y - last_y
+        if dx * dx + dy * dy > pow(0.3 * (1.0 if 1.0 > speed else speed) * dt, 2.0) and speed > 1.0:
+            course = heading + _remainder_tau(math.atan2(dy, dx) - heading)
+    t_path, slope, _ = _smoothstep_path(s_now, s_start, t_start, t_target, lateral_m)
+    road_heading = _reference_pose(tab, ds, last_i, length, s_now)[2]
+    e_lat = t_now - t_path
+    e_course = _remainder_tau(course - road_heading - math.atan(slope))
+    s_pre = s_now + speed * preview_s
+    s_pre = length if length < s_pre else s_pre
+    t_pre, _, bend = _smoothstep_path(s_pre, s_start, t_start, t_target, lateral_m)
+    i, u = _index(tab, ds, last_i, s_pre)
+    kappa_road = tab[_K, i] + u * (tab[_K, i + 1] - tab[_K, i])
+    g = 1.0 - kappa_road * t_pre
+    kappa = kappa_road / (g if g > 0.2 else 0.2) + bend
+    steer = wheelbase * kappa + understeer * speed * speed * kappa
+    v = 5.0 if 5.0 > speed else speed  # max(speed, 5.0)
+    steer -= wheelbase * (wn * wn * e_lat / (v * v) + 2.0 * zeta * wn * e_course / v)
+    steer = steer if steer < max_steer else max_steer
+    return steer if steer > -max_steer else -max_steer
+
+
+
 class Controller:
     """PID longitudinal control and path-tracking steering, at the control rate (100 Hz).
 
@@ -1136,26 +1197,6 @@ class Controller:
         self.max_accel = 3.0  # [m/s^2]
         self._last_xy: tuple[float, float] | None = None
 
-    @staticmethod
-    def _path(plan: Plan, s: float) -> tuple[float, float, float]:
-        """Planned lateral offset t(s) [m] (smoothstep), its slope dt/ds and d2t/ds2 [1/m]."""
-        length = plan.lateral_length_m
-        u = min(1.0, max(0.0, (s - plan.s_start) / length))
-        d = plan.t_target - plan.t_start
-        if u <= 0.0 or u >= 1.0:
-            return plan.t_start + d * u, 0.0, 0.0
-        return (plan.t_start + d * u * u * (3 - 2 * u), d * 6.0 * u * (1.0 - u) / length,
-                d * (6.0 - 12.0 * u) / (length * length))
-
-    def _course(self, x: float, y: float, heading: float, dt: float, speed: float) -> float:
-        course = heading
-        if self._last_xy is not None:
-            dx, dy = x - self._last_xy[0], y - self._last_xy[1]
-            if dx * dx + dy * dy > (0.3 * max(speed, 1.0) * dt) ** 2 and speed > 1.0:
-                course = heading + math.remainder(math.atan2(dy, dx) - heading, math.tau)
-        self._last_xy = (x, y)
-        return course
-
     def command(self, plan: Plan, ego, road, s_now: float, t_now: float, dt: float, corrupt):
         x, y, heading, speed = ego
         # The gains are read from memory every cycle and written back (persistent faults).
@@ -1164,20 +1205,12 @@ class Controller:
         self.kd = corrupt("control.kd", self.kd)
         self.lateral_wn = corrupt("control.lateral_wn", self.lateral_wn)
         self.understeer = corrupt("control.understeer", self.understeer)
-        course = self._course(x, y, heading, dt, speed)
-        t_path, slope, _ = self._path(plan, s_now)
-        _, _, road_heading = road.reference_pose(s_now)
-        e_lat = t_now - t_path
-        e_course = math.remainder(course - road_heading - math.atan(slope), math.tau)
-        s_pre = min(s_now + speed * self.preview_s, road.length)
-        t_pre, _, bend = self._path(plan, s_pre)
-        kappa_road = float(road.curvature(s_pre))
-        kappa = kappa_road / max(0.2, 1.0 - kappa_road * t_pre) + bend
-        steer = self.wheelbase * kappa + self.understeer * speed * speed * kappa
-        v = max(speed, 5.0)
-        wn, zeta = self.lateral_wn, self.lateral_zeta
-        steer -= self.wheelbase * (wn * wn * e_lat / (v * v) + 2.0 * zeta * wn * e_course / v)
-        steer = max(-self.max_steer, min(self.max_steer, steer))
+        last, self._last_xy = self._last_xy, (x, y)
+        steer = _steer(road._tab, road._ds, road._last_i, road.length, plan.s_start, plan.t_start, plan.t_target,
+                       plan.lateral_length_m, x, y, heading, speed, last is not None,
+                       last[0] if last is not None else 0.0, last[1] if last is not None else 0.0, dt, s_now, t_now,
+                       self.preview_s, self.wheelbase, self.understeer, self.lateral_wn, self.lateral_zeta,
+                       self.max_steer)
         steer = corrupt("control.steer", steer)
         # PID on speed error.
         err = plan.speed - speed
