@@ -1141,7 +1141,11 @@ def _steer(tab, ds, last_i, length, s_start, t_start, t_target, lateral_m, x, y,
     course = heading
     if has_last:
         dx, dy = x - last_x, y - last_y
-        if dx * dx + dy * dy > pow(0.3 * (1.0 if 1.0 > speed else speed) * dt, 2.0) and speed > 1.0:
+        step = 0.3 * (1.0 if 1.0 > speed else speed) * dt
+        reach = pow(step, 2.0)
+        if reach - reach != 0.0 and step - step == 0.0:  # CPython's ** raises where it overflows
+            raise OverflowError("(34, 'Numerical result out of range')")
+        if dx * dx + dy * dy > reach and speed > 1.0:
             course = heading + _remainder_tau(math.atan2(dy, dx) - heading)
     t_path, slope, _ = _smoothstep_path(s_now, s_start, t_start, t_target, lateral_m)
     road_heading = _reference_pose(tab, ds, last_i, length, s_now)[2]

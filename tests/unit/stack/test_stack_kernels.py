@@ -1,0 +1,216 @@
+"""The bev stack's per-step kernels: the tracks in road coordinates (`bev._road_frame`, the
+unhinted projection through bounding boxes `fastroad._project_boxed`) and the controller's
+steering law (`nodes._steer`). Each compiled kernel gives its Python's bits, and both give
+the bits of the code they replaced (kept below verbatim as the oracle: `_old_road_frame`,
+`_OldController`), non-finite values included; where that code raised, they raise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from addt_dsl.kernel import bits, interpreted
+from addt_dsl.plan import RoadPlan, SegmentPlan
+from addt_dsl.road.roadspec import build_network
+from addt_dsl.runtime.fastroad import FastRoad, _project, _project_boxed
+from addt_dsl.stack.bev import CROSSING_MIN_SPEED, CROSSING_SIN, SET_OFF_ACCEL, road_frame_objects
+from addt_dsl.stack.nodes import Controller, Obj, Plan
+
+
+def _road(*segments) -> FastRoad:
+    plan = RoadPlan(name="r", source="inline", segments=list(segments), right_lanes=2)
+    network = build_network([plan])["r"]
+    return FastRoad(network.road(next(iter(network.roads))))
+
+
+STRAIGHT = _road(SegmentPlan(kind="line", length_m=500.0))
+# A U turn: the two straights run 100 m apart, so a point between them has two near samples.
+HAIRPIN = _road(SegmentPlan(kind="line", length_m=200.0),
+                SegmentPlan(kind="arc", length_m=50.0 * math.pi, curvature_per_m=0.02),
+                SegmentPlan(kind="line", length_m=200.0))
+ROADS = (STRAIGHT, HAIRPIN)
+
+coords = st.floats(-150.0, 350.0)
+odd = st.sampled_from([math.nan, math.inf, -math.inf, 0.0, -0.0, 1e300])
+values = st.one_of(st.floats(-40.0, 40.0), odd)
+
+
+# ---------------------------------------------------------------- the old code (oracles)
+
+def _old_road_frame(road, tracked, t0):
+    """`BevStack._run_planner`'s loop over the tracks before the kernel, verbatim."""
+    objs = []
+    for o in tracked:
+        so, to = road.project(o.x, o.y)
+        hdg = float(road.reference_pose(so)[2])
+        c, s = math.cos(hdg), math.sin(hdg)
+        rc, rs = abs(math.cos(o.heading - hdg)), abs(math.sin(o.heading - hdg))
+        v_t = o.vy * c - o.vx * s
+        a_s, a_t = o.ax * c + o.ay * s, o.ay * c - o.ax * s
+        turned = rs
+        if o.kind == "pedestrian" and math.hypot(o.vx, o.vy) > CROSSING_MIN_SPEED:
+            turned = abs(math.sin(math.atan2(o.vy, o.vx) - hdg))
+        if not (turned > CROSSING_SIN and abs(v_t) > CROSSING_MIN_SPEED):
+            v_t = a_t = 0.0
+            if o.kind == "cyclist" and turned > CROSSING_SIN and math.hypot(o.vx, o.vy) < CROSSING_MIN_SPEED:
+                a_t = math.copysign(SET_OFF_ACCEL, float(t0 - to))
+        objs.append((float(so), float(to), o.vx * c + o.vy * s, v_t,
+                     o.length * rc + o.width * rs, o.length * rs + o.width * rc, a_s, a_t))
+    return objs
+
+
+class _OldController(Controller):
+    """`Controller.command`'s steering before the kernel, verbatim (to its fault site)."""
+
+    @staticmethod
+    def _path(plan, s):
+        length = plan.lateral_length_m
+        u = min(1.0, max(0.0, (s - plan.s_start) / length))
+        d = plan.t_target - plan.t_start
+        if u <= 0.0 or u >= 1.0:
+            return plan.t_start + d * u, 0.0, 0.0
+        return (plan.t_start + d * u * u * (3 - 2 * u), d * 6.0 * u * (1.0 - u) / length,
+                d * (6.0 - 12.0 * u) / (length * length))
+
+    def _course(self, x, y, heading, dt, speed):
+        course = heading
+        if self._last_xy is not None:
+            dx, dy = x - self._last_xy[0], y - self._last_xy[1]
+            if dx * dx + dy * dy > (0.3 * max(speed, 1.0) * dt) ** 2 and speed > 1.0:
+                course = heading + math.remainder(math.atan2(dy, dx) - heading, math.tau)
+        self._last_xy = (x, y)
+        return course
+
+    def steer(self, plan, ego, road, s_now, t_now, dt):
+        x, y, heading, speed = ego
+        course = self._course(x, y, heading, dt, speed)
+        t_path, slope, _ = self._path(plan, s_now)
+        _, _, road_heading = road.reference_pose(s_now)
+        e_lat = t_now - t_path
+        e_course = math.remainder(course - road_heading - math.atan(slope), math.tau)
+        s_pre = min(s_now + speed * self.preview_s, road.length)
+        t_pre, _, bend = self._path(plan, s_pre)
+        kappa_road = float(road.curvature(s_pre))
+        kappa = kappa_road / max(0.2, 1.0 - kappa_road * t_pre) + bend
+        steer = self.wheelbase * kappa + self.understeer * speed * speed * kappa
+        v = max(speed, 5.0)
+        wn, zeta = self.lateral_wn, self.lateral_zeta
+        steer -= self.wheelbase * (wn * wn * e_lat / (v * v) + 2.0 * zeta * wn * e_course / v)
+        return max(-self.max_steer, min(self.max_steer, steer))
+
+
+def _outcome(fn):
+    """The result's bits, or the exception's type and words."""
+    try:
+        out = fn()
+    except (ValueError, ZeroDivisionError, OverflowError) as e:
+        return type(e).__name__, str(e)
+    return bits(out)
+
+
+# ---------------------------------------------------------------- projection
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from(ROADS), st.one_of(coords, odd), st.one_of(coords, odd))
+def test_the_boxed_projection_gives_the_full_searchs_bits(road, x, y):
+    args = (road._tab, road._ds, road._last_i, road.length)
+    want = _outcome(lambda: _project(*args, x, y, 0.0, False))
+    assert _outcome(lambda: _project_boxed(*args, road.boxes(), x, y)) == want
+    with interpreted():
+        assert _outcome(lambda: _project_boxed(*args, road.boxes(), x, y)) == want
+
+
+def test_the_boxed_projection_finds_the_nearer_straight_of_a_hairpin():
+    # 100 m apart (the arc's diameter): 30 m from the outbound straight, 70 m from the return.
+    s, t = _project_boxed(HAIRPIN._tab, HAIRPIN._ds, HAIRPIN._last_i, HAIRPIN.length, HAIRPIN.boxes(), 120.0, 30.0)
+    assert s == pytest.approx(120.0) and t == pytest.approx(30.0)
+    s, t = _project_boxed(HAIRPIN._tab, HAIRPIN._ds, HAIRPIN._last_i, HAIRPIN.length, HAIRPIN.boxes(), 120.0, 70.0)
+    assert s == pytest.approx(200.0 + 50.0 * math.pi + 80.0) and t == pytest.approx(30.0)  # left of it, driving back
+    # on the straight road: a point 2 m left of station 100
+    assert STRAIGHT.project(100.0, 2.0) == road_frame_objects(STRAIGHT, [Obj(100.0, 2.0, 0.0, 5.0, 0.0, 4.0, 2.0)],
+                                                              0.0)[0][:2]
+
+
+# ---------------------------------------------------------------- tracks in road coordinates
+
+tracks = st.lists(st.builds(lambda x, y, h, vx, vy, ax, ay, length, width, kind:
+                            Obj(x, y, h, vx, vy, length, width, kind=kind, ax=ax, ay=ay),
+                            coords, coords, st.one_of(st.floats(-7.0, 7.0), odd), values, values, values, values,
+                            st.floats(0.3, 12.0), st.floats(0.3, 3.0),
+                            st.sampled_from(["car", "pedestrian", "cyclist", ""])),
+                  min_size=1, max_size=6)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.sampled_from(ROADS), tracks, st.floats(-8.0, 8.0))
+def test_the_tracks_in_road_coordinates_give_the_old_loops_bits(road, tracked, t0):
+    want = _outcome(lambda: _old_road_frame(road, tracked, t0))
+    assert _outcome(lambda: road_frame_objects(road, tracked, t0)) == want
+    with interpreted():
+        assert _outcome(lambda: road_frame_objects(road, tracked, t0)) == want
+
+
+def test_a_pedestrian_crossing_a_straight_road_keeps_its_velocity_across():
+    walker = Obj(50.0, -3.0, 0.0, 0.0, 1.5, 0.6, 0.6, kind="pedestrian")  # box along the road, walking across
+    car = Obj(80.0, -1.0, 0.0, 10.0, 0.3, 4.5, 1.8, kind="car")
+    (s, t, v_s, v_t, along, across, _, _), car_sc = road_frame_objects(STRAIGHT, [walker, car], -1.75)
+    assert (s, t, v_s, v_t, along, across) == (50.0, -3.0, 0.0, 1.5, 0.6, 0.6)
+    assert car_sc[2:4] == (10.0, 0.0)  # aligned with the road: its lateral velocity is noise
+
+
+# ---------------------------------------------------------------- steering
+
+plans = st.builds(lambda s_start, t_start, t_target, length: Plan(-1, t_target, 20.0, s_start, t_start, length, 0.0),
+                  st.floats(0.0, 400.0), st.floats(-6.0, 6.0), st.floats(-6.0, 6.0),
+                  st.one_of(st.floats(0.5, 120.0), st.sampled_from([0.0, -0.0, 1e-200, math.nan, math.inf])))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.sampled_from(ROADS), plans, coords, coords, st.one_of(st.floats(-4.0, 4.0), odd),
+       st.one_of(st.floats(0.0, 40.0), odd), st.one_of(st.none(), st.tuples(coords, coords)),
+       st.floats(0.0, 500.0), st.floats(-6.0, 6.0), st.one_of(st.floats(0.0, 3.0), odd))
+def test_the_steering_kernel_gives_the_old_laws_bits(road, plan, x, y, heading, speed, last, s_now, t_now, wn):
+    old = _OldController({}, 2.7)
+    old.lateral_wn, old._last_xy = wn, last
+    want = _outcome(lambda: old.steer(plan, (x, y, heading, speed), road, s_now, t_now, 0.01))
+
+    def steer():
+        """The value the steering's fault site sees (or the raise, before that site)."""
+        c = Controller({}, 2.7)
+        c.lateral_wn, c._last_xy = wn, last
+        sites = {}
+
+        def record(site, value):
+            sites[site] = value
+            return value
+
+        out = _outcome(lambda: c.command(plan, (x, y, heading, speed), road, s_now, t_now, 0.01, record))
+        assert c._last_xy == (x, y)
+        return out if isinstance(out, tuple) else bits(sites["control.steer"])
+
+    assert steer() == want
+    with interpreted():
+        assert steer() == want
+
+
+def test_on_its_path_on_a_straight_road_it_steers_straight_and_the_sites_come_in_order():
+    sites = []
+
+    def record(site, value):
+        sites.append(site)
+        return value
+
+    c = Controller({}, 2.7)
+    plan = Plan(-1, -1.75, 20.0, 0.0, -1.75, 60.0, 0.0)
+    steer, _ = c.command(plan, (100.0, -1.75, 0.0, 20.0), STRAIGHT, 100.0, -1.75, 0.01, record)
+    assert steer == 0.0
+    assert sites == ["control.kp", "control.ki", "control.kd", "control.lateral_wn", "control.understeer",
+                     "control.steer", "control.integral", "control.accel"]
+    # 1 m right of the path (a first cycle: no course from poses yet): steers left, by the
+    # feedback's wheelbase * wn^2 e / v^2 term (course error 0)
+    steer, _ = Controller({}, 2.7).command(plan, (100.0, -2.75, 0.0, 20.0), STRAIGHT, 100.0, -2.75, 0.01, record)
+    assert steer == pytest.approx(2.7 * 1.0 / 400.0)
