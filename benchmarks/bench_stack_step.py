@@ -105,8 +105,8 @@ def main() -> None:
                     if old is None or per_call < old[0]:
                         best[name][label] = (per_call, per_step)
                     calls[name][label] = count
-        print(f"\n  {n} agents: us per call (us per run-step)"
-              + ("" if len(checkouts) == 1 else f"; digests {'equal' if len(set(digests.values())) == 1 else 'DIFFER'}"))
+        same = "equal" if len(set(digests.values())) == 1 else "DIFFER"
+        print(f"\n  {n} agents: us per call (us per run-step)" + ("" if len(checkouts) == 1 else f"; digests {same}"))
         head = f"  {'':18s}{'calls':>7s}  {'this':>18s}"
         if "versus" in checkouts:
             head += f"  {'versus':>18s}  {'versus/this':>11s}"
