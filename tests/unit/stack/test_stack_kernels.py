@@ -17,7 +17,7 @@ from addt_dsl.plan import RoadPlan, SegmentPlan
 from addt_dsl.road.roadspec import build_network
 from addt_dsl.runtime.fastroad import FastRoad, _project, _project_boxed
 from addt_dsl.stack.bev import CROSSING_MIN_SPEED, CROSSING_SIN, SET_OFF_ACCEL, road_frame_objects
-from addt_dsl.stack.nodes import Controller, Obj, Plan
+from addt_dsl.stack.nodes import Controller, Obj, Plan, Tracker
 
 
 def _road(*segments) -> FastRoad:
@@ -100,6 +100,105 @@ class _OldController(Controller):
         wn, zeta = self.lateral_wn, self.lateral_zeta
         steer -= self.wheelbase * (wn * wn * e_lat / (v * v) + 2.0 * zeta * wn * e_course / v)
         return max(-self.max_steer, min(self.max_steer, steer))
+
+
+class _OldTracker(Tracker):
+    """`Tracker.update` before the kernel, verbatim (with its `_predict_cov` and `_correct`)."""
+
+    def update(self, objs: list[Obj], stamp_s: float, corrupt) -> None:
+        predicted = [self._predict(o, stamp_s - ts) for o, ts, _ in self.tracks]
+        new_tracks = []
+        used = set()
+        r_p = self.position_noise_m ** 2
+        for det in objs:
+            best, best_d = None, math.inf
+            for i, (p, (_, ts, _)) in enumerate(zip(predicted, self.tracks)):
+                if i in used:
+                    continue
+                d = math.hypot(p.x - det.x, p.y - det.y)
+                if math.isnan(p.vx):
+                    v_max = self.class_max_speed.get(det.kind, self.max_speed)
+                    gate = self.gate_m + v_max * (stamp_s - ts)
+                else:
+                    gate = self.gate_m
+                if d < gate and d < best_d:
+                    best, best_d = i, d
+            measured_v = not math.isnan(det.vx)
+            if best is None:
+                # A new track: the detection, with its velocity if the detector gives one.
+                cov = (r_p, 0.0, self.velocity_noise_mps ** 2 if measured_v else math.inf)
+                new_tracks.append((det, stamp_s, cov))
+                continue
+            used.add(best)
+            prev, ts, cov = self.tracks[best]
+            dt = max(stamp_s - ts, 1e-3)
+            if math.isnan(prev.vx) and not measured_v:
+                # Second sighting without a velocity: two-point start.
+                x, y = det.x, det.y
+                vx, vy = (det.x - prev.x) / dt, (det.y - prev.y) / dt
+                cov = (r_p, r_p / dt, 2.0 * r_p / dt ** 2)
+            else:
+                if math.isnan(prev.vx):  # a velocity-less track meets a detector's velocity
+                    pred, cov = prev, (cov[0], 0.0, math.inf)
+                else:
+                    pred = predicted[best]
+                    cov = self._predict_cov(cov, dt, self.accel_noise.get(det.kind, self.default_accel_noise))
+                (x, vx), (y, vy), cov = self._correct(
+                    (pred.x, 0.0 if math.isnan(pred.vx) else pred.vx),
+                    (pred.y, 0.0 if math.isnan(pred.vy) else pred.vy), cov, (det.x, det.y),
+                    (det.vx, det.vy) if measured_v else None)
+            ax = ay = 0.0
+            if measured_v and not math.isnan(prev.vx):
+                g = self.accel_gain
+                ax = prev.ax + g * ((vx - prev.vx) / dt - prev.ax)
+                ay = prev.ay + g * ((vy - prev.vy) / dt - prev.ay)
+            # A second sighting in a row confirms a weak track (2 of 2).
+            est = Obj(x, y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width,
+                      kind=det.kind, weak=det.weak and prev.weak and stamp_s - ts > self.confirm_s, ax=ax, ay=ay)
+            new_tracks.append((est, stamp_s, cov))
+        # Keep unmatched tracks alive (coasting) so a dropped frame does not erase an object.
+        for i, (p, ts, cov) in enumerate(self.tracks):
+            if i not in used and stamp_s - ts <= self.max_age_s:
+                new_tracks.append((p, ts, cov))
+        self.tracks = new_tracks
+
+    @staticmethod
+    def _predict_cov(cov, dt: float, accel_std: float) -> tuple[float, float, float]:
+        """P <- F P F' + Q for F = [[1, dt], [0, 1]], Q of white acceleration `accel_std`."""
+        pp, pv, vv = cov
+        q = accel_std ** 2
+        return (pp + 2.0 * dt * pv + dt * dt * vv + q * dt ** 4 / 4.0,
+                pv + dt * vv + q * dt ** 3 / 2.0,
+                vv + q * dt * dt)
+
+    def _correct(self, state_x, state_y, cov, z_pos, z_vel):
+        """Kalman update of both axes' (p, v) with the position, then the velocity if measured
+        (independent measurements: one after the other is the joint update)."""
+        pp, pv, vv = cov
+        r_p = self.position_noise_m ** 2
+        if math.isinf(vv):  # no velocity known yet: the position resets p, v stays unknown
+            k_p, k_v = 1.0, 0.0
+            pp, pv = r_p, 0.0
+        else:
+            s = pp + r_p
+            k_p, k_v = pp / s, pv / s
+            pp, pv, vv = pp - k_p * pp, pv - k_p * pv, vv - k_v * pv
+        (px, vx), (py, vy) = state_x, state_y
+        px, vx = px + k_p * (z_pos[0] - px), vx + k_v * (z_pos[0] - px)
+        py, vy = py + k_p * (z_pos[1] - py), vy + k_v * (z_pos[1] - py)
+        if z_vel is not None:
+            r_v = self.velocity_noise_mps ** 2
+            if math.isinf(vv):
+                k_p, k_v = 0.0, 1.0
+                vv = r_v
+            else:
+                s = vv + r_v
+                k_p, k_v = pv / s, vv / s
+                pp, pv, vv = pp - k_p * pv, pv - k_p * vv, vv - k_v * vv
+            px, vx = px + k_p * (z_vel[0] - vx), vx + k_v * (z_vel[0] - vx)
+            py, vy = py + k_p * (z_vel[1] - vy), vy + k_v * (z_vel[1] - vy)
+        return (px, vx), (py, vy), (pp, pv, vv)
+
 
 
 def _outcome(fn):
@@ -213,3 +312,65 @@ def test_on_its_path_on_a_straight_road_it_steers_straight_and_the_sites_come_in
     # feedback's wheelbase * wn^2 e / v^2 term (course error 0)
     steer, _ = Controller({}, 2.7).command(plan, (100.0, -2.75, 0.0, 20.0), STRAIGHT, 100.0, -2.75, 0.01, record)
     assert steer == pytest.approx(2.7 * 1.0 / 400.0)
+
+
+# ---------------------------------------------------------------- tracking
+
+def _tracker(cls, tracks, position_noise, velocity_noise):
+    t = cls(1.0, position_noise, velocity_noise)
+    t.tracks = [(Obj(o.x, o.y, o.heading, o.vx, o.vy, o.length, o.width, kind=o.kind, weak=o.weak, ax=o.ax,
+                     ay=o.ay), ts, cov) for o, ts, cov in tracks]
+    return t
+
+
+def _state(tracker):
+    return [(o.x, o.y, o.heading, o.vx, o.vy, o.length, o.width, o.kind, o.weak, o.ax, o.ay, ts, *cov)
+            for o, ts, cov in tracker.tracks]
+
+
+near = st.floats(-12.0, 12.0)
+velocity = st.one_of(st.floats(-15.0, 15.0), st.just(math.nan), odd)
+objects = st.builds(lambda x, y, vx, vy, kind, weak, ax: Obj(x, y, 0.3, vx, vy, 4.0, 1.8, kind=kind, weak=weak,
+                                                             ax=ax, ay=-ax),
+                    near, near, velocity, velocity, st.sampled_from(["car", "pedestrian", "cyclist", "obstacle"]),
+                    st.booleans(), st.floats(-3.0, 3.0))
+covariances = st.one_of(st.tuples(st.floats(1e-4, 2.0), st.floats(-0.5, 0.5), st.floats(1e-4, 4.0)),
+                        st.tuples(st.floats(1e-4, 2.0), st.just(0.0), st.just(math.inf)),
+                        st.tuples(st.sampled_from([-0.01, -1e-6, 0.0]), st.floats(-1.0, 1.0), odd))
+stamps = st.one_of(st.floats(-1.0, 1.0), st.sampled_from([-1e160, 1e-9, math.nan]))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(objects, stamps, covariances), max_size=6), st.lists(objects, max_size=6),
+       st.one_of(st.none(), st.floats(1e-4, 0.5)), st.one_of(st.none(), st.floats(1e-4, 0.5)))
+def test_the_tracker_kernel_gives_the_old_updates_bits(tracks, dets, position_noise, velocity_noise):
+    """Tracks of all kinds (velocity unknown, covariance corrupted: a memory fault's), the
+    detector measuring velocities or not: the same tracks, the same values through the
+    fault site in the same order, the same raise (at the same detection)."""
+    def run(cls):
+        tracker = _tracker(cls, tracks, position_noise, velocity_noise)
+        seen = []
+
+        def site(name, value):
+            seen.append((name, value))
+            return value + 1.0  # a corruption: it must land in the track as before
+
+        out = _outcome(lambda: tracker.update(dets, 0.1, site))
+        return out if isinstance(out, tuple) else bits([v for r in _state(tracker) for v in r
+                                                        if not isinstance(v, str)]), bits([v for _, v in seen])
+
+    want = run(_OldTracker)
+    assert run(Tracker) == want
+    with interpreted():
+        assert run(Tracker) == want
+
+
+def test_a_detection_two_metres_from_a_track_updates_it_and_a_far_one_starts_another():
+    tracker = Tracker(1.0, 0.1, 0.1)
+    tracker.update([Obj(10.0, 0.0, 0.0, 5.0, 0.0, 4.0, 1.8, kind="car")], 0.0, lambda site, v: v)
+    tracker.update([Obj(12.0, 0.0, 0.0, 5.0, 0.0, 4.0, 1.8, kind="car"),
+                    Obj(30.0, 0.0, 0.0, 5.0, 0.0, 4.0, 1.8, kind="car")], 0.1, lambda site, v: v)
+    (first, ts, cov), (second, _, _) = tracker.tracks
+    # predicted to 10.5 m, measured at 12 m: the filter lands in between
+    assert 10.5 < first.x < 12.0 and ts == 0.1 and cov[0] < 0.1 ** 2
+    assert second.x == 30.0 and len(tracker.tracks) == 2
