@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import Libm, hypot, kernel, pow
+from addt_dsl.kernel import Libm, hypot, kernel
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.runtime.fastroad import _K, _index, _reference_pose
 from addt_dsl.specs import stacks as S
@@ -20,6 +20,18 @@ from addt_dsl.vehicles import CAR, DEFAULT_MASS_KG, DEFAULT_MU
 
 G = 9.81  # [m/s^2]
 remainder = Libm("remainder", math.remainder, 2)  # exact: the C library's is CPython's
+
+
+def _c_pow(x: float, y: float) -> float:
+    """The C library's pow where CPython's ** raises OverflowError (an infinity): a kernel
+    checks and raises itself, at the same point compiled and interpreted."""
+    try:
+        return float(x) ** float(y)
+    except OverflowError:
+        return math.copysign(math.inf, x) if float(y).is_integer() and y % 2.0 == 1.0 else math.inf
+
+
+pow = Libm("pow", _c_pow, 2)  # `kernel.pow`, its Python not raising (`_c_pow`)
 
 
 @dataclass(frozen=True)
@@ -349,7 +361,7 @@ class Tracker:
             new_tracks.append((est, stamp_s, (pp, pv, vv)))
         if error:  # where the filter's arithmetic raised in Python, at the same detection
             raise (ZeroDivisionError("float division by zero") if error == _ZERO_DIVISION else
-                   OverflowError("(34, 'Numerical result out of range')"))
+                   OverflowError(34, "Numerical result out of range"))
         # Keep unmatched tracks alive (coasting) so a dropped frame does not erase an object.
         used = set(best_of.tolist())
         for i, (p, ts, cov) in enumerate(self.tracks):
@@ -1197,7 +1209,7 @@ def _steer(tab, ds, last_i, length, s_start, t_start, t_target, lateral_m, x, y,
         step = 0.3 * (1.0 if 1.0 > speed else speed) * dt
         reach = pow(step, 2.0)
         if reach - reach != 0.0 and step - step == 0.0:  # CPython's ** raises where it overflows
-            raise OverflowError("(34, 'Numerical result out of range')")
+            raise OverflowError(34, "Numerical result out of range")
         if dx * dx + dy * dy > reach and speed > 1.0:
             course = heading + _remainder_tau(math.atan2(dy, dx) - heading)
     t_path, slope, _ = _smoothstep_path(s_now, s_start, t_start, t_target, lateral_m)
