@@ -5,8 +5,9 @@ Run: PYTHONPATH=. python benchmarks/bench_stack_step.py [--agents 1,50] [--repea
 One ground-truth run of `bench_dense`'s road (4 s) per agent count, with timers on the
 stack's entry points (`BevStack.step`, `on_frame`, `_run_planner`, `_run_control`) and on the
 nodes they call (`Controller.command`, `LatticePlanner.plan`, `Tracker.update`,
-`GroundTruthPerception.run`): microseconds per call (the least mean of `--repeats` runs;
-the timers add ~0.2 us a call) and per run-step. `--versus CHECKOUT` times that checkout's
+`GroundTruthPerception.run`): the median microseconds per call and the mean per run-step
+(garbage collections included), each the least of `--repeats` runs; the timers add ~0.2 us
+a call. `--versus CHECKOUT` times that checkout's
 code (its `addt_dsl` first on the path) in the same invocation, runs alternating, and
 prints the ratios (other / this). Each measurement is a fresh worker process.
 """
@@ -16,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import time
@@ -51,19 +53,19 @@ def worker(n_agents: int, duration: float) -> dict:
     for module, cls, attr, label in TARGETS:
         owner = getattr(importlib.import_module(module), cls)
         original = getattr(owner, attr)
-        acc = totals.setdefault(label, [0, 0.0])
+        acc = totals.setdefault(label, [])
 
         def wrapper(*args, _original=original, _acc=acc, **kwargs):
             t0 = time.perf_counter()
             try:
                 return _original(*args, **kwargs)
             finally:
-                _acc[1] += time.perf_counter() - t0
-                _acc[0] += 1
+                _acc.append(time.perf_counter() - t0)
 
         setattr(owner, attr, wrapper)
     r = execute(spec, keep_trace=False)
-    return {"totals": totals, "steps": totals["step"][0], "digest": r.digest}
+    return {"totals": {k: (len(v), statistics.median(v) if v else 0.0, sum(v)) for k, v in totals.items()},
+            "steps": len(totals["step"]), "digest": r.digest}
 
 
 def measure(checkout: Path, n_agents: int, duration: float) -> dict:
@@ -98,15 +100,15 @@ def main() -> None:
             for name, path in checkouts.items():  # alternating: the load drifts alike
                 r = measure(path, n, a.duration)
                 digests[name] = r["digest"]
-                for label, (count, total) in r["totals"].items():
-                    per_call = total / count * 1e6 if count else 0.0
+                for label, (count, median, total) in r["totals"].items():
+                    per_call = median * 1e6
                     per_step = total / r["steps"] * 1e6
                     old = best[name].get(label)
-                    if old is None or per_call < old[0]:
-                        best[name][label] = (per_call, per_step)
+                    best[name][label] = (per_call, per_step) if old is None else \
+                        (min(old[0], per_call), min(old[1], per_step))
                     calls[name][label] = count
         same = "equal" if len(set(digests.values())) == 1 else "DIFFER"
-        print(f"\n  {n} agents: us per call (us per run-step)" + ("" if len(checkouts) == 1 else f"; digests {same}"))
+        print(f"\n  {n} agents: median us per call (mean us per run-step)" + ("" if len(checkouts) == 1 else f"; digests {same}"))
         head = f"  {'':18s}{'calls':>7s}  {'this':>18s}"
         if "versus" in checkouts:
             head += f"  {'versus':>18s}  {'versus/this':>11s}"

@@ -603,20 +603,15 @@ class LatticePlanner:
         controller steers it (a lane change in a bend curves more than either)."""
         reach = min(self.curve_preview_max_m, speed * speed / (2.0 * self.curve_decel) + 2.0 * self.body.length_m)
         dist, kappa = road.curvature_ahead(s0, reach)
-        if lateral is None or (s0 - lateral[0]) >= lateral[3] or lateral[2] == lateral[1]:
-            # The curvature of the line the ego drives, offset t0 from the sampled one.
-            lane_kappa = np.abs(kappa) / np.maximum(1.0 - kappa * t0, 0.1)
-        else:
-            t_path, bend = _lateral_path(s0 + dist, *lateral)
-            lane_kappa = np.abs(kappa / np.maximum(1.0 - kappa * t_path, 0.2) + bend)
-        bends = lane_kappa > 1e-6
-        if not bends.any():
+        # The curvature of the line the ego drives: offset t0 from the sampled one, or on the manoeuvre's path.
+        on_path = not (lateral is None or (s0 - lateral[0]) >= lateral[3] or lateral[2] == lateral[1])
+        s_start, t_start, t_target, length = lateral if on_path else (0.0, 0.0, 0.0, 1.0)
+        bends, cap, needed = _curve_envelope(dist, kappa, s0, t0, on_path, s_start, t_start, t_target, length,
+                                             self.max_lateral_accel, self.curve_decel, ego_speed)
+        if not bends:
             return math.inf, 0.0
-        bend_v2, d = self.max_lateral_accel / lane_kappa[bends], dist[bends]
-        cap = float(np.sqrt(np.min(bend_v2 + 2.0 * self.curve_decel * d)))
         if ego_speed <= cap:
             return cap, 0.0
-        needed = float(np.max((ego_speed * ego_speed - bend_v2) / (2.0 * np.maximum(d, 1.0))))
         return cap, min(self.max_brake, needed) if needed > 0.0 else 0.0
 
     LATERAL_MIN_M = 30.0  # [m] a lateral manoeuvre's shortest length ...
@@ -1027,14 +1022,47 @@ def time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: fl
     return (v_top - v0) / accel + (d - d_acc) / v_top
 
 
-def _lateral_path(s: np.ndarray, s_start: float, t_start: float, t_target: float,
-                  length: float) -> tuple[np.ndarray, np.ndarray]:
-    """The planned lateral offset t(s) [m] and its d2t/ds2 [1/m] at stations `s` [m]: the
-    smoothstep `Controller` steers by (`_smoothstep_path`: per control step, on floats)."""
-    u = np.clip((s - s_start) / length, 0.0, 1.0)
-    d = t_target - t_start
-    inside = (u > 0.0) & (u < 1.0)
-    return t_start + d * u * u * (3.0 - 2.0 * u), np.where(inside, d * (6.0 - 12.0 * u) / (length * length), 0.0)
+@kernel
+def _curve_envelope(dist, kappa, s0, t0, on_path, s_start, t_start, t_target, length, max_lateral_accel, curve_decel,
+                    ego_speed):
+    """`LatticePlanner._curve_speed`'s envelope over the samples ahead (`dist` [m] past `s0`,
+    the reference line's curvature `kappa` [1/m]): (any bend, the speed cap [m/s], the
+    braking that reaches every bend's speed at the bend [m/s^2]). The curvature of the line
+    driven: offset `t0` from the reference, or (`on_path`) the lateral manoeuvre's smoothstep
+    from (`s_start`, `t_start`) to `t_target` over `length` [m] plus its own curvature. As
+    numpy gave it: elementwise, a NaN passing through clips, maxima and minima."""
+    two_decel = 2.0 * curve_decel
+    cap2, needed, bends = math.inf, -math.inf, False
+    for k in range(dist.size):
+        kap = kappa[k]
+        if on_path:
+            u = (s0 + dist[k] - s_start) / length
+            if u < 0.0:  # np.clip(u, 0, 1)
+                u = 0.0
+            elif u > 1.0:
+                u = 1.0
+            d = t_target - t_start
+            t_path = t_start + d * u * u * (3.0 - 2.0 * u)
+            bend = d * (6.0 - 12.0 * u) / (length * length) if (u > 0.0) & (u < 1.0) else 0.0
+            g = 1.0 - kap * t_path
+            lane_kappa = abs(kap / (g if (g > 0.2) | (g != g) else 0.2) + bend)
+        else:
+            g = 1.0 - kap * t0
+            lane_kappa = abs(kap) / (g if (g > 0.1) | (g != g) else 0.1)
+        if not lane_kappa > 1e-6:
+            continue
+        bend_v2 = max_lateral_accel / lane_kappa
+        v2 = bend_v2 + two_decel * dist[k]
+        reach = dist[k] if (dist[k] > 1.0) | (dist[k] != dist[k]) else 1.0
+        brake = (ego_speed * ego_speed - bend_v2) / (2.0 * reach)
+        if not bends:
+            cap2, needed, bends = v2, brake, True
+        else:  # np.min, np.max: a NaN wins
+            if cap2 == cap2 and (v2 < cap2 or v2 != v2):
+                cap2 = v2
+            if needed == needed and (brake > needed or brake != brake):
+                needed = brake
+    return bends, math.sqrt(cap2), needed
 
 
 def _lane_steps(a: int, b: int) -> int:

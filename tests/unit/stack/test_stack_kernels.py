@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -17,7 +18,7 @@ from addt_dsl.plan import RoadPlan, SegmentPlan
 from addt_dsl.road.roadspec import build_network
 from addt_dsl.runtime.fastroad import FastRoad, _project, _project_boxed
 from addt_dsl.stack.bev import CROSSING_MIN_SPEED, CROSSING_SIN, SET_OFF_ACCEL, road_frame_objects
-from addt_dsl.stack.nodes import Controller, Obj, Plan, Tracker
+from addt_dsl.stack.nodes import Controller, EgoBody, LatticePlanner, Obj, Plan, Tracker
 
 
 def _road(*segments) -> FastRoad:
@@ -201,6 +202,49 @@ class _OldTracker(Tracker):
 
 
 
+def _lateral_path(s: np.ndarray, s_start: float, t_start: float, t_target: float,
+                  length: float) -> tuple[np.ndarray, np.ndarray]:
+    """The planned lateral offset t(s) [m] and its d2t/ds2 [1/m] at stations `s` [m]: the
+    smoothstep `Controller` steers by (`_smoothstep_path`: per control step, on floats)."""
+    u = np.clip((s - s_start) / length, 0.0, 1.0)
+    d = t_target - t_start
+    inside = (u > 0.0) & (u < 1.0)
+    return t_start + d * u * u * (3.0 - 2.0 * u), np.where(inside, d * (6.0 - 12.0 * u) / (length * length), 0.0)
+
+
+class _OldPlanner(LatticePlanner):
+    """`LatticePlanner._curve_speed` before the kernel, verbatim (with `_lateral_path`)."""
+
+    def _curve_speed(self, road, s0: float, t0: float, ego_speed: float, speed: float,
+                     lateral: tuple[float, float, float, float] | None = None) -> tuple[float, float]:
+        """(speed cap [m/s], braking [m/s^2]) for the curves ahead (a junction's corner, a
+        bend, a lane change): the fastest speed now from which slowing at `curve_decel` keeps
+        the lateral acceleration on the path ahead under `max_lateral_accel` (v^2 <= a_lat /
+        kappa + 2 * decel * distance, over the stopping preview), and, once the ego is at or
+        past that envelope, the deceleration that reaches each bend's speed at the bend (like
+        a stop line's: the speed loop alone lags by a couple of m/s). `lateral` = (s_start,
+        t_start, t_target, length) [m] of the lateral manoeuvre the ego follows: the path's
+        curvature is the road's at the manoeuvre's offset plus the manoeuvre's own, as the
+        controller steers it (a lane change in a bend curves more than either)."""
+        reach = min(self.curve_preview_max_m, speed * speed / (2.0 * self.curve_decel) + 2.0 * self.body.length_m)
+        dist, kappa = road.curvature_ahead(s0, reach)
+        if lateral is None or (s0 - lateral[0]) >= lateral[3] or lateral[2] == lateral[1]:
+            # The curvature of the line the ego drives, offset t0 from the sampled one.
+            lane_kappa = np.abs(kappa) / np.maximum(1.0 - kappa * t0, 0.1)
+        else:
+            t_path, bend = _lateral_path(s0 + dist, *lateral)
+            lane_kappa = np.abs(kappa / np.maximum(1.0 - kappa * t_path, 0.2) + bend)
+        bends = lane_kappa > 1e-6
+        if not bends.any():
+            return math.inf, 0.0
+        bend_v2, d = self.max_lateral_accel / lane_kappa[bends], dist[bends]
+        cap = float(np.sqrt(np.min(bend_v2 + 2.0 * self.curve_decel * d)))
+        if ego_speed <= cap:
+            return cap, 0.0
+        needed = float(np.max((ego_speed * ego_speed - bend_v2) / (2.0 * np.maximum(d, 1.0))))
+        return cap, min(self.max_brake, needed) if needed > 0.0 else 0.0
+
+
 def _outcome(fn):
     """The result's bits, or the exception's type and words."""
     try:
@@ -374,3 +418,34 @@ def test_a_detection_two_metres_from_a_track_updates_it_and_a_far_one_starts_ano
     # predicted to 10.5 m, measured at 12 m: the filter lands in between
     assert 10.5 < first.x < 12.0 and ts == 0.1 and cov[0] < 0.1 ** 2
     assert second.x == 30.0 and len(tracker.tracks) == 2
+
+
+# ---------------------------------------------------------------- curve speed
+
+CURVY = _road(SegmentPlan(kind="line", length_m=60.0), SegmentPlan(kind="arc", length_m=40.0, curvature_per_m=0.05),
+              SegmentPlan(kind="spiral", length_m=50.0, curv_start_per_m=-0.02, curv_end_per_m=0.03),
+              SegmentPlan(kind="line", length_m=100.0))
+laterals = st.one_of(st.none(), st.tuples(st.floats(-20.0, 200.0), st.floats(-5.0, 5.0), st.floats(-5.0, 5.0),
+                                          st.one_of(st.floats(0.5, 90.0), st.sampled_from([0.0, 1e-200, math.nan]))))
+
+
+@settings(max_examples=120, deadline=None)
+@given(st.sampled_from((STRAIGHT, HAIRPIN, CURVY)), st.floats(0.0, 250.0), st.one_of(st.floats(-8.0, 25.0), odd),
+       st.one_of(st.floats(0.0, 40.0), st.just(math.nan)), st.floats(0.0, 40.0), laterals,
+       st.one_of(st.floats(0.5, 6.0), st.sampled_from([0.0, math.nan])))
+def test_the_curve_envelope_kernel_gives_the_old_curve_speeds_bits(road, s0, t0, ego_speed, speed, lateral, a_lat):
+    settings_ = {"max_lateral_accel": a_lat}
+    old, new = _OldPlanner(settings_, EgoBody()), LatticePlanner(settings_, EgoBody())
+    with np.errstate(all="ignore"):
+        want = _outcome(lambda: old._curve_speed(road, s0, t0, ego_speed, speed, lateral))
+    assert _outcome(lambda: new._curve_speed(road, s0, t0, ego_speed, speed, lateral)) == want
+    with interpreted():
+        assert _outcome(lambda: new._curve_speed(road, s0, t0, ego_speed, speed, lateral)) == want
+
+
+def test_on_a_bend_of_known_radius_the_cap_is_the_lateral_limit_plus_the_slowing():
+    # 20 m radius from 60 m on: at 50 m the cap is sqrt(a_lat * r + 2 * decel * 10 m)
+    planner = LatticePlanner({"max_lateral_accel": 4.0}, EgoBody())
+    cap, brake = planner._curve_speed(CURVY, 50.0, 0.0, 5.0, 20.0)
+    assert cap == pytest.approx(math.sqrt(4.0 * 20.0 + 2.0 * 2.0 * 10.0), rel=1e-3) and brake == 0.0
+    assert planner._curve_speed(STRAIGHT, 50.0, 0.0, 30.0, 30.0) == (math.inf, 0.0)
