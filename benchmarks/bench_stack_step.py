@@ -108,7 +108,8 @@ def main() -> None:
                         (min(old[0], per_call), min(old[1], per_step))
                     calls[name][label] = count
         same = "equal" if len(set(digests.values())) == 1 else "DIFFER"
-        print(f"\n  {n} agents: median us per call (mean us per run-step)" + ("" if len(checkouts) == 1 else f"; digests {same}"))
+        print(f"\n  {n} agents: median us per call (mean us per run-step)"
+              + ("" if len(checkouts) == 1 else f"; digests {same}"))
         head = f"  {'':18s}{'calls':>7s}  {'this':>18s}"
         if "versus" in checkouts:
             head += f"  {'versus':>18s}  {'versus/this':>11s}"
