@@ -148,7 +148,7 @@ def _project(tab, ds, last_i, length, x, y, hint, hinted):
     return s, -(x - rx) * math.sin(h) + (y - ry) * math.cos(h)
 
 
-_BOX = 64  # samples per bounding box of `_nearest_boxed`
+_BOX = 128  # samples per bounding box of `_nearest_boxed`
 
 
 @kernel

@@ -41,7 +41,8 @@ def road_frame_objects(road, tracked: list, t0: float) -> list[tuple]:
     tuples), the ego at offset `t0` [m]; one kernel call over all of them (`_road_frame`)."""
     if not tracked:
         return []
-    rows = np.array([(o.x, o.y, o.heading, o.vx, o.vy, o.ax, o.ay, o.length, o.width) for o in tracked])
+    rows = np.array([(o.x, o.y, o.heading, o.vx, o.vy, o.ax, o.ay, o.length, o.width) for o in tracked],
+                    dtype=np.float64)
     kinds = np.array([_KIND_CODES.get(o.kind, 0) for o in tracked], dtype=np.int64)
     out = np.empty((len(tracked), 8))
     _road_frame(road._tab, road._ds, road._last_i, road.length, road.boxes(), rows, kinds, t0, out)
