@@ -1029,8 +1029,9 @@ def _curve_envelope(dist, kappa, s0, t0, on_path, s_start, t_start, t_target, le
     the reference line's curvature `kappa` [1/m]): (any bend, the speed cap [m/s], the
     braking that reaches every bend's speed at the bend [m/s^2]). The curvature of the line
     driven: offset `t0` from the reference, or (`on_path`) the lateral manoeuvre's smoothstep
-    from (`s_start`, `t_start`) to `t_target` over `length` [m] plus its own curvature. As
-    numpy gave it: elementwise, a NaN passing through clips, maxima and minima."""
+    from (`s_start`, `t_start`) to `t_target` over `length` [m] plus its own curvature (the
+    controller's `_smoothstep_path`, whose Python min and max drop a NaN). As numpy gave
+    it: elementwise, a NaN passing through clips, maxima and minima."""
     two_decel = 2.0 * curve_decel
     cap2, needed, bends = math.inf, -math.inf, False
     for k in range(dist.size):
