@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import Libm, hypot, kernel
+from addt_dsl.kernel import Libm, hypot, kernel, pow  # (pow: the C library's, as CPython's `**`)
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.runtime.fastroad import _K, _index, _reference_pose
 from addt_dsl.specs import stacks as S
@@ -20,18 +20,6 @@ from addt_dsl.vehicles import CAR, DEFAULT_MASS_KG, DEFAULT_MU
 
 G = 9.81  # [m/s^2]
 remainder = Libm("remainder", math.remainder, 2)  # exact: the C library's is CPython's
-
-
-def _c_pow(x: float, y: float) -> float:
-    """The C library's pow where CPython's ** raises OverflowError (an infinity): a kernel
-    checks and raises itself, at the same point compiled and interpreted."""
-    try:
-        return float(x) ** float(y)
-    except OverflowError:
-        return math.copysign(math.inf, x) if float(y).is_integer() and y % 2.0 == 1.0 else math.inf
-
-
-pow = Libm("pow", _c_pow, 2)  # `kernel.pow`, its Python not raising (`_c_pow`)
 
 
 @dataclass(frozen=True)
