@@ -416,8 +416,8 @@ class TreeEnsemble:
 @kernel
 def _tree_logits(x, feature, threshold, left, right, leaf, value, roots, baseline, depth, out):
     """Each detection's walk down every tree (at most `depth` splits); a class's logit is
-    its baseline plus its trees' leaf values summed in iteration order from the first
-    (the order numpy's sum over the iterations axis adds them: test)."""
+    its baseline plus its trees' leaf values summed in iteration order from the first,
+    onto 0.0 (as numpy's sum over the iterations axis adds them: test)."""
     iterations, classes = roots.shape
     for k in range(x.shape[0]):
         for c in range(classes):
@@ -428,7 +428,7 @@ def _tree_logits(x, feature, threshold, left, right, leaf, value, roots, baselin
                     if leaf[node]:
                         break
                     node = left[node] if x[k, feature[node]] <= threshold[node] else right[node]
-                total = value[node] if it == 0 else total + value[node]
+                total += value[node]
             out[k, c] = baseline[c] + total
 
 
