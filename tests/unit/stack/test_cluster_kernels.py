@@ -276,3 +276,12 @@ def test_stacked_eigh_gives_each_matrixs_bits():
     for k, m in enumerate(mats):
         s, a = np.linalg.eigh(m)
         assert bits(s) == bits(spread[k]) and bits(a) == bits(axes[k])
+
+
+def test_an_ensemble_deeper_than_its_depth_is_refused(shipped):
+    """The kernel's walk stops at `depth` splits, where the numpy walk read an inner node's
+    value: an ensemble whose trees go deeper is not loaded."""
+    state = shipped.state()
+    with pytest.raises(ValueError, match="deeper than its depth 5"):
+        cluster_class.TreeEnsemble.from_state({**state, "depth": np.array(5)})
+    assert cluster_class.TreeEnsemble.from_state(state).depth == shipped.depth
