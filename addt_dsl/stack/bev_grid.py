@@ -197,11 +197,6 @@ def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float 
     return heat, reg, mask
 
 
-# Offsets of the 8 neighbours in the padded map, in row-major order around the centre (1, 1).
-_NEIGHBOUR_DI = np.array([0, 0, 0, 1, 1, 2, 2, 2])
-_NEIGHBOUR_DJ = np.array([0, 1, 2, 0, 2, 0, 1, 2])
-
-
 def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec = GRID,
            max_objects: int = 64, max_overlap_m: float | None = 0.3) -> np.ndarray:
     """Peaks of a (hx, hy) score map (3×3 local maxima at or above `threshold`; scores
@@ -213,27 +208,59 @@ def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec =
     box that overlaps a higher-scoring one by more than that (vehicles cannot overlap) is
     dropped: the network may propose a car and a truck for the same face, or a phantom behind a long vehicle.
     """
-    hx, hy = heat.shape
-    # Only cells at or above the threshold can be peaks (a handful per frame): compare
-    # those with their 8 neighbours instead of shifting the whole map 8 times.
-    i, j = np.nonzero(heat >= threshold)
-    if len(i) == 0:
+    i = np.empty(max(min(max_objects, heat.size), 0), dtype=np.int64)
+    j = np.empty_like(i)
+    with np.errstate(over="ignore"):  # numpy compares the map with the threshold in its dtype
+        limit = heat.dtype.type(threshold)
+    found = _peaks(heat, limit, i, j)
+    if found == 0:
         return np.zeros((0, 7))
-    padded = np.full((hx + 2, hy + 2), -np.inf, dtype=heat.dtype)
-    padded[1:-1, 1:-1] = heat
-    centre = heat[i, j][:, None]
-    neighbours = padded[i[:, None] + _NEIGHBOUR_DI, j[:, None] + _NEIGHBOUR_DJ]  # (k, 8)
-    # Ties go to the earlier cell so a plateau yields one peak: strictly above the four
-    # neighbours that come first in row-major order, at least equal to the four after.
-    is_max = (centre > neighbours[:, :4]).all(axis=1) & (centre >= neighbours[:, 4:]).all(axis=1)
-    i, j = i[is_max], j[is_max]
-    if len(i) == 0:
-        return np.zeros((0, 7))
-    conf = heat[i, j]
-    order = np.argsort(-conf, kind="stable")[:max_objects]
-    i, j, conf = i[order], j[order], conf[order]
+    i, j = i[:found], j[:found]
     with np.errstate(all="ignore"):  # a fault can feed inf/nan in: it must flow out, not warn
-        return _boxes(heat, reg, i, j, conf, spec, max_overlap_m)
+        return _boxes(heat, reg, i, j, heat[i, j], spec, max_overlap_m)
+
+
+@kernel
+def _peaks(heat, threshold, rows, cols):
+    """The cells at or above `threshold` that are 3×3 local maxima (beyond the border:
+    -inf), the highest first (ties in row-major order), at most len(rows) of them, into
+    `rows`, `cols`; returns how many. A plateau yields one peak: a peak is strictly above
+    the four neighbours that come first in row-major order and at least equal to the four
+    after (a NaN neighbour compares False: no peak)."""
+    hx, hy = heat.shape
+    limit = rows.shape[0]
+    n = 0
+    score = np.empty(limit, dtype=heat.dtype)
+    for i in range(hx):
+        for j in range(hy):
+            v = heat[i, j]
+            if not v >= threshold:
+                continue
+            peak = True
+            for di in range(-1, 2):
+                for dj in range(-1, 2):
+                    if di == 0 and dj == 0:
+                        continue
+                    a, b = i + di, j + dj
+                    u = heat[a, b] if 0 <= a < hx and 0 <= b < hy else -np.inf
+                    before = di < 0 or (di == 0 and dj < 0)
+                    if not (v > u if before else v >= u):
+                        peak = False
+            if not peak or limit == 0:
+                continue
+            # Insert by score, highest first, after its equals (a stable sort of -score);
+            # the lowest falls off the end once `limit` are held.
+            at = n if n < limit else limit - 1
+            if n == limit and not v > score[at]:
+                continue
+            while at > 0 and v > score[at - 1]:
+                if at < limit:
+                    rows[at], cols[at], score[at] = rows[at - 1], cols[at - 1], score[at - 1]
+                at -= 1
+            rows[at], cols[at], score[at] = i, j, v
+            if n < limit:
+                n += 1
+    return n
 
 
 def _boxes(heat, reg, i, j, conf, spec, max_overlap_m):
