@@ -61,10 +61,10 @@ def cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], boxes: 
     vehicle-frame `points` and the CNN's `head.box` output (channels, hx, hy).
 
     One kernel (`_clusters`) walks the detections and their returns; numpy does what its
-    own ufuncs define the bits of, each once per frame over all points or detections: the
-    returns' angles (numpy's SIMD `arctan2` is not the C library's), the softmax (`exp`)
-    and per-beam `log2`, and the principal spreads (`np.cov`'s BLAS product, one `eigh`
-    over all detections' 2x2 matrices)."""
+    own functions define the bits of, once a frame over all returns or detections: the
+    returns' angles (numpy's SIMD `arctan2` is not the C library's), the softmax's `exp`
+    and the per-beam `log2`; and the principal spreads (`np.cov`'s BLAS product per
+    detection, one `eigh` over all detections' 2x2 matrices)."""
     k_boxes = len(boxes)
     feats = np.zeros((k_boxes, len(FEATURES)))
     valid = np.zeros(k_boxes, dtype=bool)
@@ -74,20 +74,21 @@ def cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], boxes: 
     p = np.ascontiguousarray(p, dtype=np.float64)
     hx, hy = box_map.shape[1:]
     sx, sy = float(sensor_xy[0]), float(sensor_xy[1])
-    beam = np.clip(np.round(np.degrees(np.arctan2(p[:, 2] - MOUNT_Z_M, np.hypot(p[:, 0] - sx, p[:, 1] - sy)))
-                            / BEAM_STEP_DEG).astype(np.int64) + 2, 0, 4)
-    column = np.round(np.degrees(np.arctan2(p[:, 1] - sy, p[:, 0] - sx)))  # each return's 1-degree column
+    gx, gy = p[:, 0] - sx, p[:, 1] - sy
+    elevation = np.arctan2(p[:, 2] - MOUNT_Z_M, np.hypot(gx, gy))  # [rad] seen from the sensor
+    azimuth = np.arctan2(gy, gx)
     counts = np.zeros((k_boxes, 8), dtype=np.int64)  # returns, 5 beams, head cell i, j
+    shifted = np.zeros((k_boxes, box_map.shape[0] - BOX_CHANNELS))  # class logits less their largest
     unit = np.zeros((k_boxes, 2))  # the line of sight to the centroid
     centred = np.empty(2 * len(p))  # each cluster's (2, n) x, y less their means, as np.cov has them
     offset = np.zeros(k_boxes, dtype=np.int64)
-    _clusters(p, beam, column, sx, sy, np.ascontiguousarray(boxes, dtype=np.float64), spec.x_min, spec.y_min,
-              spec.head_cell_m, hx, hy, feats, valid, counts, unit, centred, offset)
+    _clusters(p, elevation, azimuth, sx, sy, np.ascontiguousarray(boxes, dtype=np.float64),
+              np.ascontiguousarray(box_map), spec.x_min, spec.y_min, spec.head_cell_m, feats, valid, counts,
+              shifted, unit, centred, offset)
     kv = np.flatnonzero(valid)
     if len(kv) == 0:
         return feats, valid
-    logits = box_map[BOX_CHANNELS:, counts[kv, 6], counts[kv, 7]].T.astype(np.float64)  # (kv, classes)
-    prob = np.exp(logits - logits.max(axis=1, keepdims=True))
+    prob = np.exp(shifted[kv])
     prob /= prob.sum(axis=1, keepdims=True)
     feats[kv, 13:13 + prob.shape[1]] = prob
     feats[kv, 21:26] = np.log2(1 + counts[kv, 1:6]) / 5
@@ -96,14 +97,13 @@ def cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], boxes: 
         cov = np.empty((len(two), 2, 2))
         for row, (n, at) in enumerate(zip(counts[two, 0].tolist(), offset[two].tolist())):
             x = centred[at:at + 2 * n].reshape(2, n)
-            c = np.dot(x, x.T)  # np.cov's product and scale, bit for bit
-            c *= np.true_divide(1, n - 1)
+            c = np.dot(x, x.T)  # np.cov's product and scale (1 / (n - 1)), bit for bit
+            c *= 1.0 / (n - 1)
             cov[row] = c
         spread, axes = np.linalg.eigh(cov)  # stacked: each matrix's bits as alone (test)
-        # Python's max(v, 0.0): v unless 0.0 > v (keeps a -0.0).
-        feats[two, 30] = np.sqrt(np.where(0.0 > spread[:, 1], 0.0, spread[:, 1]))
-        feats[two, 31] = np.sqrt(np.where(0.0 > spread[:, 0], 0.0, spread[:, 0]))
-        feats[two, 32] = np.abs(axes[:, 0, 1] * unit[two, 1] - axes[:, 1, 1] * unit[two, 0])
+        for k, (minor, major), ((_, a01), (_, a11)), (ux, uy) in zip(two.tolist(), spread.tolist(), axes.tolist(),
+                                                                      unit[two].tolist()):
+            feats[k, 30:33] = (math.sqrt(max(major, 0.0)), math.sqrt(max(minor, 0.0)), abs(a01 * uy - a11 * ux))
     return feats, valid
 
 
@@ -199,13 +199,21 @@ def _distinct_columns(column, idx, m, only_beam, beam, seen, stamp):
 
 
 @kernel
-def _clusters(p, beam, column, sx, sy, boxes, x_min, y_min, head_cell, hx, hy, feats, valid, counts, unit,
-              centred, offset):
+def _clusters(p, elevation, azimuth, sx, sy, boxes, box_map, x_min, y_min, head_cell, feats, valid, counts,
+              shifted, unit, centred, offset):
     """`cluster_features`' per-detection loop, in the old numpy code's operations and order
     (sums as numpy's pairwise sums): fills `feats` but for the softmax, per-beam and
-    principal-spread columns, and for those `counts` (returns, per beam, head cell), `unit`
-    and each cluster's centred x, y in `centred` from `offset`."""
+    principal-spread columns, and for those `counts` (returns, per beam, head cell), the
+    class logits at the head cell less their largest (`shifted`), `unit` and each
+    cluster's centred x, y in `centred` from `offset`."""
     n_points, k_boxes = p.shape[0], boxes.shape[0]
+    hx, hy = box_map.shape[1], box_map.shape[2]
+    beam = np.empty(n_points, dtype=np.int64)
+    column = np.empty(n_points)  # each return's 1-degree column
+    for i in range(n_points):  # np.round(np.degrees(a)): rint (half to even) of a * (180 / pi)
+        b = np.rint(elevation[i] * (180.0 / math.pi) / BEAM_STEP_DEG)
+        beam[i] = 0 if math.isnan(b) else min(max(int(b) + 2, 0), 4)  # (numpy: NaN -> int64 min -> 0)
+        column[i] = np.rint(azimuth[i] * (180.0 / math.pi))
     owner = np.empty(n_points, dtype=np.int64)
     for i in range(n_points):  # np.hypot(...).argmin(axis=1): the first smallest, or the first NaN
         best, best_d = 0, 0.0
@@ -249,8 +257,19 @@ def _clusters(p, beam, column, sx, sy, boxes, x_min, y_min, head_cell, hx, hy, f
             continue
         fi = math.floor((x - x_min) / head_cell)  # clamped as floats: a fault's huge x must not wrap
         fj = math.floor((y - y_min) / head_cell)
-        counts[k, 6] = 0 if fi < 0.0 else (hx - 1 if fi > hx - 1 else int(fi))
-        counts[k, 7] = 0 if fj < 0.0 else (hy - 1 if fj > hy - 1 else int(fj))
+        ci = 0 if fi < 0.0 else (hx - 1 if fi > hx - 1 else int(fi))
+        cj = 0 if fj < 0.0 else (hy - 1 if fj > hy - 1 else int(fj))
+        counts[k, 6], counts[k, 7] = ci, cj
+        top, nan = -math.inf, False  # np.max: NaN if any
+        for c in range(shifted.shape[1]):
+            v = float(box_map[BOX_CHANNELS + c, ci, cj])
+            nan = nan or math.isnan(v)
+            if v > top:
+                top = v
+        if nan:
+            top = math.nan
+        for c in range(shifted.shape[1]):
+            shifted[k, c] = float(box_map[BOX_CHANNELS + c, ci, cj]) - top
         cx, cy = pairwise_sum(q, 0, m, 3) / m, pairwise_sum(q, 1, m, 3) / m
         rx, ry = cx - sx, cy - sy
         r = hypot(rx, ry)
