@@ -72,7 +72,6 @@ def cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], boxes: 
     if k_boxes == 0 or len(p) == 0:
         return feats, valid
     p = np.ascontiguousarray(p, dtype=np.float64)
-    hx, hy = box_map.shape[1:]
     sx, sy = float(sensor_xy[0]), float(sensor_xy[1])
     gx, gy = p[:, 0] - sx, p[:, 1] - sy
     elevation = np.arctan2(p[:, 2] - MOUNT_Z_M, np.hypot(gx, gy))  # [rad] seen from the sensor
