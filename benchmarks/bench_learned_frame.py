@@ -1,9 +1,9 @@
 """Per lidar frame cost of the learned detector's Python around the CNN: `bev_grid.decode`
 (peaks, boxes, the overlap test) and the cluster class reader (`cluster_features`,
-`TreeEnsemble.logits`) of this checkout against another's (default /work/main), on the
+`TreeEnsemble.logits`) of this checkout against another's (`--base`, e.g. a worktree of an older commit), on the
 frames of dense-traffic runs with learned perception (1/5/20/50 agents).
 
-Run: PYTHONPATH=. python benchmarks/bench_learned_frame.py [--base /path/to/checkout] [--seconds S]
+Run: PYTHONPATH=. python benchmarks/bench_learned_frame.py --base /path/to/checkout [--seconds S]
 
 Records each frame's decode and reclass inputs (head maps; returns, sensor, boxes) from one
 run per agent count, then times both versions over the same frames back to back (least of
@@ -23,7 +23,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_dense import dense_source, spec_of  # noqa: E402
 
-BASE = Path(sys.argv[sys.argv.index("--base") + 1]) if "--base" in sys.argv else Path("/work/main")
+if "--base" not in sys.argv:
+    sys.exit("usage: bench_learned_frame.py --base CHECKOUT [--seconds S] (the checkout to compare with)")
+BASE = Path(sys.argv[sys.argv.index("--base") + 1])
 SECONDS = float(sys.argv[sys.argv.index("--seconds") + 1]) if "--seconds" in sys.argv else 3.0
 
 
