@@ -85,6 +85,7 @@ class Fleet:
         self.posed = False
         self.x, self.y, self.heading = [], [], []
         self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
+        self.pose, self.pose_lo = None, 0  # posed as arrays: `Fleets._pose_arrays`' table, this run's first column
         self._plan_version = -1
         self._plan = None
         self.bind(AgentArrays.adopt([agents]), 0)  # a block of one run, until a batch adopts them
@@ -119,15 +120,14 @@ class Fleet:
         z, grade = road.elevation.at(a.s)
         return x, y, h, road.road.lane_offset(a.s, a.t), z, grade
 
-    def record(self, row: np.ndarray) -> None:
-        """The agents' fields of a step's row (`_FIELDS` but the clearance; yaw rate and
-        steer stay 0)."""
+    def record(self, block: np.ndarray, k: int) -> None:
+        """The agents' fields of sample k's row of a run's record `block` (actors 1.., fields
+        `phases.FIELDS` but steer and the clearance; the yaw rate 0): posed as arrays, one
+        kernel call (`_agent_rows`) from the poses and the agents' block."""
         if self.rows is not None:
-            row[:, :-1] = self.rows
+            block[k, 1:, :-1] = self.rows
             return
-        zero = np.zeros(self.n)
-        s, t, _, accel = self.block.values[:ACCEL + 1, self.run_row, :self.n]  # (as posed: nothing moved since)
-        row[:, :9].T[:] = (self.x, self.y, self.heading, self.v, accel, zero, s, t, self.lane_offset)
+        _agent_rows(block, k, self.pose, self.pose_lo, self.block.flat, self.block_rows)
 
     def ground_truth(self, name: str | None):
         """An agent as perception's ground truth sees it (pose of the step, speed then)."""
@@ -303,8 +303,9 @@ class Fleets:
             f, pose = run.fleet, out if len(items) == 1 else out[:, lo[j]:lo[j + 1]]
             x, y, heading = pose[POSE_X], pose[POSE_Y], pose[_HEADING]
             run.physics.set_poses(f.slots, x, y, pose[POSE_Z], heading, pose[_PITCH])
-            f.x, f.y, f.heading, f.lane_offset, f.rows = x, y, heading, pose[POSE_OFFSET], None
+            f.x, f.y, f.heading, f.rows = x, y, heading, None
             f.v = pose[_SPEED]  # (perception's ground truth: the speed of the pose)
+            f.pose, f.pose_lo = out, lo[j]  # (the row: `record`)
             f.posed = True
         return []
 
@@ -372,6 +373,20 @@ def _body_poses(out, rel, yaw_rows, yaw, half_height, flat, cells):
         grade, heading, h = out[POSE_GRADE, k], out[_HEADING, k], out[POSE_H, k]
         out[_PITCH, k] = math.atan(grade) * math.cos(heading - h) if grade != 0.0 or heading != h else 0.0
         out[POSE_Z, k] += half_height[k]
+
+
+@kernel
+def _agent_rows(block, k, pose, lo, flat, cells):
+    """Sample k's row of a run's record `block` for its agents (actor 1 + i: columns x, y,
+    heading, speed, accel, yaw rate 0, s, t, lane offset; `phases.FIELDS`) from their poses
+    `pose[:, lo + i]` (`_pose_arrays`) and their block slots `cells[i]` (accel, s, t as
+    posed: nothing moved since)."""
+    for i in range(cells.size):
+        j, c = lo + i, cells[i]
+        row = block[k, 1 + i]
+        row[0], row[1], row[2], row[3] = pose[POSE_X, j], pose[POSE_Y, j], pose[_HEADING, j], pose[_SPEED, j]
+        row[4], row[5], row[6], row[7] = flat[ACCEL, c], 0.0, flat[S, c], flat[T, c]
+        row[8] = pose[POSE_OFFSET, j]
 
 
 @dataclass

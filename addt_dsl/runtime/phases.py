@@ -152,7 +152,7 @@ def record(run: RunState, rec: Record, k: int) -> None:
         rec.block[k, :, :-1] = [ego_row, *fleet.rows]
     else:
         rec.block[k, 0, :-1] = ego_row
-        fleet.record(rec.block[k, 1:])
+        fleet.record(rec.block, k)
     for name, lanes in rec.lanes.items():  # `lane_id(A)`: only in runs that read it
         lanes[k] = run.lane_number(name)
     for name, edges in rec.edges.items():  # `road_edge(A)`: to the outer edge of A's road
