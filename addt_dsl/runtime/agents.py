@@ -74,9 +74,7 @@ class Fleet:
         self.half_height = np.array(self.half_height_m)
         self.kinds = [p.vehicle for p in plans]
         self.length = np.array([a.length_m for a in agents])
-        slots = run.physics.box_slots([a.name for a in agents])
-        contiguous = bool(slots) and slots == list(range(slots[0], slots[0] + n))
-        self.slots = slice(slots[0], slots[0] + n) if contiguous else np.array(slots, dtype=np.intp)
+        self.slots = np.array(run.physics.box_slots([a.name for a in agents]), dtype=np.intp)
         codes: dict[str, int] = {}
         road_code = np.array([codes.setdefault(a.road, len(codes)) for a in agents], dtype=np.int64)
         # Who sees whom (`fleet.step`): lengths, road codes, the ego's length and road code.
@@ -90,9 +88,12 @@ class Fleet:
         self._plan = None
         self.bind(AgentArrays.adopt([agents]), 0)  # a block of one run, until a batch adopts them
 
+    binds = 0  # `bind` calls so far, of every fleet (a `_Layout` made since holds while none)
+
     def bind(self, block: AgentArrays, run: int) -> None:
         """The agents are run `run` of `block` now (they were moved there: `AgentArrays.adopt`)."""
         self.block, self.run_row, self.block_rows = block, run, block.rows(run)
+        Fleet.binds += 1
 
     def pose_one_by_one(self, run, t_now: float, dt: float) -> None:
         """The per-agent code (`pose_on_road`, the same formulas as `Fleets.pose`): poses,
@@ -211,6 +212,7 @@ class _Layout:
         self.dt = None  # the runs' steps [s], at the first step
         self._plans: list = []
         self._idm = None
+        self.binds = Fleet.binds
 
     def idm(self, plans):
         """The runs' IDM settings, whether IDM drives each agent, the lateral targets,
@@ -236,18 +238,23 @@ class Fleets:
 
     def __init__(self, runs=()):
         self._layouts: dict[tuple[int, ...], _Layout] = {}
+        self._last: _Layout | None = None  # the layout asked for last (the pose and step phases ask each step)
         if runs:
             block = AgentArrays.adopt([run.fleet.agents for run in runs])
             for r, run in enumerate(runs):
                 run.fleet.bind(block, r)
 
     def _layout(self, fleets: list[Fleet]) -> _Layout:
-        key = tuple(id(f) for f in fleets)
+        last = self._last
+        if last is not None and last.binds == Fleet.binds and last.fleets == fleets:  # (list ==: by identity)
+            return last
+        key = tuple(map(id, fleets))
         layout = self._layouts.get(key)
-        if layout is None or any(f is not g or f.block is not layout.block for f, g in zip(layout.fleets, fleets)):
+        if layout is None or layout.binds != Fleet.binds or layout.fleets != fleets:
             layout = self._layouts[key] = _Layout(fleets)
             while len(self._layouts) > 4:  # live sets change as runs end: keep the recent ones
                 del self._layouts[next(iter(self._layouts))]
+        self._last = layout
         return layout
 
     def pose(self, runs, ts) -> None:
@@ -276,8 +283,14 @@ class Fleets:
         flat, cells = layout.block.flat, layout.cells
         n, lo = layout.n, layout.lo
         out = np.empty((_POSE_ROWS, n))
-        if not (all(fast.pose_rows(elev, flat, cells, rows, out) for fast, elev, rows in layout.groups)
-                and all(math.isfinite(f.agents[i].s) and math.isfinite(f.agents[i].t) for _, f, i in layout.path_rows)):
+        finite = True
+        for fast, elev, rows in layout.groups:
+            if not fast.pose_rows(elev, flat, cells, rows, out):
+                finite = False
+                break
+        if finite and layout.path_rows:
+            finite = all(math.isfinite(f.agents[i].s) and math.isfinite(f.agents[i].t) for _, f, i in layout.path_rows)
+        if not finite:
             s, t = flat[S:T + 1, cells]
             finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts).tolist()
             left = [item for item, ok in zip(items, finite) if not ok]
@@ -301,9 +314,8 @@ class Fleets:
         _body_poses(out, layout.zeros if rel is None else rel, layout.yaw_rows, yaw, layout.half_height, flat, cells)
         for j, (run, _) in enumerate(items):
             f, pose = run.fleet, out if len(items) == 1 else out[:, lo[j]:lo[j + 1]]
-            x, y, heading = pose[POSE_X], pose[POSE_Y], pose[_HEADING]
-            run.physics.set_poses(f.slots, x, y, pose[POSE_Z], heading, pose[_PITCH])
-            f.x, f.y, f.heading, f.rows = x, y, heading, None
+            run.physics.set_poses(f.slots, out, lo[j], _BODY_COLUMNS)
+            f.x, f.y, f.heading, f.rows = pose[POSE_X], pose[POSE_Y], pose[_HEADING], None
             f.v = pose[_SPEED]  # (perception's ground truth: the speed of the pose)
             f.pose, f.pose_lo = out, lo[j]  # (the row: `record`)
             f.posed = True
@@ -354,6 +366,7 @@ class Fleets:
 # `_pose_arrays`' rows: `FastRoad.pose_rows`' and the body's heading and pitch [rad], the speed [m/s].
 _HEADING, _PITCH, _SPEED = 6, 7, 8
 _POSE_ROWS = 9
+_BODY_COLUMNS = np.array([POSE_X, POSE_Y, POSE_Z, _HEADING, _PITCH], dtype=np.int64)  # (`PhysicsWorld.set_poses`)
 _NO_YAW = np.empty(0)
 
 
