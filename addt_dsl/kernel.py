@@ -7,9 +7,10 @@ phase over the whole batch. The same source runs interpreted as `kernel.py_func`
 check the compiled form gives its bits), so there is one definition of each computation.
 
 The settings keep IEEE semantics, so a kernel gives the bits of the Python it was written
-from: no fast-math (no reassociation, no fused multiply-add), numpy's error model (x / 0.0
-is inf or nan as in numpy, not ZeroDivisionError). numba calls the C library for `math.sin`,
-`math.exp`, `math.pow` and the like, as CPython does, with two exceptions: `x ** 2` and
+from, except a NaN's sign and payload (`bits`): no fast-math (no reassociation, no fused
+multiply-add), numpy's error model (x / 0.0 is inf or nan as in numpy, not
+ZeroDivisionError). numba calls the C library for `math.sin`, `math.exp`, `math.pow` and
+the like, as CPython does, with two exceptions: `x ** 2` and
 `x ** 2.0` become `x * x` (CPython's is the C library's `pow`, ~0.1 % of doubles differ):
 write `pow(x, 2.0)` with this module's `pow` where the Python it replaces wrote `x ** 2`;
 and `math.hypot` is the C library's where CPython has its own: use this module's `hypot`.
@@ -282,3 +283,19 @@ def hypot(x, y):
     frac3 += (old - csum) + v
     v = csum - 1.0 + (frac1 + frac2 + frac3)
     return (h + v / (2.0 * h)) / scale  # differential correction
+
+
+_NAN_BITS = 0x7FF8000000000000
+
+
+def bits(values) -> list[int]:
+    """The float64 bit patterns of `values` (a number or any array-like), every NaN as one
+    pattern: what "the same bits" means between a kernel and its Python. Compiled code keeps
+    every bit of every number, -0.0 and subnormals included, but LLVM may swap the operands
+    of + and *, and which operand's NaN an operation passes on decides the NaN's sign and
+    payload (the Python gives +nan where the kernel gives -nan). A NaN's sign and payload
+    carry no value; the same compiled code gives the same NaN in every run."""
+    import numpy as np
+
+    a = np.asarray(values, dtype=np.float64).reshape(-1)
+    return np.where(np.isnan(a), _NAN_BITS, a.view(np.int64)).tolist()

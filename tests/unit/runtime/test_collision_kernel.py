@@ -7,20 +7,15 @@ from __future__ import annotations
 
 import contextlib
 import math
-import struct
 from types import SimpleNamespace
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.kernel import interpreted
+from addt_dsl.kernel import bits, interpreted
 from addt_dsl.runtime import collision as C
 from addt_dsl.runtime.world import box_separation, separation
-
-
-def bits(values) -> list[bytes]:
-    return [struct.pack("<d", float(v)) for v in values]
 
 
 special = st.sampled_from([0.0, -0.0, 5e-324, 1e-310, 2.2250738585072014e-308, 1e-160, 1e160, 1.7976931348623157e308,

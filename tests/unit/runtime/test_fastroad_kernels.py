@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.kernel import Kernel
+from addt_dsl.kernel import Kernel, bits
 from addt_dsl.road import build_road, line, load_xodr
 from addt_dsl.runtime import fastroad as F
 from addt_dsl.runtime.agent_arrays import SCALE, S, T
@@ -40,10 +40,6 @@ def interpreted(k: Kernel) -> types.FunctionType:
     callees = {name: interpreted(fn.__globals__[name]) for name in fn.__code__.co_names
                if isinstance(fn.__globals__.get(name), Kernel)}
     return types.FunctionType(fn.__code__, {**fn.__globals__, **callees}, fn.__name__, fn.__defaults__)
-
-
-def bits(a) -> list[int]:
-    return np.asarray(a, dtype=float).view(np.int64).tolist()
 
 
 def _block(s, t) -> tuple[np.ndarray, np.ndarray]:

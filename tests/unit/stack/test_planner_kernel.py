@@ -11,6 +11,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from addt_dsl.kernel import bits
 from addt_dsl.stack.nodes import EgoBody, LatticePlanner, _lane_steps, candidate_costs, objects_array, predict_travel
 
 
@@ -88,10 +89,6 @@ def _loop_cost(self, lane, t_lane, speed, s0, t0, v0, objs, current, home, now) 
     return cost
 
 
-def _bits(xs) -> list[int]:
-    return np.asarray(xs, dtype=np.float64).view(np.int64).tolist()
-
-
 # Mostly plausible values (so candidates collide, follow and pass), some non-finite or -0.0.
 odd = st.sampled_from([math.nan, math.inf, -math.inf, -0.0, 0.0, 1e300])
 station = st.floats(60.0, 200.0) | odd
@@ -118,7 +115,7 @@ def _planner(cruise, gap, mu, length, change) -> LatticePlanner:
 @settings(max_examples=300, deadline=None)
 @given(planners, candidates, objects, st.floats(90.0, 110.0) | odd, offset, velocity, lanes,
        st.sampled_from([None, -1, -2, 1]))
-def test_kernel_gives_the_python_loops_bits(planner, cands, objs, s0, t0, v0, current, home):
+def test_kernel_gives_the_python_loopsbits(planner, cands, objs, s0, t0, v0, current, home):
     args = planner._cost_args(s0, t0, v0, objects_array(objs), current, home, 2.0)
     lane_a = np.array([c[0] for c in cands], dtype=np.int64)
     t_a, v_a = np.array([c[1] for c in cands]), np.array([c[2] for c in cands])
@@ -127,19 +124,19 @@ def test_kernel_gives_the_python_loops_bits(planner, cands, objs, s0, t0, v0, cu
         candidate_costs(lane_a, t_a, v_a, *args, compiled)
         candidate_costs.py_func(lane_a, t_a, v_a, *args, interpreted)
     reference = [_loop_cost(planner, lane, t, v, s0, t0, v0, objs, current, home, 2.0) for lane, t, v in cands]
-    assert _bits(compiled) == _bits(interpreted) == _bits(reference)
+    assert bits(compiled) == bits(interpreted) == bits(reference)
     # One candidate at a time (`_cost`) is the same.
-    assert _bits([planner._cost(lane, t, v, s0, t0, v0, objs, current, home, 2.0) for lane, t, v in cands]) \
-        == _bits(reference)
+    assert bits([planner._cost(lane, t, v, s0, t0, v0, objs, current, home, 2.0) for lane, t, v in cands]) \
+        == bits(reference)
 
 
 @settings(max_examples=200, deadline=None)
 @given(velocity | st.floats(allow_nan=True), accel | st.floats(allow_nan=True), st.floats(0.0, 10.0) | odd,
        st.sampled_from([math.inf, 6.0, 0.0]))
-def test_predict_travel_compiled_gives_its_python_bits(v, a, tau, cap):
+def test_predict_travel_compiled_gives_its_pythonbits(v, a, tau, cap):
     with np.errstate(all="ignore"):
-        assert _bits([predict_travel(v, a, tau, cap)]) == _bits([predict_travel.py_func(v, a, tau, cap)]) \
-            == _bits([_predict(v, a, tau, cap)])
+        assert bits([predict_travel(v, a, tau, cap)]) == bits([predict_travel.py_func(v, a, tau, cap)]) \
+            == bits([_predict(v, a, tau, cap)])
 
 
 def test_objects_array_pads_six_fields_with_no_acceleration():
@@ -180,7 +177,7 @@ def test_kernel_gives_the_python_loops_bits_over_a_grid_of_scenes():
             got = np.empty(len(cands))
             candidate_costs(lane_a, t_a, v_a, *args, got)
             want = [_loop_cost(planner, lane, t, v, 100.0, -1.75, v0, [o], -1, -1, 2.0) for lane, t, v in cands]
-            assert _bits(got) == _bits(want), (v0, o)
+            assert bits(got) == bits(want), (v0, o)
 
 
 def _old_overlap(a, b, c):
@@ -208,7 +205,7 @@ def _loop_ttc(fcw, s0, t0, v_s, v_t, objs):
 
 @settings(max_examples=300, deadline=None)
 @given(objects, st.floats(90.0, 110.0) | odd, offset, velocity, st.sampled_from([0.0, 0.5, -1.0]) | velocity)
-def test_first_collision_gives_the_python_loops_bits(objs, s0, t0, v_s, v_t):
+def test_first_collision_gives_the_python_loopsbits(objs, s0, t0, v_s, v_t):
     from addt_dsl.stack.nodes import ForwardCollisionCheck, first_collision
 
     fcw = ForwardCollisionCheck({})
@@ -216,5 +213,5 @@ def test_first_collision_gives_the_python_loops_bits(objs, s0, t0, v_s, v_t):
             fcw.lateral_margin_m, fcw.horizon_s)
     with np.errstate(all="ignore"):
         compiled, interpreted = first_collision(*args), first_collision.py_func(*args)
-    assert _bits(compiled) == _bits(interpreted) == _bits(_loop_ttc(fcw, s0, t0, v_s, v_t, objs)) \
-        == _bits(fcw.time_to_collision(s0, t0, v_s, v_t, objs))
+    assert bits(compiled) == bits(interpreted) == bits(_loop_ttc(fcw, s0, t0, v_s, v_t, objs)) \
+        == bits(fcw.time_to_collision(s0, t0, v_s, v_t, objs))
