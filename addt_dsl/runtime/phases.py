@@ -1,7 +1,8 @@
 """One physics step of the twin as named phases over the run's state (`state.RunState`).
 
-`batch._loop` runs them in this order at each sample k (time t = k * dt), each phase over
-every live run of the batch before the next:
+`batch._loop` runs them in this order at each sample k (time t = k * dt): the phases
+that take the whole batch over every live run at once, the per-run phases between two of
+them run by run (runs share nothing: each run sees its phases in this order):
 
   clock       the stack's clock; fault timers wake
   pose        agents on their roads (every run's agents at once: `agents.Fleets.pose`),
