@@ -83,7 +83,9 @@ class Fleet:
         self.posed = False
         self.x, self.y, self.heading = [], [], []
         self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
-        self.pose, self.pose_lo = None, 0  # posed as arrays: `Fleets._pose_arrays`' table, this run's first column
+        # Posed as arrays (`rows` None): `Fleets._pose_arrays`' table (x, y, body heading,
+        # speed, lane offset, ... x the batch's agents) and this run's first column.
+        self.pose, self.pose_lo = None, 0
         self._plan_version = -1
         self._plan = None
         self.bind(AgentArrays.adopt([agents]), 0)  # a block of one run, until a batch adopts them
@@ -136,8 +138,19 @@ class Fleet:
         if i is None or not self.posed:
             return None
         a = self.agents[i]
+        if self.rows is None:  # posed as arrays: their table's column
+            pose, k = self.pose, self.pose_lo + i
+            return _GT(float(pose[POSE_X, k]), float(pose[POSE_Y, k]), float(pose[_HEADING, k]),
+                       float(pose[_SPEED, k]), a.length_m, a.width_m, self.kinds[i])
         return _GT(float(self.x[i]), float(self.y[i]), float(self.heading[i]), float(self.v[i]),
                    a.length_m, a.width_m, self.kinds[i])
+
+    def poses(self) -> tuple:
+        """The agents' (x, y, body heading) of the step, as sequences."""
+        if self.rows is None:
+            lo = self.pose_lo
+            return tuple(self.pose[(POSE_X, POSE_Y, _HEADING), lo:lo + self.n])
+        return self.x, self.y, self.heading
 
     def array_plan(self, run):
         """(IDM settings (`fleet.IDM_FIELDS` x agents), whether IDM drives each agent, rows in
@@ -269,7 +282,7 @@ class Fleets:
         for run in runs:
             if run.networked:
                 f = run.fleet
-                for a, xi, yi, hi in zip(f.agents, f.x, f.y, f.heading):
+                for a, xi, yi, hi in zip(f.agents, *f.poses()):
                     run.world_pose[a.name] = (float(xi), float(yi), float(hi))
 
     def _pose_arrays(self, items):
@@ -312,13 +325,10 @@ class Fleets:
             a.ground_scale = f.roads[i].road.ground_scale(a.s, a.t)
         yaw = np.array([standing_yaw(a, yaw) for _, a, yaw in layout.yaw], dtype=float) if layout.yaw else _NO_YAW
         _body_poses(out, layout.zeros if rel is None else rel, layout.yaw_rows, yaw, layout.half_height, flat, cells)
-        for j, (run, _) in enumerate(items):
-            f, pose = run.fleet, out if len(items) == 1 else out[:, lo[j]:lo[j + 1]]
+        for j, (run, _) in enumerate(items):  # (each run's poses: columns lo[j]: of `out`)
+            f = run.fleet
             run.physics.set_poses(f.slots, out, lo[j], _BODY_COLUMNS)
-            f.x, f.y, f.heading, f.rows = pose[POSE_X], pose[POSE_Y], pose[_HEADING], None
-            f.v = pose[_SPEED]  # (perception's ground truth: the speed of the pose)
-            f.pose, f.pose_lo = out, lo[j]  # (the row: `record`)
-            f.posed = True
+            f.pose, f.pose_lo, f.rows, f.posed = out, lo[j], None, True
         return []
 
     def step(self, runs, ts) -> list:
