@@ -346,8 +346,9 @@ class Fleets:
         left (an agent teleported this step stays put, as `advance` has it; a non-finite
         station or offset)."""
         layout = self._layout([run.fleet for run, _ in items])
-        params, idm, target, changing = layout.idm([run.fleet.array_plan(run) for run, _ in items])
-        t_new = target.copy()
+        plans = [run.fleet.array_plan(run) for run, _ in items]
+        params, idm, target, changing = layout.idm(plans)
+        t_new = target.copy() if changing else target  # (the kernel reads it)
         for k, j, a in changing:  # (reads the agent's station before it moves, as `advance`)
             run, t_now = items[j]
             t_new[k] = lateral_profile(a, t_now + run.dt)
