@@ -35,12 +35,12 @@ def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: floa
     return x, y, h, heading, road.ground_scale(s, t)
 
 
-# Agents posed as arrays from this many on in a batch (all its runs' together): fewer, and
-# the per-agent code is quicker (posing: ~15 us of calls, two kernels among them, against
-# ~2-5 us per agent; the whole loop measured at break-even at ~4 agents: with fewer, the
-# rows as lists are quicker to record). Both ways give the same bits. (The step goes
-# through its kernel whatever the count: `Fleets.step`.)
-ARRAY_MIN_AGENTS = 4
+# Agents posed as arrays from this many on in a batch (all its runs' together): with one,
+# the per-agent code is quicker (the pose and record phases of a 1-agent run-step measured
+# ~14-18 us one by one against ~20 as arrays; with 2 and 3 agents the arrays were quicker,
+# 17-19 us against 21-30: benchmarks/bench_pose.py --pose-min, bench_phases.py). Both ways
+# give the same bits. (The step goes through its kernel whatever the count: `Fleets.step`.)
+ARRAY_MIN_AGENTS = 2
 
 
 class Fleet:
