@@ -189,10 +189,30 @@ def kernel(fn: Callable) -> Kernel:
     return Kernel(fn)
 
 
-pow = Libm("pow", lambda x, y: float(x) ** float(y), 2)
-"""x ** y [-] as CPython's float power gives it (the C library's pow) for finite results;
-where CPython raises (0 ** -1, a negative base to a fractional power) this gives pow's inf
-or nan."""
+@functools.cache
+def _libm(name: str):
+    import ctypes
+    import ctypes.util
+
+    fn = getattr(ctypes.CDLL(ctypes.util.find_library("m") or ctypes.util.find_library("c")), name)
+    fn.restype, fn.argtypes = ctypes.c_double, (ctypes.c_double, ctypes.c_double)
+    return fn
+
+
+def _c_pow(x, y) -> float:
+    """The C library's pow: CPython's `x ** y` where that is a float (CPython calls pow),
+    pow's own answer where CPython raises (an overflow, 0 ** -1) or gives a complex number
+    (a negative base to a fractional power: nan)."""
+    try:
+        r = float(x) ** float(y)
+    except (OverflowError, ZeroDivisionError):
+        return _libm("pow")(x, y)
+    return r if r.__class__ is float else math.nan
+
+
+pow = Libm("pow", _c_pow, 2)
+"""x ** y [-]: the C library's pow, compiled and interpreted alike (CPython's float power
+where that gives a float)."""
 
 @kernel
 def bisect_right(a, x, hi):

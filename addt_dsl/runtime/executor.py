@@ -73,7 +73,8 @@ EXTERNAL_SIGNALS = frozenset({signal.SIGKILL, signal.SIGTERM, signal.SIGHUP, sig
 
 
 # Runs a worker steps together by default (`default_batch`): at most BATCH_MAX (each run
-# holds its own pybullet client and world, so a worker's memory grows with its batch:
+# holds its own world, and a pybullet client where it renders or casts rays at meshes, so a
+# worker's memory grows with its batch:
 # docs/twin.md gives the measured bound; a killed sweep loses at most a batch per worker),
 # and small enough that each worker gets BATCHES_PER_WORKER batches (the last batches of
 # a sweep do not leave the other workers idle).

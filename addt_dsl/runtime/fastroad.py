@@ -148,6 +148,50 @@ def _project(tab, ds, last_i, length, x, y, hint, hinted):
     return s, -(x - rx) * math.sin(h) + (y - ry) * math.cos(h)
 
 
+_BOX = 128  # samples per bounding box of `_nearest_boxed`
+
+
+@kernel
+def _box_d2(boxes, b, x, y):
+    """A lower bound of the squared distance `_project` computes from (`x`, `y`) to any
+    sample in box `b` (x min, x max, y min, y max): rounding is monotone, so the same
+    operations on the box's nearer edge give at most any of its samples' distance."""
+    ex = boxes[b, 0] - x if x < boxes[b, 0] else (x - boxes[b, 1] if x > boxes[b, 1] else 0.0)
+    ey = boxes[b, 2] - y if y < boxes[b, 2] else (y - boxes[b, 3] if y > boxes[b, 3] else 0.0)
+    return ex * ex + ey * ey
+
+
+@kernel
+def _project_boxed(tab, ds, last_i, length, boxes, x, y):
+    """`_project` without a hint, its bits: the nearest sample (the first of the nearest)
+    found through the samples' bounding boxes (`FastRoad.boxes`), every `_BOX` samples a box:
+    the least distance in the box of the least bound bounds the answer, and only boxes
+    within it are searched. A point not finite, or no boxes, searches every sample."""
+    nb = boxes.shape[0]
+    if nb == 0 or not (x - x == 0.0 and y - y == 0.0):
+        return _project(tab, ds, last_i, length, x, y, 0.0, False)
+    n = tab.shape[1]
+    near, near_lb = 0, math.inf
+    for b in range(nb):
+        lb = _box_d2(boxes, b, x, y)
+        if lb < near_lb:
+            near, near_lb = b, lb
+    bound = math.inf
+    for k in range(near * _BOX, min((near + 1) * _BOX, n)):
+        d = (tab[_X, k] - x) * (tab[_X, k] - x) + (tab[_Y, k] - y) * (tab[_Y, k] - y)
+        if d < bound:
+            bound = d
+    best, best_d = 0, math.inf
+    for b in range(nb):
+        if _box_d2(boxes, b, x, y) > bound:
+            continue
+        for k in range(b * _BOX, min((b + 1) * _BOX, n)):
+            d = (tab[_X, k] - x) * (tab[_X, k] - x) + (tab[_Y, k] - y) * (tab[_Y, k] - y)
+            if d < best_d:
+                best, best_d = k, d
+    return _project(tab, ds, last_i, length, x, y, tab[_S, best], True)
+
+
 @kernel
 def _pose_rows(tab, ds, last_i, length, centres, starts, lanes, z, g, z_ds, z_length, flat, cells, rows, out):
     """Every actor of one road: row r = rows[j] is block slot cells[r] (`AgentArrays.flat`):
@@ -176,6 +220,7 @@ def _pose_rows(tab, ds, last_i, length, centres, starts, lanes, z, g, z_ds, z_le
 
 
 class FastRoad:
+    _boxes: np.ndarray | None = None  # `_project_boxed`'s bounding boxes, made when first asked
     _k_a: np.ndarray | None = None  # the curvature samples (and `_s_k` their stations) as arrays, made when first asked
     _lane_tables: tuple | None = None  # (centres, section starts, lanes) of `_lane_offset`, made when first asked
 
@@ -204,6 +249,22 @@ class FastRoad:
         self._tab = np.array([self._x, self._y, self._h, self._k, self._s])
         self._ds = self._s[1] - self._s[0]
         self._last_i = len(self._s) - 2
+        self._boxes = None
+
+    def boxes(self) -> np.ndarray:
+        """(x min, x max, y min, y max) [m] of every `_BOX` samples in a row (`_project_boxed`);
+        none where a sample is not finite (a NaN would end `_project`'s search)."""
+        if self._boxes is None:
+            xy = self._tab[[_X, _Y]]
+            if not np.isfinite(xy).all():
+                self._boxes = np.empty((0, 4))
+            else:
+                n = xy.shape[1]
+                pad = -n % _BOX  # the last box repeats its last sample
+                x = np.concatenate([xy[0], np.full(pad, xy[0, -1])]).reshape(-1, _BOX)
+                y = np.concatenate([xy[1], np.full(pad, xy[1, -1])]).reshape(-1, _BOX)
+                self._boxes = np.stack([x.min(1), x.max(1), y.min(1), y.max(1)], axis=1)
+        return self._boxes
 
     # ---- reference line
     def _index(self, s: float) -> tuple[int, float]:

@@ -1,10 +1,13 @@
 """The pybullet side of the twin: bodies for actors, ray casts, teardown.
 
-One private pybullet client per run (DIRECT mode, never a GUI), created and torn down by
-`PhysicsWorld`, so runs share no global state. Actor bodies are boxes posed from the
-dynamics each step; the ground is an infinite `GEOM_PLANE` (plane.urdf is only 200 m
-wide). Road meshes (runtime.roadmesh) are added as visual shapes when the run has a
-camera, and as collision trimeshes when a road is elevated, so lidar rays meet crests.
+One private pybullet client per run (DIRECT mode, never a GUI), made by `PhysicsWorld`
+the first time the run asks pybullet something (a render, a ray cast the analytic caster
+cannot answer) and given back when the run ends, so runs share no global state. Actor
+bodies are boxes posed from the dynamics each step; the ground is an infinite `GEOM_PLANE`
+(plane.urdf is only 200 m wide). Road meshes (runtime.roadmesh) are added as visual shapes
+when the run has a camera, and as collision trimeshes when a road is elevated, so lidar
+rays meet crests. A run with neither (a lidar over flat roads, ground-truth perception)
+never makes a client: its rays are cast analytically (`runtime.raycast`).
 """
 
 from __future__ import annotations
@@ -77,27 +80,24 @@ SUN_DIRECTION = (0.4, 0.3, 1.0)  # high sun: road markings render bright
 
 
 class PhysicsWorld:
-    """One pybullet client (DIRECT) with the actors' boxes, the ground and road meshes.
+    """The actors' boxes, the ground and road meshes, and the pybullet client (DIRECT) that
+    holds them once something needs it (`p`, `client`).
 
     Bodies are posed from the dynamics each step (mass 0, never integrated by
     pybullet): the engine serves ray casts (lidar), rendering (camera) and contact
     queries. `visual=False` (no camera in the run) creates no visual shapes at all.
+    Body ids are pybullet's: it numbers a new (or reset) client's bodies 0, 1, ... in the
+    order they are made, so ids are given here in that order (the ground 0), and the client,
+    made later, gets the bodies in the same order (checked).
     """
 
     def __init__(self, visual: bool = False):
-        self.client = CLIENTS.take()
-        if self.client is None:
-            with _quiet_stdout():  # (its first import prints a banner too)
-                import pybullet as p  # imported here: the compiler must never load pybullet
-
-                self.client = p.connect(p.DIRECT)
-        else:
-            import pybullet as p
-        self.p = p
+        self._client: int | None = None
+        self._p = None
         self.visual = visual
-        p.setGravity(0, 0, -9.81, physicsClientId=self.client)
-        plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.client)
-        self.ground = p.createMultiBody(0, plane, physicsClientId=self.client)
+        self._made: list[tuple] = []  # ("box", half, rgba) / ("mesh", mesh, collision): what the client gets
+        self.ground = 0
+        self._ground_rgba = None
         self.ground_ids: set[int] = {self.ground}
         self._ground_array = np.array([self.ground], dtype=np.int64)
         self.bodies: dict[str, int] = {}
@@ -114,18 +114,87 @@ class PhysicsWorld:
         self._collision_meshes = 0
         self.analytic_rays = True  # False: always ask pybullet (tests compare the two)
 
+    @property
+    def p(self):
+        """The pybullet module, the client made if it is not yet."""
+        self._connect()
+        return self._p
+
+    @property
+    def client(self) -> int:
+        """This world's pybullet client id (made now if it is not yet)."""
+        self._connect()
+        return self._client
+
+    def _connect(self) -> None:
+        """Make the client and give it every body made so far, in order, posed as last set."""
+        if self._client is not None:
+            return
+        client = CLIENTS.take()
+        if client is None:
+            with _quiet_stdout():  # (its first import prints a banner too)
+                import pybullet as p  # imported here: the compiler must never load pybullet
+
+                client = p.connect(p.DIRECT)
+        else:
+            import pybullet as p
+        self._p, self._client = p, client
+        p.setGravity(0, 0, -9.81, physicsClientId=client)
+        plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=client)
+        ground = p.createMultiBody(0, plane, physicsClientId=client)
+        if ground != self.ground:
+            raise RuntimeError(f"pybullet numbered the ground {ground}, not {self.ground}")
+        if self._ground_z != 0.0:
+            p.resetBasePositionAndOrientation(ground, (0.0, 0.0, self._ground_z), (0.0, 0.0, 0.0, 1.0),
+                                              physicsClientId=client)
+        if self._ground_rgba is not None:
+            p.changeVisualShape(ground, -1, rgbaColor=list(self._ground_rgba), textureUniqueId=-1,
+                                physicsClientId=client)
+        for body, made in enumerate(self._made, start=1):
+            got = self._make_box(*made[1:]) if made[0] == "box" else self._make_mesh(*made[1:])
+            if got != body:
+                raise RuntimeError(f"pybullet numbered body {body} as {got}")
+        self._unsynced[:] = True  # made where they were first put: pose each as last set
+
+    def _make_box(self, half, rgba) -> int:
+        p, client = self._p, self._client
+        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=list(half), physicsClientId=client)
+        visual = -1
+        if self.visual and rgba is not None:
+            visual = p.createVisualShape(p.GEOM_BOX, halfExtents=list(half), rgbaColor=list(rgba),
+                                         physicsClientId=client)
+        body = p.createMultiBody(0, shape, visual, basePosition=[0, 0, half[2]], physicsClientId=client)
+        p.setCollisionFilterGroupMask(body, -1, _BOX_GROUP, -1, physicsClientId=client)
+        return body
+
+    def _make_mesh(self, mesh, collision: bool) -> int:
+        p, client = self._p, self._client
+        verts = mesh.vertices.tolist()
+        idx = mesh.indices.tolist()
+        col = -1
+        if collision:
+            col = p.createCollisionShape(p.GEOM_MESH, vertices=verts, indices=idx,
+                                         flags=p.GEOM_FORCE_CONCAVE_TRIMESH, physicsClientId=client)
+        vis = -1
+        if self.visual:
+            vis = p.createVisualShape(p.GEOM_MESH, vertices=verts, indices=idx, rgbaColor=list(mesh.rgba),
+                                      physicsClientId=client)
+        return p.createMultiBody(0, col, vis, physicsClientId=client)
+
+    def _add(self, made: tuple) -> int:
+        """A body's id: the next in pybullet's order (made now where the client exists)."""
+        self._made.append(made)
+        body = len(self._made)
+        if self._client is not None:
+            got = self._make_box(*made[1:]) if made[0] == "box" else self._make_mesh(*made[1:])
+            if got != body:
+                raise RuntimeError(f"pybullet numbered body {body} as {got}")
+        return body
+
     def add_box(self, name: str, length: float, width: float, height: float,
                 rgba: tuple[float, float, float, float] | None = None) -> int:
         """A box body for an actor; visible to the camera only if `rgba` is given."""
-        p = self.p
-        half = [length / 2, width / 2, height / 2]
-        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=self.client)
-        visual = -1
-        if self.visual and rgba is not None:
-            visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=list(rgba),
-                                         physicsClientId=self.client)
-        body = p.createMultiBody(0, shape, visual, basePosition=[0, 0, height / 2], physicsClientId=self.client)
-        p.setCollisionFilterGroupMask(body, -1, _BOX_GROUP, -1, physicsClientId=self.client)
+        body = self._add(("box", (length / 2, width / 2, height / 2), rgba))
         self.bodies[name] = body
         self.body_names[body] = name
         self._box_slot[body] = len(self._box_half)
@@ -138,20 +207,9 @@ class PhysicsWorld:
     def add_mesh(self, mesh, collision: bool = False) -> int | None:
         """A static road mesh: visible (when the world is visual) and/or part of the ground
         for ray casts (`collision`, used for elevated roads). Returns the body id."""
-        p = self.p
         if not (self.visual or collision) or mesh.triangles == 0:
             return None
-        verts = mesh.vertices.tolist()
-        idx = mesh.indices.tolist()
-        col = -1
-        if collision:
-            col = p.createCollisionShape(p.GEOM_MESH, vertices=verts, indices=idx,
-                                         flags=p.GEOM_FORCE_CONCAVE_TRIMESH, physicsClientId=self.client)
-        vis = -1
-        if self.visual:
-            vis = p.createVisualShape(p.GEOM_MESH, vertices=verts, indices=idx, rgbaColor=list(mesh.rgba),
-                                      physicsClientId=self.client)
-        body = p.createMultiBody(0, col, vis, physicsClientId=self.client)
+        body = self._add(("mesh", mesh, collision))
         self._collision_meshes += collision
         self.ground_ids.add(body)
         self._ground_array = np.array(sorted(self.ground_ids), dtype=np.int64)
@@ -159,14 +217,17 @@ class PhysicsWorld:
 
     def set_ground_height(self, z: float) -> None:
         """Move the infinite ground plane (below the lowest road when roads are elevated)."""
-        self.p.resetBasePositionAndOrientation(self.ground, (0.0, 0.0, z), (0.0, 0.0, 0.0, 1.0),
-                                               physicsClientId=self.client)
         self._ground_z = z
+        if self._client is not None:
+            self._p.resetBasePositionAndOrientation(self.ground, (0.0, 0.0, z), (0.0, 0.0, 0.0, 1.0),
+                                                    physicsClientId=self._client)
 
     def color_ground(self, rgba) -> None:
         """Plain colour for the ground plane (the renderer draws it checkered by default)."""
-        self.p.changeVisualShape(self.ground, -1, rgbaColor=list(rgba), textureUniqueId=-1,
-                                 physicsClientId=self.client)
+        self._ground_rgba = tuple(rgba)
+        if self._client is not None:
+            self._p.changeVisualShape(self.ground, -1, rgbaColor=list(rgba), textureUniqueId=-1,
+                                      physicsClientId=self._client)
 
     def set_pose(self, name: str, x: float, y: float, z: float, heading: float, pitch: float = 0.0) -> None:
         """Pose a body: yaw `heading`, then `pitch` (nose up positive) [rad].
@@ -299,9 +360,9 @@ class PhysicsWorld:
         return rgb, zbuf, ids
 
     def close(self) -> None:
-        if self.client is not None:
-            CLIENTS.give(self.p, self.client)
-            self.client = None
+        if self._client is not None:
+            CLIENTS.give(self._p, self._client)
+            self._client = None
 
 
 def box_corners(x, y, heading, length, width) -> np.ndarray:

@@ -15,8 +15,10 @@ import time as _time
 
 import numpy as np
 
+from addt_dsl.kernel import hypot, kernel
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.registry import STACKS
+from addt_dsl.runtime.fastroad import _project_boxed, _reference_pose
 from addt_dsl.specs import stacks as S
 from addt_dsl.specs.stacks import NODE_NAMES, PERCEPTIONS
 from addt_dsl.stack.bus import Bus
@@ -31,6 +33,64 @@ CROSSING_MIN_SPEED = 0.5  # [m/s] ... and moves across it faster than this is pr
 # [m/s^2] a cyclist turned across the road at rest may set off towards the ego's path at this
 # (a rider starting from a standstill: 1-1.5 m/s^2): it is predicted so until it moves
 SET_OFF_ACCEL = 1.5
+_KIND_CODES = {"pedestrian": 1, "cyclist": 2}  # `_road_frame`'s kinds (0 any other)
+
+
+def road_frame_objects(road, tracked: list, t0: float) -> list[tuple]:
+    """The planner's objects: the tracks `tracked` in road coordinates (`LatticePlanner`'s
+    tuples), the ego at offset `t0` [m]; one kernel call over all of them (`_road_frame`)."""
+    if not tracked:
+        return []
+    rows = np.array([(o.x, o.y, o.heading, o.vx, o.vy, o.ax, o.ay, o.length, o.width) for o in tracked],
+                    dtype=np.float64)
+    kinds = np.array([_KIND_CODES.get(o.kind, 0) for o in tracked], dtype=np.int64)
+    out = np.empty((len(tracked), 8))
+    _road_frame(road._tab, road._ds, road._last_i, road.length, road.boxes(), rows, kinds, t0, out)
+    return list(map(tuple, out.tolist()))
+
+
+@kernel
+def _trig_arg(a):
+    """Raise where CPython's math.cos / math.sin of `a` would (an infinite angle)."""
+    if a - a != 0.0 and a == a:
+        raise ValueError("math domain error")
+    return a
+
+
+@kernel
+def _road_frame(tab, ds, last_i, length, boxes, rows, kinds, t0, out):
+    """Each track (rows[j]: x, y, heading [rad], vx, vy, ax, ay, length, width; kinds[j]:
+    `_KIND_CODES`) in the road's frame into out[j]: station, offset, velocity along and
+    across, extent along and across the road, acceleration along and across."""
+    for j in range(rows.shape[0]):
+        ox, oy, oh, ovx, ovy, oax, oay, olen, owid = (rows[j, 0], rows[j, 1], rows[j, 2], rows[j, 3], rows[j, 4],
+                                                      rows[j, 5], rows[j, 6], rows[j, 7], rows[j, 8])
+        so, to = _project_boxed(tab, ds, last_i, length, boxes, ox, oy)
+        # Velocity along the road, and the box's extent along and across it.
+        hdg = _reference_pose(tab, ds, last_i, length, so)[2]
+        c, s = math.cos(_trig_arg(hdg)), math.sin(hdg)
+        rc, rs = abs(math.cos(_trig_arg(oh - hdg))), abs(math.sin(oh - hdg))
+        v_t = ovy * c - ovx * s
+        a_s, a_t = oax * c + oay * s, oay * c - oax * s
+        # Across the road only for an object turned across it (a crossing pedestrian or
+        # cyclist, a vehicle turning): for one aligned with the road, the lateral velocity
+        # from 10 Hz positions alone is noise (0.24-0.30 m/s from the tracker's filter for a
+        # car, ±1 m/s before it), too much to extrapolate over the horizon. A pedestrian's
+        # box is square (a detector's box axis says nothing of where it walks): its
+        # direction of motion tells whether it crosses.
+        turned = rs
+        if kinds[j] == 1 and hypot(ovx, ovy) > CROSSING_MIN_SPEED:
+            turned = abs(math.sin(_trig_arg(math.atan2(ovy, ovx) - hdg)))
+        if not (turned > CROSSING_SIN and abs(v_t) > CROSSING_MIN_SPEED):
+            v_t = a_t = 0.0
+            # A rider turned across the road and (still) at rest: its box says where it
+            # will go before its velocity does (the tracked velocity needs ~0.5 s to pass
+            # the test above; junction_cyclist's rider sets off 9 m ahead of the ego).
+            if kinds[j] == 2 and turned > CROSSING_SIN and hypot(ovx, ovy) < CROSSING_MIN_SPEED:
+                a_t = math.copysign(SET_OFF_ACCEL, t0 - to)
+        out[j, 0], out[j, 1], out[j, 2], out[j, 3] = so, to, ovx * c + ovy * s, v_t
+        out[j, 4], out[j, 5] = olen * rc + owid * rs, olen * rs + owid * rc
+        out[j, 6], out[j, 7] = a_s, a_t
 
 
 def _ground_truth(settings, ctx):
@@ -206,7 +266,6 @@ class BevStack(S.BevStack):
         x, y, heading, speed = self.ctx.ego_pose()
         s0, t0 = road.project(x, y, self.ctx.ego_station())
         lane0 = road.lane_at(s0, t0) or self.ctx.ego_lane
-        objs = []
         self.upset(self.tracker)
         self.upset(self.planner)
         # Confirmed tracks only. A detector without velocity output leaves a track seen once
@@ -216,32 +275,7 @@ class BevStack(S.BevStack):
         # 10 Hz) gives the velocity.
         # Weak tracks (seen once with fewer returns than `min_hits`) wait for their confirmation.
         tracked = [o for o in self.tracker.objects_at(time_s) if o.velocity_known and not o.weak]
-        for o in tracked:
-            so, to = road.project(o.x, o.y)
-            # Velocity along the road, and the box's extent along and across it.
-            hdg = float(road.reference_pose(so)[2])
-            c, s = math.cos(hdg), math.sin(hdg)
-            rc, rs = abs(math.cos(o.heading - hdg)), abs(math.sin(o.heading - hdg))
-            v_t = o.vy * c - o.vx * s
-            a_s, a_t = o.ax * c + o.ay * s, o.ay * c - o.ax * s
-            # Across the road only for an object turned across it (a crossing pedestrian or
-            # cyclist, a vehicle turning): for one aligned with the road, the lateral velocity
-            # from 10 Hz positions alone is noise (0.24-0.30 m/s from the tracker's filter for a
-            # car, ±1 m/s before it), too much to extrapolate over the horizon. A pedestrian's
-            # box is square (a detector's box axis says nothing of where it walks): its
-            # direction of motion tells whether it crosses.
-            turned = rs
-            if o.kind == "pedestrian" and math.hypot(o.vx, o.vy) > CROSSING_MIN_SPEED:
-                turned = abs(math.sin(math.atan2(o.vy, o.vx) - hdg))
-            if not (turned > CROSSING_SIN and abs(v_t) > CROSSING_MIN_SPEED):
-                v_t = a_t = 0.0
-                # A rider turned across the road and (still) at rest: its box says where it
-                # will go before its velocity does (the tracked velocity needs ~0.5 s to pass
-                # the test above; junction_cyclist's rider sets off 9 m ahead of the ego).
-                if o.kind == "cyclist" and turned > CROSSING_SIN and math.hypot(o.vx, o.vy) < CROSSING_MIN_SPEED:
-                    a_t = math.copysign(SET_OFF_ACCEL, float(t0 - to))
-            objs.append((float(so), float(to), o.vx * c + o.vy * s, v_t,
-                         o.length * rc + o.width * rs, o.length * rs + o.width * rc, a_s, a_t))
+        objs = road_frame_objects(road, tracked, float(t0))
         hdg0 = heading - float(road.reference_pose(s0)[2])
         stop = self._stop_sign(float(s0), speed, self.ctx.stop_line_ahead(float(s0)))
         give_way, judged = self._give_way(float(s0), float(t0), speed, tracked, objs)

@@ -12,12 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import kernel
+from addt_dsl.kernel import Libm, hypot, kernel, pow  # (pow: the C library's, as CPython's `**`)
 from addt_dsl.plan import LIGHT_STATES
+from addt_dsl.runtime.fastroad import _K, _index, _reference_pose
 from addt_dsl.specs import stacks as S
 from addt_dsl.vehicles import CAR, DEFAULT_MASS_KG, DEFAULT_MU
 
 G = 9.81  # [m/s^2]
+remainder = Libm("remainder", math.remainder, 2)  # exact: the C library's is CPython's
 
 
 @dataclass(frozen=True)
@@ -141,6 +143,118 @@ class GroundTruthPerception:
 
 # ---------------------------------------------------------------- tracking
 
+# `_track_update`'s rows: a track's x, y, vx, vy, ax, ay, stamp and covariance (`Tracker`);
+# a detection's x, y, vx, vy, gate speed of its class while a track's velocity is unknown
+# [m/s] and its class's process noise variance [m^2/s^4]; an outcome's x, y, vx, vy,
+# covariance, ax, ay.
+_TRACK_COLUMNS, _DET_COLUMNS, _OUT_COLUMNS = 10, 6, 9
+_ZERO_DIVISION, _OVERFLOW = 1, 2  # `_track_update`'s errors: what Python's arithmetic raised
+
+
+@kernel
+def _squared(a):
+    """(a ** 2 as CPython gives it, 0) or (nan, `_OVERFLOW`) where CPython's raises."""
+    p = pow(a, 2.0)
+    if p - p != 0.0 and a - a == 0.0:
+        return math.nan, _OVERFLOW
+    return p, 0
+
+
+@kernel
+def _track_update(tracks, dets, stamp_s, gate_m, r_p, r_v, accel_gain, out, best_of):
+    """`Tracker.update`'s association and filter: per detection (in order) the nearest track
+    not yet taken within the gate (`best_of`, -1: none, a new track) and the filtered state
+    (`out`). (number of detections done, 0) or, where the Python raised, (the detection it
+    raised at, `_ZERO_DIVISION` or `_OVERFLOW`)."""
+    n_t = tracks.shape[0]
+    used = np.zeros(n_t, dtype=np.bool_)
+    for j in range(dets.shape[0]):
+        zx, zy, zvx, zvy, v_max, q = dets[j, 0], dets[j, 1], dets[j, 2], dets[j, 3], dets[j, 4], dets[j, 5]
+        best, best_d = -1, math.inf
+        for i in range(n_t):
+            if used[i]:
+                continue
+            px, py, pvx, ts = tracks[i, 0], tracks[i, 1], tracks[i, 2], tracks[i, 6]
+            if not math.isnan(pvx):  # predicted to the frame's stamp at its velocity
+                px, py = px + pvx * (stamp_s - ts), py + tracks[i, 3] * (stamp_s - ts)
+            d = hypot(px - zx, py - zy)
+            if math.isnan(pvx):
+                gate = gate_m + v_max * (stamp_s - ts)
+            else:
+                gate = gate_m
+            if d < gate and d < best_d:
+                best, best_d = i, d
+        best_of[j] = best
+        measured_v = not math.isnan(zvx)
+        if best < 0:
+            out[j, 0], out[j, 1], out[j, 2], out[j, 3] = zx, zy, zvx, zvy
+            out[j, 4], out[j, 5], out[j, 6] = r_p, 0.0, r_v if measured_v else math.inf
+            out[j, 7], out[j, 8] = 0.0, 0.0
+            continue
+        used[best] = True
+        prev_x, prev_y, prev_vx, prev_vy = tracks[best, 0], tracks[best, 1], tracks[best, 2], tracks[best, 3]
+        ts, pp, pv, vv = tracks[best, 6], tracks[best, 7], tracks[best, 8], tracks[best, 9]
+        dt = stamp_s - ts
+        dt = 1e-3 if 1e-3 > dt else dt  # max(dt, 1e-3)
+        if math.isnan(prev_vx) and not measured_v:
+            # Second sighting without a velocity: two-point start.
+            x, y = zx, zy
+            vx, vy = (zx - prev_x) / dt, (zy - prev_y) / dt
+            dt2, err = _squared(dt)
+            if err:
+                return j, err
+            pp, pv, vv = r_p, r_p / dt, 2.0 * r_p / dt2
+        else:
+            if math.isnan(prev_vx):  # a velocity-less track meets a detector's velocity
+                pred_x, pred_y, pred_vx, pred_vy = prev_x, prev_y, prev_vx, prev_vy
+                pv, vv = 0.0, math.inf
+            else:  # predicted: the state and P <- F P F' + Q (white acceleration of variance q)
+                pred_x, pred_y = prev_x + prev_vx * (stamp_s - ts), prev_y + prev_vy * (stamp_s - ts)
+                pred_vx, pred_vy = prev_vx, prev_vy
+                dt4, dt3 = pow(dt, 4.0), pow(dt, 3.0)
+                if (dt4 - dt4 != 0.0 or dt3 - dt3 != 0.0) and dt - dt == 0.0:
+                    return j, _OVERFLOW
+                pp, pv, vv = (pp + 2.0 * dt * pv + dt * dt * vv + q * dt4 / 4.0,
+                              pv + dt * vv + q * dt3 / 2.0,
+                              vv + q * dt * dt)
+            # Kalman update of both axes' (p, v) with the position, then the velocity if
+            # measured (independent measurements: one after the other is the joint update).
+            x, vx = pred_x, 0.0 if math.isnan(pred_vx) else pred_vx
+            y, vy = pred_y, 0.0 if math.isnan(pred_vy) else pred_vy
+            if math.isinf(vv):  # no velocity known yet: the position resets p, v stays unknown
+                k_p, k_v = 1.0, 0.0
+                pp, pv = r_p, 0.0
+            else:
+                s = pp + r_p
+                if s == 0.0:
+                    return j, _ZERO_DIVISION
+                k_p, k_v = pp / s, pv / s
+                pp, pv, vv = pp - k_p * pp, pv - k_p * pv, vv - k_v * pv
+            x, vx = x + k_p * (zx - x), vx + k_v * (zx - x)
+            y, vy = y + k_p * (zy - y), vy + k_v * (zy - y)
+            if measured_v:
+                if math.isinf(vv):
+                    k_p, k_v = 0.0, 1.0
+                    vv = r_v
+                else:
+                    s = vv + r_v
+                    if s == 0.0:
+                        return j, _ZERO_DIVISION
+                    k_p, k_v = pv / s, vv / s
+                    pp, pv, vv = pp - k_p * pv, pv - k_p * vv, vv - k_v * vv
+                x, vx = x + k_p * (zvx - vx), vx + k_v * (zvx - vx)
+                y, vy = y + k_p * (zvy - vy), vy + k_v * (zvy - vy)
+        ax = ay = 0.0
+        if measured_v and not math.isnan(prev_vx):
+            g = accel_gain
+            ax = tracks[best, 4] + g * ((vx - prev_vx) / dt - tracks[best, 4])
+            ay = tracks[best, 5] + g * ((vy - prev_vy) / dt - tracks[best, 5])
+        out[j, 0], out[j, 1], out[j, 2], out[j, 3] = x, y, vx, vy
+        out[j, 4], out[j, 5], out[j, 6], out[j, 7], out[j, 8] = pp, pv, vv, ax, ay
+    return dets.shape[0], 0
+
+
+
 class Tracker:
     """Nearest-neighbour association and a constant-velocity Kalman filter per track.
 
@@ -209,98 +323,39 @@ class Tracker:
         self.tracks: list[tuple[Obj, float, tuple[float, float, float]]] = []
 
     def update(self, objs: list[Obj], stamp_s: float, corrupt) -> None:
-        predicted = [self._predict(o, stamp_s - ts) for o, ts, _ in self.tracks]
-        new_tracks = []
-        used = set()
+        """Associate the detections `objs` of the frame at `stamp_s` with the tracks and
+        filter them (`_track_update`: one kernel call), the fault site `tracker.vx` on each
+        updated track's velocity in detection order."""
         r_p = self.position_noise_m ** 2
-        for det in objs:
-            best, best_d = None, math.inf
-            for i, (p, (_, ts, _)) in enumerate(zip(predicted, self.tracks)):
-                if i in used:
-                    continue
-                d = math.hypot(p.x - det.x, p.y - det.y)
-                if math.isnan(p.vx):
-                    v_max = self.class_max_speed.get(det.kind, self.max_speed)
-                    gate = self.gate_m + v_max * (stamp_s - ts)
-                else:
-                    gate = self.gate_m
-                if d < gate and d < best_d:
-                    best, best_d = i, d
-            measured_v = not math.isnan(det.vx)
-            if best is None:
+        r_v = self.velocity_noise_mps ** 2
+        tracks = np.array([(o.x, o.y, o.vx, o.vy, o.ax, o.ay, ts, *cov) for o, ts, cov in self.tracks],
+                          dtype=np.float64).reshape(len(self.tracks), _TRACK_COLUMNS)
+        dets = np.array([(d.x, d.y, d.vx, d.vy, self.class_max_speed.get(d.kind, self.max_speed),
+                          self.accel_noise.get(d.kind, self.default_accel_noise) ** 2) for d in objs],
+                        dtype=np.float64).reshape(len(objs), _DET_COLUMNS)
+        out = np.empty((len(objs), _OUT_COLUMNS))
+        best_of = np.empty(len(objs), dtype=np.int64)
+        done, error = _track_update(tracks, dets, stamp_s, self.gate_m, r_p, r_v, self.accel_gain, out, best_of)
+        new_tracks = []
+        for det, best, (x, y, vx, vy, pp, pv, vv, ax, ay) in zip(objs[:done], best_of.tolist(), out.tolist()):
+            if best < 0:
                 # A new track: the detection, with its velocity if the detector gives one.
-                cov = (r_p, 0.0, self.velocity_noise_mps ** 2 if measured_v else math.inf)
-                new_tracks.append((det, stamp_s, cov))
+                new_tracks.append((det, stamp_s, (pp, pv, vv)))
                 continue
-            used.add(best)
-            prev, ts, cov = self.tracks[best]
-            dt = max(stamp_s - ts, 1e-3)
-            if math.isnan(prev.vx) and not measured_v:
-                # Second sighting without a velocity: two-point start.
-                x, y = det.x, det.y
-                vx, vy = (det.x - prev.x) / dt, (det.y - prev.y) / dt
-                cov = (r_p, r_p / dt, 2.0 * r_p / dt ** 2)
-            else:
-                if math.isnan(prev.vx):  # a velocity-less track meets a detector's velocity
-                    pred, cov = prev, (cov[0], 0.0, math.inf)
-                else:
-                    pred = predicted[best]
-                    cov = self._predict_cov(cov, dt, self.accel_noise.get(det.kind, self.default_accel_noise))
-                (x, vx), (y, vy), cov = self._correct(
-                    (pred.x, 0.0 if math.isnan(pred.vx) else pred.vx),
-                    (pred.y, 0.0 if math.isnan(pred.vy) else pred.vy), cov, (det.x, det.y),
-                    (det.vx, det.vy) if measured_v else None)
-            ax = ay = 0.0
-            if measured_v and not math.isnan(prev.vx):
-                g = self.accel_gain
-                ax = prev.ax + g * ((vx - prev.vx) / dt - prev.ax)
-                ay = prev.ay + g * ((vy - prev.vy) / dt - prev.ay)
+            prev, ts, _ = self.tracks[best]
             # A second sighting in a row confirms a weak track (2 of 2).
             est = Obj(x, y, det.heading, corrupt("tracker.vx", vx), vy, det.length, det.width,
                       kind=det.kind, weak=det.weak and prev.weak and stamp_s - ts > self.confirm_s, ax=ax, ay=ay)
-            new_tracks.append((est, stamp_s, cov))
+            new_tracks.append((est, stamp_s, (pp, pv, vv)))
+        if error:  # where the filter's arithmetic raised in Python, at the same detection
+            raise (ZeroDivisionError("float division by zero") if error == _ZERO_DIVISION else
+                   OverflowError(34, "Numerical result out of range"))
         # Keep unmatched tracks alive (coasting) so a dropped frame does not erase an object.
+        used = set(best_of.tolist())
         for i, (p, ts, cov) in enumerate(self.tracks):
             if i not in used and stamp_s - ts <= self.max_age_s:
                 new_tracks.append((p, ts, cov))
         self.tracks = new_tracks
-
-    @staticmethod
-    def _predict_cov(cov, dt: float, accel_std: float) -> tuple[float, float, float]:
-        """P <- F P F' + Q for F = [[1, dt], [0, 1]], Q of white acceleration `accel_std`."""
-        pp, pv, vv = cov
-        q = accel_std ** 2
-        return (pp + 2.0 * dt * pv + dt * dt * vv + q * dt ** 4 / 4.0,
-                pv + dt * vv + q * dt ** 3 / 2.0,
-                vv + q * dt * dt)
-
-    def _correct(self, state_x, state_y, cov, z_pos, z_vel):
-        """Kalman update of both axes' (p, v) with the position, then the velocity if measured
-        (independent measurements: one after the other is the joint update)."""
-        pp, pv, vv = cov
-        r_p = self.position_noise_m ** 2
-        if math.isinf(vv):  # no velocity known yet: the position resets p, v stays unknown
-            k_p, k_v = 1.0, 0.0
-            pp, pv = r_p, 0.0
-        else:
-            s = pp + r_p
-            k_p, k_v = pp / s, pv / s
-            pp, pv, vv = pp - k_p * pp, pv - k_p * pv, vv - k_v * pv
-        (px, vx), (py, vy) = state_x, state_y
-        px, vx = px + k_p * (z_pos[0] - px), vx + k_v * (z_pos[0] - px)
-        py, vy = py + k_p * (z_pos[1] - py), vy + k_v * (z_pos[1] - py)
-        if z_vel is not None:
-            r_v = self.velocity_noise_mps ** 2
-            if math.isinf(vv):
-                k_p, k_v = 0.0, 1.0
-                vv = r_v
-            else:
-                s = vv + r_v
-                k_p, k_v = pv / s, vv / s
-                pp, pv, vv = pp - k_p * pv, pv - k_p * vv, vv - k_v * vv
-            px, vx = px + k_p * (z_vel[0] - vx), vx + k_v * (z_vel[0] - vx)
-            py, vy = py + k_p * (z_vel[1] - vy), vy + k_v * (z_vel[1] - vy)
-        return (px, vx), (py, vy), (pp, pv, vv)
 
     def read_state(self, site: str) -> list[tuple[str, float | int]]:
         """`tracker.tracks`: (name, value) of every field of every live track, in memory order."""
@@ -536,20 +591,15 @@ class LatticePlanner:
         controller steers it (a lane change in a bend curves more than either)."""
         reach = min(self.curve_preview_max_m, speed * speed / (2.0 * self.curve_decel) + 2.0 * self.body.length_m)
         dist, kappa = road.curvature_ahead(s0, reach)
-        if lateral is None or (s0 - lateral[0]) >= lateral[3] or lateral[2] == lateral[1]:
-            # The curvature of the line the ego drives, offset t0 from the sampled one.
-            lane_kappa = np.abs(kappa) / np.maximum(1.0 - kappa * t0, 0.1)
-        else:
-            t_path, bend = _lateral_path(s0 + dist, *lateral)
-            lane_kappa = np.abs(kappa / np.maximum(1.0 - kappa * t_path, 0.2) + bend)
-        bends = lane_kappa > 1e-6
-        if not bends.any():
+        # The curvature of the line the ego drives: offset t0 from the sampled one, or on the manoeuvre's path.
+        on_path = not (lateral is None or (s0 - lateral[0]) >= lateral[3] or lateral[2] == lateral[1])
+        s_start, t_start, t_target, length = lateral if on_path else (0.0, 0.0, 0.0, 1.0)
+        bends, cap, needed = _curve_envelope(dist, kappa, s0, t0, on_path, s_start, t_start, t_target, length,
+                                             self.max_lateral_accel, self.curve_decel, ego_speed)
+        if not bends:
             return math.inf, 0.0
-        bend_v2, d = self.max_lateral_accel / lane_kappa[bends], dist[bends]
-        cap = float(np.sqrt(np.min(bend_v2 + 2.0 * self.curve_decel * d)))
         if ego_speed <= cap:
             return cap, 0.0
-        needed = float(np.max((ego_speed * ego_speed - bend_v2) / (2.0 * np.maximum(d, 1.0))))
         return cap, min(self.max_brake, needed) if needed > 0.0 else 0.0
 
     LATERAL_MIN_M = 30.0  # [m] a lateral manoeuvre's shortest length ...
@@ -960,14 +1010,48 @@ def time_to_cover(s_from: float, s_to: float, v0: float, v_top: float, accel: fl
     return (v_top - v0) / accel + (d - d_acc) / v_top
 
 
-def _lateral_path(s: np.ndarray, s_start: float, t_start: float, t_target: float,
-                  length: float) -> tuple[np.ndarray, np.ndarray]:
-    """The planned lateral offset t(s) [m] and its d2t/ds2 [1/m] at stations `s` [m]: the
-    smoothstep `Controller._path` steers (that one per control step, on floats)."""
-    u = np.clip((s - s_start) / length, 0.0, 1.0)
-    d = t_target - t_start
-    inside = (u > 0.0) & (u < 1.0)
-    return t_start + d * u * u * (3.0 - 2.0 * u), np.where(inside, d * (6.0 - 12.0 * u) / (length * length), 0.0)
+@kernel
+def _curve_envelope(dist, kappa, s0, t0, on_path, s_start, t_start, t_target, length, max_lateral_accel, curve_decel,
+                    ego_speed):
+    """`LatticePlanner._curve_speed`'s envelope over the samples ahead (`dist` [m] past `s0`,
+    the reference line's curvature `kappa` [1/m]): (any bend, the speed cap [m/s], the
+    braking that reaches every bend's speed at the bend [m/s^2]). The curvature of the line
+    driven: offset `t0` from the reference, or (`on_path`) the lateral manoeuvre's smoothstep
+    from (`s_start`, `t_start`) to `t_target` over `length` [m] plus its own curvature (the
+    controller's `_smoothstep_path`, whose Python min and max drop a NaN). As numpy gave
+    it: elementwise, a NaN passing through clips, maxima and minima."""
+    two_decel = 2.0 * curve_decel
+    cap2, needed, bends = math.inf, -math.inf, False
+    for k in range(dist.size):
+        kap = kappa[k]
+        if on_path:
+            u = (s0 + dist[k] - s_start) / length
+            if u < 0.0:  # np.clip(u, 0, 1)
+                u = 0.0
+            elif u > 1.0:
+                u = 1.0
+            d = t_target - t_start
+            t_path = t_start + d * u * u * (3.0 - 2.0 * u)
+            bend = d * (6.0 - 12.0 * u) / (length * length) if (u > 0.0) & (u < 1.0) else 0.0
+            g = 1.0 - kap * t_path
+            lane_kappa = abs(kap / (g if (g > 0.2) | (g != g) else 0.2) + bend)
+        else:
+            g = 1.0 - kap * t0
+            lane_kappa = abs(kap) / (g if (g > 0.1) | (g != g) else 0.1)
+        if not lane_kappa > 1e-6:
+            continue
+        bend_v2 = max_lateral_accel / lane_kappa
+        v2 = bend_v2 + two_decel * dist[k]
+        reach = dist[k] if (dist[k] > 1.0) | (dist[k] != dist[k]) else 1.0
+        brake = (ego_speed * ego_speed - bend_v2) / (2.0 * reach)
+        if not bends:
+            cap2, needed, bends = v2, brake, True
+        else:  # np.min, np.max: a NaN wins
+            if cap2 == cap2 and (v2 < cap2 or v2 != v2):
+                cap2 = v2
+            if needed == needed and (brake > needed or brake != brake):
+                needed = brake
+    return bends, math.sqrt(cap2), needed
 
 
 def _lane_steps(a: int, b: int) -> int:
@@ -1101,6 +1185,69 @@ class ForwardCollisionCheck:
 
 # ---------------------------------------------------------------- control
 
+@kernel
+def _remainder_tau(a):
+    """math.remainder(a, math.tau) [rad]: exact, so the C library's has its bits; raises
+    where CPython's does (an infinite `a`)."""
+    if a - a != 0.0 and a == a:
+        raise ValueError("math domain error")
+    return remainder(a, math.tau)
+
+
+@kernel
+def _smoothstep_path(s, s_start, t_start, t_target, length):
+    """The planned lateral offset t(s) [m] (smoothstep from `t_start` at `s_start` to
+    `t_target` over `length` [m]), its slope dt/ds and d2t/ds2 [1/m]; raises where Python's
+    float division by zero does."""
+    if length == 0.0:
+        raise ZeroDivisionError("float division by zero")
+    u = (s - s_start) / length
+    u = u if u > 0.0 else 0.0  # min(1.0, max(0.0, u)) as Python's (a NaN gives 0)
+    u = u if u < 1.0 else 1.0
+    d = t_target - t_start
+    if u <= 0.0 or u >= 1.0:
+        return t_start + d * u, 0.0, 0.0
+    if length * length == 0.0:
+        raise ZeroDivisionError("float division by zero")
+    return (t_start + d * u * u * (3 - 2 * u), d * 6.0 * u * (1.0 - u) / length,
+            d * (6.0 - 12.0 * u) / (length * length))
+
+
+@kernel
+def _steer(tab, ds, last_i, length, s_start, t_start, t_target, lateral_m, x, y, heading, speed, has_last, last_x,
+           last_y, dt, s_now, t_now, preview_s, wheelbase, understeer, wn, zeta, max_steer):
+    """`Controller`'s steering [rad] (before its fault site) on the road of sample table
+    `tab` (`FastRoad`), the plan's lateral path (`_smoothstep_path`), the ego at (`x`, `y`,
+    `heading`, `speed`), at (`last_x`, `last_y`) a cycle ago if `has_last`."""
+    # The course (direction of travel) from successive poses, where the ego moved enough.
+    course = heading
+    if has_last:
+        dx, dy = x - last_x, y - last_y
+        step = 0.3 * (1.0 if 1.0 > speed else speed) * dt
+        reach = pow(step, 2.0)
+        if reach - reach != 0.0 and step - step == 0.0:  # CPython's ** raises where it overflows
+            raise OverflowError(34, "Numerical result out of range")
+        if dx * dx + dy * dy > reach and speed > 1.0:
+            course = heading + _remainder_tau(math.atan2(dy, dx) - heading)
+    t_path, slope, _ = _smoothstep_path(s_now, s_start, t_start, t_target, lateral_m)
+    road_heading = _reference_pose(tab, ds, last_i, length, s_now)[2]
+    e_lat = t_now - t_path
+    e_course = _remainder_tau(course - road_heading - math.atan(slope))
+    s_pre = s_now + speed * preview_s
+    s_pre = length if length < s_pre else s_pre
+    t_pre, _, bend = _smoothstep_path(s_pre, s_start, t_start, t_target, lateral_m)
+    i, u = _index(tab, ds, last_i, s_pre)
+    kappa_road = tab[_K, i] + u * (tab[_K, i + 1] - tab[_K, i])
+    g = 1.0 - kappa_road * t_pre
+    kappa = kappa_road / (g if g > 0.2 else 0.2) + bend
+    steer = wheelbase * kappa + understeer * speed * speed * kappa
+    v = 5.0 if 5.0 > speed else speed  # max(speed, 5.0)
+    steer -= wheelbase * (wn * wn * e_lat / (v * v) + 2.0 * zeta * wn * e_course / v)
+    steer = steer if steer < max_steer else max_steer
+    return steer if steer > -max_steer else -max_steer
+
+
+
 class Controller:
     """PID longitudinal control and path-tracking steering, at the control rate (100 Hz).
 
@@ -1136,26 +1283,6 @@ class Controller:
         self.max_accel = 3.0  # [m/s^2]
         self._last_xy: tuple[float, float] | None = None
 
-    @staticmethod
-    def _path(plan: Plan, s: float) -> tuple[float, float, float]:
-        """Planned lateral offset t(s) [m] (smoothstep), its slope dt/ds and d2t/ds2 [1/m]."""
-        length = plan.lateral_length_m
-        u = min(1.0, max(0.0, (s - plan.s_start) / length))
-        d = plan.t_target - plan.t_start
-        if u <= 0.0 or u >= 1.0:
-            return plan.t_start + d * u, 0.0, 0.0
-        return (plan.t_start + d * u * u * (3 - 2 * u), d * 6.0 * u * (1.0 - u) / length,
-                d * (6.0 - 12.0 * u) / (length * length))
-
-    def _course(self, x: float, y: float, heading: float, dt: float, speed: float) -> float:
-        course = heading
-        if self._last_xy is not None:
-            dx, dy = x - self._last_xy[0], y - self._last_xy[1]
-            if dx * dx + dy * dy > (0.3 * max(speed, 1.0) * dt) ** 2 and speed > 1.0:
-                course = heading + math.remainder(math.atan2(dy, dx) - heading, math.tau)
-        self._last_xy = (x, y)
-        return course
-
     def command(self, plan: Plan, ego, road, s_now: float, t_now: float, dt: float, corrupt):
         x, y, heading, speed = ego
         # The gains are read from memory every cycle and written back (persistent faults).
@@ -1164,20 +1291,12 @@ class Controller:
         self.kd = corrupt("control.kd", self.kd)
         self.lateral_wn = corrupt("control.lateral_wn", self.lateral_wn)
         self.understeer = corrupt("control.understeer", self.understeer)
-        course = self._course(x, y, heading, dt, speed)
-        t_path, slope, _ = self._path(plan, s_now)
-        _, _, road_heading = road.reference_pose(s_now)
-        e_lat = t_now - t_path
-        e_course = math.remainder(course - road_heading - math.atan(slope), math.tau)
-        s_pre = min(s_now + speed * self.preview_s, road.length)
-        t_pre, _, bend = self._path(plan, s_pre)
-        kappa_road = float(road.curvature(s_pre))
-        kappa = kappa_road / max(0.2, 1.0 - kappa_road * t_pre) + bend
-        steer = self.wheelbase * kappa + self.understeer * speed * speed * kappa
-        v = max(speed, 5.0)
-        wn, zeta = self.lateral_wn, self.lateral_zeta
-        steer -= self.wheelbase * (wn * wn * e_lat / (v * v) + 2.0 * zeta * wn * e_course / v)
-        steer = max(-self.max_steer, min(self.max_steer, steer))
+        last, self._last_xy = self._last_xy, (x, y)
+        steer = _steer(road._tab, road._ds, road._last_i, road.length, plan.s_start, plan.t_start, plan.t_target,
+                       plan.lateral_length_m, x, y, heading, speed, last is not None,
+                       last[0] if last is not None else 0.0, last[1] if last is not None else 0.0, dt, s_now, t_now,
+                       self.preview_s, self.wheelbase, self.understeer, self.lateral_wn, self.lateral_zeta,
+                       self.max_steer)
         steer = corrupt("control.steer", steer)
         # PID on speed error.
         err = plan.speed - speed

@@ -176,6 +176,27 @@ def test_a_nan_the_kernel_passes_on_may_differ_in_sign_only():
 
 
 @kernel
+def _pow(x, y):
+    return kpow(x, y)
+
+
+@settings(max_examples=200, deadline=None)
+@given(floats, floats)
+def test_pow_interpreted_is_the_c_librarys(x, y):
+    """Compiled and interpreted alike, where CPython's `**` raises (an overflow, 0 ** -1) or
+    gives a complex number (a negative base to a fractional power) too."""
+    from addt_dsl.kernel import _libm
+
+    assert bits(kpow(x, y)) == bits(_pow(x, y)) == bits(_libm("pow")(x, y))
+
+
+def test_pow_where_python_raises():
+    assert kpow(1e200, 2.0) == math.inf and kpow(-1e200, 3.0) == -math.inf
+    assert kpow(0.0, -1.0) == math.inf and kpow(-0.0, -1.0) == -math.inf
+    assert math.isnan(kpow(-8.0, 0.5))
+
+
+@kernel
 def _divide(a, b):
     return a / b
 

@@ -1,4 +1,5 @@
-"""Reused pybullet clients (`world.CLIENTS`): a world on a reset client is the world on a
+"""pybullet clients: made when a world first needs one (a world of boxes over the plane casts
+its rays without); reused (`world.CLIENTS`): a world on a reset client is the world on a
 new one: body ids from 0, the same render, the same ray casts, nothing left of the world
 before; at most `MAX` idle; a forked process does not take its parent's."""
 
@@ -47,6 +48,7 @@ def test_pool_bounded_and_not_inherited(monkeypatch):
     monkeypatch.setattr(W, "CLIENTS", pool)
     monkeypatch.setattr(W._Clients, "MAX", 2)
     worlds = [PhysicsWorld() for _ in range(3)]
+    assert len({w.client for w in worlds}) == 3  # (asked: made)
     for w in worlds:
         w.close()
     assert len(pool.idle) == 2  # the third disconnected
@@ -55,6 +57,42 @@ def test_pool_bounded_and_not_inherited(monkeypatch):
     w = PhysicsWorld()
     assert w.client is not None
     w.close()
+    import pybullet
+
     for c in pool.idle:
-        w.p.disconnect(physicsClientId=c)
+        pybullet.disconnect(physicsClientId=c)
     pool.idle.clear()
+
+
+def test_a_world_makes_its_client_only_when_asked(monkeypatch):
+    """Analytic ray casts need no client; the first pybullet query makes one and hands it
+    the bodies made before, in order and posed as last set: the answers of a world that had
+    its client from the start."""
+    monkeypatch.setattr(W, "CLIENTS", W._Clients())
+    lazy = PhysicsWorld()
+    ids = [lazy.add_box(n, 4.5, 1.9, 1.5) for n in ("ego", "lead", "truck")]
+    assert ids == [1, 2, 3] and lazy.ground == 0
+    lazy.set_pose("lead", 12.0, 0.5, 0.75, 0.1)
+    lazy.set_poses([2], np.array([20.0]), np.array([-1.0]), np.array([0.75]), np.array([0.3]), np.array([0.0]))
+    lazy.set_ground_height(-0.5)
+    starts = np.tile([0.0, 0.0, 1.0], (90, 1))
+    ang = np.linspace(-0.6, 0.6, 90)
+    ends = starts + 40.0 * np.stack([np.cos(ang), np.sin(ang), -0.05 * np.ones(90)], axis=1)
+    analytic = lazy.ray_cast(starts, ends, ignore="ego")
+    assert lazy._client is None  # nothing asked pybullet yet
+    eager = PhysicsWorld()
+    assert eager.client is not None  # made first, then the same bodies and poses
+    for n in ("ego", "lead", "truck"):
+        eager.add_box(n, 4.5, 1.9, 1.5)
+    eager.set_pose("lead", 12.0, 0.5, 0.75, 0.1)
+    eager.set_pose("truck", 20.0, -1.0, 0.75, 0.3)
+    eager.set_ground_height(-0.5)
+    lazy.analytic_rays = eager.analytic_rays = False
+    hit, frac = lazy.ray_cast(starts, ends, ignore="ego")
+    assert lazy._client is not None
+    want_hit, want_frac = eager.ray_cast(starts, ends, ignore="ego")
+    assert hit.tolist() == want_hit.tolist() and frac.tobytes() == want_frac.tobytes()
+    assert set(hit.tolist()) == {-1, 2, 3} and hit.tolist() == analytic[0].tolist()
+    assert np.allclose(frac, analytic[1], atol=1e-6)
+    lazy.close()
+    eager.close()
