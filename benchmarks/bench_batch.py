@@ -8,7 +8,7 @@ Run: PYTHONPATH=. python benchmarks/bench_batch.py [--quick] [--json FILE] [--pr
 - a ground-truth sweep: `examples/overtake.addt` (30 s, lidar, bev stack, drop faults) with
   64 runs (its grid cells, each repeated with other seeds), at batch 1, 16 and 64;
 - 50 IDM agents (`bench_twin.traffic_source(50)`, 5 s): one run, and 16 runs at batch 16;
-- `--scaling`: agents 1/5/20/50/100 x batch 1/16/64 (1 s runs, 16 runs or one batch);
+- `--scaling`: agents 1/5/20/50/100 x batch 1/16/64/256 (1 s runs, 16 runs or one batch);
 - `--profile B`: cProfile's top functions of the ground-truth sweep at batch B instead;
 - `--versus CHECKOUT`: each configuration in this checkout and in another one (e.g. a
   worktree of an older commit), alternating, `--rounds` times (default 2), the best of each;
@@ -34,9 +34,10 @@ import _figures as figures_json  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = "--quick" in sys.argv
 JSON_PATH = sys.argv[sys.argv.index("--json") + 1] if "--json" in sys.argv else None
-# Batch sizes of the scaling table. Not 256: a run holds ~40-45 MB until its batch ends, so
-# 256 runs are ~11 GB in one process (docs/twin.md, Batches), more than a shared machine lends.
-SCALING_BATCHES = (1, 16, 64)
+# Batch sizes of the scaling table (a traffic run without a pybullet client holds a few MB
+# until its batch ends: 256 of them fit a shared machine; docs/twin.md, Batches).
+SCALING_BATCHES = (1, 16, 64, 256)
+VERSUS_BATCHES = (1, 16, 64)  # `--versus`: an older checkout's runs held ~40 MB each (256: ~11 GB)
 
 
 def overtake_specs(n: int) -> list:
@@ -95,7 +96,7 @@ def versus(other: Path, rounds: int) -> dict:
     configs = [dict(workload="overtake", runs=16, batch=b) for b in (1, 16)]
     configs += [dict(workload="traffic", runs=1, batch=1, agents=50)]
     configs += [dict(workload="traffic", runs=max(16, b), batch=b, agents=a, duration=1.0)
-                for a in (1, 5, 20, 50, 100) for b in SCALING_BATCHES]
+                for a in (1, 5, 20, 50, 100) for b in VERSUS_BATCHES]
     print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}; this = {ROOT}, other = {other}")
     print(f"{'':34s} {'this':>9s} {'other':>9s}  sim-s per CPU-s, best of {rounds}; ratio this / other")
     figures = {}

@@ -1,6 +1,6 @@
 """Lidar points → bird's-eye-view feature grid, and the learned detector's fixed layout.
 
-Pure numpy (no torch): the compiler may import this module to list the detector's tensor
+numpy and kernels (no torch): the compiler may import this module to list the detector's tensor
 fault sites, and the training data pipeline and the runtime node share `build_grid`, so
 what the network sees in training is exactly what it sees in the loop.
 
@@ -31,6 +31,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from addt_dsl.kernel import kernel
 
 # The shipped detectors' sensors and tensor sites: the compiler checks against them too.
 from addt_dsl.specs.stacks import (CAMERA_BEV_SITES, CAMERA_BEV_TENSOR_SITES, DETECTOR_LIDAR,  # noqa: F401
@@ -195,11 +197,6 @@ def encode_targets(boxes: np.ndarray, spec: GridSpec = GRID, sigma_cells: float 
     return heat, reg, mask
 
 
-# Offsets of the 8 neighbours in the padded map, in row-major order around the centre (1, 1).
-_NEIGHBOUR_DI = np.array([0, 0, 0, 1, 1, 2, 2, 2])
-_NEIGHBOUR_DJ = np.array([0, 1, 2, 0, 2, 0, 1, 2])
-
-
 def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec = GRID,
            max_objects: int = 64, max_overlap_m: float | None = 0.3) -> np.ndarray:
     """Peaks of a (hx, hy) score map (3×3 local maxima at or above `threshold`; scores
@@ -211,27 +208,59 @@ def decode(heat: np.ndarray, reg: np.ndarray, threshold: float, spec: GridSpec =
     box that overlaps a higher-scoring one by more than that (vehicles cannot overlap) is
     dropped: the network may propose a car and a truck for the same face, or a phantom behind a long vehicle.
     """
-    hx, hy = heat.shape
-    # Only cells at or above the threshold can be peaks (a handful per frame): compare
-    # those with their 8 neighbours instead of shifting the whole map 8 times.
-    i, j = np.nonzero(heat >= threshold)
-    if len(i) == 0:
+    i = np.empty(max(min(max_objects, heat.size), 0), dtype=np.int64)
+    j = np.empty_like(i)
+    with np.errstate(over="ignore"):  # numpy compares the map with the threshold in its dtype
+        limit = heat.dtype.type(threshold)
+    found = _peaks(heat, limit, i, j)
+    if found == 0:
         return np.zeros((0, 7))
-    padded = np.full((hx + 2, hy + 2), -np.inf, dtype=heat.dtype)
-    padded[1:-1, 1:-1] = heat
-    centre = heat[i, j][:, None]
-    neighbours = padded[i[:, None] + _NEIGHBOUR_DI, j[:, None] + _NEIGHBOUR_DJ]  # (k, 8)
-    # Ties go to the earlier cell so a plateau yields one peak: strictly above the four
-    # neighbours that come first in row-major order, at least equal to the four after.
-    is_max = (centre > neighbours[:, :4]).all(axis=1) & (centre >= neighbours[:, 4:]).all(axis=1)
-    i, j = i[is_max], j[is_max]
-    if len(i) == 0:
-        return np.zeros((0, 7))
-    conf = heat[i, j]
-    order = np.argsort(-conf, kind="stable")[:max_objects]
-    i, j, conf = i[order], j[order], conf[order]
+    i, j = i[:found], j[:found]
     with np.errstate(all="ignore"):  # a fault can feed inf/nan in: it must flow out, not warn
-        return _boxes(heat, reg, i, j, conf, spec, max_overlap_m)
+        return _boxes(heat, reg, i, j, heat[i, j], spec, max_overlap_m)
+
+
+@kernel
+def _peaks(heat, threshold, rows, cols):
+    """The cells at or above `threshold` that are 3×3 local maxima (beyond the border:
+    -inf), the highest first (ties in row-major order), at most len(rows) of them, into
+    `rows`, `cols`; returns how many. A plateau yields one peak: a peak is strictly above
+    the four neighbours that come first in row-major order and at least equal to the four
+    after (a NaN neighbour compares False: no peak)."""
+    hx, hy = heat.shape
+    limit = rows.shape[0]
+    n = 0
+    score = np.empty(limit, dtype=heat.dtype)
+    for i in range(hx):
+        for j in range(hy):
+            v = heat[i, j]
+            if not v >= threshold:
+                continue
+            peak = True
+            for di in range(-1, 2):
+                for dj in range(-1, 2):
+                    if di == 0 and dj == 0:
+                        continue
+                    a, b = i + di, j + dj
+                    u = heat[a, b] if 0 <= a < hx and 0 <= b < hy else -np.inf
+                    before = di < 0 or (di == 0 and dj < 0)
+                    if not (v > u if before else v >= u):
+                        peak = False
+            if not peak or limit == 0:
+                continue
+            # Insert by score, highest first, after its equals (a stable sort of -score);
+            # the lowest falls off the end once `limit` are held.
+            at = n if n < limit else limit - 1
+            if n == limit and not v > score[at]:
+                continue
+            while at > 0 and v > score[at - 1]:
+                if at < limit:
+                    rows[at], cols[at], score[at] = rows[at - 1], cols[at - 1], score[at - 1]
+                at -= 1
+            rows[at], cols[at], score[at] = i, j, v
+            if n < limit:
+                n += 1
+    return n
 
 
 def _boxes(heat, reg, i, j, conf, spec, max_overlap_m):
@@ -250,42 +279,103 @@ def _boxes(heat, reg, i, j, conf, spec, max_overlap_m):
 def box_penetration(boxes: np.ndarray) -> np.ndarray:
     """Pairwise separation of oriented boxes (rows x, y, heading, length, width, ...) [m].
 
-    Separating-axis test over the four edge normals of each pair, vectorised: positive
-    is a gap, negative the depth of overlap along the shallowest axis.
-    """
-    x, y, h, length, width = (boxes[:, k] for k in range(5))
-    c, s = np.cos(h), np.sin(h)
-    hl, hw = 0.5 * length, 0.5 * width
-    sx = np.array([1.0, 1.0, -1.0, -1.0])
-    sy = np.array([1.0, -1.0, -1.0, 1.0])
-    cx = x[:, None] + c[:, None] * hl[:, None] * sx - s[:, None] * hw[:, None] * sy  # (N, 4)
-    cy = y[:, None] + s[:, None] * hl[:, None] * sx + c[:, None] * hw[:, None] * sy
-    axes = np.stack([np.stack([c, s], 1), np.stack([-s, c], 1)], 1)  # (N, 2 axes, 2)
-    # proj[k, a, b, :]: box b's corners projected on box k's axis a.
-    proj = axes[:, :, 0, None, None] * cx[None, None] + axes[:, :, 1, None, None] * cy[None, None]
-    lo, hi = proj.min(axis=3), proj.max(axis=3)  # (k, a, b)
-    # gap[k, i, j]: gap between boxes i and j along the better of box k's two axes.
-    gap = np.maximum(lo[:, :, None, :] - hi[:, :, :, None], lo[:, :, :, None] - hi[:, :, None, :]).max(axis=1)
-    i = np.arange(len(boxes))
-    return np.maximum(gap[i[:, None], i[:, None], i[None, :]], gap[i[None, :], i[:, None], i[None, :]])
+    Separating-axis test over the four edge normals of each pair: positive is a gap,
+    negative the depth of overlap along the shallowest axis."""
+    boxes = np.ascontiguousarray(boxes[:, :5], dtype=np.float64)
+    sep = np.empty((len(boxes), len(boxes)))
+    _separations(boxes, np.cos(boxes[:, 2]), np.sin(boxes[:, 2]), sep)  # numpy's cos, sin (test)
+    return sep
+
+
+_CORNER_X = (1.0, 1.0, -1.0, -1.0)  # the corners' signs along the box axis and across it
+_CORNER_Y = (1.0, -1.0, -1.0, 1.0)
+
+
+@kernel
+def _nan_max(a, b):
+    """np.maximum: a NaN either side gives NaN."""
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    return a if a >= b else b
+
+
+@kernel
+def _separations(boxes, c, s, sep):
+    """`box_penetration` into `sep` (n, n), as the vectorised numpy form computed it (NaN
+    in, NaN out): box j's corners projected on box k's two edge normals, the gap between
+    boxes i and j along the better of box k's axes, the better of i's and j's."""
+    n = boxes.shape[0]
+    cx, cy = np.empty((n, 4)), np.empty((n, 4))
+    for b in range(n):
+        hl, hw = 0.5 * boxes[b, 3], 0.5 * boxes[b, 4]
+        for m in range(4):
+            cx[b, m] = boxes[b, 0] + c[b] * hl * _CORNER_X[m] - s[b] * hw * _CORNER_Y[m]
+            cy[b, m] = boxes[b, 1] + s[b] * hl * _CORNER_X[m] + c[b] * hw * _CORNER_Y[m]
+    lo, hi = np.empty((n, 2, n)), np.empty((n, 2, n))  # [k, axis, box]
+    for k in range(n):
+        for axis in range(2):
+            ax, ay = (c[k], s[k]) if axis == 0 else (-s[k], c[k])
+            for b in range(n):
+                low, high = math.inf, -math.inf
+                nan = False
+                for m in range(4):
+                    v = ax * cx[b, m] + ay * cy[b, m]
+                    nan = nan or math.isnan(v)
+                    low, high = min(low, v), max(high, v)
+                lo[k, axis, b], hi[k, axis, b] = (math.nan, math.nan) if nan else (low, high)
+    for i in range(n):
+        for j in range(n):
+            best = math.nan
+            for k in (i, j):
+                g = _nan_max(_nan_max(lo[k, 0, j] - hi[k, 0, i], lo[k, 0, i] - hi[k, 0, j]),
+                             _nan_max(lo[k, 1, j] - hi[k, 1, i], lo[k, 1, i] - hi[k, 1, j]))
+                best = g if k == i else _nan_max(best, g)
+            sep[i, j] = best
+
+
+@kernel
+def _non_overlapping(boxes, c, s, max_overlap_m, keep):
+    """`_keep_non_overlapping` into `keep`; returns how many are kept."""
+    n = boxes.shape[0]
+    finite, apart = True, True
+    for i in range(n):
+        for col in range(5):
+            finite = finite and math.isfinite(boxes[i, col])
+    for i in range(n):
+        reach_i = 0.5 * math.hypot(boxes[i, 3], boxes[i, 4])  # the C library's, as np.hypot
+        for j in range(n):
+            if i != j:
+                reach_j = 0.5 * math.hypot(boxes[j, 3], boxes[j, 4])
+                if math.hypot(boxes[i, 0] - boxes[j, 0], boxes[i, 1] - boxes[j, 1]) - (reach_i + reach_j) < 0.0:
+                    apart = False
+    if finite and apart:
+        for i in range(n):
+            keep[i] = i
+        return n
+    sep = np.empty((n, n))
+    _separations(boxes, c, s, sep)
+    kept = 0
+    for i in range(n):  # highest score first
+        ok = True
+        for t in range(kept):
+            if not sep[i, keep[t]] >= -max_overlap_m:
+                ok = False
+                break
+        if ok:
+            keep[kept] = i
+            kept += 1
+    return kept
 
 
 def _keep_non_overlapping(boxes: np.ndarray, max_overlap_m: float) -> np.ndarray:
-    # Boxes whose circumcircles are apart cannot overlap: the usual frame (separate
-    # vehicles) needs no separating-axis test at all.
-    reach = 0.5 * np.hypot(boxes[:, 3], boxes[:, 4])
-    gap = np.hypot(boxes[:, None, 0] - boxes[None, :, 0], boxes[:, None, 1] - boxes[None, :, 1]) \
-        - (reach[:, None] + reach[None, :])
-    np.fill_diagonal(gap, np.inf)
-    # (NaN from a fault compares False: such frames take the full test below.)
-    if np.isfinite(boxes[:, :5]).all() and not (gap < 0.0).any():
-        return np.arange(len(boxes), dtype=np.int64)
-    sep = box_penetration(boxes)
-    keep: list[int] = []
-    for i in range(len(boxes)):  # highest score first
-        if all(sep[i, j] >= -max_overlap_m for j in keep):
-            keep.append(i)
-    return np.array(keep, dtype=np.int64)
+    """Indices of the boxes (highest score first) that no kept box overlaps by more than
+    `max_overlap_m`. Boxes whose circumcircles are apart cannot overlap: the usual frame
+    (separate vehicles) needs no separating-axis test; NaN from a fault fails every
+    comparison, so such frames take the full test."""
+    five = np.ascontiguousarray(boxes[:, :5], dtype=np.float64)
+    keep = np.empty(len(boxes), dtype=np.int64)
+    kept = _non_overlapping(five, np.cos(five[:, 2]), np.sin(five[:, 2]), float(max_overlap_m), keep)
+    return keep[:kept]
 
 
 # ---------------------------------------------------------------- camera BEV (`perception camera_bev`)
