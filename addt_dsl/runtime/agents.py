@@ -35,12 +35,12 @@ def pose_on_road(a, road, yaw: float, t_now: float, dt: float, s: float, t: floa
     return x, y, h, heading, road.ground_scale(s, t)
 
 
-# Agents posed as arrays from this many on in a batch (all its runs' together): fewer, and
-# the per-agent code is quicker (posing: ~15 us of calls, two kernels among them, against
-# ~2-5 us per agent; the whole loop measured at break-even at ~4 agents: with fewer, the
-# rows as lists are quicker to record). Both ways give the same bits. (The step goes
-# through its kernel whatever the count: `Fleets.step`.)
-ARRAY_MIN_AGENTS = 4
+# Agents posed as arrays from this many on in a batch (all its runs' together): with one,
+# the per-agent code is quicker (the pose and record phases of a 1-agent run-step measured
+# ~14-18 us one by one against ~20 as arrays; with 2 and 3 agents the arrays were quicker,
+# 17-19 us against 21-30: benchmarks/bench_pose.py --pose-min, bench_phases.py). Both ways
+# give the same bits. (The step goes through its kernel whatever the count: `Fleets.step`.)
+ARRAY_MIN_AGENTS = 2
 
 
 class Fleet:
@@ -74,9 +74,7 @@ class Fleet:
         self.half_height = np.array(self.half_height_m)
         self.kinds = [p.vehicle for p in plans]
         self.length = np.array([a.length_m for a in agents])
-        slots = run.physics.box_slots([a.name for a in agents])
-        contiguous = bool(slots) and slots == list(range(slots[0], slots[0] + n))
-        self.slots = slice(slots[0], slots[0] + n) if contiguous else np.array(slots, dtype=np.intp)
+        self.slots = np.array(run.physics.box_slots([a.name for a in agents]), dtype=np.intp)
         codes: dict[str, int] = {}
         road_code = np.array([codes.setdefault(a.road, len(codes)) for a in agents], dtype=np.int64)
         # Who sees whom (`fleet.step`): lengths, road codes, the ego's length and road code.
@@ -85,13 +83,19 @@ class Fleet:
         self.posed = False
         self.x, self.y, self.heading = [], [], []
         self.rows = [] if n == 0 else None  # the agents' row fields as lists of floats, when posed one by one
+        # Posed as arrays (`rows` None): `Fleets._pose_arrays`' table (x, y, body heading,
+        # speed, lane offset, ... x the batch's agents) and this run's first column.
+        self.pose, self.pose_lo = None, 0
         self._plan_version = -1
         self._plan = None
         self.bind(AgentArrays.adopt([agents]), 0)  # a block of one run, until a batch adopts them
 
+    binds = 0  # `bind` calls so far, of every fleet (a `_Layout` made since holds while none)
+
     def bind(self, block: AgentArrays, run: int) -> None:
         """The agents are run `run` of `block` now (they were moved there: `AgentArrays.adopt`)."""
         self.block, self.run_row, self.block_rows = block, run, block.rows(run)
+        Fleet.binds += 1
 
     def pose_one_by_one(self, run, t_now: float, dt: float) -> None:
         """The per-agent code (`pose_on_road`, the same formulas as `Fleets.pose`): poses,
@@ -119,15 +123,14 @@ class Fleet:
         z, grade = road.elevation.at(a.s)
         return x, y, h, road.road.lane_offset(a.s, a.t), z, grade
 
-    def record(self, row: np.ndarray) -> None:
-        """The agents' fields of a step's row (`_FIELDS` but the clearance; yaw rate and
-        steer stay 0)."""
+    def record(self, block: np.ndarray, k: int) -> None:
+        """The agents' fields of sample k's row of a run's record `block` (actors 1.., fields
+        `phases.FIELDS` but steer and the clearance; the yaw rate 0): posed as arrays, one
+        kernel call (`_agent_rows`) from the poses and the agents' block."""
         if self.rows is not None:
-            row[:, :-1] = self.rows
+            block[k, 1:, :-1] = self.rows
             return
-        zero = np.zeros(self.n)
-        s, t, _, accel = self.block.values[:ACCEL + 1, self.run_row, :self.n]  # (as posed: nothing moved since)
-        row[:, :9].T[:] = (self.x, self.y, self.heading, self.v, accel, zero, s, t, self.lane_offset)
+        _agent_rows(block, k, self.pose, self.pose_lo, self.block.flat, self.block_rows)
 
     def ground_truth(self, name: str | None):
         """An agent as perception's ground truth sees it (pose of the step, speed then)."""
@@ -135,8 +138,19 @@ class Fleet:
         if i is None or not self.posed:
             return None
         a = self.agents[i]
+        if self.rows is None:  # posed as arrays: their table's column
+            pose, k = self.pose, self.pose_lo + i
+            return _GT(float(pose[POSE_X, k]), float(pose[POSE_Y, k]), float(pose[_HEADING, k]),
+                       float(pose[_SPEED, k]), a.length_m, a.width_m, self.kinds[i])
         return _GT(float(self.x[i]), float(self.y[i]), float(self.heading[i]), float(self.v[i]),
                    a.length_m, a.width_m, self.kinds[i])
+
+    def poses(self) -> tuple:
+        """The agents' (x, y, body heading) of the step, as sequences."""
+        if self.rows is None:
+            lo = self.pose_lo
+            return tuple(self.pose[(POSE_X, POSE_Y, _HEADING), lo:lo + self.n])
+        return self.x, self.y, self.heading
 
     def array_plan(self, run):
         """(IDM settings (`fleet.IDM_FIELDS` x agents), whether IDM drives each agent, rows in
@@ -211,6 +225,7 @@ class _Layout:
         self.dt = None  # the runs' steps [s], at the first step
         self._plans: list = []
         self._idm = None
+        self.binds = Fleet.binds
 
     def idm(self, plans):
         """The runs' IDM settings, whether IDM drives each agent, the lateral targets,
@@ -236,18 +251,23 @@ class Fleets:
 
     def __init__(self, runs=()):
         self._layouts: dict[tuple[int, ...], _Layout] = {}
+        self._last: _Layout | None = None  # the layout asked for last (the pose and step phases ask each step)
         if runs:
             block = AgentArrays.adopt([run.fleet.agents for run in runs])
             for r, run in enumerate(runs):
                 run.fleet.bind(block, r)
 
     def _layout(self, fleets: list[Fleet]) -> _Layout:
-        key = tuple(id(f) for f in fleets)
+        last = self._last
+        if last is not None and last.binds == Fleet.binds and last.fleets == fleets:  # (list ==: by identity)
+            return last
+        key = tuple(map(id, fleets))
         layout = self._layouts.get(key)
-        if layout is None or any(f is not g or f.block is not layout.block for f, g in zip(layout.fleets, fleets)):
+        if layout is None or layout.binds != Fleet.binds or layout.fleets != fleets:
             layout = self._layouts[key] = _Layout(fleets)
             while len(self._layouts) > 4:  # live sets change as runs end: keep the recent ones
                 del self._layouts[next(iter(self._layouts))]
+        self._last = layout
         return layout
 
     def pose(self, runs, ts) -> None:
@@ -262,7 +282,7 @@ class Fleets:
         for run in runs:
             if run.networked:
                 f = run.fleet
-                for a, xi, yi, hi in zip(f.agents, f.x, f.y, f.heading):
+                for a, xi, yi, hi in zip(f.agents, *f.poses()):
                     run.world_pose[a.name] = (float(xi), float(yi), float(hi))
 
     def _pose_arrays(self, items):
@@ -276,8 +296,14 @@ class Fleets:
         flat, cells = layout.block.flat, layout.cells
         n, lo = layout.n, layout.lo
         out = np.empty((_POSE_ROWS, n))
-        if not (all(fast.pose_rows(elev, flat, cells, rows, out) for fast, elev, rows in layout.groups)
-                and all(math.isfinite(f.agents[i].s) and math.isfinite(f.agents[i].t) for _, f, i in layout.path_rows)):
+        finite = True
+        for fast, elev, rows in layout.groups:
+            if not fast.pose_rows(elev, flat, cells, rows, out):
+                finite = False
+                break
+        if finite and layout.path_rows:
+            finite = all(math.isfinite(f.agents[i].s) and math.isfinite(f.agents[i].t) for _, f, i in layout.path_rows)
+        if not finite:
             s, t = flat[S:T + 1, cells]
             finite = np.logical_and.reduceat(np.isfinite(s) & np.isfinite(t), layout.starts).tolist()
             left = [item for item, ok in zip(items, finite) if not ok]
@@ -299,13 +325,10 @@ class Fleets:
             a.ground_scale = f.roads[i].road.ground_scale(a.s, a.t)
         yaw = np.array([standing_yaw(a, yaw) for _, a, yaw in layout.yaw], dtype=float) if layout.yaw else _NO_YAW
         _body_poses(out, layout.zeros if rel is None else rel, layout.yaw_rows, yaw, layout.half_height, flat, cells)
-        for j, (run, _) in enumerate(items):
-            f, pose = run.fleet, out if len(items) == 1 else out[:, lo[j]:lo[j + 1]]
-            x, y, heading = pose[POSE_X], pose[POSE_Y], pose[_HEADING]
-            run.physics.set_poses(f.slots, x, y, pose[POSE_Z], heading, pose[_PITCH])
-            f.x, f.y, f.heading, f.lane_offset, f.rows = x, y, heading, pose[POSE_OFFSET], None
-            f.v = pose[_SPEED]  # (perception's ground truth: the speed of the pose)
-            f.posed = True
+        for j, (run, _) in enumerate(items):  # (each run's poses: columns lo[j]: of `out`)
+            f = run.fleet
+            run.physics.set_poses(f.slots, out, lo[j], _BODY_COLUMNS)
+            f.pose, f.pose_lo, f.rows, f.posed = out, lo[j], None, True
         return []
 
     def step(self, runs, ts) -> list:
@@ -323,8 +346,9 @@ class Fleets:
         left (an agent teleported this step stays put, as `advance` has it; a non-finite
         station or offset)."""
         layout = self._layout([run.fleet for run, _ in items])
-        params, idm, target, changing = layout.idm([run.fleet.array_plan(run) for run, _ in items])
-        t_new = target.copy()
+        plans = [run.fleet.array_plan(run) for run, _ in items]
+        params, idm, target, changing = layout.idm(plans)
+        t_new = target.copy() if changing else target  # (the kernel reads it)
         for k, j, a in changing:  # (reads the agent's station before it moves, as `advance`)
             run, t_now = items[j]
             t_new[k] = lateral_profile(a, t_now + run.dt)
@@ -353,6 +377,7 @@ class Fleets:
 # `_pose_arrays`' rows: `FastRoad.pose_rows`' and the body's heading and pitch [rad], the speed [m/s].
 _HEADING, _PITCH, _SPEED = 6, 7, 8
 _POSE_ROWS = 9
+_BODY_COLUMNS = np.array([POSE_X, POSE_Y, POSE_Z, _HEADING, _PITCH], dtype=np.int64)  # (`PhysicsWorld.set_poses`)
 _NO_YAW = np.empty(0)
 
 
@@ -372,6 +397,20 @@ def _body_poses(out, rel, yaw_rows, yaw, half_height, flat, cells):
         grade, heading, h = out[POSE_GRADE, k], out[_HEADING, k], out[POSE_H, k]
         out[_PITCH, k] = math.atan(grade) * math.cos(heading - h) if grade != 0.0 or heading != h else 0.0
         out[POSE_Z, k] += half_height[k]
+
+
+@kernel
+def _agent_rows(block, k, pose, lo, flat, cells):
+    """Sample k's row of a run's record `block` for its agents (actor 1 + i: columns x, y,
+    heading, speed, accel, yaw rate 0, s, t, lane offset; `phases.FIELDS`) from their poses
+    `pose[:, lo + i]` (`_pose_arrays`) and their block slots `cells[i]` (accel, s, t as
+    posed: nothing moved since)."""
+    for i in range(cells.size):
+        j, c = lo + i, cells[i]
+        row = block[k, 1 + i]
+        row[0], row[1], row[2], row[3] = pose[POSE_X, j], pose[POSE_Y, j], pose[_HEADING, j], pose[_SPEED, j]
+        row[4], row[5], row[6], row[7] = flat[ACCEL, c], 0.0, flat[S, c], flat[T, c]
+        row[8] = pose[POSE_OFFSET, j]
 
 
 @dataclass

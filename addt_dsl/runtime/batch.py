@@ -1,7 +1,9 @@
 """The engine: `execute_batch(specs) -> [RunResult]` steps many runs in lockstep.
 
-At each sample k every phase of the step (`phases.py`) runs over the runs still live,
-one phase after another (pose for every run, then record for every run, ...); a run
+At each sample k every phase of the step (`phases.py`) runs over the runs still live:
+the batch's phases (pose, collisions, ego, agents) over all of them at once, the per-run
+phases between two of them run by run (record for every run; then environment to end of
+one run, of the next, ...); a run
 leaves the live set where it ends (an ego collision, `end when`, its last sample, a stack
 error, a non-finite ego state). A single run is a batch of one (`execute.execute`): there
 is no other loop. Runs share nothing but the code: each owns its state (`state.RunState`),
@@ -95,52 +97,54 @@ def _loop(runs: list[RunState]) -> list[Trace]:
     """Step every run from time 0 until its end, an ego collision or a failure; their traces."""
     recs = [phases.Record(run) for run in runs]
     fleets = Fleets(runs)  # the agents of every run in one block of arrays
-    live = list(range(len(runs)))
+    live = list(zip(runs, recs))
     k = 0
     while live:
-        batch = [(runs[i], recs[i], k * runs[i].dt) for i in live]
-        for run, rec, t in batch:
+        # The per-run phases of one stretch of the step run run by run (runs share nothing:
+        # each run's phases in the documented order is all that matters), the batch's phases
+        # over the live runs' lists.
+        lruns = [run for run, _ in live]
+        ts = [k * run.dt for run in lruns]
+        for run, t in zip(lruns, ts):
             phases.clock(run, t)
-        phases.pose([run for run, _, _ in batch], [t for _, _, t in batch], fleets)
-        for run, rec, t in batch:
+        phases.pose(lruns, ts, fleets)
+        for run, rec in live:
             phases.record(run, rec, k)
-        collided = phases.collisions([run for run, _, _ in batch], [rec for _, rec, _ in batch], k,
-                                     [t for _, _, t in batch])
-        for run, rec, t in batch:
-            phases.environment(run, rec, k, t)
-        for run, rec, t in batch:
-            phases.variables(run, rec, k, t)
-        for run, rec, t in batch:
-            phases.lights(run, rec, k, t)
-        for run, rec, t in batch:
-            phases.outputs(run, rec, k, t)
+        collided = phases.collisions(lruns, [rec for _, rec in live], k, ts)
         going = []
-        for (run, rec, t), hit in zip(batch, collided):
+        for (run, rec), t, hit in zip(live, ts, collided):
+            phases.environment(run, rec, k, t)
+            phases.variables(run, rec, k, t)
+            phases.lights(run, rec, k, t)
+            phases.outputs(run, rec, k, t)
             ended = phases.end(run, rec, k, t)
             if hit or ended or k == rec.n - 1:
                 rec.last = k + 1
             else:
                 going.append((run, rec, t))
+        sensed, sensed_runs, sensed_ts = [], [], []
         for run, rec, t in going:
             phases.triggers(run, rec, k, t)
-        sensed = []
-        for run, rec, t in going:
             try:
                 phases.sense(run, t)
                 phases.stack(run, t)
             except Exception as exc:  # noqa: BLE001 - a stack failure is an outcome, not a crash
                 _stop(run, rec, k, f"{type(exc).__name__}: {exc}", t)
                 continue
-            sensed.append((run, rec, t))
-        moved = phases.ego([run for run, _, _ in sensed], [t for _, _, t in sensed])
-        stepped = []
-        for (run, rec, t), finite in zip(sensed, moved):
-            if finite:
-                stepped.append((run, rec, t))
-            else:
-                _stop(run, rec, k, "vehicle state became non-finite")
-        phases.agents([run for run, _, _ in stepped], [t for _, _, t in stepped], fleets)
-        alive = {id(run) for run, _, _ in stepped}
-        live = [i for i in live if id(runs[i]) in alive]
+            sensed.append((run, rec))
+            sensed_runs.append(run)
+            sensed_ts.append(t)
+        moved = phases.ego(sensed_runs, sensed_ts)
+        if all(moved):
+            live = sensed
+        else:
+            live = []
+            for (run, rec), finite in zip(sensed, moved):
+                if finite:
+                    live.append((run, rec))
+                else:
+                    _stop(run, rec, k, "vehicle state became non-finite")
+            sensed_ts = [t for (run, _), t, finite in zip(sensed, sensed_ts, moved) if finite]
+        phases.agents([run for run, _ in live], sensed_ts, fleets)
         k += 1
     return [rec.trace(run) for run, rec in zip(runs, recs)]

@@ -1,7 +1,8 @@
 """One physics step of the twin as named phases over the run's state (`state.RunState`).
 
-`batch._loop` runs them in this order at each sample k (time t = k * dt), each phase over
-every live run of the batch before the next:
+`batch._loop` runs them in this order at each sample k (time t = k * dt): the phases
+that take the whole batch over every live run at once, the per-run phases between two of
+them run by run (runs share nothing: each run sees its phases in this order):
 
   clock       the stack's clock; fault timers wake
   pose        agents on their roads (every run's agents at once: `agents.Fleets.pose`),
@@ -60,7 +61,7 @@ class Record:
         plan = run.bound
         names = self.names = ["ego"] + [a.name for a in run.agents]
         self.block = block = np.zeros((n, len(names), len(FIELDS)))
-        self.rec = {name: {f: block[:, i, j] for j, f in enumerate(FIELDS)} for i, name in enumerate(names)}
+        self.rec = {name: dict(zip(FIELDS, fields)) for name, fields in zip(names, block.transpose(1, 2, 0))}
         self.latency = {k: np.zeros(n) for k in LATENCY_NODES}
         self.outputs = {"control.steer": np.zeros(n), "control.accel": np.zeros(n)}
         self.objects = np.zeros(n)
@@ -84,11 +85,10 @@ class Record:
         frames = {"ego": run.ego_road.road_id}
         frames.update({a.name: run.agent_roads[a.name].road_id for a in run.agents})
         actors = {}
-        for name in self.names:
+        columns = np.ascontiguousarray(self.block[:last].transpose(1, 2, 0))  # [actor, field, sample]: one copy
+        for i, name in enumerate(self.names):
             length, width = self.sizes[name]
-            actors[name] = ActorTrack(name, length, width,
-                                      **{f: np.ascontiguousarray(v[:last]) for f, v in self.rec[name].items()},
-                                      frame=frames[name])
+            actors[name] = ActorTrack(name, length, width, **dict(zip(FIELDS, columns[i])), frame=frames[name])
         cut = lambda d: {k: v[:last] for k, v in d.items()}  # noqa: E731
         return Trace(run.dt, np.arange(last) * run.dt, actors, cut(self.latency), run.events, cut(self.outputs),
                      self.objects[:last], run.status, run.error, steps=cut(self.steps), lights=cut(self.lights),
@@ -152,7 +152,7 @@ def record(run: RunState, rec: Record, k: int) -> None:
         rec.block[k, :, :-1] = [ego_row, *fleet.rows]
     else:
         rec.block[k, 0, :-1] = ego_row
-        fleet.record(rec.block[k, 1:])
+        fleet.record(rec.block, k)
     for name, lanes in rec.lanes.items():  # `lane_id(A)`: only in runs that read it
         lanes[k] = run.lane_number(name)
     for name, edges in rec.edges.items():  # `road_edge(A)`: to the outer edge of A's road

@@ -252,16 +252,13 @@ class PhysicsWorld:
             unsynced[slot] = True
         self._pending.clear()
 
-    def set_poses(self, slots, x, y, z, heading, pitch) -> None:
-        """`set_pose` of many boxes at once: `slots` (a slice or indices of the box table,
-        `box_slots`) and arrays of their poses."""
+    def set_poses(self, slots: np.ndarray, table: np.ndarray, lo: int, columns: np.ndarray) -> None:
+        """`set_pose` of many boxes at once: box `slots[i]` (rows of the box table,
+        `box_slots`) at table[columns, lo + i] (columns: the rows of x, y, z, heading and
+        pitch in `table`), in one kernel call (`_put_poses`)."""
         if self._pending:
             self._flush()
-        if isinstance(slots, slice):
-            self._box_pose[slots].T[:] = (x, y, z, heading, pitch)
-        else:
-            self._box_pose[slots] = np.stack([x, y, z, heading, pitch], axis=1)
-        self._unsynced[slots] = True
+        _put_poses(self._box_pose, self._unsynced, slots, table, lo, columns)
 
     def box_slots(self, names) -> list[int]:
         """The rows of the named bodies in the box table (`set_poses`)."""
@@ -410,3 +407,14 @@ def separation(dx, dy, ca, sa, cb, sb, la, wa, lb, wb):
     if other > gap:
         gap = other
     return gap
+
+
+@kernel
+def _put_poses(box, unsynced, slots, table, lo, columns):
+    """Box slots[i]'s pose (x, y, z, heading, pitch) from table[columns, lo + i]; marked
+    for pybullet (`PhysicsWorld._sync_bodies`)."""
+    for i in range(slots.size):
+        b = slots[i]
+        for c in range(5):
+            box[b, c] = table[columns[c], lo + i]
+        unsynced[b] = True

@@ -7,6 +7,7 @@ import math
 import pickle
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -193,3 +194,25 @@ def test_pow_where_python_raises():
     assert kpow(1e200, 2.0) == math.inf and kpow(-1e200, 3.0) == -math.inf
     assert kpow(0.0, -1.0) == math.inf and kpow(-0.0, -1.0) == -math.inf
     assert math.isnan(kpow(-8.0, 0.5))
+
+
+@kernel
+def _divide(a, b):
+    return a / b
+
+
+def test_compiled_call_bound_and_interpreted_still_python():
+    """Compiled, a kernel's calls go to its dispatcher (its class's `__call__`); within
+    `interpreted()`, nested too, they run its Python (a division by zero raises), and after
+    it the compiled code again."""
+    assert _divide(1.0, 0.0) == math.inf
+    assert type(_divide).__dict__["__call__"].__func__ is _divide._compiled
+    with interpreted():
+        with pytest.raises(ZeroDivisionError):
+            _divide(1.0, 0.0)
+        with interpreted():
+            pass
+        with pytest.raises(ZeroDivisionError):  # (the inner context left it interpreted)
+            _divide(1.0, 0.0)
+    assert _divide(1.0, 0.0) == math.inf
+    assert type(_mix) is not type(_divide) and isinstance(_divide, Kernel)

@@ -73,7 +73,8 @@ def test_a_world_makes_its_client_only_when_asked(monkeypatch):
     ids = [lazy.add_box(n, 4.5, 1.9, 1.5) for n in ("ego", "lead", "truck")]
     assert ids == [1, 2, 3] and lazy.ground == 0
     lazy.set_pose("lead", 12.0, 0.5, 0.75, 0.1)
-    lazy.set_poses([2], np.array([20.0]), np.array([-1.0]), np.array([0.75]), np.array([0.3]), np.array([0.0]))
+    lazy.set_poses(np.array([2], dtype=np.intp), np.array([[20.0], [-1.0], [0.75], [0.3], [0.0]]), 0,
+                   np.arange(5, dtype=np.int64))  # (x, y, z, heading, pitch rows of a table, column 0)
     lazy.set_ground_height(-0.5)
     starts = np.tile([0.0, 0.0, 1.0], (90, 1))
     ang = np.linspace(-0.6, 0.6, 90)
