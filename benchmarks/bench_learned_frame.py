@@ -1,9 +1,9 @@
 """Per lidar frame cost of the learned detector's Python around the CNN: `bev_grid.decode`
 (peaks, boxes, the overlap test) and the cluster class reader (`cluster_features`,
-`TreeEnsemble.logits`) of this checkout against another's (`--base`, e.g. a worktree of an older commit), on the
+`TreeEnsemble.logits`) of this checkout, and of another's with `--base` (e.g. a worktree of an older commit), on the
 frames of dense-traffic runs with learned perception (1/5/20/50 agents).
 
-Run: PYTHONPATH=. python benchmarks/bench_learned_frame.py --base /path/to/checkout [--seconds S]
+Run: PYTHONPATH=. python benchmarks/bench_learned_frame.py [--base /path/to/checkout] [--seconds S] [--json F]
 
 Records each frame's decode and reclass inputs (head maps; returns, sensor, boxes) from one
 run per agent count, then times both versions over the same frames back to back (least of
@@ -23,9 +23,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_dense import dense_source, spec_of  # noqa: E402
 
-if "--base" not in sys.argv:
-    sys.exit("usage: bench_learned_frame.py --base CHECKOUT [--seconds S] (the checkout to compare with)")
-BASE = Path(sys.argv[sys.argv.index("--base") + 1])
+import _figures as figures_json  # noqa: E402
+
+BASE = Path(sys.argv[sys.argv.index("--base") + 1]) if "--base" in sys.argv else None  # None: this checkout alone
+JSON_PATH = sys.argv[sys.argv.index("--json") + 1] if "--json" in sys.argv else None
 SECONDS = float(sys.argv[sys.argv.index("--seconds") + 1]) if "--seconds" in sys.argv else 3.0
 
 
@@ -80,11 +81,15 @@ def main() -> None:
 
     from addt_dsl.stack import bev_grid
 
-    old, old_grid = (_load(name) for name in ("cluster_class", "bev_grid"))
     ensemble, _ = load_cluster_classes()
-    old_ensemble = old.TreeEnsemble.from_state(ensemble.state())
+    if BASE is None:  # this checkout alone: its figures in the "now" columns, base = now
+        old, old_grid, old_ensemble = new, bev_grid, ensemble
+    else:
+        old, old_grid = (_load(name) for name in ("cluster_class", "bev_grid"))
+        old_ensemble = old.TreeEnsemble.from_state(ensemble.state())
     load = os.getloadavg()
-    print(f"learned detector's Python per lidar frame: {BASE} (base) vs this checkout; load average "
+    figures: dict = {"base": str(BASE) if BASE else None, "load_average": load, "per_frame_us": {}}
+    print(f"learned detector's Python per lidar frame: {BASE or 'this checkout'} (base) vs this checkout; load average "
           f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores")
     print(f"  {'agents':>6s} {'frames':>6s} {'dets/frame':>10s}  {'decode base':>11s} {'now':>7s} {'x':>5s}"
           f"  {'features base':>13s} {'now':>7s} {'x':>5s}  {'logits base':>11s} {'now':>7s} {'x':>5s}")
@@ -109,6 +114,10 @@ def main() -> None:
         print(f"  {n:6d} {len(frames):6d} {dets:10.1f}  {dc_old:9.0f}us {dc_new:5.0f}us {dc_old / dc_new:5.1f}"
               f"  {cf_old:11.0f}us {cf_new:5.0f}us {cf_old / cf_new:5.1f}"
               f"  {lg_old:9.0f}us {lg_new:5.0f}us {lg_old / lg_new:5.1f}", flush=True)
+        figures["per_frame_us"][n] = {"frames": len(frames), "detections_per_frame": float(dets),
+                                      "decode": [dc_old, dc_new], "features": [cf_old, cf_new],
+                                      "logits": [lg_old, lg_new]}
+    figures_json.write(JSON_PATH, figures)
 
 
 if __name__ == "__main__":

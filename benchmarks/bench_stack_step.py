@@ -24,6 +24,9 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import _figures as figures_json  # noqa: E402
+
 ROOT = HERE.parent
 # (module, class, attribute, label): the timed calls
 TARGETS = (
@@ -82,6 +85,7 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=4.0)
     ap.add_argument("--versus", help="another checkout to time in the same invocation")
     ap.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
+    ap.add_argument("--json", help="also write the figures here")
     a = ap.parse_args()
     if a.worker:
         print(json.dumps(worker(int(a.worker[0]), float(a.worker[1]))))
@@ -92,6 +96,7 @@ def main() -> None:
     load = os.getloadavg()
     print(f"bev stack step, ground truth, {a.duration:g} s runs; least of {a.repeats}; "
           f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores")
+    figures: dict = {"load_average": load, "duration_s": a.duration, "per_call_us": {}}
     for n in (int(x) for x in a.agents.split(",")):
         best: dict[str, dict[str, float]] = {k: {} for k in checkouts}
         calls: dict[str, dict[str, int]] = {k: {} for k in checkouts}
@@ -122,6 +127,9 @@ def main() -> None:
                 ratio = other[0] / this[0] if this[0] else float("nan")
                 row += f"  {other[0]:8.2f} ({other[1]:6.2f})  {ratio:10.2f}x"
             print(row, flush=True)
+        figures["per_call_us"][n] = {name: {label: {"median_per_call": v[0], "mean_per_step": v[1]}
+                                            for label, v in best[name].items()} for name in checkouts}
+    figures_json.write(a.json, figures)
 
 
 if __name__ == "__main__":

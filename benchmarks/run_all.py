@@ -53,6 +53,9 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "pose": ([], ["--agents", "5,50", "--batches", "1,16", "--repeat", "1"]),
     "planner": ([], ["--repeats", "20", "--rounds", "1"]),
     "collisions": ([], ["--agents", "5,50", "--batch", "1,16", "--rounds", "1"]),
+    "phases": ([], ["--agents", "5,50", "--batches", "1,16", "--repeat", "1"]),
+    "stack_step": ([], ["--repeats", "1"]),
+    "learned_frame": ([], ["--seconds", "1"]),
 }
 
 

@@ -53,7 +53,7 @@ def _index(tab, ds, last_i, s):
 
 
 @kernel
-def _reference_pose(tab, ds, last_i, length, s):
+def reference_pose_at(tab, ds, last_i, length, s):
     i, u = _index(tab, ds, last_i, s)
     x = tab[_X, i] + u * (tab[_X, i + 1] - tab[_X, i])
     y = tab[_Y, i] + u * (tab[_Y, i + 1] - tab[_Y, i])
@@ -69,8 +69,16 @@ def _reference_pose(tab, ds, last_i, length, s):
 
 
 @kernel
+def curvature_at(tab, ds, last_i, s):
+    """The reference line's curvature [1/m] at station s [m] (`FastRoad.curvature`), for
+    other kernels."""
+    i, u = _index(tab, ds, last_i, s)
+    return tab[_K, i] + u * (tab[_K, i + 1] - tab[_K, i])
+
+
+@kernel
 def _point(tab, ds, last_i, length, s, t):
-    x, y, h = _reference_pose(tab, ds, last_i, length, s)
+    x, y, h = reference_pose_at(tab, ds, last_i, length, s)
     return x - math.sin(h) * t, y + math.cos(h) * t, h
 
 
@@ -135,7 +143,7 @@ def _project(tab, ds, last_i, length, x, y, hint, hinted):
                     best, best_d = k, d
         s = tab[_S, best]
     for _ in range(3):
-        rx, ry, h = _reference_pose(tab, ds, last_i, length, s)
+        rx, ry, h = reference_pose_at(tab, ds, last_i, length, s)
         step = (x - rx) * math.cos(h) + (y - ry) * math.sin(h)
         s += step
         if s < 0.0:
@@ -144,7 +152,7 @@ def _project(tab, ds, last_i, length, x, y, hint, hinted):
             s = length
         if abs(step) < 1e-6:
             break
-    rx, ry, h = _reference_pose(tab, ds, last_i, length, s)
+    rx, ry, h = reference_pose_at(tab, ds, last_i, length, s)
     return s, -(x - rx) * math.sin(h) + (y - ry) * math.cos(h)
 
 
@@ -162,7 +170,7 @@ def _box_d2(boxes, b, x, y):
 
 
 @kernel
-def _project_boxed(tab, ds, last_i, length, boxes, x, y):
+def project_boxed(tab, ds, last_i, length, boxes, x, y):
     """`_project` without a hint, its bits: the nearest sample (the first of the nearest)
     found through the samples' bounding boxes (`FastRoad.boxes`), every `_BOX` samples a box:
     the least distance in the box of the least bound bounds the answer, and only boxes
@@ -220,7 +228,7 @@ def _pose_rows(tab, ds, last_i, length, centres, starts, lanes, z, g, z_ds, z_le
 
 
 class FastRoad:
-    _boxes: np.ndarray | None = None  # `_project_boxed`'s bounding boxes, made when first asked
+    _boxes: np.ndarray | None = None  # `project_boxed`'s bounding boxes, made when first asked
     _k_a: np.ndarray | None = None  # the curvature samples (and `_s_k` their stations) as arrays, made when first asked
     _lane_tables: tuple | None = None  # (centres, section starts, lanes) of `_lane_offset`, made when first asked
 
@@ -252,7 +260,7 @@ class FastRoad:
         self._boxes = None
 
     def boxes(self) -> np.ndarray:
-        """(x min, x max, y min, y max) [m] of every `_BOX` samples in a row (`_project_boxed`);
+        """(x min, x max, y min, y max) [m] of every `_BOX` samples in a row (`project_boxed`);
         none where a sample is not finite (a NaN would end `_project`'s search)."""
         if self._boxes is None:
             xy = self._tab[[_X, _Y]]
@@ -271,7 +279,7 @@ class FastRoad:
         return _index(self._tab, self._ds, self._last_i, s)
 
     def reference_pose(self, s: float) -> tuple[float, float, float]:
-        return _reference_pose(self._tab, self._ds, self._last_i, self.length, s)
+        return reference_pose_at(self._tab, self._ds, self._last_i, self.length, s)
 
     def pose_rows(self, elevation, flat: np.ndarray, cells: np.ndarray, rows: np.ndarray, out: np.ndarray) -> bool:
         """`point`, `lane_offset` and `elevation.at` of the actors in block slots
@@ -290,7 +298,7 @@ class FastRoad:
             centres, starts, lanes = self._lanes_tabled(missing)
 
     def curvature(self, s: float) -> float:
-        i, u = _index(self._tab, self._ds, self._last_i, s)
+        i, u = _index(self._tab, self._ds, self._last_i, s)  # (as `curvature_at`: Python floats)
         return self._k[i] + u * (self._k[i + 1] - self._k[i])
 
     def ground_scale(self, s: float, t: float) -> float:

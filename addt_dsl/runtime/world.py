@@ -126,6 +126,11 @@ class PhysicsWorld:
         self._connect()
         return self._client
 
+    @property
+    def connected(self) -> bool:
+        """Whether this world holds a pybullet client now (made and not yet given back)."""
+        return self._client is not None
+
     def _connect(self) -> None:
         """Make the client and give it every body made so far, in order, posed as last set."""
         if self._client is not None:

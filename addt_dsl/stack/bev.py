@@ -18,7 +18,7 @@ import numpy as np
 from addt_dsl.kernel import hypot, kernel
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.registry import STACKS
-from addt_dsl.runtime.fastroad import _project_boxed, _reference_pose
+from addt_dsl.runtime.fastroad import project_boxed, reference_pose_at
 from addt_dsl.specs import stacks as S
 from addt_dsl.specs.stacks import NODE_NAMES, PERCEPTIONS
 from addt_dsl.stack.bus import Bus
@@ -65,9 +65,9 @@ def _road_frame(tab, ds, last_i, length, boxes, rows, kinds, t0, out):
     for j in range(rows.shape[0]):
         ox, oy, oh, ovx, ovy, oax, oay, olen, owid = (rows[j, 0], rows[j, 1], rows[j, 2], rows[j, 3], rows[j, 4],
                                                       rows[j, 5], rows[j, 6], rows[j, 7], rows[j, 8])
-        so, to = _project_boxed(tab, ds, last_i, length, boxes, ox, oy)
+        so, to = project_boxed(tab, ds, last_i, length, boxes, ox, oy)
         # Velocity along the road, and the box's extent along and across it.
-        hdg = _reference_pose(tab, ds, last_i, length, so)[2]
+        hdg = reference_pose_at(tab, ds, last_i, length, so)[2]
         c, s = math.cos(_trig_arg(hdg)), math.sin(hdg)
         rc, rs = abs(math.cos(_trig_arg(oh - hdg))), abs(math.sin(oh - hdg))
         v_t = ovy * c - ovx * s

@@ -14,7 +14,7 @@ import numpy as np
 
 from addt_dsl.kernel import Libm, hypot, kernel, pow  # (pow: the C library's, as CPython's `**`)
 from addt_dsl.plan import LIGHT_STATES
-from addt_dsl.runtime.fastroad import _K, _index, _reference_pose
+from addt_dsl.runtime.fastroad import curvature_at, reference_pose_at
 from addt_dsl.specs import stacks as S
 from addt_dsl.vehicles import CAR, DEFAULT_MASS_KG, DEFAULT_MU
 
@@ -1230,14 +1230,13 @@ def _steer(tab, ds, last_i, length, s_start, t_start, t_target, lateral_m, x, y,
         if dx * dx + dy * dy > reach and speed > 1.0:
             course = heading + _remainder_tau(math.atan2(dy, dx) - heading)
     t_path, slope, _ = _smoothstep_path(s_now, s_start, t_start, t_target, lateral_m)
-    road_heading = _reference_pose(tab, ds, last_i, length, s_now)[2]
+    road_heading = reference_pose_at(tab, ds, last_i, length, s_now)[2]
     e_lat = t_now - t_path
     e_course = _remainder_tau(course - road_heading - math.atan(slope))
     s_pre = s_now + speed * preview_s
     s_pre = length if length < s_pre else s_pre
     t_pre, _, bend = _smoothstep_path(s_pre, s_start, t_start, t_target, lateral_m)
-    i, u = _index(tab, ds, last_i, s_pre)
-    kappa_road = tab[_K, i] + u * (tab[_K, i + 1] - tab[_K, i])
+    kappa_road = curvature_at(tab, ds, last_i, s_pre)
     g = 1.0 - kappa_road * t_pre
     kappa = kappa_road / (g if g > 0.2 else 0.2) + bend
     steer = wheelbase * kappa + understeer * speed * speed * kappa

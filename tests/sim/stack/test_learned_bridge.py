@@ -92,7 +92,7 @@ def test_unreachable_remote_is_a_detected_stack_failure_and_releases_the_world(o
     class Recorded(state_module.PhysicsWorld):
         def __init__(self, *args, **kwargs):
             super().__init__(*args, **kwargs)
-            opened.append((self, self.client))
+            opened.append((self, self.client))  # (asked: made now)
 
     monkeypatch.setattr(state_module, "PhysicsWorld", Recorded)
     spec = _spec(overtake_source, 'stack external address "127.0.0.1:9" timeout 1 s')
@@ -101,7 +101,7 @@ def test_unreachable_remote_is_a_detected_stack_failure_and_releases_the_world(o
     # The run ended after the pybullet client was opened: it is released, not leaked
     # (disconnected, or reset and idle in the process's pool for the next run).
     (world, client), = opened
-    assert world.client is None
+    assert not world.connected
     assert not pybullet.getConnectionInfo(physicsClientId=client)["isConnected"] or \
         (client in world_module.CLIENTS.idle and pybullet.getNumBodies(physicsClientId=client) == 0)
 

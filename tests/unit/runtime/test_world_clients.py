@@ -80,7 +80,7 @@ def test_a_world_makes_its_client_only_when_asked(monkeypatch):
     ang = np.linspace(-0.6, 0.6, 90)
     ends = starts + 40.0 * np.stack([np.cos(ang), np.sin(ang), -0.05 * np.ones(90)], axis=1)
     analytic = lazy.ray_cast(starts, ends, ignore="ego")
-    assert lazy._client is None  # nothing asked pybullet yet
+    assert not lazy.connected  # nothing asked pybullet yet
     eager = PhysicsWorld()
     assert eager.client is not None  # made first, then the same bodies and poses
     for n in ("ego", "lead", "truck"):
@@ -90,7 +90,7 @@ def test_a_world_makes_its_client_only_when_asked(monkeypatch):
     eager.set_ground_height(-0.5)
     lazy.analytic_rays = eager.analytic_rays = False
     hit, frac = lazy.ray_cast(starts, ends, ignore="ego")
-    assert lazy._client is not None
+    assert lazy.connected
     want_hit, want_frac = eager.ray_cast(starts, ends, ignore="ego")
     assert hit.tolist() == want_hit.tolist() and frac.tobytes() == want_frac.tobytes()
     assert set(hit.tolist()) == {-1, 2, 3} and hit.tolist() == analytic[0].tolist()

@@ -1,5 +1,5 @@
 """The bev stack's per-step kernels: the tracks in road coordinates (`bev._road_frame`, the
-unhinted projection through bounding boxes `fastroad._project_boxed`) and the controller's
+unhinted projection through bounding boxes `fastroad.project_boxed`) and the controller's
 steering law (`nodes._steer`). Each compiled kernel gives its Python's bits, and both give
 the bits of the code they replaced (kept below verbatim as the oracle: `_old_road_frame`,
 `_OldController`), non-finite values included; where that code raised, they raise."""
@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from addt_dsl.kernel import bits, interpreted
 from addt_dsl.plan import RoadPlan, SegmentPlan
 from addt_dsl.road.roadspec import build_network
-from addt_dsl.runtime.fastroad import FastRoad, _project, _project_boxed
+from addt_dsl.runtime.fastroad import FastRoad, _project, project_boxed
 from addt_dsl.stack.bev import CROSSING_MIN_SPEED, CROSSING_SIN, SET_OFF_ACCEL, road_frame_objects
 from addt_dsl.stack.nodes import Controller, EgoBody, LatticePlanner, Obj, Plan, Tracker
 
@@ -261,16 +261,16 @@ def _outcome(fn):
 def test_the_boxed_projection_gives_the_full_searchs_bits(road, x, y):
     args = (road._tab, road._ds, road._last_i, road.length)
     want = _outcome(lambda: _project(*args, x, y, 0.0, False))
-    assert _outcome(lambda: _project_boxed(*args, road.boxes(), x, y)) == want
+    assert _outcome(lambda: project_boxed(*args, road.boxes(), x, y)) == want
     with interpreted():
-        assert _outcome(lambda: _project_boxed(*args, road.boxes(), x, y)) == want
+        assert _outcome(lambda: project_boxed(*args, road.boxes(), x, y)) == want
 
 
 def test_the_boxed_projection_finds_the_nearer_straight_of_a_hairpin():
     # 100 m apart (the arc's diameter): 30 m from the outbound straight, 70 m from the return.
-    s, t = _project_boxed(HAIRPIN._tab, HAIRPIN._ds, HAIRPIN._last_i, HAIRPIN.length, HAIRPIN.boxes(), 120.0, 30.0)
+    s, t = project_boxed(HAIRPIN._tab, HAIRPIN._ds, HAIRPIN._last_i, HAIRPIN.length, HAIRPIN.boxes(), 120.0, 30.0)
     assert s == pytest.approx(120.0) and t == pytest.approx(30.0)
-    s, t = _project_boxed(HAIRPIN._tab, HAIRPIN._ds, HAIRPIN._last_i, HAIRPIN.length, HAIRPIN.boxes(), 120.0, 70.0)
+    s, t = project_boxed(HAIRPIN._tab, HAIRPIN._ds, HAIRPIN._last_i, HAIRPIN.length, HAIRPIN.boxes(), 120.0, 70.0)
     assert s == pytest.approx(200.0 + 50.0 * math.pi + 80.0) and t == pytest.approx(30.0)  # left of it, driving back
     # on the straight road: a point 2 m left of station 100
     assert STRAIGHT.project(100.0, 2.0) == road_frame_objects(STRAIGHT, [Obj(100.0, 2.0, 0.0, 5.0, 0.0, 4.0, 2.0)],
