@@ -13,6 +13,7 @@ ALLOWED = {
     "distributions.py:DISTRIBUTIONS",  # the registry of distributions (filled by `register` at import)
     "runtime/store.py:_LOCKS",  # locks held now (an entry leaves when its lock is released)
     "compiler/xodr_check.py:_INFOS",  # per cached map; dropped by _MAPS's on_evict, so bounded by it
+    "kernel.py:_bound",  # the compiled kernels: one entry per module-level kernel, at its first compile
 }
 
 
