@@ -8,7 +8,7 @@ PYTHONPATH the checkout), alternating checkouts, `--repeat` times; each phase fu
 loop's own body: the loop's time less the phases' (the timers' own ~0.1 us a call land
 there too, the same in both checkouts). The least of the repeats per phase.
 
-Run: PYTHONPATH=. python benchmarks/bench_phases.py [--checkouts /work/main,.] [--agents 1,5,20,50,100]
+Run: PYTHONPATH=. python benchmarks/bench_phases.py [--checkouts OTHER_CHECKOUT,.] [--agents 1,5,20,50,100]
      [--batches 1,16] [--repeat 3] [--phases pose,record,...] [--json FILE]
 Prints us per run-step per phase and checkout, the ratio first/last, and the load.
 """
