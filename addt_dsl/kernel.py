@@ -215,6 +215,22 @@ pow = Libm("pow", _c_pow, 2)
 where that gives a float)."""
 
 @kernel
+def maximum(a, b):
+    """`np.maximum` of two floats: a NaN either side gives NaN; of equals, a."""
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    return a if a >= b else b
+
+
+@kernel
+def minimum(a, b):
+    """`np.minimum` of two floats: a NaN either side gives NaN; of equals, a."""
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    return a if a <= b else b
+
+
+@kernel
 def bisect_right(a, x, hi):
     """`bisect.bisect_right(a, x, 0, hi)`: where x goes after its equals in the sorted
     a[:hi], by the comparisons Python's `bisect` makes (a NaN x goes first)."""

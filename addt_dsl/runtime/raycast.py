@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from addt_dsl.kernel import kernel
+from addt_dsl.kernel import kernel, maximum, minimum
 
 
 def box_rotations(heading: np.ndarray, pitch: np.ndarray) -> np.ndarray:
@@ -102,21 +102,6 @@ def _cast(starts, ends, centres, rotations, half, plane_z, has_plane, plane_hits
 
 
 @kernel
-def _minimum(a, b):
-    """numpy's minimum: a NaN wins."""
-    if math.isnan(a) or math.isnan(b):
-        return math.nan
-    return a if a <= b else b
-
-
-@kernel
-def _maximum(a, b):
-    if math.isnan(a) or math.isnan(b):
-        return math.nan
-    return a if a >= b else b
-
-
-@kernel
 def _slab(ox, oy, oz, gx, gy, gz, rot, half):
     """Entry fraction of a segment (start relative to the box centre, direction g) into
     the box (axes the columns of `rot`, half extents `half`); inf for a miss or a segment
@@ -129,8 +114,8 @@ def _slab(ox, oy, oz, gx, gy, gz, rot, half):
         inv = 1.0 / d  # ±inf on an axis-parallel segment: the slab is all or nothing
         t1 = (-half[a] - o) * inv
         t2 = (half[a] - o) * inv
-        t_near = _maximum(t_near, _minimum(t1, t2))
-        t_far = _minimum(t_far, _maximum(t1, t2))
+        t_near = maximum(t_near, minimum(t1, t2))
+        t_far = minimum(t_far, maximum(t1, t2))
     if t_near <= t_far and t_near >= 0.0 and t_near <= 1.0:
         return t_near
     return math.inf

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import kernel
+from addt_dsl.kernel import kernel, maximum
 
 # The shipped detectors' sensors and tensor sites: the compiler checks against them too.
 from addt_dsl.specs.stacks import (CAMERA_BEV_SITES, CAMERA_BEV_TENSOR_SITES, DETECTOR_LIDAR,  # noqa: F401
@@ -292,14 +292,6 @@ _CORNER_Y = (1.0, -1.0, -1.0, 1.0)
 
 
 @kernel
-def _nan_max(a, b):
-    """np.maximum: a NaN either side gives NaN."""
-    if math.isnan(a) or math.isnan(b):
-        return math.nan
-    return a if a >= b else b
-
-
-@kernel
 def _separations(boxes, c, s, sep):
     """`box_penetration` into `sep` (n, n), as the vectorised numpy form computed it (NaN
     in, NaN out): box j's corners projected on box k's two edge normals, the gap between
@@ -327,9 +319,9 @@ def _separations(boxes, c, s, sep):
         for j in range(n):
             best = math.nan
             for k in (i, j):
-                g = _nan_max(_nan_max(lo[k, 0, j] - hi[k, 0, i], lo[k, 0, i] - hi[k, 0, j]),
-                             _nan_max(lo[k, 1, j] - hi[k, 1, i], lo[k, 1, i] - hi[k, 1, j]))
-                best = g if k == i else _nan_max(best, g)
+                g = maximum(maximum(lo[k, 0, j] - hi[k, 0, i], lo[k, 0, i] - hi[k, 0, j]),
+                             maximum(lo[k, 1, j] - hi[k, 1, i], lo[k, 1, i] - hi[k, 1, j]))
+                best = g if k == i else maximum(best, g)
             sep[i, j] = best
 
 
