@@ -25,14 +25,19 @@ from addt_dsl.kernel import kernel, maximum, minimum
 
 def box_rotations(heading: np.ndarray, pitch: np.ndarray) -> np.ndarray:
     """(M, 3, 3) rotations Rz(heading) @ Ry(-pitch): the body poses `PhysicsWorld.set_pose` makes."""
-    ch, sh = np.cos(heading), np.sin(heading)
     # Nose-up pitch is a negative rotation about the body's left-pointing y axis.
-    cp, sp = np.cos(pitch), np.sin(-pitch)
     rot = np.empty((len(heading), 3, 3))
-    rot[:, 0, 0], rot[:, 0, 1], rot[:, 0, 2] = ch * cp, -sh, ch * sp
-    rot[:, 1, 0], rot[:, 1, 1], rot[:, 1, 2] = sh * cp, ch, sh * sp
-    rot[:, 2, 0], rot[:, 2, 1], rot[:, 2, 2] = -sp, 0.0, cp
+    _rotations(np.cos(heading), np.sin(heading), np.cos(pitch), np.sin(-pitch), rot)
     return rot
+
+
+@kernel
+def _rotations(ch, sh, cp, sp, rot):
+    """`box_rotations` into `rot` from the angles' cosines and sines (numpy's)."""
+    for k in range(rot.shape[0]):
+        rot[k, 0, 0], rot[k, 0, 1], rot[k, 0, 2] = ch[k] * cp[k], -sh[k], ch[k] * sp[k]
+        rot[k, 1, 0], rot[k, 1, 1], rot[k, 1, 2] = sh[k] * cp[k], ch[k], sh[k] * sp[k]
+        rot[k, 2, 0], rot[k, 2, 1], rot[k, 2, 2] = -sp[k], 0.0, cp[k]
 
 
 def cast(starts: np.ndarray, ends: np.ndarray, centres: np.ndarray, rotations: np.ndarray,
@@ -79,8 +84,9 @@ def _cast(starts, ends, centres, rotations, half, plane_z, has_plane, plane_hits
     for k in range(m):
         radius[k] = math.sqrt(half[k, 0] * half[k, 0] + half[k, 1] * half[k, 1] + half[k, 2] * half[k, 2])
     # Of each box from the current start: the centre less the start (3) and its length²;
-    # the start in the box's frame (3) and whether it lies well inside, once asked (`framed`).
-    near = np.empty((m, 8))
+    # the start in the box's frame (3) and whether it lies well inside, once asked (`framed`);
+    # whether the start is outside the sphere test (then so is a segment leading away).
+    near = np.empty((m, 9))
     framed = np.zeros(m, dtype=np.bool_)
     px = py = pz = 0.0
     for i in range(n):
@@ -91,7 +97,9 @@ def _cast(starts, ends, centres, rotations, half, plane_z, has_plane, plane_hits
             for k in range(m):
                 rx, ry, rz = centres[k, 0] - sx, centres[k, 1] - sy, centres[k, 2] - sz
                 near[k, 0], near[k, 1], near[k, 2] = rx, ry, rz
-                near[k, 3] = rx * rx + ry * ry + rz * rz
+                d2 = rx * rx + ry * ry + rz * rz
+                near[k, 3] = d2
+                near[k, 8] = 1.0 if d2 > radius[k] * radius[k] * (1.0 + 1e-9) + 1e-9 * (1.0 + d2) else 0.0
                 framed[k] = False
         gx, gy, gz = ends[i, 0] - sx, ends[i, 1] - sy, ends[i, 2] - sz
         length = math.sqrt(gx * gx + gy * gy + gz * gz)
@@ -106,11 +114,16 @@ def _cast(starts, ends, centres, rotations, half, plane_z, has_plane, plane_hits
             if d2 > reach * reach * (1.0 + 1e-9) + 1e-9:
                 continue
             if length > 0.0:  # the closest point of the segment to the centre
-                proj = (rx * gx + ry * gy + rz * gz) / length
-                along = min(max(proj, 0.0), length)
-                dist2 = d2 - along * (2.0 * proj - along)
-                if dist2 > radius[k] * radius[k] * (1.0 + 1e-9) + 1e-9 * (1.0 + d2):
-                    continue
+                dot = rx * gx + ry * gy + rz * gz
+                if -math.inf < dot <= 0.0:  # it is the start (dist2 is d2): the test is the start's
+                    if near[k, 8] != 0.0:
+                        continue
+                else:
+                    proj = dot / length
+                    along = min(max(proj, 0.0), length)
+                    dist2 = d2 - along * (2.0 * proj - along)
+                    if dist2 > radius[k] * radius[k] * (1.0 + 1e-9) + 1e-9 * (1.0 + d2):
+                        continue
             if not framed[k]:
                 _frame(sx - centres[k, 0], sy - centres[k, 1], sz - centres[k, 2], rotations[k], half[k], near[k])
                 framed[k] = True

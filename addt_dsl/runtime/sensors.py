@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from addt_dsl.kernel import kernel
 from addt_dsl.registry import SENSORS
 from addt_dsl.specs import sensors as S
 
@@ -87,14 +88,34 @@ class Lidar(S.Lidar, Sensor):
     def capture(self, world, time_s):
         origin, rot = _sensor_world_pose(_ego_frame(world), self.actual)
         dirs = self._dirs @ rot.T
-        starts = np.repeat(origin[None, :], len(dirs), axis=0)
-        ends = starts + dirs * self.range_m
-        hit_ids, fractions = world.ray_cast(starts, ends)
-        hit = hit_ids >= 0
-        dist = fractions * self.range_m
+        # Every ray from the one origin: a read-only view of it, row after row (no copy).
+        origin = np.ascontiguousarray(origin, dtype=np.float64)
+        starts = np.ndarray(dirs.shape, np.float64, origin, 0, (0, origin.itemsize))
+        starts.flags.writeable = False
+        hit_ids, fractions = world.ray_cast(starts, starts + dirs * self.range_m)
         # Points in the *sensor* frame: the stack maps them with the nominal extrinsics.
-        pts = self._dirs[hit] * dist[hit, None]  # the hits only (a scan's rays mostly miss)
-        return Frame(self.name, time_s, {"points": pts, "hit_body": hit_ids[hit]})
+        pts, bodies = _returns(self._dirs, hit_ids, fractions, self.range_m)
+        return Frame(self.name, time_s, {"points": pts, "hit_body": bodies})
+
+
+@kernel
+def _returns(dirs, hit_ids, fractions, range_m):
+    """The hits of a scan, in ray order: (points, N×3: a hit ray's direction times its
+    distance, fraction × range [m]; their body ids) of the rays with a body id >= 0."""
+    n = 0
+    for i in range(hit_ids.shape[0]):
+        if hit_ids[i] >= 0:
+            n += 1
+    points = np.empty((n, 3))
+    bodies = np.empty(n, dtype=hit_ids.dtype)
+    j = 0
+    for i in range(hit_ids.shape[0]):
+        if hit_ids[i] >= 0:
+            dist = fractions[i] * range_m
+            points[j, 0], points[j, 1], points[j, 2] = dirs[i, 0] * dist, dirs[i, 1] * dist, dirs[i, 2] * dist
+            bodies[j] = hit_ids[i]
+            j += 1
+    return points, bodies
 
 
 @SENSORS.implements
