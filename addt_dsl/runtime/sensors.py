@@ -92,10 +92,21 @@ class Lidar(S.Lidar, Sensor):
         origin = np.ascontiguousarray(origin, dtype=np.float64)
         starts = np.ndarray(dirs.shape, np.float64, origin, 0, (0, origin.itemsize))
         starts.flags.writeable = False
-        hit_ids, fractions = world.ray_cast(starts, starts + dirs * self.range_m)
+        hit_ids, fractions = world.ray_cast(starts, _ray_ends(origin, dirs, self.range_m))
         # Points in the *sensor* frame: the stack maps them with the nominal extrinsics.
         pts, bodies = _returns(self._dirs, hit_ids, fractions, self.range_m)
         return Frame(self.name, time_s, {"points": pts, "hit_body": bodies})
+
+
+@kernel
+def _ray_ends(origin, dirs, range_m):
+    """origin + dirs * range_m [m], N×3: numpy's bits (a product, then a sum; numpy pays
+    ~3 us to broadcast the origin over 3-wide rows)."""
+    ends = np.empty(dirs.shape)
+    for i in range(dirs.shape[0]):
+        for c in range(3):
+            ends[i, c] = origin[c] + dirs[i, c] * range_m
+    return ends
 
 
 @kernel

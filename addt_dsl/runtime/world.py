@@ -21,6 +21,7 @@ import sys
 import numpy as np
 
 from addt_dsl.kernel import kernel
+from addt_dsl.runtime import raycast
 
 
 @contextlib.contextmanager
@@ -314,8 +315,6 @@ class PhysicsWorld:
         """`raycast.cast` on the boxes and the ground plane; with `ground_hits=False` a ray
         whose first hit is the ground reports -1 (no hit), as one whose first hit is the
         body named `ignore`."""
-        from addt_dsl.runtime import raycast
-
         pose = self.box_poses().copy()  # contiguous columns, as the caster slices them
         slot = -1 if ignore is None else self._box_slot[self.bodies[ignore]]
         index, frac = raycast.cast(starts, ends, pose[:, :3], raycast.box_rotations(pose[:, 3], pose[:, 4]),

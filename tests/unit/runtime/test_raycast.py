@@ -458,3 +458,16 @@ def test_lidar_returns_kernel_is_its_python(seed, n):
         want = _returns(dirs, ids, frac, 80.0)
     assert bits(got[0]) == bits(want[0]) and got[1].tolist() == want[1].tolist() == ids[ids >= 0].tolist()
     assert bits(got[0]) == bits(dirs[ids >= 0] * (frac * 80.0)[ids >= 0, None])
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 50), st.floats(0.5, 300.0))
+def test_lidar_ray_ends_kernel_is_its_python_and_numpys(seed, n, range_m):
+    from addt_dsl.runtime.sensors import _ray_ends
+
+    rng = np.random.default_rng(seed)
+    origin, dirs = rng.normal(size=3) * 100.0, rng.normal(size=(n, 3))
+    got = _ray_ends(origin, dirs, range_m)
+    with interpreted():
+        assert bits(_ray_ends(origin, dirs, range_m)) == bits(got)
+    assert bits(got) == bits(np.repeat(origin[None], n, axis=0) + dirs * range_m)
