@@ -283,6 +283,15 @@ def test_compiled_cast_is_its_python(m, n, seed, starts_as, plane_hits, ignore):
     assert bits(got[1]) == bits(want[1])
 
 
+def _maximum(a, b):
+    """`kernel.maximum` elementwise (np.maximum's choice between -0.0 and 0.0 varies)."""
+    return np.where(np.isnan(a) | np.isnan(b), np.nan, np.where(a >= b, a, b))
+
+
+def _minimum(a, b):
+    return np.where(np.isnan(a) | np.isnan(b), np.nan, np.where(a <= b, a, b))
+
+
 def _cast_every_box(starts, ends, centres, rot, half, plane_z, plane_hits=True, ignore=-1):
     """`raycast.cast` without culling, in numpy: every box's slab test on every ray (the
     kernel's arithmetic), the nearest (ties: the lower index), the plane, then the ignored box dropped."""
@@ -297,7 +306,7 @@ def _cast_every_box(starts, ends, centres, rot, half, plane_z, plane_hits=True, 
             o = r[0] * off[:, 0] + r[1] * off[:, 1] + r[2] * off[:, 2]
             inv = 1.0 / (r[0] * g[:, 0] + r[1] * g[:, 1] + r[2] * g[:, 2])
             t1, t2 = (-half[k, a] - o) * inv, (half[k, a] - o) * inv
-            t_near, t_far = np.maximum(t_near, np.minimum(t1, t2)), np.minimum(t_far, np.maximum(t1, t2))
+            t_near, t_far = _maximum(t_near, _minimum(t1, t2)), _minimum(t_far, _maximum(t1, t2))
         t = np.where((t_near <= t_far) & (t_near >= 0.0) & (t_near <= 1.0), t_near, np.inf)
         nearer = t < best
         best[nearer], hit[nearer] = t[nearer], k
