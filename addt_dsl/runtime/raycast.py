@@ -190,6 +190,9 @@ def _slab(start, gx, gy, gz, rot, half):
         t2 = (half[a] - o) * inv
         t_near = maximum(t_near, minimum(t1, t2))
         t_far = minimum(t_far, maximum(t1, t2))
+        # t_near only grows, t_far only shrinks (or turn NaN): a miss now is a miss
+        if t_near > t_far or t_far < 0.0 or t_near > 1.0:
+            return math.inf
     if t_near <= t_far and t_near >= 0.0 and t_near <= 1.0:
         return t_near
     return math.inf
