@@ -24,7 +24,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import _figures as figures_json  # noqa: E402
+import _figures as figures_json
 
 
 def arg(name: str, default: str) -> str:
