@@ -194,14 +194,14 @@ def _red_margins(run: RunState, rec: Record, k: int, t: float) -> None:
 def environment(run: RunState, rec: Record, k: int, t: float) -> None:
     """Environment steps (`at 3 s fog visibility 30 m`) fire on the state just recorded."""
     if run.environment_script is not None:
-        advance_environment_script(run, rec.rec, k, t)
+        advance_environment_script(run, rec, k, t)
 
 
 def variables(run: RunState, rec: Record, k: int, t: float) -> None:
     """The steps that set scenario variables fire on the state just recorded (a value set now
     is read from the next sample on: `record` took the values at sample k)."""
     if run.variable_script is not None:
-        advance_variable_script(run, rec.rec, k, t)
+        advance_variable_script(run, rec, k, t)
 
 
 def lights(run: RunState, rec: Record, k: int, t: float) -> None:
@@ -212,7 +212,7 @@ def lights(run: RunState, rec: Record, k: int, t: float) -> None:
     if run.lights is None:
         return
     if run.light_script is not None:
-        advance_light_script(run, rec.rec, k, t)
+        advance_light_script(run, rec, k, t)
         _red_margins(run, rec, k, t)
     for name in rec.lights:
         rec.lights[name][k] = run.lights.state(name, t)
@@ -241,7 +241,7 @@ def end(run: RunState, rec: Record, k: int, t: float) -> bool:
     """Whether `end when ...` holds on the state just recorded."""
     if run.end_script is None:
         return False
-    run.end_script.advance(t, condition_checker(run, rec.rec, k), lambda clause, time_s: None)
+    run.end_script.advance(t, condition_checker(run, rec, k), lambda clause, time_s: None)
     if run.end_script.done:
         run.events.append(Event(t, "end", {}))
         return True
@@ -250,18 +250,18 @@ def end(run: RunState, rec: Record, k: int, t: float) -> bool:
 
 def triggers(run: RunState, rec: Record, k: int, t: float) -> None:
     """Behaviours waiting for the first recorded state start; scripted steps fire."""
-    run.recorded = (rec.rec, k)  # live behaviour settings read the state just recorded
+    run.recorded = (rec, k)  # live behaviour settings read the state just recorded
     if run.deferred:
         for agent, clause in run.deferred:
             run._start_behavior(agent, clause, t)
         run.deferred.clear()
     if run.scripts:
-        advance_scripts(run, rec.rec, k, t)
+        advance_scripts(run, rec, k, t)
         if rec.steps:  # steps that fired now are started at this sample
             for name, code in run.step_states(t).items():
                 rec.steps[name][k] = code
     if run.faults.openers:  # `when C for W` faults: on the state as recorded at k, these steps included
-        run.faults.open_windows(t, condition_checker(run, rec.rec, k))
+        run.faults.open_windows(t, condition_checker(run, rec, k))
 
 
 def sense(run: RunState, t: float) -> None:

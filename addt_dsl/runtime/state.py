@@ -14,7 +14,6 @@ import numpy as np
 
 from addt_dsl.plan import RunSpec
 from addt_dsl.registry import BEHAVIORS, ENVIRONMENTS, SENSORS, STACKS
-from addt_dsl.runtime import oracles
 from addt_dsl.runtime.actor_road import ActorPath, ActorRoad, PlainLeg, junction_legs
 from addt_dsl.runtime.agents import Fleet
 from addt_dsl.runtime.behaviors import AgentState, advance
@@ -29,10 +28,10 @@ from addt_dsl.runtime.roadmesh import build_scene
 from addt_dsl.road.roadspec import build_network
 from addt_dsl.runtime.script import Script
 from addt_dsl.runtime.signs import SignsRuntime, junction_rule, next_sign, sign_lines, stop_sign_lines
-from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED, STEP_WAITING, compute_signals
+from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED, STEP_WAITING
 from addt_dsl.runtime.trace import Event
 from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
-from addt_dsl.runtime.triggers import oracles_signals, snapshot_trace
+from addt_dsl.runtime.triggers import Conditions
 from addt_dsl.runtime.world import PhysicsWorld
 from addt_dsl.vehicles import VEHICLES
 
@@ -252,7 +251,7 @@ class RunState:
         self.command_queue: list[tuple[float, float, float]] = []
         self.command = (0.0, 0.0)
         self._rngs: dict[str, np.random.Generator] = {}
-        self._live_snapshot = None  # (step, state) that live behaviour settings read
+        self.conditions = Conditions(self)  # what trigger conditions and live settings read
         self.behavior_version = 0  # behaviours started so far
         self.released: set[str] = set()  # actors whose completed speed behaviour let go (`move`)
 
@@ -634,13 +633,7 @@ class RunState:
     # ---- behaviours
     def live_value(self, expr) -> float:
         """A live behaviour setting (`speed(ego) + 5 km/h`) on the state recorded this step."""
-        rec, k = self.recorded
-        if self._live_snapshot is None or self._live_snapshot[0] != k:
-            # Without step states: whether a step ended can itself ask a live setting (a
-            # cruise that follows `speed(other)` ends at that speed), which would recurse.
-            self._live_snapshot = (k, snapshot_trace(self, rec, k, with_steps=False))
-        trace = self._live_snapshot[1]
-        return float(oracles.evaluate(expr, compute_signals(trace, oracles_signals(expr)), self.dt)[0])
+        return self.conditions.live_value(expr, *self.recorded)
 
     def _start_behavior(self, agent: AgentState, clause: BoundClause, time_s: float):
         cls = BEHAVIORS.implementation(clause.name)
