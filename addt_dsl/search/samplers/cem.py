@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from addt_dsl.kernel import log
 from addt_dsl.search.samplers import SamplerContext
 from addt_dsl.search.space import Axis
 
@@ -74,7 +75,7 @@ class CrossEntropySampler:
             return
         n = max(MIN_ELITE, int(math.ceil(ELITE_FRACTION * len(points))))
         elite = points[np.argsort(scores, kind="stable")[:n]]
-        w = np.log(n + 0.5) - np.log(np.arange(1, n + 1))
+        w = log.over(n + 0.5) - log.over(np.arange(1, n + 1))
         w /= w.sum()
         mu = w @ elite
         sigma = np.sqrt(w @ (elite - mu) ** 2)
