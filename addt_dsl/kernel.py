@@ -92,8 +92,12 @@ class Libm:
 
         arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
         shape = arrays[0].shape
-        out = np.empty(arrays[0].size)
-        _OVER[self.name](*(np.ascontiguousarray(a).reshape(-1) for a in arrays), out)
+        flat = [np.ascontiguousarray(a).reshape(-1) for a in arrays]
+        if _numba_loaded():
+            out = np.empty(arrays[0].size)
+            _OVER[self.name](*flat, out)
+        else:  # (the same function value by value: a compile-only process does not load numba)
+            out = np.fromiter(map(self.python, *(f.tolist() for f in flat)), np.float64, arrays[0].size)
         return out.reshape(shape) if shape else out[0]
 
 
@@ -193,6 +197,14 @@ def cache_dir() -> str:
             if old != here and old.is_dir() and time.time() - old.stat().st_mtime > 86400.0:
                 shutil.rmtree(old, ignore_errors=True)
     return str(here)
+
+
+def _numba_loaded() -> bool:
+    """Whether this process has imported numba (a kernel has run): helpers that would call a
+    kernel for a few values compute them in numpy or Python until then, the same bits."""
+    import sys
+
+    return "numba" in sys.modules
 
 
 def kernel(fn: Callable) -> Kernel:
@@ -311,8 +323,13 @@ def matmul(a, b):
     b2 = b.reshape(-1, 1) if b.ndim == 1 else b
     if a2.shape[1] != b2.shape[0]:
         raise ValueError(f"matmul: shapes {a.shape} and {b.shape} do not align")
-    out = np.empty((a2.shape[0], b2.shape[1]))
-    _matmul(np.ascontiguousarray(a2), np.ascontiguousarray(b2), out)
+    if _numba_loaded():
+        out = np.empty((a2.shape[0], b2.shape[1]))
+        _matmul(np.ascontiguousarray(a2), np.ascontiguousarray(b2), out)
+    else:  # the kernel's order, a column at a time (a compile-only process does not load numba)
+        out = a2[:, :1] * b2[:1, :] if a2.shape[1] else np.zeros((a2.shape[0], b2.shape[1]))
+        for q in range(1, a2.shape[1]):
+            out = out + a2[:, q:q + 1] * b2[q:q + 1, :]
     if a.ndim == 1 and b.ndim == 1:
         return out[0, 0]
     return out.reshape(a.shape[:-1] + b.shape[1:])

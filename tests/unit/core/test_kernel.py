@@ -309,3 +309,18 @@ def test_matmul_refuses_what_numpy_refuses():
     stack = np.arange(24.0).reshape(2, 4, 3)  # rows of a stack, as np.matmul takes them
     assert matmul(stack, np.eye(3)[:, :2]).shape == (2, 4, 2)
     assert np.array_equal(matmul(stack, np.eye(3)), stack)
+
+
+def test_helpers_give_the_same_bits_before_numba_is_loaded(monkeypatch):
+    """A compile-only process computes road geometry without loading numba: `over` and
+    `matmul` then take numpy or Python, which must give the kernels' bits."""
+    from addt_dsl import kernel as K
+
+    rng = np.random.default_rng(11)
+    x, y = rng.normal(size=300) * 5.0, rng.normal(size=300) * 5.0
+    a, b = rng.normal(size=(40, 7)), rng.normal(size=(7, 3))
+    compiled = [K.exp.over(x), K.atan2.over(y, x), K.pow.over(np.abs(x), y), K.matmul(a, b), K.matmul(a[0], a[1])]
+    monkeypatch.setattr(K, "_numba_loaded", lambda: False)
+    plain = [K.exp.over(x), K.atan2.over(y, x), K.pow.over(np.abs(x), y), K.matmul(a, b), K.matmul(a[0], a[1])]
+    for c, p in zip(compiled, plain):
+        assert bits(c) == bits(p)
