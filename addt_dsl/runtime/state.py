@@ -269,6 +269,7 @@ class RunState:
         self.vehicle_params = VehicleParams.for_vehicle(ego.mass_kg, ego.wheelbase_m, ego.mu)
         self.ego_mu = ego.mu  # the declared friction; `environment { road friction F }` scales it
         self.ego = VehicleState(x, y, h, ego.speed)
+        self.ego_row = 0  # the ego's row in its batch's block of ego states (`batch._loop`, `vehicle.StateBlock`)
         self.ego_z, self.ego.pitch = 0.0, 0.0
         self.ego_s, self.ego_t = s0, t0
         self.physics.add_box("ego", ego.length_m, ego.width_m, ego.height_m)
