@@ -46,7 +46,7 @@ from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
                                        advance_variable_script, condition_checker)
-from addt_dsl.runtime.vehicle import StateBlock
+from addt_dsl.runtime.vehicle import HEADING, X, Y, StateBlock
 
 # The recorded fields of an actor, in the order of a step's row; clearance last.
 FIELDS = ("x", "y", "heading", "speed", "accel", "yaw_rate", "s", "t", "lane_offset", "steer", "clearance")
@@ -121,7 +121,8 @@ def _pose_ego(run: RunState, t: float) -> None:
     plan, ego_road, e = run.bound, run.ego_road, run.ego
     if run.ego_agent is not None:
         pose_scripted_ego(run, t, run.dt)
-    x, y, heading = e.x, e.y, e.heading  # (each a read of the egos' block)
+    v = e.values()  # (one read of its row in the egos' block)
+    x, y, heading = v[X], v[Y], v[HEADING]
     if run.ego_agent is None:
         run.ego_s, run.ego_t = ego_road.road.project(x, y, run.ego_s)
     if run.ego_s >= ego_road.road.length and not run.left_road:
