@@ -333,9 +333,10 @@ def ego(runs: list[RunState], ts: list[float], egos: StateBlock) -> list[bool]:
                 run.leaders_stale = False
             run.move(run.ego_agent, t, dt)
             run.ego.vx, run.ego.accel = run.ego_agent.speed, run.ego_agent.accel
-    if driven:
-        egos.step([(r.ego_row, *r.command, r.ego_grade) for r in driven], [r.vehicle_params for r in driven])
-    return egos.finite([run.ego_row for run in runs])
+    if not runs:
+        return []
+    return egos.step([(r.ego_row, *r.command, r.ego_grade) for r in driven], [r.vehicle_params for r in driven],
+                     [run.ego_row for run in runs])
 
 
 def agents(runs: list[RunState], ts: list[float], fleets: Fleets) -> None:

@@ -200,7 +200,8 @@ def step(states, params, steer_cmd, accel_cmd, dt: float, grade=0.0) -> None:
     inputs = np.array([(i, a, b, c) for i, (a, b, c) in enumerate(zip(steer_cmd, accel_cmd, grade))],
                       dtype=np.float64).reshape(k, 4)
     _step_block(block, np.array([_param_row(q) for q in params], dtype=np.float64).reshape(k, N_PARAM),
-                np.full(k, n, dtype=np.int64), np.full(k, h), inputs)
+                np.full(k, n, dtype=np.int64), np.full(k, h), inputs, np.zeros(0, dtype=np.int64),
+                np.zeros(0, dtype=np.bool_))
     for v, row in zip(states, block):
         v.row[:] = row
 
@@ -209,7 +210,7 @@ class StateBlock:
     """The states of a batch's vehicles in one (vehicles, `STATE_FIELDS`) float64 block: each
     `VehicleState` given is made a view of its row (in the order given), so that the batch
     steps any of them in one kernel call (`step`) and reads their fields as arrays
-    (`records`, `finite`), while each state's attributes still read and write its row."""
+    (`records`, `step`'s finite flags), while each state's attributes still read and write its row."""
 
     def __init__(self, states: list[VehicleState], dts: list[float]):
         k = len(states)
@@ -224,18 +225,21 @@ class StateBlock:
         self._rows: list[int] = []  # (`_index`)
         self._rows_a = np.zeros(0, dtype=np.int64)
         self._out: dict[int, np.ndarray] = {}  # `records`' output by width
-        self._finite = np.zeros(k, dtype=np.bool_)  # `finite`'s output
+        self._finite = np.zeros(k, dtype=np.bool_)  # `step`'s finite flags
 
-    def step(self, inputs: list[tuple[int, float, float, float]], params: list[VehicleParams]) -> None:
+    def step(self, inputs: list[tuple[int, float, float, float]], params: list[VehicleParams],
+             rows: list[int]) -> list[bool]:
         """Advance states in place by their step: each of `inputs` (block row, steering [rad],
-        acceleration [m/s^2], grade [-]) under its parameters (`params`), as `step` does."""
+        acceleration [m/s^2], grade [-]) under its parameters (`params`), as `step` does.
+        Then whether the x, y and vx of each of block rows `rows` are finite."""
         held = self._params_of
         for (i, *_), q in zip(inputs, params):
             if held[i] is not q:  # (a new VehicleParams: the road's friction changed)
                 self.params[i] = _param_row(q)
                 held[i] = q
-        _step_block(self.states, self.params, self.n, self.h,
-                    np.array(inputs, dtype=np.float64).reshape(len(inputs), 4))
+        _step_block(self.states, self.params, self.n, self.h, np.array(inputs, dtype=np.float64).reshape(-1, 4),
+                    self._index(rows), self._finite)
+        return self._finite[:len(rows)].tolist()
 
     def records(self, rows: list[int], columns: np.ndarray, width: int) -> list[list[float]]:
         """A recorded row of `width` fields of each of block rows `rows`: its x, y, heading,
@@ -245,11 +249,6 @@ class StateBlock:
             out = self._out[width] = np.zeros((len(self.states), width))
         _records(self.states, self._index(rows), columns, out)
         return out[:len(rows)].tolist()
-
-    def finite(self, rows: list[int]) -> list[bool]:
-        """Whether the x, y and vx of each of block rows `rows` are finite."""
-        _finite(self.states, self._index(rows), self._finite)
-        return self._finite[:len(rows)].tolist()
 
     def _index(self, rows: list[int]) -> np.ndarray:
         """`rows` as an array (the last one asked, the batch's live runs, changes seldom)."""
@@ -268,13 +267,6 @@ def _records(states, rows, columns, out):
 
 
 @kernel
-def _finite(states, rows, out):
-    for j in range(rows.shape[0]):
-        st = states[rows[j]]
-        out[j] = math.isfinite(st[X]) and math.isfinite(st[Y]) and math.isfinite(st[VX])
-
-
-@kernel
 def _fmin(a, b):
     return b if math.isnan(a) or b < a else a  # numpy's fmin: a NaN loses (Python's min keeps a first NaN)
 
@@ -285,16 +277,19 @@ def _fmax(a, b):
 
 
 @kernel
-def _step_block(states, params, n, h, inputs):
+def _step_block(states, params, n, h, inputs, rows, finite):
     """Each of `inputs`' rows (block row, steering, acceleration, grade): `n[r]` substeps of
     `h[r]` [s] of state row r of `states` (`STATE_FIELDS`) under its parameters (row r of
-    `params`, `PARAM_FIELDS`)."""
+    `params`, `PARAM_FIELDS`). Then finite[j]: whether row rows[j]'s x, y and vx are finite."""
     for j in range(inputs.shape[0]):
         r = int(inputs[j, 0])
         st, p = states[r], params[r]
         steer, accel, grade = inputs[j, 1], inputs[j, 2], inputs[j, 3]
         for _ in range(n[r]):
             _substep(st, p, steer, accel, h[r], grade)
+    for j in range(rows.shape[0]):
+        st = states[rows[j]]
+        finite[j] = math.isfinite(st[X]) and math.isfinite(st[Y]) and math.isfinite(st[VX])
 
 
 @kernel

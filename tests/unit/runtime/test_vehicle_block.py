@@ -37,7 +37,8 @@ def test_block_step_is_each_state_stepped_alone(cars, commands, rnd):
         # Some rows each step, in a shuffled order: the others stay as they are.
         rows = [i for i in range(len(cars)) if (i + j) % 3]
         rnd.shuffle(rows)
-        block.step([(i, steer + 0.01 * i, accel, grade) for i in rows], [params[i] for i in rows])
+        assert block.step([(i, steer + 0.01 * i, accel, grade) for i in rows], [params[i] for i in rows],
+                          rows) == [True] * len(rows)
         for i in rows:
             step(alone[i], params[i], steer + 0.01 * i, accel, dts[i], grade)
         assert blocked == alone
@@ -69,8 +70,9 @@ def test_records_and_finite_are_the_attributes():
         v = cars[i]
         want = [v.x, v.y, v.heading, v.speed, v.accel, v.yaw_rate, 0.0, 0.0, 0.0, v.steer]
         assert bits(np.array(row)) == bits(np.array(want))
-    assert block.finite(rows) == [True, True, False]
-    assert block.finite([2, 3]) == [False, True]  # (another list of rows than the last)
+    assert block.step([], [], rows) == [True, True, False]  # (nothing stepped)
+    assert block.step([], [], [2, 3]) == [False, True]  # (another list of rows than the last)
+    assert bits(block.states) == bits([v.values() for v in cars])
 
 
 @settings(max_examples=20, deadline=None)
@@ -82,13 +84,11 @@ def test_compiled_is_its_python(cars, commands):
     rows = list(range(len(cars)))[::-1]
     for steer, accel, grade in commands + [(math.nan, math.nan, 0.0)]:
         inputs = [(i, steer, accel, grade) for i in rows]
-        compiled.step(inputs, [params[i] for i in rows])
-        a = (compiled.records(rows, COLUMNS, 10), compiled.finite(rows))
+        a = (compiled.step(inputs, [params[i] for i in rows], rows), compiled.records(rows, COLUMNS, 10))
         with interpreted():
-            python.step(inputs, [params[i] for i in rows])
-            b = (python.records(rows, COLUMNS, 10), python.finite(rows))
+            b = (python.step(inputs, [params[i] for i in rows], rows), python.records(rows, COLUMNS, 10))
         assert bits(compiled.states) == bits(python.states)
-        assert bits(np.array(a[0])) == bits(np.array(b[0])) and a[1] == b[1]
+        assert a[0] == b[0] and bits(np.array(a[1])) == bits(np.array(b[1]))
 
 
 def test_new_parameters_are_taken_up():
@@ -97,7 +97,7 @@ def test_new_parameters_are_taken_up():
     blocked, alone = [VehicleState(0.0, 0.0, 0.0, 20.0)], [VehicleState(0.0, 0.0, 0.0, 20.0)]
     block = StateBlock(blocked, [0.01])
     for p in (high, high, low, low, high):
-        block.step([(0, 0.4, -8.0, 0.0)], [p])
+        block.step([(0, 0.4, -8.0, 0.0)], [p], [0])
         step(alone[0], p, 0.4, -8.0, 0.01, 0.0)
         assert blocked == alone
 
