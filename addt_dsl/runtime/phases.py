@@ -121,7 +121,7 @@ def _pose_ego(run: RunState, t: float) -> None:
     plan, ego_road, e = run.bound, run.ego_road, run.ego
     if run.ego_agent is not None:
         pose_scripted_ego(run, t, run.dt)
-    v = e.values()  # (one read of its row in the egos' block)
+    v = e.row.tolist()  # (one read of its row in the egos' block)
     x, y, heading = v[X], v[Y], v[HEADING]
     if run.ego_agent is None:
         run.ego_s, run.ego_t = ego_road.road.project(x, y, run.ego_s)

@@ -532,12 +532,12 @@ class RunState:
         return self._rngs[name]
 
     def ego_pose(self):
-        v = self.ego.values()  # (one read of its row: cheaper than four attributes)
+        v = self.ego.row.tolist()  # (one read of its row: cheaper than four attributes)
         return v[X], v[Y], v[HEADING], math.hypot(v[VX], v[VY])
 
     def ego_frame(self):
         """(x, y, z of the road under the ego, heading, pitch nose-up) for sensor mounts."""
-        v = self.ego.values()
+        v = self.ego.row.tolist()
         return v[X], v[Y], self.ego_z, v[HEADING], v[PITCH]
 
     def ego_state(self):
