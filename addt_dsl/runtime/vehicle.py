@@ -93,6 +93,9 @@ class VehicleParams:
 STATE_FIELDS = ("x", "y", "heading", "vx", "vy", "yaw_rate", "yaw_acc", "steer", "accel_cmd_actual", "accel",
                 "ax_specific", "ay", "pitch", "slip_front", "slip_rear")
 _STATE_DOCS = {
+    "x": "[m]",
+    "y": "[m]",
+    "heading": "[rad]",
     "vx": "longitudinal speed in the body frame [m/s]",
     "vy": "lateral speed in the body frame [m/s]",
     "yaw_rate": "[rad/s]",
@@ -155,7 +158,7 @@ def _field(column: int, doc: str) -> property:
 
 
 for _column, _name in enumerate(STATE_FIELDS):
-    setattr(VehicleState, _name, _field(_column, _STATE_DOCS.get(_name, "[m]" if _name in "xy" else "[rad]")))
+    setattr(VehicleState, _name, _field(_column, _STATE_DOCS[_name]))
 del _column, _name
 
 
