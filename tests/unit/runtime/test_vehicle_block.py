@@ -13,8 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from addt_dsl.kernel import bits, interpreted
-from addt_dsl.runtime.vehicle import (N_STATE, STATE_FIELDS, StateBlock, VehicleParams, VehicleState, step,
-                                      substeps)
+from addt_dsl.runtime.vehicle import N_STATE, STATE_FIELDS, StateBlock, VehicleParams, VehicleState, step, substeps
 
 car = st.tuples(st.floats(0.2, 1.2), st.floats(-3.0, 3.0), st.floats(0.0, 40.0), st.sampled_from([0.01, 0.02, 0.025]))
 command = st.tuples(st.floats(-0.7, 0.7), st.floats(-12.0, 6.0), st.sampled_from([0.0, 0.06, -0.04]))
