@@ -61,7 +61,8 @@ def test_states_are_views_of_the_block_both_ways():
 
 def test_records_and_finite_are_the_attributes():
     cars = [VehicleState(1.0, 2.0, 0.3, 12.0, vy=0.7, accel=-1.5, yaw_rate=0.1, steer=0.02),
-            VehicleState(math.nan, 0.0, 0.0, 1.0), VehicleState(0.0, 0.0, 0.0, math.inf), VehicleState(3.0, 4.0, 5.0, 6.0)]
+            VehicleState(math.nan, 0.0, 0.0, 1.0), VehicleState(0.0, 0.0, 0.0, math.inf),
+            VehicleState(3.0, 4.0, 5.0, 6.0)]
     block = StateBlock(cars, [0.01] * 4)
     rows = [3, 0, 1]
     got = block.records(rows, COLUMNS, 10)
