@@ -30,7 +30,7 @@ from addt_dsl.runtime.script import Script
 from addt_dsl.runtime.signs import SignsRuntime, junction_rule, next_sign, sign_lines, stop_sign_lines
 from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED, STEP_WAITING
 from addt_dsl.runtime.trace import Event
-from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
+from addt_dsl.runtime.vehicle import HEADING, PITCH, VX, VY, X, Y, VehicleParams, VehicleState
 from addt_dsl.runtime.triggers import Conditions
 from addt_dsl.runtime.world import PhysicsWorld
 from addt_dsl.vehicles import VEHICLES
@@ -269,6 +269,7 @@ class RunState:
         self.vehicle_params = VehicleParams.for_vehicle(ego.mass_kg, ego.wheelbase_m, ego.mu)
         self.ego_mu = ego.mu  # the declared friction; `environment { road friction F }` scales it
         self.ego = VehicleState(x, y, h, ego.speed)
+        self.ego_row = 0  # the ego's row in its batch's block of ego states (`batch._loop`, `vehicle.StateBlock`)
         self.ego_z, self.ego.pitch = 0.0, 0.0
         self.ego_s, self.ego_t = s0, t0
         self.physics.add_box("ego", ego.length_m, ego.width_m, ego.height_m)
@@ -531,13 +532,13 @@ class RunState:
         return self._rngs[name]
 
     def ego_pose(self):
-        e = self.ego
-        return e.x, e.y, e.heading, e.speed
+        v = self.ego.row.tolist()  # (one read of its row: cheaper than four attributes)
+        return v[X], v[Y], v[HEADING], math.hypot(v[VX], v[VY])
 
     def ego_frame(self):
         """(x, y, z of the road under the ego, heading, pitch nose-up) for sensor mounts."""
-        e = self.ego
-        return e.x, e.y, self.ego_z, e.heading, e.pitch
+        v = self.ego.row.tolist()
+        return v[X], v[Y], self.ego_z, v[HEADING], v[PITCH]
 
     def ego_state(self):
         return self.ego
