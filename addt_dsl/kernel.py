@@ -84,6 +84,22 @@ class Libm:
             self._external = nt.ExternalFunction(symbol, nt.float64(*[nt.float64] * self.arity))
         return self._external
 
+    def over(self, *args):
+        """The function elementwise over arrays (float64, broadcast as numpy does; a float64
+        scalar where every argument is a scalar): numpy's ufunc of the same name with the C
+        library's bits on every machine (one compiled call)."""
+        import numpy as np
+
+        arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
+        shape = arrays[0].shape
+        flat = [np.ascontiguousarray(a).reshape(-1) for a in arrays]
+        if _numba_loaded():
+            out = np.empty(arrays[0].size)
+            _OVER[self.name](*flat, out)
+        else:  # (the same function value by value: a compile-only process does not load numba)
+            out = np.fromiter(map(self.python, *(f.tolist() for f in flat)), np.float64, arrays[0].size)
+        return out.reshape(shape) if shape else out[0]
+
 
 class Kernel:
     """A function compiled on first call (`numba.njit` with `OPTIONS`); `py_func` is the
@@ -183,6 +199,14 @@ def cache_dir() -> str:
     return str(here)
 
 
+def _numba_loaded() -> bool:
+    """Whether this process has imported numba (a kernel has run): helpers that would call a
+    kernel for a few values compute them in numpy or Python until then, the same bits."""
+    import sys
+
+    return "numba" in sys.modules
+
+
 def kernel(fn: Callable) -> Kernel:
     """Mark a module-level function as a compiled kernel. A kernel may call other kernels by
     their module-level names (compiled, they are compiled in)."""
@@ -190,12 +214,12 @@ def kernel(fn: Callable) -> Kernel:
 
 
 @functools.cache
-def _libm(name: str):
+def _libm(name: str, arity: int = 2):
     import ctypes
     import ctypes.util
 
     fn = getattr(ctypes.CDLL(ctypes.util.find_library("m") or ctypes.util.find_library("c")), name)
-    fn.restype, fn.argtypes = ctypes.c_double, (ctypes.c_double, ctypes.c_double)
+    fn.restype, fn.argtypes = ctypes.c_double, (ctypes.c_double,) * arity
     return fn
 
 
@@ -210,9 +234,121 @@ def _c_pow(x, y) -> float:
     return r if r.__class__ is float else math.nan
 
 
+def _c_math(name: str, python: Callable) -> Callable:
+    """The C library's `name` of one float as CPython's `math` function gives it (CPython
+    calls the C library), and the C library's own answer where CPython raises instead
+    (log(0) -inf, log(-1) nan, exp(1000) inf, tan(inf) nan)."""
+
+    def c(x) -> float:
+        try:
+            return python(x)
+        except (OverflowError, ValueError):
+            return _libm(name, 1)(x)
+
+    c.__name__ = c.__qualname__ = f"c_{name}"
+    return c
+
+
 pow = Libm("pow", _c_pow, 2)
 """x ** y [-]: the C library's pow, compiled and interpreted alike (CPython's float power
 where that gives a float)."""
+
+# The C library's transcendental functions, for kernels (by these names, not `math.exp`: the
+# compiler may not rewrite or vectorise them) and, through `Libm.over`, over arrays: numpy's
+# own `exp`, `log`, `log2`, `arctan`, `tan`, `arctan2` (and `power`) take SIMD code on a
+# machine with AVX-512 whose bits differ from the C library's (in ~1-8 % of doubles), so a
+# trace computed with them would depend on the machine it ran on. `sin`, `cos`, `sqrt` and
+# `hypot` give the C library's bits in numpy on every machine.
+exp = Libm("exp", _c_math("exp", math.exp), 1)
+log = Libm("log", _c_math("log", math.log), 1)
+log2 = Libm("log2", _c_math("log2", math.log2), 1)
+atan = Libm("atan", _c_math("atan", math.atan), 1)
+tan = Libm("tan", _c_math("tan", math.tan), 1)
+atan2 = Libm("atan2", math.atan2, 2)  # (CPython's never raises: the C library's throughout)
+
+
+@kernel
+def _over_exp(x, out):
+    for i in range(x.shape[0]):
+        out[i] = exp(x[i])
+
+
+@kernel
+def _over_log(x, out):
+    for i in range(x.shape[0]):
+        out[i] = log(x[i])
+
+
+@kernel
+def _over_log2(x, out):
+    for i in range(x.shape[0]):
+        out[i] = log2(x[i])
+
+
+@kernel
+def _over_atan(x, out):
+    for i in range(x.shape[0]):
+        out[i] = atan(x[i])
+
+
+@kernel
+def _over_tan(x, out):
+    for i in range(x.shape[0]):
+        out[i] = tan(x[i])
+
+
+@kernel
+def _over_atan2(y, x, out):
+    for i in range(x.shape[0]):
+        out[i] = atan2(y[i], x[i])
+
+
+@kernel
+def _over_pow(x, y, out):
+    for i in range(x.shape[0]):
+        out[i] = pow(x[i], y[i])
+
+
+def matmul(a, b):
+    """`a @ b` (np.matmul's shapes for a 1-D or 2-D `b`; `a` of any number of dimensions, a
+    stack of rows), each element summed from the first product on, in one order, without
+    fused multiply-adds: numpy's `@` calls BLAS, whose kernel (picked by the CPU: Haswell,
+    SkylakeX, Zen...) decides the order and the fusing, so its last bits depend on the machine."""
+    import numpy as np
+
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if a.ndim < 1 or b.ndim not in (1, 2):
+        raise ValueError(f"matmul takes an array of rows and a 1-D or 2-D one, not {a.ndim}-D and {b.ndim}-D")
+    a2 = a.reshape(int(np.prod(a.shape[:-1])), a.shape[-1])
+    b2 = b.reshape(-1, 1) if b.ndim == 1 else b
+    if a2.shape[1] != b2.shape[0]:
+        raise ValueError(f"matmul: shapes {a.shape} and {b.shape} do not align")
+    if _numba_loaded():
+        out = np.empty((a2.shape[0], b2.shape[1]))
+        _matmul(np.ascontiguousarray(a2), np.ascontiguousarray(b2), out)
+    else:  # the kernel's order, a column at a time (a compile-only process does not load numba)
+        out = a2[:, :1] * b2[:1, :] if a2.shape[1] else np.zeros((a2.shape[0], b2.shape[1]))
+        for q in range(1, a2.shape[1]):
+            out = out + a2[:, q:q + 1] * b2[q:q + 1, :]
+    if a.ndim == 1 and b.ndim == 1:
+        return out[0, 0]
+    return out.reshape(a.shape[:-1] + b.shape[1:])
+
+
+@kernel
+def _matmul(a, b, out):
+    n, k = a.shape
+    m = b.shape[1]
+    for i in range(n):
+        for j in range(m):
+            acc = a[i, 0] * b[0, j] if k else 0.0
+            for q in range(1, k):
+                acc += a[i, q] * b[q, j]
+            out[i, j] = acc
+
+
+_OVER = {"exp": _over_exp, "log": _over_log, "log2": _over_log2, "atan": _over_atan, "tan": _over_tan,
+         "atan2": _over_atan2, "pow": _over_pow}
 
 @kernel
 def maximum(a, b):

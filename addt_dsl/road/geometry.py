@@ -25,6 +25,9 @@ from typing import Union
 
 import numpy as np
 
+from addt_dsl.kernel import atan, atan2, matmul
+from addt_dsl.kernel import pow  # the C library's (numpy's own may differ by machine)
+
 from .limits import MAX_GEOMETRY_TURN_RAD, RoadLimitError, beyond
 
 ArrayLike = Union[float, np.ndarray]
@@ -169,8 +172,8 @@ class Spiral:
         ds = np.asarray(s, dtype=float).ravel() - self.s0
         u = ds[:, None] * self._nodes[None, :]
         phase = self.curv_start * u + 0.5 * self.curv_rate * u * u
-        c = ds * (np.cos(phase) @ self._weights)
-        sn = ds * (np.sin(phase) @ self._weights)
+        c = ds * matmul(np.cos(phase), self._weights)
+        sn = ds * matmul(np.sin(phase), self._weights)
         ch, sh = math.cos(self.hdg0), math.sin(self.hdg0)
         x = self.x0 + ch * c - sh * sn
         y = self.y0 + sh * c + ch * sn
@@ -217,7 +220,7 @@ class Poly3:
 
     def _arc_length(self, u: np.ndarray) -> np.ndarray:
         w = u[:, None] * self._nodes[None, :]
-        return u * (np.sqrt(1.0 + self._dv(w) ** 2) @ self._weights)
+        return u * matmul(np.sqrt(1.0 + self._dv(w) ** 2), self._weights)
 
     def _u_of(self, ds: np.ndarray) -> np.ndarray:
         u = ds / math.sqrt(1.0 + self.b * self.b)
@@ -236,7 +239,7 @@ class Poly3:
         ch, sh = math.cos(self.hdg0), math.sin(self.hdg0)
         x = self.x0 + ch * u - sh * v
         y = self.y0 + sh * u + ch * v
-        h = self.hdg0 + np.arctan(self._dv(u))
+        h = self.hdg0 + atan.over(self._dv(u))
         if scalar:
             return float(x[0]), float(y[0]), float(h[0])
         shape = np.shape(s)
@@ -296,7 +299,7 @@ class ParamPoly3:
         ch, sh = math.cos(self.hdg0), math.sin(self.hdg0)
         x = self.x0 + ch * u - sh * v
         y = self.y0 + sh * u + ch * v
-        h = self.hdg0 + np.arctan2(dv, du)
+        h = self.hdg0 + atan2.over(dv, du)
         return _out(x, scalar), _out(y, scalar), _out(h, scalar)
 
     def curvature(self, s: ArrayLike):
@@ -307,7 +310,7 @@ class ParamPoly3:
         dv = self.bV + p * (2.0 * self.cV + 3.0 * self.dV * p)
         ddu = 2.0 * self.cU + 6.0 * self.dU * p
         ddv = 2.0 * self.cV + 6.0 * self.dV * p
-        k = (du * ddv - dv * ddu) / (du * du + dv * dv) ** 1.5
+        k = (du * ddv - dv * ddu) / pow.over(du * du + dv * dv, 1.5)
         return _out(k, scalar)
 
 

@@ -14,6 +14,8 @@ from typing import Optional
 
 import numpy as np
 
+from addt_dsl.kernel import atan2, matmul
+
 from .geometry import CubicProfile, Geometry
 from .lanes import DRIVING_TYPES, LaneSection, lanes_at_t_array
 from .limits import MAX_COORDINATE_M, MAX_ROAD_LENGTH_M, MAX_ROAD_SAMPLES, RoadLimitError, beyond
@@ -365,7 +367,7 @@ class Road:
         k = self.curvature(s_arr)
         xc = x - np.sin(h) * t
         yc = y + np.cos(h) * t
-        hc = h + np.arctan2(dt, 1.0 - k * t)
+        hc = h + atan2.over(dt, 1.0 - k * t)
         if scalar:
             return float(xc), float(yc), float(hc)
         return xc, yc, hc
@@ -447,10 +449,10 @@ class Road:
     def _project_chunk(self, px: np.ndarray, py: np.ndarray, n_candidates: int):
         ss, xy = self._sample_s, self._sample_xy
         m = len(ss)
-        # |p - q|² via one matrix product (BLAS); round-off ~1e-16 |p|² only affects which
-        # coarse samples become candidates, not the refined result.
+        # |p - q|² via one matrix product; round-off ~1e-16 |p|² only affects which coarse
+        # samples become candidates (`kernel.matmul`: the same ones on every machine).
         p = np.stack([px, py], axis=1)
-        d2 = (p * p).sum(1)[:, None] + (xy * xy).sum(1)[None, :] - 2.0 * (p @ xy.T)
+        d2 = (p * p).sum(1)[:, None] + (xy * xy).sum(1)[None, :] - 2.0 * matmul(p, xy.T)
         # Local minima of the sampled distance (ends included) are the candidate basins;
         # take the n_candidates nearest ones.
         d2_min = np.full_like(d2, np.inf)

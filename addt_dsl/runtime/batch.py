@@ -1,17 +1,17 @@
 """The engine: `execute_batch(specs) -> [RunResult]` steps many runs in lockstep.
 
 At each sample k every phase of the step (`phases.py`) runs over the runs still live:
-the batch's phases (pose, collisions, ego, agents) over all of them at once, the per-run
-phases between two of them run by run (record for every run; then environment to end of
-one run, of the next, ...); a run
-leaves the live set where it ends (an ego collision, `end when`, its last sample, a stack
+the batch's phases (pose, record, collisions, ego, agents) over all of them at once, the
+per-run phases between two of them run by run (environment to end of one run, of the
+next, ...); a run leaves the live set where it ends (an ego collision, `end when`, its last sample, a stack
 error, a non-finite ego state). A single run is a batch of one (`execute.execute`): there
 is no other loop. Runs share nothing but the code: each owns its state (`state.RunState`),
 its pybullet client and its random streams (seeded by its RunSpec), so a run's trace is the
 same bit for bit alone, beside any other runs, in any order (tests/sim/runtime/test_batch.py).
 The phases that are pure numerics run as arrays over the batch: the agents' poses and
-their car-following step (every live run's agents concatenated: `agents.Fleets`) and the
-ego's dynamics (`phases.ego`); behaviours, sensors, triggers and the stack step per run.
+their car-following step (every live run's agents concatenated: `agents.Fleets`), the
+egos' dynamics and recorded rows (every run's ego state a row of one block:
+`vehicle.StateBlock`); behaviours, sensors, triggers and the stack step per run.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from addt_dsl.runtime.judge import judge
 from addt_dsl.runtime.result import RunResult, spec_json
 from addt_dsl.runtime.state import RunState
 from addt_dsl.runtime.trace import Event, Trace, injection_count
+from addt_dsl.runtime.vehicle import StateBlock
 
 
 def execute_batch(specs: Sequence[RunSpec], keep_trace: bool = True) -> list[RunResult]:
@@ -97,6 +98,9 @@ def _loop(runs: list[RunState]) -> list[Trace]:
     """Step every run from time 0 until its end, an ego collision or a failure; their traces."""
     recs = [phases.Record(run) for run in runs]
     fleets = Fleets(runs)  # the agents of every run in one block of arrays
+    egos = StateBlock([run.ego for run in runs], [run.dt for run in runs])  # every ego's state: one block
+    for i, run in enumerate(runs):
+        run.ego_row = i
     live = list(zip(runs, recs))
     k = 0
     while live:
@@ -108,8 +112,7 @@ def _loop(runs: list[RunState]) -> list[Trace]:
         for run, t in zip(lruns, ts):
             phases.clock(run, t)
         phases.pose(lruns, ts, fleets)
-        for run, rec in live:
-            phases.record(run, rec, k)
+        phases.record(lruns, [rec for _, rec in live], k, egos)
         collided = phases.collisions(lruns, [rec for _, rec in live], k, ts)
         going = []
         for (run, rec), t, hit in zip(live, ts, collided):
@@ -134,7 +137,7 @@ def _loop(runs: list[RunState]) -> list[Trace]:
             sensed.append((run, rec))
             sensed_runs.append(run)
             sensed_ts.append(t)
-        moved = phases.ego(sensed_runs, sensed_ts)
+        moved = phases.ego(sensed_runs, sensed_ts, egos)
         if all(moved):
             live = sensed
         else:

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from addt_dsl.kernel import exp
 from addt_dsl.registry import ENVIRONMENTS
 from addt_dsl.specs import environment as S
 
@@ -49,7 +50,7 @@ def lidar_detected(dist_m: np.ndarray, range_m: float, extinction_per_m: float) 
     """Returns still above the detection threshold after two-way attenuation: the lidar
     equation P ~ rho exp(-2 alpha d) / d^2, with the threshold that makes `range_m` the
     clear-air range, keeps a return iff d^2 exp(2 alpha d) <= range_m^2."""
-    return dist_m * dist_m * np.exp(2.0 * extinction_per_m * dist_m) <= range_m * range_m
+    return dist_m * dist_m * exp.over(2.0 * extinction_per_m * dist_m) <= range_m * range_m
 
 
 def _attenuate_lidar(sensor, frame, extinction_per_m: float, range_sigma_m: float, rng):
@@ -70,7 +71,7 @@ def _fog_camera(frame, extinction_per_m: float, airlight: float):
     """Koschmieder's scattering: I = I0 exp(-alpha d) + A (1 - exp(-alpha d)) per pixel,
     with the depth the renderer gives."""
     image = frame.data["image"].astype(np.float32)
-    trans = np.exp(-extinction_per_m * frame.data["depth"].astype(np.float32))[..., None]
+    trans = exp.over(-extinction_per_m * frame.data["depth"].astype(np.float32)).astype(np.float32)[..., None]
     out = image * trans + airlight * (1.0 - trans)
     data = dict(frame.data, image=np.clip(np.rint(out), 0, 255).astype(np.uint8))
     return dataclasses.replace(frame, data=data)  # (what was true at the capture stays)

@@ -350,7 +350,7 @@ class FastRoad:
         i0 = max(0, int(s_lo / self._ds))
         i1 = min(len(self._s) - 1, int(math.ceil(s_hi / self._ds)))
         d = self._xy[i0:i1 + 1] - (x, y)
-        return float(np.min(np.einsum("ij,ij->i", d, d)))
+        return float(np.min(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]))
 
     def road_band_t(self, s: float) -> tuple[float, float]:
         """(t_min, t_max) [m] of the road's outermost lane borders at `s` (clamped to the road)."""

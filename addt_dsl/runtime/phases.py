@@ -27,8 +27,9 @@ them run by run (runs share nothing: each run sees its phases in this order):
               `agents.Fleets.step` can, else one by one)
 
 Each phase reads and writes the run's state; `Record` holds the recorded arrays. The
-phases that take the whole batch (`pose`, `collisions`, `ego`, `agents`) run array
-programs over it; the others step per run.
+phases that take the whole batch (`pose`, `record`, `collisions`, `ego`, `agents`) run
+array programs over it (the egos' states are rows of one block, `vehicle.StateBlock`);
+the others step per run.
 """
 
 from __future__ import annotations
@@ -45,10 +46,13 @@ from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
                                        advance_variable_script, condition_checker)
-from addt_dsl.runtime.vehicle import step as vehicle_step
+from addt_dsl.runtime.vehicle import HEADING, X, Y, StateBlock
 
 # The recorded fields of an actor, in the order of a step's row; clearance last.
 FIELDS = ("x", "y", "heading", "speed", "accel", "yaw_rate", "s", "t", "lane_offset", "steer", "clearance")
+# Where the fields the ego's state gives go in its row (`vehicle.StateBlock.records`).
+_EGO_COLUMNS = np.array([FIELDS.index(f) for f in ("x", "y", "heading", "speed", "accel", "yaw_rate", "steer")])
+_S, _T, _LANE_OFFSET = FIELDS.index("s"), FIELDS.index("t"), FIELDS.index("lane_offset")
 
 
 class Record:
@@ -114,19 +118,20 @@ def pose(runs: list[RunState], ts: list[float], fleets: Fleets) -> None:
 
 
 def _pose_ego(run: RunState, t: float) -> None:
-    dt, plan, ego_road = run.dt, run.bound, run.ego_road
-    e = run.ego
+    plan, ego_road, e = run.bound, run.ego_road, run.ego
+    if run.ego_agent is not None:
+        pose_scripted_ego(run, t, run.dt)
+    v = e.row.tolist()  # (one read of its row in the egos' block)
+    x, y, heading = v[X], v[Y], v[HEADING]
     if run.ego_agent is None:
-        run.ego_s, run.ego_t = ego_road.road.project(e.x, e.y, run.ego_s)
-    else:
-        pose_scripted_ego(run, t, dt)
+        run.ego_s, run.ego_t = ego_road.road.project(x, y, run.ego_s)
     if run.ego_s >= ego_road.road.length and not run.left_road:
         # Past the end of its road or route: `s` stays at the end, the map has nothing
         # beyond, and the run goes on off the map. Say so once (a route through the
         # junction keeps the ego on the network); from then on it is in no lane: its
         # `lane_offset` is unknown (NaN), which fails `stay in lane`.
         rx, ry, h = ego_road.road.reference_pose(run.ego_s)
-        if (e.x - rx) * math.cos(h) + (e.y - ry) * math.sin(h) > 0.5 * plan.ego.length_m:
+        if (x - rx) * math.cos(h) + (y - ry) * math.sin(h) > 0.5 * plan.ego.length_m:
             run.left_road = True
             run.events.append(Event(t, "left_road", {"actor": "ego", "road": plan.ego.road,
                                                      "s": round(float(run.ego_s), 3)}))
@@ -135,18 +140,27 @@ def _pose_ego(run: RunState, t: float) -> None:
     # The ego follows the road height; its dynamics feel the grade along its heading.
     z, grade = ego_road.elevation.at(run.ego_s)
     if grade:
-        grade *= math.cos(e.heading - ego_road.road.reference_pose(run.ego_s)[2])
-    run.ego_z, e.pitch, run.ego_grade = z, math.atan(grade), grade
-    run.physics.set_pose("ego", e.x, e.y, z + plan.ego.height_m / 2, e.heading, e.pitch)
+        grade *= math.cos(heading - ego_road.road.reference_pose(run.ego_s)[2])
+    pitch = math.atan(grade)
+    run.ego_z, e.pitch, run.ego_grade = z, pitch, grade
+    run.physics.set_pose("ego", x, y, z + plan.ego.height_m / 2, heading, pitch)
     if run.networked:
-        run.world_pose["ego"] = (e.x, e.y, e.heading)
+        run.world_pose["ego"] = (x, y, heading)
 
 
-def record(run: RunState, rec: Record, k: int) -> None:
-    """Every actor's fields at sample k but the clearance."""
-    e = run.ego
-    ego_row = (e.x, e.y, e.heading, e.speed, e.accel, e.yaw_rate, run.ego_s, run.ego_t,
-               math.nan if run.left_road else run.ego_road.road.lane_offset(run.ego_s, run.ego_t), e.steer)
+def record(runs: list[RunState], recs: list[Record], k: int, egos: StateBlock) -> None:
+    """Over the batch: every actor's fields at sample k but the clearance (the egos' from
+    their block at once)."""
+    ego_rows = egos.records([run.ego_row for run in runs], _EGO_COLUMNS, len(FIELDS) - 1)
+    for run, rec, ego_row in zip(runs, recs, ego_rows):
+        _record(run, rec, k, ego_row)
+
+
+def _record(run: RunState, rec: Record, k: int, ego_row: list[float]) -> None:
+    """A run's fields at sample k, the ego's state in `ego_row` already."""
+    s, t = run.ego_s, run.ego_t
+    ego_row[_S], ego_row[_T] = s, t
+    ego_row[_LANE_OFFSET] = math.nan if run.left_road else run.ego_road.road.lane_offset(s, t)
     fleet = run.fleet
     if fleet.rows is not None:  # agents posed one by one: the rows at once
         rec.block[k, :, :-1] = [ego_row, *fleet.rows]
@@ -176,7 +190,7 @@ def record(run: RunState, rec: Record, k: int) -> None:
     if run.lights is not None:  # (the conditions of this sample's steps read them)
         _red_margins(run, rec, k, k * run.dt)
     if run.signs is not None:  # `stop_sign(A)`: to the next stop sign not stopped for
-        rec.sign_margins["ego"][k] = run.signs.margin("ego", run.ego_s + 0.5 * run.ego_plan.length_m, e.speed,
+        rec.sign_margins["ego"][k] = run.signs.margin("ego", run.ego_s + 0.5 * run.ego_plan.length_m, run.ego.speed,
                                                       run.sign_stations["ego"])
         for a in run.agents:
             rec.sign_margins[a.name][k] = run.signs.margin(a.name, a.s + 0.5 * a.length_m, a.speed,
@@ -194,14 +208,14 @@ def _red_margins(run: RunState, rec: Record, k: int, t: float) -> None:
 def environment(run: RunState, rec: Record, k: int, t: float) -> None:
     """Environment steps (`at 3 s fog visibility 30 m`) fire on the state just recorded."""
     if run.environment_script is not None:
-        advance_environment_script(run, rec.rec, k, t)
+        advance_environment_script(run, rec, k, t)
 
 
 def variables(run: RunState, rec: Record, k: int, t: float) -> None:
     """The steps that set scenario variables fire on the state just recorded (a value set now
     is read from the next sample on: `record` took the values at sample k)."""
     if run.variable_script is not None:
-        advance_variable_script(run, rec.rec, k, t)
+        advance_variable_script(run, rec, k, t)
 
 
 def lights(run: RunState, rec: Record, k: int, t: float) -> None:
@@ -212,7 +226,7 @@ def lights(run: RunState, rec: Record, k: int, t: float) -> None:
     if run.lights is None:
         return
     if run.light_script is not None:
-        advance_light_script(run, rec.rec, k, t)
+        advance_light_script(run, rec, k, t)
         _red_margins(run, rec, k, t)
     for name in rec.lights:
         rec.lights[name][k] = run.lights.state(name, t)
@@ -241,7 +255,7 @@ def end(run: RunState, rec: Record, k: int, t: float) -> bool:
     """Whether `end when ...` holds on the state just recorded."""
     if run.end_script is None:
         return False
-    run.end_script.advance(t, condition_checker(run, rec.rec, k), lambda clause, time_s: None)
+    run.end_script.advance(t, condition_checker(run, rec, k), lambda clause, time_s: None)
     if run.end_script.done:
         run.events.append(Event(t, "end", {}))
         return True
@@ -250,18 +264,18 @@ def end(run: RunState, rec: Record, k: int, t: float) -> bool:
 
 def triggers(run: RunState, rec: Record, k: int, t: float) -> None:
     """Behaviours waiting for the first recorded state start; scripted steps fire."""
-    run.recorded = (rec.rec, k)  # live behaviour settings read the state just recorded
+    run.recorded = (rec, k)  # live behaviour settings read the state just recorded
     if run.deferred:
         for agent, clause in run.deferred:
             run._start_behavior(agent, clause, t)
         run.deferred.clear()
     if run.scripts:
-        advance_scripts(run, rec.rec, k, t)
+        advance_scripts(run, rec, k, t)
         if rec.steps:  # steps that fired now are started at this sample
             for name, code in run.step_states(t).items():
                 rec.steps[name][k] = code
     if run.faults.openers:  # `when C for W` faults: on the state as recorded at k, these steps included
-        run.faults.open_windows(t, condition_checker(run, rec.rec, k))
+        run.faults.open_windows(t, condition_checker(run, rec, k))
 
 
 def sense(run: RunState, t: float) -> None:
@@ -298,12 +312,12 @@ def stack(run: RunState, t: float) -> None:
     run.stack.step(t, run.dt)
 
 
-def ego(runs: list[RunState], ts: list[float]) -> list[bool]:
+def ego(runs: list[RunState], ts: list[float], egos: StateBlock) -> list[bool]:
     """Over the batch: commands due by now take effect; each ego moves over the step: the
-    dynamics of every driven ego at once (`vehicle.step`: one kernel call per step length), an OSI
-    stack's update, or, scripted, as agents do (a stack's commands are then recorded, not
-    applied). Whether each ego's state stayed finite."""
-    driven: dict[float, list[RunState]] = {}
+    dynamics of every driven ego at once (`vehicle.StateBlock.step`: one kernel call on the
+    egos' block), an OSI stack's update, or, scripted, as agents do (a stack's commands are
+    then recorded, not applied). Whether each ego's state stayed finite."""
+    driven: list[RunState] = []
     for run, t in zip(runs, ts):
         dt = run.dt
         queue = run.command_queue
@@ -313,17 +327,17 @@ def ego(runs: list[RunState], ts: list[float]) -> list[bool]:
         if run.ego_agent is None and run.move_host is not None:
             run.move_host(run.ego, t + dt)
         elif run.ego_agent is None:
-            driven.setdefault(dt, []).append(run)
+            driven.append(run)
         else:
             if run.leaders_stale and not run.networked:  # it may ask for its leader
                 run.leaders.rebuild()
                 run.leaders_stale = False
             run.move(run.ego_agent, t, dt)
             run.ego.vx, run.ego.accel = run.ego_agent.speed, run.ego_agent.accel
-    for dt, group in driven.items():
-        vehicle_step([r.ego for r in group], [r.vehicle_params for r in group], [r.command[0] for r in group],
-                     [r.command[1] for r in group], dt, [r.ego_grade for r in group])
-    return [math.isfinite(run.ego.x) and math.isfinite(run.ego.y) and math.isfinite(run.ego.vx) for run in runs]
+    if not runs:
+        return []
+    return egos.step([(r.ego_row, *r.command, r.ego_grade) for r in driven], [r.vehicle_params for r in driven],
+                     [run.ego_row for run in runs])
 
 
 def agents(runs: list[RunState], ts: list[float], fleets: Fleets) -> None:

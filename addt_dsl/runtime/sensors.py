@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from addt_dsl.kernel import kernel
+from addt_dsl.kernel import kernel, matmul
 from addt_dsl.registry import SENSORS
 from addt_dsl.specs import sensors as S
 
@@ -87,7 +87,7 @@ class Lidar(S.Lidar, Sensor):
 
     def capture(self, world, time_s):
         origin, rot = _sensor_world_pose(_ego_frame(world), self.actual)
-        dirs = self._dirs @ rot.T
+        dirs = matmul(self._dirs, rot.T)
         # Every ray from the one origin: a read-only view of it, row after row (no copy).
         origin = np.ascontiguousarray(origin, dtype=np.float64)
         starts = np.ndarray(dirs.shape, np.float64, origin, 0, (0, origin.itemsize))
@@ -161,8 +161,8 @@ class Imu(S.Imu, Sensor):
         rot = rotation(ext.roll, ext.pitch, ext.yaw)
         rng = world.rng(self.name)
         s = self.settings
-        accel = rot.T @ f + float(s["accel_bias"]) + rng.normal(0.0, float(s["accel_noise"]), 3)
-        gyro = rot.T @ omega + float(s["gyro_bias"]) + rng.normal(0.0, float(s["gyro_noise"]), 3)
+        accel = matmul(rot.T, f) + float(s["accel_bias"]) + rng.normal(0.0, float(s["accel_noise"]), 3)
+        gyro = matmul(rot.T, omega) + float(s["gyro_bias"]) + rng.normal(0.0, float(s["gyro_noise"]), 3)
         return Frame(self.name, time_s, {"accel": accel, "gyro": gyro})
 
 
@@ -235,7 +235,7 @@ def _look_at(origin: np.ndarray, rot: np.ndarray) -> list[float]:
     right = -left
     # Rows of the view rotation: camera x = right, y = up, z = -forward.
     m = np.array([right, up, -forward])
-    t = -m @ origin
+    t = matmul(-m, origin)
     return [m[0, 0], m[1, 0], m[2, 0], 0.0,
             m[0, 1], m[1, 1], m[2, 1], 0.0,
             m[0, 2], m[1, 2], m[2, 2], 0.0,
@@ -267,11 +267,11 @@ def _sensor_world_pose(vehicle_frame, ext: Extrinsics):
     # Vehicle pitch is nose-up positive (road grade); a rotation about the left-pointing
     # y axis is nose-down positive, as for mount pitch (a positive mount pitch looks down).
     rot_v = rotation(0.0, -pitch, heading)
-    origin = np.array([x, y, z]) + rot_v @ np.array([ext.x, ext.y, ext.z])
-    return origin, rot_v @ rotation(ext.roll, ext.pitch, ext.yaw)
+    origin = np.array([x, y, z]) + matmul(rot_v, np.array([ext.x, ext.y, ext.z]))
+    return origin, matmul(rot_v, rotation(ext.roll, ext.pitch, ext.yaw))
 
 
 def sensor_to_vehicle(points: np.ndarray, ext: Extrinsics) -> np.ndarray:
     """Map sensor-frame points into the vehicle frame with extrinsics `ext`."""
     rot = rotation(ext.roll, ext.pitch, ext.yaw)
-    return points @ rot.T + np.array([ext.x, ext.y, ext.z])
+    return matmul(points, rot.T) + np.array([ext.x, ext.y, ext.z])

@@ -14,7 +14,6 @@ import numpy as np
 
 from addt_dsl.plan import RunSpec
 from addt_dsl.registry import BEHAVIORS, ENVIRONMENTS, SENSORS, STACKS
-from addt_dsl.runtime import oracles
 from addt_dsl.runtime.actor_road import ActorPath, ActorRoad, PlainLeg, junction_legs
 from addt_dsl.runtime.agents import Fleet
 from addt_dsl.runtime.behaviors import AgentState, advance
@@ -29,10 +28,10 @@ from addt_dsl.runtime.roadmesh import build_scene
 from addt_dsl.road.roadspec import build_network
 from addt_dsl.runtime.script import Script
 from addt_dsl.runtime.signs import SignsRuntime, junction_rule, next_sign, sign_lines, stop_sign_lines
-from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED, STEP_WAITING, compute_signals
+from addt_dsl.runtime.signals import STEP_ENDED, STEP_STARTED, STEP_WAITING
 from addt_dsl.runtime.trace import Event
-from addt_dsl.runtime.vehicle import VehicleParams, VehicleState
-from addt_dsl.runtime.triggers import oracles_signals, snapshot_trace
+from addt_dsl.runtime.vehicle import HEADING, PITCH, VX, VY, X, Y, VehicleParams, VehicleState
+from addt_dsl.runtime.triggers import Conditions
 from addt_dsl.runtime.world import PhysicsWorld
 from addt_dsl.vehicles import VEHICLES
 
@@ -252,7 +251,7 @@ class RunState:
         self.command_queue: list[tuple[float, float, float]] = []
         self.command = (0.0, 0.0)
         self._rngs: dict[str, np.random.Generator] = {}
-        self._live_snapshot = None  # (step, state) that live behaviour settings read
+        self.conditions = Conditions(self)  # what trigger conditions and live settings read
         self.behavior_version = 0  # behaviours started so far
         self.released: set[str] = set()  # actors whose completed speed behaviour let go (`move`)
 
@@ -270,6 +269,7 @@ class RunState:
         self.vehicle_params = VehicleParams.for_vehicle(ego.mass_kg, ego.wheelbase_m, ego.mu)
         self.ego_mu = ego.mu  # the declared friction; `environment { road friction F }` scales it
         self.ego = VehicleState(x, y, h, ego.speed)
+        self.ego_row = 0  # the ego's row in its batch's block of ego states (`batch._loop`, `vehicle.StateBlock`)
         self.ego_z, self.ego.pitch = 0.0, 0.0
         self.ego_s, self.ego_t = s0, t0
         self.physics.add_box("ego", ego.length_m, ego.width_m, ego.height_m)
@@ -532,13 +532,13 @@ class RunState:
         return self._rngs[name]
 
     def ego_pose(self):
-        e = self.ego
-        return e.x, e.y, e.heading, e.speed
+        v = self.ego.row.tolist()  # (one read of its row: cheaper than four attributes)
+        return v[X], v[Y], v[HEADING], math.hypot(v[VX], v[VY])
 
     def ego_frame(self):
         """(x, y, z of the road under the ego, heading, pitch nose-up) for sensor mounts."""
-        e = self.ego
-        return e.x, e.y, self.ego_z, e.heading, e.pitch
+        v = self.ego.row.tolist()
+        return v[X], v[Y], self.ego_z, v[HEADING], v[PITCH]
 
     def ego_state(self):
         return self.ego
@@ -634,13 +634,7 @@ class RunState:
     # ---- behaviours
     def live_value(self, expr) -> float:
         """A live behaviour setting (`speed(ego) + 5 km/h`) on the state recorded this step."""
-        rec, k = self.recorded
-        if self._live_snapshot is None or self._live_snapshot[0] != k:
-            # Without step states: whether a step ended can itself ask a live setting (a
-            # cruise that follows `speed(other)` ends at that speed), which would recurse.
-            self._live_snapshot = (k, snapshot_trace(self, rec, k, with_steps=False))
-        trace = self._live_snapshot[1]
-        return float(oracles.evaluate(expr, compute_signals(trace, oracles_signals(expr)), self.dt)[0])
+        return self.conditions.live_value(expr, *self.recorded)
 
     def _start_behavior(self, agent: AgentState, clause: BoundClause, time_s: float):
         cls = BEHAVIORS.implementation(clause.name)

@@ -12,18 +12,106 @@ from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 
 
 def condition_checker(run, rec, k: int):
-    """`holds(condition)` on the state recorded at sample k; the trace snapshot is built
-    once, at the first condition asked for."""
+    """`holds(condition)` on the state recorded at sample k (`rec`: the run's
+    `phases.Record`); the snapshot is taken at the first condition asked for."""
     snapshot = None
 
     def holds(condition) -> bool:
         nonlocal snapshot
+        conditions = run.conditions
         if snapshot is None:
-            snapshot = snapshot_trace(run, rec, k)
-        sig = compute_signals(snapshot, oracles_signals(condition))
-        return bool(oracles.satisfied(condition, sig, run.dt))
+            snapshot = conditions.snapshot(rec, k)
+        formula = conditions.formula(condition)
+        return bool(oracles.satisfied(formula, compute_signals(snapshot, formula.signals), run.dt))
 
     return holds
+
+
+class Conditions:
+    """What a run's trigger conditions and live settings read, kept over the run: each
+    formula checked once (`oracles.prepare`: its sort and signals), and two one-sample
+    `Trace` snapshots of the recorded state (with the named steps' states, for conditions;
+    without, for live settings: whether a step ended can itself ask a live setting).
+
+    A snapshot is one `Trace` whose actors' series are views of a buffer: taking it at a
+    sample copies that sample's row of the record into the buffer (building the tracks
+    anew cost ~11 us a condition, asked at every sample until it fires). A snapshot taken
+    again replaces the last one's values: a condition checker takes it at its first
+    condition and reads it for the rest of its phase."""
+
+    def __init__(self, run):
+        self.run = run
+        self._formulas: dict[int, tuple[object, oracles.Formula]] = {}  # id -> (expr kept alive, formula)
+        self._snapshots: dict[bool, _Snapshot] = {}
+
+    def formula(self, expr) -> oracles.Formula:
+        got = self._formulas.get(id(expr))
+        if got is None or got[0] is not expr:
+            got = self._formulas[id(expr)] = (expr, oracles.prepare(expr))
+        return got[1]
+
+    def snapshot(self, rec, k: int, with_steps: bool = True) -> Trace:
+        snap = self._snapshots.get(with_steps)
+        if snap is None or snap.rec is not rec:
+            snap = self._snapshots[with_steps] = _Snapshot(self.run, rec, with_steps)
+        return snap.take(k)
+
+    def live_value(self, expr, rec, k: int) -> float:
+        """A live setting's value on the state recorded at sample k (no step states)."""
+        formula = self.formula(expr)
+        snap = self._snapshots.get(False)
+        if snap is None or snap.rec is not rec or snap.k != k:
+            self.snapshot(rec, k, with_steps=False)
+            snap = self._snapshots[False]
+        return float(oracles.evaluate(formula, compute_signals(snap.trace, formula.signals), self.run.dt)[0])
+
+
+class _Snapshot:
+    """One reused one-sample `Trace` of a run's record (`Conditions`)."""
+
+    def __init__(self, run, rec, with_steps: bool):
+        self.run, self.rec, self.with_steps = run, rec, with_steps
+        self.k = -1
+        sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m)}
+        sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
+        frames = {"ego": run.ego_road.road_id}
+        frames.update({a.name: run.agent_roads[a.name].road_id for a in run.agents})
+        fields = tuple(rec.rec[rec.names[0]])
+        # [actor, field, 1]: each series a one-sample view; a row of the record's block goes in at once.
+        self._rows = np.zeros((len(rec.names), len(fields), 1))
+        actors = {name: ActorTrack(name, *sizes[name], **dict(zip(fields, self._rows[i])), frame=frames[name])
+                  for i, name in enumerate(rec.names)}
+        self._latency = {n: np.zeros(1) for n in run.stack.latency}
+        self._lights = {n: np.zeros(1) for n in run.lights.programs} if run.lights else {}
+        self.trace = Trace(run.dt, np.zeros(1), actors, self._latency, lights=self._lights,
+                           object_count=np.zeros(1))
+
+    def take(self, k: int) -> Trace:
+        run, rec, trace = self.run, self.rec, self.trace
+        self.k = k
+        self._rows[:, :, 0] = rec.block[k]
+        t = k * run.dt
+        trace.time[0] = t
+        for n, v in run.stack.latency.items():
+            series = self._latency.get(n)
+            if series is None:
+                series = self._latency[n] = np.zeros(1)
+            series[0] = v
+        for n, v in self._lights.items():
+            v[0] = run.lights.state(n, t)
+        trace.object_count[0] = float(run.stack.objects_seen)  # (as `outputs` records it at k)
+        trace.red_margin = {n: v[k:k + 1] for n, v in run.red_margins.items()}
+        trace.stop_margin = {n: v[k:k + 1] for n, v in run.sign_margins.items()}
+        trace.road_edge = {n: v[k:k + 1] for n, v in run.edges.items()}
+        trace.road_end = {n: v[k:k + 1] for n, v in run.ends.items()}
+        trace.variables = {n: v[k:k + 1] for n, v in run.variable_records.items()}
+        trace.wrong_way = {n: v[k:k + 1] for n, v in run.wrong_ways.items()}
+        trace.off_lanes = {n: v[k:k + 1] for n, v in run.offs.items()}
+        if run.lane_ids:  # `lane_id(A)` reads the lanes now
+            trace.lanes = {name: np.array([run.lane_number(name)]) for name in rec.names}
+        if run.named_steps and self.with_steps:  # `when ended(lead.brake_hard)` reads the states now
+            trace.steps = {name: np.array([code], dtype=np.int8) for name, code in run.step_states(t).items()}
+        return trace
 
 
 def advance_scripts(run, rec, k: int, t_now: float) -> None:
@@ -77,36 +165,3 @@ def advance_environment_script(run, rec, k: int, t_now: float) -> None:
     run.environment_script.advance(t_now, condition_checker(run, rec, k), start)
     if run.environment_script.done:
         run.environment_script = None
-
-
-def oracles_signals(expr) -> set[str]:
-    from addt_dsl.expr import signals_used
-
-    return signals_used(expr)
-
-
-def snapshot_trace(run, rec, k: int, with_steps: bool = True) -> Trace:
-    actors = {}
-    sizes = {"ego": (run.ego_plan.length_m, run.ego_plan.width_m)}
-    sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
-    frames = {"ego": run.ego_road.road_id}
-    frames.update({a.name: run.agent_roads[a.name].road_id for a in run.agents})
-    for name, r in rec.items():
-        actors[name] = ActorTrack(name, *sizes[name], **{f: v[k:k + 1] for f, v in r.items()}, frame=frames[name])
-    lat = {n: np.array([v]) for n, v in run.stack.latency.items()}
-    t = k * run.dt
-    lights = {n: np.array([run.lights.state(n, t)]) for n in run.lights.programs} if run.lights else {}
-    trace = Trace(run.dt, np.array([t]), actors, lat, lights=lights,
-                  red_margin={n: v[k:k + 1] for n, v in run.red_margins.items()},
-                  stop_margin={n: v[k:k + 1] for n, v in run.sign_margins.items()},
-                  object_count=np.array([float(run.stack.objects_seen)]),  # (as `outputs` records it at k)
-                  road_edge={n: v[k:k + 1] for n, v in run.edges.items()},
-                  road_end={n: v[k:k + 1] for n, v in run.ends.items()},
-                  variables={n: v[k:k + 1] for n, v in run.variable_records.items()},
-                  wrong_way={n: v[k:k + 1] for n, v in run.wrong_ways.items()},
-                  off_lanes={n: v[k:k + 1] for n, v in run.offs.items()})
-    if run.lane_ids:  # `lane_id(A)` reads the lanes now
-        trace.lanes = {name: np.array([run.lane_number(name)]) for name in rec}
-    if run.named_steps and with_steps:  # `when ended(lead.brake_hard)` reads the states now
-        trace.steps = {name: np.array([code], dtype=np.int8) for name, code in run.step_states(t).items()}
-    return trace

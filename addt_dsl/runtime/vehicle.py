@@ -90,38 +90,83 @@ class VehicleParams:
         return cls(**values)
 
 
-@dataclass
+STATE_FIELDS = ("x", "y", "heading", "vx", "vy", "yaw_rate", "yaw_acc", "steer", "accel_cmd_actual", "accel",
+                "ax_specific", "ay", "pitch", "slip_front", "slip_rear")
+_STATE_DOCS = {
+    "x": "[m]",
+    "y": "[m]",
+    "heading": "[rad]",
+    "vx": "longitudinal speed in the body frame [m/s]",
+    "vy": "lateral speed in the body frame [m/s]",
+    "yaw_rate": "[rad/s]",
+    "yaw_acc": "[rad/s^2]",
+    "steer": "actual front wheel angle [rad]",
+    "accel_cmd_actual": "drive/brake actuator output [m/s^2]",
+    "accel": "realised longitudinal acceleration dvx/dt [m/s^2]",
+    # What an accelerometer reads along the body x axis, and what shifts load between the axles.
+    "ax_specific": "longitudinal specific force (tyre and drag forces / mass) [m/s^2]",
+    "ay": "lateral acceleration of the cg in the body frame (dvy/dt + vx*r) [m/s^2]",
+    "pitch": "road grade angle under the vehicle, nose up positive [rad]",
+    "slip_front": "front axle slip angle [rad]",
+    "slip_rear": "rear axle slip angle [rad]",
+}
+
+
 class VehicleState:
-    x: float
-    y: float
-    heading: float
-    vx: float  # longitudinal speed in the body frame [m/s]
-    vy: float = 0.0  # lateral speed in the body frame [m/s]
-    yaw_rate: float = 0.0
-    yaw_acc: float = 0.0  # [rad/s^2]
-    steer: float = 0.0  # actual front wheel angle [rad]
-    accel_cmd_actual: float = 0.0  # drive/brake actuator output [m/s^2]
-    accel: float = 0.0  # realised longitudinal acceleration dvx/dt [m/s^2]
-    # Longitudinal specific force (tyre and drag forces / mass) [m/s^2]: what an
-    # accelerometer reads along the body x axis, and what shifts load between the axles.
-    ax_specific: float = 0.0
-    ay: float = 0.0  # lateral acceleration of the cg in the body frame (dvy/dt + vx*r) [m/s^2]
-    pitch: float = 0.0  # road grade angle under the vehicle, nose up positive [rad]
-    slip_front: float = 0.0  # front axle slip angle [rad]
-    slip_rear: float = 0.0  # rear axle slip angle [rad]
+    """The dynamic state of a vehicle: its fields (`STATE_FIELDS`, SI units) are the float64
+    columns of `row`, its own array or a row of a batch's block (`StateBlock`: the batch
+    steps every row in one kernel call, and reads them as arrays); the attributes read and
+    write that row."""
+
+    __slots__ = ("row",)
+
+    def __init__(self, x: float, y: float, heading: float, vx: float, vy: float = 0.0, yaw_rate: float = 0.0,
+                 yaw_acc: float = 0.0, steer: float = 0.0, accel_cmd_actual: float = 0.0, accel: float = 0.0,
+                 ax_specific: float = 0.0, ay: float = 0.0, pitch: float = 0.0, slip_front: float = 0.0,
+                 slip_rear: float = 0.0):
+        self.row = np.array([x, y, heading, vx, vy, yaw_rate, yaw_acc, steer, accel_cmd_actual, accel, ax_specific,
+                             ay, pitch, slip_front, slip_rear], dtype=np.float64)
 
     @property
     def speed(self) -> float:
-        return math.hypot(self.vx, self.vy)
+        row = self.row
+        return math.hypot(row.item(VX), row.item(VY))
+
+    def values(self) -> list[float]:
+        """The fields in `STATE_FIELDS` order."""
+        return self.row.tolist()
+
+    def __eq__(self, other) -> bool:
+        if other.__class__ is not self.__class__:
+            return NotImplemented
+        return self.row.tolist() == other.row.tolist()
+
+    __hash__ = None  # (mutable, as the dataclass it was)
+
+    def __repr__(self) -> str:
+        return "VehicleState(" + ", ".join(f"{f}={v!r}" for f, v in zip(STATE_FIELDS, self.row.tolist())) + ")"
 
 
-STATE_FIELDS = tuple(f.name for f in dataclasses.fields(VehicleState))
+def _field(column: int, doc: str) -> property:
+    def get(self) -> float:
+        return self.row.item(column)
+
+    def put(self, value: float) -> None:
+        self.row[column] = value
+
+    return property(get, put, doc=doc)
+
+
+for _column, _name in enumerate(STATE_FIELDS):
+    setattr(VehicleState, _name, _field(_column, _STATE_DOCS[_name]))
+del _column, _name
+
+
 PARAM_FIELDS = tuple(f.name for f in dataclasses.fields(VehicleParams))
-_state_row = operator.attrgetter(*STATE_FIELDS)
 _param_row = operator.attrgetter(*PARAM_FIELDS)
 
 
-# Column of each field in the rows `step` hands its kernel.
+# Column of each field in a state row and a parameter row.
 _ST = {f: i for i, f in enumerate(STATE_FIELDS)}
 _PA = {f: i for i, f in enumerate(PARAM_FIELDS)}
 N_STATE, N_PARAM = len(STATE_FIELDS), len(PARAM_FIELDS)
@@ -135,24 +180,93 @@ X, Y, HEADING, VX, VY, YAW_RATE, YAW_ACC, STEER, ACCEL_CMD, ACCEL, AX_SPECIFIC, 
                      "steer_lag_s", "accel_lag_s", "jerk_limit", "max_drive_accel", "drive_front_share", "drag"))
 
 
+def substeps(dt: float) -> tuple[int, float]:
+    """(count, length [s]) of the integration substeps of a step of `dt` [s]: at most `MAX_SUBSTEP_S` each."""
+    n = max(1, math.ceil(dt / MAX_SUBSTEP_S - 1e-9))
+    return n, dt / n
+
+
 def step(states, params, steer_cmd, accel_cmd, dt: float, grade=0.0) -> None:
     """Advance each vehicle state in place by `dt` [s] under its steering [rad] and
     acceleration [m/s^2] commands: one state and its numbers, or sequences of them (a batch
     of runs: one compiled call over them, each run's bits the same whatever its batch).
 
     `grade` is the road slope dz/ds under the vehicle (uphill positive): gravity acts
-    along it and the normal load shrinks by its cosine.
+    along it and the normal load shrinks by its cosine. States in a `StateBlock` step there
+    without a copy (`StateBlock.step`); this copies the states' rows in and out.
     """
-    n = max(1, math.ceil(dt / MAX_SUBSTEP_S - 1e-9))
     if isinstance(states, VehicleState):
         states, params, steer_cmd, accel_cmd, grade = [states], [params], [steer_cmd], [accel_cmd], [grade]
-    # One array per call (each array a numba call unboxes costs ~0.3 us): per run its state,
-    # its parameters, then steer, accel and grade.
-    rows = np.array([_state_row(v) + _param_row(q) + (a, b, c)
-                     for v, q, a, b, c in zip(states, params, steer_cmd, accel_cmd, grade)], dtype=float)
-    _step_rows(rows, n, dt / n)
-    for v, row in zip(states, rows[:, :N_STATE].tolist()):
-        v.__dict__.update(zip(STATE_FIELDS, row))
+    k = len(states)
+    n, h = substeps(dt)
+    block = np.array([v.row for v in states], dtype=np.float64).reshape(k, N_STATE)
+    inputs = np.array([(i, a, b, c) for i, (a, b, c) in enumerate(zip(steer_cmd, accel_cmd, grade))],
+                      dtype=np.float64).reshape(k, 4)
+    _step_block(block, np.array([_param_row(q) for q in params], dtype=np.float64).reshape(k, N_PARAM),
+                np.full(k, n, dtype=np.int64), np.full(k, h), inputs, np.zeros(0, dtype=np.int64),
+                np.zeros(0, dtype=np.bool_))
+    for v, row in zip(states, block):
+        v.row[:] = row
+
+
+class StateBlock:
+    """The states of a batch's vehicles in one (vehicles, `STATE_FIELDS`) float64 block: each
+    `VehicleState` given is made a view of its row (in the order given), so that the batch
+    steps any of them in one kernel call (`step`) and reads their fields as arrays
+    (`records`, `step`'s finite flags), while each state's attributes still read and write its row."""
+
+    def __init__(self, states: list[VehicleState], dts: list[float]):
+        k = len(states)
+        self.states = np.array([v.row for v in states], dtype=np.float64).reshape(k, N_STATE)
+        for v, row in zip(states, self.states):
+            v.row = row
+        self.params = np.zeros((k, N_PARAM))
+        self._params_of: list = [None] * k  # the VehicleParams each params row holds
+        sub = [substeps(dt) for dt in dts]  # (each row's step length is its run's, fixed)
+        self.n = np.array([n for n, _ in sub], dtype=np.int64)
+        self.h = np.array([h for _, h in sub], dtype=np.float64)
+        self._rows: list[int] = []  # (`_index`)
+        self._rows_a = np.zeros(0, dtype=np.int64)
+        self._out: dict[int, np.ndarray] = {}  # `records`' output by width
+        self._finite = np.zeros(k, dtype=np.bool_)  # `step`'s finite flags
+
+    def step(self, inputs: list[tuple[int, float, float, float]], params: list[VehicleParams],
+             rows: list[int]) -> list[bool]:
+        """Advance states in place by their step: each of `inputs` (block row, steering [rad],
+        acceleration [m/s^2], grade [-]) under its parameters (`params`), as `step` does.
+        Then whether the x, y and vx of each of block rows `rows` are finite."""
+        held = self._params_of
+        for (i, *_), q in zip(inputs, params):
+            if held[i] is not q:  # (a new VehicleParams: the road's friction changed)
+                self.params[i] = _param_row(q)
+                held[i] = q
+        _step_block(self.states, self.params, self.n, self.h, np.array(inputs, dtype=np.float64).reshape(-1, 4),
+                    self._index(rows), self._finite)
+        return self._finite[:len(rows)].tolist()
+
+    def records(self, rows: list[int], columns: np.ndarray, width: int) -> list[list[float]]:
+        """A recorded row of `width` fields of each of block rows `rows`: its x, y, heading,
+        speed, accel, yaw rate and steer in `columns` (in that order), 0.0 elsewhere."""
+        out = self._out.get(width)
+        if out is None:
+            out = self._out[width] = np.zeros((len(self.states), width))
+        _records(self.states, self._index(rows), columns, out)
+        return out[:len(rows)].tolist()
+
+    def _index(self, rows: list[int]) -> np.ndarray:
+        """`rows` as an array (the last one asked, the batch's live runs, changes seldom)."""
+        if rows != self._rows:
+            self._rows, self._rows_a = list(rows), np.array(rows, dtype=np.int64).reshape(-1)
+        return self._rows_a
+
+
+@kernel
+def _records(states, rows, columns, out):
+    for j in range(rows.shape[0]):
+        st = states[rows[j]]
+        out[j, columns[0]], out[j, columns[1]], out[j, columns[2]] = st[X], st[Y], st[HEADING]
+        out[j, columns[3]] = hypot(st[VX], st[VY])
+        out[j, columns[4]], out[j, columns[5]], out[j, columns[6]] = st[ACCEL], st[YAW_RATE], st[STEER]
 
 
 @kernel
@@ -166,16 +280,19 @@ def _fmax(a, b):
 
 
 @kernel
-def _step_rows(rows, n, h):
-    """`n` substeps of `h` [s] of each row's state (its first `N_STATE` columns,
-    `STATE_FIELDS`) under its parameters (the next `N_PARAM`, `PARAM_FIELDS`), steering,
-    acceleration and grade (the last three)."""
-    for r in range(rows.shape[0]):
-        row = rows[r]
-        st, p = row[:N_STATE], row[N_STATE:N_STATE + N_PARAM]
-        steer, accel, grade = row[N_STATE + N_PARAM], row[N_STATE + N_PARAM + 1], row[N_STATE + N_PARAM + 2]
-        for _ in range(n):
-            _substep(st, p, steer, accel, h, grade)
+def _step_block(states, params, n, h, inputs, rows, finite):
+    """Each of `inputs`' rows (block row, steering, acceleration, grade): `n[r]` substeps of
+    `h[r]` [s] of state row r of `states` (`STATE_FIELDS`) under its parameters (row r of
+    `params`, `PARAM_FIELDS`). Then finite[j]: whether row rows[j]'s x, y and vx are finite."""
+    for j in range(inputs.shape[0]):
+        r = int(inputs[j, 0])
+        st, p = states[r], params[r]
+        steer, accel, grade = inputs[j, 1], inputs[j, 2], inputs[j, 3]
+        for _ in range(n[r]):
+            _substep(st, p, steer, accel, h[r], grade)
+    for j in range(rows.shape[0]):
+        st = states[rows[j]]
+        finite[j] = math.isfinite(st[X]) and math.isfinite(st[Y]) and math.isfinite(st[VX])
 
 
 @kernel

@@ -15,7 +15,7 @@ import time as _time
 
 import numpy as np
 
-from addt_dsl.kernel import hypot, kernel
+from addt_dsl.kernel import hypot, kernel, tan
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.registry import STACKS
 from addt_dsl.runtime.fastroad import project_boxed, reference_pose_at
@@ -569,7 +569,7 @@ def lidar_sight(settings: dict, mount, min_hits: int) -> float:
     elev = (np.linspace(-0.5, 0.5, channels) * float(settings["vfov"]) if channels > 1 else np.zeros(1)) \
         - float(mount.pitch)
     d = np.arange(1.0, float(settings["range"]) + 0.5, 0.5)
-    z = float(mount.z) + d[:, None] * np.tan(elev[None, :])
+    z = float(mount.z) + d[:, None] * tan.over(elev[None, :])
     on_box = ((z > 0.0) & (z < SIGHT_TARGET_HEIGHT_M)).sum(axis=1)
     hits = on_box * np.floor(SIGHT_TARGET_WIDTH_M / (d * spacing))
     seen = np.nonzero(hits >= min_hits)[0]

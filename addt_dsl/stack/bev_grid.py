@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import kernel, maximum
+from addt_dsl.kernel import atan2, exp, kernel, log2, matmul, maximum
 
 # The shipped detectors' sensors and tensor sites: the compiler checks against them too.
 from addt_dsl.specs.stacks import (CAMERA_BEV_SITES, CAMERA_BEV_TENSOR_SITES, DETECTOR_LIDAR,  # noqa: F401
@@ -143,7 +143,7 @@ def build_grid_region(points_vehicle: np.ndarray, sensor_xy: tuple[float, float]
     views[4, cells] = np.bincount(inv, rx / rnorm, m) / n
     views[5, cells] = np.bincount(inv, ry / rnorm, m) / n
     views[6, cells] = np.bincount(inv, rnorm, m) / n / RANGE_SCALE_M
-    views[7, cells] = np.log2(1.0 + n) / COUNT_LOG2_SCALE
+    views[7, cells] = log2.over(1.0 + n) / COUNT_LOG2_SCALE
     # `cells` is sorted: its first and last give the rows (flat = row * ny + column).
     return grid, (int(cells[0]) // spec.ny, int(cells[-1]) // spec.ny + 1, int(iy.min()), int(iy.max()) + 1)
 
@@ -158,7 +158,7 @@ def sensor_points_to_vehicle(points_sensor: np.ndarray, ext) -> np.ndarray:
         [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
         [-sp, cp * sr, cp * cr],
     ])
-    return points_sensor @ rot.T + np.array([ext.x, ext.y, ext.z])
+    return matmul(points_sensor, rot.T) + np.array([ext.x, ext.y, ext.z])
 
 
 # ---------------------------------------------------------------- targets and decoding
@@ -268,9 +268,9 @@ def _boxes(heat, reg, i, j, conf, spec, max_overlap_m):
     r = reg[:, i, j].astype(np.float64)
     x = spec.x_min + (i + 0.5 + r[0]) * c
     y = spec.y_min + (j + 0.5 + r[1]) * c
-    heading = 0.5 * np.arctan2(r[4], r[5])  # the box axis, in [-π/2, π/2]
+    heading = 0.5 * atan2.over(r[4], r[5])  # the box axis, in [-π/2, π/2]
     cls = r[BOX_CHANNELS:].argmax(axis=0).astype(np.float64) if len(r) > BOX_CHANNELS else np.full(len(i), -1.0)
-    boxes = np.stack([x, y, heading, np.exp(r[2]), np.exp(r[3]), conf.astype(np.float64), cls], axis=1)
+    boxes = np.stack([x, y, heading, exp.over(r[2]), exp.over(r[3]), conf.astype(np.float64), cls], axis=1)
     if max_overlap_m is not None and len(boxes) > 1:
         boxes = boxes[_keep_non_overlapping(boxes, max_overlap_m)]
     return boxes

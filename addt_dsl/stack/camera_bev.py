@@ -29,6 +29,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from addt_dsl.kernel import exp
 from addt_dsl.lru import LruCache
 from addt_dsl.stack.bev_grid import CAMERA_BEV_SITES, CLASSES, GRID, decode
 from addt_dsl.stack.learned import SHAPES_CACHE_SIZE, BevDetector, boxes_to_world, load_weights, one_intra_op_thread
@@ -144,7 +145,7 @@ class CameraBevPerception(ConvTensorSites):
         found = decode(heat, box, self._logit_threshold)
         if len(found):
             with np.errstate(over="ignore"):
-                found[:, 5] = 1.0 / (1.0 + np.exp(-found[:, 5]))
+                found[:, 5] = 1.0 / (1.0 + exp.over(-found[:, 5]))
         return found
 
     # ---- tensor fault sites (ConvTensorSites): the shape of a site's output

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from addt_dsl.kernel import hypot, kernel
+from addt_dsl.kernel import atan2, exp, hypot, kernel, log2, matmul
 from addt_dsl.specs.sensors import EXTRINSICS
 from addt_dsl.stack.bev_grid import BOX_CHANNELS, CLASSES, GRID, GridSpec
 
@@ -74,8 +74,8 @@ def cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], boxes: 
     p = np.ascontiguousarray(p, dtype=np.float64)
     sx, sy = float(sensor_xy[0]), float(sensor_xy[1])
     gx, gy = p[:, 0] - sx, p[:, 1] - sy
-    elevation = np.arctan2(p[:, 2] - MOUNT_Z_M, np.hypot(gx, gy))  # [rad] seen from the sensor
-    azimuth = np.arctan2(gy, gx)
+    elevation = atan2.over(p[:, 2] - MOUNT_Z_M, np.hypot(gx, gy))  # [rad] seen from the sensor
+    azimuth = atan2.over(gy, gx)
     counts = np.zeros((k_boxes, 8), dtype=np.int64)  # returns, 5 beams, head cell i, j
     shifted = np.zeros((k_boxes, box_map.shape[0] - BOX_CHANNELS))  # class logits less their largest
     unit = np.zeros((k_boxes, 2))  # the line of sight to the centroid
@@ -87,16 +87,16 @@ def cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], boxes: 
     kv = np.flatnonzero(valid)
     if len(kv) == 0:
         return feats, valid
-    prob = np.exp(shifted[kv])
+    prob = exp.over(shifted[kv])
     prob /= prob.sum(axis=1, keepdims=True)
     feats[kv, 13:13 + prob.shape[1]] = prob
-    feats[kv, 21:26] = np.log2(1 + counts[kv, 1:6]) / 5
+    feats[kv, 21:26] = log2.over(1 + counts[kv, 1:6]) / 5
     two = kv[counts[kv, 0] >= 2]
     if len(two):
         cov = np.empty((len(two), 2, 2))
         for row, (n, at) in enumerate(zip(counts[two, 0].tolist(), offset[two].tolist())):
             x = centred[at:at + 2 * n].reshape(2, n)
-            c = np.dot(x, x.T)  # np.cov's product and scale (1 / (n - 1)), bit for bit
+            c = matmul(x, x.T)  # np.cov's product and scale (1 / (n - 1)), in one order on any machine
             c *= 1.0 / (n - 1)
             cov[row] = c
         spread, axes = np.linalg.eigh(cov)  # stacked: each matrix's bits as alone (test)

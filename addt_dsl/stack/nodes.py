@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import Libm, hypot, kernel, pow  # (pow: the C library's, as CPython's `**`)
+from addt_dsl.kernel import Libm, hypot, kernel, matmul, pow  # (pow: the C library's, as CPython's `**`)
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.runtime.fastroad import curvature_at, reference_pose_at
 from addt_dsl.specs import stacks as S
@@ -122,8 +122,8 @@ class GroundTruthPerception:
             # World → vehicle frame → actual sensor frame → vehicle frame via nominal calibration.
             dx, dy = gt.x - x, gt.y - y
             pv = np.array([cos_h * dx + sin_h * dy, -sin_h * dx + cos_h * dy, 0.8])
-            ps = rot_a.T @ (pv - np.array([actual.x, actual.y, actual.z]))
-            pn = rot_n @ ps + np.array([nominal.x, nominal.y, nominal.z])
+            ps = matmul(rot_a.T, pv - np.array([actual.x, actual.y, actual.z]))
+            pn = matmul(rot_n, ps) + np.array([nominal.x, nominal.y, nominal.z])
             yaw_err = (actual.yaw - nominal.yaw)
             vx_w = gt.speed * math.cos(gt.heading)
             vy_w = gt.speed * math.sin(gt.heading)

@@ -26,6 +26,7 @@ from collections import deque
 
 import numpy as np
 
+from addt_dsl.kernel import matmul
 from addt_dsl.stack import osi_mapping as M
 from addt_dsl.stack import osi_transport as T
 from addt_dsl.stack.bev import StackError
@@ -237,8 +238,8 @@ def _as_mounted(o: M.ObjectState, host: M.ObjectState, sensor) -> M.ObjectState:
     c, s = math.cos(host.yaw), math.sin(host.yaw)
     dx, dy = o.x - host.x, o.y - host.y
     pv = np.array([c * dx + s * dy, -s * dx + c * dy, 0.8])
-    ps = rotation(actual.roll, actual.pitch, actual.yaw).T @ (pv - np.array([actual.x, actual.y, actual.z]))
-    pn = rotation(nominal.roll, nominal.pitch, nominal.yaw) @ ps + np.array([nominal.x, nominal.y, nominal.z])
+    ps = matmul(rotation(actual.roll, actual.pitch, actual.yaw).T, pv - np.array([actual.x, actual.y, actual.z]))
+    pn = matmul(rotation(nominal.roll, nominal.pitch, nominal.yaw), ps) + np.array([nominal.x, nominal.y, nominal.z])
     return replace(o, x=host.x + c * float(pn[0]) - s * float(pn[1]), y=host.y + s * float(pn[0]) + c * float(pn[1]),
                    yaw=o.yaw - (actual.yaw - nominal.yaw))
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from addt_dsl.kernel import matmul
 from addt_dsl.runtime.sensors import rotation
 from addt_dsl.stack.bev_grid import GRID, GridSpec
 
@@ -43,7 +44,7 @@ def lift_table(intrinsics: np.ndarray, extrinsics, width: int, height: int, spec
         pts = np.stack([gx, gy, np.full_like(gx, z)], axis=-1)
         for k, ext in enumerate(extrinsics):
             rot = rotation(ext.roll, ext.pitch, ext.yaw)
-            p = (pts - np.array([ext.x, ext.y, ext.z])) @ rot  # camera frame: forward, left, up
+            p = matmul(pts - np.array([ext.x, ext.y, ext.z]), rot)  # camera frame: forward, left, up
             fwd, left, up = p[..., 0], p[..., 1], p[..., 2]
             with np.errstate(divide="ignore", invalid="ignore"):
                 u = cx - fx * left / fwd

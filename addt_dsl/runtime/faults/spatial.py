@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from addt_dsl.kernel import matmul
 from addt_dsl.registry import FAULTS
 from addt_dsl.specs import faults as S
 from addt_dsl.runtime.faults.base import FaultKind
@@ -57,13 +58,13 @@ class Noise(S.Noise, FaultKind):
         sigma, dropout = float(self.settings["range"]), float(self.settings["dropout"])
         rms = 0.0
         if sigma > 0 and n:
-            r = np.sqrt(np.einsum("ij,ij->i", pts, pts))
+            r = np.sqrt(pts[:, 0] * pts[:, 0] + pts[:, 1] * pts[:, 1] + pts[:, 2] * pts[:, 2])
             noise = self.rng.normal(0.0, sigma, n)
             # Move each point along its ray; a return cannot come from behind the sensor.
             scale = np.maximum(r + noise, 0.0)
             scale /= np.maximum(r, 1e-9)
             pts = pts * scale[:, None]
-            rms = math.sqrt(float(noise @ noise) / n)
+            rms = math.sqrt(float(matmul(noise, noise)) / n)
         lost = 0
         if dropout > 0 and n:
             keep = self.rng.random(n) >= dropout

@@ -7,12 +7,14 @@ text are read by the compiler (`addt_dsl.compiler.formula.parse_formula`).
 from __future__ import annotations
 
 from addt_dsl.runtime.oracles.stl import (
+    Formula,
     FormulaTypeError,
     UnknownSignalError,
     UnsubstitutedParameterError,
     boolean_semantics,
     evaluate,
     first_violation_time,
+    prepare,
     robustness_at_0,
     robustness_over_time,
     samples,
@@ -21,7 +23,7 @@ from addt_dsl.runtime.oracles.stl import (
 )
 
 __all__ = [
-    "FormulaTypeError", "UnknownSignalError", "UnsubstitutedParameterError",
-    "boolean_semantics", "evaluate", "first_violation_time", "robustness_at_0", "robustness_over_time",
+    "Formula", "FormulaTypeError", "UnknownSignalError", "UnsubstitutedParameterError",
+    "boolean_semantics", "evaluate", "first_violation_time", "prepare", "robustness_at_0", "robustness_over_time",
     "samples", "satisfied", "verdicts",
 ]

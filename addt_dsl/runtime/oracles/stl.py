@@ -31,8 +31,8 @@ from addt_dsl.runtime.oracles.windows import until as _until
 from addt_dsl.runtime.oracles.windows import window_reduce
 
 __all__ = [
-    "FormulaTypeError", "UnknownSignalError", "UnsubstitutedParameterError", "evaluate",
-    "first_violation_time", "robustness_at_0", "robustness_over_time", "samples", "satisfied", "verdicts",
+    "Formula", "FormulaTypeError", "UnknownSignalError", "UnsubstitutedParameterError", "evaluate",
+    "first_violation_time", "prepare", "robustness_at_0", "robustness_over_time", "samples", "satisfied", "verdicts",
 ]
 
 
@@ -250,12 +250,29 @@ def _eval(expr: Expr, ctx: _Ctx, pol: int) -> np.ndarray:
     return _DISPATCH[type(expr)](expr, ctx, pol)
 
 
-def _context(expr: Expr, signals: Mapping[str, np.ndarray], period_s: float, mode: _Mode) -> _Ctx:
+@dataclass(frozen=True, slots=True)
+class Formula:
+    """A formula checked once to be evaluated many times (a trigger's condition is asked
+    at every sample until it fires): its sort and the signals it reads, sorted. Every
+    function below that takes a formula takes an `Expr` or one of these."""
+    expr: Expr
+    sort: Sort
+    signals: tuple[str, ...]
+
+
+def prepare(expr: Expr | Formula) -> Formula:
+    """`expr` checked (`sort_of` raises on a parameter or a sort error) with its signals."""
+    if isinstance(expr, Formula):
+        return expr
+    sort = sort_of(expr)
+    return Formula(expr, sort, tuple(sorted({n.name for n in walk(expr) if isinstance(n, Signal)})))
+
+
+def _context(formula: Formula, signals: Mapping[str, np.ndarray], period_s: float, mode: _Mode) -> _Ctx:
     if not (period_s > 0 and math.isfinite(period_s)):
         raise ValueError(f"sampling period must be positive and finite, got {period_s}")
-    used = {n.name for n in walk(expr) if isinstance(n, Signal)}
     arrays: dict[str, np.ndarray] = {}
-    for name in sorted(used):
+    for name in formula.signals:
         if name not in signals:
             raise UnknownSignalError(name, sorted(signals))
         arr = np.asarray(signals[name], dtype=np.float64)
@@ -273,33 +290,34 @@ def _context(expr: Expr, signals: Mapping[str, np.ndarray], period_s: float, mod
     return _Ctx(arrays, n, float(period_s), mode)
 
 
-def _run(expr: Expr, signals, period_s, mode: _Mode, need: Sort | None) -> np.ndarray:
-    sort = sort_of(expr)
-    if need is not None and sort is not need:
-        raise FormulaTypeError(f"expected a {need.value}, got a {sort.value}")
-    ctx = _context(expr, signals, period_s, mode)
+def _run(expr: Expr | Formula, signals, period_s, mode: _Mode, need: Sort | None) -> np.ndarray:
+    formula = prepare(expr)
+    if need is not None and formula.sort is not need:
+        raise FormulaTypeError(f"expected a {need.value}, got a {formula.sort.value}")
+    ctx = _context(formula, signals, period_s, mode)
     with np.errstate(all="ignore"):  # x/0, inf-inf, sqrt(-1) are handled as values/NaN
-        out = _eval(expr, ctx, +1)
+        out = _eval(formula.expr, ctx, +1)
     # Constants broadcast as full arrays already; signals are returned as given: copy
     # so callers can't alias (and mutate) the trace.
     return np.array(out, dtype=np.float64, copy=True)
 
 
-def evaluate(expr: Expr, signals: Mapping[str, np.ndarray], period_s: float) -> np.ndarray:
+def evaluate(expr: Expr | Formula, signals: Mapping[str, np.ndarray], period_s: float) -> np.ndarray:
     """Robustness of a formula (or the value of a value expression) at every sample."""
     return _run(expr, signals, period_s, _Mode.ROBUST, None)
 
 
-def robustness_at_0(expr: Expr, signals: Mapping[str, np.ndarray], period_s: float) -> float:
+def robustness_at_0(expr: Expr | Formula, signals: Mapping[str, np.ndarray], period_s: float) -> float:
     rho = _run(expr, signals, period_s, _Mode.ROBUST, Sort.FORMULA)
     if rho.shape[0] == 0:
         raise ValueError("empty trace: no sample at time 0")
     return float(rho[0])
 
 
-def verdicts(expr: Expr, signals: Mapping[str, np.ndarray], period_s: float) -> np.ndarray:
+def verdicts(expr: Expr | Formula, signals: Mapping[str, np.ndarray], period_s: float) -> np.ndarray:
     """Boolean verdict at every sample: the sign of rho, and where rho == 0 exactly the
     Boolean semantics (only then is the second, +1/-1 evaluation paid for)."""
+    expr = prepare(expr)
     rho = _run(expr, signals, period_s, _Mode.ROBUST, Sort.FORMULA)
     out = rho > 0
     ties = rho == 0
@@ -313,7 +331,7 @@ def boolean_semantics(expr: Expr, signals: Mapping[str, np.ndarray], period_s: f
     return _run(expr, signals, period_s, _Mode.BOOLEAN, Sort.FORMULA) > 0
 
 
-def satisfied(expr: Expr, signals: Mapping[str, np.ndarray], period_s: float) -> bool:
+def satisfied(expr: Expr | Formula, signals: Mapping[str, np.ndarray], period_s: float) -> bool:
     v = verdicts(expr, signals, period_s)
     if v.shape[0] == 0:
         raise ValueError("empty trace: no sample at time 0")

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from addt_dsl.kernel import log, matmul
 from addt_dsl.search.samplers import SamplerContext
 from addt_dsl.search.space import Axis
 
@@ -74,10 +75,10 @@ class CrossEntropySampler:
             return
         n = max(MIN_ELITE, int(math.ceil(ELITE_FRACTION * len(points))))
         elite = points[np.argsort(scores, kind="stable")[:n]]
-        w = np.log(n + 0.5) - np.log(np.arange(1, n + 1))
+        w = log.over(n + 0.5) - log.over(np.arange(1, n + 1))
         w /= w.sum()
-        mu = w @ elite
-        sigma = np.sqrt(w @ (elite - mu) ** 2)
+        mu = matmul(w, elite)  # (not numpy's `@`: BLAS sums by the machine's kernel)
+        sigma = np.sqrt(matmul(w, (elite - mu) ** 2))
         self.mu = SMOOTHING * mu + (1 - SMOOTHING) * self.mu
         self.sigma = np.maximum(SMOOTHING * sigma + (1 - SMOOTHING) * self.sigma, MIN_SIGMA)
         self.p = np.clip(SMOOTHING * mu + (1 - SMOOTHING) * self.p, 0.05, 0.95)

@@ -216,3 +216,111 @@ def test_compiled_call_bound_and_interpreted_still_python():
             _divide(1.0, 0.0)
     assert _divide(1.0, 0.0) == math.inf
     assert type(_mix) is not type(_divide) and isinstance(_divide, Kernel)
+
+
+# The C library's functions over arrays (`Libm.over`): numpy's ufuncs of these names take
+# SIMD code on AVX-512 machines whose bits differ; these must give CPython's `math` bits
+# (the C library's), and the C library's own answer where `math` raises.
+LIBM_CASES = {"exp": math.exp, "log": math.log, "log2": math.log2, "atan": math.atan, "tan": math.tan}
+edge_floats = any_float | st.sampled_from([0.0, -0.0, -1.0, 1000.0, -1000.0, 709.8, 1e-320])
+
+
+def _c_answer(name: str, *args) -> float:
+    try:
+        return getattr(math, "atan2" if name == "atan2" else name)(*args)
+    except (OverflowError, ValueError):
+        return {"exp": math.inf, "tan": math.nan}.get(name) if name in ("exp", "tan") else \
+            (-math.inf if args[0] == 0.0 else math.nan)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.sampled_from(sorted(LIBM_CASES)), st.lists(edge_floats, min_size=1, max_size=30))
+def test_libm_over_arrays_gives_the_c_librarys_bits(name, values):
+    from addt_dsl import kernel as K
+
+    fn = getattr(K, name)
+    want = bits([_c_answer(name, v) for v in values])
+    assert bits(fn.over(np.array(values))) == want
+    with interpreted():
+        assert bits(fn.over(np.array(values))) == want
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.tuples(edge_floats, edge_floats), min_size=1, max_size=30))
+def test_atan2_and_pow_over_arrays(pairs):
+    from addt_dsl import kernel as K
+
+    y, x = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+    assert bits(K.atan2.over(y, x)) == bits([math.atan2(a, b) for a, b in pairs])
+    assert bits(K.pow.over(y, x)) == bits([K.pow.python(a, b) for a, b in pairs])
+
+
+def test_over_keeps_numpys_shapes_and_differs_where_numpy_takes_simd_code():
+    from addt_dsl import kernel as K
+
+    grid = np.linspace(-3.0, 3.0, 12).reshape(3, 4)
+    assert K.exp.over(grid).shape == (3, 4) and K.atan2.over(grid, 1.0).shape == (3, 4)
+    assert isinstance(K.log.over(2.0), np.float64) and K.log.over(2.0) == math.log(2.0)
+    x = np.random.default_rng(3).uniform(-10.0, 10.0, 20000)
+    assert bits(K.exp.over(x)) == bits([math.exp(v) for v in x.tolist()])
+    # (numpy's own exp gives the C library's bits only without AVX-512: nothing to assert here)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 6), st.integers(0, 4), st.integers(1, 5), st.integers(0, 2**16))
+def test_matmul_sums_in_one_order(n, k, m, seed):
+    """Each element is the products summed from the first on (no fused multiply-add): an
+    order any machine follows; compiled and interpreted alike; np.matmul's shapes."""
+    from addt_dsl.kernel import matmul
+
+    rng = np.random.default_rng(seed)
+    a, b = rng.normal(size=(n, k)) * 10.0 ** rng.integers(-5, 5), rng.normal(size=(k, m))
+    want = np.zeros((n, m))
+    for i in range(n):
+        for j in range(m):
+            acc = a[i, 0] * b[0, j] if k else 0.0
+            for q in range(1, k):
+                acc = acc + a[i, q] * b[q, j]
+            want[i, j] = acc
+    got = matmul(a, b)
+    assert bits(got) == bits(want)
+    with interpreted():
+        assert bits(matmul(a, b)) == bits(want)
+    assert matmul(a[0], b).shape == (a[0] @ b).shape
+    assert matmul(a, b[:, 0]).shape == (a @ b[:, 0]).shape
+    if k:
+        assert matmul(a[0], a[0]) == sum_in_order(a[0] * a[0])
+
+
+def sum_in_order(values) -> float:
+    acc = values[0]
+    for v in values[1:]:
+        acc = acc + v
+    return float(acc)
+
+
+def test_matmul_refuses_what_numpy_refuses():
+    from addt_dsl.kernel import matmul
+
+    with pytest.raises(ValueError):
+        matmul(np.zeros((2, 3)), np.zeros((2, 3)))
+    with pytest.raises(ValueError):
+        matmul(np.zeros((2, 2)), np.zeros((2, 2, 2)))
+    stack = np.arange(24.0).reshape(2, 4, 3)  # rows of a stack, as np.matmul takes them
+    assert matmul(stack, np.eye(3)[:, :2]).shape == (2, 4, 2)
+    assert np.array_equal(matmul(stack, np.eye(3)), stack)
+
+
+def test_helpers_give_the_same_bits_before_numba_is_loaded(monkeypatch):
+    """A compile-only process computes road geometry without loading numba: `over` and
+    `matmul` then take numpy or Python, which must give the kernels' bits."""
+    from addt_dsl import kernel as K
+
+    rng = np.random.default_rng(11)
+    x, y = rng.normal(size=300) * 5.0, rng.normal(size=300) * 5.0
+    a, b = rng.normal(size=(40, 7)), rng.normal(size=(7, 3))
+    compiled = [K.exp.over(x), K.atan2.over(y, x), K.pow.over(np.abs(x), y), K.matmul(a, b), K.matmul(a[0], a[1])]
+    monkeypatch.setattr(K, "_numba_loaded", lambda: False)
+    plain = [K.exp.over(x), K.atan2.over(y, x), K.pow.over(np.abs(x), y), K.matmul(a, b), K.matmul(a[0], a[1])]
+    for c, p in zip(compiled, plain):
+        assert bits(c) == bits(p)

@@ -20,7 +20,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.kernel import bits, interpreted
+from addt_dsl.kernel import bits, interpreted, matmul
 from addt_dsl.runtime import raycast
 from addt_dsl.runtime.sensors import Lidar
 from addt_dsl.runtime.world import PhysicsWorld
@@ -408,7 +408,7 @@ def _old_scan(world: PhysicsWorld, lidar: Lidar, scan_world) -> dict:
     from addt_dsl.runtime.sensors import _ego_frame, _sensor_world_pose
 
     origin, rot = _sensor_world_pose(_ego_frame(scan_world), lidar.actual)
-    dirs = lidar._dirs @ rot.T
+    dirs = matmul(lidar._dirs, rot.T)
     starts = np.repeat(origin[None, :], len(dirs), axis=0)
     ends = starts + dirs * lidar.range_m
     pose = world.box_poses().copy()

@@ -1,10 +1,15 @@
 """The candidate sequence a sampler proposes on a scenario, for a seed, under a fixed
 synthetic score (no simulation): the points and the RunSpecs' parameters, faults and
 seeds, one digest per search. `tests/data/search/candidate_digests.json` holds the
-digests the four samplers gave before the search was split into space, samplers and
-driver (test_sampler_registry.py compares).
+digests the four samplers gave (test_sampler_registry.py compares).
 
-Regenerate (only when a sampler's behaviour is meant to change):
+`random` and `cem` give the same candidates on any machine. `bo` and `bandit` fit Gaussian
+processes (scikit-learn, LAPACK through OpenBLAS, numpy's SIMD transcendentals), whose last
+bits depend on the machine: their digests hold on a machine like the one that made them,
+which the file names under `_machine` (OpenBLAS's kernel, whether numpy has AVX-512).
+
+Regenerate (only when a sampler's behaviour is meant to change), on a machine whose OpenBLAS
+takes its SkylakeX kernels (CI's; elsewhere `OPENBLAS_CORETYPE=SkylakeX` stands in):
     PYTHONPATH=. python tests/unit/search/candidate_trace.py > tests/data/search/candidate_digests.json
 """
 
@@ -20,6 +25,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[3]
 SCENARIOS = sorted((ROOT / "examples" / "search").glob("**/*.addt"))
 SAMPLERS = ("random", "cem", "bo", "bandit")
+MACHINE_DEPENDENT = ("bo", "bandit")
+
+
+def machine() -> dict:
+    """What the machine-dependent samplers' digests depend on: OpenBLAS's kernel, numpy's AVX-512."""
+    from numpy._core import _multiarray_umath as m
+    from threadpoolctl import threadpool_info
+
+    blas = sorted(i.get("architecture", "") for i in threadpool_info() if i.get("internal_api") == "openblas")
+    return {"openblas": blas, "numpy_avx512": bool(m.__cpu_features__.get("AVX512F"))
+            and "X86_V4" in [f for f in m.__cpu_dispatch__ if m.__cpu_features__.get(f)]}
 BATCH, JOBS, RUNS = 8, 2, 40  # the search benchmark's batch and jobs
 
 
@@ -56,7 +72,7 @@ def candidate_digest(plan, sampler: str, seed: int, runs: int = RUNS) -> str:
 def main() -> None:
     from addt_dsl.compiler import compile_file
 
-    out = {}
+    out = {"_machine": machine()}
     for path in SCENARIOS:
         plan = compile_file(path).plan
         for sampler in SAMPLERS:

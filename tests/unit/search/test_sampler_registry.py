@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.unit.search.candidate_trace import ROOT, SAMPLERS, SCENARIOS, candidate_digest, synthetic_scores
+from tests.unit.search.candidate_trace import (MACHINE_DEPENDENT, ROOT, SAMPLERS, SCENARIOS, candidate_digest,
+                                              machine, synthetic_scores)
 
 from addt_dsl.compiler import compile_file
 from addt_dsl.search.falsify import Falsifier
@@ -22,9 +23,12 @@ BEFORE = json.loads((ROOT / "tests" / "data" / "search" / "candidate_digests.jso
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
-def test_same_seeds_same_candidates_as_before_the_split(path: Path):
+def test_same_seeds_same_candidates_as_recorded(path: Path):
+    """Every sampler's candidates as recorded; the Gaussian-process samplers' only on a
+    machine like the one that recorded them (candidate_trace.py says why)."""
     plan = compile_file(path).plan
-    got = {f"{path.relative_to(ROOT)}:{s}:{seed}": candidate_digest(plan, s, seed) for s in SAMPLERS for seed in (0, 1)}
+    samplers = SAMPLERS if machine() == BEFORE["_machine"] else [s for s in SAMPLERS if s not in MACHINE_DEPENDENT]
+    got = {f"{path.relative_to(ROOT)}:{s}:{seed}": candidate_digest(plan, s, seed) for s in samplers for seed in (0, 1)}
     assert got == {k: BEFORE[k] for k in got}
 
 

@@ -1,5 +1,6 @@
 """`bev_grid`'s overlap kernels against the numpy code they replace (copied verbatim as the
-oracle) and, compiled, against their own Python."""
+oracle, but for numpy's `arctan2` and `exp`: the C library's on every machine now) and,
+compiled, against their own Python."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.kernel import interpreted
+from addt_dsl.kernel import atan2, exp, interpreted
 from addt_dsl.stack import bev_grid
 
 
@@ -73,9 +74,9 @@ def _old_boxes(heat, reg, i, j, conf, spec, max_overlap_m):
     r = reg[:, i, j].astype(np.float64)
     x = spec.x_min + (i + 0.5 + r[0]) * c
     y = spec.y_min + (j + 0.5 + r[1]) * c
-    heading = 0.5 * np.arctan2(r[4], r[5])
+    heading = 0.5 * atan2.over(r[4], r[5])
     cls = r[6:].argmax(axis=0).astype(np.float64) if len(r) > 6 else np.full(len(i), -1.0)
-    boxes = np.stack([x, y, heading, np.exp(r[2]), np.exp(r[3]), conf.astype(np.float64), cls], axis=1)
+    boxes = np.stack([x, y, heading, exp.over(r[2]), exp.over(r[3]), conf.astype(np.float64), cls], axis=1)
     if max_overlap_m is not None and len(boxes) > 1:
         boxes = boxes[old_keep_non_overlapping(boxes, max_overlap_m)]
     return boxes

@@ -1,5 +1,7 @@
-"""`cluster_class`'s kernels give the bits of the numpy code they replace (copied here
-verbatim as the oracle) and compiled, of their own Python; `pairwise_sum` is numpy's sum."""
+"""`cluster_class`'s kernels give the bits of the numpy code they replace (copied here as the
+oracle, verbatim but for numpy's `arctan2`, `exp`, `log2` and the covariance's product, which
+are the C library's and `kernel.matmul`'s on every machine now) and compiled, of their own
+Python; `pairwise_sum` is numpy's sum."""
 
 from __future__ import annotations
 
@@ -10,13 +12,23 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from addt_dsl.kernel import interpreted
+from addt_dsl.kernel import atan2, exp, interpreted, log2, matmul
 from addt_dsl.stack import cluster_class
 from addt_dsl.stack.bev_grid import BOX_CHANNELS, GRID, GridSpec
 from addt_dsl.stack.cluster_class import CLUSTER_MARGIN_M, FEATURES, MOUNT_Z_M, BEAM_STEP_DEG, pairwise_sum
 
 
 # ---------------------------------------------------------------- the numpy code replaced (verbatim)
+
+def cov_in_order(x: np.ndarray) -> np.ndarray:
+    """np.cov's steps (mean by np.average, the centred rows' product, 1 / (n - 1)), the
+    product summed in one order (`kernel.matmul`) as the features now take it."""
+    x = np.array(x, dtype=np.float64)
+    x -= np.average(x, axis=1)[:, None]
+    c = matmul(x, x.T)
+    c *= np.true_divide(1, x.shape[1] - 1)
+    return c
+
 
 def old_cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], boxes: np.ndarray,
                          box_map: np.ndarray, spec: GridSpec = GRID) -> tuple[np.ndarray, np.ndarray]:
@@ -30,7 +42,7 @@ def old_cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], box
     owner = np.hypot(p[:, None, 0] - boxes[None, :, 0], p[:, None, 1] - boxes[None, :, 1]).argmin(axis=1)
     hx, hy = box_map.shape[1:]
     sx, sy = sensor_xy
-    beam = np.clip(np.round(np.degrees(np.arctan2(p[:, 2] - MOUNT_Z_M, np.hypot(p[:, 0] - sx, p[:, 1] - sy)))
+    beam = np.clip(np.round(np.degrees(atan2.over(p[:, 2] - MOUNT_Z_M, np.hypot(p[:, 0] - sx, p[:, 1] - sy)))
                             / BEAM_STEP_DEG).astype(np.int64) + 2, 0, 4)
     for k, (x, y, heading, length, width, conf, _) in enumerate(boxes.tolist()):
         if not all(map(math.isfinite, (x, y, heading, length, width))):
@@ -46,7 +58,7 @@ def old_cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], box
         i = min(max(int(math.floor((x - spec.x_min) / spec.head_cell_m)), 0), hx - 1)
         j = min(max(int(math.floor((y - spec.y_min) / spec.head_cell_m)), 0), hy - 1)
         logits = box_map[BOX_CHANNELS:, i, j].astype(np.float64)
-        prob = np.exp(logits - logits.max())
+        prob = exp.over(logits - logits.max())
         prob /= prob.sum()
         cx, cy = q[:, 0].mean(), q[:, 1].mean()
         rx, ry = cx - sx, cy - sy
@@ -54,19 +66,19 @@ def old_cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], box
         ux, uy = rx / r, ry / r
         along = (q[:, 0] - sx) * ux + (q[:, 1] - sy) * uy
         across = (q[:, 1] - sy) * ux - (q[:, 0] - sx) * uy
-        columns = len(np.unique(np.round(np.degrees(np.arctan2(q[:, 1] - sy, q[:, 0] - sx)))))
+        columns = len(np.unique(np.round(np.degrees(atan2.over(q[:, 1] - sy, q[:, 0] - sx)))))
         wide = float(across.max() - across.min())
         bq = beam[own]
         per_beam = np.bincount(bq, minlength=5)
         if len(q) >= 2:
-            spread, axes = np.linalg.eigh(np.cov(q[:, :2].T))
+            spread, axes = np.linalg.eigh(cov_in_order(q[:, :2].T))
             major, minor = math.sqrt(max(spread[1], 0.0)), math.sqrt(max(spread[0], 0.0))
             major_sin = abs(axes[0, 1] * uy - axes[1, 1] * ux)
         else:
             major = minor = major_sin = 0.0
         level = bq == 2
         if level.any():
-            level_columns = len(np.unique(np.round(np.degrees(np.arctan2(q[level, 1] - sy, q[level, 0] - sx)))))
+            level_columns = len(np.unique(np.round(np.degrees(atan2.over(q[level, 1] - sy, q[level, 0] - sx)))))
             level_wide = float(across[level].max() - across[level].min())
         else:
             level_columns, level_wide = 0, 0.0
@@ -76,7 +88,7 @@ def old_cluster_features(points: np.ndarray, sensor_xy: tuple[float, float], box
                     along.max() - along.min(), wide, along.std(), across.std(), wide / r * 10,
                     len(q) / columns / 5, columns / 10, (x - cx) * ux + (y - cy) * uy, *prob, conf,
                     math.log(length), math.log(width), abs(math.sin(heading - math.atan2(ry, rx))),
-                    *(np.log2(1 + per_beam) / 5), (per_beam > 0).sum(), (z > 1.2).mean(), (z > 1.45).mean(),
+                    *(log2.over(1 + per_beam) / 5), (per_beam > 0).sum(), (z > 1.2).mean(), (z > 1.45).mean(),
                     (z > 1.6).mean(), major, minor, major_sin, level_columns / 10, level_wide, bq.max(),
                     (x - cx) * uy - (y - cy) * ux, math.log2(1 + int(ring.sum())) / 5)
         valid[k] = True
