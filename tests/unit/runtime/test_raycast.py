@@ -471,12 +471,32 @@ def test_lidar_returns_kernel_is_its_python(seed, n):
 
 @settings(max_examples=30, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(0, 50), st.floats(0.5, 300.0))
-def test_lidar_ray_ends_kernel_is_its_python_and_numpys(seed, n, range_m):
-    from addt_dsl.runtime.sensors import _ray_ends
+def test_lidar_ray_ends_kernel_is_its_python_and_the_old_glue(seed, n, range_m):
+    from addt_dsl.runtime.sensors import _ray_ends, rotation
 
     rng = np.random.default_rng(seed)
     origin, dirs = rng.normal(size=3) * 100.0, rng.normal(size=(n, 3))
-    got = _ray_ends(origin, dirs, range_m)
+    rot = rotation(*rng.uniform(-math.pi, math.pi, 3))
+    got = _ray_ends(origin, dirs, rot, range_m)
     with interpreted():
-        assert bits(_ray_ends(origin, dirs, range_m)) == bits(got)
-    assert bits(got) == bits(np.repeat(origin[None], n, axis=0) + dirs * range_m)
+        assert bits(_ray_ends(origin, dirs, rot, range_m)) == bits(got)
+    assert bits(got) == bits(np.repeat(origin[None], n, axis=0) + matmul(dirs, rot.T) * range_m)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_sensor_pose_kernel_is_its_python_and_kernel_matmuls(seed):
+    from addt_dsl.runtime.sensors import Extrinsics, _mount_pose, _sensor_world_pose, rotation
+
+    rng = np.random.default_rng(seed)
+    x, y, z, heading, pitch = rng.normal(size=5) * (300.0, 300.0, 10.0, 3.0, 0.1)
+    ext = Extrinsics(*rng.normal(size=6) * (2.0, 1.0, 1.5, 0.05, 0.05, 3.0))
+    origin, rot = _sensor_world_pose((x, y, z, heading, pitch), ext)
+    rot_v = rotation(0.0, -pitch, heading)
+    want_origin = np.array([x, y, z]) + matmul(rot_v, np.array([ext.x, ext.y, ext.z]))
+    want_rot = matmul(rot_v, rotation(ext.roll, ext.pitch, ext.yaw))
+    assert bits(origin) == bits(want_origin) and bits(rot) == bits(want_rot)
+    with interpreted():
+        again = _mount_pose(np.array([x, y, z]), rot_v, np.array([ext.x, ext.y, ext.z]),
+                            rotation(ext.roll, ext.pitch, ext.yaw))
+    assert bits(again[0]) == bits(origin) and bits(again[1]) == bits(rot)
