@@ -15,6 +15,11 @@ the like, as CPython does, with two exceptions: `x ** 2` and
 write `pow(x, 2.0)` with this module's `pow` where the Python it replaces wrote `x ** 2`;
 and `math.hypot` is the C library's where CPython has its own: use this module's `hypot`.
 
+The module also holds what keeps a trace the same on another machine: the C library's
+`exp`, `log`, `log2`, `atan`, `tan`, `atan2`, `pow` over arrays (`Libm.over`, where numpy's
+ufuncs take AVX-512 code with other bits) and `matmul` in one summation order (where BLAS's
+kernel, picked by the CPU, decides the order and the fused multiply-adds).
+
 numba is imported at a kernel's first call, not at import (its import costs ~0.2-0.4 s that
 a compile-only command should not pay). Compiled code is cached on disk, so a process pays
 the compile (~0.3-1 s a kernel) only the first time for a version of the code: in a folder
