@@ -352,6 +352,11 @@ def _matmul(a, b, out):
             out[i, j] = acc
 
 
+matmul_into = _matmul
+"""`matmul` of a 2-D `a` and `b` into `out` (rows of a by columns of b), in its order: for a
+kernel, which calls it by this name (matmul itself is Python)."""
+
+
 _OVER = {"exp": _over_exp, "log": _over_log, "log2": _over_log2, "atan": _over_atan, "tan": _over_tan,
          "atan2": _over_atan2, "pow": _over_pow}
 

@@ -54,6 +54,7 @@ BENCHMARKS: dict[str, tuple[list[str], list[str]]] = {
     "planner": ([], ["--repeats", "20", "--rounds", "1"]),
     "collisions": ([], ["--agents", "5,50", "--batch", "1,16", "--rounds", "1"]),
     "phases": ([], ["--agents", "5,50", "--batches", "1,16", "--repeat", "1"]),
+    "lidar": ([], ["--lidars", "360x5", "--cars", "1,20", "--frames", "100", "--repeat", "1"]),
     "stack_step": ([], ["--repeats", "1"]),
     "learned_frame": ([], ["--seconds", "1"]),
 }

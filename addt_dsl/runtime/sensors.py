@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from addt_dsl.kernel import matmul
+from addt_dsl.kernel import kernel, matmul, matmul_into
 from addt_dsl.registry import SENSORS
 from addt_dsl.specs import sensors as S
 
@@ -87,15 +87,48 @@ class Lidar(S.Lidar, Sensor):
 
     def capture(self, world, time_s):
         origin, rot = _sensor_world_pose(_ego_frame(world), self.actual)
-        dirs = matmul(self._dirs, rot.T)
-        starts = np.repeat(origin[None, :], len(dirs), axis=0)
-        ends = starts + dirs * self.range_m
-        hit_ids, fractions = world.ray_cast(starts, ends)
-        hit = hit_ids >= 0
-        dist = fractions * self.range_m
+        # Every ray from the one origin: a read-only view of it, row after row (no copy).
+        origin = np.ascontiguousarray(origin, dtype=np.float64)
+        starts = np.ndarray(self._dirs.shape, np.float64, origin, 0, (0, origin.itemsize))
+        starts.flags.writeable = False
+        hit_ids, fractions = world.ray_cast(starts, _ray_ends(origin, self._dirs, rot, self.range_m))
         # Points in the *sensor* frame: the stack maps them with the nominal extrinsics.
-        pts = self._dirs[hit] * dist[hit, None]  # the hits only (a scan's rays mostly miss)
-        return Frame(self.name, time_s, {"points": pts, "hit_body": hit_ids[hit]})
+        pts, bodies = _returns(self._dirs, hit_ids, fractions, self.range_m)
+        return Frame(self.name, time_s, {"points": pts, "hit_body": bodies})
+
+
+@kernel
+def _ray_ends(origin, dirs, rot, range_m):
+    """origin + matmul(dirs, rot.T) * range_m [m], N×3: the sensor-frame directions `dirs`
+    turned into the world by `rot` (`kernel.matmul`'s bits), a product, then a sum (numpy's
+    bits; numpy pays several us to broadcast the origin over 3-wide rows)."""
+    world = np.empty(dirs.shape)
+    matmul_into(dirs, rot.T, world)
+    ends = np.empty(dirs.shape)
+    for i in range(dirs.shape[0]):
+        for c in range(3):
+            ends[i, c] = origin[c] + world[i, c] * range_m
+    return ends
+
+
+@kernel
+def _returns(dirs, hit_ids, fractions, range_m):
+    """The hits of a scan, in ray order: (points, N×3: a hit ray's direction times its
+    distance, fraction × range [m]; their body ids) of the rays with a body id >= 0."""
+    n = 0
+    for i in range(hit_ids.shape[0]):
+        if hit_ids[i] >= 0:
+            n += 1
+    points = np.empty((n, 3))
+    bodies = np.empty(n, dtype=hit_ids.dtype)
+    j = 0
+    for i in range(hit_ids.shape[0]):
+        if hit_ids[i] >= 0:
+            dist = fractions[i] * range_m
+            points[j, 0], points[j, 1], points[j, 2] = dirs[i, 0] * dist, dirs[i, 1] * dist, dirs[i, 2] * dist
+            bodies[j] = hit_ids[i]
+            j += 1
+    return points, bodies
 
 
 @SENSORS.implements
@@ -235,9 +268,22 @@ def _sensor_world_pose(vehicle_frame, ext: Extrinsics):
     x, y, z, heading, pitch = vehicle_frame
     # Vehicle pitch is nose-up positive (road grade); a rotation about the left-pointing
     # y axis is nose-down positive, as for mount pitch (a positive mount pitch looks down).
-    rot_v = rotation(0.0, -pitch, heading)
-    origin = np.array([x, y, z]) + matmul(rot_v, np.array([ext.x, ext.y, ext.z]))
-    return origin, matmul(rot_v, rotation(ext.roll, ext.pitch, ext.yaw))
+    return _mount_pose(np.array([x, y, z]), rotation(0.0, -pitch, heading), np.array([ext.x, ext.y, ext.z]),
+                       rotation(ext.roll, ext.pitch, ext.yaw))
+
+
+@kernel
+def _mount_pose(base, rot_v, mount, rot_m):
+    """(base + rot_v mount, rot_v rot_m): a mount's world position [m] and rotation, by
+    `kernel.matmul` (its bits, one call instead of two of its ~7 us wrapper)."""
+    arm = np.empty((3, 1))
+    matmul_into(rot_v, mount.reshape(3, 1), arm)
+    origin = np.empty(3)
+    for c in range(3):
+        origin[c] = base[c] + arm[c, 0]
+    rot = np.empty((3, 3))
+    matmul_into(rot_v, rot_m, rot)
+    return origin, rot
 
 
 def sensor_to_vehicle(points: np.ndarray, ext: Extrinsics) -> np.ndarray:

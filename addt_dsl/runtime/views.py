@@ -100,7 +100,8 @@ class SensorWorld(Protocol):
         """The named generator of the world (seeded by the RunSpec)."""
 
     def ray_cast(self, starts: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(body id or -1, hit fraction) of each ray, the ego's body ignored."""
+        """(body id or -1, hit fraction) of each ray, the ego's body ignored. A lidar's
+        `starts` are its one origin, every row a read-only view of it (stride 0)."""
 
     def render(self, width: int, height: int, view, projection, segmentation: bool = True):
         """(rgb, z-buffer, body ids) of a pinhole view."""

@@ -21,6 +21,7 @@ import sys
 import numpy as np
 
 from addt_dsl.kernel import kernel
+from addt_dsl.runtime import raycast
 
 
 @contextlib.contextmanager
@@ -106,8 +107,10 @@ class PhysicsWorld:
         # (x, y, z, heading, pitch), mirrored from add_box / set_pose, and the plane height.
         self._box_slot: dict[int, int] = {}
         self._box_half: list[tuple[float, float, float]] = []
+        self._box_half_table = np.zeros((0, 3))  # the same, a row per box
         self._box_pose = np.zeros((0, 5))  # a row per box: the loop poses many agents at once
         self._box_ids = np.zeros(0, dtype=np.int64)
+        self._hit_body = np.array([self.ground, -1], dtype=np.int64)  # the caster's index -> body id
         self._unsynced = np.zeros(0, dtype=bool)  # slots posed since pybullet last saw them
         self._pending: dict[int, tuple] = {}  # slot -> pose set by `set_pose`, not yet in the table
         self._ground_z = 0.0
@@ -204,8 +207,10 @@ class PhysicsWorld:
         self.body_names[body] = name
         self._box_slot[body] = len(self._box_half)
         self._box_half.append((length / 2, width / 2, height / 2))
+        self._box_half_table = np.array(self._box_half, dtype=np.float64).reshape(-1, 3)
         self._box_pose = np.vstack([self._box_pose, (0.0, 0.0, height / 2, 0.0, 0.0)])
         self._box_ids = np.append(self._box_ids, body)
+        self._hit_body = np.concatenate([self._box_ids, [self.ground, -1]])
         self._unsynced = np.append(self._unsynced, False)
         return body
 
@@ -293,12 +298,11 @@ class PhysicsWorld:
         return self.analytic_rays and self._collision_meshes == 0
 
     def ray_cast(self, starts: np.ndarray, ends: np.ndarray, ignore: str | None = None):
-        """Batched rays; returns (body ids, -1 for none, the ground or the ignored body; hit fractions)."""
-        if self.analytic:  # ground hits are dropped below: the plane need only hide boxes
-            ids, frac = self._ray_cast_analytic(np.asarray(starts, dtype=np.float64),
-                                                np.asarray(ends, dtype=np.float64), ground_hits=False)
-        else:
-            ids, frac = self._ray_cast_pybullet(starts, ends)
+        """Batched rays; returns (body ids, -1 for none, the ground or the ignored body; hit fractions).
+        `starts` may be one origin broadcast to every ray (`np.broadcast_to`: a scan)."""
+        if self.analytic:  # the caster drops ground hits and the ignored body's itself
+            return self._ray_cast_analytic(starts, ends, ground_hits=False, ignore=ignore)
+        ids, frac = self._ray_cast_pybullet(starts, ends)
         ground = np.isin(ids, self._ground_array) if len(self._ground_array) > 1 else ids == self.ground
         ids[ground] = -1
         if ignore is not None:
@@ -306,18 +310,16 @@ class PhysicsWorld:
         frac[ids < 0] = 1.0
         return ids, frac
 
-    def _ray_cast_analytic(self, starts: np.ndarray, ends: np.ndarray, ground_hits: bool = True):
+    def _ray_cast_analytic(self, starts: np.ndarray, ends: np.ndarray, ground_hits: bool = True,
+                           ignore: str | None = None):
         """`raycast.cast` on the boxes and the ground plane; with `ground_hits=False` a ray
-        whose first hit is the ground reports -1 (no hit)."""
-        from addt_dsl.runtime import raycast
-
+        whose first hit is the ground reports -1 (no hit), as one whose first hit is the
+        body named `ignore`."""
         pose = self.box_poses().copy()  # contiguous columns, as the caster slices them
-        half = np.array(self._box_half, dtype=np.float64).reshape(-1, 3)
+        slot = -1 if ignore is None else self._box_slot[self.bodies[ignore]]
         index, frac = raycast.cast(starts, ends, pose[:, :3], raycast.box_rotations(pose[:, 3], pose[:, 4]),
-                                   half, self._ground_z, plane_hits=ground_hits)
-        ids = np.append(self._box_ids, self.ground)[index]
-        ids[index < 0] = -1
-        return ids, frac
+                                   self._box_half_table, self._ground_z, plane_hits=ground_hits, ignore=slot)
+        return self._hit_body[index], frac
 
     def _ray_cast_pybullet(self, starts, ends):
         self._sync_bodies()

@@ -20,6 +20,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from addt_dsl.kernel import bits, interpreted, matmul
 from addt_dsl.runtime import raycast
 from addt_dsl.runtime.sensors import Lidar
 from addt_dsl.runtime.world import PhysicsWorld
@@ -259,21 +260,243 @@ def test_plane_that_only_hides_boxes_answers_as_ground_hits_dropped(seed, n_boxe
     assert np.array_equal(frac_hide, frac)
 
 
-@settings(max_examples=40, deadline=None)
-@given(st.integers(0, 6), st.integers(1, 40), st.integers(0, 2**32 - 1), st.booleans(), st.booleans())
-def test_compiled_cast_is_its_python(m, n, seed, one_origin, plane_hits):
-    """The kernel's bits are its Python source's (rounded scenes: rays along faces and edges)."""
-    from addt_dsl.kernel import interpreted
-
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 6), st.integers(1, 40), st.integers(0, 2**32 - 1), st.sampled_from(["rows", "one", "same"]),
+       st.booleans(), st.integers(-1, 5))
+def test_compiled_cast_is_its_python(m, n, seed, starts_as, plane_hits, ignore):
+    """The kernel's bits are its Python source's (rounded scenes: rays along faces and edges,
+    starts on faces and inside boxes, signed zeros; one start as one row or as many equal rows)."""
     rng = np.random.default_rng(seed)
     centres = np.round(rng.uniform(-6, 6, (m, 3)))
     half = np.round(rng.uniform(0.5, 2.5, (m, 3)) * 2) / 2
     rot = raycast.box_rotations(rng.choice([0.0, 0.3, np.pi / 2], m), rng.choice([0.0, 0.05], m))
-    starts = np.round(rng.uniform(-8, 8, (1 if one_origin else n, 3))) * np.ones((n, 1))
+    starts = np.round(rng.uniform(-8, 8, (n if starts_as == "rows" else 1, 3)))
+    starts[rng.random(starts.shape) < 0.2] *= -0.0  # (±0.0)
     ends = np.round(starts + rng.uniform(-12, 12, (n, 3)))
+    if starts_as == "same":
+        starts = np.repeat(starts, n, axis=0)
     with np.errstate(all="ignore"):
-        got = raycast.cast(starts, ends, centres, rot, half, 0.0, plane_hits=plane_hits)
+        got = raycast.cast(starts, ends, centres, rot, half, 0.0, plane_hits=plane_hits, ignore=ignore)
         with interpreted():
-            want = raycast.cast(starts, ends, centres, rot, half, 0.0, plane_hits=plane_hits)
+            want = raycast.cast(starts, ends, centres, rot, half, 0.0, plane_hits=plane_hits, ignore=ignore)
     assert got[0].tolist() == want[0].tolist()
-    assert got[1].view(np.int64).tolist() == want[1].view(np.int64).tolist()
+    assert bits(got[1]) == bits(want[1])
+
+
+def _maximum(a, b):
+    """`kernel.maximum` elementwise (np.maximum's choice between -0.0 and 0.0 varies)."""
+    return np.where(np.isnan(a) | np.isnan(b), np.nan, np.where(a >= b, a, b))
+
+
+def _minimum(a, b):
+    return np.where(np.isnan(a) | np.isnan(b), np.nan, np.where(a <= b, a, b))
+
+
+def _cast_every_box(starts, ends, centres, rot, half, plane_z, plane_hits=True, ignore=-1):
+    """`raycast.cast` without culling, in numpy: every box's slab test on every ray (the
+    kernel's arithmetic), the nearest (ties: the lower index), the plane, then the ignored box dropped."""
+    starts = np.broadcast_to(starts, ends.shape)
+    g = ends - starts
+    best, hit = np.full(len(ends), np.inf), np.full(len(ends), -1)
+    for k in range(len(centres)):
+        off = starts - centres[k]
+        t_near, t_far = np.full(len(ends), -np.inf), np.full(len(ends), np.inf)
+        for a in range(3):
+            r = rot[k, :, a]
+            o = r[0] * off[:, 0] + r[1] * off[:, 1] + r[2] * off[:, 2]
+            inv = 1.0 / (r[0] * g[:, 0] + r[1] * g[:, 1] + r[2] * g[:, 2])
+            t1, t2 = (-half[k, a] - o) * inv, (half[k, a] - o) * inv
+            t_near, t_far = _maximum(t_near, _minimum(t1, t2)), _minimum(t_far, _maximum(t1, t2))
+        t = np.where((t_near <= t_far) & (t_near >= 0.0) & (t_near <= 1.0), t_near, np.inf)
+        nearer = t < best
+        best[nearer], hit[nearer] = t[nearer], k
+    above_start, above_end = starts[:, 2] - plane_z, ends[:, 2] - plane_z
+    t = above_start / (above_start - above_end)
+    plane = (above_start * above_end < 0.0) & (t < best) & (plane_hits | (hit >= 0))
+    best[plane], hit[plane] = t[plane], len(centres) if plane_hits else -1
+    hit[hit == ignore] = -1
+    return hit, np.where(hit >= 0, best, 1.0)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 8), st.sampled_from(["scan", "inside", "rows"]), st.booleans(),
+       st.booleans())
+def test_culling_changes_no_ray(seed, m, starts_as, plane_hits, rounded):
+    """What the caster skips (boxes out of a ray's reach or behind its start, boxes its start
+    lies well inside) changes no index and no fraction's bit: the same as every box tested."""
+    rng = np.random.default_rng(seed)
+    centres, half = rng.uniform(-15.0, 15.0, (m, 3)), rng.uniform(0.2, 4.0, (m, 3))
+    heading, pitch = rng.uniform(-math.pi, math.pi, m), rng.choice([0.0, 0.05, -0.3], m)
+    if rounded:
+        centres, half, heading = np.round(centres), np.round(half * 2) / 2 + 0.5, rng.choice([0.0, np.pi / 2], m)
+    rot = raycast.box_rotations(heading, pitch)
+    n = 400
+    if starts_as == "rows" or m == 0:
+        starts = rng.uniform(-18.0, 18.0, (n, 3))
+    elif starts_as == "inside":  # a lidar in its own car
+        k = int(rng.integers(m))
+        starts = (centres[k] + rot[k] @ (rng.uniform(-1.0, 1.0, 3) * half[k]))[None]
+    else:
+        starts = rng.uniform(-18.0, 18.0, (1, 3))
+    ends = starts + rng.normal(size=(n, 3)) * rng.uniform(0.0, 40.0, (n, 1))
+    if rounded:
+        starts, ends = np.round(starts * 2) / 2, np.round(ends)
+    ends[:5] = starts[:5] if len(starts) == n else starts  # segments of no length
+    ignore = int(rng.integers(-1, m)) if m else -1
+    with np.errstate(all="ignore"):
+        want = _cast_every_box(starts, ends, centres, rot, half, 0.3, plane_hits, ignore)
+        for given_starts in (starts, np.broadcast_to(starts, ends.shape)):
+            got = raycast.cast(given_starts, ends, centres, rot, half, 0.3, plane_hits=plane_hits, ignore=ignore)
+            assert got[0].tolist() == want[0].tolist()
+            assert bits(got[1]) == bits(want[1])
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(-100.0, 100.0), st.floats(-1.0, 1.0), st.booleans())
+def test_a_start_well_inside_never_hits_its_box(seed, log2_length, heading, axis_aligned):
+    """`_frame`'s claim: from a start it calls well inside a box, the slab test returns inf
+    for every segment up to `LONG` long: tiny, huge, axis-parallel (±0 components) alike."""
+    rng = np.random.default_rng(seed)
+    half = rng.uniform(0.1, 3.0, 3) * 2.0 ** rng.integers(-40, 40)
+    rot = raycast.box_rotations(np.array([heading * math.pi]), np.array([rng.choice([0.0, 0.1])]))[0]
+    local = rng.uniform(-1.0, 1.0, 3) * half
+    near_face = rng.random(3) < 0.3
+    local[near_face] = np.where(local < 0.0, -1.0, 1.0)[near_face] * (half[near_face] - 2.0 ** -99)  # (the margin)
+    out = np.zeros(9)
+    raycast._frame(*(rot @ local), rot, half, out)
+    g = rng.normal(size=3)
+    if axis_aligned:
+        g[rng.random(3) < 0.6] = rng.choice([0.0, -0.0])
+    if np.linalg.norm(g) > 0.0:
+        g *= 2.0 ** log2_length / np.linalg.norm(g)
+    if out[7] != 0.0 and np.linalg.norm(g) <= raycast.LONG:
+        with np.errstate(all="ignore"):
+            assert raycast._slab(out[4:7], *g, rot, half) == math.inf
+            with interpreted():
+                assert raycast._slab(out[4:7], *g, rot, half) == math.inf
+
+
+def test_a_start_near_a_face_is_not_well_inside():
+    rot, half, out = np.eye(3), np.array([2.0, 1.0, 0.5]), np.zeros(9)
+    raycast._frame(1.0, 0.2, 0.1, rot, half, out)
+    assert out[7] == 1.0
+    raycast._frame(2.0 - 2.0 ** -120, 0.2, 0.1, rot, half, out)
+    assert out[7] == 0.0
+    with np.errstate(invalid="ignore"):
+        raycast._frame(1.0, 0.2, 0.1, rot * np.inf, half, out)
+    assert out[7] == 0.0
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 6))
+def test_box_rotations_kernel_is_its_python_and_numpys(seed, m):
+    rng = np.random.default_rng(seed)
+    heading, pitch = rng.uniform(-math.pi, math.pi, m), rng.uniform(-0.5, 0.5, m)
+    got = raycast.box_rotations(heading, pitch)
+    with interpreted():
+        assert bits(raycast.box_rotations(heading, pitch)) == bits(got)
+    ch, sh, cp, sp = np.cos(heading), np.sin(heading), np.cos(pitch), np.sin(-pitch)
+    want = np.stack([np.stack([ch * cp, -sh, ch * sp], -1), np.stack([sh * cp, ch, sh * sp], -1),
+                     np.stack([-sp, np.zeros(m), cp], -1)], 1)
+    assert bits(got) == bits(want)
+
+
+def _old_scan(world: PhysicsWorld, lidar: Lidar, scan_world) -> dict:
+    """A scan as the lidar made it before the caster took one origin and dropped the ego
+    itself: repeated starts, every hit cast, the ground's and the ego's dropped after, the
+    hits' points in numpy."""
+    from addt_dsl.runtime.sensors import _ego_frame, _sensor_world_pose
+
+    origin, rot = _sensor_world_pose(_ego_frame(scan_world), lidar.actual)
+    dirs = matmul(lidar._dirs, rot.T)
+    starts = np.repeat(origin[None, :], len(dirs), axis=0)
+    ends = starts + dirs * lidar.range_m
+    pose = world.box_poses().copy()
+    index, frac = raycast.cast(starts, ends, pose[:, :3], raycast.box_rotations(pose[:, 3], pose[:, 4]),
+                               np.array(world._box_half).reshape(-1, 3), world._ground_z)
+    ids = np.append(world._box_ids, world.ground)[index]
+    ids[index < 0] = -1
+    ids[(ids == world.ground) | (ids == world.bodies["ego"])] = -1
+    frac[ids < 0] = 1.0
+    hit = ids >= 0
+    return {"points": lidar._dirs[hit] * (frac * lidar.range_m)[hit, None], "hit_body": ids[hit]}
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.booleans())
+def test_lidar_scans_are_the_old_scans(seed, low_mount):
+    """Seeded traffic around an ego, lidars mounted inside or above its box, tilted: the
+    frame's points and bodies have the bits of the scan made the old way (`_old_scan`)."""
+    rng = np.random.default_rng(seed)
+    world = PhysicsWorld()
+    try:
+        world.set_ground_height(float(rng.choice([0.0, -0.3])))
+        world.add_box("ego", 4.6, 1.9, 1.5)
+        ego = (rng.uniform(-50, 50), rng.uniform(-50, 50), rng.uniform(-math.pi, math.pi))
+        world.set_pose("ego", ego[0], ego[1], 0.75, ego[2], float(rng.choice([0.0, 0.03])))
+        for k in range(int(rng.integers(0, 12))):
+            world.add_box(f"a{k}", 4.6, 1.9, 1.5)
+            world.set_pose(f"a{k}", ego[0] + rng.uniform(-40, 40), ego[1] + rng.uniform(-15, 15), 0.75,
+                           rng.uniform(-math.pi, math.pi))
+        lidar = Lidar("lidar", {"rays": int(rng.choice([90, 360])), "channels": int(rng.choice([1, 5])),
+                                "vfov": math.radians(12.0), "range": 60.0,
+                                "x": float(rng.uniform(-1.0, 2.5)), "z": float(rng.uniform(0.5, 1.2) if low_mount
+                                                                              else rng.uniform(1.6, 2.5)),
+                                "pitch": float(rng.uniform(-0.2, 0.2)), "roll": float(rng.uniform(-0.05, 0.05))})
+        scan_world = _ScanWorld(world, ego)
+        got = lidar.capture(scan_world, 0.0).data
+        want = _old_scan(world, lidar, scan_world)
+        assert got["hit_body"].tolist() == want["hit_body"].tolist()
+        assert bits(got["points"]) == bits(want["points"]) and got["points"].shape == want["points"].shape
+        starts, _ = scan_world.rays[0]
+        assert starts.strides[0] == 0 and not starts.flags.writeable  # one origin, not copied
+    finally:
+        world.close()
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 50))
+def test_lidar_returns_kernel_is_its_python(seed, n):
+    from addt_dsl.runtime.sensors import _returns
+
+    rng = np.random.default_rng(seed)
+    dirs, frac = rng.normal(size=(n, 3)), rng.uniform(0.0, 1.0, n)
+    ids = rng.choice([-1, 1, 2, 7], n)
+    got = _returns(dirs, ids, frac, 80.0)
+    with interpreted():
+        want = _returns(dirs, ids, frac, 80.0)
+    assert bits(got[0]) == bits(want[0]) and got[1].tolist() == want[1].tolist() == ids[ids >= 0].tolist()
+    assert bits(got[0]) == bits(dirs[ids >= 0] * (frac * 80.0)[ids >= 0, None])
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 50), st.floats(0.5, 300.0))
+def test_lidar_ray_ends_kernel_is_its_python_and_the_old_glue(seed, n, range_m):
+    from addt_dsl.runtime.sensors import _ray_ends, rotation
+
+    rng = np.random.default_rng(seed)
+    origin, dirs = rng.normal(size=3) * 100.0, rng.normal(size=(n, 3))
+    rot = rotation(*rng.uniform(-math.pi, math.pi, 3))
+    got = _ray_ends(origin, dirs, rot, range_m)
+    with interpreted():
+        assert bits(_ray_ends(origin, dirs, rot, range_m)) == bits(got)
+    assert bits(got) == bits(np.repeat(origin[None], n, axis=0) + matmul(dirs, rot.T) * range_m)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_sensor_pose_kernel_is_its_python_and_kernel_matmuls(seed):
+    from addt_dsl.runtime.sensors import Extrinsics, _mount_pose, _sensor_world_pose, rotation
+
+    rng = np.random.default_rng(seed)
+    x, y, z, heading, pitch = rng.normal(size=5) * (300.0, 300.0, 10.0, 3.0, 0.1)
+    ext = Extrinsics(*rng.normal(size=6) * (2.0, 1.0, 1.5, 0.05, 0.05, 3.0))
+    origin, rot = _sensor_world_pose((x, y, z, heading, pitch), ext)
+    rot_v = rotation(0.0, -pitch, heading)
+    want_origin = np.array([x, y, z]) + matmul(rot_v, np.array([ext.x, ext.y, ext.z]))
+    want_rot = matmul(rot_v, rotation(ext.roll, ext.pitch, ext.yaw))
+    assert bits(origin) == bits(want_origin) and bits(rot) == bits(want_rot)
+    with interpreted():
+        again = _mount_pose(np.array([x, y, z]), rot_v, np.array([ext.x, ext.y, ext.z]),
+                            rotation(ext.roll, ext.pitch, ext.yaw))
+    assert bits(again[0]) == bits(origin) and bits(again[1]) == bits(rot)
