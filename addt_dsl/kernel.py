@@ -35,6 +35,7 @@ import functools
 import math
 import os
 import shutil
+import sys
 import time
 import types
 from collections.abc import Callable
@@ -207,8 +208,6 @@ def cache_dir() -> str:
 def _numba_loaded() -> bool:
     """Whether this process has imported numba (a kernel has run): helpers that would call a
     kernel for a few values compute them in numpy or Python until then, the same bits."""
-    import sys
-
     return "numba" in sys.modules
 
 
@@ -321,22 +320,23 @@ def matmul(a, b):
     SkylakeX, Zen...) decides the order and the fusing, so its last bits depend on the machine."""
     import numpy as np
 
-    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    a, b = np.ascontiguousarray(a, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)
     if a.ndim < 1 or b.ndim not in (1, 2):
         raise ValueError(f"matmul takes an array of rows and a 1-D or 2-D one, not {a.ndim}-D and {b.ndim}-D")
-    a2 = a.reshape(int(np.prod(a.shape[:-1])), a.shape[-1])
-    b2 = b.reshape(-1, 1) if b.ndim == 1 else b
-    if a2.shape[1] != b2.shape[0]:
+    k = a.shape[-1]
+    if b.shape[0] != k:
         raise ValueError(f"matmul: shapes {a.shape} and {b.shape} do not align")
-    if _numba_loaded():
+    a2 = a.reshape(a.size // k if k else math.prod(a.shape[:-1]), k)
+    b2 = b if b.ndim == 2 else b.reshape(k, 1)
+    if "numba" in sys.modules:  # (`_numba_loaded`, inline: this is called per object and frame)
         out = np.empty((a2.shape[0], b2.shape[1]))
-        _matmul(np.ascontiguousarray(a2), np.ascontiguousarray(b2), out)
+        _matmul(a2, b2, out)
     else:  # the kernel's order, a column at a time (a compile-only process does not load numba)
-        out = a2[:, :1] * b2[:1, :] if a2.shape[1] else np.zeros((a2.shape[0], b2.shape[1]))
-        for q in range(1, a2.shape[1]):
+        out = a2[:, :1] * b2[:1, :] if k else np.zeros((a2.shape[0], b2.shape[1]))
+        for q in range(1, k):
             out = out + a2[:, q:q + 1] * b2[q:q + 1, :]
-    if a.ndim == 1 and b.ndim == 1:
-        return out[0, 0]
+    if b.ndim == 1:
+        return out[0, 0] if a.ndim == 1 else out.reshape(a.shape[:-1])
     return out.reshape(a.shape[:-1] + b.shape[1:])
 
 
