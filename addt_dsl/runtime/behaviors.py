@@ -851,6 +851,12 @@ class Walk(S.Walk, Behavior):
         s = self.settings
         return _speed_tracking(agent, s["speed"], s["accel"], s["decel"], world.dt)
 
+    def array_law(self, world, time_s):
+        # (along its lane: heading 0; `Fleet.array_plan` leaves walkers at an angle to the loop)
+        s = self.settings
+        return (LAW_TRACK, (s["speed"], s["accel"], s["decel"])) if _fixed(s["speed"], s["accel"], s["decel"]) \
+            else None
+
     def ended(self, agent, world, time_s):
         # After its distance (ground: station steps times the ground scale) or its time;
         # neither set: never.

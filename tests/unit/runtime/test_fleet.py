@@ -232,3 +232,26 @@ def test_equal_gaps_go_to_the_first_declared():
     assert got[3, 2] == behind_mover
     assert got[3, 2] != Idm(SETTINGS[0]).accel(SimpleNamespace(speed=20.0),
                                                SimpleNamespace(leader_of=lambda a: (25.4, 0.0)), 0.0)
+
+
+def test_speed_laws_are_pythons_min_and_max_compiled_and_interpreted():
+    """`speed_tracking` and `brake_accel`, compiled and as Python, give the bits of the
+    expressions they were written from (Python's `min` and `max`: on a NaN or an equal the
+    first stays), over signed zeros, infinities, NaNs and integer settings."""
+    values = [0.0, -0.0, 1.0, -1.0, 3, 2.5, 1e-300, math.inf, -math.inf, math.nan, 7.25, 20.0]
+    track, brake = behaviors.speed_tracking, behaviors.brake_accel
+    compiled_track, compiled_brake = track.dispatcher(), brake.dispatcher()
+    for v in values:
+        for target in values:
+            for limit in (3, 2.5, 0.0, -0.0, math.inf, math.nan):
+                for dt in (0.01, 0.1):
+                    x = (target - v) / dt
+                    want = bits(max(-limit, min(2.5, x)))
+                    assert bits(track.py_func(v, target, 2.5, limit, dt)) == want
+                    assert bits(compiled_track(v, target, 2.5, limit, dt)) == want
+                    want = bits(max(-2.5, min(limit, x)))
+                    assert bits(track.py_func(v, target, limit, 2.5, dt)) == want
+                    assert bits(compiled_track(v, target, limit, 2.5, dt)) == want
+                    want = bits(min(0.0, max(-limit, x)))
+                    assert bits(brake.py_func(v, limit, target, dt)) == want
+                    assert bits(compiled_brake(v, limit, target, dt)) == want
