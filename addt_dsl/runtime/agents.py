@@ -1,8 +1,8 @@
 """The agents: how actors are posed on their roads (`pose_on_road`, the one way: agents one
 by one or as arrays, the scripted ego), one run's agents (`Fleet`: poses, rows, ground
 truth), and the agents' phases over a batch (`Fleets`: the poses as one numpy program and
-the longitudinal step of car-following agents as one compiled kernel, `fleet.step`, over
-every live run's agents, read from and written to the batch's `agent_arrays.AgentArrays`
+the longitudinal step of agents whose behaviours have an array law (IDM, cruise, brake) as
+one compiled kernel, `fleet.step`, over every live run's agents, read from and written to the batch's `agent_arrays.AgentArrays`
 block; a single run is a batch of one)."""
 
 from __future__ import annotations
