@@ -2,8 +2,8 @@
 by one or as arrays, the scripted ego), one run's agents (`Fleet`: poses, rows, ground
 truth), and the agents' phases over a batch (`Fleets`: the poses as one numpy program and
 the longitudinal step of agents whose behaviours have an array law (IDM, cruise, brake) as
-one compiled kernel, `fleet.step`, over every live run's agents, read from and written to the batch's `agent_arrays.AgentArrays`
-block; a single run is a batch of one)."""
+one compiled kernel, `fleet.step`, over every live run's agents, read from and written to
+the batch's `agent_arrays.AgentArrays` block; a single run is a batch of one)."""
 
 from __future__ import annotations
 
