@@ -1,9 +1,9 @@
 """The agents: how actors are posed on their roads (`pose_on_road`, the one way: agents one
 by one or as arrays, the scripted ego), one run's agents (`Fleet`: poses, rows, ground
 truth), and the agents' phases over a batch (`Fleets`: the poses as one numpy program and
-the longitudinal step of car-following agents as one compiled kernel, `fleet.step`, over
-every live run's agents, read from and written to the batch's `agent_arrays.AgentArrays`
-block; a single run is a batch of one)."""
+the longitudinal step of agents whose behaviours have an array law (IDM, cruise, brake) as
+one compiled kernel, `fleet.step`, over every live run's agents, read from and written to
+the batch's `agent_arrays.AgentArrays` block; a single run is a batch of one)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from addt_dsl.kernel import kernel
 from addt_dsl.runtime import fleet
 from addt_dsl.runtime.actor_road import ActorPath
 from addt_dsl.runtime.agent_arrays import ACCEL, SCALE, SPEED, AgentArrays, S, T
-from addt_dsl.runtime.behaviors import Idm, lateral_profile, relative_heading, settle_lane_change, standing_yaw
+from addt_dsl.runtime.behaviors import (LATER, LAW_NONE, lateral_profile, relative_heading, settle_lane_change,
+                                        standing_yaw)
 from addt_dsl.runtime.fastroad import POSE_GRADE, POSE_H, POSE_OFFSET, POSE_X, POSE_Y, POSE_Z
 from addt_dsl.runtime.neighbours import LANE_WINDOW_M
 
@@ -45,7 +46,7 @@ ARRAY_MIN_AGENTS = 2
 
 class Fleet:
     """One run's agents for the loop: what does not change over the run (their roads,
-    sizes, physics slots, IDM plan), the poses of the step (arrays, or lists of floats when
+    sizes, physics slots, array plan), the poses of the step (arrays, or lists of floats when
     posed one by one), the recorded rows and perception's ground truth. The array
     programs over the agents of every run of a batch are `Fleets.pose` and `Fleets.step`;
     a single run is a batch of one.
@@ -152,10 +153,14 @@ class Fleet:
             return tuple(self.pose[(POSE_X, POSE_Y, _HEADING), lo:lo + self.n])
         return self.x, self.y, self.heading
 
-    def array_plan(self, run):
-        """(IDM settings (`fleet.IDM_FIELDS` x agents), whether IDM drives each agent, rows in
-        a lane change, lateral targets) when every agent can be stepped by the kernel now
-        (`Fleets.step`), else None. Re-read when a behaviour starts."""
+    def array_plan(self, run, t_now: float):
+        """(law settings (`fleet.law_params`: `LAW_PARAMS` x agents), each agent's law
+        (`behaviors.LAWS`), rows in a lane change, lateral targets) when every agent can be
+        stepped by the kernel from the step at `t_now` [s] on (`Fleets.step`: each
+        longitudinal behaviour has an array law, `Behavior.array_law`), else None. Kept
+        until a behaviour starts (`RunState.behavior_version`: a `when ... then behavior`
+        switches an agent's law), asked again at each step while one may become such a law
+        later (a lane anchor held, a speed change under way)."""
         if run.behavior_version == self._plan_version:
             return self._plan
         if self.block.anchored[self.run_row]:
@@ -163,25 +168,26 @@ class Fleet:
         self._plan_version, self._plan = run.behavior_version, None
         if run.networked or run.lights is not None or not self.n:
             return None
-        rows, settings = [], []
-        for i, a in enumerate(self.agents):
+        laws = []
+        for a in self.agents:
             beh = run.longitudinal[a.name]
             if a.heading_rel or a.lc_keeps_station or run.agent_plans[a.name].stop_at_road_end:
                 return None  # (the loop steps lane offsets' stations and stops at road ends)
-            if beh is None:
-                continue
-            if type(beh) is not Idm or not all(isinstance(v, (int, float)) for v in beh.settings.values()):
+            law = _NO_LAW if beh is None else beh.array_law(run, t_now)
+            if law is None:
                 return None
-            rows.append(i)
-            settings.append(beh.settings)
+            if law is LATER:
+                self._plan_version = -1  # (asked again at the next step)
+                return None
+            laws.append(law)
         changing = [i for i, a in enumerate(self.agents) if a.lc_duration_s > 0.0]
         target = np.array([a.t_target for a in self.agents], dtype=float)
-        params = np.ones((len(fleet.IDM_FIELDS), self.n))  # (read only where IDM drives the agent)
-        params[:, rows] = fleet.idm_params(settings)
-        idm = np.zeros(self.n, dtype=bool)
-        idm[rows] = True
-        self._plan = (params, idm, changing, target)
+        code, params = fleet.law_params(laws)
+        self._plan = (params, code, changing, target)
         return self._plan
+
+
+_NO_LAW = (LAW_NONE, ())  # an agent without a longitudinal behaviour: no acceleration
 
 
 class _Layout:
@@ -224,26 +230,27 @@ class _Layout:
         self.done = np.empty(len(fleets), dtype=bool)
         self.dt = None  # the runs' steps [s], at the first step
         self._plans: list = []
-        self._idm = None
+        self._laws = None
         self.binds = Fleet.binds
 
-    def idm(self, plans):
-        """The runs' IDM settings, whether IDM drives each agent, the lateral targets,
-        concatenated; the agents in a lane change (row, run, agent)."""
+    def laws(self, plans):
+        """The runs' law settings, each agent's law, the lateral targets, concatenated; the
+        agents in a lane change (row, run, agent). Made again when a run's plan changed (a
+        behaviour started)."""
         if len(plans) != len(self._plans) or any(p is not q for p, q in zip(plans, self._plans)):
             changing = [(lo + i, j, f.agents[i]) for j, (p, f, lo) in enumerate(zip(plans, self.fleets, self.lo))
                         for i in p[2]]
-            self._idm = (np.concatenate([p[0] for p in plans], axis=1), np.concatenate([p[1] for p in plans]),
-                         np.concatenate([p[3] for p in plans]), changing)
+            self._laws = (np.concatenate([p[0] for p in plans], axis=1), np.concatenate([p[1] for p in plans]),
+                          np.concatenate([p[3] for p in plans]), changing)
             self._plans = list(plans)
-        return self._idm
+        return self._laws
 
 
 class Fleets:
     """The agents' phases over a batch of runs: every run's agents at once (`pose`: numpy
     over runs x agents; `step`: the kernel `fleet.step`), with the floats of the per-agent
     code. Runs whose agents cannot go so (non-finite stations; for the step: networked runs,
-    lights, behaviours other than IDM with fixed settings, see `Fleet.array_plan`) and, for
+    lights, behaviours without an array law, see `Fleet.array_plan`) and, for
     the poses, batches of few agents (the per-agent calls are quicker: `ARRAY_MIN_AGENTS`)
     go one by one inside the same phase.
 
@@ -311,7 +318,7 @@ class Fleets:
         rel = None
         for j, (run, t_now) in enumerate(items):
             f = run.fleet
-            plan = f.array_plan(run)  # with one, only lane changes turn agents off their road's heading
+            plan = f.array_plan(run, t_now)  # with one, only lane changes turn agents off their road's heading
             lateral = plan[2] if plan is not None else \
                 [i for i, a in enumerate(f.agents) if a.heading_rel or a.lc_duration_s > 0.0]
             for i in lateral:
@@ -338,7 +345,7 @@ class Fleets:
         number; the (run, t) of the runs left to that loop."""
         items, rest = [], []
         for run, t in zip(runs, ts):
-            (rest if run.fleet.array_plan(run) is None else items).append((run, t))
+            (rest if run.fleet.array_plan(run, t) is None else items).append((run, t))
         return rest + self._step_arrays(items) if items else rest
 
     def _step_arrays(self, items) -> list:
@@ -346,8 +353,8 @@ class Fleets:
         left (an agent teleported this step stays put, as `advance` has it; a non-finite
         station or offset)."""
         layout = self._layout([run.fleet for run, _ in items])
-        plans = [run.fleet.array_plan(run) for run, _ in items]
-        params, idm, target, changing = layout.idm(plans)
+        plans = [run.fleet.array_plan(run, t) for run, t in items]
+        params, law, target, changing = layout.laws(plans)
         t_new = target.copy() if changing else target  # (the kernel reads it)
         for k, j, a in changing:  # (reads the agent's station before it moves, as `advance`)
             run, t_now = items[j]
@@ -355,7 +362,7 @@ class Fleets:
         ego = np.array([x for run, _ in items for x in (run.ego_s, run.ego_t, run.ego.speed)], dtype=float)
         if layout.dt is None:
             layout.dt = np.array([run.dt for run, _ in items], dtype=float)
-        left = fleet.step(layout.bounds, layout.cells, layout.block.flat, layout.placed, t_new, idm, params,
+        left = fleet.step(layout.bounds, layout.cells, layout.block.flat, layout.placed, t_new, law, params,
                           layout.road, layout.length, ego, layout.ego_road, layout.ego_length, layout.dt,
                           LANE_WINDOW_M, layout.done)
         for k, j, a in changing:  # (only agents in a lane change may hold a moving centre)

@@ -9,7 +9,7 @@ is no other loop. Runs share nothing but the code: each owns its state (`state.R
 its pybullet client and its random streams (seeded by its RunSpec), so a run's trace is the
 same bit for bit alone, beside any other runs, in any order (tests/sim/runtime/test_batch.py).
 The phases that are pure numerics run as arrays over the batch: the agents' poses and
-their car-following step (every live run's agents concatenated: `agents.Fleets`), the
+their longitudinal step (every live run's agents concatenated: `agents.Fleets`), the
 egos' dynamics and recorded rows (every run's ego state a row of one block:
 `vehicle.StateBlock`); behaviours, sensors, triggers and the stack step per run.
 """

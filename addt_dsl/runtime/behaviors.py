@@ -65,12 +65,53 @@ class Behavior(S.BehaviorSpec):
         never end."""
         return False
 
+    def array_law(self, world, time_s: float):
+        """How the agents' kernel (`fleet.step`) steps this behaviour from `time_s` on until
+        another starts: (law, settings), its `accel` being that law (`LAWS`) of the agent's
+        speed (and, for IDM, its leader) and these fixed settings [SI]; `LATER` where it
+        will be such a law from a later step (ask again then); None: never (its `accel`
+        steps it, one agent at a time)."""
+        return None
+
+
+# The longitudinal laws the agents' kernel steps (`fleet.step`): one definition each, a
+# kernel that behaviours' `accel` call interpreted (`.py_func`) and `fleet.step` compiled
+# in. `LAW_NONE`: no acceleration (no longitudinal behaviour).
+LAW_NONE, LAW_IDM, LAW_TRACK, LAW_BRAKE = range(4)
+LAWS = ("none", "idm", "track", "brake")
+LAW_PARAMS = 5  # the most settings of a law (IDM's, `IdmParams`)
+LATER = "later"  # `array_law`: not yet
+
+
+@kernel
+def speed_tracking(v, target, a_max, b_max, dt):
+    """Accelerate at `a_max` (brake at `b_max`) [m/s^2] from speed `v` until the `target`
+    speed [m/s], landing on it within the step `dt` [s]: an acceleration setting is the
+    acceleration the agent has. (A first-order lag here once gave 1.32 m/s after 3 s at
+    `accel 2 m/s^2`.) `max(-b_max, min(a_max, x))` written as Python's `min` and `max` pick."""
+    x = (target - v) / dt
+    x = x if x < a_max else a_max
+    return x if x > -b_max else -b_max
+
+
+@kernel
+def brake_accel(v, decel, to_speed, dt):
+    """Brake at `decel` [m/s^2] from speed `v`, landing on `to_speed` [m/s] instead of
+    overshooting below it within the step `dt` [s]; never speeding up. `min(0.0,
+    max(-decel, x))` written as Python's `min` and `max` pick."""
+    x = (to_speed - v) / dt
+    x = x if x > -decel else -decel
+    return x if x < 0.0 else 0.0
+
 
 def _speed_tracking(agent: AgentState, target: float, a_max: float, b_max: float, dt: float) -> float:
-    """Accelerate at `a_max` (brake at `b_max`) until the target speed, landing on it
-    within one step: an acceleration setting is the acceleration the agent has. (A
-    first-order lag here once gave 1.32 m/s after 3 s at `accel 2 m/s^2`.)"""
-    return max(-b_max, min(a_max, (target - agent.speed) / dt))
+    """`speed_tracking` of the agent's speed."""
+    return speed_tracking.py_func(agent.speed, target, a_max, b_max, dt)
+
+
+def _fixed(*values) -> bool:
+    """Whether settings are numbers (not live expressions read at each step)."""
+    return all(isinstance(v, (int, float)) for v in values)
 
 
 # Dynamics shapes (OpenSCENARIO TransitionDynamics): progress u in [0, 1] -> blend in
@@ -172,6 +213,16 @@ class Cruise(S.Cruise, Behavior):
             return tr.accel(agent, time_s, world.dt)
         # Linear at the rate limits: the same as tracking the target.
         return _speed_tracking(agent, max(0.0, self.value("speed", world)), *self.rates(), world.dt)
+
+    def array_law(self, world, time_s):
+        # Tracking a fixed target once a shaped or timed change is over.
+        speed = self.settings["speed"]
+        if not _fixed(speed):
+            return None
+        tr = self.transition
+        if tr is not None and tr.active(time_s, world.dt):
+            return LATER
+        return LAW_TRACK, (max(0.0, speed), *self.rates())
 
     def ended(self, agent, world, time_s):
         # At the target speed: the shaped change is over, or the speed is on the target.
@@ -421,11 +472,17 @@ class Idm(S.Idm, Behavior):
             return p.accel * free
         return idm_accel.py_func(agent.speed, free, *lead, p.accel, p.time_gap, p.min_gap, p.two_sqrt_ab)
 
+    def array_law(self, world, time_s):
+        if not _fixed(*self.settings.values()):
+            return None
+        p = IdmParams.of(self.settings)
+        return LAW_IDM, (p.v0, p.accel, p.time_gap, p.min_gap, p.two_sqrt_ab)
+
     _params = None
 
 
 class IdmParams:
-    """IDM settings with their per-agent constants."""
+    """IDM settings with their per-agent constants (`Idm.array_law`'s settings, in this order)."""
 
     def __init__(self, v0, accel, time_gap, min_gap, two_sqrt_ab):
         self.v0, self.accel, self.time_gap, self.min_gap, self.two_sqrt_ab = v0, accel, time_gap, min_gap, two_sqrt_ab
@@ -670,8 +727,11 @@ class Trajectory(S.Trajectory, Behavior):
 class Brake(S.Brake, Behavior):
 
     def accel(self, agent, world, time_s):
-        # Brake at `decel`, landing on `to_speed` instead of overshooting below it.
-        return min(0.0, max(-self.settings["decel"], (self.settings["to_speed"] - agent.speed) / world.dt))
+        return brake_accel.py_func(agent.speed, self.settings["decel"], self.settings["to_speed"], world.dt)
+
+    def array_law(self, world, time_s):
+        s = self.settings
+        return (LAW_BRAKE, (s["decel"], s["to_speed"])) if _fixed(s["decel"], s["to_speed"]) else None
 
     def ended(self, agent, world, time_s):
         return agent.speed <= self.settings["to_speed"] + ENDED_SPEED_TOL_MS
@@ -790,6 +850,12 @@ class Walk(S.Walk, Behavior):
     def accel(self, agent, world, time_s):
         s = self.settings
         return _speed_tracking(agent, s["speed"], s["accel"], s["decel"], world.dt)
+
+    def array_law(self, world, time_s):
+        # (along its lane: heading 0; `Fleet.array_plan` leaves walkers at an angle to the loop)
+        s = self.settings
+        return (LAW_TRACK, (s["speed"], s["accel"], s["decel"])) if _fixed(s["speed"], s["accel"], s["decel"]) \
+            else None
 
     def ended(self, agent, world, time_s):
         # After its distance (ground: station steps times the ground scale) or its time;

@@ -1,20 +1,22 @@
-"""Car-following agents stepped as one compiled kernel (`step`): every agent of a batch's
+"""The agents' longitudinal step as one compiled kernel (`step`): every agent of a batch's
 runs, with the floats of the per-agent loop.
 
-The loop steps a run's agents one after another in declaration order: agent i finds its
-leader (`neighbours.LeaderIndex`: the nearest member strictly ahead on its road within the
-lane window, the first in member order on equal gaps; members: the agents in declaration
-order, then the ego) among the agents before it where they have already moved this step
-and those after it where they were, takes IDM's acceleration (`behaviors.idm_free`,
-`behaviors.idm_accel`, compiled in) and moves (`behaviors.advance`). `step` does exactly
-that, per run: the run's members in a list sorted by station, agent i's leader found by
-bisecting it and walking ahead while a nearer gap is still possible (`LeaderIndex.leader`'s
-walk, bound and tie rule), agent i moved to its new place in the list before agent i + 1
-looks (`LeaderIndex.moved`); with a non-finite station among the members, the scan of
-every member (`neighbours.leader_scan`), as the index does.
+The loop steps a run's agents one after another in declaration order: agent i takes its
+behaviour's acceleration and moves (`behaviors.advance`); a car-following agent first finds
+its leader (`neighbours.LeaderIndex`: the nearest member strictly ahead on its road within
+the lane window, the first in member order on equal gaps; members: the agents in
+declaration order, then the ego) among the agents before it where they have already moved
+this step and those after it where they were. `step` does exactly that for the behaviours
+whose acceleration is a law of the agent's own state and fixed settings
+(`behaviors.LAWS`, compiled in: IDM, tracking a speed, braking): per run, the run's members
+in a list sorted by station, agent i's leader found by bisecting it and walking ahead while
+a nearer gap is still possible (`LeaderIndex.leader`'s walk, bound and tie rule), agent i
+moved to its new place in the list before agent i + 1 looks (`LeaderIndex.moved`); with a
+non-finite station among the members, the scan of every member (`neighbours.leader_scan`),
+as the index does.
 
-Bit for bit: the kernel's +, -, *, /, sqrt and comparisons are Python's floats', `max`
-written as the comparison Python's `max` makes; powers are the C library's (`kernel.pow`).
+Bit for bit: the kernel's +, -, *, /, sqrt and comparisons are Python's floats', `min` and
+`max` written as the comparisons Python's make; powers are the C library's (`kernel.pow`).
 """
 
 from __future__ import annotations
@@ -24,27 +26,31 @@ import math
 import numpy as np
 
 from addt_dsl.kernel import bisect_left, bisect_right, kernel
-from addt_dsl.runtime.behaviors import IdmParams, idm_accel, idm_free
+from addt_dsl.runtime.behaviors import (LAW_BRAKE, LAW_IDM, LAW_PARAMS, LAW_TRACK, brake_accel, idm_accel, idm_free,
+                                        speed_tracking)
 from addt_dsl.runtime.neighbours import STOP_SLACK_M
 
-IDM_FIELDS = ("v0", "accel", "time_gap", "min_gap", "two_sqrt_ab")  # `IdmParams`' fields, `step`'s `params` rows
 
-
-def idm_params(settings: list[dict]) -> np.ndarray:
-    """Per-agent IDM settings (`behaviors.IdmParams.of` of each) as `step`'s `params` rows
-    (`IDM_FIELDS`) x agents."""
-    ps = [IdmParams.of(p) for p in settings]
-    return np.array([[float(getattr(p, k)) for p in ps] for k in IDM_FIELDS]).reshape(len(IDM_FIELDS), len(ps))
+def law_params(laws: list[tuple[int, tuple]]) -> tuple[np.ndarray, np.ndarray]:
+    """Per-agent laws (`behaviors.Behavior.array_law`'s (law, settings) of each) as `step`'s
+    `law` codes and `params` rows (`LAW_PARAMS` x agents; rows past a law's settings 1.0,
+    never read)."""
+    code = np.array([law for law, _ in laws], dtype=np.int64)
+    params = np.ones((LAW_PARAMS, len(laws)))
+    for i, (_, values) in enumerate(laws):
+        params[:len(values), i] = values
+    return code, params
 
 
 @kernel
-def step(lo, cells, flat, placed, t_new, idm, params, road, length, ego, ego_road, ego_length, dt, window_m,
+def step(lo, cells, flat, placed, t_new, law, params, road, length, ego, ego_road, ego_length, dt, window_m,
          done):
     """One step of every agent of the runs: run r's agents are rows lo[r]:lo[r + 1] of the
     per-agent arrays, in declaration order, their state in `flat` (`agent_arrays`' fields
     x slots) at slots `cells`, moved there in place. Per agent: `t_new` its offset after the
-    step [m] (lane change profile), `idm` whether IDM drives it (else its acceleration is 0),
-    `params` its IDM settings (`IDM_FIELDS` x agents), `road` its road's code, `length` [m].
+    step [m] (lane change profile), `law` its behaviour's law (`behaviors.LAWS`; none: its
+    acceleration is 0), `params` the law's settings (`law_params`), `road` its road's code,
+    `length` [m].
     Per run: `ego` (station [m], offset [m], speed [m/s]) run after run, `ego_road`,
     `ego_length` [m], `dt` [s]. `done[r]` False where run r is left to
     the per-agent loop, nothing of it moved: an agent teleported this step (`placed`, over
@@ -87,7 +93,12 @@ def step(lo, cells, flat, placed, t_new, idm, params, road, length, ego, ego_roa
             k, c = a + i, cells[a + i]
             s, t, v, own, rd = ms[i], mt[i], mv[i], ml[i], mroad[i]
             accel = 0.0
-            if idm[k]:
+            lw = law[k]
+            if lw == LAW_TRACK:
+                accel = speed_tracking(v, params[0, k], params[1, k], params[2, k], h)
+            elif lw == LAW_BRAKE:
+                accel = brake_accel(v, params[0, k], params[1, k], h)
+            elif lw == LAW_IDM:
                 found, best, lead, best_m = False, 0.0, 0.0, -1
                 if scan:  # `leader_scan`: every member, the first on equal gaps
                     for m in range(n + 1):

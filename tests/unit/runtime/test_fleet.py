@@ -1,9 +1,9 @@
 """The agents' step kernel (`runtime.fleet.step`) against the per-agent loop's definitions:
 each run's agents in declaration order, each finding its leader with
 `neighbours.leader_scan` over the members as it sees them (earlier agents moved, later
-ones not, then the ego), IDM's acceleration by `behaviors.Idm.accel` and the move by
-`behaviors.advance`, bit for bit; the compiled kernel against its Python source; a step
-worked by hand."""
+ones not, then the ego), its behaviour's acceleration by its `accel` (IDM, a cruise, a
+brake: each behaviour's array law) and the move by `behaviors.advance`, bit for bit; the
+compiled kernel against its Python source; a step worked by hand."""
 
 from __future__ import annotations
 
@@ -17,13 +17,26 @@ from hypothesis import strategies as st
 
 from addt_dsl.kernel import bits, interpreted
 from addt_dsl.runtime import behaviors, fleet
-from addt_dsl.runtime.behaviors import Idm, advance, idm_accel, idm_free
+from addt_dsl.runtime.behaviors import LAW_NONE, Brake, Cruise, Idm, advance, idm_accel, idm_free
 from addt_dsl.runtime.neighbours import LANE_WINDOW_M, leader_scan
 from tests.unit.runtime.test_neighbours import Member
 
 ROADS = ("r", "q")
 SETTINGS = ({"speed": 25.0, "time_gap": 1.5, "min_gap": 2.0, "accel": 1.5, "decel": 2.0},
             {"speed": 12.0, "time_gap": 0.7, "min_gap": 0.5, "accel": 3.0, "decel": 5.5})
+# The behaviours an agent may have (`which` indexes them; None: no longitudinal behaviour):
+# IDM (0, 1), cruises (rate limits within a vehicle's bound; integer settings, as a source
+# may give them), brakes.
+BEHAVIOURS = (Idm(SETTINGS[0]), Idm(SETTINGS[1]), Cruise({"speed": 13.0}),
+              Cruise({"speed": 30, "accel": 4.0, "decel": 2.5, "max_decel": 1.0}), Cruise({"speed": 0.0}),
+              Brake({"decel": 8.0}), Brake({"decel": 3, "to_speed": 5.0}))
+
+
+def law(which, dt):
+    """The kernel's (law, settings) of behaviour `which` (None: none)."""
+    if which is None:
+        return LAW_NONE, ()
+    return BEHAVIOURS[which].array_law(SimpleNamespace(dt=dt), 0.0)
 
 
 def call(runs, width: int, python=False, placed=()):
@@ -35,21 +48,20 @@ def call(runs, width: int, python=False, placed=()):
     flat = np.zeros((5, n_runs * width))
     flat[4] = 1.0
     teleported = np.zeros(n_runs * width, dtype=bool)
-    cells, lo, t_new, idm, params, road, length = [], [0], [], [], [], [], []
-    for r, (agents, _, _) in enumerate(runs):
+    cells, lo, t_new, laws, road, length = [], [0], [], [], [], []
+    for r, (agents, _, dt) in enumerate(runs):
         for i, (rd, s, t, v, ln, scale, tn, which) in enumerate(agents):
             c = r * width + i
             flat[:, c] = (s, t, v, 0.0, scale)
             teleported[c] = (r, i) in placed
-            cells.append(c), t_new.append(tn), idm.append(which is not None), road.append(rd), length.append(ln)
-            params.append(fleet.idm_params([SETTINGS[which or 0]])[:, 0])
+            cells.append(c), t_new.append(tn), laws.append(law(which, dt)), road.append(rd), length.append(ln)
         lo.append(lo[-1] + len(agents))
+    code, params = fleet.law_params(laws)
     ego = np.array([x for _, e, _ in runs for x in e[1:4]], dtype=float)
     done = np.empty(n_runs, dtype=bool)
     with np.errstate(all="ignore"), interpreted() if python else contextlib.nullcontext():
         left = fleet.step(np.array(lo, dtype=np.int64), np.array(cells, dtype=np.int64), flat, teleported,
-                      np.array(t_new, dtype=float), np.array(idm, dtype=bool),
-                      np.array(params, dtype=float).reshape(-1, 5).T.copy(), np.array(road, dtype=np.int64),
+                      np.array(t_new, dtype=float), code, params, np.array(road, dtype=np.int64),
                       np.array(length, dtype=float), ego, np.array([e[0] for _, e, _ in runs], dtype=np.int64),
                       np.array([e[4] for _, e, _ in runs], dtype=float),
                       np.array([dt for _, _, dt in runs], dtype=float), LANE_WINDOW_M, done)
@@ -66,8 +78,8 @@ def loop(agents, ego, dt):
         me = members[i]
         accel = 0.0
         if which is not None:
-            world = SimpleNamespace(leader_of=lambda agent: leader_scan(members, agent))
-            accel = Idm(SETTINGS[which]).accel(me, world, 0.0)
+            world = SimpleNamespace(leader_of=lambda agent: leader_scan(members, agent), dt=dt)
+            accel = BEHAVIOURS[which].accel(me, world, 0.0)
         agent = SimpleNamespace(accel=0.0, speed=me.speed, heading_rel=0.0, lc_duration_s=0.0, t_target=t_new,
                                 placed=False, lc_keeps_station=False, s=me.s, t=me.t, ground_scale=scale,
                                 lc_centre=None)
@@ -79,13 +91,13 @@ def loop(agents, ego, dt):
 
 # Stations on a coarse grid (equal stations and gaps: ties), offsets at lane centres and at
 # the 1.8 m window's edges, two roads, a few lengths (equal gaps need equal ones), lane
-# changes (a new offset), agents without IDM, bends (ground scale).
+# changes (a new offset), agents under each behaviour or none, bends (ground scale).
 stations = st.one_of(st.integers(0, 12).map(lambda i: 5.0 * i), st.floats(-10.0, 80.0))
 offsets = st.one_of(st.sampled_from([-5.25, -1.75, 1.75, 0.05, -1.75 + 1.8, -1.75 - 1.8]), st.floats(-7.0, 3.5))
 speeds = st.one_of(st.floats(0.0, 40.0), st.sampled_from([0.0, -0.0, 20.0]))
 agent = st.tuples(st.sampled_from([0, 0, 1]), stations, offsets, speeds, st.sampled_from([4.6, 4.6, 12.0, 0.6]),
                   st.sampled_from([1.0, 1.0, 0.97, 1.04]), st.none() | st.sampled_from([0.3, -3.5]) | offsets,
-                  st.sampled_from([0, 1, 0, None]))
+                  st.sampled_from([0, 1, 0, None, 2, 3, 4, 5, 6]))
 ego_ = st.tuples(st.sampled_from([0, 1]), stations, offsets, speeds, st.sampled_from([4.6, 5.0]))
 
 
@@ -152,7 +164,7 @@ def test_idm_powers_are_libm_pow():
     rng = np.random.default_rng(7)
     n = 40000
     v, gap, lead = (rng.uniform(lo, hi, n).tolist() for lo, hi in ((0.0, 40.0), (0.2, 80.0), (0.0, 40.0)))
-    p = fleet.idm_params([SETTINGS[0]])[:, 0].tolist()
+    p = list(law(0, 0.1)[1])
     compiled = idm_accel.dispatcher()
     differ = 0
     for vi, gi, li in zip(v, gap, lead):
@@ -220,3 +232,26 @@ def test_equal_gaps_go_to_the_first_declared():
     assert got[3, 2] == behind_mover
     assert got[3, 2] != Idm(SETTINGS[0]).accel(SimpleNamespace(speed=20.0),
                                                SimpleNamespace(leader_of=lambda a: (25.4, 0.0)), 0.0)
+
+
+def test_speed_laws_are_pythons_min_and_max_compiled_and_interpreted():
+    """`speed_tracking` and `brake_accel`, compiled and as Python, give the bits of the
+    expressions they were written from (Python's `min` and `max`: on a NaN or an equal the
+    first stays), over signed zeros, infinities, NaNs and integer settings."""
+    values = [0.0, -0.0, 1.0, -1.0, 3, 2.5, 1e-300, math.inf, -math.inf, math.nan, 7.25, 20.0]
+    track, brake = behaviors.speed_tracking, behaviors.brake_accel
+    compiled_track, compiled_brake = track.dispatcher(), brake.dispatcher()
+    for v in values:
+        for target in values:
+            for limit in (3, 2.5, 0.0, -0.0, math.inf, math.nan):
+                for dt in (0.01, 0.1):
+                    x = (target - v) / dt
+                    want = bits(max(-limit, min(2.5, x)))
+                    assert bits(track.py_func(v, target, 2.5, limit, dt)) == want
+                    assert bits(compiled_track(v, target, 2.5, limit, dt)) == want
+                    want = bits(max(-2.5, min(limit, x)))
+                    assert bits(track.py_func(v, target, limit, 2.5, dt)) == want
+                    assert bits(compiled_track(v, target, limit, 2.5, dt)) == want
+                    want = bits(min(0.0, max(-limit, x)))
+                    assert bits(brake.py_func(v, limit, target, dt)) == want
+                    assert bits(compiled_brake(v, limit, target, dt)) == want
