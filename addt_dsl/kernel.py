@@ -328,7 +328,7 @@ def matmul(a, b):
         raise ValueError(f"matmul: shapes {a.shape} and {b.shape} do not align")
     a2 = a.reshape(a.size // k if k else math.prod(a.shape[:-1]), k)
     b2 = b if b.ndim == 2 else b.reshape(k, 1)
-    if "numba" in sys.modules:  # (`_numba_loaded`, inline: this is called per object and frame)
+    if _numba_loaded():
         out = np.empty((a2.shape[0], b2.shape[1]))
         _matmul(a2, b2, out)
     else:  # the kernel's order, a column at a time (a compile-only process does not load numba)

@@ -17,6 +17,6 @@ def judge(bound: BoundScenario, trace: Trace) -> list[Verdict]:
         signals = compute_signals(trace, formula.signals)
         rho = float(oracles.robustness_at_0(formula, signals, trace.period_s))
         passed = oracles.satisfied(formula, signals, trace.period_s)
-        first = None if passed else oracles.first_violation_time(o.formula, signals, trace.period_s)
+        first = None if passed else oracles.first_violation_time(formula, signals, trace.period_s)
         out.append(Verdict(o.name, o.severity, rho, passed, first))
     return out

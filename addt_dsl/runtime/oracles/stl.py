@@ -338,7 +338,7 @@ def satisfied(expr: Expr | Formula, signals: Mapping[str, np.ndarray], period_s:
     return bool(v[0])
 
 
-def first_violation_time(expr: Expr, signals: Mapping[str, np.ndarray],
+def first_violation_time(expr: Expr | Formula, signals: Mapping[str, np.ndarray],
                          period_s: float) -> float | None:
     """When the violation of a violated formula became certain (None if it holds at time
     0, or if no single instant can be named).
@@ -349,9 +349,10 @@ def first_violation_time(expr: Expr, signals: Mapping[str, np.ndarray],
     among its violated conjuncts; a disjunction: when the later of its two violations
     became certain; a comparison with no temporal operator: 0.0, the time it is judged at.
     """
-    if satisfied(expr, signals, period_s):
+    formula = prepare(expr)
+    if satisfied(formula, signals, period_s):
         return None
-    return _violation_time(expr, signals, period_s)
+    return _violation_time(formula.expr, signals, period_s)
 
 
 def _violation_time(expr: Expr, signals: Mapping[str, np.ndarray], period_s: float) -> float | None:
