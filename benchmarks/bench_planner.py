@@ -31,7 +31,8 @@ def child(repeats: int) -> dict:
     import numpy as np
 
     from addt_dsl.stack.calibrate import _road
-    from addt_dsl.stack.nodes import Controller, LatticePlanner, Plan
+    from addt_dsl.stack.control import Controller
+    from addt_dsl.stack.nodes import LatticePlanner, Plan
     from addt_dsl.vehicles import CAR, DEFAULT_WHEELBASE_M
 
     road = _road()

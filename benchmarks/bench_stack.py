@@ -100,7 +100,7 @@ def main() -> None:
 
     from addt_dsl.runtime import sensors
     from addt_dsl.runtime.execute import execute
-    from addt_dsl.stack import bev_grid, learned, nodes
+    from addt_dsl.stack import bev_grid, control, learned, nodes
 
     torch.set_num_threads(1)
     targets = [
@@ -112,7 +112,7 @@ def main() -> None:
         (learned, "decode", "  decode + box NMS"),
         (nodes.Tracker, "update", "tracker"),
         (nodes.LatticePlanner, "plan", "planner"),
-        (nodes.Controller, "command", "control"),
+        (control.ControlBlock, "command", "control (a batch of one run)"),
     ]
     _ = bev_grid
     print(f"overtake example, 30 s simulated, drop rate 0, torch threads {torch.get_num_threads()}; "

@@ -223,7 +223,8 @@ def fidelity() -> list[str]:
     # Lane change at 30 m/s: stack controller on the planner's smoothstep plan.
     from addt_dsl.runtime.fastroad import FastRoad
     from addt_dsl.road import build_road, line
-    from addt_dsl.stack.nodes import Controller, Plan
+    from addt_dsl.stack.control import Controller
+    from addt_dsl.stack.nodes import Plan
 
     road = FastRoad(build_road("r", [line(2000.0)], 0, 2, 3.5).road("r"))
     car = VehicleState(*road.point(100.0, -5.25), 30.0)

@@ -125,13 +125,20 @@ def _loop(runs: list[RunState]) -> list[Trace]:
                 rec.last = k + 1
             else:
                 going.append((run, rec, t))
-        sensed, sensed_runs, sensed_ts = [], [], []
+        fed, fed_ts = [], []
         for run, rec, t in going:
             phases.triggers(run, rec, k, t)
             try:
                 phases.sense(run, t)
-                phases.stack(run, t)
+                phases.frames(run, t)
             except Exception as exc:  # noqa: BLE001 - a stack failure is an outcome, not a crash
+                _stop(run, rec, k, f"{type(exc).__name__}: {exc}", t)
+                continue
+            fed.append((run, rec))
+            fed_ts.append(t)
+        sensed, sensed_runs, sensed_ts = [], [], []
+        for (run, rec), t, exc in zip(fed, fed_ts, phases.stack([run for run, _ in fed], fed_ts)):
+            if exc is not None:
                 _stop(run, rec, k, f"{type(exc).__name__}: {exc}", t)
                 continue
             sensed.append((run, rec))

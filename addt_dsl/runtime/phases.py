@@ -304,12 +304,33 @@ def sense(run: RunState, t: float) -> None:
             heapq.heappush(run.inflight, (t + delay, run._frame_seq, frame))
 
 
-def stack(run: RunState, t: float) -> None:
-    """Frames that have arrived reach the stack; the stack steps."""
+def frames(run: RunState, t: float) -> None:
+    """Frames that have arrived reach the stack."""
     while run.inflight and run.inflight[0][0] <= t + 1e-12:
         _, _, frame = heapq.heappop(run.inflight)
         run.stack.on_frame(frame, t)
-    run.stack.step(t, run.dt)
+
+
+def stack(runs: list[RunState], ts: list[float]) -> list[Exception | None]:
+    """Over the batch: each run's stack steps, the stacks of a class with a batched step
+    (`step_batch(stacks, times)`: the default stack's control cycles in one kernel call)
+    together, others one by one. Per run, the exception that stopped its stack, or None."""
+    errors: list[Exception | None] = [None] * len(runs)
+    groups: dict[type, list[int]] = {}  # (in the runs' order)
+    for i, run in enumerate(runs):
+        groups.setdefault(type(run.stack), []).append(i)
+    for cls, members in groups.items():
+        step_batch = getattr(cls, "step_batch", None)
+        if step_batch is not None:
+            for i, error in zip(members, step_batch([runs[i].stack for i in members], [ts[i] for i in members])):
+                errors[i] = error
+            continue
+        for i in members:
+            try:
+                runs[i].stack.step(ts[i], runs[i].dt)
+            except Exception as exc:  # noqa: BLE001 - a stack failure is the run's outcome
+                errors[i] = exc
+    return errors
 
 
 def ego(runs: list[RunState], ts: list[float], egos: StateBlock) -> list[bool]:

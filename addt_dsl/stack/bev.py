@@ -23,8 +23,8 @@ from addt_dsl.specs import stacks as S
 from addt_dsl.specs.stacks import NODE_NAMES, PERCEPTIONS
 from addt_dsl.stack.bus import Bus
 from addt_dsl.stack.latency import load_models
-from addt_dsl.stack.nodes import (Controller, EgoBody, GroundTruthPerception, LatticePlanner, Obj,
-                                  Tracker, time_to_cover)
+from addt_dsl.stack.control import ControlBlock, Controller
+from addt_dsl.stack.nodes import EgoBody, GroundTruthPerception, LatticePlanner, Obj, Tracker, time_to_cover
 from addt_dsl.units import to_si
 from addt_dsl.vehicles import CAR
 
@@ -232,6 +232,49 @@ class BevStack(S.BevStack):
 
     # ---- the per-step tick
     def step(self, time_s: float, dt: float):
+        error = self.step_batch([self], [time_s])[0]
+        if error is not None:
+            raise error
+        return self.command
+
+    @classmethod
+    def step_batch(cls, stacks: list[BevStack], times_s: list[float]) -> list[Exception | None]:
+        """One step of each stack at its time [s] (a batch's runs): messages, the planner, and
+        the control cycle where due, the controllers without fault sites or measured latency
+        in one call (`ControlBlock.command`). Per stack, the exception that stopped it, or None."""
+        errors: list[Exception | None] = [None] * len(stacks)
+        batched: list[int] = []
+        for i, (stack, time_s) in enumerate(zip(stacks, times_s)):
+            try:
+                if not stack._tick(time_s):
+                    continue
+                if stack.plan is None:
+                    stack.command = (0.0, 0.0)
+                elif stack._control_alone():
+                    stack._run_control(time_s)
+                else:
+                    batched.append(i)
+            except Exception as exc:  # noqa: BLE001 - the run's outcome
+                errors[i] = exc
+        if batched:
+            egos, roads = [], []
+            for i in batched:
+                ctx = stacks[i].ctx
+                egos.append((*ctx.ego_pose(), ctx.ego_station()))
+                roads.append(ctx.ego_road()[0])
+            ctrls = [stacks[i].controller for i in batched]
+            for i, x in zip(batched, ControlBlock.holding(ctrls).command(ctrls, egos, roads)):
+                try:
+                    if isinstance(x, Exception):
+                        raise x
+                    stacks[i]._commanded(times_s[i], *x, 0.0)
+                except Exception as exc:  # noqa: BLE001 - the run's outcome
+                    errors[i] = exc
+        return errors
+
+    def _tick(self, time_s: float) -> bool:
+        """Messages due by `time_s` [s] arrive and the planner runs where due; whether the
+        control cycle is due."""
         self.ctx.now = time_s
         fresh_tracks = False
         for msg in self.bus.deliver_until(time_s):
@@ -246,6 +289,7 @@ class BevStack(S.BevStack):
                 fresh_tracks = True
             elif msg.topic == "plan":
                 self.plan, self.plan_stamp = msg.data, msg.stamp_s
+                self.controller.follow(self.plan)
                 # Pipeline latency of the newest information in use: sensor stamp → plan out.
                 self.pipeline_s = msg.deliver_s - msg.stamp_s
         # The planner runs on fresh tracks (event-driven, like a ROS callback) and on its
@@ -257,8 +301,17 @@ class BevStack(S.BevStack):
             self._run_planner(time_s)
         if time_s + 1e-9 >= self.next_control_s:
             self.next_control_s += self.control_period
-            self._run_control(time_s, dt)
-        return self.command
+            return True
+        return False
+
+    def _control_alone(self) -> bool:
+        """Whether this stack's control cycle runs alone: a fault on the controller's sites or
+        timing, or latency measured on the clock (the schedule's targets are fixed once bound)."""
+        alone = self.__dict__.get("_alone")
+        if alone is None:
+            targets = self.ctx.faults.by_target
+            alone = self._alone = self.measured or any(s in targets for s in ("control", *Controller.sites))
+        return alone
 
     def _run_planner(self, time_s: float) -> None:
         started = _time.perf_counter()
@@ -530,10 +583,8 @@ class BevStack(S.BevStack):
         stop = self.ctx.stop_line_ahead(s0)
         return stop is not None and stop[1] == LIGHT_STATES["green"] and stop[0] <= entry + 1.0
 
-    def _run_control(self, time_s: float, dt: float) -> None:
-        if self.plan is None:
-            self.command = (0.0, 0.0)
-            return
+    def _run_control(self, time_s: float) -> None:
+        """The control cycle through every fault site of the controller."""
         started = _time.perf_counter()
         road, _ = self.ctx.ego_road()
         x, y, heading, speed = self.ctx.ego_pose()
@@ -541,6 +592,11 @@ class BevStack(S.BevStack):
         steer, accel = self.controller.command(self.plan, (x, y, heading, speed), road,
                                                float(s_now), float(t_now), self.control_period,
                                                self.corrupt)
+        self._commanded(time_s, steer, accel, started)
+
+    def _commanded(self, time_s: float, steer: float, accel: float, started: float) -> None:
+        """The controller's command leaves after its latency (`started`: the cycle's start on
+        the clock, for measured latency)."""
         lat = self._latency("control", 0, started, time_s)
         if not (math.isfinite(steer) and math.isfinite(accel)):
             raise StackError(f"non-finite command steer={steer!r} accel={accel!r}")

@@ -142,7 +142,8 @@ def measure_planner(repeats: int) -> list[tuple[int, list[float], list[float]]]:
 
 
 def measure_control(repeats: int) -> list[tuple[int, list[float], list[float]]]:
-    from addt_dsl.stack.nodes import Controller, Plan
+    from addt_dsl.stack.control import Controller
+    from addt_dsl.stack.nodes import Plan
 
     road = _road()
     ctl = Controller({}, DEFAULT_WHEELBASE_M)

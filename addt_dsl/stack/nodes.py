@@ -12,14 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import Libm, hypot, kernel, matmul, pow  # (pow: the C library's, as CPython's `**`)
+from addt_dsl.kernel import hypot, kernel, matmul, pow  # (pow: the C library's, as CPython's `**`)
 from addt_dsl.plan import LIGHT_STATES
-from addt_dsl.runtime.fastroad import curvature_at, reference_pose_at
 from addt_dsl.specs import stacks as S
 from addt_dsl.vehicles import CAR, DEFAULT_MASS_KG, DEFAULT_MU
 
 G = 9.81  # [m/s^2]
-remainder = Libm("remainder", math.remainder, 2)  # exact: the C library's is CPython's
 
 
 @dataclass(frozen=True)
@@ -1181,129 +1179,3 @@ class ForwardCollisionCheck:
         if not self.enabled or stage < 2:
             return stage, ttc, 0.0
         return stage, ttc, self.full_brake if stage == 3 else self.partial_brake
-
-
-# ---------------------------------------------------------------- control
-
-@kernel
-def _remainder_tau(a):
-    """math.remainder(a, math.tau) [rad]: exact, so the C library's has its bits; raises
-    where CPython's does (an infinite `a`)."""
-    if a - a != 0.0 and a == a:
-        raise ValueError("math domain error")
-    return remainder(a, math.tau)
-
-
-@kernel
-def _smoothstep_path(s, s_start, t_start, t_target, length):
-    """The planned lateral offset t(s) [m] (smoothstep from `t_start` at `s_start` to
-    `t_target` over `length` [m]), its slope dt/ds and d2t/ds2 [1/m]; raises where Python's
-    float division by zero does."""
-    if length == 0.0:
-        raise ZeroDivisionError("float division by zero")
-    u = (s - s_start) / length
-    u = u if u > 0.0 else 0.0  # min(1.0, max(0.0, u)) as Python's (a NaN gives 0)
-    u = u if u < 1.0 else 1.0
-    d = t_target - t_start
-    if u <= 0.0 or u >= 1.0:
-        return t_start + d * u, 0.0, 0.0
-    if length * length == 0.0:
-        raise ZeroDivisionError("float division by zero")
-    return (t_start + d * u * u * (3 - 2 * u), d * 6.0 * u * (1.0 - u) / length,
-            d * (6.0 - 12.0 * u) / (length * length))
-
-
-@kernel
-def _steer(tab, ds, last_i, length, s_start, t_start, t_target, lateral_m, x, y, heading, speed, has_last, last_x,
-           last_y, dt, s_now, t_now, preview_s, wheelbase, understeer, wn, zeta, max_steer):
-    """`Controller`'s steering [rad] (before its fault site) on the road of sample table
-    `tab` (`FastRoad`), the plan's lateral path (`_smoothstep_path`), the ego at (`x`, `y`,
-    `heading`, `speed`), at (`last_x`, `last_y`) a cycle ago if `has_last`."""
-    # The course (direction of travel) from successive poses, where the ego moved enough.
-    course = heading
-    if has_last:
-        dx, dy = x - last_x, y - last_y
-        step = 0.3 * (1.0 if 1.0 > speed else speed) * dt
-        reach = pow(step, 2.0)
-        if reach - reach != 0.0 and step - step == 0.0:  # CPython's ** raises where it overflows
-            raise OverflowError(34, "Numerical result out of range")
-        if dx * dx + dy * dy > reach and speed > 1.0:
-            course = heading + _remainder_tau(math.atan2(dy, dx) - heading)
-    t_path, slope, _ = _smoothstep_path(s_now, s_start, t_start, t_target, lateral_m)
-    road_heading = reference_pose_at(tab, ds, last_i, length, s_now)[2]
-    e_lat = t_now - t_path
-    e_course = _remainder_tau(course - road_heading - math.atan(slope))
-    s_pre = s_now + speed * preview_s
-    s_pre = length if length < s_pre else s_pre
-    t_pre, _, bend = _smoothstep_path(s_pre, s_start, t_start, t_target, lateral_m)
-    kappa_road = curvature_at(tab, ds, last_i, s_pre)
-    g = 1.0 - kappa_road * t_pre
-    kappa = kappa_road / (g if g > 0.2 else 0.2) + bend
-    steer = wheelbase * kappa + understeer * speed * speed * kappa
-    v = 5.0 if 5.0 > speed else speed  # max(speed, 5.0)
-    steer -= wheelbase * (wn * wn * e_lat / (v * v) + 2.0 * zeta * wn * e_course / v)
-    steer = steer if steer < max_steer else max_steer
-    return steer if steer > -max_steer else -max_steer
-
-
-
-class Controller:
-    """PID longitudinal control and path-tracking steering, at the control rate (100 Hz).
-
-    Steering = feed-forward of the planned path's curvature (geometric angle plus the
-    understeer a tyre-slip vehicle needs), previewed by `preview_s` to cover the
-    actuator lag, + feedback on the lateral and course errors with gains scheduled on
-    speed, so the error dynamics keep natural frequency `lateral_wn` and damping
-    `lateral_zeta` at every speed. The course (direction of travel) comes from
-    successive poses, so the vehicle's sideslip in a curve is not mistaken for a
-    heading error. (Pure pursuit overshot lane changes at 30 m/s by ~0.8 m.)
-    """
-
-    name = "control"
-    sites = S.CONTROL_SITES
-    lateral_zeta = 1.0
-    preview_s = 0.2  # [s]
-
-    def __init__(self, settings: dict, wheelbase_m: float, body: EgoBody = EgoBody()):
-        self.kp = float(settings.get("kp", 1.0))
-        self.ki = float(settings.get("ki", 0.1))
-        self.kd = float(settings.get("kd", 0.05))
-        self.wheelbase = wheelbase_m
-        self.integral = 0.0
-        # Understeer gradient [rad/(m/s^2)]: steering feed-forward a tyre-slip vehicle
-        # needs beyond the geometric angle in a curve.
-        self.understeer = float(settings.get("understeer", 0.0028))
-        self.lateral_wn = 1.0  # [rad/s] natural frequency of the lateral error dynamics
-        self.prev_err = 0.0
-        self.max_steer = 0.5
-        # Braking beyond what the tyres transmit only locks them (the twin's ideal ABS caps
-        # it anyway): the command is bounded by the ego's friction.
-        self.max_brake = body.max_brake
-        self.max_accel = 3.0  # [m/s^2]
-        self._last_xy: tuple[float, float] | None = None
-
-    def command(self, plan: Plan, ego, road, s_now: float, t_now: float, dt: float, corrupt):
-        x, y, heading, speed = ego
-        # The gains are read from memory every cycle and written back (persistent faults).
-        self.kp = corrupt("control.kp", self.kp)
-        self.ki = corrupt("control.ki", self.ki)
-        self.kd = corrupt("control.kd", self.kd)
-        self.lateral_wn = corrupt("control.lateral_wn", self.lateral_wn)
-        self.understeer = corrupt("control.understeer", self.understeer)
-        last, self._last_xy = self._last_xy, (x, y)
-        steer = _steer(road._tab, road._ds, road._last_i, road.length, plan.s_start, plan.t_start, plan.t_target,
-                       plan.lateral_length_m, x, y, heading, speed, last is not None,
-                       last[0] if last is not None else 0.0, last[1] if last is not None else 0.0, dt, s_now, t_now,
-                       self.preview_s, self.wheelbase, self.understeer, self.lateral_wn, self.lateral_zeta,
-                       self.max_steer)
-        steer = corrupt("control.steer", steer)
-        # PID on speed error.
-        err = plan.speed - speed
-        self.integral = corrupt("control.integral", max(-5.0, min(5.0, self.integral + err * dt)))
-        deriv = (err - self.prev_err) / dt
-        self.prev_err = err
-        accel = self.kp * err + self.ki * self.integral + self.kd * deriv
-        if plan.brake > 0.0 and accel > -plan.brake:  # emergency / AEB braking: at least this
-            accel = -plan.brake
-        accel = corrupt("control.accel", max(-self.max_brake, min(self.max_accel, accel)))
-        return steer, accel

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.road import build_road, line
 from addt_dsl.runtime.vehicle import G, VehicleParams, VehicleState, fiala_lateral_force, step
-from addt_dsl.stack.nodes import Controller, Plan
+from addt_dsl.stack.control import Controller
+from addt_dsl.stack.nodes import Plan
 
 DT = 0.01
 

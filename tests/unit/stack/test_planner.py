@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 from addt_dsl.plan import RoadPlan, SegmentPlan
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.road.roadspec import build_network
-from addt_dsl.stack.nodes import G, Controller, EgoBody, ForwardCollisionCheck, LatticePlanner, Plan
+from addt_dsl.stack.control import Controller
+from addt_dsl.stack.nodes import G, EgoBody, ForwardCollisionCheck, LatticePlanner, Plan
 from addt_dsl.vehicles import VEHICLES
 
 NO_FAULT = staticmethod(lambda site, value: value)

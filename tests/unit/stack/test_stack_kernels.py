@@ -1,6 +1,6 @@
 """The bev stack's per-step kernels: the tracks in road coordinates (`bev._road_frame`, the
 unhinted projection through bounding boxes `fastroad.project_boxed`) and the controller's
-steering law (`nodes._steer`). Each compiled kernel gives its Python's bits, and both give
+steering law (`control._steer`). Each compiled kernel gives its Python's bits, and both give
 the bits of the code they replaced (kept below verbatim as the oracle: `_old_road_frame`,
 `_OldController`), non-finite values included; where that code raised, they raise."""
 
@@ -18,7 +18,8 @@ from addt_dsl.plan import RoadPlan, SegmentPlan
 from addt_dsl.road.roadspec import build_network
 from addt_dsl.runtime.fastroad import FastRoad, _project, project_boxed
 from addt_dsl.stack.bev import CROSSING_MIN_SPEED, CROSSING_SIN, SET_OFF_ACCEL, road_frame_objects
-from addt_dsl.stack.nodes import Controller, EgoBody, LatticePlanner, Obj, Plan, Tracker
+from addt_dsl.stack.control import Controller
+from addt_dsl.stack.nodes import EgoBody, LatticePlanner, Obj, Plan, Tracker
 
 
 def _road(*segments) -> FastRoad:
@@ -323,7 +324,7 @@ def test_the_steering_kernel_gives_the_old_laws_bits(road, plan, x, y, heading, 
     def steer():
         """The value the steering's fault site sees (or the raise, before that site)."""
         c = Controller({}, 2.7)
-        c.lateral_wn, c._last_xy = wn, last
+        c.lateral_wn, c.last_xy = wn, last
         sites = {}
 
         def record(site, value):
@@ -331,7 +332,7 @@ def test_the_steering_kernel_gives_the_old_laws_bits(road, plan, x, y, heading, 
             return value
 
         out = _outcome(lambda: c.command(plan, (x, y, heading, speed), road, s_now, t_now, 0.01, record))
-        assert c._last_xy == (x, y)
+        assert c.last_xy == (x, y)
         return out if isinstance(out, tuple) else bits(sites["control.steer"])
 
     assert steer() == want
