@@ -96,9 +96,15 @@ class Libm:
         library's bits on every machine (one compiled call)."""
         import numpy as np
 
-        arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
+        first = args[0]
+        if type(first) is np.ndarray and first.dtype == np.float64 and first.flags.c_contiguous and first.ndim \
+                and all(type(a) is np.ndarray and a.dtype == np.float64 and a.shape == first.shape
+                        and a.flags.c_contiguous for a in args[1:]):
+            arrays = args  # (already what broadcasting would give: the common case, ~4 us less)
+        else:
+            arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
         shape = arrays[0].shape
-        flat = [np.ascontiguousarray(a).reshape(-1) for a in arrays]
+        flat = [a.reshape(-1) if a.flags.c_contiguous else np.ascontiguousarray(a).reshape(-1) for a in arrays]
         if _numba_loaded():
             out = np.empty(arrays[0].size)
             _OVER[self.name](*flat, out)

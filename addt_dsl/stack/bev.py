@@ -22,7 +22,7 @@ from addt_dsl.runtime.fastroad import project_boxed, reference_pose_at
 from addt_dsl.specs import stacks as S
 from addt_dsl.specs.stacks import NODE_NAMES, PERCEPTIONS
 from addt_dsl.stack.bus import Bus
-from addt_dsl.stack.latency import load_models
+from addt_dsl.stack.latency import Uniforms, load_models
 from addt_dsl.stack.control import ControlBlock, Controller
 from addt_dsl.stack.nodes import EgoBody, GroundTruthPerception, LatticePlanner, Obj, Tracker, time_to_cover
 from addt_dsl.units import to_si
@@ -140,7 +140,7 @@ class BevStack(S.BevStack):
         self.measured = self.settings["latency"] == "measured"
         self.jitter = self.settings["latency"] == "model"
         # One generator per node, from the run seed: the draws repeat bit for bit.
-        self.latency_rngs = {n: ctx.rng(f"latency.{n}") for n in NODE_NAMES}
+        self.latency_rngs = {n: Uniforms(ctx.rng(f"latency.{n}")) for n in NODE_NAMES}
         self.perception = self._make_perception()
         # A fault on the node `perception` draws from the sites this mode's node has.
         self.nodes = {**type(self).nodes, "perception": tuple(self.perception.sites)}

@@ -264,6 +264,15 @@ def test_over_keeps_numpys_shapes_and_differs_where_numpy_takes_simd_code():
     x = np.random.default_rng(3).uniform(-10.0, 10.0, 20000)
     assert bits(K.exp.over(x)) == bits([math.exp(v) for v in x.tolist()])
     # (numpy's own exp gives the C library's bits only without AVX-512: nothing to assert here)
+    # Arrays taken as they are (float64, C-contiguous, one shape) and arrays copied first
+    # (strided, transposed, float32, lists, another shape broadcast) give the same values.
+    m = np.random.default_rng(4).uniform(-5.0, 5.0, (6, 8))
+    for a, b in ((m[:, ::2], m[:, 1::2]), (m.T, m.T[::-1]), (m.astype(np.float32), m), (m.tolist(), m[0])):
+        want = [math.atan2(u, v) for u, v in zip(*(np.broadcast_arrays(np.asarray(a, dtype=np.float64),
+                                                                        np.asarray(b, dtype=np.float64))[i].ravel()
+                                                   for i in (0, 1)))]
+        got = K.atan2.over(a, b)
+        assert got.shape == np.broadcast_shapes(np.shape(a), np.shape(b)) and bits(got.ravel()) == bits(want)
 
 
 @settings(max_examples=60, deadline=None)

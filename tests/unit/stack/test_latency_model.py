@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from addt_dsl.stack.calibrate import LEVELS, fit, jitter
-from addt_dsl.stack.latency import (MODEL_PATH, NODES, LatencyModel, at, crossing, e2e_ms, e2e_quantile_ms,
-                                    load_models, target_names)
+from addt_dsl.stack.latency import (MODEL_PATH, NODES, LatencyModel, Uniforms, at, crossing, e2e_ms,
+                                    e2e_quantile_ms, load_models, target_names)
 
 DATA = json.loads(MODEL_PATH.read_text())
 
@@ -18,6 +18,16 @@ DATA = json.loads(MODEL_PATH.read_text())
 def _draws(model: LatencyModel, seed: int, k: int, objects: int = 10) -> list[float]:
     rng = np.random.default_rng(seed)
     return [model.sample(objects, rng) for _ in range(k)]
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 300))
+def test_uniforms_drawn_in_blocks_are_the_generators_own_draws_one_by_one(seed, n):
+    one_by_one = np.random.default_rng(seed)
+    blocked = Uniforms(np.random.default_rng(seed))
+    assert [blocked.random() for _ in range(n)] == [float(one_by_one.random()) for _ in range(n)]
+    model = load_models()["control"]
+    assert model.sample(3, blocked) == model.sample(3, one_by_one)
 
 
 @pytest.mark.parametrize("node", NODES)
