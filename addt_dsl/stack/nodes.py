@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import hypot, kernel, matmul, pow  # (pow: the C library's, as CPython's `**`)
+from addt_dsl.kernel import hypot, kernel, pow  # (pow: the C library's, as CPython's `**`)
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.specs import stacks as S
 from addt_dsl.vehicles import CAR, DEFAULT_MASS_KG, DEFAULT_MU
@@ -77,6 +77,35 @@ def vehicle_to_world(ego_pose, px: float, py: float) -> tuple[float, float]:
 
 # ---------------------------------------------------------------- perception
 
+@kernel
+def _sensed_positions(gxy, x, y, cos_h, sin_h, rot_a, rot_n, ax, ay, az, nx, ny, nz, out):
+    """Ground-truth perception's positions [m] in the vehicle frame: each object's centre at
+    (gxy[i, 0], gxy[i, 1]), 0.8 m up, into the vehicle frame (the ego at `x`, `y`, heading
+    cosine and sine), then into the *actual* sensor's frame (rotation `rot_a`, mount `ax`,
+    `ay`, `az`) and back through the *nominal* calibration (`rot_n`, `nx`, `ny`, `nz`): out[i] =
+    (forward, left). Each product sums from its first term on, as `kernel.matmul`."""
+    for i in range(gxy.shape[0]):
+        dx, dy = gxy[i, 0] - x, gxy[i, 1] - y
+        v0, v1, v2 = cos_h * dx + sin_h * dy - ax, -sin_h * dx + cos_h * dy - ay, 0.8 - az
+        s0 = rot_a[0, 0] * v0
+        s0 += rot_a[1, 0] * v1
+        s0 += rot_a[2, 0] * v2
+        s1 = rot_a[0, 1] * v0
+        s1 += rot_a[1, 1] * v1
+        s1 += rot_a[2, 1] * v2
+        s2 = rot_a[0, 2] * v0
+        s2 += rot_a[1, 2] * v1
+        s2 += rot_a[2, 2] * v2
+        f = rot_n[0, 0] * s0
+        f += rot_n[0, 1] * s1
+        f += rot_n[0, 2] * s2
+        left = rot_n[1, 0] * s0
+        left += rot_n[1, 1] * s1
+        left += rot_n[1, 2] * s2
+        out[i, 0] = f + nx
+        out[i, 1] = left + ny
+
+
 class GroundTruthPerception:
     """Objects hit by at least `min_hits` lidar returns, positions from ground truth + noise;
     objects with fewer (at least one) are reported `weak`, for the tracker to confirm.
@@ -107,27 +136,25 @@ class GroundTruthPerception:
         if len(hits) == 0:
             return []
         ids, counts = np.unique(hits, return_counts=True)
+        seen = [(frame.actors.get(body), count) for body, count in zip(ids.tolist(), counts.tolist())]
+        seen = [(gt, count) for gt, count in seen if gt is not None]  # (as they were at the capture)
+        if not seen:
+            return []
         x, y, heading, _ = ego_pose
-        cos_h, sin_h = math.cos(heading), math.sin(heading)
         actual, nominal = sensor.actual, sensor.nominal
-        rot_a = rotation(actual.roll, actual.pitch, actual.yaw)
-        rot_n = rotation(nominal.roll, nominal.pitch, nominal.yaw)
+        where = np.empty((len(seen), 2))
+        _sensed_positions(np.array([(gt.x, gt.y) for gt, _ in seen]), x, y, math.cos(heading), math.sin(heading),
+                          rotation(actual.roll, actual.pitch, actual.yaw),
+                          rotation(nominal.roll, nominal.pitch, nominal.yaw),
+                          actual.x, actual.y, actual.z, nominal.x, nominal.y, nominal.z, where)
+        yaw_err = (actual.yaw - nominal.yaw)
         objs = []
-        for body, count in zip(ids.tolist(), counts.tolist()):
-            gt = frame.actors.get(body)  # as it was when the frame was captured
-            if gt is None:
-                continue
-            # World → vehicle frame → actual sensor frame → vehicle frame via nominal calibration.
-            dx, dy = gt.x - x, gt.y - y
-            pv = np.array([cos_h * dx + sin_h * dy, -sin_h * dx + cos_h * dy, 0.8])
-            ps = matmul(rot_a.T, pv - np.array([actual.x, actual.y, actual.z]))
-            pn = matmul(rot_n, ps) + np.array([nominal.x, nominal.y, nominal.z])
-            yaw_err = (actual.yaw - nominal.yaw)
+        for (gt, count), (px, py) in zip(seen, where.tolist()):
             vx_w = gt.speed * math.cos(gt.heading)
             vy_w = gt.speed * math.sin(gt.heading)
             rng = self.rng if count >= self.min_hits else self.weak_rng
-            px = float(pn[0]) + rng.normal(0.0, self.noise_m)
-            py = float(pn[1]) + rng.normal(0.0, self.noise_m)
+            px = px + rng.normal(0.0, self.noise_m)
+            py = py + rng.normal(0.0, self.noise_m)
             px = corrupt("perception.x", px)
             py = corrupt("perception.y", py)
             wx, wy = vehicle_to_world(ego_pose, px, py)

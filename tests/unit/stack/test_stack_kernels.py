@@ -450,3 +450,46 @@ def test_on_a_bend_of_known_radius_the_cap_is_the_lateral_limit_plus_the_slowing
     cap, brake = planner._curve_speed(CURVY, 50.0, 0.0, 5.0, 20.0)
     assert cap == pytest.approx(math.sqrt(4.0 * 20.0 + 2.0 * 2.0 * 10.0), rel=1e-3) and brake == 0.0
     assert planner._curve_speed(STRAIGHT, 50.0, 0.0, 30.0, 30.0) == (math.inf, 0.0)
+
+
+# ---------------------------------------------------------------- ground-truth perception
+
+def _old_sensed(gx, gy, ego, actual, nominal):
+    """`GroundTruthPerception.run`'s position of one object before its kernel, verbatim
+    (numpy rows and two `kernel.matmul` products)."""
+    from addt_dsl.kernel import matmul
+    from addt_dsl.runtime.sensors import rotation
+
+    x, y, heading = ego
+    cos_h, sin_h = math.cos(heading), math.sin(heading)
+    rot_a, rot_n = rotation(*actual[3:]), rotation(*nominal[3:])
+    dx, dy = gx - x, gy - y
+    pv = np.array([cos_h * dx + sin_h * dy, -sin_h * dx + cos_h * dy, 0.8])
+    ps = matmul(rot_a.T, pv - np.array(actual[:3]))
+    pn = matmul(rot_n, ps) + np.array(nominal[:3])
+    return float(pn[0]), float(pn[1])
+
+
+mounts = st.tuples(st.floats(-3.0, 3.0), st.floats(-1.5, 1.5), st.floats(0.0, 2.5), st.floats(-0.2, 0.2),
+                   st.floats(-0.2, 0.2), st.floats(-math.pi, math.pi))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(st.floats(-500.0, 500.0), st.floats(-500.0, 500.0)), min_size=1, max_size=6),
+       st.tuples(st.floats(-500.0, 500.0), st.floats(-500.0, 500.0), st.floats(-7.0, 7.0)), mounts, mounts)
+def test_the_ground_truth_positions_kernel_gives_the_two_products_bits(objects, ego, actual, nominal):
+    from addt_dsl.runtime.sensors import rotation
+    from addt_dsl.stack.nodes import _sensed_positions
+
+    want = [bits(_old_sensed(gx, gy, ego, actual, nominal)) for gx, gy in objects]
+    x, y, heading = ego
+
+    def got():
+        out = np.empty((len(objects), 2))
+        _sensed_positions(np.array(objects, dtype=float), x, y, math.cos(heading), math.sin(heading),
+                          rotation(*actual[3:]), rotation(*nominal[3:]), *actual[:3], *nominal[:3], out)
+        return [bits(row) for row in out.tolist()]
+
+    assert got() == want
+    with interpreted():
+        assert got() == want
