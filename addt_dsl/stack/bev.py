@@ -154,6 +154,7 @@ class BevStack(S.BevStack):
         self.planner = LatticePlanner(self.settings, self.body)
         self.cruise = self.planner.cruise  # the setting (the planner's may rise to clear a junction)
         self.controller = Controller(self.settings, ctx.wheelbase_m, self.body)
+        self._alone: bool | None = None  # `_control_alone`, once the fault schedule is bound
         self.aeb_stage = 0
         self.emergency = False
         self.signs_stopped: tuple[float, ...] = ()  # stations of the stop-sign lines it has stopped for
@@ -264,9 +265,10 @@ class BevStack(S.BevStack):
                 roads.append(ctx.ego_road()[0])
             ctrls = [stacks[i].controller for i in batched]
             for i, x in zip(batched, ControlBlock.holding(ctrls).command(ctrls, egos, roads)):
+                if isinstance(x, Exception):
+                    errors[i] = x
+                    continue
                 try:
-                    if isinstance(x, Exception):
-                        raise x
                     stacks[i]._commanded(times_s[i], *x, 0.0)
                 except Exception as exc:  # noqa: BLE001 - the run's outcome
                     errors[i] = exc
@@ -307,11 +309,10 @@ class BevStack(S.BevStack):
     def _control_alone(self) -> bool:
         """Whether this stack's control cycle runs alone: a fault on the controller's sites or
         timing, or latency measured on the clock (the schedule's targets are fixed once bound)."""
-        alone = self.__dict__.get("_alone")
-        if alone is None:
+        if self._alone is None:
             targets = self.ctx.faults.by_target
-            alone = self._alone = self.measured or any(s in targets for s in ("control", *Controller.sites))
-        return alone
+            self._alone = self.measured or any(s in targets for s in ("control", *Controller.sites))
+        return self._alone
 
     def _run_planner(self, time_s: float) -> None:
         started = _time.perf_counter()

@@ -188,8 +188,7 @@ class ControlBlock:
                                       ego[j:j + 1], res[j:j + 1])
                     except Exception as exc:  # noqa: BLE001 - the run's outcome
                         out[i] = exc
-                        res[j] = math.nan  # (its row is not written: the run stops)
-                        idx[j] = -1
+                        idx[j] = -1  # (its row is not written: the run stops)
                 keep = idx >= 0
                 idx, ego, res = idx[keep], ego[keep], res[keep]
                 members = [i for i in members if out[i] is None]
