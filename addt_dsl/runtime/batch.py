@@ -125,6 +125,7 @@ def _loop(runs: list[RunState]) -> list[Trace]:
                 rec.last = k + 1
             else:
                 going.append((run, rec, t))
+        phases.conditions([run for run, _, _ in going], [rec for _, rec, _ in going], k)
         fed, fed_ts = [], []
         for run, rec, t in going:
             phases.triggers(run, rec, k, t)

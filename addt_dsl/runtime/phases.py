@@ -45,7 +45,7 @@ from addt_dsl.runtime.collision import clearances_batch
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
-                                       advance_variable_script, condition_checker)
+                                       advance_variable_script, condition_checker, prefetch)
 from addt_dsl.runtime.vehicle import HEADING, X, Y, StateBlock
 
 # The recorded fields of an actor, in the order of a step's row; clearance last.
@@ -260,6 +260,12 @@ def end(run: RunState, rec: Record, k: int, t: float) -> bool:
         run.events.append(Event(t, "end", {}))
         return True
     return False
+
+
+def conditions(runs: list[RunState], recs: list[Record], k: int) -> None:
+    """Over the batch: the `when` conditions that several runs' scripts ask alike at sample
+    k, evaluated together before `triggers` (`triggers.prefetch`)."""
+    prefetch(runs, recs, k)
 
 
 def triggers(run: RunState, rec: Record, k: int, t: float) -> None:

@@ -97,6 +97,21 @@ class StepState:
             if self.edge is None:  # (with an edge, the held level goes on: only its next edge counts)
                 self.held_since = None
 
+    def _waiting(self, time_s: float) -> bool:
+        """Whether `after` or `at` still holds the step back at `time_s` (it is armed)."""
+        return time_s + TIME_EPS_S < self.armed_at + self.after_s or \
+            (self.at_s is not None and time_s + TIME_EPS_S < self.at_s)
+
+    def asks(self, time_s: float):
+        """The conditions `advance` at `time_s` will ask, as the step stands (one that its
+        `advance` re-arms or arms first, it asks besides)."""
+        if self.armed_at is None or self.done:
+            return
+        if not self.fired and self.condition is not None and self.counted_at is None and not self._waiting(time_s):
+            yield self.condition
+        if self.group is not None:
+            yield from self.group.asks(time_s)
+
     def advance(self, time_s: float, holds: Holds, start: Start, ended: Ended | None = None) -> None:
         if self.armed_at is None:
             return
@@ -104,9 +119,7 @@ class StepState:
         if self.done:
             return
         if not self.fired:
-            if time_s + TIME_EPS_S < self.armed_at + self.after_s:
-                return
-            if self.at_s is not None and time_s + TIME_EPS_S < self.at_s:
+            if self._waiting(time_s):
                 return
             if self.condition is not None and self.counted_at is None:
                 value = holds(self.condition)
@@ -157,6 +170,10 @@ class GroupState:
     def needs_state(self) -> bool:
         return any(s.needs_state() for s in self.steps)
 
+    def asks(self, time_s: float):
+        for s in self.steps:
+            yield from s.asks(time_s)
+
     def update_end(self, time_s: float, ended: Ended) -> bool:
         return all([s.update_end(time_s, ended) for s in self.steps])  # every step updated
 
@@ -190,6 +207,11 @@ class Script:
 
     def needs_state(self) -> bool:
         return any(s.needs_state() for s in self.steps)
+
+    def asks(self, time_s: float):
+        """The conditions `advance` at `time_s` will ask, as the steps stand (`StepState.asks`)."""
+        for s in self.steps:
+            yield from s.asks(time_s)
 
     def advance(self, time_s: float, holds: Holds, start: Start, ended: Ended | None = None) -> None:
         # Every repeating step whose behaviour ended by now is back in standby before any step

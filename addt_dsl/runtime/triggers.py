@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from addt_dsl.registry import ENVIRONMENTS
+from addt_dsl.expr import Temporal, Until, walk
+from addt_dsl.registry import ENVIRONMENTS, SIGNALS
 from addt_dsl.runtime import oracles
 from addt_dsl.runtime.signals import compute_signals
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
@@ -19,6 +20,9 @@ def condition_checker(run, rec, k: int):
     def holds(condition) -> bool:
         nonlocal snapshot
         conditions = run.conditions
+        answer = conditions.answered(condition, k)
+        if answer is not None:
+            return answer
         if snapshot is None:
             snapshot = conditions.snapshot(rec, k)
         formula = conditions.formula(condition)
@@ -42,13 +46,33 @@ class Conditions:
     def __init__(self, run):
         self.run = run
         self._formulas: dict[int, tuple[object, oracles.Formula]] = {}  # id -> (expr kept alive, formula)
+        self._shared: dict[int, tuple[object, str | None]] = {}  # id -> (condition kept alive, `shared_key`)
         self._snapshots: dict[bool, _Snapshot] = {}
+        self._answers: dict[int, tuple[object, int, bool]] = {}  # id -> (condition, sample, verdict): `prefetch`
 
     def formula(self, expr) -> oracles.Formula:
         got = self._formulas.get(id(expr))
         if got is None or got[0] is not expr:
             got = self._formulas[id(expr)] = (expr, oracles.prepare(expr))
         return got[1]
+
+    def shared_key(self, condition) -> str | None:
+        """What runs asking `condition` alike share (its formula's text), or None where it
+        cannot be answered with others' (`_alike`)."""
+        got = self._shared.get(id(condition))
+        if got is None or got[0] is not condition:
+            formula = self.formula(condition)
+            got = self._shared[id(condition)] = (condition, repr(formula.expr) if _alike(formula) else None)
+        return got[1]
+
+    def answer(self, condition, k: int, verdict: bool) -> None:
+        """`condition`'s verdict on the state recorded at sample k, found beforehand (`prefetch`)."""
+        self._answers[id(condition)] = (condition, k, verdict)
+
+    def answered(self, condition, k: int) -> bool | None:
+        """The verdict `answer` gave `condition` at sample k, or None."""
+        got = self._answers.get(id(condition))
+        return got[2] if got is not None and got[0] is condition and got[1] == k else None
 
     def snapshot(self, rec, k: int, with_steps: bool = True) -> Trace:
         snap = self._snapshots.get(with_steps)
@@ -112,6 +136,48 @@ class _Snapshot:
         if run.named_steps and self.with_steps:  # `when ended(lead.brake_hard)` reads the states now
             trace.steps = {name: np.array([code], dtype=np.int8) for name, code in run.step_states(t).items()}
         return trace
+
+
+def _alike(formula: oracles.Formula) -> bool:
+    """Whether runs asking `formula` can be answered in one evaluation, a sample per run: no
+    temporal operator (a sample's verdict is its own) and signals of the recorded state only
+    (not the named steps' states, which steps firing earlier in the phase change)."""
+    if not formula.signals or any(isinstance(n, (Temporal, Until)) for n in walk(formula.expr)):
+        return False
+    return all("step" not in SIGNALS.get(name.partition("(")[0]).args for name in formula.signals)
+
+
+def prefetch(runs: list, recs: list, k: int) -> None:
+    """Over the batch: the `when` conditions the runs' scripts will ask at sample k
+    (`Script.asks`) that several runs ask alike (equal formulas, `_alike`) are evaluated
+    together: each run's signals from its own snapshot, stacked a sample per run, one
+    evaluation (the evaluator works sample by sample: each run's verdict is the one it gets
+    alone); `condition_checker` takes the runs' verdicts from there. A group whose signals
+    raise is left to the runs, which raise alone."""
+    groups: dict[str, tuple[oracles.Formula, list]] = {}  # (in the order first asked)
+    for run, rec in zip(runs, recs):
+        if not run.scripts:
+            continue
+        t = k * run.dt
+        for script in run.scripts.values():
+            for condition in script.asks(t):
+                key = run.conditions.shared_key(condition)
+                if key is not None:
+                    group = groups.get(key)
+                    if group is None:
+                        group = groups[key] = (run.conditions.formula(condition), [])
+                    group[1].append((run, rec, condition))
+    for formula, members in groups.values():
+        if len(members) < 2:
+            continue
+        try:
+            signals = [compute_signals(run.conditions.snapshot(rec, k), formula.signals) for run, rec, _ in members]
+        except Exception:  # noqa: BLE001 - each run asks again alone and raises there
+            continue
+        stacked = {name: np.concatenate([s[name] for s in signals]) for name in formula.signals}
+        verdicts = oracles.verdicts(formula, stacked, members[0][0].dt).tolist()
+        for (run, _, condition), verdict in zip(members, verdicts):
+            run.conditions.answer(condition, k, verdict)
 
 
 def advance_scripts(run, rec, k: int, t_now: float) -> None:

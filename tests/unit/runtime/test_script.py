@@ -3,6 +3,7 @@ parallel groups arm together. Checked against a direct computation of firing tim
 
 from __future__ import annotations
 
+import itertools
 import math
 
 from hypothesis import given, settings
@@ -181,3 +182,42 @@ def test_repeating_steps_rearm_before_another_fires_in_the_same_step():
         clock["t"] = k * DT
         script.advance(clock["t"], holds, start, ended)
     assert started == [("go", 6.0), ("stop", 10.0), ("go", 14.0), ("stop", 18.0), ("go", 22.0)]
+
+
+def _cond(i: int) -> Binary:
+    return Binary(op=">", left=Signal(name="s(lead)"), right=Num(value=float(i)))
+
+
+steps = st.recursive(
+    st.builds(lambda i, at, after, has: TriggerPlan(condition=_cond(i) if has else None, clause=clause(f"b{i}"),
+                                                    at_s=None if at is None else Num(value=at),
+                                                    after_s=None if after is None else Num(value=after)),
+              st.integers(0, 30), st.one_of(st.none(), st.floats(0.0, 3.0)), st.one_of(st.none(), st.floats(0.0, 2.0)),
+              st.booleans()),
+    lambda inner: st.builds(lambda mode, ss, i, has: TriggerPlan(condition=_cond(i) if has else None,
+                                                                 group=GroupPlan(mode=mode, steps=ss)),
+                            st.sampled_from(["sequence", "parallel"]), st.lists(inner, min_size=1, max_size=3),
+                            st.integers(0, 30), st.booleans()),
+    max_leaves=6)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(steps, min_size=1, max_size=3), st.lists(st.booleans(), min_size=1, max_size=50))
+def test_a_script_asks_at_least_the_conditions_it_said_it_would(triggers, answers):
+    """`Script.asks(t)` before each `advance(t)`: every condition it names, advance asks
+    (answered in order from `answers`); advance asks more only of steps it armed or
+    re-armed in that same call."""
+    script = Script(tuple(bind_step(t, {}) for t in triggers))
+    given_answers = itertools.cycle(answers)
+    for k in range(40):
+        t = k * DT
+        said = list(script.asks(t))
+        asked = []
+
+        def holds(cond):
+            asked.append(cond)
+            return next(given_answers)
+
+        script.advance(t, holds, lambda c, time_s: None)
+        assert all(any(a is c for a in asked) for c in said)
+        assert [c for c in asked if any(c is s for s in said)] == [c for c in said]  # (in advance's order)

@@ -89,3 +89,44 @@ def test_a_formula_is_prepared_once_per_expression():
     assert first.signals == ("s(ego)",)
     twin = Binary(op=">", left=Signal(name="s(ego)"), right=Num(value=1.0))  # equal, another object
     assert run.conditions.formula(twin) == first
+
+
+@settings(max_examples=40, deadline=None)
+@given(conditions, st.lists(st.integers(0, 2**16), min_size=2, max_size=6, unique=True), st.integers(0, 39))
+def test_runs_asking_a_condition_alike_get_their_own_verdicts_from_one_evaluation(condition, seeds, k):
+    """`prefetch` answers each run what its own snapshot says (the whole trace's verdict at
+    k), for a condition object of each run's own (equal formulas), and the checker takes it
+    from there without evaluating again."""
+    from addt_dsl.runtime import triggers
+
+    runs = []
+    for seed in seeds:
+        run, rec = fake_run(40, seed)
+        own = condition.model_copy(deep=True)  # (each run binds its own)
+        run.scripts = {"lead": SimpleNamespace(asks=lambda t, own=own: iter([own]))}
+        runs.append((run, rec, own))
+    triggers.prefetch([r for r, _, _ in runs], [rec for _, rec, _ in runs], k)
+    for run, rec, own in runs:
+        trace = full_trace(run, rec)
+        expected = oracles.verdicts(condition, compute_signals(trace, oracles.prepare(condition).signals), DT)
+        assert run.conditions.answered(own, k) == bool(expected[k])
+        assert run.conditions.answered(own, k + 1) is None and run.conditions.answered(condition, k) is None
+    # The checker answers from the prefetched verdict (the evaluator is not asked again).
+    real, triggers.oracles.satisfied = triggers.oracles.satisfied, None
+    try:
+        for run, rec, own in runs:
+            assert condition_checker(run, rec, k)(own) == run.conditions.answered(own, k)
+    finally:
+        triggers.oracles.satisfied = real
+
+
+def test_a_condition_on_named_steps_or_over_time_is_left_to_each_run():
+    from addt_dsl.expr import Temporal
+    from addt_dsl.runtime.triggers import _alike
+
+    atom = Binary(op=">", left=Signal(name="s(lead)"), right=Num(value=1.0))
+    assert _alike(oracles.prepare(atom))
+    assert not _alike(oracles.prepare(Temporal(op="eventually", lo_s=0.0, hi_s=1.0, arg=atom)))
+    started = Binary(op=">", left=Signal(name="started(lead.go)"), right=Num(value=0.0))
+    assert not _alike(oracles.prepare(Binary(op="and", left=atom, right=started)))
+    assert not _alike(oracles.prepare(Binary(op=">", left=Num(value=2.0), right=Num(value=1.0))))
