@@ -104,35 +104,32 @@ def _loop(runs: list[RunState]) -> list[Trace]:
     live = list(zip(runs, recs))
     k = 0
     while live:
-        # The per-run phases of one stretch of the step run run by run (runs share nothing:
-        # each run's phases in the documented order is all that matters), the batch's phases
-        # over the live runs' lists.
-        lruns = [run for run, _ in live]
+        # Each phase over the live runs, in the documented order (runs share nothing: each
+        # run's phases in that order is all that matters).
+        lruns, lrecs = [run for run, _ in live], [rec for _, rec in live]
         ts = [k * run.dt for run in lruns]
-        for run, t in zip(lruns, ts):
-            phases.clock(run, t)
+        phases.clock(lruns, ts)
         phases.pose(lruns, ts, fleets)
-        phases.record(lruns, [rec for _, rec in live], k, egos)
-        collided = phases.collisions(lruns, [rec for _, rec in live], k, ts)
-        going = []
-        for (run, rec), t, hit in zip(live, ts, collided):
-            phases.environment(run, rec, k, t)
-            phases.variables(run, rec, k, t)
-            phases.lights(run, rec, k, t)
-            phases.outputs(run, rec, k, t)
-            ended = phases.end(run, rec, k, t)
-            if hit or ended or k == rec.n - 1:
+        phases.record(lruns, lrecs, k, egos)
+        collided = phases.collisions(lruns, lrecs, k, ts)
+        phases.environment(lruns, lrecs, k, ts)
+        phases.variables(lruns, lrecs, k, ts)
+        phases.lights(lruns, lrecs, k, ts)
+        phases.outputs(lruns, lrecs, k, ts)
+        ended = phases.end(lruns, lrecs, k, ts)
+        going, going_recs, going_ts = [], [], []
+        for run, rec, t, hit, done in zip(lruns, lrecs, ts, collided, ended):
+            if hit or done or k == rec.n - 1:
                 rec.last = k + 1
             else:
-                going.append((run, rec, t))
-        phases.conditions([run for run, _, _ in going], [rec for _, rec, _ in going], k)
+                going.append(run)
+                going_recs.append(rec)
+                going_ts.append(t)
+        phases.conditions(going, going_recs, k)
+        phases.triggers(going, going_recs, k, going_ts)
         fed, fed_ts = [], []
-        for run, rec, t in going:
-            phases.triggers(run, rec, k, t)
-            try:
-                phases.sense(run, t)
-                phases.frames(run, t)
-            except Exception as exc:  # noqa: BLE001 - a stack failure is an outcome, not a crash
+        for run, rec, t, exc in zip(going, going_recs, going_ts, phases.sense(going, going_ts)):
+            if exc is not None:
                 _stop(run, rec, k, f"{type(exc).__name__}: {exc}", t)
                 continue
             fed.append((run, rec))

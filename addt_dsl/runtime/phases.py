@@ -102,10 +102,13 @@ class Record:
                      off_lanes=cut(self.offs))
 
 
-def clock(run: RunState, t: float) -> None:
-    run.ctx.now = t
-    if t + 1e-12 >= run.faults.next_wake_s:  # fault timers (tensor hooks attach at their instants)
-        run.faults.wake(t)
+def clock(runs: list[RunState], ts: list[float]) -> None:
+    """Over the batch: each run's clock; fault timers due wake (tensor hooks attach at their
+    instants)."""
+    for run, t in zip(runs, ts):
+        run.ctx.now = t
+        if t + 1e-12 >= run.faults.next_wake_s:
+            run.faults.wake(t)
 
 
 def pose(runs: list[RunState], ts: list[float], fleets: Fleets) -> None:
@@ -205,31 +208,35 @@ def _red_margins(run: RunState, rec: Record, k: int, t: float) -> None:
         rec.margins[a.name][k] = run.lights.red_margin(a.name, a.s + 0.5 * a.length_m, run.stop_stations[a.name], t)
 
 
-def environment(run: RunState, rec: Record, k: int, t: float) -> None:
-    """Environment steps (`at 3 s fog visibility 30 m`) fire on the state just recorded."""
-    if run.environment_script is not None:
-        advance_environment_script(run, rec, k, t)
+def environment(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> None:
+    """Over the batch: environment steps (`at 3 s fog visibility 30 m`) fire on the state just
+    recorded."""
+    for run, rec, t in zip(runs, recs, ts):
+        if run.environment_script is not None:
+            advance_environment_script(run, rec, k, t)
 
 
-def variables(run: RunState, rec: Record, k: int, t: float) -> None:
-    """The steps that set scenario variables fire on the state just recorded (a value set now
-    is read from the next sample on: `record` took the values at sample k)."""
-    if run.variable_script is not None:
-        advance_variable_script(run, rec, k, t)
+def variables(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> None:
+    """Over the batch: the steps that set scenario variables fire on the state just recorded
+    (a value set now is read from the next sample on: `record` took the values at sample k)."""
+    for run, rec, t in zip(runs, recs, ts):
+        if run.variable_script is not None:
+            advance_variable_script(run, rec, k, t)
 
 
-def lights(run: RunState, rec: Record, k: int, t: float) -> None:
-    """Light changes fire on the state just recorded (their conditions, as the environment's
-    and the variables', read the red margins `record` took with the lights as they were);
-    then each light's state, and the margins again with the changes that fired now
-    (`red_margin` gives the same for the same states: recomputing is exact)."""
-    if run.lights is None:
-        return
-    if run.light_script is not None:
-        advance_light_script(run, rec, k, t)
-        _red_margins(run, rec, k, t)
-    for name in rec.lights:
-        rec.lights[name][k] = run.lights.state(name, t)
+def lights(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> None:
+    """Over the batch: light changes fire on the state just recorded (their conditions, as the
+    environment's and the variables', read the red margins `record` took with the lights as
+    they were); then each light's state, and the margins again with the changes that fired
+    now (`red_margin` gives the same for the same states: recomputing is exact)."""
+    for run, rec, t in zip(runs, recs, ts):
+        if run.lights is None:
+            continue
+        if run.light_script is not None:
+            advance_light_script(run, rec, k, t)
+            _red_margins(run, rec, k, t)
+        for name in rec.lights:
+            rec.lights[name][k] = run.lights.state(name, t)
 
 
 def collisions(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> list[bool]:
@@ -239,27 +246,31 @@ def collisions(runs: list[RunState], recs: list[Record], k: int, ts: list[float]
     return clearances_batch([(rec.block[k], rec.names, rec.footprints, run, t) for run, rec, t in zip(runs, recs, ts)])
 
 
-def outputs(run: RunState, rec: Record, k: int, t: float) -> None:
-    """The stack's latencies, the command, the objects it saw, named steps' states."""
-    for node in LATENCY_NODES:
-        rec.latency[node][k] = run.stack.latency[node]
-    rec.outputs["control.steer"][k] = run.command[0]
-    rec.outputs["control.accel"][k] = run.command[1]
-    rec.objects[k] = run.stack.objects_seen
-    if rec.steps:  # named steps: ended on the state just recorded
-        for name, code in run.step_states(t).items():
-            rec.steps[name][k] = code
+def outputs(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> None:
+    """Over the batch: the stack's latencies, the command, the objects it saw, named steps'
+    states."""
+    for run, rec, t in zip(runs, recs, ts):
+        latency, recorded = run.stack.latency, rec.latency
+        for node in LATENCY_NODES:
+            recorded[node][k] = latency[node]
+        rec.outputs["control.steer"][k], rec.outputs["control.accel"][k] = run.command
+        rec.objects[k] = run.stack.objects_seen
+        if rec.steps:  # named steps: ended on the state just recorded
+            for name, code in run.step_states(t).items():
+                rec.steps[name][k] = code
 
 
-def end(run: RunState, rec: Record, k: int, t: float) -> bool:
-    """Whether `end when ...` holds on the state just recorded."""
-    if run.end_script is None:
-        return False
-    run.end_script.advance(t, condition_checker(run, rec, k), lambda clause, time_s: None)
-    if run.end_script.done:
-        run.events.append(Event(t, "end", {}))
-        return True
-    return False
+def end(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> list[bool]:
+    """Over the batch: whether `end when ...` holds on the state just recorded."""
+    out = []
+    for run, rec, t in zip(runs, recs, ts):
+        script = run.end_script
+        if script is not None:
+            script.advance(t, condition_checker(run, rec, k), lambda clause, time_s: None)
+            if script.done:
+                run.events.append(Event(t, "end", {}))
+        out.append(script is not None and script.done)
+    return out
 
 
 def conditions(runs: list[RunState], recs: list[Record], k: int) -> None:
@@ -268,24 +279,40 @@ def conditions(runs: list[RunState], recs: list[Record], k: int) -> None:
     prefetch(runs, recs, k)
 
 
-def triggers(run: RunState, rec: Record, k: int, t: float) -> None:
-    """Behaviours waiting for the first recorded state start; scripted steps fire."""
-    run.recorded = (rec, k)  # live behaviour settings read the state just recorded
-    if run.deferred:
-        for agent, clause in run.deferred:
-            run._start_behavior(agent, clause, t)
-        run.deferred.clear()
-    if run.scripts:
-        advance_scripts(run, rec, k, t)
-        if rec.steps:  # steps that fired now are started at this sample
-            for name, code in run.step_states(t).items():
-                rec.steps[name][k] = code
-    if run.faults.openers:  # `when C for W` faults: on the state as recorded at k, these steps included
-        run.faults.open_windows(t, condition_checker(run, rec, k))
+def triggers(runs: list[RunState], recs: list[Record], k: int, ts: list[float]) -> None:
+    """Over the batch: behaviours waiting for the first recorded state start; scripted steps
+    fire."""
+    for run, rec, t in zip(runs, recs, ts):
+        run.recorded = (rec, k)  # live behaviour settings read the state just recorded
+        if run.deferred:
+            for agent, clause in run.deferred:
+                run._start_behavior(agent, clause, t)
+            run.deferred.clear()
+        if run.scripts:
+            advance_scripts(run, rec, k, t)
+            if rec.steps:  # steps that fired now are started at this sample
+                for name, code in run.step_states(t).items():
+                    rec.steps[name][k] = code
+        if run.faults.openers:  # `when C for W` faults: on the state as recorded at k, these steps included
+            run.faults.open_windows(t, condition_checker(run, rec, k))
 
 
-def sense(run: RunState, t: float) -> None:
-    """Sensors that are due capture; faults act on them; frames leave for the stack."""
+def sense(runs: list[RunState], ts: list[float]) -> list[Exception | None]:
+    """Over the batch: each run's sensors that are due capture, faults act on the frames and
+    frames leave for the stack, which takes those that have arrived. Per run, the exception
+    that stopped it there, or None."""
+    errors: list[Exception | None] = [None] * len(runs)
+    for i, (run, t) in enumerate(zip(runs, ts)):
+        try:
+            _sense(run, t)
+            _frames(run, t)
+        except Exception as exc:  # noqa: BLE001 - a stack failure is the run's outcome
+            errors[i] = exc
+    return errors
+
+
+def _sense(run: RunState, t: float) -> None:
+    """A run's sensors that are due capture; faults act on them; frames leave for the stack."""
     for name, sensor in run.sensors.items():
         if t + 1e-9 < run.sensor_next[name]:
             continue
@@ -310,7 +337,7 @@ def sense(run: RunState, t: float) -> None:
             heapq.heappush(run.inflight, (t + delay, run._frame_seq, frame))
 
 
-def frames(run: RunState, t: float) -> None:
+def _frames(run: RunState, t: float) -> None:
     """Frames that have arrived reach the stack."""
     while run.inflight and run.inflight[0][0] <= t + 1e-12:
         _, _, frame = heapq.heappop(run.inflight)

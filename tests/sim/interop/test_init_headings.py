@@ -284,7 +284,7 @@ def test_slaloms_containers_are_turned_for_collisions_sensors_and_osi():
     want = {w: h for w, (h, _) in expected_headings(Doc(path)).items() if w.startswith("c")}
     run = RunState(expand(_import(path, "stack").plan).specs[0])
     try:
-        phases.clock(run, 0.0)
+        phases.clock([run], [0.0])
         phases.pose([run], [0.0], Fleets())
         table = run.physics.box_poses()
         bodies = dict(zip(want, table[run.physics.box_slots(list(want)), 3]))

@@ -241,7 +241,7 @@ def _at_start(spec, read):
 
     run = RunState(spec)
     try:
-        phases.clock(run, 0.0)
+        phases.clock([run], [0.0])
         phases.pose([run], [0.0], Fleets())
         return read(run)
     finally:
