@@ -348,14 +348,18 @@ def stack(runs: list[RunState], ts: list[float]) -> list[Exception | None]:
     """Over the batch: each run's stack steps, the stacks of a class with a batched step
     (`step_batch(stacks, times)`: the default stack's control cycles in one kernel call)
     together, others one by one. Per run, the exception that stopped its stack, or None."""
+    stacks = [run.stack for run in runs]
+    kind = type(stacks[0]) if stacks else None
+    if all(type(s) is kind for s in stacks) and hasattr(kind, "step_batch"):  # (the usual batch: one class)
+        return kind.step_batch(stacks, ts)
     errors: list[Exception | None] = [None] * len(runs)
     groups: dict[type, list[int]] = {}  # (in the runs' order)
-    for i, run in enumerate(runs):
-        groups.setdefault(type(run.stack), []).append(i)
+    for i, s in enumerate(stacks):
+        groups.setdefault(type(s), []).append(i)
     for cls, members in groups.items():
         step_batch = getattr(cls, "step_batch", None)
         if step_batch is not None:
-            for i, error in zip(members, step_batch([runs[i].stack for i in members], [ts[i] for i in members])):
+            for i, error in zip(members, step_batch([stacks[i] for i in members], [ts[i] for i in members])):
                 errors[i] = error
             continue
         for i in members:

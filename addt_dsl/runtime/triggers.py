@@ -154,6 +154,8 @@ def prefetch(runs: list, recs: list, k: int) -> None:
     evaluation (the evaluator works sample by sample: each run's verdict is the one it gets
     alone); `condition_checker` takes the runs' verdicts from there. A group whose signals
     raise is left to the runs, which raise alone."""
+    if len(runs) < 2:
+        return
     groups: dict[str, tuple[oracles.Formula, list]] = {}  # (in the order first asked)
     for run, rec in zip(runs, recs):
         if not run.scripts:

@@ -239,34 +239,33 @@ class Controller:
         self.index = 0
 
     def follow(self, plan: Plan) -> None:
-        """Take `plan` as the one to follow."""
-        r = self.row
-        r[S_START], r[T_START], r[T_TARGET] = plan.s_start, plan.t_start, plan.t_target
-        r[LATERAL_M], r[SPEED], r[BRAKE] = plan.lateral_length_m, plan.speed, plan.brake
+        """Take `plan` as the one a block's cycle follows (`ControlBlock.command`)."""
+        self.row[S_START:BRAKE + 1] = (plan.s_start, plan.t_start, plan.t_target, plan.lateral_length_m, plan.speed,
+                                       plan.brake)
 
     def command(self, plan: Plan, ego, road, s_now: float, t_now: float, dt: float, corrupt):
         """(steer [rad], accel [m/s^2]) for `plan` with the ego at `ego` = (x, y, heading,
         speed) and (`s_now`, `t_now`) on `road`, a period `dt` [s] after the last cycle; every
-        value passes its fault site (`corrupt(site, value)`)."""
-        self.follow(plan)
+        value passes its fault site (`corrupt(site, value)`). (The small kernels run as their
+        Python here: the same bits, without a compiled call's overhead for one run.)"""
         r = self.row
+        v = r.tolist()
         x, y, heading, speed = ego
         # The gains are read from memory every cycle and written back (persistent faults).
-        for k, site in ((KP, "control.kp"), (KI, "control.ki"), (KD, "control.kd"), (WN, "control.lateral_wn"),
-                        (UNDERSTEER, "control.understeer")):
-            r[k] = corrupt(site, float(r[k]))
-        has_last, last_x, last_y = r[HAS_LAST] != 0.0, float(r[LAST_X]), float(r[LAST_Y])
-        r[HAS_LAST], r[LAST_X], r[LAST_Y] = 1.0, x, y
+        kp, ki, kd = corrupt("control.kp", v[KP]), corrupt("control.ki", v[KI]), corrupt("control.kd", v[KD])
+        wn, understeer = corrupt("control.lateral_wn", v[WN]), corrupt("control.understeer", v[UNDERSTEER])
+        # (a site without a fault hands its value back itself: only a changed one is written)
+        if not (kp is v[KP] and ki is v[KI] and kd is v[KD] and wn is v[WN] and understeer is v[UNDERSTEER]):
+            r[KP:UNDERSTEER + 1] = (kp, ki, kd, wn, understeer)
+        r[HAS_LAST:LAST_Y + 1] = (1.0, x, y)
         steer = _steer(road._tab, road._ds, road._last_i, road.length, plan.s_start, plan.t_start, plan.t_target,
-                       plan.lateral_length_m, x, y, heading, speed, has_last, last_x, last_y, dt, s_now, t_now,
-                       PREVIEW_S, float(r[WHEELBASE]), float(r[UNDERSTEER]), float(r[WN]), LATERAL_ZETA,
-                       float(r[MAX_STEER]))
+                       plan.lateral_length_m, x, y, heading, speed, v[HAS_LAST] != 0.0, v[LAST_X], v[LAST_Y], dt,
+                       s_now, t_now, PREVIEW_S, v[WHEELBASE], understeer, wn, LATERAL_ZETA, v[MAX_STEER])
         steer = corrupt("control.steer", steer)
         err = plan.speed - speed
-        r[INTEGRAL] = integral = corrupt("control.integral", _integrate(float(r[INTEGRAL]), err, dt))
-        accel = _accel(err, float(r[PREV_ERR]), integral, dt, float(r[KP]), float(r[KI]), float(r[KD]), plan.brake,
-                       float(r[MAX_BRAKE]), float(r[MAX_ACCEL]))
-        r[PREV_ERR] = err
+        integral = corrupt("control.integral", _integrate.py_func(v[INTEGRAL], err, dt))
+        accel = _accel.py_func(err, v[PREV_ERR], integral, dt, kp, ki, kd, plan.brake, v[MAX_BRAKE], v[MAX_ACCEL])
+        r[INTEGRAL:PREV_ERR + 1] = (integral, err)
         return steer, corrupt("control.accel", accel)
 
     @property

@@ -15,7 +15,7 @@ from addt_dsl.kernel import bits, interpreted
 from addt_dsl.plan import RoadPlan, SegmentPlan
 from addt_dsl.road.roadspec import build_network
 from addt_dsl.runtime.fastroad import FastRoad
-from addt_dsl.stack.control import FIELDS, PERIOD, ControlBlock, Controller
+from addt_dsl.stack.control import FIELDS, PERIOD, S_START, ControlBlock, Controller
 from addt_dsl.stack.nodes import EgoBody, Plan
 
 
@@ -91,8 +91,8 @@ def _run(cases):
             hints[i] = cases[i][5][cycle][1][0] % 300.0
     for i in stopped:  # the alone controller went on only as far as the batched one
         want[i] = want[i][:len(got[i])]
-    rows = [bits(list(c.row)) for c in alone]
-    return want, got, rows, [bits(list(c.row)) for c in batched], stopped
+    state = slice(0, S_START)  # (gains and memory: the plan is the block's own input)
+    return want, got, [bits(list(c.row[state])) for c in alone], [bits(list(c.row[state])) for c in batched], stopped
 
 
 @settings(max_examples=60, deadline=None)
