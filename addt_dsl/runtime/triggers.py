@@ -144,7 +144,8 @@ def _alike(formula: oracles.Formula) -> bool:
     (not the named steps' states, which steps firing earlier in the phase change)."""
     if not formula.signals or any(isinstance(n, (Temporal, Until)) for n in walk(formula.expr)):
         return False
-    return all("step" not in SIGNALS.get(name.partition("(")[0]).args for name in formula.signals)
+    specs = [SIGNALS.get(name.partition("(")[0]) for name in formula.signals]
+    return all(spec is not None and "step" not in spec.args for spec in specs)
 
 
 def prefetch(runs: list, recs: list, k: int) -> None:

@@ -130,3 +130,4 @@ def test_a_condition_on_named_steps_or_over_time_is_left_to_each_run():
     started = Binary(op=">", left=Signal(name="started(lead.go)"), right=Num(value=0.0))
     assert not _alike(oracles.prepare(Binary(op="and", left=atom, right=started)))
     assert not _alike(oracles.prepare(Binary(op=">", left=Num(value=2.0), right=Num(value=1.0))))
+    assert not _alike(oracles.prepare(Binary(op=">", left=Signal(name="nosuch(lead)"), right=Num(value=1.0))))
