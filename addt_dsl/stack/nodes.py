@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import hypot, kernel, pow  # (pow: the C library's, as CPython's `**`)
+from addt_dsl.kernel import hypot, kernel, matmul_into, pow  # (pow: the C library's, as CPython's `**`)
 from addt_dsl.plan import LIGHT_STATES
 from addt_dsl.specs import stacks as S
 from addt_dsl.vehicles import CAR, DEFAULT_MASS_KG, DEFAULT_MU
@@ -78,32 +78,26 @@ def vehicle_to_world(ego_pose, px: float, py: float) -> tuple[float, float]:
 # ---------------------------------------------------------------- perception
 
 @kernel
-def _sensed_positions(gxy, x, y, cos_h, sin_h, rot_a, rot_n, ax, ay, az, nx, ny, nz, out):
+def _sensed_positions(gxy, x, y, cos_h, sin_h, rot_a, rot_n, mount_a, mount_n, out):
     """Ground-truth perception's positions [m] in the vehicle frame: each object's centre at
     (gxy[i, 0], gxy[i, 1]), 0.8 m up, into the vehicle frame (the ego at `x`, `y`, heading
-    cosine and sine), then into the *actual* sensor's frame (rotation `rot_a`, mount `ax`,
-    `ay`, `az`) and back through the *nominal* calibration (`rot_n`, `nx`, `ny`, `nz`): out[i] =
-    (forward, left). Each product sums from its first term on, as `kernel.matmul`."""
-    for i in range(gxy.shape[0]):
+    cosine and sine), then into the *actual* sensor's frame (rotation `rot_a`, mount
+    `mount_a` = x, y, z) and back through the *nominal* calibration (`rot_n`, `mount_n`):
+    out[i] = (forward, left). The products are `kernel.matmul`'s (its kernel, row form)."""
+    m = gxy.shape[0]
+    v = np.empty((m, 3))
+    for i in range(m):
         dx, dy = gxy[i, 0] - x, gxy[i, 1] - y
-        v0, v1, v2 = cos_h * dx + sin_h * dy - ax, -sin_h * dx + cos_h * dy - ay, 0.8 - az
-        s0 = rot_a[0, 0] * v0
-        s0 += rot_a[1, 0] * v1
-        s0 += rot_a[2, 0] * v2
-        s1 = rot_a[0, 1] * v0
-        s1 += rot_a[1, 1] * v1
-        s1 += rot_a[2, 1] * v2
-        s2 = rot_a[0, 2] * v0
-        s2 += rot_a[1, 2] * v1
-        s2 += rot_a[2, 2] * v2
-        f = rot_n[0, 0] * s0
-        f += rot_n[0, 1] * s1
-        f += rot_n[0, 2] * s2
-        left = rot_n[1, 0] * s0
-        left += rot_n[1, 1] * s1
-        left += rot_n[1, 2] * s2
-        out[i, 0] = f + nx
-        out[i, 1] = left + ny
+        v[i, 0] = cos_h * dx + sin_h * dy - mount_a[0]
+        v[i, 1] = -sin_h * dx + cos_h * dy - mount_a[1]
+        v[i, 2] = 0.8 - mount_a[2]
+    in_sensor = np.empty((m, 3))
+    matmul_into(v, rot_a, in_sensor)  # each row: rot_a.T @ v
+    nominal = np.empty((m, 3))
+    matmul_into(in_sensor, rot_n.T, nominal)  # each row: rot_n @ it
+    for i in range(m):
+        out[i, 0] = nominal[i, 0] + mount_n[0]
+        out[i, 1] = nominal[i, 1] + mount_n[1]
 
 
 class GroundTruthPerception:
@@ -146,7 +140,7 @@ class GroundTruthPerception:
         _sensed_positions(np.array([(gt.x, gt.y) for gt, _ in seen]), x, y, math.cos(heading), math.sin(heading),
                           rotation(actual.roll, actual.pitch, actual.yaw),
                           rotation(nominal.roll, nominal.pitch, nominal.yaw),
-                          actual.x, actual.y, actual.z, nominal.x, nominal.y, nominal.z, where)
+                          np.array([actual.x, actual.y, actual.z]), np.array([nominal.x, nominal.y, nominal.z]), where)
         yaw_err = (actual.yaw - nominal.yaw)
         objs = []
         for (gt, count), (px, py) in zip(seen, where.tolist()):

@@ -12,23 +12,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from addt_dsl.kernel import bits, interpreted
-from addt_dsl.plan import RoadPlan, SegmentPlan
-from addt_dsl.road.roadspec import build_network
-from addt_dsl.runtime.fastroad import FastRoad
+from addt_dsl.plan import SegmentPlan
 from addt_dsl.stack.control import FIELDS, PERIOD, S_START, ControlBlock, Controller
 from addt_dsl.stack.nodes import EgoBody, Plan
+from tests.unit.stack.roadkit import STRAIGHT, road
 
-
-def _road(*segments) -> FastRoad:
-    plan = RoadPlan(name="r", source="inline", segments=list(segments), right_lanes=2)
-    network = build_network([plan])["r"]
-    return FastRoad(network.road(next(iter(network.roads))))
-
-
-STRAIGHT = _road(SegmentPlan(kind="line", length_m=500.0))
-BEND = _road(SegmentPlan(kind="line", length_m=100.0),
-             SegmentPlan(kind="arc", length_m=150.0, curvature_per_m=0.01),
-             SegmentPlan(kind="line", length_m=100.0))
+BEND = road(SegmentPlan(kind="line", length_m=100.0),
+            SegmentPlan(kind="arc", length_m=150.0, curvature_per_m=0.01),
+            SegmentPlan(kind="line", length_m=100.0))
 ROADS = (STRAIGHT, BEND)
 
 odd = st.sampled_from([math.nan, math.inf, -math.inf, 0.0, -0.0])

@@ -14,25 +14,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from addt_dsl.kernel import bits, interpreted
-from addt_dsl.plan import RoadPlan, SegmentPlan
-from addt_dsl.road.roadspec import build_network
-from addt_dsl.runtime.fastroad import FastRoad, _project, project_boxed
+from addt_dsl.plan import SegmentPlan
+from addt_dsl.runtime.fastroad import _project, project_boxed
 from addt_dsl.stack.bev import CROSSING_MIN_SPEED, CROSSING_SIN, SET_OFF_ACCEL, road_frame_objects
 from addt_dsl.stack.control import Controller
 from addt_dsl.stack.nodes import EgoBody, LatticePlanner, Obj, Plan, Tracker
+from tests.unit.stack.roadkit import HAIRPIN, STRAIGHT
+from tests.unit.stack.roadkit import road as _road
 
-
-def _road(*segments) -> FastRoad:
-    plan = RoadPlan(name="r", source="inline", segments=list(segments), right_lanes=2)
-    network = build_network([plan])["r"]
-    return FastRoad(network.road(next(iter(network.roads))))
-
-
-STRAIGHT = _road(SegmentPlan(kind="line", length_m=500.0))
-# A U turn: the two straights run 100 m apart, so a point between them has two near samples.
-HAIRPIN = _road(SegmentPlan(kind="line", length_m=200.0),
-                SegmentPlan(kind="arc", length_m=50.0 * math.pi, curvature_per_m=0.02),
-                SegmentPlan(kind="line", length_m=200.0))
 ROADS = (STRAIGHT, HAIRPIN)
 
 coords = st.floats(-150.0, 350.0)
@@ -487,7 +476,8 @@ def test_the_ground_truth_positions_kernel_gives_the_two_products_bits(objects, 
     def got():
         out = np.empty((len(objects), 2))
         _sensed_positions(np.array(objects, dtype=float), x, y, math.cos(heading), math.sin(heading),
-                          rotation(*actual[3:]), rotation(*nominal[3:]), *actual[:3], *nominal[:3], out)
+                          rotation(*actual[3:]), rotation(*nominal[3:]), np.array(actual[:3]), np.array(nominal[:3]),
+                          out)
         return [bits(row) for row in out.tolist()]
 
     assert got() == want
