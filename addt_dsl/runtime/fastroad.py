@@ -169,6 +169,11 @@ def _box_d2(boxes, b, x, y):
     return ex * ex + ey * ey
 
 
+project_hinted = _project
+"""`FastRoad.project` for a kernel, which calls it by this name: (s, t) [m] of (x, y) on sample
+table `tab`, three Newton steps from `hint` where `hinted`."""
+
+
 @kernel
 def project_boxed(tab, ds, last_i, length, boxes, x, y):
     """`_project` without a hint, its bits: the nearest sample (the first of the nearest)

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from addt_dsl.kernel import Libm, kernel
-from addt_dsl.runtime.fastroad import _project, curvature_at, reference_pose_at
+from addt_dsl.runtime.fastroad import curvature_at, project_hinted, reference_pose_at
 from addt_dsl.specs import stacks as S
 from addt_dsl.stack.nodes import EgoBody, Plan
 
@@ -121,7 +121,7 @@ def _command_rows(tab, ds, last_i, length, rows, idx, ego, out):
     for i in range(idx.shape[0]):
         r = rows[idx[i]]
         x, y, heading, speed = ego[i, 0], ego[i, 1], ego[i, 2], ego[i, 3]
-        s_now, t_now = _project(tab, ds, last_i, length, x, y, ego[i, 4], True)
+        s_now, t_now = project_hinted(tab, ds, last_i, length, x, y, ego[i, 4], True)
         dt = r[PERIOD]
         steer = _steer(tab, ds, last_i, length, r[S_START], r[T_START], r[T_TARGET], r[LATERAL_M], x, y, heading,
                        speed, r[HAS_LAST] != 0.0, r[LAST_X], r[LAST_Y], dt, s_now, t_now, PREVIEW_S, r[WHEELBASE],
