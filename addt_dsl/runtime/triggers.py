@@ -175,10 +175,10 @@ def prefetch(runs: list, recs: list, k: int) -> None:
             continue
         try:
             signals = [compute_signals(run.conditions.snapshot(rec, k), formula.signals) for run, rec, _ in members]
+            stacked = {name: np.concatenate([s[name] for s in signals]) for name in formula.signals}
+            verdicts = oracles.verdicts(formula, stacked, members[0][0].dt).tolist()
         except Exception:  # noqa: BLE001 - each run asks again alone and raises there
             continue
-        stacked = {name: np.concatenate([s[name] for s in signals]) for name in formula.signals}
-        verdicts = oracles.verdicts(formula, stacked, members[0][0].dt).tolist()
         for (run, _, condition), verdict in zip(members, verdicts):
             run.conditions.answer(condition, k, verdict)
 
