@@ -195,9 +195,10 @@ def test_a_hung_external_stack_ends_each_run_within_its_deadline(tmp_path, dribb
 
 @pytest.mark.parametrize("fresh", [False, True], ids=["resume", "fresh"])
 def test_two_sweeps_on_one_store_never_mix(tmp_path, fresh):
-    # 120 runs: the first sweep must still be running when the second has started up (with
-    # 24 short runs, a fast first sweep finished before the second took the lock).
-    scenario = sweep_file(tmp_path, repeat=30, duration="3 s")
+    # 120 runs of 12 s: the first sweep must still be running when the second has started up
+    # (with 24 short runs, and later with 120 of 3 s once the engine stepped runs in batches, a
+    # fast first sweep finished before the second took the lock).
+    scenario = sweep_file(tmp_path, repeat=30, duration="12 s")
     expected = reference(scenario, tmp_path)
     store = tmp_path / "out" / "results.sqlite"
     first = start(scenario, "--jobs", "1", "--store", store, "--no-report")
