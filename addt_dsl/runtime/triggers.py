@@ -45,25 +45,25 @@ class Conditions:
 
     def __init__(self, run):
         self.run = run
-        self._formulas: dict[int, tuple[object, oracles.Formula]] = {}  # id -> (expr kept alive, formula)
-        self._shared: dict[int, tuple[object, str | None]] = {}  # id -> (condition kept alive, `shared_key`)
+        # id -> (expr kept alive, its formula, `shared_key`)
+        self._formulas: dict[int, tuple[object, oracles.Formula, str | None]] = {}
         self._snapshots: dict[bool, _Snapshot] = {}
         self._answers: dict[int, tuple[object, int, bool]] = {}  # id -> (condition, sample, verdict): `prefetch`
 
-    def formula(self, expr) -> oracles.Formula:
+    def _prepared(self, expr) -> tuple[object, oracles.Formula, str | None]:
         got = self._formulas.get(id(expr))
         if got is None or got[0] is not expr:
-            got = self._formulas[id(expr)] = (expr, oracles.prepare(expr))
-        return got[1]
+            formula = oracles.prepare(expr)
+            got = self._formulas[id(expr)] = (expr, formula, repr(formula.expr) if _alike(formula) else None)
+        return got
+
+    def formula(self, expr) -> oracles.Formula:
+        return self._prepared(expr)[1]
 
     def shared_key(self, condition) -> str | None:
         """What runs asking `condition` alike share (its formula's text), or None where it
         cannot be answered with others' (`_alike`)."""
-        got = self._shared.get(id(condition))
-        if got is None or got[0] is not condition:
-            formula = self.formula(condition)
-            got = self._shared[id(condition)] = (condition, repr(formula.expr) if _alike(formula) else None)
-        return got[1]
+        return self._prepared(condition)[2]
 
     def answer(self, condition, k: int, verdict: bool) -> None:
         """`condition`'s verdict on the state recorded at sample k, found beforehand (`prefetch`)."""

@@ -244,6 +244,7 @@ class BevStack(S.BevStack):
         the control cycle where due, the controllers without fault sites or measured latency
         in one call (`ControlBlock.command`). Per stack, the exception that stopped it, or None."""
         errors: list[Exception | None] = [None] * len(stacks)
+        alone: list[int] = []
         batched: list[int] = []
         for i, (stack, time_s) in enumerate(zip(stacks, times_s)):
             try:
@@ -251,14 +252,13 @@ class BevStack(S.BevStack):
                     continue
                 if stack.plan is None:
                     stack.command = (0.0, 0.0)
-                elif stack._control_alone():
-                    stack._run_control(time_s)
                 else:
-                    batched.append(i)
+                    (alone if stack._control_alone() else batched).append(i)
             except Exception as exc:  # noqa: BLE001 - the run's outcome
                 errors[i] = exc
         if len(batched) == 1:  # (one cycle: the block's arrays cost more than they save)
-            i = batched.pop()
+            alone, batched = alone + batched, []
+        for i in alone:
             try:
                 stacks[i]._run_control(times_s[i])
             except Exception as exc:  # noqa: BLE001 - the run's outcome
