@@ -109,7 +109,7 @@ def _loop(runs: list[RunState]) -> list[Trace]:
         lruns, lrecs = [run for run, _ in live], [rec for _, rec in live]
         ts = [k * run.dt for run in lruns]
         phases.clock(lruns, ts)
-        phases.pose(lruns, ts, fleets)
+        phases.pose(lruns, ts, fleets, egos)
         phases.record(lruns, lrecs, k, egos)
         collided = phases.collisions(lruns, lrecs, k, ts)
         phases.environment(lruns, lrecs, k, ts)

@@ -232,6 +232,30 @@ def _pose_rows(tab, ds, last_i, length, centres, starts, lanes, z, g, z_ds, z_le
 
 
 
+@kernel
+def _ego_poses(tab, ds, last_i, length, centres, starts, lanes, z, g, z_ds, z_length, points, rows, hints, out):
+    """Row j: point rows[j] of `points` (x, y, heading its first columns) into out[j] as (x,
+    y, heading, s, t, lane offset, z, grade): `_project` from hints[j], `_lane_offset_at`,
+    `elevation_at` (`z` empty: a flat road, 0). -1; or a section `lanes` lacks, or -2 at a
+    point or hint not finite (nothing is trusted then)."""
+    for j in range(rows.size):
+        r = rows[j]
+        x, y, hint = points[r, 0], points[r, 1], hints[j]
+        if not (x - x == 0.0 and y - y == 0.0 and hint - hint == 0.0):
+            return -2
+        s, t = _project(tab, ds, last_i, length, x, y, hint, True)
+        off, missing = _lane_offset_at(tab, ds, last_i, centres, starts, lanes, s, t)
+        if missing >= 0:
+            return missing
+        out[j, 0], out[j, 1], out[j, 2] = x, y, points[r, 2]
+        out[j, 3], out[j, 4], out[j, 5] = s, t, off
+        if z.size:
+            out[j, 6], out[j, 7] = elevation_at(z, g, z_ds, z_length, s)
+        else:
+            out[j, 6], out[j, 7] = 0.0, 0.0
+    return -1
+
+
 class FastRoad:
     _boxes: np.ndarray | None = None  # `project_boxed`'s bounding boxes, made when first asked
     _k_a: np.ndarray | None = None  # the curvature samples (and `_s_k` their stations) as arrays, made when first asked
@@ -296,6 +320,24 @@ class FastRoad:
         while True:
             missing = _pose_rows(self._tab, self._ds, self._last_i, self.length, centres, starts, lanes, z, g,
                                  elevation._ds, elevation.length, flat, cells, rows, out)
+            if missing == -1:
+                return True
+            if missing == -2:
+                return False
+            centres, starts, lanes = self._lanes_tabled(missing)
+
+    def ego_poses(self, elevation, points: np.ndarray, rows: np.ndarray, hints: np.ndarray,
+                  out: np.ndarray) -> bool:
+        """Vehicles on this road, each from a nearby station: for each j, block row rows[j] of
+        `points` (x, y, heading its first three columns) into out[j] as (x, y, heading, s, t,
+        lane offset, z, grade): `project` from hints[j], `lane_offset` and `elevation.at`,
+        one kernel call with the scalar calls' code and bits. False where a coordinate or
+        hint is not finite (then none is to be used)."""
+        centres, starts, lanes = self._lane_tables or self._lanes_tabled(-1)
+        z, g = (elevation._z_a, elevation._g_a) if not elevation.flat else (_NO_PROFILE, _NO_PROFILE)
+        while True:
+            missing = _ego_poses(self._tab, self._ds, self._last_i, self.length, centres, starts, lanes, z, g,
+                                 elevation._ds, elevation.length, points, rows, hints, out)
             if missing == -1:
                 return True
             if missing == -2:

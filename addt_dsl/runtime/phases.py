@@ -42,6 +42,7 @@ import numpy as np
 from addt_dsl.runtime import lanestate
 from addt_dsl.runtime.agents import Fleets, pose_scripted_ego
 from addt_dsl.runtime.collision import clearances_batch
+from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
@@ -111,23 +112,56 @@ def clock(runs: list[RunState], ts: list[float]) -> None:
             run.faults.wake(t)
 
 
-def pose(runs: list[RunState], ts: list[float], fleets: Fleets) -> None:
+def pose(runs: list[RunState], ts: list[float], fleets: Fleets, egos: StateBlock | None = None) -> None:
     """Over the batch: agents kinematic along their roads (every run's at once,
-    `agents.Fleets.pose`), each ego where its dynamics or script put it; the bodies in the
-    physics world (for perception) and the ego's road height and grade."""
+    `agents.Fleets.pose`), each ego where its dynamics or script put it (driven egos on a
+    plain road, their rows in `egos`, projected onto it a kernel call per road:
+    `FastRoad.ego_poses`); the bodies in the physics world (for perception) and the ego's
+    road height and grade."""
     fleets.pose(runs, ts)
-    for run, t in zip(runs, ts):
-        _pose_ego(run, t)
+    posed = _ego_poses(runs, egos) if egos is not None and len(runs) > 1 else None
+    if posed is None:
+        for run, t in zip(runs, ts):
+            _pose_ego(run, t, None)
+    else:
+        for run, t, pre in zip(runs, ts, posed):
+            _pose_ego(run, t, pre)
 
 
-def _pose_ego(run: RunState, t: float) -> None:
+def _ego_poses(runs: list[RunState], egos: StateBlock) -> list[list[float] | None]:
+    """(x, y, heading, s, t, lane offset, z, grade) of each driven ego on a plain road
+    (`FastRoad.ego_poses`, one call per road), None for the others (a script, a route, a
+    road whose stations are not finite: posed one by one)."""
+    posed: list[list[float] | None] = [None] * len(runs)
+    groups: dict[int, list[int]] = {}
+    for i, run in enumerate(runs):
+        if run.ego_agent is None and type(run.ego_road.road) is FastRoad:
+            groups.setdefault(id(run.ego_road.road), []).append(i)  # (a batch's runs share their roads)
+    for members in groups.values():
+        ego_road = runs[members[0]].ego_road
+        rows = np.array([runs[i].ego_row for i in members], dtype=np.int64)
+        hints = np.array([runs[i].ego_s for i in members], dtype=np.float64)
+        out = np.empty((len(members), 8))
+        if ego_road.road.ego_poses(ego_road.elevation, egos.states, rows, hints, out):
+            for i, row in zip(members, out.tolist()):
+                posed[i] = row
+    return posed
+
+
+def _pose_ego(run: RunState, t: float, pre: list[float] | None) -> None:
+    """A run's ego posed; `pre`: its pose, station, offset and elevation from `_ego_poses`
+    (None: found here)."""
     plan, ego_road, e = run.bound, run.ego_road, run.ego
-    if run.ego_agent is not None:
-        pose_scripted_ego(run, t, run.dt)
-    v = e.row.tolist()  # (one read of its row in the egos' block)
-    x, y, heading = v[X], v[Y], v[HEADING]
-    if run.ego_agent is None:
-        run.ego_s, run.ego_t = ego_road.road.project(x, y, run.ego_s)
+    if pre is not None:
+        x, y, heading, run.ego_s, run.ego_t, run.ego_offset, z, grade = pre
+    else:
+        run.ego_offset = None  # (`record` asks the road)
+        if run.ego_agent is not None:
+            pose_scripted_ego(run, t, run.dt)
+        v = e.row.tolist()  # (one read of its row in the egos' block)
+        x, y, heading = v[X], v[Y], v[HEADING]
+        if run.ego_agent is None:
+            run.ego_s, run.ego_t = ego_road.road.project(x, y, run.ego_s)
     if run.ego_s >= ego_road.road.length and not run.left_road:
         # Past the end of its road or route: `s` stays at the end, the map has nothing
         # beyond, and the run goes on off the map. Say so once (a route through the
@@ -141,7 +175,8 @@ def _pose_ego(run: RunState, t: float) -> None:
     if not run.networked and not run.leaders_stale:  # (networked runs find leaders by position)
         run.leaders.moved(len(run.agents))  # the ego, last member; agents move in their phase
     # The ego follows the road height; its dynamics feel the grade along its heading.
-    z, grade = ego_road.elevation.at(run.ego_s)
+    if pre is None:
+        z, grade = ego_road.elevation.at(run.ego_s)
     if grade:
         grade *= math.cos(heading - ego_road.road.reference_pose(run.ego_s)[2])
     pitch = math.atan(grade)
@@ -163,7 +198,11 @@ def _record(run: RunState, rec: Record, k: int, ego_row: list[float]) -> None:
     """A run's fields at sample k, the ego's state in `ego_row` already."""
     s, t = run.ego_s, run.ego_t
     ego_row[_S], ego_row[_T] = s, t
-    ego_row[_LANE_OFFSET] = math.nan if run.left_road else run.ego_road.road.lane_offset(s, t)
+    if run.left_road:
+        ego_row[_LANE_OFFSET] = math.nan
+    else:  # (`pose` found it where it posed the ego in a batch)
+        off = run.ego_offset
+        ego_row[_LANE_OFFSET] = off if off is not None else run.ego_road.road.lane_offset(s, t)
     fleet = run.fleet
     if fleet.rows is not None:  # agents posed one by one: the rows at once
         rec.block[k, :, :-1] = [ego_row, *fleet.rows]

@@ -272,6 +272,7 @@ class RunState:
         self.ego_row = 0  # the ego's row in its batch's block of ego states (`batch._loop`, `vehicle.StateBlock`)
         self.ego_z, self.ego.pitch = 0.0, 0.0
         self.ego_s, self.ego_t = s0, t0
+        self.ego_offset: float | None = None  # [m] the lane offset at (ego_s, ego_t) where `phases.pose` found it
         self.physics.add_box("ego", ego.length_m, ego.width_m, ego.height_m)
 
         self.agents: list[AgentState] = []

@@ -88,6 +88,42 @@ def test_pose_rows_compiled_gives_its_python_bits(name, data):
     assert bits(got) == bits(want) and bits(flat_got) == bits(flat_want)
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.sampled_from(sorted(ROADS)), st.data())
+def test_ego_poses_give_the_scalar_calls_bits(name, data):
+    """`FastRoad.ego_poses` over block rows in any order: each row's x, y, heading as given,
+    `project` from its hint, `lane_offset` there and `elevation.at`, the scalar calls' bits
+    (the twin posed each ego with them); False for a point or hint not finite."""
+    fast, elev = ROADS[name]
+    n = data.draw(st.integers(1, 8))
+    points = np.zeros((n + 2, 4))
+    hints = []
+    for r in range(n):
+        s = data.draw(st.floats(-5.0, fast.length + 5.0))
+        x, y, h = fast.point(s, data.draw(st.floats(-9.0, 9.0)))
+        points[r, :3] = x + data.draw(st.floats(-2.0, 2.0)), y, h
+        hints.append(s + data.draw(st.floats(-3.0, 3.0)))
+    rows = np.array(data.draw(st.permutations(range(n))), dtype=np.int64)
+    hints_a = np.array([hints[r] for r in rows.tolist()])
+    broken = data.draw(st.booleans())
+    if broken:  # a coordinate or a hint not finite
+        k = data.draw(st.integers(0, n - 1))
+        bad = data.draw(st.sampled_from([math.nan, math.inf, -math.inf]))
+        if data.draw(st.booleans()):
+            hints_a[k] = bad
+        else:
+            points[rows[k], data.draw(st.integers(0, 1))] = bad
+    out = np.full((n, 8), 7.0)
+    assert fast.ego_poses(elev, points, rows, hints_a, out) is not broken
+    if broken:
+        return
+    for j, r in enumerate(rows.tolist()):
+        x, y, h = points[r, :3].tolist()
+        s, t = fast.project(x, y, hints_a[j].item())
+        want = [x, y, h, s, t, fast.lane_offset(s, t), *elev.at(s)]
+        assert bits(out[j].tolist()) == bits(want)
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.sampled_from(sorted(ROADS)), st.data())
 def test_project_compiled_gives_its_python_bits(name, data):
