@@ -304,6 +304,13 @@ class FastRoad:
         return self._boxes
 
     # ---- reference line
+    @property
+    def table(self) -> tuple[np.ndarray, float, int, float]:
+        """(sample table, sample spacing [m], last interval, length [m]): the reference line
+        as this module's kernels read it (`reference_pose_at`, `curvature_at`,
+        `project_hinted`), for kernels elsewhere that call them."""
+        return self._tab, self._ds, self._last_i, self.length
+
     def _index(self, s: float) -> tuple[int, float]:
         return _index(self._tab, self._ds, self._last_i, s)
 

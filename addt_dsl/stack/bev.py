@@ -45,7 +45,7 @@ def road_frame_objects(road, tracked: list, t0: float) -> list[tuple]:
                     dtype=np.float64)
     kinds = np.array([_KIND_CODES.get(o.kind, 0) for o in tracked], dtype=np.int64)
     out = np.empty((len(tracked), 8))
-    _road_frame(road._tab, road._ds, road._last_i, road.length, road.boxes(), rows, kinds, t0, out)
+    _road_frame(*road.table, road.boxes(), rows, kinds, t0, out)
     return list(map(tuple, out.tolist()))
 
 

@@ -173,19 +173,18 @@ class ControlBlock:
         out: list = [None] * n
         groups: dict[int, list[int]] = {}
         for i, road in enumerate(roads):
-            groups.setdefault(id(road._tab), []).append(i)
+            groups.setdefault(id(road.table[0]), []).append(i)
         for members in groups.values():
-            road = roads[members[0]]
+            table = roads[members[0]].table
             idx = np.array([controllers[i].index for i in members], dtype=np.int64)
             ego = np.array([egos[i] for i in members], dtype=float).reshape(len(members), 5)
             res = np.empty((len(members), 4))
             try:
-                _command_rows(road._tab, road._ds, road._last_i, road.length, self.rows, idx, ego, res)
+                _command_rows(*table, self.rows, idx, ego, res)
             except Exception:  # noqa: BLE001 - some row raised: each row alone, its own outcome
                 for j, i in enumerate(members):
                     try:
-                        _command_rows(road._tab, road._ds, road._last_i, road.length, self.rows, idx[j:j + 1],
-                                      ego[j:j + 1], res[j:j + 1])
+                        _command_rows(*table, self.rows, idx[j:j + 1], ego[j:j + 1], res[j:j + 1])
                     except Exception as exc:  # noqa: BLE001 - the run's outcome
                         out[i] = exc
                         idx[j] = -1  # (its row is not written: the run stops)
@@ -258,7 +257,7 @@ class Controller:
         if not (kp is v[KP] and ki is v[KI] and kd is v[KD] and wn is v[WN] and understeer is v[UNDERSTEER]):
             r[KP:UNDERSTEER + 1] = (kp, ki, kd, wn, understeer)
         r[HAS_LAST:LAST_Y + 1] = (1.0, x, y)
-        steer = _steer(road._tab, road._ds, road._last_i, road.length, plan.s_start, plan.t_start, plan.t_target,
+        steer = _steer(*road.table, plan.s_start, plan.t_start, plan.t_target,
                        plan.lateral_length_m, x, y, heading, speed, v[HAS_LAST] != 0.0, v[LAST_X], v[LAST_Y], dt,
                        s_now, t_now, PREVIEW_S, v[WHEELBASE], understeer, wn, LATERAL_ZETA, v[MAX_STEER])
         steer = corrupt("control.steer", steer)
