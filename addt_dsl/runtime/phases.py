@@ -6,8 +6,8 @@ them run by run (runs share nothing: each run sees its phases in this order):
 
   clock       the stack's clock; fault timers wake
   pose        agents on their roads (every run's agents at once: `agents.Fleets.pose`),
-              the ego (projected onto its road, or posed from its script), their bodies
-              in the physics world
+              the ego (projected onto its road: the batch's driven egos a kernel call per
+              road; or posed from its script), their bodies in the physics world
   record      the state row of every actor (clearance, the last field, below); margins to
               red lights and stop signs; lane states (`lanestate.py`); the scenario variables
   collisions  each actor's clearance; `collision` events (`collision.py`: every run's
