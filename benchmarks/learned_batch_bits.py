@@ -65,13 +65,14 @@ def main() -> None:
                     same[n] += _same(F.conv2d(x[:n], layer.weight, layer.bias, s), alone[:n])
                 # the window at an offset of whole strides inside one (2..6 strides) larger
                 grow_r, grow_c = rng.randint(1, 3), rng.randint(1, 3)
-                big = torch.randn(1, cin, win + s * (grow_r + rng.randint(1, 3)), win + s * (grow_c + rng.randint(1, 3)))
+                rows, cols = win + s * (grow_r + rng.randint(1, 3)), win + s * (grow_c + rng.randint(1, 3))
+                big = torch.randn(1, cin, rows, cols)
                 big[:, :, s * grow_r:s * grow_r + win, s * grow_c:s * grow_c + win] = x[:1]
                 out = F.conv2d(big, layer.weight, layer.bias, s)
                 padded += _same(out[:, :, grow_r:grow_r + cells, grow_c:grow_c + cells], alone[:1])
             figures[name] = {**{f"batch_{n}": same[n] for n in BATCHES}, "padded": padded, "trials": TRIALS}
-            print(f"{name:20s} " + " ".join(f"{same[n]:>6d}/{TRIALS:<2d}" for n in BATCHES) + f" {padded:>6d}/{TRIALS:<2d}",
-                  flush=True)
+            cells_out = " ".join(f"{same[n]:>6d}/{TRIALS:<2d}" for n in BATCHES)
+            print(f"{name:20s} {cells_out} {padded:>6d}/{TRIALS:<2d}", flush=True)
     figures_json.write(JSON_PATH, {"layers": figures, "isa_cap": os.environ.get("ONEDNN_MAX_CPU_ISA")})
 
 

@@ -148,6 +148,12 @@ def _cast(starts, ends, centres, rotations, half, plane_z, has_plane, plane_hits
         frac[i] = best if hit >= 0 else 1.0
 
 
+cast_into = _cast
+"""`cast` for a kernel, which calls it by this name: (starts (1 or N rows), ends, centres,
+rotations, half extents, plane z [m], whether there is a plane, whether its hits count,
+the box to ignore or -1, then `index` and `frac` to fill)."""
+
+
 @kernel
 def _same(a, b):
     """Whether two floats have the same bits (but NaNs, never the same: recomputed)."""

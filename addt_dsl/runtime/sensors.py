@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from addt_dsl.kernel import kernel, matmul, matmul_into
+from addt_dsl.runtime.raycast import cast_into
 from addt_dsl.registry import SENSORS
 from addt_dsl.specs import sensors as S
 
@@ -86,6 +87,14 @@ class Lidar(S.Lidar, Sensor):
         self.range_m = float(self.settings["range"])
 
     def capture(self, world, time_s):
+        scene = getattr(world, "ray_scene", None)  # (worlds that answer rays only through `ray_cast` lack it)
+        scene = scene() if scene is not None else None
+        if scene is not None:  # the whole scan in one kernel call, the bits of the calls below
+            a = self.actual
+            mount = np.array([a.x, a.y, a.z, a.roll, a.pitch, a.yaw])
+            pts, bodies = _scan(np.array(_ego_frame(world), dtype=np.float64), mount, self._dirs, self.range_m,
+                                *scene)
+            return Frame(self.name, time_s, {"points": pts, "hit_body": bodies})
         origin, rot = _sensor_world_pose(_ego_frame(world), self.actual)
         # Every ray from the one origin: a read-only view of it, row after row (no copy).
         origin = np.ascontiguousarray(origin, dtype=np.float64)
@@ -109,6 +118,32 @@ def _ray_ends(origin, dirs, rot, range_m):
         for c in range(3):
             ends[i, c] = origin[c] + world[i, c] * range_m
     return ends
+
+
+@kernel
+def _scan(frame, mount, dirs, range_m, centres, rotations, half, plane_z, ignore, hit_body):
+    """A lidar's scan where the world is boxes and a ground plane (`SensorWorld.ray_scene`):
+    `Lidar.capture`'s calls in one, their code and bits: the mount's world pose from the
+    vehicle frame (x, y, z, heading, pitch) and the mount (x, y, z, roll, pitch, yaw:
+    `_sensor_world_pose`), the rays' ends (`_ray_ends`), the first hit of each ray among the
+    boxes (`raycast.cast_into` with the ground's hits and box `ignore` dropped; the body ids
+    `hit_body[index]`, -1 for none) and the returns (`_returns`)."""
+    base, arm = np.empty(3), np.empty(3)
+    for c in range(3):
+        base[c], arm[c] = frame[c], mount[c]
+    rot_v, rot_m = np.empty((3, 3)), np.empty((3, 3))
+    _rotation_into(0.0, -frame[4], frame[3], rot_v)
+    _rotation_into(mount[3], mount[4], mount[5], rot_m)
+    origin, rot = _mount_pose(base, rot_v, arm, rot_m)
+    ends = _ray_ends(origin, dirs, rot, range_m)
+    n = dirs.shape[0]
+    index = np.empty(n, dtype=np.int64)
+    frac = np.empty(n)
+    cast_into(origin.reshape(1, 3), ends, centres, rotations, half, plane_z, True, False, ignore, index, frac)
+    ids = np.empty(n, dtype=hit_body.dtype)
+    for i in range(n):
+        ids[i] = hit_body[index[i]] if index[i] >= 0 else -1
+    return _returns(dirs, ids, frac, range_m)
 
 
 @kernel
@@ -245,13 +280,20 @@ def _look_at(origin: np.ndarray, rot: np.ndarray) -> list[float]:
 
 
 def rotation(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """The 3x3 rotation Rz(yaw) Ry(pitch) Rx(roll) [rad] (`_rotation_into`)."""
+    out = np.empty((3, 3))
+    _rotation_into(roll, pitch, yaw, out)
+    return out
+
+
+@kernel
+def _rotation_into(roll, pitch, yaw, out):
+    """`rotation` into `out` (a 3x3 array), for kernels too."""
     cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
                               math.cos(yaw), math.sin(yaw))
-    return np.array([
-        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-        [-sp, cp * sr, cp * cr],
-    ])
+    out[0, 0], out[0, 1], out[0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
+    out[1, 0], out[1, 1], out[1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
+    out[2, 0], out[2, 1], out[2, 2] = -sp, cp * sr, cp * cr
 
 
 def _ego_frame(world) -> tuple[float, float, float, float, float]:

@@ -589,6 +589,9 @@ class RunState:
     def ray_cast(self, starts, ends):
         return self.physics.ray_cast(starts, ends, ignore="ego")
 
+    def ray_scene(self):
+        return self.physics.ray_scene(ignore="ego")
+
     def actor_by_body(self, body: int):
         return self.fleet.ground_truth(self.physics.body_names.get(body))
 

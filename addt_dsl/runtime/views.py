@@ -103,6 +103,12 @@ class SensorWorld(Protocol):
         """(body id or -1, hit fraction) of each ray, the ego's body ignored. A lidar's
         `starts` are its one origin, every row a read-only view of it (stride 0)."""
 
+    def ray_scene(self) -> tuple | None:
+        """What `ray_cast` casts against where the world is boxes and a ground plane (the ego's
+        box ignored): `PhysicsWorld.ray_scene`'s tuple, for a sensor that casts in its own
+        kernel with the same bits; None where rays must go through `ray_cast`. Optional: a
+        world without it answers rays through `ray_cast` alone."""
+
     def render(self, width: int, height: int, view, projection, segmentation: bool = True):
         """(rgb, z-buffer, body ids) of a pinhole view."""
 

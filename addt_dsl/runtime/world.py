@@ -315,11 +315,24 @@ class PhysicsWorld:
         """`raycast.cast` on the boxes and the ground plane; with `ground_hits=False` a ray
         whose first hit is the ground reports -1 (no hit), as one whose first hit is the
         body named `ignore`."""
-        pose = self.box_poses().copy()  # contiguous columns, as the caster slices them
+        centres, rotations, half, plane_z, slot, hit_body = self.ray_scene(ignore)
+        index, frac = raycast.cast(starts, ends, centres, rotations, half, plane_z, plane_hits=ground_hits,
+                                   ignore=slot)
+        return hit_body[index], frac
+
+    def ray_scene(self, ignore: str | None = None) -> tuple | None:
+        """What the analytic caster reads of this world, for a kernel that casts itself
+        (`sensors._scan`): the boxes' centres (M x 3), rotations (M x 3 x 3) and half extents
+        [m], the ground plane's height [m], the box of body `ignore` (-1: none), and the body
+        id of each caster index (index M: the ground; the last entry -1). None where rays
+        must go to pybullet (road meshes in the collision world, or `analytic_rays` off)."""
+        if not self.analytic:
+            return None
+        pose = self.box_poses()
+        centres = np.ascontiguousarray(pose[:, :3])
+        rotations = raycast.box_rotations(np.ascontiguousarray(pose[:, 3]), np.ascontiguousarray(pose[:, 4]))
         slot = -1 if ignore is None else self._box_slot[self.bodies[ignore]]
-        index, frac = raycast.cast(starts, ends, pose[:, :3], raycast.box_rotations(pose[:, 3], pose[:, 4]),
-                                   self._box_half_table, self._ground_z, plane_hits=ground_hits, ignore=slot)
-        return self._hit_body[index], frac
+        return centres, rotations, self._box_half_table, float(self._ground_z), slot, self._hit_body
 
     def _ray_cast_pybullet(self, starts, ends):
         self._sync_bodies()

@@ -137,6 +137,18 @@ class _ScanWorld:
         return self.world.ray_cast(starts, ends, ignore="ego")
 
 
+class _SceneWorld(_ScanWorld):
+    """A `_ScanWorld` that also offers the analytic scene (`SensorWorld.ray_scene`)."""
+
+    def ray_scene(self):
+        return self.world.ray_scene(ignore="ego")
+
+
+def _interpreted_capture(lidar, world) -> dict:
+    with interpreted():
+        return lidar.capture(world, 0.0).data
+
+
 def test_lidar_scans_agree_with_pybullet_on_traffic():
     """Seeded traffic scenes, multi-channel lidars with tilted mounts from varied poses:
     the same hits (bodies and distances) either way, almost all to 1e-9 m."""
@@ -450,6 +462,13 @@ def test_lidar_scans_are_the_old_scans(seed, low_mount):
         assert bits(got["points"]) == bits(want["points"]) and got["points"].shape == want["points"].shape
         starts, _ = scan_world.rays[0]
         assert starts.strides[0] == 0 and not starts.flags.writeable  # one origin, not copied
+        # The whole scan in one kernel (a world that offers its scene), compiled and interpreted:
+        # the same frame, and no ray through `ray_cast`.
+        scene_world = _SceneWorld(world, ego)
+        for fused in (lidar.capture(scene_world, 0.0).data, _interpreted_capture(lidar, scene_world)):
+            assert fused["hit_body"].tolist() == want["hit_body"].tolist()
+            assert bits(fused["points"]) == bits(want["points"]) and fused["points"].shape == want["points"].shape
+        assert scene_world.rays == []
     finally:
         world.close()
 
@@ -500,3 +519,20 @@ def test_sensor_pose_kernel_is_its_python_and_kernel_matmuls(seed):
         again = _mount_pose(np.array([x, y, z]), rot_v, np.array([ext.x, ext.y, ext.z]),
                             rotation(ext.roll, ext.pitch, ext.yaw))
     assert bits(again[0]) == bits(origin) and bits(again[1]) == bits(rot)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(-7.0, 7.0), st.floats(-7.0, 7.0), st.floats(-7.0, 7.0))
+def test_rotation_is_the_formula(roll, pitch, yaw):
+    """`sensors.rotation` (a kernel) gives the bits of Rz(yaw) Ry(pitch) Rx(roll) written
+    out in Python, compiled and interpreted."""
+    from addt_dsl.runtime.sensors import rotation
+
+    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
+                              math.cos(yaw), math.sin(yaw))
+    want = [[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr]]
+    assert bits(rotation(roll, pitch, yaw)) == bits(want)
+    with interpreted():
+        assert bits(rotation(roll, pitch, yaw)) == bits(want)
