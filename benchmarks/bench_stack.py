@@ -18,7 +18,9 @@ before and after (the target: learned >= 150x in every family); then one timed
 learned run per family split into lidar, grid, network (and the conv calls inside it),
 decoding and the rest of the loop, and Table 1's time with learned perception on 2 cores
 estimated from the CPU factors; last, per detector layer, how many conv window shapes give
-other bits than a larger window (why the region forward's windows are fixed by the traces).
+other bits than a larger window (why the region forward's windows are fixed by the traces)
+and how often a batch of windows gives other bits than each alone (why runs' detectors are
+not stepped together). `--bits-only`: those two alone.
 
     PYTHONPATH=. python benchmarks/bench_stack.py --conv-backends [--repeats 3]
 
@@ -89,9 +91,19 @@ def main() -> None:
     ap.add_argument("--families-only", action="store_true", help="only the per-family real-time factors")
     ap.add_argument("--conv-backends", action="store_true",
                     help="only: the detector's conv windows of a learned curve run on other conv backends")
+    ap.add_argument("--bits-only", action="store_true",
+                    help="only: which conv windows and batches give other bits (`window_dependence`, "
+                         "`batch_dependence`)")
     args = ap.parse_args()
     if args.conv_backends:
         figures_json.write(args.json, {"conv_backends_us_per_frame": conv_backends(args.repeats)})
+        return
+    if args.bits_only:
+        import torch
+
+        torch.set_num_threads(1)  # (as the detector runs, `learned.one_intra_op_thread`)
+        figures_json.write(args.json, {"conv_window_shapes_with_other_bits": window_dependence(),
+                                       "conv_batches_with_other_bits": batch_dependence()})
         return
 
     import gc
@@ -149,6 +161,7 @@ def main() -> None:
                   f"{100 * total / cpu:>5.0f}%")
     figures["rtf_families"] = families(args.repeats)
     figures["conv_window_shapes_with_other_bits"] = window_dependence()
+    figures["conv_batches_with_other_bits"] = batch_dependence()
     figures_json.write(args.json, figures)
 
 
@@ -183,6 +196,42 @@ def window_dependence() -> dict[str, int]:
             out[name] = differ
     print("conv window shapes (of 128) whose cells get other bits than in a 20x20 window, per layer: "
           + ", ".join(f"{n} {d}" for n, d in out.items()))
+    return out
+
+
+BATCHES = (2, 7, 16, 64)
+
+
+def batch_dependence(trials: int = 10) -> dict[str, dict[int, int]]:
+    """Why the runs' detectors are not stepped together: per detector layer and batch size N,
+    in how many of `trials` random inputs (windows of 4x4 and 8x8 output cells, signed and
+    ReLU'd values) the N windows convolved as one batch give other bits than each alone (as
+    the region forward convolves them: batch 1)."""
+    import torch
+    import torch.nn.functional as F
+
+    from addt_dsl.stack.learned import load_model
+
+    model, _ = load_model()
+    torch.manual_seed(0)
+    out: dict[str, dict[int, int]] = {}
+    with torch.inference_mode():
+        for name, layer in model.layers().items():
+            k, s = layer.kernel_size[0], layer.stride[0]
+            differ = dict.fromkeys(BATCHES, 0)
+            for trial in range(trials):
+                win = ((4 if trial % 2 == 0 else 8) - 1) * s + k
+                x = torch.randn(max(BATCHES), layer.in_channels, win, win)
+                if trial % 3 == 0:
+                    x = torch.relu(x)
+                alone = torch.cat([F.conv2d(x[i:i + 1], layer.weight, layer.bias, s) for i in range(len(x))])
+                for n in BATCHES:
+                    together = F.conv2d(x[:n], layer.weight, layer.bias, s)
+                    differ[n] += not torch.equal(together.view(torch.int32), alone[:n].contiguous().view(torch.int32))
+            out[name] = differ
+    print(f"inputs (of {trials}) whose windows get other bits convolved as a batch of "
+          f"{'/'.join(map(str, BATCHES))} than one by one, per layer: "
+          + ", ".join(f"{n} {'/'.join(str(d[b]) for b in BATCHES)}" for n, d in out.items()))
     return out
 
 
