@@ -113,6 +113,7 @@ class PhysicsWorld:
         self._hit_body = np.array([self.ground, -1], dtype=np.int64)  # the caster's index -> body id
         self._unsynced = np.zeros(0, dtype=bool)  # slots posed since pybullet last saw them
         self._pending: dict[int, tuple] = {}  # slot -> pose set by `set_pose`, not yet in the table
+        self._pending_rows: list[tuple] = []  # `set_poses` calls not yet in the table, in order
         self._ground_z = 0.0
         self._collision_meshes = 0
         self.analytic_rays = True  # False: always ask pybullet (tests compare the two)
@@ -250,13 +251,17 @@ class PhysicsWorld:
 
     def box_poses(self) -> np.ndarray:
         """The box table: a row (x, y, z, heading, pitch) per box, as last posed."""
-        if self._pending:
+        if self._pending or self._pending_rows:
             self._flush()
         return self._box_pose
 
     def _flush(self) -> None:
-        """Write the poses `set_pose` kept aside into the box table."""
+        """Write the poses `set_poses` and `set_pose` kept aside into the box table, in that
+        order (`set_poses` writes `set_pose`'s in first: those kept are the newer)."""
         pose, unsynced = self._box_pose, self._unsynced
+        for slots, table, lo, columns in self._pending_rows:
+            _put_poses(pose, unsynced, slots, table, lo, columns)
+        self._pending_rows.clear()
         for slot, row in self._pending.items():
             pose[slot] = row
             unsynced[slot] = True
@@ -265,10 +270,18 @@ class PhysicsWorld:
     def set_poses(self, slots: np.ndarray, table: np.ndarray, lo: int, columns: np.ndarray) -> None:
         """`set_pose` of many boxes at once: box `slots[i]` (rows of the box table,
         `box_slots`) at table[columns, lo + i] (columns: the rows of x, y, z, heading and
-        pitch in `table`), in one kernel call (`_put_poses`)."""
+        pitch in `table`, which the caller leaves as it is from then on), in one kernel call
+        (`_put_poses`) when the table is next read: most steps no sensor reads it, and the
+        next step's poses of the same slots replace these."""
         if self._pending:
             self._flush()
-        _put_poses(self._box_pose, self._unsynced, slots, table, lo, columns)
+        rows = self._pending_rows
+        if rows and rows[-1][0] is slots:
+            rows[-1] = (slots, table, lo, columns)
+        else:
+            rows.append((slots, table, lo, columns))
+            if len(rows) > 4:  # (other slots each step: not held without bound)
+                self._flush()
 
     def box_slots(self, names) -> list[int]:
         """The rows of the named bodies in the box table (`set_poses`)."""
@@ -277,7 +290,7 @@ class PhysicsWorld:
     def _sync_bodies(self) -> None:
         """Hand pybullet the poses set since it was last asked (ray casts, renders)."""
         p, client = self.p, self.client
-        if self._pending:
+        if self._pending or self._pending_rows:
             self._flush()
         for slot in np.flatnonzero(self._unsynced).tolist():
             x, y, z, heading, pitch = self._box_pose[slot].tolist()

@@ -95,3 +95,37 @@ def test_hand_checked_row_and_pose():
     W._put_poses(box, unsynced, np.array([2], dtype=np.intp), pose, 0, A._BODY_COLUMNS)
     assert box.tolist() == [[0.0] * 5, [0.0] * 5, [2.0 * c for c in A._BODY_COLUMNS.tolist()]]
     assert unsynced.tolist() == [False, False, True]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.data())
+def test_poses_kept_aside_reach_the_table_in_call_order(data):
+    """`set_pose` and `set_poses` calls in any order and number (the same slots' array again
+    and again, other slots' arrays, a body posed each way in turn), the table read at any
+    point: it holds what writing each call through at once would (the last pose of each box,
+    every posed box marked for pybullet)."""
+    world = W.PhysicsWorld()
+    names = [f"b{i}" for i in range(5)]
+    for name in names:
+        world.add_box(name, 4.0, 2.0, 1.5)
+    slot_sets = [np.array(world.box_slots(names[i:j]), dtype=np.intp) for i, j in ((0, 2), (1, 4), (3, 5), (0, 5))]
+    want, want_u = world.box_poses().copy(), np.zeros(len(names), dtype=bool)
+    for _ in range(data.draw(st.integers(1, 14))):
+        op = data.draw(st.sampled_from(["pose", "poses", "poses", "read"]))
+        if op == "pose":
+            k = data.draw(st.integers(0, len(names) - 1))
+            row = tuple(data.draw(st.floats(-50.0, 50.0)) for _ in range(5))
+            world.set_pose(names[k], *row)
+            want[k], want_u[k] = row, True
+        elif op == "poses":
+            slots = slot_sets[data.draw(st.integers(0, len(slot_sets) - 1))]
+            lo = data.draw(st.integers(0, 2))
+            table = np.array(data.draw(st.lists(st.floats(-50.0, 50.0), min_size=A._POSE_ROWS * (lo + 5),
+                                                max_size=A._POSE_ROWS * (lo + 5)))).reshape(A._POSE_ROWS, lo + 5)
+            world.set_poses(slots, table, lo, A._BODY_COLUMNS)
+            for i, slot in enumerate(slots.tolist()):
+                want[slot], want_u[slot] = table[A._BODY_COLUMNS, lo + i], True
+        else:
+            assert world.box_poses().tolist() == want.tolist()
+    assert world.box_poses().tolist() == want.tolist()
+    assert world._unsynced.tolist() == want_u.tolist()
