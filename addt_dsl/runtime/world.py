@@ -112,8 +112,11 @@ class PhysicsWorld:
         self._box_ids = np.zeros(0, dtype=np.int64)
         self._hit_body = np.array([self.ground, -1], dtype=np.int64)  # the caster's index -> body id
         self._unsynced = np.zeros(0, dtype=bool)  # slots posed since pybullet last saw them
-        self._pending: dict[int, tuple] = {}  # slot -> pose set by `set_pose`, not yet in the table
-        self._pending_rows: list[tuple] = []  # `set_poses` calls not yet in the table, in order
+        # Poses not yet in the table, each with the number of its call (`_flush` writes them in
+        # that order): slot -> (call, pose) from `set_pose`, and `set_poses` calls.
+        self._pending: dict[int, tuple] = {}
+        self._pending_rows: list[tuple] = []
+        self._calls = 0
         self._ground_z = 0.0
         self._collision_meshes = 0
         self.analytic_rays = True  # False: always ask pybullet (tests compare the two)
@@ -247,7 +250,8 @@ class PhysicsWorld:
         loop poses every body every step, and most steps no sensor looks."""
         # Kept aside until the table is read (`_flush`): a numpy row store costs ~0.5 us,
         # a dict store ~0.05 us, and the loop poses the ego (and few agents) every step.
-        self._pending[self._box_slot[self.bodies[name]]] = (x, y, z, heading, pitch)
+        self._calls += 1
+        self._pending[self._box_slot[self.bodies[name]]] = (self._calls, (x, y, z, heading, pitch))
 
     def box_poses(self) -> np.ndarray:
         """The box table: a row (x, y, z, heading, pitch) per box, as last posed."""
@@ -256,15 +260,20 @@ class PhysicsWorld:
         return self._box_pose
 
     def _flush(self) -> None:
-        """Write the poses `set_poses` and `set_pose` kept aside into the box table, in that
-        order (`set_poses` writes `set_pose`'s in first: those kept are the newer)."""
+        """Write the poses `set_pose` and `set_poses` kept aside into the box table in the
+        order of their calls."""
         pose, unsynced = self._box_pose, self._unsynced
-        for slots, table, lo, columns in self._pending_rows:
-            _put_poses(pose, unsynced, slots, table, lo, columns)
-        self._pending_rows.clear()
-        for slot, row in self._pending.items():
+        rows = self._pending_rows
+        i = 0
+        for slot, (call, row) in sorted(self._pending.items(), key=lambda item: item[1][0]):
+            while i < len(rows) and rows[i][0] < call:
+                _put_poses(pose, unsynced, *rows[i][1:])
+                i += 1
             pose[slot] = row
             unsynced[slot] = True
+        for later in rows[i:]:
+            _put_poses(pose, unsynced, *later[1:])
+        rows.clear()
         self._pending.clear()
 
     def set_poses(self, slots: np.ndarray, table: np.ndarray, lo: int, columns: np.ndarray) -> None:
@@ -273,13 +282,12 @@ class PhysicsWorld:
         pitch in `table`, which the caller leaves as it is from then on), in one kernel call
         (`_put_poses`) when the table is next read: most steps no sensor reads it, and the
         next step's poses of the same slots replace these."""
-        if self._pending:
-            self._flush()
+        self._calls += 1
         rows = self._pending_rows
-        if rows and rows[-1][0] is slots:
-            rows[-1] = (slots, table, lo, columns)
+        if rows and rows[-1][1] is slots:  # (the same slots last time: all its poses are older than these)
+            rows[-1] = (self._calls, slots, table, lo, columns)
         else:
-            rows.append((slots, table, lo, columns))
+            rows.append((self._calls, slots, table, lo, columns))
             if len(rows) > 4:  # (other slots each step: not held without bound)
                 self._flush()
 
