@@ -100,6 +100,28 @@ def _sensed_positions(gxy, x, y, cos_h, sin_h, rot_a, rot_n, mount_a, mount_n, o
         out[i, 1] = nominal[i, 1] + mount_n[1]
 
 
+def hit_counts(hits) -> tuple[list, list]:
+    """The body ids a lidar frame's returns hit (`hit_body`), ascending, and how many returns
+    hit each: `np.unique(hits, return_counts=True)` as lists, in one compiled call."""
+    ids, counts = _id_counts(np.asarray(hits))
+    return ids.tolist(), counts.tolist()
+
+
+@kernel
+def _id_counts(hits):
+    """(the distinct values of `hits` ascending, how often each occurs)."""
+    ordered = np.sort(hits)
+    ids = np.empty(ordered.size, dtype=ordered.dtype)
+    counts = np.zeros(ordered.size, dtype=np.int64)
+    k = 0
+    for i in range(ordered.size):
+        if k == 0 or ordered[i] != ids[k - 1]:
+            ids[k] = ordered[i]
+            k += 1
+        counts[k - 1] += 1
+    return ids[:k], counts[:k]
+
+
 class GroundTruthPerception:
     """Objects hit by at least `min_hits` lidar returns, positions from ground truth + noise;
     objects with fewer (at least one) are reported `weak`, for the tracker to confirm.
@@ -129,8 +151,8 @@ class GroundTruthPerception:
         hits = frame.data["hit_body"]
         if len(hits) == 0:
             return []
-        ids, counts = np.unique(hits, return_counts=True)
-        seen = [(frame.actors.get(body), count) for body, count in zip(ids.tolist(), counts.tolist())]
+        ids, counts = hit_counts(hits)
+        seen = [(frame.actors.get(body), count) for body, count in zip(ids, counts)]
         seen = [(gt, count) for gt, count in seen if gt is not None]  # (as they were at the capture)
         if not seen:
             return []

@@ -32,6 +32,7 @@ from addt_dsl.stack import osi_transport as T
 from addt_dsl.stack.bev import StackError
 from addt_dsl.stack.bridge import (CLIENT_SETTINGS, TOKEN_ENV, ExternalStack, ProtocolError, jsonable,
                                    check_address, escape, extrinsics_dict, parse_address)
+from addt_dsl.stack.nodes import hit_counts
 
 from osi3.osi_motionrequest_pb2 import MotionRequest
 from osi3.osi_sensorview_pb2 import SensorView
@@ -215,8 +216,8 @@ class OsiStack(ExternalStack):
             else:
                 break
         _, objects, lights = snap
-        ids, counts = np.unique(np.asarray(frame.data["hit_body"]), return_counts=True)
-        seen = {self.ctx.body_name(int(b)) for b, n in zip(ids.tolist(), counts.tolist()) if n >= MIN_HITS}
+        ids, counts = hit_counts(frame.data["hit_body"])
+        seen = {self.ctx.body_name(int(b)) for b, n in zip(ids, counts) if n >= MIN_HITS}
         sensor = self.ctx.sensor(frame.sensor)
         host = objects["ego"]
         out = [_as_mounted(objects[name], host, sensor) for name in objects

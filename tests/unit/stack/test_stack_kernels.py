@@ -483,3 +483,18 @@ def test_the_ground_truth_positions_kernel_gives_the_two_products_bits(objects, 
     assert got() == want
     with interpreted():
         assert got() == want
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.integers(-3, 40), max_size=120), st.sampled_from([np.int64, np.int32]))
+def test_hit_counts_are_numpys_unique_with_counts(values, dtype):
+    """`nodes.hit_counts`: the ids ascending and their counts as `np.unique(..., return_counts=True)`
+    gives them, compiled and interpreted (empty frames, negative ids, int32 included)."""
+    from addt_dsl.stack.nodes import hit_counts
+
+    hits = np.array(values, dtype=dtype)
+    ids, counts = np.unique(hits, return_counts=True)
+    want = (ids.tolist(), counts.tolist())
+    assert hit_counts(hits) == want
+    with interpreted():
+        assert hit_counts(hits) == want
