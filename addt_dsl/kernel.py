@@ -275,6 +275,9 @@ log2 = Libm("log2", _c_math("log2", math.log2), 1)
 atan = Libm("atan", _c_math("atan", math.atan), 1)
 tan = Libm("tan", _c_math("tan", math.tan), 1)
 atan2 = Libm("atan2", math.atan2, 2)  # (CPython's never raises: the C library's throughout)
+c_hypot = Libm("hypot", lambda x, y: _libm("hypot")(x, y), 2)
+"""The C library's hypot (numpy's `np.hypot`), for kernels that compute what numpy did;
+`hypot` below is CPython's `math.hypot`, which is not the C library's."""
 
 
 @kernel

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from addt_dsl.kernel import atan2, exp, kernel, log2, matmul, maximum
+from addt_dsl.kernel import atan2, c_hypot, exp, kernel, log2, matmul, maximum
 
 # The shipped detectors' sensors and tensor sites: the compiler checks against them too.
 from addt_dsl.specs.stacks import (CAMERA_BEV_SITES, CAMERA_BEV_TENSOR_SITES, DETECTOR_LIDAR,  # noqa: F401
@@ -126,26 +126,58 @@ def build_grid_region(points_vehicle: np.ndarray, sensor_xy: tuple[float, float]
         pz = points_vehicle[:, 2]
     if len(ix) == 0:
         return grid, (0, 0, 0, 0)
-    flat = ix * spec.ny + iy
     # Per-cell reductions over the occupied cells only (a scan fills ~1 % of the grid).
-    cells, inv, n = np.unique(flat, return_inverse=True, return_counts=True)
-    m = len(cells)
-    rx, ry = px - sensor_xy[0], py - sensor_xy[1]
-    rnorm = np.maximum(np.hypot(rx, ry), 1e-6)
-    views = grid.reshape(CHANNELS, spec.nx * spec.ny)
-    views[0, cells] = np.minimum(n, 4) / 4.0
-    views[1, cells] = np.bincount(inv, fx - ix - 0.5, m) / n
-    views[2, cells] = np.bincount(inv, fy - iy - 0.5, m) / n
-    order = np.lexsort((pz, inv))  # by cell, then height: each cell's last point is its highest
-    by_cell = inv[order]
-    last = np.flatnonzero(np.r_[by_cell[1:] != by_cell[:-1], True])
-    views[3, cells] = pz[order][last] / 2.0
-    views[4, cells] = np.bincount(inv, rx / rnorm, m) / n
-    views[5, cells] = np.bincount(inv, ry / rnorm, m) / n
-    views[6, cells] = np.bincount(inv, rnorm, m) / n / RANGE_SCALE_M
-    views[7, cells] = log2.over(1.0 + n) / COUNT_LOG2_SCALE
+    region = np.empty(4, dtype=np.int64)
+    _fill_cells(ix, iy, fx, fy, px, py, pz, float(sensor_xy[0]), float(sensor_xy[1]), spec.ny,
+                grid.reshape(CHANNELS, spec.nx * spec.ny), region)
+    return grid, tuple(region.tolist())
+
+
+@kernel
+def _fill_cells(ix, iy, fx, fy, px, py, pz, sensor_x, sensor_y, ny, views, region):
+    """The channels of the cells the points fall in (cell ix * ny + iy, a point's fractional
+    cell fx, fy, its x, y, z [m]) into `views` (channels x cells), and the cells' bounding box
+    (rows, columns) into `region`: per cell in order of the points, as numpy's `unique`,
+    `bincount` (sums in the points' order), `lexsort` (the last of the highest) and the
+    C library's hypot gave them."""
+    n_pts = ix.size
+    flat = np.empty(n_pts, dtype=np.int64)
+    for i in range(n_pts):
+        flat[i] = ix[i] * ny + iy[i]
+    cells = np.unique(flat)
+    m = cells.size
+    n = np.zeros(m, dtype=np.int64)
+    sums = np.zeros((6, m))
+    top = np.empty(m)
+    for i in range(n_pts):
+        j = np.searchsorted(cells, flat[i])
+        rx, ry = px[i] - sensor_x, py[i] - sensor_y
+        rnorm = c_hypot(rx, ry)
+        if not (rnorm >= 1e-6 or rnorm != rnorm):  # np.maximum(., 1e-6): a NaN stays
+            rnorm = 1e-6
+        sums[0, j] += fx[i] - ix[i] - 0.5
+        sums[1, j] += fy[i] - iy[i] - 0.5
+        sums[2, j] += rx / rnorm
+        sums[3, j] += ry / rnorm
+        sums[4, j] += rnorm
+        if n[j] == 0 or pz[i] >= top[j]:  # (of equal heights the last, as the stable sort leaves it)
+            top[j] = pz[i]
+        n[j] += 1
+    for j in range(m):
+        c, k = cells[j], n[j]
+        views[0, c] = min(k, 4) / 4.0
+        views[1, c] = sums[0, j] / k
+        views[2, c] = sums[1, j] / k
+        views[3, c] = top[j] / 2.0
+        views[4, c] = sums[2, j] / k
+        views[5, c] = sums[3, j] / k
+        views[6, c] = sums[4, j] / k / RANGE_SCALE_M
+        views[7, c] = log2(1.0 + k) / COUNT_LOG2_SCALE
+    lo, hi = iy[0], iy[0]
+    for i in range(n_pts):
+        lo, hi = min(lo, iy[i]), max(hi, iy[i])
     # `cells` is sorted: its first and last give the rows (flat = row * ny + column).
-    return grid, (int(cells[0]) // spec.ny, int(cells[-1]) // spec.ny + 1, int(iy.min()), int(iy.max()) + 1)
+    region[0], region[1], region[2], region[3] = cells[0] // ny, cells[m - 1] // ny + 1, lo, hi + 1
 
 
 def sensor_points_to_vehicle(points_sensor: np.ndarray, ext) -> np.ndarray:

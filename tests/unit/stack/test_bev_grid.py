@@ -256,3 +256,71 @@ def test_a_reused_grid_cleared_only_in_the_last_region_equals_a_fresh_one(scans)
         assert region == fresh_region
         assert np.array_equal(reused, fresh)
         dirty = region
+
+
+def _numpy_cells(points_vehicle, sensor_xy, spec=GRID, dtype=np.float32):
+    """`build_grid_region` as numpy computed it before its per-cell reductions were a kernel
+    (verbatim but for the clearing of a reused grid and the grid's `dtype`), the reference
+    for their bits; and the kernel's inputs."""
+    from addt_dsl.kernel import log2
+    from addt_dsl.stack.bev_grid import COUNT_LOG2_SCALE, RANGE_SCALE_M
+
+    grid = np.zeros(spec.shape, dtype=dtype)
+    px, py = points_vehicle[:, 0], points_vehicle[:, 1]
+    fx, fy = (px - spec.x_min) / spec.cell_m, (py - spec.y_min) / spec.cell_m
+    ix, iy = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
+    keep = (ix >= 0) & (ix < spec.nx) & (iy >= 0) & (iy < spec.ny) & (points_vehicle[:, 2] > spec.ground_m)
+    ix, iy, fx, fy = ix[keep], iy[keep], fx[keep], fy[keep]
+    px, py, pz = px[keep], py[keep], points_vehicle[keep, 2]
+    inputs = (ix, iy, fx, fy, px, py, pz)
+    if len(ix) == 0:
+        return grid, (0, 0, 0, 0), inputs
+    flat = ix * spec.ny + iy
+    cells, inv, n = np.unique(flat, return_inverse=True, return_counts=True)
+    m = len(cells)
+    rx, ry = px - sensor_xy[0], py - sensor_xy[1]
+    rnorm = np.maximum(np.hypot(rx, ry), 1e-6)
+    views = grid.reshape(CHANNELS, spec.nx * spec.ny)
+    views[0, cells] = np.minimum(n, 4) / 4.0
+    views[1, cells] = np.bincount(inv, fx - ix - 0.5, m) / n
+    views[2, cells] = np.bincount(inv, fy - iy - 0.5, m) / n
+    order = np.lexsort((pz, inv))
+    by_cell = inv[order]
+    last = np.flatnonzero(np.r_[by_cell[1:] != by_cell[:-1], True])
+    views[3, cells] = pz[order][last] / 2.0
+    views[4, cells] = np.bincount(inv, rx / rnorm, m) / n
+    views[5, cells] = np.bincount(inv, ry / rnorm, m) / n
+    views[6, cells] = np.bincount(inv, rnorm, m) / n / RANGE_SCALE_M
+    views[7, cells] = log2.over(1.0 + n) / COUNT_LOG2_SCALE
+    return grid, (int(cells[0]) // spec.ny, int(cells[-1]) // spec.ny + 1, int(iy.min()), int(iy.max()) + 1), inputs
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(-64.0, 64.0), st.floats(-28.0, 28.0), st.floats(-0.5, 3.0),
+                          st.integers(0, 5)), max_size=30),
+       st.booleans(), st.tuples(st.floats(-3.0, 3.0), st.floats(-1.0, 1.0)))
+def test_grid_kernel_gives_the_numpy_grids_bits(points, at_sensor, sensor_xy):
+    """The per-cell reductions (`bev_grid._fill_cells`), compiled and interpreted, give the
+    bits of the numpy code they replaced: points sharing cells, equal heights in a cell,
+    points at the sensor (the 1e-6 floor), points off the grid and below the ground; in the
+    detector's float32 grid and, where no rounding to float32 hides a last bit, in float64."""
+    from addt_dsl.kernel import bits, interpreted
+    from addt_dsl.stack.bev_grid import _fill_cells, build_grid_region
+
+    # Each point with up to 5 more in its cell (a cluster of 1-6: sums of several terms, counts
+    # that are no power of 2), every other one at the same height.
+    pts = [(x + 0.01 * k, y - 0.007 * k, z if k % 2 else z + 0.001 * k) for x, y, z, more in points
+           for k in range(more + 1)]
+    pts += [(sensor_xy[0], sensor_xy[1], 1.0)] if at_sensor else []
+    arr = np.array(pts, dtype=np.float64).reshape(-1, 3)
+    want, want_region, inputs = _numpy_cells(arr, sensor_xy)
+    got, region = build_grid_region(arr, sensor_xy)
+    assert region == want_region and bits(got) == bits(want)
+    with interpreted():
+        got, region = build_grid_region(arr, sensor_xy)
+    assert region == want_region and bits(got) == bits(want)
+    if len(inputs[0]):
+        want64, _, _ = _numpy_cells(arr, sensor_xy, dtype=np.float64)
+        got64, box = np.zeros_like(want64), np.empty(4, dtype=np.int64)
+        _fill_cells(*inputs, float(sensor_xy[0]), float(sensor_xy[1]), GRID.ny, got64.reshape(CHANNELS, -1), box)
+        assert bits(got64) == bits(want64) and tuple(box.tolist()) == want_region
