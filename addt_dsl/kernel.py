@@ -13,7 +13,9 @@ ZeroDivisionError). numba calls the C library for `math.sin`, `math.exp`, `math.
 the like, as CPython does, with two exceptions: `x ** 2` and
 `x ** 2.0` become `x * x` (CPython's is the C library's `pow`, ~0.1 % of doubles differ):
 write `pow(x, 2.0)` with this module's `pow` where the Python it replaces wrote `x ** 2`;
-and `math.hypot` is the C library's where CPython has its own: use this module's `hypot`.
+and `math.hypot` is the C library's where CPython has its own: use this module's `hypot`
+(CPython's) or `c_hypot` (the C library's, as numpy's `np.hypot`), each the same compiled and
+interpreted.
 
 The module also holds what keeps a trace the same on another machine: the C library's
 `exp`, `log`, `log2`, `atan`, `tan`, `atan2`, `pow` over arrays (`Libm.over`, where numpy's
