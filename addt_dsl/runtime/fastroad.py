@@ -322,16 +322,7 @@ class FastRoad:
         cells[rows] (`AgentArrays.flat`) into out[POSE_*, rows], and `ground_scale` into the
         block's ground scales: one kernel call, the scalar calls' code and bits. False (and
         some left unposed) where a station or offset is not finite."""
-        centres, starts, lanes = self._lane_tables or self._lanes_tabled(-1)
-        z, g = (elevation._z_a, elevation._g_a) if not elevation.flat else (_NO_PROFILE, _NO_PROFILE)
-        while True:
-            missing = _pose_rows(self._tab, self._ds, self._last_i, self.length, centres, starts, lanes, z, g,
-                                 elevation._ds, elevation.length, flat, cells, rows, out)
-            if missing == -1:
-                return True
-            if missing == -2:
-                return False
-            centres, starts, lanes = self._lanes_tabled(missing)
+        return self._on_lanes(_pose_rows, elevation, flat, cells, rows, out)
 
     def ego_poses(self, elevation, points: np.ndarray, rows: np.ndarray, hints: np.ndarray,
                   out: np.ndarray) -> bool:
@@ -340,11 +331,17 @@ class FastRoad:
         lane offset, z, grade): `project` from hints[j], `lane_offset` and `elevation.at`,
         one kernel call with the scalar calls' code and bits. False where a coordinate or
         hint is not finite (then none is to be used)."""
+        return self._on_lanes(_ego_poses, elevation, points, rows, hints, out)
+
+    def _on_lanes(self, pose_kernel, elevation, *args) -> bool:
+        """`pose_kernel` (`_pose_rows`, `_ego_poses`) over this road's line, lane tables and
+        `elevation`, then `args`; called again with the sections it asks for tabled (its -1:
+        done, True; -2: a value not finite, False; else the section it lacks)."""
         centres, starts, lanes = self._lane_tables or self._lanes_tabled(-1)
         z, g = (elevation._z_a, elevation._g_a) if not elevation.flat else (_NO_PROFILE, _NO_PROFILE)
         while True:
-            missing = _ego_poses(self._tab, self._ds, self._last_i, self.length, centres, starts, lanes, z, g,
-                                 elevation._ds, elevation.length, points, rows, hints, out)
+            missing = pose_kernel(self._tab, self._ds, self._last_i, self.length, centres, starts, lanes, z, g,
+                                  elevation._ds, elevation.length, *args)
             if missing == -1:
                 return True
             if missing == -2:
