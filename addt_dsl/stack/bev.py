@@ -22,7 +22,7 @@ from addt_dsl.runtime.fastroad import project_boxed, reference_pose_at
 from addt_dsl.specs import stacks as S
 from addt_dsl.specs.stacks import NODE_NAMES, PERCEPTIONS
 from addt_dsl.stack.bus import Bus
-from addt_dsl.stack.latency import Uniforms, load_models
+from addt_dsl.stack.latency import Jitter, load_models
 from addt_dsl.stack.control import ControlBlock, Controller
 from addt_dsl.stack.nodes import EgoBody, GroundTruthPerception, LatticePlanner, Obj, Tracker, time_to_cover
 from addt_dsl.units import to_si
@@ -139,8 +139,11 @@ class BevStack(S.BevStack):
         self.latency_models = load_models(self.settings["latency_target"])
         self.measured = self.settings["latency"] == "measured"
         self.jitter = self.settings["latency"] == "model"
-        # One generator per node, from the run seed: the draws repeat bit for bit.
-        self.latency_rngs = {n: Uniforms(ctx.rng(f"latency.{n}")) for n in NODE_NAMES}
+        # Per node, its latency [s] for a count of objects: the trend, or (jitter) drawn with a
+        # generator of the node's own from the run seed, so the draws repeat bit for bit.
+        models = self.latency_models
+        self._latency_of = {n: Jitter(models[n], ctx.rng(f"latency.{n}")).sample if self.jitter
+                            else models[n].median for n in NODE_NAMES}
         self.perception = self._make_perception()
         # A fault on the node `perception` draws from the sites this mode's node has.
         self.nodes = {**type(self).nodes, "perception": tuple(self.perception.sites)}
@@ -181,12 +184,7 @@ class BevStack(S.BevStack):
 
     # ---- timing helpers
     def _latency(self, node: str, objects: int, started: float, time_s: float) -> float:
-        if self.measured:
-            base = _time.perf_counter() - started
-        elif self.jitter:
-            base = self.latency_models[node].sample(objects, self.latency_rngs[node])
-        else:
-            base = self.latency_models[node].median(objects)
+        base = _time.perf_counter() - started if self.measured else self._latency_of[node](objects)
         timing_faults = self.ctx.faults.by_target.get(node)
         lat = base + sum(f.extra_latency(node, time_s, base) for f in timing_faults) if timing_faults else base
         self.latency[node] = lat

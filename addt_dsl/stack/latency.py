@@ -19,6 +19,7 @@ so a run repeats bit for bit. Nothing is timed during a run.
 from __future__ import annotations
 
 import bisect
+import functools
 import json
 import math
 from dataclasses import dataclass
@@ -26,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from addt_dsl.kernel import bisect_right, kernel
 from addt_dsl.lru import LruCache
 from addt_dsl.specs.stacks import DEFAULT_LATENCY_TARGET, LATENCY_MODEL_PATH, latency_targets
 
@@ -67,30 +69,57 @@ class LatencyModel:
         inverse CDF, constant above the last level)."""
         return np.interp(u, self.levels, self.ratios)
 
-    def sample(self, objects: int, rng: np.random.Generator | Uniforms) -> float:
+    def ratios_of(self, u: np.ndarray) -> np.ndarray:
+        """`ratio` of each of `u`'s probabilities (float64), its arithmetic in one kernel call:
+        the same bits."""
+        out = np.empty(len(u))
+        _ratios_of(self._table[0], self._table[1], u, out)
+        return out
+
+    @functools.cached_property
+    def _table(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.array(self.levels, dtype=np.float64), np.array(self.ratios, dtype=np.float64)
+
+    def sample(self, objects: int, rng: np.random.Generator) -> float:
         """One latency [s] with `objects` objects, drawn with `rng` (one uniform per call)."""
         return self.median(objects) * self.ratio(float(rng.random()))
 
 
-class Uniforms:
-    """A generator's uniforms on [0, 1), drawn 64 at a time: the same values, in the same
-    order, as one `random()` call each (numpy's `random(n)` fills an array with what n calls
-    give), at a third of a call's cost."""
+@kernel
+def _ratios_of(levels, ratios, u, out):
+    """`LatencyModel.ratio` of each u into `out`, written as it is."""
+    n = len(levels)
+    for k in range(len(u)):
+        x = u[k]
+        i = bisect_right(levels, x, n)
+        if i >= n:
+            out[k] = ratios[n - 1]
+        else:
+            lo, hi = levels[i - 1], levels[i]
+            out[k] = ratios[i - 1] + (ratios[i] - ratios[i - 1]) * (x - lo) / (hi - lo)
 
-    __slots__ = ("rng", "_block", "_i")
+
+class Jitter:
+    """One node's latencies in a run: its model's trend times a jitter ratio, the ratios of its
+    generator's uniforms taken 64 at a time (numpy's `random(n)` fills an array with what n
+    calls give, `ratios_of` gives `ratio`'s bits): `sample` gives what `LatencyModel.sample`
+    with a call of the generator each gives, at a fifth of its cost."""
+
+    __slots__ = ("model", "rng", "_block", "_i")
     BLOCK = 64
 
-    def __init__(self, rng: np.random.Generator):
-        self.rng = rng
+    def __init__(self, model: LatencyModel, rng: np.random.Generator):
+        self.model, self.rng = model, rng
         self._block: list[float] = []
         self._i = 0
 
-    def random(self) -> float:
+    def sample(self, objects: int) -> float:
+        """The next latency [s] with `objects` objects."""
         i = self._i
         if i == len(self._block):
-            self._block, i = self.rng.random(self.BLOCK).tolist(), 0
+            self._block, i = self.model.ratios_of(self.rng.random(self.BLOCK)).tolist(), 0
         self._i = i + 1
-        return self._block[i]
+        return self.model.median(objects) * self._block[i]
 
 
 def read(path: Path = MODEL_PATH) -> dict:

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from addt_dsl.stack.calibrate import LEVELS, fit, jitter
-from addt_dsl.stack.latency import (MODEL_PATH, NODES, LatencyModel, Uniforms, at, crossing, e2e_ms,
+from addt_dsl.stack.latency import (MODEL_PATH, NODES, Jitter, LatencyModel, at, crossing, e2e_ms,
                                     e2e_quantile_ms, load_models, target_names)
 
 DATA = json.loads(MODEL_PATH.read_text())
@@ -21,13 +21,36 @@ def _draws(model: LatencyModel, seed: int, k: int, objects: int = 10) -> list[fl
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(0, 300))
-def test_uniforms_drawn_in_blocks_are_the_generators_own_draws_one_by_one(seed, n):
+@given(st.integers(0, 2**32 - 1), st.integers(0, 300), st.sampled_from(NODES),
+       st.lists(st.integers(0, 400), min_size=1, max_size=5))
+def test_jitter_drawn_in_blocks_gives_a_call_of_the_generator_each(seed, n, node, counts):
+    """`Jitter` (ratios of 64 uniforms in one kernel call) against `LatencyModel.sample` with
+    one `random()` each, bit for bit, object counts varying draw to draw."""
+    model = load_models()[node]
     one_by_one = np.random.default_rng(seed)
-    blocked = Uniforms(np.random.default_rng(seed))
-    assert [blocked.random() for _ in range(n)] == [float(one_by_one.random()) for _ in range(n)]
-    model = load_models()["control"]
-    assert model.sample(3, blocked) == model.sample(3, one_by_one)
+    blocked = Jitter(model, np.random.default_rng(seed))
+    for k in range(n):
+        objects = counts[k % len(counts)]
+        assert blocked.sample(objects) == model.sample(objects, one_by_one)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_ratios_of_gives_ratio_bits_at_the_table_levels_and_between(compiled):
+    """The kernel against `ratio` at every stored level (equal to one: the step between two
+    pieces), just below and above each, random points and the last level's flat top."""
+    from addt_dsl import kernel
+    model = load_models()["tracker"]
+    lv = np.array(model.levels)
+    u = np.concatenate([lv, np.nextafter(lv, -1.0), np.nextafter(lv, 2.0),
+                        np.random.default_rng(3).random(2000), [0.0, 0.99999999999]])
+    u = u[(u >= 0.0) & (u < 1.0)]
+    if compiled:
+        got = model.ratios_of(u)
+    else:
+        with kernel.interpreted():
+            got = model.ratios_of(u)
+    want = [model.ratio(float(x)) for x in u]
+    assert [v.hex() for v in got.tolist()] == [v.hex() for v in want]
 
 
 @pytest.mark.parametrize("node", NODES)
