@@ -216,13 +216,17 @@ class RunState:
         self.events: list[Event] = []
         self.left_road = False  # the ego passed the end of its road or route (`left_road` event)
         # Actors whose `road_edge` a condition or an oracle reads: recorded for them only.
-        self.edge_actors = sorted(set(re.findall(r"road_edge\((\w+)\)", spec.plan.model_dump_json())))
+        plan_json = spec.plan.model_dump_json()  # (formulas read as text: one dump for the five searches)
+        self.edge_actors = sorted(set(re.findall(r"road_edge\((\w+)\)", plan_json)))
         self.edges: dict = {}  # their recorded arrays (`phases.Record`)
-        self.end_actors = sorted(set(re.findall(r"road_end\((\w+)\)", spec.plan.model_dump_json())))  # `road_end`
+        self.end_actors = sorted(set(re.findall(r"road_end\((\w+)\)", plan_json)))  # `road_end`
         self.ends: dict = {}
         # `wrong_way(A)`, `off_lanes(A)` (`lanestate.py`): recorded for the actors a formula reads
-        self.wrong_way_actors = sorted(set(re.findall(r"wrong_way\((\w+)\)", spec.plan.model_dump_json())))
-        self.off_lanes_actors = sorted(set(re.findall(r"off_lanes\((\w+)\)", spec.plan.model_dump_json())))
+        self.wrong_way_actors = sorted(set(re.findall(r"wrong_way\((\w+)\)", plan_json)))
+        self.off_lanes_actors = sorted(set(re.findall(r"off_lanes\((\w+)\)", plan_json)))
+        # Whether a formula (the plan's or a fault's window) reads `lane_id(A)`: then lanes are
+        # recorded per sample.
+        self.lane_ids = '"lane_id(' in plan_json or any('"lane_id(' in f.model_dump_json() for f in spec.faults)
         self.wrong_ways: dict = {}
         self.offs: dict = {}
         self.red_margins: dict = {}  # each actor's recorded `red_light` margin (`phases.Record`)
@@ -283,8 +287,6 @@ class RunState:
         self.deferred: list[tuple[AgentState, BoundClause]] = []  # time-0 behaviours with live settings
         # Named steps (agent, `agent.label`, state), whose states are recorded per sample.
         self.named_steps: list[tuple[AgentState, str, object]] = []
-        # Whether a formula reads `lane_id(A)`: then lanes are recorded per sample.
-        self.lane_ids = '"lane_id(' in self.spec.model_dump_json()
         # A scripted ego: an AgentState moved by the agents' code (`_script`), its
         # VehicleState posed from it each step (`_pose_scripted_ego`); None: its stack drives.
         self.ego_agent = None
@@ -299,8 +301,9 @@ class RunState:
             t = float(road.road.lane_center_t(lane, u)) + a.offset
             st = AgentState(a.name, road.road_id, u, t, a.speed, 0.0, a.length_m, a.width_m, lane, t)
             self.agents.append(st)
-            self.physics.add_box(a.name, a.length_m, a.width_m, a.height_m, VEHICLES[a.vehicle].rgba)
             self._script(st, a, road)
+        self.physics.add_boxes([(a.name, a.length_m, a.width_m, a.height_m, VEHICLES[a.vehicle].rgba)
+                                for a in plan.agents])
         self.agent_by_name = {a.name: a for a in self.agents}
         # Members in `occupants` order (agents, then the ego): the order breaks leader ties.
         self.leaders = LeaderIndex([*self.agents, _EgoOccupant(self)])

@@ -206,16 +206,27 @@ class PhysicsWorld:
     def add_box(self, name: str, length: float, width: float, height: float,
                 rgba: tuple[float, float, float, float] | None = None) -> int:
         """A box body for an actor; visible to the camera only if `rgba` is given."""
-        body = self._add(("box", (length / 2, width / 2, height / 2), rgba))
-        self.bodies[name] = body
-        self.body_names[body] = name
-        self._box_slot[body] = len(self._box_half)
-        self._box_half.append((length / 2, width / 2, height / 2))
-        self._box_half_table = np.array(self._box_half, dtype=np.float64).reshape(-1, 3)
-        self._box_pose = np.vstack([self._box_pose, (0.0, 0.0, height / 2, 0.0, 0.0)])
-        self._box_ids = np.append(self._box_ids, body)
-        self._hit_body = np.concatenate([self._box_ids, [self.ground, -1]])
-        self._unsynced = np.append(self._unsynced, False)
+        return self.add_boxes([(name, length, width, height, rgba)])[0]
+
+    def add_boxes(self, boxes: list[tuple]) -> list[int]:
+        """`add_box` of each (name, length, width, height, rgba or None) in turn, the box
+        table grown once (a run's agents: adding them one by one grew it once each)."""
+        bodies, poses = [], []
+        for name, length, width, height, rgba in boxes:
+            body = self._add(("box", (length / 2, width / 2, height / 2), rgba))
+            self.bodies[name] = body
+            self.body_names[body] = name
+            self._box_slot[body] = len(self._box_half)
+            self._box_half.append((length / 2, width / 2, height / 2))
+            bodies.append(body)
+            poses.append((0.0, 0.0, height / 2, 0.0, 0.0))
+        if bodies:
+            self._box_half_table = np.array(self._box_half, dtype=np.float64).reshape(-1, 3)
+            self._box_pose = np.concatenate([self._box_pose, np.array(poses, dtype=np.float64)])
+            self._box_ids = np.concatenate([self._box_ids, np.array(bodies, dtype=np.int64)])
+            self._hit_body = np.concatenate([self._box_ids, [self.ground, -1]])
+            self._unsynced = np.concatenate([self._unsynced, np.zeros(len(bodies), dtype=bool)])
+        return bodies
         return body
 
     def add_mesh(self, mesh, collision: bool = False) -> int | None:
