@@ -97,3 +97,42 @@ def test_a_world_makes_its_client_only_when_asked(monkeypatch):
     assert np.allclose(frac, analytic[1], atol=1e-6)
     lazy.close()
     eager.close()
+
+
+def test_boxes_added_at_once_are_the_boxes_added_one_by_one(monkeypatch):
+    """`add_boxes` against `add_box` in turn: the same ids, names, slots, tables and ray casts,
+    on a world with and without a client, boxes before and after the call."""
+    monkeypatch.setattr(W, "CLIENTS", W._Clients())
+    boxes = [("lead", 4.5, 1.9, 1.5, (0.8, 0.2, 0.2, 1.0)), ("truck", 9.0, 2.5, 3.2, None),
+             ("bike", 1.8, 0.6, 1.4, (0.1, 0.1, 0.1, 1.0))]
+    starts = np.tile([0.0, 0.0, 1.0], (90, 1))
+    ang = np.linspace(-0.6, 0.6, 90)
+    ends = starts + 40.0 * np.stack([np.cos(ang), np.sin(ang), -0.05 * np.ones(90)], axis=1)
+    for eager in (False, True):
+        one, many = PhysicsWorld(), PhysicsWorld()
+        if eager:
+            assert one.client is not None and many.client is not None
+        one.add_box("ego", 4.5, 1.9, 1.5)
+        many.add_box("ego", 4.5, 1.9, 1.5)
+        ids = [one.add_box(*b) for b in boxes]
+        assert many.add_boxes(boxes) == ids == [2, 3, 4]
+        assert many.add_boxes([]) == []
+        one.add_box("last", 3.0, 1.5, 1.2)
+        many.add_box("last", 3.0, 1.5, 1.2)
+        for w in (one, many):
+            w.set_pose("truck", 20.0, -1.0, 1.6, 0.3)
+            w.set_pose("bike", 9.0, 1.0, 0.7, -0.2)
+        assert one.bodies == many.bodies and one.body_names == many.body_names
+        assert one.box_slots(list(one.bodies)) == many.box_slots(list(many.bodies))
+        assert one.box_poses().tobytes() == many.box_poses().tobytes()
+        a, b = one.ray_scene(), many.ray_scene()
+        for x, y in zip(a, b):
+            assert np.asarray(x).tobytes() == np.asarray(y).tobytes() and np.asarray(x).dtype == np.asarray(y).dtype
+        for analytic in (True, False):
+            one.analytic_rays = many.analytic_rays = analytic
+            hit, frac = one.ray_cast(starts, ends, ignore="ego")
+            got_hit, got_frac = many.ray_cast(starts, ends, ignore="ego")
+            assert hit.tolist() == got_hit.tolist() and frac.tobytes() == got_frac.tobytes()
+            assert {3, 4} <= set(hit.tolist())
+        one.close()
+        many.close()
