@@ -100,8 +100,9 @@ def test_a_world_makes_its_client_only_when_asked(monkeypatch):
 
 
 def test_boxes_added_at_once_are_the_boxes_added_one_by_one(monkeypatch):
-    """`add_boxes` against `add_box` in turn: the same ids, names, slots, tables and ray casts,
-    on a world with and without a client, boxes before and after the call."""
+    """`add_boxes` against `add_box` in turn (the same ids, names, slots, tables and ray casts)
+    and against the tables written out, on a world with and without a client, boxes added
+    before and after the call."""
     monkeypatch.setattr(W, "CLIENTS", W._Clients())
     boxes = [("lead", 4.5, 1.9, 1.5, (0.8, 0.2, 0.2, 1.0)), ("truck", 9.0, 2.5, 3.2, None),
              ("bike", 1.8, 0.6, 1.4, (0.1, 0.1, 0.1, 1.0))]
@@ -123,6 +124,13 @@ def test_boxes_added_at_once_are_the_boxes_added_one_by_one(monkeypatch):
             w.set_pose("truck", 20.0, -1.0, 1.6, 0.3)
             w.set_pose("bike", 9.0, 1.0, 0.7, -0.2)
         assert one.bodies == many.bodies and one.body_names == many.body_names
+        # The tables written out: a row per box in the order added, unposed ones where made.
+        sizes = [(4.5, 1.9, 1.5), *[b[1:4] for b in boxes], (3.0, 1.5, 1.2)]
+        scene = many.ray_scene()
+        assert scene[2].tolist() == [[l / 2, w / 2, h / 2] for l, w, h in sizes]
+        assert scene[5].tolist() == [1, 2, 3, 4, 5, many.ground, -1]
+        assert many.box_poses()[[0, 1, 4]].tolist() == [[0.0, 0.0, h / 2, 0.0, 0.0] for _, _, h in
+                                                        (sizes[0], sizes[1], sizes[4])]
         assert one.box_slots(list(one.bodies)) == many.box_slots(list(many.bodies))
         assert one.box_poses().tobytes() == many.box_poses().tobytes()
         a, b = one.ray_scene(), many.ray_scene()
