@@ -272,8 +272,10 @@ class BevStack(S.BevStack):
                 if isinstance(x, Exception):
                     errors[i] = x
                     continue
-                try:
-                    stacks[i]._commanded(times_s[i], *x, 0.0)
+                stack = stacks[i]
+                try:  # (batched: no timing fault on the node, latency not measured)
+                    lat = stack.latency["control"] = stack._latency_of["control"](0)
+                    stack._commanded(times_s[i], *x, lat)
                 except Exception as exc:  # noqa: BLE001 - the run's outcome
                     errors[i] = exc
         return errors
@@ -282,6 +284,15 @@ class BevStack(S.BevStack):
         """Messages due by `time_s` [s] arrive and the planner runs where due; whether the
         control cycle is due."""
         self.ctx.now = time_s
+        if self.bus.due(time_s) or time_s + 1e-9 >= self.next_plan_s:
+            self._deliver(time_s)
+        if time_s + 1e-9 >= self.next_control_s:
+            self.next_control_s += self.control_period
+            return True
+        return False
+
+    def _deliver(self, time_s: float) -> None:
+        """Messages due by `time_s` [s] arrive; the planner runs on fresh tracks or its timer."""
         fresh_tracks = False
         for msg in self.bus.deliver_until(time_s):
             if msg.topic == "objects":
@@ -305,10 +316,6 @@ class BevStack(S.BevStack):
             # frame that is merely a little late still trigger the replan itself.
             self.next_plan_s = time_s + 1.5 * self.planner_period
             self._run_planner(time_s)
-        if time_s + 1e-9 >= self.next_control_s:
-            self.next_control_s += self.control_period
-            return True
-        return False
 
     def _control_alone(self) -> bool:
         """Whether this stack's control cycle runs alone: a fault on the controller's sites or
@@ -597,12 +604,10 @@ class BevStack(S.BevStack):
         steer, accel = self.controller.command(self.plan, (x, y, heading, speed), road,
                                                float(s_now), float(t_now), self.control_period,
                                                self.corrupt)
-        self._commanded(time_s, steer, accel, started)
+        self._commanded(time_s, steer, accel, self._latency("control", 0, started, time_s))
 
-    def _commanded(self, time_s: float, steer: float, accel: float, started: float) -> None:
-        """The controller's command leaves after its latency (`started`: the cycle's start on
-        the clock, for measured latency)."""
-        lat = self._latency("control", 0, started, time_s)
+    def _commanded(self, time_s: float, steer: float, accel: float, lat: float) -> None:
+        """The controller's command leaves after its latency `lat` [s]."""
         if not (math.isfinite(steer) and math.isfinite(accel)):
             raise StackError(f"non-finite command steer={steer!r} accel={accel!r}")
         self.command = (steer, accel)

@@ -8,6 +8,7 @@ is deterministic.
 from __future__ import annotations
 
 import heapq
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,16 +27,24 @@ class Bus:
         self._queue: list[Message] = []
         self._seq = 0
         self.latest: dict[str, Message] = {}
+        self.next_s = math.inf  # when the next message is delivered [s] (inf: none waits)
 
     def publish(self, topic: str, data: Any, stamp_s: float, deliver_s: float) -> None:
         self._seq += 1
         heapq.heappush(self._queue, Message(deliver_s, self._seq, topic, stamp_s, data))
+        self.next_s = self._queue[0].deliver_s
+
+    def due(self, time_s: float) -> bool:
+        """Whether a message is delivered by `time_s` [s] (`deliver_until` returns some)."""
+        return self.next_s <= time_s + 1e-12
 
     def deliver_until(self, time_s: float) -> list[Message]:
         """Pop every message due by `time_s`, in delivery order; remember the latest per topic."""
         out = []
-        while self._queue and self._queue[0].deliver_s <= time_s + 1e-12:
-            msg = heapq.heappop(self._queue)
+        queue = self._queue
+        while queue and queue[0].deliver_s <= time_s + 1e-12:
+            msg = heapq.heappop(queue)
             self.latest[msg.topic] = msg
             out.append(msg)
+        self.next_s = queue[0].deliver_s if queue else math.inf
         return out
