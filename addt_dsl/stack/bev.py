@@ -24,7 +24,7 @@ from addt_dsl.specs.stacks import NODE_NAMES, PERCEPTIONS
 from addt_dsl.stack.bus import Bus
 from addt_dsl.stack.latency import Jitter, load_models
 from addt_dsl.stack.control import ControlBlock, Controller
-from addt_dsl.stack.nodes import EgoBody, GroundTruthPerception, LatticePlanner, Obj, Tracker, time_to_cover
+from addt_dsl.stack.nodes import EgoBody, GroundTruthPerception, LatticePlanner, Obj, Tracker, time_to_cover, unchanged
 from addt_dsl.units import to_si
 from addt_dsl.vehicles import CAR
 
@@ -158,6 +158,7 @@ class BevStack(S.BevStack):
         self.cruise = self.planner.cruise  # the setting (the planner's may rise to clear a junction)
         self.controller = Controller(self.settings, ctx.wheelbase_m, self.body)
         self._alone: bool | None = None  # `_control_alone`, once the fault schedule is bound
+        self._planner_corrupt = None  # `_planner_sites`, likewise
         self.aeb_stage = 0
         self.emergency = False
         self.signs_stopped: tuple[float, ...] = ()  # stations of the stop-sign lines it has stopped for
@@ -325,6 +326,14 @@ class BevStack(S.BevStack):
             self._alone = self.measured or any(s in targets for s in ("control", *Controller.sites))
         return self._alone
 
+    def _planner_sites(self):
+        """The planner's `corrupt`: this stack's, or `unchanged` where no fault targets the
+        planner's sites (the schedule's targets are fixed once bound)."""
+        if self._planner_corrupt is None:
+            targets = self.ctx.faults.by_target
+            self._planner_corrupt = self.corrupt if any(s in targets for s in LatticePlanner.sites) else unchanged
+        return self._planner_corrupt
+
     def _run_planner(self, time_s: float) -> None:
         started = _time.perf_counter()
         road, road_id = self.ctx.ego_road()
@@ -359,7 +368,7 @@ class BevStack(S.BevStack):
             oncoming = (max(self.sight_m.values()), limit if limit is not None else self.cruise,
                         self._pass_end(float(s0), stop))
         plan = self.planner.plan((float(s0), float(t0), lane0), speed, objs, road, road_id, time_s,
-                                 self.corrupt, (speed * math.cos(hdg0), speed * math.sin(hdg0)), stop,
+                                 self._planner_sites(), (speed * math.cos(hdg0), speed * math.sin(hdg0)), stop,
                                  oncoming)
         if plan.aeb_stage != self.aeb_stage:
             self.ctx.event("aeb", stage=plan.aeb_stage, ttc_s=plan.ttc_s if math.isfinite(plan.ttc_s) else None)

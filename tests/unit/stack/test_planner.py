@@ -245,3 +245,34 @@ def test_candidate_stopping_distance_is_the_braking_distance_not_a_step_short(sp
     # The collision check keeps 2 m: a stop that ends 1 m short of the car collides.
     assert cost(1.0) == math.inf
     assert cost(2.5) < math.inf
+
+
+_scene_objs = st.lists(st.tuples(st.floats(-20.0, 120.0), st.floats(-9.0, 2.0), st.floats(-3.0, 30.0),
+                                 st.floats(-1.0, 1.0), st.sampled_from([4.5, 12.0, 0.6]),
+                                 st.sampled_from([1.9, 2.5, 0.6])), max_size=5)
+
+
+@settings(max_examples=60, deadline=None)
+@given(_scene_objs, st.floats(0.0, 30.0), st.sampled_from([-1, -2]), st.floats(0.0, 3.0),
+       st.sampled_from([math.nan, math.inf, -1.0]))
+def test_the_planner_without_fault_sites_plans_what_it_plans_through_them(objs, speed, lane, now, bad):
+    """`unchanged` (no fault on the planner's sites: the candidates' loop without its calls)
+    against a `corrupt` that returns every value as it is: the same plans, step after step,
+    a NaN, infinite or negative cost among the candidates included (a corrupted object)."""
+    from addt_dsl.stack.nodes import unchanged
+
+    a, b = LatticePlanner({}), LatticePlanner({})
+    sites = []
+
+    def through(site, value):
+        sites.append(site)
+        return value
+
+    for k in range(3):
+        scene = list(objs) if k < 2 else [(*objs[0][:2], bad, *objs[0][3:])] + list(objs[1:]) if objs else []
+        s = 10.0 + 5.0 * k
+        t = float(ROAD2.lane_center_t(lane, s))
+        want = a.plan((s, t, lane), speed, scene, ROAD2, "r", now + 0.1 * k, through)
+        got = b.plan((s, t, lane), speed, scene, ROAD2, "r", now + 0.1 * k, unchanged)
+        assert repr(got) == repr(want) and a.emergency == b.emergency
+    assert "planner.cost" in sites
