@@ -96,7 +96,7 @@ def _stop(run: RunState, rec: phases.Record, k: int, error: str, t: float | None
 
 def _loop(runs: list[RunState]) -> list[Trace]:
     """Step every run from time 0 until its end, an ego collision or a failure; their traces."""
-    recs = [phases.Record(run) for run in runs]
+    recs = phases.Record.batch(runs)
     fleets = Fleets(runs)  # the agents of every run in one block of arrays
     egos = StateBlock([run.ego for run in runs], [run.dt for run in runs])  # every ego's state: one block
     for i, run in enumerate(runs):

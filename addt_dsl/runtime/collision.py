@@ -47,25 +47,47 @@ def clearances_batch(items) -> list[bool]:
         first = _first(tuple([len(item[0]) for item in items]))
         rows = np.concatenate([item[0] for item in items])
         sizes = np.concatenate([item[2] for item in items])
-    touch = np.empty((len(rows) + 8, 3), dtype=np.int64)
-    found = _clearances(first, rows, sizes, touch)
-    if found > len(touch):  # more contacts than room: again with room for all
-        touch = np.empty((found, 3), dtype=np.int64)
-        _clearances(first, rows, sizes, touch)
+    collided = clearances_rows(rows, first, _every(len(items)), sizes, [(item[1], item[3], item[4]) for item in items])
     if len(items) > 1:
         for item, lo, hi in zip(items, first.tolist(), first[1:].tolist()):
             item[0][:, -1] = rows[lo:hi, -1]
-    collided = [False] * len(items)
+    return collided
+
+
+def clearances_rows(rows, first, live, sizes, runs) -> list[bool]:
+    """`clearances_batch` on a step's rows of a whole batch (run k's actors are rows
+    `first[k]` to `first[k + 1]`, sizes likewise), for the runs `live` (their indices k,
+    int64; `runs`: for each, (its names, its run, t_now)): the clearances in place, one
+    kernel call; whether each of those runs' ego is in a collision."""
+    touch = np.empty((len(rows) + 8, 3), dtype=np.int64)
+    found = _clearances(first, live, rows, sizes, touch)
+    if found > len(touch):  # more contacts than room: again with room for all
+        touch = np.empty((found, 3), dtype=np.int64)
+        _clearances(first, live, rows, sizes, touch)
+    collided = [False] * len(runs)
     pairs: dict[int, list] = {}
     if found:
-        for k, a, b in touch[:found].tolist():  # in all-pairs order, run by run
-            pairs.setdefault(k, []).append((a, b))
-    for k, item in enumerate(items):
-        if k in pairs:
-            collided[k] = _contacts(item, pairs[k])
-        elif item[3].contacts:
-            item[3].contacts = set()
+        for j, a, b in touch[:found].tolist():  # in all-pairs order, run by run
+            pairs.setdefault(j, []).append((a, b))
+    for j, item in enumerate(runs):
+        if j in pairs:
+            collided[j] = _contacts(item, pairs[j])
+        elif item[1].contacts:
+            item[1].contacts = set()
     return collided
+
+
+def _every(n: int) -> np.ndarray:
+    """0 .. n - 1 (read only: shared)."""
+    every = _EVERY.get(n)
+    if every is None:
+        every = np.arange(n, dtype=np.int64)
+        every.flags.writeable = False
+        _EVERY.put(n, every)
+    return every
+
+
+_EVERY: LruCache[int, np.ndarray] = LruCache(64)
 
 
 # runs' actor counts -> each run's first actor (and the total); batches lose runs as they
@@ -84,9 +106,9 @@ def _first(counts: tuple) -> np.ndarray:
 
 
 def _contacts(item, pairs) -> bool:
-    """A run's `collision` events of the pairs (i, j) that touch now and did not before;
-    whether the ego is in one."""
-    names, run, t_now = item[1], item[3], item[4]
+    """A run's (names, run, t_now) `collision` events of the pairs (i, j) that touch now and
+    did not before; whether the ego is in one."""
+    names, run, t_now = item
     collided = False
     touching = set()
     for i, j in pairs:
@@ -124,12 +146,12 @@ def _exact(a, b, x, y, heading, length, width, reach, cos_h, sin_h, trig):
 
 
 @kernel
-def _clearances(first, rows, sizes, touch):
-    """Every run's clearances: run k's actors are rows `first[k]` to `first[k + 1]` of
-    `rows` (x, y, heading its first columns) and `sizes` (length, width); into the last
-    column of `rows` each actor's least `_pair` separation over the pairs of its run (1e3
-    when none is finite), into `touch` the pairs
-    that touch (separation <= 0) as (run, i, j) in all-pairs order (i < j, actors counted
+def _clearances(first, live, rows, sizes, touch):
+    """The clearances of the runs `live[0]`, `live[1]`, ...: run k's actors are rows
+    `first[k]` to `first[k + 1]` of `rows` (x, y, heading its first columns) and `sizes`
+    (length, width); into the last column of `rows` each actor's least `_pair` separation
+    over the pairs of its run (1e3 when none is finite), into `touch` the pairs that touch
+    (separation <= 0) as (j, i, k) of run live[j] in all-pairs order (i < k, actors counted
     from the run's first), as many as fit. Returns how many pairs touch.
 
     The figures are those of visiting every pair in order (a < b) with `_pair` and keeping
@@ -152,8 +174,8 @@ def _clearances(first, rows, sizes, touch):
     tol = np.empty(n)  # the slack of the pair that set each actor's first least
     low = np.empty(n)  # each actor's least plain figure less slack over its far pairs
     found = 0
-    for k in range(first.size - 1):
-        lo, hi = first[k], first[k + 1]
+    for j in range(live.size):
+        lo, hi = first[live[j]], first[live[j] + 1]
         for a in range(lo, hi):
             reach[a] = 0.5 * hypot(length[a], width[a])
             clear[a], tol[a], low[a] = math.inf, 0.0, math.inf
@@ -177,7 +199,7 @@ def _clearances(first, rows, sizes, touch):
                     sep = _exact(a, b, x, y, heading, length, width, reach, cos_h, sin_h, trig)
                     if sep <= 0.0:
                         if found < touch.shape[0]:
-                            touch[found, 0], touch[found, 1], touch[found, 2] = k, a - lo, b - lo
+                            touch[found, 0], touch[found, 1], touch[found, 2] = j, a - lo, b - lo
                         found += 1
                 if sep < clear_a:
                     clear_a, tol_a = sep, slack

@@ -36,12 +36,13 @@ from __future__ import annotations
 
 import heapq
 import math
+from itertools import accumulate
 
 import numpy as np
 
 from addt_dsl.runtime import lanestate
 from addt_dsl.runtime.agents import Fleets, pose_scripted_ego
-from addt_dsl.runtime.collision import clearances_batch
+from addt_dsl.runtime.collision import clearances_batch, clearances_rows
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
@@ -59,13 +60,18 @@ _S, _T, _LANE_OFFSET = FIELDS.index("s"), FIELDS.index("t"), FIELDS.index("lane_
 class Record:
     """The recorded arrays of a run, one row per sample: actors' fields (one block
     [sample, actor, field]: a step's state goes in as one row, per-value numpy stores cost
-    ~0.1 us each), latencies, outputs, objects seen, named steps, lights."""
+    ~0.1 us each), latencies, outputs, objects seen, named steps, lights. The records of a
+    batch (`Record.batch`) keep their actors' fields in one block of the batch's."""
 
-    def __init__(self, run: RunState):
+    def __init__(self, run: RunState, block: np.ndarray | None = None):
         n = self.n = run.n_steps + 1
         plan = run.bound
         names = self.names = ["ego"] + [a.name for a in run.agents]
-        self.block = block = np.zeros((n, len(names), len(FIELDS)))
+        if block is None:
+            block = np.zeros((n, len(names), len(FIELDS)))
+        self.block = block
+        self.batch_rows: BatchRows | None = None  # the batch's block this one is part of, and its index there
+        self.index = 0
         self.rec = {name: dict(zip(FIELDS, fields)) for name, fields in zip(names, block.transpose(1, 2, 0))}
         self.latency = {k: np.zeros(n) for k in LATENCY_NODES}
         self.outputs = {"control.steer": np.zeros(n), "control.accel": np.zeros(n)}
@@ -84,6 +90,21 @@ class Record:
         self.sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
         self.footprints = np.array([self.sizes[m] for m in names], dtype=np.float64).reshape(-1, 2)  # (length, width)
         self.last = n  # samples recorded
+
+    @classmethod
+    def batch(cls, runs: list[RunState]) -> list[Record]:
+        """The records of a batch's runs, the fields of all their actors in one block
+        [sample, actor of the batch, field] (`BatchRows`; each record's `block` the view of its
+        run's actors and samples): a step's rows of every run are one array."""
+        if len(runs) < 2:
+            return [cls(run) for run in runs]
+        first = [0, *accumulate(1 + len(run.agents) for run in runs)]
+        block = np.zeros((max(run.n_steps for run in runs) + 1, first[-1], len(FIELDS)))
+        recs = [cls(run, block[:run.n_steps + 1, lo:hi]) for run, lo, hi in zip(runs, first, first[1:])]
+        rows = BatchRows(block, np.array(first, dtype=np.int64), np.concatenate([rec.footprints for rec in recs]))
+        for i, rec in enumerate(recs):
+            rec.batch_rows, rec.index = rows, i
+        return recs
 
     def trace(self, run: RunState) -> Trace:
         last = self.last
@@ -110,6 +131,24 @@ def clock(runs: list[RunState], ts: list[float]) -> None:
         run.ctx.now = t
         if t + 1e-12 >= run.faults.next_wake_s:
             run.faults.wake(t)
+
+
+class BatchRows:
+    """The recorded fields of every actor of a batch: `block` [sample, actor, field], run r's
+    actors `first[r]` to `first[r + 1]`, their footprints (length, width [m]) `sizes`; the
+    block holds the batch's longest run (a shorter run's samples after its last stay 0)."""
+
+    def __init__(self, block: np.ndarray, first: np.ndarray, sizes: np.ndarray):
+        self.block, self.first, self.sizes = block, first, sizes
+        self.first.flags.writeable = False
+        self._live: list[int] = []
+        self._live_a = np.zeros(0, dtype=np.int64)
+
+    def live(self, index: list[int]) -> np.ndarray:
+        """The runs `index` as an array (the last one asked, the live runs, changes seldom)."""
+        if index != self._live:
+            self._live, self._live_a = index, np.array(index, dtype=np.int64)
+        return self._live_a
 
 
 def pose(runs: list[RunState], ts: list[float], fleets: Fleets, egos: StateBlock | None = None) -> None:
@@ -282,6 +321,10 @@ def collisions(runs: list[RunState], recs: list[Record], k: int, ts: list[float]
     """Over the batch: each actor's clearance at sample k (from the poses `record` wrote
     into the step's rows) and `collision` events (every run's pairs in one compiled call:
     `collision.clearances_batch`); whether each ego collided."""
+    rows = recs[0].batch_rows if len(recs) > 1 else None
+    if rows is not None and all(rec.batch_rows is rows for rec in recs):  # (a batch's records: its step's rows at once)
+        return clearances_rows(rows.block[k], rows.first, rows.live([rec.index for rec in recs]), rows.sizes,
+                               [(rec.names, run, t) for run, rec, t in zip(runs, recs, ts)])
     return clearances_batch([(rec.block[k], rec.names, rec.footprints, run, t) for run, rec, t in zip(runs, recs, ts)])
 
 

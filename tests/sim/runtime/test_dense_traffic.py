@@ -58,11 +58,12 @@ EXTRAS = """  agent parked car on r lane -3 at 150 m speed 0 m/s
   }"""
 
 
-def all_pairs(first, rows, sizes, touch):
-    """`collision._clearances` without its broad phase: every pair of each run in order,
+def all_pairs(first, live, rows, sizes, touch):
+    """`collision._clearances` without its broad phase: every pair of each live run in order,
     the separation as the loop before the kernel wrote it (math.hypot, box_separation)."""
     found = 0
-    for k, (lo, hi) in enumerate(zip(first[:-1].tolist(), first[1:].tolist())):
+    for k, run in enumerate(live.tolist()):
+        lo, hi = int(first[run]), int(first[run + 1])
         boxes = [(*rows[i, :3].tolist(), *sizes[i].tolist()) for i in range(lo, hi)]
         reach = [0.5 * math.hypot(b[3], b[4]) for b in boxes]
         clear = [math.inf] * len(boxes)

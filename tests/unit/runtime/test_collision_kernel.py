@@ -75,19 +75,45 @@ box = st.tuples(coordinate, offset, heading, size).map(lambda b: (*b[:3], *b[3])
 
 
 @settings(max_examples=150, deadline=None)
-@given(st.lists(st.lists(box, min_size=1, max_size=12), min_size=1, max_size=5))
-def test_compiled_gives_its_python_bits(runs):
-    """Batches of 1..5 runs of 1..12 actors (NaN, inf, huge and -0.0 poses included)."""
+@given(st.lists(st.lists(box, min_size=1, max_size=12), min_size=1, max_size=5), st.randoms(use_true_random=False))
+def test_compiled_gives_its_python_bits(runs, rnd):
+    """Batches of 1..5 runs of 1..12 actors (NaN, inf, huge and -0.0 poses included), all
+    of them or some (the live runs of a batch whose others ended)."""
     boxes = [b for run in runs for b in run]
     first = np.array([0, *np.cumsum([len(r) for r in runs])], dtype=np.int64)
+    live = np.array(sorted(rnd.sample(range(len(runs)), rnd.randint(1, len(runs)))), dtype=np.int64)
     results = []
     for python in (False, True):  # compiled; its Python, callees (`_pair`, hypot, separation) included
         rows, sizes = rows_of(boxes)
         touch = np.full((len(boxes) + 8, 3), -1, dtype=np.int64)
         with np.errstate(all="ignore"), interpreted() if python else contextlib.nullcontext():
-            found = C._clearances(first, rows, sizes, touch)
+            found = C._clearances(first, live, rows, sizes, touch)
         results.append((found, bits(rows.ravel()), touch.tolist()))
     assert results[0] == results[1]
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.lists(box, min_size=1, max_size=10), min_size=2, max_size=5), st.randoms(use_true_random=False))
+def test_the_live_runs_of_a_batch_rows_are_each_run_alone(runs, rnd):
+    """`clearances_rows` on the rows of a whole batch, some runs live: each live run's
+    clearances and events are those it gets alone (`reference`), the other runs' rows
+    untouched."""
+    boxes = [b for run in runs for b in run]
+    first = np.array([0, *np.cumsum([len(r) for r in runs])], dtype=np.int64)
+    live = sorted(rnd.sample(range(len(runs)), rnd.randint(1, len(runs))))
+    rows, sizes = rows_of(boxes)
+    before = rows.copy()
+    items = [([f"a{i}" for i in range(len(runs[k]))], SimpleNamespace(contacts=set(), events=[]), 0.5)
+             for k in live]
+    with np.errstate(all="ignore"):
+        collided = C.clearances_rows(rows, first, np.array(live, dtype=np.int64), sizes, items)
+        for k, (names, run, _), hit in zip(live, items, collided):
+            clear, touching = reference(runs[k])
+            assert bits(rows[first[k]:first[k + 1], -1]) == bits(clear)
+            assert [tuple(e.detail["actors"]) for e in run.events] == [(names[a], names[b]) for a, b in touching]
+            assert hit is False  # (no actor named ego)
+    for k in set(range(len(runs))) - set(live):
+        assert bits(rows[first[k]:first[k + 1]].ravel()) == bits(before[first[k]:first[k + 1]].ravel())
 
 
 def reference(boxes):
