@@ -232,6 +232,8 @@ class _Layout:
         self._plans: list = []
         self._laws = None
         self.binds = Fleet.binds
+        self.record_key: tuple | None = None  # `Fleets.record_columns`' runs, and its arrays
+        self.record_args: tuple = ()
 
     def laws(self, plans):
         """The runs' law settings, each agent's law, the lateral targets, concatenated; the
@@ -259,6 +261,7 @@ class Fleets:
     def __init__(self, runs=()):
         self._layouts: dict[tuple[int, ...], _Layout] = {}
         self._last: _Layout | None = None  # the layout asked for last (the pose and step phases ask each step)
+        self.posed: tuple | None = None  # (pose table, layout) of the last `pose`, all runs' agents as arrays
         if runs:
             block = AgentArrays.adopt([run.fleet.agents for run in runs])
             for r, run in enumerate(runs):
@@ -282,8 +285,11 @@ class Fleets:
         lane change or a walk, the extra yaw, the elevation) and hand the poses to each run's
         physics world; keep them, and each agent's lane offset, for the row."""
         items = [(run, t) for run, t in zip(runs, ts) if run.fleet.n]
+        self.posed = None
         if sum(run.fleet.n for run, _ in items) >= ARRAY_MIN_AGENTS:
             items = self._pose_arrays(items)
+            if items:  # (some runs' agents posed one by one)
+                self.posed = None
         for run, t in items:
             run.fleet.pose_one_by_one(run, t, run.dt)
         for run in runs:
@@ -336,7 +342,33 @@ class Fleets:
             f = run.fleet
             run.physics.set_poses(f.slots, out, lo[j], _BODY_COLUMNS)
             f.pose, f.pose_lo, f.rows, f.posed = out, lo[j], None, True
+        self.posed = (out, layout)
         return []
+
+    def record_columns(self, runs) -> tuple | None:
+        """Where the last `pose` put the agents of `runs` (the runs it posed, in its order):
+        (the pose table, the agents' block `AgentArrays.flat`, then per run its agents' count,
+        its first column in the table and its first slot in the block: a run's agents' slots
+        follow each other), or None where some run's agents were posed one by one
+        (`Fleet.rows`)."""
+        if self.posed is None:
+            return None
+        out, layout = self.posed
+        key = tuple(map(id, runs))
+        if layout.record_key != key:
+            fleets = iter(zip(layout.fleets, layout.lo))
+            counts, lo, cell0 = [], [], []
+            for run in runs:
+                n = run.fleet.n
+                f, first = next(fleets) if n else (None, 0)
+                if f is not None and f is not run.fleet:
+                    return None  # (not the runs it posed)
+                counts.append(n)
+                lo.append(first)
+                cell0.append(int(f.block_rows[0]) if n else 0)
+            layout.record_key = key
+            layout.record_args = tuple(np.array(v, dtype=np.int64) for v in (counts, lo, cell0))
+        return (out, layout.block.flat, *layout.record_args)
 
     def step(self, runs, ts) -> list:
         """Advance every agent of the batch as the per-agent loop would (in each run's
@@ -408,16 +440,20 @@ def _body_poses(out, rel, yaw_rows, yaw, half_height, flat, cells):
 
 @kernel
 def _agent_rows(block, k, pose, lo, flat, cells):
-    """Sample k's row of a run's record `block` for its agents (actor 1 + i: columns x, y,
-    heading, speed, accel, yaw rate 0, s, t, lane offset; `phases.FIELDS`) from their poses
-    `pose[:, lo + i]` (`_pose_arrays`) and their block slots `cells[i]` (accel, s, t as
-    posed: nothing moved since)."""
+    """Sample k's row of a run's record `block` for its agents (actor 1 + i) from their poses
+    `pose[:, lo + i]` (`_pose_arrays`) and their block slots `cells[i]` (`_agent_row`)."""
     for i in range(cells.size):
-        j, c = lo + i, cells[i]
-        row = block[k, 1 + i]
-        row[0], row[1], row[2], row[3] = pose[POSE_X, j], pose[POSE_Y, j], pose[_HEADING, j], pose[_SPEED, j]
-        row[4], row[5], row[6], row[7] = flat[ACCEL, c], 0.0, flat[S, c], flat[T, c]
-        row[8] = pose[POSE_OFFSET, j]
+        _agent_row(block[k, 1 + i], pose, lo + i, flat, cells[i])
+
+
+@kernel
+def _agent_row(row, pose, j, flat, c):
+    """An agent's recorded fields (columns x, y, heading, speed, accel, yaw rate 0, s, t, lane
+    offset; `phases.FIELDS`) from its pose `pose[:, j]` and its block slot `c` (accel, s, t
+    as posed: nothing moved since)."""
+    row[0], row[1], row[2], row[3] = pose[POSE_X, j], pose[POSE_Y, j], pose[_HEADING, j], pose[_SPEED, j]
+    row[4], row[5], row[6], row[7] = flat[ACCEL, c], 0.0, flat[S, c], flat[T, c]
+    row[8] = pose[POSE_OFFSET, j]
 
 
 @dataclass

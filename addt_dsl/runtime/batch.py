@@ -110,7 +110,7 @@ def _loop(runs: list[RunState]) -> list[Trace]:
         ts = [k * run.dt for run in lruns]
         phases.clock(lruns, ts)
         phases.pose(lruns, ts, fleets, egos)
-        phases.record(lruns, lrecs, k, egos)
+        phases.record(lruns, lrecs, k, egos, fleets)
         collided = phases.collisions(lruns, lrecs, k, ts)
         phases.environment(lruns, lrecs, k, ts)
         phases.variables(lruns, lrecs, k, ts)

@@ -40,15 +40,16 @@ from itertools import accumulate
 
 import numpy as np
 
+from addt_dsl.kernel import kernel
 from addt_dsl.runtime import lanestate
-from addt_dsl.runtime.agents import Fleets, pose_scripted_ego
+from addt_dsl.runtime.agents import Fleets, _agent_row, pose_scripted_ego
 from addt_dsl.runtime.collision import clearances_batch, clearances_rows
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
                                        advance_variable_script, condition_checker, prefetch)
-from addt_dsl.runtime.vehicle import HEADING, X, Y, StateBlock
+from addt_dsl.runtime.vehicle import HEADING, X, Y, StateBlock, ego_record
 
 # The recorded fields of an actor, in the order of a step's row; clearance last.
 FIELDS = ("x", "y", "heading", "speed", "accel", "yaw_rate", "s", "t", "lane_offset", "steer", "clearance")
@@ -89,6 +90,9 @@ class Record:
         self.sizes = {"ego": (plan.ego.length_m, plan.ego.width_m)}
         self.sizes.update({a.name: (a.length_m, a.width_m) for a in run.agents})
         self.footprints = np.array([self.sizes[m] for m in names], dtype=np.float64).reshape(-1, 2)  # (length, width)
+        # Whether the run records more than its actors' fields (`_record_extras`).
+        self.extras = bool(self.lanes or self.edges or self.ends or self.wrong_ways or self.offs or self.variables
+                           or run.lights is not None or run.signs is not None)
         self.last = n  # samples recorded
 
     @classmethod
@@ -225,29 +229,68 @@ def _pose_ego(run: RunState, t: float, pre: list[float] | None) -> None:
         run.world_pose["ego"] = (x, y, heading)
 
 
-def record(runs: list[RunState], recs: list[Record], k: int, egos: StateBlock) -> None:
-    """Over the batch: every actor's fields at sample k but the clearance (the egos' from
-    their block at once)."""
+def record(runs: list[RunState], recs: list[Record], k: int, egos: StateBlock, fleets: Fleets | None = None) -> None:
+    """Over the batch: every actor's fields at sample k but the clearance: a batch's records
+    whose agents `pose` posed as arrays (`fleets`) in one kernel call (`_record_rows`: the
+    egos' states from their block, the agents' from the pose table), else the egos' from
+    their block at once and each run's agents; then what only some runs record."""
+    rows = recs[0].batch_rows if len(recs) > 1 else None
+    cols = fleets.record_columns(runs) if rows is not None and fleets is not None else None
+    if cols is not None and all(rec.batch_rows is rows for rec in recs):
+        stl: list[float] = []
+        for run in runs:
+            stl += _ego_station(run)
+        _record_rows(rows.block[k], rows.first, rows.live([rec.index for rec in recs]), egos.states,
+                     egos.index([run.ego_row for run in runs]), _EGO_COLUMNS, np.array(stl).reshape(-1, 3), *cols)
+        for run, rec in zip(runs, recs):
+            if rec.extras:
+                _record_extras(run, rec, k)
+        return
     ego_rows = egos.records([run.ego_row for run in runs], _EGO_COLUMNS, len(FIELDS) - 1)
     for run, rec, ego_row in zip(runs, recs, ego_rows):
         _record(run, rec, k, ego_row)
 
 
+@kernel
+def _record_rows(block, first, live, states, ego_rows, columns, stl, pose, flat, counts, pose_lo, cell0):
+    """Sample k's rows of a batch's live runs (`block`: the batch's rows of sample k, run
+    live[j]'s actors from row first[live[j]]): the ego's state (`vehicle.ego_record` of block
+    row ego_rows[j]) and its station, offset and lane offset `stl[j]`, then its counts[j]
+    agents' (`agents._agent_row`: pose table columns pose_lo[j] on, block slots cell0[j] on)."""
+    for j in range(live.size):
+        c = first[live[j]]
+        row = block[c]
+        ego_record(states[ego_rows[j]], columns, row)
+        row[_S], row[_T], row[_LANE_OFFSET] = stl[j, 0], stl[j, 1], stl[j, 2]
+        for i in range(counts[j]):
+            _agent_row(block[c + 1 + i], pose, pose_lo[j] + i, flat, cell0[j] + i)
+
+
+def _ego_station(run: RunState) -> tuple[float, float, float]:
+    """The ego's recorded station, offset and lane offset [m] (NaN once it left its road)."""
+    s, t = run.ego_s, run.ego_t
+    if run.left_road:
+        return s, t, math.nan
+    off = run.ego_offset  # (`pose` found it where it posed the ego in a batch)
+    return s, t, off if off is not None else run.ego_road.road.lane_offset(s, t)
+
+
 def _record(run: RunState, rec: Record, k: int, ego_row: list[float]) -> None:
     """A run's fields at sample k, the ego's state in `ego_row` already."""
-    s, t = run.ego_s, run.ego_t
-    ego_row[_S], ego_row[_T] = s, t
-    if run.left_road:
-        ego_row[_LANE_OFFSET] = math.nan
-    else:  # (`pose` found it where it posed the ego in a batch)
-        off = run.ego_offset
-        ego_row[_LANE_OFFSET] = off if off is not None else run.ego_road.road.lane_offset(s, t)
+    ego_row[_S], ego_row[_T], ego_row[_LANE_OFFSET] = _ego_station(run)
     fleet = run.fleet
     if fleet.rows is not None:  # agents posed one by one: the rows at once
         rec.block[k, :, :-1] = [ego_row, *fleet.rows]
     else:
         rec.block[k, 0, :-1] = ego_row
         fleet.record(rec.block, k)
+    if rec.extras:
+        _record_extras(run, rec, k)
+
+
+def _record_extras(run: RunState, rec: Record, k: int) -> None:
+    """What some runs record at sample k (`Record.extras`): lanes, edges, ends, lane states,
+    variables, margins to red lights and stop signs."""
     for name, lanes in rec.lanes.items():  # `lane_id(A)`: only in runs that read it
         lanes[k] = run.lane_number(name)
     for name, edges in rec.edges.items():  # `road_edge(A)`: to the outer edge of A's road

@@ -241,7 +241,7 @@ class StateBlock:
                 self.params[i] = _param_row(q)
                 held[i] = q
         _step_block(self.states, self.params, self.n, self.h, np.array(inputs, dtype=np.float64).reshape(-1, 4),
-                    self._index(rows), self._finite)
+                    self.index(rows), self._finite)
         return self._finite[:len(rows)].tolist()
 
     def records(self, rows: list[int], columns: np.ndarray, width: int) -> list[list[float]]:
@@ -250,10 +250,10 @@ class StateBlock:
         out = self._out.get(width)
         if out is None:
             out = self._out[width] = np.zeros((len(self.states), width))
-        _records(self.states, self._index(rows), columns, out)
+        _records(self.states, self.index(rows), columns, out)
         return out[:len(rows)].tolist()
 
-    def _index(self, rows: list[int]) -> np.ndarray:
+    def index(self, rows: list[int]) -> np.ndarray:
         """`rows` as an array (the last one asked, the batch's live runs, changes seldom)."""
         if rows != self._rows:
             self._rows, self._rows_a = list(rows), np.array(rows, dtype=np.int64).reshape(-1)
@@ -263,10 +263,16 @@ class StateBlock:
 @kernel
 def _records(states, rows, columns, out):
     for j in range(rows.shape[0]):
-        st = states[rows[j]]
-        out[j, columns[0]], out[j, columns[1]], out[j, columns[2]] = st[X], st[Y], st[HEADING]
-        out[j, columns[3]] = hypot(st[VX], st[VY])
-        out[j, columns[4]], out[j, columns[5]], out[j, columns[6]] = st[ACCEL], st[YAW_RATE], st[STEER]
+        ego_record(states[rows[j]], columns, out[j])
+
+
+@kernel
+def ego_record(st, columns, row):
+    """Of a state `st` (a block row), its x, y, heading, speed, accel, yaw rate and steer into
+    `row` at `columns` (in that order)."""
+    row[columns[0]], row[columns[1]], row[columns[2]] = st[X], st[Y], st[HEADING]
+    row[columns[3]] = hypot(st[VX], st[VY])
+    row[columns[4]], row[columns[5]], row[columns[6]] = st[ACCEL], st[YAW_RATE], st[STEER]
 
 
 @kernel
