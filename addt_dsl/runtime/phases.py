@@ -8,10 +8,11 @@ them run by run (runs share nothing: each run sees its phases in this order):
   pose        agents on their roads (every run's agents at once: `agents.Fleets.pose`),
               the ego (projected onto its road: the batch's driven egos a kernel call per
               road; or posed from its script), their bodies in the physics world
-  record      the state row of every actor (clearance, the last field, below); margins to
-              red lights and stop signs; lane states (`lanestate.py`); the scenario variables
-  collisions  each actor's clearance; `collision` events (`collision.py`: every run's
-              pairs in one compiled kernel)
+  record      the state row of every actor (clearance, the last field, below; a batch's
+              rows in one compiled call into its block, `Record.batch`); margins to red
+              lights and stop signs; lane states (`lanestate.py`); the scenario variables
+  collisions  each actor's clearance; `collision` events (`collision.py`: every live
+              run's pairs in one compiled kernel over the batch's block)
   environment changes of the weather, light and road that fire on the recorded state
   variables   steps that set scenario variables, on the recorded state
   lights      light changes that fire on the recorded state; light states
