@@ -1,4 +1,5 @@
-"""The collisions phase (`collision.clearances_batch`) per run-step, in two source trees.
+"""The collisions phase (`collision.clearances_rows`, or `clearances_batch` in a tree
+without it) per run-step, in two source trees.
 
 Run: PYTHONPATH=. python benchmarks/bench_collisions.py [--before TREE] [--after TREE]
      [--agents 1,5,20,50,100] [--batch 1,16,64] [--rounds 3] [--json FILE]
@@ -9,7 +10,8 @@ station, offset and heading (seeded per run), so neighbours in adjacent lanes ta
 exact box test. The items are built as each tree's `phases.collisions` builds them
 (before: poses as lists of floats where the batch poses its agents one by one, fewer than
 `ARRAY_MIN_AGENTS` in all, else arrays, and sizes as lists up to `ALL_PAIRS_MAX` actors;
-after: the step's rows of the record and an array of sizes). Each tree is timed in its own
+after: the step's rows of the record and an array of sizes; with `clearances_rows`, the
+batch's rows in one array as the batch's record block holds them). Each tree is timed in its own
 process (`--child`), the trees alternate for `--rounds` rounds, and the least per-call time
 of all rounds is kept, in CPU time of the process (the machine is shared: CPU time is the
 steadier under load, which is printed). Prints us per run-step (one call's time / batch)
@@ -69,24 +71,42 @@ def items_for(n_agents: int, batch: int):
     return items
 
 
-def child(cases, number_s: float = 0.2, repeat: int = 5) -> dict:
-    """Least time per call [s] of `clearances_batch` per case (this process's tree)."""
-    from addt_dsl.runtime.collision import clearances_batch
+def phase_call(items):
+    """The call `phases.collisions` makes for a batch's items in this tree: where the tree
+    has `clearances_rows`, on the step's rows of the batch's record block (the runs' rows one
+    after another, every run live), else `clearances_batch` of the items."""
+    import numpy as np
 
+    from addt_dsl.runtime import collision as C
+
+    rows_of = getattr(C, "clearances_rows", None)
+    if rows_of is None or len(items) < 2 or len(items[0]) != 5:
+        return lambda: C.clearances_batch(items)
+    rows = np.concatenate([item[0] for item in items])
+    first = np.array([0, *np.cumsum([len(item[0]) for item in items])], dtype=np.int64)
+    sizes = np.concatenate([item[2] for item in items])
+    live = np.arange(len(items), dtype=np.int64)
+    runs = [(item[1], item[3], item[4]) for item in items]
+    return lambda: rows_of(rows, first, live, sizes, runs)
+
+
+def child(cases, number_s: float = 0.2, repeat: int = 5) -> dict:
+    """Least time per call [s] of the collisions phase's call (`phase_call`) per case (this
+    process's tree)."""
     out = {}
     for n, b in cases:
-        items = items_for(n, b)
-        clearances_batch(items)  # compile / warm
+        call = phase_call(items_for(n, b))
+        call()  # compile / warm
         t0, number = time.process_time(), 0
         while time.process_time() - t0 < 0.02:
-            clearances_batch(items)
+            call()
             number += 1
         number = max(1, int(number * number_s / 0.02 / repeat))
         best = float("inf")
         for _ in range(repeat):
             t0 = time.process_time()
             for _ in range(number):
-                clearances_batch(items)
+                call()
             best = min(best, (time.process_time() - t0) / number)
         out[f"{n},{b}"] = best
     return out
