@@ -441,13 +441,13 @@ def _body_poses(out, rel, yaw_rows, yaw, half_height, flat, cells):
 @kernel
 def _agent_rows(block, k, pose, lo, flat, cells):
     """Sample k's row of a run's record `block` for its agents (actor 1 + i) from their poses
-    `pose[:, lo + i]` (`_pose_arrays`) and their block slots `cells[i]` (`_agent_row`)."""
+    `pose[:, lo + i]` (`_pose_arrays`) and their block slots `cells[i]` (`agent_row`)."""
     for i in range(cells.size):
-        _agent_row(block[k, 1 + i], pose, lo + i, flat, cells[i])
+        agent_row(block[k, 1 + i], pose, lo + i, flat, cells[i])
 
 
 @kernel
-def _agent_row(row, pose, j, flat, c):
+def agent_row(row, pose, j, flat, c):
     """An agent's recorded fields (columns x, y, heading, speed, accel, yaw rate 0, s, t, lane
     offset; `phases.FIELDS`) from its pose `pose[:, j]` and its block slot `c` (accel, s, t
     as posed: nothing moved since)."""

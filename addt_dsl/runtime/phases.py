@@ -43,7 +43,7 @@ import numpy as np
 
 from addt_dsl.kernel import kernel
 from addt_dsl.runtime import lanestate
-from addt_dsl.runtime.agents import Fleets, _agent_row, pose_scripted_ego
+from addt_dsl.runtime.agents import Fleets, agent_row, pose_scripted_ego
 from addt_dsl.runtime.collision import clearances_batch, clearances_rows
 from addt_dsl.runtime.fastroad import FastRoad
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
@@ -257,14 +257,14 @@ def _record_rows(block, first, live, states, ego_rows, columns, stl, pose, flat,
     """Sample k's rows of a batch's live runs (`block`: the batch's rows of sample k, run
     live[j]'s actors from row first[live[j]]): the ego's state (`vehicle.ego_record` of block
     row ego_rows[j]) and its station, offset and lane offset `stl[j]`, then its counts[j]
-    agents' (`agents._agent_row`: pose table columns pose_lo[j] on, block slots cell0[j] on)."""
+    agents' (`agents.agent_row`: pose table columns pose_lo[j] on, block slots cell0[j] on)."""
     for j in range(live.size):
         c = first[live[j]]
         row = block[c]
         ego_record(states[ego_rows[j]], columns, row)
         row[_S], row[_T], row[_LANE_OFFSET] = stl[j, 0], stl[j, 1], stl[j, 2]
         for i in range(counts[j]):
-            _agent_row(block[c + 1 + i], pose, pose_lo[j] + i, flat, cell0[j] + i)
+            agent_row(block[c + 1 + i], pose, pose_lo[j] + i, flat, cell0[j] + i)
 
 
 def _ego_station(run: RunState) -> tuple[float, float, float]:

@@ -1,7 +1,7 @@
 """The record phase over a batch (`phases._record_rows`): one kernel call writes every live
 run's rows of a sample into the batch's block, the egos' from their states block and the
 agents' from the pose table; compiled, it gives its Python's bits, and the rows are what the
-per-run code writes (`vehicle.ego_record`, `agents._agent_row`, the fields in order)."""
+per-run code writes (`vehicle.ego_record`, `agents.agent_row`, the fields in order)."""
 
 import math
 
