@@ -51,9 +51,11 @@ from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
                                        advance_variable_script, condition_checker, prefetch)
 from addt_dsl.runtime.vehicle import HEADING, X, Y, StateBlock, ego_record
+from addt_dsl.specs.signals import FIELDS as SIGNAL_FIELDS
 
-# The recorded fields of an actor, in the order of a step's row; clearance last.
-FIELDS = ("x", "y", "heading", "speed", "accel", "yaw_rate", "s", "t", "lane_offset", "steer", "clearance")
+# The recorded fields of an actor, in the order of a step's row (the field signals'); clearance last.
+FIELDS = tuple(name for name, _, _ in SIGNAL_FIELDS)
+assert FIELDS[-1] == "clearance"
 # Where the fields the ego's state gives go in its row (`vehicle.StateBlock.records`).
 _EGO_COLUMNS = np.array([FIELDS.index(f) for f in ("x", "y", "heading", "speed", "accel", "yaw_rate", "steer")])
 _S, _T, _LANE_OFFSET = FIELDS.index("s"), FIELDS.index("t"), FIELDS.index("lane_offset")
@@ -69,6 +71,7 @@ class Record:
         n = self.n = run.n_steps + 1
         plan = run.bound
         names = self.names = ["ego"] + [a.name for a in run.agents]
+        self.actor_index = {name: i for i, name in enumerate(names)}
         if block is None:
             block = np.zeros((n, len(names), len(FIELDS)))
         self.block = block
@@ -138,6 +141,9 @@ def clock(runs: list[RunState], ts: list[float]) -> None:
             run.faults.wake(t)
 
 
+_FIELD_INDEX = {name: i for i, name in enumerate(FIELDS)}
+
+
 class BatchRows:
     """The recorded fields of every actor of a batch: `block` [sample, actor, field], run r's
     actors `first[r]` to `first[r + 1]`, their footprints (length, width [m]) `sizes`; the
@@ -154,6 +160,26 @@ class BatchRows:
         if index != self._live:
             self._live, self._live_a = index, np.array(index, dtype=np.int64)
         return self._live_a
+
+    def field_values(self, k: int, recs: list[Record], signals) -> dict[str, np.ndarray] | None:
+        """The field signals `signals` (`speed(ego)`, `s(lead)`: an actor's recorded field,
+        `signals.compute_signals`' names) at sample k of each of `recs` (records of this
+        batch), in their order: what each run's one-sample snapshot gives, read from the
+        block at once. None where one is not a field signal or a run has no such actor."""
+        out = {}
+        for name in signals:
+            fn, _, rest = name.partition("(")
+            args = [a for a in rest.rstrip(")").split(",") if a]
+            if fn not in _FIELD_INDEX or not args:
+                return None
+            cols = []
+            for rec in recs:
+                i = rec.actor_index.get(args[0])
+                if i is None:
+                    return None
+                cols.append(self.first[rec.index] + i)
+            out[name] = self.block[k, cols, _FIELD_INDEX[fn]]
+        return out
 
 
 def pose(runs: list[RunState], ts: list[float], fleets: Fleets, egos: StateBlock | None = None) -> None:

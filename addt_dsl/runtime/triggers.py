@@ -174,8 +174,13 @@ def prefetch(runs: list, recs: list, k: int) -> None:
         if len(members) < 2:
             continue
         try:
-            signals = [compute_signals(run.conditions.snapshot(rec, k), formula.signals) for run, rec, _ in members]
-            stacked = {name: np.concatenate([s[name] for s in signals]) for name in formula.signals}
+            rows = getattr(members[0][1], "batch_rows", None)  # (a batch's records: field signals from its block)
+            stacked = rows.field_values(k, [rec for _, rec, _ in members], formula.signals) \
+                if rows is not None and all(rec.batch_rows is rows for _, rec, _ in members) else None
+            if stacked is None:
+                signals = [compute_signals(run.conditions.snapshot(rec, k), formula.signals)
+                           for run, rec, _ in members]
+                stacked = {name: np.concatenate([s[name] for s in signals]) for name in formula.signals}
             verdicts = oracles.verdicts(formula, stacked, members[0][0].dt).tolist()
         except Exception:  # noqa: BLE001 - each run asks again alone and raises there
             continue

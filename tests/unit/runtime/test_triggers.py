@@ -91,12 +91,31 @@ def test_a_formula_is_prepared_once_per_expression():
     assert run.conditions.formula(twin) == first
 
 
+def batch_of(recs):
+    """The records as a batch's (`phases.Record.batch`): their blocks views of one block
+    (`BatchRows`), in reversed order within it, each with its index and actor columns."""
+    from addt_dsl.runtime.phases import BatchRows
+
+    n = max(rec.block.shape[0] for rec in recs)
+    first = np.array([0, *np.cumsum([len(rec.names) for rec in reversed(recs)])], dtype=np.int64)
+    block = np.full((n, first[-1], len(FIELDS)), 7.0)
+    rows = BatchRows(block, first, np.zeros((first[-1], 2)))
+    for i, rec in enumerate(reversed(recs)):
+        view = block[:rec.block.shape[0], first[i]:first[i + 1]]
+        view[...] = rec.block
+        rec.block, rec.batch_rows, rec.index = view, rows, i
+        rec.actor_index = {name: j for j, name in enumerate(rec.names)}
+        rec.rec = {name: dict(zip(FIELDS, view.transpose(1, 2, 0)[j])) for j, name in enumerate(rec.names)}
+
+
 @settings(max_examples=40, deadline=None)
-@given(conditions, st.lists(st.integers(0, 2**16), min_size=2, max_size=6, unique=True), st.integers(0, 39))
-def test_runs_asking_a_condition_alike_get_their_own_verdicts_from_one_evaluation(condition, seeds, k):
+@given(conditions, st.lists(st.integers(0, 2**16), min_size=2, max_size=6, unique=True), st.integers(0, 39),
+       st.booleans())
+def test_runs_asking_a_condition_alike_get_their_own_verdicts_from_one_evaluation(condition, seeds, k, batched):
     """`prefetch` answers each run what its own snapshot says (the whole trace's verdict at
     k), for a condition object of each run's own (equal formulas), and the checker takes it
-    from there without evaluating again."""
+    from there without evaluating again; `batched`: the records a batch's (field signals
+    read from its block at once)."""
     from addt_dsl.runtime import triggers
 
     runs = []
@@ -105,6 +124,8 @@ def test_runs_asking_a_condition_alike_get_their_own_verdicts_from_one_evaluatio
         own = condition.model_copy(deep=True)  # (each run binds its own)
         run.scripts = {"lead": SimpleNamespace(asks=lambda t, own=own: iter([own]))}
         runs.append((run, rec, own))
+    if batched:
+        batch_of([rec for _, rec, _ in runs])
     triggers.prefetch([r for r, _, _ in runs], [rec for _, rec, _ in runs], k)
     for run, rec, own in runs:
         trace = full_trace(run, rec)
