@@ -227,7 +227,6 @@ class PhysicsWorld:
             self._hit_body = np.concatenate([self._box_ids, [self.ground, -1]])
             self._unsynced = np.concatenate([self._unsynced, np.zeros(len(bodies), dtype=bool)])
         return bodies
-        return body
 
     def add_mesh(self, mesh, collision: bool = False) -> int | None:
         """A static road mesh: visible (when the world is visual) and/or part of the ground
