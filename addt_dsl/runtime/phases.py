@@ -46,6 +46,7 @@ from addt_dsl.runtime import lanestate
 from addt_dsl.runtime.agents import Fleets, agent_row, pose_scripted_ego
 from addt_dsl.runtime.collision import clearances_batch, clearances_rows
 from addt_dsl.runtime.fastroad import FastRoad
+from addt_dsl.runtime.signals import parse as parse_signal
 from addt_dsl.runtime.state import LATENCY_NODES, RunState
 from addt_dsl.runtime.trace import ActorTrack, Event, Trace
 from addt_dsl.runtime.triggers import (advance_environment_script, advance_light_script, advance_scripts,
@@ -155,21 +156,29 @@ class BatchRows:
         self._live: list[int] = []
         self._live_a = np.zeros(0, dtype=np.int64)
 
-    def live(self, index: list[int]) -> np.ndarray:
-        """The runs `index` as an array (the last one asked, the live runs, changes seldom)."""
-        if index != self._live:
-            self._live, self._live_a = index, np.array(index, dtype=np.int64)
-        return self._live_a
+    @staticmethod
+    def of(recs: list[Record]) -> tuple[BatchRows, np.ndarray] | None:
+        """The block several records are all part of and their runs' indices there (an array:
+        the last one asked, the live runs, changes seldom), or None (one record, or records
+        of other blocks)."""
+        rows = recs[0].batch_rows if len(recs) > 1 else None
+        if rows is None or any(rec.batch_rows is not rows for rec in recs):
+            return None
+        index = [rec.index for rec in recs]
+        if index != rows._live:
+            rows._live, rows._live_a = index, np.array(index, dtype=np.int64)
+        return rows, rows._live_a
 
     def field_values(self, k: int, recs: list[Record], signals) -> dict[str, np.ndarray] | None:
         """The field signals `signals` (`speed(ego)`, `s(lead)`: an actor's recorded field,
-        `signals.compute_signals`' names) at sample k of each of `recs` (records of this
-        batch), in their order: what each run's one-sample snapshot gives, read from the
-        block at once. None where one is not a field signal or a run has no such actor."""
+        `signals.compute_signals`' names) at sample k of each of `recs`, in their order: what
+        each run's one-sample snapshot gives, read from the block at once. None where one is
+        not a field signal, a record is not of this block or a run has no such actor."""
+        if any(rec.batch_rows is not self for rec in recs):
+            return None
         out = {}
         for name in signals:
-            fn, _, rest = name.partition("(")
-            args = [a for a in rest.rstrip(")").split(",") if a]
+            fn, args = parse_signal(name)
             if fn not in _FIELD_INDEX or not args:
                 return None
             cols = []
@@ -261,14 +270,15 @@ def record(runs: list[RunState], recs: list[Record], k: int, egos: StateBlock, f
     whose agents `pose` posed as arrays (`fleets`) in one kernel call (`_record_rows`: the
     egos' states from their block, the agents' from the pose table), else the egos' from
     their block at once and each run's agents; then what only some runs record."""
-    rows = recs[0].batch_rows if len(recs) > 1 else None
-    cols = fleets.record_columns(runs) if rows is not None and fleets is not None else None
-    if cols is not None and all(rec.batch_rows is rows for rec in recs):
+    shared = BatchRows.of(recs)
+    cols = fleets.record_columns(runs) if shared is not None and fleets is not None else None
+    if cols is not None:
+        rows, live = shared
         stl: list[float] = []
         for run in runs:
             stl += _ego_station(run)
-        _record_rows(rows.block[k], rows.first, rows.live([rec.index for rec in recs]), egos.states,
-                     egos.index([run.ego_row for run in runs]), _EGO_COLUMNS, np.array(stl).reshape(-1, 3), *cols)
+        _record_rows(rows.block[k], rows.first, live, egos.states, egos.index([run.ego_row for run in runs]),
+                     _EGO_COLUMNS, np.array(stl).reshape(-1, 3), *cols)
         for run, rec in zip(runs, recs):
             if rec.extras:
                 _record_extras(run, rec, k)
@@ -391,9 +401,10 @@ def collisions(runs: list[RunState], recs: list[Record], k: int, ts: list[float]
     """Over the batch: each actor's clearance at sample k (from the poses `record` wrote
     into the step's rows) and `collision` events (every run's pairs in one compiled call:
     `collision.clearances_batch`); whether each ego collided."""
-    rows = recs[0].batch_rows if len(recs) > 1 else None
-    if rows is not None and all(rec.batch_rows is rows for rec in recs):  # (a batch's records: its step's rows at once)
-        return clearances_rows(rows.block[k], rows.first, rows.live([rec.index for rec in recs]), rows.sizes,
+    shared = BatchRows.of(recs)
+    if shared is not None:  # (a batch's records: its step's rows at once)
+        rows, live = shared
+        return clearances_rows(rows.block[k], rows.first, live, rows.sizes,
                                [(rec.names, run, t) for run, rec, t in zip(runs, recs, ts)])
     return clearances_batch([(rec.block[k], rec.names, rec.footprints, run, t) for run, rec, t in zip(runs, recs, ts)])
 

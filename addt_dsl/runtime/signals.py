@@ -15,6 +15,12 @@ def canonical(fn: str, args: tuple[str, ...]) -> str:
     return f"{fn}({','.join(args)})"
 
 
+def parse(name: str) -> tuple[str, tuple[str, ...]]:
+    """A canonical signal name's function and arguments (`canonical`'s inverse)."""
+    fn, _, rest = name.partition("(")
+    return fn, tuple(a for a in rest.rstrip(")").split(",") if a)
+
+
 class SignalFn(S.SignalSpec):
     @staticmethod
     def compute(trace, args: tuple[str, ...]) -> np.ndarray:
@@ -286,8 +292,7 @@ def compute_signals(trace, names: set[str]) -> dict[str, np.ndarray]:
     """Evaluate canonical signal names (`ttc(ego,lead)`) on a trace."""
     out: dict[str, np.ndarray] = {}
     for name in names:
-        fn, _, rest = name.partition("(")
-        args = tuple(a for a in rest.rstrip(")").split(",") if a)
+        fn, args = parse(name)
         if SIGNALS.get(fn) is None:
             raise KeyError(f"unknown signal {name!r}")
         cls = SIGNALS.implementation(fn)

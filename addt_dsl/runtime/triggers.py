@@ -175,8 +175,8 @@ def prefetch(runs: list, recs: list, k: int) -> None:
             continue
         try:
             rows = getattr(members[0][1], "batch_rows", None)  # (a batch's records: field signals from its block)
-            stacked = rows.field_values(k, [rec for _, rec, _ in members], formula.signals) \
-                if rows is not None and all(rec.batch_rows is rows for _, rec, _ in members) else None
+            recs = [rec for _, rec, _ in members]
+            stacked = rows.field_values(k, recs, formula.signals) if rows is not None else None
             if stacked is None:
                 signals = [compute_signals(run.conditions.snapshot(rec, k), formula.signals)
                            for run, rec, _ in members]
