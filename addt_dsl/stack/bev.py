@@ -322,16 +322,19 @@ class BevStack(S.BevStack):
         """Whether this stack's control cycle runs alone: a fault on the controller's sites or
         timing, or latency measured on the clock (the schedule's targets are fixed once bound)."""
         if self._alone is None:
-            targets = self.ctx.faults.by_target
-            self._alone = self.measured or any(s in targets for s in ("control", *Controller.sites))
+            self._alone = self.measured or self._targeted(("control", *Controller.sites))
         return self._alone
+
+    def _targeted(self, sites) -> bool:
+        """Whether a fault of the schedule targets one of `sites`."""
+        targets = self.ctx.faults.by_target
+        return any(s in targets for s in sites)
 
     def _planner_sites(self):
         """The planner's `corrupt`: this stack's, or `unchanged` where no fault targets the
         planner's sites (the schedule's targets are fixed once bound)."""
         if self._planner_corrupt is None:
-            targets = self.ctx.faults.by_target
-            self._planner_corrupt = self.corrupt if any(s in targets for s in LatticePlanner.sites) else unchanged
+            self._planner_corrupt = self.corrupt if self._targeted(LatticePlanner.sites) else unchanged
         return self._planner_corrupt
 
     def _run_planner(self, time_s: float) -> None:

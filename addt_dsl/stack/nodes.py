@@ -577,16 +577,11 @@ class LatticePlanner:
                             *self._cost_args(s0, t0, ego_speed, objs_arr, current, pref, stamp_s),
                             costs)
         best = None
-        if corrupt is unchanged:  # (no fault on the planner's sites: the loop below without its calls)
-            for (lane, t_cand, speed, extra), cost in zip(cands, costs.tolist()):
-                cost = cost + extra
-                if best is None or cost < best[0]:
-                    best = (cost, lane, t_cand, speed)
-        else:
-            for (lane, t_cand, speed, extra), cost in zip(cands, costs.tolist()):
-                cost = corrupt("planner.cost", cost + extra)
-                if best is None or cost < best[0]:
-                    best = (cost, lane, t_cand, speed)
+        faulted = corrupt is not unchanged  # (no fault on the planner's sites: no call per candidate)
+        for (lane, t_cand, speed, extra), cost in zip(cands, costs.tolist()):
+            cost = corrupt("planner.cost", cost + extra) if faulted else cost + extra
+            if best is None or cost < best[0]:
+                best = (cost, lane, t_cand, speed)
         brake = 0.0
         self.emergency = best is None or not best[0] < math.inf  # NaN (a corrupted cost) too
         if self.emergency:
